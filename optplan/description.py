@@ -1,0 +1,435 @@
+"""Robot descriptions: ``models/robots/*.toml`` (D-H tables, mounting, inertias, limits,
+collision capsules) and the URDF generator behind ``optplan models build``.
+
+TOML schema (all lengths [m], masses [kg], inertias [kg m²] about the link CoM in D-H frame axes;
+angles in the unit named by ``angle_unit``, "deg" or "rad")::
+
+    name = "my_robot"
+    base_type = "floating"          # "floating" (free-flyer added on load) or "fixed"
+    angle_unit = "deg"
+
+    [base]
+    link = "base"
+    mass = 510.0
+    com = [0, 0, 0]
+    inertia = [Ixx, Ixy, Ixz, Iyy, Iyz, Izz]
+    boxes = [{ size = [1.2, 1.0, 1.6], xyz = [0, 0, 0], rpy = [0, 0, 0] }]   # collision
+
+    [arm_types.my_arm]
+    dh_convention = "modified"      # "modified" (Craig) or "standard" (distal)
+    # one row per joint: [theta_offset, alpha, a, d]; joint angle = variable + theta_offset.
+    # modified: T_i = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i) (row i holds alpha_{i-1}, a_{i-1})
+    # standard: T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)
+    dh = [[0, 0, 0, 0.225], ...]
+    masses = [...]; coms = [[x, y, z], ...]; inertias = [[Ixx, Ixy, Ixz, Iyy, Iyz, Izz], ...]
+    lower = [...]; upper = [...]    # joint limits (angle_unit)
+    velocity = [...]                # joint speed limits (angle_unit per second)
+    effort = [...]                  # optional [N m]
+    capsules = [{ link = 3, a = [0, 0, 0], b = [0.56, 0, 0], radius = 0.06 }, ...]  # in D-H frame `link`
+    tool = { xyz = [0, 0, 0], rpy = [0, 0, 0] }   # end-effector frame in the last D-H frame
+
+    [[arms]]
+    name = "A"                      # arm group name
+    type = "my_arm"
+    prefix = "a"                    # joint names a_joint1..; links a_link1..; EE frame a_ee
+    mount_xyz = [0.3, 0.51, 0.83]   # arm base frame (D-H frame 0) in the base link
+    mount_zyx = [90, 26, 0]         # Rz(a) Ry(b) Rx(c)   (or mount_rpy = [roll, pitch, yaw])
+
+Link and collision frames: the URDF link ``<prefix>_link<i>`` is the frame that joint ``i`` rotates
+about its z axis. In the modified convention it *is* D-H frame i; in the standard convention D-H
+frame i is ``<prefix>_link<i> · Tz(d_i) Tx(a_i) Rx(alpha_i)``. CoMs, inertias and capsules are given
+in D-H frame i and converted by the generator. Capsules are written to the URDF as ``<cylinder>``
+collision elements whose ``name`` ends in ``_capsule`` (URDF has no capsule); :mod:`optplan.robot`
+turns them back into exact ``coal.Capsule`` objects, plain URDF loaders see cylinders.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import escape
+
+import numpy as np
+
+from .errors import ModelError, UnknownNameError
+from .spatial import matrix_to_rpy, rotx, rotz, rpy_to_matrix, zyx_to_matrix
+
+__all__ = [
+    "ArmType", "ArmMount", "RobotDescription", "load_description", "write_urdf",
+    "repo_root", "models_dir", "urdf_dir", "available_models", "build_all",
+]
+
+
+def repo_root() -> Path:
+    """Root of the optplan checkout (``models/`` and ``urdf/`` live there).
+
+    Override with the environment variable ``OPTPLAN_ROOT``.
+    """
+    import os
+
+    env = os.environ.get("OPTPLAN_ROOT")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parents[1]
+
+
+def models_dir() -> Path:
+    return repo_root() / "models"
+
+
+def urdf_dir() -> Path:
+    return repo_root() / "urdf"
+
+
+def available_models() -> list[str]:
+    """Names of the robot descriptions in ``models/robots``."""
+    return sorted(p.stem for p in (models_dir() / "robots").glob("*.toml"))
+
+
+# --------------------------------------------------------------------------- data classes
+@dataclass(frozen=True)
+class ArmType:
+    """A serial arm given by a D-H table (angles in rad after loading)."""
+
+    name: str
+    convention: str
+    dh: np.ndarray  # (n, 4): theta_offset, alpha, a, d
+    masses: np.ndarray
+    coms: np.ndarray  # (n, 3) in D-H frame i
+    inertias: np.ndarray  # (n, 6)
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+    capsules: tuple[dict, ...]
+    tool_xyz: np.ndarray
+    tool_rpy: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.dh.shape[0]
+
+    def link_to_dh(self, i: int) -> np.ndarray:
+        """4×4 transform from URDF link ``i`` (1-based) to D-H frame i."""
+        if self.convention == "modified":
+            return np.eye(4)
+        _, alpha, a, d = self.dh[i - 1]
+        return _tz(d) @ _tx(a) @ _hrot(rotx(alpha))
+
+    def joint_origin(self, i: int) -> np.ndarray:
+        """4×4 transform from URDF link ``i-1`` (D-H frame 0 for i = 1) to the joint-``i`` frame
+        at zero joint variable (offset included)."""
+        off, alpha, a, d = self.dh[i - 1]
+        if self.convention == "modified":
+            return _hrot(rotx(alpha)) @ _tx(a) @ _tz(d) @ _hrot(rotz(off))
+        prev = np.eye(4) if i == 1 else self.link_to_dh(i - 1)
+        return prev @ _hrot(rotz(off))
+
+
+@dataclass(frozen=True)
+class ArmMount:
+    name: str
+    type: str
+    prefix: str
+    xyz: np.ndarray
+    R: np.ndarray
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    """A parsed ``models/robots/*.toml``."""
+
+    name: str
+    base_type: str
+    base_link: str
+    base_mass: float
+    base_com: np.ndarray
+    base_inertia: np.ndarray
+    base_boxes: tuple[dict, ...]
+    arm_types: dict[str, ArmType]
+    arms: tuple[ArmMount, ...]
+    source: Path | None = None
+    notes: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def total_mass(self) -> float:
+        return float(self.base_mass + sum(self.arm_types[a.type].masses.sum() for a in self.arms))
+
+
+# --------------------------------------------------------------------------- parsing helpers
+def _tx(a):
+    T = np.eye(4)
+    T[0, 3] = a
+    return T
+
+
+def _tz(d):
+    T = np.eye(4)
+    T[2, 3] = d
+    return T
+
+
+def _hrot(R):
+    T = np.eye(4)
+    T[:3, :3] = R
+    return T
+
+
+def _get(d: dict, key: str, where: str, types=None):
+    if key not in d:
+        raise ModelError(f"{where}: missing key {key!r} (present keys: {sorted(d)})")
+    v = d[key]
+    if types is not None and not isinstance(v, types):
+        raise ModelError(f"{where}.{key}: expected {types}, got {type(v).__name__} {v!r}")
+    return v
+
+
+def _array(v, shape, where: str) -> np.ndarray:
+    try:
+        arr = np.asarray(v, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ModelError(f"{where}: expected numbers of shape {shape}, got {v!r}") from exc
+    if shape is not None and arr.shape != tuple(shape):
+        raise ModelError(f"{where}: expected shape {tuple(shape)}, got {arr.shape} ({v!r})")
+    if not np.all(np.isfinite(arr)):
+        raise ModelError(f"{where}: non-finite values in {v!r}")
+    return arr
+
+
+def _parse_arm_type(name: str, d: dict, ang: float, src: str) -> ArmType:
+    where = f"{src}: arm_types.{name}"
+    conv = _get(d, "dh_convention", where, str)
+    if conv not in ("modified", "standard"):
+        raise ModelError(f"{where}.dh_convention: expected 'modified' or 'standard', got {conv!r}")
+    dh = _array(_get(d, "dh", where), None, f"{where}.dh")
+    if dh.ndim != 2 or dh.shape[1] != 4 or dh.shape[0] < 1:
+        raise ModelError(f"{where}.dh: expected rows [theta_offset, alpha, a, d], got shape {dh.shape}")
+    n = dh.shape[0]
+    dh = dh.copy()
+    dh[:, :2] *= ang
+    masses = _array(_get(d, "masses", where), (n,), f"{where}.masses")
+    if np.any(masses <= 0):
+        raise ModelError(f"{where}.masses: every mass must be > 0 kg, got {masses.tolist()}")
+    coms = _array(_get(d, "coms", where), (n, 3), f"{where}.coms")
+    inertias = _array(_get(d, "inertias", where), (n, 6), f"{where}.inertias")
+    lower = _array(_get(d, "lower", where), (n,), f"{where}.lower") * ang
+    upper = _array(_get(d, "upper", where), (n,), f"{where}.upper") * ang
+    if np.any(lower >= upper):
+        raise ModelError(f"{where}: lower limits must be < upper limits ({lower} vs {upper})")
+    velocity = _array(_get(d, "velocity", where), (n,), f"{where}.velocity") * ang
+    effort = _array(d.get("effort", [100.0] * n), (n,), f"{where}.effort")
+    caps = []
+    for k, c in enumerate(d.get("capsules", [])):
+        cw = f"{where}.capsules[{k}]"
+        link = _get(c, "link", cw, int)
+        if not 1 <= link <= n:
+            raise ModelError(f"{cw}.link: expected 1..{n}, got {link}")
+        r = float(_get(c, "radius", cw, (int, float)))
+        if r <= 0:
+            raise ModelError(f"{cw}.radius: expected > 0 m, got {r}")
+        caps.append({"link": link, "a": _array(_get(c, "a", cw), (3,), f"{cw}.a"),
+                     "b": _array(_get(c, "b", cw), (3,), f"{cw}.b"), "radius": r})
+    tool = d.get("tool", {})
+    return ArmType(
+        name=name, convention=conv, dh=dh, masses=masses, coms=coms, inertias=inertias,
+        lower=lower, upper=upper, velocity=velocity, effort=effort, capsules=tuple(caps),
+        tool_xyz=_array(tool.get("xyz", [0, 0, 0]), (3,), f"{where}.tool.xyz"),
+        tool_rpy=_array(tool.get("rpy", [0, 0, 0]), (3,), f"{where}.tool.rpy") * ang,
+    )
+
+
+def load_description(name_or_path: str | Path) -> RobotDescription:
+    """Parse a robot description TOML (a path, or a model name in ``models/robots``)."""
+    p = Path(name_or_path)
+    if p.suffix != ".toml":
+        cand = models_dir() / "robots" / f"{name_or_path}.toml"
+        if not cand.exists():
+            raise UnknownNameError("robot model", str(name_or_path), available_models())
+        p = cand
+    if not p.exists():
+        raise ModelError(f"robot description {str(p)!r} does not exist")
+    try:
+        data = tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelError(f"{p}: malformed TOML: {exc}") from exc
+    src = p.name
+    ang = {"deg": math.pi / 180.0, "rad": 1.0}.get(data.get("angle_unit", "rad"))
+    if ang is None:
+        raise ModelError(f"{src}.angle_unit: expected 'deg' or 'rad', got {data.get('angle_unit')!r}")
+    name = _get(data, "name", src, str)
+    base_type = data.get("base_type", "fixed")
+    if base_type not in ("fixed", "floating"):
+        raise ModelError(f"{src}.base_type: expected 'fixed' or 'floating', got {base_type!r}")
+    base = _get(data, "base", src, dict)
+    boxes = []
+    for k, b in enumerate(base.get("boxes", [])):
+        bw = f"{src}: base.boxes[{k}]"
+        boxes.append({"size": _array(_get(b, "size", bw), (3,), f"{bw}.size"),
+                      "xyz": _array(b.get("xyz", [0, 0, 0]), (3,), f"{bw}.xyz"),
+                      "rpy": _array(b.get("rpy", [0, 0, 0]), (3,), f"{bw}.rpy") * ang})
+    arm_types = {k: _parse_arm_type(k, v, ang, src)
+                 for k, v in _get(data, "arm_types", src, dict).items()}
+    arms = []
+    for k, a in enumerate(_get(data, "arms", src, list)):
+        aw = f"{src}: arms[{k}]"
+        t = _get(a, "type", aw, str)
+        if t not in arm_types:
+            raise UnknownNameError("arm type", t, arm_types)
+        if "mount_zyx" in a:
+            R = zyx_to_matrix(*(_array(a["mount_zyx"], (3,), f"{aw}.mount_zyx") * ang))
+        else:
+            R = rpy_to_matrix(*(_array(a.get("mount_rpy", [0, 0, 0]), (3,), f"{aw}.mount_rpy") * ang))
+        arms.append(ArmMount(name=_get(a, "name", aw, str), type=t,
+                             prefix=_get(a, "prefix", aw, str),
+                             xyz=_array(a.get("mount_xyz", [0, 0, 0]), (3,), f"{aw}.mount_xyz"), R=R))
+    names = [a.name for a in arms]
+    prefixes = [a.prefix for a in arms]
+    if len(set(names)) != len(names) or len(set(prefixes)) != len(prefixes):
+        raise ModelError(f"{src}: arm names {names} and prefixes {prefixes} must be unique")
+    return RobotDescription(
+        name=name, base_type=base_type, base_link=str(base.get("link", "base")),
+        base_mass=float(_get(base, "mass", f"{src}: base", (int, float))),
+        base_com=_array(base.get("com", [0, 0, 0]), (3,), f"{src}: base.com"),
+        base_inertia=_array(_get(base, "inertia", f"{src}: base"), (6,), f"{src}: base.inertia"),
+        base_boxes=tuple(boxes), arm_types=arm_types, arms=tuple(arms), source=p,
+        notes=str(data.get("notes", "")), extra=dict(data.get("extra", {})),
+    )
+
+
+# --------------------------------------------------------------------------- URDF writer
+def _f(x: float) -> str:
+    s = f"{x:.12g}"
+    return "0" if s in ("-0", "0") else s
+
+
+def _origin(T: np.ndarray) -> str:
+    xyz = " ".join(_f(v) for v in T[:3, 3])
+    rpy = " ".join(_f(v) for v in matrix_to_rpy(T[:3, :3]))
+    return f'<origin xyz="{xyz}" rpy="{rpy}"/>'
+
+
+def _inertial(mass: float, com: np.ndarray, inertia6: np.ndarray, T_link_dh: np.ndarray) -> str:
+    xx, xy, xz, yy, yz, zz = inertia6
+    I = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+    R = T_link_dh[:3, :3]
+    Il = R @ I @ R.T
+    c = T_link_dh[:3, :3] @ com + T_link_dh[:3, 3]
+    return (f'<inertial><origin xyz="{" ".join(_f(v) for v in c)}" rpy="0 0 0"/>'
+            f'<mass value="{_f(mass)}"/><inertia ixx="{_f(Il[0,0])}" ixy="{_f(Il[0,1])}" '
+            f'ixz="{_f(Il[0,2])}" iyy="{_f(Il[1,1])}" iyz="{_f(Il[1,2])}" izz="{_f(Il[2,2])}"/></inertial>')
+
+
+def _capsule_xml(name: str, a: np.ndarray, b: np.ndarray, r: float) -> str:
+    """A capsule from a to b (link frame) as a z-aligned cylinder element."""
+    axis = b - a
+    L = float(np.linalg.norm(axis))
+    T = np.eye(4)
+    T[:3, 3] = 0.5 * (a + b)
+    if L > 1e-12:
+        z = axis / L
+        w = np.cross([0.0, 0.0, 1.0], z)
+        s, c = np.linalg.norm(w), z[2]
+        if s < 1e-12:
+            R = np.eye(3) if c > 0 else rotx(math.pi)
+        else:
+            from .spatial import exp3
+            R = exp3(w / s * math.atan2(s, c))
+        T[:3, :3] = R
+    return (f'<collision name="{name}_capsule">{_origin(T)}<geometry>'
+            f'<cylinder radius="{_f(r)}" length="{_f(L)}"/></geometry></collision>')
+
+
+def urdf_string(desc: RobotDescription) -> str:
+    """The URDF text of a description (deterministic: the committed files are compared to it)."""
+    out = [f'<?xml version="1.0"?>',
+           f"<!-- generated by `optplan models build` from models/robots/{desc.name}.toml; do not edit -->",
+           f'<robot name="{escape(desc.name)}">']
+    base_T = np.eye(4)
+    base_I = _inertial(desc.base_mass, desc.base_com, desc.base_inertia, base_T)
+    colls = []
+    for k, b in enumerate(desc.base_boxes):
+        T = np.eye(4)
+        T[:3, :3] = rpy_to_matrix(*b["rpy"])
+        T[:3, 3] = b["xyz"]
+        colls.append(f'<collision name="{desc.base_link}_box{k}">{_origin(T)}<geometry>'
+                     f'<box size="{" ".join(_f(v) for v in b["size"])}"/></geometry></collision>')
+    out.append(f'  <link name="{desc.base_link}">{base_I}{"".join(colls)}</link>')
+    for arm in desc.arms:
+        at = desc.arm_types[arm.type]
+        p = arm.prefix
+        mount = np.eye(4)
+        mount[:3, :3] = arm.R
+        mount[:3, 3] = arm.xyz
+        out.append(f'  <link name="{p}_mount"/>')
+        out.append(f'  <joint name="{p}_mount_joint" type="fixed"><parent link="{desc.base_link}"/>'
+                   f'<child link="{p}_mount"/>{_origin(mount)}</joint>')
+        parent = f"{p}_mount"
+        for i in range(1, at.n + 1):
+            Tl = at.link_to_dh(i)
+            caps = "".join(_capsule_xml(f"{p}_link{i}_{k}", (Tl @ np.r_[c["a"], 1])[:3],
+                                        (Tl @ np.r_[c["b"], 1])[:3], c["radius"])
+                           for k, c in enumerate(at.capsules) if c["link"] == i)
+            out.append(f'  <link name="{p}_link{i}">'
+                       f'{_inertial(at.masses[i-1], at.coms[i-1], at.inertias[i-1], Tl)}{caps}</link>')
+            out.append(f'  <joint name="{p}_joint{i}" type="revolute"><parent link="{parent}"/>'
+                       f'<child link="{p}_link{i}"/>{_origin(at.joint_origin(i))}<axis xyz="0 0 1"/>'
+                       f'<limit lower="{_f(at.lower[i-1])}" upper="{_f(at.upper[i-1])}" '
+                       f'effort="{_f(at.effort[i-1])}" velocity="{_f(at.velocity[i-1])}"/></joint>')
+            parent = f"{p}_link{i}"
+        tool = np.eye(4)
+        tool[:3, :3] = rpy_to_matrix(*at.tool_rpy)
+        tool[:3, 3] = at.tool_xyz
+        out.append(f'  <link name="{p}_ee"/>')
+        out.append(f'  <joint name="{p}_ee_joint" type="fixed"><parent link="{parent}"/>'
+                   f'<child link="{p}_ee"/>{_origin(at.link_to_dh(at.n) @ tool)}</joint>')
+    out.append("</robot>")
+    return "\n".join(out) + "\n"
+
+
+def write_urdf(desc: RobotDescription, out_dir: Path | None = None) -> Path:
+    """Write ``<out_dir>/<name>.urdf`` (default: the repo's ``urdf/``) and return its path."""
+    out_dir = Path(out_dir) if out_dir is not None else urdf_dir()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"{desc.name}.urdf"
+    path.write_text(urdf_string(desc))
+    return path
+
+
+def build_all(out_dir: Path | None = None) -> list[Path]:
+    """Regenerate the URDF of every description in ``models/robots``."""
+    return [write_urdf(load_description(n), out_dir) for n in available_models()]
+
+
+def arm_metadata(desc: RobotDescription) -> dict[str, Any]:
+    """Arm groups as RobotModel expects them: ``{arm: {"joints": [...], "ee": frame}}``."""
+    return {a.name: {"joints": [f"{a.prefix}_joint{i}" for i in range(1, desc.arm_types[a.type].n + 1)],
+                     "ee": f"{a.prefix}_ee"} for a in desc.arms}
+
+
+def dh_capsules(arm: ArmType, radius: float, min_length: float = 1e-9) -> list[dict]:
+    """Capsules along the D-H link segments (each in its D-H frame), a helper for writing the
+    ``capsules`` list of a new arm: the ``a`` leg of a link belongs to it, and so does the ``d``
+    leg along its own joint axis. Zero-length legs are skipped."""
+    caps = []
+    for i in range(1, arm.n + 1):
+        off, alpha, a, d = arm.dh[i - 1]
+        if arm.convention == "modified":
+            legs = []
+            if abs(d) > min_length:
+                legs.append((np.array([0.0, 0.0, -d]), np.zeros(3)))
+            if i < arm.n:
+                a_next = arm.dh[i][2]
+                if abs(a_next) > min_length:
+                    legs.append((np.zeros(3), np.array([a_next, 0.0, 0.0])))
+        else:
+            Tinv = np.linalg.inv(_tz(d) @ _tx(a) @ _hrot(rotx(alpha)))
+            o_prev = (Tinv @ np.r_[0.0, 0.0, 0.0, 1.0])[:3]
+            knee = (Tinv @ _tz(d) @ np.r_[0.0, 0.0, 0.0, 1.0])[:3]
+            legs = [(s, e) for s, e in ((o_prev, knee), (knee, np.zeros(3)))
+                    if np.linalg.norm(e - s) > min_length]
+        for s, e in legs:
+            caps.append({"link": i, "a": s, "b": e, "radius": radius})
+    return caps

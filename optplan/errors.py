@@ -1,0 +1,60 @@
+"""Exceptions raised by optplan.
+
+Every error carries the offending value and what was expected, so a user can fix the input
+without reading the source. Failed *solves* and *plans* are never exceptions: they are statuses
+in the result objects.
+"""
+from __future__ import annotations
+
+from typing import Iterable
+
+
+class OptplanError(Exception):
+    """Base class of every optplan exception."""
+
+
+class ModelError(OptplanError, ValueError):
+    """A robot/scene description (TOML, URDF) is missing or malformed."""
+
+
+class UnknownNameError(OptplanError, KeyError):
+    """A frame, arm, joint or model name does not exist; the message lists the valid names."""
+
+    def __init__(self, kind: str, name: object, valid: Iterable[str]):
+        self.kind = kind
+        self.name = name
+        self.valid = sorted(str(v) for v in valid)
+        shown = ", ".join(self.valid[:40]) + (" ..." if len(self.valid) > 40 else "")
+        super().__init__(f"unknown {kind} {name!r}; valid {kind} names: [{shown}]")
+
+    def __str__(self) -> str:  # KeyError would otherwise repr() the message
+        return self.args[0]
+
+
+class ConfigurationError(OptplanError, ValueError):
+    """A configuration / velocity vector has the wrong size or non-finite entries."""
+
+
+def check_vector(value, size: int, what: str, *, allow_none: bool = False):
+    """Return ``value`` as a finite float vector of length ``size`` or raise ConfigurationError.
+
+    ``what`` names the quantity in the message (e.g. ``"q (Pinocchio configuration)"``).
+    """
+    import numpy as np
+
+    if value is None:
+        if allow_none:
+            return None
+        raise ConfigurationError(f"{what}: expected an array of {size} floats, got None")
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ConfigurationError(f"{what}: expected an array of {size} floats, got {value!r}") from exc
+    if arr.ndim != 1:
+        arr = arr.reshape(-1) if arr.size == size and arr.ndim == 2 and 1 in arr.shape else arr
+    if arr.shape != (size,):
+        raise ConfigurationError(f"{what}: expected shape ({size},), got shape {np.shape(value)}")
+    if not np.all(np.isfinite(arr)):
+        bad = np.flatnonzero(~np.isfinite(arr)).tolist()
+        raise ConfigurationError(f"{what}: entries {bad} are not finite (values {arr[bad].tolist()})")
+    return arr
