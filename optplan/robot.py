@@ -67,11 +67,16 @@ class RobotModel:
         self.nq, self.nv = model.nq, model.nv
         self.nj = self.nv - self.base_nv
         first = 2 if floating else 1
-        self.joint_names: tuple[str, ...] = tuple(model.names[first:])
+        names = []
         for jid in range(first, model.njoints):
+            if model.joints[jid].shortname() == "JointModelMimic":
+                continue  # coupled joint: driven by the joint it mimics, no own coordinate
             if model.nqs[jid] != 1 or model.nvs[jid] != 1:
                 raise ModelError(f"joint {model.names[jid]!r} has nq={model.nqs[jid]}, nv={model.nvs[jid]}; "
-                                 "only 1-DoF joints are supported below the (optional) free-flyer root")
+                                 "only 1-DoF joints (and mimic joints) are supported below the optional "
+                                 "free-flyer root")
+            names.append(model.names[jid])
+        self.joint_names: tuple[str, ...] = tuple(names)
         self.lower = np.array(model.lowerPositionLimit[self.base_nq:], dtype=float)
         self.upper = np.array(model.upperPositionLimit[self.base_nq:], dtype=float)
         self.velocity_limit = np.array(model.velocityLimit[self.base_nv:], dtype=float)
@@ -99,7 +104,7 @@ class RobotModel:
 
     @classmethod
     def from_urdf(cls, path: str | Path, arms: Mapping[str, str | Mapping], *, floating: bool = False,
-                  name: str | None = None) -> "RobotModel":
+                  name: str | None = None, mimic: bool = True) -> "RobotModel":
         """Load any URDF.
 
         Parameters
@@ -108,6 +113,7 @@ class RobotModel:
         arms: ``{arm_name: ee_frame}`` or ``{arm_name: {"ee": ee_frame, "joints": [names]}}``;
             without ``joints`` the arm is every 1-DoF joint from the root to the EE frame.
         floating: add a free-flyer root joint (free-floating base).
+        mimic: read URDF ``<mimic>`` tags as coupled joints (``θ = multiplier · q + offset``).
         """
         path = Path(path)
         if not path.exists():
@@ -121,9 +127,9 @@ class RobotModel:
             raise ModelError(f"{path}: expected a <robot> root element, got <{root.tag}>")
         try:
             if floating:
-                model = pin.buildModelFromXML(text, pin.JointModelFreeFlyer())
+                model = pin.buildModelFromXML(text, pin.JointModelFreeFlyer(), mimic=mimic)
             else:
-                model = pin.buildModelFromXML(text)
+                model = pin.buildModelFromXML(text, mimic=mimic)
             geom = pin.buildGeomFromUrdfString(model, text, pin.COLLISION)
         except (RuntimeError, ValueError) as exc:
             raise ModelError(f"{path}: Pinocchio could not parse the URDF: {exc}") from exc
@@ -165,7 +171,8 @@ class RobotModel:
         else:
             jids, j = [], int(self.model.frames[fid].parentJoint)
             while j > (1 if self.is_floating else 0):
-                jids.append(j)
+                if self.model.nqs[j] == 1:  # skip mimic (coupled) joints
+                    jids.append(j)
                 j = int(self.model.parents[j])
             jids.reverse()
         if not jids:
@@ -178,6 +185,9 @@ class RobotModel:
     # ------------------------------------------------------------------ configurations
     def check_q(self, q, what: str = "q") -> np.ndarray:
         """Validate a full configuration (size nq, finite, unit quaternion for a floating base)."""
+        if type(q) is np.ndarray and q.dtype == np.float64 and q.shape == (self.nq,) and np.isfinite(q).all():
+            if not self.is_floating or abs(float(q[3:7] @ q[3:7]) - 1.0) < 2e-6:
+                return q  # fast path for hot loops; the slow path below builds the error message
         q = check_vector(q, self.nq, f"{what} (Pinocchio configuration of {self.name!r}, nq={self.nq})")
         if self.is_floating:
             n = np.linalg.norm(q[3:7])

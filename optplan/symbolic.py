@@ -79,7 +79,7 @@ def _describe_joints(model: pin.Model) -> list[_Joint | None]:
         scaling, offset = 1.0, 0.0
         if name == "JointModelMimic":
             ext = jm.extract()
-            scaling, offset = float(ext.scaling()), float(ext.offset())
+            scaling, offset = float(ext.scaling), float(ext.offset)
             if scaling == 0.0:
                 raise ModelError(f"mimic joint {model.names[j]!r} has scaling 0")
         elif model.nqs[j] != 1 or model.nvs[j] != 1:

@@ -1,0 +1,105 @@
+"""The ``optplan`` command."""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+
+
+def _cmd_models_build(args) -> int:
+    from .description import available_models, load_description, urdf_dir, urdf_string, write_urdf
+
+    stale = []
+    for name in available_models():
+        desc = load_description(name)
+        path = urdf_dir() / f"{name}.urdf"
+        if args.check:
+            if not path.exists() or path.read_text() != urdf_string(desc):
+                stale.append(name)
+        else:
+            print(f"wrote {write_urdf(desc)}")
+    if args.check:
+        if stale:
+            print(f"out of date: {', '.join(stale)} (run `optplan models build`)")
+            return 1
+        print("all URDFs up to date")
+    return 0
+
+
+def _cmd_models_list(args) -> int:
+    from .description import available_models, load_description
+
+    for name in available_models():
+        d = load_description(name)
+        print(f"{name:20s} {d.base_type:8s} arms={[a.name for a in d.arms]} mass={d.total_mass:.2f} kg")
+    return 0
+
+
+def _cmd_bench_kinematics(args) -> int:
+    from .bench.kinematics import report, run
+
+    times = run(args.robot, args.calls)
+    print(report(times))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(times, f, indent=2)
+    return 0
+
+
+def _cmd_demo(args) -> int:
+    from .demo import run
+
+    t0 = time.perf_counter()
+    out = run(duration=args.duration)
+    out["runtime_s"] = time.perf_counter() - t0
+    rpy, paper = out["final_base_rpy_deg"], out["paper_final_base_rpy_deg"]
+    print("EBA robot, free-end case, 5th-order polynomial joint motion (seed 004 Sec. 4.1)")
+    print(f"  final base RPY [deg]   optplan ({rpy[0]:+.3f}, {rpy[1]:+.3f}, {rpy[2]:+.3f})   "
+          f"paper ({paper[0]:+.2f}, {paper[1]:+.2f}, {paper[2]:+.2f})")
+    print(f"  max momentum residual  {out['max_momentum_residual']:.2e}")
+    print(f"  CoM drift              {out['com_drift_m']:.2e} m")
+    print(f"  run time               {out['runtime_s']:.2f} s")
+    print("  (the paper's tables do not reproduce its numbers exactly; see docs/models.md)")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=2)
+    return 0 if out["max_momentum_residual"] < 1e-9 else 1
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="optplan", description="Motion planning and trajectory optimization "
+                                "for dual-arm space robots")
+    p.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    models = sub.add_parser("models", help="robot descriptions").add_subparsers(dest="action", required=True)
+    b = models.add_parser("build", help="regenerate urdf/<name>.urdf from models/robots/<name>.toml")
+    b.add_argument("--check", action="store_true", help="only check that the URDFs are up to date")
+    b.set_defaults(func=_cmd_models_build)
+    models.add_parser("list", help="list robot descriptions").set_defaults(func=_cmd_models_list)
+
+    bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="what", required=True)
+    k = bench.add_parser("kinematics", help="per-call times of numeric and CasADi kinematics")
+    k.add_argument("--robot", default="eba_ffsr")
+    k.add_argument("--calls", type=int, default=5000)
+    k.add_argument("--json", help="write the figures as JSON to this path")
+    k.set_defaults(func=_cmd_bench_kinematics)
+
+    d = sub.add_parser("demo", help="free-floating base of the EBA robot under a quintic joint motion")
+    d.add_argument("--duration", type=float, default=20.0, help="motion duration [s]")
+    d.add_argument("--json", help="write the figures as JSON to this path")
+    d.set_defaults(func=_cmd_demo)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,466 @@
+"""Quartic-spline smoothing (seed paper Sec. 3.3, Eq. 8-11) posed as an NLP and solved with IPOPT.
+
+Decision variables are the quartic coefficients of every segment and, with ``free_durations``, the
+segment durations ``h_i`` [s]. Internally every segment's coefficients are stored normalised,
+``p_{i,k} = coef_{i,k} h_i^k`` (position units; ``x_i(t) = sum_k p_{i,k} tau^k``,
+``tau = (t - t_i)/h_i``): this is only a scaling of the paper's ``a_i .. e_i`` that keeps the NLP
+well conditioned whatever the time unit; the returned spline uses the paper's coefficients.
+
+Equality constraints are exactly the Eq. 11 conditions (positions at the waypoints, equal
+velocity, acceleration and jerk at the inner waypoints, initial velocity and acceleration, final
+velocity), each multiplied by ``h_ref^k`` (``h_ref`` = mean initial duration) so all are in
+position units. Inequalities are sampled: ``|x'| <= qdot_max``, ``|x''| <= qddot_max`` and
+``||ee_velocity(x, x')|| <= ee_speed_max`` at ``samples_per_segment`` uniformly spaced points of
+every segment, both ends included (a point shared by two segments is constrained once). With
+``refine=True`` (default) the solution is then checked between samples (exact maxima for the joint
+limits, dense sampling + parabolic refinement for the end-effector speed) and the worst violating
+point of every offending segment is added to the samples and the NLP re-solved, warm-started, up to
+``max_refinements`` times, so the limits hold along the whole trajectory, not only at samples.
+
+With fixed durations the equalities alone determine the spline (5m equations, 5m unknowns per
+dimension), so the NLP's only feasible point is the linear solve of :func:`optplan.splines.quartic_spline`;
+the cost is irrelevant and a limit that this spline violates makes the problem infeasible
+(``success=False``, IPOPT's status). With free durations the cost is
+``time_weight * sum(h) + smooth_weight * sum_i integral ||x^(r)||^2 dt`` (r = 3 for ``cost="jerk"``,
+2 for ``"acceleration"``; units s and unit^2/s^(2r-1), summed over dimensions).
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+from numbers import Real
+from typing import Any, Dict, List, Optional, Tuple
+
+import casadi as ca
+import numpy as np
+
+from optplan.splines import (PiecewisePolynomial, _broadcast_vec, _check_int, _check_positive,
+                             _falling, _float_array, quartic_spline, segment_max_abs)
+
+__all__ = ["QuarticSmoothingResult", "smooth_quartic"]
+
+_log = logging.getLogger(__name__)
+_COSTS = {"jerk": 3, "acceleration": 2}
+_SLOTS = 3  # movable constraint points per segment (and dimension) for the refinement
+
+
+@dataclass(frozen=True)
+class QuarticSmoothingResult:
+    """Outcome of :func:`smooth_quartic` (returned for failed solves too, never None).
+
+    Attributes:
+        success: IPOPT reported success on the last solve.
+        status: IPOPT return status (e.g. ``"Solve_Succeeded"``, ``"Infeasible_Problem_Detected"``),
+            or ``"Exception: ..."`` if the solver raised.
+        iterations: IPOPT iterations summed over all (refinement) solves.
+        wall_time: total wall time [s] of the call (building, solving, checking).
+        spline: the resulting degree-4 spline (the warm start if the solver raised).
+        durations: (m,) segment durations [s].
+        max_constraint_violation: max over the Eq. 11 residuals (position [unit], derivative jumps
+            [unit/s^k], boundary conditions) and the violations of the limits along the whole
+            trajectory (exact for joint velocity / acceleration, dense sampling for the
+            end-effector speed), in the units of each quantity.
+        objective: final cost value.
+        refinements: number of re-solves with added sample points.
+    """
+
+    success: bool
+    status: str
+    iterations: int
+    wall_time: float
+    spline: PiecewisePolynomial
+    durations: np.ndarray
+    max_constraint_violation: float
+    objective: float = float("nan")
+    refinements: int = 0
+
+
+# ----------------------------------------------------------------------------- helpers
+def _limit_vec(value: Any, n: int, name: str) -> Optional[np.ndarray]:
+    if value is None:
+        return None
+    arr = np.array(value, dtype=float) if not isinstance(value, (str, bytes)) else None
+    if arr is None or arr.dtype.kind != "f":
+        raise TypeError(f"{name}: expected a positive scalar or an array of {n} positive limits, got {value!r}")
+    arr = np.full(n, float(arr)) if arr.ndim == 0 else arr.reshape(-1)
+    if arr.shape != (n,) or np.any(np.isnan(arr)) or np.any(arr <= 0):
+        raise ValueError(f"{name}: expected a positive scalar or {n} positive limits (inf allowed), got {value!r}")
+    return arr
+
+
+def _ee_wrapper(fun: Any, n: int) -> Tuple[ca.Function, type]:
+    """Canonical (q (n,1), qdot (n,1)) -> v (k,1) Function, SX if the user's Function inlines into SX."""
+    if not isinstance(fun, ca.Function):
+        raise TypeError(f"ee_velocity: expected a casadi.Function (q, qdot) -> linear velocity, got {type(fun).__name__}")
+    if fun.n_in() != 2 or fun.n_out() < 1:
+        raise ValueError(f"ee_velocity: expected 2 inputs (q, qdot) and >= 1 output, got {fun.n_in()} inputs, {fun.n_out()} outputs")
+    for i in range(2):
+        if fun.numel_in(i) != n:
+            raise ValueError(f"ee_velocity: input {i} must have {n} entries (one per waypoint dimension), got shape {fun.size_in(i)}")
+    for sym in (ca.SX, ca.MX):
+        try:
+            q, qd = sym.sym("q", n), sym.sym("qd", n)
+            out = fun(ca.reshape(q, fun.size1_in(0), fun.size2_in(0)), ca.reshape(qd, fun.size1_in(1), fun.size2_in(1)))
+            out = out[0] if isinstance(out, (list, tuple)) else out
+            return ca.Function("ee_velocity_col", [q, qd], [ca.vec(out)]), sym
+        except Exception:  # noqa: BLE001 - SX evaluation unsupported: use MX
+            continue
+    raise ValueError("ee_velocity: the Function cannot be evaluated symbolically with (n,) inputs")
+
+
+def _jerk_matrix(r: int) -> np.ndarray:
+    """Q with integral_0^1 (d^r/dtau^r sum_k p_k tau^k)^2 dtau = p^T Q p (k = 0..4)."""
+    Q = np.zeros((5, 5))
+    for p in range(r, 5):
+        for q in range(r, 5):
+            Q[p, q] = _falling(p, r) * _falling(q, r) / (p + q - 2 * r + 1)
+    return Q
+
+
+class _Problem:
+    """Data of one smoothing problem (numpy side) and its CasADi transcription."""
+
+    def __init__(self, t0: float, h: np.ndarray, X: np.ndarray, v0, a0, vf, vmax, amax, ee, ee_max,
+                 free: bool, cost_order: int, time_weight: float, smooth_weight: float, samples: int):
+        self.t0, self.X = t0, X
+        self.m, self.n = h.size, X.shape[1]
+        self.v0, self.a0, self.vf = v0, a0, vf
+        self.lims = {"qdot_max": vmax, "qddot_max": amax}
+        self.ee_max, self.free = ee_max, free
+        self.ee, self.sym = (ee if ee is not None else (None, ca.SX))
+        self.r, self.tw, self.sw, self.S = cost_order, time_weight, smooth_weight, samples
+        self.h_ref = float(h.mean())
+        # movable constraint points ("slots", fractions of a segment): per (segment, dimension) for
+        # the joint limits, per segment for the end-effector speed; set to the worst points found
+        self.slot_shape = {name: (_SLOTS, self.m, self.n) for name, lim in self.lims.items() if lim is not None}
+        if ee is not None:
+            self.slot_shape["ee_speed_max"] = (_SLOTS, self.m, 1)
+
+    def spline(self, h: np.ndarray) -> PiecewisePolynomial:
+        return quartic_spline(self.t0 + np.concatenate([[0.0], np.cumsum(h)]), self.X, self.v0, self.a0, self.vf)
+
+    # -- symbolic NLP
+    def build(self, h_fixed: np.ndarray):
+        """NLP dict (x, p, f, g) and the bounds of g; p holds the slot fractions (see pack_slots)."""
+        m, n, sym = self.m, self.n, self.sym
+        nP = 5 * m * n
+        w = sym.sym("w", nP + (m if self.free else 0))
+        idx = (np.arange(m)[:, None, None] * 5 + np.arange(5)[None, :, None]) * n + np.arange(n)[None, None, :]
+        P = [ca.reshape(w[idx[:, k, :].ravel(order="F").tolist()], m, n) for k in range(5)]
+        H = w[nP:] if self.free else ca.DM(h_fixed)
+        Hm = ca.repmat(H, 1, n)
+        psym = sym.sym("p", sum(int(np.prod(s)) for s in self.slot_shape.values()))
+        X = self.X
+        g, lb, ub = [], [], []
+
+        def add(expr, lo, hi):
+            g.append(ca.vec(expr))
+            size = expr.numel()
+            lb.append(np.broadcast_to(np.reshape(lo, -1, order="F") if np.ndim(lo) else lo, (size,)))
+            ub.append(np.broadcast_to(np.reshape(hi, -1, order="F") if np.ndim(hi) else hi, (size,)))
+
+        add(P[0], X[:-1], X[:-1])                              # a_i = x_i
+        add(P[0] + P[1] + P[2] + P[3] + P[4], X[1:], X[1:])    # x_i(t_{i+1}) = x_{i+1}
+        end = {}
+        for o in (1, 2, 3):                                    # C1, C2, C3 at inner waypoints
+            end[o] = sum(_falling(k, o) * P[k] for k in range(o, 5)) / Hm**o
+            if m > 1:
+                start_next = math.factorial(o) * P[o][1:, :] / Hm[1:, :] ** o
+                add(self.h_ref**o * (end[o][:-1, :] - start_next), 0.0, 0.0)
+        add(self.h_ref * P[1][0, :] / H[0], self.h_ref * self.v0, self.h_ref * self.v0)
+        add(self.h_ref**2 * 2 * P[2][0, :] / H[0] ** 2, self.h_ref**2 * self.a0, self.h_ref**2 * self.a0)
+        add(self.h_ref * end[1][m - 1, :], self.h_ref * self.vf, self.h_ref * self.vf)
+
+        def derivs(Ps, Hs, Fr):
+            q = Ps[0] + Ps[1] * Fr + Ps[2] * Fr**2 + Ps[3] * Fr**3 + Ps[4] * Fr**4
+            v = (Ps[1] + 2 * Ps[2] * Fr + 3 * Ps[3] * Fr**2 + 4 * Ps[4] * Fr**3) / Hs
+            a = (2 * Ps[2] + 6 * Ps[3] * Fr + 12 * Ps[4] * Fr**2) / Hs**2
+            return {"q": q, "qdot_max": v, "qddot_max": a}
+
+        def add_limits(d, npts):
+            for name in ("qdot_max", "qddot_max"):
+                lim = self.lims[name]
+                dims = [] if lim is None else np.flatnonzero(np.isfinite(lim)).tolist()
+                if dims:
+                    L = np.tile(lim[dims], (npts, 1))
+                    add(d[name][:, dims], -L, L)
+            if self.ee is not None:
+                vel = self.ee.map(npts)(d["q"].T, d["qdot_max"].T)
+                add(ca.sum1(vel**2), 0.0, self.ee_max**2)
+
+        # fixed samples: S per segment, both ends, shared knots once
+        pts = [(i, f) for i in range(m) for f in np.linspace(0.0, 1.0, self.S)[:-1]] + [(m - 1, 1.0)]
+        if self.slot_shape:
+            seg = [i for i, _ in pts]
+            add_limits(derivs([P[k][seg, :] for k in range(5)], ca.repmat(H[seg], 1, n),
+                              ca.repmat(ca.DM([f for _, f in pts]), 1, n)), len(pts))
+        # slots
+        off = 0
+        for name, shape in self.slot_shape.items():
+            size = int(np.prod(shape))
+            for s in range(_SLOTS):
+                lo = off + s * m * shape[2]
+                T = ca.reshape(psym[lo:lo + m * shape[2]], shape[2], m).T  # (m, n) or (m, 1), row-major slots
+                T = T if shape[2] == n else ca.repmat(T, 1, n)
+                d = derivs(P, Hm, T)
+                if name == "ee_speed_max":
+                    vel = self.ee.map(m)(d["q"].T, d["qdot_max"].T)
+                    add(ca.sum1(vel**2), 0.0, self.ee_max**2)
+                else:
+                    lim = self.lims[name]
+                    dims = np.flatnonzero(np.isfinite(lim)).tolist()
+                    if dims:
+                        L = np.tile(lim[dims], (m, 1))
+                        add(d[name][:, dims], -L, L)
+            off += size
+
+        Qm = _jerk_matrix(self.r)
+        J = 0
+        for p in range(5):
+            for q in range(5):
+                if Qm[p, q] != 0.0:
+                    J = J + Qm[p, q] * ca.sum2(P[p] * P[q])
+        J = ca.sum1(J * H ** (1 - 2 * self.r))
+        f = self.tw * ca.sum1(H) + self.sw * J if self.free else J
+        nlp = {"x": w, "p": psym, "f": f, "g": ca.vertcat(*g)}
+        return nlp, np.concatenate(lb), np.concatenate(ub)
+
+    def pack_slots(self, slots: Dict[str, np.ndarray]) -> np.ndarray:
+        """Slot arrays (K, m, n|1) -> parameter vector (row-major per slot, matching build)."""
+        return np.concatenate([slots[name].ravel() for name in self.slot_shape] or [np.zeros(0)])
+
+    def pack(self, pp: PiecewisePolynomial) -> np.ndarray:
+        h = pp.durations
+        p = pp.coefficients * h[:, None, None] ** np.arange(5)[None, :, None]
+        return np.concatenate([p.ravel(), h]) if self.free else p.ravel()
+
+    def unpack(self, w: np.ndarray, h_fixed: np.ndarray) -> Tuple[PiecewisePolynomial, np.ndarray]:
+        m, n = self.m, self.n
+        h = np.asarray(w[5 * m * n:], float).copy() if self.free else h_fixed.copy()
+        p = np.asarray(w[:5 * m * n], float).reshape(m, 5, n)
+        coef = p / h[:, None, None] ** np.arange(5)[None, :, None]
+        return PiecewisePolynomial(self.t0 + np.concatenate([[0.0], np.cumsum(h)]), coef), h
+
+    # -- numeric checks (independent of the NLP expressions)
+    def limit_violations(self, pp: PiecewisePolynomial, dense: int = 32) -> Dict[str, Tuple[np.ndarray, ...]]:
+        """{limit name: (excess, worst fraction, ratio)}, arrays (m, n) (joint limits) or (m, 1) (ee speed).
+
+        ``excess`` = max over the segment minus the limit (in the limit's units), ``ratio`` = max / limit.
+        """
+        out = {}
+        for name, k in (("qdot_max", 1), ("qddot_max", 2)):
+            lim = self.lims[name]
+            if lim is not None:
+                mx, loc = segment_max_abs(pp, k, dense)
+                out[name] = (mx - lim[None, :], loc, mx / lim[None, :])
+        if self.ee is not None:
+            m, G = pp.n_segments, dense
+            frac = np.linspace(0.0, 1.0, G)
+            t = pp.breakpoints[:-1, None] + frac[None, :] * pp.durations[:, None]
+            speed = self._ee_speed(pp, t.ravel()).reshape(m, G)
+            rows = np.arange(m)
+            j = np.argmax(speed, axis=1)
+            jj = np.clip(j, 1, G - 2)
+            y0, y1, y2 = speed[rows, jj - 1], speed[rows, jj], speed[rows, jj + 1]
+            den = y0 - 2 * y1 + y2
+            ok = (j == jj) & (den < 0)
+            shift = np.where(ok, 0.5 * (y0 - y2) / np.where(ok, den, -1.0), 0.0)
+            loc = np.clip(frac[jj] + np.clip(shift, -1, 1) / (G - 1), 0.0, 1.0)
+            s_loc = self._ee_speed(pp, np.minimum(pp.breakpoints[:-1] + loc * pp.durations, pp.tf))
+            better = ok & (s_loc >= speed[rows, j])
+            best = np.where(better, s_loc, speed[rows, j])
+            loc = np.where(better, loc, frac[j])
+            out["ee_speed_max"] = ((best - self.ee_max)[:, None], loc[:, None], (best / self.ee_max)[:, None])
+        return out
+
+    def _ee_speed(self, pp: PiecewisePolynomial, t: np.ndarray) -> np.ndarray:
+        v = self.ee.map(t.size)(pp(t).T, pp(t, 1).T)
+        return np.sqrt(np.sum(np.asarray(v, float) ** 2, axis=0))
+
+    def equality_residual(self, pp: PiecewisePolynomial) -> float:
+        """Max |residual| of the Eq. 11 conditions, each in its own units (unit, unit/s^k)."""
+        c, h = pp.coefficients, pp.durations
+        hp = h[:, None, None] ** np.arange(5)[None, :, None]
+        res = [np.abs(c[:, 0] - self.X[:-1]).ravel(), np.abs((c * hp).sum(axis=1) - self.X[1:]).ravel()]
+        for o in (1, 2, 3):
+            d = pp.derivative(o).coefficients
+            endv = (d * h[:, None, None] ** np.arange(d.shape[1])[None, :, None]).sum(axis=1)
+            res.append(np.abs(endv[:-1] - d[1:, 0]).ravel())
+            if o == 1:
+                res.append(np.abs(np.concatenate([d[0, 0] - self.v0, endv[-1] - self.vf])))
+            if o == 2:
+                res.append(np.abs(d[0, 0] - self.a0))
+        return float(max(r.max() if r.size else 0.0 for r in res))
+
+
+# ----------------------------------------------------------------------------- public entry point
+def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a0: Any = None, vf: Any = None,
+                   qdot_max: Any = None, qddot_max: Any = None, ee_velocity: Optional[ca.Function] = None,
+                   ee_speed_max: Optional[float] = None, free_durations: bool = False, min_duration: float = 1e-3,
+                   max_duration: Optional[float] = None, cost: str = "jerk", time_weight: float = 1.0,
+                   smooth_weight: float = 1e-3, samples_per_segment: int = 8, refine: bool = True,
+                   max_refinements: int = 4, ipopt_options: Optional[Dict[str, Any]] = None) -> QuarticSmoothingResult:
+    """Smooth waypoints with a C3 quartic spline under velocity / acceleration / end-effector-speed limits.
+
+    Args:
+        times_or_durations: (m+1,) strictly increasing waypoint times [s], or (m,) positive segment
+            durations [s] (the spline then starts at t = 0). With ``free_durations`` these are the
+            initial guess.
+        waypoints: (m+1,) or (m+1, n) positions [rad or m].
+        v0, a0, vf: initial velocity [unit/s], initial acceleration [unit/s^2], final velocity
+            [unit/s]; scalar or (n,), default 0.
+        qdot_max, qddot_max: |x'| [unit/s] and |x''| [unit/s^2] limits, scalar or (n,) (inf = none).
+        ee_velocity: ``casadi.Function`` (q (n,), qdot (n,)) -> end-effector linear velocity [m/s];
+            required with ``ee_speed_max`` [m/s] (limit on its Euclidean norm).
+        free_durations: optimise the durations h_i in [min_duration, max_duration] [s] too.
+        cost: "jerk" or "acceleration": integral of the squared derivative (the whole cost with fixed
+            durations, where it does not change the unique solution).
+        time_weight [1], smooth_weight [s^(2r-1)/unit^2]: weights of total time and smoothness
+            integral with free durations (``time_weight * T + smooth_weight * J``).
+        samples_per_segment: constraint samples per segment, both ends included (>= 2).
+        refine, max_refinements: add worst violating points between samples and re-solve.
+        ipopt_options: IPOPT options overriding the defaults (``print_level=0``, ``sb="yes"``);
+            ``print_time`` and other ``nlpsol`` options may be given in the same dict, or a nested
+            ``{"ipopt": {...}}`` dict.
+
+    Returns:
+        QuarticSmoothingResult; failures (infeasible, iteration limit, solver exception) are
+        reported through ``success``/``status``, never raised. Invalid inputs raise ValueError/TypeError.
+    """
+    t_start = time.perf_counter()
+    X = _float_array(waypoints, "waypoints")
+    X = X[:, None] if X.ndim == 1 else X
+    if X.ndim != 2 or X.shape[0] < 2 or X.shape[1] < 1:
+        raise ValueError(f"waypoints: expected shape (m+1,) or (m+1, n) with m >= 1, got shape {np.shape(waypoints)}")
+    m, n = X.shape[0] - 1, X.shape[1]
+    td = _float_array(times_or_durations, "times_or_durations")
+    if td.ndim != 1 or td.size not in (m, m + 1):
+        raise ValueError(f"times_or_durations: expected {m + 1} times or {m} durations [s] for {m + 1} waypoints, "
+                         f"got shape {td.shape}")
+    if td.size == m + 1:
+        h, t0 = np.diff(td), float(td[0])
+        if np.any(h <= 0):
+            k = int(np.flatnonzero(h <= 0)[0])
+            raise ValueError(f"times_or_durations: times must be strictly increasing, got t[{k}]={td[k]} >= t[{k + 1}]={td[k + 1]}")
+    else:
+        h, t0 = td.copy(), 0.0
+        if np.any(h <= 0):
+            raise ValueError(f"times_or_durations: durations must be > 0 s, got {h.tolist()}")
+    v0v, a0v, vfv = (_broadcast_vec(v, n, nm) for v, nm in ((v0, "v0"), (a0, "a0"), (vf, "vf")))
+    vmax, amax = _limit_vec(qdot_max, n, "qdot_max"), _limit_vec(qddot_max, n, "qddot_max")
+    if (ee_velocity is None) != (ee_speed_max is None):
+        raise ValueError("ee_velocity and ee_speed_max must be given together "
+                         f"(got ee_velocity={'set' if ee_velocity is not None else None}, ee_speed_max={ee_speed_max!r})")
+    ee = _ee_wrapper(ee_velocity, n) if ee_velocity is not None else None
+    ee_max = _check_positive(ee_speed_max, "ee_speed_max") if ee is not None else None
+    if cost not in _COSTS:
+        raise ValueError(f"cost: expected one of {sorted(_COSTS)}, got {cost!r}")
+    if not isinstance(free_durations, bool):
+        raise TypeError(f"free_durations: expected a bool, got {free_durations!r}")
+    hmin = _check_positive(min_duration, "min_duration")
+    hmax = math.inf if max_duration is None else _check_positive(max_duration, "max_duration")
+    if hmax <= hmin:
+        raise ValueError(f"max_duration: expected > min_duration={hmin}, got {max_duration}")
+    for val, nm in ((time_weight, "time_weight"), (smooth_weight, "smooth_weight")):
+        if isinstance(val, bool) or not isinstance(val, Real) or not (math.isfinite(val) and val >= 0):
+            raise ValueError(f"{nm}: expected a finite number >= 0, got {val!r}")
+    S = _check_int(samples_per_segment, "samples_per_segment", 2)
+    max_ref = _check_int(max_refinements, "max_refinements", 0)
+    if ipopt_options is not None and not isinstance(ipopt_options, dict):
+        raise TypeError(f"ipopt_options: expected a dict of IPOPT options, got {type(ipopt_options).__name__}")
+
+    prob = _Problem(t0, h, X, v0v, a0v, vfv, vmax, amax, ee, ee_max, free_durations, _COSTS[cost],
+                    float(time_weight), float(smooth_weight), S)
+    # warm start: the linear solve; with free durations stretched uniformly until it meets the limits
+    h_ws = np.clip(h, hmin * 1.01, hmax) if free_durations else h
+    pp_ws = prob.spline(h_ws)
+    if free_durations:
+        for _ in range(10):
+            viol = prob.limit_violations(pp_ws)
+            ratio = max([float(r.max()) ** (0.5 if nm == "qddot_max" else 1.0) for nm, (_, _, r) in viol.items()],
+                        default=0.0)
+            if ratio <= 1.0 or not np.all(h_ws * ratio * 1.05 <= hmax):
+                break
+            h_ws = h_ws * ratio * 1.05
+            pp_ws = prob.spline(h_ws)
+
+    opts: Dict[str, Any] = {"print_time": False, "error_on_fail": False,
+                            "ipopt": {"print_level": 0, "sb": "yes", "max_iter": 3000}}
+    if not free_durations and ee is None:
+        opts["ipopt"].update({"jac_c_constant": "yes", "jac_d_constant": "yes", "hessian_constant": "yes"})
+    top_level = set(ca.nlpsol_options("ipopt"))
+    for key, val in (ipopt_options or {}).items():
+        if key == "ipopt" and isinstance(val, dict):
+            opts["ipopt"].update(val)
+        elif key in top_level:
+            opts[key] = val
+        else:
+            opts["ipopt"][key[6:] if key.startswith("ipopt.") else key] = val
+
+    # slots start at the worst points of the warm start (plus two neighbours)
+    delta = 0.25 / (S - 1)
+    slots = {}
+    ws_viol = prob.limit_violations(pp_ws)
+    for name in prob.slot_shape:
+        loc = ws_viol[name][1]
+        slots[name] = np.stack([loc, np.clip(loc + delta, 0, 1), np.clip(loc - delta, 0, 1)])
+
+    x0 = prob.pack(pp_ws)
+    lbx, ubx = np.full(x0.size, -np.inf), np.full(x0.size, np.inf)
+    if free_durations:
+        lbx[-m:], ubx[-m:] = hmin, hmax
+    iterations, refinements, objective = 0, 0, float("nan")
+    status, success = "Not_Solved", False
+    pp, h_out = pp_ws, h_ws.copy()
+    warm: Dict[str, Any] = {}
+    try:
+        nlp, lbg, ubg = prob.build(h)
+        solvers = [ca.nlpsol("quartic_smoothing", "ipopt", nlp, opts)]
+    except Exception as exc:  # noqa: BLE001 - a failed solve is a status, not an exception
+        _log.warning("quartic smoothing: building the NLP raised %s", exc)
+        solvers, status = [], f"Exception: {type(exc).__name__}: {exc}"
+    for rnd in range(max_ref + 1 if solvers else 0):
+        try:
+            if warm and len(solvers) == 1:
+                wopts = {**opts, "ipopt": {"warm_start_init_point": "yes", "mu_init": 1e-6,
+                                           "warm_start_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9,
+                                           "warm_start_slack_bound_push": 1e-9, **opts["ipopt"]}}
+                solvers.append(ca.nlpsol("quartic_smoothing_warm", "ipopt", nlp, wopts))
+            solver = solvers[-1]
+            sol = solver(x0=x0, p=prob.pack_slots(slots), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **warm)
+            stats = dict(solver.stats())
+        except Exception as exc:  # noqa: BLE001
+            _log.warning("quartic smoothing: solver raised %s", exc)
+            status, success = f"Exception: {type(exc).__name__}: {exc}", False
+            break
+        status = str(stats.get("return_status", "Unknown"))
+        success = bool(stats.get("success", False))
+        iterations += int(stats.get("iter_count", 0))
+        objective = float(sol["f"])
+        w = np.asarray(sol["x"], float).ravel()
+        if np.all(np.isfinite(w)):
+            pp, h_out = prob.unpack(w, h)
+        if not (success and refine) or rnd == max_ref:
+            break
+        moved = 0
+        for name, (excess, loc, ratio) in prob.limit_violations(pp).items():
+            bad = (ratio > 1.0 + 1e-7) & (excess > 1e-9)
+            if np.any(bad):
+                sl = slots[name]
+                sl[2][bad], sl[1][bad], sl[0][bad] = sl[1][bad], sl[0][bad], loc[bad]
+                moved += int(bad.sum())
+        if not moved:
+            break
+        refinements += 1
+        x0 = w
+        warm = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
+        _log.debug("quartic smoothing: refinement %d moves %d constraint points", refinements, moved)
+
+    viol = [float(np.max(excess)) for excess, _, _ in prob.limit_violations(pp).values()]
+    max_viol = max([prob.equality_residual(pp)] + [max(v, 0.0) for v in viol])
+    return QuarticSmoothingResult(success=success, status=status, iterations=iterations,
+                                  wall_time=time.perf_counter() - t_start, spline=pp, durations=h_out,
+                                  max_constraint_violation=max_viol, objective=objective,
+                                  refinements=refinements)
