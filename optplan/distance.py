@@ -35,8 +35,8 @@ Construction (and why)
 * **Point-segment and point-box squared distances are computed exactly** (hard clamp of the
   segment parameter / of the box coordinates). The squared distance to a convex set is C1 by the
   envelope (Danskin) theorem, and automatic differentiation of the clamped formula returns that
-  continuous gradient. A *smooth* clamp is not used on purpose: any clamped parameter picks a
-  point *on* the segment, which over-estimates the distance (non-conservative).
+  continuous gradient. A *smooth* clamp is not used on purpose: an approximate parameter picks a
+  non-closest point *on* the segment, which over-estimates the distance (non-conservative).
 * ``sqrt(D^2)`` is kept exactly for ``D >= eps`` and continued below by the C2 polynomial
   ``eps (15 y - 10 y^2 + 3 y^3) / 8`` in ``y = D^2 / eps^2`` (proved ``<= D``, error
   ``<= 0.1411 eps``). Unlike ``sqrt(D^2 + eps^2) - eps`` (which is off by ~eps everywhere) this is
@@ -55,8 +55,12 @@ Construction (and why)
   error). For capsule-capsule the capsule needing fewer spheres is covered.
 
 Options (keyword-only, everywhere): ``eps`` [m] (default 1e-3), ``n_spheres`` (default: smallest
-k with ``rho - r <= cover_tol``), ``cover_tol`` [m] (default 2e-3), ``softmin_tol`` [m]
-(default 2e-3).
+k with ``rho - r <= cover_tol``, i.e. ``k = ceil(L / (2 sqrt(2 r tol + tol^2))) + 1``; e.g. 12 for
+r = 5 cm, L = 30 cm), ``cover_tol`` [m] (default 2e-3), ``softmin_tol`` [m] (default 2e-3).
+
+Measured against coal (5000 random separated placements per pair, half within 3 cm of contact):
+``d - d_exact <= 4.4e-16`` m; worst ``d_exact - d``: 0 (sphere-sphere, capsule-sphere),
+0.06 mm (sphere-box), 3.3 mm (capsule-capsule), 3.7 mm (capsule-box), always below the bound.
 """
 from __future__ import annotations
 
@@ -77,7 +81,7 @@ __all__ = [
     "make_distance_function", "n_covering_spheres",
 ]
 
-DEFAULT_EPS = 1e-3  #: [m] smoothing length of sqrt(D^2 + eps^2) - eps
+DEFAULT_EPS = 1e-3  #: [m] below this distance the norm is replaced by a C2 polynomial lower bound
 DEFAULT_COVER_TOL = 2e-3  #: [m] max enlargement rho - r of a capsule's covering spheres
 DEFAULT_SOFTMIN_TOL = 2e-3  #: [m] max error of the log-sum-exp soft minimum
 
@@ -325,7 +329,7 @@ def signed_distance(shape1: Shape, pose1: Pose, shape2: Shape, pose2: Pose, *, e
 
     ``R`` is the body-to-world rotation (3x3), ``p`` the body origin [m] in world; both may be
     CasADi expressions. ``error_bound(shape1, shape2, ...)`` bounds ``d_exact - d`` when separated.
-    Box-box is not supported (NotImplementedError).
+    Box-box is not supported (TypeError: cover one box by capsules or spheres).
     """
     _check_shape(shape1, "shape1")
     _check_shape(shape2, "shape2")
@@ -340,7 +344,7 @@ def signed_distance(shape1: Shape, pose1: Pose, shape2: Shape, pose2: Pose, *, e
     cover = dict(cover_tol=cover_tol, softmin_tol=softmin_tol)
     if isinstance(shape2, Box):
         if isinstance(shape1, Box):
-            raise NotImplementedError("box-box distance is not supported: cover one box by spheres/capsules")
+            raise TypeError("box-box distance is not supported: cover one box by spheres/capsules")
         if isinstance(shape1, Sphere):
             return sphere_box(_world(R1, p1, shape1.center, ops), shape1.radius, R2, p2, shape2.half_extents, **opts)
         k = n_spheres or n_covering_spheres(shape1.length, shape1.radius, cover_tol)
@@ -372,7 +376,7 @@ def error_bound(shape1: Shape, shape2: Shape, *, eps: float = DEFAULT_EPS, n_sph
     s1, s2 = kinds
     if isinstance(s2, Box):
         if isinstance(s1, Box):
-            raise NotImplementedError("box-box distance is not supported")
+            raise TypeError("box-box distance is not supported: cover one box by spheres/capsules")
         if isinstance(s1, Sphere):
             return eps
         k = n_spheres or n_covering_spheres(s1.length, s1.radius, cover_tol)

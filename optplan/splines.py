@@ -245,10 +245,11 @@ class PiecewisePolynomial:
         """Max over time of ``|d^k x / dt^k|`` per dimension, shape (n,).
 
         Computed by dense sampling (``samples_per_segment`` uniform points per segment, both ends
-        included) followed by Newton polishing of the best sample of every segment and dimension
-        towards a stationary point; the result is the max of samples and polished points, so it
-        never over-estimates and equals the exact maximum to round-off whenever the dense grid
-        brackets the extremum (always, for the low degrees used here and the default density).
+        included) and Newton iterations towards a stationary point started from every sample; the
+        result is the max over samples and Newton end points (all true values of the polynomial),
+        so it never over-estimates and equals the exact maximum to round-off as soon as one sample
+        lies in the basin of the maximising critical point (always for the low degrees used here
+        and the default density).
         """
         seg_max, _ = segment_max_abs(self, derivative, samples_per_segment)
         return seg_max.max(axis=0)
@@ -301,19 +302,19 @@ def segment_max_abs(pp: PiecewisePolynomial, derivative: int = 0,
     frac = np.linspace(0.0, 1.0, s)
     tau = np.broadcast_to((frac[None, :] * h[:, None])[:, :, None], (pp.n_segments, s, pp.dim))
     vals = np.abs(horner(c, tau))
-    best = np.argmax(vals, axis=1)  # (m, n)
-    best_val = np.take_along_axis(vals, best[:, None, :], axis=1)[:, 0, :]
-    t_best = np.take_along_axis(tau, best[:, None, :], axis=1)  # (m, 1, n)
-    t_new = t_best.copy()
-    for _ in range(8):  # Newton on the stationarity condition d/dtau x^(k) = 0
+    t_new = tau.copy()
+    for _ in range(8):  # Newton on the stationarity condition, started from every sample
         d1 = horner(dc, t_new)
         d2 = horner(ddc, t_new)
         step = np.divide(d1, d2, out=np.zeros_like(d1), where=np.abs(d2) > 1e-300)
         t_new = np.clip(t_new - step, 0.0, h[:, None, None])
-    new_val = np.abs(horner(c, t_new))[:, 0, :]
-    use_new = new_val > best_val
-    seg_max = np.where(use_new, new_val, best_val)
-    loc = np.where(use_new, t_new[:, 0, :], t_best[:, 0, :]) / h[:, None]
+    new_vals = np.abs(horner(c, t_new))
+    use_new = new_vals > vals
+    vals = np.where(use_new, new_vals, vals)
+    tau = np.where(use_new, t_new, tau)
+    best = np.argmax(vals, axis=1)[:, None, :]  # (m, 1, n)
+    seg_max = np.take_along_axis(vals, best, axis=1)[:, 0, :]
+    loc = np.take_along_axis(tau, best, axis=1)[:, 0, :] / h[:, None]
     return seg_max, loc
 
 
@@ -334,6 +335,8 @@ def quintic(q0: ArrayLike, qf: ArrayLike, T: float, v0: ArrayLike = 0.0, vf: Arr
     for arr, name in ((q0a, "q0"), (qfa, "qf")):
         if arr.ndim > 1:
             raise ValueError(f"{name}: expected a scalar or a 1-D array, got shape {arr.shape}")
+    if q0a.ndim and qfa.ndim and q0a.size != qfa.size:
+        raise ValueError(f"q0, qf: expected the same number of entries, got {q0a.size} (q0) and {qfa.size} (qf)")
     n = max(q0a.size if q0a.ndim else 1, qfa.size if qfa.ndim else 1)
     q0v, qfv = _broadcast_vec(q0a, n, "q0"), _broadcast_vec(qfa, n, "qf")
     Tv = _check_positive(T, "T (duration [s])")

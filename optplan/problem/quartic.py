@@ -11,11 +11,17 @@ velocity, acceleration and jerk at the inner waypoints, initial velocity and acc
 velocity), each multiplied by ``h_ref^k`` (``h_ref`` = mean initial duration) so all are in
 position units. Inequalities are sampled: ``|x'| <= qdot_max``, ``|x''| <= qddot_max`` and
 ``||ee_velocity(x, x')|| <= ee_speed_max`` at ``samples_per_segment`` uniformly spaced points of
-every segment, both ends included (a point shared by two segments is constrained once). With
-``refine=True`` (default) the solution is then checked between samples (exact maxima for the joint
-limits, dense sampling + parabolic refinement for the end-effector speed) and the worst violating
-point of every offending segment is added to the samples and the NLP re-solved, warm-started, up to
-``max_refinements`` times, so the limits hold along the whole trajectory, not only at samples.
+every segment, both ends included (a point shared by two segments is constrained once).
+
+With ``refine=True`` (default) each limit is also imposed at 3 movable points ("slots") per segment
+(and per dimension for the joint limits), passed to the NLP as parameters: they start at the worst
+points of the warm start; after each solve the solution is checked between samples (exact maxima
+of the polynomial |x'| and |x''| by dense sampling + Newton, dense sampling + parabolic refinement
+for the end-effector speed), the slots of every violating (segment, dimension) are moved to the new
+worst point (keeping the two previous ones) and the NLP is re-solved from the previous solution,
+up to ``max_refinements`` times. This exchange method makes the limits hold along the whole
+trajectory (to ~1e-7 relative), not only at the samples; typically 2-6 re-solves are needed when
+limits are active with free durations, none with fixed durations.
 
 With fixed durations the equalities alone determine the spline (5m equations, 5m unknowns per
 dimension), so the NLP's only feasible point is the linear solve of :func:`optplan.splines.quartic_spline`;
@@ -44,6 +50,8 @@ __all__ = ["QuarticSmoothingResult", "smooth_quartic"]
 _log = logging.getLogger(__name__)
 _COSTS = {"jerk": 3, "acceleration": 2}
 _SLOTS = 3  # movable constraint points per segment (and dimension) for the refinement
+_WARM = True
+_WS_PASSES = 8
 
 
 @dataclass(frozen=True)
@@ -123,7 +131,8 @@ class _Problem:
     """Data of one smoothing problem (numpy side) and its CasADi transcription."""
 
     def __init__(self, t0: float, h: np.ndarray, X: np.ndarray, v0, a0, vf, vmax, amax, ee, ee_max,
-                 free: bool, cost_order: int, time_weight: float, smooth_weight: float, samples: int):
+                 free: bool, cost_order: int, time_weight: float, smooth_weight: float, samples: int,
+                 slots: bool = True):
         self.t0, self.X = t0, X
         self.m, self.n = h.size, X.shape[1]
         self.v0, self.a0, self.vf = v0, a0, vf
@@ -134,9 +143,22 @@ class _Problem:
         self.h_ref = float(h.mean())
         # movable constraint points ("slots", fractions of a segment): per (segment, dimension) for
         # the joint limits, per segment for the end-effector speed; set to the worst points found
-        self.slot_shape = {name: (_SLOTS, self.m, self.n) for name, lim in self.lims.items() if lim is not None}
-        if ee is not None:
+        self.slot_shape = {name: (_SLOTS, self.m, self.n) for name, lim in self.lims.items()
+                           if lim is not None and slots}
+        if ee is not None and slots:
             self.slot_shape["ee_speed_max"] = (_SLOTS, self.m, 1)
+
+    @property
+    def has_limits(self) -> bool:
+        return any(v is not None for v in self.lims.values()) or self.ee is not None
+
+    def segment_ratio(self, pp: PiecewisePolynomial) -> np.ndarray:
+        """(m,) factor by which each segment must be slowed down to meet its limits (<1: may speed up)."""
+        out = np.zeros(pp.n_segments)
+        for name, (_, _, ratio) in self.limit_violations(pp).items():
+            r = np.max(ratio, axis=1)
+            out = np.maximum(out, np.sqrt(r) if name == "qddot_max" else r)
+        return out
 
     def spline(self, h: np.ndarray) -> PiecewisePolynomial:
         return quartic_spline(self.t0 + np.concatenate([[0.0], np.cumsum(h)]), self.X, self.v0, self.a0, self.vf)
@@ -196,24 +218,30 @@ class _Problem:
             seg = [i for i, _ in pts]
             add_limits(derivs([P[k][seg, :] for k in range(5)], ca.repmat(H[seg], 1, n),
                               ca.repmat(ca.DM([f for _, f in pts]), 1, n)), len(pts))
-        # slots
+        # slots; slot_rows[name][s, i, j] = row of g of slot s of (segment i, dimension j) (-1: none)
         off = 0
+        self.slot_rows = {}
         for name, shape in self.slot_shape.items():
             size = int(np.prod(shape))
+            rows = np.full(shape, -1, dtype=int)
             for s in range(_SLOTS):
                 lo = off + s * m * shape[2]
                 T = ca.reshape(psym[lo:lo + m * shape[2]], shape[2], m).T  # (m, n) or (m, 1), row-major slots
                 T = T if shape[2] == n else ca.repmat(T, 1, n)
                 d = derivs(P, Hm, T)
+                first = sum(e.numel() for e in g)
                 if name == "ee_speed_max":
                     vel = self.ee.map(m)(d["q"].T, d["qdot_max"].T)
                     add(ca.sum1(vel**2), 0.0, self.ee_max**2)
+                    rows[s, :, 0] = first + np.arange(m)
                 else:
                     lim = self.lims[name]
                     dims = np.flatnonzero(np.isfinite(lim)).tolist()
                     if dims:
                         L = np.tile(lim[dims], (m, 1))
                         add(d[name][:, dims], -L, L)
+                        rows[s][:, dims] = first + np.arange(m * len(dims)).reshape(len(dims), m).T
+            self.slot_rows[name] = rows
             off += size
 
         Qm = _jerk_matrix(self.r)
@@ -301,7 +329,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
                    ee_speed_max: Optional[float] = None, free_durations: bool = False, min_duration: float = 1e-3,
                    max_duration: Optional[float] = None, cost: str = "jerk", time_weight: float = 1.0,
                    smooth_weight: float = 1e-3, samples_per_segment: int = 8, refine: bool = True,
-                   max_refinements: int = 4, ipopt_options: Optional[Dict[str, Any]] = None) -> QuarticSmoothingResult:
+                   max_refinements: int = 10, ipopt_options: Optional[Dict[str, Any]] = None) -> QuarticSmoothingResult:
     """Smooth waypoints with a C3 quartic spline under velocity / acceleration / end-effector-speed limits.
 
     Args:
@@ -372,18 +400,24 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         raise TypeError(f"ipopt_options: expected a dict of IPOPT options, got {type(ipopt_options).__name__}")
 
     prob = _Problem(t0, h, X, v0v, a0v, vfv, vmax, amax, ee, ee_max, free_durations, _COSTS[cost],
-                    float(time_weight), float(smooth_weight), S)
-    # warm start: the linear solve; with free durations stretched uniformly until it meets the limits
+                    float(time_weight), float(smooth_weight), S, slots=bool(refine))
+    # warm start: the linear solve; with free durations, first every duration is scaled by its
+    # segment's limit ratio (a few fixed-point passes towards "every segment just at a limit"),
+    # then all are stretched uniformly until the spline meets the limits
     h_ws = np.clip(h, hmin * 1.01, hmax) if free_durations else h
     pp_ws = prob.spline(h_ws)
-    if free_durations:
-        for _ in range(10):
-            viol = prob.limit_violations(pp_ws)
-            ratio = max([float(r.max()) ** (0.5 if nm == "qddot_max" else 1.0) for nm, (_, _, r) in viol.items()],
-                        default=0.0)
-            if ratio <= 1.0 or not np.all(h_ws * ratio * 1.05 <= hmax):
+    if free_durations and prob.has_limits:
+        for _ in range(_WS_PASSES):
+            ratio = prob.segment_ratio(pp_ws)
+            if np.all((ratio > 0.9) & (ratio <= 1.0)):
                 break
-            h_ws = h_ws * ratio * 1.05
+            h_ws = np.clip(h_ws * np.clip(ratio, 0.5, 2.0), hmin * 1.01, hmax)
+            pp_ws = prob.spline(h_ws)
+        for _ in range(10):
+            ratio = float(prob.segment_ratio(pp_ws).max())
+            if ratio <= 1.0 or not np.all(h_ws * ratio * 1.02 <= hmax):
+                break
+            h_ws = h_ws * ratio * 1.02
             pp_ws = prob.spline(h_ws)
 
     opts: Dict[str, Any] = {"print_time": False, "error_on_fail": False,
@@ -414,21 +448,24 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
     iterations, refinements, objective = 0, 0, float("nan")
     status, success = "Not_Solved", False
     pp, h_out = pp_ws, h_ws.copy()
-    warm: Dict[str, Any] = {}
+    warm_solver = None
+    last_good: Optional[Tuple[PiecewisePolynomial, np.ndarray, str, float]] = None
     try:
         nlp, lbg, ubg = prob.build(h)
-        solvers = [ca.nlpsol("quartic_smoothing", "ipopt", nlp, opts)]
+        solver = ca.nlpsol("quartic_smoothing", "ipopt", nlp, opts)
     except Exception as exc:  # noqa: BLE001 - a failed solve is a status, not an exception
         _log.warning("quartic smoothing: building the NLP raised %s", exc)
-        solvers, status = [], f"Exception: {type(exc).__name__}: {exc}"
-    for rnd in range(max_ref + 1 if solvers else 0):
+        solver, status = None, f"Exception: {type(exc).__name__}: {exc}"
+    warm: Dict[str, Any] = {}
+    for rnd in range(max_ref + 1 if solver is not None else 0):
         try:
-            if warm and len(solvers) == 1:
-                wopts = {**opts, "ipopt": {"warm_start_init_point": "yes", "mu_init": 1e-6,
-                                           "warm_start_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9,
-                                           "warm_start_slack_bound_push": 1e-9, **opts["ipopt"]}}
-                solvers.append(ca.nlpsol("quartic_smoothing_warm", "ipopt", nlp, wopts))
-            solver = solvers[-1]
+            if warm and _WARM:
+                if warm_solver is None:  # re-solves start from the previous primal-dual point, small barrier
+                    wopts = {**opts, "ipopt": {"warm_start_init_point": "yes", "mu_init": 1e-7,
+                                               "warm_start_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9,
+                                               "warm_start_slack_bound_push": 1e-9, **opts["ipopt"]}}
+                    warm_solver = ca.nlpsol("quartic_smoothing_warm", "ipopt", nlp, wopts)
+                solver = warm_solver
             sol = solver(x0=x0, p=prob.pack_slots(slots), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **warm)
             stats = dict(solver.stats())
         except Exception as exc:  # noqa: BLE001
@@ -438,18 +475,29 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         status = str(stats.get("return_status", "Unknown"))
         success = bool(stats.get("success", False))
         iterations += int(stats.get("iter_count", 0))
-        objective = float(sol["f"])
         w = np.asarray(sol["x"], float).ravel()
+        if not success and last_good is not None:  # a refinement round failed: keep the last good solution
+            _log.debug("quartic smoothing: refinement round failed with %s, keeping the previous solution", status)
+            pp, h_out, status, objective = last_good
+            success = True
+            break
+        objective = float(sol["f"])
         if np.all(np.isfinite(w)):
             pp, h_out = prob.unpack(w, h)
         if not (success and refine) or rnd == max_ref:
             break
+        last_good = (pp, h_out, status, objective)
         moved = 0
+        lam = np.abs(np.asarray(sol["lam_g"], float).ravel())
         for name, (excess, loc, ratio) in prob.limit_violations(pp).items():
             bad = (ratio > 1.0 + 1e-7) & (excess > 1e-9)
             if np.any(bad):
-                sl = slots[name]
-                sl[2][bad], sl[1][bad], sl[0][bad] = sl[1][bad], sl[0][bad], loc[bad]
+                # exchange: the slot with the smallest multiplier (the least active one) moves
+                rows = prob.slot_rows[name]
+                mult = np.where(rows >= 0, lam[np.maximum(rows, 0)], 0.0)
+                weakest = np.argmin(mult, axis=0)
+                seg, dim = np.nonzero(bad)
+                slots[name][weakest[seg, dim], seg, dim] = loc[seg, dim]
                 moved += int(bad.sum())
         if not moved:
             break

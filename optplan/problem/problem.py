@@ -1,0 +1,314 @@
+"""`OptProblem`: declare a trajectory NLP for a :class:`RobotModel`, warm-start it, solve it with
+IPOPT and get a :class:`Solution` that says honestly how good it is.
+
+    prob = OptProblem(robot, n_intervals=50, duration=10.0)
+    prob.add_constraint(JointBoundary("start", q=q0, qd=zeros, qdd=zeros))
+    prob.add_constraint(JointBoundary("end", q=q1, qd=zeros, qdd=zeros))
+    prob.add_constraint(ClosedChain.from_configuration(robot, q0_full))
+    smooth = prob.add_cost(Smoothness("jerk"), weight=1.0)
+    prob.set_initial(q=path)          # any (M × nj) array, on any time grid
+    sol = prob.solve()                # always a Solution; sol.status is an IpoptStatus
+
+Problem (terms) ≠ transcription (:mod:`.transcription`) ≠ solver (IPOPT through ``casadi.nlpsol``,
+exact Hessian by default).
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+from scipy.interpolate import CubicSpline
+
+from ..errors import ConfigurationError
+from ..robot import RobotModel
+from .solution import IpoptStatus, Solution
+from .terms import NumericTrajectory, Term
+from .transcription import Transcription
+
+__all__ = ["OptProblem", "TermHandle"]
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class TermHandle:
+    """Named handle returned by ``add_cost`` / ``add_constraint``."""
+
+    name: str
+    term: Term
+    role: str  # "cost" | "constraint"
+    weight: float = 1.0
+
+
+class OptProblem:
+    """A trajectory optimization problem over ``n_intervals`` equal intervals.
+
+    Parameters
+    ----------
+    robot: the :class:`RobotModel` (fixed or free-floating base).
+    n_intervals: N; the trajectory has N+1 knots.
+    duration: T [s] (the initial guess when ``free_time``).
+    free_time: make T a decision variable within ``duration_bounds`` [s].
+    base0: initial base placement of a floating robot (default identity); the CoM stays where it
+        is at the start (zero momentum).
+    n_sub: RK4 sub-steps per interval for the floating-base attitude.
+    """
+
+    def __init__(self, robot: RobotModel, n_intervals: int = 50, duration: float = 10.0, *,
+                 free_time: bool = False, duration_bounds: tuple[float, float] = (1e-2, 1e4),
+                 base0: pin.SE3 | None = None, n_sub: int = 2):
+        if int(n_intervals) < 1:
+            raise ValueError(f"n_intervals: expected ≥ 1, got {n_intervals}")
+        if not (np.isfinite(duration) and duration > 0):
+            raise ValueError(f"duration: expected a positive time [s], got {duration}")
+        lo, hi = duration_bounds
+        if not 0 < lo < hi:
+            raise ValueError(f"duration_bounds: expected 0 < lower < upper, got {duration_bounds}")
+        self.robot = robot
+        self.N = int(n_intervals)
+        self.duration = float(duration)
+        self.free_time = bool(free_time)
+        self.duration_bounds = (float(lo), float(hi))
+        self.base0 = pin.SE3.Identity() if base0 is None else base0
+        self.n_sub = int(n_sub)
+        self._handles: list[TermHandle] = []
+        self._x0: np.ndarray | None = None
+        self._lam_g0: np.ndarray | None = None
+        self._built = None
+        self._com0 = None
+        self.tp = self._make_transcription()
+
+    def _make_transcription(self) -> Transcription:
+        quat0 = pin.SE3ToXYZQUAT(self.base0)[3:] if self.robot.is_floating else None
+        return Transcription(self.robot, self.N, self.duration, self.free_time, base0_quat=quat0,
+                             com0=None, n_sub=self.n_sub)
+
+    # ------------------------------------------------------------------ declaration
+    def _add(self, term: Term, role: str, name: str | None, weight: float) -> TermHandle:
+        if not isinstance(term, Term):
+            raise TypeError(f"expected an optplan term (optplan.problem.terms), got {type(term).__name__}")
+        if role == "constraint" and term.cost_only:
+            raise TypeError(f"{type(term).__name__} is a cost-only term; use add_cost")
+        if not np.isfinite(weight) or weight < 0:
+            raise ValueError(f"weight: expected a finite number ≥ 0, got {weight}")
+        base = name or term.default_name
+        names = {h.name for h in self._handles}
+        final, i = base, 2
+        while final in names:
+            if name is not None:
+                raise ValueError(f"a term named {name!r} exists already (names: {sorted(names)})")
+            final, i = f"{base}_{i}", i + 1
+        h = TermHandle(final, term, role, float(weight))
+        self._handles.append(h)
+        self._built = None
+        return h
+
+    def add_cost(self, term: Term, weight: float = 1.0, name: str | None = None) -> TermHandle:
+        """Add ``weight · cost(term)`` to the objective; returns a named handle."""
+        return self._add(term, "cost", name, weight)
+
+    def add_constraint(self, term: Term, name: str | None = None) -> TermHandle:
+        """Enforce ``lower ≤ residual ≤ upper`` of ``term``; returns a named handle."""
+        return self._add(term, "constraint", name, 1.0)
+
+    @property
+    def terms(self) -> dict[str, TermHandle]:
+        return {h.name: h for h in self._handles}
+
+    # ------------------------------------------------------------------ warm start
+    def set_initial(self, q=None, t=None, *, solution: Solution | None = None, T: float | None = None) -> None:
+        """Initial guess.
+
+        * ``q`` (M × nj) joint samples [rad] at times ``t`` (M,) [s] (default: uniform over the
+          duration); resampled onto the knots by a cubic spline, with q̇, q̈, jerk from it.
+        * ``solution``: a previous :class:`Solution` of a problem with the same knots (its raw
+          decision vector and multipliers are reused) or any knots (resampled).
+        """
+        tp = self.tp
+        Tg = float(T) if T is not None else self.duration
+        if solution is not None:
+            if solution.x is not None and solution.x.size == tp.x.shape[0] and len(solution.t) == self.N + 1:
+                self._x0 = np.array(solution.x, float)
+                self._lam_g0 = solution.lam_g
+                return
+            t, q, Tg = solution.t - solution.t[0], solution.q, solution.duration
+        if q is None:
+            raise ValueError("set_initial: give q (M × nj samples) or solution")
+        q = np.asarray(q, float)
+        if q.ndim != 2 or q.shape[1] != self.robot.nj:
+            raise ConfigurationError(f"set_initial: q must be (M, {self.robot.nj}), got shape {q.shape}")
+        if not np.all(np.isfinite(q)):
+            raise ConfigurationError("set_initial: q has non-finite entries")
+        if q.shape[0] == 1:
+            q = np.vstack([q, q])
+        if t is None:
+            t = np.linspace(0.0, Tg, q.shape[0])
+        t = np.asarray(t, float)
+        if t.shape != (q.shape[0],) or np.any(np.diff(t) <= 0):
+            raise ConfigurationError(f"set_initial: t must be strictly increasing with {q.shape[0]} entries")
+        t = (t - t[0]) * (Tg / (t[-1] - t[0]))
+        tk = np.linspace(0.0, Tg, self.N + 1)
+        if q.shape[0] >= 3:
+            sp = CubicSpline(t, q, axis=0, bc_type="clamped")
+        else:
+            sp = CubicSpline(t, q, axis=0, bc_type=((1, np.zeros(q.shape[1])), (1, np.zeros(q.shape[1]))))
+        Q, V, A = sp(tk), sp(tk, 1), sp(tk, 2)
+        h = Tg / self.N
+        J = np.diff(A, axis=0) / h
+        base_quat = None
+        if self.robot.is_floating:
+            from ..floating import simulate_base
+
+            res = simulate_base(self.robot, (tk, Q, V), tk, base0=self.base0, substeps=self.n_sub)
+            base_quat = res.q[:, 3:7]
+        self._x0 = tp.pack(Q, V, A, J, T=Tg, base_quat=base_quat)
+        self._lam_g0 = None
+
+    def set_initial_straight_line(self, q_start, q_end, T: float | None = None) -> None:
+        """Initial guess: rest-to-rest quintic from ``q_start`` to ``q_end`` (joint space)."""
+        qa = self.robot.check_joints(q_start, "q_start")
+        qb = self.robot.check_joints(q_end, "q_end")
+        s = np.linspace(0, 1, self.N + 1)
+        p = 10 * s**3 - 15 * s**4 + 6 * s**5
+        self.set_initial(q=qa + p[:, None] * (qb - qa), T=T)
+
+    # ------------------------------------------------------------------ build & solve
+    def _com0(self) -> np.ndarray:
+        if not self.robot.is_floating:
+            return np.zeros(3)
+        qs = self._initial_unpacked()["q"][0]
+        return pin.centerOfMass(self.robot.model, self.robot.model.createData(),
+                                self.robot.configuration(qs, self.base0)).copy()
+
+    def _initial_unpacked(self):
+        if self._x0 is None:
+            raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
+        return self.tp.unpack(self._x0)
+
+    def _build(self):
+        tp = self.tp
+        if self.robot.is_floating:
+            tp.com0 = self._com0()
+            tp._frame_cache.clear()
+        tp.initial_traj = self.numeric_trajectory(self._x0) if self._x0 is not None else None
+        g, lbg, ubg = [], [], []
+        G, lo, hi = tp.dynamics_constraints()
+        g.append(G); lbg.append(lo); ubg.append(hi)
+        self._con_slices: dict[str, slice] = {}
+        n = G.shape[0]
+        f = 0
+        term_exprs = {}
+        for h in self._handles:
+            if h.role == "constraint":
+                r, lo, hi = h.term.residual(tp)
+                lo, hi = np.broadcast_to(np.asarray(lo, float), (r.shape[0],)), np.broadcast_to(np.asarray(hi, float), (r.shape[0],))
+                g.append(r); lbg.append(lo); ubg.append(hi)
+                self._con_slices[h.name] = slice(n, n + r.shape[0])
+                n += r.shape[0]
+            else:
+                c = h.weight * h.term.cost(tp)
+                term_exprs[h.name] = c
+                f = f + c
+        gexpr = ca.vertcat(*g)
+        lbx = -np.inf * np.ones(tp.x.shape[0])
+        ubx = np.inf * np.ones(tp.x.shape[0])
+        if self.free_time:
+            i = tp.x.shape[0] - (4 * (self.N + 1) if tp.floating else 0) - 1
+            lbx[i], ubx[i] = self.duration_bounds
+        costs = ca.Function("costs", [tp.x], [ca.vertcat(*term_exprs.values()) if term_exprs else ca.DM.zeros(0)])
+        self._built = {"f": f, "g": gexpr, "lbg": np.concatenate(lbg), "ubg": np.concatenate(ubg),
+                       "lbx": lbx, "ubx": ubx, "cost_names": list(term_exprs), "costs": costs,
+                       "gfun": ca.Function("g", [tp.x], [gexpr]), "solver": None, "solver_opts": None}
+        return self._built
+
+    def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-6, max_iter: int = 500,
+              exact_hessian: bool = True) -> Solution:
+        """Solve with IPOPT. Never raises for a failed solve: the status is in the Solution.
+
+        ``tol`` is both IPOPT's ``tol``/``constr_viol_tol`` and the constraint-violation bound that
+        ``Solution.success`` requires. ``ipopt_options`` are passed through (e.g.
+        ``{"print_level": 5}``, ``{"linear_solver": "mumps"}``).
+        """
+        if self._x0 is None:
+            raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
+        b = self._built or self._build()
+        opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.tol": tol, "ipopt.constr_viol_tol": tol,
+                "ipopt.max_iter": int(max_iter), "ipopt.sb": "yes"}
+        if not exact_hessian:
+            opts["ipopt.hessian_approximation"] = "limited-memory"
+        for k, v in (ipopt_options or {}).items():
+            opts[k if "." in k or k in ("print_time", "expand") else f"ipopt.{k}"] = v
+        key = repr(sorted(opts.items()))
+        t0 = time.perf_counter()
+        if b["solver"] is None or b["solver_opts"] != key:
+            nlp = {"x": self.tp.x, "f": b["f"], "g": b["g"]}
+            b["solver"] = ca.nlpsol("optplan", "ipopt", nlp, opts)
+            b["solver_opts"] = key
+        args = dict(x0=self._x0, lbg=b["lbg"], ubg=b["ubg"], lbx=b["lbx"], ubx=b["ubx"])
+        if self._lam_g0 is not None and self._lam_g0.size == b["lbg"].size:
+            args["lam_g0"] = self._lam_g0
+        try:
+            out = b["solver"](**args)
+            stats = b["solver"].stats()
+            status = IpoptStatus.from_string(stats.get("return_status", "Unknown"))
+            x = np.array(out["x"]).ravel()
+            lam_g = np.array(out["lam_g"]).ravel()
+            iters = int(stats.get("iter_count", -1))
+            cost = float(out["f"])
+        except RuntimeError as exc:  # IPOPT/CasADi evaluation errors become a status
+            log.warning("IPOPT raised: %s", exc)
+            status, x, lam_g, iters, cost = IpoptStatus.INTERNAL_ERROR, self._x0.copy(), None, -1, float("nan")
+        wall = time.perf_counter() - t0
+        return self._make_solution(x, lam_g, status, iters, wall, cost, tol)
+
+    def _make_solution(self, x, lam_g, status, iters, wall, cost, tol) -> Solution:
+        b, tp = self._built, self.tp
+        gval = np.array(b["gfun"](x)).ravel()
+        viol_vec = np.maximum(np.maximum(b["lbg"] - gval, gval - b["ubg"]), 0.0)
+        viol = float(viol_vec.max()) if viol_vec.size else 0.0
+        if not np.isfinite(viol):
+            viol = float("inf")
+        terms = {}
+        cvals = np.array(b["costs"](x)).ravel()
+        for name, v in zip(b["cost_names"], cvals):
+            terms[name] = float(v)
+        for name, sl in self._con_slices.items():
+            terms[name] = float(viol_vec[sl].max()) if sl.stop > sl.start else 0.0
+        u = tp.unpack(x)
+        T = u.get("T", self.duration)
+        t = np.linspace(0.0, T, self.N + 1)
+        base_quat = base_pos = None
+        if tp.floating:
+            base_quat = u["base_quat"]
+            traj = self.numeric_trajectory(x)
+            base_pos = np.array([traj.q_full(k)[:3] for k in range(self.N + 1)])
+        success = status.succeeded and viol <= max(tol, 1e-9) * 10
+        return Solution(success=bool(success), status=status, iterations=iters, wall_time=wall, cost=cost,
+                        max_constraint_violation=viol, terms=terms, t=t, q=u["q"], qd=u["qd"], qdd=u["qdd"],
+                        jerk=u["jerk"], joint_names=self.robot.joint_names, base_quat=base_quat,
+                        base_position=base_pos, x=np.asarray(x), lam_g=lam_g)
+
+    # ------------------------------------------------------------------ evaluation helpers
+    def numeric_trajectory(self, x) -> NumericTrajectory:
+        """Knot values of a decision vector, for numeric (Pinocchio) term evaluation."""
+        u = self.tp.unpack(np.asarray(x, float))
+        return NumericTrajectory(self.robot, u["q"], u["qd"], u["qdd"], u["jerk"], u.get("T", self.duration),
+                                 u.get("base_quat"), self.tp.com0 if self.robot.is_floating else None)
+
+    def term_function(self, handle: TermHandle | str) -> ca.Function:
+        """``f(x) -> residual`` (constraint terms) or ``f(x) -> cost`` as a ``casadi.Function``."""
+        h = self.terms[handle] if isinstance(handle, str) else handle
+        if self._built is None:
+            self._build()
+        if h.role == "constraint":
+            r, _, _ = h.term.residual(self.tp)
+        else:
+            r = h.weight * h.term.cost(self.tp)
+        return ca.Function(h.name, [self.tp.x], [r])
+
+    @property
+    def initial_guess(self) -> np.ndarray | None:
+        return None if self._x0 is None else self._x0.copy()

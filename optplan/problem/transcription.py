@@ -1,0 +1,219 @@
+"""Transcription of a trajectory NLP: decision variables, dynamics constraints and the kinematic
+expressions terms are written in.
+
+Joint trajectory (documented transcription)
+-------------------------------------------
+N intervals of equal length ``h = T / N`` (``T`` fixed or a decision variable). At each of the N+1
+knots the state is ``(q_k, q̇_k, q̈_k)`` (actuated joints, [rad], [rad/s], [rad/s²]); on each interval
+the jerk ``j_k`` [rad/s³] is constant and the state is integrated *exactly*::
+
+    q_{k+1} = q_k + h q̇_k + h²/2 q̈_k + h³/6 j_k
+    q̇_{k+1} = q̇_k + h q̈_k + h²/2 j_k
+    q̈_{k+1} = q̈_k + h j_k
+
+so the joint trajectory is a C2 piecewise cubic — the continuous-time trajectory, not an
+approximation of it — and ``∫ j² dt = h Σ j_k²`` exactly.
+
+Free-floating base
+------------------
+With zero momentum the base twist in the base frame, ``[v_b; ω_b] = −Ag_b⁻¹ Ag_m q̇``, depends only
+on ``(q, q̇)`` (the base pose cancels). The base orientation (unit quaternion, Pinocchio's
+``(x, y, z, w)``) is a state at each knot, tied by multiple-shooting constraints: ``n_sub`` RK4 steps
+per interval along the exact cubic joint motion, renormalised. The base position follows in closed
+form from the fixed centre of mass: ``p_b = c₀ − R_b c_b(q)`` with ``c_b`` the CoM in the base frame.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..robot import RobotModel
+from ..symbolic import SymbolicKinematics, quat_to_matrix
+
+__all__ = ["Transcription", "quat_mul"]
+
+
+def quat_mul(a, b):
+    """Hamilton product of CasADi quaternions stored (x, y, z, w)."""
+    ax, ay, az, aw = a[0], a[1], a[2], a[3]
+    bx, by, bz, bw = b[0], b[1], b[2], b[3]
+    return ca.vertcat(aw * bx + ax * bw + ay * bz - az * by,
+                      aw * by - ax * bz + ay * bw + az * bx,
+                      aw * bz + ax * by - ay * bx + az * bw,
+                      aw * bw - ax * bx - ay * by - az * bz)
+
+
+class Transcription:
+    """Variables and kinematic expressions of one trajectory NLP (built by :class:`OptProblem`).
+
+    Terms use: ``N``, ``T``, ``h``, ``q(k)``, ``qd(k)``, ``qdd(k)``, ``jerk(k)`` (k < N),
+    ``q_full(k)`` (Pinocchio layout), ``frame(name, k) -> (R, p)`` (world), ``base_quat(k)``,
+    ``base_rotation(k)``, ``base_position(k)``, ``sym`` (:class:`SymbolicKinematics`).
+    """
+
+    def __init__(self, robot: RobotModel, n_intervals: int, duration, free_time: bool,
+                 base0_quat=None, com0=None, n_sub: int = 2):
+        self.robot = robot
+        self.N = int(n_intervals)
+        self.nj = robot.nj
+        self.sym = SymbolicKinematics(robot)
+        self.free_time = free_time
+        self.n_sub = int(n_sub)
+        nj, N = self.nj, self.N
+        self.Q = ca.MX.sym("q", nj, N + 1)
+        self.V = ca.MX.sym("qd", nj, N + 1)
+        self.A = ca.MX.sym("qdd", nj, N + 1)
+        self.J = ca.MX.sym("jerk", nj, N)
+        blocks = [ca.vec(self.Q), ca.vec(self.V), ca.vec(self.A), ca.vec(self.J)]
+        if free_time:
+            self.T_var = ca.MX.sym("T")
+            self.T = self.T_var
+            blocks.append(self.T_var)
+        else:
+            self.T_var = None
+            self.T = ca.MX(float(duration))
+        self.h = self.T / N
+        self.floating = robot.is_floating
+        if self.floating:
+            self.QB = ca.MX.sym("base_quat", 4, N + 1)
+            blocks.append(ca.vec(self.QB))
+            self.base0_quat = np.array([0, 0, 0, 1.0]) if base0_quat is None else np.asarray(base0_quat, float)
+            self.com0 = np.zeros(3) if com0 is None else np.asarray(com0, float)
+        self.x = ca.vertcat(*blocks)
+        self._frame_fns: dict[int, ca.Function] = {}
+        self._frame_cache: dict[tuple, tuple] = {}
+        self._build_base_functions()
+
+    # ------------------------------------------------------------------ variable layout
+    def unpack(self, xval: np.ndarray) -> dict[str, np.ndarray]:
+        """Split a numeric decision vector into named arrays (knots along axis 0)."""
+        nj, N = self.nj, self.N
+        out, i = {}, 0
+        for name, shape in (("q", (nj, N + 1)), ("qd", (nj, N + 1)), ("qdd", (nj, N + 1)), ("jerk", (nj, N))):
+            n = shape[0] * shape[1]
+            out[name] = np.asarray(xval[i:i + n]).reshape(shape, order="F").T.copy()
+            i += n
+        if self.free_time:
+            out["T"] = float(xval[i])
+            i += 1
+        if self.floating:
+            out["base_quat"] = np.asarray(xval[i:i + 4 * (N + 1)]).reshape((4, N + 1), order="F").T.copy()
+            i += 4 * (N + 1)
+        return out
+
+    def pack(self, q, qd, qdd, jerk, T=None, base_quat=None) -> np.ndarray:
+        parts = [np.asarray(a, float).T.reshape(-1, order="F") for a in (q, qd, qdd, jerk)]
+        if self.free_time:
+            parts.append(np.array([float(T)]))
+        if self.floating:
+            parts.append(np.asarray(base_quat, float).T.reshape(-1, order="F"))
+        return np.concatenate(parts)
+
+    # ------------------------------------------------------------------ expressions
+    def q(self, k: int):
+        return self.Q[:, k]
+
+    def qd(self, k: int):
+        return self.V[:, k]
+
+    def qdd(self, k: int):
+        return self.A[:, k]
+
+    def jerk(self, k: int):
+        return self.J[:, k]
+
+    def knot_time(self, k: int):
+        return self.h * k
+
+    def dynamics_constraints(self):
+        """Exact integration of the piecewise-constant jerk (and the base quaternion)."""
+        h = self.h
+        g = []
+        for k in range(self.N):
+            q, v, a, j = self.Q[:, k], self.V[:, k], self.A[:, k], self.J[:, k]
+            g.append(self.Q[:, k + 1] - (q + h * v + h**2 / 2 * a + h**3 / 6 * j))
+            g.append(self.V[:, k + 1] - (v + h * a + h**2 / 2 * j))
+            g.append(self.A[:, k + 1] - (a + h * j))
+        if self.floating:
+            g.append(self.QB[:, 0] - ca.DM(self.base0_quat))
+            for k in range(self.N):
+                nxt = self._base_step(self.QB[:, k], self.Q[:, k], self.V[:, k], self.A[:, k], self.J[:, k], h)
+                g.append(self.QB[:, k + 1] - nxt)
+        G = ca.vertcat(*g)
+        return G, np.zeros(G.shape[0]), np.zeros(G.shape[0])
+
+    # ------------------------------------------------------------------ floating base
+    def _build_base_functions(self):
+        if not self.floating:
+            return
+        nj = self.nj
+        qj, qdj = ca.SX.sym("qj", nj), ca.SX.sym("qdj", nj)
+        qfull = ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), qj)
+        X = self.sym.joint_placements(qfull)
+        Ag = self.sym.centroidal_map(qfull, X)
+        vb = -ca.solve(Ag[:, :6], Ag[:, 6:] @ qdj)
+        self.base_twist_fn = ca.Function("base_twist", [qj, qdj], [vb], ["qj", "qdj"], ["vb"])
+        com_b = self.sym.center_of_mass(qfull, X)
+        self.base_com_fn = ca.Function("base_com", [qj], [com_b], ["qj"], ["com_b"])
+        # one RK4 step of the quaternion along the cubic joint motion, as a Function
+        quat, q0, v0, a0, j0 = (ca.SX.sym(n, m) for n, m in
+                                (("quat", 4), ("q0", nj), ("v0", nj), ("a0", nj), ("j0", nj)))
+        hs = ca.SX.sym("h")
+
+        def joint_at(tau):
+            return (q0 + tau * v0 + tau**2 / 2 * a0 + tau**3 / 6 * j0, v0 + tau * a0 + tau**2 / 2 * j0)
+
+        def f(quat_, tau):
+            qq, vv = joint_at(tau)
+            w = self.base_twist_fn(qq, vv)[3:]
+            return 0.5 * quat_mul(quat_, ca.vertcat(w, 0))
+
+        x = quat
+        dt = hs / self.n_sub
+        for s in range(self.n_sub):
+            tau = s * dt
+            k1 = f(x, tau)
+            k2 = f(x + dt / 2 * k1, tau + dt / 2)
+            k3 = f(x + dt / 2 * k2, tau + dt / 2)
+            k4 = f(x + dt * k3, tau + dt)
+            x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = x / ca.norm_2(x)
+        self.base_step_fn = ca.Function("base_step", [quat, q0, v0, a0, j0, hs], [x])
+
+    def _base_step(self, quat, q, v, a, j, h):
+        return self.base_step_fn(quat, q, v, a, j, h)
+
+    def base_quat(self, k: int):
+        if not self.floating:
+            return ca.DM([0, 0, 0, 1.0])
+        return self.QB[:, k]
+
+    def base_rotation(self, k: int):
+        return quat_to_matrix(self.base_quat(k)) if self.floating else ca.DM.eye(3)
+
+    def base_position(self, k: int):
+        if not self.floating:
+            return ca.DM.zeros(3)
+        return ca.DM(self.com0) - self.base_rotation(k) @ self.base_com_fn(self.Q[:, k])
+
+    def q_full(self, k: int):
+        if not self.floating:
+            return self.Q[:, k]
+        return ca.vertcat(self.base_position(k), self.base_quat(k), self.Q[:, k])
+
+    # ------------------------------------------------------------------ frames
+    def frame_function(self, frame) -> ca.Function:
+        """``f(q_full) -> (R, p)`` (SX Function, cached)."""
+        fid = self.robot.frame_id(frame)
+        if fid not in self._frame_fns:
+            self._frame_fns[fid] = self.sym.fk_function(fid)
+        return self._frame_fns[fid]
+
+    def frame(self, frame, k: int):
+        """World placement ``(R, p)`` of a frame at knot k (expressions, cached)."""
+        fid = self.robot.frame_id(frame)
+        key = (fid, k)
+        if key not in self._frame_cache:
+            R, p = self.frame_function(fid)(self.q_full(k))
+            self._frame_cache[key] = (R, p)
+        return self._frame_cache[key]

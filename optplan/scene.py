@@ -1,0 +1,191 @@
+"""Scenes: obstacles, the grasped object with its grasp frames, and start/goal object poses,
+from ``models/scenes/<name>.toml``.
+
+Schema (lengths [m], angles in ``angle_unit``; ``rpy`` = roll, pitch, yaw with
+``R = Rz(yaw) Ry(pitch) Rx(roll)``)::
+
+    name = "transport"
+    robot = "tcbirrt_dual_arm"
+    angle_unit = "deg"
+
+    [object]                       # optional: a box held by the arms
+    size = [2.0, 0.8, 0.8]         # full edge lengths
+    grasps = { A = { xyz = [1, 0, 0], rpy = [0, 90, 0] }, B = { xyz = [-1, 0, 0], rpy = [0, -90, 0] } }
+    exclude_links = ["a_link6", "a_link7", "b_link6", "b_link7"]   # robot links allowed to touch it
+
+    [start]                        # object pose(s)
+    xyz = [0, 0, 3.0]
+    rpy = [0, 0, 90]
+    [goal]
+    xyz = [1.5, 0, 2.5]
+    rpy = [0, 0, 90]
+
+    [[obstacles]]
+    name = "truss_1"
+    shape = "box"                  # "box" (size), "sphere" (radius), "capsule" (radius, length along local z)
+    size = [0.2, 0.2, 4.0]
+    xyz = [2.0, 0.0, 2.0]
+    rpy = [0, 0, 0]
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from .description import models_dir
+from .errors import ModelError, UnknownNameError
+from .spatial import rpy_to_matrix
+
+__all__ = ["Obstacle", "GraspedObject", "Scene", "available_scenes"]
+
+
+def available_scenes() -> list[str]:
+    return sorted(p.stem for p in (models_dir() / "scenes").glob("*.toml"))
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A static convex obstacle. ``size``: full box edges [m]; ``radius`` [m]; ``length``: capsule
+    segment length along local z [m]."""
+
+    name: str
+    shape: str
+    placement: pin.SE3
+    size: tuple[float, float, float] | None = None
+    radius: float | None = None
+    length: float | None = None
+
+    def coal_geometry(self) -> coal.CollisionGeometry:
+        if self.shape == "box":
+            return coal.Box(*self.size)
+        if self.shape == "sphere":
+            return coal.Sphere(self.radius)
+        return coal.Capsule(self.radius, self.length)
+
+    def primitive(self):
+        """The shape for :mod:`optplan.distance` (local frame)."""
+        from . import distance as D
+
+        if self.shape == "box":
+            return D.Box(np.asarray(self.size) / 2)
+        if self.shape == "sphere":
+            return D.Sphere(self.radius)
+        return D.Capsule.along_z(self.radius, self.length)
+
+
+@dataclass(frozen=True)
+class GraspedObject:
+    """A box held by the arms: ``size`` full edges [m]; ``grasps`` maps arm name → grasp frame in the
+    object frame (where that arm's end-effector frame sits)."""
+
+    size: tuple[float, float, float]
+    grasps: dict[str, pin.SE3]
+    exclude_links: tuple[str, ...] = ()
+
+    def coal_geometry(self) -> coal.Box:
+        return coal.Box(*self.size)
+
+    def hand_pose(self, arm: str, object_pose: pin.SE3) -> pin.SE3:
+        return object_pose * self.grasps[arm]
+
+    def object_pose_from_hand(self, arm: str, hand_pose: pin.SE3) -> pin.SE3:
+        return hand_pose * self.grasps[arm].inverse()
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    robot: str | None
+    obstacles: tuple[Obstacle, ...]
+    object: GraspedObject | None = None
+    start: pin.SE3 | None = None
+    goal: pin.SE3 | None = None
+    extra: dict = field(default_factory=dict)
+
+    @classmethod
+    def load(cls, name_or_path: str | Path) -> "Scene":
+        """Load ``models/scenes/<name>.toml`` or a TOML path."""
+        p = Path(name_or_path)
+        if p.suffix != ".toml":
+            cand = models_dir() / "scenes" / f"{name_or_path}.toml"
+            if not cand.exists():
+                raise UnknownNameError("scene", str(name_or_path), available_scenes())
+            p = cand
+        if not p.exists():
+            raise ModelError(f"scene file {str(p)!r} does not exist")
+        try:
+            data = tomllib.loads(p.read_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise ModelError(f"{p}: malformed TOML: {exc}") from exc
+        return cls.from_dict(data, where=p.name)
+
+    @classmethod
+    def from_dict(cls, data: dict, where: str = "scene") -> "Scene":
+        ang = {"deg": math.pi / 180, "rad": 1.0}.get(data.get("angle_unit", "rad"))
+        if ang is None:
+            raise ModelError(f"{where}.angle_unit: expected 'deg' or 'rad', got {data.get('angle_unit')!r}")
+
+        def pose(d: dict, w: str) -> pin.SE3:
+            xyz = _vec(d.get("xyz", [0, 0, 0]), 3, f"{w}.xyz")
+            rpy = _vec(d.get("rpy", [0, 0, 0]), 3, f"{w}.rpy") * ang
+            return pin.SE3(rpy_to_matrix(*rpy), xyz)
+
+        obstacles = []
+        names = set()
+        for k, o in enumerate(data.get("obstacles", [])):
+            w = f"{where}: obstacles[{k}]"
+            name = str(o.get("name", f"obstacle_{k}"))
+            if name in names:
+                raise ModelError(f"{w}: duplicate obstacle name {name!r}")
+            names.add(name)
+            shape = o.get("shape")
+            if shape == "box":
+                size = _vec(o.get("size"), 3, f"{w}.size")
+                if np.any(size <= 0):
+                    raise ModelError(f"{w}.size: edges must be > 0 m, got {size.tolist()}")
+                obstacles.append(Obstacle(name, "box", pose(o, w), size=tuple(size)))
+            elif shape in ("sphere", "capsule"):
+                r = o.get("radius")
+                if not isinstance(r, (int, float)) or r <= 0:
+                    raise ModelError(f"{w}.radius: expected a number > 0 m, got {r!r}")
+                L = None
+                if shape == "capsule":
+                    L = o.get("length")
+                    if not isinstance(L, (int, float)) or L < 0:
+                        raise ModelError(f"{w}.length: expected a number ≥ 0 m, got {L!r}")
+                    L = float(L)
+                obstacles.append(Obstacle(name, shape, pose(o, w), radius=float(r), length=L))
+            else:
+                raise ModelError(f"{w}.shape: expected 'box', 'sphere' or 'capsule', got {shape!r}")
+        obj = None
+        if "object" in data:
+            o = data["object"]
+            size = _vec(o.get("size"), 3, f"{where}: object.size")
+            grasps = {arm: pose(g, f"{where}: object.grasps.{arm}") for arm, g in o.get("grasps", {}).items()}
+            obj = GraspedObject(tuple(size), grasps, tuple(o.get("exclude_links", ())))
+        start = pose(data["start"], f"{where}: start") if "start" in data else None
+        goal = pose(data["goal"], f"{where}: goal") if "goal" in data else None
+        return cls(str(data.get("name", where)), data.get("robot"), tuple(obstacles), obj, start, goal,
+                   dict(data.get("extra", {})))
+
+    def obstacle(self, name: str) -> Obstacle:
+        for o in self.obstacles:
+            if o.name == name:
+                return o
+        raise UnknownNameError("obstacle", name, [o.name for o in self.obstacles])
+
+
+def _vec(v, n: int, where: str) -> np.ndarray:
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ModelError(f"{where}: expected {n} numbers, got {v!r}") from exc
+    if a.shape != (n,) or not np.all(np.isfinite(a)):
+        raise ModelError(f"{where}: expected {n} finite numbers, got {v!r}")
+    return a

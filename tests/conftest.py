@@ -1,0 +1,37 @@
+"""Shared fixtures of the optplan test-suite.
+
+* ``eba`` / ``tcb``: the two shipped robots (session-scoped: loading builds collision pairs).
+* ``rng``: a fresh ``np.random.default_rng(12345)`` for every test, so a test draws the same
+  numbers whether it runs alone or inside the whole suite.
+* ``OPTPLAN_CACHE`` points to a session temporary directory, so compiled CasADi code never
+  touches the user's ``~/.cache/optplan``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optplan.robot import RobotModel
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _optplan_cache(tmp_path_factory):
+    mp = pytest.MonkeyPatch()
+    mp.setenv("OPTPLAN_CACHE", str(tmp_path_factory.mktemp("optplan_cache")))
+    yield
+    mp.undo()
+
+
+@pytest.fixture(scope="session")
+def eba() -> RobotModel:
+    return RobotModel.from_name("eba_ffsr")
+
+
+@pytest.fixture(scope="session")
+def tcb() -> RobotModel:
+    return RobotModel.from_name("tcbirrt_dual_arm")
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(12345)
