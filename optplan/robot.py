@@ -248,23 +248,38 @@ class RobotModel:
         return pin.XYZQUATToSE3(np.asarray(q, dtype=float)[:7])
 
     # ------------------------------------------------------------------ collision
-    def _default_collision_pairs(self) -> list[tuple[int, int]]:
-        """All geometry pairs except: same parent joint, parent/child joints, and pairs already in
-        contact at the neutral configuration (adjacent capsules that touch by construction)."""
-        gm, m = self.collision_model, self.model
+    def _joint_distance(self, ja: int, jb: int) -> int:
+        """Number of joints between two joints in the kinematic tree."""
+        m = self.model
+
+        def chain(j):
+            out = [j]
+            while j > 0:
+                j = int(m.parents[j])
+                out.append(j)
+            return out
+        ca_, cb = chain(ja), chain(jb)
+        common = next(j for j in ca_ if j in cb)
+        return ca_.index(common) + cb.index(common)
+
+    def _default_collision_pairs(self, min_joint_distance: int = 3) -> list[tuple[int, int]]:
+        """All geometry pairs except: pairs fewer than ``min_joint_distance`` joints apart in the
+        tree (the same link, parent/child and grandparent links: they touch or nearly touch by
+        construction, e.g. a forearm and the wrist link two joints further), and pairs already in
+        contact at the neutral configuration."""
+        gm = self.collision_model
         objs = gm.geometryObjects
         pairs = []
         for a in range(len(objs)):
             for b in range(a + 1, len(objs)):
-                ja, jb = objs[a].parentJoint, objs[b].parentJoint
-                if ja == jb or m.parents[ja] == jb or m.parents[jb] == ja:
+                if self._joint_distance(objs[a].parentJoint, objs[b].parentJoint) < min_joint_distance:
                     continue
                 pairs.append((a, b))
         if not pairs:
             return pairs
         gd = pin.GeometryData(gm)
         q0 = self.neutral()
-        pin.updateGeometryPlacements(m, self.data, gm, gd, q0)
+        pin.updateGeometryPlacements(self.model, self.data, gm, gd, q0)
         keep = []
         for a, b in pairs:
             d = _geom_distance(gm, gd, a, b)

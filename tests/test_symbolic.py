@@ -284,18 +284,23 @@ def test_prismatic_unaligned_and_mimic_joints_match_pinocchio_and_expanded_model
     assert bv == (6 if floating else 0)
 
 
-def test_symbolic_rejects_unsupported_joints(tmp_path):
-    """A continuous joint (nq = 2) cannot be a symbolic joint; the error names it."""
+def test_continuous_joints_are_refused_with_their_name(tmp_path):
+    """A continuous joint (Pinocchio: nq = 2, cos/sin) is neither a RobotModel joint nor a symbolic
+    one; both errors name it."""
+    from types import SimpleNamespace
+
+    from optplan.errors import ModelError
+
     text = MIMIC_URDF.replace('<joint name="j4" type="revolute"', '<joint name="j4" type="continuous"')
     p = tmp_path / "cont.urdf"
     p.write_text(text)
     model = pin.buildModelFromUrdf(str(p))
+    assert model.nqs[model.getJointId("j4")] == 2
     geom = pin.buildGeomFromUrdf(model, str(p), pin.COLLISION)
-    from optplan.errors import ModelError
-
-    with pytest.raises(ModelError, match="j4"):
-        robot = RobotModel(model, geom, {"arm": {"ee": "tip", "joints": ["j1", "j2", "j3"]}}, floating=False)
-        SymbolicKinematics(robot)
+    with pytest.raises(ModelError, match="'j4'"):
+        RobotModel(model, geom, {"arm": {"ee": "tip", "joints": ["j1", "j2", "j3"]}}, floating=False)
+    with pytest.raises(ModelError, match="'j4'"):
+        SymbolicKinematics(SimpleNamespace(model=model))
 
 
 # --------------------------------------------------------------------------- compiled code

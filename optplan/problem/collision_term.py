@@ -2,12 +2,16 @@
 between the robot's link capsules, the scene's obstacles and the held object.
 
 * Robot links: their exact capsules (the URDF ``*_capsule`` collision elements).
-* Held object (a box): covered by ``object_grid × object_grid`` capsules along its longest axis,
-  each spanning the full length (their union contains the box: conservative; the value can be up
-  to the capsule radius below the exact distance near the end faces).
-* Obstacles: exact boxes, spheres and capsules. Box–box pairs (a robot box vs an obstacle box) are
-  not modelled in the NLP and are reported by ``skipped``; :func:`optplan.verify.verify` still
-  checks them exactly with coal.
+* Held object: its exact box. Obstacles: exact boxes, spheres and capsules.
+* Pairs with a box on either side (object–obstacle, object–link, link–box obstacle, base box–
+  obstacle) use a **separating plane** per pair and knot: auxiliary variables ``(n, b)`` with
+  ``n·x + r_A ≤ b − m/2`` for every vertex/centre ``x`` of A (radius ``r_A``: 0 for box vertices,
+  the capsule/sphere radius otherwise), ``n·y − r_B ≥ b + m/2`` for B, and ``‖n‖² ≤ 1``. Such a
+  plane exists iff the shapes are at least ``m`` apart, so the constraints are exact, not an
+  approximation, and conservative (distance ≥ m/‖n‖ ≥ m). Planes start from coal's witness normal
+  at the initial guess.
+* Sphere/capsule-only pairs (link–link self-collision, links vs sphere/capsule obstacles) use the
+  smooth conservative distances of :mod:`optplan.distance` (≤ ``cover_tol`` + 3 mm below exact).
 
 Pair activation: a pair is constrained at every knot when its exact coal distance along the
 *initial guess* comes below ``activation`` [m] anywhere; far pairs are left out (the same pruning
@@ -30,6 +34,11 @@ from ..scene import Scene
 from .terms import NumericTrajectory, Term
 
 __all__ = ["CollisionAvoidance", "object_capsules"]
+
+
+def _box_vertices(h) -> list[np.ndarray]:
+    h = np.asarray(h, float)
+    return [np.array([sx * h[0], sy * h[1], sz * h[2]]) for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
 log = logging.getLogger(__name__)
 
 
@@ -58,13 +67,15 @@ class CollisionAvoidance(Term):
     """``d_smooth ≥ margin`` [m] for every active pair at every knot.
 
     scene: obstacles and (if ``held_object``) the grasped object; ``object_arm`` carries it.
-    activation [m]: see module docstring. cover_tol [m]: sphere-covering tolerance of the smooth
+    activation [m], window [knots]: a pair is constrained at the knots within ``window`` of those
+    where the initial guess brings it closer than ``activation`` (see module docstring). cover_tol [m]: sphere-covering tolerance of the smooth
     capsule distances (coarser = fewer spheres = faster NLP, more conservative).
     """
 
     scene: Scene | None = None
     margin: float = 0.0
-    activation: float = 0.4
+    activation: float = 0.3
+    window: int = 3
     self_collision: bool = True
     held_object: bool = True
     object_arm: str | None = None
@@ -102,16 +113,31 @@ class CollisionAvoidance(Term):
             self._hand_frame = robot.arm(self.checker.object_arm).ee_frame
 
     def _activate(self, robot, initial: NumericTrajectory | None):
+        """Active (pair, knots): knots within ``window`` of a knot where the initial guess brings
+        the pair closer than ``activation``. Sets ``active_pairs`` and ``active_knots``."""
         pairs = self.checker.pairs
         if initial is None:
-            keep = list(range(len(pairs)))
-        else:
-            dmin = np.full(len(pairs), np.inf)
-            for k in range(initial.N + 1):
-                dmin = np.minimum(dmin, self.checker.distances(initial.q_full(k)))
-            keep = [i for i in range(len(pairs)) if dmin[i] < self.activation]
-        self.active_pairs = [pairs[i] for i in keep]
+            self.active_pairs = list(pairs)
+            self.active_knots = {p: None for p in pairs}
+            return self.active_pairs
+        Dm = np.array([self.checker.distances(initial.q_full(k)) for k in range(initial.N + 1)])
+        close = Dm < self.activation
+        w = int(self.window)
+        self.active_pairs, self.active_knots = [], {}
+        for i, p in enumerate(pairs):
+            if not close[:, i].any():
+                continue
+            ks = np.flatnonzero(close[:, i])
+            mask = np.zeros(initial.N + 1, bool)
+            for k in ks:
+                mask[max(0, k - w):k + w + 1] = True
+            self.active_pairs.append(p)
+            self.active_knots[p] = np.flatnonzero(mask).tolist()
         return self.active_pairs
+
+    def _knots_of(self, pair, N: int):
+        ks = self.active_knots.get(pair)
+        return range(N + 1) if ks is None else ks
 
     # ------------------------------------------------------------------ expressions
     def _entity(self, tp, kind: str, idx: int, k: int):
@@ -146,36 +172,101 @@ class CollisionAvoidance(Term):
         return {"self": ("robot", "robot"), "robot-obstacle": ("robot", "obstacle"),
                 "object-obstacle": ("object", "obstacle"), "object-robot": ("object", "robot")}[pair.kind]
 
+    def _points(self, tp, kind: str, idx: int, k: int):
+        """World points and radius of an entity for the plane formulation: (list of 3-vectors, r)."""
+        if kind == "obstacle":
+            o = self.checker.obstacles[idx]
+            M = o.placement
+            if o.shape == "box":
+                return [ca.DM(M.act(v)) for v in _box_vertices(np.asarray(o.size) / 2)], 0.0
+            if o.shape == "sphere":
+                return [ca.DM(M.translation)], o.radius
+            return [ca.DM(M.act(np.array([0, 0, s * o.length / 2]))) for s in (-1, 1)], o.radius
+        if kind == "object":
+            Rh, ph = tp.frame(self._hand_frame, k)
+            G = self._grasp_inv
+            R, p = Rh @ ca.DM(G.rotation), ph + Rh @ ca.DM(G.translation)
+            return [p + R @ ca.DM(v) for v in _box_vertices(np.asarray(self.checker.object.size) / 2)], 0.0
+        fid, shape, Mbox = self._robot_shape[idx]
+        R, p = tp.frame(fid, k)
+        if isinstance(shape, D.Box):
+            Rb, pb = R @ ca.DM(Mbox.rotation), p + R @ ca.DM(Mbox.translation)
+            return [pb + Rb @ ca.DM(v) for v in _box_vertices(np.asarray(shape.half_extents))], 0.0
+        if isinstance(shape, D.Sphere):
+            return [p + R @ ca.DM(shape.center)], shape.radius
+        return [p + R @ ca.DM(shape.a), p + R @ ca.DM(shape.b)], shape.radius
+
+    def _is_box(self, kind: str, idx: int) -> bool:
+        if kind == "object":
+            return True
+        if kind == "obstacle":
+            return self.checker.obstacles[idx].shape == "box"
+        spec = self._robot_shape.get(idx)
+        return spec is not None and isinstance(spec[1], D.Box)
+
+    def _plane_init(self, pair, q_full) -> np.ndarray:
+        """(n, b) from coal's witness points at a configuration (normal from A to B)."""
+        Mo = self.checker._update(q_full)
+        obj_tf = coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None
+        g1, t1, g2, t2 = self.checker._geoms(pair, obj_tf)
+        req, res = coal.DistanceRequest(), coal.DistanceResult()
+        coal.distance(g1, t1, g2, t2, req, res)
+        n = np.asarray(res.normal, float)
+        if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+            n = t2.getTranslation() - t1.getTranslation()
+        n = n / max(np.linalg.norm(n), 1e-12)
+        mid = 0.5 * (np.asarray(res.getNearestPoint1()) + np.asarray(res.getNearestPoint2()))
+        return np.r_[n, n @ mid]
+
     def residual(self, tp):
         robot = tp.robot
         self._setup(robot)
         self._fns: dict = {}
         self.skipped = []
-        active = self._activate(robot, getattr(tp, "initial_traj", None))
-        rs = []
+        init = getattr(tp, "initial_traj", None)
+        active = self._activate(robot, init)
+        self._plane_slots = []  # (pair, k, aux index) for refreshing the initial planes
+        rs, lo = [], []
+        m2 = self.margin / 2
         for pair in active:
             ka, kb = self._kinds(pair)
-            for k in range(tp.N + 1):
+            if (ka == "robot" and self._robot_shape.get(pair.a) is None) or \
+                    (kb == "robot" and self._robot_shape.get(pair.b) is None):
+                self.skipped.append(pair)
+                continue
+            if self._is_box(ka, pair.a) or self._is_box(kb, pair.b):
+                for k in self._knots_of(pair, tp.N):
+                    x0 = self._plane_init(pair, init.q_full(k)) if init is not None else np.r_[1.0, 0, 0, 0]
+                    v = tp.add_variable(f"plane_{len(self._plane_slots)}", 4, x0)
+                    self._plane_slots.append((pair, k, len(tp.aux) - 1))
+                    n, b = v[:3], v[3]
+                    pa, ra = self._points(tp, ka, pair.a, k)
+                    pb, rb = self._points(tp, kb, pair.b, k)
+                    for x in pa:
+                        rs.append(b - ca.dot(n, x) - ra); lo.append(m2)
+                    for y in pb:
+                        rs.append(ca.dot(n, y) - b - rb); lo.append(m2)
+                    rs.append(1.0 - ca.sumsqr(n)); lo.append(0.0)
+                continue
+            for k in self._knots_of(pair, tp.N):
                 ea = self._entity(tp, ka, pair.a, k)
                 eb = self._entity(tp, kb, pair.b, k)
-                if ea is None or eb is None:
-                    self.skipped.append(pair)
-                    break
                 for sa in ea[0]:
                     for sb in eb[0]:
-                        f = self._dist_fn(sa, sb)
-                        if f is None:
-                            if pair not in self.skipped:
-                                self.skipped.append(pair)
-                            continue
-                        rs.append(f(ea[1], ea[2], eb[1], eb[2]))
+                        rs.append(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2])); lo.append(self.margin)
         if self.skipped:
-            log.info("collision term: %d pair(s) not modelled in the NLP (box-box): %s", len(self.skipped),
+            log.info("collision term: %d pair(s) without an NLP model: %s", len(self.skipped),
                      [(p.name_a, p.name_b) for p in self.skipped[:5]])
         if not rs:
             return ca.MX.zeros(0), np.zeros(0), np.zeros(0)
         r = ca.vertcat(*rs)
-        return r, np.full(r.shape[0], self.margin), np.full(r.shape[0], np.inf)
+        return r, np.array(lo), np.full(r.shape[0], np.inf)
+
+    def refresh_initial(self, tp, traj: NumericTrajectory) -> None:
+        """Re-seed the separating planes from a new initial guess (same active pairs)."""
+        for pair, k, i in getattr(self, "_plane_slots", []):
+            sym, _, lb, ub = tp.aux[i]
+            tp.aux[i] = (sym, self._plane_init(pair, traj.q_full(k)), lb, ub)
 
     def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         """Exact coal distances of the active pairs at every knot, ``(N+1) × n_active``."""

@@ -130,7 +130,7 @@ class OptProblem:
         tp = self.tp
         Tg = float(T) if T is not None else self.duration
         if solution is not None:
-            if solution.x is not None and solution.x.size == tp.x.shape[0] and len(solution.t) == self.N + 1:
+            if solution.x is not None and solution.x.size >= tp.x.shape[0] and len(solution.t) == self.N + 1:
                 self._x0 = np.array(solution.x, float)
                 self._lam_g0 = solution.lam_g
                 return
@@ -166,6 +166,18 @@ class OptProblem:
             base_quat = res.q[:, 3:7]
         self._x0 = tp.pack(Q, V, A, J, T=Tg, base_quat=base_quat)
         self._lam_g0 = None
+        self._refresh_aux()
+
+    def _refresh_aux(self) -> None:
+        """After a new initial guess, re-seed auxiliary variables (separating planes) of a built
+        problem; the problem structure (active collision pairs) is kept."""
+        if self._built is None:
+            return
+        traj = self.numeric_trajectory(self._x0)
+        for h in self._handles:
+            if hasattr(h.term, "refresh_initial"):
+                h.term.refresh_initial(self.tp, traj)
+        self._built["aux_init"] = self.tp.aux_init()
 
     def set_initial_straight_line(self, q_start, q_end, T: float | None = None) -> None:
         """Initial guess: rest-to-rest quintic from ``q_start`` to ``q_end`` (joint space)."""
@@ -192,18 +204,25 @@ class OptProblem:
         tp = self.tp
         if self.robot.is_floating:
             tp.com0 = self._com0()
-            tp._frame_cache.clear()
+        tp.clear_caches()
         tp.initial_traj = self.numeric_trajectory(self._x0) if self._x0 is not None else None
+        tp.clear_aux()
         g, lbg, ubg = [], [], []
         G, lo, hi = tp.dynamics_constraints()
         g.append(G); lbg.append(lo); ubg.append(hi)
         self._con_slices: dict[str, slice] = {}
+        self._residuals: dict[str, ca.MX] = {}
         n = G.shape[0]
         f = 0
         term_exprs = {}
+        self._bound_terms: dict[str, tuple] = {}
         for h in self._handles:
+            if h.role == "constraint" and hasattr(h.term, "bounds_on"):
+                self._bound_terms[h.name] = h.term.bounds_on(tp)
+                continue
             if h.role == "constraint":
                 r, lo, hi = h.term.residual(tp)
+                self._residuals[h.name] = r
                 lo, hi = np.broadcast_to(np.asarray(lo, float), (r.shape[0],)), np.broadcast_to(np.asarray(hi, float), (r.shape[0],))
                 g.append(r); lbg.append(lo); ubg.append(hi)
                 self._con_slices[h.name] = slice(n, n + r.shape[0])
@@ -213,29 +232,70 @@ class OptProblem:
                 term_exprs[h.name] = c
                 f = f + c
         gexpr = ca.vertcat(*g)
-        lbx = -np.inf * np.ones(tp.x.shape[0])
-        ubx = np.inf * np.ones(tp.x.shape[0])
+        xall = tp.x_all
+        nbase = tp.x.shape[0]
+        alo, ahi = tp.aux_bounds()
+        lbx = np.concatenate([-np.inf * np.ones(nbase), alo])
+        ubx = np.concatenate([np.inf * np.ones(nbase), ahi])
         if self.free_time:
-            i = tp.x.shape[0] - (4 * (self.N + 1) if tp.floating else 0) - 1
+            i = nbase - (4 * (self.N + 1) if tp.floating else 0) - 1
             lbx[i], ubx[i] = self.duration_bounds
-        costs = ca.Function("costs", [tp.x], [ca.vertcat(*term_exprs.values()) if term_exprs else ca.DM.zeros(0)])
+        for idx, lo, hi in self._bound_terms.values():
+            lbx[idx] = np.maximum(lbx[idx], lo)
+            ubx[idx] = np.minimum(ubx[idx], hi)
+        costs = ca.Function("costs", [xall], [ca.vertcat(*term_exprs.values()) if term_exprs else ca.DM.zeros(0)])
         self._built = {"f": f, "g": gexpr, "lbg": np.concatenate(lbg), "ubg": np.concatenate(ubg),
-                       "lbx": lbx, "ubx": ubx, "cost_names": list(term_exprs), "costs": costs,
-                       "gfun": ca.Function("g", [tp.x], [gexpr]), "solver": None, "solver_opts": None}
+                       "lbx": lbx, "ubx": ubx, "cost_names": list(term_exprs), "costs": costs, "x": xall,
+                       "nbase": nbase, "aux_init": tp.aux_init(), "ffun": ca.Function("f", [xall], [f]),
+                       "gfun": ca.Function("g", [xall], [gexpr]), "solver": None, "solver_opts": None}
         return self._built
 
+    def _reference_x(self) -> np.ndarray:
+        """Decision vector of the rest-to-rest quintic between the initial guess's end knots
+        (auxiliary variables and base states as in the initial guess), for objective scaling."""
+        u = self.tp.unpack(self._x0)
+        T = u.get("T", self.duration)
+        s = np.linspace(0.0, 1.0, self.N + 1)[:, None]
+        dq = u["q"][-1] - u["q"][0]
+        Q = u["q"][0] + (10 * s**3 - 15 * s**4 + 6 * s**5) * dq
+        V = (30 * s**2 - 60 * s**3 + 30 * s**4) * dq / T
+        A = (60 * s - 180 * s**2 + 120 * s**3) * dq / T**2
+        J = np.diff(A, axis=0) / (T / self.N)
+        xb = self.tp.pack(Q, V, A, J, T=T, base_quat=u.get("base_quat"))
+        return np.concatenate([xb, self._full_x0()[xb.size:]])
+
+    def _full_x0(self) -> np.ndarray:
+        b = self._built
+        if self._x0.size == b["x"].shape[0]:
+            return self._x0
+        return np.concatenate([self._x0[:b["nbase"]], b["aux_init"]])
+
     def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-6, max_iter: int = 500,
-              exact_hessian: bool = True) -> Solution:
+              exact_hessian: bool = True, objective_scaling: float | str = "auto") -> Solution:
         """Solve with IPOPT. Never raises for a failed solve: the status is in the Solution.
 
         ``tol`` is both IPOPT's ``tol``/``constr_viol_tol`` and the constraint-violation bound that
-        ``Solution.success`` requires. ``ipopt_options`` are passed through (e.g.
-        ``{"print_level": 5}``, ``{"linear_solver": "mumps"}``).
+        ``Solution.success`` requires. ``objective_scaling``: IPOPT's ``obj_scaling_factor``;
+        ``"auto"`` makes the objective 1 on a reference trajectory — the rest-to-rest quintic
+        between the initial guess's end configurations — because smoothness costs scale like
+        T⁻⁵ and are often ~1e-5, which costs IPOPT many barrier iterations (measured on the
+        transport example at N = 50: 71 iterations unscaled-by-guess vs 17-26 with this reference).
+        Defaults: exact Hessian, ``mu_strategy = adaptive``, MUMPS. ``ipopt_options`` are passed
+        through and override (e.g. ``{"print_level": 5}``).
         """
         if self._x0 is None:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
         b = self._built or self._build()
-        opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.tol": tol, "ipopt.constr_viol_tol": tol,
+        if objective_scaling == "auto":
+            f0 = abs(float(b["ffun"](self._reference_x())))
+            scale = float(np.clip(1.0 / f0, 1e-6, 1e8)) if np.isfinite(f0) and f0 > 0 else 1.0
+        else:
+            scale = float(objective_scaling)
+        # quantise the scale so that small changes of the warm start reuse the same solver
+        scale = float(10.0 ** (np.round(np.log10(scale) * 2) / 2)) if scale > 0 else 1.0
+        opts = {"expand": True, "ipopt.print_level": 0, "print_time": False, "ipopt.tol": tol,
+                "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
+                "ipopt.mu_strategy": "adaptive", "ipopt.obj_scaling_factor": scale,
                 "ipopt.max_iter": int(max_iter), "ipopt.sb": "yes"}
         if not exact_hessian:
             opts["ipopt.hessian_approximation"] = "limited-memory"
@@ -244,10 +304,10 @@ class OptProblem:
         key = repr(sorted(opts.items()))
         t0 = time.perf_counter()
         if b["solver"] is None or b["solver_opts"] != key:
-            nlp = {"x": self.tp.x, "f": b["f"], "g": b["g"]}
+            nlp = {"x": b["x"], "f": b["f"], "g": b["g"]}
             b["solver"] = ca.nlpsol("optplan", "ipopt", nlp, opts)
             b["solver_opts"] = key
-        args = dict(x0=self._x0, lbg=b["lbg"], ubg=b["ubg"], lbx=b["lbx"], ubx=b["ubx"])
+        args = dict(x0=self._full_x0(), lbg=b["lbg"], ubg=b["ubg"], lbx=b["lbx"], ubx=b["ubx"])
         if self._lam_g0 is not None and self._lam_g0.size == b["lbg"].size:
             args["lam_g0"] = self._lam_g0
         try:
@@ -260,7 +320,7 @@ class OptProblem:
             cost = float(out["f"])
         except RuntimeError as exc:  # IPOPT/CasADi evaluation errors become a status
             log.warning("IPOPT raised: %s", exc)
-            status, x, lam_g, iters, cost = IpoptStatus.INTERNAL_ERROR, self._x0.copy(), None, -1, float("nan")
+            status, x, lam_g, iters, cost = IpoptStatus.INTERNAL_ERROR, self._full_x0().copy(), None, -1, float("nan")
         wall = time.perf_counter() - t0
         return self._make_solution(x, lam_g, status, iters, wall, cost, tol)
 
@@ -277,6 +337,10 @@ class OptProblem:
             terms[name] = float(v)
         for name, sl in self._con_slices.items():
             terms[name] = float(viol_vec[sl].max()) if sl.stop > sl.start else 0.0
+        for name, (idx, lo, hi) in self._bound_terms.items():
+            xv = np.asarray(x)[idx]
+            terms[name] = float(np.max(np.maximum(np.maximum(lo - xv, xv - hi), 0.0)))
+            viol = max(viol, terms[name])
         u = tp.unpack(x)
         T = u.get("T", self.duration)
         t = np.linspace(0.0, T, self.N + 1)
@@ -303,11 +367,14 @@ class OptProblem:
         h = self.terms[handle] if isinstance(handle, str) else handle
         if self._built is None:
             self._build()
-        if h.role == "constraint":
-            r, _, _ = h.term.residual(self.tp)
+        if h.role == "constraint" and h.name in self._bound_terms:
+            idx = self._bound_terms[h.name][0]
+            r = self._built["x"][idx.tolist()]
+        elif h.role == "constraint":
+            r = self._residuals[h.name]
         else:
             r = h.weight * h.term.cost(self.tp)
-        return ca.Function(h.name, [self.tp.x], [r])
+        return ca.Function(h.name, [self._built["x"]], [r])
 
     @property
     def initial_guess(self) -> np.ndarray | None:

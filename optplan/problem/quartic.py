@@ -51,7 +51,6 @@ _log = logging.getLogger(__name__)
 _COSTS = {"jerk": 3, "acceleration": 2}
 _SLOTS = 3  # movable constraint points per segment (and dimension) for the refinement
 _WARM = True
-_WS_PASSES = 8
 
 
 @dataclass(frozen=True)
@@ -216,7 +215,7 @@ class _Problem:
         pts = [(i, f) for i in range(m) for f in np.linspace(0.0, 1.0, self.S)[:-1]] + [(m - 1, 1.0)]
         if self.slot_shape:
             seg = [i for i, _ in pts]
-            add_limits(derivs([P[k][seg, :] for k in range(5)], ca.repmat(H[seg], 1, n),
+            add_limits(derivs([P[k][seg, :] for k in range(5)], ca.repmat(H[seg, 0], 1, n),
                               ca.repmat(ca.DM([f for _, f in pts]), 1, n)), len(pts))
         # slots; slot_rows[name][s, i, j] = row of g of slot s of (segment i, dimension j) (-1: none)
         off = 0
@@ -286,20 +285,28 @@ class _Problem:
         if self.ee is not None:
             m, G = pp.n_segments, dense
             frac = np.linspace(0.0, 1.0, G)
-            t = pp.breakpoints[:-1, None] + frac[None, :] * pp.durations[:, None]
-            speed = self._ee_speed(pp, t.ravel()).reshape(m, G)
+            t0, h = pp.breakpoints[:-1], pp.durations
+
+            def speed_at(f):  # f (m, k) fractions -> (m, k) speeds
+                return self._ee_speed(pp, np.minimum(t0[:, None] + f * h[:, None], pp.tf).ravel()).reshape(f.shape)
+
+            speed = speed_at(np.broadcast_to(frac, (m, G)))
             rows = np.arange(m)
-            j = np.argmax(speed, axis=1)
-            jj = np.clip(j, 1, G - 2)
-            y0, y1, y2 = speed[rows, jj - 1], speed[rows, jj], speed[rows, jj + 1]
-            den = y0 - 2 * y1 + y2
-            ok = (j == jj) & (den < 0)
-            shift = np.where(ok, 0.5 * (y0 - y2) / np.where(ok, den, -1.0), 0.0)
-            loc = np.clip(frac[jj] + np.clip(shift, -1, 1) / (G - 1), 0.0, 1.0)
-            s_loc = self._ee_speed(pp, np.minimum(pp.breakpoints[:-1] + loc * pp.durations, pp.tf))
-            better = ok & (s_loc >= speed[rows, j])
-            best = np.where(better, s_loc, speed[rows, j])
-            loc = np.where(better, loc, frac[j])
+            best_f = frac[np.argmax(speed, axis=1)]
+            best = speed[rows, np.argmax(speed, axis=1)]
+            loc = best_f.copy()
+            for it in range(4):  # successive parabolic refinement on shrinking brackets
+                d = 1.0 / ((G - 1) * 4**it)
+                f3 = np.clip(loc[:, None] + np.array([-d, 0.0, d])[None, :], 0.0, 1.0)
+                y0, y1, y2 = speed_at(f3).T
+                den = y0 - 2 * y1 + y2
+                ok = den < 0
+                shift = np.where(ok, 0.5 * d * (y0 - y2) / np.where(ok, den, -1.0), 0.0)
+                loc = np.clip(loc + np.clip(shift, -d, d), 0.0, 1.0)
+            s_loc = speed_at(loc[:, None])[:, 0]
+            better = s_loc > best
+            best = np.where(better, s_loc, best)
+            loc = np.where(better, loc, best_f)
             out["ee_speed_max"] = ((best - self.ee_max)[:, None], loc[:, None], (best / self.ee_max)[:, None])
         return out
 
@@ -401,18 +408,11 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
 
     prob = _Problem(t0, h, X, v0v, a0v, vfv, vmax, amax, ee, ee_max, free_durations, _COSTS[cost],
                     float(time_weight), float(smooth_weight), S, slots=bool(refine))
-    # warm start: the linear solve; with free durations, first every duration is scaled by its
-    # segment's limit ratio (a few fixed-point passes towards "every segment just at a limit"),
-    # then all are stretched uniformly until the spline meets the limits
+    # warm start: the linear solve; with free durations stretched uniformly until it meets the limits
+    # (scaling single segments by their own limit ratio was tried and diverges: the spline couples them)
     h_ws = np.clip(h, hmin * 1.01, hmax) if free_durations else h
     pp_ws = prob.spline(h_ws)
     if free_durations and prob.has_limits:
-        for _ in range(_WS_PASSES):
-            ratio = prob.segment_ratio(pp_ws)
-            if np.all((ratio > 0.9) & (ratio <= 1.0)):
-                break
-            h_ws = np.clip(h_ws * np.clip(ratio, 0.5, 2.0), hmin * 1.01, hmax)
-            pp_ws = prob.spline(h_ws)
         for _ in range(10):
             ratio = float(prob.segment_ratio(pp_ws).max())
             if ratio <= 1.0 or not np.all(h_ws * ratio * 1.02 <= hmax):
@@ -454,7 +454,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         nlp, lbg, ubg = prob.build(h)
         solver = ca.nlpsol("quartic_smoothing", "ipopt", nlp, opts)
     except Exception as exc:  # noqa: BLE001 - a failed solve is a status, not an exception
-        _log.warning("quartic smoothing: building the NLP raised %s", exc)
+        _log.debug("quartic smoothing: building the NLP raised %s", exc)
         solver, status = None, f"Exception: {type(exc).__name__}: {exc}"
     warm: Dict[str, Any] = {}
     for rnd in range(max_ref + 1 if solver is not None else 0):
@@ -469,7 +469,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
             sol = solver(x0=x0, p=prob.pack_slots(slots), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **warm)
             stats = dict(solver.stats())
         except Exception as exc:  # noqa: BLE001
-            _log.warning("quartic smoothing: solver raised %s", exc)
+            _log.debug("quartic smoothing: solver raised %s", exc)
             status, success = f"Exception: {type(exc).__name__}: {exc}", False
             break
         status = str(stats.get("return_status", "Unknown"))

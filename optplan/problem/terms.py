@@ -204,6 +204,15 @@ class _JointBox(Term):
         ks = range(tp.N + 1)
         return ca.vertcat(*[get(k) for k in ks]), np.tile(lo, len(ks)), np.tile(hi, len(ks))
 
+    def bounds_on(self, tp):
+        """As a constraint this term is a plain bound on knot variables: (indices into x, lower,
+        upper). IPOPT treats variable bounds much more cheaply than general constraints."""
+        lo, hi = self._lims(tp.robot)
+        nj, N = tp.nj, tp.N
+        block = {"q": 0, "qd": 1, "qdd": 2}[self.which]
+        idx = block * nj * (N + 1) + np.arange(nj * (N + 1))
+        return idx, np.tile(lo, N + 1), np.tile(hi, N + 1)
+
     def numeric(self, traj):
         return getattr(traj, self.which).reshape(-1)
 

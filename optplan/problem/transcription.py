@@ -80,9 +80,36 @@ class Transcription:
             self.base0_quat = np.array([0, 0, 0, 1.0]) if base0_quat is None else np.asarray(base0_quat, float)
             self.com0 = np.zeros(3) if com0 is None else np.asarray(com0, float)
         self.x = ca.vertcat(*blocks)
+        self.aux: list[tuple[ca.MX, np.ndarray, np.ndarray, np.ndarray]] = []  # (sym, init, lb, ub)
         self._frame_fns: dict[int, ca.Function] = {}
         self._frame_cache: dict[tuple, tuple] = {}
+        self._joint_cache: dict[int, list] = {}
         self._build_base_functions()
+
+    # ------------------------------------------------------------------ auxiliary variables
+    def add_variable(self, name: str, n: int, init, lower=-np.inf, upper=np.inf) -> ca.MX:
+        """An auxiliary decision variable of size n (e.g. a separating plane), appended after the
+        trajectory variables; ``init`` is its initial guess."""
+        v = ca.MX.sym(name, n)
+        self.aux.append((v, np.broadcast_to(np.asarray(init, float), (n,)).copy(),
+                         np.broadcast_to(np.asarray(lower, float), (n,)).copy(),
+                         np.broadcast_to(np.asarray(upper, float), (n,)).copy()))
+        return v
+
+    def clear_aux(self) -> None:
+        self.aux = []
+
+    @property
+    def x_all(self):
+        return ca.vertcat(self.x, *[a[0] for a in self.aux]) if self.aux else self.x
+
+    def aux_init(self) -> np.ndarray:
+        return np.concatenate([a[1] for a in self.aux]) if self.aux else np.zeros(0)
+
+    def aux_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        if not self.aux:
+            return np.zeros(0), np.zeros(0)
+        return np.concatenate([a[2] for a in self.aux]), np.concatenate([a[3] for a in self.aux])
 
     # ------------------------------------------------------------------ variable layout
     def unpack(self, xval: np.ndarray) -> dict[str, np.ndarray]:
@@ -202,18 +229,36 @@ class Transcription:
         return ca.vertcat(self.base_position(k), self.base_quat(k), self.Q[:, k])
 
     # ------------------------------------------------------------------ frames
-    def frame_function(self, frame) -> ca.Function:
-        """``f(q_full) -> (R, p)`` (SX Function, cached)."""
-        fid = self.robot.frame_id(frame)
-        if fid not in self._frame_fns:
-            self._frame_fns[fid] = self.sym.fk_function(fid)
-        return self._frame_fns[fid]
+    def _joints_function(self) -> ca.Function:
+        """SX ``f(q_full) -> [R_1, p_1, ..., R_n, p_n]``: every joint placement in one pass (one call
+        per knot instead of one chain per frame)."""
+        if not hasattr(self, "_joints_fn"):
+            q = ca.SX.sym("q", self.robot.nq)
+            X = self.sym.joint_placements(q)
+            outs = []
+            for R, p in X[1:]:
+                outs += [R, p]
+            self._joints_fn = ca.Function("joint_placements", [q], outs)
+        return self._joints_fn
+
+    def _joint_placements_at(self, k: int):
+        if k not in self._joint_cache:
+            outs = self._joints_function()(self.q_full(k))
+            self._joint_cache[k] = [(ca.DM.eye(3), ca.DM.zeros(3))] + [
+                (outs[2 * i], outs[2 * i + 1]) for i in range(len(outs) // 2)]
+        return self._joint_cache[k]
 
     def frame(self, frame, k: int):
         """World placement ``(R, p)`` of a frame at knot k (expressions, cached)."""
         fid = self.robot.frame_id(frame)
         key = (fid, k)
         if key not in self._frame_cache:
-            R, p = self.frame_function(fid)(self.q_full(k))
-            self._frame_cache[key] = (R, p)
+            f = self.robot.model.frames[fid]
+            Rj, pj = self._joint_placements_at(k)[f.parentJoint]
+            M = f.placement
+            self._frame_cache[key] = (Rj @ ca.DM(np.array(M.rotation)), pj + Rj @ ca.DM(np.array(M.translation)))
         return self._frame_cache[key]
+
+    def clear_caches(self) -> None:
+        self._frame_cache.clear()
+        self._joint_cache.clear()
