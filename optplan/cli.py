@@ -48,6 +48,18 @@ def _cmd_bench_kinematics(args) -> int:
     return 0
 
 
+def _cmd_bench_transport(args) -> int:
+    from .bench.transport import report, run
+
+    knots = [int(k) for k in args.knots.split(",")]
+    rows = run(knots, args.seed)
+    print(report(rows, knots))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(rows, f, indent=2)
+    return 0
+
+
 def _cmd_demo(args) -> int:
     from .demo import run
 
@@ -86,6 +98,12 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("--calls", type=int, default=5000)
     k.add_argument("--json", help="write the figures as JSON to this path")
     k.set_defaults(func=_cmd_bench_kinematics)
+
+    tr = bench.add_parser("transport", help="closed-chain transport NLP at several knot counts")
+    tr.add_argument("--knots", default="25,50,100", help="comma-separated interval counts N")
+    tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--json", help="write the rows as JSON to this path")
+    tr.set_defaults(func=_cmd_bench_transport)
 
     d = sub.add_parser("demo", help="free-floating base of the EBA robot under a quintic joint motion")
     d.add_argument("--duration", type=float, default=20.0, help="motion duration [s]")

@@ -45,6 +45,7 @@ turns them back into exact ``coal.Capsule`` objects, plain URDF loaders see cyli
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -179,6 +180,8 @@ def _hrot(R):
 
 
 def _get(d: dict, key: str, where: str, types=None):
+    if not isinstance(d, dict):
+        raise ModelError(f"{where}: expected a table (key = value pairs), got {type(d).__name__} {d!r}")
     if key not in d:
         raise ModelError(f"{where}: missing key {key!r} (present keys: {sorted(d)})")
     v = d[key]
@@ -199,6 +202,19 @@ def _array(v, shape, where: str) -> np.ndarray:
     return arr
 
 
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
+
+
+def _check_inertia(I6: np.ndarray, where: str) -> None:
+    """A physical rotational inertia: symmetric positive definite and the triangle inequalities."""
+    xx, xy, xz, yy, yz, zz = I6
+    I = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+    ev = np.linalg.eigvalsh(I)
+    if ev.min() <= 0 or ev[0] + ev[1] < ev[2] * (1 - 1e-9):
+        raise ModelError(f"{where}: [Ixx, Ixy, Ixz, Iyy, Iyz, Izz] = {I6.tolist()} is not a physical inertia "
+                         f"(principal moments {ev.round(6).tolist()} must be > 0 and satisfy the triangle inequality)")
+
+
 def _parse_arm_type(name: str, d: dict, ang: float, src: str) -> ArmType:
     where = f"{src}: arm_types.{name}"
     conv = _get(d, "dh_convention", where, str)
@@ -215,6 +231,8 @@ def _parse_arm_type(name: str, d: dict, ang: float, src: str) -> ArmType:
         raise ModelError(f"{where}.masses: every mass must be > 0 kg, got {masses.tolist()}")
     coms = _array(_get(d, "coms", where), (n, 3), f"{where}.coms")
     inertias = _array(_get(d, "inertias", where), (n, 6), f"{where}.inertias")
+    for i in range(n):
+        _check_inertia(inertias[i], f"{where}.inertias[{i}] (link {i + 1})")
     lower = _array(_get(d, "lower", where), (n,), f"{where}.lower") * ang
     upper = _array(_get(d, "upper", where), (n,), f"{where}.upper") * ang
     if np.any(lower >= upper):
@@ -233,6 +251,8 @@ def _parse_arm_type(name: str, d: dict, ang: float, src: str) -> ArmType:
         caps.append({"link": link, "a": _array(_get(c, "a", cw), (3,), f"{cw}.a"),
                      "b": _array(_get(c, "b", cw), (3,), f"{cw}.b"), "radius": r})
     tool = d.get("tool", {})
+    if not isinstance(tool, dict):
+        raise ModelError(f"{where}.tool: expected a table {{ xyz = [...], rpy = [...] }}, got {tool!r}")
     return ArmType(
         name=name, convention=conv, dh=dh, masses=masses, coms=coms, inertias=inertias,
         lower=lower, upper=upper, velocity=velocity, effort=effort, capsules=tuple(caps),
@@ -256,7 +276,8 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
     except tomllib.TOMLDecodeError as exc:
         raise ModelError(f"{p}: malformed TOML: {exc}") from exc
     src = p.name
-    ang = {"deg": math.pi / 180.0, "rad": 1.0}.get(data.get("angle_unit", "rad"))
+    unit = data.get("angle_unit", "rad")
+    ang = {"deg": math.pi / 180.0, "rad": 1.0}.get(unit) if isinstance(unit, str) else None
     if ang is None:
         raise ModelError(f"{src}.angle_unit: expected 'deg' or 'rad', got {data.get('angle_unit')!r}")
     name = _get(data, "name", src, str)
@@ -289,11 +310,23 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
     prefixes = [a.prefix for a in arms]
     if len(set(names)) != len(names) or len(set(prefixes)) != len(prefixes):
         raise ModelError(f"{src}: arm names {names} and prefixes {prefixes} must be unique")
+    base_mass = _get(base, "mass", f"{src}: base", (int, float))
+    if isinstance(base_mass, bool) or not base_mass > 0:
+        raise ModelError(f"{src}: base.mass: expected a mass > 0 kg, got {base_mass!r}")
+    base_inertia = _array(_get(base, "inertia", f"{src}: base"), (6,), f"{src}: base.inertia")
+    _check_inertia(base_inertia, f"{src}: base.inertia")
+    base_link = str(base.get("link", "base"))
+    for what, value in [("name", name), ("base.link", base_link)] + [
+            (f"arms[{k}].name", a.name) for k, a in enumerate(arms)] + [
+            (f"arms[{k}].prefix", a.prefix) for k, a in enumerate(arms)]:
+        if not _NAME_RE.match(value):
+            raise ModelError(f"{src}: {what} = {value!r}: expected a name of letters, digits, '_' or '-' "
+                             "starting with a letter or '_' (it becomes a URDF/XML name)")
     return RobotDescription(
-        name=name, base_type=base_type, base_link=str(base.get("link", "base")),
-        base_mass=float(_get(base, "mass", f"{src}: base", (int, float))),
+        name=name, base_type=base_type, base_link=base_link,
+        base_mass=float(base_mass),
         base_com=_array(base.get("com", [0, 0, 0]), (3,), f"{src}: base.com"),
-        base_inertia=_array(_get(base, "inertia", f"{src}: base"), (6,), f"{src}: base.inertia"),
+        base_inertia=base_inertia,
         base_boxes=tuple(boxes), arm_types=arm_types, arms=tuple(arms), source=p,
         notes=str(data.get("notes", "")), extra=dict(data.get("extra", {})),
     )
@@ -301,7 +334,7 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
 
 # --------------------------------------------------------------------------- URDF writer
 def _f(x: float) -> str:
-    s = f"{x:.12g}"
+    s = f"{x:.17g}"
     return "0" if s in ("-0", "0") else s
 
 

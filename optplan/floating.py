@@ -112,7 +112,15 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
     model, data = robot.model, robot.model.createData()
     nj = robot.nj
     base0 = pin.SE3.Identity() if base0 is None else base0
+    if not isinstance(base0, pin.SE3):
+        raise ConfigurationError(f"base0: expected a pinocchio.SE3, got {type(base0).__name__}")
     x = pin.SE3ToXYZQUAT(base0).copy()
+
+    if not isinstance(base0, pin.SE3):
+        raise ConfigurationError(f"base0: expected a pinocchio.SE3, got {type(base0).__name__}")
+    q_first, qd_first = trajectory(float(t_grid[0]))
+    robot.check_joints(q_first, f"trajectory({t_grid[0]}) joint values")
+    robot.check_joints(qd_first, f"trajectory({t_grid[0]}) joint rates")
 
     def twist(tt: float, xb: np.ndarray):
         qj, qdj = trajectory(tt)
@@ -155,6 +163,10 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
             x[3:] /= np.linalg.norm(x[3:])
             tt += dt
         record(k + 1, t_grid[k + 1], x)
+    if not np.all(np.isfinite(Q)):
+        bad = int(np.flatnonzero(~np.all(np.isfinite(Q), axis=1))[0])
+        raise ConfigurationError(f"simulate_base: non-finite state at t = {t_grid[bad]} s (the joint trajectory "
+                                 "returned NaN/inf or a singular momentum map was met)")
     res = np.max(np.abs(H - h0), axis=1)
     log.debug("simulate_base: %d samples, max momentum residual %.3g", N, res.max())
     return FloatingResult(t_grid.copy(), Q, V, H, res)

@@ -144,6 +144,8 @@ class RobotModel:
 
     def frame_id(self, name: str | int) -> int:
         """Index of a frame by name (an int is returned unchanged after a range check)."""
+        if isinstance(name, bool):
+            raise UnknownNameError("frame", name, self.frame_names)
         if isinstance(name, (int, np.integer)):
             if not 0 <= int(name) < self.model.nframes:
                 raise UnknownNameError("frame id", name, [str(i) for i in range(self.model.nframes)])

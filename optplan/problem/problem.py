@@ -285,6 +285,7 @@ class OptProblem:
         """
         if self._x0 is None:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
+        t_setup = time.perf_counter()
         b = self._built or self._build()
         if objective_scaling == "auto":
             f0 = abs(float(b["ffun"](self._reference_x())))
@@ -302,11 +303,12 @@ class OptProblem:
         for k, v in (ipopt_options or {}).items():
             opts[k if "." in k or k in ("print_time", "expand") else f"ipopt.{k}"] = v
         key = repr(sorted(opts.items()))
-        t0 = time.perf_counter()
         if b["solver"] is None or b["solver_opts"] != key:
             nlp = {"x": b["x"], "f": b["f"], "g": b["g"]}
             b["solver"] = ca.nlpsol("optplan", "ipopt", nlp, opts)
             b["solver_opts"] = key
+        setup = time.perf_counter() - t_setup
+        t0 = time.perf_counter()
         args = dict(x0=self._full_x0(), lbg=b["lbg"], ubg=b["ubg"], lbx=b["lbx"], ubx=b["ubx"])
         if self._lam_g0 is not None and self._lam_g0.size == b["lbg"].size:
             args["lam_g0"] = self._lam_g0
@@ -322,7 +324,9 @@ class OptProblem:
             log.warning("IPOPT raised: %s", exc)
             status, x, lam_g, iters, cost = IpoptStatus.INTERNAL_ERROR, self._full_x0().copy(), None, -1, float("nan")
         wall = time.perf_counter() - t0
-        return self._make_solution(x, lam_g, status, iters, wall, cost, tol)
+        sol = self._make_solution(x, lam_g, status, iters, wall, cost, tol)
+        sol.setup_time = setup
+        return sol
 
     def _make_solution(self, x, lam_g, status, iters, wall, cost, tol) -> Solution:
         b, tp = self._built, self.tp

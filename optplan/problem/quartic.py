@@ -184,15 +184,17 @@ class _Problem:
 
         add(P[0], X[:-1], X[:-1])                              # a_i = x_i
         add(P[0] + P[1] + P[2] + P[3] + P[4], X[1:], X[1:])    # x_i(t_{i+1}) = x_{i+1}
-        end = {}
-        for o in (1, 2, 3):                                    # C1, C2, C3 at inner waypoints
-            end[o] = sum(_falling(k, o) * P[k] for k in range(o, 5)) / Hm**o
-            if m > 1:
-                start_next = math.factorial(o) * P[o][1:, :] / Hm[1:, :] ** o
-                add(self.h_ref**o * (end[o][:-1, :] - start_next), 0.0, 0.0)
-        add(self.h_ref * P[1][0, :] / H[0], self.h_ref * self.v0, self.h_ref * self.v0)
-        add(self.h_ref**2 * 2 * P[2][0, :] / H[0] ** 2, self.h_ref**2 * self.a0, self.h_ref**2 * self.a0)
-        add(self.h_ref * end[1][m - 1, :], self.h_ref * self.vf, self.h_ref * self.vf)
+        # C1, C2, C3 at inner waypoints: x_i^(o)(t_{i+1}) = x_{i+1}^(o)(t_{i+1}), multiplied by
+        # (h_i h_{i+1} / h_ref)^o -> polynomial in (p, h), position units
+        Hr = Hm / self.h_ref
+        end = {o: sum(_falling(k, o) * P[k] for k in range(o, 5)) for o in (1, 2, 3)}  # = h_i^o x_i^(o)(end)
+        if m > 1:
+            for o in (1, 2, 3):
+                add(end[o][:-1, :] * Hr[1:, :] ** o - math.factorial(o) * P[o][1:, :] * Hr[:-1, :] ** o, 0.0, 0.0)
+        hr0, hrf = H[0] / self.h_ref, H[m - 1] / self.h_ref
+        add(P[1][0, :] - self.h_ref * hr0 * ca.DM(self.v0).T, 0.0, 0.0)              # x'(t0) = v0
+        add(2 * P[2][0, :] - self.h_ref**2 * hr0**2 * ca.DM(self.a0).T, 0.0, 0.0)    # x''(t0) = a0
+        add(end[1][m - 1, :] - self.h_ref * hrf * ca.DM(self.vf).T, 0.0, 0.0)       # x'(tf) = vf
 
         def derivs(Ps, Hs, Fr):
             q = Ps[0] + Ps[1] * Fr + Ps[2] * Fr**2 + Ps[3] * Fr**3 + Ps[4] * Fr**4
@@ -213,7 +215,7 @@ class _Problem:
 
         # fixed samples: S per segment, both ends, shared knots once
         pts = [(i, f) for i in range(m) for f in np.linspace(0.0, 1.0, self.S)[:-1]] + [(m - 1, 1.0)]
-        if self.slot_shape:
+        if self.has_limits:
             seg = [i for i, _ in pts]
             add_limits(derivs([P[k][seg, :] for k in range(5)], ca.repmat(H[seg, 0], 1, n),
                               ca.repmat(ca.DM([f for _, f in pts]), 1, n)), len(pts))

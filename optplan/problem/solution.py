@@ -57,7 +57,8 @@ class Solution:
     """Result of a trajectory NLP.
 
     ``success`` is True only when IPOPT converged *and* the maximum constraint violation is below
-    the problem's tolerance. ``t`` [s] (N+1,), ``q`` [rad] (N+1, nj), ``qd``, ``qdd``, ``jerk`` (N, nj);
+    the problem's tolerance. ``wall_time`` [s] is the IPOPT run; ``setup_time`` [s] the NLP
+    construction and solver creation that preceded it (0 when a built solver was reused). ``t`` [s] (N+1,), ``q`` [rad] (N+1, nj), ``qd``, ``qdd``, ``jerk`` (N, nj);
     ``base_quat`` (N+1, 4) and ``base_position`` (N+1, 3) for a floating robot. ``terms`` maps each
     named term to its value (cost terms: weighted cost; constraints: max violation).
     """
@@ -77,6 +78,7 @@ class Solution:
     joint_names: tuple[str, ...]
     base_quat: np.ndarray | None = None
     base_position: np.ndarray | None = None
+    setup_time: float = 0.0  # [s] building the NLP and creating the IPOPT instance (first solve only)
     x: np.ndarray | None = field(default=None, repr=False)  # raw decision vector (warm starts)
     lam_g: np.ndarray | None = field(default=None, repr=False)
 
@@ -113,7 +115,7 @@ class Solution:
 
     def _meta(self) -> dict:
         return {"success": self.success, "status": self.status.value, "iterations": self.iterations,
-                "wall_time": self.wall_time, "cost": self.cost,
+                "wall_time": self.wall_time, "setup_time": self.setup_time, "cost": self.cost,
                 "max_constraint_violation": self.max_constraint_violation, "terms": self.terms,
                 "joint_names": list(self.joint_names)}
 
@@ -149,6 +151,7 @@ class Solution:
         arrays.setdefault("base_position", None)
         return cls(success=bool(meta["success"]), status=IpoptStatus.from_string(meta["status"]),
                    iterations=int(meta["iterations"]), wall_time=float(meta["wall_time"]),
+                   setup_time=float(meta.get("setup_time", 0.0)),
                    cost=float(meta["cost"]), max_constraint_violation=float(meta["max_constraint_violation"]),
                    terms={k: float(v) for k, v in meta["terms"].items()},
                    joint_names=tuple(meta["joint_names"]), **arrays)

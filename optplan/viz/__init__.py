@@ -1,0 +1,30 @@
+"""Matplotlib figures (PNG)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def plot_joint_trajectory(sol, out_dir: str | Path, name: str) -> list[Path]:
+    """Joint positions and velocities of a Solution, sampled exactly, as ``<name>_joints.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t = np.linspace(sol.t[0], sol.t[-1], 10 * (len(sol.t) - 1) + 1)
+    s = sol.sample(t)
+    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    ax[0].plot(t, np.degrees(s["q"]))
+    ax[0].set_ylabel("joint angle [deg]")
+    ax[1].plot(t, np.degrees(s["qd"]))
+    ax[1].set_ylabel("joint rate [deg/s]")
+    ax[1].set_xlabel("t [s]")
+    fig.tight_layout()
+    p = out / f"{name}_joints.png"
+    fig.savefig(p, dpi=120)
+    plt.close(fig)
+    return [p]
