@@ -1,0 +1,231 @@
+"""One interface for every planner: :class:`PlanStatus`, :class:`PlanResult`, :class:`Planner`.
+
+A planner is built once for a robot and a scene (``Planner(robot, scene, options)``) and then asked
+``plan(q_start, q_goal, time_limit=..., seed=...)`` any number of times. It always returns a
+:class:`PlanResult` (never None, never raises on an unsolvable task): the status says what happened.
+
+Path layout (``PlanResult``), for ``M`` configurations:
+
+* ``path``: ``M × nq`` joint configurations [rad] (Pinocchio order), ``path[0] = q_start`` and
+  ``path[-1] = q_goal`` on success (``0 × nq`` otherwise).
+* ``object_poses``: one entry per configuration, the world pose of the grasped object
+  (:class:`pinocchio.SE3`), or ``None`` when the planner has no object (plain RRTConnect).
+  During a regrasp the object stays where it is, so its pose is still given.
+* ``constrained``: one bool per configuration, True where both hands are on their grasps (the
+  closed-chain constraint holds); False inside regrasp segments, where one hand is off the object.
+* ``segments``: consecutive index ranges ``[start, stop]`` (inclusive, neighbours share their end
+  configuration) of kind ``"constrained"`` (closed-chain motion; consecutive configurations are
+  IK solutions of neighbouring object poses), ``"regrasp"`` (one arm, ``arm``, moves on straight
+  joint-space edges while the other arm holds the object at ``object_pose``; the end
+  configurations have both hands on the object) or ``"free"`` (unconstrained joint-space edges).
+* ``stats``: ``time_s`` (wall time of ``plan``), ``nodes``, ``iterations``, ``seed`` and
+  planner-specific counters.
+"""
+from __future__ import annotations
+
+import abc
+import enum
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ConfigurationError
+from ..robot import RobotModel
+from ..scene import Scene
+
+__all__ = ["PlanStatus", "PathSegment", "PlanResult", "Planner", "Deadline", "pose_to_vector", "vector_to_pose"]
+log = logging.getLogger(__name__)
+
+
+class PlanStatus(str, enum.Enum):
+    """Outcome of a planning query."""
+
+    EXACT = "exact"                  #: a path from start to goal was found
+    APPROXIMATE = "approximate"      #: (OMPL) the planner returned a path that stops short of the goal
+    TIMEOUT = "timeout"              #: the time limit elapsed without a path
+    INVALID_START = "invalid_start"  #: start in collision, out of limits or off the constraint manifold
+    INVALID_GOAL = "invalid_goal"    #: same for the goal
+    FAILED = "failed"                #: the planner gave up before the time limit (iteration cap, ...)
+    ERROR = "error"                  #: an exception inside the planner (message in PlanResult.message)
+
+    @property
+    def success(self) -> bool:
+        return self is PlanStatus.EXACT
+
+
+@dataclass(frozen=True)
+class PathSegment:
+    """A consecutive range ``[start, stop]`` (inclusive) of path indices of one kind:
+    ``"constrained"``, ``"regrasp"`` (``arm`` moves, object fixed at ``object_pose``) or ``"free"``."""
+
+    kind: str
+    start: int
+    stop: int
+    arm: str | None = None
+    object_pose: pin.SE3 | None = None
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "start": self.start, "stop": self.stop, "arm": self.arm,
+                "object_pose": None if self.object_pose is None else pose_to_vector(self.object_pose).tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PathSegment":
+        op = d.get("object_pose")
+        return cls(d["kind"], int(d["start"]), int(d["stop"]), d.get("arm"),
+                   None if op is None else vector_to_pose(op))
+
+
+def pose_to_vector(M: pin.SE3) -> np.ndarray:
+    """``[x, y, z, qx, qy, qz, qw]`` of a placement (Pinocchio's XYZQUAT)."""
+    return np.asarray(pin.SE3ToXYZQUAT(M), dtype=float)
+
+
+def vector_to_pose(v) -> pin.SE3:
+    """Inverse of :func:`pose_to_vector`."""
+    v = np.asarray(v, dtype=float)
+    return pin.XYZQUATToSE3(np.r_[v[:3], v[3:7] / np.linalg.norm(v[3:7])])
+
+
+@dataclass
+class PlanResult:
+    """Result of :meth:`Planner.plan` (see the module docstring for the path layout)."""
+
+    status: PlanStatus
+    planner: str
+    path: np.ndarray
+    object_poses: list = field(default_factory=list)
+    constrained: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    segments: list = field(default_factory=list)
+    stats: dict = field(default_factory=dict)
+    message: str = ""
+
+    @property
+    def success(self) -> bool:
+        return self.status.success
+
+    @property
+    def time_s(self) -> float:
+        return float(self.stats.get("time_s", float("nan")))
+
+    @property
+    def n_regrasp(self) -> int:
+        """Number of regrasp segments (one per arm that lets go and grasps again)."""
+        return sum(1 for s in self.segments if s.kind == "regrasp")
+
+    def __len__(self) -> int:
+        return len(self.path)
+
+    # ------------------------------------------------------------------ serialization
+    def to_dict(self, include_path: bool = True) -> dict:
+        d = {"status": self.status.value, "planner": self.planner, "message": self.message,
+             "stats": _jsonable(self.stats), "n_configurations": int(len(self.path)),
+             "n_regrasp": self.n_regrasp, "segments": [s.to_dict() for s in self.segments]}
+        if include_path:
+            d["path"] = np.asarray(self.path).tolist()
+            d["object_poses"] = [None if M is None else pose_to_vector(M).tolist() for M in self.object_poses]
+            d["constrained"] = [bool(c) for c in self.constrained]
+        return d
+
+    def to_json(self, include_path: bool = True) -> str:
+        return json.dumps(self.to_dict(include_path))
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PlanResult":
+        path = np.asarray(d.get("path", []), dtype=float)
+        if path.ndim != 2:
+            path = path.reshape(0, 0)
+        return cls(PlanStatus(d["status"]), d.get("planner", ""), path,
+                   [None if v is None else vector_to_pose(v) for v in d.get("object_poses", [])],
+                   np.asarray(d.get("constrained", []), dtype=bool),
+                   [PathSegment.from_dict(s) for s in d.get("segments", [])], dict(d.get("stats", {})),
+                   d.get("message", ""))
+
+    @classmethod
+    def from_json(cls, text: str) -> "PlanResult":
+        return cls.from_dict(json.loads(text))
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.floating,)):
+        return float(x)
+    if isinstance(x, enum.Enum):
+        return x.value
+    return x
+
+
+class Deadline:
+    """Wall-clock deadline: ``Deadline(seconds)``; ``expired()``; ``remaining()``."""
+
+    __slots__ = ("t0", "limit", "end")
+
+    def __init__(self, seconds: float):
+        self.t0 = time.perf_counter()
+        self.limit = float(seconds)
+        self.end = self.t0 + self.limit
+
+    def expired(self) -> bool:
+        return time.perf_counter() >= self.end
+
+    def remaining(self) -> float:
+        return self.end - time.perf_counter()
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+
+class Planner(abc.ABC):
+    """Base class: ``plan(q_start, q_goal, time_limit=10.0, seed=0) -> PlanResult``.
+
+    Subclasses implement :meth:`_plan` and may rely on :meth:`plan` for input checks (shape,
+    finiteness), timing, seeding and turning exceptions into ``PlanStatus.ERROR``.
+    """
+
+    name = "planner"
+
+    def __init__(self, robot: RobotModel, scene: Scene | None = None):
+        if not isinstance(robot, RobotModel):
+            raise TypeError(f"robot: expected optplan.RobotModel, got {type(robot).__name__}")
+        if robot.is_floating:
+            raise ConfigurationError(f"{type(self).__name__} plans for fixed-base robots; {robot.name!r} is free-floating")
+        self.robot = robot
+        self.scene = scene
+
+    def plan(self, q_start, q_goal, *, time_limit: float = 10.0, seed: int = 0) -> PlanResult:
+        """Plan from ``q_start`` to ``q_goal`` within ``time_limit`` seconds (wall clock); ``seed``
+        makes the result reproducible (same seed, same path)."""
+        qs = self.robot.check_q(np.array(q_start, dtype=float), "q_start").copy()
+        qg = self.robot.check_q(np.array(q_goal, dtype=float), "q_goal").copy()
+        if not (np.isfinite(time_limit) and time_limit > 0):
+            raise ValueError(f"time_limit: expected a positive number of seconds, got {time_limit!r}")
+        seed = int(seed)
+        deadline = Deadline(time_limit)
+        try:
+            res = self._plan(qs, qg, deadline, np.random.default_rng(seed), seed)
+        except Exception as exc:  # a planner bug must not kill a benchmark run
+            log.exception("%s failed", self.name)
+            res = self.empty_result(PlanStatus.ERROR, f"{type(exc).__name__}: {exc}")
+        res.stats.setdefault("seed", seed)
+        res.stats["time_s"] = deadline.elapsed()
+        res.stats["time_limit_s"] = float(time_limit)
+        return res
+
+    @abc.abstractmethod
+    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
+              seed: int) -> PlanResult:
+        ...
+
+    def empty_result(self, status: PlanStatus, message: str = "", **stats) -> PlanResult:
+        return PlanResult(status, self.name, np.zeros((0, self.robot.nq)), [], np.zeros(0, bool), [], dict(stats),
+                          message)

@@ -1,0 +1,230 @@
+"""Fast closed-chain kinematics for the planners: the two-hand IK step of seed 000's Alg. 4, the
+closed-chain residual h(q) of Eq. 1-2 with its Jacobian, and the held object's pose.
+
+The hot functions are CasADi expressions built from :class:`optplan.SymbolicKinematics` and
+compiled to C (:func:`optplan.codegen.compile_function`), then called through ctypes with
+preallocated buffers (~5 µs per call for both arms' FK, Jacobians and damped least-squares
+step). Without a C compiler the interpreted CasADi functions are used (slower, same numbers).
+"""
+from __future__ import annotations
+
+import ctypes
+import logging
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+
+from ..codegen import CompiledFunction, compile_function
+from ..robot import RobotModel
+from ..symbolic import SymbolicKinematics
+
+__all__ = ["IKSettings", "ClosedChainKinematics", "closure_error"]
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class IKSettings:
+    """Alg. 4 of seed 000 (per-arm iterations ``q ← q + λ J† K e``).
+
+    ``tol_position`` [m] and ``tol_orientation`` [rad]: ε_p, ε_o on each hand's pose error (Eq. 5-6);
+    ``max_iterations``: n; ``gain``: K·λ (scalar, 1 = Newton step); ``damping``: δ of the damped
+    pseudo-inverse ``Jᵀ (J Jᵀ + δ² I)⁻¹`` (δ → 0 is the paper's pseudo-inverse; a small δ keeps the
+    step bounded near singularities); ``max_step`` [rad]: largest joint change per iteration.
+    """
+
+    tol_position: float = 1e-7
+    tol_orientation: float = 1e-7
+    max_iterations: int = 30
+    gain: float = 1.0
+    damping: float = 1e-4
+    max_step: float = 0.5
+
+    def __post_init__(self):
+        for name in ("tol_position", "tol_orientation", "gain", "max_step"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise ValueError(f"IKSettings.{name}: expected a positive number, got {v!r}")
+        if not (isinstance(self.damping, (int, float)) and np.isfinite(self.damping) and self.damping >= 0):
+            raise ValueError(f"IKSettings.damping: expected a number >= 0, got {self.damping!r}")
+        if not (isinstance(self.max_iterations, int) and self.max_iterations >= 1):
+            raise ValueError(f"IKSettings.max_iterations: expected an int >= 1, got {self.max_iterations!r}")
+
+
+class _Fast:
+    """A CasADi function with dense inputs and ONE dense vector output, compiled and called
+    through ctypes with preallocated buffers (falls back to the interpreted function)."""
+
+    def __init__(self, f: ca.Function):
+        self.f = f
+        self.n_out = int(f.nnz_out(0))
+        cf = compile_function(f)
+        self.compiled = isinstance(cf, CompiledFunction)
+        if not self.compiled:
+            return
+        lib = cf.lib
+        self._fn = getattr(lib, f.name())
+        self._fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
+        self._fn.restype = ctypes.c_int
+        sz = [ctypes.c_longlong() for _ in range(4)]
+        getattr(lib, f"{f.name()}_work")(*[ctypes.byref(x) for x in sz])
+        self._in = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
+        self._out = np.zeros(max(self.n_out, 1))
+        self._iw = np.zeros(max(sz[2].value, 1), dtype=np.int64)
+        self._w = np.zeros(max(sz[3].value, 1))
+        self._arg = (ctypes.c_void_p * max(sz[0].value, f.n_in()))()
+        self._res = (ctypes.c_void_p * max(sz[1].value, 1))()
+        for i, b in enumerate(self._in):
+            self._arg[i] = b.ctypes.data
+        self._res[0] = self._out.ctypes.data
+        self._iwp = self._iw.ctypes.data
+        self._wp = self._w.ctypes.data
+        self._keep = cf  # keep the library loaded
+
+    def __call__(self, *inputs) -> np.ndarray:
+        if not self.compiled:
+            return np.asarray(self.f(*inputs), dtype=float).ravel(order="F")
+        for b, x in zip(self._in, inputs):
+            b[:] = x
+        if self._fn(self._arg, self._res, self._iwp, self._wp, 0) != 0:
+            raise RuntimeError(f"{self.f.name()}: evaluation failed")
+        return self._out[:self.n_out].copy()
+
+
+def _vee_log(R):
+    """Rotation vector of a CasADi 3 × 3 rotation (exact away from π; Appendix Eq. 12-14)."""
+    v = 0.5 * ca.vertcat(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
+    s = ca.norm_2(v)
+    c = (R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / 2.0
+    th = ca.atan2(s, c)
+    return v * ca.if_else(s > 1e-12, th / ca.fmax(s, 1e-300), 1.0)
+
+
+class ClosedChainKinematics:
+    """Kinematics of two arms holding one rigid object.
+
+    ``grasps``: arm name → grasp frame in the object frame (``scene.object.grasps``); the first
+    arm is the paper's arm 1 (the object pose is read from its hand). Configurations are the
+    robot's full ``q`` (fixed base).
+    """
+
+    def __init__(self, robot: RobotModel, grasps: dict[str, pin.SE3]):
+        if len(grasps) != 2:
+            raise ValueError(f"grasps: expected two arms, got {list(grasps)}")
+        self.robot = robot
+        self.arm_names = tuple(grasps)
+        self.grasps = {a: pin.SE3(g) for a, g in grasps.items()}
+        self.arms = [robot.arm(a) for a in self.arm_names]
+        self.idx = [a.q_idx for a in self.arms]
+        self.lower, self.upper = robot.lower.copy(), robot.upper.copy()
+        self.nq = robot.nq
+        ga, gb = (self.grasps[a] for a in self.arm_names)
+        self.T21 = ga.actInv(gb)   # hand 2 in hand 1 (Eq. 1)
+        self._grasp1_inv = ga.inverse()
+        self._data = robot.model.createData()
+        self._build()
+
+    # ------------------------------------------------------------------ code generation
+    def _build(self):
+        robot = self.robot
+        sk = SymbolicKinematics(robot)
+        q = ca.SX.sym("q", robot.nq)
+        Ro = ca.SX.sym("Ro", 3, 3)
+        po = ca.SX.sym("po", 3)
+        damp = ca.SX.sym("damping")
+        X = sk.joint_placements(q)
+        dqs, errs, frames = [], [], []
+        for a in self.arms:
+            R, p = sk.frame_placement(q, a.ee_frame_id, X)
+            frames.append((R, p))
+            J = sk.frame_jacobian(q, a.ee_frame_id, "world_aligned", X)[:, [int(i) for i in a.v_idx]]
+            G = self.grasps[a.name]
+            Rg = Ro @ ca.DM(np.array(G.rotation))
+            pg = po + Ro @ ca.DM(np.array(G.translation))
+            ep = pg - p                                     # Eq. 5
+            eo = Rg @ _vee_log(R.T @ Rg)                    # Eq. 6
+            e = ca.vertcat(ep, eo)
+            dq = J.T @ ca.solve(J @ J.T + damp ** 2 * ca.SX.eye(6), e)   # Eq. 7 with K = I
+            dqs.append(dq)
+            errs += [ca.norm_2(ep), ca.norm_2(eo)]
+        dq_full = ca.SX.zeros(robot.nq)
+        for a, dq in zip(self.arms, dqs):
+            for k, i in enumerate(a.q_idx):
+                dq_full[int(i)] = dq[k]
+        step = ca.Function("occ_ik_step", [q, ca.vec(Ro), po, damp], [ca.vertcat(dq_full, *errs)])
+        # closed-chain residual, Eq. 1-2: T_e = T_2^-1 T_1 T_21, h = [p_e; roll; pitch; yaw]
+        (R1, p1), (R2, p2) = frames
+        R21, p21 = ca.DM(np.array(self.T21.rotation)), ca.DM(np.array(self.T21.translation))
+        Re = R2.T @ R1 @ R21
+        pe = R2.T @ (R1 @ p21 + p1 - p2)
+        h = ca.vertcat(pe, ca.atan2(Re[2, 1], Re[2, 2]), -ca.atan2(Re[2, 0], ca.sqrt(Re[2, 1] ** 2 + Re[2, 2] ** 2)),
+                       ca.atan2(Re[1, 0], Re[0, 0]))
+        Jh = ca.jacobian(h, q)
+        hfun = ca.Function("occ_h", [q], [h])
+        hjfun = ca.Function("occ_hj", [q], [ca.vertcat(h, ca.vec(Jh))])
+        self._step = _Fast(step)
+        self._h = _Fast(hfun)
+        self._hj = _Fast(hjfun)
+        self.compiled = self._step.compiled
+        if not self.compiled:
+            log.warning("closed-chain kinematics run interpreted (no C compiler): planners will be slow")
+
+    # ------------------------------------------------------------------ IK (Alg. 4)
+    def ik(self, q_seed: np.ndarray, R_obj: np.ndarray, p_obj: np.ndarray, s: IKSettings) -> tuple[np.ndarray | None, int]:
+        """Both hands onto their grasps of the object at ``(R_obj, p_obj)``, starting from
+        ``q_seed``. Returns ``(q, iterations)``, ``q = None`` when ε_p, ε_o are not met within
+        ``max_iterations`` (Alg. 4 line 11)."""
+        q = q_seed.copy()
+        Rf = R_obj.reshape(-1, order="F")
+        ia, ib = self.idx
+        lo, hi = self.lower, self.upper
+        tp, to, gain, mstep = s.tol_position, s.tol_orientation, s.gain, s.max_step
+        for it in range(s.max_iterations + 1):
+            out = self._step(q, Rf, p_obj, s.damping)
+            ok_a = out[self.nq] < tp and out[self.nq + 1] < to
+            ok_b = out[self.nq + 2] < tp and out[self.nq + 3] < to
+            if ok_a and ok_b:
+                return q, it
+            if it == s.max_iterations:
+                break
+            for ok, idx in ((ok_a, ia), (ok_b, ib)):
+                if ok:
+                    continue
+                dq = gain * out[idx]
+                m = np.abs(dq).max()
+                if m > mstep:
+                    dq *= mstep / m
+                q[idx] = np.minimum(np.maximum(q[idx] + dq, lo[idx]), hi[idx])
+        return None, s.max_iterations
+
+    def hand_errors(self, q: np.ndarray, R_obj: np.ndarray, p_obj: np.ndarray) -> np.ndarray:
+        """``[|e_p1|, |e_o1|, |e_p2|, |e_o2|]`` of the hands against the object pose."""
+        return self._step(q, R_obj.reshape(-1, order="F"), p_obj, 0.0)[self.nq:]
+
+    # ------------------------------------------------------------------ constraint h(q)
+    def h(self, q: np.ndarray) -> np.ndarray:
+        """Closed-chain residual (Eq. 2): position [m] and RPY [rad] of ``T_2⁻¹ T_1 T_21``."""
+        return self._h(q)
+
+    def h_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(h(q), ∂h/∂q)`` (6 and 6 × nq)."""
+        out = self._hj(q)
+        return out[:6], out[6:].reshape(6, self.nq, order="F")
+
+    # ------------------------------------------------------------------ object
+    def object_pose(self, q: np.ndarray) -> pin.SE3:
+        """World pose of the object from arm 1's hand (Pinocchio FK)."""
+        pin.framesForwardKinematics(self.robot.model, self._data, q)
+        return self._data.oMf[self.arms[0].ee_frame_id] * self._grasp1_inv
+
+
+def closure_error(robot: RobotModel, grasps: dict[str, pin.SE3], q, data: pin.Data | None = None) -> tuple[float, float]:
+    """Independent check with Pinocchio FK: ``(position error [m], rotation error [rad])`` of the
+    hands' relative pose against the grasps' (same measure as :func:`optplan.verify.verify`)."""
+    a, b = list(grasps)
+    data = data or robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))
+    rel = data.oMf[robot.arm(a).ee_frame_id].actInv(data.oMf[robot.arm(b).ee_frame_id])
+    err = grasps[a].actInv(grasps[b]).actInv(rel)
+    return float(np.linalg.norm(err.translation)), float(np.linalg.norm(pin.log3(err.rotation)))
