@@ -35,6 +35,33 @@ angles in the unit named by ``angle_unit``, "deg" or "rad")::
     mount_xyz = [0.3, 0.51, 0.83]   # arm base frame (D-H frame 0) in the base link
     mount_zyx = [90, 26, 0]         # Rz(a) Ry(b) Rx(c)   (or mount_rpy = [roll, pitch, yaw])
 
+Serpentine (segmented, cable-driven) arm types — ``kind = "serpentine"``::
+
+    [arm_types.my_snake]
+    kind = "serpentine"
+    segments = 5                    # n_b segments
+    joints_per_segment = 6          # m universal joints per segment (even)
+    link_length = 0.15              # L_b: every rigid link, joint centre to joint centre [m]
+    link_mass = 0.8                 # per rigid link [kg] (slender rod about its CoM)
+    capsule_radius = 0.035          # collision capsule along every link [m]
+    lower = -20.0; upper = 20.0     # limits of every joint axis (angle_unit)
+    velocity = 10.0                 # speed limit of every joint axis (angle_unit per second)
+    effort = 50.0                   # optional [N m]
+    tool = { xyz = [0, 0, 0], rpy = [0, 0, 0] }   # end-effector frame in the last link frame
+
+  Universal joint j of segment i is two revolute joints with intersecting axes,
+  ``<prefix>_joint<i>_<j>_1`` then ``<prefix>_joint<i>_<j>_2``: pitch (link y) then yaw (link z)
+  for odd j, yaw then pitch for even j (the pitch-yaw-yaw-pitch layout), followed by a rigid link
+  ``<prefix>_link<i>_<j>`` of length L_b along its x axis (the next joint sits at its end, the
+  end-effector ``<prefix>_ee`` at the end of the last link). Within a segment every joint copies
+  the first one (seed 003 Eq. 1: ``θ_{i,j,1} = θ_{i,j+1,2}``, ``θ_{i,j,2} = θ_{i,j+1,1}``, i.e. all
+  pitches equal and all yaws equal): ``<prefix>_joint<i>_1_1`` (pitch) and ``<prefix>_joint<i>_1_2``
+  (yaw) are actuated, the others are URDF ``<mimic>`` joints (multiplier 1, offset 0), so the arm
+  has 2·segments degrees of freedom. The arm frame (``mount_*``) has its x axis along the
+  unbent arm. With this layout each pitch-yaw/yaw-pitch pair is a pure rotation about an axis
+  normal to the incoming link, so a segment bends in one plane and its links are tangent to a
+  circular arc (the space-arc model of :mod:`optplan.methods.arcs`).
+
 Link and collision frames: the URDF link ``<prefix>_link<i>`` is the frame that joint ``i`` rotates
 about its z axis. In the modified convention it *is* D-H frame i; in the standard convention D-H
 frame i is ``<prefix>_link<i> · Tz(d_i) Tx(a_i) Rx(alpha_i)``. CoMs, inertias and capsules are given
@@ -58,7 +85,7 @@ from .errors import ModelError, UnknownNameError
 from .spatial import matrix_to_rpy, rotx, rotz, rpy_to_matrix, zyx_to_matrix
 
 __all__ = [
-    "ArmType", "ArmMount", "RobotDescription", "load_description", "write_urdf",
+    "ArmType", "SerpentineArmType", "ArmMount", "RobotDescription", "load_description", "write_urdf",
     "repo_root", "models_dir", "urdf_dir", "available_models", "build_all",
 ]
 
@@ -130,6 +157,46 @@ class ArmType:
 
 
 @dataclass(frozen=True)
+class SerpentineArmType:
+    """A segmented serpentine arm of coupled universal joints (see the module doc; angles in rad)."""
+
+    name: str
+    segments: int
+    joints_per_segment: int
+    link_length: float
+    link_mass: float
+    capsule_radius: float
+    lower: float
+    upper: float
+    velocity: float
+    effort: float
+    tool_xyz: np.ndarray
+    tool_rpy: np.ndarray
+    kind: str = "serpentine"
+
+    @property
+    def n(self) -> int:
+        """Actuated joints (2 per segment)."""
+        return 2 * self.segments
+
+    @property
+    def n_links(self) -> int:
+        return self.segments * self.joints_per_segment
+
+    @property
+    def masses(self) -> np.ndarray:
+        return np.full(self.n_links, self.link_mass)
+
+    def axes(self, j: int) -> tuple[str, str]:
+        """Axes (``"pitch"``/``"yaw"``) of the two revolute joints of universal joint j (1-based)."""
+        return ("pitch", "yaw") if j % 2 == 1 else ("yaw", "pitch")
+
+    def joint_names(self, prefix: str) -> list[str]:
+        """The actuated joints, segment by segment: pitch then yaw of each segment's first joint."""
+        return [f"{prefix}_joint{i}_1_{k}" for i in range(1, self.segments + 1) for k in (1, 2)]
+
+
+@dataclass(frozen=True)
 class ArmMount:
     name: str
     type: str
@@ -149,7 +216,7 @@ class RobotDescription:
     base_com: np.ndarray
     base_inertia: np.ndarray
     base_boxes: tuple[dict, ...]
-    arm_types: dict[str, ArmType]
+    arm_types: dict[str, ArmType | SerpentineArmType]
     arms: tuple[ArmMount, ...]
     source: Path | None = None
     notes: str = ""
@@ -261,6 +328,50 @@ def _parse_arm_type(name: str, d: dict, ang: float, src: str) -> ArmType:
     )
 
 
+def _parse_serpentine_arm_type(name: str, d: dict, ang: float, src: str) -> SerpentineArmType:
+    where = f"{src}: arm_types.{name}"
+
+    def pos_int(key):
+        v = _get(d, key, where, int)
+        if isinstance(v, bool) or v < 1:
+            raise ModelError(f"{where}.{key}: expected a positive integer, got {v!r}")
+        return v
+
+    def pos(key, default=None):
+        v = d.get(key, default) if default is not None else _get(d, key, where, (int, float))
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+            raise ModelError(f"{where}.{key}: expected a number > 0, got {v!r}")
+        return float(v)
+
+    segments = pos_int("segments")
+    m = pos_int("joints_per_segment")
+    if m % 2:
+        raise ModelError(f"{where}.joints_per_segment: expected an even number (pitch-yaw-yaw-pitch units), got {m}")
+    lower = float(_array(_get(d, "lower", where), (), f"{where}.lower")) * ang
+    upper = float(_array(_get(d, "upper", where), (), f"{where}.upper")) * ang
+    if lower >= upper:
+        raise ModelError(f"{where}: lower limit must be < upper limit ({lower} vs {upper})")
+    tool = d.get("tool", {})
+    if not isinstance(tool, dict):
+        raise ModelError(f"{where}.tool: expected a table {{ xyz = [...], rpy = [...] }}, got {tool!r}")
+    return SerpentineArmType(
+        name=name, segments=segments, joints_per_segment=m, link_length=pos("link_length"),
+        link_mass=pos("link_mass"), capsule_radius=pos("capsule_radius"), lower=lower, upper=upper,
+        velocity=pos("velocity") * ang, effort=pos("effort", 100.0),
+        tool_xyz=_array(tool.get("xyz", [0, 0, 0]), (3,), f"{where}.tool.xyz"),
+        tool_rpy=_array(tool.get("rpy", [0, 0, 0]), (3,), f"{where}.tool.rpy") * ang,
+    )
+
+
+def _parse_any_arm_type(name: str, d: dict, ang: float, src: str):
+    kind = d.get("kind", "dh") if isinstance(d, dict) else "dh"
+    if kind == "serpentine":
+        return _parse_serpentine_arm_type(name, d, ang, src)
+    if kind != "dh":
+        raise ModelError(f"{src}: arm_types.{name}.kind: expected 'dh' (default) or 'serpentine', got {kind!r}")
+    return _parse_arm_type(name, d, ang, src)
+
+
 def load_description(name_or_path: str | Path) -> RobotDescription:
     """Parse a robot description TOML (a path, or a model name in ``models/robots``)."""
     p = Path(name_or_path)
@@ -291,7 +402,7 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
         boxes.append({"size": _array(_get(b, "size", bw), (3,), f"{bw}.size"),
                       "xyz": _array(b.get("xyz", [0, 0, 0]), (3,), f"{bw}.xyz"),
                       "rpy": _array(b.get("rpy", [0, 0, 0]), (3,), f"{bw}.rpy") * ang})
-    arm_types = {k: _parse_arm_type(k, v, ang, src)
+    arm_types = {k: _parse_any_arm_type(k, v, ang, src)
                  for k, v in _get(data, "arm_types", src, dict).items()}
     arms = []
     for k, a in enumerate(_get(data, "arms", src, list)):
@@ -399,6 +510,9 @@ def urdf_string(desc: RobotDescription) -> str:
         out.append(f'  <link name="{p}_mount"/>')
         out.append(f'  <joint name="{p}_mount_joint" type="fixed"><parent link="{desc.base_link}"/>'
                    f'<child link="{p}_mount"/>{_origin(mount)}</joint>')
+        if isinstance(at, SerpentineArmType):
+            out.extend(_serpentine_urdf(at, p))
+            continue
         parent = f"{p}_mount"
         for i in range(1, at.n + 1):
             Tl = at.link_to_dh(i)
@@ -422,6 +536,48 @@ def urdf_string(desc: RobotDescription) -> str:
     return "\n".join(out) + "\n"
 
 
+def _serpentine_urdf(at: SerpentineArmType, p: str) -> list[str]:
+    """URDF lines of a serpentine arm below ``<p>_mount`` (see the module doc)."""
+    out = []
+    L, m, r = at.link_length, at.link_mass, at.capsule_radius
+    Ixx = 0.5 * m * r * r
+    Iyy = m * (3 * r * r + L * L) / 12.0
+    rod = np.array([Ixx, 0.0, 0.0, Iyy, 0.0, Iyy])
+    axis_xyz = {"pitch": "0 1 0", "yaw": "0 0 1"}
+    limit = (f'<limit lower="{_f(at.lower)}" upper="{_f(at.upper)}" effort="{_f(at.effort)}" '
+             f'velocity="{_f(at.velocity)}"/>')
+    first = np.eye(4)
+    step = _tx(L)
+    parent = f"{p}_mount"
+    for i in range(1, at.segments + 1):
+        for j in range(1, at.joints_per_segment + 1):
+            T = first if (i == 1 and j == 1) else step
+            cross, link = f"{p}_cross{i}_{j}", f"{p}_link{i}_{j}"
+            for k, ax in enumerate(at.axes(j), start=1):
+                child = cross if k == 1 else link
+                origin = _origin(T) if k == 1 else '<origin xyz="0 0 0" rpy="0 0 0"/>'
+                mimic = ""
+                if j > 1:
+                    src_k = 1 if ax == "pitch" else 2
+                    mimic = f'<mimic joint="{p}_joint{i}_1_{src_k}" multiplier="1" offset="0"/>'
+                if k == 1:
+                    out.append(f'  <link name="{cross}"/>')
+                else:
+                    cap = _capsule_xml(f"{link}_0", np.zeros(3), np.array([L, 0.0, 0.0]), r)
+                    out.append(f'  <link name="{link}">'
+                               f'{_inertial(m, np.array([L / 2, 0.0, 0.0]), rod, np.eye(4))}{cap}</link>')
+                out.append(f'  <joint name="{p}_joint{i}_{j}_{k}" type="revolute"><parent link="{parent}"/>'
+                           f'<child link="{child}"/>{origin}<axis xyz="{axis_xyz[ax]}"/>{limit}{mimic}</joint>')
+                parent = child
+    tool = np.eye(4)
+    tool[:3, :3] = rpy_to_matrix(*at.tool_rpy)
+    tool[:3, 3] = at.tool_xyz
+    out.append(f'  <link name="{p}_ee"/>')
+    out.append(f'  <joint name="{p}_ee_joint" type="fixed"><parent link="{parent}"/>'
+               f'<child link="{p}_ee"/>{_origin(step @ tool)}</joint>')
+    return out
+
+
 def write_urdf(desc: RobotDescription, out_dir: Path | None = None) -> Path:
     """Write ``<out_dir>/<name>.urdf`` (default: the repo's ``urdf/``) and return its path."""
     out_dir = Path(out_dir) if out_dir is not None else urdf_dir()
@@ -438,8 +594,12 @@ def build_all(out_dir: Path | None = None) -> list[Path]:
 
 def arm_metadata(desc: RobotDescription) -> dict[str, Any]:
     """Arm groups as RobotModel expects them: ``{arm: {"joints": [...], "ee": frame}}``."""
-    return {a.name: {"joints": [f"{a.prefix}_joint{i}" for i in range(1, desc.arm_types[a.type].n + 1)],
-                     "ee": f"{a.prefix}_ee"} for a in desc.arms}
+    def joints(a):
+        at = desc.arm_types[a.type]
+        if isinstance(at, SerpentineArmType):
+            return at.joint_names(a.prefix)
+        return [f"{a.prefix}_joint{i}" for i in range(1, at.n + 1)]
+    return {a.name: {"joints": joints(a), "ee": f"{a.prefix}_ee"} for a in desc.arms}
 
 
 def dh_capsules(arm: ArmType, radius: float, min_length: float = 1e-9) -> list[dict]:

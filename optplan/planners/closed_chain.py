@@ -57,6 +57,8 @@ class _Fast:
     through ctypes with preallocated buffers (falls back to the interpreted function)."""
 
     def __init__(self, f: ca.Function):
+        if not f.sparsity_out(0).is_dense():
+            raise ValueError(f"{f.name()}: the output must be dense")
         self.f = f
         self.n_out = int(f.nnz_out(0))
         cf = compile_function(f)
@@ -162,7 +164,7 @@ class ClosedChainKinematics:
                        ca.atan2(Re[1, 0], Re[0, 0]))
         Jh = ca.jacobian(h, q)
         hfun = ca.Function("occ_h", [q], [h])
-        hjfun = ca.Function("occ_hj", [q], [ca.vertcat(h, ca.vec(Jh))])
+        hjfun = ca.Function("occ_hj", [q], [ca.vertcat(h, ca.vec(ca.densify(Jh)))])
         self._step = _Fast(step)
         self._h = _Fast(hfun)
         self._hj = _Fast(hjfun)

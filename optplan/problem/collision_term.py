@@ -172,29 +172,49 @@ class CollisionAvoidance(Term):
         return {"self": ("robot", "robot"), "robot-obstacle": ("robot", "obstacle"),
                 "object-obstacle": ("object", "obstacle"), "object-robot": ("object", "robot")}[pair.kind]
 
-    def _points(self, tp, kind: str, idx: int, k: int):
-        """World points and radius of an entity for the plane formulation: (list of 3-vectors, r)."""
+    def _local_points(self, kind: str, idx: int):
+        """(local points 3×m, radius, placement getter) of an entity for the plane formulation."""
         if kind == "obstacle":
             o = self.checker.obstacles[idx]
-            M = o.placement
             if o.shape == "box":
-                return [ca.DM(M.act(v)) for v in _box_vertices(np.asarray(o.size) / 2)], 0.0
-            if o.shape == "sphere":
-                return [ca.DM(M.translation)], o.radius
-            return [ca.DM(M.act(np.array([0, 0, s * o.length / 2]))) for s in (-1, 1)], o.radius
+                V = np.array(_box_vertices(np.asarray(o.size) / 2)).T
+                r = 0.0
+            elif o.shape == "sphere":
+                V, r = np.zeros((3, 1)), o.radius
+            else:
+                V, r = np.array([[0, 0, -o.length / 2], [0, 0, o.length / 2]]).T, o.radius
+            M = o.placement
+            return V, r, lambda tp, k: (ca.DM(M.rotation), ca.DM(M.translation))
         if kind == "object":
-            Rh, ph = tp.frame(self._hand_frame, k)
+            V = np.array(_box_vertices(np.asarray(self.checker.object.size) / 2)).T
             G = self._grasp_inv
-            R, p = Rh @ ca.DM(G.rotation), ph + Rh @ ca.DM(G.translation)
-            return [p + R @ ca.DM(v) for v in _box_vertices(np.asarray(self.checker.object.size) / 2)], 0.0
+
+            def obj_pose(tp, k):
+                Rh, ph = tp.frame(self._hand_frame, k)
+                return Rh @ ca.DM(G.rotation), ph + Rh @ ca.DM(G.translation)
+            return V, 0.0, obj_pose
         fid, shape, Mbox = self._robot_shape[idx]
-        R, p = tp.frame(fid, k)
         if isinstance(shape, D.Box):
-            Rb, pb = R @ ca.DM(Mbox.rotation), p + R @ ca.DM(Mbox.translation)
-            return [pb + Rb @ ca.DM(v) for v in _box_vertices(np.asarray(shape.half_extents))], 0.0
-        if isinstance(shape, D.Sphere):
-            return [p + R @ ca.DM(shape.center)], shape.radius
-        return [p + R @ ca.DM(shape.a), p + R @ ca.DM(shape.b)], shape.radius
+            V = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T
+            r = 0.0
+        elif isinstance(shape, D.Sphere):
+            V, r = np.asarray(shape.center, float).reshape(3, 1), shape.radius
+        else:
+            V, r = np.array([shape.a, shape.b], float).T, shape.radius
+        return V, r, lambda tp, k: tp.frame(fid, k)
+
+    def _plane_fn(self, Va, ra, Vb, rb) -> ca.Function:
+        """SX Function (Ra, pa, Rb, pb, nb) -> plane residuals, cached per shape pair."""
+        key = (Va.tobytes(), ra, Vb.tobytes(), rb)
+        if key not in self._pfns:
+            Ra, Rb = ca.SX.sym("Ra", 3, 3), ca.SX.sym("Rb", 3, 3)
+            pa, pb, nb = ca.SX.sym("pa", 3), ca.SX.sym("pb", 3), ca.SX.sym("nb", 4)
+            n, b = nb[:3], nb[3]
+            Pa = Ra @ ca.DM(Va) + ca.repmat(pa, 1, Va.shape[1])
+            Pb = Rb @ ca.DM(Vb) + ca.repmat(pb, 1, Vb.shape[1])
+            r = ca.vertcat((b - n.T @ Pa - ra).T, (n.T @ Pb - b - rb).T, 1.0 - ca.sumsqr(n))
+            self._pfns[key] = ca.Function(f"plane_{len(self._pfns)}", [Ra, pa, Rb, pb, nb], [r])
+        return self._pfns[key]
 
     def _is_box(self, kind: str, idx: int) -> bool:
         if kind == "object":
@@ -222,6 +242,7 @@ class CollisionAvoidance(Term):
         robot = tp.robot
         self._setup(robot)
         self._fns: dict = {}
+        self._pfns: dict = {}
         self.skipped = []
         init = getattr(tp, "initial_traj", None)
         active = self._activate(robot, init)
@@ -235,18 +256,18 @@ class CollisionAvoidance(Term):
                 self.skipped.append(pair)
                 continue
             if self._is_box(ka, pair.a) or self._is_box(kb, pair.b):
+                Va, ra, pose_a = self._local_points(ka, pair.a)
+                Vb, rb, pose_b = self._local_points(kb, pair.b)
+                fn = self._plane_fn(Va, ra, Vb, rb)
+                nrow = Va.shape[1] + Vb.shape[1]
                 for k in self._knots_of(pair, tp.N):
                     x0 = self._plane_init(pair, init.q_full(k)) if init is not None else np.r_[1.0, 0, 0, 0]
                     v = tp.add_variable(f"plane_{len(self._plane_slots)}", 4, x0)
                     self._plane_slots.append((pair, k, len(tp.aux) - 1))
-                    n, b = v[:3], v[3]
-                    pa, ra = self._points(tp, ka, pair.a, k)
-                    pb, rb = self._points(tp, kb, pair.b, k)
-                    for x in pa:
-                        rs.append(b - ca.dot(n, x) - ra); lo.append(m2)
-                    for y in pb:
-                        rs.append(ca.dot(n, y) - b - rb); lo.append(m2)
-                    rs.append(1.0 - ca.sumsqr(n)); lo.append(0.0)
+                    Ra_, pa_ = pose_a(tp, k)
+                    Rb_, pb_ = pose_b(tp, k)
+                    rs.append(fn(Ra_, pa_, Rb_, pb_, v))
+                    lo += [m2] * nrow + [0.0]
                 continue
             for k in self._knots_of(pair, tp.N):
                 ea = self._entity(tp, ka, pair.a, k)

@@ -179,6 +179,22 @@ class OptProblem:
                 h.term.refresh_initial(self.tp, traj)
         self._built["aux_init"] = self.tp.aux_init()
 
+    def set_initial_path(self, path, closed_chain=None, T: float | None = None) -> bool:
+        """Initial guess from a planner's path (M × nq configurations, no timing): resampled
+        uniformly in joint-space arc length onto the knots and, with ``closed_chain``, projected
+        back onto the closed-chain manifold (:func:`optplan.warmstart.manifold_resample`); timed by
+        a rest-to-rest quintic time law over T. Returns whether every projection converged."""
+        from ..warmstart import manifold_resample
+
+        Q, ok = manifold_resample(self.robot, path, self.N + 1, closed_chain)
+        Tg = float(T) if T is not None else self.duration
+        s_of_tau = lambda tau: 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+        tau = np.linspace(0.0, 1.0, 2001)
+        t = Tg * np.interp(np.linspace(0.0, 1.0, self.N + 1), s_of_tau(tau), tau)
+        t[0], t[-1] = 0.0, Tg
+        self.set_initial(q=self.robot.joints_of(Q.T).T if self.robot.is_floating else Q, t=t, T=Tg)
+        return ok
+
     def set_initial_straight_line(self, q_start, q_end, T: float | None = None) -> None:
         """Initial guess: rest-to-rest quintic from ``q_start`` to ``q_end`` (joint space)."""
         qa = self.robot.check_joints(q_start, "q_start")

@@ -1,0 +1,211 @@
+"""RRTConnect (Kuffner & LaValle 2000) in joint space, and joint-space path shortcutting.
+
+:func:`rrt_connect` is the algorithm on any box-bounded vector space with a validity function; it
+is what TCBiRRT calls for a regrasp (7-D: one arm's joints, the rest of the robot fixed).
+:class:`RRTConnect` is the stand-alone planner in the robot's full joint space without an object
+(self-collision and obstacles only): edges are straight lines in joint space, checked every
+``resolution`` rad (largest joint change between checks).
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from .validity import ValidityChecker
+
+__all__ = ["RRTConnectOptions", "RRTConnect", "rrt_connect", "shortcut_path", "edge_is_valid"]
+log = logging.getLogger(__name__)
+
+TRAPPED, ADVANCED, REACHED = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class RRTConnectOptions:
+    """``range`` [rad]: largest edge (Euclidean joint distance) added per extension;
+    ``resolution`` [rad]: largest per-joint change between two collision checks on an edge;
+    ``max_iterations``: cap on sample iterations (0: only the time limit);
+    ``shortcut_iterations``: random shortcut attempts on the found path (0: raw tree path);
+    ``margin`` [m]: clearance that counts as contact for the validity checker."""
+
+    range: float = 1.0
+    resolution: float = 0.03
+    max_iterations: int = 0
+    shortcut_iterations: int = 100
+    margin: float = 0.0
+
+    def __post_init__(self):
+        for name in ("range", "resolution"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"RRTConnectOptions.{name}: expected a positive number, got {v!r}")
+        for name in ("max_iterations", "shortcut_iterations"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 0):
+                raise ValueError(f"RRTConnectOptions.{name}: expected an int >= 0, got {v!r}")
+        if not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin) and self.margin >= 0):
+            raise ValueError(f"RRTConnectOptions.margin: expected a number >= 0 m, got {self.margin!r}")
+
+
+class _Tree:
+    """Nodes in a growing array, parent indices."""
+
+    def __init__(self, root: np.ndarray, cap: int = 256):
+        self.X = np.empty((cap, root.size))
+        self.X[0] = root
+        self.parent = np.empty(cap, dtype=np.int64)
+        self.parent[0] = -1
+        self.n = 1
+
+    def add(self, x: np.ndarray, parent: int) -> int:
+        if self.n == len(self.X):
+            self.X = np.concatenate([self.X, np.empty_like(self.X)])
+            self.parent = np.concatenate([self.parent, np.empty_like(self.parent)])
+        self.X[self.n] = x
+        self.parent[self.n] = parent
+        self.n += 1
+        return self.n - 1
+
+    def nearest(self, x: np.ndarray) -> int:
+        d = self.X[:self.n] - x
+        return int(np.argmin(np.einsum("ij,ij->i", d, d)))
+
+    def branch(self, i: int) -> list[np.ndarray]:
+        out = []
+        while i >= 0:
+            out.append(self.X[i].copy())
+            i = int(self.parent[i])
+        return out[::-1]
+
+
+def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray], bool], resolution: float,
+                  check_end: bool = True) -> bool:
+    """Straight joint-space edge a → b valid at every ``resolution`` step (a itself not checked)."""
+    d = b - a
+    n = max(1, int(math.ceil(float(np.abs(d).max()) / resolution)))
+    stop = n + 1 if check_end else n
+    for k in range(1, stop):
+        if not is_valid(a + (k / n) * d):
+            return False
+    return True
+
+
+def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                is_valid: Callable[[np.ndarray], bool], rng: np.random.Generator, deadline: Deadline, *,
+                range_: float = 1.0, resolution: float = 0.03, max_iterations: int = 0,
+                stats: dict | None = None) -> list[np.ndarray] | None:
+    """RRTConnect between two valid points of the box ``[lower, upper]``.
+
+    Returns the list of tree nodes from ``start`` to ``goal`` (consecutive nodes joined by valid
+    straight edges) or None (deadline / iteration cap). ``stats`` (optional dict) receives
+    ``iterations`` and ``nodes``.
+    """
+    start = np.asarray(start, float)
+    goal = np.asarray(goal, float)
+    stats = stats if stats is not None else {}
+    if edge_is_valid(start, goal, is_valid, resolution):
+        stats["iterations"] = stats.get("iterations", 0)
+        stats["nodes"] = stats.get("nodes", 0) + 2
+        return [start.copy(), goal.copy()]
+    ta, tb = _Tree(start), _Tree(goal)
+    a_is_start = True
+    it = 0
+
+    def extend(tree: _Tree, target: np.ndarray) -> tuple[int, int]:
+        i = tree.nearest(target)
+        xn = tree.X[i]
+        d = target - xn
+        dist = float(np.sqrt(d @ d))
+        if dist <= range_:
+            xnew, res = target.copy(), REACHED
+        else:
+            xnew, res = xn + (range_ / dist) * d, ADVANCED
+        if not edge_is_valid(xn, xnew, is_valid, resolution):
+            return TRAPPED, -1
+        return res, tree.add(xnew, i)
+
+    found = None
+    while not deadline.expired() and (max_iterations <= 0 or it < max_iterations):
+        it += 1
+        xr = rng.uniform(lower, upper)
+        res, ia = extend(ta, xr)
+        if res == TRAPPED:
+            ta, tb, a_is_start = tb, ta, not a_is_start
+            continue
+        target = ta.X[ia].copy()
+        while True:
+            res, ib = extend(tb, target)
+            if res != ADVANCED or deadline.expired():
+                break
+        if res == REACHED:
+            found = (ia, ib)
+            break
+        ta, tb, a_is_start = tb, ta, not a_is_start
+    stats["iterations"] = stats.get("iterations", 0) + it
+    stats["nodes"] = stats.get("nodes", 0) + ta.n + tb.n
+    if found is None:
+        return None
+    pa, pb = ta.branch(found[0]), tb.branch(found[1])
+    path = pa + pb[::-1][1:]   # the connection node is in both trees
+    if not a_is_start:
+        path = path[::-1]
+    return path
+
+
+def shortcut_path(path: list[np.ndarray], is_valid: Callable[[np.ndarray], bool], resolution: float,
+                  rng: np.random.Generator, iterations: int = 100, deadline: Deadline | None = None) -> list[np.ndarray]:
+    """Random shortcutting: replace the sub-path between two random nodes by a straight edge
+    when that edge is valid. Endpoints are kept."""
+    path = [np.asarray(p, float) for p in path]
+    for _ in range(iterations):
+        if len(path) <= 2 or (deadline is not None and deadline.expired()):
+            break
+        i, j = sorted(rng.choice(len(path), size=2, replace=False))
+        if j - i < 2:
+            continue
+        if edge_is_valid(path[i], path[j], is_valid, resolution):
+            path = path[:i + 1] + path[j:]
+    return path
+
+
+class RRTConnect(Planner):
+    """RRTConnect in the full joint space, without the held object (self-collision and obstacles).
+
+    ``plan(q_start, q_goal, time_limit, seed)`` → :class:`PlanResult` with one ``"free"``
+    segment; ``object_poses`` are None and ``constrained`` False.
+    """
+
+    name = "rrtconnect"
+
+    def __init__(self, robot, scene=None, options: RRTConnectOptions | None = None, *,
+                 checker: ValidityChecker | None = None):
+        super().__init__(robot, scene)
+        self.options = options or RRTConnectOptions()
+        if not isinstance(self.options, RRTConnectOptions):
+            raise TypeError(f"options: expected RRTConnectOptions, got {type(self.options).__name__}")
+        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
+
+    def _plan(self, q_start, q_goal, deadline, rng, seed) -> PlanResult:
+        o, ck = self.options, self.checker
+        valid = ck.is_valid_free
+        if not (ck.in_limits(q_start) and valid(q_start)):
+            return self.empty_result(PlanStatus.INVALID_START, "start out of limits or in collision")
+        if not (ck.in_limits(q_goal) and valid(q_goal)):
+            return self.empty_result(PlanStatus.INVALID_GOAL, "goal out of limits or in collision")
+        stats: dict = {}
+        c0 = ck.n_checks
+        path = rrt_connect(q_start, q_goal, self.robot.lower, self.robot.upper, valid, rng, deadline,
+                           range_=o.range, resolution=o.resolution, max_iterations=o.max_iterations, stats=stats)
+        if path is None:
+            st = PlanStatus.TIMEOUT if deadline.expired() else PlanStatus.FAILED
+            return self.empty_result(st, "no path", **stats, collision_checks=ck.n_checks - c0)
+        if o.shortcut_iterations:
+            path = shortcut_path(path, valid, o.resolution, rng, o.shortcut_iterations)
+        P = np.array(path)
+        stats["collision_checks"] = ck.n_checks - c0
+        return PlanResult(PlanStatus.EXACT, self.name, P, [None] * len(P), np.zeros(len(P), bool),
+                          [PathSegment("free", 0, len(P) - 1)], stats)

@@ -1,0 +1,484 @@
+"""TCBiRRT — task-space constrained bidirectional RRT (seed 000, Alg. 1-4 and Section 4.3).
+
+Two trees grow in the object's pose space ξ = [p; roll, pitch, yaw] (RPY as in Eq. 2,
+``R = Rz(yaw) Ry(pitch) Rx(roll)``). Each node holds (q, ξ).
+
+* RandomSampleT: ξ uniform in the box ``[xi_lower, xi_upper]`` (paper: [-2,-3,0,-π,-π,-π] ..
+  [2,3,4,π,π,π], base frame = world).
+* NearestNeighborT: Euclidean distance in ξ.
+* ConstrainedExtendT (Alg. 2): ``ξ_s = ξ_near + min(s_ξ, d) (ξ_rand − ξ_near)/d`` (Eq. 3), N object
+  poses from ξ_near to ξ_s (position linear, orientation linear in exponential coordinates, Eq. 4),
+  PathInverseKinematics (Alg. 3: IK of each pose seeded by the previous solution), IK = Alg. 4
+  (damped pseudo-inverse iterations on each hand's pose error, Eq. 5-8), every configuration
+  collision-checked; Trapped / Advanced / Reached.
+* Connection (Alg. 1 lines 7-11): tree b is extended toward tree a's new node until Trapped or
+  Reached; when it reaches ξ of that node with a different joint solution, the two solutions are
+  joined by a **regrasp** (Section 4.3, below). A failed regrasp counts as Trapped.
+
+Regrasp (Section 4.3). The paper: "the same object pose ξ_I corresponds to two joint solutions
+q_a, q_b"; the motion between them "can be interpreted as a regrasp ... an unconstrained motion
+planning problem" solved by RRTConnect, during which "the manipulators must transition to new
+joint configurations *sequentially* while maintaining the pose of the manipulated object
+unchanged", and "only one manipulator or neither" moves when the solutions are close. We read it
+as: the object stays at ξ_I; the arms move ONE AT A TIME: one arm holds the object while the other
+lets go, moves on an unconstrained joint-space RRTConnect path (its 7 joints; the rest of the robot
+fixed; the object a fixed obstacle) to its new joint solution and grasps again; then the other
+arm does the same. An arm whose two solutions agree within ``regrasp_tolerance`` does not move.
+Both orders (A first, B first) are tried. In the returned :class:`PlanResult` each such motion is
+a ``"regrasp"`` segment (``constrained`` False inside it, True at its ends, where both hands are on
+the object again).
+
+Deviations from the paper, all options (defaults in brackets):
+
+* ``interpolation`` ["geodesic"]: Eq. 4 applied to the relative rotation,
+  ``R_j = R_near exp(j/N log(R_nearᵀ R_s))``. The literal Eq. 4 on absolute exponential
+  coordinates ("absolute") swings through a full turn when the two rotations sit on either side
+  of |φ| = π; "absolute" here unwraps φ_s to the representative nearest φ_near, which makes the
+  two agree to first order. Same end poses either way.
+* ``max_joint_step`` [0.5 rad]: PathInverseKinematics counts a waypoint as failed when its IK
+  solution jumps by more than this from the previous one (the paper seeds IK with the previous
+  solution "to maintain the continuity of the joint motion"; this makes that a guarantee).
+* ``edge_resolution`` [None]: the paper checks only the N+1 configurations of an extension; with a
+  value [rad], the straight joint-space segments between consecutive configurations are checked
+  too (every ``edge_resolution`` rad).
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ConfigurationError
+from ..robot import RobotModel
+from ..scene import Scene
+from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from .closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from .rrtconnect import RRTConnectOptions, edge_is_valid, rrt_connect, shortcut_path
+from .validity import ValidityChecker
+
+__all__ = ["TCBiRRTOptions", "TCBiRRT", "exp_coordinates", "rotation_from_exp", "interpolate_task",
+           "xi_from_pose", "pose_from_xi", "PAPER_XI_LOWER", "PAPER_XI_UPPER"]
+log = logging.getLogger(__name__)
+
+TRAPPED, ADVANCED, REACHED = "trapped", "advanced", "reached"
+PAPER_XI_LOWER = (-2.0, -3.0, 0.0, -math.pi, -math.pi, -math.pi)
+PAPER_XI_UPPER = (2.0, 3.0, 4.0, math.pi, math.pi, math.pi)
+
+
+# ---------------------------------------------------------------------- task-space helpers
+def exp_coordinates(R: np.ndarray) -> np.ndarray:
+    """Rotation vector ω̂θ of ``R`` (seed 000 Appendix, Eq. 12-14), θ ∈ [0, π].
+
+    Eq. 12 (θ from the trace) and Eq. 14 (axis from the skew part) away from 0 and π; Eq. 13's
+    θ = π case is generalised to use the largest diagonal entry (Eq. 13 divides by 1 + r11, which
+    vanishes for a half turn about any axis ⊥ x) and is used whenever sin θ is too small for Eq. 14.
+    """
+    R = np.asarray(R, dtype=float)
+    v = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    s = float(np.linalg.norm(v))
+    c = float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
+    theta = math.atan2(s, c)                      # Eq. 12, robust form
+    if s < 1e-12 and c > 0:
+        return np.zeros(3)                        # θ = 0
+    if c > -0.9:
+        return v * (theta / s)                    # Eq. 14: ω̂ = vee(R − Rᵀ) / (2 sin θ)
+    # near π: ω̂ω̂ᵀ = (R + Rᵀ)/2 − cos θ I) / (1 − cos θ), take the best-conditioned column (Eq. 13)
+    B = (0.5 * (R + R.T) - c * np.eye(3)) / (1.0 - c)
+    k = int(np.argmax(np.diag(B)))
+    w = B[:, k] / math.sqrt(max(B[k, k], 1e-300))
+    if w @ v < 0:                                 # sign from the skew part (undetermined at exactly π)
+        w = -w
+    return w * theta
+
+
+def rotation_from_exp(phi: np.ndarray) -> np.ndarray:
+    """Rodrigues: ``exp([φ]×)``."""
+    return np.asarray(pin.exp3(np.asarray(phi, dtype=float)))
+
+
+def _unwrap_near(phi: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """The representative of the rotation ``exp(φ)`` (φ + 2πk φ̂) closest to ``ref``."""
+    th = float(np.linalg.norm(phi))
+    if th < 1e-12:
+        return phi
+    u = phi / th
+    cands = [phi + 2.0 * math.pi * k * u for k in (-1, 0, 1)]
+    return min(cands, key=lambda c: float(np.linalg.norm(c - ref)))
+
+
+def interpolate_task(R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int,
+                     mode: str = "geodesic") -> list[tuple[np.ndarray, np.ndarray]]:
+    """Object poses ``j = 1..n`` from ``(R0, p0)`` to ``(R1, p1)`` (Eq. 4): position linear,
+    orientation linear in exponential coordinates — of the relative rotation (``"geodesic"``) or of
+    the absolute rotations (``"absolute"``, literal Eq. 4 with φ_s unwrapped next to φ_near)."""
+    out = []
+    if mode == "geodesic":
+        w = np.asarray(pin.log3(R0.T @ R1))
+        for j in range(1, n + 1):
+            s = j / n
+            out.append((R0 @ np.asarray(pin.exp3(s * w)), p0 + s * (p1 - p0)))
+    elif mode == "absolute":
+        f0 = exp_coordinates(R0)
+        f1 = _unwrap_near(exp_coordinates(R1), f0)
+        for j in range(1, n + 1):
+            s = j / n
+            out.append((rotation_from_exp(f0 + s * (f1 - f0)), p0 + s * (p1 - p0)))
+    else:
+        raise ValueError(f"interpolation mode: expected 'geodesic' or 'absolute', got {mode!r}")
+    if out:
+        out[-1] = (np.array(R1, dtype=float), np.array(p1, dtype=float))  # exact end pose ξ_s
+    return out
+
+
+def xi_from_pose(M: pin.SE3) -> np.ndarray:
+    """ξ = [x, y, z, roll, pitch, yaw] of an object pose (Eq. 2's RPY)."""
+    return np.concatenate([M.translation, pin.rpy.matrixToRpy(M.rotation)])
+
+
+def pose_from_xi(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, p)`` of ξ."""
+    return np.asarray(pin.rpy.rpyToMatrix(float(xi[3]), float(xi[4]), float(xi[5]))), np.array(xi[:3], dtype=float)
+
+
+# ---------------------------------------------------------------------- options
+def _pos(name, v, allow_zero=False):
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and (v >= 0 if allow_zero else v > 0)
+    if not ok:
+        raise ValueError(f"TCBiRRTOptions.{name}: expected a {'non-negative' if allow_zero else 'positive'} number, got {v!r}")
+
+
+@dataclass(frozen=True)
+class TCBiRRTOptions:
+    """Parameters (paper's defaults; see the module docstring for the deviations).
+
+    ``step_size``: s_ξ (Eq. 3) [mixed m / rad, as the paper's ξ]; ``n_interp``: N (Eq. 4);
+    ``xi_lower``/``xi_upper``: the sampling box ξ_l, ξ_h (world = base frame); ``ik``: Alg. 4
+    (ε_p, ε_o, n, K·λ); ``max_joint_step`` [rad] (``inf`` turns it off); ``interpolation``;
+    ``edge_resolution`` [rad] or None; ``regrasp``: RRTConnect options of a regrasp (one arm,
+    7-D); ``regrasp_time_limit`` [s] per regrasp attempt; ``regrasp_tolerance`` [rad]: an arm whose
+    two solutions differ by less (max-norm) does not move; ``closure_tolerance``: start and goal
+    must satisfy the closed chain to this (position [m] and angle [rad]); ``margin`` [m]: clearance
+    counted as contact; ``max_iterations``: cap on Alg. 1 iterations (0: only the time limit).
+    """
+
+    step_size: float = 0.6
+    n_interp: int = 5
+    xi_lower: tuple = PAPER_XI_LOWER
+    xi_upper: tuple = PAPER_XI_UPPER
+    ik: IKSettings = field(default_factory=IKSettings)
+    max_joint_step: float = 0.5
+    interpolation: str = "geodesic"
+    edge_resolution: float | None = None
+    regrasp: RRTConnectOptions = field(default_factory=lambda: RRTConnectOptions(range=1.0, resolution=0.03,
+                                                                                 shortcut_iterations=50))
+    regrasp_time_limit: float = 2.0
+    regrasp_tolerance: float = 1e-4
+    closure_tolerance: float = 1e-6
+    margin: float = 0.0
+    max_iterations: int = 0
+
+    def __post_init__(self):
+        _pos("step_size", self.step_size)
+        if not (isinstance(self.n_interp, int) and self.n_interp >= 1):
+            raise ValueError(f"TCBiRRTOptions.n_interp: expected an int >= 1, got {self.n_interp!r}")
+        lo, hi = np.asarray(self.xi_lower, float), np.asarray(self.xi_upper, float)
+        if lo.shape != (6,) or hi.shape != (6,) or not np.all(np.isfinite(lo)) or not np.all(np.isfinite(hi)) \
+                or np.any(hi < lo):
+            raise ValueError(f"TCBiRRTOptions.xi_lower/xi_upper: expected two 6-vectors with lower <= upper, "
+                             f"got {self.xi_lower!r}, {self.xi_upper!r}")
+        object.__setattr__(self, "xi_lower", tuple(float(x) for x in lo))
+        object.__setattr__(self, "xi_upper", tuple(float(x) for x in hi))
+        if not isinstance(self.ik, IKSettings):
+            raise ValueError(f"TCBiRRTOptions.ik: expected IKSettings, got {type(self.ik).__name__}")
+        if not (isinstance(self.max_joint_step, (int, float)) and self.max_joint_step > 0):
+            raise ValueError(f"TCBiRRTOptions.max_joint_step: expected a positive number (inf: off), got {self.max_joint_step!r}")
+        if self.interpolation not in ("geodesic", "absolute"):
+            raise ValueError(f"TCBiRRTOptions.interpolation: expected 'geodesic' or 'absolute', got {self.interpolation!r}")
+        if self.edge_resolution is not None:
+            _pos("edge_resolution", self.edge_resolution)
+        if not isinstance(self.regrasp, RRTConnectOptions):
+            raise ValueError(f"TCBiRRTOptions.regrasp: expected RRTConnectOptions, got {type(self.regrasp).__name__}")
+        _pos("regrasp_time_limit", self.regrasp_time_limit)
+        _pos("regrasp_tolerance", self.regrasp_tolerance, allow_zero=True)
+        _pos("closure_tolerance", self.closure_tolerance)
+        _pos("margin", self.margin, allow_zero=True)
+        if not (isinstance(self.max_iterations, int) and self.max_iterations >= 0):
+            raise ValueError(f"TCBiRRTOptions.max_iterations: expected an int >= 0, got {self.max_iterations!r}")
+
+
+# ---------------------------------------------------------------------- tree
+class _TaskTree:
+    """Nodes (q, ξ) plus, per node, the edge from its parent: intermediate configurations and
+    object poses (j = 1..N−1) of PathInverseKinematics."""
+
+    def __init__(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, cap: int = 512):
+        self.xi = np.empty((cap, 6))
+        self.q = np.empty((cap, q.size))
+        self.parent = [-1]
+        self.pose = [(R, p)]
+        self.edge: list = [([], [])]
+        self.xi[0], self.q[0] = xi, q
+        self.n = 1
+
+    def add(self, q, xi, R, p, parent, edge_q, edge_poses) -> int:
+        if self.n == len(self.xi):
+            self.xi = np.concatenate([self.xi, np.empty_like(self.xi)])
+            self.q = np.concatenate([self.q, np.empty_like(self.q)])
+        self.xi[self.n], self.q[self.n] = xi, q
+        self.parent.append(parent)
+        self.pose.append((R, p))
+        self.edge.append((edge_q, edge_poses))
+        self.n += 1
+        return self.n - 1
+
+    def nearest(self, xi: np.ndarray) -> int:
+        d = self.xi[:self.n] - xi
+        return int(np.argmin(np.einsum("ij,ij->i", d, d)))
+
+    def branch(self, i: int) -> tuple[list[np.ndarray], list[tuple]]:
+        """Configurations and poses from the root to node i (edge intermediates included)."""
+        qs, ps = [], []
+        while i >= 0:
+            qs.append(self.q[i].copy())
+            ps.append(self.pose[i])
+            eq, ep = self.edge[i]
+            qs.extend(x.copy() for x in reversed(eq))
+            ps.extend(reversed(ep))
+            i = self.parent[i]
+        return qs[::-1], ps[::-1]
+
+
+# ---------------------------------------------------------------------- planner
+class TCBiRRT(Planner):
+    """TCBiRRT for a robot holding ``scene.object`` with two arms (``scene.object.grasps``).
+
+    ``plan(q_start, q_goal, time_limit=10, seed=0)``: both configurations must hold the object
+    (closed chain within ``closure_tolerance``), be inside the joint limits and collision-free.
+    """
+
+    name = "tcbirrt"
+
+    def __init__(self, robot: RobotModel, scene: Scene, options: TCBiRRTOptions | None = None, *,
+                 checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None):
+        super().__init__(robot, scene)
+        if scene is None or scene.object is None or len(scene.object.grasps) != 2:
+            raise ConfigurationError("TCBiRRT needs a scene with an [object] grasped by two arms")
+        self.options = options or TCBiRRTOptions()
+        if not isinstance(self.options, TCBiRRTOptions):
+            raise TypeError(f"options: expected TCBiRRTOptions, got {type(self.options).__name__}")
+        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
+        self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
+        self.grasps = scene.object.grasps
+        self._lo = np.asarray(self.options.xi_lower)
+        self._hi = np.asarray(self.options.xi_upper)
+
+    # ------------------------------------------------------------------ public helpers
+    def check_endpoint(self, q: np.ndarray) -> str | None:
+        """None when ``q`` is a valid start/goal, else the reason."""
+        ck = self.checker
+        if not ck.in_limits(q):
+            return "outside the joint limits"
+        ep, eo = closure_error(self.robot, self.grasps, q)
+        if ep > self.options.closure_tolerance or eo > self.options.closure_tolerance:
+            return f"closed chain violated ({ep:.1e} m, {eo:.1e} rad > {self.options.closure_tolerance:g})"
+        if not ck.is_valid(q):
+            return "in collision: " + ", ".join(f"{a}/{b}" for a, b in ck.colliding_pairs(q)[:3])
+        return None
+
+    # ------------------------------------------------------------------ Alg. 3
+    def path_ik(self, poses, q_near: np.ndarray, st: dict) -> list[np.ndarray] | None:
+        """PathInverseKinematics + CollisionFree of Alg. 2: IK of every pose seeded by the previous
+        solution; None at the first failure (IK, continuity or collision)."""
+        o, kin, ck = self.options, self.kin, self.checker
+        out, q = [], q_near
+        for R, p in poses:
+            st["ik_calls"] += 1
+            qn, its = kin.ik(q, R, p, o.ik)
+            st["ik_iterations"] += its
+            if qn is None:
+                st["ik_failures"] += 1
+                return None
+            if float(np.abs(qn - q).max()) > o.max_joint_step:
+                st["ik_jumps"] += 1
+                return None
+            if not ck.is_valid(qn):
+                st["collisions"] += 1
+                return None
+            if o.edge_resolution is not None and not edge_is_valid(q, qn, ck.is_valid, o.edge_resolution, False):
+                st["collisions"] += 1
+                return None
+            out.append(qn)
+            q = qn
+        return out
+
+    # ------------------------------------------------------------------ regrasp (Section 4.3)
+    def regrasp(self, q_from: np.ndarray, q_to: np.ndarray, R: np.ndarray, p: np.ndarray, rng: np.random.Generator,
+                deadline: Deadline, st: dict) -> list[tuple[str, list[np.ndarray]]] | None:
+        """Move the arms one at a time from ``q_from`` to ``q_to`` (same object pose (R, p)), the
+        object fixed. Returns ``[(arm, [full configurations from start to end of that arm's
+        motion]), ...]`` (empty when no arm needs to move) or None."""
+        o, ck, kin = self.options, self.checker, self.kin
+        moving = [(name, idx) for name, idx in zip(kin.arm_names, kin.idx)
+                  if float(np.abs(q_to[idx] - q_from[idx]).max()) > o.regrasp_tolerance]
+        if not moving:
+            return []
+        st["regrasp_attempts"] += 1
+        M = pin.SE3(R, p)
+        orders = [moving] if len(moving) == 1 else [moving, moving[::-1]]
+        sub = Deadline(min(o.regrasp_time_limit, max(deadline.remaining(), 0.0)))
+        lo, hi = self.robot.lower, self.robot.upper
+        for order in orders:
+            cur = q_from.copy()
+            segs = []
+            for name, idx in order:
+                base = cur.copy()
+
+                def valid(x, base=base, idx=idx):
+                    base[idx] = x
+                    return ck.is_valid_object_fixed(base, M)
+
+                if not valid(q_to[idx]):   # the intermediate grasp configuration itself
+                    segs = None
+                    break
+                rs: dict = {}
+                sub_path = rrt_connect(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub,
+                                       range_=o.regrasp.range, resolution=o.regrasp.resolution,
+                                       max_iterations=o.regrasp.max_iterations, stats=rs)
+                st["regrasp_nodes"] += rs.get("nodes", 0)
+                if sub_path is None:
+                    segs = None
+                    break
+                if o.regrasp.shortcut_iterations:
+                    sub_path = shortcut_path(sub_path, valid, o.regrasp.resolution, rng, o.regrasp.shortcut_iterations)
+                full = []
+                for x in sub_path:
+                    y = cur.copy()
+                    y[idx] = x
+                    full.append(y)
+                segs.append((name, full))
+                cur = full[-1].copy()
+            if segs is not None:
+                return segs
+            if sub.expired():
+                break
+        st["regrasp_failures"] += 1
+        return None
+
+    # ------------------------------------------------------------------ Alg. 2
+    def constrained_extend(self, tree: _TaskTree, i_near: int, xi_rand: np.ndarray, q_rand: np.ndarray | None,
+                           rng, deadline, st) -> tuple[str, int, list | None]:
+        o = self.options
+        st["extensions"] += 1
+        xi_near = tree.xi[i_near]
+        d = xi_rand - xi_near
+        dist = float(np.sqrt(d @ d))
+        if dist <= o.step_size:
+            xi_s, reach = xi_rand.copy(), True           # ξ_s = ξ_rand exactly
+        else:
+            xi_s, reach = xi_near + (o.step_size / dist) * d, False   # Eq. 3
+        R0, p0 = tree.pose[i_near]
+        Rs, ps = pose_from_xi(xi_s)
+        q_near = tree.q[i_near]
+        if dist > 0.0:
+            poses = interpolate_task(R0, p0, Rs, ps, o.n_interp, o.interpolation)
+            Q = self.path_ik(poses, q_near, st)
+            if Q is None:
+                st["trapped"] += 1
+                return TRAPPED, -1, None
+        else:
+            poses, Q = [], [q_near.copy()]
+        q_s = Q[-1]
+        reg = None
+        if reach and q_rand is not None:
+            reg = self.regrasp(q_s, q_rand, Rs, ps, rng, deadline, st)
+            if reg is None:
+                st["trapped"] += 1
+                return TRAPPED, -1, None
+        if dist > 0.0:
+            i_s = tree.add(q_s, xi_s, Rs, ps, i_near, Q[:-1], poses[:-1])
+        else:
+            i_s = i_near
+        return (REACHED if reach else ADVANCED), i_s, reg
+
+    # ------------------------------------------------------------------ Alg. 1
+    def _plan(self, q_start, q_goal, deadline, rng, seed) -> PlanResult:
+        o = self.options
+        st = {k: 0 for k in ("iterations", "extensions", "trapped", "ik_calls", "ik_iterations", "ik_failures",
+                             "ik_jumps", "collisions", "regrasp_attempts", "regrasp_failures", "regrasp_nodes")}
+        c0 = self.checker.n_checks
+        why = self.check_endpoint(q_start)
+        if why:
+            return self.empty_result(PlanStatus.INVALID_START, f"start {why}", **st)
+        why = self.check_endpoint(q_goal)
+        if why:
+            return self.empty_result(PlanStatus.INVALID_GOAL, f"goal {why}", **st)
+        Ms, Mg = self.kin.object_pose(q_start), self.kin.object_pose(q_goal)
+        ta = _TaskTree(q_start, xi_from_pose(Ms), Ms.rotation.copy(), Ms.translation.copy())
+        tb = _TaskTree(q_goal, xi_from_pose(Mg), Mg.rotation.copy(), Mg.translation.copy())
+        a_is_start = True
+        found = None
+        while not deadline.expired():
+            if o.max_iterations and st["iterations"] >= o.max_iterations:
+                break
+            st["iterations"] += 1
+            xi_rand = rng.uniform(self._lo, self._hi)                                    # line 3
+            i_near = ta.nearest(xi_rand)                                                 # line 4
+            res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st)   # line 5
+            if res != TRAPPED:
+                target_xi, target_q = ta.xi[i_a].copy(), ta.q[i_a].copy()
+                while True:                                                              # lines 7-11
+                    i_nb = tb.nearest(target_xi)
+                    res, i_b, reg = self.constrained_extend(tb, i_nb, target_xi, target_q, rng, deadline, st)
+                    if res != ADVANCED or deadline.expired():
+                        break
+                if res == REACHED:
+                    found = (i_a, i_b, reg)
+                    break
+            ta, tb, a_is_start = tb, ta, not a_is_start                                  # line 15
+        st["nodes"] = ta.n + tb.n
+        st["collision_checks"] = self.checker.n_checks - c0
+        if found is None:
+            if deadline.expired():
+                return self.empty_result(PlanStatus.TIMEOUT, "time limit reached", **st)
+            return self.empty_result(PlanStatus.FAILED, "iteration cap reached", **st)
+        return self._extract(ta, tb, a_is_start, found, st)
+
+    def _extract(self, ta: _TaskTree, tb: _TaskTree, a_is_start: bool, found, st) -> PlanResult:
+        """ExtractPath: tree-a branch, regrasp (q_b of tree b → q_a of tree a, reversed so the path
+        runs start → goal), reversed tree-b branch."""
+        i_a, i_b, reg = found
+        qa, pa = ta.branch(i_a)
+        qb, pb = tb.branch(i_b)
+        M_I = pin.SE3(*ta.pose[i_a])
+        # regrasp was planned from tree b's solution (q_s) to tree a's (q_rand): reverse it
+        reg_segments = []
+        for arm, full in reversed(reg or []):
+            reg_segments.append((arm, full[::-1]))
+        qs = [x for x in qa]
+        poses = [M for M in pa]
+        flags = [True] * len(qa)
+        segs: list[PathSegment] = [("constrained", 0, len(qa) - 1, None)]
+        for arm, full in reg_segments:
+            i0 = len(qs) - 1
+            qs.extend(full[1:])
+            poses.extend([(M_I.rotation, M_I.translation)] * (len(full) - 1))
+            flags.extend([False] * (len(full) - 2) + [True])
+            segs.append(("regrasp", i0, len(qs) - 1, arm))
+        i0 = len(qs) - 1
+        qs.extend(qb[::-1][1:])
+        poses.extend(pb[::-1][1:])
+        flags.extend([True] * (len(qb) - 1))
+        segs.append(("constrained", i0, len(qs) - 1, None))
+        if not a_is_start:   # tree a grew from the goal: flip everything
+            n = len(qs) - 1
+            qs, poses, flags = qs[::-1], poses[::-1], flags[::-1]
+            segs = [(k, n - b, n - a, arm) for k, a, b, arm in segs[::-1]]
+        out_segs = [PathSegment(k, a, b, arm, M_I if k == "regrasp" else None)
+                    for k, a, b, arm in segs if b > a]
+        st["n_regrasp"] = len(reg_segments)
+        return PlanResult(PlanStatus.EXACT, self.name, np.array(qs),
+                          [pin.SE3(np.asarray(R), np.asarray(p)) for R, p in poses], np.array(flags, dtype=bool),
+                          out_segs, st)
