@@ -111,6 +111,8 @@ class ClosedChainKinematics:
     robot's full ``q`` (fixed base).
     """
 
+    UNROLL = 4   # IK iterations per compiled call
+
     def __init__(self, robot: RobotModel, grasps: dict[str, pin.SE3]):
         if len(grasps) != 2:
             raise ValueError(f"grasps: expected two arms, got {list(grasps)}")
@@ -128,35 +130,67 @@ class ClosedChainKinematics:
         self._build()
 
     # ------------------------------------------------------------------ code generation
-    def _build(self):
-        robot = self.robot
-        sk = SymbolicKinematics(robot)
-        q = ca.SX.sym("q", robot.nq)
-        Ro = ca.SX.sym("Ro", 3, 3)
-        po = ca.SX.sym("po", 3)
-        damp = ca.SX.sym("damping")
+    def _arm_terms(self, sk: SymbolicKinematics, q, Ro, po, damp, with_step: bool = True):
+        """Per arm: (dq of its joints or None, |e_p|, |e_o|, (R, p) of the hand) at ``q``."""
         X = sk.joint_placements(q)
-        dqs, errs, frames = [], [], []
+        out = []
         for a in self.arms:
             R, p = sk.frame_placement(q, a.ee_frame_id, X)
-            frames.append((R, p))
-            J = sk.frame_jacobian(q, a.ee_frame_id, "world_aligned", X)[:, [int(i) for i in a.v_idx]]
             G = self.grasps[a.name]
             Rg = Ro @ ca.DM(np.array(G.rotation))
             pg = po + Ro @ ca.DM(np.array(G.translation))
             ep = pg - p                                     # Eq. 5
             eo = Rg @ _vee_log(R.T @ Rg)                    # Eq. 6
-            e = ca.vertcat(ep, eo)
-            dq = J.T @ ca.solve(J @ J.T + damp ** 2 * ca.SX.eye(6), e)   # Eq. 7 with K = I
-            dqs.append(dq)
-            errs += [ca.norm_2(ep), ca.norm_2(eo)]
-        dq_full = ca.SX.zeros(robot.nq)
-        for a, dq in zip(self.arms, dqs):
+            dq = None
+            if with_step:
+                J = sk.frame_jacobian(q, a.ee_frame_id, "world_aligned", X)[:, [int(i) for i in a.v_idx]]
+                e = ca.vertcat(ep, eo)
+                dq = J.T @ ca.solve(J @ J.T + damp ** 2 * ca.SX.eye(6), e)   # Eq. 7 (K = I), damped
+            out.append((dq, ca.norm_2(ep), ca.norm_2(eo), (R, p)))
+        return out
+
+    def _build(self):
+        robot = self.robot
+        sk = SymbolicKinematics(robot)
+        nq = robot.nq
+        q = ca.SX.sym("q", nq)
+        Ro = ca.SX.sym("Ro", 3, 3)
+        po = ca.SX.sym("po", 3)
+        damp = ca.SX.sym("damping")
+        terms = self._arm_terms(sk, q, Ro, po, damp)
+        dq_full = ca.SX.zeros(nq)
+        for a, (dq, _, _, _) in zip(self.arms, terms):
             for k, i in enumerate(a.q_idx):
                 dq_full[int(i)] = dq[k]
+        errs = [x for t in terms for x in t[1:3]]
         step = ca.Function("occ_ik_step", [q, ca.vec(Ro), po, damp], [ca.vertcat(dq_full, *errs)])
+        # K unrolled iterations of Alg. 4 (both arms; an arm stops once its errors are below ε)
+        par = ca.SX.sym("par", 6)   # damping, tol_p, tol_o, gain, max_step, remaining iterations
+        qk = q
+        n_it = 0
+        lo, hi = ca.DM(self.lower), ca.DM(self.upper)
+        for k in range(self.UNROLL):
+            tk = self._arm_terms(sk, qk, Ro, po, par[0])
+            conv = [ca.logic_and(t[1] < par[1], t[2] < par[2]) for t in tk]
+            active = k < par[5]
+            both = ca.logic_and(conv[0], conv[1])
+            n_it = n_it + ca.if_else(ca.logic_and(active, ca.logic_not(both)), 1, 0)
+            qn = ca.SX(qk)
+            for a, t, c in zip(self.arms, tk, conv):
+                idx = [int(i) for i in a.q_idx]
+                st = par[3] * t[0]
+                m = ca.mmax(ca.fabs(st))
+                st = st * ca.fmin(1.0, par[4] / ca.fmax(m, 1e-300))
+                new = ca.fmin(ca.fmax(qk[idx] + st, lo[idx]), hi[idx])
+                keep = ca.logic_or(c, ca.logic_not(active))
+                for j, i in enumerate(idx):
+                    qn[i] = ca.if_else(keep, qk[i], new[j])
+            qk = qn
+        tf = self._arm_terms(sk, qk, Ro, po, par[0], with_step=False)
+        block = ca.Function("occ_ik_block", [q, ca.vec(Ro), po, par],
+                            [ca.vertcat(qk, *[x for t in tf for x in t[1:3]], n_it)])
         # closed-chain residual, Eq. 1-2: T_e = T_2^-1 T_1 T_21, h = [p_e; roll; pitch; yaw]
-        (R1, p1), (R2, p2) = frames
+        (R1, p1), (R2, p2) = terms[0][3], terms[1][3]
         R21, p21 = ca.DM(np.array(self.T21.rotation)), ca.DM(np.array(self.T21.translation))
         Re = R2.T @ R1 @ R21
         pe = R2.T @ (R1 @ p21 + p1 - p2)
@@ -166,17 +200,38 @@ class ClosedChainKinematics:
         hfun = ca.Function("occ_h", [q], [h])
         hjfun = ca.Function("occ_hj", [q], [ca.vertcat(h, ca.vec(ca.densify(Jh)))])
         self._step = _Fast(step)
+        self._block = _Fast(block)
         self._h = _Fast(hfun)
         self._hj = _Fast(hjfun)
-        self.compiled = self._step.compiled
+        self.compiled = self._block.compiled
         if not self.compiled:
             log.warning("closed-chain kinematics run interpreted (no C compiler): planners will be slow")
+        self._par = np.zeros(6)
 
     # ------------------------------------------------------------------ IK (Alg. 4)
     def ik(self, q_seed: np.ndarray, R_obj: np.ndarray, p_obj: np.ndarray, s: IKSettings) -> tuple[np.ndarray | None, int]:
         """Both hands onto their grasps of the object at ``(R_obj, p_obj)``, starting from
-        ``q_seed``. Returns ``(q, iterations)``, ``q = None`` when ε_p, ε_o are not met within
-        ``max_iterations`` (Alg. 4 line 11)."""
+        ``q_seed`` (Alg. 4: errors Eq. 5-6, step ``q ← clamp(q + K·λ·J† e)`` with the step's largest
+        joint change clipped to ``max_step``; an arm stops once ``|e_p| < ε_p`` and ``|e_o| < ε_o``).
+        Returns ``(q, iterations)``; ``q = None`` when not converged within ``max_iterations``
+        (Alg. 4 line 11). Runs ``UNROLL`` iterations per compiled call."""
+        par = self._par
+        par[0], par[1], par[2], par[3], par[4] = s.damping, s.tol_position, s.tol_orientation, s.gain, s.max_step
+        Rf = R_obj.reshape(-1, order="F")
+        q = q_seed
+        nq, its, tp, to = self.nq, 0, s.tol_position, s.tol_orientation
+        while True:
+            par[5] = s.max_iterations - its
+            out = self._block(q, Rf, p_obj, par)
+            q = out[:nq]
+            its += int(out[nq + 4])
+            if out[nq] < tp and out[nq + 1] < to and out[nq + 2] < tp and out[nq + 3] < to:
+                return q, its
+            if its >= s.max_iterations:
+                return None, its
+
+    def ik_reference(self, q_seed: np.ndarray, R_obj: np.ndarray, p_obj: np.ndarray, s: IKSettings) -> tuple[np.ndarray | None, int]:
+        """Same as :meth:`ik`, one Python iteration per step (reference for the tests)."""
         q = q_seed.copy()
         Rf = R_obj.reshape(-1, order="F")
         ia, ib = self.idx

@@ -82,13 +82,38 @@ class _Tree:
         return out[::-1]
 
 
+_ORDERS: dict[int, list[int]] = {}
+
+
+def _bisection_order(n: int) -> list[int]:
+    """1..n−1 in coarse-to-fine (bisection) order, so a blocked edge is usually found early."""
+    if n not in _ORDERS:
+        out, seen, queue = [], {0, n}, [(0, n)]
+        while queue:
+            nxt = []
+            for lo, hi in queue:
+                if hi - lo < 2:
+                    continue
+                mid = (lo + hi) // 2
+                if mid not in seen:
+                    seen.add(mid)
+                    out.append(mid)
+                nxt += [(lo, mid), (mid, hi)]
+            queue = nxt
+        _ORDERS[n] = out
+    return _ORDERS[n]
+
+
 def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray], bool], resolution: float,
                   check_end: bool = True) -> bool:
-    """Straight joint-space edge a → b valid at every ``resolution`` step (a itself not checked)."""
+    """Straight joint-space edge a → b valid at every ``resolution`` step (largest joint change
+    between checks); ``a`` itself is not checked, ``b`` only with ``check_end``. Interior points
+    are checked coarse-to-fine."""
     d = b - a
     n = max(1, int(math.ceil(float(np.abs(d).max()) / resolution)))
-    stop = n + 1 if check_end else n
-    for k in range(1, stop):
+    if check_end and not is_valid(b):
+        return False
+    for k in _bisection_order(n):
         if not is_valid(a + (k / n) * d):
             return False
     return True

@@ -45,7 +45,7 @@ class ValidityChecker:
     """
 
     def __init__(self, robot: RobotModel, scene: Scene | None = None, *, margin: float = 0.0,
-                 object_arm: str | None = None, self_collision: bool = True):
+                 object_arm: str | None = None, self_collision: bool = True, broadphase: bool = True):
         if robot.is_floating:
             raise ValueError("ValidityChecker: fixed-base robots only")
         if not (np.isfinite(margin) and margin >= 0.0):
@@ -110,18 +110,29 @@ class ValidityChecker:
                 if self.margin > 0:
                     gd.collisionRequests[k].security_margin = self.margin
             self._gd[mode] = gd
+        # broad phase (dynamic AABB tree, coal) in front of the narrow phase: 3-5x faster in cluttered
+        # scenes; its AABBs are not inflated by a security margin, so only used with margin = 0
+        self.broadphase = bool(broadphase) and self.margin == 0.0
+        self._bp = {}
+        if self.broadphase:
+            for mode, gd in self._gd.items():
+                self._bp[mode] = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(self.model, gm, gd)
         self.n_checks = 0
 
     # ------------------------------------------------------------------ queries
     def is_valid(self, q: np.ndarray) -> bool:
         """Collision-free with the object held by the hands (falls back to ``free`` without an object)."""
         self.n_checks += 1
-        gd = self._gd["held" if self.object is not None else "free"]
-        return not pin.computeCollisions(self.model, self.data, self.gmodel, gd, q, True)
+        mode = "held" if self.object is not None else "free"
+        if self.broadphase:
+            return not pin.computeCollisions(self.model, self.data, self._bp[mode], q, True)
+        return not pin.computeCollisions(self.model, self.data, self.gmodel, self._gd[mode], q, True)
 
     def is_valid_free(self, q: np.ndarray) -> bool:
         """Collision-free without any object (self and obstacles only)."""
         self.n_checks += 1
+        if self.broadphase:
+            return not pin.computeCollisions(self.model, self.data, self._bp["free"], q, True)
         return not pin.computeCollisions(self.model, self.data, self.gmodel, self._gd["free"], q, True)
 
     def is_valid_object_fixed(self, q: np.ndarray, object_pose: pin.SE3) -> bool:
@@ -132,6 +143,10 @@ class ValidityChecker:
         gd = self._gd["fixed"]
         pin.updateGeometryPlacements(self.model, self.data, self.gmodel, gd, q)
         gd.oMg[self.fixed_id] = object_pose
+        if self.broadphase:
+            mgr = self._bp["fixed"]
+            mgr.update(False)
+            return not pin.computeCollisions(mgr, True)
         return not pin.computeCollisions(self.gmodel, gd, True)
 
     def in_limits(self, q: np.ndarray, tol: float = 1e-9) -> bool:

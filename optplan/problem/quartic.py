@@ -423,7 +423,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
             pp_ws = prob.spline(h_ws)
 
     opts: Dict[str, Any] = {"print_time": False, "error_on_fail": False,
-                            "ipopt": {"print_level": 0, "sb": "yes", "max_iter": 3000}}
+                            "ipopt": {"print_level": 0, "sb": "yes", "max_iter": 3000, "mumps_pivot_order": 0}}
     if not free_durations and ee is None:
         opts["ipopt"].update({"jac_c_constant": "yes", "jac_d_constant": "yes", "hessian_constant": "yes"})
     top_level = set(ca.nlpsol_options("ipopt"))

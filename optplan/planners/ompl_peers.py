@@ -1,0 +1,226 @@
+"""Peers from OMPL (PyPI ``ompl`` 2.x, optional): constrained planning on the same closed-chain
+constraint and the same collision checker as optplan's own planners.
+
+* state space: ``ProjectedStateSpace`` (Newton projection), ``AtlasStateSpace`` (atlas of
+  tangent charts) or ``TangentBundleStateSpace`` (lazy tangent bundle) over the 14 joints;
+* constraint: h(q) of seed 000 Eq. 1-2 (``ClosedChainKinematics.h`` / ``h_jacobian``, compiled C),
+  tolerance ``tolerance``;
+* validity: :class:`~optplan.planners.validity.ValidityChecker` (object held);
+* planner: RRTConnect (the issue's configuration), BKPIECE1, KPIECE1, RRT or PRM.
+
+What works on this machine (``/work/shared/spec/peers.md`` and our measurements, see
+``docs/planners.md``): Projected + RRTConnect practically never extends in the full ±270° joint
+box; Atlas + RRTConnect extends but slowly; Projected + BKPIECE1 with range ≈ 0.3 rad is the
+strongest general configuration we found. Every configuration is available by name
+(:func:`make_ompl_peer`), e.g. ``"ompl-atlas"`` (Atlas + RRTConnect), ``"ompl-projected-bkpiece1"``.
+
+Returned paths are re-checked (``path.check()``, then after ``path.interpolate()`` every state is
+validated again with our checker and the closed-chain residual): a path that fails is reported as
+``FAILED`` (message says why), never as a success.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ConfigurationError
+from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from .closed_chain import ClosedChainKinematics, closure_error
+from .validity import ValidityChecker
+
+__all__ = ["OMPLPeerOptions", "OMPLPeer", "make_ompl_peer", "ompl_available", "SPACES", "PLANNERS"]
+log = logging.getLogger(__name__)
+
+SPACES = ("projected", "atlas", "tangent_bundle")
+PLANNERS = ("rrtconnect", "bkpiece1", "kpiece1", "rrt", "prm")
+
+
+def ompl_available() -> bool:
+    try:
+        import ompl  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@dataclass(frozen=True)
+class OMPLPeerOptions:
+    """``space`` in :data:`SPACES`; ``planner`` in :data:`PLANNERS`; ``range`` [rad] of the tree
+    planners (None: 0.3 for the projected space, ρ_s of the atlas/tangent bundle); ``tolerance``
+    of the constraint (max |h|, m / rad); ``delta`` [rad]: manifold traversal step (OMPL default
+    0.05); ``max_projection_iterations``; ``simplify``: run OMPL's path simplifier; ``margin`` [m];
+    ``recheck_tolerance``: residual allowed on the returned, interpolated path."""
+
+    space: str = "atlas"
+    planner: str = "rrtconnect"
+    range: float | None = None
+    tolerance: float = 1e-6
+    delta: float = 0.05
+    max_projection_iterations: int = 50
+    simplify: bool = False
+    margin: float = 0.0
+    recheck_tolerance: float = 1e-4
+
+    def __post_init__(self):
+        if self.space not in SPACES:
+            raise ValueError(f"OMPLPeerOptions.space: expected one of {SPACES}, got {self.space!r}")
+        if self.planner not in PLANNERS:
+            raise ValueError(f"OMPLPeerOptions.planner: expected one of {PLANNERS}, got {self.planner!r}")
+        for name in ("tolerance", "delta", "recheck_tolerance"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"OMPLPeerOptions.{name}: expected a positive number, got {v!r}")
+        if self.range is not None and not (isinstance(self.range, (int, float)) and self.range > 0):
+            raise ValueError(f"OMPLPeerOptions.range: expected a positive number or None, got {self.range!r}")
+        if not (isinstance(self.max_projection_iterations, int) and self.max_projection_iterations >= 1):
+            raise ValueError("OMPLPeerOptions.max_projection_iterations: expected an int >= 1")
+        if not (isinstance(self.margin, (int, float)) and self.margin >= 0):
+            raise ValueError(f"OMPLPeerOptions.margin: expected a number >= 0 m, got {self.margin!r}")
+
+
+def make_ompl_peer(name: str, robot, scene, **kw) -> "OMPLPeer":
+    """``"ompl-<space>[-<planner>]"`` → :class:`OMPLPeer` (planner defaults to RRTConnect);
+    ``space`` ∈ projected, atlas, tb (tangent bundle)."""
+    parts = name.lower().split("-")
+    if len(parts) < 2 or parts[0] != "ompl":
+        raise ValueError(f"OMPL peer name: expected 'ompl-<space>[-<planner>]', got {name!r}")
+    space = {"projected": "projected", "proj": "projected", "atlas": "atlas", "tb": "tangent_bundle",
+             "tangent_bundle": "tangent_bundle"}.get(parts[1])
+    if space is None:
+        raise ValueError(f"OMPL peer {name!r}: unknown space {parts[1]!r} (projected, atlas, tb)")
+    planner = parts[2] if len(parts) > 2 else "rrtconnect"
+    planner = {"bkpiece": "bkpiece1", "kpiece": "kpiece1"}.get(planner, planner)
+    opts = OMPLPeerOptions(space=space, planner=planner, **kw)
+    return OMPLPeer(robot, scene, opts, name=name)
+
+
+class OMPLPeer(Planner):
+    """An OMPL constrained planner behind optplan's :class:`Planner` interface.
+
+    The OMPL RNG is seeded per query with ``ou.RNG.setLocalSeed(seed)`` before the state space
+    and the planner are created, so a query is reproducible up to OMPL's wall-clock dependent
+    behaviour (time limits).
+    """
+
+    name = "ompl"
+
+    def __init__(self, robot, scene, options: OMPLPeerOptions | None = None, *, name: str | None = None,
+                 checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None):
+        super().__init__(robot, scene)
+        if scene is None or scene.object is None or len(scene.object.grasps) != 2:
+            raise ConfigurationError("OMPL peers need a scene with an [object] grasped by two arms")
+        try:
+            from ompl import base as ob, geometric as og, util as ou
+        except ImportError as exc:
+            raise ImportError("the OMPL peers need the `ompl` package: pip install ompl") from exc
+        self._ob, self._og, self._ou = ob, og, ou
+        ou.setLogLevel(ou.LOG_NONE)
+        self.options = options or OMPLPeerOptions()
+        self.name = name or f"ompl-{self.options.space}-{self.options.planner}"
+        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
+        self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
+        self.grasps = scene.object.grasps
+
+    def _constraint(self, counters: dict):
+        ob, kin, nq = self._ob, self.kin, self.robot.nq
+        o = self.options
+
+        class _ClosedChain(ob.Constraint):
+            def __init__(self):
+                super().__init__(nq, 6, o.tolerance)
+                self.setMaxIterations(o.max_projection_iterations)
+
+            def function(self, x, out):
+                counters["constraint_calls"] += 1
+                out[:] = kin.h(x)
+
+            def jacobian(self, x, out):
+                counters["jacobian_calls"] += 1
+                out[:, :] = kin.h_jacobian(x)[1]
+
+        return _ClosedChain()
+
+    def _plan(self, q_start, q_goal, deadline: Deadline, rng, seed) -> PlanResult:
+        ob, og, ou = self._ob, self._og, self._ou
+        o, ck, nq = self.options, self.checker, self.robot.nq
+        st = {"constraint_calls": 0, "jacobian_calls": 0, "validity_calls": 0}
+        for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
+            ep, eo = closure_error(self.robot, self.grasps, q)
+            if not ck.in_limits(q) or not ck.is_valid(q) or max(ep, eo) > max(o.tolerance, 1e-6):
+                return self.empty_result(status, f"{which} out of limits, in collision or off the manifold", **st)
+        ou.RNG.setLocalSeed(int(seed) % (2 ** 31 - 1) + 1)
+        rvss = ob.RealVectorStateSpace(nq)
+        bounds = ob.RealVectorBounds(nq)
+        for i in range(nq):
+            bounds.setLow(i, float(self.robot.lower[i]))
+            bounds.setHigh(i, float(self.robot.upper[i]))
+        rvss.setBounds(bounds)
+        constraint = self._constraint(st)
+        if o.space == "projected":
+            css = ob.ProjectedStateSpace(rvss, constraint)
+            csi = ob.ConstrainedSpaceInformation(css)
+        elif o.space == "atlas":
+            css = ob.AtlasStateSpace(rvss, constraint)
+            csi = ob.ConstrainedSpaceInformation(css)
+        else:
+            css = ob.TangentBundleStateSpace(rvss, constraint)
+            csi = ob.TangentBundleSpaceInformation(css)
+        css.setDelta(o.delta)
+        valid_fn = ck.is_valid
+
+        def valid(state) -> bool:
+            st["validity_calls"] += 1
+            return valid_fn(np.fromiter((state[i] for i in range(nq)), float, nq))
+
+        ss = og.SimpleSetup(csi)
+        ss.setStateValidityChecker(valid)
+        s0, s1 = csi.allocState(), csi.allocState()
+        s0.copy(q_start.tolist())
+        s1.copy(q_goal.tolist())
+        if o.space != "projected":
+            css.anchorChart(s0)
+            css.anchorChart(s1)
+        ss.setStartAndGoalStates(s0, s1)
+        planner = {"rrtconnect": og.RRTConnect, "bkpiece1": og.BKPIECE1, "kpiece1": og.KPIECE1,
+                   "rrt": og.RRT, "prm": og.PRM}[o.planner](csi)
+        if o.planner != "prm":
+            rng_ = o.range if o.range is not None else (0.3 if o.space == "projected" else css.getRho_s())
+            planner.setRange(float(rng_))
+            st["range"] = float(rng_)
+        ss.setPlanner(planner)
+        ss.setup()
+        ptc = ob.PlannerTerminationCondition(deadline.expired)
+        status = ss.solve(ptc)
+        code = status.getStatus() if hasattr(status, "getStatus") else status
+        exact = bool(ss.haveExactSolutionPath())
+        st["ompl_status"] = str(status)
+        if not exact:
+            if deadline.expired():
+                return self.empty_result(PlanStatus.TIMEOUT, "time limit reached", **st)
+            return self.empty_result(PlanStatus.FAILED, f"OMPL: {status}", **st)
+        path = ss.getSolutionPath()
+        if o.simplify:
+            ss.simplifySolution(max(deadline.remaining(), 0.01))
+            path = ss.getSolutionPath()
+        ok = path.check()
+        if not ok:
+            ok = path.checkAndRepair(10)[0] if hasattr(path, "checkAndRepair") else False
+        st["path_check"] = bool(ok)
+        path.interpolate()
+        P = np.array([[path.getState(k)[i] for i in range(nq)] for k in range(path.getStateCount())])
+        resid = max(max(closure_error(self.robot, self.grasps, q)) for q in P)
+        bad = sum(1 for q in P if not ck.is_valid(q))
+        st["max_closed_chain_residual"] = resid
+        st["invalid_states"] = bad
+        del code
+        if not ok or bad or resid > o.recheck_tolerance:
+            return self.empty_result(PlanStatus.FAILED, f"returned path fails re-validation (check={ok}, "
+                                     f"{bad} invalid states, residual {resid:.1e})", **st)
+        P[0], P[-1] = q_start, q_goal
+        poses = [self.kin.object_pose(q) for q in P]
+        return PlanResult(PlanStatus.EXACT, self.name, P, poses, np.ones(len(P), bool),
+                          [PathSegment("constrained", 0, len(P) - 1)], st)

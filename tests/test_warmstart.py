@@ -1,0 +1,91 @@
+"""Warm starts from planner paths: closed-chain projection and manifold resampling."""
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.problem import ClosedChain, JointBoundary, OptProblem, Smoothness
+from optplan.spatial import rpy_to_matrix
+from optplan.warmstart import closed_chain_residual, manifold_resample, project_closed_chain
+
+
+@pytest.fixture
+def cc():
+    # a rigid 2.4 m bar held at its ends, hands facing outwards (as in the transport scene)
+    ga = pin.SE3(rpy_to_matrix(0, np.pi / 2, 0), np.array([1.2, 0, 0]))
+    gb = pin.SE3(rpy_to_matrix(0, -np.pi / 2, 0), np.array([-1.2, 0, 0]))
+    return ClosedChain.from_grasps(ga, gb)
+
+
+def _on_manifold(tcb, cc, rng):
+    """A configuration on the manifold: random arm A, arm B projected."""
+    for _ in range(50):
+        q = tcb.random_configuration(rng) * 0.5
+        r = project_closed_chain(tcb, q, cc)
+        if r.success:
+            return r.q
+    raise RuntimeError("no manifold configuration found")
+
+
+def test_residual_jacobian_matches_finite_differences(tcb, cc, rng):
+    q = tcb.random_configuration(rng)
+    _, J = closed_chain_residual(tcb, q, cc)
+    eps = 1e-6
+    Jfd = np.array([(closed_chain_residual(tcb, q + eps * e, cc)[0] - closed_chain_residual(tcb, q - eps * e, cc)[0])
+                    / (2 * eps) for e in np.eye(tcb.nq)]).T
+    assert np.abs(J - Jfd).max() < 1e-6
+
+
+def test_projection_converges_quadratically_and_lands_on_the_manifold(tcb, cc, rng):
+    q0 = _on_manifold(tcb, cc, rng)
+    q = q0 + rng.normal(scale=0.05, size=tcb.nq)
+    r = project_closed_chain(tcb, q, cc)
+    assert r.success and r.iterations <= 10
+    # independent check with Pinocchio FK
+    d = tcb.model.createData()
+    pin.framesForwardKinematics(tcb.model, d, r.q)
+    rel = d.oMf[tcb.arm("A").ee_frame_id].actInv(d.oMf[tcb.arm("B").ee_frame_id])
+    err = cc.relative.actInv(rel)
+    assert np.linalg.norm(err.translation) < 1e-9 and np.linalg.norm(pin.log3(err.rotation)) < 1e-9
+
+
+def test_manifold_resample_uniform_and_projected(tcb, cc, rng):
+    qa = _on_manifold(tcb, cc, rng)
+    path = [qa]
+    for _ in range(4):  # a planner-like path: small steps along the manifold
+        path.append(project_closed_chain(tcb, path[-1] + rng.normal(scale=0.05, size=tcb.nq), cc).q)
+    path = np.array(path)
+    Q, ok = manifold_resample(tcb, path, 21, cc)
+    assert ok and Q.shape == (21, tcb.nq)
+    np.testing.assert_allclose(Q[0], path[0])
+    np.testing.assert_allclose(Q[-1], path[-1])
+    for q in Q:
+        h, _ = closed_chain_residual(tcb, q, cc)
+        assert np.abs(h).max() < 1e-9
+    # roughly uniform in arc length (projection moves samples only slightly)
+    steps = np.linalg.norm(np.diff(Q, axis=0), axis=1)
+    assert steps.max() < 3 * steps.mean()
+
+
+def test_set_initial_path_then_solve(tcb, cc, rng):
+    qa = _on_manifold(tcb, cc, rng)
+    path = [qa]
+    for _ in range(3):
+        path.append(project_closed_chain(tcb, path[-1] + rng.normal(scale=0.05, size=tcb.nq), cc).q)
+    path = np.array(path)
+    z = np.zeros(tcb.nj)
+    prob = OptProblem(tcb, n_intervals=12, duration=20.0)
+    prob.add_constraint(JointBoundary("start", q=path[0], qd=z, qdd=z))
+    prob.add_constraint(JointBoundary("end", q=path[-1], qd=z, qdd=z))
+    prob.add_constraint(cc)
+    prob.add_cost(Smoothness("jerk"))
+    assert prob.set_initial_path(path, cc)
+    x0 = prob.numeric_trajectory(prob.initial_guess)
+    assert np.allclose(x0.q[0], path[0]) and np.allclose(x0.q[-1], path[-1])
+    assert np.allclose(x0.qd[0], 0, atol=1e-9) and np.allclose(x0.qd[-1], 0, atol=1e-9)
+    sol = prob.solve()
+    assert sol.success, sol.status
+
+
+def test_bad_path_shape(tcb, cc):
+    with pytest.raises(ValueError, match="expected"):
+        manifold_resample(tcb, np.zeros((3, 5)), 10, cc)
