@@ -60,6 +60,21 @@ def _cmd_bench_transport(args) -> int:
     return 0
 
 
+def _cmd_bench_tcbirrt(args) -> int:
+    from .bench.tcbirrt import BenchConfig, format_summary, run, summarize
+
+    cfg = BenchConfig(scenes=[s for s in args.scene.split(",") if s], planners=[p for p in args.planners.split(",") if p],
+                      trials=args.trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=args.out,
+                      clock=args.clock, progress=not args.no_progress, plot=not args.no_plot,
+                      first_trial=args.first_trial)
+    t0 = time.perf_counter()
+    rows = run(cfg)
+    print(format_summary(summarize(rows, cfg.time_limit)))
+    print(f"{len(rows)} result lines in {args.out}/results.jsonl; run time {time.perf_counter() - t0:.1f} s "
+          f"(clock: {cfg.clock})")
+    return 0
+
+
 def _cmd_demo(args) -> int:
     from .demo import run
 
@@ -104,6 +119,22 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=int, default=0)
     tr.add_argument("--json", help="write the rows as JSON to this path")
     tr.set_defaults(func=_cmd_bench_transport)
+
+    tb = bench.add_parser("tcbirrt", help="seed 000 benchmark: planners x SSPS scenes x perturbed trials")
+    tb.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, or names)")
+    tb.add_argument("--trials", type=int, default=100, help="trials per scene")
+    tb.add_argument("--first-trial", type=int, default=0, help="index of the first trial")
+    tb.add_argument("--planners", default="tcbirrt,cbirrt2,ompl-atlas",
+                    help="comma-separated: tcbirrt, cbirrt2, rrtconnect, ompl-<projected|atlas|tb>[-<planner>]")
+    tb.add_argument("--time-limit", type=float, default=10.0, help="per query [s]")
+    tb.add_argument("--seed", type=int, default=0)
+    tb.add_argument("--jobs", type=int, default=1, help="worker processes")
+    tb.add_argument("--clock", choices=["cpu", "wall"], default="cpu",
+                    help="time measured and limited in CPU seconds of the worker (default) or wall-clock seconds")
+    tb.add_argument("--out", default="bench_tcbirrt", help="output directory (results.jsonl, summary, PNG)")
+    tb.add_argument("--no-progress", action="store_true")
+    tb.add_argument("--no-plot", action="store_true")
+    tb.set_defaults(func=_cmd_bench_tcbirrt)
 
     d = sub.add_parser("demo", help="free-floating base of the EBA robot under a quintic joint motion")
     d.add_argument("--duration", type=float, default=20.0, help="motion duration [s]")

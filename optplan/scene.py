@@ -152,12 +152,12 @@ class Scene:
                 obstacles.append(Obstacle(name, "box", pose(o, w), size=tuple(size)))
             elif shape in ("sphere", "capsule"):
                 r = o.get("radius")
-                if not isinstance(r, (int, float)) or r <= 0:
+                if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r <= 0:
                     raise ModelError(f"{w}.radius: expected a number > 0 m, got {r!r}")
                 L = None
                 if shape == "capsule":
                     L = o.get("length")
-                    if not isinstance(L, (int, float)) or L < 0:
+                    if isinstance(L, bool) or not isinstance(L, (int, float)) or not math.isfinite(L) or L < 0:
                         raise ModelError(f"{w}.length: expected a number ≥ 0 m, got {L!r}")
                     L = float(L)
                 obstacles.append(Obstacle(name, shape, pose(o, w), radius=float(r), length=L))
@@ -167,6 +167,8 @@ class Scene:
         if "object" in data:
             o = data["object"]
             size = _vec(o.get("size"), 3, f"{where}: object.size")
+            if np.any(size <= 0):
+                raise ModelError(f"{where}: object.size: edges must be > 0 m, got {size.tolist()}")
             grasps = {arm: pose(g, f"{where}: object.grasps.{arm}") for arm, g in o.get("grasps", {}).items()}
             obj = GraspedObject(tuple(size), grasps, tuple(o.get("exclude_links", ())))
         start = pose(data["start"], f"{where}: start") if "start" in data else None

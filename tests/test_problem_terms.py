@@ -164,10 +164,7 @@ REGISTRY = [
     Case("smoothness_acceleration", "tcb", lambda r, g, N: Smoothness("acceleration"), role="cost", N=5),
     pytest.param(
         Case("smoothness_velocity", "tcb", lambda r, g, N: Smoothness("velocity"), role="cost"),
-        marks=pytest.mark.xfail(strict=True, reason=(
-            "terms.py Smoothness.cost('velocity'): Simpson's rule is exact only up to cubics, but "
-            "|q̇|² is quartic on each interval (q̇ quadratic); the cost overestimates ∫|q̇|² dt by "
-            "h⁵ Σ|j_k|²/480"))),
+),
     Case("path_length", "tcb", lambda r, g, N: PathLength(eps=1e-3), role="cost", weight=3.0),
     Case("duration_free_time", "tcb", lambda r, g, N: Duration(), role="cost", free_time=True),
     Case("duration_fixed_time", "tcb", lambda r, g, N: Duration(), role="cost"),
@@ -360,9 +357,6 @@ def test_registry_covers_every_exported_term():
 
 
 # --------------------------------------------------------------------------- floating-base bugs
-@pytest.mark.xfail(strict=True, reason=(
-    "problem.py:81 `self._com0 = None` shadows the method `_com0` (problem.py:191) that `_build` calls "
-    "(problem.py:206): every free-floating OptProblem raises TypeError 'NoneType' object is not callable"))
 def test_floating_problem_builds(eba):
     prob = OptProblem(eba, n_intervals=3, duration=3.0)
     q0 = np.zeros(eba.nj)
@@ -428,9 +422,6 @@ def test_knot_index_out_of_range_is_refused(tcb, rng):
         prob.term_function(prob.terms["frame_pose"])
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "terms.py _knots: a list of knot indices is wrapped modulo N+1 without the range check the single "
-    "index gets, so at=[9] on N=4 silently constrains knot 4"))
 def test_knot_index_list_out_of_range_is_refused(tcb, rng):
     prob = OptProblem(tcb, n_intervals=4, duration=2.0)
     prob.add_constraint(FramePose(tcb.arm("A").ee_frame, random_pose(rng), at=[0, 9]))

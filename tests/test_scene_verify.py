@@ -121,9 +121,6 @@ def test_duplicate_obstacle_message_names_the_obstacle(tmp_path):
         Scene.load(_write(tmp_path, GOOD.replace('name = "ball"', 'name = "box_1"')))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "scene.py Scene.from_dict: sphere/capsule radius and capsule length are checked with `r <= 0` / "
-    "`L < 0` only, so NaN and inf (valid TOML floats) are accepted as sizes"))
 @pytest.mark.parametrize("old,new", [('radius = 0.25', 'radius = nan'), ('radius = 0.25', 'radius = inf'),
                                      ('length = 1.0', 'length = nan')])
 def test_non_finite_radius_or_length_refused(tmp_path, old, new):
@@ -131,9 +128,6 @@ def test_non_finite_radius_or_length_refused(tmp_path, old, new):
         Scene.load(_write(tmp_path, GOOD.replace(old, new)))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "scene.py Scene.from_dict: the held object's size is read with _vec but, unlike obstacle boxes, "
-    "not checked for positive edges; a negative/zero object size is accepted"))
 @pytest.mark.parametrize("bad", ["[2.0, -0.8, 0.8]", "[0.0, 0.8, 0.8]"])
 def test_non_positive_object_size_refused(tmp_path, bad):
     with pytest.raises(ModelError):

@@ -240,12 +240,13 @@ class SerpentineArcModel:
     def tangent_length(self, phi):
         """T(φ) = (L_b/2) tan(φ/2) / tan(φ/2m), written as (L_b/2) U_{m−1}(cos u) cos u / cos(m u)
         with u = φ/2m (Chebyshev U: no 0/0 at a straight segment, T(0) = m L_b / 2)."""
+        cos = math.cos if isinstance(phi, (float, int, np.floating)) else ca.cos
         u = phi / (2 * self.m)
-        x = ca.cos(u)
+        x = cos(u)
         U0, U1 = 1, 2 * x
         for _ in range(self.m - 2):
             U0, U1 = U1, 2 * x * U1 - U0
-        return self.Lb / 2 * U1 * x / ca.cos(self.m * u)
+        return self.Lb / 2 * U1 * x / cos(self.m * u)
 
     def kappa(self, phi):
         return ca.tan(phi / (2 * self.m)) / (self.Lb / 2)
@@ -312,14 +313,19 @@ class SerpentineArcModel:
 
     # ------------------------------------------------------------------ numeric
     def directions(self, X, pe, ke, R_ref=None) -> list[np.ndarray]:
-        """Segment end directions k0..k5 (world) of arc parameters X and tip (pe, ke)."""
+        """Segment end directions k0..k5 (world) of arc parameters X and tip (pe, ke) (numpy)."""
         X = _np(X)
-        phi, p1, k1, p3, k3 = self._unpack(ca.DM(X), R_ref)
-        pe, ke = ca.DM(np.asarray(pe, float)), ca.DM(np.asarray(ke, float))
-        ks = [self.k0, _np(k1)]
-        for pA, kA, pB, kB, fa, fb in ((p1, k1, p3, k3, phi[1], phi[2]), (p3, k3, pe, ke, phi[3], phi[4])):
-            Va, w, n, Ta, Tb = self._double(pA, kA, pB, kB, fa, fb)
-            ks += [_np(w / n), _np(kB)]
+        R1, R3 = (np.eye(3), np.eye(3)) if R_ref is None else R_ref
+        k1 = np.asarray(R1, float) @ sph(float(X[8]), float(X[9]))
+        k3 = np.asarray(R3, float) @ sph(float(X[13]), float(X[14]))
+        p1, p3 = X[5:8], X[10:13]
+        pe, ke = np.asarray(pe, float), np.asarray(ke, float)
+        ks = [self.k0, k1]
+        h = self.Lb / 2
+        for pA, kA, pB, kB, fa, fb in ((p1, k1, p3, k3, X[1], X[2]), (p3, k3, pe, ke, X[3], X[4])):
+            Va = pA + (self.tangent_length(float(fa)) - h) * kA
+            Vb = pB - (self.tangent_length(float(fb)) + h) * kB
+            ks += [Vb - Va, kB]
         return [k / np.linalg.norm(k) for k in ks]
 
     def params_from_segments(self, ends, dirs, R_ref=None, a_near=None) -> np.ndarray:

@@ -180,9 +180,11 @@ def paper_task() -> TransposeTask:
 class DshdasrArcs:
     """The arc models of the ``dshdasr`` robot and the maps between joints and arc parameters."""
 
-    def __init__(self, robot: RobotModel | None = None):
+    def __init__(self, robot: RobotModel | None = None, desc=None):
+        """``robot``/``desc``: the shipped ``dshdasr`` by default; a variant (e.g. another mount)
+        as a RobotModel built from its URDF and the RobotDescription it was generated from."""
         self.robot = robot or RobotModel.from_name(ROBOT)
-        desc = load_description(ROBOT)
+        desc = desc or load_description(ROBOT)
         mounts = {a.name: a for a in desc.arms}
         ta, tb = desc.arm_types[mounts["A"].type], desc.arm_types[mounts["B"].type]
         d = ta.dh[:, 3]
@@ -249,8 +251,8 @@ class ArcPlanner:
 
     def __init__(self, arcs: DshdasrArcs | None = None, n_obstacles: int = 2, *, w: float = 1e-6,
                  margin: str = "paper", tol: float = 1e-12, max_iter: int = 100,
-                 hessian: str = "gauss-newton", constraint_curvature: bool = True,
-                 activation: float = 0.3, extrapolate: bool = True, formulation: str = "least-squares",
+                 hessian: str = "exact", constraint_curvature: bool = True,
+                 activation: float = 0.3, extrapolate: bool = True, formulation: str = "constrained",
                  options: dict | None = None):
         if margin not in ("paper", "links"):
             raise ValueError(f"margin: expected 'paper' or 'links', got {margin!r}")
@@ -301,7 +303,7 @@ class ArcPlanner:
                 "ipopt.mu_init": 1e-9, "ipopt.warm_start_bound_push": 1e-9,
                 "ipopt.warm_start_mult_bound_push": 1e-9, "ipopt.warm_start_slack_bound_push": 1e-9,
                 "ipopt.acceptable_tol": 1e-10, "ipopt.acceptable_iter": 3,
-                "ipopt.nlp_scaling_method": "none"}
+                "ipopt.nlp_scaling_method": "none", "ipopt.bound_relax_factor": 0.0, "calc_lam_p": False}
         if hessian == "gauss-newton" and formulation == "least-squares":
             lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", self.ng)
             J = ca.jacobian(G, X)
@@ -351,14 +353,33 @@ class ArcPlanner:
         return Xn, new, 2 * Xn - Xo
 
     # ------------------------------------------------------------------ tracking
-    def solve(self, p, x0, lam_g0=None, lam_x0=None, lbg=None):
+    def solve(self, p, x0, lam_g0=None, lam_x0=None, lbg=None, bounds: bool = True):
+        """One IPOPT solve. ``lbg``: lower bounds of the distance constraints (default 0);
+        ``bounds=False`` drops the |φ| bounds for this solve."""
         lb = self.lbg_all.copy()
         if lbg is not None:
             lb[:self.n_dist] = lbg
-        sol = self.solver(x0=x0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=lb,
-                          ubg=self.ubg_all, lam_g0=0.0 if lam_g0 is None else lam_g0,
-                          lam_x0=0.0 if lam_x0 is None else lam_x0)
+        inf = np.full(self.nx, np.inf)
+        sol = self.solver(x0=x0, p=p, lbx=self.lbx if bounds else -inf, ubx=self.ubx if bounds else inf,
+                          lbg=lb, ubg=self.ubg_all, lam_g0=0.0 if lam_g0 is None else lam_g0,
+                          lam_x0=0.0 if lam_x0 is None or not bounds else lam_x0)
         return sol, self.solver.stats()
+
+    def solve_waypoint(self, p, x0, lam_g0=None, lam_x0=None):
+        """Solve one waypoint from the start ``x0``. Distance constraints farther than
+        ``activation`` from their threshold at ``x0`` get no lower bound, and when none is near, the
+        far-away |φ| bounds are dropped too — IPOPT then has no inequality at all and takes plain
+        Newton steps without a barrier; the full problem is re-solved if the result violates
+        anything that was dropped. Returns (x, sol, stats, resolved)."""
+        g0 = np.array(self.f_eval(x0, p)[3]).ravel()
+        near = g0 < self.activation
+        sol, st = self.solve(p, x0, lam_g0, lam_x0, np.where(near, 0.0, -np.inf), bounds=bool(near.any()))
+        x = np.array(sol["x"]).ravel()
+        bad = (np.array(self.f_eval(x, p)[3]).ravel() < -1e-9).any() or (x < self.lbx).any() or (x > self.ubx).any()
+        if bad or not st["success"]:
+            sol, st = self.solve(p, x0, lam_g0, lam_x0, None, bounds=True)
+            x = np.array(sol["x"]).ravel()
+        return x, sol, st, bool(bad or not st["success"])
 
     def track(self, task: TransposeTask, q0: np.ndarray, times=None) -> "TrackResult":
         """Solve every waypoint of ``task`` from the configuration ``q0`` (which must hold the first
@@ -372,7 +393,6 @@ class ArcPlanner:
         Xs = np.zeros((n, self.nx))
         iters = np.zeros(n, int)
         ok = np.zeros(n, bool)
-        obj = np.zeros(n)
         resolves = 0
         refs = (np.eye(3),) * 3
         X = np.r_[arcs.params_from_q(q0, refs)]
@@ -383,28 +403,20 @@ class ArcPlanner:
         t_start = time.perf_counter()
         for k in range(n):
             Xn, refs_n, Xpred = self.recentre(X, refs, X_old if self.extrapolate else None, refs_old)
-            X_old, refs_old, X, refs = Xn, refs_n, Xn, refs_n
+            X_old, refs_old, refs = Xn, refs_n, refs_n
             p = self.pack(des, k, Xpred, refs, task.obstacles, thr)
             t0 = time.perf_counter()
-            g0 = np.array(self.f_eval(Xpred, p)[3]).ravel()
-            lbg = np.where(g0 < self.activation, 0.0, -np.inf)
-            sol, st = self.solve(p, Xpred, lam_g, lam_x, lbg)
-            x = np.array(sol["x"]).ravel()
-            if np.any(np.array(self.f_eval(x, p)[3]).ravel() < -1e-9):
-                resolves += 1
-                sol, st = self.solve(p, Xpred, lam_g, lam_x, None)
-                x = np.array(sol["x"]).ravel()
+            X, sol, st, again = self.solve_waypoint(p, Xpred, lam_g, lam_x)
             t_nlp += time.perf_counter() - t0
+            resolves += again
             lam_g, lam_x = np.array(sol["lam_g"]).ravel(), np.array(sol["lam_x"]).ravel()
-            iters[k], ok[k], obj[k] = st["iter_count"], st["success"], float(sol["f"])
-            X = x
-            Q[k] = arcs.q_from_params(x[:nA], x[nA:], des["pa"][k], des["Ra"][k], des["pb"][k], des["kb"][k],
+            iters[k], ok[k] = st["iter_count"], st["success"]
+            Q[k] = arcs.q_from_params(X[:nA], X[nA:], des["pa"][k], des["Ra"][k], des["pb"][k], des["kb"][k],
                                       q_prev=q_prev, refs=refs)
             q_prev = Q[k]
-            Xs[k] = self._world_angles(x, refs)
+            Xs[k] = self._world_angles(X, refs)
         runtime = time.perf_counter() - t_start
-        res = TrackResult("arcs", t, Q, des, runtime, nlp_time=t_nlp, iterations=iters, success=ok,
-                          objective=obj, X=Xs)
+        res = TrackResult("arcs", t, Q, des, runtime, nlp_time=t_nlp, iterations=iters, success=ok, X=Xs)
         res.resolves = resolves
         return res
 
@@ -518,57 +530,81 @@ def coal_centreline_distances(checker: CollisionChecker, Q, task: TransposeTask)
 
 
 # --------------------------------------------------------------------------- DLS baseline
+def _tip_errors(arcs: DshdasrArcs, data, pa_goal: pin.SE3, pb, kb):
+    Ma, Mb = data.oMf[arcs.fid_a], data.oMf[arcs.fid_b]
+    ea = np.r_[pa_goal.translation - Ma.translation, Ma.rotation @ pin.log3(Ma.rotation.T @ pa_goal.rotation)]
+    kcur = Mb.rotation[:, 0]
+    eb = np.r_[pb - Mb.translation, np.cross(kcur, kb)]
+    return ea, eb, kcur
+
+
 def dls_track(arcs: DshdasrArcs, task: TransposeTask, q0, *, damping: float = 1e-4, tol: float = 1e-9,
-              max_iterations: int = 100, times=None) -> TrackResult:
-    """Classical baseline: damped least squares (Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ e) on the full joint model,
-    warm-started at every waypoint from the previous joints. Arm-a: 6-D pose error; Arm-b: position
-    and pointing direction (the direction error k × k_d against the Jacobian (I − k kᵀ) J_ω). No
-    obstacle term: the baseline only tracks the tips."""
+              max_iterations: int = 100, max_step: float = 0.2, times=None) -> TrackResult:
+    """Classical baseline: damped least squares, ``Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ e`` (steps clipped to
+    ``max_step`` rad, joints clipped to their limits), on the full joint model of each arm,
+    warm-started at every waypoint from the previous joints, iterated until every error component
+    is below ``tol``. Arm-a: 6-D pose error (position; exponential coordinates); Arm-b: position
+    and pointing direction (error k × k_d against the Jacobian (I − k kᵀ) J_ω). No obstacle
+    term: the baseline only tracks the tips."""
     model, data = arcs.model, arcs.model.createData()
     t = task.times() if times is None else np.asarray(times, float)
     des = task.desired(t)
     A, B = arcs.arm_a, arcs.arm_b
+    lo, hi = arcs.robot.lower, arcs.robot.upper
     q = np.asarray(q0, float).copy()
     Q = np.zeros((len(t), len(q)))
     iters = np.zeros(len(t), int)
     ok = np.zeros(len(t), bool)
-    lam2 = damping ** 2
+    lam2I = damping ** 2 * np.eye(6)
     t_start = time.perf_counter()
     for k in range(len(t)):
         goal_a = pin.SE3(des["Ra"][k], des["pa"][k])
-        pb, kb = des["pb"][k], des["kb"][k]
-        for it in range(max_iterations):
+        it = 0
+        for it in range(max_iterations + 1):
             pin.computeJointJacobians(model, data, q)
             pin.updateFramePlacements(model, data)
-            Ma, Mb = data.oMf[arcs.fid_a], data.oMf[arcs.fid_b]
-            ea = np.r_[goal_a.translation - Ma.translation,
-                       Ma.rotation @ pin.log3(Ma.rotation.T @ goal_a.rotation)]
-            kcur = Mb.rotation[:, 0]
-            eb = np.r_[pb - Mb.translation, np.cross(kcur, kb)]
+            ea, eb, kcur = _tip_errors(arcs, data, goal_a, des["pb"][k], des["kb"][k])
             if max(np.abs(ea).max(), np.abs(eb).max()) < tol:
                 ok[k] = True
                 break
+            if it == max_iterations:
+                break
             Ja = pin.getFrameJacobian(model, data, arcs.fid_a, pin.LOCAL_WORLD_ALIGNED)[:, A.v_idx]
             Jb6 = pin.getFrameJacobian(model, data, arcs.fid_b, pin.LOCAL_WORLD_ALIGNED)[:, B.v_idx]
-            Pk = np.eye(3) - np.outer(kcur, kcur)
-            Jb = np.vstack([Jb6[:3], Pk @ Jb6[3:]])
-            q[A.q_idx] += Ja.T @ np.linalg.solve(Ja @ Ja.T + lam2 * np.eye(6), ea)
-            q[B.q_idx] += Jb.T @ np.linalg.solve(Jb @ Jb.T + lam2 * np.eye(6), eb)
+            Jb = np.vstack([Jb6[:3], (np.eye(3) - np.outer(kcur, kcur)) @ Jb6[3:]])
+            for arm, J, e in ((A, Ja, ea), (B, Jb, eb)):
+                dq = J.T @ np.linalg.solve(J @ J.T + lam2I, e)
+                m = np.abs(dq).max()
+                if m > max_step:
+                    dq *= max_step / m
+                q[arm.q_idx] = np.clip(q[arm.q_idx] + dq, lo[arm.j_idx], hi[arm.j_idx])
         iters[k] = it
         Q[k] = q
     runtime = time.perf_counter() - t_start
     return TrackResult("dls", t, Q, des, runtime, iterations=iters, success=ok)
 
 
-def initial_configuration(arcs: DshdasrArcs, task: TransposeTask, seed=None) -> np.ndarray:
+PAPER_INITIAL_JOINTS_DEG = {
+    "a": [100.21, 73.88, 7.98, 65.73, 17.31, 51.88, 9.67],
+    "b": [0.63, 0.35, 0.26, 2.88, 0.41, 0.34, 1.30, 1.51, 1.24, 8.03],
+}
+
+
+def initial_configuration(arcs: DshdasrArcs, task: TransposeTask, seed=None, restarts: int = 20,
+                          rng_seed: int = 0) -> np.ndarray:
     """Joints holding the first desired tips, by DLS from ``seed`` (default: the paper's initial
-    joint angles of Section 5.1 as printed, degrees, signs lost — used only as a starting guess)."""
+    joint angles of Section 5.1 as printed — signs lost and a different D-H zero, so only a
+    starting guess), then from random seeds in the limits if that fails."""
     if seed is None:
-        qa = np.array([100.21, 73.88, 7.98, 65.73, 17.31, 51.88, 9.67]) * D2R
-        qb = np.array([0.63, 0.35, 0.26, 2.88, 0.41, 0.34, 1.30, 1.51, 1.24, 8.03]) * D2R
-        seed = arcs.q(qa, qb)
-    res = dls_track(arcs, task, seed, damping=1e-2, max_iterations=2000, times=[0.0])
-    return res.q[0]
+        seed = arcs.q(np.radians(PAPER_INITIAL_JOINTS_DEG["a"]), np.radians(PAPER_INITIAL_JOINTS_DEG["b"]))
+    rng = np.random.default_rng(rng_seed)
+    q = np.asarray(seed, float)
+    for attempt in range(restarts + 1):
+        res = dls_track(arcs, task, q, damping=1e-2, max_iterations=3000, max_step=0.1, times=[0.0])
+        if res.success[0]:
+            return res.q[0]
+        q = arcs.robot.random_configuration(rng)
+    raise RuntimeError("no initial configuration found for the first waypoint")
 
 
 def run_case(planner: ArcPlanner, task: TransposeTask, q0, tol_position: float = 1e-6,

@@ -56,12 +56,12 @@ class _Fast:
     """A CasADi function with dense inputs and ONE dense vector output, compiled and called
     through ctypes with preallocated buffers (falls back to the interpreted function)."""
 
-    def __init__(self, f: ca.Function):
+    def __init__(self, f: ca.Function, opt: str = "-O2"):
         if not f.sparsity_out(0).is_dense():
             raise ValueError(f"{f.name()}: the output must be dense")
         self.f = f
         self.n_out = int(f.nnz_out(0))
-        cf = compile_function(f)
+        cf = compile_function(f, opt)
         self.compiled = isinstance(cf, CompiledFunction)
         if not self.compiled:
             return
@@ -199,14 +199,20 @@ class ClosedChainKinematics:
         Jh = ca.jacobian(h, q)
         hfun = ca.Function("occ_h", [q], [h])
         hjfun = ca.Function("occ_hj", [q], [ca.vertcat(h, ca.vec(ca.densify(Jh)))])
-        self._step = _Fast(step)
-        self._block = _Fast(block)
-        self._h = _Fast(hfun)
-        self._hj = _Fast(hjfun)
+        self._fun = {"step": step, "h": hfun, "hj": hjfun}
+        self._fast: dict[str, _Fast] = {}
+        self._block = _Fast(block, "-O1")   # -O1: a third less compile time than -O2, same speed here
         self.compiled = self._block.compiled
         if not self.compiled:
             log.warning("closed-chain kinematics run interpreted (no C compiler): planners will be slow")
         self._par = np.zeros(6)
+
+    def _get(self, name: str) -> _Fast:
+        """Compiled on first use (only the IK block is needed by TCBiRRT)."""
+        f = self._fast.get(name)
+        if f is None:
+            f = self._fast[name] = _Fast(self._fun[name])
+        return f
 
     # ------------------------------------------------------------------ IK (Alg. 4)
     def ik(self, q_seed: np.ndarray, R_obj: np.ndarray, p_obj: np.ndarray, s: IKSettings) -> tuple[np.ndarray | None, int]:
@@ -238,7 +244,7 @@ class ClosedChainKinematics:
         lo, hi = self.lower, self.upper
         tp, to, gain, mstep = s.tol_position, s.tol_orientation, s.gain, s.max_step
         for it in range(s.max_iterations + 1):
-            out = self._step(q, Rf, p_obj, s.damping)
+            out = self._get("step")(q, Rf, p_obj, s.damping)
             ok_a = out[self.nq] < tp and out[self.nq + 1] < to
             ok_b = out[self.nq + 2] < tp and out[self.nq + 3] < to
             if ok_a and ok_b:
@@ -257,16 +263,16 @@ class ClosedChainKinematics:
 
     def hand_errors(self, q: np.ndarray, R_obj: np.ndarray, p_obj: np.ndarray) -> np.ndarray:
         """``[|e_p1|, |e_o1|, |e_p2|, |e_o2|]`` of the hands against the object pose."""
-        return self._step(q, R_obj.reshape(-1, order="F"), p_obj, 0.0)[self.nq:]
+        return self._get("step")(q, R_obj.reshape(-1, order="F"), p_obj, 0.0)[self.nq:]
 
     # ------------------------------------------------------------------ constraint h(q)
     def h(self, q: np.ndarray) -> np.ndarray:
         """Closed-chain residual (Eq. 2): position [m] and RPY [rad] of ``T_2⁻¹ T_1 T_21``."""
-        return self._h(q)
+        return self._get("h")(q)
 
     def h_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(h(q), ∂h/∂q)`` (6 and 6 × nq)."""
-        out = self._hj(q)
+        out = self._get("hj")(q)
         return out[:6], out[6:].reshape(6, self.nq, order="F")
 
     # ------------------------------------------------------------------ object

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,7 +81,7 @@ class OMPLPeerOptions:
             raise ValueError(f"OMPLPeerOptions.margin: expected a number >= 0 m, got {self.margin!r}")
 
 
-def make_ompl_peer(name: str, robot, scene, **kw) -> "OMPLPeer":
+def make_ompl_peer(name: str, robot, scene, *, checker=None, kinematics=None, **kw) -> "OMPLPeer":
     """``"ompl-<space>[-<planner>]"`` → :class:`OMPLPeer` (planner defaults to RRTConnect);
     ``space`` ∈ projected, atlas, tb (tangent bundle)."""
     parts = name.lower().split("-")
@@ -95,7 +94,7 @@ def make_ompl_peer(name: str, robot, scene, **kw) -> "OMPLPeer":
     planner = parts[2] if len(parts) > 2 else "rrtconnect"
     planner = {"bkpiece": "bkpiece1", "kpiece": "kpiece1"}.get(planner, planner)
     opts = OMPLPeerOptions(space=space, planner=planner, **kw)
-    return OMPLPeer(robot, scene, opts, name=name)
+    return OMPLPeer(robot, scene, opts, name=name, checker=checker, kinematics=kinematics)
 
 
 class OMPLPeer(Planner):
@@ -152,7 +151,7 @@ class OMPLPeer(Planner):
             ep, eo = closure_error(self.robot, self.grasps, q)
             if not ck.in_limits(q) or not ck.is_valid(q) or max(ep, eo) > max(o.tolerance, 1e-6):
                 return self.empty_result(status, f"{which} out of limits, in collision or off the manifold", **st)
-        ou.RNG.setLocalSeed(int(seed) % (2 ** 31 - 1) + 1)
+        ou.RNG().setLocalSeed(int(seed) % (2 ** 31 - 1) + 1)   # (bound as an instance method)
         rvss = ob.RealVectorStateSpace(nq)
         bounds = ob.RealVectorBounds(nq)
         for i in range(nq):
@@ -195,7 +194,6 @@ class OMPLPeer(Planner):
         ss.setup()
         ptc = ob.PlannerTerminationCondition(deadline.expired)
         status = ss.solve(ptc)
-        code = status.getStatus() if hasattr(status, "getStatus") else status
         exact = bool(ss.haveExactSolutionPath())
         st["ompl_status"] = str(status)
         if not exact:
@@ -206,17 +204,14 @@ class OMPLPeer(Planner):
         if o.simplify:
             ss.simplifySolution(max(deadline.remaining(), 0.01))
             path = ss.getSolutionPath()
-        ok = path.check()
-        if not ok:
-            ok = path.checkAndRepair(10)[0] if hasattr(path, "checkAndRepair") else False
-        st["path_check"] = bool(ok)
+        ok = bool(path.check())   # (checkAndRepair's return value is not convertible in ompl 2.0.1)
+        st["path_check"] = ok
         path.interpolate()
         P = np.array([[path.getState(k)[i] for i in range(nq)] for k in range(path.getStateCount())])
         resid = max(max(closure_error(self.robot, self.grasps, q)) for q in P)
         bad = sum(1 for q in P if not ck.is_valid(q))
         st["max_closed_chain_residual"] = resid
         st["invalid_states"] = bad
-        del code
         if not ok or bad or resid > o.recheck_tolerance:
             return self.empty_result(PlanStatus.FAILED, f"returned path fails re-validation (check={ok}, "
                                      f"{bad} invalid states, residual {resid:.1e})", **st)

@@ -328,7 +328,7 @@ class TCBiRRT(Planner):
         st["regrasp_attempts"] += 1
         M = pin.SE3(R, p)
         orders = [moving] if len(moving) == 1 else [moving, moving[::-1]]
-        sub = Deadline(min(o.regrasp_time_limit, max(deadline.remaining(), 0.0)))
+        sub = deadline.sub(o.regrasp_time_limit)
         lo, hi = self.robot.lower, self.robot.upper
         for order in orders:
             cur = q_from.copy()

@@ -77,8 +77,8 @@ class OptProblem:
         self._handles: list[TermHandle] = []
         self._x0: np.ndarray | None = None
         self._lam_g0: np.ndarray | None = None
+        self._lam_x0: np.ndarray | None = None
         self._built = None
-        self._com0 = None
         self.tp = self._make_transcription()
 
     def _make_transcription(self) -> Transcription:
@@ -133,6 +133,7 @@ class OptProblem:
             if solution.x is not None and solution.x.size >= tp.x.shape[0] and len(solution.t) == self.N + 1:
                 self._x0 = np.array(solution.x, float)
                 self._lam_g0 = solution.lam_g
+                self._lam_x0 = solution.lam_x
                 return
             t, q, Tg = solution.t - solution.t[0], solution.q, solution.duration
         if q is None:
@@ -165,7 +166,7 @@ class OptProblem:
             res = simulate_base(self.robot, (tk, Q, V), tk, base0=self.base0, substeps=self.n_sub)
             base_quat = res.q[:, 3:7]
         self._x0 = tp.pack(Q, V, A, J, T=Tg, base_quat=base_quat)
-        self._lam_g0 = None
+        self._lam_g0 = self._lam_x0 = None
         self._refresh_aux()
 
     def _refresh_aux(self) -> None:
@@ -204,7 +205,7 @@ class OptProblem:
         self.set_initial(q=qa + p[:, None] * (qb - qa), T=T)
 
     # ------------------------------------------------------------------ build & solve
-    def _com0(self) -> np.ndarray:
+    def _initial_com(self) -> np.ndarray:
         if not self.robot.is_floating:
             return np.zeros(3)
         qs = self._initial_unpacked()["q"][0]
@@ -219,7 +220,7 @@ class OptProblem:
     def _build(self):
         tp = self.tp
         if self.robot.is_floating:
-            tp.com0 = self._com0()
+            tp.com0 = self._initial_com()
         tp.clear_caches()
         tp.initial_traj = self.numeric_trajectory(self._x0) if self._x0 is not None else None
         tp.clear_aux()
@@ -316,6 +317,11 @@ class OptProblem:
                 "ipopt.max_iter": int(max_iter), "ipopt.sb": "yes"}
         if not exact_hessian:
             opts["ipopt.hessian_approximation"] = "limited-memory"
+        if self._lam_g0 is not None and self._lam_g0.size == b["lbg"].size:
+            # primal-dual warm start from a previous Solution (IPOPT ignores multipliers otherwise)
+            opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
+                         "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
+                         "ipopt.warm_start_slack_bound_push": 1e-9})
         for k, v in (ipopt_options or {}).items():
             opts[k if "." in k or k in ("print_time", "expand") else f"ipopt.{k}"] = v
         key = repr(sorted(opts.items()))
@@ -328,20 +334,25 @@ class OptProblem:
         args = dict(x0=self._full_x0(), lbg=b["lbg"], ubg=b["ubg"], lbx=b["lbx"], ubx=b["ubx"])
         if self._lam_g0 is not None and self._lam_g0.size == b["lbg"].size:
             args["lam_g0"] = self._lam_g0
+            if self._lam_x0 is not None and self._lam_x0.size == b["lbx"].size:
+                args["lam_x0"] = self._lam_x0
         try:
             out = b["solver"](**args)
             stats = b["solver"].stats()
             status = IpoptStatus.from_string(stats.get("return_status", "Unknown"))
             x = np.array(out["x"]).ravel()
             lam_g = np.array(out["lam_g"]).ravel()
+            lam_x = np.array(out["lam_x"]).ravel()
             iters = int(stats.get("iter_count", -1))
             cost = float(out["f"])
         except RuntimeError as exc:  # IPOPT/CasADi evaluation errors become a status
             log.warning("IPOPT raised: %s", exc)
             status, x, lam_g, iters, cost = IpoptStatus.INTERNAL_ERROR, self._full_x0().copy(), None, -1, float("nan")
+            lam_x = None
         wall = time.perf_counter() - t0
         sol = self._make_solution(x, lam_g, status, iters, wall, cost, tol)
         sol.setup_time = setup
+        sol.lam_x = lam_x
         return sol
 
     def _make_solution(self, x, lam_g, status, iters, wall, cost, tol) -> Solution:

@@ -50,7 +50,6 @@ __all__ = ["QuarticSmoothingResult", "smooth_quartic"]
 _log = logging.getLogger(__name__)
 _COSTS = {"jerk": 3, "acceleration": 2}
 _SLOTS = 3  # movable constraint points per segment (and dimension) for the refinement
-_WARM = True
 
 
 @dataclass(frozen=True)
@@ -69,8 +68,10 @@ class QuarticSmoothingResult:
             [unit/s^k], boundary conditions) and the violations of the limits along the whole
             trajectory (exact for joint velocity / acceleration, dense sampling for the
             end-effector speed), in the units of each quantity.
-        objective: final cost value.
-        refinements: number of re-solves with added sample points.
+        objective: cost of the returned spline.
+        refinements: number of re-solves with moved constraint points.
+        stretch: factor (>= 1) by which the durations were finally stretched to remove the
+            remaining overshoot between samples (1.0 if none).
     """
 
     success: bool
@@ -82,6 +83,7 @@ class QuarticSmoothingResult:
     max_constraint_violation: float
     objective: float = float("nan")
     refinements: int = 0
+    stretch: float = 1.0
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -316,6 +318,17 @@ class _Problem:
         v = self.ee.map(t.size)(pp(t).T, pp(t, 1).T)
         return np.sqrt(np.sum(np.asarray(v, float) ** 2, axis=0))
 
+    def max_violation(self, pp: PiecewisePolynomial) -> float:
+        viol = [float(np.max(excess)) for excess, _, _ in self.limit_violations(pp).values()]
+        return max([self.equality_residual(pp)] + [max(v, 0.0) for v in viol])
+
+    def objective(self, pp: PiecewisePolynomial) -> float:
+        """The NLP cost of a spline, evaluated in numpy."""
+        h = pp.durations
+        p = pp.coefficients * h[:, None, None] ** np.arange(5)[None, :, None]  # (m, 5, n)
+        J = float(np.sum(np.einsum("ikj,kl,ilj->i", p, _jerk_matrix(self.r), p) * h ** (1 - 2 * self.r)))
+        return self.tw * float(h.sum()) + self.sw * J if self.free else J
+
     def equality_residual(self, pp: PiecewisePolynomial) -> float:
         """Max |residual| of the Eq. 11 conditions, each in its own units (unit, unit/s^k)."""
         c, h = pp.coefficients, pp.durations
@@ -338,7 +351,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
                    ee_speed_max: Optional[float] = None, free_durations: bool = False, min_duration: float = 1e-3,
                    max_duration: Optional[float] = None, cost: str = "jerk", time_weight: float = 1.0,
                    smooth_weight: float = 1e-3, samples_per_segment: int = 8, refine: bool = True,
-                   max_refinements: int = 10, ipopt_options: Optional[Dict[str, Any]] = None) -> QuarticSmoothingResult:
+                   max_refinements: int = 8, refine_tol: float = 1e-4, ipopt_options: Optional[Dict[str, Any]] = None) -> QuarticSmoothingResult:
     """Smooth waypoints with a C3 quartic spline under velocity / acceleration / end-effector-speed limits.
 
     Args:
@@ -405,6 +418,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
             raise ValueError(f"{nm}: expected a finite number >= 0, got {val!r}")
     S = _check_int(samples_per_segment, "samples_per_segment", 2)
     max_ref = _check_int(max_refinements, "max_refinements", 0)
+    tol = _check_positive(refine_tol, "refine_tol")
     if ipopt_options is not None and not isinstance(ipopt_options, dict):
         raise TypeError(f"ipopt_options: expected a dict of IPOPT options, got {type(ipopt_options).__name__}")
 
@@ -447,28 +461,19 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
     lbx, ubx = np.full(x0.size, -np.inf), np.full(x0.size, np.inf)
     if free_durations:
         lbx[-m:], ubx[-m:] = hmin, hmax
-    iterations, refinements, objective = 0, 0, float("nan")
+    iterations, refinements, stretch = 0, 0, 1.0
     status, success = "Not_Solved", False
     pp, h_out = pp_ws, h_ws.copy()
-    warm_solver = None
-    last_good: Optional[Tuple[PiecewisePolynomial, np.ndarray, str, float]] = None
+    last_good: Optional[Tuple[PiecewisePolynomial, np.ndarray, str]] = None
     try:
         nlp, lbg, ubg = prob.build(h)
         solver = ca.nlpsol("quartic_smoothing", "ipopt", nlp, opts)
     except Exception as exc:  # noqa: BLE001 - a failed solve is a status, not an exception
         _log.debug("quartic smoothing: building the NLP raised %s", exc)
         solver, status = None, f"Exception: {type(exc).__name__}: {exc}"
-    warm: Dict[str, Any] = {}
     for rnd in range(max_ref + 1 if solver is not None else 0):
         try:
-            if warm and _WARM:
-                if warm_solver is None:  # re-solves start from the previous primal-dual point, small barrier
-                    wopts = {**opts, "ipopt": {"warm_start_init_point": "yes", "mu_init": 1e-7,
-                                               "warm_start_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9,
-                                               "warm_start_slack_bound_push": 1e-9, **opts["ipopt"]}}
-                    warm_solver = ca.nlpsol("quartic_smoothing_warm", "ipopt", nlp, wopts)
-                solver = warm_solver
-            sol = solver(x0=x0, p=prob.pack_slots(slots), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **warm)
+            sol = solver(x0=x0, p=prob.pack_slots(slots), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
             stats = dict(solver.stats())
         except Exception as exc:  # noqa: BLE001
             _log.debug("quartic smoothing: solver raised %s", exc)
@@ -480,19 +485,18 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         w = np.asarray(sol["x"], float).ravel()
         if not success and last_good is not None:  # a refinement round failed: keep the last good solution
             _log.debug("quartic smoothing: refinement round failed with %s, keeping the previous solution", status)
-            pp, h_out, status, objective = last_good
+            pp, h_out, status = last_good
             success = True
             break
-        objective = float(sol["f"])
         if np.all(np.isfinite(w)):
             pp, h_out = prob.unpack(w, h)
         if not (success and refine) or rnd == max_ref:
             break
-        last_good = (pp, h_out, status, objective)
+        last_good = (pp, h_out, status)
         moved = 0
         lam = np.abs(np.asarray(sol["lam_g"], float).ravel())
         for name, (excess, loc, ratio) in prob.limit_violations(pp).items():
-            bad = (ratio > 1.0 + 1e-7) & (excess > 1e-9)
+            bad = (ratio > 1.0 + tol) & (excess > 0.0)
             if np.any(bad):
                 # exchange: the slot with the smallest multiplier (the least active one) moves
                 rows = prob.slot_rows[name]
@@ -505,12 +509,24 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
             break
         refinements += 1
         x0 = w
-        warm = {"lam_x0": sol["lam_x"], "lam_g0": sol["lam_g"]}
         _log.debug("quartic smoothing: refinement %d moves %d constraint points", refinements, moved)
 
-    viol = [float(np.max(excess)) for excess, _, _ in prob.limit_violations(pp).values()]
-    max_viol = max([prob.equality_residual(pp)] + [max(v, 0.0) for v in viol])
+    if success and free_durations and refine and prob.has_limits:
+        # remaining overshoot (<= refine_tol, or IPOPT's bound relaxation): stretch all durations by
+        # the worst ratio and re-solve Eq. 11 (exact time scaling when v0 = a0 = vf = 0)
+        for _ in range(5):
+            ratio = float(prob.segment_ratio(pp).max())
+            if ratio <= 1.0 or not np.all(h_out * ratio <= hmax):
+                break
+            stretch *= ratio * (1.0 + 1e-12)
+            h_out = h_out * ratio * (1.0 + 1e-12)
+            pp = prob.spline(h_out)
+    elif not success and free_durations:
+        # report the less infeasible of IPOPT's last iterate and the (stretched) warm start
+        if prob.max_violation(pp_ws) < prob.max_violation(pp):
+            pp, h_out = pp_ws, h_ws.copy()
+
     return QuarticSmoothingResult(success=success, status=status, iterations=iterations,
                                   wall_time=time.perf_counter() - t_start, spline=pp, durations=h_out,
-                                  max_constraint_violation=max_viol, objective=objective,
-                                  refinements=refinements)
+                                  max_constraint_violation=prob.max_violation(pp), objective=prob.objective(pp),
+                                  refinements=refinements, stretch=stretch)

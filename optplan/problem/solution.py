@@ -81,6 +81,7 @@ class Solution:
     setup_time: float = 0.0  # [s] building the NLP and creating the IPOPT instance (first solve only)
     x: np.ndarray | None = field(default=None, repr=False)  # raw decision vector (warm starts)
     lam_g: np.ndarray | None = field(default=None, repr=False)
+    lam_x: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def duration(self) -> float:
@@ -111,6 +112,8 @@ class Solution:
             out["x"] = self.x
         if self.lam_g is not None:
             out["lam_g"] = self.lam_g
+        if self.lam_x is not None:
+            out["lam_x"] = self.lam_x
         return out
 
     def _meta(self) -> dict:
@@ -141,7 +144,7 @@ class Solution:
         if path.suffix == ".json":
             d = json.loads(path.read_text())
             arrays = {k: np.asarray(d[k], float) for k in ("t", "q", "qd", "qdd", "jerk", "base_quat",
-                                                           "base_position", "x", "lam_g") if k in d}
+                                                           "base_position", "x", "lam_g", "lam_x") if k in d}
             meta = d
         else:
             with np.load(path, allow_pickle=False) as z:

@@ -106,7 +106,12 @@ def _knots(at, N: int) -> list[int]:
         if not -N - 1 <= int(at) <= N:
             raise ConfigurationError(f"knot index {at} out of range for N = {N} intervals")
         return [int(at) % (N + 1)]
-    return [int(a) % (N + 1) for a in at]
+    out = []
+    for a in at:
+        if not -N - 1 <= int(a) <= N:
+            raise ConfigurationError(f"knot index {a} in {list(at)} out of range for N = {N} intervals")
+        out.append(int(a) % (N + 1))
+    return out
 
 
 # --------------------------------------------------------------------------- base class
@@ -490,7 +495,7 @@ class BaseAttitude(Term):
 class Smoothness(Term):
     """Integral of a squared derivative: ``"jerk"`` (∫‖j‖² dt = h Σ‖j_k‖², exact),
     ``"acceleration"`` (∫‖q̈‖² dt, exact for the piecewise-linear q̈) or ``"velocity"``
-    (∫‖q̇‖² dt, Simpson's rule on each interval, exact for the piecewise-quadratic q̇)."""
+    (∫‖q̇‖² dt, exact for the piecewise-quadratic q̇)."""
 
     order: str = "jerk"
     default_name = "smoothness"
@@ -511,9 +516,10 @@ class Smoothness(Term):
                                for k in range(N))
         V, A, J = tp.V, tp.A, tp.J
         tot = 0
-        for k in range(N):
-            mid = V[:, k] + h / 2 * A[:, k] + h**2 / 8 * J[:, k]
-            tot = tot + h / 6 * (ca.sumsqr(V[:, k]) + 4 * ca.sumsqr(mid) + ca.sumsqr(V[:, k + 1]))
+        for k in range(N):  # exact ∫‖v + a τ + j τ²/2‖² dτ over [0, h]
+            v, a, j = V[:, k], A[:, k], J[:, k]
+            tot = tot + (h * ca.sumsqr(v) + h**2 * ca.dot(v, a) + h**3 / 3 * (ca.sumsqr(a) + ca.dot(v, j))
+                         + h**4 / 4 * ca.dot(a, j) + h**5 / 20 * ca.sumsqr(j))
         return tot
 
     def cost_numeric(self, traj):

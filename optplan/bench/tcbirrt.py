@@ -1,0 +1,363 @@
+"""Benchmark of seed 000 (Section 5): planners × scenes × trials, success rate p(t) and planning
+times (Eq. 9-11).
+
+``optplan bench tcbirrt --scene 1,2,3 --trials 100 --planners tcbirrt,cbirrt2,ompl-atlas
+--time-limit 10 --seed 0 --jobs 2 --out DIR``
+
+* Trials come from :class:`optplan.bench.trials.TrialGenerator` (Section 5.1), one seed per
+  trial (``SeedSequence(seed, spawn_key=(index,))``): results do not depend on ``--jobs`` or on
+  the order in which trials run.
+* ``DIR/results.jsonl``: one JSON line per (scene, trial, planner), appended as soon as it
+  finishes. A killed run resumes: lines already there are not redone (a truncated last line is
+  ignored and redone).
+* ``DIR/summary.json``, ``DIR/summary.txt`` and ``DIR/success_curves.png``: p(t) at several t,
+  success counts, median time, and mean ± std of the n_min fastest successful times of every
+  planner that has at least n_min successes (Eq. 10-11; n_min = 40, 30, 15 for scenes 1-3 per 100
+  trials, scaled with the number of trials).
+* ``clock``: "cpu" (default) measures and limits each query in CPU seconds of its worker process
+  (immune to other load on the machine); "wall" uses wall-clock time as the paper. Both are
+  recorded in every line (``time_s`` wall, ``cpu_time_s``).
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import multiprocessing as mp
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["BenchConfig", "run", "load_results", "summarize", "format_summary", "plot_success", "scene_name",
+           "PAPER", "N_MIN"]
+log = logging.getLogger(__name__)
+
+N_MIN = {"ssps_scene1": 40, "ssps_scene2": 30, "ssps_scene3": 15}   # per 100 trials (Section 5.3)
+PAPER = {  # seed 000 Tables 2-3 (t = 1000 s; times: mean ± std of the n_min fastest)
+    "tcbirrt": {"ssps_scene1": (0.94, 0.82, 0.65), "ssps_scene2": (0.96, 2.12, 0.94), "ssps_scene3": (0.93, 0.87, 0.38)},
+    "cbirrt2": {"ssps_scene1": (0.25, None, None), "ssps_scene2": (0.18, None, None), "ssps_scene3": (0.02, None, None)},
+}
+T_GRID = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 60.0, 100.0, 1000.0)
+
+
+def scene_name(s: str) -> str:
+    """``"1"`` → ``"ssps_scene1"``; other names unchanged."""
+    s = str(s).strip()
+    return f"ssps_scene{s}" if s.isdigit() else s
+
+
+@dataclass
+class BenchConfig:
+    scenes: list = field(default_factory=lambda: ["ssps_scene1", "ssps_scene2", "ssps_scene3"])
+    planners: list = field(default_factory=lambda: ["tcbirrt", "cbirrt2", "ompl-atlas"])
+    trials: int = 100
+    time_limit: float = 10.0
+    seed: int = 0
+    jobs: int = 1
+    out: str = "bench_tcbirrt"
+    clock: str = "cpu"
+    progress: bool = True
+    plot: bool = True
+    first_trial: int = 0
+
+
+# ---------------------------------------------------------------------- worker
+_W: dict = {}
+
+
+def _worker_setup(robot_name: str, scenes: list[str], planners: list[str]):
+    """Per-process cache: robot, scenes, trial generators, planners (shared checker/kinematics)."""
+    if _W.get("key") == (robot_name, tuple(scenes), tuple(planners)):
+        return
+    from ..planners import make_planner
+    from ..planners.closed_chain import ClosedChainKinematics
+    from ..planners.validity import ValidityChecker
+    from ..robot import RobotModel
+    from ..scene import Scene
+    from .trials import TrialGenerator
+
+    robot = RobotModel.from_name(robot_name)
+    _W.clear()
+    _W["key"] = (robot_name, tuple(scenes), tuple(planners))
+    _W["robot"] = robot
+    for sc in scenes:
+        scene = Scene.load(sc)
+        checker = ValidityChecker(robot, scene)
+        kin = ClosedChainKinematics(robot, scene.object.grasps)
+        _W[sc] = {"scene": scene, "gen": TrialGenerator(robot, scene), "checker": checker,
+                  "planners": {p: make_planner(p, robot, scene, checker=checker, kinematics=kin) for p in planners}}
+
+
+def _path_checks(robot, scene, checker, res, resolution: float = 0.05) -> dict:
+    """Independent checks of a returned path: closed-chain error (Pinocchio FK) at every
+    configuration flagged constrained, and collision checks along straight joint-space edges
+    every ``resolution`` rad (object held on constrained edges, fixed during regrasps)."""
+    from ..planners.closed_chain import closure_error
+    from ..planners.rrtconnect import edge_is_valid
+
+    if not res.success:
+        return {}
+    P = res.path
+    data = robot.model.createData()
+    resid = 0.0
+    for q, c in zip(P, res.constrained):
+        if c:
+            resid = max(resid, *closure_error(robot, scene.object.grasps, q, data))
+    bad = 0
+    reg = {}
+    for s in res.segments:
+        if s.kind == "regrasp":
+            for k in range(s.start, s.stop):
+                reg[k] = s.object_pose
+    for k in range(len(P) - 1):
+        if k in reg:
+            M = reg[k]
+            ok = edge_is_valid(P[k], P[k + 1], lambda x: checker.is_valid_object_fixed(x, M), resolution)
+        elif res.segments and res.segments[0].kind == "free":
+            ok = edge_is_valid(P[k], P[k + 1], checker.is_valid_free, resolution)
+        else:
+            ok = edge_is_valid(P[k], P[k + 1], checker.is_valid, resolution)
+        bad += not ok
+    length = float(np.sum(np.linalg.norm(np.diff(P, axis=0), axis=1))) if len(P) > 1 else 0.0
+    return {"max_closed_chain_residual": resid, "dense_invalid_edges": bad, "joint_path_length_rad": length}
+
+
+def _run_unit(args) -> list[dict]:
+    robot_name, scene, index, planners, time_limit, seed, clock = args
+    w = _W[scene]   # set up by _init_pool
+    t0 = time.perf_counter()
+    trial = w["gen"].generate(index, seed)
+    gen_time = time.perf_counter() - t0
+    out = []
+    for name in planners:
+        pl = w["planners"][name]
+        res = pl.plan(trial.q_start, trial.q_goal, time_limit=time_limit, seed=trial.seed, clock=clock)
+        line = {"scene": scene, "trial": index, "planner": name, "seed": seed, "planner_seed": trial.seed,
+                "status": res.status.value, "success": res.success, "time_s": res.stats.get("time_s"),
+                "cpu_time_s": res.stats.get("cpu_time_s"), "clock": clock, "time_limit_s": time_limit,
+                "n_regrasp": res.n_regrasp, "n_configurations": len(res.path), "message": res.message,
+                "regenerations": trial.regenerations, "trial_generation_s": gen_time,
+                "stats": {k: v for k, v in res.to_dict(include_path=False)["stats"].items()
+                          if k not in ("time_s", "cpu_time_s", "clock", "time_limit_s", "seed")},
+                "checks": _path_checks(_W["robot"], w["scene"], w["checker"], res),
+                "task": trial.to_dict()}
+        out.append(line)
+    return out
+
+
+def _init_pool(robot_name, scenes, planners):
+    import logging as _lg
+
+    _lg.getLogger("optplan").setLevel(_lg.ERROR)
+    _worker_setup(robot_name, scenes, planners)
+
+
+# ---------------------------------------------------------------------- results file
+def load_results(path) -> list[dict]:
+    """Lines of a results.jsonl (unparsable lines, e.g. a truncated last one, are skipped)."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / "results.jsonl"
+    rows = []
+    if not p.exists():
+        return rows
+    with open(p) as f:
+        for line in f:
+            line = line.strip()
+            if not line:
+                continue
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue
+    return rows
+
+
+def _repair_tail(p: Path) -> None:
+    """Drop a truncated last line (a killed run) so appended lines start on a fresh line."""
+    if not p.exists() or p.stat().st_size == 0:
+        return
+    data = p.read_bytes()
+    if data.endswith(b"\n"):
+        return
+    cut = data.rfind(b"\n")
+    p.write_bytes(data[:cut + 1] if cut >= 0 else b"")
+
+
+def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
+    """Run (or resume) the benchmark; returns all result lines of ``cfg.out``."""
+    from ..planners.base import CLOCKS
+
+    if cfg.clock not in CLOCKS:
+        raise ValueError(f"clock: expected 'wall' or 'cpu', got {cfg.clock!r}")
+    scenes = [scene_name(s) for s in cfg.scenes]
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    res_path = out / "results.jsonl"
+    _repair_tail(res_path)
+    done = {(r["scene"], int(r["trial"]), r["planner"]) for r in load_results(res_path)
+            if r.get("seed") == cfg.seed and r.get("time_limit_s") == cfg.time_limit and r.get("clock") == cfg.clock}
+    units = []
+    for sc in scenes:
+        for i in range(cfg.first_trial, cfg.first_trial + cfg.trials):
+            todo = [p for p in cfg.planners if (sc, i, p) not in done]
+            if todo:
+                units.append((robot_name, sc, i, todo, float(cfg.time_limit), int(cfg.seed), cfg.clock))
+    with open(out / "config.json", "w") as f:
+        json.dump({**cfg.__dict__, "scenes": scenes}, f, indent=2)
+    n_runs = sum(len(u[3]) for u in units)
+    log.info("%d planner runs to do (%d already in %s)", n_runs, len(done), res_path)
+    bar = None
+    if cfg.progress and n_runs:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n_runs, desc="bench tcbirrt", unit="run", smoothing=0.05)
+    with open(res_path, "a") as f:
+        def write(lines):
+            for ln in lines:
+                f.write(json.dumps(ln) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+            if bar is not None:
+                bar.update(len(lines))
+                ok = [ln for ln in lines if ln["success"]]
+                bar.set_postfix_str(f"{lines[0]['scene']} #{lines[0]['trial']} "
+                                    f"{sum(1 for _ in ok)}/{len(lines)} ok")
+
+        if cfg.jobs <= 1:
+            _init_pool(robot_name, scenes, cfg.planners)
+            for u in units:
+                write(_run_unit(u))
+        else:
+            ctx = mp.get_context("spawn")
+            with ctx.Pool(cfg.jobs, initializer=_init_pool, initargs=(robot_name, scenes, cfg.planners),
+                          maxtasksperchild=None) as pool:
+                for lines in pool.imap_unordered(_run_unit, units, chunksize=1):
+                    write(lines)
+    if bar is not None:
+        bar.close()
+    rows = [r for r in load_results(res_path) if r.get("seed") == cfg.seed and r.get("clock") == cfg.clock
+            and r.get("time_limit_s") == cfg.time_limit and r["scene"] in scenes and r["planner"] in cfg.planners
+            and cfg.first_trial <= int(r["trial"]) < cfg.first_trial + cfg.trials]
+    summ = summarize(rows, cfg.time_limit)
+    with open(out / "summary.json", "w") as f:
+        json.dump(summ, f, indent=2)
+    (out / "summary.txt").write_text(format_summary(summ))
+    if cfg.plot:
+        plot_success(rows, out / "success_curves.png", cfg.time_limit)
+    return rows
+
+
+# ---------------------------------------------------------------------- metrics
+def _time_of(r: dict) -> float:
+    return float(r["cpu_time_s"] if r.get("clock") == "cpu" else r["time_s"])
+
+
+def success_curve(times: list[float], n: int, ts) -> list[float]:
+    """p(t) = n_t / n (Eq. 9): fraction of the n trials solved within t."""
+    arr = np.sort(np.asarray(times, float))
+    return [float(np.searchsorted(arr, t, side="right")) / n for t in ts]
+
+
+def summarize(rows: list[dict], time_limit: float) -> dict:
+    """Per scene and planner: trials, successes, p(t), median, mean ± std of the n_min fastest
+    (only planners with ≥ n_min successes, Eq. 10-11), regenerations, path checks."""
+    out: dict = {}
+    scenes = sorted({r["scene"] for r in rows})
+    for sc in scenes:
+        rs = [r for r in rows if r["scene"] == sc]
+        trials = sorted({int(r["trial"]) for r in rs})
+        n = len(trials)
+        nmin = max(2, int(math.ceil(N_MIN.get(sc, 15) * n / 100.0))) if n else 0
+        regen = {int(r["trial"]): int(r.get("regenerations", 0)) for r in rs}
+        entry = {"n_trials": n, "n_min": nmin, "regenerations": int(sum(regen.values())), "planners": {}}
+        for p in sorted({r["planner"] for r in rs}, key=lambda x: (x != "tcbirrt", x)):
+            pr = [r for r in rs if r["planner"] == p]
+            succ = [r for r in pr if r["success"]]
+            times = sorted(_time_of(r) for r in succ)
+            all_times = sorted([_time_of(r) for r in succ] + [math.inf] * (len(pr) - len(succ)))
+            ts = [t for t in T_GRID if t <= time_limit] or [time_limit]
+            d = {"n": len(pr), "successes": len(succ), "success_rate": len(succ) / len(pr) if pr else 0.0,
+                 "p_t": dict(zip([str(t) for t in ts], success_curve(times, len(pr), ts))),
+                 "median_time_successful_s": float(np.median(times)) if times else None,
+                 "median_time_all_s": (float(all_times[len(all_times) // 2]) if all_times and
+                                       math.isfinite(all_times[len(all_times) // 2]) else None),
+                 "statuses": {s: sum(1 for r in pr if r["status"] == s) for s in sorted({r["status"] for r in pr})}}
+            if len(times) >= nmin and nmin >= 2:
+                f = np.asarray(times[:nmin])
+                d["mean_fastest_nmin_s"] = float(f.mean())
+                d["std_fastest_nmin_s"] = float(f.std(ddof=1))
+            else:
+                d["mean_fastest_nmin_s"] = d["std_fastest_nmin_s"] = None
+            if succ:
+                d["mean_n_regrasp"] = float(np.mean([r.get("n_regrasp", 0) for r in succ]))
+                chk = [r.get("checks", {}) for r in succ]
+                d["max_closed_chain_residual"] = float(max(c.get("max_closed_chain_residual", 0.0) for c in chk))
+                d["paths_with_dense_collisions"] = int(sum(1 for c in chk if c.get("dense_invalid_edges", 0) > 0))
+            entry["planners"][p] = d
+        out[sc] = entry
+    return out
+
+
+def format_summary(summ: dict) -> str:
+    lines = []
+    for sc, e in summ.items():
+        lines.append(f"{sc}: {e['n_trials']} trials, n_min = {e['n_min']}, start/goal regenerations = {e['regenerations']}")
+        ts = None
+        for p, d in e["planners"].items():
+            ts = list(d["p_t"])
+            break
+        hdr = f"  {'planner':26s} {'succ':>7s} " + " ".join(f"p({t})".rjust(8) for t in ts) + \
+              f" {'median[s]':>9s} {'mean±std n_min fastest':>24s} {'paper (succ, mean±std)':>24s}"
+        lines.append(hdr)
+        for p, d in e["planners"].items():
+            med = d["median_time_successful_s"]
+            mm = (f"{d['mean_fastest_nmin_s']:.3f} ± {d['std_fastest_nmin_s']:.3f}"
+                  if d["mean_fastest_nmin_s"] is not None else "/")
+            pp = PAPER.get(p, {}).get(sc)
+            ps = "" if pp is None else (f"{pp[0]:.2f}, " + (f"{pp[1]:.2f} ± {pp[2]:.2f}" if pp[1] is not None else "/"))
+            lines.append(f"  {p:26s} {d['successes']:3d}/{d['n']:<3d} " + " ".join(f"{v:8.2f}" for v in d["p_t"].values())
+                         + f" {('%.3f' % med) if med is not None else '/':>9s} {mm:>24s} {ps:>24s}")
+            extra = []
+            if "mean_n_regrasp" in d:
+                extra.append(f"mean regrasps {d['mean_n_regrasp']:.2f}")
+                extra.append(f"max closed-chain residual {d['max_closed_chain_residual']:.1e}")
+                extra.append(f"paths with collisions between configurations (dense 0.05 rad) {d['paths_with_dense_collisions']}")
+            extra.append("statuses " + ", ".join(f"{k} {v}" for k, v in d["statuses"].items()))
+            lines.append("      " + "; ".join(extra))
+    lines.append("targets (issue 4): TCBiRRT success >= 0.99 per scene within 10 s, median <= 0.25 s; "
+                 ">= 10x faster median than the best OMPL peer at equal or higher success")
+    return "\n".join(lines)
+
+
+def plot_success(rows: list[dict], path, time_limit: float) -> None:
+    """PNG of p(t) (Eq. 9) for every planner, one panel per scene."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenes = sorted({r["scene"] for r in rows})
+    if not scenes:
+        return
+    fig, axes = plt.subplots(1, len(scenes), figsize=(5 * len(scenes), 4), squeeze=False)
+    ts = np.logspace(-2, math.log10(max(time_limit, 0.011)), 300)
+    for ax, sc in zip(axes[0], scenes):
+        rs = [r for r in rows if r["scene"] == sc]
+        for p in sorted({r["planner"] for r in rs}, key=lambda x: (x != "tcbirrt", x)):
+            pr = [r for r in rs if r["planner"] == p]
+            times = [_time_of(r) for r in pr if r["success"]]
+            ax.step(ts, success_curve(times, len(pr), ts), where="post", label=f"{p} ({len(pr)})")
+        ax.set_xscale("log")
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_xlabel("planning time t [s]" + (" (CPU)" if rs and rs[0].get("clock") == "cpu" else ""))
+        ax.set_ylabel("success rate p(t)")
+        ax.set_title(sc)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

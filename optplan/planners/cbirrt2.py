@@ -1,0 +1,215 @@
+"""CBiRRT2 — constrained bidirectional RRT in joint space with Newton-Raphson projection onto the
+closed-chain manifold h(q) = 0 (Berenson, Srinivasa, Ferguson, Kuffner 2009; seed 000's
+classical baseline, Section 5.2 item 2: "maximum edge length between nodes 0.6 rad, step size
+for collision checking 0.2 rad").
+
+ConstrainedExtend(T, q_near, q_target): repeat { step ``min(max_edge, |q_target − q_s|)`` toward
+q_target; project onto h = 0 by Newton-Raphson (``q ← q − J⁺ h``, damped pseudo-inverse,
+``tolerance`` on max |h|); stop when the projection fails, leaves the joint limits, jumps farther
+than ``2 · max_edge``, moves away from the target, or the new configuration or its edge is in
+collision }. Edges are checked every ``collision_step`` rad: the straight segment is cut into
+pieces of at most ``collision_step`` (Euclidean), each cut point is projected onto the manifold
+and checked, and the projected points are kept as path waypoints (so every returned
+configuration satisfies h = 0 to ``tolerance``). The trees alternate (extend toward a uniform
+sample in the joint box, then connect the other tree to the reached node), as in CBiRRT.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ConfigurationError
+from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from .closed_chain import ClosedChainKinematics, closure_error
+from .validity import ValidityChecker
+
+__all__ = ["CBiRRT2Options", "CBiRRT2"]
+log = logging.getLogger(__name__)
+
+TRAPPED, ADVANCED, REACHED = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class CBiRRT2Options:
+    """``max_edge`` [rad]: step of ConstrainedExtend (paper 0.6); ``collision_step`` [rad]
+    (paper 0.2); ``tolerance``: projection tolerance on max |h| (m / rad); ``max_projection_iterations``;
+    ``damping`` of the pseudo-inverse; ``connect_distance`` [rad]: trees are joined when a
+    connect step ends this close to the target; ``margin`` [m]; ``max_iterations`` (0: time only)."""
+
+    max_edge: float = 0.6
+    collision_step: float = 0.2
+    tolerance: float = 1e-7
+    max_projection_iterations: int = 50
+    damping: float = 1e-6
+    connect_distance: float = 1e-3
+    margin: float = 0.0
+    max_iterations: int = 0
+
+    def __post_init__(self):
+        for name in ("max_edge", "collision_step", "tolerance", "connect_distance"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"CBiRRT2Options.{name}: expected a positive number, got {v!r}")
+        if not (isinstance(self.damping, (int, float)) and self.damping >= 0):
+            raise ValueError(f"CBiRRT2Options.damping: expected a number >= 0, got {self.damping!r}")
+        if not (isinstance(self.margin, (int, float)) and self.margin >= 0):
+            raise ValueError(f"CBiRRT2Options.margin: expected a number >= 0 m, got {self.margin!r}")
+        for name in ("max_projection_iterations", "max_iterations"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= (1 if name == "max_projection_iterations" else 0)):
+                raise ValueError(f"CBiRRT2Options.{name}: expected a non-negative int, got {v!r}")
+
+
+class _Tree:
+    def __init__(self, root: np.ndarray, cap: int = 512):
+        self.X = np.empty((cap, root.size))
+        self.X[0] = root
+        self.parent = [-1]
+        self.edge: list[list[np.ndarray]] = [[]]
+        self.n = 1
+
+    def add(self, x, parent, edge) -> int:
+        if self.n == len(self.X):
+            self.X = np.concatenate([self.X, np.empty_like(self.X)])
+        self.X[self.n] = x
+        self.parent.append(parent)
+        self.edge.append(edge)
+        self.n += 1
+        return self.n - 1
+
+    def nearest(self, x) -> int:
+        d = self.X[:self.n] - x
+        return int(np.argmin(np.einsum("ij,ij->i", d, d)))
+
+    def branch(self, i) -> list[np.ndarray]:
+        out = []
+        while i >= 0:
+            out.append(self.X[i].copy())
+            out.extend(x.copy() for x in reversed(self.edge[i]))
+            i = self.parent[i]
+        return out[::-1]
+
+
+class CBiRRT2(Planner):
+    """CBiRRT2 on the closed chain of ``scene.object``'s two grasps (see the module docstring)."""
+
+    name = "cbirrt2"
+
+    def __init__(self, robot, scene, options: CBiRRT2Options | None = None, *, checker: ValidityChecker | None = None,
+                 kinematics: ClosedChainKinematics | None = None):
+        super().__init__(robot, scene)
+        if scene is None or scene.object is None or len(scene.object.grasps) != 2:
+            raise ConfigurationError("CBiRRT2 needs a scene with an [object] grasped by two arms")
+        self.options = options or CBiRRT2Options()
+        if not isinstance(self.options, CBiRRT2Options):
+            raise TypeError(f"options: expected CBiRRT2Options, got {type(self.options).__name__}")
+        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
+        self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
+        self.grasps = scene.object.grasps
+        self._eye = np.eye(6)
+
+    # ------------------------------------------------------------------ projection
+    def project(self, q: np.ndarray, st: dict) -> np.ndarray | None:
+        """Newton-Raphson onto h = 0 (damped pseudo-inverse); None when it does not converge or
+        leaves the joint limits."""
+        o, kin = self.options, self.kin
+        st["projections"] += 1
+        lam2 = o.damping ** 2 * self._eye
+        for _ in range(o.max_projection_iterations):
+            h, J = kin.h_jacobian(q)
+            if float(np.abs(h).max()) < o.tolerance:
+                if np.any(q < self.robot.lower) or np.any(q > self.robot.upper):
+                    return None
+                return q
+            q = q - J.T @ np.linalg.solve(J @ J.T + lam2, h)
+        st["projection_failures"] += 1
+        return None
+
+    def _edge(self, qa: np.ndarray, qb: np.ndarray, st: dict) -> list[np.ndarray] | None:
+        """Projected, collision-checked points strictly between qa and qb (both on the manifold)."""
+        d = qb - qa
+        n = int(math.ceil(float(np.sqrt(d @ d)) / self.options.collision_step))
+        out = []
+        for k in range(1, n):
+            x = self.project(qa + (k / n) * d, st)
+            if x is None or not self.checker.is_valid(x):
+                return None
+            out.append(x)
+        return out
+
+    # ------------------------------------------------------------------ ConstrainedExtend
+    def extend(self, tree: _Tree, i_near: int, target: np.ndarray, st: dict, deadline: Deadline) -> tuple[int, int]:
+        o = self.options
+        i_old = i_near
+        q_old = tree.X[i_near].copy()
+        q_s = q_old
+        res = TRAPPED
+        while not deadline.expired():
+            d = target - q_s
+            dist = float(np.sqrt(d @ d))
+            if dist < o.connect_distance:
+                return REACHED, i_old
+            if i_old != i_near and dist > float(np.linalg.norm(target - tree.X[tree.parent[i_old]])):
+                return ADVANCED, i_old
+            step = min(o.max_edge, dist)
+            q_new = self.project(q_s + (step / dist) * d, st)
+            if q_new is None:
+                break
+            dn = q_new - q_old
+            if float(np.sqrt(dn @ dn)) > 2.0 * o.max_edge or not self.checker.is_valid(q_new):
+                break
+            edge = self._edge(q_old, q_new, st)
+            if edge is None:
+                break
+            i_old = tree.add(q_new, i_old, edge)
+            q_old = q_s = q_new
+            res = ADVANCED
+        return res, i_old
+
+    # ------------------------------------------------------------------ main loop
+    def _plan(self, q_start, q_goal, deadline, rng, seed) -> PlanResult:
+        o, ck = self.options, self.checker
+        st = {"iterations": 0, "projections": 0, "projection_failures": 0}
+        c0 = ck.n_checks
+        for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
+            ep, eo = closure_error(self.robot, self.grasps, q)
+            if not ck.in_limits(q):
+                return self.empty_result(status, f"{which} outside the joint limits", **st)
+            if max(ep, eo) > 1e-6:
+                return self.empty_result(status, f"{which} off the closed-chain manifold ({max(ep, eo):.1e})", **st)
+            if not ck.is_valid(q):
+                return self.empty_result(status, f"{which} in collision", **st)
+        ta, tb = _Tree(q_start), _Tree(q_goal)
+        a_is_start = True
+        found = None
+        lo, hi = self.robot.lower, self.robot.upper
+        while not deadline.expired():
+            if o.max_iterations and st["iterations"] >= o.max_iterations:
+                break
+            st["iterations"] += 1
+            q_rand = rng.uniform(lo, hi)
+            _, i_a = self.extend(ta, ta.nearest(q_rand), q_rand, st, deadline)
+            target = ta.X[i_a].copy()          # CBiRRT: connect to q_reached even when trapped at q_near
+            res_b, i_b = self.extend(tb, tb.nearest(target), target, st, deadline)
+            if res_b == REACHED:
+                found = (i_a, i_b)
+                break
+            ta, tb, a_is_start = tb, ta, not a_is_start
+        st["nodes"] = ta.n + tb.n
+        st["collision_checks"] = ck.n_checks - c0
+        if found is None:
+            if deadline.expired():
+                return self.empty_result(PlanStatus.TIMEOUT, "time limit reached", **st)
+            return self.empty_result(PlanStatus.FAILED, "iteration cap reached", **st)
+        pa, pb = ta.branch(found[0]), tb.branch(found[1])
+        path = pa + pb[::-1][1:]
+        if not a_is_start:
+            path = path[::-1]
+        P = np.array(path)
+        P[0], P[-1] = q_start, q_goal
+        poses = [self.kin.object_pose(q) for q in P]
+        return PlanResult(PlanStatus.EXACT, self.name, P, poses, np.ones(len(P), bool),
+                          [PathSegment("constrained", 0, len(P) - 1)], st)
