@@ -125,7 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
     tb.add_argument("--trials", type=int, default=100, help="trials per scene")
     tb.add_argument("--first-trial", type=int, default=0, help="index of the first trial")
     tb.add_argument("--planners", default="tcbirrt,cbirrt2,ompl-atlas",
-                    help="comma-separated: tcbirrt, cbirrt2, rrtconnect, ompl-<projected|atlas|tb>[-<planner>]")
+                    help="comma-separated: tcbirrt, cbirrt2, rrtconnect, ompl-<projected|atlas|tb>[-<planner>]; "
+                         "options after colons, e.g. ompl-atlas:tolerance=1e-4:range=0.5")
     tb.add_argument("--time-limit", type=float, default=10.0, help="per query [s]")
     tb.add_argument("--seed", type=int, default=0)
     tb.add_argument("--jobs", type=int, default=1, help="worker processes")

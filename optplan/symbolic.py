@@ -237,6 +237,30 @@ class SymbolicKinematics:
             Ag[:, idx] = sum(parts[1:], parts[0])
         return Ag
 
+    def momentum(self, q, v, X=None):
+        """Spatial momentum ``[p; L]`` about the world origin (world axes) for the expressions
+        ``(q, v)``, by an O(n) forward recursion of body velocities — linear in ``v`` and free of
+        any matrix inverse. (Equals ``Ag v`` transported from the CoM to the origin.)"""
+        X = self.joint_placements(q) if X is None else X
+        V = [(ca.DM.zeros(3), ca.DM.zeros(3))]  # (ω, v_O) spatial velocity of each joint frame
+        for j in range(1, self.model.njoints):
+            w, vO = V[self.joints[j].parent]
+            for idx, wc, vc in self._columns(j, X):
+                w, vO = w + wc * v[idx], vO + vc * v[idx]
+            V.append((w, vO))
+        hl, ha = 0, 0
+        for b in range(1, self.model.njoints):
+            I = self.model.inertias[b]
+            if I.mass == 0:
+                continue
+            R, p = X[b]
+            c = p + R @ ca.DM(np.array(I.lever))
+            w, vO = V[b]
+            vc = vO + ca.cross(w, c)
+            hl = hl + I.mass * vc
+            ha = ha + ca.cross(c, I.mass * vc) + R @ ca.DM(np.array(I.inertia)) @ (R.T @ w)
+        return ca.vertcat(hl, ha)
+
     def generalized_jacobian(self, q, arm: str, X=None):
         """J* = J_m − J_b Ag_b⁻¹ Ag_m (6 × nj, world axes, zero momentum) of an arm's EE;
         the ordinary 6 × nj Jacobian for a fixed base."""

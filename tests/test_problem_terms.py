@@ -283,7 +283,8 @@ def _directions(s: Setup, Jad: np.ndarray, rng) -> list[np.ndarray]:
     few where it is zero), base-quaternion tangent directions for the floating robot."""
     tp = s.prob.tp
     n = s.x.size
-    nq_block = n - (4 * (tp.N + 1) if tp.floating else 0)   # joints (+ T): plain coordinates
+    # joints (+ T): plain coordinates; then (floating) base quaternions, then base twists
+    nq_block = tp.x.shape[0] - ((4 * (tp.N + 1) + 6 * (2 * tp.n_sub * tp.N + 1)) if tp.floating else 0)
     nz = np.flatnonzero(np.any(Jad[:, :nq_block] != 0, axis=0))
     z = np.setdiff1d(np.arange(nq_block), nz)
     pick = list(rng.choice(nz, size=min(15 if tp.floating else 18, nz.size), replace=False))
@@ -302,6 +303,11 @@ def _directions(s: Setup, Jad: np.ndarray, rng) -> list[np.ndarray]:
             d4 -= (d4 @ qk) * qk
             d = np.zeros(n)
             d[off + 4 * k: off + 4 * k + 4] = d4 / np.linalg.norm(d4)
+            dirs.append(d)
+        off_u = nq_block + 4 * (tp.N + 1)  # base-twist coordinates are plain coordinates
+        for i in rng.choice(6 * (2 * tp.n_sub * tp.N + 1), size=3, replace=False):
+            d = np.zeros(n)
+            d[off_u + i] = 1.0
             dirs.append(d)
     return dirs
 
@@ -403,12 +409,16 @@ def test_floating_base_dynamics_residual_matches_simulator(eba, rng):
         tau = t - tk[k]
         return (Q[k] + tau * V[k] + tau**2 / 2 * A[k] + tau**3 / 6 * J[k], V[k] + tau * A[k] + tau**2 / 2 * J[k])
 
-    sim = simulate_base(eba, traj, tk, substeps=16)
-    x = prob.tp.pack(Q, V, A, J, base_quat=sim.q[:, 3:7])
+    m = 2 * prob.tp.n_sub
+    tm = np.linspace(0, T, m * N + 1)
+    sim = simulate_base(eba, traj, tm, substeps=16)
+    x = prob.tp.pack(Q, V, A, J, base_quat=sim.q[::m, 3:7], base_twist=sim.v[:, :6])
     g = np.array(prob._built["gfun"](x)).ravel()
     nb = 3 * nj * N
     assert np.abs(g[:nb]).max() < 1e-12                        # joint integration exact
-    assert np.abs(g[nb:]).max() < 1e-6, np.abs(g[nb:]).max()   # RK4 (n_sub=4) vs simulator
+    nm = 4 + 6 * (m * N + 1)
+    assert np.abs(g[nb:nb + nm]).max() < 1e-9, np.abs(g[nb:nb + nm]).max()   # momentum with the simulator's twists
+    assert np.abs(g[nb + nm:nb + nm + 4 * N]).max() < 1e-6     # n_sub = 4 RK4 steps per interval vs simulator
     # and the base attitude really moved (the check is not vacuous)
     assert np.linalg.norm(sim.q[-1, 3:6]) > 1e-3
 

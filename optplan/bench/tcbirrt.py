@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["BenchConfig", "run", "load_results", "summarize", "format_summary", "plot_success", "scene_name",
+__all__ = ["BenchConfig", "run", "parse_planner_spec", "load_results", "summarize", "format_summary", "plot_success", "scene_name",
            "PAPER", "N_MIN"]
 log = logging.getLogger(__name__)
 
@@ -41,6 +41,32 @@ PAPER = {  # seed 000 Tables 2-3 (t = 1000 s; times: mean ± std of the n_min fa
     "cbirrt2": {"ssps_scene1": (0.25, None, None), "ssps_scene2": (0.18, None, None), "ssps_scene3": (0.02, None, None)},
 }
 T_GRID = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 60.0, 100.0, 1000.0)
+
+
+def parse_planner_spec(spec: str) -> tuple[str, dict]:
+    """``"ompl-atlas:tolerance=1e-4:range=0.5"`` → ``("ompl-atlas", {"tolerance": 1e-4, "range": 0.5})``
+    (values: int, float, true/false/none, else string). The whole spec is the planner's label."""
+    name, *opts = spec.split(":")
+    out = {}
+    for o in opts:
+        if "=" not in o:
+            raise ValueError(f"planner option {o!r} in {spec!r}: expected key=value")
+        k, v = o.split("=", 1)
+        low = v.lower()
+        if low in ("true", "false"):
+            val = low == "true"
+        elif low == "none":
+            val = None
+        else:
+            try:
+                val = int(v)
+            except ValueError:
+                try:
+                    val = float(v)
+                except ValueError:
+                    val = v
+        out[k.strip()] = val
+    return name.strip(), out
 
 
 def scene_name(s: str) -> str:
@@ -88,7 +114,8 @@ def _worker_setup(robot_name: str, scenes: list[str], planners: list[str]):
         checker = ValidityChecker(robot, scene)
         kin = ClosedChainKinematics(robot, scene.object.grasps)
         _W[sc] = {"scene": scene, "gen": TrialGenerator(robot, scene), "checker": checker,
-                  "planners": {p: make_planner(p, robot, scene, checker=checker, kinematics=kin) for p in planners}}
+                  "planners": {p: make_planner(parse_planner_spec(p)[0], robot, scene, checker=checker, kinematics=kin,
+                                               **parse_planner_spec(p)[1]) for p in planners}}
 
 
 def _path_checks(robot, scene, checker, res, resolution: float = 0.05) -> dict:

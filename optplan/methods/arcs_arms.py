@@ -27,9 +27,9 @@ def frame_on(k) -> np.ndarray:
     """A rotation whose x axis is the unit vector k (so sph(π/2, 0) in it is k)."""
     k = np.asarray(k, float) / np.linalg.norm(k)
     a = np.array([0.0, 0.0, 1.0]) if abs(k[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    y = np.cross(a, k)
-    y /= np.linalg.norm(y)
-    z = np.cross(k, y)
+    y = _cross(a, k)
+    y /= math.sqrt(y @ y)
+    z = _cross(k, y)
     # sph(a1, a2) = (s1 c2, s1 s2, c1): at (π/2, 0) it is e_x of R_ref
     return np.column_stack([k, y, z])
 
@@ -44,7 +44,7 @@ def _angles_in(R_ref, k, a2_near=None):
 
 def _rot(axis, ang):
     axis = np.asarray(axis, float)
-    n = np.linalg.norm(axis)
+    n = math.sqrt(axis @ axis)
     if n < 1e-300:
         return np.eye(3)
     x, y, z = axis / n
@@ -62,9 +62,14 @@ def _rx(a):
     return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
 
 
+def _cross(a, b) -> np.ndarray:
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def _angle(a, b) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
-    return math.atan2(np.linalg.norm(np.cross(a, b)), float(a @ b))
+    c = _cross(a, b)
+    return math.atan2(math.sqrt(c @ c), float(a @ b))
 
 
 def _nearest(value: float, ref: float | None) -> float:
@@ -77,7 +82,8 @@ def pair_angles(v, prev: tuple[float, float] | None = None) -> tuple[float, floa
     """Roll/bend pair of an S-R-S joint pair: angles (θo, θe) with
     ``Rz(θo) Rx(−90°) Rz(θe) Rx(90°) e_z = v`` (v in the pair's input frame). Of the two branches
     (θe ≥ 0 and θo + π, −θe) the one nearest ``prev`` (after 2π unwrapping) is returned."""
-    v = np.asarray(v, float) / np.linalg.norm(v)
+    v = np.asarray(v, float)
+    v = v / math.sqrt(v @ v)
     h = math.hypot(v[0], v[1])
     te = math.atan2(h, v[2])
     to = math.atan2(v[1], v[0]) if h > 1e-12 else (prev[0] if prev is not None else 0.0)
@@ -326,7 +332,7 @@ class SerpentineArcModel:
             Va = pA + (self.tangent_length(float(fa)) - h) * kA
             Vb = pB - (self.tangent_length(float(fb)) + h) * kB
             ks += [Vb - Va, kB]
-        return [k / np.linalg.norm(k) for k in ks]
+        return [k / math.sqrt(k @ k) for k in ks]
 
     def params_from_segments(self, ends, dirs, R_ref=None, a_near=None) -> np.ndarray:
         """Arc parameters from the segment end points p_{i,e} and directions k_{i,e}, i = 1..5."""
@@ -342,7 +348,8 @@ class SerpentineArcModel:
         """(pitch, yaw) of a segment that turns the frame ``R_in`` (x = incoming direction) to the
         outgoing direction ``k_out`` in one plane, and the outgoing frame. Each pitch-yaw/yaw-pitch
         pair is a pure rotation by 2β about the normal of the bending plane (β = φ/m per joint)."""
-        v = R_in.T @ (np.asarray(k_out, float) / np.linalg.norm(k_out))
+        v = R_in.T @ np.asarray(k_out, float)
+        v = v / math.sqrt(v @ v)
         h = math.hypot(v[1], v[2])
         phi = math.atan2(h, v[0])
         if h < 1e-300:

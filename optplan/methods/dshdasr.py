@@ -36,7 +36,8 @@ from .arcs_arms import DiscreteArcModel, SerpentineArcModel, frame_on
 
 __all__ = [
     "ROBOT", "PAPER", "TransposeTask", "paper_task", "quintic", "DshdasrArcs", "ArcPlanner",
-    "TrackResult", "dls_track", "evaluate", "initial_configuration", "run_case",
+    "TrackResult", "dls_track", "evaluate", "initial_configuration", "run_case", "TABLE1_XF",
+    "arm_a_on_swivel", "make_checker", "coal_centreline_distances",
 ]
 log = logging.getLogger(__name__)
 
@@ -230,14 +231,51 @@ class DshdasrArcs:
 
 
 # --------------------------------------------------------------------------- the NLP
+def _external(fun: ca.Function, opt: str = "-O1"):
+    """``fun`` compiled to C as a ``casadi.external`` (shared library cached in
+    ``optplan.codegen.cache_dir()`` by a hash of the code); None without a C compiler."""
+    import hashlib
+    import os
+    import shutil
+    import subprocess
+    import tempfile
+    from pathlib import Path
+
+    from ..codegen import cache_dir
+
+    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    if cc is None:
+        log.warning("no C compiler: the arc NLP stays interpreted")
+        return None
+    name = fun.name()
+    with tempfile.TemporaryDirectory() as tmp:
+        cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+        cg.add(fun)
+        cg.generate(tmp + os.sep)
+        code = Path(tmp, f"{name}.c").read_bytes()
+        lib = cache_dir() / f"dshdasr_{name}_{hashlib.sha1(code + opt.encode()).hexdigest()[:16]}.so"
+        if not lib.exists():
+            t0 = time.perf_counter()
+            out = Path(tmp) / lib.name
+            proc = subprocess.run([cc, opt, "-fPIC", "-shared", str(Path(tmp, f"{name}.c")), "-o", str(out), "-lm"],
+                                  capture_output=True, text=True)
+            if proc.returncode != 0:
+                log.warning("compiling %s failed: %s", name, proc.stderr[-400:])
+                return None
+            shutil.move(str(out), lib)
+            log.info("compiled %s in %.1f s", name, time.perf_counter() - t0)
+    return ca.external(name, str(lib))
+
+
 class ArcPlanner:
     """Eq. 50 as one IPOPT NLP, built once and re-solved per waypoint.
 
     Decision ``X = (X_a (8), X_b (15))``; parameters: the desired tips (pa, ka = z axis of Ra, pb,
     kb), the proximal centre, the three angle frames, the obstacle centres and thresholds.
     Objective ``||G1||² + ||G2||² + w Σ (X − X_c)²``: the proximal term (weight ``w`` small) picks among
-    the redundant zero-residual solutions the one nearest ``X_c``, the previous solution
-    extrapolated one step (the role of the paper's warm-started gradient descent). Constraints:
+    the redundant zero-residual solutions the one nearest ``X_c``, the previous solution (the role
+    of the paper's warm-started gradient descent); IPOPT starts from the previous solution
+    extrapolated one step. Constraints:
     every arc-to-obstacle distance ≥ d_sd^k (+ the arc's deviation from its links when
     ``margin="links"``).
 
@@ -250,10 +288,10 @@ class ArcPlanner:
     when one ends up violated)."""
 
     def __init__(self, arcs: DshdasrArcs | None = None, n_obstacles: int = 2, *, w: float = 1e-6,
-                 margin: str = "paper", tol: float = 1e-12, max_iter: int = 100,
-                 hessian: str = "exact", constraint_curvature: bool = True,
+                 margin: str = "paper", tol: float = 1e-10, max_iter: int = 100,
+                 hessian: str = "exact", constraint_curvature: bool = False,
                  activation: float = 0.3, extrapolate: bool = True, formulation: str = "constrained",
-                 options: dict | None = None):
+                 compile: bool = False, options: dict | None = None):
         if margin not in ("paper", "links"):
             raise ValueError(f"margin: expected 'paper' or 'links', got {margin!r}")
         if hessian not in ("gauss-newton", "exact"):
@@ -299,21 +337,39 @@ class ArcPlanner:
             g = ca.vertcat(g, G)
         self.nx, self.np_, self.ng = X.numel(), P.numel(), g.numel()
         opts = {"ipopt.print_level": 0, "print_time": False, "expand": True, "ipopt.tol": tol,
+                "ipopt.mu_strategy": "adaptive",
                 "ipopt.max_iter": max_iter, "ipopt.warm_start_init_point": "yes",
                 "ipopt.mu_init": 1e-9, "ipopt.warm_start_bound_push": 1e-9,
                 "ipopt.warm_start_mult_bound_push": 1e-9, "ipopt.warm_start_slack_bound_push": 1e-9,
                 "ipopt.acceptable_tol": 1e-10, "ipopt.acceptable_iter": 3,
                 "ipopt.nlp_scaling_method": "none", "ipopt.bound_relax_factor": 0.0, "calc_lam_p": False}
+        lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", self.ng)
+        H = None
         if hessian == "gauss-newton" and formulation == "least-squares":
-            lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", self.ng)
             J = ca.jacobian(G, X)
             H = lam_f * 2 * (ca.mtimes(J.T, J) + w * ca.SX.eye(self.nx))
             if constraint_curvature:
                 H = H + ca.hessian(ca.dot(lam_g, g), X)[0]
+        elif formulation == "constrained" and not constraint_curvature:
+            # exact for the objective and the equality residuals, no curvature of the distances
+            H = lam_f * 2 * ca.SX.eye(self.nx) + ca.hessian(ca.dot(lam_g[self.n_dist:], G), X)[0]
+        if H is not None:
             opts["hess_lag"] = ca.Function("hess_lag", [X, P, lam_f, lam_g], [ca.triu(H)],
                                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
         opts.update(options or {})
-        self.solver = ca.nlpsol("dshdasr_arcs", "ipopt", {"x": X, "p": P, "f": f, "g": g}, opts)
+        nlp = {"x": X, "p": P, "f": f, "g": g}
+        self.solver = ca.nlpsol("dshdasr_arcs", "ipopt", nlp, opts)
+        self.compiled = False
+        if compile:
+            ext = {}
+            for name, opt_name in (("nlp_grad_f", "grad_f"), ("nlp_jac_g", "jac_g"), ("nlp_hess_l", "hess_lag")):
+                e = _external(self.solver.get_function(name))
+                if e is None:
+                    break
+                ext[opt_name] = e
+            else:
+                self.solver = ca.nlpsol("dshdasr_arcs", "ipopt", nlp, {**opts, **ext})
+                self.compiled = True
         lba, uba = A.bounds()
         lbb, ubb = B.bounds(self.arcs.b_phi_max)
         self.lbx, self.ubx = np.r_[lba, lbb], np.r_[uba, ubb]
@@ -373,7 +429,9 @@ class ArcPlanner:
         anything that was dropped. Returns (x, sol, stats, resolved)."""
         g0 = np.array(self.f_eval(x0, p)[3]).ravel()
         near = g0 < self.activation
-        sol, st = self.solve(p, x0, lam_g0, lam_x0, np.where(near, 0.0, -np.inf), bounds=bool(near.any()))
+        at_bound = ((x0 - self.lbx) < 0.2).any() or ((self.ubx - x0) < 0.2).any()
+        sol, st = self.solve(p, x0, lam_g0, lam_x0, np.where(near, 0.0, -np.inf),
+                             bounds=bool(near.any() or at_bound))
         x = np.array(sol["x"]).ravel()
         bad = (np.array(self.f_eval(x, p)[3]).ravel() < -1e-9).any() or (x < self.lbx).any() or (x > self.ubx).any()
         if bad or not st["success"]:
@@ -404,7 +462,7 @@ class ArcPlanner:
         for k in range(n):
             Xn, refs_n, Xpred = self.recentre(X, refs, X_old if self.extrapolate else None, refs_old)
             X_old, refs_old, refs = Xn, refs_n, refs_n
-            p = self.pack(des, k, Xpred, refs, task.obstacles, thr)
+            p = self.pack(des, k, Xn, refs, task.obstacles, thr)   # proximal centre: previous solution
             t0 = time.perf_counter()
             X, sol, st, again = self.solve_waypoint(p, Xpred, lam_g, lam_x)
             t_nlp += time.perf_counter() - t0
@@ -420,6 +478,23 @@ class ArcPlanner:
         res.resolves = resolves
         return res
 
+    def clear_start(self, task: TransposeTask, q: np.ndarray, clearance: float = 0.2) -> np.ndarray:
+        """Move a configuration holding the first desired tips so that every arc is at least
+        ``clearance`` [m] beyond its obstacle threshold (one NLP solve with raised thresholds,
+        proximal to ``q``); returns the recovered joints."""
+        des = task.desired([0.0])
+        refs = (np.eye(3),) * 3
+        X, refs, _ = self.recentre(np.r_[self.arcs.params_from_q(q, refs)], refs)
+        thr = {k: v + clearance for k, v in task.thresholds.items()}
+        p = self.pack(des, 0, X, refs, task.obstacles, thr)
+        sol, st = self.solve(p, X)
+        if not st["success"]:
+            raise RuntimeError(f"clear_start: IPOPT {st['return_status']}")
+        x = np.array(sol["x"]).ravel()
+        nA = self.arcs.a.nx
+        return self.arcs.q_from_params(x[:nA], x[nA:], des["pa"][0], des["Ra"][0], des["pb"][0], des["kb"][0],
+                                       q_prev=q, refs=refs)
+
     def _world_angles(self, X, refs) -> np.ndarray:
         """The solution with its direction angles in the paper's frame (Eq. 25, identity)."""
         X = X.copy()
@@ -427,10 +502,14 @@ class ArcPlanner:
             X[i], X[j] = sph_angles(d)
         return X
 
-    def arc_distances(self, X, des: dict, k: int, task: TransposeTask) -> np.ndarray:
-        """Arc-model distances (n_obs × (3 + 5)) of a solution stored with world angles."""
+    def arc_distances(self, X, des: dict, k: int, task: TransposeTask, constraints: bool = False):
+        """Arc-model distances (n_obs × (3 + 5), Arm-a's three arcs then Arm-b's five) of a
+        solution stored with world angles; with ``constraints`` also the constraint values
+        (distance − threshold [− deviation]) in the same layout."""
         p = self.pack(des, k, X, (np.eye(3),) * 3, task.obstacles, task.thresholds)
-        return np.array(self.f_eval(X, p)[2]).ravel().reshape(self.n_obs, -1)
+        out = self.f_eval(X, p)
+        d = np.array(out[2]).ravel().reshape(self.n_obs, -1)
+        return (d, np.array(out[3]).ravel().reshape(self.n_obs, -1)) if constraints else d
 
 
 # --------------------------------------------------------------------------- results
@@ -488,15 +567,20 @@ def evaluate(res: TrackResult, task: TransposeTask, arcs: DshdasrArcs, planner: 
     }
     series = {"t": res.t, "ep_a": ep_a, "eo_a": eo_a, "ep_b": ep_b, "eo_b": eo_b, "coal": clear}
     if planner is not None and res.X is not None:
-        d = np.array([planner.arc_distances(res.X[k], des, k, task) for k in range(n)])  # n × obs × 8
+        dg = [planner.arc_distances(res.X[k], des, k, task, constraints=True) for k in range(n)]
+        d = np.array([x[0] for x in dg])  # n × obs × 8
+        g = np.array([x[1] for x in dg])
         arc = {"a": d[:, :, :3].min(axis=2), "b": d[:, :, 3:].min(axis=2)}
-        series["arc"] = arc
+        con = {"a": g[:, :, :3].min(axis=2), "b": g[:, :, 3:].min(axis=2)}
+        series["arc"], series["arc_constraint"] = arc, con
         m["min_arc_distance_m"] = {arm: {f"obs{i + 1}": float(arc[arm][:, i].min())
                                          for i in range(len(task.obstacles))} for arm in ("a", "b")}
+        m["min_arc_constraint_m"] = {arm: {f"obs{i + 1}": float(con[arm][:, i].min())
+                                           for i in range(len(task.obstacles))} for arm in ("a", "b")}
         m["threshold_time_s"] = {}
         for arm in ("a", "b"):
             for i in range(len(task.obstacles)):
-                hit = np.nonzero(arc[arm][:, i] <= thr[arm] + 1e-6)[0]
+                hit = np.nonzero(con[arm][:, i] <= 1e-6)[0]
                 m["threshold_time_s"][f"{arm}_obs{i + 1}"] = float(res.t[hit[0]]) if len(hit) else None
     if res.iterations is not None:
         m["nlp_time_s"] = float(res.nlp_time)
@@ -590,11 +674,30 @@ PAPER_INITIAL_JOINTS_DEG = {
 }
 
 
-def initial_configuration(arcs: DshdasrArcs, task: TransposeTask, seed=None, restarts: int = 20,
-                          rng_seed: int = 0) -> np.ndarray:
-    """Joints holding the first desired tips, by DLS from ``seed`` (default: the paper's initial
-    joint angles of Section 5.1 as printed — signs lost and a different D-H zero, so only a
-    starting guess), then from random seeds in the limits if that fails."""
+def arm_a_on_swivel(arcs: DshdasrArcs, pa, Ra, swivel: float) -> np.ndarray:
+    """Arm-a joints holding the tip pose (pa, Ra) with the elbow at swivel angle ``swivel`` [rad]
+    on its circle about the shoulder-wrist line u: measured from the horizontal y = e_z × u toward
+    u × y (π/2: elbow up)."""
+    A = arcs.a
+    w = np.asarray(pa) - A.L7 * np.asarray(Ra)[:, 2]
+    v = w - A.shoulder
+    D = np.linalg.norm(v)
+    if D >= A.L3 + A.L5:
+        raise ValueError(f"wrist {D:.3f} m from the shoulder: out of reach")
+    F = frame_on(v / D)
+    h = math.sqrt(A.L3 ** 2 - (D / 2) ** 2)
+    e = A.shoulder + v / 2 + h * (math.cos(swivel) * F[:, 1] + math.sin(swivel) * F[:, 2])
+    Xa = A.params_from_points(A.shoulder, e, w, pa, np.asarray(Ra)[:, 2])
+    return A.recover_joints(Xa, pa, Ra)
+
+
+def initial_configuration(arcs: DshdasrArcs, task: TransposeTask, swivel_deg: float | None = 65.0,
+                          seed=None, restarts: int = 20, rng_seed: int = 0) -> np.ndarray:
+    """Joints holding the first desired tips. Arm-b (and Arm-a when ``swivel_deg`` is None) by DLS
+    from ``seed`` — default: the paper's initial joint angles of Section 5.1 as printed (signs lost,
+    another D-H zero: only a starting guess) — then from random seeds if that fails. Arm-a at the
+    elbow swivel angle ``swivel_deg`` (see :func:`arm_a_on_swivel`; 65° is our choice, see
+    docs/dshdasr.md)."""
     if seed is None:
         seed = arcs.q(np.radians(PAPER_INITIAL_JOINTS_DEG["a"]), np.radians(PAPER_INITIAL_JOINTS_DEG["b"]))
     rng = np.random.default_rng(rng_seed)
@@ -602,7 +705,11 @@ def initial_configuration(arcs: DshdasrArcs, task: TransposeTask, seed=None, res
     for attempt in range(restarts + 1):
         res = dls_track(arcs, task, q, damping=1e-2, max_iterations=3000, max_step=0.1, times=[0.0])
         if res.success[0]:
-            return res.q[0]
+            q = res.q[0]
+            if swivel_deg is not None:
+                des = task.desired([0.0])
+                q[arcs.arm_a.q_idx] = arm_a_on_swivel(arcs, des["pa"][0], des["Ra"][0], math.radians(swivel_deg))
+            return q
         q = arcs.robot.random_configuration(rng)
     raise RuntimeError("no initial configuration found for the first waypoint")
 
@@ -617,6 +724,6 @@ def run_case(planner: ArcPlanner, task: TransposeTask, q0, tol_position: float =
     ok = (m["nlp_failures"] == 0
           and max(m["max_tip_position_error_a_m"], m["max_tip_position_error_b_m"]) <= tol_position
           and max(m["max_tip_attitude_error_a_rad"], m["max_tip_direction_error_b_rad"]) <= tol_attitude
-          and all(m["min_arc_distance_m"][arm][o] >= m["thresholds_m"][arm][o] - 1e-6
+          and all(m["min_arc_constraint_m"][arm][o] >= -1e-6
                   for arm in ("a", "b") for o in m["thresholds_m"][arm]))
     return ("S" if ok else "F"), res, m

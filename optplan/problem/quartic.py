@@ -3,32 +3,46 @@
 Decision variables are the quartic coefficients of every segment and, with ``free_durations``, the
 segment durations ``h_i`` [s]. Internally every segment's coefficients are stored normalised,
 ``p_{i,k} = coef_{i,k} h_i^k`` (position units; ``x_i(t) = sum_k p_{i,k} tau^k``,
-``tau = (t - t_i)/h_i``): this is only a scaling of the paper's ``a_i .. e_i`` that keeps the NLP
-well conditioned whatever the time unit; the returned spline uses the paper's coefficients.
+``tau = (t - t_i)/h_i``): only a scaling of the paper's ``a_i .. e_i`` that keeps the NLP well
+conditioned whatever the time unit; the returned spline uses the paper's coefficients.
 
 Equality constraints are exactly the Eq. 11 conditions (positions at the waypoints, equal
 velocity, acceleration and jerk at the inner waypoints, initial velocity and acceleration, final
-velocity), each multiplied by ``h_ref^k`` (``h_ref`` = mean initial duration) so all are in
+velocity), each multiplied by ``h_ref^k`` (``h_ref`` = mean initial duration) so that all are in
 position units. Inequalities are sampled: ``|x'| <= qdot_max``, ``|x''| <= qddot_max`` and
 ``||ee_velocity(x, x')|| <= ee_speed_max`` at ``samples_per_segment`` uniformly spaced points of
 every segment, both ends included (a point shared by two segments is constrained once).
 
-With ``refine=True`` (default) each limit is also imposed at 3 movable points ("slots") per segment
-(and per dimension for the joint limits), passed to the NLP as parameters: they start at the worst
-points of the warm start; after each solve the solution is checked between samples (exact maxima
-of the polynomial |x'| and |x''| by dense sampling + Newton, dense sampling + parabolic refinement
-for the end-effector speed), the slots of every violating (segment, dimension) are moved to the new
-worst point (keeping the two previous ones) and the NLP is re-solved from the previous solution,
-up to ``max_refinements`` times. This exchange method makes the limits hold along the whole
-trajectory (to ~1e-7 relative), not only at the samples; typically 2-6 re-solves are needed when
-limits are active with free durations, none with fixed durations.
+Between samples (``refine=True``, default) each limit is also imposed at 3 movable points
+("slots") per segment (and per dimension for the joint limits), passed to the NLP as parameters.
+They start at the worst points of the warm start. After each solve the solution is checked along
+the whole trajectory (exact maxima of the polynomials |x'| and |x''|: dense sampling + Newton;
+end-effector speed: dense sampling + successive parabolic refinement); for every (segment,
+dimension) whose maximum exceeds its limit by more than ``refine_tol`` (relative), the slot with
+the smallest Lagrange multiplier moves to the worst point and the NLP is re-solved from the
+previous solution (an exchange method for the semi-infinite constraint), at most
+``max_refinements`` times. The overshoot left (<= refine_tol, plus IPOPT's bound relaxation of
+~1e-8) is removed by stretching all durations by the worst ratio and re-solving Eq. 11 (an exact
+time scaling when v0 = a0 = vf = 0): the returned spline then meets the limits everywhere, at a
+relative time cost <= refine_tol. Fixed durations need no re-solve (the slots start at the exact
+maxima of the unique spline).
 
 With fixed durations the equalities alone determine the spline (5m equations, 5m unknowns per
-dimension), so the NLP's only feasible point is the linear solve of :func:`optplan.splines.quartic_spline`;
-the cost is irrelevant and a limit that this spline violates makes the problem infeasible
-(``success=False``, IPOPT's status). With free durations the cost is
-``time_weight * sum(h) + smooth_weight * sum_i integral ||x^(r)||^2 dt`` (r = 3 for ``cost="jerk"``,
-2 for ``"acceleration"``; units s and unit^2/s^(2r-1), summed over dimensions).
+dimension), so the NLP's only feasible point is the linear solve of
+:func:`optplan.splines.quartic_spline`; the cost is irrelevant and a limit that this spline
+violates makes the problem infeasible (``success=False``, IPOPT's status). With free durations
+the cost is ``time_weight * T + smooth_weight * (T_ws / J_ws) * J``: T = sum(h) [s],
+``J = sum_i integral ||x^(r)||^2 dt`` (r = 3 for ``cost="jerk"``, 2 for ``"acceleration"``) and
+``T_ws``, ``J_ws`` their values at the warm start, so ``smooth_weight`` is unit-free: 1e-3 means
+that at the warm start the smoothness term is worth 0.1 % of the duration.
+
+Numerics: the NLP is built in MX from one per-segment Function mapped over the segments (fast
+construction of the exact Hessian); IPOPT uses MUMPS with the AMD ordering
+(``mumps_pivot_order=0``), about 4x faster here than MUMPS' automatic choice. With many segments
+and rough waypoints (e.g. a random walk of 30 waypoints in 14 dimensions) the free-duration
+problem becomes very nonconvex (the quartic spline propagates every disturbance undamped, see
+:func:`optplan.splines.quartic_spline`) and IPOPT may stall; resample the path first
+(:func:`optplan.splines.resample_path`).
 """
 from __future__ import annotations
 
@@ -63,6 +77,7 @@ class QuarticSmoothingResult:
         iterations: IPOPT iterations summed over all (refinement) solves.
         wall_time: total wall time [s] of the call (building, solving, checking).
         spline: the resulting degree-4 spline (the warm start if the solver raised).
+            Evaluate it with ``spline(t, derivative=k)``.
         durations: (m,) segment durations [s].
         max_constraint_violation: max over the Eq. 11 residuals (position [unit], derivative jumps
             [unit/s^k], boundary conditions) and the violations of the limits along the whole
@@ -165,102 +180,127 @@ class _Problem:
         return quartic_spline(self.t0 + np.concatenate([[0.0], np.cumsum(h)]), self.X, self.v0, self.a0, self.vf)
 
     # -- symbolic NLP
+    def _segment_function(self, fracs, slot_shape) -> Tuple[ca.Function, np.ndarray, np.ndarray, Dict[str, np.ndarray]]:
+        """Per-segment Function (p (5n), h, slot fractions) -> (limit constraints, smoothness integral).
+
+        The limits are imposed at the fixed fractions ``fracs`` and at the slots. Also returns the
+        bounds of the constraint output and, per limit name, the local row of slot (s, j) in that
+        output (-1: no constraint because the limit is infinite).
+        """
+        n, sym = self.n, self.sym
+        ps, hs = sym.sym("p", 5 * n), sym.sym("h")
+        sl = sym.sym("slots", sum(shape[0] * shape[2] for shape in slot_shape.values()))
+        P = [ps[k * n:(k + 1) * n] for k in range(5)]
+        g: list = []
+        lb: list = []
+        ub: list = []
+
+        def at(f):  # position, velocity, acceleration at fraction f of the segment
+            q = P[0] + P[1] * f + P[2] * f**2 + P[3] * f**3 + P[4] * f**4
+            v = (P[1] + 2 * P[2] * f + 3 * P[3] * f**2 + 4 * P[4] * f**3) / hs
+            a = (2 * P[2] + 6 * P[3] * f + 12 * P[4] * f**2) / hs**2
+            return q, v, a
+
+        def add(expr, lo, hi) -> int:
+            first = sum(e.numel() for e in g)
+            g.append(expr)
+            lb.append(np.broadcast_to(np.asarray(lo, float), (expr.numel(),)))
+            ub.append(np.broadcast_to(np.asarray(hi, float), (expr.numel(),)))
+            return first
+
+        for f in fracs:
+            q, v, a = at(float(f))
+            for name, val in (("qdot_max", v), ("qddot_max", a)):
+                lim = self.lims[name]
+                dims = [] if lim is None else np.flatnonzero(np.isfinite(lim)).tolist()
+                if dims:
+                    add(val[dims], lim[dims] * -1.0, lim[dims])
+            if self.ee is not None:
+                add(ca.sumsqr(self.ee(q, v)), 0.0, self.ee_max**2)
+        slot_rows = {name: np.full((shape[0], shape[2]), -1) for name, shape in slot_shape.items()}
+        off = 0
+        for name, shape in slot_shape.items():
+            for s in range(shape[0]):
+                for j in range(shape[2]):
+                    q, v, a = at(sl[off])
+                    off += 1
+                    if name == "ee_speed_max":
+                        slot_rows[name][s, j] = add(ca.sumsqr(self.ee(q, v)), 0.0, self.ee_max**2)
+                    elif np.isfinite(self.lims[name][j]):  # slot (s, j) constrains dimension j only
+                        lim = self.lims[name][j]
+                        slot_rows[name][s, j] = add((v if name == "qdot_max" else a)[j], -lim, lim)
+        Qm = _jerk_matrix(self.r)
+        J = sum(Qm[a_, b_] * ca.dot(P[a_], P[b_]) for a_ in range(5) for b_ in range(5) if Qm[a_, b_] != 0.0)
+        J = J * hs ** (1 - 2 * self.r)
+        fun = ca.Function("quartic_segment", [ps, hs, sl], [ca.vertcat(*g) if g else sym(0, 1), J])
+        cat = (lambda v: np.concatenate(v) if v else np.zeros(0))
+        return fun, cat(lb), cat(ub), slot_rows
+
     def build(self, h_fixed: np.ndarray):
-        """NLP dict (x, p, f, g) and the bounds of g; p holds the slot fractions (see pack_slots)."""
-        m, n, sym = self.m, self.n, self.sym
+        """NLP dict (x, p, f, g) and the bounds of g; p holds the slot fractions (see pack_slots).
+
+        Built in MX from a per-segment Function mapped over the segments, which keeps the
+        construction of IPOPT's derivative functions fast for many segments and dimensions.
+        """
+        m, n = self.m, self.n
         nP = 5 * m * n
-        w = sym.sym("w", nP + (m if self.free else 0))
-        idx = (np.arange(m)[:, None, None] * 5 + np.arange(5)[None, :, None]) * n + np.arange(n)[None, None, :]
-        P = [ca.reshape(w[idx[:, k, :].ravel(order="F").tolist()], m, n) for k in range(5)]
-        H = w[nP:] if self.free else ca.DM(h_fixed)
-        Hm = ca.repmat(H, 1, n)
-        psym = sym.sym("p", sum(int(np.prod(s)) for s in self.slot_shape.values()))
+        w = ca.MX.sym("w", nP + (m if self.free else 0))
+        Pm = ca.reshape(w[:nP], 5 * n, m)                      # column i = p_i (k-major, j-minor)
+        H = w[nP:].T if self.free else ca.DM(h_fixed).T        # (1, m)
+        # fixed samples (a segment's end is the next one's start) and slots, mapped over the segments
+        seg_fun, seg_lb, seg_ub, local_rows = self._segment_function(np.linspace(0.0, 1.0, self.S)[:-1], self.slot_shape)
+        n_sl = seg_fun.numel_in(2)
+        psym = ca.MX.sym("p", n_sl * m)
         X = self.X
-        g, lb, ub = [], [], []
+        g: list = []
+        lb: list = []
+        ub: list = []
 
         def add(expr, lo, hi):
             g.append(ca.vec(expr))
             size = expr.numel()
-            lb.append(np.broadcast_to(np.reshape(lo, -1, order="F") if np.ndim(lo) else lo, (size,)))
-            ub.append(np.broadcast_to(np.reshape(hi, -1, order="F") if np.ndim(hi) else hi, (size,)))
+            lb.append(np.broadcast_to(lo, (size,)) if np.ndim(lo) == 0 else np.ravel(lo, order="F"))
+            ub.append(np.broadcast_to(hi, (size,)) if np.ndim(hi) == 0 else np.ravel(hi, order="F"))
 
-        add(P[0], X[:-1], X[:-1])                              # a_i = x_i
-        add(P[0] + P[1] + P[2] + P[3] + P[4], X[1:], X[1:])    # x_i(t_{i+1}) = x_{i+1}
-        # C1, C2, C3 at inner waypoints: x_i^(o)(t_{i+1}) = x_{i+1}^(o)(t_{i+1}), multiplied by
-        # (h_i h_{i+1} / h_ref)^o -> polynomial in (p, h), position units
-        Hr = Hm / self.h_ref
-        end = {o: sum(_falling(k, o) * P[k] for k in range(o, 5)) for o in (1, 2, 3)}  # = h_i^o x_i^(o)(end)
-        if m > 1:
-            for o in (1, 2, 3):
-                add(end[o][:-1, :] * Hr[1:, :] ** o - math.factorial(o) * P[o][1:, :] * Hr[:-1, :] ** o, 0.0, 0.0)
-        hr0, hrf = H[0] / self.h_ref, H[m - 1] / self.h_ref
-        add(P[1][0, :] - self.h_ref * hr0 * ca.DM(self.v0).T, 0.0, 0.0)              # x'(t0) = v0
-        add(2 * P[2][0, :] - self.h_ref**2 * hr0**2 * ca.DM(self.a0).T, 0.0, 0.0)    # x''(t0) = a0
-        add(end[1][m - 1, :] - self.h_ref * hrf * ca.DM(self.vf).T, 0.0, 0.0)       # x'(tf) = vf
-
-        def derivs(Ps, Hs, Fr):
-            q = Ps[0] + Ps[1] * Fr + Ps[2] * Fr**2 + Ps[3] * Fr**3 + Ps[4] * Fr**4
-            v = (Ps[1] + 2 * Ps[2] * Fr + 3 * Ps[3] * Fr**2 + 4 * Ps[4] * Fr**3) / Hs
-            a = (2 * Ps[2] + 6 * Ps[3] * Fr + 12 * Ps[4] * Fr**2) / Hs**2
-            return {"q": q, "qdot_max": v, "qddot_max": a}
-
-        def add_limits(d, npts):
-            for name in ("qdot_max", "qddot_max"):
-                lim = self.lims[name]
-                dims = [] if lim is None else np.flatnonzero(np.isfinite(lim)).tolist()
-                if dims:
-                    L = np.tile(lim[dims], (npts, 1))
-                    add(d[name][:, dims], -L, L)
-            if self.ee is not None:
-                vel = self.ee.map(npts)(d["q"].T, d["qdot_max"].T)
-                add(ca.sum1(vel**2), 0.0, self.ee_max**2)
-
-        # fixed samples: S per segment, both ends, shared knots once
-        pts = [(i, f) for i in range(m) for f in np.linspace(0.0, 1.0, self.S)[:-1]] + [(m - 1, 1.0)]
-        if self.has_limits:
-            seg = [i for i, _ in pts]
-            add_limits(derivs([P[k][seg, :] for k in range(5)], ca.repmat(H[seg, 0], 1, n),
-                              ca.repmat(ca.DM([f for _, f in pts]), 1, n)), len(pts))
-        # slots; slot_rows[name][s, i, j] = row of g of slot s of (segment i, dimension j) (-1: none)
-        off = 0
+        P = [Pm[k * n:(k + 1) * n, :] for k in range(5)]      # (n, m) each
+        Hn = ca.repmat(H, n, 1)
+        add(P[0], X[:-1].T, X[:-1].T)                           # a_i = x_i
+        add(P[0] + P[1] + P[2] + P[3] + P[4], X[1:].T, X[1:].T)  # x_i(t_{i+1}) = x_{i+1}
+        # C1, C2, C3 at inner waypoints and the boundary conditions, times h_ref^o (position units).
+        # (Multiplying through by h_i h_{i+1} to get polynomial constraints was tried: IPOPT then
+        # needs many more iterations or stalls.)
+        end = {}
+        for o in (1, 2, 3):
+            end[o] = sum(_falling(k, o) * P[k] for k in range(o, 5)) / Hn**o
+            if m > 1:
+                add(self.h_ref**o * (end[o][:, :-1] - math.factorial(o) * P[o][:, 1:] / Hn[:, 1:] ** o), 0.0, 0.0)
+        add(self.h_ref * P[1][:, 0] / H[0], self.h_ref * self.v0, self.h_ref * self.v0)
+        add(self.h_ref**2 * 2 * P[2][:, 0] / H[0] ** 2, self.h_ref**2 * self.a0, self.h_ref**2 * self.a0)
+        add(self.h_ref * end[1][:, m - 1], self.h_ref * self.vf, self.h_ref * self.vf)
+        g_seg, J = seg_fun.map(m)(Pm, H, ca.reshape(psym, n_sl, m))
+        first = sum(e.numel() for e in g)
+        n_gs = seg_lb.size
+        if n_gs:
+            add(g_seg, np.tile(seg_lb, m), np.tile(seg_ub, m))
+        if self.has_limits:  # the end of the last segment
+            end_fun, end_lb, end_ub, _ = self._segment_function([1.0], {})
+            add(end_fun(Pm[:, m - 1], H[m - 1], ca.DM(0, 1))[0], end_lb, end_ub)
+        # global row of slot (s, segment i, dimension j)
         self.slot_rows = {}
-        for name, shape in self.slot_shape.items():
-            size = int(np.prod(shape))
-            rows = np.full(shape, -1, dtype=int)
-            for s in range(_SLOTS):
-                lo = off + s * m * shape[2]
-                T = ca.reshape(psym[lo:lo + m * shape[2]], shape[2], m).T  # (m, n) or (m, 1), row-major slots
-                T = T if shape[2] == n else ca.repmat(T, 1, n)
-                d = derivs(P, Hm, T)
-                first = sum(e.numel() for e in g)
-                if name == "ee_speed_max":
-                    vel = self.ee.map(m)(d["q"].T, d["qdot_max"].T)
-                    add(ca.sum1(vel**2), 0.0, self.ee_max**2)
-                    rows[s, :, 0] = first + np.arange(m)
-                else:
-                    lim = self.lims[name]
-                    dims = np.flatnonzero(np.isfinite(lim)).tolist()
-                    if dims:
-                        L = np.tile(lim[dims], (m, 1))
-                        add(d[name][:, dims], -L, L)
-                        rows[s][:, dims] = first + np.arange(m * len(dims)).reshape(len(dims), m).T
-            self.slot_rows[name] = rows
-            off += size
-
-        Qm = _jerk_matrix(self.r)
-        J = 0
-        for p in range(5):
-            for q in range(5):
-                if Qm[p, q] != 0.0:
-                    J = J + Qm[p, q] * ca.sum2(P[p] * P[q])
-        J = ca.sum1(J * H ** (1 - 2 * self.r))
-        f = self.tw * ca.sum1(H) + self.sw * J if self.free else J
+        for name, rows in local_rows.items():
+            glob = first + np.arange(m)[None, :, None] * n_gs + rows[:, None, :]
+            self.slot_rows[name] = np.where(rows[:, None, :] >= 0, glob, -1)
+        J = ca.sum2(J)
+        f = self.tw * ca.sum2(H) + self.sw * J if self.free else J
         nlp = {"x": w, "p": psym, "f": f, "g": ca.vertcat(*g)}
-        return nlp, np.concatenate(lb), np.concatenate(ub)
+        return nlp, np.concatenate(lb).astype(float), np.concatenate(ub).astype(float)
 
     def pack_slots(self, slots: Dict[str, np.ndarray]) -> np.ndarray:
-        """Slot arrays (K, m, n|1) -> parameter vector (row-major per slot, matching build)."""
-        return np.concatenate([slots[name].ravel() for name in self.slot_shape] or [np.zeros(0)])
+        """Slot arrays {name: (K, m, n|1)} -> parameter vector, segment-major (matching build)."""
+        if not self.slot_shape:
+            return np.zeros(0)
+        per_seg = [np.transpose(slots[name], (1, 0, 2)).reshape(self.m, -1) for name in self.slot_shape]
+        return np.concatenate(per_seg, axis=1).ravel()
 
     def pack(self, pp: PiecewisePolynomial) -> np.ndarray:
         h = pp.durations
@@ -351,7 +391,8 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
                    ee_speed_max: Optional[float] = None, free_durations: bool = False, min_duration: float = 1e-3,
                    max_duration: Optional[float] = None, cost: str = "jerk", time_weight: float = 1.0,
                    smooth_weight: float = 1e-3, samples_per_segment: int = 8, refine: bool = True,
-                   max_refinements: int = 8, refine_tol: float = 1e-4, ipopt_options: Optional[Dict[str, Any]] = None) -> QuarticSmoothingResult:
+                   max_refinements: int = 8, refine_tol: float = 1e-4,
+                   ipopt_options: Optional[Dict[str, Any]] = None) -> QuarticSmoothingResult:
     """Smooth waypoints with a C3 quartic spline under velocity / acceleration / end-effector-speed limits.
 
     Args:
@@ -367,17 +408,24 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         free_durations: optimise the durations h_i in [min_duration, max_duration] [s] too.
         cost: "jerk" or "acceleration": integral of the squared derivative (the whole cost with fixed
             durations, where it does not change the unique solution).
-        time_weight [1], smooth_weight [s^(2r-1)/unit^2]: weights of total time and smoothness
-            integral with free durations (``time_weight * T + smooth_weight * J``).
+        time_weight, smooth_weight: weights (>= 0, unit-free) of total time and smoothness with
+            free durations: cost ``time_weight * T + smooth_weight * (T_ws / J_ws) * J`` (module
+            docstring); with fixed durations the cost is J alone.
+        min_duration, max_duration: bounds on each h_i [s] with free durations.
         samples_per_segment: constraint samples per segment, both ends included (>= 2).
-        refine, max_refinements: add worst violating points between samples and re-solve.
-        ipopt_options: IPOPT options overriding the defaults (``print_level=0``, ``sb="yes"``);
-            ``print_time`` and other ``nlpsol`` options may be given in the same dict, or a nested
-            ``{"ipopt": {...}}`` dict.
+        refine: impose the limits between samples too (movable points + re-solves + final
+            stretch, see the module docstring); False: at the samples only.
+        max_refinements: maximum number of re-solves; refine_tol: relative overshoot that
+            triggers one (smaller ones are removed by the final stretch).
+        ipopt_options: IPOPT options overriding the defaults (``print_level=0``, ``sb="yes"``,
+            ``max_iter=1000``, ``mumps_pivot_order=0``); ``print_time`` and other ``nlpsol``
+            options may be given in the same dict, or a nested ``{"ipopt": {...}}`` dict.
 
     Returns:
         QuarticSmoothingResult; failures (infeasible, iteration limit, solver exception) are
-        reported through ``success``/``status``, never raised. Invalid inputs raise ValueError/TypeError.
+        reported through ``success``/``status``, never raised (then ``spline`` is IPOPT's last
+        iterate, or the warm start if that violates the constraints less). Invalid inputs raise
+        ValueError/TypeError.
     """
     t_start = time.perf_counter()
     X = _float_array(waypoints, "waypoints")
@@ -436,8 +484,13 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
             h_ws = h_ws * ratio * 1.02
             pp_ws = prob.spline(h_ws)
 
+    if free_durations and prob.sw > 0:
+        # the smoothness weight is relative to the warm start: smooth_weight * (T_ws / J_ws) * J
+        j_ws = (prob.objective(pp_ws) - prob.tw * float(h_ws.sum())) / prob.sw
+        if j_ws > 0:
+            prob.sw = prob.sw * float(h_ws.sum()) / j_ws
     opts: Dict[str, Any] = {"print_time": False, "error_on_fail": False,
-                            "ipopt": {"print_level": 0, "sb": "yes", "max_iter": 3000, "mumps_pivot_order": 0}}
+                            "ipopt": {"print_level": 0, "sb": "yes", "max_iter": 1000, "mumps_pivot_order": 0}}
     if not free_durations and ee is None:
         opts["ipopt"].update({"jac_c_constant": "yes", "jac_d_constant": "yes", "hessian_constant": "yes"})
     top_level = set(ca.nlpsol_options("ipopt"))

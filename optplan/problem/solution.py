@@ -60,7 +60,9 @@ class Solution:
     the problem's tolerance. ``wall_time`` [s] is the IPOPT run; ``setup_time`` [s] the NLP
     construction and solver creation that preceded it (0 when a built solver was reused). ``t`` [s] (N+1,), ``q`` [rad] (N+1, nj), ``qd``, ``qdd``, ``jerk`` (N, nj);
     ``base_quat`` (N+1, 4) and ``base_position`` (N+1, 3) for a floating robot. ``terms`` maps each
-    named term to its value (cost terms: weighted cost; constraints: max violation).
+    named term to its value (cost terms: weighted cost; constraints: max violation), plus
+    ``"dynamics"``: the max violation of the transcription's own constraints (integration,
+    momentum, base attitude).
     """
 
     success: bool
