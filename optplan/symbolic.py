@@ -272,6 +272,31 @@ class SymbolicKinematics:
         Ag = self.centroidal_map(q, X)
         return J[:, 6:] - J[:, :6] @ ca.solve(Ag[:, :6], Ag[:, 6:])
 
+    # ------------------------------------------------------------------ end-effector motion
+    def ee_velocity_function(self, arm: str) -> ca.Function:
+        """``f(q_joints, q̇_joints) -> v`` (3,) [m/s]: linear velocity of an arm's end-effector
+        (world axes). Fixed base: ``J q̇``; free-floating: ``J* q̇`` (zero momentum, base at identity).
+        For the quartic-spline NLP (``smooth_quartic(..., ee_velocity=...)``)."""
+        a = self.robot.arm(arm)
+        qj, qdj = ca.SX.sym("qj", self.robot.nj), ca.SX.sym("qdj", self.robot.nj)
+        v = self._ee_jacobian(qj, a.name)[:3, :] @ qdj
+        return ca.Function(f"ee_velocity_{arm}", [qj, qdj], [v], ["qj", "qdj"], ["v"])
+
+    def ee_acceleration_function(self, arm: str) -> ca.Function:
+        """``f(q, q̇, q̈) -> a`` (3,) [m/s²]: classical linear acceleration of the end-effector
+        origin, ``J q̈ + (∂(J q̇)/∂q) q̇`` (world axes; J* for a free-floating robot)."""
+        a = self.robot.arm(arm)
+        qj, qdj, qddj = (ca.SX.sym(n, self.robot.nj) for n in ("qj", "qdj", "qddj"))
+        v = self._ee_jacobian(qj, a.name)[:3, :] @ qdj
+        acc = ca.jacobian(v, qj) @ qdj + ca.jacobian(v, qdj) @ qddj
+        return ca.Function(f"ee_acceleration_{arm}", [qj, qdj, qddj], [acc], ["qj", "qdj", "qddj"], ["a"])
+
+    def _ee_jacobian(self, qj, arm: str):
+        if self.robot.is_floating:
+            qfull = ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), qj)
+            return self.generalized_jacobian(qfull, arm)
+        return self.frame_jacobian(qj, self.robot.arm(arm).ee_frame_id, "world_aligned")
+
     # ------------------------------------------------------------------ casadi.Function wrappers
     def _q(self):
         return self.sym.sym("q", self.model.nq)

@@ -127,6 +127,29 @@ def test_free_durations_with_boundary_velocities(problem):
     assert np.all(np.abs(res.spline(t, 1)) <= 1.5 + 1e-6)
 
 
+def test_single_segment_fixed_and_free():
+    x = np.array([[0.0, 1.0], [1.0, -1.0]])
+    fixed = smooth_quartic([0.0, 2.0], x, qdot_max=5.0)
+    assert fixed.success
+    np.testing.assert_allclose(fixed.spline.coefficients, quartic_spline([0.0, 2.0], x).coefficients, atol=1e-8)
+    free = smooth_quartic([2.0], x, qdot_max=0.5, free_durations=True)
+    assert free.success, free.status
+    # rest-to-rest with free final acceleration: x = x0 + dx (4 s^3 - 3 s^4), peak speed 16/9 |dx| / T
+    assert free.durations[0] == pytest.approx(16 / 9 * 2.0 / 0.5, rel=1e-6)
+    assert_eq11(free.spline, x)
+
+
+def test_without_refinement_limits_hold_at_the_samples():
+    rng = np.random.default_rng(3)
+    waypoints = np.cumsum(rng.normal(scale=0.4, size=(9, 2)), axis=0)
+    res = smooth_quartic(np.ones(8), waypoints, qdot_max=1.0, free_durations=True, refine=False,
+                         samples_per_segment=5)
+    assert res.success and res.refinements == 0 and res.stretch == 1.0
+    t = per_segment_times(res.spline, 5)
+    assert np.all(np.abs(res.spline(t, 1)) <= 1.0 + 1e-6)
+    assert_eq11(res.spline, waypoints)
+
+
 # ----------------------------------------------------------------------------- (4) end-effector speed
 def test_end_effector_speed_limit_two_link_arm():
     rng = np.random.default_rng(5)
@@ -199,3 +222,63 @@ def test_bad_inputs_raise(problem):
         smooth_quartic(times, np.full_like(waypoints, np.nan))
     with pytest.raises(ValueError, match="samples_per_segment"):
         smooth_quartic(times, waypoints, samples_per_segment=1)
+
+
+# ----------------------------------------------------------------------------- end-effector acceleration
+def two_link_ee_acceleration() -> ca.Function:
+    """(q, qdot, qddot) -> planar end-effector linear acceleration J q̈ + J̇ q̇ [m/s²]."""
+    q, qd, qdd = ca.SX.sym("q", 2), ca.SX.sym("qd", 2), ca.SX.sym("qdd", 2)
+    p = ca.vertcat(L1 * ca.cos(q[0]) + L2 * ca.cos(q[0] + q[1]), L1 * ca.sin(q[0]) + L2 * ca.sin(q[0] + q[1]), 0)
+    J = ca.jacobian(p, q)
+    v = J @ qd
+    return ca.Function("ee_acc", [q, qd, qdd], [J @ qdd + ca.jacobian(v, q) @ qd])
+
+
+def test_end_effector_acceleration_limit_two_link_arm():
+    rng = np.random.default_rng(6)
+    m = 5
+    waypoints = np.cumsum(rng.normal(scale=0.5, size=(m + 1, 2)), axis=0)
+    amax_ee, S = 0.4, 12
+    res = smooth_quartic(np.ones(m), waypoints, ee_acceleration=two_link_ee_acceleration(), ee_accel_max=amax_ee,
+                         free_durations=True, samples_per_segment=S)
+    assert res.success, res.status
+    pp = res.spline
+    assert_eq11(pp, waypoints)
+    # independent check at the constrained sample points: numpy FK + second central differences
+    t = np.clip(per_segment_times(pp, S), pp.t0 + 1e-4, pp.tf - 1e-4)
+    dt = 1e-4
+    a_fd = (two_link_fk(pp(t + dt)) - 2 * two_link_fk(pp(t)) + two_link_fk(pp(t - dt))) / dt**2
+    acc = np.linalg.norm(a_fd, axis=1)
+    assert acc.max() <= amax_ee * (1 + 1e-3)
+    assert acc.max() >= amax_ee * 0.9  # the limit is what sets the duration
+
+
+def test_end_effector_acceleration_needs_its_limit():
+    with pytest.raises(ValueError, match="ee_accel_max"):
+        smooth_quartic([0.0, 1.0, 2.0], np.zeros((3, 2)), ee_acceleration=two_link_ee_acceleration())
+
+
+def test_quartic_smoothing_on_a_robot_arm_with_end_effector_speed_limit(tcb):
+    """Seed 001's smoothing on real joint waypoints of tcbirrt_dual_arm: EE speed of arm A ≤ 0.1 m/s
+    (the paper's limit), checked with Pinocchio's frame velocity (independent of CasADi)."""
+    import pinocchio as pin
+
+    from optplan.symbolic import SymbolicKinematics
+
+    rng = np.random.default_rng(11)
+    q0 = tcb.random_joints(rng) * 0.3
+    waypoints = q0 + np.cumsum(rng.normal(scale=0.05, size=(5, tcb.nj)), axis=0)
+    fv = SymbolicKinematics(tcb).ee_velocity_function("A")
+    res = smooth_quartic(np.ones(4), waypoints, ee_velocity=fv, ee_speed_max=0.1, free_durations=True)
+    assert res.success, res.status
+    pp = res.spline
+    data = tcb.model.createData()
+    fid = tcb.arm("A").ee_frame_id
+    speeds = []
+    for t in per_segment_times(pp, 40):
+        q, v = pp(t), pp(t, 1)
+        pin.forwardKinematics(tcb.model, data, q, v)
+        speeds.append(np.linalg.norm(pin.getFrameVelocity(tcb.model, data, fid,
+                                                          pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).linear))
+    assert max(speeds) <= 0.1 + 1e-6
+    assert max(speeds) >= 0.1 * 0.99

@@ -340,3 +340,32 @@ def test_compiled_function_checks_its_inputs(syms):
         c()
     with pytest.raises(ValueError, match="shape"):
         c(np.zeros(3))
+
+
+def test_ee_velocity_and_acceleration_functions_match_pinocchio(tcb, rng):
+    """Classical EE acceleration J q̈ + J̇ q̇ vs Pinocchio's getFrameClassicalAcceleration."""
+    from optplan.symbolic import SymbolicKinematics
+
+    sym = SymbolicKinematics(tcb)
+    fv, fa = sym.ee_velocity_function("B"), sym.ee_acceleration_function("B")
+    data = tcb.model.createData()
+    fid = tcb.arm("B").ee_frame_id
+    for _ in range(10):
+        q, v, a = tcb.random_configuration(rng), rng.normal(size=tcb.nv), rng.normal(size=tcb.nv)
+        pin.forwardKinematics(tcb.model, data, q, v, a)
+        pin.updateFramePlacements(tcb.model, data)
+        LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        vel = pin.getFrameVelocity(tcb.model, data, fid, LWA).linear
+        acc = pin.getFrameClassicalAcceleration(tcb.model, data, fid, LWA).linear
+        np.testing.assert_allclose(np.array(fv(q, v)).ravel(), vel, atol=1e-10)
+        np.testing.assert_allclose(np.array(fa(q, v, a)).ravel(), acc, atol=1e-9)
+
+
+def test_ee_velocity_function_floating_uses_generalized_jacobian(eba, rng):
+    from optplan.kinematics import Kinematics
+    from optplan.symbolic import SymbolicKinematics
+
+    f = SymbolicKinematics(eba).ee_velocity_function("A")
+    qj, qd = eba.random_joints(rng), rng.normal(size=eba.nj)
+    J = Kinematics(eba).generalized_jacobian(eba.configuration(qj), "A")
+    np.testing.assert_allclose(np.array(f(qj, qd)).ravel(), J[:3] @ qd, atol=1e-10)

@@ -1,48 +1,36 @@
 """Quartic-spline smoothing (seed paper Sec. 3.3, Eq. 8-11) posed as an NLP and solved with IPOPT.
 
-Decision variables are the quartic coefficients of every segment and, with ``free_durations``, the
-segment durations ``h_i`` [s]. Internally every segment's coefficients are stored normalised,
-``p_{i,k} = coef_{i,k} h_i^k`` (position units; ``x_i(t) = sum_k p_{i,k} tau^k``,
-``tau = (t - t_i)/h_i``): only a scaling of the paper's ``a_i .. e_i`` that keeps the NLP well
-conditioned whatever the time unit; the returned spline uses the paper's coefficients.
+Variables: the quartic coefficients of every segment, stored normalised as
+``p_{i,k} = coef_{i,k} h_i^k`` (position units, ``x_i = sum_k p_{i,k} tau^k``, ``tau = (t-t_i)/h_i``;
+a scaling of the paper's ``a_i .. e_i`` that keeps the NLP well conditioned in any time unit), and
+with ``free_durations`` the segment durations ``h_i`` [s]. Equalities: exactly the Eq. 11
+conditions (positions at the waypoints, equal velocity / acceleration / jerk at the inner ones,
+v0, a0, vf), each times ``h_ref^k`` (``h_ref`` = mean initial duration) to be in position units.
+Inequalities: ``|x'| <= qdot_max``, ``|x''| <= qddot_max``, ``||ee_velocity(x, x')|| <= ee_speed_max``
+at ``samples_per_segment`` uniform points of every segment, both ends included (shared ends once).
 
-Equality constraints are exactly the Eq. 11 conditions (positions at the waypoints, equal
-velocity, acceleration and jerk at the inner waypoints, initial velocity and acceleration, final
-velocity), each multiplied by ``h_ref^k`` (``h_ref`` = mean initial duration) so that all are in
-position units. Inequalities are sampled: ``|x'| <= qdot_max``, ``|x''| <= qddot_max`` and
-``||ee_velocity(x, x')|| <= ee_speed_max`` at ``samples_per_segment`` uniformly spaced points of
-every segment, both ends included (a point shared by two segments is constrained once).
+Between samples (``refine=True``): every limit is also imposed at 3 movable points per segment
+(and dimension), NLP parameters starting at the warm start's worst points. After a solve the
+whole trajectory is checked (exact maxima of |x'|, |x''| by sampling + Newton; end-effector speed
+by sampling + parabolic refinement); where a maximum exceeds its limit by more than
+``refine_tol`` (relative) the point with the smallest multiplier moves there and the NLP is
+re-solved (an exchange method), at most ``max_refinements`` times. The overshoot left is removed
+by stretching all durations by the worst ratio and re-solving Eq. 11 (an exact time scaling when
+v0 = a0 = vf = 0): the spline then meets the limits everywhere, for a relative time cost
+<= refine_tol (``QuarticSmoothingResult.stretch``).
 
-Between samples (``refine=True``, default) each limit is also imposed at 3 movable points
-("slots") per segment (and per dimension for the joint limits), passed to the NLP as parameters.
-They start at the worst points of the warm start. After each solve the solution is checked along
-the whole trajectory (exact maxima of the polynomials |x'| and |x''|: dense sampling + Newton;
-end-effector speed: dense sampling + successive parabolic refinement); for every (segment,
-dimension) whose maximum exceeds its limit by more than ``refine_tol`` (relative), the slot with
-the smallest Lagrange multiplier moves to the worst point and the NLP is re-solved from the
-previous solution (an exchange method for the semi-infinite constraint), at most
-``max_refinements`` times. The overshoot left (<= refine_tol, plus IPOPT's bound relaxation of
-~1e-8) is removed by stretching all durations by the worst ratio and re-solving Eq. 11 (an exact
-time scaling when v0 = a0 = vf = 0): the returned spline then meets the limits everywhere, at a
-relative time cost <= refine_tol. Fixed durations need no re-solve (the slots start at the exact
-maxima of the unique spline).
-
-With fixed durations the equalities alone determine the spline (5m equations, 5m unknowns per
-dimension), so the NLP's only feasible point is the linear solve of
-:func:`optplan.splines.quartic_spline`; the cost is irrelevant and a limit that this spline
-violates makes the problem infeasible (``success=False``, IPOPT's status). With free durations
-the cost is ``time_weight * T + smooth_weight * (T_ws / J_ws) * J``: T = sum(h) [s],
+With fixed durations the equalities alone determine the spline (5m equations for 5m unknowns per
+dimension): the only feasible point is :func:`optplan.splines.quartic_spline`, the cost (J below)
+is irrelevant, and a limit this spline violates makes the NLP infeasible. With free durations the
+cost is ``time_weight * T + smooth_weight * (T_ws / J_ws) * J`` with T = sum(h) [s],
 ``J = sum_i integral ||x^(r)||^2 dt`` (r = 3 for ``cost="jerk"``, 2 for ``"acceleration"``) and
-``T_ws``, ``J_ws`` their values at the warm start, so ``smooth_weight`` is unit-free: 1e-3 means
-that at the warm start the smoothness term is worth 0.1 % of the duration.
+T_ws, J_ws their warm-start values: ``smooth_weight`` is unit-free (1e-3: the smoothness term is
+worth 0.1 % of the duration at the warm start). An absolute weight on J (~h^-5) was tried and made
+IPOPT need 3-20x more iterations.
 
-Numerics: the NLP is built in MX from one per-segment Function mapped over the segments (fast
-construction of the exact Hessian); IPOPT uses MUMPS with the AMD ordering
-(``mumps_pivot_order=0``), about 4x faster here than MUMPS' automatic choice. With many segments
-and rough waypoints (e.g. a random walk of 30 waypoints in 14 dimensions) the free-duration
-problem becomes very nonconvex (the quartic spline propagates every disturbance undamped, see
-:func:`optplan.splines.quartic_spline`) and IPOPT may stall; resample the path first
-(:func:`optplan.splines.resample_path`).
+Numerics: the NLP is built in MX from one per-segment Function mapped over the segments (building
+the exact Hessian takes ~0.1 s instead of ~1.6 s for 20 x 14 with one big SX graph); IPOPT uses
+MUMPS with the AMD ordering (``mumps_pivot_order=0``), ~4x faster here than the automatic choice.
 """
 from __future__ import annotations
 
@@ -51,7 +39,7 @@ import math
 import time
 from dataclasses import dataclass
 from numbers import Real
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, Optional, Tuple
 
 import casadi as ca
 import numpy as np
@@ -103,11 +91,13 @@ class QuarticSmoothingResult:
 
 # ----------------------------------------------------------------------------- helpers
 def _limit_vec(value: Any, n: int, name: str) -> Optional[np.ndarray]:
+    """None, a scalar or (n,) positive limits (inf allowed) -> (n,) array or None."""
     if value is None:
         return None
-    arr = np.array(value, dtype=float) if not isinstance(value, (str, bytes)) else None
-    if arr is None or arr.dtype.kind != "f":
-        raise TypeError(f"{name}: expected a positive scalar or an array of {n} positive limits, got {value!r}")
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name}: expected a positive scalar or an array of {n} positive limits, got {value!r}") from exc
     arr = np.full(n, float(arr)) if arr.ndim == 0 else arr.reshape(-1)
     if arr.shape != (n,) or np.any(np.isnan(arr)) or np.any(arr <= 0):
         raise ValueError(f"{name}: expected a positive scalar or {n} positive limits (inf allowed), got {value!r}")
@@ -117,16 +107,19 @@ def _limit_vec(value: Any, n: int, name: str) -> Optional[np.ndarray]:
 def _ee_wrapper(fun: Any, n: int) -> Tuple[ca.Function, type]:
     """Canonical (q (n,1), qdot (n,1)) -> v (k,1) Function, SX if the user's Function inlines into SX."""
     if not isinstance(fun, ca.Function):
-        raise TypeError(f"ee_velocity: expected a casadi.Function (q, qdot) -> linear velocity, got {type(fun).__name__}")
+        raise TypeError("ee_velocity: expected a casadi.Function (q, qdot) -> linear velocity, "
+                        f"got {type(fun).__name__}")
     if fun.n_in() != 2 or fun.n_out() < 1:
-        raise ValueError(f"ee_velocity: expected 2 inputs (q, qdot) and >= 1 output, got {fun.n_in()} inputs, {fun.n_out()} outputs")
+        raise ValueError("ee_velocity: expected 2 inputs (q, qdot) and >= 1 output, "
+                         f"got {fun.n_in()} inputs, {fun.n_out()} outputs")
     for i in range(2):
         if fun.numel_in(i) != n:
-            raise ValueError(f"ee_velocity: input {i} must have {n} entries (one per waypoint dimension), got shape {fun.size_in(i)}")
+            raise ValueError(f"ee_velocity: input {i} must have {n} entries (one per waypoint dimension), "
+                             f"got shape {fun.size_in(i)}")
     for sym in (ca.SX, ca.MX):
         try:
             q, qd = sym.sym("q", n), sym.sym("qd", n)
-            out = fun(ca.reshape(q, fun.size1_in(0), fun.size2_in(0)), ca.reshape(qd, fun.size1_in(1), fun.size2_in(1)))
+            out = fun(ca.reshape(q, *fun.size_in(0)), ca.reshape(qd, *fun.size_in(1)))
             out = out[0] if isinstance(out, (list, tuple)) else out
             return ca.Function("ee_velocity_col", [q, qd], [ca.vec(out)]), sym
         except Exception:  # noqa: BLE001 - SX evaluation unsupported: use MX
@@ -164,9 +157,12 @@ class _Problem:
         if ee is not None and slots:
             self.slot_shape["ee_speed_max"] = (_SLOTS, self.m, 1)
 
+    ee_acc = None  # optional Function (q, qdot, qddot) -> EE linear acceleration; set by smooth_quartic
+    ee_acc_max = None
+
     @property
     def has_limits(self) -> bool:
-        return any(v is not None for v in self.lims.values()) or self.ee is not None
+        return any(v is not None for v in self.lims.values()) or self.ee is not None or self.ee_acc is not None
 
     def segment_ratio(self, pp: PiecewisePolynomial) -> np.ndarray:
         """(m,) factor by which each segment must be slowed down to meet its limits (<1: may speed up)."""
@@ -180,7 +176,7 @@ class _Problem:
         return quartic_spline(self.t0 + np.concatenate([[0.0], np.cumsum(h)]), self.X, self.v0, self.a0, self.vf)
 
     # -- symbolic NLP
-    def _segment_function(self, fracs, slot_shape) -> Tuple[ca.Function, np.ndarray, np.ndarray, Dict[str, np.ndarray]]:
+    def _segment_function(self, fracs, slot_shape: Dict[str, tuple]):
         """Per-segment Function (p (5n), h, slot fractions) -> (limit constraints, smoothness integral).
 
         The limits are imposed at the fixed fractions ``fracs`` and at the slots. Also returns the
@@ -217,6 +213,8 @@ class _Problem:
                     add(val[dims], lim[dims] * -1.0, lim[dims])
             if self.ee is not None:
                 add(ca.sumsqr(self.ee(q, v)), 0.0, self.ee_max**2)
+            if self.ee_acc is not None:
+                add(ca.sumsqr(self.ee_acc(q, v, a)), 0.0, self.ee_acc_max**2)
         slot_rows = {name: np.full((shape[0], shape[2]), -1) for name, shape in slot_shape.items()}
         off = 0
         for name, shape in slot_shape.items():
@@ -248,7 +246,8 @@ class _Problem:
         Pm = ca.reshape(w[:nP], 5 * n, m)                      # column i = p_i (k-major, j-minor)
         H = w[nP:].T if self.free else ca.DM(h_fixed).T        # (1, m)
         # fixed samples (a segment's end is the next one's start) and slots, mapped over the segments
-        seg_fun, seg_lb, seg_ub, local_rows = self._segment_function(np.linspace(0.0, 1.0, self.S)[:-1], self.slot_shape)
+        fracs = np.linspace(0.0, 1.0, self.S)[:-1]
+        seg_fun, seg_lb, seg_ub, local_rows = self._segment_function(fracs, self.slot_shape)
         n_sl = seg_fun.numel_in(2)
         psym = ca.MX.sym("p", n_sl * m)
         X = self.X
@@ -388,7 +387,8 @@ class _Problem:
 # ----------------------------------------------------------------------------- public entry point
 def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a0: Any = None, vf: Any = None,
                    qdot_max: Any = None, qddot_max: Any = None, ee_velocity: Optional[ca.Function] = None,
-                   ee_speed_max: Optional[float] = None, free_durations: bool = False, min_duration: float = 1e-3,
+                   ee_speed_max: Optional[float] = None, ee_acceleration: Optional[ca.Function] = None,
+                   ee_accel_max: Optional[float] = None, free_durations: bool = False, min_duration: float = 1e-3,
                    max_duration: Optional[float] = None, cost: str = "jerk", time_weight: float = 1.0,
                    smooth_weight: float = 1e-3, samples_per_segment: int = 8, refine: bool = True,
                    max_refinements: int = 8, refine_tol: float = 1e-4,
@@ -405,6 +405,9 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         qdot_max, qddot_max: |x'| [unit/s] and |x''| [unit/s^2] limits, scalar or (n,) (inf = none).
         ee_velocity: ``casadi.Function`` (q (n,), qdot (n,)) -> end-effector linear velocity [m/s];
             required with ``ee_speed_max`` [m/s] (limit on its Euclidean norm).
+        ee_acceleration: ``casadi.Function`` (q, qdot, qddot) -> end-effector linear acceleration
+            [m/s²] (e.g. ``J(q) q̈ + J̇(q, q̇) q̇``); required with ``ee_accel_max`` [m/s²], imposed at
+            the ``samples_per_segment`` points of every segment (not refined between them).
         free_durations: optimise the durations h_i in [min_duration, max_duration] [s] too.
         cost: "jerk" or "acceleration": integral of the squared derivative (the whole cost with fixed
             durations, where it does not change the unique solution).
@@ -441,7 +444,8 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         h, t0 = np.diff(td), float(td[0])
         if np.any(h <= 0):
             k = int(np.flatnonzero(h <= 0)[0])
-            raise ValueError(f"times_or_durations: times must be strictly increasing, got t[{k}]={td[k]} >= t[{k + 1}]={td[k + 1]}")
+            raise ValueError("times_or_durations: times must be strictly increasing, "
+                             f"got t[{k}]={td[k]} >= t[{k + 1}]={td[k + 1]}")
     else:
         h, t0 = td.copy(), 0.0
         if np.any(h <= 0):
@@ -449,8 +453,19 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
     v0v, a0v, vfv = (_broadcast_vec(v, n, nm) for v, nm in ((v0, "v0"), (a0, "a0"), (vf, "vf")))
     vmax, amax = _limit_vec(qdot_max, n, "qdot_max"), _limit_vec(qddot_max, n, "qddot_max")
     if (ee_velocity is None) != (ee_speed_max is None):
-        raise ValueError("ee_velocity and ee_speed_max must be given together "
-                         f"(got ee_velocity={'set' if ee_velocity is not None else None}, ee_speed_max={ee_speed_max!r})")
+        raise ValueError("ee_velocity and ee_speed_max must be given together (got ee_velocity="
+                         f"{'a Function' if ee_velocity is not None else None}, ee_speed_max={ee_speed_max!r})")
+    if (ee_acceleration is None) != (ee_accel_max is None):
+        raise ValueError("ee_acceleration and ee_accel_max must be given together (got ee_acceleration="
+                         f"{'a Function' if ee_acceleration is not None else None}, ee_accel_max={ee_accel_max!r})")
+    if ee_acceleration is not None:
+        if not isinstance(ee_acceleration, ca.Function) or ee_acceleration.n_in() != 3:
+            raise TypeError("ee_acceleration: expected a casadi.Function (q, qdot, qddot) -> linear acceleration, "
+                            f"got {ee_acceleration!r}")
+        for i in range(3):
+            if ee_acceleration.numel_in(i) != n:
+                raise ValueError(f"ee_acceleration: input {i} must have {n} entries, "
+                                 f"got {ee_acceleration.size_in(i)}")
     ee = _ee_wrapper(ee_velocity, n) if ee_velocity is not None else None
     ee_max = _check_positive(ee_speed_max, "ee_speed_max") if ee is not None else None
     if cost not in _COSTS:
@@ -462,7 +477,9 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
     if hmax <= hmin:
         raise ValueError(f"max_duration: expected > min_duration={hmin}, got {max_duration}")
     for val, nm in ((time_weight, "time_weight"), (smooth_weight, "smooth_weight")):
-        if isinstance(val, bool) or not isinstance(val, Real) or not (math.isfinite(val) and val >= 0):
+        if isinstance(val, bool) or not isinstance(val, Real):
+            raise TypeError(f"{nm}: expected a finite number >= 0, got {val!r}")
+        if not (math.isfinite(val) and val >= 0):
             raise ValueError(f"{nm}: expected a finite number >= 0, got {val!r}")
     S = _check_int(samples_per_segment, "samples_per_segment", 2)
     max_ref = _check_int(max_refinements, "max_refinements", 0)
@@ -472,6 +489,9 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
 
     prob = _Problem(t0, h, X, v0v, a0v, vfv, vmax, amax, ee, ee_max, free_durations, _COSTS[cost],
                     float(time_weight), float(smooth_weight), S, slots=bool(refine))
+    if ee_acceleration is not None:
+        prob.ee_acc = ee_acceleration
+        prob.ee_acc_max = _check_positive(ee_accel_max, "ee_accel_max")
     # warm start: the linear solve; with free durations stretched uniformly until it meets the limits
     # (scaling single segments by their own limit ratio was tried and diverges: the spline couples them)
     h_ws = np.clip(h, hmin * 1.01, hmax) if free_durations else h
@@ -491,7 +511,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
             prob.sw = prob.sw * float(h_ws.sum()) / j_ws
     opts: Dict[str, Any] = {"print_time": False, "error_on_fail": False,
                             "ipopt": {"print_level": 0, "sb": "yes", "max_iter": 1000, "mumps_pivot_order": 0}}
-    if not free_durations and ee is None:
+    if not free_durations and ee is None and ee_acceleration is None:
         opts["ipopt"].update({"jac_c_constant": "yes", "jac_d_constant": "yes", "hessian_constant": "yes"})
     top_level = set(ca.nlpsol_options("ipopt"))
     for key, val in (ipopt_options or {}).items():
