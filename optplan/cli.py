@@ -66,13 +66,43 @@ def _cmd_bench_tcbirrt(args) -> int:
     cfg = BenchConfig(scenes=[s for s in args.scene.split(",") if s], planners=[p for p in args.planners.split(",") if p],
                       trials=args.trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=args.out,
                       clock=args.clock, progress=not args.no_progress, plot=not args.no_plot,
-                      first_trial=args.first_trial)
+                      first_trial=args.first_trial, merge=list(args.merge or []))
     t0 = time.perf_counter()
     rows = run(cfg)
     print(format_summary(summarize(rows, cfg.time_limit)))
     print(f"{len(rows)} result lines in {args.out}/results.jsonl; run time {time.perf_counter() - t0:.1f} s "
           f"(clock: {cfg.clock})")
     return 0
+
+
+def _cmd_plan(args) -> int:
+    from .bench.trials import TrialGenerator
+    from .pipeline import PipelineOptions, run_pipeline
+    from .robot import RobotModel
+    from .scene import Scene
+
+    robot = RobotModel.from_name("tcbirrt_dual_arm")
+    scene = Scene.load(args.scene if not args.scene.isdigit() else f"ssps_scene{args.scene}")
+    trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
+    opts = PipelineOptions(planner=args.planner, plan_time_limit=args.time_limit, warm_start=not args.cold)
+    t0 = time.perf_counter()
+    res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
+    out = res.to_dict()
+    out["wall_time_s"] = time.perf_counter() - t0
+    print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}")
+    for k in ("success", "plan_status", "plan_time_s", "n_regrasp", "opt_status", "opt_time_s", "opt_setup_time_s",
+              "opt_iterations", "max_closed_chain_residual", "min_clearance_m", "wall_time_s"):
+        v = out[k]
+        print(f"  {k:28s} {v:.3e}" if isinstance(v, float) else f"  {k:28s} {v}")
+    for s in res.segments:
+        print(f"    segment {s.kind:11s} {s.arm or '':2s} {s.solution.status.value:28s} it={s.solution.iterations:4d} "
+              f"ipopt={s.solution.wall_time:6.2f}s clearance={s.report.min_clearance_m:+.3f} m")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=2)
+    if args.save and res.segments:
+        res.save(args.save)
+    return 0 if res.success else 1
 
 
 def _cmd_demo(args) -> int:
@@ -133,9 +163,22 @@ def build_parser() -> argparse.ArgumentParser:
     tb.add_argument("--clock", choices=["cpu", "wall"], default="cpu",
                     help="time measured and limited in CPU seconds of the worker (default) or wall-clock seconds")
     tb.add_argument("--out", default="bench_tcbirrt", help="output directory (results.jsonl, summary, PNG)")
+    tb.add_argument("--merge", action="append", metavar="DIR",
+                    help="also summarize the result lines of another output directory (repeatable)")
     tb.add_argument("--no-progress", action="store_true")
     tb.add_argument("--no-plot", action="store_true")
     tb.set_defaults(func=_cmd_bench_tcbirrt)
+
+    pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene (issue 4 pipeline)")
+    pl.add_argument("--scene", default="1", help="1, 2, 3 (ssps_scene<N>) or a scene name")
+    pl.add_argument("--trial", type=int, default=0, help="trial index (perturbed start/goal, Section 5.1)")
+    pl.add_argument("--seed", type=int, default=0)
+    pl.add_argument("--planner", default="tcbirrt")
+    pl.add_argument("--time-limit", type=float, default=10.0, help="planning time limit [s]")
+    pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
+    pl.add_argument("--json", help="write the figures as JSON")
+    pl.add_argument("--save", help="write the trajectory npz (t, q, joint_names, constrained)")
+    pl.set_defaults(func=_cmd_plan)
 
     d = sub.add_parser("demo", help="free-floating base of the EBA robot under a quintic joint motion")
     d.add_argument("--duration", type=float, default=20.0, help="motion duration [s]")

@@ -82,6 +82,7 @@ class CollisionAvoidance(Term):
     object_grid: int = 2
     cover_tol: float = 0.02
     eps: float = 1e-3
+    activate_with: list = field(default_factory=list)  # extra NumericTrajectory(s) for pair activation
     default_name = "collision"
     skipped: list = field(default_factory=list)
     active_pairs: list = field(default_factory=list)
@@ -121,6 +122,8 @@ class CollisionAvoidance(Term):
             self.active_knots = {p: None for p in pairs}
             return self.active_pairs
         Dm = np.array([self.checker.distances(initial.q_full(k)) for k in range(initial.N + 1)])
+        for tr in self.activate_with:  # e.g. a previous solution that verification found colliding
+            Dm = np.minimum(Dm, np.array([self.checker.distances(tr.q_full(k)) for k in range(initial.N + 1)]))
         close = Dm < self.activation
         w = int(self.window)
         self.active_pairs, self.active_knots = [], {}

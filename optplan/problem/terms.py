@@ -89,9 +89,16 @@ class NumericTrajectory:
             self._data = self.robot.model.createData()
         return self._data
 
-    def frame(self, frame, k: int) -> pin.SE3:
+    def frame(self, frame, k) -> pin.SE3:
+        """Frame placement at knot k (int) or interior point (interval, fraction) (fixed base)."""
         fid = self.robot.frame_id(frame)
-        pin.framesForwardKinematics(self.robot.model, self.data, self.q_full(k))
+        if isinstance(k, tuple):
+            i, f = k
+            tau = f * self.h
+            q = self.q[i] + tau * self.qd[i] + tau**2 / 2 * self.qdd[i] + tau**3 / 6 * self.jerk[i]
+        else:
+            q = self.q_full(k)
+        pin.framesForwardKinematics(self.robot.model, self.data, q)
         return self.data.oMf[fid].copy()
 
 
@@ -367,7 +374,16 @@ class ClosedChain(Term):
     arm_a: str = "A"
     arm_b: str = "B"
     relative: pin.SE3 | None = None
+    interior: int = 0  # extra collocation points per interval (fixed-base robots), e.g. 1 = midpoints
     default_name = "closed_chain"
+
+    def _points(self, N: int) -> list:
+        pts = []
+        for k in range(N + 1):
+            pts.append(k)
+            if k < N:
+                pts += [(k, (i + 1) / (self.interior + 1)) for i in range(self.interior)]
+        return pts
 
     @classmethod
     def from_configuration(cls, robot: RobotModel, q, arm_a: str = "A", arm_b: str = "B") -> "ClosedChain":
@@ -397,24 +413,26 @@ class ClosedChain(Term):
         if self.relative is None:
             raise ValueError("ClosedChain.relative: expected a pinocchio.SE3 (use from_configuration/from_grasps)")
         rs = []
-        for k in range(tp.N + 1):
+        pts = self._points(tp.N)
+        for k in pts:
             r, tr = self.residual_at(tp, k)
             rs += [r, tr]
-        lo = np.tile(np.r_[np.zeros(6), 1.0], tp.N + 1)
-        hi = np.tile(np.r_[np.zeros(6), np.inf], tp.N + 1)
+        lo = np.tile(np.r_[np.zeros(6), 1.0], len(pts))
+        hi = np.tile(np.r_[np.zeros(6), np.inf], len(pts))
         return ca.vertcat(*rs), lo, hi
 
     def numeric(self, traj):
         fa, fb = self._frames(traj.robot)
         out = []
-        for k in range(traj.N + 1):
+        for k in self._points(traj.N):
             Ma, Mb = traj.frame(fa, k), traj.frame(fb, k)
             r, tr = pose_residual_numeric(Ma.actInv(Mb), self.relative)
             out.append(np.r_[r, tr])
         return np.concatenate(out)
 
     def _bounds_numeric(self, traj):
-        return (np.tile(np.r_[np.zeros(6), 1.0], traj.N + 1), np.tile(np.r_[np.zeros(6), np.inf], traj.N + 1))
+        n = len(self._points(traj.N))
+        return (np.tile(np.r_[np.zeros(6), 1.0], n), np.tile(np.r_[np.zeros(6), np.inf], n))
 
 
 @dataclass

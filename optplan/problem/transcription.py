@@ -251,15 +251,25 @@ class Transcription:
             self._joints_fn = ca.Function("joint_placements", [q], outs)
         return self._joints_fn
 
-    def _joint_placements_at(self, k: int):
+    def q_full_interior(self, k: int, frac: float):
+        """Full configuration at fraction ``frac`` ∈ (0, 1) of interval k (exact cubic joints; for a
+        floating robot the base pose is interpolated from the knots — use knots for base terms)."""
+        qj, _ = self._joint_at(k, self.h * frac)
+        if not self.floating:
+            return qj
+        raise ValueError("interior points are only available for fixed-base robots")
+
+    def _joint_placements_at(self, k):
         if k not in self._joint_cache:
-            outs = self._joints_function()(self.q_full(k))
+            q = self.q_full(k) if isinstance(k, int) else self.q_full_interior(*k)
+            outs = self._joints_function()(q)
             self._joint_cache[k] = [(ca.DM.eye(3), ca.DM.zeros(3))] + [
                 (outs[2 * i], outs[2 * i + 1]) for i in range(len(outs) // 2)]
         return self._joint_cache[k]
 
-    def frame(self, frame, k: int):
-        """World placement ``(R, p)`` of a frame at knot k (expressions, cached)."""
+    def frame(self, frame, k):
+        """World placement ``(R, p)`` of a frame at knot ``k`` (an int) or at the interior point
+        ``k = (interval, fraction)`` (expressions, cached)."""
         fid = self.robot.frame_id(frame)
         key = (fid, k)
         if key not in self._frame_cache:

@@ -1,0 +1,323 @@
+"""The main job: plan → shortcut → resample → optimize → verify, for a dual-arm robot carrying an
+object.
+
+1. **Plan** with a sampling planner (TCBiRRT by default) between two configurations that hold the
+   object. Its path is split into segments: *constrained* (both hands on the object) and *regrasp*
+   (the object stays where it is, held by one arm whose joints do not move, while the other arm
+   lets go, moves and grasps again — seed 000 Section 4.3).
+2. **Shortcut** each constrained segment: random pairs of its configurations are joined by the
+   joint-space straight line projected onto the closed-chain manifold step by step; a shortcut is
+   kept when it is collision free (coal) and shorter.
+3. **Resample** each segment uniformly in joint-space arc length onto the NLP knots, projected back
+   onto the closed-chain manifold (:mod:`optplan.warmstart`).
+4. **Optimize** each segment with :class:`~optplan.problem.OptProblem`: rest at both ends, joint
+   position and velocity limits, collision avoidance, minimum jerk, and either the closed chain
+   (constrained) or the holding arm's joints fixed (regrasp; the object then stays put and is
+   checked for collisions where it is).
+5. **Verify** every segment independently (Pinocchio + coal at 10× the knot density).
+
+The trajectory is the concatenation of the segments; ``constrained`` flags the samples where both
+hands hold the object.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from .collision import CollisionChecker
+from .ik import IKOptions, solve_grasp_ik
+from .problem import (ClosedChain, CollisionAvoidance, JointBoundary, JointPositionLimits, JointVelocityLimits,
+                      OptProblem, Smoothness)
+from .problem.solution import IpoptStatus, Solution
+from .robot import RobotModel
+from .scene import Scene
+from .spatial import interpolate_pose
+from .verify import VerifyReport, verify
+
+__all__ = ["PipelineOptions", "SegmentResult", "PipelineResult", "run_pipeline", "shortcut_constrained"]
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PipelineOptions:
+    """Options of :func:`run_pipeline`.
+
+    planner: a name for :func:`optplan.planners.make_planner`; plan_time_limit [s].
+    shortcut_attempts: random task-space shortcuts tried per constrained segment.
+    n_intervals: NLP intervals per segment; speed_fraction: segment duration = joint path length /
+    (speed_fraction × smallest joint speed limit), at least min_duration [s].
+    margin [m]: clearance required by the NLP. warm_start: False → cold start (the task-space
+    straight line between the segment's end poses through IK, or the joint-space line).
+    closed_chain_interior: closed-chain collocation points inside each interval (measured: 1 makes
+    the NLP nearly square per interval and IPOPT stalls; 0 with enough knots is better).
+    n_intervals is the minimum; a segment gets ceil(joint path length / max_interval_step [rad])
+    intervals, at most max_intervals (the closed-chain residual between knots falls like h⁴).
+    collision_retries: re-solves when coal finds a collision the NLP's active pairs missed.
+    """
+
+    planner: str = "tcbirrt"
+    plan_time_limit: float = 10.0
+    shortcut_attempts: int = 40
+    n_intervals: int = 20
+    speed_fraction: float = 0.5
+    min_duration: float = 10.0
+    margin: float = 0.02
+    warm_start: bool = True
+    closed_chain_interior: int = 0
+    max_interval_step: float = 0.06
+    max_intervals: int = 80
+    collision_retries: int = 2
+    ipopt_options: tuple = ()
+
+    def __post_init__(self):
+        if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
+            raise ValueError(f"PipelineOptions: invalid values {self}")
+
+
+@dataclass
+class SegmentResult:
+    kind: str
+    arm: str | None
+    solution: Solution
+    report: VerifyReport
+    t0: float
+
+
+@dataclass
+class PipelineResult:
+    """``plan`` (PlanResult), per-segment results, and the concatenated trajectory ``t`` [s],
+    ``q`` (M × nq), ``constrained`` (M,). ``success``: planned, every segment solved and verified."""
+
+    plan: object
+    segments: list = field(default_factory=list)
+    t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    constrained: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    plan_time_s: float = float("nan")
+    shortcut_time_s: float = 0.0
+    joint_names: tuple = ()
+
+    @property
+    def opt_status(self) -> str:
+        if not self.segments:
+            return "not_run"
+        bad = [s.solution.status for s in self.segments if not s.solution.success]
+        return (bad[0] if bad else self.segments[0].solution.status).value
+
+    @property
+    def opt_time_s(self) -> float:
+        """IPOPT time summed over the segments [s]."""
+        return float(sum(s.solution.wall_time for s in self.segments))
+
+    @property
+    def setup_time_s(self) -> float:
+        return float(sum(s.solution.setup_time for s in self.segments))
+
+    @property
+    def iterations(self) -> int:
+        return int(sum(s.solution.iterations for s in self.segments))
+
+    @property
+    def max_closed_chain_residual(self) -> float:
+        vals = [s.report.max_closed_chain_residual for s in self.segments if s.kind == "constrained"]
+        return float(max(vals)) if vals else float("nan")
+
+    @property
+    def min_clearance_m(self) -> float:
+        return float(min((s.report.min_clearance_m for s in self.segments), default=float("nan")))
+
+    @property
+    def n_regrasp(self) -> int:
+        return int(self.plan.n_regrasp) if self.plan is not None else 0
+
+    @property
+    def success(self) -> bool:
+        return bool(self.plan is not None and self.plan.success and self.segments
+                    and all(s.solution.success for s in self.segments)
+                    and (np.isnan(self.max_closed_chain_residual) or self.max_closed_chain_residual <= 1e-6)
+                    and self.min_clearance_m >= 0.0)
+
+    def to_dict(self) -> dict:
+        return {"success": self.success, "plan_status": self.plan.status.value if self.plan else "not_run",
+                "plan_time_s": self.plan_time_s, "opt_status": self.opt_status, "opt_time_s": self.opt_time_s,
+                "opt_setup_time_s": self.setup_time_s, "opt_iterations": self.iterations,
+                "max_closed_chain_residual": self.max_closed_chain_residual, "min_clearance_m": self.min_clearance_m,
+                "n_regrasp": self.n_regrasp, "n_segments": len(self.segments),
+                "shortcut_time_s": self.shortcut_time_s}
+
+    def save(self, path) -> None:
+        """npz with ``t`` [s], ``q`` [rad] (M × nq, Pinocchio order), ``joint_names``, ``constrained``."""
+        np.savez(path, t=self.t, q=self.q, joint_names=np.array(self.joint_names), constrained=self.constrained)
+
+
+# --------------------------------------------------------------------------- shortcut
+def _object_pose(robot: RobotModel, scene: Scene, q, data, arm: str) -> pin.SE3:
+    pin.framesForwardKinematics(robot.model, data, q)
+    return data.oMf[robot.arm(arm).ee_frame_id] * scene.object.grasps[arm].inverse()
+
+
+def shortcut_constrained(robot: RobotModel, scene: Scene, path: np.ndarray, rng: np.random.Generator,
+                         attempts: int = 40, checker: CollisionChecker | None = None,
+                         step: float = 0.05) -> np.ndarray:
+    """Random shortcuts of a closed-chain path: two random configurations are joined by the
+    joint-space straight line, each ``step`` [rad] projected back onto the closed-chain manifold
+    (Newton, :func:`optplan.warmstart.project_closed_chain`); kept when every projection converges,
+    every configuration is collision free (coal), consecutive configurations stay within 2·step,
+    and the path gets shorter. (Joint space rather than task space: with 14 joints and 12 closure
+    equations a pose does not fix the configuration, and IK continuation drifts along the
+    self-motion manifold.)"""
+    from .warmstart import project_closed_chain
+
+    checker = checker or CollisionChecker(robot, scene)
+    arms = list(scene.object.grasps)
+    cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
+    data = robot.model.createData()
+    path = np.array(path, float)
+    seglen = lambda P: float(np.linalg.norm(np.diff(P, axis=0), axis=1).sum())  # noqa: E731
+    for _ in range(int(attempts)):
+        if len(path) < 3:
+            break
+        i, j = sorted(rng.choice(len(path), 2, replace=False))
+        if j - i < 2:
+            continue
+        n = max(2, int(np.ceil(np.abs(path[j] - path[i]).max() / step)))
+        qs, ok = [path[i]], True
+        for k in range(1, n):
+            r = project_closed_chain(robot, path[i] + (k / n) * (path[j] - path[i]), cc, data=data)
+            if (not r.success or np.abs(r.q - qs[-1]).max() > 2 * step or not checker.is_valid(r.q)):
+                ok = False
+                break
+            qs.append(r.q)
+        if not ok or np.abs(path[j] - qs[-1]).max() > 2 * step:
+            continue
+        qs.append(path[j])
+        if seglen(np.array(qs)) < seglen(path[i:j + 1]):
+            path = np.vstack([path[:i], np.array(qs), path[j + 1:]])
+    return path
+
+
+# --------------------------------------------------------------------------- optimization
+def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind: str, arm: str | None,
+                     opts: PipelineOptions) -> tuple[OptProblem, ClosedChain | None, str | None]:
+    length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
+    vmin = float(np.min(robot.velocity_limit))
+    T = max(opts.min_duration, length / (opts.speed_fraction * vmin))
+    z = np.zeros(robot.nj)
+    N = int(np.clip(np.ceil(length / opts.max_interval_step), opts.n_intervals, opts.max_intervals))
+    prob = OptProblem(robot, n_intervals=N, duration=T)
+    prob.add_constraint(JointBoundary("start", q=seg_path[0], qd=z, qdd=z), name="start")
+    prob.add_constraint(JointBoundary("end", q=seg_path[-1], qd=z, qdd=z), name="end")
+    arms = list(scene.object.grasps)
+    cc, holder = None, None
+    if kind == "constrained":
+        cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
+        cc.interior = opts.closed_chain_interior
+        prob.add_constraint(cc, name="closed_chain")
+        prob.add_constraint(JointPositionLimits(), name="joint_limits")
+    else:  # regrasp: the holding arm's joints stay where they are, so the object does too
+        holder = next(a for a in arms if a != arm)
+        lo, hi = robot.lower.copy(), robot.upper.copy()
+        idx = robot.arm(holder).j_idx
+        lo[idx] = hi[idx] = seg_path[0][idx]
+        prob.add_constraint(JointPositionLimits(lower=lo, upper=hi), name="joint_limits")
+    prob.add_constraint(JointVelocityLimits(), name="velocity_limits")
+    prob.add_constraint(CollisionAvoidance(scene, margin=opts.margin, object_arm=holder or arms[0]), name="collision")
+    prob.add_cost(Smoothness("jerk"), name="jerk")
+    return prob, cc, holder
+
+
+def _cold_path(robot: RobotModel, scene: Scene, q0: np.ndarray, q1: np.ndarray, kind: str, n: int) -> np.ndarray:
+    """Cold start: task-space straight line through IK (constrained) or the joint-space line."""
+    if kind == "constrained":
+        arm = next(iter(scene.object.grasps))
+        data = robot.model.createData()
+        M0, M1 = _object_pose(robot, scene, q0, data, arm), _object_pose(robot, scene, q1, data, arm)
+        opts = IKOptions(tol_position=1e-10, tol_orientation=1e-10, max_step=0.05)
+        qs = [q0]
+        for k in range(1, n + 1):
+            qs.append(solve_grasp_ik(robot, interpolate_pose(M0, M1, k / n), scene.object.grasps, qs[-1], opts, data).q)
+        qs[-1] = q1
+        return np.array(qs)
+    s = np.linspace(0, 1, n + 1)[:, None]
+    return q0 + s * (q1 - q0)
+
+
+def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptions, rng: np.random.Generator,
+                      checker: CollisionChecker | None = None) -> tuple[list[SegmentResult], float]:
+    """Shortcut, resample and optimize every segment of a plan; returns (results, shortcut time)."""
+    checker = checker or CollisionChecker(robot, scene)
+    results, t0, t_short = [], 0.0, 0.0
+    ipopt = dict(opts.ipopt_options)
+    for seg in plan.segments:
+        seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
+        if len(seg_path) < 2 or np.abs(seg_path[-1] - seg_path[0]).max() < 1e-9:
+            continue
+        kind = "constrained" if seg.kind == "constrained" else "regrasp"
+        if kind == "constrained" and opts.warm_start:
+            ts = time.perf_counter()
+            seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
+            t_short += time.perf_counter() - ts
+        prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts)
+        if opts.warm_start:
+            if not prob.set_initial_path(seg_path, cc):
+                log.info("segment %s: some resampled configurations did not project onto the manifold", kind)
+        else:
+            prob.set_initial(q=_cold_path(robot, scene, seg_path[0], seg_path[-1], kind, prob.N))
+        sol = prob.solve(ipopt)
+        rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
+        for _ in range(opts.collision_retries):
+            if not sol.success or rep.min_clearance_m >= 0.0:
+                break
+            # verification found a collision in a pair the NLP did not model: activate pairs from the
+            # union of the initial guess and this solution, rebuild, re-solve from the solution
+            log.info("segment %s: clearance %.3g m by coal (%s); re-solving with more pairs", kind,
+                     rep.min_clearance_m, rep.min_clearance_pair)
+            col = prob.terms["collision"].term
+            col.activate_with = list(col.activate_with) + [prob.numeric_trajectory(sol.x)]
+            prob._built = None
+            sol2 = prob.solve(ipopt)
+            sol2.wall_time += sol.wall_time
+            sol2.setup_time += sol.setup_time
+            sol2.iterations += sol.iterations
+            sol = sol2
+            rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
+        results.append(SegmentResult(kind, seg.arm, sol, rep, t0))
+        t0 += sol.duration
+    return results, t_short
+
+
+def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: PipelineOptions | None = None,
+                 seed: int = 0) -> PipelineResult:
+    """Plan, shortcut, resample, optimize and verify (module docstring). Never raises for a failed
+    plan or solve: the statuses are in the result."""
+    from .planners import make_planner
+
+    opts = options or PipelineOptions()
+    rng = np.random.default_rng(seed)
+    checker = CollisionChecker(robot, scene)
+    planner = make_planner(opts.planner, robot, scene)
+    t0 = time.perf_counter()
+    plan = planner.plan(q_start, q_goal, time_limit=opts.plan_time_limit, seed=seed)
+    res = PipelineResult(plan=plan, plan_time_s=float(plan.stats.get("time_s", time.perf_counter() - t0)),
+                         joint_names=robot.joint_names)
+    if not plan.success:
+        return res
+    res.segments, res.shortcut_time_s = optimize_segments(robot, scene, plan, opts, rng, checker)
+    ts, qs, flags = [], [], []
+    for s in res.segments:
+        sol = s.solution
+        t = np.linspace(sol.t[0], sol.t[-1], 10 * (len(sol.t) - 1) + 1)
+        q = sol.sample(t)["q"]
+        start = 1 if ts else 0
+        ts.append(s.t0 + t[start:])
+        qs.append(q[start:])
+        f = np.full(len(t) - start, s.kind == "constrained")
+        f[-1] = True  # a regrasp ends with the hand back on the object
+        flags.append(f)
+    if ts:
+        res.t, res.q, res.constrained = np.concatenate(ts), np.vstack(qs), np.concatenate(flags)
+    return res
