@@ -34,6 +34,10 @@ redundancy left is 1 (Arm-a: the elbow circle) and 5 (Arm-b).
 The arc-to-sphere distance (Eq. 45-47) is the exact minimum distance from a point to a circular
 arc, written so that it stays smooth and finite for a straight arc (zero curvature); the joint
 recovery (Eq. 51-62) works from the arc tangents.
+
+This module holds the arc geometry; the two arm models (residuals, arcs, joint recovery) are in
+:mod:`optplan.methods.arcs_arms` and re-exported here. The per-waypoint NLP and the task are in
+:mod:`optplan.methods.dshdasr`; the choices and the paper comparison in docs/dshdasr.md.
 """
 from __future__ import annotations
 
@@ -89,10 +93,6 @@ def _atanc(x):
 
 def _norm(v):
     return ca.sqrt(ca.sumsqr(v))
-
-
-def _unit(v):
-    return v / _norm(v)
 
 
 def _dot(a, b):

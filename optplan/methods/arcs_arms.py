@@ -363,8 +363,10 @@ class SerpentineArcModel:
 
     def recover_joints(self, X, pe, ke, R_ref=None) -> np.ndarray:
         """Joint angles (pitch, yaw of each segment's first joint; 10) from the arc parameters and
-        the desired tip (Eq. 63-66): each segment's bending plane and angle from its end tangents,
-        then the universal-joint angles of a link turned by φ_i/m in that plane."""
+        the desired tip (Eq. 58-62): each segment's bending plane (normal k_{i-1} × k_i expressed in
+        the segment's input frame) and angle from its end tangents, then the universal-joint angles
+        that turn a link by φ_i/m in that plane. The tangents k2, k4 of the inner segments are the
+        common tangents of the double-arc sets."""
         ks = self.directions(X, pe, ke, R_ref)
         F = self.base_R.copy()
         q = np.zeros(10)

@@ -271,21 +271,27 @@ class ArcPlanner:
     """Eq. 50 as one IPOPT NLP, built once and re-solved per waypoint.
 
     Decision ``X = (X_a (8), X_b (15))``; parameters: the desired tips (pa, ka = z axis of Ra, pb,
-    kb), the proximal centre, the three angle frames, the obstacle centres and thresholds.
-    Objective ``||G1||² + ||G2||² + w Σ (X − X_c)²``: the proximal term (weight ``w`` small) picks among
-    the redundant zero-residual solutions the one nearest ``X_c``, the previous solution (the role
-    of the paper's warm-started gradient descent); IPOPT starts from the previous solution
-    extrapolated one step. Constraints:
-    every arc-to-obstacle distance ≥ d_sd^k (+ the arc's deviation from its links when
-    ``margin="links"``).
+    kb), the proximal centre X_c (the previous solution), the three angle frames, the obstacle
+    centres and the thresholds. Inequalities: every arc-to-obstacle distance ≥ d_sd^k (+ the arc's
+    deviation from its links when ``margin="links"``); bounds |φ| ≤ φ_max (Arm-b: the joint limits).
 
-    ``hessian="gauss-newton"`` (default) gives IPOPT ``2 σ (JᵀJ + w I)`` for the objective and
-    ``Σ λ_i ∇²g_i`` for the constraints (``constraint_curvature=True``, default) — positive definite
-    away from active constraints, and exact at a zero residual, where Newton's method on a
-    least-squares objective converges quadratically; ``"exact"`` lets CasADi differentiate
-    everything. Constraints farther than ``activation`` [m] from their threshold at the predicted
-    start are given no lower bound for that solve (checked afterwards; re-solved with all of them
-    when one ends up violated)."""
+    * ``formulation="constrained"`` (default): ``min Σ (X − X_c)²`` s.t. ``G1 = 0, G2 = 0`` and the
+      inequalities — the same solutions as Eq. 50 whenever its minimum is zero (the arms reach their
+      poses without violating a threshold), found by Newton steps in 2-3 IPOPT iterations and to
+      IPOPT's tolerance. Of the redundant solutions it takes the one nearest the previous one (the
+      role of the paper's warm-started gradient descent).
+    * ``formulation="least-squares"``: the paper's form, ``min ||G1||² + ||G2||² + w Σ (X − X_c)²``
+      (``w`` small picks among the redundant solutions); ``hessian="gauss-newton"`` gives IPOPT
+      ``2σ (JᵀJ + w I)`` for the objective (exact at a zero residual, always positive definite).
+
+    IPOPT starts from the previous solution extrapolated one step. ``constraint_curvature=False``
+    (default) leaves the distances' second derivatives out of the Hessian of the constrained form
+    (a quasi-Newton approximation that is exact away from active obstacle constraints; 17× smaller
+    Hessian code). Constraints farther than ``activation`` [m] from their threshold at the start get
+    no lower bound for that solve, and the far-away φ bounds are dropped when no constraint is near
+    — IPOPT then takes plain Newton steps; a result violating anything dropped is re-solved with
+    everything. ``compile=True`` compiles the derivative functions to C (cached, ~10 s the first
+    time)."""
 
     def __init__(self, arcs: DshdasrArcs | None = None, n_obstacles: int = 2, *, w: float = 1e-6,
                  margin: str = "paper", tol: float = 1e-10, max_iter: int = 100,
@@ -336,7 +342,7 @@ class ArcPlanner:
         if formulation == "constrained":
             g = ca.vertcat(g, G)
         self.nx, self.np_, self.ng = X.numel(), P.numel(), g.numel()
-        opts = {"ipopt.print_level": 0, "print_time": False, "expand": True, "ipopt.tol": tol,
+        opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False, "expand": True, "ipopt.tol": tol,
                 "ipopt.mu_strategy": "adaptive",
                 "ipopt.max_iter": max_iter, "ipopt.warm_start_init_point": "yes",
                 "ipopt.mu_init": 1e-9, "ipopt.warm_start_bound_push": 1e-9,
@@ -421,19 +427,22 @@ class ArcPlanner:
                           lam_x0=0.0 if lam_x0 is None or not bounds else lam_x0)
         return sol, self.solver.stats()
 
-    def solve_waypoint(self, p, x0, lam_g0=None, lam_x0=None):
+    def solve_waypoint(self, p, x0, lam_g0=None, lam_x0=None, g0=None):
         """Solve one waypoint from the start ``x0``. Distance constraints farther than
-        ``activation`` from their threshold at ``x0`` get no lower bound, and when none is near, the
-        far-away |φ| bounds are dropped too — IPOPT then has no inequality at all and takes plain
-        Newton steps without a barrier; the full problem is re-solved if the result violates
-        anything that was dropped. Returns (x, sol, stats, resolved)."""
-        g0 = np.array(self.f_eval(x0, p)[3]).ravel()
+        ``activation`` from their threshold (at ``x0``, or ``g0`` when given: the previous
+        solution's values) get no lower bound, and when none is near, the far-away |φ| bounds are
+        dropped too — IPOPT then has no inequality at all and takes plain Newton steps without a
+        barrier; the full problem is re-solved if the result violates anything that was dropped.
+        Returns (x, sol, stats, resolved)."""
+        if g0 is None:
+            g0 = np.array(self.f_eval(x0, p)[3]).ravel()
         near = g0 < self.activation
         at_bound = ((x0 - self.lbx) < 0.2).any() or ((self.ubx - x0) < 0.2).any()
         sol, st = self.solve(p, x0, lam_g0, lam_x0, np.where(near, 0.0, -np.inf),
                              bounds=bool(near.any() or at_bound))
         x = np.array(sol["x"]).ravel()
-        bad = (np.array(self.f_eval(x, p)[3]).ravel() < -1e-9).any() or (x < self.lbx).any() or (x > self.ubx).any()
+        bad = ((np.array(sol["g"]).ravel()[:self.n_dist] < -1e-9).any() or (x < self.lbx).any()
+               or (x > self.ubx).any())
         if bad or not st["success"]:
             sol, st = self.solve(p, x0, lam_g0, lam_x0, None, bounds=True)
             x = np.array(sol["x"]).ravel()
@@ -456,6 +465,7 @@ class ArcPlanner:
         X = np.r_[arcs.params_from_q(q0, refs)]
         X_old = refs_old = None
         lam_g, lam_x = np.zeros(self.ng), np.zeros(self.nx)
+        g_prev = None
         q_prev = np.asarray(q0, float)
         t_nlp = 0.0
         t_start = time.perf_counter()
@@ -464,7 +474,8 @@ class ArcPlanner:
             X_old, refs_old, refs = Xn, refs_n, refs_n
             p = self.pack(des, k, Xn, refs, task.obstacles, thr)   # proximal centre: previous solution
             t0 = time.perf_counter()
-            X, sol, st, again = self.solve_waypoint(p, Xpred, lam_g, lam_x)
+            X, sol, st, again = self.solve_waypoint(p, Xpred, lam_g, lam_x, g_prev)
+            g_prev = np.array(sol["g"]).ravel()[:self.n_dist]
             t_nlp += time.perf_counter() - t0
             resolves += again
             lam_g, lam_x = np.array(sol["lam_g"]).ravel(), np.array(sol["lam_x"]).ravel()
@@ -474,9 +485,8 @@ class ArcPlanner:
             q_prev = Q[k]
             Xs[k] = self._world_angles(X, refs)
         runtime = time.perf_counter() - t_start
-        res = TrackResult("arcs", t, Q, des, runtime, nlp_time=t_nlp, iterations=iters, success=ok, X=Xs)
-        res.resolves = resolves
-        return res
+        return TrackResult("arcs", t, Q, des, runtime, nlp_time=t_nlp, iterations=iters, success=ok, X=Xs,
+                           resolves=resolves)
 
     def clear_start(self, task: TransposeTask, q: np.ndarray, clearance: float = 0.2) -> np.ndarray:
         """Move a configuration holding the first desired tips so that every arc is at least
@@ -516,7 +526,9 @@ class ArcPlanner:
 @dataclass
 class TrackResult:
     """Joint trajectory ``q`` (n × nq, Pinocchio order) of a method along ``t`` with the desired
-    tips ``des``; ``runtime`` [s] of the whole loop (NLP solves and joint recovery, or DLS)."""
+    tips ``des``; ``runtime`` [s] of the whole loop (NLP solves and joint recovery, or DLS);
+    for the arc planner ``X`` (n × 23) holds the arc parameters with the direction angles in the
+    paper's frame (Eq. 25)."""
 
     method: str
     t: np.ndarray
@@ -529,6 +541,8 @@ class TrackResult:
     objective: np.ndarray | None = None
     X: np.ndarray | None = None
     metrics: dict = field(default_factory=dict)
+    series: dict = field(default_factory=dict)   # per-waypoint errors and distances (evaluate)
+    resolves: int = 0                             # waypoints re-solved with every constraint
 
 
 def _direction_error(k, kd) -> float:
