@@ -1,8 +1,7 @@
-"""Paper methods that are not planners or NLP terms (see each module's docstring).
-
-* :mod:`optplan.methods.eba` — seed 004: base-attitude restoration of a dual-arm free-floating
-  robot (BA, EBA, quintic, leader-follower, Fourier near-optimal, and optplan's NLP).
+"""Paper methods that are not planners or NLP terms; each module's docstring says which seed it
+reproduces (e.g. :mod:`optplan.methods.eba` — seed 004: base-attitude restoration of a dual-arm
+free-floating robot: BA, EBA, quintic, leader-follower, Fourier near-optimal and optplan's NLP).
 
 Modules are imported on demand (``from optplan.methods import eba``); this package imports nothing
-heavy itself.
+itself.
 """

@@ -108,7 +108,6 @@ class EBAKinematics:
         self.arm_a, self.arm_b = arm_a, arm_b
         self.fa = robot.arm(arm_a).ee_frame_id
         self.fb = robot.arm(arm_b).ee_frame_id
-        self.n_calls = 0
 
     def _set(self, theta) -> np.ndarray:
         self._q[7:] = theta
@@ -116,7 +115,6 @@ class EBAKinematics:
 
     def base_rate_map(self, theta) -> np.ndarray:
         """``K(θ)`` (3 × nj): base angular velocity (base frame) per joint rate, zero momentum."""
-        self.n_calls += 1
         Ag = pin.computeCentroidalMap(self.model, self.data, self._set(theta))
         _, _, X, info = dgesv(Ag[:, :6], Ag[:, 6:])
         if info != 0:
@@ -259,6 +257,7 @@ class MethodResult:
     success: bool = True
     message: str = ""
     info: dict = field(default_factory=dict)
+    raw: object = field(default=None, repr=False)  # e.g. the NLP's Solution
 
     @property
     def t(self) -> np.ndarray:
@@ -319,17 +318,14 @@ def integrate_rpy(kin: EBAKinematics, segments: list[Segment], substeps: int = 1
     from scipy.interpolate import CubicHermiteSpline
 
     a = np.zeros(3) if rpy0 is None else np.asarray(rpy0, float).copy()
-    out = []
-    for si, s in enumerate(segments):
+    out = [a.copy()]
+    for s in segments:  # a segment's first sample is the previous one's last (same time)
         sp = CubicHermiteSpline(s.t, s.q, s.qd, axis=0)
         dsp = sp.derivative()
 
-        def f(tt, al):
+        def f(tt, al, sp=sp, dsp=dsp):
             return rpy_rate_matrix(al) @ (kin.base_rate_map(sp(tt)) @ dsp(tt))
 
-        start = 0 if si == 0 else 1
-        if si == 0:
-            out.append(a.copy())
         for k in range(len(s.t) - 1):
             h = (s.t[k + 1] - s.t[k]) / substeps
             tt = s.t[k]
@@ -340,8 +336,7 @@ def integrate_rpy(kin: EBAKinematics, segments: list[Segment], substeps: int = 1
                 k4 = f(tt + h, a + h * k3)
                 a = a + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
                 tt += h
-            if k + 1 >= start:
-                out.append(a.copy())
+            out.append(a.copy())
     return np.array(out)
 
 
