@@ -70,8 +70,9 @@ def _cmd_bench_tcbirrt(args) -> int:
     t0 = time.perf_counter()
     rows = run(cfg)
     print(format_summary(summarize(rows, cfg.time_limit)))
-    print(f"{len(rows)} result lines in {args.out}/results.jsonl; run time {time.perf_counter() - t0:.1f} s "
-          f"(clock: {cfg.clock})")
+    print(f"summary of {len(rows)} result lines ({args.out}/results.jsonl"
+          f"{' and merged runs' if cfg.merge else ''}); run time {time.perf_counter() - t0:.1f} s (clock: {cfg.clock}); "
+          f"figure {args.out}/success_curves.png")
     return 0
 
 

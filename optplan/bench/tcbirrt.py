@@ -88,6 +88,7 @@ class BenchConfig:
     progress: bool = True
     plot: bool = True
     first_trial: int = 0
+    merge: list = field(default_factory=list)   # other output dirs whose lines join the summary
 
 
 # ---------------------------------------------------------------------- worker
@@ -269,6 +270,13 @@ def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
     rows = [r for r in load_results(res_path) if r.get("seed") == cfg.seed and r.get("clock") == cfg.clock
             and r.get("time_limit_s") == cfg.time_limit and r["scene"] in scenes and r["planner"] in cfg.planners
             and cfg.first_trial <= int(r["trial"]) < cfg.first_trial + cfg.trials]
+    seen = {(r["scene"], r["trial"], r["planner"]) for r in rows}
+    for other in cfg.merge:   # lines of other runs (same seed and clock) join the summary
+        for r in load_results(other):
+            key = (r["scene"], r["trial"], r["planner"])
+            if r.get("seed") == cfg.seed and r.get("clock") == cfg.clock and r["scene"] in scenes and key not in seen:
+                rows.append(r)
+                seen.add(key)
     summ = summarize(rows, cfg.time_limit)
     with open(out / "summary.json", "w") as f:
         json.dump(summ, f, indent=2)
@@ -384,7 +392,7 @@ def plot_success(rows: list[dict], path, time_limit: float) -> None:
         ax.set_ylabel("success rate p(t)")
         ax.set_title(sc)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(loc="lower right", fontsize=8)
+        ax.legend(loc="upper left", fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
