@@ -278,7 +278,7 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
                      rep.min_clearance_m, rep.min_clearance_pair)
             col = prob.terms["collision"].term
             col.activate_with = list(col.activate_with) + [prob.numeric_trajectory(sol.x)]
-            prob._built = None
+            prob.rebuild()
             sol2 = prob.solve(ipopt)
             sol2.wall_time += sol.wall_time
             sol2.setup_time += sol.setup_time

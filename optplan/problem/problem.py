@@ -115,6 +115,11 @@ class OptProblem:
         """Enforce ``lower ≤ residual ≤ upper`` of ``term``; returns a named handle."""
         return self._add(term, "constraint", name, 1.0)
 
+    def rebuild(self) -> None:
+        """Rebuild the NLP at the next solve (after changing a term's settings, e.g. the
+        collision pairs a :class:`CollisionAvoidance` activates)."""
+        self._built = None
+
     @property
     def terms(self) -> dict[str, TermHandle]:
         return {h.name: h for h in self._handles}
