@@ -46,7 +46,9 @@ log = logging.getLogger(__name__)
 class PipelineOptions:
     """Options of :func:`run_pipeline`.
 
-    planner: a name for :func:`optplan.planners.make_planner`; plan_time_limit [s].
+    planner: a name for :func:`optplan.planners.make_planner`, planner_options its keyword options
+    (default: TCBiRRT also checks edges every 0.05 rad — with the paper's configuration-only checks
+    16-28 % of paths collide between configurations, 0-2 % with it); plan_time_limit [s].
     shortcut_attempts: random task-space shortcuts tried per constrained segment.
     n_intervals: NLP intervals per segment; speed_fraction: segment duration = joint path length /
     (speed_fraction × smallest joint speed limit), at least min_duration [s].
@@ -60,6 +62,7 @@ class PipelineOptions:
     """
 
     planner: str = "tcbirrt"
+    planner_options: tuple = (("edge_resolution", 0.05),)
     plan_time_limit: float = 10.0
     shortcut_attempts: int = 40
     n_intervals: int = 20
@@ -299,7 +302,8 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     opts = options or PipelineOptions()
     rng = np.random.default_rng(seed)
     checker = CollisionChecker(robot, scene)
-    planner = make_planner(opts.planner, robot, scene)
+    kw = dict(opts.planner_options) if opts.planner == "tcbirrt" else {}
+    planner = make_planner(opts.planner, robot, scene, **kw)
     t0 = time.perf_counter()
     plan = planner.plan(q_start, q_goal, time_limit=opts.plan_time_limit, seed=seed)
     res = PipelineResult(plan=plan, plan_time_s=float(plan.stats.get("time_s", time.perf_counter() - t0)),
