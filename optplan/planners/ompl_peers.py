@@ -35,6 +35,7 @@ __all__ = ["OMPLPeerOptions", "OMPLPeer", "make_ompl_peer", "ompl_available", "S
 log = logging.getLogger(__name__)
 
 SPACES = ("projected", "atlas", "tangent_bundle")
+_OMPL_SEEDED = False
 PLANNERS = ("rrtconnect", "bkpiece1", "kpiece1", "rrt", "prm")
 
 
@@ -100,9 +101,11 @@ def make_ompl_peer(name: str, robot, scene, *, checker=None, kinematics=None, **
 class OMPLPeer(Planner):
     """An OMPL constrained planner behind optplan's :class:`Planner` interface.
 
-    The OMPL RNG is seeded per query with ``ou.RNG.setLocalSeed(seed)`` before the state space
-    and the planner are created, so a query is reproducible up to OMPL's wall-clock dependent
-    behaviour (time limits).
+    Seeding: OMPL's global seed can be set once per process, before the first sampler exists
+    (``ou.RNG.setSeed``; later calls have no effect), and ``RNG.setLocalSeed`` only seeds one RNG
+    instance, not the planners' own. So the first query of a process is seeded with its ``seed``;
+    later queries continue that process's random stream: OMPL results are NOT reproducible per
+    query (unlike optplan's planners), and the ``seed`` in their stats is informational.
     """
 
     name = "ompl"
@@ -151,7 +154,11 @@ class OMPLPeer(Planner):
             ep, eo = closure_error(self.robot, self.grasps, q)
             if not ck.in_limits(q) or not ck.is_valid(q) or max(ep, eo) > max(o.tolerance, 1e-6):
                 return self.empty_result(status, f"{which} out of limits, in collision or off the manifold", **st)
-        ou.RNG().setLocalSeed(int(seed) % (2 ** 31 - 1) + 1)   # (bound as an instance method)
+        global _OMPL_SEEDED
+        if not _OMPL_SEEDED:
+            ou.RNG.setSeed(int(seed) % (2 ** 31 - 1) + 1)
+            _OMPL_SEEDED = True
+            st["ompl_global_seed"] = int(seed) % (2 ** 31 - 1) + 1
         rvss = ob.RealVectorStateSpace(nq)
         bounds = ob.RealVectorBounds(nq)
         for i in range(nq):
