@@ -269,12 +269,13 @@ def test_constraint_bounds_match_numeric_bounds(case, robots):
     lo, hi = s.handle.term._bounds_numeric(traj)
     if hasattr(s.handle.term, "bounds_on"):
         idx = prob._bound_terms[name][0]
-        glo, ghi = b["lbx"][idx], b["ubx"][idx]
+        sc = prob.tp.variable_scale(s.handle.term.which)  # variables are scaled (transcription)
+        glo, ghi = b["lbx"][idx] / sc, b["ubx"][idx] / sc
     else:
         sl = prob._con_slices[name]
         glo, ghi = b["lbg"][sl], b["ubg"][sl]
-    np.testing.assert_array_equal(glo, lo)
-    np.testing.assert_array_equal(ghi, hi)
+    np.testing.assert_allclose(glo, lo, rtol=1e-14)
+    np.testing.assert_allclose(ghi, hi, rtol=1e-14)
 
 
 # --------------------------------------------------------------------------- (b) derivatives

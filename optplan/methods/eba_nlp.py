@@ -18,7 +18,6 @@ import logging
 import time
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 import pinocchio as pin
 
@@ -29,36 +28,8 @@ from ..verify import verify
 from .eba_baselines import closed_chain_reference
 from .eba_core import MethodResult, Scenario, hermite_segment
 
-__all__ = ["NLPOptions", "run_nlp", "build_nlp", "InteriorClosedChain"]
+__all__ = ["NLPOptions", "run_nlp", "build_nlp"]
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class InteriorClosedChain(ClosedChain):
-    """:class:`~optplan.problem.ClosedChain` at the interior knots only. At the first and last
-    knot the joints are fixed (``JointBoundary``) on the closed-chain manifold already; repeating
-    the constraint there makes IPOPT's multipliers non-unique, and it then creeps at a dual
-    infeasibility of ≈ 1e-6 for tens of iterations (measured: 60 iterations and "acceptable"
-    instead of converged)."""
-
-    default_name = "closed_chain"
-
-    def residual(self, tp):
-        if self.relative is None:
-            raise ValueError("InteriorClosedChain.relative: expected a pinocchio.SE3")
-        rs = []
-        for k in range(1, tp.N):
-            r, tr = self.residual_at(tp, k)
-            rs += [r, tr]
-        n = tp.N - 1
-        return ca.vertcat(*rs), np.tile(np.r_[np.zeros(6), 1.0], n), np.tile(np.r_[np.zeros(6), np.inf], n)
-
-    def numeric(self, traj):
-        return super().numeric(traj).reshape(traj.N + 1, 7)[1:-1].ravel()
-
-    def _bounds_numeric(self, traj):
-        n = traj.N - 1
-        return np.tile(np.r_[np.zeros(6), 1.0], n), np.tile(np.r_[np.zeros(6), np.inf], n)
 
 
 @dataclass(frozen=True)
@@ -125,8 +96,8 @@ def build_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None 
         prob.add_constraint(JointVelocityLimits())
     cc = None
     if scenario.closed_chain:
-        full = ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B")
-        cc = InteriorClosedChain(full.arm_a, full.arm_b, full.relative)
+        # at the two pinned end knots the closed chain holds already; ClosedChain leaves them out
+        cc = ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B")
         prob.add_constraint(cc)
         t, Q = closed_chain_reference(robot, scenario, o.n_intervals, o.duration)
         prob.set_initial(q=Q, t=t)

@@ -26,7 +26,7 @@ from scipy.interpolate import CubicSpline
 from ..errors import ConfigurationError
 from ..robot import RobotModel
 from .solution import IpoptStatus, Solution
-from .terms import NumericTrajectory, Term
+from .terms import JointBoundary, NumericTrajectory, Term
 from .transcription import Transcription
 
 __all__ = ["OptProblem", "TermHandle"]
@@ -136,7 +136,9 @@ class OptProblem:
         tp = self.tp
         Tg = float(T) if T is not None else self.duration
         if solution is not None:
-            if solution.x is not None and solution.x.size >= tp.x.shape[0] and len(solution.t) == self.N + 1:
+            same = (solution.x is not None and solution.x.size >= tp.x.shape[0] and len(solution.t) == self.N + 1
+                    and solution.x_scale_h is not None and np.isclose(solution.x_scale_h, tp.h0, rtol=1e-12))
+            if same:
                 self._x0 = np.array(solution.x, float)
                 self._lam_g0 = solution.lam_g
                 self._lam_x0 = solution.lam_x
@@ -227,11 +229,21 @@ class OptProblem:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
         return self.tp.unpack(self._x0)
 
+    def _pinned_q(self) -> dict[int, np.ndarray]:
+        """Knots whose joints a JointBoundary constraint fixes: ``{k: q [rad]}``."""
+        out = {}
+        for h in self._handles:
+            if h.role == "constraint" and isinstance(h.term, JointBoundary) and h.term.q is not None:
+                k = 0 if h.term.at == "start" else self.N
+                out[k] = self.robot.check_joints(h.term.q, "JointBoundary.q")
+        return out
+
     def _build(self):
         tp = self.tp
         if self.robot.is_floating:
             tp.com0 = self._initial_com()
         tp.clear_caches()
+        tp.pinned_q = self._pinned_q()
         tp.initial_traj = self.numeric_trajectory(self._x0) if self._x0 is not None else None
         tp.clear_aux()
         g, lbg, ubg = [], [], []
@@ -394,7 +406,8 @@ class OptProblem:
             terms[name] = float(viol_vec[sl].max()) if sl.stop > sl.start else 0.0
         for name, (idx, lo, hi) in self._bound_terms.items():
             xv = np.asarray(x)[idx]
-            terms[name] = float(np.max(np.maximum(np.maximum(lo - xv, xv - hi), 0.0)))
+            sc = tp.variable_scale(self.terms[name].term.which)  # back to physical units
+            terms[name] = float(np.max(np.maximum(np.maximum(lo - xv, xv - hi), 0.0))) / sc
             viol = max(viol, terms[name])
         u = tp.unpack(x)
         T = u.get("T", self.duration)
@@ -408,14 +421,15 @@ class OptProblem:
         return Solution(success=bool(success), status=status, iterations=iters, wall_time=wall, cost=cost,
                         max_constraint_violation=viol, terms=terms, t=t, q=u["q"], qd=u["qd"], qdd=u["qdd"],
                         jerk=u["jerk"], joint_names=self.robot.joint_names, base_quat=base_quat,
-                        base_position=base_pos, x=np.asarray(x), lam_g=lam_g)
+                        base_position=base_pos, x=np.asarray(x), lam_g=lam_g, x_scale_h=tp.h0)
 
     # ------------------------------------------------------------------ evaluation helpers
     def numeric_trajectory(self, x) -> NumericTrajectory:
         """Knot values of a decision vector, for numeric (Pinocchio) term evaluation."""
         u = self.tp.unpack(np.asarray(x, float))
         return NumericTrajectory(self.robot, u["q"], u["qd"], u["qdd"], u["jerk"], u.get("T", self.duration),
-                                 u.get("base_quat"), self.tp.com0 if self.robot.is_floating else None)
+                                 u.get("base_quat"), self.tp.com0 if self.robot.is_floating else None,
+                                 pinned_q=self._pinned_q())
 
     def term_function(self, handle: TermHandle | str) -> ca.Function:
         """``f(x) -> residual`` (constraint terms) or ``f(x) -> cost`` as a ``casadi.Function``."""
@@ -424,7 +438,7 @@ class OptProblem:
             self._build()
         if h.role == "constraint" and h.name in self._bound_terms:
             idx = self._bound_terms[h.name][0]
-            r = self._built["x"][idx.tolist()]
+            r = self._built["x"][idx.tolist()] / self.tp.variable_scale(h.term.which)
         elif h.role == "constraint":
             r = self._residuals[h.name]
         else:

@@ -84,6 +84,8 @@ class Solution:
     x: np.ndarray | None = field(default=None, repr=False)  # raw decision vector (warm starts)
     lam_g: np.ndarray | None = field(default=None, repr=False)
     lam_x: np.ndarray | None = field(default=None, repr=False)
+    #: the transcription's nominal interval h₀ [s] that scales ``x`` (q̇ h₀, q̈ h₀², j h₀³)
+    x_scale_h: float | None = None
 
     @property
     def duration(self) -> float:
@@ -122,7 +124,7 @@ class Solution:
         return {"success": self.success, "status": self.status.value, "iterations": self.iterations,
                 "wall_time": self.wall_time, "setup_time": self.setup_time, "cost": self.cost,
                 "max_constraint_violation": self.max_constraint_violation, "terms": self.terms,
-                "joint_names": list(self.joint_names)}
+                "joint_names": list(self.joint_names), "x_scale_h": self.x_scale_h}
 
     def save(self, path: str | Path) -> Path:
         """Save as ``.npz`` (arrays + JSON metadata) or ``.json`` (everything as lists)."""
@@ -159,4 +161,4 @@ class Solution:
                    setup_time=float(meta.get("setup_time", 0.0)),
                    cost=float(meta["cost"]), max_constraint_violation=float(meta["max_constraint_violation"]),
                    terms={k: float(v) for k, v in meta["terms"].items()},
-                   joint_names=tuple(meta["joint_names"]), **arrays)
+                   joint_names=tuple(meta["joint_names"]), x_scale_h=meta.get("x_scale_h"), **arrays)

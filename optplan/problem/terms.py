@@ -62,6 +62,8 @@ class NumericTrajectory:
     base_quat: np.ndarray | None = None
     com0: np.ndarray | None = None
     _data: pin.Data | None = field(default=None, repr=False)
+    #: knots pinned by a JointBoundary (k -> q), as ``Transcription.pinned_q``
+    pinned_q: dict = field(default_factory=dict)
 
     @property
     def N(self) -> int:
@@ -223,7 +225,8 @@ class _JointBox(Term):
         nj, N = tp.nj, tp.N
         block = {"q": 0, "qd": 1, "qdd": 2}[self.which]
         idx = block * nj * (N + 1) + np.arange(nj * (N + 1))
-        return idx, np.tile(lo, N + 1), np.tile(hi, N + 1)
+        sc = tp.variable_scale(self.which)  # the variables are scaled (transcription docstring)
+        return idx, sc * np.tile(lo, N + 1), sc * np.tile(hi, N + 1)
 
     def numeric(self, traj):
         return getattr(traj, self.which).reshape(-1)
@@ -369,21 +372,44 @@ class FramePath(Term):
 @dataclass
 class ClosedChain(Term):
     """Two end-effectors keep their relative pose ``T_a⁻¹ T_b = relative`` at every knot (seed 000
-    Eq. 1-2, with the singularity-free residual of the module docstring)."""
+    Eq. 1-2, with the singularity-free residual of the module docstring).
+
+    Knots whose joints a :class:`JointBoundary` pins (``q`` given) and which satisfy the closed
+    chain there (≤ ``pinned_tol``) are left out: the rows would repeat the boundary constraint,
+    make the constraint Jacobian rank-deficient and IPOPT's multipliers non-unique (measured on
+    the transport pipeline: wrong KKT inertia at every iteration, MUMPS pivot tolerance raised to
+    0.1 and 2-3× slower factorizations). A pinned configuration that violates it keeps its rows,
+    so an inconsistent problem still ends infeasible. The relative pose does not depend on the
+    base, so a floating robot's hands are taken in the base frame (cheaper derivatives)."""
 
     arm_a: str = "A"
     arm_b: str = "B"
     relative: pin.SE3 | None = None
     interior: int = 0  # extra collocation points per interval (fixed-base robots), e.g. 1 = midpoints
+    pinned_tol: float = 1e-9
     default_name = "closed_chain"
 
-    def _points(self, N: int) -> list:
+    def _points(self, N: int, robot: RobotModel | None = None, pinned: dict | None = None) -> list:
+        skip = set()
+        if pinned and robot is not None and self.relative is not None:
+            for k, qk in pinned.items():
+                M = self._relative_numeric(robot, robot.configuration(qk) if robot.is_floating else qk)
+                r, tr = pose_residual_numeric(M, self.relative)
+                if np.abs(r).max() <= self.pinned_tol and tr >= 1.0:
+                    skip.add(int(k))
         pts = []
         for k in range(N + 1):
-            pts.append(k)
+            if k not in skip:
+                pts.append(k)
             if k < N:
                 pts += [(k, (i + 1) / (self.interior + 1)) for i in range(self.interior)]
         return pts
+
+    def _relative_numeric(self, robot: RobotModel, q) -> pin.SE3:
+        fa, fb = self._frames(robot)
+        data = robot.model.createData()
+        pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))
+        return data.oMf[robot.frame_id(fa)].actInv(data.oMf[robot.frame_id(fb)])
 
     @classmethod
     def from_configuration(cls, robot: RobotModel, q, arm_a: str = "A", arm_b: str = "B") -> "ClosedChain":
@@ -404,8 +430,8 @@ class ClosedChain(Term):
 
     def residual_at(self, tp, k):
         fa, fb = self._frames(tp.robot)
-        Ra, pa = tp.frame(fa, k)
-        Rb, pb = tp.frame(fb, k)
+        Ra, pa = tp.frame(fa, k, base_frame=True)
+        Rb, pb = tp.frame(fb, k, base_frame=True)
         Rrel, prel = Ra.T @ Rb, Ra.T @ (pb - pa)
         return pose_residual(Rrel, prel, np.array(self.relative.rotation), ca.DM(self.relative.translation))
 
@@ -413,7 +439,7 @@ class ClosedChain(Term):
         if self.relative is None:
             raise ValueError("ClosedChain.relative: expected a pinocchio.SE3 (use from_configuration/from_grasps)")
         rs = []
-        pts = self._points(tp.N)
+        pts = self._points(tp.N, tp.robot, tp.pinned_q)
         for k in pts:
             r, tr = self.residual_at(tp, k)
             rs += [r, tr]
@@ -424,14 +450,14 @@ class ClosedChain(Term):
     def numeric(self, traj):
         fa, fb = self._frames(traj.robot)
         out = []
-        for k in self._points(traj.N):
+        for k in self._points(traj.N, traj.robot, traj.pinned_q):
             Ma, Mb = traj.frame(fa, k), traj.frame(fb, k)
             r, tr = pose_residual_numeric(Ma.actInv(Mb), self.relative)
             out.append(np.r_[r, tr])
-        return np.concatenate(out)
+        return np.concatenate(out) if out else np.zeros(0)
 
     def _bounds_numeric(self, traj):
-        n = len(self._points(traj.N))
+        n = len(self._points(traj.N, traj.robot, traj.pinned_q))
         return (np.tile(np.r_[np.zeros(6), 1.0], n), np.tile(np.r_[np.zeros(6), np.inf], n))
 
 

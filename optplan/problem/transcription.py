@@ -14,6 +14,14 @@ the jerk ``j_k`` [rad/s³] is constant and the state is integrated *exactly*::
 so the joint trajectory is a C2 piecewise cubic — the continuous-time trajectory, not an
 approximation of it — and ``∫ j² dt = h Σ j_k²`` exactly.
 
+Scaling: the decision variables are ``q``, ``h₀ q̇``, ``h₀² q̈`` and ``h₀³ j`` with the nominal
+interval ``h₀ = duration / N`` (a constant, also for free time), so the integration rows have
+O(1) coefficients. Unscaled, the closed-chain rows at knot 1 act on the first jerk through
+``h³/6`` only — with the boundary knot pinned, the equality Jacobian had a dozen singular values of
+1e-7..1e-5, IPOPT saw the wrong KKT inertia at every iteration and raised MUMPS's pivot tolerance
+(measured on the pipeline's N = 80 segments: 51 iterations in 8.7 s before, see docs/optproblem.md).
+The accessors ``q(k)``, ``qd(k)``, ``qdd(k)``, ``jerk(k)`` and ``V``, ``A``, ``J`` are in physical units.
+
 Free-floating base
 ------------------
 The base twist ``u = [v_b; ω_b]`` (base frame) is a decision variable at every half RK4 sub-step
@@ -64,11 +72,16 @@ class Transcription:
         self.free_time = free_time
         self.n_sub = int(n_sub)
         nj, N = self.nj, self.N
+        #: nominal interval h₀ [s]: the variables are q, h₀ q̇, h₀² q̈, h₀³ j (module docstring)
+        self.h0 = float(duration) / N
         self.Q = ca.MX.sym("q", nj, N + 1)
-        self.V = ca.MX.sym("qd", nj, N + 1)
-        self.A = ca.MX.sym("qdd", nj, N + 1)
-        self.J = ca.MX.sym("jerk", nj, N)
-        blocks = [ca.vec(self.Q), ca.vec(self.V), ca.vec(self.A), ca.vec(self.J)]
+        self.Vs = ca.MX.sym("qd_scaled", nj, N + 1)
+        self.As = ca.MX.sym("qdd_scaled", nj, N + 1)
+        self.Js = ca.MX.sym("jerk_scaled", nj, N)
+        self.V = self.Vs / self.h0
+        self.A = self.As / self.h0**2
+        self.J = self.Js / self.h0**3
+        blocks = [ca.vec(self.Q), ca.vec(self.Vs), ca.vec(self.As), ca.vec(self.Js)]
         if free_time:
             self.T_var = ca.MX.sym("T")
             self.T = self.T_var
@@ -89,7 +102,9 @@ class Transcription:
         self.aux: list[tuple[ca.MX, np.ndarray, np.ndarray, np.ndarray]] = []  # (sym, init, lb, ub)
         self._frame_fns: dict[int, ca.Function] = {}
         self._frame_cache: dict[tuple, tuple] = {}
-        self._joint_cache: dict[int, list] = {}
+        self._joint_cache: dict = {}
+        #: knots whose joints a JointBoundary pins (k -> q [rad]); set by OptProblem before terms are built
+        self.pinned_q: dict[int, np.ndarray] = {}
         self._build_base_functions()
 
     # ------------------------------------------------------------------ auxiliary variables
@@ -118,13 +133,17 @@ class Transcription:
         return np.concatenate([a[2] for a in self.aux]), np.concatenate([a[3] for a in self.aux])
 
     # ------------------------------------------------------------------ variable layout
+    def variable_scale(self, which: str) -> float:
+        """Factor from physical units to the decision variable of ``which`` ∈ q, qd, qdd, jerk."""
+        return {"q": 1.0, "qd": self.h0, "qdd": self.h0**2, "jerk": self.h0**3}[which]
+
     def unpack(self, xval: np.ndarray) -> dict[str, np.ndarray]:
-        """Split a numeric decision vector into named arrays (knots along axis 0)."""
+        """Split a numeric decision vector into named arrays in physical units (knots along axis 0)."""
         nj, N = self.nj, self.N
         out, i = {}, 0
         for name, shape in (("q", (nj, N + 1)), ("qd", (nj, N + 1)), ("qdd", (nj, N + 1)), ("jerk", (nj, N))):
             n = shape[0] * shape[1]
-            out[name] = np.asarray(xval[i:i + n]).reshape(shape, order="F").T.copy()
+            out[name] = np.asarray(xval[i:i + n]).reshape(shape, order="F").T / self.variable_scale(name)
             i += n
         if self.free_time:
             out["T"] = float(xval[i])
@@ -138,7 +157,8 @@ class Transcription:
         return out
 
     def pack(self, q, qd, qdd, jerk, T=None, base_quat=None, base_twist=None) -> np.ndarray:
-        parts = [np.asarray(a, float).T.reshape(-1, order="F") for a in (q, qd, qdd, jerk)]
+        parts = [self.variable_scale(n) * np.asarray(a, float).T.reshape(-1, order="F")
+                 for n, a in (("q", q), ("qd", qd), ("qdd", qdd), ("jerk", jerk))]
         if self.free_time:
             parts.append(np.array([float(T)]))
         if self.floating:
@@ -167,12 +187,13 @@ class Transcription:
     def dynamics_constraints(self):
         """Exact integration of the piecewise-constant jerk (and the base quaternion)."""
         h = self.h
+        r = h / self.h0 if self.free_time else 1.0  # h / h₀ (exactly 1 for a fixed duration)
         g = []
-        for k in range(self.N):
-            q, v, a, j = self.Q[:, k], self.V[:, k], self.A[:, k], self.J[:, k]
-            g.append(self.Q[:, k + 1] - (q + h * v + h**2 / 2 * a + h**3 / 6 * j))
-            g.append(self.V[:, k + 1] - (v + h * a + h**2 / 2 * j))
-            g.append(self.A[:, k + 1] - (a + h * j))
+        for k in range(self.N):  # the integration in scaled variables: O(1) coefficients
+            q, v, a, j = self.Q[:, k], self.Vs[:, k], self.As[:, k], self.Js[:, k]
+            g.append(self.Q[:, k + 1] - (q + r * v + r**2 / 2 * a + r**3 / 6 * j))
+            g.append(self.Vs[:, k + 1] - (v + r * a + r**2 / 2 * j))
+            g.append(self.As[:, k + 1] - (a + r * j))
         if self.floating:
             g.append(self.QB[:, 0] - ca.DM(self.base0_quat))
             m = 2 * self.n_sub  # twist columns per interval
@@ -259,22 +280,31 @@ class Transcription:
             return qj
         raise ValueError("interior points are only available for fixed-base robots")
 
-    def _joint_placements_at(self, k):
-        if k not in self._joint_cache:
-            q = self.q_full(k) if isinstance(k, int) else self.q_full_interior(*k)
+    def _joint_placements_at(self, k, base_frame: bool = False):
+        key = ("base", k) if base_frame else k
+        if base_frame and not self.floating:
+            key = k
+        if key not in self._joint_cache:
+            if base_frame and self.floating:
+                q = ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), self.Q[:, k])
+            else:
+                q = self.q_full(k) if isinstance(k, int) else self.q_full_interior(*k)
             outs = self._joints_function()(q)
-            self._joint_cache[k] = [(ca.DM.eye(3), ca.DM.zeros(3))] + [
+            self._joint_cache[key] = [(ca.DM.eye(3), ca.DM.zeros(3))] + [
                 (outs[2 * i], outs[2 * i + 1]) for i in range(len(outs) // 2)]
-        return self._joint_cache[k]
+        return self._joint_cache[key]
 
-    def frame(self, frame, k):
+    def frame(self, frame, k, base_frame: bool = False):
         """World placement ``(R, p)`` of a frame at knot ``k`` (an int) or at the interior point
-        ``k = (interval, fraction)`` (expressions, cached)."""
+        ``k = (interval, fraction)`` (expressions, cached). ``base_frame=True``: the placement
+        relative to the base (a function of the joints only; the same as world for a fixed base) —
+        for base-invariant quantities such as the relative pose of two hands, whose derivatives are
+        then much cheaper than through the floating base's pose."""
         fid = self.robot.frame_id(frame)
-        key = (fid, k)
+        key = (fid, k, bool(base_frame and self.floating))
         if key not in self._frame_cache:
             f = self.robot.model.frames[fid]
-            Rj, pj = self._joint_placements_at(k)[f.parentJoint]
+            Rj, pj = self._joint_placements_at(k, base_frame)[f.parentJoint]
             M = f.placement
             self._frame_cache[key] = (Rj @ ca.DM(np.array(M.rotation)), pj + Rj @ ca.DM(np.array(M.translation)))
         return self._frame_cache[key]
