@@ -373,3 +373,78 @@ def test_attitude_restoration_small(eba):
     intervals matches the independent simulator (10× denser) to ~1e-4 rad."""
     p, att, sol = _restoration(eba, 4, exact_hessian=False)
     _check_restoration(eba, p, att, sol, 2e-4)
+
+
+# --------------------------------------------------------------------------- (g) conditioning
+def _pinned_closed_chain_problem(tcb, N=12, shift_end=0.0):
+    """Both ends pinned on one closed-chain manifold (the end optionally moved off it)."""
+    from optplan.warmstart import project_closed_chain
+
+    rng = np.random.default_rng(5)
+    qa = tcb.random_joints(rng) * 0.4
+    cc = ClosedChain.from_configuration(tcb, qa)
+    qb = project_closed_chain(tcb, qa + rng.normal(size=14) * 0.2, cc).q
+    qb = qb + shift_end
+    p = OptProblem(tcb, n_intervals=N, duration=5.0)
+    p.add_constraint(JointBoundary("start", q=qa, qd=Z, qdd=Z))
+    p.add_constraint(JointBoundary("end", q=qb, qd=Z, qdd=Z))
+    h = p.add_constraint(cc)
+    p.add_cost(Smoothness("jerk"))
+    p.set_initial_straight_line(qa, qb)
+    return p, h
+
+
+def test_closed_chain_leaves_out_pinned_knots_it_holds_at(tcb):
+    """At pinned knots that satisfy the closed chain the rows would repeat the boundary
+    constraint (a rank-deficient Jacobian): they are left out, the residual still holds there."""
+    p, h = _pinned_closed_chain_problem(tcb)
+    p._build()
+    assert p._con_slices[h.name].stop - p._con_slices[h.name].start == 7 * (p.N - 1)
+    sol = p.solve()
+    assert sol.success, sol.status
+    full = verify(tcb, sol, closed_chain=h.term)   # every sample, ends included
+    assert full.max_closed_chain_residual < 1e-4
+
+
+def test_closed_chain_keeps_pinned_knots_it_is_violated_at(tcb):
+    """A pinned end off the manifold keeps its rows: the problem is infeasible, and says so."""
+    p, h = _pinned_closed_chain_problem(tcb, shift_end=0.05)
+    p._build()
+    assert p._con_slices[h.name].stop - p._con_slices[h.name].start == 7 * p.N
+    sol = p.solve(max_iter=100)
+    assert not sol.success and sol.terms[h.name] > 1e-3
+
+
+def test_scaled_variables_round_trip_and_integration_rows_are_unit(tcb, ends):
+    """The decision vector holds q, h₀q̇, h₀²q̈, h₀³j: pack/unpack round-trip in physical units, and
+    the integration rows have O(1) coefficients (no h³ factors) whatever the interval."""
+    import casadi as ca
+
+    qa, qb = ends
+    for T, N in ((0.5, 10), (200.0, 10)):
+        p = rest_to_rest(tcb, qa, qb, N, "jerk", T)
+        rng = np.random.default_rng(1)
+        arrs = [rng.normal(size=(N + 1, 14)) for _ in range(3)] + [rng.normal(size=(N, 14))]
+        x = p.tp.pack(*arrs)
+        u = p.tp.unpack(x)
+        for name, a in zip(("q", "qd", "qdd", "jerk"), arrs):
+            np.testing.assert_allclose(u[name], a, rtol=1e-12, atol=1e-12)
+        G, _, _ = p.tp.dynamics_constraints()
+        J = np.array(ca.Function("j", [p.tp.x], [ca.jacobian(G, p.tp.x)])(x))
+        nz = np.abs(J[J != 0])
+        assert nz.min() >= 1 / 6 - 1e-12 and nz.max() <= 1 + 1e-12
+
+
+def test_solution_reuse_requires_the_same_scaling(tcb, ends):
+    """A solution's raw vector is reused only by a problem with the same knots *and* interval;
+    otherwise it is resampled in physical units."""
+    qa, qb = ends
+    p = rest_to_rest(tcb, qa, qb, 8, "jerk", 3.0)
+    p.set_initial_straight_line(qa, qb)
+    sol = p.solve()
+    assert sol.success and sol.x_scale_h == pytest.approx(3.0 / 8)
+    p2 = rest_to_rest(tcb, qa, qb, 8, "jerk", 6.0)
+    p2.set_initial(solution=sol)
+    u = p2.tp.unpack(p2.initial_guess)
+    np.testing.assert_allclose(u["q"], sol.q, atol=1e-9)            # same shape in time
+    np.testing.assert_allclose(u["qd"], sol.qd / 2, atol=1e-6)       # twice as slow

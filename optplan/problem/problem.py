@@ -130,8 +130,10 @@ class OptProblem:
 
         * ``q`` (M × nj) joint samples [rad] at times ``t`` (M,) [s] (default: uniform over the
           duration); resampled onto the knots by a cubic spline, with q̇, q̈, jerk from it.
-        * ``solution``: a previous :class:`Solution` of a problem with the same knots (its raw
-          decision vector and multipliers are reused) or any knots (resampled).
+        * ``solution``: a previous :class:`Solution` of a problem with the same knots and interval
+          (its raw decision vector and multipliers are reused) or any other grid (resampled; a
+          fixed-duration problem time-scales it to its own duration, a free-time one starts from
+          the solution's).
         """
         tp = self.tp
         Tg = float(T) if T is not None else self.duration
@@ -143,7 +145,9 @@ class OptProblem:
                 self._lam_g0 = solution.lam_g
                 self._lam_x0 = solution.lam_x
                 return
-            t, q, Tg = solution.t - solution.t[0], solution.q, solution.duration
+            t, q = solution.t - solution.t[0], solution.q
+            if T is None and self.free_time:
+                Tg = solution.duration  # a fixed-duration problem time-scales the path to its own T
         if q is None:
             raise ValueError("set_initial: give q (M × nj samples) or solution")
         q = np.asarray(q, float)
