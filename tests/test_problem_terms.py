@@ -285,7 +285,7 @@ def _directions(s: Setup, Jad: np.ndarray, rng) -> list[np.ndarray]:
     tp = s.prob.tp
     n = s.x.size
     # joints (+ T): plain coordinates; then (floating) base quaternions, then base twists
-    nq_block = tp.x.shape[0] - ((4 * (tp.N + 1) + 6 * (2 * tp.n_sub * tp.N + 1)) if tp.floating else 0)
+    nq_block = tp.nj * (4 * tp.N + 3) + (1 if tp.free_time else 0)   # knot variables (+ T)
     nz = np.flatnonzero(np.any(Jad[:, :nq_block] != 0, axis=0))
     z = np.setdiff1d(np.arange(nq_block), nz)
     pick = list(rng.choice(nz, size=min(15 if tp.floating else 18, nz.size), replace=False))

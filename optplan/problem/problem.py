@@ -282,8 +282,7 @@ class OptProblem:
         lbx = np.concatenate([-np.inf * np.ones(nbase), alo])
         ubx = np.concatenate([np.inf * np.ones(nbase), ahi])
         if self.free_time:
-            i = nbase - ((4 * (self.N + 1) + 6 * (2 * self.n_sub * self.N + 1)) if tp.floating else 0) - 1
-            lbx[i], ubx[i] = self.duration_bounds
+            lbx[tp.T_index], ubx[tp.T_index] = self.duration_bounds
         for idx, lo, hi in self._bound_terms.values():
             lbx[idx] = np.maximum(lbx[idx], lo)
             ubx[idx] = np.minimum(ubx[idx], hi)
@@ -329,7 +328,7 @@ class OptProblem:
         * equality-dominated problems (e.g. attitude restoration): IPOPT's defaults (monotone μ,
           unscaled objective) — restoration at N = 20: 18 iterations vs 132 with the above.
 
-        Exact Hessian, MUMPS. ``ipopt_options`` are passed through and override everything (e.g.
+        Exact Hessian, MUMPS (QAMD ordering for floating-base robots). ``ipopt_options`` are passed through and override everything (e.g.
         ``{"print_level": 5}``, ``{"mu_strategy": "adaptive"}``).
         """
         if self._x0 is None:
@@ -353,6 +352,10 @@ class OptProblem:
                 "ipopt.mu_strategy": "adaptive" if inequality_heavy else "monotone",
                 "ipopt.obj_scaling_factor": scale,
                 "ipopt.max_iter": int(max_iter), "ipopt.sb": "yes"}
+        if self.robot.is_floating:
+            # MUMPS's automatic ordering (PORD here) on the floating-base transcription: 47
+            # iterations, 12.5 s; QAMD: 26 iterations, 2.6 s (restoration N = 48, measured)
+            opts["ipopt.mumps_pivot_order"] = 6
         if not exact_hessian:
             opts["ipopt.hessian_approximation"] = "limited-memory"
         if self._lam_g0 is not None and self._lam_g0.size == b["lbg"].size:

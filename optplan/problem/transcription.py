@@ -95,7 +95,13 @@ class Transcription:
             self.QB = ca.MX.sym("base_quat", 4, N + 1)
             # twist at every half RK4 sub-step: column c is time c·h/(2 n_sub)
             self.U = ca.MX.sym("base_twist", 6, 2 * self.n_sub * N + 1)
-            blocks += [ca.vec(self.QB), ca.vec(self.U)]
+            # joint positions and (scaled) rates at the twist points inside the intervals: own
+            # variables tied linearly to the cubic, so that the momentum constraint there involves
+            # 34 variables instead of the 62 of (q, q̇, q̈, j)_k — half the exact Hessian's cost
+            nm = (2 * self.n_sub - 1) * N
+            self.QM = ca.MX.sym("q_mid", nj, nm)
+            self.VMs = ca.MX.sym("qd_mid_scaled", nj, nm)
+            blocks += [ca.vec(self.QB), ca.vec(self.U), ca.vec(self.QM), ca.vec(self.VMs)]
             self.base0_quat = np.array([0, 0, 0, 1.0]) if base0_quat is None else np.asarray(base0_quat, float)
             self.com0 = np.zeros(3) if com0 is None else np.asarray(com0, float)
         self.x = ca.vertcat(*blocks)
@@ -156,7 +162,16 @@ class Transcription:
             i += 6 * nu
         return out
 
+    @property
+    def T_index(self) -> int:
+        """Index of the free duration T [s] in the decision vector."""
+        if not self.free_time:
+            raise ValueError("the duration is not a decision variable (free_time=False)")
+        return self.nj * (4 * self.N + 3)
+
     def pack(self, q, qd, qdd, jerk, T=None, base_quat=None, base_twist=None) -> np.ndarray:
+        """Decision vector from knot arrays in physical units (inverse of :meth:`unpack`; the
+        interior joint variables of a floating robot are computed from the cubic)."""
         parts = [self.variable_scale(n) * np.asarray(a, float).T.reshape(-1, order="F")
                  for n, a in (("q", q), ("qd", qd), ("qdd", qdd), ("jerk", jerk))]
         if self.free_time:
@@ -166,7 +181,20 @@ class Transcription:
             if base_twist is None:
                 base_twist = np.zeros((2 * self.n_sub * self.N + 1, 6))
             parts.append(np.asarray(base_twist, float).T.reshape(-1, order="F"))
+            h = (float(T) if self.free_time else self.h0 * self.N) / self.N
+            q, qd, qdd, jerk = (np.asarray(a, float) for a in (q, qd, qdd, jerk))
+            qm, vm = [], []
+            for k, i in self._mid_points():
+                tau = h * i / (2 * self.n_sub)
+                qm.append(q[k] + tau * qd[k] + tau**2 / 2 * qdd[k] + tau**3 / 6 * jerk[k])
+                vm.append(qd[k] + tau * qdd[k] + tau**2 / 2 * jerk[k])
+            parts += [np.concatenate(qm), self.h0 * np.concatenate(vm)]
         return np.concatenate(parts)
+
+    def _mid_points(self) -> list[tuple[int, int]]:
+        """(interval, half-sub-step index i ∈ 1..2 n_sub − 1) of the interior twist points."""
+        m = 2 * self.n_sub
+        return [(k, i) for k in range(self.N) for i in range(1, m)]
 
     # ------------------------------------------------------------------ expressions
     def q(self, k: int):
@@ -197,11 +225,17 @@ class Transcription:
         if self.floating:
             g.append(self.QB[:, 0] - ca.DM(self.base0_quat))
             m = 2 * self.n_sub  # twist columns per interval
+            mid = {ki: j for j, ki in enumerate(self._mid_points())}
+            for (k, i), j in mid.items():  # the interior joint variables follow the cubic
+                qq, vv = self._joint_at(k, h * i / m)
+                g.append(self.QM[:, j] - qq)
+                g.append(self.VMs[:, j] - self.h0 * vv)
             for c in range(m * self.N + 1):  # zero momentum at every half sub-step
                 k, i = divmod(c, m)
-                if c == m * self.N:
-                    k, i = self.N - 1, m
-                qq, vv = (self.Q[:, k], self.V[:, k]) if i == 0 else self._joint_at(k, h * i / m)
+                if i == 0:
+                    qq, vv = self.Q[:, k], self.V[:, k]
+                else:
+                    qq, vv = self.QM[:, mid[(k, i)]], self.VMs[:, mid[(k, i)]] / self.h0
                 g.append(self.momentum_fn(qq, self.U[:, c], vv))
             for k in range(self.N):
                 x = self.QB[:, k]
