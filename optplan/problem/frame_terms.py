@@ -1,0 +1,274 @@
+"""Frame terms of :class:`OptProblem`: poses and paths of frames, the closed chain of two hands,
+axis orientation and the floating base's attitude (residuals of the conventions in
+:mod:`.terms`; each with its Pinocchio evaluation)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ConfigurationError
+from ..robot import RobotModel
+from .terms import Term, _knots, _vee_skew, pose_residual, pose_residual_numeric
+
+__all__ = ["FramePose", "FramePath", "ClosedChain", "OrientationConstraint", "BaseAttitude"]
+
+
+# --------------------------------------------------------------------------- frame terms
+@dataclass
+class FramePose(Term):
+    """A frame's world pose at a knot (``at``: "start", "end", an index or a list)."""
+
+    frame: str = ""
+    target: pin.SE3 | None = None
+    at: object = "end"
+    position_only: bool = False
+    default_name = "frame_pose"
+
+    def residual(self, tp):
+        if self.target is None:
+            raise ValueError("FramePose.target: expected a pinocchio.SE3")
+        rs, lo, hi = [], [], []
+        for k in _knots(self.at, tp.N):
+            R, p = tp.frame(self.frame, k)
+            r, tr = pose_residual(R, p, np.array(self.target.rotation), ca.DM(self.target.translation))
+            if self.position_only:
+                rs.append(r[:3]); lo += [0.0] * 3; hi += [0.0] * 3
+            else:
+                rs += [r, tr]; lo += [0.0] * 6 + [1.0]; hi += [0.0] * 6 + [np.inf]
+        return ca.vertcat(*rs), np.array(lo), np.array(hi)
+
+    def numeric(self, traj):
+        out = []
+        for k in _knots(self.at, traj.N):
+            r, tr = pose_residual_numeric(traj.frame(self.frame, k), self.target)
+            out.append(r[:3] if self.position_only else np.r_[r, tr])
+        return np.concatenate(out)
+
+    def _bounds_numeric(self, traj):
+        n = len(_knots(self.at, traj.N))
+        one = (np.zeros(3), np.zeros(3)) if self.position_only else (np.r_[np.zeros(6), 1.0], np.r_[np.zeros(6), np.inf])
+        return np.tile(one[0], n), np.tile(one[1], n)
+
+    def cost(self, tp):
+        r, _, _ = self.residual(tp)
+        step = 3 if self.position_only else 7
+        keep = [i for i in range(r.shape[0]) if self.position_only or i % step != 6]
+        return ca.sumsqr(r[keep])
+
+    def cost_numeric(self, traj):
+        r = self.numeric(traj)
+        step = 3 if self.position_only else 7
+        keep = [i for i in range(r.size) if self.position_only or i % step != 6]
+        return float(np.sum(r[keep] ** 2))
+
+
+@dataclass
+class FramePath(Term):
+    """A frame follows given poses at every knot (``poses``: N+1 SE3, or a callable of time [s])."""
+
+    frame: str = ""
+    poses: object = None
+    position_only: bool = False
+    default_name = "frame_path"
+
+    def _targets(self, N, T):
+        if callable(self.poses):
+            return [self.poses(T * k / N) for k in range(N + 1)]
+        if self.poses is None or len(self.poses) != N + 1:
+            raise ValueError(f"FramePath.poses: expected {N + 1} poses (one per knot) or a callable of time")
+        return list(self.poses)
+
+    def _T(self, tp):
+        if tp.free_time and callable(self.poses):
+            raise ValueError("FramePath with a callable of time needs a fixed duration")
+        return float(ca.evalf(tp.T)) if not tp.free_time else 1.0
+
+    def residual(self, tp):
+        rs, lo, hi = [], [], []
+        for k, M in enumerate(self._targets(tp.N, self._T(tp))):
+            R, p = tp.frame(self.frame, k)
+            r, _ = pose_residual(R, p, np.array(M.rotation), ca.DM(M.translation))
+            r = r[:3] if self.position_only else r
+            rs.append(r)
+        n = sum(x.shape[0] for x in rs)
+        return ca.vertcat(*rs), np.zeros(n), np.zeros(n)
+
+    def numeric(self, traj):
+        out = []
+        for k, M in enumerate(self._targets(traj.N, traj.T)):
+            r, _ = pose_residual_numeric(traj.frame(self.frame, k), M)
+            out.append(r[:3] if self.position_only else r)
+        return np.concatenate(out)
+
+    def _bounds_numeric(self, traj):
+        n = (traj.N + 1) * (3 if self.position_only else 6)
+        return np.zeros(n), np.zeros(n)
+
+
+@dataclass
+class ClosedChain(Term):
+    """Two end-effectors keep their relative pose ``T_a⁻¹ T_b = relative`` at every knot (seed 000
+    Eq. 1-2, with the singularity-free residual of the module docstring).
+
+    Knots whose joints a :class:`JointBoundary` pins (``q`` given) and which satisfy the closed
+    chain there (≤ ``pinned_tol``) are left out: the rows would repeat the boundary constraint,
+    make the constraint Jacobian rank-deficient and IPOPT's multipliers non-unique (measured on
+    the transport pipeline: wrong KKT inertia at every iteration, MUMPS pivot tolerance raised to
+    0.1 and 2-3× slower factorizations). A pinned configuration that violates it keeps its rows,
+    so an inconsistent problem still ends infeasible. The relative pose does not depend on the
+    base, so a floating robot's hands are taken in the base frame (cheaper derivatives)."""
+
+    arm_a: str = "A"
+    arm_b: str = "B"
+    relative: pin.SE3 | None = None
+    interior: int = 0  # extra collocation points per interval (fixed-base robots), e.g. 1 = midpoints
+    pinned_tol: float = 1e-9
+    default_name = "closed_chain"
+
+    def _points(self, N: int, robot: RobotModel | None = None, pinned: dict | None = None) -> list:
+        skip = set()
+        if pinned and robot is not None and self.relative is not None:
+            for k, qk in pinned.items():
+                M = self._relative_numeric(robot, robot.configuration(qk) if robot.is_floating else qk)
+                r, tr = pose_residual_numeric(M, self.relative)
+                if np.abs(r).max() <= self.pinned_tol and tr >= 1.0:
+                    skip.add(int(k))
+        pts = []
+        for k in range(N + 1):
+            if k not in skip:
+                pts.append(k)
+            if k < N:
+                pts += [(k, (i + 1) / (self.interior + 1)) for i in range(self.interior)]
+        return pts
+
+    def _relative_numeric(self, robot: RobotModel, q) -> pin.SE3:
+        fa, fb = self._frames(robot)
+        data = robot.model.createData()
+        pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))
+        return data.oMf[robot.frame_id(fa)].actInv(data.oMf[robot.frame_id(fb)])
+
+    @classmethod
+    def from_configuration(cls, robot: RobotModel, q, arm_a: str = "A", arm_b: str = "B") -> "ClosedChain":
+        """The relative pose the two hands have at the full configuration ``q``."""
+        from ..kinematics import Kinematics
+
+        kin = Kinematics(robot)
+        Ma, Mb = kin.frame_placements(q, [robot.arm(arm_a).ee_frame, robot.arm(arm_b).ee_frame])
+        return cls(arm_a, arm_b, Ma.actInv(Mb))
+
+    @classmethod
+    def from_grasps(cls, grasp_a: pin.SE3, grasp_b: pin.SE3, arm_a: str = "A", arm_b: str = "B") -> "ClosedChain":
+        """Both hands on one rigid object with grasp frames ``grasp_a``, ``grasp_b`` (object frame)."""
+        return cls(arm_a, arm_b, grasp_a.actInv(grasp_b))
+
+    def _frames(self, robot):
+        return robot.arm(self.arm_a).ee_frame, robot.arm(self.arm_b).ee_frame
+
+    def residual_at(self, tp, k):
+        fa, fb = self._frames(tp.robot)
+        Ra, pa = tp.frame(fa, k, base_frame=True)
+        Rb, pb = tp.frame(fb, k, base_frame=True)
+        Rrel, prel = Ra.T @ Rb, Ra.T @ (pb - pa)
+        return pose_residual(Rrel, prel, np.array(self.relative.rotation), ca.DM(self.relative.translation))
+
+    def residual(self, tp):
+        if self.relative is None:
+            raise ValueError("ClosedChain.relative: expected a pinocchio.SE3 (use from_configuration/from_grasps)")
+        rs = []
+        pts = self._points(tp.N, tp.robot, tp.pinned_q)
+        for k in pts:
+            r, tr = self.residual_at(tp, k)
+            rs += [r, tr]
+        lo = np.tile(np.r_[np.zeros(6), 1.0], len(pts))
+        hi = np.tile(np.r_[np.zeros(6), np.inf], len(pts))
+        return ca.vertcat(*rs), lo, hi
+
+    def numeric(self, traj):
+        fa, fb = self._frames(traj.robot)
+        out = []
+        for k in self._points(traj.N, traj.robot, traj.pinned_q):
+            Ma, Mb = traj.frame(fa, k), traj.frame(fb, k)
+            r, tr = pose_residual_numeric(Ma.actInv(Mb), self.relative)
+            out.append(np.r_[r, tr])
+        return np.concatenate(out) if out else np.zeros(0)
+
+    def _bounds_numeric(self, traj):
+        n = len(self._points(traj.N, traj.robot, traj.pinned_q))
+        return (np.tile(np.r_[np.zeros(6), 1.0], n), np.tile(np.r_[np.zeros(6), np.inf], n))
+
+
+@dataclass
+class OrientationConstraint(Term):
+    """A body axis stays within ``max_angle`` [rad] of a world direction at every knot (seed 002's
+    orientation constraint, e.g. a cup kept upright): ``(R a_local) · a_world ≥ cos(max_angle)``."""
+
+    frame: str = ""
+    axis_local: Sequence[float] = (0.0, 0.0, 1.0)
+    axis_world: Sequence[float] = (0.0, 0.0, 1.0)
+    max_angle: float = 0.1
+    default_name = "orientation"
+
+    def _axes(self):
+        a = np.asarray(self.axis_local, float)
+        b = np.asarray(self.axis_world, float)
+        return a / np.linalg.norm(a), b / np.linalg.norm(b)
+
+    def residual(self, tp):
+        a, b = self._axes()
+        r = ca.vertcat(*[ca.dot(tp.frame(self.frame, k)[0] @ ca.DM(a), ca.DM(b)) for k in range(tp.N + 1)])
+        return r, np.full(tp.N + 1, np.cos(self.max_angle)), np.full(tp.N + 1, np.inf)
+
+    def numeric(self, traj):
+        a, b = self._axes()
+        return np.array([traj.frame(self.frame, k).rotation @ a @ b for k in range(traj.N + 1)])
+
+    def _bounds_numeric(self, traj):
+        return np.full(traj.N + 1, np.cos(self.max_angle)), np.full(traj.N + 1, np.inf)
+
+
+@dataclass
+class BaseAttitude(Term):
+    """Base orientation of a free-floating robot at a knot equals ``target`` (a rotation matrix;
+    default identity): residual ``vee(E − Eᵀ)/2`` and ``trace(E) ≥ 1`` with ``E = R_tᵀ R_b`` —
+    attitude restoration when ``target`` is the initial attitude and ``at="end"``."""
+
+    target: np.ndarray | None = None
+    at: object = "end"
+    default_name = "base_attitude"
+
+    def _target(self):
+        return np.eye(3) if self.target is None else np.asarray(self.target, float)
+
+    def residual(self, tp):
+        if not tp.floating:
+            raise ConfigurationError("BaseAttitude needs a free-floating robot")
+        rs = []
+        for k in _knots(self.at, tp.N):
+            E = ca.DM(self._target()).T @ tp.base_rotation(k)
+            rs += [_vee_skew(E), ca.trace(E)]
+        n = len(_knots(self.at, tp.N))
+        return ca.vertcat(*rs), np.tile(np.r_[0, 0, 0, 1.0], n), np.tile(np.r_[0, 0, 0, np.inf], n)
+
+    def numeric(self, traj):
+        out = []
+        for k in _knots(self.at, traj.N):
+            x, y, z, w = traj.base_quat[k] / np.linalg.norm(traj.base_quat[k])
+            E = self._target().T @ pin.Quaternion(w, x, y, z).toRotationMatrix()
+            out.append(np.r_[0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]]), np.trace(E)])
+        return np.concatenate(out)
+
+    def _bounds_numeric(self, traj):
+        n = len(_knots(self.at, traj.N))
+        return np.tile(np.r_[0, 0, 0, 1.0], n), np.tile(np.r_[0, 0, 0, np.inf], n)
+
+    def cost(self, tp):
+        r, _, _ = self.residual(tp)
+        return ca.sumsqr(r[[i for i in range(r.shape[0]) if i % 4 != 3]])
+
+    def cost_numeric(self, traj):
+        r = self.numeric(traj)
+        return float(np.sum(r[[i for i in range(r.size) if i % 4 != 3]] ** 2))
