@@ -32,7 +32,7 @@ from .collision import CollisionChecker
 from .ik import IKOptions, solve_grasp_ik
 from .problem import (ClosedChain, CollisionAvoidance, JointBoundary, JointPositionLimits, JointVelocityLimits,
                       OptProblem, Smoothness)
-from .problem.solution import IpoptStatus, Solution
+from .problem.solution import Solution
 from .robot import RobotModel
 from .scene import Scene
 from .spatial import interpolate_pose
@@ -63,6 +63,8 @@ class PipelineOptions:
     interval) finds more than this, the segment is re-solved on a finer grid (N scaled by
     (residual / (closed_chain_tol / 2))^¼, warm-started from the coarse solution), at most
     ``refinements`` times.
+    failure_retries: when IPOPT fails on a segment, re-solves on a 1.6× finer grid from the same
+    initial guess (a coarse grid can make the NLP hard).
     collision_retries: re-solves when coal finds a collision the NLP's active pairs missed.
     ipopt_options: passed to :meth:`OptProblem.solve`. Default: stop at IPOPT's "acceptable"
     level (overall error 1e-4, 5 iterations; the constraint tolerance stays 1e-6) — measured: a
@@ -85,6 +87,7 @@ class PipelineOptions:
     max_intervals: int = 100
     closed_chain_tol: float = 1e-6
     refinements: int = 2
+    failure_retries: int = 1
     collision_retries: int = 2
     ipopt_options: tuple = (("acceptable_tol", 1e-4), ("acceptable_iter", 5))
 
@@ -263,6 +266,15 @@ def _cold_path(robot: RobotModel, scene: Scene, q0: np.ndarray, q1: np.ndarray, 
     return q0 + s * (q1 - q0)
 
 
+def _initial_guess(robot, scene, prob: OptProblem, seg_path, cc, kind: str, opts: PipelineOptions) -> None:
+    """Warm start from the (shortcut) planner path, or the cold straight line."""
+    if opts.warm_start:
+        if not prob.set_initial_path(seg_path, cc):
+            log.info("segment %s: some resampled configurations did not project onto the manifold", kind)
+    else:
+        prob.set_initial(q=_cold_path(robot, scene, seg_path[0], seg_path[-1], kind, prob.N))
+
+
 def _accumulate(sol, prev: Solution) -> Solution:
     """``sol`` with the time and iterations of an earlier attempt ``prev`` added."""
     sol.wall_time += prev.wall_time
@@ -306,12 +318,20 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
             t_short += time.perf_counter() - ts
         prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts)
-        if opts.warm_start:
-            if not prob.set_initial_path(seg_path, cc):
-                log.info("segment %s: some resampled configurations did not project onto the manifold", kind)
-        else:
-            prob.set_initial(q=_cold_path(robot, scene, seg_path[0], seg_path[-1], kind, prob.N))
+        _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
         sol, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
+        for _ in range(opts.failure_retries):
+            if sol.success or prob.N >= opts.max_intervals:
+                break
+            # a coarse grid can make the NLP hard (measured: N = 30 ran into max_iter where the
+            # same segment on 48 knots converged in 10 iterations): retry on a finer grid from the
+            # same initial guess
+            N = int(min(opts.max_intervals, np.ceil(prob.N * 1.6)))
+            log.info("segment %s: IPOPT %s on %d intervals; retrying on %d", kind, sol.status.value, prob.N, N)
+            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, n_intervals=N)
+            _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
+            sol2, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
+            sol = _accumulate(sol2, sol)
         for _ in range(opts.refinements):
             res_cc = rep.max_closed_chain_residual
             if kind != "constrained" or not sol.success or not res_cc > opts.closed_chain_tol:
