@@ -376,13 +376,14 @@ def test_attitude_restoration_small(eba):
 
 
 # --------------------------------------------------------------------------- (g) conditioning
-def _pinned_closed_chain_problem(tcb, N=12, shift_end=0.0):
+def _pinned_closed_chain_problem(tcb, N=12, shift_end=0.0, skip=True):
     """Both ends pinned on one closed-chain manifold (the end optionally moved off it)."""
     from optplan.warmstart import project_closed_chain
 
     rng = np.random.default_rng(5)
     qa = tcb.random_joints(rng) * 0.4
     cc = ClosedChain.from_configuration(tcb, qa)
+    cc.skip_pinned = skip
     qb = project_closed_chain(tcb, qa + rng.normal(size=14) * 0.2, cc).q
     qb = qb + shift_end
     p = OptProblem(tcb, n_intervals=N, duration=5.0)
@@ -400,6 +401,9 @@ def test_closed_chain_leaves_out_pinned_knots_it_holds_at(tcb):
     p, h = _pinned_closed_chain_problem(tcb)
     p._build()
     assert p._con_slices[h.name].stop - p._con_slices[h.name].start == 7 * (p.N - 1)
+    p_all, h_all = _pinned_closed_chain_problem(tcb, skip=False)   # the default keeps every knot
+    p_all._build()
+    assert p_all._con_slices[h_all.name].stop - p_all._con_slices[h_all.name].start == 7 * (p.N + 1)
     sol = p.solve()
     assert sol.success, sol.status
     full = verify(tcb, sol, closed_chain=h.term)   # every sample, ends included

@@ -114,24 +114,28 @@ class ClosedChain(Term):
     """Two end-effectors keep their relative pose ``T_a⁻¹ T_b = relative`` at every knot (seed 000
     Eq. 1-2, with the singularity-free residual of the module docstring).
 
-    Knots whose joints a :class:`JointBoundary` pins (``q`` given) and which satisfy the closed
-    chain there (≤ ``pinned_tol``) are left out: the rows would repeat the boundary constraint,
-    make the constraint Jacobian rank-deficient and IPOPT's multipliers non-unique (measured on
-    the transport pipeline: wrong KKT inertia at every iteration, MUMPS pivot tolerance raised to
-    0.1 and 2-3× slower factorizations). A pinned configuration that violates it keeps its rows,
-    so an inconsistent problem still ends infeasible. The relative pose does not depend on the
-    base, so a floating robot's hands are taken in the base frame (cheaper derivatives)."""
+    ``skip_pinned=True`` leaves out the knots whose joints a :class:`JointBoundary` pins and which
+    satisfy the closed chain there (≤ ``pinned_tol``): there the rows repeat the boundary
+    constraint and make the constraint Jacobian rank-deficient. A pinned configuration that
+    violates it keeps its rows, so an inconsistent problem still ends infeasible. Off by default
+    because IPOPT's path depends on it in both directions (measured): transport example N = 50:
+    20 iterations / 1.1 s with the rows, 55 / 9.7 s without (N = 100: 25 / 2.7 s vs 78 / 252 s —
+    without them the reduced Hessian shows negative curvature at most iterations); restoration
+    NLP N = 48: 20 / 3.0 s with, 26 / 2.8 s without; pipeline trials 0-2 of scene 1: 99, 79,
+    151 iterations with, 101, 109, 74 without. The relative pose does not depend on the base, so a floating robot's
+    hands are taken in the base frame (cheaper derivatives)."""
 
     arm_a: str = "A"
     arm_b: str = "B"
     relative: pin.SE3 | None = None
     interior: int = 0  # extra collocation points per interval (fixed-base robots), e.g. 1 = midpoints
+    skip_pinned: bool = False
     pinned_tol: float = 1e-9
     default_name = "closed_chain"
 
     def _points(self, N: int, robot: RobotModel | None = None, pinned: dict | None = None) -> list:
         skip = set()
-        if pinned and robot is not None and self.relative is not None:
+        if self.skip_pinned and pinned and robot is not None and self.relative is not None:
             for k, qk in pinned.items():
                 M = self._relative_numeric(robot, robot.configuration(qk) if robot.is_floating else qk)
                 r, tr = pose_residual_numeric(M, self.relative)
