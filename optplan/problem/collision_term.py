@@ -68,7 +68,11 @@ class CollisionAvoidance(Term):
 
     scene: obstacles and (if ``held_object``) the grasped object; ``object_arm`` carries it.
     activation [m], window [knots]: a pair is constrained at the knots within ``window`` of those
-    where the initial guess brings it closer than ``activation`` (see module docstring). cover_tol [m]: sphere-covering tolerance of the smooth
+    where the initial guess brings it closer than ``activation`` (see module docstring).
+    skip_pinned: no rows at knots whose joints a JointBoundary pins — the configuration is given,
+    its clearance is not the NLP's to change (``verify`` checks it by coal), and its rows would have
+    no free joint (measured: a planner's boundary configuration 17.5 mm from an obstacle under a
+    20 mm margin made a regrasp NLP infeasible). cover_tol [m]: sphere-covering tolerance of the smooth
     capsule distances (coarser = fewer spheres = faster NLP, more conservative).
     """
 
@@ -83,6 +87,7 @@ class CollisionAvoidance(Term):
     cover_tol: float = 0.02
     eps: float = 1e-3
     activate_with: list = field(default_factory=list)  # extra NumericTrajectory(s) for pair activation
+    skip_pinned: bool = True
     default_name = "collision"
     skipped: list = field(default_factory=list)
     active_pairs: list = field(default_factory=list)
@@ -252,6 +257,8 @@ class CollisionAvoidance(Term):
         self._plane_slots = []  # (pair, k, aux index) for refreshing the initial planes
         rs, lo = [], []
         m2 = self.margin / 2
+        pinned = set(getattr(tp, "pinned_q", {})) if self.skip_pinned else set()
+        knots_of = lambda pair: [k for k in self._knots_of(pair, tp.N) if k not in pinned]  # noqa: E731
         for pair in active:
             ka, kb = self._kinds(pair)
             if (ka == "robot" and self._robot_shape.get(pair.a) is None) or \
@@ -263,7 +270,7 @@ class CollisionAvoidance(Term):
                 Vb, rb, pose_b = self._local_points(kb, pair.b)
                 fn = self._plane_fn(Va, ra, Vb, rb)
                 nrow = Va.shape[1] + Vb.shape[1]
-                for k in self._knots_of(pair, tp.N):
+                for k in knots_of(pair):
                     x0 = self._plane_init(pair, init.q_full(k)) if init is not None else np.r_[1.0, 0, 0, 0]
                     v = tp.add_variable(f"plane_{len(self._plane_slots)}", 4, x0)
                     self._plane_slots.append((pair, k, len(tp.aux) - 1))
@@ -272,7 +279,7 @@ class CollisionAvoidance(Term):
                     rs.append(fn(Ra_, pa_, Rb_, pb_, v))
                     lo += [m2] * nrow + [0.0]
                 continue
-            for k in self._knots_of(pair, tp.N):
+            for k in knots_of(pair):
                 ea = self._entity(tp, ka, pair.a, k)
                 eb = self._entity(tp, kb, pair.b, k)
                 for sa in ea[0]:
