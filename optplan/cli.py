@@ -76,6 +76,26 @@ def _cmd_bench_tcbirrt(args) -> int:
     return 0
 
 
+def _cmd_bench_warmstart(args) -> int:
+    from .bench.warmstart import WarmstartConfig, format_summary, run, summarize, validate
+
+    cfg = WarmstartConfig(scenes=[s for s in args.scene.split(",") if s.strip()], trials=args.trials, seed=args.seed,
+                          jobs=args.jobs, out=args.out, time_limit=args.time_limit,
+                          modes=tuple(m.strip() for m in args.modes.split(",") if m.strip()),
+                          first_trial=args.first_trial, progress=not args.no_progress)
+    try:
+        validate(cfg)
+    except ValueError as exc:
+        print(f"optplan bench warmstart: error: {exc}", file=sys.stderr)
+        return 2
+    t0 = time.perf_counter()
+    rows = run(cfg)
+    print(format_summary(summarize(rows)))
+    print(f"summary of {len(rows)} result lines ({args.out}/results.jsonl, {args.out}/summary.txt, "
+          f"{args.out}/summary.json); run time {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def _cmd_plan(args) -> int:
     from .bench.trials import TrialGenerator
     from .pipeline import PipelineOptions, run_pipeline
@@ -169,6 +189,19 @@ def build_parser() -> argparse.ArgumentParser:
     tb.add_argument("--no-progress", action="store_true")
     tb.add_argument("--no-plot", action="store_true")
     tb.set_defaults(func=_cmd_bench_tcbirrt)
+
+    ws = bench.add_parser("warmstart", help="issue 4 item 5: IPOPT from the TCBiRRT path (warm) vs from a straight line "
+                          "(cold) on perturbed trials")
+    ws.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, or names)")
+    ws.add_argument("--trials", type=int, default=20, help="trials per scene")
+    ws.add_argument("--first-trial", type=int, default=0, help="index of the first trial")
+    ws.add_argument("--seed", type=int, default=0)
+    ws.add_argument("--jobs", type=int, default=1, help="worker processes")
+    ws.add_argument("--time-limit", type=float, default=10.0, help="planning time limit per query [s]")
+    ws.add_argument("--modes", default="warm,cold", help="comma-separated: warm, cold")
+    ws.add_argument("--out", default="bench_warmstart", help="output directory (results.jsonl, summary.txt/json)")
+    ws.add_argument("--no-progress", action="store_true")
+    ws.set_defaults(func=_cmd_bench_warmstart)
 
     pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene (issue 4 pipeline)")
     pl.add_argument("--scene", default="1", help="1, 2, 3 (ssps_scene<N>) or a scene name")
