@@ -82,7 +82,8 @@ def _cmd_bench_warmstart(args) -> int:
     cfg = WarmstartConfig(scenes=[s for s in args.scene.split(",") if s.strip()], trials=args.trials, seed=args.seed,
                           jobs=args.jobs, out=args.out, time_limit=args.time_limit,
                           modes=tuple(m.strip() for m in args.modes.split(",") if m.strip()),
-                          first_trial=args.first_trial, progress=not args.no_progress)
+                          first_trial=args.first_trial, progress=not args.no_progress,
+                          ipopt_max_wall_time=args.ipopt_max_wall_time)
     try:
         validate(cfg)
     except ValueError as exc:
@@ -199,6 +200,8 @@ def build_parser() -> argparse.ArgumentParser:
     ws.add_argument("--jobs", type=int, default=1, help="worker processes")
     ws.add_argument("--time-limit", type=float, default=10.0, help="planning time limit per query [s]")
     ws.add_argument("--modes", default="warm,cold", help="comma-separated: warm, cold")
+    ws.add_argument("--ipopt-max-wall-time", type=float, default=None, metavar="S",
+                    help="cap every IPOPT solve at S seconds (default: iteration limit only)")
     ws.add_argument("--out", default="bench_warmstart", help="output directory (results.jsonl, summary.txt/json)")
     ws.add_argument("--no-progress", action="store_true")
     ws.set_defaults(func=_cmd_bench_warmstart)

@@ -8,9 +8,10 @@ from optplan import cli
 from optplan.bench import warmstart as ws
 
 
-def _line(scene="ssps_scene1", trial=0, mode="warm", seed=0, time_limit=10.0, success=True, plan_ok=True,
+def _line(scene="ssps_scene1", trial=0, mode="warm", seed=0, time_limit=10.0, max_wall=None, success=True, plan_ok=True,
           converged=None, iters=20, t=0.5, setup=5.0, segments=None, plan_hash="h", **kw):
     d = {"scene": scene, "trial": trial, "mode": mode, "seed": seed, "time_limit_s": time_limit,
+         "ipopt_max_wall_time_s": max_wall,
          "success": success, "plan_ok": plan_ok, "plan_status": "exact" if plan_ok else "timeout",
          "opt_status": ("Solve_Succeeded" if plan_ok else "not_run"), "converged": success if converged is None else converged,
          "opt_iterations": iters if plan_ok else 0, "opt_time_s": t if plan_ok else 0.0,
@@ -26,9 +27,9 @@ def fake_runner(monkeypatch):
     calls = []
 
     def fake(args):
-        robot, scene, index, mode, time_limit, seed = args
+        robot, scene, index, mode, time_limit, seed, max_wall = args
         calls.append((scene, index, mode))
-        return _line(scene, index, mode, seed, time_limit, iters=10 if mode == "warm" else 40,
+        return _line(scene, index, mode, seed, time_limit, max_wall, iters=10 if mode == "warm" else 40,
                      t=0.2 if mode == "warm" else 1.0)
 
     monkeypatch.setattr(ws, "_run_unit", fake)
@@ -49,6 +50,7 @@ def fake_runner(monkeypatch):
     ({"first_trial": -1}, "--first-trial"),
     ({"modes": ("warm", "lukewarm")}, "--modes"),
     ({"modes": ()}, "--modes"),
+    ({"ipopt_max_wall_time": 0.0}, "--ipopt-max-wall-time"),
 ])
 def test_validate_rejects_bad_arguments(kw, msg):
     with pytest.raises(ValueError, match=msg):
@@ -90,7 +92,8 @@ def test_resume_runs_only_missing_units_and_redoes_truncated_line(tmp_path, fake
     out.mkdir()
     done = [_line("ssps_scene1", 0, "warm"), _line("ssps_scene1", 0, "cold"), _line("ssps_scene1", 1, "warm"),
             _line("ssps_scene1", 2, "cold", seed=5),          # other seed: not this run's
-            _line("ssps_scene1", 2, "warm", time_limit=3.0)]  # other time limit: not this run's
+            _line("ssps_scene1", 2, "warm", time_limit=3.0),  # other time limit: not this run's
+            _line("ssps_scene1", 2, "warm", max_wall=60.0)]   # other IPOPT cap: not this run's
     text = "".join(json.dumps(d) + "\n" for d in done)
     text += json.dumps(_line("ssps_scene1", 1, "cold"))[:40]   # killed while writing
     (out / "results.jsonl").write_text(text)
@@ -99,7 +102,7 @@ def test_resume_runs_only_missing_units_and_redoes_truncated_line(tmp_path, fake
     assert sorted(fake_runner) == [("ssps_scene1", 1, "cold"), ("ssps_scene1", 2, "cold"), ("ssps_scene1", 2, "warm")]
     assert len(rows) == 6 and {(r["trial"], r["mode"]) for r in rows} == {(i, m) for i in range(3) for m in ws.MODES}
     lines = (out / "results.jsonl").read_text().splitlines()
-    assert len(lines) == 5 + 3 and all(json.loads(x) for x in lines)   # the truncated line is gone
+    assert len(lines) == 6 + 3 and all(json.loads(x) for x in lines)   # the truncated line is gone
     # a second run has nothing to do
     fake_runner.clear()
     ws.run(cfg)
@@ -107,12 +110,14 @@ def test_resume_runs_only_missing_units_and_redoes_truncated_line(tmp_path, fake
 
 
 def test_pending_units_order_and_keys():
-    cfg = ws.WarmstartConfig(scenes=["1", "2"], trials=2, first_trial=3, seed=7, time_limit=4.0)
-    rows = [_line("ssps_scene2", 4, "cold", seed=7, time_limit=4.0)]
+    cfg = ws.WarmstartConfig(scenes=["1", "2"], trials=2, first_trial=3, seed=7, time_limit=4.0, ipopt_max_wall_time=60)
+    rows = [_line("ssps_scene2", 4, "cold", seed=7, time_limit=4.0, max_wall=60.0),
+            _line("ssps_scene2", 3, "cold", seed=7, time_limit=4.0)]   # uncapped: not this run's
     units = ws.pending_units(cfg, ["ssps_scene1", "ssps_scene2"], rows)
     assert len(units) == 7
-    assert units[0] == ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7)
-    assert ("tcbirrt_dual_arm", "ssps_scene2", 4, "cold", 4.0, 7) not in units
+    assert units[0] == ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0)
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 4, "cold", 4.0, 7, 60.0) not in units
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "cold", 4.0, 7, 60.0) in units
 
 
 # ---------------------------------------------------------------------- statistics

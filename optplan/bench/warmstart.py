@@ -13,6 +13,10 @@ computed in both modes because it defines the segments.
   a killed run resumes without redoing finished lines (a truncated last line is dropped and redone).
   Each line holds :meth:`PipelineResult.to_dict` plus scene, trial, mode, wall and worker CPU time,
   per-segment figures, and a hash of the planned path (warm and cold should share it).
+* ``--ipopt-max-wall-time S`` caps every IPOPT solve at S seconds (IPOPT's ``max_wall_time``; a
+  capped solve fails with ``Maximum_WallTime_Exceeded``). Default: no cap, only IPOPT's iteration
+  limit — some solves then run ~1 s per iteration for 1000 iterations. Lines of runs with different
+  caps (or seeds, time limits) are kept apart.
 * A trial whose plan fails has no optimization: it counts as "no plan", not as an optimizer failure.
 * ``DIR/summary.json`` and ``DIR/summary.txt``: per scene and mode, trials with a plan, optimizer
   success rate (``success``: all segments solved, closed-chain residual <= 1e-6, clearance >= 0),
@@ -56,6 +60,7 @@ class WarmstartConfig:
     modes: tuple = MODES
     first_trial: int = 0
     progress: bool = True
+    ipopt_max_wall_time: float | None = None   # [s] per IPOPT solve (None: IPOPT's iteration limit only)
 
 
 def validate(cfg: WarmstartConfig) -> list[str]:
@@ -71,6 +76,9 @@ def validate(cfg: WarmstartConfig) -> list[str]:
         raise ValueError(f"--first-trial: expected an integer >= 0, got {cfg.first_trial!r}")
     if not (isinstance(cfg.time_limit, (int, float)) and math.isfinite(cfg.time_limit) and cfg.time_limit > 0):
         raise ValueError(f"--time-limit: expected a number > 0, got {cfg.time_limit!r}")
+    mw = cfg.ipopt_max_wall_time
+    if mw is not None and not (isinstance(mw, (int, float)) and math.isfinite(mw) and mw > 0):
+        raise ValueError(f"--ipopt-max-wall-time: expected a number > 0, got {mw!r}")
     modes = list(cfg.modes)
     bad = [m for m in modes if m not in MODES]
     if not modes or bad or len(set(modes)) != len(modes):
@@ -149,8 +157,9 @@ def _run_unit(args) -> dict:
     """One (scene, trial, mode): generate the trial, run the pipeline, return the result line."""
     from ..pipeline import PipelineOptions, run_pipeline
 
-    robot_name, scene, index, mode, time_limit, seed = args
-    line = {"scene": scene, "trial": int(index), "mode": mode, "seed": int(seed), "time_limit_s": float(time_limit)}
+    robot_name, scene, index, mode, time_limit, seed, max_wall = args
+    line = {"scene": scene, "trial": int(index), "mode": mode, "seed": int(seed), "time_limit_s": float(time_limit),
+            "ipopt_max_wall_time_s": max_wall}
     w = _state(robot_name, scene)
     t0 = time.perf_counter()
     try:
@@ -162,7 +171,9 @@ def _run_unit(args) -> dict:
                 "cpu_time_s": None, "segments": []}
     line.update({"pipeline_seed": int(trial.seed), "regenerations": int(trial.regenerations),
                  "trial_generation_s": time.perf_counter() - t0})
-    opts = PipelineOptions(plan_time_limit=float(time_limit), warm_start=(mode == "warm"))
+    opts = PipelineOptions(plan_time_limit=float(time_limit), warm_start=(mode == "warm"),
+                           ipopt_options=PipelineOptions.ipopt_options
+                           + (() if max_wall is None else (("max_wall_time", float(max_wall)),)))
     c0, ch0, w0 = time.process_time(), resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
     res, err = None, None
     try:
@@ -197,14 +208,17 @@ def _key(r: dict) -> tuple:
 
 
 def _matches(r: dict, cfg: WarmstartConfig) -> bool:
-    return r.get("seed") == cfg.seed and r.get("time_limit_s") == float(cfg.time_limit)
+    mw = None if cfg.ipopt_max_wall_time is None else float(cfg.ipopt_max_wall_time)
+    return (r.get("seed") == cfg.seed and r.get("time_limit_s") == float(cfg.time_limit)
+            and r.get("ipopt_max_wall_time_s") == mw)
 
 
 def pending_units(cfg: WarmstartConfig, scenes: list[str], rows: list[dict],
                   robot_name: str = "tcbirrt_dual_arm") -> list[tuple]:
-    """The (robot, scene, trial, mode, time_limit, seed) units not yet in ``rows``."""
+    """The (robot, scene, trial, mode, time_limit, seed, ipopt_max_wall_time) units not yet in ``rows``."""
     done = {_key(r) for r in rows if _matches(r, cfg)}
-    return [(robot_name, sc, i, m, float(cfg.time_limit), int(cfg.seed))
+    mw = None if cfg.ipopt_max_wall_time is None else float(cfg.ipopt_max_wall_time)
+    return [(robot_name, sc, i, m, float(cfg.time_limit), int(cfg.seed), mw)
             for sc in scenes for i in range(cfg.first_trial, cfg.first_trial + cfg.trials) for m in cfg.modes
             if (sc, i, m) not in done]
 
