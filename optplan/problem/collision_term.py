@@ -72,7 +72,12 @@ class CollisionAvoidance(Term):
     skip_pinned: no rows at knots whose joints a JointBoundary pins — the configuration is given,
     its clearance is not the NLP's to change (``verify`` checks it by coal), and its rows would have
     no free joint (measured: a planner's boundary configuration 17.5 mm from an obstacle under a
-    20 mm margin made a regrasp NLP infeasible). cover_tol [m]: sphere-covering tolerance of the smooth
+    20 mm margin made a regrasp NLP infeasible). skip_constant: no rows for a pair whose two
+    entities depend on no free joint (joints a JointPositionLimits holds at lower == upper, e.g. the
+    holding arm of a regrasp, vs the base, an obstacle or the held object): its distance is the same
+    at every knot, the NLP cannot change it, and a value below ``margin`` would make the NLP
+    infeasible (measured: a holding arm 17.5 mm from the base under a 20 mm margin); listed in
+    ``constant_pairs``, checked by ``verify``. cover_tol [m]: sphere-covering tolerance of the smooth
     capsule distances (coarser = fewer spheres = faster NLP, more conservative).
     """
 
@@ -88,9 +93,12 @@ class CollisionAvoidance(Term):
     eps: float = 1e-3
     activate_with: list = field(default_factory=list)  # extra NumericTrajectory(s) for pair activation
     skip_pinned: bool = True
+    skip_constant: bool = True
     default_name = "collision"
     skipped: list = field(default_factory=list)
     active_pairs: list = field(default_factory=list)
+    constant_pairs: list = field(default_factory=list)
+    relaxed: dict = field(default_factory=dict)  # (pair, knot) -> margin [m] next to boundary configurations
 
     # ------------------------------------------------------------------ entities
     def _setup(self, robot):
@@ -146,6 +154,41 @@ class CollisionAvoidance(Term):
     def _knots_of(self, pair, N: int):
         ks = self.active_knots.get(pair)
         return range(N + 1) if ks is None else ks
+
+    def _free_joints_of(self, robot, kind: str, idx: int, fixed: frozenset) -> set | None:
+        """Free joint-vector indices an entity's pose depends on (``None``: unknown, e.g. a mimic
+        joint; treated as moving). Obstacles: none; the object: its holding hand's joints."""
+        if kind == "obstacle":
+            return set()
+        m = robot.model
+        if kind == "object":
+            jid = m.frames[robot.arm(self.checker.object_arm).ee_frame_id].parentJoint
+        else:
+            jid = robot.collision_model.geometryObjects[idx].parentJoint
+        first = 2 if robot.is_floating else 1
+        out = set()
+        for j in m.supports[jid]:
+            if j < first:
+                continue
+            name = m.names[j]
+            if name not in robot.joint_names:
+                return None
+            i = robot.joint_names.index(name)
+            if i not in fixed:
+                out.add(i)
+        return out
+
+    def _is_constant(self, robot, pair, fixed: frozenset) -> bool:
+        """True when the pair's distance cannot change: neither entity depends on a free joint and,
+        for a floating base, the pair does not involve the (world-fixed) obstacles."""
+        if not fixed:
+            return False
+        ka, kb = self._kinds(pair)
+        if robot.is_floating and "obstacle" in (ka, kb):
+            return False
+        fa = self._free_joints_of(robot, ka, pair.a, fixed)
+        fb = self._free_joints_of(robot, kb, pair.b, fixed)
+        return fa is not None and fb is not None and not fa and not fb
 
     # ------------------------------------------------------------------ expressions
     def _entity(self, tp, kind: str, idx: int, k: int):
@@ -254,10 +297,16 @@ class CollisionAvoidance(Term):
         self.skipped = []
         init = getattr(tp, "initial_traj", None)
         active = self._activate(robot, init)
+        fixed = frozenset(getattr(tp, "fixed_joints", ())) if self.skip_constant else frozenset()
+        self.constant_pairs = [p for p in active if self._is_constant(robot, p, fixed)]
+        if self.constant_pairs:
+            self.active_pairs = active = [p for p in active if p not in self.constant_pairs]
+            log.info("collision term: %d pair(s) with no free joint left out: %s", len(self.constant_pairs),
+                     [(p.name_a, p.name_b) for p in self.constant_pairs[:5]])
         self._plane_slots = []  # (pair, k, aux index) for refreshing the initial planes
         rs, lo = [], []
-        m2 = self.margin / 2
         pinned = set(getattr(tp, "pinned_q", {})) if self.skip_pinned else set()
+        margin_at = self._boundary_margins(tp, init, active, pinned)
         knots_of = lambda pair: [k for k in self._knots_of(pair, tp.N) if k not in pinned]  # noqa: E731
         for pair in active:
             ka, kb = self._kinds(pair)
@@ -277,14 +326,14 @@ class CollisionAvoidance(Term):
                     Ra_, pa_ = pose_a(tp, k)
                     Rb_, pb_ = pose_b(tp, k)
                     rs.append(fn(Ra_, pa_, Rb_, pb_, v))
-                    lo += [m2] * nrow + [0.0]
+                    lo += [margin_at(pair, k) / 2] * nrow + [0.0]
                 continue
             for k in knots_of(pair):
                 ea = self._entity(tp, ka, pair.a, k)
                 eb = self._entity(tp, kb, pair.b, k)
                 for sa in ea[0]:
                     for sb in eb[0]:
-                        rs.append(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2])); lo.append(self.margin)
+                        rs.append(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2])); lo.append(margin_at(pair, k))
         if self.skipped:
             log.info("collision term: %d pair(s) without an NLP model: %s", len(self.skipped),
                      [(p.name_a, p.name_b) for p in self.skipped[:5]])
@@ -292,6 +341,57 @@ class CollisionAvoidance(Term):
             return ca.MX.zeros(0), np.zeros(0), np.zeros(0)
         r = ca.vertcat(*rs)
         return r, np.array(lo), np.full(r.shape[0], np.inf)
+
+    def _boundary_margins(self, tp, init, active, pinned):
+        """``margin_at(pair, k)`` [m]: ``margin``, except within ``window`` knots of a pinned knot
+        whose given configuration is closer than ``margin`` for that pair: there
+        ``min(margin, d_pinned / 2)``. Next to a pinned knot (rest: zero rate and acceleration)
+        the joints move by O(h³ jerk), so a boundary configuration inside the margin would make the
+        neighbouring rows need a huge jerk — measured: IPOPT stuck at 500 iterations with the dual
+        infeasibility at 5e3 on a segment ending 17.5 mm from the base under a 20 mm margin."""
+        self.relaxed = {}
+        if init is not None and pinned:
+            idx = [self.checker.pairs.index(p) for p in active]
+            w = int(self.window)
+            for kp in sorted(pinned):
+                qf = init.q_full(kp)
+                d = self.checker.distances(qf)[idx]
+                for p, dp in zip(active, d):
+                    if dp < self.margin and self._smooth_pair(p):
+                        dp = self._smooth_value(tp.robot, p, qf)  # the row's own (conservative) value
+                    if dp < self.margin:
+                        m = min(self.margin, 0.5 * float(dp))
+                        for k in range(max(0, kp - w), min(tp.N, kp + w) + 1):
+                            self.relaxed[(p, k)] = min(m, self.relaxed.get((p, k), np.inf))
+        if self.relaxed:
+            log.info("collision term: margin relaxed at %d (pair, knot) rows next to boundary configurations "
+                     "closer than %.3g m", len(self.relaxed), self.margin)
+        return lambda pair, k: self.relaxed.get((pair, k), self.margin)
+
+    def _smooth_pair(self, pair) -> bool:
+        ka, kb = self._kinds(pair)
+        return not (self._is_box(ka, pair.a) or self._is_box(kb, pair.b))
+
+    def _smooth_value(self, robot, pair, q_full) -> float:
+        """Smallest smooth-distance row [m] of a sphere/capsule pair at a configuration (what the
+        NLP's rows evaluate to there; ≤ the exact distance)."""
+        data = robot.model.createData()
+        pin.framesForwardKinematics(robot.model, data, q_full)
+
+        def entity(kind, idx):
+            if kind == "obstacle":
+                o = self.checker.obstacles[idx]
+                return [o.primitive()], o.placement.rotation, o.placement.translation
+            if kind == "object":
+                M = data.oMf[robot.frame_id(self._hand_frame)] * self._grasp_inv
+                return self._obj_caps, M.rotation, M.translation
+            fid, shape, _ = self._robot_shape[idx]
+            M = data.oMf[robot.frame_id(fid)]
+            return [shape], M.rotation, M.translation
+
+        ka, kb = self._kinds(pair)
+        ea, eb = entity(ka, pair.a), entity(kb, pair.b)
+        return min(float(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2])) for sa in ea[0] for sb in eb[0])
 
     def refresh_initial(self, tp, traj: NumericTrajectory) -> None:
         """Re-seed the separating planes from a new initial guess (same active pairs)."""
@@ -308,5 +408,9 @@ class CollisionAvoidance(Term):
         return np.array([self.checker.distances(traj.q_full(k))[idx] for k in range(traj.N + 1)])
 
     def _bounds_numeric(self, traj):
-        n = self.numeric(traj).size
-        return np.full(n, self.margin), np.full(n, np.inf)
+        D = self.numeric(traj)
+        lo = np.full(D.shape, self.margin)
+        for j, p in enumerate(self.active_pairs):
+            for k in range(D.shape[0]):
+                lo[k, j] = self.relaxed.get((p, k), self.margin)
+        return lo.reshape(-1), np.full(D.size, np.inf)

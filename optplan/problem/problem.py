@@ -26,7 +26,7 @@ from scipy.interpolate import CubicSpline
 from ..errors import ConfigurationError
 from ..robot import RobotModel
 from .solution import IpoptStatus, Solution
-from .terms import JointBoundary, NumericTrajectory, Term
+from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
 from .transcription import Transcription
 
 __all__ = ["OptProblem", "TermHandle"]
@@ -242,12 +242,22 @@ class OptProblem:
                 out[k] = self.robot.check_joints(h.term.q, "JointBoundary.q")
         return out
 
+    def _fixed_joints(self) -> frozenset[int]:
+        """Joint-vector indices that a JointPositionLimits constraint holds fixed (lower == upper)."""
+        out: set[int] = set()
+        for h in self._handles:
+            if h.role == "constraint" and isinstance(h.term, JointPositionLimits):
+                lo, hi = h.term._lims(self.robot)
+                out |= set(np.flatnonzero(np.asarray(lo) == np.asarray(hi)).tolist())
+        return frozenset(out)
+
     def _build(self):
         tp = self.tp
         if self.robot.is_floating:
             tp.com0 = self._initial_com()
         tp.clear_caches()
         tp.pinned_q = self._pinned_q()
+        tp.fixed_joints = self._fixed_joints()
         tp.initial_traj = self.numeric_trajectory(self._x0) if self._x0 is not None else None
         tp.clear_aux()
         g, lbg, ubg = [], [], []

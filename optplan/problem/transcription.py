@@ -111,6 +111,8 @@ class Transcription:
         self._joint_cache: dict = {}
         #: knots whose joints a JointBoundary pins (k -> q [rad]); set by OptProblem before terms are built
         self.pinned_q: dict[int, np.ndarray] = {}
+        #: joint-vector indices held fixed at every knot (JointPositionLimits with lower == upper)
+        self.fixed_joints: frozenset[int] = frozenset()
         self._build_base_functions()
 
     # ------------------------------------------------------------------ auxiliary variables
