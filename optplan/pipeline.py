@@ -88,7 +88,7 @@ class PipelineOptions:
     closed_chain_tol: float = 1e-6
     refinements: int = 2
     failure_retries: int = 1
-    collision_retries: int = 2
+    collision_retries: int = 3
     ipopt_options: tuple = (("acceptable_tol", 1e-4), ("acceptable_iter", 5))
 
     def __post_init__(self):
@@ -291,11 +291,14 @@ def _solve_verified(robot, scene, prob: OptProblem, cc, holder, opts: PipelineOp
     for _ in range(opts.collision_retries):
         if not sol.success or rep.min_clearance_m >= 0.0:
             break
-        # activate pairs from the union of the initial guess and this solution, rebuild, re-solve
-        log.info("segment %s: clearance %.3g m by coal (%s); re-solving with more pairs", kind,
-                 rep.min_clearance_m, rep.min_clearance_pair)
+        # activate pairs from the union of the initial guess and this solution; where the solution
+        # collides between knots, raise those pairs' margin at the knots around; rebuild, re-solve
         col = prob.terms["collision"].term
         col.activate_with = list(col.activate_with) + [prob.numeric_trajectory(sol.x)]
+        t = np.linspace(sol.t[0], sol.t[-1], 10 * (len(sol.t) - 1) + 1)
+        n = col.boost_between_knots(t, sol.sample(t)["q"], sol.t)
+        log.info("segment %s: clearance %.3g m by coal (%s); re-solving with more pairs (%d rows with a "
+                 "larger margin)", kind, rep.min_clearance_m, rep.min_clearance_pair, n)
         prob.rebuild()
         sol = _accumulate(prob.solve(ipopt), sol)
         rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)

@@ -112,3 +112,47 @@ def test_margin_relaxed_next_to_close_boundary(tcb, transport, rng):
     D = np.array([chk.distances(q) for q in sol.q])[:, [chk.pairs.index(p) for p in term.active_pairs]]
     assert D.min() >= d0 / 2 - 1e-5
     assert D[4:N - 3].min() >= margin - 1e-5
+
+
+def test_boost_between_knots(tcb, transport, rng):
+    """A pair that collides between two constrained knots gets ``margin − d_min`` more margin at both;
+    pairs that are not constrained there get nothing (activation is their remedy)."""
+    chk = CollisionChecker(tcb, transport, held_object=False)
+    for _ in range(5000):
+        qa, qb = tcb.random_joints(rng), tcb.random_joints(rng)
+        s = np.linspace(0, 1, 21)
+        Q = qa + s[:, None] * (qb - qa)
+        D = np.array([chk.distances(q) for q in Q])
+        if D[[0, -1]].min() > 0.05 and D.min() < 0:
+            break
+    else:
+        pytest.skip("no configuration pair with a collision between them")
+    margin = 0.02
+    prob = OptProblem(tcb, n_intervals=2, duration=2.0)
+    term = CollisionAvoidance(transport, margin=margin, held_object=False, activation=1e6, window=0)
+    prob.add_constraint(term)
+    prob.set_initial(q=np.array([qa, qb, qb]))
+    prob.term_function(prob.terms["collision"])
+    t = s.copy()                                   # interval 0 = [0, 1] s, sampled 20 times
+    with pytest.raises(ValueError, match="configurations of size"):
+        term.boost_between_knots(t, Q[:, :3], [0.0, 1.0, 2.0])
+    n = term.boost_between_knots(t, Q, [0.0, 1.0, 2.0])
+    bad = [i for i, p in enumerate(chk.pairs) if D[:, i].min() < 0]
+    assert n == 2 * len(bad) and len(term.margin_boost) == n
+    for i in bad:
+        p = chk.pairs[i]
+        for k in (0, 1):
+            assert term.margin_boost[(p, k)] == pytest.approx(margin - D[:, i].min())
+    # the rebuilt NLP carries the larger margin on those rows
+    prob.rebuild()
+    prob.term_function(prob.terms["collision"])
+    lbg = prob._built["lbg"][prob._con_slices["collision"]]
+    assert lbg.max() == pytest.approx(max(margin - D[:, i].min() + margin for i in bad) / 2, rel=1e-9) or \
+        lbg.max() == pytest.approx(max(margin - D[:, i].min() + margin for i in bad), rel=1e-9)
+    # a pair not constrained at those knots gets no boost
+    term2 = CollisionAvoidance(transport, margin=margin, held_object=False, activation=-1.0)
+    prob2 = OptProblem(tcb, n_intervals=2, duration=2.0)
+    prob2.add_constraint(term2)
+    prob2.set_initial(q=np.array([qa, qb, qb]))
+    prob2.term_function(prob2.terms["collision"])
+    assert term2.boost_between_knots(t, Q, [0.0, 1.0, 2.0]) == 0 and term2.margin_boost == {}
