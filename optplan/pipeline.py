@@ -65,7 +65,9 @@ class PipelineOptions:
     ``refinements`` times.
     failure_retries: when IPOPT fails on a segment, re-solves on a 1.6× finer grid from the same
     initial guess (a coarse grid can make the NLP hard).
-    collision_retries: re-solves when coal finds a collision the NLP's active pairs missed.
+    collision_retries: re-solves when coal finds a collision after a solve: pairs are activated
+    along the failed solution too, and a contact between two knots where the pair was already
+    constrained raises its margin there (:meth:`CollisionAvoidance.boost_between_knots`).
     ipopt_options: passed to :meth:`OptProblem.solve`. Default: stop at IPOPT's "acceptable"
     level (overall error 1e-4, 5 iterations; the constraint tolerance stays 1e-6) — measured: a
     warm-started segment reached that in 4 iterations and then crept 200 more at the μ floor with
