@@ -63,8 +63,9 @@ class PipelineOptions:
     interval) finds more than this, the segment is re-solved on a finer grid (N scaled by
     (residual / (closed_chain_tol / 2))^¼, warm-started from the coarse solution), at most
     ``refinements`` times.
-    failure_retries: when IPOPT fails on a segment, re-solves on a 1.6× finer grid from the same
-    initial guess (a coarse grid can make the NLP hard).
+    failure_retries: when IPOPT fails on a segment, or coal still finds a contact after the
+    collision retries, re-solves on a 1.6× finer grid from the same initial guess (a coarse grid
+    can make the NLP hard, and long intervals let links cut corners between knots).
     collision_retries: re-solves when coal finds a collision after a solve: pairs are activated
     along the failed solution too, and a contact between two knots where the pair was already
     constrained raises its margin there (:meth:`CollisionAvoidance.boost_between_knots`).
@@ -326,11 +327,12 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
         _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
         sol, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
         for _ in range(opts.failure_retries):
-            if sol.success or prob.N >= opts.max_intervals:
+            if (sol.success and rep.min_clearance_m >= 0.0) or prob.N >= opts.max_intervals:
                 break
             # a coarse grid can make the NLP hard (measured: N = 30 ran into max_iter where the
-            # same segment on 48 knots converged in 10 iterations): retry on a finer grid from the
-            # same initial guess
+            # same segment on 48 knots converged in 10 iterations), and long intervals let a link
+            # cut a corner between knots that the collision retries did not fix: retry on a finer
+            # grid from the same initial guess
             N = int(min(opts.max_intervals, np.ceil(prob.N * 1.6)))
             log.info("segment %s: IPOPT %s on %d intervals; retrying on %d", kind, sol.status.value, prob.N, N)
             prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, n_intervals=N)

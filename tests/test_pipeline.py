@@ -126,3 +126,19 @@ def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
     if k0 == "constrained":   # then the residual 8e-6 > 1e-6 → refined by (8e-6 / 5e-7)^¼ · 1.05
         assert n2 == min(opts.max_intervals, int(np.ceil(n1 * 1.05 * (8e-6 / 5e-7) ** 0.25)))
     assert results[0].solution.iterations >= 20   # the attempts' iterations are accumulated
+
+    # a solve that converges but still collides (after its collision retries) is retried too
+    calls.clear()
+
+    def colliding_solve(robot, scene, prob, cc, holder, opts, ipopt, kind):
+        calls.append((kind, prob.N))
+        sol = SimpleNamespace(success=True, wall_time=1.0, setup_time=0.5, iterations=10, duration=10.0,
+                              status=SimpleNamespace(value="Solve_Succeeded"), x=None, x_scale_h=None,
+                              t=np.linspace(0.0, 10.0, prob.N + 1), q=prob.tp.unpack(prob.initial_guess)["q"])
+        return sol, SimpleNamespace(max_closed_chain_residual=1e-7, min_clearance_m=-0.005 if len(calls) == 1 else 0.01)
+
+    monkeypatch.setattr(PL, "_solve_verified", colliding_solve)
+    results, _ = PL.optimize_segments(tcb, sc, plan, opts, np.random.default_rng(0))
+    (k0, n0), (k1, n1) = calls[:2]
+    assert k0 == k1 and n1 == min(opts.max_intervals, int(np.ceil(n0 * 1.6)))
+    assert results[0].report.min_clearance_m == 0.01
