@@ -286,6 +286,11 @@ def _accumulate(sol, prev: Solution) -> Solution:
     return sol
 
 
+def _dense_times(sol, per_interval: int = 10) -> np.ndarray:
+    """``per_interval`` samples per knot interval of a solution [s] (what ``verify`` checks)."""
+    return np.linspace(sol.t[0], sol.t[-1], per_interval * (len(sol.t) - 1) + 1)
+
+
 def _solve_verified(robot, scene, prob: OptProblem, cc, holder, opts: PipelineOptions, ipopt: dict, kind: str):
     """Solve and verify; re-solve with more collision pairs when coal finds a collision the
     NLP's active pairs missed (at most ``opts.collision_retries`` times)."""
@@ -298,7 +303,7 @@ def _solve_verified(robot, scene, prob: OptProblem, cc, holder, opts: PipelineOp
         # collides between knots, raise those pairs' margin at the knots around; rebuild, re-solve
         col = prob.terms["collision"].term
         col.activate_with = list(col.activate_with) + [prob.numeric_trajectory(sol.x)]
-        t = np.linspace(sol.t[0], sol.t[-1], 10 * (len(sol.t) - 1) + 1)
+        t = _dense_times(sol)
         n = col.boost_between_knots(t, sol.sample(t)["q"], sol.t)
         log.info("segment %s: clearance %.3g m by coal (%s); re-solving with more pairs (%d rows with a "
                  "larger margin)", kind, rep.min_clearance_m, rep.min_clearance_pair, n)
@@ -379,7 +384,7 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     ts, qs, flags = [], [], []
     for s in res.segments:
         sol = s.solution
-        t = np.linspace(sol.t[0], sol.t[-1], 10 * (len(sol.t) - 1) + 1)
+        t = _dense_times(sol)
         q = sol.sample(t)["q"]
         start = 1 if ts else 0
         ts.append(s.t0 + t[start:])

@@ -27,6 +27,14 @@ def _limit_vec(value: Any, n: int, name: str) -> Optional[np.ndarray]:
     return arr
 
 
+def _check_input_sizes(fun: ca.Function, n: int, name: str) -> None:
+    """Every input of ``fun`` has ``n`` entries (one per waypoint dimension), else ValueError."""
+    for i in range(fun.n_in()):
+        if fun.numel_in(i) != n:
+            raise ValueError(f"{name}: input {i} must have {n} entries (one per waypoint dimension), "
+                             f"got shape {fun.size_in(i)}")
+
+
 def _ee_wrapper(fun: Any, n: int) -> Tuple[ca.Function, type]:
     """Canonical (q (n,1), qdot (n,1)) -> v (k,1) Function, SX if the user's Function inlines into SX."""
     if not isinstance(fun, ca.Function):
@@ -35,10 +43,7 @@ def _ee_wrapper(fun: Any, n: int) -> Tuple[ca.Function, type]:
     if fun.n_in() != 2 or fun.n_out() < 1:
         raise ValueError("ee_velocity: expected 2 inputs (q, qdot) and >= 1 output, "
                          f"got {fun.n_in()} inputs, {fun.n_out()} outputs")
-    for i in range(2):
-        if fun.numel_in(i) != n:
-            raise ValueError(f"ee_velocity: input {i} must have {n} entries (one per waypoint dimension), "
-                             f"got shape {fun.size_in(i)}")
+    _check_input_sizes(fun, n, "ee_velocity")
     for sym in (ca.SX, ca.MX):
         try:
             q, qd = sym.sym("q", n), sym.sym("qd", n)

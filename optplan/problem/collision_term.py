@@ -136,6 +136,7 @@ class CollisionAvoidance(Term):
             self.active_knots = {p: None for p in pairs}
             return self.active_pairs
         Dm = np.array([self.checker.distances(initial.q_full(k)) for k in range(initial.N + 1)])
+        self._init_dist = Dm.copy()  # (N+1) × pairs, reused by _boundary_margins
         for tr in self.activate_with:  # e.g. a previous solution that verification found colliding
             Dm = np.minimum(Dm, np.array([self.checker.distances(tr.q_full(k)) for k in range(initial.N + 1)]))
         close = Dm < self.activation
@@ -357,9 +358,10 @@ class CollisionAvoidance(Term):
         if init is not None and pinned:
             idx = [self.checker.pairs.index(p) for p in active]
             w = int(self.window)
+            D0 = getattr(self, "_init_dist", None)
             for kp in sorted(pinned):
                 qf = init.q_full(kp)
-                d = self.checker.distances(qf)[idx]
+                d = (D0[kp] if D0 is not None and D0.shape[0] == tp.N + 1 else self.checker.distances(qf))[idx]
                 for p, dp in zip(active, d):
                     if dp < self.margin and self._smooth_pair(p):
                         dp = self._smooth_value(tp.robot, p, qf)  # the row's own (conservative) value
@@ -370,7 +372,12 @@ class CollisionAvoidance(Term):
         if self.relaxed:
             log.info("collision term: margin relaxed at %d (pair, knot) rows next to boundary configurations "
                      "closer than %.3g m", len(self.relaxed), self.margin)
-        return lambda pair, k: self.relaxed.get((pair, k), self.margin) + self.margin_boost.get((pair, k), 0.0)
+        return self._margin_at
+
+    def _margin_at(self, pair, k: int) -> float:
+        """Lower bound [m] of the pair's rows at knot k: ``margin``, relaxed next to close boundary
+        configurations (``relaxed``), plus any ``margin_boost``."""
+        return self.relaxed.get((pair, k), self.margin) + self.margin_boost.get((pair, k), 0.0)
 
     def boost_between_knots(self, traj_t, traj_q, knot_t, min_clearance: float = 0.0) -> int:
         """Raise the margin of the pairs that collide *between* knots of a solution.
@@ -458,5 +465,5 @@ class CollisionAvoidance(Term):
         lo = np.full(D.shape, self.margin)
         for j, p in enumerate(self.active_pairs):
             for k in range(D.shape[0]):
-                lo[k, j] = self.relaxed.get((p, k), self.margin)
+                lo[k, j] = self._margin_at(p, k)
         return lo.reshape(-1), np.full(D.size, np.inf)

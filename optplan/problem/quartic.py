@@ -46,7 +46,7 @@ import numpy as np
 
 from optplan.splines import PiecewisePolynomial, _broadcast_vec, _check_int, _check_positive, _float_array
 
-from ._quartic_nlp import _ee_wrapper, _limit_vec, _Problem
+from ._quartic_nlp import _check_input_sizes, _ee_wrapper, _limit_vec, _Problem
 
 __all__ = ["QuarticSmoothingResult", "smooth_quartic"]
 
@@ -167,10 +167,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         if not isinstance(ee_acceleration, ca.Function) or ee_acceleration.n_in() != 3:
             raise TypeError("ee_acceleration: expected a casadi.Function (q, qdot, qddot) -> linear acceleration, "
                             f"got {ee_acceleration!r}")
-        for i in range(3):
-            if ee_acceleration.numel_in(i) != n:
-                raise ValueError(f"ee_acceleration: input {i} must have {n} entries, "
-                                 f"got {ee_acceleration.size_in(i)}")
+        _check_input_sizes(ee_acceleration, n, "ee_acceleration")
     ee = _ee_wrapper(ee_velocity, n) if ee_velocity is not None else None
     ee_max = _check_positive(ee_speed_max, "ee_speed_max") if ee is not None else None
     if cost not in _COSTS:
