@@ -75,7 +75,7 @@ class PipelineOptions:
     the dual infeasibility falling from 1.5e-5 to 1e-6, without changing the trajectory), and
     ``perturb_always_cd = yes`` (a permanent constraint regularisation in IPOPT's KKT system;
     measured: it turns an inertia-correction blow-up of 331 iterations / 330 s into 14 iterations /
-    0.7 s, and on 40 paired warm trials of scenes 1-2 it takes 0.89× the IPOPT time at the median
+    0.7 s, and on 40 paired warm trials of scenes 1-2 it takes 0.90× the IPOPT time at the median
     with the same iteration counts — docs/planners.md).
     """
 
