@@ -195,6 +195,8 @@ class OptProblem:
             if hasattr(h.term, "refresh_initial"):
                 h.term.refresh_initial(self.tp, traj)
         self._built["aux_init"] = self.tp.aux_init()
+        nb = self._built["nbase"]
+        self._built["lbx"][nb:], self._built["ubx"][nb:] = self.tp.aux_bounds()
 
     def set_initial_path(self, path, closed_chain=None, T: float | None = None) -> bool:
         """Initial guess from a planner's path (M × nq configurations, no timing): resampled
