@@ -83,7 +83,8 @@ def _cmd_bench_warmstart(args) -> int:
                           jobs=args.jobs, out=args.out, time_limit=args.time_limit,
                           modes=tuple(m.strip() for m in args.modes.split(",") if m.strip()),
                           first_trial=args.first_trial, progress=not args.no_progress,
-                          ipopt_max_wall_time=args.ipopt_max_wall_time)
+                          ipopt_max_wall_time=args.ipopt_max_wall_time,
+                          free_plane_normals=args.free_plane_normals)
     try:
         validate(cfg)
     except ValueError as exc:
@@ -202,6 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
     ws.add_argument("--modes", default="warm,cold", help="comma-separated: warm, cold")
     ws.add_argument("--ipopt-max-wall-time", type=float, default=None, metavar="S",
                     help="cap every IPOPT solve at S seconds (default: iteration limit only)")
+    ws.add_argument("--free-plane-normals", action="store_true",
+                    help="let IPOPT move the separating-plane normals (PipelineOptions.fixed_plane_normals=False)")
     ws.add_argument("--out", default="bench_warmstart", help="output directory (results.jsonl, summary.txt/json)")
     ws.add_argument("--no-progress", action="store_true")
     ws.set_defaults(func=_cmd_bench_warmstart)

@@ -79,7 +79,8 @@ class PipelineOptions:
     with the same iteration counts — docs/planners.md).
     fixed_plane_normals: :attr:`CollisionAvoidance.fixed_normals` — separating-plane normals held
     at coal's witness normals along the warm start (measured: 3.2× less IPOPT time on 8 constrained
-    segments and fewer collision retries, at a 1-3× higher jerk cost; docs/planners.md).
+    segments and fewer collision retries, at a 1.0-3.4× higher jerk cost; docs/planners.md). A
+    segment whose fixed-normal NLP fails is re-solved with free normals before any other retry.
     """
 
     planner: str = "tcbirrt"
@@ -231,7 +232,7 @@ def shortcut_constrained(robot: RobotModel, scene: Scene, path: np.ndarray, rng:
 
 # --------------------------------------------------------------------------- optimization
 def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind: str, arm: str | None,
-                     opts: PipelineOptions, n_intervals: int | None = None
+                     opts: PipelineOptions, n_intervals: int | None = None, fixed_normals: bool | None = None
                      ) -> tuple[OptProblem, ClosedChain | None, str | None]:
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     vmin = float(np.min(robot.velocity_limit))
@@ -257,7 +258,8 @@ def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind
         prob.add_constraint(JointPositionLimits(lower=lo, upper=hi), name="joint_limits")
     prob.add_constraint(JointVelocityLimits(), name="velocity_limits")
     prob.add_constraint(CollisionAvoidance(scene, margin=opts.margin, object_arm=holder or arms[0],
-                                           fixed_normals=opts.fixed_plane_normals), name="collision")
+                                           fixed_normals=opts.fixed_plane_normals if fixed_normals is None
+                                           else fixed_normals), name="collision")
     prob.add_cost(Smoothness("jerk"), name="jerk")
     return prob, cc, holder
 
@@ -337,9 +339,20 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             ts = time.perf_counter()
             seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
             t_short += time.perf_counter() - ts
-        prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts)
+        fixed = opts.fixed_plane_normals
+        prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, fixed_normals=fixed)
         _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
         sol, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
+        if fixed and not sol.success:
+            # fixed normals confine the NLP to half-spaces around the initial guess, which can be
+            # infeasible (measured: 1 regrasp in 240 segments); the free-normal NLP is not
+            log.info("segment %s: IPOPT %s with fixed plane normals; re-solving with free normals", kind,
+                     sol.status.value)
+            fixed = False
+            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, fixed_normals=fixed)
+            _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
+            sol2, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
+            sol = _accumulate(sol2, sol)
         for _ in range(opts.failure_retries):
             if (sol.success and rep.min_clearance_m >= 0.0) or prob.N >= opts.max_intervals:
                 break
@@ -349,7 +362,8 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             # grid from the same initial guess
             N = int(min(opts.max_intervals, np.ceil(prob.N * 1.6)))
             log.info("segment %s: IPOPT %s on %d intervals; retrying on %d", kind, sol.status.value, prob.N, N)
-            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, n_intervals=N)
+            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, n_intervals=N,
+                                                fixed_normals=fixed)
             _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
             sol2, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
             sol = _accumulate(sol2, sol)
@@ -363,7 +377,8 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             if N <= prob.N:
                 break
             log.info("segment %s: closed-chain residual %.2g between knots; re-solving with N = %d", kind, res_cc, N)
-            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, n_intervals=N)
+            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, n_intervals=N,
+                                                fixed_normals=fixed)
             prob.set_initial(solution=sol)
             sol2, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
             sol = _accumulate(sol2, sol)

@@ -295,3 +295,51 @@ def test_transport_end_to_end(tcb, transport):
     assert np.abs(sol.q - Q).max() > 0.05
     print(f"transport N={N}: clearance guess {clear0:.4f} → {rep.min_clearance_m:.4f} m, closed chain "
           f"{rep.max_closed_chain_residual:.2e}, {sol.iterations} it, {wall:.1f} s")
+
+
+def test_fixed_normals_hold_coal_witness_normals(tcb, transport):
+    """``fixed_normals``: every plane's normal is bounded to (lbx == ubx) coal's unit witness normal
+    at the initial guess, its offset stays free; the solve keeps those normals and still gives a
+    trajectory that coal finds clear by the margin at the knots; a new initial guess re-seeds the
+    fixed normals from coal at that guess."""
+    N = 25
+    Q, chk = _straight_line_ik(tcb, transport, N, np.random.default_rng(0))
+    z = np.zeros(tcb.nj)
+    prob = OptProblem(tcb, n_intervals=N, duration=60.0)
+    prob.add_constraint(JointBoundary("start", q=Q[0], qd=z, qdd=z))
+    prob.add_constraint(JointBoundary("end", q=Q[-1], qd=z, qdd=z))
+    cc = ClosedChain.from_grasps(transport.object.grasps["A"], transport.object.grasps["B"])
+    prob.add_constraint(cc)
+    prob.add_constraint(JointPositionLimits())
+    prob.add_constraint(JointVelocityLimits())
+    col = prob.add_constraint(CollisionAvoidance(transport, margin=0.02, fixed_normals=True))
+    prob.add_cost(Smoothness("jerk"))
+    prob.set_initial(q=Q)
+    prob._build()
+    term, b = col.term, prob._built
+    nb = b["nbase"]
+
+    def check_bounds(traj):
+        assert term._plane_slots, "the transport scene has box pairs"
+        for pair, k, i in term._plane_slots:
+            lo, hi = b["lbx"][nb + 4 * i:nb + 4 * i + 4], b["ubx"][nb + 4 * i:nb + 4 * i + 4]
+            n_exp = term._plane_init(pair, traj.q_full(k))[:3]
+            np.testing.assert_allclose(lo[:3], n_exp, atol=1e-12)
+            np.testing.assert_array_equal(lo[:3], hi[:3])
+            assert np.linalg.norm(lo[:3]) == pytest.approx(1.0, abs=1e-9)
+            assert lo[3] == -np.inf and hi[3] == np.inf
+
+    check_bounds(prob.numeric_trajectory(prob._full_x0()))
+    sol = prob.solve()
+    assert sol.success, (sol.status, sol.max_constraint_violation)
+    x = np.asarray(sol.x)
+    for pair, k, i in term._plane_slots:
+        np.testing.assert_allclose(x[nb + 4 * i:nb + 4 * i + 3], b["lbx"][nb + 4 * i:nb + 4 * i + 3], atol=1e-9)
+    assert min(chk.min_distance(q)[0] for q in sol.q) >= 0.02 - 1e-5
+    assert verify(tcb, sol, transport, closed_chain=cc).max_closed_chain_residual <= 1e-5
+    # a new initial guess (the solution, resampled on a shifted time grid) re-seeds the normals
+    old = b["lbx"][nb:].copy()
+    prob.set_initial(q=sol.q, t=np.sqrt(np.linspace(0.0, 1.0, N + 1)))
+    check_bounds(prob.numeric_trajectory(prob._full_x0()))
+    fin = np.isfinite(old)
+    assert np.abs(b["lbx"][nb:][fin] - old[fin]).max() > 1e-3

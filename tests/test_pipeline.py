@@ -119,7 +119,7 @@ def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
         return sol, rep
 
     monkeypatch.setattr(PL, "_solve_verified", fake_solve)
-    opts = PipelineOptions(shortcut_attempts=0)
+    opts = PipelineOptions(shortcut_attempts=0, fixed_plane_normals=False)
     results, _ = PL.optimize_segments(tcb, sc, plan, opts, np.random.default_rng(0))
     (k0, n0), (k1, n1), (k2, n2) = calls[:3]
     assert k0 == k1 == k2 and n1 == min(opts.max_intervals, int(np.ceil(n0 * 1.6)))   # failure → 1.6×
@@ -142,3 +142,35 @@ def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
     (k0, n0), (k1, n1) = calls[:2]
     assert k0 == k1 and n1 == min(opts.max_intervals, int(np.ceil(n0 * 1.6)))
     assert results[0].report.min_clearance_m == 0.01
+
+
+def test_fixed_normal_failure_falls_back_to_free_normals(tcb, monkeypatch):
+    """With fixed plane normals (the default), a failed segment NLP is first re-solved on the same
+    grid with free normals, and later attempts keep free normals (fake solves: the logic only)."""
+    from types import SimpleNamespace
+
+    import optplan.pipeline as PL
+    from optplan.bench.trials import TrialGenerator
+    from optplan.planners import make_planner
+
+    sc = Scene.load("ssps_scene1")
+    tr = TrialGenerator(tcb, sc).generate(4, 0)
+    plan = make_planner("tcbirrt", tcb, sc).plan(tr.q_start, tr.q_goal, time_limit=10.0, seed=int(tr.seed))
+    assert plan.success
+    calls = []
+
+    def fake_solve(robot, scene, prob, cc, holder, opts, ipopt, kind):
+        calls.append((kind, prob.N, prob.terms["collision"].term.fixed_normals))
+        sol = SimpleNamespace(success=len(calls) != 1, wall_time=1.0, setup_time=0.5, iterations=10, duration=10.0,
+                              status=SimpleNamespace(value="Infeasible_Problem_Detected"), x=None, x_scale_h=None,
+                              t=np.linspace(0.0, 10.0, prob.N + 1), q=prob.tp.unpack(prob.initial_guess)["q"])
+        return sol, SimpleNamespace(max_closed_chain_residual=1e-7, min_clearance_m=0.01)
+
+    monkeypatch.setattr(PL, "_solve_verified", fake_solve)
+    opts = PipelineOptions(shortcut_attempts=0)
+    assert opts.fixed_plane_normals
+    results, _ = PL.optimize_segments(tcb, sc, plan, opts, np.random.default_rng(0))
+    (k0, n0, f0), (k1, n1, f1) = calls[:2]
+    assert k0 == k1 and n0 == n1 and f0 and not f1
+    assert all(f for _, _, f in calls[2:]), "the next segments start with fixed normals again"
+    assert results[0].solution.success and results[0].solution.iterations == 20

@@ -61,6 +61,7 @@ class WarmstartConfig:
     first_trial: int = 0
     progress: bool = True
     ipopt_max_wall_time: float | None = None   # [s] per IPOPT solve (None: IPOPT's iteration limit only)
+    free_plane_normals: bool = False  # PipelineOptions.fixed_plane_normals = not this (result lines record it)
 
 
 def validate(cfg: WarmstartConfig) -> list[str]:
@@ -157,9 +158,9 @@ def _run_unit(args) -> dict:
     """One (scene, trial, mode): generate the trial, run the pipeline, return the result line."""
     from ..pipeline import PipelineOptions, run_pipeline
 
-    robot_name, scene, index, mode, time_limit, seed, max_wall = args
+    robot_name, scene, index, mode, time_limit, seed, max_wall, fixed_normals = args
     line = {"scene": scene, "trial": int(index), "mode": mode, "seed": int(seed), "time_limit_s": float(time_limit),
-            "ipopt_max_wall_time_s": max_wall}
+            "ipopt_max_wall_time_s": max_wall, "fixed_plane_normals": bool(fixed_normals)}
     w = _state(robot_name, scene)
     t0 = time.perf_counter()
     try:
@@ -172,6 +173,7 @@ def _run_unit(args) -> dict:
     line.update({"pipeline_seed": int(trial.seed), "regenerations": int(trial.regenerations),
                  "trial_generation_s": time.perf_counter() - t0})
     opts = PipelineOptions(plan_time_limit=float(time_limit), warm_start=(mode == "warm"),
+                           fixed_plane_normals=bool(fixed_normals),
                            ipopt_options=PipelineOptions.ipopt_options
                            + (() if max_wall is None else (("max_wall_time", float(max_wall)),)))
     c0, ch0, w0 = time.process_time(), resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
@@ -209,16 +211,19 @@ def _key(r: dict) -> tuple:
 
 def _matches(r: dict, cfg: WarmstartConfig) -> bool:
     mw = None if cfg.ipopt_max_wall_time is None else float(cfg.ipopt_max_wall_time)
+    # lines written before the option existed were solved with free normals
     return (r.get("seed") == cfg.seed and r.get("time_limit_s") == float(cfg.time_limit)
-            and r.get("ipopt_max_wall_time_s") == mw)
+            and r.get("ipopt_max_wall_time_s") == mw
+            and r.get("fixed_plane_normals", False) == (not cfg.free_plane_normals))
 
 
 def pending_units(cfg: WarmstartConfig, scenes: list[str], rows: list[dict],
                   robot_name: str = "tcbirrt_dual_arm") -> list[tuple]:
-    """The (robot, scene, trial, mode, time_limit, seed, ipopt_max_wall_time) units not yet in ``rows``."""
+    """The (robot, scene, trial, mode, time_limit, seed, ipopt_max_wall_time, fixed_plane_normals)
+    units not yet in ``rows``."""
     done = {_key(r) for r in rows if _matches(r, cfg)}
     mw = None if cfg.ipopt_max_wall_time is None else float(cfg.ipopt_max_wall_time)
-    return [(robot_name, sc, i, m, float(cfg.time_limit), int(cfg.seed), mw)
+    return [(robot_name, sc, i, m, float(cfg.time_limit), int(cfg.seed), mw, not cfg.free_plane_normals)
             for sc in scenes for i in range(cfg.first_trial, cfg.first_trial + cfg.trials) for m in cfg.modes
             if (sc, i, m) not in done]
 

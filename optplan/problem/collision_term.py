@@ -83,10 +83,10 @@ class CollisionAvoidance(Term):
     normal at the initial guess, per pair and knot; only the offsets b are free). The rows stay
     exact and conservative (distance ≥ margin along a unit normal), the NLP loses its bilinear
     plane terms and the trajectory stays in the corridor of half-spaces around the initial guess,
-    at the price of a higher optimum (measured on 8 pipeline segments: 3.2× less IPOPT time,
-    iterations 274 → 153, two segments that ran into unconstrained obstacles with free normals now
-    clear, smoothness cost 1-3× higher — docs/planners.md). A new initial guess (``set_initial``)
-    re-seeds the normals.
+    at the price of a higher optimum (measured on 8 constrained pipeline segments: 3.2× less IPOPT
+    time, iterations 270 → 153, the two segments whose free-normal solutions ran into pairs that
+    were not activated (−346 and −10 mm) clear by 29 and 33 mm, jerk cost 1.0-3.4× higher —
+    docs/planners.md). A new initial guess (``set_initial``) re-seeds the normals.
     """
 
     scene: Scene | None = None
