@@ -264,22 +264,29 @@ def _straight_line_ik(robot, scene, N, rng):
     pytest.fail("no collision-free closed-chain start/goal found by IK")
 
 
-def test_transport_end_to_end(tcb, transport):
-    N = 25
-    Q, chk = _straight_line_ik(tcb, transport, N, np.random.default_rng(0))
-    clear0 = min(chk.min_distance(q)[0] for q in Q)
-    assert clear0 < 0, "the straight-line initial guess should collide (else the test proves nothing)"
+def _transport_problem(tcb, transport, Q, **col_kw):
+    """Rest-to-rest transport NLP through the knots Q: closed chain, limits, 20 mm collision
+    margin, minimum jerk; returns (problem, closed chain, collision handle)."""
     z = np.zeros(tcb.nj)
-    prob = OptProblem(tcb, n_intervals=N, duration=60.0)
+    prob = OptProblem(tcb, n_intervals=len(Q) - 1, duration=60.0)
     prob.add_constraint(JointBoundary("start", q=Q[0], qd=z, qdd=z))
     prob.add_constraint(JointBoundary("end", q=Q[-1], qd=z, qdd=z))
     cc = ClosedChain.from_grasps(transport.object.grasps["A"], transport.object.grasps["B"])
     prob.add_constraint(cc)
     prob.add_constraint(JointPositionLimits())
     prob.add_constraint(JointVelocityLimits())
-    col = prob.add_constraint(CollisionAvoidance(transport, margin=0.02))
+    col = prob.add_constraint(CollisionAvoidance(transport, margin=0.02, **col_kw))
     prob.add_cost(Smoothness("jerk"))
     prob.set_initial(q=Q)
+    return prob, cc, col
+
+
+def test_transport_end_to_end(tcb, transport):
+    N = 25
+    Q, chk = _straight_line_ik(tcb, transport, N, np.random.default_rng(0))
+    clear0 = min(chk.min_distance(q)[0] for q in Q)
+    assert clear0 < 0, "the straight-line initial guess should collide (else the test proves nothing)"
+    prob, cc, col = _transport_problem(tcb, transport, Q)
     t0 = time.perf_counter()
     sol = prob.solve()
     wall = time.perf_counter() - t0
@@ -304,17 +311,7 @@ def test_fixed_normals_hold_coal_witness_normals(tcb, transport):
     fixed normals from coal at that guess."""
     N = 25
     Q, chk = _straight_line_ik(tcb, transport, N, np.random.default_rng(0))
-    z = np.zeros(tcb.nj)
-    prob = OptProblem(tcb, n_intervals=N, duration=60.0)
-    prob.add_constraint(JointBoundary("start", q=Q[0], qd=z, qdd=z))
-    prob.add_constraint(JointBoundary("end", q=Q[-1], qd=z, qdd=z))
-    cc = ClosedChain.from_grasps(transport.object.grasps["A"], transport.object.grasps["B"])
-    prob.add_constraint(cc)
-    prob.add_constraint(JointPositionLimits())
-    prob.add_constraint(JointVelocityLimits())
-    col = prob.add_constraint(CollisionAvoidance(transport, margin=0.02, fixed_normals=True))
-    prob.add_cost(Smoothness("jerk"))
-    prob.set_initial(q=Q)
+    prob, cc, col = _transport_problem(tcb, transport, Q, fixed_normals=True)
     prob._build()
     term, b = col.term, prob._built
     nb = b["nbase"]

@@ -91,13 +91,8 @@ def test_pipeline_scene1_trial(tcb, tmp_path):
         assert np.all(np.diff(z["t"]) > 0)
 
 
-def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
-    """A segment whose NLP fails is re-solved once on a 1.6× finer grid; one whose closed chain
-    drifts between knots beyond closed_chain_tol is refined by (residual / (tol/2))^¼ (fake solves:
-    the logic only)."""
-    from types import SimpleNamespace
-
-    import optplan.pipeline as PL
+def _scene1_plan(tcb):
+    """Scene 1, trial 4: (scene, a successful TCBiRRT plan) for the segment-retry logic tests."""
     from optplan.bench.trials import TrialGenerator
     from optplan.planners import make_planner
 
@@ -105,6 +100,17 @@ def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
     tr = TrialGenerator(tcb, sc).generate(4, 0)
     plan = make_planner("tcbirrt", tcb, sc).plan(tr.q_start, tr.q_goal, time_limit=10.0, seed=int(tr.seed))
     assert plan.success
+    return sc, plan
+
+
+def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
+    """A segment whose NLP fails is re-solved once on a 1.6× finer grid; one whose closed chain
+    drifts between knots beyond closed_chain_tol is refined by (residual / (tol/2))^¼ (fake solves:
+    the logic only)."""
+    from types import SimpleNamespace
+
+    import optplan.pipeline as PL
+    sc, plan = _scene1_plan(tcb)
     calls = []
 
     def fake_solve(robot, scene, prob, cc, holder, opts, ipopt, kind):
@@ -150,13 +156,7 @@ def test_fixed_normal_failure_falls_back_to_free_normals(tcb, monkeypatch):
     from types import SimpleNamespace
 
     import optplan.pipeline as PL
-    from optplan.bench.trials import TrialGenerator
-    from optplan.planners import make_planner
-
-    sc = Scene.load("ssps_scene1")
-    tr = TrialGenerator(tcb, sc).generate(4, 0)
-    plan = make_planner("tcbirrt", tcb, sc).plan(tr.q_start, tr.q_goal, time_limit=10.0, seed=int(tr.seed))
-    assert plan.success
+    sc, plan = _scene1_plan(tcb)
     calls = []
 
     def fake_solve(robot, scene, prob, cc, holder, opts, ipopt, kind):
