@@ -125,7 +125,7 @@ def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
         return sol, rep
 
     monkeypatch.setattr(PL, "_solve_verified", fake_solve)
-    opts = PipelineOptions(shortcut_attempts=0, fixed_plane_normals=False)
+    opts = PipelineOptions(shortcut_attempts=0, fixed_plane_normals=False, transcription="knots")
     results, _ = PL.optimize_segments(tcb, sc, plan, opts, np.random.default_rng(0))
     (k0, n0), (k1, n1), (k2, n2) = calls[:3]
     assert k0 == k1 == k2 and n1 == min(opts.max_intervals, int(np.ceil(n0 * 1.6)))   # failure → 1.6×
@@ -167,7 +167,7 @@ def test_fixed_normal_failure_falls_back_to_free_normals(tcb, monkeypatch):
         return sol, SimpleNamespace(max_closed_chain_residual=1e-7, min_clearance_m=0.01)
 
     monkeypatch.setattr(PL, "_solve_verified", fake_solve)
-    opts = PipelineOptions(shortcut_attempts=0)
+    opts = PipelineOptions(shortcut_attempts=0, transcription="knots")
     assert opts.fixed_plane_normals
     results, _ = PL.optimize_segments(tcb, sc, plan, opts, np.random.default_rng(0))
     (k0, n0, f0), (k1, n1, f1) = calls[:2]
