@@ -147,23 +147,21 @@ class CollisionChecker:
         """Smallest distance [m] and the pair that has it (inf, None without pairs)."""
         if not self.pairs:
             return float("inf"), None
-        d = self.distances(q)
-        i = int(np.argmin(d))
-        return float(d[i]), self.pairs[i]
+        q = self.robot.check_q(q)
+        i = int(pin.computeDistances(self.model, self.data, self._cgm, self._cgd, q))
+        return float(self._cgd.distanceResults[i].min_distance), self.pairs[i]
 
     def is_valid(self, q, margin: float = 0.0) -> bool:
         """True when every pair is at least ``margin`` [m] apart (stops at the first failure;
         ``margin = 0`` uses coal's boolean collision test, the fastest)."""
+        if margin <= 0.0:
+            q = self.robot.check_q(q)
+            return not pin.computeCollisions(self.model, self.data, self._cgm, self._cgd, q, True)
         Mo = self._update(q)
         obj_tf = _tf(Mo) if Mo is not None else None
         for p in self.pairs:
             g1, t1, g2, t2 = self._geoms(p, obj_tf)
-            if margin <= 0.0:
-                self._cres.clear()
-                if coal.collide(g1, t1, g2, t2, self._creq, self._cres):
-                    return False
-            else:
-                self._res.clear()
-                if coal.distance(g1, t1, g2, t2, self._req, self._res) < margin:
-                    return False
+            self._res.clear()
+            if coal.distance(g1, t1, g2, t2, self._req, self._res) < margin:
+                return False
         return True

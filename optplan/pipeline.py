@@ -150,6 +150,8 @@ class PipelineResult:
     constrained: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     plan_time_s: float = float("nan")
     shortcut_time_s: float = 0.0
+    #: wall time of the optimization of every segment [s]: NLP setup, IPOPT and verify (not the shortcut)
+    opt_wall_s: float = 0.0
     joint_names: tuple = ()
 
     @property
@@ -198,7 +200,8 @@ class PipelineResult:
                 "opt_setup_time_s": self.setup_time_s, "opt_iterations": self.iterations,
                 "max_closed_chain_residual": self.max_closed_chain_residual, "min_clearance_m": self.min_clearance_m,
                 "n_regrasp": self.n_regrasp, "n_segments": len(self.segments),
-                "shortcut_time_s": self.shortcut_time_s}
+                "shortcut_time_s": self.shortcut_time_s, "opt_wall_s": self.opt_wall_s,
+                "attempts": [len(s.attempts) for s in self.segments]}
 
     def save(self, path) -> None:
         """npz with ``t`` [s], ``q`` [rad] (M × nq, Pinocchio order), ``joint_names``, ``constrained``."""
@@ -530,7 +533,9 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
                          joint_names=robot.joint_names)
     if not plan.success:
         return res
+    t1 = time.perf_counter()
     res.segments, res.shortcut_time_s = optimize_segments(robot, scene, plan, opts, rng, checker)
+    res.opt_wall_s = time.perf_counter() - t1 - res.shortcut_time_s
     ts, qs, flags = [], [], []
     for s in res.segments:
         sol = s.solution

@@ -139,6 +139,22 @@ class KernelCache:
         return self._fns[key]
 
 
+def _witness_plane(checker, pair, obj_tf) -> np.ndarray:
+    """(n, b): coal's unit witness normal from A to B and the mid-plane offset, at the placements
+    last set by ``checker._update`` (``obj_tf``: the held object's)."""
+    import coal
+
+    g1, t1, g2, t2 = checker._geoms(pair, obj_tf)
+    res = coal.DistanceResult()
+    coal.distance(g1, t1, g2, t2, coal.DistanceRequest(), res)
+    n = np.asarray(res.normal, float)
+    if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+        n = t2.getTranslation() - t1.getTranslation()
+    n = n / max(np.linalg.norm(n), 1e-12)
+    mid = 0.5 * (np.asarray(res.getNearestPoint1()) + np.asarray(res.getNearestPoint2()))
+    return np.r_[n, n @ mid]
+
+
 # --------------------------------------------------------------------------- assembly
 _C = (1 / 6, 4 / 6, 1 / 6)  # ∂q(t_k)/∂P_{k+a}, a = 0, 1, 2
 
@@ -284,7 +300,7 @@ class SegmentSpec:
     velocity_limit: np.ndarray | None = None
     margin: float = 0.02
     object_arm: str | None = None
-    activation: float = 0.3
+    activation: float = 0.15
     window: int = 3
 
 
@@ -337,6 +353,9 @@ class SplineSegmentProblem:
         self._plan = None
         #: use the kernel-assembled Jacobian and Hessian (False: CasADi's own AD of the whole graph)
         self.exact_derivatives = True
+        #: [m] a moving box keeps the rows of the vertices within this distance of its leading
+        #: vertex along a plane's normal (``inf``: every vertex; see :meth:`_prune`)
+        self.vertex_window = 0.5
 
     # ------------------------------------------------------------------ initial guess
     def set_initial(self, q=None, *, solution: Solution | None = None) -> None:
@@ -395,7 +414,9 @@ class SplineSegmentProblem:
 
     # ------------------------------------------------------------------ collision rows
     def _entity(self, kind: str, idx: int, holder: str):
-        """(frame id or None, points 3 × m in that frame (world if None), radius) of an entity."""
+        """(frame id or None, points 3 × m in that frame (world if None), radius) of an entity;
+        an entity that depends on no free joint (an obstacle, the fixed base, a holding arm, the
+        object it holds) comes back static: frame None and its world points."""
         col = self.col
         if kind == "obstacle":
             o = col.checker.obstacles[idx]
@@ -410,21 +431,34 @@ class SplineSegmentProblem:
         if kind == "object":
             V = np.array(_box_vertices(np.asarray(col.checker.object.size) / 2)).T
             G = col._grasp_inv
-            return self.robot.arm(holder).ee_frame_id, G.rotation @ V + G.translation[:, None], 0.0
-        spec = col._robot_shape.get(idx)
-        if spec is None:
-            return None
-        fid, shape, Mbox = spec
-        from .. import distance as D
-        if isinstance(shape, D.Box):
-            V = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T
-            return fid, V, 0.0
-        if isinstance(shape, D.Sphere):
-            return fid, np.asarray(shape.center, float).reshape(3, 1), float(shape.radius)
-        return fid, np.array([shape.a, shape.b], float).T, float(shape.radius)
+            fid, V, r = self.robot.arm(holder).ee_frame_id, G.rotation @ V + G.translation[:, None], 0.0
+        else:
+            spec = col._robot_shape.get(idx)
+            if spec is None:
+                return None
+            fid, shape, Mbox = spec
+            from .. import distance as D
+            if isinstance(shape, D.Box):
+                V, r = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T, 0.0
+            elif isinstance(shape, D.Sphere):
+                V, r = np.asarray(shape.center, float).reshape(3, 1), float(shape.radius)
+            else:
+                V, r = np.array([shape.a, shape.b], float).T, float(shape.radius)
+        if col._free_joints_of(self.robot, kind, idx, self.fixed) == set():
+            M = self._static_placement(fid)
+            return None, M.rotation @ V + M.translation[:, None], r
+        return fid, V, r
+
+    def _static_placement(self, fid: int):
+        import pinocchio as pin
+
+        data = self.robot.model.createData()
+        pin.framesForwardKinematics(self.robot.model, data, self.q0)
+        return data.oMf[fid]
 
     def _plan_collision(self, Qk: np.ndarray) -> list:
-        """Active (pair, kernel, knots, static, normals, s0, margins) along knot configurations."""
+        """Active (pair, kernel, knots, …) along the knot configurations ``Qk``: one item per pair
+        with its kernel, knots, margins and which side moves (``flip``: A is the static side)."""
         col = self.col
         if col is None:
             return []
@@ -444,30 +478,68 @@ class SplineSegmentProblem:
             ea, eb = self._entity(ka, pair.a, holder), self._entity(kb, pair.b, holder)
             if ea is None or eb is None:
                 continue
+            if ea[0] is None and eb[0] is None:
+                continue  # both static: constant distance, checked by verify
             ks = [k for k in col._knots_of(pair, N) if k not in pinned]
             if not ks:
                 continue
-            static = eb[0] is None
-            fn = self.kernels.pair(ea[0], ea[1], ea[2], eb[0], eb[1], eb[2])
-            plan.append(SimpleNamespace(pair=pair, fn=fn, knots=ks, static=static, a=ea, b=eb,
-                                        nrow=ea[1].shape[1] + (0 if static else eb[1].shape[1]),
+            flip = ea[0] is None
+            mov, other = (eb, ea) if flip else (ea, eb)
+            static = other[0] is None
+            plan.append(SimpleNamespace(pair=pair, knots=ks, static=static, flip=flip, a=mov, b=other,
                                         margins=np.array([margin_at(pair, k) for k in ks])))
         return plan
 
-    def _plane_data(self, item, Qk) -> tuple[np.ndarray, np.ndarray]:
-        """Normals (3 × K) from coal's witness at the knot configurations, and the offsets:
-        the static obstacle's support value (static) or the witness mid-plane offset."""
-        ns, ss = [], []
-        for k in item.knots:
-            nb = self.col._plane_init(item.pair, Qk[k])
-            n = nb[:3]
-            if item.static:
-                Y, rb = item.b[1], item.b[2]
-                ss.append(float(np.min(n @ Y)) - rb)
-            else:
-                ss.append(nb[3])
-            ns.append(n)
-        return np.array(ns).T, np.array(ss)
+    def _prune(self, it, side, normals: np.ndarray, Qk: np.ndarray, sign: float):
+        """Keep the points of a moving box side that come within ``vertex_window`` [m] of its
+        leading point along the (signed) normal at some knot of the pair: the others sit that far
+        behind the plane and cannot reach it without the body turning by a large angle."""
+        fid, V, r = side
+        if V.shape[1] <= 2 or not np.isfinite(self.vertex_window):
+            return side
+        import pinocchio as pin
+
+        data = self.robot.model.createData()
+        keep = np.zeros(V.shape[1], bool)
+        for t, k in enumerate(it.knots):
+            pin.framesForwardKinematics(self.robot.model, data, Qk[k])
+            proj = sign * normals[:, t] @ (data.oMf[fid].rotation @ V)
+            keep |= proj >= proj.max() - self.vertex_window
+        return fid, V[:, keep], r
+
+    def _kernels_for(self, plan: list, planes: list, Qk: np.ndarray) -> None:
+        """Point subsets (:meth:`_prune`), kernel and row count of every item."""
+        for it, (Nrm, _) in zip(plan, planes):
+            it.a = self._prune(it, it.a, Nrm, Qk, 1.0)  # rows b − n·x: x's leading along +n
+            if not it.static:
+                it.b = self._prune(it, it.b, Nrm, Qk, -1.0)  # rows n·y − b: y's leading along −n
+            it.fn = self.kernels.pair(it.a[0], it.a[1], it.a[2], it.b[0], it.b[1], it.b[2])
+            it.nrow = it.a[1].shape[1] + (0 if it.static else it.b[1].shape[1])
+
+    def _plane_data(self, plan: list, Qk) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per item: normals (3 × K) from coal's witness at the knot configurations (pointing from
+        the moving side to the other), and the offsets: the static side's support value, or the
+        witness mid-plane offset (a variable's initial value) for two moving sides."""
+        col = self.col
+        per_knot: dict[int, list] = {}
+        for i, it in enumerate(plan):
+            for t, k in enumerate(it.knots):
+                per_knot.setdefault(k, []).append((i, t))
+        out = [(np.zeros((3, len(it.knots))), np.zeros(len(it.knots))) for it in plan]
+        for k, items in per_knot.items():
+            Mo = col.checker._update(Qk[k])
+            import coal
+            obj_tf = coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None
+            for i, t in items:
+                it = plan[i]
+                nb = _witness_plane(col.checker, it.pair, obj_tf)
+                n, off = (-nb[:3], -nb[3]) if it.flip else (nb[:3], nb[3])
+                if it.static:
+                    Y, rb = it.b[1], it.b[2]
+                    off = float(np.min(n @ Y)) - rb
+                out[i][0][:, t] = n
+                out[i][1][t] = off
+        return out
 
     # ------------------------------------------------------------------ build
     def _build(self) -> _Built:
@@ -500,9 +572,10 @@ class SplineSegmentProblem:
                          np.tile(np.r_[np.zeros(6), 1.0], N - 1), np.tile(np.r_[np.zeros(6), np.inf], N - 1)))
         bi = 0
         x_b0 = []
-        for it in plan:
+        planes = self._plane_data(plan, Qk0)
+        self._kernels_for(plan, planes, Qk0)
+        for it, (Nrm, s0) in zip(plan, planes):
             K = len(it.knots)
-            Nrm, s0 = self._plane_data(it, Qk0)
             Np = ca.MX.sym("n", 3, K)
             params.append(Np)
             pvals.append(Nrm.ravel(order="F"))
@@ -580,7 +653,11 @@ class SplineSegmentProblem:
             for k, v in (ipopt_options or {}).items():
                 opts[k if "." in k or k in ("print_time", "expand") else f"ipopt.{k}"] = v
             if self.exact_derivatives:
+                # the kernels may be compiled (no derivatives of their own): IPOPT's multipliers
+                # are used as they are, not recomputed from a gradient of the Lagrangian
                 opts.update(self._derivs)
+                opts.update({"no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
+                             "calc_f": False, "calc_g": False})
             b.solver = ca.nlpsol("segment", "ipopt", self._nlp, opts)
         setup = time.perf_counter() - t_setup + (b.setup_time if b.setup_time else 0.0)
         b.setup_time = 0.0
