@@ -81,6 +81,24 @@ class PipelineOptions:
     at coal's witness normals along the warm start (measured: 3.2× less IPOPT time on 8 constrained
     segments and fewer collision retries, at a 1.0-3.4× higher jerk cost; docs/planners.md). A
     segment whose fixed-normal NLP fails is re-solved with free normals before any other retry.
+
+    transcription: ``"bspline"`` (default): each segment is a :class:`~optplan.problem.segment.
+    SplineSegmentProblem` — joint-space B-spline control points only, closed chain and fixed-normal
+    collision planes at the knots, limits on the control points (so also between knots), kernels
+    mapped over the knots and exact derivatives assembled from them; ``"knots"``: the
+    :class:`~optplan.problem.OptProblem` knot-state transcription with the options above.
+    B-spline segments get ⌈joint path length / spline_interval_step [rad]⌉ intervals for a
+    constrained segment (⌈length / free_interval_step⌉ for a regrasp), clipped to
+    [spline_min_intervals, spline_max_intervals]. Their retry policy, in order (each attempt is
+    recorded in ``SegmentResult.attempts``): (1) ``collision``: coal finds a contact after a
+    converged solve → pairs activated along the solution, margins raised between knots, re-solve
+    (≤ collision_retries); (2) ``finer-grid``: IPOPT failed or a contact remains → 1.6× the
+    intervals from the same initial guess (≤ failure_retries); (3) ``refine``: the closed-chain
+    residual between knots exceeds closed_chain_tol → the grid refined by
+    (residual / (tol/2))^¼, warm-started from the solution (≤ refinements); (4) ``fallback-knots``:
+    still not verified → the knot transcription with free plane normals.
+    ipopt_max_wall_time [s]: IPOPT's wall-clock cap per solve (a solve that hits it ends with the
+    status ``Maximum_WallTime_Exceeded``; B-spline path).
     """
 
     planner: str = "tcbirrt"
