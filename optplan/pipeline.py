@@ -125,6 +125,7 @@ class PipelineOptions:
     spline_min_intervals: int = 30
     spline_max_intervals: int = 160
     ipopt_max_wall_time: float = 60.0
+    smooth_warm_start: float = 0.0
 
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
@@ -402,6 +403,8 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         elif opts.warm_start:
             if not prob.set_initial_path(seg_path, cc):
                 log.info("segment %s: some resampled configurations did not project onto the manifold", kind)
+            if opts.smooth_warm_start > 0:
+                prob.smooth_initial(opts.smooth_warm_start, cc)
         else:
             prob.set_initial(_cold_path(robot, scene, seg_path[0], seg_path[-1], kind, int(N)))
         return prob
