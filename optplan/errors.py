@@ -35,6 +35,19 @@ class ConfigurationError(OptplanError, ValueError):
     """A configuration / velocity vector has the wrong size or non-finite entries."""
 
 
+class UsageError(OptplanError, ValueError):
+    """A command-line argument or environment setting is invalid (the command exits with status 2)."""
+
+
+class ResultFileError(OptplanError, ValueError):
+    """A saved result file (Solution, PlanResult) is unreadable, corrupted or fails its own checks;
+    the message names the file and what is wrong."""
+
+
+class OptionError(OptplanError, ValueError):
+    """A solver or method option is unknown or has a value of the wrong type/range."""
+
+
 def check_vector(value, size: int, what: str, *, allow_none: bool = False):
     """Return ``value`` as a finite float vector of length ``size`` or raise ConfigurationError.
 

@@ -25,6 +25,7 @@ from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError
 from ..robot import RobotModel
+from ..solver_options import casadi_option_name, check_ipopt_options, check_solve_arguments
 from .solution import IpoptStatus, Solution
 from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
 from .transcription import Transcription
@@ -345,6 +346,8 @@ class OptProblem:
         """
         if self._x0 is None:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
+        check_solve_arguments(tol, max_iter, objective_scaling)
+        check_ipopt_options(ipopt_options)   # an invalid option is an OptionError (ValueError) before the solve
         t_setup = time.perf_counter()
         b = self._built or self._build()
         n_ineq = int(np.sum(b["lbg"] != b["ubg"]))
@@ -376,7 +379,7 @@ class OptProblem:
                          "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
                          "ipopt.warm_start_slack_bound_push": 1e-9})
         for k, v in (ipopt_options or {}).items():
-            opts[k if "." in k or k in ("print_time", "expand") else f"ipopt.{k}"] = v
+            opts[casadi_option_name(k)] = v
         key = repr(sorted(opts.items()))
         if b["solver"] is None or b["solver_opts"] != key:
             nlp = {"x": b["x"], "f": b["f"], "g": b["g"]}
