@@ -151,9 +151,9 @@ def check_planner(name: str, option: str = "--planner") -> str:
 def check_root() -> None:
     """``OPTPLAN_ROOT``, when set, is a folder with ``models/robots`` and ``models/scenes``."""
     env = os.environ.get("OPTPLAN_ROOT")
-    if env is None:
+    if not env:   # unset or empty: the installed package's models (as optplan.description.repo_root)
         return
     p = Path(env)
-    if not env.strip() or not (p / "models").is_dir():
+    if not (p / "models").is_dir():
         raise UsageError(f"OPTPLAN_ROOT={env!r}: expected a directory that contains models/robots and "
                          "models/scenes (an optplan checkout); unset it to use the installed package's")
