@@ -267,7 +267,10 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command; a user error (bad argument, unknown name, unwritable output path, bad
     ``OPTPLAN_ROOT``, malformed description) prints one line and returns 2."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:   # --help (0) or an argparse error, already printed as one line (2)
+        return int(exc.code or 0)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     prog = " ".join(["optplan"] + [str(getattr(args, k)) for k in ("command", "action", "what")

@@ -109,12 +109,14 @@ def test_output_paths_are_checked_before_the_run(capsys, tmp_path, monkeypatch):
 def test_failed_plan_still_writes_its_json(capsys, tmp_path, monkeypatch):
     """An exception inside the run (here: a planner crash injected into the pipeline) still leaves
     the JSON with success: false and the error."""
-    from optplan.bench.trials import TrialGenerator
+    import optplan.bench.trials as trials
+    import optplan.robot as robot
 
     def boom(*a, **k):
         raise RuntimeError("injected failure")
 
-    monkeypatch.setattr(TrialGenerator, "generate", boom)
+    monkeypatch.setattr(trials, "TrialGenerator", boom)
+    monkeypatch.setattr(robot.RobotModel, "from_name", classmethod(lambda cls, name: None))
     out = tmp_path / "r.json"
     with pytest.raises(RuntimeError):
         cli.main(["plan", "--scene", "1", "--json", str(out)])
