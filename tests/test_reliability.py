@@ -211,3 +211,16 @@ def test_invalid_ipopt_option_is_a_value_error_before_the_solve(tcb):
     with pytest.raises(ValueError, match="no_such_option"):
         prob.solve({"no_such_option": 1})
     assert prob._built is None   # refused before the NLP was built
+
+
+def test_zero_counts_are_not_zero_divisions(tmp_path):
+    from optplan.bench import kinematics as bk
+    from optplan.bench.tcbirrt import BenchConfig, run, success_curve
+
+    assert all(np.isnan(success_curve([], 0, [0.1, 1.0])))
+    with pytest.raises(OptionError, match="calls"):
+        bk.run("eba_ffsr", calls=0)
+    for field, value in (("trials", 0), ("jobs", 0), ("time_limit", float("nan")), ("first_trial", -1)):
+        with pytest.raises(OptionError, match=field):
+            run(BenchConfig(out=str(tmp_path / "o"), **{field: value}))
+    assert not (tmp_path / "o").exists()
