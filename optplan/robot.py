@@ -156,7 +156,7 @@ class RobotModel:
             if not 0 <= int(name) < self.model.nframes:
                 raise UnknownNameError("frame id", name, [str(i) for i in range(self.model.nframes)])
             return int(name)
-        if not self.model.existFrame(name):
+        if not isinstance(name, str) or not self.model.existFrame(name):
             raise UnknownNameError("frame", name, self.frame_names)
         return int(self.model.getFrameId(name))
 

@@ -412,3 +412,17 @@ def test_zipfile_is_not_a_library_error(tmp_path):
         z.writestr("hello.txt", "hi")
     with pytest.raises(ResultFileError, match="s.npz"):
         Solution.load(p)
+
+
+@FAST
+@given(frame=st.one_of(junk_scalars(), st.integers(), st.text(max_size=8)),
+       reference=st.one_of(st.sampled_from(["local", "world", "world_aligned"]), st.text(max_size=6), junk_scalars()))
+def test_frame_and_reference_names(robots, frame, reference):
+    tcb = robots["tcb"]
+    kin = Kinematics(tcb)
+    try:
+        J = kin.frame_jacobian(tcb.neutral(), frame, reference=reference)
+    except OptplanError as exc:
+        assert str(exc)
+        return
+    assert J.shape == (6, tcb.nv) and np.all(np.isfinite(J))
