@@ -23,9 +23,10 @@ import numpy as np
 import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
-from ..errors import ConfigurationError
+from ..errors import ConfigurationError, OptionError
 from ..robot import RobotModel
 from ..solver_options import casadi_option_name, check_ipopt_options, check_solve_arguments
+from ..spatial import check_pose
 from .solution import IpoptStatus, Solution
 from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
 from .transcription import Transcription
@@ -74,7 +75,7 @@ class OptProblem:
         self.duration = float(duration)
         self.free_time = bool(free_time)
         self.duration_bounds = (float(lo), float(hi))
-        self.base0 = pin.SE3.Identity() if base0 is None else base0
+        self.base0 = pin.SE3.Identity() if base0 is None else check_pose(base0, "OptProblem: base0")
         self.n_sub = int(n_sub)
         self._handles: list[TermHandle] = []
         self._x0: np.ndarray | None = None
@@ -94,8 +95,12 @@ class OptProblem:
             raise TypeError(f"expected an optplan term (optplan.problem.terms), got {type(term).__name__}")
         if role == "constraint" and term.cost_only:
             raise TypeError(f"{type(term).__name__} is a cost-only term; use add_cost")
-        if not np.isfinite(weight) or weight < 0:
-            raise ValueError(f"weight: expected a finite number ≥ 0, got {weight}")
+        if isinstance(weight, bool) or not isinstance(weight, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(weight) or weight < 0:
+            raise OptionError(f"weight: expected a finite number ≥ 0, got {weight!r}")
+        for k, v in vars(term).items():   # poses given to a term (targets, relative poses) are true poses
+            if isinstance(v, pin.SE3):
+                check_pose(v, f"{type(term).__name__}.{k}")
         base = name or term.default_name
         names = {h.name for h in self._handles}
         final, i = base, 2
