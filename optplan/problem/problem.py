@@ -371,14 +371,16 @@ class OptProblem:
                 "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
                 "ipopt.mu_strategy": "adaptive" if inequality_heavy else "monotone",
                 "ipopt.obj_scaling_factor": scale,
-                "ipopt.max_iter": int(max_iter), "ipopt.sb": "yes",
-                # a closed chain at knots a JointBoundary pins repeats those rows: the constraint Jacobian
-                # is rank-deficient, MUMPS reports the KKT matrix singular and IPOPT regularises it
-                # with δ_c = value·μ^¼ for the rest of the solve. With IPOPT's 1e-8 the iterates then
-                # creep at μ_min (transport N = 25: 182 iterations, and past 500 on other builds);
-                # with 1e-6: 15 (N = 50: 16), the same on IPOPT 3.14.11 and 3.14.19. Full-rank
-                # problems never use it. docs/reliability.md
-                "ipopt.jacobian_regularization_value": 1e-6}
+                "ipopt.max_iter": int(max_iter), "ipopt.sb": "yes"}
+        if inequality_heavy:
+            # A closed chain at knots a JointBoundary pins repeats those rows: the constraint Jacobian
+            # is rank-deficient, MUMPS reports the KKT matrix singular and IPOPT regularises it with
+            # δ_c = value·μ^¼ for the rest of the solve. With IPOPT's 1e-8 the scaled transport NLP
+            # then creeps at μ_min (N = 25: 182 iterations, past 500 on other IPOPT/MUMPS builds);
+            # with 1e-6: 15 (N = 50: 16 vs 15), identical on IPOPT 3.14.11 and 3.14.19. Unused when
+            # the Jacobian has full rank; not for equality-dominated problems (closed-chain test
+            # NLP: 71 → 500 iterations). docs/reliability.md
+            opts["ipopt.jacobian_regularization_value"] = 1e-6
         if self.robot.is_floating:
             # MUMPS's automatic ordering (PORD here) on the floating-base transcription: 47
             # iterations, 12.5 s; QAMD: 26 iterations, 2.6 s (restoration N = 48, measured)
