@@ -7,6 +7,16 @@ import logging
 import sys
 import time
 
+from . import cli_args as ca
+from .errors import OptplanError, UsageError
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``optplan plan: error: argument --trials: expected ...`` (exit 2)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
 
 def _cmd_models_build(args) -> int:
     from .description import available_models, load_description, urdf_dir, urdf_string, write_urdf
@@ -51,7 +61,7 @@ def _cmd_bench_kinematics(args) -> int:
 def _cmd_bench_transport(args) -> int:
     from .bench.transport import report, run
 
-    knots = [int(k) for k in args.knots.split(",")]
+    knots = args.knots
     rows = run(knots, args.seed)
     print(report(rows, knots))
     if args.json:
@@ -61,9 +71,17 @@ def _cmd_bench_transport(args) -> int:
 
 
 def _cmd_bench_tcbirrt(args) -> int:
-    from .bench.tcbirrt import BenchConfig, format_summary, run, summarize
+    from .bench.tcbirrt import BenchConfig, format_summary, parse_planner_spec, run, summarize
 
-    cfg = BenchConfig(scenes=[s for s in args.scene.split(",") if s], planners=[p for p in args.planners.split(",") if p],
+    scenes = [ca.check_scene(s) for s in args.scene.split(",") if s.strip()] or [ca.check_scene("")]
+    planners = [p for p in args.planners.split(",") if p.strip()]
+    for p in planners or [""]:
+        try:
+            spec = parse_planner_spec(p)[0]
+        except ValueError as exc:
+            raise UsageError(f"--planners {args.planners!r}: {exc}") from None
+        ca.check_planner(spec, "--planners")
+    cfg = BenchConfig(scenes=scenes, planners=planners,
                       trials=args.trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=args.out,
                       clock=args.clock, progress=not args.no_progress, plot=not args.no_plot,
                       first_trial=args.first_trial, merge=list(args.merge or []))
@@ -104,12 +122,20 @@ def _cmd_plan(args) -> int:
     from .robot import RobotModel
     from .scene import Scene
 
+    scene_name = ca.check_scene(args.scene)
+    planner = ca.check_planner(args.planner)
     robot = RobotModel.from_name("tcbirrt_dual_arm")
-    scene = Scene.load(args.scene if not args.scene.isdigit() else f"ssps_scene{args.scene}")
-    trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
-    opts = PipelineOptions(planner=args.planner, plan_time_limit=args.time_limit, warm_start=not args.cold)
+    scene = Scene.load(scene_name)
     t0 = time.perf_counter()
-    res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
+    try:
+        trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
+        opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold)
+        res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
+    except BaseException as exc:  # a failed run still writes what it has
+        if args.json:
+            _write_json(args.json, {"success": False, "error": f"{type(exc).__name__}: {exc}",
+                                    "wall_time_s": time.perf_counter() - t0})
+        raise
     out = res.to_dict()
     out["wall_time_s"] = time.perf_counter() - t0
     print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}")
@@ -136,7 +162,7 @@ def _cmd_demo(args) -> int:
     out = run(duration=args.duration)
     out["runtime_s"] = time.perf_counter() - t0
     rpy, paper = out["final_base_rpy_deg"], out["paper_final_base_rpy_deg"]
-    print("EBA robot, free-end case, 5th-order polynomial joint motion (seed 004 Sec. 4.1)")
+    print("EBA robot, free-end case, 5th-order polynomial joint motion (EBA paper, Sec. 4.1)")
     print(f"  final base RPY [deg]   optplan ({rpy[0]:+.3f}, {rpy[1]:+.3f}, {rpy[2]:+.3f})   "
           f"paper ({paper[0]:+.2f}, {paper[1]:+.2f}, {paper[2]:+.2f})")
     print(f"  max momentum residual  {out['max_momentum_residual']:.2e}")
@@ -149,8 +175,18 @@ def _cmd_demo(args) -> int:
     return 0 if out["max_momentum_residual"] < 1e-9 else 1
 
 
+def _write_json(path: str, data) -> None:
+    with open(path, "w") as f:
+        json.dump(data, f, indent=2)
+
+
+# output-path options of each command, checked before the command runs
+_OUTPUT_FILES = ("json", "save")
+_OUTPUT_DIRS = ("out",)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="optplan", description="Motion planning and trajectory optimization "
+    p = _Parser(prog="optplan", description="Motion planning and trajectory optimization "
                                 "for dual-arm space robots")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
     sub = p.add_subparsers(dest="command", required=True)
@@ -164,26 +200,26 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="what", required=True)
     k = bench.add_parser("kinematics", help="per-call times of numeric and CasADi kinematics")
     k.add_argument("--robot", default="eba_ffsr")
-    k.add_argument("--calls", type=int, default=5000)
+    k.add_argument("--calls", type=ca.positive_int, default=5000)
     k.add_argument("--json", help="write the figures as JSON to this path")
     k.set_defaults(func=_cmd_bench_kinematics)
 
     tr = bench.add_parser("transport", help="closed-chain transport NLP at several knot counts")
-    tr.add_argument("--knots", default="25,50,100", help="comma-separated interval counts N")
-    tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--knots", type=ca.int_list(2), default=[25, 50, 100], help="comma-separated interval counts N")
+    tr.add_argument("--seed", type=ca.nonnegative_int, default=0)
     tr.add_argument("--json", help="write the rows as JSON to this path")
     tr.set_defaults(func=_cmd_bench_transport)
 
-    tb = bench.add_parser("tcbirrt", help="seed 000 benchmark: planners x SSPS scenes x perturbed trials")
+    tb = bench.add_parser("tcbirrt", help="TCBiRRT benchmark: planners x space-solar-power-station scenes x perturbed trials")
     tb.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, or names)")
-    tb.add_argument("--trials", type=int, default=100, help="trials per scene")
-    tb.add_argument("--first-trial", type=int, default=0, help="index of the first trial")
+    tb.add_argument("--trials", type=ca.positive_int, default=100, help="trials per scene")
+    tb.add_argument("--first-trial", type=ca.nonnegative_int, default=0, help="index of the first trial")
     tb.add_argument("--planners", default="tcbirrt,cbirrt2,ompl-atlas",
                     help="comma-separated: tcbirrt, cbirrt2, rrtconnect, ompl-<projected|atlas|tb>[-<planner>]; "
                          "options after colons, e.g. ompl-atlas:tolerance=1e-4:range=0.5")
-    tb.add_argument("--time-limit", type=float, default=10.0, help="per query [s]")
-    tb.add_argument("--seed", type=int, default=0)
-    tb.add_argument("--jobs", type=int, default=1, help="worker processes")
+    tb.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="per query [s]")
+    tb.add_argument("--seed", type=ca.nonnegative_int, default=0)
+    tb.add_argument("--jobs", type=ca.positive_int, default=1, help="worker processes")
     tb.add_argument("--clock", choices=["cpu", "wall"], default="cpu",
                     help="time measured and limited in CPU seconds of the worker (default) or wall-clock seconds")
     tb.add_argument("--out", default="bench_tcbirrt", help="output directory (results.jsonl, summary, PNG)")
@@ -193,16 +229,16 @@ def build_parser() -> argparse.ArgumentParser:
     tb.add_argument("--no-plot", action="store_true")
     tb.set_defaults(func=_cmd_bench_tcbirrt)
 
-    ws = bench.add_parser("warmstart", help="issue 4 item 5: IPOPT from the TCBiRRT path (warm) vs from a straight line "
+    ws = bench.add_parser("warmstart", help="IPOPT from the TCBiRRT path (warm) vs from a straight line "
                           "(cold) on perturbed trials")
     ws.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, or names)")
-    ws.add_argument("--trials", type=int, default=20, help="trials per scene")
-    ws.add_argument("--first-trial", type=int, default=0, help="index of the first trial")
-    ws.add_argument("--seed", type=int, default=0)
-    ws.add_argument("--jobs", type=int, default=1, help="worker processes")
-    ws.add_argument("--time-limit", type=float, default=10.0, help="planning time limit per query [s]")
+    ws.add_argument("--trials", type=ca.positive_int, default=20, help="trials per scene")
+    ws.add_argument("--first-trial", type=ca.nonnegative_int, default=0, help="index of the first trial")
+    ws.add_argument("--seed", type=ca.nonnegative_int, default=0)
+    ws.add_argument("--jobs", type=ca.positive_int, default=1, help="worker processes")
+    ws.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit per query [s]")
     ws.add_argument("--modes", default="warm,cold", help="comma-separated: warm, cold")
-    ws.add_argument("--ipopt-max-wall-time", type=float, default=None, metavar="S",
+    ws.add_argument("--ipopt-max-wall-time", type=ca.positive_float, default=None, metavar="S",
                     help="cap every IPOPT solve at S seconds (default: iteration limit only)")
     ws.add_argument("--transcription", choices=["bspline", "knots"], default="bspline",
                     help="trajectory NLP: B-spline control points (default) or the knot-state transcription")
@@ -212,29 +248,47 @@ def build_parser() -> argparse.ArgumentParser:
     ws.add_argument("--no-progress", action="store_true")
     ws.set_defaults(func=_cmd_bench_warmstart)
 
-    pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene (issue 4 pipeline)")
+    pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene")
     pl.add_argument("--scene", default="1", help="1, 2, 3 (ssps_scene<N>) or a scene name")
-    pl.add_argument("--trial", type=int, default=0, help="trial index (perturbed start/goal, Section 5.1)")
-    pl.add_argument("--seed", type=int, default=0)
+    pl.add_argument("--trial", type=ca.nonnegative_int, default=0, help="trial index (perturbed start/goal, Section 5.1)")
+    pl.add_argument("--seed", type=ca.nonnegative_int, default=0)
     pl.add_argument("--planner", default="tcbirrt")
-    pl.add_argument("--time-limit", type=float, default=10.0, help="planning time limit [s]")
+    pl.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit [s]")
     pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
     pl.add_argument("--json", help="write the figures as JSON")
     pl.add_argument("--save", help="write the trajectory npz (t, q, joint_names, constrained)")
     pl.set_defaults(func=_cmd_plan)
 
     d = sub.add_parser("demo", help="free-floating base of the EBA robot under a quintic joint motion")
-    d.add_argument("--duration", type=float, default=20.0, help="motion duration [s]")
+    d.add_argument("--duration", type=ca.positive_float, default=20.0, help="motion duration [s]")
     d.add_argument("--json", help="write the figures as JSON to this path")
     d.set_defaults(func=_cmd_demo)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run the command; a user error (bad argument, unknown name, unwritable output path, bad
+    ``OPTPLAN_ROOT``, malformed description) prints one line and returns 2."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:   # --help (0) or an argparse error, already printed as one line (2)
+        return int(exc.code or 0)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
-    return int(args.func(args) or 0)
+    prog = " ".join(["optplan"] + [str(getattr(args, k)) for k in ("command", "action", "what")
+                                   if isinstance(getattr(args, k, None), str)])
+    try:
+        ca.check_root()
+        for opt in _OUTPUT_FILES:
+            ca.check_output_file(getattr(args, opt, None), f"--{opt}")
+        for opt in _OUTPUT_DIRS:
+            ca.check_output_dir(getattr(args, opt, None), f"--{opt}")
+        return int(args.func(args) or 0)
+    except OptplanError as exc:  # the user's input: one line, no traceback
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"{prog}: error: {msg}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

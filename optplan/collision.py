@@ -57,6 +57,7 @@ class CollisionChecker:
         self._obs_tf = [_tf(o.placement) for o in self.obstacles]
         self.object = scene.object if (scene is not None and held_object) else None
         if self.object is not None:
+            self.object.check_robot(robot)
             self.object_arm = object_arm or next(iter(self.object.grasps))
             robot.arm(self.object_arm)
             self._obj_geom = self.object.coal_geometry()

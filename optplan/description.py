@@ -257,16 +257,45 @@ def _get(d: dict, key: str, where: str, types=None):
 
 
 def _array(v, shape, where: str) -> np.ndarray:
-    try:
-        arr = np.asarray(v, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ModelError(f"{where}: expected numbers of shape {shape}, got {v!r}") from exc
+    from .errors import real_array
+
+    arr = real_array(v, f"{where}: expected numbers of shape {shape}", ModelError)
     if shape is not None and arr.shape != tuple(shape):
         raise ModelError(f"{where}: expected shape {tuple(shape)}, got {arr.shape} ({v!r})")
     if not np.all(np.isfinite(arr)):
         raise ModelError(f"{where}: non-finite values in {v!r}")
     return arr
 
+
+def _known_keys(d: dict, allowed: tuple[str, ...], where: str) -> None:
+    """Refuse keys (tables) the schema does not have: a typo must not silently drop data."""
+    import difflib
+
+    if not isinstance(d, dict):
+        raise ModelError(f"{where}: expected a table (key = value pairs), got {type(d).__name__} {d!r}")
+    for k in d:
+        if k not in allowed:
+            close = difflib.get_close_matches(str(k), allowed, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ModelError(f"{where}: unknown key {k!r}{hint}; expected keys: {', '.join(allowed)}")
+
+
+def _positive(v, where: str, unit: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+        raise ModelError(f"{where}: expected a finite number > 0 {unit}, got {v!r}")
+    return float(v)
+
+
+_TOP_KEYS = ("name", "base_type", "angle_unit", "base", "arm_types", "arms", "notes", "extra")
+_BASE_KEYS = ("link", "mass", "com", "inertia", "boxes")
+_BOX_KEYS = ("size", "xyz", "rpy")
+_DH_KEYS = ("kind", "dh_convention", "dh", "masses", "coms", "inertias", "lower", "upper", "velocity", "effort",
+            "capsules", "tool")
+_SERPENTINE_KEYS = ("kind", "segments", "joints_per_segment", "link_length", "link_mass", "capsule_radius",
+                    "lower", "upper", "velocity", "effort", "tool")
+_CAPSULE_KEYS = ("link", "a", "b", "radius")
+_TOOL_KEYS = ("xyz", "rpy")
+_ARM_KEYS = ("name", "type", "prefix", "mount_xyz", "mount_zyx", "mount_rpy")
 
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
 
@@ -283,6 +312,7 @@ def _check_inertia(I6: np.ndarray, where: str) -> None:
 
 def _parse_arm_type(name: str, d: dict, ang: float, src: str) -> ArmType:
     where = f"{src}: arm_types.{name}"
+    _known_keys(d, _DH_KEYS, where)
     conv = _get(d, "dh_convention", where, str)
     if conv not in ("modified", "standard"):
         raise ModelError(f"{where}.dh_convention: expected 'modified' or 'standard', got {conv!r}")
@@ -304,21 +334,28 @@ def _parse_arm_type(name: str, d: dict, ang: float, src: str) -> ArmType:
     if np.any(lower >= upper):
         raise ModelError(f"{where}: lower limits must be < upper limits ({lower} vs {upper})")
     velocity = _array(_get(d, "velocity", where), (n,), f"{where}.velocity") * ang
+    if np.any(velocity <= 0):
+        raise ModelError(f"{where}.velocity: every joint speed limit must be > 0, got {(velocity / ang).tolist()}")
     effort = _array(d.get("effort", [100.0] * n), (n,), f"{where}.effort")
+    if np.any(effort <= 0):
+        raise ModelError(f"{where}.effort: every effort limit must be > 0 N m, got {effort.tolist()}")
     caps = []
-    for k, c in enumerate(d.get("capsules", [])):
+    capsules = d.get("capsules", [])
+    if not isinstance(capsules, list):
+        raise ModelError(f"{where}.capsules: expected a list of {{ link, a, b, radius }} tables, got {capsules!r}")
+    for k, c in enumerate(capsules):
         cw = f"{where}.capsules[{k}]"
+        _known_keys(c, _CAPSULE_KEYS, cw)
         link = _get(c, "link", cw, int)
-        if not 1 <= link <= n:
+        if isinstance(link, bool) or not 1 <= link <= n:
             raise ModelError(f"{cw}.link: expected 1..{n}, got {link}")
-        r = float(_get(c, "radius", cw, (int, float)))
-        if r <= 0:
-            raise ModelError(f"{cw}.radius: expected > 0 m, got {r}")
+        r = _positive(_get(c, "radius", cw, (int, float)), f"{cw}.radius", "m")
         caps.append({"link": link, "a": _array(_get(c, "a", cw), (3,), f"{cw}.a"),
                      "b": _array(_get(c, "b", cw), (3,), f"{cw}.b"), "radius": r})
     tool = d.get("tool", {})
     if not isinstance(tool, dict):
         raise ModelError(f"{where}.tool: expected a table {{ xyz = [...], rpy = [...] }}, got {tool!r}")
+    _known_keys(tool, _TOOL_KEYS, f"{where}.tool")
     return ArmType(
         name=name, convention=conv, dh=dh, masses=masses, coms=coms, inertias=inertias,
         lower=lower, upper=upper, velocity=velocity, effort=effort, capsules=tuple(caps),
@@ -329,6 +366,7 @@ def _parse_arm_type(name: str, d: dict, ang: float, src: str) -> ArmType:
 
 def _parse_serpentine_arm_type(name: str, d: dict, ang: float, src: str) -> SerpentineArmType:
     where = f"{src}: arm_types.{name}"
+    _known_keys(d, _SERPENTINE_KEYS, where)
 
     def pos_int(key):
         v = _get(d, key, where, int)
@@ -353,6 +391,7 @@ def _parse_serpentine_arm_type(name: str, d: dict, ang: float, src: str) -> Serp
     tool = d.get("tool", {})
     if not isinstance(tool, dict):
         raise ModelError(f"{where}.tool: expected a table {{ xyz = [...], rpy = [...] }}, got {tool!r}")
+    _known_keys(tool, _TOOL_KEYS, f"{where}.tool")
     return SerpentineArmType(
         name=name, segments=segments, joints_per_segment=m, link_length=pos("link_length"),
         link_mass=pos("link_mass"), capsule_radius=pos("capsule_radius"), lower=lower, upper=upper,
@@ -382,10 +421,15 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
     if not p.exists():
         raise ModelError(f"robot description {str(p)!r} does not exist")
     try:
-        data = tomllib.loads(p.read_text())
+        data = tomllib.loads(p.read_bytes().decode("utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise ModelError(f"{p}: malformed TOML: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ModelError(f"{p}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    except OSError as exc:
+        raise ModelError(f"{p}: cannot be read ({exc.strerror or exc})") from None
     src = p.name
+    _known_keys(data, _TOP_KEYS, src)
     unit = data.get("angle_unit", "rad")
     ang = {"deg": math.pi / 180.0, "rad": 1.0}.get(unit) if isinstance(unit, str) else None
     if ang is None:
@@ -395,17 +439,29 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
     if base_type not in ("fixed", "floating"):
         raise ModelError(f"{src}.base_type: expected 'fixed' or 'floating', got {base_type!r}")
     base = _get(data, "base", src, dict)
+    _known_keys(base, _BASE_KEYS, f"{src}: base")
     boxes = []
-    for k, b in enumerate(base.get("boxes", [])):
+    base_boxes = base.get("boxes", [])
+    if not isinstance(base_boxes, list):
+        raise ModelError(f"{src}: base.boxes: expected a list of {{ size, xyz, rpy }} tables, got {base_boxes!r}")
+    for k, b in enumerate(base_boxes):
         bw = f"{src}: base.boxes[{k}]"
-        boxes.append({"size": _array(_get(b, "size", bw), (3,), f"{bw}.size"),
+        _known_keys(b, _BOX_KEYS, bw)
+        size = _array(_get(b, "size", bw), (3,), f"{bw}.size")
+        if np.any(size <= 0):
+            raise ModelError(f"{bw}.size: box edges must be > 0 m, got {size.tolist()}")
+        boxes.append({"size": size,
                       "xyz": _array(b.get("xyz", [0, 0, 0]), (3,), f"{bw}.xyz"),
                       "rpy": _array(b.get("rpy", [0, 0, 0]), (3,), f"{bw}.rpy") * ang})
     arm_types = {k: _parse_any_arm_type(k, v, ang, src)
                  for k, v in _get(data, "arm_types", src, dict).items()}
     arms = []
-    for k, a in enumerate(_get(data, "arms", src, list)):
+    arm_list = _get(data, "arms", src, list)
+    if not arm_list:
+        raise ModelError(f"{src}: arms: expected at least one [[arms]] table (name, type, prefix, mount_*), got none")
+    for k, a in enumerate(arm_list):
         aw = f"{src}: arms[{k}]"
+        _known_keys(a, _ARM_KEYS, aw)
         t = _get(a, "type", aw, str)
         if t not in arm_types:
             raise UnknownNameError("arm type", t, arm_types)
@@ -420,9 +476,7 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
     prefixes = [a.prefix for a in arms]
     if len(set(names)) != len(names) or len(set(prefixes)) != len(prefixes):
         raise ModelError(f"{src}: arm names {names} and prefixes {prefixes} must be unique")
-    base_mass = _get(base, "mass", f"{src}: base", (int, float))
-    if isinstance(base_mass, bool) or not base_mass > 0:
-        raise ModelError(f"{src}: base.mass: expected a mass > 0 kg, got {base_mass!r}")
+    base_mass = _positive(_get(base, "mass", f"{src}: base"), f"{src}: base.mass", "kg")
     base_inertia = _array(_get(base, "inertia", f"{src}: base"), (6,), f"{src}: base.inertia")
     _check_inertia(base_inertia, f"{src}: base.inertia")
     base_link = str(base.get("link", "base"))

@@ -35,6 +35,50 @@ class ConfigurationError(OptplanError, ValueError):
     """A configuration / velocity vector has the wrong size or non-finite entries."""
 
 
+class UsageError(OptplanError, ValueError):
+    """A command-line argument or environment setting is invalid (the command exits with status 2)."""
+
+
+class ResultFileError(OptplanError, ValueError):
+    """A saved result file (Solution, PlanResult) is unreadable, corrupted or fails its own checks;
+    the message names the file and what is wrong."""
+
+
+class OptionError(OptplanError, ValueError):
+    """A solver or method option is unknown or has a value of the wrong type/range."""
+
+
+def real_array(value, what: str, error: type = None):
+    """``value`` as a float array, refusing what would silently become numbers: strings, booleans,
+    complex numbers (NumPy drops the imaginary part), None and other objects, ragged nesting.
+    Raises ``error`` (ConfigurationError by default) naming ``what`` and the value; finiteness and
+    shape are the caller's checks."""
+    import numbers
+
+    import numpy as np
+
+    error = error or ConfigurationError
+    if isinstance(value, np.ndarray) and value.dtype.kind in "iuf":
+        return value.astype(float, copy=False)
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError):
+        raw = None
+    kind = raw.dtype.kind if raw is not None else "?"
+    shown = repr(value)
+    shown = shown if len(shown) <= 200 else shown[:200] + "..."
+    if kind == "O":
+        flat = raw.ravel().tolist()
+        if all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)) for v in flat):
+            return raw.astype(float)
+    if kind not in "iuf":
+        names = {"b": "booleans", "c": "complex numbers", "U": "strings", "S": "bytes", "O": "non-numbers",
+                 "?": "a ragged or non-numeric value"}
+        what_kind = names[kind] if kind in names else f"dtype {raw.dtype}"
+        raise error(f"{what}: expected real numbers, got {what_kind}: {shown}")
+    return raw.astype(float)
+
+
 def check_vector(value, size: int, what: str, *, allow_none: bool = False):
     """Return ``value`` as a finite float vector of length ``size`` or raise ConfigurationError.
 
@@ -46,10 +90,7 @@ def check_vector(value, size: int, what: str, *, allow_none: bool = False):
         if allow_none:
             return None
         raise ConfigurationError(f"{what}: expected an array of {size} floats, got None")
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ConfigurationError(f"{what}: expected an array of {size} floats, got {value!r}") from exc
+    arr = real_array(value, f"{what}: expected an array of {size} floats")
     if arr.ndim != 1:
         arr = arr.reshape(-1) if arr.size == size and arr.ndim == 2 and 1 in arr.shape else arr
     if arr.shape != (size,):

@@ -18,6 +18,7 @@ from scipy.interpolate import CubicSpline
 
 from .errors import ConfigurationError, check_vector
 from .robot import RobotModel
+from .spatial import check_pose
 
 __all__ = ["FloatingResult", "simulate_base", "joint_trajectory_from_samples"]
 log = logging.getLogger(__name__)
@@ -114,6 +115,7 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
     base0 = pin.SE3.Identity() if base0 is None else base0
     if not isinstance(base0, pin.SE3):
         raise ConfigurationError(f"base0: expected a pinocchio.SE3, got {type(base0).__name__}")
+    check_pose(base0, "simulate_base: base0")
     x = pin.SE3ToXYZQUAT(base0).copy()
 
     if not isinstance(base0, pin.SE3):

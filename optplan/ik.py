@@ -12,8 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .errors import ConfigurationError
+from .errors import ConfigurationError, OptionError
 from .robot import RobotModel
+from .spatial import check_pose
 
 __all__ = ["IKOptions", "IKResult", "solve_arm_ik", "solve_grasp_ik", "pose_error"]
 log = logging.getLogger(__name__)
@@ -38,10 +39,12 @@ class IKOptions:
     def __post_init__(self):
         for name in ("tol_position", "tol_orientation", "damping", "max_step"):
             v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"IKOptions.{name}: expected a positive number, got {v!r}")
-        if self.max_iterations < 1:
-            raise ValueError(f"IKOptions.max_iterations: expected ≥ 1, got {self.max_iterations}")
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not (np.isfinite(v) and v > 0):
+                raise OptionError(f"IKOptions.{name}: expected a positive number, got {v!r}")
+        m = self.max_iterations
+        if isinstance(m, bool) or not isinstance(m, (int, np.integer)) or m < 1:
+            raise OptionError(f"IKOptions.max_iterations: expected an integer ≥ 1, got {m!r}")
 
 
 @dataclass(frozen=True)
@@ -100,8 +103,7 @@ def _solve_multi(robot: RobotModel, data: pin.Data, q0: np.ndarray, targets, opt
 def solve_arm_ik(robot: RobotModel, arm: str, goal: pin.SE3, q0, options: IKOptions | None = None,
                  data: pin.Data | None = None) -> IKResult:
     """Move ``arm``'s joints from ``q0`` until its end-effector reaches ``goal`` (world)."""
-    if not isinstance(goal, pin.SE3):
-        raise ConfigurationError(f"goal: expected a pinocchio.SE3, got {type(goal).__name__}")
+    check_pose(goal, "solve_arm_ik: goal")
     return _solve_multi(robot, data or robot.model.createData(), q0, [(arm, goal)], options or IKOptions())
 
 
@@ -109,5 +111,10 @@ def solve_grasp_ik(robot: RobotModel, object_pose: pin.SE3, grasps: dict[str, pi
                    options: IKOptions | None = None, data: pin.Data | None = None) -> IKResult:
     """Closed-chain IK: every arm in ``grasps`` puts its end-effector on
     ``object_pose * grasps[arm]`` (grasp frames in the object frame)."""
+    check_pose(object_pose, "solve_grasp_ik: object_pose")
+    if not isinstance(grasps, dict) or not grasps:
+        raise ConfigurationError(f"solve_grasp_ik: grasps: expected a dict {{arm: pinocchio.SE3}}, got {grasps!r}")
+    for a, g in grasps.items():
+        check_pose(g, f"solve_grasp_ik: grasps[{a!r}]")
     targets = [(a, object_pose * g) for a, g in grasps.items()]
     return _solve_multi(robot, data or robot.model.createData(), q0, targets, options or IKOptions())

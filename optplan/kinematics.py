@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg.lapack import dgesv
 
-from .errors import ConfigurationError, check_vector
+from .errors import ConfigurationError, OptionError, check_vector
 from .robot import RobotModel
 
 __all__ = ["Kinematics", "REFERENCE_FRAMES"]
@@ -40,8 +40,8 @@ def _base_coupling(Ag: np.ndarray) -> np.ndarray:
 def _ref(reference: str) -> pin.ReferenceFrame:
     try:
         return REFERENCE_FRAMES[reference]
-    except KeyError:
-        raise ValueError(f"reference: expected one of {sorted(REFERENCE_FRAMES)}, got {reference!r}") from None
+    except (KeyError, TypeError):
+        raise OptionError(f"reference: expected one of {sorted(REFERENCE_FRAMES)}, got {reference!r}") from None
 
 
 class Kinematics:

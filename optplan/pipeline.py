@@ -214,7 +214,7 @@ class PipelineResult:
                     and self.min_clearance_m >= 0.0)
 
     def to_dict(self) -> dict:
-        return {"success": self.success, "plan_status": self.plan.status.value if self.plan else "not_run",
+        return {"success": self.success, "plan_status": self.plan.status.value if self.plan is not None else "not_run",
                 "plan_time_s": self.plan_time_s, "opt_status": self.opt_status, "opt_time_s": self.opt_time_s,
                 "opt_setup_time_s": self.setup_time_s, "opt_iterations": self.iterations,
                 "max_closed_chain_residual": self.max_closed_chain_residual, "min_clearance_m": self.min_clearance_m,

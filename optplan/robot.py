@@ -99,6 +99,11 @@ class RobotModel:
         path = urdf_dir() / f"{name}.urdf"
         if not path.exists():
             raise ModelError(f"{path} is missing: run `optplan models build` to generate it")
+        from .description import urdf_string
+
+        if _read_text(path) != urdf_string(desc):   # never use a URDF older than its description
+            raise ModelError(f"{path} is out of date with {desc.source}: the description changed after the "
+                             "URDF was generated; run `optplan models build` to regenerate it")
         arms = arm_metadata(desc)
         return cls.from_urdf(path, arms=arms, floating=desc.base_type == "floating", name=name)
 
@@ -118,21 +123,22 @@ class RobotModel:
         path = Path(path)
         if not path.exists():
             raise ModelError(f"URDF file {str(path)!r} does not exist")
-        text = path.read_text()
+        text = _read_text(path)
         try:
             root = ET.fromstring(text)
         except ET.ParseError as exc:
             raise ModelError(f"{path}: malformed URDF XML: {exc}") from exc
         if root.tag != "robot":
             raise ModelError(f"{path}: expected a <robot> root element, got <{root.tag}>")
+        _check_urdf_joints(root, text, path)
         try:
             if floating:
                 model = pin.buildModelFromXML(text, pin.JointModelFreeFlyer(), mimic=mimic)
             else:
                 model = pin.buildModelFromXML(text, mimic=mimic)
             geom = pin.buildGeomFromUrdfString(model, text, pin.COLLISION)
-        except (RuntimeError, ValueError) as exc:
-            raise ModelError(f"{path}: Pinocchio could not parse the URDF: {exc}") from exc
+        except (RuntimeError, ValueError, TypeError) as exc:   # TypeError: Boost.Python.ArgumentError
+            raise ModelError(f"{path}: Pinocchio could not parse the URDF: {str(exc).strip().splitlines()[0]}") from exc
         _capsules_from_cylinders(root, geom)
         norm = {k: ({"ee": v} if isinstance(v, str) else dict(v)) for k, v in arms.items()}
         return cls(model, geom, norm, name=name or model.name, floating=floating, urdf_path=path)
@@ -150,7 +156,7 @@ class RobotModel:
             if not 0 <= int(name) < self.model.nframes:
                 raise UnknownNameError("frame id", name, [str(i) for i in range(self.model.nframes)])
             return int(name)
-        if not self.model.existFrame(name):
+        if not isinstance(name, str) or not self.model.existFrame(name):
             raise UnknownNameError("frame", name, self.frame_names)
         return int(self.model.getFrameId(name))
 
@@ -333,3 +339,52 @@ def _capsules_from_cylinders(root: ET.Element, geom: pin.GeometryModel) -> None:
                 raise ModelError(f"collision geometry {gname!r} not found after parsing")
             obj = geom.geometryObjects[geom.getGeometryId(gname)]
             obj.geometry = coal.Capsule(float(cyl.get("radius")), float(cyl.get("length")))
+
+
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ModelError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    except OSError as exc:
+        raise ModelError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+
+
+def _check_urdf_joints(root, text: str, path: Path) -> None:
+    """Physics checks Pinocchio's parser skips: every revolute/continuous/prismatic joint has a
+    nonzero finite axis, and finite limits with lower ≤ upper, velocity ≥ 0 and effort ≥ 0.
+    Messages name the file, the joint and its line."""
+    def line_of(name: str) -> int:
+        i = text.find(f'name="{name}"')
+        return text.count("\n", 0, i) + 1 if i >= 0 else 0
+
+    def floats(s: str | None, n: int, what: str, jn: str) -> np.ndarray:
+        try:
+            v = np.array([float(t) for t in str(s).split()])
+        except ValueError:
+            v = np.zeros(0)
+        if v.shape != (n,) or not np.all(np.isfinite(v)):
+            raise ModelError(f"{path}:{line_of(jn)}: joint {jn!r}: {what}={s!r}: expected {n} finite numbers")
+        return v
+
+    for j in root.iter("joint"):
+        jn, jt = j.get("name", "?"), j.get("type", "")
+        if jt not in ("revolute", "continuous", "prismatic"):
+            continue
+        ax = j.find("axis")
+        if ax is not None:
+            a = floats(ax.get("xyz", "1 0 0"), 3, "<axis xyz>", jn)
+            if np.linalg.norm(a) < 1e-12:
+                raise ModelError(f"{path}:{line_of(jn)}: joint {jn!r}: zero axis {a.tolist()}; expected a "
+                                 "nonzero direction")
+        lim = j.find("limit")
+        if lim is None:
+            continue
+        vals = {k: float(floats(lim.get(k), 1, f"<limit {k}>", jn)[0]) for k in ("lower", "upper", "velocity", "effort")
+                if lim.get(k) is not None}
+        if "lower" in vals and "upper" in vals and vals["lower"] > vals["upper"]:
+            raise ModelError(f"{path}:{line_of(jn)}: joint {jn!r}: lower limit {vals['lower']} > upper limit "
+                             f"{vals['upper']}")
+        for k in ("velocity", "effort"):
+            if k in vals and vals[k] < 0:
+                raise ModelError(f"{path}:{line_of(jn)}: joint {jn!r}: {k} limit {vals[k]} < 0")

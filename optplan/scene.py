@@ -91,6 +91,16 @@ class GraspedObject:
     def coal_geometry(self) -> coal.Box:
         return coal.Box(*self.size)
 
+    def check_robot(self, robot) -> None:
+        """Every grasp names an arm of ``robot`` and every ``exclude_links`` entry is one of its
+        links (a typo would silently keep the hands in collision with the object)."""
+        for arm in self.grasps:
+            robot.arm(arm)   # UnknownNameError listing the arms
+        links = {f.name for f in robot.model.frames if f.type == pin.FrameType.BODY}
+        for name in self.exclude_links:
+            if name not in links:
+                raise UnknownNameError("link in the scene's object.exclude_links", name, links)
+
     def hand_pose(self, arm: str, object_pose: pin.SE3) -> pin.SE3:
         return object_pose * self.grasps[arm]
 
@@ -120,26 +130,46 @@ class Scene:
         if not p.exists():
             raise ModelError(f"scene file {str(p)!r} does not exist")
         try:
-            data = tomllib.loads(p.read_text())
+            data = tomllib.loads(p.read_bytes().decode("utf-8"))
         except tomllib.TOMLDecodeError as exc:
             raise ModelError(f"{p}: malformed TOML: {exc}") from exc
+        except UnicodeDecodeError as exc:
+            raise ModelError(f"{p}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+        except OSError as exc:
+            raise ModelError(f"{p}: cannot be read ({exc.strerror or exc})") from None
         return cls.from_dict(data, where=p.name)
 
     @classmethod
     def from_dict(cls, data: dict, where: str = "scene") -> "Scene":
-        ang = {"deg": math.pi / 180, "rad": 1.0}.get(data.get("angle_unit", "rad"))
+        from .description import _known_keys, available_models
+
+        _known_keys(data, ("name", "robot", "angle_unit", "object", "start", "goal", "obstacles", "extra", "notes"),
+                    where)
+        unit = data.get("angle_unit", "rad")
+        ang = {"deg": math.pi / 180, "rad": 1.0}.get(unit) if isinstance(unit, str) else None
         if ang is None:
             raise ModelError(f"{where}.angle_unit: expected 'deg' or 'rad', got {data.get('angle_unit')!r}")
 
         def pose(d: dict, w: str) -> pin.SE3:
+            _known_keys(d, ("xyz", "rpy"), w)
             xyz = _vec(d.get("xyz", [0, 0, 0]), 3, f"{w}.xyz")
             rpy = _vec(d.get("rpy", [0, 0, 0]), 3, f"{w}.rpy") * ang
             return pin.SE3(rpy_to_matrix(*rpy), xyz)
 
+        robot = data.get("robot")
+        if robot is not None:
+            if not isinstance(robot, str):
+                raise ModelError(f"{where}.robot: expected a robot model name, got {robot!r}")
+            if robot not in available_models():
+                raise UnknownNameError("robot model (scene's robot)", robot, available_models())
         obstacles = []
         names = set()
-        for k, o in enumerate(data.get("obstacles", [])):
+        obs_list = data.get("obstacles", [])
+        if not isinstance(obs_list, list):
+            raise ModelError(f"{where}: obstacles: expected a list of [[obstacles]] tables, got {obs_list!r}")
+        for k, o in enumerate(obs_list):
             w = f"{where}: obstacles[{k}]"
+            _known_keys(o, ("name", "shape", "size", "radius", "length", "xyz", "rpy"), w)
             name = str(o.get("name", f"obstacle_{k}"))
             if name in names:
                 raise ModelError(f"{w}: duplicate obstacle name {name!r}")
@@ -149,7 +179,7 @@ class Scene:
                 size = _vec(o.get("size"), 3, f"{w}.size")
                 if np.any(size <= 0):
                     raise ModelError(f"{w}.size: edges must be > 0 m, got {size.tolist()}")
-                obstacles.append(Obstacle(name, "box", pose(o, w), size=tuple(size)))
+                obstacles.append(Obstacle(name, "box", pose({kk: o[kk] for kk in ("xyz", "rpy") if kk in o}, w), size=tuple(size)))
             elif shape in ("sphere", "capsule"):
                 r = o.get("radius")
                 if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r <= 0:
@@ -160,17 +190,27 @@ class Scene:
                     if isinstance(L, bool) or not isinstance(L, (int, float)) or not math.isfinite(L) or L < 0:
                         raise ModelError(f"{w}.length: expected a number ≥ 0 m, got {L!r}")
                     L = float(L)
-                obstacles.append(Obstacle(name, shape, pose(o, w), radius=float(r), length=L))
+                obstacles.append(Obstacle(name, shape, pose({kk: o[kk] for kk in ("xyz", "rpy") if kk in o}, w), radius=float(r), length=L))
             else:
                 raise ModelError(f"{w}.shape: expected 'box', 'sphere' or 'capsule', got {shape!r}")
         obj = None
         if "object" in data:
             o = data["object"]
+            _known_keys(o, ("size", "grasps", "exclude_links"), f"{where}: object")
             size = _vec(o.get("size"), 3, f"{where}: object.size")
             if np.any(size <= 0):
                 raise ModelError(f"{where}: object.size: edges must be > 0 m, got {size.tolist()}")
-            grasps = {arm: pose(g, f"{where}: object.grasps.{arm}") for arm, g in o.get("grasps", {}).items()}
-            obj = GraspedObject(tuple(size), grasps, tuple(o.get("exclude_links", ())))
+            gr = o.get("grasps", {})
+            if not isinstance(gr, dict):
+                raise ModelError(f"{where}: object.grasps: expected a table {{ A = {{ xyz, rpy }}, ... }}, got {gr!r}")
+            grasps = {arm: pose(g, f"{where}: object.grasps.{arm}") for arm, g in gr.items()}
+            excl = o.get("exclude_links", [])
+            if not isinstance(excl, list) or not all(isinstance(e, str) for e in excl):
+                raise ModelError(f"{where}: object.exclude_links: expected a list of link names, got {excl!r}")
+            obj = GraspedObject(tuple(size), grasps, tuple(excl))
+        for key in ("start", "goal", "extra"):
+            if key in data and not isinstance(data[key], dict):
+                raise ModelError(f"{where}: {key}: expected a table, got {data[key]!r}")
         start = pose(data["start"], f"{where}: start") if "start" in data else None
         goal = pose(data["goal"], f"{where}: goal") if "goal" in data else None
         return cls(str(data.get("name", where)), data.get("robot"), tuple(obstacles), obj, start, goal,
@@ -184,10 +224,9 @@ class Scene:
 
 
 def _vec(v, n: int, where: str) -> np.ndarray:
-    try:
-        a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ModelError(f"{where}: expected {n} numbers, got {v!r}") from exc
+    from .errors import real_array
+
+    a = real_array(v, f"{where}: expected {n} numbers", ModelError)
     if a.shape != (n,) or not np.all(np.isfinite(a)):
         raise ModelError(f"{where}: expected {n} finite numbers, got {v!r}")
     return a

@@ -17,7 +17,63 @@ import pinocchio as pin
 __all__ = [
     "rotx", "roty", "rotz", "rpy_to_matrix", "matrix_to_rpy", "zyx_to_matrix", "matrix_to_zyx",
     "exp3", "log3", "se3", "pose_to_vector_rpy", "interpolate_pose", "rotation_angle",
+    "check_rotation", "check_pose", "quaternion_to_matrix",
 ]
+
+#: how far ``RᵀR`` may be from the identity (and det R from 1) for R to count as a rotation
+ROTATION_TOL = 1e-6
+
+
+def check_rotation(R, what: str = "rotation", tol: float = ROTATION_TOL) -> np.ndarray:
+    """``R`` as a 3×3 float rotation matrix, or :class:`~optplan.errors.ConfigurationError` naming
+    ``what``, the value and what is wrong (shape, non-finite entries, not orthonormal, reflection)."""
+    from .errors import ConfigurationError
+
+    try:
+        A = np.asarray(R, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigurationError(f"{what}: expected a 3x3 rotation matrix of floats, got {R!r}") from None
+    if A.shape != (3, 3):
+        raise ConfigurationError(f"{what}: expected a 3x3 rotation matrix, got shape {A.shape}")
+    if not np.all(np.isfinite(A)):
+        raise ConfigurationError(f"{what}: non-finite entries in {A.tolist()}")
+    err = float(np.abs(A.T @ A - np.eye(3)).max())
+    det = float(np.linalg.det(A))
+    if err > tol or abs(det - 1.0) > tol:
+        raise ConfigurationError(f"{what}: not a rotation matrix (|RᵀR − I| = {err:.3g}, det = {det:.6g}; expected "
+                                 f"orthonormal with det +1 within {tol:g}): {A.round(6).tolist()}")
+    return A
+
+
+def check_pose(M, what: str = "pose") -> pin.SE3:
+    """``M`` if it is a :class:`pinocchio.SE3` with a finite translation and a true rotation, else
+    :class:`~optplan.errors.ConfigurationError` naming ``what`` and the value."""
+    from .errors import ConfigurationError
+
+    if not isinstance(M, pin.SE3):
+        raise ConfigurationError(f"{what}: expected a pinocchio.SE3, got {type(M).__name__} {M!r}")
+    check_rotation(M.rotation, f"{what}.rotation")
+    p = np.asarray(M.translation, dtype=float)
+    if not np.all(np.isfinite(p)):
+        raise ConfigurationError(f"{what}.translation: non-finite entries {p.tolist()}")
+    return M
+
+
+def quaternion_to_matrix(quat, what: str = "quaternion") -> np.ndarray:
+    """Rotation matrix of a quaternion ``[qx, qy, qz, qw]`` (Pinocchio's order), normalised; a
+    zero, non-finite or wrongly sized quaternion is a ConfigurationError."""
+    from .errors import ConfigurationError
+
+    try:
+        v = np.asarray(quat, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigurationError(f"{what}: expected 4 numbers [qx, qy, qz, qw], got {quat!r}") from None
+    if v.shape != (4,) or not np.all(np.isfinite(v)):
+        raise ConfigurationError(f"{what}: expected 4 finite numbers [qx, qy, qz, qw], got {quat!r}")
+    n = float(np.linalg.norm(v))
+    if n < 1e-9:
+        raise ConfigurationError(f"{what}: zero quaternion {v.tolist()} has no orientation (expected a unit quaternion)")
+    return np.asarray(pin.Quaternion(*(v[[3, 0, 1, 2]] / n)).toRotationMatrix())
 
 
 def rotx(a: float) -> np.ndarray:
@@ -38,18 +94,31 @@ def rotz(a: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+def _finite_angles(angles, what: str) -> None:
+    from .errors import ConfigurationError
+
+    try:
+        ok = all(np.isfinite(float(a)) for a in angles)
+    except (TypeError, ValueError):
+        raise ConfigurationError(f"{what}: expected 3 numbers [rad], got {tuple(angles)!r}") from None
+    if not ok:
+        raise ConfigurationError(f"{what}: expected finite angles [rad], got {tuple(angles)!r}")
+
+
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """``Rz(yaw) Ry(pitch) Rx(roll)`` from roll, pitch, yaw [rad]."""
+    _finite_angles((roll, pitch, yaw), "rpy_to_matrix: (roll, pitch, yaw)")
     return rotz(yaw) @ roty(pitch) @ rotx(roll)
 
 
 def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
     """Inverse of :func:`rpy_to_matrix`: ``(roll, pitch, yaw)`` [rad], pitch in [-π/2, π/2]."""
-    return np.asarray(pin.rpy.matrixToRpy(np.asarray(R, dtype=float)))
+    return np.asarray(pin.rpy.matrixToRpy(check_rotation(R, "matrix_to_rpy: R")))
 
 
 def zyx_to_matrix(a: float, b: float, c: float) -> np.ndarray:
     """``Rz(a) Ry(b) Rx(c)`` [rad] — seed 004's ``[αz, αy, αx]`` order."""
+    _finite_angles((a, b, c), "zyx_to_matrix: (a, b, c)")
     return rotz(a) @ roty(b) @ rotx(c)
 
 
@@ -60,12 +129,14 @@ def matrix_to_zyx(R: np.ndarray) -> np.ndarray:
 
 def exp3(w: np.ndarray) -> np.ndarray:
     """Rotation matrix of the rotation vector ``w`` [rad]."""
-    return np.asarray(pin.exp3(np.asarray(w, dtype=float)))
+    from .errors import check_vector
+
+    return np.asarray(pin.exp3(check_vector(w, 3, "exp3: w (rotation vector [rad])")))
 
 
 def log3(R: np.ndarray) -> np.ndarray:
     """Rotation vector [rad] of ``R`` (angle in [0, π])."""
-    return np.asarray(pin.log3(np.asarray(R, dtype=float)))
+    return np.asarray(pin.log3(check_rotation(R, "log3: R")))
 
 
 def rotation_angle(R: np.ndarray) -> float:
@@ -77,8 +148,10 @@ def rotation_angle(R: np.ndarray) -> float:
 
 def se3(R: np.ndarray | None = None, p=None) -> pin.SE3:
     """Build a :class:`pinocchio.SE3` from a rotation matrix and a position [m]."""
-    R = np.eye(3) if R is None else np.asarray(R, dtype=float)
-    p = np.zeros(3) if p is None else np.asarray(p, dtype=float)
+    from .errors import check_vector
+
+    R = np.eye(3) if R is None else check_rotation(R, "se3: R")
+    p = np.zeros(3) if p is None else check_vector(p, 3, "se3: p (position [m])")
     return pin.SE3(R, p)
 
 

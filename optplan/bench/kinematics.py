@@ -31,6 +31,10 @@ def _per_call(fn: Callable[[], object], calls: int) -> float:
 
 def run(robot_name: str = "eba_ffsr", calls: int = 5000, seed: int = 0) -> dict[str, float]:
     """Return ``{name: µs per call}``."""
+    if isinstance(calls, bool) or not isinstance(calls, int) or calls < 1:
+        from ..errors import OptionError
+
+        raise OptionError(f"calls: expected an integer >= 1, got {calls!r}")
     robot = RobotModel.from_name(robot_name)
     kin, sym = Kinematics(robot), SymbolicKinematics(robot)
     model, data = robot.model, kin.data

@@ -219,8 +219,17 @@ def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
     """Run (or resume) the benchmark; returns all result lines of ``cfg.out``."""
     from ..planners.base import CLOCKS
 
+    from ..errors import OptionError
+
     if cfg.clock not in CLOCKS:
-        raise ValueError(f"clock: expected 'wall' or 'cpu', got {cfg.clock!r}")
+        raise OptionError(f"clock: expected 'wall' or 'cpu', got {cfg.clock!r}")
+    for name, lo in (("trials", 1), ("jobs", 1), ("first_trial", 0)):
+        v = getattr(cfg, name)
+        if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+            raise OptionError(f"BenchConfig.{name}: expected an integer >= {lo}, got {v!r}")
+    tl = cfg.time_limit
+    if isinstance(tl, bool) or not isinstance(tl, (int, float)) or not (np.isfinite(tl) and tl > 0):
+        raise OptionError(f"BenchConfig.time_limit: expected a number of seconds > 0, got {tl!r}")
     scenes = [scene_name(s) for s in cfg.scenes]
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -294,6 +303,8 @@ def _time_of(r: dict) -> float:
 def success_curve(times: list[float], n: int, ts) -> list[float]:
     """p(t) = n_t / n (Eq. 9): fraction of the n trials solved within t."""
     arr = np.sort(np.asarray(times, float))
+    if n < 1:   # no trials: the fraction is undefined
+        return [float("nan") for _ in ts]
     return [float(np.searchsorted(arr, t, side="right")) / n for t in ts]
 
 

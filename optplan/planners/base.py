@@ -85,9 +85,17 @@ def pose_to_vector(M: pin.SE3) -> np.ndarray:
 
 
 def vector_to_pose(v) -> pin.SE3:
-    """Inverse of :func:`pose_to_vector`."""
-    v = np.asarray(v, dtype=float)
-    return pin.XYZQUATToSE3(np.r_[v[:3], v[3:7] / np.linalg.norm(v[3:7])])
+    """Inverse of :func:`pose_to_vector`; a vector that is not 7 finite numbers or whose quaternion
+    is zero is a ConfigurationError."""
+    from ..spatial import quaternion_to_matrix
+
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigurationError(f"pose: expected [x, y, z, qx, qy, qz, qw], got {v!r}") from None
+    if a.shape != (7,) or not np.all(np.isfinite(a)):
+        raise ConfigurationError(f"pose: expected 7 finite numbers [x, y, z, qx, qy, qz, qw], got {v!r}")
+    return pin.SE3(quaternion_to_matrix(a[3:], "pose quaternion"), a[:3])
 
 
 @dataclass
@@ -119,6 +127,11 @@ class PlanResult:
     def __len__(self) -> int:
         return len(self.path)
 
+    def __bool__(self) -> bool:
+        # with __len__ alone an empty (failed) result would be falsy: `if result:` must not stand in
+        # for "exists" or "succeeded"
+        raise TypeError("the truth value of a PlanResult is ambiguous: use `result.success` or `result is not None`")
+
     # ------------------------------------------------------------------ serialization
     def to_dict(self, include_path: bool = True) -> dict:
         d = {"status": self.status.value, "planner": self.planner, "message": self.message,
@@ -133,20 +146,94 @@ class PlanResult:
     def to_json(self, include_path: bool = True) -> str:
         return json.dumps(self.to_dict(include_path))
 
-    @classmethod
-    def from_dict(cls, d: dict) -> "PlanResult":
-        path = np.asarray(d.get("path", []), dtype=float)
-        if path.ndim != 2:
-            path = path.reshape(0, 0)
-        return cls(PlanStatus(d["status"]), d.get("planner", ""), path,
-                   [None if v is None else vector_to_pose(v) for v in d.get("object_poses", [])],
-                   np.asarray(d.get("constrained", []), dtype=bool),
-                   [PathSegment.from_dict(s) for s in d.get("segments", [])], dict(d.get("stats", {})),
-                   d.get("message", ""))
+    def check(self) -> None:
+        """Raise ConfigurationError when the result is inconsistent: a path that is not an M × nq
+        array of finite numbers, per-configuration lists of another length, segments outside the
+        path, or a success status without a path."""
+        p = self.path
+        if not isinstance(p, np.ndarray) or p.ndim != 2 or p.dtype.kind != "f":
+            raise ConfigurationError(f"PlanResult.path: expected an M x nq float array, got "
+                                     f"{type(p).__name__} of shape {np.shape(p)}")
+        if not np.all(np.isfinite(p)):
+            bad = np.argwhere(~np.isfinite(p))[0].tolist()
+            raise ConfigurationError(f"PlanResult.path: non-finite entry at {bad} ({p[tuple(bad)]})")
+        M = len(p)
+        if self.object_poses and len(self.object_poses) != M:
+            raise ConfigurationError(f"PlanResult.object_poses: {len(self.object_poses)} entries for {M} configurations")
+        if len(self.constrained) not in (0, M):
+            raise ConfigurationError(f"PlanResult.constrained: {len(self.constrained)} entries for {M} configurations")
+        for sg in self.segments:
+            if not (0 <= sg.start <= sg.stop < max(M, 1)):
+                raise ConfigurationError(f"PlanResult.segments: {sg.kind} [{sg.start}, {sg.stop}] is outside the "
+                                         f"path of {M} configurations")
+        if self.status.success and M < 2:
+            raise ConfigurationError(f"PlanResult: status {self.status.value!r} with a path of {M} configurations "
+                                     "(a found path has at least start and goal)")
 
     @classmethod
-    def from_json(cls, text: str) -> "PlanResult":
-        return cls.from_dict(json.loads(text))
+    def from_dict(cls, d: dict, source: str = "PlanResult") -> "PlanResult":
+        """Rebuild from :meth:`to_dict`; anything missing, malformed or inconsistent is a
+        :class:`~optplan.errors.ResultFileError` naming ``source`` and the field."""
+        from ..errors import OptplanError, ResultFileError
+
+        if not isinstance(d, dict):
+            raise ResultFileError(f"{source}: expected a JSON object with 'status', 'path', ..., got {type(d).__name__}")
+        try:
+            status = d["status"]
+            if status not in {s.value for s in PlanStatus}:
+                raise ResultFileError(f"{source}: unknown status {status!r}; expected one of "
+                                      f"{', '.join(s.value for s in PlanStatus)}")
+            raw = d.get("path", [])
+            path = np.asarray(raw, dtype=float)
+            if path.size == 0:
+                path = path.reshape(0, path.shape[1] if path.ndim == 2 else 0)
+            res = cls(PlanStatus(status), str(d.get("planner", "")), path,
+                      [None if v is None else vector_to_pose(v) for v in d.get("object_poses", [])],
+                      np.asarray(d.get("constrained", []), dtype=bool),
+                      [PathSegment.from_dict(s) for s in d.get("segments", [])], dict(d.get("stats", {})),
+                      str(d.get("message", "")))
+            res.check()
+        except ResultFileError:
+            raise
+        except KeyError as exc:
+            raise ResultFileError(f"{source}: missing field {exc}") from None
+        except (OptplanError, TypeError, ValueError, AttributeError) as exc:
+            raise ResultFileError(f"{source}: {exc}") from None
+        return res
+
+    @classmethod
+    def from_json(cls, text: str, source: str = "PlanResult JSON") -> "PlanResult":
+        from ..errors import ResultFileError
+
+        try:
+            d = json.loads(text)
+        except (json.JSONDecodeError, UnicodeDecodeError, TypeError) as exc:
+            raise ResultFileError(f"{source}: not valid JSON ({exc})") from None
+        return cls.from_dict(d, source)
+
+    def save(self, path) -> "Path":
+        """Write :meth:`to_json` to ``path``."""
+        from pathlib import Path
+
+        self.check()
+        p = Path(path)
+        p.write_text(self.to_json())
+        return p
+
+    @classmethod
+    def load(cls, path) -> "PlanResult":
+        """Read a file written by :meth:`save`; a missing, unreadable or corrupted file is a
+        :class:`~optplan.errors.ResultFileError` naming it."""
+        from pathlib import Path
+
+        from ..errors import ResultFileError
+
+        p = Path(path)
+        try:
+            text = p.read_bytes().decode("utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ResultFileError(f"{p}: cannot read a plan result ({exc})") from None
+        return cls.from_json(text, str(p))
 
 
 def _jsonable(x):
@@ -235,6 +322,11 @@ class Planner(abc.ABC):
         except Exception as exc:  # a planner bug must not kill a benchmark run
             log.exception("%s failed", self.name)
             res = self.empty_result(PlanStatus.ERROR, f"{type(exc).__name__}: {exc}")
+        try:
+            res.check()
+        except ConfigurationError as exc:  # never report success about a path that fails its own checks
+            log.error("%s returned an inconsistent result: %s", self.name, exc)
+            res = self.empty_result(PlanStatus.ERROR, f"inconsistent result: {exc}", **res.stats)
         res.stats.setdefault("seed", seed)
         res.stats["time_s"] = time.perf_counter() - w0
         res.stats["cpu_time_s"] = time.process_time() - c0

@@ -23,8 +23,10 @@ import numpy as np
 import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
-from ..errors import ConfigurationError
+from ..errors import ConfigurationError, OptionError
 from ..robot import RobotModel
+from ..solver_options import casadi_option_name, check_ipopt_options, check_solve_arguments
+from ..spatial import check_pose
 from .solution import IpoptStatus, Solution
 from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
 from .transcription import Transcription
@@ -73,7 +75,7 @@ class OptProblem:
         self.duration = float(duration)
         self.free_time = bool(free_time)
         self.duration_bounds = (float(lo), float(hi))
-        self.base0 = pin.SE3.Identity() if base0 is None else base0
+        self.base0 = pin.SE3.Identity() if base0 is None else check_pose(base0, "OptProblem: base0")
         self.n_sub = int(n_sub)
         self._handles: list[TermHandle] = []
         self._x0: np.ndarray | None = None
@@ -93,8 +95,12 @@ class OptProblem:
             raise TypeError(f"expected an optplan term (optplan.problem.terms), got {type(term).__name__}")
         if role == "constraint" and term.cost_only:
             raise TypeError(f"{type(term).__name__} is a cost-only term; use add_cost")
-        if not np.isfinite(weight) or weight < 0:
-            raise ValueError(f"weight: expected a finite number ≥ 0, got {weight}")
+        if isinstance(weight, bool) or not isinstance(weight, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(weight) or weight < 0:
+            raise OptionError(f"weight: expected a finite number ≥ 0, got {weight!r}")
+        for k, v in vars(term).items():   # poses given to a term (targets, relative poses) are true poses
+            if isinstance(v, pin.SE3):
+                check_pose(v, f"{type(term).__name__}.{k}")
         base = name or term.default_name
         names = {h.name for h in self._handles}
         final, i = base, 2
@@ -345,6 +351,8 @@ class OptProblem:
         """
         if self._x0 is None:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
+        check_solve_arguments(tol, max_iter, objective_scaling)
+        check_ipopt_options(ipopt_options)   # an invalid option is an OptionError (ValueError) before the solve
         t_setup = time.perf_counter()
         b = self._built or self._build()
         n_ineq = int(np.sum(b["lbg"] != b["ubg"]))
@@ -364,6 +372,15 @@ class OptProblem:
                 "ipopt.mu_strategy": "adaptive" if inequality_heavy else "monotone",
                 "ipopt.obj_scaling_factor": scale,
                 "ipopt.max_iter": int(max_iter), "ipopt.sb": "yes"}
+        if inequality_heavy:
+            # A closed chain at knots a JointBoundary pins repeats those rows: the constraint Jacobian
+            # is rank-deficient, MUMPS reports the KKT matrix singular and IPOPT regularises it with
+            # δ_c = value·μ^¼ for the rest of the solve. With IPOPT's 1e-8 the scaled transport NLP
+            # then creeps at μ_min (N = 25: 182 iterations, past 500 on other IPOPT/MUMPS builds);
+            # with 1e-6: 15 (N = 50: 16 vs 15), identical on IPOPT 3.14.11 and 3.14.19. Unused when
+            # the Jacobian has full rank; not for equality-dominated problems (closed-chain test
+            # NLP: 71 → 500 iterations). docs/reliability.md
+            opts["ipopt.jacobian_regularization_value"] = 1e-6
         if self.robot.is_floating:
             # MUMPS's automatic ordering (PORD here) on the floating-base transcription: 47
             # iterations, 12.5 s; QAMD: 26 iterations, 2.6 s (restoration N = 48, measured)
@@ -376,7 +393,7 @@ class OptProblem:
                          "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
                          "ipopt.warm_start_slack_bound_push": 1e-9})
         for k, v in (ipopt_options or {}).items():
-            opts[k if "." in k or k in ("print_time", "expand") else f"ipopt.{k}"] = v
+            opts[casadi_option_name(k)] = v
         key = repr(sorted(opts.items()))
         if b["solver"] is None or b["solver_opts"] != key:
             nlp = {"x": b["x"], "f": b["f"], "g": b["g"]}

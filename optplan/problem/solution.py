@@ -87,6 +87,48 @@ class Solution:
     #: the transcription's nominal interval h₀ [s] that scales ``x`` (q̇ h₀, q̈ h₀², j h₀³)
     x_scale_h: float | None = None
 
+    def __post_init__(self):
+        # a Solution never claims success about data that fails its own checks
+        if self.success:
+            try:
+                self.check()
+            except ValueError as exc:
+                import logging
+
+                logging.getLogger(__name__).error("Solution marked failed: %s", exc)
+                self.success = False
+
+    def check(self) -> None:
+        """Raise :class:`~optplan.errors.ConfigurationError` when the arrays are inconsistent
+        (shapes ``t`` (N+1,), ``q``/``qd``/``qdd`` (N+1, nj), ``jerk`` (N, nj), base arrays (N+1, 4/3)),
+        non-finite, ``t`` not increasing, or ``success`` with a status that did not converge."""
+        from ..errors import ConfigurationError
+
+        t = np.asarray(self.t)
+        if t.ndim != 1 or t.size < 2:
+            raise ConfigurationError(f"Solution.t: expected N+1 ≥ 2 knot times, got shape {t.shape}")
+        n1 = t.size
+        nj = len(self.joint_names)
+        shapes = {"q": (n1, nj), "qd": (n1, nj), "qdd": (n1, nj), "jerk": (n1 - 1, nj)}
+        if self.base_quat is not None:
+            shapes["base_quat"] = (n1, 4)
+        if self.base_position is not None:
+            shapes["base_position"] = (n1, 3)
+        for k, shape in {"t": (n1,), **shapes}.items():
+            a = np.asarray(getattr(self, k))
+            if a.shape != shape:
+                raise ConfigurationError(f"Solution.{k}: expected shape {shape}, got {a.shape}")
+            if a.dtype.kind not in "fiu" or not np.all(np.isfinite(a)):
+                raise ConfigurationError(f"Solution.{k}: expected finite numbers, got non-finite or non-numeric "
+                                         f"values (dtype {a.dtype})")
+        if np.any(np.diff(t) <= 0):
+            raise ConfigurationError(f"Solution.t: knot times must increase, got {t.tolist()[:8]}...")
+        if self.success and not self.status.succeeded:
+            raise ConfigurationError(f"Solution: success with status {self.status.value!r}")
+        if self.success and not (np.isfinite(self.max_constraint_violation) and np.isfinite(self.cost)):
+            raise ConfigurationError(f"Solution: success with cost {self.cost} and max constraint violation "
+                                     f"{self.max_constraint_violation}")
+
     @property
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0])
@@ -142,23 +184,60 @@ class Solution:
 
     @classmethod
     def load(cls, path: str | Path) -> "Solution":
+        """Read a file written by :meth:`save`. A missing file is FileNotFoundError; a corrupted one
+        (not npz/JSON, missing or malformed fields, an unknown status, NaN or wrongly shaped arrays,
+        success claimed on data that fails :meth:`check`) is a
+        :class:`~optplan.errors.ResultFileError` naming the file and what is wrong."""
+        import zipfile
+
+        from ..errors import OptplanError, ResultFileError
+
         path = Path(path)
         if not path.exists():
             raise FileNotFoundError(f"no solution file at {str(path)!r}")
-        if path.suffix == ".json":
-            d = json.loads(path.read_text())
-            arrays = {k: np.asarray(d[k], float) for k in ("t", "q", "qd", "qdd", "jerk", "base_quat",
-                                                           "base_position", "x", "lam_g", "lam_x") if k in d}
-            meta = d
-        else:
-            with np.load(path, allow_pickle=False) as z:
-                meta = json.loads(str(z["meta"]))
-                arrays = {k: z[k] for k in z.files if k not in ("meta", "joint_names")}
-        arrays.setdefault("base_quat", None)
-        arrays.setdefault("base_position", None)
-        return cls(success=bool(meta["success"]), status=IpoptStatus.from_string(meta["status"]),
-                   iterations=int(meta["iterations"]), wall_time=float(meta["wall_time"]),
-                   setup_time=float(meta.get("setup_time", 0.0)),
-                   cost=float(meta["cost"]), max_constraint_violation=float(meta["max_constraint_violation"]),
-                   terms={k: float(v) for k, v in meta["terms"].items()},
-                   joint_names=tuple(meta["joint_names"]), x_scale_h=meta.get("x_scale_h"), **arrays)
+        try:
+            if path.suffix == ".json":
+                d = json.loads(path.read_bytes().decode("utf-8"))
+                if not isinstance(d, dict):
+                    raise ResultFileError(f"{path}: expected a JSON object, got {type(d).__name__}")
+                arrays = {k: np.asarray(d[k], float) for k in ("t", "q", "qd", "qdd", "jerk", "base_quat",
+                                                               "base_position", "x", "lam_g", "lam_x") if k in d}
+                meta = d
+            else:
+                with np.load(path, allow_pickle=False) as z:
+                    meta = json.loads(str(z["meta"]))
+                    arrays = {k: z[k] for k in z.files if k not in ("meta", "joint_names")}
+            if not isinstance(meta, dict):
+                raise ResultFileError(f"{path}: metadata is not a JSON object")
+            status = meta["status"]
+            if str(status).lower() not in {m.value.lower() for m in IpoptStatus}:
+                raise ResultFileError(f"{path}: unknown status {status!r}; expected one of "
+                                      f"{', '.join(m.value for m in IpoptStatus)}")
+            missing = [k for k in ("t", "q", "qd", "qdd", "jerk") if k not in arrays]
+            if missing:
+                raise ResultFileError(f"{path}: missing arrays {missing}")
+            arrays.setdefault("base_quat", None)
+            arrays.setdefault("base_position", None)
+            success = meta["success"]
+            if not isinstance(success, (bool, np.bool_)):
+                raise ResultFileError(f"{path}: success: expected true or false, got {success!r}")
+            sol = cls.__new__(cls)
+            sol.__init__(success=False, status=IpoptStatus.from_string(status),
+                         iterations=int(meta["iterations"]), wall_time=float(meta["wall_time"]),
+                         setup_time=float(meta.get("setup_time", 0.0)),
+                         cost=float(meta["cost"]), max_constraint_violation=float(meta["max_constraint_violation"]),
+                         terms={str(k): float(v) for k, v in dict(meta["terms"]).items()},
+                         joint_names=tuple(str(n) for n in meta["joint_names"]), x_scale_h=meta.get("x_scale_h"),
+                         **arrays)
+            sol.check()
+            sol.success = bool(success)
+            sol.check()   # success now claimed: status and figures must support it
+        except ResultFileError:
+            raise
+        except KeyError as exc:
+            raise ResultFileError(f"{path}: missing field {exc}") from None
+        except (zipfile.BadZipFile, json.JSONDecodeError, UnicodeDecodeError, EOFError, OSError) as exc:
+            raise ResultFileError(f"{path}: not a readable solution file ({type(exc).__name__}: {exc})") from None
+        except (OptplanError, TypeError, ValueError, AttributeError) as exc:
+            raise ResultFileError(f"{path}: {exc}") from None
+        return sol

@@ -1,0 +1,94 @@
+"""Checks of the options a user passes to IPOPT, before a (possibly long) NLP is built and solved.
+
+IPOPT and CasADi refuse unknown names and out-of-range values only when the solver instance is
+created, as a ``RuntimeError`` whose text names neither the value nor, for range errors, the
+option. :func:`check_ipopt_options` creates a one-variable IPOPT instance per option (about a
+millisecond each) and turns a refusal into :class:`~optplan.errors.OptionError` naming the option,
+the value and what IPOPT accepts.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import sys
+
+from .errors import OptionError
+
+__all__ = ["casadi_option_name", "check_ipopt_options", "check_solve_arguments"]
+
+_CASADI_LEVEL = ("print_time", "expand")
+
+
+def casadi_option_name(key: str) -> str:
+    """``"tol"`` → ``"ipopt.tol"``; names with a dot and CasADi's own (print_time, expand) unchanged."""
+    return key if "." in key or key in _CASADI_LEVEL else f"ipopt.{key}"
+
+
+@contextlib.contextmanager
+def _quiet_stdout():
+    """IPOPT prints its option documentation to the C-level stdout on a refusal: silence it."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(fd)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), fd)
+            yield
+    finally:
+        os.dup2(saved, fd)
+        os.close(saved)
+
+
+def check_ipopt_options(options: dict | None) -> None:
+    """Raise :class:`OptionError` for an option name IPOPT/CasADi does not know or a value it refuses."""
+    if options is None:
+        return
+    if not isinstance(options, dict):
+        raise OptionError(f"ipopt_options: expected a dict {{name: value}}, got {type(options).__name__} {options!r}")
+    import casadi as ca
+
+    x = ca.SX.sym("x")
+    for key, value in options.items():
+        if not isinstance(key, str):
+            raise OptionError(f"ipopt_options: option names are strings, got {key!r}")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise OptionError(f"ipopt_options[{key!r}] = {value!r}: expected a finite number")
+        name = casadi_option_name(key)
+        opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", name: value}
+        try:
+            with _quiet_stdout():
+                ca.nlpsol("optplan_option_check", "ipopt", {"x": x, "f": x * x}, opts)
+        except (RuntimeError, TypeError, NotImplementedError) as exc:
+            text = str(exc).strip().splitlines()
+            why = text[-1] if text else type(exc).__name__
+            if "No such IPOPT option" in str(exc) or "Unknown option" in str(exc) or "print_options" in why:
+                raise OptionError(f"ipopt_options[{key!r}]: unknown IPOPT/CasADi option (see the IPOPT options "
+                                  "documentation, e.g. tol, max_iter, mu_strategy, print_level)") from None
+            raise OptionError(f"ipopt_options[{key!r}] = {value!r}: refused by IPOPT (wrong type or out of range; "
+                              f"{why.split(':')[-1].strip()})") from None
+
+
+def check_solve_arguments(tol, max_iter, objective_scaling) -> None:
+    """``tol`` a finite number > 0, ``max_iter`` an integer ≥ 0, ``objective_scaling`` "auto" or a number > 0."""
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not (math.isfinite(tol) and tol > 0):
+        raise OptionError(f"solve: tol: expected a finite number > 0, got {tol!r}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 0:
+        try:
+            import numpy as np
+
+            ok = isinstance(max_iter, np.integer) and max_iter >= 0
+        except ImportError:  # pragma: no cover
+            ok = False
+        if not ok:
+            raise OptionError(f"solve: max_iter: expected an integer >= 0, got {max_iter!r}")
+    if isinstance(objective_scaling, str) and objective_scaling == "auto":
+        return
+    if (isinstance(objective_scaling, bool)
+                                        or not isinstance(objective_scaling, (int, float))
+                                        or not (math.isfinite(objective_scaling) and objective_scaling > 0)):
+        raise OptionError(f"solve: objective_scaling: expected 'auto' or a finite number > 0, got {objective_scaling!r}")
