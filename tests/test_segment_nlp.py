@@ -18,6 +18,7 @@ import pytest
 from scipy.interpolate import BSpline
 
 from optplan.collision import CollisionChecker
+from optplan.robot import RobotModel
 from optplan.problem import ClosedChain
 from optplan.problem.bspline import boundary_points, fit_interior, knot_matrices, knot_values
 from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
@@ -166,3 +167,25 @@ def test_checker_distances_match_coal_pair_by_pair(tcb, rng):
             g1, t1, g2, t2 = chk._geoms(p, tf)
             ref.append(coal.distance(g1, t1, g2, t2, req, coal.DistanceResult()))
         np.testing.assert_allclose(d, ref, atol=5e-6)  # GJK tolerance (1e-6) on two placements
+
+
+def test_bad_arguments_are_clear_errors(tcb, transport):
+    from optplan.errors import OptionError
+
+    Q, cc = _straight_segment(tcb, transport, N=8)
+    with pytest.raises(ValueError, match="duration"):
+        SplineSegmentProblem(tcb, transport, SegmentSpec(8, -1.0, Q[0], Q[-1], cc))
+    prob = SplineSegmentProblem(tcb, transport, SegmentSpec(8, 10.0, Q[0], Q[-1], cc))
+    with pytest.raises(ValueError, match="no initial guess"):
+        prob.solve()
+    with pytest.raises(ValueError, match=r"expected \(9, 14\)"):
+        prob.set_initial(Q[:-1])
+    with pytest.raises(ValueError, match="non-finite"):
+        prob.set_initial(np.full_like(Q, np.nan))
+    prob.set_initial(Q)
+    with pytest.raises(OptionError, match="no_such_option"):
+        prob.solve({"no_such_option": 1})
+    with pytest.raises(OptionError, match="tol"):
+        prob.solve(tol=-1.0)
+    with pytest.raises(ValueError, match="fixed-base"):
+        SplineSegmentProblem(RobotModel.from_name("eba_ffsr"), None, SegmentSpec(8, 10.0, np.zeros(14), np.zeros(14)))

@@ -672,9 +672,13 @@ class SplineSegmentProblem:
     def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-6, max_iter: int = 500) -> Solution:
         """Solve with IPOPT (exact Hessian, MUMPS). Never raises for a failed solve: the status is
         in the Solution. ``ipopt_options`` are passed through (``"ipopt."`` prefix optional)."""
+        from ..solver_options import casadi_option_name, check_ipopt_options, check_solve_arguments
+
+        check_solve_arguments(tol, max_iter, 1.0)
         t_setup = time.perf_counter()
         b = self._built or self._build()
         if b.solver is None:
+            check_ipopt_options(ipopt_options)  # an invalid option is an OptionError before the solve
             # jacobian_regularization_value: IPOPT's constraint regularisation, used only when it
             # finds the Jacobian rank-deficient (docs/optproblem.md: a long segment on 136 intervals
             # went from 339 iterations without convergence to 19 with it)
@@ -683,7 +687,7 @@ class SplineSegmentProblem:
                     "ipopt.mu_strategy": "adaptive", "ipopt.max_iter": int(max_iter),
                     "ipopt.jacobian_regularization_value": 1e-6}
             for k, v in (ipopt_options or {}).items():
-                opts[k if "." in k or k in ("print_time", "expand") else f"ipopt.{k}"] = v
+                opts[casadi_option_name(k)] = v
             if self.exact_derivatives:
                 # the kernels may be compiled (no derivatives of their own): IPOPT's multipliers
                 # are used as they are, not recomputed from a gradient of the Lagrangian
