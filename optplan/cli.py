@@ -125,7 +125,22 @@ def _cmd_plan(args) -> int:
             json.dump(out, f, indent=2)
     if args.save and res.segments:
         res.save(args.save)
+        from .viz.html import save_metadata
+
+        save_metadata(args.save, robot=robot.name, scene=scene.name)
+    if (args.html or args.plot) and res.segments:
+        from .viz.outputs import write_views
+
+        for p in write_views(robot, scene, res.t, res.q, res.constrained, html=args.html, plot_dir=args.plot,
+                             title=f"optplan plan: {scene.name}, trial {args.trial}"):
+            print(f"wrote {p}")
     return 0 if res.success else 1
+
+
+def _cmd_view(args) -> int:
+    from .viz.outputs import view_command
+
+    return view_command(args)
 
 
 def _cmd_demo(args) -> int:
@@ -217,8 +232,21 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--time-limit", type=float, default=10.0, help="planning time limit [s]")
     pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
     pl.add_argument("--json", help="write the figures as JSON")
-    pl.add_argument("--save", help="write the trajectory npz (t, q, joint_names, constrained)")
+    pl.add_argument("--save", help="write the trajectory npz (t, q, joint_names, constrained, robot, scene)")
+    pl.add_argument("--html", help="write a 3D view of the motion (self-contained HTML, opens offline)")
+    pl.add_argument("--plot", metavar="DIR", help="write PNG figures: joints with limits, closed-chain residual "
+                    "and clearance over time")
     pl.set_defaults(func=_cmd_plan)
+
+    vw = sub.add_parser("view", help="3D view of a saved trajectory as a self-contained HTML file")
+    vw.add_argument("traj", metavar="TRAJ.npz", help="trajectory file (optplan plan --save, examples' --save)")
+    vw.add_argument("--scene", help="1, 2, 3 (ssps_scene<N>), a scene name or a scene TOML path "
+                    "(default: the one recorded in the file)")
+    vw.add_argument("--robot", help="robot model name (default: recorded in the file, else the scene's robot)")
+    vw.add_argument("--html", help="output HTML path (default: TRAJ with .html)")
+    vw.add_argument("--plot", metavar="DIR", help="also write the PNG figures of the trajectory to DIR")
+    vw.add_argument("--playback", type=float, default=20.0, help="seconds the whole motion takes to play (default 20)")
+    vw.set_defaults(func=_cmd_view)
 
     d = sub.add_parser("demo", help="free-floating base of the EBA robot under a quintic joint motion")
     d.add_argument("--duration", type=float, default=20.0, help="motion duration [s]")
