@@ -66,13 +66,14 @@ def _cmd_bench_tcbirrt(args) -> int:
     cfg = BenchConfig(scenes=[s for s in args.scene.split(",") if s], planners=[p for p in args.planners.split(",") if p],
                       trials=args.trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=args.out,
                       clock=args.clock, progress=not args.no_progress, plot=not args.no_plot,
-                      first_trial=args.first_trial, merge=list(args.merge or []))
+                      first_trial=args.first_trial, merge=list(args.merge or []),
+                      engine=args.engine, address=args.address)
     t0 = time.perf_counter()
     rows = run(cfg)
     print(format_summary(summarize(rows, cfg.time_limit)))
     print(f"summary of {len(rows)} result lines ({args.out}/results.jsonl"
           f"{' and merged runs' if cfg.merge else ''}); run time {time.perf_counter() - t0:.1f} s (clock: {cfg.clock}); "
-          f"figure {args.out}/success_curves.png")
+          f"figures {args.out}/success_curves.png, {args.out}/time_distributions.png")
     return 0
 
 
@@ -84,7 +85,7 @@ def _cmd_bench_warmstart(args) -> int:
                           modes=tuple(m.strip() for m in args.modes.split(",") if m.strip()),
                           first_trial=args.first_trial, progress=not args.no_progress,
                           ipopt_max_wall_time=args.ipopt_max_wall_time,
-                          free_plane_normals=args.free_plane_normals)
+                          free_plane_normals=args.free_plane_normals, engine=args.engine, address=args.address)
     try:
         validate(cfg)
     except ValueError as exc:
@@ -163,6 +164,15 @@ def _cmd_demo(args) -> int:
     return 0 if out["max_momentum_residual"] < 1e-9 else 1
 
 
+def _engine_args(p) -> None:
+    from .bench.engine import ENGINES
+
+    p.add_argument("--engine", choices=ENGINES, default="local",
+                   help="local: this process or a pool of --jobs processes; dask: a local Dask cluster of --jobs "
+                        "workers, or the cluster at --address (extra 'dask')")
+    p.add_argument("--address", metavar="URL", help="Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --engine dask)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="optplan", description="Motion planning and trajectory optimization "
                                 "for dual-arm space robots")
@@ -205,6 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also summarize the result lines of another output directory (repeatable)")
     tb.add_argument("--no-progress", action="store_true")
     tb.add_argument("--no-plot", action="store_true")
+    _engine_args(tb)
     tb.set_defaults(func=_cmd_bench_tcbirrt)
 
     ws = bench.add_parser("warmstart", help="issue 4 item 5: IPOPT from the TCBiRRT path (warm) vs from a straight line "
@@ -222,6 +233,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="let IPOPT move the separating-plane normals (PipelineOptions.fixed_plane_normals=False)")
     ws.add_argument("--out", default="bench_warmstart", help="output directory (results.jsonl, summary.txt/json)")
     ws.add_argument("--no-progress", action="store_true")
+    _engine_args(ws)
     ws.set_defaults(func=_cmd_bench_warmstart)
 
     pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene (issue 4 pipeline)")
