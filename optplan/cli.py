@@ -37,6 +37,28 @@ def _cmd_models_list(args) -> int:
     return 0
 
 
+def _cmd_models_info(args) -> int:
+    from .errors import UnknownNameError
+    from .modelinfo import format_model_info, model_info
+
+    try:
+        info = model_info(args.name)
+    except UnknownNameError as exc:
+        print(f"optplan models info: error: {exc}", file=sys.stderr)
+        return 2
+    print(format_model_info(info))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(info, f, indent=2)
+    return 0
+
+
+def _cmd_reproduce(args) -> int:
+    from .reproduce import main
+
+    return main(args)
+
+
 def _cmd_bench_kinematics(args) -> int:
     from .bench.kinematics import report, run
 
@@ -173,10 +195,17 @@ def _engine_args(p) -> None:
     p.add_argument("--address", metavar="URL", help="Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --engine dask)")
 
 
+def _version() -> str:
+    from . import __version__
+
+    return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="optplan", description="Motion planning and trajectory optimization "
                                 "for dual-arm space robots")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
+    p.add_argument("--version", action="version", version=f"optplan {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
 
     models = sub.add_parser("models", help="robot descriptions").add_subparsers(dest="action", required=True)
@@ -184,6 +213,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--check", action="store_true", help="only check that the URDFs are up to date")
     b.set_defaults(func=_cmd_models_build)
     models.add_parser("list", help="list robot descriptions").set_defaults(func=_cmd_models_list)
+    mi = models.add_parser("info", help="joints, limits, arms and masses of a robot model")
+    mi.add_argument("name", help="model name (see `optplan models list`)")
+    mi.add_argument("--json", help="write the description as JSON to this path")
+    mi.set_defaults(func=_cmd_models_info)
 
     bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="what", required=True)
     k = bench.add_parser("kinematics", help="per-call times of numeric and CasADi kinematics")
@@ -259,6 +292,13 @@ def build_parser() -> argparse.ArgumentParser:
     vw.add_argument("--plot", metavar="DIR", help="also write the PNG figures of the trajectory to DIR")
     vw.add_argument("--playback", type=float, default=20.0, help="seconds the whole motion takes to play (default 20)")
     vw.set_defaults(func=_cmd_view)
+
+    rp = sub.add_parser("reproduce", help="reproduce a source paper with one command (figures, JSON, 3D views)")
+    rp.add_argument("paper", choices=["tcbirrt", "eba", "dshdasr", "spline-rrt", "oc-rrt"])
+    rp.add_argument("--quick", action="store_true", help="a reduced run (under a minute)")
+    rp.add_argument("--out", help="output directory (default reproduce_<paper>)")
+    rp.add_argument("--no-html", action="store_true", help="no HTML views")
+    rp.set_defaults(func=_cmd_reproduce)
 
     d = sub.add_parser("demo", help="free-floating base of the EBA robot under a quintic joint motion")
     d.add_argument("--duration", type=float, default=20.0, help="motion duration [s]")

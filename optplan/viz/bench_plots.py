@@ -27,7 +27,7 @@ def _boxes(ax, groups: list[tuple[str, list[float], int]], ylabel: str, log: boo
         ax.set_yscale("log")
     if limit is not None:
         ax.axhline(limit, ls="--", color="0.4", lw=0.9, label=f"time limit {limit:g} s")
-        ax.legend(fontsize=7, loc="lower right")
+        ax.legend(fontsize=7, loc="upper right")
     ax.set_ylabel(ylabel)
     ax.grid(True, axis="y", which="both", alpha=0.3)
 

@@ -28,7 +28,7 @@ import numpy as np
 import pinocchio as pin
 
 __all__ = ["ViewOptions", "trajectory_html", "write_trajectory_html", "load_trajectory", "save_metadata", "view_file",
-           "resolve_scene", "VizUnavailable",
+           "resolve_scene", "VizUnavailable", "floating_configurations",
            "ARM_COLORS", "OBJECT_COLOR", "OBSTACLE_COLOR"]
 
 #: RGBA colours of the arms' links, in arm order (orange, blue, then green, purple)
@@ -439,7 +439,7 @@ def load_trajectory(path) -> dict:
         if not {"t", "q"} <= keys:
             raise ValueError(f"{p}: expected arrays 't' and 'q' in the npz, found {sorted(keys)}")
         out = {"t": np.asarray(z["t"], float), "q": np.asarray(z["q"], float)}
-        for k in ("constrained", "joint_names"):
+        for k in ("constrained", "joint_names", "qd"):
             if k in keys:
                 out[k] = z[k]
         for k in ("robot", "scene"):
@@ -448,6 +448,18 @@ def load_trajectory(path) -> dict:
     if out["q"].ndim != 2 or len(out["t"]) != len(out["q"]):
         raise ValueError(f"{p}: expected q of shape (M, nq) with M = len(t) = {len(out['t'])}, got {out['q'].shape}")
     return out
+
+
+def floating_configurations(robot, t, q_joints, qd_joints=None) -> np.ndarray:
+    """Full configurations (base XYZ-quaternion, then joints) of a free-floating robot whose file
+    holds only the joints: the base motion follows from momentum conservation (zero momentum,
+    base at the origin at t[0]; :func:`optplan.floating.simulate_base`)."""
+    from ..floating import joint_trajectory_from_samples, simulate_base
+
+    t = np.asarray(t, float)
+    traj = joint_trajectory_from_samples(t, np.asarray(q_joints, float),
+                                         None if qd_joints is None else np.asarray(qd_joints, float))
+    return simulate_base(robot, traj, t).q
 
 
 def save_metadata(path, *, robot: str | None = None, scene: str | None = None) -> None:
@@ -490,6 +502,8 @@ def view_file(traj_path, *, scene: str | None = None, robot: str | None = None, 
     rm = RobotModel.from_name(robot_name) if not str(robot_name).endswith(".urdf") else None
     if rm is None:
         raise ValueError(f"--robot: expected the name of a shipped model, got {robot_name!r}")
+    if rm.is_floating and tr["q"].shape[1] == rm.nj:
+        tr["q"] = floating_configurations(rm, tr["t"], tr["q"], tr.get("qd"))
     if tr["q"].shape[1] != rm.nq:
         raise ValueError(f"{traj_path}: q has {tr['q'].shape[1]} columns but robot {rm.name!r} has nq = {rm.nq}; "
                          "pass the right --robot/--scene")
