@@ -52,3 +52,25 @@ def view_command(args) -> int:
                                  constrained=tr.get("constrained")):
             print(f"wrote {f}")
     return 0
+
+
+def write_method_views(robot, trajectories: dict, out_dir, scene=None, title: str = "") -> list[Path]:
+    """One HTML view per method: ``trajectories`` maps a method name to ``(t, q)`` or ``(t, q, qd)``
+    with ``q`` full configurations or, for a free-floating robot, joints only (the base motion
+    then follows from momentum conservation). Writes ``out_dir/<name>.html``; returns the paths
+    (none, with a message on stderr, without the ``viz`` extra)."""
+    from .html import ViewOptions, VizUnavailable, floating_configurations, write_trajectory_html
+
+    out = []
+    for name, tr in trajectories.items():
+        t, q = tr[0], tr[1]
+        qd = tr[2] if len(tr) > 2 else None
+        if robot.is_floating and q.shape[1] == robot.nj:
+            q = floating_configurations(robot, t, q, qd)
+        try:
+            out.append(write_trajectory_html(Path(out_dir) / f"{name}.html", robot, scene, t, q,
+                                             options=ViewOptions(title=f"{title}{name}")))
+        except VizUnavailable as exc:
+            print(f"optplan: no HTML view written: {exc}", file=sys.stderr)
+            break
+    return out
