@@ -173,7 +173,7 @@ def _cmd_demo(args) -> int:
     out = run(duration=args.duration)
     out["runtime_s"] = time.perf_counter() - t0
     rpy, paper = out["final_base_rpy_deg"], out["paper_final_base_rpy_deg"]
-    print("EBA robot, free-end case, 5th-order polynomial joint motion (seed 004 Sec. 4.1)")
+    print("EBA robot, free-end case, 5th-order polynomial joint motion (EBA paper, Sec. 4.1)")
     print(f"  final base RPY [deg]   optplan ({rpy[0]:+.3f}, {rpy[1]:+.3f}, {rpy[2]:+.3f})   "
           f"paper ({paper[0]:+.2f}, {paper[1]:+.2f}, {paper[2]:+.2f})")
     print(f"  max momentum residual  {out['max_momentum_residual']:.2e}")
@@ -231,7 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--json", help="write the rows as JSON to this path")
     tr.set_defaults(func=_cmd_bench_transport)
 
-    tb = bench.add_parser("tcbirrt", help="seed 000 benchmark: planners x SSPS scenes x perturbed trials")
+    tb = bench.add_parser("tcbirrt", help="TCBiRRT benchmark: planners x space-solar-power-station scenes x perturbed trials")
     tb.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, or names)")
     tb.add_argument("--trials", type=int, default=100, help="trials per scene")
     tb.add_argument("--first-trial", type=int, default=0, help="index of the first trial")
@@ -251,7 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
     _engine_args(tb)
     tb.set_defaults(func=_cmd_bench_tcbirrt)
 
-    ws = bench.add_parser("warmstart", help="issue 4 item 5: IPOPT from the TCBiRRT path (warm) vs from a straight line "
+    ws = bench.add_parser("warmstart", help="IPOPT from the TCBiRRT path (warm) vs from a straight line "
                           "(cold) on perturbed trials")
     ws.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, or names)")
     ws.add_argument("--trials", type=int, default=20, help="trials per scene")
@@ -269,7 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
     _engine_args(ws)
     ws.set_defaults(func=_cmd_bench_warmstart)
 
-    pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene (issue 4 pipeline)")
+    pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene (the main job)")
     pl.add_argument("--scene", default="1", help="1, 2, 3 (ssps_scene<N>) or a scene name")
     pl.add_argument("--trial", type=int, default=0, help="trial index (perturbed start/goal, Section 5.1)")
     pl.add_argument("--seed", type=int, default=0)

@@ -91,6 +91,10 @@ def _dask_map(fn, units: list, *, jobs: int, address: str | None, initializer, i
     except ImportError as exc:
         raise EngineUnavailable("--engine dask needs the optional extra 'dask': pip install \"optplan[dask]\" "
                                 f"({exc})") from exc
+    if not log.isEnabledFor(logging.INFO):   # distributed logs every connection at INFO by default
+        for name in ("distributed", "distributed.scheduler", "distributed.core", "distributed.worker",
+                     "distributed.nanny", "distributed.http.proxy"):
+            logging.getLogger(name).setLevel(logging.WARNING)
     cluster = None
     own_client = client is None
     if client is None:
