@@ -365,7 +365,7 @@ def format_summary(summ: dict) -> str:
                 extra.append(f"paths with collisions between configurations (dense 0.05 rad) {d['paths_with_dense_collisions']}")
             extra.append("statuses " + ", ".join(f"{k} {v}" for k, v in d["statuses"].items()))
             lines.append("      " + "; ".join(extra))
-    lines.append("targets (issue 4): TCBiRRT success >= 0.99 per scene within 10 s, median <= 0.25 s; "
+    lines.append("targets: TCBiRRT success >= 0.99 per scene within 10 s, median <= 0.25 s; "
                  ">= 10x faster median than the best OMPL peer at equal or higher success")
     return "\n".join(lines)
 

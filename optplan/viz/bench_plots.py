@@ -26,8 +26,7 @@ def _boxes(ax, groups: list[tuple[str, list[float], int]], ylabel: str, log: boo
     if log and any(d.size and np.all(d > 0) for d in data):
         ax.set_yscale("log")
     if limit is not None:
-        ax.axhline(limit, ls="--", color="0.4", lw=0.9, label=f"time limit {limit:g} s")
-        ax.legend(fontsize=7, loc="upper right")
+        ax.axhline(limit, ls="--", color="0.4", lw=0.9)
     ax.set_ylabel(ylabel)
     ax.grid(True, axis="y", which="both", alpha=0.3)
 
@@ -54,7 +53,7 @@ def plot_time_distributions(rows: list[dict], path, time_limit: float | None = N
             groups.append((p, times, len(pr)))
         clock = "CPU" if rs and rs[0].get("clock") == "cpu" else "wall"
         _boxes(ax, groups, f"planning time per trial [s] ({clock})", limit=time_limit)
-        ax.set_title(sc)
+        ax.set_title(sc + ("" if time_limit is None else f" (dashed: time limit {time_limit:g} s)"), fontsize=10)
     fig.tight_layout()
     p = Path(path)
     fig.savefig(p, dpi=120)
