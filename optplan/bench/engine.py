@@ -100,7 +100,8 @@ def _dask_map(fn, units: list, *, jobs: int, address: str | None, initializer, i
     if client is None:
         if address is None:
             cluster = LocalCluster(n_workers=min(jobs, len(units)), threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
+                                   dashboard_address=None,
+                                   silence_logs=logging.INFO if log.isEnabledFor(logging.INFO) else logging.CRITICAL)
             client = Client(cluster)
         else:
             try:
