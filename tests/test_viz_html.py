@@ -98,8 +98,10 @@ def test_npz_roundtrip_and_view_file(tmp_path, dual, scene1):
     np.savez(bad, t=t)
     with pytest.raises(ValueError, match="expected arrays 't' and 'q'"):
         load_trajectory(bad)
-    with pytest.raises(ValueError, match="q has 14 columns but robot .eba_ffsr. has nq = 21"):
-        view_file(p, robot="eba_ffsr")
+    with pytest.raises(ValueError, match="q has 14 columns but robot .dshdasr. has nq = 17"):
+        view_file(p, robot="dshdasr")
+    # 14 joints of the free-floating eba_ffsr: the base motion is re-integrated (momentum conservation)
+    assert view_file(p, robot="eba_ffsr", out=tmp_path / "floating.html").stat().st_size > 100_000
 
 
 # --------------------------------------------------------------------------- real browser
