@@ -107,7 +107,8 @@ def _cmd_bench_warmstart(args) -> int:
                           modes=tuple(m.strip() for m in args.modes.split(",") if m.strip()),
                           first_trial=args.first_trial, progress=not args.no_progress,
                           ipopt_max_wall_time=args.ipopt_max_wall_time,
-                          free_plane_normals=args.free_plane_normals, engine=args.engine, address=args.address)
+                          free_plane_normals=args.free_plane_normals, transcription=args.transcription,
+                          engine=args.engine, address=args.address)
     try:
         validate(cfg)
     except ValueError as exc:
@@ -137,12 +138,13 @@ def _cmd_plan(args) -> int:
     out["wall_time_s"] = time.perf_counter() - t0
     print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}")
     for k in ("success", "plan_status", "plan_time_s", "n_regrasp", "opt_status", "opt_time_s", "opt_setup_time_s",
-              "opt_iterations", "max_closed_chain_residual", "min_clearance_m", "wall_time_s"):
+              "opt_iterations", "opt_wall_s", "max_closed_chain_residual", "min_clearance_m", "wall_time_s"):
         v = out[k]
         print(f"  {k:28s} {v:.3e}" if isinstance(v, float) else f"  {k:28s} {v}")
     for s in res.segments:
         print(f"    segment {s.kind:11s} {s.arm or '':2s} {s.solution.status.value:28s} it={s.solution.iterations:4d} "
-              f"ipopt={s.solution.wall_time:6.2f}s clearance={s.report.min_clearance_m:+.3f} m")
+              f"ipopt={s.solution.wall_time:6.2f}s clearance={s.report.min_clearance_m:+.3f} m "
+              f"attempts={'+'.join(a['reason'] for a in s.attempts)}")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=2)
@@ -262,6 +264,8 @@ def build_parser() -> argparse.ArgumentParser:
     ws.add_argument("--modes", default="warm,cold", help="comma-separated: warm, cold")
     ws.add_argument("--ipopt-max-wall-time", type=float, default=None, metavar="S",
                     help="cap every IPOPT solve at S seconds (default: iteration limit only)")
+    ws.add_argument("--transcription", choices=["bspline", "knots"], default="bspline",
+                    help="trajectory NLP: B-spline control points (default) or the knot-state transcription")
     ws.add_argument("--free-plane-normals", action="store_true",
                     help="let IPOPT move the separating-plane normals (PipelineOptions.fixed_plane_normals=False)")
     ws.add_argument("--out", default="bench_warmstart", help="output directory (results.jsonl, summary.txt/json)")

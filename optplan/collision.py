@@ -81,10 +81,32 @@ class CollisionChecker:
                     continue
                 pairs.append(Pair("object-robot", -1, g, "object", objs[g].name))
         self.pairs = pairs
+        self._build_combined()
         self._req = coal.DistanceRequest()
         self._res = coal.DistanceResult()
         self._creq = coal.CollisionRequest()
         self._cres = coal.CollisionResult()
+
+    def _build_combined(self) -> None:
+        """One Pinocchio GeometryModel with the robot's geometries, the held object (attached to its
+        hand's joint) and the obstacles (attached to the world), with exactly ``pairs`` as its
+        collision pairs in the same order, so that ``pinocchio.computeDistances`` runs the whole
+        list in C++ (the same coal narrow phase and default request as :meth:`_geoms`)."""
+        gm = self.gmodel.copy()
+        gm.removeAllCollisionPairs()
+        obs_ids = [gm.addGeometryObject(pin.GeometryObject(f"obstacle/{o.name}", 0, 0, o.placement, g))
+                   for o, g in zip(self.obstacles, self._obs_geom)]
+        obj_id = None
+        if self.object is not None:
+            fr = self.model.frames[self._hand_fid]
+            obj_id = gm.addGeometryObject(pin.GeometryObject("object/held", fr.parentJoint, self._hand_fid,
+                                                             fr.placement * self._grasp_inv, self._obj_geom))
+        for p in self.pairs:
+            a = obj_id if p.a == -1 else p.a
+            b = obs_ids[p.b] if p.kind in ("robot-obstacle", "object-obstacle") else p.b
+            gm.addCollisionPair(pin.CollisionPair(min(a, b), max(a, b)))
+        self._cgm = gm
+        self._cgd = pin.GeometryData(gm)
 
     # ------------------------------------------------------------------ placements
     def _update(self, q) -> pin.SE3 | None:
@@ -115,36 +137,31 @@ class CollisionChecker:
     # ------------------------------------------------------------------ queries
     def distances(self, q) -> np.ndarray:
         """Exact signed distance [m] of every pair at configuration ``q`` (negative: penetration)."""
-        Mo = self._update(q)
-        obj_tf = _tf(Mo) if Mo is not None else None
-        out = np.empty(len(self.pairs))
-        for i, p in enumerate(self.pairs):
-            g1, t1, g2, t2 = self._geoms(p, obj_tf)
-            self._res.clear()
-            out[i] = coal.distance(g1, t1, g2, t2, self._req, self._res)
-        return out
+        q = self.robot.check_q(q)
+        if not self.pairs:
+            return np.empty(0)
+        pin.computeDistances(self.model, self.data, self._cgm, self._cgd, q)
+        return np.fromiter((r.min_distance for r in self._cgd.distanceResults), float, len(self.pairs))
 
     def min_distance(self, q) -> tuple[float, Pair | None]:
         """Smallest distance [m] and the pair that has it (inf, None without pairs)."""
         if not self.pairs:
             return float("inf"), None
-        d = self.distances(q)
-        i = int(np.argmin(d))
-        return float(d[i]), self.pairs[i]
+        q = self.robot.check_q(q)
+        i = int(pin.computeDistances(self.model, self.data, self._cgm, self._cgd, q))
+        return float(self._cgd.distanceResults[i].min_distance), self.pairs[i]
 
     def is_valid(self, q, margin: float = 0.0) -> bool:
         """True when every pair is at least ``margin`` [m] apart (stops at the first failure;
         ``margin = 0`` uses coal's boolean collision test, the fastest)."""
+        if margin <= 0.0:
+            q = self.robot.check_q(q)
+            return not pin.computeCollisions(self.model, self.data, self._cgm, self._cgd, q, True)
         Mo = self._update(q)
         obj_tf = _tf(Mo) if Mo is not None else None
         for p in self.pairs:
             g1, t1, g2, t2 = self._geoms(p, obj_tf)
-            if margin <= 0.0:
-                self._cres.clear()
-                if coal.collide(g1, t1, g2, t2, self._creq, self._cres):
-                    return False
-            else:
-                self._res.clear()
-                if coal.distance(g1, t1, g2, t2, self._req, self._res) < margin:
-                    return False
+            self._res.clear()
+            if coal.distance(g1, t1, g2, t2, self._req, self._res) < margin:
+                return False
         return True

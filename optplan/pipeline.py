@@ -81,6 +81,24 @@ class PipelineOptions:
     at coal's witness normals along the warm start (measured: 3.2× less IPOPT time on 8 constrained
     segments and fewer collision retries, at a 1.0-3.4× higher jerk cost; docs/planners.md). A
     segment whose fixed-normal NLP fails is re-solved with free normals before any other retry.
+
+    transcription: ``"bspline"`` (default): each segment is a :class:`~optplan.problem.segment.
+    SplineSegmentProblem` — joint-space B-spline control points only, closed chain and fixed-normal
+    collision planes at the knots, limits on the control points (so also between knots), kernels
+    mapped over the knots and exact derivatives assembled from them; ``"knots"``: the
+    :class:`~optplan.problem.OptProblem` knot-state transcription with the options above.
+    B-spline segments get ⌈joint path length / spline_interval_step [rad]⌉ intervals for a
+    constrained segment (⌈length / free_interval_step⌉ for a regrasp), clipped to
+    [spline_min_intervals, spline_max_intervals]. Their retry policy, in order (each attempt is
+    recorded in ``SegmentResult.attempts``): (1) ``collision``: coal finds a contact after a
+    converged solve → pairs activated along the solution, margins raised between knots, re-solve
+    (≤ collision_retries); (2) ``finer-grid``: IPOPT failed or a contact remains → 1.6× the
+    intervals from the same initial guess (≤ failure_retries); (3) ``refine``: the closed-chain
+    residual between knots exceeds closed_chain_tol → the grid refined by
+    (residual / (tol/2))^¼, warm-started from the solution (≤ refinements); (4) ``fallback-knots``:
+    still not verified → the knot transcription with free plane normals.
+    ipopt_max_wall_time [s]: IPOPT's wall-clock cap per solve (a solve that hits it ends with the
+    status ``Maximum_WallTime_Exceeded``; B-spline path).
     """
 
     planner: str = "tcbirrt"
@@ -102,19 +120,40 @@ class PipelineOptions:
     collision_retries: int = 3
     ipopt_options: tuple = (("acceptable_tol", 1e-4), ("acceptable_iter", 5), ("perturb_always_cd", "yes"))
     fixed_plane_normals: bool = True
+    transcription: str = "bspline"
+    spline_interval_step: float = 0.05
+    spline_min_intervals: int = 30
+    spline_max_intervals: int = 160
+    ipopt_max_wall_time: float = 60.0
 
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
             raise ValueError(f"PipelineOptions: invalid values {self}")
+        if self.transcription not in ("bspline", "knots"):
+            raise ValueError(f"PipelineOptions.transcription: expected 'bspline' or 'knots', got {self.transcription!r}")
+        if not (self.spline_interval_step > 0 and 4 <= self.spline_min_intervals <= self.spline_max_intervals):
+            raise ValueError("PipelineOptions: expected spline_interval_step > 0 and 4 ≤ spline_min_intervals ≤ "
+                             f"spline_max_intervals, got {self.spline_interval_step}, {self.spline_min_intervals}, "
+                             f"{self.spline_max_intervals}")
+        if not self.ipopt_max_wall_time > 0:
+            raise ValueError(f"PipelineOptions.ipopt_max_wall_time: expected a positive time [s], got "
+                             f"{self.ipopt_max_wall_time}")
 
 
 @dataclass
 class SegmentResult:
+    """One optimized segment: ``kind`` ("constrained" or "regrasp"), the moving ``arm`` of a
+    regrasp, the final ``solution`` (times and iterations summed over its attempts), its
+    ``report`` (:func:`verify`), its start time ``t0`` [s] in the whole trajectory, and
+    ``attempts``: one dict per NLP solved, in order (``reason``, ``N``, ``status``,
+    ``iterations``, ``setup_s``, ``ipopt_s``, ``min_clearance_m``, ``closed_chain_residual``)."""
+
     kind: str
     arm: str | None
     solution: Solution
     report: VerifyReport
     t0: float
+    attempts: list = field(default_factory=list)
 
 
 @dataclass
@@ -129,6 +168,8 @@ class PipelineResult:
     constrained: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     plan_time_s: float = float("nan")
     shortcut_time_s: float = 0.0
+    #: wall time of the optimization of every segment [s]: NLP setup, IPOPT and verify (not the shortcut)
+    opt_wall_s: float = 0.0
     joint_names: tuple = ()
 
     @property
@@ -177,7 +218,8 @@ class PipelineResult:
                 "opt_setup_time_s": self.setup_time_s, "opt_iterations": self.iterations,
                 "max_closed_chain_residual": self.max_closed_chain_residual, "min_clearance_m": self.min_clearance_m,
                 "n_regrasp": self.n_regrasp, "n_segments": len(self.segments),
-                "shortcut_time_s": self.shortcut_time_s}
+                "shortcut_time_s": self.shortcut_time_s, "opt_wall_s": self.opt_wall_s,
+                "attempts": [len(s.attempts) for s in self.segments]}
 
     def save(self, path) -> None:
         """npz with ``t`` [s], ``q`` [rad] (M × nq, Pinocchio order), ``joint_names``, ``constrained``."""
@@ -324,6 +366,106 @@ def _solve_verified(robot, scene, prob: OptProblem, cc, holder, opts: PipelineOp
     return sol, rep
 
 
+def _attempt(reason: str, N: int, sol: Solution, rep: VerifyReport) -> dict:
+    return {"reason": reason, "N": int(N), "status": sol.status.value, "iterations": int(sol.iterations),
+            "setup_s": float(sol.setup_time), "ipopt_s": float(sol.wall_time),
+            "min_clearance_m": float(rep.min_clearance_m), "closed_chain_residual": float(rep.max_closed_chain_residual)}
+
+
+def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind: str, arm: str | None,
+                    opts: PipelineOptions, ipopt: dict) -> tuple[Solution, VerifyReport, list[dict]]:
+    """Optimize one segment with the B-spline NLP (:mod:`optplan.problem.segment`) under the
+    retry policy of :func:`optimize_segments`; returns (solution, report, attempts)."""
+    from .problem.segment import SegmentSpec, SplineSegmentProblem
+
+    length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
+    T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(robot.velocity_limit))))
+    arms = list(scene.object.grasps)
+    cc, holder = None, None
+    lo, hi = robot.lower.copy(), robot.upper.copy()
+    if kind == "constrained":
+        cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
+        step = opts.spline_interval_step
+    else:  # regrasp: the holding arm's joints stay where they are, so the object does too
+        holder = next(a for a in arms if a != arm)
+        idx = robot.arm(holder).j_idx
+        lo[idx] = hi[idx] = seg_path[0][idx]
+        step = opts.free_interval_step
+    ipopt = {"max_wall_time": opts.ipopt_max_wall_time, **ipopt}
+
+    def build(N: int, initial: Solution | None = None) -> SplineSegmentProblem:
+        spec = SegmentSpec(int(N), T, seg_path[0], seg_path[-1], cc, lo, hi, margin=opts.margin,
+                           object_arm=holder or arms[0])
+        prob = SplineSegmentProblem(robot, scene, spec)
+        if initial is not None:
+            prob.set_initial(solution=initial)
+        elif opts.warm_start:
+            if not prob.set_initial_path(seg_path, cc):
+                log.info("segment %s: some resampled configurations did not project onto the manifold", kind)
+        else:
+            prob.set_initial(_cold_path(robot, scene, seg_path[0], seg_path[-1], kind, int(N)))
+        return prob
+
+    attempts: list[dict] = []
+    total: Solution | None = None
+
+    def run(prob: SplineSegmentProblem, reason: str):
+        nonlocal total
+        sol = prob.solve(ipopt)
+        rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
+        attempts.append(_attempt(reason, prob.N, sol, rep))
+        log.info("segment %s: %s N=%d -> %s, %d iterations, setup %.2f s, IPOPT %.2f s, clearance %+.4f m, "
+                 "closed-chain residual %.1e", kind, reason, prob.N, sol.status.value, sol.iterations,
+                 sol.setup_time, sol.wall_time, rep.min_clearance_m, rep.max_closed_chain_residual)
+        total = sol if total is None else _accumulate(sol, total)
+        return sol, rep
+
+    def good(sol, rep) -> bool:
+        res = rep.max_closed_chain_residual
+        return bool(sol.success and rep.min_clearance_m >= 0.0
+                    and (kind != "constrained" or res <= opts.closed_chain_tol))
+
+    N = int(np.clip(np.ceil(length / step), opts.spline_min_intervals, opts.spline_max_intervals))
+    prob = build(N)
+    sol, rep = run(prob, "initial")
+    for _ in range(opts.collision_retries):  # 1. coal finds a contact the active rows missed
+        if not sol.success or rep.min_clearance_m >= 0.0:
+            break
+        prob.add_activation(sol.q)
+        t = _dense_times(sol)
+        prob.boost_between_knots(t, sol.sample(t)["q"], sol.t)
+        sol, rep = run(prob, "collision")
+    for _ in range(opts.failure_retries):  # 2. IPOPT failed, or still a contact: a finer grid
+        if (sol.success and rep.min_clearance_m >= 0.0) or N >= opts.spline_max_intervals:
+            break
+        N = int(min(opts.spline_max_intervals, np.ceil(N * 1.6)))
+        prob = build(N)
+        sol, rep = run(prob, "finer-grid")
+    for _ in range(opts.refinements):  # 3. the closed chain drifts between knots (∝ h⁴)
+        res = rep.max_closed_chain_residual
+        if kind != "constrained" or not sol.success or not res > opts.closed_chain_tol:
+            break
+        N2 = int(min(opts.spline_max_intervals, np.ceil(N * 1.05 * (res / (0.5 * opts.closed_chain_tol)) ** 0.25)))
+        if N2 <= N:
+            break
+        N = N2
+        prob = build(N, initial=sol)
+        sol, rep = run(prob, "refine")
+    if not good(sol, rep):  # 4. last resort: the knot transcription with free plane normals
+        prob2, cc2, h2 = _segment_problem(robot, scene, seg_path, kind, arm, opts, fixed_normals=False)
+        _initial_guess(robot, scene, prob2, seg_path, cc2, kind, opts)
+        sol2, rep2 = _solve_verified(robot, scene, prob2, cc2, h2, opts, ipopt, kind)
+        attempts.append(_attempt("fallback-knots", prob2.N, sol2, rep2))
+        log.info("segment %s: fallback to the knot transcription -> %s", kind, sol2.status.value)
+        if good(sol2, rep2) or not sol.success:
+            total, rep = _accumulate(sol2, total), rep2
+        else:  # keep the spline solution; the fallback's time still counts
+            total.wall_time += sol2.wall_time
+            total.setup_time += sol2.setup_time
+            total.iterations += sol2.iterations
+    return total, rep, attempts
+
+
 def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptions, rng: np.random.Generator,
                       checker: CollisionChecker | None = None) -> tuple[list[SegmentResult], float]:
     """Shortcut, resample and optimize every segment of a plan; returns (results, shortcut time)."""
@@ -339,6 +481,11 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             ts = time.perf_counter()
             seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
             t_short += time.perf_counter() - ts
+        if opts.transcription == "bspline":
+            sol, rep, attempts = _spline_segment(robot, scene, seg_path, kind, seg.arm, opts, ipopt)
+            results.append(SegmentResult(kind, seg.arm, sol, rep, t0, attempts))
+            t0 += sol.duration
+            continue
         fixed = opts.fixed_plane_normals
         prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, fixed_normals=fixed)
         _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
@@ -382,7 +529,7 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             prob.set_initial(solution=sol)
             sol2, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
             sol = _accumulate(sol2, sol)
-        results.append(SegmentResult(kind, seg.arm, sol, rep, t0))
+        results.append(SegmentResult(kind, seg.arm, sol, rep, t0, [_attempt("knots", prob.N, sol, rep)]))
         t0 += sol.duration
     return results, t_short
 
@@ -404,7 +551,9 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
                          joint_names=robot.joint_names)
     if not plan.success:
         return res
+    t1 = time.perf_counter()
     res.segments, res.shortcut_time_s = optimize_segments(robot, scene, plan, opts, rng, checker)
+    res.opt_wall_s = time.perf_counter() - t1 - res.shortcut_time_s
     ts, qs, flags = [], [], []
     for s in res.segments:
         sol = s.solution

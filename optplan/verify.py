@@ -106,10 +106,9 @@ def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_ch
                                object_arm=object_arm)
     if checker.pairs:
         for q in qfull:
-            d = checker.distances(q)
-            i = int(np.argmin(d))
-            if d[i] < dmin:
-                dmin, pair_name = float(d[i]), f"{checker.pairs[i].name_a} / {checker.pairs[i].name_b}"
+            d, p = checker.min_distance(q)
+            if d < dmin:
+                dmin, pair_name = d, f"{p.name_a} / {p.name_b}"
     # limits
     pos_v = float(np.max(np.maximum(np.maximum(robot.lower - Q, Q - robot.upper), 0.0)))
     vel_v = float(np.max(np.maximum(np.abs(QD) - robot.velocity_limit, 0.0))) if check_velocity else float("nan")

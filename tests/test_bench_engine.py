@@ -80,9 +80,10 @@ def test_warmstart_dask_single_writer(tmp_path, monkeypatch):
     from distributed import LocalCluster
 
     def fake(args):
-        robot, scene, index, mode, time_limit, seed, max_wall, fixed = args
+        robot, scene, index, mode, time_limit, seed, max_wall, fixed, *rest = args
         return {"scene": scene, "trial": index, "mode": mode, "seed": seed, "time_limit_s": time_limit,
                 "ipopt_max_wall_time_s": max_wall, "fixed_plane_normals": fixed, "success": index % 2 == 0,
+                **({"transcription": rest[0]} if rest else {}),
                 "plan_ok": True, "plan_status": "exact", "opt_status": "Solve_Succeeded", "converged": True,
                 "opt_iterations": 10 + index, "opt_time_s": 0.1 * (index + 1), "opt_setup_time_s": 1.0,
                 "segments": [], "error": None}

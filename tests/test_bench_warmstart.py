@@ -9,9 +9,10 @@ from optplan.bench import warmstart as ws
 
 
 def _line(scene="ssps_scene1", trial=0, mode="warm", seed=0, time_limit=10.0, max_wall=None, success=True, plan_ok=True,
-          converged=None, iters=20, t=0.5, setup=5.0, segments=None, plan_hash="h", fixed=True, **kw):
+          converged=None, iters=20, t=0.5, setup=5.0, segments=None, plan_hash="h", fixed=True,
+          transcription="bspline", **kw):
     d = {"scene": scene, "trial": trial, "mode": mode, "seed": seed, "time_limit_s": time_limit,
-         "ipopt_max_wall_time_s": max_wall, "fixed_plane_normals": fixed,
+         "ipopt_max_wall_time_s": max_wall, "fixed_plane_normals": fixed, "transcription": transcription,
          "success": success, "plan_ok": plan_ok, "plan_status": "exact" if plan_ok else "timeout",
          "opt_status": ("Solve_Succeeded" if plan_ok else "not_run"), "converged": success if converged is None else converged,
          "opt_iterations": iters if plan_ok else 0, "opt_time_s": t if plan_ok else 0.0,
@@ -27,10 +28,10 @@ def fake_runner(monkeypatch):
     calls = []
 
     def fake(args):
-        robot, scene, index, mode, time_limit, seed, max_wall, fixed = args
+        robot, scene, index, mode, time_limit, seed, max_wall, fixed, transcription = args
         calls.append((scene, index, mode))
         return _line(scene, index, mode, seed, time_limit, max_wall, iters=10 if mode == "warm" else 40,
-                     t=0.2 if mode == "warm" else 1.0, fixed=fixed)
+                     t=0.2 if mode == "warm" else 1.0, fixed=fixed, transcription=transcription)
 
     monkeypatch.setattr(ws, "_run_unit", fake)
     return calls
@@ -116,19 +117,24 @@ def test_pending_units_order_and_keys():
             _line("ssps_scene2", 3, "warm", seed=7, time_limit=4.0, max_wall=60.0, fixed=False)]  # free normals
     units = ws.pending_units(cfg, ["ssps_scene1", "ssps_scene2"], rows)
     assert len(units) == 7
-    assert units[0] == ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True)
-    assert ("tcbirrt_dual_arm", "ssps_scene2", 4, "cold", 4.0, 7, 60.0, True) not in units
-    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "cold", 4.0, 7, 60.0, True) in units
-    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "warm", 4.0, 7, 60.0, True) in units
+    assert units[0] == ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True, "bspline")
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 4, "cold", 4.0, 7, 60.0, True, "bspline") not in units
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "cold", 4.0, 7, 60.0, True, "bspline") in units
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "warm", 4.0, 7, 60.0, True, "bspline") in units
     # lines without the key (written before the option existed) were solved with free normals
     old = {k: v for k, v in _line("ssps_scene1", 3, "warm", seed=7, time_limit=4.0, max_wall=60.0).items()
            if k != "fixed_plane_normals"}
-    assert ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True) in ws.pending_units(
+    assert ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True, "bspline") in ws.pending_units(
         cfg, ["ssps_scene1"], [old])
+    # ... with the knot transcription (lines without the key predate the B-spline one)
+    old = {k: v for k, v in old.items() if k != "transcription"}
     free = ws.WarmstartConfig(scenes=["1"], trials=1, first_trial=3, seed=7, time_limit=4.0, ipopt_max_wall_time=60,
-                              free_plane_normals=True)
+                              free_plane_normals=True, transcription="knots")
     assert ws.pending_units(free, ["ssps_scene1"], [old]) == [
-        ("tcbirrt_dual_arm", "ssps_scene1", 3, "cold", 4.0, 7, 60.0, False)]
+        ("tcbirrt_dual_arm", "ssps_scene1", 3, "cold", 4.0, 7, 60.0, False, "knots")]
+    spline_free = ws.WarmstartConfig(scenes=["1"], trials=1, first_trial=3, seed=7, time_limit=4.0,
+                                     ipopt_max_wall_time=60, free_plane_normals=True)
+    assert len(ws.pending_units(spline_free, ["ssps_scene1"], [old])) == 2
 
 
 # ---------------------------------------------------------------------- statistics

@@ -125,7 +125,7 @@ def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
         return sol, rep
 
     monkeypatch.setattr(PL, "_solve_verified", fake_solve)
-    opts = PipelineOptions(shortcut_attempts=0, fixed_plane_normals=False)
+    opts = PipelineOptions(shortcut_attempts=0, fixed_plane_normals=False, transcription="knots")
     results, _ = PL.optimize_segments(tcb, sc, plan, opts, np.random.default_rng(0))
     (k0, n0), (k1, n1), (k2, n2) = calls[:3]
     assert k0 == k1 == k2 and n1 == min(opts.max_intervals, int(np.ceil(n0 * 1.6)))   # failure → 1.6×
@@ -167,10 +167,48 @@ def test_fixed_normal_failure_falls_back_to_free_normals(tcb, monkeypatch):
         return sol, SimpleNamespace(max_closed_chain_residual=1e-7, min_clearance_m=0.01)
 
     monkeypatch.setattr(PL, "_solve_verified", fake_solve)
-    opts = PipelineOptions(shortcut_attempts=0)
+    opts = PipelineOptions(shortcut_attempts=0, transcription="knots")
     assert opts.fixed_plane_normals
     results, _ = PL.optimize_segments(tcb, sc, plan, opts, np.random.default_rng(0))
     (k0, n0, f0), (k1, n1, f1) = calls[:2]
     assert k0 == k1 and n0 == n1 and f0 and not f1
     assert all(f for _, _, f in calls[2:]), "the next segments start with fixed normals again"
     assert results[0].solution.success and results[0].solution.iterations == 20
+
+
+def test_spline_segment_retry_policy(tcb, monkeypatch):
+    """The B-spline path's ordered retries (fake solves and reports: the logic only): a contact coal
+    finds after a converged solve → re-solve with more pairs; a closed-chain residual above the
+    tolerance → a finer grid warm-started from the solution; each attempt is recorded in order."""
+    from types import SimpleNamespace
+
+    import optplan.pipeline as PL
+    from optplan.problem.segment import SplineSegmentProblem
+    from optplan.problem.solution import IpoptStatus, Solution
+
+    sc, plan = _scene1_plan(tcb)
+    seg = next(s for s in plan.segments if s.kind == "constrained")
+    seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
+    reports = iter([(-0.01, 1e-7), (0.01, 5e-6), (0.01, 2e-7)])  # (clearance, closed-chain residual)
+    Ns = []
+
+    def fake_solve(self, ipopt=None, **kw):
+        Ns.append(self.N)
+        Q = self.knot_configurations()
+        z = np.zeros_like(Q)
+        return Solution(True, IpoptStatus.SOLVE_SUCCEEDED, 7, 0.1, 1.0, 0.0, {}, np.linspace(0, self.T, self.N + 1),
+                        Q, z, z, z[:-1], tcb.joint_names, setup_time=0.05)
+
+    def fake_verify(robot, sol, scene, closed_chain=None, object_arm=None):
+        c, r = next(reports)
+        return SimpleNamespace(min_clearance_m=c, max_closed_chain_residual=r, min_clearance_pair="x")
+
+    monkeypatch.setattr(SplineSegmentProblem, "solve", fake_solve)
+    monkeypatch.setattr(PL, "verify", fake_verify)
+    opts = PipelineOptions(shortcut_attempts=0)
+    sol, rep, attempts = PL._spline_segment(tcb, sc, seg_path, "constrained", None, opts, {})
+    assert [a["reason"] for a in attempts] == ["initial", "collision", "refine"]
+    assert Ns[0] == Ns[1] < Ns[2]
+    assert Ns[2] == int(np.ceil(Ns[1] * 1.05 * (5e-6 / 0.5e-6) ** 0.25))
+    assert sol.iterations == 21 and sol.wall_time == pytest.approx(0.3)
+    assert rep.max_closed_chain_residual == 2e-7

@@ -236,7 +236,8 @@ def test_checker_distances_equal_direct_coal(tcb, transport, rng):
         n_sep += int(np.sum(ref > 0))
         n_pen += int(np.sum(ref < 0))
         dmin, pair = chk.min_distance(q)
-        assert dmin == d.min() and pair == chk.pairs[int(np.argmin(d))]
+        # a second coal evaluation may differ in the last bit (GJK/EPA warm start): ties by value
+        assert dmin == pytest.approx(d.min(), abs=1e-9) and d[chk.pairs.index(pair)] == pytest.approx(dmin, abs=1e-9)
     assert n_sep > 0 and n_pen > 0, "random configurations should give separated and penetrating pairs"
 
 

@@ -1,0 +1,694 @@
+"""The fast segment NLP: one motion of a fixed-base robot between two rest configurations, as a
+joint-space B-spline (:mod:`.bspline`) with the closed chain, joint limits, collision avoidance
+and a minimum-jerk cost — built from per-knot kernels that are compiled once and reused.
+
+Transcription
+-------------
+Decision variables: the interior control points ``P_3 … P_{N−1}`` (the three at each end are fixed
+by rest at the pinned boundary configurations) and one offset per separating plane between two
+moving bodies. Nothing else: no velocities, accelerations, jerks or integration rows.
+
+* **Joint limits** hold on the control points, hence everywhere in between (convex hull).
+* **Velocity limits** hold on the velocity control points ``(P_{i+1} − P_i)/h``: linear rows,
+  again valid between the knots.
+* **Closed chain** at the interior knots (the same singularity-free pose residual as
+  :class:`~optplan.problem.ClosedChain`: 6 equality rows and ``trace ≥ 1`` per knot).
+* **Collision avoidance**: each active (pair, knot) gets a separating plane whose unit normal ``n``
+  is fixed at coal's witness normal along the initial guess (the fixed-normal planes of
+  :class:`~optplan.problem.CollisionAvoidance`). For a static obstacle the plane's offset is
+  eliminated exactly: the row is ``min_y n·y − r_B − n·x − r_A ≥ margin`` for each point ``x`` of
+  the moving body (capsule end points, box vertices) — the obstacle's support value is a constant
+  of the normal. Two moving bodies keep the offset ``b`` as a variable (rows
+  ``b − n·x − r_A ≥ m/2``, ``n·y − r_B − b ≥ m/2``). Rows are exact and conservative: the true
+  distance is at least the margin wherever a row holds.
+* **Cost**: ∫‖j‖² dt (exact; a constant quadratic form of the control points), scaled by the
+  rest-to-rest quintic's value so that IPOPT sees an objective of order 1.
+
+Kernels
+-------
+Every row family is one small SX function of one knot's joint vector (and the plane data), built
+once per robot and pair (:class:`KernelCache`) and evaluated over its knots with ``Function.map``;
+the NLP graph therefore has a handful of nodes whatever N is, and building the IPOPT instance
+costs a fraction of a second instead of the symbolic expansion of the whole trajectory.
+"""
+from __future__ import annotations
+
+import logging
+import time
+import weakref
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import casadi as ca
+import numpy as np
+
+from ..robot import RobotModel
+from ..scene import Scene
+from ..symbolic import SymbolicKinematics
+from .bspline import boundary_points, fit_interior, jerk_integral_reference, knot_matrices, knot_values
+from .collision_term import CollisionAvoidance, _box_vertices
+from .frame_terms import ClosedChain
+from .solution import IpoptStatus, Solution
+from .terms import NumericTrajectory, pose_residual
+
+__all__ = ["KernelCache", "SegmentSpec", "SplineSegmentProblem"]
+log = logging.getLogger(__name__)
+
+
+def _sparse(A: np.ndarray) -> ca.DM:
+    """A constant matrix with its zeros structural (a dense DM would couple every variable)."""
+    return ca.sparsify(ca.DM(A))
+
+
+# --------------------------------------------------------------------------- kernels
+class KernelCache:
+    """SX kernels of one robot, built once and shared by every segment NLP of that robot.
+
+    ``closed_chain(cc)``: ``f(q) -> 7 rows``; ``pair(...)``: ``f(q, n, s) -> rows`` of one collision
+    pair. CasADi caches each kernel's derivative functions on the kernel itself, so reusing the
+    kernels also reuses their Jacobians and Hessians."""
+
+    _per_robot: "weakref.WeakKeyDictionary[RobotModel, KernelCache]" = weakref.WeakKeyDictionary()
+
+    def __init__(self, robot: RobotModel):
+        if robot.is_floating:
+            raise ValueError("the B-spline segment NLP is for fixed-base robots; use OptProblem for "
+                             f"the free-floating {robot.name!r}")
+        self.robot = robot
+        self.sym = SymbolicKinematics(robot)
+        self._q = ca.SX.sym("q", robot.nj)
+        self._X = self.sym.joint_placements(self._q)
+        self._fns: dict = {}
+
+    @classmethod
+    def of(cls, robot: RobotModel) -> "KernelCache":
+        """The cache of ``robot`` (one per robot object)."""
+        kc = cls._per_robot.get(robot)
+        if kc is None:
+            kc = cls._per_robot[robot] = cls(robot)
+        return kc
+
+    def frame(self, fid: int):
+        """(R, p) SX of frame ``fid`` as functions of the kernel input ``q``."""
+        return self.sym.frame_placement(self._q, int(fid), self._X)
+
+    def derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
+        """``(jac, hess)`` of a kernel ``f(q, n, s)``: ``jac(q, n, s) = ∂f/∂q`` (rows × nj, sparse) and
+        ``hess(q, n, s, λ) = ∂²(λᵀf)/∂q²`` (nj × nj, symmetric, sparse) — symbolic, per knot."""
+        key = ("d", fn.name())
+        if key not in self._fns:
+            q, n, s = fn.sx_in()
+            r = fn(q, n, s)
+            lam = ca.SX.sym("lam", r.shape[0])
+            H, _ = ca.hessian(ca.dot(lam, r), q)
+            self._fns[key] = (ca.Function(f"{fn.name()}_jac", [q, n, s], [ca.jacobian(r, q)]),
+                              ca.Function(f"{fn.name()}_hess", [q, n, s, lam], [H]))
+        return self._fns[key]
+
+    def closed_chain(self, cc: ClosedChain) -> ca.Function:
+        rel = cc.relative
+        key = ("cc", cc.arm_a, cc.arm_b, np.asarray(rel.homogeneous).tobytes())
+        if key not in self._fns:
+            fa = self.robot.arm(cc.arm_a).ee_frame_id
+            fb = self.robot.arm(cc.arm_b).ee_frame_id
+            Ra, pa = self.frame(fa)
+            Rb, pb = self.frame(fb)
+            r, tr = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), np.array(rel.rotation), ca.DM(rel.translation))
+            n, s = ca.SX.sym("n", 3), ca.SX.sym("s")  # unused: every kernel has the signature (q, n, s)
+            self._fns[key] = ca.Function(f"cc_{len(self._fns)}", [self._q, n, s], [ca.vertcat(r, tr)])
+        return self._fns[key]
+
+    def pair(self, fa: int | None, Va: np.ndarray, ra: float, fb: int | None, Vb: np.ndarray, rb: float
+             ) -> ca.Function:
+        """Plane rows of one pair. Points ``Va`` (3 × m) in frame ``fa`` (None: world), radius
+        ``ra``; likewise B. B static (``fb is None``): ``f(q, n, s) = s − n·x_i − ra`` for A's
+        points (``s``: the support value of B along n); both moving: ``f(q, n, b) =
+        [b − n·x_i − ra; n·y_j − rb − b]``."""
+        key = ("pair", fa, Va.tobytes(), ra, fb, Vb.tobytes(), rb)
+        if key not in self._fns:
+            n, s = ca.SX.sym("n", 3), ca.SX.sym("s")
+            Ra, pa = self.frame(fa)
+            Xa = Ra @ ca.DM(Va) + ca.repmat(pa, 1, Va.shape[1])
+            if fb is None:
+                rows = (s - n.T @ Xa - ra).T
+            else:
+                Rb, pb = self.frame(fb)
+                Yb = Rb @ ca.DM(Vb) + ca.repmat(pb, 1, Vb.shape[1])
+                rows = ca.vertcat((s - n.T @ Xa - ra).T, (n.T @ Yb - rb - s).T)
+            self._fns[key] = ca.Function(f"pair_{len(self._fns)}", [self._q, n, s], [rows])
+        return self._fns[key]
+
+
+def _witness_plane(checker, pair, obj_tf) -> np.ndarray:
+    """(n, b): coal's unit witness normal from A to B and the mid-plane offset, at the placements
+    last set by ``checker._update`` (``obj_tf``: the held object's)."""
+    import coal
+
+    g1, t1, g2, t2 = checker._geoms(pair, obj_tf)
+    res = coal.DistanceResult()
+    coal.distance(g1, t1, g2, t2, coal.DistanceRequest(), res)
+    n = np.asarray(res.normal, float)
+    if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+        n = t2.getTranslation() - t1.getTranslation()
+    n = n / max(np.linalg.norm(n), 1e-12)
+    mid = 0.5 * (np.asarray(res.getNearestPoint1()) + np.asarray(res.getNearestPoint2()))
+    return np.r_[n, n @ mid]
+
+
+# --------------------------------------------------------------------------- assembly
+_C = (1 / 6, 4 / 6, 1 / 6)  # ∂q(t_k)/∂P_{k+a}, a = 0, 1, 2
+
+
+class _Assembly:
+    """Rows of a segment NLP and their exact Jacobian and Lagrangian Hessian, assembled from the
+    per-knot kernel derivatives: every entry of the NLP's matrices is a fixed linear combination
+    of kernel-derivative entries (the B-spline weights of the module docstring), applied as one
+    constant sparse matrix. Free control point ``p`` (3 ≤ p ≤ N−1), joint ``j`` is variable
+    ``(p − 3)·nj + j``."""
+
+    def __init__(self, N: int, nj: int, nx: int):
+        self.N, self.nj, self.nx = N, nj, nx
+        self.g, self.lbg, self.ubg, self.slices = [], [], [], {}
+        self.ng = 0
+        self.jsrc, self.hsrc = [], []  # MX nonzero vectors
+        self.j_off = self.h_off = 0
+        self.jt: list[np.ndarray] = []  # (row, col, src, weight) blocks; src −1: constant 1
+        self.ht: list[np.ndarray] = []
+
+    def _rows(self, name, expr, lo, hi):
+        n = expr.shape[0]
+        self.g.append(expr)
+        self.lbg.append(np.broadcast_to(np.asarray(lo, float), (n,)).copy())
+        self.ubg.append(np.broadcast_to(np.asarray(hi, float), (n,)).copy())
+        self.slices[name] = slice(self.ng, self.ng + n)
+        self.ng += n
+        return self.ng - n
+
+    def linear(self, name, expr, D: np.ndarray, lo, hi):
+        """Rows ``vec(P Dᵀ)`` (D: rows over the N+3 control points), constant Jacobian."""
+        r0 = self._rows(name, expr, lo, hi)
+        nj, N = self.nj, self.N
+        R, C, W = [], [], []
+        for i, prow in enumerate(D):
+            for pidx in np.flatnonzero(prow):
+                if 3 <= pidx <= N - 1:
+                    for j in range(nj):
+                        R.append(r0 + i * nj + j)
+                        C.append((pidx - 3) * nj + j)
+                        W.append(prow[pidx])
+        self.jt.append(np.array([R, C, np.full(len(R), -1), W], float))
+
+    def family(self, name, fn, jfn, hfn, knots, Qsub, Nin, Sin, bcoup, lo, hi):
+        """One kernel evaluated at ``knots`` (its rows are knot-major)."""
+        K, nj, N = len(knots), self.nj, self.N
+        m = fn.size1_out(0)
+        r0 = self._rows(name, ca.vec(fn.map(K)(Qsub, Nin, Sin)), lo, hi)
+        knots = np.asarray(knots)
+        # Jacobian: row r0 + t·m + lr, column of P_{k+a} joint j, weight c_a
+        Jm = jfn.map(K)(Qsub, Nin, Sin)
+        lr, jj = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())
+        e = len(lr)
+        self.jsrc.append(Jm.nz[:])
+        t, a, ee = np.meshgrid(np.arange(K), np.arange(3), np.arange(e), indexing="ij")
+        pidx = knots[t] + a
+        ok = (pidx >= 3) & (pidx <= N - 1)
+        self.jt.append(np.array([(r0 + t * m + lr[ee])[ok], ((pidx - 3) * nj + jj[ee])[ok],
+                                 (self.j_off + t * e + ee)[ok], np.take(_C, a)[ok]], float))
+        self.j_off += K * e
+        if bcoup is not None:  # plane offsets: ∂row/∂b = ±1
+            col0, sign = bcoup
+            t, lr2 = np.meshgrid(np.arange(K), np.arange(m), indexing="ij")
+            self.jt.append(np.array([(r0 + t * m + lr2).ravel(), (col0 + t).ravel(),
+                                     np.full(K * m, -1), np.tile(sign, K)], float))
+        # Hessian: multipliers of this family, per knot
+        self._h_pending = getattr(self, "_h_pending", [])
+        self._h_pending.append((hfn, K, knots, Qsub, Nin, Sin, r0, m))
+
+    def finish(self, x, lam_f, lam_g, Hj: np.ndarray):
+        """``(g, ∂g/∂x, triu ∇²L)`` as MX of ``x``, ``lam_f``, ``lam_g``; ``Hj``: the objective's
+        constant Hessian per joint over the free control points."""
+        nj, N, nx = self.nj, self.N, self.nx
+        G = ca.vertcat(*self.g) if self.g else ca.MX.zeros(0)
+        self.lbg = np.concatenate(self.lbg) if self.lbg else np.zeros(0)
+        self.ubg = np.concatenate(self.ubg) if self.ubg else np.zeros(0)
+        # Jacobian
+        T = np.hstack(self.jt) if self.jt else np.zeros((4, 0))
+        src = ca.vertcat(*self.jsrc, ca.MX(1.0)) if self.jsrc else ca.MX(1.0)
+        srcidx = np.where(T[2] < 0, self.j_off, T[2]).astype(int)
+        Jg = _scatter(self.ng, nx, T[0].astype(int), T[1].astype(int), srcidx, T[3], src, self.j_off + 1)
+        # Hessian
+        hs, blocks, off = [], [], 0
+        for hfn, K, knots, Qsub, Nin, Sin, r0, m in getattr(self, "_h_pending", []):
+            L = ca.reshape(lam_g[r0:r0 + m * K], m, K)
+            Hm = hfn.map(K)(Qsub, Nin, Sin, L)
+            ii, jj = (np.asarray(v) for v in hfn.sparsity_out(0).get_triplet())
+            e = len(ii)
+            hs.append(Hm.nz[:])
+            t, a, b, ee = np.meshgrid(np.arange(K), np.arange(3), np.arange(3), np.arange(e), indexing="ij")
+            pa, pb = knots[t] + a, knots[t] + b
+            row, col = (pa - 3) * nj + ii[ee], (pb - 3) * nj + jj[ee]
+            ok = (pa >= 3) & (pa <= N - 1) & (pb >= 3) & (pb <= N - 1) & (row <= col)
+            blocks.append(np.array([row[ok], col[ok], (off + t * e + ee)[ok],
+                                    (np.take(_C, a) * np.take(_C, b))[ok]], float))
+            off += K * e
+        # objective: Hj ⊗ I over the free points, times lam_f
+        pa, pb = np.nonzero(np.triu(Hj) != 0)
+        jj = np.arange(nj)
+        rows = (pa[:, None] * nj + jj).ravel()
+        cols = (pb[:, None] * nj + jj).ravel()
+        blocks.append(np.array([rows, cols, np.full(rows.size, off), np.repeat(Hj[pa, pb], nj)], float))
+        src = ca.vertcat(*hs, lam_f)
+        T = np.hstack(blocks)
+        Hl = _scatter(nx, nx, T[0].astype(int), T[1].astype(int), T[2].astype(int), T[3], src, off + 1)
+        return G, Jg, Hl
+
+
+def _scatter(nrow, ncol, rows, cols, src_idx, weights, src: ca.MX, nsrc: int) -> ca.MX:
+    """Sparse ``nrow × ncol`` MX whose entry (rows[i], cols[i]) sums ``weights[i]·src[src_idx[i]]``."""
+    import scipy.sparse as sps
+
+    key = cols.astype(np.int64) * nrow + rows
+    uniq, inv = np.unique(key, return_inverse=True)  # sorted column-major = CCS order
+    ucol, urow = uniq // nrow, uniq % nrow
+    S = sps.csc_matrix((weights, (inv, src_idx)), shape=(len(uniq), nsrc))
+    colind = np.searchsorted(ucol, np.arange(ncol + 1)).tolist()
+    sp = ca.Sparsity(nrow, ncol, colind, urow.astype(int).tolist())
+    Sd = ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.indptr.tolist(), S.indices.tolist()), S.data)
+    return ca.MX(sp, ca.mtimes(Sd, src))
+
+
+# --------------------------------------------------------------------------- problem
+@dataclass(frozen=True)
+class SegmentSpec:
+    """What a segment NLP is: a rest-to-rest motion of ``robot`` in ``scene``.
+
+    n_intervals: N (≥ 4); duration: T [s]; q_start, q_end [rad]: pinned rest configurations;
+    closed_chain: the two hands' relative pose to keep at the knots (None: no closed chain);
+    lower, upper [rad]: joint position limits (equal entries fix a joint, e.g. a holding arm);
+    velocity_limit [rad/s]; margin [m]: clearance of every active collision pair;
+    object_arm: the arm whose hand carries the scene's object (None: the first grasp's arm);
+    activation [m], window [knots]: collision pairs closer than ``activation`` along the initial
+    guess are constrained at the knots within ``window`` (as :class:`CollisionAvoidance`)."""
+
+    n_intervals: int
+    duration: float
+    q_start: np.ndarray
+    q_end: np.ndarray
+    closed_chain: ClosedChain | None = None
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+    velocity_limit: np.ndarray | None = None
+    margin: float = 0.02
+    object_arm: str | None = None
+    activation: float = 0.15
+    window: int = 3
+
+
+@dataclass
+class _Built:
+    solver: ca.Function
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+    p: np.ndarray
+    gfun: ca.Function
+    slices: dict = field(default_factory=dict)
+    setup_time: float = 0.0
+
+
+class SplineSegmentProblem:
+    """The segment NLP of the module docstring. ``set_initial_path`` / ``set_initial``, then
+    ``solve`` → :class:`~optplan.problem.Solution` (knot values of the B-spline, so ``sample`` and
+    :func:`optplan.verify.verify` see exactly the optimized trajectory)."""
+
+    def __init__(self, robot: RobotModel, scene: Scene | None, spec: SegmentSpec):
+        self.robot, self.scene, self.spec = robot, scene, spec
+        self.kernels = KernelCache.of(robot)
+        N = self.N = int(spec.n_intervals)
+        if not (np.isfinite(spec.duration) and spec.duration > 0):
+            raise ValueError(f"duration: expected a positive time [s], got {spec.duration}")
+        self.T = float(spec.duration)
+        self.h = self.T / N
+        self.M = knot_matrices(N)
+        nj = robot.nj
+        self.q0 = robot.check_joints(spec.q_start, "q_start")
+        self.q1 = robot.check_joints(spec.q_end, "q_end")
+        z = np.zeros(nj)
+        self.P_start = boundary_points(self.q0, z, z, self.h, "start")
+        self.P_end = boundary_points(self.q1, z, z, self.h, "end")
+        self.lower = robot.lower.copy() if spec.lower is None else robot.check_joints(spec.lower, "lower")
+        self.upper = robot.upper.copy() if spec.upper is None else robot.check_joints(spec.upper, "upper")
+        self.vlim = robot.velocity_limit.copy() if spec.velocity_limit is None else np.broadcast_to(
+            np.asarray(spec.velocity_limit, float), (nj,)).copy()
+        self.fixed = frozenset(np.flatnonzero(self.lower == self.upper).tolist())
+        self.col = None
+        if scene is not None:
+            self.col = CollisionAvoidance(scene, margin=spec.margin, activation=spec.activation,
+                                          window=spec.window, object_arm=spec.object_arm, fixed_normals=True)
+            self.col._setup(robot)
+        self._X0: np.ndarray | None = None  # interior control points (N−3) × nj
+        self._lam: tuple | None = None
+        self._built: _Built | None = None
+        self._plan = None
+        #: use the kernel-assembled Jacobian and Hessian (False: CasADi's own AD of the whole graph)
+        self.exact_derivatives = True
+        #: [m] a moving box keeps the rows of the vertices within this distance of its leading
+        #: vertex along a plane's normal (``inf``: every vertex; see :meth:`_prune`)
+        self.vertex_window = 0.5
+
+    # ------------------------------------------------------------------ initial guess
+    def set_initial(self, q=None, *, solution: Solution | None = None) -> None:
+        """Initial guess from knot configurations ``q`` ((N+1) × nj, on this problem's grid) or from
+        a :class:`Solution` of any grid (sampled at this grid's knots). Re-seeds the plane normals
+        at the next build."""
+        if solution is not None:
+            q = solution.sample(np.linspace(solution.t[0], solution.t[-1], self.N + 1))["q"]
+        Q = np.asarray(q, float)
+        if Q.shape != (self.N + 1, self.robot.nj):
+            raise ValueError(f"set_initial: expected ({self.N + 1}, {self.robot.nj}) knot configurations, "
+                             f"got shape {Q.shape}")
+        if not np.all(np.isfinite(Q)):
+            raise ValueError("set_initial: the initial guess has non-finite entries")
+        X = fit_interior(Q, self.P_start, self.P_end)
+        self._X0 = np.clip(X, self.lower, self.upper)
+        self._lam = None
+        self._built = None
+
+    def set_initial_path(self, path, closed_chain: ClosedChain | None = None) -> bool:
+        """Initial guess from a planner's path (M × nj, no timing): the path is followed with the
+        rest-to-rest quintic time law in joint-space arc length, each knot projected onto the
+        closed-chain manifold. Returns whether every projection converged."""
+        from ..splines import resample_path
+        from ..warmstart import project_closed_chain
+
+        path = np.asarray(path, float)
+        s, _ = resample_path(path, 2)  # validates the path
+        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        cum = np.r_[0.0, np.cumsum(seg)]
+        tau = np.linspace(0.0, 1.0, self.N + 1)
+        sigma = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+        if cum[-1] > 0:
+            target = sigma * cum[-1]
+            Q = np.column_stack([np.interp(target, cum, path[:, j]) for j in range(path.shape[1])])
+        else:
+            Q = np.repeat(path[:1], self.N + 1, axis=0)
+        ok = True
+        if closed_chain is not None:
+            data = self.robot.model.createData()
+            for k in range(1, self.N):
+                r = project_closed_chain(self.robot, Q[k], closed_chain, data=data)
+                Q[k] = r.q
+                ok &= r.success
+        Q[0], Q[-1] = self.q0, self.q1
+        self.set_initial(Q)
+        return bool(ok)
+
+    # ------------------------------------------------------------------ helpers
+    def _P(self, X) -> np.ndarray:
+        return np.vstack([self.P_start, np.asarray(X).reshape(self.N - 3, self.robot.nj), self.P_end])
+
+    def knot_configurations(self, X=None) -> np.ndarray:
+        """Knot configurations ((N+1) × nj) of interior control points X (default: the guess)."""
+        return self.M["q"] @ self._P(self._X0 if X is None else X)
+
+    # ------------------------------------------------------------------ collision rows
+    def _entity(self, kind: str, idx: int, holder: str):
+        """(frame id or None, points 3 × m in that frame (world if None), radius) of an entity;
+        an entity that depends on no free joint (an obstacle, the fixed base, a holding arm, the
+        object it holds) comes back static: frame None and its world points."""
+        col = self.col
+        if kind == "obstacle":
+            o = col.checker.obstacles[idx]
+            if o.shape == "box":
+                V, r = np.array(_box_vertices(np.asarray(o.size) / 2)).T, 0.0
+            elif o.shape == "sphere":
+                V, r = np.zeros((3, 1)), float(o.radius)
+            else:
+                V, r = np.array([[0, 0, -o.length / 2], [0, 0, o.length / 2]]).T, float(o.radius)
+            M = o.placement
+            return None, M.rotation @ V + M.translation[:, None], r
+        if kind == "object":
+            V = np.array(_box_vertices(np.asarray(col.checker.object.size) / 2)).T
+            G = col._grasp_inv
+            fid, V, r = self.robot.arm(holder).ee_frame_id, G.rotation @ V + G.translation[:, None], 0.0
+        else:
+            spec = col._robot_shape.get(idx)
+            if spec is None:
+                return None
+            fid, shape, Mbox = spec
+            from .. import distance as D
+            if isinstance(shape, D.Box):
+                V, r = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T, 0.0
+            elif isinstance(shape, D.Sphere):
+                V, r = np.asarray(shape.center, float).reshape(3, 1), float(shape.radius)
+            else:
+                V, r = np.array([shape.a, shape.b], float).T, float(shape.radius)
+        if col._free_joints_of(self.robot, kind, idx, self.fixed) == set():
+            M = self._static_placement(fid)
+            return None, M.rotation @ V + M.translation[:, None], r
+        return fid, V, r
+
+    def _static_placement(self, fid: int):
+        import pinocchio as pin
+
+        data = self.robot.model.createData()
+        pin.framesForwardKinematics(self.robot.model, data, self.q0)
+        return data.oMf[fid]
+
+    def _plan_collision(self, Qk: np.ndarray) -> list:
+        """Active (pair, kernel, knots, …) along the knot configurations ``Qk``: one item per pair
+        with its kernel, knots, margins and which side moves (``flip``: A is the static side)."""
+        col = self.col
+        if col is None:
+            return []
+        robot, N = self.robot, self.N
+        traj = NumericTrajectory(robot, Qk, Qk, Qk, Qk[:-1], self.T)
+        active = col._activate(robot, traj)
+        pinned = {0: self.q0, N: self.q1}
+        const = [p for p in active if col._is_constant(robot, p, self.fixed)]
+        active = [p for p in active if p not in const]
+        col.active_pairs = active
+        col.constant_pairs = const
+        margin_at = col._boundary_margins(SimpleNamespace(N=N), traj, active, set(pinned))
+        holder = col.checker.object_arm
+        plan = []
+        for pair in active:
+            ka, kb = col._kinds(pair)
+            ea, eb = self._entity(ka, pair.a, holder), self._entity(kb, pair.b, holder)
+            if ea is None or eb is None:
+                continue
+            if ea[0] is None and eb[0] is None:
+                continue  # both static: constant distance, checked by verify
+            ks = [k for k in col._knots_of(pair, N) if k not in pinned]
+            if not ks:
+                continue
+            flip = ea[0] is None
+            mov, other = (eb, ea) if flip else (ea, eb)
+            static = other[0] is None
+            plan.append(SimpleNamespace(pair=pair, knots=ks, static=static, flip=flip, a=mov, b=other,
+                                        margins=np.array([margin_at(pair, k) for k in ks])))
+        return plan
+
+    def _prune(self, it, side, normals: np.ndarray, Qk: np.ndarray, sign: float):
+        """Keep the points of a moving box side that come within ``vertex_window`` [m] of its
+        leading point along the (signed) normal at some knot of the pair: the others sit that far
+        behind the plane and cannot reach it without the body turning by a large angle."""
+        fid, V, r = side
+        if V.shape[1] <= 2 or not np.isfinite(self.vertex_window):
+            return side
+        import pinocchio as pin
+
+        data = self.robot.model.createData()
+        keep = np.zeros(V.shape[1], bool)
+        for t, k in enumerate(it.knots):
+            pin.framesForwardKinematics(self.robot.model, data, Qk[k])
+            proj = sign * normals[:, t] @ (data.oMf[fid].rotation @ V)
+            keep |= proj >= proj.max() - self.vertex_window
+        return fid, V[:, keep], r
+
+    def _kernels_for(self, plan: list, planes: list, Qk: np.ndarray) -> None:
+        """Point subsets (:meth:`_prune`), kernel and row count of every item."""
+        for it, (Nrm, _) in zip(plan, planes):
+            it.a = self._prune(it, it.a, Nrm, Qk, 1.0)  # rows b − n·x: x's leading along +n
+            if not it.static:
+                it.b = self._prune(it, it.b, Nrm, Qk, -1.0)  # rows n·y − b: y's leading along −n
+            it.fn = self.kernels.pair(it.a[0], it.a[1], it.a[2], it.b[0], it.b[1], it.b[2])
+            it.nrow = it.a[1].shape[1] + (0 if it.static else it.b[1].shape[1])
+
+    def _plane_data(self, plan: list, Qk) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per item: normals (3 × K) from coal's witness at the knot configurations (pointing from
+        the moving side to the other), and the offsets: the static side's support value, or the
+        witness mid-plane offset (a variable's initial value) for two moving sides."""
+        col = self.col
+        per_knot: dict[int, list] = {}
+        for i, it in enumerate(plan):
+            for t, k in enumerate(it.knots):
+                per_knot.setdefault(k, []).append((i, t))
+        out = [(np.zeros((3, len(it.knots))), np.zeros(len(it.knots))) for it in plan]
+        for k, items in per_knot.items():
+            Mo = col.checker._update(Qk[k])
+            import coal
+            obj_tf = coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None
+            for i, t in items:
+                it = plan[i]
+                nb = _witness_plane(col.checker, it.pair, obj_tf)
+                n, off = (-nb[:3], -nb[3]) if it.flip else (nb[:3], nb[3])
+                if it.static:
+                    Y, rb = it.b[1], it.b[2]
+                    off = float(np.min(n @ Y)) - rb
+                out[i][0][:, t] = n
+                out[i][1][t] = off
+        return out
+
+    # ------------------------------------------------------------------ build
+    def _build(self) -> _Built:
+        if self._X0 is None:
+            raise ValueError("no initial guess: call set_initial(...) or set_initial_path(...) first")
+        t0 = time.perf_counter()
+        N, nj, h = self.N, self.robot.nj, self.h
+        Qk0 = self.knot_configurations()
+        plan = self._plan_collision(Qk0)
+        nP = (N - 3) * nj
+        moving = [it for it in plan if not it.static]
+        nb = sum(len(it.knots) for it in moving)
+        x = ca.MX.sym("x", nP + nb)
+        Xs = ca.reshape(x[:nP], nj, N - 3)
+        Bv = x[nP:]
+        Pstart, Pend = ca.MX.sym("P_start", nj, 3), ca.MX.sym("P_end", nj, 3)
+        P = ca.horzcat(Pstart, Xs, Pend)  # nj × (N+3)
+        Qk = ca.mtimes(P, _sparse(self.M["q"].T))  # nj × (N+1)
+        params = [Pstart, Pend]
+        pvals = [self.P_start.T.ravel(order="F"), self.P_end.T.ravel(order="F")]
+        asm = _Assembly(N, nj, nP + nb)
+        # velocity control points touching a free point (convex hull: q̇ bounded everywhere)
+        dP = ca.mtimes(P, _sparse(self.M["dP"].T[:, 2:N]))
+        vb = np.tile((self.vlim * h)[:, None], (1, N - 2)).ravel(order="F")
+        asm.linear("velocity_limits", ca.vec(dP), self.M["dP"][2:N], -vb, vb)
+        fams = []
+        if self.spec.closed_chain is not None:
+            fams.append(("closed_chain", self.kernels.closed_chain(self.spec.closed_chain), list(range(1, N)),
+                         ca.DM.zeros(3, N - 1), ca.DM.zeros(1, N - 1), None,
+                         np.tile(np.r_[np.zeros(6), 1.0], N - 1), np.tile(np.r_[np.zeros(6), np.inf], N - 1)))
+        bi = 0
+        x_b0 = []
+        planes = self._plane_data(plan, Qk0)
+        self._kernels_for(plan, planes, Qk0)
+        for it, (Nrm, s0) in zip(plan, planes):
+            K = len(it.knots)
+            Np = ca.MX.sym("n", 3, K)
+            params.append(Np)
+            pvals.append(Nrm.ravel(order="F"))
+            if it.static:
+                Sp = ca.MX.sym("s", 1, K)
+                params.append(Sp)
+                pvals.append(s0)
+                fams.append((f"collision:{it.pair.name_a}|{it.pair.name_b}", it.fn, it.knots, Np, Sp, None,
+                             np.repeat(it.margins, it.nrow), np.inf))
+            else:
+                ma = it.a[1].shape[1]
+                sign = np.r_[np.ones(ma), -np.ones(it.nrow - ma)]
+                fams.append((f"collision:{it.pair.name_a}|{it.pair.name_b}", it.fn, it.knots, Np,
+                             Bv[bi:bi + K].T, (nP + bi, sign), np.repeat(it.margins / 2, it.nrow), np.inf))
+                x_b0.append(s0)
+                bi += K
+        for name, fn, knots, Nin, Sin, bcoup, lo, hi in fams:
+            jfn, hfn = self.kernels.derivatives(fn)
+            asm.family(name, fn, jfn, hfn, knots, Qk[:, knots], Nin, Sin, bcoup, lo, hi)
+        p = ca.vertcat(*[ca.vec(a) for a in params])
+        Jm = self.M["jerk"]
+        fref = jerk_integral_reference(self.q0, self.q1, self.T)
+        self._scale = scale = 1.0 / fref if fref > 0 else 1.0
+        J = ca.mtimes(P, _sparse(Jm.T))
+        f = scale * ca.sumsqr(J) / h**5  # ∫‖j‖² dt = h Σ ‖ΔP³/h³‖², scaled
+        Hj = 2 * scale / h**5 * (Jm[:, 3:N].T @ Jm[:, 3:N])  # per joint, over the free points
+        lam_f = ca.MX.sym("lam_f")
+        lam_g = ca.MX.sym("lam_g", asm.ng)
+        G, Jg, Hl = asm.finish(x, lam_f, lam_g, Hj)
+        self._nlp = {"x": x, "p": p, "f": f, "g": G}
+        self._derivs = {"jac_g": ca.Function("jac_g", [x, p], [G, Jg], ["x", "p"], ["g", "jac_g_x"]),
+                        "hess_lag": ca.Function("hess_lag", [x, p, lam_f, lam_g], [Hl],
+                                                ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])}
+        self._plan = plan
+        lbx = np.r_[np.tile(self.lower, N - 3), np.full(nb, -np.inf)]
+        ubx = np.r_[np.tile(self.upper, N - 3), np.full(nb, np.inf)]
+        self._xb0 = np.concatenate(x_b0) if x_b0 else np.zeros(0)
+        b = _Built(solver=None, lbx=lbx, ubx=ubx, lbg=asm.lbg, ubg=asm.ubg, p=np.concatenate(pvals),
+                   gfun=ca.Function("g", [x, p], [G]), slices=asm.slices)
+        b.setup_time = time.perf_counter() - t0
+        self._built = b
+        self._nfree = nP
+        return b
+
+    def rebuild(self) -> None:
+        """Rebuild at the next solve (after ``add_activation`` or ``boost_between_knots``)."""
+        self._built = None
+
+    def add_activation(self, q_knots: np.ndarray) -> None:
+        """Also activate the pairs that come close along ``q_knots`` ((N+1) × nj), e.g. a solution
+        that verification found colliding."""
+        if self.col is not None:
+            Q = np.asarray(q_knots, float)
+            self.col.activate_with = list(self.col.activate_with) + [
+                NumericTrajectory(self.robot, Q, Q, Q, Q[:-1], self.T)]
+        self._built = None
+
+    def boost_between_knots(self, traj_t, traj_q, knot_t) -> int:
+        """:meth:`CollisionAvoidance.boost_between_knots` for this problem's collision rows."""
+        if self.col is None:
+            return 0
+        self._built = None
+        return self.col.boost_between_knots(traj_t, traj_q, knot_t)
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-6, max_iter: int = 500) -> Solution:
+        """Solve with IPOPT (exact Hessian, MUMPS). Never raises for a failed solve: the status is
+        in the Solution. ``ipopt_options`` are passed through (``"ipopt."`` prefix optional)."""
+        t_setup = time.perf_counter()
+        b = self._built or self._build()
+        if b.solver is None:
+            opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": tol,
+                    "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
+                    "ipopt.mu_strategy": "adaptive", "ipopt.max_iter": int(max_iter)}
+            for k, v in (ipopt_options or {}).items():
+                opts[k if "." in k or k in ("print_time", "expand") else f"ipopt.{k}"] = v
+            if self.exact_derivatives:
+                # the kernels may be compiled (no derivatives of their own): IPOPT's multipliers
+                # are used as they are, not recomputed from a gradient of the Lagrangian
+                opts.update(self._derivs)
+                opts.update({"no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
+                             "calc_f": False, "calc_g": False})
+            b.solver = ca.nlpsol("segment", "ipopt", self._nlp, opts)
+        setup = time.perf_counter() - t_setup + (b.setup_time if b.setup_time else 0.0)
+        b.setup_time = 0.0
+        x0 = np.r_[self._X0.ravel(), self._xb0]
+        t0 = time.perf_counter()
+        try:
+            out = b.solver(x0=x0, p=b.p, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg)
+            stats = b.solver.stats()
+            status = IpoptStatus.from_string(stats.get("return_status", "Unknown"))
+            x = np.array(out["x"]).ravel()
+            lam_g = np.array(out["lam_g"]).ravel()
+            iters = int(stats.get("iter_count", -1))
+            cost = float(out["f"]) / self._scale
+        except RuntimeError as exc:
+            log.warning("IPOPT raised: %s", exc)
+            status, x, lam_g, iters, cost = IpoptStatus.INTERNAL_ERROR, x0.copy(), None, -1, float("nan")
+        wall = time.perf_counter() - t0
+        gval = np.array(b.gfun(x, b.p)).ravel()
+        viol_vec = np.maximum(np.maximum(b.lbg - gval, gval - b.ubg), 0.0)
+        viol = float(viol_vec.max()) if viol_vec.size else 0.0
+        xb = np.clip(x[:self._nfree], b.lbx[:self._nfree], b.ubx[:self._nfree])
+        viol = max(viol, float(np.abs(xb - x[:self._nfree]).max()) if self._nfree else 0.0)
+        terms = {"jerk": cost}
+        for name, sl in b.slices.items():
+            key = "collision" if name.startswith("collision:") else name
+            v = float(viol_vec[sl].max()) if sl.stop > sl.start else 0.0
+            terms[key] = max(terms.get(key, 0.0), v)
+        P = self._P(x[:self._nfree])
+        kv = knot_values(P, self.h)
+        success = bool(status.succeeded and np.isfinite(viol) and viol <= max(tol, 1e-9) * 10)
+        return Solution(success=success, status=status, iterations=iters, wall_time=wall, cost=cost,
+                        max_constraint_violation=viol, terms=terms, t=np.linspace(0.0, self.T, self.N + 1),
+                        q=kv["q"], qd=kv["qd"], qdd=kv["qdd"], jerk=kv["jerk"],
+                        joint_names=self.robot.joint_names, setup_time=setup, x=x, lam_g=lam_g)

@@ -1,0 +1,168 @@
+"""The B-spline segment NLP (optplan.problem.bspline, optplan.problem.segment) against independent
+references:
+
+* the knot maps against scipy's ``BSpline`` evaluation and derivatives;
+* the kernel-assembled constraint Jacobian and Lagrangian Hessian against CasADi's own automatic
+  differentiation of the same NLP graph, and the Jacobian against central finite differences;
+* the collision rows against coal's exact distances (a row's value is a certified lower bound);
+* the transport solve end to end, checked by ``verify`` (Pinocchio + coal), and against the knot
+  transcription's fixed-normal optimum of the same problem (the same function space);
+* ``CollisionChecker.distances`` (pinocchio.computeDistances) against coal pair by pair.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import coal
+import numpy as np
+import pytest
+from scipy.interpolate import BSpline
+
+from optplan.collision import CollisionChecker
+from optplan.problem import ClosedChain
+from optplan.problem.bspline import boundary_points, fit_interior, knot_matrices, knot_values
+from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
+from optplan.scene import Scene
+from optplan.verify import verify
+
+
+@pytest.fixture(scope="module")
+def transport():
+    return Scene.load("transport")
+
+
+def _scipy_spline(P: np.ndarray, T: float) -> BSpline:
+    N = P.shape[0] - 3
+    h = T / N
+    t = np.arange(-3, N + 4) * h  # uniform knots; the curve lives on [0, T]
+    return BSpline(t, P, 3)
+
+
+def test_knot_maps_match_scipy_bspline(rng):
+    N, T, nj = 9, 4.5, 3
+    P = rng.normal(size=(N + 3, nj))
+    kv = knot_values(P, T / N)
+    sp = _scipy_spline(P, T)
+    tk = np.linspace(0, T, N + 1)
+    np.testing.assert_allclose(kv["q"], sp(tk), atol=1e-12)
+    np.testing.assert_allclose(kv["qd"], sp.derivative(1)(tk), atol=1e-11)
+    np.testing.assert_allclose(kv["qdd"], sp.derivative(2)(tk), atol=1e-10)
+    mid = (tk[:-1] + tk[1:]) / 2
+    np.testing.assert_allclose(kv["jerk"], sp.derivative(3)(mid), atol=1e-9)
+
+
+def test_boundary_points_give_the_state_and_fit_keeps_them(rng):
+    N, T, nj = 8, 2.0, 4
+    h = T / N
+    q, v, a = (rng.normal(size=nj) for _ in range(3))
+    q1 = rng.normal(size=nj)
+    Ps, Pe = boundary_points(q, v, a, h, "start"), boundary_points(q1, -v, a, h, "end")
+    Q = rng.normal(size=(N + 1, nj))
+    P = np.vstack([Ps, fit_interior(Q, Ps, Pe), Pe])
+    kv = knot_values(P, h)
+    np.testing.assert_allclose([kv["q"][0], kv["qd"][0], kv["qdd"][0]], [q, v, a], atol=1e-12)
+    np.testing.assert_allclose([kv["q"][-1], kv["qd"][-1], kv["qdd"][-1]], [q1, -v, a], atol=1e-12)
+    with pytest.raises(ValueError, match="at least 4 intervals"):
+        knot_matrices(3)
+
+
+def _straight_segment(tcb, transport, N=24):
+    """A closed-chain transport segment: the task-space straight line through IK (collides)."""
+    from test_collision_nlp import _straight_line_ik
+
+    Q, _ = _straight_line_ik(tcb, transport, N, np.random.default_rng(0))
+    return Q, ClosedChain.from_grasps(transport.object.grasps["A"], transport.object.grasps["B"])
+
+
+@pytest.fixture(scope="module")
+def seg(tcb, transport):
+    Q, cc = _straight_segment(tcb, transport)
+    spec = SegmentSpec(len(Q) - 1, 60.0, Q[0], Q[-1], cc, margin=0.02, object_arm="A", activation=0.5)
+    prob = SplineSegmentProblem(tcb, transport, spec)
+    prob.set_initial(Q)
+    return prob, Q, cc
+
+
+def test_assembled_derivatives_equal_casadi_ad_and_finite_differences(seg, rng):
+    prob, Q, cc = seg
+    prob._build()
+    nlp, d = prob._nlp, prob._derivs
+    x, p = nlp["x"], nlp["p"]
+    b = prob._built
+    ng = b.lbg.size
+    assert len(prob._plan) > 0 and "closed_chain" in b.slices, "the segment must have collision and chain rows"
+    jac_ad = ca.Function("j", [x, p], [ca.jacobian(nlp["g"], x)])
+    lf, lg = ca.MX.sym("lf"), ca.MX.sym("lg", ng)
+    hess_ad = ca.Function("h", [x, p, lf, lg], [ca.triu(ca.hessian(lf * nlp["f"] + ca.dot(lg, nlp["g"]), x)[0])])
+    x0 = np.r_[prob._X0.ravel(), prob._xb0]
+    for trial in range(2):
+        xv = x0 + 0.02 * rng.normal(size=x0.size)
+        lam = rng.normal(size=ng)
+        Jm = np.array(d["jac_g"](xv, b.p)[1])
+        np.testing.assert_allclose(Jm, np.array(jac_ad(xv, b.p)), atol=1e-10)
+        Hm = np.array(d["hess_lag"](xv, b.p, 0.7, lam))
+        Ha = np.array(hess_ad(xv, b.p, 0.7, lam))
+        np.testing.assert_allclose(Hm, Ha, atol=1e-8 * max(1.0, np.abs(Ha).max()))
+        # finite differences of g along a few coordinates
+        for i in rng.choice(x0.size, 5, replace=False):
+            e = np.zeros(x0.size)
+            e[i] = 1e-6
+            fd = (np.array(b.gfun(xv + e, b.p)) - np.array(b.gfun(xv - e, b.p))).ravel() / 2e-6
+            np.testing.assert_allclose(Jm[:, i], fd, atol=1e-6)
+
+
+def test_collision_rows_are_certified_lower_bounds_of_coal_distance(seg, tcb, transport, rng):
+    """Each static pair's row value + margin is a lower bound of the exact distance (plane along a
+    unit normal), at perturbed configurations too."""
+    prob, Q, cc = seg
+    prob._build()
+    b = prob._built
+    chk = CollisionChecker(tcb, transport, object_arm="A")
+    x0 = np.r_[prob._X0.ravel(), prob._xb0]
+    for _ in range(3):
+        xv = x0 + 0.05 * rng.normal(size=x0.size)
+        g = np.array(b.gfun(xv, b.p)).ravel()
+        Qk = prob.knot_configurations(xv[:prob._nfree])
+        for it in prob._plan:
+            if not it.static:
+                continue
+            sl = b.slices[f"collision:{it.pair.name_a}|{it.pair.name_b}"]
+            rows = g[sl].reshape(len(it.knots), it.nrow)
+            i = chk.pairs.index(it.pair)
+            for t, k in enumerate(it.knots):
+                d = chk.distances(Qk[k])[i]
+                assert rows[t].min() <= d + 1e-6, (it.pair, k, rows[t].min(), d)
+
+
+def test_transport_segment_solves_and_verifies(seg, tcb, transport):
+    prob, Q, cc = seg
+    chk = CollisionChecker(tcb, transport, object_arm="A")
+    assert min(chk.min_distance(q)[0] for q in Q) < 0, "the initial guess should collide"
+    sol = prob.solve()
+    assert sol.success, (sol.status, sol.max_constraint_violation, sol.terms)
+    rep = verify(tcb, sol, transport, closed_chain=cc)
+    assert rep.min_clearance_m >= 0.0, rep
+    assert rep.max_closed_chain_residual <= 1e-5, rep
+    assert rep.max_velocity_limit_violation <= 1e-9 and rep.max_position_limit_violation <= 1e-9
+    np.testing.assert_allclose(sol.q[[0, -1]], Q[[0, -1]], atol=1e-12)
+    np.testing.assert_allclose(sol.qd[[0, -1]], 0.0, atol=1e-12)
+    assert sol.iterations > 0 and sol.cost > 0
+    # the cost is the exact jerk integral of the sampled trajectory
+    t = np.linspace(0, sol.t[-1], 2001)
+    assert sol.cost == pytest.approx(float(np.sum(sol.jerk**2) * (sol.t[1] - sol.t[0])), rel=1e-9)
+    assert np.all(np.isfinite(sol.sample(t)["q"]))
+
+
+def test_checker_distances_match_coal_pair_by_pair(tcb, rng):
+    sc = Scene.load("ssps_scene1")
+    chk = CollisionChecker(tcb, sc)
+    req = coal.DistanceRequest()
+    for _ in range(20):
+        q = tcb.random_configuration(rng)
+        d = chk.distances(q)
+        Mo = chk._update(q)
+        tf = coal.Transform3s(Mo.rotation, Mo.translation)
+        ref = []
+        for p in chk.pairs:
+            g1, t1, g2, t2 = chk._geoms(p, tf)
+            ref.append(coal.distance(g1, t1, g2, t2, req, coal.DistanceResult()))
+        np.testing.assert_allclose(d, ref, atol=5e-6)  # GJK tolerance (1e-6) on two placements
