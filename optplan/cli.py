@@ -83,7 +83,12 @@ def _cmd_bench_transport(args) -> int:
 
 
 def _cmd_bench_tcbirrt(args) -> int:
+    from .bench.engine import engine_error
     from .bench.tcbirrt import BenchConfig, format_summary, run, summarize
+
+    if (err := engine_error(args.engine, args.jobs, args.address)) is not None:
+        print(f"optplan bench tcbirrt: error: {err}", file=sys.stderr)
+        return 2
 
     cfg = BenchConfig(scenes=[s for s in args.scene.split(",") if s], planners=[p for p in args.planners.split(",") if p],
                       trials=args.trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=args.out,
@@ -100,7 +105,12 @@ def _cmd_bench_tcbirrt(args) -> int:
 
 
 def _cmd_bench_warmstart(args) -> int:
+    from .bench.engine import engine_error
     from .bench.warmstart import WarmstartConfig, format_summary, run, summarize, validate
+
+    if (err := engine_error(args.engine, args.jobs, args.address)) is not None:
+        print(f"optplan bench warmstart: error: {err}", file=sys.stderr)
+        return 2
 
     cfg = WarmstartConfig(scenes=[s for s in args.scene.split(",") if s.strip()], trials=args.trials, seed=args.seed,
                           jobs=args.jobs, out=args.out, time_limit=args.time_limit,

@@ -29,9 +29,12 @@ def test_local_engines_yield_every_unit_once():
     assert list(map_unordered(abs, [])) == []
 
 
-def test_warmstart_cli_rejects_address_without_dask(tmp_path, capsys):
-    rc = cli.main(["bench", "warmstart", "--address", "tcp://127.0.0.1:1", "--out", str(tmp_path / "o")])
-    assert rc == 2 and "--address: only with --engine dask" in capsys.readouterr().err
+@pytest.mark.parametrize("bench", ["warmstart", "tcbirrt"])
+def test_cli_rejects_address_without_dask(tmp_path, capsys, bench):
+    rc = cli.main(["bench", bench, "--address", "tcp://127.0.0.1:1", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"optplan bench {bench}: error: --address: only with --engine dask" in err
+    assert not (tmp_path / "o").exists()
 
 
 # --------------------------------------------------------------------------- Dask

@@ -23,7 +23,7 @@ from __future__ import annotations
 import logging
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
-__all__ = ["ENGINES", "EngineUnavailable", "validate_engine", "map_unordered"]
+__all__ = ["ENGINES", "EngineUnavailable", "validate_engine", "engine_error", "map_unordered"]
 log = logging.getLogger(__name__)
 
 ENGINES = ("local", "dask")
@@ -43,6 +43,21 @@ def validate_engine(engine: str, jobs: int, address: str | None) -> None:
         raise ValueError(f"--address: only with --engine dask (got --engine {engine} --address {address})")
     if address is not None and not str(address).strip():
         raise ValueError("--address: expected a scheduler address such as tcp://127.0.0.1:8786, got ''")
+
+
+def engine_error(engine: str, jobs: int, address: str | None) -> str | None:
+    """The message of what is wrong with the engine settings (bad values, or the ``dask`` extra
+    missing), or None when they are usable — for command lines that report instead of raising."""
+    try:
+        validate_engine(engine, jobs, address)
+    except ValueError as exc:
+        return str(exc)
+    if engine == "dask":
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            return "--engine dask needs the optional extra 'dask': pip install \"optplan[dask]\""
+    return None
 
 
 def _run_with_init(fn: Callable, initializer: Callable | None, initargs: tuple, unit):
