@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Closed-chain transport (issue 3): the two arms of `tcbirrt_dual_arm` hold the 2 x 0.8 x 0.8 m
+"""Closed-chain transport: the two arms of `tcbirrt_dual_arm` hold the 2 x 0.8 x 0.8 m
 object and carry it between two poses around obstacles (scene `models/scenes/transport.toml`).
 
 Initial guess: the straight line between the two object poses (position linear, orientation in

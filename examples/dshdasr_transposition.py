@@ -1,4 +1,4 @@
-"""Seed 003: target-satellite transposition by the discrete-serpentine dual-arm robot ``dshdasr``,
+"""Space-arc kinematics paper (DSHDASR): target-satellite transposition by the discrete-serpentine dual-arm robot ``dshdasr``,
 planned with the space-arc equivalent kinematics (one IPOPT NLP per waypoint, Eq. 50) and compared
 with a damped least-squares baseline and with the paper's figures.
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Base-attitude restoration with end constraints (seed 004 Section 4.2, issue 5) on `eba_ffsr`.
+"""Base-attitude restoration with end constraints (EBA paper, Section 4.2) on `eba_ffsr`.
 
 The two hands hold an object: their relative pose stays what it is at θ0 during the whole motion.
 Methods: leader-follower (arm A by quintic, arm B by velocity-level IK, 20 s), EBA with the null

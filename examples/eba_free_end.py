@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Base-attitude restoration, free ends (seed 004 Section 4.1, issue 5) on the `eba_ffsr` model.
+"""Base-attitude restoration, free ends (EBA paper, Section 4.1) on the `eba_ffsr` model.
 
 Both arms move from the paper's θ0 to their goals and the base attitude must come back to where it
 started. Methods: 5th-order polynomial (Eq. 34, 20 s), BA (Eq. 1-7, Q = 8I, 300 s), EBA (Eq. 8-24,
