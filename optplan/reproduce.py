@@ -203,12 +203,16 @@ def _supports(script: Path, flag: str) -> bool:
     return flag in script.read_text(encoding="utf-8", errors="replace")
 
 
-def _generic_steps(script_name: str, stem: str) -> Callable:
+def _generic_steps(script_name: str, stem: str, quick_flags: tuple = ("--quick",), robot: str | None = None) -> Callable:
+    """Steps of a paper script whose options are read off its ``--help``: ``--json``, ``--plot``,
+    ``--html`` when offered; ``--save DIR`` (a folder of npz trajectories, viewed as ``robot``)
+    when offered and ``robot`` is known; with ``--quick`` the first of ``quick_flags`` it offers."""
     def steps(out: Path, quick: bool, ex: Path) -> list[Step]:
         script = ex / script_name
         text = _help_text(script)
         args: list = []
         js = None
+        traj: tuple = ()
         if "--json" in text:
             js = out / f"{stem}.json"
             args += ["--json", js]
@@ -216,9 +220,14 @@ def _generic_steps(script_name: str, stem: str) -> Callable:
             args += ["--plot", out / "fig"]
         if "--html" in text:
             args += ["--html", out / f"{stem}.html"]
-        if quick and "--quick" in text:
-            args.append("--quick")
-        return [Step(stem, _py(script, *args), json=None if js is None else str(js))]
+        if "--save" in text and robot is not None:
+            args += ["--save", out / "traj" / stem]
+            traj = ((str(out / "traj" / stem), robot, None),)
+        if quick:
+            flag = next((f for f in quick_flags if f in text), None)
+            if flag is not None:
+                args.append(flag)
+        return [Step(stem, _py(script, *args), json=None if js is None else str(js), trajectories=traj)]
     return steps
 
 
@@ -230,7 +239,8 @@ PAPERS: dict[str, Paper] = {
     "dshdasr": Paper("dshdasr", "Space-arc equivalent kinematics of a discrete + serpentine dual-arm space robot "
                      "(target transposition)", ("dshdasr_transposition.py",), _dshdasr_steps, _dshdasr_summary),
     "spline-rrt": Paper("spline-rrt", "Spline-RRT*: coordinated dual-arm planning for a free-floating space robot",
-                        ("spline_rrt_star.py",), _generic_steps("spline_rrt_star.py", "spline_rrt_star")),
+                        ("spline_rrt_star.py",), _generic_steps("spline_rrt_star.py", "spline_rrt_star",
+                                                                 ("--quick", "--no-optimize"), "splinerrt_ffsr")),
     "oc-rrt": Paper("oc-rrt", "OC-RRT: orientation-constrained RRT for spherical-wrist dual arms",
                     ("oc_rrt.py",), _generic_steps("oc_rrt.py", "oc_rrt")),
 }
@@ -265,6 +275,8 @@ def _views(step: Step, out: Path) -> list[Path]:
             except VizUnavailable as exc:
                 print(f"  (no HTML views: {exc})")
                 return made
+            except Exception as exc:   # a view is an extra: report it, keep the run's other outputs
+                print(f"  (no HTML view of {f}: {type(exc).__name__}: {exc})")
     return made
 
 

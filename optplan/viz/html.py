@@ -426,7 +426,8 @@ for (var i = 0; i < optplanCommands.length; i++) viewer.handle_command_bytearray
 # --------------------------------------------------------------------------- trajectory files
 def load_trajectory(path) -> dict:
     """A trajectory npz (``t`` [s], ``q`` [rad] M × nq, optional ``constrained``, ``joint_names``,
-    ``robot``, ``scene``) as a dict; raises ``ValueError`` naming what is missing."""
+    ``robot``, ``scene``; ``base_q`` (M × 7) is put in front of joint-only ``q``) as a dict;
+    raises ``ValueError`` naming what is missing."""
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"trajectory file {str(p)!r} does not exist")
@@ -439,6 +440,10 @@ def load_trajectory(path) -> dict:
         if not {"t", "q"} <= keys:
             raise ValueError(f"{p}: expected arrays 't' and 'q' in the npz, found {sorted(keys)}")
         out = {"t": np.asarray(z["t"], float), "q": np.asarray(z["q"], float)}
+        if "base_q" in keys:   # a free-floating base's [x, y, z, qx, qy, qz, qw] stored apart from the joints
+            bq = np.asarray(z["base_q"], float)
+            if bq.ndim == 2 and bq.shape == (len(out["q"]), 7):
+                out["q"] = np.hstack([bq, out["q"]])
         for k in ("constrained", "joint_names", "qd"):
             if k in keys:
                 out[k] = z[k]
