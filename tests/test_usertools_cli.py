@@ -124,3 +124,25 @@ def test_plan_figures_and_profiles(tmp_path):
     paths = plot_trajectory(robot, scene, t, q, tmp_path, name="p", constrained=cons)
     assert [p.name for p in paths] == ["p_joints.png", "p_residual_clearance.png"]
     assert all(p.stat().st_size > 10_000 for p in paths)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("paper", ["tcbirrt", "eba", "dshdasr"])
+def test_reproduce_quick_end_to_end(tmp_path, paper):
+    """``optplan reproduce PAPER --quick``: every step succeeds, JSON and figures are written, an
+    HTML view exists when the viz extra is installed, and the run takes under a minute (measured
+    25-45 s on a loaded 2-core machine; the limit leaves room for a slower one)."""
+    import time
+
+    t0 = time.perf_counter()
+    rec = reproduce(paper, out=tmp_path / "r", quick=True)
+    dt = time.perf_counter() - t0
+    assert rec["success"], rec["steps"]
+    assert all(s["exit_code"] == 0 for s in rec["steps"])
+    assert any(f.endswith(".json") for f in rec["files"]) and any(f.endswith(".png") for f in rec["files"])
+    try:
+        import meshcat  # noqa: F401
+        assert any(f.endswith(".html") for f in rec["files"])
+    except ImportError:
+        pass
+    assert dt < 90.0, dt
