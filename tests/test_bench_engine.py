@@ -38,7 +38,9 @@ def test_cli_rejects_address_without_dask(tmp_path, capsys, bench):
 
 
 # --------------------------------------------------------------------------- Dask
-distributed = pytest.importorskip("distributed")
+@pytest.fixture
+def distributed():
+    return pytest.importorskip("distributed")   # the optional extra 'dask'
 
 
 def _strip(r: dict) -> dict:
@@ -49,7 +51,7 @@ def _strip(r: dict) -> dict:
     return out
 
 
-def test_tcbirrt_dask_local_cluster_equals_in_process(tmp_path):
+def test_tcbirrt_dask_local_cluster_equals_in_process(tmp_path, distributed):
     """Two worker processes of a local Dask cluster give the lines of the in-process run."""
     from distributed import LocalCluster
 
@@ -77,7 +79,7 @@ def test_tcbirrt_dask_local_cluster_equals_in_process(tmp_path):
     assert all(_strip(c[i]) == _strip(a[i]) for i in a)
 
 
-def test_warmstart_dask_single_writer(tmp_path, monkeypatch):
+def test_warmstart_dask_single_writer(tmp_path, monkeypatch, distributed):
     """Warm-start units through a Dask scheduler (workers in this process, so the stand-in unit
     runner applies): every unit written exactly once, same lines as the in-process run."""
     from distributed import LocalCluster
@@ -103,6 +105,6 @@ def test_warmstart_dask_single_writer(tmp_path, monkeypatch):
     assert rows == local
 
 
-def test_dask_unreachable_address_is_a_clear_error(tmp_path):
+def test_dask_unreachable_address_is_a_clear_error(tmp_path, distributed):
     with pytest.raises(ConnectionError, match="no Dask scheduler answers at"):
         list(map_unordered(abs, [1, 2], engine="dask", address="tcp://127.0.0.1:9", connect_timeout=1.0))

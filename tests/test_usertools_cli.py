@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import sys
 import textwrap
 
 import numpy as np
@@ -146,3 +147,17 @@ def test_reproduce_quick_end_to_end(tmp_path, paper):
     except ImportError:
         pass
     assert dt < 90.0, dt
+
+
+def test_view_without_viz_extra_is_a_clear_error(tmp_path, capsys, monkeypatch):
+    """Without meshcat, the 3D view is a message naming the extra (exit 2), not a traceback."""
+    from optplan.viz.html import VizUnavailable, save_metadata, trajectory_html
+
+    monkeypatch.setitem(sys.modules, "meshcat", None)   # import meshcat -> ImportError
+    p = tmp_path / "t.npz"
+    np.savez(p, t=[0.0, 1.0], q=np.zeros((2, 14)))
+    save_metadata(p, robot="tcbirrt_dual_arm")
+    with pytest.raises(VizUnavailable, match=r"optional extra 'viz'"):
+        trajectory_html(None, None, [0.0], np.zeros((1, 14)))
+    assert cli.main(["view", str(p)]) == 2
+    assert "pip install \"optplan[viz]\"" in capsys.readouterr().err
