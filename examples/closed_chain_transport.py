@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Closed-chain transport (issue 3): the two arms of `tcbirrt_dual_arm` hold the 2 x 0.8 x 0.8 m
+"""Closed-chain transport: the two arms of `tcbirrt_dual_arm` hold the 2 x 0.8 x 0.8 m
 object and carry it between two poses around obstacles (scene `models/scenes/transport.toml`).
 
 Initial guess: the straight line between the two object poses (position linear, orientation in
@@ -7,7 +7,7 @@ exponential coordinates) mapped through closed-chain IK; it passes through an ob
 solves the NLP (closed chain, joint limits, collision avoidance, minimum jerk), and `verify` checks
 the result at 10x the knot density with Pinocchio and coal, independently of the NLP.
 
-    python examples/closed_chain_transport.py [--knots 50] [--json out.json] [--save traj.npz]
+    python examples/closed_chain_transport.py [--knots 50] [--json out.json] [--save traj.npz] [--html view.html]
 
 Exit code 0 only when IPOPT converged and verification passed (closed-chain residual <= 1e-6,
 clearance >= 0).
@@ -85,6 +85,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", help="write the figures as JSON")
     ap.add_argument("--save", help="write the trajectory (npz: t, q, joint_names)")
     ap.add_argument("--plot", help="directory for PNG figures")
+    ap.add_argument("--html", help="write a 3D view of the motion (self-contained HTML; extra 'viz')")
     args = ap.parse_args(argv)
     out, sol = run(args.knots, args.duration, args.seed, args.margin)
     print("closed-chain transport (tcbirrt_dual_arm, scene 'transport')")
@@ -104,6 +105,13 @@ def main(argv=None) -> int:
         from optplan.viz import plot_joint_trajectory
 
         plot_joint_trajectory(sol, args.plot, "closed_chain_transport")
+    if args.html and sol is not None:
+        from optplan.viz.outputs import write_views
+
+        t = np.linspace(sol.t[0], sol.t[-1], 10 * (len(sol.t) - 1) + 1)
+        for p in write_views(RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("transport"), t, sol.sample(t)["q"],
+                             html=args.html, title="closed-chain transport"):
+            print(f"  wrote {p}")
     return 0 if out["success"] else 1
 
 

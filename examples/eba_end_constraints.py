@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Base-attitude restoration with end constraints (seed 004 Section 4.2, issue 5) on `eba_ffsr`.
+"""Base-attitude restoration with end constraints (EBA paper, Section 4.2) on `eba_ffsr`.
 
 The two hands hold an object: their relative pose stays what it is at θ0 during the whole motion.
 Methods: leader-follower (arm A by quintic, arm B by velocity-level IK, 20 s), EBA with the null
@@ -9,7 +9,7 @@ a 1e4 penalty at 19 instants) and optplan's NLP (OptProblem with ClosedChain, N 
 goal joints are rounded to 0.01°; arm B's are moved by ≤ 0.08° so that start and goal share the
 relative hand pose exactly.
 
-    python examples/eba_end_constraints.py [--json out.json] [--plot DIR] [--save DIR]
+    python examples/eba_end_constraints.py [--json out.json] [--plot DIR] [--save DIR] [--html DIR]
 
 Exit code 0 only when the run meets its criteria (optplan.methods.eba.criteria): every method
 completed and agrees with the simulator, EBA's and the NLP's closed-chain residual ≤ 1e-6, the NLP
@@ -32,6 +32,8 @@ def main(argv=None) -> int:
     ap.add_argument("--json", help="write the figures as JSON")
     ap.add_argument("--plot", help="directory for the PNG figures (Fig. 7 / Fig. 9 style)")
     ap.add_argument("--save", help="directory for DIR/<NAME>.npz (t, q, qd, joint_names)")
+    ap.add_argument("--html", help="directory for DIR/<NAME>.html: 3D view of each method's motion, base moving "
+                    "(self-contained HTML; extra 'viz')")
     ap.add_argument("--methods", default=",".join(eba.CASES["end_constrained"]),
                     help="comma-separated subset of " + ",".join(eba.CASES["end_constrained"]))
     ap.add_argument("--nlp-intervals", type=int, default=48, help="NLP intervals N (default 48)")
@@ -75,6 +77,12 @@ def main(argv=None) -> int:
             json.dump(out, f, indent=2, default=float)
     if args.save:
         eba.save_trajectories(case, args.save, robot.joint_names)
+    if args.html:
+        from optplan.viz.outputs import write_method_views
+
+        for p in write_method_views(robot, {n: (r.t, r.q, r.qd) for n, r in case.results.items()}, args.html,
+                                    title=f"EBA robot, {case.case}: "):
+            print(f"  wrote {p}")
     if args.plot:
         from optplan.methods.eba_plots import plot_case
 

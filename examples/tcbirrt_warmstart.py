@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Plan → shortcut → resample → optimize → verify on a space-solar-power-station scene (issue 4).
+"""Plan → shortcut → resample → optimize → verify on a space-solar-power-station scene.
 
 TCBiRRT (seed 000) plans a closed-chain motion of the two arms of `tcbirrt_dual_arm` carrying the
 2 x 0.8 x 0.8 m object between two perturbed poses (trial generator of Section 5.1); its path

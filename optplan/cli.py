@@ -47,6 +47,28 @@ def _cmd_models_list(args) -> int:
     return 0
 
 
+def _cmd_models_info(args) -> int:
+    from .errors import UnknownNameError
+    from .modelinfo import format_model_info, model_info
+
+    try:
+        info = model_info(args.name)
+    except UnknownNameError as exc:
+        print(f"optplan models info: error: {exc}", file=sys.stderr)
+        return 2
+    print(format_model_info(info))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(info, f, indent=2)
+    return 0
+
+
+def _cmd_reproduce(args) -> int:
+    from .reproduce import main
+
+    return main(args)
+
+
 def _cmd_bench_kinematics(args) -> int:
     from .bench.kinematics import report, run
 
@@ -71,8 +93,11 @@ def _cmd_bench_transport(args) -> int:
 
 
 def _cmd_bench_tcbirrt(args) -> int:
+    from .bench.engine import engine_error
     from .bench.tcbirrt import BenchConfig, format_summary, parse_planner_spec, run, summarize
 
+    if (err := engine_error(args.engine, args.jobs, args.address)) is not None:
+        raise UsageError(err)
     scenes = [ca.check_scene(s) for s in args.scene.split(",") if s.strip()] or [ca.check_scene("")]
     planners = [p for p in args.planners.split(",") if p.strip()]
     for p in planners or [""]:
@@ -84,25 +109,32 @@ def _cmd_bench_tcbirrt(args) -> int:
     cfg = BenchConfig(scenes=scenes, planners=planners,
                       trials=args.trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=args.out,
                       clock=args.clock, progress=not args.no_progress, plot=not args.no_plot,
-                      first_trial=args.first_trial, merge=list(args.merge or []))
+                      first_trial=args.first_trial, merge=list(args.merge or []),
+                      engine=args.engine, address=args.address)
     t0 = time.perf_counter()
     rows = run(cfg)
     print(format_summary(summarize(rows, cfg.time_limit)))
     print(f"summary of {len(rows)} result lines ({args.out}/results.jsonl"
           f"{' and merged runs' if cfg.merge else ''}); run time {time.perf_counter() - t0:.1f} s (clock: {cfg.clock}); "
-          f"figure {args.out}/success_curves.png")
+          f"figures {args.out}/success_curves.png, {args.out}/time_distributions.png")
     return 0
 
 
 def _cmd_bench_warmstart(args) -> int:
+    from .bench.engine import engine_error
     from .bench.warmstart import WarmstartConfig, format_summary, run, summarize, validate
+
+    if (err := engine_error(args.engine, args.jobs, args.address)) is not None:
+        print(f"optplan bench warmstart: error: {err}", file=sys.stderr)
+        return 2
 
     cfg = WarmstartConfig(scenes=[s for s in args.scene.split(",") if s.strip()], trials=args.trials, seed=args.seed,
                           jobs=args.jobs, out=args.out, time_limit=args.time_limit,
                           modes=tuple(m.strip() for m in args.modes.split(",") if m.strip()),
                           first_trial=args.first_trial, progress=not args.no_progress,
                           ipopt_max_wall_time=args.ipopt_max_wall_time,
-                          free_plane_normals=args.free_plane_normals, transcription=args.transcription)
+                          free_plane_normals=args.free_plane_normals, transcription=args.transcription,
+                          engine=args.engine, address=args.address)
     try:
         validate(cfg)
     except ValueError as exc:
@@ -152,7 +184,22 @@ def _cmd_plan(args) -> int:
             json.dump(out, f, indent=2)
     if args.save and res.segments:
         res.save(args.save)
+        from .viz.html import save_metadata
+
+        save_metadata(args.save, robot=robot.name, scene=scene.name)
+    if (args.html or args.plot) and res.segments:
+        from .viz.outputs import write_views
+
+        for p in write_views(robot, scene, res.t, res.q, res.constrained, html=args.html, plot_dir=args.plot,
+                             title=f"optplan plan: {scene.name}, trial {args.trial}"):
+            print(f"wrote {p}")
     return 0 if res.success else 1
+
+
+def _cmd_view(args) -> int:
+    from .viz.outputs import view_command
+
+    return view_command(args)
 
 
 def _cmd_demo(args) -> int:
@@ -185,10 +232,26 @@ _OUTPUT_FILES = ("json", "save")
 _OUTPUT_DIRS = ("out",)
 
 
+def _engine_args(p) -> None:
+    from .bench.engine import ENGINES
+
+    p.add_argument("--engine", choices=ENGINES, default="local",
+                   help="local: this process or a pool of --jobs processes; dask: a local Dask cluster of --jobs "
+                        "workers, or the cluster at --address (extra 'dask')")
+    p.add_argument("--address", metavar="URL", help="Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --engine dask)")
+
+
+def _version() -> str:
+    from . import __version__
+
+    return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="optplan", description="Motion planning and trajectory optimization "
                                 "for dual-arm space robots")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
+    p.add_argument("--version", action="version", version=f"optplan {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
 
     models = sub.add_parser("models", help="robot descriptions").add_subparsers(dest="action", required=True)
@@ -196,6 +259,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--check", action="store_true", help="only check that the URDFs are up to date")
     b.set_defaults(func=_cmd_models_build)
     models.add_parser("list", help="list robot descriptions").set_defaults(func=_cmd_models_list)
+    mi = models.add_parser("info", help="joints, limits, arms and masses of a robot model")
+    mi.add_argument("name", help="model name (see `optplan models list`)")
+    mi.add_argument("--json", help="write the description as JSON to this path")
+    mi.set_defaults(func=_cmd_models_info)
 
     bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="what", required=True)
     k = bench.add_parser("kinematics", help="per-call times of numeric and CasADi kinematics")
@@ -227,6 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also summarize the result lines of another output directory (repeatable)")
     tb.add_argument("--no-progress", action="store_true")
     tb.add_argument("--no-plot", action="store_true")
+    _engine_args(tb)
     tb.set_defaults(func=_cmd_bench_tcbirrt)
 
     ws = bench.add_parser("warmstart", help="IPOPT from the TCBiRRT path (warm) vs from a straight line "
@@ -246,9 +314,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="let IPOPT move the separating-plane normals (PipelineOptions.fixed_plane_normals=False)")
     ws.add_argument("--out", default="bench_warmstart", help="output directory (results.jsonl, summary.txt/json)")
     ws.add_argument("--no-progress", action="store_true")
+    _engine_args(ws)
     ws.set_defaults(func=_cmd_bench_warmstart)
 
-    pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene")
+    pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene (the main job)")
     pl.add_argument("--scene", default="1", help="1, 2, 3 (ssps_scene<N>) or a scene name")
     pl.add_argument("--trial", type=ca.nonnegative_int, default=0, help="trial index (perturbed start/goal, Section 5.1)")
     pl.add_argument("--seed", type=ca.nonnegative_int, default=0)
@@ -256,8 +325,28 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit [s]")
     pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
     pl.add_argument("--json", help="write the figures as JSON")
-    pl.add_argument("--save", help="write the trajectory npz (t, q, joint_names, constrained)")
+    pl.add_argument("--save", help="write the trajectory npz (t, q, joint_names, constrained, robot, scene)")
+    pl.add_argument("--html", help="write a 3D view of the motion (self-contained HTML, opens offline)")
+    pl.add_argument("--plot", metavar="DIR", help="write PNG figures: joints with limits, closed-chain residual "
+                    "and clearance over time")
     pl.set_defaults(func=_cmd_plan)
+
+    vw = sub.add_parser("view", help="3D view of a saved trajectory as a self-contained HTML file")
+    vw.add_argument("traj", metavar="TRAJ.npz", help="trajectory file (optplan plan --save, examples' --save)")
+    vw.add_argument("--scene", help="1, 2, 3 (ssps_scene<N>), a scene name or a scene TOML path "
+                    "(default: the one recorded in the file)")
+    vw.add_argument("--robot", help="robot model name (default: recorded in the file, else the scene's robot)")
+    vw.add_argument("--html", help="output HTML path (default: TRAJ with .html)")
+    vw.add_argument("--plot", metavar="DIR", help="also write the PNG figures of the trajectory to DIR")
+    vw.add_argument("--playback", type=float, default=20.0, help="seconds the whole motion takes to play (default 20)")
+    vw.set_defaults(func=_cmd_view)
+
+    rp = sub.add_parser("reproduce", help="reproduce a source paper with one command (figures, JSON, 3D views)")
+    rp.add_argument("paper", choices=["tcbirrt", "eba", "dshdasr", "spline-rrt", "oc-rrt"])
+    rp.add_argument("--quick", action="store_true", help="a reduced run (under a minute)")
+    rp.add_argument("--out", help="output directory (default reproduce_<paper>)")
+    rp.add_argument("--no-html", action="store_true", help="no HTML views")
+    rp.set_defaults(func=_cmd_reproduce)
 
     d = sub.add_parser("demo", help="free-floating base of the EBA robot under a quintic joint motion")
     d.add_argument("--duration", type=ca.positive_float, default=20.0, help="motion duration [s]")

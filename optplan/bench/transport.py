@@ -44,5 +44,5 @@ def report(rows: list[dict], knots) -> str:
                      f"{r.get('solve_time_s', float('nan')):10.2f} {r.get('setup_time_s', float('nan')):10.2f} "
                      f"{r.get('peak_rss_mb', float('nan')):8.0f} {r.get('max_closed_chain_residual', float('nan')):9.1e} "
                      f"{r.get('min_clearance_m', float('nan')):9.3f}")
-    lines.append("target (issue 3): N=50 in <= 2 s (IPOPT), closed-chain residual <= 1e-6, clearance >= 0 by coal")
+    lines.append("target: N=50 in <= 2 s (IPOPT), closed-chain residual <= 1e-6, clearance >= 0 by coal")
     return "\n".join(lines)

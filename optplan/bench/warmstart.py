@@ -29,7 +29,6 @@ import hashlib
 import json
 import logging
 import math
-import multiprocessing as mp
 import os
 import resource
 import time
@@ -38,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .engine import map_unordered, validate_engine
 from .tcbirrt import _repair_tail, load_results, scene_name
 
 __all__ = ["WarmstartConfig", "MODES", "TARGETS", "validate", "pending_units", "run", "summarize", "format_summary"]
@@ -65,6 +65,9 @@ class WarmstartConfig:
     ipopt_max_wall_time: float | None = None   # [s] per IPOPT solve (None: IPOPT's iteration limit only)
     free_plane_normals: bool = False  # PipelineOptions.fixed_plane_normals = not this (result lines record it)
     transcription: str = "bspline"    # PipelineOptions.transcription (result lines record it)
+    plot: bool = True                 # DIR/time_distributions.png (IPOPT time and iterations per trial)
+    engine: str = "local"             # "local" (process pool of `jobs`) or "dask" (optplan.bench.engine)
+    address: str | None = None        # Dask scheduler address (None: a local cluster of `jobs` workers)
 
 
 def validate(cfg: WarmstartConfig) -> list[str]:
@@ -76,6 +79,7 @@ def validate(cfg: WarmstartConfig) -> list[str]:
         raise ValueError(f"--trials: expected an integer >= 1, got {cfg.trials!r}")
     if not isinstance(cfg.jobs, int) or cfg.jobs < 1:
         raise ValueError(f"--jobs: expected an integer >= 1, got {cfg.jobs!r}")
+    validate_engine(cfg.engine, cfg.jobs, cfg.address)
     if not isinstance(cfg.first_trial, int) or cfg.first_trial < 0:
         raise ValueError(f"--first-trial: expected an integer >= 0, got {cfg.first_trial!r}")
     if not (isinstance(cfg.time_limit, (int, float)) and math.isfinite(cfg.time_limit) and cfg.time_limit > 0):
@@ -265,14 +269,9 @@ def run(cfg: WarmstartConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict
                 bar.set_postfix_str(f"{line['scene']} #{line['trial']} {line['mode']} "
                                     f"{'ok' if line.get('success') else line.get('opt_status')}; {n_ok} ok")
 
-        if cfg.jobs <= 1 or len(units) <= 1:
-            for u in units:
-                write(_run_unit(u))
-        else:
-            ctx = mp.get_context("spawn")
-            with ctx.Pool(min(cfg.jobs, len(units)), initializer=_init_pool) as pool:
-                for line in pool.imap_unordered(_run_unit, units, chunksize=1):
-                    write(line)
+        for line in map_unordered(_run_unit, units, engine=cfg.engine, jobs=cfg.jobs, address=cfg.address,
+                                  initializer=_init_pool, serial_initializer=False):
+            write(line)
     if bar is not None:
         bar.close()
     rows = select_rows(load_results(res_path), cfg, scenes)
@@ -280,6 +279,10 @@ def run(cfg: WarmstartConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict
     with open(out / "summary.json", "w") as f:
         json.dump(summ, f, indent=2)
     (out / "summary.txt").write_text(format_summary(summ) + "\n")
+    if cfg.plot:
+        from ..viz.bench_plots import plot_warmstart_distributions
+
+        plot_warmstart_distributions(rows, out / "time_distributions.png")
     return rows
 
 
