@@ -28,6 +28,7 @@ import math
 import time
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
 import pinocchio as pin
 
@@ -35,6 +36,7 @@ from ..collision import CollisionChecker
 from ..floating import simulate_base
 from ..kinematics import Kinematics
 from ..planners.base import PlanStatus
+from ..problem.terms import Term, pose_residual, pose_residual_numeric
 from ..planners.spline_rrt import CoordinatedPlan, CoordinatedRRTStar, CoordinatedRRTStarOptions
 from ..robot import RobotModel
 from ..scene import Scene
@@ -42,7 +44,7 @@ from ..spatial import exp3, log3, rotation_angle, rpy_to_matrix
 from ..splines import PiecewisePolynomial, quartic_spline, time_grid_from_path
 
 __all__ = ["SplineRRTTask", "BezierOrientation", "HandTrajectory", "smooth_hand_paths", "TrackingOptions",
-           "TrackingResult", "track", "link_distances", "evaluate", "PAPER"]
+           "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "optimize", "PAPER"]
 log = logging.getLogger(__name__)
 
 #: the paper's figures (Section 4)
@@ -348,3 +350,188 @@ def evaluate(robot: RobotModel, hands: dict, t: np.ndarray, joints: np.ndarray, 
     out["link_distance_m"], out["obstacle_distance_m"] = d["links"], d["obstacles"]
     out["link_pairs"] = d["pairs"]
     return out
+
+
+# --------------------------------------------------------------------------- optimized variant
+@dataclass
+class EndOrientation(Term):
+    """A frame's world orientation at the last knot equals ``target`` (3 × 3): ``FramePose``
+    without its position rows, which would repeat the last ``FramePath`` position rows and make
+    the equality Jacobian rank-deficient. Residual and bounds as ``FramePose``."""
+
+    frame: str = ""
+    target: np.ndarray | None = None
+    default_name = "end_orientation"
+
+    def residual(self, tp):
+        R, p = tp.frame(self.frame, tp.N)
+        r, tr = pose_residual(R, p, np.asarray(self.target, float), p)
+        return ca.vertcat(r[3:], tr), np.r_[0.0, 0.0, 0.0, 1.0], np.r_[0.0, 0.0, 0.0, np.inf]
+
+    def numeric(self, traj):
+        M = traj.frame(self.frame, traj.N)
+        r, tr = pose_residual_numeric(M, pin.SE3(np.asarray(self.target, float), M.translation))
+        return np.r_[r[3:], tr]
+
+    def _bounds_numeric(self, traj):
+        return np.r_[0.0, 0.0, 0.0, 1.0], np.r_[0.0, 0.0, 0.0, np.inf]
+
+
+@dataclass(frozen=True)
+class OptimizeOptions:
+    """The optimized variant (:func:`optimize`): ``n_intervals`` N, ``n_sub`` RK4 sub-steps of the base
+    per interval, ``link_margin`` [m] between the robot's links (and ``obstacle_margin`` [m] to the
+    obstacles), ``restore_attitude``: base attitude at T equal to the start's (hard constraint;
+    False: minimised as a cost), ``position_only``: hand paths as position constraints with the
+    orientation constrained at the goal only (False: full poses at every knot), ``orientation_weight``: weight of the squared deviation
+    from the Bézier orientation (a cost, with ``position_only``), ``tol`` IPOPT's
+    constraint tolerance, ``max_iter``."""
+
+    n_intervals: int = 40
+    n_sub: int = 1
+    link_margin: float = 0.1
+    obstacle_margin: float = 0.0
+    restore_attitude: bool = True
+    position_only: bool = True
+    orientation_weight: float = 1.0
+    tol: float = 1e-8
+    max_iter: int = 300
+
+
+def optimize(robot: RobotModel, task: SplineRRTTask, hands: dict, T: float, warm: TrackingResult,
+             options: OptimizeOptions | None = None):
+    """The Spline-RRT* task as an :class:`~optplan.problem.OptProblem` on the floating base (base at
+    the origin, zero momentum), warm-started from the tracked joint trajectory ``warm``: hands on
+    their planned paths at every knot (``FramePath``), start at rest from ``task.q_start``, rest at
+    T, joint position/velocity limits, link–link distance ≥ ``link_margin`` (``CollisionAvoidance``),
+    base attitude restored at T, minimum jerk. Returns ``(Solution, OptProblem)``."""
+    from ..problem import (BaseAttitude, CollisionAvoidance, FramePath, JointBoundary,
+                           JointPositionLimits, JointVelocityLimits, OptProblem, Smoothness)
+
+    o = options or OptimizeOptions()
+    prob = OptProblem(robot, o.n_intervals, T, n_sub=o.n_sub)
+    zero = np.zeros(robot.nj)
+    prob.add_constraint(JointBoundary("start", q=task.q_start, qd=zero, qdd=zero))
+    prob.add_constraint(JointBoundary("end", qd=zero))
+    for a, h in hands.items():
+        fr = robot.arm(a).ee_frame
+        prob.add_constraint(FramePath(fr, h.pose, position_only=o.position_only), name=f"path_{a}")
+        if o.position_only:
+            prob.add_constraint(EndOrientation(fr, h.pose(T).rotation), name=f"goal_orientation_{a}")
+            if o.orientation_weight > 0:
+                prob.add_cost(FramePath(fr, h.pose), weight=o.orientation_weight, name=f"orientation_{a}")
+    if o.restore_attitude:
+        prob.add_constraint(BaseAttitude(at="end"))
+    else:
+        prob.add_cost(BaseAttitude(at="end"), weight=1e4)
+    prob.add_constraint(JointPositionLimits())
+    prob.add_constraint(JointVelocityLimits())
+    prob.add_constraint(CollisionAvoidance(None, margin=o.link_margin, self_collision=True, held_object=False),
+                        name="links")
+    if task.scene.obstacles:
+        prob.add_constraint(CollisionAvoidance(task.scene, margin=o.obstacle_margin, self_collision=False,
+                                               held_object=False), name="obstacles")
+    prob.add_cost(Smoothness("jerk"))
+    prob.set_initial(q=warm.joints, t=warm.t)
+    sol = prob.solve(tol=o.tol, max_iter=o.max_iter)
+    return sol, prob
+
+
+# --------------------------------------------------------------------------- pipeline
+@dataclass
+class SplineRRTResult:
+    """Everything :func:`run_spline_rrt` produced: the plan, the hand references, the duration T
+    [s], the tracked joint trajectory and its independent evaluation (:func:`evaluate`), timings
+    [s], and the optimized variant (``optimized``: the :class:`~optplan.problem.Solution` and its
+    evaluation on a dense grid; None when not run)."""
+
+    task: SplineRRTTask
+    plan: CoordinatedPlan
+    hands: dict
+    T: float
+    tracking: TrackingResult | None
+    evaluation: dict | None
+    timings: dict
+    info: dict = field(default_factory=dict)
+    optimized: dict | None = None
+
+    @property
+    def success(self) -> bool:
+        return self.plan.success and self.tracking is not None
+
+    def figures(self, ev: dict | None = None, T: float | None = None) -> dict:
+        """The headline figures of one evaluation (the example's JSON keys)."""
+        ev = self.evaluation if ev is None else ev
+        arms = list(self.hands)
+        out = {"duration_s": float(self.T if T is None else T),
+               "max_ee_speed_m_s": {a: float(np.linalg.norm(np.gradient(_ee_positions(self.task.robot, ev["q"], a),
+                                                                        ev["t"], axis=0), axis=1).max())
+                                    for a in arms} if ev is not None else {},
+               "max_tracking_error_m": float(max(ev[f"tracking_position_m_{a}"].max() for a in arms)),
+               "max_tracking_error_rad": float(max(ev[f"tracking_orientation_rad_{a}"].max() for a in arms)),
+               "min_link_distance_m": float(ev["link_distance_m"].min()),
+               "final_base_rpy_deg": np.degrees(ev["base_rpy"][-1]).tolist()}
+        return out
+
+
+def _ee_positions(robot: RobotModel, Q: np.ndarray, arm: str) -> np.ndarray:
+    kin = Kinematics(robot)
+    fr = robot.arm(arm).ee_frame
+    return np.array([kin.frame_placement(q, fr).translation for q in Q])
+
+
+def run_spline_rrt(robot: RobotModel | None = None, task: SplineRRTTask | None = None, *,
+                   plan_options: CoordinatedRRTStarOptions | None = None, speed_limit: float = 0.1,
+                   joint_accel_limit: float = 0.1, optimize_durations: bool = False,
+                   tracking: TrackingOptions | None = None, optimize_options: OptimizeOptions | None = None,
+                   run_optimizer: bool = True, sample_dt: float = 0.05) -> SplineRRTResult:
+    """Spline-RRT* on the shipped task (robot ``splinerrt_ffsr``, scene ``splinerrt_capture``) or
+    the given one: plan → quartic splines (T from ‖ẋ‖ ≤ ``speed_limit`` [m/s]) → resolved-rate
+    tracking; T is then stretched (an exact time scaling of the references) until the tracked joint
+    rates stay within the robot's velocity limits and the joint accelerations within
+    ``joint_accel_limit`` [rad/s²] (the joint limits of the paper's Eq. 6). With ``run_optimizer``
+    the optimized variant follows. Never raises for a failed plan: ``result.plan.status`` says."""
+    robot = robot or RobotModel.from_name("splinerrt_ffsr")
+    task = task or SplineRRTTask.from_scene(robot)
+    po = plan_options or CoordinatedRRTStarOptions(hand_radius=0.15, max_iterations=400, seed=0)
+    tim = {}
+    t0 = time.perf_counter()
+    plan = CoordinatedRRTStar(task.scene, po).plan({a: (task.start[a].translation, task.goal[a].translation)
+                                                    for a in robot.arms})
+    tim["plan_s"] = time.perf_counter() - t0
+    if not plan.success:
+        return SplineRRTResult(task, plan, {}, float("nan"), None, None, tim, {"message": plan.message})
+    t1 = time.perf_counter()
+    hands, T, info = smooth_hand_paths(plan.paths, task.start, task.goal, speed_limit, optimize_durations)
+    tim["smooth_s"] = time.perf_counter() - t1
+    tim["plan_and_smooth_s"] = tim["plan_s"] + tim["smooth_s"]
+    info["T_speed_s"] = T
+    t2 = time.perf_counter()
+    vlim = float(np.min(robot.velocity_limit))
+    tr = ev = None
+    for rnd in range(4):
+        tr = track(robot, hands, task.q_start, T, tracking)
+        peak_v = float(np.abs(tr.qd).max())
+        peak_a = float(np.abs(np.gradient(tr.qd, tr.t, axis=0)).max())
+        ratio = max(peak_v / vlim, math.sqrt(peak_a / joint_accel_limit))
+        info.setdefault("stretch_rounds", []).append({"T_s": T, "peak_rate_rad_s": peak_v, "peak_accel_rad_s2": peak_a})
+        if ratio <= 1.0:
+            break
+        T_new = T * ratio * 1.02
+        hands = {a: HandTrajectory(h.position.time_scaled(T_new / T),
+                                   BezierOrientation(h.orientation.R0, h.orientation.R1, T_new), h.waypoints)
+                 for a, h in hands.items()}
+        T = T_new
+    tim["track_s"] = time.perf_counter() - t2
+    ev = evaluate(robot, hands, tr.t, tr.joints, tr.qd, scene=task.scene)
+    res = SplineRRTResult(task, plan, hands, T, tr, ev, tim, info)
+    if run_optimizer:
+        t3 = time.perf_counter()
+        sol, prob = optimize(robot, task, hands, T, tr, optimize_options)
+        tim["optimize_s"] = time.perf_counter() - t3
+        t = np.linspace(0.0, T, int(round(T / sample_dt)) + 1)
+        s = sol.sample(t)
+        ev_o = evaluate(robot, hands, t, s["q"], s["qd"], scene=task.scene)
+        knots = evaluate(robot, hands, sol.t, sol.q, sol.qd, scene=task.scene)
+        res.optimized = {"solution": sol, "evaluation": ev_o, "knots": knots, "problem": prob}
+    return res
