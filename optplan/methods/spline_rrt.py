@@ -44,7 +44,7 @@ from ..spatial import exp3, log3, rotation_angle, rpy_to_matrix
 from ..splines import PiecewisePolynomial, quartic_spline, time_grid_from_path
 
 __all__ = ["SplineRRTTask", "BezierOrientation", "HandTrajectory", "smooth_hand_paths", "TrackingOptions",
-           "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "optimize", "PAPER"]
+           "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "optimize", "SplineRRTResult", "run_spline_rrt", "PAPER"]
 log = logging.getLogger(__name__)
 
 #: the paper's figures (Section 4)
@@ -245,10 +245,15 @@ def _pose_error(M: pin.SE3, goal: pin.SE3) -> np.ndarray:
     return pose_error(M, goal)
 
 
-def track(robot: RobotModel, hands: dict, q_start, T: float, options: TrackingOptions | None = None) -> TrackingResult:
+def track(robot: RobotModel, hands: dict, q_start, T: float, options: TrackingOptions | None = None,
+          reference=None, null_gain: float = 1.0) -> TrackingResult:
     """Resolved-rate motion ``q̇ = J*⁺ (ξ_d + K e)`` (J* the stacked generalized Jacobians, world
     axes) from the joint vector ``q_start`` [rad], base at the origin with identity attitude and
-    zero momentum; RK4 on the configuration manifold (``pin.integrate``) with step ``dt``."""
+    zero momentum; RK4 on the configuration manifold (``pin.integrate``) with step ``dt``.
+
+    With ``reference`` (``t -> (q_ref, q̇_ref)`` joint trajectory, e.g. an optimizer's solution)
+    only the hand *positions* are tracked and the redundancy follows the reference:
+    ``q̇ = J_p⁺ (v_d + K e_p) + (I − J_p⁺ J_p)(q̇_ref + null_gain (q_ref − q))``."""
     o = options or TrackingOptions()
     t0 = time.perf_counter()
     kin = Kinematics(robot)
@@ -261,8 +266,16 @@ def track(robot: RobotModel, hands: dict, q_start, T: float, options: TrackingOp
 
     def rates(tt: float, q: np.ndarray) -> np.ndarray:
         G = kin.generalized_jacobians(q)
-        J = np.vstack([G[a] for a in arms])
         pin.framesForwardKinematics(model, data, q)
+        if reference is not None:
+            J = np.vstack([G[a][:3] for a in arms])
+            xi = np.concatenate([hands[a].position(tt, 1) + o.gain * (hands[a].position(tt) - data.oMf[f].translation)
+                                 for a, f in zip(arms, fids)])
+            Jp = np.linalg.pinv(J)
+            qr, qdr = reference(tt)
+            z = np.asarray(qdr, float) + null_gain * (np.asarray(qr, float) - q[robot.base_nq:])
+            return Jp @ xi + z - Jp @ (J @ z)
+        J = np.vstack([G[a] for a in arms])
         xi = np.concatenate([hands[a].twist(tt) + o.gain * _pose_error(data.oMf[f], hands[a].pose(tt))
                              for a, f in zip(arms, fids)])
         if o.damping > 0:
@@ -387,8 +400,8 @@ class OptimizeOptions:
     from the Bézier orientation (a cost, with ``position_only``), ``tol`` IPOPT's
     constraint tolerance, ``max_iter``."""
 
-    n_intervals: int = 40
-    n_sub: int = 1
+    n_intervals: int = 20
+    n_sub: int = 2
     link_margin: float = 0.1
     obstacle_margin: float = 0.0
     restore_attitude: bool = True
@@ -490,7 +503,9 @@ def run_spline_rrt(robot: RobotModel | None = None, task: SplineRRTTask | None =
     tracking; T is then stretched (an exact time scaling of the references) until the tracked joint
     rates stay within the robot's velocity limits and the joint accelerations within
     ``joint_accel_limit`` [rad/s²] (the joint limits of the paper's Eq. 6). With ``run_optimizer``
-    the optimized variant follows. Never raises for a failed plan: ``result.plan.status`` says."""
+    the optimized variant follows: the NLP (evaluated on a dense grid and at its knots) and its
+    execution (:func:`track` of the hand positions with the NLP's joints as the redundancy
+    reference, ``optimized["executed"]``). Never raises for a failed plan: ``result.plan.status`` says."""
     robot = robot or RobotModel.from_name("splinerrt_ffsr")
     task = task or SplineRRTTask.from_scene(robot)
     po = plan_options or CoordinatedRRTStarOptions(hand_radius=0.15, max_iterations=400, seed=0)
@@ -533,5 +548,14 @@ def run_spline_rrt(robot: RobotModel | None = None, task: SplineRRTTask | None =
         s = sol.sample(t)
         ev_o = evaluate(robot, hands, t, s["q"], s["qd"], scene=task.scene)
         knots = evaluate(robot, hands, sol.t, sol.q, sol.qd, scene=task.scene)
-        res.optimized = {"solution": sol, "evaluation": ev_o, "knots": knots, "problem": prob}
+        t4 = time.perf_counter()
+
+        def reference(tt):
+            smp = sol.sample([min(max(tt, 0.0), sol.t[-1])])
+            return smp["q"][0], smp["qd"][0]
+        ex = track(robot, hands, task.q_start, T, tracking, reference=reference)
+        ev_x = evaluate(robot, hands, ex.t, ex.joints, ex.qd, scene=task.scene)
+        tim["execute_s"] = time.perf_counter() - t4
+        res.optimized = {"solution": sol, "evaluation": ev_o, "knots": knots, "problem": prob,
+                         "executed": ex, "executed_evaluation": ev_x}
     return res
