@@ -44,7 +44,7 @@ from ..spatial import exp3, log3, rotation_angle, rpy_to_matrix
 from ..splines import PiecewisePolynomial, quartic_spline, time_grid_from_path
 
 __all__ = ["SplineRRTTask", "BezierOrientation", "HandTrajectory", "smooth_hand_paths", "TrackingOptions",
-           "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "optimize", "SplineRRTResult", "run_spline_rrt", "PAPER"]
+           "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "InteriorVelocityLimits", "optimize", "SplineRRTResult", "run_spline_rrt", "hand_separation", "PAPER"]
 log = logging.getLogger(__name__)
 
 #: the paper's figures (Section 4)
@@ -227,12 +227,16 @@ class TrackingOptions:
 @dataclass
 class TrackingResult:
     """Joint trajectory of the resolved-rate tracking: ``t`` (N,) [s], ``q`` (N, nq) full
-    configurations (the controller's own base), ``qd`` (N, nj) joint rates [rad/s]."""
+    configurations (the controller's own base), ``qd`` (N, nj) joint rates [rad/s], ``qdd`` (N, nj)
+    joint accelerations [rad/s²]: the derivative of the closed-loop rate field along the motion
+    (central differences with a 1e-4 s step, one-sided at the ends) — exact up to O(1e-8), unlike
+    differences of the samples, which miss short peaks (the quartic's abrupt stop at T)."""
 
     t: np.ndarray
     q: np.ndarray
     qd: np.ndarray
     wall_time_s: float = 0.0
+    qdd: np.ndarray | None = None
 
     @property
     def joints(self) -> np.ndarray:
@@ -289,9 +293,15 @@ def track(robot: RobotModel, hands: dict, q_start, T: float, options: TrackingOp
     q = robot.configuration(q_start)
     Q = np.empty((n + 1, robot.nq))
     QD = np.empty((n + 1, robot.nj))
+    QDD = np.empty((n + 1, robot.nj))
+    eps = 1e-4
     for k in range(n + 1):
         v1, qd = vel(t[k], q)
         Q[k], QD[k] = q, qd
+        lo, hi = max(t[k] - eps, 0.0), min(t[k] + eps, T)
+        qd_hi = rates(hi, pin.integrate(model, q, (hi - t[k]) * v1))
+        qd_lo = rates(lo, pin.integrate(model, q, (lo - t[k]) * v1))
+        QDD[k] = (qd_hi - qd_lo) / (hi - lo)
         if k == n:
             break
         h = t[k + 1] - t[k]
@@ -299,7 +309,7 @@ def track(robot: RobotModel, hands: dict, q_start, T: float, options: TrackingOp
         v3, _ = vel(t[k] + h / 2, pin.integrate(model, q, h / 2 * v2))
         v4, _ = vel(t[k] + h, pin.integrate(model, q, h * v3))
         q = pin.integrate(model, q, h / 6 * (v1 + 2 * v2 + 2 * v3 + v4))
-    return TrackingResult(t, Q, QD, time.perf_counter() - t0)
+    return TrackingResult(t, Q, QD, time.perf_counter() - t0, QDD)
 
 
 # --------------------------------------------------------------------------- evaluation
@@ -338,12 +348,13 @@ def link_distances(robot: RobotModel, Q: np.ndarray, links=(3, 5, 7), scene: Sce
 
 
 def evaluate(robot: RobotModel, hands: dict, t: np.ndarray, joints: np.ndarray, joint_rates: np.ndarray,
-             scene: Scene | None = None, base0: pin.SE3 | None = None) -> dict:
+             scene: Scene | None = None, base0: pin.SE3 | None = None,
+             joint_accelerations: np.ndarray | None = None) -> dict:
     """Figures of a joint trajectory on the free-floating robot, from the independent base simulator
     (:func:`optplan.floating.simulate_base`, cubic Hermite through the samples): per-arm
     ``tracking_position_m``/``tracking_orientation_rad`` (N,), ``base_rpy`` (N, 3) [rad],
-    ``q`` (N, nq), link distances, joint-rate/acceleration peaks [rad/s, rad/s²] (accelerations by
-    central differences of the rates)."""
+    ``q`` (N, nq), link distances, joint-rate/acceleration peaks [rad/s, rad/s²] (accelerations as
+    given, else central differences of the rates)."""
     sim = simulate_base(robot, (t, joints, joint_rates), t, base0=base0, substeps=4)
     kin = Kinematics(robot)
     out = {"t": t, "q": sim.q, "base_rpy": sim.base_rpy, "momentum_residual": float(sim.momentum_residual.max())}
@@ -355,7 +366,7 @@ def evaluate(robot: RobotModel, hands: dict, t: np.ndarray, joints: np.ndarray, 
             ep[i], eo[i] = np.linalg.norm(e[:3]), np.linalg.norm(e[3:])
         out[f"tracking_position_m_{a}"] = ep
         out[f"tracking_orientation_rad_{a}"] = eo
-    qdd = np.gradient(joint_rates, t, axis=0)
+    qdd = np.gradient(joint_rates, t, axis=0) if joint_accelerations is None else np.asarray(joint_accelerations)
     out["qd"], out["qdd"] = joint_rates, qdd
     out["max_joint_rate_rad_s"] = float(np.abs(joint_rates).max())
     out["max_joint_accel_rad_s2"] = float(np.abs(qdd).max())
@@ -390,18 +401,55 @@ class EndOrientation(Term):
         return np.r_[0.0, 0.0, 0.0, 1.0], np.r_[0.0, 0.0, 0.0, np.inf]
 
 
+@dataclass
+class InteriorVelocityLimits(Term):
+    """``|q̇| ≤ robot.velocity_limit`` [rad/s] at the interior fractions ``fractions`` of every
+    interval (``JointVelocityLimits`` holds at the knots only; q̇ is quadratic between them and
+    overshot the limit by 60 % between knots without this term — measured)."""
+
+    fractions: tuple = (1 / 6, 1 / 3, 1 / 2, 2 / 3, 5 / 6)
+    default_name = "interior_velocity_limits"
+
+    def residual(self, tp):
+        lim = tp.robot.velocity_limit
+        rows = []
+        for k in range(tp.N):
+            for f in self.fractions:
+                tau = f * tp.h
+                rows.append(tp.qd(k) + tau * tp.qdd(k) + tau ** 2 / 2 * tp.jerk(k))
+        n = len(rows)
+        return ca.vertcat(*rows), np.tile(-lim, n), np.tile(lim, n)
+
+    def numeric(self, traj):
+        out = []
+        for k in range(traj.N):
+            for f in self.fractions:
+                tau = f * traj.h
+                out.append(traj.qd[k] + tau * traj.qdd[k] + tau ** 2 / 2 * traj.jerk[k])
+        return np.concatenate(out)
+
+    def _bounds_numeric(self, traj):
+        n = traj.N * len(self.fractions)
+        lim = traj.robot.velocity_limit
+        return np.tile(-lim, n), np.tile(lim, n)
+
+
 @dataclass(frozen=True)
 class OptimizeOptions:
     """The optimized variant (:func:`optimize`): ``n_intervals`` N, ``n_sub`` RK4 sub-steps of the base
-    per interval, ``link_margin`` [m] between the robot's links (and ``obstacle_margin`` [m] to the
+    per interval, ``duration_factor``: its duration is this times the Spline-RRT* duration (> 1: the
+    same hand paths run slower, leaving the joint-rate limits room for the self-motion that restores
+    the attitude), ``joint_accel_limit`` [rad/s²] (at the knots: q̈ is piecewise linear), ``link_margin`` [m] between the robot's links (and ``obstacle_margin`` [m] to the
     obstacles), ``restore_attitude``: base attitude at T equal to the start's (hard constraint;
     False: minimised as a cost), ``position_only``: hand paths as position constraints with the
     orientation constrained at the goal only (False: full poses at every knot), ``orientation_weight``: weight of the squared deviation
     from the Bézier orientation (a cost, with ``position_only``), ``tol`` IPOPT's
     constraint tolerance, ``max_iter``."""
 
-    n_intervals: int = 20
+    n_intervals: int = 30
     n_sub: int = 2
+    duration_factor: float = 1.5
+    joint_accel_limit: float = 0.1
     link_margin: float = 0.1
     obstacle_margin: float = 0.0
     restore_attitude: bool = True
@@ -418,7 +466,7 @@ def optimize(robot: RobotModel, task: SplineRRTTask, hands: dict, T: float, warm
     their planned paths at every knot (``FramePath``), start at rest from ``task.q_start``, rest at
     T, joint position/velocity limits, link–link distance ≥ ``link_margin`` (``CollisionAvoidance``),
     base attitude restored at T, minimum jerk. Returns ``(Solution, OptProblem)``."""
-    from ..problem import (BaseAttitude, CollisionAvoidance, FramePath, JointBoundary,
+    from ..problem import (BaseAttitude, CollisionAvoidance, FramePath, JointAccelerationLimits, JointBoundary,
                            JointPositionLimits, JointVelocityLimits, OptProblem, Smoothness)
 
     o = options or OptimizeOptions()
@@ -439,6 +487,8 @@ def optimize(robot: RobotModel, task: SplineRRTTask, hands: dict, T: float, warm
         prob.add_cost(BaseAttitude(at="end"), weight=1e4)
     prob.add_constraint(JointPositionLimits())
     prob.add_constraint(JointVelocityLimits())
+    prob.add_constraint(InteriorVelocityLimits())
+    prob.add_constraint(JointAccelerationLimits(limit=o.joint_accel_limit))
     prob.add_constraint(CollisionAvoidance(None, margin=o.link_margin, self_collision=True, held_object=False),
                         name="links")
     if task.scene.obstacles:
@@ -448,6 +498,34 @@ def optimize(robot: RobotModel, task: SplineRRTTask, hands: dict, T: float, warm
     prob.set_initial(q=warm.joints, t=warm.t)
     sol = prob.solve(tol=o.tol, max_iter=o.max_iter)
     return sol, prob
+
+
+def _time_scaled(hands: dict, T_old: float, T_new: float) -> dict:
+    """The same hand paths run over ``T_new`` instead of ``T_old`` [s] (exact time scaling)."""
+    return {a: HandTrajectory(h.position.time_scaled(T_new / T_old),
+                              BezierOrientation(h.orientation.R0, h.orientation.R1, T_new, h.orientation.control),
+                              h.waypoints) for a, h in hands.items()}
+
+
+def hand_separation(task: SplineRRTTask, trials: int, separate: bool, options: CoordinatedRRTStarOptions | None = None,
+                    speed_limit: float = 0.1) -> np.ndarray:
+    """Smallest distance [m] between the two hands along the smoothed, time-synchronised splines for
+    ``trials`` seeds (0 .. trials−1), with separated sampling or without (the paper's Fig. 4 (b)
+    vs (a)); NaN for failed plans."""
+    base = options or CoordinatedRRTStarOptions(hand_radius=0.15, max_iterations=400, time_limit=10.0)
+    from dataclasses import replace
+
+    out = np.full(trials, np.nan)
+    arms = list(task.start)
+    for k in range(trials):
+        pl = CoordinatedRRTStar(task.scene, replace(base, separate=separate, seed=k))
+        res = pl.plan({a: (task.start[a].translation, task.goal[a].translation) for a in arms})
+        if not res.success:
+            continue
+        hands, T, _ = smooth_hand_paths(res.paths, task.start, task.goal, speed_limit)
+        t = np.linspace(0.0, T, 2001)
+        out[k] = float(np.linalg.norm(hands[arms[0]].position(t) - hands[arms[1]].position(t), axis=1).min())
+    return out
 
 
 # --------------------------------------------------------------------------- pipeline
@@ -508,7 +586,7 @@ def run_spline_rrt(robot: RobotModel | None = None, task: SplineRRTTask | None =
     reference, ``optimized["executed"]``). Never raises for a failed plan: ``result.plan.status`` says."""
     robot = robot or RobotModel.from_name("splinerrt_ffsr")
     task = task or SplineRRTTask.from_scene(robot)
-    po = plan_options or CoordinatedRRTStarOptions(hand_radius=0.15, max_iterations=400, seed=0)
+    po = plan_options or CoordinatedRRTStarOptions(hand_radius=0.15, max_iterations=400, seed=0, time_limit=5.0)
     tim = {}
     t0 = time.perf_counter()
     plan = CoordinatedRRTStar(task.scene, po).plan({a: (task.start[a].translation, task.goal[a].translation)
@@ -527,35 +605,36 @@ def run_spline_rrt(robot: RobotModel | None = None, task: SplineRRTTask | None =
     for rnd in range(4):
         tr = track(robot, hands, task.q_start, T, tracking)
         peak_v = float(np.abs(tr.qd).max())
-        peak_a = float(np.abs(np.gradient(tr.qd, tr.t, axis=0)).max())
+        peak_a = float(np.abs(tr.qdd).max())
         ratio = max(peak_v / vlim, math.sqrt(peak_a / joint_accel_limit))
         info.setdefault("stretch_rounds", []).append({"T_s": T, "peak_rate_rad_s": peak_v, "peak_accel_rad_s2": peak_a})
         if ratio <= 1.0:
             break
         T_new = T * ratio * 1.02
-        hands = {a: HandTrajectory(h.position.time_scaled(T_new / T),
-                                   BezierOrientation(h.orientation.R0, h.orientation.R1, T_new), h.waypoints)
-                 for a, h in hands.items()}
+        hands = _time_scaled(hands, T, T_new)
         T = T_new
     tim["track_s"] = time.perf_counter() - t2
-    ev = evaluate(robot, hands, tr.t, tr.joints, tr.qd, scene=task.scene)
+    ev = evaluate(robot, hands, tr.t, tr.joints, tr.qd, scene=task.scene, joint_accelerations=tr.qdd)
     res = SplineRRTResult(task, plan, hands, T, tr, ev, tim, info)
     if run_optimizer:
+        oo = optimize_options or OptimizeOptions()
+        T_opt = T * oo.duration_factor
+        hands_opt = _time_scaled(hands, T, T_opt)
         t3 = time.perf_counter()
-        sol, prob = optimize(robot, task, hands, T, tr, optimize_options)
+        sol, prob = optimize(robot, task, hands_opt, T_opt, tr, oo)
         tim["optimize_s"] = time.perf_counter() - t3
-        t = np.linspace(0.0, T, int(round(T / sample_dt)) + 1)
+        t = np.linspace(0.0, T_opt, int(round(T_opt / sample_dt)) + 1)
         s = sol.sample(t)
-        ev_o = evaluate(robot, hands, t, s["q"], s["qd"], scene=task.scene)
-        knots = evaluate(robot, hands, sol.t, sol.q, sol.qd, scene=task.scene)
+        ev_o = evaluate(robot, hands_opt, t, s["q"], s["qd"], scene=task.scene, joint_accelerations=s["qdd"])
+        knots = evaluate(robot, hands_opt, sol.t, sol.q, sol.qd, scene=task.scene, joint_accelerations=sol.qdd)
         t4 = time.perf_counter()
 
         def reference(tt):
             smp = sol.sample([min(max(tt, 0.0), sol.t[-1])])
             return smp["q"][0], smp["qd"][0]
-        ex = track(robot, hands, task.q_start, T, tracking, reference=reference)
-        ev_x = evaluate(robot, hands, ex.t, ex.joints, ex.qd, scene=task.scene)
+        ex = track(robot, hands_opt, task.q_start, T_opt, tracking, reference=reference)
+        ev_x = evaluate(robot, hands_opt, ex.t, ex.joints, ex.qd, scene=task.scene, joint_accelerations=ex.qdd)
         tim["execute_s"] = time.perf_counter() - t4
-        res.optimized = {"solution": sol, "evaluation": ev_o, "knots": knots, "problem": prob,
-                         "executed": ex, "executed_evaluation": ev_x}
+        res.optimized = {"solution": sol, "evaluation": ev_o, "knots": knots, "problem": prob, "T": T_opt,
+                         "hands": hands_opt, "executed": ex, "executed_evaluation": ev_x}
     return res

@@ -24,7 +24,7 @@ def write_figures(res, directory) -> list[Path]:
     out = []
     arms = list(res.hands)
     ev = res.evaluation
-    evo = res.optimized["evaluation"] if res.optimized else None
+    evo = res.optimized["executed_evaluation"] if res.optimized else None
 
     # Fig. 3: trees (top view and side view)
     fig = plt.figure(figsize=(12, 5))
@@ -73,7 +73,7 @@ def write_figures(res, directory) -> list[Path]:
             Yo = evo["q"][:, 7:] if key is None else evo[key]
             axs[k].plot(evo["t"], np.degrees(Yo), "--", lw=0.6)
         axs[k].set_ylabel(lab); axs[k].grid(alpha=0.3)
-    axs[0].set_title("Fig. 6 equivalent: joint motion (solid: Spline-RRT* tracking, dashed: optimized)")
+    axs[0].set_title("Fig. 6 equivalent: joint motion (solid: Spline-RRT*, dashed: optimized, executed)")
     axs[-1].set_xlabel("t [s]")
     out.append(_save(fig, d / "fig6_joints.png"))
 
