@@ -82,6 +82,8 @@ def test_virtual_wall_moves_with_the_hands():
     np.testing.assert_allclose(wall.coordinate(np.array([[0, 0, 0], [1, -0.3, 0.4]])), 0.0, atol=1e-12)
     assert wall.coordinate(np.array([[0, -0.1, 0]]))[0] < 0 < wall.coordinate(np.array([[1, 0.0, 0.6]]))[0]
     assert not np.allclose(wall.n0, wall.n1)  # it turns between start and goal
+    P = np.random.default_rng(1).uniform(-1, 2, (50, 3))
+    np.testing.assert_allclose([wall.coordinate_point(p) for p in P], wall.coordinate(P), atol=1e-12)
     with pytest.raises(ValueError, match="not separated"):
         VirtualWall.from_task(([0, 0, 0], [1, 0, 0]), ([0.5, 0, 0], [2, 0, 0]))
 

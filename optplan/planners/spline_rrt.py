@@ -138,6 +138,18 @@ class VirtualWall:
             return d / n
         return cls(m0, m1, normal(b0 - a0, "start"), normal(b1 - a1, "goal"))
 
+    def coordinate_point(self, x) -> float:
+        """:meth:`coordinate` of one point (3,), without numpy's per-call overhead (the sampler's
+        rejection loop calls it once per candidate)."""
+        m0, m1, n0, n1 = self.m0, self.m1, self.n0, self.n1
+        dx, dy, dz = m1[0] - m0[0], m1[1] - m0[1], m1[2] - m0[2]
+        L2 = dx * dx + dy * dy + dz * dz
+        px, py, pz = x[0] - m0[0], x[1] - m0[1], x[2] - m0[2]
+        s = 0.0 if L2 < 1e-24 else min(1.0, max(0.0, (px * dx + py * dy + pz * dz) / L2))
+        nx, ny, nz = (1 - s) * n0[0] + s * n1[0], (1 - s) * n0[1] + s * n1[1], (1 - s) * n0[2] + s * n1[2]
+        nn = (nx * nx + ny * ny + nz * nz) ** 0.5
+        return ((px - s * dx) * nx + (py - s * dy) * ny + (pz - s * dz) * nz) / nn
+
     def progress(self, P: np.ndarray) -> np.ndarray:
         """Progress s ∈ [0, 1] of points (K, 3)."""
         d = self.m1 - self.m0
@@ -341,7 +353,7 @@ class CoordinatedRRTStar:
             else:
                 for _ in range(100):
                     xr = lo + rng.random(3) * (hi - lo)
-                    if wall is None or side * wall.coordinate(xr[None])[0] >= o.wall_margin:
+                    if wall is None or side * wall.coordinate_point(xr) >= o.wall_margin:
                         break
             tree.samples.append(xr)
             d = np.linalg.norm(X[:n] - xr, axis=1)
