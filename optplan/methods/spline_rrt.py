@@ -403,15 +403,16 @@ class EndOrientation(Term):
 
 @dataclass
 class InteriorVelocityLimits(Term):
-    """``|q̇| ≤ robot.velocity_limit`` [rad/s] at the interior fractions ``fractions`` of every
+    """``|q̇| ≤ scale · robot.velocity_limit`` [rad/s] at the interior fractions ``fractions`` of every
     interval (``JointVelocityLimits`` holds at the knots only; q̇ is quadratic between them and
     overshot the limit by 60 % between knots without this term — measured)."""
 
     fractions: tuple = (1 / 6, 1 / 3, 1 / 2, 2 / 3, 5 / 6)
+    scale: float = 1.0
     default_name = "interior_velocity_limits"
 
     def residual(self, tp):
-        lim = tp.robot.velocity_limit
+        lim = self.scale * tp.robot.velocity_limit
         rows = []
         for k in range(tp.N):
             for f in self.fractions:
@@ -430,7 +431,7 @@ class InteriorVelocityLimits(Term):
 
     def _bounds_numeric(self, traj):
         n = traj.N * len(self.fractions)
-        lim = traj.robot.velocity_limit
+        lim = self.scale * traj.robot.velocity_limit
         return np.tile(-lim, n), np.tile(lim, n)
 
 
@@ -439,7 +440,9 @@ class OptimizeOptions:
     """The optimized variant (:func:`optimize`): ``n_intervals`` N, ``n_sub`` RK4 sub-steps of the base
     per interval, ``duration_factor``: its duration is this times the Spline-RRT* duration (> 1: the
     same hand paths run slower, leaving the joint-rate limits room for the self-motion that restores
-    the attitude), ``joint_accel_limit`` [rad/s²] (at the knots: q̈ is piecewise linear), ``link_margin`` [m] between the robot's links (and ``obstacle_margin`` [m] to the
+    the attitude), ``joint_accel_limit`` [rad/s²] (at the knots: q̈ is piecewise linear),
+    ``rate_margin``: the NLP's joint-rate limits are this times the robot's (the interior points
+    sample the rate, and the executed motion deviates slightly from the NLP's between knots), ``link_margin`` [m] between the robot's links (and ``obstacle_margin`` [m] to the
     obstacles), ``restore_attitude``: base attitude at T equal to the start's (hard constraint;
     False: minimised as a cost), ``position_only``: hand paths as position constraints with the
     orientation constrained at the goal only (False: full poses at every knot), ``orientation_weight``: weight of the squared deviation
@@ -450,6 +453,7 @@ class OptimizeOptions:
     n_sub: int = 2
     duration_factor: float = 1.5
     joint_accel_limit: float = 0.1
+    rate_margin: float = 0.995
     link_margin: float = 0.1
     obstacle_margin: float = 0.0
     restore_attitude: bool = True
@@ -486,8 +490,8 @@ def optimize(robot: RobotModel, task: SplineRRTTask, hands: dict, T: float, warm
     else:
         prob.add_cost(BaseAttitude(at="end"), weight=1e4)
     prob.add_constraint(JointPositionLimits())
-    prob.add_constraint(JointVelocityLimits())
-    prob.add_constraint(InteriorVelocityLimits())
+    prob.add_constraint(JointVelocityLimits(limit=o.rate_margin * robot.velocity_limit))
+    prob.add_constraint(InteriorVelocityLimits(scale=o.rate_margin))
     prob.add_constraint(JointAccelerationLimits(limit=o.joint_accel_limit))
     prob.add_constraint(CollisionAvoidance(None, margin=o.link_margin, self_collision=True, held_object=False),
                         name="links")
