@@ -172,7 +172,7 @@ def _cmd_plan(args) -> int:
     out["wall_time_s"] = time.perf_counter() - t0
     print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}")
     for k in ("success", "plan_status", "plan_time_s", "n_regrasp", "opt_status", "opt_time_s", "opt_setup_time_s",
-              "opt_iterations", "opt_wall_s", "max_closed_chain_residual", "min_clearance_m", "wall_time_s"):
+              "opt_iterations", "opt_wall_s", "opt_cpu_s", "max_closed_chain_residual", "min_clearance_m", "wall_time_s"):
         v = out[k]
         print(f"  {k:28s} {v:.3e}" if isinstance(v, float) else f"  {k:28s} {v}")
     for s in res.segments:
