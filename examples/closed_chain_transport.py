@@ -28,7 +28,8 @@ from optplan.tasks import grasp_configuration, straight_line_poses, task_space_p
 from optplan.verify import verify
 
 
-def run(knots: int = 50, duration: float = 60.0, seed: int = 0, margin: float = 0.02, scene_name: str = "transport"):
+def run(knots: int = 50, duration: float = 60.0, seed: int = 0, margin: float = 0.02, scene_name: str = "transport",
+        transcription: str = "bspline"):
     robot = RobotModel.from_name("tcbirrt_dual_arm")
     scene = Scene.load(scene_name)
     rng = np.random.default_rng(seed)
@@ -49,10 +50,25 @@ def run(knots: int = 50, duration: float = 60.0, seed: int = 0, margin: float = 
                 "message": "no collision-free start grasp whose straight-line IK path reaches the goal"}, None
     ik_time = time.perf_counter() - t0
     clearance0 = min(checker.min_distance(q)[0] for q in Q)
-    prob, cc, col = transport_problem(robot, scene, Q, duration=duration, margin=margin)
-    t1 = time.perf_counter()
+    if transcription == "bspline":  # the B-spline segment NLP (optplan.problem.segment)
+        from optplan.problem import ClosedChain
+        from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
+
+        arms = list(scene.object.grasps)
+        cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
+        t1, c1 = time.perf_counter(), time.process_time()
+        prob = SplineSegmentProblem(robot, scene, SegmentSpec(knots, duration, Q[0], Q[-1], cc, margin=margin,
+                                                              object_arm=arms[0]))
+        prob.set_initial(Q)
+        col = prob.col
+    elif transcription == "knots":
+        t1, c1 = time.perf_counter(), time.process_time()
+        prob, cc, col = transport_problem(robot, scene, Q, duration=duration, margin=margin)
+    else:
+        raise ValueError(f"transcription: expected 'bspline' or 'knots', got {transcription!r}")
     sol = prob.solve()
     total_opt = time.perf_counter() - t1
+    total_cpu = time.process_time() - c1
     rep = verify(robot, sol, scene, closed_chain=cc)
     ok = bool(sol.success and rep.max_closed_chain_residual <= 1e-6 and rep.min_clearance_m >= 0.0)
     out = {
@@ -62,6 +78,8 @@ def run(knots: int = 50, duration: float = 60.0, seed: int = 0, margin: float = 
         "solve_time_s": sol.wall_time,
         "setup_time_s": sol.setup_time,
         "build_and_solve_time_s": total_opt,
+        "build_and_solve_cpu_s": total_cpu,
+        "transcription": transcription,
         "ik_time_s": ik_time,
         "n_knots": knots + 1,
         "max_closed_chain_residual": rep.max_closed_chain_residual,
@@ -82,12 +100,14 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=60.0, help="motion duration [s]")
     ap.add_argument("--margin", type=float, default=0.02, help="required clearance in the NLP [m]")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--transcription", choices=["bspline", "knots"], default="bspline",
+                    help="trajectory NLP: B-spline control points (default) or the knot-state transcription")
     ap.add_argument("--json", help="write the figures as JSON")
     ap.add_argument("--save", help="write the trajectory (npz: t, q, joint_names)")
     ap.add_argument("--plot", help="directory for PNG figures")
     ap.add_argument("--html", help="write a 3D view of the motion (self-contained HTML; extra 'viz')")
     args = ap.parse_args(argv)
-    out, sol = run(args.knots, args.duration, args.seed, args.margin)
+    out, sol = run(args.knots, args.duration, args.seed, args.margin, transcription=args.transcription)
     print("closed-chain transport (tcbirrt_dual_arm, scene 'transport')")
     for k in ("success", "ipopt_status", "iterations", "solve_time_s", "setup_time_s", "n_knots", "max_closed_chain_residual",
               "min_clearance_m", "initial_guess_min_clearance_m"):
