@@ -157,7 +157,9 @@ def _segment_rows(res) -> list[dict]:
                     "duration_s": _finite(float(sol.duration)),
                     "max_closed_chain_residual": _finite(float(resid)),
                     "min_clearance_m": _finite(float(rep.min_clearance_m)),
-                    "min_clearance_pair": rep.min_clearance_pair, "failure": reasons})
+                    "min_clearance_pair": rep.min_clearance_pair, "failure": reasons,
+                    "attempts": [{k: (_finite(v) if isinstance(v, float) else v) for k, v in a.items()}
+                                 for a in getattr(s, "attempts", [])]})
     return out
 
 
