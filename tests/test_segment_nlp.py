@@ -189,3 +189,38 @@ def test_bad_arguments_are_clear_errors(tcb, transport):
         prob.solve(tol=-1.0)
     with pytest.raises(ValueError, match="fixed-base"):
         SplineSegmentProblem(RobotModel.from_name("eba_ffsr"), None, SegmentSpec(8, 10.0, np.zeros(14), np.zeros(14)))
+
+
+def test_cylinder_and_mesh_geometry_are_covered_not_dropped(rng):
+    """A URDF cylinder becomes the capsule of its axis and radius (which contains it); a mesh its
+    vertices; both in the parent frame. Checked by sampling the cylinder's surface."""
+    import pinocchio as pin
+
+    from optplan.problem.segment import _geometry_points
+
+    robot = RobotModel.from_name("tcbirrt_dual_arm")  # a private copy: its geometry is modified
+    g = 3
+    o = robot.collision_model.geometryObjects[g]
+    o.geometry = coal.Cylinder(0.07, 0.6)
+    o.placement = pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.1])), np.array([0.05, 0.0, 0.1]))
+    fid, V, r = _geometry_points(robot, g)
+    assert fid == o.parentFrame and V.shape == (3, 2) and r == pytest.approx(0.07)
+    a, b = V[:, 0], V[:, 1]
+    for _ in range(200):
+        th, z = rng.uniform(0, 2 * np.pi), rng.uniform(-0.3, 0.3)
+        p = o.placement.act(np.array([0.07 * np.cos(th), 0.07 * np.sin(th), z]))
+        t = np.clip((p - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
+        assert np.linalg.norm(p - (a + t * (b - a))) <= r + 1e-12
+    m = coal.BVHModelOBBRSS()
+    verts = rng.normal(size=(10, 3))
+    m.beginModel(0, 10)
+    m.addVertices(verts)
+    m.endModel()
+    o.geometry = m
+    fid, V, r = _geometry_points(robot, g)
+    np.testing.assert_allclose(V.T, [o.placement.act(v) for v in verts], atol=1e-12)
+    o.geometry = coal.Cone(0.1, 0.3)
+    from optplan.errors import ConfigurationError
+
+    with pytest.raises(ConfigurationError, match="Cone"):
+        _geometry_points(robot, g)

@@ -139,6 +139,28 @@ class KernelCache:
         return self._fns[key]
 
 
+def _geometry_points(robot: RobotModel, g: int) -> tuple[int, np.ndarray, float]:
+    """(parent frame, points 3 × m in that frame, radius) whose radius-inflated convex hull contains
+    robot collision geometry ``g``: a cylinder by the capsule of its axis and radius, a convex
+    mesh or a triangle mesh by its vertices (the convex hull). Anything else is refused."""
+    import coal
+
+    from ..errors import ConfigurationError
+
+    o = robot.collision_model.geometryObjects[g]
+    geo, M = o.geometry, o.placement
+    if isinstance(geo, coal.Cylinder):
+        V, r = np.array([[0, 0, -geo.halfLength], [0, 0, geo.halfLength]]).T, float(geo.radius)
+    elif isinstance(geo, coal.Convex):
+        V, r = np.asarray(geo.points(), float).reshape(-1, 3).T, 0.0
+    elif hasattr(geo, "num_vertices") and geo.num_vertices > 0:
+        V, r = np.array([np.asarray(geo.vertex(i), float) for i in range(geo.num_vertices)]).T, 0.0
+    else:
+        raise ConfigurationError(f"collision geometry {o.name!r} ({type(geo).__name__}): the trajectory NLP "
+                                 "handles capsules, spheres, boxes, cylinders and meshes only")
+    return o.parentFrame, M.rotation @ V + M.translation[:, None], r
+
+
 def _witness_plane(checker, pair, obj_tf) -> np.ndarray:
     """(n, b): coal's unit witness normal from A to B and the mid-plane offset, at the placements
     last set by ``checker._update`` (``obj_tf``: the held object's)."""
@@ -463,7 +485,8 @@ class SplineSegmentProblem:
         else:
             spec = col._robot_shape.get(idx)
             if spec is None:
-                return None
+                fid, V, r = _geometry_points(self.robot, idx)
+                return self._static_or_moving(kind, idx, fid, V, r)
             fid, shape, Mbox = spec
             from .. import distance as D
             if isinstance(shape, D.Box):
@@ -472,7 +495,10 @@ class SplineSegmentProblem:
                 V, r = np.asarray(shape.center, float).reshape(3, 1), float(shape.radius)
             else:
                 V, r = np.array([shape.a, shape.b], float).T, float(shape.radius)
-        if col._free_joints_of(self.robot, kind, idx, self.fixed) == set():
+        return self._static_or_moving(kind, idx, fid, V, r)
+
+    def _static_or_moving(self, kind: str, idx: int, fid: int, V: np.ndarray, r: float):
+        if self.col._free_joints_of(self.robot, kind, idx, self.fixed) == set():
             M = self._static_placement(fid)
             return None, M.rotation @ V + M.translation[:, None], r
         return fid, V, r
