@@ -224,3 +224,28 @@ def test_cylinder_and_mesh_geometry_are_covered_not_dropped(rng):
 
     with pytest.raises(ConfigurationError, match="Cone"):
         _geometry_points(robot, g)
+
+
+def test_kernel_cache_on_disk_is_reused_and_keyed_by_the_robot(tmp_path, monkeypatch):
+    """A second cache (a fresh process) loads the saved kernels: same names and values; another
+    robot never gets them."""
+    from optplan.problem.segment import KernelCache
+
+    monkeypatch.setenv("OPTPLAN_CACHE", str(tmp_path))
+    robot = RobotModel.from_name("tcbirrt_dual_arm")
+    V = np.array([[0.0, 0.1], [0.0, 0.0], [0.0, 0.3]])
+    fid = robot.arm("A").ee_frame_id
+    f1 = KernelCache(robot).pair(fid, V, 0.05, None, np.zeros((3, 1)), 0.0)
+    j1, h1 = KernelCache(robot).derivatives(f1)
+    files = sorted(p.name for p in tmp_path.rglob("*.casadi"))
+    assert len(files) == 3
+    kc2 = KernelCache(robot)
+    f2 = kc2.pair(fid, V, 0.05, None, np.zeros((3, 1)), 0.0)
+    assert f2.name() == f1.name() and sorted(p.name for p in tmp_path.rglob("*.casadi")) == files
+    q = robot.random_configuration(np.random.default_rng(0))
+    args = (q, [0.0, 0.0, 1.0], 0.3)
+    np.testing.assert_allclose(np.array(f2(*args)), np.array(f1(*args)), atol=1e-15)
+    np.testing.assert_allclose(np.array(kc2.derivatives(f2)[1](*args, [1.0, -2.0])),
+                               np.array(h1(*args, [1.0, -2.0])), atol=1e-13)
+    other = RobotModel.from_name("dshdasr")
+    assert KernelCache(other)._digest != kc2._digest

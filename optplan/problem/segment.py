@@ -34,6 +34,7 @@ costs a fraction of a second instead of the symbolic expansion of the whole traj
 from __future__ import annotations
 
 import logging
+import os
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -64,13 +65,15 @@ def _sparse(A: np.ndarray) -> ca.DM:
 class KernelCache:
     """SX kernels of one robot, built once and shared by every segment NLP of that robot.
 
-    ``closed_chain(cc)``: ``f(q) -> 7 rows``; ``pair(...)``: ``f(q, n, s) -> rows`` of one collision
-    pair. CasADi caches each kernel's derivative functions on the kernel itself, so reusing the
-    kernels also reuses their Jacobians and Hessians."""
+    ``closed_chain(cc)``: ``f(q, n, s) -> 7 rows``; ``pair(...)``: ``f(q, n, s) -> rows`` of one
+    collision pair; ``derivatives(f)``: their symbolic Jacobians and Hessians. Each function is
+    also saved under ``$OPTPLAN_CACHE/kernels`` (default ``~/.cache/optplan``), keyed by a hash of
+    the robot's kinematics and of what the kernel depends on, so a fresh process loads it instead
+    of differentiating again (``disk=False``: memory only)."""
 
     _per_robot: "weakref.WeakKeyDictionary[RobotModel, KernelCache]" = weakref.WeakKeyDictionary()
 
-    def __init__(self, robot: RobotModel):
+    def __init__(self, robot: RobotModel, disk: bool = True):
         if robot.is_floating:
             raise ValueError("the B-spline segment NLP is for fixed-base robots; use OptProblem for "
                              f"the free-floating {robot.name!r}")
@@ -79,6 +82,60 @@ class KernelCache:
         self._q = ca.SX.sym("q", robot.nj)
         self._X = self.sym.joint_placements(self._q)
         self._fns: dict = {}
+        self._digest = self._robot_digest()
+        self._dir = None
+        if disk:
+            from ..codegen import cache_dir
+
+            try:
+                self._dir = cache_dir() / "kernels" / f"casadi-{ca.__version__}"
+                self._dir.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:  # a read-only cache: memory only
+                log.info("kernel cache on disk unavailable (%s)", exc)
+                self._dir = None
+
+    def _robot_digest(self) -> bytes:
+        import hashlib
+
+        from ..symbolic import _describe_joints
+
+        h = hashlib.sha1(str(self.robot.nj).encode())
+        for jt in _describe_joints(self.robot.model):
+            if jt is None:
+                h.update(b"-")
+                continue
+            h.update(repr((jt.kind, jt.parent, jt.q_index, jt.v_index, jt.scaling, jt.offset)).encode())
+            for a in (jt.placement_R, jt.placement_p, jt.axis):
+                h.update(np.asarray(a, float).tobytes())
+        for f in self.robot.model.frames:
+            h.update(repr((f.name, int(f.parentJoint))).encode() + np.asarray(f.placement.homogeneous).tobytes())
+        return h.digest()
+
+    def _get(self, key: tuple, build) -> ca.Function:
+        """The function of ``key``: from memory, else from the disk cache, else ``build(name)``."""
+        fn = self._fns.get(key)
+        if fn is not None:
+            return fn
+        import hashlib
+
+        name = f"{key[0]}_{hashlib.sha1(self._digest + repr(key).encode()).hexdigest()[:16]}"
+        path = self._dir / f"{name}.casadi" if self._dir is not None else None
+        if path is not None and path.exists():
+            try:
+                fn = ca.Function.load(str(path))
+            except RuntimeError as exc:  # a damaged file: rebuild it
+                log.info("kernel %s not loaded (%s); rebuilding", path, exc)
+        if fn is None:
+            fn = build(name)
+            if path is not None:
+                tmp = path.with_suffix(f".{os.getpid()}.tmp")
+                try:
+                    fn.save(str(tmp))
+                    os.replace(tmp, path)  # atomic: concurrent processes never read half a file
+                except (OSError, RuntimeError) as exc:
+                    log.info("kernel %s not saved (%s)", path, exc)
+        self._fns[key] = fn
+        return fn
 
     @classmethod
     def of(cls, robot: RobotModel) -> "KernelCache":
@@ -95,28 +152,29 @@ class KernelCache:
     def derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
         """``(jac, hess)`` of a kernel ``f(q, n, s)``: ``jac(q, n, s) = ∂f/∂q`` (rows × nj, sparse) and
         ``hess(q, n, s, λ) = ∂²(λᵀf)/∂q²`` (nj × nj, symmetric, sparse) — symbolic, per knot."""
-        key = ("d", fn.name())
-        if key not in self._fns:
+        def build_jac(name):
+            q, n, s = fn.sx_in()
+            return ca.Function(name, [q, n, s], [ca.jacobian(fn(q, n, s), q)])
+
+        def build_hess(name):
             q, n, s = fn.sx_in()
             r = fn(q, n, s)
             lam = ca.SX.sym("lam", r.shape[0])
-            H, _ = ca.hessian(ca.dot(lam, r), q)
-            self._fns[key] = (ca.Function(f"{fn.name()}_jac", [q, n, s], [ca.jacobian(r, q)]),
-                              ca.Function(f"{fn.name()}_hess", [q, n, s, lam], [H]))
-        return self._fns[key]
+            return ca.Function(name, [q, n, s, lam], [ca.hessian(ca.dot(lam, r), q)[0]])
+
+        return (self._get(("jac", fn.name()), build_jac), self._get(("hess", fn.name()), build_hess))
 
     def closed_chain(self, cc: ClosedChain) -> ca.Function:
         rel = cc.relative
-        key = ("cc", cc.arm_a, cc.arm_b, np.asarray(rel.homogeneous).tobytes())
-        if key not in self._fns:
-            fa = self.robot.arm(cc.arm_a).ee_frame_id
-            fb = self.robot.arm(cc.arm_b).ee_frame_id
-            Ra, pa = self.frame(fa)
-            Rb, pb = self.frame(fb)
+
+        def build(name):
+            Ra, pa = self.frame(self.robot.arm(cc.arm_a).ee_frame_id)
+            Rb, pb = self.frame(self.robot.arm(cc.arm_b).ee_frame_id)
             r, tr = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), np.array(rel.rotation), ca.DM(rel.translation))
             n, s = ca.SX.sym("n", 3), ca.SX.sym("s")  # unused: every kernel has the signature (q, n, s)
-            self._fns[key] = ca.Function(f"cc_{len(self._fns)}", [self._q, n, s], [ca.vertcat(r, tr)])
-        return self._fns[key]
+            return ca.Function(name, [self._q, n, s], [ca.vertcat(r, tr)])
+
+        return self._get(("cc", cc.arm_a, cc.arm_b, np.asarray(rel.homogeneous).round(15).tobytes()), build)
 
     def pair(self, fa: int | None, Va: np.ndarray, ra: float, fb: int | None, Vb: np.ndarray, rb: float
              ) -> ca.Function:
@@ -124,8 +182,9 @@ class KernelCache:
         ``ra``; likewise B. B static (``fb is None``): ``f(q, n, s) = s − n·x_i − ra`` for A's
         points (``s``: the support value of B along n); both moving: ``f(q, n, b) =
         [b − n·x_i − ra; n·y_j − rb − b]``."""
-        key = ("pair", fa, Va.tobytes(), ra, fb, Vb.tobytes(), rb)
-        if key not in self._fns:
+        Va, Vb = np.ascontiguousarray(Va, float), np.ascontiguousarray(Vb, float)
+
+        def build(name):
             n, s = ca.SX.sym("n", 3), ca.SX.sym("s")
             Ra, pa = self.frame(fa)
             Xa = Ra @ ca.DM(Va) + ca.repmat(pa, 1, Va.shape[1])
@@ -135,8 +194,12 @@ class KernelCache:
                 Rb, pb = self.frame(fb)
                 Yb = Rb @ ca.DM(Vb) + ca.repmat(pb, 1, Vb.shape[1])
                 rows = ca.vertcat((s - n.T @ Xa - ra).T, (n.T @ Yb - rb - s).T)
-            self._fns[key] = ca.Function(f"pair_{len(self._fns)}", [self._q, n, s], [rows])
-        return self._fns[key]
+            return ca.Function(name, [self._q, n, s], [rows])
+
+        # the static side's points are not in the kernel (only its support value, an input)
+        key = ("pair", fa, Va.shape, Va.tobytes(), float(ra), fb,
+               None if fb is None else (Vb.shape, Vb.tobytes(), float(rb)))
+        return self._get(key, build)
 
 
 def _geometry_points(robot: RobotModel, g: int) -> tuple[int, np.ndarray, float]:
