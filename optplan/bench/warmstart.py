@@ -152,6 +152,7 @@ def _segment_rows(res) -> list[dict]:
         if not (rep.min_clearance_m >= 0.0):
             reasons.append("clearance")
         out.append({"kind": s.kind, "arm": s.arm, "status": sol.status.value, "converged": bool(sol.success),
+                    "cost": _finite(float(sol.cost)),
                     "iterations": int(sol.iterations), "ipopt_s": float(sol.wall_time),
                     "setup_s": float(sol.setup_time), "n_intervals": int(len(sol.t) - 1),
                     "duration_s": _finite(float(sol.duration)),
