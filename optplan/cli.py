@@ -174,7 +174,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.set_defaults(func=_cmd_bench_transport)
 
     tb = bench.add_parser("tcbirrt", help="seed 000 benchmark: planners x SSPS scenes x perturbed trials")
-    tb.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, or names)")
+    tb.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, names or TOML "
+                    "paths; 'suite' = the hard-scene suite hard_*, 'ssps' = scenes 1-3)")
     tb.add_argument("--trials", type=int, default=100, help="trials per scene")
     tb.add_argument("--first-trial", type=int, default=0, help="index of the first trial")
     tb.add_argument("--planners", default="tcbirrt,cbirrt2,ompl-atlas",

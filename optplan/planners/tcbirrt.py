@@ -57,7 +57,7 @@ from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from .rrtconnect import RRTConnectOptions, edge_is_valid, rrt_connect, shortcut_path
-from .task_sampling import ObjectPoseFilter, TaskSampler
+from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .validity import ValidityChecker
 
 __all__ = ["TCBiRRTOptions", "TCBiRRT", "exp_coordinates", "rotation_from_exp", "interpolate_task",
@@ -70,8 +70,10 @@ PAPER_XI_UPPER = (2.0, 3.0, 4.0, math.pi, math.pi, math.pi)
 PARTIAL = "partial"
 #: option values of each variant (fields left at None take them)
 VARIANTS = {
-    "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False},
-    "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.3, "keep_prefix": True},
+    "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False,
+              "guide_probability": 0.0, "geodesic_probability": 0.0},
+    "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.1, "keep_prefix": True,
+                 "guide_probability": 0.4, "geodesic_probability": 0.5},
 }
 
 
@@ -182,7 +184,14 @@ class TCBiRRTOptions:
       need); ``bridge_sigma``: (position [m], angle [rad]) spread of the second pose (needs
       ``sample_filter``-style checks, done whatever ``sample_filter`` says);
     * ``keep_prefix`` (False / True): when PathInverseKinematics fails after ≥ 1 valid waypoint,
-      keep the valid part as a shorter extension (adaptive step) instead of discarding it.
+      keep the valid part as a shorter extension (adaptive step) instead of discarding it;
+    * ``guide_probability`` (0 / 0.4): probability that ξ_rand is a pose of the object's lead path
+      (the object alone planned from start to goal pose, :func:`.task_sampling.object_lead_path`,
+      in attempts of ``guide_attempt_time`` [s], restarted while none is found, at most
+      ``guide_time_limit`` [s] per query) plus Gaussian noise ``guide_sigma`` (position [m], angle [rad]);
+    * ``geodesic_probability`` (0 / 0.5): probability that the orientation of a uniform or bridge
+      sample is drawn on the start-goal rotation geodesic, perturbed by ``geodesic_sigma`` [rad]
+      per axis, instead of uniformly in RPY.
     """
 
     step_size: float = 0.6
@@ -206,6 +215,12 @@ class TCBiRRTOptions:
     bridge_probability: float | None = None
     bridge_sigma: tuple = (0.3, 0.4)
     keep_prefix: bool | None = None
+    guide_probability: float | None = None
+    guide_sigma: tuple = (0.05, 0.05)
+    guide_time_limit: float = 3.0
+    guide_attempt_time: float = 0.3
+    geodesic_probability: float | None = None
+    geodesic_sigma: float = 0.15
 
     def __post_init__(self):
         if self.variant not in VARIANTS:
@@ -213,20 +228,25 @@ class TCBiRRTOptions:
         for name, v in VARIANTS[self.variant].items():   # None: the variant's value
             if getattr(self, name) is None:
                 object.__setattr__(self, name, v)
-        for name in ("goal_bias", "bridge_probability"):
+        for name in ("goal_bias", "bridge_probability", "guide_probability", "geodesic_probability"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 1.0):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected a probability in [0, 1], got {v!r}")
-        if self.goal_bias + self.bridge_probability > 1.0:
-            raise ValueError(f"TCBiRRTOptions: goal_bias + bridge_probability must be <= 1, got "
-                             f"{self.goal_bias} + {self.bridge_probability}")
+        if self.goal_bias + self.bridge_probability + self.guide_probability > 1.0:
+            raise ValueError(f"TCBiRRTOptions: goal_bias + bridge_probability + guide_probability must be <= 1, "
+                             f"got {self.goal_bias} + {self.bridge_probability} + {self.guide_probability}")
+        for name in ("bridge_sigma", "guide_sigma"):
+            bs = getattr(self, name)
+            if not (isinstance(bs, (tuple, list)) and len(bs) == 2
+                    and all(isinstance(x, (int, float)) and x > 0 for x in bs)):
+                raise ValueError(f"TCBiRRTOptions.{name}: expected (position [m], angle [rad]) > 0, got {bs!r}")
+            object.__setattr__(self, name, (float(bs[0]), float(bs[1])))
+        _pos("guide_time_limit", self.guide_time_limit)
+        _pos("guide_attempt_time", self.guide_attempt_time)
+        _pos("geodesic_sigma", self.geodesic_sigma)
         for name in ("sample_filter", "keep_prefix"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
-        bs = self.bridge_sigma
-        if not (isinstance(bs, (tuple, list)) and len(bs) == 2 and all(isinstance(x, (int, float)) and x > 0 for x in bs)):
-            raise ValueError(f"TCBiRRTOptions.bridge_sigma: expected (position [m], angle [rad]) > 0, got {bs!r}")
-        object.__setattr__(self, "bridge_sigma", (float(bs[0]), float(bs[1])))
         _pos("step_size", self.step_size)
         if not (isinstance(self.n_interp, int) and self.n_interp >= 1):
             raise ValueError(f"TCBiRRTOptions.n_interp: expected an int >= 1, got {self.n_interp!r}")
@@ -462,14 +482,18 @@ class TCBiRRT(Planner):
     def _sampler(self) -> TaskSampler | None:
         """The improved variant's ξ sampler (None: the paper's uniform box)."""
         o = self.options
-        if not (o.sample_filter or o.bridge_probability > 0 or o.goal_bias > 0):
+        if not (o.sample_filter or o.bridge_probability > 0 or o.goal_bias > 0 or o.guide_probability > 0
+                or o.geodesic_probability > 0):
             return None
         if self._filter is None:
             self._filter = ObjectPoseFilter(self.robot, self.scene)
-        return TaskSampler(self._filter if (o.sample_filter or o.bridge_probability > 0) else None,
+        need = o.sample_filter or o.bridge_probability > 0 or o.guide_probability > 0
+        return TaskSampler(self._filter if need else None,
                            self._lo, self._hi, bridge_probability=o.bridge_probability,
                            bridge_sigma=o.bridge_sigma, goal_bias=o.goal_bias,
-                           filter_tries=30 if o.sample_filter else 0)
+                           filter_tries=30 if o.sample_filter else 0, guide_probability=o.guide_probability,
+                           guide_sigma=o.guide_sigma, geodesic_probability=o.geodesic_probability,
+                           geodesic_sigma=o.geodesic_sigma)
 
     # ------------------------------------------------------------------ Alg. 1
     def _plan(self, q_start, q_goal, deadline, rng, seed) -> PlanResult:
@@ -490,9 +514,22 @@ class TCBiRRT(Planner):
         tb = _TaskTree(q_goal, xi_from_pose(Mg), Mg.rotation.copy(), Mg.translation.copy())
         a_is_start = True
         found = None
+        guide_time = 0.0
+        if sampler is not None:
+            sampler.set_endpoints(ta.xi[0], tb.xi[0])
+            st["guide_attempts"] = st["guide_waypoints"] = 0
         while not deadline.expired():
             if o.max_iterations and st["iterations"] >= o.max_iterations:
                 break
+            if (sampler is not None and o.guide_probability > 0 and sampler.guide is None
+                    and guide_time < o.guide_time_limit and st["iterations"] % 25 == 0):
+                sub = deadline.sub(min(o.guide_attempt_time, o.guide_time_limit - guide_time))
+                sampler.guide = object_lead_path(self._filter, ta.xi[0] if a_is_start else tb.xi[0],
+                                                 tb.xi[0] if a_is_start else ta.xi[0], self._lo, self._hi, rng, sub)
+                guide_time += sub.elapsed()
+                st["guide_attempts"] += 1
+                st["guide_waypoints"] = 0 if sampler.guide is None else len(sampler.guide)
+                st["guide_time_s"] = guide_time
             st["iterations"] += 1
             if sampler is None:
                 xi_rand = rng.uniform(self._lo, self._hi)                                # line 3
