@@ -28,6 +28,11 @@ Both orders (A first, B first) are tried. In the returned :class:`PlanResult` ea
 a ``"regrasp"`` segment (``constrained`` False inside it, True at its ends, where both hands are on
 the object again).
 
+``TCBiRRTOptions(variant="improved")`` adds task-space sampling aids (an object-only lead path,
+start-goal geodesic orientations, a reach/collision filter, bridge tests, goal bias) and keeps the
+valid prefix of a failed extension; see :class:`TCBiRRTOptions` and :mod:`.task_sampling`. The
+default ``variant="paper"`` is the published algorithm.
+
 Deviations from the paper, all options (defaults in brackets):
 
 * ``interpolation`` ["geodesic"]: Eq. 4 applied to the relative rotation,
