@@ -76,9 +76,9 @@ PARTIAL = "partial"
 #: option values of each variant (fields left at None take them)
 VARIANTS = {
     "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False,
-              "guide_probability": 0.0, "geodesic_probability": 0.0},
+              "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.1, "keep_prefix": True,
-                 "guide_probability": 0.4, "geodesic_probability": 0.5},
+                 "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2},
 }
 
 
@@ -196,7 +196,10 @@ class TCBiRRTOptions:
       ``guide_time_limit`` [s] per query) plus Gaussian noise ``guide_sigma`` (position [m], angle [rad]);
     * ``geodesic_probability`` (0 / 0.5): probability that the orientation of a uniform or bridge
       sample is drawn on the start-goal rotation geodesic, perturbed by ``geodesic_sigma`` [rad]
-      per axis, instead of uniformly in RPY.
+      per axis, instead of uniformly in RPY;
+    * ``ik_restarts`` (0 / 2): when a waypoint's IK solution collides or fails, retry IK this many
+      times from the previous configuration perturbed by ``N(0, ik_restart_sigma²)`` [rad] per joint
+      (another point of the arms' self-motion), still subject to ``max_joint_step``.
     """
 
     step_size: float = 0.6
@@ -226,6 +229,8 @@ class TCBiRRTOptions:
     guide_attempt_time: float = 0.3
     geodesic_probability: float | None = None
     geodesic_sigma: float = 0.15
+    ik_restarts: int | None = None
+    ik_restart_sigma: float = 0.3
 
     def __post_init__(self):
         if self.variant not in VARIANTS:
@@ -249,6 +254,9 @@ class TCBiRRTOptions:
         _pos("guide_time_limit", self.guide_time_limit)
         _pos("guide_attempt_time", self.guide_attempt_time)
         _pos("geodesic_sigma", self.geodesic_sigma)
+        _pos("ik_restart_sigma", self.ik_restart_sigma)
+        if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
+            raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
         for name in ("sample_filter", "keep_prefix"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
@@ -346,6 +354,7 @@ class TCBiRRT(Planner):
         self._lo = np.asarray(self.options.xi_lower)
         self._hi = np.asarray(self.options.xi_upper)
         self._filter: ObjectPoseFilter | None = None
+        self._rng = np.random.default_rng(0)
 
     # ------------------------------------------------------------------ public helpers
     def check_endpoint(self, q: np.ndarray) -> str | None:
@@ -374,12 +383,21 @@ class TCBiRRT(Planner):
             st["ik_iterations"] += its
             if qn is None:
                 st["ik_failures"] += 1
-                return fail
-            if float(np.abs(qn - q).max()) > o.max_joint_step:
+            elif float(np.abs(qn - q).max()) > o.max_joint_step:
                 st["ik_jumps"] += 1
-                return fail
-            if not ck.is_valid(qn):
+                qn = None
+            elif not ck.is_valid(qn):
                 st["collisions"] += 1
+                qn = None
+            for _ in range(o.ik_restarts if qn is None else 0):
+                st["ik_restarts"] += 1
+                x, its = kin.ik(q + self._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, o.ik)
+                st["ik_iterations"] += its
+                if x is not None and float(np.abs(x - q).max()) <= o.max_joint_step and ck.in_limits(x) \
+                        and ck.is_valid(x):
+                    qn = x
+                    break
+            if qn is None:
                 return fail
             if o.edge_resolution is not None and not edge_is_valid(q, qn, ck.is_valid, o.edge_resolution, False):
                 st["collisions"] += 1
@@ -503,7 +521,8 @@ class TCBiRRT(Planner):
     # ------------------------------------------------------------------ Alg. 1
     def _plan(self, q_start, q_goal, deadline, rng, seed) -> PlanResult:
         o = self.options
-        st = {k: 0 for k in ("iterations", "extensions", "trapped", "partial", "ik_calls", "ik_iterations",
+        self._rng = rng
+        st = {k: 0 for k in ("iterations", "extensions", "trapped", "partial", "ik_calls", "ik_iterations", "ik_restarts",
                              "ik_failures", "ik_jumps", "collisions", "regrasp_attempts", "regrasp_failures",
                              "regrasp_nodes")}
         sampler = self._sampler()
