@@ -98,7 +98,9 @@ def _cmd_bench_tcbirrt(args) -> int:
 
     if (err := engine_error(args.engine, args.jobs, args.address)) is not None:
         raise UsageError(err)
-    scenes = [ca.check_scene(s) for s in args.scene.split(",") if s.strip()] or [ca.check_scene("")]
+    from .bench.tcbirrt import expand_scenes
+
+    scenes = [ca.check_scene(s) for s in expand_scenes(args.scene.split(","))] or [ca.check_scene("")]
     planners = [p for p in args.planners.split(",") if p.strip()]
     for p in planners or [""]:
         try:
@@ -278,7 +280,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.set_defaults(func=_cmd_bench_transport)
 
     tb = bench.add_parser("tcbirrt", help="TCBiRRT benchmark: planners x space-solar-power-station scenes x perturbed trials")
-    tb.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, or names)")
+    tb.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, names or TOML "
+                    "paths; 'suite' = the hard-scene suite hard_*, 'ssps' = scenes 1-3)")
     tb.add_argument("--trials", type=ca.positive_int, default=100, help="trials per scene")
     tb.add_argument("--first-trial", type=ca.nonnegative_int, default=0, help="index of the first trial")
     tb.add_argument("--planners", default="tcbirrt,cbirrt2,ompl-atlas",

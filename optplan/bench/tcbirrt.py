@@ -34,7 +34,7 @@ import numpy as np
 
 from .engine import map_unordered, validate_engine
 
-__all__ = ["BenchConfig", "run", "parse_planner_spec", "load_results", "summarize", "format_summary", "plot_success", "scene_name",
+__all__ = ["BenchConfig", "run", "parse_planner_spec", "expand_scenes", "load_results", "summarize", "format_summary", "plot_success", "scene_name",
            "PAPER", "N_MIN"]
 log = logging.getLogger(__name__)
 
@@ -76,6 +76,22 @@ def scene_name(s: str) -> str:
     """``"1"`` → ``"ssps_scene1"``; other names unchanged."""
     s = str(s).strip()
     return f"ssps_scene{s}" if s.isdigit() else s
+
+
+def expand_scenes(names) -> list[str]:
+    """Scene arguments → scene names: ``"1"`` → ``"ssps_scene1"``, ``"suite"`` → every scene of the
+    hard-scene suite (:data:`optplan.bench.hardscenes.SUITE`), ``"ssps"`` → the three SSPS scenes,
+    other names and TOML paths unchanged."""
+    from .hardscenes import SUITE
+
+    out: list[str] = []
+    for s in names:
+        s = str(s).strip()
+        if not s:
+            continue
+        add = list(SUITE) if s == "suite" else [f"ssps_scene{k}" for k in (1, 2, 3)] if s == "ssps" else [scene_name(s)]
+        out.extend(x for x in add if x not in out)
+    return out
 
 
 @dataclass
@@ -236,7 +252,7 @@ def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
     if isinstance(tl, bool) or not isinstance(tl, (int, float)) or not (np.isfinite(tl) and tl > 0):
         raise OptionError(f"BenchConfig.time_limit: expected a number of seconds > 0, got {tl!r}")
     validate_engine(cfg.engine, cfg.jobs, cfg.address)
-    scenes = [scene_name(s) for s in cfg.scenes]
+    scenes = expand_scenes(cfg.scenes)
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     res_path = out / "results.jsonl"
@@ -391,9 +407,13 @@ def plot_success(rows: list[dict], path, time_limit: float) -> None:
     scenes = sorted({r["scene"] for r in rows})
     if not scenes:
         return
-    fig, axes = plt.subplots(1, len(scenes), figsize=(5 * len(scenes), 4), squeeze=False)
+    ncol = min(4, len(scenes))
+    nrow = int(math.ceil(len(scenes) / ncol))
+    fig, axes = plt.subplots(nrow, ncol, figsize=(5 * ncol, 4 * nrow), squeeze=False)
+    for ax in axes.flat[len(scenes):]:
+        ax.set_visible(False)
     ts = np.logspace(-2, math.log10(max(time_limit, 0.011)), 300)
-    for ax, sc in zip(axes[0], scenes):
+    for ax, sc in zip(axes.flat, scenes):
         rs = [r for r in rows if r["scene"] == sc]
         for p in sorted({r["planner"] for r in rs}, key=lambda x: (x != "tcbirrt", x)):
             pr = [r for r in rs if r["planner"] == p]

@@ -108,7 +108,11 @@ class TrialGenerator:
         if scene.object is None or scene.start is None or scene.goal is None:
             raise ValueError(f"scene {scene.name!r}: trials need [object], [start] and [goal]")
         self.robot, self.scene = robot, scene
-        self.options = options or TrialOptions()
+        if options is None:   # a scene may narrow the perturbation ([extra] trial_position_range [m], trial_angle_range [rad])
+            ex = scene.extra or {}
+            options = TrialOptions(position_range=float(ex.get("trial_position_range", 0.2)),
+                                   angle_range=float(ex.get("trial_angle_range", 0.5)))
+        self.options = options
         self.ik = ik or IKSettings()
         self.ik_restart = IKSettings(tol_position=self.ik.tol_position, tol_orientation=self.ik.tol_orientation,
                                      max_iterations=200, damping=0.02, max_step=0.3)

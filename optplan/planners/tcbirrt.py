@@ -28,6 +28,11 @@ Both orders (A first, B first) are tried. In the returned :class:`PlanResult` ea
 a ``"regrasp"`` segment (``constrained`` False inside it, True at its ends, where both hands are on
 the object again).
 
+``TCBiRRTOptions(variant="improved")`` adds task-space sampling aids (an object-only lead path,
+start-goal geodesic orientations, a reach/collision filter, bridge tests, goal bias) and keeps the
+valid prefix of a failed extension; see :class:`TCBiRRTOptions` and :mod:`.task_sampling`. The
+default ``variant="paper"`` is the published algorithm.
+
 Deviations from the paper, all options (defaults in brackets):
 
 * ``interpolation`` ["geodesic"]: Eq. 4 applied to the relative rotation,
@@ -57,6 +62,7 @@ from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from .rrtconnect import RRTConnectOptions, edge_is_valid, rrt_connect, shortcut_path
+from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .validity import ValidityChecker
 
 __all__ = ["TCBiRRTOptions", "TCBiRRT", "exp_coordinates", "rotation_from_exp", "interpolate_task",
@@ -66,6 +72,14 @@ log = logging.getLogger(__name__)
 TRAPPED, ADVANCED, REACHED = "trapped", "advanced", "reached"
 PAPER_XI_LOWER = (-2.0, -3.0, 0.0, -math.pi, -math.pi, -math.pi)
 PAPER_XI_UPPER = (2.0, 3.0, 4.0, math.pi, math.pi, math.pi)
+PARTIAL = "partial"
+#: option values of each variant (fields left at None take them)
+VARIANTS = {
+    "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False,
+              "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0},
+    "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.1, "keep_prefix": True,
+                 "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2},
+}
 
 
 # ---------------------------------------------------------------------- task-space helpers
@@ -162,6 +176,30 @@ class TCBiRRTOptions:
     two solutions differ by less (max-norm) does not move; ``closure_tolerance``: start and goal
     must satisfy the closed chain to this (position [m] and angle [rad]); ``margin`` [m]: clearance
     counted as contact; ``max_iterations``: cap on Alg. 1 iterations (0: only the time limit).
+
+    ``variant``: ``"paper"`` (Alg. 1-4 as published, the default) or ``"improved"``; the fields
+    below left at None take the variant's value (:data:`VARIANTS`), an explicit value overrides it:
+
+    * ``goal_bias`` (paper 0, improved 0.1): probability that ξ_rand is the pose of a random node
+      of the other tree;
+    * ``sample_filter`` (False / True): reject ξ_rand while the object alone collides with an
+      obstacle or a grasp point is beyond its arm's reach (no IK; :mod:`.task_sampling`);
+    * ``bridge_probability`` (0 / 0.3): probability of a bridge-test sample in ξ (object in
+      collision at two nearby poses, free at their midpoint: narrow openings at the rotation they
+      need); ``bridge_sigma``: (position [m], angle [rad]) spread of the second pose (needs
+      ``sample_filter``-style checks, done whatever ``sample_filter`` says);
+    * ``keep_prefix`` (False / True): when PathInverseKinematics fails after ≥ 1 valid waypoint,
+      keep the valid part as a shorter extension (adaptive step) instead of discarding it;
+    * ``guide_probability`` (0 / 0.4): probability that ξ_rand is a pose of the object's lead path
+      (the object alone planned from start to goal pose, :func:`.task_sampling.object_lead_path`,
+      in attempts of ``guide_attempt_time`` [s], restarted while none is found, at most
+      ``guide_time_limit`` [s] per query) plus Gaussian noise ``guide_sigma`` (position [m], angle [rad]);
+    * ``geodesic_probability`` (0 / 0.5): probability that the orientation of a uniform or bridge
+      sample is drawn on the start-goal rotation geodesic, perturbed by ``geodesic_sigma`` [rad]
+      per axis, instead of uniformly in RPY;
+    * ``ik_restarts`` (0 / 2): when a waypoint's IK solution collides or fails, retry IK this many
+      times from the previous configuration perturbed by ``N(0, ik_restart_sigma²)`` [rad] per joint
+      (another point of the arms' self-motion), still subject to ``max_joint_step``.
     """
 
     step_size: float = 0.6
@@ -179,8 +217,49 @@ class TCBiRRTOptions:
     closure_tolerance: float = 1e-6
     margin: float = 0.0
     max_iterations: int = 0
+    variant: str = "paper"
+    goal_bias: float | None = None
+    sample_filter: bool | None = None
+    bridge_probability: float | None = None
+    bridge_sigma: tuple = (0.3, 0.4)
+    keep_prefix: bool | None = None
+    guide_probability: float | None = None
+    guide_sigma: tuple = (0.05, 0.05)
+    guide_time_limit: float = 3.0
+    guide_attempt_time: float = 0.3
+    geodesic_probability: float | None = None
+    geodesic_sigma: float = 0.15
+    ik_restarts: int | None = None
+    ik_restart_sigma: float = 0.3
 
     def __post_init__(self):
+        if self.variant not in VARIANTS:
+            raise ValueError(f"TCBiRRTOptions.variant: expected one of {tuple(VARIANTS)}, got {self.variant!r}")
+        for name, v in VARIANTS[self.variant].items():   # None: the variant's value
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, v)
+        for name in ("goal_bias", "bridge_probability", "guide_probability", "geodesic_probability"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 1.0):
+                raise ValueError(f"TCBiRRTOptions.{name}: expected a probability in [0, 1], got {v!r}")
+        if self.goal_bias + self.bridge_probability + self.guide_probability > 1.0:
+            raise ValueError(f"TCBiRRTOptions: goal_bias + bridge_probability + guide_probability must be <= 1, "
+                             f"got {self.goal_bias} + {self.bridge_probability} + {self.guide_probability}")
+        for name in ("bridge_sigma", "guide_sigma"):
+            bs = getattr(self, name)
+            if not (isinstance(bs, (tuple, list)) and len(bs) == 2
+                    and all(isinstance(x, (int, float)) and x > 0 for x in bs)):
+                raise ValueError(f"TCBiRRTOptions.{name}: expected (position [m], angle [rad]) > 0, got {bs!r}")
+            object.__setattr__(self, name, (float(bs[0]), float(bs[1])))
+        _pos("guide_time_limit", self.guide_time_limit)
+        _pos("guide_attempt_time", self.guide_attempt_time)
+        _pos("geodesic_sigma", self.geodesic_sigma)
+        _pos("ik_restart_sigma", self.ik_restart_sigma)
+        if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
+            raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
+        for name in ("sample_filter", "keep_prefix"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
         if not (isinstance(self.n_interp, int) and self.n_interp >= 1):
             raise ValueError(f"TCBiRRTOptions.n_interp: expected an int >= 1, got {self.n_interp!r}")
@@ -274,6 +353,8 @@ class TCBiRRT(Planner):
         self.grasps = scene.object.grasps
         self._lo = np.asarray(self.options.xi_lower)
         self._hi = np.asarray(self.options.xi_upper)
+        self._filter: ObjectPoseFilter | None = None
+        self._rng = np.random.default_rng(0)
 
     # ------------------------------------------------------------------ public helpers
     def check_endpoint(self, q: np.ndarray) -> str | None:
@@ -289,27 +370,38 @@ class TCBiRRT(Planner):
         return None
 
     # ------------------------------------------------------------------ Alg. 3
-    def path_ik(self, poses, q_near: np.ndarray, st: dict) -> list[np.ndarray] | None:
+    def path_ik(self, poses, q_near: np.ndarray, st: dict, prefix: bool = False) -> list[np.ndarray] | None:
         """PathInverseKinematics + CollisionFree of Alg. 2: IK of every pose seeded by the previous
-        solution; None at the first failure (IK, continuity or collision)."""
+        solution; None at the first failure (IK, continuity or collision) — or, with ``prefix``,
+        the solutions before it (possibly empty)."""
         o, kin, ck = self.options, self.kin, self.checker
         out, q = [], q_near
+        fail = None if not prefix else out
         for R, p in poses:
             st["ik_calls"] += 1
             qn, its = kin.ik(q, R, p, o.ik)
             st["ik_iterations"] += its
             if qn is None:
                 st["ik_failures"] += 1
-                return None
-            if float(np.abs(qn - q).max()) > o.max_joint_step:
+            elif float(np.abs(qn - q).max()) > o.max_joint_step:
                 st["ik_jumps"] += 1
-                return None
-            if not ck.is_valid(qn):
+                qn = None
+            elif not ck.is_valid(qn):
                 st["collisions"] += 1
-                return None
+                qn = None
+            for _ in range(o.ik_restarts if qn is None else 0):
+                st["ik_restarts"] += 1
+                x, its = kin.ik(q + self._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, o.ik)
+                st["ik_iterations"] += its
+                if x is not None and float(np.abs(x - q).max()) <= o.max_joint_step and ck.in_limits(x) \
+                        and ck.is_valid(x):
+                    qn = x
+                    break
+            if qn is None:
+                return fail
             if o.edge_resolution is not None and not edge_is_valid(q, qn, ck.is_valid, o.edge_resolution, False):
                 st["collisions"] += 1
-                return None
+                return fail
             out.append(qn)
             q = qn
         return out
@@ -384,10 +476,17 @@ class TCBiRRT(Planner):
         q_near = tree.q[i_near]
         if dist > 0.0:
             poses = interpolate_task(R0, p0, Rs, ps, o.n_interp, o.interpolation)
-            Q = self.path_ik(poses, q_near, st)
-            if Q is None:
+            Q = self.path_ik(poses, q_near, st, prefix=o.keep_prefix)
+            if not Q:
                 st["trapped"] += 1
                 return TRAPPED, -1, None
+            if len(Q) < len(poses):          # keep_prefix: the valid part is a shorter extension
+                st["partial"] += 1
+                k = len(Q)
+                Rk, pk = poses[k - 1]
+                Rk, pk = np.asarray(Rk), np.asarray(pk)
+                i_s = tree.add(Q[-1], xi_from_pose(pin.SE3(Rk, pk)), Rk, pk, i_near, Q[:-1], poses[:k - 1])
+                return PARTIAL, i_s, None
         else:
             poses, Q = [], [q_near.copy()]
         q_s = Q[-1]
@@ -403,11 +502,30 @@ class TCBiRRT(Planner):
             i_s = i_near
         return (REACHED if reach else ADVANCED), i_s, reg
 
+    def _sampler(self) -> TaskSampler | None:
+        """The improved variant's ξ sampler (None: the paper's uniform box)."""
+        o = self.options
+        if not (o.sample_filter or o.bridge_probability > 0 or o.goal_bias > 0 or o.guide_probability > 0
+                or o.geodesic_probability > 0):
+            return None
+        if self._filter is None:
+            self._filter = ObjectPoseFilter(self.robot, self.scene)
+        need = o.sample_filter or o.bridge_probability > 0 or o.guide_probability > 0
+        return TaskSampler(self._filter if need else None,
+                           self._lo, self._hi, bridge_probability=o.bridge_probability,
+                           bridge_sigma=o.bridge_sigma, goal_bias=o.goal_bias,
+                           filter_tries=30 if o.sample_filter else 0, guide_probability=o.guide_probability,
+                           guide_sigma=o.guide_sigma, geodesic_probability=o.geodesic_probability,
+                           geodesic_sigma=o.geodesic_sigma)
+
     # ------------------------------------------------------------------ Alg. 1
     def _plan(self, q_start, q_goal, deadline, rng, seed) -> PlanResult:
         o = self.options
-        st = {k: 0 for k in ("iterations", "extensions", "trapped", "ik_calls", "ik_iterations", "ik_failures",
-                             "ik_jumps", "collisions", "regrasp_attempts", "regrasp_failures", "regrasp_nodes")}
+        self._rng = rng
+        st = {k: 0 for k in ("iterations", "extensions", "trapped", "partial", "ik_calls", "ik_iterations", "ik_restarts",
+                             "ik_failures", "ik_jumps", "collisions", "regrasp_attempts", "regrasp_failures",
+                             "regrasp_nodes")}
+        sampler = self._sampler()
         c0 = self.checker.n_checks
         why = self.check_endpoint(q_start)
         if why:
@@ -420,11 +538,27 @@ class TCBiRRT(Planner):
         tb = _TaskTree(q_goal, xi_from_pose(Mg), Mg.rotation.copy(), Mg.translation.copy())
         a_is_start = True
         found = None
+        guide_time = 0.0
+        if sampler is not None:
+            sampler.set_endpoints(ta.xi[0], tb.xi[0])
+            st["guide_attempts"] = st["guide_waypoints"] = 0
         while not deadline.expired():
             if o.max_iterations and st["iterations"] >= o.max_iterations:
                 break
+            if (sampler is not None and o.guide_probability > 0 and sampler.guide is None
+                    and guide_time < o.guide_time_limit and st["iterations"] % 25 == 0):
+                sub = deadline.sub(min(o.guide_attempt_time, o.guide_time_limit - guide_time))
+                sampler.guide = object_lead_path(self._filter, ta.xi[0] if a_is_start else tb.xi[0],
+                                                 tb.xi[0] if a_is_start else ta.xi[0], self._lo, self._hi, rng, sub)
+                guide_time += sub.elapsed()
+                st["guide_attempts"] += 1
+                st["guide_waypoints"] = 0 if sampler.guide is None else len(sampler.guide)
+                st["guide_time_s"] = guide_time
             st["iterations"] += 1
-            xi_rand = rng.uniform(self._lo, self._hi)                                    # line 3
+            if sampler is None:
+                xi_rand = rng.uniform(self._lo, self._hi)                                # line 3
+            else:
+                xi_rand = sampler.sample(rng, tb.xi[:tb.n])
             i_near = ta.nearest(xi_rand)                                                 # line 4
             res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st)   # line 5
             if res != TRAPPED:
@@ -432,7 +566,7 @@ class TCBiRRT(Planner):
                 while True:                                                              # lines 7-11
                     i_nb = tb.nearest(target_xi)
                     res, i_b, reg = self.constrained_extend(tb, i_nb, target_xi, target_q, rng, deadline, st)
-                    if res != ADVANCED or deadline.expired():
+                    if res not in (ADVANCED, PARTIAL) or deadline.expired():
                         break
                 if res == REACHED:
                     found = (i_a, i_b, reg)
@@ -440,6 +574,8 @@ class TCBiRRT(Planner):
             ta, tb, a_is_start = tb, ta, not a_is_start                                  # line 15
         st["nodes"] = ta.n + tb.n
         st["collision_checks"] = self.checker.n_checks - c0
+        if sampler is not None:
+            st.update(sampler.stats)
         if found is None:
             if deadline.expired():
                 return self.empty_result(PlanStatus.TIMEOUT, "time limit reached", **st)

@@ -1,0 +1,175 @@
+"""The hard-scene suite: every scene loads, has a feasibility witness that an independent check
+accepts (default run), and the improved TCBiRRT meets its success threshold on seeded trials
+(slow)."""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.bench.hardscenes import SUITE, load_witness, verify_path, witness_path
+from optplan.planners import TCBiRRT, TCBiRRTOptions
+from optplan.planners.base import PlanResult, PlanStatus
+from optplan.planners.closed_chain import ClosedChainKinematics
+from optplan.planners.task_sampling import ObjectPoseFilter, TaskSampler, arm_reach
+from optplan.planners.validity import ValidityChecker
+from optplan.scene import Scene
+
+
+@pytest.fixture(scope="module")
+def robot(tcb):
+    return tcb
+
+
+def test_suite_scenes_load_with_comments(robot):
+    from optplan.description import models_dir
+
+    assert len(SUITE) >= 6
+    for name in SUITE:
+        sc = Scene.load(name)
+        assert sc.robot == "tcbirrt_dual_arm" and sc.object is not None and len(sc.object.grasps) == 2
+        assert sc.object.size == (2.0, 0.8, 0.8)
+        text = (models_dir() / "scenes" / f"{name}.toml").read_text().replace("\n# ", " ")
+        assert "What makes it hard" in text, name
+
+
+@pytest.mark.parametrize("name", SUITE)
+def test_witness_is_feasible(robot, name):
+    """The stored path goes from the nominal start pose to the nominal goal pose, every
+    configuration is valid and closes the chain, every edge is re-traced and collision-checked
+    every 0.01 rad."""
+    assert witness_path(name).exists(), f"no witness for {name}"
+    scene = Scene.load(name)
+    res, prov = load_witness(name)
+    assert res.status is PlanStatus.EXACT and len(res.path) >= 2
+    kin = ClosedChainKinematics(robot, scene.object.grasps)
+    for q, M in ((res.path[0], scene.start), (res.path[-1], scene.goal)):
+        P = kin.object_pose(q)
+        assert np.linalg.norm(P.translation - M.translation) < 1e-6
+        assert np.linalg.norm(pin.log3(P.rotation.T @ M.rotation)) < 1e-6
+    chk = verify_path(robot, scene, res, kin=kin)
+    assert chk["ok"], chk["problems"]
+    assert chk["max_closure"] <= 1e-6
+
+
+def test_verify_path_rejects_a_broken_witness(robot):
+    """The checker can fail: a configuration moved into an obstacle, or a joint jump, is caught."""
+    name = SUITE[0]
+    scene = Scene.load(name)
+    res, _ = load_witness(name)
+    P = res.path.copy()
+    k = len(P) // 2
+    P[k] = P[k] + 0.3            # off the closed chain and a jump
+    bad = PlanResult(res.status, res.planner, P, res.object_poses, res.constrained, res.segments, res.stats)
+    chk = verify_path(robot, scene, bad)
+    assert not chk["ok"]
+
+
+def test_object_pose_filter_against_coal_and_reach(robot, rng):
+    """The filter's object-vs-obstacle answer agrees with the robot-level checker's object pairs
+    (exact coal), and its reach bound is never violated by real configurations."""
+    scene = Scene.load("hard_clutter_dense")
+    f = ObjectPoseFilter(robot, scene)
+    import coal
+
+    obj = scene.object.coal_geometry()
+    n_coll = 0
+    for _ in range(400):
+        R = pin.exp3(rng.normal(size=3))
+        p = rng.uniform([0.5, -2, 0.2], [3.2, 2, 4.0])
+        hit = False
+        for o in scene.obstacles:
+            req, res = coal.CollisionRequest(), coal.CollisionResult()
+            if coal.collide(obj, coal.Transform3s(R, p), o.coal_geometry(),
+                            coal.Transform3s(o.placement.rotation, o.placement.translation), req, res):
+                hit = True
+                break
+        n_coll += hit
+        assert f.object_free(R, p) == (not hit)
+    assert 0 < n_coll < 400
+    data = robot.model.createData()
+    for arm in ("A", "B"):
+        sh, reach = arm_reach(robot, arm)
+        fid = robot.arm(arm).ee_frame_id
+        for _ in range(200):
+            q = rng.uniform(robot.lower, robot.upper)
+            pin.framesForwardKinematics(robot.model, data, q)
+            assert np.linalg.norm(data.oMf[fid].translation - sh) <= reach + 1e-9
+
+
+def test_bridge_samples_are_free_and_in_narrow_places(robot, rng):
+    scene = Scene.load("hard_window")
+    f = ObjectPoseFilter(robot, scene)
+    ts = TaskSampler(f, (-2, -3, 0, -np.pi, -np.pi, -np.pi), (2, 3, 4, np.pi, np.pi, np.pi),
+                     bridge_probability=1.0, bridge_tries=400)
+    got = 0
+    for _ in range(20):
+        xi = ts.bridge(rng)
+        if xi is None:
+            continue
+        got += 1
+        R = pin.rpy.rpyToMatrix(*xi[3:])
+        assert f(R, xi[:3])
+    assert got > 0
+
+
+def test_improved_options_resolve_and_validate():
+    p = TCBiRRTOptions()
+    assert p.variant == "paper" and p.goal_bias == 0 and not p.sample_filter and not p.keep_prefix
+    im = TCBiRRTOptions(variant="improved")
+    assert im.goal_bias > 0 and im.sample_filter and im.keep_prefix and im.bridge_probability > 0
+    ab = TCBiRRTOptions(variant="improved", bridge_probability=0.0)
+    assert ab.bridge_probability == 0.0 and ab.sample_filter
+    for bad in (dict(variant="fast"), dict(goal_bias=1.5), dict(goal_bias=0.6, bridge_probability=0.6),
+                dict(keep_prefix=1), dict(bridge_sigma=(0.1,))):
+        with pytest.raises(ValueError):
+            TCBiRRTOptions(**bad)
+
+
+@pytest.mark.parametrize("name", ["hard_corridor", "hard_flip"])
+def test_improved_variant_solves_nominal_task(robot, name):
+    """Nominal start → nominal goal (seeded): the improved variant finds a path whose every
+    configuration closes the chain; the paper variant is run on the same task for comparison of
+    the iteration counts (not asserted: it may time out)."""
+    from optplan.bench.hardscenes import nominal_configurations
+
+    scene = Scene.load(name)
+    qs, qg = nominal_configurations(robot, scene)
+    ck = ValidityChecker(robot, scene)
+    kin = ClosedChainKinematics(robot, scene.object.grasps)
+    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved"), checker=ck, kinematics=kin)
+    res = pl.plan(qs, qg, time_limit=10.0, seed=0, clock="cpu")
+    assert res.success, res.message
+    assert np.allclose(res.path[0], qs) and np.allclose(res.path[-1], qg)
+    from optplan.planners.closed_chain import closure_error
+
+    for q, c in zip(res.path, res.constrained):
+        if c:
+            assert max(closure_error(robot, scene.object.grasps, q)) <= 1e-6
+    assert all(ck.is_valid(q) for q, c in zip(res.path, res.constrained) if c)
+    assert res.stats["guide_attempts"] >= 1 and res.stats["samples"] == res.stats["iterations"]
+
+
+# ---------------------------------------------------------------------- slow statistical tests
+#: scenes where the improved variant is measured below the 0.99 target (docs/planners.md, 2026-11-23);
+#: their statistical test is expected to fail until the planner improves (xfail, not strict)
+BELOW_TARGET = {"hard_truss": "27/30 within 10 s"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(reason=f"below target: {BELOW_TARGET[n]}",
+                                                                          strict=False))
+                                  if n in BELOW_TARGET else n for n in SUITE])
+def test_improved_variant_success_rate(robot, name):
+    """30 seeded trials per scene (seed 0, trials 0-29): the improved variant succeeds within 10 s
+    of CPU time in >= 28 (a true rate of 0.99 passes with probability 0.997, a true rate of 0.9 with 0.41)."""
+    from optplan.bench.trials import TrialGenerator
+
+    scene = Scene.load(name)
+    gen = TrialGenerator(robot, scene)
+    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved"))
+    n, ok = 30, 0
+    for i in range(n):
+        t = gen.generate(i, 0)
+        ok += pl.plan(t.q_start, t.q_goal, time_limit=10.0, seed=t.seed, clock="cpu").success
+    assert ok >= 28, f"{name}: {ok}/{n}"
