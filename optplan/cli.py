@@ -100,7 +100,12 @@ def _cmd_bench_tcbirrt(args) -> int:
         raise UsageError(err)
     from .bench.tcbirrt import expand_scenes
 
-    scenes = [ca.check_scene(s) for s in expand_scenes(args.scene.split(","))] or [ca.check_scene("")]
+    scenes: list[str] = []
+    for s in (t.strip() for t in args.scene.split(",")):
+        for name in (expand_scenes([s]) if s in ("suite", "ssps") else [ca.check_scene(s)] if s else []):
+            if name not in scenes:
+                scenes.append(name)
+    scenes = scenes or [ca.check_scene("")]
     planners = [p for p in args.planners.split(",") if p.strip()]
     for p in planners or [""]:
         try:
