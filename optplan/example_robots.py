@@ -6,8 +6,9 @@ Both are loaded as fixed-base dual-arm robots with 14 planning joints (two 7-joi
 * everything else (PR2: base, torso lift, head, laser tilt, grippers; Baxter: head, grippers) is
   frozen in the URDF (made ``fixed``) at a documented value, so the Pinocchio model has exactly the
   arm joints and :class:`~optplan.robot.RobotModel` works unchanged;
-* PR2's continuous joints (forearm roll, wrist roll) become revolute joints with limits ``[-π, π]``
-  (a planner in joint space needs a bounded box; every orientation is still reachable);
+* PR2's continuous joints (forearm roll, wrist roll) become revolute joints with limits ``[-2π, 2π]``
+  (a planner in joint space needs a bounded box; ±2π rather than ±π so that a path can cross
+  ±π, where PR2's wrist often sits when the gripper points forward);
 * collision geometry: the convex hull of every link's collision mesh (coal ``Convex``).
   Hulls rather than the raw triangle meshes because GJK on a hull is ~10× faster than a BVH
   mesh-mesh test and a hull is conservative (it contains the mesh: no collision is missed);
@@ -70,7 +71,7 @@ def _require_dir() -> Path:
     return d
 
 
-def _freeze(urdf: Path, keep: set[str], *, share: Path, continuous_limit: float = math.pi,
+def _freeze(urdf: Path, keep: set[str], *, share: Path, continuous_limit: float = 2 * math.pi,
             frozen_values: dict[str, float] | None = None) -> str:
     """URDF text with every movable joint not in ``keep`` made fixed (at ``frozen_values`` or 0),
     continuous joints in ``keep`` made revolute in ``[-continuous_limit, continuous_limit]``, and
