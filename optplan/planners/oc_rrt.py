@@ -53,8 +53,8 @@ class OCRRTOptions:
     ``margin`` [m]: collision margin."""
 
     connect: bool = True
-    step: float = 0.15
-    collision_step: float = 0.05
+    step: float = 0.3
+    collision_step: float = 0.1
     max_joint_step: float = 0.5
     goal_bias: float = 0.1
     max_sample_tries: int = 50
