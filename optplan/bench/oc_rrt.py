@@ -256,3 +256,66 @@ def plot_scene(directory, scene: str, dense: np.ndarray, constraint, joint_names
     fig.savefig(p, dpi=100)
     plt.close(fig)
     return [p]
+
+
+def add_arguments(p) -> None:
+    """Command-line options of ``optplan bench oc-rrt`` and ``examples/oc_rrt.py``."""
+    p.add_argument("--scenes", default=",".join(SCENES), help="comma-separated scene names")
+    p.add_argument("--planners", default=",".join(PLANNERS),
+                   help="comma-separated: oc_rrt, oc_rrt_connect, cbirrt, ompl-<projected|atlas|tb>[-<planner>]")
+    p.add_argument("--trials", type=int, default=20, help="seeded trials per scene and planner (paper: 20)")
+    p.add_argument("--time-limit", type=float, default=20.0, help="per query [s]")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--clock", choices=["cpu", "wall"], default="cpu",
+                   help="time measured and limited in CPU seconds (default) or wall-clock seconds")
+    p.add_argument("--resolution", type=float, default=0.01, help="dense path resolution for ORMSD/PRMSD [rad]")
+    p.add_argument("--out", default="bench_oc_rrt", help="output directory (results.jsonl, summary.json/txt)")
+    p.add_argument("--json", metavar="PATH", help="write the per-scene, per-planner summary as JSON")
+    p.add_argument("--plot", metavar="DIR", help="write the RMSD and joint figures (one path per scene and planner)")
+    p.add_argument("--save", metavar="DIR", help="write one dense path per scene and planner (npz: t, q, joint_names)")
+    p.add_argument("--no-progress", action="store_true")
+
+
+def command(args) -> int:
+    """Run the benchmark from parsed arguments; prints the table."""
+    from ..example_robots import example_robots_available
+
+    if not example_robots_available():
+        print("OC-RRT benchmark: PR2 needs the example-robot-data package: pip install \"optplan[robots]\"")
+        return 2
+    planners = [p for p in args.planners.split(",") if p]
+    if any(p.startswith("ompl-") for p in planners):
+        from ..planners.ompl_peers import ompl_available
+
+        if not ompl_available():
+            print("note: ompl is not installed (pip install \"optplan[ompl]\"): OMPL peer skipped")
+            planners = [p for p in planners if not p.startswith("ompl-")]
+    if args.trials < 1:
+        raise ValueError(f"--trials: expected >= 1, got {args.trials}")
+    cfg = OCBenchConfig(scenes=[s for s in args.scenes.split(",") if s], planners=planners, trials=args.trials,
+                        time_limit=args.time_limit, seed=args.seed, out=args.out, clock=args.clock,
+                        resolution=args.resolution, progress=not args.no_progress, save_dir=args.save)
+    rows = run(cfg)
+    summ = summarize(rows)
+    print(format_table(summ))
+    if args.json:
+        js = {"scenes": {sc: {p: dict(d) for p, d in e.items()} for sc, e in summ["scenes"].items()}}
+        for sc, r in summ["speedup_of_best_oc_rrt"].items():
+            for p, v in r.items():
+                js["scenes"][sc][p]["median_time_ratio_to_best_oc_rrt"] = v
+        Path(args.json).write_text(json.dumps(js, indent=2))
+        print(f"wrote {args.json}")
+    if args.plot:
+        for sc in cfg.scenes:
+            for p in cfg.planners:
+                ok = [r for r in rows if r["scene"] == sc and r["planner"] == p and r["success"]]
+                if not ok:
+                    continue
+                s = setup_scene(sc, cfg.planners)
+                res = s["planners"][p].plan(s["q_start"], s["q_goal"], time_limit=cfg.time_limit,
+                                            seed=ok[0]["planner_seed"], clock=cfg.clock)
+                if res.success:
+                    dense = _dense(s, p, res.path, cfg.resolution)
+                    for f in plot_scene(args.plot, sc, dense, s["constraint"], s["robot"].joint_names, p):
+                        print(f"wrote {f}")
+    return 0
