@@ -26,6 +26,7 @@ Angles [rad], lengths [m]; ``R`` 3 × 3 rotation matrices, ``p`` 3-vectors in th
 """
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -108,6 +109,8 @@ def _wrap(t: float) -> float:
 
 def _in_limits(t: float, lo: float, hi: float, tol: float = 1e-12) -> list[float]:
     """Every ``t + 2πk`` inside [lo, hi]."""
+    if hi - lo < TWO_PI and lo <= t <= hi:
+        return [t]
     out = []
     k0 = math.ceil((lo - tol - t) / TWO_PI)
     while True:
@@ -175,6 +178,13 @@ class DecoupledArmIK:
         self.Wseed = self.W if self.spherical else self.W67
         self._K = [_skew(w) for w in self.w]
         self._K2 = [K @ K for K in self._K]
+        u, a, v = self.w[4], self.w[5], self.w[6]
+        self._uaav = float(u @ a) * float(a @ v)
+        self._wA = float(u @ v) - self._uaav
+        self._wB = float(u @ _cross(a, v))
+        self._axv, self._av = _cross(a, v), float(a @ v)
+        x = _cross(v, np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0]))
+        self._wx, self._vxx = x, _cross(v, x)
         self._chk_q = None
 
     # ------------------------------------------------------------------ forward kinematics (PoE)
@@ -208,7 +218,7 @@ class DecoupledArmIK:
         """All wrist solutions (k × 3: q5, q6, q7) that give the hand orientation ``R_des`` with
         the main-arm joints ``q4`` (4 angles). Exact for any wrist geometry (orientation only)."""
         Rt = self.main_rotation(q4).T @ np.asarray(R_des, float) @ self.M_R.T
-        sols = wrist_angles(self.w[4], self.w[5], self.w[6], Rt, self.singular_tol)
+        sols = self._wrist_angles(Rt)
         out = []
         for t5, t6, t7 in sols:
             if not limits:
@@ -219,6 +229,25 @@ class DecoupledArmIK:
                     for a7 in _in_limits(t7, self.lower[6], self.upper[6]):
                         out.append((a5, a6, a7))
         return np.array(out, float).reshape(-1, 3)
+
+    def _wrist_angles(self, Rt) -> list[tuple[float, float, float]]:
+        """:func:`wrist_angles` for this arm's wrist axes with the axis constants precomputed."""
+        u, a, v = self.w[4], self.w[5], self.w[6]
+        Rtv = Rt @ v
+        c = float(u @ Rtv)
+        out = []
+        uRtv = c
+        for t6 in _cos_sin_eq(self._wA, self._wB, c - self._uaav, self.singular_tol):
+            c6, s6 = math.cos(t6), math.sin(t6)
+            r6v = v * c6 + self._axv * s6 + a * (self._av * (1.0 - c6))
+            ur = float(u @ r6v)
+            t5 = math.atan2(float(u @ _cross(r6v, Rtv)), float(r6v @ Rtv) - ur * uRtv)
+            R56 = (_I3 + math.sin(t5) * self._K[4] + (1.0 - math.cos(t5)) * self._K2[4]) @ \
+                (_I3 + s6 * self._K[5] + (1.0 - c6) * self._K2[5])
+            y = R56.T @ (Rt @ self._wx)
+            t7 = math.atan2(float(y @ self._vxx), float(self._wx @ y))
+            out.append((t5, _wrap(t6), t7))
+        return out
 
     # ------------------------------------------------------------------ full pose
     def solve(self, R_des, p_des, q1: float) -> np.ndarray:
@@ -268,7 +297,7 @@ class DecoupledArmIK:
             for i2, (t2, t3) in enumerate(self._sub2(P - S, Q - S)):
                 R234 = self._exp(1, t2)[0] @ self._exp(2, t3)[0] @ R4
                 Rt = R234.T @ Rg
-                for i5, (t5, t6, t7) in enumerate(wrist_angles(self.w[4], self.w[5], self.w[6], Rt, self.singular_tol)):
+                for i5, (t5, t6, t7) in enumerate(self._wrist_angles(Rt)):
                     out.append(((i4, i2, i5), np.array([q1, t2, t3, t4, t5, t6, t7])))
         return out
 
@@ -330,14 +359,11 @@ class DecoupledArmIK:
         return out
 
     def _limit_variants(self, x) -> list[np.ndarray]:
-        cands = [_in_limits(x[0], self.lower[0], self.upper[0]) and [x[0]]]
-        cands += [_in_limits(float(x[k]), self.lower[k], self.upper[k]) for k in range(1, 7)]
+        """Every 2πk shift of q2..q7 inside the limits (q1 is given: kept as it is)."""
+        cands = [[float(x[0])]] + [_in_limits(float(x[k]), self.lower[k], self.upper[k]) for k in range(1, 7)]
         if any(not c for c in cands):
             return []
-        out = [np.array([])]
-        for c in cands:
-            out = [np.r_[o, t] for o in out for t in c]
-        return out
+        return [np.array(c) for c in itertools.product(*cands)]
 
     def _sub2(self, p: np.ndarray, q: np.ndarray) -> list[tuple[float, float]]:
         """Paden-Kahan subproblem 2: (θ2, θ3) with R(w2, θ2) R(w3, θ3) p = q (axes through the origin)."""
