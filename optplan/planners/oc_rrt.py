@@ -44,8 +44,8 @@ TRAPPED, ADVANCED, REACHED = 0, 1, 2
 @dataclass(frozen=True)
 class OCRRTOptions:
     """``connect``: RRT-Connect (two trees) instead of goal-biased RRT. ``step`` [rad]: largest
-    parameter change per OCSteer (max-norm). ``collision_step`` [rad]: spacing of the
-    configurations checked along an edge, in parameters and (by subdividing) in joints. ``max_joint_step`` [rad]: largest joint change allowed
+    parameter change per OCSteer (max-norm). ``collision_step`` [rad]: parameter spacing of the
+    configurations checked along an edge. ``max_joint_step`` [rad]: largest joint change allowed
     between consecutive checked configurations (continuity on one IK branch). ``goal_bias``:
     probability of steering to the goal (RRT). ``max_sample_tries``: redraws of an unsolvable
     sample before the iteration is skipped. ``reach_tolerance`` [rad]: trees meet / the goal is
@@ -54,7 +54,7 @@ class OCRRTOptions:
 
     connect: bool = True
     step: float = 0.3
-    collision_step: float = 0.05
+    collision_step: float = 0.1
     max_joint_step: float = 0.5
     goal_bias: float = 0.1
     max_sample_tries: int = 50
@@ -145,24 +145,16 @@ class OCRRT(Planner):
         o, mf = self.options, self.manifold
         d = p1 - p0
         n = max(1, int(math.ceil(float(np.abs(d).max()) / o.collision_step)))
-        q, pprev = q0, p0
+        q = q0
         for k in range(1, n + 1):
-            pk = p0 + (k / n) * d if k < n else p1
-            x = mf.complete(pk, ref=q)
+            x = mf.complete(p0 + (k / n) * d if k < n else p1, ref=q)
             if x is None or float(np.abs(x - q).max()) > o.max_joint_step:
                 st["steer_rejects"] += 1
                 return None
-            m = int(math.ceil(float(np.abs(x - q).max()) / o.collision_step))
-            for j in range(1, m + 1):       # the joints moved more than the parameters: finer checks
-                y = x if j == m else mf.complete(pprev + (j / m) * (pk - pprev), ref=q)
-                if y is None or float(np.abs(y - q).max()) > o.max_joint_step:
-                    st["steer_rejects"] += 1
-                    return None
-                if not self._valid(y):
-                    st["collisions"] += 1
-                    return None
-                q = y
-            pprev = pk
+            if not self._valid(x):
+                st["collisions"] += 1
+                return None
+            q = x
         return q
 
     def oc_steer(self, tree: _Tree, i_near: int, p_target: np.ndarray, st) -> tuple[int, int]:
