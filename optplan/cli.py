@@ -127,6 +127,12 @@ def _cmd_bench_tcbirrt(args) -> int:
     return 0
 
 
+def _cmd_bench_oc_rrt(args) -> int:
+    from .bench.oc_rrt import command
+
+    return command(args)
+
+
 def _cmd_bench_warmstart(args) -> int:
     from .bench.engine import engine_error
     from .bench.warmstart import WarmstartConfig, format_summary, run, summarize, validate
@@ -304,6 +310,12 @@ def build_parser() -> argparse.ArgumentParser:
     tb.add_argument("--no-plot", action="store_true")
     _engine_args(tb)
     tb.set_defaults(func=_cmd_bench_tcbirrt)
+
+    oc = bench.add_parser("oc-rrt", help="OC-RRT vs CBiRRT vs OMPL: orientation-constrained dual-arm PR2 scenes")
+    from .bench.oc_rrt import add_arguments as _oc_args
+
+    _oc_args(oc)
+    oc.set_defaults(func=_cmd_bench_oc_rrt)
 
     ws = bench.add_parser("warmstart", help="IPOPT from the TCBiRRT path (warm) vs from a straight line "
                           "(cold) on perturbed trials")

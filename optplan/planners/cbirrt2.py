@@ -94,22 +94,34 @@ class _Tree:
 
 
 class CBiRRT2(Planner):
-    """CBiRRT2 on the closed chain of ``scene.object``'s two grasps (see the module docstring)."""
+    """CBiRRT2 on the closed chain of ``scene.object``'s two grasps (see the module docstring), or
+    on any other ``constraint``: an object with ``h_jacobian(q) -> (h, J)`` (``dim`` residuals and
+    their ``dim × nq`` Jacobian; residual 0 on the manifold, e.g.
+    :class:`~optplan.planners.orientation.DualArmOrientationConstraint` with TSR-style bounds on
+    the orientation error), ``dim`` and optionally ``object_pose(q)``. Works for any fixed-base robot."""
 
     name = "cbirrt2"
 
     def __init__(self, robot, scene, options: CBiRRT2Options | None = None, *, checker: ValidityChecker | None = None,
-                 kinematics: ClosedChainKinematics | None = None):
+                 kinematics: ClosedChainKinematics | None = None, constraint=None):
         super().__init__(robot, scene)
-        if scene is None or scene.object is None or len(scene.object.grasps) != 2:
-            raise ConfigurationError("CBiRRT2 needs a scene with an [object] grasped by two arms")
+        if constraint is None and (scene is None or scene.object is None or len(scene.object.grasps) != 2):
+            raise ConfigurationError("CBiRRT2 needs a scene with an [object] grasped by two arms, or a constraint")
+        if constraint is not None and not (hasattr(constraint, "h_jacobian") and hasattr(constraint, "dim")):
+            raise TypeError(f"constraint: expected an object with h_jacobian(q) and dim, got {type(constraint).__name__}")
         self.options = options or CBiRRT2Options()
         if not isinstance(self.options, CBiRRT2Options):
             raise TypeError(f"options: expected CBiRRT2Options, got {type(self.options).__name__}")
         self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
-        self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
-        self.grasps = scene.object.grasps
-        self._eye = np.eye(6)
+        self.constraint = constraint
+        if constraint is None:
+            self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
+            self.grasps = scene.object.grasps
+            self._eye = np.eye(6)
+        else:
+            self.kin = constraint
+            self.grasps = None
+            self._eye = np.eye(int(constraint.dim))
 
     # ------------------------------------------------------------------ projection
     def project(self, q: np.ndarray, st: dict) -> np.ndarray | None:
@@ -175,7 +187,10 @@ class CBiRRT2(Planner):
         st = {"iterations": 0, "projections": 0, "projection_failures": 0}
         c0 = ck.n_checks
         for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
-            ep, eo = closure_error(self.robot, self.grasps, q)
+            if self.constraint is None:
+                ep, eo = closure_error(self.robot, self.grasps, q)
+            else:
+                ep, eo = float(np.abs(self.constraint.h_jacobian(q)[0]).max()), 0.0
             if not ck.in_limits(q):
                 return self.empty_result(status, f"{which} outside the joint limits", **st)
             if max(ep, eo) > 1e-6:
@@ -210,6 +225,6 @@ class CBiRRT2(Planner):
             path = path[::-1]
         P = np.array(path)
         P[0], P[-1] = q_start, q_goal
-        poses = [self.kin.object_pose(q) for q in P]
+        poses = [self.kin.object_pose(q) for q in P] if hasattr(self.kin, "object_pose") else [None] * len(P)
         return PlanResult(PlanStatus.EXACT, self.name, P, poses, np.ones(len(P), bool),
                           [PathSegment("constrained", 0, len(P) - 1)], st)

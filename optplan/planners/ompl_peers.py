@@ -82,7 +82,7 @@ class OMPLPeerOptions:
             raise ValueError(f"OMPLPeerOptions.margin: expected a number >= 0 m, got {self.margin!r}")
 
 
-def make_ompl_peer(name: str, robot, scene, *, checker=None, kinematics=None, **kw) -> "OMPLPeer":
+def make_ompl_peer(name: str, robot, scene, *, checker=None, kinematics=None, constraint=None, **kw) -> "OMPLPeer":
     """``"ompl-<space>[-<planner>]"`` → :class:`OMPLPeer` (planner defaults to RRTConnect);
     ``space`` ∈ projected, atlas, tb (tangent bundle)."""
     parts = name.lower().split("-")
@@ -95,7 +95,7 @@ def make_ompl_peer(name: str, robot, scene, *, checker=None, kinematics=None, **
     planner = parts[2] if len(parts) > 2 else "rrtconnect"
     planner = {"bkpiece": "bkpiece1", "kpiece": "kpiece1"}.get(planner, planner)
     opts = OMPLPeerOptions(space=space, planner=planner, **kw)
-    return OMPLPeer(robot, scene, opts, name=name, checker=checker, kinematics=kinematics)
+    return OMPLPeer(robot, scene, opts, name=name, checker=checker, kinematics=kinematics, constraint=constraint)
 
 
 class OMPLPeer(Planner):
@@ -111,10 +111,12 @@ class OMPLPeer(Planner):
     name = "ompl"
 
     def __init__(self, robot, scene, options: OMPLPeerOptions | None = None, *, name: str | None = None,
-                 checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None):
+                 checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None,
+                 constraint=None):
         super().__init__(robot, scene)
-        if scene is None or scene.object is None or len(scene.object.grasps) != 2:
-            raise ConfigurationError("OMPL peers need a scene with an [object] grasped by two arms")
+        if constraint is None and (scene is None or scene.object is None or len(scene.object.grasps) != 2):
+            raise ConfigurationError("OMPL peers need a scene with an [object] grasped by two arms, or a constraint "
+                                     "(an object with h(q), h_jacobian(q) and dim)")
         try:
             from ompl import base as ob, geometric as og, util as ou
         except ImportError as exc:
@@ -124,16 +126,26 @@ class OMPLPeer(Planner):
         self.options = options or OMPLPeerOptions()
         self.name = name or f"ompl-{self.options.space}-{self.options.planner}"
         self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
-        self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
-        self.grasps = scene.object.grasps
+        self.constraint = constraint
+        if constraint is None:
+            self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
+            self.grasps = scene.object.grasps
+        else:
+            self.kin, self.grasps = constraint, None
+
+    def _residual(self, q) -> float:
+        if self.constraint is None:
+            return max(closure_error(self.robot, self.grasps, q))
+        return float(np.abs(self.constraint.h(q)).max())
 
     def _constraint(self, counters: dict):
         ob, kin, nq = self._ob, self.kin, self.robot.nq
         o = self.options
+        dim = 6 if self.constraint is None else int(self.constraint.dim)
 
         class _ClosedChain(ob.Constraint):
             def __init__(self):
-                super().__init__(nq, 6, o.tolerance)
+                super().__init__(nq, dim, o.tolerance)
                 self.setMaxIterations(o.max_projection_iterations)
 
             def function(self, x, out):
@@ -151,8 +163,7 @@ class OMPLPeer(Planner):
         o, ck, nq = self.options, self.checker, self.robot.nq
         st = {"constraint_calls": 0, "jacobian_calls": 0, "validity_calls": 0}
         for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
-            ep, eo = closure_error(self.robot, self.grasps, q)
-            if not ck.in_limits(q) or not ck.is_valid(q) or max(ep, eo) > max(o.tolerance, 1e-6):
+            if not ck.in_limits(q) or not ck.is_valid(q) or self._residual(q) > max(o.tolerance, 1e-6):
                 return self.empty_result(status, f"{which} out of limits, in collision or off the manifold", **st)
         global _OMPL_SEEDED
         if not _OMPL_SEEDED:
@@ -215,7 +226,7 @@ class OMPLPeer(Planner):
         st["path_check"] = ok
         path.interpolate()
         P = np.array([[path.getState(k)[i] for i in range(nq)] for k in range(path.getStateCount())])
-        resid = max(max(closure_error(self.robot, self.grasps, q)) for q in P)
+        resid = max(self._residual(q) for q in P)
         bad = sum(1 for q in P if not ck.is_valid(q))
         st["max_closed_chain_residual"] = resid
         st["invalid_states"] = bad
@@ -223,6 +234,6 @@ class OMPLPeer(Planner):
             return self.empty_result(PlanStatus.FAILED, f"returned path fails re-validation (check={ok}, "
                                      f"{bad} invalid states, residual {resid:.1e})", **st)
         P[0], P[-1] = q_start, q_goal
-        poses = [self.kin.object_pose(q) for q in P]
+        poses = [self.kin.object_pose(q) for q in P] if self.constraint is None else [None] * len(P)
         return PlanResult(PlanStatus.EXACT, self.name, P, poses, np.ones(len(P), bool),
                           [PathSegment("constrained", 0, len(P) - 1)], st)

@@ -1,0 +1,277 @@
+"""OC-RRT — orientation-constrained RRT for decoupled (spherical-wrist) dual arms (Alg. 1-2 of
+"OC-RRT" by the PR2 dual-arm paper's authors), in RRT and RRT-Connect form.
+
+Every node is ON the constraint manifold by construction, never projected:
+
+* **Sampling** (Alg. 1): draw the manifold parameters ``p`` uniformly in the joint limits
+  (open chain: q1..q4 of both arms; closed chain: q1..q4 of the active arm and the passive arm's
+  redundancy angle q1), solve the wrist(s) in closed form for the required hand orientation(s)
+  and, in closed chain, the passive arm by the analytic full-pose IK; a random branch is taken.
+  Parameters without a solution in the joint limits are redrawn.
+* **OCSteer** (Alg. 2): from the nearest node, step at most ``step`` [rad] (max-norm) in parameter
+  space toward the sample, complete the configuration on the branch nearest the parent, and
+  reject it if any joint moved more than ``max_joint_step`` [rad] (a branch jump or a
+  near-singular wrist) or if it, or an intermediate configuration of the edge every
+  ``collision_step`` [rad] of parameter motion (also completed on the manifold and checked for
+  the same joint-step bound), is in collision.
+* **Edges** are parameter-space straight lines completed on the manifold: :meth:`OCRRT.densify`
+  resamples a returned path at any resolution, every configuration on the manifold to the IK's
+  accuracy (~1e-14), which is how ORMSD / PRMSD are evaluated "along the path".
+
+RRT variant: goal-biased (``goal_bias``) single tree; the goal is reached when a steer toward it
+lands on it (same branch). RRT-Connect: two trees, extend one toward the sample, connect the
+other greedily to the new node.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ConfigurationError
+from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from .orientation import DualArmOrientationConstraint, OrientationManifold
+from .validity import ValidityChecker
+
+__all__ = ["OCRRTOptions", "OCRRT"]
+log = logging.getLogger(__name__)
+
+TRAPPED, ADVANCED, REACHED = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class OCRRTOptions:
+    """``connect``: RRT-Connect (two trees) instead of goal-biased RRT. ``step`` [rad]: largest
+    parameter change per OCSteer (max-norm). ``collision_step`` [rad]: parameter spacing of the
+    configurations checked along an edge. ``max_joint_step`` [rad]: largest joint change allowed
+    between consecutive checked configurations (continuity on one IK branch). ``goal_bias``:
+    probability of steering to the goal (RRT). ``max_sample_tries``: redraws of an unsolvable
+    sample before the iteration is skipped. ``reach_tolerance`` [rad]: trees meet / the goal is
+    reached when the configurations agree to this (max-norm). ``max_iterations`` (0: time only).
+    ``margin`` [m]: collision margin."""
+
+    connect: bool = True
+    step: float = 0.3
+    collision_step: float = 0.1
+    max_joint_step: float = 0.5
+    goal_bias: float = 0.1
+    max_sample_tries: int = 50
+    reach_tolerance: float = 1e-9
+    max_iterations: int = 0
+    margin: float = 0.0
+
+    def __post_init__(self):
+        for name in ("step", "collision_step", "max_joint_step", "reach_tolerance"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"OCRRTOptions.{name}: expected a positive number, got {v!r}")
+        if not (0.0 <= self.goal_bias <= 1.0):
+            raise ValueError(f"OCRRTOptions.goal_bias: expected a probability in [0, 1], got {self.goal_bias!r}")
+        for name in ("max_sample_tries", "max_iterations"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= (1 if name == "max_sample_tries" else 0)):
+                raise ValueError(f"OCRRTOptions.{name}: expected a non-negative int, got {v!r}")
+        if not (isinstance(self.margin, (int, float)) and self.margin >= 0):
+            raise ValueError(f"OCRRTOptions.margin: expected a number >= 0 m, got {self.margin!r}")
+
+
+class _Tree:
+    def __init__(self, q, p, cap: int = 512):
+        self.Q = np.empty((cap, q.size))
+        self.P = np.empty((cap, p.size))
+        self.Q[0], self.P[0] = q, p
+        self.parent = [-1]
+        self.n = 1
+
+    def add(self, q, p, parent) -> int:
+        if self.n == len(self.Q):
+            self.Q = np.concatenate([self.Q, np.empty_like(self.Q)])
+            self.P = np.concatenate([self.P, np.empty_like(self.P)])
+        self.Q[self.n], self.P[self.n] = q, p
+        self.parent.append(parent)
+        self.n += 1
+        return self.n - 1
+
+    def nearest(self, q) -> int:
+        d = self.Q[:self.n] - q
+        return int(np.argmin(np.einsum("ij,ij->i", d, d)))
+
+    def branch(self, i) -> list[np.ndarray]:
+        out = []
+        while i >= 0:
+            out.append(self.Q[i].copy())
+            i = self.parent[i]
+        return out[::-1]
+
+
+class OCRRT(Planner):
+    """OC-RRT / OC-RRT-Connect on a :class:`DualArmOrientationConstraint` (module docstring)."""
+
+    name = "oc_rrt"
+
+    def __init__(self, robot, scene, constraint: DualArmOrientationConstraint, options: OCRRTOptions | None = None,
+                 *, checker: ValidityChecker | None = None, manifold: OrientationManifold | None = None):
+        super().__init__(robot, scene)
+        if not isinstance(constraint, DualArmOrientationConstraint):
+            raise TypeError(f"constraint: expected DualArmOrientationConstraint, got {type(constraint).__name__}")
+        self.options = options or OCRRTOptions()
+        if not isinstance(self.options, OCRRTOptions):
+            raise TypeError(f"options: expected OCRRTOptions, got {type(self.options).__name__}")
+        self.constraint = constraint
+        self.manifold = manifold or OrientationManifold(constraint)
+        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
+        self.name = "oc_rrt_connect" if self.options.connect else "oc_rrt"
+        self._valid = self.checker.is_valid
+
+    # ------------------------------------------------------------------ manifold moves
+    def sample(self, rng, st) -> tuple[np.ndarray, np.ndarray] | None:
+        """Alg. 1: a configuration on the manifold from uniformly drawn parameters."""
+        mf = self.manifold
+        for _ in range(self.options.max_sample_tries):
+            st["samples"] += 1
+            p = rng.uniform(mf.lower, mf.upper)
+            q = mf.complete(p, rng=rng)
+            if q is not None:
+                return q, p
+            st["sample_failures"] += 1
+        return None
+
+    def _walk(self, q0, p0, p1, st) -> np.ndarray | None:
+        """Configurations from q0 (parameters p0) to parameters p1 along the parameter line, every
+        ``collision_step``, each completed on the branch of its predecessor, continuity- and
+        collision-checked. Returns the last configuration, or None."""
+        o, mf = self.options, self.manifold
+        d = p1 - p0
+        n = max(1, int(math.ceil(float(np.abs(d).max()) / o.collision_step)))
+        q = q0
+        for k in range(1, n + 1):
+            x = mf.complete(p0 + (k / n) * d if k < n else p1, ref=q)
+            if x is None or float(np.abs(x - q).max()) > o.max_joint_step:
+                st["steer_rejects"] += 1
+                return None
+            if not self._valid(x):
+                st["collisions"] += 1
+                return None
+            q = x
+        return q
+
+    def oc_steer(self, tree: _Tree, i_near: int, p_target: np.ndarray, st) -> tuple[int, int]:
+        """One OCSteer step from node i_near toward the parameters p_target."""
+        p0 = tree.P[i_near]
+        d = p_target - p0
+        dist = float(np.abs(d).max())
+        if dist < 1e-15:
+            return REACHED, i_near
+        p1 = p_target if dist <= self.options.step else p0 + (self.options.step / dist) * d
+        q1 = self._walk(tree.Q[i_near], p0, p1, st)
+        if q1 is None:
+            return TRAPPED, i_near
+        j = tree.add(q1, p1, i_near)
+        return (REACHED if p1 is p_target else ADVANCED), j
+
+    def connect(self, tree: _Tree, q_target, p_target, st, deadline) -> tuple[int, int]:
+        i = tree.nearest(q_target)
+        while not deadline.expired():
+            res, i = self.oc_steer(tree, i, p_target, st)
+            if res == REACHED:
+                if float(np.abs(tree.Q[i] - q_target).max()) <= self.options.reach_tolerance:
+                    return REACHED, i
+                return TRAPPED, i     # same parameters, other IK branch
+            if res == TRAPPED:
+                return TRAPPED, i
+        return TRAPPED, i
+
+    # ------------------------------------------------------------------ main loop
+    def _check_endpoint(self, q, which) -> str | None:
+        if not self.checker.in_limits(q):
+            return f"{which} outside the joint limits"
+        eo, ep = self.constraint.errors(q)
+        if max(eo, ep) > 1e-9:
+            return f"{which} off the orientation-constraint manifold (errors {eo:.1e} rad, {ep:.1e} m)"
+        if not self.checker.is_valid(q):
+            return f"{which} in collision"
+        return None
+
+    def _plan(self, q_start, q_goal, deadline: Deadline, rng, seed) -> PlanResult:
+        o, mf = self.options, self.manifold
+        st = {"iterations": 0, "samples": 0, "sample_failures": 0, "steer_rejects": 0, "collisions": 0}
+        c0, n0 = self.checker.n_checks, mf.n_complete
+        for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
+            msg = self._check_endpoint(q, which)
+            if msg:
+                return self.empty_result(status, msg, **st)
+        ps, pg = mf.params(q_start), mf.params(q_goal)
+        ta = _Tree(q_start, ps)
+        tb = _Tree(q_goal, pg) if o.connect else None
+        a_is_start, found = True, None
+        while not deadline.expired():
+            if o.max_iterations and st["iterations"] >= o.max_iterations:
+                break
+            st["iterations"] += 1
+            if not o.connect:
+                if rng.random() < o.goal_bias:
+                    res, i = self.connect(ta, q_goal, pg, st, deadline)
+                    if res == REACHED:
+                        found = (i, None)
+                        break
+                    continue
+                s = self.sample(rng, st)
+                if s is None:
+                    continue
+                self.oc_steer(ta, ta.nearest(s[0]), s[1], st)
+                continue
+            s = self.sample(rng, st)
+            if s is None:
+                continue
+            res, i_a = self.oc_steer(ta, ta.nearest(s[0]), s[1], st)
+            if res != TRAPPED:
+                res_b, i_b = self.connect(tb, ta.Q[i_a], ta.P[i_a], st, deadline)
+                if res_b == REACHED:
+                    found = (i_a, i_b)
+                    break
+            ta, tb, a_is_start = tb, ta, not a_is_start
+        st["nodes"] = ta.n + (tb.n if tb is not None else 0)
+        st["collision_checks"] = self.checker.n_checks - c0
+        st["ik_completions"] = mf.n_complete - n0
+        if found is None:
+            if deadline.expired():
+                return self.empty_result(PlanStatus.TIMEOUT, "time limit reached", **st)
+            return self.empty_result(PlanStatus.FAILED, "iteration cap reached", **st)
+        if not o.connect:
+            path = ta.branch(found[0])
+        else:
+            pa, pb = ta.branch(found[0]), tb.branch(found[1])
+            path = pa + pb[::-1][1:]
+            if not a_is_start:
+                path = path[::-1]
+        P = np.array(path)
+        P[0], P[-1] = q_start, q_goal
+        return PlanResult(PlanStatus.EXACT, self.name, P, [None] * len(P), np.ones(len(P), bool),
+                          [PathSegment("constrained", 0, len(P) - 1)], st)
+
+    # ------------------------------------------------------------------ dense path
+    def densify(self, path: np.ndarray, resolution: float = 0.01) -> np.ndarray:
+        """The path resampled every ``resolution`` [rad] of parameter motion, every configuration
+        completed on the manifold on the branch of its predecessor (the planner's own edges).
+        Raises ValueError if an edge cannot be followed (a path not made by this planner)."""
+        if not (resolution > 0):
+            raise ValueError(f"resolution: expected a positive number of radians, got {resolution!r}")
+        path = np.asarray(path, float)
+        mf = self.manifold
+        out = [path[0]]
+        for a, b in zip(path[:-1], path[1:]):
+            pa, pb = mf.params(a), mf.params(b)
+            n = max(1, int(math.ceil(float(np.abs(pb - pa).max()) / resolution)))
+            q = a
+            for k in range(1, n + 1):
+                x = mf.complete(pa + (k / n) * (pb - pa), ref=q)
+                if x is None or float(np.abs(x - q).max()) > self.options.max_joint_step:
+                    raise ValueError(f"densify: the manifold edge cannot be followed at step {k}/{n}")
+                out.append(x)
+                q = x
+            if float(np.abs(q - b).max()) > 1e-8:
+                raise ValueError(f"densify: the edge ends on another IK branch ({np.abs(q - b).max():.2e} rad)")
+            out[-1] = b
+        return np.array(out)

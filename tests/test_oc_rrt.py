@@ -1,0 +1,211 @@
+"""OC-RRT on PR2 / Baxter from example-robot-data: analytic IK against Pinocchio FK, manifold
+membership of every node and edge, the generalised CBiRRT, and (slow) statistical success."""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.example_robots import example_robots_available
+
+pytestmark = pytest.mark.skipif(not example_robots_available(),
+                                reason="example-robot-data not installed (pip install 'optplan[robots]')")
+
+
+@pytest.fixture(scope="module")
+def pr2():
+    from optplan.example_robots import load_pr2
+
+    return load_pr2()
+
+
+@pytest.fixture(scope="module")
+def baxter():
+    from optplan.example_robots import load_baxter
+
+    return load_baxter()
+
+
+def _pin_pose(robot, q, fid):
+    d = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, d, q)
+    return d.oMf[fid].copy()
+
+
+def _pose_err(M, R, p):
+    return max(float(np.linalg.norm(pin.log3(M.rotation.T @ R))), float(np.linalg.norm(M.translation - p)))
+
+
+def test_robots_load(pr2, baxter):
+    for r in (pr2, baxter):
+        assert r.nq == 14 and set(r.arms) == {"left", "right"}
+        assert all(a.n == 7 for a in r.arms.values())
+        assert len(r.collision_pairs) > 100
+    assert pr2.arm("left").joint_names[0] == "l_shoulder_pan_joint"
+    assert baxter.arm("right").joint_names[-1] == "right_w2"
+
+
+@pytest.mark.parametrize("arm", ["left", "right"])
+def test_pr2_ik_round_trip_all_branches(pr2, arm):
+    """Random joint vectors → Pinocchio pose → analytic IK: every branch reproduces the pose to
+    1e-12 (checked with Pinocchio, not the IK's own FK) and the original joints are among them."""
+    from optplan.ik_analytic import DecoupledArmIK
+
+    ik = DecoupledArmIK(pr2, arm)
+    assert ik.spherical
+    rng = np.random.default_rng(7)
+    fid = ik.arm.ee_frame_id
+    worst, n_branches = 0.0, 0
+    for _ in range(300):
+        q = pr2.random_joints(rng)
+        M = _pin_pose(pr2, q, fid)
+        qa = ik.arm_joints(q)
+        W = ik.wrist(qa[:4], M.rotation)
+        assert any(np.abs(w - qa[4:]).max() < 1e-9 for w in W)
+        for w in W:
+            x = q.copy()
+            x[ik.q_idx[4:]] = w
+            worst = max(worst, float(np.linalg.norm(pin.log3(_pin_pose(pr2, x, fid).rotation.T @ M.rotation))))
+        S = ik.solve(M.rotation, M.translation, qa[0])
+        assert any(np.abs(s - qa).max() < 1e-9 for s in S)
+        n_branches += len(S)
+        for s in S:
+            assert np.all(s >= ik.lower - 1e-12) and np.all(s <= ik.upper + 1e-12)
+            x = q.copy()
+            x[ik.q_idx] = s
+            worst = max(worst, _pose_err(_pin_pose(pr2, x, fid), M.rotation, M.translation))
+    assert worst <= 1e-12
+    assert n_branches > 300        # several branches on average (both wrist rolls ± 2π, elbow/shoulder)
+
+
+def test_baxter_offset_wrist(baxter):
+    """Baxter's wrist axes do not meet (w0-w1 offset 0.01 m): orientation-only wrist IK is still
+    exact; full-pose IK = analytic seed + Newton, to 1e-12."""
+    from optplan.ik_analytic import DecoupledArmIK
+
+    ik = DecoupledArmIK(baxter, "left")
+    assert not ik.spherical and ik.wrist_offset > 1e-3
+    rng = np.random.default_rng(3)
+    fid = ik.arm.ee_frame_id
+    found = 0
+    for _ in range(25):
+        q = baxter.random_joints(rng)
+        M = _pin_pose(baxter, q, fid)
+        qa = ik.arm_joints(q)
+        W = ik.wrist(qa[:4], M.rotation)
+        assert any(np.abs(w - qa[4:]).max() < 1e-9 for w in W)
+        S = ik.solve(M.rotation, M.translation, qa[0])
+        found += any(np.abs(s - qa).max() < 1e-8 for s in S)
+        for s in S:
+            x = q.copy()
+            x[ik.q_idx] = s
+            assert _pose_err(_pin_pose(baxter, x, fid), M.rotation, M.translation) <= 1e-12
+    assert found >= 23     # the original solution is found (misses only next to a fold of the elbow)
+
+
+def test_unreachable_and_singular_give_no_solution(pr2):
+    from optplan.ik_analytic import DecoupledArmIK
+
+    ik = DecoupledArmIK(pr2, "left")
+    assert ik.solve(np.eye(3), np.array([3.0, 0.0, 1.0]), 0.0).shape == (0, 7)
+    assert ik.solve(np.eye(3), np.array([0.5, 0.2, 1.0]), 10.0).shape == (0, 7)   # q1 outside its limits
+    q = np.array([0.2, 0.3, 0.1, -1.0, 0.4, 0.0, 0.3])        # wrist flex 0: forearm and wrist rolls aligned
+    R, p = ik.fk(q)
+    assert ik.wrist(q[:4], R).shape == (0, 3)
+    assert ik.solve(R, p, q[0]).shape == (0, 7)
+
+
+def _task(robot, scene_name):
+    from optplan.planners.orientation import OrientationManifold, constraint_from_scene, endpoints_from_scene
+    from optplan.scene import Scene
+
+    sc = Scene.load(scene_name)
+    con = constraint_from_scene(robot, sc)
+    mf = OrientationManifold(con)
+    qs, qg = endpoints_from_scene(mf, sc)
+    return sc, con, mf, qs, qg
+
+
+@pytest.mark.parametrize("scene_name", ["oc_industrial_1", "oc_tabletop"])
+def test_oc_rrt_nodes_and_edges_on_manifold(pr2, scene_name):
+    from optplan.planners.oc_rrt import OCRRT, OCRRTOptions
+
+    sc, con, mf, qs, qg = _task(pr2, scene_name)
+    pl = OCRRT(pr2, sc, con, OCRRTOptions(connect=True), manifold=mf)
+    res = pl.plan(qs, qg, time_limit=60.0, seed=1)
+    assert res.success, res.message
+    assert np.array_equal(res.path[0], qs) and np.array_equal(res.path[-1], qg)
+    for q in res.path:                                   # every node
+        eo, ep = con.errors(q)
+        assert eo <= 1e-12 and ep <= 1e-12
+    dense = pl.densify(res.path, 0.02)                   # every edge, densely
+    E = np.array([con.errors(q) for q in dense])
+    assert E.max() <= 1e-12
+    assert np.abs(np.diff(dense, axis=0)).max() <= pl.options.max_joint_step
+    assert all(pl.checker.is_valid(q) for q in dense[::3])
+    assert np.all(dense >= pr2.lower - 1e-12) and np.all(dense <= pr2.upper + 1e-12)
+    o, p = con.rmsd(dense)
+    assert o <= 1e-9 and (np.isnan(p) if con.mode == "open" else p <= 1e-9)
+
+
+def test_constraint_jacobian_matches_finite_differences(pr2):
+    from optplan.planners.orientation import constraint_from_scene
+    from optplan.scene import Scene
+
+    con = constraint_from_scene(pr2, Scene.load("oc_tabletop"))
+    q = pr2.random_joints(np.random.default_rng(0))
+    h, J = con.h_jacobian(q)
+    eps = 1e-7
+    Jn = np.column_stack([(con.h(q + eps * e) - con.h(q - eps * e)) / (2 * eps) for e in np.eye(14)])
+    assert np.abs(J - Jn).max() < 1e-6
+    assert np.allclose(h, con.h(q))
+
+
+def test_cbirrt_generalised_to_orientation_constraint(pr2):
+    from optplan.planners.cbirrt2 import CBiRRT2, CBiRRT2Options
+
+    sc, con, mf, qs, qg = _task(pr2, "oc_industrial_1")
+    pl = CBiRRT2(pr2, sc, CBiRRT2Options(), constraint=con)
+    res = pl.plan(qs, qg, time_limit=60.0, seed=0)
+    assert res.success, res.message
+    assert max(float(np.abs(con.h(q)).max()) for q in res.path) <= 1e-6
+
+
+def test_tsr_free_axis_residual(pr2):
+    """A free yaw axis: yaw errors are not penalised, pitch errors are."""
+    from optplan.planners.orientation import DualArmOrientationConstraint
+    from optplan.spatial import rpy_to_matrix
+
+    b = np.array([[0.0, 0.0], [0.0, 0.0], [-np.inf, np.inf]])
+    con = DualArmOrientationConstraint(pr2, "open", {"left": np.eye(3), "right": np.eye(3)}, orientation_bounds=b)
+    q = np.zeros(14)
+    Rl = con.hand_pose(q, "left").rotation
+    Rr = con.hand_pose(q, "right").rotation
+    con.R_hands = {"left": rpy_to_matrix(0, 0, 0.3) @ Rl, "right": Rr}
+    assert np.abs(con.h(q)).max() < 1e-12
+    con.R_hands = {"left": rpy_to_matrix(0, 0.3, 0) @ Rl, "right": Rr}
+    assert np.abs(con.h(q)).max() > 0.1
+
+
+def test_bad_input(pr2):
+    from optplan.errors import ConfigurationError
+    from optplan.planners.oc_rrt import OCRRTOptions
+    from optplan.planners.orientation import DualArmOrientationConstraint
+
+    with pytest.raises(ValueError, match="step"):
+        OCRRTOptions(step=-1.0)
+    with pytest.raises(ConfigurationError, match="mode"):
+        DualArmOrientationConstraint(pr2, "sideways", {})
+    with pytest.raises(ConfigurationError, match="R_hands"):
+        DualArmOrientationConstraint(pr2, "open", {"left": np.eye(3)})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene_name", ["oc_industrial_1", "oc_tabletop"])   # open chain, closed chain
+def test_oc_rrt_connect_success_rate(pr2, scene_name):
+    from optplan.planners.oc_rrt import OCRRT, OCRRTOptions
+
+    sc, con, mf, qs, qg = _task(pr2, scene_name)
+    pl = OCRRT(pr2, sc, con, OCRRTOptions(connect=True), manifold=mf)
+    ok = sum(pl.plan(qs, qg, time_limit=20.0, seed=s, clock="cpu").success for s in range(10))
+    assert ok >= 9
