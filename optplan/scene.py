@@ -160,8 +160,11 @@ class Scene:
         if robot is not None:
             if not isinstance(robot, str):
                 raise ModelError(f"{where}.robot: expected a robot model name, got {robot!r}")
-            if robot not in available_models():
-                raise UnknownNameError("robot model (scene's robot)", robot, available_models())
+            from .example_robots import EXAMPLE_ROBOTS
+
+            known = list(available_models()) + list(EXAMPLE_ROBOTS)  # shipped + example-robot-data's
+            if robot not in known:
+                raise UnknownNameError("robot model (scene's robot)", robot, known)
         obstacles = []
         names = set()
         obs_list = data.get("obstacles", [])
