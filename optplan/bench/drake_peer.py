@@ -389,7 +389,7 @@ class DrakeOptions:
     MinimumDistanceLowerBoundConstraint's influence-distance offset above the margin.
     tol: feasibility/optimality tolerance (SNOPT major feasibility/optimality, IPOPT tol and
     constr_viol_tol). max_iterations: SNOPT major / IPOPT iterations. time_limit [s]: SNOPT's time
-    limit (CPU), IPOPT's max_wall_time. objective_scaling: "auto" (the jerk cost divided by that of
+    limit and IPOPT's max_cpu_time (both CPU seconds). objective_scaling: "auto" (the jerk cost divided by that of
     the rest-to-rest quintic between the end configurations, as optplan scales its objective) or a
     number. trace_row: the ``trace(E) ≥ 1`` row of the closed chain.
     """
@@ -529,7 +529,7 @@ def solve_drake(dm: DrakeModel, q_knots: np.ndarray, duration: float, *, closed_
         solver = pd.IpoptSolver()
         sid = solver.solver_id()
         for k, v in (("tol", opts.tol), ("constr_viol_tol", opts.tol), ("max_iter", int(opts.max_iterations)),
-                     ("max_wall_time", float(opts.time_limit)), ("print_level", 0), ("output_file", outfile),
+                     ("max_cpu_time", float(opts.time_limit)), ("print_level", 0), ("output_file", outfile),
                      ("file_print_level", 3)):
             so.SetOption(sid, k, v)
     if not solver.available() or not solver.enabled():
