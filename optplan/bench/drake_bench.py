@@ -270,6 +270,10 @@ def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int =
         raise ValueError(f"--trials: expected an integer >= 1, got {trials!r}")
     for s in solvers:
         DrakeOptions(solver=s)  # validates the name
+    if solvers:
+        from .drake_peer import require_drake
+
+        require_drake()  # fail before any solve when Drake is missing
     solve = optplan_solve or optplan_current
     robot = RobotModel.from_name("tcbirrt_dual_arm")
     probs = _problems(list(problems), int(trials), int(first_trial), int(seed), robot)

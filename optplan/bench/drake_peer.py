@@ -42,7 +42,7 @@ from ..collision import CollisionChecker
 from ..robot import RobotModel
 from ..scene import Scene
 
-__all__ = ["DrakeUnavailable", "DrakeModel", "ClosedChainResidual", "BsplineSolution", "DrakeOptions",
+__all__ = ["DrakeUnavailable", "require_drake", "DrakeModel", "ClosedChainResidual", "BsplineSolution", "DrakeOptions",
            "DrakeResult", "fit_bspline", "jerk_matrix", "solve_drake", "SOLVERS"]
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,8 @@ class DrakeUnavailable(ImportError):
     """Drake (``pydrake``) is not installed: ``pip install "optplan[drake]"``."""
 
 
-def _pydrake():
+def require_drake():
+    """``pydrake.all``, or :class:`DrakeUnavailable` naming the extra to install."""
     try:
         import pydrake  # noqa: F401
     except ImportError as exc:
@@ -94,7 +95,7 @@ class DrakeModel:
 
     def __init__(self, robot: RobotModel, scene: Scene | None, *, object_arm: str | None = None,
                  held_object: bool = True):
-        pd = _pydrake()
+        pd = require_drake()
         if robot.is_floating:
             raise NotImplementedError("the Drake peer handles fixed-base robots only (got a free-floating base)")
         if robot.urdf_path is None:
@@ -460,7 +461,7 @@ def solve_drake(dm: DrakeModel, q_knots: np.ndarray, duration: float, *, closed_
     ``closed_chain``: an optplan :class:`~optplan.problem.ClosedChain` (None: no closed chain).
     ``margin`` [m]: lower bound on every candidate pair's signed distance at the sampled times.
     Never raises for a failed solve: the status is in the result."""
-    pd = _pydrake()
+    pd = require_drake()
     from pydrake.planning import KinematicTrajectoryOptimization
     from pydrake.trajectories import BsplineTrajectory
 
