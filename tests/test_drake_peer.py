@@ -138,6 +138,17 @@ def test_tiny_solve_returns_a_status(tcb, transport, dm, solver):
     assert s.shape == (3, tcb.nj) and np.all(np.isfinite(s))
 
 
+@pytest.mark.parametrize("solver", ["snopt", "ipopt"])
+def test_time_limit_ends_in_a_status_with_the_last_point(tcb, transport, dm, solver):
+    from optplan.tasks import transport_initial_path
+
+    Q = transport_initial_path(tcb, transport, 6, np.random.default_rng(0))
+    r = solve_drake(dm, Q, 60.0, closed_chain=DB._closed_chain(transport),
+                    options=DrakeOptions(solver=solver, time_limit=1e-4))
+    assert not r.success and "time limit" in r.status and r.solution is not None
+    assert np.all(np.isfinite(r.solution.sample([0.0, 60.0])["q"]))
+
+
 def test_bench_takes_any_optplan_solver_and_rejects_bad_names(tcb, transport, dm):
     from optplan.tasks import transport_initial_path
 
