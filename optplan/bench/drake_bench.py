@@ -322,8 +322,8 @@ def format_report(rows: list[dict]) -> str:
         lines.append(f"{r['problem']:22s} {r['method']:12s} {str(r['status'])[:34]:34s} {r['setup_s']:8.2f} "
                      f"{r['solve_s']:8.2f} {r.get('cpu_s', math.nan):7.1f} {r['iterations']:5d} {r['jerk']:9.2e} "
                      f"{r['max_closed_chain_residual']:9.1e} {1e3 * r['min_clearance_m']:8.1f} {_lim(r):8.1e} "
-                     f"{'pass' if r['passed'] else 'FAIL':>6s} {'' if math.isnan(rt) else f'{rt:9.1f}':>9s} "
-                     f"{'' if math.isnan(rc) else f'{rc:7.1f}':>7s} {'' if math.isnan(rj) else f'{rj:8.2f}':>8s}")
+                     f"{'pass' if r['passed'] else 'FAIL':>6s} {'' if math.isnan(rt) else f'{rt:9.3g}':>9s} "
+                     f"{'' if math.isnan(rc) else f'{rc:7.3g}':>7s} {'' if math.isnan(rj) else f'{rj:8.3g}':>8s}")
     lines.append("verify: converged, closed-chain residual <= 1e-6 at 10x the knot density, coal clearance >= 0; "
                  "lim viol: largest joint position [rad] / velocity [rad/s] limit violation there; t/optplan = (setup + solve) wall time of the method / that of optplan, same run; "
                  "cpu: process CPU time of the whole method call (optplan: its verify calls included)")
