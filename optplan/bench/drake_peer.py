@@ -389,7 +389,9 @@ class DrakeOptions:
     this many equally spaced times per interval (1 = at the breakpoints). influence_distance [m]:
     MinimumDistanceLowerBoundConstraint's influence-distance offset above the margin.
     tol: feasibility/optimality tolerance (SNOPT major feasibility/optimality, IPOPT tol and
-    constr_viol_tol). max_iterations: SNOPT major / IPOPT iterations. time_limit [s]: SNOPT's time
+    constr_viol_tol). max_iterations: SNOPT major / IPOPT iterations; max_minor_iterations: SNOPT's
+    total minor-iteration limit ("Iterations limit"; measured: 250,000 was reached after ~200 major
+    iterations on the 77-interval segment and on the transport problem with 2 samples per interval). time_limit [s]: SNOPT's time
     limit and IPOPT's max_cpu_time, and
     a deadline checked at every evaluation (CPU seconds; the solve then ends with a status saying so). objective_scaling: "auto" (the jerk cost divided by that of
     the rest-to-rest quintic between the end configurations, as optplan scales its objective) or a
@@ -401,6 +403,7 @@ class DrakeOptions:
     influence_distance: float = 0.01
     tol: float = 1e-6
     max_iterations: int = 3000
+    max_minor_iterations: int = 10_000_000
     time_limit: float = 600.0
     objective_scaling: float | str = "auto"
     trace_row: bool = True
@@ -549,7 +552,7 @@ def solve_drake(dm: DrakeModel, q_knots: np.ndarray, duration: float, *, closed_
         solver = pd.SnoptSolver()
         sid = solver.solver_id()
         for k, v in (("Major feasibility tolerance", opts.tol), ("Major optimality tolerance", opts.tol),
-                     ("Major iterations limit", int(opts.max_iterations)), ("Iterations limit", 100000 + 50 * int(opts.max_iterations)),
+                     ("Major iterations limit", int(opts.max_iterations)), ("Iterations limit", int(opts.max_minor_iterations)),
                      ("Time limit", float(opts.time_limit)), ("Major print level", 1)):
             so.SetOption(sid, k, v)
         so.SetOption(pd.CommonSolverOption.kPrintFileName, outfile)
