@@ -24,7 +24,7 @@ import numpy as np
 from optplan import RobotModel
 from optplan.collision import CollisionChecker
 from optplan.scene import Scene
-from optplan.tasks import grasp_configuration, straight_line_poses, task_space_path, transport_problem
+from optplan.tasks import transport_initial_path, transport_problem
 from optplan.verify import verify
 
 
@@ -35,16 +35,7 @@ def run(knots: int = 50, duration: float = 60.0, seed: int = 0, margin: float = 
     rng = np.random.default_rng(seed)
     checker = CollisionChecker(robot, scene)
     t0 = time.perf_counter()
-    start = goal = None
-    Q = None
-    for attempt in range(20):  # a start grasp whose straight-line IK path reaches the goal grasp
-        start = grasp_configuration(robot, scene, scene.start, rng, checker=checker)
-        if not start.found:
-            break
-        Q, ok = task_space_path(robot, scene, start.q, straight_line_poses(scene.start, scene.goal, knots))
-        if ok and checker.min_distance(Q[-1])[0] > 0.0:
-            break
-        Q = None
+    Q = transport_initial_path(robot, scene, knots, rng, checker=checker)
     if Q is None:
         return {"success": False, "ipopt_status": "no_initial_guess",
                 "message": "no collision-free start grasp whose straight-line IK path reaches the goal"}, None

@@ -161,6 +161,30 @@ def _cmd_bench_warmstart(args) -> int:
     return 0
 
 
+def _cmd_bench_drake(args) -> int:
+    from .bench.drake_bench import format_report, run, save_json
+
+    drake_opts = {"time_limit": args.time_limit, "samples_per_interval": args.samples_per_interval}
+    done: list = []
+
+    def on_row(r):  # the JSON file grows with every result, so a long run keeps what it measured
+        done.append(r)
+        save_json(done, args.json)
+
+    try:
+        rows = run([p.strip() for p in args.problems.split(",") if p.strip()], trials=args.trials,
+                   first_trial=args.first_trial, seed=args.seed,
+                   solvers=[s.strip() for s in args.solvers.split(",") if s.strip()], drake_options=drake_opts,
+                   on_row=on_row if args.json else None)
+    except (ValueError, ImportError) as exc:
+        print(f"optplan bench drake: error: {exc}", file=sys.stderr)
+        return 2
+    print(format_report(rows))
+    if args.json:
+        save_json(rows, args.json)
+    return 0
+
+
 def _cmd_plan(args) -> int:
     from .bench.trials import TrialGenerator
     from .pipeline import PipelineOptions, run_pipeline
@@ -336,6 +360,20 @@ def build_parser() -> argparse.ArgumentParser:
     ws.add_argument("--no-progress", action="store_true")
     _engine_args(ws)
     ws.set_defaults(func=_cmd_bench_warmstart)
+
+    dk = bench.add_parser("drake", help="optplan vs Drake's KinematicTrajectoryOptimization (SNOPT, IPOPT) on the "
+                          "transport problem and the pipeline's constrained segments, paired in one run")
+    dk.add_argument("--problems", default="transport,scene1",
+                    help="comma-separated: transport, scene1, scene2, scene3 (their trials' constrained segments)")
+    dk.add_argument("--trials", type=ca.positive_int, default=3, help="trials per scene")
+    dk.add_argument("--first-trial", type=ca.nonnegative_int, default=0, help="index of the first trial")
+    dk.add_argument("--seed", type=ca.nonnegative_int, default=0)
+    dk.add_argument("--solvers", default="snopt,ipopt", help="Drake solvers: snopt, ipopt")
+    dk.add_argument("--time-limit", type=ca.positive_float, default=300.0, help="per Drake solve [s]")
+    dk.add_argument("--samples-per-interval", type=ca.positive_int, default=1,
+                    help="Drake: closed-chain and distance constraints per B-spline interval (1 = at the knots)")
+    dk.add_argument("--json", help="write the result rows as JSON to this path")
+    dk.set_defaults(func=_cmd_bench_drake)
 
     pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene (the main job)")
     pl.add_argument("--scene", default="1", help="1, 2, 3 (ssps_scene<N>) or a scene name")

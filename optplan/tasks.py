@@ -16,7 +16,7 @@ from .robot import RobotModel
 from .scene import Scene
 from .spatial import interpolate_pose
 
-__all__ = ["GraspIK", "grasp_configuration", "task_space_path", "transport_problem"]
+__all__ = ["GraspIK", "grasp_configuration", "task_space_path", "transport_initial_path", "transport_problem"]
 log = logging.getLogger(__name__)
 
 _PRECISE = IKOptions(tol_position=1e-10, tol_orientation=1e-10, max_iterations=300)
@@ -75,6 +75,23 @@ def straight_line_poses(start: pin.SE3, goal: pin.SE3, n: int) -> list[pin.SE3]:
     """``n + 1`` object poses from start to goal: position linear, orientation in exponential
     coordinates (seed 000 Eq. 4)."""
     return [interpolate_pose(start, goal, k / n) for k in range(n + 1)]
+
+
+def transport_initial_path(robot: RobotModel, scene: Scene, knots: int, rng: np.random.Generator, *,
+                           checker: CollisionChecker | None = None, attempts: int = 20) -> np.ndarray | None:
+    """The transport problem's initial guess: a collision-free start grasp (:func:`grasp_configuration`)
+    whose straight-line object path (:func:`straight_line_poses`, ``knots`` intervals) maps through
+    closed-chain IK to a collision-free goal grasp; ``(knots + 1) × nq`` configurations, or None
+    when none of ``attempts`` start grasps gives one."""
+    checker = checker or CollisionChecker(robot, scene)
+    for _ in range(int(attempts)):
+        start = grasp_configuration(robot, scene, scene.start, rng, checker=checker)
+        if not start.found:
+            return None
+        Q, ok = task_space_path(robot, scene, start.q, straight_line_poses(scene.start, scene.goal, knots))
+        if ok and checker.min_distance(Q[-1])[0] > 0.0:
+            return Q
+    return None
 
 
 def transport_problem(robot: RobotModel, scene: Scene, Q: np.ndarray, *, duration: float = 60.0,
