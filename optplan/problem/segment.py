@@ -356,6 +356,8 @@ def _scatter(nrow, ncol, rows, cols, src_idx, weights, src: ca.MX, nsrc: int) ->
     uniq, inv = np.unique(key, return_inverse=True)  # sorted column-major = CCS order
     ucol, urow = uniq // nrow, uniq % nrow
     S = sps.csc_matrix((weights, (inv, src_idx)), shape=(len(uniq), nsrc))
+    S.sum_duplicates()  # CasADi < 3.7 needs sorted, unique row indices per column
+    S.sort_indices()
     colind = np.searchsorted(ucol, np.arange(ncol + 1)).tolist()
     sp = ca.Sparsity(nrow, ncol, colind, urow.astype(int).tolist())
     Sd = ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.indptr.tolist(), S.indices.tolist()), S.data)
