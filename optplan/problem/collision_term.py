@@ -42,6 +42,20 @@ def _box_vertices(h) -> list[np.ndarray]:
 log = logging.getLogger(__name__)
 
 
+def witness_plane(checker: CollisionChecker, pair, obj_tf) -> np.ndarray:
+    """(n, b): coal's unit witness normal from A to B and the mid-plane offset ``n·mid`` of a pair,
+    at the placements last set by ``checker._update`` (``obj_tf``: the held object's)."""
+    g1, t1, g2, t2 = checker._geoms(pair, obj_tf)
+    res = coal.DistanceResult()
+    coal.distance(g1, t1, g2, t2, coal.DistanceRequest(), res)
+    n = np.asarray(res.normal, float)
+    if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+        n = t2.getTranslation() - t1.getTranslation()
+    n = n / max(np.linalg.norm(n), 1e-12)
+    mid = 0.5 * (np.asarray(res.getNearestPoint1()) + np.asarray(res.getNearestPoint2()))
+    return np.r_[n, n @ mid]
+
+
 def object_capsules(size, grid: int = 2) -> list[D.Capsule]:
     """Capsules covering a box of full edges ``size`` [m]: a ``grid × grid`` array over the
     cross-section, each along the longest axis over the full length."""
@@ -292,16 +306,7 @@ class CollisionAvoidance(Term):
     def _plane_init(self, pair, q_full) -> np.ndarray:
         """(n, b) from coal's witness points at a configuration (normal from A to B)."""
         Mo = self.checker._update(q_full)
-        obj_tf = coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None
-        g1, t1, g2, t2 = self.checker._geoms(pair, obj_tf)
-        req, res = coal.DistanceRequest(), coal.DistanceResult()
-        coal.distance(g1, t1, g2, t2, req, res)
-        n = np.asarray(res.normal, float)
-        if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
-            n = t2.getTranslation() - t1.getTranslation()
-        n = n / max(np.linalg.norm(n), 1e-12)
-        mid = 0.5 * (np.asarray(res.getNearestPoint1()) + np.asarray(res.getNearestPoint2()))
-        return np.r_[n, n @ mid]
+        return witness_plane(self.checker, pair, coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None)
 
     def residual(self, tp):
         robot = tp.robot

@@ -47,7 +47,7 @@ from ..robot import RobotModel
 from ..scene import Scene
 from ..symbolic import SymbolicKinematics
 from .bspline import boundary_points, fit_interior, jerk_integral_reference, knot_matrices, knot_values
-from .collision_term import CollisionAvoidance, _box_vertices
+from .collision_term import CollisionAvoidance, _box_vertices, witness_plane
 from .frame_terms import ClosedChain
 from .solution import IpoptStatus, Solution
 from .terms import NumericTrajectory, pose_residual
@@ -222,22 +222,6 @@ def _geometry_points(robot: RobotModel, g: int) -> tuple[int, np.ndarray, float]
         raise ConfigurationError(f"collision geometry {o.name!r} ({type(geo).__name__}): the trajectory NLP "
                                  "handles capsules, spheres, boxes, cylinders and meshes only")
     return o.parentFrame, M.rotation @ V + M.translation[:, None], r
-
-
-def _witness_plane(checker, pair, obj_tf) -> np.ndarray:
-    """(n, b): coal's unit witness normal from A to B and the mid-plane offset, at the placements
-    last set by ``checker._update`` (``obj_tf``: the held object's)."""
-    import coal
-
-    g1, t1, g2, t2 = checker._geoms(pair, obj_tf)
-    res = coal.DistanceResult()
-    coal.distance(g1, t1, g2, t2, coal.DistanceRequest(), res)
-    n = np.asarray(res.normal, float)
-    if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
-        n = t2.getTranslation() - t1.getTranslation()
-    n = n / max(np.linalg.norm(n), 1e-12)
-    mid = 0.5 * (np.asarray(res.getNearestPoint1()) + np.asarray(res.getNearestPoint2()))
-    return np.r_[n, n @ mid]
 
 
 # --------------------------------------------------------------------------- assembly
@@ -651,7 +635,7 @@ class SplineSegmentProblem:
             obj_tf = coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None
             for i, t in items:
                 it = plan[i]
-                nb = _witness_plane(col.checker, it.pair, obj_tf)
+                nb = witness_plane(col.checker, it.pair, obj_tf)
                 n, off = (-nb[:3], -nb[3]) if it.flip else (nb[:3], nb[3])
                 if it.static:
                     Y, rb = it.b[1], it.b[2]
