@@ -277,6 +277,8 @@ def add_arguments(p) -> None:
     p.add_argument("--plot", metavar="DIR", help="write the RMSD and joint figures (one path per scene and planner)")
     p.add_argument("--save", metavar="DIR", help="write one dense path per scene and planner (npz: t, q, joint_names)")
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--quick", action="store_true",
+                   help="one trial per scene of OC-RRT-Connect and CBiRRT, 5 s per query (a smoke run, under a minute)")
 
 
 def command(args) -> int:
@@ -286,6 +288,8 @@ def command(args) -> int:
     if not example_robots_available():
         print("OC-RRT benchmark: PR2 needs the example-robot-data package: pip install \"optplan[robots]\"")
         return 2
+    if getattr(args, "quick", False):
+        args.trials, args.time_limit, args.planners = 1, min(args.time_limit, 5.0), "oc_rrt_connect,cbirrt"
     planners = [p for p in args.planners.split(",") if p]
     if any(p.startswith("ompl-") for p in planners):
         from ..planners.ompl_peers import ompl_available
