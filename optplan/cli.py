@@ -185,6 +185,14 @@ def _cmd_bench_drake(args) -> int:
     return 0
 
 
+def _load_robot(name: str):
+    """A shipped robot (models/robots) or one of example-robot-data's (pr2, baxter; extra 'robots')."""
+    from .example_robots import EXAMPLE_ROBOTS, load_example_robot
+    from .robot import RobotModel
+
+    return load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
+
+
 def _cmd_plan(args) -> int:
     from .bench.trials import TrialGenerator
     from .pipeline import PipelineOptions, run_pipeline
@@ -193,8 +201,18 @@ def _cmd_plan(args) -> int:
 
     scene_name = ca.check_scene(args.scene)
     planner = ca.check_planner(args.planner)
-    robot = RobotModel.from_name("tcbirrt_dual_arm")
     scene = Scene.load(scene_name)
+    if args.robot is not None:
+        from .description import available_models
+        from .example_robots import EXAMPLE_ROBOTS
+
+        known = list(available_models()) + list(EXAMPLE_ROBOTS)
+        if args.robot not in known:
+            raise UsageError(f"--robot {args.robot!r}: unknown robot; expected one of {', '.join(known)}")
+    if args.robot is not None and scene.robot is not None and args.robot != scene.robot:
+        raise UsageError(f"--robot {args.robot!r}: scene {scene.name!r} is made for robot {scene.robot!r} "
+                         "(its grasps and poses belong to that robot)")
+    robot = _load_robot(args.robot or scene.robot or "tcbirrt_dual_arm")
     t0 = time.perf_counter()
     try:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
@@ -380,6 +398,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--trial", type=ca.nonnegative_int, default=0, help="trial index (perturbed start/goal, Section 5.1)")
     pl.add_argument("--seed", type=ca.nonnegative_int, default=0)
     pl.add_argument("--planner", default="tcbirrt")
+    pl.add_argument("--robot", default=None, help="robot model (default: the scene's robot, else tcbirrt_dual_arm)")
     pl.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit [s]")
     pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
     pl.add_argument("--json", help="write the figures as JSON")

@@ -128,3 +128,14 @@ def test_subprocess_exit_status_and_no_traceback():
     r = subprocess.run([sys.executable, "-m", "optplan.cli", "bench", "tcbirrt", "--trials", "0"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2, r
     assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_plan_robot_option_is_checked_against_the_scene(capsys):
+    """``optplan plan --robot``: an unknown robot, or one the scene was not made for, is a one-line
+    user error (exit 2) before any planning."""
+    from optplan import cli
+
+    assert cli.main(["plan", "--scene", "1", "--robot", "nosuch"]) == 2
+    assert "unknown robot" in capsys.readouterr().err
+    assert cli.main(["plan", "--scene", "1", "--robot", "eba_ffsr"]) == 2
+    assert "made for robot 'tcbirrt_dual_arm'" in capsys.readouterr().err
