@@ -154,16 +154,21 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
 # --------------------------------------------------------------------------- methods
 def optplan_current(problem: PeerProblem) -> PeerOutcome:
     """optplan's current optimizer, as the product runs it: the transport example's single
-    ``OptProblem`` solve (:func:`optplan.tasks.transport_problem`), or for a pipeline segment
+    B-spline segment NLP solve (:class:`optplan.problem.segment.SplineSegmentProblem`), or for a pipeline segment
     :func:`optplan.pipeline.optimize_segments` on that one segment (its retries included; times
     and iterations summed over its attempts). ``setup_time``: problem declaration + NLP build +
     solver creation."""
     if problem.kind == "transport":
-        from ..tasks import transport_problem
+        from ..problem import ClosedChain
+        from ..problem.segment import SegmentSpec, SplineSegmentProblem
 
         t0 = time.perf_counter()
-        prob, _, _ = transport_problem(problem.robot, problem.scene, problem.q_knots, duration=problem.duration,
-                                       margin=problem.margin)
+        sc, q = problem.scene, np.asarray(problem.q_knots)
+        arms = list(sc.object.grasps)
+        cc = ClosedChain.from_grasps(sc.object.grasps[arms[0]], sc.object.grasps[arms[1]], arms[0], arms[1])
+        prob = SplineSegmentProblem(problem.robot, sc, SegmentSpec(len(q) - 1, problem.duration, q[0], q[-1], cc,
+                                                                   margin=problem.margin, object_arm=arms[0]))
+        prob.set_initial(q)
         declare = time.perf_counter() - t0
         sol = prob.solve()
         return PeerOutcome("optplan", "ipopt", bool(sol.success), sol.status.value, declare + sol.setup_time,
