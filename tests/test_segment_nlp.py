@@ -196,7 +196,7 @@ def test_cylinder_and_mesh_geometry_are_covered_not_dropped(rng):
     vertices; both in the parent frame. Checked by sampling the cylinder's surface."""
     import pinocchio as pin
 
-    from optplan.problem.segment import _geometry_points
+    from optplan.problem.kernels import geometry_points as _geometry_points
 
     robot = RobotModel.from_name("tcbirrt_dual_arm")  # a private copy: its geometry is modified
     g = 3
@@ -229,7 +229,7 @@ def test_cylinder_and_mesh_geometry_are_covered_not_dropped(rng):
 def test_kernel_cache_on_disk_is_reused_and_keyed_by_the_robot(tmp_path, monkeypatch):
     """A second cache (a fresh process) loads the saved kernels: same names and values; another
     robot never gets them."""
-    from optplan.problem.segment import KernelCache
+    from optplan.problem.kernels import KernelCache
 
     monkeypatch.setenv("OPTPLAN_CACHE", str(tmp_path))
     robot = RobotModel.from_name("tcbirrt_dual_arm")

@@ -97,7 +97,7 @@ class DrakeModel:
                  held_object: bool = True):
         pd = require_drake()
         if robot.is_floating:
-            raise NotImplementedError("the Drake peer handles fixed-base robots only (got a free-floating base)")
+            raise ValueError("the Drake peer handles fixed-base robots only (got a free-floating base)")
         if robot.urdf_path is None:
             raise ValueError("the Drake peer loads the robot's URDF: this RobotModel has no urdf_path")
         self.robot, self.scene = robot, scene

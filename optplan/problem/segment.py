@@ -34,9 +34,7 @@ costs a fraction of a second instead of the symbolic expansion of the whole traj
 from __future__ import annotations
 
 import logging
-import os
 import time
-import weakref
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -45,12 +43,13 @@ import numpy as np
 
 from ..robot import RobotModel
 from ..scene import Scene
-from ..symbolic import SymbolicKinematics
+from .assembly import Assembly
 from .bspline import boundary_points, fit_interior, jerk_integral_reference, knot_matrices, knot_values
 from .collision_term import CollisionAvoidance, _box_vertices, witness_plane
 from .frame_terms import ClosedChain
+from .kernels import KernelCache, geometry_points
 from .solution import IpoptStatus, Solution
-from .terms import NumericTrajectory, pose_residual
+from .terms import NumericTrajectory
 
 __all__ = ["KernelCache", "SegmentSpec", "SplineSegmentProblem"]
 log = logging.getLogger(__name__)
@@ -59,293 +58,6 @@ log = logging.getLogger(__name__)
 def _sparse(A: np.ndarray) -> ca.DM:
     """A constant matrix with its zeros structural (a dense DM would couple every variable)."""
     return ca.sparsify(ca.DM(A))
-
-
-# --------------------------------------------------------------------------- kernels
-class KernelCache:
-    """SX kernels of one robot, built once and shared by every segment NLP of that robot.
-
-    ``closed_chain(cc)``: ``f(q, n, s) -> 7 rows``; ``pair(...)``: ``f(q, n, s) -> rows`` of one
-    collision pair; ``derivatives(f)``: their symbolic Jacobians and Hessians. Each function is
-    also saved under ``$OPTPLAN_CACHE/kernels`` (default ``~/.cache/optplan``), keyed by a hash of
-    the robot's kinematics and of what the kernel depends on, so a fresh process loads it instead
-    of differentiating again (``disk=False``: memory only)."""
-
-    _per_robot: "weakref.WeakKeyDictionary[RobotModel, KernelCache]" = weakref.WeakKeyDictionary()
-
-    def __init__(self, robot: RobotModel, disk: bool = True):
-        if robot.is_floating:
-            raise ValueError("the B-spline segment NLP is for fixed-base robots; use OptProblem for "
-                             f"the free-floating {robot.name!r}")
-        self.robot = robot
-        self.sym = SymbolicKinematics(robot)
-        self._q = ca.SX.sym("q", robot.nj)
-        self._X = self.sym.joint_placements(self._q)
-        self._fns: dict = {}
-        self._digest = self._robot_digest()
-        self._dir = None
-        if disk:
-            from ..codegen import cache_dir
-
-            try:
-                self._dir = cache_dir() / "kernels" / f"casadi-{ca.__version__}"
-                self._dir.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:  # a read-only cache: memory only
-                log.info("kernel cache on disk unavailable (%s)", exc)
-                self._dir = None
-
-    def _robot_digest(self) -> bytes:
-        import hashlib
-
-        from ..symbolic import _describe_joints
-
-        h = hashlib.sha1(str(self.robot.nj).encode())
-        for jt in _describe_joints(self.robot.model):
-            if jt is None:
-                h.update(b"-")
-                continue
-            h.update(repr((jt.kind, jt.parent, jt.q_index, jt.v_index, jt.scaling, jt.offset)).encode())
-            for a in (jt.placement_R, jt.placement_p, jt.axis):
-                h.update(np.asarray(a, float).tobytes())
-        for f in self.robot.model.frames:
-            h.update(repr((f.name, int(f.parentJoint))).encode() + np.asarray(f.placement.homogeneous).tobytes())
-        return h.digest()
-
-    def _get(self, key: tuple, build) -> ca.Function:
-        """The function of ``key``: from memory, else from the disk cache, else ``build(name)``."""
-        fn = self._fns.get(key)
-        if fn is not None:
-            return fn
-        import hashlib
-
-        name = f"{key[0]}_{hashlib.sha1(self._digest + repr(key).encode()).hexdigest()[:16]}"
-        path = self._dir / f"{name}.casadi" if self._dir is not None else None
-        if path is not None and path.exists():
-            try:
-                fn = ca.Function.load(str(path))
-            except RuntimeError as exc:  # a damaged file: rebuild it
-                log.info("kernel %s not loaded (%s); rebuilding", path, exc)
-        if fn is None:
-            fn = build(name)
-            if path is not None:
-                tmp = path.with_suffix(f".{os.getpid()}.tmp")
-                try:
-                    fn.save(str(tmp))
-                    os.replace(tmp, path)  # atomic: concurrent processes never read half a file
-                except (OSError, RuntimeError) as exc:
-                    log.info("kernel %s not saved (%s)", path, exc)
-        self._fns[key] = fn
-        return fn
-
-    @classmethod
-    def of(cls, robot: RobotModel) -> "KernelCache":
-        """The cache of ``robot`` (one per robot object)."""
-        kc = cls._per_robot.get(robot)
-        if kc is None:
-            kc = cls._per_robot[robot] = cls(robot)
-        return kc
-
-    def frame(self, fid: int):
-        """(R, p) SX of frame ``fid`` as functions of the kernel input ``q``."""
-        return self.sym.frame_placement(self._q, int(fid), self._X)
-
-    def derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
-        """``(jac, hess)`` of a kernel ``f(q, n, s)``: ``jac(q, n, s) = ∂f/∂q`` (rows × nj, sparse) and
-        ``hess(q, n, s, λ) = ∂²(λᵀf)/∂q²`` (nj × nj, symmetric, sparse) — symbolic, per knot."""
-        def build_jac(name):
-            q, n, s = fn.sx_in()
-            return ca.Function(name, [q, n, s], [ca.jacobian(fn(q, n, s), q)])
-
-        def build_hess(name):
-            q, n, s = fn.sx_in()
-            r = fn(q, n, s)
-            lam = ca.SX.sym("lam", r.shape[0])
-            return ca.Function(name, [q, n, s, lam], [ca.hessian(ca.dot(lam, r), q)[0]])
-
-        return (self._get(("jac", fn.name()), build_jac), self._get(("hess", fn.name()), build_hess))
-
-    def closed_chain(self, cc: ClosedChain) -> ca.Function:
-        rel = cc.relative
-
-        def build(name):
-            Ra, pa = self.frame(self.robot.arm(cc.arm_a).ee_frame_id)
-            Rb, pb = self.frame(self.robot.arm(cc.arm_b).ee_frame_id)
-            r, tr = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), np.array(rel.rotation), ca.DM(rel.translation))
-            n, s = ca.SX.sym("n", 3), ca.SX.sym("s")  # unused: every kernel has the signature (q, n, s)
-            return ca.Function(name, [self._q, n, s], [ca.vertcat(r, tr)])
-
-        return self._get(("cc", cc.arm_a, cc.arm_b, np.asarray(rel.homogeneous).round(15).tobytes()), build)
-
-    def pair(self, fa: int | None, Va: np.ndarray, ra: float, fb: int | None, Vb: np.ndarray, rb: float
-             ) -> ca.Function:
-        """Plane rows of one pair. Points ``Va`` (3 × m) in frame ``fa`` (None: world), radius
-        ``ra``; likewise B. B static (``fb is None``): ``f(q, n, s) = s − n·x_i − ra`` for A's
-        points (``s``: the support value of B along n); both moving: ``f(q, n, b) =
-        [b − n·x_i − ra; n·y_j − rb − b]``."""
-        Va, Vb = np.ascontiguousarray(Va, float), np.ascontiguousarray(Vb, float)
-
-        def build(name):
-            n, s = ca.SX.sym("n", 3), ca.SX.sym("s")
-            Ra, pa = self.frame(fa)
-            Xa = Ra @ ca.DM(Va) + ca.repmat(pa, 1, Va.shape[1])
-            if fb is None:
-                rows = (s - n.T @ Xa - ra).T
-            else:
-                Rb, pb = self.frame(fb)
-                Yb = Rb @ ca.DM(Vb) + ca.repmat(pb, 1, Vb.shape[1])
-                rows = ca.vertcat((s - n.T @ Xa - ra).T, (n.T @ Yb - rb - s).T)
-            return ca.Function(name, [self._q, n, s], [rows])
-
-        # the static side's points are not in the kernel (only its support value, an input)
-        key = ("pair", fa, Va.shape, Va.tobytes(), float(ra), fb,
-               None if fb is None else (Vb.shape, Vb.tobytes(), float(rb)))
-        return self._get(key, build)
-
-
-def _geometry_points(robot: RobotModel, g: int) -> tuple[int, np.ndarray, float]:
-    """(parent frame, points 3 × m in that frame, radius) whose radius-inflated convex hull contains
-    robot collision geometry ``g``: a cylinder by the capsule of its axis and radius, a convex
-    mesh or a triangle mesh by its vertices (the convex hull). Anything else is refused."""
-    import coal
-
-    from ..errors import ConfigurationError
-
-    o = robot.collision_model.geometryObjects[g]
-    geo, M = o.geometry, o.placement
-    if isinstance(geo, coal.Cylinder):
-        V, r = np.array([[0, 0, -geo.halfLength], [0, 0, geo.halfLength]]).T, float(geo.radius)
-    elif isinstance(geo, coal.Convex):
-        V, r = np.asarray(geo.points(), float).reshape(-1, 3).T, 0.0
-    elif hasattr(geo, "num_vertices") and geo.num_vertices > 0:
-        V, r = np.array([np.asarray(geo.vertex(i), float) for i in range(geo.num_vertices)]).T, 0.0
-    else:
-        raise ConfigurationError(f"collision geometry {o.name!r} ({type(geo).__name__}): the trajectory NLP "
-                                 "handles capsules, spheres, boxes, cylinders and meshes only")
-    return o.parentFrame, M.rotation @ V + M.translation[:, None], r
-
-
-# --------------------------------------------------------------------------- assembly
-_C = (1 / 6, 4 / 6, 1 / 6)  # ∂q(t_k)/∂P_{k+a}, a = 0, 1, 2
-
-
-class _Assembly:
-    """Rows of a segment NLP and their exact Jacobian and Lagrangian Hessian, assembled from the
-    per-knot kernel derivatives: every entry of the NLP's matrices is a fixed linear combination
-    of kernel-derivative entries (the B-spline weights of the module docstring), applied as one
-    constant sparse matrix. Free control point ``p`` (3 ≤ p ≤ N−1), joint ``j`` is variable
-    ``(p − 3)·nj + j``."""
-
-    def __init__(self, N: int, nj: int, nx: int):
-        self.N, self.nj, self.nx = N, nj, nx
-        self.g, self.lbg, self.ubg, self.slices = [], [], [], {}
-        self.ng = 0
-        self.jsrc, self.hsrc = [], []  # MX nonzero vectors
-        self.j_off = self.h_off = 0
-        self.jt: list[np.ndarray] = []  # (row, col, src, weight) blocks; src −1: constant 1
-        self.ht: list[np.ndarray] = []
-
-    def _rows(self, name, expr, lo, hi):
-        n = expr.shape[0]
-        self.g.append(expr)
-        self.lbg.append(np.broadcast_to(np.asarray(lo, float), (n,)).copy())
-        self.ubg.append(np.broadcast_to(np.asarray(hi, float), (n,)).copy())
-        self.slices[name] = slice(self.ng, self.ng + n)
-        self.ng += n
-        return self.ng - n
-
-    def linear(self, name, expr, D: np.ndarray, lo, hi):
-        """Rows ``vec(P Dᵀ)`` (D: rows over the N+3 control points), constant Jacobian."""
-        r0 = self._rows(name, expr, lo, hi)
-        nj, N = self.nj, self.N
-        R, C, W = [], [], []
-        for i, prow in enumerate(D):
-            for pidx in np.flatnonzero(prow):
-                if 3 <= pidx <= N - 1:
-                    for j in range(nj):
-                        R.append(r0 + i * nj + j)
-                        C.append((pidx - 3) * nj + j)
-                        W.append(prow[pidx])
-        self.jt.append(np.array([R, C, np.full(len(R), -1), W], float))
-
-    def family(self, name, fn, jfn, hfn, knots, Qsub, Nin, Sin, bcoup, lo, hi):
-        """One kernel evaluated at ``knots`` (its rows are knot-major)."""
-        K, nj, N = len(knots), self.nj, self.N
-        m = fn.size1_out(0)
-        r0 = self._rows(name, ca.vec(fn.map(K)(Qsub, Nin, Sin)), lo, hi)
-        knots = np.asarray(knots)
-        # Jacobian: row r0 + t·m + lr, column of P_{k+a} joint j, weight c_a
-        Jm = jfn.map(K)(Qsub, Nin, Sin)
-        lr, jj = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())
-        e = len(lr)
-        self.jsrc.append(Jm.nz[:])
-        t, a, ee = np.meshgrid(np.arange(K), np.arange(3), np.arange(e), indexing="ij")
-        pidx = knots[t] + a
-        ok = (pidx >= 3) & (pidx <= N - 1)
-        self.jt.append(np.array([(r0 + t * m + lr[ee])[ok], ((pidx - 3) * nj + jj[ee])[ok],
-                                 (self.j_off + t * e + ee)[ok], np.take(_C, a)[ok]], float))
-        self.j_off += K * e
-        if bcoup is not None:  # plane offsets: ∂row/∂b = ±1
-            col0, sign = bcoup
-            t, lr2 = np.meshgrid(np.arange(K), np.arange(m), indexing="ij")
-            self.jt.append(np.array([(r0 + t * m + lr2).ravel(), (col0 + t).ravel(),
-                                     np.full(K * m, -1), np.tile(sign, K)], float))
-        # Hessian: multipliers of this family, per knot
-        self._h_pending = getattr(self, "_h_pending", [])
-        self._h_pending.append((hfn, K, knots, Qsub, Nin, Sin, r0, m))
-
-    def finish(self, x, lam_f, lam_g, Hj: np.ndarray):
-        """``(g, ∂g/∂x, triu ∇²L)`` as MX of ``x``, ``lam_f``, ``lam_g``; ``Hj``: the objective's
-        constant Hessian per joint over the free control points."""
-        nj, N, nx = self.nj, self.N, self.nx
-        G = ca.vertcat(*self.g) if self.g else ca.MX.zeros(0)
-        self.lbg = np.concatenate(self.lbg) if self.lbg else np.zeros(0)
-        self.ubg = np.concatenate(self.ubg) if self.ubg else np.zeros(0)
-        # Jacobian
-        T = np.hstack(self.jt) if self.jt else np.zeros((4, 0))
-        src = ca.vertcat(*self.jsrc, ca.MX(1.0)) if self.jsrc else ca.MX(1.0)
-        srcidx = np.where(T[2] < 0, self.j_off, T[2]).astype(int)
-        Jg = _scatter(self.ng, nx, T[0].astype(int), T[1].astype(int), srcidx, T[3], src, self.j_off + 1)
-        # Hessian
-        hs, blocks, off = [], [], 0
-        for hfn, K, knots, Qsub, Nin, Sin, r0, m in getattr(self, "_h_pending", []):
-            L = ca.reshape(lam_g[r0:r0 + m * K], m, K)
-            Hm = hfn.map(K)(Qsub, Nin, Sin, L)
-            ii, jj = (np.asarray(v) for v in hfn.sparsity_out(0).get_triplet())
-            e = len(ii)
-            hs.append(Hm.nz[:])
-            t, a, b, ee = np.meshgrid(np.arange(K), np.arange(3), np.arange(3), np.arange(e), indexing="ij")
-            pa, pb = knots[t] + a, knots[t] + b
-            row, col = (pa - 3) * nj + ii[ee], (pb - 3) * nj + jj[ee]
-            ok = (pa >= 3) & (pa <= N - 1) & (pb >= 3) & (pb <= N - 1) & (row <= col)
-            blocks.append(np.array([row[ok], col[ok], (off + t * e + ee)[ok],
-                                    (np.take(_C, a) * np.take(_C, b))[ok]], float))
-            off += K * e
-        # objective: Hj ⊗ I over the free points, times lam_f
-        pa, pb = np.nonzero(np.triu(Hj) != 0)
-        jj = np.arange(nj)
-        rows = (pa[:, None] * nj + jj).ravel()
-        cols = (pb[:, None] * nj + jj).ravel()
-        blocks.append(np.array([rows, cols, np.full(rows.size, off), np.repeat(Hj[pa, pb], nj)], float))
-        src = ca.vertcat(*hs, lam_f)
-        T = np.hstack(blocks)
-        Hl = _scatter(nx, nx, T[0].astype(int), T[1].astype(int), T[2].astype(int), T[3], src, off + 1)
-        return G, Jg, Hl
-
-
-def _scatter(nrow, ncol, rows, cols, src_idx, weights, src: ca.MX, nsrc: int) -> ca.MX:
-    """Sparse ``nrow × ncol`` MX whose entry (rows[i], cols[i]) sums ``weights[i]·src[src_idx[i]]``."""
-    import scipy.sparse as sps
-
-    key = cols.astype(np.int64) * nrow + rows
-    uniq, inv = np.unique(key, return_inverse=True)  # sorted column-major = CCS order
-    ucol, urow = uniq // nrow, uniq % nrow
-    S = sps.csc_matrix((weights, (inv, src_idx)), shape=(len(uniq), nsrc))
-    S.sum_duplicates()  # CasADi < 3.7 needs sorted, unique row indices per column
-    S.sort_indices()
-    colind = np.searchsorted(ucol, np.arange(ncol + 1)).tolist()
-    sp = ca.Sparsity(nrow, ncol, colind, urow.astype(int).tolist())
-    Sd = ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.indptr.tolist(), S.indices.tolist()), S.data)
-    return ca.MX(sp, ca.mtimes(Sd, src))
 
 
 # --------------------------------------------------------------------------- problem
@@ -534,7 +246,7 @@ class SplineSegmentProblem:
         else:
             spec = col._robot_shape.get(idx)
             if spec is None:
-                fid, V, r = _geometry_points(self.robot, idx)
+                fid, V, r = geometry_points(self.robot, idx)
                 return self._static_or_moving(kind, idx, fid, V, r)
             fid, shape, Mbox = spec
             from .. import distance as D
@@ -663,7 +375,7 @@ class SplineSegmentProblem:
         Qk = ca.mtimes(P, _sparse(self.M["q"].T))  # nj × (N+1)
         params = [Pstart, Pend]
         pvals = [self.P_start.T.ravel(order="F"), self.P_end.T.ravel(order="F")]
-        asm = _Assembly(N, nj, nP + nb)
+        asm = Assembly(N, nj, nP + nb)
         # velocity control points touching a free point (convex hull: q̇ bounded everywhere)
         dP = ca.mtimes(P, _sparse(self.M["dP"].T[:, 2:N]))
         vb = np.tile((self.vlim * h)[:, None], (1, N - 2)).ravel(order="F")

@@ -1,0 +1,135 @@
+"""Exact constraint Jacobian and Lagrangian Hessian of the B-spline segment NLP (:mod:`.segment`),
+assembled from per-knot kernel derivatives: every entry of the NLP's matrices is a fixed linear
+combination of kernel-derivative entries (the B-spline weights), applied as one constant sparse
+matrix."""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["Assembly"]
+
+
+_C = (1 / 6, 4 / 6, 1 / 6)  # ∂q(t_k)/∂P_{k+a}, a = 0, 1, 2
+
+
+class Assembly:
+    """Rows of a segment NLP and their exact Jacobian and Lagrangian Hessian, assembled from the
+    per-knot kernel derivatives: every entry of the NLP's matrices is a fixed linear combination
+    of kernel-derivative entries (the B-spline weights of the module docstring), applied as one
+    constant sparse matrix. Free control point ``p`` (3 ≤ p ≤ N−1), joint ``j`` is variable
+    ``(p − 3)·nj + j``."""
+
+    def __init__(self, N: int, nj: int, nx: int):
+        self.N, self.nj, self.nx = N, nj, nx
+        self.g, self.lbg, self.ubg, self.slices = [], [], [], {}
+        self.ng = 0
+        self.jsrc, self.hsrc = [], []  # MX nonzero vectors
+        self.j_off = self.h_off = 0
+        self.jt: list[np.ndarray] = []  # (row, col, src, weight) blocks; src −1: constant 1
+        self.ht: list[np.ndarray] = []
+
+    def _rows(self, name, expr, lo, hi):
+        n = expr.shape[0]
+        self.g.append(expr)
+        self.lbg.append(np.broadcast_to(np.asarray(lo, float), (n,)).copy())
+        self.ubg.append(np.broadcast_to(np.asarray(hi, float), (n,)).copy())
+        self.slices[name] = slice(self.ng, self.ng + n)
+        self.ng += n
+        return self.ng - n
+
+    def linear(self, name, expr, D: np.ndarray, lo, hi):
+        """Rows ``vec(P Dᵀ)`` (D: rows over the N+3 control points), constant Jacobian."""
+        r0 = self._rows(name, expr, lo, hi)
+        nj, N = self.nj, self.N
+        R, C, W = [], [], []
+        for i, prow in enumerate(D):
+            for pidx in np.flatnonzero(prow):
+                if 3 <= pidx <= N - 1:
+                    for j in range(nj):
+                        R.append(r0 + i * nj + j)
+                        C.append((pidx - 3) * nj + j)
+                        W.append(prow[pidx])
+        self.jt.append(np.array([R, C, np.full(len(R), -1), W], float))
+
+    def family(self, name, fn, jfn, hfn, knots, Qsub, Nin, Sin, bcoup, lo, hi):
+        """One kernel evaluated at ``knots`` (its rows are knot-major)."""
+        K, nj, N = len(knots), self.nj, self.N
+        m = fn.size1_out(0)
+        r0 = self._rows(name, ca.vec(fn.map(K)(Qsub, Nin, Sin)), lo, hi)
+        knots = np.asarray(knots)
+        # Jacobian: row r0 + t·m + lr, column of P_{k+a} joint j, weight c_a
+        Jm = jfn.map(K)(Qsub, Nin, Sin)
+        lr, jj = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())
+        e = len(lr)
+        self.jsrc.append(Jm.nz[:])
+        t, a, ee = np.meshgrid(np.arange(K), np.arange(3), np.arange(e), indexing="ij")
+        pidx = knots[t] + a
+        ok = (pidx >= 3) & (pidx <= N - 1)
+        self.jt.append(np.array([(r0 + t * m + lr[ee])[ok], ((pidx - 3) * nj + jj[ee])[ok],
+                                 (self.j_off + t * e + ee)[ok], np.take(_C, a)[ok]], float))
+        self.j_off += K * e
+        if bcoup is not None:  # plane offsets: ∂row/∂b = ±1
+            col0, sign = bcoup
+            t, lr2 = np.meshgrid(np.arange(K), np.arange(m), indexing="ij")
+            self.jt.append(np.array([(r0 + t * m + lr2).ravel(), (col0 + t).ravel(),
+                                     np.full(K * m, -1), np.tile(sign, K)], float))
+        # Hessian: multipliers of this family, per knot
+        self._h_pending = getattr(self, "_h_pending", [])
+        self._h_pending.append((hfn, K, knots, Qsub, Nin, Sin, r0, m))
+
+    def finish(self, x, lam_f, lam_g, Hj: np.ndarray):
+        """``(g, ∂g/∂x, triu ∇²L)`` as MX of ``x``, ``lam_f``, ``lam_g``; ``Hj``: the objective's
+        constant Hessian per joint over the free control points."""
+        nj, N, nx = self.nj, self.N, self.nx
+        G = ca.vertcat(*self.g) if self.g else ca.MX.zeros(0)
+        self.lbg = np.concatenate(self.lbg) if self.lbg else np.zeros(0)
+        self.ubg = np.concatenate(self.ubg) if self.ubg else np.zeros(0)
+        # Jacobian
+        T = np.hstack(self.jt) if self.jt else np.zeros((4, 0))
+        src = ca.vertcat(*self.jsrc, ca.MX(1.0)) if self.jsrc else ca.MX(1.0)
+        srcidx = np.where(T[2] < 0, self.j_off, T[2]).astype(int)
+        Jg = _scatter(self.ng, nx, T[0].astype(int), T[1].astype(int), srcidx, T[3], src, self.j_off + 1)
+        # Hessian
+        hs, blocks, off = [], [], 0
+        for hfn, K, knots, Qsub, Nin, Sin, r0, m in getattr(self, "_h_pending", []):
+            L = ca.reshape(lam_g[r0:r0 + m * K], m, K)
+            Hm = hfn.map(K)(Qsub, Nin, Sin, L)
+            ii, jj = (np.asarray(v) for v in hfn.sparsity_out(0).get_triplet())
+            e = len(ii)
+            hs.append(Hm.nz[:])
+            t, a, b, ee = np.meshgrid(np.arange(K), np.arange(3), np.arange(3), np.arange(e), indexing="ij")
+            pa, pb = knots[t] + a, knots[t] + b
+            row, col = (pa - 3) * nj + ii[ee], (pb - 3) * nj + jj[ee]
+            ok = (pa >= 3) & (pa <= N - 1) & (pb >= 3) & (pb <= N - 1) & (row <= col)
+            blocks.append(np.array([row[ok], col[ok], (off + t * e + ee)[ok],
+                                    (np.take(_C, a) * np.take(_C, b))[ok]], float))
+            off += K * e
+        # objective: Hj ⊗ I over the free points, times lam_f
+        pa, pb = np.nonzero(np.triu(Hj) != 0)
+        jj = np.arange(nj)
+        rows = (pa[:, None] * nj + jj).ravel()
+        cols = (pb[:, None] * nj + jj).ravel()
+        blocks.append(np.array([rows, cols, np.full(rows.size, off), np.repeat(Hj[pa, pb], nj)], float))
+        src = ca.vertcat(*hs, lam_f)
+        T = np.hstack(blocks)
+        Hl = _scatter(nx, nx, T[0].astype(int), T[1].astype(int), T[2].astype(int), T[3], src, off + 1)
+        return G, Jg, Hl
+
+
+def _scatter(nrow, ncol, rows, cols, src_idx, weights, src: ca.MX, nsrc: int) -> ca.MX:
+    """Sparse ``nrow × ncol`` MX whose entry (rows[i], cols[i]) sums ``weights[i]·src[src_idx[i]]``."""
+    import scipy.sparse as sps
+
+    key = cols.astype(np.int64) * nrow + rows
+    uniq, inv = np.unique(key, return_inverse=True)  # sorted column-major = CCS order
+    ucol, urow = uniq // nrow, uniq % nrow
+    S = sps.csc_matrix((weights, (inv, src_idx)), shape=(len(uniq), nsrc))
+    S.sum_duplicates()  # CasADi < 3.7 needs sorted, unique row indices per column
+    S.sort_indices()
+    colind = np.searchsorted(ucol, np.arange(ncol + 1)).tolist()
+    sp = ca.Sparsity(nrow, ncol, colind, urow.astype(int).tolist())
+    Sd = ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.indptr.tolist(), S.indices.tolist()), S.data)
+    return ca.MX(sp, ca.mtimes(Sd, src))
+
+

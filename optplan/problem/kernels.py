@@ -1,0 +1,183 @@
+"""Per-knot kernels of the B-spline segment NLP (:mod:`.segment`): small SX functions of one
+knot's joint vector — the closed chain and the plane rows of one collision pair — and their
+symbolic derivatives, built once per robot and kept in memory and on disk (:class:`KernelCache`)."""
+from __future__ import annotations
+
+import logging
+import os
+import weakref
+
+import casadi as ca
+import numpy as np
+
+from ..robot import RobotModel
+from ..symbolic import SymbolicKinematics
+from .frame_terms import ClosedChain
+from .terms import pose_residual
+
+__all__ = ["KernelCache", "geometry_points"]
+log = logging.getLogger(__name__)
+
+
+class KernelCache:
+    """SX kernels of one robot, built once and shared by every segment NLP of that robot.
+
+    ``closed_chain(cc)``: ``f(q, n, s) -> 7 rows``; ``pair(...)``: ``f(q, n, s) -> rows`` of one
+    collision pair; ``derivatives(f)``: their symbolic Jacobians and Hessians. Each function is
+    also saved under ``$OPTPLAN_CACHE/kernels`` (default ``~/.cache/optplan``), keyed by a hash of
+    the robot's kinematics and of what the kernel depends on, so a fresh process loads it instead
+    of differentiating again (``disk=False``: memory only)."""
+
+    _per_robot: "weakref.WeakKeyDictionary[RobotModel, KernelCache]" = weakref.WeakKeyDictionary()
+
+    def __init__(self, robot: RobotModel, disk: bool = True):
+        if robot.is_floating:
+            raise ValueError("the B-spline segment NLP is for fixed-base robots; use OptProblem for "
+                             f"the free-floating {robot.name!r}")
+        self.robot = robot
+        self.sym = SymbolicKinematics(robot)
+        self._q = ca.SX.sym("q", robot.nj)
+        self._X = self.sym.joint_placements(self._q)
+        self._fns: dict = {}
+        self._digest = self._robot_digest()
+        self._dir = None
+        if disk:
+            from ..codegen import cache_dir
+
+            try:
+                self._dir = cache_dir() / "kernels" / f"casadi-{ca.__version__}"
+                self._dir.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:  # a read-only cache: memory only
+                log.info("kernel cache on disk unavailable (%s)", exc)
+                self._dir = None
+
+    def _robot_digest(self) -> bytes:
+        import hashlib
+
+        from ..symbolic import _describe_joints
+
+        h = hashlib.sha1(str(self.robot.nj).encode())
+        for jt in _describe_joints(self.robot.model):
+            if jt is None:
+                h.update(b"-")
+                continue
+            h.update(repr((jt.kind, jt.parent, jt.q_index, jt.v_index, jt.scaling, jt.offset)).encode())
+            for a in (jt.placement_R, jt.placement_p, jt.axis):
+                h.update(np.asarray(a, float).tobytes())
+        for f in self.robot.model.frames:
+            h.update(repr((f.name, int(f.parentJoint))).encode() + np.asarray(f.placement.homogeneous).tobytes())
+        return h.digest()
+
+    def _get(self, key: tuple, build) -> ca.Function:
+        """The function of ``key``: from memory, else from the disk cache, else ``build(name)``."""
+        fn = self._fns.get(key)
+        if fn is not None:
+            return fn
+        import hashlib
+
+        name = f"{key[0]}_{hashlib.sha1(self._digest + repr(key).encode()).hexdigest()[:16]}"
+        path = self._dir / f"{name}.casadi" if self._dir is not None else None
+        if path is not None and path.exists():
+            try:
+                fn = ca.Function.load(str(path))
+            except RuntimeError as exc:  # a damaged file: rebuild it
+                log.info("kernel %s not loaded (%s); rebuilding", path, exc)
+        if fn is None:
+            fn = build(name)
+            if path is not None:
+                tmp = path.with_suffix(f".{os.getpid()}.tmp")
+                try:
+                    fn.save(str(tmp))
+                    os.replace(tmp, path)  # atomic: concurrent processes never read half a file
+                except (OSError, RuntimeError) as exc:
+                    log.info("kernel %s not saved (%s)", path, exc)
+        self._fns[key] = fn
+        return fn
+
+    @classmethod
+    def of(cls, robot: RobotModel) -> "KernelCache":
+        """The cache of ``robot`` (one per robot object)."""
+        kc = cls._per_robot.get(robot)
+        if kc is None:
+            kc = cls._per_robot[robot] = cls(robot)
+        return kc
+
+    def frame(self, fid: int):
+        """(R, p) SX of frame ``fid`` as functions of the kernel input ``q``."""
+        return self.sym.frame_placement(self._q, int(fid), self._X)
+
+    def derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
+        """``(jac, hess)`` of a kernel ``f(q, n, s)``: ``jac(q, n, s) = ∂f/∂q`` (rows × nj, sparse) and
+        ``hess(q, n, s, λ) = ∂²(λᵀf)/∂q²`` (nj × nj, symmetric, sparse) — symbolic, per knot."""
+        def build_jac(name):
+            q, n, s = fn.sx_in()
+            return ca.Function(name, [q, n, s], [ca.jacobian(fn(q, n, s), q)])
+
+        def build_hess(name):
+            q, n, s = fn.sx_in()
+            r = fn(q, n, s)
+            lam = ca.SX.sym("lam", r.shape[0])
+            return ca.Function(name, [q, n, s, lam], [ca.hessian(ca.dot(lam, r), q)[0]])
+
+        return (self._get(("jac", fn.name()), build_jac), self._get(("hess", fn.name()), build_hess))
+
+    def closed_chain(self, cc: ClosedChain) -> ca.Function:
+        rel = cc.relative
+
+        def build(name):
+            Ra, pa = self.frame(self.robot.arm(cc.arm_a).ee_frame_id)
+            Rb, pb = self.frame(self.robot.arm(cc.arm_b).ee_frame_id)
+            r, tr = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), np.array(rel.rotation), ca.DM(rel.translation))
+            n, s = ca.SX.sym("n", 3), ca.SX.sym("s")  # unused: every kernel has the signature (q, n, s)
+            return ca.Function(name, [self._q, n, s], [ca.vertcat(r, tr)])
+
+        return self._get(("cc", cc.arm_a, cc.arm_b, np.asarray(rel.homogeneous).round(15).tobytes()), build)
+
+    def pair(self, fa: int | None, Va: np.ndarray, ra: float, fb: int | None, Vb: np.ndarray, rb: float
+             ) -> ca.Function:
+        """Plane rows of one pair. Points ``Va`` (3 × m) in frame ``fa`` (None: world), radius
+        ``ra``; likewise B. B static (``fb is None``): ``f(q, n, s) = s − n·x_i − ra`` for A's
+        points (``s``: the support value of B along n); both moving: ``f(q, n, b) =
+        [b − n·x_i − ra; n·y_j − rb − b]``."""
+        Va, Vb = np.ascontiguousarray(Va, float), np.ascontiguousarray(Vb, float)
+
+        def build(name):
+            n, s = ca.SX.sym("n", 3), ca.SX.sym("s")
+            Ra, pa = self.frame(fa)
+            Xa = Ra @ ca.DM(Va) + ca.repmat(pa, 1, Va.shape[1])
+            if fb is None:
+                rows = (s - n.T @ Xa - ra).T
+            else:
+                Rb, pb = self.frame(fb)
+                Yb = Rb @ ca.DM(Vb) + ca.repmat(pb, 1, Vb.shape[1])
+                rows = ca.vertcat((s - n.T @ Xa - ra).T, (n.T @ Yb - rb - s).T)
+            return ca.Function(name, [self._q, n, s], [rows])
+
+        # the static side's points are not in the kernel (only its support value, an input)
+        key = ("pair", fa, Va.shape, Va.tobytes(), float(ra), fb,
+               None if fb is None else (Vb.shape, Vb.tobytes(), float(rb)))
+        return self._get(key, build)
+
+
+def geometry_points(robot: RobotModel, g: int) -> tuple[int, np.ndarray, float]:
+    """(parent frame, points 3 × m in that frame, radius) whose radius-inflated convex hull contains
+    robot collision geometry ``g``: a cylinder by the capsule of its axis and radius, a convex
+    mesh or a triangle mesh by its vertices (the convex hull). Anything else is refused."""
+    import coal
+
+    from ..errors import ConfigurationError
+
+    o = robot.collision_model.geometryObjects[g]
+    geo, M = o.geometry, o.placement
+    if isinstance(geo, coal.Cylinder):
+        V, r = np.array([[0, 0, -geo.halfLength], [0, 0, geo.halfLength]]).T, float(geo.radius)
+    elif isinstance(geo, coal.Convex):
+        V, r = np.asarray(geo.points(), float).reshape(-1, 3).T, 0.0
+    elif hasattr(geo, "num_vertices") and geo.num_vertices > 0:
+        V, r = np.array([np.asarray(geo.vertex(i), float) for i in range(geo.num_vertices)]).T, 0.0
+    else:
+        raise ConfigurationError(f"collision geometry {o.name!r} ({type(geo).__name__}): the trajectory NLP "
+                                 "handles capsules, spheres, boxes, cylinders and meshes only")
+    return o.parentFrame, M.rotation @ V + M.translation[:, None], r
+
+
