@@ -1,8 +1,8 @@
-"""Demo: the free-floating base of the EBA robot under a joint motion (seed 004, Section 4.1 path).
+"""Demo: the free-floating base of the EBA robot under a joint motion (the EBA paper, Section 4.1 path).
 
 Both arms move from the paper's θ0 to θf (free-end case) along a rest-to-rest quintic in joint space
 over 20 s; the base attitude follows from momentum conservation. This is the "5th-order
-polynomial" baseline of seed 004, which leaves roughly a degree of base attitude error
+polynomial" baseline of the EBA paper, which leaves roughly a degree of base attitude error
 (paper: (-0.81, 0.53, 0.78)°; see conventions.md for why our model gives a different value).
 """
 from __future__ import annotations

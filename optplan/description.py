@@ -54,7 +54,7 @@ Serpentine (segmented, cable-driven) arm types — ``kind = "serpentine"``::
   for odd j, yaw then pitch for even j (the pitch-yaw-yaw-pitch layout), followed by a rigid link
   ``<prefix>_link<i>_<j>`` of length L_b along its x axis (the next joint sits at its end, the
   end-effector ``<prefix>_ee`` at the end of the last link). Within a segment every joint copies
-  the first one (seed 003 Eq. 1: ``θ_{i,j,1} = θ_{i,j+1,2}``, ``θ_{i,j,2} = θ_{i,j+1,1}``, i.e. all
+  the first one (the DSHDASR paper, Eq. 1: ``θ_{i,j,1} = θ_{i,j+1,2}``, ``θ_{i,j,2} = θ_{i,j+1,1}``, i.e. all
   pitches equal and all yaws equal): ``<prefix>_joint<i>_1_1`` (pitch) and ``<prefix>_joint<i>_1_2``
   (yaw) are actuated, the others are URDF ``<mimic>`` joints (multiplier 1, offset 0), so the arm
   has 2·segments degrees of freedom. The arm frame (``mount_*``) has its x axis along the

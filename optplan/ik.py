@@ -1,7 +1,7 @@
 """Inverse kinematics: damped least squares on one arm, and the two-arm closed-chain IK of an
 object pose (both hands on their grasp frames).
 
-Errors follow seed 000 Eq. 5-6: position error ``e_p = p_goal − p`` [m] and orientation error
+Errors follow the TCBiRRT paper Eq. 5-6: position error ``e_p = p_goal − p`` [m] and orientation error
 ``e_o = R_goal φ(Rᵀ R_goal)`` (exponential coordinates, world axes) [rad].
 """
 from __future__ import annotations
@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 class IKOptions:
     """Damped least-squares IK options.
 
-    tol_position [m], tol_orientation [rad]: convergence thresholds (ε_p, ε_o of seed 000);
+    tol_position [m], tol_orientation [rad]: convergence thresholds (ε_p, ε_o of the TCBiRRT paper);
     max_iterations; damping λ (DLS ``Jᵀ (J Jᵀ + λ² I)⁻¹``); max_step [rad] per iteration (joint
     step clipped); respect_limits clips into the joint limits at every iteration.
     """
@@ -59,7 +59,7 @@ class IKResult:
 
 
 def pose_error(M: pin.SE3, goal: pin.SE3) -> np.ndarray:
-    """``[e_p; e_o]`` (world axes) from the current placement M to the goal (seed 000 Eq. 5-6)."""
+    """``[e_p; e_o]`` (world axes) from the current placement M to the goal (the TCBiRRT paper Eq. 5-6)."""
     ep = goal.translation - M.translation
     eo = M.rotation @ pin.log3(M.rotation.T @ goal.rotation)
     return np.concatenate([ep, eo])

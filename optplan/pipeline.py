@@ -4,7 +4,7 @@ object.
 1. **Plan** with a sampling planner (TCBiRRT by default) between two configurations that hold the
    object. Its path is split into segments: *constrained* (both hands on the object) and *regrasp*
    (the object stays where it is, held by one arm whose joints do not move, while the other arm
-   lets go, moves and grasps again — seed 000 Section 4.3).
+   lets go, moves and grasps again — the TCBiRRT paper Section 4.3).
 2. **Shortcut** each constrained segment: random pairs of its configurations are joined by the
    joint-space straight line projected onto the closed-chain manifold step by step; a shortcut is
    kept when it is collision free (coal) and shorter.

@@ -5,7 +5,7 @@ the edges, and every converter names its convention:
 
 * ``rpy`` (roll-pitch-yaw, Pinocchio's ``rpyToMatrix``): ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``,
   argument order ``(roll, pitch, yaw)`` [rad].
-* ``zyx`` (Z-Y-X Euler, as in seed 004's Eq. 1 ``[αz, αy, αx]``): ``R = Rz(a) @ Ry(b) @ Rx(c)``,
+* ``zyx`` (Z-Y-X Euler, as in the EBA paper's Eq. 1 ``[αz, αy, αx]``): ``R = Rz(a) @ Ry(b) @ Rx(c)``,
   argument order ``(a, b, c)`` [rad]. Same matrix as ``rpy(c, b, a)``.
 * exponential coordinates ``log3``/``exp3`` (rotation vector, [rad]) for interpolation.
 """
@@ -117,7 +117,7 @@ def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
 
 
 def zyx_to_matrix(a: float, b: float, c: float) -> np.ndarray:
-    """``Rz(a) Ry(b) Rx(c)`` [rad] — seed 004's ``[αz, αy, αx]`` order."""
+    """``Rz(a) Ry(b) Rx(c)`` [rad] — the EBA paper's ``[αz, αy, αx]`` order."""
     _finite_angles((a, b, c), "zyx_to_matrix: (a, b, c)")
     return rotz(a) @ roty(b) @ rotx(c)
 
@@ -162,7 +162,7 @@ def pose_to_vector_rpy(M: pin.SE3) -> np.ndarray:
 
 def interpolate_pose(M0: pin.SE3, M1: pin.SE3, s: float) -> pin.SE3:
     """Pose at fraction ``s`` ∈ [0, 1]: position linear, orientation linear in exponential
-    coordinates of the relative rotation (``R0 exp(s log(R0ᵀ R1))``, seed 000 Eq. 4)."""
+    coordinates of the relative rotation (``R0 exp(s log(R0ᵀ R1))``, the TCBiRRT paper Eq. 4)."""
     R = M0.rotation @ exp3(s * log3(M0.rotation.T @ M1.rotation))
     p = (1.0 - s) * M0.translation + s * M1.translation
     return pin.SE3(R, p)

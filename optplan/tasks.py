@@ -59,7 +59,7 @@ def grasp_configuration(robot: RobotModel, scene: Scene, object_pose: pin.SE3, r
 def task_space_path(robot: RobotModel, scene: Scene, q_start, poses, *, max_step: float = 0.05,
                     options: IKOptions = _PRECISE) -> tuple[np.ndarray, bool]:
     """Map object poses through closed-chain IK, each seeded by the previous solution
-    (seed 000's PathInverseKinematics). Returns (M × nq configurations, all converged)."""
+    (the TCBiRRT paper's PathInverseKinematics). Returns (M × nq configurations, all converged)."""
     opts = IKOptions(options.tol_position, options.tol_orientation, options.max_iterations,
                      options.damping, max_step, options.respect_limits)
     qs, ok = [np.asarray(q_start, float)], True
@@ -73,7 +73,7 @@ def task_space_path(robot: RobotModel, scene: Scene, q_start, poses, *, max_step
 
 def straight_line_poses(start: pin.SE3, goal: pin.SE3, n: int) -> list[pin.SE3]:
     """``n + 1`` object poses from start to goal: position linear, orientation in exponential
-    coordinates (seed 000 Eq. 4)."""
+    coordinates (the TCBiRRT paper Eq. 4)."""
     return [interpolate_pose(start, goal, k / n) for k in range(n + 1)]
 
 

@@ -1,6 +1,6 @@
 """Per-call times of the numeric (Pinocchio) and symbolic (CasADi) kinematics.
 
-Run: ``optplan bench kinematics [--robot eba_ffsr] [--calls 5000]``. Targets (issue 2): generalized
+Run: ``optplan bench kinematics [--robot eba_ffsr] [--calls 5000]``. Targets: generalized
 Jacobian of both arms ≤ 20 µs numeric; CasADi FK + Jacobian within 5× of Pinocchio per call.
 """
 from __future__ import annotations

@@ -1,10 +1,10 @@
-"""Planning trials of seed 000, Section 5.1: both nominal object poses of a scene are perturbed
+"""Planning trials of the TCBiRRT paper, Section 5.1: both nominal object poses of a scene are perturbed
 by ``T = T_nominal · T_e`` with ``T_e`` = (Euler RPY uniform in [-0.5, 0.5] rad per axis, position
 uniform in [-0.2, 0.2] m per axis), and start/goal joint configurations are solved by IK. A trial
 whose start or goal has no valid IK (no convergence, collision, clearance below
 ``min_clearance``) is regenerated with a new perturbation, and the regenerations are counted.
 
-IK of a trial pose: PathInverseKinematics (seed 000 Alg. 3) from the scene's nominal
+IK of a trial pose: PathInverseKinematics (the TCBiRRT paper Alg. 3) from the scene's nominal
 configuration (``[extra] q_start`` / ``q_goal`` in the scene TOML, both hands on the object at the
 nominal pose) along the interpolated object poses to the perturbed pose, i.e. the IK solution on
 the nominal configuration's branch; when that fails, closed-chain IK from ``ik_restarts`` random

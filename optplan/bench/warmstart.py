@@ -1,4 +1,4 @@
-"""Warm vs cold start of the trajectory optimization (issue 4, item 5): on every trial of every
+"""Warm vs cold start of the trajectory optimization: on every trial of every
 scene, the pipeline (:func:`optplan.pipeline.run_pipeline`) runs twice with the same trial and
 seed — IPOPT from the TCBiRRT path (``warm``) and from a straight line (``cold``: the task-space
 line through IK for closed-chain segments, the joint-space line for regrasps). The plan is

@@ -1,4 +1,4 @@
-"""Space-arc equivalent kinematics (seed 003, Section 3 and 4.3-4.4) in CasADi.
+"""Space-arc equivalent kinematics (the DSHDASR paper, Section 3 and 4.3-4.4) in CasADi.
 
 Each arm is described by a chain of tangent circular arcs instead of its joints:
 

@@ -1,4 +1,4 @@
-"""The two arm models of the space-arc equivalent kinematics (seed 003): residuals (Eq. 19-40),
+"""The two arm models of the space-arc equivalent kinematics (the DSHDASR paper): residuals (Eq. 19-40),
 arcs for the obstacle distances (Eq. 45-47), arc parameters from a joint configuration, and joint
 recovery from the arc parameters (Eq. 51-62). See :mod:`optplan.methods.arcs` for the conventions.
 

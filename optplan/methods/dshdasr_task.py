@@ -27,7 +27,7 @@ from .arcs import DiscreteArcModel, SerpentineArcModel
 ROBOT = "dshdasr"
 D2R = math.pi / 180.0
 
-# The paper's figures (seed 003, Section 5 and Table 1) for the comparison tables.
+# The paper's figures (the DSHDASR paper, Section 5 and Table 1) for the comparison tables.
 PAPER = {
     "max_tip_position_error_a_m": 8.991e-6,      # largest axis component, Fig. 12
     "max_tip_attitude_error_a_rad": 3.436e-5,    # largest Z-Y-X component, Fig. 12
@@ -77,7 +77,7 @@ def quintic(X0, Xf, t, tf: float) -> np.ndarray:
 # --------------------------------------------------------------------------- task
 @dataclass(frozen=True)
 class TransposeTask:
-    """Target transposition (seed 003 Section 4-5). Positions [m], angles [rad].
+    """Target transposition (the DSHDASR paper Section 4-5). Positions [m], angles [rad].
 
     ``X0``/``Xf``: target CoM pose (x, y, z, α, β, γ) with R = Rz(α) Ry(β) Rx(γ);
     ``T_et_a``/``T_et_b``: 4×4 pose of the target CoM frame in the Arm-a / Arm-b end-effector frame;
@@ -132,7 +132,7 @@ class TransposeTask:
 
 
 def paper_task() -> TransposeTask:
-    """Our reading of seed 003 Section 5 (the text lost minus signs in its display equations):
+    """Our reading of the DSHDASR paper Section 5 (the text lost minus signs in its display equations):
 
     * Xf = (−3.8552, 2.8612, −2.0035 m, −122.59°, −2.96°, −100.89°): the signs of Table 1, whose
       five goals scatter around it;

@@ -1,4 +1,4 @@
-"""The bidirectional approach (BA, seed 004 Eq. 1-7) and the enhanced bidirectional approach
+"""The bidirectional approach (BA, the EBA paper, Eq. 1-7) and the enhanced bidirectional approach
 (EBA, Eq. 8-24 without and Eq. 25-33 with end constraints).
 
 A real robot starts at the initial state ``x1(0) = [α0; θ0]``, a virtual one at the final state

@@ -1,4 +1,4 @@
-"""The paper's baselines (seed 004, Section 4): the 5th-order polynomial in joint space (Eq. 34),
+"""The paper's baselines (the EBA paper, Section 4): the 5th-order polynomial in joint space (Eq. 34),
 the leader-follower method for the end-constrained case, and the "near-optimal" Fourier method
 (Eq. 35) — solved here with IPOPT instead of the paper's modified quasi-Newton method.
 

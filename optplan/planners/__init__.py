@@ -4,7 +4,7 @@ Every planner is built for a robot and a scene and answers ``plan(q_start, q_goa
 seed=, clock=)`` with a :class:`PlanResult` (status, path, per-configuration object poses and
 closed-chain flags, segments, stats) — see :mod:`optplan.planners.base`.
 
-* :class:`TCBiRRT` — seed 000's task-space constrained bidirectional RRT with regrasp;
+* :class:`TCBiRRT` — the TCBiRRT paper's task-space constrained bidirectional RRT with regrasp;
 * :class:`CBiRRT2` — joint-space constrained BiRRT with Newton-Raphson projection;
 * :class:`RRTConnect` — unconstrained joint-space RRTConnect (no object; also the regrasp planner);
 * :class:`~optplan.planners.ompl_peers.OMPLPeer` — OMPL's Projected / Atlas / TangentBundle state

@@ -1,5 +1,5 @@
 """CBiRRT2 — constrained bidirectional RRT in joint space with Newton-Raphson projection onto the
-closed-chain manifold h(q) = 0 (Berenson, Srinivasa, Ferguson, Kuffner 2009; seed 000's
+closed-chain manifold h(q) = 0 (Berenson, Srinivasa, Ferguson, Kuffner 2009; the TCBiRRT paper's
 classical baseline, Section 5.2 item 2: "maximum edge length between nodes 0.6 rad, step size
 for collision checking 0.2 rad").
 

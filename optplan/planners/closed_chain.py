@@ -1,4 +1,4 @@
-"""Fast closed-chain kinematics for the planners: the two-hand IK step of seed 000's Alg. 4, the
+"""Fast closed-chain kinematics for the planners: the two-hand IK step of the TCBiRRT paper's Alg. 4, the
 closed-chain residual h(q) of Eq. 1-2 with its Jacobian, and the held object's pose.
 
 The hot functions are CasADi expressions built from :class:`optplan.SymbolicKinematics` and
@@ -26,7 +26,7 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class IKSettings:
-    """Alg. 4 of seed 000 (per-arm iterations ``q ← q + λ J† K e``).
+    """Alg. 4 of the TCBiRRT paper (per-arm iterations ``q ← q + λ J† K e``).
 
     ``tol_position`` [m] and ``tol_orientation`` [rad]: ε_p, ε_o on each hand's pose error (Eq. 5-6);
     ``max_iterations``: n; ``gain``: K·λ (scalar, 1 = Newton step); ``damping``: δ of the damped

@@ -3,7 +3,7 @@ constraint and the same collision checker as optplan's own planners.
 
 * state space: ``ProjectedStateSpace`` (Newton projection), ``AtlasStateSpace`` (atlas of
   tangent charts) or ``TangentBundleStateSpace`` (lazy tangent bundle) over the 14 joints;
-* constraint: h(q) of seed 000 Eq. 1-2 (``ClosedChainKinematics.h`` / ``h_jacobian``, compiled C),
+* constraint: h(q) of the TCBiRRT paper Eq. 1-2 (``ClosedChainKinematics.h`` / ``h_jacobian``, compiled C),
   tolerance ``tolerance``;
 * validity: :class:`~optplan.planners.validity.ValidityChecker` (object held);
 * planner: RRTConnect (the issue's configuration), BKPIECE1, KPIECE1, RRT or PRM.

@@ -1,4 +1,4 @@
-"""TCBiRRT — task-space constrained bidirectional RRT (seed 000, Alg. 1-4 and Section 4.3).
+"""TCBiRRT — task-space constrained bidirectional RRT (the TCBiRRT paper, Alg. 1-4 and Section 4.3).
 
 Two trees grow in the object's pose space ξ = [p; roll, pitch, yaw] (RPY as in Eq. 2,
 ``R = Rz(yaw) Ry(pitch) Rx(roll)``). Each node holds (q, ξ).
@@ -84,7 +84,7 @@ VARIANTS = {
 
 # ---------------------------------------------------------------------- task-space helpers
 def exp_coordinates(R: np.ndarray) -> np.ndarray:
-    """Rotation vector ω̂θ of ``R`` (seed 000 Appendix, Eq. 12-14), θ ∈ [0, π].
+    """Rotation vector ω̂θ of ``R`` (the TCBiRRT paper Appendix, Eq. 12-14), θ ∈ [0, π].
 
     Eq. 12 (θ from the trace) and Eq. 14 (axis from the skew part) away from 0 and π; Eq. 13's
     θ = π case is generalised to use the largest diagonal entry (Eq. 13 divides by 1 + r11, which

@@ -111,7 +111,7 @@ class FramePath(Term):
 
 @dataclass
 class ClosedChain(Term):
-    """Two end-effectors keep their relative pose ``T_a⁻¹ T_b = relative`` at every knot (seed 000
+    """Two end-effectors keep their relative pose ``T_a⁻¹ T_b = relative`` at every knot (the TCBiRRT paper
     Eq. 1-2, with the singularity-free residual of the module docstring).
 
     ``skip_pinned=True`` leaves out the knots whose joints a :class:`JointBoundary` pins and which
@@ -207,7 +207,7 @@ class ClosedChain(Term):
 
 @dataclass
 class OrientationConstraint(Term):
-    """A body axis stays within ``max_angle`` [rad] of a world direction at every knot (seed 002's
+    """A body axis stays within ``max_angle`` [rad] of a world direction at every knot (the OC-RRT paper's
     orientation constraint, e.g. a cup kept upright): ``(R a_local) · a_world ≥ cos(max_angle)``."""
 
     frame: str = ""
