@@ -231,8 +231,8 @@ def _cmd_plan(args) -> int:
         v = out[k]
         print(f"  {k:28s} {v:.3e}" if isinstance(v, float) else f"  {k:28s} {v}")
     for s in res.segments:
-        print(f"    segment {s.kind:11s} {s.arm or '':2s} {s.solution.status.value:28s} it={s.solution.iterations:4d} "
-              f"ipopt={s.solution.wall_time:6.2f}s clearance={s.report.min_clearance_m:+.3f} m "
+        print(f"    segment {s.kind:11s} {s.arm or '':2s} {s.solution.status.value:28s} it={s.solution.total_iterations:4d} "
+              f"ipopt={s.solution.total_wall_time:6.2f}s clearance={s.report.min_clearance_m:+.3f} m "
               f"attempts={'+'.join(a['reason'] for a in s.attempts)}")
     if args.json:
         with open(args.json, "w") as f:

@@ -21,6 +21,8 @@ hands hold the object.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import logging
 import time
 from dataclasses import dataclass, field
@@ -144,7 +146,8 @@ class PipelineOptions:
 @dataclass
 class SegmentResult:
     """One optimized segment: ``kind`` ("constrained" or "regrasp"), the moving ``arm`` of a
-    regrasp, the final ``solution`` (times and iterations summed over its attempts), its
+    regrasp, the final ``solution`` (its ``attempts`` list every NLP solved for the segment; the
+    totals are ``total_iterations``, ``total_wall_time``, ``total_setup_time``), its
     ``report`` (:func:`verify`), its start time ``t0`` [s] in the whole trajectory, and
     ``attempts``: one dict per NLP solved, in order (``reason``, ``N``, ``status``,
     ``iterations``, ``setup_s``, ``ipopt_s``, ``min_clearance_m``, ``closed_chain_residual``)."""
@@ -185,15 +188,15 @@ class PipelineResult:
     @property
     def opt_time_s(self) -> float:
         """IPOPT time summed over the segments [s]."""
-        return float(sum(s.solution.wall_time for s in self.segments))
+        return float(sum(s.solution.total_wall_time for s in self.segments))
 
     @property
     def setup_time_s(self) -> float:
-        return float(sum(s.solution.setup_time for s in self.segments))
+        return float(sum(s.solution.total_setup_time for s in self.segments))
 
     @property
     def iterations(self) -> int:
-        return int(sum(s.solution.iterations for s in self.segments))
+        return int(sum(s.solution.total_iterations for s in self.segments))
 
     @property
     def max_closed_chain_residual(self) -> float:
@@ -291,8 +294,8 @@ def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind
     arms = list(scene.object.grasps)
     cc, holder = None, None
     if kind == "constrained":
-        cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
-        cc.interior = opts.closed_chain_interior
+        cc = dataclasses.replace(ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]],
+                                                         arms[0], arms[1]), interior=opts.closed_chain_interior)
         prob.add_constraint(cc, name="closed_chain")
         prob.add_constraint(JointPositionLimits(), name="joint_limits")
     else:  # regrasp: the holding arm's joints stay where they are, so the object does too
@@ -335,11 +338,9 @@ def _initial_guess(robot, scene, prob: OptProblem, seg_path, cc, kind: str, opts
 
 
 def _accumulate(sol, prev: Solution) -> Solution:
-    """``sol`` with the time and iterations of an earlier attempt ``prev`` added."""
-    sol.wall_time += prev.wall_time
-    sol.setup_time += prev.setup_time
-    sol.iterations += prev.iterations
-    return sol
+    """``sol`` with the attempts of an earlier solution ``prev`` listed before its own (a
+    Solution is immutable; totals are ``total_iterations``, ``total_wall_time``, …)."""
+    return sol.after(prev)
 
 
 def _dense_times(sol, per_interval: int = 10) -> np.ndarray:
@@ -357,14 +358,14 @@ def _solve_verified(robot, scene, prob: OptProblem, cc, holder, opts: PipelineOp
             break
         # activate pairs from the union of the initial guess and this solution; where the solution
         # collides between knots, raise those pairs' margin at the knots around; rebuild, re-solve
-        col = prob.terms["collision"].term
-        col.activate_with = list(col.activate_with) + [prob.numeric_trajectory(sol.x)]
+        h = prob.terms["collision"]
+        col = h.term.with_activation(prob.numeric_trajectory(sol.x))
         t = _dense_times(sol)
-        n = col.boost_between_knots(t, sol.sample(t)["q"], sol.t)
+        col, n = col.with_boost(prob.term_data(h), t, sol.sample(t)["q"], sol.t)
         log.info("segment %s: clearance %.3g m by coal (%s); re-solving with more pairs (%d rows with a "
                  "larger margin)", kind, rep.min_clearance_m, rep.min_clearance_pair, n)
-        prob.rebuild()
-        sol = _accumulate(prob.solve(ipopt), sol)
+        prob.replace_term(h, col)
+        sol = _accumulate(prob.solve(ipopt).labelled("collision"), sol)
         rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
     return sol, rep
 
@@ -464,10 +465,8 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         log.info("segment %s: fallback to the knot transcription -> %s", kind, sol2.status.value)
         if good(sol2, rep2) or not sol.success:
             total, rep = _accumulate(sol2, total), rep2
-        else:  # keep the spline solution; the fallback's time still counts
-            total.wall_time += sol2.wall_time
-            total.setup_time += sol2.setup_time
-            total.iterations += sol2.iterations
+        else:  # keep the spline solution; the fallback's time still counts (listed in its attempts)
+            total = dataclasses.replace(total, attempts=total.attempts + sol2.attempts)
     return total, rep, attempts
 
 

@@ -261,19 +261,23 @@ def test_value_matches_numeric(case, robots):
 @pytest.mark.parametrize("case", [c for c in REGISTRY if _case_of(c).role == "constraint"], ids=_case_id)
 def test_constraint_bounds_match_numeric_bounds(case, robots):
     """The NLP's bounds of a constraint (g bounds, or variable bounds for limit terms) equal the
-    bounds the numeric evaluation uses (``_bounds_numeric``, used by ``cost_numeric``)."""
+    bounds the numeric evaluation uses (``bounds_numeric``, used by ``cost_numeric``)."""
     s = _setup(_case_of(case), robots)
     prob, name = s.prob, s.handle.name
     b = prob._built
     traj = prob.numeric_trajectory(s.x)
-    lo, hi = s.handle.term._bounds_numeric(traj)
-    if hasattr(s.handle.term, "bounds_on"):
-        idx = prob._bound_terms[name][0]
+    lo, hi = s.handle.term.bounds_numeric(traj)
+    d = prob.term_data(s.handle)
+    if d.var_bounds is not None:
+        idx = d.var_bounds[0]
         sc = prob.tp.variable_scale(s.handle.term.which)  # variables are scaled (transcription)
+        assert sc == d.var_scale
         glo, ghi = b["lbx"][idx] / sc, b["ubx"][idx] / sc
     else:
-        sl = prob._con_slices[name]
+        sl = b["rows"][name]
         glo, ghi = b["lbg"][sl], b["ubg"][sl]
+        np.testing.assert_array_equal(glo, d.lower)
+        np.testing.assert_array_equal(ghi, d.upper)
     np.testing.assert_allclose(glo, lo, rtol=1e-14)
     np.testing.assert_allclose(ghi, hi, rtol=1e-14)
 
