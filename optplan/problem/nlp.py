@@ -222,7 +222,7 @@ class SolveOutcome:
     own, unscaled objective); x, lam_g, lam_x: primal and multipliers (CasADi's convention:
     ``lam < 0`` on an active lower bound, ``> 0`` on an active upper bound; ``None`` when not
     available); label: why this run happened (e.g. a retry's reason); message: the exception
-    text of a run that raised. Arrays are read-only.
+    text of a run that raised; g: the constraint values at ``x``. Arrays are read-only.
     """
 
     status: IpoptStatus
@@ -236,11 +236,13 @@ class SolveOutcome:
     lam_x: np.ndarray | None = field(default=None, repr=False, compare=False)
     label: str = ""
     message: str = ""
+    #: the constraint values g(x) IPOPT returned (None when not computed)
+    g: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         if not isinstance(self.status, IpoptStatus):
             object.__setattr__(self, "status", IpoptStatus.from_string(self.status))
-        for name in ("x", "lam_g", "lam_x"):
+        for name in ("x", "lam_g", "lam_x", "g"):
             a = getattr(self, name)
             if a is not None:
                 a = np.array(a, float).ravel()
@@ -254,7 +256,7 @@ class SolveOutcome:
 
     def summary(self) -> "SolveOutcome":
         """The same outcome without its arrays (what a result's list of attempts keeps)."""
-        return dataclasses.replace(self, x=None, lam_g=None, lam_x=None)
+        return dataclasses.replace(self, x=None, lam_g=None, lam_x=None, g=None)
 
     def with_label(self, label: str) -> "SolveOutcome":
         return dataclasses.replace(self, label=str(label))
@@ -286,7 +288,7 @@ def outcome_from_stats(stats: Mapping, out: Mapping | None, *, wall_time: float,
     fa = np.array(f, float).ravel() if f is not None else np.zeros(0)
     cost = float(fa[0]) / cost_scale if fa.size == 1 else float("nan")
     return SolveOutcome(status, iters, wall_time, cpu_time, setup_time, cost, arr("x"), arr("lam_g"),
-                        arr("lam_x"), label=label)
+                        arr("lam_x"), label=label, g=arr("g"))
 
 
 class NlpSolver:
