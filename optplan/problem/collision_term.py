@@ -55,8 +55,8 @@ log = logging.getLogger(__name__)
 
 def witness_plane(checker: CollisionChecker, pair, obj_tf) -> np.ndarray:
     """(n, b): coal's unit witness normal from A to B and the mid-plane offset ``n·mid`` of a pair,
-    at the placements last set by ``checker._update`` (``obj_tf``: the held object's)."""
-    g1, t1, g2, t2 = checker._geoms(pair, obj_tf)
+    at the placements last set by ``checker.update_placements`` (``obj_tf``: the held object's)."""
+    g1, t1, g2, t2 = checker.pair_geometries(pair, obj_tf)
     res = coal.DistanceResult()
     coal.distance(g1, t1, g2, t2, coal.DistanceRequest(), res)
     n = np.asarray(res.normal, float)
@@ -190,6 +190,11 @@ class CollisionAvoidance(Term):
 
     def rows(self, ctx):
         return self.model(ctx.robot).build_rows(ctx)
+
+    def residual(self, tp):
+        raise TypeError("CollisionAvoidance has no residual(tp): its rows depend on the initial guess and use "
+                        "auxiliary variables (separating planes); build it with term.build(BuildContext(tp, ...)) "
+                        "or evaluate it through OptProblem.term_function(handle)")
 
     def reseed(self, data: TermData, traj: NumericTrajectory) -> tuple:
         """The auxiliary variables of built ``data`` re-seeded from a new initial guess ``traj``
@@ -441,7 +446,7 @@ class CollisionModel:
 
     def _plane_init(self, pair, q_full) -> np.ndarray:
         """(n, b) from coal's witness points at a configuration (normal from A to B)."""
-        Mo = self.checker._update(q_full)
+        Mo = self.checker.update_placements(q_full)
         return witness_plane(self.checker, pair, coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None)
 
     def build_rows(self, ctx) -> TermData:
