@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from optplan.errors import ConfigurationError, OptionError
-from optplan.problem import (ClosedChain, CollisionAvoidance, FramePose, IpoptStatus, JointBoundary,
+from optplan.problem import (BaseAttitude, ClosedChain, CollisionAvoidance, FramePose, IpoptStatus, JointBoundary,
                              JointPositionLimits, JointVelocityLimits, OptProblem, OrientationConstraint, Smoothness,
                              Solution, SolveOutcome, SolverOptions)
 from optplan.problem.nlp import NlpSolver
@@ -374,3 +374,24 @@ def test_user_defined_term_of_the_docs(tcb):
     assert sol.value(h).min() >= z_min - 1e-8 and sol.violation(h).max() <= 1e-8
     assert np.all(sol.dual(h) >= -1e-8) and sol.dual(h).max() > 1e-6   # lower bounds only; one is active
     np.testing.assert_allclose(sol.sample(sol.t, h), sol.value(h), atol=1e-7)
+
+
+def test_sample_on_a_floating_base_matches_the_knots(eba):
+    """Free-floating robot: the base attitude and a closed chain sampled at the knots equal their
+    values there (the base quaternion is interpolated between knots, exact at them); at an iterate
+    that is not a solution (max_iter=0) the handles still evaluate it."""
+    rng = np.random.default_rng(8)
+    q0 = eba.random_joints(rng) * 0.2
+    prob = OptProblem(eba, n_intervals=3, duration=2.0)
+    prob.add_constraint(JointBoundary("start", q=q0, qd=np.zeros(eba.nj), qdd=np.zeros(eba.nj)))
+    h_b = prob.add_constraint(BaseAttitude(target=None, at="all"))
+    h_c = prob.add_constraint(ClosedChain.from_configuration(eba, eba.configuration(q0)))
+    prob.set_initial_straight_line(q0, q0 + 0.2)
+    sol = prob.solve(max_iter=0)
+    assert sol.status is IpoptStatus.MAXIMUM_ITERATIONS_EXCEEDED
+    for h in (h_b, h_c):
+        np.testing.assert_allclose(sol.sample(sol.t, h), sol.value(h), atol=1e-9)
+    t = np.linspace(0.0, sol.duration, 13)
+    s = sol.sample(t, h_b)
+    assert s.shape == (13, 4) and np.all(np.isfinite(s))
+    assert np.all(sol.violation(h_b) >= 0) and sol.violation(h_c).max() > 0   # the guess leaves the manifold
