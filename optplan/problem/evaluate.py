@@ -5,6 +5,7 @@ of an :class:`~optplan.problem.OptProblem`; every :class:`~optplan.problem.Solut
 returns carries the one it was solved with."""
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,10 +40,11 @@ class TermEvaluator:
     """The terms of one build of a problem, evaluated at that build's solutions."""
 
     def __init__(self, problem, built: dict):
-        self.problem = problem
+        # a weak reference: a Solution keeps what evaluates its terms, not the problem's solver
+        self._problem = weakref.ref(problem)
         self.robot = problem.robot
-        self.tp = problem.tp
-        self.com0 = None if not self.tp.floating else np.array(self.tp.com0, float)
+        self.floating = bool(problem.tp.floating)
+        self.com0 = None if not self.floating else np.array(problem.tp.com0, float)
         self.handles = dict(problem.terms)
         self.data = dict(built["data"])
         self.rows = dict(built["rows"])
@@ -50,6 +52,11 @@ class TermEvaluator:
         self.cost_names = list(built["cost_names"])
         self.lbg, self.ubg = built["lbg"].copy(), built["ubg"].copy()
         self.dyn = built["dyn"]
+
+    @property
+    def problem(self):
+        """The problem this evaluator was built from (None once it no longer exists)."""
+        return self._problem()
 
     # ------------------------------------------------------------------ lookup
     def _binding(self, handle):
@@ -117,7 +124,7 @@ class TermEvaluator:
         M = t.size
         nj = s["q"].shape[1]
         bq = None
-        if self.tp.floating:
+        if self.floating:
             k = np.clip(np.searchsorted(sol.t, t, side="right") - 1, 0, len(sol.t) - 2)
             f = ((t - sol.t[k]) / (sol.t[k + 1] - sol.t[k]))[:, None]
             Q0, Q1 = sol.base_quat[k], sol.base_quat[k + 1]

@@ -81,6 +81,13 @@ class IpoptStatus(str, Enum):
 
 
 _HESSIANS = ("exact", "limited-memory")
+#: (name, type, value) of raw options IPOPT already accepted in this process (checking one creates
+#: a solver instance: about a millisecond)
+_CHECKED: set = set()
+
+
+def _option_key(k, v):
+    return (str(k), type(v).__name__, repr(v))
 
 
 def _number(value, name: str, *, integer: bool = False, positive: bool = True, allow_zero: bool = False):
@@ -150,11 +157,13 @@ class SolverOptions:
             raise OptionError(f"SolverOptions.raw: expected a dict {{option: value}}, got "
                               f"{type(self.raw).__name__} {self.raw!r}")
         raw = dict(self.raw)
-        if raw:
+        new = {k: v for k, v in raw.items() if _option_key(k, v) not in _CHECKED}
+        if new:
             try:
-                check_ipopt_options(raw)
+                check_ipopt_options(new)
             except OptionError as exc:
                 raise OptionError(f"SolverOptions.raw: {exc}") from None
+            _CHECKED.update(_option_key(k, v) for k, v in new.items())
         object.__setattr__(self, "raw", types.MappingProxyType(raw))
 
     # ------------------------------------------------------------------ conversions
@@ -169,6 +178,10 @@ class SolverOptions:
         if isinstance(options, SolverOptions):
             return dataclasses.replace(options, **fields) if fields else options
         if isinstance(options, Mapping):
+            from ..solver_options import check_ipopt_options
+
+            check_ipopt_options(dict(options))   # the error names ipopt_options[...], as it always did
+            _CHECKED.update(_option_key(k, v) for k, v in options.items())
             return cls(raw=options, **fields)
         raise OptionError(f"solver options: expected SolverOptions, a dict of IPOPT options or None, got "
                           f"{type(options).__name__} {options!r}")
