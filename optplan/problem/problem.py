@@ -8,9 +8,11 @@ IPOPT and get a :class:`Solution` that says honestly how good it is.
     smooth = prob.add_cost(Smoothness("jerk"), weight=1.0)
     prob.set_initial(q=path)          # any (M × nj) array, on any time grid
     sol = prob.solve()                # always a Solution; sol.status is an IpoptStatus
+    sol.value(smooth), sol.dual(h), sol.sample(t, h), prob.infeasibilities(sol)
 
-Problem (terms) ≠ transcription (:mod:`.transcription`) ≠ solver (IPOPT through ``casadi.nlpsol``,
-exact Hessian by default).
+Problem (terms: frozen configurations, each built into :class:`TermData` against a
+:class:`BuildContext`) ≠ transcription (:mod:`.transcription`) ≠ solver (the NLP core
+:mod:`.nlp`: IPOPT through ``casadi.nlpsol``, exact Hessian by default).
 """
 from __future__ import annotations
 
