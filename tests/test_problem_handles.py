@@ -395,3 +395,30 @@ def test_sample_on_a_floating_base_matches_the_knots(eba):
     s = sol.sample(t, h_b)
     assert s.shape == (13, 4) and np.all(np.isfinite(s))
     assert np.all(sol.violation(h_b) >= 0) and sol.violation(h_c).max() > 0   # the guess leaves the manifold
+
+
+def test_collision_retry_by_replacing_the_term(tcb):
+    """The pipeline's collision retry without mutation: ``with_activation`` adds a trajectory whose
+    close pairs are activated too (coal distances on either trajectory below ``activation``), and
+    ``replace_term`` rebuilds the NLP with it; the original term is unchanged."""
+    from optplan.collision import CollisionChecker
+
+    scene = Scene.load("transport")
+    rng = np.random.default_rng(21)
+    Q1 = np.array([tcb.random_joints(rng) * 0.5 for _ in range(4)])
+    Q2 = np.array([tcb.random_joints(rng) * 0.5 for _ in range(4)])
+    prob = OptProblem(tcb, n_intervals=3, duration=3.0)
+    col = CollisionAvoidance(scene, activation=0.1, window=0, held_object=False)
+    h = prob.add_constraint(col)
+    prob.set_initial(q=Q1)
+    before = set(prob.term_data(h).info["active_pairs"])
+    other = OptProblem(tcb, n_intervals=3, duration=3.0)
+    other.set_initial(q=Q2)
+    col2 = col.with_activation(other.numeric_trajectory(other.initial_guess))
+    assert col.activate_with == () and len(col2.activate_with) == 1
+    h2 = prob.replace_term(h, col2)
+    after = set(prob.term_data(h2).info["active_pairs"])
+    chk = CollisionChecker(tcb, scene, held_object=False)
+    D = np.minimum(np.array([chk.distances(q) for q in Q1]), np.array([chk.distances(q) for q in Q2]))
+    expect = {p for i, p in enumerate(chk.pairs) if (D[:, i] < 0.1).any()}
+    assert after == expect and before <= after and len(after) > len(before)
