@@ -190,6 +190,8 @@ def test_solution_is_immutable_and_lists_attempts(cc_problem, tmp_path):
         sol.success = False
     with pytest.raises(ValueError):
         sol.q[0, 0] = 1.0                                      # read-only arrays
+    with pytest.raises(TypeError):
+        sol.terms["closed_chain"] = 0.0                        # read-only mapping
     assert len(sol.attempts) == 1 and isinstance(sol.attempts[0], SolveOutcome)
     a = sol.attempts[0]
     assert a.status == sol.status and a.iterations == sol.iterations and a.x is None
@@ -422,3 +424,25 @@ def test_collision_retry_by_replacing_the_term(tcb):
     D = np.minimum(np.array([chk.distances(q) for q in Q1]), np.array([chk.distances(q) for q in Q2]))
     expect = {p for i, p in enumerate(chk.pairs) if (D[:, i] < 0.1).any()}
     assert after == expect and before <= after and len(after) > len(before)
+
+
+def test_results_options_and_terms_pickle(cc_problem, tcb):
+    """Process pools (the benchmark engine) pickle results: a Solution keeps everything but its
+    evaluator (handles then ask for the problem), options and terms stay frozen."""
+    import pickle
+
+    prob, sol, h = cc_problem
+    back = pickle.loads(pickle.dumps(sol))
+    np.testing.assert_array_equal(back.q, sol.q)
+    assert dict(back.terms) == dict(sol.terms) and back.attempts == sol.attempts
+    with pytest.raises(ValueError):
+        back.q[0, 0] = 0.0
+    with pytest.raises(ValueError, match="no problem"):
+        back.value(h["cc"])
+    o = pickle.loads(pickle.dumps(SolverOptions(tol=1e-7, raw={"mu_strategy": "adaptive"})))
+    assert o.raw["mu_strategy"] == "adaptive" and o.tol == 1e-7
+    col = CollisionAvoidance(Scene.load("transport"), margin=0.01, margin_boost={})
+    col2 = pickle.loads(pickle.dumps(col))
+    assert col2.margin == 0.01 and dict(col2.margin_boost) == {}
+    cc = pickle.loads(pickle.dumps(h["cc"].term))
+    np.testing.assert_allclose(cc.relative.homogeneous, h["cc"].term.relative.homogeneous)

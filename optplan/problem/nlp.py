@@ -166,6 +166,16 @@ class SolverOptions:
             _CHECKED.update(_option_key(k, v) for k, v in new.items())
         object.__setattr__(self, "raw", types.MappingProxyType(raw))
 
+    def __getstate__(self):
+        d = dict(self.__dict__)
+        d["raw"] = dict(d["raw"])
+        return d
+
+    def __setstate__(self, d):
+        for k, v in d.items():
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "raw", types.MappingProxyType(dict(d["raw"])))
+
     # ------------------------------------------------------------------ conversions
     @classmethod
     def coerce(cls, options: "SolverOptions | Mapping | None", **fields) -> "SolverOptions":

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -43,7 +44,7 @@ class Solution:
     wall_time: float
     cost: float
     max_constraint_violation: float
-    terms: dict[str, float]
+    terms: dict[str, float]  # read-only mapping
     t: np.ndarray
     q: np.ndarray
     qd: np.ndarray
@@ -69,7 +70,7 @@ class Solution:
         if not isinstance(self.status, IpoptStatus):
             set_("status", IpoptStatus.from_string(self.status))
         set_("joint_names", tuple(self.joint_names))
-        set_("terms", dict(self.terms))
+        set_("terms", types.MappingProxyType({str(k): float(v) for k, v in dict(self.terms).items()}))
         for k in _ARRAYS:
             a = getattr(self, k)
             if a is not None:
@@ -90,6 +91,22 @@ class Solution:
 
                 logging.getLogger(__name__).error("Solution marked failed: %s", exc)
                 set_("success", False)
+
+    # ------------------------------------------------------------------ pickling (process pools)
+    def __getstate__(self):
+        d = dict(self.__dict__)
+        d["terms"] = dict(d["terms"])
+        d["evaluator"] = None        # the problem's CasADi functions stay in the process that solved it
+        return d
+
+    def __setstate__(self, d):
+        for k, v in d.items():
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "terms", types.MappingProxyType(dict(d["terms"])))
+        for k in _ARRAYS:
+            a = getattr(self, k, None)
+            if isinstance(a, np.ndarray):
+                a.flags.writeable = False
 
     # ------------------------------------------------------------------ attempts
     def after(self, *earlier: "Solution") -> "Solution":
@@ -218,7 +235,7 @@ class Solution:
     def _meta(self) -> dict:
         return {"success": self.success, "status": self.status.value, "iterations": self.iterations,
                 "wall_time": self.wall_time, "setup_time": self.setup_time, "cost": self.cost,
-                "max_constraint_violation": self.max_constraint_violation, "terms": self.terms,
+                "max_constraint_violation": self.max_constraint_violation, "terms": dict(self.terms),
                 "joint_names": list(self.joint_names), "x_scale_h": self.x_scale_h, "cpu_time": self.cpu_time,
                 "attempts": [a.to_dict() for a in self.attempts]}
 

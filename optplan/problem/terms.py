@@ -16,6 +16,7 @@ Pose residuals avoid Euler angles: position error plus ``vee(E − Eᵀ)/2`` of 
 from __future__ import annotations
 
 import dataclasses
+import types
 import warnings
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -212,6 +213,15 @@ class Term:
             self._validate()
             return
         object.__setattr__(self, name, value)
+
+    def __getstate__(self):
+        return {k: dict(v) if isinstance(v, types.MappingProxyType) else v
+                for k, v in self.__dict__.items() if k != "_legacy"}
+
+    def __setstate__(self, state):
+        for k, v in state.items():
+            object.__setattr__(self, k, v)
+        self._validate()             # normalises (read-only mappings, arrays) again
 
     # ------------------------------------------------------------------ build (model → data)
     def build(self, ctx: BuildContext) -> TermData:
