@@ -22,7 +22,6 @@ hands hold the object.
 from __future__ import annotations
 
 import dataclasses
-
 import logging
 import time
 from dataclasses import dataclass, field
