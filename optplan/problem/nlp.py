@@ -66,10 +66,7 @@ class IpoptStatus(str, Enum):
 
     @classmethod
     def from_string(cls, s: str) -> "IpoptStatus":
-        for m in cls:
-            if m.value.lower() == str(s).lower():
-                return m
-        return cls.UNKNOWN
+        return _STATUS_BY_NAME.get(str(s).lower(), cls.UNKNOWN)
 
     @property
     def succeeded(self) -> bool:
@@ -80,6 +77,7 @@ class IpoptStatus(str, Enum):
         return self in (IpoptStatus.INFEASIBLE_PROBLEM_DETECTED, IpoptStatus.RESTORATION_FAILED)
 
 
+_STATUS_BY_NAME = {m.value.lower(): m for m in IpoptStatus}
 _HESSIANS = ("exact", "limited-memory")
 #: (name, type, value) of raw options IPOPT already accepted in this process (checking one creates
 #: a solver instance: about a millisecond)
@@ -268,7 +266,7 @@ class SolveOutcome:
         for name in ("x", "lam_g", "lam_x", "g"):
             a = getattr(self, name)
             if a is not None:
-                a = np.array(a, float).ravel()
+                a = np.array(a, dtype=float).reshape(-1)   # a copy the outcome owns
                 a.flags.writeable = False
                 object.__setattr__(self, name, a)
 
@@ -306,10 +304,14 @@ def outcome_from_stats(stats: Mapping, out: Mapping | None, *, wall_time: float,
     iters = int(stats.get("iter_count", -1))
     if out is None:
         return SolveOutcome(status, iters, wall_time, cpu_time, setup_time, label=label)
-    arr = lambda k: np.array(out[k], float).ravel() if k in out and out[k] is not None else None  # noqa: E731
-    f = out.get("f")
-    fa = np.array(f, float).ravel() if f is not None else np.zeros(0)
-    cost = float(fa[0]) / cost_scale if fa.size == 1 else float("nan")
+    def arr(k):
+        v = out.get(k)
+        if v is None:
+            return None
+        return v.full().ravel() if hasattr(v, "full") else np.array(v, dtype=float).ravel()  # DM: fast path
+
+    fa = arr("f")
+    cost = float(fa[0]) / cost_scale if fa is not None and fa.size == 1 else float("nan")
     return SolveOutcome(status, iters, wall_time, cpu_time, setup_time, cost, arr("x"), arr("lam_g"),
                         arr("lam_x"), label=label, g=arr("g"))
 
