@@ -90,7 +90,10 @@ class PipelineOptions:
     B-spline segments get ⌈joint path length / spline_interval_step [rad]⌉ intervals for a
     constrained segment (⌈length / free_interval_step⌉ for a regrasp), clipped to
     [spline_min_intervals, spline_max_intervals]. Their retry policy, in order (each attempt is
-    recorded in ``SegmentResult.attempts``): (1) ``collision``: coal finds a contact after a
+    recorded in ``SegmentResult.attempts``): (0) ``velocity``: after any solve, a velocity control
+    point beyond its joint's limit (only those the warm start brings past
+    spline_velocity_activation of the limit have rows) → rows added, re-solve (≤ velocity_retries);
+    (1) ``collision``: coal finds a contact after a
     converged solve → pairs activated along the solution, margins raised between knots, re-solve
     (≤ collision_retries); (2) ``finer-grid``: IPOPT failed or a contact remains → 1.6× the
     intervals from the same initial guess (≤ failure_retries); (3) ``refine``: the closed-chain
@@ -126,6 +129,8 @@ class PipelineOptions:
     spline_max_intervals: int = 160
     ipopt_max_wall_time: float = 60.0
     smooth_warm_start: float = 0.0
+    spline_velocity_activation: float = 0.5
+    velocity_retries: int = 2
 
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
@@ -398,7 +403,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
 
     def build(N: int, initial: Solution | None = None) -> SplineSegmentProblem:
         spec = SegmentSpec(int(N), T, seg_path[0], seg_path[-1], cc, lo, hi, margin=opts.margin,
-                           object_arm=holder or arms[0])
+                           object_arm=holder or arms[0], velocity_activation=opts.spline_velocity_activation)
         prob = SplineSegmentProblem(robot, scene, spec)
         if initial is not None:
             prob.set_initial(solution=initial)
@@ -417,6 +422,17 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     def run(prob: SplineSegmentProblem, reason: str):
         nonlocal total
         sol = prob.solve(ipopt)
+        for _ in range(opts.velocity_retries):  # 0. a joint speed the lazy velocity rows missed
+            over = prob.velocity_violations(sol) if sol.success else ()
+            if not len(over):
+                break
+            attempts.append(_attempt(reason, prob.N, sol, verify(robot, sol, scene, closed_chain=cc,
+                                                                  object_arm=holder)))
+            total = sol if total is None else _accumulate(sol, total)
+            prob.add_velocity_rows(over)
+            prob.activate_velocity(sol)  # and the entries near their limit, not only those over it
+            reason = "velocity"
+            sol = prob.solve(ipopt)
         rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
         attempts.append(_attempt(reason, prob.N, sol, rep))
         log.info("segment %s: %s N=%d -> %s, %d iterations, setup %.2f s, IPOPT %.2f s, clearance %+.4f m, "

@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 import os
 import weakref
+from collections import OrderedDict
 
 import casadi as ca
 import numpy as np
@@ -39,6 +40,7 @@ class KernelCache:
         self._q = ca.SX.sym("q", robot.nj)
         self._X = self.sym.joint_placements(self._q)
         self._fns: dict = {}
+        self._structures: "OrderedDict[tuple, object]" = OrderedDict()
         self._digest = self._robot_digest()
         self._dir = None
         if disk:
@@ -93,6 +95,22 @@ class KernelCache:
                     log.info("kernel %s not saved (%s)", path, exc)
         self._fns[key] = fn
         return fn
+
+    #: how many segment-NLP structures (:meth:`structure`) stay in memory
+    max_structures = 32
+
+    def structure(self, key: tuple, build):
+        """The symbolic segment NLP of shape ``key`` (intervals, rows, pairs and their knots), from
+        memory if an NLP of that shape was built in this process (with its IPOPT instances), else
+        ``build()`` — kept in memory only, the ``max_structures`` most recently used."""
+        st = self._structures.get(key)
+        if st is None:
+            st = self._structures[key] = build()
+            while len(self._structures) > self.max_structures:
+                self._structures.popitem(last=False)
+        else:
+            self._structures.move_to_end(key)
+        return st
 
     @classmethod
     def of(cls, robot: RobotModel) -> "KernelCache":
