@@ -100,6 +100,10 @@ class PipelineOptions:
     residual between knots exceeds closed_chain_tol → the grid refined by
     (residual / (tol/2))^¼, warm-started from the solution (≤ refinements); (4) ``fallback-knots``:
     still not verified → the knot transcription with free plane normals.
+    compile_kernels: the B-spline NLP's kernels evaluated from C compiled once per robot and
+    cached on disk (:attr:`SplineSegmentProblem.compile_kernels`): ``"auto"`` (default) uses what
+    an earlier run compiled, ``True`` compiles what is missing (about a second of the C compiler
+    per kernel, once), ``False`` never.
     ipopt_max_wall_time [s]: IPOPT's wall-clock cap per solve (a solve that hits it ends with the
     status ``Maximum_WallTime_Exceeded``; B-spline path).
     """
@@ -130,6 +134,7 @@ class PipelineOptions:
     ipopt_max_wall_time: float = 60.0
     smooth_warm_start: float = 0.0
     spline_velocity_activation: float = 0.5
+    compile_kernels: bool | str = "auto"
     velocity_retries: int = 2
 
     def __post_init__(self):
@@ -141,6 +146,9 @@ class PipelineOptions:
             raise ValueError("PipelineOptions: expected spline_interval_step > 0 and 4 ≤ spline_min_intervals ≤ "
                              f"spline_max_intervals, got {self.spline_interval_step}, {self.spline_min_intervals}, "
                              f"{self.spline_max_intervals}")
+        if self.compile_kernels not in (True, False, "auto"):
+            raise ValueError(f"PipelineOptions.compile_kernels: expected True, False or 'auto', got "
+                             f"{self.compile_kernels!r}")
         if not self.ipopt_max_wall_time > 0:
             raise ValueError(f"PipelineOptions.ipopt_max_wall_time: expected a positive time [s], got "
                              f"{self.ipopt_max_wall_time}")
@@ -407,6 +415,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         spec = SegmentSpec(int(N), T, seg_path[0], seg_path[-1], cc, lo, hi, margin=opts.margin,
                            object_arm=holder or arms[0], velocity_activation=opts.spline_velocity_activation)
         prob = SplineSegmentProblem(robot, scene, spec)
+        prob.compile_kernels = opts.compile_kernels
         if initial is not None:
             prob.set_initial(solution=initial)
         elif opts.warm_start:

@@ -319,3 +319,38 @@ def test_lazy_velocity_rows_match_all_rows_and_catch_what_they_miss(tcb, transpo
         _transport_problem(tcb, transport, Q, cc, velocity_activation=1.5)
     with pytest.raises(ValueError, match="add_velocity_rows"):
         fast.add_velocity_rows([10**9])
+
+
+def test_compiled_kernels_equal_the_symbolic_ones_and_are_found_by_auto(tmp_path, monkeypatch):
+    """A pair kernel and its derivatives compiled to C give the symbolic values; a fresh cache
+    (another process) finds the libraries with ``"auto"`` without compiling, and ``"auto"`` with
+    no library falls back to the symbolic kernels."""
+    import shutil
+
+    from optplan.problem.kernels import KernelCache
+
+    if not (shutil.which("cc") or shutil.which("gcc")):
+        pytest.skip("no C compiler")
+    monkeypatch.setenv("OPTPLAN_CACHE", str(tmp_path))
+    robot = RobotModel.from_name("tcbirrt_dual_arm")
+    fid = robot.arm("A").ee_frame_id
+    V = np.array([[0.0, 0.1], [0.0, 0.0], [0.0, 0.3]])
+    kc = KernelCache(robot)
+    fn = kc.pair(fid, V, 0.05, None, np.zeros((3, 1)), 0.0)
+    (f0, j0, h0), c0 = kc.evaluators(fn, "auto")
+    assert c0 is False and f0 is fn  # nothing compiled yet
+    (f1, j1, h1), c1 = kc.evaluators(fn, True)
+    assert c1 is True and len(list(tmp_path.rglob("*.so"))) == 3
+    (f2, j2, h2), c2 = KernelCache(robot).evaluators(fn, "auto")
+    assert c2 is True
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        q = robot.random_configuration(rng)
+        n = rng.normal(size=3)
+        args = (q, n / np.linalg.norm(n), 0.4)
+        lam = rng.normal(size=2)
+        for a, b in ((f2, f0), (j2, j0)):
+            np.testing.assert_allclose(np.array(a(*args)), np.array(b(*args)), rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(np.array(h2(*args, lam)), np.array(h0(*args, lam)), rtol=1e-12, atol=1e-13)
+    with pytest.raises(ValueError, match="compile_kernels"):
+        kc.evaluators(fn, "yes")

@@ -146,6 +146,11 @@ class SplineSegmentProblem:
         self._plan = None
         #: use the kernel-assembled Jacobian and Hessian (False: CasADi's own AD of the whole graph)
         self.exact_derivatives = True
+        #: kernels evaluated from C compiled once per robot and kept in the disk cache
+        #: (:meth:`KernelCache.compiled`): True — compile what is missing (about a second of the
+        #: C compiler per kernel, once); "auto" — use what an earlier run compiled, else the
+        #: symbolic kernels; False — the symbolic kernels only
+        self.compile_kernels: bool | str = "auto"
         #: [m] a moving box keeps the rows of the vertices within this distance of its leading
         #: vertex along a plane's normal (``inf``: every vertex; see :meth:`_prune`)
         self.vertex_window = 0.5
@@ -406,9 +411,12 @@ class SplineSegmentProblem:
         fref = jerk_integral_reference(self.q0, self.q1, self.T)
         self._scale = scale = 1.0 / fref if fref > 0 else 1.0
         pvals.append([scale / h**5])  # ∫‖j‖² dt = h Σ ‖ΔP³/h³‖², scaled to order 1
+        evals = {fn.name(): self.kernels.evaluators(fn, self.compile_kernels)
+                 for fn in ([ccfn] if ccfn is not None else []) + [it.fn for it in plan]}
         key = (N, nj, sel.tobytes(), None if ccfn is None else ccfn.name(), self.exact_derivatives,
-               tuple((it.fn.name(), tuple(it.knots), it.static) for it in plan))
-        st = self.kernels.structure(key, lambda: self._structure(sel, ccfn, plan))
+               tuple((it.fn.name(), tuple(it.knots), it.static) for it in plan),
+               tuple(sorted((name, c) for name, (_, c) in evals.items())))
+        st = self.kernels.structure(key, lambda: self._structure(sel, ccfn, plan, evals))
         self._nlp, self._derivs = st.nlp, st.derivs
         self._plan = plan
         nb = st.nb
@@ -426,7 +434,7 @@ class SplineSegmentProblem:
         self._nfree = nP
         return b
 
-    def _structure(self, sel: np.ndarray, ccfn, plan: list) -> SimpleNamespace:
+    def _structure(self, sel: np.ndarray, ccfn, plan: list, evals: dict) -> SimpleNamespace:
         """The symbolic NLP of one shape: decision variables, parameters, rows in the order of
         :meth:`_build`'s bounds, and the exact Jacobian / Hessian functions (:class:`Assembly`)."""
         N, nj = self.N, self.robot.nj
@@ -462,8 +470,8 @@ class SplineSegmentProblem:
                 fams.append((name, it.fn, it.knots, Np, Bv[bi:bi + K].T, (nP + bi, sign)))
                 bi += K
         for name, fn, knots, Nin, Sin, bcoup in fams:
-            jfn, hfn = self.kernels.derivatives(fn)
-            asm.family(name, fn, jfn, hfn, knots, Qk[:, knots], Nin, Sin, bcoup, 0.0, 0.0)
+            (f, jfn, hfn), _ = evals[fn.name()]
+            asm.family(name, f, jfn, hfn, knots, Qk[:, knots], Nin, Sin, bcoup, 0.0, 0.0)
         w = ca.MX.sym("w")  # objective weight: scale / h⁵
         params.append(w)
         p = ca.vertcat(*[ca.vec(a) for a in params])
