@@ -488,8 +488,8 @@ def _collision_rows(prob, h):
     for pair in info["active_pairs"]:
         if pair in info["skipped"]:
             continue
-        ka, kb = model._kinds(pair)
-        for k in model._knots_of(pair, prob.N):
+        ka, kb = model.kinds(pair)
+        for k in model.knots_of(pair, prob.N):
             if model._is_box(ka, pair.a) or model._is_box(kb, pair.b):
                 n = model._local_points(ka, pair.a)[0].shape[1] + model._local_points(kb, pair.b)[0].shape[1] + 1
                 blocks.append(("plane", pair, k, n))

@@ -221,7 +221,7 @@ class CollisionAvoidance(Term):
         if data is not None:
             return data.info["model"].numeric(traj)
         m = self.model(traj.robot)
-        m._activate(traj.robot, traj)
+        m.activate(traj.robot, traj)
         return m.numeric(traj)
 
     def numeric_built(self, traj: NumericTrajectory, data: TermData) -> np.ndarray:
@@ -231,7 +231,7 @@ class CollisionAvoidance(Term):
         if data is not None:
             return data.info["model"].bounds_numeric(traj)
         m = self.model(traj.robot)
-        m._activate(traj.robot, traj)
+        m.activate(traj.robot, traj)
         return m.bounds_numeric(traj)
 
     def sampled(self):
@@ -269,7 +269,7 @@ class CollisionModel:
         self.checker = CollisionChecker(robot, self.scene, held_object=self.held_object,
                                         self_collision=self.self_collision, object_arm=self.object_arm)
         objs = robot.collision_model.geometryObjects
-        self._robot_shape = {}
+        self.robot_shape = {}
         for g, o in enumerate(objs):
             geo = o.geometry
             M = o.placement
@@ -277,21 +277,21 @@ class CollisionModel:
                 hl = geo.halfLength
                 a = M.translation + M.rotation @ np.array([0, 0, -hl])
                 b = M.translation + M.rotation @ np.array([0, 0, hl])
-                self._robot_shape[g] = (o.parentFrame, D.Capsule(geo.radius, tuple(a), tuple(b)), None)
+                self.robot_shape[g] = (o.parentFrame, D.Capsule(geo.radius, tuple(a), tuple(b)), None)
             elif isinstance(geo, coal.Sphere):
-                self._robot_shape[g] = (o.parentFrame, D.Sphere(geo.radius, tuple(M.translation)), None)
+                self.robot_shape[g] = (o.parentFrame, D.Sphere(geo.radius, tuple(M.translation)), None)
             elif isinstance(geo, coal.Box):
-                self._robot_shape[g] = (o.parentFrame, D.Box(tuple(np.asarray(geo.halfSide))), M)
+                self.robot_shape[g] = (o.parentFrame, D.Box(tuple(np.asarray(geo.halfSide))), M)
             else:
-                self._robot_shape[g] = None
+                self.robot_shape[g] = None
         obj = self.checker.object
         if obj is not None:
             self._obj_caps = object_capsules(obj.size, self.object_grid)
-            self._grasp_inv = obj.grasps[self.checker.object_arm].inverse()
+            self.grasp_inv = obj.grasps[self.checker.object_arm].inverse()
             self._hand_frame = robot.arm(self.checker.object_arm).ee_frame
 
-
-    def _activate(self, robot, initial: NumericTrajectory | None):
+    # ------------------------------------------------------------------ activation (read by the segment NLP)
+    def activate(self, robot, initial: NumericTrajectory | None):
         """Active (pair, knots): knots within ``window`` of a knot where the initial guess brings
         the pair closer than ``activation``. Sets ``active_pairs`` and ``active_knots``."""
         pairs = self.checker.pairs
@@ -300,7 +300,7 @@ class CollisionModel:
             self.active_knots = {p: None for p in pairs}
             return self.active_pairs
         Dm = np.array([self.checker.distances(initial.q_full(k)) for k in range(initial.N + 1)])
-        self._init_dist = Dm.copy()  # (N+1) × pairs, reused by _boundary_margins
+        self._init_dist = Dm.copy()  # (N+1) × pairs, reused by boundary_margins
         for tr in self.activate_with:  # e.g. a previous solution that verification found colliding
             Dm = np.minimum(Dm, np.array([self.checker.distances(tr.q_full(k)) for k in range(initial.N + 1)]))
         close = Dm < self.activation
@@ -320,11 +320,11 @@ class CollisionModel:
             self.active_knots[p] = np.flatnonzero(mask).tolist()
         return self.active_pairs
 
-    def _knots_of(self, pair, N: int):
+    def knots_of(self, pair, N: int):
         ks = self.active_knots.get(pair)
         return range(N + 1) if ks is None else ks
 
-    def _free_joints_of(self, robot, kind: str, idx: int, fixed: frozenset) -> set | None:
+    def free_joints_of(self, robot, kind: str, idx: int, fixed: frozenset) -> set | None:
         """Free joint-vector indices an entity's pose depends on (``None``: unknown, e.g. a mimic
         joint; treated as moving). Obstacles: none; the object: its holding hand's joints."""
         if kind == "obstacle":
@@ -347,23 +347,23 @@ class CollisionModel:
                 out.add(i)
         return out
 
-    def _is_constant(self, robot, pair, fixed: frozenset) -> bool:
+    def is_constant(self, robot, pair, fixed: frozenset) -> bool:
         """True when the pair's distance cannot change: neither entity depends on a free joint and,
         for a floating base, the pair does not involve the (world-fixed) obstacles."""
         if not fixed:
             return False
-        ka, kb = self._kinds(pair)
+        ka, kb = self.kinds(pair)
         if robot.is_floating and "obstacle" in (ka, kb):
             return False
-        fa = self._free_joints_of(robot, ka, pair.a, fixed)
-        fb = self._free_joints_of(robot, kb, pair.b, fixed)
+        fa = self.free_joints_of(robot, ka, pair.a, fixed)
+        fb = self.free_joints_of(robot, kb, pair.b, fixed)
         return fa is not None and fb is not None and not fa and not fb
 
     # ------------------------------------------------------------------ expressions
     def _entity(self, tp, kind: str, idx: int, k: int):
         """(shapes list, R, p) of an entity at knot k; kind in robot/obstacle/object."""
         if kind == "robot":
-            spec = self._robot_shape.get(idx)
+            spec = self.robot_shape.get(idx)
             if spec is None:
                 return None
             fid, shape, Mbox = spec
@@ -375,7 +375,7 @@ class CollisionModel:
             o = self.checker.obstacles[idx]
             return [o.primitive()], ca.DM(o.placement.rotation), ca.DM(o.placement.translation)
         Rh, ph = tp.frame(self._hand_frame, k)
-        G = self._grasp_inv
+        G = self.grasp_inv
         return self._obj_caps, Rh @ ca.DM(G.rotation), ph + Rh @ ca.DM(G.translation)
 
     def _dist_fn(self, s1, s2) -> ca.Function | None:
@@ -388,7 +388,7 @@ class CollisionModel:
         return self._fns[key]
 
     @staticmethod
-    def _kinds(pair):
+    def kinds(pair):
         return {"self": ("robot", "robot"), "robot-obstacle": ("robot", "obstacle"),
                 "object-obstacle": ("object", "obstacle"), "object-robot": ("object", "robot")}[pair.kind]
 
@@ -407,13 +407,13 @@ class CollisionModel:
             return V, r, lambda tp, k: (ca.DM(M.rotation), ca.DM(M.translation))
         if kind == "object":
             V = np.array(_box_vertices(np.asarray(self.checker.object.size) / 2)).T
-            G = self._grasp_inv
+            G = self.grasp_inv
 
             def obj_pose(tp, k):
                 Rh, ph = tp.frame(self._hand_frame, k)
                 return Rh @ ca.DM(G.rotation), ph + Rh @ ca.DM(G.translation)
             return V, 0.0, obj_pose
-        fid, shape, Mbox = self._robot_shape[idx]
+        fid, shape, Mbox = self.robot_shape[idx]
         if isinstance(shape, D.Box):
             V = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T
             r = 0.0
@@ -441,7 +441,7 @@ class CollisionModel:
             return True
         if kind == "obstacle":
             return self.checker.obstacles[idx].shape == "box"
-        spec = self._robot_shape.get(idx)
+        spec = self.robot_shape.get(idx)
         return spec is not None and isinstance(spec[1], D.Box)
 
     def _plane_init(self, pair, q_full) -> np.ndarray:
@@ -456,9 +456,9 @@ class CollisionModel:
         robot = tp.robot
         self.skipped = []
         init = ctx.initial
-        active = self._activate(robot, init)
+        active = self.activate(robot, init)
         fixed = ctx.fixed_joints if self.skip_constant else frozenset()
-        self.constant_pairs = [p for p in active if self._is_constant(robot, p, fixed)]
+        self.constant_pairs = [p for p in active if self.is_constant(robot, p, fixed)]
         if self.constant_pairs:
             self.active_pairs = active = [p for p in active if p not in self.constant_pairs]
             log.info("collision term: %d pair(s) with no free joint left out: %s", len(self.constant_pairs),
@@ -467,12 +467,12 @@ class CollisionModel:
         aux: list[AuxVariable] = []
         rs, lo = [], []
         pinned = set(ctx.pinned_q) if self.skip_pinned else set()
-        margin_at = self._boundary_margins(tp, init, active, pinned)
-        knots_of = lambda pair: [k for k in self._knots_of(pair, tp.N) if k not in pinned]  # noqa: E731
+        margin_at = self.boundary_margins(tp, init, active, pinned)
+        knots_of = lambda pair: [k for k in self.knots_of(pair, tp.N) if k not in pinned]  # noqa: E731
         for pair in active:
-            ka, kb = self._kinds(pair)
-            if (ka == "robot" and self._robot_shape.get(pair.a) is None) or \
-                    (kb == "robot" and self._robot_shape.get(pair.b) is None):
+            ka, kb = self.kinds(pair)
+            if (ka == "robot" and self.robot_shape.get(pair.a) is None) or \
+                    (kb == "robot" and self.robot_shape.get(pair.b) is None):
                 self.skipped.append(pair)
                 continue
             if self._is_box(ka, pair.a) or self._is_box(kb, pair.b):
@@ -508,7 +508,7 @@ class CollisionModel:
         r = ca.vertcat(*rs)
         return TermData(residual=r, lower=np.array(lo), upper=np.full(r.shape[0], np.inf), aux=tuple(aux), info=info)
 
-    def _boundary_margins(self, tp, init, active, pinned):
+    def boundary_margins(self, tp, init, active, pinned):
         """``margin_at(pair, k)`` [m]: ``margin``, except within ``window`` knots of a pinned knot
         whose given configuration is closer than ``margin`` for that pair: there
         ``min(margin, d_pinned / 2)``. Next to a pinned knot (rest: zero rate and acceleration)
@@ -568,7 +568,7 @@ class CollisionModel:
         for i, p in enumerate(self.checker.pairs):
             if p not in self.active_pairs:
                 continue  # not constrained at all: activation (``activate_with``) is the remedy
-            ks = set(self._knots_of(p, len(knot_t) - 1))
+            ks = set(self.knots_of(p, len(knot_t) - 1))
             bad = np.flatnonzero(D[:, i] < min_clearance)
             worst: dict[int, float] = {}
             for s_ in bad:
@@ -583,7 +583,7 @@ class CollisionModel:
         return n
 
     def _smooth_pair(self, pair) -> bool:
-        ka, kb = self._kinds(pair)
+        ka, kb = self.kinds(pair)
         return not (self._is_box(ka, pair.a) or self._is_box(kb, pair.b))
 
     def _smooth_value(self, robot, pair, q_full) -> float:
@@ -597,13 +597,13 @@ class CollisionModel:
                 o = self.checker.obstacles[idx]
                 return [o.primitive()], o.placement.rotation, o.placement.translation
             if kind == "object":
-                M = data.oMf[robot.frame_id(self._hand_frame)] * self._grasp_inv
+                M = data.oMf[robot.frame_id(self._hand_frame)] * self.grasp_inv
                 return self._obj_caps, M.rotation, M.translation
-            fid, shape, _ = self._robot_shape[idx]
+            fid, shape, _ = self.robot_shape[idx]
             M = data.oMf[robot.frame_id(fid)]
             return [shape], M.rotation, M.translation
 
-        ka, kb = self._kinds(pair)
+        ka, kb = self.kinds(pair)
         ea, eb = entity(ka, pair.a), entity(kb, pair.b)
         return min(float(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2])) for sa in ea[0] for sb in eb[0])
 

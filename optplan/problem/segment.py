@@ -51,7 +51,7 @@ from .bspline import boundary_points, fit_interior, jerk_integral_reference, kno
 from .collision_term import CollisionAvoidance, _box_vertices, witness_plane
 from .frame_terms import ClosedChain
 from .kernels import KernelCache, geometry_points
-from .solution import IpoptStatus, Solution
+from .solution import Solution
 from .terms import NumericTrajectory
 
 __all__ = ["KernelCache", "SegmentSpec", "SplineSegmentProblem"]
@@ -137,9 +137,10 @@ class SplineSegmentProblem:
         self._vel_extra: set[int] = set()  # velocity entries added after a solve (add_velocity_rows)
         self.col = None
         if scene is not None:
+            # the term's per-build data (checker, shapes, active pairs): a CollisionModel
             self.col = CollisionAvoidance(scene, margin=spec.margin, activation=spec.activation,
-                                          window=spec.window, object_arm=spec.object_arm, fixed_normals=True)
-            self.col._setup(robot)
+                                          window=spec.window, object_arm=spec.object_arm,
+                                          fixed_normals=True).model(robot)
         self._X0: np.ndarray | None = None  # interior control points (N−3) × nj
         self._lam: tuple | None = None
         self._built: _Built | None = None
@@ -256,10 +257,10 @@ class SplineSegmentProblem:
             return None, M.rotation @ V + M.translation[:, None], r
         if kind == "object":
             V = np.array(_box_vertices(np.asarray(col.checker.object.size) / 2)).T
-            G = col._grasp_inv
+            G = col.grasp_inv
             fid, V, r = self.robot.arm(holder).ee_frame_id, G.rotation @ V + G.translation[:, None], 0.0
         else:
-            spec = col._robot_shape.get(idx)
+            spec = col.robot_shape.get(idx)
             if spec is None:
                 fid, V, r = geometry_points(self.robot, idx)
                 return self._static_or_moving(kind, idx, fid, V, r)
@@ -274,7 +275,7 @@ class SplineSegmentProblem:
         return self._static_or_moving(kind, idx, fid, V, r)
 
     def _static_or_moving(self, kind: str, idx: int, fid: int, V: np.ndarray, r: float):
-        if self.col._free_joints_of(self.robot, kind, idx, self.fixed) == set():
+        if self.col.free_joints_of(self.robot, kind, idx, self.fixed) == set():
             M = self._static_placement(fid)
             return None, M.rotation @ V + M.translation[:, None], r
         return fid, V, r
@@ -294,23 +295,23 @@ class SplineSegmentProblem:
             return []
         robot, N = self.robot, self.N
         traj = NumericTrajectory(robot, Qk, Qk, Qk, Qk[:-1], self.T)
-        active = col._activate(robot, traj)
+        active = col.activate(robot, traj)
         pinned = {0: self.q0, N: self.q1}
-        const = [p for p in active if col._is_constant(robot, p, self.fixed)]
+        const = [p for p in active if col.is_constant(robot, p, self.fixed)]
         active = [p for p in active if p not in const]
         col.active_pairs = active
         col.constant_pairs = const
-        margin_at = col._boundary_margins(SimpleNamespace(N=N), traj, active, set(pinned))
+        margin_at = col.boundary_margins(SimpleNamespace(N=N), traj, active, set(pinned))
         holder = col.checker.object_arm
         plan = []
         for pair in active:
-            ka, kb = col._kinds(pair)
+            ka, kb = col.kinds(pair)
             ea, eb = self._entity(ka, pair.a, holder), self._entity(kb, pair.b, holder)
             if ea is None or eb is None:
                 continue
             if ea[0] is None and eb[0] is None:
                 continue  # both static: constant distance, checked by verify
-            ks = [k for k in col._knots_of(pair, N) if k not in pinned]
+            ks = [k for k in col.knots_of(pair, N) if k not in pinned]
             if not ks:
                 continue
             flip = ea[0] is None
@@ -357,7 +358,7 @@ class SplineSegmentProblem:
                 per_knot.setdefault(k, []).append((i, t))
         out = [(np.zeros((3, len(it.knots))), np.zeros(len(it.knots))) for it in plan]
         for k, items in per_knot.items():
-            Mo = col.checker._update(Qk[k])
+            Mo = col.checker.update_placements(Qk[k])
             import coal
             obj_tf = coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None
             for i, t in items:
@@ -558,48 +559,36 @@ class SplineSegmentProblem:
     def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-6, max_iter: int = 500) -> Solution:
         """Solve with IPOPT (exact Hessian, MUMPS). Never raises for a failed solve: the status is
         in the Solution. ``ipopt_options`` are passed through (``"ipopt."`` prefix optional)."""
-        from ..solver_options import casadi_option_name, check_ipopt_options, check_solve_arguments
+        from ..solver_options import check_solve_arguments
+        from .nlp import NlpSolver, SolverOptions
 
         check_solve_arguments(tol, max_iter, 1.0)
+        sopts = SolverOptions.coerce(ipopt_options)  # an invalid option is an OptionError before the solve
         b = self._built or self._build()  # its time is charged to this solve's setup_time
         t_setup = time.perf_counter()
         st = b.solver
-        check_ipopt_options(ipopt_options)  # an invalid option is an OptionError before the solve
         # jacobian_regularization_value: IPOPT's constraint regularisation, used only when it
         # finds the Jacobian rank-deficient (docs/optproblem.md: a long segment on 136 intervals
         # went from 339 iterations without convergence to 19 with it)
-        opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": tol,
-                "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
-                "ipopt.mu_strategy": "adaptive", "ipopt.max_iter": int(max_iter),
-                "ipopt.jacobian_regularization_value": 1e-6}
-        for k, v in (ipopt_options or {}).items():
-            opts[casadi_option_name(k)] = v
-        okey = repr(sorted(opts.items()))
+        defaults = {"ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
+                    "ipopt.mu_strategy": "adaptive", "ipopt.max_iter": int(max_iter),
+                    "ipopt.jacobian_regularization_value": 1e-6}
+        okey = repr(sorted(sopts.casadi_options(defaults).items()))
+        setup = time.perf_counter() - t_setup + b.setup_time   # the NlpSolver adds its own creation time
+        b.setup_time = 0.0
         solver = st.solvers.get(okey)
         if solver is None:  # one IPOPT instance per shape and options, reused by later solves
+            extra = {}
             if self.exact_derivatives:
                 # the kernels may be compiled (no derivatives of their own): IPOPT's multipliers
                 # are used as they are, not recomputed from a gradient of the Lagrangian
-                opts.update(st.derivs)
-                opts.update({"no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
-                             "calc_f": False, "calc_g": False})
-            solver = st.solvers[okey] = ca.nlpsol("segment", "ipopt", st.nlp, opts)
-        setup = time.perf_counter() - t_setup + b.setup_time
-        b.setup_time = 0.0
+                extra = {**st.derivs, "no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
+                         "calc_f": False, "calc_g": False}
+            solver = st.solvers[okey] = NlpSolver("segment", st.nlp, sopts, defaults=defaults, casadi_options=extra)
         x0 = np.r_[self._X0.ravel(), self._xb0]
-        t0 = time.perf_counter()
-        try:
-            out = solver(x0=x0, p=b.p, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg)
-            stats = solver.stats()
-            status = IpoptStatus.from_string(stats.get("return_status", "Unknown"))
-            x = np.array(out["x"]).ravel()
-            lam_g = np.array(out["lam_g"]).ravel()
-            iters = int(stats.get("iter_count", -1))
-            cost = float(out["f"]) / self._scale
-        except RuntimeError as exc:
-            log.warning("IPOPT raised: %s", exc)
-            status, x, lam_g, iters, cost = IpoptStatus.INTERNAL_ERROR, x0.copy(), None, -1, float("nan")
-        wall = time.perf_counter() - t0
+        out = solver.solve(x0, p=b.p, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg, cost_scale=self._scale,
+                           extra_setup=setup)
+        status, x, lam_g, iters, cost, wall = out.status, np.array(out.x), out.lam_g, out.iterations, out.cost, out.wall_time
         gval = np.array(b.gfun(x, b.p)).ravel()
         viol_vec = np.maximum(np.maximum(b.lbg - gval, gval - b.ubg), 0.0)
         viol = float(viol_vec.max()) if viol_vec.size else 0.0
@@ -616,4 +605,5 @@ class SplineSegmentProblem:
         return Solution(success=success, status=status, iterations=iters, wall_time=wall, cost=cost,
                         max_constraint_violation=viol, terms=terms, t=np.linspace(0.0, self.T, self.N + 1),
                         q=kv["q"], qd=kv["qd"], qdd=kv["qdd"], jerk=kv["jerk"],
-                        joint_names=self.robot.joint_names, setup_time=setup, x=x, lam_g=lam_g)
+                        joint_names=self.robot.joint_names, setup_time=out.setup_time, cpu_time=out.cpu_time, x=x,
+                        lam_g=lam_g, attempts=(out,))
