@@ -221,3 +221,24 @@ def test_spline_segment_retry_policy(tcb, monkeypatch):
     assert sol.total_iterations == 21 and sol.total_wall_time == pytest.approx(0.3)
     assert len(sol.attempts) == 3 and sol.iterations == 7
     assert rep.max_closed_chain_residual == 2e-7
+
+
+def test_compare_pipeline_options_example_pairs_variants_and_rejects_bad_json(capsys):
+    """examples/compare_pipeline_options.py: bad --variants is exit 2 with one line; two variants
+    that differ only in a setting the trial does not exercise give the same plan and optimum."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "compare_pipeline_options.py"
+    spec = importlib.util.spec_from_file_location("compare_pipeline_options", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.main(["--variants", "[1]"]) == 2
+    assert "--variants" in capsys.readouterr().err
+    assert mod.main(["--variants", '{"a": {"no_such_field": 1}}']) == 2
+    assert mod.main(["--scene", "1", "--trials", "1", "--variants",
+                     '{"a": {}, "b": {"velocity_retries": 3}}']) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("ssps_scene1 t0")]
+    assert len(lines) == 2
+    strip = [ln.split(None, 3)[3] for ln in lines]  # everything after the variant name …
+    assert [s.split("cpu=")[0] for s in strip][0] == [s.split("cpu=")[0] for s in strip][1]  # … up to the CPU time

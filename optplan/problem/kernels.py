@@ -172,6 +172,10 @@ class KernelCache:
             self._structures.move_to_end(key)
         return st
 
+    def clear_structures(self) -> None:
+        """Forget the NLP structures kept in memory (the next solve of any shape builds it)."""
+        self._structures.clear()
+
     @classmethod
     def of(cls, robot: RobotModel) -> "KernelCache":
         """The cache of ``robot`` (one per robot object)."""
