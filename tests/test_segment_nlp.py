@@ -354,3 +354,26 @@ def test_compiled_kernels_equal_the_symbolic_ones_and_are_found_by_auto(tmp_path
         np.testing.assert_allclose(np.array(h2(*args, lam)), np.array(h0(*args, lam)), rtol=1e-12, atol=1e-13)
     with pytest.raises(ValueError, match="compile_kernels"):
         kc.evaluators(fn, "yes")
+
+
+def test_infeasibilities_name_the_worst_rows_by_family_and_knot(tcb, transport):
+    """A solve stopped after one iteration from a colliding guess violates rows: the list is sorted,
+    each entry's value and bounds are the NLP's, and its knot is the one the row belongs to; a
+    converged solve lists nothing beyond IPOPT's tolerance."""
+    Q, cc = _straight_segment(tcb, transport)
+    prob = _transport_problem(tcb, transport, Q, cc)
+    early = prob.solve(max_iter=1)
+    worst = prob.infeasibilities(early, n=5)
+    assert worst and all(a.violation >= b.violation for a, b in zip(worst, worst[1:]))
+    b = prob._built
+    for w in worst:
+        sl = b.slices[w.term]
+        g = np.array(b.gfun(early.x, b.p)).ravel()[sl.start + w.row]
+        assert g == pytest.approx(w.value) and w.violation == pytest.approx(max(w.lower - g, g - w.upper))
+        if w.term == "closed_chain":
+            assert w.point == 1 + w.row // 7
+    assert any(w.term.startswith("collision:") for w in prob.infeasibilities(early, n=10**6))
+    done = prob.solve()
+    assert done.success and all(w.violation <= 1e-5 for w in prob.infeasibilities(done))
+    with pytest.raises(ValueError, match="n: expected"):
+        prob.infeasibilities(done, n=-1)

@@ -24,6 +24,7 @@ class Assembly:
         self.N, self.nj, self.nx = N, nj, nx
         self.g, self.lbg, self.ubg, self.slices = [], [], [], {}
         self.ng = 0
+        self.points: dict = {}  # name -> (rows per knot, knots) of a kernel family, None for linear rows
         self.jsrc, self.hsrc = [], []  # MX nonzero vectors
         self.j_off = self.h_off = 0
         self.jt: list[np.ndarray] = []  # (row, col, src, weight) blocks; src −1: constant 1
@@ -35,6 +36,7 @@ class Assembly:
         self.lbg.append(np.broadcast_to(np.asarray(lo, float), (n,)).copy())
         self.ubg.append(np.broadcast_to(np.asarray(hi, float), (n,)).copy())
         self.slices[name] = slice(self.ng, self.ng + n)
+        self.points[name] = None  # rows per point: set by family
         self.ng += n
         return self.ng - n
 
@@ -61,6 +63,7 @@ class Assembly:
         m = fn.size1_out(0)
         r0 = self._rows(name, ca.vec(fn.map(K)(Qsub, Nin, Sin)), lo, hi)
         knots = np.asarray(knots)
+        self.points[name] = (m, knots.copy())
         # Jacobian: row r0 + t·m + lr, column of P_{k+a} joint j, weight c_a
         Jm = jfn.map(K)(Qsub, Nin, Sin)
         lr, jj = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())

@@ -486,7 +486,7 @@ class SplineSegmentProblem:
                   "hess_lag": ca.Function("hess_lag", [x, p, lam_f, lam_g], [Hl],
                                           ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])}
         return SimpleNamespace(nlp={"x": x, "p": p, "f": f, "g": G}, derivs=derivs, gfun=ca.Function("g", [x, p], [G]),
-                               slices=asm.slices, ng=asm.ng, np=p.shape[0], nb=nb, solvers={})
+                               slices=asm.slices, points=asm.points, ng=asm.ng, np=p.shape[0], nb=nb, solvers={})
 
     def rebuild(self) -> None:
         """Rebuild at the next solve (after ``add_activation`` or ``boost_between_knots``)."""
@@ -554,6 +554,32 @@ class SplineSegmentProblem:
             return 0
         self._built = None
         return self.col.boost_between_knots(traj_t, traj_q, knot_t)
+
+    def infeasibilities(self, solution: Solution, n: int = 10) -> list:
+        """The ``n`` worst constraint rows of ``solution`` (a solve of this problem), worst first,
+        as :class:`~optplan.problem.evaluate.Infeasibility`: row family (``velocity_limits``,
+        ``closed_chain``, ``collision:A|B``), row within it, knot (None for velocity rows),
+        value, bounds and violation (≥ 0; rad·h for velocity rows, m and rad otherwise)."""
+        from .evaluate import Infeasibility
+
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise ValueError(f"infeasibilities: n: expected an integer ≥ 0, got {n!r}")
+        b = self._built
+        if b is None or solution.x is None or np.asarray(solution.x).size != b.lbx.size:
+            raise ValueError("infeasibilities: the solution was not produced by this problem's last build; "
+                             "solve this problem and pass its solution")
+        g = np.array(b.gfun(np.asarray(solution.x), b.p)).ravel()
+        viol = np.maximum(np.maximum(b.lbg - g, g - b.ubg), 0.0)
+        out = []
+        for i in np.argsort(-viol, kind="stable")[:int(n)]:
+            if not viol[i] > 0:
+                break
+            name, sl = next((k, v) for k, v in b.slices.items() if v.start <= i < v.stop)
+            row = int(i - sl.start)
+            pts = b.solver.points.get(name)
+            point = None if pts is None else int(pts[1][row // pts[0]])
+            out.append(Infeasibility(name, row, point, float(g[i]), float(b.lbg[i]), float(b.ubg[i]), float(viol[i])))
+        return out
 
     # ------------------------------------------------------------------ solve
     def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-6, max_iter: int = 500) -> Solution:
