@@ -311,7 +311,8 @@ class FloatingSegmentSpec:
     identity, i.e. attitude restoration; ``False``: free); closed_chain: the hands' relative pose
     to keep at the knots (None: free hands); lower, upper [rad]: joint position limits (default
     the model's); velocity_limit [rad/s] (default the model's; ``False``: none); n_sub: RK4 steps
-    of the base attitude per interval."""
+    of the base attitude per interval; position_limits: False drops the joint position bounds;
+    smoothness: the cost, ``"jerk"`` (∫‖d³q/dt³‖² dt) or ``"acceleration"`` (∫‖q̈‖² dt), both exact."""
 
     n_intervals: int
     duration: float
@@ -323,6 +324,8 @@ class FloatingSegmentSpec:
     upper: np.ndarray | None = None
     velocity_limit: object = None
     n_sub: int = 1
+    position_limits: bool = True
+    smoothness: str = "jerk"
 
 
 class FloatingSplineProblem:
@@ -344,6 +347,8 @@ class FloatingSplineProblem:
         if isinstance(spec.n_sub, bool) or int(spec.n_sub) != spec.n_sub or spec.n_sub < 1:
             raise ValueError(f"n_sub: expected an integer ≥ 1, got {spec.n_sub!r}")
         self.n_sub = int(spec.n_sub)
+        if spec.smoothness not in ("jerk", "acceleration"):
+            raise ValueError(f"smoothness: expected 'jerk' or 'acceleration', got {spec.smoothness!r}")
         self.T = float(spec.duration)
         self.h = self.T / N
         self.M = knot_matrices(N)
@@ -355,6 +360,8 @@ class FloatingSplineProblem:
         self.P_end = boundary_points(self.q1, z, z, self.h, "end")
         self.lower = robot.lower.copy() if spec.lower is None else robot.check_joints(spec.lower, "lower")
         self.upper = robot.upper.copy() if spec.upper is None else robot.check_joints(spec.upper, "upper")
+        if not spec.position_limits:
+            self.lower, self.upper = np.full(nj, -np.inf), np.full(nj, np.inf)
         if spec.velocity_limit is False:
             self.vlim = None
         else:
@@ -526,16 +533,23 @@ class FloatingSplineProblem:
             A = np.zeros((4, nx + self.np))
             A[:, self._slot_xi(N)] = L
             asm.linear("end_attitude", xp, A, np.zeros(4), np.r_[0.0, 0.0, 0.0, np.inf])
-        # cost: ∫‖j‖² dt = Σ‖ΔP³‖² / h⁵, scaled
-        fref = jerk_integral_reference(self.q0, self.q1, self.T)
-        self._scale = scale = 1.0 / fref if fref > 0 else 1.0
-        Mj = self.M["jerk"]
-        Pm = ca.horzcat(*[xp[self._slot_P(i)] for i in range(N + 3)])  # nj × (N+3)
-        Jk = ca.mtimes(Pm, ca.sparsify(ca.DM(Mj.T)))
-        f = scale * ca.sumsqr(Jk) / self.h**5
+        # cost: ∫‖j‖² dt = Σ‖ΔP³‖² / h⁵ or ∫‖q̈‖² dt = h Σ (a_k² + a_k a_{k+1} + a_{k+1}²)/3, scaled
         import scipy.sparse as sps
 
-        Hp = 2 * scale / self.h**5 * (Mj[:, 3:N].T @ Mj[:, 3:N])
+        Pm = ca.horzcat(*[xp[self._slot_P(i)] for i in range(N + 3)])  # nj × (N+3)
+        if self.spec.smoothness == "jerk":
+            fref = jerk_integral_reference(self.q0, self.q1, self.T)
+            Cq = self.M["jerk"].T @ self.M["jerk"] / self.h**5  # quadratic form over the control points
+        else:
+            d = self.q1 - self.q0
+            fref = float(120.0 / 7.0 * (d @ d) / self.T**3)  # ∫ q̈² of the rest-to-rest quintic
+            Ma = self.M["qdd"] / self.h**2
+            S = (np.diag(np.r_[1.0, np.full(N - 1, 2.0), 1.0]) + np.eye(N + 1, k=1) / 2 + np.eye(N + 1, k=-1) / 2)
+            Cq = self.h / 3 * (Ma.T @ S @ Ma)
+        self._scale = scale = 1.0 / fref if fref > 0 else 1.0
+        self._cost_form = Cq
+        f = scale * ca.sum1(ca.sum2(ca.mtimes(Pm, ca.sparsify(ca.DM(Cq))) * Pm))
+        Hp = 2 * scale * Cq[3:N, 3:N]
         Hf = sps.lil_matrix((nx, nx))
         Hf[:self.nP, :self.nP] = sps.kron(Hp, sps.eye(nj))
         lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", asm.ng)
@@ -571,7 +585,10 @@ class FloatingSplineProblem:
             check_ipopt_options(ipopt_options)
             opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": dual_tol,
                     "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
-                    "ipopt.max_iter": int(max_iter)}
+                    "ipopt.max_iter": int(max_iter),
+                    # measured on the end-constrained restoration (N = 48): 30 iterations vs 34 at
+                    # IPOPT's default 0.1 (adaptive μ: 67)
+                    "ipopt.mu_init": 1e-3}
             for k, v in (ipopt_options or {}).items():
                 opts[casadi_option_name(k)] = v
             opts.update(b["derivs"])
@@ -598,7 +615,7 @@ class FloatingSplineProblem:
         viol_vec = np.maximum(np.maximum(b["lbg"] - gval, gval - b["ubg"]), 0.0)
         viol = float(viol_vec.max()) if viol_vec.size else 0.0
         viol = max(viol, float(np.max(np.maximum(np.maximum(b["lbx"] - x, x - b["ubx"]), 0.0))))
-        terms = {"jerk": cost}
+        terms = {self.spec.smoothness: cost}
         for name, sl in b["slices"].items():
             key = "dynamics" if name.startswith(("momentum", "base_attitude_dynamics")) else name
             terms[key] = max(terms.get(key, 0.0), float(viol_vec[sl].max()) if sl.stop > sl.start else 0.0)
