@@ -119,7 +119,7 @@ def test_assembled_derivatives_match_finite_differences(small_problem):
     b = prob._built
     rng = np.random.default_rng(14)
     x = np.r_[prob._X0.ravel(), prob._B0] + rng.normal(scale=1e-2, size=prob.nx)
-    p = b["p"]
+    p = prob._p()
     jac = b["derivs"]["jac_g"]
     g0, J = (np.asarray(v) for v in jac(x, p))
     J = np.asarray(ca_dense(J))
