@@ -219,3 +219,19 @@ def test_knots_transcription_is_kept_as_an_option(robot):
     from optplan.problem import OptProblem
 
     assert isinstance(prob, OptProblem) and cc is None
+
+
+def test_compiled_kernels_equal_the_symbolic_ones(kernels, tmp_path):
+    """The C-compiled form (a small kernel, -O0 to keep the test quick) evaluates as the SX one."""
+    import shutil
+
+    if shutil.which("cc") is None and shutil.which("gcc") is None:
+        pytest.skip("no C compiler")
+    f = kernels.attitude_step(1)
+    _, h = kernels.local_derivatives(f)
+    hc = kernels.compiled(h, opt="-O0")
+    assert hc is not h and hc.name() == h.name()
+    rng = np.random.default_rng(15)
+    z, lam = rng.normal(size=h.size1_in(0)), rng.normal(size=4)
+    assert np.allclose(np.asarray(hc(z, lam).full()), np.asarray(h(z, lam).full()), rtol=1e-12, atol=1e-13)
+    assert kernels.compiled(h, opt="-O0") is hc  # loaded once

@@ -24,7 +24,7 @@ PAPER = {"free_end": "EBA ≈ 370 s, planned end attitude (0, 0, 0)°",
          "end_constrained": "EBA ≈ 270 s, planned end attitude (0.11, 0.01, −0.05)°"}
 
 
-def _one(case: str, transcription: str, cache: str) -> dict:
+def _one(case: str, transcription: str, cache: str, compiled=False) -> dict:
     os.environ["OPTPLAN_CACHE"] = cache
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import time
@@ -36,7 +36,8 @@ def _one(case: str, transcription: str, cache: str) -> dict:
 
     robot = RobotModel.from_name("eba_ffsr")
     sc = eba.free_end_scenario() if case == "free_end" else eba.end_constrained_scenario(robot)
-    o = (eba.NLPOptions.free_end if case == "free_end" else eba.NLPOptions.end_constrained)(transcription=transcription)
+    o = (eba.NLPOptions.free_end if case == "free_end" else eba.NLPOptions.end_constrained)(transcription=transcription,
+                                                                                       compile_kernels=compiled)
     t0 = time.perf_counter()
     res = eba.run_nlp(robot, sc, o)
     wall = time.perf_counter() - t0
@@ -55,36 +56,42 @@ def _one(case: str, transcription: str, cache: str) -> dict:
 
 
 def run(cases=CASES) -> list[dict]:
-    """Rows in the order: per case, bspline cold, bspline warm, knots."""
+    """Rows in the order: per case, B-spline with CasADi's VM (cold, warm cache), with compiled
+    kernels (cold: compiles them; warm), knots."""
     ctx = mp.get_context("spawn")
     rows = []
     for case in cases:
         if case not in CASES:
             raise ValueError(f"cases: expected some of {CASES}, got {case!r}")
         with tempfile.TemporaryDirectory(prefix="optplan-restoration-") as cache:
-            for tr, label in (("bspline", "cold"), ("bspline", "warm"), ("knots", "-")):
+            for tr, label, comp in (("bspline", "cold", False), ("bspline", "warm", False),
+                                    ("bspline", "cold", True), ("bspline", "warm", True), ("knots", "-", False)):
                 with ctx.Pool(1) as pool:
-                    r = pool.apply(_one, (case, tr, cache))
+                    r = pool.apply(_one, (case, tr, cache, comp))
                 r["cache"] = label
+                r["kernels"] = "C" if comp else ("VM" if tr == "bspline" else "-")
                 rows.append(r)
     return rows
 
 
 def report(rows: list[dict]) -> str:
-    head = (f"{'case':16s} {'transcription':13s} {'cache':5s} {'N':>3s} {'iter':>4s} {'build s':>8s} {'IPOPT s':>8s} "
+    head = (f"{'case':16s} {'transcription':13s} {'cache':5s} {'kern':4s} {'N':>3s} {'iter':>4s} {'build s':>8s} {'IPOPT s':>8s} "
             f"{'b+s wall':>8s} {'b+s CPU':>8s} {'end att. [deg]':>14s} {'closed chain':>12s} {'cost':>10s}  status")
     lines = [head]
     for r in rows:
-        lines.append(f"{r['case']:16s} {r['transcription']:13s} {r['cache']:5s} {r['N']:3d} {r['iterations']:4d} "
+        lines.append(f"{r['case']:16s} {r['transcription']:13s} {r['cache']:5s} {r['kernels']:4s} {r['N']:3d} {r['iterations']:4d} "
                      f"{r['build_s']:8.2f} {r['solve_s']:8.2f} {r['build_solve_wall_s']:8.2f} "
                      f"{r['build_solve_cpu_s']:8.2f} {r['end_attitude_error_deg']:14.2e} "
                      f"{r['closed_chain_residual']:12.1e} {r['cost']:10.5f}  {r['status']}")
     lines.append(f"target: end-constrained restoration build + solve ≤ {TARGET_S} s (warm cache)")
     for case in dict.fromkeys(r["case"] for r in rows):
-        by = {(r["transcription"], r["cache"]): r for r in rows if r["case"] == case}
-        new, old = by.get(("bspline", "warm")), by.get(("knots", "-"))
-        if new and old:
-            lines.append(f"{case}: knots/bspline build+solve wall {old['build_solve_wall_s'] / new['build_solve_wall_s']:.1f}×, "
+        by = {(r["transcription"], r["cache"], r["kernels"]): r for r in rows if r["case"] == case}
+        old = by.get(("knots", "-", "-"))
+        for kern in ("VM", "C"):
+            new = by.get(("bspline", "warm", kern))
+            if not (new and old):
+                continue
+            lines.append(f"{case} [{kern} kernels]: knots/bspline build+solve wall {old['build_solve_wall_s'] / new['build_solve_wall_s']:.1f}×, "
                          f"CPU {old['build_solve_cpu_s'] / new['build_solve_cpu_s']:.1f}×; "
                          f"target ≤ {TARGET_S} s: {'met' if new['build_solve_wall_s'] <= TARGET_S else 'NOT met'} "
                          f"(wall {new['build_solve_wall_s']:.2f} s, CPU {new['build_solve_cpu_s']:.2f} s); paper: {PAPER[case]}")

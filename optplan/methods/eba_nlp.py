@@ -65,6 +65,7 @@ class NLPOptions:
     max_iter: int = 500
     sample_density: int = 10
     transcription: str = "bspline"
+    compile_kernels: object = "auto"
 
     def __post_init__(self):
         for n in ("n_intervals", "n_sub", "max_iter", "sample_density"):
@@ -75,6 +76,8 @@ class NLPOptions:
             v = getattr(self, n)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
                 raise ValueError(f"NLPOptions.{n}: expected a positive finite number, got {v!r}")
+        if self.compile_kernels not in (True, False, "auto"):
+            raise ValueError(f"NLPOptions.compile_kernels: expected True, False or 'auto', got {self.compile_kernels!r}")
         if self.transcription not in ("bspline", "knots"):
             raise ValueError(f"NLPOptions.transcription: expected 'bspline' or 'knots', got {self.transcription!r}")
         if self.smoothness not in ("jerk", "acceleration"):
@@ -143,7 +146,7 @@ def _build_spline(robot: RobotModel, scenario: Scenario, o: NLPOptions):
     spec = FloatingSegmentSpec(o.n_intervals, o.duration, scenario.theta0, scenario.thetaf, closed_chain=cc,
                                velocity_limit=None if o.velocity_limits else False, n_sub=o.n_sub,
                                position_limits=o.position_limits, smoothness=o.smoothness)
-    prob = FloatingSplineProblem(robot, spec)
+    prob = FloatingSplineProblem(robot, spec, compile_kernels=o.compile_kernels)
     prob.set_initial(_warm_start(robot, scenario, o))
     return prob, cc
 

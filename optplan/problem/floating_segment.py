@@ -123,6 +123,9 @@ class FloatingKernels(KernelCache):
     def momentum(self) -> ca.Function:
         """``f([q; q'; ω']) -> A_ω(q) ω' + A_m(q) q'`` (3 rows): the angular momentum about the
         centre of mass [base frame, per unit of normalised time] with zero base linear velocity."""
+        return self._get(*self._momentum_spec())
+
+    def _momentum_spec(self):
         def build(name):
             nj = self.robot.nj
             qd, w = ca.SX.sym("qd", nj), ca.SX.sym("w", 3)
@@ -131,11 +134,14 @@ class FloatingKernels(KernelCache):
             G = self.sym.center_of_mass(qf, self._X)
             return ca.Function(name, [ca.vertcat(self._q, qd, w)], [h[3:] - ca.cross(G, h[:3])])
 
-        return self._get(("fb_momentum",), build)
+        return ("fb_momentum",), build
 
     def attitude_step(self, n_sub: int) -> ca.Function:
         """``f([ξ_a; ξ_b; ω'_0 … ω'_{2 n_sub}]) -> ξ_b − RK4(ξ_a)`` (4 rows): ``n_sub`` RK4 steps of
         ``ξ' = ½ ξ ⊗ [ω'; 0]`` over one interval (u from 0 to 1), renormalised."""
+        return self._get(*self._attitude_spec(n_sub))
+
+    def _attitude_spec(self, n_sub: int):
         n_sub = int(n_sub)
 
         def build(name):
@@ -157,10 +163,13 @@ class FloatingKernels(KernelCache):
                 x = x / ca.norm_2(x)
             return ca.Function(name, [ca.vertcat(qa, qb, ca.vec(W))], [qb - x])
 
-        return self._get(("fb_attitude", n_sub), build)
+        return ("fb_attitude", n_sub), build
 
     def closed_chain(self, cc: ClosedChain) -> ca.Function:
         """``f(q) -> [pose residual (6); trace (1)]`` of the hands' relative pose (base frame)."""
+        return self._get(*self._closed_chain_spec(cc))
+
+    def _closed_chain_spec(self, cc: ClosedChain):
         rel = cc.relative
 
         def build(name):
@@ -169,7 +178,41 @@ class FloatingKernels(KernelCache):
             r, tr = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), np.array(rel.rotation), ca.DM(rel.translation))
             return ca.Function(name, [self._q], [ca.vertcat(r, tr)])
 
-        return self._get(("fb_cc", cc.arm_a, cc.arm_b, np.asarray(rel.homogeneous).round(15).tobytes()), build)
+        return ("fb_cc", cc.arm_a, cc.arm_b, np.asarray(rel.homogeneous).round(15).tobytes()), build
+
+    def _name(self, key: tuple) -> str:
+        """The name :meth:`KernelCache._get` gives the kernel of ``key``."""
+        import hashlib
+
+        return f"{key[0]}_{hashlib.sha1(self._digest + repr(key).encode()).hexdigest()[:16]}"
+
+    def kernel_set(self, kind: str, *args, compiled: bool = False, opt: str = "-O1"):
+        """``(f, ∂f/∂z, ∂²(λᵀf)/∂z²)`` of kernel ``kind`` ("momentum", "attitude" (n_sub),
+        "closed_chain" (cc)); ``compiled``: True — from C (:meth:`compiled`; compiled now if
+        missing), loaded straight from the libraries when they exist, without reading or
+        differentiating the symbolic kernels; "auto" — from C when the libraries exist, else the
+        symbolic kernels (nothing is compiled); False — the symbolic kernels."""
+        key, build = {"momentum": self._momentum_spec, "attitude": self._attitude_spec,
+                      "closed_chain": self._closed_chain_spec}[kind](*args)
+        if compiled not in (True, False, "auto"):
+            raise ValueError(f"compiled: expected True, False or 'auto', got {compiled!r}")
+        if compiled and self._dir is not None:
+            base = self._name(key)
+            names = [base, self._name(("ljac", base)), self._name(("lhess", base))]
+            libs = [self._dir / f"{n}{opt}.so" for n in names]
+            if all(lib.exists() for lib in libs):
+                out = []
+                for n, lib in zip(names, libs):
+                    k = ("compiled", n, opt)
+                    if k not in self._fns:
+                        self._fns[k] = ca.external(n, str(lib))
+                    out.append(self._fns[k])
+                return tuple(out)
+        f = self._get(key, build)
+        j, h = self.local_derivatives(f)
+        if compiled is True:
+            return self.compiled(f, opt), self.compiled(j, opt), self.compiled(h, opt)
+        return f, j, h
 
     def compiled(self, fn: ca.Function, opt: str = "-O1") -> ca.Function:
         """``fn`` compiled to C (a shared library in the kernel cache, named after the kernel, which
@@ -306,18 +349,7 @@ class _LocalAssembly:
             hi, hj = (np.asarray(v) for v in hfn.sparsity_out(0).get_triplet())
             e = len(hi)
             ti, ts, tw = template[:, 0].astype(int), template[:, 1].astype(int), template[:, 2]
-            # (kernel entry, template entry of its row input, template entry of its column input)
-            rows_of = [np.flatnonzero(ti == i) for i in range(int(ti.max()) + 1)]
-            pe, pa, pb = [], [], []
-            for ee in range(e):
-                ra = rows_of[hi[ee]] if hi[ee] < len(rows_of) else ()
-                rb = rows_of[hj[ee]] if hj[ee] < len(rows_of) else ()
-                for a in ra:
-                    for b in rb:
-                        pe.append(ee)
-                        pa.append(a)
-                        pb.append(b)
-            pe, pa, pb = np.array(pe, int), np.array(pa, int), np.array(pb, int)
+            pe, pa, pb = _entry_pairs(hi, hj, ti)
             ca_, cb_ = slots[:, ts[pa]], slots[:, ts[pb]]
             t = np.broadcast_to(np.arange(K)[:, None], ca_.shape)
             ok = (ca_ >= 0) & (ca_ < nx) & (cb_ >= 0) & (cb_ < nx) & (ca_ <= cb_)
@@ -330,6 +362,23 @@ class _LocalAssembly:
         Hl = _scatter(nx, nx, T[0].astype(int), T[1].astype(int), T[2].astype(int), T[3],
                       ca.vertcat(*hs, lam_f), off + 1)
         return G, Jg, Hl
+
+
+def _entry_pairs(hi: np.ndarray, hj: np.ndarray, ti: np.ndarray):
+    """For kernel-derivative entries ``(hi[e], hj[e])`` and template inputs ``ti``: every triple
+    ``(e, a, b)`` with ``ti[a] == hi[e]`` and ``ti[b] == hj[e]`` (vectorised)."""
+    order = np.argsort(ti, kind="stable")
+    n_in = int(max(ti.max(), hi.max(initial=0), hj.max(initial=0))) + 1
+    start = np.searchsorted(ti[order], np.arange(n_in), side="left")
+    stop = np.searchsorted(ti[order], np.arange(n_in), side="right")
+    na, nb = stop[hi] - start[hi], stop[hj] - start[hj]
+    cnt = na * nb
+    pe = np.repeat(np.arange(len(hi)), cnt)
+    local = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    nbr = np.repeat(nb, cnt)
+    pa = order[np.repeat(start[hi], cnt) + local // np.maximum(nbr, 1)]
+    pb = order[np.repeat(start[hj], cnt) + local % np.maximum(nbr, 1)]
+    return pe, pa, pb
 
 
 def _dm(A) -> ca.DM:
@@ -375,13 +424,17 @@ class FloatingSplineProblem:
     :func:`optplan.verify.verify` see exactly the optimised trajectory, and ``base_quat``: the
     integrated attitude at the knots)."""
 
-    def __init__(self, robot: RobotModel, spec: FloatingSegmentSpec, *, compile_kernels: bool = False):
+    def __init__(self, robot: RobotModel, spec: FloatingSegmentSpec, *, compile_kernels: bool | str = "auto"):
         if not robot.is_floating:
             raise ValueError(f"FloatingSplineProblem needs a free-floating robot; {robot.name!r} has a fixed base")
         self.robot, self.spec = robot, spec
         self.kernels = FloatingKernels.of(robot)
-        #: evaluate the kernels' derivatives from C compiled once per robot (:meth:`FloatingKernels.compiled`)
-        self.compile_kernels = bool(compile_kernels)
+        #: evaluate the kernels from C compiled once per robot (True: compile if needed; "auto": use
+        #: the compiled kernels when a previous run left them in the cache; False: never; see
+        #: :meth:`FloatingKernels.kernel_set`)
+        if compile_kernels not in (True, False, "auto"):
+            raise ValueError(f"compile_kernels: expected True, False or 'auto', got {compile_kernels!r}")
+        self.compile_kernels = compile_kernels
         N = self.N = int(spec.n_intervals)
         if N < 4:
             raise ValueError(f"n_intervals: expected ≥ 4, got {spec.n_intervals!r}")
@@ -512,13 +565,10 @@ class FloatingSplineProblem:
         asm = _LocalAssembly(nx, self.np)
         kc = self.kernels
         # momentum at every twist point: input [q; q'; ω'], u = i / (2 n_sub) in interval k
-        def kernel(f):
-            j, h = kc.local_derivatives(f)
-            if self.compile_kernels:
-                return kc.compiled(f), kc.compiled(j), kc.compiled(h)
-            return f, j, h
+        def kernel(kind, *args):
+            return kc.kernel_set(kind, *args, compiled=self.compile_kernels)
 
-        fmom, jm, hm = kernel(kc.momentum())
+        fmom, jm, hm = kernel("momentum")
         for i in range(m):  # points with the same fraction u share one template
             b, db = spline_basis(i / m)
             ks = list(range(N)) + ([N - 1] if i == 0 else [])  # the last knot: u = 1 of interval N − 1
@@ -549,7 +599,7 @@ class FloatingSplineProblem:
             else:
                 asm.family(f"momentum@{i}/{m}", fmom, jm, hm, tmpl[0], np.array(slots), xp, 0.0, 0.0)
         # attitude steps
-        fat, ja, ha = kernel(kc.attitude_step(self.n_sub))
+        fat, ja, ha = kernel("attitude", self.n_sub)
         nin = fat.size1_in(0)
         slots = np.array([np.concatenate([self._slot_xi(k), self._slot_xi(k + 1)] +
                                          [self._slot_w(m * k + c) for c in range(m + 1)]) for k in range(N)])
@@ -558,7 +608,7 @@ class FloatingSplineProblem:
         # closed chain at the interior knots
         cc = self.spec.closed_chain
         if cc is not None:
-            fcc, jc, hc = kernel(kc.closed_chain(cc))
+            fcc, jc, hc = kernel("closed_chain", cc)
             b, _ = spline_basis(0.0)
             tmpl = np.array([(j, a * nj + j, b[a]) for a in range(3) for j in range(nj)])
             slots = np.array([np.concatenate([self._slot_P(k + a) for a in range(3)]) for k in range(1, N)])
