@@ -44,7 +44,7 @@ def _one(case: str, transcription: str, cache: str, compiled=False) -> dict:
     rep = eba.evaluate(robot, res, sc)
     i = res.info
     return {"case": case, "transcription": transcription, "N": o.n_intervals, "status": i["ipopt_status"],
-            "success": bool(res.success), "iterations": i["iterations"], "build_s": i["setup_s"],
+            "success": bool(res.success), "iterations": i["total_iterations"], "build_s": i["setup_s"],
             "solve_s": float(res.runtime_s), "build_solve_wall_s": float(i["setup_s"] + res.runtime_s),
             "build_solve_cpu_s": i["build_and_solve_cpu_s"], "run_nlp_wall_s": wall,
             "end_attitude_error_deg": float(rep.final_base_attitude_error_deg),
