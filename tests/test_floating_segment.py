@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from scipy.integrate import solve_ivp
 
 from optplan import RobotModel
+from optplan.bench.restoration import ivp_attitude, quat_angle
 from optplan.methods import eba
 from optplan.problem import ClosedChain
 from optplan.problem.floating_segment import FloatingKernels, FloatingSegmentSpec, FloatingSplineProblem, spline_basis
@@ -155,40 +155,16 @@ def ca_dense(M):
     return np.asarray(ca.DM(M).full())
 
 
-def _ivp_attitude(robot, sol):
-    """The base attitude along the solution's exact joint motion, integrated adaptively
-    (RK45, rtol 1e-12) with Pinocchio's centroidal map at the current base pose."""
-    model, data = robot.model, robot.model.createData()
-
-    def rhs(t, x):
-        xi = x / np.linalg.norm(x)
-        s = sol.sample(np.array([min(t, sol.t[-1])]))
-        q, qd = s["q"][0], s["qd"][0]
-        Ag = pin.computeCentroidalMap(model, data, np.r_[np.zeros(3), xi, q])
-        w = np.linalg.solve(Ag[:, :6], -Ag[:, 6:] @ qd)[3:]  # local (base-frame) angular velocity
-        return 0.5 * (pin.Quaternion(xi[3], *xi[:3]) * pin.Quaternion(0.0, *w)).coeffs()
-
-    out = solve_ivp(rhs, (0.0, sol.t[-1]), np.array([0, 0, 0, 1.0]), t_eval=sol.t, rtol=1e-12, atol=1e-14,
-                    max_step=(sol.t[1] - sol.t[0]) / 2)
-    return out.y.T
-
-
-def _angle(q1, q2) -> float:
-    a = pin.Quaternion(q1[3], *q1[:3]).normalized()
-    b = pin.Quaternion(q2[3], *q2[:3]).normalized()
-    return float(np.linalg.norm(pin.log3((a.inverse() * b).toRotationMatrix())))
-
-
 def test_restoration_attitude_against_an_independent_integration(robot):
     """Free-end restoration N = 20: the NLP's knot attitudes agree with the adaptive integration
     to the stated RK4 bound (≤ 1e-6 rad at h = 1 s), and the end attitude is restored."""
     res = eba.run_nlp(robot, eba.free_end_scenario())
     assert res.success, res.message
     sol = res.raw
-    ref = _ivp_attitude(robot, sol)
-    err = max(_angle(a, b) for a, b in zip(sol.base_quat, ref))
+    ref = ivp_attitude(robot, sol)
+    err = max(quat_angle(a, b) for a, b in zip(sol.base_quat, ref))
     assert err <= 1e-6
-    assert _angle(ref[-1], [0, 0, 0, 1.0]) <= 1e-6  # independent end-attitude error
+    assert quat_angle(ref[-1], [0, 0, 0, 1.0]) <= 1e-6  # independent end-attitude error
     assert res.info["transcription"] == "bspline"
     assert res.info["boundary_velocity_max"] <= 1e-12  # rest at both ends by construction
 
