@@ -187,6 +187,18 @@ def test_bad_input_is_refused(robot):
         prob.set_initial(np.zeros((3, robot.nj)))
     with pytest.raises(ValueError, match="transcription"):
         eba.NLPOptions(transcription="collocation")
+    with pytest.raises(ValueError, match="coarse_intervals"):
+        eba.NLPOptions(coarse_intervals=2)
+    with pytest.raises(ValueError, match="compile_kernels"):
+        eba.NLPOptions(compile_kernels="yes")
+    with pytest.raises(ValueError, match="max_wall_time"):
+        prob.solve(max_wall_time=0.0)
+
+
+def test_the_time_cap_ends_in_a_status(robot):
+    res = eba.run_nlp(robot, eba.free_end_scenario(), eba.NLPOptions.free_end(max_wall_time=1e-3))
+    assert not res.success and "WallTime" in res.message
+    assert res.info["ipopt_status"] == "Maximum_WallTime_Exceeded"
 
 
 def test_knots_transcription_is_kept_as_an_option(robot):

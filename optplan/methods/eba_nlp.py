@@ -67,13 +67,14 @@ class NLPOptions:
     transcription: str = "bspline"
     compile_kernels: object = "auto"
     coarse_intervals: int | None = None
+    max_wall_time: float = 120.0
 
     def __post_init__(self):
         for n in ("n_intervals", "n_sub", "max_iter", "sample_density"):
             v = getattr(self, n)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"NLPOptions.{n}: expected an integer ≥ 1, got {v!r}")
-        for n in ("duration", "tol", "dual_tol"):
+        for n in ("duration", "tol", "dual_tol", "max_wall_time"):
             v = getattr(self, n)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
                 raise ValueError(f"NLPOptions.{n}: expected a positive finite number, got {v!r}")
@@ -164,7 +165,7 @@ def _coarse_warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions):
 
     oc = replace(o, n_intervals=o.coarse_intervals, coarse_intervals=None)
     prob, _ = _build_spline(robot, scenario, oc)
-    sol = prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter)
+    sol = prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter, max_wall_time=o.max_wall_time)
     if not sol.success:
         return None, sol
     Q = sol.sample(np.linspace(0.0, o.duration, o.n_intervals + 1))["q"]
@@ -193,7 +194,7 @@ def run_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None = 
         prob, cc = build_nlp(robot, scenario, o)
     t_decl = time.perf_counter() - t0 - (coarse.wall_time if coarse is not None else 0.0)
     if o.transcription == "bspline":
-        sol = prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter)
+        sol = prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter, max_wall_time=o.max_wall_time)
     else:
         sol = prob.solve(tol=o.tol, max_iter=o.max_iter, ipopt_options={"tol": o.dual_tol})
     cpu = time.process_time() - c0

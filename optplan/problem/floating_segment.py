@@ -544,14 +544,14 @@ class FloatingSplineProblem:
 
     def _omega_numeric(self, q, dq):
         """ω' from the momentum kernel's linear structure (numeric, Pinocchio-free)."""
-        if not hasattr(self, "_mom_fn"):
-            f = self.kernels.momentum()
+        kc = self.kernels
+        fn = kc._fns.get(("fb_momentum_linear",))
+        if fn is None:
+            f = kc.momentum()
             z = ca.SX.sym("z", f.size1_in(0))
-            nj = self.robot.nj
             J = ca.jacobian(f(z), z)
-            self._mom_fn = ca.Function("mom_lin", [z], [J[:, 2 * nj:], f(z)])
-        nj = self.robot.nj
-        Aw, r = self._mom_fn(np.r_[q, dq, np.zeros(3)])
+            fn = kc._fns[("fb_momentum_linear",)] = ca.Function("mom_lin", [z], [J[:, 2 * self.robot.nj:], f(z)])
+        Aw, r = fn(np.r_[q, dq, np.zeros(3)])
         return -np.linalg.solve(np.asarray(Aw), np.asarray(r).ravel())
 
     # ------------------------------------------------------------------ build
@@ -697,25 +697,29 @@ class FloatingSplineProblem:
 
     # ------------------------------------------------------------------ solve
     def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-8, dual_tol: float = 1e-6,
-              max_iter: int = 500) -> Solution:
+              max_iter: int = 500, max_wall_time: float = 120.0) -> Solution:
         """Solve with IPOPT (exact Hessian from the kernels, MUMPS). ``tol``: constraint violation,
-        ``dual_tol``: IPOPT's overall ``tol``. Never raises for a failed solve: the status is in the
+        ``dual_tol``: IPOPT's overall ``tol``; ``max_wall_time`` [s]: IPOPT stops there with the
+        status ``Maximum_WallTime_Exceeded``. Never raises for a failed solve: the status is in the
         Solution. ``ipopt_options`` are passed through (``"ipopt."`` prefix optional)."""
         from ..solver_options import casadi_option_name, check_ipopt_options, check_solve_arguments
 
         check_solve_arguments(tol, max_iter, 1.0)
         check_solve_arguments(dual_tol, max_iter, 1.0)
+        if not (isinstance(max_wall_time, (int, float)) and not isinstance(max_wall_time, bool)
+                and np.isfinite(max_wall_time) and max_wall_time > 0):
+            raise ValueError(f"max_wall_time: expected a positive number of seconds, got {max_wall_time!r}")
         if self._X0 is None:
             raise ValueError("no initial guess: call set_initial(...) first")
         t_setup = time.perf_counter()
         b = self._get_built()
-        okey = (tol, dual_tol, int(max_iter), repr(sorted((ipopt_options or {}).items())))
+        okey = (tol, dual_tol, int(max_iter), float(max_wall_time), repr(sorted((ipopt_options or {}).items())))
         solver = b["solvers"].get(okey)
         if solver is None:
             check_ipopt_options(ipopt_options)
             opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": dual_tol,
                     "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
-                    "ipopt.max_iter": int(max_iter),
+                    "ipopt.max_iter": int(max_iter), "ipopt.max_wall_time": float(max_wall_time),
                     # measured on the end-constrained restoration (N = 48): 30 iterations vs 34 at
                     # IPOPT's default 0.1 (adaptive μ: 67)
                     "ipopt.mu_init": 1e-3}
