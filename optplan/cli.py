@@ -153,7 +153,7 @@ def _cmd_bench_warmstart(args) -> int:
                           first_trial=args.first_trial, progress=not args.no_progress,
                           ipopt_max_wall_time=args.ipopt_max_wall_time,
                           free_plane_normals=args.free_plane_normals, transcription=args.transcription,
-                          engine=args.engine, address=args.address)
+                          compile_kernels=args.compile_kernels, engine=args.engine, address=args.address)
     try:
         validate(cfg)
     except ValueError as exc:
@@ -222,7 +222,8 @@ def _cmd_plan(args) -> int:
     t0 = time.perf_counter()
     try:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
-        opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold)
+        opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold,
+                               compile_kernels=True if args.compile_kernels else "auto")
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
     except BaseException as exc:  # a failed run still writes what it has
         if args.json:
@@ -382,6 +383,9 @@ def build_parser() -> argparse.ArgumentParser:
     ws.add_argument("--modes", default="warm,cold", help="comma-separated: warm, cold")
     ws.add_argument("--ipopt-max-wall-time", type=ca.positive_float, default=None, metavar="S",
                     help="cap every IPOPT solve at S seconds (default: iteration limit only)")
+    ws.add_argument("--compile-kernels", action="store_true",
+                    help="compile the optimizer's kernels to C where an earlier run has not (the compile time "
+                         "counts in the trial that needs it; later runs use the libraries automatically)")
     ws.add_argument("--transcription", choices=["bspline", "knots"], default="bspline",
                     help="trajectory NLP: B-spline control points (default) or the knot-state transcription")
     ws.add_argument("--free-plane-normals", action="store_true",
@@ -413,6 +417,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--robot", default=None, help="robot model (default: the scene's robot, else tcbirrt_dual_arm)")
     pl.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit [s]")
     pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
+    pl.add_argument("--compile-kernels", action="store_true",
+                    help="compile the optimizer's kernels to C where an earlier run has not (once per robot and "
+                         "collision pair, about a second each; later runs use them automatically)")
     pl.add_argument("--json", help="write the figures as JSON")
     pl.add_argument("--save", help="write the trajectory npz (t, q, joint_names, constrained, robot, scene)")
     pl.add_argument("--html", help="write a 3D view of the motion (self-contained HTML, opens offline)")

@@ -90,13 +90,20 @@ class PipelineOptions:
     B-spline segments get ⌈joint path length / spline_interval_step [rad]⌉ intervals for a
     constrained segment (⌈length / free_interval_step⌉ for a regrasp), clipped to
     [spline_min_intervals, spline_max_intervals]. Their retry policy, in order (each attempt is
-    recorded in ``SegmentResult.attempts``): (1) ``collision``: coal finds a contact after a
+    recorded in ``SegmentResult.attempts``): (0) ``velocity``: after any solve, a velocity control
+    point beyond its joint's limit (only those the warm start brings past
+    spline_velocity_activation of the limit have rows) → rows added, re-solve (≤ velocity_retries);
+    (1) ``collision``: coal finds a contact after a
     converged solve → pairs activated along the solution, margins raised between knots, re-solve
     (≤ collision_retries); (2) ``finer-grid``: IPOPT failed or a contact remains → 1.6× the
     intervals from the same initial guess (≤ failure_retries); (3) ``refine``: the closed-chain
     residual between knots exceeds closed_chain_tol → the grid refined by
     (residual / (tol/2))^¼, warm-started from the solution (≤ refinements); (4) ``fallback-knots``:
     still not verified → the knot transcription with free plane normals.
+    compile_kernels: the B-spline NLP's kernels evaluated from C compiled once per robot and
+    cached on disk (:attr:`SplineSegmentProblem.compile_kernels`): ``"auto"`` (default) uses what
+    an earlier run compiled, ``True`` compiles what is missing (about a second of the C compiler
+    per kernel, once), ``False`` never.
     ipopt_max_wall_time [s]: IPOPT's wall-clock cap per solve (a solve that hits it ends with the
     status ``Maximum_WallTime_Exceeded``; B-spline path).
     """
@@ -126,6 +133,9 @@ class PipelineOptions:
     spline_max_intervals: int = 160
     ipopt_max_wall_time: float = 60.0
     smooth_warm_start: float = 0.0
+    spline_velocity_activation: float = 0.5
+    compile_kernels: bool | str = "auto"
+    velocity_retries: int = 2
 
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
@@ -136,6 +146,9 @@ class PipelineOptions:
             raise ValueError("PipelineOptions: expected spline_interval_step > 0 and 4 ≤ spline_min_intervals ≤ "
                              f"spline_max_intervals, got {self.spline_interval_step}, {self.spline_min_intervals}, "
                              f"{self.spline_max_intervals}")
+        if self.compile_kernels not in (True, False, "auto"):
+            raise ValueError(f"PipelineOptions.compile_kernels: expected True, False or 'auto', got "
+                             f"{self.compile_kernels!r}")
         if not self.ipopt_max_wall_time > 0:
             raise ValueError(f"PipelineOptions.ipopt_max_wall_time: expected a positive time [s], got "
                              f"{self.ipopt_max_wall_time}")
@@ -369,10 +382,12 @@ def _solve_verified(robot, scene, prob: OptProblem, cc, holder, opts: PipelineOp
     return sol, rep
 
 
-def _attempt(reason: str, N: int, sol: Solution, rep: VerifyReport) -> dict:
+def _attempt(reason: str, N: int, sol: Solution, rep: VerifyReport | None) -> dict:
+    nan = float("nan")
     return {"reason": reason, "N": int(N), "status": sol.status.value, "iterations": int(sol.iterations),
             "setup_s": float(sol.setup_time), "ipopt_s": float(sol.wall_time),
-            "min_clearance_m": float(rep.min_clearance_m), "closed_chain_residual": float(rep.max_closed_chain_residual)}
+            "min_clearance_m": nan if rep is None else float(rep.min_clearance_m),
+            "closed_chain_residual": nan if rep is None else float(rep.max_closed_chain_residual)}
 
 
 def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind: str, arm: str | None,
@@ -398,8 +413,9 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
 
     def build(N: int, initial: Solution | None = None) -> SplineSegmentProblem:
         spec = SegmentSpec(int(N), T, seg_path[0], seg_path[-1], cc, lo, hi, margin=opts.margin,
-                           object_arm=holder or arms[0])
+                           object_arm=holder or arms[0], velocity_activation=opts.spline_velocity_activation)
         prob = SplineSegmentProblem(robot, scene, spec)
+        prob.compile_kernels = opts.compile_kernels
         if initial is not None:
             prob.set_initial(solution=initial)
         elif opts.warm_start:
@@ -417,6 +433,16 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     def run(prob: SplineSegmentProblem, reason: str):
         nonlocal total
         sol = prob.solve(ipopt)
+        for _ in range(opts.velocity_retries):  # 0. a joint speed the lazy velocity rows missed
+            over = prob.velocity_violations(sol) if sol.success else ()
+            if not len(over):
+                break
+            attempts.append(_attempt(reason, prob.N, sol, None))  # not verified: it is re-solved
+            total = sol if total is None else _accumulate(sol, total)
+            prob.add_velocity_rows(over)
+            prob.activate_velocity(sol)  # and the entries near their limit, not only those over it
+            reason = "velocity"
+            sol = prob.solve(ipopt)
         rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
         attempts.append(_attempt(reason, prob.N, sol, rep))
         log.info("segment %s: %s N=%d -> %s, %d iterations, setup %.2f s, IPOPT %.2f s, clearance %+.4f m, "
