@@ -55,6 +55,7 @@ import logging
 import os
 import time
 import weakref
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import casadi as ca
@@ -102,6 +103,7 @@ class FloatingKernels(KernelCache):
         self._q = ca.SX.sym("q", robot.nj)
         self._X = self.sym.joint_placements(ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), self._q))
         self._fns: dict = {}
+        self._structures: "OrderedDict[tuple, object]" = OrderedDict()
         self._digest = self._robot_digest() + b"floating-v1"
         self._dir = None
         if disk:
@@ -188,8 +190,8 @@ class FloatingKernels(KernelCache):
 
     def kernel_set(self, kind: str, *args, compiled: bool = False, opt: str = "-O1"):
         """``(f, ∂f/∂z, ∂²(λᵀf)/∂z²)`` of kernel ``kind`` ("momentum", "attitude" (n_sub),
-        "closed_chain" (cc)); ``compiled``: True — from C (:meth:`compiled`; compiled now if
-        missing), loaded straight from the libraries when they exist, without reading or
+        "closed_chain" (cc)); ``compiled``: True — from C (:meth:`KernelCache.compiled`; compiled
+        now if missing), loaded straight from the libraries when they exist, without reading or
         differentiating the symbolic kernels; "auto" — from C when the libraries exist, else the
         symbolic kernels (nothing is compiled); False — the symbolic kernels."""
         key, build = {"momentum": self._momentum_spec, "attitude": self._attitude_spec,
@@ -209,51 +211,12 @@ class FloatingKernels(KernelCache):
                     out.append(self._fns[k])
                 return tuple(out)
         f = self._get(key, build)
-        j, h = self.local_derivatives(f)
+        fns = (f, *self.local_derivatives(f))
         if compiled is True:
-            return self.compiled(f, opt), self.compiled(j, opt), self.compiled(h, opt)
-        return f, j, h
-
-    def compiled(self, fn: ca.Function, opt: str = "-O1") -> ca.Function:
-        """``fn`` compiled to C (a shared library in the kernel cache, named after the kernel, which
-        is keyed by the robot's kinematics) and loaded with ``casadi.external``: 5-10× faster
-        evaluation than CasADi's SX virtual machine. The first compilation of a robot's kernels
-        takes tens of seconds (once; the library is reused by every later process). Falls back to
-        ``fn`` (logged) without a cache directory or a C compiler."""
-        import shutil
-        import subprocess
-        import tempfile
-        from pathlib import Path
-
-        key = ("compiled", fn.name(), opt)
-        got = self._fns.get(key)
-        if got is not None:
-            return got
-        cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
-        if self._dir is None or cc is None:
-            log.info("kernel %s not compiled (no cache directory or no C compiler)", fn.name())
-            return fn
-        lib = self._dir / f"{fn.name()}{opt}.so"
-        if not lib.exists():
-            t0 = time.perf_counter()
-            with tempfile.TemporaryDirectory() as tmp:
-                cname = f"{fn.name()}.c"
-                cg = ca.CodeGenerator(cname, {"with_header": False})
-                cg.add(fn)
-                cg.generate(tmp + os.sep)
-                out = Path(tmp) / lib.name
-                proc = subprocess.run([cc, opt, "-fPIC", "-shared", str(Path(tmp, cname)), "-o", str(out), "-lm"],
-                                      capture_output=True, text=True)
-                if proc.returncode != 0:
-                    log.warning("compiling kernel %s failed (%s); using CasADi's VM", fn.name(), proc.stderr[-300:])
-                    return fn
-                tmp_lib = lib.with_suffix(f".{os.getpid()}.tmp")
-                shutil.copy(out, tmp_lib)
-                os.replace(tmp_lib, lib)  # atomic: concurrent processes never load half a library
-            log.info("compiled kernel %s in %.1f s", fn.name(), time.perf_counter() - t0)
-        ext = ca.external(fn.name(), str(lib))
-        self._fns[key] = ext
-        return ext
+            got = tuple(self.compiled(g, opt) for g in fns)
+            if all(g is not None and g is not o for g, o in zip(got, fns)):
+                return got
+        return fns
 
     def local_derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
         """``(jac(z), hess(z, λ))`` of a kernel ``f(z)``: ``∂f/∂z`` and ``∂²(λᵀf)/∂z²`` (sparse)."""
@@ -673,24 +636,13 @@ class FloatingSplineProblem:
                 None if cc is None else (cc.arm_a, cc.arm_b, np.asarray(cc.relative.homogeneous).tobytes()),
                 arr(self.lower), arr(self.upper), arr(self.vlim), arr(self.target_quat))
 
-    #: built NLPs (and their IPOPT instances) of this process, by structure (most recent last)
-    _cache: "dict[tuple, dict]" = {}
-    cache_size = 8
-
     def _get_built(self) -> dict:
-        if self._built is not None:
-            return self._built
-        key = self._structure_key()
-        b = FloatingSplineProblem._cache.pop(key, None)
-        if b is None:
-            b = self._build()
-        else:
-            b["build_time"] = 0.0
-            self._built = b
-        FloatingSplineProblem._cache[key] = b
-        while len(FloatingSplineProblem._cache) > self.cache_size:
-            FloatingSplineProblem._cache.pop(next(iter(FloatingSplineProblem._cache)))
-        return b
+        """The built NLP of this problem's structure: from memory when one of the same structure
+        was built in this process (:meth:`KernelCache.structure`, with its IPOPT instances; the
+        start/goal and the objective scale are parameters), else built now."""
+        if self._built is None:
+            self._built = self.kernels.structure(("floating_segment",) + self._structure_key(), self._build)
+        return self._built
 
     def _p(self) -> np.ndarray:
         return np.r_[self.P_start.ravel(), self.P_end.ravel(), _IDENTITY_Q, self._scale]
@@ -729,8 +681,7 @@ class FloatingSplineProblem:
             opts.update({"no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
                          "calc_f": False, "calc_g": False})
             solver = b["solvers"][okey] = ca.nlpsol("floating_segment", "ipopt", b["nlp"], opts)
-        setup = time.perf_counter() - t_setup + b["build_time"]
-        b["build_time"] = 0.0
+        setup = time.perf_counter() - t_setup  # the build (when it happened now) and the IPOPT instance
         x0 = np.r_[self._X0.ravel(), self._B0]
         pval = self._p()
         t0, c0 = time.perf_counter(), time.process_time()
