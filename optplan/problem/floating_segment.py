@@ -52,7 +52,6 @@ motion, global error O(h⁴) (measured against an adaptive integration of the sa
 from __future__ import annotations
 
 import logging
-import os
 import time
 import weakref
 from collections import OrderedDict
