@@ -199,7 +199,7 @@ class FloatingKernels(KernelCache):
             raise ValueError(f"compiled: expected True, False or 'auto', got {compiled!r}")
         if compiled and self._dir is not None:
             base = self._name(key)
-            names = [base, self._name(("ljac", base)), self._name(("lhess", base))]
+            names = [base, self._name(("ljac", base)), self._name(("lhess_triu", base))]
             libs = [self._dir / f"{n}{opt}.so" for n in names]
             if all(lib.exists() for lib in libs):
                 out = []
@@ -218,7 +218,8 @@ class FloatingKernels(KernelCache):
         return fns
 
     def local_derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
-        """``(jac(z), hess(z, λ))`` of a kernel ``f(z)``: ``∂f/∂z`` and ``∂²(λᵀf)/∂z²`` (sparse)."""
+        """``(jac(z), hess(z, λ))`` of a kernel ``f(z)``: ``∂f/∂z`` and the upper triangle of
+        ``∂²(λᵀf)/∂z²`` (sparse)."""
         def build_jac(name):
             z = fn.sx_in(0)
             return ca.Function(name, [z], [ca.jacobian(fn(z), z)])
@@ -227,9 +228,9 @@ class FloatingKernels(KernelCache):
             z = fn.sx_in(0)
             r = fn(z)
             lam = ca.SX.sym("lam", r.shape[0])
-            return ca.Function(name, [z, lam], [ca.hessian(ca.dot(lam, r), z)[0]])
+            return ca.Function(name, [z, lam], [ca.triu(ca.hessian(ca.dot(lam, r), z)[0])])
 
-        return (self._get(("ljac", fn.name()), build_jac), self._get(("lhess", fn.name()), build_hess))
+        return (self._get(("ljac", fn.name()), build_jac), self._get(("lhess_triu", fn.name()), build_hess))
 
 
 # --------------------------------------------------------------------------- assembly
@@ -312,11 +313,15 @@ class _LocalAssembly:
             e = len(hi)
             ti, ts, tw = template[:, 0].astype(int), template[:, 1].astype(int), template[:, 2]
             pe, pa, pb = _entry_pairs(hi, hj, ti)
-            ca_, cb_ = slots[:, ts[pa]], slots[:, ts[pb]]
-            t = np.broadcast_to(np.arange(K)[:, None], ca_.shape)
-            ok = (ca_ >= 0) & (ca_ < nx) & (cb_ >= 0) & (cb_ < nx) & (ca_ <= cb_)
-            blocks.append(np.array([ca_[ok], cb_[ok], (off + t * e + pe)[ok],
-                                    np.broadcast_to(tw[pa] * tw[pb], ca_.shape)[ok]], float))
+            # the kernel gives its upper triangle: an off-diagonal entry (i < j) stands for (i, j) and
+            # (j, i), i.e. global (min, max) of its two variables — twice on the diagonal
+            va, vb = slots[:, ts[pa]], slots[:, ts[pb]]
+            ca_, cb_ = np.minimum(va, vb), np.maximum(va, vb)
+            offd = np.broadcast_to(hi[pe] != hj[pe], va.shape)
+            t = np.broadcast_to(np.arange(K)[:, None], va.shape)
+            ok = (va >= 0) & (va < nx) & (vb >= 0) & (vb < nx) & (offd | (va <= vb))
+            w = np.broadcast_to(tw[pa] * tw[pb], va.shape) * np.where(offd & (va == vb), 2.0, 1.0)
+            blocks.append(np.array([ca_[ok], cb_[ok], (off + t * e + pe)[ok], w[ok]], float))
             off += K * e
         Hu = sps.triu(sps.coo_matrix(Hf)).tocoo()
         blocks.append(np.array([Hu.row, Hu.col, np.full(Hu.nnz, off), Hu.data], float))
@@ -611,8 +616,7 @@ class FloatingSplineProblem:
         scale = p[-1]  # a parameter: a built solver serves every start/goal of the same structure
         f = scale * ca.sum1(ca.sum2(ca.mtimes(Pm, ca.sparsify(ca.DM(Cq))) * Pm))
         Hp = 2 * Cq[3:N, 3:N]
-        Hf = sps.lil_matrix((nx, nx))
-        Hf[:self.nP, :self.nP] = sps.kron(Hp, sps.eye(nj))
+        Hf = sps.block_diag((sps.kron(Hp, sps.eye(nj)), sps.csr_matrix((nx - self.nP, nx - self.nP))))
         lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", asm.ng)
         G, Jg, Hl = asm.finish(lam_f * scale, lam_g, Hf.tocsr())
         nlp = {"x": x, "p": p, "f": f, "g": G}
