@@ -92,6 +92,12 @@ def _cmd_bench_transport(args) -> int:
     return 0
 
 
+def _cmd_bench_restoration(args) -> int:
+    from .bench.restoration import main
+
+    return main(["--cases", args.cases] + (["--json", args.json] if args.json else []))
+
+
 def _cmd_bench_tcbirrt(args) -> int:
     from .bench.engine import engine_error
     from .bench.tcbirrt import BenchConfig, format_summary, parse_planner_spec, run, summarize
@@ -332,6 +338,12 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=ca.nonnegative_int, default=0)
     tr.add_argument("--json", help="write the rows as JSON to this path")
     tr.set_defaults(func=_cmd_bench_transport)
+
+    rs = bench.add_parser("restoration", help="base-attitude restoration NLP (EBA paper): B-spline kernels vs "
+                          "knot transcription, cold/warm kernel cache")
+    rs.add_argument("--cases", default="free_end,end_constrained", help="comma-separated: free_end, end_constrained")
+    rs.add_argument("--json", help="write the rows as JSON to this path")
+    rs.set_defaults(func=_cmd_bench_restoration)
 
     tb = bench.add_parser("tcbirrt", help="TCBiRRT benchmark: planners x space-solar-power-station scenes x perturbed trials")
     tb.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, names or TOML "
