@@ -7,7 +7,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-__all__ = ["Assembly"]
+__all__ = ["Assembly", "scatter"]
 
 
 _C = (1 / 6, 4 / 6, 1 / 6)  # ∂q(t_k)/∂P_{k+a}, a = 0, 1, 2
@@ -94,7 +94,7 @@ class Assembly:
         T = np.hstack(self.jt) if self.jt else np.zeros((4, 0))
         src = ca.vertcat(*self.jsrc, ca.MX(1.0)) if self.jsrc else ca.MX(1.0)
         srcidx = np.where(T[2] < 0, self.j_off, T[2]).astype(int)
-        Jg = _scatter(self.ng, nx, T[0].astype(int), T[1].astype(int), srcidx, T[3], src, self.j_off + 1)
+        Jg = scatter(self.ng, nx, T[0].astype(int), T[1].astype(int), srcidx, T[3], src, self.j_off + 1)
         # Hessian
         hs, blocks, off = [], [], 0
         for hfn, K, knots, Qsub, Nin, Sin, r0, m in self._h_pending:
@@ -118,11 +118,11 @@ class Assembly:
         blocks.append(np.array([rows, cols, np.full(rows.size, off), np.repeat(Hj[pa, pb], nj)], float))
         src = ca.vertcat(*hs, lam_f)
         T = np.hstack(blocks)
-        Hl = _scatter(nx, nx, T[0].astype(int), T[1].astype(int), T[2].astype(int), T[3], src, off + 1)
+        Hl = scatter(nx, nx, T[0].astype(int), T[1].astype(int), T[2].astype(int), T[3], src, off + 1)
         return G, Jg, Hl
 
 
-def _scatter(nrow, ncol, rows, cols, src_idx, weights, src: ca.MX, nsrc: int) -> ca.MX:
+def scatter(nrow, ncol, rows, cols, src_idx, weights, src: ca.MX, nsrc: int) -> ca.MX:
     """Sparse ``nrow × ncol`` MX whose entry (rows[i], cols[i]) sums ``weights[i]·src[src_idx[i]]``."""
     import scipy.sparse as sps
 

@@ -54,7 +54,6 @@ from __future__ import annotations
 import logging
 import time
 import weakref
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import casadi as ca
@@ -62,12 +61,11 @@ import numpy as np
 import pinocchio as pin
 
 from ..robot import RobotModel
-from ..symbolic import SymbolicKinematics
-from .assembly import _scatter
+from .assembly import scatter
 from .bspline import boundary_points, fit_interior, jerk_integral_reference, knot_matrices, knot_values
 from .frame_terms import ClosedChain
 from .kernels import KernelCache
-from .solution import IpoptStatus, Solution
+from .solution import Solution
 from .terms import pose_residual
 from .transcription import quat_mul
 
@@ -94,32 +92,11 @@ class FloatingKernels(KernelCache):
 
     _per_robot: "weakref.WeakKeyDictionary[RobotModel, FloatingKernels]" = weakref.WeakKeyDictionary()
 
-    def __init__(self, robot: RobotModel, disk: bool = True):  # noqa: D107 (KernelCache refuses floating robots)
-        if not robot.is_floating:
-            raise ValueError(f"FloatingKernels: {robot.name!r} has a fixed base; use KernelCache")
-        self.robot = robot
-        self.sym = SymbolicKinematics(robot)
-        self._q = ca.SX.sym("q", robot.nj)
-        self._X = self.sym.joint_placements(ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), self._q))
-        self._fns: dict = {}
-        self._structures: "OrderedDict[tuple, object]" = OrderedDict()
-        self._digest = self._robot_digest() + b"floating-v1"
-        self._dir = None
-        if disk:
-            from ..codegen import cache_dir
+    floating_base = True
+    _digest_tag = b"floating-v1"
 
-            try:
-                self._dir = cache_dir() / "kernels" / f"casadi-{ca.__version__}"
-                self._dir.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                log.info("kernel cache on disk unavailable (%s)", exc)
-
-    @classmethod
-    def of(cls, robot: RobotModel) -> "FloatingKernels":
-        kc = cls._per_robot.get(robot)
-        if kc is None:
-            kc = cls._per_robot[robot] = cls(robot)
-        return kc
+    def _configuration(self, q):
+        return ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), q)  # base frame: the base pose is the identity
 
     def momentum(self) -> ca.Function:
         """``f([q; q'; ω']) -> A_ω(q) ω' + A_m(q) q'`` (3 rows): the angular momentum about the
@@ -304,7 +281,7 @@ class _LocalAssembly:
         T = np.hstack(self.jt)
         src = ca.vertcat(*self.jsrc, ca.MX(1.0))
         srcidx = np.where(T[2] < 0, self.j_off, T[2]).astype(int)
-        Jg = _scatter(self.ng, nx, T[0].astype(int), T[1].astype(int), srcidx, T[3], src, self.j_off + 1)
+        Jg = scatter(self.ng, nx, T[0].astype(int), T[1].astype(int), srcidx, T[3], src, self.j_off + 1)
         hs, blocks, off = [], [], 0
         for hfn, K, Z, r0, m, template, slots in self._fams:
             L = ca.reshape(lam_g[r0:r0 + m * K], m, K)
@@ -326,7 +303,7 @@ class _LocalAssembly:
         Hu = sps.triu(sps.coo_matrix(Hf)).tocoo()
         blocks.append(np.array([Hu.row, Hu.col, np.full(Hu.nnz, off), Hu.data], float))
         T = np.hstack(blocks)
-        Hl = _scatter(nx, nx, T[0].astype(int), T[1].astype(int), T[2].astype(int), T[3],
+        Hl = scatter(nx, nx, T[0].astype(int), T[1].astype(int), T[2].astype(int), T[3],
                       ca.vertcat(*hs, lam_f), off + 1)
         return G, Jg, Hl
 
@@ -657,7 +634,8 @@ class FloatingSplineProblem:
         ``dual_tol``: IPOPT's overall ``tol``; ``max_wall_time`` [s]: IPOPT stops there with the
         status ``Maximum_WallTime_Exceeded``. Never raises for a failed solve: the status is in the
         Solution. ``ipopt_options`` are passed through (``"ipopt."`` prefix optional)."""
-        from ..solver_options import casadi_option_name, check_ipopt_options, check_solve_arguments
+        from ..solver_options import check_solve_arguments
+        from .nlp import NlpSolver, SolverOptions
 
         check_solve_arguments(tol, max_iter, 1.0)
         check_solve_arguments(dual_tol, max_iter, 1.0)
@@ -666,41 +644,29 @@ class FloatingSplineProblem:
             raise ValueError(f"max_wall_time: expected a positive number of seconds, got {max_wall_time!r}")
         if self._X0 is None:
             raise ValueError("no initial guess: call set_initial(...) first")
+        sopts = SolverOptions.coerce(ipopt_options)  # an invalid option is an OptionError before the solve
         t_setup = time.perf_counter()
         b = self._get_built()
-        okey = (tol, dual_tol, int(max_iter), float(max_wall_time), repr(sorted((ipopt_options or {}).items())))
-        solver = b["solvers"].get(okey)
-        if solver is None:
-            check_ipopt_options(ipopt_options)
-            opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": dual_tol,
-                    "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
+        # mu_init 1e-3: measured on the end-constrained restoration (N = 48), 30 iterations vs 34 at
+        # IPOPT's default 0.1 (adaptive μ: 67)
+        defaults = {"ipopt.tol": dual_tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
                     "ipopt.max_iter": int(max_iter), "ipopt.max_wall_time": float(max_wall_time),
-                    # measured on the end-constrained restoration (N = 48): 30 iterations vs 34 at
-                    # IPOPT's default 0.1 (adaptive μ: 67)
                     "ipopt.mu_init": 1e-3}
-            for k, v in (ipopt_options or {}).items():
-                opts[casadi_option_name(k)] = v
-            opts.update(b["derivs"])
-            opts.update({"no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
-                         "calc_f": False, "calc_g": False})
-            solver = b["solvers"][okey] = ca.nlpsol("floating_segment", "ipopt", b["nlp"], opts)
-        setup = time.perf_counter() - t_setup  # the build (when it happened now) and the IPOPT instance
+        okey = repr(sorted(sopts.casadi_options(defaults).items()))
+        solver = b["solvers"].get(okey)
+        if solver is None:  # one IPOPT instance per structure and options
+            extra = {**b["derivs"], "no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
+                     "calc_f": False, "calc_g": False}
+            solver = b["solvers"][okey] = NlpSolver("floating_segment", b["nlp"], sopts, defaults=defaults,
+                                                    casadi_options=extra)
+        setup = time.perf_counter() - t_setup  # the build (when it happened now); NlpSolver adds its creation
         x0 = np.r_[self._X0.ravel(), self._B0]
         pval = self._p()
-        t0, c0 = time.perf_counter(), time.process_time()
-        try:
-            out = solver(x0=x0, p=pval, lbx=b["lbx"], ubx=b["ubx"], lbg=b["lbg"], ubg=b["ubg"])
-            stats = solver.stats()
-            self.last_stats = stats
-            status = IpoptStatus.from_string(stats.get("return_status", "Unknown"))
-            x = np.array(out["x"]).ravel()
-            lam_g = np.array(out["lam_g"]).ravel()
-            iters = int(stats.get("iter_count", -1))
-            cost = float(out["f"]) / self._scale
-        except RuntimeError as exc:
-            log.warning("IPOPT raised: %s", exc)
-            status, x, lam_g, iters, cost = IpoptStatus.INTERNAL_ERROR, x0.copy(), None, -1, float("nan")
-        wall, self.last_cpu_time = time.perf_counter() - t0, time.process_time() - c0
+        out = solver.solve(x0, p=pval, lbx=b["lbx"], ubx=b["ubx"], lbg=b["lbg"], ubg=b["ubg"],
+                           cost_scale=self._scale, extra_setup=setup)
+        self.last_stats = solver.stats()
+        status, x, lam_g, iters, cost = out.status, np.array(out.x), out.lam_g, out.iterations, out.cost
+        wall, self.last_cpu_time = out.wall_time, out.cpu_time
         gval = np.array(b["gfun"](x, pval)).ravel()
         viol_vec = np.maximum(np.maximum(b["lbg"] - gval, gval - b["ubg"]), 0.0)
         viol = float(viol_vec.max()) if viol_vec.size else 0.0
@@ -716,7 +682,8 @@ class FloatingSplineProblem:
                         max_constraint_violation=viol, terms=terms, t=np.linspace(0.0, self.T, self.N + 1),
                         q=kv["q"], qd=kv["qd"], qdd=kv["qdd"], jerk=kv["jerk"],
                         joint_names=self.robot.joint_names, base_quat=xi,
-                        base_position=self._base_positions(kv["q"], xi), setup_time=setup, x=x, lam_g=lam_g)
+                        base_position=self._base_positions(kv["q"], xi), setup_time=out.setup_time,
+                        cpu_time=out.cpu_time, x=x, lam_g=lam_g, attempts=(out,))
 
     def _base_positions(self, Q, xi) -> np.ndarray:
         """Base position [m] at the knots with the centre of mass fixed at the origin."""

@@ -32,17 +32,24 @@ class KernelCache:
 
     _per_robot: "weakref.WeakKeyDictionary[RobotModel, KernelCache]" = weakref.WeakKeyDictionary()
 
+    #: the base these kernels are for (:class:`~optplan.problem.floating_segment.FloatingKernels`
+    #: is the free-floating subclass); added to the disk keys of a subclass
+    floating_base = False
+    _digest_tag = b""
+
     def __init__(self, robot: RobotModel, disk: bool = True):
-        if robot.is_floating:
-            raise ValueError("the B-spline segment NLP is for fixed-base robots; use OptProblem for "
-                             f"the free-floating {robot.name!r}")
+        if robot.is_floating != self.floating_base:
+            if robot.is_floating:
+                raise ValueError("the B-spline segment NLP is for fixed-base robots; use FloatingSplineProblem "
+                                 f"(optplan.problem.floating_segment) for the free-floating {robot.name!r}")
+            raise ValueError(f"{type(self).__name__}: {robot.name!r} has a fixed base; use KernelCache")
         self.robot = robot
         self.sym = SymbolicKinematics(robot)
         self._q = ca.SX.sym("q", robot.nj)
-        self._X = self.sym.joint_placements(self._q)
+        self._X = self.sym.joint_placements(self._configuration(self._q))
         self._fns: dict = {}
         self._structures: "OrderedDict[tuple, object]" = OrderedDict()
-        self._digest = self._robot_digest()
+        self._digest = self._robot_digest() + self._digest_tag
         self._dir = None
         if disk:
             from ..codegen import cache_dir
@@ -53,6 +60,10 @@ class KernelCache:
             except OSError as exc:  # a read-only cache: memory only
                 log.info("kernel cache on disk unavailable (%s)", exc)
                 self._dir = None
+
+    def _configuration(self, q):
+        """The model configuration the kernels see for joint vector ``q`` (fixed base: ``q``)."""
+        return q
 
     def _robot_digest(self) -> bytes:
         import hashlib
