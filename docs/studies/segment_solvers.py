@@ -655,8 +655,14 @@ def main(argv=None):
     ap.add_argument("--qpsol", default="hpipm")
     ap.add_argument("--convexify", default="regularize")
     ap.add_argument("--maxiter", type=int, default=100)
+    ap.add_argument("--only", default="", help="comma-separated segment labels to keep (e.g. s3t2g3)")
     a = ap.parse_args(argv)
     cases = [tuple(int(v) for v in c.split(":")) for c in a.cases.split(",")]
+    if a.only:
+        keep = set(a.only.split(","))
+        global problems
+        _all = problems
+        problems = lambda cs: [t for t in _all(cs) if t[0] in keep]  # noqa: E731
     if a.study == "order":
         run_order(cases, a.variants.split(","))
     elif a.study == "fatrop":
