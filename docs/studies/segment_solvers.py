@@ -16,7 +16,8 @@ Every result goes through ``SplineSegmentProblem.solve``'s own post-processing a
 
     python docs/studies/segment_solvers.py order  --cases "1:0,1:5,2:0,2:3,3:0,3:2"
     python docs/studies/segment_solvers.py fatrop --cases "1:0,1:5,2:0,2:3,3:0,3:2"
-    python docs/studies/segment_solvers.py sqp    --cases 1:0 --qpsol hpipm
+    python docs/studies/segment_solvers.py fatrop-toy
+    python docs/studies/segment_solvers.py sqp    --cases 3:2 --only s3t2g3 --qpsol hpipm
     python docs/studies/segment_solvers.py csqp   --cases "1:0,1:5,2:0,2:3,3:0,3:2" --maxiter 10
 """
 from __future__ import annotations
@@ -609,6 +610,62 @@ def run_fatrop(cases, band, with_ipopt=True):
                f"hess={fs['eval_hess_time']:.2f} jac={fs['eval_jac_time']:.2f} total={fs['time_total']:.2f}")
 
 
+def run_fatrop_toy(equality: bool, timeout: float = 60.0):
+    """Fatrop on a 2-joint shift system (the stage-wise B-spline form in miniature) with the path
+    constraint ``‖q_k‖² = 1`` (``equality``) or ``≤ 1`` at every stage; run in a child process so a
+    stall ends at ``timeout`` [s]."""
+    import multiprocessing as mp
+
+    def work(q):
+        N, nj = 20, 2
+        xs = [ca.MX.sym(f"x{k}", 3 * nj) for k in range(N + 1)]
+        us = [ca.MX.sym(f"u{k}", nj if k < N else 0) for k in range(N + 1)]
+        w, g, lbg, ubg, nx, nu, ng, f = [], [], [], [], [], [], [], 0
+        for k in range(N + 1):
+            w += [xs[k], us[k]]
+            nx.append(3 * nj)
+            nu.append(us[k].numel())
+            P = [xs[k][i * nj:(i + 1) * nj] for i in range(3)] + ([us[k]] if k < N else [])
+            n0 = sum(e.numel() for e in g)
+            if k < N:
+                g.append(xs[k + 1] - ca.vertcat(P[1], P[2], P[3]))
+                lbg += [0.0] * 6
+                ubg += [0.0] * 6
+                n0 += 6
+                f += ca.sumsqr(-P[0] + 3 * P[1] - 3 * P[2] + P[3])
+                qk = (P[1] + 4 * P[2] + P[3]) / 6
+                g.append(ca.sumsqr(qk) - 1)
+                lbg.append(0.0 if equality else -np.inf)
+                ubg.append(0.0)
+            else:
+                g.append((P[0] + 4 * P[1] + P[2]) / 6 - ca.DM([0.0, 1.0]))
+                lbg += [0.0, 0.0]
+                ubg += [0.0, 0.0]
+            if k == 0:
+                g.append(xs[0] - ca.DM(np.tile([1.0, 0.0], 3)))
+                lbg += [0.0] * 6
+                ubg += [0.0] * 6
+            ng.append(sum(e.numel() for e in g) - n0)
+        S = ca.nlpsol("toy", "fatrop", {"x": ca.vertcat(*w), "f": f, "g": ca.vertcat(*g)},
+                      {"structure_detection": "manual", "N": N, "nx": nx, "nu": nu, "ng": ng,
+                       "print_time": False, "fatrop": {"print_level": 0, "max_iter": 100}})
+        S(x0=0.1, lbg=lbg, ubg=ubg)
+        st = S.stats()["fatrop"]
+        q.put((st["return_flag"], st["iterations_count"]))
+
+    q = mp.get_context("fork").Queue()
+    p = mp.get_context("fork").Process(target=work, args=(q,))
+    p.start()
+    p.join(timeout)
+    kind = "= 1" if equality else "≤ 1"
+    if p.is_alive():
+        p.terminate()
+        print(f"toy, ‖q‖² {kind}: no result after {timeout:.0f} s (stalled)")
+    else:
+        flag, it = q.get()
+        print(f"toy, ‖q‖² {kind}: return flag {flag}, {it} iterations")
+
+
 def run_sqp(cases, qpsol, convexify, max_iter):
     for lab, prob, cc, scene in problems(cases):
         b = prob._build()
@@ -647,7 +704,7 @@ def run_csqp(cases, maxiter):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("study", choices=["order", "fatrop", "sqp", "csqp"])
+    ap.add_argument("study", choices=["order", "fatrop", "fatrop-toy", "sqp", "csqp"])
     ap.add_argument("--cases", default="1:0,1:5,2:0,2:3,3:0,3:2", help="scene:trial,…")
     ap.add_argument("--variants", default="asm,knot,rand,asm@0,asm@4,asm@5,asm@6",
                     help="order: asm|knot|rand[@mumps_pivot_order],…")
@@ -665,6 +722,9 @@ def main(argv=None):
         problems = lambda cs: [t for t in _all(cs) if t[0] in keep]  # noqa: E731
     if a.study == "order":
         run_order(cases, a.variants.split(","))
+    elif a.study == "fatrop-toy":
+        run_fatrop_toy(False)
+        run_fatrop_toy(True)
     elif a.study == "fatrop":
         run_fatrop(cases, a.band)
     elif a.study == "sqp":
