@@ -102,16 +102,47 @@ def _sx_angle_to(w: np.ndarray, a, b):
     return ca.atan2(ca.dot(W, ca.cross(a, b)), ca.dot(a, b))
 
 
+def _cone_roots(u, a, v, x, tol: float, sx: bool = False):
+    """θ with ``u · R(a, θ) v = u · x`` (unit vectors; the wrist's middle joint), accurate to
+    rounding up to the double root: with α = ∠(u, a), β = ∠(a, v) the left side is
+    ``cos α cos β + sin α sin β cos(θ − φ)``, between cos(α + β) and cos|α − β|; instead of
+    ``acos`` of a ratio near ±1 (error ε / sin d), ``d = atan2(√((r − C)(r + C)), C)`` with
+    ``r ∓ C`` as products of half-angle sines of γ = ∠(u, x) computed by atan2 (relative accuracy
+    near the singular wrist). Returns (roots, ok) with ``sx`` (CasADi SX x), else a list (empty
+    when unreachable or within ``tol`` of the double root)."""
+    al = math.atan2(float(np.linalg.norm(_cross(u, a))), float(u @ a))
+    be = math.atan2(float(np.linalg.norm(_cross(a, v))), float(a @ v))
+    gmin, gmax = abs(al - be), al + be
+    r = math.sin(al) * math.sin(be)
+    phi = math.atan2(float(u @ _cross(a, v)), float(u @ v) - math.cos(al) * math.cos(be))
+    k = float(u @ a) * float(a @ v)
+    if r < 1e-14:
+        raise ModelError("DecoupledArmIK: degenerate wrist axes (middle axis parallel to an outer one)")
+    if sx:
+        U = ca.DM(u)
+        c = ca.dot(U, x)
+        g = ca.atan2(ca.norm_2(ca.cross(U, x)), c)
+        rm = 2.0 * ca.sin(0.5 * (g + gmin)) * ca.sin(0.5 * (g - gmin))
+        rp = 2.0 * ca.sin(0.5 * (gmax + g)) * ca.sin(0.5 * (gmax - g))
+        ok = ca.logic_and(rm > tol * r, rp > tol * r)
+        d = ca.atan2(ca.sqrt(ca.fmax(rm * rp, 0.0)), c - k)
+        return [(phi + d, ok), (phi - d, ok)]
+    c = float(u @ x)
+    g = math.atan2(float(np.linalg.norm(_cross(u, x))), c)
+    rm = 2.0 * math.sin(0.5 * (g + gmin)) * math.sin(0.5 * (g - gmin))
+    rp = 2.0 * math.sin(0.5 * (gmax + g)) * math.sin(0.5 * (gmax - g))
+    if rm <= tol * r or rp <= tol * r:
+        return []
+    d = math.atan2(math.sqrt(rm * rp), c - k)
+    return [phi + d, phi - d]
+
+
 def wrist_angles(w5, w6, w7, Rt, singular_tol: float = 1e-10) -> list[tuple[float, float, float]]:
     """All (θ5, θ6, θ7) with ``R(w5, θ5) R(w6, θ6) R(w7, θ7) = Rt`` (angles in (−π, π]; no
     limits). Empty when Rt is unreachable or the wrist is singular (w5, w7 aligned)."""
     u, a, v = w5, w6, w7
-    c = float(u @ Rt @ v)
-    ua, av = float(u @ a), float(a @ v)
-    A = float(u @ v) - ua * av
-    B = float(u @ _cross(a, v))
     out = []
-    for t6 in _cos_sin_eq(A, B, c - ua * av, singular_tol):
+    for t6 in _cone_roots(u, a, v, Rt @ v, singular_tol):
         R6 = rotation_about(a, t6)
         t5 = _angle_to(u, R6 @ v, Rt @ v)
         R56 = rotation_about(u, t5) @ R6
@@ -201,9 +232,6 @@ class DecoupledArmIK:
         self._K = [_skew(w) for w in self.w]
         self._K2 = [K @ K for K in self._K]
         u, a, v = self.w[4], self.w[5], self.w[6]
-        self._uaav = float(u @ a) * float(a @ v)
-        self._wA = float(u @ v) - self._uaav
-        self._wB = float(u @ _cross(a, v))
         self._axv, self._av = _cross(a, v), float(a @ v)
         x = _cross(v, np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0]))
         self._wx, self._vxx = x, _cross(v, x)
@@ -256,14 +284,16 @@ class DecoupledArmIK:
         """:func:`wrist_angles` for this arm's wrist axes with the axis constants precomputed."""
         u, a, v = self.w[4], self.w[5], self.w[6]
         Rtv = Rt @ v
-        c = float(u @ Rtv)
+        uRtv = float(u @ Rtv)
         out = []
-        uRtv = c
-        for t6 in _cos_sin_eq(self._wA, self._wB, c - self._uaav, self.singular_tol):
+        for t6 in _cone_roots(u, a, v, Rtv, self.singular_tol):
             c6, s6 = math.cos(t6), math.sin(t6)
             r6v = v * c6 + self._axv * s6 + a * (self._av * (1.0 - c6))
-            ur = float(u @ r6v)
-            t5 = math.atan2(float(u @ _cross(r6v, Rtv)), float(r6v @ Rtv) - ur * uRtv)
+            # project on the plane ⊥ u first: near the singular wrist both projections are small and
+            # the angle keeps its relative accuracy (dot products of the unprojected vectors would not)
+            x5 = r6v - u * float(u @ r6v)
+            y5 = Rtv - u * uRtv
+            t5 = math.atan2(float(u @ _cross(x5, y5)), float(x5 @ y5))
             R56 = (_I3 + math.sin(t5) * self._K[4] + (1.0 - math.cos(t5)) * self._K2[4]) @ \
                 (_I3 + s6 * self._K[5] + (1.0 - c6) * self._K2[5])
             y = R56.T @ (Rt @ self._wx)
@@ -464,11 +494,11 @@ class DecoupledArmIK:
         Rtv = Rt @ v
         c = ca.dot(u, Rtv)
         out = []
-        for t6, ok in _sx_cos_sin_eq(self._wA, self._wB, c - self._uaav, self.singular_tol):
+        for t6, ok in _cone_roots(self.w[4], self.w[5], self.w[6], Rtv, self.singular_tol, sx=True):
             c6, s6 = ca.cos(t6), ca.sin(t6)
             r6v = v * c6 + ca.DM(self._axv) * s6 + a * (self._av * (1.0 - c6))
-            ur = ca.dot(u, r6v)
-            t5 = ca.atan2(ca.dot(u, ca.cross(r6v, Rtv)), ca.dot(r6v, Rtv) - ur * c)
+            x5, y5 = r6v - u * ca.dot(u, r6v), Rtv - u * c
+            t5 = ca.atan2(ca.dot(u, ca.cross(x5, y5)), ca.dot(x5, y5))
             R56 = (ca.DM.eye(3) + ca.sin(t5) * ca.DM(self._K[4]) + (1.0 - ca.cos(t5)) * ca.DM(self._K2[4])) @ \
                 (ca.DM.eye(3) + s6 * ca.DM(self._K[5]) + (1.0 - c6) * ca.DM(self._K2[5]))
             y = R56.T @ (Rt @ ca.DM(self._wx))

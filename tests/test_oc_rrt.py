@@ -246,3 +246,31 @@ def test_compiled_completion_matches_python_ik(pr2, scene_name):
         eo, ep = con.errors(a2)
         assert eo <= 1e-12 and ep <= 1e-12
     assert n_solved > 40 and n_steps > 30
+
+
+@pytest.mark.parametrize("robot_name", ["pr2", "baxter"])
+def test_wrist_ik_accurate_next_to_the_singular_wrist(robot_name, request):
+    """Wrist roll axes nearly aligned (|q6| of 1e-4 .. 1e-3 rad): the closed form keeps 1e-12
+    against Pinocchio (an acos of a ratio near 1 would lose ~1e-16 / |q6|)."""
+    from optplan.ik_analytic import DecoupledArmIK
+
+    robot = request.getfixturevalue(robot_name)
+    rng = np.random.default_rng(11)
+    worst = 0.0
+    for arm in ("left", "right"):
+        ik = DecoupledArmIK(robot, arm)
+        fid = ik.arm.ee_frame_id
+        for q6 in (2e-4, -3e-4, 1e-3, -1e-3):
+            for _ in range(10):
+                q = robot.random_joints(rng)
+                q[ik.q_idx[5]] = q6 if robot.lower[ik.q_idx[5]] <= q6 <= robot.upper[ik.q_idx[5]] else -q6
+                R = _pin_pose(robot, q, fid).rotation
+                W = ik.wrist(ik.arm_joints(q)[:4], R)
+                # q5 and q7 separately are ill-conditioned here (only their sum is well defined as
+                # q6 → 0): the original is found to 1e-6 rad, the pose itself to 1e-12
+                assert any(np.abs(w - ik.arm_joints(q)[4:]).max() < 1e-6 for w in W)
+                for w in W:
+                    x = q.copy()
+                    x[ik.q_idx[4:]] = w
+                    worst = max(worst, float(np.linalg.norm(pin.log3(_pin_pose(robot, x, fid).rotation.T @ R))))
+    assert worst <= 1e-12, worst
