@@ -274,3 +274,20 @@ def test_wrist_ik_accurate_next_to_the_singular_wrist(robot_name, request):
                     x[ik.q_idx[4:]] = w
                     worst = max(worst, float(np.linalg.norm(pin.log3(_pin_pose(robot, x, fid).rotation.T @ R))))
     assert worst <= 1e-12, worst
+
+
+def test_completion_without_a_c_compiler(pr2, monkeypatch):
+    """No C compiler: the same kernel runs as an interpreted casadi.Function, same results."""
+    import optplan.planners.orientation as ori
+
+    sc, con, mf, qs, qg = _task(pr2, "oc_tabletop")
+    monkeypatch.setattr(ori, "compile_function", lambda f: f)
+    slow = ori.OrientationManifold(con)
+    assert not slow.kernel[0].compiled and not slow.kernel[1].compiled
+    rng = np.random.default_rng(5)
+    for i in range(50):
+        p = rng.uniform(mf.lower, mf.upper)
+        a, b = slow.complete(p, rng=np.random.default_rng(i)), mf.complete(p, rng=np.random.default_rng(i))
+        assert (a is None) == (b is None) and (a is None or np.abs(a - b).max() <= 1e-12)
+    p = mf.params(qs) + 0.01
+    assert np.abs(slow.complete(p, ref=qs) - mf.complete(p, ref=qs)).max() <= 1e-12
