@@ -20,7 +20,6 @@ the bounds: ``R e_o``); relative pose error ``log6(T_relᵀ T_1⁻¹ T_2)`` ([m]
 """
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -28,9 +27,9 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from ..errors import ConfigurationError
 from ..codegen import compile_function
-from ..ik_analytic import DecoupledArmIK, _in_limits
+from ..errors import ConfigurationError
+from ..ik_analytic import DecoupledArmIK
 from ..robot import RobotModel
 from ..scene import Scene
 from ..spatial import rpy_to_matrix
