@@ -168,7 +168,7 @@ class OrientationManifold:
     redundancy-angle IK) and picks the branch nearest to a reference configuration.
 
     ``compiled``: evaluate every closed-form branch in one C function generated with CasADi (the
-    same formulas as :class:`~optplan.ik_analytic.DecoupledArmIK`, ~100x faster than the Python
+    same formulas as :class:`~optplan.ik_analytic.DecoupledArmIK`, 30-100x faster than the Python
     path); joint limits and the branch choice are applied in numpy. ``False`` keeps the Python
     path (the reference the compiled one is tested against).
     """
