@@ -29,6 +29,7 @@ from __future__ import annotations
 import itertools
 import math
 
+import casadi as ca
 import numpy as np
 import pinocchio as pin
 
@@ -80,16 +81,68 @@ def _cos_sin_eq(A: float, B: float, C: float, tol: float) -> list[float]:
     return [phi + d, phi - d]
 
 
+def _sx_cos_sin_eq(A: float, B: float, C, tol: float) -> list[tuple]:
+    """:func:`_cos_sin_eq` with a symbolic right-hand side C (A, B numbers): the two roots and a
+    flag (1 where the roots exist and are not a double root within ``tol``)."""
+    r = math.hypot(A, B)
+    if r < 1e-14:
+        raise ModelError("DecoupledArmIK: degenerate axis geometry (A cos θ + B sin θ with A = B = 0)")
+    c = C / r
+    ok = ca.fabs(c) < 1.0 - tol
+    d = ca.acos(ca.fmin(ca.fmax(c, -1.0), 1.0))
+    phi = math.atan2(B, A)
+    return [(phi + d, ok), (phi - d, ok)]
+
+
+def _sx_angle_to(w: np.ndarray, a, b):
+    """:func:`_angle_to` with symbolic a, b (numeric unit axis w)."""
+    W = ca.DM(w)
+    a = a - W * ca.dot(W, a)
+    b = b - W * ca.dot(W, b)
+    return ca.atan2(ca.dot(W, ca.cross(a, b)), ca.dot(a, b))
+
+
+def _cone_roots(u, a, v, x, tol: float, sx: bool = False):
+    """θ with ``u · R(a, θ) v = u · x`` (unit vectors; the wrist's middle joint), accurate to
+    rounding up to the double root: with α = ∠(u, a), β = ∠(a, v) the left side is
+    ``cos α cos β + sin α sin β cos(θ − φ)``, between cos(α + β) and cos|α − β|; instead of
+    ``acos`` of a ratio near ±1 (error ε / sin d), ``d = atan2(√((r − C)(r + C)), C)`` with
+    ``r ∓ C`` as products of half-angle sines of γ = ∠(u, x) computed by atan2 (relative accuracy
+    near the singular wrist). Returns (roots, ok) with ``sx`` (CasADi SX x), else a list (empty
+    when unreachable or within ``tol`` of the double root)."""
+    al = math.atan2(float(np.linalg.norm(_cross(u, a))), float(u @ a))
+    be = math.atan2(float(np.linalg.norm(_cross(a, v))), float(a @ v))
+    gmin, gmax = abs(al - be), al + be
+    r = math.sin(al) * math.sin(be)
+    phi = math.atan2(float(u @ _cross(a, v)), float(u @ v) - math.cos(al) * math.cos(be))
+    k = float(u @ a) * float(a @ v)
+    if r < 1e-14:
+        raise ModelError("DecoupledArmIK: degenerate wrist axes (middle axis parallel to an outer one)")
+    if sx:
+        U = ca.DM(u)
+        c = ca.dot(U, x)
+        g = ca.atan2(ca.norm_2(ca.cross(U, x)), c)
+        rm = 2.0 * ca.sin(0.5 * (g + gmin)) * ca.sin(0.5 * (g - gmin))
+        rp = 2.0 * ca.sin(0.5 * (gmax + g)) * ca.sin(0.5 * (gmax - g))
+        ok = ca.logic_and(rm > tol * r, rp > tol * r)
+        d = ca.atan2(ca.sqrt(ca.fmax(rm * rp, 0.0)), c - k)
+        return [(phi + d, ok), (phi - d, ok)]
+    c = float(u @ x)
+    g = math.atan2(float(np.linalg.norm(_cross(u, x))), c)
+    rm = 2.0 * math.sin(0.5 * (g + gmin)) * math.sin(0.5 * (g - gmin))
+    rp = 2.0 * math.sin(0.5 * (gmax + g)) * math.sin(0.5 * (gmax - g))
+    if rm <= tol * r or rp <= tol * r:
+        return []
+    d = math.atan2(math.sqrt(rm * rp), c - k)
+    return [phi + d, phi - d]
+
+
 def wrist_angles(w5, w6, w7, Rt, singular_tol: float = 1e-10) -> list[tuple[float, float, float]]:
     """All (θ5, θ6, θ7) with ``R(w5, θ5) R(w6, θ6) R(w7, θ7) = Rt`` (angles in (−π, π]; no
     limits). Empty when Rt is unreachable or the wrist is singular (w5, w7 aligned)."""
     u, a, v = w5, w6, w7
-    c = float(u @ Rt @ v)
-    ua, av = float(u @ a), float(a @ v)
-    A = float(u @ v) - ua * av
-    B = float(u @ _cross(a, v))
     out = []
-    for t6 in _cos_sin_eq(A, B, c - ua * av, singular_tol):
+    for t6 in _cone_roots(u, a, v, Rt @ v, singular_tol):
         R6 = rotation_about(a, t6)
         t5 = _angle_to(u, R6 @ v, Rt @ v)
         R56 = rotation_about(u, t5) @ R6
@@ -179,9 +232,6 @@ class DecoupledArmIK:
         self._K = [_skew(w) for w in self.w]
         self._K2 = [K @ K for K in self._K]
         u, a, v = self.w[4], self.w[5], self.w[6]
-        self._uaav = float(u @ a) * float(a @ v)
-        self._wA = float(u @ v) - self._uaav
-        self._wB = float(u @ _cross(a, v))
         self._axv, self._av = _cross(a, v), float(a @ v)
         x = _cross(v, np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0]))
         self._wx, self._vxx = x, _cross(v, x)
@@ -234,14 +284,16 @@ class DecoupledArmIK:
         """:func:`wrist_angles` for this arm's wrist axes with the axis constants precomputed."""
         u, a, v = self.w[4], self.w[5], self.w[6]
         Rtv = Rt @ v
-        c = float(u @ Rtv)
+        uRtv = float(u @ Rtv)
         out = []
-        uRtv = c
-        for t6 in _cos_sin_eq(self._wA, self._wB, c - self._uaav, self.singular_tol):
+        for t6 in _cone_roots(u, a, v, Rtv, self.singular_tol):
             c6, s6 = math.cos(t6), math.sin(t6)
             r6v = v * c6 + self._axv * s6 + a * (self._av * (1.0 - c6))
-            ur = float(u @ r6v)
-            t5 = math.atan2(float(u @ _cross(r6v, Rtv)), float(r6v @ Rtv) - ur * uRtv)
+            # project on the plane ⊥ u first: near the singular wrist both projections are small and
+            # the angle keeps its relative accuracy (dot products of the unprojected vectors would not)
+            x5 = r6v - u * float(u @ r6v)
+            y5 = Rtv - u * uRtv
+            t5 = math.atan2(float(u @ _cross(x5, y5)), float(x5 @ y5))
             R56 = (_I3 + math.sin(t5) * self._K[4] + (1.0 - math.cos(t5)) * self._K2[4]) @ \
                 (_I3 + s6 * self._K[5] + (1.0 - c6) * self._K2[5])
             y = R56.T @ (Rt @ self._wx)
@@ -419,6 +471,119 @@ class DecoupledArmIK:
             p = p + R @ tk
             R = R @ Rk
         return J
+
+    # ------------------------------------------------------------------ symbolic branches (compiled kernels)
+    def sx_exp(self, k: int, t):
+        """:meth:`_exp` on a CasADi SX angle."""
+        R = ca.DM.eye(3) + ca.sin(t) * ca.DM(self._K[k]) + (1.0 - ca.cos(t)) * ca.DM(self._K2[k])
+        return R, ca.DM(self.p[k]) - R @ ca.DM(self.p[k])
+
+    def sx_fk(self, q) -> tuple:
+        """:meth:`fk` on 7 CasADi SX angles: (R 3 × 3, p 3 × 1)."""
+        R, p = ca.SX.eye(3), ca.SX.zeros(3)
+        for k in range(7):
+            Rk, pk = self.sx_exp(k, q[k])
+            p = p + R @ pk
+            R = R @ Rk
+        return R @ ca.DM(self.M_R), R @ ca.DM(self.M_p) + p
+
+    def sx_wrist_angles(self, Rt) -> list[tuple]:
+        """:meth:`_wrist_angles` in CasADi SX: both branches ``(t5, t6, t7, ok)`` (``ok`` = 1 where
+        the branch exists and is not singular; the angles stay finite either way)."""
+        u, a, v = (ca.DM(x) for x in (self.w[4], self.w[5], self.w[6]))
+        Rtv = Rt @ v
+        c = ca.dot(u, Rtv)
+        out = []
+        for t6, ok in _cone_roots(self.w[4], self.w[5], self.w[6], Rtv, self.singular_tol, sx=True):
+            c6, s6 = ca.cos(t6), ca.sin(t6)
+            r6v = v * c6 + ca.DM(self._axv) * s6 + a * (self._av * (1.0 - c6))
+            x5, y5 = r6v - u * ca.dot(u, r6v), Rtv - u * c
+            t5 = ca.atan2(ca.dot(u, ca.cross(x5, y5)), ca.dot(x5, y5))
+            R56 = (ca.DM.eye(3) + ca.sin(t5) * ca.DM(self._K[4]) + (1.0 - ca.cos(t5)) * ca.DM(self._K2[4])) @ \
+                (ca.DM.eye(3) + s6 * ca.DM(self._K[5]) + (1.0 - c6) * ca.DM(self._K2[5]))
+            y = R56.T @ (Rt @ ca.DM(self._wx))
+            t7 = ca.atan2(ca.dot(y, ca.DM(self._vxx)), ca.dot(ca.DM(self._wx), y))
+            out.append((t5, ca.atan2(s6, c6), t7, ok))
+        return out
+
+    def sx_prefix(self, qs) -> tuple:
+        """Product of the first ``len(qs)`` PoE factors on CasADi SX angles: (R 3 × 3, p 3 × 1)."""
+        R, p = ca.SX.eye(3), ca.SX.zeros(3)
+        for k, t in enumerate(qs):
+            Rk, pk = self.sx_exp(k, t)
+            p = p + R @ pk
+            R = R @ Rk
+        return R, p
+
+    def sx_wrist(self, q4, R_des) -> list[tuple]:
+        """:meth:`wrist` before joint limits, in CasADi SX: two ``(t5, t6, t7, ok)``."""
+        return self.sx_wrist_angles(self.sx_prefix(q4)[0].T @ R_des @ ca.DM(self.M_R.T))
+
+    def sx_hand_position(self, q4, R_des):
+        """Hand position [m] for main-arm joints ``q4`` and hand orientation ``R_des`` (spherical
+        wrists: the same for every wrist branch, the wrist point W being fixed by q5..q7):
+        ``g_1..4(W) + R_des M_Rᵀ (M_p − W)``."""
+        if not self.spherical:
+            raise ModelError("DecoupledArmIK.sx_hand_position: needs a spherical wrist")
+        R, p = self.sx_prefix(q4)
+        W = ca.DM(self.W)
+        return R @ W + p + R_des @ (ca.DM(self.M_R.T) @ (ca.DM(self.M_p) - W))
+
+    def sx_solve(self, R_des, p_des, q1) -> list[tuple]:
+        """:meth:`solve` before joint limits, in CasADi SX (spherical wrists only): eight branches
+        ``(x, ok)`` in the order of :meth:`solve`, ``x`` 7 SX angles; ``ok`` = 1 where the branch
+        exists and its PoE forward kinematics reproduces the request to ``accept_tolerance``."""
+        if not self.spherical:
+            raise ModelError("DecoupledArmIK.sx_solve: the closed-form full-pose IK needs a spherical wrist")
+        R1, p1 = self.sx_exp(0, q1)
+        MRt = ca.DM(self.M_R.T)
+        Rg = R1.T @ R_des @ MRt
+        pg = R1.T @ (p_des - R_des @ (MRt @ ca.DM(self.M_p)) - p1)
+        Q = Rg @ ca.DM(self.Wseed) + pg
+        S = self.S
+        QS = Q - ca.DM(S)
+        dist2 = ca.dot(QS, QS)
+        w4, p4, W = self.w[3], self.p[3], self.Wseed
+        u, v = W - p4, S - p4
+        up, vp = u - w4 * (w4 @ u), v - w4 * (w4 @ v)
+        delta2 = dist2 - float(w4 @ (u - v)) ** 2
+        C = 0.5 * (float(up @ up) + float(vp @ vp) - delta2)
+        out = []
+        for t4, ok4 in _sx_cos_sin_eq(float(up @ vp), float(w4 @ _cross(up, vp)), C, self.singular_tol):
+            R4, p4t = self.sx_exp(3, t4)
+            P = R4 @ ca.DM(W) + p4t
+            for t2, t3, ok2 in self._sx_sub2(P - ca.DM(S), QS):
+                R234 = self.sx_exp(1, t2)[0] @ self.sx_exp(2, t3)[0] @ R4
+                for t5, t6, t7, ok5 in self.sx_wrist_angles(R234.T @ Rg):
+                    x = [q1, t2, t3, t4, t5, t6, t7]
+                    R, p = self.sx_fk(x)
+                    dp = p - p_des
+                    # |R - R_des|_F = 2 sqrt(2) |sin(angle / 2)|: the rotation angle without acos
+                    dR = ca.reshape(R - R_des, 9, 1)
+                    acc = ca.logic_and(ca.dot(dp, dp) <= self.accept_tolerance ** 2,
+                                       0.5 * ca.dot(dR, dR) <= self.accept_tolerance ** 2)
+                    out.append((x, ok4 * ok2 * ok5 * acc))
+        return out
+
+    def _sx_sub2(self, p, q) -> list[tuple]:
+        """:meth:`_sub2` in CasADi SX: two ``(θ2, θ3, ok)``."""
+        w2, w3 = self.w[1], self.w[2]
+        pp, qq = ca.dot(p, p), ca.dot(q, q)
+        ok = ca.fabs(pp - qq) <= 1e-9 * ca.fmax(1.0, qq)
+        c = float(w2 @ w3)
+        den = c * c - 1.0
+        w3p, w2q = ca.dot(ca.DM(w3), p), ca.dot(ca.DM(w2), q)
+        al = (c * w3p - w2q) / den
+        be = (c * w2q - w3p) / den
+        n = _cross(w2, w3)
+        g2 = (pp - al * al - be * be - 2 * al * be * c) / float(n @ n)
+        ok = ca.logic_and(ok, g2 >= self.singular_tol * pp)
+        g = ca.sqrt(ca.fmax(g2, 0.0))
+        out = []
+        for s in (g, -g):
+            z = al * ca.DM(w2) + be * ca.DM(w3) + s * ca.DM(n)
+            out.append((_sx_angle_to(w2, z, q), _sx_angle_to(w3, p, z), ok))
+        return out
 
     # ------------------------------------------------------------------ helpers
     def arm_joints(self, q) -> np.ndarray:

@@ -23,9 +23,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from ..codegen import compile_function
 from ..errors import ConfigurationError
 from ..ik_analytic import DecoupledArmIK
 from ..robot import RobotModel
@@ -164,9 +166,14 @@ class OrientationManifold:
     closed mode ``[q1..q4 of the active arm, q1 of the passive arm]`` (5). :meth:`complete` maps
     ``p`` to every configuration on the manifold (wrist in closed form, passive arm by the
     redundancy-angle IK) and picks the branch nearest to a reference configuration.
+
+    ``compiled``: evaluate every closed-form branch in one C function generated with CasADi (the
+    same formulas as :class:`~optplan.ik_analytic.DecoupledArmIK`, 30-100x faster than the Python
+    path); joint limits and the branch choice are applied in numpy. ``False`` keeps the Python
+    path (the reference the compiled one is tested against).
     """
 
-    def __init__(self, constraint: DualArmOrientationConstraint):
+    def __init__(self, constraint: DualArmOrientationConstraint, *, compiled: bool = True):
         c = constraint
         if np.any(c.orientation_bounds != 0.0):
             raise ConfigurationError("OC-RRT's analytic parameterisation needs fixed orientations "
@@ -184,6 +191,12 @@ class OrientationManifold:
         self.upper = c.robot.upper[self.p_idx]
         self.dim = len(self.p_idx)
         self.n_complete = 0
+        #: every branch of :meth:`complete` in one compiled call (None: the Python reference path,
+        #: used when ``compiled=False`` or when the passive arm's full-pose IK needs Newton steps)
+        self.kernel = None
+        self._shared_passive = c.mode == "closed" and ia.spherical   # one passive block for both wrist branches
+        if compiled and (c.mode == "open" or ip.spherical):
+            self.kernel = _completion_kernel(self)
 
     def params(self, q) -> np.ndarray:
         return np.asarray(q, float)[self.p_idx]
@@ -202,6 +215,43 @@ class OrientationManifold:
         arm solution) nearest to ``ref`` (max-norm), else a random one (``rng``), else the first.
         None when the parameters admit no solution inside the joint limits."""
         self.n_complete += 1
+        if self.kernel is not None:
+            return self._complete_compiled(np.asarray(p, float), ref, rng)
+        return self.complete_reference(p, ref, rng)
+
+    def _complete_compiled(self, p, ref, rng):
+        if ref is not None:
+            q, found = self.kernel[1](p, ref)
+            return q if found[0] > 0.5 else None
+        c, ia, ip = self.c, self.ik[self.c.active], self.ik[self.c.passive]
+        QA, okA, QP, okP = self.kernel[0](p)
+        closed = c.mode == "closed"
+        if closed and (not okP.any() or not (ip.lower[0] - 1e-12 <= p[4] <= ip.upper[0] + 1e-12)):
+            return None     # no passive-arm solution for any wrist branch
+        q = np.empty(self.robot.nq)
+        q[self.ia[:4]] = p[:4]
+        b, w = _choose(QA, okA, ia.lower[4:], ia.upper[4:], rng)
+        if w is None:
+            return None
+        q[self.ia[4:]] = w
+        if not closed:
+            _, w = _choose(QP, okP, ip.lower[4:], ip.upper[4:], rng)
+            if w is None:
+                return None
+            q[self.ip[:4]] = p[4:8]
+            q[self.ip[4:]] = w
+            return q
+        blk = slice(0, len(QP)) if self._shared_passive else slice(b * (len(QP) // 2), (b + 1) * (len(QP) // 2))
+        _, s = _choose(QP[blk, 1:], okP[blk], ip.lower[1:], ip.upper[1:], rng, dedup=True)
+        if s is None:
+            return None
+        q[self.ip[0]] = p[4]
+        q[self.ip[1:]] = s
+        return q
+
+    def complete_reference(self, p, ref: np.ndarray | None = None, rng: np.random.Generator | None = None):
+        """:meth:`complete` on the Python path of :class:`~optplan.ik_analytic.DecoupledArmIK`
+        (no compiled code; the reference for tests)."""
         c = self.c
         q = np.empty(self.robot.nq)
         ia, ip = self.ik[c.active], self.ik[c.passive]
@@ -229,6 +279,166 @@ class OrientationManifold:
         q[self.ip] = s
         return q
 
+
+_TWO_PI = 2.0 * math.pi
+
+
+def _choose(X, ok, lo, hi, rng, *, dedup: bool = False, tol: float = 1e-12):
+    """One solution among the raw branches ``X`` (rows, with flags ``ok``) and their ``2πk`` shifts
+    inside [lo, hi] (within ``tol``, then clipped): a uniformly random one (``rng``), else the first,
+    counted in the order of :class:`~optplan.ik_analytic.DecoupledArmIK` (branch, then shifts, the
+    last joint fastest). ``dedup``: branches equal modulo 2π count once. Returns (row, angles) or
+    (-1, None)."""
+    idx = np.flatnonzero(ok > 0.5)
+    if idx.size == 0:
+        return -1, None
+    X = X[idx]
+    if dedup and len(X) > 1:
+        D = np.abs((X[:, None, :] - X[None, :, :] + math.pi) % _TWO_PI - math.pi).max(axis=2)
+        keep = ~np.any(np.tril(D < 1e-9, -1), axis=1)     # no earlier branch equal modulo 2π
+        idx, X = idx[keep], X[keep]
+    kmin = np.ceil((lo - tol - X) / _TWO_PI)
+    cnt = np.maximum(np.floor((hi + tol - X) / _TWO_PI) - kmin + 1, 0.0)
+    per_row = cnt.prod(axis=1)
+    cum = np.cumsum(per_row)
+    if cum[-1] < 0.5:
+        return -1, None
+    j = int(rng.integers(int(cum[-1]))) if rng is not None else 0
+    r = int(np.searchsorted(cum, j, side="right"))
+    j -= int(cum[r - 1]) if r else 0
+    y = X[r].copy()
+    for k in range(X.shape[1] - 1, -1, -1):
+        n = int(cnt[r, k])
+        y[k] += _TWO_PI * (kmin[r, k] + j % n)
+        j //= n
+    return int(idx[r]), np.clip(y, lo, hi)
+
+
+def _sx_nearest(rows, oks, ref, lo, hi, n_fixed: int = 0, tol: float = 1e-12):
+    """:func:`_choose` with a reference, in CasADi SX: (angles, distance, found) of the in-limit
+    ``2πk`` shift of the raw branches nearest ``ref`` (max-norm; first branch on ties). The first
+    ``n_fixed`` angles are given (never shifted, not limit-checked)."""
+    best = best_d = found = None
+    for x, ok in zip(rows, oks):
+        y, good, d = [], ok, 0.0
+        for k, t in enumerate(x):
+            if k >= n_fixed:
+                t = t + _TWO_PI * ca.floor((ref[k] - t) / _TWO_PI + 0.5)
+                t = ca.if_else(t < lo[k] - tol, t + _TWO_PI, t)
+                t = ca.if_else(t > hi[k] + tol, t - _TWO_PI, t)
+                good = ca.logic_and(good, ca.logic_and(t >= lo[k] - tol, t <= hi[k] + tol))
+                t = ca.fmin(ca.fmax(t, lo[k]), hi[k])
+            y.append(t)
+            d = ca.fmax(d, ca.fabs(t - ref[k]))
+        d = ca.if_else(good, d, 1e30)
+        if best is None:
+            best, best_d, found = y, d, good
+            continue
+        better = d < best_d
+        best = [ca.if_else(better, a, b) for a, b in zip(y, best)]
+        best_d = ca.fmin(d, best_d)
+        found = ca.logic_or(found, good)
+    return best, best_d, found
+
+
+def _completion_kernel(mf: OrientationManifold):
+    """Two compiled functions of the manifold parameters ``p``:
+
+    * ``raw(p) -> (QA, okA, QP, okP)``: the active arm's two raw wrist branches (2 × 3) and the
+      passive arm's raw wrist branches (open: 2 × 3) or full-pose branches for each active branch
+      (closed: 16 × 7, eight per active branch), with existence / accuracy flags;
+    * ``nearest(p, ref) -> (q, found)``: the whole configuration on the branches nearest ``ref``
+      (what :meth:`OrientationManifold.complete` returns with a reference), joint limits applied.
+    """
+    c, robot = mf.c, mf.robot
+    ia, ip = mf.ik[c.active], mf.ik[c.passive]
+    p = ca.SX.sym("p", mf.dim)
+    ref = ca.SX.sym("ref", robot.nq)
+    ra, rp = [ref[int(i)] for i in mf.ia], [ref[int(i)] for i in mf.ip]
+    wa = ia.sx_wrist([p[k] for k in range(4)], ca.DM(np.asarray(c.R_hands[c.active], float)))
+    QA = ca.vertcat(*[ca.horzcat(*b[:3]) for b in wa])
+    okA = ca.vertcat(*[b[3] for b in wa])
+    best_a, da, found_a = _sx_nearest([b[:3] for b in wa], [b[3] for b in wa], ra[4:], ia.lower[4:], ia.upper[4:])
+    q = [None] * robot.nq
+    for k in range(4):
+        q[int(mf.ia[k])] = p[k]
+    for k in range(3):
+        q[int(mf.ia[4 + k])] = best_a[k]
+    if c.mode == "open":
+        wp = ip.sx_wrist([p[4 + k] for k in range(4)], ca.DM(np.asarray(c.R_hands[c.passive], float)))
+        QP = ca.vertcat(*[ca.horzcat(*b[:3]) for b in wp])
+        okP = ca.vertcat(*[b[3] for b in wp])
+        best_p, _, found_p = _sx_nearest([b[:3] for b in wp], [b[3] for b in wp], rp[4:], ip.lower[4:], ip.upper[4:])
+        for k in range(4):
+            q[int(mf.ip[k])] = p[4 + k]
+        for k in range(3):
+            q[int(mf.ip[4 + k])] = best_p[k]
+    else:
+        Rr, pr = ca.DM(c.T_rel.rotation), ca.DM(c.T_rel.translation)
+        rows, oks, per_branch = [], [], []
+        sols = None
+        for t5, t6, t7, _ in wa:
+            if ia.spherical:   # the active hand pose does not depend on the wrist branch
+                R1 = ca.DM(np.asarray(c.R_hands[c.active], float))
+                p1 = ia.sx_hand_position([p[k] for k in range(4)], R1)
+            else:
+                R1, p1 = ia.sx_fk([p[0], p[1], p[2], p[3], t5, t6, t7])
+            if sols is None or not ia.spherical:
+                sols = ip.sx_solve(R1 @ Rr, R1 @ pr + p1, p[4])
+            rows += [ca.horzcat(*x) for x, _ in sols]
+            oks += [ok for _, ok in sols]
+            per_branch.append(_sx_nearest([x for x, _ in sols], [ok for _, ok in sols], rp, ip.lower, ip.upper, n_fixed=1))
+        QP, okP = ca.vertcat(*rows), ca.vertcat(*oks)
+        # the active branch chosen above (first on ties) decides which passive block is used
+        da0 = _sx_nearest([wa[0][:3]], [wa[0][3]], ra[4:], ia.lower[4:], ia.upper[4:])[1]
+        second = ca.logic_and(ca.logic_and(len(wa) > 1, da < da0), found_a)
+        (b0, _, f0), (b1, _, f1) = per_branch
+        best_p = [ca.if_else(second, y1, y0) for y0, y1 in zip(b0, b1)]
+        q1_ok = ca.logic_and(p[4] >= ip.lower[0] - 1e-12, p[4] <= ip.upper[0] + 1e-12)
+        found_p = ca.logic_and(ca.if_else(second, f1, f0), q1_ok)
+        for k in range(7):
+            q[int(mf.ip[k])] = best_p[k]
+    if c.mode == "closed" and ia.spherical:   # both blocks are the same: keep one
+        QP, okP = ca.vertcat(*rows[:len(rows) // 2]), ca.vertcat(*oks[:len(oks) // 2])
+    raw = ca.Function(f"oc_branches_{c.mode}", [p], _cse([QA, okA, QP, okP]))
+    near = ca.Function(f"oc_nearest_{c.mode}", [p, ref], _cse([ca.vertcat(*q), ca.logic_and(found_a, found_p)]))
+    return tuple(_Kernel(compile_function(f)) for f in (raw, near))
+
+
+def _cse(outs):
+    return list(ca.cse(outs)) if hasattr(ca, "cse") else outs
+
+
+class _Kernel:
+    """Call a compiled function with dense inputs and outputs through its preallocated buffers
+    (no per-call sparsity mapping), or the interpreted casadi.Function when there is no C compiler.
+    Returns fresh numpy arrays (outputs in column-major order, reshaped)."""
+
+    def __init__(self, cf):
+        self.cf = cf
+        self.compiled = not isinstance(cf, ca.Function)
+        f = cf if not self.compiled else None
+        if self.compiled and any(len(r) != s[0] * s[1] for s, r, _ in cf._out_map):
+            self.compiled = False    # a structurally sparse output: the generic call
+            self.cf = lambda *x: cf(*x)
+        if self.compiled:
+            self._shapes = [shape for shape, _, _ in cf._out_map]
+            self._call = (cf._fn, cf._arg, cf._res, cf._iw_p, cf._w_p)
+        else:
+            self._shapes = [f.size_out(i) for i in range(f.n_out())]
+
+    def __call__(self, *inputs):
+        if not self.compiled:
+            outs = self.cf(*inputs)
+            outs = outs if isinstance(outs, (list, tuple)) else [outs]
+            return tuple(np.asarray(o.full()).squeeze(axis=1) if o.size2() == 1 else np.asarray(o.full()) for o in outs)
+        for buf, x in zip(self.cf._in_bufs, inputs):
+            buf[:] = x
+        fn, arg, res, iw, w = self._call
+        if fn(arg, res, iw, w, 0) != 0:
+            raise RuntimeError(f"{self.cf.name}: evaluation failed")
+        return tuple(b[:s[0]].copy() if s[1] == 1 else b[:s[0] * s[1]].reshape(s, order="F")
+                     for b, s in zip(self.cf._out_bufs, self._shapes))
 
 def constraint_from_scene(robot: RobotModel, scene: Scene) -> DualArmOrientationConstraint:
     """The orientation task of a scene's ``[extra]`` table: ``mode`` ("open"/"closed"),
