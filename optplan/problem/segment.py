@@ -285,7 +285,7 @@ class SplineSegmentProblem:
         active = [p for p in active if p not in const]
         col.active_pairs = active
         col.constant_pairs = const
-        margin_at = col._boundary_margins(SimpleNamespace(N=N), traj, active, set(pinned))
+        margin_at = col._boundary_margins(SimpleNamespace(N=N, robot=robot), traj, active, set(pinned))
         holder = col.checker.object_arm
         plan = []
         for pair in active:
