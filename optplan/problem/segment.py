@@ -271,6 +271,24 @@ class SplineSegmentProblem:
         pin.framesForwardKinematics(self.robot.model, data, self.q0)
         return data.oMf[fid]
 
+    def _boundary_margins(self, active: list, pinned: set):
+        """``margin_at(pair, k)`` [m] as :meth:`CollisionAvoidance._boundary_margins` (the margin,
+        halved distance within ``window`` knots of a pinned configuration closer than the margin),
+        from the exact coal distances of the pinned configurations: the rows here are planes, not
+        the knot transcription's smooth distances."""
+        col, N, w = self.col, self.N, int(self.spec.window)
+        col.relaxed = {}
+        pairs = col.checker.pairs
+        for kp in sorted(pinned):
+            d = col._init_dist[kp]  # exact distances along the initial guess (set by _activate)
+            for p in active:
+                dp = float(d[pairs.index(p)])
+                if dp < col.margin:
+                    m = min(col.margin, 0.5 * dp)
+                    for k in range(max(0, kp - w), min(N, kp + w) + 1):
+                        col.relaxed[(p, k)] = min(m, col.relaxed.get((p, k), np.inf))
+        return col._margin_at
+
     def _plan_collision(self, Qk: np.ndarray) -> list:
         """Active (pair, kernel, knots, …) along the knot configurations ``Qk``: one item per pair
         with its kernel, knots, margins and which side moves (``flip``: A is the static side)."""
@@ -285,7 +303,7 @@ class SplineSegmentProblem:
         active = [p for p in active if p not in const]
         col.active_pairs = active
         col.constant_pairs = const
-        margin_at = col._boundary_margins(SimpleNamespace(N=N, robot=robot), traj, active, set(pinned))
+        margin_at = self._boundary_margins(active, set(pinned))
         holder = col.checker.object_arm
         plan = []
         for pair in active:
