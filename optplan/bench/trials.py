@@ -157,8 +157,11 @@ class TrialGenerator:
         return None
 
     def random_seed(self, rng: np.random.Generator) -> np.ndarray:
-        """IK seed: joints uniform in [-π, π] (inside the limits)."""
-        return np.clip(rng.uniform(-np.pi, np.pi, self.robot.nq), self.robot.lower, self.robot.upper)
+        """IK seed: joints uniform in [-π, π] ∩ their limits (not [-π, π] clipped to the limits: that
+        puts a joint with a one-sided range — a Panda elbow in [-3.07, -0.07] rad — at its limit
+        half of the time, where IK stalls; the same draws for limits that contain [-π, π])."""
+        r = self.robot
+        return rng.uniform(np.maximum(r.lower, -np.pi), np.minimum(r.upper, np.pi), self.robot.nq)
 
     def nominal_configuration(self, which: str, rng: np.random.Generator, tries: int = 200,
                               min_limit_margin: float = 1.0) -> np.ndarray | None:
