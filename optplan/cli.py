@@ -161,6 +161,12 @@ def _cmd_bench_warmstart(args) -> int:
     return 0
 
 
+def _cmd_bench_generalize(args) -> int:
+    from .bench.generalize import command
+
+    return command(args)
+
+
 def _cmd_bench_drake(args) -> int:
     from .bench.drake_bench import format_report, run, save_json
 
@@ -378,6 +384,13 @@ def build_parser() -> argparse.ArgumentParser:
     ws.add_argument("--no-progress", action="store_true")
     _engine_args(ws)
     ws.set_defaults(func=_cmd_bench_warmstart)
+
+    ge = bench.add_parser("generalize", help="plan -> optimize -> verify on scenes not tuned on (hard-scene suite, "
+                          "stress scenes, a dual-Panda robot from example-robot-data): success among planned trials")
+    from .bench.generalize import add_arguments as _ge_args
+
+    _ge_args(ge)
+    ge.set_defaults(func=_cmd_bench_generalize)
 
     dk = bench.add_parser("drake", help="optplan vs Drake's KinematicTrajectoryOptimization (SNOPT, IPOPT) on the "
                           "transport problem and the pipeline's constrained segments, paired in one run")
