@@ -130,6 +130,9 @@ class SplineSegmentProblem:
             self.col = CollisionAvoidance(scene, margin=spec.margin, activation=spec.activation,
                                           window=spec.window, object_arm=spec.object_arm, fixed_normals=True)
             self.col._setup(robot)
+            for g, shape in self.col._robot_shape.items():  # refuse unsupported geometry now, by name
+                if shape is None:
+                    geometry_points(robot, g)
         self._X0: np.ndarray | None = None  # interior control points (N−3) × nj
         self._lam: tuple | None = None
         self._built: _Built | None = None
