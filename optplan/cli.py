@@ -222,7 +222,8 @@ def _cmd_plan(args) -> int:
     t0 = time.perf_counter()
     try:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
-        opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold)
+        opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold,
+                               planner_options=PipelineOptions.planner_options + (("variant", args.variant),))
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
     except BaseException as exc:  # a failed run still writes what it has
         if args.json:
@@ -411,7 +412,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--trial", type=ca.nonnegative_int, default=0, help="trial index (perturbed start/goal, Section 5.1)")
     pl.add_argument("--seed", type=ca.nonnegative_int, default=0)
     pl.add_argument("--planner", default="tcbirrt")
-    pl.add_argument("--robot", default=None, help="robot model (default: the scene's robot, else tcbirrt_dual_arm)")
+    pl.add_argument("--robot", default=None, help="robot model (default: the scene's robot, else tcbirrt_dual_arm); "
+                    "also example-robot-data's pr2, baxter, dual_panda (extra 'robots')")
+    pl.add_argument("--variant", choices=["paper", "improved"], default="paper",
+                    help="TCBiRRT variant: the paper's algorithm or the improved sampler (hard scenes)")
     pl.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit [s]")
     pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
     pl.add_argument("--json", help="write the figures as JSON")
