@@ -185,3 +185,15 @@ def test_bench_scene_groups_expand_and_unknown_names_are_refused():
     assert len(names) == len(set(names))
     with pytest.raises(ValueError, match="nope"):
         expand(["nope"])
+
+
+@needs_panda
+def test_trial_perturbation_scales_with_reach(panda):
+    from optplan.bench.trials import TrialGenerator, _reach_scale
+
+    paper = RobotModel.from_name("tcbirrt_dual_arm")
+    assert _reach_scale(paper) == 1.0
+    assert TrialGenerator(paper, Scene.load("ssps_scene1")).options.position_range == 0.2
+    assert 0.3 < _reach_scale(panda) < 0.45
+    sc = Scene.load("panda_shelf")  # sets its own range
+    assert TrialGenerator(panda, sc).options.position_range == sc.extra["trial_position_range"]
