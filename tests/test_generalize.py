@@ -197,3 +197,24 @@ def test_trial_perturbation_scales_with_reach(panda):
     assert 0.3 < _reach_scale(panda) < 0.45
     sc = Scene.load("panda_shelf")  # sets its own range
     assert TrialGenerator(panda, sc).options.position_range == sc.extra["trial_position_range"]
+
+
+def test_pipeline_verified_on_a_stress_scene():
+    """A scene the optimizer was not tuned on (capsule bars, a sphere, a 180° roll of the module):
+    plan -> optimize -> verify succeeds, checked independently here (coal clearance, FK closure)."""
+    from optplan.bench.trials import TrialGenerator
+    from optplan.collision import CollisionChecker
+    from optplan.pipeline import PipelineOptions, run_pipeline
+    from optplan.planners.closed_chain import closure_error
+
+    robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("stress_cage")
+    tr = TrialGenerator(robot, scene).generate(0, 0)
+    opts = PipelineOptions(planner_options=(("edge_resolution", 0.05), ("variant", "improved")))
+    res = run_pipeline(robot, scene, tr.q_start, tr.q_goal, opts, seed=tr.seed)
+    assert res.plan.success and res.success, res.to_dict()
+    assert all(len(s.attempts) >= 1 for s in res.segments)
+    # where both hands hold the module (during a regrasp it stays with the holding arm)
+    held = [q for q, c in zip(res.q, res.constrained) if c][::5]
+    checker = CollisionChecker(robot, scene)
+    assert min(checker.min_distance(q)[0] for q in held) >= 0.0
+    assert max(max(closure_error(robot, scene.object.grasps, q)) for q in held) <= 1e-6
