@@ -73,8 +73,8 @@ class SegmentSpec:
     activation [m], window [knots]: collision pairs closer than ``activation`` along the initial
     guess are constrained at the knots within ``window`` (as :class:`CollisionAvoidance`).
     relax_to_guess: a pair's margin is at most half the guess's exact clearance within ``window``
-    knots of every knot where the guess runs closer than ``margin`` (False: only next to the pinned
-    configurations). A planner's path may pass closer than the margin where nothing wider fits
+    knots of every knot where a collision-free guess runs closer than ``margin`` (False: only next
+    to the pinned configurations; a colliding guess keeps the margin). A planner's path may pass closer than the margin where nothing wider fits
     (measured: a wrist 10 mm from its forearm under a 20 mm margin, the closed chain leaving no room
     to widen it: IPOPT ran 250 iterations into its time cap; relaxed: 18 iterations, verified)."""
 
@@ -288,13 +288,13 @@ class SplineSegmentProblem:
         col, N, w = self.col, self.N, int(self.spec.window)
         col.relaxed = {}
         pairs = col.checker.pairs
-        if self.spec.relax_to_guess:
-            pinned = set(range(N + 1))
-        for kp in sorted(pinned):
+        knots = set(range(N + 1)) if self.spec.relax_to_guess else set(pinned)
+        for kp in sorted(knots):
             d = col._init_dist[kp]  # exact distances along the initial guess (set by _activate)
             for p in active:
                 dp = float(d[pairs.index(p)])
-                if dp < col.margin:
+                # inside the path only a collision-free guess relaxes (a colliding one must be pushed out)
+                if dp < col.margin and (kp in pinned or dp >= 0.0):
                     m = min(col.margin, 0.5 * dp)
                     for k in range(max(0, kp - w), min(N, kp + w) + 1):
                         col.relaxed[(p, k)] = min(m, col.relaxed.get((p, k), np.inf))
