@@ -93,7 +93,8 @@ class PipelineOptions:
     recorded in ``SegmentResult.attempts``): (1) ``collision``: coal finds a contact after a
     converged solve → pairs activated along the solution, margins raised between knots, re-solve
     (≤ collision_retries); (2) ``finer-grid``: IPOPT failed or a contact remains → 1.6× the
-    intervals from the same initial guess (≤ failure_retries); (3) ``refine``: the closed-chain
+    intervals from the same initial guess, the pairs of every solution coal found in contact kept
+    active, then (1) again on that grid (≤ failure_retries); (3) ``refine``: the closed-chain
     residual between knots exceeds closed_chain_tol → the grid refined by
     (residual / (tol/2))^¼, warm-started from the solution (≤ refinements); (4) ``fallback-knots``:
     still not verified → the knot transcription with free plane normals.
@@ -439,19 +440,30 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     N = int(np.clip(np.ceil(length / step), opts.spline_min_intervals, opts.spline_max_intervals))
     prob = build(N)
     sol, rep = run(prob, "initial")
-    for _ in range(opts.collision_retries):  # 1. coal finds a contact the active rows missed
-        if not sol.success or rep.min_clearance_m >= 0.0:
-            break
-        prob.add_activation(sol.q)
-        t = _dense_times(sol)
-        prob.boost_between_knots(t, sol.sample(t)["q"], sol.t)
-        sol, rep = run(prob, "collision")
+    colliding: list[Solution] = []  # solutions coal found in contact: their pairs stay active on a finer grid
+
+    def fix_contacts(prob, sol, rep):
+        for _ in range(opts.collision_retries):  # 1. coal finds a contact the active rows missed
+            if not sol.success or rep.min_clearance_m >= 0.0:
+                break
+            colliding.append(sol)
+            prob.add_activation(sol.q)
+            t = _dense_times(sol)
+            prob.boost_between_knots(t, sol.sample(t)["q"], sol.t)
+            sol, rep = run(prob, "collision")
+        return sol, rep
+
+    sol, rep = fix_contacts(prob, sol, rep)
     for _ in range(opts.failure_retries):  # 2. IPOPT failed, or still a contact: a finer grid
         if (sol.success and rep.min_clearance_m >= 0.0) or N >= opts.spline_max_intervals:
             break
         N = int(min(opts.spline_max_intervals, np.ceil(N * 1.6)))
         prob = build(N)
-        sol, rep = run(prob, "finer-grid")
+        if rep.min_clearance_m < 0.0 and all(c is not sol for c in colliding):
+            colliding.append(sol)
+        for c in colliding:  # measured: without them the finer grid missed the same pair again (−199 mm)
+            prob.add_activation(c.sample(np.linspace(c.t[0], c.t[-1], N + 1))["q"])
+        sol, rep = fix_contacts(prob, *run(prob, "finer-grid"))  # the finer grid's own contacts too
     for _ in range(opts.refinements):  # 3. the closed chain drifts between knots (∝ h⁴)
         res = rep.max_closed_chain_residual
         if kind != "constrained" or not sol.success or not res > opts.closed_chain_tol:
