@@ -119,6 +119,17 @@ class CollisionChecker:
         pin.updateFramePlacement(self.model, self.data, self._hand_fid)
         return self.data.oMf[self._hand_fid] * self._grasp_inv
 
+    def update_placements(self, q) -> pin.SE3 | None:
+        """Place every geometry at configuration ``q``; returns the held object's world pose (None
+        without one). :meth:`pair_geometries` then gives a pair's shapes and placements."""
+        return self._update(q)
+
+    def pair_geometries(self, pair: Pair, obj_tf):
+        """``(geometry A, transform A, geometry B, transform B)`` of a pair (coal objects) at the
+        placements last set by :meth:`update_placements` (``obj_tf``: the held object's, a
+        ``coal.Transform3s``)."""
+        return self._geoms(pair, obj_tf)
+
     def object_pose(self, q) -> pin.SE3:
         """World pose of the held object at ``q`` (from ``object_arm``'s hand)."""
         if self.object is None:

@@ -21,6 +21,7 @@ hands hold the object.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
@@ -90,7 +91,10 @@ class PipelineOptions:
     B-spline segments get ⌈joint path length / spline_interval_step [rad]⌉ intervals for a
     constrained segment (⌈length / free_interval_step⌉ for a regrasp), clipped to
     [spline_min_intervals, spline_max_intervals]. Their retry policy, in order (each attempt is
-    recorded in ``SegmentResult.attempts``): (1) ``collision``: coal finds a contact after a
+    recorded in ``SegmentResult.attempts``): (0) ``velocity``: after any solve, a velocity control
+    point beyond its joint's limit (only those the warm start brings past
+    spline_velocity_activation of the limit have rows) → rows added, re-solve (≤ velocity_retries);
+    (1) ``collision``: coal finds a contact after a
     converged solve → pairs activated along the solution, margins raised between knots, re-solve
     (≤ collision_retries); (2) ``finer-grid``: IPOPT failed or a contact remains → 1.6× the
     intervals from the same initial guess, the pairs of every solution coal found in contact kept
@@ -98,6 +102,10 @@ class PipelineOptions:
     residual between knots exceeds closed_chain_tol → the grid refined by
     (residual / (tol/2))^¼, warm-started from the solution (≤ refinements); (4) ``fallback-knots``:
     still not verified → the knot transcription with free plane normals.
+    compile_kernels: the B-spline NLP's kernels evaluated from C compiled once per robot and
+    cached on disk (:attr:`SplineSegmentProblem.compile_kernels`): ``"auto"`` (default) uses what
+    an earlier run compiled, ``True`` compiles what is missing (about a second of the C compiler
+    per kernel, once), ``False`` never.
     ipopt_max_wall_time [s]: IPOPT's wall-clock cap per solve (a solve that hits it ends with the
     status ``Maximum_WallTime_Exceeded``; B-spline path).
     """
@@ -127,6 +135,9 @@ class PipelineOptions:
     spline_max_intervals: int = 160
     ipopt_max_wall_time: float = 60.0
     smooth_warm_start: float = 0.0
+    spline_velocity_activation: float = 0.5
+    compile_kernels: bool | str = "auto"
+    velocity_retries: int = 2
 
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
@@ -137,6 +148,9 @@ class PipelineOptions:
             raise ValueError("PipelineOptions: expected spline_interval_step > 0 and 4 ≤ spline_min_intervals ≤ "
                              f"spline_max_intervals, got {self.spline_interval_step}, {self.spline_min_intervals}, "
                              f"{self.spline_max_intervals}")
+        if self.compile_kernels not in (True, False, "auto"):
+            raise ValueError(f"PipelineOptions.compile_kernels: expected True, False or 'auto', got "
+                             f"{self.compile_kernels!r}")
         if not self.ipopt_max_wall_time > 0:
             raise ValueError(f"PipelineOptions.ipopt_max_wall_time: expected a positive time [s], got "
                              f"{self.ipopt_max_wall_time}")
@@ -145,7 +159,8 @@ class PipelineOptions:
 @dataclass
 class SegmentResult:
     """One optimized segment: ``kind`` ("constrained" or "regrasp"), the moving ``arm`` of a
-    regrasp, the final ``solution`` (times and iterations summed over its attempts), its
+    regrasp, the final ``solution`` (its ``attempts`` list every NLP solved for the segment; the
+    totals are ``total_iterations``, ``total_wall_time``, ``total_setup_time``), its
     ``report`` (:func:`verify`), its start time ``t0`` [s] in the whole trajectory, and
     ``attempts``: one dict per NLP solved, in order (``reason``, ``N``, ``status``,
     ``iterations``, ``setup_s``, ``ipopt_s``, ``min_clearance_m``, ``closed_chain_residual``)."""
@@ -186,15 +201,15 @@ class PipelineResult:
     @property
     def opt_time_s(self) -> float:
         """IPOPT time summed over the segments [s]."""
-        return float(sum(s.solution.wall_time for s in self.segments))
+        return float(sum(s.solution.total_wall_time for s in self.segments))
 
     @property
     def setup_time_s(self) -> float:
-        return float(sum(s.solution.setup_time for s in self.segments))
+        return float(sum(s.solution.total_setup_time for s in self.segments))
 
     @property
     def iterations(self) -> int:
-        return int(sum(s.solution.iterations for s in self.segments))
+        return int(sum(s.solution.total_iterations for s in self.segments))
 
     @property
     def max_closed_chain_residual(self) -> float:
@@ -292,8 +307,8 @@ def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind
     arms = list(scene.object.grasps)
     cc, holder = None, None
     if kind == "constrained":
-        cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
-        cc.interior = opts.closed_chain_interior
+        cc = dataclasses.replace(ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]],
+                                                         arms[0], arms[1]), interior=opts.closed_chain_interior)
         prob.add_constraint(cc, name="closed_chain")
         prob.add_constraint(JointPositionLimits(), name="joint_limits")
     else:  # regrasp: the holding arm's joints stay where they are, so the object does too
@@ -336,11 +351,9 @@ def _initial_guess(robot, scene, prob: OptProblem, seg_path, cc, kind: str, opts
 
 
 def _accumulate(sol, prev: Solution) -> Solution:
-    """``sol`` with the time and iterations of an earlier attempt ``prev`` added."""
-    sol.wall_time += prev.wall_time
-    sol.setup_time += prev.setup_time
-    sol.iterations += prev.iterations
-    return sol
+    """``sol`` with the attempts of an earlier solution ``prev`` listed before its own (a
+    Solution is immutable; totals are ``total_iterations``, ``total_wall_time``, …)."""
+    return sol.after(prev)
 
 
 def _dense_times(sol, per_interval: int = 10) -> np.ndarray:
@@ -358,22 +371,24 @@ def _solve_verified(robot, scene, prob: OptProblem, cc, holder, opts: PipelineOp
             break
         # activate pairs from the union of the initial guess and this solution; where the solution
         # collides between knots, raise those pairs' margin at the knots around; rebuild, re-solve
-        col = prob.terms["collision"].term
-        col.activate_with = list(col.activate_with) + [prob.numeric_trajectory(sol.x)]
+        h = prob.terms["collision"]
+        col = h.term.with_activation(prob.numeric_trajectory(sol.x))
         t = _dense_times(sol)
-        n = col.boost_between_knots(t, sol.sample(t)["q"], sol.t)
+        col, n = col.with_boost(prob.term_data(h), t, sol.sample(t)["q"], sol.t)
         log.info("segment %s: clearance %.3g m by coal (%s); re-solving with more pairs (%d rows with a "
                  "larger margin)", kind, rep.min_clearance_m, rep.min_clearance_pair, n)
-        prob.rebuild()
-        sol = _accumulate(prob.solve(ipopt), sol)
+        prob.replace_term(h, col)
+        sol = _accumulate(prob.solve(ipopt).labelled("collision"), sol)
         rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
     return sol, rep
 
 
-def _attempt(reason: str, N: int, sol: Solution, rep: VerifyReport) -> dict:
+def _attempt(reason: str, N: int, sol: Solution, rep: VerifyReport | None) -> dict:
+    nan = float("nan")
     return {"reason": reason, "N": int(N), "status": sol.status.value, "iterations": int(sol.iterations),
             "setup_s": float(sol.setup_time), "ipopt_s": float(sol.wall_time),
-            "min_clearance_m": float(rep.min_clearance_m), "closed_chain_residual": float(rep.max_closed_chain_residual)}
+            "min_clearance_m": nan if rep is None else float(rep.min_clearance_m),
+            "closed_chain_residual": nan if rep is None else float(rep.max_closed_chain_residual)}
 
 
 def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind: str, arm: str | None,
@@ -405,8 +420,9 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
 
     def build(N: int, initial: Solution | None = None) -> SplineSegmentProblem:
         spec = SegmentSpec(int(N), T, seg_path[0], seg_path[-1], cc, lo, hi, margin=opts.margin,
-                           object_arm=holder or arms[0])
+                           object_arm=holder or arms[0], velocity_activation=opts.spline_velocity_activation)
         prob = SplineSegmentProblem(robot, scene, spec)
+        prob.compile_kernels = opts.compile_kernels
         if initial is not None:
             prob.set_initial(solution=initial)
         elif opts.warm_start:
@@ -424,6 +440,16 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     def run(prob: SplineSegmentProblem, reason: str):
         nonlocal total
         sol = prob.solve(ipopt)
+        for _ in range(opts.velocity_retries):  # 0. a joint speed the lazy velocity rows missed
+            over = prob.velocity_violations(sol) if sol.success else ()
+            if not len(over):
+                break
+            attempts.append(_attempt(reason, prob.N, sol, None))  # not verified: it is re-solved
+            total = sol if total is None else _accumulate(sol, total)
+            prob.add_velocity_rows(over)
+            prob.activate_velocity(sol)  # and the entries near their limit, not only those over it
+            reason = "velocity"
+            sol = prob.solve(ipopt)
         rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
         attempts.append(_attempt(reason, prob.N, sol, rep))
         log.info("segment %s: %s N=%d -> %s, %d iterations, setup %.2f s, IPOPT %.2f s, clearance %+.4f m, "
@@ -482,10 +508,8 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         log.info("segment %s: fallback to the knot transcription -> %s", kind, sol2.status.value)
         if good(sol2, rep2) or not sol.success:
             total, rep = _accumulate(sol2, total), rep2
-        else:  # keep the spline solution; the fallback's time still counts
-            total.wall_time += sol2.wall_time
-            total.setup_time += sol2.setup_time
-            total.iterations += sol2.iterations
+        else:  # keep the spline solution; the fallback's time still counts (listed in its attempts)
+            total = dataclasses.replace(total, attempts=total.attempts + sol2.attempts)
     return total, rep, attempts
 
 

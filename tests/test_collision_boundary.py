@@ -36,7 +36,7 @@ def test_pairs_without_free_joint_are_left_out(tcb, transport, rng):
     Q = np.array([q0] * 4)
     Q[:, [i for i in range(tcb.nj) if i not in hold]] += rng.uniform(-0.3, 0.3, (4, tcb.nj - len(hold)))
     prob.set_initial(q=Q)
-    prob.term_function(prob.terms["collision"])
+    info = prob.term_data(prob.terms["collision"]).info
     # independent: pairs whose exact distance is the same whatever the free joints do
     chk = CollisionChecker(tcb, transport, object_arm="A")
     free = [i for i in range(tcb.nj) if i not in hold]
@@ -48,16 +48,16 @@ def test_pairs_without_free_joint_are_left_out(tcb, transport, rng):
     D = np.array(D)
     constant = [p for i, p in enumerate(chk.pairs) if np.ptp(D[:, i]) < 1e-12]
     assert constant, "the test needs pairs with no free joint (holding arm vs base/object/obstacles)"
-    assert sorted(map(repr, term.constant_pairs)) == sorted(map(repr, constant))
-    assert not set(map(repr, term.active_pairs)) & set(map(repr, constant))
-    assert len(term.active_pairs) + len(term.constant_pairs) == len(chk.pairs)
+    assert sorted(map(repr, info["constant_pairs"])) == sorted(map(repr, constant))
+    assert not set(map(repr, info["active_pairs"])) & set(map(repr, constant))
+    assert len(info["active_pairs"]) + len(info["constant_pairs"]) == len(chk.pairs)
     # without fixed joints nothing is constant
     prob2 = OptProblem(tcb, n_intervals=3, duration=3.0)
     term2 = CollisionAvoidance(transport, margin=0.02, activation=1e6, object_arm="A")
     prob2.add_constraint(term2)
     prob2.set_initial(q=Q)
-    prob2.term_function(prob2.terms["collision"])
-    assert term2.constant_pairs == [] and len(term2.active_pairs) == len(chk.pairs)
+    info2 = prob2.term_data(prob2.terms["collision"]).info
+    assert info2["constant_pairs"] == () and len(info2["active_pairs"]) == len(chk.pairs)
 
 
 def _close_configuration(tcb, scene, rng, lo_d=0.005, hi_d=0.02):
@@ -89,16 +89,17 @@ def test_margin_relaxed_next_to_close_boundary(tcb, transport, rng):
     h = prob.add_constraint(term)
     prob.add_cost(Smoothness("jerk"))
     prob.set_initial_straight_line(q0, q1)
-    prob.term_function(h)
-    assert (pair, 1) in term.relaxed
+    data = prob.term_data(h)
+    info = data.info
+    assert (pair, 1) in info["relaxed"]
     # robot–box-obstacle pairs are separating planes: exact, so the bound is half coal's distance
-    for (p, k), m in term.relaxed.items():
+    for (p, k), m in info["relaxed"].items():
         dp = chk.distances(q0 if k <= 3 else q1)[chk.pairs.index(p)]
         assert dp < margin and (k <= 3 or k >= N - 3)
         assert m == pytest.approx(dp / 2, abs=1e-12)
-    lo, _ = term._bounds_numeric(prob.numeric_trajectory(prob._full_x0()))
+    lo, _ = term.bounds_numeric(prob.numeric_trajectory(prob._full_x0()), data)
     lo = lo.reshape(N + 1, -1)
-    j = term.active_pairs.index(pair)
+    j = info["active_pairs"].index(pair)
     assert lo[1, j] == pytest.approx(d0 / 2) and lo[N // 2, j] == margin
     # the NLP's own rows: plane rows are bounded by m/2 (the pair's at knot 1: d0/4), smooth rows by m
     lbg = prob._built["lbg"][prob._con_slices[h.name]]
@@ -109,7 +110,7 @@ def test_margin_relaxed_next_to_close_boundary(tcb, transport, rng):
     rep = verify(tcb, sol, transport, held_object=False)
     assert rep.min_clearance_m > 0.0
     # at the knots: half the boundary distance next to it, the full margin away from it
-    D = np.array([chk.distances(q) for q in sol.q])[:, [chk.pairs.index(p) for p in term.active_pairs]]
+    D = np.array([chk.distances(q) for q in sol.q])[:, [chk.pairs.index(p) for p in info["active_pairs"]]]
     assert D.min() >= d0 / 2 - 1e-5
     assert D[4:N - 3].min() >= margin - 1e-5
 
@@ -130,13 +131,13 @@ def test_boost_between_knots(tcb, transport, rng):
     margin = 0.02
     prob = OptProblem(tcb, n_intervals=2, duration=2.0)
     term = CollisionAvoidance(transport, margin=margin, held_object=False, activation=1e6, window=0)
-    prob.add_constraint(term)
+    h = prob.add_constraint(term)
     prob.set_initial(q=np.array([qa, qb, qb]))
-    prob.term_function(prob.terms["collision"])
+    data = prob.term_data(h)
     t = s.copy()                                   # interval 0 = [0, 1] s, sampled 20 times
     with pytest.raises(ValueError, match="configurations of size"):
-        term.boost_between_knots(t, Q[:, :3], [0.0, 1.0, 2.0])
-    n = term.boost_between_knots(t, Q, [0.0, 1.0, 2.0])
+        term.with_boost(data, t, Q[:, :3], [0.0, 1.0, 2.0])
+    term, n = term.with_boost(data, t, Q, [0.0, 1.0, 2.0])
     bad = [i for i, p in enumerate(chk.pairs) if D[:, i].min() < 0]
     assert n == 2 * len(bad) and len(term.margin_boost) == n
     for i in bad:
@@ -144,15 +145,15 @@ def test_boost_between_knots(tcb, transport, rng):
         for k in (0, 1):
             assert term.margin_boost[(p, k)] == pytest.approx(margin - D[:, i].min())
     # the rebuilt NLP carries the larger margin on those rows
-    prob.rebuild()
-    prob.term_function(prob.terms["collision"])
+    h = prob.replace_term(h, term)
+    prob.term_function(h)
     lbg = prob._built["lbg"][prob._con_slices["collision"]]
     assert lbg.max() == pytest.approx(max(margin - D[:, i].min() + margin for i in bad) / 2, rel=1e-9) or \
         lbg.max() == pytest.approx(max(margin - D[:, i].min() + margin for i in bad), rel=1e-9)
     # a pair not constrained at those knots gets no boost
     term2 = CollisionAvoidance(transport, margin=margin, held_object=False, activation=-1.0)
     prob2 = OptProblem(tcb, n_intervals=2, duration=2.0)
-    prob2.add_constraint(term2)
+    h2 = prob2.add_constraint(term2)
     prob2.set_initial(q=np.array([qa, qb, qb]))
-    prob2.term_function(prob2.terms["collision"])
-    assert term2.boost_between_knots(t, Q, [0.0, 1.0, 2.0]) == 0 and term2.margin_boost == {}
+    term2b, n2 = term2.with_boost(prob2.term_data(h2), t, Q, [0.0, 1.0, 2.0])
+    assert n2 == 0 and dict(term2b.margin_boost) == {}

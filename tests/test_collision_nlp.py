@@ -65,7 +65,8 @@ class Rows:
         self.x0 = np.concatenate([self.prob.initial_guess, b["aux_init"]])
         nbase = b["nbase"]
         assert np.allclose(self.prob.tp.unpack(self.x0)["q"], Q, atol=1e-12)   # knots = the configurations
-        chk = self.term.checker
+        self.info = info = self.prob.term_data(self.h).info
+        chk = info["model"].checker
         self.chk = chk
         # structural dependence of every row on the plane variables
         xs = ca.MX.sym("x", self.x0.size)
@@ -78,13 +79,14 @@ class Rows:
                 aux_of_row[r] = (c - nbase) // 4
         self.aux_of_row = aux_of_row
         # planes: (pair, k, aux index) — and the smooth rows in order, one per (pair, knot)
-        self.planes = self.term._plane_slots
+        self.planes = info["plane_slots"]
         assert len({i for _, _, i in self.planes}) == len(self.planes)
-        assert len(self.prob.tp.aux) == len(self.planes) and all(a[0].shape[0] == 4 for a in self.prob.tp.aux)
+        aux = self.prob.term_data(self.h).aux
+        assert len(aux) == len(self.planes) and all(a.size == 4 for a in aux)
         self.smooth = []
-        for p in self.term.active_pairs:
+        for p in info["active_pairs"]:
             ka, kb = KINDS[p.kind]
-            if p in self.term.skipped:
+            if p in info["skipped"]:
                 continue
             if _is_box_side(chk, ka, p.a) or _is_box_side(chk, kb, p.b):
                 continue
@@ -92,7 +94,7 @@ class Rows:
         self.smooth_rows = np.flatnonzero(aux_of_row < 0)
         assert self.smooth_rows.size == len(self.smooth), (self.smooth_rows.size, len(self.smooth))
         # box pairs are exactly the pairs with planes, at every knot
-        n_box = sum(1 for p in self.term.active_pairs if p not in self.term.skipped and
+        n_box = sum(1 for p in info["active_pairs"] if p not in info["skipped"] and
                     (_is_box_side(chk, KINDS[p.kind][0], p.a) or _is_box_side(chk, KINDS[p.kind][1], p.b)))
         assert len(self.planes) == n_box * (N + 1)
         self.dist = np.array([chk.distances(q) for q in Q])            # exact, coal
@@ -216,8 +218,8 @@ def test_no_pairs_gives_zero_constraints(tcb, transport, rng):
         prob.set_initial_straight_line(q0, q0 + 0.2)
         F = prob.term_function(h)
         assert F.size1_out(0) == 0
-        assert term.active_pairs == []
-        assert prob.tp.aux == []
+        assert prob.term_data(h).info["active_pairs"] == ()
+        assert prob.term_data(h).aux == ()
         sol = prob.solve()
         assert sol.success, sol.status
         assert sol.terms[h.name] == 0.0
@@ -237,11 +239,12 @@ def test_activation_prunes_far_pairs(tcb, transport, rng):
     chk = CollisionChecker(tcb, transport)
     D = np.array([chk.distances(q) for q in Q])
     expect = [p for i, p in enumerate(chk.pairs) if (D[:, i] < 0.3).any()]
-    assert term.active_pairs == expect
+    info = prob.term_data(prob.terms["collision"]).info
+    assert list(info["active_pairs"]) == expect
     assert 0 < len(expect) < len(chk.pairs)
     for i, p in enumerate(chk.pairs):
         if p in expect:
-            assert term.active_knots[p] == np.flatnonzero(D[:, i] < 0.3).tolist()
+            assert info["active_knots"][p] == np.flatnonzero(D[:, i] < 0.3).tolist()
 
 
 # --------------------------------------------------------------------------- (b) end to end
@@ -313,14 +316,16 @@ def test_fixed_normals_hold_coal_witness_normals(tcb, transport):
     Q, chk = _straight_line_ik(tcb, transport, N, np.random.default_rng(0))
     prob, cc, col = _transport_problem(tcb, transport, Q, fixed_normals=True)
     prob._build()
-    term, b = col.term, prob._built
+    b = prob._built
     nb = b["nbase"]
+    info = prob.term_data(col).info
+    model, slots = info["model"], info["plane_slots"]
 
     def check_bounds(traj):
-        assert term._plane_slots, "the transport scene has box pairs"
-        for pair, k, i in term._plane_slots:
+        assert slots, "the transport scene has box pairs"
+        for pair, k, i in slots:
             lo, hi = b["lbx"][nb + 4 * i:nb + 4 * i + 4], b["ubx"][nb + 4 * i:nb + 4 * i + 4]
-            n_exp = term._plane_init(pair, traj.q_full(k))[:3]
+            n_exp = model._plane_init(pair, traj.q_full(k))[:3]
             np.testing.assert_allclose(lo[:3], n_exp, atol=1e-12)
             np.testing.assert_array_equal(lo[:3], hi[:3])
             assert np.linalg.norm(lo[:3]) == pytest.approx(1.0, abs=1e-9)
@@ -330,7 +335,7 @@ def test_fixed_normals_hold_coal_witness_normals(tcb, transport):
     sol = prob.solve()
     assert sol.success, (sol.status, sol.max_constraint_violation)
     x = np.asarray(sol.x)
-    for pair, k, i in term._plane_slots:
+    for pair, k, i in slots:
         np.testing.assert_allclose(x[nb + 4 * i:nb + 4 * i + 3], b["lbx"][nb + 4 * i:nb + 4 * i + 3], atol=1e-9)
     assert min(chk.min_distance(q)[0] for q in sol.q) >= 0.02 - 1e-5
     assert verify(tcb, sol, transport, closed_chain=cc).max_closed_chain_residual <= 1e-5

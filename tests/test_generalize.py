@@ -90,8 +90,7 @@ def test_nlp_collision_points_match_coal_placements(panda):
     place the geometry, also for links hanging from fixed joints (hand, fingers, mount)."""
     from optplan.problem.collision_term import CollisionAvoidance
 
-    col = CollisionAvoidance(Scene.load("panda_shelf"))
-    col._setup(panda)
+    col = CollisionAvoidance(Scene.load("panda_shelf")).model(panda)
     rng = np.random.default_rng(0)
     q = rng.uniform(panda.lower, panda.upper)
     data, gd = panda.model.createData(), pin.GeometryData(panda.collision_model)
@@ -101,7 +100,7 @@ def test_nlp_collision_points_match_coal_placements(panda):
     for g, o in enumerate(panda.collision_model.geometryObjects):
         if not isinstance(o.geometry, coal.Capsule):
             continue
-        fid, cap, _ = col._robot_shape[g]
+        fid, cap, _ = col.robot_shape[g]
         hl = o.geometry.halfLength
         want = [gd.oMg[g].act(np.array([0, 0, s * hl])) for s in (-1, 1)]
         got = [data.oMf[fid].act(np.asarray(p)) for p in (cap.a, cap.b)]

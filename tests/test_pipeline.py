@@ -116,9 +116,7 @@ def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
     def fake_solve(robot, scene, prob, cc, holder, opts, ipopt, kind):
         calls.append((kind, prob.N))
         first = len(calls) == 1
-        sol = SimpleNamespace(success=not first, wall_time=1.0, setup_time=0.5, iterations=10, duration=10.0,
-                              status=SimpleNamespace(value="Maximum_Iterations_Exceeded"), x=None, x_scale_h=None,
-                              t=np.linspace(0.0, 10.0, prob.N + 1), q=prob.tp.unpack(prob.initial_guess)["q"])
+        sol = _fake_solution(prob, not first, "Maximum_Iterations_Exceeded")
         rep = SimpleNamespace(max_closed_chain_residual=(0.0 if first else 8e-6), min_clearance_m=0.01)
         if kind == "constrained" and len(calls) > 2:
             rep.max_closed_chain_residual = 1e-7
@@ -131,16 +129,16 @@ def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
     assert k0 == k1 == k2 and n1 == min(opts.max_intervals, int(np.ceil(n0 * 1.6)))   # failure → 1.6×
     if k0 == "constrained":   # then the residual 8e-6 > 1e-6 → refined by (8e-6 / 5e-7)^¼ · 1.05
         assert n2 == min(opts.max_intervals, int(np.ceil(n1 * 1.05 * (8e-6 / 5e-7) ** 0.25)))
-    assert results[0].solution.iterations >= 20   # the attempts' iterations are accumulated
+    # every attempt is listed (nothing is added up in place); the totals sum them
+    assert len(results[0].solution.attempts) >= 2 and results[0].solution.total_iterations >= 20
+    assert results[0].solution.total_iterations == sum(a.iterations for a in results[0].solution.attempts)
 
     # a solve that converges but still collides (after its collision retries) is retried too
     calls.clear()
 
     def colliding_solve(robot, scene, prob, cc, holder, opts, ipopt, kind):
         calls.append((kind, prob.N))
-        sol = SimpleNamespace(success=True, wall_time=1.0, setup_time=0.5, iterations=10, duration=10.0,
-                              status=SimpleNamespace(value="Solve_Succeeded"), x=None, x_scale_h=None,
-                              t=np.linspace(0.0, 10.0, prob.N + 1), q=prob.tp.unpack(prob.initial_guess)["q"])
+        sol = _fake_solution(prob, True, "Solve_Succeeded")
         return sol, SimpleNamespace(max_closed_chain_residual=1e-7, min_clearance_m=-0.005 if len(calls) == 1 else 0.01)
 
     monkeypatch.setattr(PL, "_solve_verified", colliding_solve)
@@ -148,6 +146,17 @@ def test_failed_segment_is_retried_on_a_finer_grid(tcb, monkeypatch):
     (k0, n0), (k1, n1) = calls[:2]
     assert k0 == k1 and n1 == min(opts.max_intervals, int(np.ceil(n0 * 1.6)))
     assert results[0].report.min_clearance_m == 0.01
+
+
+def _fake_solution(prob, success: bool, failed_status: str):
+    """A Solution of ``prob``'s initial guess: 10 iterations, 1 s IPOPT, 0.5 s setup; converged
+    when ``success``, else with ``failed_status``."""
+    from optplan.problem.solution import IpoptStatus, Solution
+
+    u = prob.tp.unpack(prob.initial_guess)
+    status = IpoptStatus.SOLVE_SUCCEEDED if success else IpoptStatus.from_string(failed_status)
+    return Solution(success, status, 10, 1.0, 1.0, 0.0, {}, np.linspace(0.0, 10.0, prob.N + 1), u["q"], u["qd"],
+                    u["qdd"], u["jerk"], prob.robot.joint_names, setup_time=0.5)
 
 
 def test_fixed_normal_failure_falls_back_to_free_normals(tcb, monkeypatch):
@@ -161,9 +170,7 @@ def test_fixed_normal_failure_falls_back_to_free_normals(tcb, monkeypatch):
 
     def fake_solve(robot, scene, prob, cc, holder, opts, ipopt, kind):
         calls.append((kind, prob.N, prob.terms["collision"].term.fixed_normals))
-        sol = SimpleNamespace(success=len(calls) != 1, wall_time=1.0, setup_time=0.5, iterations=10, duration=10.0,
-                              status=SimpleNamespace(value="Infeasible_Problem_Detected"), x=None, x_scale_h=None,
-                              t=np.linspace(0.0, 10.0, prob.N + 1), q=prob.tp.unpack(prob.initial_guess)["q"])
+        sol = _fake_solution(prob, len(calls) != 1, "Infeasible_Problem_Detected")
         return sol, SimpleNamespace(max_closed_chain_residual=1e-7, min_clearance_m=0.01)
 
     monkeypatch.setattr(PL, "_solve_verified", fake_solve)
@@ -173,7 +180,8 @@ def test_fixed_normal_failure_falls_back_to_free_normals(tcb, monkeypatch):
     (k0, n0, f0), (k1, n1, f1) = calls[:2]
     assert k0 == k1 and n0 == n1 and f0 and not f1
     assert all(f for _, _, f in calls[2:]), "the next segments start with fixed normals again"
-    assert results[0].solution.success and results[0].solution.iterations == 20
+    assert results[0].solution.success and results[0].solution.total_iterations == 20
+    assert [a.status.value for a in results[0].solution.attempts] == ["Infeasible_Problem_Detected", "Solve_Succeeded"]
 
 
 def test_spline_segment_retry_policy(tcb, monkeypatch):
@@ -210,5 +218,27 @@ def test_spline_segment_retry_policy(tcb, monkeypatch):
     assert [a["reason"] for a in attempts] == ["initial", "collision", "refine"]
     assert Ns[0] == Ns[1] < Ns[2]
     assert Ns[2] == int(np.ceil(Ns[1] * 1.05 * (5e-6 / 0.5e-6) ** 0.25))
-    assert sol.iterations == 21 and sol.wall_time == pytest.approx(0.3)
+    assert sol.total_iterations == 21 and sol.total_wall_time == pytest.approx(0.3)
+    assert len(sol.attempts) == 3 and sol.iterations == 7
     assert rep.max_closed_chain_residual == 2e-7
+
+
+def test_compare_pipeline_options_example_pairs_variants_and_rejects_bad_json(capsys):
+    """examples/compare_pipeline_options.py: bad --variants is exit 2 with one line; two variants
+    that differ only in a setting the trial does not exercise give the same plan and optimum."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "compare_pipeline_options.py"
+    spec = importlib.util.spec_from_file_location("compare_pipeline_options", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.main(["--variants", "[1]"]) == 2
+    assert "--variants" in capsys.readouterr().err
+    assert mod.main(["--variants", '{"a": {"no_such_field": 1}}']) == 2
+    assert mod.main(["--scene", "1", "--trials", "1", "--variants",
+                     '{"a": {}, "b": {"velocity_retries": 3}}']) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("ssps_scene1 t0")]
+    assert len(lines) == 2
+    strip = [ln.split(None, 3)[3] for ln in lines]  # everything after the variant name …
+    assert [s.split("cpu=")[0] for s in strip][0] == [s.split("cpu=")[0] for s in strip][1]  # … up to the CPU time

@@ -11,6 +11,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -382,8 +383,7 @@ def _pinned_closed_chain_problem(tcb, N=12, shift_end=0.0, skip=True):
 
     rng = np.random.default_rng(5)
     qa = tcb.random_joints(rng) * 0.4
-    cc = ClosedChain.from_configuration(tcb, qa)
-    cc.skip_pinned = skip
+    cc = dataclasses.replace(ClosedChain.from_configuration(tcb, qa), skip_pinned=skip)
     qb = project_closed_chain(tcb, qa + rng.normal(size=14) * 0.2, cc).q
     qb = qb + shift_end
     p = OptProblem(tcb, n_intervals=N, duration=5.0)

@@ -1,7 +1,8 @@
 """Every term of optplan.problem, CasADi expression vs. its independent Pinocchio/numpy evaluation.
 
 A REGISTRY of term instances (one small problem each, N = 4..5 intervals) covers every term class
-exported by :mod:`optplan.problem` (CollisionAvoidance is covered by tests/test_collision_nlp.py),
+exported by :mod:`optplan.problem` (CollisionAvoidance in COLLISION_REGISTRY at the end: its rows
+are conservative distances, compared with coal's exact ones within their documented bound),
 on the fixed-base ``tcbirrt_dual_arm`` and — for the frame terms and BaseAttitude — on the
 free-floating ``eba_ffsr``. For each entry:
 
@@ -31,9 +32,9 @@ import pinocchio as pin
 import pytest
 
 from optplan.errors import ConfigurationError
-from optplan.problem import (BaseAttitude, ClosedChain, Duration, FramePath, FramePose, JointAccelerationLimits,
-                             JointBoundary, JointPositionLimits, JointVelocityLimits, OptProblem,
-                             OrientationConstraint, PathLength, Smoothness)
+from optplan.problem import (BaseAttitude, ClosedChain, CollisionAvoidance, Duration, FramePath, FramePose,
+                             JointAccelerationLimits, JointBoundary, JointPositionLimits, JointVelocityLimits,
+                             OptProblem, OrientationConstraint, PathLength, Smoothness)
 from optplan.scene import Scene
 from optplan.spatial import exp3
 
@@ -261,19 +262,23 @@ def test_value_matches_numeric(case, robots):
 @pytest.mark.parametrize("case", [c for c in REGISTRY if _case_of(c).role == "constraint"], ids=_case_id)
 def test_constraint_bounds_match_numeric_bounds(case, robots):
     """The NLP's bounds of a constraint (g bounds, or variable bounds for limit terms) equal the
-    bounds the numeric evaluation uses (``_bounds_numeric``, used by ``cost_numeric``)."""
+    bounds the numeric evaluation uses (``bounds_numeric``, used by ``cost_numeric``)."""
     s = _setup(_case_of(case), robots)
     prob, name = s.prob, s.handle.name
     b = prob._built
     traj = prob.numeric_trajectory(s.x)
-    lo, hi = s.handle.term._bounds_numeric(traj)
-    if hasattr(s.handle.term, "bounds_on"):
-        idx = prob._bound_terms[name][0]
+    lo, hi = s.handle.term.bounds_numeric(traj)
+    d = prob.term_data(s.handle)
+    if d.var_bounds is not None:
+        idx = d.var_bounds[0]
         sc = prob.tp.variable_scale(s.handle.term.which)  # variables are scaled (transcription)
+        assert sc == d.var_scale
         glo, ghi = b["lbx"][idx] / sc, b["ubx"][idx] / sc
     else:
-        sl = prob._con_slices[name]
+        sl = b["rows"][name]
         glo, ghi = b["lbg"][sl], b["ubg"][sl]
+        np.testing.assert_array_equal(glo, d.lower)
+        np.testing.assert_array_equal(ghi, d.upper)
     np.testing.assert_allclose(glo, lo, rtol=1e-14)
     np.testing.assert_allclose(ghi, hi, rtol=1e-14)
 
@@ -355,8 +360,9 @@ def test_registry_covers_every_exported_term():
         "JointVelocityLimits": "velocity_limits", "JointAccelerationLimits": "acceleration_limits",
         "FramePose": "frame_pose", "FramePath": "frame_path", "ClosedChain": "closed_chain",
         "OrientationConstraint": "orientation", "BaseAttitude": "base_attitude", "Smoothness": "smoothness",
-        "PathLength": "path_length", "Duration": "duration", "CollisionAvoidance": None,
+        "PathLength": "path_length", "Duration": "duration", "CollisionAvoidance": "collision",
     }
+    names |= {c.name for c in COLLISION_REGISTRY}
     assert exported <= set(by_prefix), f"term classes without a registry entry: {exported - set(by_prefix)}"
     for cls, prefix in by_prefix.items():
         if prefix is not None:
@@ -439,3 +445,102 @@ def test_knot_index_list_out_of_range_is_refused(tcb, rng):
     prob.set_initial_straight_line(np.zeros(14), np.full(14, 0.1))
     with pytest.raises(ConfigurationError, match="9"):
         prob.term_function(prob.terms["frame_pose"])
+
+
+# --------------------------------------------------------------------------- collision entries
+# CollisionAvoidance's rows are not a distance one can evaluate exactly: sphere/capsule pairs are
+# smooth conservative distances (documented: ≤ the exact coal distance and ≥ it minus cover_tol +
+# 3 mm), box pairs are separating-plane rows in auxiliary variables (a plane certifies a margin
+# ≤ the exact distance). Values are checked against coal in those terms, derivatives of the rows
+# (planes included) against central finite differences of the CasADi function.
+COLLISION_REGISTRY = [
+    Case("collision_self_capsules", "tcb", lambda r, g, N: CollisionAvoidance(
+        None, margin=0.0, activation=1e6, held_object=False, self_collision=True), N=3),
+    Case("collision_transport_planes", "tcb", lambda r, g, N: CollisionAvoidance(
+        Scene.load("transport"), margin=0.02, activation=1e6, held_object=True, object_arm="A"), N=2),
+]
+
+
+_COLLISION_CACHE: dict = {}
+
+
+def _collision_setup(case, robot):
+    if case.name not in _COLLISION_CACHE:
+        _COLLISION_CACHE[case.name] = _collision_build(case, robot)
+    return _COLLISION_CACHE[case.name]
+
+
+def _collision_build(case, robot):
+    rng = np.random.default_rng(zlib.crc32(case.name.encode()))
+    prob = OptProblem(robot, n_intervals=case.N, duration=case.T)
+    h = prob.add_constraint(case.make(robot, rng, case.N))
+    prob.set_initial(q=np.array([robot.random_joints(rng) * 0.6 for _ in range(case.N + 1)]))
+    F = prob.term_function(h)
+    x = np.concatenate([prob.initial_guess, prob._built["aux_init"]])
+    return prob, h, F, x
+
+
+def _collision_rows(prob, h):
+    """(kind, pair, knot, rows) of every block of the built rows, in order."""
+    d = prob.term_data(h)
+    model, info = d.info["model"], d.info
+    blocks = []
+    for pair in info["active_pairs"]:
+        if pair in info["skipped"]:
+            continue
+        ka, kb = model.kinds(pair)
+        for k in model.knots_of(pair, prob.N):
+            if model._is_box(ka, pair.a) or model._is_box(kb, pair.b):
+                n = model._local_points(ka, pair.a)[0].shape[1] + model._local_points(kb, pair.b)[0].shape[1] + 1
+                blocks.append(("plane", pair, k, n))
+            else:
+                ea, eb = model._entity(prob.tp, ka, pair.a, k), model._entity(prob.tp, kb, pair.b, k)
+                blocks.append(("smooth", pair, k, len(ea[0]) * len(eb[0])))
+    assert sum(b[3] for b in blocks) == d.n_rows
+    return blocks
+
+
+@pytest.mark.parametrize("case", COLLISION_REGISTRY, ids=lambda c: c.name)
+def test_collision_rows_within_documented_bound_of_coal(case, robots):
+    robot = robots[case.robot]
+    prob, h, F, x = _collision_setup(case, robot)
+    term = h.term
+    r = np.array(F(x)).ravel()
+    traj = prob.numeric_trajectory(x)
+    D = term.numeric(traj, prob.term_data(h))          # exact coal distances, knots × active pairs
+    active = list(prob.term_data(h).info["active_pairs"])
+    i, n_smooth, n_plane = 0, 0, 0
+    for kind, pair, k, n in _collision_rows(prob, h):
+        exact = D[k, active.index(pair)]
+        rows = r[i:i + n]
+        i += n
+        if kind == "smooth":
+            n_smooth += 1
+            assert rows.min() <= exact + 1e-9, (pair, k, rows.min(), exact)
+            assert rows.min() >= exact - (term.cover_tol + 3e-3) - 1e-9, (pair, k, rows.min(), exact)
+        else:
+            n_plane += 1
+            margin = 2 * rows[:-1].min()                 # the plane certifies this distance (‖n‖ ≤ 1 row last)
+            assert rows[-1] >= -1e-9
+            assert margin <= exact + 1e-7, (pair, k, margin, exact)
+            if exact > 0:                                # coal's witness plane: tight at the initial guess
+                assert margin == pytest.approx(exact, abs=1e-6)
+    assert n_smooth > 0 if "capsules" in case.name else n_plane > 0
+
+
+@pytest.mark.parametrize("case", COLLISION_REGISTRY, ids=lambda c: c.name)
+def test_collision_jacobian_matches_finite_differences(case, robots):
+    robot = robots[case.robot]
+    prob, h, F, x = _collision_setup(case, robot)
+    xs = ca.MX.sym("x", x.size)
+    Jf = ca.Function("J", [xs], [ca.jacobian(F(xs), xs)])
+    Jad = np.array(Jf(x))
+    rng = np.random.default_rng(7)
+    nz = np.flatnonzero(np.abs(Jad).sum(axis=0) > 0)
+    assert nz.size > 0
+    for j in rng.choice(nz, size=min(12, nz.size), replace=False):
+        d = np.zeros(x.size)
+        d[j] = 1.0
+        eps = 1e-6
+        fd = (np.array(F(x + eps * d)).ravel() - np.array(F(x - eps * d)).ravel()) / (2 * eps)
+        np.testing.assert_allclose(Jad @ d, fd, atol=2e-5 * max(1.0, np.abs(fd).max()))

@@ -249,3 +249,131 @@ def test_kernel_cache_on_disk_is_reused_and_keyed_by_the_robot(tmp_path, monkeyp
                                np.array(h1(*args, [1.0, -2.0])), atol=1e-13)
     other = RobotModel.from_name("dshdasr")
     assert KernelCache(other)._digest != kc2._digest
+
+
+def _transport_problem(tcb, transport, Q, cc, duration=60.0, **spec_kw):
+    spec = SegmentSpec(len(Q) - 1, duration, Q[0], Q[-1], cc, margin=0.02, object_arm="A", activation=0.5,
+                       **spec_kw)
+    prob = SplineSegmentProblem(tcb, transport, spec)
+    prob.set_initial(Q)
+    return prob
+
+
+def test_same_shape_reuses_the_structure_and_only_numbers_change(tcb, transport):
+    """A second NLP of the same shape builds nothing symbolic (the structure and its IPOPT
+    instance come from the robot's KernelCache); with other numbers (duration, hence the velocity
+    bounds and the objective weight) it still gives exactly what a fresh build gives."""
+    from optplan.problem.kernels import KernelCache
+
+    Q, cc = _straight_segment(tcb, transport)
+    kc = KernelCache.of(tcb)
+    p1 = _transport_problem(tcb, transport, Q, cc, velocity_activation=0.0)  # every velocity row
+    s1 = p1.solve()
+    n_struct = len(kc._structures)
+    p2 = _transport_problem(tcb, transport, Q, cc, velocity_activation=0.0)
+    s2 = p2.solve()
+    assert len(kc._structures) == n_struct and p2._built.solver is p1._built.solver
+    assert s2.iterations == s1.iterations and np.array_equal(s2.x, s1.x)
+    # same shape, other numbers: a shorter duration (other velocity bounds and objective weight)
+    p3 = _transport_problem(tcb, transport, Q, cc, duration=25.0, velocity_activation=0.0)
+    s3 = p3.solve()
+    assert p3._built.solver is p1._built.solver
+    kc._structures.clear()
+    p4 = _transport_problem(tcb, transport, Q, cc, duration=25.0, velocity_activation=0.0)
+    s4 = p4.solve()
+    assert p4._built.solver is not p1._built.solver
+    assert s4.status == s3.status and s4.iterations == s3.iterations
+    np.testing.assert_allclose(s4.x, s3.x, atol=1e-10)
+    assert s4.cost == pytest.approx(s3.cost, rel=1e-10) and not s3.cost == pytest.approx(s1.cost, rel=1e-3)
+
+
+def test_lazy_velocity_rows_match_all_rows_and_catch_what_they_miss(tcb, transport):
+    """Velocity rows only where the guess is fast give the same optimum as every row when no limit
+    is active; with a duration so short that the limits bind, the rows the guess did not select
+    are found by ``velocity_violations`` and, once added, the solution keeps every limit."""
+    Q, cc = _straight_segment(tcb, transport)
+    lazy = _transport_problem(tcb, transport, Q, cc)
+    full = _transport_problem(tcb, transport, Q, cc, velocity_activation=0.0)
+    sl, sf = lazy.solve(), full.solve()
+    assert lazy._built.slices.get("velocity_limits", slice(0, 0)).stop - \
+        lazy._built.slices.get("velocity_limits", slice(0, 0)).start < \
+        full._built.slices["velocity_limits"].stop - full._built.slices["velocity_limits"].start
+    assert sl.success and sf.success and lazy.velocity_violations(sl).size == 0
+    assert sl.cost == pytest.approx(sf.cost, rel=1e-4)
+    # a short duration with no velocity row at first (activation 1.0 selects only entries already at
+    # the limit): the unconstrained optimum exceeds the limits, and the added rows bring it back
+    fast = _transport_problem(tcb, transport, Q, cc, duration=25.0, velocity_activation=0.9)
+    s = fast.solve()
+    over = fast.velocity_violations(s)
+    for _ in range(2):
+        if not over.size:
+            break
+        fast.add_velocity_rows(over)
+        fast.activate_velocity(s)
+        s = fast.solve()
+        over = fast.velocity_violations(s)
+    assert s.success and over.size == 0 and fast._built.slices["velocity_limits"].stop > 0
+    rep = verify(tcb, s, transport, closed_chain=cc)
+    assert rep.max_velocity_limit_violation <= 1e-6 / fast.h  # the rows hold to IPOPT's tolerance 1e-6
+    with pytest.raises(ValueError, match="velocity_activation"):
+        _transport_problem(tcb, transport, Q, cc, velocity_activation=1.5)
+    with pytest.raises(ValueError, match="add_velocity_rows"):
+        fast.add_velocity_rows([10**9])
+
+
+def test_compiled_kernels_equal_the_symbolic_ones_and_are_found_by_auto(tmp_path, monkeypatch):
+    """A pair kernel and its derivatives compiled to C give the symbolic values; a fresh cache
+    (another process) finds the libraries with ``"auto"`` without compiling, and ``"auto"`` with
+    no library falls back to the symbolic kernels."""
+    import shutil
+
+    from optplan.problem.kernels import KernelCache
+
+    if not (shutil.which("cc") or shutil.which("gcc")):
+        pytest.skip("no C compiler")
+    monkeypatch.setenv("OPTPLAN_CACHE", str(tmp_path))
+    robot = RobotModel.from_name("tcbirrt_dual_arm")
+    fid = robot.arm("A").ee_frame_id
+    V = np.array([[0.0, 0.1], [0.0, 0.0], [0.0, 0.3]])
+    kc = KernelCache(robot)
+    fn = kc.pair(fid, V, 0.05, None, np.zeros((3, 1)), 0.0)
+    (f0, j0, h0), c0 = kc.evaluators(fn, "auto")
+    assert c0 is False and f0 is fn  # nothing compiled yet
+    (f1, j1, h1), c1 = kc.evaluators(fn, True)
+    assert c1 is True and len(list(tmp_path.rglob("*.so"))) == 3
+    (f2, j2, h2), c2 = KernelCache(robot).evaluators(fn, "auto")
+    assert c2 is True
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        q = robot.random_configuration(rng)
+        n = rng.normal(size=3)
+        args = (q, n / np.linalg.norm(n), 0.4)
+        lam = rng.normal(size=2)
+        for a, b in ((f2, f0), (j2, j0)):
+            np.testing.assert_allclose(np.array(a(*args)), np.array(b(*args)), rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(np.array(h2(*args, lam)), np.array(h0(*args, lam)), rtol=1e-12, atol=1e-13)
+    with pytest.raises(ValueError, match="compile_kernels"):
+        kc.evaluators(fn, "yes")
+
+
+def test_infeasibilities_name_the_worst_rows_by_family_and_knot(tcb, transport):
+    """A solve stopped after one iteration from a colliding guess violates rows: the list is sorted,
+    each entry's value and bounds are the NLP's, and its knot is the one the row belongs to; a
+    converged solve lists nothing beyond IPOPT's tolerance."""
+    Q, cc = _straight_segment(tcb, transport)
+    prob = _transport_problem(tcb, transport, Q, cc)
+    early = prob.solve(max_iter=1)
+    worst = prob.infeasibilities(early, n=5)
+    assert worst and all(a.violation >= b.violation for a, b in zip(worst, worst[1:]))
+    b = prob._built
+    for w in worst:
+        sl = b.slices[w.term]
+        g = np.array(b.gfun(early.x, b.p)).ravel()[sl.start + w.row]
+        assert g == pytest.approx(w.value) and w.violation == pytest.approx(max(w.lower - g, g - w.upper))
+        if w.term == "closed_chain":
+            assert w.point == 1 + w.row // 7
+    assert any(w.term.startswith("collision:") for w in prob.infeasibilities(early, n=10**6))
+    done = prob.solve()
+    assert done.success and all(w.violation <= 1e-5 for w in prob.infeasibilities(done))
+    with pytest.raises(ValueError, match="n: expected"):
+        prob.infeasibilities(done, n=-1)

@@ -65,6 +65,7 @@ class WarmstartConfig:
     ipopt_max_wall_time: float | None = None   # [s] per IPOPT solve (None: IPOPT's iteration limit only)
     free_plane_normals: bool = False  # PipelineOptions.fixed_plane_normals = not this (result lines record it)
     transcription: str = "bspline"    # PipelineOptions.transcription (result lines record it)
+    compile_kernels: bool = False     # PipelineOptions.compile_kernels True (else "auto")
     plot: bool = True                 # DIR/time_distributions.png (IPOPT time and iterations per trial)
     engine: str = "local"             # "local" (process pool of `jobs`) or "dask" (optplan.bench.engine)
     address: str | None = None        # Dask scheduler address (None: a local cluster of `jobs` workers)
@@ -170,10 +171,10 @@ def _run_unit(args) -> dict:
     """One (scene, trial, mode): generate the trial, run the pipeline, return the result line."""
     from ..pipeline import PipelineOptions, run_pipeline
 
-    robot_name, scene, index, mode, time_limit, seed, max_wall, fixed_normals, transcription = args
+    robot_name, scene, index, mode, time_limit, seed, max_wall, fixed_normals, transcription, compile_kernels = args
     line = {"scene": scene, "trial": int(index), "mode": mode, "seed": int(seed), "time_limit_s": float(time_limit),
             "ipopt_max_wall_time_s": max_wall, "fixed_plane_normals": bool(fixed_normals),
-            "transcription": transcription}
+            "transcription": transcription, "compile_kernels": bool(compile_kernels)}
     w = _state(robot_name, scene)
     t0 = time.perf_counter()
     try:
@@ -187,6 +188,7 @@ def _run_unit(args) -> dict:
                  "trial_generation_s": time.perf_counter() - t0})
     opts = PipelineOptions(plan_time_limit=float(time_limit), warm_start=(mode == "warm"),
                            fixed_plane_normals=bool(fixed_normals), transcription=transcription,
+                           compile_kernels=True if compile_kernels else "auto",
                            ipopt_options=PipelineOptions.ipopt_options
                            + (() if max_wall is None else (("max_wall_time", float(max_wall)),)))
     c0, ch0, w0 = time.process_time(), resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
@@ -228,17 +230,18 @@ def _matches(r: dict, cfg: WarmstartConfig) -> bool:
     return (r.get("seed") == cfg.seed and r.get("time_limit_s") == float(cfg.time_limit)
             and r.get("ipopt_max_wall_time_s") == mw
             and r.get("fixed_plane_normals", False) == (not cfg.free_plane_normals)
-            and r.get("transcription", "knots") == cfg.transcription)
+            and r.get("transcription", "knots") == cfg.transcription
+            and r.get("compile_kernels", False) == bool(cfg.compile_kernels))
 
 
 def pending_units(cfg: WarmstartConfig, scenes: list[str], rows: list[dict],
                   robot_name: str = "tcbirrt_dual_arm") -> list[tuple]:
     """The (robot, scene, trial, mode, time_limit, seed, ipopt_max_wall_time, fixed_plane_normals,
-    transcription) units not yet in ``rows``."""
+    transcription, compile_kernels) units not yet in ``rows``."""
     done = {_key(r) for r in rows if _matches(r, cfg)}
     mw = None if cfg.ipopt_max_wall_time is None else float(cfg.ipopt_max_wall_time)
     return [(robot_name, sc, i, m, float(cfg.time_limit), int(cfg.seed), mw, not cfg.free_plane_normals,
-             cfg.transcription)
+             cfg.transcription, bool(cfg.compile_kernels))
             for sc in scenes for i in range(cfg.first_trial, cfg.first_trial + cfg.trials) for m in cfg.modes
             if (sc, i, m) not in done]
 

@@ -17,6 +17,7 @@ import time
 import casadi as ca
 import numpy as np
 
+from ..problem.nlp import NlpSolver, SolveOutcome, SolverOptions
 from .arcs import arc_point_distance, sph, sph_angles
 from .arcs_arms import frame_on
 from .dshdasr_task import DshdasrArcs, TrackResult, TransposeTask
@@ -136,13 +137,13 @@ class ArcPlanner:
         if formulation == "constrained":
             g = ca.vertcat(g, G)
         self.nx, self.np_, self.ng = X.numel(), P.numel(), g.numel()
-        opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False, "expand": True, "ipopt.tol": tol,
-                "ipopt.mu_strategy": "adaptive",
-                "ipopt.max_iter": max_iter, "ipopt.warm_start_init_point": "yes",
-                "ipopt.mu_init": 1e-9, "ipopt.warm_start_bound_push": 1e-9,
-                "ipopt.warm_start_mult_bound_push": 1e-9, "ipopt.warm_start_slack_bound_push": 1e-9,
-                "ipopt.acceptable_tol": 1e-10, "ipopt.acceptable_iter": 3,
-                "ipopt.nlp_scaling_method": "none", "ipopt.bound_relax_factor": 0.0, "calc_lam_p": False}
+        defaults = {"ipopt.mu_strategy": "adaptive", "ipopt.warm_start_init_point": "yes",
+                    "ipopt.mu_init": 1e-9, "ipopt.warm_start_bound_push": 1e-9,
+                    "ipopt.warm_start_mult_bound_push": 1e-9, "ipopt.warm_start_slack_bound_push": 1e-9,
+                    "ipopt.acceptable_tol": 1e-10, "ipopt.acceptable_iter": 3,
+                    "ipopt.nlp_scaling_method": "none", "ipopt.bound_relax_factor": 0.0}
+        casadi_opts = {"expand": True, "calc_lam_p": False}
+        sopts = SolverOptions.coerce(options, tol=tol, max_iter=max_iter)
         lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", self.ng)
         H = None
         if hessian == "gauss-newton" and formulation == "least-squares":
@@ -154,22 +155,23 @@ class ArcPlanner:
             # exact for the objective and the equality residuals, no curvature of the distances
             H = lam_f * 2 * ca.SX.eye(self.nx) + ca.hessian(ca.dot(lam_g[self.n_dist:], G), X)[0]
         if H is not None:
-            opts["hess_lag"] = ca.Function("hess_lag", [X, P, lam_f, lam_g], [ca.triu(H)],
-                                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-        opts.update(options or {})
+            casadi_opts["hess_lag"] = ca.Function("hess_lag", [X, P, lam_f, lam_g], [ca.triu(H)],
+                                                  ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
         nlp = {"x": X, "p": P, "f": f, "g": g}
-        self.solver = ca.nlpsol("dshdasr_arcs", "ipopt", nlp, opts)
+        self.nlp_solver = NlpSolver("dshdasr_arcs", nlp, sopts, defaults=defaults, casadi_options=casadi_opts)
         self.compiled = False
         if compile:
             ext = {}
             for name, opt_name in (("nlp_grad_f", "grad_f"), ("nlp_jac_g", "jac_g"), ("nlp_hess_l", "hess_lag")):
-                e = _external(self.solver.get_function(name))
+                e = _external(self.nlp_solver.solver.get_function(name))
                 if e is None:
                     break
                 ext[opt_name] = e
             else:
-                self.solver = ca.nlpsol("dshdasr_arcs", "ipopt", nlp, {**opts, **ext})
+                self.nlp_solver = NlpSolver("dshdasr_arcs", nlp, sopts, defaults=defaults,
+                                            casadi_options={**casadi_opts, **ext})
                 self.compiled = True
+        self.solver = self.nlp_solver.solver
         lba, uba = A.bounds()
         lbb, ubb = B.bounds(self.arcs.b_phi_max)
         self.lbx, self.ubx = np.r_[lba, lbb], np.r_[uba, ubb]
@@ -209,17 +211,17 @@ class ArcPlanner:
         return Xn, new, 2 * Xn - Xo
 
     # ------------------------------------------------------------------ tracking
-    def solve(self, p, x0, lam_g0=None, lam_x0=None, lbg=None, bounds: bool = True):
-        """One IPOPT solve. ``lbg``: lower bounds of the distance constraints (default 0);
-        ``bounds=False`` drops the |φ| bounds for this solve."""
+    def solve(self, p, x0, lam_g0=None, lam_x0=None, lbg=None, bounds: bool = True) -> SolveOutcome:
+        """One IPOPT solve (a :class:`~optplan.problem.nlp.SolveOutcome`, also when IPOPT raised).
+        ``lbg``: lower bounds of the distance constraints (default 0); ``bounds=False`` drops the
+        |φ| bounds for this solve."""
         lb = self.lbg_all.copy()
         if lbg is not None:
             lb[:self.n_dist] = lbg
         inf = np.full(self.nx, np.inf)
-        sol = self.solver(x0=x0, p=p, lbx=self.lbx if bounds else -inf, ubx=self.ubx if bounds else inf,
-                          lbg=lb, ubg=self.ubg_all, lam_g0=0.0 if lam_g0 is None else lam_g0,
-                          lam_x0=0.0 if lam_x0 is None or not bounds else lam_x0)
-        return sol, self.solver.stats()
+        return self.nlp_solver.solve(x0, p=p, lbx=self.lbx if bounds else -inf, ubx=self.ubx if bounds else inf,
+                                     lbg=lb, ubg=self.ubg_all, lam_g0=0.0 if lam_g0 is None else lam_g0,
+                                     lam_x0=0.0 if lam_x0 is None or not bounds else lam_x0)
 
     def solve_waypoint(self, p, x0, lam_g0=None, lam_x0=None, g0=None):
         """Solve one waypoint from the start ``x0``. Distance constraints farther than
@@ -227,20 +229,18 @@ class ArcPlanner:
         solution's values) get no lower bound, and when none is near, the far-away |φ| bounds are
         dropped too — IPOPT then has no inequality at all and takes plain Newton steps without a
         barrier; the full problem is re-solved if the result violates anything that was dropped.
-        Returns (x, sol, stats, resolved)."""
+        Returns (x, outcome, resolved)."""
         if g0 is None:
             g0 = np.array(self.f_eval(x0, p)[3]).ravel()
         near = g0 < self.activation
         at_bound = ((x0 - self.lbx) < 0.2).any() or ((self.ubx - x0) < 0.2).any()
-        sol, st = self.solve(p, x0, lam_g0, lam_x0, np.where(near, 0.0, -np.inf),
-                             bounds=bool(near.any() or at_bound))
-        x = np.array(sol["x"]).ravel()
-        bad = ((np.array(sol["g"]).ravel()[:self.n_dist] < -1e-9).any() or (x < self.lbx).any()
-               or (x > self.ubx).any())
-        if bad or not st["success"]:
-            sol, st = self.solve(p, x0, lam_g0, lam_x0, None, bounds=True)
-            x = np.array(sol["x"]).ravel()
-        return x, sol, st, bool(bad or not st["success"])
+        out = self.solve(p, x0, lam_g0, lam_x0, np.where(near, 0.0, -np.inf), bounds=bool(near.any() or at_bound))
+        x = np.array(out.x)
+        bad = (out.g is None or (out.g[:self.n_dist] < -1e-9).any() or (x < self.lbx).any() or (x > self.ubx).any())
+        if bad or not out.success:
+            out = self.solve(p, x0, lam_g0, lam_x0, None, bounds=True)
+            x = np.array(out.x)
+        return x, out, bool(bad or not out.success)
 
     def track(self, task: TransposeTask, q0: np.ndarray, times=None) -> "TrackResult":
         """Solve every waypoint of ``task`` from the configuration ``q0`` (which must hold the first
@@ -268,12 +268,13 @@ class ArcPlanner:
             X_old, refs_old, refs = Xn, refs_n, refs_n
             p = self.pack(des, k, Xn, refs, task.obstacles, thr)   # proximal centre: previous solution
             t0 = time.perf_counter()
-            X, sol, st, again = self.solve_waypoint(p, Xpred, lam_g, lam_x, g_prev)
-            g_prev = np.array(sol["g"]).ravel()[:self.n_dist]
+            X, out, again = self.solve_waypoint(p, Xpred, lam_g, lam_x, g_prev)
+            g_prev = np.array(out.g[:self.n_dist]) if out.g is not None else None
             t_nlp += time.perf_counter() - t0
             resolves += again
-            lam_g, lam_x = np.array(sol["lam_g"]).ravel(), np.array(sol["lam_x"]).ravel()
-            iters[k], ok[k] = st["iter_count"], st["success"]
+            if out.lam_g is not None:
+                lam_g, lam_x = np.array(out.lam_g), np.array(out.lam_x)
+            iters[k], ok[k] = out.iterations, out.success
             Q[k] = arcs.q_from_params(X[:nA], X[nA:], des["pa"][k], des["Ra"][k], des["pb"][k], des["kb"][k],
                                       q_prev=q_prev, refs=refs)
             q_prev = Q[k]
@@ -291,10 +292,10 @@ class ArcPlanner:
         X, refs, _ = self.recentre(np.r_[self.arcs.params_from_q(q, refs)], refs)
         thr = {k: v + clearance for k, v in task.thresholds.items()}
         p = self.pack(des, 0, X, refs, task.obstacles, thr)
-        sol, st = self.solve(p, X)
-        if not st["success"]:
-            raise RuntimeError(f"clear_start: IPOPT {st['return_status']}")
-        x = np.array(sol["x"]).ravel()
+        out = self.solve(p, X)
+        if not out.success:
+            raise RuntimeError(f"clear_start: IPOPT {out.status.value}")
+        x = np.array(out.x)
         nA = self.arcs.a.nx
         return self.arcs.q_from_params(x[:nA], x[nA:], des["pa"][0], des["Ra"][0], des["pb"][0], des["kb"][0],
                                        q_prev=q, refs=refs)

@@ -28,6 +28,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from ..problem.nlp import NlpSolver, SolverOptions
 from ..robot import RobotModel
 from ..symbolic import SymbolicKinematics
 from .eba_core import (EBAKinematics, MethodResult, Scenario, Segment, hermite_segment, integrate_rpy,
@@ -318,19 +319,18 @@ def run_fourier(robot: RobotModel, scenario: Scenario, options: FourierOptions |
     Y0 = C0.copy()
     Y0[:, 0] = 0.0
     gexpr = ca.vertcat(*g)
-    opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": o.tol,
-            "ipopt.max_iter": o.max_iter}
     hess_mode = o.hessian if o.hessian != "auto" else ("gauss-newton" if scenario.closed_chain else "limited-memory")
-    if hess_mode == "limited-memory":
-        opts["ipopt.hessian_approximation"] = "limited-memory"
-    else:  # Gauss-Newton: the objective's (constant / JᵀJ) Hessian, constraint curvature ignored
+    extra = {}
+    if hess_mode != "limited-memory":  # Gauss-Newton: the objective's (constant / JᵀJ) Hessian, constraint curvature ignored
         lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", gexpr.shape[0])
-        opts["hess_lag"] = ca.Function("nlp_hess_l", [x, ca.MX(0, 1), lam_f, lam_g], [ca.triu(lam_f * hess)],
-                                       ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-    solver = ca.nlpsol("fourier", "ipopt", {"x": x, "f": obj, "g": gexpr}, opts)
-    out = solver(x0=Y0.reshape(-1, order="F"), lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
-    stats = solver.stats()
-    Yv = np.array(out["x"]).reshape((nj, nb), order="F")
+        extra["hess_lag"] = ca.Function("nlp_hess_l", [x, ca.MX(0, 1), lam_f, lam_g], [ca.triu(lam_f * hess)],
+                                        ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+    sopts = SolverOptions(tol=o.tol, max_iter=o.max_iter,
+                          hessian="limited-memory" if hess_mode == "limited-memory" else None)
+    solver = NlpSolver("fourier", {"x": x, "f": obj, "g": gexpr}, sopts, casadi_options=extra)
+    outcome = solver.solve(Y0.reshape(-1, order="F"), lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
+    stats = solver.stats() if outcome.iterations >= 0 else {"return_status": outcome.status.value}
+    Yv = np.array(outcome.x).reshape((nj, nb), order="F")
     Cv = Yv.copy()
     Cv[:, 0] = k0ref + Yv[:, 0] * sc
     qT_val = np.array(ca.Function("qT", [Y], [qT])(Yv)).ravel()
@@ -347,5 +347,6 @@ def run_fourier(robot: RobotModel, scenario: Scenario, options: FourierOptions |
     return MethodResult("fourier", [seg], runtime, np.asarray(Rf), None, ok,
                         "" if ok else f"IPOPT: {status}",
                         info={"options": o.__dict__.copy(), "ipopt_status": status,
-                              "iterations": int(stats.get("iter_count", -1)), "n_coefficients": int(Cv.size),
+                              "iterations": int(outcome.iterations), "n_coefficients": int(Cv.size),
+                              "outcome": outcome.to_dict(),
                               "coefficients": Cv.tolist()})

@@ -397,7 +397,7 @@ class EndOrientation(Term):
         r, tr = pose_residual_numeric(M, pin.SE3(np.asarray(self.target, float), M.translation))
         return np.r_[r[3:], tr]
 
-    def _bounds_numeric(self, traj):
+    def bounds_numeric(self, traj):
         return np.r_[0.0, 0.0, 0.0, 1.0], np.r_[0.0, 0.0, 0.0, np.inf]
 
 
@@ -429,7 +429,7 @@ class InteriorVelocityLimits(Term):
                 out.append(traj.qd[k] + tau * traj.qdd[k] + tau ** 2 / 2 * traj.jerk[k])
         return np.concatenate(out)
 
-    def _bounds_numeric(self, traj):
+    def bounds_numeric(self, traj):
         n = traj.N * len(self.fractions)
         lim = self.scale * traj.robot.velocity_limit
         return np.tile(-lim, n), np.tile(lim, n)

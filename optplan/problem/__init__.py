@@ -1,5 +1,10 @@
-"""Trajectory NLPs: :class:`OptProblem` (declaration), terms, transcription, IPOPT → :class:`Solution`."""
-from .collision_term import CollisionAvoidance
+"""Trajectory NLPs: :class:`OptProblem` (declaration), terms (frozen configurations built into
+:class:`TermData` against a :class:`BuildContext`), transcription, the NLP core
+(:mod:`.nlp`: :class:`SolverOptions`, :class:`SolveOutcome`) → :class:`Solution`."""
+from .build import AuxVariable, BuildContext, TermData
+from .collision_term import CollisionAvoidance, CollisionModel
+from .evaluate import Infeasibility
+from .nlp import NlpSolver, SolveOutcome, SolverOptions
 from .problem import OptProblem, TermHandle
 from .solution import IpoptStatus, Solution
 from .terms import (BaseAttitude, ClosedChain, Duration, FramePath, FramePose, JointAccelerationLimits,
@@ -10,4 +15,6 @@ __all__ = [
     "OptProblem", "TermHandle", "IpoptStatus", "Solution", "Term", "NumericTrajectory", "JointBoundary",
     "JointPositionLimits", "JointVelocityLimits", "JointAccelerationLimits", "FramePose", "FramePath",
     "ClosedChain", "CollisionAvoidance", "OrientationConstraint", "BaseAttitude", "Smoothness", "PathLength", "Duration",
+    "BuildContext", "TermData", "AuxVariable", "CollisionModel", "Infeasibility", "SolverOptions", "SolveOutcome",
+    "NlpSolver",
 ]

@@ -24,10 +24,11 @@ class Assembly:
         self.N, self.nj, self.nx = N, nj, nx
         self.g, self.lbg, self.ubg, self.slices = [], [], [], {}
         self.ng = 0
+        self.points: dict = {}  # name -> (rows per knot, knots) of a kernel family, None for linear rows
         self.jsrc, self.hsrc = [], []  # MX nonzero vectors
         self.j_off = self.h_off = 0
         self.jt: list[np.ndarray] = []  # (row, col, src, weight) blocks; src −1: constant 1
-        self.ht: list[np.ndarray] = []
+        self._h_pending: list[tuple] = []  # per family: what its Hessian block needs (finish)
 
     def _rows(self, name, expr, lo, hi):
         n = expr.shape[0]
@@ -35,21 +36,25 @@ class Assembly:
         self.lbg.append(np.broadcast_to(np.asarray(lo, float), (n,)).copy())
         self.ubg.append(np.broadcast_to(np.asarray(hi, float), (n,)).copy())
         self.slices[name] = slice(self.ng, self.ng + n)
+        self.points[name] = None  # rows per point: set by family
         self.ng += n
         return self.ng - n
 
-    def linear(self, name, expr, D: np.ndarray, lo, hi):
-        """Rows ``vec(P Dᵀ)`` (D: rows over the N+3 control points), constant Jacobian."""
+    def linear(self, name, expr, D: np.ndarray, lo, hi, select: np.ndarray | None = None):
+        """Rows ``vec(P Dᵀ)`` (D: rows over the N+3 control points), constant Jacobian; with
+        ``select``, only those entries of ``vec(P Dᵀ)`` (entry ``i·nj + j``: row i of D, joint j)
+        — ``expr`` must then be the selected entries, in that order."""
         r0 = self._rows(name, expr, lo, hi)
         nj, N = self.nj, self.N
+        sel = np.arange(D.shape[0] * nj) if select is None else np.asarray(select, int)
         R, C, W = [], [], []
-        for i, prow in enumerate(D):
-            for pidx in np.flatnonzero(prow):
+        for r, e in enumerate(sel):
+            i, j = divmod(int(e), nj)
+            for pidx in np.flatnonzero(D[i]):
                 if 3 <= pidx <= N - 1:
-                    for j in range(nj):
-                        R.append(r0 + i * nj + j)
-                        C.append((pidx - 3) * nj + j)
-                        W.append(prow[pidx])
+                    R.append(r0 + r)
+                    C.append((pidx - 3) * nj + j)
+                    W.append(D[i, pidx])
         self.jt.append(np.array([R, C, np.full(len(R), -1), W], float))
 
     def family(self, name, fn, jfn, hfn, knots, Qsub, Nin, Sin, bcoup, lo, hi):
@@ -58,6 +63,7 @@ class Assembly:
         m = fn.size1_out(0)
         r0 = self._rows(name, ca.vec(fn.map(K)(Qsub, Nin, Sin)), lo, hi)
         knots = np.asarray(knots)
+        self.points[name] = (m, knots.copy())
         # Jacobian: row r0 + t·m + lr, column of P_{k+a} joint j, weight c_a
         Jm = jfn.map(K)(Qsub, Nin, Sin)
         lr, jj = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())
@@ -75,7 +81,6 @@ class Assembly:
             self.jt.append(np.array([(r0 + t * m + lr2).ravel(), (col0 + t).ravel(),
                                      np.full(K * m, -1), np.tile(sign, K)], float))
         # Hessian: multipliers of this family, per knot
-        self._h_pending = getattr(self, "_h_pending", [])
         self._h_pending.append((hfn, K, knots, Qsub, Nin, Sin, r0, m))
 
     def finish(self, x, lam_f, lam_g, Hj: np.ndarray):
@@ -92,7 +97,7 @@ class Assembly:
         Jg = _scatter(self.ng, nx, T[0].astype(int), T[1].astype(int), srcidx, T[3], src, self.j_off + 1)
         # Hessian
         hs, blocks, off = [], [], 0
-        for hfn, K, knots, Qsub, Nin, Sin, r0, m in getattr(self, "_h_pending", []):
+        for hfn, K, knots, Qsub, Nin, Sin, r0, m in self._h_pending:
             L = ca.reshape(lam_g[r0:r0 + m * K], m, K)
             Hm = hfn.map(K)(Qsub, Nin, Sin, L)
             ii, jj = (np.asarray(v) for v in hfn.sparsity_out(0).get_triplet())

@@ -20,8 +20,11 @@ re-solve with a larger activation if it finds a violation (see ``solve_with_coll
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
+import types
 from dataclasses import dataclass, field
+from typing import Mapping
 
 import casadi as ca
 import coal
@@ -30,10 +33,18 @@ import pinocchio as pin
 
 from .. import distance as D
 from ..collision import CollisionChecker
+from ..errors import ConfigurationError
 from ..scene import Scene
+from .build import AuxVariable, TermData
 from .terms import NumericTrajectory, Term
 
-__all__ = ["CollisionAvoidance", "object_capsules"]
+__all__ = ["CollisionAvoidance", "CollisionModel", "object_capsules"]
+
+
+def _ro(a) -> np.ndarray:
+    a = np.array(a, float)
+    a.flags.writeable = False
+    return a
 
 
 def _box_vertices(h) -> list[np.ndarray]:
@@ -44,8 +55,8 @@ log = logging.getLogger(__name__)
 
 def witness_plane(checker: CollisionChecker, pair, obj_tf) -> np.ndarray:
     """(n, b): coal's unit witness normal from A to B and the mid-plane offset ``n·mid`` of a pair,
-    at the placements last set by ``checker._update`` (``obj_tf``: the held object's)."""
-    g1, t1, g2, t2 = checker._geoms(pair, obj_tf)
+    at the placements last set by ``checker.update_placements`` (``obj_tf``: the held object's)."""
+    g1, t1, g2, t2 = checker.pair_geometries(pair, obj_tf)
     res = coal.DistanceResult()
     coal.distance(g1, t1, g2, t2, coal.DistanceRequest(), res)
     n = np.asarray(res.normal, float)
@@ -76,7 +87,7 @@ def object_capsules(size, grid: int = 2) -> list[D.Capsule]:
     return caps
 
 
-@dataclass
+@dataclass(eq=False)
 class CollisionAvoidance(Term):
     """``d_smooth ≥ margin`` [m] for every active pair at every knot.
 
@@ -113,23 +124,152 @@ class CollisionAvoidance(Term):
     object_grid: int = 2
     cover_tol: float = 0.02
     eps: float = 1e-3
-    activate_with: list = field(default_factory=list)  # extra NumericTrajectory(s) for pair activation
+    activate_with: tuple = ()  # extra NumericTrajectory(s) for pair activation (see with_activation)
     skip_pinned: bool = True
     skip_constant: bool = True
     fixed_normals: bool = False
+    #: (pair, knot) -> extra margin [m] (see with_boost)
+    margin_boost: Mapping = field(default_factory=dict)
     default_name = "collision"
-    skipped: list = field(default_factory=list)
-    active_pairs: list = field(default_factory=list)
-    constant_pairs: list = field(default_factory=list)
-    relaxed: dict = field(default_factory=dict)  # (pair, knot) -> margin [m] next to boundary configurations
-    margin_boost: dict = field(default_factory=dict)  # (pair, knot) -> extra margin [m] (see boost_between_knots)
+
+    # A frozen configuration (see Term). Building it (build / model) creates a CollisionModel that holds the collision checker, the
+    # active pairs and every other per-build decision. The only exception is the in-place style
+    # of SplineSegmentProblem (it calls ``_setup`` and then sets ``activate_with`` /
+    # ``active_pairs`` / ``constant_pairs``): after ``_setup`` those names, and the model's
+    # methods, are forwarded to a model kept for that purpose (deprecated; use ``model(robot)``).
+    _LEGACY_NAMES = frozenset({"activate_with", "active_pairs", "constant_pairs", "relaxed", "skipped"})
+
+    def _validate(self):
+        def bad(name, want):
+            raise ConfigurationError(f"CollisionAvoidance.{name}: expected {want}, got {getattr(self, name)!r}")
+
+        if self.scene is not None and not isinstance(self.scene, Scene):
+            bad("scene", "an optplan Scene or None")
+        for name in ("margin", "activation", "cover_tol", "eps"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v):
+                bad(name, "a finite number [m]")
+        if self.margin < 0:
+            bad("margin", "a distance ≥ 0 [m]")
+        if self.cover_tol <= 0 or self.eps <= 0:
+            bad("cover_tol" if self.cover_tol <= 0 else "eps", "a distance > 0 [m]")
+        for name, lo in (("window", 0), ("object_grid", 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+                bad(name, f"an integer ≥ {lo}")
+        object.__setattr__(self, "activate_with", tuple(self.activate_with))
+        object.__setattr__(self, "margin_boost", types.MappingProxyType(dict(self.margin_boost)))
+
+    def __setattr__(self, name, value):
+        legacy = self.__dict__.get("_legacy")
+        if legacy is not None and name in self._LEGACY_NAMES:
+            if name == "activate_with":
+                value = tuple(value)
+                object.__setattr__(self, name, value)
+            setattr(legacy, name, value)
+            return
+        super().__setattr__(name, value)
+
+    def __getattr__(self, name):
+        legacy = self.__dict__.get("_legacy")
+        if legacy is not None and not name.startswith("__"):
+            return getattr(legacy, name)
+        raise AttributeError(f"{type(self).__name__!s} has no attribute {name!r}" + (
+            " (build information such as active_pairs is in the built data: OptProblem.term_data(handle).info)"
+            if name in self._LEGACY_NAMES or name in ("checker", "active_knots") else ""))
+
+    # ------------------------------------------------------------------ model → data
+    def model(self, robot) -> "CollisionModel":
+        """A new :class:`CollisionModel` (collision checker, NLP shapes, activation) for ``robot``."""
+        return CollisionModel(self, robot)
+
+    def _setup(self, robot):
+        """Deprecated in-place setup (SplineSegmentProblem): keeps a model on this term and
+        forwards the model's attributes and methods. Use :meth:`model`."""
+        object.__setattr__(self, "_legacy", CollisionModel(self, robot))
+
+    def rows(self, ctx):
+        return self.model(ctx.robot).build_rows(ctx)
+
+    def residual(self, tp):
+        raise TypeError("CollisionAvoidance has no residual(tp): its rows depend on the initial guess and use "
+                        "auxiliary variables (separating planes); build it with term.build(BuildContext(tp, ...)) "
+                        "or evaluate it through OptProblem.term_function(handle)")
+
+    def reseed(self, data: TermData, traj: NumericTrajectory) -> tuple:
+        """The auxiliary variables of built ``data`` re-seeded from a new initial guess ``traj``
+        (same active pairs): the separating planes (and, with ``fixed_normals``, their fixed
+        normals) from coal's witness normals."""
+        return data.info["model"].reseed(data, traj)
+
+    def with_activation(self, *trajectories: NumericTrajectory) -> "CollisionAvoidance":
+        """This term with more trajectories whose close pairs are activated (e.g. a solution that
+        ``verify`` found colliding)."""
+        return dataclasses.replace(self, activate_with=tuple(self.activate_with) + tuple(trajectories))
+
+    def with_boost(self, data: TermData, traj_t, traj_q, knot_t, min_clearance: float = 0.0) -> tuple:
+        """``(term, n)``: this term with the margin raised where a solution collides between knots
+        (:meth:`CollisionModel.boost_between_knots` on the pairs ``data`` activated), and the
+        number of (pair, knot) rows boosted."""
+        m = data.info["model"]
+        n = m.boost_between_knots(traj_t, traj_q, knot_t, min_clearance)
+        return dataclasses.replace(self, margin_boost=dict(m.margin_boost)), n
+
+    def numeric(self, traj: NumericTrajectory, data: TermData | None = None) -> np.ndarray:
+        """Exact coal distances of the active pairs at every knot, ``(N+1) × n_active`` — the pairs
+        the built ``data`` activated, or (without it) the pairs ``traj`` itself activates."""
+        if data is not None:
+            return data.info["model"].numeric(traj)
+        m = self.model(traj.robot)
+        m.activate(traj.robot, traj)
+        return m.numeric(traj)
+
+    def numeric_built(self, traj: NumericTrajectory, data: TermData) -> np.ndarray:
+        return self.numeric(traj, data)
+
+    def bounds_numeric(self, traj: NumericTrajectory, data: TermData | None = None):
+        if data is not None:
+            return data.info["model"].bounds_numeric(traj)
+        m = self.model(traj.robot)
+        m.activate(traj.robot, traj)
+        return m.bounds_numeric(traj)
+
+    def sampled(self):
+        return self
+
+
+_CONFIG_FIELDS = frozenset(f.name for f in dataclasses.fields(CollisionAvoidance)) - {"activate_with", "margin_boost"}
+
+
+class CollisionModel:
+    """The per-build data of a :class:`CollisionAvoidance` term: its collision checker, the NLP
+    shapes of the robot's geometries, the pairs it activates, relaxed margins and separating
+    planes. Configuration values are read from ``term``; ``activate_with`` and ``margin_boost``
+    start as the term's and may grow (``boost_between_knots``)."""
+
+    def __init__(self, term: CollisionAvoidance, robot):
+        self.term = term
+        self.activate_with = list(term.activate_with)
+        self.margin_boost = dict(term.margin_boost)
+        self.skipped, self.active_pairs, self.constant_pairs = [], [], []
+        self.relaxed, self.active_knots = {}, {}
+        self._plane_slots = []
+        self._fns, self._pfns = {}, {}
+        self._init_dist = None
+        self._setup(robot)
+
+    def __getattr__(self, name):  # the configuration (margin, scene, window …) is the term's
+        term = self.__dict__.get("term")
+        if term is not None and name in _CONFIG_FIELDS:
+            return term.__dict__[name]
+        raise AttributeError(f"CollisionModel has no attribute {name!r}")
 
     # ------------------------------------------------------------------ entities
     def _setup(self, robot):
         self.checker = CollisionChecker(robot, self.scene, held_object=self.held_object,
                                         self_collision=self.self_collision, object_arm=self.object_arm)
         objs = robot.collision_model.geometryObjects
-        self._robot_shape = {}
+        self.robot_shape = {}
         for g, o in enumerate(objs):
             geo = o.geometry
             # a geometry's placement is in its parent JOINT's frame; the rows use its parent frame
@@ -139,20 +279,21 @@ class CollisionAvoidance(Term):
                 hl = geo.halfLength
                 a = M.translation + M.rotation @ np.array([0, 0, -hl])
                 b = M.translation + M.rotation @ np.array([0, 0, hl])
-                self._robot_shape[g] = (o.parentFrame, D.Capsule(geo.radius, tuple(a), tuple(b)), None)
+                self.robot_shape[g] = (o.parentFrame, D.Capsule(geo.radius, tuple(a), tuple(b)), None)
             elif isinstance(geo, coal.Sphere):
-                self._robot_shape[g] = (o.parentFrame, D.Sphere(geo.radius, tuple(M.translation)), None)
+                self.robot_shape[g] = (o.parentFrame, D.Sphere(geo.radius, tuple(M.translation)), None)
             elif isinstance(geo, coal.Box):
-                self._robot_shape[g] = (o.parentFrame, D.Box(tuple(np.asarray(geo.halfSide))), M)
+                self.robot_shape[g] = (o.parentFrame, D.Box(tuple(np.asarray(geo.halfSide))), M)
             else:
-                self._robot_shape[g] = None
+                self.robot_shape[g] = None
         obj = self.checker.object
         if obj is not None:
             self._obj_caps = object_capsules(obj.size, self.object_grid)
-            self._grasp_inv = obj.grasps[self.checker.object_arm].inverse()
+            self.grasp_inv = obj.grasps[self.checker.object_arm].inverse()
             self._hand_frame = robot.arm(self.checker.object_arm).ee_frame
 
-    def _activate(self, robot, initial: NumericTrajectory | None):
+    # ------------------------------------------------------------------ activation (read by the segment NLP)
+    def activate(self, robot, initial: NumericTrajectory | None):
         """Active (pair, knots): knots within ``window`` of a knot where the initial guess brings
         the pair closer than ``activation``. Sets ``active_pairs`` and ``active_knots``."""
         pairs = self.checker.pairs
@@ -161,7 +302,7 @@ class CollisionAvoidance(Term):
             self.active_knots = {p: None for p in pairs}
             return self.active_pairs
         Dm = np.array([self.checker.distances(initial.q_full(k)) for k in range(initial.N + 1)])
-        self._init_dist = Dm.copy()  # (N+1) × pairs, reused by _boundary_margins
+        self._init_dist = Dm.copy()  # (N+1) × pairs, reused by boundary_margins
         for tr in self.activate_with:  # e.g. a previous solution that verification found colliding
             Dm = np.minimum(Dm, np.array([self.checker.distances(tr.q_full(k)) for k in range(initial.N + 1)]))
         close = Dm < self.activation
@@ -181,11 +322,11 @@ class CollisionAvoidance(Term):
             self.active_knots[p] = np.flatnonzero(mask).tolist()
         return self.active_pairs
 
-    def _knots_of(self, pair, N: int):
+    def knots_of(self, pair, N: int):
         ks = self.active_knots.get(pair)
         return range(N + 1) if ks is None else ks
 
-    def _free_joints_of(self, robot, kind: str, idx: int, fixed: frozenset) -> set | None:
+    def free_joints_of(self, robot, kind: str, idx: int, fixed: frozenset) -> set | None:
         """Free joint-vector indices an entity's pose depends on (``None``: unknown, e.g. a mimic
         joint; treated as moving). Obstacles: none; the object: its holding hand's joints."""
         if kind == "obstacle":
@@ -208,23 +349,23 @@ class CollisionAvoidance(Term):
                 out.add(i)
         return out
 
-    def _is_constant(self, robot, pair, fixed: frozenset) -> bool:
+    def is_constant(self, robot, pair, fixed: frozenset) -> bool:
         """True when the pair's distance cannot change: neither entity depends on a free joint and,
         for a floating base, the pair does not involve the (world-fixed) obstacles."""
         if not fixed:
             return False
-        ka, kb = self._kinds(pair)
+        ka, kb = self.kinds(pair)
         if robot.is_floating and "obstacle" in (ka, kb):
             return False
-        fa = self._free_joints_of(robot, ka, pair.a, fixed)
-        fb = self._free_joints_of(robot, kb, pair.b, fixed)
+        fa = self.free_joints_of(robot, ka, pair.a, fixed)
+        fb = self.free_joints_of(robot, kb, pair.b, fixed)
         return fa is not None and fb is not None and not fa and not fb
 
     # ------------------------------------------------------------------ expressions
     def _entity(self, tp, kind: str, idx: int, k: int):
         """(shapes list, R, p) of an entity at knot k; kind in robot/obstacle/object."""
         if kind == "robot":
-            spec = self._robot_shape.get(idx)
+            spec = self.robot_shape.get(idx)
             if spec is None:
                 return None
             fid, shape, Mbox = spec
@@ -236,7 +377,7 @@ class CollisionAvoidance(Term):
             o = self.checker.obstacles[idx]
             return [o.primitive()], ca.DM(o.placement.rotation), ca.DM(o.placement.translation)
         Rh, ph = tp.frame(self._hand_frame, k)
-        G = self._grasp_inv
+        G = self.grasp_inv
         return self._obj_caps, Rh @ ca.DM(G.rotation), ph + Rh @ ca.DM(G.translation)
 
     def _dist_fn(self, s1, s2) -> ca.Function | None:
@@ -249,7 +390,7 @@ class CollisionAvoidance(Term):
         return self._fns[key]
 
     @staticmethod
-    def _kinds(pair):
+    def kinds(pair):
         return {"self": ("robot", "robot"), "robot-obstacle": ("robot", "obstacle"),
                 "object-obstacle": ("object", "obstacle"), "object-robot": ("object", "robot")}[pair.kind]
 
@@ -268,13 +409,13 @@ class CollisionAvoidance(Term):
             return V, r, lambda tp, k: (ca.DM(M.rotation), ca.DM(M.translation))
         if kind == "object":
             V = np.array(_box_vertices(np.asarray(self.checker.object.size) / 2)).T
-            G = self._grasp_inv
+            G = self.grasp_inv
 
             def obj_pose(tp, k):
                 Rh, ph = tp.frame(self._hand_frame, k)
                 return Rh @ ca.DM(G.rotation), ph + Rh @ ca.DM(G.translation)
             return V, 0.0, obj_pose
-        fid, shape, Mbox = self._robot_shape[idx]
+        fid, shape, Mbox = self.robot_shape[idx]
         if isinstance(shape, D.Box):
             V = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T
             r = 0.0
@@ -302,37 +443,38 @@ class CollisionAvoidance(Term):
             return True
         if kind == "obstacle":
             return self.checker.obstacles[idx].shape == "box"
-        spec = self._robot_shape.get(idx)
+        spec = self.robot_shape.get(idx)
         return spec is not None and isinstance(spec[1], D.Box)
 
     def _plane_init(self, pair, q_full) -> np.ndarray:
         """(n, b) from coal's witness points at a configuration (normal from A to B)."""
-        Mo = self.checker._update(q_full)
+        Mo = self.checker.update_placements(q_full)
         return witness_plane(self.checker, pair, coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None)
 
-    def residual(self, tp):
+    def build_rows(self, ctx) -> TermData:
+        """The rows of the term for one NLP (``ctx``: the transcription, initial guess, pinned
+        knots, fixed joints); ``info`` holds this model and what it decided."""
+        tp = ctx.tp
         robot = tp.robot
-        self._setup(robot)
-        self._fns: dict = {}
-        self._pfns: dict = {}
         self.skipped = []
-        init = getattr(tp, "initial_traj", None)
-        active = self._activate(robot, init)
-        fixed = frozenset(getattr(tp, "fixed_joints", ())) if self.skip_constant else frozenset()
-        self.constant_pairs = [p for p in active if self._is_constant(robot, p, fixed)]
+        init = ctx.initial
+        active = self.activate(robot, init)
+        fixed = ctx.fixed_joints if self.skip_constant else frozenset()
+        self.constant_pairs = [p for p in active if self.is_constant(robot, p, fixed)]
         if self.constant_pairs:
             self.active_pairs = active = [p for p in active if p not in self.constant_pairs]
             log.info("collision term: %d pair(s) with no free joint left out: %s", len(self.constant_pairs),
                      [(p.name_a, p.name_b) for p in self.constant_pairs[:5]])
         self._plane_slots = []  # (pair, k, aux index) for refreshing the initial planes
+        aux: list[AuxVariable] = []
         rs, lo = [], []
-        pinned = set(getattr(tp, "pinned_q", {})) if self.skip_pinned else set()
-        margin_at = self._boundary_margins(tp, init, active, pinned)
-        knots_of = lambda pair: [k for k in self._knots_of(pair, tp.N) if k not in pinned]  # noqa: E731
+        pinned = set(ctx.pinned_q) if self.skip_pinned else set()
+        margin_at = self.boundary_margins(tp, init, active, pinned)
+        knots_of = lambda pair: [k for k in self.knots_of(pair, tp.N) if k not in pinned]  # noqa: E731
         for pair in active:
-            ka, kb = self._kinds(pair)
-            if (ka == "robot" and self._robot_shape.get(pair.a) is None) or \
-                    (kb == "robot" and self._robot_shape.get(pair.b) is None):
+            ka, kb = self.kinds(pair)
+            if (ka == "robot" and self.robot_shape.get(pair.a) is None) or \
+                    (kb == "robot" and self.robot_shape.get(pair.b) is None):
                 self.skipped.append(pair)
                 continue
             if self._is_box(ka, pair.a) or self._is_box(kb, pair.b):
@@ -342,8 +484,10 @@ class CollisionAvoidance(Term):
                 nrow = Va.shape[1] + Vb.shape[1]
                 for k in knots_of(pair):
                     x0 = self._plane_init(pair, init.q_full(k)) if init is not None else np.r_[1.0, 0, 0, 0]
-                    v = tp.add_variable(f"plane_{len(self._plane_slots)}", 4, x0, *self._plane_bounds(x0))
-                    self._plane_slots.append((pair, k, len(tp.aux) - 1))
+                    a = AuxVariable.create(f"plane_{len(self._plane_slots)}", 4, x0, *self._plane_bounds(x0))
+                    aux.append(a)
+                    v = a.sym
+                    self._plane_slots.append((pair, k, len(aux) - 1))
                     Ra_, pa_ = pose_a(tp, k)
                     Rb_, pb_ = pose_b(tp, k)
                     rs.append(fn(Ra_, pa_, Rb_, pb_, v))
@@ -358,12 +502,15 @@ class CollisionAvoidance(Term):
         if self.skipped:
             log.info("collision term: %d pair(s) without an NLP model: %s", len(self.skipped),
                      [(p.name_a, p.name_b) for p in self.skipped[:5]])
+        info = {"model": self, "active_pairs": tuple(self.active_pairs), "constant_pairs": tuple(self.constant_pairs),
+                "skipped": tuple(self.skipped), "relaxed": dict(self.relaxed), "plane_slots": tuple(self._plane_slots),
+                "active_knots": dict(self.active_knots)}
         if not rs:
-            return ca.MX.zeros(0), np.zeros(0), np.zeros(0)
+            return TermData(residual=ca.MX.zeros(0), lower=np.zeros(0), upper=np.zeros(0), info=info)
         r = ca.vertcat(*rs)
-        return r, np.array(lo), np.full(r.shape[0], np.inf)
+        return TermData(residual=r, lower=np.array(lo), upper=np.full(r.shape[0], np.inf), aux=tuple(aux), info=info)
 
-    def _boundary_margins(self, tp, init, active, pinned):
+    def boundary_margins(self, tp, init, active, pinned):
         """``margin_at(pair, k)`` [m]: ``margin``, except within ``window`` knots of a pinned knot
         whose given configuration is closer than ``margin`` for that pair: there
         ``min(margin, d_pinned / 2)``. Next to a pinned knot (rest: zero rate and acceleration)
@@ -374,7 +521,7 @@ class CollisionAvoidance(Term):
         if init is not None and pinned:
             idx = [self.checker.pairs.index(p) for p in active]
             w = int(self.window)
-            D0 = getattr(self, "_init_dist", None)
+            D0 = self._init_dist
             for kp in sorted(pinned):
                 qf = init.q_full(kp)
                 d = (D0[kp] if D0 is not None and D0.shape[0] == tp.N + 1 else self.checker.distances(qf))[idx]
@@ -423,7 +570,7 @@ class CollisionAvoidance(Term):
         for i, p in enumerate(self.checker.pairs):
             if p not in self.active_pairs:
                 continue  # not constrained at all: activation (``activate_with``) is the remedy
-            ks = set(self._knots_of(p, len(knot_t) - 1))
+            ks = set(self.knots_of(p, len(knot_t) - 1))
             bad = np.flatnonzero(D[:, i] < min_clearance)
             worst: dict[int, float] = {}
             for s_ in bad:
@@ -438,7 +585,7 @@ class CollisionAvoidance(Term):
         return n
 
     def _smooth_pair(self, pair) -> bool:
-        ka, kb = self._kinds(pair)
+        ka, kb = self.kinds(pair)
         return not (self._is_box(ka, pair.a) or self._is_box(kb, pair.b))
 
     def _smooth_value(self, robot, pair, q_full) -> float:
@@ -452,13 +599,13 @@ class CollisionAvoidance(Term):
                 o = self.checker.obstacles[idx]
                 return [o.primitive()], o.placement.rotation, o.placement.translation
             if kind == "object":
-                M = data.oMf[robot.frame_id(self._hand_frame)] * self._grasp_inv
+                M = data.oMf[robot.frame_id(self._hand_frame)] * self.grasp_inv
                 return self._obj_caps, M.rotation, M.translation
-            fid, shape, _ = self._robot_shape[idx]
+            fid, shape, _ = self.robot_shape[idx]
             M = data.oMf[robot.frame_id(fid)]
             return [shape], M.rotation, M.translation
 
-        ka, kb = self._kinds(pair)
+        ka, kb = self.kinds(pair)
         ea, eb = entity(ka, pair.a), entity(kb, pair.b)
         return min(float(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2])) for sa in ea[0] for sb in eb[0])
 
@@ -468,23 +615,22 @@ class CollisionAvoidance(Term):
             return np.full(4, -np.inf), np.full(4, np.inf)
         return np.r_[x0[:3], -np.inf], np.r_[x0[:3], np.inf]
 
-    def refresh_initial(self, tp, traj: NumericTrajectory) -> None:
-        """Re-seed the separating planes (and, with ``fixed_normals``, their fixed normals) from a
-        new initial guess (same active pairs)."""
-        for pair, k, i in getattr(self, "_plane_slots", []):
-            sym = tp.aux[i][0]
+    def reseed(self, data: TermData, traj: NumericTrajectory) -> tuple:
+        """``data.aux`` with the separating planes (and, with ``fixed_normals``, their fixed
+        normals) re-seeded from a new initial guess (same active pairs)."""
+        aux = list(data.aux)
+        for pair, k, i in data.info["plane_slots"]:
             x0 = self._plane_init(pair, traj.q_full(k))
-            tp.aux[i] = (sym, x0, *self._plane_bounds(x0))
+            lo, hi = self._plane_bounds(x0)
+            aux[i] = dataclasses.replace(aux[i], init=_ro(x0), lower=_ro(lo), upper=_ro(hi))
+        return tuple(aux)
 
     def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         """Exact coal distances of the active pairs at every knot, ``(N+1) × n_active``."""
-        if not hasattr(self, "checker"):
-            self._setup(traj.robot)
-            self._activate(traj.robot, traj)
         idx = [self.checker.pairs.index(p) for p in self.active_pairs]
         return np.array([self.checker.distances(traj.q_full(k))[idx] for k in range(traj.N + 1)])
 
-    def _bounds_numeric(self, traj):
+    def bounds_numeric(self, traj):
         D = self.numeric(traj)
         lo = np.full(D.shape, self.margin)
         for j, p in enumerate(self.active_pairs):

@@ -3,6 +3,7 @@ axis orientation and the floating base's attitude (residuals of the conventions 
 :mod:`.terms`; each with its Pinocchio evaluation)."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -12,15 +13,23 @@ import pinocchio as pin
 
 from ..errors import ConfigurationError
 from ..robot import RobotModel
-from .terms import Term, _knots, _vee_skew, pose_residual, pose_residual_numeric
+from ..spatial import check_pose
+from .build import TermData
+from .terms import Term, _check_at, _knots, _set, _vee_skew, pose_residual, pose_residual_numeric
+
+
+def _check_frame(obj, name: str = "frame"):
+    v = getattr(obj, name)
+    if not isinstance(v, (str, int, np.integer)) or isinstance(v, bool) or (isinstance(v, str) and not v):
+        raise ConfigurationError(f"{type(obj).__name__}.{name}: expected a frame name (or id), got {v!r}")
 
 __all__ = ["FramePose", "FramePath", "ClosedChain", "OrientationConstraint", "BaseAttitude"]
 
 
 # --------------------------------------------------------------------------- frame terms
-@dataclass
+@dataclass(eq=False)
 class FramePose(Term):
-    """A frame's world pose at a knot (``at``: "start", "end", an index or a list)."""
+    """A frame's world pose at a knot (``at``: "start", "end", "all", an index or a list)."""
 
     frame: str = ""
     target: pin.SE3 | None = None
@@ -28,9 +37,24 @@ class FramePose(Term):
     position_only: bool = False
     default_name = "frame_pose"
 
+    def _validate(self):
+        _check_frame(self)
+        if not isinstance(self.target, pin.SE3):
+            raise ConfigurationError(f"FramePose.target: expected a pinocchio.SE3, got {self.target!r}")
+        check_pose(self.target, "FramePose.target")
+        _set(self, "at", _check_at(self.at, "FramePose.at"))
+
+    def rows(self, ctx):
+        r, lo, hi = self.residual(ctx.tp)
+        return TermData(residual=r, lower=lo, upper=hi, points=tuple(_knots(self.at, ctx.N)),
+                        point_rows=3 if self.position_only else 7)
+
+    def sampled(self):
+        if self.at == "all":
+            return self
+        return super().sampled()
+
     def residual(self, tp):
-        if self.target is None:
-            raise ValueError("FramePose.target: expected a pinocchio.SE3")
         rs, lo, hi = [], [], []
         for k in _knots(self.at, tp.N):
             R, p = tp.frame(self.frame, k)
@@ -48,13 +72,13 @@ class FramePose(Term):
             out.append(r[:3] if self.position_only else np.r_[r, tr])
         return np.concatenate(out)
 
-    def _bounds_numeric(self, traj):
+    def bounds_numeric(self, traj):
         n = len(_knots(self.at, traj.N))
         one = (np.zeros(3), np.zeros(3)) if self.position_only else (np.r_[np.zeros(6), 1.0], np.r_[np.zeros(6), np.inf])
         return np.tile(one[0], n), np.tile(one[1], n)
 
-    def cost(self, tp):
-        r, _, _ = self.residual(tp)
+    def cost_expr(self, ctx):
+        r, _, _ = self.residual(ctx.tp)
         step = 3 if self.position_only else 7
         keep = [i for i in range(r.shape[0]) if self.position_only or i % step != 6]
         return ca.sumsqr(r[keep])
@@ -66,7 +90,7 @@ class FramePose(Term):
         return float(np.sum(r[keep] ** 2))
 
 
-@dataclass
+@dataclass(eq=False)
 class FramePath(Term):
     """A frame follows given poses at every knot (``poses``: N+1 SE3, or a callable of time [s])."""
 
@@ -74,6 +98,26 @@ class FramePath(Term):
     poses: object = None
     position_only: bool = False
     default_name = "frame_path"
+
+    def _validate(self):
+        _check_frame(self)
+        if callable(self.poses):
+            return
+        try:
+            poses = tuple(self.poses)
+        except TypeError:
+            raise ConfigurationError(f"FramePath.poses: expected a list of pinocchio.SE3 (one per knot) or a "
+                                     f"callable of time [s], got {self.poses!r}") from None
+        for i, M in enumerate(poses):
+            if not isinstance(M, pin.SE3):
+                raise ConfigurationError(f"FramePath.poses[{i}]: expected a pinocchio.SE3, got {M!r}")
+            check_pose(M, f"FramePath.poses[{i}]")
+        _set(self, "poses", poses)
+
+    def rows(self, ctx):
+        r, lo, hi = self.residual(ctx.tp)
+        return TermData(residual=r, lower=lo, upper=hi, points=tuple(range(ctx.N + 1)),
+                        point_rows=3 if self.position_only else 6)
 
     def _targets(self, N, T):
         if callable(self.poses):
@@ -104,12 +148,12 @@ class FramePath(Term):
             out.append(r[:3] if self.position_only else r)
         return np.concatenate(out)
 
-    def _bounds_numeric(self, traj):
+    def bounds_numeric(self, traj):
         n = (traj.N + 1) * (3 if self.position_only else 6)
         return np.zeros(n), np.zeros(n)
 
 
-@dataclass
+@dataclass(eq=False)
 class ClosedChain(Term):
     """Two end-effectors keep their relative pose ``T_a⁻¹ T_b = relative`` at every knot (the TCBiRRT paper
     Eq. 1-2, with the singularity-free residual of the module docstring).
@@ -132,6 +176,20 @@ class ClosedChain(Term):
     skip_pinned: bool = False
     pinned_tol: float = 1e-9
     default_name = "closed_chain"
+
+    def _validate(self):
+        if self.relative is not None:
+            if not isinstance(self.relative, pin.SE3):
+                raise ConfigurationError(f"ClosedChain.relative: expected a pinocchio.SE3 (use from_configuration/"
+                                         f"from_grasps), got {self.relative!r}")
+            check_pose(self.relative, "ClosedChain.relative")
+        if isinstance(self.interior, bool) or not isinstance(self.interior, (int, np.integer)) or self.interior < 0:
+            raise ConfigurationError(f"ClosedChain.interior: expected an integer ≥ 0 (points per interval), "
+                                     f"got {self.interior!r}")
+        if not (isinstance(self.pinned_tol, (int, float)) and np.isfinite(self.pinned_tol) and self.pinned_tol >= 0):
+            raise ConfigurationError(f"ClosedChain.pinned_tol: expected a finite number ≥ 0, got {self.pinned_tol!r}")
+        if self.arm_a == self.arm_b:
+            raise ConfigurationError(f"ClosedChain: arm_a and arm_b are the same arm {self.arm_a!r}")
 
     def _points(self, N: int, robot: RobotModel | None = None, pinned: dict | None = None) -> list:
         skip = set()
@@ -179,17 +237,27 @@ class ClosedChain(Term):
         Rrel, prel = Ra.T @ Rb, Ra.T @ (pb - pa)
         return pose_residual(Rrel, prel, np.array(self.relative.rotation), ca.DM(self.relative.translation))
 
-    def residual(self, tp):
+    def residual(self, tp, pinned_q=None):
+        """Rows at every collocation point (``pinned_q``: the knots a boundary pins, ``{k: q}``,
+        left out with ``skip_pinned``)."""
         if self.relative is None:
             raise ValueError("ClosedChain.relative: expected a pinocchio.SE3 (use from_configuration/from_grasps)")
         rs = []
-        pts = self._points(tp.N, tp.robot, tp.pinned_q)
+        pts = self._points(tp.N, tp.robot, pinned_q)
         for k in pts:
             r, tr = self.residual_at(tp, k)
             rs += [r, tr]
         lo = np.tile(np.r_[np.zeros(6), 1.0], len(pts))
         hi = np.tile(np.r_[np.zeros(6), np.inf], len(pts))
         return ca.vertcat(*rs), lo, hi
+
+    def rows(self, ctx):
+        r, lo, hi = self.residual(ctx.tp, ctx.pinned_q)
+        return TermData(residual=r, lower=lo, upper=hi, points=tuple(self._points(ctx.N, ctx.robot, ctx.pinned_q)),
+                        point_rows=7)
+
+    def sampled(self):
+        return dataclasses.replace(self, interior=0, skip_pinned=False)
 
     def numeric(self, traj):
         fa, fb = self._frames(traj.robot)
@@ -200,12 +268,12 @@ class ClosedChain(Term):
             out.append(np.r_[r, tr])
         return np.concatenate(out) if out else np.zeros(0)
 
-    def _bounds_numeric(self, traj):
+    def bounds_numeric(self, traj):
         n = len(self._points(traj.N, traj.robot, traj.pinned_q))
         return (np.tile(np.r_[np.zeros(6), 1.0], n), np.tile(np.r_[np.zeros(6), np.inf], n))
 
 
-@dataclass
+@dataclass(eq=False)
 class OrientationConstraint(Term):
     """A body axis stays within ``max_angle`` [rad] of a world direction at every knot (the OC-RRT paper's
     orientation constraint, e.g. a cup kept upright): ``(R a_local) · a_world ≥ cos(max_angle)``."""
@@ -215,6 +283,25 @@ class OrientationConstraint(Term):
     axis_world: Sequence[float] = (0.0, 0.0, 1.0)
     max_angle: float = 0.1
     default_name = "orientation"
+
+    def _validate(self):
+        _check_frame(self)
+        for n in ("axis_local", "axis_world"):
+            a = np.asarray(getattr(self, n), float) if np.ndim(getattr(self, n)) == 1 else None
+            if a is None or a.shape != (3,) or not np.all(np.isfinite(a)) or np.linalg.norm(a) < 1e-12:
+                raise ConfigurationError(f"OrientationConstraint.{n}: expected a non-zero 3-vector, "
+                                         f"got {getattr(self, n)!r}")
+            _set(self, n, tuple(float(v) for v in a))
+        m = self.max_angle
+        if isinstance(m, bool) or not isinstance(m, (int, float, np.floating)) or not 0 <= m <= np.pi:
+            raise ConfigurationError(f"OrientationConstraint.max_angle: expected an angle in [0, π] [rad], got {m!r}")
+
+    def rows(self, ctx):
+        r, lo, hi = self.residual(ctx.tp)
+        return TermData(residual=r, lower=lo, upper=hi, points=tuple(range(ctx.N + 1)), point_rows=1)
+
+    def sampled(self):
+        return self
 
     def _axes(self):
         a = np.asarray(self.axis_local, float)
@@ -230,11 +317,11 @@ class OrientationConstraint(Term):
         a, b = self._axes()
         return np.array([traj.frame(self.frame, k).rotation @ a @ b for k in range(traj.N + 1)])
 
-    def _bounds_numeric(self, traj):
+    def bounds_numeric(self, traj):
         return np.full(traj.N + 1, np.cos(self.max_angle)), np.full(traj.N + 1, np.inf)
 
 
-@dataclass
+@dataclass(eq=False)
 class BaseAttitude(Term):
     """Base orientation of a free-floating robot at a knot equals ``target`` (a rotation matrix;
     default identity): residual ``vee(E − Eᵀ)/2`` and ``trace(E) ≥ 1`` with ``E = R_tᵀ R_b`` —
@@ -243,6 +330,26 @@ class BaseAttitude(Term):
     target: np.ndarray | None = None
     at: object = "end"
     default_name = "base_attitude"
+
+    def _validate(self):
+        if self.target is not None:
+            R = np.asarray(self.target, float) if np.ndim(self.target) == 2 else None
+            if R is None or R.shape != (3, 3) or not np.all(np.isfinite(R)) \
+                    or not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+                raise ConfigurationError(f"BaseAttitude.target: expected a 3 × 3 rotation matrix, got {self.target!r}")
+            R = R.copy()
+            R.flags.writeable = False
+            _set(self, "target", R)
+        _set(self, "at", _check_at(self.at, "BaseAttitude.at"))
+
+    def rows(self, ctx):
+        r, lo, hi = self.residual(ctx.tp)
+        return TermData(residual=r, lower=lo, upper=hi, points=tuple(_knots(self.at, ctx.N)), point_rows=4)
+
+    def sampled(self):
+        if self.at == "all":
+            return self
+        return super().sampled()
 
     def _target(self):
         return np.eye(3) if self.target is None else np.asarray(self.target, float)
@@ -265,12 +372,12 @@ class BaseAttitude(Term):
             out.append(np.r_[0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]]), np.trace(E)])
         return np.concatenate(out)
 
-    def _bounds_numeric(self, traj):
+    def bounds_numeric(self, traj):
         n = len(_knots(self.at, traj.N))
         return np.tile(np.r_[0, 0, 0, 1.0], n), np.tile(np.r_[0, 0, 0, np.inf], n)
 
-    def cost(self, tp):
-        r, _, _ = self.residual(tp)
+    def cost_expr(self, ctx):
+        r, _, _ = self.residual(ctx.tp)
         return ca.sumsqr(r[[i for i in range(r.shape[0]) if i % 4 != 3]])
 
     def cost_numeric(self, traj):

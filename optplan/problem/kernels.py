@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import logging
 import os
+import time
 import weakref
+from collections import OrderedDict
 
 import casadi as ca
 import numpy as np
@@ -39,6 +41,7 @@ class KernelCache:
         self._q = ca.SX.sym("q", robot.nj)
         self._X = self.sym.joint_placements(self._q)
         self._fns: dict = {}
+        self._structures: "OrderedDict[tuple, object]" = OrderedDict()
         self._digest = self._robot_digest()
         self._dir = None
         if disk:
@@ -93,6 +96,85 @@ class KernelCache:
                     log.info("kernel %s not saved (%s)", path, exc)
         self._fns[key] = fn
         return fn
+
+    def compiled(self, fn: ca.Function, opt: str = "-O1", build: bool = True) -> ca.Function | None:
+        """``fn`` compiled to C: a shared library in the disk cache, named after the kernel (whose
+        name is keyed by the robot's kinematics), loaded with ``casadi.external`` — several times
+        faster to evaluate than CasADi's SX virtual machine. Compiling takes a C compiler and
+        about a second per kernel, once per robot and kernel; every later process loads the
+        library. ``build=False``: only load a library an earlier run compiled (None if there is
+        none). Without a cache directory or a compiler, or if compiling fails: ``fn`` (logged)."""
+        import shutil
+        import subprocess
+        import tempfile
+        from pathlib import Path
+
+        key = ("compiled", fn.name(), opt)
+        got = self._fns.get(key)
+        if got is not None:
+            return got
+        lib = None if self._dir is None else self._dir / f"{fn.name()}{opt}.so"
+        if lib is None or not lib.exists():
+            if not build:
+                return None
+            cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+            if lib is None or cc is None:
+                log.info("kernel %s not compiled (no cache directory or no C compiler)", fn.name())
+                return fn
+            t0 = time.perf_counter()
+            with tempfile.TemporaryDirectory() as tmp:
+                cname = f"{fn.name()}.c"
+                cg = ca.CodeGenerator(cname, {"with_header": False})
+                cg.add(fn)
+                cg.generate(tmp + os.sep)
+                out = Path(tmp) / lib.name
+                proc = subprocess.run([cc, opt, "-fPIC", "-shared", str(Path(tmp, cname)), "-o", str(out), "-lm"],
+                                      capture_output=True, text=True)
+                if proc.returncode != 0:
+                    log.warning("compiling kernel %s failed (%s); using CasADi's VM", fn.name(), proc.stderr[-300:])
+                    return fn
+                tmp_lib = lib.with_suffix(f".{os.getpid()}.tmp")
+                shutil.copy(out, tmp_lib)
+                os.replace(tmp_lib, lib)  # atomic: concurrent processes never load half a library
+            log.info("compiled kernel %s in %.1f s", fn.name(), time.perf_counter() - t0)
+        ext = ca.external(fn.name(), str(lib))
+        self._fns[key] = ext
+        return ext
+
+    def evaluators(self, fn: ca.Function, compiled: bool | str = False) -> tuple[tuple, bool]:
+        """``((f, jac, hess), is_compiled)`` of kernel ``fn`` for an NLP: the symbolic functions
+        (``compiled=False``), compiled C (``True``: compiled now where missing) or C where an
+        earlier run left the libraries, else symbolic (``"auto"``)."""
+        if compiled not in (True, False, "auto"):
+            raise ValueError(f"compile_kernels: expected True, False or 'auto', got {compiled!r}")
+        jfn, hfn = self.derivatives(fn)
+        fns = (fn, jfn, hfn)
+        if compiled is False:
+            return fns, False
+        got = [self.compiled(f, build=compiled is True) for f in fns]
+        if any(g is None for g in got) or any(g is f for g, f in zip(got, fns)):
+            return fns, False
+        return tuple(got), True
+
+    #: how many segment-NLP structures (:meth:`structure`) stay in memory
+    max_structures = 32
+
+    def structure(self, key: tuple, build):
+        """The symbolic segment NLP of shape ``key`` (intervals, rows, pairs and their knots), from
+        memory if an NLP of that shape was built in this process (with its IPOPT instances), else
+        ``build()`` — kept in memory only, the ``max_structures`` most recently used."""
+        st = self._structures.get(key)
+        if st is None:
+            st = self._structures[key] = build()
+            while len(self._structures) > self.max_structures:
+                self._structures.popitem(last=False)
+        else:
+            self._structures.move_to_end(key)
+        return st
+
+    def clear_structures(self) -> None:
+        """Forget the NLP structures kept in memory (the next solve of any shape builds it)."""
+        self._structures.clear()
 
     @classmethod
     def of(cls, robot: RobotModel) -> "KernelCache":

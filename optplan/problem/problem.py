@@ -8,12 +8,15 @@ IPOPT and get a :class:`Solution` that says honestly how good it is.
     smooth = prob.add_cost(Smoothness("jerk"), weight=1.0)
     prob.set_initial(q=path)          # any (M × nj) array, on any time grid
     sol = prob.solve()                # always a Solution; sol.status is an IpoptStatus
+    sol.value(smooth), sol.dual(h), sol.sample(t, h), prob.infeasibilities(sol)
 
-Problem (terms) ≠ transcription (:mod:`.transcription`) ≠ solver (IPOPT through ``casadi.nlpsol``,
-exact Hessian by default).
+Problem (terms: frozen configurations, each built into :class:`TermData` against a
+:class:`BuildContext`) ≠ transcription (:mod:`.transcription`) ≠ solver (the NLP core
+:mod:`.nlp`: IPOPT through ``casadi.nlpsol``, exact Hessian by default).
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass
@@ -25,19 +28,23 @@ from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError, OptionError
 from ..robot import RobotModel
-from ..solver_options import casadi_option_name, check_ipopt_options, check_solve_arguments
+from ..solver_options import check_solve_arguments
 from ..spatial import check_pose
-from .solution import IpoptStatus, Solution
+from .build import BuildContext, TermData
+from .evaluate import Infeasibility, TermEvaluator
+from .nlp import NlpSolver, SolveOutcome, SolverOptions
+from .solution import Solution
 from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
 from .transcription import Transcription
 
-__all__ = ["OptProblem", "TermHandle"]
+__all__ = ["OptProblem", "TermHandle", "Infeasibility"]
 log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class TermHandle:
-    """Named handle returned by ``add_cost`` / ``add_constraint``."""
+    """Named handle returned by ``add_cost`` / ``add_constraint`` (the binding of a term to a
+    problem): pass it to ``Solution.value/violation/dual/sample`` and ``OptProblem.term_data``."""
 
     name: str
     term: Term
@@ -194,15 +201,22 @@ class OptProblem:
     def _refresh_aux(self) -> None:
         """After a new initial guess, re-seed auxiliary variables (separating planes) of a built
         problem; the problem structure (active collision pairs) is kept."""
-        if self._built is None:
+        b = self._built
+        if b is None:
             return
         traj = self.numeric_trajectory(self._x0)
+        aux = []
         for h in self._handles:
-            if hasattr(h.term, "refresh_initial"):
-                h.term.refresh_initial(self.tp, traj)
-        self._built["aux_init"] = self.tp.aux_init()
-        nb = self._built["nbase"]
-        self._built["lbx"][nb:], self._built["ubx"][nb:] = self.tp.aux_bounds()
+            d = b["data"][h.name]
+            if d.aux:
+                new = h.term.reseed(d, traj)
+                b["data"][h.name] = dataclasses.replace(d, aux=tuple(new))
+                aux += list(new)
+        if aux:
+            nb = b["nbase"]
+            b["aux_init"] = np.concatenate([a.init for a in aux])
+            b["lbx"][nb:] = np.concatenate([a.lower for a in aux])
+            b["ubx"][nb:] = np.concatenate([a.upper for a in aux])
 
     def set_initial_path(self, path, closed_chain=None, T: float | None = None) -> bool:
         """Initial guess from a planner's path (M × nq configurations, no timing): resampled
@@ -246,8 +260,7 @@ class OptProblem:
         out = {}
         for h in self._handles:
             if h.role == "constraint" and isinstance(h.term, JointBoundary) and h.term.q is not None:
-                k = 0 if h.term.at == "start" else self.N
-                out[k] = self.robot.check_joints(h.term.q, "JointBoundary.q")
+                out[h.term.knot(self.N)] = self.robot.check_joints(h.term.q, "JointBoundary.q")
         return out
 
     def _fixed_joints(self) -> frozenset[int]:
@@ -255,61 +268,90 @@ class OptProblem:
         out: set[int] = set()
         for h in self._handles:
             if h.role == "constraint" and isinstance(h.term, JointPositionLimits):
-                lo, hi = h.term._lims(self.robot)
+                lo, hi = h.term.limits(self.robot)
                 out |= set(np.flatnonzero(np.asarray(lo) == np.asarray(hi)).tolist())
         return frozenset(out)
+
+    def context(self, role: str = "constraint") -> BuildContext:
+        """The :class:`BuildContext` terms are built against (transcription, initial guess,
+        pinned knots, fixed joints)."""
+        return BuildContext(self.tp, role, self.numeric_trajectory(self._x0) if self._x0 is not None else None,
+                            self._pinned_q(), self._fixed_joints())
 
     def _build(self):
         tp = self.tp
         if self.robot.is_floating:
-            tp.com0 = self._initial_com()
+            tp.set_com0(self._initial_com())
         tp.clear_caches()
-        tp.pinned_q = self._pinned_q()
-        tp.fixed_joints = self._fixed_joints()
-        tp.initial_traj = self.numeric_trajectory(self._x0) if self._x0 is not None else None
-        tp.clear_aux()
+        ctx = {role: self.context(role) for role in ("constraint", "cost")}
+        data: dict[str, TermData] = {}
+        for h in self._handles:
+            data[h.name] = h.term.build(ctx[h.role])
+        aux = [a for h in self._handles for a in data[h.name].aux]
+        xall = ca.vertcat(tp.x, *[a.sym for a in aux]) if aux else tp.x
         g, lbg, ubg = [], [], []
         G, lo, hi = tp.dynamics_constraints()
         g.append(G); lbg.append(lo); ubg.append(hi)
-        self._dyn_slice = slice(0, G.shape[0])
-        self._con_slices: dict[str, slice] = {}
-        self._residuals: dict[str, ca.MX] = {}
+        dyn = slice(0, G.shape[0])
+        rows: dict[str, slice] = {}
         n = G.shape[0]
         f = 0
-        term_exprs = {}
-        self._bound_terms: dict[str, tuple] = {}
+        cost_exprs = {}
+        var_bounds: dict[str, tuple] = {}
         for h in self._handles:
-            if h.role == "constraint" and hasattr(h.term, "bounds_on"):
-                self._bound_terms[h.name] = h.term.bounds_on(tp)
-                continue
-            if h.role == "constraint":
-                r, lo, hi = h.term.residual(tp)
-                self._residuals[h.name] = r
-                lo, hi = np.broadcast_to(np.asarray(lo, float), (r.shape[0],)), np.broadcast_to(np.asarray(hi, float), (r.shape[0],))
-                g.append(r); lbg.append(lo); ubg.append(hi)
-                self._con_slices[h.name] = slice(n, n + r.shape[0])
-                n += r.shape[0]
+            d = data[h.name]
+            if h.role == "constraint" and d.var_bounds is not None:
+                var_bounds[h.name] = d.var_bounds
+            elif h.role == "constraint":
+                g.append(d.residual); lbg.append(d.lower); ubg.append(d.upper)
+                rows[h.name] = slice(n, n + d.n_rows)
+                n += d.n_rows
             else:
-                c = h.weight * h.term.cost(tp)
-                term_exprs[h.name] = c
+                c = h.weight * d.cost
+                cost_exprs[h.name] = c
                 f = f + c
         gexpr = ca.vertcat(*g)
-        xall = tp.x_all
         nbase = tp.x.shape[0]
-        alo, ahi = tp.aux_bounds()
-        lbx = np.concatenate([-np.inf * np.ones(nbase), alo])
-        ubx = np.concatenate([np.inf * np.ones(nbase), ahi])
+        lbx = np.concatenate([-np.inf * np.ones(nbase)] + [a.lower for a in aux])
+        ubx = np.concatenate([np.inf * np.ones(nbase)] + [a.upper for a in aux])
         if self.free_time:
             lbx[tp.T_index], ubx[tp.T_index] = self.duration_bounds
-        for idx, lo, hi in self._bound_terms.values():
+        for idx, lo, hi in var_bounds.values():
             lbx[idx] = np.maximum(lbx[idx], lo)
             ubx[idx] = np.minimum(ubx[idx], hi)
-        costs = ca.Function("costs", [xall], [ca.vertcat(*term_exprs.values()) if term_exprs else ca.DM.zeros(0)])
+        costs = ca.Function("costs", [xall], [ca.vertcat(*cost_exprs.values()) if cost_exprs else ca.DM.zeros(0)])
+        self._dyn_slice, self._con_slices, self._bound_terms = dyn, rows, var_bounds
         self._built = {"f": f, "g": gexpr, "lbg": np.concatenate(lbg), "ubg": np.concatenate(ubg),
-                       "lbx": lbx, "ubx": ubx, "cost_names": list(term_exprs), "costs": costs, "x": xall,
-                       "nbase": nbase, "aux_init": tp.aux_init(), "ffun": ca.Function("f", [xall], [f]),
-                       "gfun": ca.Function("g", [xall], [gexpr]), "solver": None, "solver_opts": None}
+                       "lbx": lbx, "ubx": ubx, "cost_names": list(cost_exprs), "costs": costs, "x": xall,
+                       "nbase": nbase, "aux_init": np.concatenate([a.init for a in aux]) if aux else np.zeros(0),
+                       "ffun": ca.Function("f", [xall], [f]), "gfun": ca.Function("g", [xall], [gexpr]),
+                       "solver": None, "solver_opts": None, "data": data, "rows": rows, "var_bounds": var_bounds,
+                       "dyn": dyn}
         return self._built
+
+    def term_data(self, handle: TermHandle | str) -> TermData:
+        """The built :class:`TermData` of a term (rows, bounds, auxiliary variables, ``info`` such
+        as a collision term's active pairs); builds the NLP if needed."""
+        h = self._handle(handle)
+        b = self._built or self._build()
+        return b["data"][h.name]
+
+    def _handle(self, handle: TermHandle | str) -> TermHandle:
+        name = handle if isinstance(handle, str) else getattr(handle, "name", None)
+        if name not in self.terms:
+            raise KeyError(f"no term named {name!r} in this problem (terms: {sorted(self.terms)})")
+        return self.terms[name]
+
+    def replace_term(self, handle: TermHandle | str, term: Term) -> TermHandle:
+        """Swap the term behind a handle (same name, role and weight) for ``term`` — e.g. a
+        collision term with more activated pairs; the NLP is rebuilt at the next solve."""
+        old = self._handle(handle)
+        if not isinstance(term, Term):
+            raise TypeError(f"expected an optplan term (optplan.problem.terms), got {type(term).__name__}")
+        new = TermHandle(old.name, term, old.role, old.weight)
+        self._handles[self._handles.index(old)] = new
+        self._built = None
+        return new
 
     def _reference_x(self) -> np.ndarray:
         """Decision vector of the rest-to-rest quintic between the initial guess's end knots
@@ -332,7 +374,8 @@ class OptProblem:
         return np.concatenate([self._x0[:b["nbase"]], b["aux_init"]])
 
     def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-6, max_iter: int = 500,
-              exact_hessian: bool = True, objective_scaling: float | str = "auto") -> Solution:
+              exact_hessian: bool = True, objective_scaling: float | str = "auto",
+              options: SolverOptions | None = None) -> Solution:
         """Solve with IPOPT. Never raises for a failed solve: the status is in the Solution.
 
         ``tol`` is both IPOPT's ``tol``/``constr_viol_tol`` and the constraint-violation bound that
@@ -347,12 +390,22 @@ class OptProblem:
           unscaled objective) — restoration at N = 20: 18 iterations vs 132 with the above.
 
         Exact Hessian, MUMPS (QAMD ordering for floating-base robots). ``ipopt_options`` are passed through and override everything (e.g.
-        ``{"print_level": 5}``, ``{"mu_strategy": "adaptive"}``).
+        ``{"print_level": 5}``, ``{"mu_strategy": "adaptive"}``). ``options``: a
+        :class:`~optplan.problem.nlp.SolverOptions`; its ``tol``/``max_iter``, when set, replace
+        the arguments of the same name, its other fields and ``raw`` override the defaults.
         """
         if self._x0 is None:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
+        if options is not None and not isinstance(options, SolverOptions):
+            raise OptionError(f"solve: options: expected a SolverOptions, got {type(options).__name__} {options!r}")
+        if options is not None:
+            tol = options.tol if options.tol is not None else tol
+            max_iter = options.max_iter if options.max_iter is not None else max_iter
         check_solve_arguments(tol, max_iter, objective_scaling)
-        check_ipopt_options(ipopt_options)   # an invalid option is an OptionError (ValueError) before the solve
+        # an invalid option is an OptionError (ValueError) before the (possibly long) build
+        sopts = SolverOptions.coerce(options if options is not None else ipopt_options)
+        if options is not None and ipopt_options:
+            sopts = sopts.replace(raw={**dict(ipopt_options), **dict(sopts.raw)})
         t_setup = time.perf_counter()
         b = self._built or self._build()
         n_ineq = int(np.sum(b["lbg"] != b["ubg"]))
@@ -392,41 +445,23 @@ class OptProblem:
             opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
                          "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
                          "ipopt.warm_start_slack_bound_push": 1e-9})
-        for k, v in (ipopt_options or {}).items():
-            opts[casadi_option_name(k)] = v
-        key = repr(sorted(opts.items()))
+        final = sopts.casadi_options(defaults=opts)
+        key = repr(sorted(final.items()))
+        setup = time.perf_counter() - t_setup   # the NlpSolver adds its own creation time
         if b["solver"] is None or b["solver_opts"] != key:
-            nlp = {"x": b["x"], "f": b["f"], "g": b["g"]}
-            b["solver"] = ca.nlpsol("optplan", "ipopt", nlp, opts)
+            b["solver"] = NlpSolver("optplan", {"x": b["x"], "f": b["f"], "g": b["g"]}, sopts, defaults=opts)
             b["solver_opts"] = key
-        setup = time.perf_counter() - t_setup
-        t0 = time.perf_counter()
-        args = dict(x0=self._full_x0(), lbg=b["lbg"], ubg=b["ubg"], lbx=b["lbx"], ubx=b["ubx"])
+        args = dict(lbg=b["lbg"], ubg=b["ubg"], lbx=b["lbx"], ubx=b["ubx"])
         if self._lam_g0 is not None and self._lam_g0.size == b["lbg"].size:
             args["lam_g0"] = self._lam_g0
             if self._lam_x0 is not None and self._lam_x0.size == b["lbx"].size:
                 args["lam_x0"] = self._lam_x0
-        try:
-            out = b["solver"](**args)
-            stats = b["solver"].stats()
-            status = IpoptStatus.from_string(stats.get("return_status", "Unknown"))
-            x = np.array(out["x"]).ravel()
-            lam_g = np.array(out["lam_g"]).ravel()
-            lam_x = np.array(out["lam_x"]).ravel()
-            iters = int(stats.get("iter_count", -1))
-            cost = float(out["f"])
-        except RuntimeError as exc:  # IPOPT/CasADi evaluation errors become a status
-            log.warning("IPOPT raised: %s", exc)
-            status, x, lam_g, iters, cost = IpoptStatus.INTERNAL_ERROR, self._full_x0().copy(), None, -1, float("nan")
-            lam_x = None
-        wall = time.perf_counter() - t0
-        sol = self._make_solution(x, lam_g, status, iters, wall, cost, tol)
-        sol.setup_time = setup
-        sol.lam_x = lam_x
-        return sol
+        out = b["solver"].solve(self._full_x0(), extra_setup=setup, **args)
+        return self._make_solution(out, tol)
 
-    def _make_solution(self, x, lam_g, status, iters, wall, cost, tol) -> Solution:
+    def _make_solution(self, out: SolveOutcome, tol) -> Solution:
         b, tp = self._built, self.tp
+        x = np.array(out.x, float)
         gval = np.array(b["gfun"](x)).ravel()
         viol_vec = np.maximum(np.maximum(b["lbg"] - gval, gval - b["ubg"]), 0.0)
         viol = float(viol_vec.max()) if viol_vec.size else 0.0
@@ -441,8 +476,8 @@ class OptProblem:
         for name, sl in self._con_slices.items():
             terms[name] = float(viol_vec[sl].max()) if sl.stop > sl.start else 0.0
         for name, (idx, lo, hi) in self._bound_terms.items():
-            xv = np.asarray(x)[idx]
-            sc = tp.variable_scale(self.terms[name].term.which)  # back to physical units
+            xv = x[idx]
+            sc = b["data"][name].var_scale  # back to physical units
             terms[name] = float(np.max(np.maximum(np.maximum(lo - xv, xv - hi), 0.0))) / sc
             viol = max(viol, terms[name])
         u = tp.unpack(x)
@@ -453,11 +488,14 @@ class OptProblem:
             base_quat = u["base_quat"]
             traj = self.numeric_trajectory(x)
             base_pos = np.array([traj.q_full(k)[:3] for k in range(self.N + 1)])
+        status = out.status
         success = status.succeeded and viol <= max(tol, 1e-9) * 10
-        return Solution(success=bool(success), status=status, iterations=iters, wall_time=wall, cost=cost,
-                        max_constraint_violation=viol, terms=terms, t=t, q=u["q"], qd=u["qd"], qdd=u["qdd"],
-                        jerk=u["jerk"], joint_names=self.robot.joint_names, base_quat=base_quat,
-                        base_position=base_pos, x=np.asarray(x), lam_g=lam_g, x_scale_h=tp.h0)
+        return Solution(success=bool(success), status=status, iterations=out.iterations, wall_time=out.wall_time,
+                        cost=out.cost, max_constraint_violation=viol, terms=terms, t=t, q=u["q"], qd=u["qd"],
+                        qdd=u["qdd"], jerk=u["jerk"], joint_names=self.robot.joint_names, base_quat=base_quat,
+                        base_position=base_pos, x=x, lam_g=out.lam_g, lam_x=out.lam_x, x_scale_h=tp.h0,
+                        setup_time=out.setup_time, cpu_time=out.cpu_time, attempts=(out,),
+                        evaluator=TermEvaluator(self, b))
 
     # ------------------------------------------------------------------ evaluation helpers
     def numeric_trajectory(self, x) -> NumericTrajectory:
@@ -468,18 +506,31 @@ class OptProblem:
                                  pinned_q=self._pinned_q())
 
     def term_function(self, handle: TermHandle | str) -> ca.Function:
-        """``f(x) -> residual`` (constraint terms) or ``f(x) -> cost`` as a ``casadi.Function``."""
-        h = self.terms[handle] if isinstance(handle, str) else handle
-        if self._built is None:
-            self._build()
-        if h.role == "constraint" and h.name in self._bound_terms:
-            idx = self._bound_terms[h.name][0]
-            r = self._built["x"][idx.tolist()] / self.tp.variable_scale(h.term.which)
+        """``f(x) -> residual`` (constraint terms; a bound term's bounded variables in physical
+        units) or ``f(x) -> weighted cost`` as a ``casadi.Function`` of the full decision vector."""
+        h = self._handle(handle)
+        b = self._built or self._build()
+        d = b["data"][h.name]
+        if h.role == "constraint" and d.var_bounds is not None:
+            r = b["x"][d.var_bounds[0].tolist()] / d.var_scale
         elif h.role == "constraint":
-            r = self._residuals[h.name]
+            r = b["g"][b["rows"][h.name]]
         else:
-            r = h.weight * h.term.cost(self.tp)
-        return ca.Function(h.name, [self._built["x"]], [r])
+            r = h.weight * d.cost
+        return ca.Function(h.name, [b["x"]], [r])
+
+    def infeasibilities(self, sol: Solution, n: int = 10) -> list["Infeasibility"]:
+        """The ``n`` worst constraint rows of a solution of this problem, worst first: term name,
+        row, point (knot ``k`` or ``(k, fraction)``; None when the rows are not per point),
+        value, bounds and violation (≥ 0, physical units). The transcription's own rows are
+        listed as ``"dynamics"``."""
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise ValueError(f"infeasibilities: n: expected an integer ≥ 0, got {n!r}")
+        ev = sol.evaluator
+        if not isinstance(ev, TermEvaluator) or ev.problem is not self:
+            raise ValueError("infeasibilities: the solution was not produced by this problem (or was loaded from "
+                             "a file); solve this problem and pass its solution")
+        return ev.infeasibilities(sol, int(n))
 
     @property
     def initial_guess(self) -> np.ndarray | None:

@@ -47,6 +47,7 @@ import numpy as np
 from optplan.splines import PiecewisePolynomial, _broadcast_vec, _check_int, _check_positive, _float_array
 
 from ._quartic_nlp import _check_input_sizes, _ee_wrapper, _limit_vec, _Problem
+from .nlp import NlpSolver, SolverOptions
 
 __all__ = ["QuarticSmoothingResult", "smooth_quartic"]
 
@@ -75,6 +76,8 @@ class QuarticSmoothingResult:
         refinements: number of re-solves with moved constraint points.
         stretch: factor (>= 1) by which the durations were finally stretched to remove the
             remaining overshoot between samples (1.0 if none).
+        attempts: every IPOPT run, in order (:class:`~optplan.problem.nlp.SolveOutcome`
+            summaries: status, iterations, wall/CPU time; ``label`` "solve" or "refinement k").
     """
 
     success: bool
@@ -87,6 +90,7 @@ class QuarticSmoothingResult:
     objective: float = float("nan")
     refinements: int = 0
     stretch: float = 1.0
+    attempts: tuple = ()
 
 
 # ----------------------------------------------------------------------------- public entry point
@@ -127,7 +131,8 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
             triggers one (smaller ones are removed by the final stretch).
         ipopt_options: IPOPT options overriding the defaults (``print_level=0``, ``sb="yes"``,
             ``max_iter=1000``, ``mumps_pivot_order=0``); ``print_time`` and other ``nlpsol``
-            options may be given in the same dict, or a nested ``{"ipopt": {...}}`` dict.
+            options may be given in the same dict, or a nested ``{"ipopt": {...}}`` dict; or a
+            :class:`~optplan.problem.nlp.SolverOptions`. Unknown options are an OptionError.
 
     Returns:
         QuarticSmoothingResult; failures (infeasible, iteration limit, solver exception) are
@@ -186,8 +191,9 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
     S = _check_int(samples_per_segment, "samples_per_segment", 2)
     max_ref = _check_int(max_refinements, "max_refinements", 0)
     tol = _check_positive(refine_tol, "refine_tol")
-    if ipopt_options is not None and not isinstance(ipopt_options, dict):
-        raise TypeError(f"ipopt_options: expected a dict of IPOPT options, got {type(ipopt_options).__name__}")
+    if ipopt_options is not None and not isinstance(ipopt_options, (dict, SolverOptions)):
+        raise TypeError(f"ipopt_options: expected a dict of IPOPT options or SolverOptions, got "
+                        f"{type(ipopt_options).__name__}")
 
     prob = _Problem(t0, h, X, v0v, a0v, vfv, vmax, amax, ee, ee_max, free_durations, _COSTS[cost],
                     float(time_weight), float(smooth_weight), S, slots=bool(refine))
@@ -211,18 +217,23 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         j_ws = (prob.objective(pp_ws) - prob.tw * float(h_ws.sum())) / prob.sw
         if j_ws > 0:
             prob.sw = prob.sw * float(h_ws.sum()) / j_ws
-    opts: Dict[str, Any] = {"print_time": False, "error_on_fail": False,
-                            "ipopt": {"print_level": 0, "sb": "yes", "max_iter": 1000, "mumps_pivot_order": 0}}
+    defaults: Dict[str, Any] = {"print_level": 0, "sb": "yes", "max_iter": 1000, "mumps_pivot_order": 0}
     if not free_durations and ee is None and ee_acceleration is None:
-        opts["ipopt"].update({"jac_c_constant": "yes", "jac_d_constant": "yes", "hessian_constant": "yes"})
-    top_level = set(ca.nlpsol_options("ipopt"))
-    for key, val in (ipopt_options or {}).items():
-        if key == "ipopt" and isinstance(val, dict):
-            opts["ipopt"].update(val)
-        elif key in top_level:
-            opts[key] = val
-        else:
-            opts["ipopt"][key[6:] if key.startswith("ipopt.") else key] = val
+        defaults.update({"jac_c_constant": "yes", "jac_d_constant": "yes", "hessian_constant": "yes"})
+    casadi_opts: Dict[str, Any] = {"error_on_fail": False}
+    if isinstance(ipopt_options, SolverOptions):
+        sopts = ipopt_options
+    else:
+        top_level = set(ca.nlpsol_options("ipopt"))
+        raw: Dict[str, Any] = {}
+        for key, val in (ipopt_options or {}).items():
+            if key == "ipopt" and isinstance(val, dict):
+                raw.update(val)
+            elif key in top_level:
+                casadi_opts[key] = val
+            else:
+                raw[key[6:] if key.startswith("ipopt.") else key] = val
+        sopts = SolverOptions(raw=raw)
 
     # slots start at the worst points of the warm start (plus two neighbours)
     delta = 0.25 / (S - 1)
@@ -237,27 +248,29 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
     if free_durations:
         lbx[-m:], ubx[-m:] = hmin, hmax
     iterations, refinements, stretch = 0, 0, 1.0
+    attempts = []
     status, success = "Not_Solved", False
     pp, h_out = pp_ws, h_ws.copy()
     last_good: Optional[Tuple[PiecewisePolynomial, np.ndarray, str]] = None
     try:
         nlp, lbg, ubg = prob.build(h)
-        solver = ca.nlpsol("quartic_smoothing", "ipopt", nlp, opts)
+        solver = NlpSolver("quartic_smoothing", nlp, sopts, defaults=defaults, casadi_options=casadi_opts)
     except Exception as exc:  # noqa: BLE001 - a failed solve is a status, not an exception
         _log.debug("quartic smoothing: building the NLP raised %s", exc)
         solver, status = None, f"Exception: {type(exc).__name__}: {exc}"
     for rnd in range(max_ref + 1 if solver is not None else 0):
-        try:
-            sol = solver(x0=x0, p=prob.pack_slots(slots), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
-            stats = dict(solver.stats())
-        except Exception as exc:  # noqa: BLE001
-            _log.debug("quartic smoothing: solver raised %s", exc)
-            status, success = f"Exception: {type(exc).__name__}: {exc}", False
+        out = solver.solve(x0, p=prob.pack_slots(slots), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
+                           label="solve" if rnd == 0 else f"refinement {rnd}")
+        attempts.append(out.summary())
+        if out.iterations < 0 and out.message:  # the solver raised
+            _log.debug("quartic smoothing: solver raised %s", out.message)
+            status, success = f"Exception: RuntimeError: {out.message}", False
             break
+        stats = solver.stats()
         status = str(stats.get("return_status", "Unknown"))
         success = bool(stats.get("success", False))
-        iterations += int(stats.get("iter_count", 0))
-        w = np.asarray(sol["x"], float).ravel()
+        iterations += max(int(out.iterations), 0)
+        w = np.array(out.x, float)
         if not success and last_good is not None:  # a refinement round failed: keep the last good solution
             _log.debug("quartic smoothing: refinement round failed with %s, keeping the previous solution", status)
             pp, h_out, status = last_good
@@ -269,7 +282,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
             break
         last_good = (pp, h_out, status)
         moved = 0
-        lam = np.abs(np.asarray(sol["lam_g"], float).ravel())
+        lam = np.abs(np.asarray(out.lam_g, float))
         for name, (excess, loc, ratio) in prob.limit_violations(pp).items():
             bad = (ratio > 1.0 + tol) & (excess > 0.0)
             if np.any(bad):
@@ -304,4 +317,4 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
     return QuarticSmoothingResult(success=success, status=status, iterations=iterations,
                                   wall_time=time.perf_counter() - t_start, spline=pp, durations=h_out,
                                   max_constraint_violation=prob.max_violation(pp), objective=prob.objective(pp),
-                                  refinements=refinements, stretch=stretch)
+                                  refinements=refinements, stretch=stretch, attempts=tuple(attempts))

@@ -10,7 +10,10 @@ moving bodies. Nothing else: no velocities, accelerations, jerks or integration 
 
 * **Joint limits** hold on the control points, hence everywhere in between (convex hull).
 * **Velocity limits** hold on the velocity control points ``(P_{i+1} − P_i)/h``: linear rows,
-  again valid between the knots.
+  again valid between the knots. Only the entries the initial guess brings near the limit
+  (``velocity_activation``) get a row; :meth:`SplineSegmentProblem.velocity_violations` checks all
+  of them after a solve and :meth:`~SplineSegmentProblem.add_velocity_rows` adds what was missed
+  (each row is one more row of every KKT system IPOPT factorizes).
 * **Closed chain** at the interior knots (the same singularity-free pose residual as
   :class:`~optplan.problem.ClosedChain`: 6 equality rows and ``trace ≥ 1`` per knot).
 * **Collision avoidance**: each active (pair, knot) gets a separating plane whose unit normal ``n``
@@ -48,7 +51,7 @@ from .bspline import boundary_points, fit_interior, jerk_integral_reference, kno
 from .collision_term import CollisionAvoidance, _box_vertices, witness_plane
 from .frame_terms import ClosedChain
 from .kernels import KernelCache, geometry_points
-from .solution import IpoptStatus, Solution
+from .solution import Solution
 from .terms import NumericTrajectory
 
 __all__ = ["KernelCache", "SegmentSpec", "SplineSegmentProblem"]
@@ -71,12 +74,15 @@ class SegmentSpec:
     velocity_limit [rad/s]; margin [m]: clearance of every active collision pair;
     object_arm: the arm whose hand carries the scene's object (None: the first grasp's arm);
     activation [m], window [knots]: collision pairs closer than ``activation`` along the initial
-    guess are constrained at the knots within ``window`` (as :class:`CollisionAvoidance`).
+    guess are constrained at the knots within ``window`` (as :class:`CollisionAvoidance`);
+    velocity_activation [fraction of the limit, 0-1]: a velocity control point's entry gets a row
+    when the initial guess's exceeds this fraction of the joint's limit (0: every entry);
     relax_to_guess: a pair's margin is at most half the guess's exact clearance within ``window``
     knots of every knot where a collision-free guess runs closer than ``margin`` (False: only next
-    to the pinned configurations; a colliding guess keeps the margin). A planner's path may pass closer than the margin where nothing wider fits
-    (measured: a wrist 10 mm from its forearm under a 20 mm margin, the closed chain leaving no room
-    to widen it: IPOPT ran 250 iterations into its time cap; relaxed: 18 iterations, verified)."""
+    to the pinned configurations; a colliding guess keeps the margin). A planner's path may pass
+    closer than the margin where nothing wider fits (measured: a wrist 10 mm from its forearm under
+    a 20 mm margin, the closed chain leaving no room to widen it: IPOPT ran 250 iterations into its
+    time cap; relaxed: 18 iterations, verified)."""
 
     n_intervals: int
     duration: float
@@ -90,12 +96,13 @@ class SegmentSpec:
     object_arm: str | None = None
     activation: float = 0.15
     window: int = 3
+    velocity_activation: float = 0.5
     relax_to_guess: bool = True
 
 
 @dataclass
 class _Built:
-    solver: ca.Function
+    solver: SimpleNamespace  # the symbolic structure and its IPOPT instances (KernelCache.structure)
     lbx: np.ndarray
     ubx: np.ndarray
     lbg: np.ndarray
@@ -131,12 +138,17 @@ class SplineSegmentProblem:
         self.vlim = robot.velocity_limit.copy() if spec.velocity_limit is None else np.broadcast_to(
             np.asarray(spec.velocity_limit, float), (nj,)).copy()
         self.fixed = frozenset(np.flatnonzero(self.lower == self.upper).tolist())
+        va = spec.velocity_activation
+        if isinstance(va, bool) or not isinstance(va, (int, float, np.integer, np.floating)) or not 0 <= va <= 1:
+            raise ValueError(f"velocity_activation: expected a fraction of the limit in [0, 1], got {va!r}")
+        self._vel_extra: set[int] = set()  # velocity entries added after a solve (add_velocity_rows)
         self.col = None
         if scene is not None:
+            # the term's per-build data (checker, shapes, active pairs): a CollisionModel
             self.col = CollisionAvoidance(scene, margin=spec.margin, activation=spec.activation,
-                                          window=spec.window, object_arm=spec.object_arm, fixed_normals=True)
-            self.col._setup(robot)
-            for g, shape in self.col._robot_shape.items():  # refuse unsupported geometry now, by name
+                                          window=spec.window, object_arm=spec.object_arm,
+                                          fixed_normals=True).model(robot)
+            for g, shape in self.col.robot_shape.items():  # refuse unsupported geometry now, by name
                 if shape is None:
                     geometry_points(robot, g)
         self._X0: np.ndarray | None = None  # interior control points (N−3) × nj
@@ -145,6 +157,11 @@ class SplineSegmentProblem:
         self._plan = None
         #: use the kernel-assembled Jacobian and Hessian (False: CasADi's own AD of the whole graph)
         self.exact_derivatives = True
+        #: kernels evaluated from C compiled once per robot and kept in the disk cache
+        #: (:meth:`KernelCache.compiled`): True — compile what is missing (about a second of the
+        #: C compiler per kernel, once); "auto" — use what an earlier run compiled, else the
+        #: symbolic kernels; False — the symbolic kernels only
+        self.compile_kernels: bool | str = "auto"
         #: [m] a moving box keeps the rows of the vertices within this distance of its leading
         #: vertex along a plane's normal (``inf``: every vertex; see :meth:`_prune`)
         self.vertex_window = 0.5
@@ -250,10 +267,10 @@ class SplineSegmentProblem:
             return None, M.rotation @ V + M.translation[:, None], r
         if kind == "object":
             V = np.array(_box_vertices(np.asarray(col.checker.object.size) / 2)).T
-            G = col._grasp_inv
+            G = col.grasp_inv
             fid, V, r = self.robot.arm(holder).ee_frame_id, G.rotation @ V + G.translation[:, None], 0.0
         else:
-            spec = col._robot_shape.get(idx)
+            spec = col.robot_shape.get(idx)
             if spec is None:
                 fid, V, r = geometry_points(self.robot, idx)
                 return self._static_or_moving(kind, idx, fid, V, r)
@@ -268,7 +285,7 @@ class SplineSegmentProblem:
         return self._static_or_moving(kind, idx, fid, V, r)
 
     def _static_or_moving(self, kind: str, idx: int, fid: int, V: np.ndarray, r: float):
-        if self.col._free_joints_of(self.robot, kind, idx, self.fixed) == set():
+        if self.col.free_joints_of(self.robot, kind, idx, self.fixed) == set():
             M = self._static_placement(fid)
             return None, M.rotation @ V + M.translation[:, None], r
         return fid, V, r
@@ -308,9 +325,9 @@ class SplineSegmentProblem:
             return []
         robot, N = self.robot, self.N
         traj = NumericTrajectory(robot, Qk, Qk, Qk, Qk[:-1], self.T)
-        active = col._activate(robot, traj)
+        active = col.activate(robot, traj)
         pinned = {0: self.q0, N: self.q1}
-        const = [p for p in active if col._is_constant(robot, p, self.fixed)]
+        const = [p for p in active if col.is_constant(robot, p, self.fixed)]
         active = [p for p in active if p not in const]
         col.active_pairs = active
         col.constant_pairs = const
@@ -318,13 +335,13 @@ class SplineSegmentProblem:
         holder = col.checker.object_arm
         plan = []
         for pair in active:
-            ka, kb = col._kinds(pair)
+            ka, kb = col.kinds(pair)
             ea, eb = self._entity(ka, pair.a, holder), self._entity(kb, pair.b, holder)
             if ea is None or eb is None:
                 continue
             if ea[0] is None and eb[0] is None:
                 continue  # both static: constant distance, checked by verify
-            ks = [k for k in col._knots_of(pair, N) if k not in pinned]
+            ks = [k for k in col.knots_of(pair, N) if k not in pinned]
             if not ks:
                 continue
             flip = ea[0] is None
@@ -371,7 +388,7 @@ class SplineSegmentProblem:
                 per_knot.setdefault(k, []).append((i, t))
         out = [(np.zeros((3, len(it.knots))), np.zeros(len(it.knots))) for it in plan]
         for k, items in per_knot.items():
-            Mo = col.checker._update(Qk[k])
+            Mo = col.checker.update_placements(Qk[k])
             import coal
             obj_tf = coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None
             for i, t in items:
@@ -387,15 +404,73 @@ class SplineSegmentProblem:
 
     # ------------------------------------------------------------------ build
     def _build(self) -> _Built:
+        """Numeric data of the NLP (collision plan, plane parameters, row bounds, boundary control
+        points, objective weight) for the current initial guess, and its symbolic structure —
+        taken from the robot's :class:`KernelCache` when an NLP of the same shape (N, rows, pairs
+        and knots) was built before in this process, so that only the numbers change."""
         if self._X0 is None:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_path(...) first")
         t0 = time.perf_counter()
         N, nj, h = self.N, self.robot.nj, self.h
         Qk0 = self.knot_configurations()
         plan = self._plan_collision(Qk0)
+        planes = self._plane_data(plan, Qk0)
+        self._kernels_for(plan, planes, Qk0)
+        sel = self._velocity_entries()
+        ccfn = self.kernels.closed_chain(self.spec.closed_chain) if self.spec.closed_chain is not None else None
         nP = (N - 3) * nj
-        moving = [it for it in plan if not it.static]
-        nb = sum(len(it.knots) for it in moving)
+        # numbers: parameters (boundary points, plane normals, static supports, objective weight),
+        # row bounds in row order, initial plane offsets
+        pvals = [self.P_start.T.ravel(order="F"), self.P_end.T.ravel(order="F")]
+        lbg, ubg, x_b0 = [], [], []
+        if sel.size:
+            vb = np.tile(self.vlim * h, N - 2)[sel]
+            lbg.append(-vb)
+            ubg.append(vb)
+        if ccfn is not None:
+            lbg.append(np.tile(np.r_[np.zeros(6), 1.0], N - 1))
+            ubg.append(np.tile(np.r_[np.zeros(6), np.inf], N - 1))
+        for it, (Nrm, s0) in zip(plan, planes):
+            pvals.append(Nrm.ravel(order="F"))
+            if it.static:
+                pvals.append(np.asarray(s0, float).ravel())
+                lbg.append(np.repeat(it.margins, it.nrow))
+            else:
+                x_b0.append(s0)
+                lbg.append(np.repeat(it.margins / 2, it.nrow))
+            ubg.append(np.full(len(it.knots) * it.nrow, np.inf))
+        fref = jerk_integral_reference(self.q0, self.q1, self.T)
+        self._scale = scale = 1.0 / fref if fref > 0 else 1.0
+        pvals.append([scale / h**5])  # ∫‖j‖² dt = h Σ ‖ΔP³/h³‖², scaled to order 1
+        evals = {fn.name(): self.kernels.evaluators(fn, self.compile_kernels)
+                 for fn in ([ccfn] if ccfn is not None else []) + [it.fn for it in plan]}
+        key = (N, nj, sel.tobytes(), None if ccfn is None else ccfn.name(), self.exact_derivatives,
+               tuple((it.fn.name(), tuple(it.knots), it.static) for it in plan),
+               tuple(sorted((name, c) for name, (_, c) in evals.items())))
+        st = self.kernels.structure(key, lambda: self._structure(sel, ccfn, plan, evals))
+        self._nlp, self._derivs = st.nlp, st.derivs
+        self._plan = plan
+        nb = st.nb
+        lbx = np.r_[np.tile(self.lower, N - 3), np.full(nb, -np.inf)]
+        ubx = np.r_[np.tile(self.upper, N - 3), np.full(nb, np.inf)]
+        self._xb0 = np.concatenate(x_b0) if x_b0 else np.zeros(0)
+        b = _Built(solver=st, lbx=lbx, ubx=ubx, lbg=np.concatenate(lbg) if lbg else np.zeros(0),
+                   ubg=np.concatenate(ubg) if ubg else np.zeros(0), p=np.concatenate(pvals),
+                   gfun=st.gfun, slices=st.slices)
+        if b.lbg.size != st.ng or b.p.size != st.np:
+            raise AssertionError(f"segment NLP: {b.lbg.size} row bounds / {b.p.size} parameters for a structure "
+                                 f"of {st.ng} rows / {st.np} parameters")
+        b.setup_time = time.perf_counter() - t0
+        self._built = b
+        self._nfree = nP
+        return b
+
+    def _structure(self, sel: np.ndarray, ccfn, plan: list, evals: dict) -> SimpleNamespace:
+        """The symbolic NLP of one shape: decision variables, parameters, rows in the order of
+        :meth:`_build`'s bounds, and the exact Jacobian / Hessian functions (:class:`Assembly`)."""
+        N, nj = self.N, self.robot.nj
+        nP = (N - 3) * nj
+        nb = sum(len(it.knots) for it in plan if not it.static)
         x = ca.MX.sym("x", nP + nb)
         Xs = ca.reshape(x[:nP], nj, N - 3)
         Bv = x[nP:]
@@ -403,69 +478,95 @@ class SplineSegmentProblem:
         P = ca.horzcat(Pstart, Xs, Pend)  # nj × (N+3)
         Qk = ca.mtimes(P, _sparse(self.M["q"].T))  # nj × (N+1)
         params = [Pstart, Pend]
-        pvals = [self.P_start.T.ravel(order="F"), self.P_end.T.ravel(order="F")]
         asm = Assembly(N, nj, nP + nb)
-        # velocity control points touching a free point (convex hull: q̇ bounded everywhere)
-        dP = ca.mtimes(P, _sparse(self.M["dP"].T[:, 2:N]))
-        vb = np.tile((self.vlim * h)[:, None], (1, N - 2)).ravel(order="F")
-        asm.linear("velocity_limits", ca.vec(dP), self.M["dP"][2:N], -vb, vb)
+        if sel.size:  # velocity control points touching a free point (convex hull: q̇ bounded everywhere)
+            dP = ca.vec(ca.mtimes(P, _sparse(self.M["dP"].T[:, 2:N])))
+            asm.linear("velocity_limits", dP[sel.tolist()], self.M["dP"][2:N], 0.0, 0.0, select=sel)
         fams = []
-        if self.spec.closed_chain is not None:
-            fams.append(("closed_chain", self.kernels.closed_chain(self.spec.closed_chain), list(range(1, N)),
-                         ca.DM.zeros(3, N - 1), ca.DM.zeros(1, N - 1), None,
-                         np.tile(np.r_[np.zeros(6), 1.0], N - 1), np.tile(np.r_[np.zeros(6), np.inf], N - 1)))
+        if ccfn is not None:
+            fams.append(("closed_chain", ccfn, list(range(1, N)), ca.DM.zeros(3, N - 1), ca.DM.zeros(1, N - 1), None))
         bi = 0
-        x_b0 = []
-        planes = self._plane_data(plan, Qk0)
-        self._kernels_for(plan, planes, Qk0)
-        for it, (Nrm, s0) in zip(plan, planes):
+        for it in plan:
             K = len(it.knots)
             Np = ca.MX.sym("n", 3, K)
             params.append(Np)
-            pvals.append(Nrm.ravel(order="F"))
+            name = f"collision:{it.pair.name_a}|{it.pair.name_b}"
             if it.static:
                 Sp = ca.MX.sym("s", 1, K)
                 params.append(Sp)
-                pvals.append(s0)
-                fams.append((f"collision:{it.pair.name_a}|{it.pair.name_b}", it.fn, it.knots, Np, Sp, None,
-                             np.repeat(it.margins, it.nrow), np.inf))
+                fams.append((name, it.fn, it.knots, Np, Sp, None))
             else:
                 ma = it.a[1].shape[1]
                 sign = np.r_[np.ones(ma), -np.ones(it.nrow - ma)]
-                fams.append((f"collision:{it.pair.name_a}|{it.pair.name_b}", it.fn, it.knots, Np,
-                             Bv[bi:bi + K].T, (nP + bi, sign), np.repeat(it.margins / 2, it.nrow), np.inf))
-                x_b0.append(s0)
+                fams.append((name, it.fn, it.knots, Np, Bv[bi:bi + K].T, (nP + bi, sign)))
                 bi += K
-        for name, fn, knots, Nin, Sin, bcoup, lo, hi in fams:
-            jfn, hfn = self.kernels.derivatives(fn)
-            asm.family(name, fn, jfn, hfn, knots, Qk[:, knots], Nin, Sin, bcoup, lo, hi)
+        for name, fn, knots, Nin, Sin, bcoup in fams:
+            (f, jfn, hfn), _ = evals[fn.name()]
+            asm.family(name, f, jfn, hfn, knots, Qk[:, knots], Nin, Sin, bcoup, 0.0, 0.0)
+        w = ca.MX.sym("w")  # objective weight: scale / h⁵
+        params.append(w)
         p = ca.vertcat(*[ca.vec(a) for a in params])
         Jm = self.M["jerk"]
-        fref = jerk_integral_reference(self.q0, self.q1, self.T)
-        self._scale = scale = 1.0 / fref if fref > 0 else 1.0
-        J = ca.mtimes(P, _sparse(Jm.T))
-        f = scale * ca.sumsqr(J) / h**5  # ∫‖j‖² dt = h Σ ‖ΔP³/h³‖², scaled
-        Hj = 2 * scale / h**5 * (Jm[:, 3:N].T @ Jm[:, 3:N])  # per joint, over the free points
+        f = w * ca.sumsqr(ca.mtimes(P, _sparse(Jm.T)))
+        Hj = 2 * (Jm[:, 3:N].T @ Jm[:, 3:N])  # per joint, over the free points (times w)
         lam_f = ca.MX.sym("lam_f")
         lam_g = ca.MX.sym("lam_g", asm.ng)
-        G, Jg, Hl = asm.finish(x, lam_f, lam_g, Hj)
-        self._nlp = {"x": x, "p": p, "f": f, "g": G}
-        self._derivs = {"jac_g": ca.Function("jac_g", [x, p], [G, Jg], ["x", "p"], ["g", "jac_g_x"]),
-                        "hess_lag": ca.Function("hess_lag", [x, p, lam_f, lam_g], [Hl],
-                                                ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])}
-        self._plan = plan
-        lbx = np.r_[np.tile(self.lower, N - 3), np.full(nb, -np.inf)]
-        ubx = np.r_[np.tile(self.upper, N - 3), np.full(nb, np.inf)]
-        self._xb0 = np.concatenate(x_b0) if x_b0 else np.zeros(0)
-        b = _Built(solver=None, lbx=lbx, ubx=ubx, lbg=asm.lbg, ubg=asm.ubg, p=np.concatenate(pvals),
-                   gfun=ca.Function("g", [x, p], [G]), slices=asm.slices)
-        b.setup_time = time.perf_counter() - t0
-        self._built = b
-        self._nfree = nP
-        return b
+        G, Jg, Hl = asm.finish(x, lam_f * w, lam_g, Hj)
+        derivs = {"jac_g": ca.Function("jac_g", [x, p], [G, Jg], ["x", "p"], ["g", "jac_g_x"]),
+                  "hess_lag": ca.Function("hess_lag", [x, p, lam_f, lam_g], [Hl],
+                                          ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])}
+        return SimpleNamespace(nlp={"x": x, "p": p, "f": f, "g": G}, derivs=derivs, gfun=ca.Function("g", [x, p], [G]),
+                               slices=asm.slices, points=asm.points, ng=asm.ng, np=p.shape[0], nb=nb, solvers={})
 
     def rebuild(self) -> None:
         """Rebuild at the next solve (after ``add_activation`` or ``boost_between_knots``)."""
+        self._built = None
+
+    # ------------------------------------------------------------------ velocity rows
+    def _velocity_cp(self, X) -> np.ndarray:
+        """Velocity control points [rad/s] touching a free point, (N−2) × nj."""
+        return self.M["dP"][2:self.N] @ self._P(X) / self.h
+
+    def _fast_entries(self, X) -> set:
+        """Entries ``i·nj + j`` of the velocity control points of ``X`` past ``velocity_activation``
+        of their joint's limit (fixed joints excluded)."""
+        on = np.abs(self._velocity_cp(X)) >= self.spec.velocity_activation * self.vlim
+        on[:, sorted(self.fixed)] = False
+        return set(np.flatnonzero(on.ravel()).tolist())
+
+    def _velocity_entries(self) -> np.ndarray:
+        """Entries of the velocity control points that get a row: those the initial guess drives
+        past ``velocity_activation`` of the limit, plus those added after a solve."""
+        return np.array(sorted(self._fast_entries(self._X0) | self._vel_extra), int)
+
+    def activate_velocity(self, solution: Solution) -> int:
+        """Add the rows of every velocity entry of ``solution`` past ``velocity_activation`` of its
+        limit (the violators among them) for the next solve; returns how many rows are new."""
+        if solution.x is None:
+            return 0
+        new = self._fast_entries(np.asarray(solution.x)[:(self.N - 3) * self.robot.nj]) - self._vel_extra
+        new -= set(self._velocity_entries().tolist())
+        self.add_velocity_rows(sorted(new))
+        return len(new)
+
+    def velocity_violations(self, solution: Solution, tol: float = 1e-9) -> np.ndarray:
+        """Entries (``i·nj + j``) of the velocity control points of ``solution`` that have no row
+        and exceed the joint speed limit by more than ``tol`` [rad/s] — what the lazy selection
+        missed (entries with a row hold to the solver's constraint tolerance). Empty: q̇ is within
+        its limits everywhere."""
+        if solution.x is None:
+            return np.zeros(0, int)
+        V = np.abs(self._velocity_cp(np.asarray(solution.x)[:(self.N - 3) * self.robot.nj]))
+        over = np.flatnonzero((V - self.vlim > tol).ravel())
+        return np.setdiff1d(over, self._velocity_entries())
+
+    def add_velocity_rows(self, entries) -> None:
+        """Constrain these velocity entries (from :meth:`velocity_violations`) at the next solve."""
+        n = (self.N - 2) * self.robot.nj
+        e = np.asarray(entries, int).ravel()
+        if e.size and (e.min() < 0 or e.max() >= n):
+            raise ValueError(f"add_velocity_rows: entries must lie in [0, {n}), got {e.min()}..{e.max()}")
+        self._vel_extra |= set(e.tolist())
         self._built = None
 
     def add_activation(self, q_knots: np.ndarray) -> None:
@@ -484,49 +585,66 @@ class SplineSegmentProblem:
         self._built = None
         return self.col.boost_between_knots(traj_t, traj_q, knot_t)
 
+    def infeasibilities(self, solution: Solution, n: int = 10) -> list:
+        """The ``n`` worst constraint rows of ``solution`` (a solve of this problem), worst first,
+        as :class:`~optplan.problem.evaluate.Infeasibility`: row family (``velocity_limits``,
+        ``closed_chain``, ``collision:A|B``), row within it, knot (None for velocity rows),
+        value, bounds and violation (≥ 0; rad·h for velocity rows, m and rad otherwise)."""
+        from .evaluate import Infeasibility
+
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise ValueError(f"infeasibilities: n: expected an integer ≥ 0, got {n!r}")
+        b = self._built
+        if b is None or solution.x is None or np.asarray(solution.x).size != b.lbx.size:
+            raise ValueError("infeasibilities: the solution was not produced by this problem's last build; "
+                             "solve this problem and pass its solution")
+        g = np.array(b.gfun(np.asarray(solution.x), b.p)).ravel()
+        viol = np.maximum(np.maximum(b.lbg - g, g - b.ubg), 0.0)
+        out = []
+        for i in np.argsort(-viol, kind="stable")[:int(n)]:
+            if not viol[i] > 0:
+                break
+            name, sl = next((k, v) for k, v in b.slices.items() if v.start <= i < v.stop)
+            row = int(i - sl.start)
+            pts = b.solver.points.get(name)
+            point = None if pts is None else int(pts[1][row // pts[0]])
+            out.append(Infeasibility(name, row, point, float(g[i]), float(b.lbg[i]), float(b.ubg[i]), float(viol[i])))
+        return out
+
     # ------------------------------------------------------------------ solve
     def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-6, max_iter: int = 500) -> Solution:
         """Solve with IPOPT (exact Hessian, MUMPS). Never raises for a failed solve: the status is
         in the Solution. ``ipopt_options`` are passed through (``"ipopt."`` prefix optional)."""
-        from ..solver_options import casadi_option_name, check_ipopt_options, check_solve_arguments
+        from ..solver_options import check_solve_arguments
+        from .nlp import NlpSolver, SolverOptions
 
         check_solve_arguments(tol, max_iter, 1.0)
+        sopts = SolverOptions.coerce(ipopt_options)  # an invalid option is an OptionError before the solve
+        b = self._built or self._build()  # its time is charged to this solve's setup_time
         t_setup = time.perf_counter()
-        b = self._built or self._build()
-        if b.solver is None:
-            check_ipopt_options(ipopt_options)  # an invalid option is an OptionError before the solve
-            # jacobian_regularization_value: IPOPT's constraint regularisation, used only when it
-            # finds the Jacobian rank-deficient (docs/optproblem.md: a long segment on 136 intervals
-            # went from 339 iterations without convergence to 19 with it)
-            opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": tol,
-                    "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
+        st = b.solver
+        # jacobian_regularization_value: IPOPT's constraint regularisation, used only when it
+        # finds the Jacobian rank-deficient (docs/optproblem.md: a long segment on 136 intervals
+        # went from 339 iterations without convergence to 19 with it)
+        defaults = {"ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
                     "ipopt.mu_strategy": "adaptive", "ipopt.max_iter": int(max_iter),
                     "ipopt.jacobian_regularization_value": 1e-6}
-            for k, v in (ipopt_options or {}).items():
-                opts[casadi_option_name(k)] = v
+        okey = repr(sorted(sopts.casadi_options(defaults).items()))
+        setup = time.perf_counter() - t_setup + b.setup_time   # the NlpSolver adds its own creation time
+        b.setup_time = 0.0
+        solver = st.solvers.get(okey)
+        if solver is None:  # one IPOPT instance per shape and options, reused by later solves
+            extra = {}
             if self.exact_derivatives:
                 # the kernels may be compiled (no derivatives of their own): IPOPT's multipliers
                 # are used as they are, not recomputed from a gradient of the Lagrangian
-                opts.update(self._derivs)
-                opts.update({"no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
-                             "calc_f": False, "calc_g": False})
-            b.solver = ca.nlpsol("segment", "ipopt", self._nlp, opts)
-        setup = time.perf_counter() - t_setup + (b.setup_time if b.setup_time else 0.0)
-        b.setup_time = 0.0
+                extra = {**st.derivs, "no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
+                         "calc_f": False, "calc_g": False}
+            solver = st.solvers[okey] = NlpSolver("segment", st.nlp, sopts, defaults=defaults, casadi_options=extra)
         x0 = np.r_[self._X0.ravel(), self._xb0]
-        t0 = time.perf_counter()
-        try:
-            out = b.solver(x0=x0, p=b.p, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg)
-            stats = b.solver.stats()
-            status = IpoptStatus.from_string(stats.get("return_status", "Unknown"))
-            x = np.array(out["x"]).ravel()
-            lam_g = np.array(out["lam_g"]).ravel()
-            iters = int(stats.get("iter_count", -1))
-            cost = float(out["f"]) / self._scale
-        except RuntimeError as exc:
-            log.warning("IPOPT raised: %s", exc)
-            status, x, lam_g, iters, cost = IpoptStatus.INTERNAL_ERROR, x0.copy(), None, -1, float("nan")
-        wall = time.perf_counter() - t0
+        out = solver.solve(x0, p=b.p, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg, cost_scale=self._scale,
+                           extra_setup=setup)
+        status, x, lam_g, iters, cost, wall = out.status, np.array(out.x), out.lam_g, out.iterations, out.cost, out.wall_time
         gval = np.array(b.gfun(x, b.p)).ravel()
         viol_vec = np.maximum(np.maximum(b.lbg - gval, gval - b.ubg), 0.0)
         viol = float(viol_vec.max()) if viol_vec.size else 0.0
@@ -543,4 +661,5 @@ class SplineSegmentProblem:
         return Solution(success=success, status=status, iterations=iters, wall_time=wall, cost=cost,
                         max_constraint_violation=viol, terms=terms, t=np.linspace(0.0, self.T, self.N + 1),
                         q=kv["q"], qd=kv["qd"], qdd=kv["qdd"], jerk=kv["jerk"],
-                        joint_names=self.robot.joint_names, setup_time=setup, x=x, lam_g=lam_g)
+                        joint_names=self.robot.joint_names, setup_time=out.setup_time, cpu_time=out.cpu_time, x=x,
+                        lam_g=lam_g, attempts=(out,))

@@ -1,68 +1,41 @@
 """`Solution`: what `OptProblem.solve` returns — always, whether IPOPT succeeded or not."""
 from __future__ import annotations
 
+import dataclasses
 import json
+import types
 from dataclasses import dataclass, field
-from enum import Enum
 from pathlib import Path
 
 import numpy as np
 
+from .nlp import IpoptStatus, SolveOutcome
+
 __all__ = ["IpoptStatus", "Solution"]
 
-
-class IpoptStatus(str, Enum):
-    """IPOPT's return status (``solver.stats()["return_status"]``), plus optplan's own failures."""
-
-    SOLVE_SUCCEEDED = "Solve_Succeeded"
-    SOLVED_TO_ACCEPTABLE_LEVEL = "Solved_To_Acceptable_Level"
-    INFEASIBLE_PROBLEM_DETECTED = "Infeasible_Problem_Detected"
-    SEARCH_DIRECTION_BECOMES_TOO_SMALL = "Search_Direction_Becomes_Too_Small"
-    DIVERGING_ITERATES = "Diverging_Iterates"
-    USER_REQUESTED_STOP = "User_Requested_Stop"
-    FEASIBLE_POINT_FOUND = "Feasible_Point_Found"
-    MAXIMUM_ITERATIONS_EXCEEDED = "Maximum_Iterations_Exceeded"
-    RESTORATION_FAILED = "Restoration_Failed"
-    ERROR_IN_STEP_COMPUTATION = "Error_In_Step_Computation"
-    MAXIMUM_CPUTIME_EXCEEDED = "Maximum_CpuTime_Exceeded"
-    MAXIMUM_WALLTIME_EXCEEDED = "Maximum_WallTime_Exceeded"
-    NOT_ENOUGH_DEGREES_OF_FREEDOM = "Not_Enough_Degrees_Of_Freedom"
-    INVALID_PROBLEM_DEFINITION = "Invalid_Problem_Definition"
-    INVALID_OPTION = "Invalid_Option"
-    INVALID_NUMBER_DETECTED = "Invalid_Number_Detected"
-    UNRECOVERABLE_EXCEPTION = "Unrecoverable_Exception"
-    NONIPOPT_EXCEPTION_THROWN = "NonIpopt_Exception_Thrown"
-    INSUFFICIENT_MEMORY = "Insufficient_Memory"
-    INTERNAL_ERROR = "Internal_Error"
-    UNKNOWN = "Unknown"
-
-    @classmethod
-    def from_string(cls, s: str) -> "IpoptStatus":
-        for m in cls:
-            if m.value.lower() == str(s).lower():
-                return m
-        return cls.UNKNOWN
-
-    @property
-    def succeeded(self) -> bool:
-        return self in (IpoptStatus.SOLVE_SUCCEEDED, IpoptStatus.SOLVED_TO_ACCEPTABLE_LEVEL)
-
-    @property
-    def infeasible(self) -> bool:
-        return self in (IpoptStatus.INFEASIBLE_PROBLEM_DETECTED, IpoptStatus.RESTORATION_FAILED)
+_ARRAYS = ("t", "q", "qd", "qdd", "jerk", "base_quat", "base_position", "x", "lam_g", "lam_x")
 
 
-@dataclass
+@dataclass(frozen=True)
 class Solution:
-    """Result of a trajectory NLP.
+    """Result of a trajectory NLP (immutable: fields cannot be reassigned, arrays are read-only).
 
     ``success`` is True only when IPOPT converged *and* the maximum constraint violation is below
-    the problem's tolerance. ``wall_time`` [s] is the IPOPT run; ``setup_time`` [s] the NLP
-    construction and solver creation that preceded it (0 when a built solver was reused). ``t`` [s] (N+1,), ``q`` [rad] (N+1, nj), ``qd``, ``qdd``, ``jerk`` (N, nj);
+    the problem's tolerance. ``status``, ``iterations``, ``wall_time`` [s] (the IPOPT run),
+    ``cpu_time`` [s] and ``setup_time`` [s] (NLP construction and solver creation before it; 0
+    when a built solver was reused) describe the run that produced this trajectory; ``attempts``
+    lists every run that led to it, in order (:class:`~optplan.problem.nlp.SolveOutcome`:
+    status, iterations, times, label — e.g. a pipeline's retries), this one last; the totals are
+    :attr:`total_iterations`, :attr:`total_wall_time`, :attr:`total_setup_time`.
+    ``t`` [s] (N+1,), ``q`` [rad] (N+1, nj), ``qd``, ``qdd``, ``jerk`` (N, nj);
     ``base_quat`` (N+1, 4) and ``base_position`` (N+1, 3) for a floating robot. ``terms`` maps each
     named term to its value (cost terms: weighted cost; constraints: max violation), plus
     ``"dynamics"``: the max violation of the transcription's own constraints (integration,
     momentum, base attitude).
+
+    A Solution returned by :meth:`OptProblem.solve` evaluates the problem's terms through their
+    handles: :meth:`value`, :meth:`violation`, :meth:`dual`, :meth:`sample` (a loaded Solution
+    has no problem attached and refuses these with a clear error).
     """
 
     success: bool
@@ -71,7 +44,7 @@ class Solution:
     wall_time: float
     cost: float
     max_constraint_violation: float
-    terms: dict[str, float]
+    terms: dict[str, float]  # read-only mapping
     t: np.ndarray
     q: np.ndarray
     qd: np.ndarray
@@ -86,8 +59,29 @@ class Solution:
     lam_x: np.ndarray | None = field(default=None, repr=False)
     #: the transcription's nominal interval h₀ [s] that scales ``x`` (q̇ h₀, q̈ h₀², j h₀³)
     x_scale_h: float | None = None
+    cpu_time: float = 0.0  # [s] CPU time of the IPOPT run
+    #: every solve that led to this solution, in order (this one last); summaries without arrays
+    attempts: tuple = ()
+    #: the built problem's term evaluator (not saved); see value/violation/dual/sample
+    evaluator: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731  (frozen: only here)
+        if not isinstance(self.status, IpoptStatus):
+            set_("status", IpoptStatus.from_string(self.status))
+        set_("joint_names", tuple(self.joint_names))
+        set_("terms", types.MappingProxyType({str(k): float(v) for k, v in dict(self.terms).items()}))
+        for k in _ARRAYS:
+            a = getattr(self, k)
+            if a is not None:
+                a = np.array(a)
+                a.flags.writeable = False
+                set_(k, a)
+        if not self.attempts:
+            set_("attempts", (SolveOutcome(self.status, int(self.iterations), float(self.wall_time),
+                                           float(self.cpu_time), float(self.setup_time), float(self.cost)),))
+        else:
+            set_("attempts", tuple(a.summary() for a in self.attempts))
         # a Solution never claims success about data that fails its own checks
         if self.success:
             try:
@@ -96,9 +90,78 @@ class Solution:
                 import logging
 
                 logging.getLogger(__name__).error("Solution marked failed: %s", exc)
-                self.success = False
+                set_("success", False)
 
-    def check(self) -> None:
+    # ------------------------------------------------------------------ pickling (process pools)
+    def __getstate__(self):
+        d = dict(self.__dict__)
+        d["terms"] = dict(d["terms"])
+        d["evaluator"] = None        # the problem's CasADi functions stay in the process that solved it
+        return d
+
+    def __setstate__(self, d):
+        for k, v in d.items():
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "terms", types.MappingProxyType(dict(d["terms"])))
+        for k in _ARRAYS:
+            a = getattr(self, k, None)
+            if isinstance(a, np.ndarray):
+                a.flags.writeable = False
+
+    # ------------------------------------------------------------------ attempts
+    def after(self, *earlier: "Solution") -> "Solution":
+        """This solution with the attempts of ``earlier`` solutions (e.g. a pipeline's previous
+        retries, in order) listed before its own — nothing is added up."""
+        prev = tuple(a for s in earlier for a in s.attempts)
+        return dataclasses.replace(self, attempts=prev + self.attempts)
+
+    def labelled(self, label: str) -> "Solution":
+        """This solution with its own (last) attempt labelled (e.g. ``"collision retry"``)."""
+        att = self.attempts[:-1] + (self.attempts[-1].with_label(label),)
+        return dataclasses.replace(self, attempts=att)
+
+    @property
+    def total_iterations(self) -> int:
+        """IPOPT iterations summed over :attr:`attempts` (runs that did not start count 0)."""
+        return int(sum(max(a.iterations, 0) for a in self.attempts))
+
+    @property
+    def total_wall_time(self) -> float:
+        """IPOPT wall time [s] summed over :attr:`attempts`."""
+        return float(sum(a.wall_time for a in self.attempts))
+
+    @property
+    def total_setup_time(self) -> float:
+        """Setup time [s] summed over :attr:`attempts`."""
+        return float(sum(a.setup_time for a in self.attempts))
+
+    # ------------------------------------------------------------------ term handles
+    def _ev(self, what: str):
+        if self.evaluator is None:
+            raise ValueError(f"Solution.{what}: this solution carries no problem to evaluate terms with (it was "
+                             "loaded from a file or made by a solver without term handles); evaluate the term on the "
+                             "OptProblem that produced it")
+        return self.evaluator
+
+    def value(self, handle):
+        """The term's value at this solution: a constraint's residual rows (shaped per knot,
+        ``(points, rows per point)``, where the term is evaluated point by point), a cost's
+        weighted cost (float)."""
+        return self._ev("value").value(handle, self)
+
+    def violation(self, handle) -> np.ndarray:
+        """``max(lower − r, r − upper, 0)`` of a constraint's rows (≥ 0, shaped as :meth:`value`);
+        in the rows' physical units ([m], [rad], …)."""
+        return self._ev("violation").violation(handle, self)
+
+    def dual(self, handle) -> np.ndarray:
+        """The multipliers of a constraint's rows, shaped as :meth:`value`, as the sensitivity of
+        the optimal cost to the rows' active bound: ``∂f*/∂bound`` (≥ 0 for an active lower
+        bound, ≤ 0 for an active upper bound, 0 for an inactive row; Drake's convention; CasADi's
+        ``lam_g`` with the opposite sign)."""
+        return self._ev("dual").dual(handle, self)
+
+    def check(self, success: bool | None = None) -> None:
         """Raise :class:`~optplan.errors.ConfigurationError` when the arrays are inconsistent
         (shapes ``t`` (N+1,), ``q``/``qd``/``qdd`` (N+1, nj), ``jerk`` (N, nj), base arrays (N+1, 4/3)),
         non-finite, ``t`` not increasing, or ``success`` with a status that did not converge."""
@@ -123,9 +186,10 @@ class Solution:
                                          f"values (dtype {a.dtype})")
         if np.any(np.diff(t) <= 0):
             raise ConfigurationError(f"Solution.t: knot times must increase, got {t.tolist()[:8]}...")
-        if self.success and not self.status.succeeded:
+        claim = self.success if success is None else bool(success)
+        if claim and not self.status.succeeded:
             raise ConfigurationError(f"Solution: success with status {self.status.value!r}")
-        if self.success and not (np.isfinite(self.max_constraint_violation) and np.isfinite(self.cost)):
+        if claim and not (np.isfinite(self.max_constraint_violation) and np.isfinite(self.cost)):
             raise ConfigurationError(f"Solution: success with cost {self.cost} and max constraint violation "
                                      f"{self.max_constraint_violation}")
 
@@ -133,9 +197,15 @@ class Solution:
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0])
 
-    def sample(self, t) -> dict[str, np.ndarray]:
+    def sample(self, t, handle=None):
         """Joint position/velocity/acceleration at times ``t`` [s] — exact for the transcription
-        (piecewise cubic with constant jerk on each interval)."""
+        (piecewise cubic with constant jerk on each interval): ``{"t", "q", "qd", "qdd"}``.
+
+        With a term ``handle``: the term evaluated along the continuous trajectory at ``t``,
+        ``(len(t), rows per point)`` — the same quantity as :meth:`value` at the knots,
+        evaluated numerically (Pinocchio, coal) between them."""
+        if handle is not None:
+            return self._ev("sample").sample(handle, self, t)
         t = np.atleast_1d(np.asarray(t, float))
         if np.any(t < self.t[0] - 1e-12) or np.any(t > self.t[-1] + 1e-12):
             raise ValueError(f"sample: times must be in [{self.t[0]}, {self.t[-1]}] s, got "
@@ -165,8 +235,9 @@ class Solution:
     def _meta(self) -> dict:
         return {"success": self.success, "status": self.status.value, "iterations": self.iterations,
                 "wall_time": self.wall_time, "setup_time": self.setup_time, "cost": self.cost,
-                "max_constraint_violation": self.max_constraint_violation, "terms": self.terms,
-                "joint_names": list(self.joint_names), "x_scale_h": self.x_scale_h}
+                "max_constraint_violation": self.max_constraint_violation, "terms": dict(self.terms),
+                "joint_names": list(self.joint_names), "x_scale_h": self.x_scale_h, "cpu_time": self.cpu_time,
+                "attempts": [a.to_dict() for a in self.attempts]}
 
     def save(self, path: str | Path) -> Path:
         """Save as ``.npz`` (arrays + JSON metadata) or ``.json`` (everything as lists)."""
@@ -200,8 +271,7 @@ class Solution:
                 d = json.loads(path.read_bytes().decode("utf-8"))
                 if not isinstance(d, dict):
                     raise ResultFileError(f"{path}: expected a JSON object, got {type(d).__name__}")
-                arrays = {k: np.asarray(d[k], float) for k in ("t", "q", "qd", "qdd", "jerk", "base_quat",
-                                                               "base_position", "x", "lam_g", "lam_x") if k in d}
+                arrays = {k: np.asarray(d[k], float) for k in _ARRAYS if k in d}
                 meta = d
             else:
                 with np.load(path, allow_pickle=False) as z:
@@ -221,17 +291,19 @@ class Solution:
             success = meta["success"]
             if not isinstance(success, (bool, np.bool_)):
                 raise ResultFileError(f"{path}: success: expected true or false, got {success!r}")
-            sol = cls.__new__(cls)
-            sol.__init__(success=False, status=IpoptStatus.from_string(status),
-                         iterations=int(meta["iterations"]), wall_time=float(meta["wall_time"]),
-                         setup_time=float(meta.get("setup_time", 0.0)),
-                         cost=float(meta["cost"]), max_constraint_violation=float(meta["max_constraint_violation"]),
-                         terms={str(k): float(v) for k, v in dict(meta["terms"]).items()},
-                         joint_names=tuple(str(n) for n in meta["joint_names"]), x_scale_h=meta.get("x_scale_h"),
-                         **arrays)
-            sol.check()
-            sol.success = bool(success)
-            sol.check()   # success now claimed: status and figures must support it
+            attempts = meta.get("attempts") or ()   # files written before attempts were saved have none
+            if not isinstance(attempts, (list, tuple)) or not all(isinstance(a, dict) for a in attempts):
+                raise ResultFileError(f"{path}: attempts: expected a list of objects, got {attempts!r}")
+            sol = cls(success=False, status=IpoptStatus.from_string(status),
+                      iterations=int(meta["iterations"]), wall_time=float(meta["wall_time"]),
+                      setup_time=float(meta.get("setup_time", 0.0)), cpu_time=float(meta.get("cpu_time", 0.0)),
+                      cost=float(meta["cost"]), max_constraint_violation=float(meta["max_constraint_violation"]),
+                      terms={str(k): float(v) for k, v in dict(meta["terms"]).items()},
+                      joint_names=tuple(str(n) for n in meta["joint_names"]), x_scale_h=meta.get("x_scale_h"),
+                      attempts=tuple(SolveOutcome.from_dict(a) for a in attempts), **arrays)
+            sol.check(success=bool(success))   # success claimed: status and figures must support it
+            if success:
+                sol = dataclasses.replace(sol, success=True)
         except ResultFileError:
             raise
         except KeyError as exc:

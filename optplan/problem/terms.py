@@ -1,7 +1,9 @@
 """The term library of :class:`OptProblem`.
 
-A term is a residual ``r`` (a vector of CasADi expressions of the transcription) with bounds
-``lower ≤ r ≤ upper``. Added with ``add_constraint`` the bounds are enforced; added with
+A term is a frozen, validated configuration (a frozen dataclass; bad values are refused when it
+is created, naming the value). :meth:`Term.build` turns it into :class:`~.build.TermData` for one
+NLP, given a :class:`~.build.BuildContext`. Its constraint form is a residual ``r`` (a vector of
+CasADi expressions of the transcription) with bounds ``lower ≤ r ≤ upper``. Added with ``add_constraint`` the bounds are enforced; added with
 ``add_cost`` the cost is ``weight · Σ (r − clip(r, lower, upper))²`` — the squared bound violation
 (for equality terms, ``Σ (r − target)²``) — unless the term defines its own cost (smoothness, path
 length, duration). Every term also evaluates the same residual **numerically with Pinocchio**
@@ -13,6 +15,9 @@ Pose residuals avoid Euler angles: position error plus ``vee(E − Eᵀ)/2`` of 
 """
 from __future__ import annotations
 
+import dataclasses
+import types
+import warnings
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -22,12 +27,14 @@ import pinocchio as pin
 
 from ..errors import ConfigurationError
 from ..robot import RobotModel
+from .build import BuildContext, TermData
 from .transcription import Transcription
 
 __all__ = [
     "Term", "JointBoundary", "JointPositionLimits", "JointVelocityLimits", "JointAccelerationLimits",
     "FramePose", "FramePath", "ClosedChain", "OrientationConstraint", "BaseAttitude", "Smoothness",
-    "PathLength", "Duration", "NumericTrajectory", "pose_residual", "pose_residual_numeric",
+    "PathLength", "Duration", "NumericTrajectory", "pose_residual", "pose_residual_numeric", "BuildContext",
+    "TermData",
 ]
 
 
@@ -104,6 +111,46 @@ class NumericTrajectory:
         return self.data.oMf[fid].copy()
 
 
+def _check_at(at, what: str, allowed=("all", "start", "end")) -> object:
+    """A knot selection: one of ``allowed``, an int, or a non-empty list of ints (frozen as a tuple)."""
+    if isinstance(at, str):
+        if at not in allowed:
+            raise ConfigurationError(f"{what}: expected one of {allowed}, a knot index or a list of them, got {at!r}")
+        return at
+    if isinstance(at, (int, np.integer)) and not isinstance(at, bool):
+        return int(at)
+    try:
+        ks = tuple(at)
+    except TypeError:
+        raise ConfigurationError(f"{what}: expected one of {allowed}, a knot index or a list of them, "
+                                 f"got {at!r}") from None
+    if not ks or not all(isinstance(k, (int, np.integer)) and not isinstance(k, bool) for k in ks):
+        raise ConfigurationError(f"{what}: expected a non-empty list of knot indices, got {at!r}")
+    return tuple(int(k) for k in ks)
+
+
+def _frozen_vector(v, what: str, allow_none: bool = True):
+    """A finite 1-D float array (read-only) or None."""
+    if v is None:
+        if allow_none:
+            return None
+        raise ConfigurationError(f"{what}: expected a vector, got None")
+    from ..errors import real_array
+
+    a = np.array(real_array(v, what), float)
+    if a.ndim == 0:
+        a = a.reshape(1)
+    if a.ndim != 1 or not np.all(np.isfinite(a)):
+        raise ConfigurationError(f"{what}: expected a finite 1-D vector, got {v!r}")
+    a.flags.writeable = False
+    return a
+
+
+def _set(obj, name, value):
+    """Normalise a field of a frozen term in its _validate."""
+    object.__setattr__(obj, name, value)
+
+
 def _knots(at, N: int) -> list[int]:
     if at == "all":
         return list(range(N + 1))
@@ -125,22 +172,79 @@ def _knots(at, N: int) -> list[int]:
 
 # --------------------------------------------------------------------------- base class
 class Term:
-    """Base class: subclasses implement ``residual(tp) -> (expr, lower, upper)`` and
-    ``numeric(traj) -> ndarray`` (same quantity, Pinocchio); optional ``cost(tp)``."""
+    """Base class of the terms: a frozen configuration. Subclasses are ``@dataclass(eq=False)``
+    and validate (and normalise, with ``object.__setattr__``) their fields in ``_validate``;
+    after ``__init__`` a term is frozen: ``dataclasses.replace(term, field=value)`` makes a changed
+    copy. (Assigning a field in place still works for code written before terms were frozen,
+    with a DeprecationWarning, and is validated again; it will become
+    ``dataclasses.FrozenInstanceError``.)
+
+    :meth:`build` (what :class:`OptProblem` calls) returns the term's :class:`TermData` for one
+    NLP. A subclass implements either
+
+    * ``residual(tp) -> (expr, lower, upper)`` — rows in the transcription's expressions, for a
+      term that needs nothing but the transcription; or
+    * ``rows(ctx) -> TermData`` — when it needs the context (initial guess, pinned knots, fixed
+      joints) or auxiliary variables;
+
+    and ``numeric(traj)`` / ``bounds_numeric(traj)``: the same rows evaluated numerically with
+    Pinocchio, independently of the CasADi expressions (the tests compare the two). A cost-only
+    term implements ``cost_expr(ctx)`` and ``cost_numeric(traj)``.
+    """
 
     default_name = "term"
     cost_only = False
     constraint_only = False
 
+    def __post_init__(self):
+        self._validate()
+        object.__setattr__(self, "_frozen", True)
+
+    def _validate(self) -> None:
+        """Check (and normalise) the fields; raise ConfigurationError naming the bad value."""
+
+    def __setattr__(self, name, value):
+        if self.__dict__.get("_frozen"):
+            warnings.warn(f"{type(self).__name__}.{name} = ...: terms are frozen configurations; changing one in "
+                          f"place is deprecated and will raise dataclasses.FrozenInstanceError — use "
+                          f"dataclasses.replace(term, {name}=...) (and OptProblem.replace_term)",
+                          DeprecationWarning, stacklevel=2)
+            object.__setattr__(self, name, value)
+            self._validate()
+            return
+        object.__setattr__(self, name, value)
+
+    def __getstate__(self):
+        return {k: dict(v) if isinstance(v, types.MappingProxyType) else v
+                for k, v in self.__dict__.items() if k != "_legacy"}
+
+    def __setstate__(self, state):
+        for k, v in state.items():
+            object.__setattr__(self, k, v)
+        self._validate()             # normalises (read-only mappings, arrays) again
+
+    # ------------------------------------------------------------------ build (model → data)
+    def build(self, ctx: BuildContext) -> TermData:
+        """The term's data for one NLP: its rows (``ctx.role == "constraint"``) or its cost."""
+        if ctx.role == "cost":
+            return TermData(cost=self.cost_expr(ctx))
+        if self.cost_only:
+            raise TypeError(f"{type(self).__name__} is a cost-only term; use add_cost")
+        return self.rows(ctx)
+
+    def rows(self, ctx: BuildContext) -> TermData:
+        """The constraint rows (default: from :meth:`residual`)."""
+        r, lo, hi = self.residual(ctx.tp)
+        return TermData(residual=r, lower=lo, upper=hi)
+
     def residual(self, tp: Transcription):
         raise TypeError(f"{type(self).__name__} is a cost-only term: it has no residual/constraint form")
 
-    def numeric(self, traj: NumericTrajectory) -> np.ndarray:
-        raise TypeError(f"{type(self).__name__} is a cost-only term: it has no residual form")
-
-    def cost(self, tp: Transcription):
-        r, lo, hi = self.residual(tp)
-        lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    def cost_expr(self, ctx: BuildContext):
+        """The cost expression (default: squared bound violation of the rows; ``Σ (r − target)²``
+        for equality rows)."""
+        d = self.rows(dataclasses.replace(ctx, role="constraint"))
+        r, lo, hi = d.residual, d.lower, d.upper
         viol = []
         for i in range(r.shape[0]):
             if lo[i] == hi[i]:
@@ -150,21 +254,50 @@ class Term:
                     viol.append(ca.fmax(r[i] - hi[i], 0))
                 if np.isfinite(lo[i]):
                     viol.append(ca.fmin(r[i] - lo[i], 0))
-        v = ca.vertcat(*viol)
-        return ca.sumsqr(v)
+        return ca.sumsqr(ca.vertcat(*viol))
+
+    def cost(self, tp: Transcription):
+        """The cost expression on a bare transcription (no initial guess, no pinned knots)."""
+        return self.cost_expr(BuildContext(tp, role="cost"))
+
+    def reseed(self, data: TermData, traj: "NumericTrajectory") -> tuple:
+        """``data.aux`` re-seeded for a new initial guess ``traj`` (the problem's structure kept);
+        terms without auxiliary variables return them unchanged."""
+        return data.aux
+
+    # ------------------------------------------------------------------ numeric (Pinocchio) evaluation
+    def numeric(self, traj: NumericTrajectory) -> np.ndarray:
+        raise TypeError(f"{type(self).__name__} is a cost-only term: it has no residual form")
+
+    def numeric_built(self, traj: NumericTrajectory, data: TermData) -> np.ndarray:
+        """:meth:`numeric` for the rows a build produced (``data``); the same unless the build
+        made choices (e.g. a collision term's active pairs)."""
+        return self.numeric(traj)
+
+    def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` of the rows :meth:`numeric` returns."""
+        raise TypeError(f"{type(self).__name__} is a cost-only term: it has no bounds")
+
+    def _bounds_numeric(self, traj):  # the name used before bounds_numeric
+        return self.bounds_numeric(traj)
 
     def cost_numeric(self, traj: NumericTrajectory) -> float:
-        """Numeric value of :meth:`cost` (default: squared bound violation of ``numeric``)."""
+        """Numeric value of the cost (default: squared bound violation of ``numeric``)."""
         r = self.numeric(traj)
-        lo, hi = self._bounds_numeric(traj)
+        lo, hi = self.bounds_numeric(traj)
         return float(np.sum(np.where(lo == hi, r - lo, np.maximum(r - hi, 0) + np.minimum(r - lo, 0)) ** 2))
 
-    def _bounds_numeric(self, traj):
-        raise TypeError(f"{type(self).__name__} is a cost-only term: it has no bounds")
+    def sampled(self) -> "Term":
+        """The term evaluated point by point along a trajectory (what ``Solution.sample`` runs
+        ``numeric`` of, on a trajectory whose knots are the sample times). Terms tied to given
+        knots (boundaries, poses at a knot) have none."""
+        raise TypeError(f"{type(self).__name__} is evaluated at given knots, not along the trajectory: "
+                        "sample() applies to terms imposed at every knot (limits, closed chain, orientation, "
+                        "collision, paths given as a function of time)")
 
 
 # --------------------------------------------------------------------------- joint terms
-@dataclass
+@dataclass(eq=False)
 class JointBoundary(Term):
     """Joint values at the start or end knot: any of ``q`` [rad], ``qd`` [rad/s], ``qdd`` [rad/s²]."""
 
@@ -174,16 +307,22 @@ class JointBoundary(Term):
     qdd: Sequence[float] | None = None
     default_name = "boundary"
 
-    def _parts(self, N):
+    def _validate(self):
         if self.at not in ("start", "end"):
-            raise ValueError(f"JointBoundary.at: expected 'start' or 'end', got {self.at!r}")
-        k = 0 if self.at == "start" else N
-        return k, [(n, v) for n, v in (("q", self.q), ("qd", self.qd), ("qdd", self.qdd)) if v is not None]
+            raise ConfigurationError(f"JointBoundary.at: expected 'start' or 'end', got {self.at!r}")
+        for n in ("q", "qd", "qdd"):
+            _set(self, n, _frozen_vector(getattr(self, n), f"JointBoundary.{n}"))
+        if self.q is None and self.qd is None and self.qdd is None:
+            raise ConfigurationError("JointBoundary: give at least one of q, qd, qdd")
+
+    def knot(self, N: int) -> int:
+        return 0 if self.at == "start" else N
+
+    def _parts(self, N):
+        return self.knot(N), [(n, v) for n, v in (("q", self.q), ("qd", self.qd), ("qdd", self.qdd)) if v is not None]
 
     def residual(self, tp):
         k, parts = self._parts(tp.N)
-        if not parts:
-            raise ValueError("JointBoundary: give at least one of q, qd, qdd")
         exprs, targets = [], []
         for n, v in parts:
             v = tp.robot.check_joints(v, f"JointBoundary.{n}")
@@ -192,64 +331,107 @@ class JointBoundary(Term):
         t = np.concatenate(targets)
         return ca.vertcat(*exprs), t, t
 
+    def rows(self, ctx):
+        r, lo, hi = self.residual(ctx.tp)
+        k, parts = self._parts(ctx.N)
+        return TermData(residual=r, lower=lo, upper=hi, points=(k,), point_rows=int(r.shape[0]))
+
     def numeric(self, traj):
         k, parts = self._parts(traj.N)
         return np.concatenate([getattr(traj, n)[k] for n, _ in parts])
 
-    def _bounds_numeric(self, traj):
+    def bounds_numeric(self, traj):
         k, parts = self._parts(traj.N)
         t = np.concatenate([np.asarray(v, float) for _, v in parts])
         return t, t
 
 
-@dataclass
+@dataclass(eq=False)
 class _JointBox(Term):
     lower: Sequence[float] | None = None
     upper: Sequence[float] | None = None
     which = "q"
 
-    def _lims(self, robot):  # overridden by each concrete limit term
+    def _validate(self):
+        name = type(self).__name__
+        for n in ("lower", "upper"):
+            _set(self, n, _frozen_vector(getattr(self, n), f"{name}.{n}"))
+        if self.lower is not None and self.upper is not None and self.lower.shape == self.upper.shape \
+                and np.any(self.lower > self.upper):
+            raise ConfigurationError(f"{name}: lower > upper at joints {np.flatnonzero(self.lower > self.upper).tolist()}")
+
+    def limits(self, robot) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` per joint in physical units for ``robot``."""
         raise TypeError(f"{type(self).__name__} is abstract: use JointPositionLimits, "
                         "JointVelocityLimits or JointAccelerationLimits")
 
+    def _lims(self, robot):  # the name used before ``limits``
+        return self.limits(robot)
+
     def residual(self, tp):
-        lo, hi = self._lims(tp.robot)
+        lo, hi = self.limits(tp.robot)
         get = {"q": tp.q, "qd": tp.qd, "qdd": tp.qdd}[self.which]
         ks = range(tp.N + 1)
         return ca.vertcat(*[get(k) for k in ks]), np.tile(lo, len(ks)), np.tile(hi, len(ks))
 
-    def bounds_on(self, tp):
-        """As a constraint this term is a plain bound on knot variables: (indices into x, lower,
-        upper). IPOPT treats variable bounds much more cheaply than general constraints."""
-        lo, hi = self._lims(tp.robot)
+    def rows(self, ctx):
+        r, lo, hi = self.residual(ctx.tp)
+        return TermData(residual=r, lower=lo, upper=hi, points=tuple(range(ctx.N + 1)), point_rows=ctx.tp.nj)
+
+    def build(self, ctx):
+        """As a constraint this term is a plain bound on knot variables (IPOPT treats variable
+        bounds much more cheaply than general constraints): ``var_bounds`` = (indices into x,
+        lower, upper) in the scaled decision variables."""
+        if ctx.role == "cost":
+            return super().build(ctx)
+        tp = ctx.tp
+        lo, hi = self.limits(tp.robot)
         nj, N = tp.nj, tp.N
         block = {"q": 0, "qd": 1, "qdd": 2}[self.which]
         idx = block * nj * (N + 1) + np.arange(nj * (N + 1))
         sc = tp.variable_scale(self.which)  # the variables are scaled (transcription docstring)
-        return idx, sc * np.tile(lo, N + 1), sc * np.tile(hi, N + 1)
+        return TermData(var_bounds=(idx, sc * np.tile(lo, N + 1), sc * np.tile(hi, N + 1)), var_scale=sc,
+                        points=tuple(range(N + 1)), point_rows=nj)
+
+    def bounds_on(self, tp):
+        """``(indices into x, lower, upper)``: the variable bounds of :meth:`build`."""
+        return self.build(BuildContext(tp)).var_bounds
 
     def numeric(self, traj):
         return getattr(traj, self.which).reshape(-1)
 
-    def _bounds_numeric(self, traj):
-        lo, hi = self._lims(traj.robot)
+    def bounds_numeric(self, traj):
+        lo, hi = self.limits(traj.robot)
         return np.tile(lo, traj.N + 1), np.tile(hi, traj.N + 1)
 
+    def sampled(self):
+        return self
 
-@dataclass
+
+@dataclass(eq=False)
 class JointPositionLimits(_JointBox):
     """``lower ≤ q_k ≤ upper`` at every knot [rad] (default: the robot's limits)."""
 
     default_name = "joint_limits"
     which = "q"
 
-    def _lims(self, robot):
+    def limits(self, robot):
         lo = robot.lower if self.lower is None else robot.check_joints(self.lower, "lower")
         hi = robot.upper if self.upper is None else robot.check_joints(self.upper, "upper")
         return lo, hi
 
 
-@dataclass
+def _check_limit(obj, allow_none: bool):
+    name = type(obj).__name__
+    if obj.limit is None and allow_none:
+        return
+    a = _frozen_vector(obj.limit, f"{name}.limit", allow_none=False)
+    if np.any(a < 0):
+        raise ConfigurationError(f"{name}.limit: expected values ≥ 0, got {obj.limit!r}")
+    _set(obj, "limit", a if a.size > 1 else float(a[0]))
+
+
+@dataclass(eq=False)
 class JointVelocityLimits(_JointBox):
     """``|q̇_k| ≤ limit`` [rad/s] (default: the robot's velocity limits); ``lower``/``upper``
     override."""
@@ -258,13 +440,17 @@ class JointVelocityLimits(_JointBox):
     default_name = "velocity_limits"
     which = "qd"
 
-    def _lims(self, robot):
+    def _validate(self):
+        super()._validate()
+        _check_limit(self, allow_none=True)
+
+    def limits(self, robot):
         lim = robot.velocity_limit if self.limit is None else np.broadcast_to(
             np.asarray(self.limit, float), (robot.nj,))
         return -lim, lim
 
 
-@dataclass
+@dataclass(eq=False)
 class JointAccelerationLimits(_JointBox):
     """``|q̈_k| ≤ limit`` [rad/s²] at every knot (q̈ is piecewise linear, so knots bound it)."""
 
@@ -272,13 +458,17 @@ class JointAccelerationLimits(_JointBox):
     default_name = "acceleration_limits"
     which = "qdd"
 
-    def _lims(self, robot):
+    def _validate(self):
+        super()._validate()
+        _check_limit(self, allow_none=False)
+
+    def limits(self, robot):
         lim = np.broadcast_to(np.asarray(self.limit, float), (robot.nj,))
         return -lim, lim
 
 
 # --------------------------------------------------------------------------- cost-only terms
-@dataclass
+@dataclass(eq=False)
 class Smoothness(Term):
     """Integral of a squared derivative: ``"jerk"`` (∫‖j‖² dt = h Σ‖j_k‖², exact),
     ``"acceleration"`` (∫‖q̈‖² dt, exact for the piecewise-linear q̈) or ``"velocity"``
@@ -288,12 +478,13 @@ class Smoothness(Term):
     default_name = "smoothness"
     cost_only = True
 
-    def _check(self):
+    def _validate(self):
         if self.order not in ("jerk", "acceleration", "velocity"):
-            raise ValueError(f"Smoothness.order: expected 'jerk', 'acceleration' or 'velocity', got {self.order!r}")
+            raise ConfigurationError(f"Smoothness.order: expected 'jerk', 'acceleration' or 'velocity', "
+                                     f"got {self.order!r}")
 
-    def cost(self, tp):
-        self._check()
+    def cost_expr(self, ctx):
+        tp = ctx.tp
         h, N = tp.h, tp.N
         if self.order == "jerk":
             return h * ca.sumsqr(tp.J)
@@ -310,7 +501,6 @@ class Smoothness(Term):
         return tot
 
     def cost_numeric(self, traj):
-        self._check()
         from scipy.integrate import quad_vec
 
         N, h = traj.N, traj.h
@@ -325,7 +515,7 @@ class Smoothness(Term):
         return float(sum(quad_vec(integrand, k * h, (k + 1) * h)[0] for k in range(N)))
 
 
-@dataclass
+@dataclass(eq=False)
 class PathLength(Term):
     """Joint-space path length ``Σ_k sqrt(‖q_{k+1} − q_k‖² + ε²) − ε`` [rad] (smoothed at 0)."""
 
@@ -333,7 +523,13 @@ class PathLength(Term):
     default_name = "path_length"
     cost_only = True
 
-    def cost(self, tp):
+    def _validate(self):
+        if isinstance(self.eps, bool) or not isinstance(self.eps, (int, float, np.floating)) \
+                or not (np.isfinite(self.eps) and self.eps > 0):
+            raise ConfigurationError(f"PathLength.eps: expected a finite number > 0 [rad], got {self.eps!r}")
+
+    def cost_expr(self, ctx):
+        tp = ctx.tp
         return sum(ca.sqrt(ca.sumsqr(tp.Q[:, k + 1] - tp.Q[:, k]) + self.eps**2) - self.eps for k in range(tp.N))
 
     def cost_numeric(self, traj):
@@ -341,15 +537,15 @@ class PathLength(Term):
         return float(np.sum(np.sqrt(np.sum(d**2, axis=1) + self.eps**2) - self.eps))
 
 
-@dataclass
+@dataclass(eq=False)
 class Duration(Term):
     """Total duration ``T`` [s] (a cost for free-final-time problems)."""
 
     default_name = "duration"
     cost_only = True
 
-    def cost(self, tp):
-        return tp.T
+    def cost_expr(self, ctx):
+        return ctx.tp.T
 
     def cost_numeric(self, traj):
         return float(traj.T)

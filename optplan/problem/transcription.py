@@ -105,40 +105,15 @@ class Transcription:
             self.base0_quat = np.array([0, 0, 0, 1.0]) if base0_quat is None else np.asarray(base0_quat, float)
             self.com0 = np.zeros(3) if com0 is None else np.asarray(com0, float)
         self.x = ca.vertcat(*blocks)
-        self.aux: list[tuple[ca.MX, np.ndarray, np.ndarray, np.ndarray]] = []  # (sym, init, lb, ub)
-        self._frame_fns: dict[int, ca.Function] = {}
         self._frame_cache: dict[tuple, tuple] = {}
         self._joint_cache: dict = {}
-        #: knots whose joints a JointBoundary pins (k -> q [rad]); set by OptProblem before terms are built
-        self.pinned_q: dict[int, np.ndarray] = {}
-        #: joint-vector indices held fixed at every knot (JointPositionLimits with lower == upper)
-        self.fixed_joints: frozenset[int] = frozenset()
+        self._joints_fn: ca.Function | None = None
         self._build_base_functions()
 
-    # ------------------------------------------------------------------ auxiliary variables
-    def add_variable(self, name: str, n: int, init, lower=-np.inf, upper=np.inf) -> ca.MX:
-        """An auxiliary decision variable of size n (e.g. a separating plane), appended after the
-        trajectory variables; ``init`` is its initial guess."""
-        v = ca.MX.sym(name, n)
-        self.aux.append((v, np.broadcast_to(np.asarray(init, float), (n,)).copy(),
-                         np.broadcast_to(np.asarray(lower, float), (n,)).copy(),
-                         np.broadcast_to(np.asarray(upper, float), (n,)).copy()))
-        return v
-
-    def clear_aux(self) -> None:
-        self.aux = []
-
-    @property
-    def x_all(self):
-        return ca.vertcat(self.x, *[a[0] for a in self.aux]) if self.aux else self.x
-
-    def aux_init(self) -> np.ndarray:
-        return np.concatenate([a[1] for a in self.aux]) if self.aux else np.zeros(0)
-
-    def aux_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        if not self.aux:
-            return np.zeros(0), np.zeros(0)
-        return np.concatenate([a[2] for a in self.aux]), np.concatenate([a[3] for a in self.aux])
+    def set_com0(self, com0) -> None:
+        """The (fixed) centre of mass [m] of a floating robot, from the initial configuration."""
+        if self.floating:
+            self.com0 = np.asarray(com0, float).copy()
 
     # ------------------------------------------------------------------ variable layout
     def variable_scale(self, which: str) -> float:
@@ -299,7 +274,7 @@ class Transcription:
     def _joints_function(self) -> ca.Function:
         """SX ``f(q_full) -> [R_1, p_1, ..., R_n, p_n]``: every joint placement in one pass (one call
         per knot instead of one chain per frame)."""
-        if not hasattr(self, "_joints_fn"):
+        if self._joints_fn is None:
             q = ca.SX.sym("q", self.robot.nq)
             X = self.sym.joint_placements(q)
             outs = []
