@@ -111,21 +111,22 @@ def test_nlp_collision_points_match_coal_placements(panda):
 
 @needs_panda
 def test_planner_defaults_scale_with_reach(panda):
-    from optplan.planners import TCBiRRT
-    from optplan.planners.tcbirrt import PAPER_REACH, PAPER_XI_LOWER, PAPER_XI_UPPER, TCBiRRTOptions
-
-    paper = TCBiRRT(RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("ssps_scene1"))
-    assert tuple(paper._lo) == PAPER_XI_LOWER and tuple(paper._hi) == PAPER_XI_UPPER and paper.step_size == 0.6
-    p = TCBiRRT(panda, Scene.load("panda_shelf"))
     from optplan.planners.task_sampling import arm_reach
+    from optplan.planners.tcbirrt import (PAPER_REACH, PAPER_XI_LOWER, PAPER_XI_UPPER, TCBiRRTOptions,
+                                          reach_scaled_workspace)
 
+    lo, hi, step = reach_scaled_workspace(RobotModel.from_name("tcbirrt_dual_arm"), TCBiRRTOptions())
+    assert tuple(lo) == PAPER_XI_LOWER and tuple(hi) == PAPER_XI_UPPER and step == 0.6  # the paper's robot
+    lo, hi, step = reach_scaled_workspace(panda, TCBiRRTOptions())
     reach = arm_reach(panda, "left")[1]
-    assert p.step_size == pytest.approx(0.6 * reach / PAPER_REACH)
-    assert np.allclose(0.5 * (p._lo[:3] + p._hi[:3]), [0.0, 0.0, 0.333])
-    assert np.allclose(p._hi[:3] - p._lo[:3], np.array([4.0, 6.0, 4.0]) * reach / PAPER_REACH)
-    explicit = TCBiRRT(panda, Scene.load("panda_shelf"), TCBiRRTOptions(xi_lower=(-1, -1, 0, -3, -3, -3),
-                                                                         xi_upper=(1, 1, 1, 3, 3, 3)))
-    assert tuple(explicit._lo) == (-1, -1, 0, -3, -3, -3)
+    assert step == pytest.approx(0.6 * reach / PAPER_REACH)
+    assert np.allclose(0.5 * (lo[:3] + hi[:3]), [0.0, 0.0, 0.333])   # the shoulders' midpoint
+    assert np.allclose(hi[:3] - lo[:3], np.array([4.0, 6.0, 4.0]) * reach / PAPER_REACH)
+    assert np.allclose(lo[3:], PAPER_XI_LOWER[3:])                    # angles are not scaled
+    given = TCBiRRTOptions(xi_lower=(-1, -1, 0, -3, -3, -3), xi_upper=(1, 1, 1, 3, 3, 3))
+    assert tuple(reach_scaled_workspace(panda, given)[0]) == (-1, -1, 0, -3, -3, -3)  # explicit: as given
+    off = TCBiRRTOptions(scale_to_reach=False)
+    assert tuple(reach_scaled_workspace(panda, off)[0]) == PAPER_XI_LOWER
 
 
 # --------------------------------------------------------------------------- geometry refused or handled
@@ -193,9 +194,7 @@ def test_trial_perturbation_scales_with_reach(panda):
     paper = RobotModel.from_name("tcbirrt_dual_arm")
     assert _reach_scale(paper) == 1.0
     assert TrialGenerator(paper, Scene.load("ssps_scene1")).options.position_range == 0.2
-    assert 0.3 < _reach_scale(panda) < 0.45
-    sc = Scene.load("panda_shelf")  # sets its own range
-    assert TrialGenerator(panda, sc).options.position_range == sc.extra["trial_position_range"]
+    assert 0.3 < _reach_scale(panda) < 0.45  # Panda trials: 0.2 m × that, unless the scene sets its range
 
 
 def test_pipeline_verified_on_a_stress_scene():
