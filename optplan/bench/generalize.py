@@ -86,8 +86,6 @@ def _robot(name: str):
 
 def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
     """One (scene, trial): the result line (see the module docstring)."""
-    import resource
-
     from ..pipeline import PipelineOptions, run_pipeline
     from ..scene import Scene
     from .trials import TrialGenerator
@@ -106,7 +104,7 @@ def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
                 "error": f"{type(exc).__name__}: {exc}", "segments": []}
     opts = PipelineOptions(plan_time_limit=float(cfg.time_limit), ipopt_max_wall_time=float(cfg.ipopt_max_wall_time),
                            planner_options=(("edge_resolution", 0.05), ("variant", cfg.planner_variant)))
-    c0, ch0, w0 = time.process_time(), resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+    c0, w0 = time.process_time(), time.perf_counter()
     res, err = None, None
     try:
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=int(trial.seed))
