@@ -216,3 +216,38 @@ def test_pipeline_verified_on_a_stress_scene():
     checker = CollisionChecker(robot, scene)
     assert min(checker.min_distance(q)[0] for q in held) >= 0.0
     assert max(max(closure_error(robot, scene.object.grasps, q)) for q in held) <= 1e-6
+
+
+def test_margins_relax_only_where_a_collision_free_guess_is_closer_than_the_margin():
+    """``relax_to_guess``: inside the path a pair's margin becomes half the guess's exact (coal)
+    clearance only where that clearance is in [0, margin); where the guess collides it stays."""
+    from optplan.problem import ClosedChain
+    from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
+    from optplan.warmstart import project_closed_chain
+
+    robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("transport")
+    g = scene.object.grasps
+    cc = ClosedChain.from_grasps(g["A"], g["B"], "A", "B")
+    from optplan.bench.trials import TrialGenerator
+
+    tr = TrialGenerator(robot, scene).generate(0, 0)
+    N = 24
+    Q = np.linspace(tr.q_start, tr.q_goal, N + 1)
+    Q[1:-1] = [project_closed_chain(robot, q, cc).q for q in Q[1:-1]]
+    prob = SplineSegmentProblem(robot, scene, SegmentSpec(N, 30.0, Q[0], Q[-1], cc, margin=0.05, object_arm="A",
+                                                          activation=0.5))
+    prob.set_initial(Q)
+    prob._build()
+    col = prob.col
+    Qk = prob.knot_configurations()
+    D = np.array([col.checker.distances(q) for q in Qk])
+    pairs = col.checker.pairs
+    w = prob.spec.window
+    assert col.relaxed, "the straight guess passes closer than 5 cm somewhere"
+    active = [pairs.index(p) for p in col.active_pairs]
+    assert (D[1:-1][:, active] < 0).any(), "and collides somewhere (those rows keep the margin)"
+    for (p, k), m in col.relaxed.items():
+        near = [j for j in range(max(0, k - w), min(N, k + w) + 1)]
+        d = D[near, pairs.index(p)]
+        cand = [0.5 * x for j, x in zip(near, d) if x < 0.05 and (x >= 0 or j in (0, N))]
+        assert cand and m == pytest.approx(min(min(cand), 0.05), abs=1e-12)
