@@ -112,8 +112,13 @@ def test_nlp_collision_points_match_coal_placements(panda):
 @needs_panda
 def test_planner_defaults_scale_with_reach(panda):
     from optplan.planners.task_sampling import arm_reach
-    from optplan.planners.tcbirrt import (PAPER_REACH, PAPER_XI_LOWER, PAPER_XI_UPPER, TCBiRRTOptions,
-                                          reach_scaled_workspace)
+    from optplan.planners.tcbirrt import (
+        PAPER_REACH,
+        PAPER_XI_LOWER,
+        PAPER_XI_UPPER,
+        TCBiRRTOptions,
+        reach_scaled_workspace,
+    )
 
     lo, hi, step = reach_scaled_workspace(RobotModel.from_name("tcbirrt_dual_arm"), TCBiRRTOptions())
     assert tuple(lo) == PAPER_XI_LOWER and tuple(hi) == PAPER_XI_UPPER and step == 0.6  # the paper's robot
