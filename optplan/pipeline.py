@@ -101,7 +101,8 @@ class PipelineOptions:
     active, then (1) again on that grid (≤ failure_retries); (3) ``refine``: the closed-chain
     residual between knots exceeds closed_chain_tol → the grid refined by
     (residual / (tol/2))^¼, warm-started from the solution (≤ refinements); (4) ``fallback-knots``:
-    still not verified → the knot transcription with free plane normals.
+    still not verified → the knot transcription with free plane normals (not on a robot with
+    cylinder or mesh collision geometry, which that transcription does not model).
     compile_kernels: the B-spline NLP's kernels evaluated from C compiled once per robot and
     cached on disk (:attr:`SplineSegmentProblem.compile_kernels`): ``"auto"`` (default) uses what
     an earlier run compiled, ``True`` compiles what is missing (about a second of the C compiler
@@ -500,7 +501,13 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         N = N2
         prob = build(N, initial=sol)
         sol, rep = run(prob, "refine")
-    if not good(sol, rep):  # 4. last resort: the knot transcription with free plane normals
+    # the knot transcription has no rows for cylinders and meshes (the B-spline NLP bounds them):
+    # on such a robot its solution would ignore them, so it is not tried
+    unmodelled = [] if prob.col is None else [g for g, shape in prob.col.robot_shape.items() if shape is None]
+    if not good(sol, rep) and unmodelled:
+        log.info("segment %s: no knot-transcription fallback (it does not model %d of the robot's collision "
+                 "geometries)", kind, len(unmodelled))
+    if not good(sol, rep) and not unmodelled:  # 4. last resort: the knot transcription with free plane normals
         prob2, cc2, h2 = _segment_problem(robot, scene, seg_path, kind, arm, opts, fixed_normals=False)
         _initial_guess(robot, scene, prob2, seg_path, cc2, kind, opts)
         sol2, rep2 = _solve_verified(robot, scene, prob2, cc2, h2, opts, ipopt, kind)
