@@ -167,6 +167,12 @@ def _cmd_bench_warmstart(args) -> int:
     return 0
 
 
+def _cmd_bench_generalize(args) -> int:
+    from .bench.generalize import command
+
+    return command(args)
+
+
 def _cmd_bench_drake(args) -> int:
     from .bench.drake_bench import format_report, run, save_json
 
@@ -223,7 +229,8 @@ def _cmd_plan(args) -> int:
     try:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
         opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold,
-                               compile_kernels=True if args.compile_kernels else "auto")
+                               compile_kernels=True if args.compile_kernels else "auto",
+                               planner_options=PipelineOptions.planner_options + (("variant", args.variant),))
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
     except BaseException as exc:  # a failed run still writes what it has
         if args.json:
@@ -395,6 +402,13 @@ def build_parser() -> argparse.ArgumentParser:
     _engine_args(ws)
     ws.set_defaults(func=_cmd_bench_warmstart)
 
+    ge = bench.add_parser("generalize", help="plan -> optimize -> verify on scenes not tuned on (hard-scene suite, "
+                          "stress scenes, a dual-Panda robot from example-robot-data): success among planned trials")
+    from .bench.generalize import add_arguments as _ge_args
+
+    _ge_args(ge)
+    ge.set_defaults(func=_cmd_bench_generalize)
+
     dk = bench.add_parser("drake", help="optplan vs Drake's KinematicTrajectoryOptimization (SNOPT, IPOPT) on the "
                           "transport problem and the pipeline's constrained segments, paired in one run")
     dk.add_argument("--problems", default="transport,scene1",
@@ -414,7 +428,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--trial", type=ca.nonnegative_int, default=0, help="trial index (perturbed start/goal, Section 5.1)")
     pl.add_argument("--seed", type=ca.nonnegative_int, default=0)
     pl.add_argument("--planner", default="tcbirrt")
-    pl.add_argument("--robot", default=None, help="robot model (default: the scene's robot, else tcbirrt_dual_arm)")
+    pl.add_argument("--robot", default=None, help="robot model (default: the scene's robot, else tcbirrt_dual_arm); "
+                    "also example-robot-data's pr2, baxter, dual_panda (extra 'robots')")
+    pl.add_argument("--variant", choices=["paper", "improved"], default="paper",
+                    help="TCBiRRT variant: the paper's algorithm or the improved sampler (hard scenes)")
     pl.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit [s]")
     pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
     pl.add_argument("--compile-kernels", action="store_true",

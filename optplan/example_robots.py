@@ -42,7 +42,7 @@ PR2_ARM_JOINTS = {s: [f"{p}_{j}_joint" for j in ("shoulder_pan", "shoulder_lift"
                   for s, p in (("left", "l"), ("right", "r"))}
 BAXTER_ARM_JOINTS = {s: [f"{s}_{j}" for j in ("s0", "s1", "e0", "e1", "w0", "w1", "w2")] for s in ("left", "right")}
 PR2_TORSO_LIFT = 0.15   # [m] frozen torso lift (range 0 .. 0.31 m)
-EXAMPLE_ROBOTS = ("pr2", "baxter")
+EXAMPLE_ROBOTS = ("pr2", "baxter", "dual_panda")
 
 
 def example_robot_data_dir() -> Path | None:
@@ -181,5 +181,9 @@ def load_baxter() -> RobotModel:
 
 
 def load_example_robot(name: str) -> RobotModel:
-    """``"pr2"`` or ``"baxter"``."""
+    """``"pr2"``, ``"baxter"`` or ``"dual_panda"`` (two Pandas on a plate, :mod:`optplan.dual_panda`)."""
+    if name.lower() == "dual_panda":
+        from .dual_panda import load_dual_panda
+
+        return load_dual_panda()
     return _load(name.lower())

@@ -127,15 +127,20 @@ def _worker_setup(robot_name: str, scenes: list[str], planners: list[str]):
     from ..scene import Scene
     from .trials import TrialGenerator
 
-    robot = RobotModel.from_name(robot_name)
+    from ..example_robots import EXAMPLE_ROBOTS, load_example_robot
+
     _W.clear()
     _W["key"] = (robot_name, tuple(scenes), tuple(planners))
-    _W["robot"] = robot
+    robots: dict = {}
     for sc in scenes:
         scene = Scene.load(sc)
+        name = scene.robot or robot_name  # the scene's own robot (shipped or example-robot-data's)
+        if name not in robots:
+            robots[name] = load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
+        robot = robots[name]
         checker = ValidityChecker(robot, scene)
         kin = ClosedChainKinematics(robot, scene.object.grasps)
-        _W[sc] = {"scene": scene, "gen": TrialGenerator(robot, scene), "checker": checker,
+        _W[sc] = {"scene": scene, "robot": robot, "gen": TrialGenerator(robot, scene), "checker": checker,
                   "planners": {p: make_planner(parse_planner_spec(p)[0], robot, scene, checker=checker, kinematics=kin,
                                                **parse_planner_spec(p)[1]) for p in planners}}
 
@@ -191,7 +196,7 @@ def _run_unit(args) -> list[dict]:
                 "regenerations": trial.regenerations, "trial_generation_s": gen_time,
                 "stats": {k: v for k, v in res.to_dict(include_path=False)["stats"].items()
                           if k not in ("time_s", "cpu_time_s", "clock", "time_limit_s", "seed")},
-                "checks": _path_checks(_W["robot"], w["scene"], w["checker"], res),
+                "checks": _path_checks(w["robot"], w["scene"], w["checker"], res),
                 "task": trial.to_dict()}
         out.append(line)
     return out

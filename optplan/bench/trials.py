@@ -1,6 +1,7 @@
 """Planning trials of the TCBiRRT paper, Section 5.1: both nominal object poses of a scene are perturbed
 by ``T = T_nominal · T_e`` with ``T_e`` = (Euler RPY uniform in [-0.5, 0.5] rad per axis, position
-uniform in [-0.2, 0.2] m per axis), and start/goal joint configurations are solved by IK. A trial
+uniform in [-0.2, 0.2] m per axis — scaled by the robot's arm reach / the paper robot's when the
+scene does not set ``[extra] trial_position_range``), and start/goal joint configurations are solved by IK. A trial
 whose start or goal has no valid IK (no convergence, collision, clearance below
 ``min_clearance``) is regenerated with a new perturbation, and the regenerations are counted.
 
@@ -100,6 +101,17 @@ def perturb_pose(nominal: pin.SE3, rng: np.random.Generator, position_range: flo
     return nominal * pin.SE3(rpy_to_matrix(*eu), pe)
 
 
+def _reach_scale(robot: RobotModel) -> float:
+    """The robot's mean arm reach / the TCBiRRT paper robot's (1 for that robot; the paper's 0.2 m
+    perturbation is sized for its 2.94 m arms)."""
+    from ..planners.task_sampling import arm_reach
+    from ..planners.tcbirrt import PAPER_REACH
+
+    if robot.is_floating or not robot.arms:
+        return 1.0
+    return float(np.mean([arm_reach(robot, a)[1] for a in robot.arms])) / PAPER_REACH
+
+
 class TrialGenerator:
     """Trials of one scene. ``generate(index, seed)`` → :class:`Trial` (deterministic)."""
 
@@ -110,7 +122,7 @@ class TrialGenerator:
         self.robot, self.scene = robot, scene
         if options is None:   # a scene may narrow the perturbation ([extra] trial_position_range [m], trial_angle_range [rad])
             ex = scene.extra or {}
-            options = TrialOptions(position_range=float(ex.get("trial_position_range", 0.2)),
+            options = TrialOptions(position_range=float(ex.get("trial_position_range", 0.2 * _reach_scale(robot))),
                                    angle_range=float(ex.get("trial_angle_range", 0.5)))
         self.options = options
         self.ik = ik or IKSettings()
@@ -157,8 +169,11 @@ class TrialGenerator:
         return None
 
     def random_seed(self, rng: np.random.Generator) -> np.ndarray:
-        """IK seed: joints uniform in [-π, π] (inside the limits)."""
-        return np.clip(rng.uniform(-np.pi, np.pi, self.robot.nq), self.robot.lower, self.robot.upper)
+        """IK seed: joints uniform in [-π, π] ∩ their limits (not [-π, π] clipped to the limits: that
+        puts a joint with a one-sided range — a Panda elbow in [-3.07, -0.07] rad — at its limit
+        half of the time, where IK stalls; the same draws for limits that contain [-π, π])."""
+        r = self.robot
+        return rng.uniform(np.maximum(r.lower, -np.pi), np.minimum(r.upper, np.pi), self.robot.nq)
 
     def nominal_configuration(self, which: str, rng: np.random.Generator, tries: int = 200,
                               min_limit_margin: float = 1.0) -> np.ndarray | None:

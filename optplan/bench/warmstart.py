@@ -112,18 +112,20 @@ _W: dict = {}
 
 
 def _state(robot_name: str, scene: str) -> dict:
-    """Per-process cache of the robot, scenes and trial generators."""
+    """Per-process cache of the robots, scenes and trial generators. The robot is the scene's own
+    (its ``robot`` field: a shipped model or one of example-robot-data's), else ``robot_name``."""
+    from ..example_robots import EXAMPLE_ROBOTS, load_example_robot
     from ..robot import RobotModel
     from ..scene import Scene
     from .trials import TrialGenerator
 
-    if _W.get("robot_name") != robot_name:
-        _W.clear()
-        _W["robot_name"] = robot_name
-        _W["robot"] = RobotModel.from_name(robot_name)
     if scene not in _W:
         sc = Scene.load(scene)
-        _W[scene] = {"scene": sc, "gen": TrialGenerator(_W["robot"], sc)}
+        name = sc.robot or robot_name
+        robots = _W.setdefault("robots", {})
+        if name not in robots:
+            robots[name] = load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
+        _W[scene] = {"scene": sc, "gen": TrialGenerator(robots[name], sc)}
     return _W[scene]
 
 

@@ -200,6 +200,12 @@ class TCBiRRTOptions:
     * ``ik_restarts`` (0 / 2): when a waypoint's IK solution collides or fails, retry IK this many
       times from the previous configuration perturbed by ``N(0, ik_restart_sigma²)`` [rad] per joint
       (another point of the arms' self-motion), still subject to ``max_joint_step``.
+
+    ``scale_to_reach``: the default box and ``step_size`` are the paper's, sized for its robot
+    (arms of :data:`PAPER_REACH` m about their shoulders' midpoint (0, 0, 2) m); for another robot
+    the planner scales the box's position part and the step size by the robot's mean arm reach /
+    :data:`PAPER_REACH` about that robot's shoulders' midpoint (the paper's robot: unchanged). A box
+    or step size set explicitly is used as given.
     """
 
     step_size: float = 0.6
@@ -231,6 +237,7 @@ class TCBiRRTOptions:
     geodesic_sigma: float = 0.15
     ik_restarts: int | None = None
     ik_restart_sigma: float = 0.3
+    scale_to_reach: bool = True
 
     def __post_init__(self):
         if self.variant not in VARIANTS:
@@ -257,7 +264,7 @@ class TCBiRRTOptions:
         _pos("ik_restart_sigma", self.ik_restart_sigma)
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
-        for name in ("sample_filter", "keep_prefix"):
+        for name in ("sample_filter", "keep_prefix", "scale_to_reach"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
@@ -286,6 +293,32 @@ class TCBiRRTOptions:
         _pos("margin", self.margin, allow_zero=True)
         if not (isinstance(self.max_iterations, int) and self.max_iterations >= 0):
             raise ValueError(f"TCBiRRTOptions.max_iterations: expected an int >= 0, got {self.max_iterations!r}")
+
+
+#: [m] the paper robot's arm reach bound (:func:`.task_sampling.arm_reach` of ``tcbirrt_dual_arm``)
+PAPER_REACH = 2.938195019102723
+
+
+def reach_scaled_workspace(robot: RobotModel, options: TCBiRRTOptions) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(xi_lower, xi_upper, step_size)`` the planner uses for ``robot`` (see
+    :attr:`TCBiRRTOptions.scale_to_reach`)."""
+    from .task_sampling import arm_reach
+
+    lo, hi, step = np.asarray(options.xi_lower, float), np.asarray(options.xi_upper, float), float(options.step_size)
+    default = (options.xi_lower == PAPER_XI_LOWER and options.xi_upper == PAPER_XI_UPPER
+               and step == TCBiRRTOptions.step_size)
+    if not (options.scale_to_reach and default) or robot.is_floating or not robot.arms:
+        return lo, hi, step
+    reach = [arm_reach(robot, a) for a in robot.arms]
+    scale = float(np.mean([r for _, r in reach])) / PAPER_REACH
+    centre = np.mean([sh for sh, _ in reach], axis=0)
+    paper_centre = 0.5 * (lo[:3] + hi[:3])
+    if abs(scale - 1.0) < 1e-9 and np.allclose(centre, paper_centre, atol=1e-9):
+        return lo, hi, step
+    lo, hi = lo.copy(), hi.copy()
+    half = 0.5 * (hi[:3] - lo[:3]) * scale
+    lo[:3], hi[:3] = centre - half, centre + half
+    return lo, hi, step * scale
 
 
 # ---------------------------------------------------------------------- tree
@@ -351,8 +384,7 @@ class TCBiRRT(Planner):
         self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
         self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
         self.grasps = scene.object.grasps
-        self._lo = np.asarray(self.options.xi_lower)
-        self._hi = np.asarray(self.options.xi_upper)
+        self._lo, self._hi, self.step_size = reach_scaled_workspace(robot, self.options)
         self._filter: ObjectPoseFilter | None = None
         self._rng = np.random.default_rng(0)
 
@@ -467,10 +499,10 @@ class TCBiRRT(Planner):
         xi_near = tree.xi[i_near]
         d = xi_rand - xi_near
         dist = float(np.sqrt(d @ d))
-        if dist <= o.step_size:
+        if dist <= self.step_size:
             xi_s, reach = xi_rand.copy(), True           # ξ_s = ξ_rand exactly
         else:
-            xi_s, reach = xi_near + (o.step_size / dist) * d, False   # Eq. 3
+            xi_s, reach = xi_near + (self.step_size / dist) * d, False   # Eq. 3
         R0, p0 = tree.pose[i_near]
         Rs, ps = pose_from_xi(xi_s)
         q_near = tree.q[i_near]

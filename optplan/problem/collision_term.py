@@ -272,7 +272,9 @@ class CollisionModel:
         self.robot_shape = {}
         for g, o in enumerate(objs):
             geo = o.geometry
-            M = o.placement
+            # a geometry's placement is in its parent JOINT's frame; the rows use its parent frame
+            # (not the joint's when the link hangs from fixed joints: a hand, fingers, a mount)
+            M = robot.model.frames[o.parentFrame].placement.inverse() * o.placement
             if isinstance(geo, coal.Capsule):
                 hl = geo.halfLength
                 a = M.translation + M.rotation @ np.array([0, 0, -hl])

@@ -261,7 +261,8 @@ def geometry_points(robot: RobotModel, g: int) -> tuple[int, np.ndarray, float]:
     from ..errors import ConfigurationError
 
     o = robot.collision_model.geometryObjects[g]
-    geo, M = o.geometry, o.placement
+    # the placement is in the parent joint's frame; the points are returned in the parent frame
+    geo, M = o.geometry, robot.model.frames[o.parentFrame].placement.inverse() * o.placement
     if isinstance(geo, coal.Cylinder):
         V, r = np.array([[0, 0, -geo.halfLength], [0, 0, geo.halfLength]]).T, float(geo.radius)
     elif isinstance(geo, coal.Convex):

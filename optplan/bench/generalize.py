@@ -1,0 +1,270 @@
+"""Generalisation of the pipeline: plan → optimize → verify on scenes the optimizer was not tuned
+on, with each scene's own robot (the scene's ``robot`` field: a shipped model or one of
+example-robot-data's, e.g. the two-Panda ``dual_panda``).
+
+``optplan bench generalize --scene suite,stress,panda_shelf --trials 5 --out DIR``
+
+* ``suite`` = the hard-scene suite (``hard_*``), ``stress`` = the stress scenes (``stress_*``),
+  ``panda`` = the dual-Panda scenes (``panda_*``); any scene name works too.
+* Planner: TCBiRRT, ``variant="improved"`` (the hard scenes' planner), edges checked every 0.05 rad,
+  ``--time-limit`` [s] per query; the sampling box and step scale with the robot's reach.
+* Per trial: :func:`optplan.pipeline.run_pipeline` with the product's defaults (B-spline segment
+  NLP, its retry policy, IPOPT capped at ``--ipopt-max-wall-time`` per solve). A trial the
+  planner does not solve counts as "no plan", not as an optimizer failure.
+* ``DIR/results.jsonl``: one line per (scene, trial), the same fields as ``optplan bench
+  warmstart`` (mode ``warm``) plus the robot, its collision-pair count and the attempts per
+  segment; resumable. ``DIR/summary.txt``: per scene, planner successes, optimizer converged and
+  verified among them, optimization wall/CPU time per trial (median / p95), IPOPT iterations and
+  the NLP attempts by reason (``initial``, ``collision``, ``finer-grid``, ``refine``,
+  ``fallback-knots``), next to the targets (≥ 95 % of planned trials; median ≤ 1 s, p95 ≤ 3 s).
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["GeneralizeConfig", "expand", "run", "summarize", "format_summary", "TARGET_SUCCESS"]
+log = logging.getLogger(__name__)
+
+#: target: the optimizer succeeds (converged and verified) on this fraction of the planned trials
+TARGET_SUCCESS = 0.95
+GROUPS = {"suite": "hard_", "stress": "stress_", "panda": "panda_"}
+
+
+@dataclass
+class GeneralizeConfig:
+    scenes: list = field(default_factory=lambda: ["suite", "stress", "panda"])
+    trials: int = 5
+    first_trial: int = 0
+    seed: int = 0
+    out: str = "bench_generalize"
+    time_limit: float = 10.0                 # planning time limit per query [s]
+    ipopt_max_wall_time: float = 60.0        # [s] per IPOPT solve
+    planner_variant: str = "improved"
+    progress: bool = True
+
+
+def expand(names) -> list[str]:
+    """Scene names from ``suite`` / ``stress`` / ``panda`` groups and plain names (validated)."""
+    from ..scene import available_scenes
+
+    known = available_scenes()
+    out: list[str] = []
+    for s in (str(n).strip() for n in names):
+        if not s:
+            continue
+        group = [k for k in known if k.startswith(GROUPS[s])] if s in GROUPS else None
+        if group is None:
+            if s not in known:
+                raise ValueError(f"--scene: unknown scene {s!r} (groups: {', '.join(GROUPS)}; scenes: "
+                                 f"{', '.join(known)})")
+            group = [s]
+        out += [g for g in group if g not in out]
+    if not out:
+        raise ValueError("--scene: no scene given")
+    return out
+
+
+_W: dict = {}
+
+
+def _robot(name: str):
+    from ..example_robots import EXAMPLE_ROBOTS, load_example_robot
+    from ..robot import RobotModel
+
+    if name not in _W:
+        _W[name] = load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
+    return _W[name]
+
+
+def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
+    """One (scene, trial): the result line (see the module docstring)."""
+    from ..pipeline import PipelineOptions, run_pipeline
+    from ..scene import Scene
+    from .trials import TrialGenerator
+    from .warmstart import _finite, _path_hash, _segment_rows
+
+    scene = Scene.load(scene_name)
+    robot = _robot(scene.robot or "tcbirrt_dual_arm")
+    line = {"scene": scene_name, "trial": int(index), "mode": "warm", "seed": int(cfg.seed), "robot": robot.name,
+            "n_collision_pairs": len(robot.collision_pairs), "time_limit_s": float(cfg.time_limit),
+            "ipopt_max_wall_time_s": float(cfg.ipopt_max_wall_time), "planner_variant": cfg.planner_variant}
+    t0 = time.perf_counter()
+    try:
+        trial = TrialGenerator(robot, scene).generate(index, cfg.seed)
+    except Exception as exc:  # no valid start/goal: no plan, no optimization
+        return {**line, "success": False, "plan_ok": False, "plan_status": "no_trial", "opt_status": "not_run",
+                "error": f"{type(exc).__name__}: {exc}", "segments": []}
+    opts = PipelineOptions(plan_time_limit=float(cfg.time_limit), ipopt_max_wall_time=float(cfg.ipopt_max_wall_time),
+                           planner_options=(("edge_resolution", 0.05), ("variant", cfg.planner_variant)))
+    c0, w0 = time.process_time(), time.perf_counter()
+    res, err = None, None
+    try:
+        res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=int(trial.seed))
+    except Exception as exc:  # recorded, not fatal: the run goes on
+        log.warning("%s trial %d: pipeline raised %s: %s", scene_name, index, type(exc).__name__, exc)
+        err = f"{type(exc).__name__}: {exc}"
+    line.update({"wall_time_s": time.perf_counter() - w0, "cpu_time_s": time.process_time() - c0,
+                 "trial_generation_s": w0 - t0})
+    if res is None:
+        return {**line, "success": False, "plan_ok": None, "plan_status": "error", "opt_status": "error",
+                "error": err, "segments": []}
+    line.update({k: _finite(v) for k, v in res.to_dict().items()})
+    line.update({"plan_ok": bool(res.plan is not None and res.plan.success), "plan_hash": _path_hash(res.plan),
+                 "converged": bool(res.segments) and all(s.solution.success for s in res.segments),
+                 "segments": _segment_rows(res), "error": None})
+    return line
+
+
+def _done(rows: list[dict], cfg: GeneralizeConfig) -> set:
+    return {(r["scene"], int(r["trial"])) for r in rows
+            if r.get("seed") == cfg.seed and r.get("time_limit_s") == float(cfg.time_limit)
+            and r.get("ipopt_max_wall_time_s") == float(cfg.ipopt_max_wall_time)
+            and r.get("planner_variant") == cfg.planner_variant}
+
+
+def run(cfg: GeneralizeConfig) -> list[dict]:
+    """Run (or resume) the benchmark; writes ``results.jsonl`` and ``summary.txt`` / ``.json``."""
+    from .tcbirrt import _repair_tail, load_results
+
+    scenes = expand(cfg.scenes)
+    if not isinstance(cfg.trials, int) or cfg.trials < 1:
+        raise ValueError(f"--trials: expected an integer >= 1, got {cfg.trials!r}")
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "results.jsonl"
+    _repair_tail(path)
+    done = _done(load_results(path), cfg)
+    units = [(s, i) for s in scenes for i in range(cfg.first_trial, cfg.first_trial + cfg.trials) if (s, i) not in done]
+    bar = None
+    if cfg.progress and units:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(units), desc="bench generalize", unit="trial")
+    with open(path, "a") as f:
+        for s, i in units:
+            line = run_trial(s, i, cfg)
+            f.write(json.dumps(line) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix_str(f"{s} #{i} {'ok' if line.get('success') else line.get('opt_status')}")
+    if bar is not None:
+        bar.close()
+    keep = {}
+    for r in load_results(path):
+        if (r["scene"], int(r["trial"])) in _done([r], cfg) and r["scene"] in scenes \
+                and cfg.first_trial <= int(r["trial"]) < cfg.first_trial + cfg.trials:
+            keep[(r["scene"], int(r["trial"]))] = r
+    rows = [keep[k] for k in sorted(keep)]
+    summ = summarize(rows)
+    (out / "summary.json").write_text(json.dumps(summ, indent=2))
+    (out / "summary.txt").write_text(format_summary(summ) + "\n")
+    return rows
+
+
+def _stats(v) -> dict:
+    v = np.asarray([x for x in v if x is not None and math.isfinite(x)], float)
+    if not v.size:
+        return {"median": None, "p95": None, "max": None}
+    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(v.max())}
+
+
+def _group(rows: list[dict]) -> dict:
+    planned = [r for r in rows if r.get("plan_ok")]
+    ok = [r for r in planned if r.get("success")]
+    attempts: dict = {}
+    failures: dict = {}
+    for r in planned:
+        for s in r.get("segments", []):
+            for a in s.get("attempts", []):
+                attempts[a["reason"]] = attempts.get(a["reason"], 0) + 1
+            for why in s.get("failure", []):
+                key = f"{s['kind']}:{why}"
+                failures[key] = failures.get(key, 0) + 1
+    return {"trials": len(rows), "planned": len(planned), "success": len(ok),
+            "converged": sum(1 for r in planned if r.get("converged")),
+            "success_rate": len(ok) / len(planned) if planned else None,
+            "opt_wall_s": _stats([r.get("opt_wall_s") for r in planned]),
+            "opt_cpu_s": _stats([r.get("opt_cpu_s") for r in planned]),
+            "iterations": _stats([r.get("opt_iterations") for r in planned]),
+            "plan_time_s": _stats([r.get("plan_time_s") for r in planned]),
+            "attempts": dict(sorted(attempts.items())), "failures": failures,
+            "n_collision_pairs": max((r.get("n_collision_pairs", 0) for r in rows), default=0),
+            "robot": rows[0].get("robot") if rows else None}
+
+
+def summarize(rows: list[dict]) -> dict:
+    """Per scene and ``all``: :func:`_group` figures."""
+    scenes = sorted({r["scene"] for r in rows})
+    out = {s: _group([r for r in rows if r["scene"] == s]) for s in scenes}
+    out["all"] = _group(rows)
+    return out
+
+
+def format_summary(summ: dict) -> str:
+    f = lambda v, fmt=".2f": "/" if v is None else format(v, fmt)  # noqa: E731
+    hdr = (f"{'scene':20s} {'robot':16s} {'pairs':>5s} {'planned':>7s} {'conv':>5s} {'verified':>8s} "
+           f"{'opt wall s med/p95':>18s} {'opt CPU s med/p95':>17s} {'iter med/p95':>12s}  attempts")
+    lines = ["plan -> optimize -> verify on scenes not tuned on (rates over the trials the planner solved)", hdr,
+             "-" * len(hdr)]
+    for s, g in summ.items():
+        lines.append(f"{s:20s} {str(g['robot'] if s != 'all' else ''):16s} {g['n_collision_pairs'] if s != 'all' else '':>5} "
+                     f"{g['planned']:3d}/{g['trials']:<3d} {g['converged']:5d} {g['success']:8d} "
+                     f"{f(g['opt_wall_s']['median']):>8s}/{f(g['opt_wall_s']['p95']):<9s} "
+                     f"{f(g['opt_cpu_s']['median']):>8s}/{f(g['opt_cpu_s']['p95']):<8s} "
+                     f"{f(g['iterations']['median'], '.0f'):>5s}/{f(g['iterations']['p95'], '.0f'):<6s} "
+                     + ", ".join(f"{k} {v}" for k, v in g["attempts"].items()))
+        if g["failures"] and s != "all":
+            lines.append(f"{'':20s} failures: " + ", ".join(f"{k} {v}" for k, v in g["failures"].items()))
+    a = summ.get("all", {})
+    if a.get("planned"):
+        met = a["success_rate"] >= TARGET_SUCCESS
+        w = a["opt_wall_s"]
+        tmet = w["median"] is not None and w["median"] <= 1.0 and w["p95"] <= 3.0
+        lines.append(f"targets: verified {a['success']}/{a['planned']} = {100 * a['success_rate']:.0f}% of planned "
+                     f"trials (target >= {100 * TARGET_SUCCESS:.0f}%: {'met' if met else 'NOT met'}); optimization "
+                     f"per trial median {f(w['median'])} s / p95 {f(w['p95'])} s wall (target <= 1 / 3 s: "
+                     f"{'met' if tmet else 'NOT met'})")
+    return "\n".join(lines)
+
+
+def command(args) -> int:
+    """``optplan bench generalize``."""
+    cfg = GeneralizeConfig(scenes=[s for s in args.scene.split(",") if s.strip()], trials=args.trials,
+                           first_trial=args.first_trial, seed=args.seed, out=args.out, time_limit=args.time_limit,
+                           ipopt_max_wall_time=args.ipopt_max_wall_time, progress=not args.no_progress)
+    try:
+        expand(cfg.scenes)
+    except ValueError as exc:
+        from ..errors import UsageError
+
+        raise UsageError(str(exc)) from None
+    t0 = time.perf_counter()
+    rows = run(cfg)
+    print(format_summary(summarize(rows)))
+    print(f"{len(rows)} result lines in {cfg.out}/results.jsonl; run time {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def add_arguments(p) -> None:
+    from .. import cli_args as ca
+
+    p.add_argument("--scene", default="suite,stress,panda",
+                   help="comma-separated scene names or groups: suite (hard_*), stress (stress_*), panda (panda_*)")
+    p.add_argument("--trials", type=ca.positive_int, default=5, help="trials per scene")
+    p.add_argument("--first-trial", type=ca.nonnegative_int, default=0)
+    p.add_argument("--seed", type=ca.nonnegative_int, default=0)
+    p.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit per query [s]")
+    p.add_argument("--ipopt-max-wall-time", type=ca.positive_float, default=60.0, metavar="S",
+                   help="cap every IPOPT solve at S seconds (default 60)")
+    p.add_argument("--out", default="bench_generalize", help="output directory (results.jsonl, summary.txt/json)")
+    p.add_argument("--no-progress", action="store_true")
