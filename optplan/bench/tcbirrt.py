@@ -19,6 +19,10 @@ times (Eq. 9-11).
 * ``clock``: "cpu" (default) measures and limits each query in CPU seconds of its worker process
   (immune to other load on the machine); "wall" uses wall-clock time as the paper. Both are
   recorded in every line (``time_s`` wall, ``cpu_time_s``).
+* A returned path counts as a success only when every straight joint-space edge between its
+  configurations is collision-free when checked so densely that no point of the robot or object
+  moves more than :data:`SWEEP_TOLERANCE` between checks (``success``; the planner's own verdict
+  is ``planner_success``, and the summary counts the difference as rejected paths).
 """
 from __future__ import annotations
 
@@ -43,6 +47,9 @@ PAPER = {  # the TCBiRRT paper Tables 2-3 (t = 1000 s; times: mean ± std of the
     "tcbirrt": {"ssps_scene1": (0.94, 0.82, 0.65), "ssps_scene2": (0.96, 2.12, 0.94), "ssps_scene3": (0.93, 0.87, 0.38)},
     "cbirrt2": {"ssps_scene1": (0.25, None, None), "ssps_scene2": (0.18, None, None), "ssps_scene3": (0.02, None, None)},
 }
+#: [m] the bench's edge check of every returned path: no point of the robot or object moves farther
+#: between two checked configurations; a path with an edge in collision at this density is not a success
+SWEEP_TOLERANCE = 0.01
 T_GRID = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 60.0, 100.0, 1000.0)
 
 
@@ -145,10 +152,12 @@ def _worker_setup(robot_name: str, scenes: list[str], planners: list[str]):
                                                **parse_planner_spec(p)[1]) for p in planners}}
 
 
-def _path_checks(robot, scene, checker, res, resolution: float = 0.05) -> dict:
+def _path_checks(robot, scene, checker, res, resolution: float = 0.05, sweep: float = SWEEP_TOLERANCE) -> dict:
     """Independent checks of a returned path: closed-chain error (Pinocchio FK) at every
     configuration flagged constrained, and collision checks along straight joint-space edges
-    every ``resolution`` rad (object held on constrained edges, fixed during regrasps)."""
+    (object held on constrained edges, fixed during regrasps) every ``resolution`` rad
+    (``dense_invalid_edges``) and so densely that no point of the robot or object moves more than
+    ``sweep`` [m] between checks (``swept_invalid_edges``, :meth:`ValidityChecker.sweep_weights`)."""
     from ..planners.closed_chain import closure_error
     from ..planners.rrtconnect import edge_is_valid
 
@@ -160,7 +169,7 @@ def _path_checks(robot, scene, checker, res, resolution: float = 0.05) -> dict:
     for q, c in zip(P, res.constrained):
         if c:
             resid = max(resid, *closure_error(robot, scene.object.grasps, q, data))
-    bad = 0
+    bad = swept = 0
     reg = {}
     for s in res.segments:
         if s.kind == "regrasp":
@@ -169,14 +178,16 @@ def _path_checks(robot, scene, checker, res, resolution: float = 0.05) -> dict:
     for k in range(len(P) - 1):
         if k in reg:
             M = reg[k]
-            ok = edge_is_valid(P[k], P[k + 1], lambda x: checker.is_valid_object_fixed(x, M), resolution)
+            fn, mode = (lambda x, M=M: checker.is_valid_object_fixed(x, M)), "fixed"
         elif res.segments and res.segments[0].kind == "free":
-            ok = edge_is_valid(P[k], P[k + 1], checker.is_valid_free, resolution)
+            fn, mode = checker.is_valid_free, "free"
         else:
-            ok = edge_is_valid(P[k], P[k + 1], checker.is_valid, resolution)
-        bad += not ok
+            fn, mode = checker.is_valid, "held"
+        bad += not edge_is_valid(P[k], P[k + 1], fn, resolution)
+        swept += not edge_is_valid(P[k], P[k + 1], fn, sweep, weights=checker.sweep_weights(mode, per_geometry=True))
     length = float(np.sum(np.linalg.norm(np.diff(P, axis=0), axis=1))) if len(P) > 1 else 0.0
-    return {"max_closed_chain_residual": resid, "dense_invalid_edges": bad, "joint_path_length_rad": length}
+    return {"max_closed_chain_residual": resid, "dense_invalid_edges": bad, "swept_invalid_edges": swept,
+            "sweep_tolerance_m": sweep, "joint_path_length_rad": length}
 
 
 def _run_unit(args) -> list[dict]:
@@ -189,14 +200,16 @@ def _run_unit(args) -> list[dict]:
     for name in planners:
         pl = w["planners"][name]
         res = pl.plan(trial.q_start, trial.q_goal, time_limit=time_limit, seed=trial.seed, clock=clock)
+        checks = _path_checks(w["robot"], w["scene"], w["checker"], res)
+        clean = res.success and checks.get("swept_invalid_edges", 0) == 0
         line = {"scene": scene, "trial": index, "planner": name, "seed": seed, "planner_seed": trial.seed,
-                "status": res.status.value, "success": res.success, "time_s": res.stats.get("time_s"),
+                "status": res.status.value, "success": clean, "planner_success": res.success, "time_s": res.stats.get("time_s"),
                 "cpu_time_s": res.stats.get("cpu_time_s"), "clock": clock, "time_limit_s": time_limit,
                 "n_regrasp": res.n_regrasp, "n_configurations": len(res.path), "message": res.message,
                 "regenerations": trial.regenerations, "trial_generation_s": gen_time,
                 "stats": {k: v for k, v in res.to_dict(include_path=False)["stats"].items()
                           if k not in ("time_s", "cpu_time_s", "clock", "time_limit_s", "seed")},
-                "checks": _path_checks(w["robot"], w["scene"], w["checker"], res),
+                "checks": checks,
                 "task": trial.to_dict()}
         out.append(line)
     return out
@@ -346,6 +359,7 @@ def summarize(rows: list[dict], time_limit: float) -> dict:
         for p in sorted({r["planner"] for r in rs}, key=lambda x: (x != "tcbirrt", x)):
             pr = [r for r in rs if r["planner"] == p]
             succ = [r for r in pr if r["success"]]
+            clipping = sum(1 for r in pr if r.get("planner_success", r["success"]) and not r["success"])
             times = sorted(_time_of(r) for r in succ)
             all_times = sorted([_time_of(r) for r in succ] + [math.inf] * (len(pr) - len(succ)))
             ts = [t for t in T_GRID if t <= time_limit] or [time_limit]
@@ -354,6 +368,7 @@ def summarize(rows: list[dict], time_limit: float) -> dict:
                  "median_time_successful_s": float(np.median(times)) if times else None,
                  "median_time_all_s": (float(all_times[len(all_times) // 2]) if all_times and
                                        math.isfinite(all_times[len(all_times) // 2]) else None),
+                 "clipping_paths": clipping,
                  "statuses": {s: sum(1 for r in pr if r["status"] == s) for s in sorted({r["status"] for r in pr})}}
             if len(times) >= nmin and nmin >= 2:
                 f = np.asarray(times[:nmin])
@@ -395,6 +410,9 @@ def format_summary(summ: dict) -> str:
                 extra.append(f"mean regrasps {d['mean_n_regrasp']:.2f}")
                 extra.append(f"max closed-chain residual {d['max_closed_chain_residual']:.1e}")
                 extra.append(f"paths with collisions between configurations (dense 0.05 rad) {d['paths_with_dense_collisions']}")
+            if d.get("clipping_paths"):
+                extra.append(f"returned paths rejected for an edge in collision ({SWEEP_TOLERANCE * 100:g} cm sweep) "
+                              f"{d['clipping_paths']}")
             extra.append("statuses " + ", ".join(f"{k} {v}" for k, v in d["statuses"].items()))
             lines.append("      " + "; ".join(extra))
     lines.append("targets: TCBiRRT success >= 0.99 per scene within 10 s, median <= 0.25 s; "

@@ -105,12 +105,15 @@ def _bisection_order(n: int) -> list[int]:
 
 
 def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray], bool], resolution: float,
-                  check_end: bool = True) -> bool:
+                  check_end: bool = True, weights: np.ndarray | None = None) -> bool:
     """Straight joint-space edge a → b valid at every ``resolution`` step (largest joint change
-    between checks); ``a`` itself is not checked, ``b`` only with ``check_end``. Interior points
-    are checked coarse-to-fine."""
+    between checks [rad]; with ``weights`` w, the weighted step ``Σ w_j |Δq_j|`` instead, or with a
+    matrix of weights the largest row's — e.g. :meth:`ValidityChecker.sweep_weights`, in which case
+    ``resolution`` is a distance [m] that no point of the robot moves farther than between two checks); ``a`` itself is not checked, ``b``
+    only with ``check_end``. Interior points are checked coarse-to-fine."""
     d = b - a
-    n = max(1, int(math.ceil(float(np.abs(d).max()) / resolution)))
+    size = float(np.abs(d).max()) if weights is None else float(np.max(weights @ np.abs(d)))
+    n = max(1, int(math.ceil(size / resolution)))
     if check_end and not is_valid(b):
         return False
     for k in _bisection_order(n):
@@ -122,17 +125,18 @@ def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray],
 def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                 is_valid: Callable[[np.ndarray], bool], rng: np.random.Generator, deadline: Deadline, *,
                 range_: float = 1.0, resolution: float = 0.03, max_iterations: int = 0,
-                stats: dict | None = None) -> list[np.ndarray] | None:
+                stats: dict | None = None, weights: np.ndarray | None = None) -> list[np.ndarray] | None:
     """RRTConnect between two valid points of the box ``[lower, upper]``.
 
     Returns the list of tree nodes from ``start`` to ``goal`` (consecutive nodes joined by valid
-    straight edges) or None (deadline / iteration cap). ``stats`` (optional dict) receives
+    straight edges, checked as :func:`edge_is_valid` with ``resolution`` and ``weights``) or None
+    (deadline / iteration cap). ``stats`` (optional dict) receives
     ``iterations`` and ``nodes``.
     """
     start = np.asarray(start, float)
     goal = np.asarray(goal, float)
     stats = stats if stats is not None else {}
-    if edge_is_valid(start, goal, is_valid, resolution):
+    if edge_is_valid(start, goal, is_valid, resolution, weights=weights):
         stats["iterations"] = stats.get("iterations", 0)
         stats["nodes"] = stats.get("nodes", 0) + 2
         return [start.copy(), goal.copy()]
@@ -149,7 +153,7 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
             xnew, res = target.copy(), REACHED
         else:
             xnew, res = xn + (range_ / dist) * d, ADVANCED
-        if not edge_is_valid(xn, xnew, is_valid, resolution):
+        if not edge_is_valid(xn, xnew, is_valid, resolution, weights=weights):
             return TRAPPED, -1
         return res, tree.add(xnew, i)
 
@@ -182,9 +186,11 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
 
 
 def shortcut_path(path: list[np.ndarray], is_valid: Callable[[np.ndarray], bool], resolution: float,
-                  rng: np.random.Generator, iterations: int = 100, deadline: Deadline | None = None) -> list[np.ndarray]:
+                  rng: np.random.Generator, iterations: int = 100, deadline: Deadline | None = None,
+                  weights: np.ndarray | None = None) -> list[np.ndarray]:
     """Random shortcutting: replace the sub-path between two random nodes by a straight edge
-    when that edge is valid. Endpoints are kept."""
+    when that edge is valid (:func:`edge_is_valid` with ``resolution`` and ``weights``). Endpoints
+    are kept."""
     path = [np.asarray(p, float) for p in path]
     for _ in range(iterations):
         if len(path) <= 2 or (deadline is not None and deadline.expired()):
@@ -192,7 +198,7 @@ def shortcut_path(path: list[np.ndarray], is_valid: Callable[[np.ndarray], bool]
         i, j = sorted(rng.choice(len(path), size=2, replace=False))
         if j - i < 2:
             continue
-        if edge_is_valid(path[i], path[j], is_valid, resolution):
+        if edge_is_valid(path[i], path[j], is_valid, resolution, weights=weights):
             path = path[:i + 1] + path[j:]
     return path
 

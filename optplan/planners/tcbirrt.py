@@ -40,12 +40,29 @@ Deviations from the paper, all options (defaults in brackets):
   coordinates ("absolute") swings through a full turn when the two rotations sit on either side
   of |φ| = π; "absolute" here unwraps φ_s to the representative nearest φ_near, which makes the
   two agree to first order. Same end poses either way.
-* ``max_joint_step`` [0.5 rad]: PathInverseKinematics counts a waypoint as failed when its IK
+* ``max_joint_step`` [paper 0.5 rad, improved 0.25 rad]: PathInverseKinematics counts a waypoint as failed when its IK
   solution jumps by more than this from the previous one (the paper seeds IK with the previous
   solution "to maintain the continuity of the joint motion"; this makes that a guarantee).
 * ``edge_resolution`` [None]: the paper checks only the N+1 configurations of an extension; with a
   value [rad], the straight joint-space segments between consecutive configurations are checked
   too (every ``edge_resolution`` rad).
+* ``joint_connect`` [False in both variants; see docs/planners.md]: the trees are joined in JOINT space when the
+  task-space connection cannot do it — CBiRRT2's ConstrainedExtend (Newton projection onto the
+  closed chain, :class:`.CBiRRT2`, options ``joint_connect_options``) from tree b's configuration
+  toward tree a's: (1) when the connect step reaches tree a's object pose with another joint
+  solution, before a regrasp is tried (a regrasp releases a hand; the joint-space motion keeps
+  both hands on the object); (2) when the connect step is trapped within ``joint_connect_radius``
+  (ξ distance) of tree a's node; both only when the two configurations are within
+  ``joint_connect_max_distance`` [rad, Euclidean] (farther ones are other IK branches). Its configurations close the chain to the projection tolerance
+  and form a ``"constrained"`` part of the path.
+* ``edge_tolerance`` [paper 0: off; improved 0.01 m]: the straight joint-space segments between consecutive
+  configurations (constrained edges and regrasp motions) are checked so densely that no point of
+  the arms or the object moves farther than this between two checks (per-joint sweep bound of
+  :meth:`.ValidityChecker.sweep_weights`): a path is collision-free along its edges, not only at its
+  configurations, up to obstacles or contacts thinner than ``edge_tolerance``. With
+  ``lazy_edges`` [False] the constrained edges are checked only once they lie on a
+  start-goal path; an edge that fails removes its node and that node's subtree from the tree and
+  the search goes on (lazy collision checking, as LazyPRM / LazyRRT).
 """
 from __future__ import annotations
 
@@ -60,6 +77,8 @@ from ..errors import ConfigurationError
 from ..robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from .cbirrt2 import CBiRRT2, CBiRRT2Options
+from .cbirrt2 import _Tree as _JointTree
 from .closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from .rrtconnect import RRTConnectOptions, edge_is_valid, rrt_connect, shortcut_path
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
@@ -76,9 +95,11 @@ PARTIAL = "partial"
 #: option values of each variant (fields left at None take them)
 VARIANTS = {
     "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False,
-              "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0},
-    "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.1, "keep_prefix": True,
-                 "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2},
+              "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0,
+              "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5},
+    "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
+                 "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
+                 "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25},
 }
 
 
@@ -170,8 +191,9 @@ class TCBiRRTOptions:
 
     ``step_size``: s_ξ (Eq. 3) [mixed m / rad, as the paper's ξ]; ``n_interp``: N (Eq. 4);
     ``xi_lower``/``xi_upper``: the sampling box ξ_l, ξ_h (world = base frame); ``ik``: Alg. 4
-    (ε_p, ε_o, n, K·λ); ``max_joint_step`` [rad] (``inf`` turns it off); ``interpolation``;
-    ``edge_resolution`` [rad] or None; ``regrasp``: RRTConnect options of a regrasp (one arm,
+    (ε_p, ε_o, n, K·λ); ``max_joint_step`` [rad] (``inf`` turns it off; None: the variant's value); ``interpolation``;
+    ``edge_resolution`` [rad] or None; ``edge_tolerance`` [m] (0: off) and ``lazy_edges``
+    (both None: the variant's value), see the module docstring; ``regrasp``: RRTConnect options of a regrasp (one arm,
     7-D); ``regrasp_time_limit`` [s] per regrasp attempt; ``regrasp_tolerance`` [rad]: an arm whose
     two solutions differ by less (max-norm) does not move; ``closure_tolerance``: start and goal
     must satisfy the closed chain to this (position [m] and angle [rad]); ``margin`` [m]: clearance
@@ -184,7 +206,7 @@ class TCBiRRTOptions:
       of the other tree;
     * ``sample_filter`` (False / True): reject ξ_rand while the object alone collides with an
       obstacle or a grasp point is beyond its arm's reach (no IK; :mod:`.task_sampling`);
-    * ``bridge_probability`` (0 / 0.3): probability of a bridge-test sample in ξ (object in
+    * ``bridge_probability`` (0 / 0: off by default, see docs/planners.md): probability of a bridge-test sample in ξ (object in
       collision at two nearby poses, free at their midpoint: narrow openings at the rotation they
       need); ``bridge_sigma``: (position [m], angle [rad]) spread of the second pose (needs
       ``sample_filter``-style checks, done whatever ``sample_filter`` says);
@@ -213,9 +235,16 @@ class TCBiRRTOptions:
     xi_lower: tuple = PAPER_XI_LOWER
     xi_upper: tuple = PAPER_XI_UPPER
     ik: IKSettings = field(default_factory=IKSettings)
-    max_joint_step: float = 0.5
+    max_joint_step: float | None = None
     interpolation: str = "geodesic"
     edge_resolution: float | None = None
+    edge_tolerance: float | None = None
+    lazy_edges: bool | None = None
+    joint_connect: bool | None = None
+    joint_connect_radius: float = 1.0
+    joint_connect_max_distance: float = 2.0
+    joint_connect_options: CBiRRT2Options = field(default_factory=lambda: CBiRRT2Options(max_edge=0.3, collision_step=0.1,
+                                                                                         tolerance=1e-8))
     regrasp: RRTConnectOptions = field(default_factory=lambda: RRTConnectOptions(range=1.0, resolution=0.03,
                                                                                  shortcut_iterations=50))
     regrasp_time_limit: float = 2.0
@@ -264,7 +293,12 @@ class TCBiRRTOptions:
         _pos("ik_restart_sigma", self.ik_restart_sigma)
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
-        for name in ("sample_filter", "keep_prefix", "scale_to_reach"):
+        _pos("joint_connect_radius", self.joint_connect_radius)
+        _pos("joint_connect_max_distance", self.joint_connect_max_distance)
+        if not isinstance(self.joint_connect_options, CBiRRT2Options):
+            raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
+                             f"got {type(self.joint_connect_options).__name__}")
+        for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
@@ -285,6 +319,7 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.interpolation: expected 'geodesic' or 'absolute', got {self.interpolation!r}")
         if self.edge_resolution is not None:
             _pos("edge_resolution", self.edge_resolution)
+        _pos("edge_tolerance", self.edge_tolerance, allow_zero=True)
         if not isinstance(self.regrasp, RRTConnectOptions):
             raise ValueError(f"TCBiRRTOptions.regrasp: expected RRTConnectOptions, got {type(self.regrasp).__name__}")
         _pos("regrasp_time_limit", self.regrasp_time_limit)
@@ -334,11 +369,17 @@ class _TaskTree:
         self.edge: list = [([], [])]
         self.xi[0], self.q[0] = xi, q
         self.n = 1
+        self.alive = np.ones(cap, dtype=bool)
+        self.checked = np.zeros(cap, dtype=bool)   # edge from the parent verified (lazy edges)
+        self.checked[0] = True
+        self.n_dead = 0
 
     def add(self, q, xi, R, p, parent, edge_q, edge_poses) -> int:
         if self.n == len(self.xi):
             self.xi = np.concatenate([self.xi, np.empty_like(self.xi)])
             self.q = np.concatenate([self.q, np.empty_like(self.q)])
+            self.alive = np.concatenate([self.alive, np.ones_like(self.alive)])
+            self.checked = np.concatenate([self.checked, np.zeros_like(self.checked)])
         self.xi[self.n], self.q[self.n] = xi, q
         self.parent.append(parent)
         self.pose.append((R, p))
@@ -348,7 +389,23 @@ class _TaskTree:
 
     def nearest(self, xi: np.ndarray) -> int:
         d = self.xi[:self.n] - xi
-        return int(np.argmin(np.einsum("ij,ij->i", d, d)))
+        d2 = np.einsum("ij,ij->i", d, d)
+        if self.n_dead:
+            d2[~self.alive[:self.n]] = np.inf
+        return int(np.argmin(d2))
+
+    def alive_xi(self) -> np.ndarray:
+        return self.xi[:self.n] if not self.n_dead else self.xi[:self.n][self.alive[:self.n]]
+
+    def kill(self, i: int) -> int:
+        """Remove node i and its subtree (children have larger indices); returns how many died."""
+        dead = 0
+        for k in range(i, self.n):
+            if self.alive[k] and (k == i or not self.alive[self.parent[k]]):
+                self.alive[k] = False
+                dead += 1
+        self.n_dead += dead
+        return dead
 
     def branch(self, i: int) -> tuple[list[np.ndarray], list[tuple]]:
         """Configurations and poses from the root to node i (edge intermediates included)."""
@@ -386,6 +443,9 @@ class TCBiRRT(Planner):
         self.grasps = scene.object.grasps
         self._lo, self._hi, self.step_size = reach_scaled_workspace(robot, self.options)
         self._filter: ObjectPoseFilter | None = None
+        self._w_held = self.checker.sweep_weights("held", per_geometry=True)
+        self._w_fixed = self.checker.sweep_weights("fixed", per_geometry=True)
+        self._cb: CBiRRT2 | None = None
         self._rng = np.random.default_rng(0)
 
     # ------------------------------------------------------------------ public helpers
@@ -430,13 +490,90 @@ class TCBiRRT(Planner):
                     qn = x
                     break
             if qn is None:
-                return fail
+                return self._edges_prefix(q_near, out, fail, st) if fail is not None else None
             if o.edge_resolution is not None and not edge_is_valid(q, qn, ck.is_valid, o.edge_resolution, False):
                 st["collisions"] += 1
-                return fail
+                return self._edges_prefix(q_near, out, fail, st) if fail is not None else None
             out.append(qn)
             q = qn
+        return self._edges_prefix(q_near, out, fail, st)
+
+    def _edges_prefix(self, q_near, out, fail, st):
+        """Eager edge checks after the waypoints' own checks (a failing waypoint costs no edge check):
+        ``out`` if every edge passes, else the prefix before the first failing edge (or None)."""
+        o = self.options
+        if not o.edge_tolerance or o.lazy_edges:
+            return out
+        prev = q_near
+        for k, x in enumerate(out):
+            if not self._edge_ok(prev, x, st):
+                return None if fail is None else out[:k]
+            prev = x
         return out
+
+    def _edge_ok(self, a: np.ndarray, b: np.ndarray, st: dict) -> bool:
+        """The straight joint segment a → b (object held) at ``edge_tolerance`` (ends not checked)."""
+        st["edge_checks"] += 1
+        if edge_is_valid(a, b, self.checker.is_valid, self.options.edge_tolerance, False, self._w_held):
+            return True
+        st["edge_collisions"] += 1
+        return False
+
+    def _branch_ok(self, tree: _TaskTree, i: int, st: dict, deadline: Deadline) -> int | None:
+        """Lazy edges: verify every unchecked edge from the root to node i (root side first); a
+        straight segment in collision is repaired, when ``joint_connect`` is on, by a joint-space
+        constrained path between its ends (:meth:`joint_connect`), spliced into the node's edge.
+        Returns the first node whose edge cannot be made valid, or None when all pass."""
+        chain = []
+        while i > 0 and not tree.checked[i]:
+            chain.append(i)
+            i = tree.parent[i]
+        for k in reversed(chain):
+            eq, ep = tree.edge[k]
+            qs = [tree.q[tree.parent[k]], *eq, tree.q[k]]
+            new_q, new_p = [], []
+            for j, (a, b) in enumerate(zip(qs[:-1], qs[1:])):
+                if not self._edge_ok(a, b, st):
+                    jp = self.joint_connect(a, b, deadline, st) if self.options.joint_connect else None
+                    if jp is None:
+                        return k
+                    st["edge_repairs"] = st.get("edge_repairs", 0) + 1
+                    for x in jp[:-1]:
+                        M = self.kin.object_pose(x)
+                        new_q.append(x)
+                        new_p.append((M.rotation.copy(), M.translation.copy()))
+                if j < len(eq):
+                    new_q.append(eq[j])
+                    new_p.append(ep[j])
+            tree.edge[k] = (new_q, new_p)
+            tree.checked[k] = True
+        return None
+
+    def joint_connect(self, q_from: np.ndarray, q_to: np.ndarray, deadline: Deadline, st: dict) -> list[np.ndarray] | None:
+        """CBiRRT2's ConstrainedExtend in joint space from ``q_from`` to ``q_to`` (both on the closed
+        chain); the configurations after ``q_from`` up to ``q_to`` (its edges checked at
+        ``edge_tolerance`` when set), or None when trapped."""
+        from .cbirrt2 import REACHED as CB_REACHED
+
+        if self._cb is None:
+            self._cb = CBiRRT2(self.robot, self.scene, self.options.joint_connect_options, checker=self.checker,
+                               kinematics=self.kin)
+        st["joint_connect_attempts"] += 1
+        cst = {"projections": 0, "projection_failures": 0}
+        tree = _JointTree(np.asarray(q_from, float))
+        res, i = self._cb.extend(tree, 0, np.asarray(q_to, float), cst, deadline)
+        st["joint_connect_projections"] += cst["projections"]
+        if res != CB_REACHED:
+            return None
+        path = tree.branch(i)[1:] + [np.asarray(q_to, float).copy()]
+        if self.options.edge_tolerance:
+            prev = q_from
+            for x in path:
+                if not self._edge_ok(prev, x, st):
+                    return None
+                prev = x
+        st["joint_connect_successes"] += 1
+        return path
 
     # ------------------------------------------------------------------ regrasp (Section 4.3)
     def regrasp(self, q_from: np.ndarray, q_to: np.ndarray, R: np.ndarray, p: np.ndarray, rng: np.random.Generator,
@@ -477,6 +614,12 @@ class TCBiRRT(Planner):
                     break
                 if o.regrasp.shortcut_iterations:
                     sub_path = shortcut_path(sub_path, valid, o.regrasp.resolution, rng, o.regrasp.shortcut_iterations)
+                if o.edge_tolerance and not all(   # the found motion re-checked at the sweep bound of this arm
+                        edge_is_valid(x, y, valid, o.edge_tolerance, False, self._w_fixed[:, idx])
+                        for x, y in zip(sub_path[:-1], sub_path[1:])):
+                    st["edge_collisions"] += 1
+                    segs = None
+                    break
                 full = []
                 for x in sub_path:
                     y = cur.copy()
@@ -524,7 +667,13 @@ class TCBiRRT(Planner):
         q_s = Q[-1]
         reg = None
         if reach and q_rand is not None:
-            reg = self.regrasp(q_s, q_rand, Rs, ps, rng, deadline, st)
+            dq = float(np.linalg.norm(q_rand - q_s))
+            if o.joint_connect and o.regrasp_tolerance < dq <= o.joint_connect_max_distance:
+                jp = self.joint_connect(q_s, q_rand, deadline, st)
+                if jp is not None:
+                    reg = [(None, [q_s.copy(), *jp])]
+            if reg is None:
+                reg = self.regrasp(q_s, q_rand, Rs, ps, rng, deadline, st)
             if reg is None:
                 st["trapped"] += 1
                 return TRAPPED, -1, None
@@ -556,7 +705,8 @@ class TCBiRRT(Planner):
         self._rng = rng
         st = {k: 0 for k in ("iterations", "extensions", "trapped", "partial", "ik_calls", "ik_iterations", "ik_restarts",
                              "ik_failures", "ik_jumps", "collisions", "regrasp_attempts", "regrasp_failures",
-                             "regrasp_nodes")}
+                             "regrasp_nodes", "edge_checks", "edge_collisions", "lazy_rejections",
+                             "joint_connect_attempts", "joint_connect_successes", "joint_connect_projections")}
         sampler = self._sampler()
         c0 = self.checker.n_checks
         why = self.check_endpoint(q_start)
@@ -590,7 +740,7 @@ class TCBiRRT(Planner):
             if sampler is None:
                 xi_rand = rng.uniform(self._lo, self._hi)                                # line 3
             else:
-                xi_rand = sampler.sample(rng, tb.xi[:tb.n])
+                xi_rand = sampler.sample(rng, tb.alive_xi())
             i_near = ta.nearest(xi_rand)                                                 # line 4
             res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st)   # line 5
             if res != TRAPPED:
@@ -600,7 +750,22 @@ class TCBiRRT(Planner):
                     res, i_b, reg = self.constrained_extend(tb, i_nb, target_xi, target_q, rng, deadline, st)
                     if res not in (ADVANCED, PARTIAL) or deadline.expired():
                         break
+                if res == TRAPPED and o.joint_connect and not deadline.expired():
+                    i_nb = tb.nearest(target_xi)
+                    if float(np.linalg.norm(tb.xi[i_nb] - target_xi)) <= o.joint_connect_radius and \
+                            float(np.linalg.norm(tb.q[i_nb] - target_q)) <= o.joint_connect_max_distance:
+                        jp = self.joint_connect(tb.q[i_nb], target_q, deadline, st)
+                        if jp is not None:
+                            res, i_b, reg = REACHED, i_nb, [(None, [tb.q[i_nb].copy(), *jp])]
                 if res == REACHED:
+                    if o.edge_tolerance and o.lazy_edges:
+                        bad_a, bad_b = self._branch_ok(ta, i_a, st, deadline), self._branch_ok(tb, i_b, st, deadline)
+                        if bad_a is not None or bad_b is not None:
+                            st["lazy_rejections"] += 1
+                            st["lazy_removed_nodes"] = st.get("lazy_removed_nodes", 0) + \
+                                (ta.kill(bad_a) if bad_a is not None else 0) + (tb.kill(bad_b) if bad_b is not None else 0)
+                            ta, tb, a_is_start = tb, ta, not a_is_start
+                            continue
                     found = (i_a, i_b, reg)
                     break
             ta, tb, a_is_start = tb, ta, not a_is_start                                  # line 15
@@ -628,25 +793,36 @@ class TCBiRRT(Planner):
         qs = [x for x in qa]
         poses = [M for M in pa]
         flags = [True] * len(qa)
-        segs: list[PathSegment] = [("constrained", 0, len(qa) - 1, None)]
+        segs: list = []
+        run0 = 0                    # start of the current constrained run
+        n_joint = 0
         for arm, full in reg_segments:
             i0 = len(qs) - 1
             qs.extend(full[1:])
+            if arm is None:         # joint-space constrained connection (joint_connect): part of the constrained run
+                n_joint += 1
+                for x in full[1:]:
+                    M = self.kin.object_pose(x)
+                    poses.append((M.rotation.copy(), M.translation.copy()))
+                flags.extend([True] * (len(full) - 1))
+                continue
+            segs.append(("constrained", run0, i0, None))
             poses.extend([(M_I.rotation, M_I.translation)] * (len(full) - 1))
             flags.extend([False] * (len(full) - 2) + [True])
             segs.append(("regrasp", i0, len(qs) - 1, arm))
-        i0 = len(qs) - 1
+            run0 = len(qs) - 1
         qs.extend(qb[::-1][1:])
         poses.extend(pb[::-1][1:])
         flags.extend([True] * (len(qb) - 1))
-        segs.append(("constrained", i0, len(qs) - 1, None))
+        segs.append(("constrained", run0, len(qs) - 1, None))
         if not a_is_start:   # tree a grew from the goal: flip everything
             n = len(qs) - 1
             qs, poses, flags = qs[::-1], poses[::-1], flags[::-1]
             segs = [(k, n - b, n - a, arm) for k, a, b, arm in segs[::-1]]
         out_segs = [PathSegment(k, a, b, arm, M_I if k == "regrasp" else None)
                     for k, a, b, arm in segs if b > a]
-        st["n_regrasp"] = len(reg_segments)
+        st["n_regrasp"] = len(reg_segments) - n_joint
+        st["joint_connections"] = n_joint
         return PlanResult(PlanStatus.EXACT, self.name, np.array(qs),
                           [pin.SE3(np.asarray(R), np.asarray(p)) for R, p in poses], np.array(flags, dtype=bool),
                           out_segs, st)

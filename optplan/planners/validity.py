@@ -23,6 +23,13 @@ Three modes:
 * ``is_valid_free(q)``: no object (plain joint-space planning).
 
 ``margin`` [m]: pairs closer than this count as colliding (coal's security margin).
+
+:meth:`ValidityChecker.sweep_weights` gives, per joint, an upper bound [m/rad] on how far any point
+of the checked geometry (robot links, and the held object in the ``"held"`` mode) moves per radian
+of that joint, whatever the other joints: along a straight joint-space segment no point moves
+farther than ``Σ_j w_j |Δq_j|``. Edge checks spaced by that bound
+(:func:`optplan.planners.rrtconnect.edge_is_valid` with ``weights``) tie the check density to the
+geometry instead of to a joint angle.
 """
 from __future__ import annotations
 
@@ -118,6 +125,48 @@ class ValidityChecker:
             for mode, gd in self._gd.items():
                 self._bp[mode] = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(self.model, gm, gd)
         self.n_checks = 0
+        self._sweep = {mode: self._sweep_bound(mode) for mode in ("held", "fixed", "free")}
+
+    def _sweep_bound(self, mode: str) -> np.ndarray:
+        """One row per moving geometry, one column per q index: (chain length from the joint's
+        origin to the geometry's joint + distance of the geometry's bounding sphere from that joint
+        + its radius) [m] when the joint moves the geometry, else 0; revolute (1-dof) joints
+        assumed, prismatic joints count 1 m/m."""
+        model, gm = self.model, self.gmodel
+        skip = {self.fixed_id}
+        if mode != "held" and self.held_id is not None:
+            skip.add(self.held_id)
+        reach_of_geom = []
+        for gid, go in enumerate(gm.geometryObjects):
+            if gid in skip or go.parentJoint == 0:
+                continue
+            g = go.geometry
+            g.computeLocalAABB()
+            c = go.placement.act(np.asarray(g.aabb_center))
+            reach_of_geom.append((int(go.parentJoint), float(np.linalg.norm(c)) + float(g.aabb_radius)))
+        w = np.zeros((len(reach_of_geom), model.nv))
+        for row, (k, r) in enumerate(reach_of_geom):
+            length = r
+            j = k
+            while j > 0:            # joint j moves geometry k's body; its origin is `length` away at most
+                jm = model.joints[j]
+                idx = jm.idx_v
+                prismatic = "P" in jm.shortname().replace("JointModel", "")[:1]
+                for t in range(idx, idx + jm.nv):
+                    w[row, t] = 1.0 if prismatic else length
+                length += float(np.linalg.norm(model.jointPlacements[j].translation))
+                j = int(model.parents[j])
+        return w
+
+    def sweep_weights(self, mode: str = "held", per_geometry: bool = False) -> np.ndarray:
+        """Per-joint bound [m/rad] on the displacement of any checked point (see the module
+        docstring); ``mode``: ``"held"`` (robot + held object), ``"fixed"`` / ``"free"`` (robot only).
+        With ``per_geometry`` one row per moving geometry (a point of geometry g moves at most
+        ``W[g] @ |Δq|``, a tighter bound than the per-joint maximum over all geometries)."""
+        if mode not in self._sweep:
+            raise ValueError(f"sweep_weights: mode must be 'held', 'fixed' or 'free', got {mode!r}")
+        W = self._sweep[mode]
+        return W.copy() if per_geometry else W.max(axis=0)
 
     # ------------------------------------------------------------------ queries
     def is_valid(self, q: np.ndarray) -> bool:
