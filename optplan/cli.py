@@ -176,7 +176,8 @@ def _cmd_bench_drake(args) -> int:
         rows = run([p.strip() for p in args.problems.split(",") if p.strip()], trials=args.trials,
                    first_trial=args.first_trial, seed=args.seed,
                    solvers=[s.strip() for s in args.solvers.split(",") if s.strip()], drake_options=drake_opts,
-                   drake_refinements=args.refinements, on_row=on_row if args.json else None)
+                   drake_refinements=args.refinements, on_row=on_row if args.json else None,
+                   segments=[s.strip() for s in args.segments.split(",") if s.strip()])
     except (ValueError, ImportError) as exc:
         print(f"optplan bench drake: error: {exc}", file=sys.stderr)
         return 2
@@ -390,6 +391,8 @@ def build_parser() -> argparse.ArgumentParser:
     dk.add_argument("--solvers", default="snopt,ipopt", help="Drake solvers: snopt, ipopt")
     dk.add_argument("--time-limit", type=ca.positive_float, default=150.0,
                     help="CPU seconds per Drake problem, refinements included (the solve then ends with that status)")
+    dk.add_argument("--segments", default="constrained",
+                    help="pipeline segments to compare: constrained, regrasp (one arm moves, the other holds)")
     dk.add_argument("--refinements", type=ca.nonnegative_int, default=2,
                     help="Drake: closed-chain grid refinements after a converged solve, as the pipeline's")
     dk.add_argument("--samples-per-interval", type=ca.positive_int, default=1,

@@ -171,6 +171,74 @@ def test_bench_takes_any_optplan_solver_and_rejects_bad_names(tcb, transport, dm
         DB.run(["transport"], solvers=["gurobi"])
 
 
+def _uniform_bspline(P: np.ndarray, T: float, t: np.ndarray) -> np.ndarray:
+    """q(t) of optplan's uniform cubic B-spline with control points P ((N+3) × nj) on [0, T]: the
+    textbook basis, written independently of optplan.problem.bspline and of Drake."""
+    N = P.shape[0] - 3
+    out = []
+    for ti in t:
+        k = min(int(ti / (T / N)), N - 1)
+        u = ti / (T / N) - k
+        b = np.array([(1 - u) ** 3, 3 * u**3 - 6 * u**2 + 4, -3 * u**3 + 3 * u**2 + 3 * u + 1, u**3]) / 6
+        out.append(b @ P[k:k + 4])
+    return np.array(out)
+
+
+def test_drake_warm_start_is_the_spline_nlp_initial_trajectory(tcb, dm, rng):
+    """fit_bspline through the B-spline NLP's knot values at rest gives Drake exactly optplan's
+    initial trajectory (same C2 cubic space), also between the knots."""
+    from optplan.problem.bspline import boundary_points
+    from pydrake.trajectories import BsplineTrajectory
+
+    N, T, nj = 9, 13.0, tcb.nj
+    q0, q1 = tcb.random_joints(rng), tcb.random_joints(rng)
+    z = np.zeros(nj)
+    P = np.vstack([boundary_points(q0, z, z, T / N, "start"), rng.uniform(-1, 1, (N - 3, nj)),
+                   boundary_points(q1, z, z, T / N, "end")])
+    knots = _uniform_bspline(P, T, np.linspace(0, T, N + 1))
+    C = fit_bspline(dm.to_drake(knots), T)
+    tr = BsplineTrajectory(_basis(N, T), [C[:, [i]] for i in range(N + 3)])
+    ts = np.linspace(0, T, 7 * N + 1)
+    got = dm.from_drake(np.array([tr.value(t).ravel() for t in ts]))
+    assert np.allclose(got, _uniform_bspline(P, T, ts), atol=1e-10)
+
+
+def test_one_pipeline_segment_both_sides_verified_and_reported(tcb):
+    """A constrained segment of scene 1 (the pipeline's B-spline NLP with its retries vs Drake +
+    SNOPT under a short CPU limit): same N, duration and warm start, both rows verified and in the
+    report with the ratios and the summary line."""
+    probs = DB.pipeline_segment_instances("ssps_scene1", 1, robot=tcb)
+    assert probs, "the planner should solve scene 1 trial 1"
+    p = min(probs, key=lambda q: q.n_intervals)
+    assert p.kind == "segment" and p.q_knots.shape == (p.n_intervals + 1, tcb.nj)
+    assert np.allclose(p.q_knots[0], p.path[0]) and np.allclose(p.q_knots[-1], p.path[-1])
+    opt = DB.optplan_current(p)
+    assert opt.info["n_intervals_first"] == p.n_intervals            # the pipeline's first attempt
+    assert opt.solution.t[-1] == pytest.approx(p.duration)
+    dk = DB.drake_solve(p, DrakeOptions(solver="snopt", time_limit=3.0), refinements=2)
+    assert dk.solution.duration == pytest.approx(p.duration) and dk.info["n_control_points"] >= p.n_intervals + 3
+    rows = [DB.evaluate(p, opt), DB.evaluate(p, dk)]
+    for r in rows:
+        assert np.isfinite(r["max_closed_chain_residual"]) and np.isfinite(r["min_clearance_m"])
+        assert np.isfinite(r["jerk"]) and isinstance(r["passed"], bool)
+    assert rows[0]["passed"], rows[0]
+    if not dk.success:
+        assert not rows[1]["passed"]
+    rep = DB.format_report(rows)
+    assert p.name in rep and "summary drake-snopt: optplan passed 1/1" in rep
+
+
+def test_regrasp_instance_fixes_the_holding_arm(tcb):
+    probs = DB.pipeline_segment_instances("ssps_scene1", 1, robot=tcb, kinds=("regrasp",))
+    assert probs and all(p.kind == "regrasp" and p.closed_chain is None for p in probs)
+    p = probs[0]
+    fixed = np.flatnonzero(p.lower == p.upper)
+    assert set(fixed) == set(tcb.arm(p.object_arm).j_idx) and p.arm != p.object_arm
+    assert np.allclose(p.q_knots[:, fixed], p.q_knots[0, fixed], atol=1e-9)
+    with pytest.raises(ValueError, match="kinds"):
+        DB.pipeline_segment_instances("ssps_scene1", 1, robot=tcb, kinds=("flying",))
+
+
 @pytest.mark.slow
 def test_pipeline_segment_paired_run():
     """End to end on one pipeline segment (scene 1, trial 2, the 21-interval one): the instance's
@@ -186,6 +254,7 @@ def test_pipeline_segment_paired_run():
     # set_initial_path projects the resampled path onto the manifold, then re-times it with a cubic
     # spline evaluated at the uniform knots: near the manifold, not on it (measured 3e-4)
     assert np.abs(r[:, :6]).max() < 1e-2
-    rows = [DB.evaluate(p, DB.optplan_current(p)), DB.evaluate(p, DB.drake_solve(p, DrakeOptions(time_limit=300)))]
+    rows = [DB.evaluate(p, DB.optplan_current(p)), DB.evaluate(p, DB.drake_solve(p, DrakeOptions(time_limit=150),
+                                                                                  refinements=2))]
     assert rows[0]["passed"]  # optplan's pipeline on its own segment
     assert rows[1]["method"] == "drake-snopt" and rows[1]["n_intervals"] == p.n_intervals

@@ -45,7 +45,9 @@ class PeerProblem:
     """One trajectory problem both optimizers solve: ``q_knots`` ((N+1) × nj) the warm start at N
     uniform intervals over ``duration`` [s] (its first/last rows are the rest configurations),
     ``closed_chain`` (or None), ``margin`` [m], ``object_arm`` (the arm the held object follows),
-    ``path`` the planner path the warm start was resampled from (pipeline segments)."""
+    ``path`` the planner path the warm start was resampled from (pipeline segments). ``kind``:
+    "transport", "segment" (a constrained segment of the pipeline) or "regrasp" (one arm moves,
+    ``arm``; the other holds the object, its joints fixed by ``lower`` = ``upper`` [rad])."""
 
     name: str
     kind: str  # "transport" | "segment"
@@ -58,6 +60,9 @@ class PeerProblem:
     object_arm: str | None = None
     path: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+    arm: str | None = None
 
     @property
     def n_intervals(self) -> int:
@@ -107,7 +112,8 @@ def transport_instance(robot: RobotModel | None = None, *, knots: int = 50, dura
                        next(iter(scene.object.grasps)), None, {"seed": seed, "knots": knots})
 
 
-def _spline_warm_start(robot: RobotModel, scene: Scene, seg_path: np.ndarray, opts) -> tuple[np.ndarray, float]:
+def _spline_warm_start(robot: RobotModel, scene: Scene, seg_path: np.ndarray, opts, kind: str = "constrained",
+                       lower=None, upper=None, holder: str | None = None) -> tuple[np.ndarray, float]:
     """The knot configurations and duration [s] of the B-spline segment NLP's first attempt in the
     pipeline (``PipelineOptions.transcription = "bspline"``): its N and T, ``set_initial_path`` on the
     shortcut path (and ``smooth_initial`` when the options ask for it). The B-spline through these
@@ -115,12 +121,14 @@ def _spline_warm_start(robot: RobotModel, scene: Scene, seg_path: np.ndarray, op
     exactly: both are the C2 cubic on the same grid with the same knot values and end velocities)."""
     from ..problem.segment import SegmentSpec, SplineSegmentProblem
 
-    cc = _closed_chain(scene)
+    cc = _closed_chain(scene) if kind == "constrained" else None
+    step = opts.spline_interval_step if kind == "constrained" else opts.free_interval_step
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(robot.velocity_limit))))
-    N = int(np.clip(np.ceil(length / opts.spline_interval_step), opts.spline_min_intervals, opts.spline_max_intervals))
-    prob = SplineSegmentProblem(robot, scene, SegmentSpec(N, T, seg_path[0], seg_path[-1], cc, margin=opts.margin,
-                                                          object_arm=next(iter(scene.object.grasps))))
+    N = int(np.clip(np.ceil(length / step), opts.spline_min_intervals, opts.spline_max_intervals))
+    prob = SplineSegmentProblem(robot, scene, SegmentSpec(N, T, seg_path[0], seg_path[-1], cc, lower, upper,
+                                                          margin=opts.margin,
+                                                          object_arm=holder or next(iter(scene.object.grasps))))
     prob.set_initial_path(seg_path, cc)
     if opts.smooth_warm_start > 0:
         prob.smooth_initial(opts.smooth_warm_start, cc)
@@ -128,11 +136,12 @@ def _spline_warm_start(robot: RobotModel, scene: Scene, seg_path: np.ndarray, op
 
 
 def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, robot: RobotModel | None = None,
-                               options=None) -> list[PeerProblem]:
-    """The constrained segments of the pipeline on trial ``trial`` of ``scene_name`` (trials and
-    seeds as ``optplan bench warmstart``): planner path → shortcut (the pipeline's RNG sequence) →
-    the warm start, N and duration of the pipeline's B-spline segment NLP (its first attempt).
-    Empty when the plan fails."""
+                               options=None, kinds=("constrained",)) -> list[PeerProblem]:
+    """The segments of the pipeline on trial ``trial`` of ``scene_name`` (trials and seeds as
+    ``optplan bench warmstart``) whose kind is in ``kinds`` ("constrained", "regrasp"): planner
+    path → shortcut of the constrained segments (the pipeline's RNG sequence) → the warm start, N
+    and duration of the pipeline's B-spline segment NLP (its first attempt). Empty when the plan
+    fails."""
     from ..collision import CollisionChecker
     from ..pipeline import PipelineOptions, shortcut_constrained
     from ..planners import make_planner
@@ -155,16 +164,33 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
     checker = CollisionChecker(robot, scene)
     cc = _closed_chain(scene)
     out = []
+    bad = set(kinds) - {"constrained", "regrasp"}
+    if bad:
+        raise ValueError(f"kinds: expected 'constrained' and/or 'regrasp', got {sorted(bad)}")
+    arms = list(scene.object.grasps)
     for i, seg in enumerate(plan.segments):
         seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
-        if seg.kind != "constrained" or len(seg_path) < 2 or np.abs(seg_path[-1] - seg_path[0]).max() < 1e-9:
+        if len(seg_path) < 2 or np.abs(seg_path[-1] - seg_path[0]).max() < 1e-9:
             continue
-        seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
-        Q, T = _spline_warm_start(robot, scene, seg_path, opts)
+        kind = "constrained" if seg.kind == "constrained" else "regrasp"  # as optimize_segments
+        if kind == "constrained":  # shortcut even when not compared: it consumes the pipeline's RNG
+            seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
+        if kind not in kinds:
+            continue
         length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
-        out.append(PeerProblem(f"{scene.name}/t{trial}/s{i}", "segment", robot, scene, Q, T, cc,
-                               opts.margin, next(iter(scene.object.grasps)), seg_path,
-                               {"scene": scene.name, "trial": int(trial), "segment": i, "path_length_rad": length}))
+        info = {"scene": scene.name, "trial": int(trial), "segment": i, "path_length_rad": length}
+        if kind == "constrained":
+            Q, T = _spline_warm_start(robot, scene, seg_path, opts)
+            out.append(PeerProblem(f"{scene.name}/t{trial}/s{i}", "segment", robot, scene, Q, T, cc,
+                                   opts.margin, arms[0], seg_path, info))
+            continue
+        holder = next(a for a in arms if a != seg.arm)  # the pipeline's regrasp: the holding arm is fixed
+        lo, hi = robot.lower.copy(), robot.upper.copy()
+        idx = robot.arm(holder).j_idx
+        lo[idx] = hi[idx] = seg_path[0][idx]
+        Q, T = _spline_warm_start(robot, scene, seg_path, opts, "regrasp", lo, hi, holder)
+        out.append(PeerProblem(f"{scene.name}/t{trial}/s{i}r", "regrasp", robot, scene, Q, T, None, opts.margin,
+                               holder, seg_path, info, lo, hi, seg.arm))
     return out
 
 
@@ -194,14 +220,19 @@ def optplan_current(problem: PeerProblem) -> PeerOutcome:
     from ..pipeline import PipelineOptions, _spline_segment
 
     opts = PipelineOptions()
+    kind = "constrained" if problem.kind == "segment" else "regrasp"
     t0 = time.perf_counter()
-    sol, rep, attempts = _spline_segment(problem.robot, problem.scene, np.asarray(problem.path), "constrained", None,
+    sol, rep, attempts = _spline_segment(problem.robot, problem.scene, np.asarray(problem.path), kind, problem.arm,
                                          opts, dict(opts.ipopt_options))
     wall = time.perf_counter() - t0
+    if attempts and attempts[0]["N"] != problem.n_intervals:
+        log.warning("%s: the pipeline's first attempt has N = %d, the peer problem %d", problem.name,
+                    attempts[0]["N"], problem.n_intervals)
     return PeerOutcome("optplan", "ipopt", bool(sol.success), sol.status.value, float(sol.setup_time),
                        float(sol.wall_time), int(sol.iterations), sol,
-                       {"wall_time_s": wall, "n_intervals_final": int(len(sol.t) - 1), "attempts": len(attempts),
-                        "attempt_reasons": ",".join(a["reason"] for a in attempts)})
+                       {"wall_time_s": wall, "n_intervals_first": int(attempts[0]["N"]) if attempts else -1,
+                        "n_intervals_final": int(len(sol.t) - 1), "attempts": len(attempts),
+                        "attempt_log": ",".join(a["reason"] for a in attempts)})
 
 
 def drake_solve(problem: PeerProblem, options=None, model=None, *, refinements: int = 0,
@@ -223,7 +254,7 @@ def drake_solve(problem: PeerProblem, options=None, model=None, *, refinements: 
     build = time.perf_counter() - t0
     c0 = time.process_time()
     r = solve_drake(dm, problem.q_knots, problem.duration, closed_chain=problem.closed_chain, margin=problem.margin,
-                    options=opts)
+                    options=opts, lower=problem.lower, upper=problem.upper)
     setup, solve, iters, N = build + r.setup_time, r.solve_time, r.iterations, problem.n_intervals
     attempts = [f"N={N}:{r.status}"]
     for _ in range(int(refinements)):
@@ -238,7 +269,7 @@ def drake_solve(problem: PeerProblem, options=None, model=None, *, refinements: 
         N = N2
         Q2 = r.solution.sample(np.linspace(0.0, problem.duration, N + 1))["q"]
         r = solve_drake(dm, Q2, problem.duration, closed_chain=problem.closed_chain, margin=problem.margin,
-                        options=replace(opts, time_limit=remaining))
+                        options=replace(opts, time_limit=remaining), lower=problem.lower, upper=problem.upper)
         setup, solve, iters = setup + r.setup_time, solve + r.solve_time, iters + max(r.iterations, 0)
         attempts.append(f"N={N}:{r.status}")
     return PeerOutcome(f"drake-{r.solver}", r.solver, r.success, r.status, setup, solve, iters, r.solution,
@@ -284,7 +315,8 @@ def evaluate(problem: PeerProblem, outcome: PeerOutcome) -> dict:
     return row
 
 
-def _problems(names, trials: int, first_trial: int, seed: int, robot: RobotModel) -> list[PeerProblem]:
+def _problems(names, trials: int, first_trial: int, seed: int, robot: RobotModel,
+              segments=("constrained",)) -> list[PeerProblem]:
     out = []
     for name in names:
         if name == "transport":
@@ -292,18 +324,19 @@ def _problems(names, trials: int, first_trial: int, seed: int, robot: RobotModel
             continue
         scene = f"ssps_scene{name[5:]}" if name.startswith("scene") and name[5:].isdigit() else name
         for k in range(first_trial, first_trial + trials):
-            out += pipeline_segment_instances(scene, k, seed=seed, robot=robot)
+            out += pipeline_segment_instances(scene, k, seed=seed, robot=robot, kinds=segments)
     return out
 
 
 def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int = 0, seed: int = 0,
         solvers=("snopt", "ipopt"), optplan_solve: Callable[[PeerProblem], PeerOutcome] | None = None,
-        drake_options: dict | None = None, drake_refinements: int = 2, progress: bool = True,
+        drake_options: dict | None = None, drake_refinements: int = 2, segments=("constrained",), progress: bool = True,
         on_row: Callable[[dict], None] | None = None) -> list[dict]:
     """Solve every problem with ``optplan_solve`` (default :func:`optplan_current`) and with Drake
     under each solver in ``solvers``, paired in this process; returns the rows of :func:`evaluate`.
     ``problems``: "transport", "scene1".."scene3" or scene names (their trials ``first_trial`` …
-    ``first_trial + trials − 1``, constrained segments). ``drake_options``: fields of
+    ``first_trial + trials − 1``, their segments of the kinds in ``segments``: "constrained",
+    "regrasp"). ``drake_options``: fields of
     :class:`~optplan.bench.drake_peer.DrakeOptions` other than ``solver``. ``drake_refinements``:
     closed-chain grid refinements Drake gets (:func:`drake_solve`; default as many as the pipeline's).
     Each row carries ``wall_s`` and ``cpu_s``: wall and process CPU time [s] of the whole method call
@@ -318,6 +351,9 @@ def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int =
             raise ValueError(f"--problems: unknown problem {n!r} (expected transport, scene1, scene2, scene3 or a scene name)")
     if int(trials) < 1:
         raise ValueError(f"--trials: expected an integer >= 1, got {trials!r}")
+    bad = set(segments) - {"constrained", "regrasp"}
+    if bad or not segments:
+        raise ValueError(f"--segments: expected constrained and/or regrasp, got {','.join(segments)}")
     for s in solvers:
         DrakeOptions(solver=s)  # validates the name
     if solvers:
@@ -326,7 +362,7 @@ def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int =
         require_drake()  # fail before any solve when Drake is missing
     solve = optplan_solve or optplan_current
     robot = RobotModel.from_name("tcbirrt_dual_arm")
-    probs = _problems(list(problems), int(trials), int(first_trial), int(seed), robot)
+    probs = _problems(list(problems), int(trials), int(first_trial), int(seed), robot, tuple(segments))
     rows = []
     for i, p in enumerate(probs):
         methods = [solve] + [lambda p, s=s: drake_solve(p, DrakeOptions(solver=s, **(drake_options or {})),
@@ -360,6 +396,11 @@ def _wall(r: dict) -> float:
     return float(r.get("wall_s", r["time_s"]))
 
 
+def _finite(f, values) -> float:
+    v = [x for x in values if np.isfinite(x)]
+    return float(f(v)) if v else math.nan
+
+
 def summarize(rows: list[dict], jerk_slack: float = 1.01) -> dict:
     """Per Drake method: problems compared, passes, and on how many problems optplan met the target
     (it passed ``verify``, and Drake either failed or was slower (wall) at a jerk cost no lower than
@@ -376,9 +417,8 @@ def summarize(rows: list[dict], jerk_slack: float = 1.01) -> dict:
             quality = not r["passed"] or (b["jerk"] <= jerk_slack * r["jerk"])
             won += bool(b["passed"] and quality and (not r["passed"] or _wall(b) < _wall(r)))
         out[m] = {"problems": len(rs), "passed": sum(bool(r["passed"]) for r in rs), "optplan_met_target": won,
-                  "median_wall_ratio": float(np.nanmedian(wall)) if rs else math.nan,
-                  "min_wall_ratio": float(np.nanmin(wall)) if rs else math.nan,
-                  "median_cpu_ratio": float(np.nanmedian(cpu)) if rs else math.nan}
+                  "median_wall_ratio": _finite(np.median, wall), "min_wall_ratio": _finite(np.min, wall),
+                  "median_cpu_ratio": _finite(np.median, cpu)}
     return out
 
 
