@@ -203,11 +203,17 @@ def test_drake_warm_start_is_the_spline_nlp_initial_trajectory(tcb, dm, rng):
     assert np.allclose(got, _uniform_bspline(P, T, ts), atol=1e-10)
 
 
-def test_one_pipeline_segment_both_sides_verified_and_reported(tcb):
+@pytest.fixture(scope="module")
+def scene1_trial1(tcb):
+    """The constrained and regrasp segments of scene 1, trial 1 (one plan for both tests)."""
+    return DB.pipeline_segment_instances("ssps_scene1", 1, robot=tcb, kinds=("constrained", "regrasp"))
+
+
+def test_one_pipeline_segment_both_sides_verified_and_reported(tcb, scene1_trial1):
     """A constrained segment of scene 1 (the pipeline's B-spline NLP with its retries vs Drake +
     SNOPT under a short CPU limit): same N, duration and warm start, both rows verified and in the
     report with the ratios and the summary line."""
-    probs = DB.pipeline_segment_instances("ssps_scene1", 1, robot=tcb)
+    probs = [q for q in scene1_trial1 if q.kind == "segment"]
     assert probs, "the planner should solve scene 1 trial 1"
     p = min(probs, key=lambda q: q.n_intervals)
     assert p.kind == "segment" and p.q_knots.shape == (p.n_intervals + 1, tcb.nj)
@@ -228,13 +234,18 @@ def test_one_pipeline_segment_both_sides_verified_and_reported(tcb):
     assert p.name in rep and "summary drake-snopt: optplan passed 1/1" in rep
 
 
-def test_regrasp_instance_fixes_the_holding_arm(tcb):
-    probs = DB.pipeline_segment_instances("ssps_scene1", 1, robot=tcb, kinds=("regrasp",))
-    assert probs and all(p.kind == "regrasp" and p.closed_chain is None for p in probs)
+def test_regrasp_instance_fixes_the_holding_arm(tcb, scene1_trial1):
+    probs = [q for q in scene1_trial1 if q.kind == "regrasp"]
+    assert probs and all(p.closed_chain is None and p.arm is not None for p in probs)
     p = probs[0]
     fixed = np.flatnonzero(p.lower == p.upper)
     assert set(fixed) == set(tcb.arm(p.object_arm).j_idx) and p.arm != p.object_arm
     assert np.allclose(p.q_knots[:, fixed], p.q_knots[0, fixed], atol=1e-9)
+    out = DB.drake_solve(p, DrakeOptions(solver="snopt", time_limit=2.0))
+    qs = out.solution.sample(np.linspace(0.0, p.duration, 41))["q"]
+    assert np.abs(qs[:, fixed] - p.q_knots[0, fixed]).max() < 1e-9     # Drake keeps the holding arm fixed
+    row = DB.evaluate(p, out)
+    assert np.isfinite(row["min_clearance_m"]) and row["method"] == "drake-snopt"
     with pytest.raises(ValueError, match="kinds"):
         DB.pipeline_segment_instances("ssps_scene1", 1, robot=tcb, kinds=("flying",))
 

@@ -147,6 +147,9 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
     from ..planners import make_planner
     from .trials import TrialGenerator
 
+    bad = set(kinds) - {"constrained", "regrasp"}
+    if bad:
+        raise ValueError(f"kinds: expected 'constrained' and/or 'regrasp', got {sorted(bad)}")
     opts = options or PipelineOptions()
     if opts.transcription != "bspline":
         raise ValueError(f"pipeline_segment_instances: the peer compares the B-spline segment NLP, got "
@@ -164,9 +167,6 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
     checker = CollisionChecker(robot, scene)
     cc = _closed_chain(scene)
     out = []
-    bad = set(kinds) - {"constrained", "regrasp"}
-    if bad:
-        raise ValueError(f"kinds: expected 'constrained' and/or 'regrasp', got {sorted(bad)}")
     arms = list(scene.object.grasps)
     for i, seg in enumerate(plan.segments):
         seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
