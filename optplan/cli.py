@@ -177,7 +177,8 @@ def _cmd_bench_drake(args) -> int:
                    first_trial=args.first_trial, seed=args.seed,
                    solvers=[s.strip() for s in args.solvers.split(",") if s.strip()], drake_options=drake_opts,
                    drake_refinements=args.refinements, on_row=on_row if args.json else None,
-                   segments=[s.strip() for s in args.segments.split(",") if s.strip()])
+                   segments=[s.strip() for s in args.segments.split(",") if s.strip()],
+                   only=[s.strip() for s in (args.only or "").split(",") if s.strip()])
     except (ValueError, ImportError) as exc:
         print(f"optplan bench drake: error: {exc}", file=sys.stderr)
         return 2
@@ -393,6 +394,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="CPU seconds per Drake problem, refinements included (the solve then ends with that status)")
     dk.add_argument("--segments", default="constrained",
                     help="pipeline segments to compare: constrained, regrasp (one arm moves, the other holds)")
+    dk.add_argument("--only", help="comma-separated problem names to keep, e.g. transport,ssps_scene1/t0/s3")
     dk.add_argument("--refinements", type=ca.nonnegative_int, default=2,
                     help="Drake: closed-chain grid refinements after a converged solve, as the pipeline's")
     dk.add_argument("--samples-per-interval", type=ca.positive_int, default=1,

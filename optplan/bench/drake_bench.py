@@ -330,13 +330,15 @@ def _problems(names, trials: int, first_trial: int, seed: int, robot: RobotModel
 
 def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int = 0, seed: int = 0,
         solvers=("snopt", "ipopt"), optplan_solve: Callable[[PeerProblem], PeerOutcome] | None = None,
-        drake_options: dict | None = None, drake_refinements: int = 2, segments=("constrained",), progress: bool = True,
+        drake_options: dict | None = None, drake_refinements: int = 2, segments=("constrained",), only=(),
+        progress: bool = True,
         on_row: Callable[[dict], None] | None = None) -> list[dict]:
     """Solve every problem with ``optplan_solve`` (default :func:`optplan_current`) and with Drake
     under each solver in ``solvers``, paired in this process; returns the rows of :func:`evaluate`.
     ``problems``: "transport", "scene1".."scene3" or scene names (their trials ``first_trial`` …
     ``first_trial + trials − 1``, their segments of the kinds in ``segments``: "constrained",
-    "regrasp"). ``drake_options``: fields of
+    "regrasp"); ``only``: if given, the names of the problems to keep (e.g. "ssps_scene1/t0/s3").
+    ``drake_options``: fields of
     :class:`~optplan.bench.drake_peer.DrakeOptions` other than ``solver``. ``drake_refinements``:
     closed-chain grid refinements Drake gets (:func:`drake_solve`; default as many as the pipeline's).
     Each row carries ``wall_s`` and ``cpu_s``: wall and process CPU time [s] of the whole method call
@@ -363,6 +365,12 @@ def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int =
     solve = optplan_solve or optplan_current
     robot = RobotModel.from_name("tcbirrt_dual_arm")
     probs = _problems(list(problems), int(trials), int(first_trial), int(seed), robot, tuple(segments))
+    if only:
+        missing = set(only) - {p.name for p in probs}
+        if missing:
+            raise ValueError(f"--only: no problem named {', '.join(sorted(missing))} (have: "
+                             f"{', '.join(p.name for p in probs)})")
+        probs = [p for p in probs if p.name in set(only)]
     rows = []
     for i, p in enumerate(probs):
         methods = [solve] + [lambda p, s=s: drake_solve(p, DrakeOptions(solver=s, **(drake_options or {})),
