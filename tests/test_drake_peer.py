@@ -149,6 +149,27 @@ def test_time_limit_ends_in_a_status_with_the_last_point(tcb, transport, dm, sol
     assert np.all(np.isfinite(r.solution.sample([0.0, 60.0])["q"]))
 
 
+def test_isolated_solve_returns_the_trajectory_or_a_killed_status(tcb, transport, monkeypatch):
+    """In a child process: the trajectory comes back (same as in-process), and a solve past the
+    kernel's CPU limit is a status, not a hang."""
+    from optplan.tasks import transport_initial_path
+
+    Q = transport_initial_path(tcb, transport, 6, np.random.default_rng(0))
+    p = DB.PeerProblem("tiny", "transport", tcb, transport, Q, 60.0, DB._closed_chain(transport), 0.02, "A")
+    o = DB.drake_solve(p, DrakeOptions(max_iterations=3, time_limit=30.0), isolate=True)
+    ref = DB.drake_solve(p, DrakeOptions(max_iterations=3, time_limit=30.0))
+    assert o.status == ref.status and not o.info["killed"]
+    ts = np.linspace(0.0, 60.0, 13)
+    assert np.allclose(o.solution.sample(ts)["q"], ref.solution.sample(ts)["q"], atol=1e-12)
+    Q = transport_initial_path(tcb, transport, 20, np.random.default_rng(0))
+    p = DB.PeerProblem("small", "transport", tcb, transport, Q, 60.0, DB._closed_chain(transport), 0.02, "A")
+    monkeypatch.setattr(DB, "KILL_GRACE", -29.0)  # the kernel stops the child after 1 CPU s
+    o = DB.drake_solve(p, DrakeOptions(time_limit=30.0), isolate=True)
+    assert o.info["killed"] and "killed at the CPU limit" in o.status and o.solution is None
+    row = DB.evaluate(p, o)
+    assert not row["passed"] and "small" in DB.format_report([row])
+
+
 def test_bench_takes_any_optplan_solver_and_rejects_bad_names(tcb, transport, dm):
     from optplan.tasks import transport_initial_path
 
