@@ -478,22 +478,36 @@ def _finite(f, values) -> float:
     return float(f(v)) if v else math.nan
 
 
+def _paired(rows: list[dict]) -> list[tuple[dict, dict | None]]:
+    """Each row with the optplan row it is paired with: the latest optplan row of the same problem
+    before it (the same run), None for optplan rows and unpaired rows."""
+    last, out = {}, []
+    for r in rows:
+        if r["method"] == "optplan":
+            last[r["problem"]] = r
+            out.append((r, None))
+        else:
+            out.append((r, last.get(r["problem"])))
+    return out
+
+
 def summarize(rows: list[dict], jerk_slack: float = 1.01) -> dict:
     """Per Drake method: problems compared, passes, and on how many problems optplan met the target
     (it passed ``verify``, and Drake either failed or was slower (wall) at a jerk cost no lower than
     optplan's / ``jerk_slack``); median Drake/optplan wall and CPU ratios."""
-    base = {r["problem"]: r for r in rows if r["method"] == "optplan"}
-    out = {"optplan": {"problems": len(base), "passed": sum(bool(r["passed"]) for r in base.values())}}
+    base = [r for r in rows if r["method"] == "optplan"]
+    out = {"optplan": {"problems": len({r["problem"] for r in base}), "runs": len(base),
+                       "passed": sum(bool(r["passed"]) for r in base)}}
+    pairs = _paired(rows)
     for m in sorted({r["method"] for r in rows} - {"optplan"}):
-        rs = [r for r in rows if r["method"] == m and r["problem"] in base]
+        rs = [(r, b) for r, b in pairs if r["method"] == m and b is not None]
         won, wall, cpu = 0, [], []
-        for r in rs:
-            b = base[r["problem"]]
+        for r, b in rs:
             wall.append(_ratio(_wall(r), _wall(b)))
             cpu.append(_ratio(r.get("cpu_s", math.nan), b.get("cpu_s", math.nan)))
             quality = not r["passed"] or (b["jerk"] <= jerk_slack * r["jerk"])
             won += bool(b["passed"] and quality and (not r["passed"] or _wall(b) < _wall(r)))
-        out[m] = {"problems": len(rs), "passed": sum(bool(r["passed"]) for r in rs), "optplan_met_target": won,
+        out[m] = {"problems": len(rs), "passed": sum(bool(r["passed"]) for r, _ in rs), "optplan_met_target": won,
                   "median_wall_ratio": _finite(np.median, wall), "min_wall_ratio": _finite(np.min, wall),
                   "median_cpu_ratio": _finite(np.median, cpu)}
     return out
@@ -506,14 +520,12 @@ def format_report(rows: list[dict]) -> str:
            f"{'jerk':>8s} {'cc resid':>8s} {'clear mm':>8s} {'verify':>6s} {'wall/opt':>8s} {'cpu/opt':>7s} "
            f"{'jerk/opt':>8s}")
     lines = [hdr, "-" * len(hdr)]
-    base = {r["problem"]: r for r in rows if r["method"] == "optplan"}
 
     def f(v, spec, width):
         return f"{v:{spec}}".rjust(width) if isinstance(v, (int, float)) and math.isfinite(v) else " " * width
 
-    for r in rows:
-        b = base.get(r["problem"])
-        other = b is not None and r is not b
+    for r, b in _paired(rows):
+        other = b is not None
         rt = _ratio(_wall(r), _wall(b)) if other else math.nan
         rj = _ratio(r["jerk"], b["jerk"]) if other else math.nan
         rc = _ratio(r.get("cpu_s", math.nan), b.get("cpu_s", math.nan)) if other else math.nan
@@ -531,7 +543,7 @@ def format_report(rows: list[dict]) -> str:
     summ = summarize(rows)
     o = summ.pop("optplan")
     for m, d in summ.items():
-        lines.append(f"summary {m}: optplan passed {o['passed']}/{o['problems']}, {m} passed {d['passed']}/{d['problems']}; "
+        lines.append(f"summary {m}: optplan passed {o['passed']}/{o['runs']} runs, {m} passed {d['passed']}/{d['problems']}; "
                      f"optplan faster at equal or better verified quality on {d['optplan_met_target']}/{d['problems']}; "
                      f"wall ratio {m}/optplan median {d['median_wall_ratio']:.3g} (min {d['min_wall_ratio']:.3g}), "
                      f"CPU ratio median {d['median_cpu_ratio']:.3g}")
