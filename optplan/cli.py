@@ -178,22 +178,25 @@ def _cmd_bench_drake(args) -> int:
 
     drake_opts = {"time_limit": args.time_limit, "samples_per_interval": args.samples_per_interval}
     done: list = []
+    command = "optplan " + " ".join(sys.argv[1:])
 
     def on_row(r):  # the JSON file grows with every result, so a long run keeps what it measured
         done.append(r)
-        save_json(done, args.json)
+        save_json(done, args.json, command)
 
     try:
         rows = run([p.strip() for p in args.problems.split(",") if p.strip()], trials=args.trials,
                    first_trial=args.first_trial, seed=args.seed,
                    solvers=[s.strip() for s in args.solvers.split(",") if s.strip()], drake_options=drake_opts,
-                   on_row=on_row if args.json else None)
+                   drake_refinements=args.refinements, on_row=on_row if args.json else None,
+                   segments=[s.strip() for s in args.segments.split(",") if s.strip()],
+                   only=[s.strip() for s in (args.only or "").split(",") if s.strip()])
     except (ValueError, ImportError) as exc:
         print(f"optplan bench drake: error: {exc}", file=sys.stderr)
         return 2
     print(format_report(rows))
     if args.json:
-        save_json(rows, args.json)
+        save_json(rows, args.json, command)
     return 0
 
 
@@ -417,7 +420,13 @@ def build_parser() -> argparse.ArgumentParser:
     dk.add_argument("--first-trial", type=ca.nonnegative_int, default=0, help="index of the first trial")
     dk.add_argument("--seed", type=ca.nonnegative_int, default=0)
     dk.add_argument("--solvers", default="snopt,ipopt", help="Drake solvers: snopt, ipopt")
-    dk.add_argument("--time-limit", type=ca.positive_float, default=300.0, help="per Drake solve [s]")
+    dk.add_argument("--time-limit", type=ca.positive_float, default=150.0,
+                    help="CPU seconds per Drake problem, refinements included (the solve then ends with that status)")
+    dk.add_argument("--segments", default="constrained",
+                    help="pipeline segments to compare: constrained, regrasp (one arm moves, the other holds)")
+    dk.add_argument("--only", help="comma-separated problem names to keep, e.g. transport,ssps_scene1/t0/s3")
+    dk.add_argument("--refinements", type=ca.nonnegative_int, default=2,
+                    help="Drake: closed-chain grid refinements after a converged solve, as the pipeline's")
     dk.add_argument("--samples-per-interval", type=ca.positive_int, default=1,
                     help="Drake: closed-chain and distance constraints per B-spline interval (1 = at the knots)")
     dk.add_argument("--json", help="write the result rows as JSON to this path")

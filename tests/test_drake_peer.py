@@ -149,6 +149,27 @@ def test_time_limit_ends_in_a_status_with_the_last_point(tcb, transport, dm, sol
     assert np.all(np.isfinite(r.solution.sample([0.0, 60.0])["q"]))
 
 
+def test_isolated_solve_returns_the_trajectory_or_a_killed_status(tcb, transport, monkeypatch):
+    """In a child process: the trajectory comes back (same as in-process), and a solve past the
+    kernel's CPU limit is a status, not a hang."""
+    from optplan.tasks import transport_initial_path
+
+    Q = transport_initial_path(tcb, transport, 6, np.random.default_rng(0))
+    p = DB.PeerProblem("tiny", "transport", tcb, transport, Q, 60.0, DB._closed_chain(transport), 0.02, "A")
+    o = DB.drake_solve(p, DrakeOptions(max_iterations=3, time_limit=30.0), isolate=True)
+    ref = DB.drake_solve(p, DrakeOptions(max_iterations=3, time_limit=30.0))
+    assert o.status == ref.status and not o.info["killed"]
+    ts = np.linspace(0.0, 60.0, 13)
+    assert np.allclose(o.solution.sample(ts)["q"], ref.solution.sample(ts)["q"], atol=1e-12)
+    Q = transport_initial_path(tcb, transport, 20, np.random.default_rng(0))
+    p = DB.PeerProblem("small", "transport", tcb, transport, Q, 60.0, DB._closed_chain(transport), 0.02, "A")
+    monkeypatch.setattr(DB, "KILL_GRACE", -29.0)  # the kernel stops the child after 1 CPU s
+    o = DB.drake_solve(p, DrakeOptions(time_limit=30.0), isolate=True)
+    assert o.info["killed"] and "killed at the CPU limit" in o.status and o.solution is None
+    row = DB.evaluate(p, o)
+    assert not row["passed"] and "small" in DB.format_report([row])
+
+
 def test_bench_takes_any_optplan_solver_and_rejects_bad_names(tcb, transport, dm):
     from optplan.tasks import transport_initial_path
 
@@ -171,6 +192,85 @@ def test_bench_takes_any_optplan_solver_and_rejects_bad_names(tcb, transport, dm
         DB.run(["transport"], solvers=["gurobi"])
 
 
+def _uniform_bspline(P: np.ndarray, T: float, t: np.ndarray) -> np.ndarray:
+    """q(t) of optplan's uniform cubic B-spline with control points P ((N+3) × nj) on [0, T]: the
+    textbook basis, written independently of optplan.problem.bspline and of Drake."""
+    N = P.shape[0] - 3
+    out = []
+    for ti in t:
+        k = min(int(ti / (T / N)), N - 1)
+        u = ti / (T / N) - k
+        b = np.array([(1 - u) ** 3, 3 * u**3 - 6 * u**2 + 4, -3 * u**3 + 3 * u**2 + 3 * u + 1, u**3]) / 6
+        out.append(b @ P[k:k + 4])
+    return np.array(out)
+
+
+def test_drake_warm_start_is_the_spline_nlp_initial_trajectory(tcb, dm, rng):
+    """fit_bspline through the B-spline NLP's knot values at rest gives Drake exactly optplan's
+    initial trajectory (same C2 cubic space), also between the knots."""
+    from optplan.problem.bspline import boundary_points
+    from pydrake.trajectories import BsplineTrajectory
+
+    N, T, nj = 9, 13.0, tcb.nj
+    q0, q1 = tcb.random_joints(rng), tcb.random_joints(rng)
+    z = np.zeros(nj)
+    P = np.vstack([boundary_points(q0, z, z, T / N, "start"), rng.uniform(-1, 1, (N - 3, nj)),
+                   boundary_points(q1, z, z, T / N, "end")])
+    knots = _uniform_bspline(P, T, np.linspace(0, T, N + 1))
+    C = fit_bspline(dm.to_drake(knots), T)
+    tr = BsplineTrajectory(_basis(N, T), [C[:, [i]] for i in range(N + 3)])
+    ts = np.linspace(0, T, 7 * N + 1)
+    got = dm.from_drake(np.array([tr.value(t).ravel() for t in ts]))
+    assert np.allclose(got, _uniform_bspline(P, T, ts), atol=1e-10)
+
+
+@pytest.fixture(scope="module")
+def scene1_trial1(tcb):
+    """The constrained and regrasp segments of scene 1, trial 1 (one plan for both tests)."""
+    return DB.pipeline_segment_instances("ssps_scene1", 1, robot=tcb, kinds=("constrained", "regrasp"))
+
+
+def test_one_pipeline_segment_both_sides_verified_and_reported(tcb, scene1_trial1):
+    """A constrained segment of scene 1 (the pipeline's B-spline NLP with its retries vs Drake +
+    SNOPT under a short CPU limit): same N, duration and warm start, both rows verified and in the
+    report with the ratios and the summary line."""
+    probs = [q for q in scene1_trial1 if q.kind == "segment"]
+    assert probs, "the planner should solve scene 1 trial 1"
+    p = min(probs, key=lambda q: q.n_intervals)
+    assert p.kind == "segment" and p.q_knots.shape == (p.n_intervals + 1, tcb.nj)
+    assert np.allclose(p.q_knots[0], p.path[0]) and np.allclose(p.q_knots[-1], p.path[-1])
+    opt = DB.optplan_current(p)
+    assert opt.info["n_intervals_first"] == p.n_intervals            # the pipeline's first attempt
+    assert opt.solution.t[-1] == pytest.approx(p.duration)
+    dk = DB.drake_solve(p, DrakeOptions(solver="snopt", time_limit=3.0), refinements=2)
+    assert dk.solution.duration == pytest.approx(p.duration) and dk.info["n_control_points"] >= p.n_intervals + 3
+    rows = [DB.evaluate(p, opt), DB.evaluate(p, dk)]
+    for r in rows:
+        assert np.isfinite(r["max_closed_chain_residual"]) and np.isfinite(r["min_clearance_m"])
+        assert np.isfinite(r["jerk"]) and isinstance(r["passed"], bool)
+    assert rows[0]["passed"], rows[0]
+    if not dk.success:
+        assert not rows[1]["passed"]
+    rep = DB.format_report(rows)
+    assert p.name in rep and "summary drake-snopt: optplan passed 1/1 runs" in rep
+
+
+def test_regrasp_instance_fixes_the_holding_arm(tcb, scene1_trial1):
+    probs = [q for q in scene1_trial1 if q.kind == "regrasp"]
+    assert probs and all(p.closed_chain is None and p.arm is not None for p in probs)
+    p = probs[0]
+    fixed = np.flatnonzero(p.lower == p.upper)
+    assert set(fixed) == set(tcb.arm(p.object_arm).j_idx) and p.arm != p.object_arm
+    assert np.allclose(p.q_knots[:, fixed], p.q_knots[0, fixed], atol=1e-9)
+    out = DB.drake_solve(p, DrakeOptions(solver="snopt", time_limit=2.0))
+    qs = out.solution.sample(np.linspace(0.0, p.duration, 41))["q"]
+    assert np.abs(qs[:, fixed] - p.q_knots[0, fixed]).max() < 1e-9     # Drake keeps the holding arm fixed
+    row = DB.evaluate(p, out)
+    assert np.isfinite(row["min_clearance_m"]) and row["method"] == "drake-snopt"
+    with pytest.raises(ValueError, match="kinds"):
+        DB.pipeline_segment_instances("ssps_scene1", 1, robot=tcb, kinds=("flying",))
+
+
 @pytest.mark.slow
 def test_pipeline_segment_paired_run():
     """End to end on one pipeline segment (scene 1, trial 2, the 21-interval one): the instance's
@@ -186,6 +286,7 @@ def test_pipeline_segment_paired_run():
     # set_initial_path projects the resampled path onto the manifold, then re-times it with a cubic
     # spline evaluated at the uniform knots: near the manifold, not on it (measured 3e-4)
     assert np.abs(r[:, :6]).max() < 1e-2
-    rows = [DB.evaluate(p, DB.optplan_current(p)), DB.evaluate(p, DB.drake_solve(p, DrakeOptions(time_limit=300)))]
+    rows = [DB.evaluate(p, DB.optplan_current(p)), DB.evaluate(p, DB.drake_solve(p, DrakeOptions(time_limit=150),
+                                                                                  refinements=2))]
     assert rows[0]["passed"]  # optplan's pipeline on its own segment
     assert rows[1]["method"] == "drake-snopt" and rows[1]["n_intervals"] == p.n_intervals

@@ -23,7 +23,6 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 from typing import Callable
 
 import numpy as np
@@ -34,7 +33,7 @@ from ..scene import Scene
 from ..verify import verify
 
 __all__ = ["PeerProblem", "PeerOutcome", "transport_instance", "pipeline_segment_instances", "optplan_current",
-           "drake_solve", "jerk_cost", "evaluate", "run", "format_report", "RESIDUAL_TOL"]
+           "drake_solve", "jerk_cost", "evaluate", "run", "summarize", "format_report", "RESIDUAL_TOL"]
 log = logging.getLogger(__name__)
 
 RESIDUAL_TOL = 1e-6
@@ -46,7 +45,9 @@ class PeerProblem:
     """One trajectory problem both optimizers solve: ``q_knots`` ((N+1) × nj) the warm start at N
     uniform intervals over ``duration`` [s] (its first/last rows are the rest configurations),
     ``closed_chain`` (or None), ``margin`` [m], ``object_arm`` (the arm the held object follows),
-    ``path`` the planner path the warm start was resampled from (pipeline segments)."""
+    ``path`` the planner path the warm start was resampled from (pipeline segments). ``kind``:
+    "transport", "segment" (a constrained segment of the pipeline) or "regrasp" (one arm moves,
+    ``arm``; the other holds the object, its joints fixed by ``lower`` = ``upper`` [rad])."""
 
     name: str
     kind: str  # "transport" | "segment"
@@ -59,6 +60,9 @@ class PeerProblem:
     object_arm: str | None = None
     path: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+    arm: str | None = None
 
     @property
     def n_intervals(self) -> int:
@@ -108,19 +112,48 @@ def transport_instance(robot: RobotModel | None = None, *, knots: int = 50, dura
                        next(iter(scene.object.grasps)), None, {"seed": seed, "knots": knots})
 
 
+def _spline_warm_start(robot: RobotModel, scene: Scene, seg_path: np.ndarray, opts, kind: str = "constrained",
+                       lower=None, upper=None, holder: str | None = None) -> tuple[np.ndarray, float]:
+    """The knot configurations and duration [s] of the B-spline segment NLP's first attempt in the
+    pipeline (``PipelineOptions.transcription = "bspline"``): its N and T, ``set_initial_path`` on the
+    shortcut path (and ``smooth_initial`` when the options ask for it). The B-spline through these
+    knots at rest is the NLP's initial trajectory (:func:`.drake_peer.fit_bspline` reproduces it
+    exactly: both are the C2 cubic on the same grid with the same knot values and end velocities)."""
+    from ..problem.segment import SegmentSpec, SplineSegmentProblem
+
+    cc = _closed_chain(scene) if kind == "constrained" else None
+    step = opts.spline_interval_step if kind == "constrained" else opts.free_interval_step
+    length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
+    T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(robot.velocity_limit))))
+    N = int(np.clip(np.ceil(length / step), opts.spline_min_intervals, opts.spline_max_intervals))
+    prob = SplineSegmentProblem(robot, scene, SegmentSpec(N, T, seg_path[0], seg_path[-1], cc, lower, upper,
+                                                          margin=opts.margin,
+                                                          object_arm=holder or next(iter(scene.object.grasps))))
+    prob.set_initial_path(seg_path, cc)
+    if opts.smooth_warm_start > 0:
+        prob.smooth_initial(opts.smooth_warm_start, cc)
+    return prob.knot_configurations(), float(T)
+
+
 def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, robot: RobotModel | None = None,
-                               options=None) -> list[PeerProblem]:
-    """The constrained segments of the pipeline on trial ``trial`` of ``scene_name`` (trials and
-    seeds as ``optplan bench warmstart``): planner path → shortcut (the pipeline's RNG sequence) →
-    ``OptProblem.set_initial_path`` warm start on the pipeline's N and duration. Empty when the
-    plan fails."""
+                               options=None, kinds=("constrained",)) -> list[PeerProblem]:
+    """The segments of the pipeline on trial ``trial`` of ``scene_name`` (trials and seeds as
+    ``optplan bench warmstart``) whose kind is in ``kinds`` ("constrained", "regrasp"): planner
+    path → shortcut of the constrained segments (the pipeline's RNG sequence) → the warm start, N
+    and duration of the pipeline's B-spline segment NLP (its first attempt). Empty when the plan
+    fails."""
     from ..collision import CollisionChecker
     from ..pipeline import PipelineOptions, shortcut_constrained
     from ..planners import make_planner
-    from ..problem import OptProblem
     from .trials import TrialGenerator
 
+    bad = set(kinds) - {"constrained", "regrasp"}
+    if bad:
+        raise ValueError(f"kinds: expected 'constrained' and/or 'regrasp', got {sorted(bad)}")
     opts = options or PipelineOptions()
+    if opts.transcription != "bspline":
+        raise ValueError(f"pipeline_segment_instances: the peer compares the B-spline segment NLP, got "
+                         f"transcription {opts.transcription!r}")
     robot = robot or RobotModel.from_name("tcbirrt_dual_arm")
     scene = Scene.load(scene_name)
     tr = TrialGenerator(robot, scene).generate(int(trial), int(seed))
@@ -134,20 +167,30 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
     checker = CollisionChecker(robot, scene)
     cc = _closed_chain(scene)
     out = []
+    arms = list(scene.object.grasps)
     for i, seg in enumerate(plan.segments):
         seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
-        if seg.kind != "constrained" or len(seg_path) < 2 or np.abs(seg_path[-1] - seg_path[0]).max() < 1e-9:
+        if len(seg_path) < 2 or np.abs(seg_path[-1] - seg_path[0]).max() < 1e-9:
             continue
-        seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
-        # the pipeline's grid and duration for a constrained segment (PipelineOptions docstring)
+        kind = "constrained" if seg.kind == "constrained" else "regrasp"  # as optimize_segments
+        if kind == "constrained":  # shortcut even when not compared: it consumes the pipeline's RNG
+            seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
+        if kind not in kinds:
+            continue
         length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
-        T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(robot.velocity_limit))))
-        N = int(np.clip(np.ceil(length / opts.max_interval_step), opts.n_intervals, opts.max_intervals))
-        prob = OptProblem(robot, n_intervals=N, duration=T)
-        prob.set_initial_path(seg_path, cc)
-        out.append(PeerProblem(f"{scene.name}/t{trial}/s{i}", "segment", robot, scene, _warm_start_knots(prob), T, cc,
-                               opts.margin, next(iter(scene.object.grasps)), seg_path,
-                               {"scene": scene.name, "trial": int(trial), "segment": i, "path_length_rad": length}))
+        info = {"scene": scene.name, "trial": int(trial), "segment": i, "path_length_rad": length}
+        if kind == "constrained":
+            Q, T = _spline_warm_start(robot, scene, seg_path, opts)
+            out.append(PeerProblem(f"{scene.name}/t{trial}/s{i}", "segment", robot, scene, Q, T, cc,
+                                   opts.margin, arms[0], seg_path, info))
+            continue
+        holder = next(a for a in arms if a != seg.arm)  # the pipeline's regrasp: the holding arm is fixed
+        lo, hi = robot.lower.copy(), robot.upper.copy()
+        idx = robot.arm(holder).j_idx
+        lo[idx] = hi[idx] = seg_path[0][idx]
+        Q, T = _spline_warm_start(robot, scene, seg_path, opts, "regrasp", lo, hi, holder)
+        out.append(PeerProblem(f"{scene.name}/t{trial}/s{i}r", "regrasp", robot, scene, Q, T, None, opts.margin,
+                               holder, seg_path, info, lo, hi, seg.arm))
     return out
 
 
@@ -155,8 +198,9 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
 def optplan_current(problem: PeerProblem) -> PeerOutcome:
     """optplan's current optimizer, as the product runs it: the transport example's single
     B-spline segment NLP solve (:class:`optplan.problem.segment.SplineSegmentProblem`), or for a pipeline segment
-    :func:`optplan.pipeline.optimize_segments` on that one segment (its retries included; times
-    and iterations summed over its attempts). ``setup_time``: problem declaration + NLP build +
+    the pipeline's B-spline segment optimization (``optplan.pipeline._spline_segment``, called
+    as the pipeline calls it, with its retry policy: collision re-solves, a finer grid, closed-chain
+    refinement, the knot-transcription fallback; times and iterations summed over its attempts). ``setup_time``: problem declaration + NLP build +
     solver creation."""
     if problem.kind == "transport":
         from ..problem import ClosedChain
@@ -173,37 +217,126 @@ def optplan_current(problem: PeerProblem) -> PeerOutcome:
         sol = prob.solve()
         return PeerOutcome("optplan", "ipopt", bool(sol.success), sol.status.value, declare + sol.setup_time,
                            sol.wall_time, int(sol.iterations), sol, {"attempts": 1})
-    from ..pipeline import PipelineOptions, optimize_segments
-    from ..planners.base import PathSegment
+    from ..pipeline import PipelineOptions, _spline_segment
 
-    opts = PipelineOptions(shortcut_attempts=0)  # the path is already shortcut
-    path = problem.path
-    plan = SimpleNamespace(path=path, segments=[PathSegment("constrained", 0, len(path) - 1)])
+    opts = PipelineOptions()
+    kind = "constrained" if problem.kind == "segment" else "regrasp"
     t0 = time.perf_counter()
-    results, _ = optimize_segments(problem.robot, problem.scene, plan, opts, np.random.default_rng(0))
+    sol, rep, attempts = _spline_segment(problem.robot, problem.scene, np.asarray(problem.path), kind, problem.arm,
+                                         opts, dict(opts.ipopt_options))
     wall = time.perf_counter() - t0
-    sol = results[0].solution
+    if attempts and attempts[0]["N"] != problem.n_intervals:
+        log.warning("%s: the pipeline's first attempt has N = %d, the peer problem %d", problem.name,
+                    attempts[0]["N"], problem.n_intervals)
     return PeerOutcome("optplan", "ipopt", bool(sol.success), sol.status.value, float(sol.setup_time),
                        float(sol.wall_time), int(sol.iterations), sol,
-                       {"wall_time_s": wall, "n_intervals_final": int(len(sol.t) - 1)})
+                       {"wall_time_s": wall, "n_intervals_first": int(attempts[0]["N"]) if attempts else -1,
+                        "n_intervals_final": int(len(sol.t) - 1), "attempts": len(attempts),
+                        "attempt_log": ",".join(a["reason"] for a in attempts)})
 
 
-def drake_solve(problem: PeerProblem, options=None, model=None) -> PeerOutcome:
+KILL_GRACE = 30.0  # [CPU s] beyond the time limit before an isolated Drake solve is killed
+
+
+def drake_solve(problem: PeerProblem, options=None, model=None, *, refinements: int = 0,
+                closed_chain_tol: float = RESIDUAL_TOL, max_intervals: int = 160, isolate: bool = False) -> PeerOutcome:
     """Drake's ``KinematicTrajectoryOptimization`` (:mod:`.drake_peer`) on ``problem``; the plant
-    and scene-graph construction counts as setup."""
+    and scene-graph construction counts as setup.
+
+    refinements: as the pipeline does for its own segments, a converged solution whose closed-chain
+    residual between knots (``verify``) exceeds ``closed_chain_tol`` is re-solved on a grid refined
+    by ``(residual / (tol/2))^¼`` (at most ``max_intervals``), warm-started from the solution, at
+    most this many times. ``options.time_limit`` [CPU s] bounds all attempts together.
+
+    isolate: solve in a forked child process whose CPU time the kernel caps at ``time_limit`` +
+    ``KILL_GRACE`` (POSIX only). The time limit is otherwise checked at every function evaluation,
+    and SNOPT was measured cycling inside one QP subproblem for 876,000 minor iterations without
+    any (a pipeline segment of scene 2, N = 65); a killed solve is a status without a trajectory."""
+    if isolate:
+        return _drake_solve_isolated(problem, options, refinements=refinements, closed_chain_tol=closed_chain_tol,
+                                     max_intervals=max_intervals)
+    from dataclasses import replace
+
     from .drake_peer import DrakeModel, DrakeOptions, solve_drake
 
     opts = options or DrakeOptions()
     t0 = time.perf_counter()
     dm = model or DrakeModel(problem.robot, problem.scene, object_arm=problem.object_arm)
     build = time.perf_counter() - t0
+    c0 = time.process_time()
     r = solve_drake(dm, problem.q_knots, problem.duration, closed_chain=problem.closed_chain, margin=problem.margin,
-                    options=opts)
-    return PeerOutcome(f"drake-{r.solver}", r.solver, r.success, r.status, build + r.setup_time, r.solve_time,
-                       r.iterations, r.solution,
+                    options=opts, lower=problem.lower, upper=problem.upper)
+    setup, solve, iters, N = build + r.setup_time, r.solve_time, r.iterations, problem.n_intervals
+    attempts = [f"N={N}:{r.status}"]
+    for _ in range(int(refinements)):
+        if not r.success or problem.closed_chain is None:
+            break
+        res = verify(problem.robot, r.solution, problem.scene, closed_chain=problem.closed_chain,
+                     object_arm=problem.object_arm).max_closed_chain_residual
+        remaining = opts.time_limit - (time.process_time() - c0)
+        N2 = int(min(max_intervals, np.ceil(N * 1.05 * (res / (0.5 * closed_chain_tol)) ** 0.25)))
+        if not res > closed_chain_tol or N2 <= N or remaining < 1.0:
+            break
+        N = N2
+        Q2 = r.solution.sample(np.linspace(0.0, problem.duration, N + 1))["q"]
+        r = solve_drake(dm, Q2, problem.duration, closed_chain=problem.closed_chain, margin=problem.margin,
+                        options=replace(opts, time_limit=remaining), lower=problem.lower, upper=problem.upper)
+        setup, solve, iters = setup + r.setup_time, solve + r.solve_time, iters + max(r.iterations, 0)
+        attempts.append(f"N={N}:{r.status}")
+    return PeerOutcome(f"drake-{r.solver}", r.solver, r.success, r.status, setup, solve, iters, r.solution,
                        {"model_build_s": build, "n_variables": r.n_variables, "n_constraints": r.n_constraints,
                         "missing_pairs": len(dm.missing_pairs), "extra_pairs": len(dm.extra_pairs),
-                        "candidate_pairs": dm.n_candidate_pairs, **r.info})
+                        "candidate_pairs": dm.n_candidate_pairs, "n_intervals_final": N, "attempts": len(attempts),
+                        "attempt_log": " | ".join(attempts), **r.info})
+
+
+def _drake_child(conn, problem, options, kw) -> None:  # pragma: no cover - runs in the forked child
+    import resource
+
+    limit = int(np.ceil(options.time_limit + KILL_GRACE))
+    resource.setrlimit(resource.RLIMIT_CPU, (limit, limit + 5))
+    out = drake_solve(problem, options, **kw)
+    tr = out.solution.trajectory
+    P = np.column_stack([np.asarray(c).ravel() for c in tr.control_points()])
+    conn.send({"outcome": {k: getattr(out, k) for k in ("method", "solver", "success", "status", "setup_time",
+                                                        "solve_time", "iterations", "info")},
+               "P": P, "T": float(tr.end_time()), "N": int(out.solution.n_intervals)})
+    conn.close()
+
+
+def _drake_solve_isolated(problem: PeerProblem, options, **kw) -> PeerOutcome:
+    import multiprocessing as mp
+
+    from pydrake.trajectories import BsplineTrajectory
+
+    from .drake_peer import BsplineSolution, DrakeModel, DrakeOptions, _basis
+
+    opts = options or DrakeOptions()
+    ctx = mp.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    t0 = time.perf_counter()
+    proc = ctx.Process(target=_drake_child, args=(send, problem, opts, kw), daemon=True)
+    proc.start()
+    send.close()
+    msg = None
+    try:
+        msg = recv.recv()
+    except EOFError:  # the child died: killed at its CPU limit
+        pass
+    proc.join()
+    wall = time.perf_counter() - t0
+    if msg is None:
+        status = (f"{opts.solver.upper()}: killed at the CPU limit ({opts.time_limit + KILL_GRACE:g} s) inside the "
+                  f"solver (exit code {proc.exitcode}); no point returned")
+        return PeerOutcome(f"drake-{opts.solver}", opts.solver, False, status, 0.0, wall, -1, None,
+                           {"killed": True, "n_intervals_final": problem.n_intervals})
+    dm = DrakeModel(problem.robot, problem.scene, object_arm=problem.object_arm)
+    N, T, P = msg["N"], msg["T"], msg["P"]
+    traj = BsplineTrajectory(_basis(N, T), [P[:, [i]] for i in range(P.shape[1])])
+    o = msg["outcome"]
+    return PeerOutcome(o["method"], o["solver"], o["success"], o["status"], o["setup_time"], o["solve_time"],
+                       o["iterations"], BsplineSolution(traj, dm, N, tuple(problem.robot.joint_names)),
+                       {**o["info"], "killed": False})
 
 
 # --------------------------------------------------------------------------- evaluation
@@ -242,7 +375,8 @@ def evaluate(problem: PeerProblem, outcome: PeerOutcome) -> dict:
     return row
 
 
-def _problems(names, trials: int, first_trial: int, seed: int, robot: RobotModel) -> list[PeerProblem]:
+def _problems(names, trials: int, first_trial: int, seed: int, robot: RobotModel,
+              segments=("constrained",)) -> list[PeerProblem]:
     out = []
     for name in names:
         if name == "transport":
@@ -250,19 +384,34 @@ def _problems(names, trials: int, first_trial: int, seed: int, robot: RobotModel
             continue
         scene = f"ssps_scene{name[5:]}" if name.startswith("scene") and name[5:].isdigit() else name
         for k in range(first_trial, first_trial + trials):
-            out += pipeline_segment_instances(scene, k, seed=seed, robot=robot)
+            out += pipeline_segment_instances(scene, k, seed=seed, robot=robot, kinds=segments)
     return out
+
+
+def _cpu() -> float:
+    """CPU time [s] of this process and of its waited-for children."""
+    import resource
+
+    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + ch.ru_utime + ch.ru_stime
 
 
 def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int = 0, seed: int = 0,
         solvers=("snopt", "ipopt"), optplan_solve: Callable[[PeerProblem], PeerOutcome] | None = None,
-        drake_options: dict | None = None, progress: bool = True, on_row: Callable[[dict], None] | None = None
-        ) -> list[dict]:
+        drake_options: dict | None = None, drake_refinements: int = 2, segments=("constrained",), only=(),
+        isolate: bool = True, progress: bool = True,
+        on_row: Callable[[dict], None] | None = None) -> list[dict]:
     """Solve every problem with ``optplan_solve`` (default :func:`optplan_current`) and with Drake
     under each solver in ``solvers``, paired in this process; returns the rows of :func:`evaluate`.
     ``problems``: "transport", "scene1".."scene3" or scene names (their trials ``first_trial`` …
-    ``first_trial + trials − 1``, constrained segments). ``drake_options``: fields of
-    :class:`~optplan.bench.drake_peer.DrakeOptions` other than ``solver``."""
+    ``first_trial + trials − 1``, their segments of the kinds in ``segments``: "constrained",
+    "regrasp"); ``only``: if given, the names of the problems to keep (e.g. "ssps_scene1/t0/s3").
+    ``drake_options``: fields of
+    :class:`~optplan.bench.drake_peer.DrakeOptions` other than ``solver``. ``drake_refinements``:
+    closed-chain grid refinements Drake gets (:func:`drake_solve`; default as many as the pipeline's).
+    ``isolate``: each Drake solve in a child process with a hard CPU limit (:func:`drake_solve`).
+    Each row carries ``wall_s`` and ``cpu_s``: wall and CPU time [s] of the whole method call
+    (retries and the method's own checks included; child processes' CPU time included)."""
     from .drake_peer import DrakeOptions
 
     known = {"transport", "scene1", "scene2", "scene3"}
@@ -273,6 +422,9 @@ def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int =
             raise ValueError(f"--problems: unknown problem {n!r} (expected transport, scene1, scene2, scene3 or a scene name)")
     if int(trials) < 1:
         raise ValueError(f"--trials: expected an integer >= 1, got {trials!r}")
+    bad = set(segments) - {"constrained", "regrasp"}
+    if bad or not segments:
+        raise ValueError(f"--segments: expected constrained and/or regrasp, got {','.join(segments)}")
     for s in solvers:
         DrakeOptions(solver=s)  # validates the name
     if solvers:
@@ -281,17 +433,24 @@ def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int =
         require_drake()  # fail before any solve when Drake is missing
     solve = optplan_solve or optplan_current
     robot = RobotModel.from_name("tcbirrt_dual_arm")
-    probs = _problems(list(problems), int(trials), int(first_trial), int(seed), robot)
+    probs = _problems(list(problems), int(trials), int(first_trial), int(seed), robot, tuple(segments))
+    if only:
+        missing = set(only) - {p.name for p in probs}
+        if missing:
+            raise ValueError(f"--only: no problem named {', '.join(sorted(missing))} (have: "
+                             f"{', '.join(p.name for p in probs)})")
+        probs = [p for p in probs if p.name in set(only)]
     rows = []
     for i, p in enumerate(probs):
-        methods = [solve] + [lambda p, s=s: drake_solve(p, DrakeOptions(solver=s, **(drake_options or {})))
+        methods = [solve] + [lambda p, s=s: drake_solve(p, DrakeOptions(solver=s, **(drake_options or {})),
+                                                        refinements=drake_refinements, isolate=isolate)
                              for s in solvers]
         for method in methods:
-            c0 = time.process_time()
+            c0, w0 = _cpu(), time.perf_counter()
             out = method(p)
-            cpu = time.process_time() - c0
+            cpu, wall = _cpu() - c0, time.perf_counter() - w0
             row = evaluate(p, out)
-            row["cpu_s"] = cpu
+            row["cpu_s"], row["wall_s"] = cpu, wall
             rows.append(row)
             if on_row:
                 on_row(row)
@@ -310,39 +469,100 @@ def _lim(r: dict) -> float:
     return max(r.get("max_position_limit_violation", math.nan), r.get("max_velocity_limit_violation", math.nan))
 
 
-def format_report(rows: list[dict]) -> str:
-    """The table: per problem and method the figures, and Drake / optplan ratios (time, jerk)."""
-    hdr = (f"{'problem':22s} {'method':12s} {'status':34s} {'setup s':>8s} {'solve s':>8s} {'cpu s':>7s} {'iter':>5s} "
-           f"{'jerk':>9s} {'cc resid':>9s} {'clear mm':>8s} {'lim viol':>8s} {'verify':>6s} {'t/optplan':>9s} {'cpu/opt':>7s} {'jerk/opt':>8s}")
-    lines = [hdr, "-" * len(hdr)]
-    base = {}
+def _wall(r: dict) -> float:
+    return float(r.get("wall_s", r["time_s"]))
+
+
+def _finite(f, values) -> float:
+    v = [x for x in values if np.isfinite(x)]
+    return float(f(v)) if v else math.nan
+
+
+def _paired(rows: list[dict]) -> list[tuple[dict, dict | None]]:
+    """Each row with the optplan row it is paired with: the latest optplan row of the same problem
+    before it (the same run), None for optplan rows and unpaired rows."""
+    last, out = {}, []
     for r in rows:
         if r["method"] == "optplan":
-            base[r["problem"]] = r
-    for r in rows:
-        b = base.get(r["problem"])
-        rt = _ratio(r["time_s"], b["time_s"]) if b and r is not b else math.nan
-        rj = _ratio(r["jerk"], b["jerk"]) if b and r is not b else math.nan
-        rc = _ratio(r.get("cpu_s", math.nan), b.get("cpu_s", math.nan)) if b and r is not b else math.nan
-        lines.append(f"{r['problem']:22s} {r['method']:12s} {str(r['status'])[:34]:34s} {r['setup_s']:8.2f} "
-                     f"{r['solve_s']:8.2f} {r.get('cpu_s', math.nan):7.1f} {r['iterations']:5d} {r['jerk']:9.2e} "
-                     f"{r['max_closed_chain_residual']:9.1e} {1e3 * r['min_clearance_m']:8.1f} {_lim(r):8.1e} "
-                     f"{'pass' if r['passed'] else 'FAIL':>6s} {'' if math.isnan(rt) else f'{rt:9.3g}':>9s} "
-                     f"{'' if math.isnan(rc) else f'{rc:7.3g}':>7s} {'' if math.isnan(rj) else f'{rj:8.3g}':>8s}")
-    lines.append("verify: converged, closed-chain residual <= 1e-6 at 10x the knot density, coal clearance >= 0; "
-                 "lim viol: largest joint position [rad] / velocity [rad/s] limit violation there; t/optplan = (setup + solve) wall time of the method / that of optplan, same run; "
-                 "cpu: process CPU time of the whole method call (optplan: its verify calls included)")
+            last[r["problem"]] = r
+            out.append((r, None))
+        else:
+            out.append((r, last.get(r["problem"])))
+    return out
+
+
+def summarize(rows: list[dict], jerk_slack: float = 1.01) -> dict:
+    """Per Drake method: problems compared, passes, and on how many problems optplan met the target
+    (it passed ``verify``, and Drake either failed or was slower (wall) at a jerk cost no lower than
+    optplan's / ``jerk_slack``); median Drake/optplan wall and CPU ratios."""
+    base = [r for r in rows if r["method"] == "optplan"]
+    out = {"optplan": {"problems": len({r["problem"] for r in base}), "runs": len(base),
+                       "passed": sum(bool(r["passed"]) for r in base)}}
+    pairs = _paired(rows)
+    for m in sorted({r["method"] for r in rows} - {"optplan"}):
+        rs = [(r, b) for r, b in pairs if r["method"] == m and b is not None]
+        won, wall, cpu = 0, [], []
+        for r, b in rs:
+            wall.append(_ratio(_wall(r), _wall(b)))
+            cpu.append(_ratio(r.get("cpu_s", math.nan), b.get("cpu_s", math.nan)))
+            quality = not r["passed"] or (b["jerk"] <= jerk_slack * r["jerk"])
+            won += bool(b["passed"] and quality and (not r["passed"] or _wall(b) < _wall(r)))
+        out[m] = {"problems": len(rs), "passed": sum(bool(r["passed"]) for r, _ in rs), "optplan_met_target": won,
+                  "median_wall_ratio": _finite(np.median, wall), "min_wall_ratio": _finite(np.min, wall),
+                  "median_cpu_ratio": _finite(np.median, cpu)}
+    return out
+
+
+def format_report(rows: list[dict]) -> str:
+    """The table: per problem and method the figures, the Drake / optplan ratios (wall time, CPU
+    time, jerk) and a summary line per Drake solver."""
+    hdr = (f"{'problem':18s} {'method':12s} {'status':34s} {'N':>8s} {'wall s':>7s} {'cpu s':>7s} {'iter':>5s} "
+           f"{'jerk':>8s} {'cc resid':>8s} {'clear mm':>8s} {'verify':>6s} {'wall/opt':>8s} {'cpu/opt':>7s} "
+           f"{'jerk/opt':>8s}")
+    lines = [hdr, "-" * len(hdr)]
+
+    def f(v, spec, width):
+        return f"{v:{spec}}".rjust(width) if isinstance(v, (int, float)) and math.isfinite(v) else " " * width
+
+    for r, b in _paired(rows):
+        other = b is not None
+        rt = _ratio(_wall(r), _wall(b)) if other else math.nan
+        rj = _ratio(r["jerk"], b["jerk"]) if other else math.nan
+        rc = _ratio(r.get("cpu_s", math.nan), b.get("cpu_s", math.nan)) if other else math.nan
+        n0, n1 = r.get("n_intervals", 0), r.get("n_intervals_final", r.get("n_intervals", 0))
+        ns = f"{n0}" if n0 == n1 else f"{n0}>{n1}"
+        lines.append(f"{r['problem'][:18]:18s} {r['method']:12s} {str(r['status'])[:34]:34s} {ns:>8s} "
+                     f"{_wall(r):7.1f} {f(r.get('cpu_s', math.nan), '.1f', 7)} {r['iterations']:5d} "
+                     f"{f(r['jerk'], '.2e', 8)} {f(r['max_closed_chain_residual'], '.1e', 8)} "
+                     f"{f(1e3 * r['min_clearance_m'], '.1f', 8)} {'pass' if r['passed'] else 'FAIL':>6s} "
+                     f"{f(rt, '.3g', 8)} {f(rc, '.3g', 7)} {f(rj, '.3g', 8)}")
+    lines.append("N: intervals (first > final attempt); wall/cpu: wall and process CPU time [s] of the whole method "
+                 "call (retries, refinements and the method's own verify calls included); verify: converged, "
+                 "closed-chain residual <= 1e-6 at 10x the knot density, coal clearance >= 0; x/opt: Drake / optplan "
+                 "in the same run")
+    summ = summarize(rows)
+    o = summ.pop("optplan")
+    for m, d in summ.items():
+        lines.append(f"summary {m}: optplan passed {o['passed']}/{o['runs']} runs, {m} passed {d['passed']}/{d['problems']}; "
+                     f"optplan faster at equal or better verified quality on {d['optplan_met_target']}/{d['problems']}; "
+                     f"wall ratio {m}/optplan median {d['median_wall_ratio']:.3g} (min {d['min_wall_ratio']:.3g}), "
+                     f"CPU ratio median {d['median_cpu_ratio']:.3g}")
     lines.append("target: optplan faster than the Drake peer on every problem at equal or better verified quality")
     return "\n".join(lines)
 
 
-def save_json(rows: list[dict], path: str) -> None:
+def save_json(rows: list[dict], path: str, command: str | None = None) -> None:
+    """``{"command", "rows", "summary"}`` to ``path`` (rows as :func:`evaluate` makes them, non-finite
+    numbers as null; the summary of :func:`summarize`)."""
     def clean(v):
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, (np.floating, np.integer, np.bool_)):
+            v = v.item()
         if isinstance(v, float) and not math.isfinite(v):
             return None
-        if isinstance(v, (np.floating, np.integer, np.bool_)):
-            return v.item()
         return v
 
     with open(path, "w") as f:
-        json.dump([{k: clean(v) for k, v in r.items()} for r in rows], f, indent=2)
+        json.dump({"command": command, "rows": [clean(r) for r in rows], "summary": clean(summarize(rows))}, f,
+                  indent=2)

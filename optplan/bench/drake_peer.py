@@ -483,13 +483,15 @@ class _Deadline:
 
 
 def solve_drake(dm: DrakeModel, q_knots: np.ndarray, duration: float, *, closed_chain=None, margin: float = 0.02,
-                options: DrakeOptions | None = None, collision: bool = True) -> DrakeResult:
+                options: DrakeOptions | None = None, collision: bool = True, lower=None, upper=None) -> DrakeResult:
     """Solve the trajectory problem with ``KinematicTrajectoryOptimization`` (module docstring).
 
     ``q_knots`` ((N+1) × nj, optplan's joint order): the warm start at N uniform intervals over
     ``duration`` [s]; its first and last rows are the boundary configurations (at rest).
     ``closed_chain``: an optplan :class:`~optplan.problem.ClosedChain` (None: no closed chain).
     ``margin`` [m]: lower bound on every candidate pair's signed distance at the sampled times.
+    ``lower``, ``upper`` [rad] (optplan's joint order; default the robot's limits): bounds on the
+    control points; equal entries fix a joint (the holding arm of a regrasp).
     Never raises for a failed solve: the status is in the result."""
     pd = require_drake()
     from pydrake.planning import KinematicTrajectoryOptimization
@@ -513,7 +515,9 @@ def solve_drake(dm: DrakeModel, q_knots: np.ndarray, duration: float, *, closed_
         kto.AddPathPositionConstraint(q, q, s)
         kto.AddPathVelocityConstraint(z, z, s)
         kto.AddPathAccelerationConstraint(z, z, s)
-    kto.AddPositionBounds(dm.lower, dm.upper)
+    lo = dm.lower if lower is None else dm.to_drake(dm.robot.check_joints(lower, "lower"))
+    hi = dm.upper if upper is None else dm.to_drake(dm.robot.check_joints(upper, "upper"))
+    kto.AddPositionBounds(lo, hi)
     kto.AddVelocityBounds(-dm.velocity_limit, dm.velocity_limit)
     # sampled path constraints (interior samples; the ends are fixed configurations)
     m = int(opts.samples_per_interval)
