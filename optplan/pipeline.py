@@ -103,6 +103,9 @@ class PipelineOptions:
     (residual / (tol/2))^¼, warm-started from the solution (≤ refinements); (4) ``fallback-knots``:
     still not verified → the knot transcription with free plane normals (not on a robot with
     cylinder or mesh collision geometry, which that transcription does not model).
+    coarse_factor: with k ≥ 2, a constrained segment is first solved on ⌈N / k⌉ intervals (at least
+    8), and the N-interval NLP starts from that optimum, projected onto the closed chain, with its
+    collision pairs activated along it (recorded as a ``coarse`` attempt). 0 (default): off.
     compile_kernels: the B-spline NLP's kernels evaluated from C compiled once per robot and
     cached on disk (:attr:`SplineSegmentProblem.compile_kernels`): ``"auto"`` (default) uses what
     an earlier run compiled, ``True`` compiles what is missing (about a second of the C compiler
@@ -139,6 +142,7 @@ class PipelineOptions:
     spline_velocity_activation: float = 0.5
     compile_kernels: bool | str = "auto"
     velocity_retries: int = 2
+    coarse_factor: int = 0
 
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
@@ -419,13 +423,13 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     ipopt = {"max_wall_time": opts.ipopt_max_wall_time, "constr_viol_tol": cv, "acceptable_constr_viol_tol": cv,
              **ipopt}
 
-    def build(N: int, initial: Solution | None = None) -> SplineSegmentProblem:
+    def build(N: int, initial: Solution | None = None, project: bool = False) -> SplineSegmentProblem:
         spec = SegmentSpec(int(N), T, seg_path[0], seg_path[-1], cc, lo, hi, margin=opts.margin,
                            object_arm=holder or arms[0], velocity_activation=opts.spline_velocity_activation)
         prob = SplineSegmentProblem(robot, scene, spec)
         prob.compile_kernels = opts.compile_kernels
         if initial is not None:
-            prob.set_initial(solution=initial)
+            prob.set_initial(solution=initial, closed_chain=cc if project else None)
         elif opts.warm_start:
             if not prob.set_initial_path(seg_path, cc):
                 log.info("segment %s: some resampled configurations did not project onto the manifold", kind)
@@ -465,7 +469,20 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
                     and (kind != "constrained" or res <= opts.closed_chain_tol))
 
     N = int(np.clip(np.ceil(length / step), opts.spline_min_intervals, opts.spline_max_intervals))
-    prob = build(N)
+    prob = None
+    Nc = int(np.ceil(N / opts.coarse_factor)) if opts.coarse_factor >= 2 else 0
+    if kind == "constrained" and opts.warm_start and Nc >= 8:
+        # coarse-to-fine: the planner path's corners are smoothed on a coarse grid first, and the
+        # fine NLP starts from (and activates its pairs along) the coarse optimum
+        coarse = build(Nc)
+        csol = coarse.solve(ipopt)
+        attempts.append(_attempt("coarse", Nc, csol, None))
+        total = csol
+        log.info("segment %s: coarse N=%d -> %s, %d iterations", kind, Nc, csol.status.value, csol.iterations)
+        if csol.success:
+            prob = build(N, initial=csol, project=True)
+    if prob is None:
+        prob = build(N)
     sol, rep = run(prob, "initial")
     colliding: list[Solution] = []  # solutions coal found in contact: their pairs stay active on a finer grid
 

@@ -242,3 +242,24 @@ def test_compare_pipeline_options_example_pairs_variants_and_rejects_bad_json(ca
     assert len(lines) == 2
     strip = [ln.split(None, 3)[3] for ln in lines]  # everything after the variant name …
     assert [s.split("cpu=")[0] for s in strip][0] == [s.split("cpu=")[0] for s in strip][1]  # … up to the CPU time
+
+
+def test_coarse_to_fine_records_the_coarse_attempt_and_verifies():
+    """coarse_factor: the constrained segments start from a coarse grid's optimum (a ``coarse``
+    attempt before ``initial``), and the trial still verifies."""
+    import dataclasses
+
+    from optplan.bench.trials import TrialGenerator
+    from optplan.pipeline import PipelineOptions, run_pipeline
+    from optplan.robot import RobotModel
+    from optplan.scene import Scene
+
+    robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("ssps_scene1")
+    trial = TrialGenerator(robot, scene).generate(0, 0)
+    res = run_pipeline(robot, scene, trial.q_start, trial.q_goal,
+                       dataclasses.replace(PipelineOptions(), coarse_factor=3), seed=int(trial.seed))
+    assert res.success
+    cons = [s for s in res.segments if s.kind == "constrained"]
+    assert cons and all(s.attempts[0]["reason"] == "coarse" and s.attempts[1]["reason"] == "initial"
+                        and s.attempts[0]["N"] == -(-s.attempts[1]["N"] // 3) for s in cons)
+    assert all(s.attempts[0]["reason"] != "coarse" for s in res.segments if s.kind == "regrasp")

@@ -167,12 +167,21 @@ class SplineSegmentProblem:
         self.vertex_window = 0.5
 
     # ------------------------------------------------------------------ initial guess
-    def set_initial(self, q=None, *, solution: Solution | None = None) -> None:
+    def set_initial(self, q=None, *, solution: Solution | None = None,
+                    closed_chain: ClosedChain | None = None) -> None:
         """Initial guess from knot configurations ``q`` ((N+1) × nj, on this problem's grid) or from
-        a :class:`Solution` of any grid (sampled at this grid's knots). Re-seeds the plane normals
-        at the next build."""
+        a :class:`Solution` of any grid (sampled at this grid's knots; with ``closed_chain``, each
+        interior knot is projected onto it — a coarser grid's solution drifts between its knots).
+        Re-seeds the plane normals at the next build."""
         if solution is not None:
             q = solution.sample(np.linspace(solution.t[0], solution.t[-1], self.N + 1))["q"]
+            if closed_chain is not None:
+                from ..warmstart import project_closed_chain
+
+                q = np.array(q, float)
+                data = self.robot.model.createData()
+                for k in range(1, self.N):
+                    q[k] = project_closed_chain(self.robot, q[k], closed_chain, data=data).q
         Q = np.asarray(q, float)
         if Q.shape != (self.N + 1, self.robot.nj):
             raise ValueError(f"set_initial: expected ({self.N + 1}, {self.robot.nj}) knot configurations, "
