@@ -196,6 +196,8 @@ def test_bad_input(pr2):
 
     with pytest.raises(ValueError, match="step"):
         OCRRTOptions(step=-1.0)
+    with pytest.raises(ValueError, match="goal_from_new"):
+        OCRRTOptions(goal_from_new="yes")
     with pytest.raises(ConfigurationError, match="mode"):
         DualArmOrientationConstraint(pr2, "sideways", {})
     with pytest.raises(ConfigurationError, match="R_hands"):

@@ -48,7 +48,9 @@ class OCRRTOptions:
     configurations checked along an edge. ``max_joint_step`` [rad]: largest joint change allowed
     between consecutive checked configurations (continuity on one IK branch). ``goal_bias``:
     probability of steering to the goal (RRT). ``max_sample_tries``: redraws of an unsolvable
-    sample before the iteration is skipped. ``reach_tolerance`` [rad]: trees meet / the goal is
+    sample before the iteration is skipped. ``goal_from_new`` (RRT): with probability
+    ``goal_bias`` also steer to the goal from each node just added, not only from the node nearest
+    the goal. ``reach_tolerance`` [rad]: trees meet / the goal is
     reached when the configurations agree to this (max-norm). ``max_iterations`` (0: time only).
     ``margin`` [m]: collision margin."""
 
@@ -57,6 +59,7 @@ class OCRRTOptions:
     collision_step: float = 0.1
     max_joint_step: float = 0.5
     goal_bias: float = 0.1
+    goal_from_new: bool = True
     max_sample_tries: int = 50
     reach_tolerance: float = 1e-9
     max_iterations: int = 0
@@ -73,6 +76,8 @@ class OCRRTOptions:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= (1 if name == "max_sample_tries" else 0)):
                 raise ValueError(f"OCRRTOptions.{name}: expected a non-negative int, got {v!r}")
+        if not isinstance(self.goal_from_new, bool):
+            raise ValueError(f"OCRRTOptions.goal_from_new: expected True/False, got {self.goal_from_new!r}")
         if not (isinstance(self.margin, (int, float)) and self.margin >= 0):
             raise ValueError(f"OCRRTOptions.margin: expected a number >= 0 m, got {self.margin!r}")
 
@@ -171,8 +176,10 @@ class OCRRT(Planner):
         j = tree.add(q1, p1, i_near)
         return (REACHED if p1 is p_target else ADVANCED), j
 
-    def connect(self, tree: _Tree, q_target, p_target, st, deadline) -> tuple[int, int]:
-        i = tree.nearest(q_target)
+    def connect(self, tree: _Tree, q_target, p_target, st, deadline, start: int | None = None) -> tuple[int, int]:
+        """Steer repeatedly toward ``p_target`` from node ``start`` (default: the node nearest
+        ``q_target``) until it is reached on ``q_target``'s branch or the steer is trapped."""
+        i = tree.nearest(q_target) if start is None else int(start)
         while not deadline.expired():
             res, i = self.oc_steer(tree, i, p_target, st)
             if res == REACHED:
@@ -220,7 +227,14 @@ class OCRRT(Planner):
                 s = self.sample(rng, st)
                 if s is None:
                     continue
-                self.oc_steer(ta, ta.nearest(s[0]), s[1], st)
+                res, j = self.oc_steer(ta, ta.nearest(s[0]), s[1], st)
+                if o.goal_from_new and res != TRAPPED and rng.random() < o.goal_bias:
+                    # also try the goal from the node just added: the node nearest the goal can sit
+                    # behind an obstacle for good, a new node elsewhere may see past it
+                    res, i = self.connect(ta, q_goal, pg, st, deadline, start=j)
+                    if res == REACHED:
+                        found = (i, None)
+                        break
                 continue
             s = self.sample(rng, st)
             if s is None:
