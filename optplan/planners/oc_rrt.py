@@ -218,20 +218,17 @@ class OCRRT(Planner):
                 break
             st["iterations"] += 1
             if not o.connect:
+                start = -1  # -1: no goal attempt; None: from the node nearest the goal
                 if rng.random() < o.goal_bias:
-                    res, i = self.connect(ta, q_goal, pg, st, deadline)
-                    if res == REACHED:
-                        found = (i, None)
-                        break
-                    continue
-                s = self.sample(rng, st)
-                if s is None:
-                    continue
-                res, j = self.oc_steer(ta, ta.nearest(s[0]), s[1], st)
-                if o.goal_from_new and res != TRAPPED and rng.random() < o.goal_bias:
-                    # also try the goal from the node just added: the node nearest the goal can sit
-                    # behind an obstacle for good, a new node elsewhere may see past it
-                    res, i = self.connect(ta, q_goal, pg, st, deadline, start=j)
+                    start = None
+                elif (s := self.sample(rng, st)) is not None:
+                    res, j = self.oc_steer(ta, ta.nearest(s[0]), s[1], st)
+                    if o.goal_from_new and res != TRAPPED and rng.random() < o.goal_bias:
+                        # also from the node just added: the node nearest the goal can sit behind
+                        # an obstacle for good, a new node elsewhere may see past it
+                        start = j
+                if start != -1:
+                    res, i = self.connect(ta, q_goal, pg, st, deadline, start=start)
                     if res == REACHED:
                         found = (i, None)
                         break

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["knot_matrices", "boundary_points", "knot_values", "fit_interior", "jerk_integral_reference"]
+__all__ = ["knot_matrices", "boundary_points", "knot_values", "fit_interior", "jerk_integral_reference",
+           "rest_to_rest"]
 
 
 def knot_matrices(N: int) -> dict[str, np.ndarray]:
@@ -89,3 +90,20 @@ def jerk_integral_reference(q0, q1, T: float) -> float:
     of a minimum-jerk objective)."""
     d = np.asarray(q1, float) - np.asarray(q0, float)
     return float(720.0 * (d @ d) / T**5)
+
+
+def rest_to_rest(robot, N: int, duration: float, q_start, q_end, lower=None, upper=None) -> tuple:
+    """The grid of a rest-to-rest motion of ``robot`` on N intervals over ``duration`` [s]:
+    ``(T, h, knot matrices, q0, q1, P_start, P_end, lower, upper)`` — the three boundary control
+    points at each end from rest at the checked configurations, and the joint limits [rad]
+    (``None``: the robot's)."""
+    if not (np.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration: expected a positive time [s], got {duration!r}")
+    T = float(duration)
+    h = T / N
+    q0, q1 = robot.check_joints(q_start, "q_start"), robot.check_joints(q_end, "q_end")
+    z = np.zeros(robot.nj)
+    lo = robot.lower.copy() if lower is None else robot.check_joints(lower, "lower")
+    hi = robot.upper.copy() if upper is None else robot.check_joints(upper, "upper")
+    return (T, h, knot_matrices(N), q0, q1, boundary_points(q0, z, z, h, "start"),
+            boundary_points(q1, z, z, h, "end"), lo, hi)

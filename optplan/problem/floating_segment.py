@@ -62,7 +62,7 @@ import pinocchio as pin
 
 from ..robot import RobotModel
 from .assembly import scatter
-from .bspline import boundary_points, fit_interior, jerk_integral_reference, knot_matrices, knot_values
+from .bspline import fit_interior, jerk_integral_reference, knot_values, rest_to_rest
 from .frame_terms import ClosedChain
 from .kernels import KernelCache
 from .solution import Solution
@@ -382,24 +382,14 @@ class FloatingSplineProblem:
         N = self.N = int(spec.n_intervals)
         if N < 4:
             raise ValueError(f"n_intervals: expected ≥ 4, got {spec.n_intervals!r}")
-        if not (np.isfinite(spec.duration) and spec.duration > 0):
-            raise ValueError(f"duration: expected a positive time [s], got {spec.duration!r}")
         if isinstance(spec.n_sub, bool) or int(spec.n_sub) != spec.n_sub or spec.n_sub < 1:
             raise ValueError(f"n_sub: expected an integer ≥ 1, got {spec.n_sub!r}")
         self.n_sub = int(spec.n_sub)
         if spec.smoothness not in ("jerk", "acceleration"):
             raise ValueError(f"smoothness: expected 'jerk' or 'acceleration', got {spec.smoothness!r}")
-        self.T = float(spec.duration)
-        self.h = self.T / N
-        self.M = knot_matrices(N)
+        (self.T, self.h, self.M, self.q0, self.q1, self.P_start, self.P_end, self.lower,
+         self.upper) = rest_to_rest(robot, N, spec.duration, spec.q_start, spec.q_end, spec.lower, spec.upper)
         nj = robot.nj
-        self.q0 = robot.check_joints(spec.q_start, "q_start")
-        self.q1 = robot.check_joints(spec.q_end, "q_end")
-        z = np.zeros(nj)
-        self.P_start = boundary_points(self.q0, z, z, self.h, "start")
-        self.P_end = boundary_points(self.q1, z, z, self.h, "end")
-        self.lower = robot.lower.copy() if spec.lower is None else robot.check_joints(spec.lower, "lower")
-        self.upper = robot.upper.copy() if spec.upper is None else robot.check_joints(spec.upper, "upper")
         if not spec.position_limits:
             self.lower, self.upper = np.full(nj, -np.inf), np.full(nj, np.inf)
         if spec.velocity_limit is False:

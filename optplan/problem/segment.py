@@ -47,7 +47,7 @@ import numpy as np
 from ..robot import RobotModel
 from ..scene import Scene
 from .assembly import Assembly
-from .bspline import boundary_points, fit_interior, jerk_integral_reference, knot_matrices, knot_values
+from .bspline import fit_interior, jerk_integral_reference, knot_values, rest_to_rest
 from .collision_term import CollisionAvoidance, _box_vertices, witness_plane
 from .frame_terms import ClosedChain
 from .kernels import KernelCache, geometry_points
@@ -122,19 +122,9 @@ class SplineSegmentProblem:
         self.robot, self.scene, self.spec = robot, scene, spec
         self.kernels = KernelCache.of(robot)
         N = self.N = int(spec.n_intervals)
-        if not (np.isfinite(spec.duration) and spec.duration > 0):
-            raise ValueError(f"duration: expected a positive time [s], got {spec.duration}")
-        self.T = float(spec.duration)
-        self.h = self.T / N
-        self.M = knot_matrices(N)
+        (self.T, self.h, self.M, self.q0, self.q1, self.P_start, self.P_end, self.lower,
+         self.upper) = rest_to_rest(robot, N, spec.duration, spec.q_start, spec.q_end, spec.lower, spec.upper)
         nj = robot.nj
-        self.q0 = robot.check_joints(spec.q_start, "q_start")
-        self.q1 = robot.check_joints(spec.q_end, "q_end")
-        z = np.zeros(nj)
-        self.P_start = boundary_points(self.q0, z, z, self.h, "start")
-        self.P_end = boundary_points(self.q1, z, z, self.h, "end")
-        self.lower = robot.lower.copy() if spec.lower is None else robot.check_joints(spec.lower, "lower")
-        self.upper = robot.upper.copy() if spec.upper is None else robot.check_joints(spec.upper, "upper")
         self.vlim = robot.velocity_limit.copy() if spec.velocity_limit is None else np.broadcast_to(
             np.asarray(spec.velocity_limit, float), (nj,)).copy()
         self.fixed = frozenset(np.flatnonzero(self.lower == self.upper).tolist())
