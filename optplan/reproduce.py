@@ -15,6 +15,8 @@ orientation-constrained RRT for spherical-wrist dual arms).
 """
 from __future__ import annotations
 
+import logging
+
 import json
 
 import subprocess
@@ -51,6 +53,8 @@ class Paper:
     summary: Callable | None = None   # (out: Path, steps: list[Step]) -> list[str]
     extra_views: Callable | None = None   # (out: Path, quick: bool) -> list[Path]
 
+
+log = logging.getLogger(__name__)
 
 def examples_dir() -> Path:
     """The ``examples/`` folder of the source tree optplan runs from."""
@@ -94,7 +98,7 @@ def _tcbirrt_view(out: Path, quick: bool) -> list[Path]:
     trial = TrialGenerator(robot, scene).generate(0, 0)
     res = make_planner("tcbirrt", robot, scene).plan(trial.q_start, trial.q_goal, time_limit=10.0, seed=trial.seed)
     if not res.success:
-        print(f"  (TCBiRRT found no path for the view: {res.status.value})")
+        log.warning("TCBiRRT found no path for the view: %s", res.status.value)
         return []
     P = np.asarray(res.path, float)
     t = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1) / 0.5)])
@@ -273,28 +277,29 @@ def _views(step: Step, out: Path) -> list[Path]:
             try:
                 made.append(view_file(f, robot=robot, scene=scene, out=out / "html" / f"{p.name}_{f.stem}.html"))
             except VizUnavailable as exc:
-                print(f"  (no HTML views: {exc})")
+                log.warning("no HTML views: %s", exc)
                 return made
             except Exception as exc:   # a view is an extra: report it, keep the run's other outputs
-                print(f"  (no HTML view of {f}: {type(exc).__name__}: {exc})")
+                log.warning("no HTML view of %s: %s: %s", f, type(exc).__name__, exc)
     return made
 
 
 def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = True,
-              examples: Path | None = None) -> dict:
+              examples: Path | None = None, say=print) -> dict:
     """Run a paper's reproduction; returns (and writes to ``out/reproduce.json``) the record of
-    its steps. Raises :class:`ReproduceError` when it cannot start."""
+    its steps. ``say``: where the progress lines go (the command line: ``print``). Raises
+    :class:`ReproduceError` when it cannot start."""
     steps = plan_steps(paper, out, quick, examples)
     p = PAPERS[paper]
     out = Path(out)
     (out / "traj").mkdir(parents=True, exist_ok=True)
-    print(f"optplan reproduce {paper}{' --quick' if quick else ''}: {p.title}")
-    print(f"  output folder {out}")
+    say(f"optplan reproduce {paper}{' --quick' if quick else ''}: {p.title}")
+    say(f"  output folder {out}")
     record = {"paper": paper, "title": p.title, "quick": quick, "steps": [], "files": []}
     t_all = time.perf_counter()
     ok = True
     for st in steps:
-        print(f"\n$ python {' '.join(st.argv)}", flush=True)
+        say(f"\n$ python {' '.join(st.argv)}", flush=True)
         t0 = time.perf_counter()
         log_path = out / f"{st.name}.log"
         with open(log_path, "w") as log:
@@ -308,7 +313,7 @@ def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = Tru
         ok &= rc == 0
         record["steps"].append({"name": st.name, "argv": list(st.argv), "exit_code": rc, "run_time_s": dt,
                                 "log": str(log_path), "json": st.json})
-        print(f"  [{st.name}: exit code {rc}, {dt:.1f} s]")
+        say(f"  [{st.name}: exit code {rc}, {dt:.1f} s]")
         if html:
             for v in _views(st, out):
                 record["files"].append(str(v))
@@ -317,21 +322,21 @@ def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = Tru
             for v in p.extra_views(out, quick):
                 record["files"].append(str(v))
         except ImportError as exc:
-            print(f"  (no HTML view: {exc})")
+            log.warning("no HTML view: %s", exc)
     record["files"] += sorted(str(f) for f in out.rglob("*") if f.suffix in (".png", ".html", ".json")
                               and str(f) not in record["files"])
     record["run_time_s"] = time.perf_counter() - t_all
     record["success"] = bool(ok)
     if p.summary is not None:
-        print(f"\n{p.title}: ours next to the paper's")
+        say(f"\n{p.title}: ours next to the paper's")
         for line in p.summary(out, steps):
-            print(line)
+            say(line)
     (out / "reproduce.json").write_text(json.dumps(record, indent=2))
     html_files = [f for f in record["files"] if f.endswith(".html")]
-    print(f"\nrun time {record['run_time_s']:.1f} s; {'all steps succeeded' if ok else 'SOME STEPS FAILED'}; "
+    say(f"\nrun time {record['run_time_s']:.1f} s; {'all steps succeeded' if ok else 'SOME STEPS FAILED'}; "
           f"record {out / 'reproduce.json'}")
     for f in html_files:
-        print(f"  3D view: {f}")
+        say(f"  3D view: {f}")
     return record
 
 
