@@ -36,7 +36,9 @@ def main(argv=None) -> int:
     ap.add_argument("--scene", default="1", help="comma-separated: 1, 2, 3 (ssps_scene<N>) or scene names")
     ap.add_argument("--trials", type=int, default=4, help="trials per scene (from --first-trial)")
     ap.add_argument("--first-trial", type=int, default=0)
-    ap.add_argument("--variants", required=True, help='JSON: {"name": {PipelineOptions field: value, ...}, ...}')
+    ap.add_argument("--variants", default='{"symbolic": {"compile_kernels": false}, "auto": {}}',
+                    help='JSON: {"name": {PipelineOptions field: value, ...}, ...} (default: the symbolic '
+                         'kernels against the default, which uses kernels an earlier run compiled to C)')
     args = ap.parse_args(argv)
     try:
         variants = json.loads(args.variants)
