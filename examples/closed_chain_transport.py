@@ -79,10 +79,19 @@ def run(knots: int = 50, duration: float = 60.0, seed: int = 0, margin: float = 
         "initial_guess_min_clearance_m": clearance0,
         "max_position_limit_violation": rep.max_position_limit_violation,
         "max_velocity_limit_violation": rep.max_velocity_limit_violation,
-        "active_collision_pairs": len(col.active_pairs) if col else 0,
+        "active_collision_pairs": _active_pairs(prob, col, transcription),
         "cost": sol.cost,
     }
     return out, sol
+
+
+def _active_pairs(prob, col, transcription: str) -> int:
+    """Number of collision pairs with rows in the NLP."""
+    if col is None:
+        return 0
+    if transcription == "bspline":
+        return len(col.active_pairs)  # the segment NLP's CollisionModel
+    return len(prob.term_data("collision").info.get("active_pairs", ()))
 
 
 def main(argv=None) -> int:
@@ -105,7 +114,7 @@ def main(argv=None) -> int:
         if k in out:
             v = out[k]
             print(f"  {k:32s} {v:.3e}" if isinstance(v, float) else f"  {k:32s} {v}")
-    print("  targets (issue 3): N=50 solved in <= 2 s, closed-chain residual <= 1e-6, clearance >= 0 (coal)")
+    print("  targets: N=50 built and solved in <= 0.3 s, closed-chain residual <= 1e-6, clearance >= 0 (coal)")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=2)

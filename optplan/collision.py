@@ -82,6 +82,8 @@ class CollisionChecker:
                     continue
                 pairs.append(Pair("object-robot", -1, g, "object", objs[g].name))
         self.pairs = pairs
+        #: position of each pair in :attr:`pairs` (and in :meth:`distances`' result)
+        self.pair_index: dict[Pair, int] = {p: i for i, p in enumerate(pairs)}
         self._build_combined()
         self._req = coal.DistanceRequest()
         self._res = coal.DistanceResult()
@@ -108,6 +110,9 @@ class CollisionChecker:
             gm.addCollisionPair(pin.CollisionPair(min(a, b), max(a, b)))
         self._cgm = gm
         self._cgd = pin.GeometryData(gm)
+        # references into the results vector (never resized after this): faster to read than
+        # iterating ``distanceResults`` anew on every call
+        self._dist_results = list(self._cgd.distanceResults)
 
     # ------------------------------------------------------------------ placements
     def _update(self, q) -> pin.SE3 | None:
@@ -153,7 +158,7 @@ class CollisionChecker:
         if not self.pairs:
             return np.empty(0)
         pin.computeDistances(self.model, self.data, self._cgm, self._cgd, q)
-        return np.fromiter((r.min_distance for r in self._cgd.distanceResults), float, len(self.pairs))
+        return np.array([r.min_distance for r in self._dist_results])
 
     def min_distance(self, q) -> tuple[float, Pair | None]:
         """Smallest distance [m] and the pair that has it (inf, None without pairs)."""

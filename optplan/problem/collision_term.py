@@ -308,7 +308,7 @@ class CollisionModel:
         close = Dm < self.activation
         for (p, k) in self.margin_boost:  # boosted rows are always constrained
             if p in pairs and 0 <= k <= initial.N:
-                close[k, pairs.index(p)] = True
+                close[k, self.checker.pair_index[p]] = True
         w = int(self.window)
         self.active_pairs, self.active_knots = [], {}
         for i, p in enumerate(pairs):
@@ -519,7 +519,7 @@ class CollisionModel:
         infeasibility at 5e3 on a segment ending 17.5 mm from the base under a 20 mm margin."""
         self.relaxed = {}
         if init is not None and pinned:
-            idx = [self.checker.pairs.index(p) for p in active]
+            idx = [self.checker.pair_index[p] for p in active]
             w = int(self.window)
             D0 = self._init_dist
             for kp in sorted(pinned):
@@ -567,8 +567,9 @@ class CollisionModel:
             raise ValueError(f"boost_between_knots: {len(traj_t)} times for {len(Q)} configurations")
         D = np.array([self.checker.distances(q) for q in Q])
         n = 0
+        active = set(self.active_pairs)
         for i, p in enumerate(self.checker.pairs):
-            if p not in self.active_pairs:
+            if p not in active:
                 continue  # not constrained at all: activation (``activate_with``) is the remedy
             ks = set(self.knots_of(p, len(knot_t) - 1))
             bad = np.flatnonzero(D[:, i] < min_clearance)
@@ -627,7 +628,7 @@ class CollisionModel:
 
     def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         """Exact coal distances of the active pairs at every knot, ``(N+1) × n_active``."""
-        idx = [self.checker.pairs.index(p) for p in self.active_pairs]
+        idx = [self.checker.pair_index[p] for p in self.active_pairs]
         return np.array([self.checker.distances(traj.q_full(k))[idx] for k in range(traj.N + 1)])
 
     def bounds_numeric(self, traj):

@@ -303,12 +303,12 @@ class SplineSegmentProblem:
         the knot transcription's smooth distances."""
         col, N, w = self.col, self.N, int(self.spec.window)
         col.relaxed = {}
-        pairs = col.checker.pairs
+        index = col.checker.pair_index
         knots = set(range(N + 1)) if self.spec.relax_to_guess else set(pinned)
         for kp in sorted(knots):
             d = col._init_dist[kp]  # exact distances along the initial guess (set by _activate)
             for p in active:
-                dp = float(d[pairs.index(p)])
+                dp = float(d[index[p]])
                 # inside the path only a collision-free guess relaxes (a colliding one must be pushed out)
                 if dp < col.margin and (kp in pinned or dp >= 0.0):
                     m = min(col.margin, 0.5 * dp)
