@@ -35,14 +35,14 @@ import pinocchio as pin
 
 from .errors import ConfigurationError, ModelError
 from .robot import RobotModel
+from .spatial import skew
 
 __all__ = ["DecoupledArmIK", "rotation_about", "wrist_angles"]
 
 TWO_PI = 2.0 * math.pi
 
 
-def _skew(w):
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+_skew = skew
 
 
 _I3 = np.eye(3)

@@ -8,16 +8,20 @@ the edges, and every converter names its convention:
 * ``zyx`` (Z-Y-X Euler, as in the EBA paper's Eq. 1 ``[αz, αy, αx]``): ``R = Rz(a) @ Ry(b) @ Rx(c)``,
   argument order ``(a, b, c)`` [rad]. Same matrix as ``rpy(c, b, a)``.
 * exponential coordinates ``log3``/``exp3`` (rotation vector, [rad]) for interpolation.
+* ``vee_skew(E)`` = vee((E − Eᵀ)/2) = sin θ · axis of a rotation ``E`` (numpy or CasADi), and the
+  singularity-free pose residual built from it (:func:`pose_residual`), used by every pose and
+  closed-chain constraint.
 """
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 import pinocchio as pin
 
 __all__ = [
     "rotx", "roty", "rotz", "rpy_to_matrix", "matrix_to_rpy", "zyx_to_matrix", "matrix_to_zyx",
     "exp3", "log3", "se3", "pose_to_vector_rpy", "interpolate_pose", "rotation_angle",
-    "check_rotation", "check_pose", "quaternion_to_matrix",
+    "check_rotation", "check_pose", "quaternion_to_matrix", "vee_skew", "skew", "pose_residual",
 ]
 
 #: how far ``RᵀR`` may be from the identity (and det R from 1) for R to count as a rotation
@@ -139,10 +143,38 @@ def log3(R: np.ndarray) -> np.ndarray:
     return np.asarray(pin.log3(check_rotation(R, "log3: R")))
 
 
+def vee_skew(E):
+    """``vee((E − Eᵀ)/2)`` — ``sin θ · axis`` of the rotation ``E`` — as a numpy (3,) array, or a
+    CasADi column when ``E`` is a CasADi matrix. Exact to round-off near ``E = I`` (an acos-based
+    log is not); zero also at θ = π, so constraints pair it with ``trace(E) ≥ 1``."""
+    if isinstance(E, (ca.SX, ca.MX, ca.DM)):
+        return 0.5 * ca.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1])
+    E = np.asarray(E)
+    return 0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
+
+
+def skew(v) -> np.ndarray:
+    """``[v]×`` (3 × 3) of a 3-vector: ``skew(v) @ w = v × w``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def pose_residual(R, p, R_target, p_target):
+    """``([p − p_t; vee_skew(E)] (6), trace(E))`` with ``E = R_tᵀ R``: the singularity-free pose
+    residual (position [m], sin θ · axis) of every pose constraint; zero with ``trace(E) ≥ 1`` iff
+    the pose is the target. CasADi when any of ``R``, ``p`` is CasADi (a numpy target is lifted),
+    numpy otherwise."""
+    if isinstance(R, (ca.SX, ca.MX)) or isinstance(p, (ca.SX, ca.MX)):
+        Rt = ca.DM(R_target) if isinstance(R_target, np.ndarray) else R_target
+        E = Rt.T @ R
+        return ca.vertcat(p - p_target, vee_skew(E)), ca.trace(E)
+    E = np.asarray(R_target).T @ np.asarray(R)
+    return np.concatenate([np.asarray(p) - np.asarray(p_target), vee_skew(E)]), float(np.trace(E))
+
+
 def rotation_angle(R: np.ndarray) -> float:
     """Geodesic angle [rad] of ``R`` (robust near 0 and π)."""
     c = (np.trace(R) - 1.0) / 2.0
-    s = 0.5 * np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    s = float(np.linalg.norm(vee_skew(R)))
     return float(np.arctan2(s, np.clip(c, -1.0, 1.0)))
 
 

@@ -41,6 +41,7 @@ import pinocchio as pin
 from ..collision import CollisionChecker
 from ..robot import RobotModel
 from ..scene import Scene
+from ..spatial import skew, vee_skew
 
 __all__ = ["DrakeUnavailable", "require_drake", "DrakeModel", "ClosedChainResidual", "BsplineSolution", "DrakeOptions",
            "DrakeResult", "fit_bspline", "jerk_matrix", "solve_drake", "SOLVERS"]
@@ -70,12 +71,7 @@ def _rt(M: pin.SE3):
     return RigidTransform(RotationMatrix(np.asarray(M.rotation)), np.asarray(M.translation))
 
 
-def _skew(w) -> np.ndarray:
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-
-
-def _vee_skew(E) -> np.ndarray:
-    return 0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
+_skew, _vee_skew = skew, vee_skew
 
 
 # --------------------------------------------------------------------------- model

@@ -30,6 +30,7 @@ import pinocchio as pin
 
 from ..problem.nlp import NlpSolver, SolverOptions
 from ..robot import RobotModel
+from ..spatial import vee_skew
 from ..symbolic import SymbolicKinematics
 from .eba_core import (EBAKinematics, MethodResult, Scenario, Segment, hermite_segment, integrate_rpy,
                        rpy_matrix)
@@ -295,7 +296,7 @@ def run_fourier(robot: RobotModel, scenario: Scenario, options: FourierOptions |
         rel0 = scenario.relative
         E = ca.DM(np.array(rel0.rotation)).T @ Ra.T @ Rb
         r = ca.vertcat(Ra.T @ (pb - pa) - ca.DM(np.array(rel0.translation)),
-                       0.5 * ca.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]))
+                       vee_skew(E))
         ccfun = ca.Function("cc", [th], [r])
         tc = np.linspace(0.0, T, o.closed_chain_samples)[1:-1]
         Bi = np.array(_fourier_basis(tc, h, T)[1])

@@ -32,6 +32,7 @@ from scipy.linalg.lapack import dgesv
 from ..errors import ConfigurationError
 from ..floating import simulate_base
 from ..robot import RobotModel
+from ..spatial import skew
 
 __all__ = [
     "THETA0_DEG", "FREE_END_THETAF_DEG", "END_CONSTRAINED_THETAF_DEG", "PAPER_FIGURES", "Scenario",
@@ -64,9 +65,7 @@ PAPER_FIGURES = {
 }
 
 
-def skew3(r: np.ndarray) -> np.ndarray:
-    """3 × 3 cross-product matrix ``[r]×``."""
-    return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+skew3 = skew   # the cross-product matrix ``[r]×`` (:func:`optplan.spatial.skew`)
 
 
 def rpy_rate_matrix(rpy: np.ndarray) -> np.ndarray:

@@ -13,9 +13,9 @@ import pinocchio as pin
 
 from ..errors import ConfigurationError
 from ..robot import RobotModel
-from ..spatial import check_pose
+from ..spatial import check_pose, pose_residual, vee_skew
 from .build import TermData
-from .terms import Term, _check_at, _knots, _set, _vee_skew, pose_residual, pose_residual_numeric
+from .terms import Term, _check_at, _knots, _set, pose_residual_numeric
 
 
 def _check_frame(obj, name: str = "frame"):
@@ -360,7 +360,7 @@ class BaseAttitude(Term):
         rs = []
         for k in _knots(self.at, tp.N):
             E = ca.DM(self._target()).T @ tp.base_rotation(k)
-            rs += [_vee_skew(E), ca.trace(E)]
+            rs += [vee_skew(E), ca.trace(E)]
         n = len(_knots(self.at, tp.N))
         return ca.vertcat(*rs), np.tile(np.r_[0, 0, 0, 1.0], n), np.tile(np.r_[0, 0, 0, np.inf], n)
 
@@ -369,7 +369,7 @@ class BaseAttitude(Term):
         for k in _knots(self.at, traj.N):
             x, y, z, w = traj.base_quat[k] / np.linalg.norm(traj.base_quat[k])
             E = self._target().T @ pin.Quaternion(w, x, y, z).toRotationMatrix()
-            out.append(np.r_[0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]]), np.trace(E)])
+            out.append(np.r_[vee_skew(E), np.trace(E)])
         return np.concatenate(out)
 
     def bounds_numeric(self, traj):

@@ -27,6 +27,7 @@ import pinocchio as pin
 
 from ..errors import ConfigurationError
 from ..robot import RobotModel
+from ..spatial import pose_residual, vee_skew
 from .build import BuildContext, TermData
 from .transcription import Transcription
 
@@ -39,20 +40,12 @@ __all__ = [
 
 
 # --------------------------------------------------------------------------- helpers
-def _vee_skew(E):
-    return 0.5 * ca.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1])
-
-
-def pose_residual(R, p, R_target, p_target):
-    """``[p − p_t (3); vee(E − Eᵀ)/2 (3)]`` and ``trace(E)`` with ``E = R_tᵀ R`` (CasADi)."""
-    E = ca.DM(R_target).T @ R if isinstance(R_target, np.ndarray) else R_target.T @ R
-    return ca.vertcat(p - p_target, _vee_skew(E)), ca.trace(E)
+_vee_skew = vee_skew
 
 
 def pose_residual_numeric(M: pin.SE3, target: pin.SE3) -> tuple[np.ndarray, float]:
-    E = target.rotation.T @ M.rotation
-    s = 0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
-    return np.concatenate([M.translation - target.translation, s]), float(np.trace(E))
+    """:func:`~optplan.spatial.pose_residual` of a placement against a target placement (numpy)."""
+    return pose_residual(M.rotation, M.translation, target.rotation, target.translation)
 
 
 @dataclass
