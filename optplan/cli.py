@@ -19,7 +19,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _cmd_models_build(args) -> int:
-    from .description import available_models, load_description, urdf_dir, urdf_string, write_urdf
+    from .description import available_models, load_description, urdf_dir
+    from .urdf_writer import urdf_string, write_urdf
 
     stale = []
     for name in available_models():

@@ -84,8 +84,8 @@ from .errors import ModelError, UnknownNameError
 from .spatial import rotx, rotz, rpy_to_matrix, zyx_to_matrix
 
 __all__ = [
-    "ArmType", "SerpentineArmType", "ArmMount", "RobotDescription", "load_description", "write_urdf",
-    "repo_root", "models_dir", "urdf_dir", "available_models", "build_all",
+    "ArmType", "SerpentineArmType", "ArmMount", "RobotDescription", "load_description",
+    "repo_root", "models_dir", "urdf_dir", "available_models",
 ]
 
 
@@ -532,5 +532,10 @@ def dh_capsules(arm: ArmType, radius: float, min_length: float = 1e-9) -> list[d
     return caps
 
 
-# the URDF writer lives in optplan.urdf_writer; re-exported here for the public API
-from .urdf_writer import build_all, urdf_string, write_urdf  # noqa: E402,F401
+def __getattr__(name):
+    # URDF generation lives in .urdf_writer (which imports this module); the old path warns
+    if name in ("build_all", "urdf_string", "write_urdf"):
+        from ._compat import moved
+
+        return moved(__name__, name, "optplan.urdf_writer")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,5 +1,5 @@
-"""Inverse kinematics: damped least squares on one arm, and the two-arm closed-chain IK of an
-object pose (both hands on their grasp frames).
+"""Inverse kinematics: damped least squares on one arm or several at once (the two-hand IK of an
+object pose, :func:`optplan.constraints.closed_chain.solve_grasp_ik`, calls it).
 
 Errors follow the TCBiRRT paper Eq. 5-6: position error ``e_p = p_goal − p`` [m] and orientation error
 ``e_o = R_goal φ(Rᵀ R_goal)`` (exponential coordinates, world axes) [rad].
@@ -12,11 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .errors import ConfigurationError, OptionError
+from .errors import OptionError
 from .robot import RobotModel
 from .spatial import check_pose
 
-__all__ = ["IKOptions", "IKResult", "solve_arm_ik", "solve_grasp_ik", "pose_error"]
+__all__ = ["IKOptions", "IKResult", "solve_arm_ik", "solve_multi", "pose_error"]
 log = logging.getLogger(__name__)
 
 
@@ -65,8 +65,9 @@ def pose_error(M: pin.SE3, goal: pin.SE3) -> np.ndarray:
     return np.concatenate([ep, eo])
 
 
-def _solve_multi(robot: RobotModel, data: pin.Data, q0: np.ndarray, targets, opts: IKOptions) -> IKResult:
-    """DLS on several (arm, goal) pairs at once; only the arms' joints move."""
+def solve_multi(robot: RobotModel, data: pin.Data, q0: np.ndarray, targets, opts: IKOptions) -> IKResult:
+    """Damped least squares on several ``(arm, goal)`` pairs at once from ``q0``; only those arms'
+    joints move (``data``: a Pinocchio data of the robot's model)."""
     q = robot.check_q(q0, "q0").copy()
     model = robot.model
     arms = [robot.arm(a) for a, _ in targets]
@@ -104,17 +105,12 @@ def solve_arm_ik(robot: RobotModel, arm: str, goal: pin.SE3, q0, options: IKOpti
                  data: pin.Data | None = None) -> IKResult:
     """Move ``arm``'s joints from ``q0`` until its end-effector reaches ``goal`` (world)."""
     check_pose(goal, "solve_arm_ik: goal")
-    return _solve_multi(robot, data or robot.model.createData(), q0, [(arm, goal)], options or IKOptions())
+    return solve_multi(robot, data or robot.model.createData(), q0, [(arm, goal)], options or IKOptions())
 
 
-def solve_grasp_ik(robot: RobotModel, object_pose: pin.SE3, grasps: dict[str, pin.SE3], q0,
-                   options: IKOptions | None = None, data: pin.Data | None = None) -> IKResult:
-    """Closed-chain IK: every arm in ``grasps`` puts its end-effector on
-    ``object_pose * grasps[arm]`` (grasp frames in the object frame)."""
-    check_pose(object_pose, "solve_grasp_ik: object_pose")
-    if not isinstance(grasps, dict) or not grasps:
-        raise ConfigurationError(f"solve_grasp_ik: grasps: expected a dict {{arm: pinocchio.SE3}}, got {grasps!r}")
-    for a, g in grasps.items():
-        check_pose(g, f"solve_grasp_ik: grasps[{a!r}]")
-    targets = [(a, object_pose * g) for a, g in grasps.items()]
-    return _solve_multi(robot, data or robot.model.createData(), q0, targets, options or IKOptions())
+def __getattr__(name):
+    if name == "solve_grasp_ik":
+        from ._compat import moved
+
+        return moved(__name__, name, "optplan.constraints.closed_chain")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -27,16 +27,14 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import pinocchio as pin
 
 from .collision import CollisionChecker
-from .ik import IKOptions, solve_grasp_ik
-from .problem import (ClosedChain, CollisionAvoidance, JointBoundary, JointPositionLimits, JointVelocityLimits,
-                      OptProblem, Smoothness)
+from .ik import IKOptions
+from .problem import ClosedChain, OptProblem
 from .problem.solution import Solution
 from .robot import RobotModel
 from .scene import Scene
-from .spatial import interpolate_pose
+from .tasks import object_pose, segment_problem, straight_line_poses, task_space_path
 from .verify import VerifyReport, verify
 
 __all__ = ["PipelineOptions", "SegmentResult", "PipelineResult", "run_pipeline", "shortcut_constrained"]
@@ -251,11 +249,6 @@ class PipelineResult:
 
 
 # --------------------------------------------------------------------------- shortcut
-def _object_pose(robot: RobotModel, scene: Scene, q, data, arm: str) -> pin.SE3:
-    pin.framesForwardKinematics(robot.model, data, q)
-    return data.oMf[robot.arm(arm).ee_frame_id] * scene.object.grasps[arm].inverse()
-
-
 def shortcut_constrained(robot: RobotModel, scene: Scene, path: np.ndarray, rng: np.random.Generator,
                          attempts: int = 40, checker: CollisionChecker | None = None,
                          step: float = 0.05) -> np.ndarray:
@@ -266,7 +259,7 @@ def shortcut_constrained(robot: RobotModel, scene: Scene, path: np.ndarray, rng:
     and the path gets shorter. (Joint space rather than task space: with 14 joints and 12 closure
     equations a pose does not fix the configuration, and IK continuation drifts along the
     self-motion manifold.)"""
-    from .warmstart import project_closed_chain
+    from .constraints.closed_chain import project_closed_chain
 
     checker = checker or CollisionChecker(robot, scene)
     arms = list(scene.object.grasps)
@@ -303,30 +296,22 @@ def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     vmin = float(np.min(robot.velocity_limit))
     T = max(opts.min_duration, length / (opts.speed_fraction * vmin))
-    z = np.zeros(robot.nj)
     step = opts.max_interval_step if kind == "constrained" else opts.free_interval_step
     N = n_intervals or int(np.clip(np.ceil(length / step), opts.n_intervals, opts.max_intervals))
-    prob = OptProblem(robot, n_intervals=N, duration=T)
-    prob.add_constraint(JointBoundary("start", q=seg_path[0], qd=z, qdd=z), name="start")
-    prob.add_constraint(JointBoundary("end", q=seg_path[-1], qd=z, qdd=z), name="end")
     arms = list(scene.object.grasps)
-    cc, holder = None, None
+    cc, holder, limits = None, None, None
     if kind == "constrained":
         cc = dataclasses.replace(ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]],
                                                          arms[0], arms[1]), interior=opts.closed_chain_interior)
-        prob.add_constraint(cc, name="closed_chain")
-        prob.add_constraint(JointPositionLimits(), name="joint_limits")
     else:  # regrasp: the holding arm's joints stay where they are, so the object does too
         holder = next(a for a in arms if a != arm)
         lo, hi = robot.lower.copy(), robot.upper.copy()
         idx = robot.arm(holder).j_idx
         lo[idx] = hi[idx] = seg_path[0][idx]
-        prob.add_constraint(JointPositionLimits(lower=lo, upper=hi), name="joint_limits")
-    prob.add_constraint(JointVelocityLimits(), name="velocity_limits")
-    prob.add_constraint(CollisionAvoidance(scene, margin=opts.margin, object_arm=holder or arms[0],
-                                           fixed_normals=opts.fixed_plane_normals if fixed_normals is None
-                                           else fixed_normals), name="collision")
-    prob.add_cost(Smoothness("jerk"), name="jerk")
+        limits = (lo, hi)
+    prob, _ = segment_problem(robot, scene, seg_path[0], seg_path[-1], N, T, closed_chain=cc, joint_limits=limits,
+                              margin=opts.margin, object_arm=holder or arms[0],
+                              fixed_normals=opts.fixed_plane_normals if fixed_normals is None else fixed_normals)
     return prob, cc, holder
 
 
@@ -335,13 +320,11 @@ def _cold_path(robot: RobotModel, scene: Scene, q0: np.ndarray, q1: np.ndarray, 
     if kind == "constrained":
         arm = next(iter(scene.object.grasps))
         data = robot.model.createData()
-        M0, M1 = _object_pose(robot, scene, q0, data, arm), _object_pose(robot, scene, q1, data, arm)
-        opts = IKOptions(tol_position=1e-10, tol_orientation=1e-10, max_step=0.05)
-        qs = [q0]
-        for k in range(1, n + 1):
-            qs.append(solve_grasp_ik(robot, interpolate_pose(M0, M1, k / n), scene.object.grasps, qs[-1], opts, data).q)
-        qs[-1] = q1
-        return np.array(qs)
+        M0, M1 = object_pose(robot, scene, q0, arm, data), object_pose(robot, scene, q1, arm, data)
+        Q, _ = task_space_path(robot, scene, q0, straight_line_poses(M0, M1, n), max_step=0.05,
+                               options=IKOptions(tol_position=1e-10, tol_orientation=1e-10))
+        Q[-1] = q1
+        return Q
     s = np.linspace(0, 1, n + 1)[:, None]
     return q0 + s * (q1 - q0)
 

@@ -99,7 +99,7 @@ class RobotModel:
         path = urdf_dir() / f"{name}.urdf"
         if not path.exists():
             raise ModelError(f"{path} is missing: run `optplan models build` to generate it")
-        from .description import urdf_string
+        from .urdf_writer import urdf_string
 
         if _read_text(path) != urdf_string(desc):   # never use a URDF older than its description
             raise ModelError(f"{path} is out of date with {desc.source}: the description changed after the "

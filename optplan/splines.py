@@ -22,12 +22,21 @@ import numpy as np
 from scipy.linalg import solve_banded
 
 __all__ = [
+    "quintic_time_law",
     "PiecewisePolynomial",
     "quintic",
     "quartic_spline",
     "resample_path",
     "time_grid_from_path",
 ]
+
+
+def quintic_time_law(s):
+    """The rest-to-rest quintic time law ``p(s) = 10s³ − 15s⁴ + 6s⁵`` on s ∈ [0, 1] (zero velocity
+    and acceleration at both ends) and its first two derivatives in s: ``(p, p', p'')``."""
+    s = np.asarray(s, float)
+    return (10 * s**3 - 15 * s**4 + 6 * s**5, 30 * s**2 - 60 * s**3 + 30 * s**4, 60 * s - 180 * s**2 + 120 * s**3)
+
 
 ArrayLike = Union[float, np.ndarray, list, tuple]
 

@@ -16,9 +16,11 @@ import numpy as np
 import pinocchio as pin
 
 from .collision import CollisionChecker
+from .constraints.closed_chain import closure_error
 from .floating import simulate_base
 from .robot import RobotModel
 from .scene import Scene
+from .spatial import rotation_angle
 
 __all__ = ["VerifyReport", "verify"]
 
@@ -54,8 +56,7 @@ class VerifyReport:
         return json.dumps(self.to_dict())
 
 
-def _angle(R: np.ndarray) -> float:
-    return float(np.linalg.norm(pin.log3(R)))
+_angle = rotation_angle
 
 
 def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_chain=None,
@@ -70,7 +71,7 @@ def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_ch
     ts = np.linspace(solution.t[0], solution.t[-1], N * int(density) + 1)
     smp = solution.sample(ts)
     Q, QD = smp["q"], smp["qd"]
-    model, data = robot.model, robot.model.createData()
+    data = robot.model.createData()
     base_mismatch = final_err = mom = float("nan")
     if robot.is_floating:
         sim = simulate_base(robot, (ts, Q, QD), ts, substeps=2)
@@ -91,15 +92,10 @@ def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_ch
     # closed chain
     cc_p = cc_r = float("nan")
     if closed_chain is not None:
-        fa = robot.arm(closed_chain.arm_a).ee_frame_id
-        fb = robot.arm(closed_chain.arm_b).ee_frame_id
         cc_p = cc_r = 0.0
         for q in qfull:
-            pin.framesForwardKinematics(model, data, q)
-            rel = data.oMf[fa].actInv(data.oMf[fb])
-            err = closed_chain.relative.actInv(rel)
-            cc_p = max(cc_p, float(np.linalg.norm(err.translation)))
-            cc_r = max(cc_r, _angle(err.rotation))
+            ep, er = closure_error(robot, closed_chain, q, data)
+            cc_p, cc_r = max(cc_p, ep), max(cc_r, er)
     # clearance
     dmin, pair_name = float("inf"), ""
     checker = CollisionChecker(robot, scene, held_object=held_object and scene is not None and scene.object is not None,

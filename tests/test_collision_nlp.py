@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 
 from optplan.collision import CollisionChecker
-from optplan.ik import IKOptions, solve_grasp_ik
+from optplan.constraints.closed_chain import solve_grasp_ik
+from optplan.ik import IKOptions
 from optplan.problem import (ClosedChain, CollisionAvoidance, JointBoundary, JointPositionLimits,
                              JointVelocityLimits, OptProblem, Smoothness)
 from optplan.scene import Scene

@@ -208,7 +208,7 @@ def test_pipeline_verified_on_a_stress_scene():
     from optplan.bench.trials import TrialGenerator
     from optplan.collision import CollisionChecker
     from optplan.pipeline import PipelineOptions, run_pipeline
-    from optplan.planners.closed_chain import closure_error
+    from optplan.constraints.closed_chain import closure_error
 
     robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("stress_cage")
     tr = TrialGenerator(robot, scene).generate(0, 0)
@@ -228,7 +228,7 @@ def test_margins_relax_only_where_a_collision_free_guess_is_closer_than_the_marg
     clearance only where that clearance is in [0, margin); where the guess collides it stays."""
     from optplan.problem import ClosedChain
     from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
-    from optplan.warmstart import project_closed_chain
+    from optplan.constraints.closed_chain import project_closed_chain
 
     robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("transport")
     g = scene.object.grasps

@@ -10,7 +10,7 @@ import pytest
 from optplan.bench.hardscenes import SUITE, load_witness, verify_path, witness_path
 from optplan.planners import TCBiRRT, TCBiRRTOptions
 from optplan.planners.base import PlanResult, PlanStatus
-from optplan.planners.closed_chain import ClosedChainKinematics
+from optplan.constraints.closed_chain import ClosedChainKinematics
 from optplan.planners.task_sampling import ObjectPoseFilter, TaskSampler, arm_reach
 from optplan.planners.validity import ValidityChecker
 from optplan.scene import Scene
@@ -143,7 +143,7 @@ def test_improved_variant_solves_nominal_task(robot, name):
     res = pl.plan(qs, qg, time_limit=10.0, seed=0, clock="cpu")
     assert res.success, res.message
     assert np.allclose(res.path[0], qs) and np.allclose(res.path[-1], qg)
-    from optplan.planners.closed_chain import closure_error
+    from optplan.constraints.closed_chain import closure_error
 
     for q, c in zip(res.path, res.constrained):
         if c:
@@ -213,7 +213,7 @@ def test_joint_connect_joins_two_closed_chain_configurations(robot, rng):
     chain (Pinocchio FK) and is collision-free, and the path ends exactly at the target."""
     from optplan.bench.hardscenes import nominal_configurations
     from optplan.planners.base import Deadline
-    from optplan.planners.closed_chain import closure_error
+    from optplan.constraints.closed_chain import closure_error
 
     scene = Scene.load("hard_flip")
     qs, _ = nominal_configurations(robot, scene)

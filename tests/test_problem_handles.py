@@ -28,7 +28,7 @@ Z = np.zeros(14)
 @pytest.fixture(scope="module")
 def cc_problem(tcb):
     """A small closed-chain transport: both ends pinned on the manifold, velocity limits, jerk cost."""
-    from optplan.warmstart import project_closed_chain
+    from optplan.constraints.closed_chain import project_closed_chain
 
     rng = np.random.default_rng(3)
     qa = tcb.random_joints(rng) * 0.4

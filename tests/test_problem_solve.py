@@ -379,7 +379,7 @@ def test_attitude_restoration_small(eba):
 # --------------------------------------------------------------------------- (g) conditioning
 def _pinned_closed_chain_problem(tcb, N=12, shift_end=0.0, skip=True):
     """Both ends pinned on one closed-chain manifold (the end optionally moved off it)."""
-    from optplan.warmstart import project_closed_chain
+    from optplan.constraints.closed_chain import project_closed_chain
 
     rng = np.random.default_rng(5)
     qa = tcb.random_joints(rng) * 0.4

@@ -103,7 +103,7 @@ def test_reproduce_runs_a_script_with_the_flags_it_offers(tmp_path):
 
 def test_plan_figures_and_profiles(tmp_path):
     from optplan.collision import CollisionChecker
-    from optplan.planners.closed_chain import closure_error
+    from optplan.constraints.closed_chain import closure_error
     from optplan.robot import RobotModel
     from optplan.scene import Scene
     from optplan.viz.plan_plots import plot_trajectory, trajectory_profiles

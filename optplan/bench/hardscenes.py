@@ -36,7 +36,7 @@ import pinocchio as pin
 
 from ..description import models_dir
 from ..planners.base import PlanResult
-from ..planners.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from ..planners.rrtconnect import edge_is_valid
 from ..planners.tcbirrt import interpolate_task
 from ..planners.validity import ValidityChecker

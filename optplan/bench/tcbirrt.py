@@ -128,7 +128,7 @@ def _worker_setup(robot_name: str, scenes: list[str], planners: list[str]):
     if _W.get("key") == (robot_name, tuple(scenes), tuple(planners)):
         return
     from ..planners import make_planner
-    from ..planners.closed_chain import ClosedChainKinematics
+    from ..constraints.closed_chain import ClosedChainKinematics
     from ..planners.validity import ValidityChecker
     from ..robot import RobotModel
     from ..scene import Scene
@@ -158,7 +158,7 @@ def _path_checks(robot, scene, checker, res, resolution: float = 0.05, sweep: fl
     (object held on constrained edges, fixed during regrasps) every ``resolution`` rad
     (``dense_invalid_edges``) and so densely that no point of the robot or object moves more than
     ``sweep`` [m] between checks (``swept_invalid_edges``, :meth:`ValidityChecker.sweep_weights`)."""
-    from ..planners.closed_chain import closure_error
+    from ..constraints.closed_chain import closure_error
     from ..planners.rrtconnect import edge_is_valid
 
     if not res.success:

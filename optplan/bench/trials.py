@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..planners.base import pose_to_vector, vector_to_pose
-from ..planners.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from ..planners.tcbirrt import interpolate_task
 from ..planners.validity import ValidityChecker
 from ..robot import RobotModel

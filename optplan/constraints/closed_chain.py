@@ -1,14 +1,28 @@
-"""Fast closed-chain kinematics for the planners: the two-hand IK step of the TCBiRRT paper's Alg. 4, the
-closed-chain residual h(q) of Eq. 1-2 with its Jacobian, and the held object's pose.
+"""The closed chain of two hands holding one rigid object — the one place it is defined.
 
-The hot functions are CasADi expressions built from :class:`optplan.SymbolicKinematics` and
-compiled to C (:func:`optplan.codegen.compile_function`), then called through ctypes with
-preallocated buffers (~5 µs per call for both arms' FK, Jacobians and damped least-squares
-step). Without a C compiler the interpreted CasADi functions are used (slower, same numbers).
+Two end-effectors ``a``, ``b`` keep their relative pose ``T_a⁻¹ T_b = relative`` (hand b in hand a's
+frame; for an object held with grasp frames ``G_a``, ``G_b`` in the object frame, ``relative =
+G_a⁻¹ G_b``; the TCBiRRT paper Eq. 1-2). Its residual is the singularity-free pose residual of
+:func:`optplan.spatial.pose_residual` of the relative pose against ``relative``:
+``h = [p_rel − p*; vee((E − Eᵀ)/2)]`` with ``E = R*ᵀ R_rel`` (position [m], sin θ · axis), with
+``trace(E) ≥ 1`` excluding the spurious θ = π zero. Everything that needs the closed chain calls
+this module:
+
+* :func:`relative_pose_residual` — the residual from the two hands' placements (numpy or CasADi),
+  used by the NLP term :class:`~optplan.problem.ClosedChain` and the paper methods;
+* :func:`closed_chain_residual` — ``(h, ∂h/∂q)`` numerically with Pinocchio (exact Jacobian);
+* :func:`project_closed_chain` — Newton–Raphson projection with minimum-norm steps;
+* :func:`manifold_resample` — a planner's path resampled by joint-space arc length, each sample
+  projected (the warm start of the trajectory NLPs);
+* :func:`closure_error` — the independent check (position error [m], rotation angle [rad]);
+* :func:`solve_grasp_ik` — damped least-squares IK of both hands onto an object pose;
+* :class:`ClosedChainKinematics` — the same residual, its Jacobian and the two-hand IK step of the
+  TCBiRRT paper's Alg. 4 as CasADi expressions compiled to C for the planners' hot loops
+  (:class:`optplan.codegen.FastFunction`, ~5 µs per call for both arms' FK, Jacobians and damped
+  least-squares step; without a C compiler the interpreted CasADi functions are used).
 """
 from __future__ import annotations
 
-import ctypes
 import logging
 from dataclasses import dataclass
 
@@ -16,12 +30,153 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from ..codegen import CompiledFunction, compile_function
+from ..codegen import FastFunction
+from ..errors import ConfigurationError
+from ..ik import IKOptions, IKResult, solve_multi
 from ..robot import RobotModel
+from ..spatial import check_pose, pose_residual, rotation_angle, skew, vee_skew
+from ..splines import resample_path
 from ..symbolic import SymbolicKinematics
 
-__all__ = ["IKSettings", "ClosedChainKinematics", "closure_error"]
+__all__ = ["relative_pose_residual", "closed_chain_residual", "project_closed_chain", "ProjectionResult",
+           "closure_error", "manifold_resample", "solve_grasp_ik", "IKSettings", "ClosedChainKinematics", "ChainSpec"]
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ChainSpec:
+    """The closed chain as data: arm names ``arm_a``, ``arm_b`` and ``relative`` = ``T_a⁻¹ T_b``
+    (any object with these three attributes, e.g. :class:`~optplan.problem.ClosedChain`, is
+    accepted where a chain is expected)."""
+
+    arm_a: str
+    arm_b: str
+    relative: pin.SE3
+
+    @classmethod
+    def from_grasps(cls, grasps: dict[str, pin.SE3]) -> "ChainSpec":
+        """Both hands on one object: ``grasps`` = {arm: grasp frame in the object frame} (two arms)."""
+        if not isinstance(grasps, dict) or len(grasps) != 2:
+            raise ConfigurationError(f"grasps: expected a dict of two arms {{arm: pinocchio.SE3}}, got {grasps!r}")
+        a, b = list(grasps)
+        return cls(a, b, grasps[a].actInv(grasps[b]))
+
+
+def relative_pose_residual(Ra, pa, Rb, pb, relative: pin.SE3):
+    """``(h (6), trace(E))`` of hand b's pose in hand a's frame, ``(Raᵀ Rb, Raᵀ (pb − pa))``,
+    against ``relative`` (CasADi when the placements are CasADi, numpy otherwise)."""
+    Rt, pt = np.array(relative.rotation), np.array(relative.translation)
+    if isinstance(Ra, (ca.SX, ca.MX)) or isinstance(pa, (ca.SX, ca.MX)):
+        return pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), Rt, ca.DM(pt))
+    return pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), Rt, pt)
+
+
+@dataclass(frozen=True)
+class ProjectionResult:
+    """Result of :func:`project_closed_chain`: configuration ``q``, ``success``, Newton
+    ``iterations``, final ``residual`` ‖h‖∞ ([m] / [rad])."""
+
+    q: np.ndarray
+    success: bool
+    iterations: int
+    residual: float
+
+
+def closed_chain_residual(robot: RobotModel, q, closed_chain, data: pin.Data | None = None):
+    """``(h (6,), J_h (6 × nv))``: the closed-chain residual (module docstring) at the full
+    configuration ``q``, expressed in hand a's frame, and its exact Jacobian. ``closed_chain``: any
+    object with ``arm_a``, ``arm_b``, ``relative`` (:class:`ChainSpec`, the NLP term)."""
+    data = data or robot.model.createData()
+    a, b = robot.arm(closed_chain.arm_a), robot.arm(closed_chain.arm_b)
+    model = robot.model
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    Ma, Mb = data.oMf[a.ee_frame_id], data.oMf[b.ee_frame_id]
+    h, _ = relative_pose_residual(Ma.rotation, Ma.translation, Mb.rotation, Mb.translation, closed_chain.relative)
+    E = closed_chain.relative.rotation.T @ Ma.rotation.T @ Mb.rotation
+    LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    Ja = pin.getFrameJacobian(model, data, a.ee_frame_id, LWA)
+    Jb = pin.getFrameJacobian(model, data, b.ee_frame_id, LWA)
+    Jlin = Ma.rotation.T @ (Jb[:3] - Ja[:3] + skew(Mb.translation - Ma.translation) @ Ja[3:])
+    # Ė = E [ω]× with ω = R_bᵀ (ω_b − ω_a) (body rate), and d vee((E − Eᵀ)/2) = ½ (tr E · I − Eᵀ) ω
+    Jang = 0.5 * (np.trace(E) * np.eye(3) - E.T) @ Mb.rotation.T @ (Jb[3:] - Ja[3:])
+    return h, np.vstack([Jlin, Jang])
+
+
+def project_closed_chain(robot: RobotModel, q, closed_chain, *, tol: float = 1e-10, max_iterations: int = 50,
+                         data: pin.Data | None = None, joints=None, clip: bool = True) -> ProjectionResult:
+    """Newton–Raphson projection of the full configuration ``q`` onto ``T_a⁻¹ T_b = relative``
+    with minimum-norm steps ``dq = −J⁺ h``. ``joints``: indices into the joint vector that may move
+    (default: both arms' joints); ``clip``: keep them within the joint limits. ``tol`` on ‖h‖∞
+    ([m], [rad])."""
+    q = np.array(robot.check_q(q), float)
+    data = data or robot.model.createData()
+    if joints is None:
+        arms = (robot.arm(closed_chain.arm_a), robot.arm(closed_chain.arm_b))
+        j_idx = np.concatenate([a.j_idx for a in arms])
+    else:
+        j_idx = np.asarray(joints, dtype=int)
+    off_q, off_v = robot.nq - robot.nj, robot.model.nv - robot.nj   # floating base: 7 / 6
+    qidx, cols = j_idx + off_q, j_idx + off_v
+    lo, hi = robot.lower[j_idx], robot.upper[j_idx]
+    res = np.inf
+    for it in range(max_iterations + 1):
+        h, J = closed_chain_residual(robot, q, closed_chain, data)
+        res = float(np.abs(h).max())
+        if res < tol:
+            return ProjectionResult(q, True, it, res)
+        if it == max_iterations:
+            break
+        Jc = J[:, cols]
+        dq = -Jc.T @ np.linalg.solve(Jc @ Jc.T + 1e-12 * np.eye(6), h)
+        q[qidx] = np.clip(q[qidx] + dq, lo, hi) if clip else q[qidx] + dq
+    return ProjectionResult(q, False, max_iterations, res)
+
+
+def closure_error(robot: RobotModel, grasps_or_chain, q, data: pin.Data | None = None) -> tuple[float, float]:
+    """Independent check with Pinocchio FK: ``(position error [m], rotation angle [rad])`` of the
+    hands' relative pose at ``q`` against the chain's (``grasps_or_chain``: {arm: grasp frame} of
+    two arms, or an object with ``arm_a``, ``arm_b``, ``relative``); the measure of
+    :func:`optplan.verify.verify`."""
+    cc = ChainSpec.from_grasps(grasps_or_chain) if isinstance(grasps_or_chain, dict) else grasps_or_chain
+    data = data or robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))
+    rel = data.oMf[robot.arm(cc.arm_a).ee_frame_id].actInv(data.oMf[robot.arm(cc.arm_b).ee_frame_id])
+    err = cc.relative.actInv(rel)
+    return float(np.linalg.norm(err.translation)), rotation_angle(err.rotation)
+
+
+def solve_grasp_ik(robot: RobotModel, object_pose: pin.SE3, grasps: dict[str, pin.SE3], q0,
+                   options: IKOptions | None = None, data: pin.Data | None = None) -> IKResult:
+    """Closed-chain IK: every arm in ``grasps`` puts its end-effector on
+    ``object_pose * grasps[arm]`` (grasp frames in the object frame); damped least squares
+    (:class:`~optplan.ik.IKOptions`) from ``q0``."""
+    check_pose(object_pose, "solve_grasp_ik: object_pose")
+    if not isinstance(grasps, dict) or not grasps:
+        raise ConfigurationError(f"solve_grasp_ik: grasps: expected a dict {{arm: pinocchio.SE3}}, got {grasps!r}")
+    for a, g in grasps.items():
+        check_pose(g, f"solve_grasp_ik: grasps[{a!r}]")
+    targets = [(a, object_pose * g) for a, g in grasps.items()]
+    return solve_multi(robot, data or robot.model.createData(), q0, targets, options or IKOptions())
+
+
+def manifold_resample(robot: RobotModel, path, n: int, closed_chain=None) -> tuple[np.ndarray, bool]:
+    """``n`` configurations uniform in joint-space arc length along ``path`` (M × nq), each
+    projected onto the closed-chain manifold when ``closed_chain`` is given. Returns the array and
+    whether every projection converged."""
+    path = np.asarray(path, float)
+    if path.ndim != 2 or path.shape[1] != robot.nq or path.shape[0] < 2:
+        raise ValueError(f"path: expected (M ≥ 2, {robot.nq}) configurations, got shape {path.shape}")
+    _, Q = resample_path(path, int(n))
+    if closed_chain is None:
+        return Q, True
+    ok = True
+    data = robot.model.createData()
+    for i in range(1, len(Q) - 1):
+        r = project_closed_chain(robot, Q[i], closed_chain, data=data)
+        Q[i] = r.q
+        ok &= r.success
+    return Q, bool(ok)
 
 
 @dataclass(frozen=True)
@@ -52,51 +207,10 @@ class IKSettings:
             raise ValueError(f"IKSettings.max_iterations: expected an int >= 1, got {self.max_iterations!r}")
 
 
-class _Fast:
-    """A CasADi function with dense inputs and ONE dense vector output, compiled and called
-    through ctypes with preallocated buffers (falls back to the interpreted function)."""
-
-    def __init__(self, f: ca.Function, opt: str = "-O2"):
-        if not f.sparsity_out(0).is_dense():
-            raise ValueError(f"{f.name()}: the output must be dense")
-        self.f = f
-        self.n_out = int(f.nnz_out(0))
-        cf = compile_function(f, opt)
-        self.compiled = isinstance(cf, CompiledFunction)
-        if not self.compiled:
-            return
-        lib = cf.lib
-        self._fn = getattr(lib, f.name())
-        self._fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
-        self._fn.restype = ctypes.c_int
-        sz = [ctypes.c_longlong() for _ in range(4)]
-        getattr(lib, f"{f.name()}_work")(*[ctypes.byref(x) for x in sz])
-        self._in = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
-        self._out = np.zeros(max(self.n_out, 1))
-        self._iw = np.zeros(max(sz[2].value, 1), dtype=np.int64)
-        self._w = np.zeros(max(sz[3].value, 1))
-        self._arg = (ctypes.c_void_p * max(sz[0].value, f.n_in()))()
-        self._res = (ctypes.c_void_p * max(sz[1].value, 1))()
-        for i, b in enumerate(self._in):
-            self._arg[i] = b.ctypes.data
-        self._res[0] = self._out.ctypes.data
-        self._iwp = self._iw.ctypes.data
-        self._wp = self._w.ctypes.data
-        self._keep = cf  # keep the library loaded
-
-    def __call__(self, *inputs) -> np.ndarray:
-        if not self.compiled:
-            return np.asarray(self.f(*inputs), dtype=float).ravel(order="F")
-        for b, x in zip(self._in, inputs):
-            b[:] = x
-        if self._fn(self._arg, self._res, self._iwp, self._wp, 0) != 0:
-            raise RuntimeError(f"{self.f.name()}: evaluation failed")
-        return self._out[:self.n_out].copy()
-
 
 def _vee_log(R):
     """Rotation vector of a CasADi 3 × 3 rotation (exact away from π; Appendix Eq. 12-14)."""
-    v = 0.5 * ca.vertcat(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
+    v = vee_skew(R)
     s = ca.norm_2(v)
     c = (R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / 2.0
     th = ca.atan2(s, c)
@@ -189,29 +303,25 @@ class ClosedChainKinematics:
         tf = self._arm_terms(sk, qk, Ro, po, par[0], with_step=False)
         block = ca.Function("occ_ik_block", [q, ca.vec(Ro), po, par],
                             [ca.vertcat(qk, *[x for t in tf for x in t[1:3]], n_it)])
-        # closed-chain residual, Eq. 1-2: T_e = T_2^-1 T_1 T_21, h = [p_e; roll; pitch; yaw]
+        # the closed-chain residual (module docstring): hand 2 in hand 1 against T_21
         (R1, p1), (R2, p2) = terms[0][3], terms[1][3]
-        R21, p21 = ca.DM(np.array(self.T21.rotation)), ca.DM(np.array(self.T21.translation))
-        Re = R2.T @ R1 @ R21
-        pe = R2.T @ (R1 @ p21 + p1 - p2)
-        h = ca.vertcat(pe, ca.atan2(Re[2, 1], Re[2, 2]), -ca.atan2(Re[2, 0], ca.sqrt(Re[2, 1] ** 2 + Re[2, 2] ** 2)),
-                       ca.atan2(Re[1, 0], Re[0, 0]))
+        h, _ = relative_pose_residual(R1, p1, R2, p2, self.T21)
         Jh = ca.jacobian(h, q)
         hfun = ca.Function("occ_h", [q], [h])
         hjfun = ca.Function("occ_hj", [q], [ca.vertcat(h, ca.vec(ca.densify(Jh)))])
         self._fun = {"step": step, "h": hfun, "hj": hjfun}
-        self._fast: dict[str, _Fast] = {}
-        self._block = _Fast(block, "-O1")   # -O1: a third less compile time than -O2, same speed here
+        self._fast: dict[str, FastFunction] = {}
+        self._block = FastFunction(block, "-O1")   # -O1: a third less compile time than -O2, same speed here
         self.compiled = self._block.compiled
         if not self.compiled:
             log.warning("closed-chain kinematics run interpreted (no C compiler): planners will be slow")
         self._par = np.zeros(6)
 
-    def _get(self, name: str) -> _Fast:
+    def _get(self, name: str) -> FastFunction:
         """Compiled on first use (only the IK block is needed by TCBiRRT)."""
         f = self._fast.get(name)
         if f is None:
-            f = self._fast[name] = _Fast(self._fun[name])
+            f = self._fast[name] = FastFunction(self._fun[name])
         return f
 
     # ------------------------------------------------------------------ IK (Alg. 4)
@@ -267,7 +377,8 @@ class ClosedChainKinematics:
 
     # ------------------------------------------------------------------ constraint h(q)
     def h(self, q: np.ndarray) -> np.ndarray:
-        """Closed-chain residual (Eq. 2): position [m] and RPY [rad] of ``T_2⁻¹ T_1 T_21``."""
+        """The closed-chain residual (module docstring) of hand 2 in hand 1 against ``T_21``:
+        position [m] and sin θ · axis."""
         return self._get("h")(q)
 
     def h_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -280,14 +391,3 @@ class ClosedChainKinematics:
         """World pose of the object from arm 1's hand (Pinocchio FK)."""
         pin.framesForwardKinematics(self.robot.model, self._data, q)
         return self._data.oMf[self.arms[0].ee_frame_id] * self._grasp1_inv
-
-
-def closure_error(robot: RobotModel, grasps: dict[str, pin.SE3], q, data: pin.Data | None = None) -> tuple[float, float]:
-    """Independent check with Pinocchio FK: ``(position error [m], rotation error [rad])`` of the
-    hands' relative pose against the grasps' (same measure as :func:`optplan.verify.verify`)."""
-    a, b = list(grasps)
-    data = data or robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))
-    rel = data.oMf[robot.arm(a).ee_frame_id].actInv(data.oMf[robot.arm(b).ee_frame_id])
-    err = grasps[a].actInv(grasps[b]).actInv(rel)
-    return float(np.linalg.norm(err.translation)), float(np.linalg.norm(pin.log3(err.rotation)))

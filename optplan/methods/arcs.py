@@ -166,5 +166,10 @@ def arc_from_tangent_length(P, t0, t1, phi, T) -> Arc:
                2 * T * ca.cos(phi / 2) / _sinc(phi / 2))
 
 
-# the two arm models live in arcs_arms.py (split by concept); re-exported here
-from .arcs_arms import DiscreteArcModel, SerpentineArcModel  # noqa: E402
+def __getattr__(name):
+    # the two arm models live in arcs_arms.py (which imports this module); the old path warns
+    if name in ("DiscreteArcModel", "SerpentineArcModel"):
+        from .._compat import moved
+
+        return moved(__name__, name, __name__ + "_arms")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -22,7 +22,8 @@ import pinocchio as pin
 from ..description import load_description
 from ..robot import RobotModel
 from ..spatial import zyx_to_matrix
-from .arcs import DiscreteArcModel, SerpentineArcModel
+from ..splines import quintic_time_law
+from .arcs_arms import DiscreteArcModel, SerpentineArcModel
 
 ROBOT = "dshdasr"
 D2R = math.pi / 180.0
@@ -70,7 +71,7 @@ def _T(R, p) -> np.ndarray:
 def quintic(X0, Xf, t, tf: float) -> np.ndarray:
     """Eq. 42: X0 + (Xf − X0)(10 s³ − 15 s⁴ + 6 s⁵), s = t/tf (rest-to-rest)."""
     s = np.clip(np.asarray(t, float) / tf, 0.0, 1.0)
-    h = 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
+    h = quintic_time_law(s)[0]
     return np.asarray(X0)[None, :] + np.outer(h, np.asarray(Xf) - np.asarray(X0))
 
 

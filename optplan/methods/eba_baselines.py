@@ -28,9 +28,10 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from ..constraints.closed_chain import relative_pose_residual
 from ..problem.nlp import NlpSolver, SolverOptions
 from ..robot import RobotModel
-from ..spatial import vee_skew
+from ..splines import quintic_time_law
 from ..symbolic import SymbolicKinematics
 from .eba_core import (EBAKinematics, MethodResult, Scenario, Segment, hermite_segment, integrate_rpy,
                        rpy_matrix)
@@ -52,10 +53,7 @@ def _check_int(owner: str, minimum: int, **kw) -> None:
             raise ValueError(f"{owner}.{n}: expected an integer ≥ {minimum}, got {v!r}")
 
 
-def quintic_profile(s):
-    """Rest-to-rest quintic ``p(s) = 10s³ − 15s⁴ + 6s⁵`` and its first two derivatives in s."""
-    s = np.asarray(s, float)
-    return (10 * s**3 - 15 * s**4 + 6 * s**5, 30 * s**2 - 60 * s**3 + 30 * s**4, 60 * s - 180 * s**2 + 120 * s**3)
+quintic_profile = quintic_time_law   # (p, p', p'') of the rest-to-rest quintic (:mod:`optplan.splines`)
 
 
 # --------------------------------------------------------------------------- 5th-order polynomial
@@ -294,9 +292,7 @@ def run_fourier(robot: RobotModel, scenario: Scenario, options: FourierOptions |
         Ra, pa = sym.frame_placement(qfull, fa, X)
         Rb, pb = sym.frame_placement(qfull, fb, X)
         rel0 = scenario.relative
-        E = ca.DM(np.array(rel0.rotation)).T @ Ra.T @ Rb
-        r = ca.vertcat(Ra.T @ (pb - pa) - ca.DM(np.array(rel0.translation)),
-                       vee_skew(E))
+        r, _ = relative_pose_residual(Ra, pa, Rb, pb, rel0)
         ccfun = ca.Function("cc", [th], [r])
         tc = np.linspace(0.0, T, o.closed_chain_samples)[1:-1]
         Bi = np.array(_fourier_basis(tc, h, T)[1])

@@ -29,10 +29,11 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg.lapack import dgesv
 
+from ..constraints.closed_chain import ChainSpec, closure_error, project_closed_chain
 from ..errors import ConfigurationError
 from ..floating import simulate_base
 from ..robot import RobotModel
-from ..spatial import skew
+from ..spatial import rotation_angle as _rotation_angle, skew
 
 __all__ = [
     "THETA0_DEG", "FREE_END_THETAF_DEG", "END_CONSTRAINED_THETAF_DEG", "PAPER_FIGURES", "Scenario",
@@ -86,9 +87,7 @@ def matrix_rpy(R) -> np.ndarray:
     return np.asarray(pin.rpy.matrixToRpy(np.asarray(R, float)))
 
 
-def rotation_angle(R: np.ndarray) -> float:
-    """Geodesic angle [rad] of a rotation matrix."""
-    return float(np.linalg.norm(pin.log3(np.asarray(R, float))))
+rotation_angle = _rotation_angle   # geodesic angle [rad] (:func:`optplan.spatial.rotation_angle`)
 
 
 # --------------------------------------------------------------------------- kinematics
@@ -154,28 +153,22 @@ class EBAKinematics:
         return e, Ma.rotation
 
     def closed_chain_residual(self, theta, rel0: pin.SE3) -> float:
-        """max(position error [m], rotation error [rad]) of the relative hand pose (as
-        :func:`optplan.verify.verify`)."""
-        err = rel0.actInv(self.relative_pose(theta))
-        return max(float(np.linalg.norm(err.translation)), rotation_angle(err.rotation))
+        """max(position error [m], rotation error [rad]) of the relative hand pose
+        (:func:`optplan.constraints.closed_chain.closure_error`, as :func:`optplan.verify.verify`)."""
+        return max(closure_error(self.robot, ChainSpec(self.arm_a, self.arm_b, rel0), self._set(theta), self.data))
 
     def project_closed_chain(self, theta, rel0: pin.SE3, joints=None, tol: float = 1e-13,
                              max_iter: int = 50) -> np.ndarray:
         """Newton projection of ``θ`` onto ``{relative_pose = rel0}`` with a minimum-norm change of
-        ``joints`` (indices into the joint vector; default all)."""
-        th = np.array(theta, float)
+        ``joints`` (indices into the joint vector; default all), joint limits not enforced
+        (:func:`optplan.constraints.closed_chain.project_closed_chain`)."""
         idx = np.arange(self.nj) if joints is None else np.asarray(joints)
-        for _ in range(max_iter):
-            e, Ra = self.closed_chain_error(th, rel0)
-            if np.max(np.abs(e)) < tol:
-                return th
-            H = self.constraint_jacobian(th)
-            G = np.vstack([Ra.T @ H[:3], Ra.T @ H[3:]])[:, idx]
-            th[idx] -= np.linalg.lstsq(G, e, rcond=None)[0]
-        e, _ = self.closed_chain_error(th, rel0)
-        if np.max(np.abs(e)) > 1e-9:
-            raise ConfigurationError(f"closed-chain projection did not converge (error {np.max(np.abs(e)):.2e})")
-        return th
+        r = project_closed_chain(self.robot, self._set(np.array(theta, float)).copy(),
+                                 ChainSpec(self.arm_a, self.arm_b, rel0), tol=tol, max_iterations=max_iter,
+                                 data=self.data, joints=idx, clip=False)
+        if r.residual > 1e-9:
+            raise ConfigurationError(f"closed-chain projection did not converge (error {r.residual:.2e})")
+        return r.q[7:].copy()
 
 
 # --------------------------------------------------------------------------- scenarios

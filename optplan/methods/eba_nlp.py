@@ -34,6 +34,7 @@ from ..problem.floating_segment import FloatingSegmentSpec, FloatingSplineProble
 from ..problem import (BaseAttitude, ClosedChain, JointBoundary, JointPositionLimits, JointVelocityLimits,
                        OptProblem, Smoothness)
 from ..robot import RobotModel
+from ..splines import quintic_time_law
 from ..verify import verify
 from .eba_baselines import closed_chain_reference
 from .eba_core import MethodResult, Scenario, hermite_segment
@@ -141,7 +142,7 @@ def _warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions) -> np.ndar
     if scenario.closed_chain:
         return closed_chain_reference(robot, scenario, o.n_intervals, o.duration)[1]
     s = np.linspace(0.0, 1.0, o.n_intervals + 1)
-    s = 10 * s**3 - 15 * s**4 + 6 * s**5
+    s = quintic_time_law(s)[0]
     return scenario.theta0 + s[:, None] * (scenario.thetaf - scenario.theta0)
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from .base import CLOCKS, Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2, CBiRRT2Options
-from .closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from .rrtconnect import RRTConnect, RRTConnectOptions, rrt_connect, shortcut_path
 from .tcbirrt import TCBiRRT, TCBiRRTOptions, exp_coordinates, interpolate_task
 from .validity import ValidityChecker

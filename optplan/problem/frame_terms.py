@@ -11,6 +11,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from ..constraints.closed_chain import relative_pose_residual
 from ..errors import ConfigurationError
 from ..robot import RobotModel
 from ..spatial import check_pose, pose_residual, vee_skew
@@ -234,8 +235,7 @@ class ClosedChain(Term):
         fa, fb = self._frames(tp.robot)
         Ra, pa = tp.frame(fa, k, base_frame=True)
         Rb, pb = tp.frame(fb, k, base_frame=True)
-        Rrel, prel = Ra.T @ Rb, Ra.T @ (pb - pa)
-        return pose_residual(Rrel, prel, np.array(self.relative.rotation), ca.DM(self.relative.translation))
+        return relative_pose_residual(Ra, pa, Rb, pb, self.relative)
 
     def residual(self, tp, pinned_q=None):
         """Rows at every collocation point (``pinned_q``: the knots a boundary pins, ``{k: q}``,

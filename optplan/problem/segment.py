@@ -166,7 +166,7 @@ class SplineSegmentProblem:
         if solution is not None:
             q = solution.sample(np.linspace(solution.t[0], solution.t[-1], self.N + 1))["q"]
             if closed_chain is not None:
-                from ..warmstart import project_closed_chain
+                from ..constraints.closed_chain import project_closed_chain
 
                 q = np.array(q, float)
                 data = self.robot.model.createData()
@@ -188,7 +188,7 @@ class SplineSegmentProblem:
         rest-to-rest quintic time law in joint-space arc length, each knot projected onto the
         closed-chain manifold. Returns whether every projection converged."""
         from ..splines import resample_path
-        from ..warmstart import project_closed_chain
+        from ..constraints.closed_chain import project_closed_chain
 
         path = np.asarray(path, float)
         s, _ = resample_path(path, 2)  # validates the path
@@ -219,7 +219,7 @@ class SplineSegmentProblem:
         then each knot projected back onto the closed-chain manifold. A planner path's corners
         give the guess a jerk thousands of times the optimum's; rounding them off before IPOPT
         starts saves iterations."""
-        from ..warmstart import project_closed_chain
+        from ..constraints.closed_chain import project_closed_chain
 
         if self._X0 is None:
             raise ValueError("no initial guess to smooth: call set_initial(...) first")

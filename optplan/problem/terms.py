@@ -32,8 +32,7 @@ from .build import BuildContext, TermData
 from .transcription import Transcription
 
 __all__ = [
-    "Term", "JointBoundary", "JointPositionLimits", "JointVelocityLimits", "JointAccelerationLimits",
-    "FramePose", "FramePath", "ClosedChain", "OrientationConstraint", "BaseAttitude", "Smoothness",
+    "Term", "JointBoundary", "JointPositionLimits", "JointVelocityLimits", "JointAccelerationLimits", "Smoothness",
     "PathLength", "Duration", "NumericTrajectory", "pose_residual", "pose_residual_numeric", "BuildContext",
     "TermData",
 ]
@@ -544,5 +543,13 @@ class Duration(Term):
         return float(traj.T)
 
 
-# the frame terms live in .frame_terms (split by concept); re-exported here
-from .frame_terms import BaseAttitude, ClosedChain, FramePath, FramePose, OrientationConstraint  # noqa: E402
+_FRAME_TERMS = ("BaseAttitude", "ClosedChain", "FramePath", "FramePose", "OrientationConstraint")
+
+
+def __getattr__(name):
+    # the frame terms live in .frame_terms (which imports this module); the old path warns
+    if name in _FRAME_TERMS:
+        from .._compat import moved
+
+        return moved(__name__, name, "optplan.problem")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
