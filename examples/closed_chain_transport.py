@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from optplan import RobotModel
-from optplan.collision import CollisionChecker
+from optplan.collision.checker import CollisionChecker
 from optplan.scene import Scene
 from optplan.tasks import transport_initial_path, transport_problem
 from optplan.verify import verify

@@ -28,11 +28,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .collision import CollisionChecker
-from .ik import IKOptions
+from .collision.checker import CollisionChecker
+from .model.ik import IKOptions
 from .problem import ClosedChain, OptProblem
 from .problem.solution import Solution
-from .robot import RobotModel
+from .model.robot import RobotModel
 from .scene import Scene
 from .tasks import object_pose, segment_problem, straight_line_poses, task_space_path
 from .verify import VerifyReport, verify

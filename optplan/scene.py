@@ -38,9 +38,9 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .description import models_dir
+from .model.description import models_dir
 from .errors import ModelError, UnknownNameError
-from .spatial import rpy_to_matrix
+from .geometry.spatial import rpy_to_matrix
 
 __all__ = ["Obstacle", "GraspedObject", "Scene", "available_scenes"]
 
@@ -69,8 +69,8 @@ class Obstacle:
         return coal.Capsule(self.radius, self.length)
 
     def primitive(self):
-        """The shape for :mod:`optplan.distance` (local frame)."""
-        from . import distance as D
+        """The shape for :mod:`optplan.geometry.distance` (local frame)."""
+        from .geometry import distance as D
 
         if self.shape == "box":
             return D.Box(np.asarray(self.size) / 2)
@@ -141,7 +141,7 @@ class Scene:
 
     @classmethod
     def from_dict(cls, data: dict, where: str = "scene") -> "Scene":
-        from .description import _known_keys, available_models
+        from .model.description import _known_keys, available_models
 
         _known_keys(data, ("name", "robot", "angle_unit", "object", "start", "goal", "obstacles", "extra", "notes"),
                     where)
@@ -160,7 +160,7 @@ class Scene:
         if robot is not None:
             if not isinstance(robot, str):
                 raise ModelError(f"{where}.robot: expected a robot model name, got {robot!r}")
-            from .example_robots import EXAMPLE_ROBOTS
+            from .model.example_robots import EXAMPLE_ROBOTS
 
             known = list(available_models()) + list(EXAMPLE_ROBOTS)  # shipped + example-robot-data's
             if robot not in known:

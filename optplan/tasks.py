@@ -8,14 +8,14 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .collision import CollisionChecker
+from .collision.checker import CollisionChecker
 from .constraints.closed_chain import solve_grasp_ik
-from .ik import IKOptions
+from .model.ik import IKOptions
 from .problem import (ClosedChain, CollisionAvoidance, JointBoundary, JointPositionLimits, JointVelocityLimits,
                       OptProblem, Smoothness)
-from .robot import RobotModel
+from .model.robot import RobotModel
 from .scene import Scene
-from .spatial import interpolate_pose
+from .geometry.spatial import interpolate_pose
 
 __all__ = ["GraspIK", "grasp_configuration", "task_space_path", "transport_initial_path", "transport_problem",
            "segment_problem", "object_pose"]

@@ -21,13 +21,13 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ..planners.base import pose_to_vector, vector_to_pose
-from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
-from ..planners.tcbirrt import interpolate_task
-from ..planners.validity import ValidityChecker
-from ..robot import RobotModel
-from ..scene import Scene
-from ..spatial import rpy_to_matrix
+from .planners.base import pose_to_vector, vector_to_pose
+from .constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from .planners.tcbirrt import interpolate_task
+from .planners.validity import ValidityChecker
+from .model.robot import RobotModel
+from .scene import Scene
+from .geometry.spatial import rpy_to_matrix
 
 __all__ = ["TrialOptions", "Trial", "TrialGenerator", "perturb_pose", "trial_seed"]
 log = logging.getLogger(__name__)
@@ -104,8 +104,8 @@ def perturb_pose(nominal: pin.SE3, rng: np.random.Generator, position_range: flo
 def _reach_scale(robot: RobotModel) -> float:
     """The robot's mean arm reach / the TCBiRRT paper robot's (1 for that robot; the paper's 0.2 m
     perturbation is sized for its 2.94 m arms)."""
-    from ..planners.task_sampling import arm_reach
-    from ..planners.tcbirrt import PAPER_REACH
+    from .planners.task_sampling import arm_reach
+    from .planners.tcbirrt import PAPER_REACH
 
     if robot.is_floating or not robot.arms:
         return 1.0
@@ -181,7 +181,7 @@ class TrialGenerator:
         random-seed IK solutions with all joints ``min_limit_margin`` [rad] inside their limits, the
         one with the largest exact clearance (coal; helper used to write a scene's ``[extra]
         q_start / q_goal``)."""
-        from ..collision import CollisionChecker
+        from .collision.checker import CollisionChecker
 
         M = self.scene.start if which == "start" else self.scene.goal
         cc = CollisionChecker(self.robot, self.scene)

@@ -4,7 +4,7 @@ At ``density`` × the knot density (default 10×) the exact joint trajectory of 
 :class:`~optplan.problem.Solution` is sampled and checked with Pinocchio and coal only:
 closed-chain residual (FK of both hands), exact minimum clearance (coal, robot + held object vs
 scene and self), joint position/velocity limit violations, and for a free-floating robot the base
-attitude re-integrated by :func:`optplan.floating.simulate_base` (momentum residual, and its
+attitude re-integrated by :func:`optplan.model.floating.simulate_base` (momentum residual, and its
 difference from the NLP's own base states).
 """
 from __future__ import annotations
@@ -15,12 +15,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pinocchio as pin
 
-from .collision import CollisionChecker
+from .collision.checker import CollisionChecker
 from .constraints.closed_chain import closure_error
-from .floating import simulate_base
-from .robot import RobotModel
+from .model.floating import simulate_base
+from .model.robot import RobotModel
 from .scene import Scene
-from .spatial import rotation_angle
+from .geometry.spatial import rotation_angle
 
 __all__ = ["VerifyReport", "verify"]
 

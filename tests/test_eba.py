@@ -14,8 +14,8 @@ import pinocchio as pin
 import pytest
 
 from optplan import Kinematics, simulate_base
-from optplan.methods import eba
-from optplan.methods.eba_core import EBAKinematics, matrix_rpy, rpy_matrix, rpy_rate_matrix
+from optplan.papers import eba
+from optplan.papers.eba.core import EBAKinematics, matrix_rpy, rpy_matrix, rpy_rate_matrix
 
 AGREE_RAD = 1e-5  # method's own final attitude vs the independent simulator
 

@@ -1,4 +1,4 @@
-"""Free-floating simulation (optplan.floating.simulate_base) against physics it must obey:
+"""Free-floating simulation (optplan.model.floating.simulate_base) against physics it must obey:
 momentum conservation, a fixed (or uniformly moving) centre of mass, path-dependence only
 (driftless), 4th-order convergence, and the generalized Jacobian for small motions."""
 from __future__ import annotations
@@ -7,8 +7,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.floating import FloatingResult, joint_trajectory_from_samples, simulate_base
-from optplan.kinematics import Kinematics
+from optplan.model.floating import FloatingResult, joint_trajectory_from_samples, simulate_base
+from optplan.model.kinematics import Kinematics
 
 DEG = np.pi / 180.0
 TOTAL_MASS = 593.58  # seed 004 Table 2

@@ -22,7 +22,7 @@ def robot(tcb):
 
 
 def test_suite_scenes_load_with_comments(robot):
-    from optplan.description import models_dir
+    from optplan.model.description import models_dir
 
     assert len(SUITE) >= 6
     for name in SUITE:
@@ -250,7 +250,7 @@ def test_improved_variant_success_rate(robot, name):
     of CPU time, a path whose every edge passes the bench's independent 1 cm sweep check in >= 28
     (a true rate of 0.99 passes with probability 0.997, a true rate of 0.9 with 0.41)."""
     from optplan.bench.tcbirrt import _path_checks
-    from optplan.bench.trials import TrialGenerator
+    from optplan.trials import TrialGenerator
 
     scene = Scene.load(name)
     gen = TrialGenerator(robot, scene)
@@ -269,7 +269,7 @@ def test_improved_variant_success_rate(robot, name):
 def test_improved_variant_ssps_scenes(robot, name):
     """The three SSPS scenes of the TCBiRRT paper: 100 seeded trials, all solved with clean edges."""
     from optplan.bench.tcbirrt import _path_checks
-    from optplan.bench.trials import TrialGenerator
+    from optplan.trials import TrialGenerator
 
     scene = Scene.load(name)
     gen = TrialGenerator(robot, scene)

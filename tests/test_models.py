@@ -14,9 +14,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.description import (available_models, build_all, dh_capsules, load_description, models_dir,
-                                 urdf_dir, urdf_string, write_urdf)
-from optplan.robot import RobotModel
+from optplan.model.description import available_models, dh_capsules, load_description, models_dir, urdf_dir
+from optplan.model.urdf_writer import build_all, urdf_string, write_urdf
+from optplan.model.robot import RobotModel
 
 DEG = math.pi / 180.0
 
@@ -340,7 +340,7 @@ def _user_robot(tmp_path, *, name, conv, dh_deg, coms, caps, tool_xyz=(0, 0, 0),
     toml_path.write_text(text)
     desc = load_description(toml_path)
     urdf = write_urdf(desc, tmp_path)
-    from optplan.description import arm_metadata
+    from optplan.model.description import arm_metadata
     robot = RobotModel.from_urdf(urdf, arm_metadata(desc), floating=False, name=name)
     return robot
 

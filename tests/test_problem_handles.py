@@ -403,7 +403,7 @@ def test_collision_retry_by_replacing_the_term(tcb):
     """The pipeline's collision retry without mutation: ``with_activation`` adds a trajectory whose
     close pairs are activated too (coal distances on either trajectory below ``activation``), and
     ``replace_term`` rebuilds the NLP with it; the original term is unchanged."""
-    from optplan.collision import CollisionChecker
+    from optplan.collision.checker import CollisionChecker
 
     scene = Scene.load("transport")
     rng = np.random.default_rng(21)

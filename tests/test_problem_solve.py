@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicHermiteSpline
 
-from optplan.kinematics import Kinematics
+from optplan.model.kinematics import Kinematics
 from optplan.problem import (BaseAttitude, ClosedChain, Duration, FramePose, IpoptStatus, JointAccelerationLimits,
                              JointBoundary, JointPositionLimits, JointVelocityLimits, OptProblem, Smoothness,
                              Solution)
@@ -351,7 +351,7 @@ def _check_restoration(eba, p, att, sol, tol):
     assert rep.base_attitude_mismatch_rad <= tol
     assert rep.max_momentum_residual < 1e-9
     # the straight-line path alone (no restoration) turns the base: the constraint did something
-    from optplan.floating import simulate_base
+    from optplan.model.floating import simulate_base
 
     s = np.linspace(0, 1, 201)[:, None]
     sim = simulate_base(eba, (s[:, 0] * 20.0, Q0 + (10 * s**3 - 15 * s**4 + 6 * s**5) * (QF - Q0)),

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from optplan.problem.quartic import QuarticSmoothingResult, smooth_quartic
-from optplan.splines import PiecewisePolynomial, quartic_spline
+from optplan.geometry.splines import PiecewisePolynomial, quartic_spline
 
 L1, L2 = 1.0, 0.7  # planar 2-link arm [m]
 INFEASIBLE = {"Infeasible_Problem_Detected", "Restoration_Failed"}
@@ -263,7 +263,7 @@ def test_quartic_smoothing_on_a_robot_arm_with_end_effector_speed_limit(tcb):
     (the paper's limit), checked with Pinocchio's frame velocity (independent of CasADi)."""
     import pinocchio as pin
 
-    from optplan.symbolic import SymbolicKinematics
+    from optplan.model.symbolic import SymbolicKinematics
 
     rng = np.random.default_rng(11)
     q0 = tcb.random_joints(rng) * 0.3

@@ -1,4 +1,4 @@
-"""Scenes (optplan.scene), exact collision checking (optplan.collision) and independent trajectory
+"""Scenes (optplan.scene), exact collision checking (optplan.collision.checker) and independent trajectory
 verification (optplan.verify).
 
 * Scene.load refuses bad files with a ModelError / UnknownNameError naming the offending value.
@@ -17,11 +17,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.collision import CollisionChecker
+from optplan.collision.checker import CollisionChecker
 from optplan.errors import ModelError, UnknownNameError
 from optplan.problem import ClosedChain
 from optplan.scene import Scene, available_scenes
-from optplan.spatial import exp3, rotx, roty, rotz
+from optplan.geometry.spatial import exp3, rotx, roty, rotz
 from optplan.verify import verify
 
 DEG = np.pi / 180

@@ -28,7 +28,7 @@ from typing import Callable
 import numpy as np
 
 from ..problem import ClosedChain
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..scene import Scene
 from ..verify import verify
 
@@ -99,7 +99,7 @@ def _warm_start_knots(prob) -> np.ndarray:
 def transport_instance(robot: RobotModel | None = None, *, knots: int = 50, duration: float = 60.0,
                        margin: float = 0.02, seed: int = 0) -> PeerProblem:
     """The closed-chain transport problem of ``examples/closed_chain_transport.py``."""
-    from ..collision import CollisionChecker
+    from ..collision.checker import CollisionChecker
     from ..tasks import transport_initial_path
 
     robot = robot or RobotModel.from_name("tcbirrt_dual_arm")
@@ -142,10 +142,10 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
     path → shortcut of the constrained segments (the pipeline's RNG sequence) → the warm start, N
     and duration of the pipeline's B-spline segment NLP (its first attempt). Empty when the plan
     fails."""
-    from ..collision import CollisionChecker
+    from ..collision.checker import CollisionChecker
     from ..pipeline import PipelineOptions, shortcut_constrained
     from ..planners import make_planner
-    from .trials import TrialGenerator
+    from ..trials import TrialGenerator
 
     bad = set(kinds) - {"constrained", "regrasp"}
     if bad:

@@ -38,10 +38,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from ..collision import CollisionChecker
-from ..robot import RobotModel
+from ..collision.checker import CollisionChecker
+from ..model.robot import RobotModel
 from ..scene import Scene
-from ..spatial import skew, vee_skew
+from ..geometry.spatial import skew, vee_skew
 
 __all__ = ["DrakeUnavailable", "require_drake", "DrakeModel", "ClosedChainResidual", "BsplineSolution", "DrakeOptions",
            "DrakeResult", "fit_bspline", "jerk_matrix", "solve_drake", "SOLVERS"]
@@ -82,7 +82,7 @@ class DrakeModel:
     removed; the collision geometry is registered by hand from optplan's own collision model
     (URDF cylinders named ``*_capsule`` are capsules there, Drake would read cylinders), the
     scene's obstacles on the world body and the held object on ``object_arm``'s hand. The collision
-    filter leaves exactly the pairs of :class:`optplan.collision.CollisionChecker` as candidates;
+    filter leaves exactly the pairs of :class:`optplan.collision.checker.CollisionChecker` as candidates;
     ``missing_pairs`` lists optplan pairs Drake would not check (empty when the two agree).
 
     ``to_drake(q)`` / ``from_drake(q)`` map joint vectors between optplan's (Pinocchio's) order

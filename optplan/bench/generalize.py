@@ -76,8 +76,8 @@ _W: dict = {}
 
 
 def _robot(name: str):
-    from ..example_robots import EXAMPLE_ROBOTS, load_example_robot
-    from ..robot import RobotModel
+    from ..model.example_robots import EXAMPLE_ROBOTS, load_example_robot
+    from ..model.robot import RobotModel
 
     if name not in _W:
         _W[name] = load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
@@ -88,7 +88,7 @@ def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
     """One (scene, trial): the result line (see the module docstring)."""
     from ..pipeline import PipelineOptions, run_pipeline
     from ..scene import Scene
-    from .trials import TrialGenerator
+    from ..trials import TrialGenerator
     from .warmstart import _finite, _path_hash, _segment_rows
 
     scene = Scene.load(scene_name)

@@ -13,8 +13,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .robot import RobotModel
-from .scene import Scene
+from ..model.robot import RobotModel
+from ..scene import Scene
 
 __all__ = ["CollisionChecker", "Pair"]
 log = logging.getLogger(__name__)

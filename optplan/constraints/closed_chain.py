@@ -3,7 +3,7 @@
 Two end-effectors ``a``, ``b`` keep their relative pose ``T_a⁻¹ T_b = relative`` (hand b in hand a's
 frame; for an object held with grasp frames ``G_a``, ``G_b`` in the object frame, ``relative =
 G_a⁻¹ G_b``; the TCBiRRT paper Eq. 1-2). Its residual is the singularity-free pose residual of
-:func:`optplan.spatial.pose_residual` of the relative pose against ``relative``:
+:func:`optplan.geometry.spatial.pose_residual` of the relative pose against ``relative``:
 ``h = [p_rel − p*; vee((E − Eᵀ)/2)]`` with ``E = R*ᵀ R_rel`` (position [m], sin θ · axis), with
 ``trace(E) ≥ 1`` excluding the spurious θ = π zero. Everything that needs the closed chain calls
 this module:
@@ -32,11 +32,11 @@ import pinocchio as pin
 
 from ..codegen import FastFunction
 from ..errors import ConfigurationError
-from ..ik import IKOptions, IKResult, solve_multi
-from ..robot import RobotModel
-from ..spatial import check_pose, pose_residual, rotation_angle, skew, vee_skew
-from ..splines import resample_path
-from ..symbolic import SymbolicKinematics
+from ..model.ik import IKOptions, IKResult, solve_multi
+from ..model.robot import RobotModel
+from ..geometry.spatial import check_pose, pose_residual, rotation_angle, skew, vee_skew
+from ..geometry.splines import resample_path
+from ..model.symbolic import SymbolicKinematics
 
 __all__ = ["relative_pose_residual", "closed_chain_residual", "project_closed_chain", "ProjectionResult",
            "closure_error", "manifold_resample", "solve_grasp_ik", "IKSettings", "ClosedChainKinematics", "ChainSpec"]
@@ -150,7 +150,7 @@ def solve_grasp_ik(robot: RobotModel, object_pose: pin.SE3, grasps: dict[str, pi
                    options: IKOptions | None = None, data: pin.Data | None = None) -> IKResult:
     """Closed-chain IK: every arm in ``grasps`` puts its end-effector on
     ``object_pose * grasps[arm]`` (grasp frames in the object frame); damped least squares
-    (:class:`~optplan.ik.IKOptions`) from ``q0``."""
+    (:class:`~optplan.model.ik.IKOptions`) from ``q0``."""
     check_pose(object_pose, "solve_grasp_ik: object_pose")
     if not isinstance(grasps, dict) or not grasps:
         raise ConfigurationError(f"solve_grasp_ik: grasps: expected a dict {{arm: pinocchio.SE3}}, got {grasps!r}")

@@ -1,4 +1,4 @@
-"""Backend-agnostic smooth building blocks for :mod:`optplan.distance`.
+"""Backend-agnostic smooth building blocks for :mod:`optplan.geometry.distance`.
 
 Every function here works on two backends with one code path:
 
@@ -9,7 +9,7 @@ The backend is chosen by :func:`select_ops` (CasADi as soon as one argument is a
 is passed around as an ``ops`` object exposing ``sqrt, exp, log, fmax, fmin, dot, mv, mtv, stack``.
 All lengths are in metres [m], squared lengths in [m^2].
 
-Private module: the public API lives in :mod:`optplan.distance`.
+Private module: the public API lives in :mod:`optplan.geometry.distance`.
 """
 from __future__ import annotations
 

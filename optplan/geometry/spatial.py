@@ -31,7 +31,7 @@ ROTATION_TOL = 1e-6
 def check_rotation(R, what: str = "rotation", tol: float = ROTATION_TOL) -> np.ndarray:
     """``R`` as a 3×3 float rotation matrix, or :class:`~optplan.errors.ConfigurationError` naming
     ``what``, the value and what is wrong (shape, non-finite entries, not orthonormal, reflection)."""
-    from .errors import ConfigurationError
+    from ..errors import ConfigurationError
 
     try:
         A = np.asarray(R, dtype=float)
@@ -52,7 +52,7 @@ def check_rotation(R, what: str = "rotation", tol: float = ROTATION_TOL) -> np.n
 def check_pose(M, what: str = "pose") -> pin.SE3:
     """``M`` if it is a :class:`pinocchio.SE3` with a finite translation and a true rotation, else
     :class:`~optplan.errors.ConfigurationError` naming ``what`` and the value."""
-    from .errors import ConfigurationError
+    from ..errors import ConfigurationError
 
     if not isinstance(M, pin.SE3):
         raise ConfigurationError(f"{what}: expected a pinocchio.SE3, got {type(M).__name__} {M!r}")
@@ -66,7 +66,7 @@ def check_pose(M, what: str = "pose") -> pin.SE3:
 def quaternion_to_matrix(quat, what: str = "quaternion") -> np.ndarray:
     """Rotation matrix of a quaternion ``[qx, qy, qz, qw]`` (Pinocchio's order), normalised; a
     zero, non-finite or wrongly sized quaternion is a ConfigurationError."""
-    from .errors import ConfigurationError
+    from ..errors import ConfigurationError
 
     try:
         v = np.asarray(quat, dtype=float)
@@ -99,7 +99,7 @@ def rotz(a: float) -> np.ndarray:
 
 
 def _finite_angles(angles, what: str) -> None:
-    from .errors import ConfigurationError
+    from ..errors import ConfigurationError
 
     try:
         ok = all(np.isfinite(float(a)) for a in angles)
@@ -133,7 +133,7 @@ def matrix_to_zyx(R: np.ndarray) -> np.ndarray:
 
 def exp3(w: np.ndarray) -> np.ndarray:
     """Rotation matrix of the rotation vector ``w`` [rad]."""
-    from .errors import check_vector
+    from ..errors import check_vector
 
     return np.asarray(pin.exp3(check_vector(w, 3, "exp3: w (rotation vector [rad])")))
 
@@ -180,7 +180,7 @@ def rotation_angle(R: np.ndarray) -> float:
 
 def se3(R: np.ndarray | None = None, p=None) -> pin.SE3:
     """Build a :class:`pinocchio.SE3` from a rotation matrix and a position [m]."""
-    from .errors import check_vector
+    from ..errors import check_vector
 
     R = np.eye(3) if R is None else check_rotation(R, "se3: R")
     p = np.zeros(3) if p is None else check_vector(p, 3, "se3: p (position [m])")

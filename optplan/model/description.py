@@ -60,13 +60,13 @@ Serpentine (segmented, cable-driven) arm types — ``kind = "serpentine"``::
   has 2·segments degrees of freedom. The arm frame (``mount_*``) has its x axis along the
   unbent arm. With this layout each pitch-yaw/yaw-pitch pair is a pure rotation about an axis
   normal to the incoming link, so a segment bends in one plane and its links are tangent to a
-  circular arc (the space-arc model of :mod:`optplan.methods.arcs`).
+  circular arc (the space-arc model of :mod:`optplan.papers.dshdasr.arcs`).
 
 Link and collision frames: the URDF link ``<prefix>_link<i>`` is the frame that joint ``i`` rotates
 about its z axis. In the modified convention it *is* D-H frame i; in the standard convention D-H
 frame i is ``<prefix>_link<i> · Tz(d_i) Tx(a_i) Rx(alpha_i)``. CoMs, inertias and capsules are given
 in D-H frame i and converted by the generator. Capsules are written to the URDF as ``<cylinder>``
-collision elements whose ``name`` ends in ``_capsule`` (URDF has no capsule); :mod:`optplan.robot`
+collision elements whose ``name`` ends in ``_capsule`` (URDF has no capsule); :mod:`optplan.model.robot`
 turns them back into exact ``coal.Capsule`` objects, plain URDF loaders see cylinders.
 """
 from __future__ import annotations
@@ -80,8 +80,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ModelError, UnknownNameError
-from .spatial import rotx, rotz, rpy_to_matrix, zyx_to_matrix
+from ..errors import ModelError, UnknownNameError
+from ..geometry.spatial import rotx, rotz, rpy_to_matrix, zyx_to_matrix
 
 __all__ = [
     "ArmType", "SerpentineArmType", "ArmMount", "RobotDescription", "load_description",
@@ -99,7 +99,7 @@ def repo_root() -> Path:
     env = os.environ.get("OPTPLAN_ROOT")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[1]
+    return Path(__file__).resolve().parents[2]
 
 
 def models_dir() -> Path:
@@ -257,7 +257,7 @@ def _get(d: dict, key: str, where: str, types=None):
 
 
 def _array(v, shape, where: str) -> np.ndarray:
-    from .errors import real_array
+    from ..errors import real_array
 
     arr = real_array(v, f"{where}: expected numbers of shape {shape}", ModelError)
     if shape is not None and arr.shape != tuple(shape):
@@ -535,7 +535,7 @@ def dh_capsules(arm: ArmType, radius: float, min_length: float = 1e-9) -> list[d
 def __getattr__(name):
     # URDF generation lives in .urdf_writer (which imports this module); the old path warns
     if name in ("build_all", "urdf_string", "write_urdf"):
-        from ._compat import moved
+        from .._compat import moved
 
-        return moved(__name__, name, "optplan.urdf_writer")
+        return moved(__name__, name, "optplan.model.urdf_writer")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -9,7 +9,7 @@ user would load theirs.
   ``"right"``, end-effector frames ``{left,right}_panda_hand_tcp`` (z along the gripper).
 * **Collision geometry**: the vendor models every link as a ``<cylinder>`` with a ``<sphere>`` of
   the same radius at each end of its axis — exactly a capsule. :func:`merge_capsules` replaces
-  each such triple by one capsule (named ``*_capsule``, which :class:`~optplan.robot.RobotModel`
+  each such triple by one capsule (named ``*_capsule``, which :class:`~optplan.model.robot.RobotModel`
   turns into a coal capsule), so every link is a shape the trajectory NLP handles exactly; a
   cylinder or sphere that is not part of such a triple stays what it is (the NLP bounds a
   cylinder by the capsule of its axis and radius). The plate is a box.
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from .errors import ModelError
+from ..errors import ModelError
 from .robot import RobotModel
 
 __all__ = ["load_dual_panda", "merge_capsules", "pair_budget", "srdf_disabled_pairs", "BASE_OFFSET",
@@ -54,7 +54,7 @@ def _floats(s: str | None, default: str) -> np.ndarray:
 
 
 def _origin(col: ET.Element) -> pin.SE3:
-    from .spatial import rpy_to_matrix
+    from ..geometry.spatial import rpy_to_matrix
 
     o = col.find("origin")
     xyz = _floats(o.get("xyz") if o is not None else None, "0 0 0")

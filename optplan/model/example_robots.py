@@ -5,7 +5,7 @@ Both are loaded as fixed-base dual-arm robots with 14 planning joints (two 7-joi
 
 * everything else (PR2: base, torso lift, head, laser tilt, grippers; Baxter: head, grippers) is
   frozen in the URDF (made ``fixed``) at a documented value, so the Pinocchio model has exactly the
-  arm joints and :class:`~optplan.robot.RobotModel` works unchanged;
+  arm joints and :class:`~optplan.model.robot.RobotModel` works unchanged;
 * PR2's continuous joints (forearm roll, wrist roll) become revolute joints with limits ``[-2π, 2π]``
   (a planner in joint space needs a bounded box; ±2π rather than ±π so that a path can cross
   ±π, where PR2's wrist often sits when the gripper points forward);
@@ -30,7 +30,7 @@ from pathlib import Path
 import coal
 import numpy as np
 
-from .errors import ModelError
+from ..errors import ModelError
 from .robot import RobotModel
 
 __all__ = ["example_robot_data_dir", "example_robots_available", "load_pr2", "load_baxter", "load_example_robot",
@@ -181,7 +181,7 @@ def load_baxter() -> RobotModel:
 
 
 def load_example_robot(name: str) -> RobotModel:
-    """``"pr2"``, ``"baxter"`` or ``"dual_panda"`` (two Pandas on a plate, :mod:`optplan.dual_panda`)."""
+    """``"pr2"``, ``"baxter"`` or ``"dual_panda"`` (two Pandas on a plate, :mod:`optplan.model.dual_panda`)."""
     if name.lower() == "dual_panda":
         from .dual_panda import load_dual_panda
 

@@ -16,9 +16,9 @@ import numpy as np
 import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
-from .errors import ConfigurationError, check_vector
+from ..errors import ConfigurationError, check_vector
 from .robot import RobotModel
-from .spatial import check_pose
+from ..geometry.spatial import check_pose
 
 __all__ = ["FloatingResult", "simulate_base", "joint_trajectory_from_samples"]
 log = logging.getLogger(__name__)

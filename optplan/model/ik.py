@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .errors import OptionError
+from ..errors import OptionError
 from .robot import RobotModel
-from .spatial import check_pose
+from ..geometry.spatial import check_pose
 
 __all__ = ["IKOptions", "IKResult", "solve_arm_ik", "solve_multi", "pose_error"]
 log = logging.getLogger(__name__)
@@ -110,7 +110,7 @@ def solve_arm_ik(robot: RobotModel, arm: str, goal: pin.SE3, q0, options: IKOpti
 
 def __getattr__(name):
     if name == "solve_grasp_ik":
-        from ._compat import moved
+        from .._compat import moved
 
         return moved(__name__, name, "optplan.constraints.closed_chain")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -33,9 +33,9 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from .errors import ConfigurationError, ModelError
+from ..errors import ConfigurationError, ModelError
 from .robot import RobotModel
-from .spatial import skew
+from ..geometry.spatial import skew
 
 __all__ = ["DecoupledArmIK", "rotation_about", "wrist_angles"]
 

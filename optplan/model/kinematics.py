@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg.lapack import dgesv
 
-from .errors import ConfigurationError, OptionError, check_vector
+from ..errors import ConfigurationError, OptionError, check_vector
 from .robot import RobotModel
 
 __all__ = ["Kinematics", "REFERENCE_FRAMES"]

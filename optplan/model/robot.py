@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from .description import arm_metadata, available_models, load_description, urdf_dir
-from .errors import ConfigurationError, ModelError, UnknownNameError, check_vector
+from ..errors import ConfigurationError, ModelError, UnknownNameError, check_vector
 
 __all__ = ["Arm", "RobotModel"]
 log = logging.getLogger(__name__)

@@ -7,7 +7,7 @@ Supported joints: a free-flyer root, 1-DoF revolute or prismatic joints about an
 motion subspace, so every 1-DoF joint type Pinocchio builds is covered. Fixed URDF joints are
 Pinocchio frames and are handled as frames.
 
-Conventions are those of :mod:`optplan.kinematics`: ``q`` in Pinocchio order (free-flyer base
+Conventions are those of :mod:`optplan.model.kinematics`: ``q`` in Pinocchio order (free-flyer base
 ``[x, y, z, qx, qy, qz, qw]``; the quaternion is used as given, so keep it unit), Jacobians with
 rows ``[linear; angular]``, ``Ag`` about the CoM in world axes.
 
@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from .errors import ModelError
+from ..errors import ModelError
 from .robot import RobotModel
 
 __all__ = ["SymbolicKinematics", "skew", "quat_to_matrix", "rodrigues"]

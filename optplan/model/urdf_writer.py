@@ -1,4 +1,4 @@
-"""URDF writer behind ``optplan models build``: turns a :class:`~optplan.description.RobotDescription`
+"""URDF writer behind ``optplan models build``: turns a :class:`~optplan.model.description.RobotDescription`
 into URDF text (deterministic, so committed URDFs can be compared with it)."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from .description import RobotDescription, SerpentineArmType, _tx, available_models, load_description, urdf_dir
-from .spatial import matrix_to_rpy, rotx, rpy_to_matrix
+from ..geometry.spatial import matrix_to_rpy, rotx, rpy_to_matrix
 
 __all__ = ["urdf_string", "write_urdf", "build_all"]
 
@@ -48,7 +48,7 @@ def _capsule_xml(name: str, a: np.ndarray, b: np.ndarray, r: float) -> str:
         if s < 1e-12:
             R = np.eye(3) if c > 0 else rotx(math.pi)
         else:
-            from .spatial import exp3
+            from ..geometry.spatial import exp3
             R = exp3(w / s * math.atan2(s, c))
         T[:3, :3] = R
     return (f'<collision name="{name}_capsule">{_origin(T)}<geometry>'

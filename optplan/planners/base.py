@@ -34,7 +34,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..scene import Scene
 
 __all__ = ["PlanStatus", "PathSegment", "PlanResult", "Planner", "Deadline", "CLOCKS", "pose_to_vector", "vector_to_pose"]
@@ -87,7 +87,7 @@ def pose_to_vector(M: pin.SE3) -> np.ndarray:
 def vector_to_pose(v) -> pin.SE3:
     """Inverse of :func:`pose_to_vector`; a vector that is not 7 finite numbers or whose quaternion
     is zero is a ConfigurationError."""
-    from ..spatial import quaternion_to_matrix
+    from ..geometry.spatial import quaternion_to_matrix
 
     try:
         a = np.asarray(v, dtype=float)

@@ -74,7 +74,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2, CBiRRT2Options

@@ -13,8 +13,8 @@ import pinocchio as pin
 
 from ..constraints.closed_chain import relative_pose_residual
 from ..errors import ConfigurationError
-from ..robot import RobotModel
-from ..spatial import check_pose, pose_residual, vee_skew
+from ..model.robot import RobotModel
+from ..geometry.spatial import check_pose, pose_residual, vee_skew
 from .build import TermData
 from .terms import Term, _check_at, _knots, _set, pose_residual_numeric
 
@@ -217,7 +217,7 @@ class ClosedChain(Term):
     @classmethod
     def from_configuration(cls, robot: RobotModel, q, arm_a: str = "A", arm_b: str = "B") -> "ClosedChain":
         """The relative pose the two hands have at the full configuration ``q``."""
-        from ..kinematics import Kinematics
+        from ..model.kinematics import Kinematics
 
         kin = Kinematics(robot)
         Ma, Mb = kin.frame_placements(q, [robot.arm(arm_a).ee_frame, robot.arm(arm_b).ee_frame])

@@ -27,10 +27,10 @@ import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError, OptionError
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..solver_options import check_solve_arguments
-from ..spatial import check_pose
-from ..splines import quintic_time_law
+from ..geometry.spatial import check_pose
+from ..geometry.splines import quintic_time_law
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
 from .nlp import NlpSolver, SolveOutcome, SolverOptions
@@ -187,7 +187,7 @@ class OptProblem:
         J = np.diff(A, axis=0) / h
         base_quat = None
         if self.robot.is_floating:
-            from ..floating import simulate_base
+            from ..model.floating import simulate_base
 
             m = 2 * self.n_sub
             tm = np.linspace(0.0, Tg, m * self.N + 1)

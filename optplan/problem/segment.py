@@ -44,7 +44,7 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..scene import Scene
 from .assembly import Assembly
 from .bspline import fit_interior, jerk_integral_reference, knot_values, rest_to_rest
@@ -187,7 +187,7 @@ class SplineSegmentProblem:
         """Initial guess from a planner's path (M × nj, no timing): the path is followed with the
         rest-to-rest quintic time law in joint-space arc length, each knot projected onto the
         closed-chain manifold. Returns whether every projection converged."""
-        from ..splines import resample_path
+        from ..geometry.splines import resample_path
         from ..constraints.closed_chain import project_closed_chain
 
         path = np.asarray(path, float)
@@ -274,7 +274,7 @@ class SplineSegmentProblem:
                 fid, V, r = geometry_points(self.robot, idx)
                 return self._static_or_moving(kind, idx, fid, V, r)
             fid, shape, Mbox = spec
-            from .. import distance as D
+            from ..geometry import distance as D
             if isinstance(shape, D.Box):
                 V, r = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T, 0.0
             elif isinstance(shape, D.Sphere):

@@ -26,8 +26,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError
-from ..robot import RobotModel
-from ..spatial import pose_residual, vee_skew
+from ..model.robot import RobotModel
+from ..geometry.spatial import pose_residual, vee_skew
 from .build import BuildContext, TermData
 from .transcription import Transcription
 
@@ -43,7 +43,7 @@ _vee_skew = vee_skew
 
 
 def pose_residual_numeric(M: pin.SE3, target: pin.SE3) -> tuple[np.ndarray, float]:
-    """:func:`~optplan.spatial.pose_residual` of a placement against a target placement (numpy)."""
+    """:func:`~optplan.geometry.spatial.pose_residual` of a placement against a target placement (numpy)."""
     return pose_residual(M.rotation, M.translation, target.rotation, target.translation)
 
 

@@ -7,7 +7,7 @@ space robot ``dshdasr`` with the space-arc equivalent kinematics, solved as one 
   (``T_et^a``); Arm-b's tip sits at the point given by ``T_et^b`` and points at the locked point;
   two spherical obstacles. :func:`paper_task` is our reading of the paper's numbers (minus signs
   were lost in the text; the reading is documented there and in docs/dshdasr.md).
-* :class:`DshdasrArcs` — the two arc models of the robot (:mod:`optplan.methods.arcs`), arc
+* :class:`DshdasrArcs` — the two arc models of the robot (:mod:`optplan.papers.dshdasr.arcs`), arc
   parameters from joint angles and joints recovered from arc parameters.
 * :class:`ArcPlanner` — the NLP ``min ||G1||² + ||G2||² + w ||X − X_prev||²`` subject to the arc-to-
   sphere distances ≥ d_sd, built once (desired poses, previous solution and obstacles are
@@ -29,10 +29,10 @@ module                    holds
 """
 from __future__ import annotations
 
-from .dshdasr_baseline import PAPER_INITIAL_JOINTS_DEG, arm_a_on_swivel, dls_track, initial_configuration
-from .dshdasr_eval import coal_centreline_distances, evaluate, make_checker, run_case
-from .dshdasr_nlp import ArcPlanner
-from .dshdasr_task import (D2R, PAPER, ROBOT, TABLE1_XF, DshdasrArcs, TrackResult, TransposeTask, paper_task,
+from .baseline import PAPER_INITIAL_JOINTS_DEG, arm_a_on_swivel, dls_track, initial_configuration
+from .evaluate import coal_centreline_distances, evaluate, make_checker, run_case
+from .nlp import ArcPlanner
+from .task import (D2R, PAPER, ROBOT, TABLE1_XF, DshdasrArcs, TrackResult, TransposeTask, paper_task,
                            quintic)
 
 __all__ = [

@@ -1,6 +1,6 @@
 """The two arm models of the space-arc equivalent kinematics (the DSHDASR paper): residuals (Eq. 19-40),
 arcs for the obstacle distances (Eq. 45-47), arc parameters from a joint configuration, and joint
-recovery from the arc parameters (Eq. 51-62). See :mod:`optplan.methods.arcs` for the conventions.
+recovery from the arc parameters (Eq. 51-62). See :mod:`optplan.papers.dshdasr.arcs` for the conventions.
 
 Directions among the unknowns are two spherical angles (Eq. 25) measured in a reference frame
 ``R_ref``: ``k = R_ref · sph(a1, a2)``. With ``R_ref = I`` this is the paper's parameterization; the

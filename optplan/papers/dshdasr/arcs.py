@@ -36,8 +36,8 @@ arc, written so that it stays smooth and finite for a straight arc (zero curvatu
 recovery (Eq. 51-62) works from the arc tangents.
 
 This module holds the arc geometry; the two arm models (residuals, arcs, joint recovery) are in
-:mod:`optplan.methods.arcs_arms` and re-exported here. The per-waypoint NLP and the task are in
-:mod:`optplan.methods.dshdasr`; the choices and the paper comparison in docs/dshdasr.md.
+:mod:`optplan.papers.dshdasr.arc_models` and re-exported here. The per-waypoint NLP and the task are in
+:mod:`optplan.papers.dshdasr`; the choices and the paper comparison in docs/dshdasr.md.
 """
 from __future__ import annotations
 
@@ -169,7 +169,7 @@ def arc_from_tangent_length(P, t0, t1, phi, T) -> Arc:
 def __getattr__(name):
     # the two arm models live in arcs_arms.py (which imports this module); the old path warns
     if name in ("DiscreteArcModel", "SerpentineArcModel"):
-        from .._compat import moved
+        from ..._compat import moved
 
         return moved(__name__, name, __name__ + "_arms")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -4,7 +4,7 @@
 * :func:`arm_a_on_swivel`, :func:`initial_configuration` — joints holding the first desired tips
   (the paper's initial joint angles :data:`PAPER_INITIAL_JOINTS_DEG` as the DLS seed).
 
-Public entry point: :mod:`optplan.methods.dshdasr`.
+Public entry point: :mod:`optplan.papers.dshdasr`.
 """
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from .dshdasr_task import DshdasrArcs, TrackResult, TransposeTask
+from .task import DshdasrArcs, TrackResult, TransposeTask
 # after .dshdasr_task, which loads .arcs: importing .arcs_arms first fails (the two import each other)
-from .arcs_arms import frame_on
+from .arc_models import frame_on
 
 
 # --------------------------------------------------------------------------- DLS baseline

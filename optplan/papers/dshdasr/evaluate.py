@@ -5,7 +5,7 @@
   arc-model distances.
 * :func:`run_case` — one transposition by :class:`~.dshdasr_nlp.ArcPlanner`, judged 'S' or 'F'.
 
-Public entry point: :mod:`optplan.methods.dshdasr`.
+Public entry point: :mod:`optplan.papers.dshdasr`.
 """
 from __future__ import annotations
 
@@ -13,12 +13,12 @@ import math
 
 import numpy as np
 
-from ..collision import CollisionChecker
-from ..robot import RobotModel
-from ..scene import Scene
-from ..spatial import log3
-from .dshdasr_nlp import ArcPlanner
-from .dshdasr_task import DshdasrArcs, TrackResult, TransposeTask
+from ...collision.checker import CollisionChecker
+from ...model.robot import RobotModel
+from ...scene import Scene
+from ...geometry.spatial import log3
+from .nlp import ArcPlanner
+from .task import DshdasrArcs, TrackResult, TransposeTask
 
 
 # --------------------------------------------------------------------------- evaluation

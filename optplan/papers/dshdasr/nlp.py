@@ -6,7 +6,7 @@
   previous one; :meth:`ArcPlanner.track` returns a :class:`~.dshdasr_task.TrackResult`.
 * ``_external`` — optional C compilation of the NLP's derivative functions.
 
-Public entry point: :mod:`optplan.methods.dshdasr`.
+Public entry point: :mod:`optplan.papers.dshdasr`.
 """
 from __future__ import annotations
 
@@ -17,10 +17,10 @@ import time
 import casadi as ca
 import numpy as np
 
-from ..problem.nlp import NlpSolver, SolveOutcome, SolverOptions
+from ...problem.nlp import NlpSolver, SolveOutcome, SolverOptions
 from .arcs import arc_point_distance, sph, sph_angles
-from .arcs_arms import frame_on
-from .dshdasr_task import DshdasrArcs, TrackResult, TransposeTask
+from .arc_models import frame_on
+from .task import DshdasrArcs, TrackResult, TransposeTask
 
 log = logging.getLogger(__name__)
 
@@ -36,7 +36,7 @@ def _external(fun: ca.Function, opt: str = "-O1"):
     import tempfile
     from pathlib import Path
 
-    from ..codegen import cache_dir
+    from ...codegen import cache_dir
 
     cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
     if cc is None:

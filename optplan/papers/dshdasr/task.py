@@ -4,12 +4,12 @@
   :func:`quintic` (Eq. 42).
 * :class:`TransposeTask` — the target transposition of Section 5; :func:`paper_task` is our
   reading of the paper's numbers (documented there and in docs/dshdasr.md).
-* :class:`DshdasrArcs` — the two arc models of the robot (:mod:`optplan.methods.arcs`), arc
+* :class:`DshdasrArcs` — the two arc models of the robot (:mod:`optplan.papers.dshdasr.arcs`), arc
   parameters from joint angles and joints recovered from arc parameters.
 * :class:`TrackResult` — the joint trajectory a method returns (shared by the arc NLP of
   :mod:`.dshdasr_nlp` and the DLS baseline of :mod:`.dshdasr_baseline`).
 
-Public entry point: :mod:`optplan.methods.dshdasr`.
+Public entry point: :mod:`optplan.papers.dshdasr`.
 """
 from __future__ import annotations
 
@@ -19,11 +19,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pinocchio as pin
 
-from ..description import load_description
-from ..robot import RobotModel
-from ..spatial import zyx_to_matrix
-from ..splines import quintic_time_law
-from .arcs_arms import DiscreteArcModel, SerpentineArcModel
+from ...model.description import load_description
+from ...model.robot import RobotModel
+from ...geometry.spatial import zyx_to_matrix
+from ...geometry.splines import quintic_time_law
+from .arc_models import DiscreteArcModel, SerpentineArcModel
 
 ROBOT = "dshdasr"
 D2R = math.pi / 180.0

@@ -20,7 +20,7 @@ attitude from the independent simulator :func:`optplan.simulate_base`, joint err
 jumps, closed-chain residual. :func:`run_case` runs a whole section. Options are frozen dataclasses
 validated on construction whose defaults are the paper's. See ``docs/eba.md``.
 
-    from optplan.methods import eba
+    from optplan.papers import eba
     case = eba.run_case("free_end")
     rpy = {name: rep.final_base_rpy_deg for name, rep in case.reports.items()}  # [deg]
     text = eba.table(case)                                                    # ours vs the paper's
@@ -32,14 +32,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..robot import RobotModel
-from .eba_ba import BAOptions, EBAOptions, run_ba, run_eba
-from .eba_baselines import (FourierOptions, LeaderFollowerOptions, QuinticOptions, closed_chain_reference,
+from ...model.robot import RobotModel
+from .ba import BAOptions, EBAOptions, run_ba, run_eba
+from .baselines import (FourierOptions, LeaderFollowerOptions, QuinticOptions, closed_chain_reference,
                             run_fourier, run_leader_follower, run_quintic)
-from .eba_core import (END_CONSTRAINED_THETAF_DEG, FREE_END_THETAF_DEG, PAPER_FIGURES, THETA0_DEG, EBAKinematics,
+from .core import (END_CONSTRAINED_THETAF_DEG, FREE_END_THETAF_DEG, PAPER_FIGURES, THETA0_DEG, EBAKinematics,
                        MethodReport, MethodResult, Scenario, Segment, end_constrained_scenario, evaluate,
                        free_end_scenario, integrate_rpy, simulate_result)
-from .eba_nlp import NLPOptions, build_nlp, run_nlp
+from .nlp import NLPOptions, build_nlp, run_nlp
 
 __all__ = [
     "BAOptions", "EBAOptions", "QuinticOptions", "LeaderFollowerOptions", "FourierOptions", "NLPOptions",

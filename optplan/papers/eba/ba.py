@@ -39,8 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import expit
 
-from ..robot import RobotModel
-from .eba_core import EBAKinematics, MethodResult, Scenario, Segment, rpy_matrix, rpy_rate_matrix
+from ...model.robot import RobotModel
+from .core import EBAKinematics, MethodResult, Scenario, Segment, rpy_matrix, rpy_rate_matrix
 
 __all__ = ["BAOptions", "EBAOptions", "run_ba", "run_eba", "sig", "eba_input", "dls_inverse"]
 log = logging.getLogger(__name__)

@@ -28,12 +28,12 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from ..constraints.closed_chain import relative_pose_residual
-from ..problem.nlp import NlpSolver, SolverOptions
-from ..robot import RobotModel
-from ..splines import quintic_time_law
-from ..symbolic import SymbolicKinematics
-from .eba_core import (EBAKinematics, MethodResult, Scenario, Segment, hermite_segment, integrate_rpy,
+from ...constraints.closed_chain import relative_pose_residual
+from ...problem.nlp import NlpSolver, SolverOptions
+from ...model.robot import RobotModel
+from ...geometry.splines import quintic_time_law
+from ...model.symbolic import SymbolicKinematics
+from .core import (EBAKinematics, MethodResult, Scenario, Segment, hermite_segment, integrate_rpy,
                        rpy_matrix)
 
 __all__ = ["QuinticOptions", "LeaderFollowerOptions", "FourierOptions", "run_quintic",
@@ -53,7 +53,7 @@ def _check_int(owner: str, minimum: int, **kw) -> None:
             raise ValueError(f"{owner}.{n}: expected an integer ≥ {minimum}, got {v!r}")
 
 
-quintic_profile = quintic_time_law   # (p, p', p'') of the rest-to-rest quintic (:mod:`optplan.splines`)
+quintic_profile = quintic_time_law   # (p, p', p'') of the rest-to-rest quintic (:mod:`optplan.geometry.splines`)
 
 
 # --------------------------------------------------------------------------- 5th-order polynomial

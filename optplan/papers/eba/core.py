@@ -1,4 +1,4 @@
-"""Shared pieces of the seed-004 methods (:mod:`optplan.methods.eba`): the two scenarios of the
+"""Shared pieces of the seed-004 methods (:mod:`optplan.papers.eba`): the two scenarios of the
 paper's Section 4, fast numeric kinematics for the ODE right-hand sides, the trajectory container
 every method returns, and the evaluation of a trajectory with the independent free-floating
 simulator (:func:`optplan.simulate_base`).
@@ -29,11 +29,11 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg.lapack import dgesv
 
-from ..constraints.closed_chain import ChainSpec, closure_error, project_closed_chain
-from ..errors import ConfigurationError
-from ..floating import simulate_base
-from ..robot import RobotModel
-from ..spatial import rotation_angle as _rotation_angle, skew
+from ...constraints.closed_chain import ChainSpec, closure_error, project_closed_chain
+from ...errors import ConfigurationError
+from ...model.floating import simulate_base
+from ...model.robot import RobotModel
+from ...geometry.spatial import rotation_angle as _rotation_angle, skew
 
 __all__ = [
     "THETA0_DEG", "FREE_END_THETAF_DEG", "END_CONSTRAINED_THETAF_DEG", "PAPER_FIGURES", "Scenario",
@@ -66,7 +66,7 @@ PAPER_FIGURES = {
 }
 
 
-skew3 = skew   # the cross-product matrix ``[r]×`` (:func:`optplan.spatial.skew`)
+skew3 = skew   # the cross-product matrix ``[r]×`` (:func:`optplan.geometry.spatial.skew`)
 
 
 def rpy_rate_matrix(rpy: np.ndarray) -> np.ndarray:
@@ -87,7 +87,7 @@ def matrix_rpy(R) -> np.ndarray:
     return np.asarray(pin.rpy.matrixToRpy(np.asarray(R, float)))
 
 
-rotation_angle = _rotation_angle   # geodesic angle [rad] (:func:`optplan.spatial.rotation_angle`)
+rotation_angle = _rotation_angle   # geodesic angle [rad] (:func:`optplan.geometry.spatial.rotation_angle`)
 
 
 # --------------------------------------------------------------------------- kinematics

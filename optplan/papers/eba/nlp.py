@@ -30,14 +30,14 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ..problem.floating_segment import FloatingSegmentSpec, FloatingSplineProblem
-from ..problem import (BaseAttitude, ClosedChain, JointBoundary, JointPositionLimits, JointVelocityLimits,
+from ...problem.floating_segment import FloatingSegmentSpec, FloatingSplineProblem
+from ...problem import (BaseAttitude, ClosedChain, JointBoundary, JointPositionLimits, JointVelocityLimits,
                        OptProblem, Smoothness)
-from ..robot import RobotModel
-from ..splines import quintic_time_law
-from ..verify import verify
-from .eba_baselines import closed_chain_reference
-from .eba_core import MethodResult, Scenario, hermite_segment
+from ...model.robot import RobotModel
+from ...geometry.splines import quintic_time_law
+from ...verify import verify
+from .baselines import closed_chain_reference
+from .core import MethodResult, Scenario, hermite_segment
 
 __all__ = ["NLPOptions", "run_nlp", "build_nlp"]
 log = logging.getLogger(__name__)
@@ -172,7 +172,7 @@ def _coarse_warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions):
     Q = sol.sample(np.linspace(0.0, o.duration, o.n_intervals + 1))["q"]
     Q[0], Q[-1] = scenario.theta0, scenario.thetaf
     if scenario.closed_chain:
-        from .eba_core import EBAKinematics
+        from .core import EBAKinematics
 
         kin = EBAKinematics(robot)
         for k in range(1, o.n_intervals):

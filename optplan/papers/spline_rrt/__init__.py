@@ -7,7 +7,7 @@ Pipeline (:func:`run_spline_rrt`):
 1. :class:`~optplan.planners.spline_rrt.CoordinatedRRTStar` plans both hand *positions* (separated
    sampling behind a moving virtual wall).
 2. :func:`smooth_hand_paths`: a C3 quartic spline through each tree's waypoints (Eq. 8-11 with
-   v0 = a0 = vf = 0, :func:`optplan.splines.quartic_spline`), waypoint times proportional to the
+   v0 = a0 = vf = 0, :func:`optplan.geometry.splines.quartic_spline`), waypoint times proportional to the
    segment lengths; the duration T is the smallest one for which both hands keep ‖ẋ‖ ≤ the speed
    limit (an exact time scaling, since v0 = a0 = vf = 0 are invariant under it). With
    ``optimize_durations`` the segment durations come from the quartic NLP
@@ -15,7 +15,7 @@ Pipeline (:func:`run_spline_rrt`):
    Orientation: a 5th-order Bézier between the start and goal orientations (:class:`BezierOrientation`).
 3. :func:`track`: resolved rates through the generalized Jacobian (Eq. 5) with closed-loop
    correction, ``q̇ = J*⁺ (ξ_d + K e)``, the base integrated with the joints (momentum zero). The
-   figures reported are recomputed from :func:`optplan.floating.simulate_base` (independent
+   figures reported are recomputed from :func:`optplan.model.floating.simulate_base` (independent
    integrator) on the joint samples.
 4. :func:`optimize`: the same task as an :class:`~optplan.problem.OptProblem` on the floating base,
    warm-started from the tracked joint trajectory: hand paths as constraints, links ≥ 0.1 m apart,
@@ -32,16 +32,16 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from ..collision import CollisionChecker
-from ..floating import simulate_base
-from ..kinematics import Kinematics
-from ..planners.base import PlanStatus
-from ..problem.terms import Term, pose_residual, pose_residual_numeric
-from ..planners.spline_rrt import CoordinatedPlan, CoordinatedRRTStar, CoordinatedRRTStarOptions
-from ..robot import RobotModel
-from ..scene import Scene
-from ..spatial import exp3, log3, rotation_angle, rpy_to_matrix
-from ..splines import PiecewisePolynomial, quartic_spline, time_grid_from_path
+from ...collision.checker import CollisionChecker
+from ...model.floating import simulate_base
+from ...model.kinematics import Kinematics
+from ...planners.base import PlanStatus
+from ...problem.terms import Term, pose_residual, pose_residual_numeric
+from ...planners.spline_rrt import CoordinatedPlan, CoordinatedRRTStar, CoordinatedRRTStarOptions
+from ...model.robot import RobotModel
+from ...scene import Scene
+from ...geometry.spatial import exp3, log3, rotation_angle, rpy_to_matrix
+from ...geometry.splines import PiecewisePolynomial, quartic_spline, time_grid_from_path
 
 __all__ = ["SplineRRTTask", "BezierOrientation", "HandTrajectory", "smooth_hand_paths", "TrackingOptions",
            "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "InteriorVelocityLimits", "optimize", "SplineRRTResult", "run_spline_rrt", "hand_separation", "PAPER"]
@@ -83,7 +83,7 @@ class SplineRRTTask:
                 raise ValueError(f"scene {scene.name!r}: [extra] needs q_start_{a} ({robot.arm(a).n} joint angles)")
             qs[robot.arm(a).j_idx] = np.asarray(qa, float) * unit
         # the stored angles choose the IK branch; the exact start configuration is the IK solution
-        from ..ik import IKOptions, solve_arm_ik
+        from ...model.ik import IKOptions, solve_arm_ik
 
         q = robot.configuration(qs)
         for a in robot.arms:
@@ -184,7 +184,7 @@ def smooth_hand_paths(paths: dict, start: dict, goal: dict, speed_limit: float =
         if optimize_durations:
             import casadi as ca
 
-            from ..problem.quartic import smooth_quartic
+            from ...problem.quartic import smooth_quartic
 
             x, xd = ca.SX.sym("x", 3), ca.SX.sym("xd", 3)
             vmax = _max_norm(pp, 1)
@@ -244,7 +244,7 @@ class TrackingResult:
 
 
 def _pose_error(M: pin.SE3, goal: pin.SE3) -> np.ndarray:
-    from ..ik import pose_error
+    from ...model.ik import pose_error
 
     return pose_error(M, goal)
 
@@ -351,7 +351,7 @@ def evaluate(robot: RobotModel, hands: dict, t: np.ndarray, joints: np.ndarray, 
              scene: Scene | None = None, base0: pin.SE3 | None = None,
              joint_accelerations: np.ndarray | None = None) -> dict:
     """Figures of a joint trajectory on the free-floating robot, from the independent base simulator
-    (:func:`optplan.floating.simulate_base`, cubic Hermite through the samples): per-arm
+    (:func:`optplan.model.floating.simulate_base`, cubic Hermite through the samples): per-arm
     ``tracking_position_m``/``tracking_orientation_rad`` (N,), ``base_rpy`` (N, 3) [rad],
     ``q`` (N, nq), link distances, joint-rate/acceleration peaks [rad/s, rad/s²] (accelerations as
     given, else central differences of the rates)."""
@@ -470,7 +470,7 @@ def optimize(robot: RobotModel, task: SplineRRTTask, hands: dict, T: float, warm
     their planned paths at every knot (``FramePath``), start at rest from ``task.q_start``, rest at
     T, joint position/velocity limits, link–link distance ≥ ``link_margin`` (``CollisionAvoidance``),
     base attitude restored at T, minimum jerk. Returns ``(Solution, OptProblem)``."""
-    from ..problem import (BaseAttitude, CollisionAvoidance, FramePath, JointAccelerationLimits, JointBoundary,
+    from ...problem import (BaseAttitude, CollisionAvoidance, FramePath, JointAccelerationLimits, JointBoundary,
                            JointPositionLimits, JointVelocityLimits, OptProblem, Smoothness)
 
     o = options or OptimizeOptions()
