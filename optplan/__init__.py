@@ -44,7 +44,7 @@ _EXPORTS = {
     "JointAccelerationLimits": "problem", "FramePose": "problem", "FramePath": "problem",
     "ClosedChain": "problem", "CollisionAvoidance": "problem", "OrientationConstraint": "problem",
     "BaseAttitude": "problem", "Smoothness": "problem", "PathLength": "problem", "Duration": "problem",
-    "verify": "verify", "VerifyReport": "verify",
+    "verify": "verification", "VerifyReport": "verification",
     # planners
     "make_planner": "planners", "planner_names": "planners", "Planner": "planners",
     "PlanResult": "planners", "PlanStatus": "planners",
@@ -64,7 +64,7 @@ def __getattr__(name: str):
         value = getattr(importlib.import_module(f"{__name__}.{mod}"), name)
         globals()[name] = value
         return value
-    if name in _OLD_SUBMODULES:
+    if name in _OLD_SUBMODULES and name not in _EXPORTS:
         return importlib.import_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 

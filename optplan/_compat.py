@@ -38,6 +38,7 @@ MOVED_MODULES = {
     "optplan.warmstart": "optplan.constraints.closed_chain",
     "optplan.planners.closed_chain": "optplan.constraints.closed_chain",
     "optplan.bench.trials": "optplan.trials",
+    "optplan.verify": "optplan.verification",
     "optplan.methods": "optplan.papers",
     "optplan.methods.eba": "optplan.papers.eba",
     "optplan.methods.eba_core": "optplan.papers.eba.core",

@@ -35,7 +35,7 @@ from .problem.solution import Solution
 from .model.robot import RobotModel
 from .scene import Scene
 from .tasks import object_pose, segment_problem, straight_line_poses, task_space_path
-from .verify import VerifyReport, verify
+from .verification import VerifyReport, verify
 
 __all__ = ["PipelineOptions", "SegmentResult", "PipelineResult", "run_pipeline", "shortcut_constrained"]
 log = logging.getLogger(__name__)

@@ -16,7 +16,7 @@ from optplan.collision.checker import CollisionChecker
 from optplan.problem import (CollisionAvoidance, JointBoundary, JointPositionLimits, JointVelocityLimits, OptProblem,
                              Smoothness)
 from optplan.scene import Scene
-from optplan.verify import verify
+from optplan.verification import verify
 
 
 @pytest.fixture(scope="module")

@@ -28,7 +28,7 @@ from optplan.problem import (ClosedChain, CollisionAvoidance, JointBoundary, Joi
                              JointVelocityLimits, OptProblem, Smoothness)
 from optplan.scene import Scene
 from optplan.geometry.spatial import interpolate_pose
-from optplan.verify import verify
+from optplan.verification import verify
 
 
 @pytest.fixture(scope="module")

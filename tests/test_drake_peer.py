@@ -16,7 +16,7 @@ from optplan.bench.drake_peer import (BsplineSolution, ClosedChainResidual, Drak
 from optplan.collision.checker import CollisionChecker  # noqa: E402
 from optplan.problem.terms import NumericTrajectory  # noqa: E402
 from optplan.scene import Scene  # noqa: E402
-from optplan.verify import verify  # noqa: E402
+from optplan.verification import verify  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,7 @@ from optplan.model.kinematics import Kinematics
 from optplan.problem import (BaseAttitude, ClosedChain, Duration, FramePose, IpoptStatus, JointAccelerationLimits,
                              JointBoundary, JointPositionLimits, JointVelocityLimits, OptProblem, Smoothness,
                              Solution)
-from optplan.verify import verify
+from optplan.verification import verify
 
 DEG = np.pi / 180
 Z = np.zeros(14)

@@ -23,7 +23,7 @@ from optplan.problem import ClosedChain
 from optplan.problem.bspline import boundary_points, fit_interior, knot_matrices, knot_values
 from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
 from optplan.scene import Scene
-from optplan.verify import verify
+from optplan.verification import verify
 
 
 @pytest.fixture(scope="module")

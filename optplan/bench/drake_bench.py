@@ -8,7 +8,7 @@ constrained segments of the pipeline on the perturbed trials of the assembly sce
 → :func:`optplan.pipeline.shortcut_constrained` → the arc-length resampled, manifold-projected
 warm start of ``OptProblem.set_initial_path``, with the pipeline's N and duration). Every method
 gets the same start/goal, duration, margin, collision geometry and warm start, and every result
-is checked by :func:`optplan.verify.verify` (closed-chain residual at 10× the knot density ≤ 1e-6,
+is checked by :func:`optplan.verify` (closed-chain residual at 10× the knot density ≤ 1e-6,
 coal clearance ≥ 0) and its jerk cost ``∫‖d³q/dt³‖² dt`` computed from the trajectory itself.
 
 The optplan side is a callable ``optplan_solve(problem) -> PeerOutcome`` (default
@@ -30,7 +30,7 @@ import numpy as np
 from ..problem import ClosedChain
 from ..model.robot import RobotModel
 from ..scene import Scene
-from ..verify import verify
+from ..verification import verify
 
 __all__ = ["PeerProblem", "PeerOutcome", "transport_instance", "pipeline_segment_instances", "optplan_current",
            "drake_solve", "jerk_cost", "evaluate", "run", "summarize", "format_report", "RESIDUAL_TOL"]
@@ -71,7 +71,7 @@ class PeerProblem:
 
 @dataclass
 class PeerOutcome:
-    """What a method returns for a problem: ``solution`` is anything :func:`optplan.verify.verify`
+    """What a method returns for a problem: ``solution`` is anything :func:`optplan.verify`
     takes (``t`` and ``sample(t)``); ``success`` the solver's own verdict; times [s]."""
 
     method: str

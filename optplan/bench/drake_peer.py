@@ -23,7 +23,7 @@ Formulation (optional extra ``drake``; ``pip install "optplan[drake]"``):
 Solvers: SNOPT (bundled in the pip wheel) or IPOPT (Drake supplies gradients only, so IPOPT runs
 with a limited-memory Hessian). :func:`solve_drake` returns a :class:`DrakeResult` with the solver,
 its status, the times and iterations, and a :class:`BsplineSolution` — the adapter that
-:func:`optplan.verify.verify` checks like any optplan solution.
+:func:`optplan.verify` checks like any optplan solution.
 """
 from __future__ import annotations
 
@@ -333,7 +333,7 @@ def _quintic_reference_jerk(q0, q1, T: float) -> float:
 
 @dataclass
 class BsplineSolution:
-    """A Drake B-spline joint trajectory in the form :func:`optplan.verify.verify` takes: ``t``
+    """A Drake B-spline joint trajectory in the form :func:`optplan.verify` takes: ``t``
     (the N+1 breakpoints [s]; ``verify`` samples density × N intervals), ``sample(t)`` →
     ``{"t", "q", "qd", "qdd"}`` in optplan's joint order, evaluated from the B-spline itself."""
 

@@ -7,7 +7,7 @@ with the cache that run left on disk (``warm``: a fresh process that loads them)
 (NLP construction + IPOPT instance) and IPOPT wall times, the CPU time of build + solve,
 iterations (coarse + fine NLP), the C compiler's CPU time (cold compiled runs), the end
 attitude error [deg] and closed-chain residual from the independent
-simulator (:func:`optplan.verify.verify`), and the cost. Target: end-constrained restoration
+simulator (:func:`optplan.verify`), and the cost. Target: end-constrained restoration
 built and solved in ≤ 1 s. The paper's own method (EBA) took ≈ 370 s (free end) and ≈ 270 s
 (end constraints) and left 0.01-0.12° of attitude error in its planned trajectories.
 

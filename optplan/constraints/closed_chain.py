@@ -137,7 +137,7 @@ def closure_error(robot: RobotModel, grasps_or_chain, q, data: pin.Data | None =
     """Independent check with Pinocchio FK: ``(position error [m], rotation angle [rad])`` of the
     hands' relative pose at ``q`` against the chain's (``grasps_or_chain``: {arm: grasp frame} of
     two arms, or an object with ``arm_a``, ``arm_b``, ``relative``); the measure of
-    :func:`optplan.verify.verify`."""
+    :func:`optplan.verify`."""
     cc = ChainSpec.from_grasps(grasps_or_chain) if isinstance(grasps_or_chain, dict) else grasps_or_chain
     data = data or robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))

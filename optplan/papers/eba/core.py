@@ -154,7 +154,7 @@ class EBAKinematics:
 
     def closed_chain_residual(self, theta, rel0: pin.SE3) -> float:
         """max(position error [m], rotation error [rad]) of the relative hand pose
-        (:func:`optplan.constraints.closed_chain.closure_error`, as :func:`optplan.verify.verify`)."""
+        (:func:`optplan.constraints.closed_chain.closure_error`, as :func:`optplan.verify`)."""
         return max(closure_error(self.robot, ChainSpec(self.arm_a, self.arm_b, rel0), self._set(theta), self.data))
 
     def project_closed_chain(self, theta, rel0: pin.SE3, joints=None, tol: float = 1e-13,

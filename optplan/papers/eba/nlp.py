@@ -35,7 +35,7 @@ from ...problem import (BaseAttitude, ClosedChain, JointBoundary, JointPositionL
                        OptProblem, Smoothness)
 from ...model.robot import RobotModel
 from ...geometry.splines import quintic_time_law
-from ...verify import verify
+from ...verification import verify
 from .baselines import closed_chain_reference
 from .core import MethodResult, Scenario, hermite_segment
 
@@ -184,7 +184,7 @@ def run_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None = 
     """Solve the restoration NLP; ``runtime_s`` is IPOPT's wall time (both solves with
     ``coarse_intervals``), ``info`` holds the NLP construction time (``setup_s``), the CPU time of
     build + solve, the status, the iterations (``iterations`` of the final NLP,
-    ``total_iterations``) and :func:`optplan.verify.verify`'s independent figures."""
+    ``total_iterations``) and :func:`optplan.verify`'s independent figures."""
     o = options or (NLPOptions.end_constrained() if scenario.closed_chain else NLPOptions.free_end())
     t0, c0 = time.perf_counter(), time.process_time()
     coarse = None
