@@ -34,6 +34,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ModelError
+from ._robot_data import _require_dir
 from .robot import RobotModel
 
 __all__ = ["load_dual_panda", "merge_capsules", "pair_budget", "srdf_disabled_pairs", "BASE_OFFSET",
@@ -210,8 +211,6 @@ def pair_budget(robot: RobotModel, disabled: set[frozenset], samples: int = 2000
 def load_dual_panda() -> RobotModel:
     """The dual-Panda robot of the module docstring (needs ``example-robot-data``). Its pair
     budget is in ``robot.pair_budget`` (:func:`pair_budget`)."""
-    from .example_robots import _require_dir
-
     share = _require_dir()
     text = dual_panda_urdf(share)
     cache = Path(tempfile.gettempdir()) / "optplan_example_robots"

@@ -31,6 +31,7 @@ import coal
 import numpy as np
 
 from ..errors import ModelError
+from ._robot_data import _require_dir, example_robot_data_dir
 from .robot import RobotModel
 
 __all__ = ["example_robot_data_dir", "example_robots_available", "load_pr2", "load_baxter", "load_example_robot",
@@ -45,30 +46,9 @@ PR2_TORSO_LIFT = 0.15   # [m] frozen torso lift (range 0 .. 0.31 m)
 EXAMPLE_ROBOTS = ("pr2", "baxter", "dual_panda")
 
 
-def example_robot_data_dir() -> Path | None:
-    """``.../share/example-robot-data`` of the installed ``example-robot-data`` wheel, or None."""
-    import site
-    import sys
-
-    roots = list(site.getsitepackages()) + [site.getusersitepackages()] + list(sys.path)
-    for r in roots:
-        p = Path(r) / "cmeel.prefix" / "share" / "example-robot-data"
-        if (p / "robots").is_dir():
-            return p
-    return None
-
-
 def example_robots_available() -> bool:
     d = example_robot_data_dir()
     return d is not None and (d / "robots/pr2_description/urdf/pr2.urdf").exists()
-
-
-def _require_dir() -> Path:
-    d = example_robot_data_dir()
-    if d is None:
-        raise ModelError("PR2 and Baxter need the `example-robot-data` package: pip install \"optplan[robots]\" "
-                         "(or pip install example-robot-data)")
-    return d
 
 
 def _freeze(urdf: Path, keep: set[str], *, share: Path, continuous_limit: float = 2 * math.pi,

@@ -171,5 +171,5 @@ def __getattr__(name):
     if name in ("DiscreteArcModel", "SerpentineArcModel"):
         from ..._compat import moved
 
-        return moved(__name__, name, __name__ + "_arms")
+        return moved(__name__, name, "optplan.papers.dshdasr.arc_models")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
