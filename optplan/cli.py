@@ -209,6 +209,17 @@ def _load_robot(name: str):
     return load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
 
 
+def _plan_planner_options(planner: str, variant: str) -> tuple | None:
+    """``--variant`` is a TCBiRRT option; other planners take the pipeline's defaults."""
+    from .pipeline import PLANNER_DEFAULTS
+
+    if planner == "tcbirrt":
+        return PLANNER_DEFAULTS["tcbirrt"] + (("variant", variant),)
+    if variant != "paper":
+        raise UsageError(f"--variant {variant!r}: only the tcbirrt planner has variants, not {planner!r}")
+    return None
+
+
 def _cmd_plan(args) -> int:
     from .trials import TrialGenerator
     from .pipeline import PipelineOptions, run_pipeline
@@ -234,7 +245,7 @@ def _cmd_plan(args) -> int:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
         opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold,
                                compile_kernels=True if args.compile_kernels else "auto",
-                               planner_options=PipelineOptions.planner_options + (("variant", args.variant),))
+                               planner_options=_plan_planner_options(planner, args.variant))
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
     except BaseException as exc:  # a failed run still writes what it has
         if args.json:

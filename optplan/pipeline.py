@@ -41,12 +41,18 @@ __all__ = ["PipelineOptions", "SegmentResult", "PipelineResult", "run_pipeline",
 log = logging.getLogger(__name__)
 
 
+#: the pipeline's planner options when ``PipelineOptions.planner_options`` is None, per planner
+PLANNER_DEFAULTS: dict[str, tuple] = {"tcbirrt": (("edge_resolution", 0.05),)}
+
+
 @dataclass(frozen=True)
 class PipelineOptions:
     """Options of :func:`run_pipeline`.
 
     planner: a name for :func:`optplan.planners.make_planner`, planner_options its keyword options
-    (default: TCBiRRT also checks edges every 0.05 rad — with the paper's configuration-only checks
+    as ``((name, value), ...)``, passed to whichever planner is chosen (an option the planner does
+    not have is an :class:`~optplan.errors.OptionError`); None: :data:`PLANNER_DEFAULTS` of the
+    planner (TCBiRRT also checks edges every 0.05 rad — with the paper's configuration-only checks
     16-28 % of paths collide between configurations, 0-2 % with it); plan_time_limit [s].
     shortcut_attempts: random task-space shortcuts tried per constrained segment.
     n_intervals: NLP intervals per segment; speed_fraction: segment duration = joint path length /
@@ -113,7 +119,7 @@ class PipelineOptions:
     """
 
     planner: str = "tcbirrt"
-    planner_options: tuple = (("edge_resolution", 0.05),)
+    planner_options: tuple | None = None
     plan_time_limit: float = 10.0
     shortcut_attempts: int = 40
     n_intervals: int = 20
@@ -141,6 +147,12 @@ class PipelineOptions:
     compile_kernels: bool | str = "auto"
     velocity_retries: int = 2
     coarse_factor: int = 0
+
+    def planner_kwargs(self) -> dict:
+        """Keyword options for :func:`~optplan.planners.make_planner` (module defaults when
+        ``planner_options`` is None)."""
+        opts = PLANNER_DEFAULTS.get(self.planner.lower(), ()) if self.planner_options is None else self.planner_options
+        return dict(opts)
 
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
@@ -179,7 +191,8 @@ class SegmentResult:
 @dataclass
 class PipelineResult:
     """``plan`` (PlanResult), per-segment results, and the concatenated trajectory ``t`` [s],
-    ``q`` (M × nq), ``constrained`` (M,). ``success``: planned, every segment solved and verified."""
+    ``q`` (M × nq), ``constrained`` (M,). ``success``: planned, every segment solved and verified
+    (closed-chain residual ≤ ``closed_chain_tol``, clearance ≥ 0)."""
 
     plan: object
     segments: list = field(default_factory=list)
@@ -193,6 +206,8 @@ class PipelineResult:
     #: the same in this process's CPU time [s] (what a loaded machine does not inflate)
     opt_cpu_s: float = 0.0
     joint_names: tuple = ()
+    #: the closed-chain tolerance [m, rad] the trajectory is verified against (PipelineOptions.closed_chain_tol)
+    closed_chain_tol: float = 1e-6
 
     @property
     def opt_status(self) -> str:
@@ -231,7 +246,8 @@ class PipelineResult:
     def success(self) -> bool:
         return bool(self.plan is not None and self.plan.success and self.segments
                     and all(s.solution.success for s in self.segments)
-                    and (np.isnan(self.max_closed_chain_residual) or self.max_closed_chain_residual <= 1e-6)
+                    and (np.isnan(self.max_closed_chain_residual)
+                         or self.max_closed_chain_residual <= self.closed_chain_tol)
                     and self.min_clearance_m >= 0.0)
 
     def to_dict(self) -> dict:
@@ -599,12 +615,11 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     opts = options or PipelineOptions()
     rng = np.random.default_rng(seed)
     checker = CollisionChecker(robot, scene)
-    kw = dict(opts.planner_options) if opts.planner == "tcbirrt" else {}
-    planner = make_planner(opts.planner, robot, scene, **kw)
+    planner = make_planner(opts.planner, robot, scene, **opts.planner_kwargs())
     t0 = time.perf_counter()
     plan = planner.plan(q_start, q_goal, time_limit=opts.plan_time_limit, seed=seed)
     res = PipelineResult(plan=plan, plan_time_s=float(plan.stats.get("time_s", time.perf_counter() - t0)),
-                         joint_names=robot.joint_names)
+                         joint_names=robot.joint_names, closed_chain_tol=opts.closed_chain_tol)
     if not plan.success:
         return res
     t1, c1 = time.perf_counter(), time.process_time()

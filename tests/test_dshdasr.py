@@ -1,4 +1,4 @@
-"""Seed 003 (DSHDASR): the robot model with coupled serpentine joints, its symbolic kinematics,
+"""The DSHDASR paper: the robot model with coupled serpentine joints, its symbolic kinematics,
 the space-arc equivalent kinematics (residuals, joint recovery, arc-to-sphere distance), the
 per-waypoint NLP on the nominal transposition, the DLS baseline and the Table 1 extra cases."""
 from __future__ import annotations

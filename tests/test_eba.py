@@ -1,4 +1,4 @@
-"""Seed 004 (issue 5): BA, EBA, quintic, leader-follower, Fourier and optplan's restoration NLP.
+"""The EBA paper (issue 5): BA, EBA, quintic, leader-follower, Fourier and optplan's restoration NLP.
 
 Every method runs once per module (fixtures); the tests check the issue's bullets: EBA's meeting
 (Δθ → 0 with zero velocity at 0, t_m, 2 t_m), BA's velocity jumps, the NLP's exact restoration

@@ -1,4 +1,4 @@
-"""Audit of BA / EBA (optplan.papers.eba.ba) against seed 004's equations — docs/_eba_audit.md.
+"""Audit of BA / EBA (optplan.papers.eba.ba) against the EBA paper's equations — docs/_eba_audit.md.
 
 Each test rebuilds one printed equation independently (the paper's Eq. 1 matrix on the
 world-frame base angular velocity in its [αz, αy, αx] order, the printed Eq. 21 form

@@ -11,8 +11,8 @@ from optplan.model.floating import FloatingResult, joint_trajectory_from_samples
 from optplan.model.kinematics import Kinematics
 
 DEG = np.pi / 180.0
-TOTAL_MASS = 593.58  # seed 004 Table 2
-# seed 004, Section 4.1 free-end case (same start for both arms)
+TOTAL_MASS = 593.58  # the EBA paper Table 2
+# the EBA paper, Section 4.1 free-end case (same start for both arms)
 Q0 = np.r_[[-23.44, -90, 12.51, 104.8, -27.33, 66.56, -38] * 2] * DEG
 QF = np.r_[[-23.44, -80, -17.49, 134.8, -12.33, 111.56, -38],
            [-23.44, -180, 47.51, 144.8, 7.67, 86.56, -38]] * DEG

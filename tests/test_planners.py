@@ -1,4 +1,4 @@
-"""Planners of issue 4: TCBiRRT (seed 000 Alg. 1-4 + regrasp), RRTConnect, CBiRRT2, OMPL peers,
+"""Planners of issue 4: TCBiRRT (the TCBiRRT paper Alg. 1-4 + regrasp), RRTConnect, CBiRRT2, OMPL peers,
 the SSPS scenes and trial generation, and the benchmark runner.
 
 Every closed-chain check is independent of the planners: Pinocchio FK of both hands

@@ -362,8 +362,8 @@ def _check_restoration(eba, p, att, sol, tol):
 
 
 @pytest.mark.slow
-def test_attitude_restoration_seed004(eba):
-    """Seed 004 θ0 → θf, N = 30 (≈ minutes: the exact-Hessian build of the floating base is slow;
+def test_attitude_restoration_eba(eba):
+    """The EBA paper's θ0 → θf, N = 30 (≈ minutes: the exact-Hessian build of the floating base is slow;
     limited-memory Hessian avoids the multi-GB expansion)."""
     p, att, sol = _restoration(eba, 30, ipopt_options={"expand": False})
     _check_restoration(eba, p, att, sol, 1e-5)

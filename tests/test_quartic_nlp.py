@@ -259,7 +259,7 @@ def test_end_effector_acceleration_needs_its_limit():
 
 
 def test_quartic_smoothing_on_a_robot_arm_with_end_effector_speed_limit(tcb):
-    """Seed 001's smoothing on real joint waypoints of tcbirrt_dual_arm: EE speed of arm A ≤ 0.1 m/s
+    """The Spline-RRT* paper's smoothing on real joint waypoints of tcbirrt_dual_arm: EE speed of arm A ≤ 0.1 m/s
     (the paper's limit), checked with Pinocchio's frame velocity (independent of CasADi)."""
     import pinocchio as pin
 

@@ -157,8 +157,7 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
     robot = robot or RobotModel.from_name("tcbirrt_dual_arm")
     scene = Scene.load(scene_name)
     tr = TrialGenerator(robot, scene).generate(int(trial), int(seed))
-    kw = dict(opts.planner_options) if opts.planner == "tcbirrt" else {}
-    plan = make_planner(opts.planner, robot, scene, **kw).plan(tr.q_start, tr.q_goal, time_limit=opts.plan_time_limit,
+    plan = make_planner(opts.planner, robot, scene, **opts.planner_kwargs()).plan(tr.q_start, tr.q_goal, time_limit=opts.plan_time_limit,
                                                                seed=tr.seed)
     if not plan.success:
         log.warning("%s trial %d: plan failed (%s)", scene_name, trial, plan.status.value)

@@ -15,6 +15,9 @@ closed-chain flags, segments, stats) — see :mod:`optplan.planners.base`.
 """
 from __future__ import annotations
 
+import dataclasses
+
+from ..errors import OptionError
 from .base import CLOCKS, Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2, CBiRRT2Options
 from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
@@ -38,9 +41,17 @@ def planner_names() -> list[str]:
 
 def make_planner(name: str, robot, scene, *, checker: ValidityChecker | None = None,
                  kinematics: ClosedChainKinematics | None = None, **options) -> Planner:
-    """Build a planner by name; ``options`` are the fields of its options dataclass.
+    """Build a planner by name; ``options`` are the fields of its options dataclass (another name
+    is an :class:`~optplan.errors.OptionError` listing the planner's options).
     ``checker``/``kinematics`` may be shared between planners of the same robot and scene."""
     key = name.lower()
+    cls = {"tcbirrt": TCBiRRTOptions, "cbirrt2": CBiRRT2Options, "rrtconnect": RRTConnectOptions}.get(key)
+    if cls is not None:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise OptionError(f"make_planner({name!r}): unknown option(s) {', '.join(unknown)}; "
+                              f"{cls.__name__} has: {', '.join(sorted(known))}")
     if key == "tcbirrt":
         return TCBiRRT(robot, scene, TCBiRRTOptions(**options), checker=checker, kinematics=kinematics)
     if key == "cbirrt2":
