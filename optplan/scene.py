@@ -30,7 +30,6 @@ Schema (lengths [m], angles in ``angle_unit``; ``rpy`` = roll, pitch, yaw with
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,7 +37,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .model.description import models_dir
+from .model.description import models_dir, read_model_toml
 from .errors import ModelError, UnknownNameError
 from .geometry.spatial import rpy_to_matrix
 
@@ -121,22 +120,7 @@ class Scene:
     @classmethod
     def load(cls, name_or_path: str | Path) -> "Scene":
         """Load ``models/scenes/<name>.toml`` or a TOML path."""
-        p = Path(name_or_path)
-        if p.suffix != ".toml":
-            cand = models_dir() / "scenes" / f"{name_or_path}.toml"
-            if not cand.exists():
-                raise UnknownNameError("scene", str(name_or_path), available_scenes())
-            p = cand
-        if not p.exists():
-            raise ModelError(f"scene file {str(p)!r} does not exist")
-        try:
-            data = tomllib.loads(p.read_bytes().decode("utf-8"))
-        except tomllib.TOMLDecodeError as exc:
-            raise ModelError(f"{p}: malformed TOML: {exc}") from exc
-        except UnicodeDecodeError as exc:
-            raise ModelError(f"{p}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
-        except OSError as exc:
-            raise ModelError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+        data, p = read_model_toml(name_or_path, "scenes", "scene", available_scenes)
         return cls.from_dict(data, where=p.name)
 
     @classmethod

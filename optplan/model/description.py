@@ -410,24 +410,31 @@ def _parse_any_arm_type(name: str, d: dict, ang: float, src: str):
     return _parse_arm_type(name, d, ang, src)
 
 
-def load_description(name_or_path: str | Path) -> RobotDescription:
-    """Parse a robot description TOML (a path, or a model name in ``models/robots``)."""
+def read_model_toml(name_or_path: str | Path, folder: str, what: str, available) -> tuple[dict, Path]:
+    """``(data, path)`` of a TOML file: a path ending in ``.toml``, or a name in
+    ``models/<folder>`` (``what``: "robot model", "scene"; ``available()``: the known names for the
+    error). A missing, malformed, non-UTF-8 or unreadable file is a :class:`ModelError`."""
     p = Path(name_or_path)
     if p.suffix != ".toml":
-        cand = models_dir() / "robots" / f"{name_or_path}.toml"
+        cand = models_dir() / folder / f"{name_or_path}.toml"
         if not cand.exists():
-            raise UnknownNameError("robot model", str(name_or_path), available_models())
+            raise UnknownNameError(what, str(name_or_path), available())
         p = cand
     if not p.exists():
-        raise ModelError(f"robot description {str(p)!r} does not exist")
+        raise ModelError(f"{what} file {str(p)!r} does not exist")
     try:
-        data = tomllib.loads(p.read_bytes().decode("utf-8"))
+        return tomllib.loads(p.read_bytes().decode("utf-8")), p
     except tomllib.TOMLDecodeError as exc:
         raise ModelError(f"{p}: malformed TOML: {exc}") from exc
     except UnicodeDecodeError as exc:
         raise ModelError(f"{p}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
     except OSError as exc:
         raise ModelError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+
+
+def load_description(name_or_path: str | Path) -> RobotDescription:
+    """Parse a robot description TOML (a path, or a model name in ``models/robots``)."""
+    data, p = read_model_toml(name_or_path, "robots", "robot model", available_models)
     src = p.name
     _known_keys(data, _TOP_KEYS, src)
     unit = data.get("angle_unit", "rad")

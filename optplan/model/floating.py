@@ -20,7 +20,7 @@ from ..errors import ConfigurationError, check_vector
 from .robot import RobotModel
 from ..geometry.spatial import check_pose
 
-__all__ = ["FloatingResult", "simulate_base", "joint_trajectory_from_samples"]
+__all__ = ["FloatingResult", "simulate_base", "joint_trajectory_from_samples", "rk4_step"]
 log = logging.getLogger(__name__)
 
 JointTrajectory = Callable[[float], tuple[np.ndarray, np.ndarray]]
@@ -54,6 +54,16 @@ class FloatingResult:
     @property
     def final_base(self) -> pin.SE3:
         return pin.XYZQUATToSE3(self.q[-1, :7])
+
+
+def rk4_step(f, t: float, x: np.ndarray, h: float, k1: np.ndarray | None = None) -> np.ndarray:
+    """One classical Runge–Kutta step of ``ẋ = f(t, x)`` from ``(t, x)`` over ``h`` (``k1``:
+    ``f(t, x)`` when the caller has it already)."""
+    k1 = f(t, x) if k1 is None else k1
+    k2 = f(t + h / 2, x + h / 2 * k1)
+    k3 = f(t + h / 2, x + h / 2 * k2)
+    k4 = f(t + h, x + h * k3)
+    return x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 def joint_trajectory_from_samples(t, q_joints, qd_joints=None) -> JointTrajectory:
@@ -157,11 +167,7 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
         dt = (t_grid[k + 1] - t_grid[k]) / substeps
         tt = t_grid[k]
         for _ in range(substeps):
-            k1 = deriv(tt, x)
-            k2 = deriv(tt + dt / 2, x + dt / 2 * k1)
-            k3 = deriv(tt + dt / 2, x + dt / 2 * k2)
-            k4 = deriv(tt + dt, x + dt * k3)
-            x = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = rk4_step(deriv, tt, x, dt)
             x[3:] /= np.linalg.norm(x[3:])
             tt += dt
         record(k + 1, t_grid[k + 1], x)

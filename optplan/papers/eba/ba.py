@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import expit
 
+from ...model.floating import rk4_step
 from ...model.robot import RobotModel
 from .core import EBAKinematics, MethodResult, Scenario, Segment, rpy_matrix, rpy_rate_matrix
 
@@ -221,10 +222,7 @@ def _rk4(f, X, t_end, dt, max_rate, rate_of, met=None):
             diverged = True
             break
         Fs.append(k1)
-        k2 = f(t + dt / 2, X + dt / 2 * k1)
-        k3 = f(t + dt / 2, X + dt / 2 * k2)
-        k4 = f(t + dt, X + dt * k3)
-        X = X + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        X = rk4_step(f, t, X, dt, k1)
         t += dt
         Xs.append(X.copy())
         ts.append(t)

@@ -31,7 +31,7 @@ from scipy.linalg.lapack import dgesv
 
 from ...constraints.closed_chain import ChainSpec, closure_error, project_closed_chain
 from ...errors import ConfigurationError
-from ...model.floating import simulate_base
+from ...model.floating import rk4_step, simulate_base
 from ...model.robot import RobotModel
 from ...geometry.spatial import rotation_angle as _rotation_angle, skew
 
@@ -322,11 +322,7 @@ def integrate_rpy(kin: EBAKinematics, segments: list[Segment], substeps: int = 1
             h = (s.t[k + 1] - s.t[k]) / substeps
             tt = s.t[k]
             for _ in range(substeps):
-                k1 = f(tt, a)
-                k2 = f(tt + h / 2, a + h / 2 * k1)
-                k3 = f(tt + h / 2, a + h / 2 * k2)
-                k4 = f(tt + h, a + h * k3)
-                a = a + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+                a = rk4_step(f, tt, a, h)
                 tt += h
             out.append(a.copy())
     return np.array(out)
