@@ -77,7 +77,7 @@ def object_pose(robot: RobotModel, scene: Scene, q, arm: str, data: pin.Data | N
     """World pose of the scene's object held by ``arm``'s hand at the full configuration ``q``."""
     data = data or robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))
-    return data.oMf[robot.arm(arm).ee_frame_id] * scene.object.grasps[arm].inverse()
+    return scene.object.object_pose_from_hand(arm, data.oMf[robot.arm(arm).ee_frame_id])
 
 
 def straight_line_poses(start: pin.SE3, goal: pin.SE3, n: int) -> list[pin.SE3]:

@@ -216,7 +216,9 @@ for old_mod, name, new_mod in [
         ("optplan.problem.terms", "ClosedChain", "optplan.problem.frame_terms"),
         ("optplan.model.description", "urdf_string", "optplan.model.urdf_writer"),
         ("optplan.model.ik", "solve_grasp_ik", "optplan.constraints.closed_chain"),
-        ("optplan.papers.dshdasr.arcs", "DiscreteArcModel", "optplan.papers.dshdasr.arc_models")]:
+        ("optplan.papers.dshdasr.arcs", "DiscreteArcModel", "optplan.papers.dshdasr.arc_models"),
+        ("optplan.planners", "ClosedChainKinematics", "optplan.constraints.closed_chain"),
+        ("optplan.planners", "interpolate_task", "optplan.planners.tcbirrt")]:
     with warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")
         obj = getattr(importlib.import_module(old_mod), name)

@@ -16,21 +16,37 @@ closed-chain flags, segments, stats) — see :mod:`optplan.planners.base`.
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 from ..errors import OptionError
-from .base import CLOCKS, Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from .base import PathSegment, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2, CBiRRT2Options
-from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
-from .rrtconnect import RRTConnect, RRTConnectOptions, rrt_connect, shortcut_path
-from .tcbirrt import TCBiRRT, TCBiRRTOptions, exp_coordinates, interpolate_task
+from .rrtconnect import RRTConnect, RRTConnectOptions
+from .tcbirrt import TCBiRRT, TCBiRRTOptions
 from .validity import ValidityChecker
 
+if TYPE_CHECKING:
+    from ..constraints.closed_chain import ClosedChainKinematics
+
 __all__ = [
-    "CBiRRT2", "CBiRRT2Options", "CLOCKS", "ClosedChainKinematics", "Deadline", "IKSettings", "PathSegment",
-    "PlanResult", "PlanStatus", "Planner", "RRTConnect", "RRTConnectOptions", "TCBiRRT", "TCBiRRTOptions",
-    "ValidityChecker", "closure_error", "exp_coordinates", "interpolate_task", "make_planner", "planner_names",
-    "rrt_connect", "shortcut_path",
+    "CBiRRT2", "CBiRRT2Options", "PathSegment", "PlanResult", "PlanStatus", "Planner", "RRTConnect",
+    "RRTConnectOptions", "TCBiRRT", "TCBiRRTOptions", "ValidityChecker", "make_planner", "planner_names",
 ]
+
+#: names this package used to export, now imported from the module that defines them
+_MOVED = {"CLOCKS": "optplan.planners.base", "Deadline": "optplan.planners.base",
+          "ClosedChainKinematics": "optplan.constraints.closed_chain",
+          "IKSettings": "optplan.constraints.closed_chain", "closure_error": "optplan.constraints.closed_chain",
+          "rrt_connect": "optplan.planners.rrtconnect", "shortcut_path": "optplan.planners.rrtconnect",
+          "exp_coordinates": "optplan.planners.tcbirrt", "interpolate_task": "optplan.planners.tcbirrt"}
+
+
+def __getattr__(name):
+    if name in _MOVED:
+        from .._compat import moved
+
+        return moved(__name__, name, _MOVED[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def planner_names() -> list[str]:
