@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .planners.base import pose_to_vector, vector_to_pose
+from .geometry.spatial import pose_to_vector, vector_to_pose
 from .constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from .planners.tcbirrt import interpolate_task
 from .planners.validity import ValidityChecker

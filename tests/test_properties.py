@@ -31,7 +31,8 @@ from optplan.model.description import load_description, models_dir
 from optplan.errors import OptplanError, ResultFileError
 from optplan.model.ik import IKOptions, solve_arm_ik
 from optplan.model.kinematics import Kinematics
-from optplan.planners.base import PlanResult, PlanStatus, vector_to_pose
+from optplan.geometry.spatial import vector_to_pose
+from optplan.planners.base import PlanResult, PlanStatus
 from optplan.problem import JointBoundary, OptProblem
 from optplan.problem.solution import IpoptStatus, Solution
 from optplan.model.robot import RobotModel

@@ -14,7 +14,8 @@ from optplan.collision.checker import CollisionChecker
 from optplan.model.description import load_description, models_dir, urdf_dir
 from optplan.errors import ConfigurationError, ModelError, OptionError, ResultFileError, UnknownNameError
 from optplan.pipeline import PipelineResult
-from optplan.planners.base import PlanResult, PlanStatus, vector_to_pose
+from optplan.geometry.spatial import vector_to_pose
+from optplan.planners.base import PlanResult, PlanStatus
 from optplan.problem.solution import IpoptStatus, Solution
 from optplan.model.robot import RobotModel
 from optplan.scene import Scene

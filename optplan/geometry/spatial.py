@@ -21,7 +21,7 @@ import pinocchio as pin
 __all__ = [
     "rotx", "roty", "rotz", "rpy_to_matrix", "matrix_to_rpy", "zyx_to_matrix", "matrix_to_zyx",
     "exp3", "log3", "se3", "pose_to_vector_rpy", "interpolate_pose", "rotation_angle",
-    "check_rotation", "check_pose", "quaternion_to_matrix", "vee_skew", "skew", "pose_residual",
+    "check_rotation", "check_pose", "quaternion_to_matrix", "vee_skew", "skew", "pose_residual", "pose_to_vector", "vector_to_pose",
 ]
 
 #: how far ``RᵀR`` may be from the identity (and det R from 1) for R to count as a rotation
@@ -66,18 +66,27 @@ def check_pose(M, what: str = "pose") -> pin.SE3:
 def quaternion_to_matrix(quat, what: str = "quaternion") -> np.ndarray:
     """Rotation matrix of a quaternion ``[qx, qy, qz, qw]`` (Pinocchio's order), normalised; a
     zero, non-finite or wrongly sized quaternion is a ConfigurationError."""
-    from ..errors import ConfigurationError
+    from ..errors import ConfigurationError, check_vector
 
-    try:
-        v = np.asarray(quat, dtype=float)
-    except (TypeError, ValueError):
-        raise ConfigurationError(f"{what}: expected 4 numbers [qx, qy, qz, qw], got {quat!r}") from None
-    if v.shape != (4,) or not np.all(np.isfinite(v)):
-        raise ConfigurationError(f"{what}: expected 4 finite numbers [qx, qy, qz, qw], got {quat!r}")
+    v = check_vector(quat, 4, f"{what} [qx, qy, qz, qw]")
     n = float(np.linalg.norm(v))
     if n < 1e-9:
         raise ConfigurationError(f"{what}: zero quaternion {v.tolist()} has no orientation (expected a unit quaternion)")
     return np.asarray(pin.Quaternion(*(v[[3, 0, 1, 2]] / n)).toRotationMatrix())
+
+
+def pose_to_vector(M: pin.SE3) -> np.ndarray:
+    """``[x, y, z, qx, qy, qz, qw]`` of a placement (Pinocchio's XYZQUAT)."""
+    return np.asarray(pin.SE3ToXYZQUAT(M), dtype=float)
+
+
+def vector_to_pose(v) -> pin.SE3:
+    """Inverse of :func:`pose_to_vector`; a vector that is not 7 finite numbers or whose quaternion
+    is zero is a ConfigurationError."""
+    from ..errors import check_vector
+
+    a = check_vector(v, 7, "pose [x, y, z, qx, qy, qz, qw]")
+    return pin.SE3(quaternion_to_matrix(a[3:], "pose quaternion"), a[:3])
 
 
 def rotx(a: float) -> np.ndarray:
