@@ -162,8 +162,11 @@ def vee_skew(E):
     return 0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
 
 
-def skew(v) -> np.ndarray:
-    """``[v]×`` (3 × 3) of a 3-vector: ``skew(v) @ w = v × w``."""
+def skew(v):
+    """``[v]×`` (3 × 3) of a 3-vector: ``skew(v) @ w = v × w`` (a CasADi matrix when ``v`` is
+    CasADi, numpy otherwise)."""
+    if isinstance(v, (ca.SX, ca.MX, ca.DM)):
+        return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]), ca.horzcat(-v[1], v[0], 0))
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 

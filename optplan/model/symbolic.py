@@ -23,14 +23,13 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ModelError
+from ..geometry.spatial import skew as _skew
 from .robot import RobotModel
 
 __all__ = ["SymbolicKinematics", "skew", "quat_to_matrix", "rodrigues"]
 
 
-def skew(w):
-    """3 × 3 cross-product matrix of a CasADi (or numeric) 3-vector."""
-    return ca.vertcat(ca.horzcat(0, -w[2], w[1]), ca.horzcat(w[2], 0, -w[0]), ca.horzcat(-w[1], w[0], 0))
+skew = _skew   # 3 × 3 cross-product matrix (:func:`optplan.geometry.spatial.skew`)
 
 
 def quat_to_matrix(quat):
@@ -45,7 +44,7 @@ def quat_to_matrix(quat):
 
 def rodrigues(axis: np.ndarray, angle):
     """``exp(angle [axis]×)`` for a constant unit axis and a symbolic angle."""
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]], float)
+    K = _skew(np.asarray(axis, float))
     return ca.DM.eye(3) + ca.sin(angle) * ca.DM(K) + (1 - ca.cos(angle)) * ca.DM(K @ K)
 
 
