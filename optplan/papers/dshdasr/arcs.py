@@ -49,7 +49,7 @@ import numpy as np
 
 __all__ = [
     "sph", "sph_angles", "Arc", "arc_point_distance", "arc_sample", "arc_deviation",
-    "arc_from_tangent_length", "DiscreteArcModel", "SerpentineArcModel",
+    "arc_from_tangent_length",
 ]
 
 
