@@ -22,10 +22,10 @@ import time
 import numpy as np
 
 from optplan import RobotModel
-from optplan.collision import CollisionChecker
+from optplan.collision.checker import CollisionChecker
 from optplan.scene import Scene
 from optplan.tasks import transport_initial_path, transport_problem
-from optplan.verify import verify
+from optplan.verification import verify
 
 
 def run(knots: int = 50, duration: float = 60.0, seed: int = 0, margin: float = 0.02, scene_name: str = "transport",

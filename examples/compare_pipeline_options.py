@@ -26,10 +26,10 @@ def _tuples(v):
 
 
 def main(argv=None) -> int:
-    from optplan.bench.trials import TrialGenerator
+    from optplan.trials import TrialGenerator
     from optplan.pipeline import PipelineOptions, run_pipeline
     from optplan.problem.kernels import KernelCache
-    from optplan.robot import RobotModel
+    from optplan.model.robot import RobotModel
     from optplan.scene import Scene
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from optplan.methods.dshdasr import (PAPER, TABLE1_XF, ArcPlanner, DshdasrArcs, dls_track, evaluate,
+from optplan.papers.dshdasr import (PAPER, TABLE1_XF, ArcPlanner, DshdasrArcs, dls_track, evaluate,
                                      initial_configuration, paper_task, run_case)
 
 TOL = 1e-6
@@ -37,7 +37,7 @@ def _fmt_d(m, arm, obs):
 # --------------------------------------------------------------------------- figures
 def _target_errors(res, task, arcs):
     """Target CoM pose error (Fig. 14): the target held by Arm-a's FK through T_et^a vs Eq. 42."""
-    from optplan.spatial import log3
+    from optplan.geometry.spatial import log3
 
     targets = task.target(res.t)
     ep, eo = np.zeros(len(res.t)), np.zeros(len(res.t))
@@ -72,7 +72,7 @@ def plot_all(res, base, task, arcs, planner, out_dir) -> list[Path]:
     import casadi as ca
     import matplotlib.pyplot as plt
 
-    from optplan.methods.arcs import arc_sample
+    from optplan.papers.dshdasr.arcs import arc_sample
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -216,7 +216,7 @@ def main(argv=None) -> int:
 
     thr = task.thresholds
     n = len(res.t)
-    print(f"DSHDASR target transposition (seed 003): {n} waypoints, {task.duration:.0f} s at {task.rate:.0f} Hz, "
+    print(f"DSHDASR target transposition (the DSHDASR paper): {n} waypoints, {task.duration:.0f} s at {task.rate:.0f} Hz, "
           f"obstacle margin '{args.margin}'")
     print(f"{'':40s} {'optplan arcs':>14s} {'DLS baseline':>14s} {'paper':>12s}")
     rows = [("max tip position error Arm-a [m]", "max_tip_position_error_a_m"),
@@ -269,7 +269,7 @@ def main(argv=None) -> int:
     if args.save:
         np.savez(args.save, t=res.t, q=res.q, joint_names=np.array(arcs.robot.joint_names), robot=np.array("dshdasr"))
     if args.html:
-        from optplan.methods.dshdasr_eval import make_checker
+        from optplan.papers.dshdasr.evaluate import make_checker
         from optplan.viz.outputs import write_views
 
         for p in write_views(arcs.robot, make_checker(arcs.robot, task).scene, res.t, res.q, html=args.html,

@@ -12,7 +12,7 @@ relative hand pose exactly.
 
     python examples/eba_end_constraints.py [--json out.json] [--plot DIR] [--save DIR] [--html DIR]
 
-Exit code 0 only when the run meets its criteria (optplan.methods.eba.criteria): every method
+Exit code 0 only when the run meets its criteria (optplan.papers.eba.criteria): every method
 completed and agrees with the simulator, EBA's and the NLP's closed-chain residual ≤ 1e-6, the NLP
 restores the attitude to ≤ 1e-6 rad with zero boundary velocity/acceleration, EBA <
 leader-follower and NLP < EBA.
@@ -25,7 +25,7 @@ import sys
 import time
 
 from optplan import RobotModel
-from optplan.methods import eba
+from optplan.papers import eba
 
 
 def main(argv=None) -> int:
@@ -48,7 +48,7 @@ def main(argv=None) -> int:
     opts = {"eba": eba.EBAOptions.paper_end_constrained(),
             "nlp": eba.NLPOptions.end_constrained(n_intervals=args.nlp_intervals)}
     case = eba.run_case("end_constrained", methods, opts, robot=robot)
-    print("EBA robot, end constraints (seed 004 Sec. 4.2) — final base RPY from the independent simulator")
+    print("EBA robot, end constraints (the EBA paper Sec. 4.2) — final base RPY from the independent simulator")
     print(f"  goal: arm B's printed joints moved by {case.scenario.goal_adjustment_deg:.3f}° onto the start's "
           "closed-chain manifold")
     print(eba.table(case))
@@ -85,7 +85,7 @@ def main(argv=None) -> int:
                                     title=f"EBA robot, {case.case}: "):
             print(f"  wrote {p}")
     if args.plot:
-        from optplan.methods.eba_plots import plot_case
+        from optplan.papers.eba.plots import plot_case
 
         for p in plot_case(case, args.plot):
             print(f"  wrote {p}")

@@ -14,7 +14,7 @@ variant (`--eba-lambda 0` makes it the main one).
 
     python examples/eba_free_end.py [--json out.json] [--plot DIR] [--save DIR] [--html DIR] [--methods quintic,eba]
 
-Exit code 0 only when the run meets its criteria (optplan.methods.eba.criteria): every method
+Exit code 0 only when the run meets its criteria (optplan.papers.eba.criteria): every method
 completed and agrees with the simulator, the NLP restores the attitude to ≤ 1e-6 rad with zero
 boundary velocity/acceleration, EBA < quintic and NLP < EBA, BA's velocity jumps ≫ EBA's.
 """
@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 from optplan import RobotModel
-from optplan.methods import eba
+from optplan.papers import eba
 
 
 def main(argv=None) -> int:
@@ -56,7 +56,7 @@ def main(argv=None) -> int:
         scen = case.scenario
         vres = eba.run_eba(robot, scen, eba.EBAOptions.paper_free_end())
         variant = eba.evaluate(robot, vres, scen)
-    print("EBA robot, free ends (seed 004 Sec. 4.1) — final base RPY from the independent simulator")
+    print("EBA robot, free ends (the EBA paper Sec. 4.1) — final base RPY from the independent simulator")
     print(eba.table(case))
     if variant is not None:
         v = variant
@@ -96,7 +96,7 @@ def main(argv=None) -> int:
                                     title=f"EBA robot, {case.case}: "):
             print(f"  wrote {p}")
     if args.plot:
-        from optplan.methods.eba_plots import plot_case
+        from optplan.papers.eba.plots import plot_case
 
         for p in plot_case(case, args.plot):
             print(f"  wrote {p}")

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from optplan.methods.spline_rrt import PAPER, OptimizeOptions, run_spline_rrt
+from optplan.papers.spline_rrt import PAPER, OptimizeOptions, run_spline_rrt
 from optplan.planners.spline_rrt import CoordinatedRRTStarOptions
 
 
@@ -159,7 +159,7 @@ def main(argv=None) -> int:
               f"{o['max_tracking_error_rad']:.3f} rad")
 
     if args.compare_unseparated > 0:
-        from optplan.methods.spline_rrt import hand_separation
+        from optplan.papers.spline_rrt import hand_separation
 
         n = args.compare_unseparated
         sep, uns = hand_separation(res.task, n, True), hand_separation(res.task, n, False)
@@ -182,7 +182,7 @@ def main(argv=None) -> int:
             np.savez(args.save / "spline_rrt_star_optimized.npz", t=evo["t"], q=evo["q"][:, 7:],
                      joint_names=names, base_q=evo["q"][:, :7])
     if args.plot:
-        from optplan.methods.spline_rrt_plots import write_figures
+        from optplan.papers.spline_rrt.plots import write_figures
 
         for p in write_figures(res, args.plot):
             print(f"wrote {p}")

@@ -19,7 +19,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _cmd_models_build(args) -> int:
-    from .description import available_models, load_description, urdf_dir, urdf_string, write_urdf
+    from .model.description import available_models, load_description, urdf_dir
+    from .model.urdf_writer import urdf_string, write_urdf
 
     stale = []
     for name in available_models():
@@ -39,7 +40,7 @@ def _cmd_models_build(args) -> int:
 
 
 def _cmd_models_list(args) -> int:
-    from .description import available_models, load_description
+    from .model.description import available_models, load_description
 
     for name in available_models():
         d = load_description(name)
@@ -49,7 +50,7 @@ def _cmd_models_list(args) -> int:
 
 def _cmd_models_info(args) -> int:
     from .errors import UnknownNameError
-    from .modelinfo import format_model_info, model_info
+    from .model.modelinfo import format_model_info, model_info
 
     try:
         info = model_info(args.name)
@@ -202,24 +203,35 @@ def _cmd_bench_drake(args) -> int:
 
 def _load_robot(name: str):
     """A shipped robot (models/robots) or one of example-robot-data's (pr2, baxter; extra 'robots')."""
-    from .example_robots import EXAMPLE_ROBOTS, load_example_robot
-    from .robot import RobotModel
+    from .model.example_robots import EXAMPLE_ROBOTS, load_example_robot
+    from .model.robot import RobotModel
 
     return load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
 
 
+def _plan_planner_options(planner: str, variant: str) -> tuple | None:
+    """``--variant`` is a TCBiRRT option; other planners take the pipeline's defaults."""
+    from .pipeline import PLANNER_DEFAULTS
+
+    if planner == "tcbirrt":
+        return PLANNER_DEFAULTS["tcbirrt"] + (("variant", variant),)
+    if variant != "paper":
+        raise UsageError(f"--variant {variant!r}: only the tcbirrt planner has variants, not {planner!r}")
+    return None
+
+
 def _cmd_plan(args) -> int:
-    from .bench.trials import TrialGenerator
+    from .trials import TrialGenerator
     from .pipeline import PipelineOptions, run_pipeline
-    from .robot import RobotModel
+    from .model.robot import RobotModel
     from .scene import Scene
 
     scene_name = ca.check_scene(args.scene)
     planner = ca.check_planner(args.planner)
     scene = Scene.load(scene_name)
     if args.robot is not None:
-        from .description import available_models
-        from .example_robots import EXAMPLE_ROBOTS
+        from .model.description import available_models
+        from .model.example_robots import EXAMPLE_ROBOTS
 
         known = list(available_models()) + list(EXAMPLE_ROBOTS)
         if args.robot not in known:
@@ -233,7 +245,7 @@ def _cmd_plan(args) -> int:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
         opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold,
                                compile_kernels=True if args.compile_kernels else "auto",
-                               planner_options=PipelineOptions.planner_options + (("variant", args.variant),))
+                               planner_options=_plan_planner_options(planner, args.variant))
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
     except BaseException as exc:  # a failed run still writes what it has
         if args.json:

@@ -151,7 +151,7 @@ def check_planner(name: str, option: str = "--planner") -> str:
 def check_root() -> None:
     """``OPTPLAN_ROOT``, when set, is a folder with ``models/robots`` and ``models/scenes``."""
     env = os.environ.get("OPTPLAN_ROOT")
-    if not env:   # unset or empty: the installed package's models (as optplan.description.repo_root)
+    if not env:   # unset or empty: the installed package's models (as optplan.model.description.repo_root)
         return
     p = Path(env)
     if not (p / "models").is_dir():

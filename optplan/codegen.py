@@ -21,7 +21,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["CompiledFunction", "compile_function", "cache_dir"]
+__all__ = ["CompiledFunction", "FastFunction", "compile_function", "cache_dir"]
 log = logging.getLogger(__name__)
 
 
@@ -86,6 +86,31 @@ class CompiledFunction:
             out[rows, cols] = buf[:rows.size]
             outs.append(out[:, 0] if shape[1] == 1 else out)
         return tuple(outs)
+
+
+class FastFunction:
+    """A CasADi function with dense inputs and ONE dense vector output for hot loops: compiled
+    (:func:`compile_function`) and called with the inputs copied into preallocated buffers and no
+    shape checks (inputs already flat, column-major); falls back to the interpreted function."""
+
+    def __init__(self, f: ca.Function, opt: str = "-O2"):
+        if not f.sparsity_out(0).is_dense():
+            raise ValueError(f"{f.name()}: the output must be dense")
+        self.f = f
+        self.n_out = int(f.nnz_out(0))
+        cf = compile_function(f, opt)
+        self.compiled = isinstance(cf, CompiledFunction)
+        self._cf = cf if self.compiled else None
+
+    def __call__(self, *inputs) -> np.ndarray:
+        cf = self._cf
+        if cf is None:
+            return np.asarray(self.f(*inputs), dtype=float).ravel(order="F")
+        for b, x in zip(cf._in_bufs, inputs):
+            b[:] = x
+        if cf._fn(cf._arg, cf._res, cf._iw_p, cf._w_p, 0) != 0:
+            raise RuntimeError(f"{self.f.name()}: evaluation failed")
+        return cf._out_bufs[0][:self.n_out].copy()
 
 
 def compile_function(f: ca.Function, opt: str = "-O2"):

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .floating import simulate_base
-from .kinematics import Kinematics
-from .robot import RobotModel
+from .model.floating import simulate_base
+from .model.kinematics import Kinematics
+from .model.robot import RobotModel
+from .geometry.splines import quintic_time_law
 
 THETA0_DEG = np.array([-23.44, -90, 12.51, 104.8, -27.33, 66.56, -38] * 2, float)
 THETAF_DEG = np.array([-23.44, -80, -17.49, 134.8, -12.33, 111.56, -38,
@@ -26,8 +27,8 @@ def run(duration: float = 20.0, samples: int = 401) -> dict:
 
     def traj(t: float):
         s = t / duration
-        p = 10 * s**3 - 15 * s**4 + 6 * s**5
-        dp = (30 * s**2 - 60 * s**3 + 30 * s**4) / duration
+        p, dp, _ = quintic_time_law(s)
+        dp = dp / duration
         return q0 + p * (qf - q0), dp * (qf - q0)
 
     res = simulate_base(robot, traj, np.linspace(0.0, duration, samples))

@@ -27,20 +27,22 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import pinocchio as pin
 
-from .collision import CollisionChecker
-from .ik import IKOptions, solve_grasp_ik
-from .problem import (ClosedChain, CollisionAvoidance, JointBoundary, JointPositionLimits, JointVelocityLimits,
-                      OptProblem, Smoothness)
+from .collision.checker import CollisionChecker
+from .model.ik import IKOptions
+from .problem import ClosedChain, OptProblem
 from .problem.solution import Solution
-from .robot import RobotModel
+from .model.robot import RobotModel
 from .scene import Scene
-from .spatial import interpolate_pose
-from .verify import VerifyReport, verify
+from .tasks import object_pose, segment_problem, straight_line_poses, task_space_path
+from .verification import VerifyReport, verify
 
 __all__ = ["PipelineOptions", "SegmentResult", "PipelineResult", "run_pipeline", "shortcut_constrained"]
 log = logging.getLogger(__name__)
+
+
+#: the pipeline's planner options when ``PipelineOptions.planner_options`` is None, per planner
+PLANNER_DEFAULTS: dict[str, tuple] = {"tcbirrt": (("edge_resolution", 0.05),)}
 
 
 @dataclass(frozen=True)
@@ -48,7 +50,9 @@ class PipelineOptions:
     """Options of :func:`run_pipeline`.
 
     planner: a name for :func:`optplan.planners.make_planner`, planner_options its keyword options
-    (default: TCBiRRT also checks edges every 0.05 rad — with the paper's configuration-only checks
+    as ``((name, value), ...)``, passed to whichever planner is chosen (an option the planner does
+    not have is an :class:`~optplan.errors.OptionError`); None: :data:`PLANNER_DEFAULTS` of the
+    planner (TCBiRRT also checks edges every 0.05 rad — with the paper's configuration-only checks
     16-28 % of paths collide between configurations, 0-2 % with it); plan_time_limit [s].
     shortcut_attempts: random task-space shortcuts tried per constrained segment.
     n_intervals: NLP intervals per segment; speed_fraction: segment duration = joint path length /
@@ -115,7 +119,7 @@ class PipelineOptions:
     """
 
     planner: str = "tcbirrt"
-    planner_options: tuple = (("edge_resolution", 0.05),)
+    planner_options: tuple | None = None
     plan_time_limit: float = 10.0
     shortcut_attempts: int = 40
     n_intervals: int = 20
@@ -143,6 +147,12 @@ class PipelineOptions:
     compile_kernels: bool | str = "auto"
     velocity_retries: int = 2
     coarse_factor: int = 0
+
+    def planner_kwargs(self) -> dict:
+        """Keyword options for :func:`~optplan.planners.make_planner` (module defaults when
+        ``planner_options`` is None)."""
+        opts = PLANNER_DEFAULTS.get(self.planner.lower(), ()) if self.planner_options is None else self.planner_options
+        return dict(opts)
 
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
@@ -181,7 +191,8 @@ class SegmentResult:
 @dataclass
 class PipelineResult:
     """``plan`` (PlanResult), per-segment results, and the concatenated trajectory ``t`` [s],
-    ``q`` (M × nq), ``constrained`` (M,). ``success``: planned, every segment solved and verified."""
+    ``q`` (M × nq), ``constrained`` (M,). ``success``: planned, every segment solved and verified
+    (closed-chain residual ≤ ``closed_chain_tol``, clearance ≥ 0)."""
 
     plan: object
     segments: list = field(default_factory=list)
@@ -195,6 +206,8 @@ class PipelineResult:
     #: the same in this process's CPU time [s] (what a loaded machine does not inflate)
     opt_cpu_s: float = 0.0
     joint_names: tuple = ()
+    #: the closed-chain tolerance [m, rad] the trajectory is verified against (PipelineOptions.closed_chain_tol)
+    closed_chain_tol: float = 1e-6
 
     @property
     def opt_status(self) -> str:
@@ -233,7 +246,8 @@ class PipelineResult:
     def success(self) -> bool:
         return bool(self.plan is not None and self.plan.success and self.segments
                     and all(s.solution.success for s in self.segments)
-                    and (np.isnan(self.max_closed_chain_residual) or self.max_closed_chain_residual <= 1e-6)
+                    and (np.isnan(self.max_closed_chain_residual)
+                         or self.max_closed_chain_residual <= self.closed_chain_tol)
                     and self.min_clearance_m >= 0.0)
 
     def to_dict(self) -> dict:
@@ -251,11 +265,6 @@ class PipelineResult:
 
 
 # --------------------------------------------------------------------------- shortcut
-def _object_pose(robot: RobotModel, scene: Scene, q, data, arm: str) -> pin.SE3:
-    pin.framesForwardKinematics(robot.model, data, q)
-    return data.oMf[robot.arm(arm).ee_frame_id] * scene.object.grasps[arm].inverse()
-
-
 def shortcut_constrained(robot: RobotModel, scene: Scene, path: np.ndarray, rng: np.random.Generator,
                          attempts: int = 40, checker: CollisionChecker | None = None,
                          step: float = 0.05) -> np.ndarray:
@@ -266,7 +275,7 @@ def shortcut_constrained(robot: RobotModel, scene: Scene, path: np.ndarray, rng:
     and the path gets shorter. (Joint space rather than task space: with 14 joints and 12 closure
     equations a pose does not fix the configuration, and IK continuation drifts along the
     self-motion manifold.)"""
-    from .warmstart import project_closed_chain
+    from .constraints.closed_chain import project_closed_chain
 
     checker = checker or CollisionChecker(robot, scene)
     arms = list(scene.object.grasps)
@@ -303,30 +312,22 @@ def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     vmin = float(np.min(robot.velocity_limit))
     T = max(opts.min_duration, length / (opts.speed_fraction * vmin))
-    z = np.zeros(robot.nj)
     step = opts.max_interval_step if kind == "constrained" else opts.free_interval_step
     N = n_intervals or int(np.clip(np.ceil(length / step), opts.n_intervals, opts.max_intervals))
-    prob = OptProblem(robot, n_intervals=N, duration=T)
-    prob.add_constraint(JointBoundary("start", q=seg_path[0], qd=z, qdd=z), name="start")
-    prob.add_constraint(JointBoundary("end", q=seg_path[-1], qd=z, qdd=z), name="end")
     arms = list(scene.object.grasps)
-    cc, holder = None, None
+    cc, holder, limits = None, None, None
     if kind == "constrained":
         cc = dataclasses.replace(ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]],
                                                          arms[0], arms[1]), interior=opts.closed_chain_interior)
-        prob.add_constraint(cc, name="closed_chain")
-        prob.add_constraint(JointPositionLimits(), name="joint_limits")
     else:  # regrasp: the holding arm's joints stay where they are, so the object does too
         holder = next(a for a in arms if a != arm)
         lo, hi = robot.lower.copy(), robot.upper.copy()
         idx = robot.arm(holder).j_idx
         lo[idx] = hi[idx] = seg_path[0][idx]
-        prob.add_constraint(JointPositionLimits(lower=lo, upper=hi), name="joint_limits")
-    prob.add_constraint(JointVelocityLimits(), name="velocity_limits")
-    prob.add_constraint(CollisionAvoidance(scene, margin=opts.margin, object_arm=holder or arms[0],
-                                           fixed_normals=opts.fixed_plane_normals if fixed_normals is None
-                                           else fixed_normals), name="collision")
-    prob.add_cost(Smoothness("jerk"), name="jerk")
+        limits = (lo, hi)
+    prob, _ = segment_problem(robot, scene, seg_path[0], seg_path[-1], N, T, closed_chain=cc, joint_limits=limits,
+                              margin=opts.margin, object_arm=holder or arms[0],
+                              fixed_normals=opts.fixed_plane_normals if fixed_normals is None else fixed_normals)
     return prob, cc, holder
 
 
@@ -335,13 +336,11 @@ def _cold_path(robot: RobotModel, scene: Scene, q0: np.ndarray, q1: np.ndarray, 
     if kind == "constrained":
         arm = next(iter(scene.object.grasps))
         data = robot.model.createData()
-        M0, M1 = _object_pose(robot, scene, q0, data, arm), _object_pose(robot, scene, q1, data, arm)
-        opts = IKOptions(tol_position=1e-10, tol_orientation=1e-10, max_step=0.05)
-        qs = [q0]
-        for k in range(1, n + 1):
-            qs.append(solve_grasp_ik(robot, interpolate_pose(M0, M1, k / n), scene.object.grasps, qs[-1], opts, data).q)
-        qs[-1] = q1
-        return np.array(qs)
+        M0, M1 = object_pose(robot, scene, q0, arm, data), object_pose(robot, scene, q1, arm, data)
+        Q, _ = task_space_path(robot, scene, q0, straight_line_poses(M0, M1, n), max_step=0.05,
+                               options=IKOptions(tol_position=1e-10, tol_orientation=1e-10))
+        Q[-1] = q1
+        return Q
     s = np.linspace(0, 1, n + 1)[:, None]
     return q0 + s * (q1 - q0)
 
@@ -616,12 +615,11 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     opts = options or PipelineOptions()
     rng = np.random.default_rng(seed)
     checker = CollisionChecker(robot, scene)
-    kw = dict(opts.planner_options) if opts.planner == "tcbirrt" else {}
-    planner = make_planner(opts.planner, robot, scene, **kw)
+    planner = make_planner(opts.planner, robot, scene, **opts.planner_kwargs())
     t0 = time.perf_counter()
     plan = planner.plan(q_start, q_goal, time_limit=opts.plan_time_limit, seed=seed)
     res = PipelineResult(plan=plan, plan_time_s=float(plan.stats.get("time_s", time.perf_counter() - t0)),
-                         joint_names=robot.joint_names)
+                         joint_names=robot.joint_names, closed_chain_tol=opts.closed_chain_tol)
     if not plan.success:
         return res
     t1, c1 = time.perf_counter(), time.process_time()

@@ -87,9 +87,9 @@ def _tcbirrt_view(out: Path, quick: bool) -> list[Path]:
     returns, configurations timed at 0.5 rad/s of joint motion."""
     import numpy as np
 
-    from .bench.trials import TrialGenerator
+    from .trials import TrialGenerator
     from .planners import make_planner
-    from .robot import RobotModel
+    from .model.robot import RobotModel
     from .scene import Scene
     from .viz.html import ViewOptions, write_trajectory_html
 
@@ -174,7 +174,7 @@ def _dshdasr_steps(out: Path, quick: bool, ex: Path) -> list[Step]:
 
 
 def _dshdasr_summary(out: Path, steps) -> list[str]:
-    from .methods.dshdasr import PAPER
+    from .papers.dshdasr import PAPER
 
     p = out / "dshdasr.json"
     if not p.exists():

@@ -30,7 +30,6 @@ Schema (lengths [m], angles in ``angle_unit``; ``rpy`` = roll, pitch, yaw with
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,9 +37,9 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .description import models_dir
+from .model.description import models_dir, read_model_toml
 from .errors import ModelError, UnknownNameError
-from .spatial import rpy_to_matrix
+from .geometry.spatial import rpy_to_matrix
 
 __all__ = ["Obstacle", "GraspedObject", "Scene", "available_scenes"]
 
@@ -69,8 +68,8 @@ class Obstacle:
         return coal.Capsule(self.radius, self.length)
 
     def primitive(self):
-        """The shape for :mod:`optplan.distance` (local frame)."""
-        from . import distance as D
+        """The shape for :mod:`optplan.geometry.distance` (local frame)."""
+        from .geometry import distance as D
 
         if self.shape == "box":
             return D.Box(np.asarray(self.size) / 2)
@@ -121,27 +120,12 @@ class Scene:
     @classmethod
     def load(cls, name_or_path: str | Path) -> "Scene":
         """Load ``models/scenes/<name>.toml`` or a TOML path."""
-        p = Path(name_or_path)
-        if p.suffix != ".toml":
-            cand = models_dir() / "scenes" / f"{name_or_path}.toml"
-            if not cand.exists():
-                raise UnknownNameError("scene", str(name_or_path), available_scenes())
-            p = cand
-        if not p.exists():
-            raise ModelError(f"scene file {str(p)!r} does not exist")
-        try:
-            data = tomllib.loads(p.read_bytes().decode("utf-8"))
-        except tomllib.TOMLDecodeError as exc:
-            raise ModelError(f"{p}: malformed TOML: {exc}") from exc
-        except UnicodeDecodeError as exc:
-            raise ModelError(f"{p}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
-        except OSError as exc:
-            raise ModelError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+        data, p = read_model_toml(name_or_path, "scenes", "scene", available_scenes)
         return cls.from_dict(data, where=p.name)
 
     @classmethod
     def from_dict(cls, data: dict, where: str = "scene") -> "Scene":
-        from .description import _known_keys, available_models
+        from .model.description import _known_keys, available_models
 
         _known_keys(data, ("name", "robot", "angle_unit", "object", "start", "goal", "obstacles", "extra", "notes"),
                     where)
@@ -160,7 +144,7 @@ class Scene:
         if robot is not None:
             if not isinstance(robot, str):
                 raise ModelError(f"{where}.robot: expected a robot model name, got {robot!r}")
-            from .example_robots import EXAMPLE_ROBOTS
+            from .model.example_robots import EXAMPLE_ROBOTS
 
             known = list(available_models()) + list(EXAMPLE_ROBOTS)  # shipped + example-robot-data's
             if robot not in known:

@@ -8,15 +8,17 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .collision import CollisionChecker
-from .ik import IKOptions, solve_grasp_ik
+from .collision.checker import CollisionChecker
+from .constraints.closed_chain import solve_grasp_ik
+from .model.ik import IKOptions
 from .problem import (ClosedChain, CollisionAvoidance, JointBoundary, JointPositionLimits, JointVelocityLimits,
                       OptProblem, Smoothness)
-from .robot import RobotModel
+from .model.robot import RobotModel
 from .scene import Scene
-from .spatial import interpolate_pose
+from .geometry.spatial import interpolate_pose
 
-__all__ = ["GraspIK", "grasp_configuration", "task_space_path", "transport_initial_path", "transport_problem"]
+__all__ = ["GraspIK", "grasp_configuration", "task_space_path", "transport_initial_path", "transport_problem",
+           "segment_problem", "object_pose"]
 log = logging.getLogger(__name__)
 
 _PRECISE = IKOptions(tol_position=1e-10, tol_orientation=1e-10, max_iterations=300)
@@ -71,6 +73,13 @@ def task_space_path(robot: RobotModel, scene: Scene, q_start, poses, *, max_step
     return np.array(qs), bool(ok)
 
 
+def object_pose(robot: RobotModel, scene: Scene, q, arm: str, data: pin.Data | None = None) -> pin.SE3:
+    """World pose of the scene's object held by ``arm``'s hand at the full configuration ``q``."""
+    data = data or robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))
+    return scene.object.object_pose_from_hand(arm, data.oMf[robot.arm(arm).ee_frame_id])
+
+
 def straight_line_poses(start: pin.SE3, goal: pin.SE3, n: int) -> list[pin.SE3]:
     """``n + 1`` object poses from start to goal: position linear, orientation in exponential
     coordinates (the TCBiRRT paper Eq. 4)."""
@@ -94,27 +103,48 @@ def transport_initial_path(robot: RobotModel, scene: Scene, knots: int, rng: np.
     return None
 
 
-def transport_problem(robot: RobotModel, scene: Scene, Q: np.ndarray, *, duration: float = 60.0,
-                      margin: float = 0.02, velocity_limits: bool = True,
-                      collision: bool = True) -> tuple[OptProblem, ClosedChain, CollisionAvoidance | None]:
-    """The closed-chain transport NLP on ``len(Q) − 1`` intervals: boundary configurations of Q at
-    rest, closed chain from the scene's grasps, joint position (and velocity) limits, collision
-    avoidance with ``margin`` [m], minimum jerk; warm-started from Q."""
-    N = len(Q) - 1
+def segment_problem(robot: RobotModel, scene: Scene, q_start, q_end, n_intervals: int, duration: float, *,
+                    closed_chain: ClosedChain | None = None, joint_limits=None, velocity_limits: bool = True,
+                    collision: bool = True, margin: float = 0.02, object_arm: str | None = None,
+                    fixed_normals: bool | None = None, end_name: str = "end"
+                    ) -> tuple[OptProblem, CollisionAvoidance | None]:
+    """The rest-to-rest NLP of one path segment: ``q_start`` → ``q_end`` at rest on
+    ``n_intervals`` intervals over ``duration`` [s]; the ``closed_chain`` (when given), joint
+    position limits (``joint_limits``: ``(lower, upper)`` [rad], default the robot's), joint
+    velocity limits, collision avoidance with ``margin`` [m] (object held by ``object_arm``; plane
+    normals fixed when ``fixed_normals``), minimum jerk. The one builder of the transport NLP of
+    the examples and of the pipeline's segments; returns ``(problem, collision term or None)``."""
     z = np.zeros(robot.nj)
-    prob = OptProblem(robot, n_intervals=N, duration=duration)
-    prob.add_constraint(JointBoundary("start", q=Q[0], qd=z, qdd=z), name="start")
-    prob.add_constraint(JointBoundary("end", q=Q[-1], qd=z, qdd=z), name="goal")
-    arms = list(scene.object.grasps)
-    cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
-    prob.add_constraint(cc, name="closed_chain")
-    prob.add_constraint(JointPositionLimits(), name="joint_limits")
+    prob = OptProblem(robot, n_intervals=n_intervals, duration=duration)
+    prob.add_constraint(JointBoundary("start", q=q_start, qd=z, qdd=z), name="start")
+    prob.add_constraint(JointBoundary("end", q=q_end, qd=z, qdd=z), name=end_name)
+    if closed_chain is not None:
+        prob.add_constraint(closed_chain, name="closed_chain")
+    lo, hi = joint_limits if joint_limits is not None else (None, None)
+    prob.add_constraint(JointPositionLimits(lower=lo, upper=hi), name="joint_limits")
     if velocity_limits:
         prob.add_constraint(JointVelocityLimits(), name="velocity_limits")
     col = None
     if collision:
-        col = CollisionAvoidance(scene, margin=margin)
+        kw = {} if fixed_normals is None else {"fixed_normals": fixed_normals}
+        if object_arm is not None:
+            kw["object_arm"] = object_arm
+        col = CollisionAvoidance(scene, margin=margin, **kw)
         prob.add_constraint(col, name="collision")
     prob.add_cost(Smoothness("jerk"), name="jerk")
+    return prob, col
+
+
+def transport_problem(robot: RobotModel, scene: Scene, Q: np.ndarray, *, duration: float = 60.0,
+                      margin: float = 0.02, velocity_limits: bool = True,
+                      collision: bool = True) -> tuple[OptProblem, ClosedChain, CollisionAvoidance | None]:
+    """The closed-chain transport NLP on ``len(Q) − 1`` intervals (:func:`segment_problem`):
+    boundary configurations of Q at rest, closed chain from the scene's grasps, joint position
+    (and velocity) limits, collision avoidance with ``margin`` [m], minimum jerk; warm-started
+    from Q."""
+    arms = list(scene.object.grasps)
+    cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
+    prob, col = segment_problem(robot, scene, Q[0], Q[-1], len(Q) - 1, duration, closed_chain=cc,
+                                velocity_limits=velocity_limits, collision=collision, margin=margin, end_name="goal")
     prob.set_initial(q=Q)
     return prob, cc, col

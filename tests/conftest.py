@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from optplan.robot import RobotModel
+from optplan.model.robot import RobotModel
 
 
 @pytest.fixture(scope="session", autouse=True)

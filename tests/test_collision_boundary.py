@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from optplan.collision import CollisionChecker
+from optplan.collision.checker import CollisionChecker
 from optplan.problem import (CollisionAvoidance, JointBoundary, JointPositionLimits, JointVelocityLimits, OptProblem,
                              Smoothness)
 from optplan.scene import Scene
-from optplan.verify import verify
+from optplan.verification import verify
 
 
 @pytest.fixture(scope="module")

@@ -21,13 +21,14 @@ import coal
 import numpy as np
 import pytest
 
-from optplan.collision import CollisionChecker
-from optplan.ik import IKOptions, solve_grasp_ik
+from optplan.collision.checker import CollisionChecker
+from optplan.constraints.closed_chain import solve_grasp_ik
+from optplan.model.ik import IKOptions
 from optplan.problem import (ClosedChain, CollisionAvoidance, JointBoundary, JointPositionLimits,
                              JointVelocityLimits, OptProblem, Smoothness)
 from optplan.scene import Scene
-from optplan.spatial import interpolate_pose
-from optplan.verify import verify
+from optplan.geometry.spatial import interpolate_pose
+from optplan.verification import verify
 
 
 @pytest.fixture(scope="module")

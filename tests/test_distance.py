@@ -1,4 +1,4 @@
-"""Tests of optplan.distance against coal's exact signed distance (independent implementation)."""
+"""Tests of optplan.geometry.distance against coal's exact signed distance (independent implementation)."""
 from __future__ import annotations
 
 import math
@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from optplan import distance as D
-from optplan.distance import (Box, Capsule, Sphere, capsule_box, capsule_capsule, capsule_sphere,
+from optplan.geometry import distance as D
+from optplan.geometry.distance import (Box, Capsule, Sphere, capsule_box, capsule_capsule, capsule_sphere,
                               error_bound, make_distance_function, n_covering_spheres,
                               point_segment_distance, point_segment_distance_sq, signed_distance,
                               sphere_box, sphere_sphere)

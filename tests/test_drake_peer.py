@@ -13,10 +13,10 @@ pytest.importorskip("pydrake")
 from optplan.bench import drake_bench as DB  # noqa: E402
 from optplan.bench.drake_peer import (BsplineSolution, ClosedChainResidual, DrakeModel, DrakeOptions,  # noqa: E402
                                       _basis, fit_bspline, jerk_matrix, solve_drake)
-from optplan.collision import CollisionChecker  # noqa: E402
+from optplan.collision.checker import CollisionChecker  # noqa: E402
 from optplan.problem.terms import NumericTrajectory  # noqa: E402
 from optplan.scene import Scene  # noqa: E402
-from optplan.verify import verify  # noqa: E402
+from optplan.verification import verify  # noqa: E402
 
 
 @pytest.fixture(scope="module")

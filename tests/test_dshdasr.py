@@ -1,4 +1,4 @@
-"""Seed 003 (DSHDASR): the robot model with coupled serpentine joints, its symbolic kinematics,
+"""The DSHDASR paper: the robot model with coupled serpentine joints, its symbolic kinematics,
 the space-arc equivalent kinematics (residuals, joint recovery, arc-to-sphere distance), the
 per-waypoint NLP on the nominal transposition, the DLS baseline and the Table 1 extra cases."""
 from __future__ import annotations
@@ -11,12 +11,13 @@ import pinocchio as pin
 import pytest
 
 from optplan import Kinematics, RobotModel, SymbolicKinematics
-from optplan.description import load_description, urdf_dir, urdf_string
+from optplan.model.description import load_description, urdf_dir
+from optplan.model.urdf_writer import urdf_string
 from optplan.errors import ModelError
-from optplan.methods.arcs import (Arc, arc_deviation, arc_from_tangent_length, arc_point_distance, arc_sample,
+from optplan.papers.dshdasr.arcs import (Arc, arc_deviation, arc_from_tangent_length, arc_point_distance, arc_sample,
                                   sph, sph_angles)
-from optplan.methods.arcs_arms import frame_on
-from optplan.methods.dshdasr import (PAPER, TABLE1_XF, ArcPlanner, DshdasrArcs, arm_a_on_swivel, dls_track,
+from optplan.papers.dshdasr.arc_models import frame_on
+from optplan.papers.dshdasr import (PAPER, TABLE1_XF, ArcPlanner, DshdasrArcs, arm_a_on_swivel, dls_track,
                                      evaluate, initial_configuration, paper_task, quintic, run_case)
 
 D2R = math.pi / 180

@@ -1,4 +1,4 @@
-"""Seed 004 (issue 5): BA, EBA, quintic, leader-follower, Fourier and optplan's restoration NLP.
+"""The EBA paper (issue 5): BA, EBA, quintic, leader-follower, Fourier and optplan's restoration NLP.
 
 Every method runs once per module (fixtures); the tests check the issue's bullets: EBA's meeting
 (Δθ → 0 with zero velocity at 0, t_m, 2 t_m), BA's velocity jumps, the NLP's exact restoration
@@ -14,8 +14,8 @@ import pinocchio as pin
 import pytest
 
 from optplan import Kinematics, simulate_base
-from optplan.methods import eba
-from optplan.methods.eba_core import EBAKinematics, matrix_rpy, rpy_matrix, rpy_rate_matrix
+from optplan.papers import eba
+from optplan.papers.eba.core import EBAKinematics, matrix_rpy, rpy_matrix, rpy_rate_matrix
 
 AGREE_RAD = 1e-5  # method's own final attitude vs the independent simulator
 

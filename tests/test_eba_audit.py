@@ -1,4 +1,4 @@
-"""Audit of BA / EBA (optplan.methods.eba_ba) against seed 004's equations — docs/_eba_audit.md.
+"""Audit of BA / EBA (optplan.papers.eba.ba) against the EBA paper's equations — docs/_eba_audit.md.
 
 Each test rebuilds one printed equation independently (the paper's Eq. 1 matrix on the
 world-frame base angular velocity in its [αz, αy, αx] order, the printed Eq. 21 form
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from optplan import Kinematics
-from optplan.methods import eba as eba_mod  # ``eba`` is the conftest fixture (the robot)
-from optplan.methods.eba_ba import BAOptions, EBAOptions, dls_inverse, eba_input, sig
-from optplan.methods.eba_core import rotation_angle, rpy_matrix, rpy_rate_matrix
+from optplan.papers import eba as eba_mod  # ``eba`` is the conftest fixture (the robot)
+from optplan.papers.eba.ba import BAOptions, EBAOptions, dls_inverse, eba_input, sig
+from optplan.papers.eba.core import rotation_angle, rpy_matrix, rpy_rate_matrix
 
 
 @pytest.fixture(scope="module")

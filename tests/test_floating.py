@@ -1,4 +1,4 @@
-"""Free-floating simulation (optplan.floating.simulate_base) against physics it must obey:
+"""Free-floating simulation (optplan.model.floating.simulate_base) against physics it must obey:
 momentum conservation, a fixed (or uniformly moving) centre of mass, path-dependence only
 (driftless), 4th-order convergence, and the generalized Jacobian for small motions."""
 from __future__ import annotations
@@ -7,12 +7,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.floating import FloatingResult, joint_trajectory_from_samples, simulate_base
-from optplan.kinematics import Kinematics
+from optplan.model.floating import FloatingResult, joint_trajectory_from_samples, simulate_base
+from optplan.model.kinematics import Kinematics
 
 DEG = np.pi / 180.0
-TOTAL_MASS = 593.58  # seed 004 Table 2
-# seed 004, Section 4.1 free-end case (same start for both arms)
+TOTAL_MASS = 593.58  # the EBA paper Table 2
+# the EBA paper, Section 4.1 free-end case (same start for both arms)
 Q0 = np.r_[[-23.44, -90, 12.51, 104.8, -27.33, 66.56, -38] * 2] * DEG
 QF = np.r_[[-23.44, -80, -17.49, 134.8, -12.33, 111.56, -38],
            [-23.44, -180, 47.51, 144.8, 7.67, 86.56, -38]] * DEG

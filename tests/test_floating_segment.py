@@ -10,7 +10,7 @@ import pytest
 
 from optplan import RobotModel
 from optplan.bench.restoration import ivp_attitude, quat_angle
-from optplan.methods import eba
+from optplan.papers import eba
 from optplan.problem import ClosedChain
 from optplan.problem.floating_segment import FloatingKernels, FloatingSegmentSpec, FloatingSplineProblem, spline_basis
 
@@ -107,7 +107,7 @@ def small_problem(robot):
     cc = ClosedChain.from_configuration(robot, robot.configuration(sc.theta0), "A", "B")
     N = 6
     prob = FloatingSplineProblem(robot, FloatingSegmentSpec(N, 20.0, sc.theta0, sc.thetaf, closed_chain=cc))
-    from optplan.methods.eba_baselines import closed_chain_reference
+    from optplan.papers.eba.baselines import closed_chain_reference
 
     prob.set_initial(closed_chain_reference(robot, sc, N, 20.0)[1])
     prob._build()

@@ -11,8 +11,8 @@ import pinocchio as pin
 import pytest
 
 from optplan.errors import ConfigurationError
-from optplan.example_robots import example_robot_data_dir
-from optplan.robot import RobotModel
+from optplan.model.example_robots import example_robot_data_dir
+from optplan.model.robot import RobotModel
 from optplan.scene import Scene
 
 
@@ -26,14 +26,14 @@ needs_panda = pytest.mark.skipif(not _panda_available(), reason="needs example-r
 
 @pytest.fixture(scope="module")
 def panda():
-    from optplan.dual_panda import load_dual_panda
+    from optplan.model.dual_panda import load_dual_panda
 
     return load_dual_panda()
 
 
 # --------------------------------------------------------------------------- capsule merge (no data needed)
 def test_merge_capsules_joins_a_cylinder_and_its_end_spheres():
-    from optplan.dual_panda import merge_capsules
+    from optplan.model.dual_panda import merge_capsules
 
     link = ET.fromstring("""<link name="l">
       <collision><origin rpy="0 1.5707963267948966 0" xyz="-0.075 0 0.06"/><geometry><cylinder length="0.03" radius="0.09"/></geometry></collision>
@@ -72,7 +72,7 @@ def test_dual_panda_loads_with_a_pair_budget(panda):
 def test_disabled_pairs_stay_apart_on_random_configurations(panda):
     """Independent check of the SRDF's "never in collision" claim: pairs of one arm the budget
     leaves out (and that are not adjacent) keep a positive coal distance on random configurations."""
-    from optplan.dual_panda import sampled_min_distances
+    from optplan.model.dual_panda import sampled_min_distances
 
     kept = set(panda.collision_pairs)
     objs = panda.collision_model.geometryObjects
@@ -194,7 +194,7 @@ def test_bench_scene_groups_expand_and_unknown_names_are_refused():
 
 @needs_panda
 def test_trial_perturbation_scales_with_reach(panda):
-    from optplan.bench.trials import TrialGenerator, _reach_scale
+    from optplan.trials import TrialGenerator, _reach_scale
 
     paper = RobotModel.from_name("tcbirrt_dual_arm")
     assert _reach_scale(paper) == 1.0
@@ -205,10 +205,10 @@ def test_trial_perturbation_scales_with_reach(panda):
 def test_pipeline_verified_on_a_stress_scene():
     """A scene the optimizer was not tuned on (capsule bars, a sphere, a 180° roll of the module):
     plan -> optimize -> verify succeeds, checked independently here (coal clearance, FK closure)."""
-    from optplan.bench.trials import TrialGenerator
-    from optplan.collision import CollisionChecker
+    from optplan.trials import TrialGenerator
+    from optplan.collision.checker import CollisionChecker
     from optplan.pipeline import PipelineOptions, run_pipeline
-    from optplan.planners.closed_chain import closure_error
+    from optplan.constraints.closed_chain import closure_error
 
     robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("stress_cage")
     tr = TrialGenerator(robot, scene).generate(0, 0)
@@ -228,12 +228,12 @@ def test_margins_relax_only_where_a_collision_free_guess_is_closer_than_the_marg
     clearance only where that clearance is in [0, margin); where the guess collides it stays."""
     from optplan.problem import ClosedChain
     from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
-    from optplan.warmstart import project_closed_chain
+    from optplan.constraints.closed_chain import project_closed_chain
 
     robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("transport")
     g = scene.object.grasps
     cc = ClosedChain.from_grasps(g["A"], g["B"], "A", "B")
-    from optplan.bench.trials import TrialGenerator
+    from optplan.trials import TrialGenerator
 
     tr = TrialGenerator(robot, scene).generate(0, 0)
     N = 24

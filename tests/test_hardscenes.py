@@ -10,7 +10,7 @@ import pytest
 from optplan.bench.hardscenes import SUITE, load_witness, verify_path, witness_path
 from optplan.planners import TCBiRRT, TCBiRRTOptions
 from optplan.planners.base import PlanResult, PlanStatus
-from optplan.planners.closed_chain import ClosedChainKinematics
+from optplan.constraints.closed_chain import ClosedChainKinematics
 from optplan.planners.task_sampling import ObjectPoseFilter, TaskSampler, arm_reach
 from optplan.planners.validity import ValidityChecker
 from optplan.scene import Scene
@@ -22,7 +22,7 @@ def robot(tcb):
 
 
 def test_suite_scenes_load_with_comments(robot):
-    from optplan.description import models_dir
+    from optplan.model.description import models_dir
 
     assert len(SUITE) >= 6
     for name in SUITE:
@@ -143,7 +143,7 @@ def test_improved_variant_solves_nominal_task(robot, name):
     res = pl.plan(qs, qg, time_limit=10.0, seed=0, clock="cpu")
     assert res.success, res.message
     assert np.allclose(res.path[0], qs) and np.allclose(res.path[-1], qg)
-    from optplan.planners.closed_chain import closure_error
+    from optplan.constraints.closed_chain import closure_error
 
     for q, c in zip(res.path, res.constrained):
         if c:
@@ -213,7 +213,7 @@ def test_joint_connect_joins_two_closed_chain_configurations(robot, rng):
     chain (Pinocchio FK) and is collision-free, and the path ends exactly at the target."""
     from optplan.bench.hardscenes import nominal_configurations
     from optplan.planners.base import Deadline
-    from optplan.planners.closed_chain import closure_error
+    from optplan.constraints.closed_chain import closure_error
 
     scene = Scene.load("hard_flip")
     qs, _ = nominal_configurations(robot, scene)
@@ -250,7 +250,7 @@ def test_improved_variant_success_rate(robot, name):
     of CPU time, a path whose every edge passes the bench's independent 1 cm sweep check in >= 28
     (a true rate of 0.99 passes with probability 0.997, a true rate of 0.9 with 0.41)."""
     from optplan.bench.tcbirrt import _path_checks
-    from optplan.bench.trials import TrialGenerator
+    from optplan.trials import TrialGenerator
 
     scene = Scene.load(name)
     gen = TrialGenerator(robot, scene)
@@ -269,7 +269,7 @@ def test_improved_variant_success_rate(robot, name):
 def test_improved_variant_ssps_scenes(robot, name):
     """The three SSPS scenes of the TCBiRRT paper: 100 seeded trials, all solved with clean edges."""
     from optplan.bench.tcbirrt import _path_checks
-    from optplan.bench.trials import TrialGenerator
+    from optplan.trials import TrialGenerator
 
     scene = Scene.load(name)
     gen = TrialGenerator(robot, scene)

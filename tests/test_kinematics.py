@@ -1,4 +1,4 @@
-"""Numeric kinematics (optplan.kinematics): momentum conservation of the base twist, the
+"""Numeric kinematics (optplan.model.kinematics): momentum conservation of the base twist, the
 generalized Jacobian against an independent formula (mass matrix, SPART/SpaceDyn form) and
 against Pinocchio's own velocity propagation."""
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.kinematics import Kinematics
+from optplan.model.kinematics import Kinematics
 
 N = 30
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED

@@ -1,6 +1,6 @@
 """Robot descriptions (models/robots/*.toml) and the generated URDFs (urdf/*.urdf).
 
-Every expected value here comes from outside the generator: seed 004's Tables 1-2 typed in by
+Every expected value here comes from outside the generator: the EBA paper's Tables 1-2 typed in by
 hand, D-H products written out as matrices in this file, and plain Pinocchio / coal.
 """
 from __future__ import annotations
@@ -14,13 +14,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.description import (available_models, build_all, dh_capsules, load_description, models_dir,
-                                 urdf_dir, urdf_string, write_urdf)
-from optplan.robot import RobotModel
+from optplan.model.description import available_models, dh_capsules, load_description, models_dir, urdf_dir
+from optplan.model.urdf_writer import build_all, urdf_string, write_urdf
+from optplan.model.robot import RobotModel
 
 DEG = math.pi / 180.0
 
-# --------------------------------------------------------------------------- seed 004, by hand
+# --------------------------------------------------------------------------- the EBA paper, by hand
 # Table 1 (theta offset [deg], alpha [deg], a [m], d [m]); read as modified D-H:
 # row i = (theta_off_i, alpha_{i-1}, a_{i-1}, d_i) (shared/spec/conventions.md).
 EBA_DH = np.array([[0, 0, 0, 0.225],
@@ -48,7 +48,7 @@ EBA_TOTAL_MASS = 593.58
 # Table 1 note: arm A at (0.3, 0.51, 0.83) m, "RPY" (90, 26, 0) deg read as Rz(90) Ry(26) Rx(0).
 EBA_MOUNT_A = (np.array([0.3, 0.51, 0.83]), (90.0, 26.0, 0.0))
 
-# tcbirrt_dual_arm: the documented reading of seed 000's table (see the TOML header): standard
+# tcbirrt_dual_arm: the documented reading of the TCBiRRT paper's table (see the TOML header): standard
 # D-H, rows (theta_off, alpha_i, a_i, d_i) [deg, deg, m, m]; mounts at (0, ±1, 2) m, no rotation.
 TCB_DH = np.array([[0, 90, 0, 0],
                    [0, 90, 0, 0.24],
@@ -195,7 +195,7 @@ def test_robot_model_matches_plain_pinocchio(eba, tcb):
                                atol=1e-14)
 
 
-# --------------------------------------------------------------------------- seed 004 Table 2
+# --------------------------------------------------------------------------- the EBA paper Table 2
 def test_eba_masses_match_table_2():
     m = plain_model("eba_ffsr", True)
     assert m.inertias[1].mass == pytest.approx(EBA_BASE_MASS, abs=1e-12)
@@ -340,7 +340,7 @@ def _user_robot(tmp_path, *, name, conv, dh_deg, coms, caps, tool_xyz=(0, 0, 0),
     toml_path.write_text(text)
     desc = load_description(toml_path)
     urdf = write_urdf(desc, tmp_path)
-    from optplan.description import arm_metadata
+    from optplan.model.description import arm_metadata
     robot = RobotModel.from_urdf(urdf, arm_metadata(desc), floating=False, name=name)
     return robot
 

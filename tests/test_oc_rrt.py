@@ -6,7 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.example_robots import example_robots_available
+from optplan.model.example_robots import example_robots_available
 
 pytestmark = pytest.mark.skipif(not example_robots_available(),
                                 reason="example-robot-data not installed (pip install 'optplan[robots]')")
@@ -14,14 +14,14 @@ pytestmark = pytest.mark.skipif(not example_robots_available(),
 
 @pytest.fixture(scope="module")
 def pr2():
-    from optplan.example_robots import load_pr2
+    from optplan.model.example_robots import load_pr2
 
     return load_pr2()
 
 
 @pytest.fixture(scope="module")
 def baxter():
-    from optplan.example_robots import load_baxter
+    from optplan.model.example_robots import load_baxter
 
     return load_baxter()
 
@@ -49,7 +49,7 @@ def test_robots_load(pr2, baxter):
 def test_pr2_ik_round_trip_all_branches(pr2, arm):
     """Random joint vectors → Pinocchio pose → analytic IK: every branch reproduces the pose to
     1e-12 (checked with Pinocchio, not the IK's own FK) and the original joints are among them."""
-    from optplan.ik_analytic import DecoupledArmIK
+    from optplan.model.ik_analytic import DecoupledArmIK
 
     ik = DecoupledArmIK(pr2, arm)
     assert ik.spherical
@@ -81,7 +81,7 @@ def test_pr2_ik_round_trip_all_branches(pr2, arm):
 def test_baxter_offset_wrist(baxter):
     """Baxter's wrist axes do not meet (w0-w1 offset 0.01 m): orientation-only wrist IK is still
     exact; full-pose IK = analytic seed + Newton, to 1e-12."""
-    from optplan.ik_analytic import DecoupledArmIK
+    from optplan.model.ik_analytic import DecoupledArmIK
 
     ik = DecoupledArmIK(baxter, "left")
     assert not ik.spherical and ik.wrist_offset > 1e-3
@@ -104,7 +104,7 @@ def test_baxter_offset_wrist(baxter):
 
 
 def test_unreachable_and_singular_give_no_solution(pr2):
-    from optplan.ik_analytic import DecoupledArmIK
+    from optplan.model.ik_analytic import DecoupledArmIK
 
     ik = DecoupledArmIK(pr2, "left")
     assert ik.solve(np.eye(3), np.array([3.0, 0.0, 1.0]), 0.0).shape == (0, 7)
@@ -176,7 +176,7 @@ def test_cbirrt_generalised_to_orientation_constraint(pr2):
 def test_tsr_free_axis_residual(pr2):
     """A free yaw axis: yaw errors are not penalised, pitch errors are."""
     from optplan.planners.orientation import DualArmOrientationConstraint
-    from optplan.spatial import rpy_to_matrix
+    from optplan.geometry.spatial import rpy_to_matrix
 
     b = np.array([[0.0, 0.0], [0.0, 0.0], [-np.inf, np.inf]])
     con = DualArmOrientationConstraint(pr2, "open", {"left": np.eye(3), "right": np.eye(3)}, orientation_bounds=b)
@@ -254,7 +254,7 @@ def test_compiled_completion_matches_python_ik(pr2, scene_name):
 def test_wrist_ik_accurate_next_to_the_singular_wrist(robot_name, request):
     """Wrist roll axes nearly aligned (|q6| of 1e-4 .. 1e-3 rad): the closed form keeps 1e-12
     against Pinocchio (an acos of a ratio near 1 would lose ~1e-16 / |q6|)."""
-    from optplan.ik_analytic import DecoupledArmIK
+    from optplan.model.ik_analytic import DecoupledArmIK
 
     robot = request.getfixturevalue(robot_name)
     rng = np.random.default_rng(11)

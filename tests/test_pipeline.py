@@ -3,7 +3,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.collision import CollisionChecker
+from optplan.collision.checker import CollisionChecker
 from optplan.pipeline import PipelineOptions, PipelineResult, shortcut_constrained
 from optplan.scene import Scene
 from optplan.tasks import grasp_configuration, straight_line_poses, task_space_path
@@ -70,7 +70,7 @@ def test_pipeline_scene1_trial(tcb, tmp_path):
     """The README's main job end to end (one trial of scene 1, ~15-30 s): planned, every segment
     solved, the closed chain held to 1e-6 and positive clearance by the independent verify, and
     the saved trajectory has the documented keys, with ``constrained`` false inside regrasps."""
-    from optplan.bench.trials import TrialGenerator
+    from optplan.trials import TrialGenerator
     from optplan.pipeline import run_pipeline
 
     sc = Scene.load("ssps_scene1")
@@ -93,7 +93,7 @@ def test_pipeline_scene1_trial(tcb, tmp_path):
 
 def _scene1_plan(tcb):
     """Scene 1, trial 4: (scene, a successful TCBiRRT plan) for the segment-retry logic tests."""
-    from optplan.bench.trials import TrialGenerator
+    from optplan.trials import TrialGenerator
     from optplan.planners import make_planner
 
     sc = Scene.load("ssps_scene1")
@@ -249,9 +249,9 @@ def test_coarse_to_fine_records_the_coarse_attempt_and_verifies():
     attempt before ``initial``), and the trial still verifies."""
     import dataclasses
 
-    from optplan.bench.trials import TrialGenerator
+    from optplan.trials import TrialGenerator
     from optplan.pipeline import PipelineOptions, run_pipeline
-    from optplan.robot import RobotModel
+    from optplan.model.robot import RobotModel
     from optplan.scene import Scene
 
     robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("ssps_scene1")

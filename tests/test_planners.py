@@ -1,8 +1,8 @@
-"""Planners of issue 4: TCBiRRT (seed 000 Alg. 1-4 + regrasp), RRTConnect, CBiRRT2, OMPL peers,
+"""Planners of issue 4: TCBiRRT (the TCBiRRT paper Alg. 1-4 + regrasp), RRTConnect, CBiRRT2, OMPL peers,
 the SSPS scenes and trial generation, and the benchmark runner.
 
 Every closed-chain check is independent of the planners: Pinocchio FK of both hands
-(``closure_error``) and exact coal distances (``optplan.collision.CollisionChecker``).
+(``closure_error``) and exact coal distances (``optplan.collision.checker.CollisionChecker``).
 """
 from __future__ import annotations
 
@@ -13,14 +13,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.bench.trials import TrialGenerator, TrialOptions, perturb_pose, trial_seed
-from optplan.collision import CollisionChecker
-from optplan.planners import (CBiRRT2, CBiRRT2Options, ClosedChainKinematics, IKSettings, PlanResult, PlanStatus,
-                              RRTConnect, RRTConnectOptions, TCBiRRT, TCBiRRTOptions, ValidityChecker, closure_error,
-                              exp_coordinates, interpolate_task, make_planner)
+from optplan.trials import TrialGenerator, TrialOptions, perturb_pose, trial_seed
+from optplan.collision.checker import CollisionChecker
+from optplan.constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from optplan.planners import (CBiRRT2, CBiRRT2Options, PlanResult, PlanStatus, RRTConnect, RRTConnectOptions, TCBiRRT,
+                              TCBiRRTOptions, ValidityChecker, make_planner)
+from optplan.planners.tcbirrt import exp_coordinates, interpolate_task
 from optplan.planners.tcbirrt import pose_from_xi, rotation_from_exp, xi_from_pose
 from optplan.scene import Scene
-from optplan.spatial import rpy_to_matrix
+from optplan.geometry.spatial import rpy_to_matrix
 
 IK_TOL = 1e-6   # closed-chain tolerance every returned configuration must meet (position m, angle rad)
 
@@ -335,7 +336,7 @@ def blocked_scene(scene1) -> Scene:
     """Scene 1 plus a box where the nominal start object is: the start is in collision."""
     import tomllib
 
-    from optplan.description import models_dir
+    from optplan.model.description import models_dir
 
     d = tomllib.loads((models_dir() / "scenes" / "ssps_scene1.toml").read_text())
     d["obstacles"].append({"name": "intruder", "shape": "box", "size": [0.3, 0.3, 0.3], "xyz": list(scene1.start.translation)})

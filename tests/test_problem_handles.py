@@ -28,7 +28,7 @@ Z = np.zeros(14)
 @pytest.fixture(scope="module")
 def cc_problem(tcb):
     """A small closed-chain transport: both ends pinned on the manifold, velocity limits, jerk cost."""
-    from optplan.warmstart import project_closed_chain
+    from optplan.constraints.closed_chain import project_closed_chain
 
     rng = np.random.default_rng(3)
     qa = tcb.random_joints(rng) * 0.4
@@ -403,7 +403,7 @@ def test_collision_retry_by_replacing_the_term(tcb):
     """The pipeline's collision retry without mutation: ``with_activation`` adds a trajectory whose
     close pairs are activated too (coal distances on either trajectory below ``activation``), and
     ``replace_term`` rebuilds the NLP with it; the original term is unchanged."""
-    from optplan.collision import CollisionChecker
+    from optplan.collision.checker import CollisionChecker
 
     scene = Scene.load("transport")
     rng = np.random.default_rng(21)

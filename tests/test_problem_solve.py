@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicHermiteSpline
 
-from optplan.kinematics import Kinematics
+from optplan.model.kinematics import Kinematics
 from optplan.problem import (BaseAttitude, ClosedChain, Duration, FramePose, IpoptStatus, JointAccelerationLimits,
                              JointBoundary, JointPositionLimits, JointVelocityLimits, OptProblem, Smoothness,
                              Solution)
-from optplan.verify import verify
+from optplan.verification import verify
 
 DEG = np.pi / 180
 Z = np.zeros(14)
@@ -351,7 +351,7 @@ def _check_restoration(eba, p, att, sol, tol):
     assert rep.base_attitude_mismatch_rad <= tol
     assert rep.max_momentum_residual < 1e-9
     # the straight-line path alone (no restoration) turns the base: the constraint did something
-    from optplan.floating import simulate_base
+    from optplan.model.floating import simulate_base
 
     s = np.linspace(0, 1, 201)[:, None]
     sim = simulate_base(eba, (s[:, 0] * 20.0, Q0 + (10 * s**3 - 15 * s**4 + 6 * s**5) * (QF - Q0)),
@@ -362,8 +362,8 @@ def _check_restoration(eba, p, att, sol, tol):
 
 
 @pytest.mark.slow
-def test_attitude_restoration_seed004(eba):
-    """Seed 004 θ0 → θf, N = 30 (≈ minutes: the exact-Hessian build of the floating base is slow;
+def test_attitude_restoration_eba(eba):
+    """The EBA paper's θ0 → θf, N = 30 (≈ minutes: the exact-Hessian build of the floating base is slow;
     limited-memory Hessian avoids the multi-GB expansion)."""
     p, att, sol = _restoration(eba, 30, ipopt_options={"expand": False})
     _check_restoration(eba, p, att, sol, 1e-5)
@@ -379,7 +379,7 @@ def test_attitude_restoration_small(eba):
 # --------------------------------------------------------------------------- (g) conditioning
 def _pinned_closed_chain_problem(tcb, N=12, shift_end=0.0, skip=True):
     """Both ends pinned on one closed-chain manifold (the end optionally moved off it)."""
-    from optplan.warmstart import project_closed_chain
+    from optplan.constraints.closed_chain import project_closed_chain
 
     rng = np.random.default_rng(5)
     qa = tcb.random_joints(rng) * 0.4

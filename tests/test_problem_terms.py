@@ -36,7 +36,7 @@ from optplan.problem import (BaseAttitude, ClosedChain, CollisionAvoidance, Dura
                              JointAccelerationLimits, JointBoundary, JointPositionLimits, JointVelocityLimits,
                              OptProblem, OrientationConstraint, PathLength, Smoothness)
 from optplan.scene import Scene
-from optplan.spatial import exp3
+from optplan.geometry.spatial import exp3
 
 FD_STEP = 1e-6
 
@@ -398,8 +398,8 @@ def test_floating_com_is_fixed_at_initial_guess(eba, rng):
 
 def test_floating_base_dynamics_residual_matches_simulator(eba, rng):
     """The multiple-shooting base-quaternion constraints are (near) satisfied by the base attitude
-    that optplan.floating.simulate_base integrates along the same cubic joint motion."""
-    from optplan.floating import simulate_base
+    that optplan.model.floating.simulate_base integrates along the same cubic joint motion."""
+    from optplan.model.floating import simulate_base
 
     N, T = 6, 6.0
     prob = unshadow_com0(OptProblem(eba, n_intervals=N, duration=T, n_sub=4))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from optplan.problem.quartic import QuarticSmoothingResult, smooth_quartic
-from optplan.splines import PiecewisePolynomial, quartic_spline
+from optplan.geometry.splines import PiecewisePolynomial, quartic_spline
 
 L1, L2 = 1.0, 0.7  # planar 2-link arm [m]
 INFEASIBLE = {"Infeasible_Problem_Detected", "Restoration_Failed"}
@@ -259,11 +259,11 @@ def test_end_effector_acceleration_needs_its_limit():
 
 
 def test_quartic_smoothing_on_a_robot_arm_with_end_effector_speed_limit(tcb):
-    """Seed 001's smoothing on real joint waypoints of tcbirrt_dual_arm: EE speed of arm A ≤ 0.1 m/s
+    """The Spline-RRT* paper's smoothing on real joint waypoints of tcbirrt_dual_arm: EE speed of arm A ≤ 0.1 m/s
     (the paper's limit), checked with Pinocchio's frame velocity (independent of CasADi)."""
     import pinocchio as pin
 
-    from optplan.symbolic import SymbolicKinematics
+    from optplan.model.symbolic import SymbolicKinematics
 
     rng = np.random.default_rng(11)
     q0 = tcb.random_joints(rng) * 0.3

@@ -10,15 +10,16 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.collision import CollisionChecker
-from optplan.description import load_description, models_dir, urdf_dir
+from optplan.collision.checker import CollisionChecker
+from optplan.model.description import load_description, models_dir, urdf_dir
 from optplan.errors import ConfigurationError, ModelError, OptionError, ResultFileError, UnknownNameError
 from optplan.pipeline import PipelineResult
-from optplan.planners.base import PlanResult, PlanStatus, vector_to_pose
+from optplan.geometry.spatial import vector_to_pose
+from optplan.planners.base import PlanResult, PlanStatus
 from optplan.problem.solution import IpoptStatus, Solution
-from optplan.robot import RobotModel
+from optplan.model.robot import RobotModel
 from optplan.scene import Scene
-from optplan.spatial import se3
+from optplan.geometry.spatial import se3
 
 EBA_TOML = (models_dir() / "robots" / "eba_ffsr.toml").read_text()
 TCB_URDF = (urdf_dir() / "tcbirrt_dual_arm.urdf").read_text()

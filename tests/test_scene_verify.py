@@ -1,5 +1,5 @@
-"""Scenes (optplan.scene), exact collision checking (optplan.collision) and independent trajectory
-verification (optplan.verify).
+"""Scenes (optplan.scene), exact collision checking (optplan.collision.checker) and independent trajectory
+verification (optplan.verification).
 
 * Scene.load refuses bad files with a ModelError / UnknownNameError naming the offending value.
 * Scene.load("transport") has the content of models/scenes/transport.toml.
@@ -17,12 +17,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.collision import CollisionChecker
+from optplan.collision.checker import CollisionChecker
 from optplan.errors import ModelError, UnknownNameError
 from optplan.problem import ClosedChain
 from optplan.scene import Scene, available_scenes
-from optplan.spatial import exp3, rotx, roty, rotz
-from optplan.verify import verify
+from optplan.geometry.spatial import exp3, rotx, roty, rotz
+from optplan.verification import verify
 
 DEG = np.pi / 180
 

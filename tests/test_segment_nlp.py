@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 from scipy.interpolate import BSpline
 
-from optplan.collision import CollisionChecker
-from optplan.robot import RobotModel
+from optplan.collision.checker import CollisionChecker
+from optplan.model.robot import RobotModel
 from optplan.problem import ClosedChain
 from optplan.problem.bspline import boundary_points, fit_interior, knot_matrices, knot_values
 from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
 from optplan.scene import Scene
-from optplan.verify import verify
+from optplan.verification import verify
 
 
 @pytest.fixture(scope="module")

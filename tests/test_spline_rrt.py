@@ -7,13 +7,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.floating import simulate_base
-from optplan.methods.spline_rrt import (BezierOrientation, SplineRRTTask, TrackingOptions, evaluate,
+from optplan.model.floating import simulate_base
+from optplan.papers.spline_rrt import (BezierOrientation, SplineRRTTask, TrackingOptions, evaluate,
                                         link_distances, smooth_hand_paths, track)
 from optplan.planners.base import PlanStatus
 from optplan.planners.spline_rrt import (CoordinatedRRTStar, CoordinatedRRTStarOptions, VirtualWall,
                                          point_obstacle_distance)
-from optplan.robot import RobotModel
+from optplan.model.robot import RobotModel
 from optplan.scene import Scene
 
 
@@ -237,7 +237,7 @@ def test_link_distances_are_the_coal_distances_of_links_3_5_7(robot, task):
 # ------------------------------------------------------------------ optimized variant (slow)
 @pytest.mark.slow
 def test_optimized_variant_restores_the_base_attitude():
-    from optplan.methods.spline_rrt import run_spline_rrt
+    from optplan.papers.spline_rrt import run_spline_rrt
 
     res = run_spline_rrt()
     sol = res.optimized["solution"]
@@ -275,7 +275,7 @@ def test_quartic_nlp_durations_shorten_the_motion(task, plan, smoothed):
 def test_joint_limits_stretch_the_duration(robot, task):
     """Eq. 6: with a tighter joint-acceleration limit the pipeline stretches T until the tracked
     joint motion respects it."""
-    from optplan.methods.spline_rrt import run_spline_rrt
+    from optplan.papers.spline_rrt import run_spline_rrt
 
     po = CoordinatedRRTStarOptions(hand_radius=0.15, max_iterations=200, seed=1, time_limit=30.0)
     res = run_spline_rrt(robot, task, plan_options=po, joint_accel_limit=0.02, run_optimizer=False,

@@ -1,4 +1,4 @@
-"""Tests of optplan.splines: quintic profiles, the Eq. 8-11 quartic spline, path helpers."""
+"""Tests of optplan.geometry.splines: quintic profiles, the Eq. 8-11 quartic spline, path helpers."""
 from __future__ import annotations
 
 import json
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from optplan.splines import (PiecewisePolynomial, quartic_spline, quintic, resample_path,
+from optplan.geometry.splines import (PiecewisePolynomial, quartic_spline, quintic, resample_path,
                              time_grid_from_path)
 
 

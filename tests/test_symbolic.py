@@ -1,4 +1,4 @@
-"""CasADi kinematics (optplan.symbolic) against Pinocchio's numeric algorithms, finite
+"""CasADi kinematics (optplan.model.symbolic) against Pinocchio's numeric algorithms, finite
 differences of Pinocchio's FK, an expanded (non-mimic) model, and compiled C code."""
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 
 from optplan import codegen
 from optplan.codegen import compile_function
-from optplan.kinematics import Kinematics
-from optplan.robot import RobotModel
-from optplan.symbolic import SymbolicKinematics
+from optplan.model.kinematics import Kinematics
+from optplan.model.robot import RobotModel
+from optplan.model.symbolic import SymbolicKinematics
 
 N_CONFIGS = 50
 REFS = {"world_aligned": pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
@@ -344,7 +344,7 @@ def test_compiled_function_checks_its_inputs(syms):
 
 def test_ee_velocity_and_acceleration_functions_match_pinocchio(tcb, rng):
     """Classical EE acceleration J q̈ + J̇ q̇ vs Pinocchio's getFrameClassicalAcceleration."""
-    from optplan.symbolic import SymbolicKinematics
+    from optplan.model.symbolic import SymbolicKinematics
 
     sym = SymbolicKinematics(tcb)
     fv, fa = sym.ee_velocity_function("B"), sym.ee_acceleration_function("B")
@@ -362,8 +362,8 @@ def test_ee_velocity_and_acceleration_functions_match_pinocchio(tcb, rng):
 
 
 def test_ee_velocity_function_floating_uses_generalized_jacobian(eba, rng):
-    from optplan.kinematics import Kinematics
-    from optplan.symbolic import SymbolicKinematics
+    from optplan.model.kinematics import Kinematics
+    from optplan.model.symbolic import SymbolicKinematics
 
     f = SymbolicKinematics(eba).ee_velocity_function("A")
     qj, qd = eba.random_joints(rng), rng.normal(size=eba.nj)

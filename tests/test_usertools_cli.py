@@ -21,7 +21,7 @@ def test_version(capsys):
 
 
 def test_models_info_matches_pinocchio(tmp_path, capsys):
-    from optplan.robot import RobotModel
+    from optplan.model.robot import RobotModel
 
     out = tmp_path / "info.json"
     assert cli.main(["models", "info", "eba_ffsr", "--json", str(out)]) == 0
@@ -102,9 +102,9 @@ def test_reproduce_runs_a_script_with_the_flags_it_offers(tmp_path):
 
 
 def test_plan_figures_and_profiles(tmp_path):
-    from optplan.collision import CollisionChecker
-    from optplan.planners.closed_chain import closure_error
-    from optplan.robot import RobotModel
+    from optplan.collision.checker import CollisionChecker
+    from optplan.constraints.closed_chain import closure_error
+    from optplan.model.robot import RobotModel
     from optplan.scene import Scene
     from optplan.viz.plan_plots import plot_trajectory, trajectory_profiles
 

@@ -20,7 +20,7 @@ import pytest
 
 pytest.importorskip("meshcat")
 
-from optplan.robot import RobotModel  # noqa: E402
+from optplan.model.robot import RobotModel  # noqa: E402
 from optplan.scene import Scene  # noqa: E402
 from optplan.viz.html import (ARM_COLORS, ViewOptions, load_trajectory, save_metadata, trajectory_html,  # noqa: E402
                               view_file, write_trajectory_html)

@@ -4,8 +4,8 @@ import pinocchio as pin
 import pytest
 
 from optplan.problem import ClosedChain, JointBoundary, OptProblem, Smoothness
-from optplan.spatial import rpy_to_matrix
-from optplan.warmstart import closed_chain_residual, manifold_resample, project_closed_chain
+from optplan.geometry.spatial import rpy_to_matrix
+from optplan.constraints.closed_chain import closed_chain_residual, manifold_resample, project_closed_chain
 
 
 @pytest.fixture

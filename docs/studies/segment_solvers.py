@@ -12,7 +12,7 @@ of the warm-start benchmark's trials (same planner, seeds, shortcut and grid as
 * ``csqp``:   mim-solvers' ``SolverCSQP`` on crocoddyl action models of the same stage-wise form.
 
 Every result goes through ``SplineSegmentProblem.solve``'s own post-processing and
-:func:`optplan.verify.verify`. Results: docs/optproblem.md, "Structure-exploiting solvers".
+:func:`optplan.verification.verify`. Results: docs/optproblem.md, "Structure-exploiting solvers".
 
     python docs/studies/segment_solvers.py order  --cases "1:0,1:5,2:0,2:3,3:0,3:2"
     python docs/studies/segment_solvers.py fatrop --cases "1:0,1:5,2:0,2:3,3:0,3:2"
@@ -33,14 +33,14 @@ import time
 import casadi as ca
 import numpy as np
 
-from optplan.bench.trials import TrialGenerator
+from optplan.trials import TrialGenerator
 from optplan.pipeline import PipelineOptions, shortcut_constrained
 from optplan.planners import make_planner
 from optplan.problem import ClosedChain
 from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
-from optplan.robot import RobotModel
+from optplan.model.robot import RobotModel
 from optplan.scene import Scene
-from optplan.verify import verify
+from optplan.verification import verify
 
 robot = RobotModel.from_name("tcbirrt_dual_arm")
 opts = PipelineOptions()

@@ -8,7 +8,7 @@ constrained segments of the pipeline on the perturbed trials of the assembly sce
 → :func:`optplan.pipeline.shortcut_constrained` → the arc-length resampled, manifold-projected
 warm start of ``OptProblem.set_initial_path``, with the pipeline's N and duration). Every method
 gets the same start/goal, duration, margin, collision geometry and warm start, and every result
-is checked by :func:`optplan.verify.verify` (closed-chain residual at 10× the knot density ≤ 1e-6,
+is checked by :func:`optplan.verify` (closed-chain residual at 10× the knot density ≤ 1e-6,
 coal clearance ≥ 0) and its jerk cost ``∫‖d³q/dt³‖² dt`` computed from the trajectory itself.
 
 The optplan side is a callable ``optplan_solve(problem) -> PeerOutcome`` (default
@@ -28,9 +28,9 @@ from typing import Callable
 import numpy as np
 
 from ..problem import ClosedChain
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..scene import Scene
-from ..verify import verify
+from ..verification import verify
 
 __all__ = ["PeerProblem", "PeerOutcome", "transport_instance", "pipeline_segment_instances", "optplan_current",
            "drake_solve", "jerk_cost", "evaluate", "run", "summarize", "format_report", "RESIDUAL_TOL"]
@@ -71,7 +71,7 @@ class PeerProblem:
 
 @dataclass
 class PeerOutcome:
-    """What a method returns for a problem: ``solution`` is anything :func:`optplan.verify.verify`
+    """What a method returns for a problem: ``solution`` is anything :func:`optplan.verify`
     takes (``t`` and ``sample(t)``); ``success`` the solver's own verdict; times [s]."""
 
     method: str
@@ -99,7 +99,7 @@ def _warm_start_knots(prob) -> np.ndarray:
 def transport_instance(robot: RobotModel | None = None, *, knots: int = 50, duration: float = 60.0,
                        margin: float = 0.02, seed: int = 0) -> PeerProblem:
     """The closed-chain transport problem of ``examples/closed_chain_transport.py``."""
-    from ..collision import CollisionChecker
+    from ..collision.checker import CollisionChecker
     from ..tasks import transport_initial_path
 
     robot = robot or RobotModel.from_name("tcbirrt_dual_arm")
@@ -142,10 +142,10 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
     path → shortcut of the constrained segments (the pipeline's RNG sequence) → the warm start, N
     and duration of the pipeline's B-spline segment NLP (its first attempt). Empty when the plan
     fails."""
-    from ..collision import CollisionChecker
+    from ..collision.checker import CollisionChecker
     from ..pipeline import PipelineOptions, shortcut_constrained
     from ..planners import make_planner
-    from .trials import TrialGenerator
+    from ..trials import TrialGenerator
 
     bad = set(kinds) - {"constrained", "regrasp"}
     if bad:
@@ -157,8 +157,7 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
     robot = robot or RobotModel.from_name("tcbirrt_dual_arm")
     scene = Scene.load(scene_name)
     tr = TrialGenerator(robot, scene).generate(int(trial), int(seed))
-    kw = dict(opts.planner_options) if opts.planner == "tcbirrt" else {}
-    plan = make_planner(opts.planner, robot, scene, **kw).plan(tr.q_start, tr.q_goal, time_limit=opts.plan_time_limit,
+    plan = make_planner(opts.planner, robot, scene, **opts.planner_kwargs()).plan(tr.q_start, tr.q_goal, time_limit=opts.plan_time_limit,
                                                                seed=tr.seed)
     if not plan.success:
         log.warning("%s trial %d: plan failed (%s)", scene_name, trial, plan.status.value)

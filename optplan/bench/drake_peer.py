@@ -23,7 +23,7 @@ Formulation (optional extra ``drake``; ``pip install "optplan[drake]"``):
 Solvers: SNOPT (bundled in the pip wheel) or IPOPT (Drake supplies gradients only, so IPOPT runs
 with a limited-memory Hessian). :func:`solve_drake` returns a :class:`DrakeResult` with the solver,
 its status, the times and iterations, and a :class:`BsplineSolution` — the adapter that
-:func:`optplan.verify.verify` checks like any optplan solution.
+:func:`optplan.verify` checks like any optplan solution.
 """
 from __future__ import annotations
 
@@ -38,9 +38,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from ..collision import CollisionChecker
-from ..robot import RobotModel
+from ..collision.checker import CollisionChecker
+from ..model.robot import RobotModel
 from ..scene import Scene
+from ..geometry.spatial import skew, vee_skew
 
 __all__ = ["DrakeUnavailable", "require_drake", "DrakeModel", "ClosedChainResidual", "BsplineSolution", "DrakeOptions",
            "DrakeResult", "fit_bspline", "jerk_matrix", "solve_drake", "SOLVERS"]
@@ -70,12 +71,7 @@ def _rt(M: pin.SE3):
     return RigidTransform(RotationMatrix(np.asarray(M.rotation)), np.asarray(M.translation))
 
 
-def _skew(w) -> np.ndarray:
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-
-
-def _vee_skew(E) -> np.ndarray:
-    return 0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
+_skew, _vee_skew = skew, vee_skew
 
 
 # --------------------------------------------------------------------------- model
@@ -86,7 +82,7 @@ class DrakeModel:
     removed; the collision geometry is registered by hand from optplan's own collision model
     (URDF cylinders named ``*_capsule`` are capsules there, Drake would read cylinders), the
     scene's obstacles on the world body and the held object on ``object_arm``'s hand. The collision
-    filter leaves exactly the pairs of :class:`optplan.collision.CollisionChecker` as candidates;
+    filter leaves exactly the pairs of :class:`optplan.collision.checker.CollisionChecker` as candidates;
     ``missing_pairs`` lists optplan pairs Drake would not check (empty when the two agree).
 
     ``to_drake(q)`` / ``from_drake(q)`` map joint vectors between optplan's (Pinocchio's) order
@@ -337,7 +333,7 @@ def _quintic_reference_jerk(q0, q1, T: float) -> float:
 
 @dataclass
 class BsplineSolution:
-    """A Drake B-spline joint trajectory in the form :func:`optplan.verify.verify` takes: ``t``
+    """A Drake B-spline joint trajectory in the form :func:`optplan.verify` takes: ``t``
     (the N+1 breakpoints [s]; ``verify`` samples density × N intervals), ``sample(t)`` →
     ``{"t", "q", "qd", "qdd"}`` in optplan's joint order, evaluated from the B-spline itself."""
 

@@ -76,8 +76,8 @@ _W: dict = {}
 
 
 def _robot(name: str):
-    from ..example_robots import EXAMPLE_ROBOTS, load_example_robot
-    from ..robot import RobotModel
+    from ..model.example_robots import EXAMPLE_ROBOTS, load_example_robot
+    from ..model.robot import RobotModel
 
     if name not in _W:
         _W[name] = load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
@@ -86,9 +86,9 @@ def _robot(name: str):
 
 def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
     """One (scene, trial): the result line (see the module docstring)."""
-    from ..pipeline import PipelineOptions, run_pipeline
+    from ..pipeline import PLANNER_DEFAULTS, PipelineOptions, run_pipeline
     from ..scene import Scene
-    from .trials import TrialGenerator
+    from ..trials import TrialGenerator
     from .warmstart import _finite, _path_hash, _segment_rows
 
     scene = Scene.load(scene_name)
@@ -103,7 +103,7 @@ def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
         return {**line, "success": False, "plan_ok": False, "plan_status": "no_trial", "opt_status": "not_run",
                 "error": f"{type(exc).__name__}: {exc}", "segments": []}
     opts = PipelineOptions(plan_time_limit=float(cfg.time_limit), ipopt_max_wall_time=float(cfg.ipopt_max_wall_time),
-                           planner_options=(("edge_resolution", 0.05), ("variant", cfg.planner_variant)))
+                           planner_options=PLANNER_DEFAULTS["tcbirrt"] + (("variant", cfg.planner_variant),))
     c0, w0 = time.process_time(), time.perf_counter()
     res, err = None, None
     try:

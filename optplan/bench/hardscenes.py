@@ -34,13 +34,13 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ..description import models_dir
+from ..model.description import models_dir
 from ..planners.base import PlanResult
-from ..planners.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from ..planners.rrtconnect import edge_is_valid
 from ..planners.tcbirrt import interpolate_task
 from ..planners.validity import ValidityChecker
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..scene import Scene
 
 __all__ = ["SUITE", "witness_path", "load_witness", "verify_path", "make_witness", "nominal_configurations"]
@@ -64,7 +64,7 @@ def load_witness(scene: str) -> tuple[PlanResult, dict]:
 
 def nominal_configurations(robot: RobotModel, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """The scene's ``[extra] q_start / q_goal`` [rad], polished to the closed chain."""
-    from .trials import TrialGenerator
+    from ..trials import TrialGenerator
 
     gen = TrialGenerator(robot, scene)
     qs, qg = gen.q_nominal["q_start"], gen.q_nominal["q_goal"]
@@ -212,7 +212,7 @@ def clutter_obstacles(n: int, seed: int, *, region=((0.6, 3.2), (-2.2, 2.2), (0.
     ``hard_clutter_*.toml`` (their comments give ``n`` and ``seed``)."""
     import coal
 
-    from .trials import TrialGenerator
+    from ..trials import TrialGenerator
 
     robot = RobotModel.from_name("tcbirrt_dual_arm")
     s1 = Scene.load("ssps_scene1")

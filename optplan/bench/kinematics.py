@@ -12,9 +12,9 @@ import numpy as np
 import pinocchio as pin
 
 from ..codegen import compile_function
-from ..kinematics import Kinematics
-from ..robot import RobotModel
-from ..symbolic import SymbolicKinematics
+from ..model.kinematics import Kinematics
+from ..model.robot import RobotModel
+from ..model.symbolic import SymbolicKinematics
 
 
 def _per_call(fn: Callable[[], object], calls: int) -> float:

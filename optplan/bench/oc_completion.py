@@ -42,7 +42,7 @@ def run(trials: int = 10, time_limit: float = 10.0, seed: int = 0, scenes=None) 
 
 
 def main(argv=None) -> int:
-    from ..example_robots import example_robots_available
+    from ..model.example_robots import example_robots_available
 
     p = argparse.ArgumentParser(description="OC-RRT-Connect: compiled vs Python manifold completion (paired)")
     p.add_argument("--trials", type=int, default=10)

@@ -1,4 +1,4 @@
-"""Accuracy and speed of the analytic IK (``optplan.ik_analytic``) of PR2's and Baxter's arms
+"""Accuracy and speed of the analytic IK (``optplan.model.ik_analytic``) of PR2's and Baxter's arms
 against Pinocchio's forward kinematics over random joint vectors in the limits.
 
 ``python -m optplan.bench.oc_ik [--poses 1000] [--seed 1]`` prints, per arm: the largest pose
@@ -18,8 +18,8 @@ __all__ = ["run"]
 
 
 def run(poses: int = 1000, seed: int = 1) -> list[dict]:
-    from ..example_robots import load_baxter, load_pr2
-    from ..ik_analytic import DecoupledArmIK
+    from ..model.example_robots import load_baxter, load_pr2
+    from ..model.ik_analytic import DecoupledArmIK
 
     rows = []
     for load in (load_pr2, load_baxter):

@@ -65,7 +65,7 @@ _CACHE: dict = {}
 
 def setup_scene(scene_name: str, planners) -> dict:
     """Robot, scene, constraint, start/goal and planners of one scene (cached per process)."""
-    from ..example_robots import load_pr2
+    from ..model.example_robots import load_pr2
     from ..planners.cbirrt2 import CBiRRT2, CBiRRT2Options
     from ..planners.oc_rrt import OCRRT, OCRRTOptions
     from ..planners.orientation import OrientationManifold, constraint_from_scene, endpoints_from_scene
@@ -283,7 +283,7 @@ def add_arguments(p) -> None:
 
 def command(args) -> int:
     """Run the benchmark from parsed arguments; prints the table."""
-    from ..example_robots import example_robots_available
+    from ..model.example_robots import example_robots_available
 
     if not example_robots_available():
         print("OC-RRT benchmark: PR2 needs the example-robot-data package: pip install \"optplan[robots]\"")

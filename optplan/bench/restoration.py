@@ -7,7 +7,7 @@ with the cache that run left on disk (``warm``: a fresh process that loads them)
 (NLP construction + IPOPT instance) and IPOPT wall times, the CPU time of build + solve,
 iterations (coarse + fine NLP), the C compiler's CPU time (cold compiled runs), the end
 attitude error [deg] and closed-chain residual from the independent
-simulator (:func:`optplan.verify.verify`), and the cost. Target: end-constrained restoration
+simulator (:func:`optplan.verify`), and the cost. Target: end-constrained restoration
 built and solved in ≤ 1 s. The paper's own method (EBA) took ≈ 370 s (free end) and ≈ 270 s
 (end constraints) and left 0.01-0.12° of attitude error in its planned trajectories.
 
@@ -34,8 +34,8 @@ def _one(case: str, transcription: str, cache: str, compiled=False) -> dict:
 
     import numpy as np
 
-    from ..methods import eba
-    from ..robot import RobotModel
+    from ..papers import eba
+    from ..model.robot import RobotModel
 
     robot = RobotModel.from_name("eba_ffsr")
     sc = eba.free_end_scenario() if case == "free_end" else eba.end_constrained_scenario(robot)
@@ -148,8 +148,8 @@ ACCURACY_RUNS = (("free_end", 10, 1), ("free_end", 20, 1), ("free_end", 40, 1), 
 
 def accuracy(runs=ACCURACY_RUNS) -> list[dict]:
     """The B-spline NLP's knot attitudes against :func:`ivp_attitude`, per (case, N, n_sub)."""
-    from ..methods import eba
-    from ..robot import RobotModel
+    from ..papers import eba
+    from ..model.robot import RobotModel
 
     robot = RobotModel.from_name("eba_ffsr")
     rows = []

@@ -4,7 +4,7 @@ times (Eq. 9-11).
 ``optplan bench tcbirrt --scene 1,2,3 --trials 100 --planners tcbirrt,cbirrt2,ompl-atlas
 --time-limit 10 --seed 0 --jobs 2 --out DIR``
 
-* Trials come from :class:`optplan.bench.trials.TrialGenerator` (Section 5.1), one seed per
+* Trials come from :class:`optplan.trials.TrialGenerator` (Section 5.1), one seed per
   trial (``SeedSequence(seed, spawn_key=(index,))``): results do not depend on ``--jobs`` or on
   the order in which trials run, nor on the engine (``--engine local|dask``, see
   :mod:`optplan.bench.engine`); this process is the only writer of the results file.
@@ -128,13 +128,13 @@ def _worker_setup(robot_name: str, scenes: list[str], planners: list[str]):
     if _W.get("key") == (robot_name, tuple(scenes), tuple(planners)):
         return
     from ..planners import make_planner
-    from ..planners.closed_chain import ClosedChainKinematics
+    from ..constraints.closed_chain import ClosedChainKinematics
     from ..planners.validity import ValidityChecker
-    from ..robot import RobotModel
+    from ..model.robot import RobotModel
     from ..scene import Scene
-    from .trials import TrialGenerator
+    from ..trials import TrialGenerator
 
-    from ..example_robots import EXAMPLE_ROBOTS, load_example_robot
+    from ..model.example_robots import EXAMPLE_ROBOTS, load_example_robot
 
     _W.clear()
     _W["key"] = (robot_name, tuple(scenes), tuple(planners))
@@ -158,7 +158,7 @@ def _path_checks(robot, scene, checker, res, resolution: float = 0.05, sweep: fl
     (object held on constrained edges, fixed during regrasps) every ``resolution`` rad
     (``dense_invalid_edges``) and so densely that no point of the robot or object moves more than
     ``sweep`` [m] between checks (``swept_invalid_edges``, :meth:`ValidityChecker.sweep_weights`)."""
-    from ..planners.closed_chain import closure_error
+    from ..constraints.closed_chain import closure_error
     from ..planners.rrtconnect import edge_is_valid
 
     if not res.success:

@@ -21,7 +21,7 @@ def _one(knots: int, seed: int, transcription: str = "bspline") -> dict:
     import importlib.util
     from pathlib import Path
 
-    from ..description import repo_root
+    from ..model.description import repo_root
 
     spec = importlib.util.spec_from_file_location("cct", Path(repo_root()) / "examples" / "closed_chain_transport.py")
     mod = importlib.util.module_from_spec(spec)

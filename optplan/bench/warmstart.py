@@ -6,7 +6,7 @@ computed in both modes because it defines the segments.
 
 ``optplan bench warmstart --scene 1,2,3 --trials 20 --seed 0 --jobs 2 --out DIR [--time-limit 10]``
 
-* Trials come from :class:`optplan.bench.trials.TrialGenerator` (``generate(index, seed)``); the
+* Trials come from :class:`optplan.trials.TrialGenerator` (``generate(index, seed)``); the
   pipeline seed is the trial's own seed, so results do not depend on ``--jobs`` or on the order in
   which units run.
 * ``DIR/results.jsonl``: one JSON line per (scene, trial, mode), appended as soon as it finishes;
@@ -114,10 +114,10 @@ _W: dict = {}
 def _state(robot_name: str, scene: str) -> dict:
     """Per-process cache of the robots, scenes and trial generators. The robot is the scene's own
     (its ``robot`` field: a shipped model or one of example-robot-data's), else ``robot_name``."""
-    from ..example_robots import EXAMPLE_ROBOTS, load_example_robot
-    from ..robot import RobotModel
+    from ..model.example_robots import EXAMPLE_ROBOTS, load_example_robot
+    from ..model.robot import RobotModel
     from ..scene import Scene
-    from .trials import TrialGenerator
+    from ..trials import TrialGenerator
 
     if scene not in _W:
         sc = Scene.load(scene)

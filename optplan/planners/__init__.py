@@ -15,19 +15,38 @@ closed-chain flags, segments, stats) — see :mod:`optplan.planners.base`.
 """
 from __future__ import annotations
 
-from .base import CLOCKS, Deadline, PathSegment, Planner, PlanResult, PlanStatus
+import dataclasses
+from typing import TYPE_CHECKING
+
+from ..errors import OptionError
+from .base import PathSegment, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2, CBiRRT2Options
-from .closed_chain import ClosedChainKinematics, IKSettings, closure_error
-from .rrtconnect import RRTConnect, RRTConnectOptions, rrt_connect, shortcut_path
-from .tcbirrt import TCBiRRT, TCBiRRTOptions, exp_coordinates, interpolate_task
+from .rrtconnect import RRTConnect, RRTConnectOptions
+from .tcbirrt import TCBiRRT, TCBiRRTOptions
 from .validity import ValidityChecker
 
+if TYPE_CHECKING:
+    from ..constraints.closed_chain import ClosedChainKinematics
+
 __all__ = [
-    "CBiRRT2", "CBiRRT2Options", "CLOCKS", "ClosedChainKinematics", "Deadline", "IKSettings", "PathSegment",
-    "PlanResult", "PlanStatus", "Planner", "RRTConnect", "RRTConnectOptions", "TCBiRRT", "TCBiRRTOptions",
-    "ValidityChecker", "closure_error", "exp_coordinates", "interpolate_task", "make_planner", "planner_names",
-    "rrt_connect", "shortcut_path",
+    "CBiRRT2", "CBiRRT2Options", "PathSegment", "PlanResult", "PlanStatus", "Planner", "RRTConnect",
+    "RRTConnectOptions", "TCBiRRT", "TCBiRRTOptions", "ValidityChecker", "make_planner", "planner_names",
 ]
+
+#: names this package used to export, now imported from the module that defines them
+_MOVED = {"CLOCKS": "optplan.planners.base", "Deadline": "optplan.planners.base",
+          "ClosedChainKinematics": "optplan.constraints.closed_chain",
+          "IKSettings": "optplan.constraints.closed_chain", "closure_error": "optplan.constraints.closed_chain",
+          "rrt_connect": "optplan.planners.rrtconnect", "shortcut_path": "optplan.planners.rrtconnect",
+          "exp_coordinates": "optplan.planners.tcbirrt", "interpolate_task": "optplan.planners.tcbirrt"}
+
+
+def __getattr__(name):
+    if name in _MOVED:
+        from .._compat import moved
+
+        return moved(__name__, name, _MOVED[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def planner_names() -> list[str]:
@@ -38,9 +57,17 @@ def planner_names() -> list[str]:
 
 def make_planner(name: str, robot, scene, *, checker: ValidityChecker | None = None,
                  kinematics: ClosedChainKinematics | None = None, **options) -> Planner:
-    """Build a planner by name; ``options`` are the fields of its options dataclass.
+    """Build a planner by name; ``options`` are the fields of its options dataclass (another name
+    is an :class:`~optplan.errors.OptionError` listing the planner's options).
     ``checker``/``kinematics`` may be shared between planners of the same robot and scene."""
     key = name.lower()
+    cls = {"tcbirrt": TCBiRRTOptions, "cbirrt2": CBiRRT2Options, "rrtconnect": RRTConnectOptions}.get(key)
+    if cls is not None:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise OptionError(f"make_planner({name!r}): unknown option(s) {', '.join(unknown)}; "
+                              f"{cls.__name__} has: {', '.join(sorted(known))}")
     if key == "tcbirrt":
         return TCBiRRT(robot, scene, TCBiRRTOptions(**options), checker=checker, kinematics=kinematics)
     if key == "cbirrt2":

@@ -34,7 +34,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError
-from ..robot import RobotModel
+from ..geometry.spatial import pose_to_vector, vector_to_pose
+from ..model.robot import RobotModel
 from ..scene import Scene
 
 __all__ = ["PlanStatus", "PathSegment", "PlanResult", "Planner", "Deadline", "CLOCKS", "pose_to_vector", "vector_to_pose"]
@@ -77,25 +78,6 @@ class PathSegment:
         op = d.get("object_pose")
         return cls(d["kind"], int(d["start"]), int(d["stop"]), d.get("arm"),
                    None if op is None else vector_to_pose(op))
-
-
-def pose_to_vector(M: pin.SE3) -> np.ndarray:
-    """``[x, y, z, qx, qy, qz, qw]`` of a placement (Pinocchio's XYZQUAT)."""
-    return np.asarray(pin.SE3ToXYZQUAT(M), dtype=float)
-
-
-def vector_to_pose(v) -> pin.SE3:
-    """Inverse of :func:`pose_to_vector`; a vector that is not 7 finite numbers or whose quaternion
-    is zero is a ConfigurationError."""
-    from ..spatial import quaternion_to_matrix
-
-    try:
-        a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError):
-        raise ConfigurationError(f"pose: expected [x, y, z, qx, qy, qz, qw], got {v!r}") from None
-    if a.shape != (7,) or not np.all(np.isfinite(a)):
-        raise ConfigurationError(f"pose: expected 7 finite numbers [x, y, z, qx, qy, qz, qw], got {v!r}")
-    return pin.SE3(quaternion_to_matrix(a[3:], "pose quaternion"), a[:3])
 
 
 @dataclass

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import ConfigurationError
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
-from .closed_chain import ClosedChainKinematics, closure_error
+from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from .validity import ValidityChecker
 
 __all__ = ["CBiRRT2Options", "CBiRRT2"]

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import ConfigurationError
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
-from .closed_chain import ClosedChainKinematics, closure_error
+from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from .validity import ValidityChecker
 
 __all__ = ["OMPLPeerOptions", "OMPLPeer", "make_ompl_peer", "ompl_available", "SPACES", "PLANNERS"]

@@ -24,7 +24,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..scene import Scene
 
 __all__ = ["ObjectPoseFilter", "TaskSampler", "arm_reach", "object_lead_path"]

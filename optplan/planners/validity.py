@@ -1,12 +1,12 @@
 """Fast validity checking for the planners.
 
-:class:`optplan.collision.CollisionChecker` loops over its pairs in Python (~0.5-1 ms per
+:class:`optplan.collision.checker.CollisionChecker` loops over its pairs in Python (~0.5-1 ms per
 configuration); the planners check tens of thousands of configurations per query. This checker
 puts the robot's capsules, the scene's obstacles and the object into ONE Pinocchio
 ``GeometryModel`` and lets ``pinocchio.computeCollisions`` run the whole pair list in C++ (coal
 narrow phase, stop at the first collision): ~20-60 µs per configuration.
 
-The pair set is the same as :class:`~optplan.collision.CollisionChecker`'s (a test checks that
+The pair set is the same as :class:`~optplan.collision.checker.CollisionChecker`'s (a test checks that
 they agree on random configurations):
 
 * robot self-collision pairs (``robot.collision_pairs``),
@@ -38,7 +38,7 @@ import logging
 import numpy as np
 import pinocchio as pin
 
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..scene import Scene
 
 __all__ = ["ValidityChecker"]

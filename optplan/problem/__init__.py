@@ -7,9 +7,9 @@ from .evaluate import Infeasibility
 from .nlp import NlpSolver, SolveOutcome, SolverOptions
 from .problem import OptProblem, TermHandle
 from .solution import IpoptStatus, Solution
-from .terms import (BaseAttitude, ClosedChain, Duration, FramePath, FramePose, JointAccelerationLimits,
-                    JointBoundary, JointPositionLimits, JointVelocityLimits, NumericTrajectory,
-                    OrientationConstraint, PathLength, Smoothness, Term)
+from .frame_terms import BaseAttitude, ClosedChain, FramePath, FramePose, OrientationConstraint
+from .terms import (Duration, JointAccelerationLimits, JointBoundary, JointPositionLimits, JointVelocityLimits,
+                    NumericTrajectory, PathLength, Smoothness, Term)
 
 __all__ = [
     "OptProblem", "TermHandle", "IpoptStatus", "Solution", "Term", "NumericTrajectory", "JointBoundary",

@@ -8,7 +8,7 @@ from typing import Any, Dict, Optional, Tuple
 import casadi as ca
 import numpy as np
 
-from optplan.splines import PiecewisePolynomial, _falling, quartic_spline, segment_max_abs
+from optplan.geometry.splines import PiecewisePolynomial, _falling, quartic_spline, segment_max_abs
 
 _SLOTS = 3  # movable constraint points per segment (and dimension) for the refinement
 

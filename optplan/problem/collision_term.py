@@ -1,4 +1,4 @@
-"""Collision avoidance as NLP constraints: smooth, conservative distances (:mod:`optplan.distance`)
+"""Collision avoidance as NLP constraints: smooth, conservative distances (:mod:`optplan.geometry.distance`)
 between the robot's link capsules, the scene's obstacles and the held object.
 
 * Robot links: their exact capsules (the URDF ``*_capsule`` collision elements).
@@ -11,7 +11,7 @@ between the robot's link capsules, the scene's obstacles and the held object.
   approximation, and conservative (distance ≥ m/‖n‖ ≥ m). Planes start from coal's witness normal
   at the initial guess.
 * Sphere/capsule-only pairs (link–link self-collision, links vs sphere/capsule obstacles) use the
-  smooth conservative distances of :mod:`optplan.distance` (≤ ``cover_tol`` + 3 mm below exact).
+  smooth conservative distances of :mod:`optplan.geometry.distance` (≤ ``cover_tol`` + 3 mm below exact).
 
 Pair activation: a pair is constrained at every knot when its exact coal distance along the
 *initial guess* comes below ``activation`` [m] anywhere; far pairs are left out (the same pruning
@@ -31,8 +31,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .. import distance as D
-from ..collision import CollisionChecker
+from ..geometry import distance as D
+from ..collision.checker import CollisionChecker
 from ..errors import ConfigurationError
 from ..scene import Scene
 from .build import AuxVariable, TermData

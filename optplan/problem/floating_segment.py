@@ -60,7 +60,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from .assembly import scatter
 from .bspline import fit_interior, jerk_integral_reference, knot_values, rest_to_rest
 from .frame_terms import ClosedChain

@@ -11,11 +11,12 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from ..constraints.closed_chain import relative_pose_residual
 from ..errors import ConfigurationError
-from ..robot import RobotModel
-from ..spatial import check_pose
+from ..model.robot import RobotModel
+from ..geometry.spatial import check_pose, pose_residual, vee_skew
 from .build import TermData
-from .terms import Term, _check_at, _knots, _set, _vee_skew, pose_residual, pose_residual_numeric
+from .terms import Term, _check_at, _knots, _set, pose_residual_numeric
 
 
 def _check_frame(obj, name: str = "frame"):
@@ -216,7 +217,7 @@ class ClosedChain(Term):
     @classmethod
     def from_configuration(cls, robot: RobotModel, q, arm_a: str = "A", arm_b: str = "B") -> "ClosedChain":
         """The relative pose the two hands have at the full configuration ``q``."""
-        from ..kinematics import Kinematics
+        from ..model.kinematics import Kinematics
 
         kin = Kinematics(robot)
         Ma, Mb = kin.frame_placements(q, [robot.arm(arm_a).ee_frame, robot.arm(arm_b).ee_frame])
@@ -234,8 +235,7 @@ class ClosedChain(Term):
         fa, fb = self._frames(tp.robot)
         Ra, pa = tp.frame(fa, k, base_frame=True)
         Rb, pb = tp.frame(fb, k, base_frame=True)
-        Rrel, prel = Ra.T @ Rb, Ra.T @ (pb - pa)
-        return pose_residual(Rrel, prel, np.array(self.relative.rotation), ca.DM(self.relative.translation))
+        return relative_pose_residual(Ra, pa, Rb, pb, self.relative)
 
     def residual(self, tp, pinned_q=None):
         """Rows at every collocation point (``pinned_q``: the knots a boundary pins, ``{k: q}``,
@@ -360,7 +360,7 @@ class BaseAttitude(Term):
         rs = []
         for k in _knots(self.at, tp.N):
             E = ca.DM(self._target()).T @ tp.base_rotation(k)
-            rs += [_vee_skew(E), ca.trace(E)]
+            rs += [vee_skew(E), ca.trace(E)]
         n = len(_knots(self.at, tp.N))
         return ca.vertcat(*rs), np.tile(np.r_[0, 0, 0, 1.0], n), np.tile(np.r_[0, 0, 0, np.inf], n)
 
@@ -369,7 +369,7 @@ class BaseAttitude(Term):
         for k in _knots(self.at, traj.N):
             x, y, z, w = traj.base_quat[k] / np.linalg.norm(traj.base_quat[k])
             E = self._target().T @ pin.Quaternion(w, x, y, z).toRotationMatrix()
-            out.append(np.r_[0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]]), np.trace(E)])
+            out.append(np.r_[vee_skew(E), np.trace(E)])
         return np.concatenate(out)
 
     def bounds_numeric(self, traj):

@@ -12,8 +12,8 @@ from collections import OrderedDict
 import casadi as ca
 import numpy as np
 
-from ..robot import RobotModel
-from ..symbolic import SymbolicKinematics
+from ..model.robot import RobotModel
+from ..model.symbolic import SymbolicKinematics
 from .frame_terms import ClosedChain
 from .terms import pose_residual
 
@@ -68,7 +68,7 @@ class KernelCache:
     def _robot_digest(self) -> bytes:
         import hashlib
 
-        from ..symbolic import _describe_joints
+        from ..model.symbolic import _describe_joints
 
         h = hashlib.sha1(str(self.robot.nj).encode())
         for jt in _describe_joints(self.robot.model):

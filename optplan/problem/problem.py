@@ -27,9 +27,10 @@ import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError, OptionError
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..solver_options import check_solve_arguments
-from ..spatial import check_pose
+from ..geometry.spatial import check_pose
+from ..geometry.splines import quintic_time_law
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
 from .nlp import NlpSolver, SolveOutcome, SolverOptions
@@ -186,7 +187,7 @@ class OptProblem:
         J = np.diff(A, axis=0) / h
         base_quat = None
         if self.robot.is_floating:
-            from ..floating import simulate_base
+            from ..model.floating import simulate_base
 
             m = 2 * self.n_sub
             tm = np.linspace(0.0, Tg, m * self.N + 1)
@@ -223,13 +224,12 @@ class OptProblem:
         uniformly in joint-space arc length onto the knots and, with ``closed_chain``, projected
         back onto the closed-chain manifold (:func:`optplan.warmstart.manifold_resample`); timed by
         a rest-to-rest quintic time law over T. Returns whether every projection converged."""
-        from ..warmstart import manifold_resample
+        from ..constraints.closed_chain import manifold_resample
 
         Q, ok = manifold_resample(self.robot, path, self.N + 1, closed_chain)
         Tg = float(T) if T is not None else self.duration
-        s_of_tau = lambda tau: 10 * tau**3 - 15 * tau**4 + 6 * tau**5
         tau = np.linspace(0.0, 1.0, 2001)
-        t = Tg * np.interp(np.linspace(0.0, 1.0, self.N + 1), s_of_tau(tau), tau)
+        t = Tg * np.interp(np.linspace(0.0, 1.0, self.N + 1), quintic_time_law(tau)[0], tau)
         t[0], t[-1] = 0.0, Tg
         self.set_initial(q=self.robot.joints_of(Q.T).T if self.robot.is_floating else Q, t=t, T=Tg)
         return ok
@@ -239,7 +239,7 @@ class OptProblem:
         qa = self.robot.check_joints(q_start, "q_start")
         qb = self.robot.check_joints(q_end, "q_end")
         s = np.linspace(0, 1, self.N + 1)
-        p = 10 * s**3 - 15 * s**4 + 6 * s**5
+        p = quintic_time_law(s)[0]
         self.set_initial(q=qa + p[:, None] * (qb - qa), T=T)
 
     # ------------------------------------------------------------------ build & solve
@@ -360,9 +360,8 @@ class OptProblem:
         T = u.get("T", self.duration)
         s = np.linspace(0.0, 1.0, self.N + 1)[:, None]
         dq = u["q"][-1] - u["q"][0]
-        Q = u["q"][0] + (10 * s**3 - 15 * s**4 + 6 * s**5) * dq
-        V = (30 * s**2 - 60 * s**3 + 30 * s**4) * dq / T
-        A = (60 * s - 180 * s**2 + 120 * s**3) * dq / T**2
+        p, dp, ddp = quintic_time_law(s)
+        Q, V, A = u["q"][0] + p * dq, dp * dq / T, ddp * dq / T**2
         J = np.diff(A, axis=0) / (T / self.N)
         xb = self.tp.pack(Q, V, A, J, T=T, base_quat=u.get("base_quat"), base_twist=u.get("base_twist"))
         return np.concatenate([xb, self._full_x0()[xb.size:]])

@@ -20,7 +20,7 @@ v0 = a0 = vf = 0): the spline then meets the limits everywhere, for a relative t
 <= refine_tol (``QuarticSmoothingResult.stretch``).
 
 With fixed durations the equalities alone determine the spline (5m equations for 5m unknowns per
-dimension): the only feasible point is :func:`optplan.splines.quartic_spline`, the cost (J below)
+dimension): the only feasible point is :func:`optplan.geometry.splines.quartic_spline`, the cost (J below)
 is irrelevant, and a limit this spline violates makes the NLP infeasible. With free durations the
 cost is ``time_weight * T + smooth_weight * (T_ws / J_ws) * J`` with T = sum(h) [s],
 ``J = sum_i integral ||x^(r)||^2 dt`` (r = 3 for ``cost="jerk"``, 2 for ``"acceleration"``) and
@@ -44,7 +44,7 @@ from typing import Any, Dict, Optional, Tuple
 import casadi as ca
 import numpy as np
 
-from optplan.splines import PiecewisePolynomial, _broadcast_vec, _check_int, _check_positive, _float_array
+from optplan.geometry.splines import PiecewisePolynomial, _broadcast_vec, _check_int, _check_positive, _float_array
 
 from ._quartic_nlp import _check_input_sizes, _ee_wrapper, _limit_vec, _Problem
 from .nlp import NlpSolver, SolverOptions

@@ -44,7 +44,7 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 
-from ..robot import RobotModel
+from ..model.robot import RobotModel
 from ..scene import Scene
 from .assembly import Assembly
 from .bspline import fit_interior, jerk_integral_reference, knot_values, rest_to_rest
@@ -166,7 +166,7 @@ class SplineSegmentProblem:
         if solution is not None:
             q = solution.sample(np.linspace(solution.t[0], solution.t[-1], self.N + 1))["q"]
             if closed_chain is not None:
-                from ..warmstart import project_closed_chain
+                from ..constraints.closed_chain import project_closed_chain
 
                 q = np.array(q, float)
                 data = self.robot.model.createData()
@@ -187,8 +187,8 @@ class SplineSegmentProblem:
         """Initial guess from a planner's path (M × nj, no timing): the path is followed with the
         rest-to-rest quintic time law in joint-space arc length, each knot projected onto the
         closed-chain manifold. Returns whether every projection converged."""
-        from ..splines import resample_path
-        from ..warmstart import project_closed_chain
+        from ..geometry.splines import resample_path
+        from ..constraints.closed_chain import project_closed_chain
 
         path = np.asarray(path, float)
         s, _ = resample_path(path, 2)  # validates the path
@@ -219,7 +219,7 @@ class SplineSegmentProblem:
         then each knot projected back onto the closed-chain manifold. A planner path's corners
         give the guess a jerk thousands of times the optimum's; rounding them off before IPOPT
         starts saves iterations."""
-        from ..warmstart import project_closed_chain
+        from ..constraints.closed_chain import project_closed_chain
 
         if self._X0 is None:
             raise ValueError("no initial guess to smooth: call set_initial(...) first")
@@ -274,7 +274,7 @@ class SplineSegmentProblem:
                 fid, V, r = geometry_points(self.robot, idx)
                 return self._static_or_moving(kind, idx, fid, V, r)
             fid, shape, Mbox = spec
-            from .. import distance as D
+            from ..geometry import distance as D
             if isinstance(shape, D.Box):
                 V, r = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T, 0.0
             elif isinstance(shape, D.Sphere):

@@ -26,33 +26,25 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError
-from ..robot import RobotModel
+from ..model.robot import RobotModel
+from ..geometry.spatial import pose_residual, vee_skew
 from .build import BuildContext, TermData
 from .transcription import Transcription
 
 __all__ = [
-    "Term", "JointBoundary", "JointPositionLimits", "JointVelocityLimits", "JointAccelerationLimits",
-    "FramePose", "FramePath", "ClosedChain", "OrientationConstraint", "BaseAttitude", "Smoothness",
+    "Term", "JointBoundary", "JointPositionLimits", "JointVelocityLimits", "JointAccelerationLimits", "Smoothness",
     "PathLength", "Duration", "NumericTrajectory", "pose_residual", "pose_residual_numeric", "BuildContext",
     "TermData",
 ]
 
 
 # --------------------------------------------------------------------------- helpers
-def _vee_skew(E):
-    return 0.5 * ca.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1])
-
-
-def pose_residual(R, p, R_target, p_target):
-    """``[p − p_t (3); vee(E − Eᵀ)/2 (3)]`` and ``trace(E)`` with ``E = R_tᵀ R`` (CasADi)."""
-    E = ca.DM(R_target).T @ R if isinstance(R_target, np.ndarray) else R_target.T @ R
-    return ca.vertcat(p - p_target, _vee_skew(E)), ca.trace(E)
+_vee_skew = vee_skew
 
 
 def pose_residual_numeric(M: pin.SE3, target: pin.SE3) -> tuple[np.ndarray, float]:
-    E = target.rotation.T @ M.rotation
-    s = 0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
-    return np.concatenate([M.translation - target.translation, s]), float(np.trace(E))
+    """:func:`~optplan.geometry.spatial.pose_residual` of a placement against a target placement (numpy)."""
+    return pose_residual(M.rotation, M.translation, target.rotation, target.translation)
 
 
 @dataclass
@@ -551,5 +543,13 @@ class Duration(Term):
         return float(traj.T)
 
 
-# the frame terms live in .frame_terms (split by concept); re-exported here
-from .frame_terms import BaseAttitude, ClosedChain, FramePath, FramePose, OrientationConstraint  # noqa: E402
+_FRAME_TERMS = ("BaseAttitude", "ClosedChain", "FramePath", "FramePose", "OrientationConstraint")
+
+
+def __getattr__(name):
+    # the frame terms live in .frame_terms (which imports this module); the old path warns
+    if name in _FRAME_TERMS:
+        from .._compat import moved
+
+        return moved(__name__, name, "optplan.problem")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -39,8 +39,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..robot import RobotModel
-from ..symbolic import SymbolicKinematics, quat_to_matrix
+from ..model.robot import RobotModel
+from ..model.symbolic import SymbolicKinematics, quat_to_matrix
 
 __all__ = ["Transcription", "quat_mul"]
 

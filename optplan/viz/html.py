@@ -458,8 +458,8 @@ def load_trajectory(path) -> dict:
 def floating_configurations(robot, t, q_joints, qd_joints=None) -> np.ndarray:
     """Full configurations (base XYZ-quaternion, then joints) of a free-floating robot whose file
     holds only the joints: the base motion follows from momentum conservation (zero momentum,
-    base at the origin at t[0]; :func:`optplan.floating.simulate_base`)."""
-    from ..floating import joint_trajectory_from_samples, simulate_base
+    base at the origin at t[0]; :func:`optplan.model.floating.simulate_base`)."""
+    from ..model.floating import joint_trajectory_from_samples, simulate_base
 
     t = np.asarray(t, float)
     traj = joint_trajectory_from_samples(t, np.asarray(q_joints, float),
@@ -496,7 +496,7 @@ def view_file(traj_path, *, scene: str | None = None, robot: str | None = None, 
     """Write the HTML view of a trajectory npz (``optplan view``). The scene and robot come from
     the arguments, else from the npz (``optplan plan --save`` records them), else the robot from
     the scene's ``robot``. Returns the HTML path (default: the npz path with ``.html``)."""
-    from ..robot import RobotModel
+    from ..model.robot import RobotModel
 
     tr = load_trajectory(traj_path)
     sc = resolve_scene(scene if scene is not None else tr.get("scene"))

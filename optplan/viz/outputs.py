@@ -42,7 +42,7 @@ def view_command(args) -> int:
         return 2
     print(f"wrote {p} (open it in a browser: play/pause and the time slider are at the bottom)")
     if args.plot:
-        from ..robot import RobotModel
+        from ..model.robot import RobotModel
         from .plan_plots import plot_trajectory
 
         tr = load_trajectory(args.traj)

@@ -23,8 +23,8 @@ def trajectory_profiles(robot, scene, t, q, constrained=None, max_samples: int =
     relative pose, NaN where the chain is open), ``clearance_m`` (exact smallest distance over
     self, robot-obstacle and — while the chain holds — object pairs; while it is open the object
     stays where it is and only the robot is checked) and ``constrained``."""
-    from ..collision import CollisionChecker
-    from ..planners.closed_chain import closure_error
+    from ..collision.checker import CollisionChecker
+    from ..constraints.closed_chain import closure_error
 
     t = np.asarray(t, float)
     q = np.asarray(q, float)

@@ -1,0 +1,644 @@
+"""Spline-RRT* (Yu et al., "Spline-RRT*: coordinated motion planning of dual-arm space robot"):
+coordinated task-space RRT* → quartic splines → resolved-rate joint motion on the free-floating
+robot — and optplan's optimized variant of the same task.
+
+Pipeline (:func:`run_spline_rrt`):
+
+1. :class:`~optplan.planners.spline_rrt.CoordinatedRRTStar` plans both hand *positions* (separated
+   sampling behind a moving virtual wall).
+2. :func:`smooth_hand_paths`: a C3 quartic spline through each tree's waypoints (Eq. 8-11 with
+   v0 = a0 = vf = 0, :func:`optplan.geometry.splines.quartic_spline`), waypoint times proportional to the
+   segment lengths; the duration T is the smallest one for which both hands keep ‖ẋ‖ ≤ the speed
+   limit (an exact time scaling, since v0 = a0 = vf = 0 are invariant under it). With
+   ``optimize_durations`` the segment durations come from the quartic NLP
+   (:func:`optplan.problem.quartic.smooth_quartic`, minimum time under the speed limit).
+   Orientation: a 5th-order Bézier between the start and goal orientations (:class:`BezierOrientation`).
+3. :func:`track`: resolved rates through the generalized Jacobian (Eq. 5) with closed-loop
+   correction, ``q̇ = J*⁺ (ξ_d + K e)``, the base integrated with the joints (momentum zero). The
+   figures reported are recomputed from :func:`optplan.model.floating.simulate_base` (independent
+   integrator) on the joint samples.
+4. :func:`optimize`: the same task as an :class:`~optplan.problem.OptProblem` on the floating base,
+   warm-started from the tracked joint trajectory: hand paths as constraints, links ≥ 0.1 m apart,
+   base attitude restored at the end.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+
+from ...collision.checker import CollisionChecker
+from ...model.floating import simulate_base
+from ...model.kinematics import Kinematics
+from ...planners.base import PlanStatus
+from ...problem.terms import Term, pose_residual, pose_residual_numeric
+from ...planners.spline_rrt import CoordinatedPlan, CoordinatedRRTStar, CoordinatedRRTStarOptions
+from ...model.robot import RobotModel
+from ...scene import Scene
+from ...geometry.spatial import exp3, log3, rotation_angle, rpy_to_matrix
+from ...geometry.splines import PiecewisePolynomial, quartic_spline, time_grid_from_path
+
+__all__ = ["SplineRRTTask", "BezierOrientation", "HandTrajectory", "smooth_hand_paths", "TrackingOptions",
+           "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "InteriorVelocityLimits", "optimize", "SplineRRTResult", "run_spline_rrt", "hand_separation", "PAPER"]
+log = logging.getLogger(__name__)
+
+#: the paper's figures (Section 4)
+PAPER = {"duration_s": 16.0, "ee_speed_limit_m_s": 0.1, "tracking_error": 1e-4, "min_link_distance_m": 0.1,
+         "joint_rate_limit_deg_s": 0.1, "joint_accel_limit_deg_s2": 0.1}
+
+
+# --------------------------------------------------------------------------- task
+@dataclass(frozen=True)
+class SplineRRTTask:
+    """Start and goal hand poses (world, [m]) per arm and the initial joint vector [rad]."""
+
+    robot: RobotModel
+    scene: Scene
+    start: dict
+    goal: dict
+    q_start: np.ndarray
+
+    @classmethod
+    def from_scene(cls, robot: RobotModel, scene: Scene | str = "splinerrt_capture") -> "SplineRRTTask":
+        """Read ``start_<arm>``/``goal_<arm>`` ([x, y, z, roll, pitch, yaw], [m] and the scene's angle
+        unit) and ``q_start_<arm>`` from the scene's ``[extra]`` table."""
+        scene = Scene.load(scene) if isinstance(scene, str) else scene
+        e = scene.extra
+        unit = math.pi / 180.0  # the shipped scene is in degrees
+        start, goal = {}, {}
+        qs = robot.neutral()[robot.base_nq:].copy()
+        for a in robot.arms:
+            for key, out in (("start", start), ("goal", goal)):
+                v = e.get(f"{key}_{a}")
+                if v is None or len(v) != 6:
+                    raise ValueError(f"scene {scene.name!r}: [extra] needs {key}_{a} = [x, y, z, roll, pitch, yaw]")
+                out[a] = pin.SE3(rpy_to_matrix(*(np.asarray(v[3:], float) * unit)), np.asarray(v[:3], float))
+            qa = e.get(f"q_start_{a}")
+            if qa is None or len(qa) != robot.arm(a).n:
+                raise ValueError(f"scene {scene.name!r}: [extra] needs q_start_{a} ({robot.arm(a).n} joint angles)")
+            qs[robot.arm(a).j_idx] = np.asarray(qa, float) * unit
+        # the stored angles choose the IK branch; the exact start configuration is the IK solution
+        from ...model.ik import IKOptions, solve_arm_ik
+
+        q = robot.configuration(qs)
+        for a in robot.arms:
+            res = solve_arm_ik(robot, a, start[a], q, IKOptions(tol_position=1e-12, tol_orientation=1e-12,
+                                                               max_iterations=100))
+            if res.position_error > 1e-9 or res.orientation_error > 1e-9:
+                raise ValueError(f"scene {scene.name!r}: q_start_{a} does not lead IK to start_{a} (error "
+                                 f"{res.position_error:.3g} m, {res.orientation_error:.3g} rad)")
+            q = res.q
+        return cls(robot, scene, start, goal, robot.joints_of(q).copy())
+
+
+# --------------------------------------------------------------------------- orientation
+class BezierOrientation:
+    """Orientation along a 5th-order Bézier curve in exponential coordinates relative to the start:
+    ``R(τ) = R0 exp(B(τ))``, ``B(τ) = Σ_k C(5,k) (1−τ)^(5−k) τ^k c_k``, τ = t/T. The default control
+    points ``c = (0, 0, 0, φ, φ, φ)`` with ``φ = log(R0ᵀ R1)`` give zero angular velocity and
+    acceleration at both ends (rest to rest)."""
+
+    def __init__(self, R0: np.ndarray, R1: np.ndarray, T: float, control: np.ndarray | None = None):
+        if not (np.isfinite(T) and T > 0):
+            raise ValueError(f"T: expected a positive duration [s], got {T}")
+        self.R0, self.R1, self.T = np.asarray(R0, float), np.asarray(R1, float), float(T)
+        phi = log3(self.R0.T @ self.R1)
+        self.control = (np.array([np.zeros(3)] * 3 + [phi] * 3) if control is None
+                        else np.asarray(control, float).reshape(6, 3))
+
+    def _B(self, tau: float, k: int = 0) -> np.ndarray:
+        c = self.control
+        n = 5
+        for _ in range(k):  # derivative control points
+            c = n * np.diff(c, axis=0)
+            n -= 1
+        out = np.zeros(3)
+        for i in range(n + 1):
+            out += math.comb(n, i) * (1 - tau) ** (n - i) * tau ** i * c[i]
+        return out
+
+    def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(R (3, 3), ω (3,) world axes [rad/s])`` at time t [s]."""
+        tau = float(np.clip(t / self.T, 0.0, 1.0))
+        B, dB = self._B(tau), self._B(tau, 1) / self.T
+        R = self.R0 @ exp3(B)
+        return R, R @ (np.asarray(pin.Jexp3(B)) @ dB)
+
+
+@dataclass
+class HandTrajectory:
+    """One hand's reference: position spline [m] (quartic, C3) and Bézier orientation."""
+
+    position: PiecewisePolynomial
+    orientation: BezierOrientation
+    waypoints: np.ndarray
+
+    def pose(self, t: float) -> pin.SE3:
+        R, _ = self.orientation(t)
+        return pin.SE3(R, self.position(t))
+
+    def twist(self, t: float) -> np.ndarray:
+        """``[v; ω]`` world axes [m/s, rad/s]."""
+        _, w = self.orientation(t)
+        return np.concatenate([self.position(t, 1), w])
+
+    def max_speed(self, n: int = 4001) -> float:
+        """max ‖ẋ‖ [m/s] (dense sampling refined by a bounded 1-D search around the best sample)."""
+        return _max_norm(self.position, 1, n)
+
+
+def _max_norm(pp: PiecewisePolynomial, k: int, n: int = 4001) -> float:
+    from scipy.optimize import minimize_scalar
+
+    t = np.linspace(pp.t0, pp.tf, n)
+    v = np.linalg.norm(pp(t, k), axis=1)
+    i = int(np.argmax(v))
+    a, b = t[max(i - 1, 0)], t[min(i + 1, n - 1)]
+    if b <= a:
+        return float(v[i])
+    r = minimize_scalar(lambda s: -np.linalg.norm(pp(s, k)), bounds=(a, b), method="bounded",
+                        options={"xatol": 1e-10 * max(1.0, pp.tf)})
+    return float(max(v[i], -r.fun))
+
+
+def smooth_hand_paths(paths: dict, start: dict, goal: dict, speed_limit: float = 0.1,
+                      optimize_durations: bool = False) -> tuple[dict, float, dict]:
+    """Quartic splines (v0 = a0 = vf = 0) through the waypoints of every hand, one duration T [s]
+    for both: the smallest with ‖ẋ‖ ≤ ``speed_limit`` [m/s] for every hand (exact time scaling).
+    Returns ``({arm: HandTrajectory}, T, info)``; ``info`` holds per-arm durations before the common
+    T and, with ``optimize_durations``, the quartic NLP's status."""
+    if not (np.isfinite(speed_limit) and speed_limit > 0):
+        raise ValueError(f"speed_limit: expected a positive speed [m/s], got {speed_limit}")
+    splines, T_arm, info = {}, {}, {"nlp": {}}
+    for a, W in paths.items():
+        W = np.asarray(W, float)
+        if W.ndim != 2 or W.shape[1] != 3 or len(W) < 2:
+            raise ValueError(f"paths[{a!r}]: expected (M ≥ 2, 3) waypoints, got shape {W.shape}")
+        times = time_grid_from_path(W, 1.0)
+        pp = quartic_spline(times, W, 0.0, 0.0, 0.0)
+        if optimize_durations:
+            import casadi as ca
+
+            from ...problem.quartic import smooth_quartic
+
+            x, xd = ca.SX.sym("x", 3), ca.SX.sym("xd", 3)
+            vmax = _max_norm(pp, 1)
+            res = smooth_quartic(times * vmax / speed_limit, W, free_durations=True,
+                                 ee_velocity=ca.Function("v", [x, xd], [xd]), ee_speed_max=speed_limit,
+                                 ipopt_options={"max_iter": 300})
+            info["nlp"][a] = {"status": res.status, "iterations": res.iterations, "wall_time_s": res.wall_time}
+            if res.success:
+                pp = res.spline
+        vmax = _max_norm(pp, 1)
+        T_arm[a] = pp.duration * vmax / speed_limit
+        splines[a] = (pp, W)
+    T = max(T_arm.values()) * (1.0 + 1e-9)
+    out = {}
+    for a, (pp, W) in splines.items():
+        pp = pp.time_scaled(T / pp.duration)
+        ori = BezierOrientation(start[a].rotation, goal[a].rotation, T)
+        out[a] = HandTrajectory(pp, ori, W)
+    info["T_arm_s"] = T_arm
+    return out, T, info
+
+
+# --------------------------------------------------------------------------- tracking
+@dataclass(frozen=True)
+class TrackingOptions:
+    """Resolved-rate tracking: ``dt`` integration and output step [s], ``gain`` K [1/s] of the
+    closed-loop correction, ``damping`` of the pseudo-inverse (0: Moore-Penrose)."""
+
+    dt: float = 0.05
+    gain: float = 5.0
+    damping: float = 0.0
+
+    def __post_init__(self):
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"TrackingOptions.dt: expected a positive step [s], got {self.dt}")
+        if not (np.isfinite(self.gain) and self.gain >= 0):
+            raise ValueError(f"TrackingOptions.gain: expected ≥ 0 [1/s], got {self.gain}")
+
+
+@dataclass
+class TrackingResult:
+    """Joint trajectory of the resolved-rate tracking: ``t`` (N,) [s], ``q`` (N, nq) full
+    configurations (the controller's own base), ``qd`` (N, nj) joint rates [rad/s], ``qdd`` (N, nj)
+    joint accelerations [rad/s²]: the derivative of the closed-loop rate field along the motion
+    (central differences with a 1e-4 s step, one-sided at the ends) — exact up to O(1e-8), unlike
+    differences of the samples, which miss short peaks (the quartic's abrupt stop at T)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    wall_time_s: float = 0.0
+    qdd: np.ndarray | None = None
+
+    @property
+    def joints(self) -> np.ndarray:
+        return self.q[:, 7:]
+
+
+def _pose_error(M: pin.SE3, goal: pin.SE3) -> np.ndarray:
+    from ...model.ik import pose_error
+
+    return pose_error(M, goal)
+
+
+def track(robot: RobotModel, hands: dict, q_start, T: float, options: TrackingOptions | None = None,
+          reference=None, null_gain: float = 1.0) -> TrackingResult:
+    """Resolved-rate motion ``q̇ = J*⁺ (ξ_d + K e)`` (J* the stacked generalized Jacobians, world
+    axes) from the joint vector ``q_start`` [rad], base at the origin with identity attitude and
+    zero momentum; RK4 on the configuration manifold (``pin.integrate``) with step ``dt``.
+
+    With ``reference`` (``t -> (q_ref, q̇_ref)`` joint trajectory, e.g. an optimizer's solution)
+    only the hand *positions* are tracked and the redundancy follows the reference:
+    ``q̇ = J_p⁺ (v_d + K e_p) + (I − J_p⁺ J_p)(q̇_ref + null_gain (q_ref − q))``."""
+    o = options or TrackingOptions()
+    t0 = time.perf_counter()
+    kin = Kinematics(robot)
+    arms = list(hands)
+    fids = [robot.arm(a).ee_frame_id for a in arms]
+    data = robot.model.createData()
+    model = robot.model
+    n = int(math.ceil(T / o.dt - 1e-9))
+    t = np.linspace(0.0, T, n + 1)
+
+    def rates(tt: float, q: np.ndarray) -> np.ndarray:
+        G = kin.generalized_jacobians(q)
+        pin.framesForwardKinematics(model, data, q)
+        if reference is not None:
+            J = np.vstack([G[a][:3] for a in arms])
+            xi = np.concatenate([hands[a].position(tt, 1) + o.gain * (hands[a].position(tt) - data.oMf[f].translation)
+                                 for a, f in zip(arms, fids)])
+            Jp = np.linalg.pinv(J)
+            qr, qdr = reference(tt)
+            z = np.asarray(qdr, float) + null_gain * (np.asarray(qr, float) - q[robot.base_nq:])
+            return Jp @ xi + z - Jp @ (J @ z)
+        J = np.vstack([G[a] for a in arms])
+        xi = np.concatenate([hands[a].twist(tt) + o.gain * _pose_error(data.oMf[f], hands[a].pose(tt))
+                             for a, f in zip(arms, fids)])
+        if o.damping > 0:
+            return J.T @ np.linalg.solve(J @ J.T + o.damping ** 2 * np.eye(J.shape[0]), xi)
+        return np.linalg.lstsq(J, xi, rcond=None)[0]
+
+    def vel(tt: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        qd = rates(tt, q)
+        return kin.full_velocity(q, qd), qd
+
+    q = robot.configuration(q_start)
+    Q = np.empty((n + 1, robot.nq))
+    QD = np.empty((n + 1, robot.nj))
+    QDD = np.empty((n + 1, robot.nj))
+    eps = 1e-4
+    for k in range(n + 1):
+        v1, qd = vel(t[k], q)
+        Q[k], QD[k] = q, qd
+        lo, hi = max(t[k] - eps, 0.0), min(t[k] + eps, T)
+        qd_hi = rates(hi, pin.integrate(model, q, (hi - t[k]) * v1))
+        qd_lo = rates(lo, pin.integrate(model, q, (lo - t[k]) * v1))
+        QDD[k] = (qd_hi - qd_lo) / (hi - lo)
+        if k == n:
+            break
+        h = t[k + 1] - t[k]
+        v2, _ = vel(t[k] + h / 2, pin.integrate(model, q, h / 2 * v1))
+        v3, _ = vel(t[k] + h / 2, pin.integrate(model, q, h / 2 * v2))
+        v4, _ = vel(t[k] + h, pin.integrate(model, q, h * v3))
+        q = pin.integrate(model, q, h / 6 * (v1 + 2 * v2 + 2 * v3 + v4))
+    return TrackingResult(t, Q, QD, time.perf_counter() - t0, QDD)
+
+
+# --------------------------------------------------------------------------- evaluation
+def _link_pairs(checker: CollisionChecker, links=(3, 5, 7), arms=("a", "b")) -> list[int]:
+    names_a = tuple(f"{arms[0]}_link{i}_" for i in links)
+    names_b = tuple(f"{arms[1]}_link{i}_" for i in links)
+    out = []
+    for k, p in enumerate(checker.pairs):
+        if p.kind != "self":
+            continue
+        if (p.name_a.startswith(names_a) and p.name_b.startswith(names_b)) or \
+           (p.name_a.startswith(names_b) and p.name_b.startswith(names_a)):
+            out.append(k)
+    return out
+
+
+def link_distances(robot: RobotModel, Q: np.ndarray, links=(3, 5, 7), scene: Scene | None = None) -> dict:
+    """Exact (coal) distances along configurations ``Q`` (N, nq): ``"links"`` (N,) the smallest
+    distance between links ``links`` of arm A and of arm B [m] (the paper's Fig. 8), ``"pairs"``
+    their names, ``"obstacles"`` (N,) the smallest link–obstacle distance (inf without a scene)."""
+    checker = CollisionChecker(robot, scene, held_object=False)
+    sel = _link_pairs(checker, links)
+    if not sel:
+        raise ValueError(f"no collision pair between links {links} of the two arms")
+    obs = [k for k, p in enumerate(checker.pairs) if p.kind == "robot-obstacle"]
+    L, O = np.empty(len(Q)), np.full(len(Q), np.inf)
+    per_pair = np.empty((len(Q), len(sel)))
+    for i, q in enumerate(Q):
+        d = checker.distances(q)
+        per_pair[i] = d[sel]
+        L[i] = d[sel].min()
+        if obs:
+            O[i] = d[obs].min()
+    return {"links": L, "per_pair": per_pair, "pairs": [(checker.pairs[k].name_a, checker.pairs[k].name_b) for k in sel],
+            "obstacles": O}
+
+
+def evaluate(robot: RobotModel, hands: dict, t: np.ndarray, joints: np.ndarray, joint_rates: np.ndarray,
+             scene: Scene | None = None, base0: pin.SE3 | None = None,
+             joint_accelerations: np.ndarray | None = None) -> dict:
+    """Figures of a joint trajectory on the free-floating robot, from the independent base simulator
+    (:func:`optplan.model.floating.simulate_base`, cubic Hermite through the samples): per-arm
+    ``tracking_position_m``/``tracking_orientation_rad`` (N,), ``base_rpy`` (N, 3) [rad],
+    ``q`` (N, nq), link distances, joint-rate/acceleration peaks [rad/s, rad/s²] (accelerations as
+    given, else central differences of the rates)."""
+    sim = simulate_base(robot, (t, joints, joint_rates), t, base0=base0, substeps=4)
+    kin = Kinematics(robot)
+    out = {"t": t, "q": sim.q, "base_rpy": sim.base_rpy, "momentum_residual": float(sim.momentum_residual.max())}
+    for a, h in hands.items():
+        ep, eo = np.empty(len(t)), np.empty(len(t))
+        fr = robot.arm(a).ee_frame
+        for i, (tt, q) in enumerate(zip(t, sim.q)):
+            e = _pose_error(kin.frame_placement(q, fr), h.pose(tt))
+            ep[i], eo[i] = np.linalg.norm(e[:3]), np.linalg.norm(e[3:])
+        out[f"tracking_position_m_{a}"] = ep
+        out[f"tracking_orientation_rad_{a}"] = eo
+    qdd = np.gradient(joint_rates, t, axis=0) if joint_accelerations is None else np.asarray(joint_accelerations)
+    out["qd"], out["qdd"] = joint_rates, qdd
+    out["max_joint_rate_rad_s"] = float(np.abs(joint_rates).max())
+    out["max_joint_accel_rad_s2"] = float(np.abs(qdd).max())
+    d = link_distances(robot, sim.q, scene=scene)
+    out["link_distance_m"], out["obstacle_distance_m"] = d["links"], d["obstacles"]
+    out["link_pairs"] = d["pairs"]
+    return out
+
+
+# --------------------------------------------------------------------------- optimized variant
+@dataclass
+class EndOrientation(Term):
+    """A frame's world orientation at the last knot equals ``target`` (3 × 3): ``FramePose``
+    without its position rows, which would repeat the last ``FramePath`` position rows and make
+    the equality Jacobian rank-deficient. Residual and bounds as ``FramePose``."""
+
+    frame: str = ""
+    target: np.ndarray | None = None
+    default_name = "end_orientation"
+
+    def residual(self, tp):
+        R, p = tp.frame(self.frame, tp.N)
+        r, tr = pose_residual(R, p, np.asarray(self.target, float), p)
+        return ca.vertcat(r[3:], tr), np.r_[0.0, 0.0, 0.0, 1.0], np.r_[0.0, 0.0, 0.0, np.inf]
+
+    def numeric(self, traj):
+        M = traj.frame(self.frame, traj.N)
+        r, tr = pose_residual_numeric(M, pin.SE3(np.asarray(self.target, float), M.translation))
+        return np.r_[r[3:], tr]
+
+    def bounds_numeric(self, traj):
+        return np.r_[0.0, 0.0, 0.0, 1.0], np.r_[0.0, 0.0, 0.0, np.inf]
+
+
+@dataclass
+class InteriorVelocityLimits(Term):
+    """``|q̇| ≤ scale · robot.velocity_limit`` [rad/s] at the interior fractions ``fractions`` of every
+    interval (``JointVelocityLimits`` holds at the knots only; q̇ is quadratic between them and
+    overshot the limit by 60 % between knots without this term — measured)."""
+
+    fractions: tuple = (1 / 6, 1 / 3, 1 / 2, 2 / 3, 5 / 6)
+    scale: float = 1.0
+    default_name = "interior_velocity_limits"
+
+    def residual(self, tp):
+        lim = self.scale * tp.robot.velocity_limit
+        rows = []
+        for k in range(tp.N):
+            for f in self.fractions:
+                tau = f * tp.h
+                rows.append(tp.qd(k) + tau * tp.qdd(k) + tau ** 2 / 2 * tp.jerk(k))
+        n = len(rows)
+        return ca.vertcat(*rows), np.tile(-lim, n), np.tile(lim, n)
+
+    def numeric(self, traj):
+        out = []
+        for k in range(traj.N):
+            for f in self.fractions:
+                tau = f * traj.h
+                out.append(traj.qd[k] + tau * traj.qdd[k] + tau ** 2 / 2 * traj.jerk[k])
+        return np.concatenate(out)
+
+    def bounds_numeric(self, traj):
+        n = traj.N * len(self.fractions)
+        lim = self.scale * traj.robot.velocity_limit
+        return np.tile(-lim, n), np.tile(lim, n)
+
+
+@dataclass(frozen=True)
+class OptimizeOptions:
+    """The optimized variant (:func:`optimize`): ``n_intervals`` N, ``n_sub`` RK4 sub-steps of the base
+    per interval, ``duration_factor``: its duration is this times the Spline-RRT* duration (> 1: the
+    same hand paths run slower, leaving the joint-rate limits room for the self-motion that restores
+    the attitude), ``joint_accel_limit`` [rad/s²] (at the knots: q̈ is piecewise linear),
+    ``rate_margin``: the NLP's joint-rate limits are this times the robot's (the interior points
+    sample the rate, and the executed motion deviates slightly from the NLP's between knots), ``link_margin`` [m] between the robot's links (and ``obstacle_margin`` [m] to the
+    obstacles), ``restore_attitude``: base attitude at T equal to the start's (hard constraint;
+    False: minimised as a cost), ``position_only``: hand paths as position constraints with the
+    orientation constrained at the goal only (False: full poses at every knot), ``orientation_weight``: weight of the squared deviation
+    from the Bézier orientation (a cost, with ``position_only``), ``tol`` IPOPT's
+    constraint tolerance, ``max_iter``."""
+
+    n_intervals: int = 30
+    n_sub: int = 2
+    duration_factor: float = 1.5
+    joint_accel_limit: float = 0.1
+    rate_margin: float = 0.995
+    link_margin: float = 0.1
+    obstacle_margin: float = 0.0
+    restore_attitude: bool = True
+    position_only: bool = True
+    orientation_weight: float = 1.0
+    tol: float = 1e-8
+    max_iter: int = 300
+
+
+def optimize(robot: RobotModel, task: SplineRRTTask, hands: dict, T: float, warm: TrackingResult,
+             options: OptimizeOptions | None = None):
+    """The Spline-RRT* task as an :class:`~optplan.problem.OptProblem` on the floating base (base at
+    the origin, zero momentum), warm-started from the tracked joint trajectory ``warm``: hands on
+    their planned paths at every knot (``FramePath``), start at rest from ``task.q_start``, rest at
+    T, joint position/velocity limits, link–link distance ≥ ``link_margin`` (``CollisionAvoidance``),
+    base attitude restored at T, minimum jerk. Returns ``(Solution, OptProblem)``."""
+    from ...problem import (BaseAttitude, CollisionAvoidance, FramePath, JointAccelerationLimits, JointBoundary,
+                           JointPositionLimits, JointVelocityLimits, OptProblem, Smoothness)
+
+    o = options or OptimizeOptions()
+    prob = OptProblem(robot, o.n_intervals, T, n_sub=o.n_sub)
+    zero = np.zeros(robot.nj)
+    prob.add_constraint(JointBoundary("start", q=task.q_start, qd=zero, qdd=zero))
+    prob.add_constraint(JointBoundary("end", qd=zero))
+    for a, h in hands.items():
+        fr = robot.arm(a).ee_frame
+        prob.add_constraint(FramePath(fr, h.pose, position_only=o.position_only), name=f"path_{a}")
+        if o.position_only:
+            prob.add_constraint(EndOrientation(fr, h.pose(T).rotation), name=f"goal_orientation_{a}")
+            if o.orientation_weight > 0:
+                prob.add_cost(FramePath(fr, h.pose), weight=o.orientation_weight, name=f"orientation_{a}")
+    if o.restore_attitude:
+        prob.add_constraint(BaseAttitude(at="end"))
+    else:
+        prob.add_cost(BaseAttitude(at="end"), weight=1e4)
+    prob.add_constraint(JointPositionLimits())
+    prob.add_constraint(JointVelocityLimits(limit=o.rate_margin * robot.velocity_limit))
+    prob.add_constraint(InteriorVelocityLimits(scale=o.rate_margin))
+    prob.add_constraint(JointAccelerationLimits(limit=o.joint_accel_limit))
+    prob.add_constraint(CollisionAvoidance(None, margin=o.link_margin, self_collision=True, held_object=False),
+                        name="links")
+    if task.scene.obstacles:
+        prob.add_constraint(CollisionAvoidance(task.scene, margin=o.obstacle_margin, self_collision=False,
+                                               held_object=False), name="obstacles")
+    prob.add_cost(Smoothness("jerk"))
+    prob.set_initial(q=warm.joints, t=warm.t)
+    sol = prob.solve(tol=o.tol, max_iter=o.max_iter)
+    return sol, prob
+
+
+def _time_scaled(hands: dict, T_old: float, T_new: float) -> dict:
+    """The same hand paths run over ``T_new`` instead of ``T_old`` [s] (exact time scaling)."""
+    return {a: HandTrajectory(h.position.time_scaled(T_new / T_old),
+                              BezierOrientation(h.orientation.R0, h.orientation.R1, T_new, h.orientation.control),
+                              h.waypoints) for a, h in hands.items()}
+
+
+def hand_separation(task: SplineRRTTask, trials: int, separate: bool, options: CoordinatedRRTStarOptions | None = None,
+                    speed_limit: float = 0.1) -> np.ndarray:
+    """Smallest distance [m] between the two hands along the smoothed, time-synchronised splines for
+    ``trials`` seeds (0 .. trials−1), with separated sampling or without (the paper's Fig. 4 (b)
+    vs (a)); NaN for failed plans."""
+    base = options or CoordinatedRRTStarOptions(hand_radius=0.15, max_iterations=400, time_limit=10.0)
+    from dataclasses import replace
+
+    out = np.full(trials, np.nan)
+    arms = list(task.start)
+    for k in range(trials):
+        pl = CoordinatedRRTStar(task.scene, replace(base, separate=separate, seed=k))
+        res = pl.plan({a: (task.start[a].translation, task.goal[a].translation) for a in arms})
+        if not res.success:
+            continue
+        hands, T, _ = smooth_hand_paths(res.paths, task.start, task.goal, speed_limit)
+        t = np.linspace(0.0, T, 2001)
+        out[k] = float(np.linalg.norm(hands[arms[0]].position(t) - hands[arms[1]].position(t), axis=1).min())
+    return out
+
+
+# --------------------------------------------------------------------------- pipeline
+@dataclass
+class SplineRRTResult:
+    """Everything :func:`run_spline_rrt` produced: the plan, the hand references, the duration T
+    [s], the tracked joint trajectory and its independent evaluation (:func:`evaluate`), timings
+    [s], and the optimized variant (``optimized``: the :class:`~optplan.problem.Solution` and its
+    evaluation on a dense grid; None when not run)."""
+
+    task: SplineRRTTask
+    plan: CoordinatedPlan
+    hands: dict
+    T: float
+    tracking: TrackingResult | None
+    evaluation: dict | None
+    timings: dict
+    info: dict = field(default_factory=dict)
+    optimized: dict | None = None
+
+    @property
+    def success(self) -> bool:
+        return self.plan.success and self.tracking is not None
+
+    def figures(self, ev: dict | None = None, T: float | None = None) -> dict:
+        """The headline figures of one evaluation (the example's JSON keys)."""
+        ev = self.evaluation if ev is None else ev
+        arms = list(self.hands)
+        out = {"duration_s": float(self.T if T is None else T),
+               "max_ee_speed_m_s": {a: float(np.linalg.norm(np.gradient(_ee_positions(self.task.robot, ev["q"], a),
+                                                                        ev["t"], axis=0), axis=1).max())
+                                    for a in arms} if ev is not None else {},
+               "max_tracking_error_m": float(max(ev[f"tracking_position_m_{a}"].max() for a in arms)),
+               "max_tracking_error_rad": float(max(ev[f"tracking_orientation_rad_{a}"].max() for a in arms)),
+               "min_link_distance_m": float(ev["link_distance_m"].min()),
+               "final_base_rpy_deg": np.degrees(ev["base_rpy"][-1]).tolist()}
+        return out
+
+
+def _ee_positions(robot: RobotModel, Q: np.ndarray, arm: str) -> np.ndarray:
+    kin = Kinematics(robot)
+    fr = robot.arm(arm).ee_frame
+    return np.array([kin.frame_placement(q, fr).translation for q in Q])
+
+
+def run_spline_rrt(robot: RobotModel | None = None, task: SplineRRTTask | None = None, *,
+                   plan_options: CoordinatedRRTStarOptions | None = None, speed_limit: float = 0.1,
+                   joint_accel_limit: float = 0.1, optimize_durations: bool = False,
+                   tracking: TrackingOptions | None = None, optimize_options: OptimizeOptions | None = None,
+                   run_optimizer: bool = True, sample_dt: float = 0.05) -> SplineRRTResult:
+    """Spline-RRT* on the shipped task (robot ``splinerrt_ffsr``, scene ``splinerrt_capture``) or
+    the given one: plan → quartic splines (T from ‖ẋ‖ ≤ ``speed_limit`` [m/s]) → resolved-rate
+    tracking; T is then stretched (an exact time scaling of the references) until the tracked joint
+    rates stay within the robot's velocity limits and the joint accelerations within
+    ``joint_accel_limit`` [rad/s²] (the joint limits of the paper's Eq. 6). With ``run_optimizer``
+    the optimized variant follows: the NLP (evaluated on a dense grid and at its knots) and its
+    execution (:func:`track` of the hand positions with the NLP's joints as the redundancy
+    reference, ``optimized["executed"]``). Never raises for a failed plan: ``result.plan.status`` says."""
+    robot = robot or RobotModel.from_name("splinerrt_ffsr")
+    task = task or SplineRRTTask.from_scene(robot)
+    po = plan_options or CoordinatedRRTStarOptions(hand_radius=0.15, max_iterations=400, seed=0, time_limit=5.0)
+    tim = {}
+    t0 = time.perf_counter()
+    plan = CoordinatedRRTStar(task.scene, po).plan({a: (task.start[a].translation, task.goal[a].translation)
+                                                    for a in robot.arms})
+    tim["plan_s"] = time.perf_counter() - t0
+    if not plan.success:
+        return SplineRRTResult(task, plan, {}, float("nan"), None, None, tim, {"message": plan.message})
+    t1 = time.perf_counter()
+    hands, T, info = smooth_hand_paths(plan.paths, task.start, task.goal, speed_limit, optimize_durations)
+    tim["smooth_s"] = time.perf_counter() - t1
+    tim["plan_and_smooth_s"] = tim["plan_s"] + tim["smooth_s"]
+    info["T_speed_s"] = T
+    t2 = time.perf_counter()
+    vlim = float(np.min(robot.velocity_limit))
+    tr = ev = None
+    for rnd in range(4):
+        tr = track(robot, hands, task.q_start, T, tracking)
+        peak_v = float(np.abs(tr.qd).max())
+        peak_a = float(np.abs(tr.qdd).max())
+        ratio = max(peak_v / vlim, math.sqrt(peak_a / joint_accel_limit))
+        info.setdefault("stretch_rounds", []).append({"T_s": T, "peak_rate_rad_s": peak_v, "peak_accel_rad_s2": peak_a})
+        if ratio <= 1.0:
+            break
+        T_new = T * ratio * 1.02
+        hands = _time_scaled(hands, T, T_new)
+        T = T_new
+    tim["track_s"] = time.perf_counter() - t2
+    ev = evaluate(robot, hands, tr.t, tr.joints, tr.qd, scene=task.scene, joint_accelerations=tr.qdd)
+    res = SplineRRTResult(task, plan, hands, T, tr, ev, tim, info)
+    if run_optimizer:
+        oo = optimize_options or OptimizeOptions()
+        T_opt = T * oo.duration_factor
+        hands_opt = _time_scaled(hands, T, T_opt)
+        t3 = time.perf_counter()
+        sol, prob = optimize(robot, task, hands_opt, T_opt, tr, oo)
+        tim["optimize_s"] = time.perf_counter() - t3
+        t = np.linspace(0.0, T_opt, int(round(T_opt / sample_dt)) + 1)
+        s = sol.sample(t)
+        ev_o = evaluate(robot, hands_opt, t, s["q"], s["qd"], scene=task.scene, joint_accelerations=s["qdd"])
+        knots = evaluate(robot, hands_opt, sol.t, sol.q, sol.qd, scene=task.scene, joint_accelerations=sol.qdd)
+        t4 = time.perf_counter()
+
+        def reference(tt):
+            smp = sol.sample([min(max(tt, 0.0), sol.t[-1])])
+            return smp["q"][0], smp["qd"][0]
+        ex = track(robot, hands_opt, task.q_start, T_opt, tracking, reference=reference)
+        ev_x = evaluate(robot, hands_opt, ex.t, ex.joints, ex.qd, scene=task.scene, joint_accelerations=ex.qdd)
+        tim["execute_s"] = time.perf_counter() - t4
+        res.optimized = {"solution": sol, "evaluation": ev_o, "knots": knots, "problem": prob, "T": T_opt,
+                         "hands": hands_opt, "executed": ex, "executed_evaluation": ev_x}
+    return res

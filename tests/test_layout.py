@@ -1,0 +1,249 @@
+"""The package layout: dependencies point one way, no import circles, the public surface imports,
+and the old import paths still work (with a DeprecationWarning) for one release.
+
+The import graph is read from the source with ``ast`` (no import side effects): every ``import``
+and ``from … import`` of an ``optplan`` module, at module level and inside functions (a lazy import
+is still a dependency).
+"""
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "optplan"
+
+#: layer of each part of the package; a module may import its own layer and the ones below.
+#: Order: geometry → model → constraints / collision / scene → problem / planners → tasks, trials,
+#: verification, viz → pipeline → paper reproductions → benchmarks → command line. The package
+#: ``optplan/__init__`` (lazy public names) counts as the top; importing it is no dependency.
+LAYERS = [
+    (0, ("optplan.errors", "optplan._compat", "optplan.geometry")),
+    (1, ("optplan.codegen", "optplan.solver_options", "optplan.model")),
+    (2, ("optplan.constraints", "optplan.collision", "optplan.scene")),
+    (3, ("optplan.problem", "optplan.planners")),
+    (4, ("optplan.tasks", "optplan.trials", "optplan.verification", "optplan.viz")),
+    (5, ("optplan.pipeline",)),
+    (6, ("optplan.papers",)),
+    (7, ("optplan.bench", "optplan.cli_args")),   # cli_args: argument checks shared with the bench commands
+    (8, ("optplan.cli", "optplan.reproduce", "optplan.demo", "optplan")),
+]
+
+
+def _layer(module: str) -> int:
+    best, rank = "", None
+    for r, prefixes in LAYERS:
+        for p in prefixes:
+            if (module == p or module.startswith(p + ".")) and len(p) > len(best):
+                best, rank = p, r
+    assert rank is not None, f"{module}: no layer (add it to LAYERS in {__file__})"
+    return rank
+
+
+def _modules() -> dict[str, tuple[Path, bool]]:
+    out = {}
+    for p in sorted(PKG.rglob("*.py")):
+        parts = list(p.relative_to(PKG.parent).with_suffix("").parts)
+        is_pkg = parts[-1] == "__init__"
+        if is_pkg:
+            parts = parts[:-1]
+        out[".".join(parts)] = (p, is_pkg)
+    return out
+
+
+def _imports(module: str, path: Path, is_pkg: bool, known) -> list[tuple[str, int, bool]]:
+    """``(imported optplan module, line, inside a function)`` of one file."""
+    found = []
+
+    def targets(node):
+        if isinstance(node, ast.Import):
+            return [a.name for a in node.names if a.name.split(".")[0] == "optplan"]
+        if node.level:
+            pkg = module.split(".") if is_pkg else module.split(".")[:-1]
+            base = ".".join(pkg[:len(pkg) - node.level + 1] + ([node.module] if node.module else []))
+        else:
+            base = node.module or ""
+        if base.split(".")[0] != "optplan":
+            return []
+        return [f"{base}.{a.name}" if f"{base}.{a.name}" in known else base for a in node.names]
+
+    def visit(node, in_function):
+        for child in ast.iter_child_nodes(node):
+            f = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
+            if isinstance(child, (ast.Import, ast.ImportFrom)):
+                found.extend((t, child.lineno, f) for t in targets(child))
+            visit(child, f)
+
+    visit(ast.parse(path.read_text()), False)
+    return found
+
+
+@pytest.fixture(scope="module")
+def graph():
+    mods = _modules()
+    return mods, {m: _imports(m, p, is_pkg, mods) for m, (p, is_pkg) in mods.items()}
+
+
+def test_every_module_has_a_layer(graph):
+    mods, _ = graph
+    for m in mods:
+        _layer(m)
+
+
+def test_no_upward_imports(graph):
+    """geometry never imports model, the library never imports papers/ or bench/, ..."""
+    _, edges = graph
+    bad = []
+    for m, imps in edges.items():
+        for t, line, _ in imps:
+            if t != "optplan" and _layer(t) > _layer(m):
+                bad.append(f"{m}:{line} imports {t} (layer {_layer(m)} -> {_layer(t)})")
+    assert not bad, "upward imports:\n" + "\n".join(bad)
+
+
+def _cycles(adj: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan, iterative)."""
+    index, low, on, stack, out, counter = {}, {}, set(), [], [], [0]
+    for root in adj:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(adj[root])))]
+        index[root] = low[root] = counter[0]
+        counter[0] += 1
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is not None:
+                if w not in adj:
+                    continue
+                if w not in index:
+                    index[w] = low[w] = counter[0]
+                    counter[0] += 1
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(adj[w]))))
+                elif w in on:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    out.append(sorted(comp))
+    return out
+
+
+def test_cycle_finder_finds_a_cycle():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_circles(graph):
+    """No circles among the library's modules, lazy (function-level) imports included; in the
+    benchmarks (:mod:`optplan.bench`) none at module level."""
+    _, edges = graph
+    adj = {m: {t for t, _, lazy in imps if t != m and t != "optplan"
+               and not (lazy and m.startswith("optplan.bench"))}
+           for m, imps in edges.items()}
+    assert _cycles(adj) == []
+
+
+def test_papers_and_bench_stay_out_of_the_main_job(graph):
+    """The pipeline and the ``plan`` command do not import a paper reproduction or a benchmark."""
+    _, edges = graph
+    for m in ("optplan.pipeline", "optplan.tasks", "optplan.trials", "optplan.verification"):
+        assert not [t for t, _, _ in edges[m] if t.startswith(("optplan.papers", "optplan.bench"))], m
+    src = (PKG / "cli.py").read_text()
+    plan = src[src.index("def _cmd_plan("):]
+    plan = plan[:plan.index("\ndef ", 1)]
+    assert "bench" not in plan and "papers" not in plan
+
+
+# --------------------------------------------------------------------------- public surface
+def test_every_public_name_imports():
+    import optplan
+
+    assert len(optplan.__all__) == len(set(optplan.__all__))
+    for name in optplan.__all__:
+        assert getattr(optplan, name) is not None, name
+    ns: dict = {}
+    exec("from optplan import *", ns)
+    assert {n for n in optplan.__all__ if n != "__version__"} <= set(ns)
+    assert callable(optplan.verify) and callable(optplan.run_pipeline) and callable(optplan.make_planner)
+    from optplan.problem import ClosedChain
+
+    assert optplan.ClosedChain is ClosedChain
+
+
+_OLD_PATHS_SCRIPT = r"""
+import importlib, json, sys, warnings
+import optplan
+from optplan._compat import MOVED_MODULES
+
+out = {"modules": {}, "names": {}}
+# the forms users wrote
+with warnings.catch_warnings(record=True) as w:
+    warnings.simplefilter("always")
+    from optplan.robot import RobotModel as R1
+    from optplan.methods.eba import run_eba as e1
+    from optplan.warmstart import manifold_resample as m1
+out["from_import"] = [R1 is optplan.RobotModel, e1 is importlib.import_module("optplan.papers.eba").run_eba,
+                      m1 is importlib.import_module("optplan.constraints.closed_chain").manifold_resample,
+                      sum(issubclass(x.category, DeprecationWarning) for x in w) >= 3]
+for old, new in MOVED_MODULES.items():
+    sys.modules.pop(old, None)   # imported above through the old path: import it again
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        m = importlib.import_module(old)
+    out["modules"][old] = [m is importlib.import_module(new),
+                           any(issubclass(x.category, DeprecationWarning) and new in str(x.message) for x in w)]
+# names that moved out of modules that stay
+for old_mod, name, new_mod in [
+        ("optplan.problem.terms", "ClosedChain", "optplan.problem.frame_terms"),
+        ("optplan.model.description", "urdf_string", "optplan.model.urdf_writer"),
+        ("optplan.model.ik", "solve_grasp_ik", "optplan.constraints.closed_chain"),
+        ("optplan.papers.dshdasr.arcs", "DiscreteArcModel", "optplan.papers.dshdasr.arc_models"),
+        ("optplan.planners", "ClosedChainKinematics", "optplan.constraints.closed_chain"),
+        ("optplan.planners", "interpolate_task", "optplan.planners.tcbirrt")]:
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        obj = getattr(importlib.import_module(old_mod), name)
+    out["names"][f"{old_mod}.{name}"] = [obj is getattr(importlib.import_module(new_mod), name),
+                                         any(issubclass(x.category, DeprecationWarning) for x in w)]
+print(json.dumps(out))
+"""
+
+
+def test_old_import_paths_warn_and_resolve_to_the_same_objects():
+    """Run in a fresh interpreter: importing an old path rebinds ``optplan.<old name>`` to the module."""
+    r = subprocess.run([sys.executable, "-c", _OLD_PATHS_SCRIPT], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out["modules"] and all(same for same, _ in out["modules"].values()), out["modules"]
+    assert all(warned for _, warned in out["modules"].values()), out["modules"]
+    assert all(same and warned for same, warned in out["names"].values()), out["names"]
+    assert all(out["from_import"]), out["from_import"]
+
+
+def test_the_library_imports_no_old_path(graph):
+    """Inside the package every import uses the new paths (an old one would warn on every use)."""
+    from optplan._compat import MOVED_MODULES
+
+    _, edges = graph
+    bad = [f"{m}:{line} imports {t}" for m, imps in edges.items() for t, line, _ in imps
+           if any(t == old or t.startswith(old + ".") for old in MOVED_MODULES)]
+    assert not bad, bad

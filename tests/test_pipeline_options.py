@@ -1,0 +1,54 @@
+"""Pipeline options reach the planner that is chosen, and success is judged with the tolerance the
+user set: ``planner_options`` are passed to any planner (an option it does not have is an
+OptionError naming the planner's options), and ``PipelineResult.success`` uses
+``closed_chain_tol``."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+from optplan.errors import OptionError
+from optplan.model.robot import RobotModel
+from optplan.pipeline import PLANNER_DEFAULTS, PipelineOptions, PipelineResult, run_pipeline
+from optplan.planners import make_planner
+from optplan.scene import Scene
+
+
+@pytest.fixture(scope="module")
+def robot_scene():
+    return RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("ssps_scene1")
+
+
+def test_planner_options_default_per_planner_and_explicit_ones_pass_through():
+    assert PipelineOptions().planner_kwargs() == dict(PLANNER_DEFAULTS["tcbirrt"])
+    assert PipelineOptions(planner="cbirrt2").planner_kwargs() == {}
+    assert PipelineOptions(planner="rrtconnect", planner_options=(("range", 0.5),)).planner_kwargs() == \
+        {"range": 0.5}
+
+
+def test_make_planner_names_the_unknown_option_and_the_known_ones(robot_scene):
+    robot, scene = robot_scene
+    with pytest.raises(OptionError, match=r"cbirrt2.*variant.*CBiRRT2Options has:"):
+        make_planner("cbirrt2", robot, scene, variant="improved")
+
+
+def test_run_pipeline_no_longer_drops_options_of_other_planners(robot_scene):
+    """Before, any option given for a planner other than TCBiRRT was silently ignored."""
+    robot, scene = robot_scene
+    q = robot.neutral()
+    with pytest.raises(OptionError, match="not_an_option"):
+        run_pipeline(robot, scene, q, q, PipelineOptions(planner="cbirrt2", planner_options=(("not_an_option", 1),)))
+
+
+def _result(residual: float, tol: float) -> PipelineResult:
+    seg = SimpleNamespace(kind="constrained", solution=SimpleNamespace(success=True),
+                          report=SimpleNamespace(max_closed_chain_residual=residual, min_clearance_m=0.01))
+    return PipelineResult(plan=SimpleNamespace(success=True), segments=[seg], closed_chain_tol=tol)
+
+
+def test_success_uses_the_closed_chain_tolerance():
+    assert _result(5e-6, 1e-5).success          # was judged against a hard-coded 1e-6
+    assert not _result(5e-6, 1e-6).success
+    assert not _result(5e-7, 1e-7).success
+    assert _result(5e-7, 1e-6).success
