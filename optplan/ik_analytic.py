@@ -231,7 +231,7 @@ class DecoupledArmIK:
         self.Wseed = self.W if self.spherical else self.W67
         self._K = [_skew(w) for w in self.w]
         self._K2 = [K @ K for K in self._K]
-        u, a, v = self.w[4], self.w[5], self.w[6]
+        a, v = self.w[5], self.w[6]
         self._axv, self._av = _cross(a, v), float(a @ v)
         x = _cross(v, np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0]))
         self._wx, self._vxx = x, _cross(v, x)

@@ -29,7 +29,7 @@ __all__ = [
     "time_grid_from_path",
 ]
 
-ArrayLike = Union[float, np.ndarray, list, tuple]
+ArrayLike = float | np.ndarray | list | tuple
 
 
 # ----------------------------------------------------------------------------- validation helpers

@@ -391,7 +391,7 @@ def format_summary(summ: dict) -> str:
     for sc, e in summ.items():
         lines.append(f"{sc}: {e['n_trials']} trials, n_min = {e['n_min']}, start/goal regenerations = {e['regenerations']}")
         ts = None
-        for p, d in e["planners"].items():
+        for d in e["planners"].values():
             ts = list(d["p_t"])
             break
         hdr = f"  {'planner':26s} {'succ':>7s} " + " ".join(f"p({t})".rjust(8) for t in ts) + \
@@ -404,7 +404,7 @@ def format_summary(summ: dict) -> str:
             pp = PAPER.get(p, {}).get(sc)
             ps = "" if pp is None else (f"{pp[0]:.2f}, " + (f"{pp[1]:.2f} ± {pp[2]:.2f}" if pp[1] is not None else "/"))
             lines.append(f"  {p:26s} {d['successes']:3d}/{d['n']:<3d} " + " ".join(f"{v:8.2f}" for v in d["p_t"].values())
-                         + f" {('%.3f' % med) if med is not None else '/':>9s} {mm:>24s} {ps:>24s}")
+                         + f" {f'{med:.3f}' if med is not None else '/':>9s} {mm:>24s} {ps:>24s}")
             extra = []
             if "mean_n_regrasp" in d:
                 extra.append(f"mean regrasps {d['mean_n_regrasp']:.2f}")

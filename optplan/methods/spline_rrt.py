@@ -606,7 +606,7 @@ def run_spline_rrt(robot: RobotModel | None = None, task: SplineRRTTask | None =
     t2 = time.perf_counter()
     vlim = float(np.min(robot.velocity_limit))
     tr = ev = None
-    for rnd in range(4):
+    for _round in range(4):
         tr = track(robot, hands, task.q_start, T, tracking)
         peak_v = float(np.abs(tr.qd).max())
         peak_a = float(np.abs(tr.qdd).max())

@@ -29,6 +29,7 @@ import json
 import logging
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -213,8 +214,6 @@ class PlanResult:
 
     def save(self, path) -> "Path":
         """Write :meth:`to_json` to ``path``."""
-        from pathlib import Path
-
         self.check()
         p = Path(path)
         p.write_text(self.to_json())
@@ -262,7 +261,7 @@ class Deadline:
 
     __slots__ = ("t0", "limit", "end", "clock")
 
-    def __init__(self, seconds: float, clock: str = "wall"):
+    def __init__(self, seconds: float, clock: str = "wall") -> None:
         if clock not in CLOCKS:
             raise ValueError(f"clock: expected 'wall' or 'cpu', got {clock!r}")
         self.clock = CLOCKS[clock]
@@ -297,7 +296,7 @@ class Planner(abc.ABC):
 
     name = "planner"
 
-    def __init__(self, robot: RobotModel, scene: Scene | None = None):
+    def __init__(self, robot: RobotModel, scene: Scene | None = None) -> None:
         if not isinstance(robot, RobotModel):
             raise TypeError(f"robot: expected optplan.RobotModel, got {type(robot).__name__}")
         if robot.is_floating:

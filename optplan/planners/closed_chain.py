@@ -167,7 +167,7 @@ class ClosedChainKinematics:
         # K unrolled iterations of Alg. 4 (both arms; an arm stops once its errors are below ε)
         par = ca.SX.sym("par", 6)   # damping, tol_p, tol_o, gain, max_step, remaining iterations
         qk = q
-        n_it = 0
+        n_it: ca.SX | int = 0
         lo, hi = ca.DM(self.lower), ca.DM(self.upper)
         for k in range(self.UNROLL):
             tk = self._arm_terms(sk, qk, Ro, po, par[0])

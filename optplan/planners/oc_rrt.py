@@ -83,7 +83,7 @@ class OCRRTOptions:
 
 
 class _Tree:
-    def __init__(self, q, p, cap: int = 512):
+    def __init__(self, q, p, cap: int = 512) -> None:
         self.Q = np.empty((cap, q.size))
         self.P = np.empty((cap, p.size))
         self.Q[0], self.P[0] = q, p
@@ -117,7 +117,7 @@ class OCRRT(Planner):
     name = "oc_rrt"
 
     def __init__(self, robot, scene, constraint: DualArmOrientationConstraint, options: OCRRTOptions | None = None,
-                 *, checker: ValidityChecker | None = None, manifold: OrientationManifold | None = None):
+                 *, checker: ValidityChecker | None = None, manifold: OrientationManifold | None = None) -> None:
         super().__init__(robot, scene)
         if not isinstance(constraint, DualArmOrientationConstraint):
             raise TypeError(f"constraint: expected DualArmOrientationConstraint, got {type(constraint).__name__}")

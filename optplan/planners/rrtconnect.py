@@ -54,7 +54,7 @@ class RRTConnectOptions:
 class _Tree:
     """Nodes in a growing array, parent indices."""
 
-    def __init__(self, root: np.ndarray, cap: int = 256):
+    def __init__(self, root: np.ndarray, cap: int = 256) -> None:
         self.X = np.empty((cap, root.size))
         self.X[0] = root
         self.parent = np.empty(cap, dtype=np.int64)
@@ -213,7 +213,7 @@ class RRTConnect(Planner):
     name = "rrtconnect"
 
     def __init__(self, robot, scene=None, options: RRTConnectOptions | None = None, *,
-                 checker: ValidityChecker | None = None):
+                 checker: ValidityChecker | None = None) -> None:
         super().__init__(robot, scene)
         self.options = options or RRTConnectOptions()
         if not isinstance(self.options, RRTConnectOptions):

@@ -231,7 +231,7 @@ class CoordinatedPlan:
 class CoordinatedRRTStar:
     """Coordinated RRT* of two hand positions among the obstacles of ``scene`` (module docstring)."""
 
-    def __init__(self, scene: Scene | None = None, options: CoordinatedRRTStarOptions | None = None):
+    def __init__(self, scene: Scene | None = None, options: CoordinatedRRTStarOptions | None = None) -> None:
         if scene is not None and not isinstance(scene, Scene):
             raise TypeError(f"scene: expected an optplan Scene or None, got {type(scene).__name__}")
         self.scene = scene
@@ -342,7 +342,7 @@ class CoordinatedRRTStar:
         n = 1
         goal_idx = -1
         best = np.inf
-        for it in range(o.max_iterations):
+        for _iteration in range(o.max_iterations):
             if time.perf_counter() >= deadline:
                 break
             if goal_idx >= 0 and o.stop_at_first:

@@ -56,7 +56,7 @@ class ObjectPoseFilter:
     """Cheap necessary conditions on an object pose (no IK): object ∩ obstacles = ∅ and both grasp
     points within reach. ``margin`` [m] shrinks the reach bound's slack (0: the exact bound)."""
 
-    def __init__(self, robot: RobotModel, scene: Scene, margin: float = 0.0):
+    def __init__(self, robot: RobotModel, scene: Scene, margin: float = 0.0) -> None:
         if scene.object is None:
             raise ValueError("ObjectPoseFilter needs a scene with an [object]")
         self.obj = scene.object.coal_geometry()
@@ -187,7 +187,7 @@ class TaskSampler:
                  bridge_probability: float = 0.0, bridge_sigma: tuple[float, float] = (0.3, 0.4),
                  bridge_tries: int = 60, goal_bias: float = 0.0, guide_probability: float = 0.0,
                  guide_sigma: tuple[float, float] = (0.05, 0.05), geodesic_probability: float = 0.0,
-                 geodesic_sigma: float = 0.15, endpoints: tuple | None = None):
+                 geodesic_sigma: float = 0.15, endpoints: tuple | None = None) -> None:
         self.filt = filt
         self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
         self.filter_tries = int(filter_tries)

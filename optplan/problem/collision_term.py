@@ -139,7 +139,7 @@ class CollisionAvoidance(Term):
     # methods, are forwarded to a model kept for that purpose (deprecated; use ``model(robot)``).
     _LEGACY_NAMES = frozenset({"activate_with", "active_pairs", "constant_pairs", "relaxed", "skipped"})
 
-    def _validate(self):
+    def _validate(self) -> None:
         def bad(name, want):
             raise ConfigurationError(f"CollisionAvoidance.{name}: expected {want}, got {getattr(self, name)!r}")
 
@@ -160,7 +160,7 @@ class CollisionAvoidance(Term):
         object.__setattr__(self, "activate_with", tuple(self.activate_with))
         object.__setattr__(self, "margin_boost", types.MappingProxyType(dict(self.margin_boost)))
 
-    def __setattr__(self, name, value):
+    def __setattr__(self, name, value) -> None:
         legacy = self.__dict__.get("_legacy")
         if legacy is not None and name in self._LEGACY_NAMES:
             if name == "activate_with":
@@ -183,7 +183,7 @@ class CollisionAvoidance(Term):
         """A new :class:`CollisionModel` (collision checker, NLP shapes, activation) for ``robot``."""
         return CollisionModel(self, robot)
 
-    def _setup(self, robot):
+    def _setup(self, robot) -> None:
         """Deprecated in-place setup (SplineSegmentProblem): keeps a model on this term and
         forwards the model's attributes and methods. Use :meth:`model`."""
         object.__setattr__(self, "_legacy", CollisionModel(self, robot))
@@ -247,7 +247,7 @@ class CollisionModel:
     planes. Configuration values are read from ``term``; ``activate_with`` and ``margin_boost``
     start as the term's and may grow (``boost_between_knots``)."""
 
-    def __init__(self, term: CollisionAvoidance, robot):
+    def __init__(self, term: CollisionAvoidance, robot) -> None:
         self.term = term
         self.activate_with = list(term.activate_with)
         self.margin_boost = dict(term.margin_boost)
@@ -265,7 +265,7 @@ class CollisionModel:
         raise AttributeError(f"CollisionModel has no attribute {name!r}")
 
     # ------------------------------------------------------------------ entities
-    def _setup(self, robot):
+    def _setup(self, robot) -> None:
         self.checker = CollisionChecker(robot, self.scene, held_object=self.held_object,
                                         self_collision=self.self_collision, object_arm=self.object_arm)
         objs = robot.collision_model.geometryObjects
@@ -498,7 +498,8 @@ class CollisionModel:
                 eb = self._entity(tp, kb, pair.b, k)
                 for sa in ea[0]:
                     for sb in eb[0]:
-                        rs.append(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2])); lo.append(margin_at(pair, k))
+                        rs.append(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2]))
+                        lo.append(margin_at(pair, k))
         if self.skipped:
             log.info("collision term: %d pair(s) without an NLP model: %s", len(self.skipped),
                      [(p.name_a, p.name_b) for p in self.skipped[:5]])

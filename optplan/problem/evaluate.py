@@ -39,7 +39,7 @@ class Infeasibility:
 class TermEvaluator:
     """The terms of one build of a problem, evaluated at that build's solutions."""
 
-    def __init__(self, problem, built: dict):
+    def __init__(self, problem, built: dict) -> None:
         # a weak reference: a Solution keeps what evaluates its terms, not the problem's solver
         self._problem = weakref.ref(problem)
         self.robot = problem.robot

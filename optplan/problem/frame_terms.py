@@ -60,9 +60,13 @@ class FramePose(Term):
             R, p = tp.frame(self.frame, k)
             r, tr = pose_residual(R, p, np.array(self.target.rotation), ca.DM(self.target.translation))
             if self.position_only:
-                rs.append(r[:3]); lo += [0.0] * 3; hi += [0.0] * 3
+                rs.append(r[:3])
+                lo += [0.0] * 3
+                hi += [0.0] * 3
             else:
-                rs += [r, tr]; lo += [0.0] * 6 + [1.0]; hi += [0.0] * 6 + [np.inf]
+                rs += [r, tr]
+                lo += [0.0] * 6 + [1.0]
+                hi += [0.0] * 6 + [np.inf]
         return ca.vertcat(*rs), np.array(lo), np.array(hi)
 
     def numeric(self, traj):
@@ -132,7 +136,7 @@ class FramePath(Term):
         return float(ca.evalf(tp.T)) if not tp.free_time else 1.0
 
     def residual(self, tp):
-        rs, lo, hi = [], [], []
+        rs = []
         for k, M in enumerate(self._targets(tp.N, self._T(tp))):
             R, p = tp.frame(self.frame, k)
             r, _ = pose_residual(R, p, np.array(M.rotation), ca.DM(M.translation))

@@ -227,7 +227,9 @@ class OptProblem:
 
         Q, ok = manifold_resample(self.robot, path, self.N + 1, closed_chain)
         Tg = float(T) if T is not None else self.duration
-        s_of_tau = lambda tau: 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+        def s_of_tau(tau):
+            return 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+
         tau = np.linspace(0.0, 1.0, 2001)
         t = Tg * np.interp(np.linspace(0.0, 1.0, self.N + 1), s_of_tau(tau), tau)
         t[0], t[-1] = 0.0, Tg
@@ -291,7 +293,9 @@ class OptProblem:
         xall = ca.vertcat(tp.x, *[a.sym for a in aux]) if aux else tp.x
         g, lbg, ubg = [], [], []
         G, lo, hi = tp.dynamics_constraints()
-        g.append(G); lbg.append(lo); ubg.append(hi)
+        g.append(G)
+        lbg.append(lo)
+        ubg.append(hi)
         dyn = slice(0, G.shape[0])
         rows: dict[str, slice] = {}
         n = G.shape[0]
@@ -303,7 +307,9 @@ class OptProblem:
             if h.role == "constraint" and d.var_bounds is not None:
                 var_bounds[h.name] = d.var_bounds
             elif h.role == "constraint":
-                g.append(d.residual); lbg.append(d.lower); ubg.append(d.upper)
+                g.append(d.residual)
+                lbg.append(d.lower)
+                ubg.append(d.upper)
                 rows[h.name] = slice(n, n + d.n_rows)
                 n += d.n_rows
             else:

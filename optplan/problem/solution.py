@@ -65,7 +65,7 @@ class Solution:
     #: the built problem's term evaluator (not saved); see value/violation/dual/sample
     evaluator: object = field(default=None, repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731  (frozen: only here)
         if not isinstance(self.status, IpoptStatus):
             set_("status", IpoptStatus.from_string(self.status))
@@ -99,7 +99,7 @@ class Solution:
         d["evaluator"] = None        # the problem's CasADi functions stay in the process that solved it
         return d
 
-    def __setstate__(self, d):
+    def __setstate__(self, d) -> None:
         for k, v in d.items():
             object.__setattr__(self, k, v)
         object.__setattr__(self, "terms", types.MappingProxyType(dict(d["terms"])))

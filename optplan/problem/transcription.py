@@ -64,7 +64,7 @@ class Transcription:
     """
 
     def __init__(self, robot: RobotModel, n_intervals: int, duration, free_time: bool,
-                 base0_quat=None, com0=None, n_sub: int = 2):
+                 base0_quat=None, com0=None, n_sub: int = 2) -> None:
         self.robot = robot
         self.N = int(n_intervals)
         self.nj = robot.nj
@@ -229,7 +229,7 @@ class Transcription:
         q, v, a, j = self.Q[:, k], self.V[:, k], self.A[:, k], self.J[:, k]
         return q + tau * v + tau**2 / 2 * a + tau**3 / 6 * j, v + tau * a + tau**2 / 2 * j
 
-    def _build_base_functions(self):
+    def _build_base_functions(self) -> None:
         if not self.floating:
             return
         nj = self.nj
