@@ -34,18 +34,23 @@ TRAPPED, ADVANCED, REACHED = 0, 1, 2
 
 @dataclass(frozen=True)
 class CBiRRT2Options:
-    """``max_edge`` [rad]: step of ConstrainedExtend (paper 0.6); ``collision_step`` [rad]
-    (paper 0.2); ``tolerance``: projection tolerance on max |h| (m / rad); ``max_projection_iterations``;
-    ``damping`` of the pseudo-inverse; ``connect_distance`` [rad]: trees are joined when a
-    connect step ends this close to the target; ``margin`` [m]; ``max_iterations`` (0: time only)."""
+    """Options of :class:`CBiRRT2` (Berenson et al.'s constrained bidirectional RRT)."""
 
+    #: Step of ConstrainedExtend [rad] (the paper: 0.6).
     max_edge: float = 0.6
+    #: Joint spacing of the collision checks along an edge [rad] (the paper: 0.2).
     collision_step: float = 0.2
+    #: Projection tolerance on the constraint residual, max |h| [m or rad per row].
     tolerance: float = 1e-7
+    #: Newton iterations of one projection onto the constraint [count].
     max_projection_iterations: int = 50
+    #: Damping of the pseudo-inverse in the projection [-].
     damping: float = 1e-6
+    #: The trees are joined when a connect step ends this close to its target [rad].
     connect_distance: float = 1e-3
+    #: Clearance counted as contact [m].
     margin: float = 0.0
+    #: Cap on the planner's iterations [count] (0: only the time limit).
     max_iterations: int = 0
 
     def __post_init__(self):

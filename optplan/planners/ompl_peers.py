@@ -49,20 +49,26 @@ def ompl_available() -> bool:
 
 @dataclass(frozen=True)
 class OMPLPeerOptions:
-    """``space`` in :data:`SPACES`; ``planner`` in :data:`PLANNERS`; ``range`` [rad] of the tree
-    planners (None: 0.3 for the projected space, ρ_s of the atlas/tangent bundle); ``tolerance``
-    of the constraint (max |h|, m / rad); ``delta`` [rad]: manifold traversal step (OMPL default
-    0.05); ``max_projection_iterations``; ``simplify``: run OMPL's path simplifier; ``margin`` [m];
-    ``recheck_tolerance``: residual allowed on the returned, interpolated path."""
+    """Options of the OMPL constrained-planning peers."""
 
+    #: Constrained state space, one of :data:`SPACES`.
     space: str = "atlas"
+    #: OMPL planner, one of :data:`PLANNERS`.
     planner: str = "rrtconnect"
+    #: Extension range of the tree planners [rad] (None: 0.3 for the projected space, ρ_s of the atlas / tangent
+    #: bundle).
     range: float | None = None
+    #: Tolerance of the constraint, max |h| [m or rad per row].
     tolerance: float = 1e-6
+    #: Manifold traversal step [rad] (OMPL's default 0.05).
     delta: float = 0.05
+    #: Newton iterations of one projection [count].
     max_projection_iterations: int = 50
+    #: Run OMPL's path simplifier on the solution.
     simplify: bool = False
+    #: Clearance counted as contact [m].
     margin: float = 0.0
+    #: Constraint residual allowed on the returned, interpolated path [m or rad per row].
     recheck_tolerance: float = 1e-4
 
     def __post_init__(self):

@@ -26,16 +26,17 @@ TRAPPED, ADVANCED, REACHED = 0, 1, 2
 
 @dataclass(frozen=True)
 class RRTConnectOptions:
-    """``range`` [rad]: largest edge (Euclidean joint distance) added per extension;
-    ``resolution`` [rad]: largest per-joint change between two collision checks on an edge;
-    ``max_iterations``: cap on sample iterations (0: only the time limit);
-    ``shortcut_iterations``: random shortcut attempts on the found path (0: raw tree path);
-    ``margin`` [m]: clearance that counts as contact for the validity checker."""
+    """Options of :class:`RRTConnect` (joint-space RRT-Connect)."""
 
+    #: Largest edge added per extension, Euclidean joint distance [rad].
     range: float = 1.0
+    #: Largest per-joint change between two collision checks on an edge [rad].
     resolution: float = 0.03
+    #: Cap on sample iterations [count] (0: only the time limit).
     max_iterations: int = 0
+    #: Random shortcut attempts on the found path [count] (0: the raw tree path).
     shortcut_iterations: int = 100
+    #: Clearance counted as contact by the validity checker [m].
     margin: float = 0.0
 
     def __post_init__(self):

@@ -37,38 +37,36 @@ __all__ = ["CoordinatedRRTStarOptions", "VirtualWall", "Tree", "CoordinatedPlan"
 
 @dataclass(frozen=True)
 class CoordinatedRRTStarOptions:
-    """Options of :class:`CoordinatedRRTStar`.
+    """Options of :class:`CoordinatedRRTStar`."""
 
-    step: maximal edge length of the steering function [m].
-    rewire_radius: upper bound of the RRT* neighbourhood radius [m]; the radius used with n
-        vertices is ``min(rewire_radius, gamma (log n / n)^(1/3))``.
-    gamma: RRT* constant [m] (None: Karaman-Frazzoli's ``2 (1 + 1/3)^(1/3) (vol / ζ₃)^(1/3)`` with
-        the sampling box's volume, times 1.1).
-    max_iterations: iterations per tree (every iteration draws one sample).
-    time_limit: wall-time limit of the whole query [s].
-    goal_bias: probability of sampling the goal.
-    stop_at_first: stop a tree as soon as it reaches its goal (plain RRT behaviour with rewiring);
-        False (default) keeps improving the path until the iteration or time limit (RRT*).
-    hand_radius: clearance of a hand position from the obstacles [m].
-    wall_margin: distance each hand keeps from the virtual wall [m].
-    separate: sample each hand on its own side of the wall (False: the unseparated baseline).
-    padding: the sampling box is the bounding box of the starts and goals grown by this [m].
-    edge_resolution: spacing of the points checked along an edge [m].
-    seed: seed of the numpy Generator (None: nondeterministic).
-    """
-
+    #: Maximal edge length of the steering function [m].
     step: float = 0.1
+    #: Upper bound of the RRT* neighbourhood radius [m]; with n vertices the radius is ``min(rewire_radius,
+    #: gamma (log n / n)^(1/3))``.
     rewire_radius: float = 0.3
+    #: RRT* constant [m] (None: Karaman-Frazzoli's ``2 (1 + 1/3)^(1/3) (vol / ζ₃)^(1/3)`` with the sampling
+    #: box's volume, times 1.1).
     gamma: float | None = None
+    #: Iterations per tree [count] (every iteration draws one sample).
     max_iterations: int = 600
+    #: Wall-time limit of the whole query [s].
     time_limit: float = 1.0
+    #: Probability of sampling the goal [-].
     goal_bias: float = 0.05
+    #: Stop a tree as soon as it reaches its goal (plain RRT behaviour with rewiring); False keeps improving the
+    #: path until the iteration or time limit (RRT*).
     stop_at_first: bool = False
+    #: Clearance of a hand position from the obstacles [m].
     hand_radius: float = 0.05
+    #: Distance each hand keeps from the virtual wall [m].
     wall_margin: float = 0.03
+    #: Sample each hand on its own side of the wall (False: the unseparated baseline).
     separate: bool = True
+    #: The sampling box is the bounding box of the starts and goals grown by this [m].
     padding: float = 0.25
+    #: Spacing of the points checked along an edge [m].
     edge_resolution: float = 0.01
+    #: Seed of the numpy Generator (None: nondeterministic).
     seed: int | None = None
 
     def __post_init__(self):

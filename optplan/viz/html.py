@@ -54,20 +54,23 @@ def _need_meshcat():
 
 @dataclass(frozen=True)
 class ViewOptions:
-    """``fps``: frames per second of playback; ``playback_s``: how long [s] the whole motion plays
-    (``None``: in real time, at ``speed``); ``speed``: playback speed-up (motion seconds per second
-    shown) when ``playback_s`` is None; ``max_frames``: at most this many frames (longer motions
-    are sampled more coarsely); ``hand_paths``: draw the end-effector paths; ``autoplay``: start
-    playing on load; ``title``: page title; ``camera``: camera position [m] in the world (``None``:
-    looking at the scene from the front, above)."""
+    """Options of the offline HTML views."""
 
+    #: Frames per second of playback [1/s].
     fps: float = 25.0
+    #: How long the whole motion plays [s] (None: in real time, at ``speed``).
     playback_s: float | None = 20.0
+    #: Playback speed-up when ``playback_s`` is None [motion s per shown s].
     speed: float = 1.0
+    #: At most this many frames [count] (longer motions are sampled more coarsely).
     max_frames: int = 600
+    #: Draw the end-effector paths.
     hand_paths: bool = True
+    #: Start playing on load.
     autoplay: bool = False
+    #: Page title.
     title: str = "optplan trajectory"
+    #: Camera position in the world [m] (None: looking at the scene from the front, above).
     camera: tuple | None = None
 
     def __post_init__(self):
