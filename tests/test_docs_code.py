@@ -40,3 +40,15 @@ def test_code_blocks_run(page):
                 raise AssertionError(f"docs/{page}, python block {i + 1} failed: {type(exc).__name__}: {exc}") from exc
     finally:
         del sys.modules[module.__name__]
+
+
+def test_decision_records_linked_from_the_code_exist():
+    """Every ``docs/decisions/NNNN-title.md`` named in the package's source or the docs is a file."""
+    root = DOCS.parent
+    pattern = re.compile(r"docs/decisions/\d{4}-[a-z0-9-]+\.md")
+    named = set()
+    for path in list((root / "optplan").rglob("*.py")) + list(DOCS.rglob("*.md")):
+        named |= set(pattern.findall(path.read_text(encoding="utf-8")))
+    assert named, "no decision record is linked from the code"
+    missing = sorted(n for n in named if not (root / n).is_file())
+    assert not missing, f"linked decision records that do not exist: {missing}"

@@ -6,10 +6,9 @@ constraint and the same collision checker as optplan's own planners.
 * constraint: h(q) of the TCBiRRT paper Eq. 1-2 (``ClosedChainKinematics.h`` / ``h_jacobian``, compiled C),
   tolerance ``tolerance``;
 * validity: :class:`~optplan.planners.validity.ValidityChecker` (object held);
-* planner: RRTConnect (the issue's configuration), BKPIECE1, KPIECE1, RRT or PRM.
+* planner: RRTConnect (the default), BKPIECE1, KPIECE1, RRT or PRM.
 
-What works on this machine (``/work/shared/spec/peers.md`` and our measurements, see
-``docs/planners.md``): Projected + RRTConnect practically never extends in the full ±270° joint
+What works (see docs/decisions/0001-tcbirrt-benchmark-ssps-scenes.md): Projected + RRTConnect practically never extends in the full ±270° joint
 box; Atlas + RRTConnect extends but slowly; Projected + BKPIECE1 with range ≈ 0.3 rad is the
 strongest general configuration we found. Every configuration is available by name
 (:func:`make_ompl_peer`), e.g. ``"ompl-atlas"`` (Atlas + RRTConnect), ``"ompl-projected-bkpiece1"``.

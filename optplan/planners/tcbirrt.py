@@ -46,7 +46,7 @@ Deviations from the paper, all options (defaults in brackets):
 * ``edge_resolution`` [None]: the paper checks only the N+1 configurations of an extension; with a
   value [rad], the straight joint-space segments between consecutive configurations are checked
   too (every ``edge_resolution`` rad).
-* ``joint_connect`` [False in both variants; see docs/planners.md]: the trees are joined in JOINT space when the
+* ``joint_connect`` [False in both variants; see docs/decisions/0004-tcbirrt-improved-variant.md]: the trees are joined in JOINT space when the
   task-space connection cannot do it — CBiRRT2's ConstrainedExtend (Newton projection onto the
   closed chain, :class:`.CBiRRT2`, options ``joint_connect_options``) from tree b's configuration
   toward tree a's: (1) when the connect step reaches tree a's object pose with another joint
@@ -219,7 +219,7 @@ class TCBiRRTOptions:
     #: variant's value, :data:`VARIANTS`).
     lazy_edges: bool | None = None
     #: Join the trees in joint space (CBiRRT2's ConstrainedExtend) when the task-space connection cannot (None:
-    #: the variant's value, :data:`VARIANTS`); see docs/decisions/0003-tcbirrt-sampling-aids-off.md.
+    #: the variant's value, :data:`VARIANTS`); see docs/decisions/0004-tcbirrt-improved-variant.md.
     joint_connect: bool | None = None
     #: The joint-space connection is tried when a connect step is trapped within this ξ distance of the other
     #: tree's node [mixed m / rad].
@@ -253,7 +253,7 @@ class TCBiRRTOptions:
     sample_filter: bool | None = None
     #: Probability of a bridge-test sample in ξ (object in collision at two nearby poses, free at their
     #: midpoint) [-] (None: the variant's value, :data:`VARIANTS`): 0 in both; see
-    #: docs/decisions/0003-tcbirrt-sampling-aids-off.md.
+    #: docs/decisions/0004-tcbirrt-improved-variant.md.
     bridge_probability: float | None = None
     #: Spread of the bridge test's second pose: (position [m], angle [rad]).
     bridge_sigma: tuple = (0.3, 0.4)

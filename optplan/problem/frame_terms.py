@@ -166,11 +166,8 @@ class ClosedChain(Term):
     satisfy the closed chain there (≤ ``pinned_tol``): there the rows repeat the boundary
     constraint and make the constraint Jacobian rank-deficient. A pinned configuration that
     violates it keeps its rows, so an inconsistent problem still ends infeasible. Off by default
-    because IPOPT's path depends on it in both directions (measured): transport example N = 50:
-    20 iterations / 1.1 s with the rows, 55 / 9.7 s without (N = 100: 25 / 2.7 s vs 78 / 252 s —
-    without them the reduced Hessian shows negative curvature at most iterations); restoration
-    NLP N = 48: 20 / 3.0 s with, 26 / 2.8 s without; pipeline trials 0-2 of scene 1: 99, 79,
-    151 iterations with, 101, 109, 74 without. The relative pose does not depend on the base, so a floating robot's
+    because IPOPT's path depends on it in both directions: see docs/decisions/0010-knot-transcription-defaults.md.
+    The relative pose does not depend on the base, so a floating robot's
     hands are taken in the base frame (cheaper derivatives)."""
 
     arm_a: str = "A"

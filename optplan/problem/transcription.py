@@ -18,8 +18,8 @@ Scaling: the decision variables are ``q``, ``h₀ q̇``, ``h₀² q̈`` and ``h�
 interval ``h₀ = duration / N`` (a constant, also for free time), so the integration rows have
 O(1) coefficients. Unscaled, the closed-chain rows at knot 1 act on the first jerk through
 ``h³/6`` only — with the boundary knot pinned, the equality Jacobian had a dozen singular values of
-1e-7..1e-5, IPOPT saw the wrong KKT inertia at every iteration and raised MUMPS's pivot tolerance
-(measured on the pipeline's N = 80 segments: 51 iterations in 8.7 s before, see docs/optproblem.md).
+1e-7..1e-5, IPOPT saw the wrong KKT inertia at every iteration and raised MUMPS's pivot tolerance.
+See docs/decisions/0010-knot-transcription-defaults.md.
 The accessors ``q(k)``, ``qd(k)``, ``qdd(k)``, ``jerk(k)`` and ``V``, ``A``, ``J`` are in physical units.
 
 Free-floating base
