@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import Any
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,7 +54,7 @@ class CBiRRT2Options:
     #: Cap on the planner's iterations [count] (0: only the time limit).
     max_iterations: int = 0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("max_edge", "collision_step", "tolerance", "connect_distance"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -76,7 +77,7 @@ class _Tree:
         self.edge: list[list[np.ndarray]] = [[]]
         self.n = 1
 
-    def add(self, x, parent, edge) -> int:
+    def add(self, x: np.ndarray, parent: int, edge: list[np.ndarray]) -> int:
         if self.n == len(self.X):
             self.X = np.concatenate([self.X, np.empty_like(self.X)])
         self.X[self.n] = x
@@ -85,11 +86,11 @@ class _Tree:
         self.n += 1
         return self.n - 1
 
-    def nearest(self, x) -> int:
+    def nearest(self, x: np.ndarray) -> int:
         d = self.X[:self.n] - x
         return int(np.argmin(np.einsum("ij,ij->i", d, d)))
 
-    def branch(self, i) -> list[np.ndarray]:
+    def branch(self, i: int) -> list[np.ndarray]:
         out = []
         while i >= 0:
             out.append(self.X[i].copy())
@@ -107,8 +108,9 @@ class CBiRRT2(Planner):
 
     name = "cbirrt2"
 
-    def __init__(self, robot, scene, options: CBiRRT2Options | None = None, *, checker: ValidityChecker | None = None,
-                 kinematics: ClosedChainKinematics | None = None, constraint=None):
+    def __init__(self, robot: Any, scene: Any, options: CBiRRT2Options | None = None, *,
+                 checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None,
+                 constraint: Any = None) -> None:
         super().__init__(robot, scene)
         if constraint is None and (scene is None or scene.object is None or len(scene.object.grasps) != 2):
             raise ConfigurationError("CBiRRT2 needs a scene with an [object] grasped by two arms, or a constraint")
@@ -129,7 +131,7 @@ class CBiRRT2(Planner):
             self._eye = np.eye(int(constraint.dim))
 
     # ------------------------------------------------------------------ projection
-    def project(self, q: np.ndarray, st: dict) -> np.ndarray | None:
+    def project(self, q: np.ndarray, st: dict[str, Any]) -> np.ndarray | None:
         """Newton-Raphson onto h = 0 (damped pseudo-inverse); None when it does not converge or
         leaves the joint limits."""
         o, kin = self.options, self.kin
@@ -145,7 +147,7 @@ class CBiRRT2(Planner):
         st["projection_failures"] += 1
         return None
 
-    def _edge(self, qa: np.ndarray, qb: np.ndarray, st: dict) -> list[np.ndarray] | None:
+    def _edge(self, qa: np.ndarray, qb: np.ndarray, st: dict[str, Any]) -> list[np.ndarray] | None:
         """Projected, collision-checked points strictly between qa and qb (both on the manifold)."""
         d = qb - qa
         n = int(math.ceil(float(np.sqrt(d @ d)) / self.options.collision_step))
@@ -158,7 +160,8 @@ class CBiRRT2(Planner):
         return out
 
     # ------------------------------------------------------------------ ConstrainedExtend
-    def extend(self, tree: _Tree, i_near: int, target: np.ndarray, st: dict, deadline: Deadline) -> tuple[int, int]:
+    def extend(self, tree: _Tree, i_near: int, target: np.ndarray, st: dict[str, Any],
+               deadline: Deadline) -> tuple[int, int]:
         o = self.options
         i_old = i_near
         q_old = tree.X[i_near].copy()
@@ -187,7 +190,8 @@ class CBiRRT2(Planner):
         return res, i_old
 
     # ------------------------------------------------------------------ main loop
-    def _plan(self, q_start, q_goal, deadline, rng, seed) -> PlanResult:
+    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
+              seed: int) -> PlanResult:
         o, ck = self.options, self.checker
         st = {"iterations": 0, "projections": 0, "projection_failures": 0}
         c0 = ck.n_checks

@@ -85,8 +85,8 @@ class _Problem:
         if ee is not None and slots:
             self.slot_shape["ee_speed_max"] = (_SLOTS, self.m, 1)
 
-    ee_acc = None  # optional Function (q, qdot, qddot) -> EE linear acceleration; set by smooth_quartic
-    ee_acc_max = None
+    ee_acc: Any = None  # optional Function (q, qdot, qddot) -> EE linear acceleration; set by smooth_quartic
+    ee_acc_max: float | None = None
 
     @property
     def has_limits(self) -> bool:
