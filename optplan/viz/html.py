@@ -22,7 +22,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -165,7 +165,7 @@ def _obstacle_geometry(ob):
 def _colored_geometry(robot) -> pin.GeometryModel:
     """A copy of the collision model with one colour per arm (links of the base in grey)."""
     gm = robot.collision_model.copy()
-    joint_arm = {}
+    joint_arm: dict[int, int] = {}
     for k, arm in enumerate(robot.arms.values()):
         for jn in arm.joint_names:
             joint_arm[int(robot.model.getJointId(jn))] = k
@@ -177,8 +177,8 @@ def _colored_geometry(robot) -> pin.GeometryModel:
         if j > 0:
             joint_arm.setdefault(jid, joint_arm[j])
     for g in gm.geometryObjects:
-        k = joint_arm.get(int(g.parentJoint))
-        g.meshColor = np.array(BASE_COLOR if k is None else ARM_COLORS[k % len(ARM_COLORS)], float)
+        ka = joint_arm.get(int(g.parentJoint))
+        g.meshColor = np.array(BASE_COLOR if ka is None else ARM_COLORS[ka % len(ARM_COLORS)], float)
     return gm
 
 
@@ -442,7 +442,7 @@ def load_trajectory(path) -> dict:
         keys = set(z.files)
         if not {"t", "q"} <= keys:
             raise ValueError(f"{p}: expected arrays 't' and 'q' in the npz, found {sorted(keys)}")
-        out = {"t": np.asarray(z["t"], float), "q": np.asarray(z["q"], float)}
+        out: dict[str, Any] = {"t": np.asarray(z["t"], float), "q": np.asarray(z["q"], float)}
         if "base_q" in keys:   # a free-floating base's [x, y, z, qx, qy, qz, qw] stored apart from the joints
             bq = np.asarray(z["base_q"], float)
             if bq.ndim == 2 and bq.shape == (len(out["q"]), 7):
