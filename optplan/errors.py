@@ -6,7 +6,8 @@ in the result objects.
 """
 from __future__ import annotations
 
-from typing import Iterable, cast
+from collections.abc import Iterable
+from typing import cast
 
 
 class OptplanError(Exception):

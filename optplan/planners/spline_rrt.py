@@ -119,7 +119,7 @@ class VirtualWall:
     n1: np.ndarray
 
     @classmethod
-    def from_task(cls, first: tuple[Any, Any], second: tuple[Any, Any]) -> "VirtualWall":
+    def from_task(cls, first: tuple[Any, Any], second: tuple[Any, Any]) -> VirtualWall:
         """Wall of the task ``first = (start, goal)``, ``second = (start, goal)`` (positions [m])."""
         (a0, a1), (b0, b1) = (np.asarray(first[0], float), np.asarray(first[1], float)), \
                              (np.asarray(second[0], float), np.asarray(second[1], float))

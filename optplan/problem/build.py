@@ -11,8 +11,9 @@ the returned data, which :class:`~optplan.problem.OptProblem` assembles into the
 from __future__ import annotations
 
 import types
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -71,7 +72,7 @@ class AuxVariable:
     upper: np.ndarray
 
     @classmethod
-    def create(cls, name: str, n: int, init: Any, lower: Any = -np.inf, upper: Any = np.inf) -> "AuxVariable":
+    def create(cls, name: str, n: int, init: Any, lower: Any = -np.inf, upper: Any = np.inf) -> AuxVariable:
         return cls(name, ca.MX.sym(name, n), _vec(init, n, "init"), _vec(lower, n, "lower"), _vec(upper, n, "upper"))
 
     @property

@@ -4,9 +4,10 @@ from __future__ import annotations
 import dataclasses
 import json
 import types
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -110,13 +111,13 @@ class Solution:
                 a.flags.writeable = False
 
     # ------------------------------------------------------------------ attempts
-    def after(self, *earlier: "Solution") -> "Solution":
+    def after(self, *earlier: Solution) -> Solution:
         """This solution with the attempts of ``earlier`` solutions (e.g. a pipeline's previous
         retries, in order) listed before its own — nothing is added up."""
         prev = tuple(a for s in earlier for a in s.attempts)
         return dataclasses.replace(self, attempts=prev + self.attempts)
 
-    def labelled(self, label: str) -> "Solution":
+    def labelled(self, label: str) -> Solution:
         """This solution with its own (last) attempt labelled (e.g. ``"collision retry"``)."""
         att = self.attempts[:-1] + (self.attempts[-1].with_label(label),)
         return dataclasses.replace(self, attempts=att)
@@ -257,7 +258,7 @@ class Solution:
         return path
 
     @classmethod
-    def load(cls, path: str | Path) -> "Solution":
+    def load(cls, path: str | Path) -> Solution:
         """Read a file written by :meth:`save`. A missing file is FileNotFoundError; a corrupted one
         (not npz/JSON, missing or malformed fields, an unknown status, NaN or wrongly shaped arrays,
         success claimed on data that fails :meth:`check`) is a
