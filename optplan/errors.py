@@ -6,7 +6,8 @@ in the result objects.
 """
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
+from typing import cast
 
 
 class OptplanError(Exception):
@@ -48,7 +49,7 @@ class OptionError(OptplanError, ValueError):
     """A solver or method option is unknown or has a value of the wrong type/range."""
 
 
-def real_array(value, what: str, error: type = None):
+def real_array(value, what: str, error: type | None = None):
     """``value`` as a float array, refusing what would silently become numbers: strings, booleans,
     complex numbers (NumPy drops the imaginary part), None and other objects, ragged nesting.
     Raises ``error`` (ConfigurationError by default) naming ``what`` and the value; finiteness and
@@ -65,6 +66,7 @@ def real_array(value, what: str, error: type = None):
     except (TypeError, ValueError):
         raw = None
     kind = raw.dtype.kind if raw is not None else "?"
+    raw = cast(np.ndarray, raw)   # None only with kind "?", which is refused below before raw is used
     shown = repr(value)
     shown = shown if len(shown) <= 200 else shown[:200] + "..."
     if kind == "O":

@@ -35,18 +35,21 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class TrialOptions:
-    """``position_range`` [m] and ``angle_range`` [rad]: half-widths of the uniform perturbation
-    (paper: 0.2 m, 0.5 rad); ``min_clearance`` [m] of start and goal; ``ik_restarts``: random-seed
-    IK attempts after the continuation from the nominal configuration fails; ``continuation_steps``:
-    object poses between nominal and perturbed pose; ``limit_margin`` [rad]: start/goal joints at
-    least this far inside the limits; ``max_regenerations`` per trial."""
+    """How the benchmark's start/goal tasks are drawn (the TCBiRRT paper, Section 5.1)."""
 
+    #: Half-width of the uniform position perturbation of the object [m] (the paper: 0.2).
     position_range: float = 0.2
+    #: Half-width of the uniform RPY perturbation, per axis [rad] (the paper: 0.5).
     angle_range: float = 0.5
+    #: Clearance required at start and goal [m].
     min_clearance: float = 0.02
+    #: Random-seed IK attempts after the continuation from the nominal configuration fails [count].
     ik_restarts: int = 20
+    #: Object poses between the nominal and the perturbed pose [count].
     continuation_steps: int = 10
+    #: Start and goal joints at least this far inside their limits [rad].
     limit_margin: float = 0.05
+    #: Redraws per trial before giving up [count].
     max_regenerations: int = 200
 
     def __post_init__(self):

@@ -149,7 +149,7 @@ def test_random_feasible_planes_are_conservative(rows):
     rng = np.random.default_rng(5)
     nbase = rows.prob._built["nbase"]
     checked = 0
-    for trial in range(12):
+    for _trial in range(12):
         x = rows.x0.copy()
         P = x[nbase:].reshape(-1, 4)
         P[:, :3] += rng.normal(size=(P.shape[0], 3)) * 0.15
@@ -336,7 +336,7 @@ def test_fixed_normals_hold_coal_witness_normals(tcb, transport):
     sol = prob.solve()
     assert sol.success, (sol.status, sol.max_constraint_violation)
     x = np.asarray(sol.x)
-    for pair, k, i in slots:
+    for _pair, _k, i in slots:
         np.testing.assert_allclose(x[nb + 4 * i:nb + 4 * i + 3], b["lbx"][nb + 4 * i:nb + 4 * i + 3], atol=1e-9)
     assert min(chk.min_distance(q)[0] for q in sol.q) >= 0.02 - 1e-5
     assert verify(tcb, sol, transport, closed_chain=cc).max_closed_chain_residual <= 1e-5

@@ -211,7 +211,7 @@ def test_casadi_gradient_matches_finite_differences(pair: str) -> None:
         x = pose_vector(pose1, pose2)
         val, grad = casadi_gradient(s1, s2)(x)
         assert abs(val - signed_distance(s1, pose1, s2, pose2)) <= 1e-12
-        fd = fd_gradient(lambda y: signed_distance(s1, poses_of(y)[0], s2, poses_of(y)[1]), x)
+        fd = fd_gradient(lambda y, s1=s1, s2=s2: signed_distance(s1, poses_of(y)[0], s2, poses_of(y)[1]), x)
         assert np.all(np.isfinite(grad))
         assert np.max(np.abs(grad - fd)) <= 1e-5 * max(1.0, np.max(np.abs(fd))), (pair, s1, s2, grad, fd)
         checked += 1

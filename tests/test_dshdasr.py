@@ -74,7 +74,9 @@ def frames(arcs, q):
 
 def xa_xb(arcs, q):
     f = frames(arcs, q)
-    P = lambda n: f(n).translation.copy()
+    def P(n):
+        return f(n).translation.copy()
+
     Xa = arcs.a.params_from_points(P("a_link2"), P("a_link4"), P("a_link6"), P("a_ee"), f("a_ee").rotation[:, 2])
     Xb = arcs.b.params_from_segments([P(f"b_link{i}_1") for i in range(2, 6)] + [P("b_ee")],
                                      [f(f"b_link{i}_6").rotation[:, 0] for i in range(1, 6)])
@@ -114,7 +116,9 @@ def test_eq1_coupling_matches_the_uncoupled_model(robot, rng):
         # Eq. 1 literally: first axis of joint j = second axis of joint j+1 and vice versa
         for i in range(1, 6):
             for j in range(1, 6):
-                v = lambda jj, k: qf[full.idx_qs[full.getJointId(f"b_joint{i}_{jj}_{k}")]]
+                def v(jj, k, qf=qf, i=i):
+                    return qf[full.idx_qs[full.getJointId(f"b_joint{i}_{jj}_{k}")]]
+
                 assert v(j, 1) == v(j + 1, 2) and v(j, 2) == v(j + 1, 1)
         pin.framesForwardKinematics(robot.model, dc, q)
         pin.framesForwardKinematics(full, df, qf)

@@ -93,7 +93,7 @@ def test_generalized_jacobian_predicts_small_simulated_ee_motion(eba, rng):
         return out
 
     e1, e2 = errors(2e-3), errors(1e-3)
-    for (err1, size1), (err2, size2) in zip(e1, e2):
+    for (err1, _size1), (err2, size2) in zip(e1, e2):
         assert err2 < 2e-2 * size2  # first order right
         assert 3.6 < err1 / err2 < 4.4, (err1, err2)  # remainder is second order
 

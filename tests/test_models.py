@@ -103,9 +103,9 @@ def dh_standard(theta, d, a, alpha):
                      [0, 0, 0, 1]])
 
 
-def dh_chain(rows_deg, q, convention, T0=np.eye(4)):
+def dh_chain(rows_deg, q, convention, T0=None):
     """World transforms of D-H frames 1..n (rows [theta_off deg, alpha deg, a, d])."""
-    out, T = [], T0.copy()
+    out, T = [], (np.eye(4) if T0 is None else T0.copy())
     for (off, alpha, a, d), qi in zip(rows_deg, q):
         th = qi + off * DEG
         if convention == "modified":

@@ -6,6 +6,7 @@ Every closed-chain check is independent of the planners: Pinocchio FK of both ha
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -298,7 +299,7 @@ def test_tcbirrt_regrasp_segments(tcb, scene1, checker, tcb_result):
         for M in res.object_poses[s.start:s.stop + 1]:
             assert np.allclose(M.homogeneous, s.object_pose.homogeneous)
         for a, b in zip(seg[:-1], seg[1:]):
-            assert edge_is_valid(a, b, lambda x: checker.is_valid_object_fixed(x, s.object_pose), 0.03)
+            assert edge_is_valid(a, b, lambda x, s=s: checker.is_valid_object_fixed(x, s.object_pose), 0.03)
 
 
 def test_tcbirrt_forced_regrasp(tcb, scene1, tcbirrt, kin, gen, rng):
@@ -399,7 +400,7 @@ def test_options_are_validated():
     o = TCBiRRTOptions()
     assert (o.step_size, o.n_interp) == (0.6, 5)
     assert o.xi_lower == (-2.0, -3.0, 0.0, -math.pi, -math.pi, -math.pi)
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         o.step_size = 1.0   # frozen
 
 

@@ -95,7 +95,7 @@ def test_assembled_derivatives_equal_casadi_ad_and_finite_differences(seg, rng):
     lf, lg = ca.MX.sym("lf"), ca.MX.sym("lg", ng)
     hess_ad = ca.Function("h", [x, p, lf, lg], [ca.triu(ca.hessian(lf * nlp["f"] + ca.dot(lg, nlp["g"]), x)[0])])
     x0 = np.r_[prob._X0.ravel(), prob._xb0]
-    for trial in range(2):
+    for _trial in range(2):
         xv = x0 + 0.02 * rng.normal(size=x0.size)
         lam = rng.normal(size=ng)
         Jm = np.array(d["jac_g"](xv, b.p)[1])

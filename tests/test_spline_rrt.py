@@ -94,7 +94,8 @@ def test_separated_sampling_never_crosses_hand_paths():
     point stays on its own side, and the two hand paths never come close to each other."""
     rng = np.random.default_rng(20261123)
     for trial in range(12):
-        a0 = rng.uniform(-0.3, 0.3, 3); a0[1] -= 0.15
+        a0 = rng.uniform(-0.3, 0.3, 3)
+        a0[1] -= 0.15
         b0 = a0 + np.r_[rng.uniform(-0.1, 0.1), 0.3, rng.uniform(-0.1, 0.1)]
         a1 = a0 + np.r_[1.0, rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4)]
         b1 = a1 + np.r_[rng.uniform(-0.1, 0.1), rng.uniform(0.2, 0.5), rng.uniform(-0.1, 0.1)]
@@ -161,7 +162,7 @@ def test_quartic_splines_meet_the_paper_conditions(plan, smoothed):
         np.testing.assert_allclose(pp(0.0, 2), 0.0, atol=1e-12)
         np.testing.assert_allclose(pp(T, 1), 0.0, atol=1e-12)
         np.testing.assert_allclose(pp(pp.breakpoints), plan.paths[a], atol=1e-12)  # through every waypoint
-        c, hseg = pp.coefficients, pp.durations
+        hseg = pp.durations
         for k in range(4):  # C0..C3 at the inner waypoints
             dc = pp.derivative(k).coefficients
             left = sum(dc[:-1, p] * hseg[:-1, None] ** p for p in range(dc.shape[1]))

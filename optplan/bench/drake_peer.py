@@ -379,29 +379,30 @@ class BsplineSolution:
 # --------------------------------------------------------------------------- solve
 @dataclass(frozen=True)
 class DrakeOptions:
-    """Options of :func:`solve_drake`.
+    """Options of :func:`solve_drake`."""
 
-    solver: "snopt" or "ipopt". samples_per_interval: closed-chain and min-distance constraints at
-    this many equally spaced times per interval (1 = at the breakpoints). influence_distance [m]:
-    MinimumDistanceLowerBoundConstraint's influence-distance offset above the margin.
-    tol: feasibility/optimality tolerance (SNOPT major feasibility/optimality, IPOPT tol and
-    constr_viol_tol). max_iterations: SNOPT major / IPOPT iterations; max_minor_iterations: SNOPT's
-    total minor-iteration limit ("Iterations limit"; measured: 250,000 was reached after ~200 major
-    iterations on the 77-interval segment and on the transport problem with 2 samples per interval). time_limit [s]: SNOPT's time
-    limit and IPOPT's max_cpu_time, and
-    a deadline checked at every evaluation (CPU seconds; the solve then ends with a status saying so). objective_scaling: "auto" (the jerk cost divided by that of
-    the rest-to-rest quintic between the end configurations, as optplan scales its objective) or a
-    number. trace_row: the ``trace(E) ≥ 1`` row of the closed chain.
-    """
-
+    #: ``"snopt"`` or ``"ipopt"``.
     solver: str = "snopt"
+    #: Closed-chain and minimum-distance constraints at this many equally spaced times per interval [count] (1:
+    #: at the breakpoints).
     samples_per_interval: int = 1
+    #: MinimumDistanceLowerBoundConstraint's influence-distance offset above the margin [m].
     influence_distance: float = 0.01
+    #: Feasibility / optimality tolerance (SNOPT major feasibility and optimality, IPOPT ``tol`` and
+    #: ``constr_viol_tol``) [-].
     tol: float = 1e-6
+    #: SNOPT major / IPOPT iterations, at most [count].
     max_iterations: int = 3000
+    #: SNOPT's total minor-iteration limit ("Iterations limit") [count]; 250,000 was too few for the larger
+    #: problems (docs/drake_peer.md).
     max_minor_iterations: int = 10_000_000
+    #: SNOPT's time limit and IPOPT's ``max_cpu_time``, and a deadline checked at every evaluation [CPU s] (the
+    #: solve then ends with a status saying so).
     time_limit: float = 600.0
+    #: ``"auto"`` (the jerk cost divided by that of the rest-to-rest quintic between the end configurations, as
+    #: optplan scales its objective) or a number [-].
     objective_scaling: float | str = "auto"
+    #: Add the closed chain's ``trace(E) ≥ 1`` row.
     trace_row: bool = True
 
     def __post_init__(self):

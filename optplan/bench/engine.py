@@ -21,7 +21,8 @@ Engines:
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from typing import Any
 
 __all__ = ["ENGINES", "EngineUnavailable", "validate_engine", "engine_error", "map_unordered"]
 log = logging.getLogger(__name__)

@@ -40,14 +40,25 @@ GROUPS = {"suite": "hard_", "stress": "stress_", "panda": "panda_"}
 
 @dataclass
 class GeneralizeConfig:
+    """Configuration of ``optplan bench generalize``."""
+
+    #: Scene groups: ``"suite"`` (hard scenes), ``"stress"`` (stress scenes), ``"panda"`` (two Pandas).
     scenes: list = field(default_factory=lambda: ["suite", "stress", "panda"])
+    #: Trials per scene [count].
     trials: int = 5
+    #: Index of the first trial [index] (to resume or split a run).
     first_trial: int = 0
+    #: Base seed of the trials (trial i uses ``SeedSequence(seed, spawn_key=(i,))``).
     seed: int = 0
+    #: Output directory.
     out: str = "bench_generalize"
-    time_limit: float = 10.0                 # planning time limit per query [s]
-    ipopt_max_wall_time: float = 60.0        # [s] per IPOPT solve
+    #: Planning time limit per query [s].
+    time_limit: float = 10.0
+    #: IPOPT's wall-clock cap per solve [s].
+    ipopt_max_wall_time: float = 60.0
+    #: TCBiRRT variant, ``"paper"`` or ``"improved"``.
     planner_variant: str = "improved"
+    #: Show a progress bar.
     progress: bool = True
 
 

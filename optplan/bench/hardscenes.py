@@ -105,7 +105,7 @@ def verify_path(robot: RobotModel, scene: Scene, res: PlanResult, *, resolution:
         a, b = P[k], P[k + 1]
         if k in reg:
             M = reg[k]
-            if not edge_is_valid(a, b, lambda x: ck.is_valid_object_fixed(x, M), resolution):
+            if not edge_is_valid(a, b, lambda x, M=M: ck.is_valid_object_fixed(x, M), resolution):
                 problems.append(f"regrasp edge {k}-{k + 1} in collision")
             n_dense += 1
             continue

@@ -38,15 +38,27 @@ PLANNERS = ("oc_rrt", "oc_rrt_connect", "cbirrt", OMPL_PEER)
 
 @dataclass
 class OCBenchConfig:
+    """Configuration of ``optplan bench oc-rrt``."""
+
+    #: Scene names (``models/scenes/*.toml``) to run.
     scenes: list = field(default_factory=lambda: list(SCENES))
+    #: Planner specs to compare (``name[:option=value...]``).
     planners: list = field(default_factory=lambda: list(PLANNERS))
+    #: Trials per scene [count].
     trials: int = 20
+    #: Time limit per query [s] (of ``clock``).
     time_limit: float = 20.0
+    #: Base seed of the trials.
     seed: int = 0
+    #: Output directory.
     out: str = "bench_oc_rrt"
+    #: ``"cpu"`` (CPU seconds of the worker) or ``"wall"``.
     clock: str = "cpu"
+    #: Spacing of the independent re-check of every returned path [rad].
     resolution: float = 0.01
+    #: Show a progress bar.
     progress: bool = True
+    #: Directory for the paths found (None: not saved).
     save_dir: str | None = None
 
 

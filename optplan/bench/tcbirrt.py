@@ -103,20 +103,36 @@ def expand_scenes(names) -> list[str]:
 
 @dataclass
 class BenchConfig:
+    """Configuration of ``optplan bench tcbirrt``."""
+
+    #: Scene names (``models/scenes/*.toml``) to run.
     scenes: list = field(default_factory=lambda: ["ssps_scene1", "ssps_scene2", "ssps_scene3"])
+    #: Planner specs to compare (``name[:option=value...]``).
     planners: list = field(default_factory=lambda: ["tcbirrt", "cbirrt2", "ompl-atlas"])
+    #: Trials per scene [count].
     trials: int = 100
+    #: Time limit per query [s] (of ``clock``).
     time_limit: float = 10.0
+    #: Base seed of the trials (trial i uses ``SeedSequence(seed, spawn_key=(i,))``).
     seed: int = 0
+    #: Worker processes [count].
     jobs: int = 1
+    #: Output directory (``results.jsonl``, summaries, figures).
     out: str = "bench_tcbirrt"
+    #: ``"cpu"`` (CPU seconds of the worker process) or ``"wall"``.
     clock: str = "cpu"
+    #: Show a progress bar.
     progress: bool = True
+    #: Write ``success_curves.png``.
     plot: bool = True
+    #: Index of the first trial [index] (to resume or split a run).
     first_trial: int = 0
-    merge: list = field(default_factory=list)   # other output dirs whose lines join the summary
-    engine: str = "local"             # "local" (process pool of `jobs`) or "dask" (optplan.bench.engine)
-    address: str | None = None        # Dask scheduler address (None: a local cluster of `jobs` workers)
+    #: Other output directories whose result lines join the summary.
+    merge: list = field(default_factory=list)
+    #: ``"local"`` (a process pool of ``jobs``) or ``"dask"`` (:mod:`optplan.bench.engine`).
+    engine: str = "local"
+    #: Dask scheduler address (None: a local cluster of ``jobs`` workers).
+    address: str | None = None
 
 
 # ---------------------------------------------------------------------- worker
@@ -391,7 +407,7 @@ def format_summary(summ: dict) -> str:
     for sc, e in summ.items():
         lines.append(f"{sc}: {e['n_trials']} trials, n_min = {e['n_min']}, start/goal regenerations = {e['regenerations']}")
         ts = None
-        for p, d in e["planners"].items():
+        for d in e["planners"].values():
             ts = list(d["p_t"])
             break
         hdr = f"  {'planner':26s} {'succ':>7s} " + " ".join(f"p({t})".rjust(8) for t in ts) + \
@@ -404,7 +420,7 @@ def format_summary(summ: dict) -> str:
             pp = PAPER.get(p, {}).get(sc)
             ps = "" if pp is None else (f"{pp[0]:.2f}, " + (f"{pp[1]:.2f} ± {pp[2]:.2f}" if pp[1] is not None else "/"))
             lines.append(f"  {p:26s} {d['successes']:3d}/{d['n']:<3d} " + " ".join(f"{v:8.2f}" for v in d["p_t"].values())
-                         + f" {('%.3f' % med) if med is not None else '/':>9s} {mm:>24s} {ps:>24s}")
+                         + f" {f'{med:.3f}' if med is not None else '/':>9s} {mm:>24s} {ps:>24s}")
             extra = []
             if "mean_n_regrasp" in d:
                 extra.append(f"mean regrasps {d['mean_n_regrasp']:.2f}")

@@ -53,22 +53,41 @@ RESIDUAL_TOL = 1e-6
 
 @dataclass
 class WarmstartConfig:
+    """Configuration of ``optplan bench warmstart``."""
+
+    #: Scene names (``models/scenes/*.toml``) to run.
     scenes: list = field(default_factory=lambda: ["ssps_scene1", "ssps_scene2", "ssps_scene3"])
+    #: Trials per scene [count].
     trials: int = 20
+    #: Base seed of the trials.
     seed: int = 0
+    #: Worker processes [count].
     jobs: int = 1
+    #: Output directory.
     out: str = "bench_warmstart"
-    time_limit: float = 10.0          # planning time limit per query [s]
+    #: Planning time limit per query [s].
+    time_limit: float = 10.0
+    #: Initial guesses to compare: ``"warm"`` (the planner's path) and/or ``"cold"`` (straight line).
     modes: tuple = MODES
+    #: Index of the first trial [index] (to resume or split a run).
     first_trial: int = 0
+    #: Show a progress bar.
     progress: bool = True
-    ipopt_max_wall_time: float | None = None   # [s] per IPOPT solve (None: IPOPT's iteration limit only)
-    free_plane_normals: bool = False  # PipelineOptions.fixed_plane_normals = not this (result lines record it)
-    transcription: str = "bspline"    # PipelineOptions.transcription (result lines record it)
-    compile_kernels: bool = False     # PipelineOptions.compile_kernels True (else "auto")
-    plot: bool = True                 # DIR/time_distributions.png (IPOPT time and iterations per trial)
-    engine: str = "local"             # "local" (process pool of `jobs`) or "dask" (optplan.bench.engine)
-    address: str | None = None        # Dask scheduler address (None: a local cluster of `jobs` workers)
+    #: IPOPT's wall-clock cap per solve [s] (None: IPOPT's iteration limit only).
+    ipopt_max_wall_time: float | None = None
+    #: Free separating-plane normals (``PipelineOptions.fixed_plane_normals = not this``; result lines record
+    #: it).
+    free_plane_normals: bool = False
+    #: ``PipelineOptions.transcription`` (result lines record it).
+    transcription: str = "bspline"
+    #: ``PipelineOptions.compile_kernels = True`` (else ``"auto"``).
+    compile_kernels: bool = False
+    #: Write ``DIR/time_distributions.png`` (IPOPT time and iterations per trial).
+    plot: bool = True
+    #: ``"local"`` (a process pool of ``jobs``) or ``"dask"`` (:mod:`optplan.bench.engine`).
+    engine: str = "local"
+    #: Dask scheduler address (None: a local cluster of ``jobs`` workers).
+    address: str | None = None
 
 
 def validate(cfg: WarmstartConfig) -> list[str]:

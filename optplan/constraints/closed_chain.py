@@ -181,19 +181,20 @@ def manifold_resample(robot: RobotModel, path, n: int, closed_chain=None) -> tup
 
 @dataclass(frozen=True)
 class IKSettings:
-    """Alg. 4 of the TCBiRRT paper (per-arm iterations ``q ← q + λ J† K e``).
+    """Alg. 4 of the TCBiRRT paper (per-arm iterations ``q ← q + λ J† K e``)."""
 
-    ``tol_position`` [m] and ``tol_orientation`` [rad]: ε_p, ε_o on each hand's pose error (Eq. 5-6);
-    ``max_iterations``: n; ``gain``: K·λ (scalar, 1 = Newton step); ``damping``: δ of the damped
-    pseudo-inverse ``Jᵀ (J Jᵀ + δ² I)⁻¹`` (δ → 0 is the paper's pseudo-inverse; a small δ keeps the
-    step bounded near singularities); ``max_step`` [rad]: largest joint change per iteration.
-    """
-
+    #: ε_p: tolerance on each hand's position error (Eq. 5) [m].
     tol_position: float = 1e-7
+    #: ε_o: tolerance on each hand's orientation error (Eq. 6) [rad].
     tol_orientation: float = 1e-7
+    #: n: iterations per solve [count].
     max_iterations: int = 30
+    #: K·λ: scalar step gain [-] (1 = Newton step).
     gain: float = 1.0
+    #: δ of the damped pseudo-inverse ``Jᵀ (J Jᵀ + δ² I)⁻¹`` [-] (δ → 0 is the paper's pseudo-inverse; a small δ
+    #: keeps the step bounded near singularities).
     damping: float = 1e-4
+    #: Largest joint change per iteration [rad].
     max_step: float = 0.5
 
     def __post_init__(self):
@@ -281,7 +282,7 @@ class ClosedChainKinematics:
         # K unrolled iterations of Alg. 4 (both arms; an arm stops once its errors are below ε)
         par = ca.SX.sym("par", 6)   # damping, tol_p, tol_o, gain, max_step, remaining iterations
         qk = q
-        n_it = 0
+        n_it: ca.SX | int = 0
         lo, hi = ca.DM(self.lower), ca.DM(self.upper)
         for k in range(self.UNROLL):
             tk = self._arm_terms(sk, qk, Ro, po, par[0])

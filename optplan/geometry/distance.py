@@ -144,7 +144,7 @@ class Box:
         object.__setattr__(self, "half_extents", (float(h[0]), float(h[1]), float(h[2])))
 
 
-Shape = Union[Sphere, Capsule, Box]
+Shape = Sphere | Capsule | Box
 
 
 def _options(eps: float, cover_tol: float, softmin_tol: float) -> tuple[float, float, float]:

@@ -38,7 +38,7 @@ def quintic_time_law(s):
     return (10 * s**3 - 15 * s**4 + 6 * s**5, 30 * s**2 - 60 * s**3 + 30 * s**4, 60 * s - 180 * s**2 + 120 * s**3)
 
 
-ArrayLike = Union[float, np.ndarray, list, tuple]
+ArrayLike = float | np.ndarray | list | tuple
 
 
 # ----------------------------------------------------------------------------- validation helpers
@@ -387,7 +387,7 @@ def _quartic_triplets(h: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray
     r = h[:-1] / h[1:]
     for order in (1, 2, 3):
         ks = np.arange(order, 5)
-        w = np.array([_falling(p, order) for p in ks])
+        w = np.array([_falling(int(p), order) for p in ks])
         row = base[:-1] + 1 + order
         rows += [np.repeat(row, ks.size), row]
         cols += [(5 * inner[:, None] + ks[None, :]).ravel(), 5 * (inner + 1) + order]

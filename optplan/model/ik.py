@@ -22,18 +22,19 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class IKOptions:
-    """Damped least-squares IK options.
+    """Damped least-squares IK options."""
 
-    tol_position [m], tol_orientation [rad]: convergence thresholds (ε_p, ε_o of the TCBiRRT paper);
-    max_iterations; damping λ (DLS ``Jᵀ (J Jᵀ + λ² I)⁻¹``); max_step [rad] per iteration (joint
-    step clipped); respect_limits clips into the joint limits at every iteration.
-    """
-
+    #: Convergence threshold on the position error, ε_p of the TCBiRRT paper [m].
     tol_position: float = 1e-6
+    #: Convergence threshold on the orientation error, ε_o [rad].
     tol_orientation: float = 1e-6
+    #: Iteration cap [count].
     max_iterations: int = 200
+    #: λ of the damped least squares ``Jᵀ (J Jᵀ + λ² I)⁻¹`` [-].
     damping: float = 1e-3
+    #: Largest joint step per iteration [rad] (the step is clipped).
     max_step: float = 0.3
+    #: Clip into the joint limits at every iteration.
     respect_limits: bool = True
 
     def __post_init__(self):

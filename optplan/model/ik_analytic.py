@@ -231,7 +231,7 @@ class DecoupledArmIK:
         self.Wseed = self.W if self.spherical else self.W67
         self._K = [_skew(w) for w in self.w]
         self._K2 = [K @ K for K in self._K]
-        u, a, v = self.w[4], self.w[5], self.w[6]
+        a, v = self.w[5], self.w[6]
         self._axv, self._av = _cross(a, v), float(a @ v)
         x = _cross(v, np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0]))
         self._wx, self._vxx = x, _cross(v, x)
@@ -317,7 +317,7 @@ class DecoupledArmIK:
             sols = [x for _, x in self._position_branches(Rg, pg, q1, self.Wseed)]
         else:
             sols = self._offset_wrist_solutions(Rg, pg, q1, R_des, p_des)
-        out = []
+        out: list[np.ndarray] = []
         for x in sols:
             ys = self._limit_variants(x)
             if not ys:
@@ -331,7 +331,7 @@ class DecoupledArmIK:
                     out.append(y)
         return np.array(out, float).reshape(-1, 7)
 
-    def _position_branches(self, Rg, pg, q1, W) -> list[np.ndarray]:
+    def _position_branches(self, Rg, pg, q1, W) -> list[tuple[tuple[int, int, int], np.ndarray]]:
         """Branches (q1, q2..q7): the point ``Wseed`` (fixed by q6, q7) is where the pose needs it
         once it has been carried to ``W`` by q5 (W = Wseed for a spherical wrist), then the wrist."""
         Q = Rg @ self.Wseed + pg             # where the wrist point must go (before q2, q3, q4)
@@ -364,7 +364,7 @@ class DecoupledArmIK:
             W5 = rotation_about(self.w[4], t) @ (self.W67 - self.p[4]) + self.p[4]
             for key, x in self._position_branches(Rg, pg, q1, W5):
                 vals.setdefault(key, {})[g] = (_wrap(x[4] - t), x)
-        out = []
+        out: list[np.ndarray] = []
         for key, d in vals.items():
             for g in range(n_grid):
                 if g not in d or g + 1 not in d:

@@ -16,7 +16,7 @@ closed-chain flags, segments, stats) — see :mod:`optplan.planners.base`.
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import OptionError
 from .base import PathSegment, Planner, PlanResult, PlanStatus
@@ -41,7 +41,7 @@ _MOVED = {"CLOCKS": "optplan.planners.base", "Deadline": "optplan.planners.base"
           "exp_coordinates": "optplan.planners.tcbirrt", "interpolate_task": "optplan.planners.tcbirrt"}
 
 
-def __getattr__(name):
+def __getattr__(name: str) -> Any:
     if name in _MOVED:
         from .._compat import moved
 
@@ -55,8 +55,8 @@ def planner_names() -> list[str]:
             "ompl-projected-bkpiece1", "ompl-atlas-bkpiece1", "ompl-projected-kpiece1"]
 
 
-def make_planner(name: str, robot, scene, *, checker: ValidityChecker | None = None,
-                 kinematics: ClosedChainKinematics | None = None, **options) -> Planner:
+def make_planner(name: str, robot: Any, scene: Any, *, checker: ValidityChecker | None = None,
+                 kinematics: ClosedChainKinematics | None = None, **options: Any) -> Planner:
     """Build a planner by name; ``options`` are the fields of its options dataclass (another name
     is an :class:`~optplan.errors.OptionError` listing the planner's options).
     ``checker``/``kinematics`` may be shared between planners of the same robot and scene."""

@@ -29,6 +29,8 @@ import json
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import Any
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -69,12 +71,12 @@ class PathSegment:
     arm: str | None = None
     object_pose: pin.SE3 | None = None
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"kind": self.kind, "start": self.start, "stop": self.stop, "arm": self.arm,
                 "object_pose": None if self.object_pose is None else pose_to_vector(self.object_pose).tolist()}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "PathSegment":
+    def from_dict(cls, d: dict[str, Any]) -> "PathSegment":
         op = d.get("object_pose")
         return cls(d["kind"], int(d["start"]), int(d["stop"]), d.get("arm"),
                    None if op is None else vector_to_pose(op))
@@ -87,10 +89,10 @@ class PlanResult:
     status: PlanStatus
     planner: str
     path: np.ndarray
-    object_poses: list = field(default_factory=list)
+    object_poses: list[pin.SE3 | None] = field(default_factory=list)
     constrained: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-    segments: list = field(default_factory=list)
-    stats: dict = field(default_factory=dict)
+    segments: list[PathSegment] = field(default_factory=list)
+    stats: dict[str, Any] = field(default_factory=dict)
     message: str = ""
 
     @property
@@ -115,7 +117,7 @@ class PlanResult:
         raise TypeError("the truth value of a PlanResult is ambiguous: use `result.success` or `result is not None`")
 
     # ------------------------------------------------------------------ serialization
-    def to_dict(self, include_path: bool = True) -> dict:
+    def to_dict(self, include_path: bool = True) -> dict[str, Any]:
         d = {"status": self.status.value, "planner": self.planner, "message": self.message,
              "stats": _jsonable(self.stats), "n_configurations": int(len(self.path)),
              "n_regrasp": self.n_regrasp, "segments": [s.to_dict() for s in self.segments]}
@@ -153,7 +155,7 @@ class PlanResult:
                                      "(a found path has at least start and goal)")
 
     @classmethod
-    def from_dict(cls, d: dict, source: str = "PlanResult") -> "PlanResult":
+    def from_dict(cls, d: dict[str, Any], source: str = "PlanResult") -> "PlanResult":
         """Rebuild from :meth:`to_dict`; anything missing, malformed or inconsistent is a
         :class:`~optplan.errors.ResultFileError` naming ``source`` and the field."""
         from ..errors import OptplanError, ResultFileError
@@ -193,21 +195,17 @@ class PlanResult:
             raise ResultFileError(f"{source}: not valid JSON ({exc})") from None
         return cls.from_dict(d, source)
 
-    def save(self, path) -> "Path":
+    def save(self, path: str | Path) -> Path:
         """Write :meth:`to_json` to ``path``."""
-        from pathlib import Path
-
         self.check()
         p = Path(path)
         p.write_text(self.to_json())
         return p
 
     @classmethod
-    def load(cls, path) -> "PlanResult":
+    def load(cls, path: str | Path) -> "PlanResult":
         """Read a file written by :meth:`save`; a missing, unreadable or corrupted file is a
         :class:`~optplan.errors.ResultFileError` naming it."""
-        from pathlib import Path
-
         from ..errors import ResultFileError
 
         p = Path(path)
@@ -218,7 +216,7 @@ class PlanResult:
         return cls.from_json(text, str(p))
 
 
-def _jsonable(x):
+def _jsonable(x: Any) -> Any:
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -244,7 +242,7 @@ class Deadline:
 
     __slots__ = ("t0", "limit", "end", "clock")
 
-    def __init__(self, seconds: float, clock: str = "wall"):
+    def __init__(self, seconds: float, clock: str = "wall") -> None:
         if clock not in CLOCKS:
             raise ValueError(f"clock: expected 'wall' or 'cpu', got {clock!r}")
         self.clock = CLOCKS[clock]
@@ -279,7 +277,7 @@ class Planner(abc.ABC):
 
     name = "planner"
 
-    def __init__(self, robot: RobotModel, scene: Scene | None = None):
+    def __init__(self, robot: RobotModel, scene: Scene | None = None) -> None:
         if not isinstance(robot, RobotModel):
             raise TypeError(f"robot: expected optplan.RobotModel, got {type(robot).__name__}")
         if robot.is_floating:
@@ -287,7 +285,8 @@ class Planner(abc.ABC):
         self.robot = robot
         self.scene = scene
 
-    def plan(self, q_start, q_goal, *, time_limit: float = 10.0, seed: int = 0, clock: str = "wall") -> PlanResult:
+    def plan(self, q_start: Any, q_goal: Any, *, time_limit: float = 10.0, seed: int = 0,
+             clock: str = "wall") -> PlanResult:
         """Plan from ``q_start`` to ``q_goal`` within ``time_limit`` seconds of ``clock`` ("wall"
         or "cpu"); ``seed`` makes the result reproducible (same seed, same path, unless the time
         limit cuts the search at a load-dependent point). ``stats`` gets ``time_s`` (wall) and
@@ -321,6 +320,6 @@ class Planner(abc.ABC):
               seed: int) -> PlanResult:
         ...
 
-    def empty_result(self, status: PlanStatus, message: str = "", **stats) -> PlanResult:
+    def empty_result(self, status: PlanStatus, message: str = "", **stats: Any) -> PlanResult:
         return PlanResult(status, self.name, np.zeros((0, self.robot.nq)), [], np.zeros(0, bool), [], dict(stats),
                           message)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import Any
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,21 +35,26 @@ TRAPPED, ADVANCED, REACHED = 0, 1, 2
 
 @dataclass(frozen=True)
 class CBiRRT2Options:
-    """``max_edge`` [rad]: step of ConstrainedExtend (paper 0.6); ``collision_step`` [rad]
-    (paper 0.2); ``tolerance``: projection tolerance on max |h| (m / rad); ``max_projection_iterations``;
-    ``damping`` of the pseudo-inverse; ``connect_distance`` [rad]: trees are joined when a
-    connect step ends this close to the target; ``margin`` [m]; ``max_iterations`` (0: time only)."""
+    """Options of :class:`CBiRRT2` (Berenson et al.'s constrained bidirectional RRT)."""
 
+    #: Step of ConstrainedExtend [rad] (the paper: 0.6).
     max_edge: float = 0.6
+    #: Joint spacing of the collision checks along an edge [rad] (the paper: 0.2).
     collision_step: float = 0.2
+    #: Projection tolerance on the constraint residual, max |h| [m or rad per row].
     tolerance: float = 1e-7
+    #: Newton iterations of one projection onto the constraint [count].
     max_projection_iterations: int = 50
+    #: Damping of the pseudo-inverse in the projection [-].
     damping: float = 1e-6
+    #: The trees are joined when a connect step ends this close to its target [rad].
     connect_distance: float = 1e-3
+    #: Clearance counted as contact [m].
     margin: float = 0.0
+    #: Cap on the planner's iterations [count] (0: only the time limit).
     max_iterations: int = 0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("max_edge", "collision_step", "tolerance", "connect_distance"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -71,7 +77,7 @@ class _Tree:
         self.edge: list[list[np.ndarray]] = [[]]
         self.n = 1
 
-    def add(self, x, parent, edge) -> int:
+    def add(self, x: np.ndarray, parent: int, edge: list[np.ndarray]) -> int:
         if self.n == len(self.X):
             self.X = np.concatenate([self.X, np.empty_like(self.X)])
         self.X[self.n] = x
@@ -80,11 +86,11 @@ class _Tree:
         self.n += 1
         return self.n - 1
 
-    def nearest(self, x) -> int:
+    def nearest(self, x: np.ndarray) -> int:
         d = self.X[:self.n] - x
         return int(np.argmin(np.einsum("ij,ij->i", d, d)))
 
-    def branch(self, i) -> list[np.ndarray]:
+    def branch(self, i: int) -> list[np.ndarray]:
         out = []
         while i >= 0:
             out.append(self.X[i].copy())
@@ -102,8 +108,9 @@ class CBiRRT2(Planner):
 
     name = "cbirrt2"
 
-    def __init__(self, robot, scene, options: CBiRRT2Options | None = None, *, checker: ValidityChecker | None = None,
-                 kinematics: ClosedChainKinematics | None = None, constraint=None):
+    def __init__(self, robot: Any, scene: Any, options: CBiRRT2Options | None = None, *,
+                 checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None,
+                 constraint: Any = None) -> None:
         super().__init__(robot, scene)
         if constraint is None and (scene is None or scene.object is None or len(scene.object.grasps) != 2):
             raise ConfigurationError("CBiRRT2 needs a scene with an [object] grasped by two arms, or a constraint")
@@ -124,7 +131,7 @@ class CBiRRT2(Planner):
             self._eye = np.eye(int(constraint.dim))
 
     # ------------------------------------------------------------------ projection
-    def project(self, q: np.ndarray, st: dict) -> np.ndarray | None:
+    def project(self, q: np.ndarray, st: dict[str, Any]) -> np.ndarray | None:
         """Newton-Raphson onto h = 0 (damped pseudo-inverse); None when it does not converge or
         leaves the joint limits."""
         o, kin = self.options, self.kin
@@ -140,7 +147,7 @@ class CBiRRT2(Planner):
         st["projection_failures"] += 1
         return None
 
-    def _edge(self, qa: np.ndarray, qb: np.ndarray, st: dict) -> list[np.ndarray] | None:
+    def _edge(self, qa: np.ndarray, qb: np.ndarray, st: dict[str, Any]) -> list[np.ndarray] | None:
         """Projected, collision-checked points strictly between qa and qb (both on the manifold)."""
         d = qb - qa
         n = int(math.ceil(float(np.sqrt(d @ d)) / self.options.collision_step))
@@ -153,7 +160,8 @@ class CBiRRT2(Planner):
         return out
 
     # ------------------------------------------------------------------ ConstrainedExtend
-    def extend(self, tree: _Tree, i_near: int, target: np.ndarray, st: dict, deadline: Deadline) -> tuple[int, int]:
+    def extend(self, tree: _Tree, i_near: int, target: np.ndarray, st: dict[str, Any],
+               deadline: Deadline) -> tuple[int, int]:
         o = self.options
         i_old = i_near
         q_old = tree.X[i_near].copy()
@@ -182,7 +190,8 @@ class CBiRRT2(Planner):
         return res, i_old
 
     # ------------------------------------------------------------------ main loop
-    def _plan(self, q_start, q_goal, deadline, rng, seed) -> PlanResult:
+    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
+              seed: int) -> PlanResult:
         o, ck = self.options, self.checker
         st = {"iterations": 0, "projections": 0, "projection_failures": 0}
         c0 = ck.n_checks

@@ -30,7 +30,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ConfigurationError
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .orientation import DualArmOrientationConstraint, OrientationManifold
 from .validity import ValidityChecker
@@ -43,26 +42,28 @@ TRAPPED, ADVANCED, REACHED = 0, 1, 2
 
 @dataclass(frozen=True)
 class OCRRTOptions:
-    """``connect``: RRT-Connect (two trees) instead of goal-biased RRT. ``step`` [rad]: largest
-    parameter change per OCSteer (max-norm). ``collision_step`` [rad]: parameter spacing of the
-    configurations checked along an edge. ``max_joint_step`` [rad]: largest joint change allowed
-    between consecutive checked configurations (continuity on one IK branch). ``goal_bias``:
-    probability of steering to the goal (RRT). ``max_sample_tries``: redraws of an unsolvable
-    sample before the iteration is skipped. ``goal_from_new`` (RRT): with probability
-    ``goal_bias`` also steer to the goal from each node just added, not only from the node nearest
-    the goal. ``reach_tolerance`` [rad]: trees meet / the goal is
-    reached when the configurations agree to this (max-norm). ``max_iterations`` (0: time only).
-    ``margin`` [m]: collision margin."""
+    """Options of :class:`OCRRT` (orientation-constrained RRT / RRT-Connect)."""
 
+    #: RRT-Connect (two trees) instead of goal-biased RRT.
     connect: bool = True
+    #: Largest parameter change per OCSteer, max-norm [rad].
     step: float = 0.3
+    #: Parameter spacing of the configurations checked along an edge [rad].
     collision_step: float = 0.1
+    #: Largest joint change between consecutive checked configurations [rad] (continuity on one IK branch).
     max_joint_step: float = 0.5
+    #: Probability of steering to the goal (RRT) [-].
     goal_bias: float = 0.1
+    #: RRT: with probability ``goal_bias`` also steer to the goal from each node just added, not only from the
+    #: node nearest the goal.
     goal_from_new: bool = True
+    #: Redraws of an unsolvable sample before the iteration is skipped [count].
     max_sample_tries: int = 50
+    #: The trees meet / the goal is reached when the configurations agree to this, max-norm [rad].
     reach_tolerance: float = 1e-9
+    #: Cap on iterations [count] (0: only the time limit).
     max_iterations: int = 0
+    #: Clearance counted as contact [m].
     margin: float = 0.0
 
     def __post_init__(self):
@@ -83,7 +84,7 @@ class OCRRTOptions:
 
 
 class _Tree:
-    def __init__(self, q, p, cap: int = 512):
+    def __init__(self, q, p, cap: int = 512) -> None:
         self.Q = np.empty((cap, q.size))
         self.P = np.empty((cap, p.size))
         self.Q[0], self.P[0] = q, p
@@ -117,7 +118,7 @@ class OCRRT(Planner):
     name = "oc_rrt"
 
     def __init__(self, robot, scene, constraint: DualArmOrientationConstraint, options: OCRRTOptions | None = None,
-                 *, checker: ValidityChecker | None = None, manifold: OrientationManifold | None = None):
+                 *, checker: ValidityChecker | None = None, manifold: OrientationManifold | None = None) -> None:
         super().__init__(robot, scene)
         if not isinstance(constraint, DualArmOrientationConstraint):
             raise TypeError(f"constraint: expected DualArmOrientationConstraint, got {type(constraint).__name__}")

@@ -6,10 +6,9 @@ constraint and the same collision checker as optplan's own planners.
 * constraint: h(q) of the TCBiRRT paper Eq. 1-2 (``ClosedChainKinematics.h`` / ``h_jacobian``, compiled C),
   tolerance ``tolerance``;
 * validity: :class:`~optplan.planners.validity.ValidityChecker` (object held);
-* planner: RRTConnect (the issue's configuration), BKPIECE1, KPIECE1, RRT or PRM.
+* planner: RRTConnect (the default), BKPIECE1, KPIECE1, RRT or PRM.
 
-What works on this machine (``/work/shared/spec/peers.md`` and our measurements, see
-``docs/planners.md``): Projected + RRTConnect practically never extends in the full ±270° joint
+What works (see docs/decisions/0001-tcbirrt-benchmark-ssps-scenes.md): Projected + RRTConnect practically never extends in the full ±270° joint
 box; Atlas + RRTConnect extends but slowly; Projected + BKPIECE1 with range ≈ 0.3 rad is the
 strongest general configuration we found. Every configuration is available by name
 (:func:`make_ompl_peer`), e.g. ``"ompl-atlas"`` (Atlas + RRTConnect), ``"ompl-projected-bkpiece1"``.
@@ -23,6 +22,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -49,23 +49,29 @@ def ompl_available() -> bool:
 
 @dataclass(frozen=True)
 class OMPLPeerOptions:
-    """``space`` in :data:`SPACES`; ``planner`` in :data:`PLANNERS`; ``range`` [rad] of the tree
-    planners (None: 0.3 for the projected space, ρ_s of the atlas/tangent bundle); ``tolerance``
-    of the constraint (max |h|, m / rad); ``delta`` [rad]: manifold traversal step (OMPL default
-    0.05); ``max_projection_iterations``; ``simplify``: run OMPL's path simplifier; ``margin`` [m];
-    ``recheck_tolerance``: residual allowed on the returned, interpolated path."""
+    """Options of the OMPL constrained-planning peers."""
 
+    #: Constrained state space, one of :data:`SPACES`.
     space: str = "atlas"
+    #: OMPL planner, one of :data:`PLANNERS`.
     planner: str = "rrtconnect"
+    #: Extension range of the tree planners [rad] (None: 0.3 for the projected space, ρ_s of the atlas / tangent
+    #: bundle).
     range: float | None = None
+    #: Tolerance of the constraint, max |h| [m or rad per row].
     tolerance: float = 1e-6
+    #: Manifold traversal step [rad] (OMPL's default 0.05).
     delta: float = 0.05
+    #: Newton iterations of one projection [count].
     max_projection_iterations: int = 50
+    #: Run OMPL's path simplifier on the solution.
     simplify: bool = False
+    #: Clearance counted as contact [m].
     margin: float = 0.0
+    #: Constraint residual allowed on the returned, interpolated path [m or rad per row].
     recheck_tolerance: float = 1e-4
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.space not in SPACES:
             raise ValueError(f"OMPLPeerOptions.space: expected one of {SPACES}, got {self.space!r}")
         if self.planner not in PLANNERS:
@@ -82,7 +88,9 @@ class OMPLPeerOptions:
             raise ValueError(f"OMPLPeerOptions.margin: expected a number >= 0 m, got {self.margin!r}")
 
 
-def make_ompl_peer(name: str, robot, scene, *, checker=None, kinematics=None, constraint=None, **kw) -> "OMPLPeer":
+def make_ompl_peer(name: str, robot: Any, scene: Any, *, checker: ValidityChecker | None = None,
+                   kinematics: ClosedChainKinematics | None = None, constraint: Any = None,
+                   **kw: Any) -> "OMPLPeer":
     """``"ompl-<space>[-<planner>]"`` → :class:`OMPLPeer` (planner defaults to RRTConnect);
     ``space`` ∈ projected, atlas, tb (tangent bundle)."""
     parts = name.lower().split("-")
@@ -110,9 +118,9 @@ class OMPLPeer(Planner):
 
     name = "ompl"
 
-    def __init__(self, robot, scene, options: OMPLPeerOptions | None = None, *, name: str | None = None,
+    def __init__(self, robot: Any, scene: Any, options: OMPLPeerOptions | None = None, *, name: str | None = None,
                  checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None,
-                 constraint=None):
+                 constraint: Any = None) -> None:
         super().__init__(robot, scene)
         if constraint is None and (scene is None or scene.object is None or len(scene.object.grasps) != 2):
             raise ConfigurationError("OMPL peers need a scene with an [object] grasped by two arms, or a constraint "
@@ -133,35 +141,36 @@ class OMPLPeer(Planner):
         else:
             self.kin, self.grasps = constraint, None
 
-    def _residual(self, q) -> float:
+    def _residual(self, q: np.ndarray) -> float:
         if self.constraint is None:
             return max(closure_error(self.robot, self.grasps, q))
         return float(np.abs(self.constraint.h(q)).max())
 
-    def _constraint(self, counters: dict):
+    def _constraint(self, counters: dict[str, int]) -> Any:
         ob, kin, nq = self._ob, self.kin, self.robot.nq
         o = self.options
         dim = 6 if self.constraint is None else int(self.constraint.dim)
 
-        class _ClosedChain(ob.Constraint):
-            def __init__(self):
+        class _ClosedChain(ob.Constraint):  # type: ignore[misc,name-defined]  # OMPL's class, known at run time only
+            def __init__(self) -> None:
                 super().__init__(nq, dim, o.tolerance)
                 self.setMaxIterations(o.max_projection_iterations)
 
-            def function(self, x, out):
+            def function(self, x: Any, out: Any) -> None:
                 counters["constraint_calls"] += 1
                 out[:] = kin.h(x)
 
-            def jacobian(self, x, out):
+            def jacobian(self, x: Any, out: Any) -> None:
                 counters["jacobian_calls"] += 1
                 out[:, :] = kin.h_jacobian(x)[1]
 
         return _ClosedChain()
 
-    def _plan(self, q_start, q_goal, deadline: Deadline, rng, seed) -> PlanResult:
+    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
+              seed: int) -> PlanResult:
         ob, og, ou = self._ob, self._og, self._ou
         o, ck, nq = self.options, self.checker, self.robot.nq
-        st = {"constraint_calls": 0, "jacobian_calls": 0, "validity_calls": 0}
+        st: dict[str, Any] = {"constraint_calls": 0, "jacobian_calls": 0, "validity_calls": 0}
         for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
             if not ck.in_limits(q) or not ck.is_valid(q) or self._residual(q) > max(o.tolerance, 1e-6):
                 return self.empty_result(status, f"{which} out of limits, in collision or off the manifold", **st)
@@ -189,7 +198,7 @@ class OMPLPeer(Planner):
         css.setDelta(o.delta)
         valid_fn = ck.is_valid
 
-        def valid(state) -> bool:
+        def valid(state: Any) -> bool:
             st["validity_calls"] += 1
             return valid_fn(np.fromiter((state[i] for i in range(nq)), float, nq))
 

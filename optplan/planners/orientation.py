@@ -173,7 +173,7 @@ class OrientationManifold:
     path (the reference the compiled one is tested against).
     """
 
-    def __init__(self, constraint: DualArmOrientationConstraint, *, compiled: bool = True):
+    def __init__(self, constraint: DualArmOrientationConstraint, *, compiled: bool = True) -> None:
         c = constraint
         if np.any(c.orientation_bounds != 0.0):
             raise ConfigurationError("OC-RRT's analytic parameterisation needs fixed orientations "
@@ -414,7 +414,7 @@ class _Kernel:
     (no per-call sparsity mapping), or the interpreted casadi.Function when there is no C compiler.
     Returns fresh numpy arrays (outputs in column-major order, reshaped)."""
 
-    def __init__(self, cf):
+    def __init__(self, cf) -> None:
         self.cf = cf
         self.compiled = not isinstance(cf, ca.Function)
         f = cf if not self.compiled else None

@@ -10,13 +10,17 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .validity import ValidityChecker
+
+if TYPE_CHECKING:
+    from ..scene import Scene
 
 __all__ = ["RRTConnectOptions", "RRTConnect", "rrt_connect", "shortcut_path", "edge_is_valid"]
 log = logging.getLogger(__name__)
@@ -26,19 +30,20 @@ TRAPPED, ADVANCED, REACHED = 0, 1, 2
 
 @dataclass(frozen=True)
 class RRTConnectOptions:
-    """``range`` [rad]: largest edge (Euclidean joint distance) added per extension;
-    ``resolution`` [rad]: largest per-joint change between two collision checks on an edge;
-    ``max_iterations``: cap on sample iterations (0: only the time limit);
-    ``shortcut_iterations``: random shortcut attempts on the found path (0: raw tree path);
-    ``margin`` [m]: clearance that counts as contact for the validity checker."""
+    """Options of :class:`RRTConnect` (joint-space RRT-Connect)."""
 
+    #: Largest edge added per extension, Euclidean joint distance [rad].
     range: float = 1.0
+    #: Largest per-joint change between two collision checks on an edge [rad].
     resolution: float = 0.03
+    #: Cap on sample iterations [count] (0: only the time limit).
     max_iterations: int = 0
+    #: Random shortcut attempts on the found path [count] (0: the raw tree path).
     shortcut_iterations: int = 100
+    #: Clearance counted as contact by the validity checker [m].
     margin: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("range", "resolution"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -54,7 +59,7 @@ class RRTConnectOptions:
 class _Tree:
     """Nodes in a growing array, parent indices."""
 
-    def __init__(self, root: np.ndarray, cap: int = 256):
+    def __init__(self, root: np.ndarray, cap: int = 256) -> None:
         self.X = np.empty((cap, root.size))
         self.X[0] = root
         self.parent = np.empty(cap, dtype=np.int64)
@@ -125,7 +130,7 @@ def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray],
 def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                 is_valid: Callable[[np.ndarray], bool], rng: np.random.Generator, deadline: Deadline, *,
                 range_: float = 1.0, resolution: float = 0.03, max_iterations: int = 0,
-                stats: dict | None = None, weights: np.ndarray | None = None) -> list[np.ndarray] | None:
+                stats: dict[str, Any] | None = None, weights: np.ndarray | None = None) -> list[np.ndarray] | None:
     """RRTConnect between two valid points of the box ``[lower, upper]``.
 
     Returns the list of tree nodes from ``start`` to ``goal`` (consecutive nodes joined by valid
@@ -212,22 +217,23 @@ class RRTConnect(Planner):
 
     name = "rrtconnect"
 
-    def __init__(self, robot, scene=None, options: RRTConnectOptions | None = None, *,
-                 checker: ValidityChecker | None = None):
+    def __init__(self, robot: Any, scene: Scene | None = None, options: RRTConnectOptions | None = None, *,
+                 checker: ValidityChecker | None = None) -> None:
         super().__init__(robot, scene)
         self.options = options or RRTConnectOptions()
         if not isinstance(self.options, RRTConnectOptions):
             raise TypeError(f"options: expected RRTConnectOptions, got {type(self.options).__name__}")
         self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
 
-    def _plan(self, q_start, q_goal, deadline, rng, seed) -> PlanResult:
+    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
+              seed: int) -> PlanResult:
         o, ck = self.options, self.checker
         valid = ck.is_valid_free
         if not (ck.in_limits(q_start) and valid(q_start)):
             return self.empty_result(PlanStatus.INVALID_START, "start out of limits or in collision")
         if not (ck.in_limits(q_goal) and valid(q_goal)):
             return self.empty_result(PlanStatus.INVALID_GOAL, "goal out of limits or in collision")
-        stats: dict = {}
+        stats: dict[str, Any] = {}
         c0 = ck.n_checks
         path = rrt_connect(q_start, q_goal, self.robot.lower, self.robot.upper, valid, rng, deadline,
                            range_=o.range, resolution=o.resolution, max_iterations=o.max_iterations, stats=stats)

@@ -25,10 +25,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any, cast
 
 import numpy as np
 
-from ..scene import Scene
+from ..scene import Obstacle, Scene
 from .base import PlanStatus
 
 __all__ = ["CoordinatedRRTStarOptions", "VirtualWall", "Tree", "CoordinatedPlan", "CoordinatedRRTStar",
@@ -37,41 +38,39 @@ __all__ = ["CoordinatedRRTStarOptions", "VirtualWall", "Tree", "CoordinatedPlan"
 
 @dataclass(frozen=True)
 class CoordinatedRRTStarOptions:
-    """Options of :class:`CoordinatedRRTStar`.
+    """Options of :class:`CoordinatedRRTStar`."""
 
-    step: maximal edge length of the steering function [m].
-    rewire_radius: upper bound of the RRT* neighbourhood radius [m]; the radius used with n
-        vertices is ``min(rewire_radius, gamma (log n / n)^(1/3))``.
-    gamma: RRT* constant [m] (None: Karaman-Frazzoli's ``2 (1 + 1/3)^(1/3) (vol / ζ₃)^(1/3)`` with
-        the sampling box's volume, times 1.1).
-    max_iterations: iterations per tree (every iteration draws one sample).
-    time_limit: wall-time limit of the whole query [s].
-    goal_bias: probability of sampling the goal.
-    stop_at_first: stop a tree as soon as it reaches its goal (plain RRT behaviour with rewiring);
-        False (default) keeps improving the path until the iteration or time limit (RRT*).
-    hand_radius: clearance of a hand position from the obstacles [m].
-    wall_margin: distance each hand keeps from the virtual wall [m].
-    separate: sample each hand on its own side of the wall (False: the unseparated baseline).
-    padding: the sampling box is the bounding box of the starts and goals grown by this [m].
-    edge_resolution: spacing of the points checked along an edge [m].
-    seed: seed of the numpy Generator (None: nondeterministic).
-    """
-
+    #: Maximal edge length of the steering function [m].
     step: float = 0.1
+    #: Upper bound of the RRT* neighbourhood radius [m]; with n vertices the radius is ``min(rewire_radius,
+    #: gamma (log n / n)^(1/3))``.
     rewire_radius: float = 0.3
+    #: RRT* constant [m] (None: Karaman-Frazzoli's ``2 (1 + 1/3)^(1/3) (vol / ζ₃)^(1/3)`` with the sampling
+    #: box's volume, times 1.1).
     gamma: float | None = None
+    #: Iterations per tree [count] (every iteration draws one sample).
     max_iterations: int = 600
+    #: Wall-time limit of the whole query [s].
     time_limit: float = 1.0
+    #: Probability of sampling the goal [-].
     goal_bias: float = 0.05
+    #: Stop a tree as soon as it reaches its goal (plain RRT behaviour with rewiring); False keeps improving the
+    #: path until the iteration or time limit (RRT*).
     stop_at_first: bool = False
+    #: Clearance of a hand position from the obstacles [m].
     hand_radius: float = 0.05
+    #: Distance each hand keeps from the virtual wall [m].
     wall_margin: float = 0.03
+    #: Sample each hand on its own side of the wall (False: the unseparated baseline).
     separate: bool = True
+    #: The sampling box is the bounding box of the starts and goals grown by this [m].
     padding: float = 0.25
+    #: Spacing of the points checked along an edge [m].
     edge_resolution: float = 0.01
+    #: Seed of the numpy Generator (None: nondeterministic).
     seed: int | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("step", "rewire_radius", "time_limit", "edge_resolution"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
@@ -89,7 +88,7 @@ class CoordinatedRRTStarOptions:
 
 
 # --------------------------------------------------------------------------- geometry
-def point_obstacle_distance(points: np.ndarray, obstacle) -> np.ndarray:
+def point_obstacle_distance(points: np.ndarray, obstacle: Obstacle) -> np.ndarray:
     """Exact Euclidean distance [m] from points (K, 3) to a scene obstacle (sphere, capsule or box;
     negative inside a sphere/capsule, 0 inside a box)."""
     P = np.atleast_2d(np.asarray(points, float))
@@ -98,7 +97,7 @@ def point_obstacle_distance(points: np.ndarray, obstacle) -> np.ndarray:
     if obstacle.shape == "sphere":
         return np.linalg.norm(local, axis=1) - obstacle.radius
     if obstacle.shape == "capsule":
-        h = obstacle.length / 2.0
+        h = cast(float, obstacle.length) / 2.0   # a capsule has a length
         z = np.clip(local[:, 2], -h, h)
         d = local.copy()
         d[:, 2] -= z
@@ -120,7 +119,7 @@ class VirtualWall:
     n1: np.ndarray
 
     @classmethod
-    def from_task(cls, first: tuple, second: tuple) -> "VirtualWall":
+    def from_task(cls, first: tuple[Any, Any], second: tuple[Any, Any]) -> VirtualWall:
         """Wall of the task ``first = (start, goal)``, ``second = (start, goal)`` (positions [m])."""
         (a0, a1), (b0, b1) = (np.asarray(first[0], float), np.asarray(first[1], float)), \
                              (np.asarray(second[0], float), np.asarray(second[1], float))
@@ -129,7 +128,7 @@ class VirtualWall:
         L = np.linalg.norm(travel)
         u = travel / L if L > 1e-12 else np.zeros(3)
 
-        def normal(d, when):
+        def normal(d: np.ndarray, when: str) -> np.ndarray:
             d = d - (d @ u) * u
             n = np.linalg.norm(d)
             if n < 1e-9:
@@ -138,7 +137,7 @@ class VirtualWall:
             return d / n
         return cls(m0, m1, normal(b0 - a0, "start"), normal(b1 - a1, "goal"))
 
-    def coordinate_point(self, x) -> float:
+    def coordinate_point(self, x: np.ndarray) -> float:
         """:meth:`coordinate` of one point (3,), without numpy's per-call overhead (the sampler's
         rejection loop calls it once per candidate)."""
         m0, m1, n0, n1 = self.m0, self.m1, self.n0, self.n1
@@ -179,11 +178,11 @@ class Tree:
     parent: np.ndarray
     cost: np.ndarray
     n: int = 1
-    samples: list = field(default_factory=list)
+    samples: list[np.ndarray] = field(default_factory=list)
     rewired: int = 0
-    rewired_edges: list = field(default_factory=list)
+    rewired_edges: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
     goal_index: int = -1
-    best_cost: list = field(default_factory=list)
+    best_cost: list[float] = field(default_factory=list)
 
     def path_to(self, i: int) -> np.ndarray:
         idx = []
@@ -217,10 +216,10 @@ class CoordinatedPlan:
     arm, ``seed``); ``message``."""
 
     status: PlanStatus
-    paths: dict
-    trees: dict
+    paths: dict[str, np.ndarray]
+    trees: dict[str, Tree]
     wall: VirtualWall | None
-    stats: dict
+    stats: dict[str, Any]
     message: str = ""
 
     @property
@@ -231,7 +230,7 @@ class CoordinatedPlan:
 class CoordinatedRRTStar:
     """Coordinated RRT* of two hand positions among the obstacles of ``scene`` (module docstring)."""
 
-    def __init__(self, scene: Scene | None = None, options: CoordinatedRRTStarOptions | None = None):
+    def __init__(self, scene: Scene | None = None, options: CoordinatedRRTStarOptions | None = None) -> None:
         if scene is not None and not isinstance(scene, Scene):
             raise TypeError(f"scene: expected an optplan Scene or None, got {type(scene).__name__}")
         self.scene = scene
@@ -261,13 +260,13 @@ class CoordinatedRRTStar:
         s = np.linspace(0.0, 1.0, k + 1)[:, None]
         return a + s * (b - a)
 
-    def valid_edge(self, a, b, side: float, wall: VirtualWall | None) -> bool:
+    def valid_edge(self, a: np.ndarray, b: np.ndarray, side: float, wall: VirtualWall | None) -> bool:
         """Every point of the edge a→b (at ``edge_resolution``) is clear of the obstacles and on the
         hand's side of the wall (``side`` −1 for the first hand, +1 for the second)."""
         return self._valid_points(self._edge_points(np.asarray(a, float), np.asarray(b, float)), side, wall)
 
     # ------------------------------------------------------------------ planning
-    def plan(self, task: dict, seed: int | None = None) -> CoordinatedPlan:
+    def plan(self, task: dict[str, Any], seed: int | None = None) -> CoordinatedPlan:
         """Plan both hands: ``task = {arm: (start (3,), goal (3,)), ...}`` with exactly two arms, the
         first on the negative side of the wall. ``seed`` overrides ``options.seed``."""
         t0 = time.perf_counter()
@@ -311,7 +310,7 @@ class CoordinatedRRTStar:
             tree = self._grow(s, g, sides[a], wall, lo, hi, gamma, rng, deadline)
             trees[a] = tree
             iters += len(tree.best_cost)
-        paths = {}
+        paths: dict[str, np.ndarray] = {}
         for a in arms:
             t = trees[a]
             if t.goal_index < 0:
@@ -330,7 +329,8 @@ class CoordinatedRRTStar:
                  "gamma_m": gamma, "seed": seed}
         return CoordinatedPlan(status, paths, trees, wall, stats, msg)
 
-    def _grow(self, start, goal, side, wall, lo, hi, gamma, rng, deadline) -> Tree:
+    def _grow(self, start: np.ndarray, goal: np.ndarray, side: float, wall: VirtualWall | None, lo: np.ndarray,
+              hi: np.ndarray, gamma: float, rng: np.random.Generator, deadline: float) -> Tree:
         o = self.options
         cap = o.max_iterations + 2
         X = np.empty((cap, 3))
@@ -342,7 +342,7 @@ class CoordinatedRRTStar:
         n = 1
         goal_idx = -1
         best = np.inf
-        for it in range(o.max_iterations):
+        for _iteration in range(o.max_iterations):
             if time.perf_counter() >= deadline:
                 break
             if goal_idx >= 0 and o.stop_at_first:

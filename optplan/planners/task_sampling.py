@@ -20,6 +20,8 @@ costs microseconds where one ConstrainedExtend costs tenths of a millisecond or 
 """
 from __future__ import annotations
 
+from typing import Any, cast
+
 import coal
 import numpy as np
 import pinocchio as pin
@@ -56,7 +58,7 @@ class ObjectPoseFilter:
     """Cheap necessary conditions on an object pose (no IK): object ∩ obstacles = ∅ and both grasp
     points within reach. ``margin`` [m] shrinks the reach bound's slack (0: the exact bound)."""
 
-    def __init__(self, robot: RobotModel, scene: Scene, margin: float = 0.0):
+    def __init__(self, robot: RobotModel, scene: Scene, margin: float = 0.0) -> None:
         if scene.object is None:
             raise ValueError("ObjectPoseFilter needs a scene with an [object]")
         self.obj = scene.object.coal_geometry()
@@ -72,9 +74,9 @@ class ObjectPoseFilter:
             if o.shape == "box":
                 radii.append(float(np.linalg.norm(np.asarray(o.size) / 2)))
             elif o.shape == "sphere":
-                radii.append(o.radius)
-            else:
-                radii.append(o.radius + o.length / 2)
+                radii.append(cast(float, o.radius))
+            else:   # a capsule: radius and length are set
+                radii.append(cast(float, o.radius) + cast(float, o.length) / 2)
         self.centres = np.asarray(centres, float).reshape(-1, 3)
         self.radii = np.asarray(radii, float)
         self.grasps = []
@@ -115,8 +117,8 @@ def _rpy_matrix(xi: np.ndarray) -> np.ndarray:
     return np.asarray(pin.rpy.rpyToMatrix(float(xi[3]), float(xi[4]), float(xi[5])))
 
 
-def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.ndarray, lo, hi,
-                     rng: np.random.Generator, deadline, *, resolution: float = 0.04, range_: float = 0.3,
+def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.ndarray, lo: Any, hi: Any,
+                     rng: np.random.Generator, deadline: Any, *, resolution: float = 0.04, range_: float = 0.3,
                      spacing: float = 0.1, shortcut_iterations: int = 50, bridge_probability: float = 0.5,
                      bridge_sigma: tuple[float, float] = (0.3, 0.4),
                      geodesic_probability: float = 0.5) -> np.ndarray | None:
@@ -126,7 +128,7 @@ def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
     ``(n, 6)`` or None (deadline)."""
     from .rrtconnect import _Tree, edge_is_valid, shortcut_path
 
-    def valid(xi):
+    def valid(xi: np.ndarray) -> bool:
         return filt(_rpy_matrix(xi), xi[:3])
 
     lo = np.minimum(np.asarray(lo, float), np.minimum(xi_start, xi_goal))
@@ -137,7 +139,7 @@ def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
     ta, tb = _Tree(np.asarray(xi_start, float)), _Tree(np.asarray(xi_goal, float))
     a_first = True
 
-    def extend(tree, target, connect):
+    def extend(tree: Any, target: np.ndarray, connect: bool) -> tuple[int, bool]:
         i = tree.nearest(target)
         while True:
             x = tree.X[i]
@@ -183,11 +185,11 @@ class TaskSampler:
     ``bridge_sigma``: (position [m], angle [rad]) standard deviations of the bridge test's second
     pose; counters in :attr:`stats`."""
 
-    def __init__(self, filt: ObjectPoseFilter | None, lo, hi, *, filter_tries: int = 30,
+    def __init__(self, filt: ObjectPoseFilter | None, lo: Any, hi: Any, *, filter_tries: int = 30,
                  bridge_probability: float = 0.0, bridge_sigma: tuple[float, float] = (0.3, 0.4),
                  bridge_tries: int = 60, goal_bias: float = 0.0, guide_probability: float = 0.0,
                  guide_sigma: tuple[float, float] = (0.05, 0.05), geodesic_probability: float = 0.0,
-                 geodesic_sigma: float = 0.15, endpoints: tuple | None = None):
+                 geodesic_sigma: float = 0.15, endpoints: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         self.filt = filt
         self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
         self.filter_tries = int(filter_tries)
@@ -200,7 +202,8 @@ class TaskSampler:
         self.guide: np.ndarray | None = None
         self.p_geo = float(geodesic_probability)
         self.geo_sigma = float(geodesic_sigma)
-        self._R0 = self._w = None
+        self._R0: np.ndarray | None = None
+        self._w: np.ndarray | None = None
         if endpoints is not None:
             self.set_endpoints(*endpoints)
         self.stats = {"samples": 0, "goal_samples": 0, "bridge_samples": 0, "guide_samples": 0,
@@ -217,11 +220,11 @@ class TaskSampler:
         ``N(0, geodesic_sigma²)`` per axis — the orientations tight openings between them allow."""
         xi = rng.uniform(self.lo, self.hi)
         if self._R0 is not None and rng.random() < self.p_geo:
-            R = self._R0 @ np.asarray(pin.exp3(rng.random() * self._w)) @ np.asarray(pin.exp3(rng.normal(0.0, self.geo_sigma, 3)))
+            R = self._R0 @ np.asarray(pin.exp3(rng.random() * cast(np.ndarray, self._w))) @ np.asarray(pin.exp3(rng.normal(0.0, self.geo_sigma, 3)))
             xi[3:] = np.asarray(pin.rpy.matrixToRpy(R))
         return xi
 
-    def _ok(self, xi) -> bool:
+    def _ok(self, xi: np.ndarray) -> bool:
         return self.filt is None or self.filt(_rpy_matrix(xi), xi[:3])
 
     def uniform(self, rng: np.random.Generator) -> np.ndarray:
@@ -236,7 +239,7 @@ class TaskSampler:
         return xi
 
     def bridge(self, rng: np.random.Generator) -> np.ndarray | None:
-        f = self.filt
+        f = cast(ObjectPoseFilter, self.filt)   # called only with a filter
         for _ in range(self.bridge_tries):
             a = self._draw(rng)
             Ra = _rpy_matrix(a)

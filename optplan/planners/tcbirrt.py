@@ -46,7 +46,7 @@ Deviations from the paper, all options (defaults in brackets):
 * ``edge_resolution`` [None]: the paper checks only the N+1 configurations of an extension; with a
   value [rad], the straight joint-space segments between consecutive configurations are checked
   too (every ``edge_resolution`` rad).
-* ``joint_connect`` [False in both variants; see docs/planners.md]: the trees are joined in JOINT space when the
+* ``joint_connect`` [False in both variants; see docs/decisions/0004-tcbirrt-improved-variant.md]: the trees are joined in JOINT space when the
   task-space connection cannot do it — CBiRRT2's ConstrainedExtend (Newton projection onto the
   closed chain, :class:`.CBiRRT2`, options ``joint_connect_options``) from tree b's configuration
   toward tree a's: (1) when the connect step reaches tree a's object pose with another joint
@@ -187,85 +187,101 @@ def _pos(name, v, allow_zero=False):
 
 @dataclass(frozen=True)
 class TCBiRRTOptions:
-    """Parameters (paper's defaults; see the module docstring for the deviations).
+    """Options of :class:`TCBiRRT` (the paper's defaults; the module docstring explains the deviations).
 
-    ``step_size``: s_ξ (Eq. 3) [mixed m / rad, as the paper's ξ]; ``n_interp``: N (Eq. 4);
-    ``xi_lower``/``xi_upper``: the sampling box ξ_l, ξ_h (world = base frame); ``ik``: Alg. 4
-    (ε_p, ε_o, n, K·λ); ``max_joint_step`` [rad] (``inf`` turns it off; None: the variant's value); ``interpolation``;
-    ``edge_resolution`` [rad] or None; ``edge_tolerance`` [m] (0: off) and ``lazy_edges``
-    (both None: the variant's value), see the module docstring; ``regrasp``: RRTConnect options of a regrasp (one arm,
-    7-D); ``regrasp_time_limit`` [s] per regrasp attempt; ``regrasp_tolerance`` [rad]: an arm whose
-    two solutions differ by less (max-norm) does not move; ``closure_tolerance``: start and goal
-    must satisfy the closed chain to this (position [m] and angle [rad]); ``margin`` [m]: clearance
-    counted as contact; ``max_iterations``: cap on Alg. 1 iterations (0: only the time limit).
-
-    ``variant``: ``"paper"`` (Alg. 1-4 as published, the default) or ``"improved"``; the fields
-    below left at None take the variant's value (:data:`VARIANTS`), an explicit value overrides it:
-
-    * ``goal_bias`` (paper 0, improved 0.1): probability that ξ_rand is the pose of a random node
-      of the other tree;
-    * ``sample_filter`` (False / True): reject ξ_rand while the object alone collides with an
-      obstacle or a grasp point is beyond its arm's reach (no IK; :mod:`.task_sampling`);
-    * ``bridge_probability`` (0 / 0: off by default, see docs/planners.md): probability of a bridge-test sample in ξ (object in
-      collision at two nearby poses, free at their midpoint: narrow openings at the rotation they
-      need); ``bridge_sigma``: (position [m], angle [rad]) spread of the second pose (needs
-      ``sample_filter``-style checks, done whatever ``sample_filter`` says);
-    * ``keep_prefix`` (False / True): when PathInverseKinematics fails after ≥ 1 valid waypoint,
-      keep the valid part as a shorter extension (adaptive step) instead of discarding it;
-    * ``guide_probability`` (0 / 0.4): probability that ξ_rand is a pose of the object's lead path
-      (the object alone planned from start to goal pose, :func:`.task_sampling.object_lead_path`,
-      in attempts of ``guide_attempt_time`` [s], restarted while none is found, at most
-      ``guide_time_limit`` [s] per query) plus Gaussian noise ``guide_sigma`` (position [m], angle [rad]);
-    * ``geodesic_probability`` (0 / 0.5): probability that the orientation of a uniform or bridge
-      sample is drawn on the start-goal rotation geodesic, perturbed by ``geodesic_sigma`` [rad]
-      per axis, instead of uniformly in RPY;
-    * ``ik_restarts`` (0 / 2): when a waypoint's IK solution collides or fails, retry IK this many
-      times from the previous configuration perturbed by ``N(0, ik_restart_sigma²)`` [rad] per joint
-      (another point of the arms' self-motion), still subject to ``max_joint_step``.
-
-    ``scale_to_reach``: the default box and ``step_size`` are the paper's, sized for its robot
-    (arms of :data:`PAPER_REACH` m about their shoulders' midpoint (0, 0, 2) m); for another robot
-    the planner scales the box's position part and the step size by the robot's mean arm reach /
-    :data:`PAPER_REACH` about that robot's shoulders' midpoint (the paper's robot: unchanged). A box
-    or step size set explicitly is used as given.
+    ``variant`` selects ``"paper"`` (Alg. 1-4 as published, the default) or ``"improved"``; fields left
+    at None take the variant's value (:data:`VARIANTS`), an explicit value overrides it.
     """
 
+    #: s_ξ of Eq. 3: largest task-space step of an extension [mixed m / rad, as the paper's ξ].
     step_size: float = 0.6
+    #: N of Eq. 4: object poses per extension [count].
     n_interp: int = 5
+    #: ξ_l: lower corner of the sampling box (x, y, z [m], roll, pitch, yaw [rad]; world = base frame).
     xi_lower: tuple = PAPER_XI_LOWER
+    #: ξ_h: upper corner of the sampling box (x, y, z [m], roll, pitch, yaw [rad]).
     xi_upper: tuple = PAPER_XI_UPPER
+    #: Alg. 4's IK settings (ε_p, ε_o, n, K·λ).
     ik: IKSettings = field(default_factory=IKSettings)
+    #: A waypoint whose IK solution jumps by more than this from the previous one fails [rad] (``inf``: off;
+    #: None: the variant's value, :data:`VARIANTS`: paper 0.5, improved 0.25).
     max_joint_step: float | None = None
+    #: ``"geodesic"`` (Eq. 4 on the relative rotation) or ``"absolute"`` (the literal Eq. 4 on unwrapped
+    #: exponential coordinates).
     interpolation: str = "geodesic"
+    #: Check the straight joint-space segments between consecutive configurations every this many radians [rad]
+    #: (None: only the N+1 configurations, as the paper).
     edge_resolution: float | None = None
+    #: Check edges so densely that no point of the arms or object moves farther than this between two checks [m]
+    #: (0: off; None: the variant's value, :data:`VARIANTS`: paper 0, improved 0.01).
     edge_tolerance: float | None = None
+    #: Check constrained edges only once they lie on a start-goal path (lazy collision checking) (None: the
+    #: variant's value, :data:`VARIANTS`).
     lazy_edges: bool | None = None
+    #: Join the trees in joint space (CBiRRT2's ConstrainedExtend) when the task-space connection cannot (None:
+    #: the variant's value, :data:`VARIANTS`); see docs/decisions/0004-tcbirrt-improved-variant.md.
     joint_connect: bool | None = None
+    #: The joint-space connection is tried when a connect step is trapped within this ξ distance of the other
+    #: tree's node [mixed m / rad].
     joint_connect_radius: float = 1.0
+    #: The joint-space connection is tried only when the two configurations are within this Euclidean joint distance [rad] (farther ones are
+    #: other IK branches).
     joint_connect_max_distance: float = 2.0
+    #: CBiRRT2 options of the joint-space connection.
     joint_connect_options: CBiRRT2Options = field(default_factory=lambda: CBiRRT2Options(max_edge=0.3, collision_step=0.1,
                                                                                          tolerance=1e-8))
+    #: RRTConnect options of a regrasp motion (one arm, 7-D, object fixed).
     regrasp: RRTConnectOptions = field(default_factory=lambda: RRTConnectOptions(range=1.0, resolution=0.03,
                                                                                  shortcut_iterations=50))
+    #: Time limit per regrasp attempt [s].
     regrasp_time_limit: float = 2.0
+    #: An arm whose two solutions differ by less than this (max-norm) does not move [rad].
     regrasp_tolerance: float = 1e-4
+    #: Start and goal must satisfy the closed chain to this (position [m] and angle [rad]).
     closure_tolerance: float = 1e-6
+    #: Clearance counted as contact [m].
     margin: float = 0.0
+    #: Cap on Alg. 1 iterations [count] (0: only the time limit).
     max_iterations: int = 0
+    #: ``"paper"`` (the published algorithm) or ``"improved"`` (task-space sampling aids).
     variant: str = "paper"
+    #: Probability that ξ_rand is the pose of a random node of the other tree [-] (None: the variant's value,
+    #: :data:`VARIANTS`): paper 0, improved 0.1.
     goal_bias: float | None = None
+    #: Reject ξ_rand while the object alone collides or a grasp point is beyond its arm's reach (no IK;
+    #: :mod:`.task_sampling`) (None: the variant's value, :data:`VARIANTS`).
     sample_filter: bool | None = None
+    #: Probability of a bridge-test sample in ξ (object in collision at two nearby poses, free at their
+    #: midpoint) [-] (None: the variant's value, :data:`VARIANTS`): 0 in both; see
+    #: docs/decisions/0004-tcbirrt-improved-variant.md.
     bridge_probability: float | None = None
+    #: Spread of the bridge test's second pose: (position [m], angle [rad]).
     bridge_sigma: tuple = (0.3, 0.4)
+    #: When PathInverseKinematics fails after ≥ 1 valid waypoint, keep the valid part as a shorter extension
+    #: (None: the variant's value, :data:`VARIANTS`).
     keep_prefix: bool | None = None
+    #: Probability that ξ_rand is a pose of the object's lead path plus Gaussian noise ``guide_sigma`` [-]
+    #: (None: the variant's value, :data:`VARIANTS`): paper 0, improved 0.4.
     guide_probability: float | None = None
+    #: Noise of a lead-path sample: (position [m], angle [rad]).
     guide_sigma: tuple = (0.05, 0.05)
+    #: Time spent on the object's lead path per query, at most [s].
     guide_time_limit: float = 3.0
+    #: Time of one lead-path attempt (restarted while none is found) [s].
     guide_attempt_time: float = 0.3
+    #: Probability that a sample's orientation is drawn on the start-goal rotation geodesic, perturbed by
+    #: ``geodesic_sigma`` [-] (None: the variant's value, :data:`VARIANTS`): paper 0, improved 0.5.
     geodesic_probability: float | None = None
+    #: Perturbation of a geodesic orientation sample, per axis [rad].
     geodesic_sigma: float = 0.15
+    #: When a waypoint's IK solution collides or fails, retry IK this many times from the previous configuration
+    #: perturbed by ``N(0, ik_restart_sigma²)`` [count] (None: the variant's value, :data:`VARIANTS`): paper 0,
+    #: improved 2.
     ik_restarts: int | None = None
+    #: Standard deviation of an IK restart's perturbation, per joint [rad].
     ik_restart_sigma: float = 0.3
+    #: Scale the default box's position part and the step size by the robot's mean arm reach /
+    #: :data:`PAPER_REACH` about its shoulders' midpoint (a box or step set explicitly is used as given).
     scale_to_reach: bool = True
 
     def __post_init__(self):

@@ -69,7 +69,7 @@ class _Problem:
 
     def __init__(self, t0: float, h: np.ndarray, X: np.ndarray, v0, a0, vf, vmax, amax, ee, ee_max,
                  free: bool, cost_order: int, time_weight: float, smooth_weight: float, samples: int,
-                 slots: bool = True):
+                 slots: bool = True) -> None:
         self.t0, self.X = t0, X
         self.m, self.n = h.size, X.shape[1]
         self.v0, self.a0, self.vf = v0, a0, vf
@@ -85,8 +85,8 @@ class _Problem:
         if ee is not None and slots:
             self.slot_shape["ee_speed_max"] = (_SLOTS, self.m, 1)
 
-    ee_acc = None  # optional Function (q, qdot, qddot) -> EE linear acceleration; set by smooth_quartic
-    ee_acc_max = None
+    ee_acc: Any = None  # optional Function (q, qdot, qddot) -> EE linear acceleration; set by smooth_quartic
+    ee_acc_max: float | None = None
 
     @property
     def has_limits(self) -> bool:
@@ -159,7 +159,9 @@ class _Problem:
         J = sum(Qm[a_, b_] * ca.dot(P[a_], P[b_]) for a_ in range(5) for b_ in range(5) if Qm[a_, b_] != 0.0)
         J = J * hs ** (1 - 2 * self.r)
         fun = ca.Function("quartic_segment", [ps, hs, sl], [ca.vertcat(*g) if g else sym(0, 1), J])
-        cat = (lambda v: np.concatenate(v) if v else np.zeros(0))
+        def cat(v):
+            return np.concatenate(v) if v else np.zeros(0)
+
         return fun, cat(lb), cat(ub), slot_rows
 
     def build(self, h_fixed: np.ndarray):
@@ -183,7 +185,7 @@ class _Problem:
         lb: list = []
         ub: list = []
 
-        def add(expr, lo, hi):
+        def add(expr, lo, hi) -> None:
             g.append(ca.vec(expr))
             size = expr.numel()
             lb.append(np.broadcast_to(lo, (size,)) if np.ndim(lo) == 0 else np.ravel(lo, order="F"))

@@ -11,8 +11,9 @@ the returned data, which :class:`~optplan.problem.OptProblem` assembles into the
 from __future__ import annotations
 
 import types
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -36,24 +37,24 @@ class BuildContext:
     role: str = "constraint"
     initial: Any = None
     pinned_q: Mapping[int, np.ndarray] = field(default_factory=dict)
-    fixed_joints: frozenset = frozenset()
+    fixed_joints: frozenset[int] = frozenset()
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.role not in ("constraint", "cost"):
             raise ValueError(f"BuildContext.role: expected 'constraint' or 'cost', got {self.role!r}")
         object.__setattr__(self, "pinned_q", types.MappingProxyType(dict(self.pinned_q)))
         object.__setattr__(self, "fixed_joints", frozenset(self.fixed_joints))
 
     @property
-    def robot(self):
+    def robot(self) -> Any:
         return self.tp.robot
 
     @property
     def N(self) -> int:
-        return self.tp.N
+        return int(self.tp.N)
 
 
-def _vec(v, n: int, what: str) -> np.ndarray:
+def _vec(v: Any, n: int, what: str) -> np.ndarray:
     a = np.broadcast_to(np.asarray(v, float), (n,)).copy()
     a.flags.writeable = False
     return a
@@ -71,7 +72,7 @@ class AuxVariable:
     upper: np.ndarray
 
     @classmethod
-    def create(cls, name: str, n: int, init, lower=-np.inf, upper=np.inf) -> "AuxVariable":
+    def create(cls, name: str, n: int, init: Any, lower: Any = -np.inf, upper: Any = np.inf) -> AuxVariable:
         return cls(name, ca.MX.sym(name, n), _vec(init, n, "init"), _vec(lower, n, "lower"), _vec(upper, n, "upper"))
 
     @property
@@ -99,14 +100,14 @@ class TermData:
     lower: np.ndarray | None = None
     upper: np.ndarray | None = None
     cost: Any = None
-    aux: tuple = ()
-    var_bounds: tuple | None = None
+    aux: tuple[AuxVariable, ...] = ()
+    var_bounds: tuple[Any, ...] | None = None
     var_scale: float = 1.0
-    points: tuple | None = None
+    points: tuple[Any, ...] | None = None
     point_rows: int | None = None
     info: Mapping[str, Any] = field(default_factory=dict)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.residual is not None:
             n = int(self.residual.shape[0])
             object.__setattr__(self, "lower", _vec(self.lower if self.lower is not None else 0.0, n, "lower"))
@@ -122,7 +123,7 @@ class TermData:
             return int(len(self.var_bounds[0]))
         return 0 if self.residual is None else int(self.residual.shape[0])
 
-    def row_points(self) -> list:
+    def row_points(self) -> list[Any]:
         """The point (knot ``k`` or ``(k, fraction)``) of every row, or ``None`` per row when unknown."""
         n = self.n_rows
         if self.points is None or not self.point_rows:

@@ -96,22 +96,20 @@ class CollisionAvoidance(Term):
     where the initial guess brings it closer than ``activation`` (see module docstring).
     skip_pinned: no rows at knots whose joints a JointBoundary pins — the configuration is given,
     its clearance is not the NLP's to change (``verify`` checks it by coal), and its rows would have
-    no free joint (measured: a planner's boundary configuration 17.5 mm from an obstacle under a
-    20 mm margin made a regrasp NLP infeasible). skip_constant: no rows for a pair whose two
+    no free joint (a planner's boundary configuration closer than the margin made a regrasp NLP
+    infeasible). skip_constant: no rows for a pair whose two
     entities depend on no free joint (joints a JointPositionLimits holds at lower == upper, e.g. the
     holding arm of a regrasp, vs the base, an obstacle or the held object): its distance is the same
     at every knot, the NLP cannot change it, and a value below ``margin`` would make the NLP
-    infeasible (measured: a holding arm 17.5 mm from the base under a 20 mm margin); listed in
+    infeasible (a holding arm closer to the base than the margin); listed in
     ``constant_pairs``, checked by ``verify``. cover_tol [m]: sphere-covering tolerance of the smooth
     capsule distances (coarser = fewer spheres = faster NLP, more conservative).
     fixed_normals: the separating planes' normals are held at their initial values (coal's witness
     normal at the initial guess, per pair and knot; only the offsets b are free). The rows stay
     exact and conservative (distance ≥ margin along a unit normal), the NLP loses its bilinear
     plane terms and the trajectory stays in the corridor of half-spaces around the initial guess,
-    at the price of a higher optimum (measured on 8 constrained pipeline segments: 3.2× less IPOPT
-    time, iterations 270 → 153, the two segments whose free-normal solutions ran into pairs that
-    were not activated (−346 and −10 mm) clear by 29 and 33 mm, jerk cost 1.0-3.4× higher —
-    docs/planners.md). A new initial guess (``set_initial``) re-seeds the normals.
+    at the price of a higher optimum. A new initial guess (``set_initial``) re-seeds the normals.
+    See docs/decisions/0003-fixed-plane-normals.md and docs/decisions/0010-knot-transcription-defaults.md.
     """
 
     scene: Scene | None = None
@@ -139,7 +137,7 @@ class CollisionAvoidance(Term):
     # methods, are forwarded to a model kept for that purpose (deprecated; use ``model(robot)``).
     _LEGACY_NAMES = frozenset({"activate_with", "active_pairs", "constant_pairs", "relaxed", "skipped"})
 
-    def _validate(self):
+    def _validate(self) -> None:
         def bad(name, want):
             raise ConfigurationError(f"CollisionAvoidance.{name}: expected {want}, got {getattr(self, name)!r}")
 
@@ -160,7 +158,7 @@ class CollisionAvoidance(Term):
         object.__setattr__(self, "activate_with", tuple(self.activate_with))
         object.__setattr__(self, "margin_boost", types.MappingProxyType(dict(self.margin_boost)))
 
-    def __setattr__(self, name, value):
+    def __setattr__(self, name, value) -> None:
         legacy = self.__dict__.get("_legacy")
         if legacy is not None and name in self._LEGACY_NAMES:
             if name == "activate_with":
@@ -183,7 +181,7 @@ class CollisionAvoidance(Term):
         """A new :class:`CollisionModel` (collision checker, NLP shapes, activation) for ``robot``."""
         return CollisionModel(self, robot)
 
-    def _setup(self, robot):
+    def _setup(self, robot) -> None:
         """Deprecated in-place setup (SplineSegmentProblem): keeps a model on this term and
         forwards the model's attributes and methods. Use :meth:`model`."""
         object.__setattr__(self, "_legacy", CollisionModel(self, robot))
@@ -247,7 +245,7 @@ class CollisionModel:
     planes. Configuration values are read from ``term``; ``activate_with`` and ``margin_boost``
     start as the term's and may grow (``boost_between_knots``)."""
 
-    def __init__(self, term: CollisionAvoidance, robot):
+    def __init__(self, term: CollisionAvoidance, robot) -> None:
         self.term = term
         self.activate_with = list(term.activate_with)
         self.margin_boost = dict(term.margin_boost)
@@ -265,7 +263,7 @@ class CollisionModel:
         raise AttributeError(f"CollisionModel has no attribute {name!r}")
 
     # ------------------------------------------------------------------ entities
-    def _setup(self, robot):
+    def _setup(self, robot) -> None:
         self.checker = CollisionChecker(robot, self.scene, held_object=self.held_object,
                                         self_collision=self.self_collision, object_arm=self.object_arm)
         objs = robot.collision_model.geometryObjects
@@ -498,7 +496,8 @@ class CollisionModel:
                 eb = self._entity(tp, kb, pair.b, k)
                 for sa in ea[0]:
                     for sb in eb[0]:
-                        rs.append(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2])); lo.append(margin_at(pair, k))
+                        rs.append(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2]))
+                        lo.append(margin_at(pair, k))
         if self.skipped:
             log.info("collision term: %d pair(s) without an NLP model: %s", len(self.skipped),
                      [(p.name_a, p.name_b) for p in self.skipped[:5]])
@@ -515,8 +514,7 @@ class CollisionModel:
         whose given configuration is closer than ``margin`` for that pair: there
         ``min(margin, d_pinned / 2)``. Next to a pinned knot (rest: zero rate and acceleration)
         the joints move by O(h³ jerk), so a boundary configuration inside the margin would make the
-        neighbouring rows need a huge jerk — measured: IPOPT stuck at 500 iterations with the dual
-        infeasibility at 5e3 on a segment ending 17.5 mm from the base under a 20 mm margin."""
+        neighbouring rows need a huge jerk. See docs/decisions/0010-knot-transcription-defaults.md."""
         self.relaxed = {}
         if init is not None and pinned:
             idx = [self.checker.pair_index[p] for p in active]
@@ -551,8 +549,7 @@ class CollisionModel:
         is below ``min_clearance`` [m], the margin at the two knots around that sample grows by
         ``margin − d`` (d: the smallest distance in the interval), so that a re-solve keeps the
         pair clear of the sweep between the knots (the knots alone held the margin, the motion
-        between them cut the corner — measured: a wrist 20 mm from a truss at the knots,
-        −5 mm between them). Returns the number of (pair, knot) rows boosted; call
+        between them cut the corner; see docs/decisions/0010-knot-transcription-defaults.md). Returns the number of (pair, knot) rows boosted; call
         :meth:`OptProblem.rebuild` afterwards."""
         robot = self.checker.robot
         knot_t = np.asarray(knot_t, float)

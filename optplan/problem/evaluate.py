@@ -7,10 +7,19 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .build import TermData
 from .terms import NumericTrajectory
+
+if TYPE_CHECKING:
+    from .problem import TermHandle
+    from .solution import Solution
+
+#: what names a term: its handle or its name
+HandleLike = Any
 
 __all__ = ["TermEvaluator", "Infeasibility"]
 
@@ -39,7 +48,7 @@ class Infeasibility:
 class TermEvaluator:
     """The terms of one build of a problem, evaluated at that build's solutions."""
 
-    def __init__(self, problem, built: dict):
+    def __init__(self, problem: Any, built: dict[str, Any]) -> None:
         # a weak reference: a Solution keeps what evaluates its terms, not the problem's solver
         self._problem = weakref.ref(problem)
         self.robot = problem.robot
@@ -54,12 +63,12 @@ class TermEvaluator:
         self.dyn = built["dyn"]
 
     @property
-    def problem(self):
+    def problem(self) -> Any:
         """The problem this evaluator was built from (None once it no longer exists)."""
         return self._problem()
 
     # ------------------------------------------------------------------ lookup
-    def _binding(self, handle):
+    def _binding(self, handle: HandleLike) -> tuple[TermHandle, TermData]:
         name = handle if isinstance(handle, str) else getattr(handle, "name", None)
         if name not in self.handles:
             raise KeyError(f"no term named {name!r} in the problem of this solution (terms: {sorted(self.handles)})")
@@ -69,14 +78,14 @@ class TermEvaluator:
                            "handle replace_term returned (or the name)")
         return h, self.data[name]
 
-    def _constraint(self, handle, what: str):
+    def _constraint(self, handle: HandleLike, what: str) -> tuple[TermHandle, TermData]:
         h, d = self._binding(handle)
         if h.role != "constraint":
             raise TypeError(f"{what}: {h.name!r} is a cost (it has no rows, bounds or multipliers); value() gives "
                             "its cost")
         return h, d
 
-    def _rows(self, h, d, x):
+    def _rows(self, h: TermHandle, d: TermData, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(values, lower, upper) of a constraint's rows, physical units."""
         x = np.asarray(x, float)
         if d.var_bounds is not None:
@@ -84,22 +93,22 @@ class TermEvaluator:
             sc = d.var_scale
             return x[idx] / sc, np.asarray(lo) / sc, np.asarray(hi) / sc
         g = np.array(self.gfun(x)).ravel()[self.rows[h.name]]
-        return g, d.lower, d.upper
+        return g, np.asarray(d.lower), np.asarray(d.upper)
 
     # ------------------------------------------------------------------ Solution API
-    def value(self, handle, sol):
+    def value(self, handle: HandleLike, sol: Solution) -> float | np.ndarray:
         h, d = self._binding(handle)
         if h.role == "cost":
             return float(np.array(self.costs(sol.x)).ravel()[self.cost_names.index(h.name)])
         r, _, _ = self._rows(h, d, sol.x)
         return d.shaped(r)
 
-    def violation(self, handle, sol) -> np.ndarray:
+    def violation(self, handle: HandleLike, sol: Solution) -> np.ndarray:
         h, d = self._constraint(handle, "violation")
         r, lo, hi = self._rows(h, d, sol.x)
         return d.shaped(np.maximum(np.maximum(lo - r, r - hi), 0.0))
 
-    def dual(self, handle, sol) -> np.ndarray:
+    def dual(self, handle: HandleLike, sol: Solution) -> np.ndarray:
         h, d = self._constraint(handle, "dual")
         if d.var_bounds is not None:
             if sol.lam_x is None:
@@ -109,7 +118,7 @@ class TermEvaluator:
             raise ValueError(f"dual: no constraint multipliers in this solution (status {sol.status.value})")
         return d.shaped(-np.asarray(sol.lam_g)[self.rows[h.name]])
 
-    def sample(self, handle, sol, t) -> np.ndarray:
+    def sample(self, handle: HandleLike, sol: Solution, t: Any) -> np.ndarray:
         h, d = self._binding(handle)
         term = h.term.sampled()
         t = np.atleast_1d(np.asarray(t, float))
@@ -117,7 +126,7 @@ class TermEvaluator:
         v = np.asarray(term.numeric_built(traj, d), float)
         return v.reshape(t.size, -1)
 
-    def sampled_trajectory(self, sol, t) -> NumericTrajectory:
+    def sampled_trajectory(self, sol: Solution, t: np.ndarray) -> NumericTrajectory:
         """A :class:`NumericTrajectory` whose knots are the times ``t`` [s] of a solution (joints
         exact; a floating base's quaternion normalised-linearly interpolated between knots)."""
         s = sol.sample(t)
@@ -127,7 +136,8 @@ class TermEvaluator:
         if self.floating:
             k = np.clip(np.searchsorted(sol.t, t, side="right") - 1, 0, len(sol.t) - 2)
             f = ((t - sol.t[k]) / (sol.t[k + 1] - sol.t[k]))[:, None]
-            Q0, Q1 = sol.base_quat[k], sol.base_quat[k + 1]
+            base_quat = np.asarray(sol.base_quat)          # a floating robot's solution has one
+            Q0, Q1 = base_quat[k], base_quat[k + 1]
             Q1 = np.where((np.sum(Q0 * Q1, axis=1) < 0)[:, None], -Q1, Q1)
             bq = (1 - f) * Q0 + f * Q1
             bq /= np.linalg.norm(bq, axis=1, keepdims=True)
@@ -136,8 +146,8 @@ class TermEvaluator:
                                  self.com0)
 
     # ------------------------------------------------------------------ problem API
-    def infeasibilities(self, sol, n: int):
-        out = []
+    def infeasibilities(self, sol: Solution, n: int) -> list[Infeasibility]:
+        out: list[Infeasibility] = []
         x = np.asarray(sol.x, float)
         g = np.array(self.gfun(x)).ravel()
         sl = self.dyn

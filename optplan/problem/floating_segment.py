@@ -601,7 +601,9 @@ class FloatingSplineProblem:
     def _structure_key(self) -> tuple:
         """What the built NLP depends on (everything but the start/goal and the warm start)."""
         cc = self.spec.closed_chain
-        arr = (lambda a: None if a is None else np.asarray(a, float).tobytes())
+        def arr(a):
+            return None if a is None else np.asarray(a, float).tobytes()
+
         return (self.kernels._digest, self.N, self.T, self.n_sub, self.spec.smoothness, self.compile_kernels,
                 None if cc is None else (cc.arm_a, cc.arm_b, np.asarray(cc.relative.homogeneous).tobytes()),
                 arr(self.lower), arr(self.upper), arr(self.vlim), arr(self.target_quat))

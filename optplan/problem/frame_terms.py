@@ -61,9 +61,13 @@ class FramePose(Term):
             R, p = tp.frame(self.frame, k)
             r, tr = pose_residual(R, p, np.array(self.target.rotation), ca.DM(self.target.translation))
             if self.position_only:
-                rs.append(r[:3]); lo += [0.0] * 3; hi += [0.0] * 3
+                rs.append(r[:3])
+                lo += [0.0] * 3
+                hi += [0.0] * 3
             else:
-                rs += [r, tr]; lo += [0.0] * 6 + [1.0]; hi += [0.0] * 6 + [np.inf]
+                rs += [r, tr]
+                lo += [0.0] * 6 + [1.0]
+                hi += [0.0] * 6 + [np.inf]
         return ca.vertcat(*rs), np.array(lo), np.array(hi)
 
     def numeric(self, traj):
@@ -133,7 +137,7 @@ class FramePath(Term):
         return float(ca.evalf(tp.T)) if not tp.free_time else 1.0
 
     def residual(self, tp):
-        rs, lo, hi = [], [], []
+        rs = []
         for k, M in enumerate(self._targets(tp.N, self._T(tp))):
             R, p = tp.frame(self.frame, k)
             r, _ = pose_residual(R, p, np.array(M.rotation), ca.DM(M.translation))
@@ -163,11 +167,8 @@ class ClosedChain(Term):
     satisfy the closed chain there (≤ ``pinned_tol``): there the rows repeat the boundary
     constraint and make the constraint Jacobian rank-deficient. A pinned configuration that
     violates it keeps its rows, so an inconsistent problem still ends infeasible. Off by default
-    because IPOPT's path depends on it in both directions (measured): transport example N = 50:
-    20 iterations / 1.1 s with the rows, 55 / 9.7 s without (N = 100: 25 / 2.7 s vs 78 / 252 s —
-    without them the reduced Hessian shows negative curvature at most iterations); restoration
-    NLP N = 48: 20 / 3.0 s with, 26 / 2.8 s without; pipeline trials 0-2 of scene 1: 99, 79,
-    151 iterations with, 101, 109, 74 without. The relative pose does not depend on the base, so a floating robot's
+    because IPOPT's path depends on it in both directions: see docs/decisions/0010-knot-transcription-defaults.md.
+    The relative pose does not depend on the base, so a floating robot's
     hands are taken in the base frame (cheaper derivatives)."""
 
     arm_a: str = "A"

@@ -104,29 +104,27 @@ def _number(value, name: str, *, integer: bool = False, positive: bool = True, a
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """How IPOPT runs. ``None`` keeps the default of the NLP that uses the options.
+    """How IPOPT runs. ``None`` keeps the default of the NLP that uses the options."""
 
-    tol: IPOPT's ``tol``; the problems of :mod:`optplan.problem` also use it as the constraint-
-        violation tolerance (``constr_viol_tol``) and the bound ``Solution.success`` requires.
-    max_iter: iteration cap (integer ≥ 0).
-    max_wall_time: wall-clock cap per solve [s] (> 0); a solve that hits it ends with
-        ``IpoptStatus.MAXIMUM_WALLTIME_EXCEEDED``.
-    max_cpu_time: CPU-time cap per solve [s] (> 0).
-    print_level: IPOPT's console output, 0 (silent) … 12.
-    linear_solver: IPOPT's ``linear_solver`` (``"mumps"`` is the one every install has).
-    hessian: ``"exact"`` or ``"limited-memory"`` (L-BFGS).
-    raw: any other IPOPT option (``"mu_strategy"`` or ``"ipopt.mu_strategy"``) or CasADi nlpsol
-        option (``"expand"``, ``"print_time"``), applied last: it overrides everything, the
-        fields above included. Checked against IPOPT when the options are created.
-    """
-
+    #: IPOPT's ``tol`` [-]; the problems of :mod:`optplan.problem` also use it as the constraint-violation
+    #: tolerance (``constr_viol_tol``) and the bound ``Solution.success`` requires.
     tol: float | None = None
+    #: Iteration cap [count] (integer ≥ 0).
     max_iter: int | None = None
+    #: Wall-clock cap per solve [s] (> 0); a solve that hits it ends with
+    #: ``IpoptStatus.MAXIMUM_WALLTIME_EXCEEDED``.
     max_wall_time: float | None = None
+    #: CPU-time cap per solve [s] (> 0).
     max_cpu_time: float | None = None
+    #: IPOPT's console output [level], 0 (silent) … 12.
     print_level: int = 0
+    #: IPOPT's ``linear_solver`` (``"mumps"`` is the one every install has).
     linear_solver: str | None = None
+    #: ``"exact"`` or ``"limited-memory"`` (L-BFGS).
     hessian: str | None = None
+    #: Any other IPOPT option (``"mu_strategy"`` or ``"ipopt.mu_strategy"``) or CasADi nlpsol option
+    #: (``"expand"``, ``"print_time"``), applied last: it overrides everything, the fields above included.
+    #: Checked against IPOPT when the options are created.
     raw: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):

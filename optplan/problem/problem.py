@@ -291,7 +291,9 @@ class OptProblem:
         xall = ca.vertcat(tp.x, *[a.sym for a in aux]) if aux else tp.x
         g, lbg, ubg = [], [], []
         G, lo, hi = tp.dynamics_constraints()
-        g.append(G); lbg.append(lo); ubg.append(hi)
+        g.append(G)
+        lbg.append(lo)
+        ubg.append(hi)
         dyn = slice(0, G.shape[0])
         rows: dict[str, slice] = {}
         n = G.shape[0]
@@ -303,7 +305,9 @@ class OptProblem:
             if h.role == "constraint" and d.var_bounds is not None:
                 var_bounds[h.name] = d.var_bounds
             elif h.role == "constraint":
-                g.append(d.residual); lbg.append(d.lower); ubg.append(d.upper)
+                g.append(d.residual)
+                lbg.append(d.lower)
+                ubg.append(d.upper)
                 rows[h.name] = slice(n, n + d.n_rows)
                 n += d.n_rows
             else:
@@ -378,15 +382,15 @@ class OptProblem:
         """Solve with IPOPT. Never raises for a failed solve: the status is in the Solution.
 
         ``tol`` is both IPOPT's ``tol``/``constr_viol_tol`` and the constraint-violation bound that
-        ``Solution.success`` requires. Defaults depend on the problem's structure (measured):
+        ``Solution.success`` requires. Defaults depend on the problem's structure
+        (see docs/decisions/0010-knot-transcription-defaults.md):
 
         * inequality-heavy problems (collision planes, more inequality than equality rows):
           ``mu_strategy = adaptive`` and, with ``objective_scaling = "auto"``, the objective scaled
           to 1 on a reference trajectory (the rest-to-rest quintic between the initial guess's end
-          configurations; smoothness costs scale like T⁻⁵ and are ~1e-5) — transport example at
-          N = 50: 20 iterations vs 65 with IPOPT's defaults;
+          configurations; smoothness costs scale like T⁻⁵ and are ~1e-5);
         * equality-dominated problems (e.g. attitude restoration): IPOPT's defaults (monotone μ,
-          unscaled objective) — restoration at N = 20: 18 iterations vs 132 with the above.
+          unscaled objective).
 
         Exact Hessian, MUMPS (QAMD ordering for floating-base robots). ``ipopt_options`` are passed through and override everything (e.g.
         ``{"print_level": 5}``, ``{"mu_strategy": "adaptive"}``). ``options``: a

@@ -90,7 +90,7 @@ class QuarticSmoothingResult:
     objective: float = float("nan")
     refinements: int = 0
     stretch: float = 1.0
-    attempts: tuple = ()
+    attempts: tuple[Any, ...] = ()
 
 
 # ----------------------------------------------------------------------------- public entry point
@@ -259,6 +259,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         _log.debug("quartic smoothing: building the NLP raised %s", exc)
         solver, status = None, f"Exception: {type(exc).__name__}: {exc}"
     for rnd in range(max_ref + 1 if solver is not None else 0):
+        assert solver is not None   # the loop runs only with a solver
         out = solver.solve(x0, p=prob.pack_slots(slots), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
                            label="solve" if rnd == 0 else f"refinement {rnd}")
         attempts.append(out.summary())
@@ -283,8 +284,8 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         last_good = (pp, h_out, status)
         moved = 0
         lam = np.abs(np.asarray(out.lam_g, float))
-        for name, (excess, loc, ratio) in prob.limit_violations(pp).items():
-            bad = (ratio > 1.0 + tol) & (excess > 0.0)
+        for name, (excess, loc, ratios) in prob.limit_violations(pp).items():
+            bad = (ratios > 1.0 + tol) & (excess > 0.0)
             if np.any(bad):
                 # exchange: the slot with the smallest multiplier (the least active one) moves
                 rows = prob.slot_rows[name]

@@ -80,9 +80,8 @@ class SegmentSpec:
     relax_to_guess: a pair's margin is at most half the guess's exact clearance within ``window``
     knots of every knot where a collision-free guess runs closer than ``margin`` (False: only next
     to the pinned configurations; a colliding guess keeps the margin). A planner's path may pass
-    closer than the margin where nothing wider fits (measured: a wrist 10 mm from its forearm under
-    a 20 mm margin, the closed chain leaving no room to widen it: IPOPT ran 250 iterations into its
-    time cap; relaxed: 18 iterations, verified)."""
+    closer than the margin where nothing wider fits (the closed chain leaving no room to widen it).
+    See docs/decisions/0010-knot-transcription-defaults.md."""
 
     n_intervals: int
     duration: float

@@ -4,8 +4,10 @@ from __future__ import annotations
 import dataclasses
 import json
 import types
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -61,12 +63,12 @@ class Solution:
     x_scale_h: float | None = None
     cpu_time: float = 0.0  # [s] CPU time of the IPOPT run
     #: every solve that led to this solution, in order (this one last); summaries without arrays
-    attempts: tuple = ()
+    attempts: tuple[SolveOutcome, ...] = ()
     #: the built problem's term evaluator (not saved); see value/violation/dual/sample
-    evaluator: object = field(default=None, repr=False, compare=False)
+    evaluator: Any = field(default=None, repr=False, compare=False)
 
-    def __post_init__(self):
-        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731  (frozen: only here)
+    def __post_init__(self) -> None:
+        set_: Callable[[str, Any], None] = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731  (frozen: only here)
         if not isinstance(self.status, IpoptStatus):
             set_("status", IpoptStatus.from_string(self.status))
         set_("joint_names", tuple(self.joint_names))
@@ -93,13 +95,13 @@ class Solution:
                 set_("success", False)
 
     # ------------------------------------------------------------------ pickling (process pools)
-    def __getstate__(self):
+    def __getstate__(self) -> dict[str, Any]:
         d = dict(self.__dict__)
         d["terms"] = dict(d["terms"])
         d["evaluator"] = None        # the problem's CasADi functions stay in the process that solved it
         return d
 
-    def __setstate__(self, d):
+    def __setstate__(self, d: dict[str, Any]) -> None:
         for k, v in d.items():
             object.__setattr__(self, k, v)
         object.__setattr__(self, "terms", types.MappingProxyType(dict(d["terms"])))
@@ -109,13 +111,13 @@ class Solution:
                 a.flags.writeable = False
 
     # ------------------------------------------------------------------ attempts
-    def after(self, *earlier: "Solution") -> "Solution":
+    def after(self, *earlier: Solution) -> Solution:
         """This solution with the attempts of ``earlier`` solutions (e.g. a pipeline's previous
         retries, in order) listed before its own — nothing is added up."""
         prev = tuple(a for s in earlier for a in s.attempts)
         return dataclasses.replace(self, attempts=prev + self.attempts)
 
-    def labelled(self, label: str) -> "Solution":
+    def labelled(self, label: str) -> Solution:
         """This solution with its own (last) attempt labelled (e.g. ``"collision retry"``)."""
         att = self.attempts[:-1] + (self.attempts[-1].with_label(label),)
         return dataclasses.replace(self, attempts=att)
@@ -136,30 +138,32 @@ class Solution:
         return float(sum(a.setup_time for a in self.attempts))
 
     # ------------------------------------------------------------------ term handles
-    def _ev(self, what: str):
+    def _ev(self, what: str) -> Any:
         if self.evaluator is None:
             raise ValueError(f"Solution.{what}: this solution carries no problem to evaluate terms with (it was "
                              "loaded from a file or made by a solver without term handles); evaluate the term on the "
                              "OptProblem that produced it")
         return self.evaluator
 
-    def value(self, handle):
+    def value(self, handle: Any) -> Any:
         """The term's value at this solution: a constraint's residual rows (shaped per knot,
         ``(points, rows per point)``, where the term is evaluated point by point), a cost's
         weighted cost (float)."""
         return self._ev("value").value(handle, self)
 
-    def violation(self, handle) -> np.ndarray:
+    def violation(self, handle: Any) -> np.ndarray:
         """``max(lower − r, r − upper, 0)`` of a constraint's rows (≥ 0, shaped as :meth:`value`);
         in the rows' physical units ([m], [rad], …)."""
-        return self._ev("violation").violation(handle, self)
+        out: np.ndarray = self._ev("violation").violation(handle, self)
+        return out
 
-    def dual(self, handle) -> np.ndarray:
+    def dual(self, handle: Any) -> np.ndarray:
         """The multipliers of a constraint's rows, shaped as :meth:`value`, as the sensitivity of
         the optimal cost to the rows' active bound: ``∂f*/∂bound`` (≥ 0 for an active lower
         bound, ≤ 0 for an active upper bound, 0 for an inactive row; Drake's convention; CasADi's
         ``lam_g`` with the opposite sign)."""
-        return self._ev("dual").dual(handle, self)
+        out: np.ndarray = self._ev("dual").dual(handle, self)
+        return out
 
     def check(self, success: bool | None = None) -> None:
         """Raise :class:`~optplan.errors.ConfigurationError` when the arrays are inconsistent
@@ -197,7 +201,7 @@ class Solution:
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0])
 
-    def sample(self, t, handle=None):
+    def sample(self, t: Any, handle: Any = None) -> Any:
         """Joint position/velocity/acceleration at times ``t`` [s] — exact for the transcription
         (piecewise cubic with constant jerk on each interval): ``{"t", "q", "qd", "qdd"}``.
 
@@ -219,8 +223,8 @@ class Solution:
                 "qd": v0 + tau * a0 + tau**2 / 2 * j0, "qdd": a0 + tau * j0}
 
     # ------------------------------------------------------------------ persistence
-    def _arrays(self) -> dict[str, np.ndarray]:
-        out = {"t": self.t, "q": self.q, "qd": self.qd, "qdd": self.qdd, "jerk": self.jerk}
+    def _arrays(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"t": self.t, "q": self.q, "qd": self.qd, "qdd": self.qdd, "jerk": self.jerk}
         if self.base_quat is not None:
             out["base_quat"] = self.base_quat
             out["base_position"] = self.base_position
@@ -232,7 +236,7 @@ class Solution:
             out["lam_x"] = self.lam_x
         return out
 
-    def _meta(self) -> dict:
+    def _meta(self) -> dict[str, Any]:
         return {"success": self.success, "status": self.status.value, "iterations": self.iterations,
                 "wall_time": self.wall_time, "setup_time": self.setup_time, "cost": self.cost,
                 "max_constraint_violation": self.max_constraint_violation, "terms": dict(self.terms),
@@ -254,7 +258,7 @@ class Solution:
         return path
 
     @classmethod
-    def load(cls, path: str | Path) -> "Solution":
+    def load(cls, path: str | Path) -> Solution:
         """Read a file written by :meth:`save`. A missing file is FileNotFoundError; a corrupted one
         (not npz/JSON, missing or malformed fields, an unknown status, NaN or wrongly shaped arrays,
         success claimed on data that fails :meth:`check`) is a
@@ -271,7 +275,7 @@ class Solution:
                 d = json.loads(path.read_bytes().decode("utf-8"))
                 if not isinstance(d, dict):
                     raise ResultFileError(f"{path}: expected a JSON object, got {type(d).__name__}")
-                arrays = {k: np.asarray(d[k], float) for k in _ARRAYS if k in d}
+                arrays: dict[str, Any] = {k: np.asarray(d[k], float) for k in _ARRAYS if k in d}
                 meta = d
             else:
                 with np.load(path, allow_pickle=False) as z:

@@ -138,7 +138,7 @@ def _frozen_vector(v, what: str, allow_none: bool = True):
     return a
 
 
-def _set(obj, name, value):
+def _set(obj, name, value) -> None:
     """Normalise a field of a frozen term in its _validate."""
     object.__setattr__(obj, name, value)
 
@@ -188,14 +188,14 @@ class Term:
     cost_only = False
     constraint_only = False
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self._validate()
         object.__setattr__(self, "_frozen", True)
 
     def _validate(self) -> None:
         """Check (and normalise) the fields; raise ConfigurationError naming the bad value."""
 
-    def __setattr__(self, name, value):
+    def __setattr__(self, name, value) -> None:
         if self.__dict__.get("_frozen"):
             warnings.warn(f"{type(self).__name__}.{name} = ...: terms are frozen configurations; changing one in "
                           f"place is deprecated and will raise dataclasses.FrozenInstanceError — use "
@@ -210,7 +210,7 @@ class Term:
         return {k: dict(v) if isinstance(v, types.MappingProxyType) else v
                 for k, v in self.__dict__.items() if k != "_legacy"}
 
-    def __setstate__(self, state):
+    def __setstate__(self, state) -> None:
         for k, v in state.items():
             object.__setattr__(self, k, v)
         self._validate()             # normalises (read-only mappings, arrays) again
@@ -432,7 +432,7 @@ class JointVelocityLimits(_JointBox):
     default_name = "velocity_limits"
     which = "qd"
 
-    def _validate(self):
+    def _validate(self) -> None:
         super()._validate()
         _check_limit(self, allow_none=True)
 
@@ -450,7 +450,7 @@ class JointAccelerationLimits(_JointBox):
     default_name = "acceleration_limits"
     which = "qdd"
 
-    def _validate(self):
+    def _validate(self) -> None:
         super()._validate()
         _check_limit(self, allow_none=False)
 
@@ -500,7 +500,7 @@ class Smoothness(Term):
         def integrand(t):
             k = min(int(t / h), N - 1)
             tau = t - k * h
-            q0, v0, a0, j0 = traj.q[k], traj.qd[k], traj.qdd[k], traj.jerk[k]
+            v0, a0, j0 = traj.qd[k], traj.qdd[k], traj.jerk[k]
             val = {"jerk": j0, "acceleration": a0 + tau * j0, "velocity": v0 + tau * a0 + tau**2 / 2 * j0}[self.order]
             return float(val @ val)
 

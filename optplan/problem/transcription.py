@@ -18,8 +18,8 @@ Scaling: the decision variables are ``q``, ``h₀ q̇``, ``h₀² q̈`` and ``h�
 interval ``h₀ = duration / N`` (a constant, also for free time), so the integration rows have
 O(1) coefficients. Unscaled, the closed-chain rows at knot 1 act on the first jerk through
 ``h³/6`` only — with the boundary knot pinned, the equality Jacobian had a dozen singular values of
-1e-7..1e-5, IPOPT saw the wrong KKT inertia at every iteration and raised MUMPS's pivot tolerance
-(measured on the pipeline's N = 80 segments: 51 iterations in 8.7 s before, see docs/optproblem.md).
+1e-7..1e-5, IPOPT saw the wrong KKT inertia at every iteration and raised MUMPS's pivot tolerance.
+See docs/decisions/0010-knot-transcription-defaults.md.
 The accessors ``q(k)``, ``qd(k)``, ``qdd(k)``, ``jerk(k)`` and ``V``, ``A``, ``J`` are in physical units.
 
 Free-floating base
@@ -36,6 +36,8 @@ symbolically) cost 15-80 s of setup at N = 10.
 """
 from __future__ import annotations
 
+from typing import Any
+
 import casadi as ca
 import numpy as np
 
@@ -44,8 +46,11 @@ from ..model.symbolic import SymbolicKinematics, quat_to_matrix
 
 __all__ = ["Transcription", "quat_mul"]
 
+#: a CasADi expression (MX, SX or DM)
+Expr = Any
 
-def quat_mul(a, b):
+
+def quat_mul(a: Expr, b: Expr) -> Expr:
     """Hamilton product of CasADi quaternions stored (x, y, z, w)."""
     ax, ay, az, aw = a[0], a[1], a[2], a[3]
     bx, by, bz, bw = b[0], b[1], b[2], b[3]
@@ -63,8 +68,8 @@ class Transcription:
     ``base_rotation(k)``, ``base_position(k)``, ``sym`` (:class:`SymbolicKinematics`).
     """
 
-    def __init__(self, robot: RobotModel, n_intervals: int, duration, free_time: bool,
-                 base0_quat=None, com0=None, n_sub: int = 2):
+    def __init__(self, robot: RobotModel, n_intervals: int, duration: float, free_time: bool,
+                 base0_quat: Any = None, com0: Any = None, n_sub: int = 2) -> None:
         self.robot = robot
         self.N = int(n_intervals)
         self.nj = robot.nj
@@ -82,6 +87,7 @@ class Transcription:
         self.A = self.As / self.h0**2
         self.J = self.Js / self.h0**3
         blocks = [ca.vec(self.Q), ca.vec(self.Vs), ca.vec(self.As), ca.vec(self.Js)]
+        self.T_var: ca.MX | None
         if free_time:
             self.T_var = ca.MX.sym("T")
             self.T = self.T_var
@@ -105,12 +111,12 @@ class Transcription:
             self.base0_quat = np.array([0, 0, 0, 1.0]) if base0_quat is None else np.asarray(base0_quat, float)
             self.com0 = np.zeros(3) if com0 is None else np.asarray(com0, float)
         self.x = ca.vertcat(*blocks)
-        self._frame_cache: dict[tuple, tuple] = {}
-        self._joint_cache: dict = {}
+        self._frame_cache: dict[tuple[Any, ...], tuple[Expr, Expr]] = {}
+        self._joint_cache: dict[Any, list[tuple[Expr, Expr]]] = {}
         self._joints_fn: ca.Function | None = None
         self._build_base_functions()
 
-    def set_com0(self, com0) -> None:
+    def set_com0(self, com0: Any) -> None:
         """The (fixed) centre of mass [m] of a floating robot, from the initial configuration."""
         if self.floating:
             self.com0 = np.asarray(com0, float).copy()
@@ -123,7 +129,8 @@ class Transcription:
     def unpack(self, xval: np.ndarray) -> dict[str, np.ndarray]:
         """Split a numeric decision vector into named arrays in physical units (knots along axis 0)."""
         nj, N = self.nj, self.N
-        out, i = {}, 0
+        out: dict[str, Any] = {}
+        i = 0
         for name, shape in (("q", (nj, N + 1)), ("qd", (nj, N + 1)), ("qdd", (nj, N + 1)), ("jerk", (nj, N))):
             n = shape[0] * shape[1]
             out[name] = np.asarray(xval[i:i + n]).reshape(shape, order="F").T / self.variable_scale(name)
@@ -146,7 +153,8 @@ class Transcription:
             raise ValueError("the duration is not a decision variable (free_time=False)")
         return self.nj * (4 * self.N + 3)
 
-    def pack(self, q, qd, qdd, jerk, T=None, base_quat=None, base_twist=None) -> np.ndarray:
+    def pack(self, q: Any, qd: Any, qdd: Any, jerk: Any, T: Any = None, base_quat: Any = None,
+             base_twist: Any = None) -> np.ndarray:
         """Decision vector from knot arrays in physical units (inverse of :meth:`unpack`; the
         interior joint variables of a floating robot are computed from the cubic)."""
         parts = [self.variable_scale(n) * np.asarray(a, float).T.reshape(-1, order="F")
@@ -174,22 +182,22 @@ class Transcription:
         return [(k, i) for k in range(self.N) for i in range(1, m)]
 
     # ------------------------------------------------------------------ expressions
-    def q(self, k: int):
+    def q(self, k: int) -> Expr:
         return self.Q[:, k]
 
-    def qd(self, k: int):
+    def qd(self, k: int) -> Expr:
         return self.V[:, k]
 
-    def qdd(self, k: int):
+    def qdd(self, k: int) -> Expr:
         return self.A[:, k]
 
-    def jerk(self, k: int):
+    def jerk(self, k: int) -> Expr:
         return self.J[:, k]
 
-    def knot_time(self, k: int):
+    def knot_time(self, k: int) -> Expr:
         return self.h * k
 
-    def dynamics_constraints(self):
+    def dynamics_constraints(self) -> tuple[Expr, np.ndarray, np.ndarray]:
         """Exact integration of the piecewise-constant jerk (and the base quaternion)."""
         h = self.h
         r = h / self.h0 if self.free_time else 1.0  # h / h₀ (exactly 1 for a fixed duration)
@@ -224,12 +232,12 @@ class Transcription:
         return G, np.zeros(G.shape[0]), np.zeros(G.shape[0])
 
     # ------------------------------------------------------------------ floating base
-    def _joint_at(self, k: int, tau):
+    def _joint_at(self, k: int, tau: Expr) -> tuple[Expr, Expr]:
         """Joint position and rate at time tau into interval k (exact cubic)."""
         q, v, a, j = self.Q[:, k], self.V[:, k], self.A[:, k], self.J[:, k]
         return q + tau * v + tau**2 / 2 * a + tau**3 / 6 * j, v + tau * a + tau**2 / 2 * j
 
-    def _build_base_functions(self):
+    def _build_base_functions(self) -> None:
         if not self.floating:
             return
         nj = self.nj
@@ -242,7 +250,7 @@ class Transcription:
         self.base_com_fn = ca.Function("base_com", [qj], [com_b], ["qj"], ["com_b"])
         quat, w0, wm, w1, hs = (ca.SX.sym(n, m) for n, m in (("quat", 4), ("w0", 3), ("wm", 3), ("w1", 3), ("h", 1)))
 
-        def f(x, w):
+        def f(x: Expr, w: Expr) -> Expr:
             return 0.5 * quat_mul(x, ca.vertcat(w, 0))
 
         k1 = f(quat, w0)
@@ -252,20 +260,20 @@ class Transcription:
         x = quat + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         self.quat_step_fn = ca.Function("quat_step", [quat, w0, wm, w1, hs], [x / ca.norm_2(x)])
 
-    def base_quat(self, k: int):
+    def base_quat(self, k: int) -> Expr:
         if not self.floating:
             return ca.DM([0, 0, 0, 1.0])
         return self.QB[:, k]
 
-    def base_rotation(self, k: int):
+    def base_rotation(self, k: int) -> Expr:
         return quat_to_matrix(self.base_quat(k)) if self.floating else ca.DM.eye(3)
 
-    def base_position(self, k: int):
+    def base_position(self, k: int) -> Expr:
         if not self.floating:
             return ca.DM.zeros(3)
         return ca.DM(self.com0) - self.base_rotation(k) @ self.base_com_fn(self.Q[:, k])
 
-    def q_full(self, k: int):
+    def q_full(self, k: int) -> Expr:
         if not self.floating:
             return self.Q[:, k]
         return ca.vertcat(self.base_position(k), self.base_quat(k), self.Q[:, k])
@@ -283,7 +291,7 @@ class Transcription:
             self._joints_fn = ca.Function("joint_placements", [q], outs)
         return self._joints_fn
 
-    def q_full_interior(self, k: int, frac: float):
+    def q_full_interior(self, k: int, frac: float) -> Expr:
         """Full configuration at fraction ``frac`` ∈ (0, 1) of interval k (exact cubic joints; for a
         floating robot the base pose is interpolated from the knots — use knots for base terms)."""
         qj, _ = self._joint_at(k, self.h * frac)
@@ -291,7 +299,7 @@ class Transcription:
             return qj
         raise ValueError("interior points are only available for fixed-base robots")
 
-    def _joint_placements_at(self, k, base_frame: bool = False):
+    def _joint_placements_at(self, k: Any, base_frame: bool = False) -> list[tuple[Expr, Expr]]:
         key = ("base", k) if base_frame else k
         if base_frame and not self.floating:
             key = k
@@ -305,7 +313,7 @@ class Transcription:
                 (outs[2 * i], outs[2 * i + 1]) for i in range(len(outs) // 2)]
         return self._joint_cache[key]
 
-    def frame(self, frame, k, base_frame: bool = False):
+    def frame(self, frame: str | int, k: Any, base_frame: bool = False) -> tuple[Expr, Expr]:
         """World placement ``(R, p)`` of a frame at knot ``k`` (an int) or at the interior point
         ``k = (interval, fraction)`` (expressions, cached). ``base_frame=True``: the placement
         relative to the base (a function of the joints only; the same as world for a fixed base) —

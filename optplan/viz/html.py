@@ -22,7 +22,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -54,20 +54,23 @@ def _need_meshcat():
 
 @dataclass(frozen=True)
 class ViewOptions:
-    """``fps``: frames per second of playback; ``playback_s``: how long [s] the whole motion plays
-    (``None``: in real time, at ``speed``); ``speed``: playback speed-up (motion seconds per second
-    shown) when ``playback_s`` is None; ``max_frames``: at most this many frames (longer motions
-    are sampled more coarsely); ``hand_paths``: draw the end-effector paths; ``autoplay``: start
-    playing on load; ``title``: page title; ``camera``: camera position [m] in the world (``None``:
-    looking at the scene from the front, above)."""
+    """Options of the offline HTML views."""
 
+    #: Frames per second of playback [1/s].
     fps: float = 25.0
+    #: How long the whole motion plays [s] (None: in real time, at ``speed``).
     playback_s: float | None = 20.0
+    #: Playback speed-up when ``playback_s`` is None [motion s per shown s].
     speed: float = 1.0
+    #: At most this many frames [count] (longer motions are sampled more coarsely).
     max_frames: int = 600
+    #: Draw the end-effector paths.
     hand_paths: bool = True
+    #: Start playing on load.
     autoplay: bool = False
+    #: Page title.
     title: str = "optplan trajectory"
+    #: Camera position in the world [m] (None: looking at the scene from the front, above).
     camera: tuple | None = None
 
     def __post_init__(self):
@@ -162,7 +165,7 @@ def _obstacle_geometry(ob):
 def _colored_geometry(robot) -> pin.GeometryModel:
     """A copy of the collision model with one colour per arm (links of the base in grey)."""
     gm = robot.collision_model.copy()
-    joint_arm = {}
+    joint_arm: dict[int, int] = {}
     for k, arm in enumerate(robot.arms.values()):
         for jn in arm.joint_names:
             joint_arm[int(robot.model.getJointId(jn))] = k
@@ -174,8 +177,8 @@ def _colored_geometry(robot) -> pin.GeometryModel:
         if j > 0:
             joint_arm.setdefault(jid, joint_arm[j])
     for g in gm.geometryObjects:
-        k = joint_arm.get(int(g.parentJoint))
-        g.meshColor = np.array(BASE_COLOR if k is None else ARM_COLORS[k % len(ARM_COLORS)], float)
+        ka = joint_arm.get(int(g.parentJoint))
+        g.meshColor = np.array(BASE_COLOR if ka is None else ARM_COLORS[ka % len(ARM_COLORS)], float)
     return gm
 
 
@@ -439,7 +442,7 @@ def load_trajectory(path) -> dict:
         keys = set(z.files)
         if not {"t", "q"} <= keys:
             raise ValueError(f"{p}: expected arrays 't' and 'q' in the npz, found {sorted(keys)}")
-        out = {"t": np.asarray(z["t"], float), "q": np.asarray(z["q"], float)}
+        out: dict[str, Any] = {"t": np.asarray(z["t"], float), "q": np.asarray(z["q"], float)}
         if "base_q" in keys:   # a free-floating base's [x, y, z, qx, qy, qz, qw] stored apart from the joints
             bq = np.asarray(z["base_q"], float)
             if bq.ndim == 2 and bq.shape == (len(out["q"]), 7):

@@ -108,7 +108,7 @@ def initial_configuration(arcs: DshdasrArcs, task: TransposeTask, swivel_deg: fl
         seed = arcs.q(np.radians(PAPER_INITIAL_JOINTS_DEG["a"]), np.radians(PAPER_INITIAL_JOINTS_DEG["b"]))
     rng = np.random.default_rng(rng_seed)
     q = np.asarray(seed, float)
-    for attempt in range(restarts + 1):
+    for _attempt in range(restarts + 1):
         res = dls_track(arcs, task, q, damping=1e-2, max_iterations=3000, max_step=0.1, times=[0.0])
         if res.success[0]:
             q = res.q[0]

@@ -35,7 +35,6 @@ def evaluate(res: TrackResult, task: TransposeTask, arcs: DshdasrArcs, planner: 
     des = res.des
     n = len(res.t)
     ep_a, eo_a, ep_b, eo_b = (np.zeros(n) for _ in range(4))
-    eo_a_zyx = np.zeros((n, 3))
     for k in range(n):
         Ma, Mb = arcs.tips(res.q[k])
         ep_a[k] = np.linalg.norm(Ma.translation - des["pa"][k])

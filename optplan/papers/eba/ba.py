@@ -68,19 +68,22 @@ def _check_common(cls: str, o) -> None:
 
 @dataclass(frozen=True)
 class BAOptions:
-    """BA options (paper Section 4.1): ``Q`` — the Lyapunov weight is ``Q·I`` (paper 8);
-    ``horizon`` [s] = 2 t_m (paper 300); ``dt`` [s] RK4 step (the output sampling with DOP853);
-    ``max_rate`` [rad/s]: the run is stopped and reported as diverged when a joint rate exceeds it;
-    ``integrator`` ``"rk4"`` | ``"dop853"`` (adaptive, ``rtol``); ``meet_tol`` [rad]: None = meet at
-    ``horizon / 2`` (the paper's 300 s), else meet as soon as ``max |Δx| ≤ meet_tol`` (the "time is
-    determined by the value of Δx" reading; still at most ``horizon / 2``)."""
+    """BA options (the EBA paper, Section 4.1)."""
 
+    #: The Lyapunov weight is ``Q·I`` [-] (the paper: 8).
     Q: float = 8.0
+    #: Simulated time, 2 t_m [s] (the paper: 300).
     horizon: float = 300.0
+    #: RK4 step, and the output sampling with DOP853 [s].
     dt: float = 0.05
+    #: The run is stopped and reported as diverged when a joint rate exceeds this [rad/s].
     max_rate: float = 10.0
+    #: ``"rk4"`` (fixed step ``dt``) or ``"dop853"`` (adaptive, ``rtol``).
     integrator: str = "rk4"
+    #: Relative tolerance of DOP853 [-].
     rtol: float = 1e-9
+    #: None: meet at ``horizon / 2`` (the paper's 300 s); a number [rad]: meet as soon as ``max |Δx| ≤
+    #: meet_tol`` (the "time is determined by the value of Δx" reading; still at most ``horizon / 2``).
     meet_tol: float | None = None
 
     def __post_init__(self):
@@ -93,37 +96,34 @@ class BAOptions:
 
 @dataclass(frozen=True)
 class EBAOptions:
-    """EBA options. Defaults are the paper's free-end values (Section 4.1): ``k = 1.3``,
-    ``m = 0.125``, ``t0 = 1000`` s, ``lam = 0``, ``horizon = 300`` s (= 2 t_m); the end-constrained
-    values (Section 4.2) are :meth:`paper_end_constrained`. ``dt`` [s]: RK4 step (the output
-    sampling with DOP853); ``max_rate`` [rad/s]: stop and report divergence above it (not in the
-    paper: a guard); ``pinv_derivative``: keep Eq. 18's ``Ẇ̄†`` term (not the paper's method,
-    which neglects it).
+    """EBA options. Defaults are the paper's free-end values (Section 4.1); the end-constrained
+    values (Section 4.2) are :meth:`paper_end_constrained`. Readings of the paper that the audit
+    (``docs/eba_audit.md``) found ambiguous are options whose defaults are the most literal reading.
+    """
 
-    Readings of the paper the audit (``docs/_eba_audit.md``) found ambiguous, as options whose
-    defaults are the most literal reading:
-
-    * ``meet_tol`` [rad] — None (default): ``t_m = horizon / 2``, Section 4.1's "the simulation
-      time of the planning simulation is set as 300 s" (and BA's jumps at 150 s / 300 s); a number:
-      the robots meet as soon as ``max |Δx| ≤ meet_tol`` (the same paragraph's "the time is
-      determined by the value of Δx"), never later than ``horizon / 2``;
-    * ``horizon`` = 2 t_m (default 300 s) rather than t_m = 300 s: use ``horizon=600`` for the
-      other reading.
-
-    ``integrator``: ``"rk4"`` (default, fixed step ``dt``) or ``"dop853"`` (scipy's adaptive
-    8th-order Runge-Kutta with relative tolerance ``rtol``) — not a reading of the paper (which
-    does not say how it integrates) but an accuracy check."""
-
+    #: Gain k of the EBA law [-] (the paper: 1.3).
     k: float = 1.3
+    #: Exponent m of the EBA law [-] (the paper: 0.125).
     m: float = 0.125
+    #: Time constant t0 of the EBA law [s] (the paper: 1000).
     t0: float = 1000.0
+    #: λ of the EBA law [-] (the paper: 0).
     lam: float = 0.0
+    #: Simulated time, 2 t_m [s] (default 300 s; ``horizon=600`` for the t_m = 300 s reading).
     horizon: float = 300.0
+    #: RK4 step, and the output sampling with DOP853 [s].
     dt: float = 0.1
+    #: Stop and report divergence above this joint rate [rad/s] (not in the paper: a guard).
     max_rate: float = 10.0
+    #: Keep Eq. 18's ``Ẇ̄†`` term (not the paper's method, which neglects it).
     pinv_derivative: bool = False
+    #: ``"rk4"`` (fixed step ``dt``) or ``"dop853"`` (scipy's adaptive 8th-order Runge-Kutta with ``rtol``; an
+    #: accuracy check, not a reading of the paper).
     integrator: str = "rk4"
+    #: Relative tolerance of DOP853 [-].
     rtol: float = 1e-9
+    #: None: ``t_m = horizon / 2`` (Section 4.1's 300 s simulation); a number [rad]: the robots meet as soon as
+    #: ``max |Δx| ≤ meet_tol``, never later than ``horizon / 2``.
     meet_tol: float | None = None
 
     def __post_init__(self):

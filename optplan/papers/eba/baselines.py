@@ -59,10 +59,11 @@ quintic_profile = quintic_time_law   # (p, p', p'') of the rest-to-rest quintic 
 # --------------------------------------------------------------------------- 5th-order polynomial
 @dataclass(frozen=True)
 class QuinticOptions:
-    """Eq. 34 with zero boundary velocity and acceleration: ``duration`` [s] (paper 20),
-    ``samples`` of the output trajectory."""
+    """Eq. 34 with zero boundary velocity and acceleration."""
 
+    #: Duration of the motion [s] (the paper: 20).
     duration: float = 20.0
+    #: Samples of the output trajectory [count].
     samples: int = 401
 
     def __post_init__(self):
@@ -88,14 +89,18 @@ def run_quintic(robot: RobotModel, scenario: Scenario, options: QuinticOptions |
 # --------------------------------------------------------------------------- leader-follower
 @dataclass(frozen=True)
 class LeaderFollowerOptions:
-    """Leader-follower (Section 4.2): the ``leader`` arm follows the quintic to its goal over
-    ``duration`` [s] (paper 20); the follower solves ``H_F θ̇_F = −H_L θ̇_L − K e`` (velocity-level
-    IK keeping the relative hand pose; minimum-norm, ``e`` the relative-pose error, ``clik_gain``
-    K [1/s] corrects integration drift) with RK4 steps of ``dt`` [s]."""
+    """Leader-follower (the EBA paper, Section 4.2): the leader arm follows the quintic to its goal; the
+    follower solves ``H_F θ̇_F = −H_L θ̇_L − K e`` (velocity-level IK keeping the relative hand pose;
+    minimum-norm, ``e`` the relative-pose error).
+    """
 
+    #: Duration of the motion [s] (the paper: 20).
     duration: float = 20.0
+    #: The leader arm's name.
     leader: str = "A"
+    #: RK4 step [s].
     dt: float = 0.02
+    #: K: gain of the closed-loop correction of integration drift [1/s].
     clik_gain: float = 5.0
 
     def __post_init__(self):
@@ -179,24 +184,29 @@ def closed_chain_reference(robot: RobotModel, scenario: Scenario, n: int, durati
 # --------------------------------------------------------------------------- Fourier (near-optimal)
 @dataclass(frozen=True)
 class FourierOptions:
-    """Near-optimal Fourier method (Eq. 35) with IPOPT. ``n_harmonics`` h (paper: 98 = 14 × 7
-    coefficients, i.e. h = 3), ``duration`` T [s] (paper 20), ``penalty`` (paper 1e4),
-    ``n_steps`` RK4 steps of the base quaternion, ``velocity_limit_deg_s`` at ``n_limit_samples``
-    instants (the paper's 10 °/s; None: no limit), ``closed_chain_samples`` (end-constrained
-    case), IPOPT ``tol`` and ``max_iter``, ``hessian``: ``"limited-memory"`` (L-BFGS),
-    ``"gauss-newton"`` (the objective's exact Hessian with the closed-chain residual's JᵀJ,
-    constraint curvature ignored) or ``"auto"`` (L-BFGS free end — measured 23 iterations vs 46 —,
-    Gauss-Newton end-constrained — L-BFGS stalls at 300 iterations there)."""
+    """Near-optimal Fourier method (the EBA paper, Eq. 35) with IPOPT."""
 
+    #: h: harmonics per joint [count] (the paper: 98 = 14 × 7 coefficients, i.e. h = 3).
     n_harmonics: int = 3
+    #: T: duration of the motion [s] (the paper: 20).
     duration: float = 20.0
+    #: Weight of the penalty terms [-] (the paper: 1e4).
     penalty: float = 1e4
+    #: RK4 steps of the base quaternion [count].
     n_steps: int = 40
+    #: Joint velocity limit [deg/s] (the paper's 10; None: no limit).
     velocity_limit_deg_s: float | None = 10.0
+    #: Instants at which the velocity limit is imposed [count].
     n_limit_samples: int = 81
+    #: Instants at which the closed chain is imposed (end-constrained case) [count].
     closed_chain_samples: int = 21
+    #: IPOPT's ``tol`` [-].
     tol: float = 1e-8
+    #: IPOPT iterations, at most [count].
     max_iter: int = 300
+    #: ``"limited-memory"`` (L-BFGS), ``"gauss-newton"`` (the objective's exact Hessian with the closed-chain
+    #: residual's JᵀJ, constraint curvature ignored) or ``"auto"`` (L-BFGS free end, Gauss-Newton
+    #: end-constrained; see docs/decisions/0009-eba-nlp-solver-settings.md).
     hessian: str = "auto"
 
     def __post_init__(self):

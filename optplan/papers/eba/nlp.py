@@ -45,29 +45,37 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class NLPOptions:
-    """``n_intervals`` N (N+1 knots), ``duration`` T [s] (20 s as the paper's polynomial),
-    ``n_sub`` RK4 sub-steps of the base per interval, ``smoothness`` ("jerk" or "acceleration"),
-    joint ``position_limits`` / ``velocity_limits`` (the model's: ±360°, 10 °/s), ``tol``: IPOPT's
-    constraint-violation tolerance (and the one ``Solution.success`` requires), ``dual_tol``:
-    IPOPT's overall ``tol`` (dual infeasibility of the objective scaled to ≈ 1; with the closed
-    chain the constraints at the first/last knot repeat the fixed boundary joints, the
-    multipliers are not unique and IPOPT creeps at dual infeasibility ≈ 1e-6 for 45 more
-    iterations if asked for 1e-8 — measured), ``max_iter``, ``sample_density`` samples per
-    interval of the returned trajectory."""
+    """Options of the base-attitude restoration NLP."""
 
+    #: N: intervals of the grid (N+1 knots) [count].
     n_intervals: int = 20
+    #: T: duration of the motion [s] (20 s as the paper's polynomial).
     duration: float = 20.0
+    #: RK4 sub-steps of the base attitude per interval [count].
     n_sub: int = 1
+    #: Minimised derivative: ``"jerk"`` or ``"acceleration"``.
     smoothness: str = "jerk"
+    #: Impose the model's joint position limits (±360°) at every knot.
     position_limits: bool = True
+    #: Impose the model's joint velocity limits (10 °/s) at every knot.
     velocity_limits: bool = True
+    #: IPOPT's constraint-violation tolerance, and the one ``Solution.success`` requires [-].
     tol: float = 1e-8
+    #: IPOPT's overall ``tol`` (dual infeasibility of the objective scaled to ≈ 1) [-]; see
+    #: docs/decisions/0009-eba-nlp-solver-settings.md.
     dual_tol: float = 1e-6
+    #: IPOPT iterations, at most [count].
     max_iter: int = 500
+    #: Samples per interval of the returned trajectory [count].
     sample_density: int = 10
+    #: ``"bspline"`` (:class:`~optplan.problem.floating_segment.FloatingSplineProblem`) or ``"knots"``
+    #: (:class:`~optplan.problem.OptProblem`).
     transcription: str = "bspline"
+    #: B-spline kernels from compiled C: True, False or ``"auto"`` (what an earlier run compiled).
     compile_kernels: object = "auto"
+    #: Warm-start the NLP from the same NLP solved on this many intervals [count] (None: off; ≥ 4).
     coarse_intervals: int | None = None
+    #: IPOPT's wall-clock cap per solve [s].
     max_wall_time: float = 120.0
 
     def __post_init__(self):

@@ -210,11 +210,13 @@ def smooth_hand_paths(paths: dict, start: dict, goal: dict, speed_limit: float =
 # --------------------------------------------------------------------------- tracking
 @dataclass(frozen=True)
 class TrackingOptions:
-    """Resolved-rate tracking: ``dt`` integration and output step [s], ``gain`` K [1/s] of the
-    closed-loop correction, ``damping`` of the pseudo-inverse (0: Moore-Penrose)."""
+    """Resolved-rate tracking options."""
 
+    #: Integration and output step [s].
     dt: float = 0.05
+    #: K: gain of the closed-loop correction [1/s].
     gain: float = 5.0
+    #: Damping of the pseudo-inverse [-] (0: Moore-Penrose).
     damping: float = 0.0
 
     def __post_init__(self):
@@ -437,29 +439,34 @@ class InteriorVelocityLimits(Term):
 
 @dataclass(frozen=True)
 class OptimizeOptions:
-    """The optimized variant (:func:`optimize`): ``n_intervals`` N, ``n_sub`` RK4 sub-steps of the base
-    per interval, ``duration_factor``: its duration is this times the Spline-RRT* duration (> 1: the
-    same hand paths run slower, leaving the joint-rate limits room for the self-motion that restores
-    the attitude), ``joint_accel_limit`` [rad/s²] (at the knots: q̈ is piecewise linear),
-    ``rate_margin``: the NLP's joint-rate limits are this times the robot's (the interior points
-    sample the rate, and the executed motion deviates slightly from the NLP's between knots), ``link_margin`` [m] between the robot's links (and ``obstacle_margin`` [m] to the
-    obstacles), ``restore_attitude``: base attitude at T equal to the start's (hard constraint;
-    False: minimised as a cost), ``position_only``: hand paths as position constraints with the
-    orientation constrained at the goal only (False: full poses at every knot), ``orientation_weight``: weight of the squared deviation
-    from the Bézier orientation (a cost, with ``position_only``), ``tol`` IPOPT's
-    constraint tolerance, ``max_iter``."""
+    """Options of the optimized variant (:func:`optimize`)."""
 
+    #: N: intervals of the grid [count].
     n_intervals: int = 30
+    #: RK4 sub-steps of the base per interval [count].
     n_sub: int = 2
+    #: Its duration is this times the Spline-RRT* duration [-] (> 1: the same hand paths run slower, leaving the
+    #: joint-rate limits room for the self-motion that restores the attitude).
     duration_factor: float = 1.5
+    #: Joint acceleration limit at the knots [rad/s²] (q̈ is piecewise linear).
     joint_accel_limit: float = 0.1
+    #: The NLP's joint-rate limits are this times the robot's [-] (the interior points sample the rate, and the
+    #: executed motion deviates slightly from the NLP's between knots).
     rate_margin: float = 0.995
+    #: Clearance between the robot's links [m].
     link_margin: float = 0.1
+    #: Clearance to the obstacles [m].
     obstacle_margin: float = 0.0
+    #: Base attitude at T equal to the start's as a hard constraint (False: minimised as a cost).
     restore_attitude: bool = True
+    #: Hand paths as position constraints with the orientation constrained at the goal only (False: full poses
+    #: at every knot).
     position_only: bool = True
+    #: Weight of the squared deviation from the Bézier orientation (a cost, with ``position_only``) [1/rad²].
     orientation_weight: float = 1.0
+    #: IPOPT's constraint tolerance [-].
     tol: float = 1e-8
+    #: IPOPT iterations, at most [count].
     max_iter: int = 300
 
 
@@ -606,7 +613,7 @@ def run_spline_rrt(robot: RobotModel | None = None, task: SplineRRTTask | None =
     t2 = time.perf_counter()
     vlim = float(np.min(robot.velocity_limit))
     tr = ev = None
-    for rnd in range(4):
+    for _round in range(4):
         tr = track(robot, hands, task.q_start, T, tracking)
         peak_v = float(np.abs(tr.qd).max())
         peak_a = float(np.abs(tr.qdd).max())
