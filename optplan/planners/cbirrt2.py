@@ -25,6 +25,7 @@ import numpy as np
 from ..errors import ConfigurationError
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from ..constraints.closed_chain import ClosedChainKinematics, closure_error
+from .tree import Tree
 from .validity import ValidityChecker
 
 __all__ = ["CBiRRT2Options", "CBiRRT2"]
@@ -67,36 +68,6 @@ class CBiRRT2Options:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= (1 if name == "max_projection_iterations" else 0)):
                 raise ValueError(f"CBiRRT2Options.{name}: expected a non-negative int, got {v!r}")
-
-
-class _Tree:
-    def __init__(self, root: np.ndarray, cap: int = 512):
-        self.X = np.empty((cap, root.size))
-        self.X[0] = root
-        self.parent = [-1]
-        self.edge: list[list[np.ndarray]] = [[]]
-        self.n = 1
-
-    def add(self, x: np.ndarray, parent: int, edge: list[np.ndarray]) -> int:
-        if self.n == len(self.X):
-            self.X = np.concatenate([self.X, np.empty_like(self.X)])
-        self.X[self.n] = x
-        self.parent.append(parent)
-        self.edge.append(edge)
-        self.n += 1
-        return self.n - 1
-
-    def nearest(self, x: np.ndarray) -> int:
-        d = self.X[:self.n] - x
-        return int(np.argmin(np.einsum("ij,ij->i", d, d)))
-
-    def branch(self, i: int) -> list[np.ndarray]:
-        out = []
-        while i >= 0:
-            out.append(self.X[i].copy())
-            out.extend(x.copy() for x in reversed(self.edge[i]))
-            i = self.parent[i]
-        return out[::-1]
 
 
 class CBiRRT2(Planner):
@@ -160,7 +131,7 @@ class CBiRRT2(Planner):
         return out
 
     # ------------------------------------------------------------------ ConstrainedExtend
-    def extend(self, tree: _Tree, i_near: int, target: np.ndarray, st: dict[str, Any],
+    def extend(self, tree: Tree, i_near: int, target: np.ndarray, st: dict[str, Any],
                deadline: Deadline) -> tuple[int, int]:
         o = self.options
         i_old = i_near
@@ -206,7 +177,7 @@ class CBiRRT2(Planner):
                 return self.empty_result(status, f"{which} off the closed-chain manifold ({max(ep, eo):.1e})", **st)
             if not ck.is_valid(q):
                 return self.empty_result(status, f"{which} in collision", **st)
-        ta, tb = _Tree(q_start), _Tree(q_goal)
+        ta, tb = Tree(q_start, 512, edges=True), Tree(q_goal, 512, edges=True)
         a_is_start = True
         found = None
         lo, hi = self.robot.lower, self.robot.upper

@@ -32,6 +32,7 @@ import numpy as np
 
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .orientation import DualArmOrientationConstraint, OrientationManifold
+from .tree import Tree
 from .validity import ValidityChecker
 
 __all__ = ["OCRRTOptions", "OCRRT"]
@@ -81,35 +82,6 @@ class OCRRTOptions:
             raise ValueError(f"OCRRTOptions.goal_from_new: expected True/False, got {self.goal_from_new!r}")
         if not (isinstance(self.margin, (int, float)) and self.margin >= 0):
             raise ValueError(f"OCRRTOptions.margin: expected a number >= 0 m, got {self.margin!r}")
-
-
-class _Tree:
-    def __init__(self, q, p, cap: int = 512) -> None:
-        self.Q = np.empty((cap, q.size))
-        self.P = np.empty((cap, p.size))
-        self.Q[0], self.P[0] = q, p
-        self.parent = [-1]
-        self.n = 1
-
-    def add(self, q, p, parent) -> int:
-        if self.n == len(self.Q):
-            self.Q = np.concatenate([self.Q, np.empty_like(self.Q)])
-            self.P = np.concatenate([self.P, np.empty_like(self.P)])
-        self.Q[self.n], self.P[self.n] = q, p
-        self.parent.append(parent)
-        self.n += 1
-        return self.n - 1
-
-    def nearest(self, q) -> int:
-        d = self.Q[:self.n] - q
-        return int(np.argmin(np.einsum("ij,ij->i", d, d)))
-
-    def branch(self, i) -> list[np.ndarray]:
-        out = []
-        while i >= 0:
-            out.append(self.Q[i].copy())
-            i = self.parent[i]
-        return out[::-1]
 
 
 class OCRRT(Planner):
@@ -163,7 +135,7 @@ class OCRRT(Planner):
             q = x
         return q
 
-    def oc_steer(self, tree: _Tree, i_near: int, p_target: np.ndarray, st) -> tuple[int, int]:
+    def oc_steer(self, tree: Tree, i_near: int, p_target: np.ndarray, st) -> tuple[int, int]:
         """One OCSteer step from node i_near toward the parameters p_target."""
         p0 = tree.P[i_near]
         d = p_target - p0
@@ -171,20 +143,20 @@ class OCRRT(Planner):
         if dist < 1e-15:
             return REACHED, i_near
         p1 = p_target if dist <= self.options.step else p0 + (self.options.step / dist) * d
-        q1 = self._walk(tree.Q[i_near], p0, p1, st)
+        q1 = self._walk(tree.X[i_near], p0, p1, st)
         if q1 is None:
             return TRAPPED, i_near
-        j = tree.add(q1, p1, i_near)
+        j = tree.add(q1, i_near, P=p1)
         return (REACHED if p1 is p_target else ADVANCED), j
 
-    def connect(self, tree: _Tree, q_target, p_target, st, deadline, start: int | None = None) -> tuple[int, int]:
+    def connect(self, tree: Tree, q_target, p_target, st, deadline, start: int | None = None) -> tuple[int, int]:
         """Steer repeatedly toward ``p_target`` from node ``start`` (default: the node nearest
         ``q_target``) until it is reached on ``q_target``'s branch or the steer is trapped."""
         i = tree.nearest(q_target) if start is None else int(start)
         while not deadline.expired():
             res, i = self.oc_steer(tree, i, p_target, st)
             if res == REACHED:
-                if float(np.abs(tree.Q[i] - q_target).max()) <= self.options.reach_tolerance:
+                if float(np.abs(tree.X[i] - q_target).max()) <= self.options.reach_tolerance:
                     return REACHED, i
                 return TRAPPED, i     # same parameters, other IK branch
             if res == TRAPPED:
@@ -211,8 +183,8 @@ class OCRRT(Planner):
             if msg:
                 return self.empty_result(status, msg, **st)
         ps, pg = mf.params(q_start), mf.params(q_goal)
-        ta = _Tree(q_start, ps)
-        tb = _Tree(q_goal, pg) if o.connect else None
+        ta = Tree(q_start, 512, P=ps)
+        tb = Tree(q_goal, 512, P=pg) if o.connect else None
         a_is_start, found = True, None
         while not deadline.expired():
             if o.max_iterations and st["iterations"] >= o.max_iterations:
@@ -239,7 +211,7 @@ class OCRRT(Planner):
                 continue
             res, i_a = self.oc_steer(ta, ta.nearest(s[0]), s[1], st)
             if res != TRAPPED:
-                res_b, i_b = self.connect(tb, ta.Q[i_a], ta.P[i_a], st, deadline)
+                res_b, i_b = self.connect(tb, ta.X[i_a], ta.P[i_a], st, deadline)
                 if res_b == REACHED:
                     found = (i_a, i_b)
                     break

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from .tree import Tree
 from .validity import ValidityChecker
 
 if TYPE_CHECKING:
@@ -54,37 +55,6 @@ class RRTConnectOptions:
                 raise ValueError(f"RRTConnectOptions.{name}: expected an int >= 0, got {v!r}")
         if not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin) and self.margin >= 0):
             raise ValueError(f"RRTConnectOptions.margin: expected a number >= 0 m, got {self.margin!r}")
-
-
-class _Tree:
-    """Nodes in a growing array, parent indices."""
-
-    def __init__(self, root: np.ndarray, cap: int = 256) -> None:
-        self.X = np.empty((cap, root.size))
-        self.X[0] = root
-        self.parent = np.empty(cap, dtype=np.int64)
-        self.parent[0] = -1
-        self.n = 1
-
-    def add(self, x: np.ndarray, parent: int) -> int:
-        if self.n == len(self.X):
-            self.X = np.concatenate([self.X, np.empty_like(self.X)])
-            self.parent = np.concatenate([self.parent, np.empty_like(self.parent)])
-        self.X[self.n] = x
-        self.parent[self.n] = parent
-        self.n += 1
-        return self.n - 1
-
-    def nearest(self, x: np.ndarray) -> int:
-        d = self.X[:self.n] - x
-        return int(np.argmin(np.einsum("ij,ij->i", d, d)))
-
-    def branch(self, i: int) -> list[np.ndarray]:
-        out = []
-        while i >= 0:
-            out.append(self.X[i].copy())
-            i = int(self.parent[i])
-        return out[::-1]
 
 
 _ORDERS: dict[int, list[int]] = {}
@@ -145,11 +115,11 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
         stats["iterations"] = stats.get("iterations", 0)
         stats["nodes"] = stats.get("nodes", 0) + 2
         return [start.copy(), goal.copy()]
-    ta, tb = _Tree(start), _Tree(goal)
+    ta, tb = Tree(start), Tree(goal)
     a_is_start = True
     it = 0
 
-    def extend(tree: _Tree, target: np.ndarray) -> tuple[int, int]:
+    def extend(tree: Tree, target: np.ndarray) -> tuple[int, int]:
         i = tree.nearest(target)
         xn = tree.X[i]
         d = target - xn

@@ -126,7 +126,8 @@ def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
     ``resolution`` by ``filt``) whose samples are bridge-test poses with probability
     ``bridge_probability`` (else uniform in the box), shortcut, then resampled every ``spacing``;
     ``(n, 6)`` or None (deadline)."""
-    from .rrtconnect import _Tree, edge_is_valid, shortcut_path
+    from .rrtconnect import edge_is_valid, shortcut_path
+    from .tree import Tree
 
     def valid(xi: np.ndarray) -> bool:
         return filt(_rpy_matrix(xi), xi[:3])
@@ -136,7 +137,7 @@ def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
     sampler = TaskSampler(filt, lo, hi, filter_tries=0, bridge_probability=bridge_probability,
                           bridge_sigma=bridge_sigma, bridge_tries=20, geodesic_probability=geodesic_probability,
                           endpoints=(xi_start, xi_goal))
-    ta, tb = _Tree(np.asarray(xi_start, float)), _Tree(np.asarray(xi_goal, float))
+    ta, tb = Tree(np.asarray(xi_start, float)), Tree(np.asarray(xi_goal, float))
     a_first = True
 
     def extend(tree: Any, target: np.ndarray, connect: bool) -> tuple[int, bool]:

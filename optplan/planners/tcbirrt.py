@@ -78,8 +78,8 @@ from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2, CBiRRT2Options
-from .cbirrt2 import _Tree as _JointTree
 from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from .tree import Tree
 from .rrtconnect import RRTConnectOptions, edge_is_valid, rrt_connect, shortcut_path
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .validity import ValidityChecker
@@ -373,67 +373,37 @@ def reach_scaled_workspace(robot: RobotModel, options: TCBiRRTOptions) -> tuple[
 
 
 # ---------------------------------------------------------------------- tree
-class _TaskTree:
-    """Nodes (q, ξ) plus, per node, the edge from its parent: intermediate configurations and
-    object poses (j = 1..N−1) of PathInverseKinematics."""
+class _TaskTree(Tree):
+    """Nodes keyed by ξ (nearest neighbour), their configurations ``q``, object poses and, per
+    node, the edge from its parent: intermediate configurations and object poses (j = 1..N−1)
+    of PathInverseKinematics; ``checked``: edge from the parent verified (lazy edges)."""
 
     def __init__(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, cap: int = 512):
-        self.xi = np.empty((cap, 6))
-        self.q = np.empty((cap, q.size))
-        self.parent = [-1]
+        super().__init__(xi, cap, edges=True, q=q, checked=True)
         self.pose = [(R, p)]
-        self.edge: list = [([], [])]
-        self.xi[0], self.q[0] = xi, q
-        self.n = 1
-        self.alive = np.ones(cap, dtype=bool)
-        self.checked = np.zeros(cap, dtype=bool)   # edge from the parent verified (lazy edges)
-        self.checked[0] = True
-        self.n_dead = 0
+        self.edge[0] = ([], [])
+
+    @property
+    def xi(self) -> np.ndarray:
+        return self.X
 
     def add(self, q, xi, R, p, parent, edge_q, edge_poses) -> int:
-        if self.n == len(self.xi):
-            self.xi = np.concatenate([self.xi, np.empty_like(self.xi)])
-            self.q = np.concatenate([self.q, np.empty_like(self.q)])
-            self.alive = np.concatenate([self.alive, np.ones_like(self.alive)])
-            self.checked = np.concatenate([self.checked, np.zeros_like(self.checked)])
-        self.xi[self.n], self.q[self.n] = xi, q
-        self.parent.append(parent)
         self.pose.append((R, p))
-        self.edge.append((edge_q, edge_poses))
-        self.n += 1
-        return self.n - 1
-
-    def nearest(self, xi: np.ndarray) -> int:
-        d = self.xi[:self.n] - xi
-        d2 = np.einsum("ij,ij->i", d, d)
-        if self.n_dead:
-            d2[~self.alive[:self.n]] = np.inf
-        return int(np.argmin(d2))
+        return super().add(xi, parent, (edge_q, edge_poses), q=q, checked=False)
 
     def alive_xi(self) -> np.ndarray:
-        return self.xi[:self.n] if not self.n_dead else self.xi[:self.n][self.alive[:self.n]]
-
-    def kill(self, i: int) -> int:
-        """Remove node i and its subtree (children have larger indices); returns how many died."""
-        dead = 0
-        for k in range(i, self.n):
-            if self.alive[k] and (k == i or not self.alive[self.parent[k]]):
-                self.alive[k] = False
-                dead += 1
-        self.n_dead += dead
-        return dead
+        return self.live_keys()
 
     def branch(self, i: int) -> tuple[list[np.ndarray], list[tuple]]:
         """Configurations and poses from the root to node i (edge intermediates included)."""
         qs, ps = [], []
-        while i >= 0:
-            qs.append(self.q[i].copy())
-            ps.append(self.pose[i])
-            eq, ep = self.edge[i]
-            qs.extend(x.copy() for x in reversed(eq))
-            ps.extend(reversed(ep))
-            i = self.parent[i]
-        return qs[::-1], ps[::-1]
+        for k in self.indices(i):
+            eq, ep = self.edge[k]
+            qs.extend(x.copy() for x in eq)
+            ps.extend(ep)
+            qs.append(self.q[k].copy())
+            ps.append(self.pose[k])
+        return qs, ps
 
 
 # ---------------------------------------------------------------------- planner
@@ -576,7 +546,7 @@ class TCBiRRT(Planner):
                                kinematics=self.kin)
         st["joint_connect_attempts"] += 1
         cst = {"projections": 0, "projection_failures": 0}
-        tree = _JointTree(np.asarray(q_from, float))
+        tree = Tree(np.asarray(q_from, float), 512, edges=True)
         res, i = self._cb.extend(tree, 0, np.asarray(q_to, float), cst, deadline)
         st["joint_connect_projections"] += cst["projections"]
         if res != CB_REACHED:
