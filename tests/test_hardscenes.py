@@ -189,6 +189,98 @@ def test_sweep_weights_bound_every_point_displacement(robot, rng):
     assert worst > 0.3
 
 
+def _edges_for_bound_tests(robot, ck, rng, n_random):
+    """Edges of three kinds: a stored witness path's (constrained motions of both arms, much
+    self-motion), random short ones, random long ones."""
+    res, _ = load_witness("hard_bay")
+    P = res.path
+    edges = [(P[k], P[k + 1]) for k in rng.choice(len(P) - 1, size=8, replace=False)]
+    for k in range(n_random):
+        qa = rng.uniform(robot.lower, robot.upper)
+        sig = 0.05 if k % 2 else 0.4
+        edges.append((qa, np.clip(qa + rng.normal(0.0, sig, qa.size), robot.lower, robot.upper)))
+    return edges
+
+
+@pytest.mark.parametrize("mode", ["held", "fixed"])
+def test_edge_checkpoints_bound_every_point_travel(robot, rng, mode):
+    """The Jacobian edge bound is conservative against Pinocchio FK: between two consecutive
+    checkpoints of :meth:`ValidityChecker.edge_checkpoints`, no corner of any checked geometry's
+    bounding box (held object included in "held") travels farther than the tolerance (path length
+    summed over 12 sub-steps, a lower bound of the true travel); it needs fewer checks than the
+    configuration-free bound on the witness's self-motion edges."""
+    scene = Scene.load("hard_bay")
+    ck = ValidityChecker(robot, scene)
+    gm, model = ck.gmodel, robot.model
+    gd, data = pin.GeometryData(gm), model.createData()
+    ids = ck._moving_geometries(mode)
+    corners = [(g, c) for g in ids for c in _corners(gm.geometryObjects[g])]
+    tol = 0.01
+
+    local = np.array([c for _, c in corners])
+    owner = np.repeat(np.arange(len(ids)), 8)
+
+    def points(q):
+        pin.updateGeometryPlacements(model, data, gm, gd, q)
+        R = np.array([gd.oMg[g].rotation for g in ids])[owner]
+        p = np.array([gd.oMg[g].translation for g in ids])[owner]
+        return np.einsum("kij,kj->ki", R, local) + p
+
+    worst, n_jac, n_static = 0.0, 0, 0
+    for a, b in _edges_for_bound_tests(robot, ck, rng, 8):
+        ts = ck.edge_checkpoints(a, b, tol, mode)
+        assert np.all(np.diff(ts) > 0) and (ts.size == 0 or (ts[0] > 0 and ts[-1] < 1))
+        n_jac += ts.size + 1
+        n_static += int(np.ceil(np.max(ck.sweep_weights(mode, per_geometry=True) @ np.abs(b - a)) / tol))
+        knots = np.concatenate([[0.0], ts, [1.0]])
+        for t0, t1 in zip(knots[:-1], knots[1:]):
+            X = [points(a + t * (b - a)) for t in np.linspace(t0, t1, 13)]
+            travel = np.sum([np.linalg.norm(x1 - x0, axis=1) for x0, x1 in zip(X[:-1], X[1:])], axis=0)
+            assert travel.max() <= tol * (1 + 1e-9), (t0, t1, travel.max())
+            worst = max(worst, float(travel.max()) / tol)
+    assert worst > 0.5                  # not vacuous
+    assert n_jac < n_static
+
+
+def test_edge_checks_never_miss_a_clip_exact_distances(robot, rng):
+    """Against exact coal distances: on random edges through the cluttered scene, every pair whose
+    distance at a checkpoint exceeds twice the tolerance (both bodies may move by the tolerance)
+    does not collide anywhere up to the next checkpoint (3 random points and the next checkpoint: exact distance > 0), and
+    :meth:`ValidityChecker.edge_is_valid` accepts an edge only where the densely sampled edge
+    (60 sub-steps) has no collision other than grazes shallower than the tolerance."""
+    scene = Scene.load("hard_clutter_dense")
+    ck = ValidityChecker(robot, scene)
+    gm, model = ck.gmodel, robot.model
+    gd, data = pin.GeometryData(gm), model.createData()
+    active = [k for k, grp in enumerate(ck._pair_group) if grp in ("held", "obstacle", "self")]
+    tol = 0.01
+    from optplan.bench.hardscenes import nominal_configurations
+
+    def dist(q):
+        pin.computeDistances(model, data, gm, gd, q)
+        return np.array([gd.distanceResults[k].min_distance for k in active])
+
+    qs, qg = nominal_configurations(robot, scene)
+    checked = accepted = 0
+    for k in range(12):                  # edges from valid configurations toward nearby ones
+        a = (qs if k % 2 else qg) + rng.normal(0.0, 0.05, qs.size)
+        b = a + rng.normal(0.0, 0.08, a.size)
+        ts = ck.edge_checkpoints(a, b, tol, "held")
+        knots = np.concatenate([[0.0], ts, [1.0]])
+        for t0, t1 in zip(knots[:-1], knots[1:]):
+            d0 = dist(a + t0 * (b - a))
+            clear = d0 > 2 * tol
+            for t in np.append(rng.uniform(t0, t1, 3), t1):
+                d = dist(a + t * (b - a))
+                assert np.all(d[clear] > 0.0), (k, t0, t)
+                checked += int(clear.sum())
+        if ck.is_valid(a) and ck.is_valid(b) and ck.edge_is_valid(a, b, tol, "held"):
+            accepted += 1
+            for t in np.arange(1, 60) / 60:
+                assert dist(a + t * (b - a)).min() > -tol, (k, t)
+    assert checked > 300 and accepted >= 2
+
+
 def test_improved_paths_are_collision_free_along_edges(robot):
     """Every straight joint segment of an improved-variant path passes the bench's independent
     edge check at 1 cm sweep, while the paper variant (configurations only) is checked as before."""

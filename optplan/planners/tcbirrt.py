@@ -59,7 +59,12 @@ Deviations from the paper, all options (defaults in brackets):
   configurations (constrained edges and regrasp motions) are checked so densely that no point of
   the arms or the object moves farther than this between two checks (per-joint sweep bound of
   :meth:`.ValidityChecker.sweep_weights`): a path is collision-free along its edges, not only at its
-  configurations, up to obstacles or contacts thinner than ``edge_tolerance``. With
+  configurations, up to obstacles or contacts thinner than ``edge_tolerance``. ``edge_bound``
+  [paper and improved "jacobian"] picks the bound that spaces those checks: ``"jacobian"``
+  (:meth:`.ValidityChecker.edge_checkpoints`: each geometry's speed from the Jacobian at the
+  edge's cell ends plus a second-order remainder — an arm's self-motion moves joints a lot and
+  the geometry little, and is counted as such) or ``"static"`` (the configuration-free
+  per-geometry bound ``Σ_j W_gj |Δq_j|``); both are conservative. With
   ``lazy_edges`` [False] the constrained edges are checked only once they lie on a
   start-goal path; an edge that fails removes its node and that node's subtree from the tree and
   the search goes on (lazy collision checking, as LazyPRM / LazyRRT).
@@ -218,6 +223,9 @@ class TCBiRRTOptions:
     #: Check constrained edges only once they lie on a start-goal path (lazy collision checking) (None: the
     #: variant's value, :data:`VARIANTS`).
     lazy_edges: bool | None = None
+    #: The bound that spaces the ``edge_tolerance`` checks: ``"jacobian"`` (each geometry's speed from the Jacobian
+    #: plus a second-order remainder) or ``"static"`` (the configuration-free per-geometry bound); both conservative.
+    edge_bound: str = "jacobian"
     #: Join the trees in joint space (CBiRRT2's ConstrainedExtend) when the task-space connection cannot (None:
     #: the variant's value, :data:`VARIANTS`); see docs/decisions/0004-tcbirrt-improved-variant.md.
     joint_connect: bool | None = None
@@ -331,6 +339,8 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.ik: expected IKSettings, got {type(self.ik).__name__}")
         if not (isinstance(self.max_joint_step, (int, float)) and self.max_joint_step > 0):
             raise ValueError(f"TCBiRRTOptions.max_joint_step: expected a positive number (inf: off), got {self.max_joint_step!r}")
+        if self.edge_bound not in ("jacobian", "static"):
+            raise ValueError(f"TCBiRRTOptions.edge_bound: expected 'jacobian' or 'static', got {self.edge_bound!r}")
         if self.interpolation not in ("geodesic", "absolute"):
             raise ValueError(f"TCBiRRTOptions.interpolation: expected 'geodesic' or 'absolute', got {self.interpolation!r}")
         if self.edge_resolution is not None:
@@ -500,7 +510,12 @@ class TCBiRRT(Planner):
     def _edge_ok(self, a: np.ndarray, b: np.ndarray, st: dict) -> bool:
         """The straight joint segment a → b (object held) at ``edge_tolerance`` (ends not checked)."""
         st["edge_checks"] += 1
-        if edge_is_valid(a, b, self.checker.is_valid, self.options.edge_tolerance, False, self._w_held):
+        o = self.options
+        if o.edge_bound == "jacobian":
+            ok = self.checker.edge_is_valid(a, b, o.edge_tolerance, "held")
+        else:
+            ok = edge_is_valid(a, b, self.checker.is_valid, o.edge_tolerance, False, self._w_held)
+        if ok:
             return True
         st["edge_collisions"] += 1
         return False
@@ -601,8 +616,7 @@ class TCBiRRT(Planner):
                 if o.regrasp.shortcut_iterations:
                     sub_path = shortcut_path(sub_path, valid, o.regrasp.resolution, rng, o.regrasp.shortcut_iterations)
                 if o.edge_tolerance and not all(   # the found motion re-checked at the sweep bound of this arm
-                        edge_is_valid(x, y, valid, o.edge_tolerance, False, self._w_fixed[:, idx])
-                        for x, y in zip(sub_path[:-1], sub_path[1:])):
+                        self._regrasp_edge_ok(cur, idx, x, y, M) for x, y in zip(sub_path[:-1], sub_path[1:])):
                     st["edge_collisions"] += 1
                     segs = None
                     break
@@ -619,6 +633,22 @@ class TCBiRRT(Planner):
                 break
         st["regrasp_failures"] += 1
         return None
+
+    def _regrasp_edge_ok(self, base: np.ndarray, idx, x: np.ndarray, y: np.ndarray, M: pin.SE3) -> bool:
+        """One arm's straight segment x → y (its joints ``idx``; the rest of ``base`` still, the
+        object fixed at M) at ``edge_tolerance`` with the ``edge_bound`` (ends not checked)."""
+        o = self.options
+        if o.edge_bound == "jacobian":
+            a, b = base.copy(), base.copy()
+            a[idx], b[idx] = x, y
+            return self.checker.edge_is_valid(a, b, o.edge_tolerance, "fixed", object_pose=M)
+        base = base.copy()
+
+        def valid(z):
+            base[idx] = z
+            return self.checker.is_valid_object_fixed(base, M)
+
+        return edge_is_valid(x, y, valid, o.edge_tolerance, False, self._w_fixed[:, idx])
 
     # ------------------------------------------------------------------ Alg. 2
     def constrained_extend(self, tree: _TaskTree, i_near: int, xi_rand: np.ndarray, q_rand: np.ndarray | None,

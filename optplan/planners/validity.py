@@ -34,6 +34,7 @@ geometry instead of to a joint angle.
 from __future__ import annotations
 
 import logging
+import math
 from typing import cast
 
 import numpy as np
@@ -128,6 +129,11 @@ class ValidityChecker:
                 self._bp[mode] = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(self.model, gm, gd)
         self.n_checks = 0
         self._sweep = {mode: self._sweep_bound(mode) for mode in ("held", "fixed", "free")}
+        self._spheres = {mode: self._sweep_spheres(mode) for mode in ("held", "fixed", "free")}
+        # the velocity (Jacobian) bound of edge_checkpoints assumes revolute 1-dof joints
+        self._revolute_only = all(jm.nv == 1 and jm.shortname().replace("JointModel", "").startswith("R")
+                                  for jm in list(self.model.joints)[1:])
+        self._profile_fns: dict = {}
 
     def _sweep_bound(self, mode: str) -> np.ndarray:
         """One row per moving geometry, one column per q index: (chain length from the joint's
@@ -159,6 +165,156 @@ class ValidityChecker:
                 length += float(np.linalg.norm(model.jointPlacements[j].translation))
                 j = int(model.parents[j])
         return w
+
+    def _moving_geometries(self, mode: str) -> list[int]:
+        """Geometry ids of the rows of :meth:`_sweep_bound` (same order)."""
+        skip = {self.fixed_id}
+        if mode != "held" and self.held_id is not None:
+            skip.add(self.held_id)
+        return [gid for gid, go in enumerate(self.gmodel.geometryObjects) if gid not in skip and go.parentJoint != 0]
+
+    def _sweep_spheres(self, mode: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per row of :meth:`_sweep_bound`: (row index of its parent joint among the distinct parent
+        joints, bounding-sphere centre in the parent joint's frame [m], radius [m]) and the distinct
+        parent joint ids."""
+        gids = self._moving_geometries(mode)
+        joints = sorted({int(self.gmodel.geometryObjects[g].parentJoint) for g in gids})
+        row = np.array([joints.index(int(self.gmodel.geometryObjects[g].parentJoint)) for g in gids], dtype=int)
+        c = np.zeros((len(gids), 3))
+        rad = np.zeros(len(gids))
+        for k, g in enumerate(gids):
+            go = self.gmodel.geometryObjects[g]
+            go.geometry.computeLocalAABB()
+            c[k] = go.placement.act(np.asarray(go.geometry.aabb_center))
+            rad[k] = float(go.geometry.aabb_radius)
+        return row, c, rad, np.array(joints, dtype=int)
+
+    def _profile_function(self, mode: str):
+        """Compiled ``(a, b) -> C``: ``C[i]`` [m] bounds the distance any point of the checked
+        geometry travels along ``q(t) = a + t (b − a)`` for ``t ∈ [0, i/m]``, ``m =``
+        :attr:`CELLS` (see :meth:`edge_checkpoints`). None when the robot has joints other than
+        1-dof revolute ones."""
+        if mode in self._profile_fns:
+            return self._profile_fns[mode]
+        fn = None
+        if self._revolute_only:
+            import casadi as ca
+
+            from ..symbolic import SymbolicKinematics
+            from .closed_chain import _Fast
+
+            sk = SymbolicKinematics(self.robot)
+            row, c, rad, joints = self._spheres[mode]
+            W = self._sweep[mode]
+            n, m, G = self.model.nq, self.CELLS, W.shape[0]
+            q, d = ca.SX.sym("q", n), ca.SX.sym("d", n)
+            X = sk.joint_placements(q)
+            twist = {}
+            for j in joints:                       # spatial velocity (ω, v at the world origin) of each body
+                w, v = ca.SX.zeros(3), ca.SX.zeros(3)
+                for k in sk._support(int(j)):
+                    for vi, wk, vk in sk._columns(k, X):
+                        w, v = w + wk * d[vi], v + vk * d[vi]
+                twist[int(j)] = (w, v)
+            speed = []
+            for g in range(G):                     # |v_c| + |ω| ρ of each bounding sphere
+                j = int(joints[row[g]])
+                R, p = X[j]
+                w, v = twist[j]
+                speed.append(ca.norm_2(v + ca.cross(w, R @ ca.DM(c[g]) + p)) + ca.norm_2(w) * float(rad[g]))
+            f1 = ca.Function("sweep_speed", [q, d], [ca.vertcat(*speed)])
+            a, b = ca.SX.sym("a", n), ca.SX.sym("b", n)
+            dd = b - a
+            Q = ca.horzcat(*[a + (i / m) * dd for i in range(m + 1)])
+            S = f1.map(m + 1)(Q, ca.repmat(dd, 1, m + 1))          # G × (m+1): speed at the cell ends
+            D = ca.fabs(dd)
+            r2, static = [], []
+            for g in range(G):                     # rate of change of the speed bound; configuration-free bound
+                anc = [k for k in range(n) if W[g, k] > 0.0]
+                acc, before, pairs = 0, 0, 0
+                for k in anc:
+                    acc = acc + W[g, k] * D[k] * (D[k] + 2 * before)
+                    pairs = pairs + D[k] * before
+                    before = before + D[k]
+                r2.append(acc + float(rad[g]) * pairs)
+                static.append(ca.dot(ca.DM(W[g]), D))
+            r2, static = ca.vertcat(*r2), ca.vertcat(*static)
+            cum = [ca.SX(0.0)]
+            for i in range(m):                     # ∫ over cell i of max_g min(static, (s_i + s_i+1 + r/m)/2)
+                Fi = ca.mmax(ca.fmin(static, 0.5 * (S[:, i] + S[:, i + 1] + r2 / m)))
+                cum.append(cum[-1] + Fi / m)
+            fn = _Fast(ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)]), "-O1")
+        self._profile_fns[mode] = fn
+        return fn
+
+    def edge_checkpoints(self, a: np.ndarray, b: np.ndarray, tolerance: float, mode: str = "held") -> np.ndarray:
+        """Interior parameters ``0 < t_1 < … < t_m < 1`` of the straight joint segment
+        ``q(t) = a + t (b − a)`` such that no point of the checked geometry (``mode`` as in
+        :meth:`sweep_weights`) travels farther than ``tolerance`` [m] between consecutive ones
+        (``t_0 = 0``, ``t_{m+1} = 1``); ``a`` and ``b`` are full configurations.
+
+        Conservative bound, per geometry g (bounding sphere of centre c and radius ρ on body i):
+        a point x of g moves at speed ``|ẋ| ≤ s(t) = |v_c| + |ω| ρ`` with ``(v_c, ω)`` the twist of
+        body i for the joint velocity ``d = b − a``. ``s`` is evaluated exactly (Jacobian) at the
+        ends of :attr:`CELLS` equal cells of [0, 1], so joint motions that cancel — an arm's
+        self-motion — count as they are; in between it changes at most at the rate
+        ``r = Σ_{j,k} |d_j||d_k| W_{max(j,k)} + ρ Σ_{j<k} |d_j||d_k|`` (j, k over the revolute joints
+        that move g, ordered base to tip; ``|∂²x/∂q_j∂q_k| ≤ |x − o_{max(j,k)}| ≤ W_{max(j,k)}``, the
+        per-geometry weight of :meth:`sweep_weights`, and ``|dω/dt| ≤ Σ_{j<k} |d_j||d_k|``). On a
+        cell ``[t_i, t_i + h]`` both ``s ≤ s(t_i) + (t − t_i) r`` and ``s ≤ s(t_i + h) + (t_i + h − t) r``
+        hold, so ``s ≤ (s(t_i) + s(t_i + h) + h r) / 2``, and ``s ≤ W·|d|`` (configuration-free).
+        The maximum over g of the smaller is integrated over the cells (compiled, one call per edge)
+        and a checkpoint placed every ``tolerance`` of the integral.
+
+        Robots with joints other than 1-dof revolute, and edges short enough that the
+        configuration-free bound needs at most 4 interior checks, get uniform checkpoints
+        ``⌈max_g W_g·|d| / tolerance⌉`` (the configuration-free bound alone)."""
+        a = np.asarray(a, float)
+        b = np.asarray(b, float)
+        W = self._sweep[mode]
+        static = W @ np.abs(b - a)                          # [m] per unit t, per geometry
+        smax = float(static.max()) if static.size else 0.0
+        n_static = int(math.ceil(smax / tolerance)) if smax > 0 else 1
+        if n_static <= 5 or (fn := self._profile_function(mode)) is None:
+            return np.arange(1, n_static) / n_static
+        C = fn(a, b)
+        n = max(1, int(math.ceil(C[-1] / tolerance)))
+        if n >= n_static:
+            return np.arange(1, n_static) / n_static
+        return np.interp(np.arange(1, n) * tolerance, C, np.linspace(0.0, 1.0, C.size))
+
+    #: cells of [0, 1] on which :meth:`edge_checkpoints` bounds the speed by a constant
+    CELLS = 8
+
+    def edge_is_valid(self, a: np.ndarray, b: np.ndarray, tolerance: float, mode: str = "held",
+                      object_pose: pin.SE3 | None = None, check_end: bool = False) -> bool:
+        """The straight joint segment ``a → b`` collision-free at the checkpoints of
+        :meth:`edge_checkpoints` (no point of the checked geometry travels farther than ``tolerance``
+        [m] between two checks), checked coarse-to-fine; ``a`` itself is not checked, ``b`` only with
+        ``check_end``. ``mode``: ``"held"`` (:meth:`is_valid`), ``"fixed"``
+        (:meth:`is_valid_object_fixed` at ``object_pose``) or ``"free"``."""
+        from .rrtconnect import _bisection_order
+
+        if mode == "held":
+            fn = self.is_valid if self.object is not None else self.is_valid_free
+        elif mode == "fixed":
+            if object_pose is None:
+                raise ValueError("edge_is_valid: mode 'fixed' needs object_pose")
+            fn = lambda x: self.is_valid_object_fixed(x, object_pose)   # noqa: E731
+        elif mode == "free":
+            fn = self.is_valid_free
+        else:
+            raise ValueError(f"edge_is_valid: mode must be 'held', 'fixed' or 'free', got {mode!r}")
+        a = np.asarray(a, float)
+        b = np.asarray(b, float)
+        if check_end and not fn(b):
+            return False
+        ts = self.edge_checkpoints(a, b, tolerance, mode)
+        d = b - a
+        for k in _bisection_order(len(ts) + 1):
+            if not fn(a + ts[k - 1] * d):
+                return False
+        return True
 
     def sweep_weights(self, mode: str = "held", per_geometry: bool = False) -> np.ndarray:
         """Per-joint bound [m/rad] on the displacement of any checked point (see the module
