@@ -17,15 +17,23 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from optplan.papers.dshdasr import (PAPER, TABLE1_XF, ArcPlanner, DshdasrArcs, dls_track, evaluate,
-                                     initial_configuration, paper_task, run_case)
+from optplan.papers.dshdasr import (
+    PAPER,
+    TABLE1_XF,
+    ArcPlanner,
+    DshdasrArcs,
+    dls_track,
+    evaluate,
+    initial_configuration,
+    paper_task,
+    run_case,
+)
 
 TOL = 1e-6
 

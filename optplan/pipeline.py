@@ -30,9 +30,9 @@ import numpy as np
 
 from .collision.checker import CollisionChecker
 from .model.ik import IKOptions
+from .model.robot import RobotModel
 from .problem import ClosedChain, OptProblem
 from .problem.solution import Solution
-from .model.robot import RobotModel
 from .scene import Scene
 from .tasks import object_pose, segment_problem, straight_line_poses, task_space_path
 from .verification import VerifyReport, verify

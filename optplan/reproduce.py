@@ -15,16 +15,14 @@ orientation-constrained RRT for spherical-wrist dual arms).
 """
 from __future__ import annotations
 
-import logging
-
 import json
-
+import logging
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 __all__ = ["PAPERS", "Paper", "Step", "ReproduceError", "examples_dir", "plan_steps", "reproduce"]
 
@@ -87,10 +85,10 @@ def _tcbirrt_view(out: Path, quick: bool) -> list[Path]:
     returns, configurations timed at 0.5 rad/s of joint motion."""
     import numpy as np
 
-    from .trials import TrialGenerator
-    from .planners import make_planner
     from .model.robot import RobotModel
+    from .planners import make_planner
     from .scene import Scene
+    from .trials import TrialGenerator
     from .viz.html import ViewOptions, write_trajectory_html
 
     robot = RobotModel.from_name("tcbirrt_dual_arm")

@@ -37,9 +37,9 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .model.description import models_dir, read_model_toml
 from .errors import ModelError, UnknownNameError
 from .geometry.spatial import rpy_to_matrix
+from .model.description import models_dir, read_model_toml
 
 __all__ = ["Obstacle", "GraspedObject", "Scene", "available_scenes"]
 
@@ -118,13 +118,13 @@ class Scene:
     extra: dict = field(default_factory=dict)
 
     @classmethod
-    def load(cls, name_or_path: str | Path) -> "Scene":
+    def load(cls, name_or_path: str | Path) -> Scene:
         """Load ``models/scenes/<name>.toml`` or a TOML path."""
         data, p = read_model_toml(name_or_path, "scenes", "scene", available_scenes)
         return cls.from_dict(data, where=p.name)
 
     @classmethod
-    def from_dict(cls, data: dict, where: str = "scene") -> "Scene":
+    def from_dict(cls, data: dict, where: str = "scene") -> Scene:
         from .model.description import _known_keys, available_models
 
         _known_keys(data, ("name", "robot", "angle_unit", "object", "start", "goal", "obstacles", "extra", "notes"),

@@ -10,12 +10,19 @@ import pinocchio as pin
 
 from .collision.checker import CollisionChecker
 from .constraints.closed_chain import solve_grasp_ik
-from .model.ik import IKOptions
-from .problem import (ClosedChain, CollisionAvoidance, JointBoundary, JointPositionLimits, JointVelocityLimits,
-                      OptProblem, Smoothness)
-from .model.robot import RobotModel
-from .scene import Scene
 from .geometry.spatial import interpolate_pose
+from .model.ik import IKOptions
+from .model.robot import RobotModel
+from .problem import (
+    ClosedChain,
+    CollisionAvoidance,
+    JointBoundary,
+    JointPositionLimits,
+    JointVelocityLimits,
+    OptProblem,
+    Smoothness,
+)
+from .scene import Scene
 
 __all__ = ["GraspIK", "grasp_configuration", "task_space_path", "transport_initial_path", "transport_problem",
            "segment_problem", "object_pose"]

@@ -21,13 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .geometry.spatial import pose_to_vector, vector_to_pose
 from .constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from .geometry.spatial import pose_to_vector, rpy_to_matrix, vector_to_pose
+from .model.robot import RobotModel
 from .planners.tcbirrt import interpolate_task
 from .planners.validity import ValidityChecker
-from .model.robot import RobotModel
 from .scene import Scene
-from .geometry.spatial import rpy_to_matrix
 
 __all__ = ["TrialOptions", "Trial", "TrialGenerator", "perturb_pose", "trial_seed"]
 log = logging.getLogger(__name__)
@@ -84,7 +83,7 @@ class Trial:
                 "q_start": self.q_start.tolist(), "q_goal": self.q_goal.tolist(), "regenerations": self.regenerations}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Trial":
+    def from_dict(cls, d: dict) -> Trial:
         return cls(d["scene"], int(d["index"]), int(d["seed"]), vector_to_pose(d["object_start"]),
                    vector_to_pose(d["object_goal"]), np.asarray(d["q_start"], float), np.asarray(d["q_goal"], float),
                    int(d["regenerations"]))

@@ -13,8 +13,14 @@ import numpy as np
 import pytest
 
 from optplan.collision.checker import CollisionChecker
-from optplan.problem import (CollisionAvoidance, JointBoundary, JointPositionLimits, JointVelocityLimits, OptProblem,
-                             Smoothness)
+from optplan.problem import (
+    CollisionAvoidance,
+    JointBoundary,
+    JointPositionLimits,
+    JointVelocityLimits,
+    OptProblem,
+    Smoothness,
+)
 from optplan.scene import Scene
 from optplan.verification import verify
 

@@ -23,11 +23,18 @@ import pytest
 
 from optplan.collision.checker import CollisionChecker
 from optplan.constraints.closed_chain import solve_grasp_ik
-from optplan.model.ik import IKOptions
-from optplan.problem import (ClosedChain, CollisionAvoidance, JointBoundary, JointPositionLimits,
-                             JointVelocityLimits, OptProblem, Smoothness)
-from optplan.scene import Scene
 from optplan.geometry.spatial import interpolate_pose
+from optplan.model.ik import IKOptions
+from optplan.problem import (
+    ClosedChain,
+    CollisionAvoidance,
+    JointBoundary,
+    JointPositionLimits,
+    JointVelocityLimits,
+    OptProblem,
+    Smoothness,
+)
+from optplan.scene import Scene
 from optplan.verification import verify
 
 

@@ -12,10 +12,22 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from optplan.geometry import distance as D
-from optplan.geometry.distance import (Box, Capsule, Sphere, capsule_box, capsule_capsule, capsule_sphere,
-                              error_bound, make_distance_function, n_covering_spheres,
-                              point_segment_distance, point_segment_distance_sq, signed_distance,
-                              sphere_box, sphere_sphere)
+from optplan.geometry.distance import (
+    Box,
+    Capsule,
+    Sphere,
+    capsule_box,
+    capsule_capsule,
+    capsule_sphere,
+    error_bound,
+    make_distance_function,
+    n_covering_spheres,
+    point_segment_distance,
+    point_segment_distance_sq,
+    signed_distance,
+    sphere_box,
+    sphere_sphere,
+)
 
 N_SEPARATED = 500  # separated placements per pair type
 TOL = 1e-9  # [m] conservativeness slack (floating point)

@@ -11,8 +11,16 @@ import pytest
 pytest.importorskip("pydrake")
 
 from optplan.bench import drake_bench as DB  # noqa: E402
-from optplan.bench.drake_peer import (BsplineSolution, ClosedChainResidual, DrakeModel, DrakeOptions,  # noqa: E402
-                                      _basis, fit_bspline, jerk_matrix, solve_drake)
+from optplan.bench.drake_peer import (  # noqa: E402
+    BsplineSolution,
+    ClosedChainResidual,
+    DrakeModel,
+    DrakeOptions,
+    _basis,
+    fit_bspline,
+    jerk_matrix,
+    solve_drake,
+)
 from optplan.collision.checker import CollisionChecker  # noqa: E402
 from optplan.problem.terms import NumericTrajectory  # noqa: E402
 from optplan.scene import Scene  # noqa: E402
@@ -208,8 +216,9 @@ def _uniform_bspline(P: np.ndarray, T: float, t: np.ndarray) -> np.ndarray:
 def test_drake_warm_start_is_the_spline_nlp_initial_trajectory(tcb, dm, rng):
     """fit_bspline through the B-spline NLP's knot values at rest gives Drake exactly optplan's
     initial trajectory (same C2 cubic space), also between the knots."""
-    from optplan.problem.bspline import boundary_points
     from pydrake.trajectories import BsplineTrajectory
+
+    from optplan.problem.bspline import boundary_points
 
     N, T, nj = 9, 13.0, tcb.nj
     q0, q1 = tcb.random_joints(rng), tcb.random_joints(rng)

@@ -11,14 +11,31 @@ import pinocchio as pin
 import pytest
 
 from optplan import Kinematics, RobotModel, SymbolicKinematics
+from optplan.errors import ModelError
 from optplan.model.description import load_description, urdf_dir
 from optplan.model.urdf_writer import urdf_string
-from optplan.errors import ModelError
-from optplan.papers.dshdasr.arcs import (Arc, arc_deviation, arc_from_tangent_length, arc_point_distance, arc_sample,
-                                  sph, sph_angles)
+from optplan.papers.dshdasr import (
+    PAPER,
+    TABLE1_XF,
+    ArcPlanner,
+    DshdasrArcs,
+    arm_a_on_swivel,
+    dls_track,
+    evaluate,
+    initial_configuration,
+    paper_task,
+    quintic,
+    run_case,
+)
 from optplan.papers.dshdasr.arc_models import frame_on
-from optplan.papers.dshdasr import (PAPER, TABLE1_XF, ArcPlanner, DshdasrArcs, arm_a_on_swivel, dls_track,
-                                     evaluate, initial_configuration, paper_task, quintic, run_case)
+from optplan.papers.dshdasr.arcs import (
+    arc_deviation,
+    arc_from_tangent_length,
+    arc_point_distance,
+    arc_sample,
+    sph,
+    sph_angles,
+)
 
 D2R = math.pi / 180
 

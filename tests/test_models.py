@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 import tomllib
-from pathlib import Path
 
 import coal
 import numpy as np
@@ -15,8 +14,8 @@ import pinocchio as pin
 import pytest
 
 from optplan.model.description import available_models, dh_capsules, load_description, models_dir, urdf_dir
-from optplan.model.urdf_writer import build_all, urdf_string, write_urdf
 from optplan.model.robot import RobotModel
+from optplan.model.urdf_writer import build_all, urdf_string, write_urdf
 
 DEG = math.pi / 180.0
 

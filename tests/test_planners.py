@@ -14,15 +14,24 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.trials import TrialGenerator, TrialOptions, perturb_pose, trial_seed
 from optplan.collision.checker import CollisionChecker
 from optplan.constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
-from optplan.planners import (CBiRRT2, CBiRRT2Options, PlanResult, PlanStatus, RRTConnect, RRTConnectOptions, TCBiRRT,
-                              TCBiRRTOptions, ValidityChecker, make_planner)
-from optplan.planners.tcbirrt import exp_coordinates, interpolate_task
-from optplan.planners.tcbirrt import pose_from_xi, rotation_from_exp, xi_from_pose
-from optplan.scene import Scene
 from optplan.geometry.spatial import rpy_to_matrix
+from optplan.planners import (
+    CBiRRT2,
+    CBiRRT2Options,
+    PlanResult,
+    PlanStatus,
+    RRTConnect,
+    RRTConnectOptions,
+    TCBiRRT,
+    TCBiRRTOptions,
+    ValidityChecker,
+    make_planner,
+)
+from optplan.planners.tcbirrt import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
+from optplan.scene import Scene
+from optplan.trials import TrialGenerator, TrialOptions, perturb_pose, trial_seed
 
 IK_TOL = 1e-6   # closed-chain tolerance every returned configuration must meet (position m, angle rad)
 

@@ -16,9 +16,22 @@ import numpy as np
 import pytest
 
 from optplan.errors import ConfigurationError, OptionError
-from optplan.problem import (BaseAttitude, ClosedChain, CollisionAvoidance, FramePose, IpoptStatus, JointBoundary,
-                             JointPositionLimits, JointVelocityLimits, OptProblem, OrientationConstraint, Smoothness,
-                             Solution, SolveOutcome, SolverOptions)
+from optplan.problem import (
+    BaseAttitude,
+    ClosedChain,
+    CollisionAvoidance,
+    FramePose,
+    IpoptStatus,
+    JointBoundary,
+    JointPositionLimits,
+    JointVelocityLimits,
+    OptProblem,
+    OrientationConstraint,
+    Smoothness,
+    Solution,
+    SolveOutcome,
+    SolverOptions,
+)
 from optplan.problem.nlp import NlpSolver
 from optplan.scene import Scene
 

@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 
 import numpy as np
@@ -20,9 +19,20 @@ import pytest
 from scipy.interpolate import CubicHermiteSpline
 
 from optplan.model.kinematics import Kinematics
-from optplan.problem import (BaseAttitude, ClosedChain, Duration, FramePose, IpoptStatus, JointAccelerationLimits,
-                             JointBoundary, JointPositionLimits, JointVelocityLimits, OptProblem, Smoothness,
-                             Solution)
+from optplan.problem import (
+    BaseAttitude,
+    ClosedChain,
+    Duration,
+    FramePose,
+    IpoptStatus,
+    JointAccelerationLimits,
+    JointBoundary,
+    JointPositionLimits,
+    JointVelocityLimits,
+    OptProblem,
+    Smoothness,
+    Solution,
+)
 from optplan.verification import verify
 
 DEG = np.pi / 180

@@ -23,8 +23,8 @@ feasible trajectories (q_0, q̇_0, q̈_0, jerks).
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import casadi as ca
 import numpy as np
@@ -32,11 +32,24 @@ import pinocchio as pin
 import pytest
 
 from optplan.errors import ConfigurationError
-from optplan.problem import (BaseAttitude, ClosedChain, CollisionAvoidance, Duration, FramePath, FramePose,
-                             JointAccelerationLimits, JointBoundary, JointPositionLimits, JointVelocityLimits,
-                             OptProblem, OrientationConstraint, PathLength, Smoothness)
-from optplan.scene import Scene
 from optplan.geometry.spatial import exp3
+from optplan.problem import (
+    BaseAttitude,
+    ClosedChain,
+    CollisionAvoidance,
+    Duration,
+    FramePath,
+    FramePose,
+    JointAccelerationLimits,
+    JointBoundary,
+    JointPositionLimits,
+    JointVelocityLimits,
+    OptProblem,
+    OrientationConstraint,
+    PathLength,
+    Smoothness,
+)
+from optplan.scene import Scene
 
 FD_STEP = 1e-6
 

@@ -8,12 +8,23 @@ import pinocchio as pin
 import pytest
 
 from optplan.model.floating import simulate_base
-from optplan.papers.spline_rrt import (BezierOrientation, SplineRRTTask, TrackingOptions, evaluate,
-                                        link_distances, smooth_hand_paths, track)
-from optplan.planners.base import PlanStatus
-from optplan.planners.spline_rrt import (CoordinatedRRTStar, CoordinatedRRTStarOptions, VirtualWall,
-                                         point_obstacle_distance)
 from optplan.model.robot import RobotModel
+from optplan.papers.spline_rrt import (
+    BezierOrientation,
+    SplineRRTTask,
+    TrackingOptions,
+    evaluate,
+    link_distances,
+    smooth_hand_paths,
+    track,
+)
+from optplan.planners.base import PlanStatus
+from optplan.planners.spline_rrt import (
+    CoordinatedRRTStar,
+    CoordinatedRRTStarOptions,
+    VirtualWall,
+    point_obstacle_distance,
+)
 from optplan.scene import Scene
 
 

@@ -7,10 +7,10 @@ import time
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from optplan.geometry.splines import (PiecewisePolynomial, quartic_spline, quintic, resample_path,
-                             time_grid_from_path)
+from optplan.geometry.splines import PiecewisePolynomial, quartic_spline, quintic, resample_path, time_grid_from_path
 
 
 def _segment_end_derivative(pp: PiecewisePolynomial, i: int, k: int) -> np.ndarray:

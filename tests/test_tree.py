@@ -3,8 +3,6 @@
 recorded with the per-planner tree classes this tree replaced (same results, node for node)."""
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 

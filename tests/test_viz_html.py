@@ -22,8 +22,15 @@ pytest.importorskip("meshcat")
 
 from optplan.model.robot import RobotModel  # noqa: E402
 from optplan.scene import Scene  # noqa: E402
-from optplan.viz.html import (ARM_COLORS, ViewOptions, load_trajectory, save_metadata, trajectory_html,  # noqa: E402
-                              view_file, write_trajectory_html)
+from optplan.viz.html import (  # noqa: E402
+    ARM_COLORS,
+    ViewOptions,
+    load_trajectory,
+    save_metadata,
+    trajectory_html,
+    view_file,
+    write_trajectory_html,
+)
 
 
 @pytest.fixture(scope="module")

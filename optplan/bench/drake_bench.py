@@ -22,13 +22,13 @@ import json
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
-from ..problem import ClosedChain
 from ..model.robot import RobotModel
+from ..problem import ClosedChain
 from ..scene import Scene
 from ..verification import verify
 

@@ -6,7 +6,7 @@ Jacobian of both arms ≤ 20 µs numeric; CasADi FK + Jacobian within 5× of Pin
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin

@@ -143,14 +143,13 @@ def _worker_setup(robot_name: str, scenes: list[str], planners: list[str]):
     """Per-process cache: robot, scenes, trial generators, planners (shared checker/kinematics)."""
     if _W.get("key") == (robot_name, tuple(scenes), tuple(planners)):
         return
-    from ..planners import make_planner
     from ..constraints.closed_chain import ClosedChainKinematics
-    from ..planners.validity import ValidityChecker
+    from ..model.example_robots import EXAMPLE_ROBOTS, load_example_robot
     from ..model.robot import RobotModel
+    from ..planners import make_planner
+    from ..planners.validity import ValidityChecker
     from ..scene import Scene
     from ..trials import TrialGenerator
-
-    from ..model.example_robots import EXAMPLE_ROBOTS, load_example_robot
 
     _W.clear()
     _W["key"] = (robot_name, tuple(scenes), tuple(planners))
@@ -272,9 +271,8 @@ def _repair_tail(p: Path) -> None:
 
 def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
     """Run (or resume) the benchmark; returns all result lines of ``cfg.out``."""
-    from ..planners.base import CLOCKS
-
     from ..errors import OptionError
+    from ..planners.base import CLOCKS
 
     if cfg.clock not in CLOCKS:
         raise OptionError(f"clock: expected 'wall' or 'cpu', got {cfg.clock!r}")

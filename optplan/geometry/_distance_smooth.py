@@ -14,7 +14,8 @@ Private module: the public API lives in :mod:`optplan.geometry.distance`.
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import casadi as ca
 import numpy as np

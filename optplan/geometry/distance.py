@@ -66,13 +66,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Optional, Union
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
-from . import _distance_smooth as _s
 from optplan.geometry._distance_smooth import n_covering_spheres
+
+from . import _distance_smooth as _s
 
 __all__ = [
     "DEFAULT_EPS", "DEFAULT_COVER_TOL", "DEFAULT_SOFTMIN_TOL", "Sphere", "Capsule", "Box", "Shape",
@@ -120,7 +121,7 @@ class Capsule:
         object.__setattr__(self, "b", _tuple3(self.b, "Capsule.b"))
 
     @classmethod
-    def along_z(cls, radius: float, length: float) -> "Capsule":
+    def along_z(cls, radius: float, length: float) -> Capsule:
         """Capsule along the local z axis centred at the origin, like ``coal.Capsule(radius, length)``."""
         length = float(length)
         if not math.isfinite(length) or length < 0.0:
@@ -163,7 +164,7 @@ def _numeric_length(a: Any, b: Any, name: str) -> float:
     return float(np.linalg.norm(np.asarray(b, float).ravel() - np.asarray(a, float).ravel()))
 
 
-def _plan_cover(length1: float, r1: float, length2: float, r2: float, n_spheres: Optional[int],
+def _plan_cover(length1: float, r1: float, length2: float, r2: float, n_spheres: int | None,
                 cover_tol: float) -> tuple[bool, int]:
     """(swap, k): cover capsule 2 instead of 1 if ``swap``; auto: fewest spheres, else least error."""
     k1 = n_spheres or n_covering_spheres(length1, r1, cover_tol)
@@ -221,7 +222,7 @@ def capsule_sphere(a: Expr, b: Expr, r: Expr, c: Expr, rs: Expr, *, eps: float =
 
 
 def capsule_capsule(a1: Expr, b1: Expr, r1: Expr, a2: Expr, b2: Expr, r2: Expr, *,
-                    eps: float = DEFAULT_EPS, n_spheres: Optional[int] = None,
+                    eps: float = DEFAULT_EPS, n_spheres: int | None = None,
                     cover_tol: float = DEFAULT_COVER_TOL, softmin_tol: float = DEFAULT_SOFTMIN_TOL,
                     reduce: bool = True) -> Expr:
     """Smooth conservative distance [m] between capsules ``(a1, b1, r1)`` and ``(a2, b2, r2)``.
@@ -273,7 +274,7 @@ def sphere_box(c: Expr, r: Expr, R: Expr, p: Expr, h: Any, *, eps: float = DEFAU
 
 
 def capsule_box(a: Expr, b: Expr, r: Expr, R: Expr, p: Expr, h: Any, *, eps: float = DEFAULT_EPS,
-                n_spheres: Optional[int] = None, cover_tol: float = DEFAULT_COVER_TOL,
+                n_spheres: int | None = None, cover_tol: float = DEFAULT_COVER_TOL,
                 softmin_tol: float = DEFAULT_SOFTMIN_TOL, reduce: bool = True) -> Expr:
     """Smooth conservative distance [m] between capsule ``(a, b, r)`` and box ``(R, p, h)``.
 
@@ -323,7 +324,7 @@ _ORDER = {Sphere: 0, Capsule: 1, Box: 2}
 
 
 def signed_distance(shape1: Shape, pose1: Pose, shape2: Shape, pose2: Pose, *, eps: float = DEFAULT_EPS,
-                    n_spheres: Optional[int] = None, cover_tol: float = DEFAULT_COVER_TOL,
+                    n_spheres: int | None = None, cover_tol: float = DEFAULT_COVER_TOL,
                     softmin_tol: float = DEFAULT_SOFTMIN_TOL) -> Expr:
     """Smooth conservative signed distance [m] between two shapes placed at ``pose = (R, p)``.
 
@@ -364,7 +365,7 @@ def signed_distance(shape1: Shape, pose1: Pose, shape2: Shape, pose2: Pose, *, e
                          _world(R2, p2, shape2.center, ops), shape2.radius, **opts)
 
 
-def error_bound(shape1: Shape, shape2: Shape, *, eps: float = DEFAULT_EPS, n_spheres: Optional[int] = None,
+def error_bound(shape1: Shape, shape2: Shape, *, eps: float = DEFAULT_EPS, n_spheres: int | None = None,
                 cover_tol: float = DEFAULT_COVER_TOL, softmin_tol: float = DEFAULT_SOFTMIN_TOL) -> float:
     """Upper bound [m] on ``d_exact - signed_distance(...)`` for separated shapes (same options)."""
     _check_shape(shape1, "shape1")
@@ -391,8 +392,8 @@ def error_bound(shape1: Shape, shape2: Shape, *, eps: float = DEFAULT_EPS, n_sph
     return 0.0 if s1.radius + s2.radius >= eps else norm_err
 
 
-def make_distance_function(shape1: Shape, shape2: Shape, *, name: Optional[str] = None, eps: float = DEFAULT_EPS,
-                           n_spheres: Optional[int] = None, cover_tol: float = DEFAULT_COVER_TOL,
+def make_distance_function(shape1: Shape, shape2: Shape, *, name: str | None = None, eps: float = DEFAULT_EPS,
+                           n_spheres: int | None = None, cover_tol: float = DEFAULT_COVER_TOL,
                            softmin_tol: float = DEFAULT_SOFTMIN_TOL) -> ca.Function:
     """``casadi.Function(R1 (3x3), p1 (3x1), R2 (3x3), p2 (3x1)) -> d`` [m] built on SX.
 

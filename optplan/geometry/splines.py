@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from numbers import Integral, Real
-from typing import Any, Optional, Tuple, Union
+from typing import Any
 
 import numpy as np
 from scipy.linalg import solve_banded
@@ -195,7 +195,7 @@ class PiecewisePolynomial:
         scale = np.array([_falling(p + k, k) for p in range(deg - k + 1)])
         return self._c[:, k:, :] * scale[None, :, None]
 
-    def derivative(self, k: int = 1) -> "PiecewisePolynomial":
+    def derivative(self, k: int = 1) -> PiecewisePolynomial:
         """The k-th time derivative as a PiecewisePolynomial (degree ``max(degree-k, 0)``; zero if k > degree)."""
         k = _check_int(k, "k (derivative order)", 0)
         return PiecewisePolynomial(self._t, self._derivative_coefficients(k))
@@ -232,7 +232,7 @@ class PiecewisePolynomial:
             out += c[:, p, :]
         return out.reshape(arr.shape + (self.dim,))
 
-    def time_scaled(self, factor: float) -> "PiecewisePolynomial":
+    def time_scaled(self, factor: float) -> PiecewisePolynomial:
         """The same path run ``factor`` times slower (factor > 1: slower, < 1: faster).
 
         The start time is kept: ``t' = t0 + factor (t - t0)``, so that ``y(t') = x(t)``; the k-th
@@ -243,7 +243,7 @@ class PiecewisePolynomial:
         powers = f ** -np.arange(self.degree + 1, dtype=float)
         return PiecewisePolynomial(t, self._c * powers[None, :, None])
 
-    def sample(self, n: int, derivative: int = 0) -> Tuple[np.ndarray, np.ndarray]:
+    def sample(self, n: int, derivative: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """``n`` >= 2 uniform times over ``[t0, tf]`` [s] and the values there: ``(t (n,), x (n, dim))``."""
         n = _check_int(n, "n (number of samples)", 2)
         t = np.linspace(self._t[0], self._t[-1], n)
@@ -273,7 +273,7 @@ class PiecewisePolynomial:
         }
 
     @classmethod
-    def from_dict(cls, data: dict) -> "PiecewisePolynomial":
+    def from_dict(cls, data: dict) -> PiecewisePolynomial:
         """Rebuild from :meth:`to_dict` output."""
         if not isinstance(data, dict):
             raise TypeError(f"data: expected a dict from PiecewisePolynomial.to_dict(), got {type(data).__name__}")
@@ -287,7 +287,7 @@ class PiecewisePolynomial:
 
 
 def segment_max_abs(pp: PiecewisePolynomial, derivative: int = 0,
-                    samples_per_segment: int = 64) -> Tuple[np.ndarray, np.ndarray]:
+                    samples_per_segment: int = 64) -> tuple[np.ndarray, np.ndarray]:
     """Per-segment maximum of ``|x^(k)|``: ``(max (m, n), location as a fraction in [0, 1] of the segment (m, n))``.
 
     Dense sampling + Newton polishing, see :meth:`PiecewisePolynomial.max_abs`.
@@ -367,7 +367,7 @@ def quintic(q0: ArrayLike, qf: ArrayLike, T: float, v0: ArrayLike = 0.0, vf: Arr
 _KL, _KU = 3, 2  # lower / upper bandwidth of the normalised Eq. 11 system
 
 
-def _quartic_triplets(h: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _quartic_triplets(h: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows, columns, values of the 5m x 5m Eq. 11 system in normalised unknowns.
 
     Unknowns ``p[5i+k] = coef_{i,k} h_i^k`` (position units, so the matrix is O(1) and independent of
@@ -399,8 +399,8 @@ def _quartic_triplets(h: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray
     return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
 
 
-def quartic_spline(times: ArrayLike, waypoints: ArrayLike, v0: Optional[ArrayLike] = None,
-                   a0: Optional[ArrayLike] = None, vf: Optional[ArrayLike] = None) -> PiecewisePolynomial:
+def quartic_spline(times: ArrayLike, waypoints: ArrayLike, v0: ArrayLike | None = None,
+                   a0: ArrayLike | None = None, vf: ArrayLike | None = None) -> PiecewisePolynomial:
     """C3 piecewise-quartic spline through waypoints (seed paper Eq. 8-11, any number m >= 1 of segments).
 
     Args:
@@ -452,7 +452,7 @@ def quartic_spline(times: ArrayLike, waypoints: ArrayLike, v0: Optional[ArrayLik
 
 
 # ----------------------------------------------------------------------------- path helpers
-def _path_and_lengths(path: Any, metric: Optional[ArrayLike]) -> Tuple[np.ndarray, np.ndarray]:
+def _path_and_lengths(path: Any, metric: ArrayLike | None) -> tuple[np.ndarray, np.ndarray]:
     p = _float_array(path, "path")
     if p.ndim == 1:
         p = p[:, None]
@@ -465,7 +465,7 @@ def _path_and_lengths(path: Any, metric: Optional[ArrayLike]) -> Tuple[np.ndarra
     return p, seg
 
 
-def resample_path(path: ArrayLike, n: int, metric: Optional[ArrayLike] = None) -> Tuple[np.ndarray, np.ndarray]:
+def resample_path(path: ArrayLike, n: int, metric: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Resample a polyline at ``n`` points uniformly spaced in (weighted) arc length.
 
     Args:
@@ -492,7 +492,7 @@ def resample_path(path: ArrayLike, n: int, metric: Optional[ArrayLike] = None) -
     return s, pts
 
 
-def time_grid_from_path(path: ArrayLike, total_time: float, metric: Optional[ArrayLike] = None,
+def time_grid_from_path(path: ArrayLike, total_time: float, metric: ArrayLike | None = None,
                         min_fraction: float = 0.05) -> np.ndarray:
     """Waypoint times [s] on ``[0, total_time]`` with intervals proportional to segment lengths.
 

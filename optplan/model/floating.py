@@ -9,16 +9,16 @@ system is driftless: the final base pose depends only on the joint *path*, not o
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError, check_vector
-from .robot import RobotModel
 from ..geometry.spatial import check_pose
+from .robot import RobotModel
 
 __all__ = ["FloatingResult", "simulate_base", "joint_trajectory_from_samples", "rk4_step"]
 log = logging.getLogger(__name__)

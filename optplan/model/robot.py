@@ -11,16 +11,16 @@ from __future__ import annotations
 
 import logging
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import coal
 import numpy as np
 import pinocchio as pin
 
-from .description import arm_metadata, available_models, load_description, urdf_dir
 from ..errors import ConfigurationError, ModelError, UnknownNameError, check_vector
+from .description import arm_metadata, available_models, load_description, urdf_dir
 
 __all__ = ["Arm", "RobotModel"]
 log = logging.getLogger(__name__)
@@ -91,7 +91,7 @@ class RobotModel:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def from_name(cls, name: str) -> "RobotModel":
+    def from_name(cls, name: str) -> RobotModel:
         """Load a shipped model (``models/robots/<name>.toml`` + ``urdf/<name>.urdf``)."""
         if name not in available_models():
             raise UnknownNameError("robot model", name, available_models())
@@ -109,7 +109,7 @@ class RobotModel:
 
     @classmethod
     def from_urdf(cls, path: str | Path, arms: Mapping[str, str | Mapping], *, floating: bool = False,
-                  name: str | None = None, mimic: bool = True) -> "RobotModel":
+                  name: str | None = None, mimic: bool = True) -> RobotModel:
         """Load any URDF.
 
         Parameters

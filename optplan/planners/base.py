@@ -29,8 +29,8 @@ import json
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -76,7 +76,7 @@ class PathSegment:
                 "object_pose": None if self.object_pose is None else pose_to_vector(self.object_pose).tolist()}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "PathSegment":
+    def from_dict(cls, d: dict[str, Any]) -> PathSegment:
         op = d.get("object_pose")
         return cls(d["kind"], int(d["start"]), int(d["stop"]), d.get("arm"),
                    None if op is None else vector_to_pose(op))
@@ -155,7 +155,7 @@ class PlanResult:
                                      "(a found path has at least start and goal)")
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], source: str = "PlanResult") -> "PlanResult":
+    def from_dict(cls, d: dict[str, Any], source: str = "PlanResult") -> PlanResult:
         """Rebuild from :meth:`to_dict`; anything missing, malformed or inconsistent is a
         :class:`~optplan.errors.ResultFileError` naming ``source`` and the field."""
         from ..errors import OptplanError, ResultFileError
@@ -186,7 +186,7 @@ class PlanResult:
         return res
 
     @classmethod
-    def from_json(cls, text: str, source: str = "PlanResult JSON") -> "PlanResult":
+    def from_json(cls, text: str, source: str = "PlanResult JSON") -> PlanResult:
         from ..errors import ResultFileError
 
         try:
@@ -203,7 +203,7 @@ class PlanResult:
         return p
 
     @classmethod
-    def load(cls, path: str | Path) -> "PlanResult":
+    def load(cls, path: str | Path) -> PlanResult:
         """Read a file written by :meth:`save`; a missing, unreadable or corrupted file is a
         :class:`~optplan.errors.ResultFileError` naming it."""
         from ..errors import ResultFileError
@@ -259,7 +259,7 @@ class Deadline:
     def elapsed(self) -> float:
         return self.clock() - self.t0
 
-    def sub(self, seconds: float) -> "Deadline":
+    def sub(self, seconds: float) -> Deadline:
         """A deadline on the same clock ending at the earlier of ``seconds`` from now and this one."""
         d = Deadline.__new__(Deadline)
         d.clock, d.t0 = self.clock, self.clock()

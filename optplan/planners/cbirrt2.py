@@ -17,14 +17,14 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from ..errors import ConfigurationError
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
-from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from .tree import Tree
 from .validity import ValidityChecker
 

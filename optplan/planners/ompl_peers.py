@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
+from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from ..errors import ConfigurationError
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
-from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from .validity import ValidityChecker
 
 __all__ = ["OMPLPeerOptions", "OMPLPeer", "make_ompl_peer", "ompl_available", "SPACES", "PLANNERS"]
@@ -90,7 +90,7 @@ class OMPLPeerOptions:
 
 def make_ompl_peer(name: str, robot: Any, scene: Any, *, checker: ValidityChecker | None = None,
                    kinematics: ClosedChainKinematics | None = None, constraint: Any = None,
-                   **kw: Any) -> "OMPLPeer":
+                   **kw: Any) -> OMPLPeer:
     """``"ompl-<space>[-<planner>]"`` → :class:`OMPLPeer` (planner defaults to RRTConnect);
     ``space`` ∈ projected, atlas, tb (tangent bundle)."""
     parts = name.lower().split("-")
@@ -126,7 +126,9 @@ class OMPLPeer(Planner):
             raise ConfigurationError("OMPL peers need a scene with an [object] grasped by two arms, or a constraint "
                                      "(an object with h(q), h_jacobian(q) and dim)")
         try:
-            from ompl import base as ob, geometric as og, util as ou
+            from ompl import base as ob
+            from ompl import geometric as og
+            from ompl import util as ou
         except ImportError as exc:
             raise ImportError("the OMPL peers need the `ompl` package: pip install ompl") from exc
         self._ob, self._og, self._ou = ob, og, ou

@@ -78,15 +78,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from ..errors import ConfigurationError
 from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2, CBiRRT2Options
-from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
-from .tree import Tree
 from .rrtconnect import RRTConnectOptions, edge_is_valid, rrt_connect, shortcut_path
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
+from .tree import Tree
 from .validity import ValidityChecker
 
 __all__ = ["TCBiRRTOptions", "TCBiRRT", "exp_coordinates", "rotation_from_exp", "interpolate_task",

@@ -200,8 +200,8 @@ class ValidityChecker:
         if self._revolute_only:
             import casadi as ca
 
-            from ..symbolic import SymbolicKinematics
-            from .closed_chain import _Fast
+            from ..model.symbolic import SymbolicKinematics
+            from ..codegen import FastFunction
 
             sk = SymbolicKinematics(self.robot)
             row, c, rad, joints = self._spheres[mode]
@@ -243,7 +243,7 @@ class ValidityChecker:
             for i in range(m):                     # ∫ over cell i of max_g min(static, (s_i + s_i+1 + r/m)/2)
                 Fi = ca.mmax(ca.fmin(static, 0.5 * (S[:, i] + S[:, i + 1] + r2 / m)))
                 cum.append(cum[-1] + Fi / m)
-            fn = _Fast(ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)]), "-O1")
+            fn = FastFunction(ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)]), "-O1")
         self._profile_fns[mode] = fn
         return fn
 

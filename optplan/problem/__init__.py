@@ -4,12 +4,21 @@
 from .build import AuxVariable, BuildContext, TermData
 from .collision_term import CollisionAvoidance, CollisionModel
 from .evaluate import Infeasibility
+from .frame_terms import BaseAttitude, ClosedChain, FramePath, FramePose, OrientationConstraint
 from .nlp import NlpSolver, SolveOutcome, SolverOptions
 from .problem import OptProblem, TermHandle
 from .solution import IpoptStatus, Solution
-from .frame_terms import BaseAttitude, ClosedChain, FramePath, FramePose, OrientationConstraint
-from .terms import (Duration, JointAccelerationLimits, JointBoundary, JointPositionLimits, JointVelocityLimits,
-                    NumericTrajectory, PathLength, Smoothness, Term)
+from .terms import (
+                    Duration,
+                    JointAccelerationLimits,
+                    JointBoundary,
+                    JointPositionLimits,
+                    JointVelocityLimits,
+                    NumericTrajectory,
+                    PathLength,
+                    Smoothness,
+                    Term,
+)
 
 __all__ = [
     "OptProblem", "TermHandle", "IpoptStatus", "Solution", "Term", "NumericTrajectory", "JointBoundary",

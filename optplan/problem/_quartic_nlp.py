@@ -3,7 +3,7 @@ the model behind :func:`optplan.problem.quartic.smooth_quartic`, which documents
 from __future__ import annotations
 
 import math
-from typing import Any, Dict, Optional, Tuple
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -13,7 +13,7 @@ from optplan.geometry.splines import PiecewisePolynomial, _falling, quartic_spli
 _SLOTS = 3  # movable constraint points per segment (and dimension) for the refinement
 
 
-def _limit_vec(value: Any, n: int, name: str) -> Optional[np.ndarray]:
+def _limit_vec(value: Any, n: int, name: str) -> np.ndarray | None:
     """None, a scalar or (n,) positive limits (inf allowed) -> (n,) array or None."""
     if value is None:
         return None
@@ -35,7 +35,7 @@ def _check_input_sizes(fun: ca.Function, n: int, name: str) -> None:
                              f"got shape {fun.size_in(i)}")
 
 
-def _ee_wrapper(fun: Any, n: int) -> Tuple[ca.Function, type]:
+def _ee_wrapper(fun: Any, n: int) -> tuple[ca.Function, type]:
     """Canonical (q (n,1), qdot (n,1)) -> v (k,1) Function, SX if the user's Function inlines into SX."""
     if not isinstance(fun, ca.Function):
         raise TypeError("ee_velocity: expected a casadi.Function (q, qdot) -> linear velocity, "
@@ -104,7 +104,7 @@ class _Problem:
         return quartic_spline(self.t0 + np.concatenate([[0.0], np.cumsum(h)]), self.X, self.v0, self.a0, self.vf)
 
     # -- symbolic NLP
-    def _segment_function(self, fracs, slot_shape: Dict[str, tuple]):
+    def _segment_function(self, fracs, slot_shape: dict[str, tuple]):
         """Per-segment Function (p (5n), h, slot fractions) -> (limit constraints, smoothness integral).
 
         The limits are imposed at the fixed fractions ``fracs`` and at the slots. Also returns the
@@ -224,7 +224,7 @@ class _Problem:
         nlp = {"x": w, "p": psym, "f": f, "g": ca.vertcat(*g)}
         return nlp, np.concatenate(lb).astype(float), np.concatenate(ub).astype(float)
 
-    def pack_slots(self, slots: Dict[str, np.ndarray]) -> np.ndarray:
+    def pack_slots(self, slots: dict[str, np.ndarray]) -> np.ndarray:
         """Slot arrays {name: (K, m, n|1)} -> parameter vector, segment-major (matching build)."""
         if not self.slot_shape:
             return np.zeros(0)
@@ -236,7 +236,7 @@ class _Problem:
         p = pp.coefficients * h[:, None, None] ** np.arange(5)[None, :, None]
         return np.concatenate([p.ravel(), h]) if self.free else p.ravel()
 
-    def unpack(self, w: np.ndarray, h_fixed: np.ndarray) -> Tuple[PiecewisePolynomial, np.ndarray]:
+    def unpack(self, w: np.ndarray, h_fixed: np.ndarray) -> tuple[PiecewisePolynomial, np.ndarray]:
         m, n = self.m, self.n
         h = np.asarray(w[5 * m * n:], float).copy() if self.free else h_fixed.copy()
         p = np.asarray(w[:5 * m * n], float).reshape(m, 5, n)
@@ -244,7 +244,7 @@ class _Problem:
         return PiecewisePolynomial(self.t0 + np.concatenate([[0.0], np.cumsum(h)]), coef), h
 
     # -- numeric checks (independent of the NLP expressions)
-    def limit_violations(self, pp: PiecewisePolynomial, dense: int = 32) -> Dict[str, Tuple[np.ndarray, ...]]:
+    def limit_violations(self, pp: PiecewisePolynomial, dense: int = 32) -> dict[str, tuple[np.ndarray, ...]]:
         """{limit name: (excess, worst fraction, ratio)}, arrays (m, n) (joint limits) or (m, 1) (ee speed).
 
         ``excess`` = max over the segment minus the limit (in the limit's units), ``ratio`` = max / limit.

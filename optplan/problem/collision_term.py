@@ -23,17 +23,17 @@ from __future__ import annotations
 import dataclasses
 import logging
 import types
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 import casadi as ca
 import coal
 import numpy as np
 import pinocchio as pin
 
-from ..geometry import distance as D
 from ..collision.checker import CollisionChecker
 from ..errors import ConfigurationError
+from ..geometry import distance as D
 from ..scene import Scene
 from .build import AuxVariable, TermData
 from .terms import NumericTrajectory, Term
@@ -177,7 +177,7 @@ class CollisionAvoidance(Term):
             if name in self._LEGACY_NAMES or name in ("checker", "active_knots") else ""))
 
     # ------------------------------------------------------------------ model → data
-    def model(self, robot) -> "CollisionModel":
+    def model(self, robot) -> CollisionModel:
         """A new :class:`CollisionModel` (collision checker, NLP shapes, activation) for ``robot``."""
         return CollisionModel(self, robot)
 
@@ -200,7 +200,7 @@ class CollisionAvoidance(Term):
         normals) from coal's witness normals."""
         return data.info["model"].reseed(data, traj)
 
-    def with_activation(self, *trajectories: NumericTrajectory) -> "CollisionAvoidance":
+    def with_activation(self, *trajectories: NumericTrajectory) -> CollisionAvoidance:
         """This term with more trajectories whose close pairs are activated (e.g. a solution that
         ``verify`` found colliding)."""
         return dataclasses.replace(self, activate_with=tuple(self.activate_with) + tuple(trajectories))

@@ -90,7 +90,7 @@ class FloatingKernels(KernelCache):
     with ``z`` its local input vector; :meth:`local_derivatives` gives ``∂f/∂z`` and
     ``∂²(λᵀf)/∂z²``. The kinematics are those of the base frame (base pose identity)."""
 
-    _per_robot: "weakref.WeakKeyDictionary[RobotModel, FloatingKernels]" = weakref.WeakKeyDictionary()
+    _per_robot: weakref.WeakKeyDictionary[RobotModel, FloatingKernels] = weakref.WeakKeyDictionary()
 
     floating_base = True
     _digest_tag = b"floating-v1"

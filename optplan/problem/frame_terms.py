@@ -4,8 +4,8 @@ axis orientation and the floating base's attitude (residuals of the conventions 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import casadi as ca
 import numpy as np
@@ -13,8 +13,8 @@ import pinocchio as pin
 
 from ..constraints.closed_chain import relative_pose_residual
 from ..errors import ConfigurationError
-from ..model.robot import RobotModel
 from ..geometry.spatial import check_pose, pose_residual, vee_skew
+from ..model.robot import RobotModel
 from .build import TermData
 from .terms import Term, _check_at, _knots, _set, pose_residual_numeric
 
@@ -216,7 +216,7 @@ class ClosedChain(Term):
         return data.oMf[robot.frame_id(fa)].actInv(data.oMf[robot.frame_id(fb)])
 
     @classmethod
-    def from_configuration(cls, robot: RobotModel, q, arm_a: str = "A", arm_b: str = "B") -> "ClosedChain":
+    def from_configuration(cls, robot: RobotModel, q, arm_a: str = "A", arm_b: str = "B") -> ClosedChain:
         """The relative pose the two hands have at the full configuration ``q``."""
         from ..model.kinematics import Kinematics
 
@@ -225,7 +225,7 @@ class ClosedChain(Term):
         return cls(arm_a, arm_b, Ma.actInv(Mb))
 
     @classmethod
-    def from_grasps(cls, grasp_a: pin.SE3, grasp_b: pin.SE3, arm_a: str = "A", arm_b: str = "B") -> "ClosedChain":
+    def from_grasps(cls, grasp_a: pin.SE3, grasp_b: pin.SE3, arm_a: str = "A", arm_b: str = "B") -> ClosedChain:
         """Both hands on one rigid object with grasp frames ``grasp_a``, ``grasp_b`` (object frame)."""
         return cls(arm_a, arm_b, grasp_a.actInv(grasp_b))
 

@@ -30,7 +30,7 @@ class KernelCache:
     the robot's kinematics and of what the kernel depends on, so a fresh process loads it instead
     of differentiating again (``disk=False``: memory only)."""
 
-    _per_robot: "weakref.WeakKeyDictionary[RobotModel, KernelCache]" = weakref.WeakKeyDictionary()
+    _per_robot: weakref.WeakKeyDictionary[RobotModel, KernelCache] = weakref.WeakKeyDictionary()
 
     #: the base these kernels are for (:class:`~optplan.problem.floating_segment.FloatingKernels`
     #: is the free-floating subclass); added to the disk keys of a subclass
@@ -48,7 +48,7 @@ class KernelCache:
         self._q = ca.SX.sym("q", robot.nj)
         self._X = self.sym.joint_placements(self._configuration(self._q))
         self._fns: dict = {}
-        self._structures: "OrderedDict[tuple, object]" = OrderedDict()
+        self._structures: OrderedDict[tuple, object] = OrderedDict()
         self._digest = self._robot_digest() + self._digest_tag
         self._dir = None
         if disk:
@@ -188,7 +188,7 @@ class KernelCache:
         self._structures.clear()
 
     @classmethod
-    def of(cls, robot: RobotModel) -> "KernelCache":
+    def of(cls, robot: RobotModel) -> KernelCache:
         """The cache of ``robot`` (one per robot object)."""
         kc = cls._per_robot.get(robot)
         if kc is None:

@@ -27,9 +27,10 @@ import logging
 import math
 import time
 import types
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -65,7 +66,7 @@ class IpoptStatus(str, Enum):
     UNKNOWN = "Unknown"
 
     @classmethod
-    def from_string(cls, s: str) -> "IpoptStatus":
+    def from_string(cls, s: str) -> IpoptStatus:
         return _STATUS_BY_NAME.get(str(s).lower(), cls.UNKNOWN)
 
     @property
@@ -174,7 +175,7 @@ class SolverOptions:
 
     # ------------------------------------------------------------------ conversions
     @classmethod
-    def coerce(cls, options: "SolverOptions | Mapping | None", **fields) -> "SolverOptions":
+    def coerce(cls, options: SolverOptions | Mapping | None, **fields) -> SolverOptions:
         """``options`` as :class:`SolverOptions`: an instance (``fields`` given explicitly
         override its fields), a plain dict of IPOPT options (→ ``raw``, the pass-through the
         problems' ``solve(ipopt_options)`` always accepted) or ``None``."""
@@ -192,7 +193,7 @@ class SolverOptions:
         raise OptionError(f"solver options: expected SolverOptions, a dict of IPOPT options or None, got "
                           f"{type(options).__name__} {options!r}")
 
-    def replace(self, **changes) -> "SolverOptions":
+    def replace(self, **changes) -> SolverOptions:
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
 
@@ -273,11 +274,11 @@ class SolveOutcome:
         """IPOPT converged (``status.succeeded``); a problem may still require more (feasibility)."""
         return self.status.succeeded
 
-    def summary(self) -> "SolveOutcome":
+    def summary(self) -> SolveOutcome:
         """The same outcome without its arrays (what a result's list of attempts keeps)."""
         return dataclasses.replace(self, x=None, lam_g=None, lam_x=None, g=None)
 
-    def with_label(self, label: str) -> "SolveOutcome":
+    def with_label(self, label: str) -> SolveOutcome:
         return dataclasses.replace(self, label=str(label))
 
     def to_dict(self) -> dict:
@@ -287,7 +288,7 @@ class SolveOutcome:
                 "label": self.label, "message": self.message}
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> "SolveOutcome":
+    def from_dict(cls, d: Mapping) -> SolveOutcome:
         return cls(status=IpoptStatus.from_string(d.get("status", "Unknown")), iterations=int(d.get("iterations", -1)),
                    wall_time=float(d.get("wall_time", 0.0)), cpu_time=float(d.get("cpu_time", 0.0)),
                    setup_time=float(d.get("setup_time", 0.0)), cost=float(d.get("cost", float("nan"))),

@@ -27,10 +27,10 @@ import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError, OptionError
-from ..model.robot import RobotModel
-from ..solver_options import check_solve_arguments
 from ..geometry.spatial import check_pose
 from ..geometry.splines import quintic_time_law
+from ..model.robot import RobotModel
+from ..solver_options import check_solve_arguments
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
 from .nlp import NlpSolver, SolveOutcome, SolverOptions
@@ -522,7 +522,7 @@ class OptProblem:
             r = h.weight * d.cost
         return ca.Function(h.name, [b["x"]], [r])
 
-    def infeasibilities(self, sol: Solution, n: int = 10) -> list["Infeasibility"]:
+    def infeasibilities(self, sol: Solution, n: int = 10) -> list[Infeasibility]:
         """The ``n`` worst constraint rows of a solution of this problem, worst first: term name,
         row, point (knot ``k`` or ``(k, fraction)``; None when the rows are not per point),
         value, bounds and violation (≥ 0, physical units). The transcription's own rows are

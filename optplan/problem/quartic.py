@@ -39,7 +39,7 @@ import math
 import time
 from dataclasses import dataclass
 from numbers import Real
-from typing import Any, Dict, Optional, Tuple
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -95,13 +95,13 @@ class QuarticSmoothingResult:
 
 # ----------------------------------------------------------------------------- public entry point
 def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a0: Any = None, vf: Any = None,
-                   qdot_max: Any = None, qddot_max: Any = None, ee_velocity: Optional[ca.Function] = None,
-                   ee_speed_max: Optional[float] = None, ee_acceleration: Optional[ca.Function] = None,
-                   ee_accel_max: Optional[float] = None, free_durations: bool = False, min_duration: float = 1e-3,
-                   max_duration: Optional[float] = None, cost: str = "jerk", time_weight: float = 1.0,
+                   qdot_max: Any = None, qddot_max: Any = None, ee_velocity: ca.Function | None = None,
+                   ee_speed_max: float | None = None, ee_acceleration: ca.Function | None = None,
+                   ee_accel_max: float | None = None, free_durations: bool = False, min_duration: float = 1e-3,
+                   max_duration: float | None = None, cost: str = "jerk", time_weight: float = 1.0,
                    smooth_weight: float = 1e-3, samples_per_segment: int = 8, refine: bool = True,
                    max_refinements: int = 8, refine_tol: float = 1e-4,
-                   ipopt_options: Optional[Dict[str, Any]] = None) -> QuarticSmoothingResult:
+                   ipopt_options: dict[str, Any] | None = None) -> QuarticSmoothingResult:
     """Smooth waypoints with a C3 quartic spline under velocity / acceleration / end-effector-speed limits.
 
     Args:
@@ -217,15 +217,15 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
         j_ws = (prob.objective(pp_ws) - prob.tw * float(h_ws.sum())) / prob.sw
         if j_ws > 0:
             prob.sw = prob.sw * float(h_ws.sum()) / j_ws
-    defaults: Dict[str, Any] = {"print_level": 0, "sb": "yes", "max_iter": 1000, "mumps_pivot_order": 0}
+    defaults: dict[str, Any] = {"print_level": 0, "sb": "yes", "max_iter": 1000, "mumps_pivot_order": 0}
     if not free_durations and ee is None and ee_acceleration is None:
         defaults.update({"jac_c_constant": "yes", "jac_d_constant": "yes", "hessian_constant": "yes"})
-    casadi_opts: Dict[str, Any] = {"error_on_fail": False}
+    casadi_opts: dict[str, Any] = {"error_on_fail": False}
     if isinstance(ipopt_options, SolverOptions):
         sopts = ipopt_options
     else:
         top_level = set(ca.nlpsol_options("ipopt"))
-        raw: Dict[str, Any] = {}
+        raw: dict[str, Any] = {}
         for key, val in (ipopt_options or {}).items():
             if key == "ipopt" and isinstance(val, dict):
                 raw.update(val)
@@ -251,7 +251,7 @@ def smooth_quartic(times_or_durations: Any, waypoints: Any, *, v0: Any = None, a
     attempts = []
     status, success = "Not_Solved", False
     pp, h_out = pp_ws, h_ws.copy()
-    last_good: Optional[Tuple[PiecewisePolynomial, np.ndarray, str]] = None
+    last_good: tuple[PiecewisePolynomial, np.ndarray, str] | None = None
     try:
         nlp, lbg, ubg = prob.build(h)
         solver = NlpSolver("quartic_smoothing", nlp, sopts, defaults=defaults, casadi_options=casadi_opts)

@@ -18,16 +18,16 @@ from __future__ import annotations
 import dataclasses
 import types
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import casadi as ca
 import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError
-from ..model.robot import RobotModel
 from ..geometry.spatial import pose_residual, vee_skew
+from ..model.robot import RobotModel
 from .build import BuildContext, TermData
 from .transcription import Transcription
 
@@ -252,7 +252,7 @@ class Term:
         """The cost expression on a bare transcription (no initial guess, no pinned knots)."""
         return self.cost_expr(BuildContext(tp, role="cost"))
 
-    def reseed(self, data: TermData, traj: "NumericTrajectory") -> tuple:
+    def reseed(self, data: TermData, traj: NumericTrajectory) -> tuple:
         """``data.aux`` re-seeded for a new initial guess ``traj`` (the problem's structure kept);
         terms without auxiliary variables return them unchanged."""
         return data.aux
@@ -279,7 +279,7 @@ class Term:
         lo, hi = self.bounds_numeric(traj)
         return float(np.sum(np.where(lo == hi, r - lo, np.maximum(r - hi, 0) + np.minimum(r - lo, 0)) ** 2))
 
-    def sampled(self) -> "Term":
+    def sampled(self) -> Term:
         """The term evaluated point by point along a trajectory (what ``Solution.sample`` runs
         ``numeric`` of, on a trajectory whose knots are the sample times). Terms tied to given
         knots (boundaries, poses at a knot) have none."""

@@ -32,8 +32,7 @@ from __future__ import annotations
 from .baseline import PAPER_INITIAL_JOINTS_DEG, arm_a_on_swivel, dls_track, initial_configuration
 from .evaluate import coal_centreline_distances, evaluate, make_checker, run_case
 from .nlp import ArcPlanner
-from .task import (D2R, PAPER, ROBOT, TABLE1_XF, DshdasrArcs, TrackResult, TransposeTask, paper_task,
-                           quintic)
+from .task import D2R, PAPER, ROBOT, TABLE1_XF, DshdasrArcs, TrackResult, TransposeTask, paper_task, quintic
 
 __all__ = [
     "ROBOT", "PAPER", "TransposeTask", "paper_task", "quintic", "DshdasrArcs", "ArcPlanner",

@@ -14,7 +14,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from .arcs import Arc, _dot, _norm, _sinc, _series_guard, arc_from_tangent_length, sph, sph_angles
+from .arcs import Arc, _dot, _norm, _series_guard, _sinc, arc_from_tangent_length, sph, sph_angles
 
 __all__ = ["DiscreteArcModel", "SerpentineArcModel", "frame_on", "pair_angles"]
 

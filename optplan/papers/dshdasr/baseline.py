@@ -14,9 +14,9 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from .task import DshdasrArcs, TrackResult, TransposeTask
 # after .dshdasr_task, which loads .arcs: importing .arcs_arms first fails (the two import each other)
 from .arc_models import frame_on
+from .task import DshdasrArcs, TrackResult, TransposeTask
 
 
 # --------------------------------------------------------------------------- DLS baseline

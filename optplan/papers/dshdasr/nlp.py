@@ -18,8 +18,8 @@ import casadi as ca
 import numpy as np
 
 from ...problem.nlp import NlpSolver, SolveOutcome, SolverOptions
-from .arcs import arc_point_distance, sph, sph_angles
 from .arc_models import frame_on
+from .arcs import arc_point_distance, sph, sph_angles
 from .task import DshdasrArcs, TrackResult, TransposeTask
 
 log = logging.getLogger(__name__)
@@ -242,7 +242,7 @@ class ArcPlanner:
             x = np.array(out.x)
         return x, out, bool(bad or not out.success)
 
-    def track(self, task: TransposeTask, q0: np.ndarray, times=None) -> "TrackResult":
+    def track(self, task: TransposeTask, q0: np.ndarray, times=None) -> TrackResult:
         """Solve every waypoint of ``task`` from the configuration ``q0`` (which must hold the first
         desired tips); returns the recovered joints and the per-waypoint NLP statistics."""
         arcs = self.arcs

@@ -19,10 +19,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pinocchio as pin
 
-from ...model.description import load_description
-from ...model.robot import RobotModel
 from ...geometry.spatial import zyx_to_matrix
 from ...geometry.splines import quintic_time_law
+from ...model.description import load_description
+from ...model.robot import RobotModel
 from .arc_models import DiscreteArcModel, SerpentineArcModel
 
 ROBOT = "dshdasr"
@@ -125,7 +125,7 @@ class TransposeTask:
             kb.append(d / np.linalg.norm(d))
         return {"pa": np.array(pa), "Ra": np.array(Ra), "pb": np.array(pb), "kb": np.array(kb)}
 
-    def with_goal(self, Xf_deg) -> "TransposeTask":
+    def with_goal(self, Xf_deg) -> TransposeTask:
         """The same task with another goal pose given as (m, m, m, deg, deg, deg)."""
         Xf = np.asarray(Xf_deg, float).copy()
         Xf[3:] *= D2R

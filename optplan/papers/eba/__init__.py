@@ -34,11 +34,31 @@ import numpy as np
 
 from ...model.robot import RobotModel
 from .ba import BAOptions, EBAOptions, run_ba, run_eba
-from .baselines import (FourierOptions, LeaderFollowerOptions, QuinticOptions, closed_chain_reference,
-                            run_fourier, run_leader_follower, run_quintic)
-from .core import (END_CONSTRAINED_THETAF_DEG, FREE_END_THETAF_DEG, PAPER_FIGURES, THETA0_DEG, EBAKinematics,
-                       MethodReport, MethodResult, Scenario, Segment, end_constrained_scenario, evaluate,
-                       free_end_scenario, integrate_rpy, simulate_result)
+from .baselines import (
+    FourierOptions,
+    LeaderFollowerOptions,
+    QuinticOptions,
+    closed_chain_reference,
+    run_fourier,
+    run_leader_follower,
+    run_quintic,
+)
+from .core import (
+    END_CONSTRAINED_THETAF_DEG,
+    FREE_END_THETAF_DEG,
+    PAPER_FIGURES,
+    THETA0_DEG,
+    EBAKinematics,
+    MethodReport,
+    MethodResult,
+    Scenario,
+    Segment,
+    end_constrained_scenario,
+    evaluate,
+    free_end_scenario,
+    integrate_rpy,
+    simulate_result,
+)
 from .nlp import NLPOptions, build_nlp, run_nlp
 
 __all__ = [

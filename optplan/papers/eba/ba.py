@@ -139,12 +139,12 @@ class EBAOptions:
         _check_common("EBAOptions", self)
 
     @classmethod
-    def paper_free_end(cls, **overrides) -> "EBAOptions":
+    def paper_free_end(cls, **overrides) -> EBAOptions:
         """Section 4.1: k = 1.3, m = 0.125, t0 = 1000 s, λ = 0, 300 s."""
         return cls(**overrides)
 
     @classmethod
-    def paper_end_constrained(cls, **overrides) -> "EBAOptions":
+    def paper_end_constrained(cls, **overrides) -> EBAOptions:
         """Section 4.2: k = 1.1, m = 0.1, t0 = 95 s, λ = 1e-5, 200 s."""
         base = dict(k=1.1, m=0.1, t0=95.0, lam=1e-5, horizon=200.0)
         base.update(overrides)
@@ -169,7 +169,7 @@ def sig(t: float, t0: float) -> float:
     return float(expit(t0 - t))
 
 
-def eba_input(Wb: np.ndarray, dx: np.ndarray, z: np.ndarray, t: float, o: "EBAOptions",
+def eba_input(Wb: np.ndarray, dx: np.ndarray, z: np.ndarray, t: float, o: EBAOptions,
               Wd: np.ndarray | None = None) -> np.ndarray:
     """The EBA input ``Ũ = [U1; U2]`` of Eq. 32 (Eq. 20 when ``Sig ≡ 1``, i.e. t0 ≫ t):
     ``Ũ = −m [k + S(S−1)] S W̄‡ Δx − (m W̄‡ W̄ + k I) z`` with ``S = Sig(t, t0)`` and ``W̄‡`` of

@@ -29,12 +29,11 @@ import numpy as np
 import pinocchio as pin
 
 from ...constraints.closed_chain import relative_pose_residual
-from ...problem.nlp import NlpSolver, SolverOptions
-from ...model.robot import RobotModel
 from ...geometry.splines import quintic_time_law
+from ...model.robot import RobotModel
 from ...model.symbolic import SymbolicKinematics
-from .core import (EBAKinematics, MethodResult, Scenario, Segment, hermite_segment, integrate_rpy,
-                       rpy_matrix)
+from ...problem.nlp import NlpSolver, SolverOptions
+from .core import EBAKinematics, MethodResult, Scenario, Segment, hermite_segment, integrate_rpy, rpy_matrix
 
 __all__ = ["QuinticOptions", "LeaderFollowerOptions", "FourierOptions", "run_quintic",
            "run_leader_follower", "run_fourier", "quintic_profile", "closed_chain_reference"]

@@ -30,11 +30,18 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ...problem.floating_segment import FloatingSegmentSpec, FloatingSplineProblem
-from ...problem import (BaseAttitude, ClosedChain, JointBoundary, JointPositionLimits, JointVelocityLimits,
-                       OptProblem, Smoothness)
-from ...model.robot import RobotModel
 from ...geometry.splines import quintic_time_law
+from ...model.robot import RobotModel
+from ...problem import (
+    BaseAttitude,
+    ClosedChain,
+    JointBoundary,
+    JointPositionLimits,
+    JointVelocityLimits,
+    OptProblem,
+    Smoothness,
+)
+from ...problem.floating_segment import FloatingSegmentSpec, FloatingSplineProblem
 from ...verification import verify
 from .baselines import closed_chain_reference
 from .core import MethodResult, Scenario, hermite_segment
@@ -98,13 +105,13 @@ class NLPOptions:
             raise ValueError(f"NLPOptions.smoothness: expected 'jerk' or 'acceleration', got {self.smoothness!r}")
 
     @classmethod
-    def free_end(cls, **overrides) -> "NLPOptions":
+    def free_end(cls, **overrides) -> NLPOptions:
         """N = 20, one RK4 step per interval: measured final attitude 1.9e-7 rad (independent
         simulator), IPOPT 0.5 s."""
         return cls(**overrides)
 
     @classmethod
-    def end_constrained(cls, **overrides) -> "NLPOptions":
+    def end_constrained(cls, **overrides) -> NLPOptions:
         """N = 48: the closed chain holds at the knots only and drifts ∝ h⁴ between them
         (max residual 2.5e-5 at N = 20, 1.4e-6 at N = 40, 6.5e-7 at N = 48, dense sampling);
         warm-started from the same NLP on 12 intervals (``coarse_intervals``)."""

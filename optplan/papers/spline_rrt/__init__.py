@@ -33,15 +33,15 @@ import numpy as np
 import pinocchio as pin
 
 from ...collision.checker import CollisionChecker
-from ...model.floating import simulate_base
-from ...model.kinematics import Kinematics
-from ...planners.base import PlanStatus
-from ...problem.terms import Term, pose_residual, pose_residual_numeric
-from ...planners.spline_rrt import CoordinatedPlan, CoordinatedRRTStar, CoordinatedRRTStarOptions
-from ...model.robot import RobotModel
-from ...scene import Scene
 from ...geometry.spatial import exp3, log3, rotation_angle, rpy_to_matrix
 from ...geometry.splines import PiecewisePolynomial, quartic_spline, time_grid_from_path
+from ...model.floating import simulate_base
+from ...model.kinematics import Kinematics
+from ...model.robot import RobotModel
+from ...planners.base import PlanStatus
+from ...planners.spline_rrt import CoordinatedPlan, CoordinatedRRTStar, CoordinatedRRTStarOptions
+from ...problem.terms import Term, pose_residual, pose_residual_numeric
+from ...scene import Scene
 
 __all__ = ["SplineRRTTask", "BezierOrientation", "HandTrajectory", "smooth_hand_paths", "TrackingOptions",
            "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "InteriorVelocityLimits", "optimize", "SplineRRTResult", "run_spline_rrt", "hand_separation", "PAPER"]
@@ -64,7 +64,7 @@ class SplineRRTTask:
     q_start: np.ndarray
 
     @classmethod
-    def from_scene(cls, robot: RobotModel, scene: Scene | str = "splinerrt_capture") -> "SplineRRTTask":
+    def from_scene(cls, robot: RobotModel, scene: Scene | str = "splinerrt_capture") -> SplineRRTTask:
         """Read ``start_<arm>``/``goal_<arm>`` ([x, y, z, roll, pitch, yaw], [m] and the scene's angle
         unit) and ``q_start_<arm>`` from the scene's ``[extra]`` table."""
         scene = Scene.load(scene) if isinstance(scene, str) else scene
@@ -477,8 +477,17 @@ def optimize(robot: RobotModel, task: SplineRRTTask, hands: dict, T: float, warm
     their planned paths at every knot (``FramePath``), start at rest from ``task.q_start``, rest at
     T, joint position/velocity limits, link–link distance ≥ ``link_margin`` (``CollisionAvoidance``),
     base attitude restored at T, minimum jerk. Returns ``(Solution, OptProblem)``."""
-    from ...problem import (BaseAttitude, CollisionAvoidance, FramePath, JointAccelerationLimits, JointBoundary,
-                           JointPositionLimits, JointVelocityLimits, OptProblem, Smoothness)
+    from ...problem import (
+        BaseAttitude,
+        CollisionAvoidance,
+        FramePath,
+        JointAccelerationLimits,
+        JointBoundary,
+        JointPositionLimits,
+        JointVelocityLimits,
+        OptProblem,
+        Smoothness,
+    )
 
     o = options or OptimizeOptions()
     prob = OptProblem(robot, o.n_intervals, T, n_sub=o.n_sub)
