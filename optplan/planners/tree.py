@@ -13,6 +13,8 @@ results on fixed seeds; the search is a few per cent of an iteration (IK, collis
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 __all__ = ["Tree"]
@@ -28,7 +30,7 @@ class Tree:
     the intermediate configurations of the edge from the parent for :meth:`branch`.
     """
 
-    def __init__(self, root, cap: int = 256, *, edges: bool = False, **columns):
+    def __init__(self, root: Any, cap: int = 256, *, edges: bool = False, **columns: Any) -> None:
         root = np.asarray(root, float)
         if root.ndim != 1:
             raise ValueError(f"Tree: expected a 1-D root, got shape {root.shape}")
@@ -44,7 +46,7 @@ class Tree:
             a = np.empty((cap, *v.shape), dtype=v.dtype if v.dtype != object else float)
             a[0] = v
             setattr(self, name, a)
-        self.edge: list | None = [[]] if edges else None
+        self.edge: list[Any] | None = [[]] if edges else None
         self.alive: np.ndarray | None = None     # created by the first kill()
         self.n_dead = 0
         self.n = 1
@@ -52,8 +54,8 @@ class Tree:
     def __len__(self) -> int:
         return self.n
 
-    def _grow(self):
-        def double(a):
+    def _grow(self) -> None:
+        def double(a: np.ndarray) -> np.ndarray:
             return np.concatenate([a, np.empty_like(a)])
         self.X = double(self.X)
         self.parent = double(self.parent)
@@ -62,7 +64,7 @@ class Tree:
         if self.alive is not None:
             self.alive = np.concatenate([self.alive, np.ones_like(self.alive)])
 
-    def add(self, x, parent: int, edge=None, **columns) -> int:
+    def add(self, x: Any, parent: int, edge: Any = None, **columns: Any) -> int:
         """Append a node (key ``x``, column values ``columns``, edge payload ``edge``) below
         ``parent``; returns its index."""
         if self.n == len(self.X):
@@ -77,17 +79,19 @@ class Tree:
         self.n = n + 1
         return n
 
-    def nearest(self, x) -> int:
+    def nearest(self, x: Any) -> int:
         """Index of the live node nearest ``x`` (squared Euclidean distance in the key)."""
         d = self.X[:self.n] - x
         d2 = np.einsum("ij,ij->i", d, d)
-        if self.n_dead:
+        if self.n_dead and self.alive is not None:
             d2[~self.alive[:self.n]] = np.inf
         return int(np.argmin(d2))
 
     def live_keys(self) -> np.ndarray:
         """Key coordinates of the live nodes."""
-        return self.X[:self.n] if not self.n_dead else self.X[:self.n][self.alive[:self.n]]
+        if not self.n_dead or self.alive is None:
+            return self.X[:self.n]
+        return self.X[:self.n][self.alive[:self.n]]
 
     def kill(self, i: int) -> int:
         """Delete node ``i`` and its subtree (children have larger indices); returns how many
@@ -105,11 +109,11 @@ class Tree:
 
     def indices(self, i: int) -> list[int]:
         """Node indices from the root to node ``i``."""
-        out = []
+        out: list[int] = []
         parent = self.parent
         while i >= 0:
             out.append(int(i))
-            i = parent[i]
+            i = int(parent[i])
         return out[::-1]
 
     def branch(self, i: int, column: str | None = None) -> list[np.ndarray]:
@@ -117,7 +121,7 @@ class Tree:
         (payload, when the tree keeps edges) before its end node; or copies of ``column`` at the
         nodes only."""
         A = self.X if column is None else getattr(self, column)
-        out = []
+        out: list[np.ndarray] = []
         edge = self.edge if column is None else None
         for k in self.indices(i):
             if edge is not None:

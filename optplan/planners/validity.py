@@ -35,7 +35,8 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import cast
+from collections.abc import Callable
+from typing import Any, cast
 
 import numpy as np
 import pinocchio as pin
@@ -133,7 +134,7 @@ class ValidityChecker:
         # the velocity (Jacobian) bound of edge_checkpoints assumes revolute 1-dof joints
         self._revolute_only = all(jm.nv == 1 and jm.shortname().replace("JointModel", "").startswith("R")
                                   for jm in list(self.model.joints)[1:])
-        self._profile_fns: dict = {}
+        self._profile_fns: dict[str, Any] = {}
 
     def _sweep_bound(self, mode: str) -> np.ndarray:
         """One row per moving geometry, one column per q index: (chain length from the joint's
@@ -189,7 +190,7 @@ class ValidityChecker:
             rad[k] = float(go.geometry.aabb_radius)
         return row, c, rad, np.array(joints, dtype=int)
 
-    def _profile_function(self, mode: str):
+    def _profile_function(self, mode: str) -> Any:
         """Compiled ``(a, b) -> C``: ``C[i]`` [m] bounds the distance any point of the checked
         geometry travels along ``q(t) = a + t (b − a)`` for ``t ∈ [0, i/m]``, ``m =``
         :attr:`CELLS` (see :meth:`edge_checkpoints`). None when the robot has joints other than
@@ -200,8 +201,8 @@ class ValidityChecker:
         if self._revolute_only:
             import casadi as ca
 
-            from ..model.symbolic import SymbolicKinematics
             from ..codegen import FastFunction
+            from ..model.symbolic import SymbolicKinematics
 
             sk = SymbolicKinematics(self.robot)
             row, c, rad, joints = self._spheres[mode]
@@ -228,10 +229,13 @@ class ValidityChecker:
             Q = ca.horzcat(*[a + (i / m) * dd for i in range(m + 1)])
             S = f1.map(m + 1)(Q, ca.repmat(dd, 1, m + 1))          # G × (m+1): speed at the cell ends
             D = ca.fabs(dd)
-            r2, static = [], []
+            r2: Any = []
+            static: Any = []
             for g in range(G):                     # rate of change of the speed bound; configuration-free bound
                 anc = [k for k in range(n) if W[g, k] > 0.0]
-                acc, before, pairs = 0, 0, 0
+                acc: Any = 0
+                before: Any = 0
+                pairs: Any = 0
                 for k in anc:
                     acc = acc + W[g, k] * D[k] * (D[k] + 2 * before)
                     pairs = pairs + D[k] * before
@@ -239,7 +243,7 @@ class ValidityChecker:
                 r2.append(acc + float(rad[g]) * pairs)
                 static.append(ca.dot(ca.DM(W[g]), D))
             r2, static = ca.vertcat(*r2), ca.vertcat(*static)
-            cum = [ca.SX(0.0)]
+            cum: list[Any] = [ca.SX(0.0)]
             for i in range(m):                     # ∫ over cell i of max_g min(static, (s_i + s_i+1 + r/m)/2)
                 Fi = ca.mmax(ca.fmin(static, 0.5 * (S[:, i] + S[:, i + 1] + r2 / m)))
                 cum.append(cum[-1] + Fi / m)
@@ -295,6 +299,7 @@ class ValidityChecker:
         (:meth:`is_valid_object_fixed` at ``object_pose``) or ``"free"``."""
         from .rrtconnect import _bisection_order
 
+        fn: Callable[[np.ndarray], bool]
         if mode == "held":
             fn = self.is_valid if self.object is not None else self.is_valid_free
         elif mode == "fixed":
