@@ -56,7 +56,8 @@ def _modules() -> dict[str, tuple[Path, bool]]:
 
 
 def _imports(module: str, path: Path, is_pkg: bool, known) -> list[tuple[str, int, bool]]:
-    """``(imported optplan module, line, inside a function)`` of one file."""
+    """``(imported optplan module, line, inside a function)`` of one file (imports under
+    ``if TYPE_CHECKING:`` are left out: they do not run)."""
     found = []
 
     def targets(node):
@@ -73,6 +74,8 @@ def _imports(module: str, path: Path, is_pkg: bool, known) -> list[tuple[str, in
 
     def visit(node, in_function):
         for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+                continue  # type-only imports: no import at run time (annotations are strings)
             f = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
             if isinstance(child, (ast.Import, ast.ImportFrom)):
                 found.extend((t, child.lineno, f) for t in targets(child))

@@ -18,7 +18,7 @@ import numpy as np
 
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .tree import Tree
-from .validity import ValidityChecker
+from .validity import ValidityChecker, _bisection_order
 
 if TYPE_CHECKING:
     from ..scene import Scene
@@ -55,28 +55,6 @@ class RRTConnectOptions:
                 raise ValueError(f"RRTConnectOptions.{name}: expected an int >= 0, got {v!r}")
         if not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin) and self.margin >= 0):
             raise ValueError(f"RRTConnectOptions.margin: expected a number >= 0 m, got {self.margin!r}")
-
-
-_ORDERS: dict[int, list[int]] = {}
-
-
-def _bisection_order(n: int) -> list[int]:
-    """1..n−1 in coarse-to-fine (bisection) order, so a blocked edge is usually found early."""
-    if n not in _ORDERS:
-        out, seen, queue = [], {0, n}, [(0, n)]
-        while queue:
-            nxt = []
-            for lo, hi in queue:
-                if hi - lo < 2:
-                    continue
-                mid = (lo + hi) // 2
-                if mid not in seen:
-                    seen.add(mid)
-                    out.append(mid)
-                nxt += [(lo, mid), (mid, hi)]
-            queue = nxt
-        _ORDERS[n] = out
-    return _ORDERS[n]
 
 
 def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray], bool], resolution: float,

@@ -443,6 +443,11 @@ class TCBiRRT(Planner):
         self._w_fixed = self.checker.sweep_weights("fixed", per_geometry=True)
         self._cb: CBiRRT2 | None = None
         self._rng = np.random.default_rng(0)
+        if self.options.edge_tolerance and self.options.edge_bound == "jacobian":
+            # the edge-bound functions are built (and, once per robot, scene and object, compiled: seconds
+            # of the C compiler) here, so that no plan's time limit pays for them
+            for mode in ("held", "fixed"):
+                self.checker.prepare_edge_bound(mode)
 
     # ------------------------------------------------------------------ public helpers
     def check_endpoint(self, q: np.ndarray) -> str | None:

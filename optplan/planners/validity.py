@@ -48,6 +48,28 @@ __all__ = ["ValidityChecker"]
 log = logging.getLogger(__name__)
 
 
+_ORDERS: dict[int, list[int]] = {}
+
+
+def _bisection_order(n: int) -> list[int]:
+    """1..n−1 in coarse-to-fine (bisection) order, so a blocked edge is usually found early."""
+    if n not in _ORDERS:
+        out, seen, queue = [], {0, n}, [(0, n)]
+        while queue:
+            nxt = []
+            for lo, hi in queue:
+                if hi - lo < 2:
+                    continue
+                mid = (lo + hi) // 2
+                if mid not in seen:
+                    seen.add(mid)
+                    out.append(mid)
+                nxt += [(lo, mid), (mid, hi)]
+            queue = nxt
+        _ORDERS[n] = out
+    return _ORDERS[n]
+
+
 class ValidityChecker:
     """Boolean collision checks in C++ (see the module docstring).
 
@@ -190,6 +212,13 @@ class ValidityChecker:
             rad[k] = float(go.geometry.aabb_radius)
         return row, c, rad, np.array(joints, dtype=int)
 
+    def prepare_edge_bound(self, mode: str) -> None:
+        """Build (and compile, cached on disk) the speed profile :meth:`edge_checkpoints` uses in
+        ``mode`` now rather than at the first edge check, e.g. before a planner's clock starts."""
+        if mode not in self._sweep:
+            raise ValueError(f"prepare_edge_bound: mode must be one of {tuple(self._sweep)}, got {mode!r}")
+        self._profile_function(mode)
+
     def _profile_function(self, mode: str) -> Any:
         """Compiled ``(a, b) -> C``: ``C[i]`` [m] bounds the distance any point of the checked
         geometry travels along ``q(t) = a + t (b − a)`` for ``t ∈ [0, i/m]``, ``m =``
@@ -297,8 +326,6 @@ class ValidityChecker:
         [m] between two checks), checked coarse-to-fine; ``a`` itself is not checked, ``b`` only with
         ``check_end``. ``mode``: ``"held"`` (:meth:`is_valid`), ``"fixed"``
         (:meth:`is_valid_object_fixed` at ``object_pose``) or ``"free"``."""
-        from .rrtconnect import _bisection_order
-
         fn: Callable[[np.ndarray], bool]
         if mode == "held":
             fn = self.is_valid if self.object is not None else self.is_valid_free
