@@ -247,3 +247,19 @@ def test_the_library_imports_no_old_path(graph):
     bad = [f"{m}:{line} imports {t}" for m, imps in edges.items() for t, line, _ in imps
            if any(t == old or t.startswith(old + ".") for old in MOVED_MODULES)]
     assert not bad, bad
+
+
+# --------------------------------------------------------------------------- paper keys
+def test_paper_keys_name_the_reproductions(tmp_path):
+    """The keys of docs/papers.md: a package per reproduction, and ``optplan reproduce`` takes the
+    key with an underscore as well as the command-line hyphen."""
+    from optplan.reproduce import PAPERS, plan_steps
+
+    assert {k.replace("-", "_") for k in PAPERS} == {"tcbirrt", "eba", "dshdasr", "spline_rrt", "oc_rrt"}
+    for key in ("eba", "dshdasr", "spline_rrt"):
+        assert (PKG / "papers" / key / "__init__.py").exists()
+    assert [s.argv for s in plan_steps("spline_rrt", tmp_path, quick=True)] == \
+           [s.argv for s in plan_steps("spline-rrt", tmp_path, quick=True)]
+    text = (PKG.parent / "docs" / "papers.md").read_text()
+    for key in ("tcbirrt", "spline_rrt", "oc_rrt", "dshdasr", "eba"):
+        assert f"| `{key}` |" in text
