@@ -189,6 +189,15 @@ def test_every_public_name_imports():
     assert optplan.ClosedChain is ClosedChain
 
 
+def test_import_optplan_stays_cheap():
+    """The public names load on first use: ``import optplan`` pulls in no solver or model library."""
+    code = ("import sys, optplan; heavy = [m for m in ('casadi', 'pinocchio', 'coal', 'scipy', 'matplotlib') "
+            "if m in sys.modules]; print(heavy)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.strip() == "[]"
+
+
 _OLD_PATHS_SCRIPT = r"""
 import importlib, json, sys, warnings
 import optplan
