@@ -26,11 +26,11 @@ def _tuples(v):
 
 
 def main(argv=None) -> int:
-    from optplan.trials import TrialGenerator
+    from optplan.model.robot import RobotModel
     from optplan.pipeline import PipelineOptions, run_pipeline
     from optplan.problem.kernels import KernelCache
-    from optplan.model.robot import RobotModel
     from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="1", help="comma-separated: 1, 2, 3 (ssps_scene<N>) or scene names")

@@ -221,10 +221,10 @@ def _plan_planner_options(planner: str, variant: str) -> tuple | None:
 
 
 def _cmd_plan(args) -> int:
-    from .trials import TrialGenerator
-    from .pipeline import PipelineOptions, run_pipeline
     from .model.robot import RobotModel
+    from .pipeline import PipelineOptions, run_pipeline
     from .scene import Scene
+    from .trials import TrialGenerator
 
     scene_name = ca.check_scene(args.scene)
     planner = ca.check_planner(args.planner)

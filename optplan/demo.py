@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .geometry.splines import quintic_time_law
 from .model.floating import simulate_base
 from .model.kinematics import Kinematics
 from .model.robot import RobotModel
-from .geometry.splines import quintic_time_law
 
 THETA0_DEG = np.array([-23.44, -90, 12.51, 104.8, -27.33, 66.56, -38] * 2, float)
 THETAF_DEG = np.array([-23.44, -80, -17.49, 134.8, -12.33, 111.56, -38,

@@ -37,9 +37,9 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .model.description import models_dir, read_model_toml
 from .errors import ModelError, UnknownNameError
 from .geometry.spatial import rpy_to_matrix
+from .model.description import models_dir, read_model_toml
 
 __all__ = ["Obstacle", "GraspedObject", "Scene", "available_scenes"]
 

@@ -21,13 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .geometry.spatial import pose_to_vector, vector_to_pose
 from .constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from .geometry.spatial import pose_to_vector, rpy_to_matrix, vector_to_pose
+from .model.robot import RobotModel
 from .planners.tcbirrt import interpolate_task
 from .planners.validity import ValidityChecker
-from .model.robot import RobotModel
 from .scene import Scene
-from .geometry.spatial import rpy_to_matrix
 
 __all__ = ["TrialOptions", "Trial", "TrialGenerator", "perturb_pose", "trial_seed"]
 log = logging.getLogger(__name__)

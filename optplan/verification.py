@@ -17,10 +17,10 @@ import pinocchio as pin
 
 from .collision.checker import CollisionChecker
 from .constraints.closed_chain import closure_error
+from .geometry.spatial import rotation_angle
 from .model.floating import simulate_base
 from .model.robot import RobotModel
 from .scene import Scene
-from .geometry.spatial import rotation_angle
 
 __all__ = ["VerifyReport", "verify"]
 

@@ -13,13 +13,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.model.description import load_description, models_dir, urdf_dir
-from optplan.model.urdf_writer import urdf_string
 from optplan.errors import ConfigurationError, ModelError, OptplanError, UnknownNameError
+from optplan.model.description import load_description, models_dir, urdf_dir
 from optplan.model.floating import joint_trajectory_from_samples, simulate_base
 from optplan.model.kinematics import Kinematics
 from optplan.model.robot import RobotModel
 from optplan.model.symbolic import SymbolicKinematics
+from optplan.model.urdf_writer import urdf_string
 
 EBA_TOML = (models_dir() / "robots" / "eba_ffsr.toml").read_text()
 DH_BLOCK = re.compile(r"^dh = \[\[.*?\]\]\n", re.S | re.M)

@@ -109,8 +109,8 @@ def test_output_paths_are_checked_before_the_run(capsys, tmp_path, monkeypatch):
 def test_failed_plan_still_writes_its_json(capsys, tmp_path, monkeypatch):
     """An exception inside the run (here: a planner crash injected into the pipeline) still leaves
     the JSON with success: false and the error."""
-    import optplan.trials as trials
     import optplan.model.robot as robot
+    import optplan.trials as trials
 
     def boom(*a, **k):
         raise RuntimeError("injected failure")

@@ -205,10 +205,10 @@ def test_trial_perturbation_scales_with_reach(panda):
 def test_pipeline_verified_on_a_stress_scene():
     """A scene the optimizer was not tuned on (capsule bars, a sphere, a 180° roll of the module):
     plan -> optimize -> verify succeeds, checked independently here (coal clearance, FK closure)."""
-    from optplan.trials import TrialGenerator
     from optplan.collision.checker import CollisionChecker
-    from optplan.pipeline import PipelineOptions, run_pipeline
     from optplan.constraints.closed_chain import closure_error
+    from optplan.pipeline import PipelineOptions, run_pipeline
+    from optplan.trials import TrialGenerator
 
     robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("stress_cage")
     tr = TrialGenerator(robot, scene).generate(0, 0)
@@ -226,9 +226,9 @@ def test_pipeline_verified_on_a_stress_scene():
 def test_margins_relax_only_where_a_collision_free_guess_is_closer_than_the_margin():
     """``relax_to_guess``: inside the path a pair's margin becomes half the guess's exact (coal)
     clearance only where that clearance is in [0, margin); where the guess collides it stays."""
+    from optplan.constraints.closed_chain import project_closed_chain
     from optplan.problem import ClosedChain
     from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
-    from optplan.constraints.closed_chain import project_closed_chain
 
     robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("transport")
     g = scene.object.grasps

@@ -8,9 +8,9 @@ import pinocchio as pin
 import pytest
 
 from optplan.bench.hardscenes import SUITE, load_witness, verify_path, witness_path
+from optplan.constraints.closed_chain import ClosedChainKinematics
 from optplan.planners import TCBiRRT, TCBiRRTOptions
 from optplan.planners.base import PlanResult, PlanStatus
-from optplan.constraints.closed_chain import ClosedChainKinematics
 from optplan.planners.task_sampling import ObjectPoseFilter, TaskSampler, arm_reach
 from optplan.planners.validity import ValidityChecker
 from optplan.scene import Scene
@@ -212,8 +212,8 @@ def test_joint_connect_joins_two_closed_chain_configurations(robot, rng):
     configuration to another one of a nearby object pose, every returned configuration closes the
     chain (Pinocchio FK) and is collision-free, and the path ends exactly at the target."""
     from optplan.bench.hardscenes import nominal_configurations
-    from optplan.planners.base import Deadline
     from optplan.constraints.closed_chain import closure_error
+    from optplan.planners.base import Deadline
 
     scene = Scene.load("hard_flip")
     qs, _ = nominal_configurations(robot, scene)

@@ -175,8 +175,8 @@ def test_cbirrt_generalised_to_orientation_constraint(pr2):
 
 def test_tsr_free_axis_residual(pr2):
     """A free yaw axis: yaw errors are not penalised, pitch errors are."""
-    from optplan.planners.orientation import DualArmOrientationConstraint
     from optplan.geometry.spatial import rpy_to_matrix
+    from optplan.planners.orientation import DualArmOrientationConstraint
 
     b = np.array([[0.0, 0.0], [0.0, 0.0], [-np.inf, np.inf]])
     con = DualArmOrientationConstraint(pr2, "open", {"left": np.eye(3), "right": np.eye(3)}, orientation_bounds=b)

@@ -70,8 +70,8 @@ def test_pipeline_scene1_trial(tcb, tmp_path):
     """The README's main job end to end (one trial of scene 1, ~15-30 s): planned, every segment
     solved, the closed chain held to 1e-6 and positive clearance by the independent verify, and
     the saved trajectory has the documented keys, with ``constrained`` false inside regrasps."""
-    from optplan.trials import TrialGenerator
     from optplan.pipeline import run_pipeline
+    from optplan.trials import TrialGenerator
 
     sc = Scene.load("ssps_scene1")
     tr = TrialGenerator(tcb, sc).generate(4, 0)
@@ -93,8 +93,8 @@ def test_pipeline_scene1_trial(tcb, tmp_path):
 
 def _scene1_plan(tcb):
     """Scene 1, trial 4: (scene, a successful TCBiRRT plan) for the segment-retry logic tests."""
-    from optplan.trials import TrialGenerator
     from optplan.planners import make_planner
+    from optplan.trials import TrialGenerator
 
     sc = Scene.load("ssps_scene1")
     tr = TrialGenerator(tcb, sc).generate(4, 0)
@@ -249,10 +249,10 @@ def test_coarse_to_fine_records_the_coarse_attempt_and_verifies():
     attempt before ``initial``), and the trial still verifies."""
     import dataclasses
 
-    from optplan.trials import TrialGenerator
-    from optplan.pipeline import PipelineOptions, run_pipeline
     from optplan.model.robot import RobotModel
+    from optplan.pipeline import PipelineOptions, run_pipeline
     from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
 
     robot, scene = RobotModel.from_name("tcbirrt_dual_arm"), Scene.load("ssps_scene1")
     trial = TrialGenerator(robot, scene).generate(0, 0)

@@ -27,17 +27,16 @@ from hypothesis import strategies as st
 
 from optplan import cli
 from optplan.cli_args import positive_float, positive_int
-from optplan.model.description import load_description, models_dir
 from optplan.errors import OptplanError, ResultFileError
+from optplan.geometry.spatial import check_rotation, exp3, log3, se3, vector_to_pose
+from optplan.model.description import load_description, models_dir
 from optplan.model.ik import IKOptions, solve_arm_ik
 from optplan.model.kinematics import Kinematics
-from optplan.geometry.spatial import vector_to_pose
+from optplan.model.robot import RobotModel
 from optplan.planners.base import PlanResult, PlanStatus
 from optplan.problem import JointBoundary, OptProblem
 from optplan.problem.solution import IpoptStatus, Solution
-from optplan.model.robot import RobotModel
 from optplan.scene import Scene
-from optplan.geometry.spatial import check_rotation, exp3, log3, se3
 
 FAST = settings(max_examples=40, deadline=None, derandomize=True, database=None,
                 suppress_health_check=list(HealthCheck))

@@ -5,8 +5,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from optplan.problem.quartic import QuarticSmoothingResult, smooth_quartic
 from optplan.geometry.splines import PiecewisePolynomial, quartic_spline
+from optplan.problem.quartic import QuarticSmoothingResult, smooth_quartic
 
 L1, L2 = 1.0, 0.7  # planar 2-link arm [m]
 INFEASIBLE = {"Infeasible_Problem_Detected", "Restoration_Failed"}

@@ -11,15 +11,14 @@ import pinocchio as pin
 import pytest
 
 from optplan.collision.checker import CollisionChecker
-from optplan.model.description import load_description, models_dir, urdf_dir
 from optplan.errors import ConfigurationError, ModelError, OptionError, ResultFileError, UnknownNameError
+from optplan.geometry.spatial import se3, vector_to_pose
+from optplan.model.description import load_description, models_dir, urdf_dir
+from optplan.model.robot import RobotModel
 from optplan.pipeline import PipelineResult
-from optplan.geometry.spatial import vector_to_pose
 from optplan.planners.base import PlanResult, PlanStatus
 from optplan.problem.solution import IpoptStatus, Solution
-from optplan.model.robot import RobotModel
 from optplan.scene import Scene
-from optplan.geometry.spatial import se3
 
 EBA_TOML = (models_dir() / "robots" / "eba_ffsr.toml").read_text()
 TCB_URDF = (urdf_dir() / "tcbirrt_dual_arm.urdf").read_text()

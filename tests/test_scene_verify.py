@@ -19,9 +19,9 @@ import pytest
 
 from optplan.collision.checker import CollisionChecker
 from optplan.errors import ModelError, UnknownNameError
+from optplan.geometry.spatial import exp3, rotx, roty, rotz
 from optplan.problem import ClosedChain
 from optplan.scene import Scene, available_scenes
-from optplan.geometry.spatial import exp3, rotx, roty, rotz
 from optplan.verification import verify
 
 DEG = np.pi / 180

@@ -3,9 +3,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.problem import ClosedChain, JointBoundary, OptProblem, Smoothness
-from optplan.geometry.spatial import rpy_to_matrix
 from optplan.constraints.closed_chain import closed_chain_residual, manifold_resample, project_closed_chain
+from optplan.geometry.spatial import rpy_to_matrix
+from optplan.problem import ClosedChain, JointBoundary, OptProblem, Smoothness
 
 
 @pytest.fixture

@@ -27,8 +27,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..problem import ClosedChain
 from ..model.robot import RobotModel
+from ..problem import ClosedChain
 from ..scene import Scene
 from ..verification import verify
 

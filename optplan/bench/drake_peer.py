@@ -39,9 +39,9 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision.checker import CollisionChecker
+from ..geometry.spatial import skew, vee_skew
 from ..model.robot import RobotModel
 from ..scene import Scene
-from ..geometry.spatial import skew, vee_skew
 
 __all__ = ["DrakeUnavailable", "require_drake", "DrakeModel", "ClosedChainResidual", "BsplineSolution", "DrakeOptions",
            "DrakeResult", "fit_bspline", "jerk_matrix", "solve_drake", "SOLVERS"]

@@ -34,13 +34,13 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ..model.description import models_dir
-from ..planners.base import PlanResult
 from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from ..model.description import models_dir
+from ..model.robot import RobotModel
+from ..planners.base import PlanResult
 from ..planners.rrtconnect import edge_is_valid
 from ..planners.tcbirrt import interpolate_task
 from ..planners.validity import ValidityChecker
-from ..model.robot import RobotModel
 from ..scene import Scene
 
 __all__ = ["SUITE", "witness_path", "load_witness", "verify_path", "make_witness", "nominal_configurations"]

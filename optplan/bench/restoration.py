@@ -34,8 +34,8 @@ def _one(case: str, transcription: str, cache: str, compiled=False) -> dict:
 
     import numpy as np
 
-    from ..papers import eba
     from ..model.robot import RobotModel
+    from ..papers import eba
 
     robot = RobotModel.from_name("eba_ffsr")
     sc = eba.free_end_scenario() if case == "free_end" else eba.end_constrained_scenario(robot)
@@ -148,8 +148,8 @@ ACCURACY_RUNS = (("free_end", 10, 1), ("free_end", 20, 1), ("free_end", 40, 1), 
 
 def accuracy(runs=ACCURACY_RUNS) -> list[dict]:
     """The B-spline NLP's knot attitudes against :func:`ivp_attitude`, per (case, N, n_sub)."""
-    from ..papers import eba
     from ..model.robot import RobotModel
+    from ..papers import eba
 
     robot = RobotModel.from_name("eba_ffsr")
     rows = []

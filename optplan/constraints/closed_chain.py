@@ -32,10 +32,10 @@ import pinocchio as pin
 
 from ..codegen import FastFunction
 from ..errors import ConfigurationError
-from ..model.ik import IKOptions, IKResult, solve_multi
-from ..model.robot import RobotModel
 from ..geometry.spatial import check_pose, pose_residual, rotation_angle, skew, vee_skew
 from ..geometry.splines import resample_path
+from ..model.ik import IKOptions, IKResult, solve_multi
+from ..model.robot import RobotModel
 from ..model.symbolic import SymbolicKinematics
 
 __all__ = ["relative_pose_residual", "closed_chain_residual", "project_closed_chain", "ProjectionResult",

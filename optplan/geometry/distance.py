@@ -71,8 +71,9 @@ from typing import Any, Optional, Union
 import casadi as ca
 import numpy as np
 
-from . import _distance_smooth as _s
 from optplan.geometry._distance_smooth import n_covering_spheres
+
+from . import _distance_smooth as _s
 
 __all__ = [
     "DEFAULT_EPS", "DEFAULT_COVER_TOL", "DEFAULT_SOFTMIN_TOL", "Sphere", "Capsule", "Box", "Shape",

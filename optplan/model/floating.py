@@ -17,8 +17,8 @@ import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError, check_vector
-from .robot import RobotModel
 from ..geometry.spatial import check_pose
+from .robot import RobotModel
 
 __all__ = ["FloatingResult", "simulate_base", "joint_trajectory_from_samples", "rk4_step"]
 log = logging.getLogger(__name__)

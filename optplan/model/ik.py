@@ -13,8 +13,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import OptionError
-from .robot import RobotModel
 from ..geometry.spatial import check_pose
+from .robot import RobotModel
 
 __all__ = ["IKOptions", "IKResult", "solve_arm_ik", "solve_multi", "pose_error"]
 log = logging.getLogger(__name__)

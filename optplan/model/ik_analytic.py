@@ -34,8 +34,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError, ModelError
-from .robot import RobotModel
 from ..geometry.spatial import skew
+from .robot import RobotModel
 
 __all__ = ["DecoupledArmIK", "rotation_about", "wrist_angles"]
 

@@ -19,8 +19,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from .description import arm_metadata, available_models, load_description, urdf_dir
 from ..errors import ConfigurationError, ModelError, UnknownNameError, check_vector
+from .description import arm_metadata, available_models, load_description, urdf_dir
 
 __all__ = ["Arm", "RobotModel"]
 log = logging.getLogger(__name__)

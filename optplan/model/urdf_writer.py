@@ -8,8 +8,8 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from .description import RobotDescription, SerpentineArmType, _tx, available_models, load_description, urdf_dir
 from ..geometry.spatial import matrix_to_rpy, rotx, rpy_to_matrix
+from .description import RobotDescription, SerpentineArmType, _tx, available_models, load_description, urdf_dir
 
 __all__ = ["urdf_string", "write_urdf", "build_all"]
 

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from ..errors import ConfigurationError
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
-from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from .validity import ValidityChecker
 
 __all__ = ["CBiRRT2Options", "CBiRRT2"]

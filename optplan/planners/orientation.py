@@ -29,10 +29,10 @@ import pinocchio as pin
 
 from ..codegen import compile_function
 from ..errors import ConfigurationError
+from ..geometry.spatial import rpy_to_matrix
 from ..model.ik_analytic import DecoupledArmIK
 from ..model.robot import RobotModel
 from ..scene import Scene
-from ..geometry.spatial import rpy_to_matrix
 
 __all__ = ["DualArmOrientationConstraint", "OrientationManifold", "constraint_from_scene", "endpoints_from_scene"]
 

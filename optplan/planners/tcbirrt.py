@@ -73,13 +73,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from ..errors import ConfigurationError
 from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2, CBiRRT2Options
 from .cbirrt2 import _Tree as _JointTree
-from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from .rrtconnect import RRTConnectOptions, edge_is_valid, rrt_connect, shortcut_path
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .validity import ValidityChecker

@@ -39,8 +39,8 @@ import logging
 import numpy as np
 import pinocchio as pin
 
-from ..model.robot import RobotModel
 from ..collision.checker import pair_indices, scene_geometry, scene_pairs
+from ..model.robot import RobotModel
 from ..scene import Scene
 
 __all__ = ["ValidityChecker"]

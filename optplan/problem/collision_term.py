@@ -31,9 +31,9 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ..geometry import distance as D
 from ..collision.checker import CollisionChecker
 from ..errors import ConfigurationError
+from ..geometry import distance as D
 from ..scene import Scene
 from .build import AuxVariable, TermData
 from .terms import NumericTrajectory, Term

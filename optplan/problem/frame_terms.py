@@ -13,8 +13,8 @@ import pinocchio as pin
 
 from ..constraints.closed_chain import relative_pose_residual
 from ..errors import ConfigurationError
-from ..model.robot import RobotModel
 from ..geometry.spatial import check_pose, pose_residual, vee_skew
+from ..model.robot import RobotModel
 from .build import TermData
 from .terms import Term, _check_at, _knots, _set, pose_residual_numeric
 

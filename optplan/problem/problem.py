@@ -27,10 +27,10 @@ import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError, OptionError
-from ..model.robot import RobotModel
-from ..solver_options import check_solve_arguments
 from ..geometry.spatial import check_pose
 from ..geometry.splines import quintic_time_law
+from ..model.robot import RobotModel
+from ..solver_options import check_solve_arguments
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
 from .nlp import NlpSolver, SolveOutcome, SolverOptions

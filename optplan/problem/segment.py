@@ -187,8 +187,8 @@ class SplineSegmentProblem:
         """Initial guess from a planner's path (M × nj, no timing): the path is followed with the
         rest-to-rest quintic time law in joint-space arc length, each knot projected onto the
         closed-chain manifold. Returns whether every projection converged."""
-        from ..geometry.splines import resample_path
         from ..constraints.closed_chain import project_closed_chain
+        from ..geometry.splines import resample_path
 
         path = np.asarray(path, float)
         s, _ = resample_path(path, 2)  # validates the path

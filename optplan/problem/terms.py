@@ -26,8 +26,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError
-from ..model.robot import RobotModel
 from ..geometry.spatial import pose_residual, vee_skew
+from ..model.robot import RobotModel
 from .build import BuildContext, TermData
 from .transcription import Transcription
 

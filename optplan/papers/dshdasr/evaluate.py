@@ -14,9 +14,9 @@ import math
 import numpy as np
 
 from ...collision.checker import CollisionChecker
+from ...geometry.spatial import log3
 from ...model.robot import RobotModel
 from ...scene import Scene
-from ...geometry.spatial import log3
 from .nlp import ArcPlanner
 from .task import DshdasrArcs, TrackResult, TransposeTask
 

@@ -18,8 +18,8 @@ import casadi as ca
 import numpy as np
 
 from ...problem.nlp import NlpSolver, SolveOutcome, SolverOptions
-from .arcs import arc_point_distance, sph, sph_angles
 from .arc_models import frame_on
+from .arcs import arc_point_distance, sph, sph_angles
 from .task import DshdasrArcs, TrackResult, TransposeTask
 
 log = logging.getLogger(__name__)

@@ -19,10 +19,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pinocchio as pin
 
-from ...model.description import load_description
-from ...model.robot import RobotModel
 from ...geometry.spatial import zyx_to_matrix
 from ...geometry.splines import quintic_time_law
+from ...model.description import load_description
+from ...model.robot import RobotModel
 from .arc_models import DiscreteArcModel, SerpentineArcModel
 
 ROBOT = "dshdasr"

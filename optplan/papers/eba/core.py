@@ -31,9 +31,10 @@ from scipy.linalg.lapack import dgesv
 
 from ...constraints.closed_chain import ChainSpec, closure_error, project_closed_chain
 from ...errors import ConfigurationError
+from ...geometry.spatial import rotation_angle as _rotation_angle
+from ...geometry.spatial import skew
 from ...model.floating import rk4_step, simulate_base
 from ...model.robot import RobotModel
-from ...geometry.spatial import rotation_angle as _rotation_angle, skew
 
 __all__ = [
     "THETA0_DEG", "FREE_END_THETAF_DEG", "END_CONSTRAINED_THETAF_DEG", "PAPER_FIGURES", "Scenario",
