@@ -210,9 +210,11 @@ with warnings.catch_warnings(record=True) as w:
     from optplan.robot import RobotModel as R1
     from optplan.methods.eba import run_eba as e1
     from optplan.warmstart import manifold_resample as m1
-out["from_import"] = [R1 is optplan.RobotModel, e1 is importlib.import_module("optplan.papers.eba").run_eba,
+    sp = optplan.spatial   # attribute access to an old submodule after ``import optplan``
+out["from_import"] = [sp is importlib.import_module("optplan.geometry.spatial"), R1 is optplan.RobotModel,
+                      e1 is importlib.import_module("optplan.papers.eba").run_eba,
                       m1 is importlib.import_module("optplan.constraints.closed_chain").manifold_resample,
-                      sum(issubclass(x.category, DeprecationWarning) for x in w) >= 3]
+                      sum(issubclass(x.category, DeprecationWarning) for x in w) >= 4]
 for old, new in MOVED_MODULES.items():
     sys.modules.pop(old, None)   # imported above through the old path: import it again
     with warnings.catch_warnings(record=True) as w:
