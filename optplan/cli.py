@@ -221,6 +221,7 @@ def _plan_planner_options(planner: str, variant: str) -> tuple | None:
 
 
 def _cmd_plan(args) -> int:
+    from .model.robot import RobotModel
     from .pipeline import PipelineOptions, run_pipeline
     from .scene import Scene
     from .trials import TrialGenerator
@@ -475,7 +476,8 @@ def build_parser() -> argparse.ArgumentParser:
     vw.set_defaults(func=_cmd_view)
 
     rp = sub.add_parser("reproduce", help="reproduce a source paper with one command (figures, JSON, 3D views)")
-    rp.add_argument("paper", choices=["tcbirrt", "eba", "dshdasr", "spline-rrt", "oc-rrt"])
+    rp.add_argument("paper", choices=["tcbirrt", "eba", "dshdasr", "spline-rrt", "oc-rrt"],
+                    type=lambda s: s.replace("_", "-"), help="the paper's key (docs/papers.md; spline_rrt = spline-rrt)")
     rp.add_argument("--quick", action="store_true", help="a reduced run (under a minute)")
     rp.add_argument("--out", help="output directory (default reproduce_<paper>)")
     rp.add_argument("--no-html", action="store_true", help="no HTML views")

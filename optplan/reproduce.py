@@ -251,6 +251,7 @@ PAPERS: dict[str, Paper] = {
 def plan_steps(paper: str, out, quick: bool = False, examples: Path | None = None) -> list[Step]:
     """The steps ``reproduce`` would run (raises :class:`ReproduceError` for an unknown paper or a
     missing script)."""
+    paper = paper.replace("_", "-")   # the package keys (optplan.papers.spline_rrt) name the same papers
     if paper not in PAPERS:
         raise ReproduceError(f"unknown paper {paper!r}; expected one of {', '.join(PAPERS)}")
     p = PAPERS[paper]
@@ -288,7 +289,7 @@ def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = Tru
     its steps. ``say``: where the progress lines go (the command line: ``print``). Raises
     :class:`ReproduceError` when it cannot start."""
     steps = plan_steps(paper, out, quick, examples)
-    p = PAPERS[paper]
+    p = PAPERS[paper.replace("_", "-")]
     out = Path(out)
     (out / "traj").mkdir(parents=True, exist_ok=True)
     say(f"optplan reproduce {paper}{' --quick' if quick else ''}: {p.title}")

@@ -192,6 +192,15 @@ def test_every_public_name_imports():
     assert optplan.ClosedChain is ClosedChain
 
 
+def test_import_optplan_stays_cheap():
+    """The public names load on first use: ``import optplan`` pulls in no solver or model library."""
+    code = ("import sys, optplan; heavy = [m for m in ('casadi', 'pinocchio', 'coal', 'scipy', 'matplotlib') "
+            "if m in sys.modules]; print(heavy)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.strip() == "[]"
+
+
 _OLD_PATHS_SCRIPT = r"""
 import importlib, json, sys, warnings
 import optplan
@@ -204,9 +213,11 @@ with warnings.catch_warnings(record=True) as w:
     from optplan.robot import RobotModel as R1
     from optplan.methods.eba import run_eba as e1
     from optplan.warmstart import manifold_resample as m1
-out["from_import"] = [R1 is optplan.RobotModel, e1 is importlib.import_module("optplan.papers.eba").run_eba,
+    sp = optplan.spatial   # attribute access to an old submodule after ``import optplan``
+out["from_import"] = [sp is importlib.import_module("optplan.geometry.spatial"), R1 is optplan.RobotModel,
+                      e1 is importlib.import_module("optplan.papers.eba").run_eba,
                       m1 is importlib.import_module("optplan.constraints.closed_chain").manifold_resample,
-                      sum(issubclass(x.category, DeprecationWarning) for x in w) >= 3]
+                      sum(issubclass(x.category, DeprecationWarning) for x in w) >= 4]
 for old, new in MOVED_MODULES.items():
     sys.modules.pop(old, None)   # imported above through the old path: import it again
     with warnings.catch_warnings(record=True) as w:
@@ -250,3 +261,19 @@ def test_the_library_imports_no_old_path(graph):
     bad = [f"{m}:{line} imports {t}" for m, imps in edges.items() for t, line, _ in imps
            if any(t == old or t.startswith(old + ".") for old in MOVED_MODULES)]
     assert not bad, bad
+
+
+# --------------------------------------------------------------------------- paper keys
+def test_paper_keys_name_the_reproductions(tmp_path):
+    """The keys of docs/papers.md: a package per reproduction, and ``optplan reproduce`` takes the
+    key with an underscore as well as the command-line hyphen."""
+    from optplan.reproduce import PAPERS, plan_steps
+
+    assert {k.replace("-", "_") for k in PAPERS} == {"tcbirrt", "eba", "dshdasr", "spline_rrt", "oc_rrt"}
+    for key in ("eba", "dshdasr", "spline_rrt"):
+        assert (PKG / "papers" / key / "__init__.py").exists()
+    assert [s.argv for s in plan_steps("spline_rrt", tmp_path, quick=True)] == \
+           [s.argv for s in plan_steps("spline-rrt", tmp_path, quick=True)]
+    text = (PKG.parent / "docs" / "papers.md").read_text()
+    for key in ("tcbirrt", "spline_rrt", "oc_rrt", "dshdasr", "eba"):
+        assert f"| `{key}` |" in text

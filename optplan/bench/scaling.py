@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..viz import save_figure
+
 __all__ = ["measure", "compare_runs", "plot_scaling", "main"]
 
 
@@ -138,11 +140,7 @@ def plot_scaling(res: dict, path) -> Path:
     n = res["runs"][0]["units"]
     fig.suptitle(f"{n} planner runs ({', '.join(res['planners'])}; {res['trials']} trials x {len(res['scenes'])} scenes), "
                  f"{res['cores']} cores shared with other jobs", fontsize=9)
-    fig.tight_layout()
-    p = Path(path)
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
-    return p
+    return save_figure(fig, path)
 
 
 def main(argv=None) -> int:

@@ -3,6 +3,11 @@ obstacles, and the grasped object vs obstacles and robot links.
 
 Geometry entities are named: robot geometry objects by their Pinocchio names (``a_link3_0``),
 obstacles by their scene names, the held object ``"object"``.
+
+The checked pair set and the geometry model that holds robot, obstacles and held object are
+defined once here (:func:`scene_geometry`, :func:`scene_pairs`) and shared by
+:class:`CollisionChecker` (distances) and the planners'
+:class:`~optplan.planners.validity.ValidityChecker` (boolean checks in C++).
 """
 from __future__ import annotations
 
@@ -16,7 +21,7 @@ import pinocchio as pin
 from ..model.robot import RobotModel
 from ..scene import Scene
 
-__all__ = ["CollisionChecker", "Pair"]
+__all__ = ["CollisionChecker", "Pair", "SceneGeometry", "scene_geometry", "scene_pairs"]
 log = logging.getLogger(__name__)
 
 
@@ -36,6 +41,77 @@ def _tf(M: pin.SE3) -> coal.Transform3s:
     return coal.Transform3s(M.rotation, M.translation)
 
 
+@dataclass(frozen=True)
+class SceneGeometry:
+    """One Pinocchio ``GeometryModel`` with the robot's geometries (indices ``0 .. n_robot − 1``),
+    then the scene's obstacles (``"obstacle/<name>"``, fixed in the world; ``obstacle_ids`` in the
+    scene's order), then the held object (``"object/held"``, rigidly on ``object_arm``'s hand;
+    ``held_id``, None without one). No collision pairs: see :func:`scene_pairs`."""
+
+    model: pin.GeometryModel
+    n_robot: int
+    obstacle_ids: tuple
+    held_id: int | None
+    object_arm: str | None
+
+
+def scene_geometry(robot: RobotModel, scene: Scene | None, object_arm: str | None = None, *,
+                   held_object: bool = True) -> SceneGeometry:
+    """The :class:`SceneGeometry` of ``robot`` in ``scene`` (``held_object``: include the scene's
+    object, held by ``object_arm``, default its first grasping arm)."""
+    gm = robot.collision_model.copy()
+    gm.removeAllCollisionPairs()
+    n_robot = len(gm.geometryObjects)
+    obstacles = list(scene.obstacles) if scene is not None else []
+    obs_ids = tuple(gm.addGeometryObject(pin.GeometryObject(f"obstacle/{o.name}", 0, 0, o.placement, o.coal_geometry()))
+                    for o in obstacles)
+    obj = scene.object if (scene is not None and held_object) else None
+    held_id, arm_name = None, None
+    if obj is not None:
+        arm_name = object_arm or next(iter(obj.grasps))
+        arm = robot.arm(arm_name)
+        fr = robot.model.frames[arm.ee_frame_id]
+        held_id = gm.addGeometryObject(pin.GeometryObject("object/held", fr.parentJoint, arm.ee_frame_id,
+                                                          fr.placement * obj.grasps[arm_name].inverse(),
+                                                          obj.coal_geometry()))
+    return SceneGeometry(gm, n_robot, obs_ids, held_id, arm_name)
+
+
+def scene_pairs(robot: RobotModel, scene: Scene | None, *, held_object: bool = True,
+                self_collision: bool = True) -> list[Pair]:
+    """THE checked pair set, in this order: the robot's own collision pairs
+    (``robot.collision_pairs``); every robot geometry × every obstacle (a fixed base's own
+    geometry excepted: the scene is built around it); the held object × every obstacle; the held
+    object × every robot geometry whose link is not in the object's ``exclude_links`` (the hands
+    on the fixtures)."""
+    objs = robot.collision_model.geometryObjects
+    obstacles = list(scene.obstacles) if scene is not None else []
+    obj = scene.object if (scene is not None and held_object) else None
+    pairs: list[Pair] = []
+    if self_collision:
+        pairs += [Pair("self", a, b, objs[a].name, objs[b].name) for a, b in robot.collision_pairs]
+    for g in range(len(objs)):
+        if not robot.is_floating and objs[g].parentJoint == 0:
+            continue  # fixed base geometry vs static obstacles: the scene is built around it
+        for i, o in enumerate(obstacles):
+            pairs.append(Pair("robot-obstacle", g, i, objs[g].name, o.name))
+    if obj is not None:
+        for i, o in enumerate(obstacles):
+            pairs.append(Pair("object-obstacle", -1, i, "object", o.name))
+        excl = set(obj.exclude_links)
+        for g in range(len(objs)):
+            if robot.model.frames[objs[g].parentFrame].name not in excl:
+                pairs.append(Pair("object-robot", -1, g, "object", objs[g].name))
+    return pairs
+
+
+def pair_indices(pair: Pair, geometry: SceneGeometry) -> tuple[int, int]:
+    """The two geometry indices of ``pair`` in ``geometry.model``."""
+    a = geometry.held_id if pair.a == -1 else pair.a
+    b = geometry.obstacle_ids[pair.b] if pair.kind in ("robot-obstacle", "object-obstacle") else pair.b
+    return a, b
+
+
 class CollisionChecker:
     """Exact distances [m] for a robot in a scene (optionally holding the scene's object).
 
@@ -51,7 +127,6 @@ class CollisionChecker:
         self.data = robot.model.createData()
         self.gmodel = robot.collision_model
         self.gdata = pin.GeometryData(self.gmodel)
-        objs = self.gmodel.geometryObjects
         self.obstacles = list(scene.obstacles) if scene is not None else []
         self._obs_geom = [o.coal_geometry() for o in self.obstacles]
         self._obs_tf = [_tf(o.placement) for o in self.obstacles]
@@ -63,27 +138,9 @@ class CollisionChecker:
             self._obj_geom = self.object.coal_geometry()
             self._grasp_inv = self.object.grasps[self.object_arm].inverse()
             self._hand_fid = robot.arm(self.object_arm).ee_frame_id
-        pairs: list[Pair] = []
-        if self_collision:
-            pairs += [Pair("self", a, b, objs[a].name, objs[b].name) for a, b in robot.collision_pairs]
-        fixed_base_joint = 0
-        for g in range(len(objs)):
-            if not robot.is_floating and objs[g].parentJoint == fixed_base_joint:
-                continue  # fixed base geometry vs static obstacles: the scene is built around it
-            for i, o in enumerate(self.obstacles):
-                pairs.append(Pair("robot-obstacle", g, i, objs[g].name, o.name))
-        if self.object is not None:
-            for i, o in enumerate(self.obstacles):
-                pairs.append(Pair("object-obstacle", -1, i, "object", o.name))
-            excl = set(self.object.exclude_links)
-            for g in range(len(objs)):
-                link = self.model.frames[objs[g].parentFrame].name
-                if link in excl:
-                    continue
-                pairs.append(Pair("object-robot", -1, g, "object", objs[g].name))
-        self.pairs = pairs
+        self.pairs = scene_pairs(robot, scene, held_object=held_object, self_collision=self_collision)
         #: position of each pair in :attr:`pairs` (and in :meth:`distances`' result)
-        self.pair_index: dict[Pair, int] = {p: i for i, p in enumerate(pairs)}
+        self.pair_index: dict[Pair, int] = {p: i for i, p in enumerate(self.pairs)}
         self._build_combined()
         self._req = coal.DistanceRequest()
         self._res = coal.DistanceResult()
@@ -95,18 +152,11 @@ class CollisionChecker:
         hand's joint) and the obstacles (attached to the world), with exactly ``pairs`` as its
         collision pairs in the same order, so that ``pinocchio.computeDistances`` runs the whole
         list in C++ (the same coal narrow phase and default request as :meth:`_geoms`)."""
-        gm = self.gmodel.copy()
-        gm.removeAllCollisionPairs()
-        obs_ids = [gm.addGeometryObject(pin.GeometryObject(f"obstacle/{o.name}", 0, 0, o.placement, g))
-                   for o, g in zip(self.obstacles, self._obs_geom)]
-        obj_id = None
-        if self.object is not None:
-            fr = self.model.frames[self._hand_fid]
-            obj_id = gm.addGeometryObject(pin.GeometryObject("object/held", fr.parentJoint, self._hand_fid,
-                                                             fr.placement * self._grasp_inv, self._obj_geom))
+        geo = scene_geometry(self.robot, self.scene, self.object_arm if self.object is not None else None,
+                             held_object=self.object is not None)
+        gm = geo.model
         for p in self.pairs:
-            a = obj_id if p.a == -1 else p.a
-            b = obs_ids[p.b] if p.kind in ("robot-obstacle", "object-obstacle") else p.b
+            a, b = pair_indices(p, geo)
             gm.addCollisionPair(pin.CollisionPair(min(a, b), max(a, b)))
         self._cgm = gm
         self._cgd = pin.GeometryData(gm)

@@ -168,7 +168,7 @@ class OrientationManifold:
     redundancy-angle IK) and picks the branch nearest to a reference configuration.
 
     ``compiled``: evaluate every closed-form branch in one C function generated with CasADi (the
-    same formulas as :class:`~optplan.model.ik_analytic.DecoupledArmIK`, 30-100x faster than the Python
+    same formulas as :class:`~optplan.ik_analytic.DecoupledArmIK`, 30-100x faster than the Python
     path); joint limits and the branch choice are applied in numpy. ``False`` keeps the Python
     path (the reference the compiled one is tested against).
     """
@@ -250,7 +250,7 @@ class OrientationManifold:
         return q
 
     def complete_reference(self, p, ref: np.ndarray | None = None, rng: np.random.Generator | None = None):
-        """:meth:`complete` on the Python path of :class:`~optplan.model.ik_analytic.DecoupledArmIK`
+        """:meth:`complete` on the Python path of :class:`~optplan.ik_analytic.DecoupledArmIK`
         (no compiled code; the reference for tests)."""
         c = self.c
         q = np.empty(self.robot.nq)
@@ -286,7 +286,7 @@ _TWO_PI = 2.0 * math.pi
 def _choose(X, ok, lo, hi, rng, *, dedup: bool = False, tol: float = 1e-12):
     """One solution among the raw branches ``X`` (rows, with flags ``ok``) and their ``2πk`` shifts
     inside [lo, hi] (within ``tol``, then clipped): a uniformly random one (``rng``), else the first,
-    counted in the order of :class:`~optplan.model.ik_analytic.DecoupledArmIK` (branch, then shifts, the
+    counted in the order of :class:`~optplan.ik_analytic.DecoupledArmIK` (branch, then shifts, the
     last joint fastest). ``dedup``: branches equal modulo 2π count once. Returns (row, angles) or
     (-1, None)."""
     idx = np.flatnonzero(ok > 0.5)

@@ -1,13 +1,14 @@
 """Fast validity checking for the planners.
 
-:class:`optplan.collision.checker.CollisionChecker` loops over its pairs in Python (~0.5-1 ms per
+:class:`optplan.collision.CollisionChecker` loops over its pairs in Python (~0.5-1 ms per
 configuration); the planners check tens of thousands of configurations per query. This checker
 puts the robot's capsules, the scene's obstacles and the object into ONE Pinocchio
 ``GeometryModel`` and lets ``pinocchio.computeCollisions`` run the whole pair list in C++ (coal
 narrow phase, stop at the first collision): ~20-60 µs per configuration.
 
-The pair set is the same as :class:`~optplan.collision.checker.CollisionChecker`'s (a test checks that
-they agree on random configurations):
+The pair set is :class:`~optplan.collision.CollisionChecker`'s, from the same function
+(:func:`optplan.collision.checker.scene_pairs`; a test checks that they agree on random
+configurations):
 
 * robot self-collision pairs (``robot.collision_pairs``),
 * every moving robot geometry × every obstacle (the fixed base is not checked against the scene),
@@ -41,6 +42,7 @@ from typing import Any, cast
 import numpy as np
 import pinocchio as pin
 
+from ..collision.checker import pair_indices, scene_geometry, scene_pairs
 from ..model.robot import RobotModel
 from ..scene import Scene
 
@@ -87,43 +89,22 @@ class ValidityChecker:
         self.margin = float(margin)
         self.model = robot.model
         self.data = robot.model.createData()
-        gm = robot.collision_model.copy()
-        n_robot = len(gm.geometryObjects)
-        robot_geoms = list(range(n_robot))
-        moving = [g for g in robot_geoms if gm.geometryObjects[g].parentJoint != 0]
-        obstacles = list(scene.obstacles) if scene is not None else []
-        obs_ids = []
-        for o in obstacles:
-            go = pin.GeometryObject(f"obstacle/{o.name}", 0, 0, o.placement, o.coal_geometry())
-            obs_ids.append(gm.addGeometryObject(go))
+        # robot, obstacles, held object and the pair set as the exact checker has them
+        geo = scene_geometry(robot, scene, object_arm)
+        gm = geo.model
+        robot_geoms = list(range(geo.n_robot))
         self.object = scene.object if scene is not None else None
-        self.held_id = self.fixed_id = None
+        self.held_id, self.fixed_id = geo.held_id, None
         if self.object is not None:
-            self.object_arm = object_arm or next(iter(self.object.grasps))
-            arm = robot.arm(self.object_arm)
-            fr = robot.model.frames[arm.ee_frame_id]
-            place = fr.placement * self.object.grasps[self.object_arm].inverse()
-            self.held_id = gm.addGeometryObject(pin.GeometryObject("object/held", fr.parentJoint, arm.ee_frame_id,
-                                                                   place, self.object.coal_geometry()))
+            self.object_arm = geo.object_arm
             self.fixed_id = gm.addGeometryObject(pin.GeometryObject("object/fixed", 0, 0, pin.SE3.Identity(),
                                                                     self.object.coal_geometry()))
-        gm.removeAllCollisionPairs()
         groups: dict[str, list[tuple[int, int]]] = {"held": [], "fixed": [], "obstacle": [], "self": []}
+        group_of = {"object-obstacle": "held", "object-robot": "held", "robot-obstacle": "obstacle", "self": "self"}
+        for p in scene_pairs(robot, scene, self_collision=self_collision):
+            groups[group_of[p.kind]].append(pair_indices(p, geo))
         if self.object is not None:
-            held_id, fixed_id = cast(int, self.held_id), cast(int, self.fixed_id)   # set just above
-            excl = set(self.object.exclude_links)
-            for oid in obs_ids:
-                groups["held"].append((held_id, oid))
-            for g in robot_geoms:
-                link = robot.model.frames[gm.geometryObjects[g].parentFrame].name
-                if link not in excl:
-                    groups["held"].append((g, held_id))
-                groups["fixed"].append((g, fixed_id))
-        for oid in obs_ids:
-            for g in moving:
-                groups["obstacle"].append((g, oid))
-        if self_collision:
-            groups["self"] = [cast(tuple[int, int], tuple(p)) for p in robot.collision_pairs]
+            groups["fixed"] = [(g, self.fixed_id) for g in robot_geoms]
         # order: object pairs first (the big box collides most), then obstacles, then self
         order = ["held", "fixed", "obstacle", "self"]
         self._pair_group = []

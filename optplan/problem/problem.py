@@ -222,7 +222,7 @@ class OptProblem:
     def set_initial_path(self, path, closed_chain=None, T: float | None = None) -> bool:
         """Initial guess from a planner's path (M × nq configurations, no timing): resampled
         uniformly in joint-space arc length onto the knots and, with ``closed_chain``, projected
-        back onto the closed-chain manifold (:func:`optplan.warmstart.manifold_resample`); timed by
+        back onto the closed-chain manifold (:func:`optplan.constraints.closed_chain.manifold_resample`); timed by
         a rest-to-rest quintic time law over T. Returns whether every projection converged."""
         from ..constraints.closed_chain import manifold_resample
 

@@ -5,6 +5,19 @@ from pathlib import Path
 
 import numpy as np
 
+__all__ = ["save_figure", "plot_joint_trajectory"]
+
+
+def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
+    """Lay out ``fig``, write it to ``path`` (PNG at ``dpi``), close it; returns the path."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    p = Path(path)
+    fig.savefig(p, dpi=dpi)
+    plt.close(fig)
+    return p
+
 
 def plot_joint_trajectory(sol, out_dir: str | Path, name: str) -> list[Path]:
     """Joint positions and velocities of a Solution, sampled exactly, as ``<name>_joints.png``."""
@@ -23,8 +36,4 @@ def plot_joint_trajectory(sol, out_dir: str | Path, name: str) -> list[Path]:
     ax[1].plot(t, np.degrees(s["qd"]))
     ax[1].set_ylabel("joint rate [deg/s]")
     ax[1].set_xlabel("t [s]")
-    fig.tight_layout()
-    p = out / f"{name}_joints.png"
-    fig.savefig(p, dpi=120)
-    plt.close(fig)
-    return [p]
+    return [save_figure(fig, out / f"{name}_joints.png", dpi=120)]

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import save_figure
+
 __all__ = ["plot_time_distributions", "plot_warmstart_distributions"]
 
 
@@ -54,11 +56,7 @@ def plot_time_distributions(rows: list[dict], path, time_limit: float | None = N
         clock = "CPU" if rs and rs[0].get("clock") == "cpu" else "wall"
         _boxes(ax, groups, f"planning time per trial [s] ({clock})", limit=time_limit)
         ax.set_title(sc + ("" if time_limit is None else f" (dashed: time limit {time_limit:g} s)"), fontsize=10)
-    fig.tight_layout()
-    p = Path(path)
-    fig.savefig(p, dpi=120)
-    plt.close(fig)
-    return p
+    return save_figure(fig, path, dpi=120)
 
 
 def plot_warmstart_distributions(rows: list[dict], path) -> Path | None:
@@ -85,8 +83,4 @@ def plot_warmstart_distributions(rows: list[dict], path) -> Path | None:
                 groups.append((m, vals, len(mr)))
             _boxes(axes[k, c], groups, lab, log=log)
         axes[0, c].set_title(sc)
-    fig.tight_layout()
-    p = Path(path)
-    fig.savefig(p, dpi=120)
-    plt.close(fig)
-    return p
+    return save_figure(fig, path, dpi=120)

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import save_figure
+
 __all__ = ["trajectory_profiles", "plot_trajectory"]
 
 
@@ -106,11 +108,7 @@ def plot_trajectory(robot, scene, t, q, out_dir, name: str = "plan", constrained
             if r == 0:
                 ax.set_title(f"arm {arm.name} (dashed: joint limits; grey: regrasp)", fontsize=8)
         axes[-1, c].set_xlabel("t [s]")
-    fig.tight_layout()
-    p = out / f"{name}_joints.png"
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_figure(fig, out / f"{name}_joints.png"))
 
     prof = trajectory_profiles(robot, scene, t, q, cons, max_samples)
     fig, ax = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
@@ -131,9 +129,5 @@ def plot_trajectory(robot, scene, t, q, out_dir, name: str = "plan", constrained
     _shade_open(ax[1], tt, prof["constrained"])
     ax[0].set_title(f"{robot.name}" + (f" in {scene.name}" if scene is not None else "")
                     + f": min clearance {np.nanmin(prof['clearance_m']):+.3f} m", fontsize=9)
-    fig.tight_layout()
-    p = out / f"{name}_residual_clearance.png"
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_figure(fig, out / f"{name}_residual_clearance.png"))
     return paths

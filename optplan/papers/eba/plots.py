@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ...viz import save_figure
+
 __all__ = ["plot_case"]
 
 _TITLES = {"quintic": "5th-order polynomial", "ba": "BA", "eba": "EBA", "leader_follower": "leader-follower",
@@ -39,11 +41,7 @@ def plot_case(case_result, out_dir, prefix: str | None = None) -> list[Path]:
         ax.set_title(_TITLES.get(name, name), fontsize=9)
     axes[-1, 0].set_xlabel("t [s]")
     fig.suptitle(f"joint angular velocities ({case_result.case.replace('_', ' ')}; 14 joints, A then B)", fontsize=10)
-    fig.tight_layout()
-    p = out / f"{prefix}_joint_velocity.png"
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_figure(fig, out / f"{prefix}_joint_velocity.png"))
     fig, axes = plt.subplots(n, 1, figsize=(9, 2.0 * n), squeeze=False)
     for ax, name in zip(axes[:, 0], names):
         t, rpy = case_result.traces[name]
@@ -56,9 +54,5 @@ def plot_case(case_result, out_dir, prefix: str | None = None) -> list[Path]:
     axes[0, 0].legend(fontsize=8, loc="upper left")
     axes[-1, 0].set_xlabel("t [s]")
     fig.suptitle(f"base attitude (RPY, independent simulator; {case_result.case.replace('_', ' ')})", fontsize=10)
-    fig.tight_layout()
-    p = out / f"{prefix}_base_rpy.png"
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_figure(fig, out / f"{prefix}_base_rpy.png"))
     return paths

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ...viz import save_figure
+
 __all__ = ["write_figures"]
 
 
@@ -122,10 +124,4 @@ def write_figures(res, directory) -> list[Path]:
     return out
 
 
-def _save(fig, path: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    return path
+_save = save_figure
