@@ -221,7 +221,6 @@ def _plan_planner_options(planner: str, variant: str) -> tuple | None:
 
 
 def _cmd_plan(args) -> int:
-    from .model.robot import RobotModel
     from .pipeline import PipelineOptions, run_pipeline
     from .scene import Scene
     from .trials import TrialGenerator

@@ -32,8 +32,6 @@ def _one(case: str, transcription: str, cache: str, compiled=False) -> dict:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import time
 
-    import numpy as np
-
     from ..model.robot import RobotModel
     from ..papers import eba
 

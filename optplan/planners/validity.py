@@ -104,7 +104,8 @@ class ValidityChecker:
         for p in scene_pairs(robot, scene, self_collision=self_collision):
             groups[group_of[p.kind]].append(pair_indices(p, geo))
         if self.object is not None:
-            groups["fixed"] = [(g, self.fixed_id) for g in robot_geoms]
+            fixed_id = cast(int, self.fixed_id)   # set just above
+            groups["fixed"] = [(g, fixed_id) for g in robot_geoms]
         # order: object pairs first (the big box collides most), then obstacles, then self
         order = ["held", "fixed", "obstacle", "self"]
         self._pair_group = []

@@ -33,12 +33,11 @@ import numpy as np
 import pinocchio as pin
 
 from ...collision.checker import CollisionChecker
-from ...geometry.spatial import exp3, log3, rotation_angle, rpy_to_matrix
+from ...geometry.spatial import exp3, log3, rpy_to_matrix
 from ...geometry.splines import PiecewisePolynomial, quartic_spline, time_grid_from_path
 from ...model.floating import simulate_base
 from ...model.kinematics import Kinematics
 from ...model.robot import RobotModel
-from ...planners.base import PlanStatus
 from ...planners.spline_rrt import CoordinatedPlan, CoordinatedRRTStar, CoordinatedRRTStarOptions
 from ...problem.terms import Term, pose_residual, pose_residual_numeric
 from ...scene import Scene
