@@ -227,9 +227,7 @@ class OptProblem:
 
         Q, ok = manifold_resample(self.robot, path, self.N + 1, closed_chain)
         Tg = float(T) if T is not None else self.duration
-        def s_of_tau(tau):
-            return 10 * tau**3 - 15 * tau**4 + 6 * tau**5
-
+        s_of_tau = lambda tau: 10 * tau**3 - 15 * tau**4 + 6 * tau**5
         tau = np.linspace(0.0, 1.0, 2001)
         t = Tg * np.interp(np.linspace(0.0, 1.0, self.N + 1), s_of_tau(tau), tau)
         t[0], t[-1] = 0.0, Tg
