@@ -216,7 +216,7 @@ def main(argv=None) -> int:
 
     thr = task.thresholds
     n = len(res.t)
-    print(f"DSHDASR target transposition (DSHDASR paper): {n} waypoints, {task.duration:.0f} s at {task.rate:.0f} Hz, "
+    print(f"DSHDASR target transposition (seed 003): {n} waypoints, {task.duration:.0f} s at {task.rate:.0f} Hz, "
           f"obstacle margin '{args.margin}'")
     print(f"{'':40s} {'optplan arcs':>14s} {'DLS baseline':>14s} {'paper':>12s}")
     rows = [("max tip position error Arm-a [m]", "max_tip_position_error_a_m"),

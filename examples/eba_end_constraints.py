@@ -48,7 +48,7 @@ def main(argv=None) -> int:
     opts = {"eba": eba.EBAOptions.paper_end_constrained(),
             "nlp": eba.NLPOptions.end_constrained(n_intervals=args.nlp_intervals)}
     case = eba.run_case("end_constrained", methods, opts, robot=robot)
-    print("EBA robot, end constraints (EBA paper, Sec. 4.2) — final base RPY from the independent simulator")
+    print("EBA robot, end constraints (seed 004 Sec. 4.2) — final base RPY from the independent simulator")
     print(f"  goal: arm B's printed joints moved by {case.scenario.goal_adjustment_deg:.3f}° onto the start's "
           "closed-chain manifold")
     print(eba.table(case))

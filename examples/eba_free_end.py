@@ -56,7 +56,7 @@ def main(argv=None) -> int:
         scen = case.scenario
         vres = eba.run_eba(robot, scen, eba.EBAOptions.paper_free_end())
         variant = eba.evaluate(robot, vres, scen)
-    print("EBA robot, free ends (EBA paper, Sec. 4.1) — final base RPY from the independent simulator")
+    print("EBA robot, free ends (seed 004 Sec. 4.1) — final base RPY from the independent simulator")
     print(eba.table(case))
     if variant is not None:
         v = variant

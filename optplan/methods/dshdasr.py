@@ -1,4 +1,4 @@
-"""DSHDASR paper: coordinated collision-free target transposition by the discrete-serpentine dual-arm
+"""Seed 003: coordinated collision-free target transposition by the discrete-serpentine dual-arm
 space robot ``dshdasr`` with the space-arc equivalent kinematics, solved as one NLP per waypoint
 (Eq. 50) with IPOPT — and a damped least-squares baseline on the full joint model.
 

@@ -1,4 +1,4 @@
-"""DSHDASR paper (``dshdasr``): the classical baseline and the initial configuration.
+"""Seed 003 (``dshdasr``): the classical baseline and the initial configuration.
 
 * :func:`dls_track` — damped least squares on the joints of both arms (tips only, no obstacles).
 * :func:`arm_a_on_swivel`, :func:`initial_configuration` — joints holding the first desired tips

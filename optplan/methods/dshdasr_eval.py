@@ -1,4 +1,4 @@
-"""DSHDASR paper (``dshdasr``): evaluation of a joint trajectory and one whole case.
+"""Seed 003 (``dshdasr``): evaluation of a joint trajectory and one whole case.
 
 * :func:`evaluate` — tip errors by Pinocchio FK of the joints, coal distances on the link capsules
   (:func:`make_checker`, :func:`coal_centreline_distances`) and, for the arc planner, the

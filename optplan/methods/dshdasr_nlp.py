@@ -1,4 +1,4 @@
-"""DSHDASR paper (``dshdasr``): the space-arc NLP (Eq. 50), solved per waypoint with IPOPT.
+"""Seed 003 (``dshdasr``): the space-arc NLP (Eq. 50), solved per waypoint with IPOPT.
 
 * :class:`ArcPlanner` — the NLP ``min ||G1||² + ||G2||² + w ||X − X_prev||²`` (or its constrained
   form) subject to the arc-to-sphere distances ≥ d_sd, built once (desired poses, previous

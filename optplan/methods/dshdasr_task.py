@@ -1,4 +1,4 @@
-"""DSHDASR paper (``dshdasr``): the task definition and the robot's arc models.
+"""Seed 003 (``dshdasr``): the task definition and the robot's arc models.
 
 * :data:`PAPER` (the paper's figures), :data:`TABLE1_XF` (the five extra goals of Table 1),
   :func:`quintic` (Eq. 42).

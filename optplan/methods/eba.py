@@ -1,4 +1,4 @@
-"""EBA paper — base-attitude restoration of a dual-arm free-floating robot.
+"""Seed 004 — base-attitude restoration of a dual-arm free-floating robot.
 
 The paper's methods and optplan's NLP on the ``eba_ffsr`` model, for the paper's two simulations
 (Section 4.1 free ends, Section 4.2 end constraints):

@@ -1,4 +1,4 @@
-"""Shared pieces of the EBA paper methods (:mod:`optplan.methods.eba`): the two scenarios of the
+"""Shared pieces of the seed-004 methods (:mod:`optplan.methods.eba`): the two scenarios of the
 paper's Section 4, fast numeric kinematics for the ODE right-hand sides, the trajectory container
 every method returns, and the evaluation of a trajectory with the independent free-floating
 simulator (:func:`optplan.simulate_base`).

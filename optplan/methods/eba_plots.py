@@ -1,4 +1,4 @@
-"""Figures of the EBA examples in the style of the paper's Fig. 4/7 (joint angular velocities
+"""Figures of the seed-004 examples in the style of the paper's Fig. 4/7 (joint angular velocities
 per method; meeting instants marked) and Fig. 6/9 (base RPY per method), as PNG."""
 from __future__ import annotations
 

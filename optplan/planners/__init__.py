@@ -15,8 +15,6 @@ closed-chain flags, segments, stats) — see :mod:`optplan.planners.base`.
 """
 from __future__ import annotations
 
-from typing import Any
-
 from .base import CLOCKS, Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2, CBiRRT2Options
 from .closed_chain import ClosedChainKinematics, IKSettings, closure_error
@@ -38,8 +36,8 @@ def planner_names() -> list[str]:
             "ompl-projected-bkpiece1", "ompl-atlas-bkpiece1", "ompl-projected-kpiece1"]
 
 
-def make_planner(name: str, robot: Any, scene: Any, *, checker: ValidityChecker | None = None,
-                 kinematics: ClosedChainKinematics | None = None, **options: Any) -> Planner:
+def make_planner(name: str, robot, scene, *, checker: ValidityChecker | None = None,
+                 kinematics: ClosedChainKinematics | None = None, **options) -> Planner:
     """Build a planner by name; ``options`` are the fields of its options dataclass.
     ``checker``/``kinematics`` may be shared between planners of the same robot and scene."""
     key = name.lower()

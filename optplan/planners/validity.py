@@ -34,7 +34,6 @@ geometry instead of to a joint angle.
 from __future__ import annotations
 
 import logging
-from typing import cast
 
 import numpy as np
 import pinocchio as pin
@@ -53,7 +52,7 @@ class ValidityChecker:
     """
 
     def __init__(self, robot: RobotModel, scene: Scene | None = None, *, margin: float = 0.0,
-                 object_arm: str | None = None, self_collision: bool = True, broadphase: bool = True) -> None:
+                 object_arm: str | None = None, self_collision: bool = True, broadphase: bool = True):
         if robot.is_floating:
             raise ValueError("ValidityChecker: fixed-base robots only")
         if not (np.isfinite(margin) and margin >= 0.0):
@@ -86,20 +85,19 @@ class ValidityChecker:
         gm.removeAllCollisionPairs()
         groups: dict[str, list[tuple[int, int]]] = {"held": [], "fixed": [], "obstacle": [], "self": []}
         if self.object is not None:
-            held_id, fixed_id = cast(int, self.held_id), cast(int, self.fixed_id)   # set just above
             excl = set(self.object.exclude_links)
             for oid in obs_ids:
-                groups["held"].append((held_id, oid))
+                groups["held"].append((self.held_id, oid))
             for g in robot_geoms:
                 link = robot.model.frames[gm.geometryObjects[g].parentFrame].name
                 if link not in excl:
-                    groups["held"].append((g, held_id))
-                groups["fixed"].append((g, fixed_id))
+                    groups["held"].append((g, self.held_id))
+                groups["fixed"].append((g, self.fixed_id))
         for oid in obs_ids:
             for g in moving:
                 groups["obstacle"].append((g, oid))
         if self_collision:
-            groups["self"] = [cast(tuple[int, int], tuple(p)) for p in robot.collision_pairs]
+            groups["self"] = [tuple(p) for p in robot.collision_pairs]
         # order: object pairs first (the big box collides most), then obstacles, then self
         order = ["held", "fixed", "obstacle", "self"]
         self._pair_group = []
