@@ -86,7 +86,7 @@ def pose_to_vector(M: pin.SE3) -> np.ndarray:
     return np.asarray(pin.SE3ToXYZQUAT(M), dtype=float)
 
 
-def vector_to_pose(v: Any) -> pin.SE3:
+def vector_to_pose(v) -> pin.SE3:
     """Inverse of :func:`pose_to_vector`; a vector that is not 7 finite numbers or whose quaternion
     is zero is a ConfigurationError."""
     from ..spatial import quaternion_to_matrix
