@@ -176,8 +176,8 @@ def pair_budget(robot: RobotModel, disabled: set[frozenset], samples: int = 2000
     """Filter ``robot``'s self-collision pairs by the SRDF's per-arm ``disabled`` link pairs (in
     place: ``robot.collision_pairs`` and its coal collision data), except pairs that ``samples``
     random configurations (``seed``) bring into contact with *this* geometry: the SRDF was
-    computed on the vendor's meshes, and the capsules are fatter (measured: link3 against link7,
-    the hand and the fingers, in 0.2-0.6 % of random configurations). Returns the counts of each
+    computed on the vendor's meshes, and the capsules are fatter (see
+    docs/decisions/0011-paper-reproduction-grids-and-guards.md). Returns the counts of each
     stage (``geometries``, ``all_pairs``, ``joint_distance`` — after the three-joint rule and the
     neutral-contact rule —, ``srdf_disabled``, ``restored``: disabled by the SRDF but found in
     contact, ``kept``) and ``restored_pairs`` (geometry names)."""

@@ -79,7 +79,7 @@ class ValidityChecker:
     """
 
     def __init__(self, robot: RobotModel, scene: Scene | None = None, *, margin: float = 0.0,
-                 object_arm: str | None = None, self_collision: bool = True, broadphase: bool = True) -> None:
+                 object_arm: str | None = None, self_collision: bool = True, broadphase: bool = True):
         if robot.is_floating:
             raise ValueError("ValidityChecker: fixed-base robots only")
         if not (np.isfinite(margin) and margin >= 0.0):

@@ -3,7 +3,7 @@ the model behind :func:`optplan.problem.quartic.smooth_quartic`, which documents
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import casadi as ca
 import numpy as np
@@ -44,9 +44,11 @@ def _ee_wrapper(fun: Any, n: int) -> tuple[ca.Function, type]:
         raise ValueError("ee_velocity: expected 2 inputs (q, qdot) and >= 1 output, "
                          f"got {fun.n_in()} inputs, {fun.n_out()} outputs")
     _check_input_sizes(fun, n, "ee_velocity")
+    sym: Any
     for sym in (ca.SX, ca.MX):
         try:
-            q, qd = sym.sym("q", n), sym.sym("qd", n)
+            q: Any = sym.sym("q", n)
+            qd: Any = sym.sym("qd", n)
             out = fun(ca.reshape(q, *fun.size_in(0)), ca.reshape(qd, *fun.size_in(1)))
             out = out[0] if isinstance(out, (list, tuple)) else out
             return ca.Function("ee_velocity_col", [q, qd], [ca.vec(out)]), sym
@@ -67,7 +69,8 @@ def _jerk_matrix(r: int) -> np.ndarray:
 class _Problem:
     """Data of one smoothing problem (numpy side) and its CasADi transcription."""
 
-    def __init__(self, t0: float, h: np.ndarray, X: np.ndarray, v0, a0, vf, vmax, amax, ee, ee_max,
+    def __init__(self, t0: float, h: np.ndarray, X: np.ndarray, v0: Any, a0: Any, vf: Any, vmax: Any, amax: Any,
+                 ee: Any, ee_max: Any,
                  free: bool, cost_order: int, time_weight: float, smooth_weight: float, samples: int,
                  slots: bool = True) -> None:
         self.t0, self.X = t0, X
@@ -75,6 +78,8 @@ class _Problem:
         self.v0, self.a0, self.vf = v0, a0, vf
         self.lims = {"qdot_max": vmax, "qddot_max": amax}
         self.ee_max, self.free = ee_max, free
+        self.ee: Any
+        self.sym: Any
         self.ee, self.sym = (ee if ee is not None else (None, ca.SX))
         self.r, self.tw, self.sw, self.S = cost_order, time_weight, smooth_weight, samples
         self.h_ref = float(h.mean())
@@ -104,7 +109,7 @@ class _Problem:
         return quartic_spline(self.t0 + np.concatenate([[0.0], np.cumsum(h)]), self.X, self.v0, self.a0, self.vf)
 
     # -- symbolic NLP
-    def _segment_function(self, fracs, slot_shape: dict[str, tuple]):
+    def _segment_function(self, fracs: Any, slot_shape: dict[str, Any]) -> tuple[Any, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """Per-segment Function (p (5n), h, slot fractions) -> (limit constraints, smoothness integral).
 
         The limits are imposed at the fixed fractions ``fracs`` and at the slots. Also returns the
@@ -115,17 +120,17 @@ class _Problem:
         ps, hs = sym.sym("p", 5 * n), sym.sym("h")
         sl = sym.sym("slots", sum(shape[0] * shape[2] for shape in slot_shape.values()))
         P = [ps[k * n:(k + 1) * n] for k in range(5)]
-        g: list = []
-        lb: list = []
-        ub: list = []
+        g: list[Any] = []
+        lb: list[np.ndarray] = []
+        ub: list[np.ndarray] = []
 
-        def at(f):  # position, velocity, acceleration at fraction f of the segment
+        def at(f: Any) -> tuple[Any, Any, Any]:  # position, velocity, acceleration at fraction f of the segment
             q = P[0] + P[1] * f + P[2] * f**2 + P[3] * f**3 + P[4] * f**4
             v = (P[1] + 2 * P[2] * f + 3 * P[3] * f**2 + 4 * P[4] * f**3) / hs
             a = (2 * P[2] + 6 * P[3] * f + 12 * P[4] * f**2) / hs**2
             return q, v, a
 
-        def add(expr, lo, hi) -> int:
+        def add(expr: Any, lo: Any, hi: Any) -> int:
             first = sum(e.numel() for e in g)
             g.append(expr)
             lb.append(np.broadcast_to(np.asarray(lo, float), (expr.numel(),)))
@@ -142,7 +147,7 @@ class _Problem:
             if self.ee is not None:
                 add(ca.sumsqr(self.ee(q, v)), 0.0, self.ee_max**2)
             if self.ee_acc is not None:
-                add(ca.sumsqr(self.ee_acc(q, v, a)), 0.0, self.ee_acc_max**2)
+                add(ca.sumsqr(self.ee_acc(q, v, a)), 0.0, cast(float, self.ee_acc_max)**2)
         slot_rows = {name: np.full((shape[0], shape[2]), -1) for name, shape in slot_shape.items()}
         off = 0
         for name, shape in slot_shape.items():
@@ -159,12 +164,12 @@ class _Problem:
         J = sum(Qm[a_, b_] * ca.dot(P[a_], P[b_]) for a_ in range(5) for b_ in range(5) if Qm[a_, b_] != 0.0)
         J = J * hs ** (1 - 2 * self.r)
         fun = ca.Function("quartic_segment", [ps, hs, sl], [ca.vertcat(*g) if g else sym(0, 1), J])
-        def cat(v):
+        def cat(v: list[np.ndarray]) -> np.ndarray:
             return np.concatenate(v) if v else np.zeros(0)
 
         return fun, cat(lb), cat(ub), slot_rows
 
-    def build(self, h_fixed: np.ndarray):
+    def build(self, h_fixed: np.ndarray) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
         """NLP dict (x, p, f, g) and the bounds of g; p holds the slot fractions (see pack_slots).
 
         Built in MX from a per-segment Function mapped over the segments, which keeps the
@@ -181,11 +186,11 @@ class _Problem:
         n_sl = seg_fun.numel_in(2)
         psym = ca.MX.sym("p", n_sl * m)
         X = self.X
-        g: list = []
-        lb: list = []
-        ub: list = []
+        g: list[Any] = []
+        lb: list[np.ndarray] = []
+        ub: list[np.ndarray] = []
 
-        def add(expr, lo, hi) -> None:
+        def add(expr: Any, lo: Any, hi: Any) -> None:
             g.append(ca.vec(expr))
             size = expr.numel()
             lb.append(np.broadcast_to(lo, (size,)) if np.ndim(lo) == 0 else np.ravel(lo, order="F"))
@@ -244,7 +249,7 @@ class _Problem:
         return PiecewisePolynomial(self.t0 + np.concatenate([[0.0], np.cumsum(h)]), coef), h
 
     # -- numeric checks (independent of the NLP expressions)
-    def limit_violations(self, pp: PiecewisePolynomial, dense: int = 32) -> dict[str, tuple[np.ndarray, ...]]:
+    def limit_violations(self, pp: PiecewisePolynomial, dense: int = 32) -> dict[str, tuple[Any, ...]]:
         """{limit name: (excess, worst fraction, ratio)}, arrays (m, n) (joint limits) or (m, 1) (ee speed).
 
         ``excess`` = max over the segment minus the limit (in the limit's units), ``ratio`` = max / limit.
@@ -260,7 +265,7 @@ class _Problem:
             frac = np.linspace(0.0, 1.0, G)
             t0, h = pp.breakpoints[:-1], pp.durations
 
-            def speed_at(f):  # f (m, k) fractions -> (m, k) speeds
+            def speed_at(f: np.ndarray) -> np.ndarray:  # f (m, k) fractions -> (m, k) speeds
                 return self._ee_speed(pp, np.minimum(t0[:, None] + f * h[:, None], pp.tf).ravel()).reshape(f.shape)
 
             speed = speed_at(np.broadcast_to(frac, (m, G)))

@@ -106,15 +106,14 @@ class NLPOptions:
 
     @classmethod
     def free_end(cls, **overrides) -> NLPOptions:
-        """N = 20, one RK4 step per interval: measured final attitude 1.9e-7 rad (independent
-        simulator), IPOPT 0.5 s."""
+        """N = 20, one RK4 step per interval. See docs/decisions/0011-paper-reproduction-grids-and-guards.md."""
         return cls(**overrides)
 
     @classmethod
     def end_constrained(cls, **overrides) -> NLPOptions:
-        """N = 48: the closed chain holds at the knots only and drifts ∝ h⁴ between them
-        (max residual 2.5e-5 at N = 20, 1.4e-6 at N = 40, 6.5e-7 at N = 48, dense sampling);
-        warm-started from the same NLP on 12 intervals (``coarse_intervals``)."""
+        """N = 48: the closed chain holds at the knots only and drifts ∝ h⁴ between them;
+        warm-started from the same NLP on 12 intervals (``coarse_intervals``).
+        See docs/decisions/0011-paper-reproduction-grids-and-guards.md."""
         base = dict(n_intervals=48, coarse_intervals=12)
         base.update(overrides)
         return cls(**base)

@@ -406,7 +406,7 @@ class EndOrientation(Term):
 class InteriorVelocityLimits(Term):
     """``|q̇| ≤ scale · robot.velocity_limit`` [rad/s] at the interior fractions ``fractions`` of every
     interval (``JointVelocityLimits`` holds at the knots only; q̇ is quadratic between them and
-    overshot the limit by 60 % between knots without this term — measured)."""
+    overshoots the limit between knots without this term). See docs/decisions/0011-paper-reproduction-grids-and-guards.md."""
 
     fractions: tuple = (1 / 6, 1 / 3, 1 / 2, 2 / 3, 5 / 6)
     scale: float = 1.0
