@@ -74,7 +74,8 @@ class SegmentSpec:
     velocity_limit [rad/s]; margin [m]: clearance of every active collision pair;
     object_arm: the arm whose hand carries the scene's object (None: the first grasp's arm);
     activation [m], window [knots]: collision pairs closer than ``activation`` along the initial
-    guess are constrained at the knots within ``window`` (as :class:`CollisionAvoidance`);
+    guess are constrained at the knots within ``window`` (as :class:`CollisionAvoidance`; the
+    rest are checked by ``verify`` after the solve, see docs/decisions/0012-segment-nlp-rows.md);
     velocity_activation [fraction of the limit, 0-1]: a velocity control point's entry gets a row
     when the initial guess's exceeds this fraction of the joint's limit (0: every entry);
     relax_to_guess: a pair's margin is at most half the guess's exact clearance within ``window``
@@ -93,7 +94,7 @@ class SegmentSpec:
     velocity_limit: np.ndarray | None = None
     margin: float = 0.02
     object_arm: str | None = None
-    activation: float = 0.15
+    activation: float = 0.12
     window: int = 3
     velocity_activation: float = 0.5
     relax_to_guess: bool = True
