@@ -80,6 +80,7 @@ import pinocchio as pin
 
 from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from ..errors import ConfigurationError
+from ..geometry.spatial import vee_skew
 from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
@@ -117,7 +118,7 @@ def exp_coordinates(R: np.ndarray) -> np.ndarray:
     vanishes for a half turn about any axis ⊥ x) and is used whenever sin θ is too small for Eq. 14.
     """
     R = np.asarray(R, dtype=float)
-    v = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    v = vee_skew(R)
     s = float(np.linalg.norm(v))
     c = float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
     theta = math.atan2(s, c)                      # Eq. 12, robust form

@@ -60,13 +60,13 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from ..constraints.closed_chain import relative_pose_residual
 from ..model.robot import RobotModel
 from .assembly import scatter
 from .bspline import fit_interior, jerk_integral_reference, knot_values, rest_to_rest
 from .frame_terms import ClosedChain
 from .kernels import KernelCache
 from .solution import Solution
-from .terms import pose_residual
 from .transcription import quat_mul
 
 __all__ = ["FloatingKernels", "FloatingSegmentSpec", "FloatingSplineProblem", "spline_basis"]
@@ -153,7 +153,7 @@ class FloatingKernels(KernelCache):
         def build(name):
             Ra, pa = self.frame(self.robot.arm(cc.arm_a).ee_frame_id)
             Rb, pb = self.frame(self.robot.arm(cc.arm_b).ee_frame_id)
-            r, tr = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), np.array(rel.rotation), ca.DM(rel.translation))
+            r, tr = relative_pose_residual(Ra, pa, Rb, pb, rel)
             return ca.Function(name, [self._q], [ca.vertcat(r, tr)])
 
         return ("fb_cc", cc.arm_a, cc.arm_b, np.asarray(rel.homogeneous).round(15).tobytes()), build

@@ -12,10 +12,10 @@ from collections import OrderedDict
 import casadi as ca
 import numpy as np
 
+from ..constraints.closed_chain import relative_pose_residual
 from ..model.robot import RobotModel
 from ..model.symbolic import SymbolicKinematics
 from .frame_terms import ClosedChain
-from .terms import pose_residual
 
 __all__ = ["KernelCache", "geometry_points"]
 log = logging.getLogger(__name__)
@@ -220,7 +220,7 @@ class KernelCache:
         def build(name):
             Ra, pa = self.frame(self.robot.arm(cc.arm_a).ee_frame_id)
             Rb, pb = self.frame(self.robot.arm(cc.arm_b).ee_frame_id)
-            r, tr = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), np.array(rel.rotation), ca.DM(rel.translation))
+            r, tr = relative_pose_residual(Ra, pa, Rb, pb, rel)
             n, s = ca.SX.sym("n", 3), ca.SX.sym("s")  # unused: every kernel has the signature (q, n, s)
             return ca.Function(name, [self._q, n, s], [ca.vertcat(r, tr)])
 

@@ -188,14 +188,14 @@ class SplineSegmentProblem:
         rest-to-rest quintic time law in joint-space arc length, each knot projected onto the
         closed-chain manifold. Returns whether every projection converged."""
         from ..constraints.closed_chain import project_closed_chain
-        from ..geometry.splines import resample_path
+        from ..geometry.splines import quintic_time_law, resample_path
 
         path = np.asarray(path, float)
         s, _ = resample_path(path, 2)  # validates the path
         seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
         cum = np.r_[0.0, np.cumsum(seg)]
         tau = np.linspace(0.0, 1.0, self.N + 1)
-        sigma = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+        sigma = quintic_time_law(tau)[0]
         if cum[-1] > 0:
             target = sigma * cum[-1]
             Q = np.column_stack([np.interp(target, cum, path[:, j]) for j in range(path.shape[1])])
