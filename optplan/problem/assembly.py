@@ -13,22 +13,18 @@ __all__ = ["Assembly", "scatter"]
 _C = (1 / 6, 4 / 6, 1 / 6)  # ∂q(t_k)/∂P_{k+a}, a = 0, 1, 2
 
 
-class Assembly:
-    """Rows of a segment NLP and their exact Jacobian and Lagrangian Hessian, assembled from the
-    per-knot kernel derivatives: every entry of the NLP's matrices is a fixed linear combination
-    of kernel-derivative entries (the B-spline weights of the module docstring), applied as one
-    constant sparse matrix. Free control point ``p`` (3 ≤ p ≤ N−1), joint ``j`` is variable
-    ``(p − 3)·nj + j``."""
+class RowAssembly:
+    """The rows of an NLP in order: their expressions, bounds and named slices, and the blocks of
+    their Jacobian as ``(row, col, src, weight)`` triplets (``src`` −1: the constant 1) over the
+    MX nonzero vectors ``jsrc``. :class:`Assembly` (the joint B-spline segment NLP) and the
+    floating-base segment NLP's assembly build on it."""
 
-    def __init__(self, N: int, nj: int, nx: int):
-        self.N, self.nj, self.nx = N, nj, nx
+    def __init__(self) -> None:
         self.g, self.lbg, self.ubg, self.slices = [], [], [], {}
         self.ng = 0
-        self.points: dict = {}  # name -> (rows per knot, knots) of a kernel family, None for linear rows
-        self.jsrc, self.hsrc = [], []  # MX nonzero vectors
-        self.j_off = self.h_off = 0
+        self.jsrc: list = []  # MX nonzero vectors
+        self.j_off = 0
         self.jt: list[np.ndarray] = []  # (row, col, src, weight) blocks; src −1: constant 1
-        self._h_pending: list[tuple] = []  # per family: what its Hessian block needs (finish)
 
     def _rows(self, name, expr, lo, hi):
         n = expr.shape[0]
@@ -36,9 +32,28 @@ class Assembly:
         self.lbg.append(np.broadcast_to(np.asarray(lo, float), (n,)).copy())
         self.ubg.append(np.broadcast_to(np.asarray(hi, float), (n,)).copy())
         self.slices[name] = slice(self.ng, self.ng + n)
-        self.points[name] = None  # rows per point: set by family
         self.ng += n
         return self.ng - n
+
+
+class Assembly(RowAssembly):
+    """Rows of a segment NLP and their exact Jacobian and Lagrangian Hessian, assembled from the
+    per-knot kernel derivatives: every entry of the NLP's matrices is a fixed linear combination
+    of kernel-derivative entries (the B-spline weights of the module docstring), applied as one
+    constant sparse matrix. Free control point ``p`` (3 ≤ p ≤ N−1), joint ``j`` is variable
+    ``(p − 3)·nj + j``."""
+
+    def __init__(self, N: int, nj: int, nx: int):
+        super().__init__()
+        self.N, self.nj, self.nx = N, nj, nx
+        self.points: dict = {}  # name -> (rows per knot, knots) of a kernel family, None for linear rows
+        self.hsrc: list = []  # MX nonzero vectors
+        self.h_off = 0
+        self._h_pending: list[tuple] = []  # per family: what its Hessian block needs (finish)
+
+    def _rows(self, name, expr, lo, hi):
+        self.points[name] = None  # rows per point: set by family
+        return super()._rows(name, expr, lo, hi)
 
     def linear(self, name, expr, D: np.ndarray, lo, hi, select: np.ndarray | None = None):
         """Rows ``vec(P Dᵀ)`` (D: rows over the N+3 control points), constant Jacobian; with

@@ -71,6 +71,17 @@ def knot_values(P: np.ndarray, h: float) -> dict[str, np.ndarray]:
     return {"q": M["q"] @ P, "qd": M["qd"] @ P / h, "qdd": M["qdd"] @ P / h**2, "jerk": M["jerk"] @ P / h**3}
 
 
+def check_knot_guess(q, N: int, nj: int) -> np.ndarray:
+    """``q`` as an (N+1) × nj array of finite knot configurations [rad], or a ValueError naming
+    what ``set_initial`` got."""
+    Q = np.asarray(q, float)
+    if Q.shape != (N + 1, nj):
+        raise ValueError(f"set_initial: expected ({N + 1}, {nj}) knot configurations, got shape {Q.shape}")
+    if not np.all(np.isfinite(Q)):
+        raise ValueError("set_initial: the initial guess has non-finite entries")
+    return Q
+
+
 def fit_interior(Q: np.ndarray, P_start: np.ndarray, P_end: np.ndarray) -> np.ndarray:
     """Interior control points ``P_3 … P_{N−1}`` ((N−3) × nj) whose knot values are closest (least
     squares) to ``Q`` ((N+1) × nj) at the interior knots 1 … N−1, the end points being fixed."""

@@ -62,8 +62,8 @@ import pinocchio as pin
 
 from ..constraints.closed_chain import relative_pose_residual
 from ..model.robot import RobotModel
-from .assembly import scatter
-from .bspline import fit_interior, jerk_integral_reference, knot_values, rest_to_rest
+from .assembly import RowAssembly, scatter
+from .bspline import check_knot_guess, fit_interior, jerk_integral_reference, knot_values, rest_to_rest
 from .frame_terms import ClosedChain
 from .kernels import KernelCache
 from .solution import Solution
@@ -211,7 +211,7 @@ class FloatingKernels(KernelCache):
 
 
 # --------------------------------------------------------------------------- assembly
-class _LocalAssembly:
+class _LocalAssembly(RowAssembly):
     """Rows of the NLP from kernels whose inputs are fixed linear combinations of the decision
     variables ``x`` (nx) and parameters ``p``: input ``i`` of instance ``t`` is
     ``Σ w · xp[slot[t, s]]`` over the template entries ``(i, s, w)`` of its family (``xp = [x; p]``;
@@ -219,20 +219,9 @@ class _LocalAssembly:
     ``Wᵀ H W`` as constant sparse scatters of the mapped kernel derivatives."""
 
     def __init__(self, nx: int, np_: int):
+        super().__init__()
         self.nx, self.np = nx, np_
-        self.g, self.lbg, self.ubg, self.slices = [], [], [], {}
-        self.ng = 0
-        self.jt, self.jsrc, self.j_off = [], [], 0
         self._fams = []
-
-    def _rows(self, name, expr, lo, hi):
-        n = expr.shape[0]
-        self.g.append(expr)
-        self.lbg.append(np.broadcast_to(np.asarray(lo, float), (n,)).copy())
-        self.ubg.append(np.broadcast_to(np.asarray(hi, float), (n,)).copy())
-        self.slices[name] = slice(self.ng, self.ng + n)
-        self.ng += n
-        return self.ng - n
 
     def linear(self, name, xp, A: np.ndarray, lo, hi):
         """Rows ``A @ [x; p]`` (A: rows × (nx + np), dense or sparse)."""
@@ -442,12 +431,7 @@ class FloatingSplineProblem:
     def set_initial(self, q) -> None:
         """Initial guess from knot configurations ``q`` ((N+1) × nj [rad]); the base attitude and
         twists are initialised by integrating the guess (RK4, as the NLP)."""
-        Q = np.asarray(q, float)
-        if Q.shape != (self.N + 1, self.robot.nj):
-            raise ValueError(f"set_initial: expected ({self.N + 1}, {self.robot.nj}) knot configurations, "
-                             f"got shape {Q.shape}")
-        if not np.all(np.isfinite(Q)):
-            raise ValueError("set_initial: the initial guess has non-finite entries")
+        Q = check_knot_guess(q, self.N, self.robot.nj)
         self._X0 = np.clip(fit_interior(Q, self.P_start, self.P_end), self.lower, self.upper)
         self._B0 = self._integrate(self._X0)
 

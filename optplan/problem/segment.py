@@ -47,7 +47,7 @@ import numpy as np
 from ..model.robot import RobotModel
 from ..scene import Scene
 from .assembly import Assembly
-from .bspline import fit_interior, jerk_integral_reference, knot_values, rest_to_rest
+from .bspline import check_knot_guess, fit_interior, jerk_integral_reference, knot_values, rest_to_rest
 from .collision_term import CollisionAvoidance, _box_vertices, witness_plane
 from .frame_terms import ClosedChain
 from .kernels import KernelCache, geometry_points
@@ -172,12 +172,7 @@ class SplineSegmentProblem:
                 data = self.robot.model.createData()
                 for k in range(1, self.N):
                     q[k] = project_closed_chain(self.robot, q[k], closed_chain, data=data).q
-        Q = np.asarray(q, float)
-        if Q.shape != (self.N + 1, self.robot.nj):
-            raise ValueError(f"set_initial: expected ({self.N + 1}, {self.robot.nj}) knot configurations, "
-                             f"got shape {Q.shape}")
-        if not np.all(np.isfinite(Q)):
-            raise ValueError("set_initial: the initial guess has non-finite entries")
+        Q = check_knot_guess(q, self.N, self.robot.nj)
         X = fit_interior(Q, self.P_start, self.P_end)
         self._X0 = np.clip(X, self.lower, self.upper)
         self._lam = None
