@@ -19,7 +19,11 @@ Every node is ON the constraint manifold by construction, never projected:
   accuracy (~1e-14), which is how ORMSD / PRMSD are evaluated "along the path".
 
 RRT variant: goal-biased (``goal_bias``) single tree; the goal is reached when a steer toward it
-lands on it (same branch). RRT-Connect: two trees, extend one toward the sample, connect the
+lands on it (same branch). ``OCRRTOptions.paper()`` is the paper's Algorithm 2 exactly; the
+default single tree adds goal attempts from new nodes, samples around the goal's parameters on
+the goal's branch (the few nodes past an obstacle next to the goal grow), goal attempts from the
+nodes grown toward them, and bisection of fast but continuous steps next to singular wrists
+(see :class:`OCRRTOptions`). RRT-Connect: two trees, extend one toward the sample, connect the
 other greedily to the new node.
 """
 from __future__ import annotations
@@ -94,7 +98,7 @@ class OCRRTOptions:
     refine_depth: int | None = None
     extend_to_sample: bool = False
     goal_turn_joints: tuple = ()
-    goal_region_bias: float = 0.2
+    goal_region_bias: float = 0.3
     goal_region_radius: float = 1.0
     goal_from_region: bool = True
     bridge_bias: float = 0.0
