@@ -126,12 +126,13 @@ def _task(robot, scene_name):
     return sc, con, mf, qs, qg
 
 
-@pytest.mark.parametrize("scene_name", ["oc_industrial_1", "oc_tabletop"])
-def test_oc_rrt_nodes_and_edges_on_manifold(pr2, scene_name):
+@pytest.mark.parametrize("scene_name,connect", [("oc_industrial_1", True), ("oc_tabletop", True),
+                                                ("oc_industrial_1", False), ("oc_tabletop", False)])
+def test_oc_rrt_nodes_and_edges_on_manifold(pr2, scene_name, connect):
     from optplan.planners.oc_rrt import OCRRT, OCRRTOptions
 
     sc, con, mf, qs, qg = _task(pr2, scene_name)
-    pl = OCRRT(pr2, sc, con, OCRRTOptions(connect=True), manifold=mf)
+    pl = OCRRT(pr2, sc, con, OCRRTOptions(connect=connect), manifold=mf)
     res = pl.plan(qs, qg, time_limit=60.0, seed=1)
     assert res.success, res.message
     assert np.array_equal(res.path[0], qs) and np.array_equal(res.path[-1], qg)
@@ -198,10 +199,85 @@ def test_bad_input(pr2):
         OCRRTOptions(step=-1.0)
     with pytest.raises(ValueError, match="goal_from_new"):
         OCRRTOptions(goal_from_new="yes")
+    for bad in (dict(variant="fast"), dict(refine_depth=-1), dict(goal_region_bias=1.5), dict(bridge_sigma=0.0),
+                dict(goal_turn_joints="l_wrist_roll_joint"), dict(extend_to_sample=1)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            OCRRTOptions(**bad)
     with pytest.raises(ConfigurationError, match="mode"):
         DualArmOrientationConstraint(pr2, "sideways", {})
     with pytest.raises(ConfigurationError, match="R_hands"):
         DualArmOrientationConstraint(pr2, "open", {"left": np.eye(3)})
+
+
+def test_paper_variant_ignores_the_improvements(pr2):
+    """variant="paper" is Algorithm 2 whatever else is set: same tree node for node."""
+    from optplan.planners.oc_rrt import OCRRT, OCRRTOptions
+
+    sc, con, mf, qs, qg = _task(pr2, "oc_industrial_2")
+    a = OCRRTOptions.paper(max_iterations=150)
+    b = OCRRTOptions(connect=False, variant="paper", max_iterations=150, refine_depth=5, goal_region_bias=0.9,
+                     extend_to_sample=True, bridge_bias=0.5)
+    assert a.variant == "paper" and not a.connect and not a.goal_from_new
+    ra, rb = (OCRRT(pr2, sc, con, o, manifold=mf).plan(qs, qg, time_limit=60, seed=3) for o in (a, b))
+    assert ra.stats["nodes"] == rb.stats["nodes"] and ra.stats["refinements"] == rb.stats["refinements"] == 0
+    assert ra.status == rb.status
+
+
+def test_refinement_passes_fast_motion_but_not_branch_jumps(pr2):
+    """Bisection accepts a continuous motion whose joint step exceeds the bound at the coarse
+    step (every bisected step within the bound), and rejects a jump that does not shrink with
+    the parameter step (another branch)."""
+    from optplan.planners.oc_rrt import OCRRT, OCRRTOptions
+
+    sc, con, mf, qs, qg = _task(pr2, "oc_tabletop")
+    pl = OCRRT(pr2, sc, con, OCRRTOptions(connect=False, max_joint_step=0.02), manifold=mf)
+    st = {k: 0 for k in ("ik_rejects", "jump_rejects", "refinements", "collisions")}
+    ps, pg = mf.params(qs), mf.params(qg)
+    pm = ps + (0.05 / np.abs(pg - ps).max()) * (pg - ps)      # 0.05 rad of parameter motion
+    assert np.abs(mf.complete(pm, ref=qs) - qs).max() > 0.02   # too far for one step
+    assert pl._advance(qs, ps, pm, 0, False, st) is None and st["jump_rejects"] == 1
+    trace = []
+    x = pl._advance(qs, ps, pm, 6, False, st, trace)
+    assert x is not None and st["refinements"] > 0 and trace
+    seq = [qs, *trace, x]
+    assert max(float(np.abs(b - a).max()) for a, b in zip(seq[:-1], seq[1:])) <= 0.02
+    assert np.abs(x - mf.complete(pm, ref=qs)).max() < 1e-12
+    far = qs.copy()
+    far[pr2.joint_names.index("l_wrist_flex_joint")] += 0.5   # no branch near: the jump stays
+    st["jump_rejects"] = 0
+    assert pl._advance(far, ps, ps, 6, False, st) is None and st["jump_rejects"] > 0
+
+
+def test_goal_turn_equivalents(pr2):
+    from optplan.errors import ConfigurationError
+    from optplan.planners.oc_rrt import OCRRT, OCRRTOptions
+
+    sc, con, mf, qs, qg = _task(pr2, "oc_passageway")
+    names = ("l_forearm_roll_joint", "r_wrist_roll_joint")
+    pl = OCRRT(pr2, sc, con, OCRRTOptions(connect=False, goal_turn_joints=names), manifold=mf)
+    j = [pr2.joint_names.index(n) for n in names]
+    q = qg.copy()
+    q[j[0]] += 2 * np.pi
+    q[j[1]] -= 2 * np.pi
+    assert list(pl._turns(q, qg)) == [1, -1]
+    assert pl._turns(q + 1e-6, qg) is None
+    q2 = qg.copy()
+    q2[pr2.joint_names.index("l_wrist_roll_joint")] += 2 * np.pi          # not a declared turn joint
+    assert pl._turns(q2, qg) is None
+    with pytest.raises(ConfigurationError, match="goal_turn_joints"):
+        OCRRT(pr2, sc, con, OCRRTOptions(goal_turn_joints=("no_such_joint",)), manifold=mf)
+
+
+@pytest.mark.slow
+def test_single_tree_oc_rrt_success_on_the_narrow_passageway(pr2):
+    """The single-tree OC-RRT (default improvements) on the closed-chain scene where the paper's
+    Algorithm 2 succeeds half of the time: >= 9 of 10 seeded queries within 10 s CPU."""
+    from optplan.planners.oc_rrt import OCRRT, OCRRTOptions
+
+    sc, con, mf, qs, qg = _task(pr2, "oc_passageway")
+    pl = OCRRT(pr2, sc, con, OCRRTOptions(connect=False), manifold=mf)
+    ok = sum(pl.plan(qs, qg, time_limit=10.0, seed=100 + s, clock="cpu").success for s in range(10))
+    assert ok >= 9
 
 
 @pytest.mark.slow

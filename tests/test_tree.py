@@ -122,7 +122,8 @@ def test_pr2_planners_unchanged_on_fixed_seeds(scene_name, planner, seed):
         pl = CBiRRT2(s["robot"], s["scene"], CBiRRT2Options(max_iterations=150), checker=s["checker"],
                      constraint=s["constraint"])
     else:
-        o = OCRRTOptions(connect=True, max_iterations=600) if planner == "oc_rrt_connect" else \
-            OCRRTOptions(connect=False, goal_from_new=True, max_iterations=600)
+        before = dict(refine_depth=0, goal_region_bias=0.0, max_iterations=600)   # the options of then
+        o = OCRRTOptions(connect=True, **before) if planner == "oc_rrt_connect" else \
+            OCRRTOptions(connect=False, goal_from_new=True, **before)
         pl = OCRRT(s["robot"], s["scene"], s["constraint"], o, checker=s["checker"], manifold=s["manifold"])
     _check(pl.plan(s["q_start"], s["q_goal"], time_limit=100, seed=seed), GOLDEN_PR2[(scene_name, planner, seed)])

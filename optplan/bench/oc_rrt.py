@@ -34,6 +34,8 @@ log = logging.getLogger(__name__)
 SCENES = ("oc_industrial_1", "oc_industrial_2", "oc_tabletop", "oc_passageway")
 OMPL_PEER = "ompl-projected-bkpiece1"   # the strongest OMPL constrained configuration we found (peers.md)
 PLANNERS = ("oc_rrt", "oc_rrt_connect", "cbirrt", OMPL_PEER)
+#: also accepted: "oc_rrt_paper" (the paper's single-tree Algorithm 2, OCRRTOptions.paper())
+EXTRA_PLANNERS = ("oc_rrt_paper",)
 
 
 @dataclass
@@ -99,6 +101,9 @@ def setup_scene(scene_name: str, planners) -> dict:
     for p in planners:
         if p == "oc_rrt":
             pl[p] = OCRRT(robot, scene, con, OCRRTOptions(connect=False), checker=ck, manifold=mf)
+        elif p == "oc_rrt_paper":
+            pl[p] = OCRRT(robot, scene, con, OCRRTOptions.paper(), checker=ck, manifold=mf)
+            pl[p].name = p
         elif p == "oc_rrt_connect":
             pl[p] = OCRRT(robot, scene, con, OCRRTOptions(connect=True), checker=ck, manifold=mf)
         elif p == "cbirrt":
@@ -109,7 +114,7 @@ def setup_scene(scene_name: str, planners) -> dict:
 
             pl[p] = make_ompl_peer(p, robot, scene, checker=ck, constraint=con)
         else:
-            raise ValueError(f"unknown planner {p!r}; expected one of {PLANNERS}")
+            raise ValueError(f"unknown planner {p!r}; expected one of {PLANNERS + EXTRA_PLANNERS}")
     out = {"robot": robot, "scene": scene, "constraint": con, "manifold": mf, "q_start": q_start,
            "q_goal": q_goal, "checker": ck, "planners": pl}
     _CACHE[key] = out
@@ -200,7 +205,8 @@ def summarize(rows: list[dict]) -> dict:
     scenes: dict = {}
     for sc in sorted({r["scene"] for r in rows}, key=lambda x: (SCENES.index(x) if x in SCENES else 99, x)):
         e = {}
-        for p in sorted({r["planner"] for r in rows if r["scene"] == sc}, key=lambda x: (PLANNERS.index(x) if x in PLANNERS else 99, x)):
+        order = PLANNERS[:1] + EXTRA_PLANNERS + PLANNERS[1:]
+        for p in sorted({r["planner"] for r in rows if r["scene"] == sc}, key=lambda x: (order.index(x) if x in order else 99, x)):
             pr = [r for r in rows if r["scene"] == sc and r["planner"] == p]
             ok = [r for r in pr if r["success"]]
             nodes = [r["nodes"] for r in ok if r.get("nodes") is not None]
@@ -219,7 +225,11 @@ def summarize(rows: list[dict]) -> dict:
                    default=None)
         ratios[sc] = {p: (d["median_time_s"] / best if (best and d["median_time_s"] is not None) else None)
                       for p, d in e.items() if not p.startswith("oc_rrt")}
-    return {"scenes": scenes, "speedup_of_best_oc_rrt": ratios}
+    per = {sc: {v: {p: (d["median_time_s"] / e[v]["median_time_s"] if d["median_time_s"] is not None else None)
+                    for p, d in e.items() if not p.startswith("oc_rrt")}
+                for v in e if v.startswith("oc_rrt") and e[v]["median_time_s"]}
+           for sc, e in scenes.items()}
+    return {"scenes": scenes, "speedup_of_best_oc_rrt": ratios, "speedup_of_each_oc_rrt": per}
 
 
 def format_table(summ: dict) -> str:
@@ -231,9 +241,9 @@ def format_table(summ: dict) -> str:
             lines.append(f"{sc:18s} {p:26s} {d['success_rate']:8.2f} {fm(d['median_time_s'], '12.3f')} "
                          f"{fm(d['median_nodes'], '7.0f')} {fm(d['max_ormsd_rad'], '15.1e')} {fm(d['max_prmsd_m'], '13.1e')} "
                          f"{d['paths_with_dense_collisions']:8d}")
-        r = summ["speedup_of_best_oc_rrt"].get(sc, {})
-        if r:
-            lines.append("    median time of peer / best OC-RRT: " + ", ".join(f"{p} {fm(v, '.1f')}x" for p, v in r.items()))
+        for v, r in summ.get("speedup_of_each_oc_rrt", {}).get(sc, {}).items():
+            if r:
+                lines.append(f"    median time of peer / {v}: " + ", ".join(f"{p} {fm(x, '.1f')}x" for p, x in r.items()))
     lines.append("hit@0.05: successful paths with a configuration in collision when re-checked every 0.05 rad "
                  "of the dense path (collisions between the configurations the planner checked)")
     lines.append("targets: ORMSD, PRMSD <= 1e-9 along the path; success >= 0.95 per scene; OC-RRT faster than "
@@ -277,7 +287,8 @@ def add_arguments(p) -> None:
     """Command-line options of ``optplan bench oc-rrt`` and ``examples/oc_rrt.py``."""
     p.add_argument("--scenes", default=",".join(SCENES), help="comma-separated scene names")
     p.add_argument("--planners", default=",".join(PLANNERS),
-                   help="comma-separated: oc_rrt, oc_rrt_connect, cbirrt, ompl-<projected|atlas|tb>[-<planner>]")
+                   help="comma-separated: oc_rrt, oc_rrt_connect, cbirrt, ompl-<projected|atlas|tb>[-<planner>], "
+                        "oc_rrt_paper (the paper's single-tree Algorithm 2)")
     p.add_argument("--trials", type=int, default=20, help="seeded trials per scene and planner (paper: 20)")
     p.add_argument("--time-limit", type=float, default=20.0, help="per query [s]")
     p.add_argument("--seed", type=int, default=0)
@@ -322,6 +333,9 @@ def command(args) -> int:
         for sc, r in summ["speedup_of_best_oc_rrt"].items():
             for p, v in r.items():
                 js["scenes"][sc][p]["median_time_ratio_to_best_oc_rrt"] = v
+        for sc, per in summ["speedup_of_each_oc_rrt"].items():
+            for v, r in per.items():
+                js["scenes"][sc][v]["peer_median_time_ratios"] = r
         Path(args.json).write_text(json.dumps(js, indent=2))
         print(f"wrote {args.json}")
     if args.plot:

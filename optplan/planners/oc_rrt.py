@@ -19,7 +19,11 @@ Every node is ON the constraint manifold by construction, never projected:
   accuracy (~1e-14), which is how ORMSD / PRMSD are evaluated "along the path".
 
 RRT variant: goal-biased (``goal_bias``) single tree; the goal is reached when a steer toward it
-lands on it (same branch). RRT-Connect: two trees, extend one toward the sample, connect the
+lands on it (same branch). ``OCRRTOptions.paper()`` is the paper's Algorithm 2 exactly; the
+default single tree adds goal attempts from new nodes, samples around the goal's parameters on
+the goal's branch (the few nodes past an obstacle next to the goal grow), goal attempts from the
+nodes grown toward them, and bisection of fast but continuous steps next to singular wrists
+(see :class:`OCRRTOptions`). RRT-Connect: two trees, extend one toward the sample, connect the
 other greedily to the new node.
 """
 from __future__ import annotations
@@ -30,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ConfigurationError
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .orientation import DualArmOrientationConstraint, OrientationManifold
 from .tree import Tree
@@ -66,8 +71,59 @@ class OCRRTOptions:
     max_iterations: int = 0
     #: Clearance counted as contact [m].
     margin: float = 0.0
+    #: ``"improved"`` or ``"paper"``: the paper's Algorithm 2 exactly (goal-biased steering from the node nearest
+    #: the goal only; ``goal_from_new``, ``refine_depth``, ``extend_to_sample``, ``goal_turn_joints`` and the
+    #: goal region are then ignored); :meth:`paper` builds it.
+    variant: str = "improved"
+    #: Bisections of a checked step that moves a joint more than ``max_joint_step`` before it is rejected [count]:
+    #: a continuous but fast motion (wrist rolls next to a singular wrist) passes, a jump to another IK branch does
+    #: not shrink and is still rejected; 0: reject at once (the paper); None: 3 for the single tree, 0 for
+    #: RRT-Connect.
+    refine_depth: int | None = None
+    #: Single tree: steer toward the sample until it is reached or blocked (RRT-Ext-Connect) instead of one step.
+    extend_to_sample: bool = False
+    #: Names of continuous joints whose ``q + 2πk`` is the same physical configuration; the single tree then also
+    #: accepts the goal's equivalents on them and the path ends at the one reached (``stats["goal_turns"]``).
+    #: Empty: the exact goal.
+    goal_turn_joints: tuple = ()
+    #: Single tree: probability that a sample is drawn within ``goal_region_radius`` of the goal's parameters and
+    #: completed on the goal's IK branch [-].
+    goal_region_bias: float = 0.3
+    #: Half-width of the goal region, max-norm over the parameters [rad].
+    goal_region_radius: float = 1.0
+    #: Steer to the goal from every node grown toward a goal-region sample.
+    goal_from_region: bool = True
+    #: Probability of a bridge-test sample (both ends in collision, midpoint free: narrow passages) [-].
+    bridge_bias: float = 0.0
+    #: Spread of the bridge test's second parameter vector (Gaussian) [rad].
+    bridge_sigma: float = 0.2
+
+    @classmethod
+    def paper(cls, **kw) -> OCRRTOptions:
+        """The paper's single-tree OC-RRT (Algorithm 2): goal-biased steering from the node
+        nearest the goal, one OCSteer step toward each sample, the exact goal configuration."""
+        return cls(connect=False, variant="paper", goal_from_new=False, **kw)
 
     def __post_init__(self):
+        if self.variant not in ("improved", "paper"):
+            raise ValueError(f"OCRRTOptions.variant: expected 'improved' or 'paper', got {self.variant!r}")
+        if self.refine_depth is not None and not (isinstance(self.refine_depth, int) and 0 <= self.refine_depth <= 20):
+            raise ValueError(f"OCRRTOptions.refine_depth: expected an int in [0, 20], got {self.refine_depth!r}")
+        for name in ("goal_region_bias", "bridge_bias"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and 0.0 <= v <= 1.0):
+                raise ValueError(f"OCRRTOptions.{name}: expected a probability in [0, 1], got {v!r}")
+        for name in ("goal_region_radius", "bridge_sigma"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"OCRRTOptions.{name}: expected a positive number of radians, got {v!r}")
+        if not isinstance(self.goal_from_region, bool):
+            raise ValueError(f"OCRRTOptions.goal_from_region: expected True/False, got {self.goal_from_region!r}")
+        if not isinstance(self.extend_to_sample, bool):
+            raise ValueError(f"OCRRTOptions.extend_to_sample: expected True/False, got {self.extend_to_sample!r}")
+        if isinstance(self.goal_turn_joints, str) or not all(isinstance(n, str) for n in self.goal_turn_joints):
+            raise ValueError(f"OCRRTOptions.goal_turn_joints: expected a tuple of joint names, got {self.goal_turn_joints!r}")
+        object.__setattr__(self, "goal_turn_joints", tuple(self.goal_turn_joints))
         for name in ("step", "collision_step", "max_joint_step", "reach_tolerance"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -102,6 +158,21 @@ class OCRRT(Planner):
         self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
         self.name = "oc_rrt_connect" if self.options.connect else "oc_rrt"
         self._valid = self.checker.is_valid
+        o = self.options
+        paper = o.variant == "paper"
+        self._refine = 0 if paper else (o.refine_depth if o.refine_depth is not None else (0 if o.connect else 3))
+        self._extend = o.extend_to_sample and not paper
+        self._goal_from_new = o.goal_from_new and not paper
+        self._goal_region = o.goal_region_bias > 0 and not paper
+        self._bridge = o.bridge_bias > 0 and not paper
+        self._goal_from_region = self._goal_region and o.goal_from_region
+        self._from_goal_region = False
+        names = list(robot.joint_names)
+        unknown = [n for n in o.goal_turn_joints if n not in names]
+        if unknown:
+            raise ConfigurationError(f"OCRRTOptions.goal_turn_joints: {unknown} are not joints of {robot.name!r} "
+                                     f"(joints: {names})")
+        self._turn_idx = np.array([] if paper else [names.index(n) for n in o.goal_turn_joints], dtype=int)
 
     # ------------------------------------------------------------------ manifold moves
     def sample(self, rng, st) -> tuple[np.ndarray, np.ndarray] | None:
@@ -116,23 +187,77 @@ class OCRRT(Planner):
             st["sample_failures"] += 1
         return None
 
+    def _advance(self, q, pa, pb, depth: int, check: bool, st, trace: list | None = None) -> np.ndarray | None:
+        """The configuration at parameters ``pb`` followed from ``q`` (at ``pa``) on q's branch:
+        rejected when the parameters have no solution, when a joint moves more than
+        ``max_joint_step`` (after up to ``depth`` bisections of the parameter step) or, with
+        ``check``, when it (or a bisection point) is in collision. None when rejected.
+        ``trace`` receives the bisection points, in order."""
+        o = self.options
+        x = self.manifold.complete(pb, ref=q)
+        if x is None:
+            st["ik_rejects"] += 1
+            return None
+        if float(np.abs(x - q).max()) > o.max_joint_step:
+            if depth <= 0:
+                st["jump_rejects"] += 1
+                return None
+            st["refinements"] += 1
+            pm = 0.5 * (pa + pb)
+            y = self._advance(q, pa, pm, depth - 1, check, st, trace)
+            if y is None:
+                return None
+            if trace is not None:
+                trace.append(y)
+            return self._advance(y, pm, pb, depth - 1, check, st, trace)
+        if check and not self._valid(x):
+            st["collisions"] += 1
+            return None
+        return x
+
+    def _goal_region_sample(self, rng, st, p_goal, q_goal):
+        """A sample within ``goal_region_radius`` of the goal's parameters, on the goal's branch."""
+        mf, r = self.manifold, self.options.goal_region_radius
+        for _ in range(self.options.max_sample_tries):
+            st["samples"] += 1
+            p = np.clip(p_goal + rng.uniform(-r, r, p_goal.size), mf.lower, mf.upper)
+            q = mf.complete(p, ref=q_goal)
+            if q is not None:
+                return q, p
+            st["sample_failures"] += 1
+        return None
+
+    def _bridge_sample(self, rng, st):
+        """Bridge test: the midpoint of two colliding configurations ``bridge_sigma`` apart, if free."""
+        mf, o = self.manifold, self.options
+        for _ in range(o.max_sample_tries):
+            s1 = self.sample(rng, st)
+            if s1 is None or self._valid(s1[0]):
+                continue
+            p2 = np.clip(s1[1] + rng.normal(0.0, o.bridge_sigma, s1[1].size), mf.lower, mf.upper)
+            q2 = mf.complete(p2, ref=s1[0])
+            if q2 is None or self._valid(q2):
+                continue
+            pm = 0.5 * (s1[1] + p2)
+            qm = mf.complete(pm, ref=s1[0])
+            if qm is not None and self._valid(qm):
+                st["bridge_samples"] += 1
+                return qm, pm
+        return None
+
     def _walk(self, q0, p0, p1, st) -> np.ndarray | None:
         """Configurations from q0 (parameters p0) to parameters p1 along the parameter line, every
         ``collision_step``, each completed on the branch of its predecessor, continuity- and
         collision-checked. Returns the last configuration, or None."""
-        o, mf = self.options, self.manifold
         d = p1 - p0
-        n = max(1, int(math.ceil(float(np.abs(d).max()) / o.collision_step)))
-        q = q0
+        n = max(1, int(math.ceil(float(np.abs(d).max()) / self.options.collision_step)))
+        q, pa = q0, p0
         for k in range(1, n + 1):
-            x = mf.complete(p0 + (k / n) * d if k < n else p1, ref=q)
-            if x is None or float(np.abs(x - q).max()) > o.max_joint_step:
-                st["steer_rejects"] += 1
+            pb = p0 + (k / n) * d if k < n else p1
+            q = self._advance(q, pa, pb, self._refine, True, st)
+            if q is None:
                 return None
-            if not self._valid(x):
-                st["collisions"] += 1
-                return None
-            q = x
+            pa = pb
         return q
 
     def oc_steer(self, tree: Tree, i_near: int, p_target: np.ndarray, st) -> tuple[int, int]:
@@ -149,19 +274,42 @@ class OCRRT(Planner):
         j = tree.add(q1, i_near, P=p1)
         return (REACHED if p1 is p_target else ADVANCED), j
 
-    def connect(self, tree: Tree, q_target, p_target, st, deadline, start: int | None = None) -> tuple[int, int]:
+    def _turns(self, q, q_goal) -> np.ndarray | None:
+        """Whole turns k on ``goal_turn_joints`` with ``q = q_goal + 2πk`` there (and q = q_goal
+        elsewhere, to ``reach_tolerance``), or None."""
+        d = q - q_goal
+        k = np.round(d[self._turn_idx] / (2.0 * math.pi))
+        d[self._turn_idx] -= 2.0 * math.pi * k
+        return k if float(np.abs(d).max()) <= self.options.reach_tolerance else None
+
+    def connect(self, tree: Tree, q_target, p_target, st, deadline, start: int | None = None,
+                goal: bool = False) -> tuple[int, int]:
         """Steer repeatedly toward ``p_target`` from node ``start`` (default: the node nearest
-        ``q_target``) until it is reached on ``q_target``'s branch or the steer is trapped."""
+        ``q_target``) until it is reached on ``q_target``'s branch (``goal``: or on a
+        whole-turn equivalent, see ``goal_turn_joints``) or the steer is trapped."""
         i = tree.nearest(q_target) if start is None else int(start)
         while not deadline.expired():
             res, i = self.oc_steer(tree, i, p_target, st)
             if res == REACHED:
                 if float(np.abs(tree.X[i] - q_target).max()) <= self.options.reach_tolerance:
                     return REACHED, i
+                if goal and self._turn_idx.size and self._turns(tree.X[i], q_target) is not None:
+                    return REACHED, i
                 return TRAPPED, i     # same parameters, other IK branch
             if res == TRAPPED:
                 return TRAPPED, i
         return TRAPPED, i
+
+    def _draw(self, rng, st, p_goal, q_goal):
+        """The single tree's sample: goal-region, bridge or uniform (Alg. 1)."""
+        o = self.options
+        if self._goal_region and rng.random() < o.goal_region_bias:
+            self._from_goal_region = True
+            return self._goal_region_sample(rng, st, p_goal, q_goal)
+        self._from_goal_region = False
+        if self._bridge and rng.random() < o.bridge_bias:
+            return self._bridge_sample(rng, st)
+        return self.sample(rng, st)
 
     # ------------------------------------------------------------------ main loop
     def _check_endpoint(self, q, which) -> str | None:
@@ -176,7 +324,8 @@ class OCRRT(Planner):
 
     def _plan(self, q_start, q_goal, deadline: Deadline, rng, seed) -> PlanResult:
         o, mf = self.options, self.manifold
-        st = {"iterations": 0, "samples": 0, "sample_failures": 0, "steer_rejects": 0, "collisions": 0}
+        st = {"iterations": 0, "samples": 0, "sample_failures": 0, "steer_rejects": 0, "collisions": 0,
+              "ik_rejects": 0, "jump_rejects": 0, "refinements": 0, "goal_attempts": 0, "bridge_samples": 0}
         c0, n0 = self.checker.n_checks, mf.n_complete
         for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
             msg = self._check_endpoint(q, which)
@@ -194,14 +343,23 @@ class OCRRT(Planner):
                 start = -1  # -1: no goal attempt; None: from the node nearest the goal
                 if rng.random() < o.goal_bias:
                     start = None
-                elif (s := self.sample(rng, st)) is not None:
-                    res, j = self.oc_steer(ta, ta.nearest(s[0]), s[1], st)
-                    if o.goal_from_new and res != TRAPPED and rng.random() < o.goal_bias:
+                elif (s := self._draw(rng, st, pg, q_goal)) is not None:
+                    i_near = ta.nearest(s[0])
+                    if self._extend:
+                        res, j = self.connect(ta, s[0], s[1], st, deadline, start=i_near)
+                        grew = j != i_near
+                    else:
+                        res, j = self.oc_steer(ta, i_near, s[1], st)
+                        grew = res != TRAPPED
+                    if self._goal_from_region and grew and self._from_goal_region:
+                        start = j     # a node grown toward the goal region: try the goal from it
+                    elif self._goal_from_new and grew and rng.random() < o.goal_bias:
                         # also from the node just added: the node nearest the goal can sit behind
                         # an obstacle for good, a new node elsewhere may see past it
                         start = j
                 if start != -1:
-                    res, i = self.connect(ta, q_goal, pg, st, deadline, start=start)
+                    st["goal_attempts"] += 1
+                    res, i = self.connect(ta, q_goal, pg, st, deadline, start=start, goal=True)
                     if res == REACHED:
                         found = (i, None)
                         break
@@ -216,6 +374,7 @@ class OCRRT(Planner):
                     found = (i_a, i_b)
                     break
             ta, tb, a_is_start = tb, ta, not a_is_start
+        st["steer_rejects"] = st["ik_rejects"] + st["jump_rejects"]
         st["nodes"] = ta.n + (tb.n if tb is not None else 0)
         st["collision_checks"] = self.checker.n_checks - c0
         st["ik_completions"] = mf.n_complete - n0
@@ -232,13 +391,20 @@ class OCRRT(Planner):
                 path = path[::-1]
         P = np.array(path)
         P[0], P[-1] = q_start, q_goal
+        if not o.connect and self._turn_idx.size:
+            k = self._turns(ta.X[found[0]].copy(), q_goal)
+            if k is not None and np.any(k != 0):
+                P[-1, self._turn_idx] += 2.0 * math.pi * k
+                st["goal_turns"] = {self.robot.joint_names[j]: int(v) for j, v in zip(self._turn_idx, k) if v}
         return PlanResult(PlanStatus.EXACT, self.name, P, [None] * len(P), np.ones(len(P), bool),
                           [PathSegment("constrained", 0, len(P) - 1)], st)
 
     # ------------------------------------------------------------------ dense path
     def densify(self, path: np.ndarray, resolution: float = 0.01) -> np.ndarray:
-        """The path resampled every ``resolution`` [rad] of parameter motion, every configuration
-        completed on the manifold on the branch of its predecessor (the planner's own edges).
+        """The path resampled every ``resolution`` [rad] of parameter motion (and where the planner
+        bisected a fast step, ``refine_depth``, at the bisection points as well), every
+        configuration completed on the manifold on the branch of its predecessor (the planner's
+        own edges): no joint moves more than ``max_joint_step`` between neighbours.
         Raises ValueError if an edge cannot be followed (a path not made by this planner)."""
         if not (resolution > 0):
             raise ValueError(f"resolution: expected a positive number of radians, got {resolution!r}")
@@ -249,12 +415,15 @@ class OCRRT(Planner):
             pa, pb = mf.params(a), mf.params(b)
             n = max(1, int(math.ceil(float(np.abs(pb - pa).max()) / resolution)))
             q = a
+            st = {"ik_rejects": 0, "jump_rejects": 0, "refinements": 0}
+            p_prev = pa
             for k in range(1, n + 1):
-                x = mf.complete(pa + (k / n) * (pb - pa), ref=q)
-                if x is None or float(np.abs(x - q).max()) > self.options.max_joint_step:
+                pk = pa + (k / n) * (pb - pa)
+                x = self._advance(q, p_prev, pk, self._refine, False, st, out)
+                if x is None:
                     raise ValueError(f"densify: the manifold edge cannot be followed at step {k}/{n}")
                 out.append(x)
-                q = x
+                q, p_prev = x, pk
             if float(np.abs(q - b).max()) > 1e-8:
                 raise ValueError(f"densify: the edge ends on another IK branch ({np.abs(q - b).max():.2e} rad)")
             out[-1] = b
