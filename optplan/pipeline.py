@@ -126,6 +126,9 @@ class PipelineOptions:
     #: IPOPT's wall-clock cap per solve [s] (a solve that hits it ends with ``Maximum_WallTime_Exceeded``;
     #: B-spline path).
     ipopt_max_wall_time: float = 60.0
+    #: IPOPT's iteration cap per B-spline solve [count]; a solve that hits it goes on to the next retry of the policy
+    #: (see docs/decisions/0012-segment-nlp-rows.md for the iteration counts this is set from).
+    spline_max_iterations: int = 200
     #: Weight of the jerk penalty that smooths the B-spline warm start before IPOPT
     #: (:meth:`SplineSegmentProblem.smooth_initial`) [-]; 0: off.
     smooth_warm_start: float = 0.0
@@ -160,6 +163,9 @@ class PipelineOptions:
         if self.compile_kernels not in (True, False, "auto"):
             raise ValueError(f"PipelineOptions.compile_kernels: expected True, False or 'auto', got "
                              f"{self.compile_kernels!r}")
+        if not (isinstance(self.spline_max_iterations, int) and self.spline_max_iterations >= 1):
+            raise ValueError(f"PipelineOptions.spline_max_iterations: expected an int >= 1, got "
+                             f"{self.spline_max_iterations!r}")
         if not self.ipopt_max_wall_time > 0:
             raise ValueError(f"PipelineOptions.ipopt_max_wall_time: expected a positive time [s], got "
                              f"{self.ipopt_max_wall_time}")
@@ -413,8 +419,8 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     # closed_chain_tol / √3 so that knots pass with room for the drift between them (measured: a
     # segment verified at 2e-6 on 48, 70 and 103 intervals alike — knot-level, not h⁴ drift)
     cv = 0.5 * opts.closed_chain_tol / (2.0 * np.sqrt(3.0))
-    ipopt = {"max_wall_time": opts.ipopt_max_wall_time, "constr_viol_tol": cv, "acceptable_constr_viol_tol": cv,
-             **ipopt}
+    ipopt = {"max_wall_time": opts.ipopt_max_wall_time, "max_iter": opts.spline_max_iterations,
+             "constr_viol_tol": cv, "acceptable_constr_viol_tol": cv, **ipopt}
 
     def build(N: int, initial: Solution | None = None, project: bool = False) -> SplineSegmentProblem:
         spec = SegmentSpec(int(N), T, seg_path[0], seg_path[-1], cc, lo, hi, margin=opts.margin,

@@ -52,3 +52,11 @@ def test_success_uses_the_closed_chain_tolerance():
     assert not _result(5e-6, 1e-6).success
     assert not _result(5e-7, 1e-7).success
     assert _result(5e-7, 1e-6).success
+
+
+@pytest.mark.parametrize("bad", [0, -3, 2.5, "200"])
+def test_spline_max_iterations_is_checked(bad):
+    from optplan.pipeline import PipelineOptions
+
+    with pytest.raises(ValueError, match="spline_max_iterations"):
+        PipelineOptions(spline_max_iterations=bad)
