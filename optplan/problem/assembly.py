@@ -4,8 +4,12 @@ combination of kernel-derivative entries (the B-spline weights), applied as one 
 matrix."""
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import casadi as ca
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ["Assembly", "scatter"]
 
@@ -20,13 +24,17 @@ class RowAssembly:
     floating-base segment NLP's assembly build on it."""
 
     def __init__(self) -> None:
-        self.g, self.lbg, self.ubg, self.slices = [], [], [], {}
+        self.g: list[Any] = []  # CasADi row expressions
+        # bounds: one vector per block while rows are added; finish() joins them into one np.ndarray
+        self.lbg: Any = []
+        self.ubg: Any = []
+        self.slices: dict[str, slice] = {}
         self.ng = 0
-        self.jsrc: list = []  # MX nonzero vectors
+        self.jsrc: list[ca.MX] = []  # MX nonzero vectors
         self.j_off = 0
         self.jt: list[np.ndarray] = []  # (row, col, src, weight) blocks; src −1: constant 1
 
-    def _rows(self, name, expr, lo, hi):
+    def _rows(self, name: str, expr: Any, lo: npt.ArrayLike, hi: npt.ArrayLike) -> int:
         n = expr.shape[0]
         self.g.append(expr)
         self.lbg.append(np.broadcast_to(np.asarray(lo, float), (n,)).copy())
@@ -46,16 +54,17 @@ class Assembly(RowAssembly):
     def __init__(self, N: int, nj: int, nx: int):
         super().__init__()
         self.N, self.nj, self.nx = N, nj, nx
-        self.points: dict = {}  # name -> (rows per knot, knots) of a kernel family, None for linear rows
-        self.hsrc: list = []  # MX nonzero vectors
+        self.points: dict[str, tuple[int, np.ndarray] | None] = {}  # name -> (rows per knot, knots) of a kernel family, None for linear rows
+        self.hsrc: list[ca.MX] = []  # MX nonzero vectors
         self.h_off = 0
-        self._h_pending: list[tuple] = []  # per family: what its Hessian block needs (finish)
+        self._h_pending: list[tuple[Any, ...]] = []  # per family: what its Hessian block needs (finish)
 
-    def _rows(self, name, expr, lo, hi):
+    def _rows(self, name: str, expr: Any, lo: npt.ArrayLike, hi: npt.ArrayLike) -> int:
         self.points[name] = None  # rows per point: set by family
         return super()._rows(name, expr, lo, hi)
 
-    def linear(self, name, expr, D: np.ndarray, lo, hi, select: np.ndarray | None = None):
+    def linear(self, name: str, expr: Any, D: np.ndarray, lo: npt.ArrayLike, hi: npt.ArrayLike,
+               select: np.ndarray | None = None) -> None:
         """Rows ``vec(P Dᵀ)`` (D: rows over the N+3 control points), constant Jacobian; with
         ``select``, only those entries of ``vec(P Dᵀ)`` (entry ``i·nj + j``: row i of D, joint j)
         — ``expr`` must then be the selected entries, in that order."""
@@ -72,7 +81,9 @@ class Assembly(RowAssembly):
                     W.append(D[i, pidx])
         self.jt.append(np.array([R, C, np.full(len(R), -1), W], float))
 
-    def family(self, name, fn, jfn, hfn, knots, Qsub, Nin, Sin, bcoup, lo, hi):
+    def family(self, name: str, fn: ca.Function, jfn: ca.Function, hfn: ca.Function,
+               knots: Sequence[int] | np.ndarray, Qsub: Any, Nin: Any, Sin: Any,
+               bcoup: tuple[int, np.ndarray] | None, lo: npt.ArrayLike, hi: npt.ArrayLike) -> None:
         """One kernel evaluated at ``knots`` (its rows are knot-major)."""
         K, nj, N = len(knots), self.nj, self.N
         m = fn.size1_out(0)
@@ -84,6 +95,7 @@ class Assembly(RowAssembly):
         lr, jj = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())
         e = len(lr)
         self.jsrc.append(Jm.nz[:])
+        t: np.ndarray
         t, a, ee = np.meshgrid(np.arange(K), np.arange(3), np.arange(e), indexing="ij")
         pidx = knots[t] + a
         ok = (pidx >= 3) & (pidx <= N - 1)
@@ -98,7 +110,7 @@ class Assembly(RowAssembly):
         # Hessian: multipliers of this family, per knot
         self._h_pending.append((hfn, K, knots, Qsub, Nin, Sin, r0, m))
 
-    def finish(self, x, lam_f, lam_g, Hj: np.ndarray):
+    def finish(self, x: ca.MX, lam_f: ca.MX, lam_g: ca.MX, Hj: np.ndarray) -> tuple[ca.MX, ca.MX, ca.MX]:
         """``(g, ∂g/∂x, triu ∇²L)`` as MX of ``x``, ``lam_f``, ``lam_g``; ``Hj``: the objective's
         constant Hessian per joint over the free control points."""
         nj, N, nx = self.nj, self.N, self.nx
@@ -137,7 +149,8 @@ class Assembly(RowAssembly):
         return G, Jg, Hl
 
 
-def scatter(nrow, ncol, rows, cols, src_idx, weights, src: ca.MX, nsrc: int) -> ca.MX:
+def scatter(nrow: int, ncol: int, rows: np.ndarray, cols: np.ndarray, src_idx: np.ndarray, weights: np.ndarray,
+            src: ca.MX, nsrc: int) -> ca.MX:
     """Sparse ``nrow × ncol`` MX whose entry (rows[i], cols[i]) sums ``weights[i]·src[src_idx[i]]``."""
     import scipy.sparse as sps
 

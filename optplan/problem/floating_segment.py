@@ -54,10 +54,13 @@ from __future__ import annotations
 import logging
 import time
 import weakref
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, cast
 
 import casadi as ca
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from ..constraints.closed_chain import relative_pose_residual
@@ -73,6 +76,9 @@ __all__ = ["FloatingKernels", "FloatingSegmentSpec", "FloatingSplineProblem", "s
 log = logging.getLogger(__name__)
 
 _IDENTITY_Q = np.array([0.0, 0.0, 0.0, 1.0])
+
+#: a kernel's cache key and its builder ``build(name) -> Function`` (:meth:`KernelCache._get`)
+_KernelSpec = tuple[tuple[Any, ...], Callable[[str], ca.Function]]
 
 
 def spline_basis(u: float) -> tuple[np.ndarray, np.ndarray]:
@@ -90,12 +96,12 @@ class FloatingKernels(KernelCache):
     with ``z`` its local input vector; :meth:`local_derivatives` gives ``∂f/∂z`` and
     ``∂²(λᵀf)/∂z²``. The kinematics are those of the base frame (base pose identity)."""
 
-    _per_robot: weakref.WeakKeyDictionary[RobotModel, FloatingKernels] = weakref.WeakKeyDictionary()
+    _per_robot: weakref.WeakKeyDictionary[RobotModel, KernelCache] = weakref.WeakKeyDictionary()
 
     floating_base = True
     _digest_tag = b"floating-v1"
 
-    def _configuration(self, q):
+    def _configuration(self, q: ca.SX) -> ca.SX:
         return ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), q)  # base frame: the base pose is the identity
 
     def momentum(self) -> ca.Function:
@@ -103,8 +109,8 @@ class FloatingKernels(KernelCache):
         centre of mass [base frame, per unit of normalised time] with zero base linear velocity."""
         return self._get(*self._momentum_spec())
 
-    def _momentum_spec(self):
-        def build(name):
+    def _momentum_spec(self) -> _KernelSpec:
+        def build(name: str) -> ca.Function:
             nj = self.robot.nj
             qd, w = ca.SX.sym("qd", nj), ca.SX.sym("w", 3)
             qf = ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), self._q)
@@ -119,15 +125,15 @@ class FloatingKernels(KernelCache):
         ``ξ' = ½ ξ ⊗ [ω'; 0]`` over one interval (u from 0 to 1), renormalised."""
         return self._get(*self._attitude_spec(n_sub))
 
-    def _attitude_spec(self, n_sub: int):
+    def _attitude_spec(self, n_sub: int) -> _KernelSpec:
         n_sub = int(n_sub)
 
-        def build(name):
+        def build(name: str) -> ca.Function:
             qa, qb = ca.SX.sym("xi_a", 4), ca.SX.sym("xi_b", 4)
             W = ca.SX.sym("w", 3, 2 * n_sub + 1)
             hs = 1.0 / n_sub
 
-            def f(x, w):
+            def f(x: ca.SX, w: ca.SX) -> ca.SX:
                 return 0.5 * quat_mul(x, ca.vertcat(w, 0))
 
             x = qa
@@ -147,31 +153,36 @@ class FloatingKernels(KernelCache):
         """``f(q) -> [pose residual (6); trace (1)]`` of the hands' relative pose (base frame)."""
         return self._get(*self._closed_chain_spec(cc))
 
-    def _closed_chain_spec(self, cc: ClosedChain):
+    def _closed_chain_spec(self, cc: ClosedChain) -> _KernelSpec:
         rel = cc.relative
 
-        def build(name):
+        def build(name: str) -> ca.Function:
             Ra, pa = self.frame(self.robot.arm(cc.arm_a).ee_frame_id)
             Rb, pb = self.frame(self.robot.arm(cc.arm_b).ee_frame_id)
             r, tr = relative_pose_residual(Ra, pa, Rb, pb, rel)
             return ca.Function(name, [self._q], [ca.vertcat(r, tr)])
 
-        return ("fb_cc", cc.arm_a, cc.arm_b, np.asarray(rel.homogeneous).round(15).tobytes()), build
+        # a chain without its relative pose fails here (AttributeError), as it always did
+        return ("fb_cc", cc.arm_a, cc.arm_b,
+                np.asarray(rel.homogeneous).round(15).tobytes()), build  # type: ignore[union-attr]
 
-    def _name(self, key: tuple) -> str:
+    def _name(self, key: tuple[Any, ...]) -> str:
         """The name :meth:`KernelCache._get` gives the kernel of ``key``."""
         import hashlib
 
         return f"{key[0]}_{hashlib.sha1(self._digest + repr(key).encode()).hexdigest()[:16]}"
 
-    def kernel_set(self, kind: str, *args, compiled: bool = False, opt: str = "-O1"):
+    def kernel_set(self, kind: str, *args: Any, compiled: bool | str = False,
+                   opt: str = "-O1") -> tuple[ca.Function, ...]:
         """``(f, ∂f/∂z, ∂²(λᵀf)/∂z²)`` of kernel ``kind`` ("momentum", "attitude" (n_sub),
         "closed_chain" (cc)); ``compiled``: True — from C (:meth:`KernelCache.compiled`; compiled
         now if missing), loaded straight from the libraries when they exist, without reading or
         differentiating the symbolic kernels; "auto" — from C when the libraries exist, else the
         symbolic kernels (nothing is compiled); False — the symbolic kernels."""
-        key, build = {"momentum": self._momentum_spec, "attitude": self._attitude_spec,
-                      "closed_chain": self._closed_chain_spec}[kind](*args)
+        specs: dict[str, Callable[..., _KernelSpec]] = {
+            "momentum": self._momentum_spec, "attitude": self._attitude_spec,
+            "closed_chain": self._closed_chain_spec}
+        key, build = specs[kind](*args)
         if compiled not in (True, False, "auto"):
             raise ValueError(f"compiled: expected True, False or 'auto', got {compiled!r}")
         if compiled and self._dir is not None:
@@ -191,17 +202,17 @@ class FloatingKernels(KernelCache):
         if compiled is True:
             got = tuple(self.compiled(g, opt) for g in fns)
             if all(g is not None and g is not o for g, o in zip(got, fns)):
-                return got
+                return cast("tuple[ca.Function, ...]", got)  # every entry compiled (checked above)
         return fns
 
     def local_derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
         """``(jac(z), hess(z, λ))`` of a kernel ``f(z)``: ``∂f/∂z`` and the upper triangle of
         ``∂²(λᵀf)/∂z²`` (sparse)."""
-        def build_jac(name):
+        def build_jac(name: str) -> ca.Function:
             z = fn.sx_in(0)
             return ca.Function(name, [z], [ca.jacobian(fn(z), z)])
 
-        def build_hess(name):
+        def build_hess(name: str) -> ca.Function:
             z = fn.sx_in(0)
             r = fn(z)
             lam = ca.SX.sym("lam", r.shape[0])
@@ -221,9 +232,10 @@ class _LocalAssembly(RowAssembly):
     def __init__(self, nx: int, np_: int):
         super().__init__()
         self.nx, self.np = nx, np_
-        self._fams = []
+        # per family: (Hessian kernel, K, kernel inputs Z, first row, rows per instance, template, slots)
+        self._fams: list[tuple[ca.Function, int, ca.MX, int, int, np.ndarray, np.ndarray]] = []
 
-    def linear(self, name, xp, A: np.ndarray, lo, hi):
+    def linear(self, name: str, xp: ca.MX, A: Any, lo: npt.ArrayLike, hi: npt.ArrayLike) -> None:
         """Rows ``A @ [x; p]`` (A: rows × (nx + np), dense or sparse)."""
         import scipy.sparse as sps
 
@@ -232,7 +244,8 @@ class _LocalAssembly(RowAssembly):
         Ax = A[:, :self.nx].tocoo()
         self.jt.append(np.array([r0 + Ax.row, Ax.col, np.full(Ax.nnz, -1), Ax.data], float))
 
-    def family(self, name, fn, jfn, hfn, template: np.ndarray, slots: np.ndarray, xp, lo, hi):
+    def family(self, name: str, fn: ca.Function, jfn: ca.Function, hfn: ca.Function, template: np.ndarray,
+               slots: np.ndarray, xp: ca.MX, lo: npt.ArrayLike, hi: npt.ArrayLike) -> None:
         """``template``: (n_entries, 3) rows ``(input i, slot s, weight)``; ``slots``: (K, n_slots)
         global indices into ``[x; p]`` (−1: zero)."""
         import scipy.sparse as sps
@@ -260,7 +273,7 @@ class _LocalAssembly(RowAssembly):
         self.j_off += K * e
         self._fams.append((hfn, K, Z, r0, m, template, slots))
 
-    def finish(self, lam_f, lam_g, Hf):
+    def finish(self, lam_f: ca.MX, lam_g: ca.MX, Hf: Any) -> tuple[ca.MX, ca.MX, ca.MX]:
         """``(g, ∂g/∂x, triu ∇²L)``; ``Hf``: the objective's constant Hessian (nx × nx, sparse)."""
         import scipy.sparse as sps
 
@@ -297,7 +310,7 @@ class _LocalAssembly(RowAssembly):
         return G, Jg, Hl
 
 
-def _entry_pairs(hi: np.ndarray, hj: np.ndarray, ti: np.ndarray):
+def _entry_pairs(hi: np.ndarray, hj: np.ndarray, ti: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For kernel-derivative entries ``(hi[e], hj[e])`` and template inputs ``ti``: every triple
     ``(e, a, b)`` with ``ti[a] == hi[e]`` and ``ti[b] == hj[e]`` (vectorised)."""
     order = np.argsort(ti, kind="stable")
@@ -314,7 +327,7 @@ def _entry_pairs(hi: np.ndarray, hj: np.ndarray, ti: np.ndarray):
     return pe, pa, pb
 
 
-def _dm(A) -> ca.DM:
+def _dm(A: Any) -> ca.DM:
     """A scipy sparse matrix as a CasADi DM with the same structural nonzeros."""
     import scipy.sparse as sps
 
@@ -361,7 +374,7 @@ class FloatingSplineProblem:
         if not robot.is_floating:
             raise ValueError(f"FloatingSplineProblem needs a free-floating robot; {robot.name!r} has a fixed base")
         self.robot, self.spec = robot, spec
-        self.kernels = FloatingKernels.of(robot)
+        self.kernels = cast(FloatingKernels, FloatingKernels.of(robot))  # of(): an instance of cls
         #: evaluate the kernels from C compiled once per robot (True: compile if needed; "auto": use
         #: the compiled kernels when a previous run left them in the cache; False: never; see
         #: :meth:`FloatingKernels.kernel_set`)
@@ -400,9 +413,9 @@ class FloatingSplineProblem:
             d = self.q1 - self.q0
             fref = float(120.0 / 7.0 * (d @ d) / self.T**3)  # ∫ q̈² dt of the quintic
         self._scale = 1.0 / fref if fref > 0 else 1.0
-        self._X0 = None
-        self._B0 = None
-        self._built = None
+        self._X0: np.ndarray | None = None
+        self._B0: np.ndarray | None = None
+        self._built: dict[str, Any] | None = None
         # layout of x: [P_3 … P_{N−1} (nj each) | ξ_1 … ξ_N (4 each) | ω'_0 … ω'_{2 n_sub N} (3 each)]
         self.nP = (N - 3) * nj
         self.nW = 2 * self.n_sub * N + 1
@@ -428,17 +441,17 @@ class FloatingSplineProblem:
         return self.nP + 4 * self.N + 3 * c + np.arange(3)
 
     # ------------------------------------------------------------------ initial guess
-    def set_initial(self, q) -> None:
+    def set_initial(self, q: npt.ArrayLike) -> None:
         """Initial guess from knot configurations ``q`` ((N+1) × nj [rad]); the base attitude and
         twists are initialised by integrating the guess (RK4, as the NLP)."""
         Q = check_knot_guess(q, self.N, self.robot.nj)
         self._X0 = np.clip(fit_interior(Q, self.P_start, self.P_end), self.lower, self.upper)
         self._B0 = self._integrate(self._X0)
 
-    def _P(self, X) -> np.ndarray:
+    def _P(self, X: npt.ArrayLike) -> np.ndarray:
         return np.vstack([self.P_start, np.asarray(X).reshape(self.N - 3, self.robot.nj), self.P_end])
 
-    def _integrate(self, X) -> np.ndarray:
+    def _integrate(self, X: npt.ArrayLike) -> np.ndarray:
         """[ξ_1 … ξ_N; ω'_0 …] of the joint trajectory of control points X, by the NLP's own
         kernels (numeric)."""
         P = self._P(X)
@@ -460,7 +473,7 @@ class FloatingSplineProblem:
             out.append(xi)
         return np.r_[np.concatenate(out), W.ravel()]
 
-    def _omega_numeric(self, q, dq):
+    def _omega_numeric(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
         """ω' from the momentum kernel's linear structure (numeric, Pinocchio-free)."""
         kc = self.kernels
         fn = kc._fns.get(("fb_momentum_linear",))
@@ -473,7 +486,7 @@ class FloatingSplineProblem:
         return -np.linalg.solve(np.asarray(Aw), np.asarray(r).ravel())
 
     # ------------------------------------------------------------------ build
-    def _build(self):
+    def _build(self) -> dict[str, Any]:
         t0 = time.perf_counter()
         N, nj, nx = self.N, self.robot.nj, self.nx
         m = 2 * self.n_sub
@@ -483,7 +496,7 @@ class FloatingSplineProblem:
         asm = _LocalAssembly(nx, self.np)
         kc = self.kernels
         # momentum at every twist point: input [q; q'; ω'], u = i / (2 n_sub) in interval k
-        def kernel(kind, *args):
+        def kernel(kind: str, *args: Any) -> tuple[ca.Function, ...]:
             return kc.kernel_set(kind, *args, compiled=self.compile_kernels)
 
         fmom, jm, hm = kernel("momentum")
@@ -519,18 +532,18 @@ class FloatingSplineProblem:
         # attitude steps
         fat, ja, ha = kernel("attitude", self.n_sub)
         nin = fat.size1_in(0)
-        slots = np.array([np.concatenate([self._slot_xi(k), self._slot_xi(k + 1)] +
-                                         [self._slot_w(m * k + c) for c in range(m + 1)]) for k in range(N)])
-        tmpl = np.array([(i, i, 1.0) for i in range(nin)])
-        asm.family("base_attitude_dynamics", fat, ja, ha, tmpl, slots, xp, 0.0, 0.0)
+        slots_a = np.array([np.concatenate([self._slot_xi(k), self._slot_xi(k + 1)] +
+                                           [self._slot_w(m * k + c) for c in range(m + 1)]) for k in range(N)])
+        tmpl_a = np.array([(i, i, 1.0) for i in range(nin)])
+        asm.family("base_attitude_dynamics", fat, ja, ha, tmpl_a, slots_a, xp, 0.0, 0.0)
         # closed chain at the interior knots
         cc = self.spec.closed_chain
         if cc is not None:
             fcc, jc, hc = kernel("closed_chain", cc)
             b, _ = spline_basis(0.0)
-            tmpl = np.array([(j, a * nj + j, b[a]) for a in range(3) for j in range(nj)])
-            slots = np.array([np.concatenate([self._slot_P(k + a) for a in range(3)]) for k in range(1, N)])
-            asm.family("closed_chain", fcc, jc, hc, tmpl, slots, xp,
+            tmpl_c = np.array([(j, a * nj + j, b[a]) for a in range(3) for j in range(nj)])
+            slots_c = np.array([np.concatenate([self._slot_P(k + a) for a in range(3)]) for k in range(1, N)])
+            asm.family("closed_chain", fcc, jc, hc, tmpl_c, slots_c, xp,
                        np.tile(np.r_[np.zeros(6), 1.0], N - 1), np.tile(np.r_[np.zeros(6), np.inf], N - 1))
         # velocity limits on the velocity control points touching a free point
         if self.vlim is not None:
@@ -582,17 +595,19 @@ class FloatingSplineProblem:
                            build_time=time.perf_counter() - t0)
         return self._built
 
-    def _structure_key(self) -> tuple:
+    def _structure_key(self) -> tuple[Any, ...]:
         """What the built NLP depends on (everything but the start/goal and the warm start)."""
         cc = self.spec.closed_chain
-        def arr(a):
+        def arr(a: npt.ArrayLike | None) -> bytes | None:
             return None if a is None else np.asarray(a, float).tobytes()
 
         return (self.kernels._digest, self.N, self.T, self.n_sub, self.spec.smoothness, self.compile_kernels,
-                None if cc is None else (cc.arm_a, cc.arm_b, np.asarray(cc.relative.homogeneous).tobytes()),
+                None if cc is None else (cc.arm_a, cc.arm_b,
+                                          # a chain without its relative pose fails here (AttributeError), as it always did
+                                          np.asarray(cc.relative.homogeneous).tobytes()),  # type: ignore[union-attr]
                 arr(self.lower), arr(self.upper), arr(self.vlim), arr(self.target_quat))
 
-    def _get_built(self) -> dict:
+    def _get_built(self) -> dict[str, Any]:
         """The built NLP of this problem's structure: from memory when one of the same structure
         was built in this process (:meth:`KernelCache.structure`, with its IPOPT instances; the
         start/goal and the objective scale are parameters), else built now."""
@@ -604,7 +619,7 @@ class FloatingSplineProblem:
         return np.r_[self.P_start.ravel(), self.P_end.ravel(), _IDENTITY_Q, self._scale]
 
     # ------------------------------------------------------------------ solve
-    def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-8, dual_tol: float = 1e-6,
+    def solve(self, ipopt_options: dict[str, Any] | None = None, *, tol: float = 1e-8, dual_tol: float = 1e-6,
               max_iter: int = 500, max_wall_time: float = 120.0) -> Solution:
         """Solve with IPOPT (exact Hessian from the kernels, MUMPS). ``tol``: constraint violation,
         ``dual_tol``: IPOPT's overall ``tol``; ``max_wall_time`` [s]: IPOPT stops there with the
@@ -661,7 +676,7 @@ class FloatingSplineProblem:
                         base_position=self._base_positions(kv["q"], xi), setup_time=out.setup_time,
                         cpu_time=out.cpu_time, x=x, lam_g=lam_g, attempts=(out,))
 
-    def _base_positions(self, Q, xi) -> np.ndarray:
+    def _base_positions(self, Q: np.ndarray, xi: np.ndarray) -> np.ndarray:
         """Base position [m] at the knots with the centre of mass fixed at the origin."""
         model, data = self.robot.model, self.robot.model.createData()
         out = []
@@ -672,11 +687,11 @@ class FloatingSplineProblem:
         return np.array(out)
 
 
-def _quat_conj(q):
+def _quat_conj(q: np.ndarray) -> np.ndarray:
     return np.array([-q[0], -q[1], -q[2], q[3]])
 
 
-def _quat_left(a) -> np.ndarray:
+def _quat_left(a: np.ndarray) -> np.ndarray:
     """Matrix L(a) with ``a ⊗ b = L(a) b`` (quaternions stored x, y, z, w)."""
     ax, ay, az, aw = a
     return np.array([[aw, -az, ay, ax],

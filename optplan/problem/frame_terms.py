@@ -4,11 +4,13 @@ axis orientation and the floating base's attitude (residuals of the conventions 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import casadi as ca
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from ..constraints.closed_chain import relative_pose_residual
@@ -18,8 +20,16 @@ from ..model.robot import RobotModel
 from .build import TermData
 from .terms import Term, _check_at, _knots, _set, pose_residual_numeric
 
+if TYPE_CHECKING:
+    from .build import BuildContext
+    from .terms import NumericTrajectory
+    from .transcription import Transcription
 
-def _check_frame(obj, name: str = "frame"):
+#: point of a term's rows: a knot ``k`` or an interior point ``(k, fraction)``
+_Point = int | tuple[int, float]
+
+
+def _check_frame(obj: object, name: str = "frame") -> None:
     v = getattr(obj, name)
     if not isinstance(v, (str, int, np.integer)) or isinstance(v, bool) or (isinstance(v, str) and not v):
         raise ConfigurationError(f"{type(obj).__name__}.{name}: expected a frame name (or id), got {v!r}")
@@ -38,28 +48,29 @@ class FramePose(Term):
     position_only: bool = False
     default_name = "frame_pose"
 
-    def _validate(self):
+    def _validate(self) -> None:
         _check_frame(self)
         if not isinstance(self.target, pin.SE3):
             raise ConfigurationError(f"FramePose.target: expected a pinocchio.SE3, got {self.target!r}")
         check_pose(self.target, "FramePose.target")
         _set(self, "at", _check_at(self.at, "FramePose.at"))
 
-    def rows(self, ctx):
+    def rows(self, ctx: BuildContext) -> TermData:
         r, lo, hi = self.residual(ctx.tp)
         return TermData(residual=r, lower=lo, upper=hi, points=tuple(_knots(self.at, ctx.N)),
                         point_rows=3 if self.position_only else 7)
 
-    def sampled(self):
+    def sampled(self) -> Term:
         if self.at == "all":
             return self
         return super().sampled()
 
-    def residual(self, tp):
+    def residual(self, tp: Transcription) -> tuple[Any, np.ndarray, np.ndarray]:
         rs, lo, hi = [], [], []
         for k in _knots(self.at, tp.N):
             R, p = tp.frame(self.frame, k)
-            r, tr = pose_residual(R, p, np.array(self.target.rotation), ca.DM(self.target.translation))
+            r, tr = pose_residual(R, p, np.array(self.target.rotation),  # type: ignore[union-attr]  # an SE3 after _validate
+                                  ca.DM(self.target.translation))  # type: ignore[union-attr]
             if self.position_only:
                 rs.append(r[:3])
                 lo += [0.0] * 3
@@ -70,25 +81,25 @@ class FramePose(Term):
                 hi += [0.0] * 6 + [np.inf]
         return ca.vertcat(*rs), np.array(lo), np.array(hi)
 
-    def numeric(self, traj):
+    def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         out = []
         for k in _knots(self.at, traj.N):
             r, tr = pose_residual_numeric(traj.frame(self.frame, k), self.target)
             out.append(r[:3] if self.position_only else np.r_[r, tr])
         return np.concatenate(out)
 
-    def bounds_numeric(self, traj):
+    def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         n = len(_knots(self.at, traj.N))
         one = (np.zeros(3), np.zeros(3)) if self.position_only else (np.r_[np.zeros(6), 1.0], np.r_[np.zeros(6), np.inf])
         return np.tile(one[0], n), np.tile(one[1], n)
 
-    def cost_expr(self, ctx):
+    def cost_expr(self, ctx: BuildContext) -> Any:
         r, _, _ = self.residual(ctx.tp)
         step = 3 if self.position_only else 7
         keep = [i for i in range(r.shape[0]) if self.position_only or i % step != 6]
         return ca.sumsqr(r[keep])
 
-    def cost_numeric(self, traj):
+    def cost_numeric(self, traj: NumericTrajectory) -> float:
         r = self.numeric(traj)
         step = 3 if self.position_only else 7
         keep = [i for i in range(r.size) if self.position_only or i % step != 6]
@@ -100,16 +111,16 @@ class FramePath(Term):
     """A frame follows given poses at every knot (``poses``: N+1 SE3, or a callable of time [s])."""
 
     frame: str = ""
-    poses: object = None
+    poses: Sequence[pin.SE3] | Callable[[float], pin.SE3] | None = None
     position_only: bool = False
     default_name = "frame_path"
 
-    def _validate(self):
+    def _validate(self) -> None:
         _check_frame(self)
         if callable(self.poses):
             return
         try:
-            poses = tuple(self.poses)
+            poses = tuple(self.poses)  # type: ignore[arg-type]  # None: the TypeError reported below
         except TypeError:
             raise ConfigurationError(f"FramePath.poses: expected a list of pinocchio.SE3 (one per knot) or a "
                                      f"callable of time [s], got {self.poses!r}") from None
@@ -119,24 +130,24 @@ class FramePath(Term):
             check_pose(M, f"FramePath.poses[{i}]")
         _set(self, "poses", poses)
 
-    def rows(self, ctx):
+    def rows(self, ctx: BuildContext) -> TermData:
         r, lo, hi = self.residual(ctx.tp)
         return TermData(residual=r, lower=lo, upper=hi, points=tuple(range(ctx.N + 1)),
                         point_rows=3 if self.position_only else 6)
 
-    def _targets(self, N, T):
+    def _targets(self, N: int, T: float) -> list[pin.SE3]:
         if callable(self.poses):
             return [self.poses(T * k / N) for k in range(N + 1)]
         if self.poses is None or len(self.poses) != N + 1:
             raise ValueError(f"FramePath.poses: expected {N + 1} poses (one per knot) or a callable of time")
         return list(self.poses)
 
-    def _T(self, tp):
+    def _T(self, tp: Transcription) -> float:
         if tp.free_time and callable(self.poses):
             raise ValueError("FramePath with a callable of time needs a fixed duration")
         return float(ca.evalf(tp.T)) if not tp.free_time else 1.0
 
-    def residual(self, tp):
+    def residual(self, tp: Transcription) -> tuple[Any, np.ndarray, np.ndarray]:
         rs = []
         for k, M in enumerate(self._targets(tp.N, self._T(tp))):
             R, p = tp.frame(self.frame, k)
@@ -146,14 +157,14 @@ class FramePath(Term):
         n = sum(x.shape[0] for x in rs)
         return ca.vertcat(*rs), np.zeros(n), np.zeros(n)
 
-    def numeric(self, traj):
+    def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         out = []
         for k, M in enumerate(self._targets(traj.N, traj.T)):
             r, _ = pose_residual_numeric(traj.frame(self.frame, k), M)
             out.append(r[:3] if self.position_only else r)
         return np.concatenate(out)
 
-    def bounds_numeric(self, traj):
+    def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         n = (traj.N + 1) * (3 if self.position_only else 6)
         return np.zeros(n), np.zeros(n)
 
@@ -179,7 +190,7 @@ class ClosedChain(Term):
     pinned_tol: float = 1e-9
     default_name = "closed_chain"
 
-    def _validate(self):
+    def _validate(self) -> None:
         if self.relative is not None:
             if not isinstance(self.relative, pin.SE3):
                 raise ConfigurationError(f"ClosedChain.relative: expected a pinocchio.SE3 (use from_configuration/"
@@ -193,7 +204,8 @@ class ClosedChain(Term):
         if self.arm_a == self.arm_b:
             raise ConfigurationError(f"ClosedChain: arm_a and arm_b are the same arm {self.arm_a!r}")
 
-    def _points(self, N: int, robot: RobotModel | None = None, pinned: dict | None = None) -> list:
+    def _points(self, N: int, robot: RobotModel | None = None,
+                pinned: Mapping[int, np.ndarray] | None = None) -> list[_Point]:
         skip = set()
         if self.skip_pinned and pinned and robot is not None and self.relative is not None:
             for k, qk in pinned.items():
@@ -201,7 +213,7 @@ class ClosedChain(Term):
                 r, tr = pose_residual_numeric(M, self.relative)
                 if np.abs(r).max() <= self.pinned_tol and tr >= 1.0:
                     skip.add(int(k))
-        pts = []
+        pts: list[_Point] = []
         for k in range(N + 1):
             if k not in skip:
                 pts.append(k)
@@ -209,14 +221,14 @@ class ClosedChain(Term):
                 pts += [(k, (i + 1) / (self.interior + 1)) for i in range(self.interior)]
         return pts
 
-    def _relative_numeric(self, robot: RobotModel, q) -> pin.SE3:
+    def _relative_numeric(self, robot: RobotModel, q: npt.ArrayLike) -> pin.SE3:
         fa, fb = self._frames(robot)
         data = robot.model.createData()
         pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))
         return data.oMf[robot.frame_id(fa)].actInv(data.oMf[robot.frame_id(fb)])
 
     @classmethod
-    def from_configuration(cls, robot: RobotModel, q, arm_a: str = "A", arm_b: str = "B") -> ClosedChain:
+    def from_configuration(cls, robot: RobotModel, q: npt.ArrayLike, arm_a: str = "A", arm_b: str = "B") -> ClosedChain:
         """The relative pose the two hands have at the full configuration ``q``."""
         from ..model.kinematics import Kinematics
 
@@ -229,16 +241,16 @@ class ClosedChain(Term):
         """Both hands on one rigid object with grasp frames ``grasp_a``, ``grasp_b`` (object frame)."""
         return cls(arm_a, arm_b, grasp_a.actInv(grasp_b))
 
-    def _frames(self, robot):
+    def _frames(self, robot: RobotModel) -> tuple[str, str]:
         return robot.arm(self.arm_a).ee_frame, robot.arm(self.arm_b).ee_frame
 
-    def residual_at(self, tp, k):
+    def residual_at(self, tp: Transcription, k: _Point) -> tuple[Any, Any]:
         fa, fb = self._frames(tp.robot)
         Ra, pa = tp.frame(fa, k, base_frame=True)
         Rb, pb = tp.frame(fb, k, base_frame=True)
         return relative_pose_residual(Ra, pa, Rb, pb, self.relative)
 
-    def residual(self, tp, pinned_q=None):
+    def residual(self, tp: Transcription, pinned_q: Mapping[int, np.ndarray] | None = None) -> tuple[Any, np.ndarray, np.ndarray]:
         """Rows at every collocation point (``pinned_q``: the knots a boundary pins, ``{k: q}``,
         left out with ``skip_pinned``)."""
         if self.relative is None:
@@ -252,15 +264,15 @@ class ClosedChain(Term):
         hi = np.tile(np.r_[np.zeros(6), np.inf], len(pts))
         return ca.vertcat(*rs), lo, hi
 
-    def rows(self, ctx):
+    def rows(self, ctx: BuildContext) -> TermData:
         r, lo, hi = self.residual(ctx.tp, ctx.pinned_q)
         return TermData(residual=r, lower=lo, upper=hi, points=tuple(self._points(ctx.N, ctx.robot, ctx.pinned_q)),
                         point_rows=7)
 
-    def sampled(self):
+    def sampled(self) -> Term:
         return dataclasses.replace(self, interior=0, skip_pinned=False)
 
-    def numeric(self, traj):
+    def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         fa, fb = self._frames(traj.robot)
         out = []
         for k in self._points(traj.N, traj.robot, traj.pinned_q):
@@ -269,7 +281,7 @@ class ClosedChain(Term):
             out.append(np.r_[r, tr])
         return np.concatenate(out) if out else np.zeros(0)
 
-    def bounds_numeric(self, traj):
+    def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         n = len(self._points(traj.N, traj.robot, traj.pinned_q))
         return (np.tile(np.r_[np.zeros(6), 1.0], n), np.tile(np.r_[np.zeros(6), np.inf], n))
 
@@ -285,7 +297,7 @@ class OrientationConstraint(Term):
     max_angle: float = 0.1
     default_name = "orientation"
 
-    def _validate(self):
+    def _validate(self) -> None:
         _check_frame(self)
         for n in ("axis_local", "axis_world"):
             a = np.asarray(getattr(self, n), float) if np.ndim(getattr(self, n)) == 1 else None
@@ -297,28 +309,28 @@ class OrientationConstraint(Term):
         if isinstance(m, bool) or not isinstance(m, (int, float, np.floating)) or not 0 <= m <= np.pi:
             raise ConfigurationError(f"OrientationConstraint.max_angle: expected an angle in [0, π] [rad], got {m!r}")
 
-    def rows(self, ctx):
+    def rows(self, ctx: BuildContext) -> TermData:
         r, lo, hi = self.residual(ctx.tp)
         return TermData(residual=r, lower=lo, upper=hi, points=tuple(range(ctx.N + 1)), point_rows=1)
 
-    def sampled(self):
+    def sampled(self) -> Term:
         return self
 
-    def _axes(self):
+    def _axes(self) -> tuple[np.ndarray, np.ndarray]:
         a = np.asarray(self.axis_local, float)
         b = np.asarray(self.axis_world, float)
         return a / np.linalg.norm(a), b / np.linalg.norm(b)
 
-    def residual(self, tp):
+    def residual(self, tp: Transcription) -> tuple[Any, np.ndarray, np.ndarray]:
         a, b = self._axes()
         r = ca.vertcat(*[ca.dot(tp.frame(self.frame, k)[0] @ ca.DM(a), ca.DM(b)) for k in range(tp.N + 1)])
         return r, np.full(tp.N + 1, np.cos(self.max_angle)), np.full(tp.N + 1, np.inf)
 
-    def numeric(self, traj):
+    def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         a, b = self._axes()
         return np.array([traj.frame(self.frame, k).rotation @ a @ b for k in range(traj.N + 1)])
 
-    def bounds_numeric(self, traj):
+    def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         return np.full(traj.N + 1, np.cos(self.max_angle)), np.full(traj.N + 1, np.inf)
 
 
@@ -332,7 +344,7 @@ class BaseAttitude(Term):
     at: object = "end"
     default_name = "base_attitude"
 
-    def _validate(self):
+    def _validate(self) -> None:
         if self.target is not None:
             R = np.asarray(self.target, float) if np.ndim(self.target) == 2 else None
             if R is None or R.shape != (3, 3) or not np.all(np.isfinite(R)) \
@@ -343,19 +355,19 @@ class BaseAttitude(Term):
             _set(self, "target", R)
         _set(self, "at", _check_at(self.at, "BaseAttitude.at"))
 
-    def rows(self, ctx):
+    def rows(self, ctx: BuildContext) -> TermData:
         r, lo, hi = self.residual(ctx.tp)
         return TermData(residual=r, lower=lo, upper=hi, points=tuple(_knots(self.at, ctx.N)), point_rows=4)
 
-    def sampled(self):
+    def sampled(self) -> Term:
         if self.at == "all":
             return self
         return super().sampled()
 
-    def _target(self):
+    def _target(self) -> np.ndarray:
         return np.eye(3) if self.target is None else np.asarray(self.target, float)
 
-    def residual(self, tp):
+    def residual(self, tp: Transcription) -> tuple[Any, np.ndarray, np.ndarray]:
         if not tp.floating:
             raise ConfigurationError("BaseAttitude needs a free-floating robot")
         rs = []
@@ -365,22 +377,23 @@ class BaseAttitude(Term):
         n = len(_knots(self.at, tp.N))
         return ca.vertcat(*rs), np.tile(np.r_[0, 0, 0, 1.0], n), np.tile(np.r_[0, 0, 0, np.inf], n)
 
-    def numeric(self, traj):
+    def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         out = []
         for k in _knots(self.at, traj.N):
-            x, y, z, w = traj.base_quat[k] / np.linalg.norm(traj.base_quat[k])
+            # a floating robot's trajectory (None on a fixed base: residual rejects those)
+            x, y, z, w = traj.base_quat[k] / np.linalg.norm(traj.base_quat[k])  # type: ignore[index]
             E = self._target().T @ pin.Quaternion(w, x, y, z).toRotationMatrix()
             out.append(np.r_[vee_skew(E), np.trace(E)])
         return np.concatenate(out)
 
-    def bounds_numeric(self, traj):
+    def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         n = len(_knots(self.at, traj.N))
         return np.tile(np.r_[0, 0, 0, 1.0], n), np.tile(np.r_[0, 0, 0, np.inf], n)
 
-    def cost_expr(self, ctx):
+    def cost_expr(self, ctx: BuildContext) -> Any:
         r, _, _ = self.residual(ctx.tp)
         return ca.sumsqr(r[[i for i in range(r.shape[0]) if i % 4 != 3]])
 
-    def cost_numeric(self, traj):
+    def cost_numeric(self, traj: NumericTrajectory) -> float:
         r = self.numeric(traj)
         return float(np.sum(r[[i for i in range(r.size) if i % 4 != 3]] ** 2))
