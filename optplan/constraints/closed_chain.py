@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import casadi as ca
 import numpy as np
@@ -41,6 +42,17 @@ from ..model.symbolic import SymbolicKinematics
 __all__ = ["relative_pose_residual", "closed_chain_residual", "project_closed_chain", "ProjectionResult",
            "closure_error", "manifold_resample", "solve_grasp_ik", "IKSettings", "ClosedChainKinematics", "ChainSpec"]
 log = logging.getLogger(__name__)
+
+
+class ChainLike(Protocol):
+    """Anything that describes a closed chain: :class:`ChainSpec`, :class:`~optplan.problem.ClosedChain`."""
+
+    @property
+    def arm_a(self) -> str: ...
+    @property
+    def arm_b(self) -> str: ...
+    @property
+    def relative(self) -> pin.SE3: ...
 
 
 @dataclass(frozen=True)
@@ -62,7 +74,7 @@ class ChainSpec:
         return cls(a, b, grasps[a].actInv(grasps[b]))
 
 
-def relative_pose_residual(Ra, pa, Rb, pb, relative: pin.SE3):
+def relative_pose_residual(Ra: Any, pa: Any, Rb: Any, pb: Any, relative: pin.SE3) -> tuple[Any, Any]:
     """``(h (6), trace(E))`` of hand b's pose in hand a's frame, ``(Raᵀ Rb, Raᵀ (pb − pa))``,
     against ``relative`` (CasADi when the placements are CasADi, numpy otherwise)."""
     Rt, pt = np.array(relative.rotation), np.array(relative.translation)
@@ -82,7 +94,8 @@ class ProjectionResult:
     residual: float
 
 
-def closed_chain_residual(robot: RobotModel, q, closed_chain, data: pin.Data | None = None):
+def closed_chain_residual(robot: RobotModel, q: np.ndarray, closed_chain: ChainLike,
+                          data: pin.Data | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(h (6,), J_h (6 × nv))``: the closed-chain residual (module docstring) at the full
     configuration ``q``, expressed in hand a's frame, and its exact Jacobian. ``closed_chain``: any
     object with ``arm_a``, ``arm_b``, ``relative`` (:class:`ChainSpec`, the NLP term)."""
@@ -103,8 +116,9 @@ def closed_chain_residual(robot: RobotModel, q, closed_chain, data: pin.Data | N
     return h, np.vstack([Jlin, Jang])
 
 
-def project_closed_chain(robot: RobotModel, q, closed_chain, *, tol: float = 1e-10, max_iterations: int = 50,
-                         data: pin.Data | None = None, joints=None, clip: bool = True) -> ProjectionResult:
+def project_closed_chain(robot: RobotModel, q: np.ndarray, closed_chain: ChainLike, *, tol: float = 1e-10,
+                         max_iterations: int = 50, data: pin.Data | None = None, joints: Any = None,
+                         clip: bool = True) -> ProjectionResult:
     """Newton–Raphson projection of the full configuration ``q`` onto ``T_a⁻¹ T_b = relative``
     with minimum-norm steps ``dq = −J⁺ h``. ``joints``: indices into the joint vector that may move
     (default: both arms' joints); ``clip``: keep them within the joint limits. ``tol`` on ‖h‖∞
@@ -133,12 +147,12 @@ def project_closed_chain(robot: RobotModel, q, closed_chain, *, tol: float = 1e-
     return ProjectionResult(q, False, max_iterations, res)
 
 
-def closure_error(robot: RobotModel, grasps_or_chain, q, data: pin.Data | None = None) -> tuple[float, float]:
+def closure_error(robot: RobotModel, grasps_or_chain: dict[str, pin.SE3] | ChainLike, q: np.ndarray, data: pin.Data | None = None) -> tuple[float, float]:
     """Independent check with Pinocchio FK: ``(position error [m], rotation angle [rad])`` of the
     hands' relative pose at ``q`` against the chain's (``grasps_or_chain``: {arm: grasp frame} of
     two arms, or an object with ``arm_a``, ``arm_b``, ``relative``); the measure of
     :func:`optplan.verify`."""
-    cc = ChainSpec.from_grasps(grasps_or_chain) if isinstance(grasps_or_chain, dict) else grasps_or_chain
+    cc: ChainLike = ChainSpec.from_grasps(grasps_or_chain) if isinstance(grasps_or_chain, dict) else grasps_or_chain
     data = data or robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))
     rel = data.oMf[robot.arm(cc.arm_a).ee_frame_id].actInv(data.oMf[robot.arm(cc.arm_b).ee_frame_id])
@@ -146,7 +160,7 @@ def closure_error(robot: RobotModel, grasps_or_chain, q, data: pin.Data | None =
     return float(np.linalg.norm(err.translation)), rotation_angle(err.rotation)
 
 
-def solve_grasp_ik(robot: RobotModel, object_pose: pin.SE3, grasps: dict[str, pin.SE3], q0,
+def solve_grasp_ik(robot: RobotModel, object_pose: pin.SE3, grasps: dict[str, pin.SE3], q0: np.ndarray,
                    options: IKOptions | None = None, data: pin.Data | None = None) -> IKResult:
     """Closed-chain IK: every arm in ``grasps`` puts its end-effector on
     ``object_pose * grasps[arm]`` (grasp frames in the object frame); damped least squares
@@ -160,7 +174,7 @@ def solve_grasp_ik(robot: RobotModel, object_pose: pin.SE3, grasps: dict[str, pi
     return solve_multi(robot, data or robot.model.createData(), q0, targets, options or IKOptions())
 
 
-def manifold_resample(robot: RobotModel, path, n: int, closed_chain=None) -> tuple[np.ndarray, bool]:
+def manifold_resample(robot: RobotModel, path: Any, n: int, closed_chain: ChainLike | None = None) -> tuple[np.ndarray, bool]:
     """``n`` configurations uniform in joint-space arc length along ``path`` (M × nq), each
     projected onto the closed-chain manifold when ``closed_chain`` is given. Returns the array and
     whether every projection converged."""
@@ -197,7 +211,7 @@ class IKSettings:
     #: Largest joint change per iteration [rad].
     max_step: float = 0.5
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("tol_position", "tol_orientation", "gain", "max_step"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
@@ -209,7 +223,7 @@ class IKSettings:
 
 
 
-def _vee_log(R):
+def _vee_log(R: ca.SX) -> ca.SX:
     """Rotation vector of a CasADi 3 × 3 rotation (exact away from π; Appendix Eq. 12-14)."""
     v = vee_skew(R)
     s = ca.norm_2(v)
@@ -228,7 +242,7 @@ class ClosedChainKinematics:
 
     UNROLL = 4   # IK iterations per compiled call
 
-    def __init__(self, robot: RobotModel, grasps: dict[str, pin.SE3]):
+    def __init__(self, robot: RobotModel, grasps: dict[str, pin.SE3]) -> None:
         if len(grasps) != 2:
             raise ValueError(f"grasps: expected two arms, got {list(grasps)}")
         self.robot = robot
@@ -245,7 +259,8 @@ class ClosedChainKinematics:
         self._build()
 
     # ------------------------------------------------------------------ code generation
-    def _arm_terms(self, sk: SymbolicKinematics, q, Ro, po, damp, with_step: bool = True):
+    def _arm_terms(self, sk: SymbolicKinematics, q: ca.SX, Ro: ca.SX, po: ca.SX, damp: ca.SX,
+                   with_step: bool = True) -> list[tuple[Any, ca.SX, ca.SX, tuple[ca.SX, ca.SX]]]:
         """Per arm: (dq of its joints or None, |e_p|, |e_o|, (R, p) of the hand) at ``q``."""
         X = sk.joint_placements(q)
         out = []
@@ -264,7 +279,7 @@ class ClosedChainKinematics:
             out.append((dq, ca.norm_2(ep), ca.norm_2(eo), (R, p)))
         return out
 
-    def _build(self):
+    def _build(self) -> None:
         robot = self.robot
         sk = SymbolicKinematics(robot)
         nq = robot.nq

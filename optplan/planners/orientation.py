@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -46,13 +47,13 @@ class DualArmOrientationConstraint:
 
     robot: RobotModel
     mode: str
-    R_hands: dict
+    R_hands: dict[str, np.ndarray]
     active: str = "left"
     passive: str = "right"
     T_rel: pin.SE3 | None = None
     orientation_bounds: np.ndarray = field(default_factory=lambda: np.zeros((3, 2)))
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.mode not in ("open", "closed"):
             raise ConfigurationError(f"mode: expected 'open' or 'closed', got {self.mode!r}")
         self.robot.arm(self.active)
@@ -74,6 +75,7 @@ class DualArmOrientationConstraint:
         self.orientation_bounds = b
         if self.mode == "closed":
             self.R_hands = dict(self.R_hands)
+            assert self.T_rel is not None  # checked above
             self.R_hands[self.passive] = np.asarray(self.R_hands[self.active]) @ self.T_rel.rotation
         self.fids = {a: self.robot.arm(a).ee_frame_id for a in (self.active, self.passive)}
         self.data = self.robot.model.createData()
@@ -81,7 +83,7 @@ class DualArmOrientationConstraint:
         self.ambient_dim = self.robot.nq
 
     # ------------------------------------------------------------------ residual (projection planners)
-    def _orientation_rows(self, arm: str, with_jac: bool):
+    def _orientation_rows(self, arm: str, with_jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
         m, d = self.robot.model, self.data
         R = d.oMf[self.fids[arm]].rotation
         Rd = np.asarray(self.R_hands[arm])
@@ -97,8 +99,9 @@ class DualArmOrientationConstraint:
         J[(e > lo) & (e < hi)] = 0.0       # inside a free / bounded axis: no pull
         return h, J
 
-    def _relative_rows(self, with_jac: bool):
+    def _relative_rows(self, with_jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
         m, d = self.robot.model, self.data
+        assert self.T_rel is not None  # closed mode (__post_init__)
         T1, T2 = d.oMf[self.fids[self.active]], d.oMf[self.fids[self.passive]]
         Terr = self.T_rel.actInv(T1.actInv(T2))
         h = pin.log6(Terr).vector
@@ -109,7 +112,7 @@ class DualArmOrientationConstraint:
         Ad21 = (T2.actInv(T1)).toActionMatrix()
         return h, pin.Jlog6(Terr) @ (J2 - Ad21 @ J1)
 
-    def h_jacobian(self, q) -> tuple[np.ndarray, np.ndarray]:
+    def h_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Residual (``dim``) and its Jacobian (``dim × nq``) at q."""
         m, d = self.robot.model, self.data
         pin.computeJointJacobians(m, d, q)
@@ -117,19 +120,21 @@ class DualArmOrientationConstraint:
         if self.mode == "open":
             ha, Ja = self._orientation_rows(self.active, True)
             hb, Jb = self._orientation_rows(self.passive, True)
+            assert Ja is not None and Jb is not None  # with_jac=True
             return np.r_[ha, hb], np.vstack([Ja, Jb])
         ha, Ja = self._orientation_rows(self.active, True)
         hr, Jr = self._relative_rows(True)
+        assert Ja is not None and Jr is not None  # with_jac=True
         return np.r_[ha, hr], np.vstack([Ja, Jr])
 
-    def h(self, q) -> np.ndarray:
+    def h(self, q: np.ndarray) -> np.ndarray:
         pin.framesForwardKinematics(self.robot.model, self.data, q)
         if self.mode == "open":
             return np.r_[self._orientation_rows(self.active, False)[0], self._orientation_rows(self.passive, False)[0]]
         return np.r_[self._orientation_rows(self.active, False)[0], self._relative_rows(False)[0]]
 
     # ------------------------------------------------------------------ metrics
-    def errors(self, q) -> tuple[float, float]:
+    def errors(self, q: np.ndarray) -> tuple[float, float]:
         """(orientation error [rad]: the larger of the two hands' ``|log(R_dᵀ R)|``, relative
         position error [m] of the passive hand in the active hand frame; 0 in open mode)."""
         pin.framesForwardKinematics(self.robot.model, self.data, q)
@@ -138,6 +143,7 @@ class DualArmOrientationConstraint:
                  for a in (self.active, self.passive))
         ep = 0.0
         if self.mode == "closed":
+            assert self.T_rel is not None  # closed mode (__post_init__)
             T1, T2 = d.oMf[self.fids[self.active]], d.oMf[self.fids[self.passive]]
             ep = float(np.linalg.norm(T1.actInv(T2).translation - self.T_rel.translation))
         return eo, ep
@@ -150,11 +156,11 @@ class DualArmOrientationConstraint:
         p = float(np.sqrt(np.mean(E[:, 1] ** 2))) if self.mode == "closed" else float("nan")
         return o, p
 
-    def hand_pose(self, q, arm: str) -> pin.SE3:
+    def hand_pose(self, q: np.ndarray, arm: str) -> pin.SE3:
         pin.framesForwardKinematics(self.robot.model, self.data, q)
         return self.data.oMf[self.fids[arm]].copy()
 
-    def object_pose(self, q):
+    def object_pose(self, q: np.ndarray) -> pin.SE3 | None:
         return None
 
 
@@ -193,15 +199,16 @@ class OrientationManifold:
         self.n_complete = 0
         #: every branch of :meth:`complete` in one compiled call (None: the Python reference path,
         #: used when ``compiled=False`` or when the passive arm's full-pose IK needs Newton steps)
-        self.kernel = None
+        self.kernel: tuple[_Kernel, ...] | None = None
         self._shared_passive = c.mode == "closed" and ia.spherical   # one passive block for both wrist branches
         if compiled and (c.mode == "open" or ip.spherical):
             self.kernel = _completion_kernel(self)
 
-    def params(self, q) -> np.ndarray:
+    def params(self, q: Any) -> np.ndarray:
         return np.asarray(q, float)[self.p_idx]
 
-    def _pick(self, sols: np.ndarray, ref, rng):
+    def _pick(self, sols: np.ndarray, ref: np.ndarray | None,
+              rng: np.random.Generator | None) -> np.ndarray | None:
         if len(sols) == 0:
             return None
         if ref is not None:
@@ -210,7 +217,7 @@ class OrientationManifold:
             return sols[int(rng.integers(len(sols)))]
         return sols[0]
 
-    def complete(self, p, ref: np.ndarray | None = None, rng: np.random.Generator | None = None) -> np.ndarray | None:
+    def complete(self, p: np.ndarray, ref: np.ndarray | None = None, rng: np.random.Generator | None = None) -> np.ndarray | None:
         """The configuration on the manifold with parameters ``p``: the branch (wrist / passive
         arm solution) nearest to ``ref`` (max-norm), else a random one (``rng``), else the first.
         None when the parameters admit no solution inside the joint limits."""
@@ -219,7 +226,9 @@ class OrientationManifold:
             return self._complete_compiled(np.asarray(p, float), ref, rng)
         return self.complete_reference(p, ref, rng)
 
-    def _complete_compiled(self, p, ref, rng):
+    def _complete_compiled(self, p: np.ndarray, ref: np.ndarray | None,
+                           rng: np.random.Generator | None) -> np.ndarray | None:
+        assert self.kernel is not None  # complete() calls this only with a kernel
         if ref is not None:
             q, found = self.kernel[1](p, ref)
             return q if found[0] > 0.5 else None
@@ -249,7 +258,8 @@ class OrientationManifold:
         q[self.ip[1:]] = s
         return q
 
-    def complete_reference(self, p, ref: np.ndarray | None = None, rng: np.random.Generator | None = None):
+    def complete_reference(self, p: np.ndarray, ref: np.ndarray | None = None,
+                           rng: np.random.Generator | None = None) -> np.ndarray | None:
         """:meth:`complete` on the Python path of :class:`~optplan.ik_analytic.DecoupledArmIK`
         (no compiled code; the reference for tests)."""
         c = self.c
@@ -283,7 +293,8 @@ class OrientationManifold:
 _TWO_PI = 2.0 * math.pi
 
 
-def _choose(X, ok, lo, hi, rng, *, dedup: bool = False, tol: float = 1e-12):
+def _choose(X: np.ndarray, ok: np.ndarray, lo: np.ndarray, hi: np.ndarray, rng: np.random.Generator | None, *,
+            dedup: bool = False, tol: float = 1e-12) -> tuple[int, np.ndarray | None]:
     """One solution among the raw branches ``X`` (rows, with flags ``ok``) and their ``2πk`` shifts
     inside [lo, hi] (within ``tol``, then clipped): a uniformly random one (``rng``), else the first,
     counted in the order of :class:`~optplan.ik_analytic.DecoupledArmIK` (branch, then shifts, the
@@ -314,13 +325,17 @@ def _choose(X, ok, lo, hi, rng, *, dedup: bool = False, tol: float = 1e-12):
     return int(idx[r]), np.clip(y, lo, hi)
 
 
-def _sx_nearest(rows, oks, ref, lo, hi, n_fixed: int = 0, tol: float = 1e-12):
+def _sx_nearest(rows: list[Any], oks: list[Any], ref: list[Any], lo: np.ndarray, hi: np.ndarray, n_fixed: int = 0,
+                tol: float = 1e-12) -> tuple[Any, Any, Any]:
     """:func:`_choose` with a reference, in CasADi SX: (angles, distance, found) of the in-limit
     ``2πk`` shift of the raw branches nearest ``ref`` (max-norm; first branch on ties). The first
     ``n_fixed`` angles are given (never shifted, not limit-checked)."""
-    best = best_d = found = None
+    best: Any = None
+    best_d: Any = None
+    found: Any = None
     for x, ok in zip(rows, oks):
-        y, good, d = [], ok, 0.0
+        y: list[Any] = []
+        good, d = ok, 0.0
         for k, t in enumerate(x):
             if k >= n_fixed:
                 t = t + _TWO_PI * ca.floor((ref[k] - t) / _TWO_PI + 0.5)
@@ -341,7 +356,7 @@ def _sx_nearest(rows, oks, ref, lo, hi, n_fixed: int = 0, tol: float = 1e-12):
     return best, best_d, found
 
 
-def _completion_kernel(mf: OrientationManifold):
+def _completion_kernel(mf: OrientationManifold) -> tuple[_Kernel, ...]:
     """Two compiled functions of the manifold parameters ``p``:
 
     * ``raw(p) -> (QA, okA, QP, okP)``: the active arm's two raw wrist branches (2 × 3) and the
@@ -359,7 +374,7 @@ def _completion_kernel(mf: OrientationManifold):
     QA = ca.vertcat(*[ca.horzcat(*b[:3]) for b in wa])
     okA = ca.vertcat(*[b[3] for b in wa])
     best_a, da, found_a = _sx_nearest([b[:3] for b in wa], [b[3] for b in wa], ra[4:], ia.lower[4:], ia.upper[4:])
-    q = [None] * robot.nq
+    q: list[Any] = [None] * robot.nq
     for k in range(4):
         q[int(mf.ia[k])] = p[k]
     for k in range(3):
@@ -374,13 +389,14 @@ def _completion_kernel(mf: OrientationManifold):
         for k in range(3):
             q[int(mf.ip[4 + k])] = best_p[k]
     else:
+        assert c.T_rel is not None  # closed mode
         Rr, pr = ca.DM(c.T_rel.rotation), ca.DM(c.T_rel.translation)
         rows, oks, per_branch = [], [], []
         sols = None
         for t5, t6, t7, _ in wa:
             if ia.spherical:   # the active hand pose does not depend on the wrist branch
                 R1 = ca.DM(np.asarray(c.R_hands[c.active], float))
-                p1 = ia.sx_hand_position([p[k] for k in range(4)], R1)
+                p1 = ia.sx_hand_position([p[k] for k in range(4)], R1)  # type: ignore[no-untyped-call]  # ik_analytic is not annotated yet
             else:
                 R1, p1 = ia.sx_fk([p[0], p[1], p[2], p[3], t5, t6, t7])
             if sols is None or not ia.spherical:
@@ -405,7 +421,7 @@ def _completion_kernel(mf: OrientationManifold):
     return tuple(_Kernel(compile_function(f)) for f in (raw, near))
 
 
-def _cse(outs):
+def _cse(outs: list[Any]) -> list[Any]:
     return list(ca.cse(outs)) if hasattr(ca, "cse") else outs
 
 
@@ -414,7 +430,7 @@ class _Kernel:
     (no per-call sparsity mapping), or the interpreted casadi.Function when there is no C compiler.
     Returns fresh numpy arrays (outputs in column-major order, reshaped)."""
 
-    def __init__(self, cf) -> None:
+    def __init__(self, cf: Any) -> None:
         self.cf = cf
         self.compiled = not isinstance(cf, ca.Function)
         f = cf if not self.compiled else None
@@ -425,9 +441,11 @@ class _Kernel:
             self._shapes = [shape for shape, _, _ in cf._out_map]
             self._call = (cf._fn, cf._arg, cf._res, cf._iw_p, cf._w_p)
         else:
-            self._shapes = [f.size_out(i) for i in range(f.n_out())]
+            # f is None when the branch above turned a compiled function with a sparse output into the
+            # generic call: this line would then fail (left as it is: annotations only)
+            self._shapes = [f.size_out(i) for i in range(f.n_out())]  # type: ignore[union-attr]
 
-    def __call__(self, *inputs):
+    def __call__(self, *inputs: Any) -> tuple[np.ndarray, ...]:
         if not self.compiled:
             outs = self.cf(*inputs)
             outs = outs if isinstance(outs, (list, tuple)) else [outs]
@@ -445,7 +463,7 @@ def constraint_from_scene(robot: RobotModel, scene: Scene) -> DualArmOrientation
     ``active``/``passive`` arm names, ``hand_rpy`` = {arm: [r, p, y]} (scene angle unit: deg) and,
     in closed mode, the ``[object]`` grasps of the two arms (``T_rel = G_active⁻¹ G_passive``)."""
     ex = scene.extra
-    mode = ex.get("mode")
+    mode: Any = ex.get("mode")  # validated by DualArmOrientationConstraint
     active, passive = ex.get("active", "left"), ex.get("passive", "right")
     rpy = ex.get("hand_rpy", {})
     unit = math.pi / 180.0 if ex.get("angle_unit", "deg") == "deg" else 1.0
@@ -479,7 +497,7 @@ def endpoints_from_scene(manifold: OrientationManifold, scene: Scene) -> tuple[n
         raise ConfigurationError(f"scene {scene.name!r}: start_params {ps[0].tolist()} have no IK solution in the limits")
     # the goal on the same IK branch / 2π sheet as the start: follow the straight parameter line
     # (collisions ignored), else the solution nearest the start
-    q = qs
+    q: np.ndarray | None = qs
     for s in np.linspace(0.0, 1.0, 201)[1:]:
         x = manifold.complete(ps[0] + s * (ps[1] - ps[0]), ref=q)
         if x is None or np.abs(x - q).max() > 0.3:

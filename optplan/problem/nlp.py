@@ -82,14 +82,14 @@ _STATUS_BY_NAME = {m.value.lower(): m for m in IpoptStatus}
 _HESSIANS = ("exact", "limited-memory")
 #: (name, type, value) of raw options IPOPT already accepted in this process (checking one creates
 #: a solver instance: about a millisecond)
-_CHECKED: set = set()
+_CHECKED: set[tuple[str, str, str]] = set()
 
 
-def _option_key(k, v):
+def _option_key(k: Any, v: Any) -> tuple[str, str, str]:
     return (str(k), type(v).__name__, repr(v))
 
 
-def _number(value, name: str, *, integer: bool = False, positive: bool = True, allow_zero: bool = False):
+def _number(value: Any, name: str, *, integer: bool = False, positive: bool = True, allow_zero: bool = False) -> None:
     bad = isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating))
     if not bad and integer and not float(value).is_integer():
         bad = True
@@ -128,7 +128,7 @@ class SolverOptions:
     #: Checked against IPOPT when the options are created.
     raw: Mapping[str, Any] = field(default_factory=dict)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         from ..solver_options import check_ipopt_options
 
         if self.tol is not None:
@@ -163,19 +163,19 @@ class SolverOptions:
             _CHECKED.update(_option_key(k, v) for k, v in new.items())
         object.__setattr__(self, "raw", types.MappingProxyType(raw))
 
-    def __getstate__(self):
+    def __getstate__(self) -> dict[str, Any]:
         d = dict(self.__dict__)
         d["raw"] = dict(d["raw"])
         return d
 
-    def __setstate__(self, d):
+    def __setstate__(self, d: dict[str, Any]) -> None:
         for k, v in d.items():
             object.__setattr__(self, k, v)
         object.__setattr__(self, "raw", types.MappingProxyType(dict(d["raw"])))
 
     # ------------------------------------------------------------------ conversions
     @classmethod
-    def coerce(cls, options: SolverOptions | Mapping | None, **fields) -> SolverOptions:
+    def coerce(cls, options: SolverOptions | Mapping[str, Any] | None, **fields: Any) -> SolverOptions:
         """``options`` as :class:`SolverOptions`: an instance (``fields`` given explicitly
         override its fields), a plain dict of IPOPT options (→ ``raw``, the pass-through the
         problems' ``solve(ipopt_options)`` always accepted) or ``None``."""
@@ -193,16 +193,16 @@ class SolverOptions:
         raise OptionError(f"solver options: expected SolverOptions, a dict of IPOPT options or None, got "
                           f"{type(options).__name__} {options!r}")
 
-    def replace(self, **changes) -> SolverOptions:
+    def replace(self, **changes: Any) -> SolverOptions:
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
 
-    def casadi_options(self, defaults: Mapping[str, Any] | None = None) -> dict:
+    def casadi_options(self, defaults: Mapping[str, Any] | None = None) -> dict[str, Any]:
         """The ``casadi.nlpsol`` options dict: the NLP's ``defaults`` (flat ``"ipopt.x"`` names),
         then the fields that are set, then ``raw``."""
         from ..solver_options import casadi_option_name
 
-        opts = {"print_time": False, "ipopt.sb": "yes"}
+        opts: dict[str, Any] = {"print_time": False, "ipopt.sb": "yes"}
         for k, v in (defaults or {}).items():
             opts[casadi_option_name(k)] = v
         opts["ipopt.print_level"] = int(self.print_level)
@@ -224,7 +224,7 @@ class SolverOptions:
             opts[casadi_option_name(k)] = v
         return opts
 
-    def raw_value(self, name: str, default=None):
+    def raw_value(self, name: str, default: Any = None) -> Any:
         """The value of an IPOPT option given in ``raw`` (with or without the ``ipopt.`` prefix)."""
         for k in (name, f"ipopt.{name}"):
             if k in self.raw:
@@ -259,7 +259,7 @@ class SolveOutcome:
     #: the constraint values g(x) IPOPT returned (None when not computed)
     g: np.ndarray | None = field(default=None, repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not isinstance(self.status, IpoptStatus):
             object.__setattr__(self, "status", IpoptStatus.from_string(self.status))
         for name in ("x", "lam_g", "lam_x", "g"):
@@ -281,21 +281,21 @@ class SolveOutcome:
     def with_label(self, label: str) -> SolveOutcome:
         return dataclasses.replace(self, label=str(label))
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no arrays)."""
         return {"status": self.status.value, "iterations": int(self.iterations), "wall_time": float(self.wall_time),
                 "cpu_time": float(self.cpu_time), "setup_time": float(self.setup_time), "cost": float(self.cost),
                 "label": self.label, "message": self.message}
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> SolveOutcome:
+    def from_dict(cls, d: Mapping[str, Any]) -> SolveOutcome:
         return cls(status=IpoptStatus.from_string(d.get("status", "Unknown")), iterations=int(d.get("iterations", -1)),
                    wall_time=float(d.get("wall_time", 0.0)), cpu_time=float(d.get("cpu_time", 0.0)),
                    setup_time=float(d.get("setup_time", 0.0)), cost=float(d.get("cost", float("nan"))),
                    label=str(d.get("label", "")), message=str(d.get("message", "")))
 
 
-def outcome_from_stats(stats: Mapping, out: Mapping | None, *, wall_time: float, cpu_time: float = 0.0,
+def outcome_from_stats(stats: Mapping[str, Any], out: Mapping[str, Any] | None, *, wall_time: float, cpu_time: float = 0.0,
                        setup_time: float = 0.0, cost_scale: float = 1.0, label: str = "") -> SolveOutcome:
     """A :class:`SolveOutcome` from ``solver.stats()`` and the solver's output dict (for NLPs
     that call a ``casadi.nlpsol`` of their own). ``cost_scale`` divides the returned ``f``."""
@@ -303,7 +303,7 @@ def outcome_from_stats(stats: Mapping, out: Mapping | None, *, wall_time: float,
     iters = int(stats.get("iter_count", -1))
     if out is None:
         return SolveOutcome(status, iters, wall_time, cpu_time, setup_time, label=label)
-    def arr(k):
+    def arr(k: str) -> np.ndarray | None:
         v = out.get(k)
         if v is None:
             return None
@@ -324,8 +324,9 @@ class NlpSolver:
     ``setup_time`` [s]: the creation of the instance (charged to the first solve's outcome).
     """
 
-    def __init__(self, name: str, nlp: Mapping, options: SolverOptions | Mapping | None = None, *,
-                 defaults: Mapping[str, Any] | None = None, casadi_options: Mapping[str, Any] | None = None):
+    def __init__(self, name: str, nlp: Mapping[str, Any], options: SolverOptions | Mapping[str, Any] | None = None, *,
+                 defaults: Mapping[str, Any] | None = None,
+                 casadi_options: Mapping[str, Any] | None = None) -> None:
         import casadi as ca
 
         self.options = SolverOptions.coerce(options)
@@ -337,13 +338,14 @@ class NlpSolver:
         self.setup_time = time.perf_counter() - t0
         self._setup_pending = self.setup_time
 
-    def solve(self, x0, *, lbx=None, ubx=None, lbg=None, ubg=None, p=None, lam_g0=None, lam_x0=None,
+    def solve(self, x0: Any, *, lbx: Any = None, ubx: Any = None, lbg: Any = None, ubg: Any = None, p: Any = None,
+              lam_g0: Any = None, lam_x0: Any = None,
               cost_scale: float = 1.0, label: str = "", extra_setup: float = 0.0) -> SolveOutcome:
         """Run IPOPT from ``x0``. Never raises for a failed run: a CasADi/IPOPT exception becomes
         ``IpoptStatus.INTERNAL_ERROR`` with ``x = x0``. ``cost_scale`` divides the returned
         objective (for NLPs that scale their objective themselves); ``extra_setup`` [s] is added
         to the outcome's ``setup_time`` (e.g. the NLP's own construction)."""
-        args = {"x0": x0}
+        args: dict[str, Any] = {"x0": x0}
         for k, v in (("lbx", lbx), ("ubx", ubx), ("lbg", lbg), ("ubg", ubg), ("p", p), ("lam_g0", lam_g0),
                      ("lam_x0", lam_x0)):
             if v is not None:
@@ -362,5 +364,5 @@ class NlpSolver:
         return outcome_from_stats(stats, out, wall_time=time.perf_counter() - t0, cpu_time=time.process_time() - c0,
                                   setup_time=setup, cost_scale=cost_scale, label=label)
 
-    def stats(self) -> dict:
+    def stats(self) -> dict[str, Any]:
         return dict(self.solver.stats())

@@ -40,9 +40,11 @@ import logging
 import time
 from dataclasses import dataclass, field
 from types import SimpleNamespace
+from typing import Any
 
 import casadi as ca
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..model.robot import RobotModel
 from ..scene import Scene
@@ -109,7 +111,7 @@ class _Built:
     ubg: np.ndarray
     p: np.ndarray
     gfun: ca.Function
-    slices: dict = field(default_factory=dict)
+    slices: dict[str, slice] = field(default_factory=dict)
     setup_time: float = 0.0
 
 
@@ -142,9 +144,9 @@ class SplineSegmentProblem:
                 if shape is None:
                     geometry_points(robot, g)
         self._X0: np.ndarray | None = None  # interior control points (N−3) × nj
-        self._lam: tuple | None = None
+        self._lam: tuple[Any, ...] | None = None
         self._built: _Built | None = None
-        self._plan = None
+        self._plan: list[SimpleNamespace] | None = None
         #: use the kernel-assembled Jacobian and Hessian (False: CasADi's own AD of the whole graph)
         self.exact_derivatives = True
         #: kernels evaluated from C compiled once per robot and kept in the disk cache
@@ -157,7 +159,7 @@ class SplineSegmentProblem:
         self.vertex_window = 0.5
 
     # ------------------------------------------------------------------ initial guess
-    def set_initial(self, q=None, *, solution: Solution | None = None,
+    def set_initial(self, q: ArrayLike | None = None, *, solution: Solution | None = None,
                     closed_chain: ClosedChain | None = None) -> None:
         """Initial guess from knot configurations ``q`` ((N+1) × nj, on this problem's grid) or from
         a :class:`Solution` of any grid (sampled at this grid's knots; with ``closed_chain``, each
@@ -178,7 +180,7 @@ class SplineSegmentProblem:
         self._lam = None
         self._built = None
 
-    def set_initial_path(self, path, closed_chain: ClosedChain | None = None) -> bool:
+    def set_initial_path(self, path: ArrayLike, closed_chain: ClosedChain | None = None) -> bool:
         """Initial guess from a planner's path (M × nj, no timing): the path is followed with the
         rest-to-rest quintic time law in joint-space arc length, each knot projected onto the
         closed-chain manifold. Returns whether every projection converged."""
@@ -236,30 +238,36 @@ class SplineSegmentProblem:
         self.set_initial(Qs)
 
     # ------------------------------------------------------------------ helpers
-    def _P(self, X) -> np.ndarray:
+    def _P(self, X: ArrayLike) -> np.ndarray:
         return np.vstack([self.P_start, np.asarray(X).reshape(self.N - 3, self.robot.nj), self.P_end])
 
-    def knot_configurations(self, X=None) -> np.ndarray:
+    def knot_configurations(self, X: ArrayLike | None = None) -> np.ndarray:
         """Knot configurations ((N+1) × nj) of interior control points X (default: the guess)."""
-        return self.M["q"] @ self._P(self._X0 if X is None else X)
+        X = self._X0 if X is None else X
+        assert X is not None  # callers check that there is a guess
+        return self.M["q"] @ self._P(X)
 
     # ------------------------------------------------------------------ collision rows
-    def _entity(self, kind: str, idx: int, holder: str):
+    def _entity(self, kind: str, idx: int, holder: str) -> tuple[int | None, np.ndarray, float]:
         """(frame id or None, points 3 × m in that frame (world if None), radius) of an entity;
         an entity that depends on no free joint (an obstacle, the fixed base, a holding arm, the
         object it holds) comes back static: frame None and its world points."""
         col = self.col
+        assert col is not None  # collision rows exist only with a scene
         if kind == "obstacle":
             o = col.checker.obstacles[idx]
             if o.shape == "box":
                 V, r = np.array(_box_vertices(np.asarray(o.size) / 2)).T, 0.0
             elif o.shape == "sphere":
+                assert o.radius is not None  # a sphere obstacle has a radius
                 V, r = np.zeros((3, 1)), float(o.radius)
             else:
+                assert o.radius is not None and o.length is not None  # a capsule obstacle has both
                 V, r = np.array([[0, 0, -o.length / 2], [0, 0, o.length / 2]]).T, float(o.radius)
             M = o.placement
             return None, M.rotation @ V + M.translation[:, None], r
         if kind == "object":
+            assert col.checker.object is not None  # an "object" entity exists only with a held object
             V = np.array(_box_vertices(np.asarray(col.checker.object.size) / 2)).T
             G = col.grasp_inv
             fid, V, r = self.robot.arm(holder).ee_frame_id, G.rotation @ V + G.translation[:, None], 0.0
@@ -271,6 +279,7 @@ class SplineSegmentProblem:
             fid, shape, Mbox = spec
             from ..geometry import distance as D
             if isinstance(shape, D.Box):
+                assert Mbox is not None  # a box's placement in its frame is kept
                 V, r = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T, 0.0
             elif isinstance(shape, D.Sphere):
                 V, r = np.asarray(shape.center, float).reshape(3, 1), float(shape.radius)
@@ -278,25 +287,28 @@ class SplineSegmentProblem:
                 V, r = np.array([shape.a, shape.b], float).T, float(shape.radius)
         return self._static_or_moving(kind, idx, fid, V, r)
 
-    def _static_or_moving(self, kind: str, idx: int, fid: int, V: np.ndarray, r: float):
+    def _static_or_moving(self, kind: str, idx: int, fid: int, V: np.ndarray,
+                          r: float) -> tuple[int | None, np.ndarray, float]:
+        assert self.col is not None  # collision rows exist only with a scene
         if self.col.free_joints_of(self.robot, kind, idx, self.fixed) == set():
             M = self._static_placement(fid)
             return None, M.rotation @ V + M.translation[:, None], r
         return fid, V, r
 
-    def _static_placement(self, fid: int):
+    def _static_placement(self, fid: int) -> Any:
         import pinocchio as pin
 
         data = self.robot.model.createData()
         pin.framesForwardKinematics(self.robot.model, data, self.q0)
         return data.oMf[fid]
 
-    def _boundary_margins(self, active: list, pinned: set):
+    def _boundary_margins(self, active: list[Any], pinned: set[int]) -> Any:
         """``margin_at(pair, k)`` [m] as :meth:`CollisionAvoidance._boundary_margins` (the margin,
         halved distance within ``window`` knots of a pinned configuration closer than the margin),
         from the exact coal distances of the pinned configurations: the rows here are planes, not
         the knot transcription's smooth distances."""
         col, N, w = self.col, self.N, int(self.spec.window)
+        assert col is not None and col._init_dist is not None  # a scene, and the guess's distances (_activate)
         col.relaxed = {}
         index = col.checker.pair_index
         knots = set(range(N + 1)) if self.spec.relax_to_guess else set(pinned)
@@ -311,7 +323,7 @@ class SplineSegmentProblem:
                         col.relaxed[(p, k)] = min(m, col.relaxed.get((p, k), np.inf))
         return col._margin_at
 
-    def _plan_collision(self, Qk: np.ndarray) -> list:
+    def _plan_collision(self, Qk: np.ndarray) -> list[SimpleNamespace]:
         """Active (pair, kernel, knots, …) along the knot configurations ``Qk``: one item per pair
         with its kernel, knots, margins and which side moves (``flip``: A is the static side)."""
         col = self.col
@@ -329,7 +341,7 @@ class SplineSegmentProblem:
         holder = col.checker.object_arm
         plan = []
         for pair in active:
-            ka, kb = col.kinds(pair)
+            ka, kb = col.kinds(pair)  # type: ignore[no-untyped-call]  # collision_term is not annotated yet
             ea, eb = self._entity(ka, pair.a, holder), self._entity(kb, pair.b, holder)
             if ea is None or eb is None:
                 continue
@@ -345,7 +357,8 @@ class SplineSegmentProblem:
                                         margins=np.array([margin_at(pair, k) for k in ks])))
         return plan
 
-    def _prune(self, it, side, normals: np.ndarray, Qk: np.ndarray, sign: float):
+    def _prune(self, it: SimpleNamespace, side: tuple[int | None, np.ndarray, float], normals: np.ndarray,
+               Qk: np.ndarray, sign: float) -> tuple[int | None, np.ndarray, float]:
         """Keep the points of a moving box side that come within ``vertex_window`` [m] of its
         leading point along the (signed) normal at some knot of the pair: the others sit that far
         behind the plane and cannot reach it without the body turning by a large angle."""
@@ -362,7 +375,8 @@ class SplineSegmentProblem:
             keep |= proj >= proj.max() - self.vertex_window
         return fid, V[:, keep], r
 
-    def _kernels_for(self, plan: list, planes: list, Qk: np.ndarray) -> None:
+    def _kernels_for(self, plan: list[SimpleNamespace], planes: list[tuple[np.ndarray, np.ndarray]],
+                     Qk: np.ndarray) -> None:
         """Point subsets (:meth:`_prune`), kernel and row count of every item."""
         for it, (Nrm, _) in zip(plan, planes):
             it.a = self._prune(it, it.a, Nrm, Qk, 1.0)  # rows b − n·x: x's leading along +n
@@ -371,17 +385,18 @@ class SplineSegmentProblem:
             it.fn = self.kernels.pair(it.a[0], it.a[1], it.a[2], it.b[0], it.b[1], it.b[2])
             it.nrow = it.a[1].shape[1] + (0 if it.static else it.b[1].shape[1])
 
-    def _plane_data(self, plan: list, Qk) -> list[tuple[np.ndarray, np.ndarray]]:
+    def _plane_data(self, plan: list[SimpleNamespace], Qk: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per item: normals (3 × K) from coal's witness at the knot configurations (pointing from
         the moving side to the other), and the offsets: the static side's support value, or the
         witness mid-plane offset (a variable's initial value) for two moving sides."""
         col = self.col
-        per_knot: dict[int, list] = {}
+        per_knot: dict[int, list[tuple[int, int]]] = {}
         for i, it in enumerate(plan):
             for t, k in enumerate(it.knots):
                 per_knot.setdefault(k, []).append((i, t))
         out = [(np.zeros((3, len(it.knots))), np.zeros(len(it.knots))) for it in plan]
         for k, items in per_knot.items():
+            assert col is not None  # plan items exist only with collision rows
             Mo = col.checker.update_placements(Qk[k])
             import coal
             obj_tf = coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None
@@ -459,7 +474,8 @@ class SplineSegmentProblem:
         self._nfree = nP
         return b
 
-    def _structure(self, sel: np.ndarray, ccfn, plan: list, evals: dict) -> SimpleNamespace:
+    def _structure(self, sel: np.ndarray, ccfn: ca.Function | None, plan: list[SimpleNamespace],
+                   evals: dict[str, Any]) -> SimpleNamespace:
         """The symbolic NLP of one shape: decision variables, parameters, rows in the order of
         :meth:`_build`'s bounds, and the exact Jacobian / Hessian functions (:class:`Assembly`)."""
         N, nj = self.N, self.robot.nj
@@ -476,7 +492,7 @@ class SplineSegmentProblem:
         if sel.size:  # velocity control points touching a free point (convex hull: q̇ bounded everywhere)
             dP = ca.vec(ca.mtimes(P, _sparse(self.M["dP"].T[:, 2:N])))
             asm.linear("velocity_limits", dP[sel.tolist()], self.M["dP"][2:N], 0.0, 0.0, select=sel)
-        fams = []
+        fams: list[tuple[str, Any, list[int], Any, Any, tuple[int, np.ndarray] | None]] = []
         if ccfn is not None:
             fams.append(("closed_chain", ccfn, list(range(1, N)), ca.DM.zeros(3, N - 1), ca.DM.zeros(1, N - 1), None))
         bi = 0
@@ -496,7 +512,8 @@ class SplineSegmentProblem:
                 bi += K
         for name, fn, knots, Nin, Sin, bcoup in fams:
             (f, jfn, hfn), _ = evals[fn.name()]
-            asm.family(name, f, jfn, hfn, knots, Qk[:, knots], Nin, Sin, bcoup, 0.0, 0.0)
+            asm.family(name, f, jfn, hfn,  # type: ignore[no-untyped-call]  # Assembly is not annotated yet
+                       knots, Qk[:, knots], Nin, Sin, bcoup, 0.0, 0.0)
         w = ca.MX.sym("w")  # objective weight: scale / h⁵
         params.append(w)
         p = ca.vertcat(*[ca.vec(a) for a in params])
@@ -517,11 +534,11 @@ class SplineSegmentProblem:
         self._built = None
 
     # ------------------------------------------------------------------ velocity rows
-    def _velocity_cp(self, X) -> np.ndarray:
+    def _velocity_cp(self, X: ArrayLike) -> np.ndarray:
         """Velocity control points [rad/s] touching a free point, (N−2) × nj."""
         return self.M["dP"][2:self.N] @ self._P(X) / self.h
 
-    def _fast_entries(self, X) -> set:
+    def _fast_entries(self, X: ArrayLike) -> set[int]:
         """Entries ``i·nj + j`` of the velocity control points of ``X`` past ``velocity_activation``
         of their joint's limit (fixed joints excluded)."""
         on = np.abs(self._velocity_cp(X)) >= self.spec.velocity_activation * self.vlim
@@ -531,6 +548,7 @@ class SplineSegmentProblem:
     def _velocity_entries(self) -> np.ndarray:
         """Entries of the velocity control points that get a row: those the initial guess drives
         past ``velocity_activation`` of the limit, plus those added after a solve."""
+        assert self._X0 is not None  # _build checks that there is a guess
         return np.array(sorted(self._fast_entries(self._X0) | self._vel_extra), int)
 
     def activate_velocity(self, solution: Solution) -> int:
@@ -554,7 +572,7 @@ class SplineSegmentProblem:
         over = np.flatnonzero((V - self.vlim > tol).ravel())
         return np.setdiff1d(over, self._velocity_entries())
 
-    def add_velocity_rows(self, entries) -> None:
+    def add_velocity_rows(self, entries: ArrayLike) -> None:
         """Constrain these velocity entries (from :meth:`velocity_violations`) at the next solve."""
         n = (self.N - 2) * self.robot.nj
         e = np.asarray(entries, int).ravel()
@@ -572,14 +590,14 @@ class SplineSegmentProblem:
                 NumericTrajectory(self.robot, Q, Q, Q, Q[:-1], self.T)]
         self._built = None
 
-    def boost_between_knots(self, traj_t, traj_q, knot_t) -> int:
+    def boost_between_knots(self, traj_t: ArrayLike, traj_q: ArrayLike, knot_t: ArrayLike) -> int:
         """:meth:`CollisionAvoidance.boost_between_knots` for this problem's collision rows."""
         if self.col is None:
             return 0
         self._built = None
         return self.col.boost_between_knots(traj_t, traj_q, knot_t)
 
-    def infeasibilities(self, solution: Solution, n: int = 10) -> list:
+    def infeasibilities(self, solution: Solution, n: int = 10) -> list[Any]:
         """The ``n`` worst constraint rows of ``solution`` (a solve of this problem), worst first,
         as :class:`~optplan.problem.evaluate.Infeasibility`: row family (``velocity_limits``,
         ``closed_chain``, ``collision:A|B``), row within it, knot (None for velocity rows),
@@ -606,7 +624,7 @@ class SplineSegmentProblem:
         return out
 
     # ------------------------------------------------------------------ solve
-    def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-6, max_iter: int = 500) -> Solution:
+    def solve(self, ipopt_options: dict[str, Any] | None = None, *, tol: float = 1e-6, max_iter: int = 500) -> Solution:
         """Solve with IPOPT (exact Hessian, MUMPS). Never raises for a failed solve: the status is
         in the Solution. ``ipopt_options`` are passed through (``"ipopt."`` prefix optional)."""
         from ..solver_options import check_solve_arguments
@@ -635,6 +653,7 @@ class SplineSegmentProblem:
                 extra = {**st.derivs, "no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
                          "calc_f": False, "calc_g": False}
             solver = st.solvers[okey] = NlpSolver("segment", st.nlp, sopts, defaults=defaults, casadi_options=extra)
+        assert self._X0 is not None  # _build refuses to run without a guess
         x0 = np.r_[self._X0.ravel(), self._xb0]
         out = solver.solve(x0, p=b.p, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg, cost_scale=self._scale,
                            extra_setup=setup)
