@@ -39,6 +39,7 @@ class CompiledFunction:
     """
 
     def __init__(self, f: ca.Function, lib_path: Path):
+        self.f = f  # the interpreted function (same values)
         self.name = f.name()
         self.lib = ctypes.CDLL(str(lib_path))
         self._fn = getattr(self.lib, self.name)

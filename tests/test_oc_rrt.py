@@ -369,3 +369,25 @@ def test_completion_without_a_c_compiler(pr2, monkeypatch):
         assert (a is None) == (b is None) and (a is None or np.abs(a - b).max() <= 1e-12)
     p = mf.params(qs) + 0.01
     assert np.abs(slow.complete(p, ref=qs) - mf.complete(p, ref=qs)).max() <= 1e-12
+
+
+def test_kernel_with_a_sparse_output_falls_back_to_the_interpreted_function():
+    """A compiled completion kernel whose output is structurally sparse is called through the
+    interpreted casadi.Function (same values), not the dense buffers."""
+    import casadi as ca
+
+    from optplan.codegen import CompiledFunction, compile_function
+    from optplan.planners.orientation import _Kernel
+
+    x = ca.SX.sym("x", 2)
+    out = ca.SX(2, 1)  # its 2nd entry is a structural zero
+    out[0] = 2 * x[0]
+    f = ca.Function("sparse_out_kernel", [x], [out, x[1] ** 2])
+    cf = compile_function(f)
+    if not isinstance(cf, CompiledFunction):
+        pytest.skip("no C compiler")
+    k = _Kernel(cf)
+    assert not k.compiled
+    a, b = k(np.array([1.5, -2.0]))
+    np.testing.assert_allclose(a, [3.0, 0.0])
+    np.testing.assert_allclose(b, 4.0)

@@ -435,15 +435,14 @@ class _Kernel:
         self.compiled = not isinstance(cf, ca.Function)
         f = cf if not self.compiled else None
         if self.compiled and any(len(r) != s[0] * s[1] for s, r, _ in cf._out_map):
-            self.compiled = False    # a structurally sparse output: the generic call
-            self.cf = lambda *x: cf(*x)
+            self.compiled = False    # a structurally sparse output: the interpreted function
+            self.cf = f = cf.f
         if self.compiled:
             self._shapes = [shape for shape, _, _ in cf._out_map]
             self._call = (cf._fn, cf._arg, cf._res, cf._iw_p, cf._w_p)
         else:
-            # f is None when the branch above turned a compiled function with a sparse output into the
-            # generic call: this line would then fail (left as it is: annotations only)
-            self._shapes = [f.size_out(i) for i in range(f.n_out())]  # type: ignore[union-attr]
+            assert f is not None
+            self._shapes = [f.size_out(i) for i in range(f.n_out())]
 
     def __call__(self, *inputs: Any) -> tuple[np.ndarray, ...]:
         if not self.compiled:
