@@ -512,7 +512,7 @@ class SplineSegmentProblem:
                 bi += K
         for name, fn, knots, Nin, Sin, bcoup in fams:
             (f, jfn, hfn), _ = evals[fn.name()]
-            asm.family(name, f, jfn, hfn,  # type: ignore[no-untyped-call]  # Assembly is not annotated yet
+            asm.family(name, f, jfn, hfn,
                        knots, Qk[:, knots], Nin, Sin, bcoup, 0.0, 0.0)
         w = ca.MX.sym("w")  # objective weight: scale / h⁵
         params.append(w)
