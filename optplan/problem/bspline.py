@@ -22,7 +22,13 @@ Boundary states: the three control points at each end follow from ``(q, q̇, q̈
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:
+    from ..model.robot import RobotModel
 
 __all__ = ["knot_matrices", "boundary_points", "knot_values", "fit_interior", "jerk_integral_reference",
            "rest_to_rest"]
@@ -51,7 +57,7 @@ def knot_matrices(N: int) -> dict[str, np.ndarray]:
     return {"q": Mq, "qd": Mv, "qdd": Ma, "jerk": Mj, "dP": Md}
 
 
-def boundary_points(q, qd, qdd, h: float, at: str) -> np.ndarray:
+def boundary_points(q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, h: float, at: str) -> np.ndarray:
     """The three control points (3 × nj, in order) fixed by the state ``(q, q̇, q̈)`` at the start
     (``at="start"``: P_0, P_1, P_2) or the end (``"end"``: P_N, P_{N+1}, P_{N+2})."""
     q, qd, qdd = (np.asarray(a, float) for a in (q, qd, qdd))
@@ -71,7 +77,7 @@ def knot_values(P: np.ndarray, h: float) -> dict[str, np.ndarray]:
     return {"q": M["q"] @ P, "qd": M["qd"] @ P / h, "qdd": M["qdd"] @ P / h**2, "jerk": M["jerk"] @ P / h**3}
 
 
-def check_knot_guess(q, N: int, nj: int) -> np.ndarray:
+def check_knot_guess(q: ArrayLike | None, N: int, nj: int) -> np.ndarray:
     """``q`` as an (N+1) × nj array of finite knot configurations [rad], or a ValueError naming
     what ``set_initial`` got."""
     Q = np.asarray(q, float)
@@ -96,14 +102,17 @@ def fit_interior(Q: np.ndarray, P_start: np.ndarray, P_end: np.ndarray) -> np.nd
     return X
 
 
-def jerk_integral_reference(q0, q1, T: float) -> float:
+def jerk_integral_reference(q0: ArrayLike, q1: ArrayLike, T: float) -> float:
     """∫‖j‖² dt of the rest-to-rest quintic from q0 to q1 over T [s]: 720 ‖Δq‖² / T⁵ (the scale
     of a minimum-jerk objective)."""
     d = np.asarray(q1, float) - np.asarray(q0, float)
     return float(720.0 * (d @ d) / T**5)
 
 
-def rest_to_rest(robot, N: int, duration: float, q_start, q_end, lower=None, upper=None) -> tuple:
+def rest_to_rest(robot: RobotModel, N: int, duration: float, q_start: ArrayLike, q_end: ArrayLike,
+                 lower: ArrayLike | None = None, upper: ArrayLike | None = None
+                 ) -> tuple[float, float, dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                            np.ndarray, np.ndarray]:
     """The grid of a rest-to-rest motion of ``robot`` on N intervals over ``duration`` [s]:
     ``(T, h, knot matrices, q0, q1, P_start, P_end, lower, upper)`` — the three boundary control
     points at each end from rest at the checked configurations, and the joint limits [rad]

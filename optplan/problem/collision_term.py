@@ -23,37 +23,41 @@ from __future__ import annotations
 import dataclasses
 import logging
 import types
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any, NoReturn, cast
 
 import casadi as ca
 import coal
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
-from ..collision.checker import CollisionChecker
+from ..collision.checker import CollisionChecker, Pair
 from ..errors import ConfigurationError
 from ..geometry import distance as D
+from ..model.robot import RobotModel
 from ..scene import Scene
-from .build import AuxVariable, TermData
+from .build import AuxVariable, BuildContext, TermData
 from .terms import NumericTrajectory, Term
+from .transcription import Expr, Transcription
 
 __all__ = ["CollisionAvoidance", "CollisionModel", "object_capsules"]
 
 
-def _ro(a) -> np.ndarray:
+def _ro(a: ArrayLike) -> np.ndarray:
     a = np.array(a, float)
     a.flags.writeable = False
     return a
 
 
-def _box_vertices(h) -> list[np.ndarray]:
+def _box_vertices(h: ArrayLike) -> list[np.ndarray]:
     h = np.asarray(h, float)
     return [np.array([sx * h[0], sy * h[1], sz * h[2]]) for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
 log = logging.getLogger(__name__)
 
 
-def witness_plane(checker: CollisionChecker, pair, obj_tf) -> np.ndarray:
+def witness_plane(checker: CollisionChecker, pair: Pair, obj_tf: coal.Transform3s | None) -> np.ndarray:
     """(n, b): coal's unit witness normal from A to B and the mid-plane offset ``n·mid`` of a pair,
     at the placements last set by ``checker.update_placements`` (``obj_tf``: the held object's)."""
     g1, t1, g2, t2 = checker.pair_geometries(pair, obj_tf)
@@ -67,7 +71,7 @@ def witness_plane(checker: CollisionChecker, pair, obj_tf) -> np.ndarray:
     return np.r_[n, n @ mid]
 
 
-def object_capsules(size, grid: int = 2) -> list[D.Capsule]:
+def object_capsules(size: ArrayLike, grid: int = 2) -> list[D.Capsule]:
     """Capsules covering a box of full edges ``size`` [m]: a ``grid × grid`` array over the
     cross-section, each along the longest axis over the full length."""
     size = np.asarray(size, float)
@@ -83,7 +87,8 @@ def object_capsules(size, grid: int = 2) -> list[D.Capsule]:
             c[others[1]] = -size[others[1]] / 2 + (j + 0.5) * cell[1]
             a, b = c.copy(), c.copy()
             a[ax], b[ax] = -size[ax] / 2, size[ax] / 2
-            caps.append(D.Capsule(r, tuple(a), tuple(b)))
+            caps.append(D.Capsule(r, cast("tuple[float, float, float]", tuple(a)),
+                                  cast("tuple[float, float, float]", tuple(b))))
     return caps
 
 
@@ -122,12 +127,12 @@ class CollisionAvoidance(Term):
     object_grid: int = 2
     cover_tol: float = 0.02
     eps: float = 1e-3
-    activate_with: tuple = ()  # extra NumericTrajectory(s) for pair activation (see with_activation)
+    activate_with: tuple[NumericTrajectory, ...] = ()  # extra NumericTrajectory(s) for pair activation (see with_activation)
     skip_pinned: bool = True
     skip_constant: bool = True
     fixed_normals: bool = False
     #: (pair, knot) -> extra margin [m] (see with_boost)
-    margin_boost: Mapping = field(default_factory=dict)
+    margin_boost: Mapping[tuple[Pair, int], float] = field(default_factory=dict)
     default_name = "collision"
 
     # A frozen configuration (see Term). Building it (build / model) creates a CollisionModel that holds the collision checker, the
@@ -138,7 +143,7 @@ class CollisionAvoidance(Term):
     _LEGACY_NAMES = frozenset({"activate_with", "active_pairs", "constant_pairs", "relaxed", "skipped"})
 
     def _validate(self) -> None:
-        def bad(name, want):
+        def bad(name: str, want: str) -> NoReturn:
             raise ConfigurationError(f"CollisionAvoidance.{name}: expected {want}, got {getattr(self, name)!r}")
 
         if self.scene is not None and not isinstance(self.scene, Scene):
@@ -158,7 +163,7 @@ class CollisionAvoidance(Term):
         object.__setattr__(self, "activate_with", tuple(self.activate_with))
         object.__setattr__(self, "margin_boost", types.MappingProxyType(dict(self.margin_boost)))
 
-    def __setattr__(self, name, value) -> None:
+    def __setattr__(self, name: str, value: Any) -> None:
         legacy = self.__dict__.get("_legacy")
         if legacy is not None and name in self._LEGACY_NAMES:
             if name == "activate_with":
@@ -168,7 +173,7 @@ class CollisionAvoidance(Term):
             return
         super().__setattr__(name, value)
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Any:
         legacy = self.__dict__.get("_legacy")
         if legacy is not None and not name.startswith("__"):
             return getattr(legacy, name)
@@ -177,24 +182,24 @@ class CollisionAvoidance(Term):
             if name in self._LEGACY_NAMES or name in ("checker", "active_knots") else ""))
 
     # ------------------------------------------------------------------ model → data
-    def model(self, robot) -> CollisionModel:
+    def model(self, robot: RobotModel) -> CollisionModel:
         """A new :class:`CollisionModel` (collision checker, NLP shapes, activation) for ``robot``."""
         return CollisionModel(self, robot)
 
-    def _setup(self, robot) -> None:
+    def _setup(self, robot: RobotModel) -> None:
         """Deprecated in-place setup (SplineSegmentProblem): keeps a model on this term and
         forwards the model's attributes and methods. Use :meth:`model`."""
         object.__setattr__(self, "_legacy", CollisionModel(self, robot))
 
-    def rows(self, ctx):
+    def rows(self, ctx: BuildContext) -> TermData:
         return self.model(ctx.robot).build_rows(ctx)
 
-    def residual(self, tp):
+    def residual(self, tp: Transcription) -> tuple[Expr, np.ndarray, np.ndarray]:
         raise TypeError("CollisionAvoidance has no residual(tp): its rows depend on the initial guess and use "
                         "auxiliary variables (separating planes); build it with term.build(BuildContext(tp, ...)) "
                         "or evaluate it through OptProblem.term_function(handle)")
 
-    def reseed(self, data: TermData, traj: NumericTrajectory) -> tuple:
+    def reseed(self, data: TermData, traj: NumericTrajectory) -> tuple[AuxVariable, ...]:
         """The auxiliary variables of built ``data`` re-seeded from a new initial guess ``traj``
         (same active pairs): the separating planes (and, with ``fixed_normals``, their fixed
         normals) from coal's witness normals."""
@@ -205,7 +210,8 @@ class CollisionAvoidance(Term):
         ``verify`` found colliding)."""
         return dataclasses.replace(self, activate_with=tuple(self.activate_with) + tuple(trajectories))
 
-    def with_boost(self, data: TermData, traj_t, traj_q, knot_t, min_clearance: float = 0.0) -> tuple:
+    def with_boost(self, data: TermData, traj_t: np.ndarray, traj_q: ArrayLike, knot_t: ArrayLike,
+                   min_clearance: float = 0.0) -> tuple[CollisionAvoidance, int]:
         """``(term, n)``: this term with the margin raised where a solution collides between knots
         (:meth:`CollisionModel.boost_between_knots` on the pairs ``data`` activated), and the
         number of (pair, knot) rows boosted."""
@@ -225,14 +231,15 @@ class CollisionAvoidance(Term):
     def numeric_built(self, traj: NumericTrajectory, data: TermData) -> np.ndarray:
         return self.numeric(traj, data)
 
-    def bounds_numeric(self, traj: NumericTrajectory, data: TermData | None = None):
+    def bounds_numeric(self, traj: NumericTrajectory, data: TermData | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
         if data is not None:
             return data.info["model"].bounds_numeric(traj)
         m = self.model(traj.robot)
         m.activate(traj.robot, traj)
         return m.bounds_numeric(traj)
 
-    def sampled(self):
+    def sampled(self) -> Term:
         return self
 
 
@@ -245,29 +252,34 @@ class CollisionModel:
     planes. Configuration values are read from ``term``; ``activate_with`` and ``margin_boost``
     start as the term's and may grow (``boost_between_knots``)."""
 
-    def __init__(self, term: CollisionAvoidance, robot) -> None:
+    def __init__(self, term: CollisionAvoidance, robot: RobotModel) -> None:
         self.term = term
         self.activate_with = list(term.activate_with)
         self.margin_boost = dict(term.margin_boost)
-        self.skipped, self.active_pairs, self.constant_pairs = [], [], []
-        self.relaxed, self.active_knots = {}, {}
-        self._plane_slots = []
-        self._fns, self._pfns = {}, {}
-        self._init_dist = None
+        self.skipped: list[Pair] = []
+        self.active_pairs: list[Pair] = []
+        self.constant_pairs: list[Pair] = []
+        self.relaxed: dict[tuple[Pair, int], float] = {}
+        self.active_knots: dict[Pair, list[int] | None] = {}
+        self._plane_slots: list[tuple[Pair, int, int]] = []
+        self._fns: dict[tuple[str, str], ca.Function | None] = {}
+        self._pfns: dict[tuple[bytes, float, bytes, float], ca.Function] = {}
+        self._init_dist: np.ndarray | None = None
         self._setup(robot)
 
-    def __getattr__(self, name):  # the configuration (margin, scene, window …) is the term's
+    def __getattr__(self, name: str) -> Any:  # the configuration (margin, scene, window …) is the term's
         term = self.__dict__.get("term")
         if term is not None and name in _CONFIG_FIELDS:
             return term.__dict__[name]
         raise AttributeError(f"CollisionModel has no attribute {name!r}")
 
     # ------------------------------------------------------------------ entities
-    def _setup(self, robot) -> None:
+    def _setup(self, robot: RobotModel) -> None:
         self.checker = CollisionChecker(robot, self.scene, held_object=self.held_object,
                                         self_collision=self.self_collision, object_arm=self.object_arm)
         objs = robot.collision_model.geometryObjects
-        self.robot_shape = {}
+        # geometry index -> (parent frame, shape, box placement or None); None: no NLP model
+        self.robot_shape: dict[int, tuple[int, D.Shape, Any] | None] = {}
         for g, o in enumerate(objs):
             geo = o.geometry
             # a geometry's placement is in its parent JOINT's frame; the rows use its parent frame
@@ -291,7 +303,7 @@ class CollisionModel:
             self._hand_frame = robot.arm(self.checker.object_arm).ee_frame
 
     # ------------------------------------------------------------------ activation (read by the segment NLP)
-    def activate(self, robot, initial: NumericTrajectory | None):
+    def activate(self, robot: RobotModel, initial: NumericTrajectory | None) -> list[Pair]:
         """Active (pair, knots): knots within ``window`` of a knot where the initial guess brings
         the pair closer than ``activation``. Sets ``active_pairs`` and ``active_knots``."""
         pairs = self.checker.pairs
@@ -314,17 +326,17 @@ class CollisionModel:
                 continue
             ks = np.flatnonzero(close[:, i])
             mask = np.zeros(initial.N + 1, bool)
-            for k in ks:
-                mask[max(0, k - w):k + w + 1] = True
+            for kc in ks:
+                mask[max(0, kc - w):kc + w + 1] = True
             self.active_pairs.append(p)
             self.active_knots[p] = np.flatnonzero(mask).tolist()
         return self.active_pairs
 
-    def knots_of(self, pair, N: int):
+    def knots_of(self, pair: Pair, N: int) -> Sequence[int]:
         ks = self.active_knots.get(pair)
         return range(N + 1) if ks is None else ks
 
-    def free_joints_of(self, robot, kind: str, idx: int, fixed: frozenset) -> set | None:
+    def free_joints_of(self, robot: RobotModel, kind: str, idx: int, fixed: frozenset[int]) -> set[int] | None:
         """Free joint-vector indices an entity's pose depends on (``None``: unknown, e.g. a mimic
         joint; treated as moving). Obstacles: none; the object: its holding hand's joints."""
         if kind == "obstacle":
@@ -347,7 +359,7 @@ class CollisionModel:
                 out.add(i)
         return out
 
-    def is_constant(self, robot, pair, fixed: frozenset) -> bool:
+    def is_constant(self, robot: RobotModel, pair: Pair, fixed: frozenset[int]) -> bool:
         """True when the pair's distance cannot change: neither entity depends on a free joint and,
         for a floating base, the pair does not involve the (world-fixed) obstacles."""
         if not fixed:
@@ -360,7 +372,8 @@ class CollisionModel:
         return fa is not None and fb is not None and not fa and not fb
 
     # ------------------------------------------------------------------ expressions
-    def _entity(self, tp, kind: str, idx: int, k: int):
+    def _entity(self, tp: Transcription, kind: str, idx: int, k: int
+                ) -> tuple[Sequence[D.Shape], Expr, Expr] | None:
         """(shapes list, R, p) of an entity at knot k; kind in robot/obstacle/object."""
         if kind == "robot":
             spec = self.robot_shape.get(idx)
@@ -373,12 +386,13 @@ class CollisionModel:
             return [shape], R, p
         if kind == "obstacle":
             o = self.checker.obstacles[idx]
-            return [o.primitive()], ca.DM(o.placement.rotation), ca.DM(o.placement.translation)
+            # Obstacle.primitive is not annotated yet
+            return [o.primitive()], ca.DM(o.placement.rotation), ca.DM(o.placement.translation)  # type: ignore[no-untyped-call]
         Rh, ph = tp.frame(self._hand_frame, k)
         G = self.grasp_inv
         return self._obj_caps, Rh @ ca.DM(G.rotation), ph + Rh @ ca.DM(G.translation)
 
-    def _dist_fn(self, s1, s2) -> ca.Function | None:
+    def _dist_fn(self, s1: D.Shape, s2: D.Shape) -> ca.Function | None:
         key = (repr(s1), repr(s2))
         if key not in self._fns:
             if isinstance(s1, D.Box) and isinstance(s2, D.Box):
@@ -388,11 +402,12 @@ class CollisionModel:
         return self._fns[key]
 
     @staticmethod
-    def kinds(pair):
+    def kinds(pair: Pair) -> tuple[str, str]:
         return {"self": ("robot", "robot"), "robot-obstacle": ("robot", "obstacle"),
                 "object-obstacle": ("object", "obstacle"), "object-robot": ("object", "robot")}[pair.kind]
 
-    def _local_points(self, kind: str, idx: int):
+    def _local_points(self, kind: str, idx: int
+                      ) -> tuple[np.ndarray, float, Callable[[Transcription, int], tuple[Expr, Expr]]]:
         """(local points 3×m, radius, placement getter) of an entity for the plane formulation."""
         if kind == "obstacle":
             o = self.checker.obstacles[idx]
@@ -400,20 +415,25 @@ class CollisionModel:
                 V = np.array(_box_vertices(np.asarray(o.size) / 2)).T
                 r = 0.0
             elif o.shape == "sphere":
+                assert o.radius is not None  # narrowing only: a sphere obstacle has its radius
                 V, r = np.zeros((3, 1)), o.radius
             else:
+                assert o.radius is not None and o.length is not None  # narrowing only: a capsule has both
                 V, r = np.array([[0, 0, -o.length / 2], [0, 0, o.length / 2]]).T, o.radius
             M = o.placement
             return V, r, lambda tp, k: (ca.DM(M.rotation), ca.DM(M.translation))
         if kind == "object":
+            assert self.checker.object is not None  # narrowing only: an object pair has the held object
             V = np.array(_box_vertices(np.asarray(self.checker.object.size) / 2)).T
             G = self.grasp_inv
 
-            def obj_pose(tp, k):
+            def obj_pose(tp: Transcription, k: int) -> tuple[Expr, Expr]:
                 Rh, ph = tp.frame(self._hand_frame, k)
                 return Rh @ ca.DM(G.rotation), ph + Rh @ ca.DM(G.translation)
             return V, 0.0, obj_pose
-        fid, shape, Mbox = self.robot_shape[idx]
+        spec = self.robot_shape[idx]
+        assert spec is not None  # narrowing only: pairs without an NLP model are skipped before
+        fid, shape, Mbox = spec
         if isinstance(shape, D.Box):
             V = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T
             r = 0.0
@@ -423,7 +443,7 @@ class CollisionModel:
             V, r = np.array([shape.a, shape.b], float).T, shape.radius
         return V, r, lambda tp, k: tp.frame(fid, k)
 
-    def _plane_fn(self, Va, ra, Vb, rb) -> ca.Function:
+    def _plane_fn(self, Va: np.ndarray, ra: float, Vb: np.ndarray, rb: float) -> ca.Function:
         """SX Function (Ra, pa, Rb, pb, nb) -> plane residuals, cached per shape pair."""
         key = (Va.tobytes(), ra, Vb.tobytes(), rb)
         if key not in self._pfns:
@@ -444,12 +464,12 @@ class CollisionModel:
         spec = self.robot_shape.get(idx)
         return spec is not None and isinstance(spec[1], D.Box)
 
-    def _plane_init(self, pair, q_full) -> np.ndarray:
+    def _plane_init(self, pair: Pair, q_full: np.ndarray) -> np.ndarray:
         """(n, b) from coal's witness points at a configuration (normal from A to B)."""
         Mo = self.checker.update_placements(q_full)
         return witness_plane(self.checker, pair, coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None)
 
-    def build_rows(self, ctx) -> TermData:
+    def build_rows(self, ctx: BuildContext) -> TermData:
         """The rows of the term for one NLP (``ctx``: the transcription, initial guess, pinned
         knots, fixed joints); ``info`` holds this model and what it decided."""
         tp = ctx.tp
@@ -465,10 +485,11 @@ class CollisionModel:
                      [(p.name_a, p.name_b) for p in self.constant_pairs[:5]])
         self._plane_slots = []  # (pair, k, aux index) for refreshing the initial planes
         aux: list[AuxVariable] = []
-        rs, lo = [], []
+        rs: list[Expr] = []
+        lo: list[float] = []
         pinned = set(ctx.pinned_q) if self.skip_pinned else set()
         margin_at = self.boundary_margins(tp, init, active, pinned)
-        knots_of = lambda pair: [k for k in self.knots_of(pair, tp.N) if k not in pinned]  # noqa: E731
+        knots_of: Callable[[Pair], list[int]] = lambda pair: [k for k in self.knots_of(pair, tp.N) if k not in pinned]  # noqa: E731
         for pair in active:
             ka, kb = self.kinds(pair)
             if (ka == "robot" and self.robot_shape.get(pair.a) is None) or \
@@ -494,9 +515,11 @@ class CollisionModel:
             for k in knots_of(pair):
                 ea = self._entity(tp, ka, pair.a, k)
                 eb = self._entity(tp, kb, pair.b, k)
+                assert ea is not None and eb is not None  # narrowing only: pairs without a model were skipped
                 for sa in ea[0]:
                     for sb in eb[0]:
-                        rs.append(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2]))
+                        # a smooth pair (no box: those have planes above), so there is a distance function
+                        rs.append(cast(ca.Function, self._dist_fn(sa, sb))(ea[1], ea[2], eb[1], eb[2]))
                         lo.append(margin_at(pair, k))
         if self.skipped:
             log.info("collision term: %d pair(s) without an NLP model: %s", len(self.skipped),
@@ -509,7 +532,8 @@ class CollisionModel:
         r = ca.vertcat(*rs)
         return TermData(residual=r, lower=np.array(lo), upper=np.full(r.shape[0], np.inf), aux=tuple(aux), info=info)
 
-    def boundary_margins(self, tp, init, active, pinned):
+    def boundary_margins(self, tp: Transcription, init: NumericTrajectory | None, active: list[Pair],
+                         pinned: set[int]) -> Callable[[Pair, int], float]:
         """``margin_at(pair, k)`` [m]: ``margin``, except within ``window`` knots of a pinned knot
         whose given configuration is closer than ``margin`` for that pair: there
         ``min(margin, d_pinned / 2)``. Next to a pinned knot (rest: zero rate and acceleration)
@@ -535,12 +559,13 @@ class CollisionModel:
                      "closer than %.3g m", len(self.relaxed), self.margin)
         return self._margin_at
 
-    def _margin_at(self, pair, k: int) -> float:
+    def _margin_at(self, pair: Pair, k: int) -> float:
         """Lower bound [m] of the pair's rows at knot k: ``margin``, relaxed next to close boundary
         configurations (``relaxed``), plus any ``margin_boost``."""
         return self.relaxed.get((pair, k), self.margin) + self.margin_boost.get((pair, k), 0.0)
 
-    def boost_between_knots(self, traj_t, traj_q, knot_t, min_clearance: float = 0.0) -> int:
+    def boost_between_knots(self, traj_t: np.ndarray, traj_q: ArrayLike, knot_t: ArrayLike,
+                            min_clearance: float = 0.0) -> int:
         """Raise the margin of the pairs that collide *between* knots of a solution.
 
         ``traj_t`` [s], ``traj_q``: the solution sampled finely (e.g. 10 per interval) — full
@@ -582,38 +607,43 @@ class CollisionModel:
                     n += 1
         return n
 
-    def _smooth_pair(self, pair) -> bool:
+    def _smooth_pair(self, pair: Pair) -> bool:
         ka, kb = self.kinds(pair)
         return not (self._is_box(ka, pair.a) or self._is_box(kb, pair.b))
 
-    def _smooth_value(self, robot, pair, q_full) -> float:
+    def _smooth_value(self, robot: RobotModel, pair: Pair, q_full: np.ndarray) -> float:
         """Smallest smooth-distance row [m] of a sphere/capsule pair at a configuration (what the
         NLP's rows evaluate to there; ≤ the exact distance)."""
         data = robot.model.createData()
         pin.framesForwardKinematics(robot.model, data, q_full)
 
-        def entity(kind, idx):
+        def entity(kind: str, idx: int) -> tuple[Sequence[D.Shape], np.ndarray, np.ndarray]:
             if kind == "obstacle":
                 o = self.checker.obstacles[idx]
-                return [o.primitive()], o.placement.rotation, o.placement.translation
+                # Obstacle.primitive is not annotated yet
+                return [o.primitive()], o.placement.rotation, o.placement.translation  # type: ignore[no-untyped-call]
             if kind == "object":
                 M = data.oMf[robot.frame_id(self._hand_frame)] * self.grasp_inv
                 return self._obj_caps, M.rotation, M.translation
-            fid, shape, _ = self.robot_shape[idx]
+            spec = self.robot_shape[idx]
+            assert spec is not None  # narrowing only: a smooth pair's robot geometries have a model
+            fid, shape, _ = spec
             M = data.oMf[robot.frame_id(fid)]
             return [shape], M.rotation, M.translation
 
         ka, kb = self.kinds(pair)
         ea, eb = entity(ka, pair.a), entity(kb, pair.b)
-        return min(float(self._dist_fn(sa, sb)(ea[1], ea[2], eb[1], eb[2])) for sa in ea[0] for sb in eb[0])
+        # a smooth pair (no box), so there is a distance function
+        return min(float(cast(ca.Function, self._dist_fn(sa, sb))(ea[1], ea[2], eb[1], eb[2]))
+                   for sa in ea[0] for sb in eb[0])
 
-    def _plane_bounds(self, x0) -> tuple[np.ndarray, np.ndarray]:
+    def _plane_bounds(self, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of a plane variable (n, b): free, or n held at x0's normal (``fixed_normals``)."""
         if not self.fixed_normals:
             return np.full(4, -np.inf), np.full(4, np.inf)
         return np.r_[x0[:3], -np.inf], np.r_[x0[:3], np.inf]
 
-    def reseed(self, data: TermData, traj: NumericTrajectory) -> tuple:
+    def reseed(self, data: TermData, traj: NumericTrajectory) -> tuple[AuxVariable, ...]:
         """``data.aux`` with the separating planes (and, with ``fixed_normals``, their fixed
         normals) re-seeded from a new initial guess (same active pairs)."""
         aux = list(data.aux)
@@ -628,7 +658,7 @@ class CollisionModel:
         idx = [self.checker.pair_index[p] for p in self.active_pairs]
         return np.array([self.checker.distances(traj.q_full(k))[idx] for k in range(traj.N + 1)])
 
-    def bounds_numeric(self, traj):
+    def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         D = self.numeric(traj)
         lo = np.full(D.shape, self.margin)
         for j, p in enumerate(self.active_pairs):

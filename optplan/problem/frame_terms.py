@@ -44,7 +44,7 @@ class FramePose(Term):
 
     frame: str = ""
     target: pin.SE3 | None = None
-    at: object = "end"
+    at: str | int | Sequence[int] = "end"
     position_only: bool = False
     default_name = "frame_pose"
 
@@ -341,7 +341,7 @@ class BaseAttitude(Term):
     attitude restoration when ``target`` is the initial attitude and ``at="end"``."""
 
     target: np.ndarray | None = None
-    at: object = "end"
+    at: str | int | Sequence[int] = "end"
     default_name = "base_attitude"
 
     def _validate(self) -> None:

@@ -8,6 +8,9 @@ import os
 import time
 import weakref
 from collections import OrderedDict
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar, cast
 
 import casadi as ca
 import numpy as np
@@ -19,6 +22,7 @@ from .frame_terms import ClosedChain
 
 __all__ = ["KernelCache", "geometry_points"]
 log = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 
 class KernelCache:
@@ -47,21 +51,21 @@ class KernelCache:
         self.sym = SymbolicKinematics(robot)
         self._q = ca.SX.sym("q", robot.nj)
         self._X = self.sym.joint_placements(self._configuration(self._q))
-        self._fns: dict = {}
-        self._structures: OrderedDict[tuple, object] = OrderedDict()
+        self._fns: dict[tuple[Any, ...], ca.Function] = {}
+        self._structures: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
         self._digest = self._robot_digest() + self._digest_tag
-        self._dir = None
+        self._dir: Path | None = None
         if disk:
             from ..codegen import cache_dir
 
             try:
-                self._dir = cache_dir() / "kernels" / f"casadi-{ca.__version__}"
+                self._dir = cache_dir() / "kernels" / f"casadi-{ca.__version__}"  # type: ignore[attr-defined]  # casadi's stubs omit __version__
                 self._dir.mkdir(parents=True, exist_ok=True)
             except OSError as exc:  # a read-only cache: memory only
                 log.info("kernel cache on disk unavailable (%s)", exc)
                 self._dir = None
 
-    def _configuration(self, q):
+    def _configuration(self, q: ca.SX) -> ca.SX:
         """The model configuration the kernels see for joint vector ``q`` (fixed base: ``q``)."""
         return q
 
@@ -82,7 +86,7 @@ class KernelCache:
             h.update(repr((f.name, int(f.parentJoint))).encode() + np.asarray(f.placement.homogeneous).tobytes())
         return h.digest()
 
-    def _get(self, key: tuple, build) -> ca.Function:
+    def _get(self, key: tuple[Any, ...], build: Callable[[str], ca.Function]) -> ca.Function:
         """The function of ``key``: from memory, else from the disk cache, else ``build(name)``."""
         fn = self._fns.get(key)
         if fn is not None:
@@ -152,7 +156,8 @@ class KernelCache:
         self._fns[key] = ext
         return ext
 
-    def evaluators(self, fn: ca.Function, compiled: bool | str = False) -> tuple[tuple, bool]:
+    def evaluators(self, fn: ca.Function, compiled: bool | str = False
+                   ) -> tuple[tuple[ca.Function, ca.Function, ca.Function], bool]:
         """``((f, jac, hess), is_compiled)`` of kernel ``fn`` for an NLP: the symbolic functions
         (``compiled=False``), compiled C (``True``: compiled now where missing) or C where an
         earlier run left the libraries, else symbolic (``"auto"``)."""
@@ -165,12 +170,13 @@ class KernelCache:
         got = [self.compiled(f, build=compiled is True) for f in fns]
         if any(g is None for g in got) or any(g is f for g, f in zip(got, fns)):
             return fns, False
-        return tuple(got), True
+        # no None among them: checked above
+        return cast("tuple[ca.Function, ca.Function, ca.Function]", tuple(got)), True
 
     #: how many segment-NLP structures (:meth:`structure`) stay in memory
     max_structures = 32
 
-    def structure(self, key: tuple, build):
+    def structure(self, key: tuple[Any, ...], build: Callable[[], _T]) -> _T:
         """The symbolic segment NLP of shape ``key`` (intervals, rows, pairs and their knots), from
         memory if an NLP of that shape was built in this process (with its IPOPT instances), else
         ``build()`` — kept in memory only, the ``max_structures`` most recently used."""
@@ -195,18 +201,18 @@ class KernelCache:
             kc = cls._per_robot[robot] = cls(robot)
         return kc
 
-    def frame(self, fid: int):
+    def frame(self, fid: int) -> tuple[ca.SX, ca.SX]:
         """(R, p) SX of frame ``fid`` as functions of the kernel input ``q``."""
         return self.sym.frame_placement(self._q, int(fid), self._X)
 
     def derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
         """``(jac, hess)`` of a kernel ``f(q, n, s)``: ``jac(q, n, s) = ∂f/∂q`` (rows × nj, sparse) and
         ``hess(q, n, s, λ) = ∂²(λᵀf)/∂q²`` (nj × nj, symmetric, sparse) — symbolic, per knot."""
-        def build_jac(name):
+        def build_jac(name: str) -> ca.Function:
             q, n, s = fn.sx_in()
             return ca.Function(name, [q, n, s], [ca.jacobian(fn(q, n, s), q)])
 
-        def build_hess(name):
+        def build_hess(name: str) -> ca.Function:
             q, n, s = fn.sx_in()
             r = fn(q, n, s)
             lam = ca.SX.sym("lam", r.shape[0])
@@ -216,8 +222,9 @@ class KernelCache:
 
     def closed_chain(self, cc: ClosedChain) -> ca.Function:
         rel = cc.relative
+        assert rel is not None  # narrowing only: a ClosedChain without a relative pose failed below before too
 
-        def build(name):
+        def build(name: str) -> ca.Function:
             Ra, pa = self.frame(self.robot.arm(cc.arm_a).ee_frame_id)
             Rb, pb = self.frame(self.robot.arm(cc.arm_b).ee_frame_id)
             r, tr = relative_pose_residual(Ra, pa, Rb, pb, rel)
@@ -226,15 +233,15 @@ class KernelCache:
 
         return self._get(("cc", cc.arm_a, cc.arm_b, np.asarray(rel.homogeneous).round(15).tobytes()), build)
 
-    def pair(self, fa: int | None, Va: np.ndarray, ra: float, fb: int | None, Vb: np.ndarray, rb: float
+    def pair(self, fa: int, Va: np.ndarray, ra: float, fb: int | None, Vb: np.ndarray, rb: float
              ) -> ca.Function:
-        """Plane rows of one pair. Points ``Va`` (3 × m) in frame ``fa`` (None: world), radius
+        """Plane rows of one pair. Points ``Va`` (3 × m) in frame ``fa``, radius
         ``ra``; likewise B. B static (``fb is None``): ``f(q, n, s) = s − n·x_i − ra`` for A's
         points (``s``: the support value of B along n); both moving: ``f(q, n, b) =
         [b − n·x_i − ra; n·y_j − rb − b]``."""
         Va, Vb = np.ascontiguousarray(Va, float), np.ascontiguousarray(Vb, float)
 
-        def build(name):
+        def build(name: str) -> ca.Function:
             n, s = ca.SX.sym("n", 3), ca.SX.sym("s")
             Ra, pa = self.frame(fa)
             Xa = Ra @ ca.DM(Va) + ca.repmat(pa, 1, Va.shape[1])

@@ -20,10 +20,12 @@ import dataclasses
 import logging
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import casadi as ca
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError, OptionError
@@ -37,6 +39,9 @@ from .nlp import NlpSolver, SolveOutcome, SolverOptions
 from .solution import Solution
 from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
 from .transcription import Transcription
+
+if TYPE_CHECKING:
+    from .frame_terms import ClosedChain
 
 __all__ = ["OptProblem", "TermHandle", "Infeasibility"]
 log = logging.getLogger(__name__)
@@ -89,7 +94,7 @@ class OptProblem:
         self._x0: np.ndarray | None = None
         self._lam_g0: np.ndarray | None = None
         self._lam_x0: np.ndarray | None = None
-        self._built = None
+        self._built: dict[str, Any] | None = None
         self.tp = self._make_transcription()
 
     def _make_transcription(self) -> Transcription:
@@ -139,7 +144,7 @@ class OptProblem:
         return {h.name: h for h in self._handles}
 
     # ------------------------------------------------------------------ warm start
-    def set_initial(self, q=None, t=None, *, solution: Solution | None = None, T: float | None = None) -> None:
+    def set_initial(self, q: ArrayLike | None = None, t: ArrayLike | None = None, *, solution: Solution | None = None, T: float | None = None) -> None:
         """Initial guess.
 
         * ``q`` (M × nj) joint samples [rad] at times ``t`` (M,) [s] (default: uniform over the
@@ -205,6 +210,7 @@ class OptProblem:
         b = self._built
         if b is None:
             return
+        assert self._x0 is not None  # narrowing only: set_initial set it
         traj = self.numeric_trajectory(self._x0)
         aux = []
         for h in self._handles:
@@ -219,7 +225,8 @@ class OptProblem:
             b["lbx"][nb:] = np.concatenate([a.lower for a in aux])
             b["ubx"][nb:] = np.concatenate([a.upper for a in aux])
 
-    def set_initial_path(self, path, closed_chain=None, T: float | None = None) -> bool:
+    def set_initial_path(self, path: ArrayLike, closed_chain: ClosedChain | None = None,
+                         T: float | None = None) -> bool:
         """Initial guess from a planner's path (M × nq configurations, no timing): resampled
         uniformly in joint-space arc length onto the knots and, with ``closed_chain``, projected
         back onto the closed-chain manifold (:func:`optplan.constraints.closed_chain.manifold_resample`); timed by
@@ -234,7 +241,7 @@ class OptProblem:
         self.set_initial(q=self.robot.joints_of(Q.T).T if self.robot.is_floating else Q, t=t, T=Tg)
         return ok
 
-    def set_initial_straight_line(self, q_start, q_end, T: float | None = None) -> None:
+    def set_initial_straight_line(self, q_start: ArrayLike, q_end: ArrayLike, T: float | None = None) -> None:
         """Initial guess: rest-to-rest quintic from ``q_start`` to ``q_end`` (joint space)."""
         qa = self.robot.check_joints(q_start, "q_start")
         qb = self.robot.check_joints(q_end, "q_end")
@@ -250,7 +257,7 @@ class OptProblem:
         return pin.centerOfMass(self.robot.model, self.robot.model.createData(),
                                 self.robot.configuration(qs, self.base0)).copy()
 
-    def _initial_unpacked(self):
+    def _initial_unpacked(self) -> dict[str, np.ndarray]:
         if self._x0 is None:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
         return self.tp.unpack(self._x0)
@@ -278,7 +285,7 @@ class OptProblem:
         return BuildContext(self.tp, role, self.numeric_trajectory(self._x0) if self._x0 is not None else None,
                             self._pinned_q(), self._fixed_joints())
 
-    def _build(self):
+    def _build(self) -> dict[str, Any]:
         tp = self.tp
         if self.robot.is_floating:
             tp.set_com0(self._initial_com())
@@ -289,7 +296,9 @@ class OptProblem:
             data[h.name] = h.term.build(ctx[h.role])
         aux = [a for h in self._handles for a in data[h.name].aux]
         xall = ca.vertcat(tp.x, *[a.sym for a in aux]) if aux else tp.x
-        g, lbg, ubg = [], [], []
+        g: list[Any] = []
+        lbg: list[Any] = []  # arrays (TermData's bounds are optional in type, set for every constraint row)
+        ubg: list[Any] = []
         G, lo, hi = tp.dynamics_constraints()
         g.append(G)
         lbg.append(lo)
@@ -299,7 +308,7 @@ class OptProblem:
         n = G.shape[0]
         f = 0
         cost_exprs = {}
-        var_bounds: dict[str, tuple] = {}
+        var_bounds: dict[str, tuple[Any, ...]] = {}
         for h in self._handles:
             d = data[h.name]
             if h.role == "constraint" and d.var_bounds is not None:
@@ -360,7 +369,8 @@ class OptProblem:
     def _reference_x(self) -> np.ndarray:
         """Decision vector of the rest-to-rest quintic between the initial guess's end knots
         (auxiliary variables and base states as in the initial guess), for objective scaling."""
-        u = self.tp.unpack(self._x0)
+        assert self._x0 is not None  # narrowing only: solve() checked it
+        u: dict[str, Any] = self.tp.unpack(self._x0)  # "T" is a float
         T = u.get("T", self.duration)
         s = np.linspace(0.0, 1.0, self.N + 1)[:, None]
         dq = u["q"][-1] - u["q"][0]
@@ -372,11 +382,12 @@ class OptProblem:
 
     def _full_x0(self) -> np.ndarray:
         b = self._built
+        assert self._x0 is not None and b is not None  # narrowing only: solve() checked and built them
         if self._x0.size == b["x"].shape[0]:
             return self._x0
         return np.concatenate([self._x0[:b["nbase"]], b["aux_init"]])
 
-    def solve(self, ipopt_options: dict | None = None, *, tol: float = 1e-6, max_iter: int = 500,
+    def solve(self, ipopt_options: dict[str, Any] | None = None, *, tol: float = 1e-6, max_iter: int = 500,
               exact_hessian: bool = True, objective_scaling: float | str = "auto",
               options: SolverOptions | None = None) -> Solution:
         """Solve with IPOPT. Never raises for a failed solve: the status is in the Solution.
@@ -462,8 +473,9 @@ class OptProblem:
         out = b["solver"].solve(self._full_x0(), extra_setup=setup, **args)
         return self._make_solution(out, tol)
 
-    def _make_solution(self, out: SolveOutcome, tol) -> Solution:
+    def _make_solution(self, out: SolveOutcome, tol: float) -> Solution:
         b, tp = self._built, self.tp
+        assert b is not None  # narrowing only: solve() built it
         x = np.array(out.x, float)
         gval = np.array(b["gfun"](x)).ravel()
         viol_vec = np.maximum(np.maximum(b["lbg"] - gval, gval - b["ubg"]), 0.0)
@@ -501,9 +513,9 @@ class OptProblem:
                         evaluator=TermEvaluator(self, b))
 
     # ------------------------------------------------------------------ evaluation helpers
-    def numeric_trajectory(self, x) -> NumericTrajectory:
+    def numeric_trajectory(self, x: ArrayLike) -> NumericTrajectory:
         """Knot values of a decision vector, for numeric (Pinocchio) term evaluation."""
-        u = self.tp.unpack(np.asarray(x, float))
+        u: dict[str, Any] = self.tp.unpack(np.asarray(x, float))  # "T" is a float
         return NumericTrajectory(self.robot, u["q"], u["qd"], u["qdd"], u["jerk"], u.get("T", self.duration),
                                  u.get("base_quat"), self.tp.com0 if self.robot.is_floating else None,
                                  pinned_q=self._pinned_q())

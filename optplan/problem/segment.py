@@ -341,7 +341,7 @@ class SplineSegmentProblem:
         holder = col.checker.object_arm
         plan = []
         for pair in active:
-            ka, kb = col.kinds(pair)  # type: ignore[no-untyped-call]  # collision_term is not annotated yet
+            ka, kb = col.kinds(pair)
             ea, eb = self._entity(ka, pair.a, holder), self._entity(kb, pair.b, holder)
             if ea is None or eb is None:
                 continue
@@ -450,7 +450,7 @@ class SplineSegmentProblem:
             ubg.append(np.full(len(it.knots) * it.nrow, np.inf))
         fref = jerk_integral_reference(self.q0, self.q1, self.T)
         self._scale = scale = 1.0 / fref if fref > 0 else 1.0
-        pvals.append([scale / h**5])  # ∫‖j‖² dt = h Σ ‖ΔP³/h³‖², scaled to order 1
+        pvals.append(np.array([scale / h**5]))  # ∫‖j‖² dt = h Σ ‖ΔP³/h³‖², scaled to order 1
         evals = {fn.name(): self.kernels.evaluators(fn, self.compile_kernels)
                  for fn in ([ccfn] if ccfn is not None else []) + [it.fn for it in plan]}
         key = (N, nj, sel.tobytes(), None if ccfn is None else ccfn.name(), self.exact_derivatives,
@@ -595,7 +595,7 @@ class SplineSegmentProblem:
         if self.col is None:
             return 0
         self._built = None
-        return self.col.boost_between_knots(traj_t, traj_q, knot_t)
+        return self.col.boost_between_knots(np.asarray(traj_t, float), traj_q, knot_t)
 
     def infeasibilities(self, solution: Solution, n: int = 10) -> list[Any]:
         """The ``n`` worst constraint rows of ``solution`` (a solve of this problem), worst first,

@@ -20,6 +20,7 @@ import types
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any, Literal, cast, overload
 
 import casadi as ca
 import numpy as np
@@ -28,8 +29,8 @@ import pinocchio as pin
 from ..errors import ConfigurationError
 from ..geometry.spatial import pose_residual, vee_skew
 from ..model.robot import RobotModel
-from .build import BuildContext, TermData
-from .transcription import Transcription
+from .build import AuxVariable, BuildContext, TermData
+from .transcription import Expr, Transcription
 
 __all__ = [
     "Term", "JointBoundary", "JointPositionLimits", "JointVelocityLimits", "JointAccelerationLimits", "Smoothness",
@@ -62,7 +63,7 @@ class NumericTrajectory:
     com0: np.ndarray | None = None
     _data: pin.Data | None = field(default=None, repr=False)
     #: knots pinned by a JointBoundary (k -> q), as ``Transcription.pinned_q``
-    pinned_q: dict = field(default_factory=dict)
+    pinned_q: dict[int, np.ndarray] = field(default_factory=dict)
 
     @property
     def N(self) -> int:
@@ -76,6 +77,7 @@ class NumericTrajectory:
         r = self.robot
         if not r.is_floating:
             return self.q[k]
+        assert self.base_quat is not None  # narrowing only: a floating robot's trajectory has base_quat
         quat = self.base_quat[k] / np.linalg.norm(self.base_quat[k])
         qf = np.concatenate([np.zeros(3), quat, self.q[k]])
         data = self.data
@@ -90,7 +92,7 @@ class NumericTrajectory:
             self._data = self.robot.model.createData()
         return self._data
 
-    def frame(self, frame, k) -> pin.SE3:
+    def frame(self, frame: str | int, k: int | tuple[int, float]) -> pin.SE3:
         """Frame placement at knot k (int) or interior point (interval, fraction) (fixed base)."""
         fid = self.robot.frame_id(frame)
         if isinstance(k, tuple):
@@ -103,7 +105,8 @@ class NumericTrajectory:
         return self.data.oMf[fid].copy()
 
 
-def _check_at(at, what: str, allowed=("all", "start", "end")) -> object:
+def _check_at(at: Any, what: str, allowed: tuple[str, ...] = ("all", "start", "end")
+              ) -> str | int | tuple[int, ...]:
     """A knot selection: one of ``allowed``, an int, or a non-empty list of ints (frozen as a tuple)."""
     if isinstance(at, str):
         if at not in allowed:
@@ -121,7 +124,11 @@ def _check_at(at, what: str, allowed=("all", "start", "end")) -> object:
     return tuple(int(k) for k in ks)
 
 
-def _frozen_vector(v, what: str, allow_none: bool = True):
+@overload
+def _frozen_vector(v: Any, what: str, allow_none: Literal[False]) -> np.ndarray: ...
+@overload
+def _frozen_vector(v: Any, what: str, allow_none: bool = True) -> np.ndarray | None: ...
+def _frozen_vector(v: Any, what: str, allow_none: bool = True) -> np.ndarray | None:
     """A finite 1-D float array (read-only) or None."""
     if v is None:
         if allow_none:
@@ -138,12 +145,12 @@ def _frozen_vector(v, what: str, allow_none: bool = True):
     return a
 
 
-def _set(obj, name, value) -> None:
+def _set(obj: object, name: str, value: object) -> None:
     """Normalise a field of a frozen term in its _validate."""
     object.__setattr__(obj, name, value)
 
 
-def _knots(at, N: int) -> list[int]:
+def _knots(at: str | int | Sequence[int], N: int) -> list[int]:
     if at == "all":
         return list(range(N + 1))
     if at == "start":
@@ -195,7 +202,7 @@ class Term:
     def _validate(self) -> None:
         """Check (and normalise) the fields; raise ConfigurationError naming the bad value."""
 
-    def __setattr__(self, name, value) -> None:
+    def __setattr__(self, name: str, value: Any) -> None:
         if self.__dict__.get("_frozen"):
             warnings.warn(f"{type(self).__name__}.{name} = ...: terms are frozen configurations; changing one in "
                           f"place is deprecated and will raise dataclasses.FrozenInstanceError — use "
@@ -206,11 +213,11 @@ class Term:
             return
         object.__setattr__(self, name, value)
 
-    def __getstate__(self):
+    def __getstate__(self) -> dict[str, Any]:
         return {k: dict(v) if isinstance(v, types.MappingProxyType) else v
                 for k, v in self.__dict__.items() if k != "_legacy"}
 
-    def __setstate__(self, state) -> None:
+    def __setstate__(self, state: dict[str, Any]) -> None:
         for k, v in state.items():
             object.__setattr__(self, k, v)
         self._validate()             # normalises (read-only mappings, arrays) again
@@ -229,14 +236,15 @@ class Term:
         r, lo, hi = self.residual(ctx.tp)
         return TermData(residual=r, lower=lo, upper=hi)
 
-    def residual(self, tp: Transcription):
+    def residual(self, tp: Transcription) -> tuple[Expr, np.ndarray, np.ndarray]:
         raise TypeError(f"{type(self).__name__} is a cost-only term: it has no residual/constraint form")
 
-    def cost_expr(self, ctx: BuildContext):
+    def cost_expr(self, ctx: BuildContext) -> Expr:
         """The cost expression (default: squared bound violation of the rows; ``Σ (r − target)²``
         for equality rows)."""
         d = self.rows(dataclasses.replace(ctx, role="constraint"))
         r, lo, hi = d.residual, d.lower, d.upper
+        assert lo is not None and hi is not None  # narrowing only: constraint rows carry their bounds
         viol = []
         for i in range(r.shape[0]):
             if lo[i] == hi[i]:
@@ -248,11 +256,11 @@ class Term:
                     viol.append(ca.fmin(r[i] - lo[i], 0))
         return ca.sumsqr(ca.vertcat(*viol))
 
-    def cost(self, tp: Transcription):
+    def cost(self, tp: Transcription) -> Expr:
         """The cost expression on a bare transcription (no initial guess, no pinned knots)."""
         return self.cost_expr(BuildContext(tp, role="cost"))
 
-    def reseed(self, data: TermData, traj: NumericTrajectory) -> tuple:
+    def reseed(self, data: TermData, traj: NumericTrajectory) -> tuple[AuxVariable, ...]:
         """``data.aux`` re-seeded for a new initial guess ``traj`` (the problem's structure kept);
         terms without auxiliary variables return them unchanged."""
         return data.aux
@@ -270,7 +278,7 @@ class Term:
         """``(lower, upper)`` of the rows :meth:`numeric` returns."""
         raise TypeError(f"{type(self).__name__} is a cost-only term: it has no bounds")
 
-    def _bounds_numeric(self, traj):  # the name used before bounds_numeric
+    def _bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:  # the name used before bounds_numeric
         return self.bounds_numeric(traj)
 
     def cost_numeric(self, traj: NumericTrajectory) -> float:
@@ -299,7 +307,7 @@ class JointBoundary(Term):
     qdd: Sequence[float] | None = None
     default_name = "boundary"
 
-    def _validate(self):
+    def _validate(self) -> None:
         if self.at not in ("start", "end"):
             raise ConfigurationError(f"JointBoundary.at: expected 'start' or 'end', got {self.at!r}")
         for n in ("q", "qd", "qdd"):
@@ -310,10 +318,10 @@ class JointBoundary(Term):
     def knot(self, N: int) -> int:
         return 0 if self.at == "start" else N
 
-    def _parts(self, N):
+    def _parts(self, N: int) -> tuple[int, list[tuple[str, Sequence[float] | np.ndarray]]]:
         return self.knot(N), [(n, v) for n, v in (("q", self.q), ("qd", self.qd), ("qdd", self.qdd)) if v is not None]
 
-    def residual(self, tp):
+    def residual(self, tp: Transcription) -> tuple[Expr, np.ndarray, np.ndarray]:
         k, parts = self._parts(tp.N)
         exprs, targets = [], []
         for n, v in parts:
@@ -323,16 +331,16 @@ class JointBoundary(Term):
         t = np.concatenate(targets)
         return ca.vertcat(*exprs), t, t
 
-    def rows(self, ctx):
+    def rows(self, ctx: BuildContext) -> TermData:
         r, lo, hi = self.residual(ctx.tp)
         k, parts = self._parts(ctx.N)
         return TermData(residual=r, lower=lo, upper=hi, points=(k,), point_rows=int(r.shape[0]))
 
-    def numeric(self, traj):
+    def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         k, parts = self._parts(traj.N)
         return np.concatenate([getattr(traj, n)[k] for n, _ in parts])
 
-    def bounds_numeric(self, traj):
+    def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         k, parts = self._parts(traj.N)
         t = np.concatenate([np.asarray(v, float) for _, v in parts])
         return t, t
@@ -344,33 +352,35 @@ class _JointBox(Term):
     upper: Sequence[float] | None = None
     which = "q"
 
-    def _validate(self):
+    def _validate(self) -> None:
         name = type(self).__name__
         for n in ("lower", "upper"):
             _set(self, n, _frozen_vector(getattr(self, n), f"{name}.{n}"))
-        if self.lower is not None and self.upper is not None and self.lower.shape == self.upper.shape \
-                and np.any(self.lower > self.upper):
-            raise ConfigurationError(f"{name}: lower > upper at joints {np.flatnonzero(self.lower > self.upper).tolist()}")
+        lower = cast("np.ndarray | None", self.lower)  # normalised by _frozen_vector just above
+        upper = cast("np.ndarray | None", self.upper)
+        if lower is not None and upper is not None and lower.shape == upper.shape \
+                and np.any(lower > upper):
+            raise ConfigurationError(f"{name}: lower > upper at joints {np.flatnonzero(lower > upper).tolist()}")
 
-    def limits(self, robot) -> tuple[np.ndarray, np.ndarray]:
+    def limits(self, robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
         """``(lower, upper)`` per joint in physical units for ``robot``."""
         raise TypeError(f"{type(self).__name__} is abstract: use JointPositionLimits, "
                         "JointVelocityLimits or JointAccelerationLimits")
 
-    def _lims(self, robot):  # the name used before ``limits``
+    def _lims(self, robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:  # the name used before ``limits``
         return self.limits(robot)
 
-    def residual(self, tp):
+    def residual(self, tp: Transcription) -> tuple[Expr, np.ndarray, np.ndarray]:
         lo, hi = self.limits(tp.robot)
         get = {"q": tp.q, "qd": tp.qd, "qdd": tp.qdd}[self.which]
         ks = range(tp.N + 1)
         return ca.vertcat(*[get(k) for k in ks]), np.tile(lo, len(ks)), np.tile(hi, len(ks))
 
-    def rows(self, ctx):
+    def rows(self, ctx: BuildContext) -> TermData:
         r, lo, hi = self.residual(ctx.tp)
         return TermData(residual=r, lower=lo, upper=hi, points=tuple(range(ctx.N + 1)), point_rows=ctx.tp.nj)
 
-    def build(self, ctx):
+    def build(self, ctx: BuildContext) -> TermData:
         """As a constraint this term is a plain bound on knot variables (IPOPT treats variable
         bounds much more cheaply than general constraints): ``var_bounds`` = (indices into x,
         lower, upper) in the scaled decision variables."""
@@ -385,18 +395,18 @@ class _JointBox(Term):
         return TermData(var_bounds=(idx, sc * np.tile(lo, N + 1), sc * np.tile(hi, N + 1)), var_scale=sc,
                         points=tuple(range(N + 1)), point_rows=nj)
 
-    def bounds_on(self, tp):
+    def bounds_on(self, tp: Transcription) -> tuple[Any, ...] | None:
         """``(indices into x, lower, upper)``: the variable bounds of :meth:`build`."""
         return self.build(BuildContext(tp)).var_bounds
 
-    def numeric(self, traj):
+    def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         return getattr(traj, self.which).reshape(-1)
 
-    def bounds_numeric(self, traj):
+    def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self.limits(traj.robot)
         return np.tile(lo, traj.N + 1), np.tile(hi, traj.N + 1)
 
-    def sampled(self):
+    def sampled(self) -> Term:
         return self
 
 
@@ -407,13 +417,13 @@ class JointPositionLimits(_JointBox):
     default_name = "joint_limits"
     which = "q"
 
-    def limits(self, robot):
+    def limits(self, robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
         lo = robot.lower if self.lower is None else robot.check_joints(self.lower, "lower")
         hi = robot.upper if self.upper is None else robot.check_joints(self.upper, "upper")
         return lo, hi
 
 
-def _check_limit(obj, allow_none: bool):
+def _check_limit(obj: JointVelocityLimits | JointAccelerationLimits, allow_none: bool) -> None:
     name = type(obj).__name__
     if obj.limit is None and allow_none:
         return
@@ -436,7 +446,7 @@ class JointVelocityLimits(_JointBox):
         super()._validate()
         _check_limit(self, allow_none=True)
 
-    def limits(self, robot):
+    def limits(self, robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
         lim = robot.velocity_limit if self.limit is None else np.broadcast_to(
             np.asarray(self.limit, float), (robot.nj,))
         return -lim, lim
@@ -454,7 +464,7 @@ class JointAccelerationLimits(_JointBox):
         super()._validate()
         _check_limit(self, allow_none=False)
 
-    def limits(self, robot):
+    def limits(self, robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
         lim = np.broadcast_to(np.asarray(self.limit, float), (robot.nj,))
         return -lim, lim
 
@@ -470,12 +480,12 @@ class Smoothness(Term):
     default_name = "smoothness"
     cost_only = True
 
-    def _validate(self):
+    def _validate(self) -> None:
         if self.order not in ("jerk", "acceleration", "velocity"):
             raise ConfigurationError(f"Smoothness.order: expected 'jerk', 'acceleration' or 'velocity', "
                                      f"got {self.order!r}")
 
-    def cost_expr(self, ctx):
+    def cost_expr(self, ctx: BuildContext) -> Expr:
         tp = ctx.tp
         h, N = tp.h, tp.N
         if self.order == "jerk":
@@ -492,12 +502,12 @@ class Smoothness(Term):
                          + h**4 / 4 * ca.dot(a, j) + h**5 / 20 * ca.sumsqr(j))
         return tot
 
-    def cost_numeric(self, traj):
+    def cost_numeric(self, traj: NumericTrajectory) -> float:
         from scipy.integrate import quad_vec
 
         N, h = traj.N, traj.h
 
-        def integrand(t):
+        def integrand(t: float) -> float:
             k = min(int(t / h), N - 1)
             tau = t - k * h
             v0, a0, j0 = traj.qd[k], traj.qdd[k], traj.jerk[k]
@@ -515,16 +525,16 @@ class PathLength(Term):
     default_name = "path_length"
     cost_only = True
 
-    def _validate(self):
+    def _validate(self) -> None:
         if isinstance(self.eps, bool) or not isinstance(self.eps, (int, float, np.floating)) \
                 or not (np.isfinite(self.eps) and self.eps > 0):
             raise ConfigurationError(f"PathLength.eps: expected a finite number > 0 [rad], got {self.eps!r}")
 
-    def cost_expr(self, ctx):
+    def cost_expr(self, ctx: BuildContext) -> Expr:
         tp = ctx.tp
         return sum(ca.sqrt(ca.sumsqr(tp.Q[:, k + 1] - tp.Q[:, k]) + self.eps**2) - self.eps for k in range(tp.N))
 
-    def cost_numeric(self, traj):
+    def cost_numeric(self, traj: NumericTrajectory) -> float:
         d = np.diff(traj.q, axis=0)
         return float(np.sum(np.sqrt(np.sum(d**2, axis=1) + self.eps**2) - self.eps))
 
@@ -536,17 +546,17 @@ class Duration(Term):
     default_name = "duration"
     cost_only = True
 
-    def cost_expr(self, ctx):
+    def cost_expr(self, ctx: BuildContext) -> Expr:
         return ctx.tp.T
 
-    def cost_numeric(self, traj):
+    def cost_numeric(self, traj: NumericTrajectory) -> float:
         return float(traj.T)
 
 
 _FRAME_TERMS = ("BaseAttitude", "ClosedChain", "FramePath", "FramePose", "OrientationConstraint")
 
 
-def __getattr__(name):
+def __getattr__(name: str) -> Any:
     # the frame terms live in .frame_terms (which imports this module); the old path warns
     if name in _FRAME_TERMS:
         from .._compat import moved
