@@ -27,6 +27,7 @@ from .validity import ValidityChecker
 
 if TYPE_CHECKING:
     from ..constraints.closed_chain import ClosedChainKinematics
+    from ..model.robot import RobotModel
 
 __all__ = [
     "CBiRRT2", "CBiRRT2Options", "PathSegment", "PlanResult", "PlanStatus", "Planner", "RRTConnect",
@@ -55,7 +56,7 @@ def planner_names() -> list[str]:
             "ompl-projected-bkpiece1", "ompl-atlas-bkpiece1", "ompl-projected-kpiece1"]
 
 
-def make_planner(name: str, robot: Any, scene: Any, *, checker: ValidityChecker | None = None,
+def make_planner(name: str, robot: RobotModel, scene: Any, *, checker: ValidityChecker | None = None,
                  kinematics: ClosedChainKinematics | None = None, **options: Any) -> Planner:
     """Build a planner by name; ``options`` are the fields of its options dataclass (another name
     is an :class:`~optplan.errors.OptionError` listing the planner's options).

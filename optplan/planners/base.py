@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from ..errors import ConfigurationError
@@ -285,7 +286,7 @@ class Planner(abc.ABC):
         self.robot = robot
         self.scene = scene
 
-    def plan(self, q_start: Any, q_goal: Any, *, time_limit: float = 10.0, seed: int = 0,
+    def plan(self, q_start: npt.ArrayLike, q_goal: npt.ArrayLike, *, time_limit: float = 10.0, seed: int = 0,
              clock: str = "wall") -> PlanResult:
         """Plan from ``q_start`` to ``q_goal`` within ``time_limit`` seconds of ``clock`` ("wall"
         or "cpu"); ``seed`` makes the result reproducible (same seed, same path, unless the time

@@ -37,7 +37,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import pinocchio as pin
@@ -45,6 +45,9 @@ import pinocchio as pin
 from ..collision.checker import pair_indices, scene_geometry, scene_pairs
 from ..model.robot import RobotModel
 from ..scene import Scene
+
+if TYPE_CHECKING:
+    from ..codegen import FastFunction
 
 __all__ = ["ValidityChecker"]
 log = logging.getLogger(__name__)
@@ -138,7 +141,7 @@ class ValidityChecker:
         # the velocity (Jacobian) bound of edge_checkpoints assumes revolute 1-dof joints
         self._revolute_only = all(jm.nv == 1 and jm.shortname().replace("JointModel", "").startswith("R")
                                   for jm in list(self.model.joints)[1:])
-        self._profile_fns: dict[str, Any] = {}
+        self._profile_fns: dict[str, FastFunction | None] = {}
 
     def _sweep_bound(self, mode: str) -> np.ndarray:
         """One row per moving geometry, one column per q index: (chain length from the joint's
@@ -201,7 +204,7 @@ class ValidityChecker:
             raise ValueError(f"prepare_edge_bound: mode must be one of {tuple(self._sweep)}, got {mode!r}")
         self._profile_function(mode)
 
-    def _profile_function(self, mode: str) -> Any:
+    def _profile_function(self, mode: str) -> FastFunction | None:
         """Compiled ``(a, b) -> C``: ``C[i]`` [m] bounds the distance any point of the checked
         geometry travels along ``q(t) = a + t (b − a)`` for ``t ∈ [0, i/m]``, ``m =``
         :attr:`CELLS` (see :meth:`edge_checkpoints`). None when the robot has joints other than
