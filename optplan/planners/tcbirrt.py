@@ -73,7 +73,9 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any, cast
 
 import numpy as np
 import pinocchio as pin
@@ -185,7 +187,7 @@ def pose_from_xi(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ---------------------------------------------------------------------- options
-def _pos(name, v, allow_zero=False):
+def _pos(name: str, v: object, allow_zero: bool = False) -> None:
     ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and (v >= 0 if allow_zero else v > 0)
     if not ok:
         raise ValueError(f"TCBiRRTOptions.{name}: expected a {'non-negative' if allow_zero else 'positive'} number, got {v!r}")
@@ -204,9 +206,9 @@ class TCBiRRTOptions:
     #: N of Eq. 4: object poses per extension [count].
     n_interp: int = 5
     #: ξ_l: lower corner of the sampling box (x, y, z [m], roll, pitch, yaw [rad]; world = base frame).
-    xi_lower: tuple = PAPER_XI_LOWER
+    xi_lower: tuple[float, ...] = PAPER_XI_LOWER
     #: ξ_h: upper corner of the sampling box (x, y, z [m], roll, pitch, yaw [rad]).
-    xi_upper: tuple = PAPER_XI_UPPER
+    xi_upper: tuple[float, ...] = PAPER_XI_UPPER
     #: Alg. 4's IK settings (ε_p, ε_o, n, K·λ).
     ik: IKSettings = field(default_factory=IKSettings)
     #: A waypoint whose IK solution jumps by more than this from the previous one fails [rad] (``inf``: off;
@@ -265,7 +267,7 @@ class TCBiRRTOptions:
     #: docs/decisions/0004-tcbirrt-improved-variant.md.
     bridge_probability: float | None = None
     #: Spread of the bridge test's second pose: (position [m], angle [rad]).
-    bridge_sigma: tuple = (0.3, 0.4)
+    bridge_sigma: tuple[float, float] = (0.3, 0.4)
     #: When PathInverseKinematics fails after ≥ 1 valid waypoint, keep the valid part as a shorter extension
     #: (None: the variant's value, :data:`VARIANTS`).
     keep_prefix: bool | None = None
@@ -273,7 +275,7 @@ class TCBiRRTOptions:
     #: (None: the variant's value, :data:`VARIANTS`): paper 0, improved 0.4.
     guide_probability: float | None = None
     #: Noise of a lead-path sample: (position [m], angle [rad]).
-    guide_sigma: tuple = (0.05, 0.05)
+    guide_sigma: tuple[float, float] = (0.05, 0.05)
     #: Time spent on the object's lead path per query, at most [s].
     guide_time_limit: float = 3.0
     #: Time of one lead-path attempt (restarted while none is found) [s].
@@ -293,7 +295,7 @@ class TCBiRRTOptions:
     #: :data:`PAPER_REACH` about its shoulders' midpoint (a box or step set explicitly is used as given).
     scale_to_reach: bool = True
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise ValueError(f"TCBiRRTOptions.variant: expected one of {tuple(VARIANTS)}, got {self.variant!r}")
         for name, v in VARIANTS[self.variant].items():   # None: the variant's value
@@ -303,7 +305,7 @@ class TCBiRRTOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 1.0):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected a probability in [0, 1], got {v!r}")
-        if self.goal_bias + self.bridge_probability + self.guide_probability > 1.0:
+        if cast(float, self.goal_bias) + cast(float, self.bridge_probability) + cast(float, self.guide_probability) > 1.0:
             raise ValueError(f"TCBiRRTOptions: goal_bias + bridge_probability + guide_probability must be <= 1, "
                              f"got {self.goal_bias} + {self.bridge_probability} + {self.guide_probability}")
         for name in ("bridge_sigma", "guide_sigma"):
@@ -389,6 +391,10 @@ class _TaskTree(Tree):
     node, the edge from its parent: intermediate configurations and object poses (j = 1..N−1)
     of PathInverseKinematics; ``checked``: edge from the parent verified (lazy edges)."""
 
+    q: np.ndarray       # columns the base class creates with setattr
+    checked: np.ndarray
+    edge: list[Any]     # always kept (edges=True)
+
     def __init__(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, cap: int = 512):
         super().__init__(xi, cap, edges=True, q=q, checked=True)
         self.pose = [(R, p)]
@@ -398,16 +404,16 @@ class _TaskTree(Tree):
     def xi(self) -> np.ndarray:
         return self.X
 
-    def add(self, q, xi, R, p, parent, edge_q, edge_poses) -> int:
+    def add(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, parent: int, edge_q: list[np.ndarray], edge_poses: list[tuple[np.ndarray, np.ndarray]]) -> int:  # type: ignore[override]  # a task node needs its q and object pose too; never used as a plain Tree
         self.pose.append((R, p))
         return super().add(xi, parent, (edge_q, edge_poses), q=q, checked=False)
 
     def alive_xi(self) -> np.ndarray:
         return self.live_keys()
 
-    def branch(self, i: int) -> tuple[list[np.ndarray], list[tuple]]:
+    def branch(self, i: int) -> tuple[list[np.ndarray], list[tuple[np.ndarray, np.ndarray]]]:  # type: ignore[override]  # configurations and poses; never used as a plain Tree
         """Configurations and poses from the root to node i (edge intermediates included)."""
-        qs, ps = [], []
+        qs, ps = [], []  # type: list[np.ndarray], list[tuple[np.ndarray, np.ndarray]]
         for k in self.indices(i):
             eq, ep = self.edge[k]
             qs.extend(x.copy() for x in eq)
@@ -426,6 +432,7 @@ class TCBiRRT(Planner):
     """
 
     name = "tcbirrt"
+    scene: Scene   # __init__ refuses a scene without an object
 
     def __init__(self, robot: RobotModel, scene: Scene, options: TCBiRRTOptions | None = None, *,
                  checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None):
@@ -464,12 +471,12 @@ class TCBiRRT(Planner):
         return None
 
     # ------------------------------------------------------------------ Alg. 3
-    def path_ik(self, poses, q_near: np.ndarray, st: dict, prefix: bool = False) -> list[np.ndarray] | None:
+    def path_ik(self, poses: list[tuple[np.ndarray, np.ndarray]], q_near: np.ndarray, st: dict[str, Any], prefix: bool = False) -> list[np.ndarray] | None:
         """PathInverseKinematics + CollisionFree of Alg. 2: IK of every pose seeded by the previous
         solution; None at the first failure (IK, continuity or collision) — or, with ``prefix``,
         the solutions before it (possibly empty)."""
         o, kin, ck = self.options, self.kin, self.checker
-        out, q = [], q_near
+        out, q = [], q_near  # type: list[np.ndarray], np.ndarray
         fail = None if not prefix else out
         for R, p in poses:
             st["ik_calls"] += 1
@@ -477,17 +484,17 @@ class TCBiRRT(Planner):
             st["ik_iterations"] += its
             if qn is None:
                 st["ik_failures"] += 1
-            elif float(np.abs(qn - q).max()) > o.max_joint_step:
+            elif float(np.abs(qn - q).max()) > cast(float, o.max_joint_step):
                 st["ik_jumps"] += 1
                 qn = None
             elif not ck.is_valid(qn):
                 st["collisions"] += 1
                 qn = None
-            for _ in range(o.ik_restarts if qn is None else 0):
+            for _ in range(cast(int, o.ik_restarts) if qn is None else 0):
                 st["ik_restarts"] += 1
                 x, its = kin.ik(q + self._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, o.ik)
                 st["ik_iterations"] += its
-                if x is not None and float(np.abs(x - q).max()) <= o.max_joint_step and ck.in_limits(x) \
+                if x is not None and float(np.abs(x - q).max()) <= cast(float, o.max_joint_step) and ck.in_limits(x) \
                         and ck.is_valid(x):
                     qn = x
                     break
@@ -500,7 +507,7 @@ class TCBiRRT(Planner):
             q = qn
         return self._edges_prefix(q_near, out, fail, st)
 
-    def _edges_prefix(self, q_near, out, fail, st):
+    def _edges_prefix(self, q_near: np.ndarray, out: list[np.ndarray], fail: list[np.ndarray] | None, st: dict[str, Any]) -> list[np.ndarray] | None:
         """Eager edge checks after the waypoints' own checks (a failing waypoint costs no edge check):
         ``out`` if every edge passes, else the prefix before the first failing edge (or None)."""
         o = self.options
@@ -513,20 +520,20 @@ class TCBiRRT(Planner):
             prev = x
         return out
 
-    def _edge_ok(self, a: np.ndarray, b: np.ndarray, st: dict) -> bool:
+    def _edge_ok(self, a: np.ndarray, b: np.ndarray, st: dict[str, Any]) -> bool:
         """The straight joint segment a → b (object held) at ``edge_tolerance`` (ends not checked)."""
         st["edge_checks"] += 1
         o = self.options
         if o.edge_bound == "jacobian":
-            ok = self.checker.edge_is_valid(a, b, o.edge_tolerance, "held")
+            ok = self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "held")
         else:
-            ok = edge_is_valid(a, b, self.checker.is_valid, o.edge_tolerance, False, self._w_held)
+            ok = edge_is_valid(a, b, self.checker.is_valid, cast(float, o.edge_tolerance), False, self._w_held)
         if ok:
             return True
         st["edge_collisions"] += 1
         return False
 
-    def _branch_ok(self, tree: _TaskTree, i: int, st: dict, deadline: Deadline) -> int | None:
+    def _branch_ok(self, tree: _TaskTree, i: int, st: dict[str, Any], deadline: Deadline) -> int | None:
         """Lazy edges: verify every unchecked edge from the root to node i (root side first); a
         straight segment in collision is repaired, when ``joint_connect`` is on, by a joint-space
         constrained path between its ends (:meth:`joint_connect`), spliced into the node's edge.
@@ -556,7 +563,7 @@ class TCBiRRT(Planner):
             tree.checked[k] = True
         return None
 
-    def joint_connect(self, q_from: np.ndarray, q_to: np.ndarray, deadline: Deadline, st: dict) -> list[np.ndarray] | None:
+    def joint_connect(self, q_from: np.ndarray, q_to: np.ndarray, deadline: Deadline, st: dict[str, Any]) -> list[np.ndarray] | None:
         """CBiRRT2's ConstrainedExtend in joint space from ``q_from`` to ``q_to`` (both on the closed
         chain); the configurations after ``q_from`` up to ``q_to`` (its edges checked at
         ``edge_tolerance`` when set), or None when trapped."""
@@ -584,7 +591,7 @@ class TCBiRRT(Planner):
 
     # ------------------------------------------------------------------ regrasp (Section 4.3)
     def regrasp(self, q_from: np.ndarray, q_to: np.ndarray, R: np.ndarray, p: np.ndarray, rng: np.random.Generator,
-                deadline: Deadline, st: dict) -> list[tuple[str, list[np.ndarray]]] | None:
+                deadline: Deadline, st: dict[str, Any]) -> list[tuple[str, list[np.ndarray]]] | None:
         """Move the arms one at a time from ``q_from`` to ``q_to`` (same object pose (R, p)), the
         object fixed. Returns ``[(arm, [full configurations from start to end of that arm's
         motion]), ...]`` (empty when no arm needs to move) or None."""
@@ -600,18 +607,18 @@ class TCBiRRT(Planner):
         lo, hi = self.robot.lower, self.robot.upper
         for order in orders:
             cur = q_from.copy()
-            segs = []
+            segs: list[tuple[str, list[np.ndarray]]] | None = []
             for name, idx in order:
                 base = cur.copy()
 
-                def valid(x, base=base, idx=idx):
+                def valid(x: np.ndarray, base: np.ndarray = base, idx: np.ndarray = idx) -> bool:
                     base[idx] = x
                     return ck.is_valid_object_fixed(base, M)
 
                 if not valid(q_to[idx]):   # the intermediate grasp configuration itself
                     segs = None
                     break
-                rs: dict = {}
+                rs: dict[str, Any] = {}
                 sub_path = rrt_connect(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub,
                                        range_=o.regrasp.range, resolution=o.regrasp.resolution,
                                        max_iterations=o.regrasp.max_iterations, stats=rs)
@@ -631,7 +638,7 @@ class TCBiRRT(Planner):
                     y = cur.copy()
                     y[idx] = x
                     full.append(y)
-                segs.append((name, full))
+                segs.append((name, full))  # type: ignore[union-attr]  # segs is None only on the paths that break out of this loop
                 cur = full[-1].copy()
             if segs is not None:
                 return segs
@@ -640,25 +647,25 @@ class TCBiRRT(Planner):
         st["regrasp_failures"] += 1
         return None
 
-    def _regrasp_edge_ok(self, base: np.ndarray, idx, x: np.ndarray, y: np.ndarray, M: pin.SE3) -> bool:
+    def _regrasp_edge_ok(self, base: np.ndarray, idx: np.ndarray, x: np.ndarray, y: np.ndarray, M: pin.SE3) -> bool:
         """One arm's straight segment x → y (its joints ``idx``; the rest of ``base`` still, the
         object fixed at M) at ``edge_tolerance`` with the ``edge_bound`` (ends not checked)."""
         o = self.options
         if o.edge_bound == "jacobian":
             a, b = base.copy(), base.copy()
             a[idx], b[idx] = x, y
-            return self.checker.edge_is_valid(a, b, o.edge_tolerance, "fixed", object_pose=M)
+            return self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "fixed", object_pose=M)
         base = base.copy()
 
-        def valid(z):
+        def valid(z: np.ndarray) -> bool:
             base[idx] = z
             return self.checker.is_valid_object_fixed(base, M)
 
-        return edge_is_valid(x, y, valid, o.edge_tolerance, False, self._w_fixed[:, idx])
+        return edge_is_valid(x, y, valid, cast(float, o.edge_tolerance), False, self._w_fixed[:, idx])
 
     # ------------------------------------------------------------------ Alg. 2
     def constrained_extend(self, tree: _TaskTree, i_near: int, xi_rand: np.ndarray, q_rand: np.ndarray | None,
-                           rng, deadline, st) -> tuple[str, int, list | None]:
+                           rng: np.random.Generator, deadline: Deadline, st: dict[str, Any]) -> tuple[str, int, Sequence[tuple[str | None, list[np.ndarray]]] | None]:
         o = self.options
         st["extensions"] += 1
         xi_near = tree.xi[i_near]
@@ -673,7 +680,7 @@ class TCBiRRT(Planner):
         q_near = tree.q[i_near]
         if dist > 0.0:
             poses = interpolate_task(R0, p0, Rs, ps, o.n_interp, o.interpolation)
-            Q = self.path_ik(poses, q_near, st, prefix=o.keep_prefix)
+            Q = self.path_ik(poses, q_near, st, prefix=cast(bool, o.keep_prefix))
             if not Q:
                 st["trapped"] += 1
                 return TRAPPED, -1, None
@@ -687,7 +694,7 @@ class TCBiRRT(Planner):
         else:
             poses, Q = [], [q_near.copy()]
         q_s = Q[-1]
-        reg = None
+        reg: Sequence[tuple[str | None, list[np.ndarray]]] | None = None
         if reach and q_rand is not None:
             dq = float(np.linalg.norm(q_rand - q_s))
             if o.joint_connect and o.regrasp_tolerance < dq <= o.joint_connect_max_distance:
@@ -708,24 +715,24 @@ class TCBiRRT(Planner):
     def _sampler(self) -> TaskSampler | None:
         """The improved variant's ξ sampler (None: the paper's uniform box)."""
         o = self.options
-        if not (o.sample_filter or o.bridge_probability > 0 or o.goal_bias > 0 or o.guide_probability > 0
-                or o.geodesic_probability > 0):
+        if not (o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.goal_bias) > 0 or cast(float, o.guide_probability) > 0
+                or cast(float, o.geodesic_probability) > 0):
             return None
         if self._filter is None:
             self._filter = ObjectPoseFilter(self.robot, self.scene)
-        need = o.sample_filter or o.bridge_probability > 0 or o.guide_probability > 0
+        need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
         return TaskSampler(self._filter if need else None,
-                           self._lo, self._hi, bridge_probability=o.bridge_probability,
-                           bridge_sigma=o.bridge_sigma, goal_bias=o.goal_bias,
-                           filter_tries=30 if o.sample_filter else 0, guide_probability=o.guide_probability,
-                           guide_sigma=o.guide_sigma, geodesic_probability=o.geodesic_probability,
+                           self._lo, self._hi, bridge_probability=cast(float, o.bridge_probability),
+                           bridge_sigma=o.bridge_sigma, goal_bias=cast(float, o.goal_bias),
+                           filter_tries=30 if o.sample_filter else 0, guide_probability=cast(float, o.guide_probability),
+                           guide_sigma=o.guide_sigma, geodesic_probability=cast(float, o.geodesic_probability),
                            geodesic_sigma=o.geodesic_sigma)
 
     # ------------------------------------------------------------------ Alg. 1
-    def _plan(self, q_start, q_goal, deadline, rng, seed) -> PlanResult:
+    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator, seed: int) -> PlanResult:
         o = self.options
         self._rng = rng
-        st = {k: 0 for k in ("iterations", "extensions", "trapped", "partial", "ik_calls", "ik_iterations", "ik_restarts",
+        st: dict[str, Any] = {k: 0 for k in ("iterations", "extensions", "trapped", "partial", "ik_calls", "ik_iterations", "ik_restarts",
                              "ik_failures", "ik_jumps", "collisions", "regrasp_attempts", "regrasp_failures",
                              "regrasp_nodes", "edge_checks", "edge_collisions", "lazy_rejections",
                              "joint_connect_attempts", "joint_connect_successes", "joint_connect_projections")}
@@ -749,10 +756,10 @@ class TCBiRRT(Planner):
         while not deadline.expired():
             if o.max_iterations and st["iterations"] >= o.max_iterations:
                 break
-            if (sampler is not None and o.guide_probability > 0 and sampler.guide is None
+            if (sampler is not None and cast(float, o.guide_probability) > 0 and sampler.guide is None
                     and guide_time < o.guide_time_limit and st["iterations"] % 25 == 0):
                 sub = deadline.sub(min(o.guide_attempt_time, o.guide_time_limit - guide_time))
-                sampler.guide = object_lead_path(self._filter, ta.xi[0] if a_is_start else tb.xi[0],
+                sampler.guide = object_lead_path(cast(ObjectPoseFilter, self._filter), ta.xi[0] if a_is_start else tb.xi[0],
                                                  tb.xi[0] if a_is_start else ta.xi[0], self._lo, self._hi, rng, sub)
                 guide_time += sub.elapsed()
                 st["guide_attempts"] += 1
@@ -801,7 +808,7 @@ class TCBiRRT(Planner):
             return self.empty_result(PlanStatus.FAILED, "iteration cap reached", **st)
         return self._extract(ta, tb, a_is_start, found, st)
 
-    def _extract(self, ta: _TaskTree, tb: _TaskTree, a_is_start: bool, found, st) -> PlanResult:
+    def _extract(self, ta: _TaskTree, tb: _TaskTree, a_is_start: bool, found: tuple[int, int, Sequence[tuple[str | None, list[np.ndarray]]] | None], st: dict[str, Any]) -> PlanResult:
         """ExtractPath: tree-a branch, regrasp (q_b of tree b → q_a of tree a, reversed so the path
         runs start → goal), reversed tree-b branch."""
         i_a, i_b, reg = found
@@ -815,7 +822,7 @@ class TCBiRRT(Planner):
         qs = [x for x in qa]
         poses = [M for M in pa]
         flags = [True] * len(qa)
-        segs: list = []
+        segs: list[tuple[str, int, int, str | None]] = []
         run0 = 0                    # start of the current constrained run
         n_joint = 0
         for arm, full in reg_segments:
