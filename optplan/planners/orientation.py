@@ -221,8 +221,7 @@ class OrientationManifold:
 
     def _complete_compiled(self, p, ref, rng):
         if ref is not None:
-            q, found = self.kernel[1](p, ref)
-            return q if found[0] > 0.5 else None
+            return self.kernel[1].flagged(p, ref)
         c, ia, ip = self.c, self.ik[self.c.active], self.ik[self.c.passive]
         QA, okA, QP, okP = self.kernel[0](p)
         closed = c.mode == "closed"
@@ -288,30 +287,49 @@ def _choose(X, ok, lo, hi, rng, *, dedup: bool = False, tol: float = 1e-12):
     inside [lo, hi] (within ``tol``, then clipped): a uniformly random one (``rng``), else the first,
     counted in the order of :class:`~optplan.ik_analytic.DecoupledArmIK` (branch, then shifts, the
     last joint fastest). ``dedup``: branches equal modulo 2π count once. Returns (row, angles) or
-    (-1, None)."""
-    idx = np.flatnonzero(ok > 0.5)
-    if idx.size == 0:
+    (-1, None).
+
+    Scalar Python on the few (2-8) rows of three angles: the same IEEE operations in the same
+    order as the array form it replaced (same choice for the same generator, one draw), without
+    ~15 numpy calls of per-call overhead."""
+    idx = [i for i, f in enumerate(ok.tolist()) if f > 0.5]
+    if not idx:
         return -1, None
-    X = X[idx]
-    if dedup and len(X) > 1:
-        D = np.abs((X[:, None, :] - X[None, :, :] + math.pi) % _TWO_PI - math.pi).max(axis=2)
-        keep = ~np.any(np.tril(D < 1e-9, -1), axis=1)     # no earlier branch equal modulo 2π
-        idx, X = idx[keep], X[keep]
-    kmin = np.ceil((lo - tol - X) / _TWO_PI)
-    cnt = np.maximum(np.floor((hi + tol - X) / _TWO_PI) - kmin + 1, 0.0)
-    per_row = cnt.prod(axis=1)
-    cum = np.cumsum(per_row)
-    if cum[-1] < 0.5:
+    if dedup and len(idx) > 1:
+        Xs = X[idx]
+        D = np.abs((Xs[:, None, :] - Xs[None, :, :] + math.pi) % _TWO_PI - math.pi).max(axis=2)
+        keep = (~np.any(np.tril(D < 1e-9, -1), axis=1)).tolist()     # no earlier branch equal modulo 2π
+        idx = [i for i, k in zip(idx, keep) if k]
+    rows = X.tolist()
+    lo, hi = lo.tolist(), hi.tolist()
+    floor, ceil = math.floor, math.ceil
+    kmins, cnts, cum = [], [], []
+    total = 0
+    for i in idx:
+        x = rows[i]
+        km = [ceil((a - tol - v) / _TWO_PI) for a, v in zip(lo, x)]
+        cn = [max(floor((b + tol - v) / _TWO_PI) - k + 1, 0) for b, v, k in zip(hi, x, km)]
+        n = 1
+        for c in cn:
+            n *= c
+        total += n
+        kmins.append(km)
+        cnts.append(cn)
+        cum.append(total)
+    if total == 0:
         return -1, None
-    j = int(rng.integers(int(cum[-1]))) if rng is not None else 0
-    r = int(np.searchsorted(cum, j, side="right"))
-    j -= int(cum[r - 1]) if r else 0
-    y = X[r].copy()
-    for k in range(X.shape[1] - 1, -1, -1):
-        n = int(cnt[r, k])
-        y[k] += _TWO_PI * (kmin[r, k] + j % n)
+    j = int(rng.integers(total)) if rng is not None else 0
+    r = 0
+    while cum[r] <= j:      # first row whose cumulative count exceeds j
+        r += 1
+    j -= cum[r - 1] if r else 0
+    y = list(rows[idx[r]])
+    cn, km = cnts[r], kmins[r]
+    for k in range(len(y) - 1, -1, -1):
+        n = cn[k]
+        y[k] += _TWO_PI * (km[k] + j % n)
         j //= n
-    return int(idx[r]), np.clip(y, lo, hi)
+    return idx[r], np.array([min(max(v, a), b) for v, a, b in zip(y, lo, hi)])
 
 
 def _sx_nearest(rows, oks, ref, lo, hi, n_fixed: int = 0, tol: float = 1e-12):
@@ -424,8 +442,24 @@ class _Kernel:
         if self.compiled:
             self._shapes = [shape for shape, _, _ in cf._out_map]
             self._call = (cf._fn, cf._arg, cf._res, cf._iw_p, cf._w_p)
+            self._bufs = (cf._in_bufs, cf._out_bufs)
+            self._n0 = self._shapes[0][0] * self._shapes[0][1]
         else:
             self._shapes = [f.size_out(i) for i in range(f.n_out())]
+
+    def flagged(self, *inputs):
+        """The first output (a vector, fresh copy) when the first entry of the second output is
+        > 0.5, else None: :meth:`__call__` without building the outputs that are not returned."""
+        if not self.compiled:
+            out, flag = self(*inputs)[:2]
+            return out if flag.flat[0] > 0.5 else None
+        ins, outs = self._bufs
+        for buf, x in zip(ins, inputs):
+            buf[:] = x
+        fn, arg, res, iw, w = self._call
+        if fn(arg, res, iw, w, 0) != 0:
+            raise RuntimeError(f"{self.cf.name}: evaluation failed")
+        return outs[0][:self._n0].copy() if outs[1][0] > 0.5 else None
 
     def __call__(self, *inputs):
         if not self.compiled:
