@@ -178,15 +178,17 @@ class OCRRT(Planner):
         if unknown:
             raise ConfigurationError(f"OCRRTOptions.goal_turn_joints: {unknown} are not joints of {robot.name!r} "
                                      f"(joints: {names})")
+        self._span = self.manifold.upper - self.manifold.lower   # what rng.uniform(lower, upper) scales by
         self._turn_idx = np.array([] if paper else [names.index(n) for n in o.goal_turn_joints], dtype=int)
 
     # ------------------------------------------------------------------ manifold moves
     def sample(self, rng, st) -> tuple[np.ndarray, np.ndarray] | None:
         """Alg. 1: a configuration on the manifold from uniformly drawn parameters."""
         mf = self.manifold
+        lo, span, n = mf.lower, self._span, mf.dim
         for _ in range(self.options.max_sample_tries):
             st["samples"] += 1
-            p = rng.uniform(mf.lower, mf.upper)
+            p = lo + span * rng.random(n)      # = rng.uniform(lo, hi), same draws, ~20x less overhead
             q = mf.complete(p, rng=rng)
             if q is not None:
                 return q, p
@@ -224,9 +226,11 @@ class OCRRT(Planner):
     def _goal_region_sample(self, rng, st, p_goal, q_goal):
         """A sample within ``goal_region_radius`` of the goal's parameters, on the goal's branch."""
         mf, r = self.manifold, self.options.goal_region_radius
+        lo, hi, n = mf.lower, mf.upper, p_goal.size
         for _ in range(self.options.max_sample_tries):
             st["samples"] += 1
-            p = np.clip(p_goal + rng.uniform(-r, r, p_goal.size), mf.lower, mf.upper)
+            # = np.clip(p_goal + rng.uniform(-r, r, n), lo, hi): same draws and values
+            p = np.minimum(np.maximum(p_goal + (-r + (r + r) * rng.random(n)), lo), hi)
             q = mf.complete(p, ref=q_goal)
             if q is not None:
                 return q, p

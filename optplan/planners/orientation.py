@@ -223,7 +223,7 @@ class OrientationManifold:
         if ref is not None:
             return self.kernel[1].flagged(p, ref)
         c, ia, ip = self.c, self.ik[self.c.active], self.ik[self.c.passive]
-        QA, okA, QP, okP = self.kernel[0](p)
+        QA, okA, QP, okP = self.kernel[0].peek(p)     # read here only; the choice copies what it returns
         closed = c.mode == "closed"
         if closed and (not okP.any() or not (ip.lower[0] - 1e-12 <= p[4] <= ip.upper[0] + 1e-12)):
             return None     # no passive-arm solution for any wrist branch
@@ -444,8 +444,22 @@ class _Kernel:
             self._call = (cf._fn, cf._arg, cf._res, cf._iw_p, cf._w_p)
             self._bufs = (cf._in_bufs, cf._out_bufs)
             self._n0 = self._shapes[0][0] * self._shapes[0][1]
+            self._views = tuple(b[:s[0]] if s[1] == 1 else b[:s[0] * s[1]].reshape(s, order="F")
+                                for b, s in zip(cf._out_bufs, self._shapes))
         else:
             self._shapes = [f.size_out(i) for i in range(f.n_out())]
+
+    def peek(self, *inputs):
+        """The outputs as views of the kernel's buffers (valid until its next call; read, do not
+        keep): :meth:`__call__` without the copies."""
+        if not self.compiled:
+            return self(*inputs)
+        for buf, x in zip(self._bufs[0], inputs):
+            buf[:] = x
+        fn, arg, res, iw, w = self._call
+        if fn(arg, res, iw, w, 0) != 0:
+            raise RuntimeError(f"{self.cf.name}: evaluation failed")
+        return self._views
 
     def flagged(self, *inputs):
         """The first output (a vector, fresh copy) when the first entry of the second output is
