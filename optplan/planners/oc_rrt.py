@@ -44,6 +44,12 @@ __all__ = ["OCRRTOptions", "OCRRT"]
 log = logging.getLogger(__name__)
 
 TRAPPED, ADVANCED, REACHED = 0, 1, 2
+_max = np.maximum.reduce
+
+
+def _maxabs(a: np.ndarray) -> float:
+    """max |a_i| (``float(np.abs(a).max())`` without the method's Python wrapper)."""
+    return float(_max(np.abs(a)))
 
 
 @dataclass(frozen=True)
@@ -202,11 +208,11 @@ class OCRRT(Planner):
         ``check``, when it (or a bisection point) is in collision. None when rejected.
         ``trace`` receives the bisection points, in order."""
         o = self.options
-        x = self.manifold.complete(pb, ref=q)
+        x = self.manifold.complete_near(pb, q)
         if x is None:
             st["ik_rejects"] += 1
             return None
-        if float(np.abs(x - q).max()) > o.max_joint_step:
+        if _maxabs(x - q) > o.max_joint_step:
             if depth <= 0:
                 st["jump_rejects"] += 1
                 return None
@@ -260,7 +266,7 @@ class OCRRT(Planner):
         ``collision_step``, each completed on the branch of its predecessor, continuity- and
         collision-checked. Returns the last configuration, or None."""
         d = p1 - p0
-        n = max(1, int(math.ceil(float(np.abs(d).max()) / self.options.collision_step)))
+        n = max(1, int(math.ceil(_maxabs(d) / self.options.collision_step)))
         q, pa = q0, p0
         for k in range(1, n + 1):
             pb = p0 + (k / n) * d if k < n else p1
@@ -274,7 +280,7 @@ class OCRRT(Planner):
         """One OCSteer step from node i_near toward the parameters p_target."""
         p0 = tree.P[i_near]
         d = p_target - p0
-        dist = float(np.abs(d).max())
+        dist = _maxabs(d)
         if dist < 1e-15:
             return REACHED, i_near
         p1 = p_target if dist <= self.options.step else p0 + (self.options.step / dist) * d
@@ -290,7 +296,7 @@ class OCRRT(Planner):
         d = q - q_goal
         k = np.round(d[self._turn_idx] / (2.0 * math.pi))
         d[self._turn_idx] -= 2.0 * math.pi * k
-        return k if float(np.abs(d).max()) <= self.options.reach_tolerance else None
+        return k if _maxabs(d) <= self.options.reach_tolerance else None
 
     def connect(self, tree: Tree, q_target, p_target, st, deadline, start: int | None = None,
                 goal: bool = False) -> tuple[int, int]:
@@ -301,7 +307,7 @@ class OCRRT(Planner):
         while not deadline.expired():
             res, i = self.oc_steer(tree, i, p_target, st)
             if res == REACHED:
-                if float(np.abs(tree.X[i] - q_target).max()) <= self.options.reach_tolerance:
+                if _maxabs(tree.X[i] - q_target) <= self.options.reach_tolerance:
                     return REACHED, i
                 if goal and self._turn_idx.size and self._turns(tree.X[i], q_target) is not None:
                     return REACHED, i

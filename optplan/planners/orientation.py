@@ -219,6 +219,14 @@ class OrientationManifold:
             return self._complete_compiled(np.asarray(p, float), ref, rng)
         return self.complete_reference(p, ref, rng)
 
+    def complete_near(self, p: np.ndarray, ref: np.ndarray) -> np.ndarray | None:
+        """:meth:`complete` ``(p, ref=ref)`` for float arrays (the planners' inner loop, without
+        the conversions and dispatch)."""
+        self.n_complete += 1
+        if self.kernel is not None:
+            return self.kernel[1].flagged(p, ref)
+        return self.complete_reference(p, ref, None)
+
     def _complete_compiled(self, p, ref, rng):
         if ref is not None:
             return self.kernel[1].flagged(p, ref)
@@ -301,20 +309,19 @@ def _choose(X, ok, lo, hi, rng, *, dedup: bool = False, tol: float = 1e-12):
         keep = (~np.any(np.tril(D < 1e-9, -1), axis=1)).tolist()     # no earlier branch equal modulo 2π
         idx = [i for i, k in zip(idx, keep) if k]
     rows = X.tolist()
-    lo, hi = lo.tolist(), hi.tolist()
+    lim = list(zip(lo.tolist(), hi.tolist()))
     floor, ceil = math.floor, math.ceil
-    kmins, cnts, cum = [], [], []
+    cum = []
     total = 0
-    for i in idx:
-        x = rows[i]
-        km = [ceil((a - tol - v) / _TWO_PI) for a, v in zip(lo, x)]
-        cn = [max(floor((b + tol - v) / _TWO_PI) - k + 1, 0) for b, v, k in zip(hi, x, km)]
+    for i in idx:               # in-limit shifts of row i: the product over its angles
         n = 1
-        for c in cn:
+        for (a, b), v in zip(lim, rows[i]):
+            c = floor((b + tol - v) / _TWO_PI) - ceil((a - tol - v) / _TWO_PI) + 1
+            if c <= 0:
+                n = 0
+                break
             n *= c
         total += n
-        kmins.append(km)
-        cnts.append(cn)
         cum.append(total)
     if total == 0:
         return -1, None
@@ -323,13 +330,17 @@ def _choose(X, ok, lo, hi, rng, *, dedup: bool = False, tol: float = 1e-12):
     while cum[r] <= j:      # first row whose cumulative count exceeds j
         r += 1
     j -= cum[r - 1] if r else 0
-    y = list(rows[idx[r]])
-    cn, km = cnts[r], kmins[r]
+    y = rows[idx[r]]
+    out = [0.0] * len(y)
     for k in range(len(y) - 1, -1, -1):
-        n = cn[k]
-        y[k] += _TWO_PI * (km[k] + j % n)
+        a, b = lim[k]
+        v = y[k]
+        km = ceil((a - tol - v) / _TWO_PI)
+        n = floor((b + tol - v) / _TWO_PI) - km + 1
+        v += _TWO_PI * (km + j % n)
         j //= n
-    return idx[r], np.array([min(max(v, a), b) for v, a, b in zip(y, lo, hi)])
+        out[k] = min(max(v, a), b)
+    return idx[r], np.array(out)
 
 
 def _sx_nearest(rows, oks, ref, lo, hi, n_fixed: int = 0, tol: float = 1e-12):
