@@ -208,11 +208,11 @@ class OCRRT(Planner):
         ``check``, when it (or a bisection point) is in collision. None when rejected.
         ``trace`` receives the bisection points, in order."""
         o = self.options
-        x = self.manifold.complete_near(pb, q)
+        x, dq = self.manifold.complete_step(pb, q)
         if x is None:
             st["ik_rejects"] += 1
             return None
-        if _maxabs(x - q) > o.max_joint_step:
+        if dq > o.max_joint_step:
             if depth <= 0:
                 st["jump_rejects"] += 1
                 return None

@@ -219,17 +219,19 @@ class OrientationManifold:
             return self._complete_compiled(np.asarray(p, float), ref, rng)
         return self.complete_reference(p, ref, rng)
 
-    def complete_near(self, p: np.ndarray, ref: np.ndarray) -> np.ndarray | None:
+    def complete_step(self, p: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray | None, float]:
         """:meth:`complete` ``(p, ref=ref)`` for float arrays (the planners' inner loop, without
-        the conversions and dispatch)."""
+        the conversions and dispatch), and the max-norm joint distance of the result from ``ref``
+        [rad] (0.0 when there is no solution)."""
         self.n_complete += 1
         if self.kernel is not None:
             return self.kernel[1].flagged(p, ref)
-        return self.complete_reference(p, ref, None)
+        q = self.complete_reference(p, ref, None)
+        return (None, 0.0) if q is None else (q, float(np.abs(q - ref).max()))
 
     def _complete_compiled(self, p, ref, rng):
         if ref is not None:
-            return self.kernel[1].flagged(p, ref)
+            return self.kernel[1].flagged(p, ref)[0]
         c, ia, ip = self.c, self.ik[self.c.active], self.ik[self.c.passive]
         QA, okA, QP, okP = self.kernel[0].peek(p)     # read here only; the choice copies what it returns
         closed = c.mode == "closed"
@@ -376,8 +378,9 @@ def _completion_kernel(mf: OrientationManifold):
     * ``raw(p) -> (QA, okA, QP, okP)``: the active arm's two raw wrist branches (2 × 3) and the
       passive arm's raw wrist branches (open: 2 × 3) or full-pose branches for each active branch
       (closed: 16 × 7, eight per active branch), with existence / accuracy flags;
-    * ``nearest(p, ref) -> (q, found)``: the whole configuration on the branches nearest ``ref``
-      (what :meth:`OrientationManifold.complete` returns with a reference), joint limits applied.
+    * ``nearest(p, ref) -> (q, found, dist)``: the whole configuration on the branches nearest
+      ``ref`` (what :meth:`OrientationManifold.complete` returns with a reference), joint limits
+      applied, and its max-norm distance from ``ref`` [rad].
     """
     c, robot = mf.c, mf.robot
     ia, ip = mf.ik[c.active], mf.ik[c.passive]
@@ -430,7 +433,9 @@ def _completion_kernel(mf: OrientationManifold):
     if c.mode == "closed" and ia.spherical:   # both blocks are the same: keep one
         QP, okP = ca.vertcat(*rows[:len(rows) // 2]), ca.vertcat(*oks[:len(oks) // 2])
     raw = ca.Function(f"oc_branches_{c.mode}", [p], _cse([QA, okA, QP, okP]))
-    near = ca.Function(f"oc_nearest_{c.mode}", [p, ref], _cse([ca.vertcat(*q), ca.logic_and(found_a, found_p)]))
+    qv = ca.vertcat(*q)
+    near = ca.Function(f"oc_nearest_{c.mode}", [p, ref],
+                       _cse([qv, ca.logic_and(found_a, found_p), ca.mmax(ca.fabs(qv - ref))]))
     return tuple(_Kernel(compile_function(f)) for f in (raw, near))
 
 
@@ -473,18 +478,19 @@ class _Kernel:
         return self._views
 
     def flagged(self, *inputs):
-        """The first output (a vector, fresh copy) when the first entry of the second output is
-        > 0.5, else None: :meth:`__call__` without building the outputs that are not returned."""
+        """(first output (a vector, fresh copy), first entry of the third output) when the first
+        entry of the second output is > 0.5, else (None, 0.0): :meth:`__call__` without building
+        the outputs that are not returned."""
         if not self.compiled:
-            out, flag = self(*inputs)[:2]
-            return out if flag.flat[0] > 0.5 else None
+            out, flag, aux = self(*inputs)[:3]
+            return (out, float(np.asarray(aux).flat[0])) if flag.flat[0] > 0.5 else (None, 0.0)
         ins, outs = self._bufs
         for buf, x in zip(ins, inputs):
             buf[:] = x
         fn, arg, res, iw, w = self._call
         if fn(arg, res, iw, w, 0) != 0:
             raise RuntimeError(f"{self.cf.name}: evaluation failed")
-        return outs[0][:self._n0].copy() if outs[1][0] > 0.5 else None
+        return (outs[0][:self._n0].copy(), float(outs[2][0])) if outs[1][0] > 0.5 else (None, 0.0)
 
     def __call__(self, *inputs):
         if not self.compiled:
