@@ -261,12 +261,15 @@ class OCRRT(Planner):
                 return qm, pm
         return None
 
-    def _walk(self, q0, p0, p1, st) -> np.ndarray | None:
+    def _walk(self, q0, p0, p1, st, d: np.ndarray | None = None, dist: float | None = None) -> np.ndarray | None:
         """Configurations from q0 (parameters p0) to parameters p1 along the parameter line, every
         ``collision_step``, each completed on the branch of its predecessor, continuity- and
-        collision-checked. Returns the last configuration, or None."""
-        d = p1 - p0
-        n = max(1, int(math.ceil(_maxabs(d) / self.options.collision_step)))
+        collision-checked. Returns the last configuration, or None. ``d``, ``dist``: ``p1 - p0``
+        and its max-norm when the caller has them."""
+        if d is None:
+            d = p1 - p0
+            dist = _maxabs(d)
+        n = max(1, int(math.ceil(dist / self.options.collision_step)))
         q, pa = q0, p0
         for k in range(1, n + 1):
             pb = p0 + (k / n) * d if k < n else p1
@@ -283,8 +286,12 @@ class OCRRT(Planner):
         dist = _maxabs(d)
         if dist < 1e-15:
             return REACHED, i_near
-        p1 = p_target if dist <= self.options.step else p0 + (self.options.step / dist) * d
-        q1 = self._walk(tree.X[i_near], p0, p1, st)
+        if dist <= self.options.step:
+            p1 = p_target
+            q1 = self._walk(tree.X[i_near], p0, p1, st, d, dist)   # p1 - p0 is d
+        else:
+            p1 = p0 + (self.options.step / dist) * d
+            q1 = self._walk(tree.X[i_near], p0, p1, st)
         if q1 is None:
             return TRAPPED, i_near
         j = tree.add(q1, i_near, P=p1)

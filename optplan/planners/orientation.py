@@ -191,6 +191,9 @@ class OrientationManifold:
         self.upper = c.robot.upper[self.p_idx]
         self.dim = len(self.p_idx)
         self.n_complete = 0
+        # index slices of the joints complete() writes (plain slices when the indices are a range)
+        self._ix = {k: _as_slice(v) for k, v in (("a4", ia.q_idx[:4]), ("aw", ia.q_idx[4:]), ("p4", ip.q_idx[:4]),
+                                                ("pw", ip.q_idx[4:]), ("p1", ip.q_idx[1:]))}
         #: every branch of :meth:`complete` in one compiled call (None: the Python reference path,
         #: used when ``compiled=False`` or when the passive arm's full-pose IK needs Newton steps)
         self.kernel = None
@@ -237,25 +240,26 @@ class OrientationManifold:
         closed = c.mode == "closed"
         if closed and (not okP.any() or not (ip.lower[0] - 1e-12 <= p[4] <= ip.upper[0] + 1e-12)):
             return None     # no passive-arm solution for any wrist branch
+        ix = self._ix
         q = np.empty(self.robot.nq)
-        q[self.ia[:4]] = p[:4]
+        q[ix["a4"]] = p[:4]
         b, w = _choose(QA, okA, ia.lower[4:], ia.upper[4:], rng)
         if w is None:
             return None
-        q[self.ia[4:]] = w
+        q[ix["aw"]] = w
         if not closed:
             _, w = _choose(QP, okP, ip.lower[4:], ip.upper[4:], rng)
             if w is None:
                 return None
-            q[self.ip[:4]] = p[4:8]
-            q[self.ip[4:]] = w
+            q[ix["p4"]] = p[4:8]
+            q[ix["pw"]] = w
             return q
         blk = slice(0, len(QP)) if self._shared_passive else slice(b * (len(QP) // 2), (b + 1) * (len(QP) // 2))
         _, s = _choose(QP[blk, 1:], okP[blk], ip.lower[1:], ip.upper[1:], rng, dedup=True)
         if s is None:
             return None
         q[self.ip[0]] = p[4]
-        q[self.ip[1:]] = s
+        q[ix["p1"]] = s
         return q
 
     def complete_reference(self, p, ref: np.ndarray | None = None, rng: np.random.Generator | None = None):
@@ -290,6 +294,14 @@ class OrientationManifold:
 
 
 _TWO_PI = 2.0 * math.pi
+
+
+def _as_slice(idx):
+    """``slice(a, b)`` when the integer indices are ``a, a+1, ..., b-1``, else the indices."""
+    idx = np.asarray(idx, dtype=int)
+    if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
 
 
 def _choose(X, ok, lo, hi, rng, *, dedup: bool = False, tol: float = 1e-12):
