@@ -391,3 +391,43 @@ def test_kernel_with_a_sparse_output_falls_back_to_the_interpreted_function():
     a, b = k(np.array([1.5, -2.0]))
     np.testing.assert_allclose(a, [3.0, 0.0])
     np.testing.assert_allclose(b, 4.0)
+
+
+def test_branch_choice_matches_enumeration():
+    """The random IK-branch choice (counting shifts, one draw) picks the same solution as drawing
+    one index into the explicit list of every in-limit 2πk shift of every branch (branch order,
+    then shifts, the last joint fastest), duplicates modulo 2π counted once."""
+    import itertools
+    import math
+
+    from optplan.planners.orientation import _choose
+
+    g = np.random.default_rng(3)
+    tol, checked = 1e-12, 0
+    for _ in range(400):
+        rows, cols = int(g.choice([2, 8])), int(g.choice([3, 6]))
+        X = g.uniform(-7, 7, (rows, cols))
+        if g.random() < 0.3:
+            X[1] = X[0] + 2 * math.pi * g.integers(-1, 2, cols)
+        ok = (g.random(rows) < 0.7).astype(float)
+        hi = g.choice([1.0, 2.3, math.pi, 2 * math.pi], cols)
+        lo = -g.choice([1.0, 2.3, math.pi, 2 * math.pi], cols)
+        dedup = bool(g.random() < 0.5)
+        sols, kept = [], []
+        for r in range(rows):
+            if ok[r] < 0.5 or (dedup and any(np.allclose((X[r] - X[k] + math.pi) % (2 * math.pi) - math.pi, 0, atol=1e-9)
+                                             for k in kept)):
+                continue
+            kept.append(r)
+            shifts = [[x + 2 * math.pi * k for k in range(-4, 5) if lo[c] - tol <= x + 2 * math.pi * k <= hi[c] + tol]
+                      for c, x in enumerate(X[r])]
+            sols += [(r, np.clip(y, lo, hi)) for y in itertools.product(*shifts)]
+        seed = int(g.integers(2**31))
+        row, y = _choose(X, ok, lo, hi, np.random.default_rng(seed), dedup=dedup)
+        if not sols:
+            assert row == -1 and y is None
+            continue
+        r_ref, y_ref = sols[int(np.random.default_rng(seed).integers(len(sols)))]
+        assert row == r_ref and np.allclose(y, y_ref, atol=1e-12, rtol=0)
+        checked += 1
+    assert checked > 200

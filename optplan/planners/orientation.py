@@ -197,6 +197,9 @@ class OrientationManifold:
         self.upper = c.robot.upper[self.p_idx]
         self.dim = len(self.p_idx)
         self.n_complete = 0
+        # index slices of the joints complete() writes (plain slices when the indices are a range)
+        self._ix = {k: _as_slice(v) for k, v in (("a4", ia.q_idx[:4]), ("aw", ia.q_idx[4:]), ("p4", ip.q_idx[:4]),
+                                                ("pw", ip.q_idx[4:]), ("p1", ip.q_idx[1:]))}
         #: every branch of :meth:`complete` in one compiled call (None: the Python reference path,
         #: used when ``compiled=False`` or when the passive arm's full-pose IK needs Newton steps)
         self.kernel: tuple[_Kernel, ...] | None = None
@@ -226,36 +229,46 @@ class OrientationManifold:
             return self._complete_compiled(np.asarray(p, float), ref, rng)
         return self.complete_reference(p, ref, rng)
 
+    def complete_step(self, p: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray | None, float]:
+        """:meth:`complete` ``(p, ref=ref)`` for float arrays (the planners' inner loop, without
+        the conversions and dispatch), and the max-norm joint distance of the result from ``ref``
+        [rad] (0.0 when there is no solution)."""
+        self.n_complete += 1
+        if self.kernel is not None:
+            return self.kernel[1].flagged(p, ref)
+        q = self.complete_reference(p, ref, None)
+        return (None, 0.0) if q is None else (q, float(np.abs(q - ref).max()))
+
     def _complete_compiled(self, p: np.ndarray, ref: np.ndarray | None,
                            rng: np.random.Generator | None) -> np.ndarray | None:
         assert self.kernel is not None  # complete() calls this only with a kernel
         if ref is not None:
-            q, found = self.kernel[1](p, ref)
-            return q if found[0] > 0.5 else None
+            return self.kernel[1].flagged(p, ref)[0]
         c, ia, ip = self.c, self.ik[self.c.active], self.ik[self.c.passive]
-        QA, okA, QP, okP = self.kernel[0](p)
+        QA, okA, QP, okP = self.kernel[0].peek(p)     # read here only; the choice copies what it returns
         closed = c.mode == "closed"
         if closed and (not okP.any() or not (ip.lower[0] - 1e-12 <= p[4] <= ip.upper[0] + 1e-12)):
             return None     # no passive-arm solution for any wrist branch
+        ix = self._ix
         q = np.empty(self.robot.nq)
-        q[self.ia[:4]] = p[:4]
+        q[ix["a4"]] = p[:4]
         b, w = _choose(QA, okA, ia.lower[4:], ia.upper[4:], rng)
         if w is None:
             return None
-        q[self.ia[4:]] = w
+        q[ix["aw"]] = w
         if not closed:
             _, w = _choose(QP, okP, ip.lower[4:], ip.upper[4:], rng)
             if w is None:
                 return None
-            q[self.ip[:4]] = p[4:8]
-            q[self.ip[4:]] = w
+            q[ix["p4"]] = p[4:8]
+            q[ix["pw"]] = w
             return q
         blk = slice(0, len(QP)) if self._shared_passive else slice(b * (len(QP) // 2), (b + 1) * (len(QP) // 2))
         _, s = _choose(QP[blk, 1:], okP[blk], ip.lower[1:], ip.upper[1:], rng, dedup=True)
         if s is None:
             return None
         q[self.ip[0]] = p[4]
-        q[self.ip[1:]] = s
+        q[ix["p1"]] = s
         return q
 
     def complete_reference(self, p: np.ndarray, ref: np.ndarray | None = None,
@@ -293,36 +306,66 @@ class OrientationManifold:
 _TWO_PI = 2.0 * math.pi
 
 
+def _as_slice(idx: Any) -> slice | np.ndarray:
+    """``slice(a, b)`` when the integer indices are ``a, a+1, ..., b-1``, else the indices."""
+    idx = np.asarray(idx, dtype=int)
+    if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
+
+
 def _choose(X: np.ndarray, ok: np.ndarray, lo: np.ndarray, hi: np.ndarray, rng: np.random.Generator | None, *,
             dedup: bool = False, tol: float = 1e-12) -> tuple[int, np.ndarray | None]:
     """One solution among the raw branches ``X`` (rows, with flags ``ok``) and their ``2πk`` shifts
     inside [lo, hi] (within ``tol``, then clipped): a uniformly random one (``rng``), else the first,
     counted in the order of :class:`~optplan.ik_analytic.DecoupledArmIK` (branch, then shifts, the
     last joint fastest). ``dedup``: branches equal modulo 2π count once. Returns (row, angles) or
-    (-1, None)."""
-    idx = np.flatnonzero(ok > 0.5)
-    if idx.size == 0:
+    (-1, None).
+
+    Scalar Python on the few (2-8) rows of three angles: the same IEEE operations in the same
+    order as the array form it replaced (same choice for the same generator, one draw), without
+    ~15 numpy calls of per-call overhead."""
+    idx = [i for i, f in enumerate(ok.tolist()) if f > 0.5]
+    if not idx:
         return -1, None
-    X = X[idx]
-    if dedup and len(X) > 1:
-        D = np.abs((X[:, None, :] - X[None, :, :] + math.pi) % _TWO_PI - math.pi).max(axis=2)
-        keep = ~np.any(np.tril(D < 1e-9, -1), axis=1)     # no earlier branch equal modulo 2π
-        idx, X = idx[keep], X[keep]
-    kmin = np.ceil((lo - tol - X) / _TWO_PI)
-    cnt = np.maximum(np.floor((hi + tol - X) / _TWO_PI) - kmin + 1, 0.0)
-    per_row = cnt.prod(axis=1)
-    cum = np.cumsum(per_row)
-    if cum[-1] < 0.5:
+    if dedup and len(idx) > 1:
+        Xs = X[idx]
+        D = np.abs((Xs[:, None, :] - Xs[None, :, :] + math.pi) % _TWO_PI - math.pi).max(axis=2)
+        keep = (~np.any(np.tril(D < 1e-9, -1), axis=1)).tolist()     # no earlier branch equal modulo 2π
+        idx = [i for i, k in zip(idx, keep) if k]
+    rows = X.tolist()
+    lim = list(zip(lo.tolist(), hi.tolist()))
+    floor, ceil = math.floor, math.ceil
+    cum = []
+    total = 0
+    for i in idx:               # in-limit shifts of row i: the product over its angles
+        n = 1
+        for (a, b), v in zip(lim, rows[i]):
+            c = floor((b + tol - v) / _TWO_PI) - ceil((a - tol - v) / _TWO_PI) + 1
+            if c <= 0:
+                n = 0
+                break
+            n *= c
+        total += n
+        cum.append(total)
+    if total == 0:
         return -1, None
-    j = int(rng.integers(int(cum[-1]))) if rng is not None else 0
-    r = int(np.searchsorted(cum, j, side="right"))
-    j -= int(cum[r - 1]) if r else 0
-    y = X[r].copy()
-    for k in range(X.shape[1] - 1, -1, -1):
-        n = int(cnt[r, k])
-        y[k] += _TWO_PI * (kmin[r, k] + j % n)
+    j = int(rng.integers(total)) if rng is not None else 0
+    r = 0
+    while cum[r] <= j:      # first row whose cumulative count exceeds j
+        r += 1
+    j -= cum[r - 1] if r else 0
+    y = rows[idx[r]]
+    out = [0.0] * len(y)
+    for k in range(len(y) - 1, -1, -1):
+        a, b = lim[k]
+        v = y[k]
+        km = ceil((a - tol - v) / _TWO_PI)
+        n = floor((b + tol - v) / _TWO_PI) - km + 1
+        v += _TWO_PI * (km + j % n)
         j //= n
-    return int(idx[r]), np.clip(y, lo, hi)
+        out[k] = min(max(v, a), b)
+    return idx[r], np.array(out)
 
 
 def _sx_nearest(rows: list[Any], oks: list[Any], ref: list[Any], lo: np.ndarray, hi: np.ndarray, n_fixed: int = 0,
@@ -362,8 +405,9 @@ def _completion_kernel(mf: OrientationManifold) -> tuple[_Kernel, ...]:
     * ``raw(p) -> (QA, okA, QP, okP)``: the active arm's two raw wrist branches (2 × 3) and the
       passive arm's raw wrist branches (open: 2 × 3) or full-pose branches for each active branch
       (closed: 16 × 7, eight per active branch), with existence / accuracy flags;
-    * ``nearest(p, ref) -> (q, found)``: the whole configuration on the branches nearest ``ref``
-      (what :meth:`OrientationManifold.complete` returns with a reference), joint limits applied.
+    * ``nearest(p, ref) -> (q, found, dist)``: the whole configuration on the branches nearest
+      ``ref`` (what :meth:`OrientationManifold.complete` returns with a reference), joint limits
+      applied, and its max-norm distance from ``ref`` [rad].
     """
     c, robot = mf.c, mf.robot
     ia, ip = mf.ik[c.active], mf.ik[c.passive]
@@ -417,7 +461,9 @@ def _completion_kernel(mf: OrientationManifold) -> tuple[_Kernel, ...]:
     if c.mode == "closed" and ia.spherical:   # both blocks are the same: keep one
         QP, okP = ca.vertcat(*rows[:len(rows) // 2]), ca.vertcat(*oks[:len(oks) // 2])
     raw = ca.Function(f"oc_branches_{c.mode}", [p], _cse([QA, okA, QP, okP]))
-    near = ca.Function(f"oc_nearest_{c.mode}", [p, ref], _cse([ca.vertcat(*q), ca.logic_and(found_a, found_p)]))
+    qv = ca.vertcat(*q)
+    near = ca.Function(f"oc_nearest_{c.mode}", [p, ref],
+                       _cse([qv, ca.logic_and(found_a, found_p), ca.mmax(ca.fabs(qv - ref))]))
     return tuple(_Kernel(compile_function(f)) for f in (raw, near))
 
 
@@ -440,9 +486,40 @@ class _Kernel:
         if self.compiled:
             self._shapes = [shape for shape, _, _ in cf._out_map]
             self._call = (cf._fn, cf._arg, cf._res, cf._iw_p, cf._w_p)
+            self._bufs = (cf._in_bufs, cf._out_bufs)
+            self._n0 = self._shapes[0][0] * self._shapes[0][1]
+            self._views = tuple(b[:s[0]] if s[1] == 1 else b[:s[0] * s[1]].reshape(s, order="F")
+                                for b, s in zip(cf._out_bufs, self._shapes))
         else:
             assert f is not None
             self._shapes = [f.size_out(i) for i in range(f.n_out())]
+
+    def peek(self, *inputs: Any) -> tuple[np.ndarray, ...]:
+        """The outputs as views of the kernel's buffers (valid until its next call; read, do not
+        keep): :meth:`__call__` without the copies."""
+        if not self.compiled:
+            return self(*inputs)
+        for buf, x in zip(self._bufs[0], inputs):
+            buf[:] = x
+        fn, arg, res, iw, w = self._call
+        if fn(arg, res, iw, w, 0) != 0:
+            raise RuntimeError(f"{self.cf.name}: evaluation failed")
+        return self._views
+
+    def flagged(self, *inputs: Any) -> tuple[np.ndarray | None, float]:
+        """(first output (a vector, fresh copy), first entry of the third output) when the first
+        entry of the second output is > 0.5, else (None, 0.0): :meth:`__call__` without building
+        the outputs that are not returned."""
+        if not self.compiled:
+            out, flag, aux = self(*inputs)[:3]
+            return (out, float(np.asarray(aux).flat[0])) if flag.flat[0] > 0.5 else (None, 0.0)
+        ins, outs = self._bufs
+        for buf, x in zip(ins, inputs):
+            buf[:] = x
+        fn, arg, res, iw, w = self._call
+        if fn(arg, res, iw, w, 0) != 0:
+            raise RuntimeError(f"{self.cf.name}: evaluation failed")
+        return (outs[0][:self._n0].copy(), float(outs[2][0])) if outs[1][0] > 0.5 else (None, 0.0)
 
     def __call__(self, *inputs: Any) -> tuple[np.ndarray, ...]:
         if not self.compiled:
