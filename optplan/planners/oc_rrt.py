@@ -31,6 +31,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -39,6 +40,10 @@ from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .orientation import DualArmOrientationConstraint, OrientationManifold
 from .tree import Tree
 from .validity import ValidityChecker
+
+if TYPE_CHECKING:
+    from ..model.robot import RobotModel
+    from ..scene import Scene
 
 __all__ = ["OCRRTOptions", "OCRRT"]
 log = logging.getLogger(__name__)
@@ -91,7 +96,7 @@ class OCRRTOptions:
     #: Names of continuous joints whose ``q + 2πk`` is the same physical configuration; the single tree then also
     #: accepts the goal's equivalents on them and the path ends at the one reached (``stats["goal_turns"]``).
     #: Empty: the exact goal.
-    goal_turn_joints: tuple = ()
+    goal_turn_joints: tuple[str, ...] = ()
     #: Single tree: probability that a sample is drawn within ``goal_region_radius`` of the goal's parameters and
     #: completed on the goal's IK branch [-].
     goal_region_bias: float = 0.3
@@ -105,12 +110,12 @@ class OCRRTOptions:
     bridge_sigma: float = 0.2
 
     @classmethod
-    def paper(cls, **kw) -> OCRRTOptions:
+    def paper(cls, **kw: Any) -> OCRRTOptions:
         """The paper's single-tree OC-RRT (Algorithm 2): goal-biased steering from the node
         nearest the goal, one OCSteer step toward each sample, the exact goal configuration."""
         return cls(connect=False, variant="paper", goal_from_new=False, **kw)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.variant not in ("improved", "paper"):
             raise ValueError(f"OCRRTOptions.variant: expected 'improved' or 'paper', got {self.variant!r}")
         if self.refine_depth is not None and not (isinstance(self.refine_depth, int) and 0 <= self.refine_depth <= 20):
@@ -146,12 +151,18 @@ class OCRRTOptions:
             raise ValueError(f"OCRRTOptions.margin: expected a number >= 0 m, got {self.margin!r}")
 
 
+class _ParamTree(Tree):
+    """A tree whose nodes also carry the manifold parameters ``P`` (a column of :class:`Tree`)."""
+
+    P: np.ndarray
+
+
 class OCRRT(Planner):
     """OC-RRT / OC-RRT-Connect on a :class:`DualArmOrientationConstraint` (module docstring)."""
 
     name = "oc_rrt"
 
-    def __init__(self, robot, scene, constraint: DualArmOrientationConstraint, options: OCRRTOptions | None = None,
+    def __init__(self, robot: RobotModel, scene: Scene | None, constraint: DualArmOrientationConstraint, options: OCRRTOptions | None = None,
                  *, checker: ValidityChecker | None = None, manifold: OrientationManifold | None = None) -> None:
         super().__init__(robot, scene)
         if not isinstance(constraint, DualArmOrientationConstraint):
@@ -182,7 +193,7 @@ class OCRRT(Planner):
         self._turn_idx = np.array([] if paper else [names.index(n) for n in o.goal_turn_joints], dtype=int)
 
     # ------------------------------------------------------------------ manifold moves
-    def sample(self, rng, st) -> tuple[np.ndarray, np.ndarray] | None:
+    def sample(self, rng: np.random.Generator, st: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
         """Alg. 1: a configuration on the manifold from uniformly drawn parameters."""
         mf = self.manifold
         lo, span, n = mf.lower, self._span, mf.dim
@@ -195,7 +206,8 @@ class OCRRT(Planner):
             st["sample_failures"] += 1
         return None
 
-    def _advance(self, q, pa, pb, depth: int, check: bool, st, trace: list | None = None) -> np.ndarray | None:
+    def _advance(self, q: np.ndarray, pa: np.ndarray, pb: np.ndarray, depth: int, check: bool, st: dict[str, Any],
+                 trace: list[Any] | None = None) -> np.ndarray | None:
         """The configuration at parameters ``pb`` followed from ``q`` (at ``pa``) on q's branch:
         rejected when the parameters have no solution, when a joint moves more than
         ``max_joint_step`` (after up to ``depth`` bisections of the parameter step) or, with
@@ -223,7 +235,8 @@ class OCRRT(Planner):
             return None
         return x
 
-    def _goal_region_sample(self, rng, st, p_goal, q_goal):
+    def _goal_region_sample(self, rng: np.random.Generator, st: dict[str, Any], p_goal: np.ndarray,
+                            q_goal: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """A sample within ``goal_region_radius`` of the goal's parameters, on the goal's branch."""
         mf, r = self.manifold, self.options.goal_region_radius
         lo, hi, n = mf.lower, mf.upper, p_goal.size
@@ -237,7 +250,7 @@ class OCRRT(Planner):
             st["sample_failures"] += 1
         return None
 
-    def _bridge_sample(self, rng, st):
+    def _bridge_sample(self, rng: np.random.Generator, st: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
         """Bridge test: the midpoint of two colliding configurations ``bridge_sigma`` apart, if free."""
         mf, o = self.manifold, self.options
         for _ in range(o.max_sample_tries):
@@ -255,25 +268,26 @@ class OCRRT(Planner):
                 return qm, pm
         return None
 
-    def _walk(self, q0, p0, p1, st, d: np.ndarray | None = None, dist: float | None = None) -> np.ndarray | None:
+    def _walk(self, q0: np.ndarray, p0: np.ndarray, p1: np.ndarray, st: dict[str, Any], d: np.ndarray | None = None,
+              dist: float | None = None) -> np.ndarray | None:
         """Configurations from q0 (parameters p0) to parameters p1 along the parameter line, every
         ``collision_step``, each completed on the branch of its predecessor, continuity- and
         collision-checked. Returns the last configuration, or None. ``d``, ``dist``: ``p1 - p0``
         and its max-norm when the caller has them."""
-        if d is None:
+        if d is None or dist is None:
             d = p1 - p0
             dist = _maxabs(d)
         n = max(1, int(math.ceil(dist / self.options.collision_step)))
         q, pa = q0, p0
         for k in range(1, n + 1):
             pb = p0 + (k / n) * d if k < n else p1
-            q = self._advance(q, pa, pb, self._refine, True, st)
-            if q is None:
+            qn = self._advance(q, pa, pb, self._refine, True, st)
+            if qn is None:
                 return None
-            pa = pb
+            q, pa = qn, pb
         return q
 
-    def oc_steer(self, tree: Tree, i_near: int, p_target: np.ndarray, st) -> tuple[int, int]:
+    def oc_steer(self, tree: _ParamTree, i_near: int, p_target: np.ndarray, st: dict[str, Any]) -> tuple[int, int]:
         """One OCSteer step from node i_near toward the parameters p_target."""
         p0 = tree.P[i_near]
         d = p_target - p0
@@ -291,7 +305,7 @@ class OCRRT(Planner):
         j = tree.add(q1, i_near, P=p1)
         return (REACHED if p1 is p_target else ADVANCED), j
 
-    def _turns(self, q, q_goal) -> np.ndarray | None:
+    def _turns(self, q: np.ndarray, q_goal: np.ndarray) -> np.ndarray | None:
         """Whole turns k on ``goal_turn_joints`` with ``q = q_goal + 2πk`` there (and q = q_goal
         elsewhere, to ``reach_tolerance``), or None."""
         d = q - q_goal
@@ -299,7 +313,8 @@ class OCRRT(Planner):
         d[self._turn_idx] -= 2.0 * math.pi * k
         return k if _maxabs(d) <= self.options.reach_tolerance else None
 
-    def connect(self, tree: Tree, q_target, p_target, st, deadline, start: int | None = None,
+    def connect(self, tree: _ParamTree, q_target: np.ndarray, p_target: np.ndarray, st: dict[str, Any], deadline: Deadline,
+                start: int | None = None,
                 goal: bool = False) -> tuple[int, int]:
         """Steer repeatedly toward ``p_target`` from node ``start`` (default: the node nearest
         ``q_target``) until it is reached on ``q_target``'s branch (``goal``: or on a
@@ -317,7 +332,8 @@ class OCRRT(Planner):
                 return TRAPPED, i
         return TRAPPED, i
 
-    def _draw(self, rng, st, p_goal, q_goal):
+    def _draw(self, rng: np.random.Generator, st: dict[str, Any], p_goal: np.ndarray,
+              q_goal: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """The single tree's sample: goal-region, bridge or uniform (Alg. 1)."""
         o = self.options
         if self._goal_region and rng.random() < o.goal_region_bias:
@@ -329,7 +345,7 @@ class OCRRT(Planner):
         return self.sample(rng, st)
 
     # ------------------------------------------------------------------ main loop
-    def _check_endpoint(self, q, which) -> str | None:
+    def _check_endpoint(self, q: np.ndarray, which: str) -> str | None:
         if not self.checker.in_limits(q):
             return f"{which} outside the joint limits"
         eo, ep = self.constraint.errors(q)
@@ -339,9 +355,9 @@ class OCRRT(Planner):
             return f"{which} in collision"
         return None
 
-    def _plan(self, q_start, q_goal, deadline: Deadline, rng, seed) -> PlanResult:
+    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator, seed: int) -> PlanResult:
         o, mf = self.options, self.manifold
-        st = {"iterations": 0, "samples": 0, "sample_failures": 0, "steer_rejects": 0, "collisions": 0,
+        st: dict[str, Any] = {"iterations": 0, "samples": 0, "sample_failures": 0, "steer_rejects": 0, "collisions": 0,
               "ik_rejects": 0, "jump_rejects": 0, "refinements": 0, "goal_attempts": 0, "bridge_samples": 0}
         c0, n0 = self.checker.n_checks, mf.n_complete
         for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
@@ -349,15 +365,15 @@ class OCRRT(Planner):
             if msg:
                 return self.empty_result(status, msg, **st)
         ps, pg = mf.params(q_start), mf.params(q_goal)
-        ta = Tree(q_start, 512, P=ps)
-        tb = Tree(q_goal, 512, P=pg) if o.connect else None
-        a_is_start, found = True, None
+        ta = _ParamTree(q_start, 512, P=ps)
+        tb = _ParamTree(q_goal, 512, P=pg) if o.connect else None
+        a_is_start, found = True, cast(tuple[int, int | None] | None, None)
         while not deadline.expired():
             if o.max_iterations and st["iterations"] >= o.max_iterations:
                 break
             st["iterations"] += 1
             if not o.connect:
-                start = -1  # -1: no goal attempt; None: from the node nearest the goal
+                start: int | None = -1  # -1: no goal attempt; None: from the node nearest the goal
                 if rng.random() < o.goal_bias:
                     start = None
                 elif (s := self._draw(rng, st, pg, q_goal)) is not None:
@@ -385,6 +401,7 @@ class OCRRT(Planner):
             if s is None:
                 continue
             res, i_a = self.oc_steer(ta, ta.nearest(s[0]), s[1], st)
+            assert tb is not None  # RRT-Connect grows two trees
             if res != TRAPPED:
                 res_b, i_b = self.connect(tb, ta.X[i_a], ta.P[i_a], st, deadline)
                 if res_b == REACHED:
@@ -402,6 +419,7 @@ class OCRRT(Planner):
         if not o.connect:
             path = ta.branch(found[0])
         else:
+            assert tb is not None and found[1] is not None
             pa, pb = ta.branch(found[0]), tb.branch(found[1])
             path = pa + pb[::-1][1:]
             if not a_is_start:
