@@ -199,6 +199,15 @@ def test_summary_without_plans_or_rows():
     assert ws.summarize([]) == {}
 
 
+def test_summary_counts_a_planned_row_without_an_opt_status():
+    """A planned row that lacks ``opt_status`` (e.g. a hand-edited or older results line) is
+    counted under None beside the others, not a TypeError from sorting None with strings."""
+    rows = [_line(trial=0), _line(trial=1)]
+    del rows[1]["opt_status"]
+    w = ws.summarize(rows)["ssps_scene1"]["modes"]["warm"]
+    assert w["opt_statuses"] == {"Solve_Succeeded": 1, None: 1}
+
+
 @pytest.mark.slow
 def test_real_run_scene1_trial0(tmp_path):
     cfg = ws.WarmstartConfig(scenes=["1"], trials=1, out=str(tmp_path), progress=False)

@@ -24,6 +24,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -31,6 +32,9 @@ from ..model.robot import RobotModel
 from ..problem import ClosedChain
 from ..scene import Scene
 from ..verification import verify
+
+if TYPE_CHECKING:
+    from .drake_peer import BsplineSolution
 
 __all__ = ["PeerProblem", "PeerOutcome", "transport_instance", "pipeline_segment_instances", "optplan_current",
            "drake_solve", "jerk_cost", "evaluate", "run", "summarize", "format_report", "RESIDUAL_TOL"]
@@ -85,9 +89,18 @@ class PeerOutcome:
     info: dict = field(default_factory=dict)
 
 
+def _grasps(scene: Scene) -> dict:
+    """The scene's grasps (arm name → grasp frame in the object); a clear error for a scene without
+    a held object (these are closed-chain problems)."""
+    if scene.object is None:
+        raise ValueError(f"scene {scene.name!r}: no held object, so no closed chain to benchmark")
+    return scene.object.grasps
+
+
 def _closed_chain(scene: Scene) -> ClosedChain:
-    arms = list(scene.object.grasps)
-    return ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
+    grasps = _grasps(scene)
+    arms = list(grasps)
+    return ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
 
 
 def _warm_start_knots(prob) -> np.ndarray:
@@ -109,7 +122,7 @@ def transport_instance(robot: RobotModel | None = None, *, knots: int = 50, dura
     if Q is None:
         raise RuntimeError("transport: no collision-free start grasp whose straight-line IK path reaches the goal")
     return PeerProblem("transport", "transport", robot, scene, Q, float(duration), _closed_chain(scene), margin,
-                       next(iter(scene.object.grasps)), None, {"seed": seed, "knots": knots})
+                       next(iter(_grasps(scene))), None, {"seed": seed, "knots": knots})
 
 
 def _spline_warm_start(robot: RobotModel, scene: Scene, seg_path: np.ndarray, opts, kind: str = "constrained",
@@ -128,7 +141,7 @@ def _spline_warm_start(robot: RobotModel, scene: Scene, seg_path: np.ndarray, op
     N = int(np.clip(np.ceil(length / step), opts.spline_min_intervals, opts.spline_max_intervals))
     prob = SplineSegmentProblem(robot, scene, SegmentSpec(N, T, seg_path[0], seg_path[-1], cc, lower, upper,
                                                           margin=opts.margin,
-                                                          object_arm=holder or next(iter(scene.object.grasps))))
+                                                          object_arm=holder or next(iter(_grasps(scene)))))
     prob.set_initial_path(seg_path, cc)
     if opts.smooth_warm_start > 0:
         prob.smooth_initial(opts.smooth_warm_start, cc)
@@ -166,7 +179,7 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
     checker = CollisionChecker(robot, scene)
     cc = _closed_chain(scene)
     out = []
-    arms = list(scene.object.grasps)
+    arms = list(_grasps(scene))
     for i, seg in enumerate(plan.segments):
         seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
         if len(seg_path) < 2 or np.abs(seg_path[-1] - seg_path[0]).max() < 1e-9:
@@ -207,8 +220,9 @@ def optplan_current(problem: PeerProblem) -> PeerOutcome:
 
         t0 = time.perf_counter()
         sc, q = problem.scene, np.asarray(problem.q_knots)
-        arms = list(sc.object.grasps)
-        cc = ClosedChain.from_grasps(sc.object.grasps[arms[0]], sc.object.grasps[arms[1]], arms[0], arms[1])
+        grasps = _grasps(sc)
+        arms = list(grasps)
+        cc = ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
         prob = SplineSegmentProblem(problem.robot, sc, SegmentSpec(len(q) - 1, problem.duration, q[0], q[-1], cc,
                                                                    margin=problem.margin, object_arm=arms[0]))
         prob.set_initial(q)
@@ -277,6 +291,7 @@ def drake_solve(problem: PeerProblem, options=None, model=None, *, refinements: 
         if not res > closed_chain_tol or N2 <= N or remaining < 1.0:
             break
         N = N2
+        assert r.solution is not None  # r.success: the solver returned a trajectory
         Q2 = r.solution.sample(np.linspace(0.0, problem.duration, N + 1))["q"]
         r = solve_drake(dm, Q2, problem.duration, closed_chain=problem.closed_chain, margin=problem.margin,
                         options=replace(opts, time_limit=remaining), lower=problem.lower, upper=problem.upper)
@@ -295,11 +310,12 @@ def _drake_child(conn, problem, options, kw) -> None:  # pragma: no cover - runs
     limit = int(np.ceil(options.time_limit + KILL_GRACE))
     resource.setrlimit(resource.RLIMIT_CPU, (limit, limit + 5))
     out = drake_solve(problem, options, **kw)
-    tr = out.solution.trajectory
+    sol = cast("BsplineSolution", out.solution)  # drake_solve always returns Drake's trajectory
+    tr = sol.trajectory
     P = np.column_stack([np.asarray(c).ravel() for c in tr.control_points()])
     conn.send({"outcome": {k: getattr(out, k) for k in ("method", "solver", "success", "status", "setup_time",
                                                         "solve_time", "iterations", "info")},
-               "P": P, "T": float(tr.end_time()), "N": int(out.solution.n_intervals)})
+               "P": P, "T": float(tr.end_time()), "N": int(sol.n_intervals)})
     conn.close()
 
 
@@ -480,7 +496,8 @@ def _finite(f, values) -> float:
 def _paired(rows: list[dict]) -> list[tuple[dict, dict | None]]:
     """Each row with the optplan row it is paired with: the latest optplan row of the same problem
     before it (the same run), None for optplan rows and unpaired rows."""
-    last, out = {}, []
+    last: dict[str, dict] = {}
+    out: list[tuple[dict, dict | None]] = []
     for r in rows:
         if r["method"] == "optplan":
             last[r["problem"]] = r
@@ -495,7 +512,7 @@ def summarize(rows: list[dict], jerk_slack: float = 1.01) -> dict:
     (it passed ``verify``, and Drake either failed or was slower (wall) at a jerk cost no lower than
     optplan's / ``jerk_slack``); median Drake/optplan wall and CPU ratios."""
     base = [r for r in rows if r["method"] == "optplan"]
-    out = {"optplan": {"problems": len({r["problem"] for r in base}), "runs": len(base),
+    out: dict[str, dict] = {"optplan": {"problems": len({r["problem"] for r in base}), "runs": len(base),
                        "passed": sum(bool(r["passed"]) for r in base)}}
     pairs = _paired(rows)
     for m in sorted({r["method"] for r in rows} - {"optplan"}):
@@ -524,10 +541,9 @@ def format_report(rows: list[dict]) -> str:
         return f"{v:{spec}}".rjust(width) if isinstance(v, (int, float)) and math.isfinite(v) else " " * width
 
     for r, b in _paired(rows):
-        other = b is not None
-        rt = _ratio(_wall(r), _wall(b)) if other else math.nan
-        rj = _ratio(r["jerk"], b["jerk"]) if other else math.nan
-        rc = _ratio(r.get("cpu_s", math.nan), b.get("cpu_s", math.nan)) if other else math.nan
+        rt = _ratio(_wall(r), _wall(b)) if b is not None else math.nan
+        rj = _ratio(r["jerk"], b["jerk"]) if b is not None else math.nan
+        rc = _ratio(r.get("cpu_s", math.nan), b.get("cpu_s", math.nan)) if b is not None else math.nan
         n0, n1 = r.get("n_intervals", 0), r.get("n_intervals_final", r.get("n_intervals", 0))
         ns = f"{n0}" if n0 == n1 else f"{n0}>{n1}"
         lines.append(f"{r['problem'][:18]:18s} {r['method']:12s} {str(r['status'])[:34]:34s} {ns:>8s} "

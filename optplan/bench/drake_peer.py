@@ -34,6 +34,7 @@ import tempfile
 import time
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -104,7 +105,7 @@ class DrakeModel:
             for tag in ("collision", "visual"):
                 for el in list(link.findall(tag)):
                     link.remove(el)
-        children = {j.find("child").get("link") for j in root.iter("joint")}
+        children = {c.get("link") for j in root.iter("joint") if (c := j.find("child")) is not None}
         roots = [lk.get("name") for lk in root.iter("link") if lk.get("name") not in children]
         pd.Parser(plant).AddModelsFromString(ET.tostring(root, encoding="unicode"), "urdf")
         if roots and roots[0] != "world":
@@ -122,6 +123,7 @@ class DrakeModel:
         obstacles = list(scene.obstacles) if scene is not None else []
         for o in obstacles:
             if o.shape == "box":
+                assert o.size is not None  # a box obstacle has its edges (Scene.from_dict requires them)
                 shp = pd.Box(*o.size)
             elif o.shape == "sphere":
                 shp = pd.Sphere(o.radius)
@@ -130,13 +132,14 @@ class DrakeModel:
             self.obstacle_gids.append(plant.RegisterCollisionGeometry(plant.world_body(), _rt(o.placement), shp,
                                                                       o.name, friction))
         self.object_gid = None
-        has_obj = scene is not None and scene.object is not None and held_object
-        self.object_arm = (object_arm or next(iter(scene.object.grasps))) if has_obj else None
-        if has_obj:
+        obj = scene.object if scene is not None and held_object else None
+        has_obj = obj is not None
+        self.object_arm = (object_arm or next(iter(obj.grasps))) if obj is not None else None
+        if obj is not None and self.object_arm is not None:
             hand = plant.GetFrameByName(robot.arm(self.object_arm).ee_frame).body()
             X_hand_ee = plant.GetFrameByName(robot.arm(self.object_arm).ee_frame).GetFixedPoseInBodyFrame()
-            X = X_hand_ee.multiply(_rt(scene.object.grasps[self.object_arm].inverse()))
-            self.object_gid = plant.RegisterCollisionGeometry(hand, X, pd.Box(*scene.object.size), "object", friction)
+            X = X_hand_ee.multiply(_rt(obj.grasps[self.object_arm].inverse()))
+            self.object_gid = plant.RegisterCollisionGeometry(hand, X, pd.Box(*obj.size), "object", friction)
         plant.Finalize()
         # collision filter: exactly optplan's pairs
         checker = CollisionChecker(robot, scene, held_object=has_obj, object_arm=self.object_arm)
@@ -337,7 +340,7 @@ class BsplineSolution:
     (the N+1 breakpoints [s]; ``verify`` samples density × N intervals), ``sample(t)`` →
     ``{"t", "q", "qd", "qdd"}`` in optplan's joint order, evaluated from the B-spline itself."""
 
-    trajectory: object          # pydrake BsplineTrajectory (Drake joint order), time in [0, T] s
+    trajectory: Any             # pydrake BsplineTrajectory (Drake joint order), time in [0, T] s
     dm: DrakeModel
     n_intervals: int
     joint_names: tuple = ()
@@ -468,7 +471,9 @@ class _Deadline:
     MARK = "optplan: CPU time limit reached"
 
     def __init__(self, limit: float):
-        self.limit, self.t0, self.last = float(limit), None, None
+        self.limit = float(limit)
+        self.t0: float | None = None
+        self.last: np.ndarray | None = None
 
     def start(self) -> None:
         self.t0 = time.process_time()
@@ -560,10 +565,10 @@ def solve_drake(dm: DrakeModel, q_knots: np.ndarray, duration: float, *, closed_
     else:
         solver = pd.IpoptSolver()
         sid = solver.solver_id()
-        for k, v in (("tol", opts.tol), ("constr_viol_tol", opts.tol), ("max_iter", int(opts.max_iterations)),
-                     ("max_cpu_time", float(opts.time_limit)), ("print_level", 0), ("output_file", outfile),
-                     ("file_print_level", 5)):
-            so.SetOption(sid, k, v)
+        for name, value in (("tol", opts.tol), ("constr_viol_tol", opts.tol), ("max_iter", int(opts.max_iterations)),
+                            ("max_cpu_time", float(opts.time_limit)), ("print_level", 0), ("output_file", outfile),
+                            ("file_print_level", 5)):
+            so.SetOption(sid, name, value)
     if not solver.available() or not solver.enabled():
         raise DrakeUnavailable(f"Drake's {solver_name} solver is not available in this build")
     # SNOPT 7.4's own "Time limit" is not enforced on these problems (measured: 330 CPU s past a
@@ -588,6 +593,7 @@ def solve_drake(dm: DrakeModel, q_knots: np.ndarray, duration: float, *, closed_
         pass
     if res is None:  # stopped at the deadline: the last evaluated point
         status = f"{solver_name.upper()}: stopped at the time limit ({opts.time_limit:g} s CPU)"
+        assert watch.last is not None  # the deadline is raised from an evaluation, which kept its point
         Pl = watch.last[cp_idx]
         traj = BsplineTrajectory(_basis(N, T), [Pl[:, [i]] for i in range(N + 3)])
         success, cost = False, float("nan")

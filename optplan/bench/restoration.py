@@ -20,6 +20,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import tempfile
+from typing import Any, cast
 
 CASES = ("free_end", "end_constrained")
 TARGET_S = 1.0
@@ -156,9 +157,10 @@ def accuracy(runs=ACCURACY_RUNS) -> list[dict]:
         o = (eba.NLPOptions.free_end if case == "free_end" else eba.NLPOptions.end_constrained)(
             n_intervals=N, n_sub=n_sub)
         res = eba.run_nlp(robot, sc, o)
-        ref = ivp_attitude(robot, res.raw)
+        raw = cast(Any, res.raw)  # the NLP's Solution (MethodResult.raw is typed object)
+        ref = ivp_attitude(robot, raw)
         rows.append({"case": case, "N": N, "n_sub": n_sub, "success": bool(res.success),
-                     "max_knot_attitude_error_rad": max(quat_angle(a, b) for a, b in zip(res.raw.base_quat, ref)),
+                     "max_knot_attitude_error_rad": max(quat_angle(a, b) for a, b in zip(raw.base_quat, ref)),
                      "end_attitude_independent_rad": quat_angle(ref[-1], [0, 0, 0, 1.0]),
                      "closed_chain_residual": float(res.info["verify_max_closed_chain_residual"])})
         r = rows[-1]

@@ -22,7 +22,10 @@ def _one(knots: int, seed: int, transcription: str = "bspline") -> dict:
 
     from ..model.description import repo_root
 
-    spec = importlib.util.spec_from_file_location("cct", Path(repo_root()) / "examples" / "closed_chain_transport.py")
+    path = Path(repo_root()) / "examples" / "closed_chain_transport.py"
+    spec = importlib.util.spec_from_file_location("cct", path)
+    if spec is None or spec.loader is None:
+        raise FileNotFoundError(f"transport benchmark: cannot load the example {path}")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     out, _ = mod.run(knots=knots, seed=seed, transcription=transcription)

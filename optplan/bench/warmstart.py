@@ -34,11 +34,15 @@ import resource
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from .engine import map_unordered, validate_engine
 from .tcbirrt import _repair_tail, load_results, scene_name
+
+if TYPE_CHECKING:
+    from ..planners.base import PlanResult
 
 __all__ = ["WarmstartConfig", "MODES", "TARGETS", "validate", "pending_units", "run", "summarize", "format_summary"]
 log = logging.getLogger(__name__)
@@ -228,7 +232,8 @@ def _run_unit(args) -> dict:
         return line
     d = {k: _finite(v) for k, v in res.to_dict().items()}
     line.update(d)
-    line.update({"plan_ok": bool(res.plan is not None and res.plan.success), "plan_hash": _path_hash(res.plan),
+    plan = cast("PlanResult | None", res.plan)  # PipelineResult.plan is typed object
+    line.update({"plan_ok": bool(plan is not None and plan.success), "plan_hash": _path_hash(res.plan),
                  "converged": bool(res.segments) and all(s.solution.success for s in res.segments),
                  "segments": _segment_rows(res), "error": None})
     return line
@@ -324,7 +329,7 @@ def select_rows(rows: list[dict], cfg: WarmstartConfig, scenes: list[str]) -> li
 
 
 # ---------------------------------------------------------------------- statistics
-def _stats(vals: list[float]) -> dict:
+def _stats(vals: list[float | None]) -> dict:
     v = np.asarray([x for x in vals if x is not None], float)
     if v.size == 0:
         return {"n": 0, "median": None, "mean": None, "p95": None, "max": None}
@@ -355,7 +360,7 @@ def _mode_summary(rows: list[dict]) -> dict:
     planned = [r for r in rows if r.get("plan_ok")]
     succ = [r for r in planned if r.get("success")]
     conv = [r for r in planned if r.get("converged")]
-    plan_fail = {}
+    plan_fail: dict[str, int] = {}
     for r in rows:
         if not r.get("plan_ok"):
             plan_fail[r.get("plan_status", "?")] = plan_fail.get(r.get("plan_status", "?"), 0) + 1
@@ -376,7 +381,7 @@ def _mode_summary(rows: list[dict]) -> dict:
         "min_clearance_m": (min((r["min_clearance_m"] for r in planned if r.get("min_clearance_m") is not None),
                                 default=None)),
         "opt_statuses": {s: sum(1 for r in planned if r.get("opt_status") == s)
-                         for s in sorted({r.get("opt_status") for r in planned})},
+                         for s in sorted({r.get("opt_status") for r in planned}, key=str)},
         "failure_modes": _failure_modes(rows),
     }
 
@@ -384,7 +389,7 @@ def _mode_summary(rows: list[dict]) -> dict:
 def _paired(rows: list[dict]) -> dict:
     """Trials where both modes have a plan: how often the plans differ, and on the trials both
     modes solve, median cold/warm ratios of iterations and IPOPT time."""
-    by = {}
+    by: dict[tuple[str, int], dict[str, dict]] = {}
     for r in rows:
         by.setdefault((r["scene"], int(r["trial"])), {})[r["mode"]] = r
     pairs = [(d["warm"], d["cold"]) for d in by.values() if "warm" in d and "cold" in d
@@ -409,7 +414,7 @@ def summarize(rows: list[dict]) -> dict:
     out: dict = {}
     for sc, rs in groups:
         modes = [m for m in MODES if any(r["mode"] == m for r in rs)]
-        entry = {"n_trials": len({(r["scene"], int(r["trial"])) for r in rs}),
+        entry: dict[str, Any] = {"n_trials": len({(r["scene"], int(r["trial"])) for r in rs}),
                  "modes": {m: _mode_summary([r for r in rs if r["mode"] == m]) for m in modes}}
         if "warm" in modes and "cold" in modes:
             entry["paired"] = _paired(rs)
