@@ -25,7 +25,7 @@ import numpy as np
 from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from ..errors import ConfigurationError
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
-from .tree import Tree
+from .tree import Tree, joined_path
 from .validity import ValidityChecker
 
 __all__ = ["CBiRRT2Options", "CBiRRT2"]
@@ -199,11 +199,7 @@ class CBiRRT2(Planner):
             if deadline.expired():
                 return self.empty_result(PlanStatus.TIMEOUT, "time limit reached", **st)
             return self.empty_result(PlanStatus.FAILED, "iteration cap reached", **st)
-        pa, pb = ta.branch(found[0]), tb.branch(found[1])
-        path = pa + pb[::-1][1:]
-        if not a_is_start:
-            path = path[::-1]
-        P = np.array(path)
+        P = np.array(joined_path(ta, found[0], tb, found[1], a_is_start))
         P[0], P[-1] = q_start, q_goal
         poses = [self.kin.object_pose(q) for q in P] if hasattr(self.kin, "object_pose") else [None] * len(P)
         return PlanResult(PlanStatus.EXACT, self.name, P, poses, np.ones(len(P), bool),

@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import ConfigurationError
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .orientation import DualArmOrientationConstraint, OrientationManifold
-from .tree import Tree
+from .tree import Tree, joined_path
 from .validity import ValidityChecker
 
 if TYPE_CHECKING:
@@ -420,10 +420,7 @@ class OCRRT(Planner):
             path = ta.branch(found[0])
         else:
             assert tb is not None and found[1] is not None
-            pa, pb = ta.branch(found[0]), tb.branch(found[1])
-            path = pa + pb[::-1][1:]
-            if not a_is_start:
-                path = path[::-1]
+            path = joined_path(ta, found[0], tb, found[1], a_is_start)
         P = np.array(path)
         P[0], P[-1] = q_start, q_goal
         if not o.connect and self._turn_idx.size:

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
-from .tree import Tree
+from .tree import Tree, joined_path
 from .validity import ValidityChecker, _bisection_order
 
 if TYPE_CHECKING:
@@ -131,11 +131,7 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
     stats["nodes"] = stats.get("nodes", 0) + ta.n + tb.n
     if found is None:
         return None
-    pa, pb = ta.branch(found[0]), tb.branch(found[1])
-    path = pa + pb[::-1][1:]   # the connection node is in both trees
-    if not a_is_start:
-        path = path[::-1]
-    return path
+    return joined_path(ta, found[0], tb, found[1], a_is_start)
 
 
 def shortcut_path(path: list[np.ndarray], is_valid: Callable[[np.ndarray], bool], resolution: float,

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Tree"]
+__all__ = ["Tree", "joined_path"]
 
 
 class Tree:
@@ -128,3 +128,12 @@ class Tree:
                 out.extend(x.copy() for x in edge[k])
             out.append(A[k].copy())
         return out
+
+
+def joined_path(ta: Tree, i: int, tb: Tree, j: int, a_is_start: bool) -> list[np.ndarray]:
+    """The path of two trees that met, from the start to the goal: root of ``ta`` → node ``i``, then
+    node ``j`` of ``tb`` → its root (``i`` and ``j`` hold the same configuration, kept once);
+    ``a_is_start``: ``ta`` grew from the start (else the path is reversed)."""
+    pa, pb = ta.branch(i), tb.branch(j)
+    path = pa + pb[::-1][1:]
+    return path if a_is_start else path[::-1]
