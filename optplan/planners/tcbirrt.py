@@ -101,10 +101,12 @@ PARTIAL = "partial"
 VARIANTS = {
     "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False,
               "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0,
-              "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5},
+              "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
+              "regrasp_share_orders": False},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
-                 "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25},
+                 "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
+                 "regrasp_share_orders": True},
 }
 
 
@@ -199,8 +201,11 @@ class TCBiRRTOptions:
     (ε_p, ε_o, n, K·λ); ``max_joint_step`` [rad] (``inf`` turns it off; None: the variant's value); ``interpolation``;
     ``edge_resolution`` [rad] or None; ``edge_tolerance`` [m] (0: off), ``edge_bound`` ("jacobian" or "static") and ``lazy_edges``
     (both None: the variant's value), see the module docstring; ``regrasp``: RRTConnect options of a regrasp (one arm,
-    7-D); ``regrasp_time_limit`` [s] per regrasp attempt; ``regrasp_tolerance`` [rad]: an arm whose
-    two solutions differ by less (max-norm) does not move; ``closure_tolerance``: start and goal
+    7-D); ``regrasp_time_limit`` [s] per regrasp attempt; ``regrasp_share_orders`` (paper False,
+    improved True; None: the variant's value): the two arm orders (A first, B first) each get an
+    equal share of that budget instead of the first order using all it needs (a second arm
+    that cannot reach its new solution once the first has moved then no longer starves the other
+    order); ``regrasp_tolerance`` [rad]: an arm whose two solutions differ by less (max-norm) does not move; ``closure_tolerance``: start and goal
     must satisfy the closed chain to this (position [m] and angle [rad]); ``margin`` [m]: clearance
     counted as contact; ``max_iterations``: cap on Alg. 1 iterations (0: only the time limit).
 
@@ -255,6 +260,7 @@ class TCBiRRTOptions:
                                                                                  shortcut_iterations=50))
     regrasp_time_limit: float = 2.0
     regrasp_tolerance: float = 1e-4
+    regrasp_share_orders: bool | None = None
     closure_tolerance: float = 1e-6
     margin: float = 0.0
     max_iterations: int = 0
@@ -304,7 +310,8 @@ class TCBiRRTOptions:
         if not isinstance(self.joint_connect_options, CBiRRT2Options):
             raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
                              f"got {type(self.joint_connect_options).__name__}")
-        for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect"):
+        for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
+                     "regrasp_share_orders"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
@@ -604,7 +611,11 @@ class TCBiRRT(Planner):
         orders = [moving] if len(moving) == 1 else [moving, moving[::-1]]
         sub = deadline.sub(o.regrasp_time_limit)
         lo, hi = self.robot.lower, self.robot.upper
-        for order in orders:
+        for n_order, order in enumerate(orders):
+            if o.regrasp_share_orders:   # this order's share of what is left of the regrasp's budget
+                sub_o = sub.sub(sub.remaining() / (len(orders) - n_order))
+            else:
+                sub_o = sub
             cur = q_from.copy()
             segs = []
             for name, idx in order:
@@ -618,7 +629,7 @@ class TCBiRRT(Planner):
                     segs = None
                     break
                 rs: dict = {}
-                sub_path = rrt_connect(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub,
+                sub_path = rrt_connect(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub_o,
                                        range_=o.regrasp.range, resolution=o.regrasp.resolution,
                                        max_iterations=o.regrasp.max_iterations, stats=rs)
                 st["regrasp_nodes"] += rs.get("nodes", 0)
