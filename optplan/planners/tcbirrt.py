@@ -106,7 +106,7 @@ VARIANTS = {
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
-                 "regrasp_share_orders": True},
+                 "regrasp_share_orders": False},
 }
 
 
@@ -201,8 +201,8 @@ class TCBiRRTOptions:
     (ε_p, ε_o, n, K·λ); ``max_joint_step`` [rad] (``inf`` turns it off; None: the variant's value); ``interpolation``;
     ``edge_resolution`` [rad] or None; ``edge_tolerance`` [m] (0: off), ``edge_bound`` ("jacobian" or "static") and ``lazy_edges``
     (both None: the variant's value), see the module docstring; ``regrasp``: RRTConnect options of a regrasp (one arm,
-    7-D); ``regrasp_time_limit`` [s] per regrasp attempt; ``regrasp_share_orders`` (paper False,
-    improved True; None: the variant's value): the two arm orders (A first, B first) each get an
+    7-D); ``regrasp_time_limit`` [s] per regrasp attempt; ``regrasp_share_orders`` (False in both
+    variants, see docs/planners.md; None: the variant's value): the two arm orders (A first, B first) each get an
     equal share of that budget instead of the first order using all it needs (a second arm
     that cannot reach its new solution once the first has moved then no longer starves the other
     order); ``regrasp_tolerance`` [rad]: an arm whose two solutions differ by less (max-norm) does not move; ``closure_tolerance``: start and goal
