@@ -297,6 +297,19 @@ def test_improved_paths_are_collision_free_along_edges(robot):
     chk = _path_checks(robot, scene, ck, res)
     assert chk["swept_invalid_edges"] == 0 and chk["sweep_tolerance_m"] == SWEEP_TOLERANCE
     assert res.stats["edge_checks"] > 0
+    assert pl.options.edge_bound == "jacobian" and pl.options.verify_path
+    assert res.stats["path_verified_edges"] >= len(res.path) - 1 - sum(s.stop - s.start for s in res.segments
+                                                                        if s.kind == "regrasp")
+
+
+def test_edge_bound_options_are_checked():
+    with pytest.raises(ValueError, match="edge_bound"):
+        TCBiRRTOptions(variant="improved", edge_bound="exact")
+    with pytest.raises(ValueError, match="verify_path"):
+        TCBiRRTOptions(verify_path=1)
+    with pytest.raises(ValueError, match="regrasp_share_orders"):
+        TCBiRRTOptions(regrasp_share_orders="yes")
+    assert not TCBiRRTOptions().verify_path and not TCBiRRTOptions(variant="improved").regrasp_share_orders
 
 
 def test_joint_connect_joins_two_closed_chain_configurations(robot, rng):
