@@ -466,6 +466,8 @@ class TCBiRRT(Planner):
         self._filter: ObjectPoseFilter | None = None
         self._w_held = self.checker.sweep_weights("held", per_geometry=True)
         self._w_fixed = self.checker.sweep_weights("fixed", per_geometry=True)
+        if self.options.edge_tolerance and self.options.edge_bound == "jacobian":
+            self.checker.prepare_edge_checks(("held", "fixed"))   # compiled once, before any time limit
         self._cb: CBiRRT2 | None = None
         self._rng = np.random.default_rng(0)
 

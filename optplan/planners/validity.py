@@ -44,6 +44,8 @@ from ..scene import Scene
 
 __all__ = ["ValidityChecker"]
 log = logging.getLogger(__name__)
+#: compiled speed profiles shared by the checkers of one process (key: robot model, mode, geometry bounds)
+_PROFILE_CACHE: dict = {}
 
 
 class ValidityChecker:
@@ -194,6 +196,12 @@ class ValidityChecker:
         1-dof revolute ones."""
         if mode in self._profile_fns:
             return self._profile_fns[mode]
+        row, c, rad, joints = self._spheres[mode]
+        W = self._sweep[mode]
+        key = (id(self.model), mode, W.tobytes(), c.tobytes(), rad.tobytes(), row.tobytes(), joints.tobytes())
+        if key in _PROFILE_CACHE:           # another checker of the same robot and held object
+            self._profile_fns[mode] = _PROFILE_CACHE[key][1]
+            return self._profile_fns[mode]
         fn = None
         if self._revolute_only:
             import casadi as ca
@@ -202,8 +210,6 @@ class ValidityChecker:
             from .closed_chain import _Fast
 
             sk = SymbolicKinematics(self.robot)
-            row, c, rad, joints = self._spheres[mode]
-            W = self._sweep[mode]
             n, m, G = self.model.nq, self.CELLS, W.shape[0]
             q, d = ca.SX.sym("q", n), ca.SX.sym("d", n)
             X = sk.joint_placements(q)
@@ -243,7 +249,15 @@ class ValidityChecker:
                 cum.append(cum[-1] + Fi / m)
             fn = _Fast(ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)]), "-O1")
         self._profile_fns[mode] = fn
+        _PROFILE_CACHE[key] = (self.model, fn)     # the model is kept alive so that its id stays unique
         return fn
+
+    def prepare_edge_checks(self, modes=("held", "fixed")) -> None:
+        """Build (or load from the compile cache) the compiled speed profiles of
+        :meth:`edge_checkpoints` now rather than at the first edge check (a planner calls this
+        before its time limit starts; the first build compiles C code, seconds)."""
+        for mode in modes:
+            self._profile_function(mode)
 
     def edge_checkpoints(self, a: np.ndarray, b: np.ndarray, tolerance: float, mode: str = "held") -> np.ndarray:
         """Interior parameters ``0 < t_1 < … < t_m < 1`` of the straight joint segment
