@@ -297,6 +297,19 @@ def test_improved_paths_are_collision_free_along_edges(robot):
     chk = _path_checks(robot, scene, ck, res)
     assert chk["swept_invalid_edges"] == 0 and chk["sweep_tolerance_m"] == SWEEP_TOLERANCE
     assert res.stats["edge_checks"] > 0
+    assert pl.options.edge_bound == "jacobian" and pl.options.verify_path
+    assert res.stats["path_verified_edges"] >= len(res.path) - 1 - sum(s.stop - s.start for s in res.segments
+                                                                        if s.kind == "regrasp")
+
+
+def test_edge_bound_options_are_checked():
+    with pytest.raises(ValueError, match="edge_bound"):
+        TCBiRRTOptions(variant="improved", edge_bound="exact")
+    with pytest.raises(ValueError, match="verify_path"):
+        TCBiRRTOptions(verify_path=1)
+    with pytest.raises(ValueError, match="regrasp_share_orders"):
+        TCBiRRTOptions(regrasp_share_orders="yes")
+    assert not TCBiRRTOptions().verify_path and not TCBiRRTOptions(variant="improved").regrasp_share_orders
 
 
 def test_joint_connect_joins_two_closed_chain_configurations(robot, rng):
@@ -327,10 +340,10 @@ def test_joint_connect_joins_two_closed_chain_configurations(robot, rng):
 
 
 # ---------------------------------------------------------------------- slow statistical tests
-#: scenes where the improved variant is measured below the 0.99 target with edges checked (docs/planners.md,
-#: 2026-11-23, clean paths within 10 s);
+#: scenes where the improved variant is measured below this test's threshold (28 of 30) with edges checked
+#: (docs/planners.md, 2026-11-24, clean paths within 10 s CPU; window 28/30, sparse clutter 29/30 pass at the threshold);
 #: their statistical test is expected to fail until the planner improves (xfail, not strict)
-BELOW_TARGET = {"hard_window": "27/30", "hard_bay": "26/30", "hard_clutter_dense": "23/30", "hard_truss": "14/30"}
+BELOW_TARGET = {"hard_truss": "18/30"}
 
 
 @pytest.mark.slow

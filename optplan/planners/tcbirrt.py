@@ -64,7 +64,12 @@ Deviations from the paper, all options (defaults in brackets):
   (:meth:`.ValidityChecker.edge_checkpoints`: each geometry's speed from the Jacobian at the
   edge's cell ends plus a second-order remainder — an arm's self-motion moves joints a lot and
   the geometry little, and is counted as such) or ``"static"`` (the configuration-free
-  per-geometry bound ``Σ_j W_gj |Δq_j|``); both are conservative. With
+  per-geometry bound ``Σ_j W_gj |Δq_j|``); both are conservative. With ``verify_path`` [paper False,
+  improved True] and the Jacobian bound, a start-goal path, once found, has its edges checked once
+  more at the configuration-free bound's uniform spacing: a second, different sampling at the same
+  tolerance (a graze shallower than the tolerance that one sampling misses, the other may
+  catch); a failing tree edge removes its node and that node's subtree, a failing regrasp motion
+  the connection, and the search goes on. With
   ``lazy_edges`` [False] the constrained edges are checked only once they lie on a
   start-goal path; an edge that fails removes its node and that node's subtree from the tree and
   the search goes on (lazy collision checking, as LazyPRM / LazyRRT).
@@ -104,10 +109,12 @@ PARTIAL = "partial"
 VARIANTS = {
     "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False,
               "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0,
-              "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5},
+              "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
+              "regrasp_share_orders": False, "verify_path": False},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
-                 "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25},
+                 "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
+                 "regrasp_share_orders": False, "verify_path": True},
 }
 
 
@@ -229,6 +236,9 @@ class TCBiRRTOptions:
     #: The bound that spaces the ``edge_tolerance`` checks: ``"jacobian"`` (each geometry's speed from the Jacobian
     #: plus a second-order remainder) or ``"static"`` (the configuration-free per-geometry bound); both conservative.
     edge_bound: str = "jacobian"
+    #: Re-check a found path's edges at the configuration-free bound's uniform spacing (the benchmark's); a
+    #: failing edge removes its subtree and the search goes on (None: the variant's value, :data:`VARIANTS`).
+    verify_path: bool | None = None
     #: Join the trees in joint space (CBiRRT2's ConstrainedExtend) when the task-space connection cannot (None:
     #: the variant's value, :data:`VARIANTS`); see docs/decisions/0004-tcbirrt-improved-variant.md.
     joint_connect: bool | None = None
@@ -248,6 +258,10 @@ class TCBiRRTOptions:
     regrasp_time_limit: float = 2.0
     #: An arm whose two solutions differ by less than this (max-norm) does not move [rad].
     regrasp_tolerance: float = 1e-4
+    #: The two arm orders of a regrasp (A first, B first) each get an equal share of ``regrasp_time_limit``
+    #: instead of the first order using all it needs (None: the variant's value: off in both, see
+    #: docs/planners.md).
+    regrasp_share_orders: bool | None = None
     #: Start and goal must satisfy the closed chain to this (position [m] and angle [rad]).
     closure_tolerance: float = 1e-6
     #: Clearance counted as contact [m].
@@ -325,7 +339,8 @@ class TCBiRRTOptions:
         if not isinstance(self.joint_connect_options, CBiRRT2Options):
             raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
                              f"got {type(self.joint_connect_options).__name__}")
-        for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect"):
+        for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
+                     "regrasp_share_orders", "verify_path"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
@@ -449,13 +464,10 @@ class TCBiRRT(Planner):
         self._filter: ObjectPoseFilter | None = None
         self._w_held = self.checker.sweep_weights("held", per_geometry=True)
         self._w_fixed = self.checker.sweep_weights("fixed", per_geometry=True)
+        if self.options.edge_tolerance and self.options.edge_bound == "jacobian":
+            self.checker.prepare_edge_checks(("held", "fixed"))   # compiled once, before any time limit
         self._cb: CBiRRT2 | None = None
         self._rng = np.random.default_rng(0)
-        if self.options.edge_tolerance and self.options.edge_bound == "jacobian":
-            # the edge-bound functions are built (and, once per robot, scene and object, compiled: seconds
-            # of the C compiler) here, so that no plan's time limit pays for them
-            for mode in ("held", "fixed"):
-                self.checker.prepare_edge_bound(mode)
 
     # ------------------------------------------------------------------ public helpers
     def check_endpoint(self, q: np.ndarray) -> str | None:
@@ -533,6 +545,40 @@ class TCBiRRT(Planner):
         st["edge_collisions"] += 1
         return False
 
+    def _static_edge_ok(self, a: np.ndarray, b: np.ndarray, st: dict[str, Any], object_pose: pin.SE3 | None = None) -> bool:
+        """The segment a → b at ``edge_tolerance`` with the configuration-free bound's uniform spacing
+        (object held, or fixed at ``object_pose``); ends not checked."""
+        st["path_verified_edges"] += 1
+        if object_pose is None:
+            return edge_is_valid(a, b, self.checker.is_valid, cast(float, self.options.edge_tolerance), False, self._w_held)
+        return edge_is_valid(a, b, lambda x: self.checker.is_valid_object_fixed(x, object_pose),
+                             cast(float, self.options.edge_tolerance), False, self._w_fixed)
+
+    def _verify_branch(self, tree: _TaskTree, i: int, st: dict[str, Any]) -> int | None:
+        """``verify_path``: every not yet verified edge from the root to node i at the uniform
+        spacing; the first node whose edge fails, or None (verified edges are marked)."""
+        chain: list[int] = []
+        while i > 0 and not tree.checked[i]:
+            chain.append(i)
+            i = tree.parent[i]
+        for k in reversed(chain):
+            eq, _ = tree.edge[k]
+            qs = [tree.q[tree.parent[k]], *eq, tree.q[k]]
+            if not all(self._static_edge_ok(a, b, st) for a, b in zip(qs[:-1], qs[1:])):
+                return k
+            tree.checked[k] = True
+        return None
+
+    def _verify_connection(self, ta: _TaskTree, i_a: int, reg: Sequence[tuple[str | None, list[np.ndarray]]] | None,
+                           st: dict[str, Any]) -> bool:
+        """``verify_path``: the regrasp motions (object fixed at tree a's node pose) and joint-space
+        connections of a connection at the uniform spacing."""
+        M = pin.SE3(*ta.pose[i_a])
+        for arm, full in reg or []:
+            if not all(self._static_edge_ok(a, b, st, None if arm is None else M) for a, b in zip(full[:-1], full[1:])):
+                return False
+        return True
+
     def _branch_ok(self, tree: _TaskTree, i: int, st: dict[str, Any], deadline: Deadline) -> int | None:
         """Lazy edges: verify every unchecked edge from the root to node i (root side first); a
         straight segment in collision is repaired, when ``joint_connect`` is on, by a joint-space
@@ -605,7 +651,11 @@ class TCBiRRT(Planner):
         orders = [moving] if len(moving) == 1 else [moving, moving[::-1]]
         sub = deadline.sub(o.regrasp_time_limit)
         lo, hi = self.robot.lower, self.robot.upper
-        for order in orders:
+        for n_order, order in enumerate(orders):
+            if o.regrasp_share_orders:   # this order's share of what is left of the regrasp's budget
+                sub_o = sub.sub(sub.remaining() / (len(orders) - n_order))
+            else:
+                sub_o = sub
             cur = q_from.copy()
             segs: list[tuple[str, list[np.ndarray]]] | None = []
             for name, idx in order:
@@ -619,7 +669,7 @@ class TCBiRRT(Planner):
                     segs = None
                     break
                 rs: dict[str, Any] = {}
-                sub_path = rrt_connect(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub,
+                sub_path = rrt_connect(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub_o,
                                        range_=o.regrasp.range, resolution=o.regrasp.resolution,
                                        max_iterations=o.regrasp.max_iterations, stats=rs)
                 st["regrasp_nodes"] += rs.get("nodes", 0)
@@ -735,7 +785,8 @@ class TCBiRRT(Planner):
         st: dict[str, Any] = {k: 0 for k in ("iterations", "extensions", "trapped", "partial", "ik_calls", "ik_iterations", "ik_restarts",
                              "ik_failures", "ik_jumps", "collisions", "regrasp_attempts", "regrasp_failures",
                              "regrasp_nodes", "edge_checks", "edge_collisions", "lazy_rejections",
-                             "joint_connect_attempts", "joint_connect_successes", "joint_connect_projections")}
+                             "joint_connect_attempts", "joint_connect_successes", "joint_connect_projections",
+                             "path_rejections", "path_verified_edges")}
         sampler = self._sampler()
         c0 = self.checker.n_checks
         why = self.check_endpoint(q_start)
@@ -793,6 +844,15 @@ class TCBiRRT(Planner):
                             st["lazy_rejections"] += 1
                             st["lazy_removed_nodes"] = st.get("lazy_removed_nodes", 0) + \
                                 (ta.kill(bad_a) if bad_a is not None else 0) + (tb.kill(bad_b) if bad_b is not None else 0)
+                            ta, tb, a_is_start = tb, ta, not a_is_start
+                            continue
+                    if o.edge_tolerance and o.verify_path and o.edge_bound != "static":
+                        bad_a, bad_b = self._verify_branch(ta, i_a, st), self._verify_branch(tb, i_b, st)
+                        if bad_a is not None or bad_b is not None or not self._verify_connection(ta, i_a, reg, st):
+                            st["path_rejections"] += 1
+                            for tr, bad in ((ta, bad_a), (tb, bad_b)):
+                                if bad is not None:
+                                    tr.kill(bad)
                             ta, tb, a_is_start = tb, ta, not a_is_start
                             continue
                     found = (i_a, i_b, reg)

@@ -51,6 +51,8 @@ if TYPE_CHECKING:
 
 __all__ = ["ValidityChecker"]
 log = logging.getLogger(__name__)
+#: compiled speed profiles shared by the checkers of one process (key: robot model, mode, geometry bounds)
+_PROFILE_CACHE: dict[tuple[Any, ...], tuple[Any, FastFunction | None]] = {}
 
 
 _ORDERS: dict[int, list[int]] = {}
@@ -197,19 +199,18 @@ class ValidityChecker:
             rad[k] = float(go.geometry.aabb_radius)
         return row, c, rad, np.array(joints, dtype=int)
 
-    def prepare_edge_bound(self, mode: str) -> None:
-        """Build (and compile, cached on disk) the speed profile :meth:`edge_checkpoints` uses in
-        ``mode`` now rather than at the first edge check, e.g. before a planner's clock starts."""
-        if mode not in self._sweep:
-            raise ValueError(f"prepare_edge_bound: mode must be one of {tuple(self._sweep)}, got {mode!r}")
-        self._profile_function(mode)
-
     def _profile_function(self, mode: str) -> FastFunction | None:
         """Compiled ``(a, b) -> C``: ``C[i]`` [m] bounds the distance any point of the checked
         geometry travels along ``q(t) = a + t (b − a)`` for ``t ∈ [0, i/m]``, ``m =``
         :attr:`CELLS` (see :meth:`edge_checkpoints`). None when the robot has joints other than
         1-dof revolute ones."""
         if mode in self._profile_fns:
+            return self._profile_fns[mode]
+        row, c, rad, joints = self._spheres[mode]
+        W = self._sweep[mode]
+        key = (id(self.model), mode, W.tobytes(), c.tobytes(), rad.tobytes(), row.tobytes(), joints.tobytes())
+        if key in _PROFILE_CACHE:           # another checker of the same robot and held object
+            self._profile_fns[mode] = _PROFILE_CACHE[key][1]
             return self._profile_fns[mode]
         fn = None
         if self._revolute_only:
@@ -219,8 +220,6 @@ class ValidityChecker:
             from ..model.symbolic import SymbolicKinematics
 
             sk = SymbolicKinematics(self.robot)
-            row, c, rad, joints = self._spheres[mode]
-            W = self._sweep[mode]
             n, m, G = self.model.nq, self.CELLS, W.shape[0]
             q, d = ca.SX.sym("q", n), ca.SX.sym("d", n)
             X = sk.joint_placements(q)
@@ -263,7 +262,17 @@ class ValidityChecker:
                 cum.append(cum[-1] + Fi / m)
             fn = FastFunction(ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)]), "-O1")
         self._profile_fns[mode] = fn
+        _PROFILE_CACHE[key] = (self.model, fn)     # the model is kept alive so that its id stays unique
         return fn
+
+    def prepare_edge_checks(self, modes: tuple[str, ...] = ("held", "fixed")) -> None:
+        """Build (or load from the compile cache) the compiled speed profiles of
+        :meth:`edge_checkpoints` now rather than at the first edge check (a planner calls this
+        before its time limit starts; the first build compiles C code, seconds)."""
+        for mode in modes:
+            if mode not in self._sweep:
+                raise ValueError(f"prepare_edge_checks: mode must be one of {tuple(self._sweep)}, got {mode!r}")
+            self._profile_function(mode)
 
     def edge_checkpoints(self, a: np.ndarray, b: np.ndarray, tolerance: float, mode: str = "held") -> np.ndarray:
         """Interior parameters ``0 < t_1 < … < t_m < 1`` of the straight joint segment
