@@ -25,17 +25,21 @@ import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .collision.checker import CollisionChecker
 from .model.ik import IKOptions
 from .model.robot import RobotModel
-from .problem import ClosedChain, OptProblem
+from .problem import ClosedChain, CollisionAvoidance, OptProblem
 from .problem.solution import Solution
 from .scene import Scene
-from .tasks import object_pose, segment_problem, straight_line_poses, task_space_path
+from .tasks import _held_object, object_pose, segment_problem, straight_line_poses, task_space_path
 from .verification import VerifyReport, verify
+
+if TYPE_CHECKING:
+    from .planners.base import PlanResult
 
 __all__ = ["PipelineOptions", "SegmentResult", "PipelineResult", "run_pipeline", "shortcut_constrained"]
 log = logging.getLogger(__name__)
@@ -194,7 +198,7 @@ class PipelineResult:
     ``q`` (M × nq), ``constrained`` (M,). ``success``: planned, every segment solved and verified
     (closed-chain residual ≤ ``closed_chain_tol``, clearance ≥ 0)."""
 
-    plan: object
+    plan: PlanResult | None
     segments: list = field(default_factory=list)
     t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
@@ -278,8 +282,9 @@ def shortcut_constrained(robot: RobotModel, scene: Scene, path: np.ndarray, rng:
     from .constraints.closed_chain import project_closed_chain
 
     checker = checker or CollisionChecker(robot, scene)
-    arms = list(scene.object.grasps)
-    cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
+    grasps = _held_object(scene).grasps
+    arms = list(grasps)
+    cc = ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
     data = robot.model.createData()
     path = np.array(path, float)
     seglen = lambda P: float(np.linalg.norm(np.diff(P, axis=0), axis=1).sum())  # noqa: E731
@@ -314,10 +319,11 @@ def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind
     T = max(opts.min_duration, length / (opts.speed_fraction * vmin))
     step = opts.max_interval_step if kind == "constrained" else opts.free_interval_step
     N = n_intervals or int(np.clip(np.ceil(length / step), opts.n_intervals, opts.max_intervals))
-    arms = list(scene.object.grasps)
+    grasps = _held_object(scene).grasps
+    arms = list(grasps)
     cc, holder, limits = None, None, None
     if kind == "constrained":
-        cc = dataclasses.replace(ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]],
+        cc = dataclasses.replace(ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]],
                                                          arms[0], arms[1]), interior=opts.closed_chain_interior)
     else:  # regrasp: the holding arm's joints stay where they are, so the object does too
         holder = next(a for a in arms if a != arm)
@@ -334,7 +340,7 @@ def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind
 def _cold_path(robot: RobotModel, scene: Scene, q0: np.ndarray, q1: np.ndarray, kind: str, n: int) -> np.ndarray:
     """Cold start: task-space straight line through IK (constrained) or the joint-space line."""
     if kind == "constrained":
-        arm = next(iter(scene.object.grasps))
+        arm = next(iter(_held_object(scene).grasps))
         data = robot.model.createData()
         M0, M1 = object_pose(robot, scene, q0, arm, data), object_pose(robot, scene, q1, arm, data)
         Q, _ = task_space_path(robot, scene, q0, straight_line_poses(M0, M1, n), max_step=0.05,
@@ -376,6 +382,7 @@ def _solve_verified(robot, scene, prob: OptProblem, cc, holder, opts: PipelineOp
         # activate pairs from the union of the initial guess and this solution; where the solution
         # collides between knots, raise those pairs' margin at the knots around; rebuild, re-solve
         h = prob.terms["collision"]
+        assert isinstance(h.term, CollisionAvoidance) and sol.x is not None   # the collision term; a solved NLP
         col = h.term.with_activation(prob.numeric_trajectory(sol.x))
         t = _dense_times(sol)
         col, n = col.with_boost(prob.term_data(h), t, sol.sample(t)["q"], sol.t)
@@ -403,11 +410,12 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
 
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(robot.velocity_limit))))
-    arms = list(scene.object.grasps)
+    grasps = _held_object(scene).grasps
+    arms = list(grasps)
     cc, holder = None, None
     lo, hi = robot.lower.copy(), robot.upper.copy()
     if kind == "constrained":
-        cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
+        cc = ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
         step = opts.spline_interval_step
     else:  # regrasp: the holding arm's joints stay where they are, so the object does too
         holder = next(a for a in arms if a != arm)
@@ -523,6 +531,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     if not good(sol, rep) and unmodelled:
         log.info("segment %s: no knot-transcription fallback (it does not model %d of the robot's collision "
                  "geometries)", kind, len(unmodelled))
+    assert total is not None   # run() set it
     if not good(sol, rep) and not unmodelled:  # 4. last resort: the knot transcription with free plane normals
         prob2, cc2, h2 = _segment_problem(robot, scene, seg_path, kind, arm, opts, fixed_normals=False)
         _initial_guess(robot, scene, prob2, seg_path, cc2, kind, opts)
@@ -627,7 +636,9 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
                                                                         with_cpu=True)
     res.opt_wall_s = time.perf_counter() - t1 - res.shortcut_time_s
     res.opt_cpu_s = time.process_time() - c1 - shortcut_cpu
-    ts, qs, flags = [], [], []
+    ts: list[np.ndarray] = []
+    qs: list[np.ndarray] = []
+    flags: list[np.ndarray] = []
     for s in res.segments:
         sol = s.solution
         t = _dense_times(sol)

@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 __all__ = ["PAPERS", "Paper", "Step", "ReproduceError", "examples_dir", "plan_steps", "reproduce"]
 
@@ -186,7 +187,8 @@ def _dshdasr_summary(out: Path, steps) -> list[str]:
         if key in d:
             lines.append(f"  {label:36s} {d[key]:10.2e} {PAPER.get(key, float('nan')):10.2e}")
     if d.get("cases"):
-        lines.append(f"  extra goals of Table 1: {' '.join(d['cases'])} (paper {' '.join(PAPER['cases'])})")
+        paper_cases = cast("list[str]", PAPER["cases"])
+        lines.append(f"  extra goals of Table 1: {' '.join(d['cases'])} (paper {' '.join(paper_cases)})")
     return lines
 
 
@@ -294,19 +296,20 @@ def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = Tru
     (out / "traj").mkdir(parents=True, exist_ok=True)
     say(f"optplan reproduce {paper}{' --quick' if quick else ''}: {p.title}")
     say(f"  output folder {out}")
-    record = {"paper": paper, "title": p.title, "quick": quick, "steps": [], "files": []}
+    record: dict[str, Any] = {"paper": paper, "title": p.title, "quick": quick, "steps": [], "files": []}
     t_all = time.perf_counter()
     ok = True
     for st in steps:
         say(f"\n$ python {' '.join(st.argv)}", flush=True)
         t0 = time.perf_counter()
         log_path = out / f"{st.name}.log"
-        with open(log_path, "w") as log:
+        with open(log_path, "w") as log_file:
             proc = subprocess.Popen([sys.executable, *st.argv], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                     text=True, bufsize=1)
+            assert proc.stdout is not None   # stdout=PIPE
             for line in proc.stdout:
                 sys.stdout.write(line)
-                log.write(line)
+                log_file.write(line)
             rc = proc.wait()
         dt = time.perf_counter() - t0
         ok &= rc == 0

@@ -62,6 +62,8 @@ class Obstacle:
 
     def coal_geometry(self) -> coal.CollisionGeometry:
         if self.shape == "box":
+            if self.size is None:
+                raise ModelError(f"box obstacle {self.name!r} has no size")
             return coal.Box(*self.size)
         if self.shape == "sphere":
             return coal.Sphere(self.radius)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -22,13 +23,20 @@ from .problem import (
     OptProblem,
     Smoothness,
 )
-from .scene import Scene
+from .scene import GraspedObject, Scene
 
 __all__ = ["GraspIK", "grasp_configuration", "task_space_path", "transport_initial_path", "transport_problem",
            "segment_problem", "object_pose"]
 log = logging.getLogger(__name__)
 
 _PRECISE = IKOptions(tol_position=1e-10, tol_orientation=1e-10, max_iterations=300)
+
+
+def _held_object(scene: Scene) -> GraspedObject:
+    """The scene's held object; a ValueError naming the scene when it has none."""
+    if scene.object is None:
+        raise ValueError(f"scene {scene.name!r} has no [object] with grasps")
+    return scene.object
 
 
 @dataclass(frozen=True)
@@ -73,8 +81,9 @@ def task_space_path(robot: RobotModel, scene: Scene, q_start, poses, *, max_step
                      options.damping, max_step, options.respect_limits)
     qs, ok = [np.asarray(q_start, float)], True
     data = robot.model.createData()
+    grasps = _held_object(scene).grasps
     for M in poses[1:]:
-        r = solve_grasp_ik(robot, M, scene.object.grasps, qs[-1], opts, data)
+        r = solve_grasp_ik(robot, M, grasps, qs[-1], opts, data)
         ok &= r.success
         qs.append(r.q)
     return np.array(qs), bool(ok)
@@ -84,7 +93,7 @@ def object_pose(robot: RobotModel, scene: Scene, q, arm: str, data: pin.Data | N
     """World pose of the scene's object held by ``arm``'s hand at the full configuration ``q``."""
     data = data or robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, np.asarray(q, float))
-    return scene.object.object_pose_from_hand(arm, data.oMf[robot.arm(arm).ee_frame_id])
+    return _held_object(scene).object_pose_from_hand(arm, data.oMf[robot.arm(arm).ee_frame_id])
 
 
 def straight_line_poses(start: pin.SE3, goal: pin.SE3, n: int) -> list[pin.SE3]:
@@ -121,7 +130,7 @@ def segment_problem(robot: RobotModel, scene: Scene, q_start, q_end, n_intervals
     velocity limits, collision avoidance with ``margin`` [m] (object held by ``object_arm``; plane
     normals fixed when ``fixed_normals``), minimum jerk. The one builder of the transport NLP of
     the examples and of the pipeline's segments; returns ``(problem, collision term or None)``."""
-    z = np.zeros(robot.nj)
+    z = [0.0] * robot.nj
     prob = OptProblem(robot, n_intervals=n_intervals, duration=duration)
     prob.add_constraint(JointBoundary("start", q=q_start, qd=z, qdd=z), name="start")
     prob.add_constraint(JointBoundary("end", q=q_end, qd=z, qdd=z), name=end_name)
@@ -133,7 +142,7 @@ def segment_problem(robot: RobotModel, scene: Scene, q_start, q_end, n_intervals
         prob.add_constraint(JointVelocityLimits(), name="velocity_limits")
     col = None
     if collision:
-        kw = {} if fixed_normals is None else {"fixed_normals": fixed_normals}
+        kw: dict[str, Any] = {} if fixed_normals is None else {"fixed_normals": fixed_normals}
         if object_arm is not None:
             kw["object_arm"] = object_arm
         col = CollisionAvoidance(scene, margin=margin, **kw)
@@ -149,8 +158,9 @@ def transport_problem(robot: RobotModel, scene: Scene, Q: np.ndarray, *, duratio
     boundary configurations of Q at rest, closed chain from the scene's grasps, joint position
     (and velocity) limits, collision avoidance with ``margin`` [m], minimum jerk; warm-started
     from Q."""
-    arms = list(scene.object.grasps)
-    cc = ClosedChain.from_grasps(scene.object.grasps[arms[0]], scene.object.grasps[arms[1]], arms[0], arms[1])
+    grasps = _held_object(scene).grasps
+    arms = list(grasps)
+    cc = ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
     prob, col = segment_problem(robot, scene, Q[0], Q[-1], len(Q) - 1, duration, closed_chain=cc,
                                 velocity_limits=velocity_limits, collision=collision, margin=margin, end_name="goal")
     prob.set_initial(q=Q)

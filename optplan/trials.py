@@ -153,6 +153,7 @@ class TrialGenerator:
               rng: np.random.Generator) -> np.ndarray | None:
         """A valid configuration holding the object at ``M`` (continuation, then random restarts)."""
         kin = self.kin
+        q: np.ndarray | None
         if q_nominal is not None:
             q = q_nominal
             for R, p in interpolate_task(nominal_pose.rotation, nominal_pose.translation, M.rotation, M.translation,
@@ -186,6 +187,7 @@ class TrialGenerator:
         from .collision.checker import CollisionChecker
 
         M = self.scene.start if which == "start" else self.scene.goal
+        assert M is not None   # the constructor checked [start] and [goal]
         cc = CollisionChecker(self.robot, self.scene)
         best, best_d = None, -np.inf
         for _ in range(tries):
@@ -224,6 +226,7 @@ class TrialGenerator:
 
     def check_trial(self, t: Trial, tol: float = 1e-6) -> bool:
         """Both configurations hold the object at the trial's poses within ``tol``."""
+        assert self.scene.object is not None   # the constructor checked [object]
         for q in (t.q_start, t.q_goal):
             ep, eo = closure_error(self.robot, self.scene.object.grasps, q)
             if ep > tol or eo > tol:

@@ -103,7 +103,7 @@ def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_ch
     if checker.pairs:
         for q in qfull:
             d, p = checker.min_distance(q)
-            if d < dmin:
+            if d < dmin and p is not None:
                 dmin, pair_name = d, f"{p.name_a} / {p.name_b}"
     # limits
     pos_v = float(np.max(np.maximum(np.maximum(robot.lower - Q, Q - robot.upper), 0.0)))

@@ -101,6 +101,27 @@ def test_reproduce_runs_a_script_with_the_flags_it_offers(tmp_path):
     assert not rec["success"] and rec["steps"][0]["exit_code"] == 3
 
 
+def test_reproduce_reports_a_missing_extra_view(tmp_path, monkeypatch, caplog):
+    """An extra HTML view that cannot be made (its optional dependency missing) is a logged
+    warning and the run's record stands (the step log's file handle once shadowed the logger)."""
+    import dataclasses
+
+    import optplan.reproduce as rp
+
+    ex = tmp_path / "examples"
+    ex.mkdir()
+    (ex / "oc_rrt.py").write_text("print('ok')\n")
+
+    def no_view(out, quick):
+        raise ImportError("the viz extra is not installed")
+
+    monkeypatch.setitem(rp.PAPERS, "oc-rrt", dataclasses.replace(rp.PAPERS["oc-rrt"], extra_views=no_view))
+    with caplog.at_level("WARNING", logger="optplan.reproduce"):
+        rec = reproduce("oc-rrt", out=tmp_path / "out", quick=True, html=True, examples=ex)
+    assert rec["success"]
+    assert "no HTML view: the viz extra is not installed" in caplog.text
+
+
 def test_plan_figures_and_profiles(tmp_path):
     from optplan.collision.checker import CollisionChecker
     from optplan.constraints.closed_chain import closure_error

@@ -27,12 +27,12 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 if TYPE_CHECKING:
-    from ..planners.base import PlanResult
+    pass
 
 __all__ = ["GeneralizeConfig", "expand", "run", "summarize", "format_summary", "TARGET_SUCCESS"]
 log = logging.getLogger(__name__)
@@ -132,7 +132,7 @@ def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
         return {**line, "success": False, "plan_ok": None, "plan_status": "error", "opt_status": "error",
                 "error": err, "segments": []}
     line.update({k: _finite(v) for k, v in res.to_dict().items()})
-    plan = cast("PlanResult | None", res.plan)  # PipelineResult.plan is typed object
+    plan = res.plan
     line.update({"plan_ok": bool(plan is not None and plan.success), "plan_hash": _path_hash(res.plan),
                  "converged": bool(res.segments) and all(s.solution.success for s in res.segments),
                  "segments": _segment_rows(res), "error": None})

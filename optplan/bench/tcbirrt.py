@@ -43,7 +43,7 @@ __all__ = ["BenchConfig", "run", "parse_planner_spec", "expand_scenes", "load_re
 log = logging.getLogger(__name__)
 
 N_MIN = {"ssps_scene1": 40, "ssps_scene2": 30, "ssps_scene3": 15}   # per 100 trials (Section 5.3)
-PAPER = {  # the TCBiRRT paper Tables 2-3 (t = 1000 s; times: mean ± std of the n_min fastest)
+PAPER: dict[str, dict[str, tuple[float, float | None, float | None]]] = {  # the TCBiRRT paper Tables 2-3 (t = 1000 s; times: mean ± std of the n_min fastest)
     "tcbirrt": {"ssps_scene1": (0.94, 0.82, 0.65), "ssps_scene2": (0.96, 2.12, 0.94), "ssps_scene3": (0.93, 0.87, 0.38)},
     "cbirrt2": {"ssps_scene1": (0.25, None, None), "ssps_scene2": (0.18, None, None), "ssps_scene3": (0.02, None, None)},
 }

@@ -34,7 +34,7 @@ import resource
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -42,7 +42,7 @@ from .engine import map_unordered, validate_engine
 from .tcbirrt import _repair_tail, load_results, scene_name
 
 if TYPE_CHECKING:
-    from ..planners.base import PlanResult
+    pass
 
 __all__ = ["WarmstartConfig", "MODES", "TARGETS", "validate", "pending_units", "run", "summarize", "format_summary"]
 log = logging.getLogger(__name__)
@@ -232,7 +232,7 @@ def _run_unit(args) -> dict:
         return line
     d = {k: _finite(v) for k, v in res.to_dict().items()}
     line.update(d)
-    plan = cast("PlanResult | None", res.plan)  # PipelineResult.plan is typed object
+    plan = res.plan
     line.update({"plan_ok": bool(plan is not None and plan.success), "plan_hash": _path_hash(res.plan),
                  "converged": bool(res.segments) and all(s.solution.success for s in res.segments),
                  "segments": _segment_rows(res), "error": None})

@@ -18,6 +18,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from ..errors import ModelError
 from ..model.robot import RobotModel
 from ..scene import Scene
 
@@ -107,7 +108,13 @@ def scene_pairs(robot: RobotModel, scene: Scene | None, *, held_object: bool = T
 
 def pair_indices(pair: Pair, geometry: SceneGeometry) -> tuple[int, int]:
     """The two geometry indices of ``pair`` in ``geometry.model``."""
-    a = geometry.held_id if pair.a == -1 else pair.a
+    if pair.a == -1:
+        if geometry.held_id is None:
+            raise ModelError(f"pair {pair.name_a} / {pair.name_b} involves the held object, "
+                             "but the scene geometry was built without one")
+        a = geometry.held_id
+    else:
+        a = pair.a
     b = geometry.obstacle_ids[pair.b] if pair.kind in ("robot-obstacle", "object-obstacle") else pair.b
     return a, b
 

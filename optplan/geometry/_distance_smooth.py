@@ -297,7 +297,7 @@ def point_box_sq(q: Any, h: Any, ops: Ops) -> Any:
     return ops.dot(excess, excess)
 
 
-def box_inside_term(q: Any, h: Sequence[float], eps: float, ops: Ops) -> Any:
+def box_inside_term(q: Any, h: Sequence[float] | np.ndarray, eps: float, ops: Ops) -> Any:
     """Smooth lower bound [m] of ``min(max_i(|q_i| - h_i), 0)`` (the inside part of the box SDF).
 
     ``max_i(|q_i| - h_i)`` is the max of the six affine functions ``+-q_i - h_i``; it is replaced by

@@ -341,28 +341,30 @@ def signed_distance(shape1: Shape, pose1: Pose, shape2: Shape, pose2: Pose, *, e
     R2, p2 = _pose(pose2, "pose2", ops)
     if _ORDER[type(shape1)] > _ORDER[type(shape2)]:
         shape1, R1, p1, shape2, R2, p2 = shape2, R2, p2, shape1, R1, p1
-    opts = dict(eps=eps)
-    cover = dict(cover_tol=cover_tol, softmin_tol=softmin_tol)
     if isinstance(shape2, Box):
         if isinstance(shape1, Box):
             raise TypeError("box-box distance is not supported: cover one box by spheres/capsules")
         if isinstance(shape1, Sphere):
-            return sphere_box(_world(R1, p1, shape1.center, ops), shape1.radius, R2, p2, shape2.half_extents, **opts)
+            return sphere_box(_world(R1, p1, shape1.center, ops), shape1.radius, R2, p2, shape2.half_extents, eps=eps)
         k = n_spheres or n_covering_spheres(shape1.length, shape1.radius, cover_tol)
         return capsule_box(_world(R1, p1, shape1.a, ops), _world(R1, p1, shape1.b, ops), shape1.radius,
-                           R2, p2, shape2.half_extents, n_spheres=k, **opts, **cover)
+                           R2, p2, shape2.half_extents, n_spheres=k, eps=eps, cover_tol=cover_tol,
+                           softmin_tol=softmin_tol)
     if isinstance(shape2, Capsule):
         a2, b2 = _world(R2, p2, shape2.a, ops), _world(R2, p2, shape2.b, ops)
         if isinstance(shape1, Sphere):
-            return capsule_sphere(a2, b2, shape2.radius, _world(R1, p1, shape1.center, ops), shape1.radius, **opts)
+            return capsule_sphere(a2, b2, shape2.radius, _world(R1, p1, shape1.center, ops), shape1.radius, eps=eps)
+        assert isinstance(shape1, Capsule)   # ordered: shape1 precedes shape2 in _ORDER
         a1, b1 = _world(R1, p1, shape1.a, ops), _world(R1, p1, shape1.b, ops)
         swap, k = _plan_cover(shape1.length, shape1.radius, shape2.length, shape2.radius, n_spheres, cover_tol)
         caps = [(a1, b1, shape1.radius), (a2, b2, shape2.radius)]
         if swap:
             caps.reverse()
-        return capsule_capsule(*caps[0], *caps[1], n_spheres=k, **opts, **cover)
+        return capsule_capsule(*caps[0], *caps[1], n_spheres=k, eps=eps, cover_tol=cover_tol,
+                               softmin_tol=softmin_tol)
+    assert isinstance(shape1, Sphere) and isinstance(shape2, Sphere)   # ordered: neither is a box or capsule
     return sphere_sphere(_world(R1, p1, shape1.center, ops), shape1.radius,
-                         _world(R2, p2, shape2.center, ops), shape2.radius, **opts)
+                         _world(R2, p2, shape2.center, ops), shape2.radius, eps=eps)
 
 
 def error_bound(shape1: Shape, shape2: Shape, *, eps: float = DEFAULT_EPS, n_spheres: int | None = None,
@@ -389,6 +391,7 @@ def error_bound(shape1: Shape, shape2: Shape, *, eps: float = DEFAULT_EPS, n_sph
         c = s2 if swap else s1
         cov = _s.covering_radius(c.radius, c.length, k) - c.radius
         return cov + norm_err + (softmin_tol if k > 1 else 0.0)
+    assert not isinstance(s1, Box) and not isinstance(s2, Box)   # ordered: a box is always s2
     return 0.0 if s1.radius + s2.radius >= eps else norm_err
 
 

@@ -387,7 +387,7 @@ def _quartic_triplets(h: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     r = h[:-1] / h[1:]
     for order in (1, 2, 3):
         ks = np.arange(order, 5)
-        w = np.array([_falling(p, order) for p in ks])
+        w = np.array([_falling(int(p), order) for p in ks])
         row = base[:-1] + 1 + order
         rows += [np.repeat(row, ks.size), row]
         cols += [(5 * inner[:, None] + ks[None, :]).ravel(), 5 * (inner + 1) + order]

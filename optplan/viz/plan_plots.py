@@ -41,7 +41,7 @@ def trajectory_profiles(robot, scene, t, q, constrained=None, max_samples: int =
     rr = np.full(len(idx), np.nan)
     cl = np.empty(len(idx))
     for j, k in enumerate(idx):
-        if has_obj and cons[k]:
+        if held is not None and scene is not None and scene.object is not None and cons[k]:
             rp[j], rr[j] = closure_error(robot, scene.object.grasps, q[k], data)
             cl[j] = held.min_distance(q[k])[0]
         else:
