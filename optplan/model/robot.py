@@ -338,7 +338,7 @@ def _capsules_from_cylinders(root: ET.Element, geom: pin.GeometryModel) -> None:
             if not geom.existGeometryName(gname):
                 raise ModelError(f"collision geometry {gname!r} not found after parsing")
             obj = geom.geometryObjects[geom.getGeometryId(gname)]
-            obj.geometry = coal.Capsule(float(cyl.get("radius")), float(cyl.get("length")))
+            obj.geometry = coal.Capsule(float(cyl.attrib["radius"]), float(cyl.attrib["length"]))
 
 
 def _read_text(path: Path) -> str:
