@@ -54,6 +54,10 @@ class RobotModel:
     (any URDF; name the arms' end-effector frames and, optionally, their joints).
     """
 
+    #: The self-collision pair filtering report, set only by loaders that filter the pairs
+    #: (:func:`optplan.model.dual_panda.load_dual_panda`); a declaration, not a default.
+    pair_budget: dict
+
     def __init__(self, model: pin.Model, collision_model: pin.GeometryModel, arms: Mapping[str, Mapping],
                  *, name: str | None = None, floating: bool, urdf_path: Path | None = None):
         self.model = model
