@@ -11,6 +11,7 @@ from optplan.model.floating import simulate_base
 from optplan.model.robot import RobotModel
 from optplan.papers.spline_rrt import (
     BezierOrientation,
+    SplineRRTResult,
     SplineRRTTask,
     TrackingOptions,
     evaluate,
@@ -302,3 +303,13 @@ def test_task_from_scene_needs_the_poses(robot):
     bad = Scene.from_dict({"name": "empty", "obstacles": []})
     with pytest.raises(ValueError, match="start_A"):
         SplineRRTTask.from_scene(robot, bad)
+
+
+def test_figures_of_a_result_without_evaluation_is_a_clear_error():
+    # a failed plan leaves ``evaluation`` None: its figures are a ValueError that says so, not a
+    # TypeError from indexing None (found by mypy)
+    from types import SimpleNamespace
+
+    failed = SimpleNamespace(evaluation=None, hands={"left": None}, T=float("nan"))
+    with pytest.raises(ValueError, match="no evaluation"):
+        SplineRRTResult.figures(failed)  # type: ignore[arg-type]

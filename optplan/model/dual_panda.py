@@ -73,14 +73,14 @@ def merge_capsules(link: ET.Element, tol: float = 2e-3) -> int:
     for c in cols:
         s = c.find("geometry/sphere")
         if s is not None:
-            spheres.append((c, float(s.get("radius")), _origin(c).translation))
+            spheres.append((c, float(s.attrib["radius"]), _origin(c).translation))
     used: set[int] = set()
     n = 0
     for c in cols:
         cyl = c.find("geometry/cylinder")
         if cyl is None:
             continue
-        r, L = float(cyl.get("radius")), float(cyl.get("length"))
+        r, L = float(cyl.attrib["radius"]), float(cyl.attrib["length"])
         M = _origin(c)
         ends = [M.translation + M.rotation @ np.array([0.0, 0.0, s * L / 2]) for s in (-1, 1)]
         match = []
@@ -107,14 +107,15 @@ def _prefix_tree(root: ET.Element, prefix: str) -> list[ET.Element]:
         if el.tag not in ("link", "joint"):
             continue
         e = copy.deepcopy(el)
-        e.set("name", prefix + e.get("name"))
+        e.set("name", prefix + e.attrib["name"])
         if e.tag == "joint":
             for tag in ("parent", "child"):
                 t = e.find(tag)
-                t.set("link", prefix + t.get("link"))
+                assert t is not None   # a URDF joint has a parent and a child
+                t.set("link", prefix + t.attrib["link"])
             m = e.find("mimic")
             if m is not None:
-                m.set("joint", prefix + m.get("joint"))
+                m.set("joint", prefix + m.attrib["joint"])
         out.append(e)
     return out
 
@@ -137,8 +138,9 @@ def dual_panda_urdf(share: Path) -> str:
     for side, y in zip(SIDES, (BASE_OFFSET, -BASE_OFFSET)):
         for e in _prefix_tree(arm, f"{side}_"):
             if e.tag == "joint" and e.get("type") == "prismatic":  # the fingers: frozen, open
-                o = e.find("origin")
-                ax = _floats(e.find("axis").get("xyz"), "1 0 0")
+                o, axis = e.find("origin"), e.find("axis")
+                assert o is not None and axis is not None   # the Panda's finger joints have both
+                ax = _floats(axis.get("xyz"), "1 0 0")
                 o.set("xyz", " ".join(repr(float(v)) for v in _floats(o.get("xyz"), "0 0 0") + FINGER_OPENING * ax))
                 e.set("type", "fixed")
                 for tag in ("limit", "mimic", "dynamics", "axis", "safety_controller"):

@@ -62,7 +62,7 @@ def _freeze(urdf: Path, keep: set[str], *, share: Path, continuous_limit: float 
         root.remove(t)
     found = set()
     for j in root.findall("joint"):
-        name, typ = j.get("name"), j.get("type")
+        name, typ = j.attrib["name"], j.get("type")
         if typ == "fixed":
             continue
         if name in keep:
@@ -80,8 +80,8 @@ def _freeze(urdf: Path, keep: set[str], *, share: Path, continuous_limit: float 
             o = j.find("origin")
             if o is None:
                 o = ET.SubElement(j, "origin", {"xyz": "0 0 0", "rpy": "0 0 0"})
-            axis = np.array([float(x) for x in (j.find("axis").get("xyz").split() if j.find("axis") is not None
-                                                 else ["1", "0", "0"])])
+            ax = j.find("axis")
+            axis = np.array([float(x) for x in (ax.attrib["xyz"].split() if ax is not None else ["1", "0", "0"])])
             if typ != "prismatic":
                 raise ModelError(f"freezing {name!r} at a non-zero value is only implemented for prismatic joints")
             xyz = np.array([float(x) for x in o.get("xyz", "0 0 0").split()])
@@ -143,7 +143,7 @@ def _load(kind: str) -> RobotModel:
     arms = {s: {"ee": ee[s], "joints": joints[s]} for s in ("left", "right")}
     robot = RobotModel.from_urdf(path, arms=arms, name=kind)
     _convex_hulls(robot)
-    robot.__init__(robot.model, robot.collision_model, arms, name=kind, floating=False, urdf_path=path)
+    RobotModel.__init__(robot, robot.model, robot.collision_model, arms, name=kind, floating=False, urdf_path=path)
     order = [robot.model.getJointId(n) for n in joints["left"] + joints["right"]]
     if robot.nj != 14 or sorted(order) != order:
         log.info("%s: joint order %s", kind, robot.joint_names)

@@ -81,7 +81,7 @@ def solve_multi(robot: RobotModel, data: pin.Data, q0: np.ndarray, targets, opts
         errs, ep, eo = [], 0.0, 0.0
         for a, g in zip(arms, goals):
             e = pose_error(data.oMf[a.ee_frame_id], g)
-            ep, eo = max(ep, np.linalg.norm(e[:3])), max(eo, np.linalg.norm(e[3:]))
+            ep, eo = max(ep, float(np.linalg.norm(e[:3]))), max(eo, float(np.linalg.norm(e[3:])))
             errs.append(e)
         if ep < opts.tol_position and eo < opts.tol_orientation:
             return IKResult(True, q, it - 1, ep, eo)
@@ -96,8 +96,8 @@ def solve_multi(robot: RobotModel, data: pin.Data, q0: np.ndarray, targets, opts
                 qa = np.clip(qa, lo[a.j_idx], hi[a.j_idx])
             q[a.q_idx] = qa
     pin.framesForwardKinematics(model, data, q)
-    ep = max(np.linalg.norm(pose_error(data.oMf[a.ee_frame_id], g)[:3]) for a, g in zip(arms, goals))
-    eo = max(np.linalg.norm(pose_error(data.oMf[a.ee_frame_id], g)[3:]) for a, g in zip(arms, goals))
+    ep = max(float(np.linalg.norm(pose_error(data.oMf[a.ee_frame_id], g)[:3])) for a, g in zip(arms, goals))
+    eo = max(float(np.linalg.norm(pose_error(data.oMf[a.ee_frame_id], g)[3:])) for a, g in zip(arms, goals))
     ok = ep < opts.tol_position and eo < opts.tol_orientation
     return IKResult(bool(ok), q, opts.max_iterations, float(ep), float(eo))
 

@@ -389,9 +389,9 @@ class DecoupledArmIK:
                         tb, fb = t, f
                     else:
                         ta, fa = t, f
-                x = self._newton(x, R_des, p_des)
-                if x is not None and not any(np.abs(_wrap_vec(x - y)).max() < 1e-8 for y in out):
-                    out.append(x)
+                xn = self._newton(x, R_des, p_des)
+                if xn is not None and not any(np.abs(_wrap_vec(xn - y)).max() < 1e-8 for y in out):
+                    out.append(xn)
         # the two elbow roots (i4 = 0, 1) of a branch merge at a fold where the wrist point leaves
         # the reach of the elbow: a root between the fold and the last grid point is bracketed by
         # the two roots' values at that grid point; Newton from the one closer to zero
@@ -405,9 +405,9 @@ class DecoupledArmIK:
                 fb, xb = other[g]
                 if fa * fb > 0 or abs(fa - fb) > 1.0:
                     continue
-                x = self._newton(xa if abs(fa) < abs(fb) else xb, R_des, p_des)
-                if x is not None and not any(np.abs(_wrap_vec(x - y)).max() < 1e-8 for y in out):
-                    out.append(x)
+                xn = self._newton(xa if abs(fa) < abs(fb) else xb, R_des, p_des)
+                if xn is not None and not any(np.abs(_wrap_vec(xn - y)).max() < 1e-8 for y in out):
+                    out.append(xn)
         return out
 
     def _limit_variants(self, x) -> list[np.ndarray]:

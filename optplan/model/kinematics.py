@@ -17,7 +17,7 @@ import pinocchio as pin
 from scipy.linalg.lapack import dgesv
 
 from ..errors import ConfigurationError, OptionError, check_vector
-from .robot import RobotModel
+from .robot import Arm, RobotModel
 
 __all__ = ["Kinematics", "REFERENCE_FRAMES"]
 
@@ -120,6 +120,7 @@ class Kinematics:
         Ag_b⁻¹ Ag_m = H_b⁻¹ H_bm.) For a fixed-base robot it is the ordinary Jacobian.
         """
         q = self.robot.check_q(q)
+        a: Arm | None
         if frame is None:
             if arm is None:
                 raise ValueError("generalized_jacobian: give an arm name or a frame")

@@ -54,6 +54,10 @@ class RobotModel:
     (any URDF; name the arms' end-effector frames and, optionally, their joints).
     """
 
+    #: The self-collision pair filtering report, set only by loaders that filter the pairs
+    #: (:func:`optplan.model.dual_panda.load_dual_panda`); a declaration, not a default.
+    pair_budget: dict
+
     def __init__(self, model: pin.Model, collision_model: pin.GeometryModel, arms: Mapping[str, Mapping],
                  *, name: str | None = None, floating: bool, urdf_path: Path | None = None):
         self.model = model
@@ -338,7 +342,7 @@ def _capsules_from_cylinders(root: ET.Element, geom: pin.GeometryModel) -> None:
             if not geom.existGeometryName(gname):
                 raise ModelError(f"collision geometry {gname!r} not found after parsing")
             obj = geom.geometryObjects[geom.getGeometryId(gname)]
-            obj.geometry = coal.Capsule(float(cyl.get("radius")), float(cyl.get("length")))
+            obj.geometry = coal.Capsule(float(cyl.attrib["radius"]), float(cyl.attrib["length"]))
 
 
 def _read_text(path: Path) -> str:

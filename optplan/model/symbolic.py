@@ -137,6 +137,7 @@ class SymbolicKinematics:
         """Velocity fields of joint j's columns: list of (v_index, ω (3), v_O (3)) with v_O the
         velocity of the point at the world origin (spatial velocity, world axes)."""
         jt = self.joints[j]
+        assert jt is not None   # joint 0 (the universe) has no columns
         R, p = X[j]
         if jt.kind == "free_flyer":
             cols = []

@@ -302,9 +302,9 @@ class JointBoundary(Term):
     """Joint values at the start or end knot: any of ``q`` [rad], ``qd`` [rad/s], ``qdd`` [rad/s²]."""
 
     at: str = "start"
-    q: Sequence[float] | None = None
-    qd: Sequence[float] | None = None
-    qdd: Sequence[float] | None = None
+    q: Sequence[float] | np.ndarray | None = None
+    qd: Sequence[float] | np.ndarray | None = None
+    qdd: Sequence[float] | np.ndarray | None = None
     default_name = "boundary"
 
     def _validate(self) -> None:
@@ -438,7 +438,7 @@ class JointVelocityLimits(_JointBox):
     """``|q̇_k| ≤ limit`` [rad/s] (default: the robot's velocity limits); ``lower``/``upper``
     override."""
 
-    limit: Sequence[float] | float | None = None
+    limit: Sequence[float] | np.ndarray | float | None = None
     default_name = "velocity_limits"
     which = "qd"
 

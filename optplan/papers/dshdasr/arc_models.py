@@ -20,7 +20,8 @@ __all__ = ["DiscreteArcModel", "SerpentineArcModel", "frame_on", "pair_angles"]
 
 
 def _np(x) -> np.ndarray:
-    return np.array(ca.DM(x)).ravel() if isinstance(x, (ca.DM, ca.SX, ca.MX)) else np.asarray(x, float)
+    # casadi converts a constant SX/MX to DM at run time; its stubs list only numeric inputs
+    return np.array(ca.DM(x)).ravel() if isinstance(x, (ca.DM, ca.SX, ca.MX)) else np.asarray(x, float)  # type: ignore[arg-type]
 
 
 def frame_on(k) -> np.ndarray:
@@ -96,6 +97,7 @@ def pair_angles(v, prev: tuple[float, float] | None = None) -> tuple[float, floa
         dist = (o - prev[0]) ** 2 + (e - prev[1]) ** 2
         if best is None or dist < best[0]:
             best = (dist, o, e)
+    assert best is not None   # cands is not empty
     return best[1], best[2]
 
 

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -107,13 +108,13 @@ class Arc:
     ``length`` [m] (CasADi expressions or numbers). ``v = t1 − (t0·t1) t0`` points from the arc
     toward its centre with norm sin φ, so κ u = λ v for the unit normal u."""
 
-    P: object
-    t0: object
-    t1: object
-    phi: object
-    kappa: object
-    lam: object
-    length: object
+    P: Any
+    t0: Any
+    t1: Any
+    phi: Any
+    kappa: Any
+    lam: Any
+    length: Any
 
     def _v(self):
         return self.t1 - _dot(self.t0, self.t1) * self.t0

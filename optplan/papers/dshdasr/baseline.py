@@ -110,7 +110,7 @@ def initial_configuration(arcs: DshdasrArcs, task: TransposeTask, swivel_deg: fl
     q = np.asarray(seed, float)
     for _attempt in range(restarts + 1):
         res = dls_track(arcs, task, q, damping=1e-2, max_iterations=3000, max_step=0.1, times=[0.0])
-        if res.success[0]:
+        if res.success is not None and res.success[0]:
             q = res.q[0]
             if swivel_deg is not None:
                 des = task.desired([0.0])

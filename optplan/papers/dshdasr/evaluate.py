@@ -10,6 +10,7 @@ Public entry point: :mod:`optplan.papers.dshdasr`.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -44,7 +45,7 @@ def evaluate(res: TrackResult, task: TransposeTask, arcs: DshdasrArcs, planner: 
     checker = checker or make_checker(arcs.robot, task)
     clear = coal_centreline_distances(checker, res.q, task)
     thr = task.thresholds
-    m = {
+    m: dict[str, Any] = {
         "max_tip_position_error_a_m": float(ep_a.max()),
         "max_tip_attitude_error_a_rad": float(eo_a.max()),
         "max_tip_position_error_b_m": float(ep_b.max()),
@@ -72,7 +73,7 @@ def evaluate(res: TrackResult, task: TransposeTask, arcs: DshdasrArcs, planner: 
             for i in range(len(task.obstacles)):
                 hit = np.nonzero(con[arm][:, i] <= 1e-6)[0]
                 m["threshold_time_s"][f"{arm}_obs{i + 1}"] = float(res.t[hit[0]]) if len(hit) else None
-    if res.iterations is not None:
+    if res.iterations is not None and res.success is not None:
         m["nlp_time_s"] = float(res.nlp_time)
         m["nlp_iterations_mean"] = float(res.iterations.mean())
         m["nlp_failures"] = int((~res.success).sum())

@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -142,7 +143,7 @@ class ArcPlanner:
                     "ipopt.warm_start_mult_bound_push": 1e-9, "ipopt.warm_start_slack_bound_push": 1e-9,
                     "ipopt.acceptable_tol": 1e-10, "ipopt.acceptable_iter": 3,
                     "ipopt.nlp_scaling_method": "none", "ipopt.bound_relax_factor": 0.0}
-        casadi_opts = {"expand": True, "calc_lam_p": False}
+        casadi_opts: dict[str, Any] = {"expand": True, "calc_lam_p": False}
         sopts = SolverOptions.coerce(options, tol=tol, max_iter=max_iter)
         lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", self.ng)
         H = None

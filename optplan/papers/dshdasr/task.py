@@ -202,7 +202,7 @@ class DshdasrArcs:
         pin.framesForwardKinematics(self.model, self.data, q)
         o = self.data.oMf
         pts = [o[i].translation for i in self._fa]
-        Xa = self.a.params_from_points(*pts, o[self._fa[3]].rotation[:, 2], R_ref=refs[0])
+        Xa = self.a.params_from_points(pts[0], pts[1], pts[2], pts[3], o[self._fa[3]].rotation[:, 2], R_ref=refs[0])
         Xb = self.b.params_from_segments([o[i].translation for i in self._fb_ends],
                                          [o[i].rotation[:, 0] for i in self._fb_dirs], R_ref=refs[1:])
         return Xa, Xb

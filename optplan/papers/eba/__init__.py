@@ -28,6 +28,7 @@ validated on construction whose defaults are the paper's. See ``docs/eba.md``.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -79,7 +80,7 @@ CASES = {
     "end_constrained": ("leader_follower", "eba", "fourier", "nlp"),
 }
 
-METHODS = {
+METHODS: dict[str, tuple[Callable[..., MethodResult], type]] = {
     "quintic": (run_quintic, QuinticOptions),
     "ba": (run_ba, BAOptions),
     "eba": (run_eba, EBAOptions),

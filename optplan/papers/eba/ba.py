@@ -35,6 +35,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.special import expit
@@ -146,7 +147,7 @@ class EBAOptions:
     @classmethod
     def paper_end_constrained(cls, **overrides) -> EBAOptions:
         """Section 4.2: k = 1.1, m = 0.1, t0 = 95 s, λ = 1e-5, 200 s."""
-        base = dict(k=1.1, m=0.1, t0=95.0, lam=1e-5, horizon=200.0)
+        base: dict[str, Any] = dict(k=1.1, m=0.1, t0=95.0, lam=1e-5, horizon=200.0)
         base.update(overrides)
         return cls(**base)
 

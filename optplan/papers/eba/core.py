@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -52,7 +53,7 @@ END_CONSTRAINED_THETAF_DEG = np.array([-23.44, -141.29, 16.92, 168.53, -110.15, 
 
 #: The paper's reported figures (Section 4.1 / 4.2). "planned" = the planning result ("desired"),
 #: "real" = after the paper's closed-loop control simulation, which optplan does not reproduce.
-PAPER_FIGURES = {
+PAPER_FIGURES: dict[str, dict[str, dict[str, Any]]] = {
     "free_end": {
         "quintic": {"planned_rpy_deg": (-0.81, 0.53, 0.78), "real_rpy_deg": (-0.82, 0.52, 0.79), "runtime_s": 0.42},
         "ba": {"planned_rpy_deg": (0.0, 0.0, 0.0), "real_rpy_deg": (-0.07, 0.02, 0.13), "runtime_s": 370.0},

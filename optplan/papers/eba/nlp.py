@@ -26,6 +26,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -79,7 +80,7 @@ class NLPOptions:
     #: (:class:`~optplan.problem.OptProblem`).
     transcription: str = "bspline"
     #: B-spline kernels from compiled C: True, False or ``"auto"`` (what an earlier run compiled).
-    compile_kernels: object = "auto"
+    compile_kernels: bool | str = "auto"
     #: Warm-start the NLP from the same NLP solved on this many intervals [count] (None: off; ≥ 4).
     coarse_intervals: int | None = None
     #: IPOPT's wall-clock cap per solve [s].
@@ -114,7 +115,7 @@ class NLPOptions:
         """N = 48: the closed chain holds at the knots only and drifts ∝ h⁴ between them;
         warm-started from the same NLP on 12 intervals (``coarse_intervals``).
         See docs/decisions/0011-paper-reproduction-grids-and-guards.md."""
-        base = dict(n_intervals=48, coarse_intervals=12)
+        base: dict[str, Any] = dict(n_intervals=48, coarse_intervals=12)
         base.update(overrides)
         return cls(**base)
 
@@ -178,6 +179,7 @@ def _coarse_warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions):
     Solution)."""
     from dataclasses import replace
 
+    assert o.coarse_intervals is not None   # the caller checks
     oc = replace(o, n_intervals=o.coarse_intervals, coarse_intervals=None)
     prob, _ = _build_spline(robot, scenario, oc)
     sol = prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter, max_wall_time=o.max_wall_time)

@@ -27,6 +27,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -69,7 +70,8 @@ class SplineRRTTask:
         scene = Scene.load(scene) if isinstance(scene, str) else scene
         e = scene.extra
         unit = math.pi / 180.0  # the shipped scene is in degrees
-        start, goal = {}, {}
+        start: dict[str, pin.SE3] = {}
+        goal: dict[str, pin.SE3] = {}
         qs = robot.neutral()[robot.base_nq:].copy()
         for a in robot.arms:
             for key, out in (("start", start), ("goal", goal)):
@@ -173,7 +175,8 @@ def smooth_hand_paths(paths: dict, start: dict, goal: dict, speed_limit: float =
     T and, with ``optimize_durations``, the quartic NLP's status."""
     if not (np.isfinite(speed_limit) and speed_limit > 0):
         raise ValueError(f"speed_limit: expected a positive speed [m/s], got {speed_limit}")
-    splines, T_arm, info = {}, {}, {"nlp": {}}
+    info: dict[str, Any] = {"nlp": {}}
+    splines, T_arm = {}, {}
     for a, W in paths.items():
         W = np.asarray(W, float)
         if W.ndim != 2 or W.shape[1] != 3 or len(W) < 2:
@@ -572,11 +575,13 @@ class SplineRRTResult:
     def figures(self, ev: dict | None = None, T: float | None = None) -> dict:
         """The headline figures of one evaluation (the example's JSON keys)."""
         ev = self.evaluation if ev is None else ev
+        if ev is None:
+            raise ValueError("SplineRRTResult.figures: no evaluation to report (the plan failed)")
         arms = list(self.hands)
         out = {"duration_s": float(self.T if T is None else T),
                "max_ee_speed_m_s": {a: float(np.linalg.norm(np.gradient(_ee_positions(self.task.robot, ev["q"], a),
                                                                         ev["t"], axis=0), axis=1).max())
-                                    for a in arms} if ev is not None else {},
+                                    for a in arms},
                "max_tracking_error_m": float(max(ev[f"tracking_position_m_{a}"].max() for a in arms)),
                "max_tracking_error_rad": float(max(ev[f"tracking_orientation_rad_{a}"].max() for a in arms)),
                "min_link_distance_m": float(ev["link_distance_m"].min()),
@@ -623,6 +628,7 @@ def run_spline_rrt(robot: RobotModel | None = None, task: SplineRRTTask | None =
     tr = ev = None
     for _round in range(4):
         tr = track(robot, hands, task.q_start, T, tracking)
+        assert tr.qdd is not None   # track() fills it
         peak_v = float(np.abs(tr.qd).max())
         peak_a = float(np.abs(tr.qdd).max())
         ratio = max(peak_v / vlim, math.sqrt(peak_a / joint_accel_limit))
@@ -633,6 +639,7 @@ def run_spline_rrt(robot: RobotModel | None = None, task: SplineRRTTask | None =
         hands = _time_scaled(hands, T, T_new)
         T = T_new
     tim["track_s"] = time.perf_counter() - t2
+    assert tr is not None   # the stretch loop runs at least once
     ev = evaluate(robot, hands, tr.t, tr.joints, tr.qd, scene=task.scene, joint_accelerations=tr.qdd)
     res = SplineRRTResult(task, plan, hands, T, tr, ev, tim, info)
     if run_optimizer:
