@@ -30,6 +30,7 @@ import json
 import logging
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -79,13 +80,16 @@ def verify_path(robot: RobotModel, scene: Scene, res: PlanResult, *, resolution:
     """Independent check of a closed-chain path with regrasps (see the module docstring).
     Returns ``{"ok": bool, "problems": [...], "configurations": M, "dense_configurations": n,
     "max_closure": ...}``."""
+    if scene.object is None:
+        raise ValueError(f"scene {scene.name!r}: a closed-chain path needs a held [object]")
+    grasps = scene.object.grasps
     ck = checker or ValidityChecker(robot, scene)
-    kin = kin or ClosedChainKinematics(robot, scene.object.grasps)
+    kin = kin or ClosedChainKinematics(robot, grasps)
     ik = IKSettings(tol_position=1e-9, tol_orientation=1e-9, max_iterations=50)
     P, C = np.asarray(res.path), np.asarray(res.constrained, bool)
     problems: list[str] = []
     data = robot.model.createData()
-    reg = {}
+    reg: dict[int, Any] = {}
     for s in res.segments:
         if s.kind == "regrasp":
             for k in range(s.start, s.stop):
@@ -95,7 +99,7 @@ def verify_path(robot: RobotModel, scene: Scene, res: PlanResult, *, resolution:
         if not ck.in_limits(q):
             problems.append(f"configuration {k} outside the joint limits")
         if C[k]:
-            e = max(closure_error(robot, scene.object.grasps, q, data))
+            e = max(closure_error(robot, grasps, q, data))
             max_cl = max(max_cl, e)
             if e > closure_tolerance:
                 problems.append(f"configuration {k}: closed chain violated by {e:.1e}")
@@ -105,7 +109,10 @@ def verify_path(robot: RobotModel, scene: Scene, res: PlanResult, *, resolution:
         a, b = P[k], P[k + 1]
         if k in reg:
             M = reg[k]
-            if not edge_is_valid(a, b, lambda x, M=M: ck.is_valid_object_fixed(x, M), resolution):
+            def valid_fixed(x: np.ndarray, M: Any = M) -> bool:
+                return ck.is_valid_object_fixed(x, M)
+
+            if not edge_is_valid(a, b, valid_fixed, resolution):
                 problems.append(f"regrasp edge {k}-{k + 1} in collision")
             n_dense += 1
             continue
@@ -151,6 +158,8 @@ def make_witness(scene_name: str, *, planner: str = "tcbirrt:variant=improved:ed
     robot = RobotModel.from_name("tcbirrt_dual_arm")
     scene = Scene.load(scene_name)
     qs, qg = nominal_configurations(robot, scene)
+    if scene.object is None:
+        raise ValueError(f"scene {scene_name!r}: TCBiRRT needs a held [object]")
     ck = ValidityChecker(robot, scene)
     kin = ClosedChainKinematics(robot, scene.object.grasps)
     name, opts = parse_planner_spec(planner)
@@ -218,8 +227,9 @@ def clutter_obstacles(n: int, seed: int, *, region=((0.6, 3.2), (-2.2, 2.2), (0.
     s1 = Scene.load("ssps_scene1")
     gen = TrialGenerator(robot, s1)
     rng = np.random.default_rng(seed)
+    assert s1.object is not None and s1.start is not None and s1.goal is not None  # the shipped scene has them
     obj = s1.object.coal_geometry()
-    out = []
+    out: list[dict[str, Any]] = []
     tries = 0
     while len(out) < n and tries < 100 * n:
         tries += 1
@@ -238,7 +248,7 @@ def clutter_obstacles(n: int, seed: int, *, region=((0.6, 3.2), (-2.2, 2.2), (0.
              "xyz": [round(float(x), 3) for x in c]}
         trial = Scene.from_dict({"obstacles": [d], "object": _obj_dict(), "robot": s1.robot})
         ck = ValidityChecker(robot, trial)
-        if all(ck.is_valid(q) for q in gen.q_nominal.values()):
+        if all(q is not None and ck.is_valid(q) for q in gen.q_nominal.values()):
             out.append(d)
     return out
 

@@ -80,6 +80,7 @@ _CACHE: dict = {}
 def setup_scene(scene_name: str, planners) -> dict:
     """Robot, scene, constraint, start/goal and planners of one scene (cached per process)."""
     from ..model.example_robots import load_pr2
+    from ..planners.base import Planner
     from ..planners.cbirrt2 import CBiRRT2, CBiRRT2Options
     from ..planners.oc_rrt import OCRRT, OCRRTOptions
     from ..planners.orientation import OrientationManifold, constraint_from_scene, endpoints_from_scene
@@ -97,7 +98,7 @@ def setup_scene(scene_name: str, planners) -> dict:
     mf = OrientationManifold(con)
     q_start, q_goal = endpoints_from_scene(mf, scene)
     ck = ValidityChecker(robot, scene)
-    pl = {}
+    pl: dict[str, Planner] = {}
     for p in planners:
         if p == "oc_rrt":
             pl[p] = OCRRT(robot, scene, con, OCRRTOptions(connect=False), checker=ck, manifold=mf)

@@ -33,6 +33,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -53,16 +54,17 @@ SWEEP_TOLERANCE = 0.01
 T_GRID = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 60.0, 100.0, 1000.0)
 
 
-def parse_planner_spec(spec: str) -> tuple[str, dict]:
+def parse_planner_spec(spec: str) -> tuple[str, dict[str, Any]]:
     """``"ompl-atlas:tolerance=1e-4:range=0.5"`` → ``("ompl-atlas", {"tolerance": 1e-4, "range": 0.5})``
     (values: int, float, true/false/none, else string). The whole spec is the planner's label."""
     name, *opts = spec.split(":")
-    out = {}
+    out: dict[str, Any] = {}
     for o in opts:
         if "=" not in o:
             raise ValueError(f"planner option {o!r} in {spec!r}: expected key=value")
         k, v = o.split("=", 1)
         low = v.lower()
+        val: Any
         if low in ("true", "false"):
             val = low == "true"
         elif low == "none":
@@ -160,6 +162,8 @@ def _worker_setup(robot_name: str, scenes: list[str], planners: list[str]):
         if name not in robots:
             robots[name] = load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
         robot = robots[name]
+        if scene.object is None:
+            raise ValueError(f"scene {sc!r}: the TCBiRRT benchmark needs a held [object]")
         checker = ValidityChecker(robot, scene)
         kin = ClosedChainKinematics(robot, scene.object.grasps)
         _W[sc] = {"scene": scene, "robot": robot, "gen": TrialGenerator(robot, scene), "checker": checker,
@@ -243,7 +247,7 @@ def load_results(path) -> list[dict]:
     p = Path(path)
     if p.is_dir():
         p = p / "results.jsonl"
-    rows = []
+    rows: list[dict[str, Any]] = []
     if not p.exists():
         return rows
     with open(p) as f:
@@ -369,7 +373,7 @@ def summarize(rows: list[dict], time_limit: float) -> dict:
         n = len(trials)
         nmin = max(2, int(math.ceil(N_MIN.get(sc, 15) * n / 100.0))) if n else 0
         regen = {int(r["trial"]): int(r.get("regenerations", 0)) for r in rs}
-        entry = {"n_trials": n, "n_min": nmin, "regenerations": int(sum(regen.values())), "planners": {}}
+        entry: dict[str, Any] = {"n_trials": n, "n_min": nmin, "regenerations": int(sum(regen.values())), "planners": {}}
         for p in sorted({r["planner"] for r in rs}, key=lambda x: (x != "tcbirrt", x)):
             pr = [r for r in rs if r["planner"] == p]
             succ = [r for r in pr if r["success"]]
@@ -404,7 +408,7 @@ def format_summary(summ: dict) -> str:
     lines = []
     for sc, e in summ.items():
         lines.append(f"{sc}: {e['n_trials']} trials, n_min = {e['n_min']}, start/goal regenerations = {e['regenerations']}")
-        ts = None
+        ts: list[Any] = []
         for d in e["planners"].values():
             ts = list(d["p_t"])
             break
