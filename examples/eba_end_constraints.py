@@ -62,7 +62,7 @@ def main(argv=None) -> int:
         print(f"  nlp: IPOPT {i['ipopt_status']} in {i.get('total_iterations', i['iterations'])} iterations, {case.results['nlp'].runtime_s:.2f} s "
               f"(+ {i['setup_s']:.1f} s building the NLP); verify: final attitude "
               f"{i['verify_final_base_attitude_error_rad']:.1e} rad, closed chain {i['verify_max_closed_chain_residual']:.1e}")
-    print("  targets (issue 5): EBA/NLP closed-chain residual ≤ 1e-6, NLP ≤ 1e-6 rad; EBA ≤ 5 s, NLP ≤ 2 s, "
+    print("  targets: EBA/NLP closed-chain residual ≤ 1e-6, NLP ≤ 1e-6 rad; EBA ≤ 5 s, NLP ≤ 2 s, "
           "Fourier ≤ 30 s")
     crit = eba.criteria(case)
     ok = all(c[1] for c in crit)

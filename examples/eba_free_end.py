@@ -65,7 +65,7 @@ def main(argv=None) -> int:
               f"run {v.runtime_s:.2f} s")
     print("  paper 'real' = after the paper's closed-loop control simulation (not reproduced here);")
     print("  joint err includes the joint mismatch at the meeting (BA/EBA); max jump over t = 0, t_m, end")
-    print("  targets (issue 5): quintic ≈ 1°, EBA ≤ 0.01°, NLP ≤ 1e-6 rad; run times EBA ≤ 5 s, NLP ≤ 2 s, "
+    print("  targets: quintic ≈ 1°, EBA ≤ 0.01°, NLP ≤ 1e-6 rad; run times EBA ≤ 5 s, NLP ≤ 2 s, "
           "Fourier ≤ 30 s")
     if "nlp" in case.results:
         i = case.results["nlp"].info

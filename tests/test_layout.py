@@ -156,12 +156,9 @@ def test_cycle_finder_finds_a_cycle():
 
 
 def test_no_import_circles(graph):
-    """No circles among the library's modules, lazy (function-level) imports included; in the
-    benchmarks (:mod:`optplan.bench`) none at module level."""
+    """No circles among the package's modules, lazy (function-level) imports included."""
     _, edges = graph
-    adj = {m: {t for t, _, lazy in imps if t != m and t != "optplan"
-               and not (lazy and m.startswith("optplan.bench"))}
-           for m, imps in edges.items()}
+    adj = {m: {t for t, _, _ in imps if t != m and t != "optplan"} for m, imps in edges.items()}
     assert _cycles(adj) == []
 
 

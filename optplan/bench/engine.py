@@ -140,3 +140,30 @@ def _dask_map(fn, units: list, *, jobs: int, address: str | None, initializer, i
             client.close()
         if cluster is not None:
             cluster.close()
+
+
+def parse_planner_spec(spec: str) -> tuple[str, dict[str, Any]]:
+    """``"ompl-atlas:tolerance=1e-4:range=0.5"`` → ``("ompl-atlas", {"tolerance": 1e-4, "range": 0.5})``
+    (values: int, float, true/false/none, else string). The whole spec is the planner's label."""
+    name, *opts = spec.split(":")
+    out: dict[str, Any] = {}
+    for o in opts:
+        if "=" not in o:
+            raise ValueError(f"planner option {o!r} in {spec!r}: expected key=value")
+        k, v = o.split("=", 1)
+        low = v.lower()
+        val: Any
+        if low in ("true", "false"):
+            val = low == "true"
+        elif low == "none":
+            val = None
+        else:
+            try:
+                val = int(v)
+            except ValueError:
+                try:
+                    val = float(v)
+                except ValueError:
+                    val = v
+        out[k.strip()] = val
+    return name.strip(), out

@@ -153,7 +153,7 @@ def make_witness(scene_name: str, *, planner: str = "tcbirrt:variant=improved:ed
     """Plan nominal start → nominal goal with ``planner`` for each seed until a path passes
     :func:`verify_path`; write it to :func:`witness_path`."""
     from ..planners import make_planner
-    from .tcbirrt import parse_planner_spec
+    from .engine import parse_planner_spec
 
     robot = RobotModel.from_name("tcbirrt_dual_arm")
     scene = Scene.load(scene_name)

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from .engine import map_unordered, validate_engine
+from .engine import map_unordered, parse_planner_spec, validate_engine
 
 __all__ = ["BenchConfig", "run", "parse_planner_spec", "expand_scenes", "load_results", "summarize", "format_summary", "plot_success", "scene_name",
            "PAPER", "N_MIN"]
@@ -52,33 +52,6 @@ PAPER: dict[str, dict[str, tuple[float, float | None, float | None]]] = {  # the
 #: between two checked configurations; a path with an edge in collision at this density is not a success
 SWEEP_TOLERANCE = 0.01
 T_GRID = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 60.0, 100.0, 1000.0)
-
-
-def parse_planner_spec(spec: str) -> tuple[str, dict[str, Any]]:
-    """``"ompl-atlas:tolerance=1e-4:range=0.5"`` → ``("ompl-atlas", {"tolerance": 1e-4, "range": 0.5})``
-    (values: int, float, true/false/none, else string). The whole spec is the planner's label."""
-    name, *opts = spec.split(":")
-    out: dict[str, Any] = {}
-    for o in opts:
-        if "=" not in o:
-            raise ValueError(f"planner option {o!r} in {spec!r}: expected key=value")
-        k, v = o.split("=", 1)
-        low = v.lower()
-        val: Any
-        if low in ("true", "false"):
-            val = low == "true"
-        elif low == "none":
-            val = None
-        else:
-            try:
-                val = int(v)
-            except ValueError:
-                try:
-                    val = float(v)
-                except ValueError:
-                    val = v
-        out[k.strip()] = val
-    return name.strip(), out
 
 
 def scene_name(s: str) -> str:
