@@ -84,7 +84,7 @@ class _MovedModuleFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         return importlib.import_module(new)
 
     def exec_module(self, module):
-        pass   # the new module is already executed
+        """Nothing to run: :meth:`create_module` returned the new module, already executed."""
 
 
 _FINDER = _MovedModuleFinder()

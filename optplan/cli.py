@@ -65,9 +65,14 @@ def _cmd_models_info(args) -> int:
 
 
 def _cmd_reproduce(args) -> int:
-    from .reproduce import main
+    from .reproduce import ReproduceError, reproduce
 
-    return main(args)
+    try:
+        rec = reproduce(args.paper, out=args.out or f"reproduce_{args.paper}", quick=args.quick, html=not args.no_html)
+    except ReproduceError as exc:
+        print(f"optplan reproduce: error: {exc}", file=sys.stderr)
+        return 2
+    return 0 if rec["success"] else 1
 
 
 def _cmd_bench_kinematics(args) -> int:
@@ -280,9 +285,30 @@ def _cmd_plan(args) -> int:
 
 
 def _cmd_view(args) -> int:
-    from .viz.outputs import view_command
+    """``optplan view TRAJ.npz [--scene] [--robot] [--html] [--plot DIR] [--playback S]``."""
+    from dataclasses import replace
+    from pathlib import Path
 
-    return view_command(args)
+    from .viz.html import ViewOptions, VizUnavailable, load_trajectory, resolve_scene, view_file
+
+    try:
+        p = view_file(args.traj, scene=args.scene, robot=args.robot, out=args.html,
+                      options=replace(ViewOptions(), playback_s=args.playback))
+    except (ValueError, FileNotFoundError, VizUnavailable) as exc:
+        print(f"optplan view: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {p} (open it in a browser: play/pause and the time slider are at the bottom)")
+    if args.plot:
+        from .model.robot import RobotModel
+        from .viz.plan_plots import plot_trajectory
+
+        tr = load_trajectory(args.traj)
+        sc = resolve_scene(args.scene if args.scene is not None else tr.get("scene"))
+        rm = RobotModel.from_name(args.robot or tr.get("robot") or sc.robot)
+        for f in plot_trajectory(rm, sc, tr["t"], tr["q"], args.plot, name=Path(args.traj).stem,
+                                 constrained=tr.get("constrained")):
+            print(f"wrote {f}")
+    return 0
 
 
 def _cmd_demo(args) -> int:

@@ -342,13 +342,5 @@ def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = Tru
     return record
 
 
-def main(args) -> int:
-    try:
-        rec = reproduce(args.paper, out=args.out or f"reproduce_{args.paper}", quick=args.quick, html=not args.no_html)
-    except ReproduceError as exc:
-        print(f"optplan reproduce: error: {exc}", file=sys.stderr)
-        return 2
-    return 0 if rec["success"] else 1
-
 
 
