@@ -24,7 +24,7 @@ import pinocchio as pin
 from .constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
 from .geometry.spatial import pose_to_vector, rpy_to_matrix, vector_to_pose
 from .model.robot import RobotModel
-from .planners.tcbirrt import interpolate_task
+from .planners.task_space import interpolate_task
 from .planners.validity import ValidityChecker
 from .scene import Scene
 
@@ -107,7 +107,7 @@ def _reach_scale(robot: RobotModel) -> float:
     """The robot's mean arm reach / the TCBiRRT paper robot's (1 for that robot; the paper's 0.2 m
     perturbation is sized for its 2.94 m arms)."""
     from .planners.task_sampling import arm_reach
-    from .planners.tcbirrt import PAPER_REACH
+    from .planners.tcbirrt_options import PAPER_REACH
 
     if robot.is_floating or not robot.arms:
         return 1.0

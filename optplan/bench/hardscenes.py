@@ -40,7 +40,7 @@ from ..model.description import models_dir
 from ..model.robot import RobotModel
 from ..planners.base import PlanResult
 from ..planners.rrtconnect import edge_is_valid
-from ..planners.tcbirrt import interpolate_task
+from ..planners.task_space import interpolate_task
 from ..planners.validity import ValidityChecker
 from ..scene import Scene
 

@@ -77,327 +77,39 @@ Deviations from the paper, all options (defaults in brackets):
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Any, cast
 
 import numpy as np
 import pinocchio as pin
 
-from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from ..errors import ConfigurationError
-from ..geometry.spatial import vee_skew
 from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
-from .cbirrt2 import CBiRRT2, CBiRRT2Options
-from .rrtconnect import RRTConnectOptions, edge_is_valid, rrt_connect, shortcut_path
+from .cbirrt2 import CBiRRT2
+from .rrtconnect import edge_is_valid, rrt_connect, shortcut_path
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
+from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
+from .tcbirrt_options import (
+    PAPER_REACH,
+    PAPER_XI_LOWER,
+    PAPER_XI_UPPER,
+    VARIANTS,
+    TCBiRRTOptions,
+    reach_scaled_workspace,
+)
 from .tree import Tree
 from .validity import ValidityChecker
 
 __all__ = ["TCBiRRTOptions", "TCBiRRT", "exp_coordinates", "rotation_from_exp", "interpolate_task",
-           "xi_from_pose", "pose_from_xi", "PAPER_XI_LOWER", "PAPER_XI_UPPER"]
+           "xi_from_pose", "pose_from_xi", "PAPER_XI_LOWER", "PAPER_XI_UPPER", "PAPER_REACH", "VARIANTS",
+           "reach_scaled_workspace"]
 log = logging.getLogger(__name__)
 
 TRAPPED, ADVANCED, REACHED = "trapped", "advanced", "reached"
-PAPER_XI_LOWER = (-2.0, -3.0, 0.0, -math.pi, -math.pi, -math.pi)
-PAPER_XI_UPPER = (2.0, 3.0, 4.0, math.pi, math.pi, math.pi)
 PARTIAL = "partial"
-#: option values of each variant (fields left at None take them)
-VARIANTS = {
-    "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False,
-              "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0,
-              "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
-              "regrasp_share_orders": False, "verify_path": False},
-    "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
-                 "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
-                 "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
-                 "regrasp_share_orders": False, "verify_path": True},
-}
-
-
-# ---------------------------------------------------------------------- task-space helpers
-def exp_coordinates(R: np.ndarray) -> np.ndarray:
-    """Rotation vector ω̂θ of ``R`` (the TCBiRRT paper Appendix, Eq. 12-14), θ ∈ [0, π].
-
-    Eq. 12 (θ from the trace) and Eq. 14 (axis from the skew part) away from 0 and π; Eq. 13's
-    θ = π case is generalised to use the largest diagonal entry (Eq. 13 divides by 1 + r11, which
-    vanishes for a half turn about any axis ⊥ x) and is used whenever sin θ is too small for Eq. 14.
-    """
-    R = np.asarray(R, dtype=float)
-    v = vee_skew(R)
-    s = float(np.linalg.norm(v))
-    c = float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
-    theta = math.atan2(s, c)                      # Eq. 12, robust form
-    if s < 1e-12 and c > 0:
-        return np.zeros(3)                        # θ = 0
-    if c > -0.9:
-        return v * (theta / s)                    # Eq. 14: ω̂ = vee(R − Rᵀ) / (2 sin θ)
-    # near π: ω̂ω̂ᵀ = (R + Rᵀ)/2 − cos θ I) / (1 − cos θ), take the best-conditioned column (Eq. 13)
-    B = (0.5 * (R + R.T) - c * np.eye(3)) / (1.0 - c)
-    k = int(np.argmax(np.diag(B)))
-    w = B[:, k] / math.sqrt(max(B[k, k], 1e-300))
-    if w @ v < 0:                                 # sign from the skew part (undetermined at exactly π)
-        w = -w
-    return w * theta
-
-
-def rotation_from_exp(phi: np.ndarray) -> np.ndarray:
-    """Rodrigues: ``exp([φ]×)``."""
-    return np.asarray(pin.exp3(np.asarray(phi, dtype=float)))
-
-
-def _unwrap_near(phi: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """The representative of the rotation ``exp(φ)`` (φ + 2πk φ̂) closest to ``ref``."""
-    th = float(np.linalg.norm(phi))
-    if th < 1e-12:
-        return phi
-    u = phi / th
-    cands = [phi + 2.0 * math.pi * k * u for k in (-1, 0, 1)]
-    return min(cands, key=lambda c: float(np.linalg.norm(c - ref)))
-
-
-def interpolate_task(R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int,
-                     mode: str = "geodesic") -> list[tuple[np.ndarray, np.ndarray]]:
-    """Object poses ``j = 1..n`` from ``(R0, p0)`` to ``(R1, p1)`` (Eq. 4): position linear,
-    orientation linear in exponential coordinates — of the relative rotation (``"geodesic"``) or of
-    the absolute rotations (``"absolute"``, literal Eq. 4 with φ_s unwrapped next to φ_near)."""
-    out = []
-    if mode == "geodesic":
-        w = np.asarray(pin.log3(R0.T @ R1))
-        for j in range(1, n + 1):
-            s = j / n
-            out.append((R0 @ np.asarray(pin.exp3(s * w)), p0 + s * (p1 - p0)))
-    elif mode == "absolute":
-        f0 = exp_coordinates(R0)
-        f1 = _unwrap_near(exp_coordinates(R1), f0)
-        for j in range(1, n + 1):
-            s = j / n
-            out.append((rotation_from_exp(f0 + s * (f1 - f0)), p0 + s * (p1 - p0)))
-    else:
-        raise ValueError(f"interpolation mode: expected 'geodesic' or 'absolute', got {mode!r}")
-    if out:
-        out[-1] = (np.array(R1, dtype=float), np.array(p1, dtype=float))  # exact end pose ξ_s
-    return out
-
-
-def xi_from_pose(M: pin.SE3) -> np.ndarray:
-    """ξ = [x, y, z, roll, pitch, yaw] of an object pose (Eq. 2's RPY)."""
-    return np.concatenate([M.translation, pin.rpy.matrixToRpy(M.rotation)])
-
-
-def pose_from_xi(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(R, p)`` of ξ."""
-    return np.asarray(pin.rpy.rpyToMatrix(float(xi[3]), float(xi[4]), float(xi[5]))), np.array(xi[:3], dtype=float)
-
-
-# ---------------------------------------------------------------------- options
-def _pos(name: str, v: object, allow_zero: bool = False) -> None:
-    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and (v >= 0 if allow_zero else v > 0)
-    if not ok:
-        raise ValueError(f"TCBiRRTOptions.{name}: expected a {'non-negative' if allow_zero else 'positive'} number, got {v!r}")
-
-
-@dataclass(frozen=True)
-class TCBiRRTOptions:
-    """Options of :class:`TCBiRRT` (the paper's defaults; the module docstring explains the deviations).
-
-    ``variant`` selects ``"paper"`` (Alg. 1-4 as published, the default) or ``"improved"``; fields left
-    at None take the variant's value (:data:`VARIANTS`), an explicit value overrides it.
-    """
-
-    #: s_ξ of Eq. 3: largest task-space step of an extension [mixed m / rad, as the paper's ξ].
-    step_size: float = 0.6
-    #: N of Eq. 4: object poses per extension [count].
-    n_interp: int = 5
-    #: ξ_l: lower corner of the sampling box (x, y, z [m], roll, pitch, yaw [rad]; world = base frame).
-    xi_lower: tuple[float, ...] = PAPER_XI_LOWER
-    #: ξ_h: upper corner of the sampling box (x, y, z [m], roll, pitch, yaw [rad]).
-    xi_upper: tuple[float, ...] = PAPER_XI_UPPER
-    #: Alg. 4's IK settings (ε_p, ε_o, n, K·λ).
-    ik: IKSettings = field(default_factory=IKSettings)
-    #: A waypoint whose IK solution jumps by more than this from the previous one fails [rad] (``inf``: off;
-    #: None: the variant's value, :data:`VARIANTS`: paper 0.5, improved 0.25).
-    max_joint_step: float | None = None
-    #: ``"geodesic"`` (Eq. 4 on the relative rotation) or ``"absolute"`` (the literal Eq. 4 on unwrapped
-    #: exponential coordinates).
-    interpolation: str = "geodesic"
-    #: Check the straight joint-space segments between consecutive configurations every this many radians [rad]
-    #: (None: only the N+1 configurations, as the paper).
-    edge_resolution: float | None = None
-    #: Check edges so densely that no point of the arms or object moves farther than this between two checks [m]
-    #: (0: off; None: the variant's value, :data:`VARIANTS`: paper 0, improved 0.01).
-    edge_tolerance: float | None = None
-    #: Check constrained edges only once they lie on a start-goal path (lazy collision checking) (None: the
-    #: variant's value, :data:`VARIANTS`).
-    lazy_edges: bool | None = None
-    #: The bound that spaces the ``edge_tolerance`` checks: ``"jacobian"`` (each geometry's speed from the Jacobian
-    #: plus a second-order remainder) or ``"static"`` (the configuration-free per-geometry bound); both conservative.
-    edge_bound: str = "jacobian"
-    #: Re-check a found path's edges at the configuration-free bound's uniform spacing (the benchmark's); a
-    #: failing edge removes its subtree and the search goes on (None: the variant's value, :data:`VARIANTS`).
-    verify_path: bool | None = None
-    #: Join the trees in joint space (CBiRRT2's ConstrainedExtend) when the task-space connection cannot (None:
-    #: the variant's value, :data:`VARIANTS`); see docs/decisions/0004-tcbirrt-improved-variant.md.
-    joint_connect: bool | None = None
-    #: The joint-space connection is tried when a connect step is trapped within this ξ distance of the other
-    #: tree's node [mixed m / rad].
-    joint_connect_radius: float = 1.0
-    #: The joint-space connection is tried only when the two configurations are within this Euclidean joint distance [rad] (farther ones are
-    #: other IK branches).
-    joint_connect_max_distance: float = 2.0
-    #: CBiRRT2 options of the joint-space connection.
-    joint_connect_options: CBiRRT2Options = field(default_factory=lambda: CBiRRT2Options(max_edge=0.3, collision_step=0.1,
-                                                                                         tolerance=1e-8))
-    #: RRTConnect options of a regrasp motion (one arm, 7-D, object fixed).
-    regrasp: RRTConnectOptions = field(default_factory=lambda: RRTConnectOptions(range=1.0, resolution=0.03,
-                                                                                 shortcut_iterations=50))
-    #: Time limit per regrasp attempt [s].
-    regrasp_time_limit: float = 2.0
-    #: An arm whose two solutions differ by less than this (max-norm) does not move [rad].
-    regrasp_tolerance: float = 1e-4
-    #: The two arm orders of a regrasp (A first, B first) each get an equal share of ``regrasp_time_limit``
-    #: instead of the first order using all it needs (None: the variant's value: off in both, see
-    #: docs/planners.md).
-    regrasp_share_orders: bool | None = None
-    #: Start and goal must satisfy the closed chain to this (position [m] and angle [rad]).
-    closure_tolerance: float = 1e-6
-    #: Clearance counted as contact [m].
-    margin: float = 0.0
-    #: Cap on Alg. 1 iterations [count] (0: only the time limit).
-    max_iterations: int = 0
-    #: ``"paper"`` (the published algorithm) or ``"improved"`` (task-space sampling aids).
-    variant: str = "paper"
-    #: Probability that ξ_rand is the pose of a random node of the other tree [-] (None: the variant's value,
-    #: :data:`VARIANTS`): paper 0, improved 0.1.
-    goal_bias: float | None = None
-    #: Reject ξ_rand while the object alone collides or a grasp point is beyond its arm's reach (no IK;
-    #: :mod:`.task_sampling`) (None: the variant's value, :data:`VARIANTS`).
-    sample_filter: bool | None = None
-    #: Probability of a bridge-test sample in ξ (object in collision at two nearby poses, free at their
-    #: midpoint) [-] (None: the variant's value, :data:`VARIANTS`): 0 in both; see
-    #: docs/decisions/0004-tcbirrt-improved-variant.md.
-    bridge_probability: float | None = None
-    #: Spread of the bridge test's second pose: (position [m], angle [rad]).
-    bridge_sigma: tuple[float, float] = (0.3, 0.4)
-    #: When PathInverseKinematics fails after ≥ 1 valid waypoint, keep the valid part as a shorter extension
-    #: (None: the variant's value, :data:`VARIANTS`).
-    keep_prefix: bool | None = None
-    #: Probability that ξ_rand is a pose of the object's lead path plus Gaussian noise ``guide_sigma`` [-]
-    #: (None: the variant's value, :data:`VARIANTS`): paper 0, improved 0.4.
-    guide_probability: float | None = None
-    #: Noise of a lead-path sample: (position [m], angle [rad]).
-    guide_sigma: tuple[float, float] = (0.05, 0.05)
-    #: Time spent on the object's lead path per query, at most [s].
-    guide_time_limit: float = 3.0
-    #: Time of one lead-path attempt (restarted while none is found) [s].
-    guide_attempt_time: float = 0.3
-    #: Probability that a sample's orientation is drawn on the start-goal rotation geodesic, perturbed by
-    #: ``geodesic_sigma`` [-] (None: the variant's value, :data:`VARIANTS`): paper 0, improved 0.5.
-    geodesic_probability: float | None = None
-    #: Perturbation of a geodesic orientation sample, per axis [rad].
-    geodesic_sigma: float = 0.15
-    #: When a waypoint's IK solution collides or fails, retry IK this many times from the previous configuration
-    #: perturbed by ``N(0, ik_restart_sigma²)`` [count] (None: the variant's value, :data:`VARIANTS`): paper 0,
-    #: improved 2.
-    ik_restarts: int | None = None
-    #: Standard deviation of an IK restart's perturbation, per joint [rad].
-    ik_restart_sigma: float = 0.3
-    #: Scale the default box's position part and the step size by the robot's mean arm reach /
-    #: :data:`PAPER_REACH` about its shoulders' midpoint (a box or step set explicitly is used as given).
-    scale_to_reach: bool = True
-
-    def __post_init__(self) -> None:
-        if self.variant not in VARIANTS:
-            raise ValueError(f"TCBiRRTOptions.variant: expected one of {tuple(VARIANTS)}, got {self.variant!r}")
-        for name, v in VARIANTS[self.variant].items():   # None: the variant's value
-            if getattr(self, name) is None:
-                object.__setattr__(self, name, v)
-        for name in ("goal_bias", "bridge_probability", "guide_probability", "geodesic_probability"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 1.0):
-                raise ValueError(f"TCBiRRTOptions.{name}: expected a probability in [0, 1], got {v!r}")
-        if cast(float, self.goal_bias) + cast(float, self.bridge_probability) + cast(float, self.guide_probability) > 1.0:
-            raise ValueError(f"TCBiRRTOptions: goal_bias + bridge_probability + guide_probability must be <= 1, "
-                             f"got {self.goal_bias} + {self.bridge_probability} + {self.guide_probability}")
-        for name in ("bridge_sigma", "guide_sigma"):
-            bs = getattr(self, name)
-            if not (isinstance(bs, (tuple, list)) and len(bs) == 2
-                    and all(isinstance(x, (int, float)) and x > 0 for x in bs)):
-                raise ValueError(f"TCBiRRTOptions.{name}: expected (position [m], angle [rad]) > 0, got {bs!r}")
-            object.__setattr__(self, name, (float(bs[0]), float(bs[1])))
-        _pos("guide_time_limit", self.guide_time_limit)
-        _pos("guide_attempt_time", self.guide_attempt_time)
-        _pos("geodesic_sigma", self.geodesic_sigma)
-        _pos("ik_restart_sigma", self.ik_restart_sigma)
-        if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
-            raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
-        _pos("joint_connect_radius", self.joint_connect_radius)
-        _pos("joint_connect_max_distance", self.joint_connect_max_distance)
-        if not isinstance(self.joint_connect_options, CBiRRT2Options):
-            raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
-                             f"got {type(self.joint_connect_options).__name__}")
-        for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
-                     "regrasp_share_orders", "verify_path"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
-        _pos("step_size", self.step_size)
-        if not (isinstance(self.n_interp, int) and self.n_interp >= 1):
-            raise ValueError(f"TCBiRRTOptions.n_interp: expected an int >= 1, got {self.n_interp!r}")
-        lo, hi = np.asarray(self.xi_lower, float), np.asarray(self.xi_upper, float)
-        if lo.shape != (6,) or hi.shape != (6,) or not np.all(np.isfinite(lo)) or not np.all(np.isfinite(hi)) \
-                or np.any(hi < lo):
-            raise ValueError(f"TCBiRRTOptions.xi_lower/xi_upper: expected two 6-vectors with lower <= upper, "
-                             f"got {self.xi_lower!r}, {self.xi_upper!r}")
-        object.__setattr__(self, "xi_lower", tuple(float(x) for x in lo))
-        object.__setattr__(self, "xi_upper", tuple(float(x) for x in hi))
-        if not isinstance(self.ik, IKSettings):
-            raise ValueError(f"TCBiRRTOptions.ik: expected IKSettings, got {type(self.ik).__name__}")
-        if not (isinstance(self.max_joint_step, (int, float)) and self.max_joint_step > 0):
-            raise ValueError(f"TCBiRRTOptions.max_joint_step: expected a positive number (inf: off), got {self.max_joint_step!r}")
-        if self.edge_bound not in ("jacobian", "static"):
-            raise ValueError(f"TCBiRRTOptions.edge_bound: expected 'jacobian' or 'static', got {self.edge_bound!r}")
-        if self.interpolation not in ("geodesic", "absolute"):
-            raise ValueError(f"TCBiRRTOptions.interpolation: expected 'geodesic' or 'absolute', got {self.interpolation!r}")
-        if self.edge_resolution is not None:
-            _pos("edge_resolution", self.edge_resolution)
-        _pos("edge_tolerance", self.edge_tolerance, allow_zero=True)
-        if not isinstance(self.regrasp, RRTConnectOptions):
-            raise ValueError(f"TCBiRRTOptions.regrasp: expected RRTConnectOptions, got {type(self.regrasp).__name__}")
-        _pos("regrasp_time_limit", self.regrasp_time_limit)
-        _pos("regrasp_tolerance", self.regrasp_tolerance, allow_zero=True)
-        _pos("closure_tolerance", self.closure_tolerance)
-        _pos("margin", self.margin, allow_zero=True)
-        if not (isinstance(self.max_iterations, int) and self.max_iterations >= 0):
-            raise ValueError(f"TCBiRRTOptions.max_iterations: expected an int >= 0, got {self.max_iterations!r}")
-
-
-#: [m] the paper robot's arm reach bound (:func:`.task_sampling.arm_reach` of ``tcbirrt_dual_arm``)
-PAPER_REACH = 2.938195019102723
-
-
-def reach_scaled_workspace(robot: RobotModel, options: TCBiRRTOptions) -> tuple[np.ndarray, np.ndarray, float]:
-    """``(xi_lower, xi_upper, step_size)`` the planner uses for ``robot`` (see
-    :attr:`TCBiRRTOptions.scale_to_reach`)."""
-    from .task_sampling import arm_reach
-
-    lo, hi, step = np.asarray(options.xi_lower, float), np.asarray(options.xi_upper, float), float(options.step_size)
-    default = (options.xi_lower == PAPER_XI_LOWER and options.xi_upper == PAPER_XI_UPPER
-               and step == TCBiRRTOptions.step_size)
-    if not (options.scale_to_reach and default) or robot.is_floating or not robot.arms:
-        return lo, hi, step
-    reach = [arm_reach(robot, a) for a in robot.arms]
-    scale = float(np.mean([r for _, r in reach])) / PAPER_REACH
-    centre = np.mean([sh for sh, _ in reach], axis=0)
-    paper_centre = 0.5 * (lo[:3] + hi[:3])
-    if abs(scale - 1.0) < 1e-9 and np.allclose(centre, paper_centre, atol=1e-9):
-        return lo, hi, step
-    lo, hi = lo.copy(), hi.copy()
-    half = 0.5 * (hi[:3] - lo[:3]) * scale
-    lo[:3], hi[:3] = centre - half, centre + half
-    return lo, hi, step * scale
 
 
 # ---------------------------------------------------------------------- tree
