@@ -32,6 +32,7 @@ import numpy as np
 from .collision.checker import CollisionChecker
 from .model.ik import IKOptions
 from .model.robot import RobotModel
+from .pipeline_options import PLANNER_DEFAULTS, PipelineOptions
 from .problem import ClosedChain, CollisionAvoidance, OptProblem
 from .problem.solution import Solution
 from .scene import Scene
@@ -41,138 +42,8 @@ from .verification import VerifyReport, verify
 if TYPE_CHECKING:
     from .planners.base import PlanResult
 
-__all__ = ["PipelineOptions", "SegmentResult", "PipelineResult", "run_pipeline", "shortcut_constrained"]
+__all__ = ["PipelineOptions", "PLANNER_DEFAULTS", "SegmentResult", "PipelineResult", "run_pipeline", "shortcut_constrained"]
 log = logging.getLogger(__name__)
-
-
-#: the pipeline's planner options when ``PipelineOptions.planner_options`` is None, per planner
-PLANNER_DEFAULTS: dict[str, tuple] = {"tcbirrt": (("edge_resolution", 0.05),)}
-
-
-@dataclass(frozen=True)
-class PipelineOptions:
-    """Options of :func:`run_pipeline`: plan → shortcut → one trajectory NLP per segment → verify.
-
-    Retry policy of a B-spline segment, in order (each attempt is recorded in ``SegmentResult.attempts``):
-    (0) ``velocity``: after any solve, a velocity control point beyond its joint's limit → rows added,
-    re-solve (≤ ``velocity_retries``); (1) ``collision``: coal finds a contact after a converged solve →
-    pairs activated along the solution, margins raised between knots
-    (:meth:`CollisionAvoidance.boost_between_knots`), re-solve (≤ ``collision_retries``); (2)
-    ``finer-grid``: IPOPT failed or a contact remains → 1.6× the intervals from the same initial guess,
-    the pairs of every solution coal found in contact kept active, then (1) again on that grid (≤
-    ``failure_retries``); (3) ``refine``: the closed-chain residual between knots exceeds
-    ``closed_chain_tol`` → the grid refined by (residual / (tol/2))^¼, warm-started from the solution (≤
-    ``refinements``); (4) ``fallback-knots``: still not verified → the knot transcription with free plane
-    normals (not on a robot with cylinder or mesh collision geometry, which that transcription does not
-    model). A segment whose fixed-normal NLP fails is re-solved with free normals before any other retry.
-    """
-
-    #: Planner name for :func:`optplan.planners.make_planner` (``"tcbirrt"``, ``"cbirrt2"``, ...).
-    planner: str = "tcbirrt"
-    #: The planner's keyword options as ``(name, value)`` pairs, passed to whichever planner is chosen (an
-    #: option the planner does not have is an :class:`~optplan.errors.OptionError`). None: the planner's
-    #: :data:`PLANNER_DEFAULTS` (TCBiRRT also checks edges every 0.05 rad; see
-    #: docs/decisions/0001-tcbirrt-benchmark-ssps-scenes.md).
-    planner_options: tuple | None = None
-    #: Time limit of the planner [s].
-    plan_time_limit: float = 10.0
-    #: Random task-space shortcuts tried per constrained segment [count].
-    shortcut_attempts: int = 40
-    #: Minimum number of NLP intervals per segment (knot transcription) [count].
-    n_intervals: int = 20
-    #: Segment duration = joint path length / (speed_fraction × smallest joint speed limit) [fraction, 0-1].
-    speed_fraction: float = 0.5
-    #: Shortest segment duration [s].
-    min_duration: float = 10.0
-    #: Clearance required by the NLP [m].
-    margin: float = 0.02
-    #: Start IPOPT from the planner's path; False: cold start from the task-space straight line between the
-    #: segment's end poses through IK, or the joint-space line
-    #: (docs/decisions/0002-warm-start-and-ipopt-settings.md).
-    warm_start: bool = True
-    #: Closed-chain collocation points inside each interval (knot transcription) [count]; 0 with enough knots is
-    #: better than 1, which makes the NLP nearly square per interval.
-    closed_chain_interior: int = 0
-    #: A constrained segment gets ⌈joint path length / max_interval_step⌉ intervals (knot transcription) [rad].
-    max_interval_step: float = 0.1
-    #: A regrasp segment (no closed chain) gets ⌈joint path length / free_interval_step⌉ intervals [rad].
-    free_interval_step: float = 0.15
-    #: At most this many intervals per segment (knot transcription) [count].
-    max_intervals: int = 100
-    #: Closed-chain residual allowed between knots when verified at 10 samples per interval [m and rad]; more →
-    #: the segment is refined (the residual falls like h⁴).
-    closed_chain_tol: float = 1e-6
-    #: Grid refinements per segment for the closed-chain residual, at most [count].
-    refinements: int = 2
-    #: Re-solves on a 1.6× finer grid after IPOPT fails or coal still finds a contact [count].
-    failure_retries: int = 1
-    #: Re-solves after coal finds a collision in a solution [count].
-    collision_retries: int = 3
-    #: IPOPT options as ``(name, value)`` pairs, passed to the solve. Default: stop at IPOPT's "acceptable"
-    #: level (overall error 1e-4 for 5 iterations; the constraint tolerance stays 1e-6) and ``perturb_always_cd
-    #: = yes`` (a permanent constraint regularisation of the KKT system); see
-    #: docs/decisions/0002-warm-start-and-ipopt-settings.md.
-    ipopt_options: tuple = (("acceptable_tol", 1e-4), ("acceptable_iter", 5), ("perturb_always_cd", "yes"))
-    #: Hold the separating-plane normals at coal's witness normals along the warm start
-    #: (:attr:`CollisionAvoidance.fixed_normals`); see docs/decisions/0003-fixed-plane-normals.md.
-    fixed_plane_normals: bool = True
-    #: ``"bspline"``: each segment a :class:`~optplan.problem.segment.SplineSegmentProblem` (joint-space
-    #: B-spline control points, closed chain and fixed-normal planes at the knots, limits on the control
-    #: points); ``"knots"``: the :class:`~optplan.problem.OptProblem` knot-state transcription.
-    transcription: str = "bspline"
-    #: A constrained B-spline segment gets ⌈joint path length / spline_interval_step⌉ intervals [rad] (a
-    #: regrasp: ⌈length / free_interval_step⌉).
-    spline_interval_step: float = 0.05
-    #: Fewest intervals of a B-spline segment [count].
-    spline_min_intervals: int = 30
-    #: Most intervals of a B-spline segment [count].
-    spline_max_intervals: int = 160
-    #: IPOPT's wall-clock cap per solve [s] (a solve that hits it ends with ``Maximum_WallTime_Exceeded``;
-    #: B-spline path).
-    ipopt_max_wall_time: float = 60.0
-    #: IPOPT's iteration cap per B-spline solve [count]; a solve that hits it goes on to the next retry of the policy
-    #: (see docs/decisions/0012-segment-nlp-rows.md for the iteration counts this is set from).
-    spline_max_iterations: int = 200
-    #: Weight of the jerk penalty that smooths the B-spline warm start before IPOPT
-    #: (:meth:`SplineSegmentProblem.smooth_initial`) [-]; 0: off.
-    smooth_warm_start: float = 0.0
-    #: Only velocity control points the warm start brings past this fraction of their joint's limit get rows
-    #: [fraction, 0-1].
-    spline_velocity_activation: float = 0.5
-    #: The B-spline NLP's kernels from C compiled once per robot and cached on disk: ``"auto"`` uses what an
-    #: earlier run compiled, True compiles what is missing (about a second of the C compiler per kernel, once),
-    #: False never.
-    compile_kernels: bool | str = "auto"
-    #: Re-solves with velocity rows added for control points beyond their limit [count].
-    velocity_retries: int = 2
-    #: k [-], ≥ 2: solve a constrained segment first on ⌈N / k⌉ intervals (at least 8) and start the N-interval NLP
-    #: from that optimum, projected onto the closed chain (a ``coarse`` attempt); 0: off.
-    coarse_factor: int = 0
-
-    def planner_kwargs(self) -> dict:
-        """Keyword options for :func:`~optplan.planners.make_planner` (module defaults when
-        ``planner_options`` is None)."""
-        opts = PLANNER_DEFAULTS.get(self.planner.lower(), ()) if self.planner_options is None else self.planner_options
-        return dict(opts)
-
-    def __post_init__(self):
-        if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
-            raise ValueError(f"PipelineOptions: invalid values {self}")
-        if self.transcription not in ("bspline", "knots"):
-            raise ValueError(f"PipelineOptions.transcription: expected 'bspline' or 'knots', got {self.transcription!r}")
-        if not (self.spline_interval_step > 0 and 4 <= self.spline_min_intervals <= self.spline_max_intervals):
-            raise ValueError("PipelineOptions: expected spline_interval_step > 0 and 4 ≤ spline_min_intervals ≤ "
-                             f"spline_max_intervals, got {self.spline_interval_step}, {self.spline_min_intervals}, "
-                             f"{self.spline_max_intervals}")
-        if self.compile_kernels not in (True, False, "auto"):
-            raise ValueError(f"PipelineOptions.compile_kernels: expected True, False or 'auto', got "
-                             f"{self.compile_kernels!r}")
-        if not (isinstance(self.spline_max_iterations, int) and self.spline_max_iterations >= 1):
-            raise ValueError(f"PipelineOptions.spline_max_iterations: expected an int >= 1, got "
-                             f"{self.spline_max_iterations!r}")
-        if not self.ipopt_max_wall_time > 0:
-            raise ValueError(f"PipelineOptions.ipopt_max_wall_time: expected a positive time [s], got "
-                             f"{self.ipopt_max_wall_time}")
 
 
 @dataclass
