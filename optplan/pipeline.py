@@ -145,7 +145,7 @@ def shortcut_constrained(robot: RobotModel, scene: Scene, path: np.ndarray, rng:
                          step: float = 0.05) -> np.ndarray:
     """Random shortcuts of a closed-chain path: two random configurations are joined by the
     joint-space straight line, each ``step`` [rad] projected back onto the closed-chain manifold
-    (Newton, :func:`optplan.warmstart.project_closed_chain`); kept when every projection converges,
+    (Newton, :func:`optplan.constraints.closed_chain.project_closed_chain`); kept when every projection converges,
     every configuration is collision free (coal), consecutive configurations stay within 2·step,
     and the path gets shorter. (Joint space rather than task space: with 14 joints and 12 closure
     equations a pose does not fix the configuration, and IK continuation drifts along the

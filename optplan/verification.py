@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from .collision.checker import CollisionChecker
-from .constraints.closed_chain import closure_error
+from .constraints.closed_chain import closure_errors
 from .geometry.spatial import rotation_angle
 from .model.floating import simulate_base
 from .model.robot import RobotModel
@@ -92,19 +92,13 @@ def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_ch
     # closed chain
     cc_p = cc_r = float("nan")
     if closed_chain is not None:
-        cc_p = cc_r = 0.0
-        for q in qfull:
-            ep, er = closure_error(robot, closed_chain, q, data)
-            cc_p, cc_r = max(cc_p, ep), max(cc_r, er)
-    # clearance
-    dmin, pair_name = float("inf"), ""
+        ep, er = closure_errors(robot, closed_chain, qfull, data)
+        cc_p, cc_r = float(ep.max()), float(er.max())
+    # clearance: exactly the smallest coal distance over the samples
     checker = CollisionChecker(robot, scene, held_object=held_object and scene is not None and scene.object is not None,
                                object_arm=object_arm)
-    if checker.pairs:
-        for q in qfull:
-            d, p = checker.min_distance(q)
-            if d < dmin and p is not None:
-                dmin, pair_name = d, f"{p.name_a} / {p.name_b}"
+    dmin, pair, _ = checker.min_distance_along(qfull)
+    pair_name = "" if pair is None else f"{pair.name_a} / {pair.name_b}"
     # limits
     pos_v = float(np.max(np.maximum(np.maximum(robot.lower - Q, Q - robot.upper), 0.0)))
     vel_v = float(np.max(np.maximum(np.abs(QD) - robot.velocity_limit, 0.0))) if check_velocity else float("nan")

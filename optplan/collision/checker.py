@@ -153,6 +153,7 @@ class CollisionChecker:
         self._res = coal.DistanceResult()
         self._creq = coal.CollisionRequest()
         self._cres = coal.CollisionResult()
+        self._sweep: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # see min_distance_along
 
     def _build_combined(self) -> None:
         """One Pinocchio GeometryModel with the robot's geometries, the held object (attached to its
@@ -224,6 +225,66 @@ class CollisionChecker:
         q = self.robot.check_q(q)
         i = int(pin.computeDistances(self.model, self.data, self._cgm, self._cgd, q))
         return float(self._cgd.distanceResults[i].min_distance), self.pairs[i]
+
+    def min_distance_along(self, Q, anchor_every: int = 10) -> tuple[float, Pair | None, int]:
+        """Exactly the smallest :meth:`min_distance` over the configurations ``Q`` (M × nq) and
+        its pair, without computing every row: every ``anchor_every``-th row (and the last) gets
+        all pair distances; a row in between is bounded from below, per pair, by the pair's
+        distance at the anchors on either side minus how far its two geometries can have moved
+        since (:func:`optplan.collision.sweep.sweep_weights`), and only rows whose bound is below
+        the smallest distance found so far are computed, the lowest bound first. Returns
+        ``(distance [m], pair, rows computed)`` (``inf, None, 0`` without pairs or rows)."""
+        Q = np.asarray(Q, float)
+        if Q.ndim != 2 or Q.shape[1] != self.robot.nq:
+            raise ValueError(f"Q: expected an (M, {self.robot.nq}) array of configurations, got shape {Q.shape}")
+        if not self.pairs or not len(Q):
+            return float("inf"), None, 0
+        if int(anchor_every) < 1:
+            raise ValueError(f"anchor_every: expected an int >= 1, got {anchor_every!r}")
+        if self.model.nq != self.model.nv:        # a free-flyer or other non-1-dof joints: no bound, every row
+            best_d, best_p = float("inf"), None
+            for q in Q:
+                d, p = self.min_distance(q)
+                if d < best_d:
+                    best_d, best_p = d, p
+            return best_d, best_p, len(Q)
+        if self._sweep is None:
+            from .sweep import sweep_weights
+
+            W = sweep_weights(self.model, self._cgm)
+            pa = np.array([cp.first for cp in self._cgm.collisionPairs], dtype=int)
+            pb = np.array([cp.second for cp in self._cgm.collisionPairs], dtype=int)
+            self._sweep = (W, pa, pb)
+        W, pa, pb = self._sweep
+        M = len(Q)
+        anchors = list(range(0, M, int(anchor_every)))
+        if anchors[-1] != M - 1:
+            anchors.append(M - 1)
+        D = np.array([self.distances(Q[i]) for i in anchors])      # anchors × pairs
+        amin = D.min(axis=1)
+        r = int(amin.argmin())
+        dmin = float(amin[r])
+        best: Pair | None = self.pairs[int(D[r].argmin())]
+        lower = np.full(M, np.inf)
+        for r in range(len(anchors) - 1):
+            i0, i1 = anchors[r], anchors[r + 1]
+            if i1 - i0 < 2:
+                continue
+            seg = Q[i0 + 1:i1]
+            m0 = W @ np.abs(seg - Q[i0]).T                             # geometries × rows
+            m1 = W @ np.abs(seg - Q[i1]).T
+            low = np.maximum(D[r][:, None] - m0[pa] - m0[pb], D[r + 1][:, None] - m1[pa] - m1[pb])
+            lower[i0 + 1:i1] = low.min(axis=0)
+        rows = np.nonzero(lower < dmin)[0]
+        n = len(anchors)
+        for i in rows[np.argsort(lower[rows], kind="stable")]:
+            if lower[i] >= dmin:
+                break
+            d, p = self.min_distance(Q[i])
+            n += 1
+            if d < dmin:
+                dmin, best = d, p
+        return dmin, best, n
 
     def is_valid(self, q, margin: float = 0.0) -> bool:
         """True when every pair is at least ``margin`` [m] apart (stops at the first failure;

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import casadi as ca
 import numpy as np
@@ -40,7 +40,7 @@ from ..model.robot import RobotModel
 from ..model.symbolic import SymbolicKinematics
 
 __all__ = ["relative_pose_residual", "closed_chain_residual", "project_closed_chain", "ProjectionResult",
-           "closure_error", "manifold_resample", "solve_grasp_ik", "IKSettings", "ClosedChainKinematics", "ChainSpec"]
+           "closure_error", "closure_errors", "manifold_resample", "solve_grasp_ik", "IKSettings", "ClosedChainKinematics", "ChainSpec"]
 log = logging.getLogger(__name__)
 
 
@@ -116,15 +116,44 @@ def closed_chain_residual(robot: RobotModel, q: np.ndarray, closed_chain: ChainL
     return h, np.vstack([Jlin, Jang])
 
 
+#: compiled ``(q, vec(R*), p*) -> [h; vec(∂h/∂q)]`` per (robot model, arm a, arm b); None: not available
+_RESIDUAL_FNS: dict[tuple[int, str, str], tuple[Any, FastFunction | None]] = {}
+
+
+def _compiled_residual(robot: RobotModel, arm_a: str, arm_b: str) -> FastFunction | None:
+    """The closed-chain residual and its Jacobian with respect to the full ``q`` as one compiled
+    function of ``(q, vec(relative rotation), relative translation)`` (fixed-base robots; None
+    for a floating base or without a C compiler). Built once per robot and arm pair in a process;
+    the compiled library is cached on disk."""
+    key = (id(robot.model), arm_a, arm_b)
+    got = _RESIDUAL_FNS.get(key)
+    if got is not None:
+        return got[1]
+    fn = None
+    if not robot.is_floating and robot.model.nq == robot.model.nv:
+        sk = SymbolicKinematics(robot)
+        q = ca.SX.sym("q", robot.nq)
+        Rt, pt = ca.SX.sym("Rt", 3, 3), ca.SX.sym("pt", 3)
+        X = sk.joint_placements(q)
+        Ra, pa = sk.frame_placement(q, robot.arm(arm_a).ee_frame_id, X)
+        Rb, pb = sk.frame_placement(q, robot.arm(arm_b).ee_frame_id, X)
+        h, _ = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), Rt, pt)
+        f = ca.Function("closed_chain_hj", [q, ca.vec(Rt), pt], [ca.vertcat(h, ca.vec(ca.densify(ca.jacobian(h, q))))])
+        fast = FastFunction(f, "-O1")
+        fn = fast if fast.compiled else None
+    _RESIDUAL_FNS[key] = (robot.model, fn)      # the model is kept alive so that its id stays unique
+    return fn
+
+
 def project_closed_chain(robot: RobotModel, q: np.ndarray, closed_chain: ChainLike, *, tol: float = 1e-10,
                          max_iterations: int = 50, data: pin.Data | None = None, joints: Any = None,
                          clip: bool = True) -> ProjectionResult:
     """Newton–Raphson projection of the full configuration ``q`` onto ``T_a⁻¹ T_b = relative``
     with minimum-norm steps ``dq = −J⁺ h``. ``joints``: indices into the joint vector that may move
     (default: both arms' joints); ``clip``: keep them within the joint limits. ``tol`` on ‖h‖∞
-    ([m], [rad])."""
+    ([m], [rad]). On a fixed-base robot the residual and its Jacobian come from one compiled
+    function (the same values as :func:`closed_chain_residual`, which is used otherwise)."""
     q = np.array(robot.check_q(q), float)
-    data = data or robot.model.createData()
     if joints is None:
         arms = (robot.arm(closed_chain.arm_a), robot.arm(closed_chain.arm_b))
         j_idx = np.concatenate([a.j_idx for a in arms])
@@ -133,16 +162,29 @@ def project_closed_chain(robot: RobotModel, q: np.ndarray, closed_chain: ChainLi
     off_q, off_v = robot.nq - robot.nj, robot.model.nv - robot.nj   # floating base: 7 / 6
     qidx, cols = j_idx + off_q, j_idx + off_v
     lo, hi = robot.lower[j_idx], robot.upper[j_idx]
+    fast = _compiled_residual(robot, closed_chain.arm_a, closed_chain.arm_b)
+    if fast is not None:
+        rel = closed_chain.relative
+        Rt = np.asarray(rel.rotation).reshape(-1, order="F")
+        pt = np.asarray(rel.translation)
+        nq = robot.nq
+    else:
+        data = data or robot.model.createData()
+    reg = 1e-12 * np.eye(6)
     res = np.inf
     for it in range(max_iterations + 1):
-        h, J = closed_chain_residual(robot, q, closed_chain, data)
+        if fast is not None:
+            out = fast(q, Rt, pt)
+            h, Jc = out[:6], out[6:].reshape(6, nq, order="F")[:, cols]
+        else:
+            h, J = closed_chain_residual(robot, q, closed_chain, data)
+            Jc = J[:, cols]
         res = float(np.abs(h).max())
         if res < tol:
             return ProjectionResult(q, True, it, res)
         if it == max_iterations:
             break
-        Jc = J[:, cols]
-        dq = -Jc.T @ np.linalg.solve(Jc @ Jc.T + 1e-12 * np.eye(6), h)
+        dq = -Jc.T @ np.linalg.solve(Jc @ Jc.T + reg, h)
         q[qidx] = np.clip(q[qidx] + dq, lo, hi) if clip else q[qidx] + dq
     return ProjectionResult(q, False, max_iterations, res)
 
@@ -158,6 +200,34 @@ def closure_error(robot: RobotModel, grasps_or_chain: dict[str, pin.SE3] | Chain
     rel = data.oMf[robot.arm(cc.arm_a).ee_frame_id].actInv(data.oMf[robot.arm(cc.arm_b).ee_frame_id])
     err = cc.relative.actInv(rel)
     return float(np.linalg.norm(err.translation)), rotation_angle(err.rotation)
+
+
+def closure_errors(robot: RobotModel, grasps_or_chain: dict[str, pin.SE3] | ChainLike, Q: np.ndarray,
+                   data: pin.Data | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`closure_error` at every row of ``Q`` (M × nq): ``(position errors [m] (M,), rotation
+    angles [rad] (M,))``, Pinocchio FK of the two hands per row and the error arithmetic in numpy."""
+    cc: ChainLike = ChainSpec.from_grasps(grasps_or_chain) if isinstance(grasps_or_chain, dict) else grasps_or_chain
+    Q = np.asarray(Q, float)
+    if Q.ndim != 2 or Q.shape[1] != robot.nq:
+        raise ValueError(f"Q: expected an (M, {robot.nq}) array of configurations, got shape {Q.shape}")
+    model = robot.model
+    data = data or model.createData()
+    fa, fb = robot.arm(cc.arm_a).ee_frame_id, robot.arm(cc.arm_b).ee_frame_id
+    M = len(Q)
+    Ra, Rb, pa, pb = np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3)), np.empty((M, 3))
+    for i, q in enumerate(Q):
+        pin.forwardKinematics(model, data, q)
+        A = pin.updateFramePlacement(model, data, fa)
+        B = pin.updateFramePlacement(model, data, fb)
+        Ra[i], pa[i], Rb[i], pb[i] = A.rotation, A.translation, B.rotation, B.translation
+    Rt, pt = np.asarray(cc.relative.rotation), np.asarray(cc.relative.translation)
+    RaT = np.transpose(Ra, (0, 2, 1))
+    p_rel = np.einsum("mij,mj->mi", RaT, pb - pa)                 # hand b in hand a
+    E = np.einsum("ji,mjk->mik", Rt, RaT @ Rb)                     # Rtᵀ R_rel
+    pos = np.linalg.norm(p_rel - pt, axis=1)                       # |Rtᵀ (p_rel − pt)|
+    v = 0.5 * np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]], axis=1)
+    c = np.clip((np.trace(E, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    return pos, np.arctan2(np.linalg.norm(v, axis=1), c)
 
 
 def solve_grasp_ik(robot: RobotModel, object_pose: pin.SE3, grasps: dict[str, pin.SE3], q0: np.ndarray,
@@ -241,6 +311,9 @@ class ClosedChainKinematics:
     """
 
     UNROLL = 4   # IK iterations per compiled call
+    #: the compiled functions of every (robot model, arms, grasps) built in this process: a planner made
+    #: for each query of the same robot and object reuses them instead of generating the C code again
+    _BUILT: ClassVar[dict[tuple[Any, ...], tuple[Any, ...]]] = {}
 
     def __init__(self, robot: RobotModel, grasps: dict[str, pin.SE3]) -> None:
         if len(grasps) != 2:
@@ -256,7 +329,20 @@ class ClosedChainKinematics:
         self.T21 = ga.actInv(gb)   # hand 2 in hand 1 (Eq. 1)
         self._grasp1_inv = ga.inverse()
         self._data = robot.model.createData()
-        self._build()
+        self._fun: dict[str, ca.Function]
+        self._fast: dict[str, FastFunction]
+        self._block: FastFunction
+        key = (id(robot.model), self.arm_names,
+               tuple(np.asarray(self.grasps[a].homogeneous).round(15).tobytes() for a in self.arm_names))
+        built = ClosedChainKinematics._BUILT.get(key)
+        if built is None:
+            self._build()
+            # the model is kept alive so that its id stays unique
+            ClosedChainKinematics._BUILT[key] = (robot.model, self._fun, self._fast, self._block)
+        else:
+            _, self._fun, self._fast, self._block = built
+            self.compiled = self._block.compiled
+        self._par = np.zeros(6)
 
     # ------------------------------------------------------------------ code generation
     def _arm_terms(self, sk: SymbolicKinematics, q: ca.SX, Ro: ca.SX, po: ca.SX, damp: ca.SX,
@@ -326,7 +412,7 @@ class ClosedChainKinematics:
         hfun = ca.Function("occ_h", [q], [h])
         hjfun = ca.Function("occ_hj", [q], [ca.vertcat(h, ca.vec(ca.densify(Jh)))])
         self._fun = {"step": step, "h": hfun, "hj": hjfun}
-        self._fast: dict[str, FastFunction] = {}
+        self._fast = {}
         self._block = FastFunction(block, "-O1")   # -O1: a third less compile time than -O2, same speed here
         self.compiled = self._block.compiled
         if not self.compiled:

@@ -43,6 +43,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..collision.checker import pair_indices, scene_geometry, scene_pairs
+from ..collision.sweep import sweep_weights
 from ..model.robot import RobotModel
 from ..scene import Scene
 
@@ -146,35 +147,9 @@ class ValidityChecker:
         self._profile_fns: dict[str, FastFunction | None] = {}
 
     def _sweep_bound(self, mode: str) -> np.ndarray:
-        """One row per moving geometry, one column per q index: (chain length from the joint's
-        origin to the geometry's joint + distance of the geometry's bounding sphere from that joint
-        + its radius) [m] when the joint moves the geometry, else 0; revolute (1-dof) joints
-        assumed, prismatic joints count 1 m/m."""
-        model, gm = self.model, self.gmodel
-        skip = {self.fixed_id}
-        if mode != "held" and self.held_id is not None:
-            skip.add(self.held_id)
-        reach_of_geom = []
-        for gid, go in enumerate(gm.geometryObjects):
-            if gid in skip or go.parentJoint == 0:
-                continue
-            g = go.geometry
-            g.computeLocalAABB()
-            c = go.placement.act(np.asarray(g.aabb_center))
-            reach_of_geom.append((int(go.parentJoint), float(np.linalg.norm(c)) + float(g.aabb_radius)))
-        w = np.zeros((len(reach_of_geom), model.nv))
-        for row, (k, r) in enumerate(reach_of_geom):
-            length = r
-            j = k
-            while j > 0:            # joint j moves geometry k's body; its origin is `length` away at most
-                jm = model.joints[j]
-                idx = jm.idx_v
-                prismatic = "P" in jm.shortname().replace("JointModel", "")[:1]
-                for t in range(idx, idx + jm.nv):
-                    w[row, t] = 1.0 if prismatic else length
-                length += float(np.linalg.norm(model.jointPlacements[j].translation))
-                j = int(model.parents[j])
-        return w
+        """One row per moving geometry of ``mode`` (:meth:`_moving_geometries`), one column per
+        q index: :func:`optplan.collision.sweep.sweep_weights`."""
+        return sweep_weights(self.model, self.gmodel)[self._moving_geometries(mode)]
 
     def _moving_geometries(self, mode: str) -> list[int]:
         """Geometry ids of the rows of :meth:`_sweep_bound` (same order)."""

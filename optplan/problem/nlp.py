@@ -147,7 +147,9 @@ class SolverOptions:
             if not isinstance(self.linear_solver, str):
                 raise OptionError(f"SolverOptions.linear_solver: expected a name such as 'mumps', "
                                   f"got {self.linear_solver!r}")
-            check_ipopt_options({"linear_solver": self.linear_solver})
+            if _option_key("linear_solver", self.linear_solver) not in _CHECKED:
+                check_ipopt_options({"linear_solver": self.linear_solver})
+                _CHECKED.add(_option_key("linear_solver", self.linear_solver))
         if self.raw is None:
             object.__setattr__(self, "raw", types.MappingProxyType({}))
         if not isinstance(self.raw, Mapping):
@@ -187,8 +189,9 @@ class SolverOptions:
         if isinstance(options, Mapping):
             from ..solver_options import check_ipopt_options
 
-            check_ipopt_options(dict(options))   # the error names ipopt_options[...], as it always did
-            _CHECKED.update(_option_key(k, v) for k, v in options.items())
+            new = {k: v for k, v in options.items() if _option_key(k, v) not in _CHECKED}
+            check_ipopt_options(new)   # the error names ipopt_options[...], as it always did
+            _CHECKED.update(_option_key(k, v) for k, v in new.items())
             return cls(raw=options, **fields)
         raise OptionError(f"solver options: expected SolverOptions, a dict of IPOPT options or None, got "
                           f"{type(options).__name__} {options!r}")

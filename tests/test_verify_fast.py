@@ -1,0 +1,139 @@
+"""The fast paths of verification and projection against their references: the exact clearance
+along a sampled trajectory (pruned by sweep bounds) against every row; the batched closure errors
+against the per-configuration Pinocchio check; the compiled closed-chain residual and Jacobian
+against Pinocchio's; the sweep bound against the real displacement of geometry points."""
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.collision.checker import CollisionChecker
+from optplan.collision.sweep import sweep_weights
+from optplan.constraints import closed_chain as ccm
+from optplan.constraints.closed_chain import (
+    ChainSpec,
+    ClosedChainKinematics,
+    closed_chain_residual,
+    closure_error,
+    closure_errors,
+    project_closed_chain,
+)
+from optplan.planners.validity import ValidityChecker
+from optplan.scene import Scene
+
+
+@pytest.fixture(scope="module")
+def scene1():
+    return Scene.load("ssps_scene1")
+
+
+def _smooth_path(robot, rng, q0, n=201, scale=0.6):
+    """A smooth random joint path from ``q0`` (sum of a few sines per joint)."""
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    amp = rng.normal(scale=scale, size=(3, robot.nq))
+    Q = q0 + sum(amp[k] * np.sin((k + 1) * np.pi * t) / (k + 1) for k in range(3))
+    return np.clip(Q, robot.lower, robot.upper)
+
+
+def test_sweep_weights_bound_every_point_displacement(tcb, rng):
+    W = sweep_weights(tcb.model, tcb.collision_model)
+    data, gdata = tcb.model.createData(), pin.GeometryData(tcb.collision_model)
+    gd2 = pin.GeometryData(tcb.collision_model)
+    data2 = tcb.model.createData()
+    worst = 0.0
+    for _ in range(200):
+        q1 = tcb.random_configuration(rng)
+        q2 = np.clip(q1 + rng.normal(scale=0.3, size=tcb.nq), tcb.lower, tcb.upper)
+        pin.updateGeometryPlacements(tcb.model, data, tcb.collision_model, gdata, q1)
+        pin.updateGeometryPlacements(tcb.model, data2, tcb.collision_model, gd2, q2)
+        bound = W @ np.abs(q2 - q1)
+        for g, go in enumerate(tcb.collision_model.geometryObjects):
+            go.geometry.computeLocalAABB()
+            lo, hi = np.asarray(go.geometry.aabb_local.min_), np.asarray(go.geometry.aabb_local.max_)
+            pts = lo + rng.random((8, 3)) * (hi - lo)         # points of the geometry's box, local frame
+            d = max(np.linalg.norm(gd2.oMg[g].act(p) - gdata.oMg[g].act(p)) for p in pts)
+            assert d <= bound[g] + 1e-12
+            if bound[g] > 0:
+                worst = max(worst, d / bound[g])
+    assert worst > 0.2          # the bound is not vacuous
+
+
+def test_validity_checker_rows_are_the_shared_sweep_weights(tcb, scene1):
+    vc = ValidityChecker(tcb, scene1)
+    W = sweep_weights(tcb.model, vc.gmodel)
+    for mode in ("held", "fixed", "free"):
+        np.testing.assert_array_equal(vc.sweep_weights(mode, per_geometry=True), W[vc._moving_geometries(mode)])
+
+
+@pytest.mark.parametrize("collide", [False, True])
+def test_min_distance_along_is_the_exact_minimum(tcb, scene1, rng, collide):
+    chk = CollisionChecker(tcb, scene1)
+    q0 = np.zeros(tcb.nq)
+    for _ in range(3):
+        Q = _smooth_path(tcb, rng, q0, scale=1.5 if collide else 0.3)
+        ref = [chk.min_distance(q) for q in Q]
+        i = int(np.argmin([d for d, _ in ref]))
+        d, pair, n = chk.min_distance_along(Q)
+        assert abs(d - ref[i][0]) < 1e-9 and pair == ref[i][1]
+        assert n <= len(Q)
+
+
+def test_min_distance_along_checks_its_input(tcb, scene1):
+    chk = CollisionChecker(tcb, scene1)
+    with pytest.raises(ValueError, match="configurations"):
+        chk.min_distance_along(np.zeros((3, tcb.nq + 1)))
+    with pytest.raises(ValueError, match="anchor_every"):
+        chk.min_distance_along(np.zeros((3, tcb.nq)), anchor_every=0)
+    assert chk.min_distance_along(np.zeros((0, tcb.nq)))[1] is None
+
+
+def test_closure_errors_match_the_per_configuration_check(tcb, scene1, rng):
+    cc = ChainSpec.from_grasps(scene1.object.grasps)
+    Q = np.array([tcb.random_configuration(rng) for _ in range(30)])
+    ep, er = closure_errors(tcb, cc, Q)
+    ref = np.array([closure_error(tcb, cc, q) for q in Q])
+    np.testing.assert_allclose(ep, ref[:, 0], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(er, ref[:, 1], rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="configurations"):
+        closure_errors(tcb, cc, Q[:, :-1])
+
+
+def test_compiled_closed_chain_residual_matches_pinocchio(tcb, scene1, rng):
+    cc = ChainSpec.from_grasps(scene1.object.grasps)
+    fn = ccm._compiled_residual(tcb, cc.arm_a, cc.arm_b)
+    if fn is None:
+        pytest.skip("no C compiler")
+    Rt, pt = np.asarray(cc.relative.rotation).reshape(-1, order="F"), np.asarray(cc.relative.translation)
+    for _ in range(20):
+        q = tcb.random_configuration(rng)
+        out = fn(q, Rt, pt)
+        h, J = closed_chain_residual(tcb, q, cc)
+        np.testing.assert_allclose(out[:6], h, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(out[6:].reshape(6, tcb.nq, order="F"), J, rtol=0, atol=1e-10)
+
+
+def test_projection_same_with_and_without_the_compiled_residual(tcb, scene1, rng):
+    cc = ChainSpec.from_grasps(scene1.object.grasps)
+    qs = [tcb.random_configuration(rng) * 0.3 for _ in range(10)]
+    fast = [project_closed_chain(tcb, q, cc) for q in qs]
+    key = (id(tcb.model), cc.arm_a, cc.arm_b)
+    saved = ccm._RESIDUAL_FNS.get(key)
+    ccm._RESIDUAL_FNS[key] = (tcb.model, None)         # force the Pinocchio path
+    try:
+        slow = [project_closed_chain(tcb, q, cc) for q in qs]
+    finally:
+        if saved is None:
+            ccm._RESIDUAL_FNS.pop(key)
+        else:
+            ccm._RESIDUAL_FNS[key] = saved
+    assert sum(r.success for r in fast) >= 5
+    for a, b in zip(fast, slow):
+        assert a.success == b.success and a.iterations == b.iterations
+        np.testing.assert_allclose(a.q, b.q, rtol=0, atol=1e-6)   # Newton from far off the manifold amplifies round-off
+
+
+def test_closed_chain_kinematics_reused_within_a_process(tcb, scene1, rng):
+    k1 = ClosedChainKinematics(tcb, scene1.object.grasps)
+    k2 = ClosedChainKinematics(tcb, scene1.object.grasps)
+    assert k1._block is k2._block
+    q = tcb.random_configuration(rng)
+    np.testing.assert_array_equal(k1.h(q), k2.h(q))
