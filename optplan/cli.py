@@ -159,7 +159,8 @@ def _cmd_bench_warmstart(args) -> int:
                           first_trial=args.first_trial, progress=not args.no_progress,
                           ipopt_max_wall_time=args.ipopt_max_wall_time,
                           free_plane_normals=args.free_plane_normals, transcription=args.transcription,
-                          compile_kernels=args.compile_kernels, engine=args.engine, address=args.address)
+                          compile_kernels=args.compile_kernels, engine=args.engine, address=args.address,
+                          segment_workers=args.segment_workers)
     try:
         validate(cfg)
     except ValueError as exc:
@@ -433,6 +434,9 @@ def build_parser() -> argparse.ArgumentParser:
     ws.add_argument("--compile-kernels", action="store_true",
                     help="compile the optimizer's kernels to C where an earlier run has not (the compile time "
                          "counts in the trial that needs it; later runs use the libraries automatically)")
+    ws.add_argument("--segment-workers", type=ca.positive_int, default=None, metavar="N",
+                    help="processes per trial that optimize its segments side by side (default: 2 on a machine "
+                         "with 2 or more CPUs when --jobs is 1, else 1)")
     ws.add_argument("--transcription", choices=["bspline", "knots"], default="bspline",
                     help="trajectory NLP: B-spline control points (default) or the knot-state transcription")
     ws.add_argument("--free-plane-normals", action="store_true",
