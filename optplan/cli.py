@@ -249,7 +249,7 @@ def _cmd_plan(args) -> int:
     try:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
         opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold,
-                               compile_kernels=True if args.compile_kernels else "auto",
+                               compile_kernels=True if args.compile_kernels else "auto", workers=args.workers,
                                planner_options=_plan_planner_options(planner, args.variant))
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
     except BaseException as exc:  # a failed run still writes what it has
@@ -487,6 +487,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--compile-kernels", action="store_true",
                     help="compile the optimizer's kernels to C where an earlier run has not (once per robot and "
                          "collision pair, about a second each; later runs use them automatically)")
+    pl.add_argument("--workers", type=ca.positive_int, default=None, metavar="N",
+                    help="processes that optimize the plan's segments side by side (default: 2 on a machine with "
+                         "2 or more CPUs, else 1; the trajectory does not depend on it)")
     pl.add_argument("--json", help="write the figures as JSON")
     pl.add_argument("--save", help="write the trajectory npz (t, q, joint_names, constrained, robot, scene)")
     pl.add_argument("--html", help="write a 3D view of the motion (self-contained HTML, opens offline)")
