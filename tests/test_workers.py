@@ -44,9 +44,9 @@ def test_bad_arguments():
 
 
 def test_pipeline_same_trajectory_with_two_processes(tcb):
-    from optplan.trials import TrialGenerator
     from optplan.pipeline import PipelineOptions, run_pipeline
     from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
 
     scene = Scene.load("ssps_scene1")
     trial = TrialGenerator(tcb, scene).generate(2, 0)
