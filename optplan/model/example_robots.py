@@ -109,7 +109,10 @@ def _convex_hulls(robot: RobotModel) -> int:
     for obj in robot.collision_model.geometryObjects:
         g = obj.geometry
         if isinstance(g, coal.BVHModelBase):
-            g.buildConvexRepresentation(False)
+            # the hull (qhull), not buildConvexRepresentation: that one keeps the mesh's own triangles as
+            # the polytope's faces, and on a non-convex mesh coal's hill-climbing support function then
+            # stops at local maxima: distances too large by centimetres to decimetres, collisions missed
+            g.buildConvexHull(True, "Qt")
             obj.geometry = g.convex
             n += 1
     return n

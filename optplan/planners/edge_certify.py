@@ -131,6 +131,13 @@ class EdgeCertifier:
                                             else 1.0 for g in out])
         return out
 
+    def prepare(self, modes: tuple[str, ...] = ("held", "fixed")) -> None:
+        """Build the pair groups of ``modes`` (and the compiled speed profiles) now, before a
+        planner's time limit starts."""
+        for mode in modes:
+            self.groups(mode)
+            self.checker._profile_function(self._mode(mode))
+
     # ------------------------------------------------------------------ exact distances
     def _distances(self, mode: str, gs: np.ndarray, x: np.ndarray, object_pose: pin.SE3 | None) -> np.ndarray:
         """Exact clearance [m] (minus the checker's margin) of each group in ``gs`` at ``x``."""
