@@ -9,13 +9,16 @@ point of it, and every configuration where a distance was evaluated has clearanc
 
 How (conservative advancement): the active collision pairs of a mode (those of
 :class:`~optplan.planners.validity.ValidityChecker`'s ``"held"``, ``"fixed"`` or ``"free"`` mode)
-are split into groups by the joint that carries the pair's faster-moving geometry. For each group
+are split into groups by the two joints that carry the pair's geometries (the world for
+obstacles). For each group
 ``G`` the certifier keeps the exact distance ``d_G`` (coal, through ``pinocchio.computeDistances``
 on the group's pairs only) at the configuration ``x_G`` where it was last evaluated and a weight
 row ``w_G = max over pairs (W[g1] + W[g2])`` from the per-geometry sweep weights
 (:func:`optplan.collision.sweep.sweep_weights`: no point of geometry ``g`` is displaced farther
 than ``W[g]·|q − x|`` between any ``q`` and ``x``, so no pair's distance drops by more than
-``w_G·|q − x|``). On a chord ``[u, v]`` of the path ``|q − x_G| ≤ max(|u − x_G|, |v − x_G|)``
+``w_G·|q − x|``), with the columns of the joints that carry BOTH geometries of a pair set to zero
+(they move the pair rigidly: the held object and the forearm holding it stay where they are
+relative to each other whatever the shoulder does). On a chord ``[u, v]`` of the path ``|q − x_G| ≤ max(|u − x_G|, |v − x_G|)``
 component-wise, so the group stays clear on the whole chord (in fact on every chord of a run of
 vertices, taking the maximum over them) when
 ``d_G − w_G·max|Q_i − x_G| ≥ min_clearance / 2``. Groups that fail are re-evaluated at the start
@@ -109,12 +112,14 @@ class EdgeCertifier:
         pairs = self.gmodel.collisionPairs
         W = self._W
         rowsum = W.sum(axis=1)
-        by_joint: dict[int, list[int]] = {}
+        by_joint: dict[tuple[int, int], list[int]] = {}
         for k, cp in enumerate(pairs):
             if not src.activeCollisionPairs[k]:
                 continue
-            g = cp.first if rowsum[cp.first] >= rowsum[cp.second] else cp.second
-            by_joint.setdefault(int(self.gmodel.geometryObjects[g].parentJoint), []).append(k)
+            g, h = (cp.first, cp.second) if rowsum[cp.first] >= rowsum[cp.second] else (cp.second, cp.first)
+            objs = self.gmodel.geometryObjects
+            key = (int(objs[g].parentJoint), int(objs[h].parentJoint))
+            by_joint.setdefault(key, []).append(k)
         out = []
         for _, ks in sorted(by_joint.items()):
             gd = pin.GeometryData(self.gmodel)
@@ -122,7 +127,7 @@ class EdgeCertifier:
             for k in range(len(pairs)):
                 if k not in keep:
                     gd.deactivateCollisionPair(k)
-            w = np.max([W[pairs[k].first] + W[pairs[k].second] for k in ks], axis=0)
+            w = np.max([self._pair_weights(pairs[k].first, pairs[k].second) for k in ks], axis=0)
             out.append(_Group(gd, w, ks))
         self._groups[mode] = out
         self._Wg[mode] = np.array([g.w for g in out]).reshape(len(out), self.model.nv)
@@ -130,6 +135,22 @@ class EdgeCertifier:
         self._pair_factor[mode] = np.array([2.0 if any(moving[pairs[k].first] and moving[pairs[k].second] for k in g.pairs)
                                             else 1.0 for g in out])
         return out
+
+    def _pair_weights(self, g1: int, g2: int) -> np.ndarray:
+        """``W[g1] + W[g2]`` without the joints that move both geometries: a joint that carries both
+        moves them rigidly together (their distance is that of their placements in the frame of
+        the deepest joint carrying both, which only the joints below it change)."""
+        w = self._W[g1] + self._W[g2]
+        objs, model = self.gmodel.geometryObjects, self.model
+        j1, j2 = int(objs[g1].parentJoint), int(objs[g2].parentJoint)
+        if j1 == 0 or j2 == 0:
+            return w
+        common = set(model.supports[j1]) & set(model.supports[j2])
+        for j in common:
+            if j > 0:
+                jm = model.joints[j]
+                w[jm.idx_v:jm.idx_v + jm.nv] = 0.0
+        return w
 
     def prepare(self, modes: tuple[str, ...] = ("held", "fixed")) -> None:
         """Build the pair groups of ``modes`` (and the compiled speed profiles) now, before a
@@ -181,7 +202,7 @@ class EdgeCertifier:
         D = self._distances(mode, np.arange(G), Q[0], object_pose)
         if D.min() < self.min_clearance:
             return False
-        st = {"X": X, "D": D}
+        st = {"X": X, "D": D, "profile": len(Q) == 2}   # the compiled profile pays off on long straight edges
         return self._run(Q, 0, len(Q) - 1, mode, object_pose, st)
 
     # ------------------------------------------------------------------ advancement
@@ -222,11 +243,12 @@ class EdgeCertifier:
         ``w_G·|v − u|`` per unit s, and (straight segments longer than a few checks) the compiled
         Jacobian speed profile ``C(s)`` of :meth:`ValidityChecker.edge_checkpoints` (bound on the
         travel of any point of any geometry), times 2 for groups with pairs of two moving
-        geometries."""
+        geometries; the profile only for straight segments (a path's short chords do not repay
+        its compiled call)."""
         Wg = self._Wg[mode]
         half = 0.5 * self.min_clearance
         rate = Wg @ np.abs(v - u)                                # [m] per unit s, per group
-        prof = self._profile(mode, u, v, rate)
+        prof = self._profile(mode, u, v, rate, st["profile"])
         k = self._pair_factor[mode]
         reach = np.zeros(len(rate))
         # groups evaluated elsewhere and still certified on the whole chord
@@ -256,10 +278,11 @@ class EdgeCertifier:
         # progress of at least min_clearance / 2 of travel per step, so never stuck
         return np.maximum(out, s + 1e-12)
 
-    def _profile(self, mode: str, u: np.ndarray, v: np.ndarray, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    def _profile(self, mode: str, u: np.ndarray, v: np.ndarray, rate: np.ndarray,
+                 st_profile: bool) -> tuple[np.ndarray, np.ndarray] | None:
         """(knots, cumulative travel bound) of the compiled speed profile, or None when the static
         bound is short anyway or the robot has no compiled profile."""
-        if rate.size == 0 or float(rate.max()) < 10.0 * self.min_clearance:
+        if not st_profile or rate.size == 0 or float(rate.max()) < 10.0 * self.min_clearance:
             return None
         fn = self.checker._profile_function(mode)
         if fn is None:

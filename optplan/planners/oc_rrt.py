@@ -125,6 +125,9 @@ class OCRRTOptions:
     #: that resolution — by conservative advancement on exact distances. Off: configurations checked every
     #: ``collision_step`` only (the paper).
     certified_edges: bool = True
+    #: Certify an edge only once it lies on a start-goal path (a failing edge removes its node's subtree and the
+    #: search goes on; lazy collision checking); False: every new edge at once.
+    certify_lazily: bool = True
     #: Parameter spacing of the certified chord path [rad] (the benchmark densifies at 0.01 too).
     certify_resolution: float = 0.01
     #: Certified edges keep every collision pair at least half of this apart; an edge whose exact clearance drops
@@ -151,6 +154,8 @@ class OCRRTOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"OCRRTOptions.{name}: expected a positive number of radians, got {v!r}")
+        if not isinstance(self.certify_lazily, bool):
+            raise ValueError(f"OCRRTOptions.certify_lazily: expected True/False, got {self.certify_lazily!r}")
         if not isinstance(self.certified_edges, bool):
             raise ValueError(f"OCRRTOptions.certified_edges: expected True/False, got {self.certified_edges!r}")
         for name in ("certify_resolution", "edge_min_clearance"):
@@ -213,6 +218,9 @@ class OCRRT(Planner):
         self._bridge = o.bridge_bias > 0 and not paper
         self._goal_from_region = self._goal_region and o.goal_from_region
         self._from_goal_region = False
+        self._eager_cert = o.certified_edges and not o.certify_lazily
+        self._lazy_cert = o.certified_edges and o.certify_lazily
+        self._cert_done: dict[int, set[int]] = {}
         names = list(robot.joint_names)
         unknown = [n for n in o.goal_turn_joints if n not in names]
         if unknown:
@@ -329,10 +337,26 @@ class OCRRT(Planner):
         else:
             p1 = p0 + (self.options.step / dist) * d
             q1 = self._walk(tree.X[i_near], p0, p1, st)
-        if q1 is None or (self.options.certified_edges and not self._certified(tree.X[i_near], p0, q1, p1, st)):
+        if q1 is None or (self._eager_cert and not self._certified(tree.X[i_near], p0, q1, p1, st)):
             return TRAPPED, i_near
         j = tree.add(q1, i_near, P=p1)
         return (REACHED if p1 is p_target else ADVANCED), j
+
+    def _branch_certified(self, tree: _ParamTree, i: int, st: dict[str, Any]) -> bool:
+        """Lazy certification: every not yet certified edge from the root to node i (root side
+        first); the first failing edge's node is removed with its subtree."""
+        done = self._cert_done.setdefault(id(tree), set())
+        chain = []
+        while i > 0 and i not in done:
+            chain.append(i)
+            i = int(tree.parent[i])
+        for k in reversed(chain):
+            j = int(tree.parent[k])
+            if not self._certified(tree.X[j], tree.P[j], tree.X[k], tree.P[k], st):
+                st["certify_removed_nodes"] += tree.kill(k)
+                return False
+            done.add(k)
+        return True
 
     def _turns(self, q: np.ndarray, q_goal: np.ndarray) -> np.ndarray | None:
         """Whole turns k on ``goal_turn_joints`` with ``q = q_goal + 2πk`` there (and q = q_goal
@@ -388,7 +412,8 @@ class OCRRT(Planner):
         o, mf = self.options, self.manifold
         st: dict[str, Any] = {"iterations": 0, "samples": 0, "sample_failures": 0, "steer_rejects": 0, "collisions": 0,
               "ik_rejects": 0, "jump_rejects": 0, "refinements": 0, "goal_attempts": 0, "bridge_samples": 0,
-              "certified_edges": 0, "certify_rejects": 0}
+              "certified_edges": 0, "certify_rejects": 0, "certify_removed_nodes": 0}
+        self._cert_done = {}
         c0, n0 = self.checker.n_checks, mf.n_complete
         for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
             msg = self._check_endpoint(q, which)
@@ -423,7 +448,7 @@ class OCRRT(Planner):
                 if start != -1:
                     st["goal_attempts"] += 1
                     res, i = self.connect(ta, q_goal, pg, st, deadline, start=start, goal=True)
-                    if res == REACHED:
+                    if res == REACHED and (not self._lazy_cert or self._branch_certified(ta, i, st)):
                         found = (i, None)
                         break
                 continue
@@ -434,7 +459,8 @@ class OCRRT(Planner):
             assert tb is not None  # RRT-Connect grows two trees
             if res != TRAPPED:
                 res_b, i_b = self.connect(tb, ta.X[i_a], ta.P[i_a], st, deadline)
-                if res_b == REACHED:
+                if res_b == REACHED and (not self._lazy_cert or (self._branch_certified(ta, i_a, st)
+                                                                 & self._branch_certified(tb, i_b, st))):
                     found = (i_a, i_b)
                     break
             ta, tb, a_is_start = tb, ta, not a_is_start
