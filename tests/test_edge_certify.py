@@ -143,3 +143,84 @@ def test_bad_input_errors(setup):
     # a configuration in collision: rejected at once, no exception
     assert not cert.segment(qg, qg) or ck.is_valid(qg)
     assert isinstance(pin.SE3.Identity(), pin.SE3)
+
+
+def test_tcbirrt_certified_edges_clean_without_path_verification(setup):
+    """TCBiRRT (improved, ``edge_bound="certified"``): the bench's independent dense and 1 cm
+    sweep checks find no clipping edge, and no path re-verification ran."""
+    from optplan.bench.tcbirrt import _path_checks
+    from optplan.planners import TCBiRRT, TCBiRRTOptions
+
+    robot = setup[0]
+    scene = Scene.load("hard_flip")
+    qs, qg = nominal_configurations(robot, scene)
+    ck = ValidityChecker(robot, scene)
+    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved", edge_bound="certified"), checker=ck)
+    res = pl.plan(qs, qg, time_limit=10.0, seed=1, clock="cpu")
+    assert res.success, res.message
+    chk = _path_checks(robot, scene, ck, res)
+    assert chk["swept_invalid_edges"] == 0 and chk["dense_invalid_edges"] == 0
+    assert res.stats.get("path_verified_edges", 0) == 0 and res.stats["edge_checks"] > 0
+    with pytest.raises(ValueError, match="edge_bound"):
+        TCBiRRTOptions(edge_bound="exact")
+    with pytest.raises(ValueError, match="edge_min_clearance"):
+        TCBiRRTOptions(edge_min_clearance=0.0)
+
+
+_pr2 = pytest.mark.skipif("not __import__('optplan.model.example_robots', fromlist=['x']).example_robots_available()",
+                          reason="needs example-robot-data (pip install 'optplan[robots]')")
+
+
+@_pr2
+def test_pr2_hulls_are_convex_and_coal_distances_exact():
+    """Every PR2 collision geometry is a true convex hull (every stored point a hull vertex), and
+    coal's distance between two of them never exceeds the closest vertex pair (a support function
+    stuck on a non-convex face graph did: decimetres too far)."""
+    import coal
+    from scipy.spatial import ConvexHull
+    from scipy.spatial.distance import cdist
+
+    from optplan.model.example_robots import load_pr2
+
+    robot = load_pr2()
+    gm = robot.collision_model
+    pts = {}
+    for k, go in enumerate(gm.geometryObjects):
+        g = go.geometry
+        if not isinstance(g, coal.ConvexBase):
+            continue                      # primitives (boxes, cylinders) from the URDF
+        P = np.asarray(g.points())
+        assert len(ConvexHull(P).vertices) == len(P), go.name
+        pts[k] = P
+    data, gd = robot.model.createData(), pin.GeometryData(gm)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        q = np.clip(rng.uniform(robot.lower, robot.upper), -3.0, 3.0)
+        pin.updateGeometryPlacements(robot.model, data, gm, gd, q)
+        for a, b in robot.collision_pairs[::7]:
+            if a not in pts or b not in pts:
+                continue
+            Ta, Tb = gd.oMg[a], gd.oMg[b]
+            d = coal.distance(gm.geometryObjects[a].geometry, coal.Transform3s(Ta.rotation, Ta.translation),
+                              gm.geometryObjects[b].geometry, coal.Transform3s(Tb.rotation, Tb.translation),
+                              coal.DistanceRequest(), coal.DistanceResult())
+            Wa, Wb = pts[a] @ Ta.rotation.T + Ta.translation, pts[b] @ Tb.rotation.T + Tb.translation
+            assert d <= cdist(Wa, Wb).min() + 1e-9
+
+
+@_pr2
+@pytest.mark.parametrize("planner", ["oc_rrt_connect", "cbirrt"])
+def test_certified_orientation_planners_paths_clear_everywhere(planner):
+    """OC-RRT-Connect and CBiRRT with certified edges on the tray scene: every configuration of the
+    path as executed (OC-RRT: densified at the certified resolution; CBiRRT: its waypoints) and 4
+    points on every chord between them are collision-free by the exact checker."""
+    from optplan.bench.oc_rrt import densify_linear, setup_scene
+
+    s = setup_scene("oc_tabletop", [planner])
+    pl, ex = s["planners"][planner], CollisionChecker(s["robot"], s["scene"])
+    assert pl.options.certified_edges
+    res = pl.plan(s["q_start"], s["q_goal"], time_limit=10.0, seed=3, clock="cpu")
+    assert res.success, res.message
+    P = pl.densify(res.path, pl.options.certify_resolution) if planner == "oc_rrt_connect" else res.path
+    dense = densify_linear(P, 2e-3)
+    assert all(ex.is_valid(q) for q in dense)

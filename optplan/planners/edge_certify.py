@@ -72,7 +72,9 @@ class EdgeCertifier:
 
     ``min_clearance`` [m]: a path whose exact clearance (beyond the checker's ``margin``) drops
     below this at an evaluated configuration is rejected; a certified path keeps every pair at
-    least ``min_clearance / 2`` (+ ``margin``) apart everywhere.
+    least ``min_clearance / 2`` (+ ``margin``) apart everywhere. When the path's first or last
+    configuration is itself closer than ``min_clearance`` (a valid start or goal nearly in
+    contact), half of that end's clearance replaces ``min_clearance`` for that path.
 
     Counters: ``n_distance_calls`` (group distance evaluations), ``n_paths`` (certify calls).
     """
@@ -200,23 +202,42 @@ class EdgeCertifier:
             return True
         X = np.repeat(Q[:1], G, axis=0)                    # where each group was evaluated
         D = self._distances(mode, np.arange(G), Q[0], object_pose)
-        if D.min() < self.min_clearance:
+        # the floor: min_clearance, or half an end's own clearance when an end is closer than that
+        # (else no edge could leave a start or reach a goal that is valid but nearly in contact)
+        floor = self.min_clearance
+        d0 = float(D.min())
+        if d0 <= 0.0:
             return False
-        st = {"X": X, "D": D, "profile": len(Q) == 2}   # the compiled profile pays off on long straight edges
+        floor = min(floor, 0.5 * d0)
+        if len(Q) > 1 and self._near(mode, Q[-1], object_pose):
+            d1 = float(self._distances(mode, np.arange(G), Q[-1], object_pose).min())
+            if d1 <= 0.0:
+                return False
+            floor = min(floor, 0.5 * d1)
+        st = {"X": X, "D": D, "floor": floor, "profile": len(Q) == 2}   # the profile pays off on long straight edges
         return self._run(Q, 0, len(Q) - 1, mode, object_pose, st)
+
+    def _near(self, mode: str, x: np.ndarray, object_pose: pin.SE3 | None) -> bool:
+        """Some active pair closer than ``min_clearance`` (+ margin) at x (boolean checks with a
+        security margin: cheaper than the distances)."""
+        gd = self._margin_data(mode, 0.0)
+        pin.updateGeometryPlacements(self.model, self.data, self.gmodel, gd, x)
+        if mode == "fixed":
+            gd.oMg[self.checker.fixed_id] = object_pose
+        return bool(pin.computeCollisions(self.gmodel, gd, True))
 
     # ------------------------------------------------------------------ advancement
     def _uncovered(self, mode: str, V: np.ndarray, st: dict[str, Any]) -> np.ndarray:
         """Groups not certified on every chord through the vertices V (k × nq)."""
         M = np.abs(V[None, :, :] - st["X"][:, None, :]).max(axis=1)           # G × nq
         bound = np.einsum("gj,gj->g", self._Wg[mode], M)
-        return np.flatnonzero(st["D"] - bound < 0.5 * self.min_clearance)
+        return np.flatnonzero(st["D"] - bound < 0.5 * st["floor"])
 
     def _evaluate(self, mode: str, gs: np.ndarray, x: np.ndarray, object_pose: pin.SE3 | None, st: dict[str, Any]) -> bool:
         d = self._distances(mode, gs, x, object_pose)
         st["D"][gs] = d
         st["X"][gs] = x
-        return bool(d.min() >= self.min_clearance)
+        return bool(d.min() >= st["floor"])
 
     def _run(self, Q: np.ndarray, i: int, j: int, mode: str, object_pose: pin.SE3 | None, st: dict[str, Any]) -> bool:
         if i == j:
@@ -246,7 +267,7 @@ class EdgeCertifier:
         geometries; the profile only for straight segments (a path's short chords do not repay
         its compiled call)."""
         Wg = self._Wg[mode]
-        half = 0.5 * self.min_clearance
+        half = 0.5 * st["floor"]
         rate = Wg @ np.abs(v - u)                                # [m] per unit s, per group
         prof = self._profile(mode, u, v, rate, st["profile"])
         k = self._pair_factor[mode]
@@ -282,7 +303,7 @@ class EdgeCertifier:
                  st_profile: bool) -> tuple[np.ndarray, np.ndarray] | None:
         """(knots, cumulative travel bound) of the compiled speed profile, or None when the static
         bound is short anyway or the robot has no compiled profile."""
-        if not st_profile or rate.size == 0 or float(rate.max()) < 10.0 * self.min_clearance:
+        if not st_profile or rate.size == 0 or float(rate.max()) < 0.01:
             return None
         fn = self.checker._profile_function(mode)
         if fn is None:
@@ -327,7 +348,8 @@ class EdgeCertifier:
                     gd.deactivateCollisionPair(k)
                     continue
                 both = moving[cp.first] and moving[cp.second]
-                gd.collisionRequests[k].security_margin = (tol if both else 0.5 * tol) + 0.5 * self.min_clearance \
-                    + self.checker.margin
+                # tol = 0: the near-contact test of an end (min_clearance); else the discrete alternative
+                extra = self.min_clearance if tol == 0.0 else 0.5 * self.min_clearance
+                gd.collisionRequests[k].security_margin = (tol if both else 0.5 * tol) + extra + self.checker.margin
             self._margin_gd[key] = gd
         return self._margin_gd[key]
