@@ -22,6 +22,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -121,8 +122,9 @@ def setup_scene(scene_name: str, planners) -> dict:
             pl[p] = make_ompl_peer(p, robot, scene, checker=ck, constraint=con)
         else:
             raise ValueError(f"unknown planner {p!r}; expected one of {PLANNERS + EXTRA_PLANNERS}")
-        if hasattr(pl[p], "checker") and getattr(pl[p].options, "certified_edges", False):
-            ck.certifier(pl[p].options.edge_min_clearance).prepare(("held",))   # before any time limit
+        opts: Any = getattr(pl[p], "options", None)
+        if opts is not None and getattr(opts, "certified_edges", False):
+            ck.certifier(opts.edge_min_clearance).prepare(("held",))   # before any time limit
     out = {"robot": robot, "scene": scene, "constraint": con, "manifold": mf, "q_start": q_start,
            "q_goal": q_goal, "checker": ck, "planners": pl}
     _CACHE[key] = out
