@@ -492,8 +492,11 @@ class OCRRT(Planner):
         """The path resampled every ``resolution`` [rad] of parameter motion (and where the planner
         bisected a fast step, ``refine_depth``, at the bisection points as well), every
         configuration completed on the manifold on the branch of its predecessor (the planner's
-        own edges): no joint moves more than ``max_joint_step`` between neighbours.
-        Raises ValueError if an edge cannot be followed (a path not made by this planner)."""
+        own edges): no joint moves more than ``max_joint_step`` between neighbours. At
+        ``resolution = certify_resolution`` (0.01) and with ``certified_edges`` these are the
+        configurations whose chord path (straight joint segments between them) was certified
+        collision-free. Raises ValueError if an edge cannot be followed (a path not made by this
+        planner)."""
         if not (resolution > 0):
             raise ValueError(f"resolution: expected a positive number of radians, got {resolution!r}")
         path = np.asarray(path, float)
