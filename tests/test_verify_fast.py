@@ -152,3 +152,11 @@ def test_distances_below_match_every_pair_at_every_row(tcb, scene1, rng, thresho
     np.testing.assert_array_equal(rows, r_ref)
     np.testing.assert_array_equal(pairs, p_ref)
     np.testing.assert_allclose(dist, D[r_ref, p_ref], rtol=0, atol=1e-9)
+
+
+def test_shared_checker_is_reused_per_robot_scene_and_options(tcb, scene1):
+    a = CollisionChecker.shared(tcb, scene1)
+    assert CollisionChecker.shared(tcb, scene1) is a
+    assert CollisionChecker.shared(tcb, scene1, held_object=False) is not a
+    other = Scene.load("ssps_scene1")                   # another scene object: its own checker
+    assert CollisionChecker.shared(tcb, other) is not a

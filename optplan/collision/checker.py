@@ -12,6 +12,7 @@ defined once here (:func:`scene_geometry`, :func:`scene_pairs`) and shared by
 from __future__ import annotations
 
 import logging
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -155,6 +156,28 @@ class CollisionChecker:
         self._creq = coal.CollisionRequest()
         self._cres = coal.CollisionResult()
         self._sweep: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # see min_distance_along
+
+    #: checkers of :meth:`shared`, most recently used last (key: robot, scene, options)
+    _SHARED: OrderedDict[tuple[Any, ...], tuple[Any, Any, CollisionChecker]] = OrderedDict()
+    _SHARED_MAX = 16
+
+    @classmethod
+    def shared(cls, robot: RobotModel, scene: Scene | None = None, *, held_object: bool = True,
+               self_collision: bool = True, object_arm: str | None = None) -> CollisionChecker:
+        """A checker for these arguments reused within the process (building one takes a few
+        milliseconds: the verification of every solve and every segment NLP ask for one). The
+        robot and scene are identified by object: a checker is never shared between two robot or
+        scene objects, and holds on to the ones it was built for."""
+        key = (id(robot), id(scene), bool(held_object), bool(self_collision), object_arm)
+        got = cls._SHARED.get(key)
+        if got is not None and got[0] is robot and got[1] is scene:
+            cls._SHARED.move_to_end(key)
+            return got[2]
+        chk = cls(robot, scene, held_object=held_object, self_collision=self_collision, object_arm=object_arm)
+        cls._SHARED[key] = (robot, scene, chk)
+        while len(cls._SHARED) > cls._SHARED_MAX:
+            cls._SHARED.popitem(last=False)
+        return chk
 
     def _build_combined(self) -> None:
         """One Pinocchio GeometryModel with the robot's geometries, the held object (attached to its

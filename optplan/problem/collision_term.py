@@ -275,8 +275,8 @@ class CollisionModel:
 
     # ------------------------------------------------------------------ entities
     def _setup(self, robot: RobotModel) -> None:
-        self.checker = CollisionChecker(robot, self.scene, held_object=self.held_object,
-                                        self_collision=self.self_collision, object_arm=self.object_arm)
+        self.checker = CollisionChecker.shared(robot, self.scene, held_object=self.held_object,
+                                               self_collision=self.self_collision, object_arm=self.object_arm)
         objs = robot.collision_model.geometryObjects
         # geometry index -> (parent frame, shape, box placement or None); None: no NLP model
         self.robot_shape: dict[int, tuple[int, D.Shape, Any] | None] = {}
