@@ -339,6 +339,41 @@ def test_joint_connect_joins_two_closed_chain_configurations(robot, rng):
     assert st["joint_connect_successes"] == 1 and st["edge_checks"] == len(path)
 
 
+def test_branch_grafts_give_a_verified_path_with_regrasps_inside_a_tree(robot):
+    """``branch_grafts``: another IK branch grown into a tree by a regrasp edge. On a truss trial whose start
+    and goal lie on different IK branches: the path passes the independent closed-chain/regrasp check
+    (every edge re-traced) and the bench's 1 cm sweep check, each regrasp segment keeps the object still
+    and moves one arm, and a graft's regrasp motions are segments of the path like a connection's."""
+    from optplan.bench.tcbirrt import _path_checks
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load("hard_truss")
+    ck = ValidityChecker(robot, scene)
+    kin = ClosedChainKinematics(robot, scene.object.grasps)
+    t = TrialGenerator(robot, scene).generate(6, 0)
+    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved", branch_grafts=2), checker=ck, kinematics=kin)
+    res = pl.plan(t.q_start, t.q_goal, time_limit=30.0, seed=t.seed, clock="cpu")
+    assert res.success, res.message
+    assert res.stats["grafts"] >= 1 and res.stats["graft_attempts"] >= res.stats["grafts"]
+    assert np.allclose(res.path[0], t.q_start) and np.allclose(res.path[-1], t.q_goal)
+    chk = verify_path(robot, scene, res, kin=kin, checker=ck)
+    assert chk["ok"], chk["problems"]
+    assert _path_checks(robot, scene, ck, res)["swept_invalid_edges"] == 0
+    regs = [s for s in res.segments if s.kind == "regrasp"]
+    assert len(regs) == res.stats["n_regrasp"] >= 2
+    for s in regs:
+        P = res.path[s.start:s.stop + 1]
+        moved = [a for a, idx in zip(kin.arm_names, kin.idx) if np.ptp(P[:, idx], axis=0).max() > 0]
+        assert moved == [s.arm]
+        assert res.constrained[s.start] and res.constrained[s.stop] and not res.constrained[s.start + 1:s.stop].any()
+        for M in res.object_poses[s.start:s.stop + 1]:
+            assert np.allclose(M.homogeneous, s.object_pose.homogeneous)
+    with pytest.raises(ValueError, match="branch_grafts"):
+        TCBiRRTOptions(branch_grafts=-1)
+    with pytest.raises(ValueError, match="graft_time_limit"):
+        TCBiRRTOptions(graft_time_limit=0)
+
+
 # ---------------------------------------------------------------------- slow statistical tests
 #: scenes where the improved variant is measured below this test's threshold (28 of 30) with edges checked
 #: (docs/planners.md, 2026-11-24, clean paths within 10 s CPU; window 28/30, sparse clutter 29/30 pass at the threshold);

@@ -419,23 +419,30 @@ class TCBiRRT(Planner):
             if x is None:
                 st["graft_ik_failures"] = st.get("graft_ik_failures", 0) + 1
                 continue
-            if float(np.linalg.norm(x - q_i)) < o.graft_min_distance:
-                st["graft_same_branch"] = st.get("graft_same_branch", 0) + 1
-                continue
-            if not ck.in_limits(x) or not ck.is_valid(x):
-                st["graft_collisions"] = st.get("graft_collisions", 0) + 1
-                continue
-            if any(float(np.linalg.norm(tree.q[j] - x)) < o.graft_min_distance for j in tree.twins.get(i, ())):
-                continue   # a branch this pose already has
-            reg = self.regrasp(q_i, x, R, p, rng, deadline.sub(o.graft_time_limit), st)
-            if reg is None:
-                st["graft_regrasp_failures"] = st.get("graft_regrasp_failures", 0) + 1
-                continue
-            if o.edge_tolerance and o.verify_path and o.edge_bound != "static" and not all(
-                    self._static_edge_ok(a, b, st, pin.SE3(R, p)) for _, full in reg for a, b in zip(full[:-1], full[1:])):
-                continue
-            st["grafts"] += 1
-            return tree.add_graft(i, x, reg)
+            cands = [x]
+            if o.graft_single_arm:   # each arm's IK is independent at a fixed object pose: one arm's new branch alone
+                for idx in kin.idx:
+                    y = q_i.copy()
+                    y[idx] = x[idx]
+                    cands.append(y)
+            for y in cands:
+                if float(np.linalg.norm(y - q_i)) < o.graft_min_distance:
+                    st["graft_same_branch"] = st.get("graft_same_branch", 0) + 1
+                    continue
+                if not ck.in_limits(y) or not ck.is_valid(y):
+                    st["graft_collisions"] = st.get("graft_collisions", 0) + 1
+                    continue
+                if any(float(np.linalg.norm(tree.q[j] - y)) < o.graft_min_distance for j in tree.twins.get(i, ())):
+                    continue   # a branch this pose already has
+                reg = self.regrasp(q_i, y, R, p, rng, deadline.sub(o.graft_time_limit), st)
+                if reg is None:
+                    st["graft_regrasp_failures"] = st.get("graft_regrasp_failures", 0) + 1
+                    continue
+                if o.edge_tolerance and o.verify_path and o.edge_bound != "static" and not all(
+                        self._static_edge_ok(a, b, st, pin.SE3(R, p)) for _, full in reg for a, b in zip(full[:-1], full[1:])):
+                    continue
+                st["grafts"] += 1
+                return tree.add_graft(i, y, reg)
         return None
 
     # ------------------------------------------------------------------ regrasp (Section 4.3)

@@ -109,6 +109,8 @@ class TCBiRRTOptions:
     graft_time_limit: float = 0.5
     #: IK seeds per branch-graft attempt (the other tree's configuration, then perturbed by ``ik_restart_sigma``) [count].
     graft_seeds: int = 3
+    #: A graft may also move one arm only to its new IK solution (the other keeps its own) [bool].
+    graft_single_arm: bool = False
     #: A graft's joint solution must differ from its node's by at least this (Euclidean) [rad]; nearer ones are the
     #: same branch.
     graft_min_distance: float = 1.5
@@ -196,7 +198,7 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
-                     "regrasp_share_orders", "verify_path"):
+                     "regrasp_share_orders", "verify_path", "graft_single_arm"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
