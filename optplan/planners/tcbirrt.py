@@ -614,15 +614,19 @@ class TCBiRRT(Planner):
         if sampler is not None:
             sampler.set_endpoints(ta.xi[0], tb.xi[0])
             st["guide_attempts"] = st["guide_waypoints"] = 0
-        if o.branch_grafts:
+        root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
+        if o.branch_grafts and o.root_grafts_first:
             for tr, other in ((ta, tb), (tb, ta)):
                 self._graft(tr, 0, other, deadline, st)
         while not deadline.expired():
             if o.max_iterations and st["iterations"] >= o.max_iterations:
                 break
-            if o.branch_grafts and st["iterations"] and st["iterations"] % o.graft_interval == 0 \
-                    and len(ta.graft) < cast(int, o.branch_grafts):
-                self._graft(ta, None, tb, deadline, st)
+            if o.branch_grafts and st["iterations"] and st["iterations"] % o.graft_interval == 0:
+                # the trees take turns (tree a is the same tree at every multiple of an even interval)
+                tr, other = (ta, tb) if (st["iterations"] // o.graft_interval) % 2 else (tb, ta)
+                if len(tr.graft) < cast(int, o.branch_grafts):
+                    self._graft(tr, None if root_grafted[id(tr)] else 0, other, deadline, st)   # the root's first
+                    root_grafted[id(tr)] = True
             if (sampler is not None and cast(float, o.guide_probability) > 0 and sampler.guide is None
                     and guide_time < o.guide_time_limit and st["iterations"] % 25 == 0):
                 sub = deadline.sub(min(o.guide_attempt_time, o.guide_time_limit - guide_time))

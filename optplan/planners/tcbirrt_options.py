@@ -103,8 +103,11 @@ class TCBiRRTOptions:
     #: that solution lies on another branch, the arms regrasp to it (object fixed) and it becomes a node of the
     #: same tree; a connection then prefers the node whose configuration is nearest the other tree's.
     branch_grafts: int | None = None
-    #: Iterations between two branch-graft attempts (the first is at the roots, before the search) [count].
+    #: Iterations between two branch-graft attempts (each tree's first attempt is at its root) [count].
     graft_interval: int = 100
+    #: Try a graft at both roots before the search (instead of after the first ``graft_interval`` iterations,
+    #: which leaves queries solved quickly without grafts untouched) [bool].
+    root_grafts_first: bool = True
     #: Time limit of one branch graft's regrasp [s].
     graft_time_limit: float = 0.5
     #: IK seeds per branch-graft attempt (the other tree's configuration, then perturbed by ``ik_restart_sigma``) [count].
@@ -198,7 +201,7 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
-                     "regrasp_share_orders", "verify_path", "graft_single_arm"):
+                     "regrasp_share_orders", "verify_path", "graft_single_arm", "root_grafts_first"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
