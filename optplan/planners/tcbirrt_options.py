@@ -26,7 +26,7 @@ VARIANTS = {
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
-                 "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 0},
+                 "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4},
 }
 
 
@@ -111,7 +111,7 @@ class TCBiRRTOptions:
     #: Time limit of one branch graft's regrasp [s].
     graft_time_limit: float = 0.5
     #: IK seeds per branch-graft attempt (the other tree's configuration, then perturbed by ``ik_restart_sigma``) [count].
-    graft_seeds: int = 3
+    graft_seeds: int = 4
     #: A graft may also move one arm only to its new IK solution (the other keeps its own) [bool].
     graft_single_arm: bool = False
     #: A graft's joint solution must differ from its node's by at least this (Euclidean) [rad]; nearer ones are the
