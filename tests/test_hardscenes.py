@@ -419,9 +419,10 @@ def test_extract_puts_a_grafts_regrasps_into_the_path(robot, rng, a_is_start):
 
 # ---------------------------------------------------------------------- slow statistical tests
 #: scenes where the improved variant is measured below this test's threshold (28 of 30) with edges checked
-#: (docs/planners.md, 2026-11-24, clean paths within 10 s CPU; window 28/30, sparse clutter 29/30 pass at the threshold);
-#: their statistical test is expected to fail until the planner improves (xfail, not strict)
-BELOW_TARGET = {"hard_truss": "18/30"}
+#: (docs/decisions/0004-tcbirrt-improved-variant.md, 2026-11-24, clean paths within 10 s CPU; window 28/30, sparse
+#: clutter 29/30 pass at the threshold); their statistical test is expected to fail until the planner improves
+#: (xfail, not strict); :func:`test_improved_variant_truss_rate` holds the truss to what it does reach
+BELOW_TARGET = {"hard_truss": "23-26/30 with branch grafts (20-21/30 without)"}
 
 
 @pytest.mark.slow
@@ -445,6 +446,26 @@ def test_improved_variant_success_rate(robot, name):
         res = pl.plan(t.q_start, t.q_goal, time_limit=10.0, seed=t.seed, clock="cpu")
         ok += res.success and _path_checks(robot, scene, ck, res)["swept_invalid_edges"] == 0
     assert ok >= 28, f"{name}: {ok}/{n}"
+
+
+@pytest.mark.slow
+def test_improved_variant_truss_rate(robot):
+    """The truss below the suite's target: the same 30 seeded trials, >= 22 clean successes within 10 s of
+    CPU time (a true rate of 0.8 passes with probability 0.87, the 0.67-0.70 measured without branch grafts
+    with 0.30-0.43; measured with grafts: 23, 23 and 26 of 30)."""
+    from optplan.bench.tcbirrt import _path_checks
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load("hard_truss")
+    gen = TrialGenerator(robot, scene)
+    ck = ValidityChecker(robot, scene)
+    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved"), checker=ck)
+    ok = 0
+    for i in range(30):
+        t = gen.generate(i, 0)
+        res = pl.plan(t.q_start, t.q_goal, time_limit=10.0, seed=t.seed, clock="cpu")
+        ok += res.success and _path_checks(robot, scene, ck, res)["swept_invalid_edges"] == 0
+    assert ok >= 22, f"hard_truss: {ok}/30"
 
 
 @pytest.mark.slow

@@ -615,15 +615,17 @@ class TCBiRRT(Planner):
             sampler.set_endpoints(ta.xi[0], tb.xi[0])
             st["guide_attempts"] = st["guide_waypoints"] = 0
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
-        if o.branch_grafts and o.root_grafts_first:
+        if o.branch_grafts and o.root_grafts_first and not o.graft_after:
             for tr, other in ((ta, tb), (tb, ta)):
                 self._graft(tr, 0, other, deadline, st)
+                root_grafted[id(tr)] = True
         while not deadline.expired():
             if o.max_iterations and st["iterations"] >= o.max_iterations:
                 break
-            if o.branch_grafts and st["iterations"] and st["iterations"] % o.graft_interval == 0:
+            k_graft = st["iterations"] - o.graft_after
+            if o.branch_grafts and k_graft > 0 and k_graft % o.graft_interval == 0:
                 # the trees take turns (tree a is the same tree at every multiple of an even interval)
-                tr, other = (ta, tb) if (st["iterations"] // o.graft_interval) % 2 else (tb, ta)
+                tr, other = (ta, tb) if (k_graft // o.graft_interval) % 2 else (tb, ta)
                 if len(tr.graft) < cast(int, o.branch_grafts):
                     self._graft(tr, None if root_grafted[id(tr)] else 0, other, deadline, st)   # the root's first
                     root_grafted[id(tr)] = True

@@ -105,7 +105,10 @@ class TCBiRRTOptions:
     branch_grafts: int | None = None
     #: Iterations between two branch-graft attempts (each tree's first attempt is at its root) [count].
     graft_interval: int = 100
-    #: Try a graft at both roots before the search (instead of after the first ``graft_interval`` iterations,
+    #: Iterations of the search before the first branch graft [count] (0: from the start); a query solved sooner
+    #: is untouched by grafts.
+    graft_after: int = 0
+    #: Try a graft at both roots before the search (with ``graft_after`` 0) (instead of after the first ``graft_interval`` iterations,
     #: which leaves queries solved quickly without grafts untouched) [bool].
     root_grafts_first: bool = True
     #: Time limit of one branch graft's regrasp [s].
@@ -189,10 +192,10 @@ class TCBiRRTOptions:
         _pos("ik_restart_sigma", self.ik_restart_sigma)
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
-        for name in ("branch_grafts", "graft_interval", "graft_seeds"):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and not isinstance(v, bool) and v >= (0 if name == "branch_grafts" else 1)):
-                raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {0 if name == 'branch_grafts' else 1}, got {v!r}")
+        for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds"):
+            v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after") else 1)
+            if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
+                raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
         _pos("graft_time_limit", self.graft_time_limit)
         _pos("graft_min_distance", self.graft_min_distance)
         _pos("joint_connect_radius", self.joint_connect_radius)
