@@ -107,7 +107,7 @@ class TCBiRRTOptions:
     graft_interval: int = 100
     #: Iterations of the search before the first branch graft [count] (0: from the start); a query solved sooner
     #: is untouched by grafts.
-    graft_after: int = 0
+    graft_after: int = 1500
     #: Try a graft at both roots before the search (with ``graft_after`` 0) (instead of after the first ``graft_interval`` iterations,
     #: which leaves queries solved quickly without grafts untouched) [bool].
     root_grafts_first: bool = True
