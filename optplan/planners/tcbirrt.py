@@ -55,6 +55,16 @@ Deviations from the paper, all options (defaults in brackets):
   (ξ distance) of tree a's node; both only when the two configurations are within
   ``joint_connect_max_distance`` [rad, Euclidean] (farther ones are other IK branches). Its configurations close the chain to the projection tolerance
   and form a ``"constrained"`` part of the path.
+* ``branch_grafts`` [paper 0; improved 4 per tree, from iteration ``graft_after`` = 1500]: a tree grows
+  other IK branches of its own nodes. Constrained motion keeps each arm on its IK branch, so two trees
+  on different branches meet only through a regrasp at the meeting pose, which in a tight passage
+  often cannot be planned. Every ``graft_interval`` iterations one tree (in turn) takes a node — its
+  root first, then the node nearest a random node of the other tree — solves the node's object pose
+  by IK seeded from the other tree's configuration nearest in ξ (then perturbed, then random seeds),
+  and when that solution is valid and another branch (≥ ``graft_min_distance`` away), joins it to
+  the node by a regrasp (Section 4.3, ``graft_time_limit``): a "graft" node at the same pose. The
+  extension picks one of a pose's branches at random, the connection the one nearest the other
+  tree's configuration; a path through a graft has its regrasp segments where the graft is.
 * ``edge_tolerance`` [paper 0: off; improved 0.01 m]: the straight joint-space segments between consecutive
   configurations (constrained edges and regrasp motions) are checked so densely that no point of
   the arms or the object moves farther than this between two checks (per-joint sweep bound of
