@@ -154,7 +154,7 @@ class _TaskTree(Tree):
         configuration by the regrasp ``motions``: a second IK branch of the same tree."""
         R, p = self.pose[i]
         self.pose.append((R, p))
-        k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=True)
+        k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=False)
         self.graft[k] = motions
         group = self.twins.setdefault(i, [i])
         group.append(k)
@@ -326,9 +326,14 @@ class TCBiRRT(Planner):
             chain.append(i)
             i = tree.parent[i]
         for k in reversed(chain):
-            eq, _ = tree.edge[k]
-            qs = [tree.q[tree.parent[k]], *eq, tree.q[k]]
-            if not all(self._static_edge_ok(a, b, st) for a, b in zip(qs[:-1], qs[1:])):
+            if k in tree.graft:   # a graft's regrasp motions, object fixed at the node's pose
+                M = pin.SE3(*tree.pose[k])
+                ok = all(self._static_edge_ok(a, b, st, M) for _, full in tree.graft[k] for a, b in zip(full[:-1], full[1:]))
+            else:
+                eq, _ = tree.edge[k]
+                qs = [tree.q[tree.parent[k]], *eq, tree.q[k]]
+                ok = all(self._static_edge_ok(a, b, st) for a, b in zip(qs[:-1], qs[1:]))
+            if not ok:
                 return k
             tree.checked[k] = True
         return None
@@ -353,6 +358,9 @@ class TCBiRRT(Planner):
             chain.append(i)
             i = tree.parent[i]
         for k in reversed(chain):
+            if k in tree.graft:      # regrasp motions: checked at edge_tolerance when planned
+                tree.checked[k] = True
+                continue
             eq, ep = tree.edge[k]
             qs = [tree.q[tree.parent[k]], *eq, tree.q[k]]
             new_q, new_p = [], []
@@ -412,8 +420,6 @@ class TCBiRRT(Planner):
         if i in tree.graft:
             return None
         st["graft_attempts"] += 1
-        if o.edge_tolerance and o.verify_path and o.edge_bound != "static" and self._verify_branch(tree, i, st) is not None:
-            return None    # the node's own branch fails the dense check: it would be removed anyway
         R, p = tree.pose[i]
         q_i = tree.q[i]
         seed = other.q[other.nearest(tree.xi[i])]
@@ -448,10 +454,7 @@ class TCBiRRT(Planner):
                 if reg is None:
                     st["graft_regrasp_failures"] = st.get("graft_regrasp_failures", 0) + 1
                     continue
-                if o.edge_tolerance and o.verify_path and o.edge_bound != "static" and not all(
-                        self._static_edge_ok(a, b, st, pin.SE3(R, p)) for _, full in reg for a, b in zip(full[:-1], full[1:])):
-                    continue
-                st["grafts"] += 1
+                st["grafts"] += 1   # its regrasp motions are verified (verify_path) once on a start-goal path
                 return tree.add_graft(i, y, reg)
         return None
 
