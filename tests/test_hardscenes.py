@@ -388,8 +388,8 @@ def test_extract_puts_a_grafts_regrasps_into_the_path(robot, rng, a_is_start):
     the root's pose) → a constrained edge; tree b's root closes the path. The path runs from the start
     tree's root to the goal tree's root, the graft's motions are ``"regrasp"`` segments at the right
     indices and object pose, and ``constrained`` is False only inside them."""
-    from optplan.planners.tcbirrt import _TaskTree
     from optplan.planners.task_space import xi_from_pose
+    from optplan.planners.tcbirrt import _TaskTree
 
     scene = Scene.load("hard_truss")
     pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved"))

@@ -639,7 +639,7 @@ class TCBiRRT(Planner):
             if o.branch_grafts and k_graft > 0 and k_graft % o.graft_interval == 0:
                 # the trees take turns (tree a is the same tree at every multiple of an even interval)
                 tr, other = (ta, tb) if (k_graft // o.graft_interval) % 2 else (tb, ta)
-                if len(tr.graft) < cast(int, o.branch_grafts):
+                if len(tr.graft) < o.branch_grafts:
                     self._graft(tr, None if root_grafted[id(tr)] else 0, other, deadline, st)   # the root's first
                     root_grafted[id(tr)] = True
             if (sampler is not None and cast(float, o.guide_probability) > 0 and sampler.guide is None
