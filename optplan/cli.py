@@ -159,7 +159,8 @@ def _cmd_bench_warmstart(args) -> int:
                           first_trial=args.first_trial, progress=not args.no_progress,
                           ipopt_max_wall_time=args.ipopt_max_wall_time,
                           free_plane_normals=args.free_plane_normals, transcription=args.transcription,
-                          compile_kernels=args.compile_kernels, engine=args.engine, address=args.address)
+                          compile_kernels=args.compile_kernels, engine=args.engine, address=args.address,
+                          segment_workers=args.segment_workers)
     try:
         validate(cfg)
     except ValueError as exc:
@@ -248,7 +249,7 @@ def _cmd_plan(args) -> int:
     try:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
         opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold,
-                               compile_kernels=True if args.compile_kernels else "auto",
+                               compile_kernels=True if args.compile_kernels else "auto", workers=args.workers,
                                planner_options=_plan_planner_options(planner, args.variant))
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
     except BaseException as exc:  # a failed run still writes what it has
@@ -433,6 +434,9 @@ def build_parser() -> argparse.ArgumentParser:
     ws.add_argument("--compile-kernels", action="store_true",
                     help="compile the optimizer's kernels to C where an earlier run has not (the compile time "
                          "counts in the trial that needs it; later runs use the libraries automatically)")
+    ws.add_argument("--segment-workers", type=ca.positive_int, default=None, metavar="N",
+                    help="processes per trial that optimize its segments side by side (default: 2 on a machine "
+                         "with 2 or more CPUs when --jobs is 1, else 1)")
     ws.add_argument("--transcription", choices=["bspline", "knots"], default="bspline",
                     help="trajectory NLP: B-spline control points (default) or the knot-state transcription")
     ws.add_argument("--free-plane-normals", action="store_true",
@@ -483,6 +487,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--compile-kernels", action="store_true",
                     help="compile the optimizer's kernels to C where an earlier run has not (once per robot and "
                          "collision pair, about a second each; later runs use them automatically)")
+    pl.add_argument("--workers", type=ca.positive_int, default=None, metavar="N",
+                    help="processes that optimize the plan's segments side by side (default: 2 on a machine with "
+                         "2 or more CPUs, else 1; the trajectory does not depend on it)")
     pl.add_argument("--json", help="write the figures as JSON")
     pl.add_argument("--save", help="write the trajectory npz (t, q, joint_names, constrained, robot, scene)")
     pl.add_argument("--html", help="write a 3D view of the motion (self-contained HTML, opens offline)")

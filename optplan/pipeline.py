@@ -38,6 +38,7 @@ from .problem.solution import Solution
 from .scene import Scene
 from .tasks import _held_object, object_pose, segment_problem, straight_line_poses, task_space_path
 from .verification import VerifyReport, verify
+from .workers import default_workers, run_jobs
 
 if TYPE_CHECKING:
     from .planners.base import PlanResult
@@ -419,10 +420,12 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
 def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptions, rng: np.random.Generator,
                       checker: CollisionChecker | None = None, with_cpu: bool = False):
     """Shortcut, resample and optimize every segment of a plan; returns (results, shortcut wall
-    time [s]) and, with ``with_cpu``, the shortcut's CPU time [s] too."""
+    time [s]) and, with ``with_cpu``, the shortcut's CPU time [s] and the CPU time [s] worker
+    processes spent on segments (``opts.workers``) too."""
     checker = checker or CollisionChecker(robot, scene)
     results, t0, t_short, c_short = [], 0.0, 0.0, 0.0
     ipopt = dict(opts.ipopt_options)
+    jobs: list[tuple[np.ndarray, str, str | None]] = []
     for seg in plan.segments:
         seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
         if len(seg_path) < 2 or np.abs(seg_path[-1] - seg_path[0]).max() < 1e-9:
@@ -433,13 +436,20 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
             t_short += time.perf_counter() - ts
             c_short += time.process_time() - cs
-        if opts.transcription == "bspline":
-            sol, rep, attempts = _spline_segment(robot, scene, seg_path, kind, seg.arm, opts, ipopt)
-            results.append(SegmentResult(kind, seg.arm, sol, rep, t0, attempts))
+        jobs.append((seg_path, kind, seg.arm))
+    if opts.transcription == "bspline":
+        # the segments are independent NLPs: solved side by side (same results in any process)
+        cost = [float(np.abs(np.diff(p, axis=0)).sum()) * (3.0 if k == "constrained" else 1.0) for p, k, _ in jobs]
+        workers = opts.workers if opts.workers is not None else default_workers()
+        solved, worker_cpu = run_jobs((robot, scene), _spline_segment,
+                                      [(p, k, a, opts, ipopt) for p, k, a in jobs], cost, workers)
+        for (_, kind, arm), (sol, rep, attempts) in zip(jobs, solved):
+            results.append(SegmentResult(kind, arm, sol, rep, t0, attempts))
             t0 += sol.duration
-            continue
+        return (results, t_short, c_short, worker_cpu) if with_cpu else (results, t_short)
+    for seg_path, kind, arm in jobs:
         fixed = opts.fixed_plane_normals
-        prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, fixed_normals=fixed)
+        prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, arm, opts, fixed_normals=fixed)
         _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
         sol, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
         if fixed and not sol.success:
@@ -448,7 +458,7 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             log.info("segment %s: IPOPT %s with fixed plane normals; re-solving with free normals", kind,
                      sol.status.value)
             fixed = False
-            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, fixed_normals=fixed)
+            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, arm, opts, fixed_normals=fixed)
             _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
             sol2, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
             sol = _accumulate(sol2, sol)
@@ -461,7 +471,7 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             # grid from the same initial guess
             N = int(min(opts.max_intervals, np.ceil(prob.N * 1.6)))
             log.info("segment %s: IPOPT %s on %d intervals; retrying on %d", kind, sol.status.value, prob.N, N)
-            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, n_intervals=N,
+            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, arm, opts, n_intervals=N,
                                                 fixed_normals=fixed)
             _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
             sol2, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
@@ -476,14 +486,14 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             if N <= prob.N:
                 break
             log.info("segment %s: closed-chain residual %.2g between knots; re-solving with N = %d", kind, res_cc, N)
-            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, seg.arm, opts, n_intervals=N,
+            prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, arm, opts, n_intervals=N,
                                                 fixed_normals=fixed)
             prob.set_initial(solution=sol)
             sol2, rep = _solve_verified(robot, scene, prob, cc, holder, opts, ipopt, kind)
             sol = _accumulate(sol2, sol)
-        results.append(SegmentResult(kind, seg.arm, sol, rep, t0, [_attempt("knots", prob.N, sol, rep)]))
+        results.append(SegmentResult(kind, arm, sol, rep, t0, [_attempt("knots", prob.N, sol, rep)]))
         t0 += sol.duration
-    return (results, t_short, c_short) if with_cpu else (results, t_short)
+    return (results, t_short, c_short, 0.0) if with_cpu else (results, t_short)
 
 
 def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: PipelineOptions | None = None,
@@ -503,10 +513,11 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     if not plan.success:
         return res
     t1, c1 = time.perf_counter(), time.process_time()
-    res.segments, res.shortcut_time_s, shortcut_cpu = optimize_segments(robot, scene, plan, opts, rng, checker,
-                                                                        with_cpu=True)
+    res.segments, res.shortcut_time_s, shortcut_cpu, worker_cpu = optimize_segments(robot, scene, plan, opts, rng,
+                                                                                    checker, with_cpu=True)
     res.opt_wall_s = time.perf_counter() - t1 - res.shortcut_time_s
-    res.opt_cpu_s = time.process_time() - c1 - shortcut_cpu
+    res.opt_cpu_s = time.process_time() - c1 - shortcut_cpu + worker_cpu   # this process's and the workers'
+
     ts: list[np.ndarray] = []
     qs: list[np.ndarray] = []
     flags: list[np.ndarray] = []

@@ -110,6 +110,10 @@ class PipelineOptions:
     #: k [-], ≥ 2: solve a constrained segment first on ⌈N / k⌉ intervals (at least 8) and start the N-interval NLP
     #: from that optimum, projected onto the closed chain (a ``coarse`` attempt); 0: off.
     coarse_factor: int = 0
+    #: Processes that optimize a plan's segments side by side (this one and ``workers − 1`` forked workers that
+    #: inherit the robot, scene and caches; :mod:`optplan.workers`) [count]; None: 2 on a machine with at least
+    #: 2 CPUs, else 1. The results do not depend on it.
+    workers: int | None = None
 
     def planner_kwargs(self) -> dict:
         """Keyword options for :func:`~optplan.planners.make_planner` (module defaults when
@@ -126,6 +130,9 @@ class PipelineOptions:
             raise ValueError("PipelineOptions: expected spline_interval_step > 0 and 4 ≤ spline_min_intervals ≤ "
                              f"spline_max_intervals, got {self.spline_interval_step}, {self.spline_min_intervals}, "
                              f"{self.spline_max_intervals}")
+        if self.workers is not None and (isinstance(self.workers, bool) or not isinstance(self.workers, int)
+                                         or self.workers < 1):
+            raise ValueError(f"PipelineOptions.workers: expected an integer >= 1 or None, got {self.workers!r}")
         if self.compile_kernels not in (True, False, "auto"):
             raise ValueError(f"PipelineOptions.compile_kernels: expected True, False or 'auto', got "
                              f"{self.compile_kernels!r}")

@@ -4,7 +4,8 @@
 * ``rng``: a fresh ``np.random.default_rng(12345)`` for every test, so a test draws the same
   numbers whether it runs alone or inside the whole suite.
 * ``OPTPLAN_CACHE`` points to a session temporary directory, so compiled CasADi code never
-  touches the user's ``~/.cache/optplan``.
+  touches the user's ``~/.cache/optplan``; background kernel compiles are off
+  (``OPTPLAN_BACKGROUND_COMPILE=0``).
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from optplan.model.robot import RobotModel
 def _optplan_cache(tmp_path_factory):
     mp = pytest.MonkeyPatch()
     mp.setenv("OPTPLAN_CACHE", str(tmp_path_factory.mktemp("optplan_cache")))
+    mp.setenv("OPTPLAN_BACKGROUND_COMPILE", "0")   # no compiler processes outliving the tests
     yield
     mp.undo()
 

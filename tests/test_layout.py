@@ -23,7 +23,7 @@ PKG = Path(__file__).resolve().parents[1] / "optplan"
 #: ``optplan/__init__`` (lazy public names) counts as the top; importing it is no dependency.
 LAYERS = [
     (0, ("optplan.errors", "optplan._compat", "optplan.geometry")),
-    (1, ("optplan.codegen", "optplan.solver_options", "optplan.model")),
+    (1, ("optplan.codegen", "optplan.solver_options", "optplan.workers", "optplan.model")),
     (2, ("optplan.constraints", "optplan.collision", "optplan.scene")),
     (3, ("optplan.problem", "optplan.planners")),
     (4, ("optplan.tasks", "optplan.trials", "optplan.verification", "optplan.viz")),

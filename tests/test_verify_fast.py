@@ -74,7 +74,9 @@ def test_min_distance_along_is_the_exact_minimum(tcb, scene1, rng, collide):
         i = int(np.argmin([d for d, _ in ref]))
         d, pair, n = chk.min_distance_along(Q)
         assert abs(d - ref[i][0]) < 1e-9 and pair == ref[i][1]
-        assert n <= len(Q)
+        assert n <= len(Q) * len(chk.pairs)
+        if not collide:
+            assert n < 0.5 * len(Q) * len(chk.pairs)     # the bounds spare most pair distances
 
 
 def test_min_distance_along_checks_its_input(tcb, scene1):
@@ -137,3 +139,16 @@ def test_closed_chain_kinematics_reused_within_a_process(tcb, scene1, rng):
     assert k1._block is k2._block
     q = tcb.random_configuration(rng)
     np.testing.assert_array_equal(k1.h(q), k2.h(q))
+
+
+@pytest.mark.parametrize("threshold", [0.0, 0.05])
+def test_distances_below_match_every_pair_at_every_row(tcb, scene1, rng, threshold):
+    chk = CollisionChecker(tcb, scene1)
+    Q = _smooth_path(tcb, rng, np.zeros(tcb.nq), n=151, scale=1.5)
+    D = np.array([chk.distances(q) for q in Q])
+    r_ref, p_ref = np.nonzero(D < threshold)
+    rows, pairs, dist = chk.distances_below(Q, threshold)
+    assert len(r_ref) > 0
+    np.testing.assert_array_equal(rows, r_ref)
+    np.testing.assert_array_equal(pairs, p_ref)
+    np.testing.assert_allclose(dist, D[r_ref, p_ref], rtol=0, atol=1e-9)

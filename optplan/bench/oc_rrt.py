@@ -22,6 +22,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -34,8 +35,9 @@ log = logging.getLogger(__name__)
 SCENES = ("oc_industrial_1", "oc_industrial_2", "oc_tabletop", "oc_passageway")
 OMPL_PEER = "ompl-projected-bkpiece1"   # the strongest OMPL constrained configuration we found (peers.md)
 PLANNERS = ("oc_rrt", "oc_rrt_connect", "cbirrt", OMPL_PEER)
-#: also accepted: "oc_rrt_paper" (the paper's single-tree Algorithm 2, OCRRTOptions.paper())
-EXTRA_PLANNERS = ("oc_rrt_paper",)
+#: also accepted: "oc_rrt_paper" (the paper's single-tree Algorithm 2, OCRRTOptions.paper()) and each planner's
+#: "<name>_uncertified" (edges checked at their configurations only, not certified)
+EXTRA_PLANNERS = ("oc_rrt_paper", "oc_rrt_uncertified", "oc_rrt_connect_uncertified", "cbirrt_uncertified")
 
 
 @dataclass
@@ -100,22 +102,29 @@ def setup_scene(scene_name: str, planners) -> dict:
     ck = ValidityChecker(robot, scene)
     pl: dict[str, Planner] = {}
     for p in planners:
-        if p == "oc_rrt":
-            pl[p] = OCRRT(robot, scene, con, OCRRTOptions(connect=False), checker=ck, manifold=mf)
+        cert = not p.endswith("_uncertified")
+        base = p.removesuffix("_uncertified")
+        if base == "oc_rrt":
+            pl[p] = OCRRT(robot, scene, con, OCRRTOptions(connect=False, certified_edges=cert), checker=ck, manifold=mf)
+            pl[p].name = p
         elif p == "oc_rrt_paper":
             pl[p] = OCRRT(robot, scene, con, OCRRTOptions.paper(), checker=ck, manifold=mf)
             pl[p].name = p
-        elif p == "oc_rrt_connect":
-            pl[p] = OCRRT(robot, scene, con, OCRRTOptions(connect=True), checker=ck, manifold=mf)
-        elif p == "cbirrt":
-            pl[p] = CBiRRT2(robot, scene, CBiRRT2Options(), checker=ck, constraint=con)
-            pl[p].name = "cbirrt"
+        elif base == "oc_rrt_connect":
+            pl[p] = OCRRT(robot, scene, con, OCRRTOptions(connect=True, certified_edges=cert), checker=ck, manifold=mf)
+            pl[p].name = p
+        elif base == "cbirrt":
+            pl[p] = CBiRRT2(robot, scene, CBiRRT2Options(certified_edges=cert), checker=ck, constraint=con)
+            pl[p].name = p
         elif p.startswith("ompl-"):
             from ..planners.ompl_peers import make_ompl_peer
 
             pl[p] = make_ompl_peer(p, robot, scene, checker=ck, constraint=con)
         else:
             raise ValueError(f"unknown planner {p!r}; expected one of {PLANNERS + EXTRA_PLANNERS}")
+        opts: Any = getattr(pl[p], "options", None)
+        if opts is not None and getattr(opts, "certified_edges", False):
+            ck.certifier(opts.edge_min_clearance).prepare(("held",))   # before any time limit
     out = {"robot": robot, "scene": scene, "constraint": con, "manifold": mf, "q_start": q_start,
            "q_goal": q_goal, "checker": ck, "planners": pl}
     _CACHE[key] = out

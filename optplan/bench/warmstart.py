@@ -86,6 +86,9 @@ class WarmstartConfig:
     transcription: str = "bspline"
     #: ``PipelineOptions.compile_kernels = True`` (else ``"auto"``).
     compile_kernels: bool = False
+    #: Processes per trial that optimize its segments side by side (``PipelineOptions.workers``) [count]; None: the
+    #: pipeline's default with ``jobs`` = 1, else 1 (the trials already run side by side). Recorded per result line.
+    segment_workers: int | None = None
     #: Write ``DIR/time_distributions.png`` (IPOPT time and iterations per trial).
     plot: bool = True
     #: ``"local"`` (a process pool of ``jobs``) or ``"dask"`` (:mod:`optplan.bench.engine`).
@@ -103,6 +106,9 @@ def validate(cfg: WarmstartConfig) -> list[str]:
         raise ValueError(f"--trials: expected an integer >= 1, got {cfg.trials!r}")
     if not isinstance(cfg.jobs, int) or cfg.jobs < 1:
         raise ValueError(f"--jobs: expected an integer >= 1, got {cfg.jobs!r}")
+    if cfg.segment_workers is not None and (isinstance(cfg.segment_workers, bool)
+                                            or not isinstance(cfg.segment_workers, int) or cfg.segment_workers < 1):
+        raise ValueError(f"--segment-workers: expected an integer >= 1, got {cfg.segment_workers!r}")
     validate_engine(cfg.engine, cfg.jobs, cfg.address)
     if not isinstance(cfg.first_trial, int) or cfg.first_trial < 0:
         raise ValueError(f"--first-trial: expected an integer >= 0, got {cfg.first_trial!r}")
@@ -193,8 +199,10 @@ def _segment_rows(res) -> list[dict]:
 def _run_unit(args) -> dict:
     """One (scene, trial, mode): generate the trial, run the pipeline, return the result line."""
     from ..pipeline import PipelineOptions, run_pipeline
+    from ..workers import default_workers
 
-    robot_name, scene, index, mode, time_limit, seed, max_wall, fixed_normals, transcription, compile_kernels = args
+    robot_name, scene, index, mode, time_limit, seed, max_wall, fixed_normals, transcription, compile_kernels = args[:10]
+    seg_workers = args[10] if len(args) > 10 else None
     line = {"scene": scene, "trial": int(index), "mode": mode, "seed": int(seed), "time_limit_s": float(time_limit),
             "ipopt_max_wall_time_s": max_wall, "fixed_plane_normals": bool(fixed_normals),
             "transcription": transcription, "compile_kernels": bool(compile_kernels)}
@@ -211,7 +219,7 @@ def _run_unit(args) -> dict:
                  "trial_generation_s": time.perf_counter() - t0})
     opts = PipelineOptions(plan_time_limit=float(time_limit), warm_start=(mode == "warm"),
                            fixed_plane_normals=bool(fixed_normals), transcription=transcription,
-                           compile_kernels=True if compile_kernels else "auto",
+                           compile_kernels=True if compile_kernels else "auto", workers=seg_workers,
                            ipopt_options=PipelineOptions.ipopt_options
                            + (() if max_wall is None else (("max_wall_time", float(max_wall)),)))
     c0, ch0, w0 = time.process_time(), resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
@@ -224,7 +232,8 @@ def _run_unit(args) -> dict:
     wall = time.perf_counter() - w0
     cpu = time.process_time() - c0
     ch1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    line.update({"wall_time_s": wall, "cpu_time_s": cpu,
+    line.update({"segment_workers": opts.workers if opts.workers is not None else default_workers(),
+                 "wall_time_s": wall, "cpu_time_s": cpu,
                  "child_cpu_time_s": (ch1.ru_utime + ch1.ru_stime) - (ch0.ru_utime + ch0.ru_stime)})
     if res is None:
         line.update({"success": False, "plan_ok": None, "plan_status": "error", "opt_status": "error",
@@ -261,11 +270,12 @@ def _matches(r: dict, cfg: WarmstartConfig) -> bool:
 def pending_units(cfg: WarmstartConfig, scenes: list[str], rows: list[dict],
                   robot_name: str = "tcbirrt_dual_arm") -> list[tuple]:
     """The (robot, scene, trial, mode, time_limit, seed, ipopt_max_wall_time, fixed_plane_normals,
-    transcription, compile_kernels) units not yet in ``rows``."""
+    transcription, compile_kernels, segment_workers) units not yet in ``rows``."""
     done = {_key(r) for r in rows if _matches(r, cfg)}
     mw = None if cfg.ipopt_max_wall_time is None else float(cfg.ipopt_max_wall_time)
+    seg_workers = cfg.segment_workers if cfg.segment_workers is not None else (None if cfg.jobs == 1 else 1)
     return [(robot_name, sc, i, m, float(cfg.time_limit), int(cfg.seed), mw, not cfg.free_plane_normals,
-             cfg.transcription, bool(cfg.compile_kernels))
+             cfg.transcription, bool(cfg.compile_kernels), seg_workers)
             for sc in scenes for i in range(cfg.first_trial, cfg.first_trial + cfg.trials) for m in cfg.modes
             if (sc, i, m) not in done]
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any
 
 import coal
 import numpy as np
@@ -226,28 +227,11 @@ class CollisionChecker:
         i = int(pin.computeDistances(self.model, self.data, self._cgm, self._cgd, q))
         return float(self._cgd.distanceResults[i].min_distance), self.pairs[i]
 
-    def min_distance_along(self, Q, anchor_every: int = 10) -> tuple[float, Pair | None, int]:
-        """Exactly the smallest :meth:`min_distance` over the configurations ``Q`` (M × nq) and
-        its pair, without computing every row: every ``anchor_every``-th row (and the last) gets
-        all pair distances; a row in between is bounded from below, per pair, by the pair's
-        distance at the anchors on either side minus how far its two geometries can have moved
-        since (:func:`optplan.collision.sweep.sweep_weights`), and only rows whose bound is below
-        the smallest distance found so far are computed, the lowest bound first. Returns
-        ``(distance [m], pair, rows computed)`` (``inf, None, 0`` without pairs or rows)."""
-        Q = np.asarray(Q, float)
-        if Q.ndim != 2 or Q.shape[1] != self.robot.nq:
-            raise ValueError(f"Q: expected an (M, {self.robot.nq}) array of configurations, got shape {Q.shape}")
-        if not self.pairs or not len(Q):
-            return float("inf"), None, 0
-        if int(anchor_every) < 1:
-            raise ValueError(f"anchor_every: expected an int >= 1, got {anchor_every!r}")
-        if self.model.nq != self.model.nv:        # a free-flyer or other non-1-dof joints: no bound, every row
-            best_d, best_p = float("inf"), None
-            for q in Q:
-                d, p = self.min_distance(q)
-                if d < best_d:
-                    best_d, best_p = d, p
-            return best_d, best_p, len(Q)
+    def _anchor_bounds(self, Q: np.ndarray, every: int) -> tuple[list[int], np.ndarray, np.ndarray]:
+        """Anchor rows of ``Q`` (every ``every``-th and the last), all pair distances there
+        (anchors × pairs), and a lower bound on every pair's distance at every row (pairs × rows;
+        ``inf`` at the anchors): the distance at the anchor on either side minus how far the
+        pair's two geometries can have moved since (the larger of the two)."""
         if self._sweep is None:
             from .sweep import sweep_weights
 
@@ -257,15 +241,11 @@ class CollisionChecker:
             self._sweep = (W, pa, pb)
         W, pa, pb = self._sweep
         M = len(Q)
-        anchors = list(range(0, M, int(anchor_every)))
+        anchors = list(range(0, M, every))
         if anchors[-1] != M - 1:
             anchors.append(M - 1)
         D = np.array([self.distances(Q[i]) for i in anchors])      # anchors × pairs
-        amin = D.min(axis=1)
-        r = int(amin.argmin())
-        dmin = float(amin[r])
-        best: Pair | None = self.pairs[int(D[r].argmin())]
-        lower = np.full(M, np.inf)
+        lower = np.full((len(self.pairs), M), np.inf)
         for r in range(len(anchors) - 1):
             i0, i1 = anchors[r], anchors[r + 1]
             if i1 - i0 < 2:
@@ -273,18 +253,85 @@ class CollisionChecker:
             seg = Q[i0 + 1:i1]
             m0 = W @ np.abs(seg - Q[i0]).T                             # geometries × rows
             m1 = W @ np.abs(seg - Q[i1]).T
-            low = np.maximum(D[r][:, None] - m0[pa] - m0[pb], D[r + 1][:, None] - m1[pa] - m1[pb])
-            lower[i0 + 1:i1] = low.min(axis=0)
-        rows = np.nonzero(lower < dmin)[0]
-        n = len(anchors)
-        for i in rows[np.argsort(lower[rows], kind="stable")]:
-            if lower[i] >= dmin:
+            lower[:, i0 + 1:i1] = np.maximum(D[r][:, None] - m0[pa] - m0[pb], D[r + 1][:, None] - m1[pa] - m1[pb])
+        return anchors, D, lower
+
+    def _check_rows(self, Q: Any, anchor_every: Any) -> np.ndarray:
+        Q = np.asarray(Q, float)
+        if Q.ndim != 2 or Q.shape[1] != self.robot.nq:
+            raise ValueError(f"Q: expected an (M, {self.robot.nq}) array of configurations, got shape {Q.shape}")
+        if isinstance(anchor_every, bool) or not isinstance(anchor_every, (int, np.integer)) or anchor_every < 1:
+            raise ValueError(f"anchor_every: expected an int >= 1, got {anchor_every!r}")
+        return Q
+
+    def distances_below(self, Q, threshold: float, anchor_every: int = 10
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every (row of ``Q``, pair) whose exact distance is below ``threshold`` [m], as arrays
+        ``(rows, pair indices, distances [m])`` — the same entries as ``distances`` at every row
+        filtered by the threshold, with the anchor bounds of :meth:`min_distance_along` sparing
+        the pairs that cannot be that close."""
+        Q = self._check_rows(Q, anchor_every)
+        if not self.pairs or not len(Q):
+            return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
+        thr = float(threshold)
+        if self.model.nq != self.model.nv:        # no bound: every row
+            D = np.array([self.distances(q) for q in Q])
+            r_, p_ = np.nonzero(D < thr)
+            return r_, p_, D[r_, p_]
+        anchors, D, lower = self._anchor_bounds(Q, int(anchor_every))
+        ra, pa_ = np.nonzero(D < thr)
+        rows, pairs, dist = [np.asarray(anchors)[ra]], [pa_], [D[ra, pa_]]
+        gm, gd = self._cgm, self._cgd
+        for i in np.nonzero((lower < thr).any(axis=0))[0].tolist():
+            pin.updateGeometryPlacements(self.model, self.data, gm, gd, Q[i])
+            for p in np.nonzero(lower[:, i] < thr)[0].tolist():
+                d = pin.computeDistance(gm, gd, p).min_distance
+                if d < thr:
+                    rows.append(np.array([i]))
+                    pairs.append(np.array([p]))
+                    dist.append(np.array([d]))
+        r_, p_, d_ = np.concatenate(rows).astype(int), np.concatenate(pairs).astype(int), np.concatenate(dist)
+        order = np.lexsort((p_, r_))
+        return r_[order], p_[order], d_[order]
+
+    def min_distance_along(self, Q, anchor_every: int = 10) -> tuple[float, Pair | None, int]:
+        """Exactly the smallest :meth:`min_distance` over the configurations ``Q`` (M × nq) and
+        its pair, without computing every pair at every row: every ``anchor_every``-th row (and
+        the last) gets all pair distances; in between, a pair's distance is bounded from below by
+        its distance at the anchors on either side minus how far its two geometries can have moved
+        since (:func:`optplan.collision.sweep.sweep_weights`), and only the pairs whose bound is
+        below the smallest distance found so far are computed, rows with the lowest bound first.
+        Returns ``(distance [m], pair, pair distances computed)`` (``inf, None, 0`` without pairs or
+        rows)."""
+        Q = self._check_rows(Q, anchor_every)
+        if not self.pairs or not len(Q):
+            return float("inf"), None, 0
+        n_pairs = len(self.pairs)
+        if self.model.nq != self.model.nv:        # a free-flyer or other non-1-dof joints: no bound, every row
+            best_d, best_p = float("inf"), None
+            for q in Q:
+                d, p = self.min_distance(q)
+                if d < best_d:
+                    best_d, best_p = d, p
+            return best_d, best_p, len(Q) * n_pairs
+        anchors, D, lower = self._anchor_bounds(Q, int(anchor_every))
+        amin = D.min(axis=1)
+        r = int(amin.argmin())
+        dmin, ibest = float(amin[r]), int(D[r].argmin())
+        row_lower = lower.min(axis=0)
+        rows = np.nonzero(row_lower < dmin)[0]
+        n = len(anchors) * n_pairs
+        gm, gd = self._cgm, self._cgd
+        for i in rows[np.argsort(row_lower[rows], kind="stable")]:
+            if row_lower[i] >= dmin:
                 break
-            d, p = self.min_distance(Q[i])
-            n += 1
-            if d < dmin:
-                dmin, best = d, p
-        return dmin, best, n
+            pin.updateGeometryPlacements(self.model, self.data, gm, gd, Q[i])
+            for k in np.nonzero(lower[:, i] < dmin)[0].tolist():
+                d = pin.computeDistance(gm, gd, k).min_distance
+                n += 1
+                if d < dmin:
+                    dmin, ibest = float(d), k
+        return dmin, self.pairs[ibest], n
 
     def is_valid(self, q, margin: float = 0.0) -> bool:
         """True when every pair is at least ``margin`` [m] apart (stops at the first failure;

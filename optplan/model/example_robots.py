@@ -29,6 +29,7 @@ from pathlib import Path
 
 import coal
 import numpy as np
+import pinocchio as pin
 
 from ..errors import ModelError
 from ._robot_data import _require_dir, example_robot_data_dir
@@ -109,10 +110,32 @@ def _convex_hulls(robot: RobotModel) -> int:
     for obj in robot.collision_model.geometryObjects:
         g = obj.geometry
         if isinstance(g, coal.BVHModelBase):
-            g.buildConvexRepresentation(False)
+            # the hull (qhull), not buildConvexRepresentation: that one keeps the mesh's own triangles as
+            # the polytope's faces, and on a non-convex mesh coal's hill-climbing support function then
+            # stops at local maxima: distances too large by centimetres to decimetres, collisions missed
+            g.buildConvexHull(True, "Qt")
             obj.geometry = g.convex
             n += 1
     return n
+
+
+#: self-collision pairs whose HULLS overlap where the meshes never touch: PR2's torso hull fills the
+#: concave shoulder mounts, so the upper arms enter it in a third of the joint box (sampled: 196 of
+#: 600 pair tests in collision as hulls, 0 as meshes, mesh distance ≥ 3.6 cm); they are not checked
+_HULL_ONLY_PAIRS = {"pr2": (("torso_lift_link_0", "l_upper_arm_link_0"), ("torso_lift_link_0", "r_upper_arm_link_0"))}
+
+
+def _drop_hull_only_pairs(robot: RobotModel, kind: str) -> None:
+    drop = {frozenset(p) for p in _HULL_ONLY_PAIRS.get(kind, ())}
+    if not drop:
+        return
+    objs = robot.collision_model.geometryObjects
+    robot.collision_pairs = [(a, b) for a, b in robot.collision_pairs
+                             if frozenset((objs[a].name, objs[b].name)) not in drop]
+    robot.collision_model.removeAllCollisionPairs()
+    for a, b in robot.collision_pairs:
+        robot.collision_model.addCollisionPair(pin.CollisionPair(a, b))
+    robot.collision_data = pin.GeometryData(robot.collision_model)
 
 
 def _load(kind: str) -> RobotModel:
@@ -144,6 +167,7 @@ def _load(kind: str) -> RobotModel:
     robot = RobotModel.from_urdf(path, arms=arms, name=kind)
     _convex_hulls(robot)
     RobotModel.__init__(robot, robot.model, robot.collision_model, arms, name=kind, floating=False, urdf_path=path)
+    _drop_hull_only_pairs(robot, kind)
     order = [robot.model.getJointId(n) for n in joints["left"] + joints["right"]]
     if robot.nj != 14 or sorted(order) != order:
         log.info("%s: joint order %s", kind, robot.joint_names)

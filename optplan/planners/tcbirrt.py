@@ -74,7 +74,10 @@ Deviations from the paper, all options (defaults in brackets):
   (:meth:`.ValidityChecker.edge_checkpoints`: each geometry's speed from the Jacobian at the
   edge's cell ends plus a second-order remainder — an arm's self-motion moves joints a lot and
   the geometry little, and is counted as such) or ``"static"`` (the configuration-free
-  per-geometry bound ``Σ_j W_gj |Δq_j|``); both are conservative. With ``verify_path`` [paper False,
+  per-geometry bound ``Σ_j W_gj |Δq_j|``); both are conservative, and ``"certified"``: no spacing at
+  all, each edge is certified collision-free at every point by conservative advancement on exact
+  distances (:meth:`.ValidityChecker.edge_is_certified`; every pair stays at least
+  ``edge_min_clearance / 2`` apart), so ``verify_path`` is not needed and not done. With ``verify_path`` [paper False,
   improved True] and the Jacobian bound, a start-goal path, once found, has its edges checked once
   more at the configuration-free bound's uniform spacing: a second, different sampling at the same
   tolerance (a graze shallower than the tolerance that one sampling misses, the other may
@@ -228,8 +231,10 @@ class TCBiRRT(Planner):
         self._filter: ObjectPoseFilter | None = None
         self._w_held = self.checker.sweep_weights("held", per_geometry=True)
         self._w_fixed = self.checker.sweep_weights("fixed", per_geometry=True)
-        if self.options.edge_tolerance and self.options.edge_bound == "jacobian":
+        if self.options.edge_tolerance and self.options.edge_bound in ("jacobian", "certified"):
             self.checker.prepare_edge_checks(("held", "fixed"))   # compiled once, before any time limit
+            if self.options.edge_bound == "certified":
+                self.checker.certifier(self.options.edge_min_clearance).prepare(("held", "fixed"))
         self._cb: CBiRRT2 | None = None
         self._rng = np.random.default_rng(0)
 
@@ -300,7 +305,9 @@ class TCBiRRT(Planner):
         """The straight joint segment a → b (object held) at ``edge_tolerance`` (ends not checked)."""
         st["edge_checks"] += 1
         o = self.options
-        if o.edge_bound == "jacobian":
+        if o.edge_bound == "certified":
+            ok = self.checker.edge_is_certified(a, b, "held", min_clearance=o.edge_min_clearance)
+        elif o.edge_bound == "jacobian":
             ok = self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "held")
         else:
             ok = edge_is_valid(a, b, self.checker.is_valid, cast(float, o.edge_tolerance), False, self._w_held)
@@ -524,9 +531,11 @@ class TCBiRRT(Planner):
         """One arm's straight segment x → y (its joints ``idx``; the rest of ``base`` still, the
         object fixed at M) at ``edge_tolerance`` with the ``edge_bound`` (ends not checked)."""
         o = self.options
-        if o.edge_bound == "jacobian":
+        if o.edge_bound in ("jacobian", "certified"):
             a, b = base.copy(), base.copy()
             a[idx], b[idx] = x, y
+            if o.edge_bound == "certified":
+                return self.checker.edge_is_certified(a, b, "fixed", object_pose=M, min_clearance=o.edge_min_clearance)
             return self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "fixed", object_pose=M)
         base = base.copy()
 
@@ -681,7 +690,7 @@ class TCBiRRT(Planner):
                                 (ta.kill(bad_a) if bad_a is not None else 0) + (tb.kill(bad_b) if bad_b is not None else 0)
                             ta, tb, a_is_start = tb, ta, not a_is_start
                             continue
-                    if o.edge_tolerance and o.verify_path and o.edge_bound != "static":
+                    if o.edge_tolerance and o.verify_path and o.edge_bound == "jacobian":
                         bad_a, bad_b = self._verify_branch(ta, i_a, st), self._verify_branch(tb, i_b, st)
                         if bad_a is not None or bad_b is not None or not self._verify_connection(ta, i_a, reg, st):
                             st["path_rejections"] += 1

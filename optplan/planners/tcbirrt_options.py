@@ -70,8 +70,13 @@ class TCBiRRTOptions:
     #: variant's value, :data:`VARIANTS`).
     lazy_edges: bool | None = None
     #: The bound that spaces the ``edge_tolerance`` checks: ``"jacobian"`` (each geometry's speed from the Jacobian
-    #: plus a second-order remainder) or ``"static"`` (the configuration-free per-geometry bound); both conservative.
+    #: plus a second-order remainder) or ``"static"`` (the configuration-free per-geometry bound); both conservative;
+    #: or ``"certified"``: every edge certified collision-free at every point (conservative advancement on exact
+    #: distances, :meth:`.ValidityChecker.edge_is_certified`; ``edge_tolerance`` > 0 only switches the checks on).
     edge_bound: str = "jacobian"
+    #: ``edge_bound="certified"``: an edge is rejected where the exact clearance drops below this, and a certified
+    #: edge keeps every pair at least half of it apart [m].
+    edge_min_clearance: float = 1e-3
     #: Re-check a found path's edges at the configuration-free bound's uniform spacing (the benchmark's); a
     #: failing edge removes its subtree and the search goes on (None: the variant's value, :data:`VARIANTS`).
     verify_path: bool | None = None
@@ -221,8 +226,9 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.ik: expected IKSettings, got {type(self.ik).__name__}")
         if not (isinstance(self.max_joint_step, (int, float)) and self.max_joint_step > 0):
             raise ValueError(f"TCBiRRTOptions.max_joint_step: expected a positive number (inf: off), got {self.max_joint_step!r}")
-        if self.edge_bound not in ("jacobian", "static"):
-            raise ValueError(f"TCBiRRTOptions.edge_bound: expected 'jacobian' or 'static', got {self.edge_bound!r}")
+        if self.edge_bound not in ("jacobian", "static", "certified"):
+            raise ValueError(f"TCBiRRTOptions.edge_bound: expected 'jacobian', 'static' or 'certified', got {self.edge_bound!r}")
+        _pos("edge_min_clearance", self.edge_min_clearance)
         if self.interpolation not in ("geodesic", "absolute"):
             raise ValueError(f"TCBiRRTOptions.interpolation: expected 'geodesic' or 'absolute', got {self.interpolation!r}")
         if self.edge_resolution is not None:

@@ -30,7 +30,9 @@ of the checked geometry (robot links, and the held object in the ``"held"`` mode
 of that joint, whatever the other joints: along a straight joint-space segment no point moves
 farther than ``Σ_j w_j |Δq_j|``. Edge checks spaced by that bound
 (:func:`optplan.planners.rrtconnect.edge_is_valid` with ``weights``) tie the check density to the
-geometry instead of to a joint angle.
+geometry instead of to a joint angle. :meth:`ValidityChecker.edge_is_certified` goes further: a
+segment certified collision-free at every point by conservative advancement on exact distances
+(:mod:`optplan.planners.edge_certify`).
 """
 from __future__ import annotations
 
@@ -46,6 +48,7 @@ from ..collision.checker import pair_indices, scene_geometry, scene_pairs
 from ..collision.sweep import sweep_weights
 from ..model.robot import RobotModel
 from ..scene import Scene
+from .edge_certify import EdgeCertifier
 
 if TYPE_CHECKING:
     from ..codegen import FastFunction
@@ -145,6 +148,7 @@ class ValidityChecker:
         self._revolute_only = all(jm.nv == 1 and jm.shortname().replace("JointModel", "").startswith("R")
                                   for jm in list(self.model.joints)[1:])
         self._profile_fns: dict[str, FastFunction | None] = {}
+        self._certifiers: dict[float, EdgeCertifier] = {}
 
     def _sweep_bound(self, mode: str) -> np.ndarray:
         """One row per moving geometry of ``mode`` (:meth:`_moving_geometries`), one column per
@@ -316,6 +320,27 @@ class ValidityChecker:
             if not fn(a + ts[k - 1] * d):
                 return False
         return True
+
+    def certifier(self, min_clearance: float = 1e-3) -> EdgeCertifier:
+        """The :class:`~optplan.planners.edge_certify.EdgeCertifier` of this checker for
+        ``min_clearance`` [m] (built once per value; shares the geometry and the pair set)."""
+        key = float(min_clearance)
+        if key not in self._certifiers:
+            self._certifiers[key] = EdgeCertifier(self, key)
+        return self._certifiers[key]
+
+    def edge_is_certified(self, a: np.ndarray, b: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None,
+                          min_clearance: float = 1e-3) -> bool:
+        """The straight joint segment ``a → b`` (ends included) CERTIFIED collision-free by
+        conservative advancement on exact distances (:mod:`optplan.planners.edge_certify`): no pair
+        closer than ``min_clearance / 2`` [m] (+ ``margin``) at any point of it. Unlike
+        :meth:`edge_is_valid` no fixed check spacing is involved. ``mode`` as in :meth:`edge_is_valid`."""
+        return self.certifier(min_clearance).segment(a, b, mode, object_pose)
+
+    def path_is_certified(self, Q: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None,
+                          min_clearance: float = 1e-3) -> bool:
+        """:meth:`edge_is_certified` for the piecewise-linear joint path through the rows of ``Q``."""
+        return self.certifier(min_clearance).path(Q, mode, object_pose)
 
     def sweep_weights(self, mode: str = "held", per_geometry: bool = False) -> np.ndarray:
         """Per-joint bound [m/rad] on the displacement of any checked point (see the module

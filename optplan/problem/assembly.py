@@ -162,7 +162,8 @@ def scatter(nrow: int, ncol: int, rows: np.ndarray, cols: np.ndarray, src_idx: n
     S.sort_indices()
     colind = np.searchsorted(ucol, np.arange(ncol + 1)).tolist()
     sp = ca.Sparsity(nrow, ncol, colind, urow.astype(int).tolist())
-    Sd = ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.indptr.tolist(), S.indices.tolist()), S.data)
+    # nonzeros as a list: CasADi converts a Python list ~1.6x faster than an ndarray (measured, 477k entries)
+    Sd = ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.indptr.tolist(), S.indices.tolist()), S.data.tolist())
     return ca.MX(sp, ca.mtimes(Sd, src))
 
 

@@ -587,18 +587,18 @@ class CollisionModel:
             Q = np.array([robot.configuration(q) for q in Q])
         if len(Q) != len(traj_t):
             raise ValueError(f"boost_between_knots: {len(traj_t)} times for {len(Q)} configurations")
-        D = np.array([self.checker.distances(q) for q in Q])
+        rows, idx, dist = self.checker.distances_below(Q, min_clearance)   # exact, pairs that cannot be close skipped
         n = 0
         active = set(self.active_pairs)
         for i, p in enumerate(self.checker.pairs):
             if p not in active:
                 continue  # not constrained at all: activation (``activate_with``) is the remedy
             ks = set(self.knots_of(p, len(knot_t) - 1))
-            bad = np.flatnonzero(D[:, i] < min_clearance)
+            mine = idx == i
             worst: dict[int, float] = {}
-            for s_ in bad:
+            for s_, d_ in zip(rows[mine].tolist(), dist[mine].tolist()):
                 k = int(np.clip(np.searchsorted(knot_t, traj_t[s_], side="right") - 1, 0, len(knot_t) - 2))
-                worst[k] = min(worst.get(k, np.inf), float(D[s_, i]))
+                worst[k] = min(worst.get(k, np.inf), float(d_))
             for k, d in worst.items():
                 if k not in ks or k + 1 not in ks:
                     continue  # a knot next to it was unconstrained: activation widens the window

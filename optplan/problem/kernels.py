@@ -18,7 +18,9 @@ import numpy as np
 from ..constraints.closed_chain import relative_pose_residual
 from ..model.robot import RobotModel
 from ..model.symbolic import SymbolicKinematics
+from . import kernel_compiler as background
 from .frame_terms import ClosedChain
+from .kernel_compiler import compile_library
 
 __all__ = ["KernelCache", "geometry_points"]
 log = logging.getLogger(__name__)
@@ -119,11 +121,6 @@ class KernelCache:
         about a second per kernel, once per robot and kernel; every later process loads the
         library. ``build=False``: only load a library an earlier run compiled (None if there is
         none). Without a cache directory or a compiler, or if compiling fails: ``fn`` (logged)."""
-        import shutil
-        import subprocess
-        import tempfile
-        from pathlib import Path
-
         key = ("compiled", fn.name(), opt)
         got = self._fns.get(key)
         if got is not None:
@@ -132,25 +129,12 @@ class KernelCache:
         if lib is None or not lib.exists():
             if not build:
                 return None
-            cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
-            if lib is None or cc is None:
-                log.info("kernel %s not compiled (no cache directory or no C compiler)", fn.name())
+            if lib is None:
+                log.info("kernel %s not compiled (no cache directory)", fn.name())
                 return fn
             t0 = time.perf_counter()
-            with tempfile.TemporaryDirectory() as tmp:
-                cname = f"{fn.name()}.c"
-                cg = ca.CodeGenerator(cname, {"with_header": False})
-                cg.add(fn)
-                cg.generate(tmp + os.sep)
-                out = Path(tmp) / lib.name
-                proc = subprocess.run([cc, opt, "-fPIC", "-shared", str(Path(tmp, cname)), "-o", str(out), "-lm"],
-                                      capture_output=True, text=True)
-                if proc.returncode != 0:
-                    log.warning("compiling kernel %s failed (%s); using CasADi's VM", fn.name(), proc.stderr[-300:])
-                    return fn
-                tmp_lib = lib.with_suffix(f".{os.getpid()}.tmp")
-                shutil.copy(out, tmp_lib)
-                os.replace(tmp_lib, lib)  # atomic: concurrent processes never load half a library
+            if not compile_library(fn, lib, opt):
+                return fn
             log.info("compiled kernel %s in %.1f s", fn.name(), time.perf_counter() - t0)
         ext = ca.external(fn.name(), str(lib))
         self._fns[key] = ext
@@ -160,7 +144,8 @@ class KernelCache:
                    ) -> tuple[tuple[ca.Function, ca.Function, ca.Function], bool]:
         """``((f, jac, hess), is_compiled)`` of kernel ``fn`` for an NLP: the symbolic functions
         (``compiled=False``), compiled C (``True``: compiled now where missing) or C where an
-        earlier run left the libraries, else symbolic (``"auto"``)."""
+        earlier run left the libraries, else symbolic (``"auto"``; the missing libraries are then
+        queued for a background compile, :mod:`optplan.problem.kernel_compiler`)."""
         if compiled not in (True, False, "auto"):
             raise ValueError(f"compile_kernels: expected True, False or 'auto', got {compiled!r}")
         jfn, hfn = self.derivatives(fn)
@@ -169,6 +154,10 @@ class KernelCache:
             return fns, False
         got = [self.compiled(f, build=compiled is True) for f in fns]
         if any(g is None for g in got) or any(g is f for g, f in zip(got, fns)):
+            if compiled == "auto" and self._dir is not None:   # for the next NLPs and processes
+                for f, g in zip(fns, got):
+                    if g is None:
+                        background.queue(self._dir, f.name(), "-O1")
             return fns, False
         # no None among them: checked above
         return cast("tuple[ca.Function, ca.Function, ca.Function]", tuple(got)), True

@@ -48,6 +48,7 @@ from numpy.typing import ArrayLike
 
 from ..model.robot import RobotModel
 from ..scene import Scene
+from . import kernel_compiler
 from .assembly import Assembly
 from .bspline import check_knot_guess, fit_interior, jerk_integral_reference, knot_values, rest_to_rest
 from .collision_term import CollisionAvoidance, _box_vertices, witness_plane
@@ -453,6 +454,7 @@ class SplineSegmentProblem:
         pvals.append(np.array([scale / h**5]))  # ∫‖j‖² dt = h Σ ‖ΔP³/h³‖², scaled to order 1
         evals = {fn.name(): self.kernels.evaluators(fn, self.compile_kernels)
                  for fn in ([ccfn] if ccfn is not None else []) + [it.fn for it in plan]}
+        kernel_compiler.launch()   # kernels evaluated symbolically here: compiled in the background for later NLPs
         key = (N, nj, sel.tobytes(), None if ccfn is None else ccfn.name(), self.exact_derivatives,
                tuple((it.fn.name(), tuple(it.knots), it.static) for it in plan),
                tuple(sorted((name, c) for name, (_, c) in evals.items())))

@@ -1,0 +1,127 @@
+"""Independent jobs of one context run side by side in forked worker processes.
+
+The pipeline optimizes the segments of a plan one NLP each; they share nothing but the robot and
+the scene, so on a machine with several cores they can be solved at the same time. IPOPT holds
+Python's global interpreter lock while it runs, so threads do not help; processes do.
+
+:func:`run_jobs` keeps, per context (the robot and scene objects a job needs), a pool of worker
+processes created with ``fork``: a worker starts with the parent's memory — the robot, the scene,
+the loaded kernels and compiled libraries — so nothing is pickled but a job's arguments and its
+result. The calling process takes a share of the jobs itself (longest first, by the cost estimate
+the caller gives), the workers the rest. A job's function must be importable by name (a
+module-level function) and deterministic: which process runs a job does not change its result.
+Where ``fork`` is not available, with one worker, or if a worker dies, the jobs run here, in order.
+"""
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import os
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+__all__ = ["default_workers", "run_jobs", "shutdown"]
+log = logging.getLogger(__name__)
+
+#: contexts the forked workers inherit: key -> the context objects (kept alive while a pool uses them)
+_CONTEXTS: dict[tuple[int, ...], tuple[Any, ...]] = {}
+#: the pools of the most recently used contexts
+_POOLS: OrderedDict[tuple[int, ...], ProcessPoolExecutor] = OrderedDict()
+#: how many pools (each with its worker processes) stay alive
+MAX_POOLS = 2
+
+
+def default_workers() -> int:
+    """Processes a pipeline uses by default: 2 where the machine has at least 2 CPUs available to
+    this process, else 1 (more rarely help: a plan has 2-4 segments, one or two of them long)."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        n = os.cpu_count() or 1
+    return 2 if n >= 2 else 1
+
+
+def shutdown() -> None:
+    """Stop every worker process (they are also stopped when the interpreter exits)."""
+    while _POOLS:
+        key, pool = _POOLS.popitem(last=False)
+        pool.shutdown(wait=False, cancel_futures=True)
+        _CONTEXTS.pop(key, None)
+
+
+def _pool(context: tuple[Any, ...], workers: int) -> tuple[tuple[int, ...], ProcessPoolExecutor] | None:
+    if "fork" not in mp.get_all_start_methods():  # pragma: no cover - not on Linux
+        return None
+    key = (*(id(c) for c in context), workers)
+    pool = _POOLS.get(key)
+    if pool is not None:
+        _POOLS.move_to_end(key)
+        return key, pool
+    _CONTEXTS[key] = context             # before the workers fork: they inherit it
+    pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"))
+    _POOLS[key] = pool
+    while len(_POOLS) > MAX_POOLS:
+        old, p = _POOLS.popitem(last=False)
+        p.shutdown(wait=False, cancel_futures=True)
+        _CONTEXTS.pop(old, None)
+    return key, pool
+
+
+def _run_batch(key: tuple[int, ...], fn: Callable[..., Any], batch: list[tuple[int, tuple[Any, ...]]]
+               ) -> tuple[list[tuple[int, Any]], float]:  # pragma: no cover - runs in a worker process
+    """In a worker: ``fn(*context, *args)`` for every job of the batch; results and CPU time [s]."""
+    context = _CONTEXTS[key]
+    c0 = time.process_time()
+    out = [(i, fn(*context, *args)) for i, args in batch]
+    return out, time.process_time() - c0
+
+
+def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]],
+             cost: Sequence[float], workers: int) -> tuple[list[Any], float]:
+    """``[fn(*context, *job) for job in jobs]`` computed by this process and ``workers − 1``
+    forked worker processes (see the module docstring); ``cost``: an estimate per job, used to
+    share them out (longest first, each to the least loaded process). Returns the results in
+    job order and the CPU time [s] the workers spent (this process's own is its ``process_time``)."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    if len(cost) != len(jobs):
+        raise ValueError(f"cost: expected one estimate per job ({len(jobs)}), got {len(cost)}")
+    n_proc = min(workers, len(jobs))
+    got = _pool(context, n_proc - 1) if n_proc > 1 else None
+    if got is None:
+        return [fn(*context, *job) for job in jobs], 0.0
+    key, pool = got
+    bins: list[list[int]] = [[] for _ in range(n_proc)]
+    load = [0.0] * n_proc
+    for i in sorted(range(len(jobs)), key=lambda i: -float(cost[i])):
+        least = load.index(min(load))
+        bins[least].append(i)
+        load[least] += float(cost[i])
+    futures: list[tuple[list[int], Future]] = []
+    try:
+        for b in bins[1:]:
+            if b:
+                futures.append((b, pool.submit(_run_batch, key, fn, [(i, tuple(jobs[i])) for i in b])))
+    except BrokenProcessPool:  # pragma: no cover - a worker died earlier
+        log.warning("worker processes unavailable; running every job here")
+        _POOLS.pop(key, None)
+        return [fn(*context, *job) for job in jobs], 0.0
+    results: list[Any] = [None] * len(jobs)
+    for i in bins[0]:
+        results[i] = fn(*context, *jobs[i])
+    worker_cpu = 0.0
+    for b, fut in futures:
+        try:
+            out, cpu = fut.result()
+        except BrokenProcessPool:  # pragma: no cover - a worker died: its jobs run here
+            log.warning("a worker process died; running its %d jobs here", len(b))
+            _POOLS.pop(key, None)
+            out, cpu = [(i, fn(*context, *jobs[i])) for i in b], 0.0
+        worker_cpu += cpu
+        for i, r in out:
+            results[i] = r
+    return results, worker_cpu

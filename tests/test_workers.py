@@ -1,0 +1,58 @@
+"""Jobs solved side by side in forked worker processes: same results, in order, as in one process."""
+import os
+import time
+
+import numpy as np
+import pytest
+
+from optplan.workers import default_workers, run_jobs, shutdown
+
+
+def _job(scale, offset, x, spin=0.0):
+    """A deterministic job that burns ``spin`` seconds of CPU and says where it ran."""
+    t = time.process_time()
+    while time.process_time() - t < spin:
+        pass
+    return scale * x + offset, os.getpid()
+
+
+def test_results_in_job_order_and_identical_to_serial():
+    jobs = [(x, 0.05) for x in range(6)]
+    par, cpu = run_jobs((2.0, 1.0), _job, jobs, cost=[1.0] * 6, workers=2)
+    ser, cpu1 = run_jobs((2.0, 1.0), _job, jobs, cost=[1.0] * 6, workers=1)
+    assert [r[0] for r in par] == [r[0] for r in ser] == [2.0 * x + 1.0 for x in range(6)]
+    assert cpu1 == 0.0
+    pids = {r[1] for r in par}
+    assert os.getpid() in pids and len(pids) == 2          # this process took a share, one worker the rest
+    assert cpu > 0.1                                        # the worker's CPU time is reported
+    shutdown()
+
+
+def test_longest_jobs_spread_over_processes():
+    jobs = [(x, 0.0) for x in range(4)]
+    out, _ = run_jobs((1.0, 0.0), _job, jobs, cost=[10.0, 9.0, 1.0, 1.0], workers=2)
+    assert out[0][1] != out[1][1]                            # the two long jobs run in different processes
+    shutdown()
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="workers"):
+        run_jobs((), _job, [], cost=[], workers=0)
+    with pytest.raises(ValueError, match="cost"):
+        run_jobs((1.0, 0.0), _job, [(1,)], cost=[], workers=2)
+    assert default_workers() in (1, 2)
+
+
+def test_pipeline_same_trajectory_with_two_processes(tcb):
+    from optplan.pipeline import PipelineOptions, run_pipeline
+    from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load("ssps_scene1")
+    trial = TrialGenerator(tcb, scene).generate(2, 0)
+    a = run_pipeline(tcb, scene, trial.q_start, trial.q_goal, PipelineOptions(workers=1), seed=int(trial.seed))
+    b = run_pipeline(tcb, scene, trial.q_start, trial.q_goal, PipelineOptions(workers=2), seed=int(trial.seed))
+    assert a.success and b.success and len(a.segments) == len(b.segments) >= 2
+    np.testing.assert_array_equal(a.q, b.q)
+    assert a.iterations == b.iterations
+    shutdown()
