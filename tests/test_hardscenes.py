@@ -339,11 +339,98 @@ def test_joint_connect_joins_two_closed_chain_configurations(robot, rng):
     assert st["joint_connect_successes"] == 1 and st["edge_checks"] == len(path)
 
 
+def test_branch_grafts_give_a_verified_path(robot):
+    """The improved variant grows other IK branches into its trees (``branch_grafts``; here from the first
+    iteration, ``graft_after=0``, with grafts at both roots before the search). On a truss trial
+    whose start and goal lie on different IK branches: the chain closes at every constrained
+    configuration (Pinocchio FK), every straight edge passes the bench's independent 1 cm sweep check
+    (regrasp edges with the object fixed), and each regrasp segment keeps the object still and moves
+    one arm."""
+    from optplan.bench.tcbirrt import _path_checks
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load("hard_truss")
+    ck = ValidityChecker(robot, scene)
+    kin = ClosedChainKinematics(robot, scene.object.grasps)
+    t = TrialGenerator(robot, scene).generate(15, 0)
+    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved", graft_after=0), checker=ck, kinematics=kin)
+    assert pl.options.branch_grafts == 4 and TCBiRRTOptions().branch_grafts == 0
+    res = pl.plan(t.q_start, t.q_goal, time_limit=30.0, seed=t.seed, clock="cpu")
+    assert res.success, res.message
+    assert res.stats["grafts"] >= 1 and res.stats["graft_attempts"] >= res.stats["grafts"]
+    assert np.allclose(res.path[0], t.q_start) and np.allclose(res.path[-1], t.q_goal)
+    from optplan.constraints.closed_chain import closure_error
+
+    for q, c in zip(res.path, res.constrained):
+        assert ck.in_limits(q)
+        if c:   # both hands on the object: the chain closes (Pinocchio FK) and the configuration is free
+            assert max(closure_error(robot, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q)
+    chk = _path_checks(robot, scene, ck, res)   # every straight edge, regrasps with the object fixed, at 1 cm sweep
+    assert chk["swept_invalid_edges"] == 0 and chk["max_closed_chain_residual"] <= 1e-6
+    regs = [s for s in res.segments if s.kind == "regrasp"]
+    assert len(regs) == res.stats["n_regrasp"] >= 2
+    for s in regs:
+        P = res.path[s.start:s.stop + 1]
+        moved = [a for a, idx in zip(kin.arm_names, kin.idx) if np.ptp(P[:, idx], axis=0).max() > 0]
+        assert moved == [s.arm]
+        assert res.constrained[s.start] and res.constrained[s.stop] and not res.constrained[s.start + 1:s.stop].any()
+        for M in res.object_poses[s.start:s.stop + 1]:
+            assert np.allclose(M.homogeneous, s.object_pose.homogeneous)
+    for bad in (dict(branch_grafts=-1), dict(graft_time_limit=0), dict(graft_seeds=0), dict(graft_single_arm=1),
+                dict(graft_after=-1)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            TCBiRRTOptions(**bad)
+
+
+@pytest.mark.parametrize("a_is_start", [True, False])
+def test_extract_puts_a_grafts_regrasps_into_the_path(robot, rng, a_is_start):
+    """Path extraction with a graft inside a tree: tree a = root → graft (arm A, then arm B regrasp at
+    the root's pose) → a constrained edge; tree b's root closes the path. The path runs from the start
+    tree's root to the goal tree's root, the graft's motions are ``"regrasp"`` segments at the right
+    indices and object pose, and ``constrained`` is False only inside them."""
+    from optplan.planners.task_space import xi_from_pose
+    from optplan.planners.tcbirrt import _TaskTree
+
+    scene = Scene.load("hard_truss")
+    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved"))
+    kin = pl.kin
+    ia, ib = kin.idx
+    q = [rng.uniform(robot.lower, robot.upper) for _ in range(6)]
+    q0, q_end = q[0], q[5]
+    q_a_moved = q0.copy()
+    q_a_moved[ia] = q[1][ia]
+    q_graft = q_a_moved.copy()
+    q_graft[ib] = q[2][ib]
+    mid_a, mid_b = q0.copy(), q_a_moved.copy()
+    mid_a[ia] = 0.5 * (q0[ia] + q_a_moved[ia])
+    mid_b[ib] = 0.5 * (q_a_moved[ib] + q_graft[ib])
+    M0, M1 = kin.object_pose(q0), kin.object_pose(q_end)
+    ta = _TaskTree(q0, xi_from_pose(M0), M0.rotation, M0.translation)
+    g = ta.add_graft(0, q_graft, [("A", [q0, mid_a, q_a_moved]), ("B", [q_a_moved, mid_b, q_graft])])
+    assert ta.twins[0] == ta.twins[g] == [0, g] and np.array_equal(ta.xi[g], ta.xi[0])
+    assert ta.twin_nearest(0, q_graft, rng) == g and ta.twin_nearest(g, q0, rng) == 0
+    e = ta.add(q_end, xi_from_pose(M1), M1.rotation, M1.translation, g, [q[3]], [(M1.rotation, M1.translation)])
+    tb = _TaskTree(q_end, xi_from_pose(M1), M1.rotation, M1.translation)
+    st = {}
+    if a_is_start:
+        res = pl._extract(ta, tb, True, (e, 0, None), st)
+    else:
+        res = pl._extract(tb, ta, False, (0, e, None), st)
+    expect = [q0, mid_a, q_a_moved, mid_b, q_graft, q[3], q_end]
+    assert len(res.path) == len(expect) and all(np.array_equal(x, y) for x, y in zip(res.path, expect))
+    assert [(s.kind, s.start, s.stop, s.arm) for s in res.segments] == [
+        ("regrasp", 0, 2, "A"), ("regrasp", 2, 4, "B"), ("constrained", 4, 6, None)]
+    assert list(res.constrained) == [True, False, True, False, True, True, True]
+    assert np.allclose(res.segments[0].object_pose.homogeneous, M0.homogeneous)
+    assert st["n_regrasp"] == 2 and st["joint_connections"] == 0
+
+
 # ---------------------------------------------------------------------- slow statistical tests
 #: scenes where the improved variant is measured below this test's threshold (28 of 30) with edges checked
-#: (docs/planners.md, 2026-11-24, clean paths within 10 s CPU; window 28/30, sparse clutter 29/30 pass at the threshold);
-#: their statistical test is expected to fail until the planner improves (xfail, not strict)
-BELOW_TARGET = {"hard_truss": "18/30"}
+#: (docs/decisions/0004-tcbirrt-improved-variant.md, 2026-11-24, clean paths within 10 s CPU; window 28/30, sparse
+#: clutter 29/30 pass at the threshold); their statistical test is expected to fail until the planner improves
+#: (xfail, not strict); :func:`test_improved_variant_truss_rate` holds the truss to what it does reach
+BELOW_TARGET = {"hard_truss": "23/30 with branch grafts (19-21/30 without)"}
 
 
 @pytest.mark.slow
@@ -367,6 +454,27 @@ def test_improved_variant_success_rate(robot, name):
         res = pl.plan(t.q_start, t.q_goal, time_limit=10.0, seed=t.seed, clock="cpu")
         ok += res.success and _path_checks(robot, scene, ck, res)["swept_invalid_edges"] == 0
     assert ok >= 28, f"{name}: {ok}/{n}"
+
+
+@pytest.mark.slow
+def test_improved_variant_truss_rate(robot):
+    """The truss below the suite's target: the same 30 seeded trials, >= 22 clean successes within 10 s of
+    CPU time. Measured (docs/decisions/0004, 2026-11-24): 23/30 with the improved variant's branch grafts,
+    19-21/30 without (a true rate of 0.77 passes with probability 0.76, the 0.67 without grafts with 0.30:
+    a regression bar, not the target)."""
+    from optplan.bench.tcbirrt import _path_checks
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load("hard_truss")
+    gen = TrialGenerator(robot, scene)
+    ck = ValidityChecker(robot, scene)
+    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved"), checker=ck)
+    ok = 0
+    for i in range(30):
+        t = gen.generate(i, 0)
+        res = pl.plan(t.q_start, t.q_goal, time_limit=10.0, seed=t.seed, clock="cpu")
+        ok += res.success and _path_checks(robot, scene, ck, res)["swept_invalid_edges"] == 0
+    assert ok >= 22, f"hard_truss: {ok}/30"
 
 
 @pytest.mark.slow

@@ -55,6 +55,16 @@ Deviations from the paper, all options (defaults in brackets):
   (ξ distance) of tree a's node; both only when the two configurations are within
   ``joint_connect_max_distance`` [rad, Euclidean] (farther ones are other IK branches). Its configurations close the chain to the projection tolerance
   and form a ``"constrained"`` part of the path.
+* ``branch_grafts`` [paper 0; improved 4 per tree, from iteration ``graft_after`` = 1500]: a tree grows
+  other IK branches of its own nodes. Constrained motion keeps each arm on its IK branch, so two trees
+  on different branches meet only through a regrasp at the meeting pose, which in a tight passage
+  often cannot be planned. Every ``graft_interval`` iterations one tree (in turn) takes a node — its
+  root first, then the node nearest a random node of the other tree — solves the node's object pose
+  by IK seeded from the other tree's configuration nearest in ξ (then perturbed, then random seeds),
+  and when that solution is valid and another branch (≥ ``graft_min_distance`` away), joins it to
+  the node by a regrasp (Section 4.3, ``graft_time_limit``): a "graft" node at the same pose. The
+  extension picks one of a pose's branches at random, the connection the one nearest the other
+  tree's configuration; a path through a graft has its regrasp segments where the graft is.
 * ``edge_tolerance`` [paper 0: off; improved 0.01 m]: the straight joint-space segments between consecutive
   configurations (constrained edges and regrasp motions) are checked so densely that no point of
   the arms or the object moves farther than this between two checks (per-joint sweep bound of
@@ -129,6 +139,10 @@ class _TaskTree(Tree):
         super().__init__(xi, cap, edges=True, q=q, checked=True)
         self.pose = [(R, p)]
         self.edge[0] = ([], [])
+        #: graft node → its regrasp motions from the parent's configuration (object fixed at the node's pose)
+        self.graft: dict[int, list[tuple[str, list[np.ndarray]]]] = {}
+        #: node → the live and dead nodes at the same object pose (itself included), for nodes that have grafts
+        self.twins: dict[int, list[int]] = {}
 
     @property
     def xi(self) -> np.ndarray:
@@ -137,6 +151,44 @@ class _TaskTree(Tree):
     def add(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, parent: int, edge_q: list[np.ndarray], edge_poses: list[tuple[np.ndarray, np.ndarray]]) -> int:  # type: ignore[override]  # a task node needs its q and object pose too; never used as a plain Tree
         self.pose.append((R, p))
         return super().add(xi, parent, (edge_q, edge_poses), q=q, checked=False)
+
+    def add_graft(self, i: int, q: np.ndarray, motions: list[tuple[str, list[np.ndarray]]]) -> int:
+        """A node at node i's object pose with another joint solution ``q``, reached from node i's
+        configuration by the regrasp ``motions``: a second IK branch of the same tree."""
+        R, p = self.pose[i]
+        self.pose.append((R, p))
+        k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=False)
+        self.graft[k] = motions
+        group = self.twins.setdefault(i, [i])
+        group.append(k)
+        self.twins[k] = group
+        return k
+
+    def twin_nearest(self, i: int, q: np.ndarray | None, rng: np.random.Generator) -> int:
+        """Among node i and the live nodes at its pose (other IK branches): the one whose configuration
+        is nearest ``q``, or a random one when ``q`` is None."""
+        group = self.twins.get(i)
+        if group is None:
+            return i
+        if self.alive is not None:
+            group = [k for k in group if self.alive[k]]
+        if q is None:
+            return int(group[int(rng.integers(len(group)))])
+        return int(min(group, key=lambda k: float(np.sum((self.q[k] - q) ** 2))))
+
+    def pieces(self, i: int) -> list[tuple[Any, ...]]:
+        """The motion from the root to node i: ``("c", configurations, poses)`` (a constrained edge,
+        both ends included) and ``("r", arm, configurations, pose)`` (one arm's regrasp motion)."""
+        out: list[tuple[Any, ...]] = []
+        idx = self.indices(i)
+        for a, k in zip(idx[:-1], idx[1:]):
+            if k in self.graft:
+                out.extend(("r", arm, full, self.pose[k]) for arm, full in self.graft[k])
+            else:
+                eq, ep = self.edge[k]
+                out.append(("c", [self.q[a].copy(), *(x.copy() for x in eq), self.q[k].copy()],
+                            [self.pose[a], *ep, self.pose[k]]))
+        return out
 
     def alive_xi(self) -> np.ndarray:
         return self.live_keys()
@@ -281,9 +333,14 @@ class TCBiRRT(Planner):
             chain.append(i)
             i = tree.parent[i]
         for k in reversed(chain):
-            eq, _ = tree.edge[k]
-            qs = [tree.q[tree.parent[k]], *eq, tree.q[k]]
-            if not all(self._static_edge_ok(a, b, st) for a, b in zip(qs[:-1], qs[1:])):
+            if k in tree.graft:   # a graft's regrasp motions, object fixed at the node's pose
+                M = pin.SE3(*tree.pose[k])
+                ok = all(self._static_edge_ok(a, b, st, M) for _, full in tree.graft[k] for a, b in zip(full[:-1], full[1:]))
+            else:
+                eq, _ = tree.edge[k]
+                qs = [tree.q[tree.parent[k]], *eq, tree.q[k]]
+                ok = all(self._static_edge_ok(a, b, st) for a, b in zip(qs[:-1], qs[1:]))
+            if not ok:
                 return k
             tree.checked[k] = True
         return None
@@ -308,6 +365,9 @@ class TCBiRRT(Planner):
             chain.append(i)
             i = tree.parent[i]
         for k in reversed(chain):
+            if k in tree.graft:      # regrasp motions: checked at edge_tolerance when planned
+                tree.checked[k] = True
+                continue
             eq, ep = tree.edge[k]
             qs = [tree.q[tree.parent[k]], *eq, tree.q[k]]
             new_q, new_p = [], []
@@ -353,6 +413,57 @@ class TCBiRRT(Planner):
                 prev = x
         st["joint_connect_successes"] += 1
         return path
+
+    def _graft(self, tree: _TaskTree, i: int | None, other: _TaskTree, deadline: Deadline, st: dict[str, Any]) -> int | None:
+        """``branch_grafts``: another IK branch at node i of ``tree`` (when None: the node nearest a random
+        live node of ``other``):
+        IK of its object pose seeded from ``other``'s configuration nearest in ξ; a valid solution at
+        least ``graft_min_distance`` from the node's joins the tree by a regrasp. The new node, or None."""
+        o, ck, kin = self.options, self.checker, self.kin
+        rng = self._rng
+        if i is None:   # the node nearest a random node of the other tree: where the trees meet, more often
+            live = np.flatnonzero(other.alive[:other.n]) if other.alive is not None else np.arange(other.n)
+            i = tree.nearest(other.xi[int(live[int(rng.integers(live.size))])])
+        if i in tree.graft:
+            return None
+        st["graft_attempts"] += 1
+        R, p = tree.pose[i]
+        q_i = tree.q[i]
+        seed = other.q[other.nearest(tree.xi[i])]
+        for k in range(o.graft_seeds):
+            if k == 0:
+                q0 = seed
+            elif k % 2:
+                q0 = seed + rng.normal(0.0, o.ik_restart_sigma, seed.size)
+            else:          # a random configuration: a branch neither tree has
+                q0 = rng.uniform(self.robot.lower, self.robot.upper)
+            x, its = kin.ik(q0, R, p, o.ik)
+            st["ik_iterations"] += its
+            if x is None:
+                st["graft_ik_failures"] = st.get("graft_ik_failures", 0) + 1
+                continue
+            cands = [x]
+            if o.graft_single_arm:   # each arm's IK is independent at a fixed object pose: one arm's new branch alone
+                for idx in kin.idx:
+                    y = q_i.copy()
+                    y[idx] = x[idx]
+                    cands.append(y)
+            for y in cands:
+                if float(np.linalg.norm(y - q_i)) < o.graft_min_distance:
+                    st["graft_same_branch"] = st.get("graft_same_branch", 0) + 1
+                    continue
+                if not ck.in_limits(y) or not ck.is_valid(y):
+                    st["graft_collisions"] = st.get("graft_collisions", 0) + 1
+                    continue
+                if any(float(np.linalg.norm(tree.q[j] - y)) < o.graft_min_distance for j in tree.twins.get(i, ())):
+                    continue   # a branch this pose already has
+                reg = self.regrasp(q_i, y, R, p, rng, deadline.sub(o.graft_time_limit), st)
+                if reg is None:
+                    st["graft_regrasp_failures"] = st.get("graft_regrasp_failures", 0) + 1
+                    continue
+                st["grafts"] += 1   # its regrasp motions are verified (verify_path) once on a start-goal path
+                return tree.add_graft(i, y, reg)
+        return None
 
     # ------------------------------------------------------------------ regrasp (Section 4.3)
     def regrasp(self, q_from: np.ndarray, q_to: np.ndarray, R: np.ndarray, p: np.ndarray, rng: np.random.Generator,
@@ -507,7 +618,7 @@ class TCBiRRT(Planner):
                              "ik_failures", "ik_jumps", "collisions", "regrasp_attempts", "regrasp_failures",
                              "regrasp_nodes", "edge_checks", "edge_collisions", "lazy_rejections",
                              "joint_connect_attempts", "joint_connect_successes", "joint_connect_projections",
-                             "path_rejections", "path_verified_edges")}
+                             "path_rejections", "path_verified_edges", "graft_attempts", "grafts")}
         sampler = self._sampler()
         c0 = self.checker.n_checks
         why = self.check_endpoint(q_start)
@@ -525,9 +636,21 @@ class TCBiRRT(Planner):
         if sampler is not None:
             sampler.set_endpoints(ta.xi[0], tb.xi[0])
             st["guide_attempts"] = st["guide_waypoints"] = 0
+        root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
+        if o.branch_grafts and o.root_grafts_first and not o.graft_after:
+            for tr, other in ((ta, tb), (tb, ta)):
+                self._graft(tr, 0, other, deadline, st)
+                root_grafted[id(tr)] = True
         while not deadline.expired():
             if o.max_iterations and st["iterations"] >= o.max_iterations:
                 break
+            k_graft = st["iterations"] - o.graft_after
+            if o.branch_grafts and k_graft > 0 and k_graft % o.graft_interval == 0:
+                # the trees take turns (tree a is the same tree at every multiple of an even interval)
+                tr, other = (ta, tb) if (k_graft // o.graft_interval) % 2 else (tb, ta)
+                if len(tr.graft) < o.branch_grafts:
+                    self._graft(tr, None if root_grafted[id(tr)] else 0, other, deadline, st)   # the root's first
+                    root_grafted[id(tr)] = True
             if (sampler is not None and cast(float, o.guide_probability) > 0 and sampler.guide is None
                     and guide_time < o.guide_time_limit and st["iterations"] % 25 == 0):
                 sub = deadline.sub(min(o.guide_attempt_time, o.guide_time_limit - guide_time))
@@ -542,12 +665,12 @@ class TCBiRRT(Planner):
                 xi_rand = rng.uniform(self._lo, self._hi)                                # line 3
             else:
                 xi_rand = sampler.sample(rng, tb.alive_xi())
-            i_near = ta.nearest(xi_rand)                                                 # line 4
+            i_near = ta.twin_nearest(ta.nearest(xi_rand), None, rng)                     # line 4
             res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st)   # line 5
             if res != TRAPPED:
                 target_xi, target_q = ta.xi[i_a].copy(), ta.q[i_a].copy()
                 while True:                                                              # lines 7-11
-                    i_nb = tb.nearest(target_xi)
+                    i_nb = tb.twin_nearest(tb.nearest(target_xi), target_q, rng)
                     res, i_b, reg = self.constrained_extend(tb, i_nb, target_xi, target_q, rng, deadline, st)
                     if res not in (ADVANCED, PARTIAL) or deadline.expired():
                         break
@@ -591,48 +714,57 @@ class TCBiRRT(Planner):
 
     def _extract(self, ta: _TaskTree, tb: _TaskTree, a_is_start: bool, found: tuple[int, int, Sequence[tuple[str | None, list[np.ndarray]]] | None], st: dict[str, Any]) -> PlanResult:
         """ExtractPath: tree-a branch, regrasp (q_b of tree b → q_a of tree a, reversed so the path
-        runs start → goal), reversed tree-b branch."""
+        runs start → goal), reversed tree-b branch; regrasp motions of grafts inside either branch
+        become ``"regrasp"`` segments too."""
         i_a, i_b, reg = found
-        qa, pa = ta.branch(i_a)
-        qb, pb = tb.branch(i_b)
-        M_I = pin.SE3(*ta.pose[i_a])
-        # regrasp was planned from tree b's solution (q_s) to tree a's (q_rand): reverse it
-        reg_segments = []
-        for arm, full in reversed(reg or []):
-            reg_segments.append((arm, full[::-1]))
-        qs = [x for x in qa]
-        poses = [M for M in pa]
-        flags = [True] * len(qa)
-        segs: list[tuple[str, int, int, str | None]] = []
-        run0 = 0                    # start of the current constrained run
+        M_I = ta.pose[i_a]
+        moves: list[tuple[Any, ...]] = ta.pieces(i_a)
         n_joint = 0
-        for arm, full in reg_segments:
-            i0 = len(qs) - 1
-            qs.extend(full[1:])
-            if arm is None:         # joint-space constrained connection (joint_connect): part of the constrained run
+        # the connection was planned from tree b's solution (q_s) to tree a's (q_rand): reversed
+        for arm, full in reversed(reg or []):
+            full = full[::-1]
+            if arm is None:         # joint-space constrained connection (joint_connect): a constrained move
                 n_joint += 1
-                for x in full[1:]:
+                poses = []
+                for x in full:
                     M = self.kin.object_pose(x)
                     poses.append((M.rotation.copy(), M.translation.copy()))
-                flags.extend([True] * (len(full) - 1))
-                continue
-            segs.append(("constrained", run0, i0, None))
-            poses.extend([(M_I.rotation, M_I.translation)] * (len(full) - 1))
-            flags.extend([False] * (len(full) - 2) + [True])
-            segs.append(("regrasp", i0, len(qs) - 1, arm))
-            run0 = len(qs) - 1
-        qs.extend(qb[::-1][1:])
-        poses.extend(pb[::-1][1:])
-        flags.extend([True] * (len(qb) - 1))
-        segs.append(("constrained", run0, len(qs) - 1, None))
+                moves.append(("c", full, poses))
+            else:
+                moves.append(("r", arm, full, M_I))
+        moves.extend(_reverse_move(m) for m in reversed(tb.pieces(i_b)))
+        q0, pose0 = ta.q[0].copy(), ta.pose[0]
         if not a_is_start:   # tree a grew from the goal: flip everything
-            n = len(qs) - 1
-            qs, poses, flags = qs[::-1], poses[::-1], flags[::-1]
-            segs = [(k, n - b, n - a, arm) for k, a, b, arm in segs[::-1]]
-        out_segs = [PathSegment(k, a, b, arm, M_I if k == "regrasp" else None)
-                    for k, a, b, arm in segs if b > a]
-        st["n_regrasp"] = len(reg_segments) - n_joint
+            moves = [_reverse_move(m) for m in reversed(moves)]
+            q0, pose0 = tb.q[0].copy(), tb.pose[0]
+        qs, poses, flags = [q0], [pose0], [True]
+        segs: list[tuple[str, int, int, str | None, Any]] = []
+        run0 = 0                    # start of the current constrained run
+        for m in moves:
+            if m[0] == "c":
+                qs.extend(m[1][1:])
+                poses.extend(m[2][1:])
+                flags.extend([True] * (len(m[1]) - 1))
+                continue
+            _, arm, full, M = m
+            i0 = len(qs) - 1
+            segs.append(("constrained", run0, i0, None, None))
+            qs.extend(full[1:])
+            poses.extend([M] * (len(full) - 1))
+            flags.extend([False] * (len(full) - 2) + [True])
+            segs.append(("regrasp", i0, len(qs) - 1, arm, pin.SE3(np.asarray(M[0]), np.asarray(M[1]))))
+            run0 = len(qs) - 1
+        segs.append(("constrained", run0, len(qs) - 1, None, None))
+        out_segs = [PathSegment(k, a, b, arm, M) for k, a, b, arm, M in segs if b > a]
+        st["n_regrasp"] = sum(1 for m in moves if m[0] == "r")
         st["joint_connections"] = n_joint
         return PlanResult(PlanStatus.EXACT, self.name, np.array(qs),
                           [pin.SE3(np.asarray(R), np.asarray(p)) for R, p in poses], np.array(flags, dtype=bool),
                           out_segs, st)
+
+
+def _reverse_move(m: tuple[Any, ...]) -> tuple[Any, ...]:
+    """A move of :meth:`_TaskTree.pieces` run backwards."""
+    if m[0] == "c":
+        return ("c", m[1][::-1], m[2][::-1])
+    return ("r", m[1], m[2][::-1], m[3])

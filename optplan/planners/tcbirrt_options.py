@@ -22,11 +22,11 @@ VARIANTS = {
     "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False,
               "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0,
               "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
-              "regrasp_share_orders": False, "verify_path": False},
+              "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
-                 "regrasp_share_orders": False, "verify_path": True},
+                 "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4},
 }
 
 
@@ -103,6 +103,28 @@ class TCBiRRTOptions:
     #: instead of the first order using all it needs (None: the variant's value: off in both, see
     #: docs/planners.md).
     regrasp_share_orders: bool | None = None
+    #: Grow up to this many other IK branches into each tree [count] (None: the variant's value, :data:`VARIANTS`):
+    #: a node's object pose is solved by IK seeded from the other tree's configuration nearest in ξ, and, when
+    #: that solution lies on another branch, the arms regrasp to it (object fixed) and it becomes a node of the
+    #: same tree; a connection then prefers the node whose configuration is nearest the other tree's.
+    branch_grafts: int | None = None
+    #: Iterations between two branch-graft attempts (each tree's first attempt is at its root) [count].
+    graft_interval: int = 100
+    #: Iterations of the search before the first branch graft [count] (0: from the start); a query solved sooner
+    #: is untouched by grafts.
+    graft_after: int = 1500
+    #: Try a graft at both roots before the search (with ``graft_after`` 0) (instead of after the first ``graft_interval`` iterations,
+    #: which leaves queries solved quickly without grafts untouched) [bool].
+    root_grafts_first: bool = True
+    #: Time limit of one branch graft's regrasp [s].
+    graft_time_limit: float = 0.5
+    #: IK seeds per branch-graft attempt (the other tree's configuration, then perturbed by ``ik_restart_sigma``) [count].
+    graft_seeds: int = 4
+    #: A graft may also move one arm only to its new IK solution (the other keeps its own) [bool].
+    graft_single_arm: bool = False
+    #: A graft's joint solution must differ from its node's by at least this (Euclidean) [rad]; nearer ones are the
+    #: same branch.
+    graft_min_distance: float = 1.5
     #: Start and goal must satisfy the closed chain to this (position [m] and angle [rad]).
     closure_tolerance: float = 1e-6
     #: Clearance counted as contact [m].
@@ -175,13 +197,19 @@ class TCBiRRTOptions:
         _pos("ik_restart_sigma", self.ik_restart_sigma)
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
+        for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds"):
+            v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after") else 1)
+            if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
+                raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
+        _pos("graft_time_limit", self.graft_time_limit)
+        _pos("graft_min_distance", self.graft_min_distance)
         _pos("joint_connect_radius", self.joint_connect_radius)
         _pos("joint_connect_max_distance", self.joint_connect_max_distance)
         if not isinstance(self.joint_connect_options, CBiRRT2Options):
             raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
-                     "regrasp_share_orders", "verify_path"):
+                     "regrasp_share_orders", "verify_path", "graft_single_arm", "root_grafts_first"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
