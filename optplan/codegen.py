@@ -21,7 +21,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["CompiledFunction", "FastFunction", "compile_function", "cache_dir"]
+__all__ = ["CompiledFunction", "FastFunction", "build_library", "c_compiler", "compile_function", "cache_dir"]
 log = logging.getLogger(__name__)
 
 
@@ -114,11 +114,31 @@ class FastFunction:
         return cf._out_bufs[0][:self.n_out].copy()
 
 
+def c_compiler() -> str | None:
+    """The C compiler (``$CC``, else ``cc``, else ``gcc``), or None."""
+    return shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+
+
+def build_library(c_file: Path, lib: Path, opt: str) -> str | None:
+    """Compile the C file into the shared library ``lib``, written atomically (a concurrent
+    process never loads half a library). None on success, else why not (no compiler, or the
+    compiler's last error lines)."""
+    cc = c_compiler()
+    if cc is None:
+        return "no C compiler"
+    tmp_lib = lib.with_name(f"{lib.name}.{os.getpid()}.tmp")
+    proc = subprocess.run([cc, opt, "-fPIC", "-shared", str(c_file), "-o", str(tmp_lib), "-lm"],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        return proc.stderr[-500:]
+    os.replace(tmp_lib, lib)
+    return None
+
+
 def compile_function(f: ca.Function, opt: str = "-O2"):
     """Compile ``f`` (cached) and return a :class:`CompiledFunction`, or ``f`` itself when no C
     compiler is available (a warning is logged once)."""
-    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
-    if cc is None:
+    if c_compiler() is None:
         log.warning("no C compiler found: %s stays an interpreted casadi.Function", f.name())
         return f
     with tempfile.TemporaryDirectory() as tmp:
@@ -130,11 +150,8 @@ def compile_function(f: ca.Function, opt: str = "-O2"):
         digest = hashlib.sha1(code + opt.encode()).hexdigest()[:16]
         lib = cache_dir() / f"{f.name()}_{digest}.so"
         if not lib.exists():
-            tmp_lib = Path(tmp) / lib.name
-            cmd = [cc, opt, "-fPIC", "-shared", str(Path(tmp, cname)), "-o", str(tmp_lib), "-lm"]
-            proc = subprocess.run(cmd, capture_output=True, text=True)
-            if proc.returncode != 0:
-                log.warning("compiling %s failed (%s); using the interpreted function", f.name(), proc.stderr[-500:])
+            err = build_library(Path(tmp, cname), lib, opt)
+            if err is not None:
+                log.warning("compiling %s failed (%s); using the interpreted function", f.name(), err)
                 return f
-            shutil.move(str(tmp_lib), lib)
     return CompiledFunction(f, lib)

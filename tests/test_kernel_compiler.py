@@ -26,7 +26,9 @@ def _closed_chain_kernel(kc, tcb):
 
 
 def test_auto_queues_then_background_compiles_then_loads_c(fresh_cache, tcb, tmp_path, monkeypatch, rng):
-    if kc_mod.shutil.which(os.environ.get("CC", "cc")) is None and kc_mod.shutil.which("gcc") is None:
+    from optplan.codegen import c_compiler
+
+    if c_compiler() is None:
         pytest.skip("no C compiler")
     kc = fresh_cache
     fn = _closed_chain_kernel(kc, tcb)

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import logging
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -25,6 +24,8 @@ import time
 from pathlib import Path
 
 import casadi as ca
+
+from ..codegen import build_library
 
 __all__ = ["compile_library", "launch", "queue"]
 log = logging.getLogger(__name__)
@@ -35,27 +36,18 @@ _LOCK = ".background-compile.pid"
 
 
 def compile_library(fn: ca.Function, lib: Path, opt: str = "-O1") -> bool:
-    """Generate C for ``fn`` and compile it into the shared library ``lib`` (written atomically:
-    a concurrent reader never loads half a file). False, logged, without a C compiler or when
-    compiling fails."""
-    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
-    if cc is None:
-        log.info("kernel %s not compiled (no C compiler)", fn.name())
-        return False
+    """Generate C for ``fn`` and compile it into the shared library ``lib``
+    (:func:`optplan.codegen.build_library`). False, logged, without a C compiler or when compiling
+    fails."""
     with tempfile.TemporaryDirectory() as tmp:
         cname = f"{fn.name()}.c"
         cg = ca.CodeGenerator(cname, {"with_header": False})
         cg.add(fn)
         cg.generate(tmp + os.sep)
-        out = Path(tmp) / lib.name
-        proc = subprocess.run([cc, opt, "-fPIC", "-shared", str(Path(tmp, cname)), "-o", str(out), "-lm"],
-                              capture_output=True, text=True)
-        if proc.returncode != 0:
-            log.warning("compiling kernel %s failed (%s)", fn.name(), proc.stderr[-300:])
-            return False
-        tmp_lib = lib.with_suffix(f".{os.getpid()}.tmp")
-        shutil.copy(out, tmp_lib)
-        os.replace(tmp_lib, lib)
+        err = build_library(Path(tmp, cname), lib, opt)
+    if err is not None:
+        log.info("kernel %s not compiled (%s)", fn.name(), err)
+        return False
     return True
 
 
