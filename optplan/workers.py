@@ -10,7 +10,8 @@ the loaded kernels and compiled libraries — so nothing is pickled but a job's 
 result. The calling process takes a share of the jobs itself (longest first, by the cost estimate
 the caller gives), the workers the rest. A job's function must be importable by name (a
 module-level function) and deterministic: which process runs a job does not change its result.
-Where ``fork`` is not available, with one worker, or if a worker dies, the jobs run here, in order.
+Where ``fork`` is not available, with one worker, inside a daemonic process (a worker of a process
+pool, which may not have children), or if a worker dies, the jobs run here, in order.
 """
 from __future__ import annotations
 
@@ -55,6 +56,8 @@ def shutdown() -> None:
 
 def _pool(context: tuple[Any, ...], workers: int) -> tuple[tuple[int, ...], ProcessPoolExecutor] | None:
     if "fork" not in mp.get_all_start_methods():  # pragma: no cover - not on Linux
+        return None
+    if mp.current_process().daemon:   # a pool's worker (e.g. a benchmark's) may not have children
         return None
     key = (*(id(c) for c in context), workers)
     pool = _POOLS.get(key)

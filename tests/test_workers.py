@@ -56,3 +56,20 @@ def test_pipeline_same_trajectory_with_two_processes(tcb):
     np.testing.assert_array_equal(a.q, b.q)
     assert a.iterations == b.iterations
     shutdown()
+
+
+def _in_daemon(q):
+    out, cpu = run_jobs((2.0, 1.0), _job, [(1, 0.0), (2, 0.0)], cost=[1.0, 1.0], workers=2)
+    q.put(([r[0] for r in out], {r[1] for r in out} == {os.getpid()}, cpu))
+
+
+def test_inside_a_daemonic_process_the_jobs_run_there():
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork")
+    q = ctx.Queue()
+    p = ctx.Process(target=_in_daemon, args=(q,), daemon=True)
+    p.start()
+    values, all_here, cpu = q.get(timeout=60)
+    p.join(timeout=60)
+    assert values == [3.0, 5.0] and all_here and cpu == 0.0
