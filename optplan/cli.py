@@ -181,21 +181,23 @@ def _cmd_bench_generalize(args) -> int:
 
 
 def _cmd_bench_drake(args) -> int:
-    from .bench.drake_bench import format_report, run, save_json
+    from .bench.drake_bench import format_report, format_row, run, save_json
 
     drake_opts = {"time_limit": args.time_limit, "samples_per_interval": args.samples_per_interval}
     done: list = []
     command = "optplan " + " ".join(sys.argv[1:])
 
-    def on_row(r):  # the JSON file grows with every result, so a long run keeps what it measured
-        done.append(r)
-        save_json(done, args.json, command)
+    def on_row(r):  # progress; the JSON file grows with every result, so a long run keeps what it measured
+        print(format_row(r), flush=True)
+        if args.json:
+            done.append(r)
+            save_json(done, args.json, command)
 
     try:
         rows = run([p.strip() for p in args.problems.split(",") if p.strip()], trials=args.trials,
                    first_trial=args.first_trial, seed=args.seed,
                    solvers=[s.strip() for s in args.solvers.split(",") if s.strip()], drake_options=drake_opts,
-                   drake_refinements=args.refinements, on_row=on_row if args.json else None,
+                   drake_refinements=args.refinements, on_row=on_row, progress=False,
                    segments=[s.strip() for s in args.segments.split(",") if s.strip()],
                    only=[s.strip() for s in (args.only or "").split(",") if s.strip()])
     except (ValueError, ImportError) as exc:

@@ -411,6 +411,12 @@ def _cpu() -> float:
     return time.process_time() + ch.ru_utime + ch.ru_stime
 
 
+def format_row(row: dict) -> str:
+    """One result row as a progress line: problem, method, status, time, iterations, verify."""
+    return (f"{row['problem']:22s} {row['method']:12s} {row['status'][:40]:40s} {row['time_s']:8.2f} s  "
+            f"it={row['iterations']}  verify={'pass' if row['verified'] else 'FAIL'}")
+
+
 def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int = 0, seed: int = 0,
         solvers=("snopt", "ipopt"), optplan_solve: Callable[[PeerProblem], PeerOutcome] | None = None,
         drake_options: dict | None = None, drake_refinements: int = 2, segments=("constrained",), only=(),
@@ -470,9 +476,7 @@ def run(problems=("transport", "scene1"), *, trials: int = 3, first_trial: int =
             if on_row:
                 on_row(row)
             if progress:
-                print(f"[{i + 1}/{len(probs)}] {p.name:22s} {row['method']:12s} {row['status'][:40]:40s} "
-                      f"{row['time_s']:8.2f} s  it={row['iterations']}  verify={'pass' if row['verified'] else 'FAIL'}",
-                      flush=True)
+                log.info("[%d/%d] %s", i + 1, len(probs), format_row(row))
     return rows
 
 

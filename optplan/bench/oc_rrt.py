@@ -319,7 +319,7 @@ def command(args) -> int:
     from ..model.example_robots import example_robots_available
 
     if not example_robots_available():
-        print("OC-RRT benchmark: PR2 needs the example-robot-data package: pip install \"optplan[robots]\"")
+        log.error("OC-RRT benchmark: PR2 needs the example-robot-data package: pip install \"optplan[robots]\"")
         return 2
     if getattr(args, "quick", False):
         args.trials, args.time_limit, args.planners = 1, min(args.time_limit, 5.0), "oc_rrt_connect,cbirrt"
@@ -328,7 +328,7 @@ def command(args) -> int:
         from ..planners.ompl_peers import ompl_available
 
         if not ompl_available():
-            print("note: ompl is not installed (pip install \"optplan[ompl]\"): OMPL peer skipped")
+            log.warning("ompl is not installed (pip install \"optplan[ompl]\"): OMPL peer skipped")
             planners = [p for p in planners if not p.startswith("ompl-")]
     if args.trials < 1:
         raise ValueError(f"--trials: expected >= 1, got {args.trials}")

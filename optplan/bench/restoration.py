@@ -17,6 +17,7 @@ integration (the stated RK4 bound).
 """
 from __future__ import annotations
 
+import logging
 import multiprocessing as mp
 import os
 import tempfile
@@ -27,6 +28,8 @@ TARGET_S = 1.0
 PAPER = {"free_end": "EBA ≈ 370 s, planned end attitude (0, 0, 0)°",
          "end_constrained": "EBA ≈ 270 s, planned end attitude (0.11, 0.01, −0.05)°"}
 
+
+log = logging.getLogger(__name__)
 
 def _one(case: str, transcription: str, cache: str, compiled=False) -> dict:
     os.environ["OPTPLAN_CACHE"] = cache
@@ -164,9 +167,9 @@ def accuracy(runs=ACCURACY_RUNS) -> list[dict]:
                      "end_attitude_independent_rad": quat_angle(ref[-1], [0, 0, 0, 1.0]),
                      "closed_chain_residual": float(res.info["verify_max_closed_chain_residual"])})
         r = rows[-1]
-        print(f"{case:16s} N = {N:3d} n_sub = {n_sub}: knot attitude vs solve_ivp {r['max_knot_attitude_error_rad']:.2e} rad, "
-              f"end attitude (independent) {r['end_attitude_independent_rad']:.2e} rad, "
-              f"closed chain {r['closed_chain_residual']:.1e}", flush=True)
+        log.info("%-16s N = %3d n_sub = %d: knot attitude vs solve_ivp %.2e rad, end attitude (independent) %.2e rad, "
+                 "closed chain %.1e", case, N, n_sub, r["max_knot_attitude_error_rad"],
+                 r["end_attitude_independent_rad"], r["closed_chain_residual"])
     return rows
 
 
@@ -182,6 +185,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.accuracy:
         rows = accuracy()
+        for r in rows:
+            print(f"{r['case']:16s} N = {r['N']:3d} n_sub = {r['n_sub']}: knot attitude vs solve_ivp "
+                  f"{r['max_knot_attitude_error_rad']:.2e} rad, end attitude (independent) "
+                  f"{r['end_attitude_independent_rad']:.2e} rad, closed chain {r['closed_chain_residual']:.1e}")
         if args.json:
             with open(args.json, "w") as f:
                 json.dump(rows, f, indent=2, default=float)
