@@ -299,6 +299,15 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     # closed_chain_tol / √3 so that knots pass with room for the drift between them (measured: a
     # segment verified at 2e-6 on 48, 70 and 103 intervals alike — knot-level, not h⁴ drift)
     cv = 0.5 * opts.closed_chain_tol / (2.0 * np.sqrt(3.0))
+    if cc is not None:
+        # the end configurations are pinned: rows next to them cannot be held much tighter than
+        # the ends' own residual (a planner's start 2.1e-7 m off the manifold against a row
+        # tolerance of 1.4e-7: IPOPT stalled at 1.5e-7 until its iteration limit, docs/decisions/0015);
+        # hold them to twice that residual, up to half of closed_chain_tol / √3
+        from .constraints.closed_chain import closure_errors
+
+        pos, rot = closure_errors(robot, grasps, np.asarray([seg_path[0], seg_path[-1]], float))
+        cv = float(min(max(cv, 2.0 * max(pos.max(), rot.max())), opts.closed_chain_tol / (2.0 * np.sqrt(3.0))))
     ipopt = {"max_wall_time": opts.ipopt_max_wall_time, "max_iter": opts.spline_max_iterations,
              "constr_viol_tol": cv, "acceptable_constr_viol_tol": cv, **ipopt}
 

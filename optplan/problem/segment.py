@@ -642,7 +642,13 @@ class SplineSegmentProblem:
         # went from 339 iterations without convergence to 19 with it)
         defaults = {"ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
                     "ipopt.mu_strategy": "adaptive", "ipopt.max_iter": int(max_iter),
-                    "ipopt.jacobian_regularization_value": 1e-6}
+                    "ipopt.jacobian_regularization_value": 1e-6,
+                    # theta_max_fact: the filter refuses points whose constraint violation exceeds
+                    # 10 × max(1, the initial one) (IPOPT's default: 10⁴ ×). A warm start lies near the
+                    # manifold; one long segment accepted a step to a closed-chain residual of 3.3 and
+                    # never came back (200 iterations; with 10: 50 iterations, verified;
+                    # docs/decisions/0015)
+                    "ipopt.theta_max_fact": 10.0}
         okey = repr(sorted(sopts.casadi_options(defaults).items()))
         setup = time.perf_counter() - t_setup + b.setup_time   # the NlpSolver adds its own creation time
         b.setup_time = 0.0

@@ -1,0 +1,91 @@
+"""Segment NLPs that once failed, kept as regressions: the constrained segments of two planner paths
+(saved in ``tests/data``), optimized by the pipeline's B-spline segment policy and checked by
+``verify`` (Pinocchio + coal), each beside the setting that made it fail.
+
+* ``segment_stress_shelf_filter.npz`` (scene ``stress_shelf``, a 10.2 rad path on 160 intervals):
+  with IPOPT's default filter bound (``theta_max_fact`` = 10⁴) a step to a closed-chain residual of
+  3.3 was accepted at iteration 17 and the solve never came back (200 iterations, then the knot
+  fallback failed too); the segment NLP's bound (10) keeps the iterates near the manifold.
+* ``segment_ssps_scene3_ends.npz`` (scene ``ssps_scene3``): the planner's start configuration is
+  2.1e-7 m off the closed-chain manifold, above the rows' tolerance (1.4e-7); IPOPT stalled at a
+  violation of 1.5e-7 next to the pinned start until its iteration limit. The pipeline now holds the
+  rows to twice the ends' own residual.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import optplan.pipeline as PL
+from optplan.constraints.closed_chain import closure_errors
+from optplan.pipeline_options import PipelineOptions
+from optplan.problem import ClosedChain
+from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
+from optplan.scene import Scene
+
+DATA = Path(__file__).parent / "data"
+
+
+def _load(name: str):
+    d = np.load(DATA / name)
+    return np.asarray(d["path"], float), str(d["scene"]), str(d["kind"])
+
+
+def _chain(scene):
+    grasps = PL._held_object(scene).grasps
+    arms = list(grasps)
+    return grasps, ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1]), arms
+
+
+def test_filter_bound_keeps_a_long_segment_near_the_manifold(tcb):
+    path, scene_name, kind = _load("segment_stress_shelf_filter.npz")
+    scene = Scene.load(scene_name)
+    opts = PipelineOptions(failure_retries=0)
+    sol, rep, attempts = PL._spline_segment(tcb, scene, path, kind, None, opts, {})
+    first = attempts[0]
+    assert first["reason"] == "initial" and first["status"] == "Solve_Succeeded", attempts
+    assert first["iterations"] <= 100, attempts
+    assert rep.min_clearance_m >= 0.0 and rep.max_closed_chain_residual <= opts.closed_chain_tol, rep
+
+    # the same NLP, with the pipeline's IPOPT options, under IPOPT's own bound leaves the manifold
+    grasps, cc, arms = _chain(scene)
+    length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+    N = int(np.clip(np.ceil(length / opts.spline_interval_step), opts.spline_min_intervals, opts.spline_max_intervals))
+    T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(tcb.velocity_limit))))
+    prob = SplineSegmentProblem(tcb, scene, SegmentSpec(N, T, path[0], path[-1], cc, margin=opts.margin,
+                                                        object_arm=arms[0],
+                                                        velocity_activation=opts.spline_velocity_activation))
+    prob.set_initial_path(path, cc)
+    cv = 0.5 * opts.closed_chain_tol / (2.0 * np.sqrt(3.0))
+    ipopt = {**dict(opts.ipopt_options), "constr_viol_tol": cv, "acceptable_constr_viol_tol": cv}
+    loose = prob.solve({**ipopt, "theta_max_fact": 1e4}, max_iter=30)
+    bounded = prob.solve(ipopt, max_iter=30)
+    assert not loose.success and loose.terms["closed_chain"] > 0.1, loose.terms
+    assert bounded.terms["closed_chain"] < 1e-2, bounded.terms
+
+
+def test_rows_next_to_pinned_ends_are_held_to_what_the_ends_allow(tcb, monkeypatch):
+    path, scene_name, kind = _load("segment_ssps_scene3_ends.npz")
+    scene = Scene.load(scene_name)
+    grasps, _, _ = _chain(scene)
+    opts = PipelineOptions(failure_retries=0)
+    quarter = 0.5 * opts.closed_chain_tol / (2.0 * np.sqrt(3.0))
+    pos, rot = closure_errors(tcb, grasps, path[[0, -1]])
+    end = float(max(pos.max(), rot.max()))
+    assert end > quarter, "the saved path should start off the manifold by more than the rows' usual tolerance"
+
+    seen = []
+    solve = SplineSegmentProblem.solve
+
+    def spy(self, ipopt_options=None, **kw):
+        seen.append(dict(ipopt_options or {}))
+        return solve(self, ipopt_options, **kw)
+
+    monkeypatch.setattr(SplineSegmentProblem, "solve", spy)
+    sol, rep, attempts = PL._spline_segment(tcb, scene, path, kind, None, opts, {})
+    assert all(o["constr_viol_tol"] >= min(2 * end, opts.closed_chain_tol / (2 * np.sqrt(3))) for o in seen), seen
+    first = attempts[0]
+    assert first["status"] == "Solve_Succeeded" and first["iterations"] <= 60, attempts
+    assert sol.success and rep.min_clearance_m >= 0.0 and rep.max_closed_chain_residual <= opts.closed_chain_tol, rep
