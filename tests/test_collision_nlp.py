@@ -253,6 +253,10 @@ def test_activation_prunes_far_pairs(tcb, transport, rng):
     for i, p in enumerate(chk.pairs):
         if p in expect:
             assert info["active_knots"][p] == np.flatnonzero(D[:, i] < 0.3).tolist()
+    # the distances kept for the margin relaxation: exact below the activation, +inf above
+    D0 = info["model"]._init_dist
+    np.testing.assert_allclose(D0[D < 0.3], D[D < 0.3], atol=1e-9)
+    assert np.all(np.isinf(D0[D >= 0.3]))
 
 
 # --------------------------------------------------------------------------- (b) end to end

@@ -169,6 +169,37 @@ def test_checker_distances_match_coal_pair_by_pair(tcb, rng):
         np.testing.assert_allclose(d, ref, atol=5e-6)  # GJK tolerance (1e-6) on two placements
 
 
+def test_witness_planes_match_coal_pair_by_pair_and_separate(tcb, rng):
+    """The batched planes (one placement update, one C++ distance per pair) against coal.distance on
+    the pair's own geometries: the same unit normal from A to B and mid-plane offset, and for a
+    separated pair the plane separates the witness points (A's below, B's above)."""
+    from optplan.problem.collision_term import witness_plane
+
+    sc = Scene.load("hard_clutter_dense")
+    chk = CollisionChecker(tcb, sc)
+    assert chk._flip.any() and not chk._flip.all(), "both pair orientations should occur in the combined model"
+    req = coal.DistanceRequest()
+    for _ in range(10):
+        q = tcb.random_configuration(rng)
+        W = chk.witness_planes(q, range(len(chk.pairs)))
+        D = chk.distances(q)
+        Mo = chk._update(q)
+        tf = coal.Transform3s(Mo.rotation, Mo.translation)
+        for i, p in enumerate(chk.pairs):
+            ref = witness_plane(chk, p, tf)
+            # GJK's witness points on two placements of the same geometry (hand x grasp vs the joint)
+            np.testing.assert_allclose(W[i], ref, atol=1e-4 if D[i] > 1.0 else 1e-8)
+            assert abs(np.linalg.norm(W[i, :3]) - 1) < 1e-12
+            if D[i] > 1e-3:
+                g1, t1, g2, t2 = chk._geoms(p, tf)
+                res = coal.DistanceResult()
+                coal.distance(g1, t1, g2, t2, req, res)
+                n, b = W[i, :3], W[i, 3]
+                assert n @ np.asarray(res.getNearestPoint1()) < b < n @ np.asarray(res.getNearestPoint2())
+    with pytest.raises(ValueError):
+        chk.witness_planes(np.zeros(3), [0])
+
+
 def test_bad_arguments_are_clear_errors(tcb, transport):
     from optplan.errors import OptionError
 

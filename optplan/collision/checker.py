@@ -187,9 +187,12 @@ class CollisionChecker:
         geo = scene_geometry(self.robot, self.scene, self.object_arm if self.object is not None else None,
                              held_object=self.object is not None)
         gm = geo.model
+        flip = []
         for p in self.pairs:
             a, b = pair_indices(p, geo)
             gm.addCollisionPair(pin.CollisionPair(min(a, b), max(a, b)))
+            flip.append(a > b)
+        self._flip = np.array(flip, bool)  # the combined model's pair runs B -> A
         self._cgm = gm
         self._cgd = pin.GeometryData(gm)
         # references into the results vector (never resized after this): faster to read than
@@ -241,6 +244,34 @@ class CollisionChecker:
             return np.empty(0)
         pin.computeDistances(self.model, self.data, self._cgm, self._cgd, q)
         return np.array([r.min_distance for r in self._dist_results])
+
+    def witness_planes(self, q, pair_indices) -> np.ndarray:
+        """Separating planes of the pairs ``pair_indices`` (indices into ``pairs``) at configuration
+        ``q``: one row ``(n, n·m)`` per pair — coal's unit witness normal from A to B and the
+        offset of the witness points' midpoint ``m`` (the same query as :func:`coal.distance` on
+        :meth:`pair_geometries`; the placements are set once, each pair is one C++ call). A
+        degenerate normal (coincident witness points) is replaced by the direction between the
+        two geometries' origins."""
+        q = self.robot.check_q(q)
+        idx = np.asarray(pair_indices, int).ravel()
+        out = np.zeros((idx.size, 4))
+        if not idx.size:
+            return out
+        gm, gd = self._cgm, self._cgd
+        pin.updateGeometryPlacements(self.model, self.data, gm, gd, q)
+        for row, p in enumerate(idx.tolist()):
+            res = pin.computeDistance(gm, gd, p)
+            cp = gm.collisionPairs[p]
+            n = np.asarray(res.normal, float)
+            if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+                n = gd.oMg[cp.second].translation - gd.oMg[cp.first].translation
+            n = n / max(float(np.linalg.norm(n)), 1e-12)
+            if self._flip[p]:
+                n = -n
+            mid = 0.5 * (np.asarray(res.getNearestPoint1(), float) + np.asarray(res.getNearestPoint2(), float))
+            out[row, :3] = n
+            out[row, 3] = n @ mid
+        return out
 
     def min_distance(self, q) -> tuple[float, Pair | None]:
         """Smallest distance [m] and the pair that has it (inf, None without pairs)."""

@@ -311,10 +311,21 @@ class CollisionModel:
             self.active_pairs = list(pairs)
             self.active_knots = {p: None for p in pairs}
             return self.active_pairs
-        Dm = np.array([self.checker.distances(initial.q_full(k)) for k in range(initial.N + 1)])
-        self._init_dist = Dm.copy()  # (N+1) × pairs, reused by boundary_margins
+        # exact distances below the activation (and the margin), +inf elsewhere: the anchor bounds
+        # of distances_below spare the pairs that cannot come that close
+        thr = max(float(self.activation), float(self.margin))
+
+        def below(tr: NumericTrajectory) -> np.ndarray:
+            Q = np.array([tr.q_full(k) for k in range(initial.N + 1)])
+            D = np.full((len(Q), len(pairs)), np.inf)
+            r_, p_, d_ = self.checker.distances_below(Q, thr)
+            D[r_, p_] = d_
+            return D
+
+        Dm = below(initial)
+        self._init_dist = Dm.copy()  # (N+1) × pairs, exact where below max(activation, margin): boundary_margins
         for tr in self.activate_with:  # e.g. a previous solution that verification found colliding
-            Dm = np.minimum(Dm, np.array([self.checker.distances(tr.q_full(k)) for k in range(initial.N + 1)]))
+            Dm = np.minimum(Dm, below(tr))
         close = Dm < self.activation
         for (p, k) in self.margin_boost:  # boosted rows are always constrained
             if p in pairs and 0 <= k <= initial.N:

@@ -51,7 +51,7 @@ from ..scene import Scene
 from . import kernel_compiler
 from .assembly import Assembly
 from .bspline import check_knot_guess, fit_interior, jerk_integral_reference, knot_values, rest_to_rest
-from .collision_term import CollisionAvoidance, _box_vertices, witness_plane
+from .collision_term import CollisionAvoidance, _box_vertices
 from .frame_terms import ClosedChain
 from .kernels import KernelCache, geometry_points
 from .solution import Solution
@@ -398,12 +398,10 @@ class SplineSegmentProblem:
         out = [(np.zeros((3, len(it.knots))), np.zeros(len(it.knots))) for it in plan]
         for k, items in per_knot.items():
             assert col is not None  # plan items exist only with collision rows
-            Mo = col.checker.update_placements(Qk[k])
-            import coal
-            obj_tf = coal.Transform3s(Mo.rotation, Mo.translation) if Mo is not None else None
-            for i, t in items:
+            chk = col.checker
+            W = chk.witness_planes(Qk[k], [chk.pair_index[plan[i].pair] for i, _ in items])
+            for (i, t), nb in zip(items, W):
                 it = plan[i]
-                nb = witness_plane(col.checker, it.pair, obj_tf)
                 n, off = (-nb[:3], -nb[3]) if it.flip else (nb[:3], nb[3])
                 if it.static:
                     Y, rb = it.b[1], it.b[2]
