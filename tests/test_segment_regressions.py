@@ -16,7 +16,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 import optplan.pipeline as PL
 from optplan.constraints.closed_chain import closure_errors
