@@ -93,9 +93,7 @@ class KernelCache:
         fn = self._fns.get(key)
         if fn is not None:
             return fn
-        import hashlib
-
-        name = f"{key[0]}_{hashlib.sha1(self._digest + repr(key).encode()).hexdigest()[:16]}"
+        name = self._name(key)
         path = self._dir / f"{name}.casadi" if self._dir is not None else None
         if path is not None and path.exists():
             try:
@@ -113,6 +111,20 @@ class KernelCache:
                     log.info("kernel %s not saved (%s)", path, exc)
         self._fns[key] = fn
         return fn
+
+    def _name(self, key: tuple[Any, ...]) -> str:
+        """The name (and disk-cache stem) of the function of ``key``."""
+        import hashlib
+
+        return f"{key[0]}_{hashlib.sha1(self._digest + repr(key).encode()).hexdigest()[:16]}"
+
+    def _compiled_by_name(self, name: str, opt: str) -> ca.Function | None:
+        """The compiled library of the function ``name`` if an earlier run left it, else None."""
+        key = ("compiled", name, opt)
+        got = self._fns.get(key)
+        if got is None and self._dir is not None and (self._dir / f"{name}{opt}.so").exists():
+            got = self._fns[key] = ca.external(name, str(self._dir / f"{name}{opt}.so"))
+        return got
 
     def compiled(self, fn: ca.Function, opt: str = "-O1", build: bool = True) -> ca.Function | None:
         """``fn`` compiled to C: a shared library in the disk cache, named after the kernel (whose
@@ -148,6 +160,11 @@ class KernelCache:
         queued for a background compile, :mod:`optplan.problem.kernel_compiler`)."""
         if compiled not in (True, False, "auto"):
             raise ValueError(f"compile_kernels: expected True, False or 'auto', got {compiled!r}")
+        if compiled is not False:  # all three compiled earlier: their symbolic forms are not loaded
+            names = [fn.name(), self._name(("jac", fn.name())), self._name(("hess", fn.name()))]
+            libs = [self._compiled_by_name(n, "-O1") for n in names]
+            if all(lib is not None for lib in libs):
+                return cast("tuple[ca.Function, ca.Function, ca.Function]", tuple(libs)), True
         jfn, hfn = self.derivatives(fn)
         fns = (fn, jfn, hfn)
         if compiled is False:
