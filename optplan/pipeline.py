@@ -43,7 +43,8 @@ from .workers import default_workers, run_jobs
 if TYPE_CHECKING:
     from .planners.base import PlanResult
 
-__all__ = ["PipelineOptions", "PLANNER_DEFAULTS", "SegmentResult", "PipelineResult", "run_pipeline", "shortcut_constrained"]
+__all__ = ["PipelineOptions", "PLANNER_DEFAULTS", "SegmentResult", "PipelineResult", "run_pipeline", "shortcut_constrained",
+           "shortcut_free"]
 log = logging.getLogger(__name__)
 
 
@@ -180,6 +181,47 @@ def shortcut_constrained(robot: RobotModel, scene: Scene, path: np.ndarray, rng:
         if seglen(np.array(qs)) < seglen(path[i:j + 1]):
             path = np.vstack([path[:i], np.array(qs), path[j + 1:]])
     return path
+
+
+def shortcut_free(robot: RobotModel, scene: Scene, path: np.ndarray, rng: np.random.Generator,
+                  attempts: int = 40, checker: CollisionChecker | None = None,
+                  step: float = 0.02) -> np.ndarray:
+    """Random shortcuts of a regrasp path (one arm moves, the other holds the object still): two
+    random configurations are joined by the joint-space straight line when it is collision free
+    at samples ``step`` [rad] apart (the largest joint change between samples; checked coarse to
+    fine, stopping at the first contact) and shorter. ``checker`` must place the held object on
+    the holding arm. The optimizer then starts from a path without the planner's detours: fewer
+    corners for the minimum-jerk motion to cut into obstacles it had no rows for, and fewer knots
+    (a segment's grid follows its length)."""
+    checker = checker or CollisionChecker(robot, scene)
+    path = np.array(path, float)
+    seglen = lambda P: float(np.linalg.norm(np.diff(P, axis=0), axis=1).sum())  # noqa: E731
+    tried: set[tuple[int, int]] = set()  # pairs refused on the current path
+    for _ in range(int(attempts)):
+        if len(path) < 3:
+            break
+        i, j = (int(v) for v in sorted(rng.choice(len(path), 2, replace=False)))
+        if j - i < 2 or (i, j) in tried:
+            continue
+        tried.add((i, j))
+        if float(np.linalg.norm(path[j] - path[i])) >= seglen(path[i:j + 1]) - 1e-12:
+            continue
+        n = max(2, int(np.ceil(np.abs(path[j] - path[i]).max() / step)))
+        if all(checker.is_valid(path[i] + (k / n) * (path[j] - path[i])) for k in _coarse_to_fine(n)):
+            path = np.vstack([path[:i + 1], path[j:]])
+            tried.clear()
+    return path
+
+
+def _coarse_to_fine(n: int):
+    """The interior sample indices 1 … n−1 of a line of n intervals, midpoints first (breadth first)."""
+    queue = [(0, n)]
+    while queue:
+        a, b = queue.pop(0)
+        if b - a > 1:
+            m = (a + b) // 2
+            yield m
+            queue += [(a, m), (m, b)]
 
 
 # --------------------------------------------------------------------------- optimization
@@ -435,6 +477,7 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
     results, t0, t_short, c_short = [], 0.0, 0.0, 0.0
     ipopt = dict(opts.ipopt_options)
     jobs: list[tuple[np.ndarray, str, str | None]] = []
+    free_rng = rng.spawn(1)[0]  # its own stream: the constrained shortcuts draw as before
     for seg in plan.segments:
         seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
         if len(seg_path) < 2 or np.abs(seg_path[-1] - seg_path[0]).max() < 1e-9:
@@ -443,6 +486,13 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
         if kind == "constrained" and opts.warm_start:
             ts, cs = time.perf_counter(), time.process_time()
             seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
+            t_short += time.perf_counter() - ts
+            c_short += time.process_time() - cs
+        elif kind == "regrasp" and opts.warm_start and opts.free_shortcut_attempts > 0 and seg.arm is not None:
+            ts, cs = time.perf_counter(), time.process_time()
+            holder = next(a for a in _held_object(scene).grasps if a != seg.arm)
+            seg_path = shortcut_free(robot, scene, seg_path, free_rng, opts.free_shortcut_attempts,
+                                     CollisionChecker.shared(robot, scene, object_arm=holder))
             t_short += time.perf_counter() - ts
             c_short += time.process_time() - cs
         jobs.append((seg_path, kind, seg.arm))

@@ -40,6 +40,8 @@ class PipelineOptions:
     plan_time_limit: float = 10.0
     #: Random task-space shortcuts tried per constrained segment [count].
     shortcut_attempts: int = 40
+    #: Random joint-space shortcuts tried per regrasp segment (the moving arm's path; 0: none) [count].
+    free_shortcut_attempts: int = 40
     #: Minimum number of NLP intervals per segment (knot transcription) [count].
     n_intervals: int = 20
     #: Segment duration = joint path length / (speed_fraction × smallest joint speed limit) [fraction, 0-1].
@@ -139,6 +141,10 @@ class PipelineOptions:
         if not (isinstance(self.spline_max_iterations, int) and self.spline_max_iterations >= 1):
             raise ValueError(f"PipelineOptions.spline_max_iterations: expected an int >= 1, got "
                              f"{self.spline_max_iterations!r}")
+        for name in ("shortcut_attempts", "free_shortcut_attempts"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"PipelineOptions.{name}: expected an integer >= 0, got {v!r}")
         if not self.ipopt_max_wall_time > 0:
             raise ValueError(f"PipelineOptions.ipopt_max_wall_time: expected a positive time [s], got "
                              f"{self.ipopt_max_wall_time}")

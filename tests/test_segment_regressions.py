@@ -10,12 +10,15 @@
   2.1e-7 m off the closed-chain manifold, above the rows' tolerance (1.4e-7); IPOPT stalled at a
   violation of 1.5e-7 next to the pinned start until its iteration limit. The pipeline now holds the
   rows to twice the ends' own residual.
+* ``segment_hard_window_regrasp.npz``: a regrasp path the pipeline shortens before optimizing it
+  (``shortcut_free``), checked against exact distances on a finer grid than the shortcut's own.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import optplan.pipeline as PL
 from optplan.constraints.closed_chain import closure_errors
@@ -88,3 +91,33 @@ def test_rows_next_to_pinned_ends_are_held_to_what_the_ends_allow(tcb, monkeypat
     first = attempts[0]
     assert first["status"] == "Solve_Succeeded" and first["iterations"] <= 60, attempts
     assert sol.success and rep.min_clearance_m >= 0.0 and rep.max_closed_chain_residual <= opts.closed_chain_tol, rep
+
+
+def test_regrasp_shortcut_keeps_ends_and_the_holding_arm_and_stays_collision_free(tcb):
+    """A planner's regrasp path (``segment_hard_window_regrasp.npz``: arm A moves, B holds the
+    object; the straight line between its ends passes 0.39 m deep through the wall) shortened by
+    joint-space shortcuts: same ends, the holding arm's joints untouched, shorter, and every
+    straight piece collision free when re-checked every 5 mrad by exact coal distances."""
+    from optplan.collision.checker import CollisionChecker
+
+    d = np.load(DATA / "segment_hard_window_regrasp.npz")
+    path, scene, arm = np.asarray(d["path"], float), Scene.load(str(d["scene"])), str(d["arm"])
+    holder = next(a for a in PL._held_object(scene).grasps if a != arm)
+    chk = CollisionChecker(tcb, scene, object_arm=holder)
+
+    def dense(P, step=0.005):
+        return np.vstack([P[k] + np.linspace(0, 1, max(2, int(np.ceil(np.abs(P[k + 1] - P[k]).max() / step))) + 1)[:, None]
+                          * (P[k + 1] - P[k]) for k in range(len(P) - 1)])
+
+    assert chk.min_distance_along(dense(path[[0, -1]]))[0] < -0.1, "the straight line should cross the wall"
+    out = PL.shortcut_free(tcb, scene, path, np.random.default_rng(0), 40, chk)
+    L = lambda P: float(np.linalg.norm(np.diff(P, axis=0), axis=1).sum())  # noqa: E731
+    assert len(out) < len(path) and L(out) < L(path) - 1.0
+    np.testing.assert_array_equal(out[[0, -1]], path[[0, -1]])
+    idx = tcb.arm(holder).j_idx
+    np.testing.assert_array_equal(out[:, idx], np.broadcast_to(path[0, idx], out[:, idx].shape))
+    assert chk.min_distance_along(dense(out))[0] > 0.0
+    # every kept configuration is one of the planner's
+    assert all(np.any(np.all(path == q, axis=1)) for q in out)
+    with pytest.raises(ValueError):
+        PipelineOptions(free_shortcut_attempts=-1)
