@@ -442,12 +442,12 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         res = rep.max_closed_chain_residual
         if kind != "constrained" or not sol.success or not res > opts.closed_chain_tol:
             break
-        N2 = int(min(opts.spline_max_intervals, np.ceil(N * 1.05 * (res / (0.5 * opts.closed_chain_tol)) ** 0.25)))
+        N2 = int(min(opts.spline_refine_max_intervals, np.ceil(N * 1.05 * (res / (0.5 * opts.closed_chain_tol)) ** 0.25)))
         if N2 <= N:
             break
         N = N2
         prob = build(N, initial=sol)
-        sol, rep = run(prob, "refine")
+        sol, rep = fix_contacts(prob, *run(prob, "refine"))  # the refined grid's own contacts too
     # the knot transcription has no rows for cylinders and meshes (the B-spline NLP bounds them):
     # on such a robot its solution would ignore them, so it is not tried
     unmodelled = [] if prob.col is None else [g for g, shape in prob.col.robot_shape.items() if shape is None]

@@ -89,8 +89,12 @@ class PipelineOptions:
     spline_interval_step: float = 0.05
     #: Fewest intervals of a B-spline segment [count].
     spline_min_intervals: int = 30
-    #: Most intervals of a B-spline segment [count].
+    #: Most intervals of a B-spline segment [count] (first solve, collision re-solves, finer grid).
     spline_max_intervals: int = 160
+    #: Most intervals of the refinement re-solve [count] (≥ ``spline_max_intervals``): when the
+    #: closed chain drifts too far between knots of a segment already at ``spline_max_intervals``,
+    #: the grid is refined beyond it, warm-started from the solution.
+    spline_refine_max_intervals: int = 240
     #: IPOPT's wall-clock cap per solve [s] (a solve that hits it ends with ``Maximum_WallTime_Exceeded``;
     #: B-spline path).
     ipopt_max_wall_time: float = 60.0
@@ -141,6 +145,10 @@ class PipelineOptions:
         if not (isinstance(self.spline_max_iterations, int) and self.spline_max_iterations >= 1):
             raise ValueError(f"PipelineOptions.spline_max_iterations: expected an int >= 1, got "
                              f"{self.spline_max_iterations!r}")
+        if isinstance(self.spline_refine_max_intervals, bool) or not isinstance(self.spline_refine_max_intervals, int) \
+                or self.spline_refine_max_intervals < self.spline_max_intervals:
+            raise ValueError(f"PipelineOptions.spline_refine_max_intervals: expected an integer >= spline_max_intervals "
+                             f"({self.spline_max_intervals}), got {self.spline_refine_max_intervals!r}")
         for name in ("shortcut_attempts", "free_shortcut_attempts"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:

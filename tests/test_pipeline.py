@@ -223,6 +223,45 @@ def test_spline_segment_retry_policy(tcb, monkeypatch):
     assert rep.max_closed_chain_residual == 2e-7
 
 
+def test_refinement_may_pass_the_interval_cap_and_its_contacts_are_fixed(tcb, monkeypatch):
+    """A segment at ``spline_max_intervals`` whose closed chain drifts between knots is refined
+    beyond the cap (up to ``spline_refine_max_intervals``), and a contact coal finds in the refined
+    solution gets its collision re-solve (fake solves and reports: the policy only)."""
+    from types import SimpleNamespace
+
+    import optplan.pipeline as PL
+    from optplan.problem.segment import SplineSegmentProblem
+    from optplan.problem.solution import IpoptStatus, Solution
+
+    sc, plan = _scene1_plan(tcb)
+    seg = next(s for s in plan.segments if s.kind == "constrained")
+    seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
+    reports = iter([(0.01, 5e-6), (-0.01, 2e-7), (0.01, 2e-7)])  # (clearance, closed-chain residual)
+    Ns = []
+
+    def fake_solve(self, ipopt=None, **kw):
+        Ns.append(self.N)
+        Q = self.knot_configurations()
+        z = np.zeros_like(Q)
+        return Solution(True, IpoptStatus.SOLVE_SUCCEEDED, 7, 0.1, 1.0, 0.0, {}, np.linspace(0, self.T, self.N + 1),
+                        Q, z, z, z[:-1], tcb.joint_names, setup_time=0.05)
+
+    def fake_verify(robot, sol, scene, closed_chain=None, object_arm=None):
+        c, r = next(reports)
+        return SimpleNamespace(min_clearance_m=c, max_closed_chain_residual=r, min_clearance_pair="x")
+
+    monkeypatch.setattr(SplineSegmentProblem, "solve", fake_solve)
+    monkeypatch.setattr(PL, "verify", fake_verify)
+    opts = PipelineOptions(shortcut_attempts=0, spline_min_intervals=30, spline_max_intervals=30,
+                           spline_refine_max_intervals=60)
+    sol, rep, attempts = PL._spline_segment(tcb, sc, seg_path, "constrained", None, opts, {})
+    assert [a["reason"] for a in attempts] == ["initial", "refine", "collision"]
+    assert Ns == [30, int(np.ceil(30 * 1.05 * (5e-6 / 0.5e-6) ** 0.25)), Ns[1]] and 30 < Ns[1] <= 60
+    assert rep.min_clearance_m == 0.01
+    with pytest.raises(ValueError, match="spline_refine_max_intervals"):
+        PipelineOptions(spline_max_intervals=160, spline_refine_max_intervals=100)
+
+
 def test_compare_pipeline_options_example_pairs_variants_and_rejects_bad_json(capsys):
     """examples/compare_pipeline_options.py: bad --variants is exit 2 with one line; two variants
     that differ only in a setting the trial does not exercise give the same plan and optimum."""
