@@ -490,9 +490,9 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             c_short += time.process_time() - cs
         elif kind == "regrasp" and opts.warm_start and opts.free_shortcut_attempts > 0 and seg.arm is not None:
             ts, cs = time.perf_counter(), time.process_time()
-            holder = next(a for a in _held_object(scene).grasps if a != seg.arm)
+            holding = next(a for a in _held_object(scene).grasps if a != seg.arm)
             seg_path = shortcut_free(robot, scene, seg_path, free_rng, opts.free_shortcut_attempts,
-                                     CollisionChecker.shared(robot, scene, object_arm=holder))
+                                     CollisionChecker.shared(robot, scene, object_arm=holding))
             t_short += time.perf_counter() - ts
             c_short += time.process_time() - cs
         jobs.append((seg_path, kind, seg.arm))
