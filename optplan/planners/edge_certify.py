@@ -44,7 +44,7 @@ configuration, so it is certified too; the margins disable the broad phase.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pinocchio as pin
@@ -94,6 +94,10 @@ class EdgeCertifier:
         self.n_distance_calls = 0
         self.n_paths = 0
         self.n_checks = 0
+        self.n_cache_hits = 0
+        # vertex cache (``path(..., cache=True)``): per configuration (and mode, object pose) a lower
+        # bound on each group's clearance there and that vertex's exact clearance when it is near
+        self._vertex: dict[tuple[Any, ...], tuple[np.ndarray, float | None]] = {}
         if self.model.nq != self.model.nv:
             raise ValueError("EdgeCertifier: robots whose configuration is not a joint vector (nq != nv) are not supported")
 
@@ -154,6 +158,24 @@ class EdgeCertifier:
                 w[jm.idx_v:jm.idx_v + jm.nv] = 0.0
         return w
 
+    #: vertices kept by the vertex cache (oldest dropped first)
+    CACHE_SIZE = 20000
+
+    def clear_cache(self) -> None:
+        """Forget the vertex cache (a planner does this at the start of each query, so that a query's
+        result does not depend on the queries before it)."""
+        self._vertex.clear()
+
+    def _key(self, mode: str, x: np.ndarray, object_pose: pin.SE3 | None) -> tuple[Any, ...]:
+        if mode == "fixed":
+            return (mode, x.tobytes(), cast(pin.SE3, object_pose).homogeneous.tobytes())
+        return (mode, x.tobytes())
+
+    def _remember(self, key: tuple[Any, ...], lower: np.ndarray, d_near: float | None) -> None:
+        if len(self._vertex) >= self.CACHE_SIZE:
+            del self._vertex[next(iter(self._vertex))]
+        self._vertex[key] = (lower, d_near)
+
     def prepare(self, modes: tuple[str, ...] = ("held", "fixed")) -> None:
         """Build the pair groups of ``modes`` (and the compiled speed profiles) now, before a
         planner's time limit starts."""
@@ -178,15 +200,34 @@ class EdgeCertifier:
         self.n_distance_calls += len(gs)
         return out - self.checker.margin
 
-    # ------------------------------------------------------------------ public checks
-    def segment(self, a: np.ndarray, b: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None) -> bool:
-        """The straight joint segment ``a → b`` (both ends included) certified collision-free."""
-        return self.path(np.array([a, b], dtype=float), mode, object_pose)
+    def _distance1(self, mode: str, g: int, x: np.ndarray, object_pose: pin.SE3 | None) -> float:
+        """:meth:`_distances` of the one group ``g``, as a float."""
+        gd = self._groups[mode][g].gd
+        pin.updateGeometryPlacements(self.model, self.data, self.gmodel, gd, x)
+        if mode == "fixed":
+            gd.oMg[self.checker.fixed_id] = object_pose
+        k = pin.computeDistances(self.gmodel, gd)
+        self.n_distance_calls += 1
+        return gd.distanceResults[k].min_distance - self.checker.margin
 
-    def path(self, Q: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None) -> bool:
+    # ------------------------------------------------------------------ public checks
+    def segment(self, a: np.ndarray, b: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None,
+                cache: bool = False) -> bool:
+        """The straight joint segment ``a → b`` (both ends included) certified collision-free."""
+        return self.path(np.array([a, b], dtype=float), mode, object_pose, cache)
+
+    def path(self, Q: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None, cache: bool = False) -> bool:
         """The piecewise-linear joint path through the rows of ``Q`` (m × nq, m ≥ 1) certified
         collision-free (every point of every chord, vertices included). ``mode``: ``"held"``
-        (object held by the hands), ``"fixed"`` (object standing at ``object_pose``), ``"free"``."""
+        (object held by the hands), ``"fixed"`` (object standing at ``object_pose``), ``"free"``.
+
+        ``cache``: start from what an earlier certified path left at this path's first vertex (a
+        lower bound on each group's clearance there: the clearance where the group was last
+        evaluated minus its motion bound to the vertex), and leave the same at its last vertex.
+        A planner that certifies edge after edge from its tree's nodes then evaluates every group
+        at a vertex once instead of once per edge; same certificate (every bound used is a valid
+        lower bound), the distances are only evaluated at other points. The floor is the same as
+        without the cache (each vertex's exact clearance is kept when it is near)."""
         Q = np.asarray(Q, dtype=float)
         if Q.ndim != 2 or Q.shape[0] < 1 or Q.shape[1] != self.model.nq:
             raise ValueError(f"path: expected an (m >= 1) × {self.model.nq} array of configurations, got shape {Q.shape}")
@@ -201,26 +242,50 @@ class EdgeCertifier:
         if G == 0:
             return True
         X = np.repeat(Q[:1], G, axis=0)                    # where each group was evaluated
-        D = self._distances(mode, np.arange(G), Q[0], object_pose)
-        # the floor: min_clearance, or half an end's own clearance when an end is closer than that
-        # (else no edge could leave a start or reach a goal that is valid but nearly in contact)
+        exact = np.ones(G, dtype=bool)                     # D exact at X (else a lower bound)
+        # the floor: min_clearance, or half an end's own clearance when an end is closer than twice
+        # that (start) or than that (end) (else no edge could leave a start or reach a goal that is
+        # valid but nearly in contact)
         floor = self.min_clearance
-        d0 = float(D.min())
-        if d0 <= 0.0:
-            return False
-        floor = min(floor, 0.5 * d0)
-        if len(Q) > 1 and self._near(mode, Q[-1], object_pose):
-            d1 = float(self._distances(mode, np.arange(G), Q[-1], object_pose).min())
-            if d1 <= 0.0:
+        hit = self._vertex.get(self._key(mode, Q[0], object_pose)) if cache else None
+        if hit is not None:
+            self.n_cache_hits += 1
+            D, d0 = hit[0].copy(), hit[1]
+            exact[:] = False
+            if d0 is not None:
+                floor = min(floor, 0.5 * d0)
+        else:
+            D = self._distances(mode, np.arange(G), Q[0], object_pose)
+            d0 = float(D.min())
+            if d0 <= 0.0:
                 return False
-            floor = min(floor, 0.5 * d1)
-        st = {"X": X, "D": D, "floor": floor, "profile": len(Q) == 2}   # the profile pays off on long straight edges
-        return self._run(Q, 0, len(Q) - 1, mode, object_pose, st)
+            floor = min(floor, 0.5 * d0)
+            if cache:
+                self._remember(self._key(mode, Q[0], object_pose), D.copy(), d0 if d0 < 2.0 * self.min_clearance else None)
+        end = None
+        if len(Q) > 1:
+            end = self._vertex.get(self._key(mode, Q[-1], object_pose)) if cache else None
+            if end is not None:
+                d1 = end[1]
+            elif self._near(mode, Q[-1], object_pose, 2.0 if cache else 1.0):
+                d1 = float(self._distances(mode, np.arange(G), Q[-1], object_pose).min())
+                if d1 <= 0.0:
+                    return False
+            else:
+                d1 = None
+            if d1 is not None and d1 < self.min_clearance:
+                floor = min(floor, 0.5 * d1)
+        st = {"X": X, "D": D, "exact": exact, "floor": floor, "profile": len(Q) == 2}   # the profile pays off on long straight edges
+        ok = self._run(Q, 0, len(Q) - 1, mode, object_pose, st)
+        if ok and cache and len(Q) > 1 and end is None:
+            lower = st["D"] - np.einsum("gj,gj->g", self._Wg[mode], np.abs(Q[-1] - st["X"]))
+            self._remember(self._key(mode, Q[-1], object_pose), lower, d1 if d1 is not None and d1 < 2.0 * self.min_clearance else None)
+        return ok
 
-    def _near(self, mode: str, x: np.ndarray, object_pose: pin.SE3 | None) -> bool:
-        """Some active pair closer than ``min_clearance`` (+ margin) at x (boolean checks with a
-        security margin: cheaper than the distances)."""
-        gd = self._margin_data(mode, 0.0)
+    def _near(self, mode: str, x: np.ndarray, object_pose: pin.SE3 | None, factor: float = 1.0) -> bool:
+        """Some active pair closer than ``factor · min_clearance`` (+ margin) at x (boolean checks with
+        a security margin: cheaper than the distances)."""
+        gd = self._margin_data(mode, 0.0, factor)
         pin.updateGeometryPlacements(self.model, self.data, self.gmodel, gd, x)
         if mode == "fixed":
             gd.oMg[self.checker.fixed_id] = object_pose
@@ -237,6 +302,7 @@ class EdgeCertifier:
         d = self._distances(mode, gs, x, object_pose)
         st["D"][gs] = d
         st["X"][gs] = x
+        st["exact"][gs] = True
         return bool(d.min() >= st["floor"])
 
     def _run(self, Q: np.ndarray, i: int, j: int, mode: str, object_pose: pin.SE3 | None, st: dict[str, Any]) -> bool:
@@ -245,7 +311,7 @@ class EdgeCertifier:
         bad = self._uncovered(mode, Q[i:j + 1], st)
         if bad.size == 0:
             return True
-        stale = bad[np.any(st["X"][bad] != Q[i], axis=1)]
+        stale = bad[np.any(st["X"][bad] != Q[i], axis=1) | ~st["exact"][bad]]
         if stale.size:
             if not self._evaluate(mode, stale, Q[i], object_pose, st):
                 return False
@@ -277,21 +343,41 @@ class EdgeCertifier:
         reach[st["D"] - np.einsum("gj,gj->g", Wg, M) >= half] = np.inf
         at_u = np.all(st["X"] == u, axis=1) & ~np.isinf(reach)
         reach[at_u] = self._reach(0.0, st["D"][at_u], rate[at_u], k[at_u], half, prof)
+        D, X, exact, floor, dq = st["D"], st["X"], st["exact"], st["floor"], v - u
         while True:
-            s = float(reach.min())
+            g = int(reach.argmin())
+            s = float(reach[g])
             if s >= 1.0:
                 return True
-            gs = np.flatnonzero(reach <= s)
-            if not self._evaluate(mode, gs, u + s * (v - u), object_pose, st):
+            x = u + s * dq
+            if np.count_nonzero(reach <= s) > 1:
+                gs = np.flatnonzero(reach <= s)
+                if not self._evaluate(mode, gs, x, object_pose, st):
+                    return False
+                reach[gs] = self._reach(s, D[gs], rate[gs], k[gs], half, prof)
+                continue
+            # one group (the usual case): the same steps on scalars (numpy's per-call overhead is most
+            # of a step's cost otherwise)
+            d = self._distance1(mode, g, x, object_pose)
+            D[g], X[g], exact[g] = d, x, True
+            if d < floor:
                 return False
-            reach[gs] = self._reach(s, st["D"][gs], rate[gs], k[gs], half, prof)
+            budget = d - half
+            r = float(rate[g])
+            out = s + budget / r if r > 0.0 else math.inf
+            if prof is not None:
+                knots, C = prof
+                c0 = float(np.interp(s, knots, C))
+                out = max(out, float(np.interp(c0 + budget / float(k[g]), C, knots, right=np.inf)))
+            reach[g] = max(out, s + 1e-12)
 
     @staticmethod
     def _reach(s: float, d: np.ndarray, rate: np.ndarray, k: np.ndarray, half: float,
                prof: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
         budget = d - half                                           # > 0 after a passed evaluation
-        with np.errstate(divide="ignore"):
-            out = s + budget / rate
+        out = np.full_like(budget, np.inf)
+        np.divide(budget, rate, out=out, where=rate > 0.0)
+        out += s
         if prof is not None:
             knots, C = prof
             c0 = float(np.interp(s, knots, C))
@@ -337,8 +423,8 @@ class EdgeCertifier:
                 return False
         return True
 
-    def _margin_data(self, mode: str, tol: float) -> Any:
-        key = (mode, tol)
+    def _margin_data(self, mode: str, tol: float, factor: float = 1.0) -> Any:
+        key = (mode, tol, factor)
         if key not in self._margin_gd:
             src = self.checker._gd[mode]
             gd = pin.GeometryData(self.gmodel)
@@ -349,7 +435,7 @@ class EdgeCertifier:
                     continue
                 both = moving[cp.first] and moving[cp.second]
                 # tol = 0: the near-contact test of an end (min_clearance); else the discrete alternative
-                extra = self.min_clearance if tol == 0.0 else 0.5 * self.min_clearance
+                extra = factor * self.min_clearance if tol == 0.0 else 0.5 * self.min_clearance
                 gd.collisionRequests[k].security_margin = (tol if both else 0.5 * tol) + extra + self.checker.margin
             self._margin_gd[key] = gd
         return self._margin_gd[key]

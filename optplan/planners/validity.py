@@ -330,12 +330,13 @@ class ValidityChecker:
         return self._certifiers[key]
 
     def edge_is_certified(self, a: np.ndarray, b: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None,
-                          min_clearance: float = 1e-3) -> bool:
+                          min_clearance: float = 1e-3, cache: bool = False) -> bool:
         """The straight joint segment ``a → b`` (ends included) CERTIFIED collision-free by
         conservative advancement on exact distances (:mod:`optplan.planners.edge_certify`): no pair
         closer than ``min_clearance / 2`` [m] (+ ``margin``) at any point of it. Unlike
-        :meth:`edge_is_valid` no fixed check spacing is involved. ``mode`` as in :meth:`edge_is_valid`."""
-        return self.certifier(min_clearance).segment(a, b, mode, object_pose)
+        :meth:`edge_is_valid` no fixed check spacing is involved. ``mode`` as in :meth:`edge_is_valid`;
+        ``cache``: the certifier's vertex cache (:meth:`.EdgeCertifier.path`)."""
+        return self.certifier(min_clearance).segment(a, b, mode, object_pose, cache)
 
     def path_is_certified(self, Q: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None,
                           min_clearance: float = 1e-3) -> bool:
