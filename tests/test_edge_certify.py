@@ -224,3 +224,58 @@ def test_certified_orientation_planners_paths_clear_everywhere(planner):
     P = pl.densify(res.path, pl.options.certify_resolution) if planner == "oc_rrt_connect" else res.path
     dense = densify_linear(P, 2e-3)
     assert all(ex.is_valid(q) for q in dense)
+
+
+def test_vertex_cache_certifies_the_same_and_saves_distance_calls(setup):
+    """Edge after edge along random walks (as a planner's extensions: each edge starts where the last
+    ended): with the vertex cache every certified edge is collision-free at 2e-4 rad spacing and keeps
+    ≥ min_clearance / 2 by exact distances, the decisions equal those without the cache, and the
+    cache needs fewer distance calls. Clearing it gives the same calls again (a query's result does
+    not depend on the queries before it)."""
+    robot, scene, ck, ex, qs, qg = setup
+    rng = np.random.default_rng(11)
+    walks = []
+    while len(walks) < 6:
+        a = (qs if len(walks) % 2 else qg) + rng.normal(0.0, 0.04, qs.size)
+        if not (ck.in_limits(a) and ck.is_valid(a)):
+            continue
+        W = [a]
+        for _ in range(8):
+            b = W[-1] + rng.normal(0.0, 0.03, a.size)
+            if not ck.is_valid(b):
+                break
+            W.append(b)
+        if len(W) >= 4:
+            walks.append(W)
+    plain, cached = EdgeCertifier(ck, 1e-3), EdgeCertifier(ck, 1e-3)
+
+    def run(cert, cache):
+        out = []
+        for W in walks:
+            for u, v in zip(W[:-1], W[1:]):
+                ok = cert.segment(u, v, "held", cache=cache)
+                out.append(ok)
+                if not ok:
+                    break
+        return out
+
+    ok_plain, ok_cached = run(plain, False), run(cached, True)
+    # equal on these walks (a borderline edge could in principle be decided differently: the distances
+    # are evaluated at other points)
+    assert ok_cached == ok_plain
+    assert sum(ok_cached) >= 10 and cached.n_cache_hits >= 10
+    assert cached.n_distance_calls < 0.7 * plain.n_distance_calls, (cached.n_distance_calls, plain.n_distance_calls)
+    k = 0
+    for W in walks:
+        for u, v in zip(W[:-1], W[1:]):
+            if not ok_cached[k]:
+                break
+            fine = _dense(u, v, 2e-4)
+            assert all(ex.is_valid(q) for q in fine)
+            floor = min(1e-3, 0.5 * min(ex.min_distance(u)[0], ex.min_distance(v)[0]))   # ≤ the certifier's floor
+            assert min(ex.min_distance(q)[0] for q in fine[::10]) >= 0.5 * floor - 1e-9
+            k += 1
+    n1 = cached.n_distance_calls
+    cached.clear_cache()
+    run(cached, True)
+    assert cached.n_distance_calls - n1 == n1

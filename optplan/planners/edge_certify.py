@@ -43,6 +43,7 @@ configuration, so it is certified too; the margins disable the broad phase.
 """
 from __future__ import annotations
 
+import bisect
 import math
 from typing import Any, cast
 
@@ -89,7 +90,7 @@ class EdgeCertifier:
         self._W = sweep_weights(self.model, self.gmodel)          # geometries × nv [m/rad]
         self._groups: dict[str, list[_Group]] = {}
         self._Wg: dict[str, np.ndarray] = {}
-        self._pair_factor: dict[str, np.ndarray] = {}
+        self._pair_rows: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, int]] = {}
         self._margin_gd: dict[tuple[str, float], Any] = {}
         self.n_distance_calls = 0
         self.n_paths = 0
@@ -137,9 +138,18 @@ class EdgeCertifier:
             out.append(_Group(gd, w, ks))
         self._groups[mode] = out
         self._Wg[mode] = np.array([g.w for g in out]).reshape(len(out), self.model.nv)
-        moving = W.sum(axis=1) > 0
-        self._pair_factor[mode] = np.array([2.0 if any(moving[pairs[k].first] and moving[pairs[k].second] for k in g.pairs)
-                                            else 1.0 for g in out])
+        # per pair, the rows of its two geometries among the checker's moving geometries of this mode
+        # (the speed rows of its compiled cell speeds; a static geometry gets the zero row at the end)
+        gids = self.checker._moving_geometries(mode)
+        row_of = {gid: r for r, gid in enumerate(gids)}
+        zero = len(gids)
+        r1, r2, starts = [], [], []
+        for g in out:
+            starts.append(len(r1))
+            for k in g.pairs:
+                r1.append(row_of.get(pairs[k].first, zero))
+                r2.append(row_of.get(pairs[k].second, zero))
+        self._pair_rows[mode] = (np.array(r1, dtype=int), np.array(r2, dtype=int), np.array(starts, dtype=int), zero)
         return out
 
     def _pair_weights(self, g1: int, g2: int) -> np.ndarray:
@@ -181,7 +191,7 @@ class EdgeCertifier:
         planner's time limit starts."""
         for mode in modes:
             self.groups(mode)
-            self.checker._profile_function(self._mode(mode))
+            self.checker._cell_speed_function(self._mode(mode))
 
     # ------------------------------------------------------------------ exact distances
     def _distances(self, mode: str, gs: np.ndarray, x: np.ndarray, object_pose: pin.SE3 | None) -> np.ndarray:
@@ -335,15 +345,15 @@ class EdgeCertifier:
         Wg = self._Wg[mode]
         half = 0.5 * st["floor"]
         rate = Wg @ np.abs(v - u)                                # [m] per unit s, per group
-        prof = self._profile(mode, u, v, rate, st["profile"])
-        k = self._pair_factor[mode]
+        K = self._profile(mode, u, v, rate, st["profile"])
         reach = np.zeros(len(rate))
         # groups evaluated elsewhere and still certified on the whole chord
         M = np.maximum(np.abs(u - st["X"]), np.abs(v - st["X"]))
         reach[st["D"] - np.einsum("gj,gj->g", Wg, M) >= half] = np.inf
-        at_u = np.all(st["X"] == u, axis=1) & ~np.isinf(reach)
-        reach[at_u] = self._reach(0.0, st["D"][at_u], rate[at_u], k[at_u], half, prof)
+        at_u = np.flatnonzero(np.all(st["X"] == u, axis=1) & ~np.isinf(reach))
+        reach[at_u] = self._reach(0.0, at_u, st["D"][at_u], rate[at_u], half, K)
         D, X, exact, floor, dq = st["D"], st["X"], st["exact"], st["floor"], v - u
+        Kl = None if K is None else K.tolist()
         while True:
             g = int(reach.argmin())
             s = float(reach[g])
@@ -354,7 +364,7 @@ class EdgeCertifier:
                 gs = np.flatnonzero(reach <= s)
                 if not self._evaluate(mode, gs, x, object_pose, st):
                     return False
-                reach[gs] = self._reach(s, D[gs], rate[gs], k[gs], half, prof)
+                reach[gs] = self._reach(s, gs, D[gs], rate[gs], half, K)
                 continue
             # one group (the usual case): the same steps on scalars (numpy's per-call overhead is most
             # of a step's cost otherwise)
@@ -365,37 +375,57 @@ class EdgeCertifier:
             budget = d - half
             r = float(rate[g])
             out = s + budget / r if r > 0.0 else math.inf
-            if prof is not None:
-                knots, C = prof
-                c0 = float(np.interp(s, knots, C))
-                out = max(out, float(np.interp(c0 + budget / float(k[g]), C, knots, right=np.inf)))
+            if Kl is not None:
+                Kg = Kl[g]
+                out = max(out, _inverse_travel(Kg, _travel(Kg, s) + budget))
             reach[g] = max(out, s + 1e-12)
 
     @staticmethod
-    def _reach(s: float, d: np.ndarray, rate: np.ndarray, k: np.ndarray, half: float,
-               prof: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    def _reach(s: float, gs: np.ndarray, d: np.ndarray, rate: np.ndarray, half: float, K: np.ndarray | None) -> np.ndarray:
+        """How far (in s) the groups ``gs`` evaluated at s with clearances d stay certified: the larger
+        of the static bound's and the per-group travel bound's (``K``, :meth:`_profile`) reach."""
         budget = d - half                                           # > 0 after a passed evaluation
         out = np.full_like(budget, np.inf)
         np.divide(budget, rate, out=out, where=rate > 0.0)
         out += s
-        if prof is not None:
-            knots, C = prof
-            c0 = float(np.interp(s, knots, C))
-            out = np.maximum(out, np.interp(c0 + budget / k, C, knots, right=np.inf))
+        if K is not None and gs.size:
+            Kg = K[gs]
+            m = Kg.shape[1] - 1
+            t = s * m
+            i = min(int(t), m - 1)
+            c = Kg[:, i] + (t - i) * (Kg[:, i + 1] - Kg[:, i]) + budget      # travel allowed up to here
+            j = np.count_nonzero(Kg <= c[:, None], axis=1)                  # Kg[:, j-1] <= c < Kg[:, j]
+            inside = j <= m
+            jj, rows = j[inside], np.flatnonzero(inside)
+            lo, hi = Kg[rows, jj - 1], Kg[rows, jj]
+            sk = np.full_like(budget, np.inf)
+            sk[inside] = (jj - 1 + (c[inside] - lo) / (hi - lo)) / m
+            out = np.maximum(out, sk)
         # progress of at least min_clearance / 2 of travel per step, so never stuck
         return np.maximum(out, s + 1e-12)
 
-    def _profile(self, mode: str, u: np.ndarray, v: np.ndarray, rate: np.ndarray,
-                 st_profile: bool) -> tuple[np.ndarray, np.ndarray] | None:
-        """(knots, cumulative travel bound) of the compiled speed profile, or None when the static
-        bound is short anyway or the robot has no compiled profile."""
+    def _profile(self, mode: str, u: np.ndarray, v: np.ndarray, rate: np.ndarray, st_profile: bool) -> np.ndarray | None:
+        """Per group, the cumulative bound ``K[G, i]`` [m] on how much any pair of the group can
+        approach between s = 0 and s = i/m on the chord u → v (m = :attr:`ValidityChecker.CELLS`):
+        the integral over the cells of the largest, over the group's pairs, sum of the two geometries'
+        speed bounds (the compiled per-geometry cell speeds of
+        :meth:`ValidityChecker._cell_speed_function`, Jacobian at the cell ends plus a second-order
+        remainder; a static geometry adds 0). None when the static bound is short anyway or the
+        robot has no compiled speeds."""
         if not st_profile or rate.size == 0 or float(rate.max()) < 0.01:
             return None
-        fn = self.checker._profile_function(mode)
+        fn = self.checker._cell_speed_function(mode)
         if fn is None:
             return None
-        C = np.asarray(fn(u, v), float).ravel()
-        return np.linspace(0.0, 1.0, C.size), np.maximum.accumulate(C)
+        r1, r2, starts, zero = self._pair_rows[mode]
+        m = self.checker.CELLS
+        V = np.zeros((zero + 1, m))
+        V[:zero] = np.asarray(fn(u, v), float).reshape(zero, m, order="F")
+        Gm = np.maximum.reduceat(V[r1] + V[r2], starts, axis=0)
+        K = np.zeros((len(starts), m + 1))
+        np.cumsum(Gm, axis=1, out=K[:, 1:])
+        K[:, 1:] /= m
+        return K
 
     # ------------------------------------------------------------------ the discrete alternative
     def discrete_segment(self, a: np.ndarray, b: np.ndarray, tolerance: float, mode: str = "held",
@@ -439,3 +469,27 @@ class EdgeCertifier:
                 gd.collisionRequests[k].security_margin = (tol if both else 0.5 * tol) + extra + self.checker.margin
             self._margin_gd[key] = gd
         return self._margin_gd[key]
+
+
+def _travel(C: list[float], s: float) -> float:
+    """The cumulative travel bound ``C`` (values at ``len(C)`` equally spaced knots of [0, 1]) at ``s``,
+    linearly interpolated (as ``np.interp``, on Python floats: a step of the advancement is a few
+    scalar operations)."""
+    m = len(C) - 1
+    t = s * m
+    i = min(int(t), m - 1)
+    return C[i] + (t - i) * (C[i + 1] - C[i])
+
+
+def _inverse_travel(C: list[float], c: float) -> float:
+    """The largest ``s`` in [0, 1] with interpolated ``C(s) ≤ c`` (``C`` nondecreasing), inf beyond
+    the last knot's value."""
+    if c > C[-1]:
+        return math.inf
+    j = bisect.bisect_right(C, c)          # C[j-1] <= c < C[j]
+    if j == 0:
+        return 0.0
+    if j >= len(C):
+        return 1.0
+    m = len(C) - 1
+    return (j - 1 + (c - C[j - 1]) / (C[j] - C[j - 1])) / m

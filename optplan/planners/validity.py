@@ -147,7 +147,7 @@ class ValidityChecker:
         # the velocity (Jacobian) bound of edge_checkpoints assumes revolute 1-dof joints
         self._revolute_only = all(jm.nv == 1 and jm.shortname().replace("JointModel", "").startswith("R")
                                   for jm in list(self.model.joints)[1:])
-        self._profile_fns: dict[str, FastFunction | None] = {}
+        self._profile_fns: dict[Any, FastFunction | None] = {}
         self._certifiers: dict[float, EdgeCertifier] = {}
 
     def _sweep_bound(self, mode: str) -> np.ndarray:
@@ -183,14 +183,25 @@ class ValidityChecker:
         geometry travels along ``q(t) = a + t (b − a)`` for ``t ∈ [0, i/m]``, ``m =``
         :attr:`CELLS` (see :meth:`edge_checkpoints`). None when the robot has joints other than
         1-dof revolute ones."""
-        if mode in self._profile_fns:
-            return self._profile_fns[mode]
+        return self._compiled_sweep(mode, "profile")
+
+    def _cell_speed_function(self, mode: str) -> FastFunction | None:
+        """Compiled ``(a, b) -> V`` (``V.reshape(G, m, order="F")``): ``V[g, i]`` [m per unit t] bounds
+        the speed of every point of the g-th geometry of :meth:`_moving_geometries` on the cell
+        ``[i/m, (i+1)/m]`` of ``q(t) = a + t (b − a)`` — the per-geometry terms whose maximum over g
+        :meth:`_profile_function` integrates. None as there."""
+        return self._compiled_sweep(mode, "cells")
+
+    def _compiled_sweep(self, mode: str, what: str) -> FastFunction | None:
+        key_fn = mode if what == "profile" else (mode, what)
+        if key_fn in self._profile_fns:
+            return self._profile_fns[key_fn]
         row, c, rad, joints = self._spheres[mode]
         W = self._sweep[mode]
-        key = (id(self.model), mode, W.tobytes(), c.tobytes(), rad.tobytes(), row.tobytes(), joints.tobytes())
+        key = (id(self.model), mode, what, W.tobytes(), c.tobytes(), rad.tobytes(), row.tobytes(), joints.tobytes())
         if key in _PROFILE_CACHE:           # another checker of the same robot and held object
-            self._profile_fns[mode] = _PROFILE_CACHE[key][1]
-            return self._profile_fns[mode]
+            self._profile_fns[key_fn] = _PROFILE_CACHE[key][1]
+            return self._profile_fns[key_fn]
         fn = None
         if self._revolute_only:
             import casadi as ca
@@ -235,12 +246,16 @@ class ValidityChecker:
                 r2.append(acc + float(rad[g]) * pairs)
                 static.append(ca.dot(ca.DM(W[g]), D))
             r2, static = ca.vertcat(*r2), ca.vertcat(*static)
-            cum: list[Any] = [ca.SX(0.0)]
-            for i in range(m):                     # ∫ over cell i of max_g min(static, (s_i + s_i+1 + r/m)/2)
-                Fi = ca.mmax(ca.fmin(static, 0.5 * (S[:, i] + S[:, i + 1] + r2 / m)))
-                cum.append(cum[-1] + Fi / m)
-            fn = FastFunction(ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)]), "-O1")
-        self._profile_fns[mode] = fn
+            # per cell i and geometry g: the speed bound min(static, (s_i + s_i+1 + r/m)/2)
+            cells = [ca.fmin(static, 0.5 * (S[:, i] + S[:, i + 1] + r2 / m)) for i in range(m)]
+            if what == "profile":
+                cum: list[Any] = [ca.SX(0.0)]
+                for i in range(m):                 # ∫ over cell i of max_g of the cell's bound
+                    cum.append(cum[-1] + ca.mmax(cells[i]) / m)
+                fn = FastFunction(ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)]), "-O1")
+            else:
+                fn = FastFunction(ca.Function(f"sweep_cells_{mode}", [a, b], [ca.vertcat(*cells)]), "-O1")
+        self._profile_fns[key_fn] = fn
         _PROFILE_CACHE[key] = (self.model, fn)     # the model is kept alive so that its id stays unique
         return fn
 
