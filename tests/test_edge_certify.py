@@ -279,3 +279,68 @@ def test_vertex_cache_certifies_the_same_and_saves_distance_calls(setup):
     cached.clear_cache()
     run(cached, True)
     assert cached.n_distance_calls - n1 == n1
+
+
+def test_relative_motion_bound_against_dense_exact_distances(setup):
+    """The held object's speed relative to each robot geometry it is paired with (the rows after the
+    per-geometry ones of the compiled cell speeds): on tree-like edges between closed-chain
+    configurations, the exact coal distance of every such pair changes between any two of 12 points
+    of a cell by at most that bound times their spacing, and so does every per-geometry pair
+    (sum of the two speeds). The relative bound is below the sum on most cells (what it is for)."""
+    import coal
+
+    from optplan.constraints.closed_chain import ClosedChainKinematics, IKSettings
+    from optplan.planners.task_space import interpolate_task
+
+    robot, scene, ck, ex, qs, qg = setup
+    kin = ClosedChainKinematics(robot, scene.object.grasps)
+    gids = ck._moving_geometries("held")
+    rel = ck._relative_pairs("held")
+    assert len(rel) >= 4
+    fn = ck._cell_speed_function("held")
+    G, m = len(gids), ck.CELLS
+    model, gm = ck.model, ck.gmodel
+    data, gd = model.createData(), pin.GeometryData(gm)
+    rng = np.random.default_rng(5)
+    edges = []
+    for q0 in (qs, qg):   # consecutive closed-chain configurations of object-pose interpolations (as the planner's)
+        M0 = kin.object_pose(q0)
+        for _ in range(6):
+            M1 = M0 * pin.exp6(np.r_[rng.normal(0.0, 0.08, 3), rng.normal(0.0, 0.15, 3)])
+            q = q0
+            for R, p in interpolate_task(M0.rotation, M0.translation, M1.rotation, M1.translation, 5, "geodesic"):
+                x, _ = kin.ik(q, R, p, IKSettings())
+                if x is None:
+                    break
+                edges.append((q, x))
+                q = x
+    assert len(edges) >= 15
+
+    def pair_distance(g1, g2):
+        o1, o2 = gm.geometryObjects[g1], gm.geometryObjects[g2]
+        T1, T2 = gd.oMg[g1], gd.oMg[g2]
+        return coal.distance(o1.geometry, coal.Transform3s(T1.rotation, T1.translation), o2.geometry,
+                             coal.Transform3s(T2.rotation, T2.translation), coal.DistanceRequest(), coal.DistanceResult())
+
+    n_tighter = n_cells = 0
+    worst = 0.0
+    for a, b in edges:
+        V = np.asarray(fn(a, b), float).reshape(G + len(rel), m, order="F")
+        for i in range(m):
+            ts = (i + np.linspace(0.0, 1.0, 12)) / m
+            dist = np.empty((len(ts), len(rel)))
+            for k, t in enumerate(ts):
+                pin.updateGeometryPlacements(model, data, gm, gd, a + t * (b - a))
+                dist[k] = [pair_distance(gids[o], gids[l]) for o, l in rel]
+            h = ts[1] - ts[0]
+            for p, (o, l) in enumerate(rel):
+                bound_rel, bound_sum = V[G + p, i], V[o, i] + V[l, i]
+                change = np.abs(np.subtract.outer(dist[:, p], dist[:, p]))
+                spacing = h * np.abs(np.subtract.outer(np.arange(12), np.arange(12)))
+                assert np.all(change <= bound_rel * spacing + 1e-9), (p, i, change.max(), bound_rel)
+                assert np.all(change <= bound_sum * spacing + 1e-9)
+                worst = max(worst, float((change[spacing > 0] / (spacing[spacing > 0] * bound_rel)).max()))
+                n_tighter += bound_rel < bound_sum
+                n_cells += 1
+    assert n_tighter > 0.5 * n_cells, (n_tighter, n_cells)
+    assert worst > 0.05   # the check has teeth: distances do change at a visible fraction of the bound

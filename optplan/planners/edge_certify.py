@@ -90,7 +90,7 @@ class EdgeCertifier:
         self._W = sweep_weights(self.model, self.gmodel)          # geometries × nv [m/rad]
         self._groups: dict[str, list[_Group]] = {}
         self._Wg: dict[str, np.ndarray] = {}
-        self._pair_rows: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, int]] = {}
+        self._pair_rows: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]] = {}
         self._margin_gd: dict[tuple[str, float], Any] = {}
         self.n_distance_calls = 0
         self.n_paths = 0
@@ -140,16 +140,20 @@ class EdgeCertifier:
         self._Wg[mode] = np.array([g.w for g in out]).reshape(len(out), self.model.nv)
         # per pair, the rows of its two geometries among the checker's moving geometries of this mode
         # (the speed rows of its compiled cell speeds; a static geometry gets the zero row at the end)
+        # and the row of its relative speed (held object against a robot geometry), if it has one
         gids = self.checker._moving_geometries(mode)
         row_of = {gid: r for r, gid in enumerate(gids)}
         zero = len(gids)
-        r1, r2, starts = [], [], []
+        rel = {tuple(sorted((gids[a], gids[b]))): zero + i for i, (a, b) in enumerate(self.checker._relative_pairs(mode))}
+        r1, r2, rr, starts = [], [], [], []
         for g in out:
             starts.append(len(r1))
             for k in g.pairs:
-                r1.append(row_of.get(pairs[k].first, zero))
-                r2.append(row_of.get(pairs[k].second, zero))
-        self._pair_rows[mode] = (np.array(r1, dtype=int), np.array(r2, dtype=int), np.array(starts, dtype=int), zero)
+                r1.append(row_of.get(pairs[k].first, -1))
+                r2.append(row_of.get(pairs[k].second, -1))
+                rr.append(rel.get(tuple(sorted((pairs[k].first, pairs[k].second))), -1))
+        self._pair_rows[mode] = (np.array(r1, dtype=int), np.array(r2, dtype=int), np.array(rr, dtype=int),
+                                 np.array(starts, dtype=int), zero + len(rel))
         return out
 
     def _pair_weights(self, g1: int, g2: int) -> np.ndarray:
@@ -417,11 +421,13 @@ class EdgeCertifier:
         fn = self.checker._cell_speed_function(mode)
         if fn is None:
             return None
-        r1, r2, starts, zero = self._pair_rows[mode]
+        r1, r2, rr, starts, n_rows = self._pair_rows[mode]
         m = self.checker.CELLS
-        V = np.zeros((zero + 1, m))
-        V[:zero] = np.asarray(fn(u, v), float).reshape(zero, m, order="F")
-        Gm = np.maximum.reduceat(V[r1] + V[r2], starts, axis=0)
+        V = np.zeros((n_rows + 1, m))                 # the last row: a static geometry's speed, 0
+        V[:n_rows] = np.asarray(fn(u, v), float).reshape(n_rows, m, order="F")
+        Pv = V[r1] + V[r2]                            # sum of the pair's two speeds, or their relative speed
+        np.minimum(Pv, V[rr], out=Pv, where=(rr >= 0)[:, None])
+        Gm = np.maximum.reduceat(Pv, starts, axis=0)
         K = np.zeros((len(starts), m + 1))
         np.cumsum(Gm, axis=1, out=K[:, 1:])
         K[:, 1:] /= m
