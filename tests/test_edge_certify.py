@@ -344,3 +344,22 @@ def test_relative_motion_bound_against_dense_exact_distances(setup):
                 n_cells += 1
     assert n_tighter > 0.5 * n_cells, (n_tighter, n_cells)
     assert worst > 0.05   # the check has teeth: distances do change at a visible fraction of the bound
+
+
+def test_reach_never_advances_a_group_without_budget():
+    """A group whose (cached lower-bound) clearance is below half the floor gets no reach beyond s
+    (it is evaluated at once), whatever its travel bound; with budget, the reach is where the travel
+    bound uses it up (piecewise-linear inverse)."""
+    K = np.array([[0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8],
+                  [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+                  [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8]])
+    gs = np.arange(3)
+    half = 5e-4
+    d = np.array([1e-4, 1e-4, 0.05 + half])           # budgets: negative, negative, 0.05
+    rate = np.array([1.0, 1.0, 10.0])                  # static bound: reach s + budget / rate
+    out0 = EdgeCertifier._reach(0.0, gs, d, rate, half, K)       # at a chord's start (a cached vertex)
+    assert out0[0] <= 1e-9 and out0[1] <= 1e-9
+    out = EdgeCertifier._reach(0.25, gs, d, rate, half, K)
+    assert out[0] <= 0.25 + 1e-9 and out[1] <= 0.25 + 1e-9
+    # K(0.25) = 0.2; +0.05 -> 0.25 -> s = 0.3125 (static: 0.255)
+    assert out[2] == pytest.approx(0.3125)

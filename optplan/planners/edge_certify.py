@@ -97,8 +97,8 @@ class EdgeCertifier:
         self.n_checks = 0
         self.n_cache_hits = 0
         # vertex cache (``path(..., cache=True)``): per configuration (and mode, object pose) a lower
-        # bound on each group's clearance there and that vertex's exact clearance when it is near
-        self._vertex: dict[tuple[Any, ...], tuple[np.ndarray, float | None]] = {}
+        # bound on each group's clearance there
+        self._vertex: dict[tuple[Any, ...], np.ndarray] = {}
         if self.model.nq != self.model.nv:
             raise ValueError("EdgeCertifier: robots whose configuration is not a joint vector (nq != nv) are not supported")
 
@@ -185,10 +185,10 @@ class EdgeCertifier:
             return (mode, x.tobytes(), cast(pin.SE3, object_pose).homogeneous.tobytes())
         return (mode, x.tobytes())
 
-    def _remember(self, key: tuple[Any, ...], lower: np.ndarray, d_near: float | None) -> None:
+    def _remember(self, key: tuple[Any, ...], lower: np.ndarray) -> None:
         if len(self._vertex) >= self.CACHE_SIZE:
             del self._vertex[next(iter(self._vertex))]
-        self._vertex[key] = (lower, d_near)
+        self._vertex[key] = lower
 
     def prepare(self, modes: tuple[str, ...] = ("held", "fixed")) -> None:
         """Build the pair groups of ``modes`` (and the compiled speed profiles) now, before a
@@ -240,8 +240,9 @@ class EdgeCertifier:
         evaluated minus its motion bound to the vertex), and leave the same at its last vertex.
         A planner that certifies edge after edge from its tree's nodes then evaluates every group
         at a vertex once instead of once per edge; same certificate (every bound used is a valid
-        lower bound), the distances are only evaluated at other points. The floor is the same as
-        without the cache (each vertex's exact clearance is kept when it is near)."""
+        lower bound), the distances are only evaluated at other points. The floor's exception for
+        ends closer than ``min_clearance`` is applied only to paths rejected without it (same
+        certificate: see :meth:`_path_cached`)."""
         Q = np.asarray(Q, dtype=float)
         if Q.ndim != 2 or Q.shape[0] < 1 or Q.shape[1] != self.model.nq:
             raise ValueError(f"path: expected an (m >= 1) × {self.model.nq} array of configurations, got shape {Q.shape}")
@@ -255,46 +256,65 @@ class EdgeCertifier:
         G = len(self._groups[mode])
         if G == 0:
             return True
+        if cache:
+            return self._path_cached(Q, mode, object_pose, G)
         X = np.repeat(Q[:1], G, axis=0)                    # where each group was evaluated
         exact = np.ones(G, dtype=bool)                     # D exact at X (else a lower bound)
+        D = self._distances(mode, np.arange(G), Q[0], object_pose)
         # the floor: min_clearance, or half an end's own clearance when an end is closer than twice
         # that (start) or than that (end) (else no edge could leave a start or reach a goal that is
         # valid but nearly in contact)
-        floor = self.min_clearance
-        hit = self._vertex.get(self._key(mode, Q[0], object_pose)) if cache else None
+        d0 = float(D.min())
+        if d0 <= 0.0:
+            return False
+        floor = min(self.min_clearance, 0.5 * d0)
+        if len(Q) > 1 and self._near(mode, Q[-1], object_pose):
+            d1 = float(self._distances(mode, np.arange(G), Q[-1], object_pose).min())
+            if d1 <= 0.0:
+                return False
+            floor = min(floor, 0.5 * d1)
+        st = {"X": X, "D": D, "exact": exact, "floor": floor, "profile": len(Q) == 2}   # the profile pays off on long straight edges
+        return self._run(Q, 0, len(Q) - 1, mode, object_pose, st)
+
+    def _path_cached(self, Q: np.ndarray, mode: str, object_pose: pin.SE3 | None, G: int) -> bool:
+        """:meth:`path` with the vertex cache. The ends' own clearances (the floor's exception) are
+        looked at only when the path is rejected at the plain floor: a path certified at the higher
+        floor is certified at a lower one too; a rejected one is certified again from scratch at the
+        floor its ends allow, when that is lower."""
+        key0 = self._key(mode, Q[0], object_pose)
+        hit = self._vertex.get(key0)
+        d0: float | None = None
         if hit is not None:
             self.n_cache_hits += 1
-            D, d0 = hit[0].copy(), hit[1]
-            exact[:] = False
-            if d0 is not None:
-                floor = min(floor, 0.5 * d0)
+            D, exact = hit.copy(), np.zeros(G, dtype=bool)
         else:
-            D = self._distances(mode, np.arange(G), Q[0], object_pose)
+            D, exact = self._distances(mode, np.arange(G), Q[0], object_pose), np.ones(G, dtype=bool)
             d0 = float(D.min())
             if d0 <= 0.0:
                 return False
-            floor = min(floor, 0.5 * d0)
-            if cache:
-                self._remember(self._key(mode, Q[0], object_pose), D.copy(), d0 if d0 < 2.0 * self.min_clearance else None)
-        end = None
-        if len(Q) > 1:
-            end = self._vertex.get(self._key(mode, Q[-1], object_pose)) if cache else None
-            if end is not None:
-                d1 = end[1]
-            elif self._near(mode, Q[-1], object_pose, 2.0 if cache else 1.0):
-                d1 = float(self._distances(mode, np.arange(G), Q[-1], object_pose).min())
-                if d1 <= 0.0:
-                    return False
-            else:
-                d1 = None
-            if d1 is not None and d1 < self.min_clearance:
-                floor = min(floor, 0.5 * d1)
-        st = {"X": X, "D": D, "exact": exact, "floor": floor, "profile": len(Q) == 2}   # the profile pays off on long straight edges
-        ok = self._run(Q, 0, len(Q) - 1, mode, object_pose, st)
-        if ok and cache and len(Q) > 1 and end is None:
-            lower = st["D"] - np.einsum("gj,gj->g", self._Wg[mode], np.abs(Q[-1] - st["X"]))
-            self._remember(self._key(mode, Q[-1], object_pose), lower, d1 if d1 is not None and d1 < 2.0 * self.min_clearance else None)
+            self._remember(key0, D.copy())
+        floor = self.min_clearance if d0 is None else min(self.min_clearance, 0.5 * d0)
+        st = {"X": np.repeat(Q[:1], G, axis=0), "D": D, "exact": exact, "floor": floor, "profile": len(Q) == 2}
+        ok = self._certify(Q, mode, object_pose, st)
+        if not ok and len(Q) > 1:
+            D0 = self._distances(mode, np.arange(G), Q[0], object_pose)
+            d0 = float(D0.min())
+            d1 = float(self._distances(mode, np.arange(G), Q[-1], object_pose).min())
+            low = min(self.min_clearance, 0.5 * d0, 0.5 * d1 if d1 < self.min_clearance else np.inf)
+            if d0 > 0.0 and d1 > 0.0 and low < floor:
+                st = {"X": np.repeat(Q[:1], G, axis=0), "D": D0, "exact": np.ones(G, dtype=bool), "floor": low,
+                      "profile": len(Q) == 2}
+                ok = self._certify(Q, mode, object_pose, st)
+        if ok and len(Q) > 1:
+            key1 = self._key(mode, Q[-1], object_pose)
+            if key1 not in self._vertex:
+                self._remember(key1, st["D"] - np.einsum("gj,gj->g", self._Wg[mode], np.abs(Q[-1] - st["X"])))
         return ok
+
+    def _certify(self, Q: np.ndarray, mode: str, object_pose: pin.SE3 | None, st: dict[str, Any]) -> bool:
+        if len(Q) == 2:      # one chord: advance along it at once
+            return self._chord(Q[0], Q[1], mode, object_pose, st)
+        return self._run(Q, 0, len(Q) - 1, mode, object_pose, st)
 
     def _near(self, mode: str, x: np.ndarray, object_pose: pin.SE3 | None, factor: float = 1.0) -> bool:
         """Some active pair closer than ``factor · min_clearance`` (+ margin) at x (boolean checks with
@@ -399,11 +419,12 @@ class EdgeCertifier:
             i = min(int(t), m - 1)
             c = Kg[:, i] + (t - i) * (Kg[:, i + 1] - Kg[:, i]) + budget      # travel allowed up to here
             j = np.count_nonzero(Kg <= c[:, None], axis=1)                  # Kg[:, j-1] <= c < Kg[:, j]
-            inside = j <= m
+            inside = (j <= m) & (j >= 1)   # j = 0: a cached lower bound below the floor (budget < 0), no reach
             jj, rows = j[inside], np.flatnonzero(inside)
             lo, hi = Kg[rows, jj - 1], Kg[rows, jj]
             sk = np.full_like(budget, np.inf)
             sk[inside] = (jj - 1 + (c[inside] - lo) / (hi - lo)) / m
+            sk[j == 0] = s
             out = np.maximum(out, sk)
         # progress of at least min_clearance / 2 of travel per step, so never stuck
         return np.maximum(out, s + 1e-12)
