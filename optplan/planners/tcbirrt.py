@@ -622,8 +622,10 @@ class TCBiRRT(Planner):
                              "path_rejections", "path_verified_edges", "graft_attempts", "grafts")}
         sampler = self._sampler()
         c0 = self.checker.n_checks
-        if o.edge_tolerance and o.edge_bound == "certified":   # a query's result must not depend on the queries before it
-            self.checker.certifier(o.edge_min_clearance).clear_cache()
+        cert = self.checker.certifier(o.edge_min_clearance) if o.edge_tolerance and o.edge_bound == "certified" else None
+        if cert is not None:   # a query's result must not depend on the queries before it
+            cert.clear_cache()
+            n_dist0 = cert.n_distance_calls
         why = self.check_endpoint(q_start)
         if why:
             return self.empty_result(PlanStatus.INVALID_START, f"start {why}", **st)
@@ -707,6 +709,8 @@ class TCBiRRT(Planner):
             ta, tb, a_is_start = tb, ta, not a_is_start                                  # line 15
         st["nodes"] = ta.n + tb.n
         st["collision_checks"] = self.checker.n_checks - c0
+        if cert is not None:
+            st["distance_calls"] = cert.n_distance_calls - n_dist0   # certified edges: exact group distances
         if sampler is not None:
             st.update(sampler.stats)
         if found is None:
