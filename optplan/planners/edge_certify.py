@@ -91,7 +91,7 @@ class EdgeCertifier:
         self._groups: dict[str, list[_Group]] = {}
         self._Wg: dict[str, np.ndarray] = {}
         self._pair_rows: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]] = {}
-        self._margin_gd: dict[tuple[str, float], Any] = {}
+        self._margin_gd: dict[tuple[str, float, float], Any] = {}
         self.n_distance_calls = 0
         self.n_paths = 0
         self.n_checks = 0
@@ -145,7 +145,10 @@ class EdgeCertifier:
         row_of = {gid: r for r, gid in enumerate(gids)}
         zero = len(gids)
         rel = {tuple(sorted((gids[a], gids[b]))): zero + i for i, (a, b) in enumerate(self.checker._relative_pairs(mode))}
-        r1, r2, rr, starts = [], [], [], []
+        r1: list[int] = []
+        r2: list[int] = []
+        rr: list[int] = []
+        starts: list[int] = []
         for g in out:
             starts.append(len(r1))
             for k in g.pairs:
