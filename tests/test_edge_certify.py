@@ -363,3 +363,29 @@ def test_reach_never_advances_a_group_without_budget():
     assert out[0] <= 0.25 + 1e-9 and out[1] <= 0.25 + 1e-9
     # K(0.25) = 0.2; +0.05 -> 0.25 -> s = 0.3125 (static: 0.255)
     assert out[2] == pytest.approx(0.3125)
+
+
+def test_vertex_cache_is_per_object_pose_in_the_fixed_mode(setup):
+    """Regrasp motions (object standing at a pose): cached bounds are kept per object pose — a chain
+    certified with the object at one pose gives no cache hit to the same configurations with the
+    object elsewhere — and the cached decisions equal the uncached ones, each accepted edge free at
+    2e-4 rad spacing."""
+    robot, scene, ck, ex, qs, qg = setup
+    M1, M2 = ex.object_pose(qs), ex.object_pose(qg)
+    rng = np.random.default_rng(4)
+    chain = [qs + rng.normal(0.0, 0.02, qs.size)]
+    while len(chain) < 7:
+        chain.append(chain[-1] + rng.normal(0.0, 0.03, qs.size))
+    plain, cached = EdgeCertifier(ck, 1e-3), EdgeCertifier(ck, 1e-3)
+    n_ok = 0
+    for M in (M1, M2):
+        hits0 = cached.n_cache_hits
+        for k, (u, v) in enumerate(zip(chain[:-1], chain[1:])):
+            ok = cached.segment(u, v, "fixed", M, cache=True)
+            if k == 0:
+                assert cached.n_cache_hits == hits0        # nothing cached for this pose's first vertex
+            assert ok == plain.segment(u, v, "fixed", M)
+            if ok:
+                n_ok += 1
+                assert all(ck.is_valid_object_fixed(q, M) for q in _dense(u, v, 2e-4))
+    assert cached.n_cache_hits >= 4 and n_ok >= 6, (cached.n_cache_hits, n_ok)
