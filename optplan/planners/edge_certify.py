@@ -43,8 +43,9 @@ configuration, so it is certified too; the margins disable the broad phase.
 """
 from __future__ import annotations
 
+import bisect
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pinocchio as pin
@@ -89,11 +90,15 @@ class EdgeCertifier:
         self._W = sweep_weights(self.model, self.gmodel)          # geometries × nv [m/rad]
         self._groups: dict[str, list[_Group]] = {}
         self._Wg: dict[str, np.ndarray] = {}
-        self._pair_factor: dict[str, np.ndarray] = {}
-        self._margin_gd: dict[tuple[str, float], Any] = {}
+        self._pair_rows: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]] = {}
+        self._margin_gd: dict[tuple[str, float, float], Any] = {}
         self.n_distance_calls = 0
         self.n_paths = 0
         self.n_checks = 0
+        self.n_cache_hits = 0
+        # vertex cache (``path(..., cache=True)``): per configuration (and mode, object pose) a lower
+        # bound on each group's clearance there
+        self._vertex: dict[tuple[Any, ...], np.ndarray] = {}
         if self.model.nq != self.model.nv:
             raise ValueError("EdgeCertifier: robots whose configuration is not a joint vector (nq != nv) are not supported")
 
@@ -133,9 +138,25 @@ class EdgeCertifier:
             out.append(_Group(gd, w, ks))
         self._groups[mode] = out
         self._Wg[mode] = np.array([g.w for g in out]).reshape(len(out), self.model.nv)
-        moving = W.sum(axis=1) > 0
-        self._pair_factor[mode] = np.array([2.0 if any(moving[pairs[k].first] and moving[pairs[k].second] for k in g.pairs)
-                                            else 1.0 for g in out])
+        # per pair, the rows of its two geometries among the checker's moving geometries of this mode
+        # (the speed rows of its compiled cell speeds; a static geometry gets the zero row at the end)
+        # and the row of its relative speed (held object against a robot geometry), if it has one
+        gids = self.checker._moving_geometries(mode)
+        row_of = {gid: r for r, gid in enumerate(gids)}
+        zero = len(gids)
+        rel = {tuple(sorted((gids[a], gids[b]))): zero + i for i, (a, b) in enumerate(self.checker._relative_pairs(mode))}
+        r1: list[int] = []
+        r2: list[int] = []
+        rr: list[int] = []
+        starts: list[int] = []
+        for g in out:
+            starts.append(len(r1))
+            for k in g.pairs:
+                r1.append(row_of.get(pairs[k].first, -1))
+                r2.append(row_of.get(pairs[k].second, -1))
+                rr.append(rel.get(tuple(sorted((pairs[k].first, pairs[k].second))), -1))
+        self._pair_rows[mode] = (np.array(r1, dtype=int), np.array(r2, dtype=int), np.array(rr, dtype=int),
+                                 np.array(starts, dtype=int), zero + len(rel))
         return out
 
     def _pair_weights(self, g1: int, g2: int) -> np.ndarray:
@@ -154,12 +175,30 @@ class EdgeCertifier:
                 w[jm.idx_v:jm.idx_v + jm.nv] = 0.0
         return w
 
+    #: vertices kept by the vertex cache (oldest dropped first)
+    CACHE_SIZE = 20000
+
+    def clear_cache(self) -> None:
+        """Forget the vertex cache (a planner does this at the start of each query, so that a query's
+        result does not depend on the queries before it)."""
+        self._vertex.clear()
+
+    def _key(self, mode: str, x: np.ndarray, object_pose: pin.SE3 | None) -> tuple[Any, ...]:
+        if mode == "fixed":
+            return (mode, x.tobytes(), cast(pin.SE3, object_pose).homogeneous.tobytes())
+        return (mode, x.tobytes())
+
+    def _remember(self, key: tuple[Any, ...], lower: np.ndarray) -> None:
+        if len(self._vertex) >= self.CACHE_SIZE:
+            del self._vertex[next(iter(self._vertex))]
+        self._vertex[key] = lower
+
     def prepare(self, modes: tuple[str, ...] = ("held", "fixed")) -> None:
         """Build the pair groups of ``modes`` (and the compiled speed profiles) now, before a
         planner's time limit starts."""
         for mode in modes:
             self.groups(mode)
-            self.checker._profile_function(self._mode(mode))
+            self.checker._cell_speed_function(self._mode(mode))
 
     # ------------------------------------------------------------------ exact distances
     def _distances(self, mode: str, gs: np.ndarray, x: np.ndarray, object_pose: pin.SE3 | None) -> np.ndarray:
@@ -178,15 +217,35 @@ class EdgeCertifier:
         self.n_distance_calls += len(gs)
         return out - self.checker.margin
 
-    # ------------------------------------------------------------------ public checks
-    def segment(self, a: np.ndarray, b: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None) -> bool:
-        """The straight joint segment ``a → b`` (both ends included) certified collision-free."""
-        return self.path(np.array([a, b], dtype=float), mode, object_pose)
+    def _distance1(self, mode: str, g: int, x: np.ndarray, object_pose: pin.SE3 | None) -> float:
+        """:meth:`_distances` of the one group ``g``, as a float."""
+        gd = self._groups[mode][g].gd
+        pin.updateGeometryPlacements(self.model, self.data, self.gmodel, gd, x)
+        if mode == "fixed":
+            gd.oMg[self.checker.fixed_id] = object_pose
+        k = pin.computeDistances(self.gmodel, gd)
+        self.n_distance_calls += 1
+        return gd.distanceResults[k].min_distance - self.checker.margin
 
-    def path(self, Q: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None) -> bool:
+    # ------------------------------------------------------------------ public checks
+    def segment(self, a: np.ndarray, b: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None,
+                cache: bool = False) -> bool:
+        """The straight joint segment ``a → b`` (both ends included) certified collision-free."""
+        return self.path(np.array([a, b], dtype=float), mode, object_pose, cache)
+
+    def path(self, Q: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None, cache: bool = False) -> bool:
         """The piecewise-linear joint path through the rows of ``Q`` (m × nq, m ≥ 1) certified
         collision-free (every point of every chord, vertices included). ``mode``: ``"held"``
-        (object held by the hands), ``"fixed"`` (object standing at ``object_pose``), ``"free"``."""
+        (object held by the hands), ``"fixed"`` (object standing at ``object_pose``), ``"free"``.
+
+        ``cache``: start from what an earlier certified path left at this path's first vertex (a
+        lower bound on each group's clearance there: the clearance where the group was last
+        evaluated minus its motion bound to the vertex), and leave the same at its last vertex.
+        A planner that certifies edge after edge from its tree's nodes then evaluates every group
+        at a vertex once instead of once per edge; same certificate (every bound used is a valid
+        lower bound), the distances are only evaluated at other points. The floor's exception for
+        ends closer than ``min_clearance`` is applied only to paths rejected without it (same
+        certificate: see :meth:`_path_cached`)."""
         Q = np.asarray(Q, dtype=float)
         if Q.ndim != 2 or Q.shape[0] < 1 or Q.shape[1] != self.model.nq:
             raise ValueError(f"path: expected an (m >= 1) × {self.model.nq} array of configurations, got shape {Q.shape}")
@@ -200,27 +259,70 @@ class EdgeCertifier:
         G = len(self._groups[mode])
         if G == 0:
             return True
+        if cache:
+            return self._path_cached(Q, mode, object_pose, G)
         X = np.repeat(Q[:1], G, axis=0)                    # where each group was evaluated
+        exact = np.ones(G, dtype=bool)                     # D exact at X (else a lower bound)
         D = self._distances(mode, np.arange(G), Q[0], object_pose)
-        # the floor: min_clearance, or half an end's own clearance when an end is closer than that
-        # (else no edge could leave a start or reach a goal that is valid but nearly in contact)
-        floor = self.min_clearance
+        # the floor: min_clearance, or half an end's own clearance when an end is closer than twice
+        # that (start) or than that (end) (else no edge could leave a start or reach a goal that is
+        # valid but nearly in contact)
         d0 = float(D.min())
         if d0 <= 0.0:
             return False
-        floor = min(floor, 0.5 * d0)
+        floor = min(self.min_clearance, 0.5 * d0)
         if len(Q) > 1 and self._near(mode, Q[-1], object_pose):
             d1 = float(self._distances(mode, np.arange(G), Q[-1], object_pose).min())
             if d1 <= 0.0:
                 return False
             floor = min(floor, 0.5 * d1)
-        st = {"X": X, "D": D, "floor": floor, "profile": len(Q) == 2}   # the profile pays off on long straight edges
+        st = {"X": X, "D": D, "exact": exact, "floor": floor, "profile": len(Q) == 2}   # the profile pays off on long straight edges
         return self._run(Q, 0, len(Q) - 1, mode, object_pose, st)
 
-    def _near(self, mode: str, x: np.ndarray, object_pose: pin.SE3 | None) -> bool:
-        """Some active pair closer than ``min_clearance`` (+ margin) at x (boolean checks with a
-        security margin: cheaper than the distances)."""
-        gd = self._margin_data(mode, 0.0)
+    def _path_cached(self, Q: np.ndarray, mode: str, object_pose: pin.SE3 | None, G: int) -> bool:
+        """:meth:`path` with the vertex cache. The ends' own clearances (the floor's exception) are
+        looked at only when the path is rejected at the plain floor: a path certified at the higher
+        floor is certified at a lower one too; a rejected one is certified again from scratch at the
+        floor its ends allow, when that is lower."""
+        key0 = self._key(mode, Q[0], object_pose)
+        hit = self._vertex.get(key0)
+        d0: float | None = None
+        if hit is not None:
+            self.n_cache_hits += 1
+            D, exact = hit.copy(), np.zeros(G, dtype=bool)
+        else:
+            D, exact = self._distances(mode, np.arange(G), Q[0], object_pose), np.ones(G, dtype=bool)
+            d0 = float(D.min())
+            if d0 <= 0.0:
+                return False
+            self._remember(key0, D.copy())
+        floor = self.min_clearance if d0 is None else min(self.min_clearance, 0.5 * d0)
+        st = {"X": np.repeat(Q[:1], G, axis=0), "D": D, "exact": exact, "floor": floor, "profile": len(Q) == 2}
+        ok = self._certify(Q, mode, object_pose, st)
+        if not ok and len(Q) > 1:
+            D0 = self._distances(mode, np.arange(G), Q[0], object_pose)
+            d0 = float(D0.min())
+            d1 = float(self._distances(mode, np.arange(G), Q[-1], object_pose).min())
+            low = min(self.min_clearance, 0.5 * d0, 0.5 * d1 if d1 < self.min_clearance else np.inf)
+            if d0 > 0.0 and d1 > 0.0 and low < floor:
+                st = {"X": np.repeat(Q[:1], G, axis=0), "D": D0, "exact": np.ones(G, dtype=bool), "floor": low,
+                      "profile": len(Q) == 2}
+                ok = self._certify(Q, mode, object_pose, st)
+        if ok and len(Q) > 1:
+            key1 = self._key(mode, Q[-1], object_pose)
+            if key1 not in self._vertex:
+                self._remember(key1, st["D"] - np.einsum("gj,gj->g", self._Wg[mode], np.abs(Q[-1] - st["X"])))
+        return ok
+
+    def _certify(self, Q: np.ndarray, mode: str, object_pose: pin.SE3 | None, st: dict[str, Any]) -> bool:
+        if len(Q) == 2:      # one chord: advance along it at once
+            return self._chord(Q[0], Q[1], mode, object_pose, st)
+        return self._run(Q, 0, len(Q) - 1, mode, object_pose, st)
+
+    def _near(self, mode: str, x: np.ndarray, object_pose: pin.SE3 | None, factor: float = 1.0) -> bool:
+        """Some active pair closer than ``factor · min_clearance`` (+ margin) at x (boolean checks with
+        a security margin: cheaper than the distances)."""
+        gd = self._margin_data(mode, 0.0, factor)
         pin.updateGeometryPlacements(self.model, self.data, self.gmodel, gd, x)
         if mode == "fixed":
             gd.oMg[self.checker.fixed_id] = object_pose
@@ -237,6 +339,7 @@ class EdgeCertifier:
         d = self._distances(mode, gs, x, object_pose)
         st["D"][gs] = d
         st["X"][gs] = x
+        st["exact"][gs] = True
         return bool(d.min() >= st["floor"])
 
     def _run(self, Q: np.ndarray, i: int, j: int, mode: str, object_pose: pin.SE3 | None, st: dict[str, Any]) -> bool:
@@ -245,7 +348,7 @@ class EdgeCertifier:
         bad = self._uncovered(mode, Q[i:j + 1], st)
         if bad.size == 0:
             return True
-        stale = bad[np.any(st["X"][bad] != Q[i], axis=1)]
+        stale = bad[np.any(st["X"][bad] != Q[i], axis=1) | ~st["exact"][bad]]
         if stale.size:
             if not self._evaluate(mode, stale, Q[i], object_pose, st):
                 return False
@@ -269,47 +372,90 @@ class EdgeCertifier:
         Wg = self._Wg[mode]
         half = 0.5 * st["floor"]
         rate = Wg @ np.abs(v - u)                                # [m] per unit s, per group
-        prof = self._profile(mode, u, v, rate, st["profile"])
-        k = self._pair_factor[mode]
+        K = self._profile(mode, u, v, rate, st["profile"])
         reach = np.zeros(len(rate))
         # groups evaluated elsewhere and still certified on the whole chord
         M = np.maximum(np.abs(u - st["X"]), np.abs(v - st["X"]))
         reach[st["D"] - np.einsum("gj,gj->g", Wg, M) >= half] = np.inf
-        at_u = np.all(st["X"] == u, axis=1) & ~np.isinf(reach)
-        reach[at_u] = self._reach(0.0, st["D"][at_u], rate[at_u], k[at_u], half, prof)
+        at_u = np.flatnonzero(np.all(st["X"] == u, axis=1) & ~np.isinf(reach))
+        reach[at_u] = self._reach(0.0, at_u, st["D"][at_u], rate[at_u], half, K)
+        D, X, exact, floor, dq = st["D"], st["X"], st["exact"], st["floor"], v - u
+        Kl = None if K is None else K.tolist()
         while True:
-            s = float(reach.min())
+            g = int(reach.argmin())
+            s = float(reach[g])
             if s >= 1.0:
                 return True
-            gs = np.flatnonzero(reach <= s)
-            if not self._evaluate(mode, gs, u + s * (v - u), object_pose, st):
+            x = u + s * dq
+            if np.count_nonzero(reach <= s) > 1:
+                gs = np.flatnonzero(reach <= s)
+                if not self._evaluate(mode, gs, x, object_pose, st):
+                    return False
+                reach[gs] = self._reach(s, gs, D[gs], rate[gs], half, K)
+                continue
+            # one group (the usual case): the same steps on scalars (numpy's per-call overhead is most
+            # of a step's cost otherwise)
+            d = self._distance1(mode, g, x, object_pose)
+            D[g], X[g], exact[g] = d, x, True
+            if d < floor:
                 return False
-            reach[gs] = self._reach(s, st["D"][gs], rate[gs], k[gs], half, prof)
+            budget = d - half
+            r = float(rate[g])
+            out = s + budget / r if r > 0.0 else math.inf
+            if Kl is not None:
+                Kg = Kl[g]
+                out = max(out, _inverse_travel(Kg, _travel(Kg, s) + budget))
+            reach[g] = max(out, s + 1e-12)
 
     @staticmethod
-    def _reach(s: float, d: np.ndarray, rate: np.ndarray, k: np.ndarray, half: float,
-               prof: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    def _reach(s: float, gs: np.ndarray, d: np.ndarray, rate: np.ndarray, half: float, K: np.ndarray | None) -> np.ndarray:
+        """How far (in s) the groups ``gs`` evaluated at s with clearances d stay certified: the larger
+        of the static bound's and the per-group travel bound's (``K``, :meth:`_profile`) reach."""
         budget = d - half                                           # > 0 after a passed evaluation
-        with np.errstate(divide="ignore"):
-            out = s + budget / rate
-        if prof is not None:
-            knots, C = prof
-            c0 = float(np.interp(s, knots, C))
-            out = np.maximum(out, np.interp(c0 + budget / k, C, knots, right=np.inf))
+        out = np.full_like(budget, np.inf)
+        np.divide(budget, rate, out=out, where=rate > 0.0)
+        out += s
+        if K is not None and gs.size:
+            Kg = K[gs]
+            m = Kg.shape[1] - 1
+            t = s * m
+            i = min(int(t), m - 1)
+            c = Kg[:, i] + (t - i) * (Kg[:, i + 1] - Kg[:, i]) + budget      # travel allowed up to here
+            j = np.count_nonzero(Kg <= c[:, None], axis=1)                  # Kg[:, j-1] <= c < Kg[:, j]
+            inside = (j <= m) & (j >= 1)   # j = 0: a cached lower bound below the floor (budget < 0), no reach
+            jj, rows = j[inside], np.flatnonzero(inside)
+            lo, hi = Kg[rows, jj - 1], Kg[rows, jj]
+            sk = np.full_like(budget, np.inf)
+            sk[inside] = (jj - 1 + (c[inside] - lo) / (hi - lo)) / m
+            sk[j == 0] = s
+            out = np.maximum(out, sk)
         # progress of at least min_clearance / 2 of travel per step, so never stuck
         return np.maximum(out, s + 1e-12)
 
-    def _profile(self, mode: str, u: np.ndarray, v: np.ndarray, rate: np.ndarray,
-                 st_profile: bool) -> tuple[np.ndarray, np.ndarray] | None:
-        """(knots, cumulative travel bound) of the compiled speed profile, or None when the static
-        bound is short anyway or the robot has no compiled profile."""
+    def _profile(self, mode: str, u: np.ndarray, v: np.ndarray, rate: np.ndarray, st_profile: bool) -> np.ndarray | None:
+        """Per group, the cumulative bound ``K[G, i]`` [m] on how much any pair of the group can
+        approach between s = 0 and s = i/m on the chord u → v (m = :attr:`ValidityChecker.CELLS`):
+        the integral over the cells of the largest, over the group's pairs, sum of the two geometries'
+        speed bounds (the compiled per-geometry cell speeds of
+        :meth:`ValidityChecker._cell_speed_function`, Jacobian at the cell ends plus a second-order
+        remainder; a static geometry adds 0). None when the static bound is short anyway or the
+        robot has no compiled speeds."""
         if not st_profile or rate.size == 0 or float(rate.max()) < 0.01:
             return None
-        fn = self.checker._profile_function(mode)
+        fn = self.checker._cell_speed_function(mode)
         if fn is None:
             return None
-        C = np.asarray(fn(u, v), float).ravel()
-        return np.linspace(0.0, 1.0, C.size), np.maximum.accumulate(C)
+        r1, r2, rr, starts, n_rows = self._pair_rows[mode]
+        m = self.checker.CELLS
+        V = np.zeros((n_rows + 1, m))                 # the last row: a static geometry's speed, 0
+        V[:n_rows] = np.asarray(fn(u, v), float).reshape(n_rows, m, order="F")
+        Pv = V[r1] + V[r2]                            # sum of the pair's two speeds, or their relative speed
+        np.minimum(Pv, V[rr], out=Pv, where=(rr >= 0)[:, None])
+        Gm = np.maximum.reduceat(Pv, starts, axis=0)
+        K = np.zeros((len(starts), m + 1))
+        np.cumsum(Gm, axis=1, out=K[:, 1:])
+        K[:, 1:] /= m
+        return K
 
     # ------------------------------------------------------------------ the discrete alternative
     def discrete_segment(self, a: np.ndarray, b: np.ndarray, tolerance: float, mode: str = "held",
@@ -337,8 +483,8 @@ class EdgeCertifier:
                 return False
         return True
 
-    def _margin_data(self, mode: str, tol: float) -> Any:
-        key = (mode, tol)
+    def _margin_data(self, mode: str, tol: float, factor: float = 1.0) -> Any:
+        key = (mode, tol, factor)
         if key not in self._margin_gd:
             src = self.checker._gd[mode]
             gd = pin.GeometryData(self.gmodel)
@@ -349,7 +495,31 @@ class EdgeCertifier:
                     continue
                 both = moving[cp.first] and moving[cp.second]
                 # tol = 0: the near-contact test of an end (min_clearance); else the discrete alternative
-                extra = self.min_clearance if tol == 0.0 else 0.5 * self.min_clearance
+                extra = factor * self.min_clearance if tol == 0.0 else 0.5 * self.min_clearance
                 gd.collisionRequests[k].security_margin = (tol if both else 0.5 * tol) + extra + self.checker.margin
             self._margin_gd[key] = gd
         return self._margin_gd[key]
+
+
+def _travel(C: list[float], s: float) -> float:
+    """The cumulative travel bound ``C`` (values at ``len(C)`` equally spaced knots of [0, 1]) at ``s``,
+    linearly interpolated (as ``np.interp``, on Python floats: a step of the advancement is a few
+    scalar operations)."""
+    m = len(C) - 1
+    t = s * m
+    i = min(int(t), m - 1)
+    return C[i] + (t - i) * (C[i + 1] - C[i])
+
+
+def _inverse_travel(C: list[float], c: float) -> float:
+    """The largest ``s`` in [0, 1] with interpolated ``C(s) ≤ c`` (``C`` nondecreasing), inf beyond
+    the last knot's value."""
+    if c > C[-1]:
+        return math.inf
+    j = bisect.bisect_right(C, c)          # C[j-1] <= c < C[j]
+    if j == 0:
+        return 0.0
+    if j >= len(C):
+        return 1.0
+    m = len(C) - 1
+    return (j - 1 + (c - C[j - 1]) / (C[j] - C[j - 1])) / m

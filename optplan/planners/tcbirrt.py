@@ -306,7 +306,7 @@ class TCBiRRT(Planner):
         st["edge_checks"] += 1
         o = self.options
         if o.edge_bound == "certified":
-            ok = self.checker.edge_is_certified(a, b, "held", min_clearance=o.edge_min_clearance)
+            ok = self.checker.edge_is_certified(a, b, "held", min_clearance=o.edge_min_clearance, cache=True)
         elif o.edge_bound == "jacobian":
             ok = self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "held")
         else:
@@ -535,7 +535,8 @@ class TCBiRRT(Planner):
             a, b = base.copy(), base.copy()
             a[idx], b[idx] = x, y
             if o.edge_bound == "certified":
-                return self.checker.edge_is_certified(a, b, "fixed", object_pose=M, min_clearance=o.edge_min_clearance)
+                return self.checker.edge_is_certified(a, b, "fixed", object_pose=M, min_clearance=o.edge_min_clearance,
+                                                      cache=True)
             return self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "fixed", object_pose=M)
         base = base.copy()
 
@@ -621,6 +622,10 @@ class TCBiRRT(Planner):
                              "path_rejections", "path_verified_edges", "graft_attempts", "grafts")}
         sampler = self._sampler()
         c0 = self.checker.n_checks
+        cert = self.checker.certifier(o.edge_min_clearance) if o.edge_tolerance and o.edge_bound == "certified" else None
+        if cert is not None:   # a query's result must not depend on the queries before it
+            cert.clear_cache()
+            n_dist0 = cert.n_distance_calls
         why = self.check_endpoint(q_start)
         if why:
             return self.empty_result(PlanStatus.INVALID_START, f"start {why}", **st)
@@ -704,6 +709,8 @@ class TCBiRRT(Planner):
             ta, tb, a_is_start = tb, ta, not a_is_start                                  # line 15
         st["nodes"] = ta.n + tb.n
         st["collision_checks"] = self.checker.n_checks - c0
+        if cert is not None:
+            st["distance_calls"] = cert.n_distance_calls - n_dist0   # certified edges: exact group distances
         if sampler is not None:
             st.update(sampler.stats)
         if found is None:

@@ -147,7 +147,7 @@ class ValidityChecker:
         # the velocity (Jacobian) bound of edge_checkpoints assumes revolute 1-dof joints
         self._revolute_only = all(jm.nv == 1 and jm.shortname().replace("JointModel", "").startswith("R")
                                   for jm in list(self.model.joints)[1:])
-        self._profile_fns: dict[str, FastFunction | None] = {}
+        self._profile_fns: dict[Any, FastFunction | None] = {}
         self._certifiers: dict[float, EdgeCertifier] = {}
 
     def _sweep_bound(self, mode: str) -> np.ndarray:
@@ -183,14 +183,46 @@ class ValidityChecker:
         geometry travels along ``q(t) = a + t (b − a)`` for ``t ∈ [0, i/m]``, ``m =``
         :attr:`CELLS` (see :meth:`edge_checkpoints`). None when the robot has joints other than
         1-dof revolute ones."""
-        if mode in self._profile_fns:
-            return self._profile_fns[mode]
+        return self._compiled_sweep(mode, "profile")
+
+    def _cell_speed_function(self, mode: str) -> FastFunction | None:
+        """Compiled ``(a, b) -> V`` (``V.reshape(G + P, m, order="F")``): ``V[g, i]`` [m per unit t]
+        bounds the speed of every point of the g-th geometry of :meth:`_moving_geometries` on the cell
+        ``[i/m, (i+1)/m]`` of ``q(t) = a + t (b − a)`` — the per-geometry terms whose maximum over g
+        :meth:`_profile_function` integrates; ``V[G + p, i]`` bounds the speed of the held object's
+        points relative to the other geometry of the p-th pair of :meth:`_relative_pairs` (how fast
+        the pair can approach). None as there."""
+        return self._compiled_sweep(mode, "cells")
+
+    def _relative_pairs(self, mode: str) -> list[tuple[int, int]]:
+        """``"held"`` mode: (row of the held object, row of a robot geometry) among
+        :meth:`_moving_geometries` for every active pair of the two (the rows after the per-geometry
+        ones in :meth:`_cell_speed_function`: their relative speed, which the closed chain keeps small).
+        Empty in the other modes."""
+        if mode != "held" or self.held_id is None:
+            return []
+        gids = self._moving_geometries(mode)
+        row_of = {gid: r for r, gid in enumerate(gids)}
+        gd = self._gd[mode]
+        out = []
+        for k, cp in enumerate(self.gmodel.collisionPairs):
+            if not gd.activeCollisionPairs[k] or self.held_id not in (cp.first, cp.second):
+                continue
+            other = cp.second if cp.first == self.held_id else cp.first
+            if other in row_of:
+                out.append((row_of[self.held_id], row_of[other]))
+        return out
+
+    def _compiled_sweep(self, mode: str, what: str) -> FastFunction | None:
+        key_fn = mode if what == "profile" else (mode, what)
+        if key_fn in self._profile_fns:
+            return self._profile_fns[key_fn]
         row, c, rad, joints = self._spheres[mode]
         W = self._sweep[mode]
-        key = (id(self.model), mode, W.tobytes(), c.tobytes(), rad.tobytes(), row.tobytes(), joints.tobytes())
+        key = (id(self.model), mode, what, W.tobytes(), c.tobytes(), rad.tobytes(), row.tobytes(), joints.tobytes())
         if key in _PROFILE_CACHE:           # another checker of the same robot and held object
-            self._profile_fns[mode] = _PROFILE_CACHE[key][1]
-            return self._profile_fns[mode]
+            self._profile_fns[key_fn] = _PROFILE_CACHE[key][1]
+            return self._profile_fns[key_fn]
         fn = None
         if self._revolute_only:
             import casadi as ca
@@ -209,20 +241,30 @@ class ValidityChecker:
                     for vi, wk, vk in sk._columns(k, X):
                         w, v = w + wk * d[vi], v + vk * d[vi]
                 twist[int(j)] = (w, v)
-            speed = []
+            speed, centre = [], []
             for g in range(G):                     # |v_c| + |ω| ρ of each bounding sphere
                 j = int(joints[row[g]])
                 R, p = X[j]
                 w, v = twist[j]
-                speed.append(ca.norm_2(v + ca.cross(w, R @ ca.DM(c[g]) + p)) + ca.norm_2(w) * float(rad[g]))
-            f1 = ca.Function("sweep_speed", [q, d], [ca.vertcat(*speed)])
+                centre.append(R @ ca.DM(c[g]) + p)
+                speed.append(ca.norm_2(v + ca.cross(w, centre[g])) + ca.norm_2(w) * float(rad[g]))
+            rel = self._relative_pairs(mode) if what == "cells" else []
+            rel_speed, rel_gap = [], []
+            for gO, gL in rel:                     # the speed of gO's sphere in gL's frame; centre distance
+                (wO, vO), (wL, vL) = twist[int(joints[row[gO]])], twist[int(joints[row[gL]])]
+                dw = wO - wL
+                rel_speed.append(ca.norm_2(vO - vL + ca.cross(dw, centre[gO])) + ca.norm_2(dw) * float(rad[gO]))
+                rel_gap.append(ca.norm_2(centre[gO] - centre[gL]))
+            f1 = ca.Function("sweep_speed", [q, d], [ca.vertcat(*speed, *rel_speed, *rel_gap)])
             a, b = ca.SX.sym("a", n), ca.SX.sym("b", n)
             dd = b - a
             Q = ca.horzcat(*[a + (i / m) * dd for i in range(m + 1)])
-            S = f1.map(m + 1)(Q, ca.repmat(dd, 1, m + 1))          # G × (m+1): speed at the cell ends
+            SS = f1.map(m + 1)(Q, ca.repmat(dd, 1, m + 1))         # speeds (and pair terms) at the cell ends
+            S = SS[:G, :]                                           # G × (m+1): speed at the cell ends
             D = ca.fabs(dd)
             r2: Any = []
             static: Any = []
+            accs, anc_sum, anc_pairs = [], [], []
             for g in range(G):                     # rate of change of the speed bound; configuration-free bound
                 anc = [k for k in range(n) if W[g, k] > 0.0]
                 acc: Any = 0
@@ -234,13 +276,39 @@ class ValidityChecker:
                     before = before + D[k]
                 r2.append(acc + float(rad[g]) * pairs)
                 static.append(ca.dot(ca.DM(W[g]), D))
+                accs.append(acc)
+                anc_sum.append(before)
+                anc_pairs.append(pairs)
             r2, static = ca.vertcat(*r2), ca.vertcat(*static)
-            cum: list[Any] = [ca.SX(0.0)]
-            for i in range(m):                     # ∫ over cell i of max_g min(static, (s_i + s_i+1 + r/m)/2)
-                Fi = ca.mmax(ca.fmin(static, 0.5 * (S[:, i] + S[:, i + 1] + r2 / m)))
-                cum.append(cum[-1] + Fi / m)
-            fn = FastFunction(ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)]), "-O1")
-        self._profile_fns[mode] = fn
+            # per cell i and geometry g: the speed bound min(static, (s_i + s_i+1 + r/m)/2)
+            cells = [ca.fmin(static, 0.5 * (S[:, i] + S[:, i + 1] + r2 / m)) for i in range(m)]
+            if rel:
+                # relative speed of gO's points in gL's frame, u = ẋ_O(x) − (v_L + ω_L × x), bounded by
+                # |u(c_O)| + |ω_O − ω_L| ρ_O. Its rate of change: d/dt (v_L + ω_L × c_O) = ÿ − ω_L × ẏ + ω_L × ċ_O
+                # with y the point of gL's body at c_O, so ≤ |ẍ_O(c_O)| + |ÿ| + |ω_L| (|ẏ| + |ċ_O|)
+                # + ρ_O (|ω̇_O| + |ω̇_L|); |ÿ| ≤ Σ_jk |d_j||d_k| dist(c_O, axis_max(j,k)) and |ẏ| ≤ Σ_j |d_j|
+                # dist(c_O, axis_j) over gL's joints, with dist(c_O, axis_j) ≤ |c_O − c_L| + W_L[j]
+                # (|c_O − c_L| bounded on a cell by its values at the cell ends and the centres' speeds)
+                P = len(rel)
+                RS, RG = SS[G:G + P, :], SS[G + P:G + 2 * P, :]
+                for i in range(m):
+                    col = []
+                    for p_, (gO, gL) in enumerate(rel):
+                        vmax = static[gO] + static[gL]
+                        gap = 0.5 * (RG[p_, i] + RG[p_, i + 1] + vmax / m)
+                        rr = (accs[gO] + accs[gL] + gap * anc_sum[gL] ** 2
+                              + anc_sum[gL] * (static[gO] + static[gL] + gap * anc_sum[gL])
+                              + float(rad[gO]) * (anc_pairs[gO] + anc_pairs[gL]))
+                        col.append(ca.fmin(vmax, 0.5 * (RS[p_, i] + RS[p_, i + 1] + rr / m)))
+                    cells[i] = ca.vertcat(cells[i], *col)
+            if what == "profile":
+                cum: list[Any] = [ca.SX(0.0)]
+                for i in range(m):                 # ∫ over cell i of max_g of the cell's bound
+                    cum.append(cum[-1] + ca.mmax(cells[i]) / m)
+                fn = FastFunction(ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)]), "-O1")
+            else:
+                fn = FastFunction(ca.Function(f"sweep_cells_{mode}", [a, b], [ca.vertcat(*cells)]), "-O1")
+        self._profile_fns[key_fn] = fn
         _PROFILE_CACHE[key] = (self.model, fn)     # the model is kept alive so that its id stays unique
         return fn
 
@@ -330,12 +398,13 @@ class ValidityChecker:
         return self._certifiers[key]
 
     def edge_is_certified(self, a: np.ndarray, b: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None,
-                          min_clearance: float = 1e-3) -> bool:
+                          min_clearance: float = 1e-3, cache: bool = False) -> bool:
         """The straight joint segment ``a → b`` (ends included) CERTIFIED collision-free by
         conservative advancement on exact distances (:mod:`optplan.planners.edge_certify`): no pair
         closer than ``min_clearance / 2`` [m] (+ ``margin``) at any point of it. Unlike
-        :meth:`edge_is_valid` no fixed check spacing is involved. ``mode`` as in :meth:`edge_is_valid`."""
-        return self.certifier(min_clearance).segment(a, b, mode, object_pose)
+        :meth:`edge_is_valid` no fixed check spacing is involved. ``mode`` as in :meth:`edge_is_valid`;
+        ``cache``: the certifier's vertex cache (:meth:`.EdgeCertifier.path`)."""
+        return self.certifier(min_clearance).segment(a, b, mode, object_pose, cache)
 
     def path_is_certified(self, Q: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None,
                           min_clearance: float = 1e-3) -> bool:
