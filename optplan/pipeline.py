@@ -446,7 +446,17 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         if N2 <= N:
             break
         N = N2
+        prev = prob
         prob = build(N, initial=sol)
+        # the pairs the previous grid had rows for stay active (its guess and every colliding
+        # solution): activated along the solution alone, a pair whose rows held it > 0.12 m away lost
+        # them, and the refined solve went 64 mm into it (decision 0015)
+        Qp = prev.knot_configurations()
+        tq = np.linspace(0.0, 1.0, N + 1)
+        tp = np.linspace(0.0, 1.0, len(Qp))
+        prob.add_activation(np.column_stack([np.interp(tq, tp, Qp[:, j]) for j in range(Qp.shape[1])]))
+        for c in colliding:
+            prob.add_activation(c.sample(np.linspace(c.t[0], c.t[-1], N + 1))["q"])
         sol, rep = fix_contacts(prob, *run(prob, "refine"))  # the refined grid's own contacts too
     # the knot transcription has no rows for cylinders and meshes (the B-spline NLP bounds them):
     # on such a robot its solution would ignore them, so it is not tried
