@@ -101,6 +101,7 @@ from ..errors import ConfigurationError
 from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from .branch_bridge import bridge_graft
 from .cbirrt2 import CBiRRT2
 from .rrtconnect import edge_is_valid, rrt_connect, shortcut_path
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
@@ -421,17 +422,24 @@ class TCBiRRT(Planner):
         least ``graft_min_distance`` from the node's joins the tree by a regrasp. The new node, or None."""
         o, ck, kin = self.options, self.checker, self.kin
         rng = self._rng
-        if i is None:   # the node nearest a random node of the other tree: where the trees meet, more often
-            live = np.flatnonzero(other.alive[:other.n]) if other.alive is not None else np.arange(other.n)
-            i = tree.nearest(other.xi[int(live[int(rng.integers(live.size))])])
+        if i is None:
+            if o.graft_node == "any" or (o.graft_node == "mixed" and rng.random() < 0.5):   # a random live node
+                live = np.flatnonzero(tree.alive[:tree.n]) if tree.alive is not None else np.arange(tree.n)
+                i = int(live[int(rng.integers(live.size))])
+            else:   # the node nearest a random node of the other tree: where the trees meet, more often
+                live = np.flatnonzero(other.alive[:other.n]) if other.alive is not None else np.arange(other.n)
+                i = tree.nearest(other.xi[int(live[int(rng.integers(live.size))])])
         if i in tree.graft:
             return None
         st["graft_attempts"] += 1
         R, p = tree.pose[i]
         q_i = tree.q[i]
         seed = other.q[other.nearest(tree.xi[i])]
-        for k in range(o.graft_seeds):
-            if k == 0:
+        branches = [other.q[0], *(other.q[g] for g in other.graft)] if o.graft_branch_seeds else []
+        for k in range(-len(branches), o.graft_seeds):
+            if k < 0:      # the other tree's branches: its root's and its grafts' configurations
+                q0 = branches[k]
+            elif k == 0:
                 q0 = seed
             elif k % 2:
                 q0 = seed + rng.normal(0.0, o.ik_restart_sigma, seed.size)
@@ -637,6 +645,7 @@ class TCBiRRT(Planner):
             sampler.set_endpoints(ta.xi[0], tb.xi[0])
             st["guide_attempts"] = st["guide_waypoints"] = 0
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
+        bridges = {id(ta): 0, id(tb): 0}
         if o.branch_grafts and o.root_grafts_first and not o.graft_after:
             for tr, other in ((ta, tb), (tb, ta)):
                 self._graft(tr, 0, other, deadline, st)
@@ -648,7 +657,7 @@ class TCBiRRT(Planner):
             if o.branch_grafts and k_graft > 0 and k_graft % o.graft_interval == 0:
                 # the trees take turns (tree a is the same tree at every multiple of an even interval)
                 tr, other = (ta, tb) if (k_graft // o.graft_interval) % 2 else (tb, ta)
-                if len(tr.graft) < o.branch_grafts:
+                if len(tr.graft) - bridges[id(tr)] < o.branch_grafts:   # bridge grafts have their own count
                     self._graft(tr, None if root_grafted[id(tr)] else 0, other, deadline, st)   # the root's first
                     root_grafted[id(tr)] = True
             if (sampler is not None and cast(float, o.guide_probability) > 0 and sampler.guide is None
@@ -661,12 +670,21 @@ class TCBiRRT(Planner):
                 st["guide_waypoints"] = 0 if sampler.guide is None else len(sampler.guide)
                 st["guide_time_s"] = guide_time
             st["iterations"] += 1
-            if sampler is None:
-                xi_rand = rng.uniform(self._lo, self._hi)                                # line 3
+            k_bridge = st["iterations"] - o.graft_after
+            i_bridge = None
+            if o.bridge_grafts and k_bridge > 0 and k_bridge % o.bridge_interval == 0 and \
+                    bridges[id(ta)] < o.bridge_grafts:   # tree a re-grasps at its frontier (.branch_bridge)
+                i_bridge = bridge_graft(self, ta, tb, deadline, st)
+                bridges[id(ta)] += i_bridge is not None
+            if i_bridge is not None:       # the step beyond the bridge graft: connect tree b to it
+                res, i_a = ADVANCED, i_bridge
             else:
-                xi_rand = sampler.sample(rng, tb.alive_xi())
-            i_near = ta.twin_nearest(ta.nearest(xi_rand), None, rng)                     # line 4
-            res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st)   # line 5
+                if sampler is None:
+                    xi_rand = rng.uniform(self._lo, self._hi)                            # line 3
+                else:
+                    xi_rand = sampler.sample(rng, tb.alive_xi())
+                i_near = ta.twin_nearest(ta.nearest(xi_rand), None, rng)                 # line 4
+                res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st)   # line 5
             if res != TRAPPED:
                 target_xi, target_q = ta.xi[i_a].copy(), ta.q[i_a].copy()
                 while True:                                                              # lines 7-11

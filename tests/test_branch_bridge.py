@@ -1,0 +1,99 @@
+"""Bridge grafts of TCBiRRT (:mod:`optplan.planners.branch_bridge`): at a tree's frontier the arms re-grasp
+into an IK solution from which a constrained step toward the other tree passes. Checked against
+Pinocchio FK (the closed chain), the checker's exact collision queries at every configuration and the
+bench's 1 cm sweep spacing along every straight edge."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
+from optplan.planners import TCBiRRT, TCBiRRTOptions
+from optplan.planners.base import Deadline
+from optplan.planners.branch_bridge import bridge_graft, closest_pair
+from optplan.planners.rrtconnect import edge_is_valid
+from optplan.planners.task_space import xi_from_pose
+from optplan.planners.tcbirrt import _TaskTree
+from optplan.planners.validity import ValidityChecker
+from optplan.scene import Scene
+
+SWEEP = 0.01   # [m] the bench's sweep spacing (no point of the robot or object moves farther between checks)
+
+
+@pytest.fixture(scope="module")
+def truss(tcb):
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load("hard_truss")
+    ck = ValidityChecker(tcb, scene)
+    kin = ClosedChainKinematics(tcb, scene.object.grasps)
+    return scene, ck, kin, TrialGenerator(tcb, scene).generate(6, 0)
+
+
+def _tree(kin, q):
+    M = kin.object_pose(q)
+    return _TaskTree(q, xi_from_pose(M), M.rotation.copy(), M.translation.copy())
+
+
+def test_closest_pair_is_the_closest_of_the_sampled_pairs(tcb, truss, rng):
+    scene, ck, kin, t = truss
+    a, b = _tree(kin, t.q_start), _tree(kin, t.q_goal)
+    for _ in range(30):   # random nodes (poses only matter here)
+        q = rng.uniform(tcb.lower, tcb.upper)
+        for tr in (a, b):
+            M = kin.object_pose(q)
+            xi = xi_from_pose(M) + rng.normal(0.0, 0.5, 6)
+            tr.add(q, xi, M.rotation, M.translation, 0, [], [])
+    i, j = closest_pair(a, b, np.random.default_rng(1), pairs=10_000)   # every node of b sampled: the closest pair
+    D = np.linalg.norm(a.xi[:a.n, None] - b.xi[None, :b.n], axis=2)
+    assert D[i, j] == pytest.approx(D.min())
+
+
+def test_bridge_graft_regrasps_into_a_configuration_that_steps_toward_the_other_tree(tcb, truss):
+    """From the start of a truss trial toward its goal: the new node lies one step (``step_size`` in ξ) toward
+    the goal tree's root, below a graft at the start's pose whose configuration closes the chain, is free and is
+    not the start's (beyond one restart's joint step); the graft's regrasp motions each move one arm with the
+    object fixed, and every edge (regrasp motions and the constrained step) passes the 1 cm sweep check."""
+    scene, ck, kin, t = truss
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", bridge_grafts=4), checker=ck, kinematics=kin)
+    pl._rng = np.random.default_rng(3)
+    a, b = _tree(kin, t.q_start), _tree(kin, t.q_goal)
+    st = {"ik_iterations": 0, "ik_calls": 0, "ik_failures": 0, "ik_jumps": 0, "collisions": 0, "ik_restarts": 0,
+          "edge_checks": 0, "edge_collisions": 0, "regrasp_attempts": 0, "regrasp_failures": 0, "regrasp_nodes": 0}
+    n = None
+    for _ in range(10):
+        n = bridge_graft(pl, a, b, Deadline(5.0, "cpu"), st)
+        if n is not None:
+            break
+    assert n is not None, st
+    g = int(a.parent[n])
+    assert g in a.graft and a.parent[g] == 0 and np.array_equal(a.xi[g], a.xi[0])
+    y = a.q[g]
+    assert float(np.abs(y - t.q_start).max()) > pl.options.max_joint_step
+    d = b.xi[0] - a.xi[0]
+    assert np.allclose(a.xi[n], a.xi[0] + pl.step_size * d / np.linalg.norm(d), atol=1e-9)
+    w_fixed, w_held = ck.sweep_weights("fixed", per_geometry=True), ck.sweep_weights("held", per_geometry=True)
+    M0 = kin.object_pose(t.q_start)
+    prev = t.q_start
+    for arm, full in a.graft[g]:
+        idx = kin.idx[kin.arm_names.index(arm)]
+        other = np.setdiff1d(np.arange(tcb.nq), idx)
+        assert np.allclose(full[0], prev) and all(np.array_equal(x[other], prev[other]) for x in full)
+        for x0, x1 in zip(full[:-1], full[1:]):
+            assert edge_is_valid(x0, x1, lambda z: ck.is_valid_object_fixed(z, M0), SWEEP, weights=w_fixed)
+        prev = full[-1]
+    assert np.allclose(prev, y)
+    qs = [y, *a.edge[n][0], a.q[n]]
+    for q in qs:   # both hands on the object (Pinocchio FK) and free
+        assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q) and ck.in_limits(q)
+    for x0, x1 in zip(qs[:-1], qs[1:]):
+        assert edge_is_valid(x0, x1, ck.is_valid, SWEEP, weights=w_held)
+    assert st["bridges"] == 1 and st["bridge_attempts"] >= 1
+
+
+def test_bridge_options_are_checked():
+    assert TCBiRRTOptions(variant="improved").bridge_grafts >= 0 and TCBiRRTOptions().bridge_grafts == 0
+    for bad in (dict(bridge_grafts=-1), dict(bridge_interval=0), dict(bridge_seeds=0), dict(bridge_pairs=0),
+                dict(graft_node="frontier"), dict(graft_branch_seeds=1)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            TCBiRRTOptions(**bad)
