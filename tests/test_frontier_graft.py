@@ -1,4 +1,4 @@
-"""Bridge grafts of TCBiRRT (:mod:`optplan.planners.branch_bridge`): at a tree's frontier the arms re-grasp
+"""Frontier grafts of TCBiRRT (:mod:`optplan.planners.frontier_graft`): at a tree's frontier the arms re-grasp
 into an IK solution from which a constrained step toward the other tree passes. Checked against
 Pinocchio FK (the closed chain), the checker's exact collision queries at every configuration and the
 bench's 1 cm sweep spacing along every straight edge."""
@@ -10,7 +10,7 @@ import pytest
 from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
 from optplan.planners import TCBiRRT, TCBiRRTOptions
 from optplan.planners.base import Deadline
-from optplan.planners.branch_bridge import bridge_graft, closest_pair
+from optplan.planners.frontier_graft import closest_pair, frontier_graft
 from optplan.planners.rrtconnect import edge_is_valid
 from optplan.planners.task_space import xi_from_pose
 from optplan.planners.tcbirrt import _TaskTree
@@ -49,20 +49,20 @@ def test_closest_pair_is_the_closest_of_the_sampled_pairs(tcb, truss, rng):
     assert D[i, j] == pytest.approx(D.min())
 
 
-def test_bridge_graft_regrasps_into_a_configuration_that_steps_toward_the_other_tree(tcb, truss):
+def test_frontier_graft_regrasps_into_a_configuration_that_steps_toward_the_other_tree(tcb, truss):
     """From the start of a truss trial toward its goal: the new node lies one step (``step_size`` in ξ) toward
     the goal tree's root, below a graft at the start's pose whose configuration closes the chain, is free and is
     not the start's (beyond one restart's joint step); the graft's regrasp motions each move one arm with the
     object fixed, and every edge (regrasp motions and the constrained step) passes the 1 cm sweep check."""
     scene, ck, kin, t = truss
-    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", bridge_grafts=4), checker=ck, kinematics=kin)
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", frontier_grafts=4), checker=ck, kinematics=kin)
     pl._rng = np.random.default_rng(3)
     a, b = _tree(kin, t.q_start), _tree(kin, t.q_goal)
     st = {"ik_iterations": 0, "ik_calls": 0, "ik_failures": 0, "ik_jumps": 0, "collisions": 0, "ik_restarts": 0,
           "edge_checks": 0, "edge_collisions": 0, "regrasp_attempts": 0, "regrasp_failures": 0, "regrasp_nodes": 0}
     n = None
     for _ in range(10):
-        n = bridge_graft(pl, a, b, Deadline(5.0, "cpu"), st)
+        n = frontier_graft(pl, a, b, Deadline(5.0, "cpu"), st)
         if n is not None:
             break
     assert n is not None, st
@@ -88,12 +88,12 @@ def test_bridge_graft_regrasps_into_a_configuration_that_steps_toward_the_other_
         assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q) and ck.in_limits(q)
     for x0, x1 in zip(qs[:-1], qs[1:]):
         assert edge_is_valid(x0, x1, ck.is_valid, SWEEP, weights=w_held)
-    assert st["bridges"] == 1 and st["bridge_attempts"] >= 1
+    assert st["frontier_grafts"] == 1 and st["frontier_attempts"] >= 1
 
 
-def test_bridge_options_are_checked():
-    assert TCBiRRTOptions(variant="improved").bridge_grafts >= 0 and TCBiRRTOptions().bridge_grafts == 0
-    for bad in (dict(bridge_grafts=-1), dict(bridge_interval=0), dict(bridge_seeds=0), dict(bridge_pairs=0),
+def test_frontier_options_are_checked():
+    assert TCBiRRTOptions(variant="improved").frontier_grafts >= 0 and TCBiRRTOptions().frontier_grafts == 0
+    for bad in (dict(frontier_grafts=-1), dict(frontier_interval=0), dict(frontier_seeds=0), dict(frontier_pairs=0),
                 dict(graft_node="frontier"), dict(graft_branch_seeds=1)):
         with pytest.raises(ValueError, match=next(iter(bad))):
             TCBiRRTOptions(**bad)

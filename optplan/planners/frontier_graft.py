@@ -1,4 +1,4 @@
-"""Bridge grafts for TCBiRRT: re-grasp the arms at a tree's frontier into a configuration from which the
+"""Frontier grafts for TCBiRRT: re-grasp the arms at a tree's frontier into a configuration from which the
 tree can move on toward the other tree.
 
 Why. A constrained extension keeps each arm on its IK branch and, for a redundant (7-joint) arm, close to
@@ -9,10 +9,10 @@ on either side, each with arms in a position that collides one step further on. 
 (:meth:`.TCBiRRT._graft`) grows another IK solution at a node, but accepts any valid one: it is mostly
 one that collides one step further too.
 
-What. Every ``bridge_interval`` iterations (after ``graft_after``) one tree takes the node nearest the
-other tree (the closest of ``bridge_pairs`` random pairs: a node of the other tree and its nearest
+What. Every ``frontier_interval`` iterations (after ``graft_after``) one tree takes the node nearest the
+other tree (the closest of ``frontier_pairs`` random pairs: a node of the other tree and its nearest
 node in this tree) and the other tree's node's pose as the direction. At the node's object pose it solves
-IK from random seeds (``bridge_seeds``); a solution — or the node's configuration with one arm moved to
+IK from random seeds (``frontier_seeds``); a solution — or the node's configuration with one arm moved to
 that solution (one arm re-grasps only) — is kept only when it is valid AND a constrained extension from
 it one step (``step_size``) toward the other tree's node passes (PathInverseKinematics, every waypoint
 and edge checked as in the search). Only then are the arms re-grasped to it (the regrasp of Section 4.3:
@@ -22,7 +22,7 @@ below it, which the search then tries to connect to the other tree.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -32,7 +32,7 @@ if TYPE_CHECKING:   # the planner and its tree; imported only for the type check
     from .base import Deadline
     from .tcbirrt import TCBiRRT, _TaskTree
 
-__all__ = ["closest_pair", "bridge_graft"]
+__all__ = ["closest_pair", "frontier_graft"]
 
 
 def closest_pair(tree: _TaskTree, other: _TaskTree, rng: np.random.Generator, pairs: int) -> tuple[int, int]:
@@ -48,12 +48,12 @@ def closest_pair(tree: _TaskTree, other: _TaskTree, rng: np.random.Generator, pa
     return out
 
 
-def bridge_graft(pl: TCBiRRT, tree: _TaskTree, other: _TaskTree, deadline: Deadline, st: dict[str, Any]) -> int | None:
-    """One bridge-graft attempt of ``tree`` toward ``other`` (module docstring). The new node one step
+def frontier_graft(pl: TCBiRRT, tree: _TaskTree, other: _TaskTree, deadline: Deadline, st: dict[str, Any]) -> int | None:
+    """One frontier-graft attempt of ``tree`` toward ``other`` (module docstring). The new node one step
     beyond the graft, or None."""
     o, ck, kin, rng = pl.options, pl.checker, pl.kin, pl._rng
-    i, j = closest_pair(tree, other, rng, o.bridge_pairs)
-    st["bridge_attempts"] = st.get("bridge_attempts", 0) + 1
+    i, j = closest_pair(tree, other, rng, o.frontier_pairs)
+    st["frontier_attempts"] = st.get("frontier_attempts", 0) + 1
     R, p = tree.pose[i]
     q_i = tree.q[i]
     d = other.xi[j] - tree.xi[i]
@@ -64,7 +64,8 @@ def bridge_graft(pl: TCBiRRT, tree: _TaskTree, other: _TaskTree, deadline: Deadl
     Rs, ps = pose_from_xi(xi_s)
     poses = interpolate_task(R, p, Rs, ps, o.n_interp, o.interpolation)
     twins = [tree.q[k] for k in tree.twins.get(i, [i])]
-    for _ in range(o.bridge_seeds):
+    step = cast(float, o.max_joint_step)   # resolved from the variant
+    for _ in range(o.frontier_seeds):
         if deadline.expired():
             return None
         x, its = kin.ik(rng.uniform(pl.robot.lower, pl.robot.upper), R, p, o.ik)
@@ -78,19 +79,19 @@ def bridge_graft(pl: TCBiRRT, tree: _TaskTree, other: _TaskTree, deadline: Deadl
             cands.append(y)
         cands.append(x)
         for y in cands:
-            if any(float(np.abs(y - t).max()) <= o.max_joint_step for t in twins):
+            if any(float(np.abs(y - t).max()) <= step for t in twins):
                 continue   # the node's own configuration (or one of its grafts'), give or take a restart
             if not ck.in_limits(y) or not ck.is_valid(y):
                 continue
             Q = pl.path_ik(poses, y, st)   # the look-ahead: one constrained step toward the other tree
             if not Q or len(Q) < len(poses):
-                st["bridge_lookahead_failures"] = st.get("bridge_lookahead_failures", 0) + 1
+                st["frontier_lookahead_failures"] = st.get("frontier_lookahead_failures", 0) + 1
                 continue
             reg = pl.regrasp(q_i, y, R, p, rng, deadline.sub(o.graft_time_limit), st)
             if reg is None:
-                st["bridge_regrasp_failures"] = st.get("bridge_regrasp_failures", 0) + 1
+                st["frontier_regrasp_failures"] = st.get("frontier_regrasp_failures", 0) + 1
                 continue
-            st["bridges"] = st.get("bridges", 0) + 1
+            st["frontier_grafts"] = st.get("frontier_grafts", 0) + 1
             g = tree.add_graft(i, y, reg)
             return tree.add(Q[-1], xi_s, Rs, ps, g, Q[:-1], poses[:-1])
     return None
