@@ -26,7 +26,7 @@ VARIANTS = {
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
-                 "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 0},
+                 "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4},
 }
 
 
