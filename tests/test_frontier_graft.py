@@ -97,3 +97,35 @@ def test_frontier_options_are_checked():
                 dict(graft_node="frontier"), dict(graft_branch_seeds=1)):
         with pytest.raises(ValueError, match=next(iter(bad))):
             TCBiRRTOptions(**bad)
+
+
+def test_planner_with_frontier_grafts_returns_a_verified_path(tcb, truss):
+    """The search with frontier grafts from iteration 50 (``graft_after=0``; branch grafts off) on a truss trial
+    whose trees stop at the grid from either side: a path from start to goal whose constrained configurations
+    close the chain (Pinocchio FK) and are free, every straight edge passes the bench's independent 1 cm sweep
+    check, and each regrasp segment moves one arm with the object still."""
+    from optplan.bench.tcbirrt import _path_checks
+    from optplan.trials import TrialGenerator
+
+    scene, ck, kin, _ = truss
+    t = TrialGenerator(tcb, scene).generate(18, 0)
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", graft_after=0, branch_grafts=0), checker=ck,
+                 kinematics=kin)
+    res = pl.plan(t.q_start, t.q_goal, time_limit=30.0, seed=t.seed, clock="cpu")
+    assert res.success, res.message
+    assert res.stats["frontier_attempts"] >= 1 and res.stats["grafts"] == 0
+    assert np.allclose(res.path[0], t.q_start) and np.allclose(res.path[-1], t.q_goal)
+    for q, c in zip(res.path, res.constrained):
+        assert ck.in_limits(q)
+        if c:
+            assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q)
+    chk = _path_checks(tcb, scene, ck, res)
+    assert chk["swept_invalid_edges"] == 0 and chk["max_closed_chain_residual"] <= 1e-6
+    regs = [s for s in res.segments if s.kind == "regrasp"]
+    assert len(regs) == res.n_regrasp >= 2
+    for s in regs:
+        P = res.path[s.start:s.stop + 1]
+        moved = [a for a, idx in zip(kin.arm_names, kin.idx) if np.ptp(P[:, idx], axis=0).max() > 0]
+        assert moved == [s.arm]
+        for M in res.object_poses[s.start:s.stop + 1]:
+            assert np.allclose(M.homogeneous, s.object_pose.homogeneous)
