@@ -94,6 +94,7 @@ def test_frontier_graft_regrasps_into_a_configuration_that_steps_toward_the_othe
 def test_frontier_options_are_checked():
     assert TCBiRRTOptions(variant="improved").frontier_grafts == 4 and TCBiRRTOptions().frontier_grafts == 0
     for bad in (dict(frontier_grafts=-1), dict(frontier_interval=0), dict(frontier_seeds=0), dict(frontier_pairs=0),
+                dict(frontier_radius=-0.1),
                 dict(graft_node="frontier"), dict(graft_branch_seeds=1)):
         with pytest.raises(ValueError, match=next(iter(bad))):
             TCBiRRTOptions(**bad)

@@ -53,13 +53,13 @@ def frontier_graft(pl: TCBiRRT, tree: _TaskTree, other: _TaskTree, deadline: Dea
     beyond the graft, or None."""
     o, ck, kin, rng = pl.options, pl.checker, pl.kin, pl._rng
     i, j = closest_pair(tree, other, rng, o.frontier_pairs)
+    d = other.xi[j] - tree.xi[i]
+    dist = float(np.linalg.norm(d))
+    if dist <= 1e-9 or (o.frontier_radius and dist > o.frontier_radius):
+        return None
     st["frontier_attempts"] = st.get("frontier_attempts", 0) + 1
     R, p = tree.pose[i]
     q_i = tree.q[i]
-    d = other.xi[j] - tree.xi[i]
-    dist = float(np.linalg.norm(d))
-    if dist <= 1e-9:
-        return None
     xi_s = other.xi[j].copy() if dist <= pl.step_size else tree.xi[i] + (pl.step_size / dist) * d
     Rs, ps = pose_from_xi(xi_s)
     poses = interpolate_task(R, p, Rs, ps, o.n_interp, o.interpolation)

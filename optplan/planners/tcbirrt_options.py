@@ -139,6 +139,9 @@ class TCBiRRTOptions:
     frontier_seeds: int = 6
     #: Random node pairs of which a frontier graft takes the closest in ξ [count].
     frontier_pairs: int = 8
+    #: A frontier graft is tried only when that closest pair is at most this far apart in ξ [m and rad, as ξ]
+    #: (0: at any distance).
+    frontier_radius: float = 0.0
     #: A graft's joint solution must differ from its node's by at least this (Euclidean) [rad]; nearer ones are the
     #: same branch.
     graft_min_distance: float = 1.5
@@ -223,6 +226,7 @@ class TCBiRRTOptions:
         if self.graft_node not in ("meet", "any", "mixed"):
             raise ValueError(f"TCBiRRTOptions.graft_node: expected 'meet', 'any' or 'mixed', got {self.graft_node!r}")
         _pos("graft_min_distance", self.graft_min_distance)
+        _pos("frontier_radius", self.frontier_radius, allow_zero=True)
         _pos("joint_connect_radius", self.joint_connect_radius)
         _pos("joint_connect_max_distance", self.joint_connect_max_distance)
         if not isinstance(self.joint_connect_options, CBiRRT2Options):
