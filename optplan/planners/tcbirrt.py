@@ -65,6 +65,12 @@ Deviations from the paper, all options (defaults in brackets):
   the node by a regrasp (Section 4.3, ``graft_time_limit``): a "graft" node at the same pose. The
   extension picks one of a pose's branches at random, the connection the one nearest the other
   tree's configuration; a path through a graft has its regrasp segments where the graft is.
+* ``frontier_grafts`` [paper 0; improved 4 per tree, every ``frontier_interval`` = 50 iterations after
+  ``graft_after``]: at the node nearest the other tree, the arms re-grasp (one arm, or both) into an IK
+  solution from random seeds that is valid AND from which one constrained step toward the other tree
+  passes; the solution is a graft node, the step's end a node below it, and tree b is connected to it
+  (:mod:`.frontier_graft`). Where the arms, not the object, block a passage, each tree's arms stop in a
+  self-motion position that collides one step further on; the look-ahead picks one that does not.
 * ``edge_tolerance`` [paper 0: off; improved 0.01 m]: the straight joint-space segments between consecutive
   configurations (constrained edges and regrasp motions) are checked so densely that no point of
   the arms or the object moves farther than this between two checks (per-joint sweep bound of
@@ -102,6 +108,7 @@ from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2
+from .frontier_graft import frontier_graft
 from .rrtconnect import edge_is_valid, rrt_connect, shortcut_path
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
@@ -421,17 +428,24 @@ class TCBiRRT(Planner):
         least ``graft_min_distance`` from the node's joins the tree by a regrasp. The new node, or None."""
         o, ck, kin = self.options, self.checker, self.kin
         rng = self._rng
-        if i is None:   # the node nearest a random node of the other tree: where the trees meet, more often
-            live = np.flatnonzero(other.alive[:other.n]) if other.alive is not None else np.arange(other.n)
-            i = tree.nearest(other.xi[int(live[int(rng.integers(live.size))])])
+        if i is None:
+            if o.graft_node == "any" or (o.graft_node == "mixed" and rng.random() < 0.5):   # a random live node
+                live = np.flatnonzero(tree.alive[:tree.n]) if tree.alive is not None else np.arange(tree.n)
+                i = int(live[int(rng.integers(live.size))])
+            else:   # the node nearest a random node of the other tree: where the trees meet, more often
+                live = np.flatnonzero(other.alive[:other.n]) if other.alive is not None else np.arange(other.n)
+                i = tree.nearest(other.xi[int(live[int(rng.integers(live.size))])])
         if i in tree.graft:
             return None
         st["graft_attempts"] += 1
         R, p = tree.pose[i]
         q_i = tree.q[i]
         seed = other.q[other.nearest(tree.xi[i])]
-        for k in range(o.graft_seeds):
-            if k == 0:
+        branches = [other.q[0], *(other.q[g] for g in other.graft)] if o.graft_branch_seeds else []
+        for k in range(-len(branches), o.graft_seeds):
+            if k < 0:      # the other tree's branches: its root's and its grafts' configurations
+                q0 = branches[k]
+            elif k == 0:
                 q0 = seed
             elif k % 2:
                 q0 = seed + rng.normal(0.0, o.ik_restart_sigma, seed.size)
@@ -642,6 +656,7 @@ class TCBiRRT(Planner):
             sampler.set_endpoints(ta.xi[0], tb.xi[0])
             st["guide_attempts"] = st["guide_waypoints"] = 0
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
+        fronts = {id(ta): 0, id(tb): 0}
         if o.branch_grafts and o.root_grafts_first and not o.graft_after:
             for tr, other in ((ta, tb), (tb, ta)):
                 self._graft(tr, 0, other, deadline, st)
@@ -653,7 +668,7 @@ class TCBiRRT(Planner):
             if o.branch_grafts and k_graft > 0 and k_graft % o.graft_interval == 0:
                 # the trees take turns (tree a is the same tree at every multiple of an even interval)
                 tr, other = (ta, tb) if (k_graft // o.graft_interval) % 2 else (tb, ta)
-                if len(tr.graft) < o.branch_grafts:
+                if len(tr.graft) - fronts[id(tr)] < o.branch_grafts:   # frontier grafts have their own count
                     self._graft(tr, None if root_grafted[id(tr)] else 0, other, deadline, st)   # the root's first
                     root_grafted[id(tr)] = True
             if (sampler is not None and cast(float, o.guide_probability) > 0 and sampler.guide is None
@@ -666,12 +681,21 @@ class TCBiRRT(Planner):
                 st["guide_waypoints"] = 0 if sampler.guide is None else len(sampler.guide)
                 st["guide_time_s"] = guide_time
             st["iterations"] += 1
-            if sampler is None:
-                xi_rand = rng.uniform(self._lo, self._hi)                                # line 3
+            k_front = st["iterations"] - o.graft_after
+            i_front = None
+            if o.frontier_grafts and k_front > 0 and k_front % o.frontier_interval == 0 and \
+                    fronts[id(ta)] < o.frontier_grafts:   # tree a re-grasps at its frontier (.frontier_graft)
+                i_front = frontier_graft(self, ta, tb, deadline, st)
+                fronts[id(ta)] += i_front is not None
+            if i_front is not None:       # the step beyond the frontier graft: connect tree b to it
+                res, i_a = ADVANCED, i_front
             else:
-                xi_rand = sampler.sample(rng, tb.alive_xi())
-            i_near = ta.twin_nearest(ta.nearest(xi_rand), None, rng)                     # line 4
-            res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st)   # line 5
+                if sampler is None:
+                    xi_rand = rng.uniform(self._lo, self._hi)                            # line 3
+                else:
+                    xi_rand = sampler.sample(rng, tb.alive_xi())
+                i_near = ta.twin_nearest(ta.nearest(xi_rand), None, rng)                 # line 4
+                res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st)   # line 5
             if res != TRAPPED:
                 target_xi, target_q = ta.xi[i_a].copy(), ta.q[i_a].copy()
                 while True:                                                              # lines 7-11

@@ -22,11 +22,11 @@ VARIANTS = {
     "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False,
               "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0,
               "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
-              "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0},
+              "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
-                 "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4},
+                 "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4},
 }
 
 
@@ -122,6 +122,26 @@ class TCBiRRTOptions:
     graft_seeds: int = 4
     #: A graft may also move one arm only to its new IK solution (the other keeps its own) [bool].
     graft_single_arm: bool = False
+    #: Seed a graft's IK first with the other tree's branches — its root's configuration and its own grafts' — before
+    #: the configuration nearest in ξ (the other tree's branch is usually free away from where the trees meet, where
+    #: the nearest configuration's IK solution collides) [bool].
+    graft_branch_seeds: bool = False
+    #: Which node a branch graft is tried at: ``"meet"`` (the node nearest a random node of the other tree: where the
+    #: trees meet), ``"any"`` (a random live node of the tree) or ``"mixed"`` (either, with equal probability).
+    graft_node: str = "meet"
+    #: Frontier grafts per tree [count] (None: the variant's value, :data:`VARIANTS`; 0: off): at the node nearest the
+    #: other tree, the arms re-grasp into an IK solution from which one constrained step toward the other tree
+    #: passes (:mod:`.frontier_graft`); tried every ``frontier_interval`` iterations after ``graft_after``.
+    frontier_grafts: int | None = None
+    #: Iterations between two frontier-graft attempts (the trees take turns) [count].
+    frontier_interval: int = 50
+    #: Random IK seeds per frontier-graft attempt [count].
+    frontier_seeds: int = 6
+    #: Random node pairs of which a frontier graft takes the closest in ξ [count].
+    frontier_pairs: int = 8
+    #: A frontier graft is tried only when that closest pair is at most this far apart in ξ [m and rad, as ξ]
+    #: (0: at any distance).
+    frontier_radius: float = 0.0
     #: A graft's joint solution must differ from its node's by at least this (Euclidean) [rad]; nearer ones are the
     #: same branch.
     graft_min_distance: float = 1.5
@@ -197,19 +217,24 @@ class TCBiRRTOptions:
         _pos("ik_restart_sigma", self.ik_restart_sigma)
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
-        for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds"):
-            v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after") else 1)
+        for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds", "frontier_grafts", "frontier_interval",
+                     "frontier_seeds", "frontier_pairs"):
+            v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after", "frontier_grafts") else 1)
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
         _pos("graft_time_limit", self.graft_time_limit)
+        if self.graft_node not in ("meet", "any", "mixed"):
+            raise ValueError(f"TCBiRRTOptions.graft_node: expected 'meet', 'any' or 'mixed', got {self.graft_node!r}")
         _pos("graft_min_distance", self.graft_min_distance)
+        _pos("frontier_radius", self.frontier_radius, allow_zero=True)
         _pos("joint_connect_radius", self.joint_connect_radius)
         _pos("joint_connect_max_distance", self.joint_connect_max_distance)
         if not isinstance(self.joint_connect_options, CBiRRT2Options):
             raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
-                     "regrasp_share_orders", "verify_path", "graft_single_arm", "root_grafts_first"):
+                     "regrasp_share_orders", "verify_path", "graft_single_arm", "root_grafts_first",
+                     "graft_branch_seeds"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)

@@ -1,0 +1,97 @@
+"""Frontier grafts for TCBiRRT: re-grasp the arms at a tree's frontier into a configuration from which the
+tree can move on toward the other tree.
+
+Why. A constrained extension keeps each arm on its IK branch and, for a redundant (7-joint) arm, close to
+its self-motion position: PathInverseKinematics seeds every pose with the previous solution, and a restart
+may move a joint by at most ``max_joint_step``. Where the arms, not the object, block a passage (the truss:
+the elbows hit the beams beside the bay the module passes through), both trees stop at the passage
+on either side, each with arms in a position that collides one step further on. A branch graft
+(:meth:`.TCBiRRT._graft`) grows another IK solution at a node, but accepts any valid one: it is mostly
+one that collides one step further too.
+
+What. Every ``frontier_interval`` iterations (after ``graft_after``) one tree takes the node nearest the
+other tree (the closest of ``frontier_pairs`` random pairs: a node of the other tree and its nearest
+node in this tree) and the other tree's node's pose as the direction. At the node's object pose it solves
+IK from random seeds (``frontier_seeds``); a solution — or the node's configuration with one arm moved to
+that solution (one arm re-grasps only) — is kept only when it is valid AND a constrained extension from
+it one step (``step_size``) toward the other tree's node passes (PathInverseKinematics, every waypoint
+and edge checked as in the search). Only then are the arms re-grasped to it (the regrasp of Section 4.3:
+one arm at a time, an RRTConnect in the arm's joint space, the object fixed; ``graft_time_limit``); the
+solution becomes a graft node (another branch of the tree at the same pose) and the step's end a node
+below it, which the search then tries to connect to the other tree.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+
+from .task_space import interpolate_task, pose_from_xi
+
+if TYPE_CHECKING:   # the planner and its tree; imported only for the type checker (tcbirrt imports this module)
+    from .base import Deadline
+    from .tcbirrt import TCBiRRT, _TaskTree
+
+__all__ = ["closest_pair", "frontier_graft"]
+
+
+def closest_pair(tree: _TaskTree, other: _TaskTree, rng: np.random.Generator, pairs: int) -> tuple[int, int]:
+    """The closest in ξ of ``pairs`` pairs (a random live node j of ``other``, the node i of ``tree``
+    nearest it): ``(i, j)``. A tournament: biased toward where the trees come closest, not always the same pair."""
+    live = np.flatnonzero(other.alive[:other.n]) if other.alive is not None else np.arange(other.n)
+    best, out = np.inf, (0, 0)
+    for j in live[rng.integers(live.size, size=pairs)]:
+        i = tree.nearest(other.xi[int(j)])
+        d = float(np.linalg.norm(tree.xi[i] - other.xi[int(j)]))
+        if d < best:
+            best, out = d, (int(i), int(j))
+    return out
+
+
+def frontier_graft(pl: TCBiRRT, tree: _TaskTree, other: _TaskTree, deadline: Deadline, st: dict[str, Any]) -> int | None:
+    """One frontier-graft attempt of ``tree`` toward ``other`` (module docstring). The new node one step
+    beyond the graft, or None."""
+    o, ck, kin, rng = pl.options, pl.checker, pl.kin, pl._rng
+    i, j = closest_pair(tree, other, rng, o.frontier_pairs)
+    d = other.xi[j] - tree.xi[i]
+    dist = float(np.linalg.norm(d))
+    if dist <= 1e-9 or (o.frontier_radius and dist > o.frontier_radius):
+        return None
+    st["frontier_attempts"] = st.get("frontier_attempts", 0) + 1
+    R, p = tree.pose[i]
+    q_i = tree.q[i]
+    xi_s = other.xi[j].copy() if dist <= pl.step_size else tree.xi[i] + (pl.step_size / dist) * d
+    Rs, ps = pose_from_xi(xi_s)
+    poses = interpolate_task(R, p, Rs, ps, o.n_interp, o.interpolation)
+    twins = [tree.q[k] for k in tree.twins.get(i, [i])]
+    step = cast(float, o.max_joint_step)   # resolved from the variant
+    for _ in range(o.frontier_seeds):
+        if deadline.expired():
+            return None
+        x, its = kin.ik(rng.uniform(pl.robot.lower, pl.robot.upper), R, p, o.ik)
+        st["ik_iterations"] += its
+        if x is None:
+            continue
+        cands = []
+        for idx in kin.idx:   # one arm re-grasps (the other keeps its configuration), then both
+            y = q_i.copy()
+            y[idx] = x[idx]
+            cands.append(y)
+        cands.append(x)
+        for y in cands:
+            if any(float(np.abs(y - t).max()) <= step for t in twins):
+                continue   # the node's own configuration (or one of its grafts'), give or take a restart
+            if not ck.in_limits(y) or not ck.is_valid(y):
+                continue
+            Q = pl.path_ik(poses, y, st)   # the look-ahead: one constrained step toward the other tree
+            if not Q or len(Q) < len(poses):
+                st["frontier_lookahead_failures"] = st.get("frontier_lookahead_failures", 0) + 1
+                continue
+            reg = pl.regrasp(q_i, y, R, p, rng, deadline.sub(o.graft_time_limit), st)
+            if reg is None:
+                st["frontier_regrasp_failures"] = st.get("frontier_regrasp_failures", 0) + 1
+                continue
+            st["frontier_grafts"] = st.get("frontier_grafts", 0) + 1
+            g = tree.add_graft(i, y, reg)
+            return tree.add(Q[-1], xi_s, Rs, ps, g, Q[:-1], poses[:-1])
+    return None

@@ -1,0 +1,132 @@
+"""Frontier grafts of TCBiRRT (:mod:`optplan.planners.frontier_graft`): at a tree's frontier the arms re-grasp
+into an IK solution from which a constrained step toward the other tree passes. Checked against
+Pinocchio FK (the closed chain), the checker's exact collision queries at every configuration and the
+bench's 1 cm sweep spacing along every straight edge."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
+from optplan.planners import TCBiRRT, TCBiRRTOptions
+from optplan.planners.base import Deadline
+from optplan.planners.frontier_graft import closest_pair, frontier_graft
+from optplan.planners.rrtconnect import edge_is_valid
+from optplan.planners.task_space import xi_from_pose
+from optplan.planners.tcbirrt import _TaskTree
+from optplan.planners.validity import ValidityChecker
+from optplan.scene import Scene
+
+SWEEP = 0.01   # [m] the bench's sweep spacing (no point of the robot or object moves farther between checks)
+
+
+@pytest.fixture(scope="module")
+def truss(tcb):
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load("hard_truss")
+    ck = ValidityChecker(tcb, scene)
+    kin = ClosedChainKinematics(tcb, scene.object.grasps)
+    return scene, ck, kin, TrialGenerator(tcb, scene).generate(6, 0)
+
+
+def _tree(kin, q):
+    M = kin.object_pose(q)
+    return _TaskTree(q, xi_from_pose(M), M.rotation.copy(), M.translation.copy())
+
+
+def test_closest_pair_is_the_closest_of_the_sampled_pairs(tcb, truss, rng):
+    scene, ck, kin, t = truss
+    a, b = _tree(kin, t.q_start), _tree(kin, t.q_goal)
+    for _ in range(30):   # random nodes (poses only matter here)
+        q = rng.uniform(tcb.lower, tcb.upper)
+        for tr in (a, b):
+            M = kin.object_pose(q)
+            xi = xi_from_pose(M) + rng.normal(0.0, 0.5, 6)
+            tr.add(q, xi, M.rotation, M.translation, 0, [], [])
+    i, j = closest_pair(a, b, np.random.default_rng(1), pairs=10_000)   # every node of b sampled: the closest pair
+    D = np.linalg.norm(a.xi[:a.n, None] - b.xi[None, :b.n], axis=2)
+    assert D[i, j] == pytest.approx(D.min())
+
+
+def test_frontier_graft_regrasps_into_a_configuration_that_steps_toward_the_other_tree(tcb, truss):
+    """From the start of a truss trial toward its goal: the new node lies one step (``step_size`` in ξ) toward
+    the goal tree's root, below a graft at the start's pose whose configuration closes the chain, is free and is
+    not the start's (beyond one restart's joint step); the graft's regrasp motions each move one arm with the
+    object fixed, and every edge (regrasp motions and the constrained step) passes the 1 cm sweep check."""
+    scene, ck, kin, t = truss
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", frontier_grafts=4), checker=ck, kinematics=kin)
+    pl._rng = np.random.default_rng(3)
+    a, b = _tree(kin, t.q_start), _tree(kin, t.q_goal)
+    st = {"ik_iterations": 0, "ik_calls": 0, "ik_failures": 0, "ik_jumps": 0, "collisions": 0, "ik_restarts": 0,
+          "edge_checks": 0, "edge_collisions": 0, "regrasp_attempts": 0, "regrasp_failures": 0, "regrasp_nodes": 0}
+    n = None
+    for _ in range(10):
+        n = frontier_graft(pl, a, b, Deadline(5.0, "cpu"), st)
+        if n is not None:
+            break
+    assert n is not None, st
+    g = int(a.parent[n])
+    assert g in a.graft and a.parent[g] == 0 and np.array_equal(a.xi[g], a.xi[0])
+    y = a.q[g]
+    assert float(np.abs(y - t.q_start).max()) > pl.options.max_joint_step
+    d = b.xi[0] - a.xi[0]
+    assert np.allclose(a.xi[n], a.xi[0] + pl.step_size * d / np.linalg.norm(d), atol=1e-9)
+    w_fixed, w_held = ck.sweep_weights("fixed", per_geometry=True), ck.sweep_weights("held", per_geometry=True)
+    M0 = kin.object_pose(t.q_start)
+    prev = t.q_start
+    for arm, full in a.graft[g]:
+        idx = kin.idx[kin.arm_names.index(arm)]
+        other = np.setdiff1d(np.arange(tcb.nq), idx)
+        assert np.allclose(full[0], prev) and all(np.array_equal(x[other], prev[other]) for x in full)
+        for x0, x1 in zip(full[:-1], full[1:]):
+            assert edge_is_valid(x0, x1, lambda z: ck.is_valid_object_fixed(z, M0), SWEEP, weights=w_fixed)
+        prev = full[-1]
+    assert np.allclose(prev, y)
+    qs = [y, *a.edge[n][0], a.q[n]]
+    for q in qs:   # both hands on the object (Pinocchio FK) and free
+        assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q) and ck.in_limits(q)
+    for x0, x1 in zip(qs[:-1], qs[1:]):
+        assert edge_is_valid(x0, x1, ck.is_valid, SWEEP, weights=w_held)
+    assert st["frontier_grafts"] == 1 and st["frontier_attempts"] >= 1
+
+
+def test_frontier_options_are_checked():
+    assert TCBiRRTOptions(variant="improved").frontier_grafts == 4 and TCBiRRTOptions().frontier_grafts == 0
+    for bad in (dict(frontier_grafts=-1), dict(frontier_interval=0), dict(frontier_seeds=0), dict(frontier_pairs=0),
+                dict(frontier_radius=-0.1),
+                dict(graft_node="frontier"), dict(graft_branch_seeds=1)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            TCBiRRTOptions(**bad)
+
+
+def test_planner_with_frontier_grafts_returns_a_verified_path(tcb, truss):
+    """The search with frontier grafts from iteration 50 (``graft_after=0``; branch grafts off) on a truss trial
+    whose trees stop at the grid from either side: a path from start to goal whose constrained configurations
+    close the chain (Pinocchio FK) and are free, every straight edge passes the bench's independent 1 cm sweep
+    check, and each regrasp segment moves one arm with the object still."""
+    from optplan.bench.tcbirrt import _path_checks
+    from optplan.trials import TrialGenerator
+
+    scene, ck, kin, _ = truss
+    t = TrialGenerator(tcb, scene).generate(18, 0)
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", graft_after=0, branch_grafts=0), checker=ck,
+                 kinematics=kin)
+    res = pl.plan(t.q_start, t.q_goal, time_limit=30.0, seed=t.seed, clock="cpu")
+    assert res.success, res.message
+    assert res.stats["frontier_attempts"] >= 1 and res.stats["grafts"] == 0
+    assert np.allclose(res.path[0], t.q_start) and np.allclose(res.path[-1], t.q_goal)
+    for q, c in zip(res.path, res.constrained):
+        assert ck.in_limits(q)
+        if c:
+            assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q)
+    chk = _path_checks(tcb, scene, ck, res)
+    assert chk["swept_invalid_edges"] == 0 and chk["max_closed_chain_residual"] <= 1e-6
+    regs = [s for s in res.segments if s.kind == "regrasp"]
+    assert len(regs) == res.n_regrasp >= 2
+    for s in regs:
+        P = res.path[s.start:s.stop + 1]
+        moved = [a for a, idx in zip(kin.arm_names, kin.idx) if np.ptp(P[:, idx], axis=0).max() > 0]
+        assert moved == [s.arm]
+        for M in res.object_poses[s.start:s.stop + 1]:
+            assert np.allclose(M.homogeneous, s.object_pose.homogeneous)
