@@ -436,6 +436,24 @@ def test_extract_puts_a_grafts_regrasps_into_the_path(robot, rng, a_is_start):
 BELOW_TARGET: dict[str, str] = {"hard_truss": "0.97 with frontier grafts (261 of 270 in nine runs); 28/30 wants 0.99"}
 
 
+def _clean_successes(robot, scene_name: str, n: int) -> int:
+    """Trials 0 … n−1 (seed 0) the improved variant solves within 10 s of CPU time with every edge
+    passing the bench's independent 1 cm sweep check."""
+    from optplan.bench.tcbirrt import _path_checks
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load(scene_name)
+    gen = TrialGenerator(robot, scene)
+    ck = ValidityChecker(robot, scene)
+    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved"), checker=ck)
+    ok = 0
+    for i in range(n):
+        t = gen.generate(i, 0)
+        res = pl.plan(t.q_start, t.q_goal, time_limit=10.0, seed=t.seed, clock="cpu")
+        ok += bool(res.success and _path_checks(robot, scene, ck, res)["swept_invalid_edges"] == 0)
+    return ok
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(reason=f"below target: {BELOW_TARGET[n]}",
                                                                           strict=False))
@@ -444,18 +462,8 @@ def test_improved_variant_success_rate(robot, name):
     """30 seeded trials per scene (seed 0, trials 0-29): the improved variant returns, within 10 s
     of CPU time, a path whose every edge passes the bench's independent 1 cm sweep check in >= 28
     (a true rate of 0.99 passes with probability 0.997, a true rate of 0.9 with 0.41)."""
-    from optplan.bench.tcbirrt import _path_checks
-    from optplan.trials import TrialGenerator
-
-    scene = Scene.load(name)
-    gen = TrialGenerator(robot, scene)
-    ck = ValidityChecker(robot, scene)
-    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved"), checker=ck)
-    n, ok = 30, 0
-    for i in range(n):
-        t = gen.generate(i, 0)
-        res = pl.plan(t.q_start, t.q_goal, time_limit=10.0, seed=t.seed, clock="cpu")
-        ok += res.success and _path_checks(robot, scene, ck, res)["swept_invalid_edges"] == 0
+    n = 30
+    ok = _clean_successes(robot, name, n)
     assert ok >= 28, f"{name}: {ok}/{n}"
 
 
@@ -466,18 +474,7 @@ def test_improved_variant_truss_rate(robot):
     with the improved variant's frontier grafts, 30/30 twice in the bench afterwards, 27 and 26 of 30 in this file's
     two tests on the merged main beside another job; 22-25/30 without them (a true rate of 0.97 passes with
     probability 0.99, the 0.78 without frontier grafts with 0.18). A regression bar below the suite's 28."""
-    from optplan.bench.tcbirrt import _path_checks
-    from optplan.trials import TrialGenerator
-
-    scene = Scene.load("hard_truss")
-    gen = TrialGenerator(robot, scene)
-    ck = ValidityChecker(robot, scene)
-    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved"), checker=ck)
-    ok = 0
-    for i in range(30):
-        t = gen.generate(i, 0)
-        res = pl.plan(t.q_start, t.q_goal, time_limit=10.0, seed=t.seed, clock="cpu")
-        ok += res.success and _path_checks(robot, scene, ck, res)["swept_invalid_edges"] == 0
+    ok = _clean_successes(robot, "hard_truss", 30)
     assert ok >= 26, f"hard_truss: {ok}/30"
 
 
@@ -485,16 +482,5 @@ def test_improved_variant_truss_rate(robot):
 @pytest.mark.parametrize("name", ["ssps_scene1", "ssps_scene2", "ssps_scene3"])
 def test_improved_variant_ssps_scenes(robot, name):
     """The three SSPS scenes of the TCBiRRT paper: 100 seeded trials, all solved with clean edges."""
-    from optplan.bench.tcbirrt import _path_checks
-    from optplan.trials import TrialGenerator
-
-    scene = Scene.load(name)
-    gen = TrialGenerator(robot, scene)
-    ck = ValidityChecker(robot, scene)
-    pl = TCBiRRT(robot, scene, TCBiRRTOptions(variant="improved"), checker=ck)
-    ok = 0
-    for i in range(100):
-        t = gen.generate(i, 0)
-        res = pl.plan(t.q_start, t.q_goal, time_limit=10.0, seed=t.seed, clock="cpu")
-        ok += res.success and _path_checks(robot, scene, ck, res)["swept_invalid_edges"] == 0
+    ok = _clean_successes(robot, name, 100)
     assert ok == 100, f"{name}: {ok}/100"

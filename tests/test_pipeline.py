@@ -184,10 +184,10 @@ def test_fixed_normal_failure_falls_back_to_free_normals(tcb, monkeypatch):
     assert [a.status.value for a in results[0].solution.attempts] == ["Infeasible_Problem_Detected", "Solve_Succeeded"]
 
 
-def test_spline_segment_retry_policy(tcb, monkeypatch):
-    """The B-spline path's ordered retries (fake solves and reports: the logic only): a contact coal
-    finds after a converged solve → re-solve with more pairs; a closed-chain residual above the
-    tolerance → a finer grid warm-started from the solution; each attempt is recorded in order."""
+def _fake_policy(tcb, monkeypatch, reports):
+    """Scene 1's first constrained segment, with SplineSegmentProblem.solve and verify faked: each
+    solve converges in 7 iterations at its initial guess, each verify returns the next (clearance,
+    closed-chain residual) of ``reports``. Returns (scene, segment path, intervals of every solve)."""
     from types import SimpleNamespace
 
     import optplan.pipeline as PL
@@ -197,8 +197,8 @@ def test_spline_segment_retry_policy(tcb, monkeypatch):
     sc, plan = _scene1_plan(tcb)
     seg = next(s for s in plan.segments if s.kind == "constrained")
     seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
-    reports = iter([(-0.01, 1e-7), (0.01, 5e-6), (0.01, 2e-7)])  # (clearance, closed-chain residual)
-    Ns = []
+    reports = iter(reports)
+    Ns: list[int] = []
 
     def fake_solve(self, ipopt=None, **kw):
         Ns.append(self.N)
@@ -213,6 +213,16 @@ def test_spline_segment_retry_policy(tcb, monkeypatch):
 
     monkeypatch.setattr(SplineSegmentProblem, "solve", fake_solve)
     monkeypatch.setattr(PL, "verify", fake_verify)
+    return sc, seg_path, Ns
+
+
+def test_spline_segment_retry_policy(tcb, monkeypatch):
+    """The B-spline path's ordered retries (fake solves and reports: the logic only): a contact coal
+    finds after a converged solve → re-solve with more pairs; a closed-chain residual above the
+    tolerance → a finer grid warm-started from the solution; each attempt is recorded in order."""
+    import optplan.pipeline as PL
+
+    sc, seg_path, Ns = _fake_policy(tcb, monkeypatch, [(-0.01, 1e-7), (0.01, 5e-6), (0.01, 2e-7)])
     opts = PipelineOptions(shortcut_attempts=0)
     sol, rep, attempts = PL._spline_segment(tcb, sc, seg_path, "constrained", None, opts, {})
     assert [a["reason"] for a in attempts] == ["initial", "collision", "refine"]
@@ -227,31 +237,9 @@ def test_refinement_may_pass_the_interval_cap_and_its_contacts_are_fixed(tcb, mo
     """A segment at ``spline_max_intervals`` whose closed chain drifts between knots is refined
     beyond the cap (up to ``spline_refine_max_intervals``), and a contact coal finds in the refined
     solution gets its collision re-solve (fake solves and reports: the policy only)."""
-    from types import SimpleNamespace
-
     import optplan.pipeline as PL
-    from optplan.problem.segment import SplineSegmentProblem
-    from optplan.problem.solution import IpoptStatus, Solution
 
-    sc, plan = _scene1_plan(tcb)
-    seg = next(s for s in plan.segments if s.kind == "constrained")
-    seg_path = np.asarray(plan.path[seg.start:seg.stop + 1])
-    reports = iter([(0.01, 5e-6), (-0.01, 2e-7), (0.01, 2e-7)])  # (clearance, closed-chain residual)
-    Ns = []
-
-    def fake_solve(self, ipopt=None, **kw):
-        Ns.append(self.N)
-        Q = self.knot_configurations()
-        z = np.zeros_like(Q)
-        return Solution(True, IpoptStatus.SOLVE_SUCCEEDED, 7, 0.1, 1.0, 0.0, {}, np.linspace(0, self.T, self.N + 1),
-                        Q, z, z, z[:-1], tcb.joint_names, setup_time=0.05)
-
-    def fake_verify(robot, sol, scene, closed_chain=None, object_arm=None):
-        c, r = next(reports)
-        return SimpleNamespace(min_clearance_m=c, max_closed_chain_residual=r, min_clearance_pair="x")
-
-    monkeypatch.setattr(SplineSegmentProblem, "solve", fake_solve)
-    monkeypatch.setattr(PL, "verify", fake_verify)
+    sc, seg_path, Ns = _fake_policy(tcb, monkeypatch, [(0.01, 5e-6), (-0.01, 2e-7), (0.01, 2e-7)])
     opts = PipelineOptions(shortcut_attempts=0, spline_min_intervals=30, spline_max_intervals=30,
                            spline_refine_max_intervals=60)
     sol, rep, attempts = PL._spline_segment(tcb, sc, seg_path, "constrained", None, opts, {})
