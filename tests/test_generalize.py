@@ -202,6 +202,41 @@ def test_trial_perturbation_scales_with_reach(panda):
     assert 0.3 < _reach_scale(panda) < 0.45  # Panda trials: 0.2 m × that, unless the scene sets its range
 
 
+@needs_panda
+def test_panda_bar_witness_is_feasible_and_the_straight_line_is_not(panda):
+    """``panda_bar``: the nominal start and goal hold the box; IK continuation from the start
+    (box straight up, then forward to the goal) is collision-free by coal at every pose and ends at
+    the scene's goal configuration (one IK branch: no regrasp needed); the straight line collides."""
+    from optplan.collision.checker import CollisionChecker
+    from optplan.constraints.closed_chain import closure_error
+    from optplan.planners.task_space import interpolate_task
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load("panda_bar")
+    tg = TrialGenerator(panda, scene)
+    qs, qg = tg.q_nominal["q_start"], tg.q_nominal["q_goal"]
+    assert max(closure_error(panda, scene.object.grasps, qs)) <= 1e-6
+    assert max(closure_error(panda, scene.object.grasps, qg)) <= 1e-6
+    checker = CollisionChecker(panda, scene)
+    S, G = scene.start, scene.goal
+    up = pin.SE3(S.rotation, np.array([S.translation[0], S.translation[1], G.translation[2]]))
+
+    def follow(poses):
+        q, path = qs.copy(), [qs.copy()]
+        for A, B in zip(poses[:-1], poses[1:]):
+            for R, p in interpolate_task(A.rotation, A.translation, B.rotation, B.translation, 40):
+                q2, _ = tg.kin.ik(q, R, p, tg.ik)
+                assert q2 is not None and np.abs(q2 - q).max() < 0.3, "IK continuation left its branch"
+                q = q2
+                path.append(q.copy())
+        return path
+
+    witness = follow([S, up, G])
+    assert min(checker.min_distance(q)[0] for q in witness) > 0.02
+    assert np.abs(witness[-1] - qg).max() < 1e-3   # the scene's goal configuration: same branch
+    assert min(checker.min_distance(q)[0] for q in follow([S, G])) < -0.02
+
+
 def test_pipeline_verified_on_a_stress_scene():
     """A scene the optimizer was not tuned on (capsule bars, a sphere, a 180° roll of the module):
     plan -> optimize -> verify succeeds, checked independently here (coal clearance, FK closure)."""
