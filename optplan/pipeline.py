@@ -495,7 +495,7 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     checker = CollisionChecker(robot, scene)
     planner = make_planner(opts.planner, robot, scene, **opts.planner_kwargs())
     t0 = time.perf_counter()
-    plan = planner.plan(q_start, q_goal, time_limit=opts.plan_time_limit, seed=seed)
+    plan = planner.plan(q_start, q_goal, time_limit=opts.plan_time_limit, seed=seed, clock=opts.plan_clock)
     res = PipelineResult(plan=plan, plan_time_s=float(plan.stats.get("time_s", time.perf_counter() - t0)),
                          joint_names=robot.joint_names, closed_chain_tol=opts.closed_chain_tol)
     if not plan.success:
