@@ -370,12 +370,21 @@ class CollisionModel:
                 out.add(i)
         return out
 
-    def is_constant(self, robot: RobotModel, pair: Pair, fixed: frozenset[int]) -> bool:
+    def is_constant(self, robot: RobotModel, pair: Pair, fixed: frozenset[int],
+                    rigid_arms: Sequence[str] = ()) -> bool:
         """True when the pair's distance cannot change: neither entity depends on a free joint and,
-        for a floating base, the pair does not involve the (world-fixed) obstacles."""
+        for a floating base, the pair does not involve the (world-fixed) obstacles; or the pair is
+        the held object and a robot geometry on the same rigid body as the hand of one of
+        ``rigid_arms`` (the arms holding the object in this NLP: the object's own arm, and the
+        other one where the closed chain holds — e.g. a wrist link just behind a grasping hand)."""
+        ka, kb = self.kinds(pair)
+        if rigid_arms and {ka, kb} == {"object", "robot"}:
+            g = pair.b if kb == "robot" else pair.a
+            jid = robot.collision_model.geometryObjects[g].parentJoint
+            if any(robot.model.frames[robot.arm(a).ee_frame_id].parentJoint == jid for a in rigid_arms):
+                return True
         if not fixed:
             return False
-        ka, kb = self.kinds(pair)
         if robot.is_floating and "obstacle" in (ka, kb):
             return False
         fa = self.free_joints_of(robot, ka, pair.a, fixed)

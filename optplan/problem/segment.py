@@ -334,7 +334,11 @@ class SplineSegmentProblem:
         traj = NumericTrajectory(robot, Qk, Qk, Qk, Qk[:-1], self.T)
         active = col.activate(robot, traj)
         pinned = {0: self.q0, N: self.q1}
-        const = [p for p in active if col.is_constant(robot, p, self.fixed)]
+        # arms holding the object here: its own arm and, under the closed chain, the other one too;
+        # the object keeps its distance to the geometry that rides on their hands (verify checks it)
+        cc = self.spec.closed_chain
+        rigid = [col.checker.object_arm] + ([cc.arm_a, cc.arm_b] if cc is not None else [])
+        const = [p for p in active if col.is_constant(robot, p, self.fixed, rigid)]
         active = [p for p in active if p not in const]
         col.active_pairs = active
         col.constant_pairs = const
