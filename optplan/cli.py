@@ -488,7 +488,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit [s]")
     pl.add_argument("--clock", choices=["wall", "cpu"], default="wall",
                     help="the planning time limit in wall-clock seconds (default) or CPU seconds of the planner "
-                         "(the same seed then gives the same plan however busy the machine is)")
+                         "(a seeded plan then hardly depends on how busy the machine is)")
     pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
     pl.add_argument("--compile-kernels", action="store_true",
                     help="compile the optimizer's kernels to C where an earlier run has not (once per robot and "

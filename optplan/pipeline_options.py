@@ -39,7 +39,8 @@ class PipelineOptions:
     #: Time limit of the planner [s].
     plan_time_limit: float = 10.0
     #: The clock of ``plan_time_limit`` and of the planner's inner budgets: ``"wall"`` (elapsed time) or
-    #: ``"cpu"`` (this process's CPU time: a seeded plan then does not depend on what else the machine runs).
+    #: ``"cpu"`` (this process's CPU time: a seeded plan then hardly depends on what else the machine runs; the
+    #: planner's own budgets still end at a CPU time, not at an iteration count).
     plan_clock: str = "wall"
     #: Random task-space shortcuts tried per constrained segment [count].
     shortcut_attempts: int = 40
