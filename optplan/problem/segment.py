@@ -650,7 +650,13 @@ class SplineSegmentProblem:
                     # manifold; one long segment accepted a step to a closed-chain residual of 3.3 and
                     # never came back (200 iterations; with 10: 50 iterations, verified;
                     # docs/decisions/0015)
-                    "ipopt.theta_max_fact": 10.0}
+                    "ipopt.theta_max_fact": 10.0,
+                    # perturb_always_cd: IPOPT's permanent regularisation of the constraint block of
+                    # its KKT system (rank-deficient closed-chain rows next to the pinned ends). The
+                    # pipeline's default since it was measured on its segments (decision 0002); the
+                    # problem's own default too since the transport example (N = 50) went from 32
+                    # iterations (20 inertia corrections) to 20 (docs/decisions/0015)
+                    "ipopt.perturb_always_cd": "yes"}
         okey = repr(sorted(sopts.casadi_options(defaults).items()))
         setup = time.perf_counter() - t_setup + b.setup_time   # the NlpSolver adds its own creation time
         b.setup_time = 0.0
