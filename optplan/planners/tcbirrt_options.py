@@ -28,7 +28,7 @@ VARIANTS = {
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
-                 "regrasp_both_arms": True, "regrasp_backoff": True},
+                 "regrasp_both_arms": False, "regrasp_backoff": True},
 }
 
 
@@ -101,7 +101,8 @@ class TCBiRRTOptions:
     regrasp_time_limit: float = 2.0
     #: When neither one-arm-at-a-time order of a regrasp passes, move both arms at once (RRTConnect in the two
     #: arms' joints, the object standing still at its pose: a released object in orbit stays where it is), in
-    #: what is left of the regrasp's time (None: the variant's value, :data:`VARIANTS`: paper off, improved on).
+    #: what is left of the regrasp's time (None: the variant's value, :data:`VARIANTS`: off in both; a path with such a
+    #: motion has a ``"regrasp"`` segment whose ``arm`` is :data:`.BOTH_ARMS`).
     regrasp_both_arms: bool | None = None
     #: Halve a regrasp's time limit after each failed regrasp of the query, down to ``regrasp_min_time_limit``; a
     #: successful regrasp restores ``regrasp_time_limit`` (None: the variant's value: paper off, improved on).
