@@ -111,7 +111,7 @@ def test_variants_regrasp_options():
 
     paper, improved = TCBiRRTOptions(), TCBiRRTOptions(variant="improved")
     assert (paper.regrasp_backoff, paper.regrasp_both_arms) == (False, False)
-    assert (improved.regrasp_backoff, improved.regrasp_both_arms) == (True, False)
+    assert (improved.regrasp_backoff, improved.regrasp_both_arms) == (False, False)
     with pytest.raises(ValueError, match="regrasp_min_time_limit"):
         TCBiRRTOptions(regrasp_min_time_limit=0.0)
     with pytest.raises(ValueError, match="regrasp_both_arms"):

@@ -28,7 +28,7 @@ VARIANTS = {
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
-                 "regrasp_both_arms": False, "regrasp_backoff": True},
+                 "regrasp_both_arms": False, "regrasp_backoff": False},
 }
 
 
@@ -105,7 +105,7 @@ class TCBiRRTOptions:
     #: motion has a ``"regrasp"`` segment whose ``arm`` is :data:`.BOTH_ARMS`).
     regrasp_both_arms: bool | None = None
     #: Halve a regrasp's time limit after each failed regrasp of the query, down to ``regrasp_min_time_limit``; a
-    #: successful regrasp restores ``regrasp_time_limit`` (None: the variant's value: paper off, improved on).
+    #: successful regrasp restores ``regrasp_time_limit`` (None: the variant's value: off in both; see docs/generalization.md).
     regrasp_backoff: bool | None = None
     #: Smallest regrasp time limit of ``regrasp_backoff`` [s].
     regrasp_min_time_limit: float = 0.05
