@@ -9,13 +9,12 @@ import pytest
 from optplan.collision.checker import CollisionChecker
 from optplan.constraints.closed_chain import ClosedChainKinematics
 from optplan.errors import ConfigurationError
+from optplan.model.example_robots import example_robot_data_dir
 from optplan.planners import make_planner
 from optplan.planners.base import BOTH_ARMS, Deadline, PlanStatus
 from optplan.planners.validity import ValidityChecker
 from optplan.scene import Scene
 from optplan.trials import TrialGenerator
-
-from optplan.model.example_robots import example_robot_data_dir
 
 _ERD = example_robot_data_dir()
 needs_panda = pytest.mark.skipif(_ERD is None or not (_ERD / "robots/panda_description/urdf/panda_collision.urdf").exists(),
@@ -127,8 +126,12 @@ def test_regrasp_backoff_halves_the_time_limit_after_each_failure(tcb):
         pl = make_planner("tcbirrt", tcb, scene, variant="improved", regrasp_backoff=backoff,
                           regrasp_time_limit=0.8, regrasp_min_time_limit=0.15)
         M, x = _other_solution(pl, tr.q_start, rng)
-        seen = []
-        pl._regrasp_orders = lambda *a, **k: seen.append(a[5].limit)   # records the budget, fails
+        seen: list[float] = []
+
+        def record(*a, seen=seen, **k):   # records the budget, fails
+            seen.append(a[5].limit)
+
+        pl._regrasp_orders = record
         st = _st()
         for _ in range(4):
             assert pl.regrasp(tr.q_start, x, M.rotation, M.translation, rng, Deadline(60.0), st) is None
