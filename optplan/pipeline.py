@@ -188,7 +188,7 @@ def _regrasp_scene(robot: RobotModel, scene: Scene, seg_path: np.ndarray, arm: s
     if arm == BOTH_ARMS:
         first = next(iter(obj.grasps))
         M = object_pose(robot, scene, np.asarray(seg_path[0], float), first, robot.model.createData())
-        fixed = Obstacle("object", "box", M, size=tuple(obj.size), exclude_links=tuple(obj.exclude_links))
+        fixed = Obstacle("object", "box", M, size=(float(obj.size[0]), float(obj.size[1]), float(obj.size[2])), exclude_links=tuple(obj.exclude_links))
         return dataclasses.replace(scene, obstacles=(*scene.obstacles, fixed), object=None), None
     holder = next(a for a in obj.grasps if a != arm)
     if lo is not None and hi is not None:

@@ -296,11 +296,12 @@ class CollisionModel:
                 self.robot_shape[g] = (o.parentFrame, D.Box(tuple(np.asarray(geo.halfSide))), M)
             else:
                 self.robot_shape[g] = None
-        obj = self.checker.object
+        obj, holder = self.checker.object, self.checker.object_arm
         if obj is not None:
+            assert holder is not None  # a checker with an object has its holding arm
             self._obj_caps = object_capsules(obj.size, self.object_grid)
-            self.grasp_inv = obj.grasps[self.checker.object_arm].inverse()
-            self._hand_frame = robot.arm(self.checker.object_arm).ee_frame
+            self.grasp_inv = obj.grasps[holder].inverse()
+            self._hand_frame = robot.arm(holder).ee_frame
 
     # ------------------------------------------------------------------ activation (read by the segment NLP)
     def activate(self, robot: RobotModel, initial: NumericTrajectory | None) -> list[Pair]:
@@ -354,6 +355,7 @@ class CollisionModel:
             return set()
         m = robot.model
         if kind == "object":
+            assert self.checker.object_arm is not None  # an "object" entity exists only with a held object
             jid = m.frames[robot.arm(self.checker.object_arm).ee_frame_id].parentJoint
         else:
             jid = robot.collision_model.geometryObjects[idx].parentJoint

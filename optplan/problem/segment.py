@@ -249,7 +249,7 @@ class SplineSegmentProblem:
         return self.M["q"] @ self._P(X)
 
     # ------------------------------------------------------------------ collision rows
-    def _entity(self, kind: str, idx: int, holder: str) -> tuple[int | None, np.ndarray, float]:
+    def _entity(self, kind: str, idx: int, holder: str | None) -> tuple[int | None, np.ndarray, float]:
         """(frame id or None, points 3 × m in that frame (world if None), radius) of an entity;
         an entity that depends on no free joint (an obstacle, the fixed base, a holding arm, the
         object it holds) comes back static: frame None and its world points."""
@@ -271,6 +271,7 @@ class SplineSegmentProblem:
             assert col.checker.object is not None  # an "object" entity exists only with a held object
             V = np.array(_box_vertices(np.asarray(col.checker.object.size) / 2)).T
             G = col.grasp_inv
+            assert holder is not None  # an "object" entity exists only with a held object
             fid, V, r = self.robot.arm(holder).ee_frame_id, G.rotation @ V + G.translation[:, None], 0.0
         else:
             spec = col.robot_shape.get(idx)
@@ -337,7 +338,7 @@ class SplineSegmentProblem:
         # arms holding the object here: its own arm and, under the closed chain, the other one too;
         # the object keeps its distance to the geometry that rides on their hands (verify checks it)
         cc = self.spec.closed_chain
-        rigid = [col.checker.object_arm] + ([cc.arm_a, cc.arm_b] if cc is not None else [])
+        rigid = [a for a in [col.checker.object_arm] + ([cc.arm_a, cc.arm_b] if cc is not None else []) if a is not None]
         const = [p for p in active if col.is_constant(robot, p, self.fixed, rigid)]
         active = [p for p in active if p not in const]
         col.active_pairs = active
