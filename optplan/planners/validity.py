@@ -92,6 +92,17 @@ def _bisection_fractions(n: int) -> np.ndarray:
     return f
 
 
+_ORDER_INDICES: dict[int, np.ndarray] = {}
+
+
+def _bisection_indices(n: int) -> np.ndarray:
+    """``k − 1`` for the ``k`` of :func:`_bisection_order` (same order): indices into the n − 1 interior points."""
+    f = _ORDER_INDICES.get(n)
+    if f is None:
+        f = _ORDER_INDICES[n] = np.array(_bisection_order(n), dtype=int) - 1
+    return f
+
+
 class ValidityChecker:
     """Boolean collision checks in C++ (see the module docstring).
 
@@ -414,8 +425,7 @@ class ValidityChecker:
         if self._pool:   # the same points in the same order, one batch call
             if not len(ts):
                 return True
-            order = np.asarray(_bisection_order(len(ts) + 1)) - 1
-            return self.first_invalid(a + ts[order][:, None] * d, mode, object_pose) < 0
+            return self.first_invalid(a + ts[_bisection_indices(len(ts) + 1)][:, None] * d, mode, object_pose) < 0
         for k in _bisection_order(len(ts) + 1):
             if not fn(a + ts[k - 1] * d):
                 return False
