@@ -56,7 +56,7 @@ def test_first_invalid_matches_reference_loop(setup, mode):
     one = {"held": ref.is_valid, "free": ref.is_valid_free,
            "fixed": lambda q: ref.is_valid_object_fixed(q, M)}[mode]
     hits = 0
-    for trial in range(60):
+    for _ in range(60):
         Q = _configs(robot, qs, rng, int(rng.integers(1, 12)), float(rng.choice([0.02, 0.1, 0.4])))
         expect = next((k for k, q in enumerate(Q) if not one(q)), -1)
         n0 = fast.n_checks
@@ -89,9 +89,10 @@ def test_edges_match_reference(setup):
         # one arm moving, the rest at a base configuration, the object still (a regrasp's edges)
         x, y = a[idx], b[idx]
 
-        def arm_ref(z, base=qs.copy()):
-            base[idx] = z
-            return ref.is_valid_object_fixed(base, M)
+        def arm_ref(z):
+            q = qs.copy()
+            q[idx] = z
+            return ref.is_valid_object_fixed(q, M)
 
         arm = fast.validity("fixed", M, base=qs, joints=idx)
         assert edge_is_valid(x, y, arm, 0.03) == edge_is_valid(x, y, arm_ref, 0.03)
