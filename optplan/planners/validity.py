@@ -23,6 +23,11 @@ Three modes:
   hand must not pass through it; at a grasp the hand links are ≥ 0.1 m from the object's faces),
 * ``is_valid_free(q)``: no object (plain joint-space planning).
 
+:meth:`ValidityChecker.first_invalid` checks many configurations of one mode in order, stopping at the
+first collision, in one call; :meth:`ValidityChecker.validity` wraps a mode (and optionally one arm
+moving while the rest of the robot stands still) as a function with that batch form, which
+:func:`optplan.planners.rrtconnect.edge_is_valid` uses for an edge's checkpoints.
+
 ``margin`` [m]: pairs closer than this count as colliding (coal's security margin).
 
 :meth:`ValidityChecker.sweep_weights` gives, per joint, an upper bound [m/rad] on how far any point
@@ -106,7 +111,12 @@ def _bisection_indices(n: int) -> np.ndarray:
 class ValidityChecker:
     """Boolean collision checks in C++ (see the module docstring).
 
-    Counters ``n_checks`` (all modes) are incremented on every call.
+    Counters ``n_checks`` (all modes) are incremented on every call (by the configurations checked for
+    a batch). ``broadphase``: a dynamic AABB tree in front of the narrow phase (only with
+    ``margin = 0``); ``batch``: the queries go through Pinocchio's batch collision API (a pool of one
+    broad-phase manager per mode, one thread) when this Pinocchio has it — the same verdicts, cheaper
+    per call, and :meth:`first_invalid` checks many configurations in one call; False: one
+    ``computeCollisions`` call per configuration.
     """
 
     def __init__(self, robot: RobotModel, scene: Scene | None = None, *, margin: float = 0.0,
