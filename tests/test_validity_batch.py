@@ -114,3 +114,32 @@ def test_validity_bad_input(setup):
         fast.first_invalid(qs, "held")
     with pytest.raises(ValueError, match="object_pose"):
         fast.first_invalid(qs[None, :], "fixed")
+
+
+def _bisection_reference(n):
+    """Coarse-to-fine interior points of 0..n, interval by interval (the former implementation)."""
+    out, seen, queue = [], {0, n}, [(0, n)]
+    while queue:
+        nxt = []
+        for lo, hi in queue:
+            if hi - lo < 2:
+                continue
+            mid = (lo + hi) // 2
+            if mid not in seen:
+                seen.add(mid)
+                out.append(mid)
+            nxt += [(lo, mid), (mid, hi)]
+        queue = nxt
+    return out
+
+
+def test_bisection_order_matches_reference():
+    from optplan.planners.validity import _bisection_fractions, _bisection_indices, _bisection_order
+
+    for n in [*range(0, 300), 511, 512, 513, 1000, 4097]:
+        ref = _bisection_reference(n)
+        assert _bisection_order(n) == ref
+        assert sorted(ref) == list(range(1, n))                      # every interior point once
+        if n >= 1:
+            assert np.array_equal(_bisection_fractions(n), np.array([k / n for k in ref], dtype=float))
+            assert np.array_equal(_bisection_indices(n), np.array(ref, dtype=int) - 1)
