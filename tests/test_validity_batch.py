@@ -143,3 +143,19 @@ def test_bisection_order_matches_reference():
         if n >= 1:
             assert np.array_equal(_bisection_fractions(n), np.array([k / n for k in ref], dtype=float))
             assert np.array_equal(_bisection_indices(n), np.array(ref, dtype=int) - 1)
+
+
+def test_without_batch_api_the_loop_answers_the_same(setup):
+    """A checker with a security margin has no broad phase and no batch pool: ``first_invalid`` and the
+    batch form of ``validity`` fall back to one query per row, with the same answers."""
+    robot, scene, fast, ref, qs, qg = setup
+    from optplan.planners.validity import ValidityChecker
+
+    ck = ValidityChecker(robot, scene, margin=0.01)
+    assert not ck._pool
+    rng = np.random.default_rng(9)
+    for _ in range(20):
+        Q = _configs(robot, qs, rng, 6, 0.3)
+        expect = next((k for k, q in enumerate(Q) if not ck.is_valid(q)), -1)
+        assert ck.first_invalid(Q, "held") == expect
+        assert ck.validity("held").first_invalid(Q) == expect
