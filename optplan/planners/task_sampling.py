@@ -21,7 +21,6 @@ costs microseconds where one ConstrainedExtend costs tenths of a millisecond or 
 from __future__ import annotations
 
 import math
-
 from typing import Any, cast
 
 import coal
