@@ -250,7 +250,8 @@ def _cmd_plan(args) -> int:
     t0 = time.perf_counter()
     try:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
-        opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, warm_start=not args.cold,
+        opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, plan_clock=args.clock,
+                               warm_start=not args.cold,
                                compile_kernels=True if args.compile_kernels else "auto", workers=args.workers,
                                planner_options=_plan_planner_options(planner, args.variant))
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
@@ -485,6 +486,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--variant", choices=["paper", "improved"], default="paper",
                     help="TCBiRRT variant: the paper's algorithm or the improved sampler (hard scenes)")
     pl.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit [s]")
+    pl.add_argument("--clock", choices=["wall", "cpu"], default="wall",
+                    help="the planning time limit in wall-clock seconds (default) or CPU seconds of the planner "
+                         "(a seeded plan then hardly depends on how busy the machine is)")
     pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
     pl.add_argument("--compile-kernels", action="store_true",
                     help="compile the optimizer's kernels to C where an earlier run has not (once per robot and "

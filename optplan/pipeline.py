@@ -4,7 +4,9 @@ object.
 1. **Plan** with a sampling planner (TCBiRRT by default) between two configurations that hold the
    object. Its path is split into segments: *constrained* (both hands on the object) and *regrasp*
    (the object stays where it is, held by one arm whose joints do not move, while the other arm
-   lets go, moves and grasps again — the TCBiRRT paper Section 4.3).
+   lets go, moves and grasps again — the TCBiRRT paper Section 4.3; or both arms let go and move
+   while the released object stands still where it is, ``arm`` =
+   :data:`~optplan.planners.base.BOTH_ARMS`).
 2. **Shortcut** each constrained segment: random pairs of its configurations are joined by the
    joint-space straight line projected onto the closed-chain manifold step by step; a shortcut is
    kept when it is collision free (coal) and shorter.
@@ -13,7 +15,8 @@ object.
 4. **Optimize** each segment with :class:`~optplan.problem.OptProblem`: rest at both ends, joint
    position and velocity limits, collision avoidance, minimum jerk, and either the closed chain
    (constrained) or the holding arm's joints fixed (regrasp; the object then stays put and is
-   checked for collisions where it is).
+   checked for collisions where it is; a both-arm regrasp has no joint fixed and the object as an
+   obstacle at its pose, B-spline transcription only).
 5. **Verify** every segment independently (Pinocchio + coal at 10× the knot density).
 
 The trajectory is the concatenation of the segments; ``constrained`` flags the samples where both
@@ -30,9 +33,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .collision.checker import CollisionChecker
+from .errors import ConfigurationError
 from .model.ik import IKOptions
 from .model.robot import RobotModel
 from .pipeline_options import PLANNER_DEFAULTS, PipelineOptions
+from .planners.base import BOTH_ARMS
 from .problem import ClosedChain, CollisionAvoidance, OptProblem
 from .problem.solution import Solution
 from .scene import Scene
@@ -170,6 +175,28 @@ def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind
     return prob, cc, holder
 
 
+def _regrasp_scene(robot: RobotModel, scene: Scene, seg_path: np.ndarray, arm: str | None,
+                   lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> tuple[Scene, str | None]:
+    """A regrasp segment's scene and holding arm. One arm moves: the other (returned) holds the object
+    and its joints are pinned in ``lo``/``hi`` to the segment's first configuration. Both move
+    (``arm`` = :data:`~optplan.planners.base.BOTH_ARMS`): no holder, no pinned joints; the object
+    stands still at its pose as an obstacle of the returned scene, which the links of the object's
+    ``exclude_links`` may touch (as the hands' links may in a one-arm regrasp)."""
+    from .scene import Obstacle
+
+    obj = _held_object(scene)
+    if arm == BOTH_ARMS:
+        first = next(iter(obj.grasps))
+        M = object_pose(robot, scene, np.asarray(seg_path[0], float), first, robot.model.createData())
+        fixed = Obstacle("object", "box", M, size=(float(obj.size[0]), float(obj.size[1]), float(obj.size[2])), exclude_links=tuple(obj.exclude_links))
+        return dataclasses.replace(scene, obstacles=(*scene.obstacles, fixed), object=None), None
+    holder = next(a for a in obj.grasps if a != arm)
+    if lo is not None and hi is not None:
+        idx = robot.arm(holder).j_idx
+        lo[idx] = hi[idx] = seg_path[0][idx]
+    return scene, holder
+
+
 def _cold_path(robot: RobotModel, scene: Scene, q0: np.ndarray, q1: np.ndarray, kind: str, n: int) -> np.ndarray:
     """Cold start: task-space straight line through IK (constrained) or the joint-space line."""
     if kind == "constrained":
@@ -251,9 +278,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         cc = ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
         step = opts.spline_interval_step
     else:  # regrasp: the holding arm's joints stay where they are, so the object does too
-        holder = next(a for a in arms if a != arm)
-        idx = robot.arm(holder).j_idx
-        lo[idx] = hi[idx] = seg_path[0][idx]
+        scene, holder = _regrasp_scene(robot, scene, seg_path, arm, lo, hi)
         step = opts.free_interval_step
     # the closed-chain rows hold per component to constr_viol_tol; verify measures the norm of the
     # position error (and the rotation angle), up to √3 times that: hold the rows to a quarter of
@@ -419,9 +444,10 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             c_short += time.process_time() - cs
         elif kind == "regrasp" and opts.warm_start and opts.free_shortcut_attempts > 0 and seg.arm is not None:
             ts, cs = time.perf_counter(), time.process_time()
-            holding = next(a for a in _held_object(scene).grasps if a != seg.arm)
+            seg_scene, holding = _regrasp_scene(robot, scene, seg_path, seg.arm)
             seg_path = shortcut_free(robot, scene, seg_path, free_rng, opts.free_shortcut_attempts,
-                                     CollisionChecker.shared(robot, scene, object_arm=holding))
+                                     CollisionChecker.shared(robot, seg_scene, object_arm=holding)
+                                     if seg_scene is scene else CollisionChecker(robot, seg_scene))
             t_short += time.perf_counter() - ts
             c_short += time.process_time() - cs
         jobs.append((seg_path, kind, seg.arm))
@@ -436,6 +462,9 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             t0 += sol.duration
         return (results, t_short, c_short, worker_cpu) if with_cpu else (results, t_short)
     for seg_path, kind, arm in jobs:
+        if arm == BOTH_ARMS:
+            raise ConfigurationError("a regrasp in which both arms move needs the B-spline transcription "
+                                     "(PipelineOptions.transcription='bspline')")
         fixed = opts.fixed_plane_normals
         prob, cc, holder = _segment_problem(robot, scene, seg_path, kind, arm, opts, fixed_normals=fixed)
         _initial_guess(robot, scene, prob, seg_path, cc, kind, opts)
@@ -495,7 +524,7 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     checker = CollisionChecker(robot, scene)
     planner = make_planner(opts.planner, robot, scene, **opts.planner_kwargs())
     t0 = time.perf_counter()
-    plan = planner.plan(q_start, q_goal, time_limit=opts.plan_time_limit, seed=seed)
+    plan = planner.plan(q_start, q_goal, time_limit=opts.plan_time_limit, seed=seed, clock=opts.plan_clock)
     res = PipelineResult(plan=plan, plan_time_s=float(plan.stats.get("time_s", time.perf_counter() - t0)),
                          joint_names=robot.joint_names, closed_chain_tol=opts.closed_chain_tol)
     if not plan.success:

@@ -38,6 +38,10 @@ class PipelineOptions:
     planner_options: tuple | None = None
     #: Time limit of the planner [s].
     plan_time_limit: float = 10.0
+    #: The clock of ``plan_time_limit`` and of the planner's inner budgets: ``"wall"`` (elapsed time) or
+    #: ``"cpu"`` (this process's CPU time: a seeded plan then hardly depends on what else the machine runs; the
+    #: planner's own budgets still end at a CPU time, not at an iteration count).
+    plan_clock: str = "wall"
     #: Random task-space shortcuts tried per constrained segment [count].
     shortcut_attempts: int = 40
     #: Random joint-space shortcuts tried per regrasp segment (the moving arm's path; 0: none) [count].
@@ -130,6 +134,8 @@ class PipelineOptions:
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
             raise ValueError(f"PipelineOptions: invalid values {self}")
+        if self.plan_clock not in ("wall", "cpu"):
+            raise ValueError(f"PipelineOptions.plan_clock: expected 'wall' or 'cpu', got {self.plan_clock!r}")
         if self.transcription not in ("bspline", "knots"):
             raise ValueError(f"PipelineOptions.transcription: expected 'bspline' or 'knots', got {self.transcription!r}")
         if not (self.spline_interval_step > 0 and 4 <= self.spline_min_intervals <= self.spline_max_intervals):

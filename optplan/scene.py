@@ -59,6 +59,9 @@ class Obstacle:
     size: tuple[float, float, float] | None = None
     radius: float | None = None
     length: float | None = None
+    #: robot links allowed to touch it (not checked against it), e.g. the hands at their grasps when a
+    #: released object stands still as an obstacle during a both-arm regrasp
+    exclude_links: tuple[str, ...] = ()
 
     def coal_geometry(self) -> coal.CollisionGeometry:
         if self.shape == "box":

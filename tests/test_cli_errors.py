@@ -139,3 +139,21 @@ def test_plan_robot_option_is_checked_against_the_scene(capsys):
     assert "unknown robot" in capsys.readouterr().err
     assert cli.main(["plan", "--scene", "1", "--robot", "eba_ffsr"]) == 2
     assert "made for robot 'tcbirrt_dual_arm'" in capsys.readouterr().err
+
+
+def test_plan_clock_reaches_the_pipeline_and_bad_values_are_refused(capsys, monkeypatch):
+    """``optplan plan --clock cpu`` plans on the CPU clock; an unknown clock is a usage error."""
+    import optplan.pipeline as pipeline
+
+    seen = {}
+
+    def fake(robot, scene, q_start, q_goal, options=None, seed=0):
+        seen["clock"] = options.plan_clock
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(pipeline, "run_pipeline", fake)
+    with pytest.raises(RuntimeError, match="stop here"):
+        cli.main(["plan", "--scene", "1", "--clock", "cpu"])
+    assert seen["clock"] == "cpu"
+    assert cli.main(["plan", "--scene", "1", "--clock", "moon"]) == 2
+    assert "moon" in capsys.readouterr().err

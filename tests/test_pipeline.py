@@ -64,19 +64,22 @@ def test_pipeline_result_reports_failed_plan_as_status():
 def test_options_validated():
     with pytest.raises(ValueError):
         PipelineOptions(n_intervals=1)
+    with pytest.raises(ValueError, match="plan_clock.*'sun'"):
+        PipelineOptions(plan_clock="sun")
 
 
 def test_pipeline_scene1_trial(tcb, tmp_path):
-    """The README's main job end to end (one trial of scene 1, ~15-30 s): planned, every segment
-    solved, the closed chain held to 1e-6 and positive clearance by the independent verify, and
-    the saved trajectory has the documented keys, with ``constrained`` false inside regrasps."""
+    """The README's main job end to end (one trial of scene 1, ~15-30 s): planned (on the CPU
+    clock: the planner gets the clock), every segment solved, the closed chain held to 1e-6 and
+    positive clearance by the independent verify, and the saved trajectory has the documented
+    keys, with ``constrained`` false inside regrasps."""
     from optplan.pipeline import run_pipeline
     from optplan.trials import TrialGenerator
 
     sc = Scene.load("ssps_scene1")
     tr = TrialGenerator(tcb, sc).generate(4, 0)
-    res = run_pipeline(tcb, sc, tr.q_start, tr.q_goal, PipelineOptions(), seed=int(tr.seed))
-    assert res.plan.success
+    res = run_pipeline(tcb, sc, tr.q_start, tr.q_goal, PipelineOptions(plan_clock="cpu"), seed=int(tr.seed))
+    assert res.plan.success and res.plan.stats["clock"] == "cpu"
     assert res.success, res.to_dict()
     assert res.max_closed_chain_residual <= 1e-6 and res.min_clearance_m >= 0.0
     assert res.q.shape[1] == tcb.nq and res.constrained.shape == res.t.shape

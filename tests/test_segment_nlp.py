@@ -200,6 +200,48 @@ def test_witness_planes_match_coal_pair_by_pair_and_separate(tcb, rng):
         chk.witness_planes(np.zeros(3), [0])
 
 
+def test_object_pairs_riding_on_a_holding_hand_are_constant_and_left_out(tcb, transport):
+    """Without the scene's hand-link exclusions, the object's pairs with geometry on a holding
+    hand's body (its parent joint is the hand frame's) are left out of the closed-chain NLP — and
+    coal confirms each keeps its distance along the closed-chain path; in a regrasp (no closed
+    chain) only the holder's stay out, the moving hand's are rows."""
+    import dataclasses
+
+    sc = dataclasses.replace(transport, object=dataclasses.replace(transport.object, exclude_links=()))
+    Q, cc = _straight_segment(tcb, sc)
+    hand_joint = {a: tcb.model.frames[tcb.arm(a).ee_frame_id].parentJoint for a in ("A", "B")}
+
+    def rides(p, arms):
+        geoms = tcb.collision_model.geometryObjects
+        g = [i for i, n in ((p.a, p.name_a), (p.b, p.name_b)) if n != "object"]
+        return len(g) == 1 and "object" in (p.name_a, p.name_b) and geoms[g[0]].parentJoint in {hand_joint[a] for a in arms}
+
+    spec = SegmentSpec(len(Q) - 1, 60.0, Q[0], Q[-1], cc, margin=0.02, object_arm="A", activation=0.5)
+    prob = SplineSegmentProblem(tcb, sc, spec)
+    prob.set_initial(Q)
+    prob._plan_collision(prob.knot_configurations())
+    const, active = prob.col.constant_pairs, prob.col.active_pairs
+    assert const and all(rides(p, "AB") for p in const)
+    assert {a for p in const for a in "AB" if rides(p, a)} == {"A", "B"}
+    assert not any(rides(p, "AB") for p in active)
+    chk = CollisionChecker(tcb, sc)
+    idx = [chk.pairs.index(p) for p in const]
+    D = np.array([chk.distances(q)[idx] for q in Q])
+    assert np.ptp(D, axis=0).max() < 1e-6   # constant along the path, by coal
+    # a regrasp of arm B: the object rides on A (fixed), B's hand moves past it
+    lo, hi = tcb.lower.copy(), tcb.upper.copy()
+    ia = tcb.arm("A").j_idx
+    lo[ia] = hi[ia] = Q[0][ia]
+    q1 = Q[0].copy()
+    q1[tcb.arm("B").j_idx] += 0.3
+    spec = SegmentSpec(20, 10.0, Q[0], q1, None, lo, hi, margin=0.02, object_arm="A", activation=0.5)
+    prob = SplineSegmentProblem(tcb, sc, spec)
+    prob.set_initial(np.linspace(Q[0], q1, 21))
+    prob._plan_collision(prob.knot_configurations())
+    assert not any(rides(p, "B") for p in prob.col.constant_pairs)
+    assert any(rides(p, "B") for p in prob.col.active_pairs)
+
+
 def test_bad_arguments_are_clear_errors(tcb, transport):
     from optplan.errors import OptionError
 

@@ -159,3 +159,23 @@ def test_without_batch_api_the_loop_answers_the_same(setup):
         expect = next((k for k, q in enumerate(Q) if not ck.is_valid(q)), -1)
         assert ck.first_invalid(Q, "held") == expect
         assert ck.validity("held").first_invalid(Q) == expect
+
+
+def test_exempted_pairs_skipped_by_batch_queries_too(setup):
+    """``exempt`` (a regrasp's grasp contacts) switches pairs off for the single AND the batch queries, and
+    back on after the block."""
+    robot, scene, fast, ref, qs, qg = setup
+    M = ClosedChainKinematics(robot, scene.object.grasps).object_pose(qs)
+    rng = np.random.default_rng(21)
+    Q = _configs(robot, qs, rng, 400, 0.5)
+    q = next(x for x in Q if not ref.is_valid_object_fixed(x, M) and ref.colliding_pairs(x, "fixed", M))
+    gd = ref._gd["fixed"]
+    ref.colliding_pairs(q, "fixed", M)            # leaves the pairs' results in gd
+    pairs = tuple(k for k in range(len(gd.collisionResults))
+                  if gd.activeCollisionPairs[k] and gd.collisionResults[k].isCollision())
+    with fast.exempt(pairs), ref.exempt(pairs):
+        assert fast.is_valid_object_fixed(q, M) and ref.is_valid_object_fixed(q, M)
+        assert fast.first_invalid(q[None, :], "fixed", M) == -1
+        assert fast.validity("fixed", M).first_invalid(np.vstack([q, q])) == -1
+    assert not fast.is_valid_object_fixed(q, M)
+    assert fast.first_invalid(q[None, :], "fixed", M) == 0

@@ -97,6 +97,8 @@ def scene_pairs(robot: RobotModel, scene: Scene | None, *, held_object: bool = T
         if not robot.is_floating and objs[g].parentJoint == 0:
             continue  # fixed base geometry vs static obstacles: the scene is built around it
         for i, o in enumerate(obstacles):
+            if o.exclude_links and robot.model.frames[objs[g].parentFrame].name in o.exclude_links:
+                continue  # a link allowed to touch this obstacle (Obstacle.exclude_links)
             pairs.append(Pair("robot-obstacle", g, i, objs[g].name, o.name))
     if obj is not None:
         for i, o in enumerate(obstacles):
@@ -140,6 +142,8 @@ class CollisionChecker:
         self._obs_geom = [o.coal_geometry() for o in self.obstacles]
         self._obs_tf = [_tf(o.placement) for o in self.obstacles]
         self.object = scene.object if (scene is not None and held_object) else None
+        #: the arm whose hand carries the object (None without one)
+        self.object_arm: str | None = None
         if self.object is not None:
             self.object.check_robot(robot)
             self.object_arm = object_arm or next(iter(self.object.grasps))

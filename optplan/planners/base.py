@@ -64,7 +64,8 @@ class PlanStatus(str, enum.Enum):
 @dataclass(frozen=True)
 class PathSegment:
     """A consecutive range ``[start, stop]`` (inclusive) of path indices of one kind:
-    ``"constrained"``, ``"regrasp"`` (``arm`` moves, object fixed at ``object_pose``) or ``"free"``."""
+    ``"constrained"``, ``"regrasp"`` (``arm`` moves, object fixed at ``object_pose``; ``arm`` is
+    :data:`BOTH_ARMS` when both arms move, the object standing at ``object_pose``) or ``"free"``."""
 
     kind: str
     start: int
@@ -81,6 +82,10 @@ class PathSegment:
         op = d.get("object_pose")
         return cls(d["kind"], int(d["start"]), int(d["stop"]), d.get("arm"),
                    None if op is None else vector_to_pose(op))
+
+
+#: ``PathSegment.arm`` of a regrasp in which both arms move (the object stands still where it is)
+BOTH_ARMS = "both"
 
 
 @dataclass

@@ -22,11 +22,13 @@ VARIANTS = {
     "paper": {"goal_bias": 0.0, "sample_filter": False, "bridge_probability": 0.0, "keep_prefix": False,
               "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0,
               "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
-              "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0},
+              "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
+              "regrasp_both_arms": False, "regrasp_backoff": False},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
-                 "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4},
+                 "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
+                 "regrasp_both_arms": False, "regrasp_backoff": False},
 }
 
 
@@ -97,6 +99,16 @@ class TCBiRRTOptions:
                                                                                  shortcut_iterations=50))
     #: Time limit per regrasp attempt [s].
     regrasp_time_limit: float = 2.0
+    #: When neither one-arm-at-a-time order of a regrasp passes, move both arms at once (RRTConnect in the two
+    #: arms' joints, the object standing still at its pose: a released object in orbit stays where it is), in
+    #: what is left of the regrasp's time (None: the variant's value, :data:`VARIANTS`: off in both; a path with such a
+    #: motion has a ``"regrasp"`` segment whose ``arm`` is :data:`.BOTH_ARMS`).
+    regrasp_both_arms: bool | None = None
+    #: Halve a regrasp's time limit after each failed regrasp of the query, down to ``regrasp_min_time_limit``; a
+    #: successful regrasp restores ``regrasp_time_limit`` (None: the variant's value: off in both; see docs/generalization.md).
+    regrasp_backoff: bool | None = None
+    #: Smallest regrasp time limit of ``regrasp_backoff`` [s].
+    regrasp_min_time_limit: float = 0.05
     #: An arm whose two solutions differ by less than this (max-norm) does not move [rad].
     regrasp_tolerance: float = 1e-4
     #: The two arm orders of a regrasp (A first, B first) each get an equal share of ``regrasp_time_limit``
@@ -233,7 +245,7 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
-                     "regrasp_share_orders", "verify_path", "graft_single_arm", "root_grafts_first",
+                     "regrasp_share_orders", "verify_path", "graft_single_arm", "regrasp_both_arms", "regrasp_backoff", "root_grafts_first",
                      "graft_branch_seeds"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
@@ -262,6 +274,7 @@ class TCBiRRTOptions:
         if not isinstance(self.regrasp, RRTConnectOptions):
             raise ValueError(f"TCBiRRTOptions.regrasp: expected RRTConnectOptions, got {type(self.regrasp).__name__}")
         _pos("regrasp_time_limit", self.regrasp_time_limit)
+        _pos("regrasp_min_time_limit", self.regrasp_min_time_limit)
         _pos("regrasp_tolerance", self.regrasp_tolerance, allow_zero=True)
         _pos("closure_tolerance", self.closure_tolerance)
         _pos("margin", self.margin, allow_zero=True)

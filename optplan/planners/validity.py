@@ -20,7 +20,10 @@ Three modes:
 * ``is_valid(q)``: the object held by the hands (closed-chain motion),
 * ``is_valid_object_fixed(q, object_pose)``: the object standing still at ``object_pose`` while
   the hands move (regrasp); here EVERY robot geometry is checked against the object (a released
-  hand must not pass through it; at a grasp the hand links are ≥ 0.1 m from the object's faces),
+  hand must not pass through it), except the pairs a regrasp exempts with :meth:`exempt` — those
+  :meth:`grasp_contacts` finds at its ends: a hand geometry on one of the object's ``exclude_links``
+  that touches the object at its grasp (the Panda's fingers straddle the box's face; the benchmark
+  robot's hand links stay ≥ 0.1 m from it, so nothing is exempted there),
 * ``is_valid_free(q)``: no object (plain joint-space planning).
 
 :meth:`ValidityChecker.first_invalid` checks many configurations of one mode in order, stopping at the
@@ -43,7 +46,8 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
@@ -565,6 +569,46 @@ class ValidityChecker:
         and ``joints``: ``x`` holds only the values of the joints ``joints`` (indices into q), the others
         stay at ``base`` (one arm moving while the rest of the robot stands still, as in a regrasp)."""
         return ConfigValidity(self, mode, object_pose, base, joints)
+
+    def grasp_contacts(self, q: np.ndarray, object_pose: pin.SE3) -> tuple[int, ...]:
+        """Indices of the ``"fixed"``-mode pairs in collision at ``q`` between the object standing at
+        ``object_pose`` and a robot geometry on one of the object's ``exclude_links`` (the links allowed
+        to touch it: a hand on the object at its grasp); other colliding pairs are not listed."""
+        if self.object is None:
+            return ()
+        excl = set(self.object.exclude_links)
+        if not excl:
+            return ()
+        gd = self._gd["fixed"]
+        pin.updateGeometryPlacements(self.model, self.data, self.gmodel, gd, q)
+        gd.oMg[self.fixed_id] = object_pose
+        pin.computeCollisions(self.gmodel, gd, False)
+        objs, out = self.gmodel.geometryObjects, []
+        for k, cp in enumerate(self.gmodel.collisionPairs):
+            if self._pair_group[k] != "fixed" or not gd.activeCollisionPairs[k] or not gd.collisionResults[k].isCollision():
+                continue
+            g = cp.first if cp.second == self.fixed_id else cp.second
+            if self.model.frames[objs[g].parentFrame].name in excl:
+                out.append(k)
+        return tuple(out)
+
+    @contextmanager
+    def exempt(self, pairs: tuple[int, ...], mode: str = "fixed") -> Iterator[None]:
+        """Within the block, ``mode``'s checks skip the pair indices ``pairs`` (e.g. a regrasp's
+        :meth:`grasp_contacts`); restored on exit."""
+        gd = self._gd[mode]
+        off = [k for k in pairs if gd.activeCollisionPairs[k]]
+        pool = self._pool.get(mode)
+        gds = [gd] if pool is None else [gd, pool.getGeometryData(0)]   # the batch queries' pairs too
+        for g in gds:
+            for k in off:
+                g.deactivateCollisionPair(k)
+        try:
+            yield
+        finally:
+            for g in gds:
+                for k in off:
+                    g.activateCollisionPair(k)
 
     def in_limits(self, q: np.ndarray, tol: float = 1e-9) -> bool:
         return bool(np.all(q >= self.robot.lower - tol) and np.all(q <= self.robot.upper + tol))

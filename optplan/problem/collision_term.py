@@ -296,11 +296,12 @@ class CollisionModel:
                 self.robot_shape[g] = (o.parentFrame, D.Box(tuple(np.asarray(geo.halfSide))), M)
             else:
                 self.robot_shape[g] = None
-        obj = self.checker.object
+        obj, holder = self.checker.object, self.checker.object_arm
         if obj is not None:
+            assert holder is not None  # a checker with an object has its holding arm
             self._obj_caps = object_capsules(obj.size, self.object_grid)
-            self.grasp_inv = obj.grasps[self.checker.object_arm].inverse()
-            self._hand_frame = robot.arm(self.checker.object_arm).ee_frame
+            self.grasp_inv = obj.grasps[holder].inverse()
+            self._hand_frame = robot.arm(holder).ee_frame
 
     # ------------------------------------------------------------------ activation (read by the segment NLP)
     def activate(self, robot: RobotModel, initial: NumericTrajectory | None) -> list[Pair]:
@@ -354,6 +355,7 @@ class CollisionModel:
             return set()
         m = robot.model
         if kind == "object":
+            assert self.checker.object_arm is not None  # an "object" entity exists only with a held object
             jid = m.frames[robot.arm(self.checker.object_arm).ee_frame_id].parentJoint
         else:
             jid = robot.collision_model.geometryObjects[idx].parentJoint
@@ -370,12 +372,21 @@ class CollisionModel:
                 out.add(i)
         return out
 
-    def is_constant(self, robot: RobotModel, pair: Pair, fixed: frozenset[int]) -> bool:
+    def is_constant(self, robot: RobotModel, pair: Pair, fixed: frozenset[int],
+                    rigid_arms: Sequence[str] = ()) -> bool:
         """True when the pair's distance cannot change: neither entity depends on a free joint and,
-        for a floating base, the pair does not involve the (world-fixed) obstacles."""
+        for a floating base, the pair does not involve the (world-fixed) obstacles; or the pair is
+        the held object and a robot geometry on the same rigid body as the hand of one of
+        ``rigid_arms`` (the arms holding the object in this NLP: the object's own arm, and the
+        other one where the closed chain holds — e.g. a wrist link just behind a grasping hand)."""
+        ka, kb = self.kinds(pair)
+        if rigid_arms and {ka, kb} == {"object", "robot"}:
+            g = pair.b if kb == "robot" else pair.a
+            jid = robot.collision_model.geometryObjects[g].parentJoint
+            if any(robot.model.frames[robot.arm(a).ee_frame_id].parentJoint == jid for a in rigid_arms):
+                return True
         if not fixed:
             return False
-        ka, kb = self.kinds(pair)
         if robot.is_floating and "obstacle" in (ka, kb):
             return False
         fa = self.free_joints_of(robot, ka, pair.a, fixed)

@@ -249,7 +249,7 @@ class SplineSegmentProblem:
         return self.M["q"] @ self._P(X)
 
     # ------------------------------------------------------------------ collision rows
-    def _entity(self, kind: str, idx: int, holder: str) -> tuple[int | None, np.ndarray, float]:
+    def _entity(self, kind: str, idx: int, holder: str | None) -> tuple[int | None, np.ndarray, float]:
         """(frame id or None, points 3 × m in that frame (world if None), radius) of an entity;
         an entity that depends on no free joint (an obstacle, the fixed base, a holding arm, the
         object it holds) comes back static: frame None and its world points."""
@@ -271,6 +271,7 @@ class SplineSegmentProblem:
             assert col.checker.object is not None  # an "object" entity exists only with a held object
             V = np.array(_box_vertices(np.asarray(col.checker.object.size) / 2)).T
             G = col.grasp_inv
+            assert holder is not None  # an "object" entity exists only with a held object
             fid, V, r = self.robot.arm(holder).ee_frame_id, G.rotation @ V + G.translation[:, None], 0.0
         else:
             spec = col.robot_shape.get(idx)
@@ -334,7 +335,11 @@ class SplineSegmentProblem:
         traj = NumericTrajectory(robot, Qk, Qk, Qk, Qk[:-1], self.T)
         active = col.activate(robot, traj)
         pinned = {0: self.q0, N: self.q1}
-        const = [p for p in active if col.is_constant(robot, p, self.fixed)]
+        # arms holding the object here: its own arm and, under the closed chain, the other one too;
+        # the object keeps its distance to the geometry that rides on their hands (verify checks it)
+        cc = self.spec.closed_chain
+        rigid = [a for a in [col.checker.object_arm] + ([cc.arm_a, cc.arm_b] if cc is not None else []) if a is not None]
+        const = [p for p in active if col.is_constant(robot, p, self.fixed, rigid)]
         active = [p for p in active if p not in const]
         col.active_pairs = active
         col.constant_pairs = const
@@ -646,7 +651,13 @@ class SplineSegmentProblem:
                     # manifold; one long segment accepted a step to a closed-chain residual of 3.3 and
                     # never came back (200 iterations; with 10: 50 iterations, verified;
                     # docs/decisions/0015)
-                    "ipopt.theta_max_fact": 10.0}
+                    "ipopt.theta_max_fact": 10.0,
+                    # perturb_always_cd: IPOPT's permanent regularisation of the constraint block of
+                    # its KKT system (rank-deficient closed-chain rows next to the pinned ends). The
+                    # pipeline's default since it was measured on its segments (decision 0002); the
+                    # problem's own default too since the transport example (N = 50) went from 32
+                    # iterations (20 inertia corrections) to 20 (docs/decisions/0015)
+                    "ipopt.perturb_always_cd": "yes"}
         okey = repr(sorted(sopts.casadi_options(defaults).items()))
         setup = time.perf_counter() - t_setup + b.setup_time   # the NlpSolver adds its own creation time
         b.setup_time = 0.0
