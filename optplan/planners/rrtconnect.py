@@ -18,7 +18,7 @@ import numpy as np
 
 from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from .tree import Tree, joined_path
-from .validity import ValidityChecker, _bisection_order
+from .validity import ValidityChecker, _bisection_fractions, _bisection_order
 
 if TYPE_CHECKING:
     from ..scene import Scene
@@ -63,12 +63,16 @@ def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray],
     between checks [rad]; with ``weights`` w, the weighted step ``Σ w_j |Δq_j|`` instead, or with a
     matrix of weights the largest row's — e.g. :meth:`ValidityChecker.sweep_weights`, in which case
     ``resolution`` is a distance [m] that no point of the robot moves farther than between two checks); ``a`` itself is not checked, ``b``
-    only with ``check_end``. Interior points are checked coarse-to-fine."""
+    only with ``check_end``. Interior points are checked coarse-to-fine. An ``is_valid`` with a
+    ``first_invalid(X)`` method (:meth:`ValidityChecker.validity`) gets them in one batch, in that order."""
     d = b - a
     size = float(np.abs(d).max()) if weights is None else float(np.max(weights @ np.abs(d)))
     n = max(1, int(math.ceil(size / resolution)))
     if check_end and not is_valid(b):
         return False
+    batch = getattr(is_valid, "first_invalid", None)
+    if batch is not None:   # e.g. ValidityChecker.validity: the same points in the same order, one call
+        return n < 2 or batch(a + _bisection_fractions(n)[:, None] * d) < 0
     for k in _bisection_order(n):
         if not is_valid(a + (k / n) * d):
             return False

@@ -317,7 +317,7 @@ class TCBiRRT(Planner):
         elif o.edge_bound == "jacobian":
             ok = self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "held")
         else:
-            ok = edge_is_valid(a, b, self.checker.is_valid, cast(float, o.edge_tolerance), False, self._w_held)
+            ok = edge_is_valid(a, b, self.checker.validity("held"), cast(float, o.edge_tolerance), False, self._w_held)
         if ok:
             return True
         st["edge_collisions"] += 1
@@ -328,8 +328,8 @@ class TCBiRRT(Planner):
         (object held, or fixed at ``object_pose``); ends not checked."""
         st["path_verified_edges"] += 1
         if object_pose is None:
-            return edge_is_valid(a, b, self.checker.is_valid, cast(float, self.options.edge_tolerance), False, self._w_held)
-        return edge_is_valid(a, b, lambda x: self.checker.is_valid_object_fixed(x, object_pose),
+            return edge_is_valid(a, b, self.checker.validity("held"), cast(float, self.options.edge_tolerance), False, self._w_held)
+        return edge_is_valid(a, b, self.checker.validity("fixed", object_pose),
                              cast(float, self.options.edge_tolerance), False, self._w_fixed)
 
     def _verify_branch(self, tree: _TaskTree, i: int, st: dict[str, Any]) -> int | None:
@@ -569,12 +569,7 @@ class TCBiRRT(Planner):
         """The joints ``idx`` from ``cur`` to ``q_to[idx]`` (the others still, the object fixed at M) by
         RRTConnect + shortcuts, its edges re-checked at ``edge_tolerance``: the full configurations, or None."""
         o, ck = self.options, self.checker
-        base = cur.copy()
-
-        def valid(x: np.ndarray) -> bool:
-            base[idx] = x
-            return ck.is_valid_object_fixed(base, M)
-
+        valid = ck.validity("fixed", M, base=cur, joints=idx)   # these joints move, the rest and the object stand still
         rs: dict[str, Any] = {}
         lo, hi = self.robot.lower, self.robot.upper
         sub_path = rrt_connect(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub,
@@ -607,13 +602,8 @@ class TCBiRRT(Planner):
                 return self.checker.edge_is_certified(a, b, "fixed", object_pose=M, min_clearance=o.edge_min_clearance,
                                                       cache=True)
             return self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "fixed", object_pose=M)
-        base = base.copy()
-
-        def valid(z: np.ndarray) -> bool:
-            base[idx] = z
-            return self.checker.is_valid_object_fixed(base, M)
-
-        return edge_is_valid(x, y, valid, cast(float, o.edge_tolerance), False, self._w_fixed[:, idx])
+        return edge_is_valid(x, y, self.checker.validity("fixed", M, base=base, joints=idx), cast(float, o.edge_tolerance),
+                             False, self._w_fixed[:, idx])
 
     # ------------------------------------------------------------------ Alg. 2
     def constrained_extend(self, tree: _TaskTree, i_near: int, xi_rand: np.ndarray, q_rand: np.ndarray | None,
