@@ -7,17 +7,19 @@ Python's global interpreter lock while it runs, so threads do not help; processe
 :func:`run_jobs` keeps, per context (the robot and scene objects a job needs), a pool of worker
 processes created with ``fork``: a worker starts with the parent's memory — the robot, the scene,
 the loaded kernels and compiled libraries — so nothing is pickled but a job's arguments and its
-result. The calling process takes a share of the jobs itself (longest first, by the cost estimate
-the caller gives), the workers the rest. A job's function must be importable by name (a
+result. Jobs go out longest first (by the cost estimate the caller gives), each to the first
+process that is free, the calling process included. A job's function must be importable by name (a
 module-level function) and deterministic: which process runs a job does not change its result.
 Where ``fork`` is not available, with one worker, inside a daemonic process (a worker of a process
 pool, which may not have children), or if a worker dies, the jobs run here, in order.
 """
 from __future__ import annotations
 
+import functools
 import logging
 import multiprocessing as mp
 import os
+import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
@@ -86,9 +88,11 @@ def _run_batch(key: tuple[int, ...], fn: Callable[..., Any], batch: list[tuple[i
 def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]],
              cost: Sequence[float], workers: int) -> tuple[list[Any], float]:
     """``[fn(*context, *job) for job in jobs]`` computed by this process and ``workers − 1``
-    forked worker processes (see the module docstring); ``cost``: an estimate per job, used to
-    share them out (longest first, each to the least loaded process). Returns the results in
-    job order and the CPU time [s] the workers spent (this process's own is its ``process_time``)."""
+    forked worker processes (see the module docstring). ``cost``: an estimate per job. The jobs are
+    handed out longest estimate first, each to the first process that is free (this one takes the
+    next job whenever it finishes one; a worker is sent the next as soon as it returns one), so a
+    wrong estimate leaves no process idle while jobs wait. Returns the results in job order and the
+    CPU time [s] the workers spent (this process's own is its ``process_time``)."""
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
     if len(cost) != len(jobs):
@@ -98,33 +102,77 @@ def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tu
     if got is None:
         return [fn(*context, *job) for job in jobs], 0.0
     key, pool = got
-    bins: list[list[int]] = [[] for _ in range(n_proc)]
-    load = [0.0] * n_proc
-    for i in sorted(range(len(jobs)), key=lambda i: -float(cost[i])):
-        least = load.index(min(load))
-        bins[least].append(i)
-        load[least] += float(cost[i])
-    futures: list[tuple[list[int], Future]] = []
-    try:
-        for b in bins[1:]:
-            if b:
-                futures.append((b, pool.submit(_run_batch, key, fn, [(i, tuple(jobs[i])) for i in b])))
-    except BrokenProcessPool:  # pragma: no cover - a worker died earlier
-        log.warning("worker processes unavailable; running every job here")
-        _POOLS.pop(key, None)
-        return [fn(*context, *job) for job in jobs], 0.0
+    order = sorted(range(len(jobs)), key=lambda i: -float(cost[i]))
+    lock = threading.Lock()
+    nxt, pending, worker_cpu = [0], [0], [0.0]   # next job of ``order``, jobs at the workers, their CPU [s]
+    here: list[int] = []            # jobs a failed worker hands back to this process
     results: list[Any] = [None] * len(jobs)
-    for i in bins[0]:
-        results[i] = fn(*context, *jobs[i])
-    worker_cpu = 0.0
-    for b, fut in futures:
+    errors: list[BaseException] = []
+    all_done = threading.Event()
+
+    def take() -> int | None:
+        with lock:
+            if nxt[0] >= len(order):
+                return None
+            nxt[0] += 1
+            return order[nxt[0] - 1]
+
+    def send() -> None:   # the next job to a worker (runs in this thread or in the pool's callback thread)
+        with lock:   # taken and counted as pending at once: this thread never sees it in neither place
+            if nxt[0] >= len(order):
+                return
+            i = order[nxt[0]]
+            nxt[0] += 1
+            pending[0] += 1
+        try:
+            fut = pool.submit(_run_batch, key, fn, [(i, tuple(jobs[i]))])
+        except (BrokenProcessPool, RuntimeError):  # pragma: no cover - the pool is gone: run it here
+            log.warning("worker processes unavailable; running the remaining jobs here")
+            _POOLS.pop(key, None)
+            with lock:
+                here.append(i)
+                pending[0] -= 1
+                if pending[0] == 0:
+                    all_done.set()
+            return
+        fut.add_done_callback(functools.partial(returned, i=i))
+
+    def returned(fut: Future, i: int) -> None:
         try:
             out, cpu = fut.result()
-        except BrokenProcessPool:  # pragma: no cover - a worker died: its jobs run here
-            log.warning("a worker process died; running its %d jobs here", len(b))
+        except BrokenProcessPool:  # pragma: no cover - a worker died: its job runs here
+            log.warning("a worker process died; running its job here")
             _POOLS.pop(key, None)
-            out, cpu = [(i, fn(*context, *jobs[i])) for i in b], 0.0
-        worker_cpu += cpu
-        for i, r in out:
-            results[i] = r
-    return results, worker_cpu
+            with lock:
+                here.append(i)
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the calling thread
+            with lock:
+                errors.append(exc)
+        else:
+            with lock:
+                worker_cpu[0] += cpu
+            for j, r in out:
+                results[j] = r
+            if key in _POOLS:
+                send()
+        with lock:
+            pending[0] -= 1
+            if pending[0] == 0:
+                all_done.set()
+
+    for _ in range(n_proc - 1):
+        send()
+    while True:
+        i = take()
+        if i is None:
+            break
+        results[i] = fn(*context, *jobs[i])
+    with lock:
+        if pending[0] == 0:
+            all_done.set()
+    all_done.wait()
+    if errors:
+        raise errors[0]
+    for i in here:   # pragma: no cover - only after a worker died
+        results[i] = fn(*context, *jobs[i])
+    return results, worker_cpu[0]

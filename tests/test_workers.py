@@ -35,6 +35,29 @@ def test_longest_jobs_spread_over_processes():
     shutdown()
 
 
+def test_a_free_process_takes_the_next_job_whatever_the_estimates_said():
+    """The estimates say jobs 0 and 1 are long; in fact only job 1 is. While one process runs
+    job 1, the other runs job 0 and then the two short ones (a fixed split by the estimates would
+    have given one of them to the busy process)."""
+    jobs = [(0, 0.02), (1, 0.8), (2, 0.02), (3, 0.02)]
+    out, _ = run_jobs((1.0, 0.0), _job, jobs, cost=[10.0, 9.0, 1.0, 1.0], workers=2)
+    assert [r[0] for r in out] == [0.0, 1.0, 2.0, 3.0]
+    assert out[0][1] == out[2][1] == out[3][1] != out[1][1]
+    shutdown()
+
+
+def _fails(scale, offset, x):
+    if x == 1:
+        raise ValueError("job 1 failed")
+    return _job(scale, offset, x, 0.2)
+
+
+def test_an_error_in_a_worker_reaches_the_caller():
+    with pytest.raises(ValueError, match="job 1 failed"):
+        run_jobs((1.0, 0.0), _fails, [(0,), (1,)], cost=[2.0, 1.0], workers=2)
+    shutdown()
+
+
 def test_bad_arguments():
     with pytest.raises(ValueError, match="workers"):
         run_jobs((), _job, [], cost=[], workers=0)
