@@ -76,13 +76,11 @@ def _pool(context: tuple[Any, ...], workers: int) -> tuple[tuple[int, ...], Proc
     return key, pool
 
 
-def _run_batch(key: tuple[int, ...], fn: Callable[..., Any], batch: list[tuple[int, tuple[Any, ...]]]
-               ) -> tuple[list[tuple[int, Any]], float]:  # pragma: no cover - runs in a worker process
-    """In a worker: ``fn(*context, *args)`` for every job of the batch; results and CPU time [s]."""
-    context = _CONTEXTS[key]
+def _run_job(key: tuple[int, ...], fn: Callable[..., Any], args: tuple[Any, ...]
+             ) -> tuple[Any, float]:  # pragma: no cover - runs in a worker process
+    """In a worker: ``fn(*context, *args)``; its result and CPU time [s]."""
     c0 = time.process_time()
-    out = [(i, fn(*context, *args)) for i, args in batch]
-    return out, time.process_time() - c0
+    return fn(*_CONTEXTS[key], *args), time.process_time() - c0
 
 
 def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]],
@@ -105,68 +103,69 @@ def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tu
     order = sorted(range(len(jobs)), key=lambda i: -float(cost[i]))
     lock = threading.Lock()
     nxt, pending, worker_cpu = [0], [0], [0.0]   # next job of ``order``, jobs at the workers, their CPU [s]
-    here: list[int] = []            # jobs a failed worker hands back to this process
+    here: list[int] = []                         # jobs a failed worker hands back to this process
     results: list[Any] = [None] * len(jobs)
     errors: list[BaseException] = []
     all_done = threading.Event()
 
-    def take() -> int | None:
+    def take(to_worker: bool) -> int | None:
+        """The next job; one for a worker is counted as pending in the same step, so that this
+        thread never finds a job in neither place."""
         with lock:
             if nxt[0] >= len(order):
                 return None
             nxt[0] += 1
+            pending[0] += to_worker
             return order[nxt[0] - 1]
 
-    def send() -> None:   # the next job to a worker (runs in this thread or in the pool's callback thread)
-        with lock:   # taken and counted as pending at once: this thread never sees it in neither place
-            if nxt[0] >= len(order):
-                return
-            i = order[nxt[0]]
-            nxt[0] += 1
-            pending[0] += 1
+    def settle(i: int | None = None) -> None:
+        """A worker's job is over (``i``: to be run here instead)."""
+        with lock:
+            if i is not None:
+                here.append(i)
+            pending[0] -= 1
+            if pending[0] == 0:
+                all_done.set()
+
+    def send() -> None:   # runs in this thread or in the pool's callback thread
+        i = take(to_worker=True)
+        if i is None:
+            return
         try:
-            fut = pool.submit(_run_batch, key, fn, [(i, tuple(jobs[i]))])
+            fut = pool.submit(_run_job, key, fn, tuple(jobs[i]))
         except (BrokenProcessPool, RuntimeError):  # pragma: no cover - the pool is gone: run it here
             log.warning("worker processes unavailable; running the remaining jobs here")
             _POOLS.pop(key, None)
-            with lock:
-                here.append(i)
-                pending[0] -= 1
-                if pending[0] == 0:
-                    all_done.set()
+            settle(i)
             return
         fut.add_done_callback(functools.partial(returned, i=i))
 
     def returned(fut: Future, i: int) -> None:
         try:
-            out, cpu = fut.result()
+            results[i], cpu = fut.result()
         except BrokenProcessPool:  # pragma: no cover - a worker died: its job runs here
             log.warning("a worker process died; running its job here")
             _POOLS.pop(key, None)
-            with lock:
-                here.append(i)
+            settle(i)
+            return
         except BaseException as exc:  # noqa: BLE001 - re-raised in the calling thread
-            with lock:
-                errors.append(exc)
+            errors.append(exc)
         else:
             with lock:
                 worker_cpu[0] += cpu
-            for j, r in out:
-                results[j] = r
             if key in _POOLS:
                 send()
-        with lock:
-            pending[0] -= 1
-            if pending[0] == 0:
-                all_done.set()
+        settle()
 
     for _ in range(n_proc - 1):
         send()
-    while True:
-        i = take()
-        if i is None:
-            break
-        results[i] = fn(*context, *jobs[i])
+    try:
+        while (i := take(to_worker=False)) is not None:
+            results[i] = fn(*context, *jobs[i])
+    except BaseException:
+        with lock:   # no further job goes to a worker
+            nxt[0] = len(order)
+        raise
     with lock:
         if pending[0] == 0:
             all_done.set()

@@ -29,7 +29,7 @@ def test_results_in_job_order_and_identical_to_serial():
 
 
 def test_longest_jobs_spread_over_processes():
-    jobs = [(x, 0.0) for x in range(4)]
+    jobs = [(0, 0.3), (1, 0.3), (2, 0.0), (3, 0.0)]   # the long ones take time: both processes are busy
     out, _ = run_jobs((1.0, 0.0), _job, jobs, cost=[10.0, 9.0, 1.0, 1.0], workers=2)
     assert out[0][1] != out[1][1]                            # the two long jobs run in different processes
     shutdown()
@@ -39,7 +39,7 @@ def test_a_free_process_takes_the_next_job_whatever_the_estimates_said():
     """The estimates say jobs 0 and 1 are long; in fact only job 1 is. While one process runs
     job 1, the other runs job 0 and then the two short ones (a fixed split by the estimates would
     have given one of them to the busy process)."""
-    jobs = [(0, 0.02), (1, 0.8), (2, 0.02), (3, 0.02)]
+    jobs = [(0, 0.1), (1, 0.8), (2, 0.02), (3, 0.02)]
     out, _ = run_jobs((1.0, 0.0), _job, jobs, cost=[10.0, 9.0, 1.0, 1.0], workers=2)
     assert [r[0] for r in out] == [0.0, 1.0, 2.0, 3.0]
     assert out[0][1] == out[2][1] == out[3][1] != out[1][1]
