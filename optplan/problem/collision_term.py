@@ -382,8 +382,8 @@ class CollisionModel:
         ka, kb = self.kinds(pair)
         if rigid_arms and {ka, kb} == {"object", "robot"}:
             g = pair.b if kb == "robot" else pair.a
-            jid = robot.collision_model.geometryObjects[g].parentJoint
-            if any(robot.model.frames[robot.arm(a).ee_frame_id].parentJoint == jid for a in rigid_arms):
+            hands = {robot.model.frames[robot.arm(a).ee_frame_id].parentJoint for a in rigid_arms}
+            if robot.collision_model.geometryObjects[g].parentJoint in hands:
                 return True
         if not fixed:
             return False

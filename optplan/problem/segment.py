@@ -268,10 +268,9 @@ class SplineSegmentProblem:
             M = o.placement
             return None, M.rotation @ V + M.translation[:, None], r
         if kind == "object":
-            assert col.checker.object is not None  # an "object" entity exists only with a held object
+            assert col.checker.object is not None and holder is not None  # only with a held object
             V = np.array(_box_vertices(np.asarray(col.checker.object.size) / 2)).T
             G = col.grasp_inv
-            assert holder is not None  # an "object" entity exists only with a held object
             fid, V, r = self.robot.arm(holder).ee_frame_id, G.rotation @ V + G.translation[:, None], 0.0
         else:
             spec = col.robot_shape.get(idx)
@@ -335,10 +334,10 @@ class SplineSegmentProblem:
         traj = NumericTrajectory(robot, Qk, Qk, Qk, Qk[:-1], self.T)
         active = col.activate(robot, traj)
         pinned = {0: self.q0, N: self.q1}
-        # arms holding the object here: its own arm and, under the closed chain, the other one too;
-        # the object keeps its distance to the geometry that rides on their hands (verify checks it)
+        # arms holding the object here (both under the closed chain, else its own arm): the object
+        # keeps its distance to the geometry that rides on their hands (verify checks it)
         cc = self.spec.closed_chain
-        rigid = [a for a in [col.checker.object_arm] + ([cc.arm_a, cc.arm_b] if cc is not None else []) if a is not None]
+        rigid = [cc.arm_a, cc.arm_b] if cc is not None else [a for a in (col.checker.object_arm,) if a is not None]
         const = [p for p in active if col.is_constant(robot, p, self.fixed, rigid)]
         active = [p for p in active if p not in const]
         col.active_pairs = active
