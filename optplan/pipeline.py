@@ -164,10 +164,8 @@ def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind
         cc = dataclasses.replace(ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]],
                                                          arms[0], arms[1]), interior=opts.closed_chain_interior)
     else:  # regrasp: the holding arm's joints stay where they are, so the object does too
-        holder = next(a for a in arms if a != arm)
         lo, hi = robot.lower.copy(), robot.upper.copy()
-        idx = robot.arm(holder).j_idx
-        lo[idx] = hi[idx] = seg_path[0][idx]
+        scene, holder = _regrasp_scene(robot, scene, seg_path, arm, lo, hi)
         limits = (lo, hi)
     prob, _ = segment_problem(robot, scene, seg_path[0], seg_path[-1], N, T, closed_chain=cc, joint_limits=limits,
                               margin=opts.margin, object_arm=holder or arms[0],
@@ -188,7 +186,8 @@ def _regrasp_scene(robot: RobotModel, scene: Scene, seg_path: np.ndarray, arm: s
     if arm == BOTH_ARMS:
         first = next(iter(obj.grasps))
         M = object_pose(robot, scene, np.asarray(seg_path[0], float), first, robot.model.createData())
-        fixed = Obstacle("object", "box", M, size=(float(obj.size[0]), float(obj.size[1]), float(obj.size[2])), exclude_links=tuple(obj.exclude_links))
+        sx, sy, sz = (float(v) for v in obj.size)
+        fixed = Obstacle("object", "box", M, size=(sx, sy, sz), exclude_links=tuple(obj.exclude_links))
         return dataclasses.replace(scene, obstacles=(*scene.obstacles, fixed), object=None), None
     holder = next(a for a in obj.grasps if a != arm)
     if lo is not None and hi is not None:
