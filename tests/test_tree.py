@@ -98,9 +98,22 @@ def test_tcbirrt_unchanged_on_fixed_seeds(tcb, variant, seed):
 
     sc = Scene.load("ssps_scene1")
     tr = TrialGenerator(tcb, sc).generate(0, 0)
-    pl = TCBiRRT(tcb, sc, TCBiRRTOptions(variant=variant, max_iterations=300), checker=ValidityChecker(tcb, sc),
-                 kinematics=ClosedChainKinematics(tcb, sc.object.grasps))
+    # recorded before the improved variant took its orientations from the lead path (lead_orientation_probability)
+    pl = TCBiRRT(tcb, sc, TCBiRRTOptions(variant=variant, max_iterations=300, lead_orientation_probability=0.0),
+                 checker=ValidityChecker(tcb, sc), kinematics=ClosedChainKinematics(tcb, sc.object.grasps))
     _check(pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=seed), GOLDEN_TCB[(variant, seed)])
+
+
+def test_tcbirrt_improved_defaults_unchanged_on_a_fixed_seed(tcb):
+    """The improved variant's own defaults (lead-path orientations included), recorded 2026-11-24."""
+    from optplan.bench.trials import TrialGenerator
+    from optplan.planners import TCBiRRT, TCBiRRTOptions
+    from optplan.scene import Scene
+
+    sc = Scene.load("ssps_scene1")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    pl = TCBiRRT(tcb, sc, TCBiRRTOptions(variant="improved", max_iterations=1000))
+    _check(pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=0), ("exact", 114, 82, 1904.9856439901168))
 
 
 @pytest.mark.parametrize("scene_name,planner,seed", sorted(GOLDEN_PR2))

@@ -192,7 +192,8 @@ class TaskSampler:
                  bridge_probability: float = 0.0, bridge_sigma: tuple[float, float] = (0.3, 0.4),
                  bridge_tries: int = 60, goal_bias: float = 0.0, guide_probability: float = 0.0,
                  guide_sigma: tuple[float, float] = (0.05, 0.05), geodesic_probability: float = 0.0,
-                 geodesic_sigma: float = 0.15, endpoints: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+                 geodesic_sigma: float = 0.15, endpoints: tuple[np.ndarray, np.ndarray] | None = None,
+                 lead_orientation_probability: float = 0.0) -> None:
         self.filt = filt
         self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
         self.filter_tries = int(filter_tries)
@@ -205,6 +206,7 @@ class TaskSampler:
         self.guide: np.ndarray | None = None
         self.p_geo = float(geodesic_probability)
         self.geo_sigma = float(geodesic_sigma)
+        self.p_lead = float(lead_orientation_probability)
         self._R0: np.ndarray | None = None
         self._w: np.ndarray | None = None
         if endpoints is not None:
@@ -220,9 +222,17 @@ class TaskSampler:
     def _draw(self, rng: np.random.Generator) -> np.ndarray:
         """Uniform in the box; with probability ``geodesic_probability`` the orientation is instead
         a point of the start-goal rotation geodesic (uniform parameter) perturbed by
-        ``N(0, geodesic_sigma²)`` per axis — the orientations tight openings between them allow."""
+        ``N(0, geodesic_sigma²)`` per axis — the orientations tight openings between them allow; with
+        probability ``lead_orientation_probability`` (once a lead path is known) the orientation is that of
+        the lead path's pose nearest in position, perturbed the same way — the orientation the passage
+        there lets the object through with."""
         xi = rng.uniform(self.lo, self.hi)
-        if self._R0 is not None and rng.random() < self.p_geo:
+        if self.p_lead > 0.0 and self.guide is not None and rng.random() < self.p_lead:
+            d = self.guide[:, :3] - xi[:3]
+            g = self.guide[int(np.argmin(np.einsum("ij,ij->i", d, d)))]
+            R = _rpy_matrix(g) @ np.asarray(pin.exp3(rng.normal(0.0, self.geo_sigma, 3)))
+            xi[3:] = np.asarray(pin.rpy.matrixToRpy(R))
+        elif self._R0 is not None and rng.random() < self.p_geo:
             R = self._R0 @ np.asarray(pin.exp3(rng.random() * cast(np.ndarray, self._w))) @ np.asarray(pin.exp3(rng.normal(0.0, self.geo_sigma, 3)))
             xi[3:] = np.asarray(pin.rpy.matrixToRpy(R))
         return xi

@@ -140,10 +140,11 @@ class _TaskTree(Tree):
 
     q: np.ndarray       # columns the base class creates with setattr
     checked: np.ndarray
+    dom: np.ndarray     # per node: its dynamic domain radius or its step (``trap_adapt``); inf: unset
     edge: list[Any]     # always kept (edges=True)
 
     def __init__(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, cap: int = 512):
-        super().__init__(xi, cap, edges=True, q=q, checked=True)
+        super().__init__(xi, cap, edges=True, q=q, checked=True, dom=np.inf)
         self.pose = [(R, p)]
         self.edge[0] = ([], [])
         #: graft node → its regrasp motions from the parent's configuration (object fixed at the node's pose)
@@ -157,14 +158,14 @@ class _TaskTree(Tree):
 
     def add(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, parent: int, edge_q: list[np.ndarray], edge_poses: list[tuple[np.ndarray, np.ndarray]]) -> int:  # type: ignore[override]  # a task node needs its q and object pose too; never used as a plain Tree
         self.pose.append((R, p))
-        return super().add(xi, parent, (edge_q, edge_poses), q=q, checked=False)
+        return super().add(xi, parent, (edge_q, edge_poses), q=q, checked=False, dom=np.inf)
 
     def add_graft(self, i: int, q: np.ndarray, motions: list[tuple[str, list[np.ndarray]]]) -> int:
         """A node at node i's object pose with another joint solution ``q``, reached from node i's
         configuration by the regrasp ``motions``: a second IK branch of the same tree."""
         R, p = self.pose[i]
         self.pose.append((R, p))
-        k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=False)
+        k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=False, dom=np.inf)
         self.graft[k] = motions
         group = self.twins.setdefault(i, [i])
         group.append(k)
@@ -607,16 +608,18 @@ class TCBiRRT(Planner):
 
     # ------------------------------------------------------------------ Alg. 2
     def constrained_extend(self, tree: _TaskTree, i_near: int, xi_rand: np.ndarray, q_rand: np.ndarray | None,
-                           rng: np.random.Generator, deadline: Deadline, st: dict[str, Any]) -> tuple[str, int, Sequence[tuple[str | None, list[np.ndarray]]] | None]:
+                           rng: np.random.Generator, deadline: Deadline, st: dict[str, Any],
+                           step: float | None = None) -> tuple[str, int, Sequence[tuple[str | None, list[np.ndarray]]] | None]:
         o = self.options
         st["extensions"] += 1
+        step = self.step_size if step is None else step
         xi_near = tree.xi[i_near]
         d = xi_rand - xi_near
         dist = float(np.sqrt(d @ d))
-        if dist <= self.step_size:
+        if dist <= step:
             xi_s, reach = xi_rand.copy(), True           # ξ_s = ξ_rand exactly
         else:
-            xi_s, reach = xi_near + (self.step_size / dist) * d, False   # Eq. 3
+            xi_s, reach = xi_near + (step / dist) * d, False   # Eq. 3
         R0, p0 = tree.pose[i_near]
         Rs, ps = pose_from_xi(xi_s)
         q_near = tree.q[i_near]
@@ -658,7 +661,7 @@ class TCBiRRT(Planner):
         """The improved variant's ξ sampler (None: the paper's uniform box)."""
         o = self.options
         if not (o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.goal_bias) > 0 or cast(float, o.guide_probability) > 0
-                or cast(float, o.geodesic_probability) > 0):
+                or cast(float, o.geodesic_probability) > 0 or cast(float, o.lead_orientation_probability) > 0):
             return None
         if self._filter is None:
             self._filter = ObjectPoseFilter(self.robot, self.scene)
@@ -668,7 +671,8 @@ class TCBiRRT(Planner):
                            bridge_sigma=o.bridge_sigma, goal_bias=cast(float, o.goal_bias),
                            filter_tries=30 if o.sample_filter else 0, guide_probability=cast(float, o.guide_probability),
                            guide_sigma=o.guide_sigma, geodesic_probability=cast(float, o.geodesic_probability),
-                           geodesic_sigma=o.geodesic_sigma)
+                           geodesic_sigma=o.geodesic_sigma,
+                           lead_orientation_probability=cast(float, o.lead_orientation_probability))
 
     # ------------------------------------------------------------------ Alg. 1
     def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator, seed: int) -> PlanResult:
@@ -735,12 +739,25 @@ class TCBiRRT(Planner):
             if i_front is not None:       # the step beyond the frontier graft: connect tree b to it
                 res, i_a = ADVANCED, i_front
             else:
-                if sampler is None:
-                    xi_rand = rng.uniform(self._lo, self._hi)                            # line 3
-                else:
-                    xi_rand = sampler.sample(rng, tb.alive_xi())
-                i_near = ta.twin_nearest(ta.nearest(xi_rand), None, rng)                 # line 4
-                res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st)   # line 5
+                for _ in range(o.domain_tries if o.trap_adapt == "domain" else 1):
+                    if sampler is None:
+                        xi_rand = rng.uniform(self._lo, self._hi)                        # line 3
+                    else:
+                        xi_rand = sampler.sample(rng, tb.alive_xi())
+                    i_near = ta.nearest(xi_rand)                                         # line 4
+                    if o.trap_adapt != "domain" or float(np.sum((xi_rand - ta.xi[i_near]) ** 2)) <= ta.dom[i_near] ** 2:
+                        break
+                    st["domain_rejections"] = st.get("domain_rejections", 0) + 1   # outside the node's dynamic domain
+                i_near = ta.twin_nearest(i_near, None, rng)
+                step = None
+                if o.trap_adapt == "step" and np.isfinite(ta.dom[i_near]):
+                    step = float(ta.dom[i_near])
+                res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st, step)   # line 5
+                if o.trap_adapt == "domain" and res == TRAPPED:
+                    ta.dom[i_near] = self.step_size * o.domain_radius
+                elif o.trap_adapt == "step":   # halve the node's step when trapped, double it back when not
+                    cur = self.step_size if not np.isfinite(ta.dom[i_near]) else float(ta.dom[i_near])
+                    ta.dom[i_near] = max(cur * 0.5, self.step_size / 8.0) if res == TRAPPED else min(cur * 2.0, self.step_size)
             if res != TRAPPED:
                 target_xi, target_q = ta.xi[i_a].copy(), ta.q[i_a].copy()
                 while True:                                                              # lines 7-11

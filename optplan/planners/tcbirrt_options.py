@@ -23,12 +23,12 @@ VARIANTS = {
               "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0,
               "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
-              "regrasp_both_arms": False, "regrasp_backoff": False},
+              "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
-                 "regrasp_both_arms": False, "regrasp_backoff": False},
+                 "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5},
 }
 
 
@@ -194,12 +194,25 @@ class TCBiRRTOptions:
     geodesic_probability: float | None = None
     #: Perturbation of a geodesic orientation sample, per axis [rad].
     geodesic_sigma: float = 0.15
+    #: Probability that a uniform sample's orientation is the lead path's orientation at the lead pose nearest in
+    #: position, perturbed by ``geodesic_sigma`` (the orientation the passage there admits; once a lead path is
+    #: known; before ``geodesic_probability``) [-] (None: the variant's value, :data:`VARIANTS`: paper 0, improved 0.5).
+    lead_orientation_probability: float | None = None
     #: When a waypoint's IK solution collides or fails, retry IK this many times from the previous configuration
     #: perturbed by ``N(0, ik_restart_sigma²)`` [count] (None: the variant's value, :data:`VARIANTS`): paper 0,
     #: improved 2.
     ik_restarts: int | None = None
     #: Standard deviation of an IK restart's perturbation, per joint [rad].
     ik_restart_sigma: float = 0.3
+    #: What a trapped extension changes at the node it started from: ``"off"``; ``"step"`` (adaptive step size:
+    #: the node's s_ξ is halved, down to s_ξ/8, and doubled back after an extension that is not trapped); or
+    #: ``"domain"`` (dynamic domain: from then on a sample farther than ``domain_radius`` · s_ξ from the node,
+    #: when it is the nearest, is drawn again, up to ``domain_tries`` draws).
+    trap_adapt: str = "off"
+    #: Dynamic-domain radius of a node after a trapped extension, in units of s_ξ [-].
+    domain_radius: float = 1.0
+    #: Draws per iteration with ``trap_adapt="domain"`` (the last one is extended toward regardless) [count].
+    domain_tries: int = 10
     #: Scale the default box's position part and the step size by the robot's mean arm reach /
     #: :data:`PAPER_REACH` about its shoulders' midpoint (a box or step set explicitly is used as given).
     scale_to_reach: bool = True
@@ -210,7 +223,8 @@ class TCBiRRTOptions:
         for name, v in VARIANTS[self.variant].items():   # None: the variant's value
             if getattr(self, name) is None:
                 object.__setattr__(self, name, v)
-        for name in ("goal_bias", "bridge_probability", "guide_probability", "geodesic_probability"):
+        for name in ("goal_bias", "bridge_probability", "guide_probability", "geodesic_probability",
+                     "lead_orientation_probability"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 1.0):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected a probability in [0, 1], got {v!r}")
@@ -227,6 +241,11 @@ class TCBiRRTOptions:
         _pos("guide_attempt_time", self.guide_attempt_time)
         _pos("geodesic_sigma", self.geodesic_sigma)
         _pos("ik_restart_sigma", self.ik_restart_sigma)
+        if self.trap_adapt not in ("off", "step", "domain"):
+            raise ValueError(f"TCBiRRTOptions.trap_adapt: expected 'off', 'step' or 'domain', got {self.trap_adapt!r}")
+        _pos("domain_radius", self.domain_radius)
+        if not (isinstance(self.domain_tries, int) and not isinstance(self.domain_tries, bool) and self.domain_tries >= 1):
+            raise ValueError(f"TCBiRRTOptions.domain_tries: expected an int >= 1, got {self.domain_tries!r}")
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
         for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds", "frontier_grafts", "frontier_interval",
