@@ -28,6 +28,11 @@ group allows and re-evaluates there. A distance below ``min_clearance`` rejects 
 advance never takes steps shorter than ``min_clearance / (2 w_G·|v − u|)``, so it terminates
 (no Zeno behaviour near contact).
 
+The pairs are those active in the checker's mode NOW: inside
+:meth:`~optplan.planners.validity.ValidityChecker.exempt` (a regrasp's grasp contacts) the exempted
+pairs are skipped here as in the boolean and batch checks. Groups, weights and the vertex cache are
+kept per (mode, exempted pairs), so no bound or verdict crosses from one exemption to another.
+
 Groups far from everything (the other arm's links, distant obstacles) are evaluated once per
 path; only the pairs that are near contact cost distance calls. The distance call is ~10× a
 collision check (all pairs of the group, no early exit, no broad phase), so planners run their
