@@ -28,6 +28,11 @@ group allows and re-evaluates there. A distance below ``min_clearance`` rejects 
 advance never takes steps shorter than ``min_clearance / (2 w_G·|v − u|)``, so it terminates
 (no Zeno behaviour near contact).
 
+The pairs are those active in the checker's mode NOW: inside
+:meth:`~optplan.planners.validity.ValidityChecker.exempt` (a regrasp's grasp contacts) the exempted
+pairs are skipped here as in the boolean and batch checks. Groups, weights and the vertex cache are
+kept per (mode, exempted pairs), so no bound or verdict crosses from one exemption to another.
+
 Groups far from everything (the other arm's links, distant obstacles) are evaluated once per
 path; only the pairs that are near contact cost distance calls. The distance call is ~10× a
 collision check (all pairs of the group, no early exit, no broad phase), so planners run their
@@ -55,6 +60,9 @@ from ..collision.sweep import sweep_weights
 __all__ = ["EdgeCertifier"]
 
 _MODES = ("held", "fixed", "free")
+
+#: a mode and the pair indices the checker exempts in it (:meth:`ValidityChecker.exempt`)
+_State = tuple[str, frozenset[int]]
 
 
 class _Group:
@@ -88,10 +96,14 @@ class EdgeCertifier:
         self.model, self.gmodel = checker.model, checker.gmodel
         self.data = self.model.createData()
         self._W = sweep_weights(self.model, self.gmodel)          # geometries × nv [m/rad]
-        self._groups: dict[str, list[_Group]] = {}
-        self._Wg: dict[str, np.ndarray] = {}
-        self._pair_rows: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]] = {}
-        self._margin_gd: dict[tuple[str, float, float], Any] = {}
+        # per (mode, pairs the checker's ``exempt`` switches off now): the pair groups, their weight
+        # rows and the rows of their pairs' speeds; a group's GeometryData per set of its pairs
+        self._groups: dict[_State, list[_Group]] = {}
+        self._Wg: dict[_State, np.ndarray] = {}
+        self._pair_rows: dict[_State, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]] = {}
+        self._group_gd: dict[tuple[int, ...], Any] = {}
+        self._pair_w: dict[int, np.ndarray] = {}
+        self._margin_gd: dict[tuple[_State, float, float], Any] = {}
         self.n_distance_calls = 0
         self.n_paths = 0
         self.n_checks = 0
@@ -110,12 +122,27 @@ class EdgeCertifier:
             return "free"
         return mode
 
+    def _state(self, mode: str) -> _State:
+        """``mode`` and the pairs the checker exempts in it now: the certifier's groups, weights, margin
+        data and vertex cache are kept per state, so a regrasp's exemption switches off the same pairs
+        here as in the boolean and batch checks, and no verdict is carried from one exemption to another."""
+        return (mode, self.checker.exempted(mode))
+
+    #: exemption states whose groups are kept (oldest dropped first)
+    STATES_KEPT = 256
+
     def groups(self, mode: str) -> list[_Group]:
-        """The pair groups of ``mode`` (built on first use)."""
+        """The pair groups of ``mode`` under the checker's current exemption (built on first use)."""
         mode = self._mode(mode)
-        if mode in self._groups:
-            return self._groups[mode]
-        src = self.checker._gd[mode]
+        state = self._state(mode)
+        if state in self._groups:
+            return self._groups[state]
+        if len(self._groups) >= self.STATES_KEPT:
+            old = next(iter(self._groups))
+            del self._groups[old], self._Wg[old], self._pair_rows[old]
+            for mk in [mk for mk in self._margin_gd if mk[0] == old]:
+                del self._margin_gd[mk]
+        src = self.checker._gd[mode]      # its active pairs: the mode's, less the exempted ones
         pairs = self.gmodel.collisionPairs
         W = self._W
         rowsum = W.sum(axis=1)
@@ -125,19 +152,14 @@ class EdgeCertifier:
                 continue
             g, h = (cp.first, cp.second) if rowsum[cp.first] >= rowsum[cp.second] else (cp.second, cp.first)
             objs = self.gmodel.geometryObjects
-            key = (int(objs[g].parentJoint), int(objs[h].parentJoint))
-            by_joint.setdefault(key, []).append(k)
+            joints = (int(objs[g].parentJoint), int(objs[h].parentJoint))
+            by_joint.setdefault(joints, []).append(k)
         out = []
         for _, ks in sorted(by_joint.items()):
-            gd = pin.GeometryData(self.gmodel)
-            keep = set(ks)
-            for k in range(len(pairs)):
-                if k not in keep:
-                    gd.deactivateCollisionPair(k)
-            w = np.max([self._pair_weights(pairs[k].first, pairs[k].second) for k in ks], axis=0)
-            out.append(_Group(gd, w, ks))
-        self._groups[mode] = out
-        self._Wg[mode] = np.array([g.w for g in out]).reshape(len(out), self.model.nv)
+            w = np.max([self._pair_weights_of(k) for k in ks], axis=0)
+            out.append(_Group(self._group_data(tuple(ks)), w, ks))
+        self._groups[state] = out
+        self._Wg[state] = np.array([g.w for g in out]).reshape(len(out), self.model.nv)
         # per pair, the rows of its two geometries among the checker's moving geometries of this mode
         # (the speed rows of its compiled cell speeds; a static geometry gets the zero row at the end)
         # and the row of its relative speed (held object against a robot geometry), if it has one
@@ -155,9 +177,29 @@ class EdgeCertifier:
                 r1.append(row_of.get(pairs[k].first, -1))
                 r2.append(row_of.get(pairs[k].second, -1))
                 rr.append(rel.get(tuple(sorted((pairs[k].first, pairs[k].second))), -1))
-        self._pair_rows[mode] = (np.array(r1, dtype=int), np.array(r2, dtype=int), np.array(rr, dtype=int),
+        self._pair_rows[state] = (np.array(r1, dtype=int), np.array(r2, dtype=int), np.array(rr, dtype=int),
                                  np.array(starts, dtype=int), zero + len(rel))
         return out
+
+    def _group_data(self, ks: tuple[int, ...]) -> Any:
+        """A GeometryData with only the pairs ``ks`` active (shared by the states with this group)."""
+        gd = self._group_gd.get(ks)
+        if gd is None:
+            gd = pin.GeometryData(self.gmodel)
+            keep = set(ks)
+            for k in range(len(self.gmodel.collisionPairs)):
+                if k not in keep:
+                    gd.deactivateCollisionPair(k)
+            self._group_gd[ks] = gd
+        return gd
+
+    def _pair_weights_of(self, k: int) -> np.ndarray:
+        """:meth:`_pair_weights` of pair ``k`` (kept)."""
+        w = self._pair_w.get(k)
+        if w is None:
+            cp = self.gmodel.collisionPairs[k]
+            w = self._pair_w[k] = self._pair_weights(cp.first, cp.second)
+        return w
 
     def _pair_weights(self, g1: int, g2: int) -> np.ndarray:
         """``W[g1] + W[g2]`` without the joints that move both geometries: a joint that carries both
@@ -184,9 +226,10 @@ class EdgeCertifier:
         self._vertex.clear()
 
     def _key(self, mode: str, x: np.ndarray, object_pose: pin.SE3 | None) -> tuple[Any, ...]:
+        state = self._state(mode)
         if mode == "fixed":
-            return (mode, x.tobytes(), cast(pin.SE3, object_pose).homogeneous.tobytes())
-        return (mode, x.tobytes())
+            return (state, x.tobytes(), cast(pin.SE3, object_pose).homogeneous.tobytes())
+        return (state, x.tobytes())
 
     def _remember(self, key: tuple[Any, ...], lower: np.ndarray) -> None:
         if len(self._vertex) >= self.CACHE_SIZE:
@@ -203,7 +246,7 @@ class EdgeCertifier:
     # ------------------------------------------------------------------ exact distances
     def _distances(self, mode: str, gs: np.ndarray, x: np.ndarray, object_pose: pin.SE3 | None) -> np.ndarray:
         """Exact clearance [m] (minus the checker's margin) of each group in ``gs`` at ``x``."""
-        groups = self._groups[mode]
+        groups = self._groups[self._state(mode)]
         pin.forwardKinematics(self.model, self.data, x)
         out = np.empty(len(gs))
         fixed_id = self.checker.fixed_id
@@ -219,7 +262,7 @@ class EdgeCertifier:
 
     def _distance1(self, mode: str, g: int, x: np.ndarray, object_pose: pin.SE3 | None) -> float:
         """:meth:`_distances` of the one group ``g``, as a float."""
-        gd = self._groups[mode][g].gd
+        gd = self._groups[self._state(mode)][g].gd
         pin.updateGeometryPlacements(self.model, self.data, self.gmodel, gd, x)
         if mode == "fixed":
             gd.oMg[self.checker.fixed_id] = object_pose
@@ -254,9 +297,8 @@ class EdgeCertifier:
         mode = self._mode(mode)
         if mode == "fixed" and object_pose is None:
             raise ValueError("path: mode 'fixed' needs object_pose")
-        self.groups(mode)
+        G = len(self.groups(mode))
         self.n_paths += 1
-        G = len(self._groups[mode])
         if G == 0:
             return True
         if cache:
@@ -311,7 +353,7 @@ class EdgeCertifier:
         if ok and len(Q) > 1:
             key1 = self._key(mode, Q[-1], object_pose)
             if key1 not in self._vertex:
-                self._remember(key1, st["D"] - np.einsum("gj,gj->g", self._Wg[mode], np.abs(Q[-1] - st["X"])))
+                self._remember(key1, st["D"] - np.einsum("gj,gj->g", self._Wg[self._state(mode)], np.abs(Q[-1] - st["X"])))
         return ok
 
     def _certify(self, Q: np.ndarray, mode: str, object_pose: pin.SE3 | None, st: dict[str, Any]) -> bool:
@@ -332,7 +374,7 @@ class EdgeCertifier:
     def _uncovered(self, mode: str, V: np.ndarray, st: dict[str, Any]) -> np.ndarray:
         """Groups not certified on every chord through the vertices V (k × nq)."""
         M = np.abs(V[None, :, :] - st["X"][:, None, :]).max(axis=1)           # G × nq
-        bound = np.einsum("gj,gj->g", self._Wg[mode], M)
+        bound = np.einsum("gj,gj->g", self._Wg[self._state(mode)], M)
         return np.flatnonzero(st["D"] - bound < 0.5 * st["floor"])
 
     def _evaluate(self, mode: str, gs: np.ndarray, x: np.ndarray, object_pose: pin.SE3 | None, st: dict[str, Any]) -> bool:
@@ -369,7 +411,7 @@ class EdgeCertifier:
         travel of any point of any geometry), times 2 for groups with pairs of two moving
         geometries; the profile only for straight segments (a path's short chords do not repay
         its compiled call)."""
-        Wg = self._Wg[mode]
+        Wg = self._Wg[self._state(mode)]
         half = 0.5 * st["floor"]
         rate = Wg @ np.abs(v - u)                                # [m] per unit s, per group
         K = self._profile(mode, u, v, rate, st["profile"])
@@ -445,7 +487,7 @@ class EdgeCertifier:
         fn = self.checker._cell_speed_function(mode)
         if fn is None:
             return None
-        r1, r2, rr, starts, n_rows = self._pair_rows[mode]
+        r1, r2, rr, starts, n_rows = self._pair_rows[self._state(mode)]
         m = self.checker.CELLS
         V = np.zeros((n_rows + 1, m))                 # the last row: a static geometry's speed, 0
         V[:n_rows] = np.asarray(fn(u, v), float).reshape(n_rows, m, order="F")
@@ -484,7 +526,7 @@ class EdgeCertifier:
         return True
 
     def _margin_data(self, mode: str, tol: float, factor: float = 1.0) -> Any:
-        key = (mode, tol, factor)
+        key = (self._state(mode), tol, factor)
         if key not in self._margin_gd:
             src = self.checker._gd[mode]
             gd = pin.GeometryData(self.gmodel)

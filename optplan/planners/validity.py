@@ -210,6 +210,7 @@ class ValidityChecker:
                                   for jm in list(self.model.joints)[1:])
         self._profile_fns: dict[Any, FastFunction | None] = {}
         self._certifiers: dict[float, EdgeCertifier] = {}
+        self._exempted: dict[str, frozenset[int]] = {}   # per mode, the pairs exempt() has switched off
 
     def _sweep_bound(self, mode: str) -> np.ndarray:
         """One row per moving geometry of ``mode`` (:meth:`_moving_geometries`), one column per
@@ -264,10 +265,10 @@ class ValidityChecker:
             return []
         gids = self._moving_geometries(mode)
         row_of = {gid: r for r, gid in enumerate(gids)}
-        gd = self._gd[mode]
+        gd, off = self._gd[mode], self.exempted(mode)   # exempted pairs keep their rows (the compiled rows do not change)
         out = []
         for k, cp in enumerate(self.gmodel.collisionPairs):
-            if not gd.activeCollisionPairs[k] or self.held_id not in (cp.first, cp.second):
+            if not (gd.activeCollisionPairs[k] or k in off) or self.held_id not in (cp.first, cp.second):
                 continue
             other = cp.second if cp.first == self.held_id else cp.first
             if other in row_of:
@@ -595,20 +596,28 @@ class ValidityChecker:
     @contextmanager
     def exempt(self, pairs: tuple[int, ...], mode: str = "fixed") -> Iterator[None]:
         """Within the block, ``mode``'s checks skip the pair indices ``pairs`` (e.g. a regrasp's
-        :meth:`grasp_contacts`); restored on exit."""
+        :meth:`grasp_contacts`); restored on exit. The boolean checks, the batch queries and the
+        certified edges (:meth:`edge_is_certified`, :meth:`path_is_certified`) all skip them."""
         gd = self._gd[mode]
         off = [k for k in pairs if gd.activeCollisionPairs[k]]
         pool = self._pool.get(mode)
         gds = [gd] if pool is None else [gd, pool.getGeometryData(0)]   # the batch queries' pairs too
+        before = self._exempted.get(mode, frozenset())
         for g in gds:
             for k in off:
                 g.deactivateCollisionPair(k)
+        self._exempted[mode] = before | frozenset(off)   # the certifiers read it (their pair groups per set)
         try:
             yield
         finally:
             for g in gds:
                 for k in off:
                     g.activateCollisionPair(k)
+            self._exempted[mode] = before
+
+    def exempted(self, mode: str = "fixed") -> frozenset[int]:
+        """The pair indices that :meth:`exempt` switches off in ``mode`` right now (empty outside it)."""
+        return self._exempted.get(mode, frozenset())
 
     def in_limits(self, q: np.ndarray, tol: float = 1e-9) -> bool:
         return bool(np.all(q >= self.robot.lower - tol) and np.all(q <= self.robot.upper + tol))
