@@ -24,7 +24,7 @@ from ..errors import ModelError
 from ..model.robot import RobotModel
 from ..scene import Scene
 
-__all__ = ["CollisionChecker", "Pair", "SceneGeometry", "scene_geometry", "scene_pairs"]
+__all__ = ["CollisionChecker", "Pair", "SceneGeometry", "exact_contact_requests", "scene_geometry", "scene_pairs"]
 log = logging.getLogger(__name__)
 
 
@@ -38,6 +38,22 @@ class Pair:
     b: int
     name_a: str
     name_b: str
+
+
+def exact_contact_requests(gdata: Any) -> None:
+    """Make every collision request of a Pinocchio ``GeometryData`` decide by the sign of coal's
+    exact distance (``enable_contact = True``, which Pinocchio's default requests switch off).
+
+    Without it, a pair that coal's GJK handles through a shape's inner core plus a swept-sphere
+    radius (a capsule is a segment of radius r: capsule-box, capsule-cylinder, capsule-mesh) is
+    reported FREE when that inner core touches the other shape to within GJK's tolerance (1e-6 m)
+    from outside: GJK then stops with "collision, run EPA for the depth" at an inner distance
+    above coal's collision threshold (1e-12 m), and without contacts EPA is skipped, so the
+    penetration of the radius (up to r) is never seen. With contacts requested, EPA runs in that
+    case and its depth decides; it runs only on pairs GJK finds in contact, so collision-free
+    checks cost the same."""
+    for req in gdata.collisionRequests:
+        req.enable_contact = True
 
 
 def _tf(M: pin.SE3) -> coal.Transform3s:
@@ -199,6 +215,7 @@ class CollisionChecker:
         self._flip = np.array(flip, bool)  # the combined model's pair runs B -> A
         self._cgm = gm
         self._cgd = pin.GeometryData(gm)
+        exact_contact_requests(self._cgd)   # is_valid's boolean test agrees with the distances' sign
         # references into the results vector (never resized after this): faster to read than
         # iterating ``distanceResults`` anew on every call
         self._dist_results = list(self._cgd.distanceResults)

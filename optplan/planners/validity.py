@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 import pinocchio as pin
 
-from ..collision.checker import pair_indices, scene_geometry, scene_pairs
+from ..collision.checker import exact_contact_requests, pair_indices, scene_geometry, scene_pairs
 from ..collision.sweep import sweep_weights
 from ..model.robot import RobotModel
 from ..scene import Scene
@@ -129,12 +129,16 @@ class ValidityChecker:
     ``margin = 0``); ``batch``: the queries go through Pinocchio's batch collision API (a pool of one
     broad-phase manager per mode, one thread) when this Pinocchio has it — the same verdicts, cheaper
     per call, and :meth:`first_invalid` checks many configurations in one call; False: one
-    ``computeCollisions`` call per configuration.
+    ``computeCollisions`` call per configuration. ``exact_contacts``: every collision request asks coal
+    for contacts (:func:`optplan.collision.checker.exact_contact_requests`), so that a verdict agrees
+    with the sign of the exact distance also where a capsule's segment touches a box's face (there
+    Pinocchio's default requests report a capsule sunk by its radius as free); False: Pinocchio's
+    default requests.
     """
 
     def __init__(self, robot: RobotModel, scene: Scene | None = None, *, margin: float = 0.0,
                  object_arm: str | None = None, self_collision: bool = True, broadphase: bool = True,
-                 batch: bool = True):
+                 batch: bool = True, exact_contacts: bool = True):
         if robot.is_floating:
             raise ValueError("ValidityChecker: fixed-base robots only")
         if not (np.isfinite(margin) and margin >= 0.0):
@@ -142,6 +146,7 @@ class ValidityChecker:
         self.robot = robot
         self.scene = scene
         self.margin = float(margin)
+        self.exact_contacts = bool(exact_contacts)
         self.model = robot.model
         self.data = robot.model.createData()
         # robot, obstacles, held object and the pair set as the exact checker has them
@@ -179,6 +184,8 @@ class ValidityChecker:
                     gd.deactivateCollisionPair(k)
                 if self.margin > 0:
                     gd.collisionRequests[k].security_margin = self.margin
+            if self.exact_contacts:
+                exact_contact_requests(gd)
             self._gd[mode] = gd
         # broad phase (dynamic AABB tree, coal) in front of the narrow phase: 3-5x faster in cluttered
         # scenes; its AABBs are not inflated by a security margin, so only used with margin = 0
@@ -199,6 +206,8 @@ class ValidityChecker:
                 for k in range(len(gm.collisionPairs)):
                     if not gd.activeCollisionPairs[k]:
                         pgd.deactivateCollisionPair(k)
+                if self.exact_contacts:
+                    exact_contact_requests(pgd)
                 self._pool[mode] = pool
             if self.fixed_id is not None:   # the still object's placement, set per query
                 self._pool_object = self._pool["fixed"].getGeometryModel(0).geometryObjects[self.fixed_id]
