@@ -43,6 +43,7 @@ def exact_distance(ck: ValidityChecker, k: int, gd) -> float:
 
 def hand_pairs(ck: ValidityChecker) -> list[int]:
     """The ``"fixed"``-mode pairs of a robot geometry on one of the object's ``exclude_links`` (the hands)."""
+    assert ck.object is not None
     excl = set(ck.object.exclude_links)
     objs, out = ck.gmodel.geometryObjects, []
     for k, cp in enumerate(ck.gmodel.collisionPairs):
@@ -61,6 +62,7 @@ def agree() -> None:
     robot = _robot("dual_panda")
     for name in ("panda_bar", "panda_shelf"):
         scene = Scene.load(name)
+        assert scene.object is not None
         cks = {"before": ValidityChecker(robot, scene, exact_contacts=False), "after": ValidityChecker(robot, scene)}
         kin, gen = ClosedChainKinematics(robot, scene.object.grasps), TrialGenerator(robot, scene)
         ref = cks["after"]
@@ -103,7 +105,7 @@ def cost(repeat: int) -> None:
     print(f"benchmark robot, hard_bay, 3000 random configurations: valid {verdict['before'].sum()} (before), "
           f"{verdict['after'].sum()} (after), verdicts differ on {(verdict['before'] != verdict['after']).sum()}")
     free = Q[verdict["before"] & verdict["after"]]
-    best: dict[tuple[str, str], float] = {}
+    best: dict[tuple[str, str, str], float] = {}
     for _ in range(repeat):
         for tag, ck in cks.items():   # paired: both checkers in every round
             t0 = time.perf_counter()
@@ -119,7 +121,7 @@ def cost(repeat: int) -> None:
             t4 = time.perf_counter()
             for key, v in ((("is_valid", "all 3000"), (t1 - t0) / len(Q)), (("first_invalid", "valid rows"), (t2 - t1) / len(free)),
                            (("is_valid", "colliding"), (t4 - t3) / max(1, len(coll)))):
-                best[(tag, *key)] = min(best.get((tag, *key), np.inf), v)   # type: ignore[arg-type]
+                best[(tag, *key)] = min(best.get((tag, *key), np.inf), v)
     for what in (("is_valid", "all 3000"), ("first_invalid", "valid rows"), ("is_valid", "colliding")):
         b, a = best[("before", *what)], best[("after", *what)]
         print(f"  {what[0]:13s} ({what[1]:10s}): before {1e6 * b:7.2f} µs, after {1e6 * a:7.2f} µs per configuration "
