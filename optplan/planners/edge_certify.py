@@ -55,6 +55,7 @@ from typing import Any, cast
 import numpy as np
 import pinocchio as pin
 
+from ..collision.checker import exact_contact_requests
 from ..collision.sweep import sweep_weights
 
 __all__ = ["EdgeCertifier"]
@@ -539,6 +540,8 @@ class EdgeCertifier:
                 # tol = 0: the near-contact test of an end (min_clearance); else the discrete alternative
                 extra = factor * self.min_clearance if tol == 0.0 else 0.5 * self.min_clearance
                 gd.collisionRequests[k].security_margin = (tol if both else 0.5 * tol) + extra + self.checker.margin
+            if self.checker.exact_contacts:   # as the checker's own requests (margins below 1e-6 m need it)
+                exact_contact_requests(gd)
             self._margin_gd[key] = gd
         return self._margin_gd[key]
 
