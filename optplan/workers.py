@@ -11,7 +11,9 @@ result. Jobs go out longest first (by the cost estimate the caller gives), each 
 process that is free, the calling process included. A job's function must be importable by name (a
 module-level function) and deterministic: which process runs a job does not change its result.
 Where ``fork`` is not available, with one worker, inside a daemonic process (a worker of a process
-pool, which may not have children), or if a worker dies, the jobs run here, in order.
+pool, which may not have children), or if a worker dies, the jobs run here, in order. A job sent to a
+worker that has not started :data:`STALL_S` after this process ran out of jobs is taken back and run here
+(a warning is logged).
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import CancelledError, Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
@@ -36,6 +38,9 @@ _CONTEXTS: dict[tuple[int, ...], tuple[Any, ...]] = {}
 _POOLS: OrderedDict[tuple[int, ...], ProcessPoolExecutor] = OrderedDict()
 #: how many pools (each with its worker processes) stay alive
 MAX_POOLS = 2
+#: a job sent to a worker that has not started after this long once this process has nothing left to do is
+#: taken back and run here [s] (a job is handed to a worker's queue within milliseconds of being sent)
+STALL_S = 5.0
 
 
 def default_workers() -> int:
@@ -107,6 +112,7 @@ def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tu
     results: list[Any] = [None] * len(jobs)
     errors: list[BaseException] = []
     all_done = threading.Event()
+    sent: dict[int, Future] = {}                 # jobs at the workers, by index
 
     def take(to_worker: bool) -> int | None:
         """The next job; one for a worker is counted as pending in the same step, so that this
@@ -138,11 +144,18 @@ def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tu
             _POOLS.pop(key, None)
             settle(i)
             return
+        with lock:
+            sent[i] = fut
         fut.add_done_callback(functools.partial(returned, i=i))
 
     def returned(fut: Future, i: int) -> None:
+        with lock:
+            sent.pop(i, None)
         try:
             results[i], cpu = fut.result()
+        except CancelledError:   # taken back before a worker started it (see the wait below): run here
+            settle(i)
+            return
         except BrokenProcessPool:  # pragma: no cover - a worker died: its job runs here
             log.warning("a worker process died; running its job here")
             _POOLS.pop(key, None)
@@ -169,9 +182,18 @@ def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tu
     with lock:
         if pending[0] == 0:
             all_done.set()
-    all_done.wait()
+    waited = 0.0
+    while not all_done.wait(timeout=0.5):
+        waited += 0.5
+        if waited < STALL_S:
+            continue
+        with lock:   # a job the pool never handed to its worker is run here instead
+            stalled = [f for f in sent.values() if not f.running() and not f.done()]
+        for f in stalled:
+            if f.cancel():
+                log.warning("a job sent to a worker process did not start within %.0f s; running it here", waited)
     if errors:
         raise errors[0]
-    for i in here:   # pragma: no cover - only after a worker died
+    for i in here:   # after a worker died, or a job it never started
         results[i] = fn(*context, *jobs[i])
     return results, worker_cpu[0]

@@ -46,6 +46,31 @@ def test_a_free_process_takes_the_next_job_whatever_the_estimates_said():
     shutdown()
 
 
+class _LostJobs:
+    """A pool that accepts jobs and never starts them (a work item lost between the pool and its
+    worker, once seen as a hang of the generalisation benchmark)."""
+
+    def submit(self, *args, **kwargs):
+        from concurrent.futures import Future
+
+        return Future()   # pending for ever
+
+
+def test_a_job_the_pool_never_starts_is_run_here(monkeypatch, caplog):
+    import optplan.workers as W
+
+    monkeypatch.setattr(W, "_pool", lambda context, workers: (("lost",), _LostJobs()))
+    monkeypatch.setattr(W, "STALL_S", 0.5)
+    jobs = [(x, 0.0) for x in range(4)]
+    t0 = time.perf_counter()
+    with caplog.at_level("WARNING", logger="optplan.workers"):
+        out, cpu = run_jobs((2.0, 1.0), _job, jobs, cost=[4.0, 3.0, 2.0, 1.0], workers=2)
+    assert [r[0] for r in out] == [2.0 * x + 1.0 for x in range(4)]
+    assert {r[1] for r in out} == {os.getpid()} and cpu == 0.0
+    assert time.perf_counter() - t0 < 5.0
+    assert "did not start" in caplog.text
+
+
 def _fails(scale, offset, x):
     if x == 1:
         raise ValueError("job 1 failed")
