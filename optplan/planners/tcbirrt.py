@@ -657,6 +657,29 @@ class TCBiRRT(Planner):
             i_s = i_near
         return (REACHED if reach else ADVANCED), i_s, reg
 
+    def _sample_near(self, ta: _TaskTree, tb: _TaskTree, sampler: TaskSampler | None, rng: np.random.Generator,
+                     st: dict[str, Any]) -> tuple[np.ndarray, int]:
+        """Alg. 1 lines 3-4: ξ_rand and the node of ``ta`` to extend from. With ``trap_adapt="domain"`` a sample
+        outside its nearest node's dynamic domain is drawn again (up to ``domain_tries`` draws)."""
+        o = self.options
+        for _ in range(o.domain_tries if o.trap_adapt == "domain" else 1):
+            xi_rand = rng.uniform(self._lo, self._hi) if sampler is None else sampler.sample(rng, tb.alive_xi())
+            i_near = ta.nearest(xi_rand)
+            if o.trap_adapt != "domain" or float(np.sum((xi_rand - ta.xi[i_near]) ** 2)) <= ta.dom[i_near] ** 2:
+                break
+            st["domain_rejections"] = st.get("domain_rejections", 0) + 1
+        return xi_rand, ta.twin_nearest(i_near, None, rng)
+
+    def _trap_update(self, tree: _TaskTree, i: int, res: str) -> None:
+        """``trap_adapt``: after an extension from node i, its dynamic domain (set when trapped) or its step
+        (halved when trapped, down to s_ξ/8; doubled back, up to s_ξ, when not)."""
+        o = self.options
+        if o.trap_adapt == "domain" and res == TRAPPED:
+            tree.dom[i] = self.step_size * o.domain_radius
+        elif o.trap_adapt == "step":
+            cur = self.step_size if not np.isfinite(tree.dom[i]) else float(tree.dom[i])
+            tree.dom[i] = max(cur * 0.5, self.step_size / 8.0) if res == TRAPPED else min(cur * 2.0, self.step_size)
+
     def _sampler(self) -> TaskSampler | None:
         """The improved variant's ξ sampler (None: the paper's uniform box)."""
         o = self.options
@@ -739,25 +762,10 @@ class TCBiRRT(Planner):
             if i_front is not None:       # the step beyond the frontier graft: connect tree b to it
                 res, i_a = ADVANCED, i_front
             else:
-                for _ in range(o.domain_tries if o.trap_adapt == "domain" else 1):
-                    if sampler is None:
-                        xi_rand = rng.uniform(self._lo, self._hi)                        # line 3
-                    else:
-                        xi_rand = sampler.sample(rng, tb.alive_xi())
-                    i_near = ta.nearest(xi_rand)                                         # line 4
-                    if o.trap_adapt != "domain" or float(np.sum((xi_rand - ta.xi[i_near]) ** 2)) <= ta.dom[i_near] ** 2:
-                        break
-                    st["domain_rejections"] = st.get("domain_rejections", 0) + 1   # outside the node's dynamic domain
-                i_near = ta.twin_nearest(i_near, None, rng)
-                step = None
-                if o.trap_adapt == "step" and np.isfinite(ta.dom[i_near]):
-                    step = float(ta.dom[i_near])
+                xi_rand, i_near = self._sample_near(ta, tb, sampler, rng, st)              # lines 3-4
+                step = float(ta.dom[i_near]) if o.trap_adapt == "step" and np.isfinite(ta.dom[i_near]) else None
                 res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st, step)   # line 5
-                if o.trap_adapt == "domain" and res == TRAPPED:
-                    ta.dom[i_near] = self.step_size * o.domain_radius
-                elif o.trap_adapt == "step":   # halve the node's step when trapped, double it back when not
-                    cur = self.step_size if not np.isfinite(ta.dom[i_near]) else float(ta.dom[i_near])
-                    ta.dom[i_near] = max(cur * 0.5, self.step_size / 8.0) if res == TRAPPED else min(cur * 2.0, self.step_size)
+                self._trap_update(ta, i_near, res)
             if res != TRAPPED:
                 target_xi, target_q = ta.xi[i_a].copy(), ta.q[i_a].copy()
                 while True:                                                              # lines 7-11
