@@ -228,7 +228,7 @@ def test_no_pairs_gives_zero_constraints(tcb, transport, rng):
         assert F.size1_out(0) == 0
         assert prob.term_data(h).info["active_pairs"] == ()
         assert prob.term_data(h).aux == ()
-        sol = prob.solve()
+        sol = prob.solve(guarantees=False)   # no pair constrained: what coal finds between knots is not checked here
         assert sol.success, sol.status
         assert sol.terms[h.name] == 0.0
         np.testing.assert_allclose(sol.q[0], q0, atol=1e-8)

@@ -55,7 +55,9 @@ def cc_problem(tcb):
     h_o = prob.add_constraint(OrientationConstraint(tcb.arm("A").ee_frame, max_angle=np.pi))
     h_j = prob.add_cost(Smoothness("jerk"), weight=2.0)
     prob.set_initial_straight_line(qa, qb)
-    sol = prob.solve(tol=1e-9)
+    # handles on this grid (N = 6: the closed chain drifts between knots; the dense check and its
+    # refinement are tested in test_guarantees.py)
+    sol = prob.solve(tol=1e-9, guarantees=False)
     assert sol.success, sol.status
     return prob, sol, {"cc": h_cc, "v": h_v, "o": h_o, "j": h_j}
 

@@ -73,7 +73,8 @@ class TermEvaluator:
         if name not in self.handles:
             raise KeyError(f"no term named {name!r} in the problem of this solution (terms: {sorted(self.handles)})")
         h = self.handles[name]
-        if not isinstance(handle, str) and handle.term is not h.term:
+        if not isinstance(handle, str) and handle.term is not h.term \
+                and getattr(h.term, "_origin", None) is not handle.term:   # refined by the dense check
             raise KeyError(f"the handle {name!r} refers to a term that was replaced before this solve; use the "
                            "handle replace_term returned (or the name)")
         return h, self.data[name]

@@ -64,6 +64,8 @@ class IpoptStatus(str, Enum):
     INSUFFICIENT_MEMORY = "Insufficient_Memory"
     INTERNAL_ERROR = "Internal_Error"
     UNKNOWN = "Unknown"
+    #: converged, but a constraint is violated between knots (optplan's dense check)
+    VIOLATED_BETWEEN_KNOTS = "Violated_Between_Knots"
 
     @classmethod
     def from_string(cls, s: str) -> IpoptStatus:

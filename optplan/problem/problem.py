@@ -35,6 +35,7 @@ from ..model.robot import RobotModel
 from ..solver_options import check_solve_arguments
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
+from .guarantees import GuaranteeOptions, enforce_between_knots
 from .nlp import NlpSolver, SolveOutcome, SolverOptions
 from .solution import Solution
 from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
@@ -389,8 +390,23 @@ class OptProblem:
 
     def solve(self, ipopt_options: dict[str, Any] | None = None, *, tol: float = 1e-6, max_iter: int = 500,
               exact_hessian: bool = True, objective_scaling: float | str = "auto",
-              options: SolverOptions | None = None) -> Solution:
-        """Solve with IPOPT. Never raises for a failed solve: the status is in the Solution.
+              options: SolverOptions | None = None, guarantees: GuaranteeOptions | bool | None = None) -> Solution:
+        """Solve with IPOPT, then check the solution densely between knots and refine it
+        (:mod:`optplan.problem.guarantees`; ``guarantees``: a :class:`GuaranteeOptions`, or False
+        for no check). Never raises for a failed solve: the status is in the Solution; ``success``
+        is never True with a constraint violated between knots (the grid, ``self.N``, may grow).
+        The other arguments: :meth:`solve_knots`."""
+        g = GuaranteeOptions.coerce(guarantees)
+        args = dict(tol=tol, max_iter=max_iter, exact_hessian=exact_hessian, objective_scaling=objective_scaling,
+                    options=options)
+        sol = self.solve_knots(ipopt_options, **args)  # type: ignore[arg-type]
+        return enforce_between_knots(self, sol, lambda: self.solve_knots(ipopt_options, **args), g)  # type: ignore[arg-type]
+
+    def solve_knots(self, ipopt_options: dict[str, Any] | None = None, *, tol: float = 1e-6, max_iter: int = 500,
+                    exact_hessian: bool = True, objective_scaling: float | str = "auto",
+                    options: SolverOptions | None = None) -> Solution:
+        """Solve with IPOPT, constraints at the knots only (no dense check). Never raises for a
+        failed solve: the status is in the Solution.
 
         ``tol`` is both IPOPT's ``tol``/``constr_viol_tol`` and the constraint-violation bound that
         ``Solution.success`` requires. Defaults depend on the problem's structure

@@ -22,8 +22,10 @@ _ARRAYS = ("t", "q", "qd", "qdd", "jerk", "base_quat", "base_position", "x", "la
 class Solution:
     """Result of a trajectory NLP (immutable: fields cannot be reassigned, arrays are read-only).
 
-    ``success`` is True only when IPOPT converged *and* the maximum constraint violation is below
-    the problem's tolerance. ``status``, ``iterations``, ``wall_time`` [s] (the IPOPT run),
+    ``success`` is True only when IPOPT converged, the maximum constraint violation is below
+    the problem's tolerance *and* (for :meth:`OptProblem.solve`) the dense check between knots
+    found no violation (:mod:`optplan.problem.guarantees`; otherwise the status is
+    ``VIOLATED_BETWEEN_KNOTS`` and :attr:`between_knots` lists the violations). ``status``, ``iterations``, ``wall_time`` [s] (the IPOPT run),
     ``cpu_time`` [s] and ``setup_time`` [s] (NLP construction and solver creation before it; 0
     when a built solver was reused) describe the run that produced this trajectory; ``attempts``
     lists every run that led to it, in order (:class:`~optplan.problem.nlp.SolveOutcome`:
@@ -66,6 +68,9 @@ class Solution:
     attempts: tuple[SolveOutcome, ...] = ()
     #: the built problem's term evaluator (not saved); see value/violation/dual/sample
     evaluator: Any = field(default=None, repr=False, compare=False)
+    #: constraints violated between knots (:class:`~optplan.problem.guarantees.Violation`, worst
+    #: first) when the dense check after the solve failed (status ``VIOLATED_BETWEEN_KNOTS``); not saved
+    between_knots: tuple[Any, ...] = field(default=(), repr=False, compare=False)
 
     def __post_init__(self) -> None:
         set_: Callable[[str, Any], None] = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731  (frozen: only here)

@@ -1,0 +1,314 @@
+"""What ``success`` guarantees between knots: a dense check of a solved problem and the ordered
+refinement :meth:`OptProblem.solve` runs before it reports success.
+
+The NLP enforces its constraint rows at the knots (and at a term's own interior points). Joint
+positions are cubic and rates quadratic between knots, torques, frame poses and distances are
+nonlinear in them: a row that holds at every knot can be violated in between (a link cutting a
+corner of an obstacle, a closed chain drifting ∝ h⁴, a torque peak). :func:`check_between_knots`
+samples the exact piecewise-cubic trajectory at ``density`` points per interval and evaluates every
+constraint that is imposed along the trajectory with its numeric twin (Pinocchio, coal):
+
+* collision: exact coal distances of **every** checked pair (not only the pairs the NLP activated)
+  against the term's margin (relaxed next to a given boundary configuration as in the NLP);
+* every other term whose rows are imposed along the trajectory (joint limits, torque limits, closed
+  chain, orientation, frame poses at every knot, ...): its rows against its bounds.
+
+Terms tied to given knots (boundaries, a pose at one knot) hold there by construction and are not
+sampled. A row is violated when it leaves its bounds by more than ``tol + rel_tol · |bound|``.
+
+:func:`enforce_between_knots` is the loop ``OptProblem.solve`` runs after a converged solve,
+in the pipeline's order: (1) **collision** — pairs activated along the solution and margins
+raised at the knots around a contact, re-solve on the same grid warm-started; (2) **refine** —
+``growth``× the intervals, warm-started from the solution (terms at given knot indices are
+moved to the same times); then, if a violation remains, the solution is returned with
+``success=False`` and status :attr:`IpoptStatus.VIOLATED_BETWEEN_KNOTS`, its violations in
+``Solution.between_knots``. See docs/decisions/0017-dense-check-between-knots.md.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import OptionError
+from .collision_term import CollisionAvoidance
+from .nlp import IpoptStatus
+from .solution import Solution
+
+__all__ = ["GuaranteeOptions", "Violation", "check_between_knots", "enforce_between_knots"]
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class GuaranteeOptions:
+    """Options of the dense check after a solve (``OptProblem.solve(guarantees=...)``)."""
+
+    #: Samples per knot interval of the dense check (≥ 10) [-].
+    density: int = 10
+    #: Absolute tolerance of a row between knots, in the row's units [m, rad, rad/s, N·m].
+    tol: float = 1e-3
+    #: Relative tolerance, times the magnitude of the violated bound [-].
+    rel_tol: float = 1e-3
+    #: Re-solves with pairs activated and margins raised around a contact (same grid) [-].
+    collision_retries: int = 2
+    #: Re-solves on a finer grid, warm-started from the solution [-].
+    refinements: int = 2
+    #: Factor by which a refinement multiplies the number of intervals (an integer ≥ 2) [-].
+    growth: int = 2
+    #: No refinement past this many intervals [-].
+    max_intervals: int = 400
+
+    def __post_init__(self) -> None:
+        for name, lo in (("density", 10), ("collision_retries", 0), ("refinements", 0), ("growth", 2),
+                         ("max_intervals", 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+                raise OptionError(f"GuaranteeOptions.{name}: expected an integer ≥ {lo}, got {v!r}")
+        for name in ("tol", "rel_tol"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not (np.isfinite(v) and v >= 0):
+                raise OptionError(f"GuaranteeOptions.{name}: expected a finite number ≥ 0, got {v!r}")
+
+    @classmethod
+    def coerce(cls, value: Any) -> GuaranteeOptions | None:
+        """``None``/``True`` → defaults, ``False`` → no check, an instance → itself."""
+        if value is None or value is True:
+            return cls()
+        if value is False:
+            return None
+        if isinstance(value, cls):
+            return value
+        raise OptionError(f"guarantees: expected a GuaranteeOptions, True or False, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Violation:
+    """A constraint violated between knots: ``term`` (its name), ``t`` [s] (the worst sample of
+    the interval), ``interval`` (knot interval ``k``: between knots k and k+1), ``component``
+    (joint name, collision pair ``"a | b"`` or ``"row i"``), ``value`` and the violated ``bound``
+    (row units), ``amount`` (how far beyond the bound, ≥ 0)."""
+
+    term: str
+    t: float
+    interval: int
+    component: str
+    value: float
+    bound: float
+    amount: float
+
+    def __str__(self) -> str:
+        return (f"{self.term}[{self.component}] at t={self.t:.4g} s: {self.value:.6g} beyond {self.bound:.6g} "
+                f"by {self.amount:.3g}")
+
+
+def _components(n: int, robot: Any) -> list[str]:
+    return list(robot.joint_names) if n == robot.nj else [f"row {i}" for i in range(n)]
+
+
+def _allowed(bound: np.ndarray, o: GuaranteeOptions) -> np.ndarray:
+    b = np.where(np.isfinite(bound), np.abs(bound), 0.0)
+    return o.tol + o.rel_tol * b
+
+
+def _worst(out: list[Violation], name: str, t: np.ndarray, h: float, N: int, comp: list[str],
+           value: np.ndarray, lo: np.ndarray, hi: np.ndarray, o: GuaranteeOptions) -> None:
+    """Append the worst violation per (component, interval) of sampled rows ``value`` (M × n)."""
+    below, above = lo - value, value - hi
+    amount = np.maximum(np.maximum(below, above), 0.0)
+    bound = np.where(below > above, lo, hi)
+    bad = amount > _allowed(bound, o)
+    k = np.clip((t / h).astype(int), 0, N - 1)
+    best: dict[tuple[int, int], int] = {}
+    for i, j in zip(*np.nonzero(bad)):
+        key = (int(j), int(k[i]))
+        if key not in best or amount[i, j] > amount[best[key], j]:
+            best[key] = int(i)
+    for (j, kk), i in best.items():
+        out.append(Violation(name, float(t[i]), kk, comp[j], float(value[i, j]), float(bound[i, j]),
+                             float(amount[i, j])))
+
+
+def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: Any, traj: Any, t: np.ndarray,
+               h: float, N: int, o: GuaranteeOptions) -> None:
+    model = data.info.get("model")
+    if model is None:
+        return
+    checker = model.checker
+    robot = traj.robot
+    Q = np.array([traj.q_full(i) for i in range(traj.N + 1)])
+    margin = float(term.margin)
+    constant = set(data.info.get("constant_pairs", ()))
+    relaxed: Mapping[Any, float] = data.info.get("relaxed", {})
+    rows, idx, dist = checker.distances_below(Q, margin)
+    k = np.clip((t / h).astype(int), 0, N - 1)
+    best: dict[tuple[int, int], tuple[int, float, float]] = {}
+    for r_, p_, d_ in zip(rows.tolist(), idx.tolist(), dist.tolist()):
+        pair = checker.pairs[p_]
+        if pair in constant:
+            continue   # no free joint moves this pair: its clearance is given, not the NLP's
+        kk = int(k[r_])
+        bound = min(relaxed.get((pair, kk), margin), relaxed.get((pair, kk + 1), margin))
+        amount = bound - d_
+        if amount <= o.tol + o.rel_tol * abs(bound):
+            continue
+        if (p_, kk) not in best or amount > best[(p_, kk)][2]:
+            best[(p_, kk)] = (r_, bound, amount)
+    del robot
+    for (p_, kk), (r_, bound, amount) in best.items():
+        pair = checker.pairs[p_]
+        d = bound - amount
+        out.append(Violation(name, float(t[r_]), kk, f"{pair.name_a} | {pair.name_b}", float(d), float(bound),
+                             float(amount)))
+
+
+def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions | None = None) -> list[Violation]:
+    """Every constraint of ``problem`` not enforced between knots by construction, checked at
+    ``options.density`` samples per interval of the solution ``sol`` (module docstring); the worst
+    violation per (term, component, interval), worst first. An empty list: nothing violated."""
+    o = options or GuaranteeOptions()
+    ev = sol.evaluator
+    if ev is None or sol.x is None:
+        raise ValueError("check_between_knots: the solution carries no problem to evaluate (solve the problem and "
+                         "pass its solution)")
+    N = len(sol.t) - 1
+    T = float(sol.t[-1] - sol.t[0])
+    h = T / N
+    t = np.linspace(0.0, T, o.density * N + 1)
+    traj = ev.sampled_trajectory(sol, t + sol.t[0])
+    out: list[Violation] = []
+    for name, hd in ev.handles.items():
+        if hd.role != "constraint":
+            continue
+        term, data = hd.term, ev.data[name]
+        if isinstance(term, CollisionAvoidance):
+            _collision(out, name, term, data, traj, t, h, N, o)
+            continue
+        try:
+            s = term.sampled()
+        except TypeError:
+            continue   # tied to given knots: holds there by construction
+        v = np.asarray(s.numeric_built(traj, data), float).reshape(t.size, -1)
+        lo, hi = (np.asarray(b, float).reshape(t.size, -1) for b in s.bounds_numeric(traj))
+        _worst(out, name, t, h, N, _components(v.shape[1], problem.robot), v, lo, hi, o)
+    out.sort(key=lambda x: -x.amount)
+    return out
+
+
+# --------------------------------------------------------------------------- the refinement loop
+def _lineage(new: Any, old: Any) -> Any:
+    """Mark ``new`` as derived from ``old`` (a user's handle to ``old`` keeps working)."""
+    object.__setattr__(new, "_origin", getattr(old, "_origin", old))
+    return new
+
+
+def _collision_retry(problem: Any, sol: Solution, viol: list[Violation], o: GuaranteeOptions) -> bool:
+    """Activate pairs along the solution and raise margins around contacts; False if no collision
+    term has a violation."""
+    names = {v.term for v in viol}
+    changed = False
+    t = np.linspace(sol.t[0], sol.t[-1], o.density * (len(sol.t) - 1) + 1)
+    for name, hd in list(problem.terms.items()):
+        if name not in names or hd.role != "constraint" or not isinstance(hd.term, CollisionAvoidance):
+            continue
+        col = hd.term.with_activation(problem.numeric_trajectory(sol.x))
+        q = sol.sample(t)["q"]
+        if problem.robot.is_floating:
+            q = sol.evaluator.sampled_trajectory(sol, t)
+            q = np.array([q.q_full(i) for i in range(t.size)])
+        col, n = col.with_boost(problem.term_data(hd), t, q, sol.t, min_clearance=float(hd.term.margin))
+        log.info("between knots: %s: %d rows with a larger margin, pairs activated along the solution; re-solving",
+                 name, n)
+        problem.replace_term(hd, _lineage(col, hd.term))
+        changed = True
+    if changed:
+        problem.set_initial(solution=sol)
+    return changed
+
+
+def _remap_at(at: Any, N: int, f: int) -> Any:
+    if isinstance(at, (int, np.integer)):
+        return int(at) % (N + 1) * f
+    if isinstance(at, tuple):
+        return tuple(int(a) % (N + 1) * f for a in at)
+    return at
+
+
+def _regriddable(problem: Any) -> bool:
+    for hd in problem.terms.values():
+        poses = getattr(hd.term, "poses", None)
+        if poses is not None and not callable(poses):
+            return False   # a path given per knot has no value at new knots
+    return True
+
+
+def _refine(problem: Any, sol: Solution, o: GuaranteeOptions) -> bool:
+    """Re-grid the problem with ``growth``× the intervals, warm-started from ``sol``; False if
+    not possible (interval cap, terms given per knot)."""
+    f = int(o.growth)
+    if problem.N * f > o.max_intervals or not _regriddable(problem):
+        return False
+    N = problem.N
+    for _, hd in list(problem.terms.items()):
+        term, new = hd.term, None
+        at = getattr(term, "at", None)
+        if at is not None and not isinstance(at, str):
+            new = dataclasses.replace(term, at=_remap_at(at, N, f))
+        if isinstance(term, CollisionAvoidance):
+            # per-knot boosts and activating trajectories belong to the old grid; the warm start (this
+            # solution) activates the pairs it brings close
+            new = dataclasses.replace(term, activate_with=(), margin_boost={})
+        if new is not None:
+            problem.replace_term(hd, _lineage(new, term))
+    problem.N = N * f
+    problem.tp = problem._make_transcription()
+    problem._built = None
+    if problem.robot.is_floating:
+        problem.set_initial(solution=sol)   # base states re-integrated on the new grid
+    else:
+        # the solution itself, exactly: each interval split in f with the same constant jerk
+        tk = np.linspace(sol.t[0], sol.t[-1], problem.N + 1)
+        s = sol.sample(tk)
+        problem._x0 = problem.tp.pack(s["q"], s["qd"], s["qdd"], np.repeat(np.asarray(sol.jerk), f, axis=0),
+                                      T=sol.duration)
+        problem._lam_g0 = problem._lam_x0 = None
+    log.info("between knots: re-solving on %d intervals (was %d)", problem.N, N)
+    return True
+
+
+def enforce_between_knots(problem: Any, sol: Solution, solve_once: Callable[[], Solution],
+                          options: GuaranteeOptions | None) -> Solution:
+    """After a solve: check densely and refine (module docstring) until nothing is violated or
+    the bounds are reached. Never returns ``success=True`` with a dense violation."""
+    if options is None or not sol.success:
+        return sol
+    o = options
+    viol = check_between_knots(problem, sol, o)
+    n_col = n_ref = 0
+    while viol:
+        log.info("between knots: %d violation(s), worst %s", len(viol), viol[0])
+        col = any(isinstance(problem.terms[v.term].term, CollisionAvoidance) for v in viol if v.term in problem.terms)
+        if col and n_col < o.collision_retries and _collision_retry(problem, sol, viol, o):
+            n_col += 1
+            label = "collision"
+        elif n_ref < o.refinements and _refine(problem, sol, o):
+            n_ref += 1
+            label = "refine"
+        else:
+            break
+        new = solve_once().labelled(label).after(sol)
+        if not new.success:
+            # the re-solve failed: report the converged solution and what it violates, with the
+            # failed attempt listed
+            return dataclasses.replace(sol, success=False, status=IpoptStatus.VIOLATED_BETWEEN_KNOTS,
+                                       between_knots=tuple(viol), attempts=new.attempts)
+        sol = new
+        viol = check_between_knots(problem, sol, o)
+    if viol:
+        return dataclasses.replace(sol, success=False, status=IpoptStatus.VIOLATED_BETWEEN_KNOTS,
+                                   between_knots=tuple(viol))
+    return sol
