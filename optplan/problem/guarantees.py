@@ -20,7 +20,7 @@ sampled. A row is violated when it leaves its bounds by more than ``tol + rel_to
 in the pipeline's order: (1) **collision** — pairs activated along the solution and margins
 raised at the knots around a contact, re-solve on the same grid warm-started; (2) **refine** —
 ``growth``× the intervals, warm-started from the solution (terms at given knot indices are
-moved to the same times); then, if a violation remains, the solution is returned with
+moved to the same times), with its own collision re-solves; then, if a violation remains, the solution is returned with
 ``success=False`` and status :attr:`IpoptStatus.VIOLATED_BETWEEN_KNOTS`, its violations in
 ``Solution.between_knots``. See docs/decisions/0017-dense-check-between-knots.md.
 """
@@ -53,8 +53,8 @@ class GuaranteeOptions:
     tol: float = 1e-3
     #: Relative tolerance, times the magnitude of the violated bound [-].
     rel_tol: float = 1e-3
-    #: Re-solves with pairs activated and margins raised around a contact (same grid) [-].
-    collision_retries: int = 2
+    #: Re-solves with pairs activated and margins raised around a contact, per grid [-].
+    collision_retries: int = 3
     #: Re-solves on a finer grid, warm-started from the solution [-].
     refinements: int = 2
     #: Factor by which a refinement multiplies the number of intervals (an integer ≥ 2) [-].
@@ -297,15 +297,20 @@ def enforce_between_knots(problem: Any, sol: Solution, solve_once: Callable[[], 
             label = "collision"
         elif n_ref < o.refinements and _refine(problem, sol, o):
             n_ref += 1
+            n_col = 0   # a new grid: its own collision retries
             label = "refine"
         else:
             break
         new = solve_once().labelled(label).after(sol)
         if not new.success:
-            # the re-solve failed: report the converged solution and what it violates, with the
-            # failed attempt listed
-            return dataclasses.replace(sol, success=False, status=IpoptStatus.VIOLATED_BETWEEN_KNOTS,
-                                       between_knots=tuple(viol), attempts=new.attempts)
+            # keep the converged solution (with the failed attempt listed); a failed collision
+            # re-solve passes on to the next step, a failed refinement ends the loop
+            sol = dataclasses.replace(sol, attempts=new.attempts)
+            if label == "refine":
+                break
+            n_col = o.collision_retries
+            problem.set_initial(solution=sol)
+            continue
         sol = new
         viol = check_between_knots(problem, sol, o)
     if viol:

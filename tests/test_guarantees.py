@@ -1,0 +1,172 @@
+"""What ``success`` guarantees between knots (optplan.problem.guarantees).
+
+Independent references: ``optplan.verification.verify`` (coal at 10× the knot density, written
+apart from the dense check) and exact coal distances; the knot-only solve (``solve_knots`` or
+``guarantees=False``) as the case that the dense check must catch.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from optplan.collision.checker import CollisionChecker
+from optplan.errors import OptionError
+from optplan.model.robot import RobotModel
+from optplan.problem import CollisionAvoidance, IpoptStatus, JointBoundary, OptProblem, Smoothness
+from optplan.problem.guarantees import GuaranteeOptions, check_between_knots
+from optplan.scene import Obstacle, Scene
+from optplan.verification import verify
+
+
+# --------------------------------------------------------------------------- the UR5 case
+def _ur5(tmp_path_factory) -> RobotModel:
+    """UR5 of example-robot-data, each collision mesh replaced by its bounding box (the NLP's
+    collision rows model boxes and capsules, not meshes)."""
+    import coal
+
+    from optplan.model._robot_data import example_robot_data_dir
+
+    share = example_robot_data_dir()
+    urdf = None if share is None else share / "robots/ur_description/urdf/ur5_robot.urdf"
+    if urdf is None or not urdf.exists():
+        pytest.skip("example-robot-data is not installed (extra 'robots')")
+    loader = coal.MeshLoader()
+
+    def box(m: re.Match) -> str:
+        bvh = loader.load(m.group(1).replace("package://example-robot-data/", f"{share}/"), np.ones(3))
+        bvh.computeLocalAABB()
+        lo, hi = np.array(bvh.aabb_local.min_), np.array(bvh.aabb_local.max_)
+        c, s = (lo + hi) / 2, hi - lo
+        return f'<origin xyz="{c[0]} {c[1]} {c[2]}" rpy="0 0 0"/><geometry><box size="{s[0]} {s[1]} {s[2]}"/></geometry>'
+
+    text = re.sub(r'<geometry>\s*<mesh filename="([^"]+collision[^"]+)"\s*/>\s*</geometry>', box, urdf.read_text())
+    text = re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
+    path = tmp_path_factory.mktemp("ur5") / "ur5_boxes.urdf"
+    path.write_text(text)
+    return RobotModel.from_urdf(path, arms={"A": "tool0"}, name="ur5")
+
+
+Q0 = np.array([-1.2, -1.2, 1.5, -1.9, -1.57, 0.0])
+Q1 = np.array([1.2, -1.2, 1.5, -1.9, -1.57, 0.0])
+MARGIN = 0.02
+
+
+@pytest.fixture(scope="module")
+def ur5_case(tmp_path_factory):
+    r = _ur5(tmp_path_factory)
+    d = r.model.createData()
+    pin.framesForwardKinematics(r.model, d, (Q0 + Q1) / 2)
+    pm = d.oMf[r.frame_id("tool0")].translation
+    c = np.r_[pm[:2] + 0.09 * pm[:2] / np.linalg.norm(pm[:2]), pm[2]]   # a box just outside the tool's arc
+    scene = Scene("ur5_box", None, (Obstacle("box", "box", pin.SE3(np.eye(3), c), size=(0.1, 0.1, 0.3)),))
+    return r, scene
+
+
+def _ur5_problem(r, scene, N=10):
+    z = np.zeros(6)
+    prob = OptProblem(r, n_intervals=N, duration=3.0)
+    prob.add_constraint(JointBoundary("start", q=Q0, qd=z, qdd=z))
+    prob.add_constraint(JointBoundary("end", q=Q1, qd=z, qdd=z))
+    prob.add_cost(Smoothness("jerk"))
+    h = prob.add_constraint(CollisionAvoidance(scene, margin=MARGIN, self_collision=False))
+    prob.set_initial_straight_line(Q0, Q1)
+    return prob, h
+
+
+def test_ur5_margin_missed_between_knots_is_caught(ur5_case):
+    """The knot-only solve holds the margin at the knots and cuts it between them (the case a user
+    reported as success); the dense check names the pair, the time and the amount."""
+    r, scene = ur5_case
+    prob, h = _ur5_problem(r, scene)
+    sol = prob.solve_knots()
+    assert sol.success
+    assert sol.violation(h).max() < 1e-6                       # every knot row holds
+    rep = verify(r, sol, scene)
+    assert rep.min_clearance_m < MARGIN - 0.005                # 10× denser: the margin is missed
+    viol = check_between_knots(prob, sol)
+    assert viol and viol[0].term == h.name and "box" in viol[0].component
+    assert viol[0].amount == pytest.approx(MARGIN - rep.min_clearance_m, abs=1e-6)
+    assert 0 < viol[0].t < 3.0 and 0 <= viol[0].interval < 10
+    assert "at t=" in str(viol[0])
+
+
+def test_ur5_solve_refines_until_the_margin_holds(ur5_case):
+    r, scene = ur5_case
+    prob, h = _ur5_problem(r, scene)
+    sol = prob.solve()
+    o = GuaranteeOptions()
+    assert sol.success, (sol.status, sol.between_knots[:3])
+    assert [a.label for a in sol.attempts][0] == "" and len(sol.attempts) > 1   # it had to re-solve
+    rep = verify(r, sol, scene)
+    assert rep.min_clearance_m >= MARGIN - (o.tol + o.rel_tol * MARGIN)
+    assert sol.between_knots == () and check_between_knots(prob, sol) == []
+    assert sol.violation(h).shape[0] > 0                       # the user's handle still evaluates
+
+
+def test_violation_is_a_status_when_refinement_is_off(ur5_case):
+    r, scene = ur5_case
+    prob, h = _ur5_problem(r, scene)
+    sol = prob.solve(guarantees=GuaranteeOptions(collision_retries=0, refinements=0))
+    assert not sol.success and sol.status is IpoptStatus.VIOLATED_BETWEEN_KNOTS
+    assert not sol.status.succeeded
+    assert sol.between_knots and sol.between_knots[0].term == h.name
+    assert prob.N == 10
+
+
+def test_guarantee_options_refuse_bad_values():
+    for kw in ({"density": 5}, {"tol": -1.0}, {"growth": 1}, {"refinements": 1.5}):
+        with pytest.raises(OptionError, match=next(iter(kw))):
+            GuaranteeOptions(**kw)
+    with pytest.raises(OptionError, match="guarantees"):
+        GuaranteeOptions.coerce("yes")
+
+
+# --------------------------------------------------------------------------- property
+@pytest.fixture(scope="module")
+def tcb_arm():
+    return RobotModel.from_name("tcbirrt_dual_arm")
+
+
+@settings(max_examples=5, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(offset=st.floats(0.0, 0.12), side=st.floats(0.0, 2 * np.pi), size=st.floats(0.04, 0.12),
+       margin=st.floats(0.005, 0.04), frac=st.floats(0.3, 0.7))
+def test_success_implies_no_dense_violation(tcb_arm, offset, side, size, margin, frac):
+    """Random box obstacles near a straight joint-space move of one arm, random margins: whenever
+    ``solve`` reports success, coal finds no clearance below the margin (beyond the check's
+    tolerance) at 10× the knot density."""
+    r = tcb_arm
+    qa = r.neutral()
+    qb = qa.copy()
+    qb[:3] += np.array([0.6, -0.4, 0.5])                       # arm A only
+    d = r.model.createData()
+    ee = r.arm("A").ee_frame_id
+    pin.framesForwardKinematics(r.model, d, qa + frac * (qb - qa))
+    p = d.oMf[ee].translation.copy()
+    u = np.array([np.cos(side), np.sin(side), 0.0])
+    c = p + (offset + size / 2) * u
+    scene = Scene("box", None, (Obstacle("box", "box", pin.SE3(np.eye(3), c), size=(size, size, size)),))
+    checker = CollisionChecker(r, scene, self_collision=False)
+    for q in (qa, qb):   # the given ends must clear the margin (else nothing can succeed)
+        assume(checker.distances(q).min() > margin + 0.01)
+    z = np.zeros(r.nj)
+    prob = OptProblem(r, n_intervals=6, duration=2.0)
+    prob.add_constraint(JointBoundary("start", q=qa, qd=z, qdd=z))
+    prob.add_constraint(JointBoundary("end", q=qb, qd=z, qdd=z))
+    prob.add_cost(Smoothness("jerk"))
+    prob.add_constraint(CollisionAvoidance(scene, margin=margin, self_collision=False))
+    prob.set_initial_straight_line(qa, qb)
+    sol = prob.solve(max_iter=200)
+    if sol.success:
+        o = GuaranteeOptions()
+        ts = np.linspace(0.0, sol.duration, 10 * (len(sol.t) - 1) + 1)
+        dmin, pair, _ = checker.min_distance_along(sol.sample(ts)["q"])
+        assert dmin >= margin - (o.tol + o.rel_tol * margin) - 1e-9, (dmin, pair)
+    else:
+        assert sol.status is not IpoptStatus.SOLVE_SUCCEEDED or sol.between_knots
+
