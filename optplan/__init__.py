@@ -44,6 +44,8 @@ _EXPORTS = {
     "JointAccelerationLimits": "problem", "FramePose": "problem", "FramePath": "problem",
     "ClosedChain": "problem", "CollisionAvoidance": "problem", "OrientationConstraint": "problem",
     "BaseAttitude": "problem", "Smoothness": "problem", "PathLength": "problem", "Duration": "problem",
+    "JointTorqueLimits": "problem", "TorqueCost": "problem", "GuaranteeOptions": "problem",
+    "SymbolicDynamics": "model.dynamics",
     "verify": "verification", "VerifyReport": "verification",
     # planners
     "make_planner": "planners", "planner_names": "planners", "Planner": "planners",

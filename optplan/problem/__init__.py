@@ -3,8 +3,10 @@
 (:mod:`.nlp`: :class:`SolverOptions`, :class:`SolveOutcome`) → :class:`Solution`."""
 from .build import AuxVariable, BuildContext, TermData
 from .collision_term import CollisionAvoidance, CollisionModel
+from .dynamics_terms import JointTorqueLimits, TorqueCost
 from .evaluate import Infeasibility
 from .frame_terms import BaseAttitude, ClosedChain, FramePath, FramePose, OrientationConstraint
+from .guarantees import GuaranteeOptions, Violation, check_between_knots
 from .nlp import NlpSolver, SolveOutcome, SolverOptions
 from .problem import OptProblem, TermHandle
 from .solution import IpoptStatus, Solution
@@ -25,5 +27,5 @@ __all__ = [
     "JointPositionLimits", "JointVelocityLimits", "JointAccelerationLimits", "FramePose", "FramePath",
     "ClosedChain", "CollisionAvoidance", "OrientationConstraint", "BaseAttitude", "Smoothness", "PathLength", "Duration",
     "BuildContext", "TermData", "AuxVariable", "CollisionModel", "Infeasibility", "SolverOptions", "SolveOutcome",
-    "NlpSolver",
+    "NlpSolver", "JointTorqueLimits", "TorqueCost", "GuaranteeOptions", "Violation", "check_between_knots",
 ]
