@@ -43,11 +43,13 @@ from optplan.problem import (
     JointAccelerationLimits,
     JointBoundary,
     JointPositionLimits,
+    JointTorqueLimits,
     JointVelocityLimits,
     OptProblem,
     OrientationConstraint,
     PathLength,
     Smoothness,
+    TorqueCost,
 )
 from optplan.scene import Scene
 
@@ -172,6 +174,14 @@ REGISTRY = [
     Case("base_attitude_all", "eba", lambda r, g, N: BaseAttitude(target=None, at="all")),
     Case("base_attitude_cost", "eba", lambda r, g, N: BaseAttitude(target=random_rotation(g), at=[1, 3]),
          role="cost", weight=0.7),
+    # joint torques (recursive Newton-Euler), fixed and free-floating base
+    Case("torque_limits", "tcb", lambda r, g, N: JointTorqueLimits(limit=50.0)),
+    Case("torque_limits_interior_eba", "eba", lambda r, g, N: JointTorqueLimits(limit=20.0, interior=1)),
+    Case("torque_limits_cost", "tcb", lambda r, g, N: JointTorqueLimits(limit={r.joint_names[1]: 5.0}),
+         role="cost", weight=1e-4),
+    Case("torque_cost", "tcb", lambda r, g, N: TorqueCost(weights=g.uniform(0.5, 2.0, r.nj)), role="cost",
+         weight=1e-4),
+    Case("torque_cost_eba", "eba", lambda r, g, N: TorqueCost(), role="cost"),
     # cost-only terms
     Case("smoothness_jerk", "tcb", lambda r, g, N: Smoothness("jerk"), role="cost"),
     Case("smoothness_jerk_free_time", "tcb", lambda r, g, N: Smoothness("jerk"), role="cost", free_time=True),
@@ -374,6 +384,7 @@ def test_registry_covers_every_exported_term():
         "FramePose": "frame_pose", "FramePath": "frame_path", "ClosedChain": "closed_chain",
         "OrientationConstraint": "orientation", "BaseAttitude": "base_attitude", "Smoothness": "smoothness",
         "PathLength": "path_length", "Duration": "duration", "CollisionAvoidance": "collision",
+        "JointTorqueLimits": "torque_limits", "TorqueCost": "torque_cost",
     }
     names |= {c.name for c in COLLISION_REGISTRY}
     assert exported <= set(by_prefix), f"term classes without a registry entry: {exported - set(by_prefix)}"

@@ -139,7 +139,7 @@ class SymbolicDynamics:
                              "base wrench is zero by construction)")
         _, f, _ = self._pass(q, v, a)
         F0, n0 = f[0]
-        return -ca.vertcat(F0, n0)
+        return ca.vertcat(-F0, -n0)
 
     # ------------------------------------------------------------------ free-floating base
     def _inverse_total_inertia(self, X: list) -> Any:

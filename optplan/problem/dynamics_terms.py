@@ -13,6 +13,7 @@ checks every limit densely after the solve (:mod:`optplan.problem.guarantees`).
 """
 from __future__ import annotations
 
+import dataclasses
 import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -157,16 +158,27 @@ class JointTorqueLimits(Term):
                         point_rows=tp.nj)
 
     def numeric(self, traj: NumericTrajectory) -> np.ndarray:
-        """Pinocchio's joint torques at every knot of ``traj``, ``(N+1) · nj`` (knots only)."""
-        return np.concatenate([joint_torques_numeric(traj.robot, traj.q[k], traj.qd[k], traj.qdd[k])
-                               for k in range(traj.N + 1)])
+        """Pinocchio's joint torques at the rows' points of ``traj`` (knots and interior points,
+        from the exact piecewise cubic), ``points · nj``."""
+        out = []
+        for pt in _points(traj.N, int(self.interior)):
+            if isinstance(pt, int):
+                q, v, a = traj.q[pt], traj.qd[pt], traj.qdd[pt]
+            else:
+                k, f = pt
+                s = f * traj.h
+                q0, v0, a0, j0 = traj.q[k], traj.qd[k], traj.qdd[k], traj.jerk[k]
+                q, v, a = q0 + s * v0 + s**2 / 2 * a0 + s**3 / 6 * j0, v0 + s * a0 + s**2 / 2 * j0, a0 + s * j0
+            out.append(joint_torques_numeric(traj.robot, q, v, a))
+        return np.concatenate(out)
 
     def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self.limits(traj.robot)
-        return np.tile(lo, traj.N + 1), np.tile(hi, traj.N + 1)
+        n = len(_points(traj.N, int(self.interior)))
+        return np.tile(lo, n), np.tile(hi, n)
 
     def sampled(self) -> Term:
-        return self
+        return dataclasses.replace(self, interior=0)
 
 
 @dataclass(eq=False)
