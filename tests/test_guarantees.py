@@ -170,3 +170,75 @@ def test_success_implies_no_dense_violation(tcb_arm, offset, side, size, margin,
     else:
         assert sol.status is not IpoptStatus.SOLVE_SUCCEEDED or sol.between_knots
 
+
+
+# --------------------------------------------------------------------------- closed chain, knots moved
+def test_closed_chain_drift_is_refined_and_knot_terms_follow(tcb_arm):
+    """A closed-chain transport on 8 intervals drifts between knots (∝ h⁴); ``solve`` refines the
+    grid until the chain holds densely (Pinocchio FK in ``verify``), and a position imposed at knot
+    4 of 8 is imposed at the same time on the finer grid."""
+    from optplan.constraints.closed_chain import project_closed_chain
+    from optplan.model.kinematics import Kinematics
+    from optplan.problem import ClosedChain, FramePose
+
+    r = tcb_arm
+    rng = np.random.default_rng(3)
+    qa = r.random_joints(rng) * 0.4
+    cc = ClosedChain.from_configuration(r, qa)
+    qb = project_closed_chain(r, qa + rng.normal(size=14) * 0.15, cc).q
+    qm = project_closed_chain(r, (qa + qb) / 2 + rng.normal(size=14) * 0.02, cc).q
+    target = Kinematics(r).frame_placements(qm, [r.arm("A").ee_frame])[0]
+    z = np.zeros(14)
+
+    def problem():
+        prob = OptProblem(r, n_intervals=8, duration=4.0)
+        prob.add_constraint(JointBoundary("start", q=qa, qd=z, qdd=z))
+        prob.add_constraint(JointBoundary("end", q=qb, qd=z, qdd=z))
+        prob.add_constraint(cc)
+        fp = prob.add_constraint(FramePose(r.arm("A").ee_frame, target, at=4, position_only=True))
+        prob.add_cost(Smoothness("jerk"))
+        prob.set_initial_straight_line(qa, qb)
+        return prob, fp
+
+    o = GuaranteeOptions(tol=1e-5, rel_tol=0.0)   # the closed chain to 1e-5 m / rad per row
+    prob, _ = problem()
+    knots = prob.solve_knots(tol=1e-9)
+    assert knots.success
+    assert verify(r, knots, closed_chain=cc).max_closed_chain_residual > 2 * o.tol   # drifts between knots
+    prob, fp = problem()
+    sol = prob.solve(tol=1e-9, guarantees=o)
+    assert sol.success, (sol.status, sol.between_knots[:2])
+    assert prob.N > 8 and "refine" in [a.label for a in sol.attempts]
+    assert verify(r, sol, closed_chain=cc).max_closed_chain_residual <= 2 * o.tol     # |rows| ≤ tol each
+    assert prob.terms[fp.name].term.at == prob.N // 2                             # knot 4 of 8 → same time
+    k = int(np.argmin(np.abs(sol.t - 2.0)))
+    M = Kinematics(r).frame_placements(sol.q[k], [r.arm("A").ee_frame])[0]
+    np.testing.assert_allclose(M.translation, target.translation, atol=1e-6)
+    assert sol.value(fp).shape == (1, 3)                                          # the user's handle
+
+
+def test_dense_check_on_a_floating_robot():
+    """Torque and velocity limits of a free-floating robot evaluated between knots: the sampled
+    torque rows are Pinocchio's floating-base torques (zero base wrench, zero momentum)."""
+    from optplan.problem import JointTorqueLimits, JointVelocityLimits
+    from optplan.problem.dynamics_terms import joint_torques_numeric
+
+    r = RobotModel.from_name("eba_ffsr")
+    q0 = r.joints_of(r.neutral())
+    q1 = q0.copy()
+    q1[:3] += 0.6
+    z = np.zeros(r.nj)
+    prob = OptProblem(r, n_intervals=4, duration=2.0, n_sub=1)
+    prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
+    prob.add_constraint(JointBoundary("end", q=q1, qd=z, qdd=z))
+    prob.add_constraint(JointVelocityLimits(limit=10.0))
+    ht = prob.add_constraint(JointTorqueLimits(limit=1e4))
+    prob.add_cost(Smoothness("jerk"))
+    prob.set_initial_straight_line(q0, q1)
+    sol = prob.solve_knots()
+    assert sol.success
+    ts = np.linspace(0.0, 2.0, 41)
+    s = sol.sample(ts)
+    tau = np.array([joint_torques_numeric(r, *x) for x in zip(s["q"], s["qd"], s["qdd"])])
+    np.testing.assert_allclose(sol.sample(ts, ht), tau, rtol=1e-9, atol=1e-9)
+    assert check_between_knots(prob, sol) == []
