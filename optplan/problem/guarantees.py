@@ -139,7 +139,6 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
     if model is None:
         return
     checker = model.checker
-    robot = traj.robot
     Q = np.array([traj.q_full(i) for i in range(traj.N + 1)])
     margin = float(term.margin)
     constant = set(data.info.get("constant_pairs", ()))
@@ -158,7 +157,6 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
             continue
         if (p_, kk) not in best or amount > best[(p_, kk)][2]:
             best[(p_, kk)] = (r_, bound, amount)
-    del robot
     for (p_, kk), (r_, bound, amount) in best.items():
         pair = checker.pairs[p_]
         d = bound - amount
@@ -216,10 +214,11 @@ def _collision_retry(problem: Any, sol: Solution, viol: list[Violation], o: Guar
         if name not in names or hd.role != "constraint" or not isinstance(hd.term, CollisionAvoidance):
             continue
         col = hd.term.with_activation(problem.numeric_trajectory(sol.x))
-        q = sol.sample(t)["q"]
         if problem.robot.is_floating:
-            q = sol.evaluator.sampled_trajectory(sol, t)
-            q = np.array([q.q_full(i) for i in range(t.size)])
+            tr = sol.evaluator.sampled_trajectory(sol, t)
+            q = np.array([tr.q_full(i) for i in range(t.size)])
+        else:
+            q = sol.sample(t)["q"]
         col, n = col.with_boost(problem.term_data(hd), t, q, sol.t, min_clearance=float(hd.term.margin))
         log.info("between knots: %s: %d rows with a larger margin, pairs activated along the solution; re-solving",
                  name, n)
