@@ -14,7 +14,8 @@ constraint that is imposed along the trajectory with its numeric twin (Pinocchio
   chain, orientation, frame poses at every knot, ...): its rows against its bounds.
 
 Terms tied to given knots (boundaries, a pose at one knot) hold there by construction and are not
-sampled. A row is violated when it leaves its bounds by more than ``tol + rel_tol · |bound|``.
+sampled. A free-floating base's attitude between knots is integrated with zero momentum from each
+knot's attitude along the exact joint trajectory. A row is violated when it leaves its bounds by more than ``tol + rel_tol · |bound|``.
 
 :func:`enforce_between_knots` is the loop ``OptProblem.solve`` runs after a converged solve,
 in the pipeline's order: (1) **collision** — pairs activated along the solution and margins
@@ -33,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from ..errors import OptionError
 from .collision_term import CollisionAvoidance
@@ -164,6 +166,28 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
                              float(amount)))
 
 
+def _base_attitudes(robot: Any, sol: Solution, t: np.ndarray, density: int) -> np.ndarray:
+    """Base quaternions of a free-floating robot at the sample times ``t`` (``density`` per
+    interval): integrated with zero momentum (:func:`~optplan.model.floating.simulate_base`)
+    from each knot's attitude over its interval, along the exact joint trajectory."""
+    from ..model.floating import simulate_base
+
+    def joints(tt: float) -> tuple[np.ndarray, np.ndarray]:
+        s = sol.sample(tt)
+        return s["q"][0], s["qd"][0]
+
+    bq = np.asarray(sol.base_quat, float)
+    out = np.empty((t.size, 4))
+    for k in range(len(sol.t) - 1):
+        i0 = k * density
+        x, y, z, w = bq[k] / np.linalg.norm(bq[k])
+        base0 = pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), np.zeros(3))
+        res = simulate_base(robot, joints, t[i0:i0 + density + 1], base0=base0, substeps=2)
+        out[i0:i0 + density] = res.q[:-1, 3:7]
+    out[-1] = bq[-1] / np.linalg.norm(bq[-1])
+    return out
+
+
 def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions | None = None) -> list[Violation]:
     """Every constraint of ``problem`` not enforced between knots by construction, checked at
     ``options.density`` samples per interval of the solution ``sol`` (module docstring); the worst
@@ -178,6 +202,8 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
     h = T / N
     t = np.linspace(0.0, T, o.density * N + 1)
     traj = ev.sampled_trajectory(sol, t + sol.t[0])
+    if traj.base_quat is not None:
+        traj.base_quat = _base_attitudes(problem.robot, sol, t + sol.t[0], o.density)
     out: list[Violation] = []
     for name, hd in ev.handles.items():
         if hd.role != "constraint":
