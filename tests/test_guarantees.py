@@ -228,7 +228,7 @@ def test_dense_check_on_a_floating_robot():
     q1 = q0.copy()
     q1[:3] += 0.6
     z = np.zeros(r.nj)
-    prob = OptProblem(r, n_intervals=4, duration=2.0, n_sub=1)
+    prob = OptProblem(r, n_intervals=3, duration=2.0, n_sub=1)
     prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
     prob.add_constraint(JointBoundary("end", q=q1, qd=z, qdd=z))
     prob.add_constraint(JointVelocityLimits(limit=10.0))
