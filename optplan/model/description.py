@@ -414,7 +414,12 @@ def read_model_toml(name_or_path: str | Path, folder: str, what: str, available)
     """``(data, path)`` of a TOML file: a path ending in ``.toml``, or a name in
     ``models/<folder>`` (``what``: "robot model", "scene"; ``available()``: the known names for the
     error). A missing, malformed, non-UTF-8 or unreadable file is a :class:`ModelError`."""
-    p = Path(name_or_path)
+    from .. import limits
+
+    if not isinstance(name_or_path, (str, Path)):
+        raise ModelError(f"{what}: expected a name or a path to a .toml file, got {type(name_or_path).__name__} "
+                         f"{name_or_path!r}")
+    p = limits.check_path(name_or_path, f"{what} file", ModelError)
     if p.suffix != ".toml":
         cand = models_dir() / folder / f"{name_or_path}.toml"
         if not cand.exists():
@@ -422,10 +427,18 @@ def read_model_toml(name_or_path: str | Path, folder: str, what: str, available)
         p = cand
     if not p.exists():
         raise ModelError(f"{what} file {str(p)!r} does not exist")
+    if p.is_dir():
+        raise ModelError(f"{what} file {str(p)!r} is a folder; expected a TOML file")
+    limit_name = "MAX_SCENE_BYTES" if folder == "scenes" else "MAX_ROBOT_BYTES"
+    limits.check_file_size(p, getattr(limits, limit_name), what, ModelError, limit_name)
     try:
-        return tomllib.loads(p.read_bytes().decode("utf-8")), p
+        text = p.read_bytes().decode("utf-8")
+        limits.check_nesting(text, str(p), ModelError)
+        return tomllib.loads(text), p
     except tomllib.TOMLDecodeError as exc:
         raise ModelError(f"{p}: malformed TOML: {exc}") from exc
+    except RecursionError:   # belt and braces: check_nesting refuses the deep files first
+        raise ModelError(f"{p}: arrays/tables nested too deeply to parse") from None
     except UnicodeDecodeError as exc:
         raise ModelError(f"{p}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
     except OSError as exc:
