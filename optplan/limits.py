@@ -18,7 +18,7 @@ import numpy as np
 
 __all__ = ["MAX_SCENE_BYTES", "MAX_ROBOT_BYTES", "MAX_URDF_BYTES", "MAX_RESULT_BYTES", "MAX_OBSTACLES",
            "MAX_NESTING", "MAX_COORDINATE_M", "MAX_SIZE_M", "MAX_NAME_CHARS", "MAX_PATH_CHARS",
-           "check_file_size", "check_nesting", "check_path"]
+           "check_file_size", "check_nesting", "check_path", "check_output_path"]
 
 #: Largest scene TOML file [bytes] (the shipped scenes: < 5 kB).
 MAX_SCENE_BYTES = 1_000_000
@@ -93,3 +93,19 @@ def check_nesting(text: str, where: str, error: type[Exception]) -> None:
     if depth > MAX_NESTING:
         raise error(f"{where}: arrays/tables nested {depth} levels deep; the limit is {MAX_NESTING} "
                     "(optplan.limits.MAX_NESTING)")
+
+
+def check_output_path(path: str | Path, what: str, error: type[Exception]) -> Path:
+    """``path`` as a Path a file can be written to, or ``error`` naming it: a name or path longer
+    than the OS allows, a parent folder that does not exist or is a file, a target that is a folder."""
+    if not isinstance(path, (str, Path)):
+        raise error(f"{what}: expected a file path, got {type(path).__name__} {path!r}")
+    p = check_path(path, what, error)
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.exists():
+        raise error(f"{what} {str(p)!r}: the folder {str(parent)!r} does not exist; create it first")
+    if not parent.is_dir():
+        raise error(f"{what} {str(p)!r}: {str(parent)!r} is a file, not a folder")
+    if p.is_dir():
+        raise error(f"{what} {str(p)!r} is a folder; expected a file name")
+    return p

@@ -229,6 +229,19 @@ class RobotModel:
                                          "expected a unit quaternion (x, y, z, w)")
         return q
 
+    def check_in_limits(self, q, what: str = "q", tol: float = 1e-6) -> np.ndarray:
+        """``q`` (checked by :meth:`check_q`) with every joint within its limits ± ``tol`` [rad or
+        m], else :class:`ConfigurationError` naming the joints, values and limits."""
+        q = self.check_q(q, what)
+        qj = q[self.base_nq:]
+        bad = np.flatnonzero((qj < self.lower - tol) | (qj > self.upper + tol))
+        if bad.size:
+            shown = ", ".join(f"{self.joint_names[i]} = {qj[i]:.6g} not in [{self.lower[i]:.6g}, {self.upper[i]:.6g}]"
+                              for i in bad[:5])
+            raise ConfigurationError(f"{what}: {bad.size} joint(s) outside their limits: {shown}"
+                                     + (" ..." if bad.size > 5 else ""))
+        return q
+
     def check_v(self, v, what: str = "v") -> np.ndarray:
         return check_vector(v, self.nv, f"{what} (velocity of {self.name!r}, nv={self.nv})")
 
@@ -324,8 +337,10 @@ class RobotModel:
         return keep
 
     def self_distances(self, q) -> np.ndarray:
-        """Exact (coal) distances [m] of every active self-collision pair at ``q``."""
-        q = self.check_q(q)
+        """Exact (coal) distances [m] of every active self-collision pair at ``q`` (joints within
+        their limits, else ConfigurationError: a configuration the robot cannot take has no
+        self-collision answer)."""
+        q = self.check_in_limits(q)
         pin.updateGeometryPlacements(self.model, self.data, self.collision_model, self.collision_data, q)
         return np.array([_geom_distance(self.collision_model, self.collision_data, a, b)
                          for a, b in self.collision_pairs])

@@ -64,6 +64,9 @@ class IpoptStatus(str, Enum):
     INSUFFICIENT_MEMORY = "Insufficient_Memory"
     INTERNAL_ERROR = "Internal_Error"
     UNKNOWN = "Unknown"
+    #: optplan's own: a configuration a JointBoundary pins is in collision (checked before IPOPT runs;
+    #: the NLP cannot move it, and with its rows left out IPOPT would report success)
+    BOUNDARY_IN_COLLISION = "Boundary_In_Collision"
 
     @classmethod
     def from_string(cls, s: str) -> IpoptStatus:
