@@ -103,9 +103,10 @@ def check_vector(value, size: int, what: str, *, allow_none: bool = False):
     return arr
 
 
-class UnreachableError(OptplanError, ValueError):
+class UnreachableError(OptplanError, RuntimeError):
     """A task asks for an object or hand pose out of the robot's reach (or, after every allowed
-    redraw, no valid configuration holds it); the message names the pose, the arm and the reach."""
+    redraw, no valid configuration holds it); the message names the pose, the arm and the reach.
+    (A RuntimeError too: what trial generation raised before it had its own class.)"""
 
 
 def check_int(value, what: str, *, minimum: int | None = None, maximum: int | None = None,

@@ -204,7 +204,6 @@ class PlanResult:
     @classmethod
     def from_json(cls, text: str, source: str = "PlanResult JSON") -> PlanResult:
         from ..errors import ResultFileError
-
         from ..limits import check_nesting
 
         if isinstance(text, (bytes, bytearray)):
@@ -237,9 +236,8 @@ class PlanResult:
     def load(cls, path: str | Path) -> PlanResult:
         """Read a file written by :meth:`save`; a missing, unreadable or corrupted file is a
         :class:`~optplan.errors.ResultFileError` naming it."""
-        from ..errors import ResultFileError
-
         from .. import limits
+        from ..errors import ResultFileError
 
         p = limits.check_path(path, "plan result file", ResultFileError)
         if p.is_file():
