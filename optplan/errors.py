@@ -119,7 +119,8 @@ def check_int(value, what: str, *, minimum: int | None = None, maximum: int | No
     import numpy as np
 
     error = error or OptionError
-    rng = (f" ≥ {minimum}" if minimum is not None else "") + (f" ≤ {maximum}" if maximum is not None else "")
+    rng = " and".join(r for r in (f" ≥ {minimum}" if minimum is not None else "",
+                                  f" ≤ {maximum}" if maximum is not None else "") if r)
     ok = isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
     if not ok and isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
         ok = bool(np.isfinite(float(value))) and float(value).is_integer()
