@@ -7,7 +7,10 @@ in the result objects.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import cast
+from typing import TYPE_CHECKING, cast
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 class OptplanError(Exception):
@@ -49,7 +52,7 @@ class OptionError(OptplanError, ValueError):
     """A solver or method option is unknown or has a value of the wrong type/range."""
 
 
-def real_array(value, what: str, error: type | None = None):
+def real_array(value, what: str, error: type | None = None) -> np.ndarray:
     """``value`` as a float array, refusing what would silently become numbers: strings, booleans,
     complex numbers (NumPy drops the imaginary part), None and other objects, ragged nesting.
     Raises ``error`` (ConfigurationError by default) naming ``what`` and the value; finiteness and

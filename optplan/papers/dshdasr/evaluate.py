@@ -96,6 +96,7 @@ def view_scene(robot: RobotModel, task: TransposeTask, target_size: float = 0.4)
     import pinocchio as pin
 
     obs = make_checker(robot, task).scene
+    assert obs is not None   # make_checker builds the obstacles' scene
     arm = list(robot.arms)[0]   # Arm-a
     grasp = pin.SE3(np.linalg.inv(np.asarray(task.T_et_a, float)))   # the hand in the target's frame
     obj = GraspedObject((target_size,) * 3, {arm: grasp})
