@@ -151,6 +151,24 @@ def goal_40m_out(tmp):
     return _moved_goal(40.0)
 
 
+def _far_goal_scene(tmp: Path) -> Path:
+    import re
+
+    src = (Path(__file__).resolve().parents[1] / "models" / "scenes" / "ssps_scene1.toml").read_text()
+    text = re.sub(r"(\[goal\]\nxyz = \[)([^,]+)", lambda m: m.group(1) + str(float(m.group(2)) + 40.0), src)
+    assert text != src
+    return _write(tmp, "far_goal.toml", text)
+
+
+def cli_plan_goal_40m_out(tmp):
+    return _cli(["plan", "--scene", str(_far_goal_scene(tmp)), "--time-limit", "2"])
+
+
+def cli_bench_goal_40m_out(tmp):
+    return _cli(["bench", "tcbirrt", "--scene", str(_far_goal_scene(tmp)), "--trials", "1", "--planners", "tcbirrt",
+                 "--out", str(tmp / "bench"), "--no-progress", "--no-plot"])
+
+
 # --------------------------------------------------------------------------- API: the raw errors
 def arms_list(tmp):
     from optplan import RobotModel
@@ -298,6 +316,18 @@ def cli_plan_big_scene(tmp):
     return _cli(["plan", "--scene", str(p)])
 
 
+def cli_plan_json_long_name(tmp):
+    return _cli(["plan", "--json", str(tmp / ("x" * 300 + ".json"))])
+
+
+def cli_plan_save_long_path(tmp):
+    return _cli(["plan", "--save", "/".join([str(tmp)] + ["d" * 200] * 25) + "/a.npz"])
+
+
+def cli_view_long_name(tmp):
+    return _cli(["view", str(tmp / ("v" * 300 + ".npz"))])
+
+
 # --------------------------------------------------------------------------- the silent ones
 def arm_with_other_arms_joints(tmp):
     from optplan import RobotModel
@@ -379,6 +409,8 @@ CASES: list[tuple[str, Callable, str | Callable]] = [
     ("files", urdf_garbage_mesh, "garbage.stl"),
     ("reach", goal_6m_out, "unreachable goal"),
     ("reach", goal_40m_out, "unreachable goal"),
+    ("reach", cli_plan_goal_40m_out, "unreachable goal"),
+    ("reach", cli_bench_goal_40m_out, "unreachable goal"),
     ("api", arms_list, "arms: expected a mapping"),
     ("api", arms_int_frame, "arms['A']"),
     ("api", fk_wrong_size, "expected 14 numbers"),
@@ -397,6 +429,9 @@ CASES: list[tuple[str, Callable, str | Callable]] = [
     ("cli", cli_bench_bad_planner_option, "step_size"),
     ("cli", cli_models_build_urdf_is_a_file, "is a file, not a folder"),
     ("cli", cli_plan_big_scene, "MAX_SCENE_BYTES"),
+    ("cli", cli_plan_json_long_name, "--json: a file or folder name of 305 characters"),
+    ("cli", cli_plan_save_long_path, "--save: the path has"),
+    ("cli", cli_view_long_name, "trajectory file: a file or folder name of 304 characters"),
     ("silent", arm_with_other_arms_joints, "'b_joint1' does not move its end-effector frame 'a_ee'"),
     ("silent", scene_unknown_exclude_link, "a_lnk7"),
     ("silent", self_distances_huge_angle, "outside their limits"),

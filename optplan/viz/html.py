@@ -473,7 +473,9 @@ def load_trajectory(path) -> dict:
     """A trajectory npz (``t`` [s], ``q`` [rad] M × nq, optional ``constrained``, ``joint_names``,
     ``robot``, ``scene``; ``base_q`` (M × 7) is put in front of joint-only ``q``) as a dict;
     raises ``ValueError`` naming what is missing."""
-    p = Path(path)
+    from ..limits import check_path
+
+    p = check_path(path, "trajectory file", ValueError)
     if not p.exists():
         raise FileNotFoundError(f"trajectory file {str(p)!r} does not exist")
     try:
