@@ -110,10 +110,20 @@ class CheckedFunction(ca.Function):
     def __init__(self, f: ca.Function, owner: str = "") -> None:
         super().__init__(f)
         self._owner = owner
+        self._numel = tuple(f.numel_in(i) for i in range(f.n_in()))   # SWIG calls cost µs: once
+
+    def _sizes(self) -> tuple[int, ...]:
+        n = getattr(self, "_numel", None)   # (absent on an unpickled copy)
+        if n is None:
+            n = self._numel = tuple(self.numel_in(i) for i in range(self.n_in()))
+        return n
 
     def _checked(self, i: int, value):
         if isinstance(value, (ca.SX, ca.MX)):
             return value
+        if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1 \
+                and value.size == self._sizes()[i] and np.isfinite(value).all():
+            return value   # the common case, without building a message
         name = self.name_in(i)
         n = self.numel_in(i)
         what = f"{self.name()}({name}){getattr(self, '_owner', '')}"
@@ -128,7 +138,7 @@ class CheckedFunction(ca.Function):
         return arr.reshape(self.size_in(i), order="F")
 
     def __call__(self, *args, **kwargs):
-        if args and len(args) == self.n_in():
+        if args and len(args) == len(self._sizes()):
             args = tuple(self._checked(i, a) for i, a in enumerate(args))
         elif kwargs:
             names = self.name_in()
