@@ -131,6 +131,35 @@ def urdf_garbage_mesh(tmp):
           '</collision></link>')
 
 
+def robot_far_mount(tmp):
+    from optplan.model.description import load_description, models_dir
+
+    text = (models_dir() / "robots" / "eba_ffsr.toml").read_text()
+    i = text.index("mount_xyz = ")
+    j = text.index("\n", i)
+    return load_description(_write(tmp, "far_mount.toml", text[:i] + "mount_xyz = [1e308, 0, 0]" + text[j:]))
+
+
+def _trials_of_scene_with(tmp, extra: str):
+    from optplan.trials import TrialGenerator
+
+    src = (Path(__file__).resolve().parents[1] / "models" / "scenes" / "transport.toml").read_text()
+    text = src.replace("[extra]\n", "[extra]\n" + extra + "\n", 1) if "[extra]" in src else src + "\n[extra]\n" + extra + "\n"
+    return TrialGenerator(_tcb(), _load_scene(_write(tmp, "extra.toml", text)))
+
+
+def scene_trial_range_text(tmp):
+    return _trials_of_scene_with(tmp, 'trial_position_range = "wide"')
+
+
+def scene_trial_range_huge(tmp):
+    return _trials_of_scene_with(tmp, "trial_position_range = 1e308")
+
+
+def scene_q_start_short(tmp):
+    return _trials_of_scene_with(tmp, "q_start = [0.0, 1.0]")
+
+
 def _moved_goal(offset_m: float):
     import pinocchio as pin
 
@@ -407,6 +436,10 @@ CASES: list[tuple[str, Callable, str | Callable]] = [
     ("files", urdf_bogus_type, "bogus.urdf:2: joint 'j': type 'bogus'"),
     ("files", urdf_missing_mesh, "nothere.stl"),
     ("files", urdf_garbage_mesh, "garbage.stl"),
+    ("files", robot_far_mount, "arms[0].mount_xyz: lengths must be within ±1000 m"),
+    ("files", scene_trial_range_text, "extra.trial_position_range"),
+    ("files", scene_trial_range_huge, "TrialOptions.position_range"),
+    ("files", scene_q_start_short, "extra.q_start must have 14 finite joint values"),
     ("reach", goal_6m_out, "unreachable goal"),
     ("reach", goal_40m_out, "unreachable goal"),
     ("reach", cli_plan_goal_40m_out, "unreachable goal"),

@@ -506,7 +506,7 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
         if not _NAME_RE.match(value):
             raise ModelError(f"{src}: {what} = {value!r}: expected a name of letters, digits, '_' or '-' "
                              "starting with a letter or '_' (it becomes a URDF/XML name)")
-    return RobotDescription(
+    desc = RobotDescription(
         name=name, base_type=base_type, base_link=base_link,
         base_mass=float(base_mass),
         base_com=_array(base.get("com", [0, 0, 0]), (3,), f"{src}: base.com"),
@@ -514,6 +514,34 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
         base_boxes=tuple(boxes), arm_types=arm_types, arms=tuple(arms), source=p,
         notes=str(data.get("notes", "")), extra=dict(data.get("extra", {})),
     )
+    _check_lengths(desc, src)
+    return desc
+
+
+def _check_lengths(desc: RobotDescription, src: str) -> None:
+    """Every length of a description (base boxes and CoM, mounts, D-H a and d, link CoMs, tools,
+    capsules, serpentine links) within ±``optplan.limits.MAX_COORDINATE_M`` [m]: a 1e308 m link
+    would load and poison every later computation with infinities."""
+    from ..limits import MAX_COORDINATE_M
+
+    fields: list[tuple[str, Any]] = [("base.com", desc.base_com)]
+    fields += [(f"base.boxes[{k}].{f}", b[f]) for k, b in enumerate(desc.base_boxes) for f in ("size", "xyz")]
+    fields += [(f"arms[{k}].mount_xyz", a.xyz) for k, a in enumerate(desc.arms)]
+    for name, at in desc.arm_types.items():
+        w = f"arm_types.{name}"
+        if isinstance(at, ArmType):
+            fields += [(f"{w}.dh (a, d columns)", np.asarray(at.dh)[:, 2:4]), (f"{w}.coms", at.coms),
+                       (f"{w}.tool.xyz", at.tool_xyz)]
+            fields += [(f"{w}.capsules[{k}].{f}", c[f]) for k, c in enumerate(at.capsules)
+                       for f in ("a", "b", "radius") if f in c]
+        else:
+            fields += [(f"{w}.link_length", at.link_length), (f"{w}.capsule_radius", at.capsule_radius),
+                       (f"{w}.tool.xyz", at.tool_xyz)]
+    for what, value in fields:
+        v = np.abs(np.asarray(value, dtype=float))
+        if v.size and float(v.max()) > MAX_COORDINATE_M:
+            raise ModelError(f"{src}: {what}: lengths must be within ±{MAX_COORDINATE_M:g} m "
+                             f"(optplan.limits.MAX_COORDINATE_M), got {np.asarray(value).tolist()}")
 
 
 def arm_metadata(desc: RobotDescription) -> dict[str, Any]:
