@@ -33,6 +33,7 @@ from ..geometry.spatial import check_pose
 from ..geometry.splines import quintic_time_law
 from ..model.robot import RobotModel
 from ..solver_options import check_solve_arguments
+from .boundary import pinned_collisions
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
 from .nlp import IpoptStatus, NlpSolver, SolveOutcome, SolverOptions
@@ -435,7 +436,7 @@ class OptProblem:
             sopts = sopts.replace(raw={**dict(ipopt_options), **dict(sopts.raw)})
         t_setup = time.perf_counter()
         b = self._built or self._build()
-        clash = self._pinned_collisions(b)
+        clash = pinned_collisions(self, b, self.BOUNDARY_PENETRATION_TOL)
         if clash:
             log.warning("OptProblem.solve: %s", clash)
             out0 = SolveOutcome(IpoptStatus.BOUNDARY_IN_COLLISION, -1, 0.0, setup_time=time.perf_counter() - t_setup,
@@ -494,39 +495,6 @@ class OptProblem:
 
     #: penetration [m] beyond which a pinned boundary configuration counts as in collision
     BOUNDARY_PENETRATION_TOL = 1e-4
-
-    def _pinned_collisions(self, b: dict[str, Any]) -> str:
-        """The configurations JointBoundary pins that a CollisionAvoidance term's checker finds in
-        collision (exact coal distance < −BOUNDARY_PENETRATION_TOL): a message naming the knot,
-        the pair and the depth; "" when there are none. A floating robot's end knot is not checked
-        (its base placement there is an outcome of the solve)."""
-        from .collision_term import CollisionAvoidance
-
-        pinned = self._pinned_q()
-        if not pinned:
-            return ""
-        for h in self._handles:
-            if h.role != "constraint" or not isinstance(h.term, CollisionAvoidance):
-                continue
-            info = b["data"][h.name].info or {}
-            model = info.get("model")
-            if model is None:
-                continue
-            for k, qj in sorted(pinned.items()):
-                if self.robot.is_floating:
-                    if k != 0:
-                        continue
-                    q_full = np.concatenate([pin.SE3ToXYZQUAT(self.base0), qj])
-                else:
-                    q_full = qj
-                d, pair = model.checker.min_distance(q_full)
-                if d < -self.BOUNDARY_PENETRATION_TOL:
-                    which = "start" if k == 0 else ("end" if k == self.N else f"knot {k}")
-                    names = f"{pair.name_a} and {pair.name_b}" if pair is not None else "a pair"
-                    return (f"the {which} configuration (pinned by JointBoundary) is in collision: {names} "
-                            f"penetrate by {-d:.4g} m (term {h.name!r}); the NLP cannot move a pinned "
-                            "configuration: choose a collision-free one")
-        return ""
 
     def _make_solution(self, out: SolveOutcome, tol: float) -> Solution:
         b, tp = self._built, self.tp
