@@ -339,10 +339,15 @@ def cli_models_build_urdf_is_a_file(tmp):
     return _cli(["models", "build"], env={"OPTPLAN_ROOT": str(root)})
 
 
+def _sparse(p: Path, size: int) -> Path:
+    """A file of ``size`` bytes that takes no disk space (its size is all the check looks at)."""
+    with open(p, "wb") as f:
+        f.truncate(size)
+    return p
+
+
 def cli_plan_big_scene(tmp):
-    p = tmp / "big_cli.toml"
-    p.write_bytes(b"# padding\n" * 5_000_000)
-    return _cli(["plan", "--scene", str(p)])
+    return _cli(["plan", "--scene", str(_sparse(tmp / "big_cli.toml", 50_000_000))])
 
 
 def cli_plan_json_long_name(tmp):
@@ -521,8 +526,7 @@ def test_big_scene_is_refused_fast(tmp_path):
     """A 50 MB scene is refused by its size before parsing: well under a second."""
     from optplan.errors import ModelError
 
-    p = tmp_path / "big.toml"
-    p.write_bytes(b"# padding\n" * 5_000_000)
+    p = _sparse(tmp_path / "big.toml", 50_000_000)
     t0 = time.perf_counter()
     with pytest.raises(ModelError, match="MAX_SCENE_BYTES"):
         _load_scene(p)
