@@ -16,10 +16,12 @@ __all__ = ["pinned_collisions"]
 
 
 def pinned_collisions(problem: OptProblem, built: dict[str, Any], tol: float) -> str:
-    """The first configuration pinned by a JointBoundary that a CollisionAvoidance term's checker
-    finds in collision (exact coal distance < −``tol`` [m]), as a message naming the knot, the pair
-    and the depth; "" when there is none. A floating robot's end knot is not checked (its base
-    placement there is an outcome of the solve)."""
+    """The first configuration pinned by a JointBoundary at which a pair of a CollisionAvoidance
+    term is in collision (exact coal distance < −``tol`` [m]), as a message naming the knot, the pair
+    and the depth; "" when there is none. The pairs checked are the term's own: the ones its
+    activation chose (a penetrating pair is closer than any ``activation`` ≥ 0) and the constant
+    ones; a term whose activation leaves every pair out checks nothing. A floating robot's end knot
+    is not checked (its base placement there is an outcome of the solve)."""
     from .collision_term import CollisionAvoidance
 
     pinned = problem._pinned_q()
@@ -31,8 +33,10 @@ def pinned_collisions(problem: OptProblem, built: dict[str, Any], tol: float) ->
             continue
         info = built["data"][h.name].info or {}
         model = info.get("model")
-        if model is None:
+        own = list(info.get("active_pairs", ())) + list(info.get("constant_pairs", ()))
+        if model is None or not own:
             continue
+        idx = [model.checker.pairs.index(p) for p in own]
         for k, qj in sorted(pinned.items()):
             if robot.is_floating:
                 if k != 0:
@@ -40,10 +44,12 @@ def pinned_collisions(problem: OptProblem, built: dict[str, Any], tol: float) ->
                 q_full = np.concatenate([pin.SE3ToXYZQUAT(problem.base0), qj])
             else:
                 q_full = qj
-            d, pair = model.checker.min_distance(q_full)
+            dist = model.checker.distances(q_full)[idx]
+            j = int(np.argmin(dist))
+            d, pair = float(dist[j]), own[j]
             if d < -tol:
                 which = "start" if k == 0 else ("end" if k == problem.N else f"knot {k}")
-                names = f"{pair.name_a} and {pair.name_b}" if pair is not None else "a pair"
+                names = f"{pair.name_a} and {pair.name_b}"
                 return (f"the {which} configuration (pinned by JointBoundary) is in collision: {names} "
                         f"penetrate by {-d:.4g} m (term {h.name!r}); the NLP cannot move a pinned "
                         "configuration: choose a collision-free one")
