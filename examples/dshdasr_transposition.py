@@ -81,6 +81,7 @@ def plot_all(res, base, task, arcs, planner, out_dir) -> list[Path]:
     import matplotlib.pyplot as plt
 
     from optplan.papers.dshdasr.arcs import arc_sample
+    from optplan.viz.html import arm_color
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -154,8 +155,9 @@ def plot_all(res, base, task, arcs, planner, out_dir) -> list[Path]:
         k = int(np.argmin(np.abs(t - tt)))
         ax = fig.add_subplot(2, 3, n_ + 1, projection="3d")
         pa, pb = _points(arcs, res.q[k])
-        ax.plot(*pa.T, "-o", color="tab:blue", ms=3, lw=3, label="Arm-a links")
-        ax.plot(*pb.T, "-", color="tab:orange", lw=2, label="Arm-b links")
+        # the arms' colours of the HTML view (Arm-a orange, Arm-b blue)
+        ax.plot(*pa.T, "-o", color=arm_color(arcs.robot, "A")[:3], ms=3, lw=3, label="Arm-a links")
+        ax.plot(*pb.T, "-", color=arm_color(arcs.robot, "B")[:3], lw=2, label="Arm-b links")
         X = res.X[k]
         d = res.des
         arcs_a = A.arcs(ca.DM(X[:8]), ca.DM(d["pa"][k]), ca.DM(d["Ra"][k][:, 2]))
@@ -277,10 +279,10 @@ def main(argv=None) -> int:
     if args.save:
         np.savez(args.save, t=res.t, q=res.q, joint_names=np.array(arcs.robot.joint_names), robot=np.array("dshdasr"))
     if args.html:
-        from optplan.papers.dshdasr.evaluate import make_checker
+        from optplan.papers.dshdasr.evaluate import view_scene
         from optplan.viz.outputs import write_views
 
-        for p in write_views(arcs.robot, make_checker(arcs.robot, task).scene, res.t, res.q, html=args.html,
+        for p in write_views(arcs.robot, view_scene(arcs.robot, task), res.t, res.q, html=args.html,
                              title="DSHDASR target transposition (space-arc kinematics)"):
             print(f"wrote {p}")
     if args.plot:

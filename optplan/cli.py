@@ -107,6 +107,7 @@ def _cmd_bench_restoration(args) -> int:
 def _cmd_bench_tcbirrt(args) -> int:
     from .bench.engine import engine_error
     from .bench.tcbirrt import BenchConfig, format_summary, parse_planner_spec, run, summarize
+    from .planners import check_planner_options
 
     if (err := engine_error(args.engine, args.jobs, args.address)) is not None:
         raise UsageError(err)
@@ -121,10 +122,14 @@ def _cmd_bench_tcbirrt(args) -> int:
     planners = [p for p in args.planners.split(",") if p.strip()]
     for p in planners or [""]:
         try:
-            spec = parse_planner_spec(p)[0]
+            spec, opts = parse_planner_spec(p)
         except ValueError as exc:
             raise UsageError(f"--planners {args.planners!r}: {exc}") from None
         ca.check_planner(spec, "--planners")
+        try:
+            check_planner_options(spec, **opts)
+        except OptplanError as exc:
+            raise UsageError(f"--planners {args.planners!r}: {exc}") from None
     cfg = BenchConfig(scenes=scenes, planners=planners,
                       trials=args.trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=args.out,
                       clock=args.clock, progress=not args.no_progress, plot=not args.no_plot,

@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 
 from .errors import UsageError
+from .limits import check_path
 
 __all__ = ["positive_int", "nonnegative_int", "positive_float", "int_list", "check_output_file",
            "check_output_dir", "check_scene", "check_planner", "check_root"]
@@ -78,7 +79,7 @@ def check_output_file(path: str | None, option: str) -> None:
     read-only file systems and missing folders are found before a long run, also as root."""
     if path is None:
         return
-    p = Path(path)
+    p = check_path(path, option, UsageError)   # names > 255 bytes, paths > 4096 characters
     if p.is_dir():
         raise UsageError(f"{option} {path}: is a directory; expected a file path to write")
     if not p.parent.is_dir():
@@ -100,7 +101,7 @@ def check_output_dir(path: str | None, option: str) -> None:
     """The folder ``path`` exists and takes new files, or can be created."""
     if path is None:
         return
-    p = Path(path)
+    p = check_path(path, option, UsageError)
     if p.exists() and not p.is_dir():
         raise UsageError(f"{option} {path}: exists and is not a directory")
     probe = p

@@ -7,7 +7,10 @@ in the result objects.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import cast
+from typing import TYPE_CHECKING, cast
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 class OptplanError(Exception):
@@ -49,7 +52,7 @@ class OptionError(OptplanError, ValueError):
     """A solver or method option is unknown or has a value of the wrong type/range."""
 
 
-def real_array(value, what: str, error: type | None = None):
+def real_array(value, what: str, error: type | None = None) -> np.ndarray:
     """``value`` as a float array, refusing what would silently become numbers: strings, booleans,
     complex numbers (NumPy drops the imaginary part), None and other objects, ragged nesting.
     Raises ``error`` (ConfigurationError by default) naming ``what`` and the value; finiteness and
@@ -101,3 +104,55 @@ def check_vector(value, size: int, what: str, *, allow_none: bool = False):
         bad = np.flatnonzero(~np.isfinite(arr)).tolist()
         raise ConfigurationError(f"{what}: entries {bad} are not finite (values {arr[bad].tolist()})")
     return arr
+
+
+class UnreachableError(OptplanError, RuntimeError):
+    """A task asks for an object or hand pose out of the robot's reach (or, after every allowed
+    redraw, no valid configuration holds it); the message names the pose, the arm and the reach.
+    (A RuntimeError too: what trial generation raised before it had its own class.)"""
+
+
+def check_int(value, what: str, *, minimum: int | None = None, maximum: int | None = None,
+              error: type | None = None) -> int:
+    """``value`` as an ``int``, refusing what ``int()`` would silently truncate or convert: floats
+    with a fraction (2.7), strings ("10"), booleans, None, NaN. A float equal to an integer (10.0)
+    is accepted. Raises ``error`` (OptionError by default) naming ``what`` and the value."""
+    import numbers
+
+    import numpy as np
+
+    error = error or OptionError
+    rng = " and".join(r for r in (f" ≥ {minimum}" if minimum is not None else "",
+                                  f" ≤ {maximum}" if maximum is not None else "") if r)
+    ok = isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+    if not ok and isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
+        ok = bool(np.isfinite(float(value))) and float(value).is_integer()
+    if not ok:
+        raise error(f"{what}: expected an integer{rng}, got {type(value).__name__} {value!r}")
+    out = int(value)
+    if (minimum is not None and out < minimum) or (maximum is not None and out > maximum):
+        raise error(f"{what}: expected an integer{rng}, got {value!r}")
+    return out
+
+
+def check_real(value, what: str, *, minimum: float | None = None, maximum: float | None = None,
+               strict_minimum: bool = False, unit: str = "", error: type | None = None) -> float:
+    """``value`` as a finite ``float`` within ``[minimum, maximum]`` (``minimum`` excluded when
+    ``strict_minimum``), refusing strings, booleans, None, NaN and infinities. Raises ``error``
+    (OptionError by default) naming ``what``, the value and the expected range with its unit."""
+    import math
+    import numbers
+
+    import numpy as np
+
+    error = error or OptionError
+    lo = "" if minimum is None else (f" > {minimum:g}" if strict_minimum else f" ≥ {minimum:g}")
+    hi = "" if maximum is None else f" ≤ {maximum:g}"
+    rng = lo + (" and" if lo and hi else "") + hi + (f" {unit}" if unit and (lo or hi) else "")
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise error(f"{what}: expected a finite number{rng}, got {type(value).__name__} {value!r}")
+    out = float(value)
+    if not math.isfinite(out) or (minimum is not None and (out <= minimum if strict_minimum else out < minimum)) \
+            or (maximum is not None and out > maximum):
+        raise error(f"{what}: expected a finite number{rng}, got {value!r}")
+    return out

@@ -37,6 +37,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from . import limits
 from .errors import ModelError, UnknownNameError
 from .geometry.spatial import rpy_to_matrix
 from .model.description import models_dir, read_model_toml
@@ -141,7 +142,7 @@ class Scene:
 
         def pose(d: dict, w: str) -> pin.SE3:
             _known_keys(d, ("xyz", "rpy"), w)
-            xyz = _vec(d.get("xyz", [0, 0, 0]), 3, f"{w}.xyz")
+            xyz = _vec(d.get("xyz", [0, 0, 0]), 3, f"{w}.xyz", limits.MAX_COORDINATE_M)
             rpy = _vec(d.get("rpy", [0, 0, 0]), 3, f"{w}.rpy") * ang
             return pin.SE3(rpy_to_matrix(*rpy), xyz)
 
@@ -159,6 +160,9 @@ class Scene:
         obs_list = data.get("obstacles", [])
         if not isinstance(obs_list, list):
             raise ModelError(f"{where}: obstacles: expected a list of [[obstacles]] tables, got {obs_list!r}")
+        if len(obs_list) > limits.MAX_OBSTACLES:
+            raise ModelError(f"{where}: {len(obs_list)} obstacles; the limit is {limits.MAX_OBSTACLES} "
+                             "(optplan.limits.MAX_OBSTACLES)")
         for k, o in enumerate(obs_list):
             w = f"{where}: obstacles[{k}]"
             _known_keys(o, ("name", "shape", "size", "radius", "length", "xyz", "rpy"), w)
@@ -168,19 +172,22 @@ class Scene:
             names.add(name)
             shape = o.get("shape")
             if shape == "box":
-                size = _vec(o.get("size"), 3, f"{w}.size")
+                size = _vec(o.get("size"), 3, f"{w}.size", limits.MAX_SIZE_M)
                 if np.any(size <= 0):
                     raise ModelError(f"{w}.size: edges must be > 0 m, got {size.tolist()}")
                 obstacles.append(Obstacle(name, "box", pose({kk: o[kk] for kk in ("xyz", "rpy") if kk in o}, w), size=tuple(size)))
             elif shape in ("sphere", "capsule"):
                 r = o.get("radius")
-                if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r <= 0:
-                    raise ModelError(f"{w}.radius: expected a number > 0 m, got {r!r}")
+                if isinstance(r, bool) or not isinstance(r, (int, float)) or not math.isfinite(r) or r <= 0 \
+                        or r > limits.MAX_SIZE_M:
+                    raise ModelError(f"{w}.radius: expected a number > 0 m and ≤ {limits.MAX_SIZE_M:g} m, got {r!r}")
                 L = None
                 if shape == "capsule":
                     L = o.get("length")
-                    if isinstance(L, bool) or not isinstance(L, (int, float)) or not math.isfinite(L) or L < 0:
-                        raise ModelError(f"{w}.length: expected a number ≥ 0 m, got {L!r}")
+                    if isinstance(L, bool) or not isinstance(L, (int, float)) or not math.isfinite(L) or L < 0 \
+                            or L > limits.MAX_SIZE_M:
+                        raise ModelError(f"{w}.length: expected a number ≥ 0 m and ≤ {limits.MAX_SIZE_M:g} m, "
+                                         f"got {L!r}")
                     L = float(L)
                 obstacles.append(Obstacle(name, shape, pose({kk: o[kk] for kk in ("xyz", "rpy") if kk in o}, w), radius=float(r), length=L))
             else:
@@ -189,7 +196,7 @@ class Scene:
         if "object" in data:
             o = data["object"]
             _known_keys(o, ("size", "grasps", "exclude_links"), f"{where}: object")
-            size = _vec(o.get("size"), 3, f"{where}: object.size")
+            size = _vec(o.get("size"), 3, f"{where}: object.size", limits.MAX_SIZE_M)
             if np.any(size <= 0):
                 raise ModelError(f"{where}: object.size: edges must be > 0 m, got {size.tolist()}")
             gr = o.get("grasps", {})
@@ -200,6 +207,8 @@ class Scene:
             if not isinstance(excl, list) or not all(isinstance(e, str) for e in excl):
                 raise ModelError(f"{where}: object.exclude_links: expected a list of link names, got {excl!r}")
             obj = GraspedObject(tuple(size), grasps, tuple(excl))
+            if isinstance(robot, str):
+                _check_exclude_links(robot, excl, f"{where}: object.exclude_links")
         for key in ("start", "goal", "extra"):
             if key in data and not isinstance(data[key], dict):
                 raise ModelError(f"{where}: {key}: expected a table, got {data[key]!r}")
@@ -215,10 +224,42 @@ class Scene:
         raise UnknownNameError("obstacle", name, [o.name for o in self.obstacles])
 
 
-def _vec(v, n: int, where: str) -> np.ndarray:
+def _vec(v, n: int, where: str, bound: float | None = None) -> np.ndarray:
+    """``n`` finite numbers; with ``bound`` [m], each within ±bound (a physical range)."""
     from .errors import real_array
 
     a = real_array(v, f"{where}: expected {n} numbers", ModelError)
     if a.shape != (n,) or not np.all(np.isfinite(a)):
         raise ModelError(f"{where}: expected {n} finite numbers, got {v!r}")
+    if bound is not None and np.any(np.abs(a) > bound):
+        raise ModelError(f"{where}: expected {n} numbers within ±{bound:g} m, got {a.tolist()} "
+                         "(optplan.limits: MAX_COORDINATE_M for positions, MAX_SIZE_M for sizes)")
     return a
+
+
+def _link_names_of_shipped_robot(robot: str) -> set[str] | None:
+    """The link names of a shipped robot model (from its generated URDF), None for other robots."""
+    import re
+
+    from .model.description import available_models, urdf_dir
+
+    if robot not in available_models():
+        return None
+    path = urdf_dir() / f"{robot}.urdf"
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None   # RobotModel.from_name reports a missing URDF with the command that builds it
+    return set(re.findall(r'<link\s+name="([^"]+)"', text))
+
+
+def _check_exclude_links(robot: str, names: list[str], where: str) -> None:
+    """Every name in an ``exclude_links`` list is a link of the scene's robot (shipped models; the
+    other robots are checked when a collision checker is built): a typo would silently keep the
+    hands in collision with the object."""
+    links = _link_names_of_shipped_robot(robot)
+    if links is None:
+        return
+    for name in names:
+        if name not in links:
+            raise UnknownNameError(f"link of {robot!r} in {where}", name, links)

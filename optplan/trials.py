@@ -22,6 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from .constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
+from .errors import ModelError, OptionError, UnreachableError, check_real, real_array
 from .geometry.spatial import pose_to_vector, rpy_to_matrix, vector_to_pose
 from .model.robot import RobotModel
 from .planners.task_space import interpolate_task
@@ -52,14 +53,18 @@ class TrialOptions:
     max_regenerations: int = 200
 
     def __post_init__(self):
-        for name in ("position_range", "angle_range", "min_clearance", "limit_margin"):
+        from .limits import MAX_COORDINATE_M
+
+        maxima = {"position_range": MAX_COORDINATE_M, "angle_range": 2 * math.pi, "min_clearance": MAX_COORDINATE_M,
+                  "limit_margin": 2 * math.pi}
+        for name, hi in maxima.items():
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ValueError(f"TrialOptions.{name}: expected a number >= 0, got {v!r}")
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and 0 <= v <= hi):
+                raise OptionError(f"TrialOptions.{name}: expected a number >= 0 and <= {hi:g}, got {v!r}")
         for name in ("ik_restarts", "continuation_steps", "max_regenerations"):
             v = getattr(self, name)
-            if not (isinstance(v, int) and v >= 1):
-                raise ValueError(f"TrialOptions.{name}: expected an int >= 1, got {v!r}")
+            if not (isinstance(v, int) and not isinstance(v, bool) and v >= 1):
+                raise OptionError(f"TrialOptions.{name}: expected an int >= 1, got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -120,13 +125,18 @@ class TrialGenerator:
     def __init__(self, robot: RobotModel, scene: Scene, options: TrialOptions | None = None,
                  ik: IKSettings | None = None):
         if scene.object is None or scene.start is None or scene.goal is None:
-            raise ValueError(f"scene {scene.name!r}: trials need [object], [start] and [goal]")
+            raise ModelError(f"scene {scene.name!r}: trials need [object], [start] and [goal]")
         self.robot, self.scene = robot, scene
         if options is None:   # a scene may narrow the perturbation ([extra] trial_position_range [m], trial_angle_range [rad])
             ex = scene.extra or {}
-            options = TrialOptions(position_range=float(ex.get("trial_position_range", 0.2 * _reach_scale(robot))),
-                                   angle_range=float(ex.get("trial_angle_range", 0.5)))
+            where = f"scene {scene.name!r}: extra."
+            options = TrialOptions(
+                position_range=check_real(ex.get("trial_position_range", 0.2 * _reach_scale(robot)),
+                                          where + "trial_position_range", minimum=0.0, unit="m", error=ModelError),
+                angle_range=check_real(ex.get("trial_angle_range", 0.5), where + "trial_angle_range", minimum=0.0,
+                                       unit="rad", error=ModelError))
         self.options = options
+        self._check_reach()
         self.ik = ik or IKSettings()
         self.ik_restart = IKSettings(tol_position=self.ik.tol_position, tol_orientation=self.ik.tol_orientation,
                                      max_iterations=200, damping=0.02, max_step=0.3)
@@ -137,11 +147,40 @@ class TrialGenerator:
         for key, M in (("q_start", scene.start), ("q_goal", scene.goal)):
             q = None
             if key in extra:
-                q = np.asarray(extra[key], dtype=float) * (math.pi / 180.0 if extra.get("q_unit", "rad") == "deg" else 1.0)
-                if q.shape != (robot.nq,):
-                    raise ValueError(f"scene {scene.name!r}: extra.{key} must have {robot.nq} joint values")
+                q = real_array(extra[key], f"scene {scene.name!r}: extra.{key}", ModelError) * (
+                    math.pi / 180.0 if extra.get("q_unit", "rad") == "deg" else 1.0)
+                if q.shape != (robot.nq,) or not np.all(np.isfinite(q)):
+                    raise ModelError(f"scene {scene.name!r}: extra.{key} must have {robot.nq} finite joint values, "
+                                     f"got {extra[key]!r}")
                 q, _ = self.kin.ik(q, M.rotation, M.translation, self.ik)   # polish to the IK tolerance
             self.q_nominal[key] = q
+
+    def _check_reach(self) -> None:
+        """:class:`UnreachableError` before any sampling when a hand's grasp at the nominal start or
+        goal pose is farther from its arm's first joint than the arm can reach, even after the
+        most favourable perturbation (position ±position_range per axis, rotation ≤ √3·angle_range
+        about the object's origin). A necessary condition only (an upper bound on the reach);
+        fixed-base robots (a floating base moves the shoulders)."""
+        from .planners.task_sampling import arm_reach
+
+        if self.robot.is_floating:
+            return
+        assert self.scene.object is not None   # the constructor checked [object]
+        o = self.options
+        for which, M in (("start", self.scene.start), ("goal", self.scene.goal)):
+            assert M is not None
+            for arm, G in self.scene.object.grasps.items():
+                shoulder, reach = arm_reach(self.robot, arm)
+                hand = (M * G).translation
+                dist = float(np.linalg.norm(hand - shoulder))
+                slack = math.sqrt(3.0) * o.position_range + min(2.0, math.sqrt(3.0) * o.angle_range) * float(
+                    np.linalg.norm(G.translation))
+                if dist - slack > reach:
+                    raise UnreachableError(
+                        f"scene {self.scene.name!r}: unreachable {which}: arm {arm!r}'s grasp at "
+                        f"{np.round(hand, 3).tolist()} m is {dist:.3f} m from the arm's first joint at "
+                        f"{np.round(shoulder, 3).tolist()} m; the arm reaches at most {reach:.3f} m "
+                        f"(+{slack:.3f} m of trial perturbation); move the object's [{which}] pose closer")
 
     # ------------------------------------------------------------------ IK of one pose
     def _acceptable(self, q: np.ndarray) -> bool:
@@ -221,8 +260,10 @@ class TrialGenerator:
             if qg is None:
                 continue
             return Trial(self.scene.name, int(index), planner_seed, Ms, Mg, qs, qg, k)
-        raise RuntimeError(f"scene {self.scene.name!r}, trial {index}: no valid start/goal IK after "
-                           f"{o.max_regenerations} regenerations")
+        raise UnreachableError(f"scene {self.scene.name!r}, trial {index}: no valid start/goal IK after "
+                               f"{o.max_regenerations} regenerations (object poses perturbed by ±{o.position_range:g} "
+                               f"m, ±{o.angle_range:g} rad around the scene's [start] and [goal]): the poses are "
+                               "out of reach or in collision")
 
     def check_trial(self, t: Trial, tol: float = 1e-6) -> bool:
         """Both configurations hold the object at the trial's poses within ``tol``."""

@@ -88,7 +88,8 @@ def test_malformed_toml(tmp_path):
     ('<sdf version="1.6"><model name="x"/></sdf>', "<sdf>"),
     ('<robot name="x"/>', "could not parse"),  # no links
     ('<robot name="x"><link name="a"/><joint name="j" type="revolute"><parent link="a"/><child link="zz"/>'
-     '<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>', "could not parse"),
+     '<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>',
+     "child link 'zz' is not defined"),
 ])
 def test_malformed_urdf(tmp_path, text, needle):
     p = _write(tmp_path, text, "bad.urdf")

@@ -431,3 +431,26 @@ def test_branch_choice_matches_enumeration():
         assert row == r_ref and np.allclose(y, y_ref, atol=1e-12, rtol=0)
         checked += 1
     assert checked > 200
+
+
+def test_example_writes_nothing_unless_asked(tmp_path, monkeypatch, capsys):
+    """``examples/oc_rrt.py`` without ``--out`` leaves the current directory as it was (its
+    resumable results go to a temporary folder); with ``--out DIR`` they are in DIR."""
+    import runpy
+    import sys
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "oc_rrt.py"
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    argv = [str(example), "--trials", "1", "--time-limit", "1", "--scenes", "oc_tabletop", "--planners",
+            "oc_rrt_connect", "--no-progress"]
+    for extra in ([], ["--out", str(tmp_path / "kept")]):
+        monkeypatch.setattr(sys, "argv", argv + extra)
+        with pytest.raises(SystemExit) as exc:
+            runpy.run_path(str(example), run_name="__main__")
+        assert exc.value.code == 0
+    assert list(cwd.iterdir()) == []
+    assert (tmp_path / "kept" / "results.jsonl").is_file()
+    assert "oc_tabletop" in capsys.readouterr().out

@@ -236,3 +236,151 @@ def test_browser_floating_base_moves(tmp_path, browser):
     assert np.linalg.norm(p1 - p0) > 0.5
     img = _screenshot(browser, "viewer_eba_ffsr_floating.png")
     assert img.std() > 10.0
+
+
+# --------------------------------------------------------------------------- what the page shows
+def _commands(page: str) -> list[dict]:
+    """The MeshCat commands a page replays, decoded."""
+    import base64
+    import json
+
+    import umsgpack
+
+    m = re.search(r"var optplanCommands = \[\n(.*?)\n\];", page, re.S)
+    assert m is not None
+    return [umsgpack.unpackb(base64.b64decode(b)) for b in json.loads("[" + m.group(1) + "]")]
+
+
+def _stl_normals(data) -> np.ndarray:
+    import struct
+
+    raw = data.data if hasattr(data, "data") else data
+    n = struct.unpack("<I", raw[80:84])[0]
+    rec = np.frombuffer(raw, dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]), count=n, offset=84)
+    return rec["n"]
+
+
+def _ur5(tmp_path):
+    from optplan.model.example_robots import example_robot_data_dir
+
+    d = example_robot_data_dir()
+    urdf = None if d is None else d / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"
+    if urdf is None or not urdf.exists():
+        pytest.skip("example-robot-data (UR5 meshes) not installed")
+    text = urdf.read_text().replace("package://example-robot-data/robots/", f"{d / 'robots'}/")
+    p = tmp_path / "ur5.urdf"
+    p.write_text(text)
+    return RobotModel.from_urdf(p, {"A": "tool0"})
+
+
+def test_mesh_robot_has_its_arm_colour_and_lit_normals(tmp_path):
+    """UR5's collision STLs carry zero facet normals (three.js then renders them black whatever
+    the material): the page gets copies with normals, and every arm link the arm's colour."""
+    from optplan.viz.html import _color_int, arm_color
+
+    robot = _ur5(tmp_path)
+    page = trajectory_html(robot, None, np.array([0.0, 1.0]), np.zeros((2, robot.nq)))
+    meshes = [c for c in _commands(page) if c["type"] == "set_object" and "/robot/collisions/" in c["path"]
+              and c["object"]["geometries"][0].get("format") == "stl"]
+    assert len(meshes) >= 6
+    orange = _color_int(arm_color(robot, "A"))
+    assert sum(c["object"]["materials"][0]["color"] == orange for c in meshes) >= 6   # every link past the base
+    for c in meshes:
+        n = _stl_normals(c["object"]["geometries"][0]["data"])
+        assert np.all(np.abs(np.linalg.norm(n, axis=1) - 1.0) < 1e-4), c["path"]
+
+
+def test_stl_with_normals_keeps_good_files_and_fixes_zero_normals(tmp_path):
+    """The facet normal computed from the vertices is the unit normal of the triangle (right hand
+    rule); a file that has normals is returned unchanged."""
+    import struct
+
+    from optplan.viz.meshes import stl_with_normals
+
+    rec = np.zeros(2, dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]))
+    rec["v"][0] = [[0, 0, 0], [1, 0, 0], [0, 1, 0]]    # normal +z
+    rec["v"][1] = [[0, 0, 0], [0, 0, 1], [0, 1, 0]]    # normal -x
+    p = tmp_path / "zero.stl"
+    p.write_bytes(b"x" * 80 + struct.pack("<I", 2) + rec.tobytes())
+    q = stl_with_normals(p)
+    assert q != p
+    assert np.allclose(_stl_normals(q.read_bytes()), [[0, 0, 1], [-1, 0, 0]])
+    assert stl_with_normals(q) == q
+
+
+def test_camera_sees_both_arms_of_the_floating_robot():
+    """Every joint and geometry of both arms, at every shown configuration of the EBA free-end
+    motion (joints from the paper's start to its goal, the base from momentum conservation), is
+    inside the default camera's vertical field of view. The camera used to frame the hand paths
+    only, and cut arm B off (42° off the axis for a 37.5° half-angle)."""
+    from optplan.papers import eba
+    from optplan.viz.html import CAMERA_FOV_DEG, _default_camera, _shown_points, floating_configurations
+
+    robot = RobotModel.from_name("eba_ffsr")
+    sc = eba.scenario("free_end", robot)
+    t = np.linspace(0.0, 10.0, 40)
+    s = np.linspace(0.0, 1.0, 40)[:, None]
+    q = floating_configurations(robot, t, (1 - s) * sc.theta0 + s * sc.thetaf, None)
+    pts = _shown_points(robot, None, q, np.zeros((0, 3)), None)
+    assert len(pts) >= 40 * robot.model.njoints   # both arms' joints, not only the hands
+    target, cam = _default_camera(pts)
+    axis = (target - cam) / np.linalg.norm(target - cam)
+    ang = np.degrees(np.arccos(np.clip((pts - cam) @ axis / np.linalg.norm(pts - cam, axis=1), -1, 1)))
+    assert ang.max() < CAMERA_FOV_DEG / 2, ang.max()
+
+
+def test_dshdasr_view_shows_the_target():
+    """The DSHDASR view has the target (held by Arm-a at T_et^a, legend 'target'): its pose in
+    the view is Arm-a's hand pose times T_et^a, the pose the task prescribes for the target."""
+    import pinocchio as pin
+
+    from optplan.papers.dshdasr.evaluate import view_scene
+    from optplan.papers.dshdasr.task import paper_task
+    from optplan.viz.html import _object_poses
+
+    robot = RobotModel.from_name("dshdasr")
+    task = paper_task()
+    scene = view_scene(robot, task)
+    q = np.random.default_rng(3).uniform(-0.5, 0.5, (2, robot.nq))
+    poses = _object_poses(robot, scene, q, None)
+    data = robot.model.createData()
+    for k in range(2):
+        pin.framesForwardKinematics(robot.model, data, q[k])
+        hand = data.oMf[robot.arm("A").ee_frame_id].homogeneous
+        assert np.allclose(poses[k].homogeneous, hand @ task.T_et_a, atol=1e-9)
+    page = trajectory_html(robot, scene, np.array([0.0, 1.0]), q)
+    assert '"object": true' in page and "&#9632;</span> target" in page
+    assert any(c["type"] == "set_object" and c["path"].endswith("/object") for c in _commands(page))
+    assert len(scene.obstacles) == len(task.obstacles)
+
+
+def test_residual_plot_labels_the_regrasp_band(tmp_path, dual, scene1, monkeypatch):
+    """The grey band of a regrasp has a legend entry in the residual/clearance figure."""
+    from optplan.viz import plan_plots
+
+    figs = []
+    monkeypatch.setattr(plan_plots, "save_figure", lambda fig, path: figs.append(fig) or Path(path))
+    t, q = _scene_motion(scene1, dual, 12)
+    cons = np.ones(len(t), bool)
+    cons[4:8] = False
+    plan_plots.plot_trajectory(dual, scene1, t, q, tmp_path, constrained=cons, max_samples=12)
+    res = figs[-1]
+    for ax in res.axes:
+        labels = [tx.get_text() for tx in ax.get_legend().get_texts()]
+        assert plan_plots.REGRASP_LABEL in labels, labels
+
+
+def test_browser_mesh_robot_is_not_black(tmp_path, browser):
+    """A mesh robot (UR5) shows the arm's orange in a real browser."""
+    robot = _ur5(tmp_path)
+    q = np.tile(np.array([0.0, -1.2, 1.2, 0.0, 0.0, 0.0]), (2, 1))
+    page = write_trajectory_html(tmp_path / "ur5.html", robot, None, np.array([0.0, 1.0]), q)
+    _load(browser, page)
+    assert _errors(browser) == []
+    for _ in range(20):
+        img = _screenshot(browser, "viewer_ur5.png")
+        a = _color_pixels(img, ARM_COLORS[0])
+        if a > 300:
+            break
+        time.sleep(0.25)
+    assert a > 300, a

@@ -305,7 +305,9 @@ def add_arguments(p) -> None:
     p.add_argument("--clock", choices=["cpu", "wall"], default="cpu",
                    help="time measured and limited in CPU seconds (default) or wall-clock seconds")
     p.add_argument("--resolution", type=float, default=0.01, help="dense path resolution for ORMSD/PRMSD [rad]")
-    p.add_argument("--out", default="bench_oc_rrt", help="output directory (results.jsonl, summary.json/txt)")
+    p.add_argument("--out", default="bench_oc_rrt",
+                   help="output directory (results.jsonl, summary.json/txt; a run resumes from it); "
+                        "examples/oc_rrt.py writes none unless given")
     p.add_argument("--json", metavar="PATH", help="write the per-scene, per-planner summary as JSON")
     p.add_argument("--plot", metavar="DIR", help="write the RMSD and joint figures (one path per scene and planner)")
     p.add_argument("--save", metavar="DIR", help="write one dense path per scene and planner (npz: t, q, joint_names)")
@@ -332,10 +334,21 @@ def command(args) -> int:
             planners = [p for p in planners if not p.startswith("ompl-")]
     if args.trials < 1:
         raise ValueError(f"--trials: expected >= 1, got {args.trials}")
-    cfg = OCBenchConfig(scenes=[s for s in args.scenes.split(",") if s], planners=planners, trials=args.trials,
-                        time_limit=args.time_limit, seed=args.seed, out=args.out, clock=args.clock,
-                        resolution=args.resolution, progress=not args.no_progress, save_dir=args.save)
-    rows = run(cfg)
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="optplan-oc-rrt-") as scratch:
+        # no --out (the example's default): the resumable results go to a temporary folder, removed
+        # after the run, never into the current directory
+        out = args.out if args.out is not None else scratch
+        cfg = OCBenchConfig(scenes=[s for s in args.scenes.split(",") if s], planners=planners, trials=args.trials,
+                            time_limit=args.time_limit, seed=args.seed, out=out, clock=args.clock,
+                            resolution=args.resolution, progress=not args.no_progress, save_dir=args.save)
+        rows = run(cfg)
+    return _report(args, cfg, rows)
+
+
+def _report(args, cfg: OCBenchConfig, rows: list[dict]) -> int:
+    """Print the table; write ``--json`` and ``--plot`` when asked."""
     summ = summarize(rows)
     print(format_table(summ))
     if args.json:

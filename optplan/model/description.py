@@ -414,7 +414,12 @@ def read_model_toml(name_or_path: str | Path, folder: str, what: str, available)
     """``(data, path)`` of a TOML file: a path ending in ``.toml``, or a name in
     ``models/<folder>`` (``what``: "robot model", "scene"; ``available()``: the known names for the
     error). A missing, malformed, non-UTF-8 or unreadable file is a :class:`ModelError`."""
-    p = Path(name_or_path)
+    from .. import limits
+
+    if not isinstance(name_or_path, (str, Path)):
+        raise ModelError(f"{what}: expected a name or a path to a .toml file, got {type(name_or_path).__name__} "
+                         f"{name_or_path!r}")
+    p = limits.check_path(name_or_path, f"{what} file", ModelError)
     if p.suffix != ".toml":
         cand = models_dir() / folder / f"{name_or_path}.toml"
         if not cand.exists():
@@ -422,10 +427,18 @@ def read_model_toml(name_or_path: str | Path, folder: str, what: str, available)
         p = cand
     if not p.exists():
         raise ModelError(f"{what} file {str(p)!r} does not exist")
+    if p.is_dir():
+        raise ModelError(f"{what} file {str(p)!r} is a folder; expected a TOML file")
+    limit_name = "MAX_SCENE_BYTES" if folder == "scenes" else "MAX_ROBOT_BYTES"
+    limits.check_file_size(p, getattr(limits, limit_name), what, ModelError, limit_name)
     try:
-        return tomllib.loads(p.read_bytes().decode("utf-8")), p
+        text = p.read_bytes().decode("utf-8")
+        limits.check_nesting(text, str(p), ModelError)
+        return tomllib.loads(text), p
     except tomllib.TOMLDecodeError as exc:
         raise ModelError(f"{p}: malformed TOML: {exc}") from exc
+    except RecursionError:   # belt and braces: check_nesting refuses the deep files first
+        raise ModelError(f"{p}: arrays/tables nested too deeply to parse") from None
     except UnicodeDecodeError as exc:
         raise ModelError(f"{p}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
     except OSError as exc:
@@ -493,7 +506,7 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
         if not _NAME_RE.match(value):
             raise ModelError(f"{src}: {what} = {value!r}: expected a name of letters, digits, '_' or '-' "
                              "starting with a letter or '_' (it becomes a URDF/XML name)")
-    return RobotDescription(
+    desc = RobotDescription(
         name=name, base_type=base_type, base_link=base_link,
         base_mass=float(base_mass),
         base_com=_array(base.get("com", [0, 0, 0]), (3,), f"{src}: base.com"),
@@ -501,6 +514,34 @@ def load_description(name_or_path: str | Path) -> RobotDescription:
         base_boxes=tuple(boxes), arm_types=arm_types, arms=tuple(arms), source=p,
         notes=str(data.get("notes", "")), extra=dict(data.get("extra", {})),
     )
+    _check_lengths(desc, src)
+    return desc
+
+
+def _check_lengths(desc: RobotDescription, src: str) -> None:
+    """Every length of a description (base boxes and CoM, mounts, D-H a and d, link CoMs, tools,
+    capsules, serpentine links) within ±``optplan.limits.MAX_COORDINATE_M`` [m]: a 1e308 m link
+    would load and poison every later computation with infinities."""
+    from ..limits import MAX_COORDINATE_M
+
+    fields: list[tuple[str, Any]] = [("base.com", desc.base_com)]
+    fields += [(f"base.boxes[{k}].{f}", b[f]) for k, b in enumerate(desc.base_boxes) for f in ("size", "xyz")]
+    fields += [(f"arms[{k}].mount_xyz", a.xyz) for k, a in enumerate(desc.arms)]
+    for name, at in desc.arm_types.items():
+        w = f"arm_types.{name}"
+        if isinstance(at, ArmType):
+            fields += [(f"{w}.dh (a, d columns)", np.asarray(at.dh)[:, 2:4]), (f"{w}.coms", at.coms),
+                       (f"{w}.tool.xyz", at.tool_xyz)]
+            fields += [(f"{w}.capsules[{k}].{f}", c[f]) for k, c in enumerate(at.capsules)
+                       for f in ("a", "b", "radius") if f in c]
+        else:
+            fields += [(f"{w}.link_length", at.link_length), (f"{w}.capsule_radius", at.capsule_radius),
+                       (f"{w}.tool.xyz", at.tool_xyz)]
+    for what, value in fields:
+        v = np.abs(np.asarray(value, dtype=float))
+        if v.size and float(v.max()) > MAX_COORDINATE_M:
+            raise ModelError(f"{src}: {what}: lengths must be within ±{MAX_COORDINATE_M:g} m "
+                             f"(optplan.limits.MAX_COORDINATE_M), got {np.asarray(value).tolist()}")
 
 
 def arm_metadata(desc: RobotDescription) -> dict[str, Any]:

@@ -21,6 +21,7 @@ import pinocchio as pin
 
 from ..errors import ConfigurationError, ModelError, UnknownNameError, check_vector
 from .description import arm_metadata, available_models, load_description, urdf_dir
+from .urdf_checks import check_urdf_structure
 
 __all__ = ["Arm", "RobotModel"]
 log = logging.getLogger(__name__)
@@ -124,9 +125,17 @@ class RobotModel:
         floating: add a free-flyer root joint (free-floating base).
         mimic: read URDF ``<mimic>`` tags as coupled joints (``θ = multiplier · q + offset``).
         """
-        path = Path(path)
+        from .. import limits
+
+        if not isinstance(path, (str, Path)):
+            raise ModelError(f"URDF file: expected a path, got {type(path).__name__} {path!r}")
+        path = limits.check_path(path, "URDF file", ModelError)
         if not path.exists():
             raise ModelError(f"URDF file {str(path)!r} does not exist")
+        if path.is_dir():
+            raise ModelError(f"URDF file {str(path)!r} is a folder; expected a .urdf file")
+        limits.check_file_size(path, limits.MAX_URDF_BYTES, "URDF", ModelError, "MAX_URDF_BYTES")
+        norm = _arm_specs(arms)
         text = _read_text(path)
         try:
             root = ET.fromstring(text)
@@ -134,6 +143,7 @@ class RobotModel:
             raise ModelError(f"{path}: malformed URDF XML: {exc}") from exc
         if root.tag != "robot":
             raise ModelError(f"{path}: expected a <robot> root element, got <{root.tag}>")
+        check_urdf_structure(root, text, path)
         _check_urdf_joints(root, text, path)
         try:
             if floating:
@@ -142,9 +152,8 @@ class RobotModel:
                 model = pin.buildModelFromXML(text, mimic=mimic)
             geom = pin.buildGeomFromUrdfString(model, text, pin.COLLISION)
         except (RuntimeError, ValueError, TypeError) as exc:   # TypeError: Boost.Python.ArgumentError
-            raise ModelError(f"{path}: Pinocchio could not parse the URDF: {str(exc).strip().splitlines()[0]}") from exc
+            raise ModelError(f"{path}: Pinocchio could not parse the URDF: {_pinocchio_message(exc)}") from exc
         _capsules_from_cylinders(root, geom)
-        norm = {k: ({"ee": v} if isinstance(v, str) else dict(v)) for k, v in arms.items()}
         return cls(model, geom, norm, name=name or model.name, floating=floating, urdf_path=path)
 
     # ------------------------------------------------------------------ names
@@ -176,10 +185,22 @@ class RobotModel:
         fid = self.frame_id(spec["ee"])
         if "joints" in spec and spec["joints"] is not None:
             jids = []
+            chain, j = set(), int(self.model.frames[fid].parentJoint)
+            while j > 0:   # the joints between the root and the end-effector frame
+                chain.add(j)
+                j = int(self.model.parents[j])
             for jn in spec["joints"]:
                 if jn not in self.joint_names:
                     raise UnknownNameError("joint", jn, self.joint_names)
-                jids.append(int(self.model.getJointId(jn)))
+                jid = int(self.model.getJointId(jn))
+                if jid not in chain:
+                    on_chain = [self.model.names[k] for k in sorted(chain) if self.model.names[k] in self.joint_names]
+                    raise ModelError(f"arm {arm_name!r}: joint {jn!r} does not move its end-effector frame "
+                                     f"{spec['ee']!r} (it is not between the root and that frame); the joints "
+                                     f"that do: {on_chain}")
+                if jid in jids:
+                    raise ModelError(f"arm {arm_name!r}: joint {jn!r} is listed twice")
+                jids.append(jid)
         else:
             jids, j = [], int(self.model.frames[fid].parentJoint)
             while j > (1 if self.is_floating else 0):
@@ -206,6 +227,19 @@ class RobotModel:
             if abs(n - 1.0) > 1e-6:
                 raise ConfigurationError(f"{what}: base quaternion q[3:7]={q[3:7].tolist()} has norm {n:.6g}, "
                                          "expected a unit quaternion (x, y, z, w)")
+        return q
+
+    def check_in_limits(self, q, what: str = "q", tol: float = 1e-6) -> np.ndarray:
+        """``q`` (checked by :meth:`check_q`) with every joint within its limits ± ``tol`` [rad or
+        m], else :class:`ConfigurationError` naming the joints, values and limits."""
+        q = self.check_q(q, what)
+        qj = q[self.base_nq:]
+        bad = np.flatnonzero((qj < self.lower - tol) | (qj > self.upper + tol))
+        if bad.size:
+            shown = ", ".join(f"{self.joint_names[i]} = {qj[i]:.6g} not in [{self.lower[i]:.6g}, {self.upper[i]:.6g}]"
+                              for i in bad[:5])
+            raise ConfigurationError(f"{what}: {bad.size} joint(s) outside their limits: {shown}"
+                                     + (" ..." if bad.size > 5 else ""))
         return q
 
     def check_v(self, v, what: str = "v") -> np.ndarray:
@@ -303,8 +337,10 @@ class RobotModel:
         return keep
 
     def self_distances(self, q) -> np.ndarray:
-        """Exact (coal) distances [m] of every active self-collision pair at ``q``."""
-        q = self.check_q(q)
+        """Exact (coal) distances [m] of every active self-collision pair at ``q`` (joints within
+        their limits, else ConfigurationError: a configuration the robot cannot take has no
+        self-collision answer)."""
+        q = self.check_in_limits(q)
         pin.updateGeometryPlacements(self.model, self.data, self.collision_model, self.collision_data, q)
         return np.array([_geom_distance(self.collision_model, self.collision_data, a, b)
                          for a, b in self.collision_pairs])
@@ -343,6 +379,46 @@ def _capsules_from_cylinders(root: ET.Element, geom: pin.GeometryModel) -> None:
                 raise ModelError(f"collision geometry {gname!r} not found after parsing")
             obj = geom.geometryObjects[geom.getGeometryId(gname)]
             obj.geometry = coal.Capsule(float(cyl.attrib["radius"]), float(cyl.attrib["length"]))
+
+
+def _arm_specs(arms) -> dict[str, dict]:
+    """``{arm: {"ee": frame, "joints": [...]}}`` from the ``arms`` argument of :meth:`RobotModel.from_urdf`."""
+    if not isinstance(arms, Mapping):
+        raise ModelError(f"arms: expected a mapping {{arm_name: ee_frame}} or {{arm_name: {{'ee': frame, 'joints': "
+                         f"[...]}}}}, got {type(arms).__name__} {arms!r}")
+    out = {}
+    for k, v in arms.items():
+        if not isinstance(k, str) or not k:
+            raise ModelError(f"arms: arm names must be non-empty strings, got {k!r}")
+        if isinstance(v, str):
+            out[k] = {"ee": v}
+        elif isinstance(v, Mapping):
+            unknown = sorted(set(v) - {"ee", "joints"})
+            if unknown:
+                raise ModelError(f"arms[{k!r}]: unknown keys {unknown}; expected 'ee' and optionally 'joints'")
+            joints = v.get("joints")
+            if joints is not None and (isinstance(joints, str) or not all(isinstance(j, str) for j in joints)):
+                raise ModelError(f"arms[{k!r}].joints: expected a list of joint names, got {joints!r}")
+            if not isinstance(v.get("ee"), str):
+                raise ModelError(f"arms[{k!r}].ee: expected an end-effector frame name, got {v.get('ee')!r}")
+            out[k] = dict(v)
+        else:
+            raise ModelError(f"arms[{k!r}]: expected an end-effector frame name or {{'ee': frame, 'joints': [...]}}, "
+                             f"got {type(v).__name__} {v!r}")
+    return out
+
+
+def _pinocchio_message(exc: Exception) -> str:
+    """The useful part of a Pinocchio/coal exception: the ``message:`` lines (they name the mesh
+    file and the loader's reason) when there are some, else the first line."""
+    lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
+    if not lines:
+        return type(exc).__name__
+    for i, ln in enumerate(lines):
+        if ln.startswith("message:"):
+            rest = [ln[len("message:"):].strip()] + [x for x in lines[i + 1:] if not x.startswith("Hint:")]
+            return " ".join(x for x in rest if x)
+    return lines[0]
 
 
 def _read_text(path: Path) -> str:

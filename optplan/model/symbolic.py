@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from ..errors import ModelError
+from ..errors import ConfigurationError, ModelError, check_vector, real_array
 from ..geometry.spatial import skew as _skew
 from .robot import RobotModel
 
@@ -100,6 +100,52 @@ def _describe_joints(model: pin.Model) -> list[_Joint | None]:
     return out
 
 
+class CheckedFunction(ca.Function):
+    """A ``casadi.Function`` whose numeric calls are checked first: every numeric argument (NumPy
+    array, list, number, ``casadi.DM``) must have the input's number of entries and only finite
+    values, else :class:`~optplan.errors.ConfigurationError` names the function, the input and the
+    value (CasADi would raise a bare ``RuntimeError`` for a wrong size and return NaN for NaN).
+    Symbolic arguments (``SX``/``MX``) pass unchanged."""
+
+    def __init__(self, f: ca.Function, owner: str = "") -> None:
+        super().__init__(f)
+        self._owner = owner
+        self._numel = tuple(f.numel_in(i) for i in range(f.n_in()))   # SWIG calls cost µs: once
+
+    def _sizes(self) -> tuple[int, ...]:
+        n = getattr(self, "_numel", None)   # (absent on an unpickled copy)
+        if n is None:
+            n = self._numel = tuple(self.numel_in(i) for i in range(self.n_in()))
+        return n
+
+    def _checked(self, i: int, value):
+        if isinstance(value, (ca.SX, ca.MX)):
+            return value
+        if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1 \
+                and value.size == self._sizes()[i] and np.isfinite(value).all():
+            return value   # the common case, without building a message
+        name = self.name_in(i)
+        n = self.numel_in(i)
+        what = f"{self.name()}({name}){getattr(self, '_owner', '')}"
+        if isinstance(value, ca.DM):
+            value = np.asarray(value.full(), float)
+        arr = real_array(value, f"{what}: expected {n} numbers")
+        if arr.size != n:
+            raise ConfigurationError(f"{what}: expected {n} numbers (shape {self.size_in(i)}), got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            bad = np.flatnonzero(~np.isfinite(arr.ravel())).tolist()
+            raise ConfigurationError(f"{what}: entries {bad[:20]} are not finite")
+        return arr.reshape(self.size_in(i), order="F")
+
+    def __call__(self, *args, **kwargs):
+        if args and len(args) == len(self._sizes()):
+            args = tuple(self._checked(i, a) for i, a in enumerate(args))
+        elif kwargs:
+            names = self.name_in()
+            kwargs = {k: (self._checked(names.index(k), v) if k in names else v) for k, v in kwargs.items()}
+        return super().__call__(*args, **kwargs)
+
+
 class SymbolicKinematics:
     """Symbolic forward kinematics, Jacobians and momentum matrix of a :class:`RobotModel`.
 
@@ -116,6 +162,9 @@ class SymbolicKinematics:
     # ------------------------------------------------------------------ core recursions
     def joint_placements(self, q):
         """World ``(R, p)`` of every joint frame (index 0 = world) for the expression ``q``."""
+        if not isinstance(q, (ca.SX, ca.MX)):   # numbers: the size and finiteness are checked
+            q = ca.DM(check_vector(np.asarray(q.full()) if isinstance(q, ca.DM) else q, self.model.nq,
+                                   f"q (Pinocchio configuration of {self.robot.name!r}, nq={self.model.nq})"))
         out = [(ca.DM.eye(3), ca.DM.zeros(3))]
         for j in range(1, self.model.njoints):
             jt = self.joints[j]
@@ -303,7 +352,7 @@ class SymbolicKinematics:
 
     def _cached(self, key, build):
         if key not in self._functions:
-            self._functions[key] = build()
+            self._functions[key] = CheckedFunction(build(), f" of {self.robot.name!r}")
         return self._functions[key]
 
     def fk_function(self, frame) -> ca.Function:

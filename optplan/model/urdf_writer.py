@@ -149,8 +149,16 @@ def _serpentine_urdf(at: SerpentineArmType, p: str) -> list[str]:
 
 def write_urdf(desc: RobotDescription, out_dir: Path | None = None) -> Path:
     """Write ``<out_dir>/<name>.urdf`` (default: the repo's ``urdf/``) and return its path."""
+    from ..errors import ModelError
+
     out_dir = Path(out_dir) if out_dir is not None else urdf_dir()
-    out_dir.mkdir(parents=True, exist_ok=True)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ModelError(f"cannot write {desc.name}.urdf: {str(out_dir)!r} is a file, not a folder (move it away; "
+                         "`optplan models build` writes the URDFs there)")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ModelError(f"cannot create the URDF folder {str(out_dir)!r}: {exc.strerror or exc}") from None
     path = out_dir / f"{desc.name}.urdf"
     path.write_text(urdf_string(desc))
     return path

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from ..model.robot import RobotModel
 
 __all__ = [
-    "CBiRRT2", "CBiRRT2Options", "PathSegment", "PlanResult", "PlanStatus", "Planner", "RRTConnect",
+    "check_planner_options", "CBiRRT2", "CBiRRT2Options", "PathSegment", "PlanResult", "PlanStatus", "Planner", "RRTConnect",
     "RRTConnectOptions", "TCBiRRT", "TCBiRRTOptions", "ValidityChecker", "make_planner", "planner_names",
 ]
 
@@ -54,6 +54,27 @@ def planner_names() -> list[str]:
     """Names accepted by :func:`make_planner` (OMPL: ``ompl-<projected|atlas|tb>[-<planner>]``)."""
     return ["tcbirrt", "cbirrt2", "rrtconnect", "ompl-projected", "ompl-atlas", "ompl-tb",
             "ompl-projected-bkpiece1", "ompl-atlas-bkpiece1", "ompl-projected-kpiece1"]
+
+
+def check_planner_options(name: str, **options: Any) -> None:
+    """Raise :class:`~optplan.errors.OptionError` when ``options`` are not valid fields and values
+    of planner ``name``'s options dataclass (checked without a robot, e.g. before a benchmark
+    starts its workers); OMPL peers' options are checked when they are built."""
+    key = str(name).lower()
+    cls = {"tcbirrt": TCBiRRTOptions, "cbirrt2": CBiRRT2Options, "rrtconnect": RRTConnectOptions}.get(key)
+    if cls is None:
+        return
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise OptionError(f"planner {name!r}: unknown option(s) {', '.join(unknown)}; "
+                          f"{cls.__name__} has: {', '.join(sorted(known))}")
+    try:
+        cls(**options)
+    except OptionError:
+        raise
+    except (TypeError, ValueError) as exc:
+        raise OptionError(f"planner {name!r}: {exc}") from None
 
 
 def make_planner(name: str, robot: RobotModel, scene: Any, *, checker: ValidityChecker | None = None,

@@ -36,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from ..errors import ConfigurationError
+from ..errors import ConfigurationError, OptionError, check_int, check_real, real_array
 from ..geometry.spatial import pose_to_vector, vector_to_pose
 from ..model.robot import RobotModel
 from ..scene import Scene
@@ -174,7 +174,17 @@ class PlanResult:
                 raise ResultFileError(f"{source}: unknown status {status!r}; expected one of "
                                       f"{', '.join(s.value for s in PlanStatus)}")
             raw = d.get("path", [])
-            path = np.asarray(raw, dtype=float)
+            if isinstance(raw, np.ndarray):
+                pass
+            elif not isinstance(raw, list) or not all(isinstance(row, list) for row in raw) \
+                    or len({len(row) for row in raw}) > 1:
+                lens = sorted({len(row) for row in raw if isinstance(row, list)}) if isinstance(raw, list) else []
+                raise ResultFileError(f"{source}: path: expected a list of M configurations of equal length "
+                                      f"(M x nq numbers), got {type(raw).__name__}"
+                                      + (f" with rows of lengths {lens[:10]}" if lens else "")
+                                      + (" and non-list rows" if isinstance(raw, list)
+                                         and not all(isinstance(row, list) for row in raw) else ""))
+            path = real_array(raw, f"{source}: path", ResultFileError)
             if path.size == 0:
                 path = path.reshape(0, path.shape[1] if path.ndim == 2 else 0)
             res = cls(PlanStatus(status), str(d.get("planner", "")), path,
@@ -194,17 +204,31 @@ class PlanResult:
     @classmethod
     def from_json(cls, text: str, source: str = "PlanResult JSON") -> PlanResult:
         from ..errors import ResultFileError
+        from ..limits import check_nesting
 
+        if isinstance(text, (bytes, bytearray)):
+            try:
+                text = text.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise ResultFileError(f"{source}: not UTF-8 text ({exc})") from None
+        if not isinstance(text, str):
+            raise ResultFileError(f"{source}: expected JSON text, got {type(text).__name__}")
+        check_nesting(text, source, ResultFileError)
         try:
             d = json.loads(text)
         except (json.JSONDecodeError, UnicodeDecodeError, TypeError) as exc:
             raise ResultFileError(f"{source}: not valid JSON ({exc})") from None
+        except RecursionError:   # belt and braces: check_nesting refuses the deep texts first
+            raise ResultFileError(f"{source}: arrays nested too deeply to parse") from None
         return cls.from_dict(d, source)
 
     def save(self, path: str | Path) -> Path:
         """Write :meth:`to_json` to ``path``."""
+        from ..errors import ResultFileError
+        from ..limits import check_output_path
+
         self.check()
-        p = Path(path)
+        p = check_output_path(path, "PlanResult.save: file", ResultFileError)
         p.write_text(self.to_json())
         return p
 
@@ -212,9 +236,12 @@ class PlanResult:
     def load(cls, path: str | Path) -> PlanResult:
         """Read a file written by :meth:`save`; a missing, unreadable or corrupted file is a
         :class:`~optplan.errors.ResultFileError` naming it."""
+        from .. import limits
         from ..errors import ResultFileError
 
-        p = Path(path)
+        p = limits.check_path(path, "plan result file", ResultFileError)
+        if p.is_file():
+            limits.check_file_size(p, limits.MAX_RESULT_BYTES, "plan result", ResultFileError, "MAX_RESULT_BYTES")
         try:
             text = p.read_bytes().decode("utf-8")
         except (OSError, UnicodeDecodeError) as exc:
@@ -299,9 +326,11 @@ class Planner(abc.ABC):
         ``cpu_time_s``."""
         qs = self.robot.check_q(np.array(q_start, dtype=float), "q_start").copy()
         qg = self.robot.check_q(np.array(q_goal, dtype=float), "q_goal").copy()
-        if not (np.isfinite(time_limit) and time_limit > 0):
-            raise ValueError(f"time_limit: expected a positive number of seconds, got {time_limit!r}")
-        seed = int(seed)
+        time_limit = check_real(time_limit, f"{type(self).__name__}.plan: time_limit", minimum=0.0,
+                                strict_minimum=True, unit="s")
+        seed = check_int(seed, f"{type(self).__name__}.plan: seed", minimum=0, maximum=2**63 - 1)
+        if clock not in CLOCKS:
+            raise OptionError(f"{type(self).__name__}.plan: clock: expected 'wall' or 'cpu', got {clock!r}")
         c0, w0 = time.process_time(), time.perf_counter()
         deadline = Deadline(time_limit, clock)
         try:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from ..geometry.spatial import vee_skew
+from ..geometry.spatial import check_rotation, vee_skew
 
 __all__ = ["exp_coordinates", "rotation_from_exp", "interpolate_task", "xi_from_pose", "pose_from_xi"]
 
@@ -19,7 +19,8 @@ def exp_coordinates(R: np.ndarray) -> np.ndarray:
     θ = π case is generalised to use the largest diagonal entry (Eq. 13 divides by 1 + r11, which
     vanishes for a half turn about any axis ⊥ x) and is used whenever sin θ is too small for Eq. 14.
     """
-    R = np.asarray(R, dtype=float)
+    if not (type(R) is np.ndarray and R.shape == (3, 3) and R.dtype == np.float64 and np.isfinite(R).all()):
+        R = check_rotation(R, "exp_coordinates: R (3 x 3 rotation matrix)")   # the error names the value
     v = vee_skew(R)
     s = float(np.linalg.norm(v))
     c = float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))

@@ -66,6 +66,9 @@ class IpoptStatus(str, Enum):
     UNKNOWN = "Unknown"
     #: converged, but a constraint is violated between knots (optplan's dense check)
     VIOLATED_BETWEEN_KNOTS = "Violated_Between_Knots"
+    #: optplan's own: a configuration a JointBoundary pins is in collision (checked before IPOPT runs;
+    #: the NLP cannot move it, and with its rows left out IPOPT would report success)
+    BOUNDARY_IN_COLLISION = "Boundary_In_Collision"
 
     @classmethod
     def from_string(cls, s: str) -> IpoptStatus:

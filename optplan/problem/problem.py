@@ -28,15 +28,16 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline
 
-from ..errors import ConfigurationError, OptionError
+from ..errors import ConfigurationError, OptionError, check_int, check_real, real_array
 from ..geometry.spatial import check_pose
 from ..geometry.splines import quintic_time_law
 from ..model.robot import RobotModel
 from ..solver_options import check_solve_arguments
+from .boundary import pinned_collisions
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
 from .guarantees import GuaranteeOptions, enforce_between_knots
-from .nlp import NlpSolver, SolveOutcome, SolverOptions
+from .nlp import IpoptStatus, NlpSolver, SolveOutcome, SolverOptions
 from .solution import Solution
 from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
 from .transcription import Transcription
@@ -77,20 +78,26 @@ class OptProblem:
     def __init__(self, robot: RobotModel, n_intervals: int = 50, duration: float = 10.0, *,
                  free_time: bool = False, duration_bounds: tuple[float, float] = (1e-2, 1e4),
                  base0: pin.SE3 | None = None, n_sub: int = 2):
-        if int(n_intervals) < 1:
-            raise ValueError(f"n_intervals: expected ≥ 1, got {n_intervals}")
-        if not (np.isfinite(duration) and duration > 0):
-            raise ValueError(f"duration: expected a positive time [s], got {duration}")
-        lo, hi = duration_bounds
+        if not isinstance(robot, RobotModel):
+            raise OptionError(f"OptProblem: robot: expected an optplan.RobotModel, got {type(robot).__name__}")
+        n_intervals = check_int(n_intervals, "OptProblem: n_intervals (number of intervals)", minimum=1,
+                                maximum=100_000)
+        duration = check_real(duration, "OptProblem: duration", minimum=0.0, strict_minimum=True, unit="s")
+        if not isinstance(duration_bounds, (tuple, list)) or len(duration_bounds) != 2:
+            raise OptionError(f"OptProblem: duration_bounds: expected (lower, upper) [s], got {duration_bounds!r}")
+        lo = check_real(duration_bounds[0], "OptProblem: duration_bounds[0]", minimum=0.0, strict_minimum=True, unit="s")
+        hi = check_real(duration_bounds[1], "OptProblem: duration_bounds[1]", minimum=0.0, strict_minimum=True, unit="s")
         if not 0 < lo < hi:
-            raise ValueError(f"duration_bounds: expected 0 < lower < upper, got {duration_bounds}")
+            raise OptionError(f"OptProblem: duration_bounds: expected 0 < lower < upper [s], got {duration_bounds}")
+        if not isinstance(free_time, (bool, np.bool_)):
+            raise OptionError(f"OptProblem: free_time: expected True or False, got {free_time!r}")
         self.robot = robot
-        self.N = int(n_intervals)
-        self.duration = float(duration)
+        self.N = n_intervals
+        self.duration = duration
         self.free_time = bool(free_time)
-        self.duration_bounds = (float(lo), float(hi))
+        self.duration_bounds = (lo, hi)
         self.base0 = pin.SE3.Identity() if base0 is None else check_pose(base0, "OptProblem: base0")
-        self.n_sub = int(n_sub)
+        self.n_sub = check_int(n_sub, "OptProblem: n_sub (RK4 sub-steps per interval)", minimum=1, maximum=1000)
         self._handles: list[TermHandle] = []
         self._x0: np.ndarray | None = None
         self._lam_g0: np.ndarray | None = None
@@ -156,7 +163,7 @@ class OptProblem:
           the solution's).
         """
         tp = self.tp
-        Tg = float(T) if T is not None else self.duration
+        Tg = check_real(T, "set_initial: T", minimum=0.0, strict_minimum=True, unit="s") if T is not None else self.duration
         if solution is not None:
             same = (solution.x is not None and solution.x.size >= tp.x.shape[0] and len(solution.t) == self.N + 1
                     and solution.x_scale_h is not None and np.isclose(solution.x_scale_h, tp.h0, rtol=1e-12))
@@ -170,7 +177,7 @@ class OptProblem:
                 Tg = solution.duration  # a fixed-duration problem time-scales the path to its own T
         if q is None:
             raise ValueError("set_initial: give q (M × nj samples) or solution")
-        q = np.asarray(q, float)
+        q = real_array(q, "set_initial: q (joint samples [rad])")
         if q.ndim != 2 or q.shape[1] != self.robot.nj:
             raise ConfigurationError(f"set_initial: q must be (M, {self.robot.nj}), got shape {q.shape}")
         if not np.all(np.isfinite(q)):
@@ -179,8 +186,15 @@ class OptProblem:
             q = np.vstack([q, q])
         if t is None:
             t = np.linspace(0.0, Tg, q.shape[0])
-        t = np.asarray(t, float)
-        if t.shape != (q.shape[0],) or np.any(np.diff(t) <= 0):
+        t = real_array(t, "set_initial: t (sample times [s])")
+        if t.shape != (q.shape[0],):
+            raise ConfigurationError(f"set_initial: t (sample times [s]): expected {q.shape[0]} entries (one per row "
+                                     f"of q), got shape {t.shape}")
+        if not np.all(np.isfinite(t)):
+            bad = np.flatnonzero(~np.isfinite(t)).tolist()
+            raise ConfigurationError(f"set_initial: t (sample times [s]): entries {bad} are not finite "
+                                     f"(values {t[bad].tolist()})")
+        if np.any(np.diff(t) <= 0):
             raise ConfigurationError(f"set_initial: t must be strictly increasing with {q.shape[0]} entries")
         t = (t - t[0]) * (Tg / (t[-1] - t[0]))
         tk = np.linspace(0.0, Tg, self.N + 1)
@@ -235,7 +249,7 @@ class OptProblem:
         from ..constraints.closed_chain import manifold_resample
 
         Q, ok = manifold_resample(self.robot, path, self.N + 1, closed_chain)
-        Tg = float(T) if T is not None else self.duration
+        Tg = check_real(T, "set_initial: T", minimum=0.0, strict_minimum=True, unit="s") if T is not None else self.duration
         tau = np.linspace(0.0, 1.0, 2001)
         t = Tg * np.interp(np.linspace(0.0, 1.0, self.N + 1), quintic_time_law(tau)[0], tau)
         t[0], t[-1] = 0.0, Tg
@@ -438,6 +452,12 @@ class OptProblem:
             sopts = sopts.replace(raw={**dict(ipopt_options), **dict(sopts.raw)})
         t_setup = time.perf_counter()
         b = self._built or self._build()
+        clash = pinned_collisions(self, b, self.BOUNDARY_PENETRATION_TOL)
+        if clash:
+            log.warning("OptProblem.solve: %s", clash)
+            out0 = SolveOutcome(IpoptStatus.BOUNDARY_IN_COLLISION, -1, 0.0, setup_time=time.perf_counter() - t_setup,
+                                x=self._full_x0(), message=clash)
+            return self._make_solution(out0, tol)
         n_ineq = int(np.sum(b["lbg"] != b["ubg"]))
         inequality_heavy = n_ineq > 0.5 * (b["lbg"].size - n_ineq)
         if objective_scaling == "auto":
@@ -488,6 +508,9 @@ class OptProblem:
                 args["lam_x0"] = self._lam_x0
         out = b["solver"].solve(self._full_x0(), extra_setup=setup, **args)
         return self._make_solution(out, tol)
+
+    #: penetration [m] beyond which a pinned boundary configuration counts as in collision
+    BOUNDARY_PENETRATION_TOL = 1e-4
 
     def _make_solution(self, out: SolveOutcome, tol: float) -> Solution:
         b, tp = self._built, self.tp

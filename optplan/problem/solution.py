@@ -250,7 +250,10 @@ class Solution:
 
     def save(self, path: str | Path) -> Path:
         """Save as ``.npz`` (arrays + JSON metadata) or ``.json`` (everything as lists)."""
-        path = Path(path)
+        from ..errors import ResultFileError
+        from ..limits import check_output_path
+
+        path = check_output_path(path, "Solution.save: file", ResultFileError)
         if path.suffix == ".json":
             d = self._meta()
             d.update({k: v.tolist() for k, v in self._arrays().items()})

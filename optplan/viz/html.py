@@ -28,8 +28,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .meshes import stl_with_normals
+
 __all__ = ["ViewOptions", "trajectory_html", "write_trajectory_html", "load_trajectory", "save_metadata", "view_file",
-           "resolve_scene", "VizUnavailable", "floating_configurations",
+           "resolve_scene", "VizUnavailable", "floating_configurations", "arm_color",
            "ARM_COLORS", "OBJECT_COLOR", "OBSTACLE_COLOR"]
 
 #: RGBA colours of the arms' links, in arm order (orange, blue, then green, purple)
@@ -38,6 +40,17 @@ BASE_COLOR = (0.78, 0.78, 0.80, 1.0)
 OBJECT_COLOR = (0.15, 0.8, 0.55, 0.85)
 OBSTACLE_COLOR = (0.55, 0.55, 0.6, 0.55)
 PATH_COLORS = (0xff8c00, 0x1f78f2, 0x33bf4d, 0x994dcc)
+
+
+def arm_color(robot, arm: str) -> tuple[float, float, float, float]:
+    """The RGBA colour of ``arm``'s links in the views (:data:`ARM_COLORS` in the robot's arm
+    order); figures use it too, so that an arm has one colour in the HTML view and the PNGs."""
+    names = list(robot.arms)
+    if arm not in names:
+        from ..errors import UnknownNameError
+
+        raise UnknownNameError("arm", arm, names)
+    return ARM_COLORS[names.index(arm) % len(ARM_COLORS)]
 
 
 class VizUnavailable(ImportError):
@@ -164,8 +177,12 @@ def _obstacle_geometry(ob):
 
 
 def _colored_geometry(robot) -> pin.GeometryModel:
-    """A copy of the collision model with one colour per arm (links of the base in grey)."""
+    """A copy of the collision model with one colour per arm (links of the base in grey); STL
+    meshes without normals are replaced by copies with normals (:func:`stl_with_normals`)."""
     gm = robot.collision_model.copy()
+    for g in gm.geometryObjects:
+        if g.meshPath and g.meshPath.lower().endswith(".stl") and Path(g.meshPath).is_file():
+            g.meshPath = str(stl_with_normals(g.meshPath))
     joint_arm: dict[int, int] = {}
     for k, arm in enumerate(robot.arms.values()):
         for jn in arm.joint_names:
@@ -217,16 +234,38 @@ def _object_poses(robot, scene, q: np.ndarray, constrained: np.ndarray | None) -
     return [first if p is None else p for p in poses]
 
 
-def _default_camera(robot, scene, hand_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Camera target (centre of everything shown) and position (front, above) in the world [m]."""
+#: MeshCat's default camera: vertical field of view [deg]
+CAMERA_FOV_DEG = 75.0
+
+
+def _shown_points(robot, scene, qs: np.ndarray, hand_points: np.ndarray, obj_poses) -> np.ndarray:
+    """Points that must be in view [m]: the hand paths, every joint and every collision geometry
+    of the robot at the shown configurations (both arms and the base, not only the hands), the
+    obstacles and the carried object."""
     pts = [hand_points.reshape(-1, 3)]
+    data = robot.model.createData()
+    gd = pin.GeometryData(robot.collision_model)
+    step = max(1, len(qs) // 50)
+    for qk in qs[::step]:
+        pin.updateGeometryPlacements(robot.model, data, robot.collision_model, gd, qk)
+        pts.append(np.array([M.translation for M in data.oMi[1:]] + [M.translation for M in gd.oMg]).reshape(-1, 3))
     if scene is not None:
-        pts += [np.asarray(o.placement.translation)[None] for o in scene.obstacles]
-    P = np.concatenate([p for p in pts if p.size])
-    lo, hi = P.min(axis=0), P.max(axis=0)
-    c = (lo + hi) / 2
-    r = max(float(np.linalg.norm(hi - lo)) / 2, 1.0)
-    return c, c + r * np.array([1.25, -1.0, 0.7])
+        for o in scene.obstacles:
+            pts.append(np.asarray(o.placement.translation)[None])
+    if obj_poses is not None:
+        pts.append(np.array([M.translation for M in obj_poses[::step]]))
+    return np.concatenate([p for p in pts if p.size])
+
+
+def _default_camera(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera target (centre of the points) and position (front, above) in the world [m], far
+    enough that the sphere around every point (plus 0.3 m for the link radii) fits the field of
+    view."""
+    c = (points.min(axis=0) + points.max(axis=0)) / 2
+    r = max(float(np.max(np.linalg.norm(points - c, axis=1))) + 0.3, 1.0)
+    d = np.array([1.25, -1.0, 0.7])
+    dist = 1.05 * r / math.sin(math.radians(CAMERA_FOV_DEG) / 2)
+    return c, c + dist * d / np.linalg.norm(d)
 
 
 # --------------------------------------------------------------------------- main entry points
@@ -321,7 +360,7 @@ def trajectory_html(robot, scene, t, q, *, constrained=None, options: ViewOption
     if n_frames > 1:
         vis.set_animation(anim, play=o.autoplay, repetitions=1)
 
-    target, cam = _default_camera(robot, scene, hands)
+    target, cam = _default_camera(_shown_points(robot, scene, qs, hands, obj_poses))
     if o.camera is not None:
         cam = np.asarray(o.camera, float)
     # meshcat's camera lives in a y-up frame rotated from the world's z-up: (x, y, z) -> (x, z, -y)
@@ -331,7 +370,8 @@ def trajectory_html(robot, scene, t, q, *, constrained=None, options: ViewOption
 
     meta = {"title": o.title, "robot": robot.name, "scene": None if scene is None else scene.name,
             "duration_s": duration, "frames": int(n_frames), "fps": float(fps), "speed": float(speed),
-            "floating": bool(robot.is_floating), "arms": list(robot.arms), "object": obj_poses is not None}
+            "floating": bool(robot.is_floating), "arms": list(robot.arms), "object": obj_poses is not None,
+            "object_label": str((scene.extra or {}).get("object_label", "object")) if scene is not None else "object"}
     return _page(window.commands(), meta)
 
 
@@ -356,7 +396,8 @@ def _page(commands: Sequence[bytes], meta: dict) -> str:
         for i, a in enumerate(meta["arms"]))
     info = _html.escape(f"{meta['robot']}" + (f" in {meta['scene']}" if meta["scene"] else "")
                         + f", {meta['duration_s']:.2f} s" + (", free-floating base" if meta["floating"] else ""))
-    obj_legend = ' &middot; <span style="color:#26cc8c">&#9632;</span> object' if meta.get("object") else ""
+    obj_legend = (f' &middot; <span style="color:#{_color_int(OBJECT_COLOR):06x}">&#9632;</span> '
+                  f'{_html.escape(meta.get("object_label", "object"))}') if meta.get("object") else ""
     # </script> cannot occur inside the inline script
     js = js.replace("</script", "<\\/script")
     return f"""<!DOCTYPE html>
@@ -432,7 +473,9 @@ def load_trajectory(path) -> dict:
     """A trajectory npz (``t`` [s], ``q`` [rad] M × nq, optional ``constrained``, ``joint_names``,
     ``robot``, ``scene``; ``base_q`` (M × 7) is put in front of joint-only ``q``) as a dict;
     raises ``ValueError`` naming what is missing."""
-    p = Path(path)
+    from ..limits import check_path
+
+    p = check_path(path, "trajectory file", ValueError)
     if not p.exists():
         raise FileNotFoundError(f"trajectory file {str(p)!r} does not exist")
     try:

@@ -49,10 +49,16 @@ def trajectory_profiles(robot, scene, t, q, constrained=None, max_samples: int =
     return {"t": t[idx], "residual_m": rp, "residual_rad": rr, "clearance_m": cl, "constrained": cons[idx]}
 
 
-def _shade_open(ax, t, cons):
-    """Grey bands where the closed chain is open (regrasps)."""
+#: legend entry of the grey bands
+REGRASP_LABEL = "regrasp (closed chain open)"
+
+
+def _shade_open(ax, t, cons) -> bool:
+    """Grey bands where the closed chain is open (regrasps); the first one carries the legend
+    label :data:`REGRASP_LABEL`. Returns whether any band was drawn."""
     k = 0
     n = len(t)
+    drawn = False
     while k < n:
         if cons[k]:
             k += 1
@@ -60,8 +66,10 @@ def _shade_open(ax, t, cons):
         j = k
         while j + 1 < n and not cons[j + 1]:
             j += 1
-        ax.axvspan(t[k], t[j], color="0.85", zorder=0, lw=0)
+        ax.axvspan(t[k], t[j], color="0.85", zorder=0, lw=0, label=None if drawn else REGRASP_LABEL)
+        drawn = True
         k = j + 1
+    return drawn
 
 
 def plot_trajectory(robot, scene, t, q, out_dir, name: str = "plan", constrained=None,
@@ -117,16 +125,18 @@ def plot_trajectory(robot, scene, t, q, out_dir, name: str = "plan", constrained
         ax[0].semilogy(tt, np.maximum(prof["residual_m"], 1e-16), label="position [m]")
         ax[0].semilogy(tt, np.maximum(prof["residual_rad"], 1e-16), label="orientation [rad]")
         ax[0].axhline(1e-6, ls="--", color="crimson", lw=0.9, label="tolerance 1e-6")
-        ax[0].legend(fontsize=8)
     else:
         ax[0].text(0.5, 0.5, "no closed chain in this trajectory", ha="center", va="center", transform=ax[0].transAxes)
     ax[0].set_ylabel("closed-chain residual")
     _shade_open(ax[0], tt, prof["constrained"])
-    ax[1].plot(tt, prof["clearance_m"], color="C2")
-    ax[1].axhline(0.0, ls="--", color="crimson", lw=0.9)
+    ax[1].plot(tt, prof["clearance_m"], color="C2", label="clearance")
+    ax[1].axhline(0.0, ls="--", color="crimson", lw=0.9, label="contact (0 m)")
     ax[1].set_ylabel("clearance [m] (coal)")
     ax[1].set_xlabel("t [s]")
     _shade_open(ax[1], tt, prof["constrained"])
+    for a in ax:   # after the bands, so that the grey regrasp band has its entry
+        if a.get_legend_handles_labels()[0]:
+            a.legend(fontsize=8)
     ax[0].set_title(f"{robot.name}" + (f" in {scene.name}" if scene is not None else "")
                     + f": min clearance {np.nanmin(prof['clearance_m']):+.3f} m", fontsize=9)
     paths.append(save_figure(fig, out / f"{name}_residual_clearance.png"))

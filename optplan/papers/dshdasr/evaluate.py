@@ -17,7 +17,7 @@ import numpy as np
 from ...collision.checker import CollisionChecker
 from ...geometry.spatial import log3
 from ...model.robot import RobotModel
-from ...scene import Scene
+from ...scene import GraspedObject, Scene
 from .nlp import ArcPlanner
 from .task import DshdasrArcs, TrackResult, TransposeTask
 
@@ -87,6 +87,20 @@ def make_checker(robot: RobotModel, task: TransposeTask) -> CollisionChecker:
         {"name": f"obs{i + 1}", "shape": "sphere", "radius": task.obstacle_radius, "xyz": list(map(float, c))}
         for i, c in enumerate(task.obstacles)]})
     return CollisionChecker(robot, scene, held_object=False, self_collision=False)
+
+
+def view_scene(robot: RobotModel, task: TransposeTask, target_size: float = 0.4) -> Scene:
+    """The scene of the 3D view: the obstacles and the target, drawn as a cube of ``target_size``
+    [m] around its centre of mass, held by Arm-a at ``T_et_a`` (so the view's object pose is the
+    target pose the task prescribes wherever Arm-a's tip is on its desired pose)."""
+    import pinocchio as pin
+
+    obs = make_checker(robot, task).scene
+    assert obs is not None   # make_checker builds the obstacles' scene
+    arm = list(robot.arms)[0]   # Arm-a
+    grasp = pin.SE3(np.linalg.inv(np.asarray(task.T_et_a, float)))   # the hand in the target's frame
+    obj = GraspedObject((target_size,) * 3, {arm: grasp})
+    return Scene("dshdasr_view", None, obs.obstacles, obj, None, None, {"object_label": "target"})
 
 
 def coal_centreline_distances(checker: CollisionChecker, Q, task: TransposeTask) -> dict[str, np.ndarray]:

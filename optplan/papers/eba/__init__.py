@@ -68,7 +68,8 @@ __all__ = [
     "closed_chain_reference", "EBAKinematics", "MethodResult", "MethodReport", "Scenario", "Segment",
     "evaluate", "simulate_result", "integrate_rpy", "free_end_scenario", "end_constrained_scenario",
     "THETA0_DEG", "FREE_END_THETAF_DEG", "END_CONSTRAINED_THETAF_DEG", "PAPER_FIGURES", "CASES", "METHODS",
-    "CaseResult", "run_method", "run_case", "scenario", "TARGETS", "criteria", "table", "case_json",
+    "CaseResult", "run_method", "run_case", "scenario", "TARGETS", "criteria", "paper_targets", "verdict", "table",
+    "case_json",
     "save_trajectories",
 ]
 log = logging.getLogger(__name__)
@@ -194,6 +195,42 @@ def criteria(case_result: CaseResult, agree_rad: float = 1e-5) -> list[tuple[str
                 cc = P[name].max_closed_chain_residual
                 out.append((f"{name}: closed-chain residual ≤ 1e-6", cc <= 1e-6, f"{cc:.2e}"))
     return out
+
+
+def paper_targets(case_result: CaseResult) -> list[tuple[str, bool, str]]:
+    """The paper's absolute figures as ``(target, met, measured value)``, for the methods that
+    ran: the quintic's attitude error of the order of a degree (0.1°-10°), EBA ≤ 0.01°, the NLP ≤
+    1e-6 rad, and the run times of :data:`TARGETS`. Reported next to :func:`criteria`, never
+    folded into them: our model does not reproduce the paper's numbers exactly (EBA ends at
+    0.1°-0.2°, see docs/eba.md), so a run can meet every criterion and miss targets — the
+    examples print both counts."""
+    P = case_result.reports
+    out = []
+    if "quintic" in P:
+        a = P["quintic"].final_base_attitude_error_deg
+        out.append(("quintic: final attitude error of the order of a degree (0.1°-10°)", 0.1 <= a <= 10.0, f"{a:.3g}°"))
+    if "eba" in P:
+        a = P["eba"].final_base_attitude_error_deg
+        lim = float(TARGETS["eba_attitude_deg"])  # type: ignore[arg-type]  # a number in TARGETS
+        out.append((f"eba: final attitude error ≤ {lim:g}° (the paper's figure)", a <= lim, f"{a:.3g}°"))
+    if "nlp" in P:
+        err = float(np.deg2rad(P["nlp"].final_base_attitude_error_deg))
+        lim = float(TARGETS["nlp_attitude_rad"])  # type: ignore[arg-type]
+        out.append((f"nlp: final attitude error ≤ {lim:g} rad", err <= lim, f"{err:.2e} rad"))
+    for name in ("eba", "nlp", "fourier"):
+        if name in P:
+            limit = float(TARGETS[f"{name}_runtime_s"])  # type: ignore[arg-type]
+            out.append((f"{name}: run time ≤ {limit:g} s", P[name].runtime_s <= limit, f"{P[name].runtime_s:.2f} s"))
+    return out
+
+
+def verdict(crit: list[tuple[str, bool, str]], targets: list[tuple[str, bool, str]]) -> str:
+    """One honest line: how many criteria (pass/fail) and how many of the paper's targets (reported)
+    were met, naming every missed target with its measured value."""
+    missed = [f"{d} — measured {v}" for d, m, v in targets if not m]
+    line = (f"criteria (pass/fail): {sum(c[1] for c in crit)}/{len(crit)} met; "
+            f"the paper's targets (reported, not pass/fail): {sum(t[1] for t in targets)}/{len(targets)} met")
+    return line + ("; missed: " + "; ".join(missed) if missed else "")
 
 
 def _fmt3(v) -> str:
