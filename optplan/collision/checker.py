@@ -271,8 +271,9 @@ class CollisionChecker:
         ``q``: one row ``(n, n·m)`` per pair — coal's unit witness normal from A to B and the
         offset of the witness points' midpoint ``m`` (the same query as :func:`coal.distance` on
         :meth:`pair_geometries`; the placements are set once, each pair is one C++ call). A
-        degenerate normal (coincident witness points) is replaced by the direction between the
-        two geometries' origins."""
+        normal coal leaves unset (a triangle mesh) is the direction between the witness points of
+        a separated pair, else (coincident witness points) the direction between the two
+        geometries' origins."""
         q = self.robot.check_q(q)
         idx = np.asarray(pair_indices, int).ravel()
         out = np.zeros((idx.size, 4))
@@ -284,12 +285,16 @@ class CollisionChecker:
             res = pin.computeDistance(gm, gd, p)
             cp = gm.collisionPairs[p]
             n = np.asarray(res.normal, float)
-            if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
-                n = gd.oMg[cp.second].translation - gd.oMg[cp.first].translation
+            p1, p2 = np.asarray(res.getNearestPoint1(), float), np.asarray(res.getNearestPoint2(), float)
+            if not np.all(np.isfinite(n)) or abs(float(np.linalg.norm(n)) - 1.0) > 1e-6:
+                # coal leaves the normal unset for triangle meshes (BVH): between separated
+                # shapes the nearest points give it; else the direction between the origins
+                n = p2 - p1 if res.min_distance > 0 and np.linalg.norm(p2 - p1) > 1e-12 else \
+                    gd.oMg[cp.second].translation - gd.oMg[cp.first].translation
             n = n / max(float(np.linalg.norm(n)), 1e-12)
             if self._flip[p]:
                 n = -n
-            mid = 0.5 * (np.asarray(res.getNearestPoint1(), float) + np.asarray(res.getNearestPoint2(), float))
+            mid = 0.5 * (p1 + p2)
             out[row, :3] = n
             out[row, 3] = n @ mid
         return out
