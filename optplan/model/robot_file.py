@@ -25,7 +25,9 @@ Without ``mount`` the URDF is the whole robot and ``ee``/``joints`` name its fra
 * ``"mesh"`` — the URDF's collision geometry as is (the trajectory NLP bounds a mesh by its vertices);
 * ``"primitives"`` — every mesh replaced by certified capsules (:mod:`.primitive_fit`) everywhere;
 * ``"auto"`` (default) — the planner and the NLP work on the capsules, :func:`optplan.verify`
-  judges on the exact meshes (``robot.exact``).
+  judges on the meshes (``robot.exact``), each as its convex hull (it contains the mesh, so no
+  contact of the mesh is missed; GJK on a hull is ~10× faster than coal's mesh–mesh distance,
+  which made a verification of the UR5's meshes take seconds per segment).
 
 Self-collision pairs are then pruned (:mod:`.pair_budget`), and the report is in
 ``robot.pair_budget``; the capsule fits per link in ``robot.primitive_report``.
@@ -418,6 +420,8 @@ def _load(data: dict, base_dir: Path) -> Any:
         exact_gm = robot.collision_model
         gm, report = fitted_geometry(robot.model, exact_gm, max_capsules=ncap)
         exact = robot if mode == "auto" and report else None
+        if exact is not None:
+            _convex_hulls(exact.collision_model)
         robot = RobotModel(robot.model, gm, arms, name=name, floating=floating, urdf_path=upath)
         if exact is not None:
             robot.exact = exact
@@ -457,6 +461,16 @@ def _cached_budget(robot: Any, text: str, mode: str, ncap: int, samples: int, pr
     except OSError:
         pass
     return budget
+
+
+def _convex_hulls(gm: pin.GeometryModel) -> None:
+    """Every triangle mesh of ``gm`` replaced by its convex hull (coal ``Convex``, qhull): it
+    contains the mesh, and GJK on a hull is ~10× faster than coal's mesh–mesh distance."""
+    for o in gm.geometryObjects:
+        g = o.geometry
+        if isinstance(g, coal.BVHModelBase):
+            g.buildConvexHull(True, "Qt")
+            o.geometry = g.convex
 
 
 def _link_of(model: pin.Model, gm: pin.GeometryModel, g: int) -> str:
