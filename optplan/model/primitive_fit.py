@@ -36,7 +36,7 @@ __all__ = ["CapsuleFit", "MeshFit", "fit_capsule", "fit_mesh", "certify", "segme
 CERT_EPS = 1e-6
 #: a single capsule whose volume exceeds this multiple of the mesh hull's volume is split [ratio]
 SPLIT_RATIO = 2.0
-_VERSION = 1   # of the fitting algorithm: part of the cache key
+_VERSION = 2   # of the fitting algorithm: part of the cache key
 
 
 @dataclass(frozen=True)
@@ -108,31 +108,23 @@ def _axis_capsule(P: np.ndarray, c: np.ndarray, u: np.ndarray) -> tuple[float, n
     rmin = math.sqrt(float(d2.max()))
     span = float(t.max() - t.min())
 
-    def ends(r: float) -> tuple[float, float]:
-        s = np.sqrt(np.maximum(r * r - d2, 0.0))
+    def volumes(r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        s = np.sqrt(np.maximum(r[:, None] ** 2 - d2[None, :], 0.0))
         # point i is within r of [lo, hi] iff lo − s_i ≤ t_i ≤ hi + s_i
-        lo, hi = float(np.min(t + s)), float(np.max(t - s))
-        if lo > hi:   # one point of the line is within r of every point
-            lo = hi = 0.5 * (lo + hi)
-        return lo, hi
+        lo, hi = np.min(t + s, axis=1), np.max(t - s, axis=1)
+        mid = 0.5 * (lo + hi)
+        flip = lo > hi   # one point of the line is within r of every point
+        lo, hi = np.where(flip, mid, lo), np.where(flip, mid, hi)
+        return np.pi * r * r * (hi - lo) + 4.0 / 3.0 * np.pi * r ** 3, lo, hi
 
-    def vol(r: float) -> float:
-        lo, hi = ends(r)
-        return capsule_volume(r, hi - lo)
-
-    rs = np.linspace(rmin, max(rmin, 0.5 * span + rmin) + 1e-9, 24)
-    vs = [vol(float(r)) for r in rs]
-    k = int(np.argmin(vs))
-    lo_r, hi_r = rs[max(k - 1, 0)], rs[min(k + 1, len(rs) - 1)]
-    for _ in range(30):   # golden section on the bracket
-        m1, m2 = lo_r + 0.382 * (hi_r - lo_r), lo_r + 0.618 * (hi_r - lo_r)
-        if vol(m1) <= vol(m2):
-            hi_r = m2
-        else:
-            lo_r = m1
-    r = 0.5 * (lo_r + hi_r)
-    lo, hi = ends(r)
-    return vol(r), c + lo * u, c + hi * u
+    a_r, b_r = rmin, max(rmin, 0.5 * span + rmin) + 1e-9
+    for _ in range(4):   # grid, then three refinements of the bracket around the best
+        rs = np.linspace(a_r, b_r, 24)
+        vs, _, _ = volumes(rs)
+        k = int(np.argmin(vs))
+        a_r, b_r = rs[max(k - 1, 0)], rs[min(k + 1, len(rs) - 1)]
+    v, lo, hi = volumes(np.array([rs[k]]))
+    return float(v[0]), c + float(lo[0]) * u, c + float(hi[0]) * u
 
 
 def fit_capsule(P: np.ndarray) -> CapsuleFit:
@@ -166,7 +158,7 @@ def fit_capsule(P: np.ndarray) -> CapsuleFit:
         return _axis_capsule(P, c, u)[0]
 
     best = minimize(f, np.zeros(4), method="Nelder-Mead",
-                    options={"xatol": 1e-5, "fatol": 1e-12, "maxiter": 400, "initial_simplex":
+                    options={"xatol": 1e-4, "fatol": 1e-12, "maxiter": 250, "initial_simplex":
                              np.vstack([np.zeros(4), 0.2 * np.eye(4)])})
     x = best.x if best.fun <= f(np.zeros(4)) else np.zeros(4)
     c, u = line(x)
