@@ -12,7 +12,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 import pytest
-from _random_robot import random_dual_arm_urdf, write_stl
+from _random_robot import random_dual_arm_urdf
 
 from optplan.errors import ModelError
 from optplan.model.primitive_fit import CERT_EPS, fit_capsule, fit_mesh, segment_distances
