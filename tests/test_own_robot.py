@@ -323,3 +323,14 @@ def test_scene_without_robot_that_does_not_fit_is_a_clear_error(tmp_path, capsys
     rc = cli.main(["plan", "--scene", str(sc)])
     err = capsys.readouterr().err
     assert rc == 2 and "does not fit robot 'tcbirrt_dual_arm'" in err and "names no robot" in err
+
+
+def test_bench_generalize_robot_finds_its_scenes_or_says_none(tmp_path, capsys):
+    from optplan import cli
+    from optplan.bench.generalize import scenes_for_robot
+
+    if _erd_available():
+        assert scenes_for_robot(str(FILES / "dual_ur5.toml")) == ["own_ur5_bar"]
+        assert scenes_for_robot("dual_panda_mesh") == ["own_panda_bar"]
+    rc = cli.main(["bench", "generalize", "--robot", str(tmp_path / "nobody.toml"), "--out", str(tmp_path / "o")])
+    assert rc == 2 and "no scene in models/scenes is made for it" in capsys.readouterr().err
