@@ -286,11 +286,11 @@ class CollisionChecker:
             cp = gm.collisionPairs[p]
             n = np.asarray(res.normal, float)
             p1, p2 = np.asarray(res.getNearestPoint1(), float), np.asarray(res.getNearestPoint2(), float)
-            if not np.all(np.isfinite(n)) or abs(float(np.linalg.norm(n)) - 1.0) > 1e-6:
-                # coal leaves the normal unset for triangle meshes (BVH): between separated
-                # shapes the nearest points give it; else the direction between the origins
-                n = p2 - p1 if res.min_distance > 0 and np.linalg.norm(p2 - p1) > 1e-12 else \
-                    gd.oMg[cp.second].translation - gd.oMg[cp.first].translation
+            unset = not np.all(np.isfinite(n)) or abs(float(np.linalg.norm(n)) - 1.0) > 1e-3
+            if unset and res.min_distance > 0 and np.linalg.norm(p2 - p1) > 1e-12:
+                n = p2 - p1   # coal leaves the normal unset for triangle meshes (BVH): the nearest points give it
+            elif not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+                n = gd.oMg[cp.second].translation - gd.oMg[cp.first].translation
             n = n / max(float(np.linalg.norm(n)), 1e-12)
             if self._flip[p]:
                 n = -n

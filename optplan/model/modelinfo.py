@@ -41,9 +41,9 @@ def model_info(name: str) -> dict:
     if not robot.is_floating:
         from ..planners.task_sampling import arm_reach_estimate
 
-        for a in robot.arms:
-            est, bound = arm_reach_estimate(robot, a)
-            arms[a]["reach_m"], arms[a]["reach_bound_m"] = est, bound
+        for arm_name in robot.arms:
+            est, bound = arm_reach_estimate(robot, arm_name)
+            arms[arm_name]["reach_m"], arms[arm_name]["reach_bound_m"] = est, bound
     judge = robot.judge
     jk: dict = {}
     for g in judge.collision_model.geometryObjects:

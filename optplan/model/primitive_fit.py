@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import minimize
 
 __all__ = ["CapsuleFit", "MeshFit", "fit_capsule", "fit_mesh", "certify", "segment_distances", "CERT_EPS",
@@ -82,7 +83,7 @@ def capsule_volume(r: float, length: float) -> float:
     return math.pi * r * r * length + 4.0 / 3.0 * math.pi * r ** 3
 
 
-def segment_distances(P: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def segment_distances(P: npt.ArrayLike, a: npt.ArrayLike, b: npt.ArrayLike) -> np.ndarray:
     """Distances [m] of the points P (n × 3) to the segment [a, b] (closed form)."""
     P, a, b = np.asarray(P, float), np.asarray(a, float), np.asarray(b, float)
     d = b - a

@@ -55,7 +55,7 @@ def arm_reach(robot: RobotModel, arm: str) -> tuple[np.ndarray, float]:
     return shoulder, reach
 
 
-_REACH_CACHE: dict = {}
+_REACH_CACHE: dict[tuple[int, str, int, int], tuple[RobotModel, tuple[float, float]]] = {}
 
 
 def arm_reach_estimate(robot: RobotModel, arm: str, samples: int = 4000, seed: int = 0) -> tuple[float, float]:
