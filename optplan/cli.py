@@ -213,9 +213,9 @@ def _cmd_bench_drake(args) -> int:
 def _load_robot(name: str):
     """A shipped robot (models/robots), one of example-robot-data's (pr2, baxter, dual_panda;
     extra 'robots'), a robot file (models/robots/files, or any path) or a bare URDF path."""
-    from .model.robot import RobotModel
+    from .model.example_robots import load_robot
 
-    return RobotModel.from_name(name)
+    return load_robot(name)
 
 
 def _check_fits(scene, robot, robot_name: str, given: bool) -> None:
@@ -263,7 +263,8 @@ def _cmd_plan(args) -> int:
     planner = ca.check_planner(args.planner)
     scene = Scene.load(scene_name)
     if args.robot is not None:
-        from .model.robot_file import is_robot_path, known_robot_names
+        from .model.example_robots import known_robot_names
+        from .model.robot_file import is_robot_path
 
         known = known_robot_names()
         if args.robot not in known and not is_robot_path(args.robot):

@@ -155,7 +155,8 @@ class Scene:
         if robot is not None:
             if not isinstance(robot, str):
                 raise ModelError(f"{where}.robot: expected a robot model name, got {robot!r}")
-            from .model.robot_file import is_robot_path, known_robot_names
+            from .model.example_robots import known_robot_names
+            from .model.robot_file import is_robot_path
 
             known = known_robot_names()  # shipped, example-robot-data's, robot files in models/robots/files
             if not is_robot_path(robot) and robot not in known:

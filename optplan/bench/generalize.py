@@ -125,10 +125,10 @@ _W: dict = {}
 
 
 def _robot(name: str):
-    from ..model.robot import RobotModel
+    from ..model.example_robots import load_robot
 
     if name not in _W:
-        _W[name] = RobotModel.from_name(name)   # shipped, example-robot-data's, robot file or URDF path
+        _W[name] = load_robot(name)   # shipped, example-robot-data's, robot file or URDF path
     return _W[name]
 
 

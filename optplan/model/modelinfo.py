@@ -17,9 +17,9 @@ def _deg(x: float) -> float | None:
 def model_info(name: str) -> dict:
     """A JSON-friendly description of the robot ``name`` (a shipped model, a robot file or a URDF
     path; angles [deg], rates [deg/s], masses [kg], lengths [m], volumes [m³])."""
-    from .robot import RobotModel
+    from .example_robots import load_robot
 
-    robot = RobotModel.from_name(name)
+    robot = load_robot(name)
     m = robot.model
     joints = []
     for k, jn in enumerate(robot.joint_names):
@@ -39,7 +39,7 @@ def model_info(name: str) -> dict:
     for g in geoms:
         kinds[type(g.geometry).__name__] = kinds.get(type(g.geometry).__name__, 0) + 1
     if not robot.is_floating:
-        from ..planners.task_sampling import arm_reach_estimate
+        from .reach import arm_reach_estimate
 
         for arm_name in robot.arms:
             est, bound = arm_reach_estimate(robot, arm_name)

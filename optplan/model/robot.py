@@ -103,22 +103,20 @@ class RobotModel:
     # ------------------------------------------------------------------ constructors
     @classmethod
     def from_name(cls, name: str) -> RobotModel:
-        """Load a shipped model (``models/robots/<name>.toml`` + ``urdf/<name>.urdf``), one of
-        example-robot-data's (``pr2``, ``baxter``, ``dual_panda``), or a robot file / URDF path
+        """Load a shipped model (``models/robots/<name>.toml`` + ``urdf/<name>.urdf``), a robot
+        file (a path, or a name in ``models/robots/files``) or a bare URDF path
         (:mod:`optplan.model.robot_file`)."""
         from .robot_file import is_robot_path, load_robot_file
 
         if isinstance(name, Path) or (isinstance(name, str) and is_robot_path(name)):
-            return load_robot_file(name)
+            return load_robot_file(name, cls)
         if name not in available_models():
-            from .example_robots import EXAMPLE_ROBOTS, load_example_robot
-            from .robot_file import available_robot_files, known_robot_names, robot_files_dir
+            from .robot_file import available_robot_files, robot_files_dir
 
-            if name in EXAMPLE_ROBOTS:
-                return load_example_robot(name)
             if name in available_robot_files():
-                return load_robot_file(robot_files_dir() / f"{name}.toml")
-            raise UnknownNameError("robot model (or a robot file / URDF path)", name, known_robot_names())
+                return load_robot_file(robot_files_dir() / f"{name}.toml", cls)
+            raise UnknownNameError("robot model", name, available_models() + available_robot_files()
+                                   + ["a robot file (.toml) or URDF path"])
             raise UnknownNameError("robot model", name, available_models())
         desc = load_description(name)
         path = urdf_dir() / f"{name}.urdf"

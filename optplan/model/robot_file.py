@@ -52,7 +52,7 @@ import pinocchio as pin
 
 from ..errors import ModelError
 
-__all__ = ["available_robot_files", "known_robot_names", "robot_files_dir", "load_robot_file", "load_urdf_robot", "resolve_uri", "package_search_dirs", "is_robot_path",
+__all__ = ["available_robot_files", "robot_files_dir", "load_robot_file", "load_urdf_robot", "resolve_uri", "package_search_dirs", "is_robot_path",
            "infer_arms", "COLLISION_MODES"]
 log = logging.getLogger(__name__)
 
@@ -73,14 +73,6 @@ def available_robot_files() -> list[str]:
     """Names of the robot files in :func:`robot_files_dir` (loadable by name)."""
     d = robot_files_dir()
     return sorted(p.stem for p in d.glob("*.toml")) if d.is_dir() else []
-
-
-def known_robot_names() -> list[str]:
-    """Every robot loadable by name: shipped descriptions, example-robot-data's, robot files."""
-    from .description import available_models
-    from .example_robots import EXAMPLE_ROBOTS
-
-    return list(available_models()) + list(EXAMPLE_ROBOTS) + available_robot_files()
 
 
 def is_robot_path(name: str) -> bool:
@@ -357,24 +349,30 @@ def infer_arms(model: pin.Model) -> dict[str, str]:
     return {"A": a, "B": b}
 
 
-def load_urdf_robot(path: str | Path, **kw: Any) -> Any:
-    """A bare URDF as a robot: arms inferred (:func:`infer_arms`), collision ``"auto"``."""
+def load_urdf_robot(path: str | Path, cls: Any, **kw: Any) -> Any:
+    """A bare URDF as a robot (a ``cls``, :class:`~optplan.model.robot.RobotModel`): arms inferred
+    (:func:`infer_arms`), collision ``"auto"``."""
     path = Path(path)
     m = pin.buildModelFromUrdf(str(path)) if path.exists() else None
     if m is None:
         raise ModelError(f"URDF file {str(path)!r} does not exist")
     data = {"name": path.stem, "urdf": str(path.resolve()), "arms": {k: {"ee": v} for k, v in infer_arms(m).items()}}
     data.update(kw)
-    return _load(data, path.parent)
+    return _load(data, path.parent, cls)
 
 
-def load_robot_file(path: str | Path) -> Any:
-    """The :class:`~optplan.model.robot.RobotModel` of a robot file (module docstring) or bare URDF."""
+def load_robot_file(path: str | Path, cls: Any = None) -> Any:
+    """The :class:`~optplan.model.robot.RobotModel` (or ``cls``) of a robot file (module docstring)
+    or bare URDF. (``RobotModel.from_name(path)`` is the usual way in.)"""
     import tomllib
 
+    if cls is None:   # called directly: the model class, imported here (robot.py imports this module)
+        import importlib
+
+        cls = importlib.import_module(__package__ + ".robot").RobotModel
     path = Path(path)
     if path.suffix in (".urdf", ".xml"):
-        return load_urdf_robot(path)
+        return load_urdf_robot(path, cls)
     if not path.exists():
         raise ModelError(f"robot file {str(path)!r} does not exist")
     try:
@@ -386,14 +384,13 @@ def load_robot_file(path: str | Path) -> Any:
         raise ModelError(f"{path}: unknown keys {sorted(extra)}; expected {', '.join(_KEYS)}")
     data.setdefault("name", path.stem)
     try:
-        return _load(data, path.parent)
+        return _load(data, path.parent, cls)
     except ModelError as exc:
         raise ModelError(f"{path}: {exc}") from None
 
 
-def _load(data: dict, base_dir: Path) -> Any:
+def _load(data: dict, base_dir: Path, RobotModel: Any) -> Any:   # noqa: N803 (the class)
     from .pair_budget import prune_pairs
-    from .robot import RobotModel
 
     pdirs = data.get("package_dirs", [])
     if not isinstance(pdirs, list) or not all(isinstance(p, str) for p in pdirs):
