@@ -334,3 +334,31 @@ def test_bench_generalize_robot_finds_its_scenes_or_says_none(tmp_path, capsys):
         assert scenes_for_robot("dual_panda_mesh") == ["own_panda_bar"]
     rc = cli.main(["bench", "generalize", "--robot", str(tmp_path / "nobody.toml"), "--out", str(tmp_path / "o")])
     assert rc == 2 and "no scene in models/scenes is made for it" in capsys.readouterr().err
+
+
+@needs_erd
+def test_vendor_primitives_merge_into_capsules(tmp_path):
+    """panda_collision.urdf models each link as a cylinder with a sphere at each end: the robot
+    file makes each triple one capsule (merge_capsules, the general step), in both arms."""
+    p = _write(tmp_path, '''
+name = "prims"
+urdf = "package://example-robot-data/robots/panda_description/urdf/panda_collision.urdf"
+fixed_joints = { "panda_finger_joint*" = 0.04 }
+[arms.left]
+ee = "panda_hand_tcp"
+mount = { xyz = [0.0, 0.35, 0.0] }
+[arms.right]
+ee = "panda_hand_tcp"
+mount = { xyz = [0.0, -0.35, 0.0] }
+''')
+    r = RobotModel.from_name(str(p))
+    kinds = {type(o.geometry).__name__ for o in r.collision_model.geometryObjects}
+    assert r.nj == 14 and kinds == {"Capsule"} and r.judge is r   # nothing fitted: no separate judge
+
+
+def test_floating_robot_file(tmp_path, rng):
+    urdf = random_dual_arm_urdf(rng, tmp_path / "arm", kinds=("capsule", "sphere"))
+    p = _write(tmp_path, f'name = "fl"\nurdf = "{urdf}"\nfloating = true\npair_samples = 50\n'
+                         '[arms.A]\nee = "A_tool"\n[arms.B]\nee = "B_tool"\n')
+    r = RobotModel.from_name(str(p))
+    assert r.is_floating and r.nq == r.nj + 7 and r.pair_budget["samples"] == 50

@@ -20,7 +20,9 @@ mount = { xyz = [0, 0.4, 0], rpy = [0, 0, 0] }   # [m], [rad]: copy of `urdf` fi
 # prefix = "left_"                # default "<arm>_" (mounted arms only)
 ```
 
-Without ``mount`` the URDF is the whole robot and ``ee``/``joints`` name its frames. ``collision``:
+Without ``mount`` the URDF is the whole robot and ``ee``/``joints`` name its frames. ``collision``
+(in every mode but ``"mesh"``, a link's ``<cylinder>`` with a ``<sphere>`` of its radius at each end
+of its axis becomes one capsule, :func:`merge_capsules`):
 
 * ``"mesh"`` — the URDF's collision geometry as is (the trajectory NLP bounds a mesh by its vertices);
 * ``"primitives"`` — every mesh replaced by certified capsules (:mod:`.primitive_fit`) everywhere;
@@ -142,6 +144,50 @@ def _resolve_meshes(root: ET.Element, base_dir: Path, package_dirs: Sequence[str
 
 def _floats(s: str | None, default: str) -> np.ndarray:
     return np.array([float(x) for x in (s or default).split()])
+
+
+def _origin(col: ET.Element) -> pin.SE3:
+    o = col.find("origin")
+    xyz = _floats(o.get("xyz") if o is not None else None, "0 0 0")
+    rpy = _floats(o.get("rpy") if o is not None else None, "0 0 0")
+    return pin.SE3(pin.rpy.rpyToMatrix(*rpy), xyz)
+
+
+def merge_capsules(link: ET.Element, tol: float = 2e-3) -> int:
+    """In one URDF ``<link>``: every ``<cylinder>`` collision with a ``<sphere>`` collision of the
+    same radius (± ``tol`` [m]) centred at each end of its axis (± ``tol``) becomes one collision
+    named ``<link>_<k>_capsule`` (the union of the three is exactly that capsule) and the two
+    spheres are removed. Returns the number of capsules made."""
+    cols = link.findall("collision")
+    spheres = []
+    for c in cols:
+        s = c.find("geometry/sphere")
+        if s is not None:
+            spheres.append((c, float(s.attrib["radius"]), _origin(c).translation))
+    used: set[int] = set()
+    n = 0
+    for c in cols:
+        cyl = c.find("geometry/cylinder")
+        if cyl is None:
+            continue
+        r, L = float(cyl.attrib["radius"]), float(cyl.attrib["length"])
+        M = _origin(c)
+        ends = [M.translation + M.rotation @ np.array([0.0, 0.0, s * L / 2]) for s in (-1, 1)]
+        match = []
+        for e in ends:
+            k = next((i for i, (_, rs, p) in enumerate(spheres)
+                      if i not in used and i not in match and abs(rs - r) <= tol and np.linalg.norm(p - e) <= tol), None)
+            if k is None:
+                break
+            match.append(k)
+        if len(match) != 2:
+            continue
+        used.update(match)
+        c.set("name", f"{link.get('name')}_{n}_capsule")
+        n += 1
+    for i in sorted(used, reverse=True):
+        link.remove(spheres[i][0])
+    return n
 
 
 def _root_link(root: ET.Element) -> str:
@@ -307,6 +353,9 @@ def _compose(data: dict, base_dir: Path, package_dirs: list) -> tuple[str, dict[
             arms[a] = {"ee": prefix + str(s["ee"]), "joints": None if joints is None else [prefix + str(x) for x in joints]}
     for t in list(root.findall("transmission")) + list(root.findall("gazebo")):
         root.remove(t)
+    if data.get("collision", "auto") != "mesh":   # a cylinder with a sphere at each end: one capsule
+        for link in root.findall("link"):
+            merge_capsules(link)
     if "fixed_joints" in data:
         _fix_joints(root, data["fixed_joints"],
                     [str(s.get("prefix", f"{a}_")) for a, s in arms_spec.items()] if mounted else ())
