@@ -133,13 +133,23 @@ def _parse(path: Path) -> ET.Element:
 
 
 def _resolve_meshes(root: ET.Element, base_dir: Path, package_dirs: Sequence[str | Path]) -> None:
-    for m in root.iter("mesh"):
-        fn = m.get("filename")
-        if fn:
-            p = resolve_uri(fn, base_dir, package_dirs)
-            if not p.exists():
-                raise ModelError(f"mesh {fn!r}: {p} does not exist")
-            m.set("filename", str(p))
+    """Mesh file names as absolute paths: a collision mesh that cannot be found is an error, a
+    visual one is left as it is (only the collision geometry is loaded)."""
+    for kind in ("collision", "visual"):
+        for el in root.iter(kind):
+            for m in el.iter("mesh"):
+                fn = m.get("filename")
+                if not fn:
+                    continue
+                try:
+                    p = resolve_uri(fn, base_dir, package_dirs)
+                    if not p.exists():
+                        raise ModelError(f"{kind} mesh {fn!r}: {p} does not exist")
+                except ModelError:
+                    if kind == "collision":
+                        raise
+                    continue
+                m.set("filename", str(p))
 
 
 def _floats(s: str | None, default: str) -> np.ndarray:
