@@ -26,12 +26,15 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["prune_pairs", "certify_pair", "joint_path", "MAX_PATH_JOINTS", "SAMPLE_CLEARANCE"]
+__all__ = ["prune_pairs", "certify_pair", "joint_path", "sampled_min_distances", "MAX_CELLS", "MAX_PATH_JOINTS",
+           "SAMPLE_CLEARANCE"]
 
 #: pairs with more joints than this between their links are never certified (kept)
 MAX_PATH_JOINTS = 4
 #: [m] candidates for certification: pairs whose sampled distance never falls below this
 SAMPLE_CLEARANCE = 0.005
+#: distance evaluations allowed to certify one pair [count] (past it the pair is kept)
+MAX_CELLS = 1000
 
 
 def _chain(model: pin.Model, j: int) -> list[int]:
@@ -81,7 +84,7 @@ def _lever(model: pin.Model, side: list[int], g: pin.GeometryObject) -> dict[int
     return out
 
 
-def certify_pair(robot, a: int, b: int, max_cells: int = 1000) -> bool:
+def certify_pair(robot, a: int, b: int, max_cells: int = MAX_CELLS) -> bool:
     """Is geometry pair (a, b) collision-free over the whole joint box? (module docstring)."""
     model, gm = robot.model, robot.collision_model
     oa, ob = gm.geometryObjects[a], gm.geometryObjects[b]
@@ -171,7 +174,7 @@ def sampled_min_distances(robot, pairs, n: int, seed: int) -> np.ndarray:
     return out
 
 
-def prune_pairs(robot, samples: int = 1000, seed: int = 0, max_cells: int = 1000) -> dict:
+def prune_pairs(robot, samples: int = 1000, seed: int = 0, max_cells: int = MAX_CELLS) -> dict:
     """Prune ``robot``'s self-collision pairs (module docstring) in place; returns the budget:
     ``geometries``, ``all_pairs``, ``after_adjacent`` (stage 2), ``candidates`` (never closer
     than :data:`SAMPLE_CLEARANCE` in ``samples`` configurations), ``certified`` (pruned), ``kept``."""

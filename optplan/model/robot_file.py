@@ -496,10 +496,11 @@ def _cached_budget(robot: Any, text: str, mode: str, ncap: int, samples: int, pr
     by the URDF text and the settings (pairs stored by geometry names)."""
     import json
 
-    from .pair_budget import MAX_PATH_JOINTS, SAMPLE_CLEARANCE
-    from .primitive_fit import _cache_dir
+    from .pair_budget import MAX_CELLS, MAX_PATH_JOINTS, SAMPLE_CLEARANCE
+    from .primitive_fit import _VERSION, _cache_dir
 
-    key = hashlib.sha256(json.dumps([text, mode, ncap, samples, MAX_PATH_JOINTS, SAMPLE_CLEARANCE, 2]).encode()).hexdigest()
+    key = hashlib.sha256(json.dumps([text, mode, ncap, samples, MAX_PATH_JOINTS, SAMPLE_CLEARANCE, MAX_CELLS, _VERSION, 3])
+                         .encode()).hexdigest()
     path = _cache_dir().parent / "pair_budgets" / f"{key}.json"
     names = [o.name for o in robot.collision_model.geometryObjects]
     if path.exists():
