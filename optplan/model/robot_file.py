@@ -382,8 +382,9 @@ def _cached_urdf(text: str, name: str) -> Path:
 
 
 def infer_arms(model: pin.Model) -> dict[str, str]:
-    """Arms of a bare URDF: the leaf frames that end a chain of ≥ 3 actuated joints, one per
-    branch below the last branching joint. Raises naming the candidates when not exactly two."""
+    """Arms of a bare URDF: at every leaf joint of the tree that has at least three movable joints
+    above it, the last frame attached to it (a tool frame when there is one), named ``A`` and
+    ``B`` in name order. Raises naming the candidates when there are not exactly two."""
     children: dict[int, list[int]] = {}
     for j in range(1, model.njoints):
         children.setdefault(int(model.parents[j]), []).append(j)
@@ -412,9 +413,12 @@ def load_urdf_robot(path: str | Path, cls: Any, **kw: Any) -> Any:
     """A bare URDF as a robot (a ``cls``, :class:`~optplan.model.robot.RobotModel`): arms inferred
     (:func:`infer_arms`), collision ``"auto"``."""
     path = Path(path)
-    m = pin.buildModelFromUrdf(str(path)) if path.exists() else None
-    if m is None:
+    if not path.exists():
         raise ModelError(f"URDF file {str(path)!r} does not exist")
+    try:
+        m = pin.buildModelFromUrdf(str(path))
+    except (RuntimeError, ValueError) as exc:
+        raise ModelError(f"{path}: Pinocchio could not parse the URDF: {str(exc).strip().splitlines()[0]}") from exc
     data = {"name": path.stem, "urdf": str(path.resolve()), "arms": {k: {"ee": v} for k, v in infer_arms(m).items()}}
     data.update(kw)
     return _load(data, path.parent, cls)
