@@ -362,3 +362,27 @@ def test_floating_robot_file(tmp_path, rng):
                          '[arms.A]\nee = "A_tool"\n[arms.B]\nee = "B_tool"\n')
     r = RobotModel.from_name(str(p))
     assert r.is_floating and r.nq == r.nj + 7 and r.pair_budget["samples"] == 50
+
+
+def test_from_urdf_resolves_package_uris_and_fixes_joints(tmp_path, rng, monkeypatch):
+    """``package://`` through package_dirs or ROS_PACKAGE_PATH (a clear error naming the searched
+    directories otherwise); fixed_joints locks joints out of the planning joints."""
+    urdf = random_dual_arm_urdf(rng, tmp_path / "src", kinds=("mesh",))
+    pkg = tmp_path / "share" / "mypkg"
+    pkg.mkdir(parents=True)
+    text = urdf.read_text()
+    for stl in (tmp_path / "src").glob("*.stl"):
+        stl.rename(pkg / stl.name)
+        text = text.replace(str(tmp_path / "src" / stl.name), f"package://mypkg/{stl.name}")
+    assert "package://mypkg/" in text
+    p = tmp_path / "pkg.urdf"
+    p.write_text(text)
+    arms = {"A": "A_tool", "B": "B_tool"}
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    with pytest.raises(ModelError, match="package 'mypkg' not found"):
+        RobotModel.from_urdf(p, arms=arms)
+    r = RobotModel.from_urdf(p, arms=arms, package_dirs=[tmp_path / "share"], fixed_joints=["B_j3"])
+    assert r.nj == 5 and "B_j3" not in r.joint_names
+    assert all(isinstance(o.geometry, coal.BVHModelBase) for o in r.collision_model.geometryObjects)
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "share"))
+    assert RobotModel.from_urdf(p, arms=arms).nj == 6
