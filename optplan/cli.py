@@ -291,7 +291,13 @@ def _cmd_plan(args) -> int:
         raise
     out = res.to_dict()
     out["wall_time_s"] = time.perf_counter() - t0
-    print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}")
+    from .collision.checker import pair_budget_counts
+
+    out["pairs"] = pc = pair_budget_counts(robot, scene)
+    print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}, robot {robot.name!r}")
+    print(f"  pairs checked: self {pc['self']}, robot-obstacle {pc['robot_obstacle']}, object-obstacle "
+          f"{pc['object_obstacle']}, object-robot {pc['object_robot']} ({pc['object_robot_rigid']} rigid with a "
+          "holding hand: no NLP rows while both hands hold)")
     for k in ("success", "plan_status", "plan_time_s", "n_regrasp", "opt_status", "opt_time_s", "opt_setup_time_s",
               "opt_iterations", "opt_wall_s", "opt_cpu_s", "max_closed_chain_residual", "min_clearance_m", "wall_time_s"):
         v = out[k]

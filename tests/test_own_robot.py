@@ -300,7 +300,10 @@ def test_plan_own_robot_end_to_end(robot_file, scene, tmp_path, capsys):
     assert rc == 0 and res["success"], res
     assert res["min_clearance_m"] >= 0.0 and res["max_closed_chain_residual"] <= 1e-5
     info = capsys.readouterr().out
-    assert "opt_status" in info
+    assert "opt_status" in info and "rigid with a holding hand" in info
+    assert res["pairs"]["self"] > 0
+    # the Panda's link 7 carries the hand (fixed joints): rigid with it; the UR5's hand links are all excluded
+    assert (res["pairs"]["object_robot_rigid"] > 0) == ("panda" in robot_file)
 
 
 @needs_erd

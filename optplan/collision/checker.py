@@ -126,6 +126,24 @@ def scene_pairs(robot: RobotModel, scene: Scene | None, *, held_object: bool = T
     return pairs
 
 
+def pair_budget_counts(robot: RobotModel, scene: Scene | None) -> dict[str, int]:
+    """The checked pairs by kind (:func:`scene_pairs`) and ``object_robot_rigid``: held object ×
+    robot geometry on the same rigid body as a grasping hand. Those never move relative to the
+    object while both hands hold it, so the trajectory NLP gives them no rows then (the
+    verification checks them all)."""
+    pairs = scene_pairs(robot, scene)
+    out = {"self": 0, "robot_obstacle": 0, "object_obstacle": 0, "object_robot": 0, "object_robot_rigid": 0}
+    hands = set()
+    if scene is not None and scene.object is not None:
+        hands = {int(robot.model.frames[robot.arm(a).ee_frame_id].parentJoint) for a in scene.object.grasps}
+    objs = robot.collision_model.geometryObjects
+    for p in pairs:
+        out[p.kind.replace("-", "_")] += 1
+        if p.kind == "object-robot" and int(objs[p.b].parentJoint) in hands:
+            out["object_robot_rigid"] += 1
+    return out
+
+
 def pair_indices(pair: Pair, geometry: SceneGeometry) -> tuple[int, int]:
     """The two geometry indices of ``pair`` in ``geometry.model``."""
     if pair.a == -1:
