@@ -6,9 +6,10 @@ import json
 import logging
 import sys
 import time
+from pathlib import Path
 
 from . import cli_args as ca
-from .errors import OptplanError, UsageError
+from .errors import ModelError, OptplanError, UsageError
 
 
 class _Parser(argparse.ArgumentParser):
@@ -215,11 +216,36 @@ def _cmd_bench_drake(args) -> int:
 
 
 def _load_robot(name: str):
-    """A shipped robot (models/robots) or one of example-robot-data's (pr2, baxter; extra 'robots')."""
-    from .model.example_robots import EXAMPLE_ROBOTS, load_example_robot
-    from .model.robot import RobotModel
+    """A shipped robot (models/robots), one of example-robot-data's (pr2, baxter, dual_panda;
+    extra 'robots'), a robot file (models/robots/files, or any path) or a bare URDF path."""
+    from .model.example_robots import load_robot
 
-    return load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
+    return load_robot(name)
+
+
+def _check_fits(scene, robot, robot_name: str, given: bool) -> None:
+    """A clear error when the scene's grasps or configurations do not fit the robot (never a
+    silent fallback to another robot)."""
+    if robot is None:
+        return
+    try:
+        scene.check_robot(robot)
+    except ModelError as exc:
+        hint = "" if given else \
+            f" (the scene names no robot, so {robot_name!r} was tried: pass --robot or set the scene's robot)"
+        raise UsageError(f"{exc}{hint}") from None
+
+
+def _same_robot(a: str, b: str) -> bool:
+    """Do two robot names / paths name the same robot (paths compared resolved)?"""
+    from .model.robot_file import is_robot_path
+
+    if is_robot_path(a) and is_robot_path(b):
+        return Path(a).expanduser().resolve() == Path(b).expanduser().resolve()
+    if is_robot_path(a) != is_robot_path(b):   # a path and a name: the name's robot file?
+        path, name = (a, b) if is_robot_path(a) else (b, a)
+        return Path(path).stem == name
+    return a == b
 
 
 def _plan_planner_options(planner: str, variant: str) -> tuple | None:
@@ -242,18 +268,21 @@ def _cmd_plan(args) -> int:
     planner = ca.check_planner(args.planner)
     scene = Scene.load(scene_name)
     if args.robot is not None:
-        from .model.description import available_models
-        from .model.example_robots import EXAMPLE_ROBOTS
+        from .model.example_robots import known_robot_names
+        from .model.robot_file import is_robot_path
 
-        known = list(available_models()) + list(EXAMPLE_ROBOTS)
-        if args.robot not in known:
-            raise UsageError(f"--robot {args.robot!r}: unknown robot; expected one of {', '.join(known)}")
-    if args.robot is not None and scene.robot is not None and args.robot != scene.robot:
+        known = known_robot_names()
+        if args.robot not in known and not is_robot_path(args.robot):
+            raise UsageError(f"--robot {args.robot!r}: unknown robot; expected one of {', '.join(known)}, "
+                             "or a robot file / URDF path")
+    if args.robot is not None and scene.robot is not None and not _same_robot(args.robot, scene.robot):
         raise UsageError(f"--robot {args.robot!r}: scene {scene.name!r} is made for robot {scene.robot!r} "
                          "(its grasps and poses belong to that robot)")
-    robot = _load_robot(args.robot or scene.robot or "tcbirrt_dual_arm")
+    robot_name = args.robot or scene.robot or "tcbirrt_dual_arm"
+    robot = _load_robot(robot_name)
     t0 = time.perf_counter()
     try:
+        _check_fits(scene, robot, robot_name, given=bool(args.robot or scene.robot))
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
         opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, plan_clock=args.clock,
                                warm_start=not args.cold,
@@ -267,7 +296,13 @@ def _cmd_plan(args) -> int:
         raise
     out = res.to_dict()
     out["wall_time_s"] = time.perf_counter() - t0
-    print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}")
+    from .collision.checker import pair_budget_counts
+
+    out["pairs"] = pc = pair_budget_counts(robot, scene)
+    print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}, robot {robot.name!r}")
+    print(f"  pairs checked: self {pc['self']}, robot-obstacle {pc['robot_obstacle']}, object-obstacle "
+          f"{pc['object_obstacle']}, object-robot {pc['object_robot']} ({pc['object_robot_rigid']} rigid with a "
+          "holding hand: no NLP rows while both hands hold)")
     for k in ("success", "plan_status", "plan_time_s", "n_regrasp", "opt_status", "opt_time_s", "opt_setup_time_s",
               "opt_iterations", "opt_wall_s", "opt_cpu_s", "max_closed_chain_residual", "min_clearance_m", "wall_time_s"):
         v = out[k]

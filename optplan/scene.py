@@ -127,11 +127,17 @@ class Scene:
     def load(cls, name_or_path: str | Path) -> Scene:
         """Load ``models/scenes/<name>.toml`` or a TOML path."""
         data, p = read_model_toml(name_or_path, "scenes", "scene", available_scenes)
+        robot = data.get("robot")
+        if isinstance(robot, str):   # a robot file or URDF path: relative to the scene file
+            from .model.robot_file import is_robot_path
+
+            if is_robot_path(robot) and not Path(robot).expanduser().is_absolute():
+                data = {**data, "robot": str((p.parent / robot).resolve())}
         return cls.from_dict(data, where=p.name)
 
     @classmethod
     def from_dict(cls, data: dict, where: str = "scene") -> Scene:
-        from .model.description import _known_keys, available_models
+        from .model.description import _known_keys
 
         _known_keys(data, ("name", "robot", "angle_unit", "object", "start", "goal", "obstacles", "extra", "notes"),
                     where)
@@ -150,11 +156,12 @@ class Scene:
         if robot is not None:
             if not isinstance(robot, str):
                 raise ModelError(f"{where}.robot: expected a robot model name, got {robot!r}")
-            from .model.example_robots import EXAMPLE_ROBOTS
+            from .model.example_robots import known_robot_names
+            from .model.robot_file import is_robot_path
 
-            known = list(available_models()) + list(EXAMPLE_ROBOTS)  # shipped + example-robot-data's
-            if robot not in known:
-                raise UnknownNameError("robot model (scene's robot)", robot, known)
+            known = known_robot_names()  # shipped, example-robot-data's, robot files in models/robots/files
+            if not is_robot_path(robot) and robot not in known:
+                raise UnknownNameError("robot model (scene's robot; or a robot file / URDF path)", robot, known)
         obstacles = []
         names = set()
         obs_list = data.get("obstacles", [])
@@ -216,6 +223,21 @@ class Scene:
         goal = pose(data["goal"], f"{where}: goal") if "goal" in data else None
         return cls(str(data.get("name", where)), data.get("robot"), tuple(obstacles), obj, start, goal,
                    dict(data.get("extra", {})))
+
+    def check_robot(self, robot) -> None:
+        """Does the scene fit ``robot``? Its grasps name arms of the robot, its ``exclude_links``
+        are the robot's links and its ``[extra] q_start`` / ``q_goal`` have the robot's joint
+        count; else a :class:`ModelError` naming what does not fit."""
+        try:
+            if self.object is not None:
+                self.object.check_robot(robot)
+            for key in ("q_start", "q_goal"):
+                q = self.extra.get(key)
+                if q is not None and len(q) != robot.nq:
+                    raise ModelError(f"extra.{key} has {len(q)} joint values, the robot has {robot.nq} "
+                                     f"({', '.join(robot.joint_names)})")
+        except (ModelError, UnknownNameError) as exc:
+            raise ModelError(f"scene {self.name!r} does not fit robot {robot.name!r}: {exc}") from None
 
     def obstacle(self, name: str) -> Obstacle:
         for o in self.obstacles:

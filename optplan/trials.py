@@ -109,14 +109,13 @@ def perturb_pose(nominal: pin.SE3, rng: np.random.Generator, position_range: flo
 
 
 def _reach_scale(robot: RobotModel) -> float:
-    """The robot's mean arm reach / the TCBiRRT paper robot's (1 for that robot; the paper's 0.2 m
-    perturbation is sized for its 2.94 m arms)."""
-    from .planners.task_sampling import arm_reach
-    from .planners.tcbirrt_options import PAPER_REACH
+    """The robot's mean sampled arm reach / the TCBiRRT paper robot's (1 for that robot; the
+    paper's 0.2 m perturbation is sized for its 2.7 m arms)."""
+    from .planners.tcbirrt_options import reach_scale
 
     if robot.is_floating or not robot.arms:
         return 1.0
-    return float(np.mean([arm_reach(robot, a)[1] for a in robot.arms])) / PAPER_REACH
+    return reach_scale(robot)
 
 
 class TrialGenerator:

@@ -95,7 +95,8 @@ def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_ch
         ep, er = closure_errors(robot, closed_chain, qfull, data)
         cc_p, cc_r = float(ep.max()), float(er.max())
     # clearance: exactly the smallest coal distance over the samples
-    checker = CollisionChecker.shared(robot, scene, object_arm=object_arm,
+    # the exact geometry when the robot plans on fitted primitives (robot.judge)
+    checker = CollisionChecker.shared(robot.judge, scene, object_arm=object_arm,
                                       held_object=held_object and scene is not None and scene.object is not None)
     dmin, pair, _ = checker.min_distance_along(qfull)
     pair_name = "" if pair is None else f"{pair.name_a} / {pair.name_b}"

@@ -3,9 +3,13 @@ on, with each scene's own robot (the scene's ``robot`` field: a shipped model or
 example-robot-data's, e.g. the two-Panda ``dual_panda``).
 
 ``optplan bench generalize --scene suite,stress,panda_shelf --trials 5 --out DIR``
+``optplan bench generalize --robot models/robots/files/dual_ur5.toml --trials 5 --out DIR``
 
 * ``suite`` = the hard-scene suite (``hard_*``), ``stress`` = the stress scenes (``stress_*``),
-  ``panda`` = the dual-Panda scenes (``panda_*``); any scene name works too.
+  ``panda`` = the dual-Panda scenes (``panda_*``), ``own`` = the scenes of robots loaded from
+  robot files (``own_*``); any scene name works too. ``--robot`` runs every trial on that robot
+  (a robot file or URDF path; without ``--scene``, on the scenes made for it); the summary adds
+  the process's peak memory.
 * Planner: TCBiRRT, ``variant="improved"`` (the hard scenes' planner), edges checked every 0.05 rad,
   ``--time-limit`` [s] per query; the sampling box and step scale with the robot's reach.
 * Per trial: :func:`optplan.pipeline.run_pipeline` with the product's defaults (B-spline segment
@@ -39,7 +43,7 @@ log = logging.getLogger(__name__)
 
 #: target: the optimizer succeeds (converged and verified) on this fraction of the planned trials
 TARGET_SUCCESS = 0.95
-GROUPS = {"suite": "hard_", "stress": "stress_", "panda": "panda_"}
+GROUPS = {"suite": "hard_", "stress": "stress_", "panda": "panda_", "own": "own_"}
 
 
 @dataclass
@@ -67,6 +71,33 @@ class GeneralizeConfig:
     planner_variant: str = "improved"
     #: Show a progress bar.
     progress: bool = True
+    #: The robot of every trial: a robot file or URDF path, or a model name (None: each scene's own
+    #: robot). With a robot and no scenes given, the scenes in ``models/scenes`` made for it.
+    robot: str | None = None
+
+
+def scenes_for_robot(robot: str) -> list[str]:
+    """The scenes of ``models/scenes`` whose ``robot`` is ``robot`` (a name, or a path compared
+    resolved; a path also matches a scene naming its file's stem)."""
+    from ..model.robot_file import is_robot_path
+    from ..scene import Scene, available_scenes
+
+    def same(a: str, b: str) -> bool:
+        if is_robot_path(a) and is_robot_path(b):
+            return Path(a).expanduser().resolve() == Path(b).expanduser().resolve()
+        if is_robot_path(a) != is_robot_path(b):
+            path, name = (a, b) if is_robot_path(a) else (b, a)
+            return Path(path).stem == name
+        return a == b
+    out = []
+    for n in available_scenes():
+        try:
+            sc = Scene.load(n)
+        except Exception:   # a scene that does not load (e.g. a missing optional robot) is not one
+            continue
+        if sc.robot is not None and same(robot, sc.robot):
+            out.append(n)
+    return out
 
 
 def expand(names) -> list[str]:
@@ -94,11 +125,10 @@ _W: dict = {}
 
 
 def _robot(name: str):
-    from ..model.example_robots import EXAMPLE_ROBOTS, load_example_robot
-    from ..model.robot import RobotModel
+    from ..model.example_robots import load_robot
 
     if name not in _W:
-        _W[name] = load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
+        _W[name] = load_robot(name)   # shipped, example-robot-data's, robot file or URDF path
     return _W[name]
 
 
@@ -110,7 +140,8 @@ def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
     from .warmstart import _finite, _path_hash, _segment_rows
 
     scene = Scene.load(scene_name)
-    robot = _robot(scene.robot or "tcbirrt_dual_arm")
+    robot = _robot(cfg.robot or scene.robot or "tcbirrt_dual_arm")
+    scene.check_robot(robot)   # a clear error, not a traceback deep in a trial
     line = {"scene": scene_name, "trial": int(index), "mode": "warm", "seed": int(cfg.seed), "robot": robot.name,
             "n_collision_pairs": len(robot.collision_pairs), "time_limit_s": float(cfg.time_limit),
             "ipopt_max_wall_time_s": float(cfg.ipopt_max_wall_time), "planner_variant": cfg.planner_variant,
@@ -132,7 +163,7 @@ def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
         log.warning("%s trial %d: pipeline raised %s: %s", scene_name, index, type(exc).__name__, exc)
         err = f"{type(exc).__name__}: {exc}"
     line.update({"wall_time_s": time.perf_counter() - w0, "cpu_time_s": time.process_time() - c0,
-                 "trial_generation_s": w0 - t0})
+                 "trial_generation_s": w0 - t0, "peak_rss_mb": _peak_rss_mb()})
     if res is None:
         return {**line, "success": False, "plan_ok": None, "plan_status": "error", "opt_status": "error",
                 "error": err, "segments": []}
@@ -142,6 +173,18 @@ def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
                  "converged": bool(res.segments) and all(s.solution.success for s in res.segments),
                  "segments": _segment_rows(res), "error": None})
     return line
+
+
+def _peak_rss_mb() -> float | None:
+    """Peak resident memory of this process so far [MB] (``ru_maxrss``; None where unavailable)."""
+    try:
+        import resource
+        import sys
+
+        kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        return float(kb) / (1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0)
+    except (ImportError, OSError):
+        return None
 
 
 def _done(rows: list[dict], cfg: GeneralizeConfig) -> set:
@@ -155,7 +198,13 @@ def run(cfg: GeneralizeConfig) -> list[dict]:
     """Run (or resume) the benchmark; writes ``results.jsonl`` and ``summary.txt`` / ``.json``."""
     from .tcbirrt import _repair_tail, load_results
 
-    scenes = expand(cfg.scenes)
+    scenes = expand(cfg.scenes) if cfg.scenes else []
+    if not scenes:
+        if cfg.robot is None:
+            raise ValueError("--scene: no scene given")
+        scenes = scenes_for_robot(cfg.robot)
+        if not scenes:
+            raise ValueError(f"--robot {cfg.robot!r}: no scene in models/scenes is made for it; pass --scene")
     if cfg.clock not in ("cpu", "wall"):
         raise ValueError(f"clock: expected 'cpu' or 'wall', got {cfg.clock!r}")
     if not isinstance(cfg.trials, int) or cfg.trials < 1:
@@ -222,6 +271,7 @@ def _group(rows: list[dict]) -> dict:
             "plan_time_s": _stats([r.get("plan_time_s") for r in planned]),
             "attempts": dict(sorted(attempts.items())), "failures": failures,
             "n_collision_pairs": max((r.get("n_collision_pairs", 0) for r in rows), default=0),
+            "peak_rss_mb": max((r["peak_rss_mb"] for r in rows if r.get("peak_rss_mb") is not None), default=None),
             "robot": rows[0].get("robot") if rows else None}
 
 
@@ -257,16 +307,24 @@ def format_summary(summ: dict) -> str:
                      f"trials (target >= {100 * TARGET_SUCCESS:.0f}%: {'met' if met else 'NOT met'}); optimization "
                      f"per trial median {f(w['median'])} s / p95 {f(w['p95'])} s wall (target <= 1 / 3 s: "
                      f"{'met' if tmet else 'NOT met'})")
+    if a.get("peak_rss_mb") is not None:
+        lines.append(f"peak memory of the process: {a['peak_rss_mb']:.0f} MB (target <= 1024 MB: "
+                     f"{'met' if a['peak_rss_mb'] <= 1024 else 'NOT met'})")
     return "\n".join(lines)
 
 
 def command(args) -> int:
     """``optplan bench generalize``."""
-    cfg = GeneralizeConfig(scenes=[s for s in args.scene.split(",") if s.strip()], trials=args.trials,
+    scene_arg = args.scene if args.scene is not None else ("" if args.robot else "suite,stress,panda")
+    cfg = GeneralizeConfig(scenes=[s for s in scene_arg.split(",") if s.strip()], trials=args.trials,
                            first_trial=args.first_trial, seed=args.seed, out=args.out, time_limit=args.time_limit,
-                           ipopt_max_wall_time=args.ipopt_max_wall_time, clock=args.clock, progress=not args.no_progress)
+                           ipopt_max_wall_time=args.ipopt_max_wall_time, clock=args.clock, progress=not args.no_progress,
+                           robot=args.robot)
     try:
-        expand(cfg.scenes)
+        if cfg.scenes:
+            expand(cfg.scenes)
+        elif cfg.robot and not scenes_for_robot(cfg.robot):
+            raise ValueError(f"--robot {cfg.robot!r}: no scene in models/scenes is made for it; pass --scene")
     except ValueError as exc:
         from ..errors import UsageError
 
@@ -281,8 +339,12 @@ def command(args) -> int:
 def add_arguments(p) -> None:
     from .. import cli_args as ca
 
-    p.add_argument("--scene", default="suite,stress,panda",
-                   help="comma-separated scene names or groups: suite (hard_*), stress (stress_*), panda (panda_*)")
+    p.add_argument("--scene", default=None,
+                   help="comma-separated scene names or groups: suite (hard_*), stress (stress_*), panda (panda_*), "
+                        "own (own_*: robots loaded from robot files); default suite,stress,panda, or with --robot "
+                        "the scenes made for that robot")
+    p.add_argument("--robot", default=None,
+                   help="robot of every trial: a robot file or URDF path, or a model name (default: each scene's)")
     p.add_argument("--trials", type=ca.positive_int, default=5, help="trials per scene")
     p.add_argument("--first-trial", type=ca.nonnegative_int, default=0)
     p.add_argument("--seed", type=ca.nonnegative_int, default=0)

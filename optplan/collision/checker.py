@@ -126,6 +126,24 @@ def scene_pairs(robot: RobotModel, scene: Scene | None, *, held_object: bool = T
     return pairs
 
 
+def pair_budget_counts(robot: RobotModel, scene: Scene | None) -> dict[str, int]:
+    """The checked pairs by kind (:func:`scene_pairs`) and ``object_robot_rigid``: held object ×
+    robot geometry on the same rigid body as a grasping hand. Those never move relative to the
+    object while both hands hold it, so the trajectory NLP gives them no rows then (the
+    verification checks them all)."""
+    pairs = scene_pairs(robot, scene)
+    out = {"self": 0, "robot_obstacle": 0, "object_obstacle": 0, "object_robot": 0, "object_robot_rigid": 0}
+    hands = set()
+    if scene is not None and scene.object is not None:
+        hands = {int(robot.model.frames[robot.arm(a).ee_frame_id].parentJoint) for a in scene.object.grasps}
+    objs = robot.collision_model.geometryObjects
+    for p in pairs:
+        out[p.kind.replace("-", "_")] += 1
+        if p.kind == "object-robot" and int(objs[p.b].parentJoint) in hands:
+            out["object_robot_rigid"] += 1
+    return out
+
+
 def pair_indices(pair: Pair, geometry: SceneGeometry) -> tuple[int, int]:
     """The two geometry indices of ``pair`` in ``geometry.model``."""
     if pair.a == -1:
@@ -271,8 +289,9 @@ class CollisionChecker:
         ``q``: one row ``(n, n·m)`` per pair — coal's unit witness normal from A to B and the
         offset of the witness points' midpoint ``m`` (the same query as :func:`coal.distance` on
         :meth:`pair_geometries`; the placements are set once, each pair is one C++ call). A
-        degenerate normal (coincident witness points) is replaced by the direction between the
-        two geometries' origins."""
+        normal coal leaves unset (a triangle mesh) is the direction between the witness points of
+        a separated pair, else (coincident witness points) the direction between the two
+        geometries' origins."""
         q = self.robot.check_q(q)
         idx = np.asarray(pair_indices, int).ravel()
         out = np.zeros((idx.size, 4))
@@ -284,12 +303,16 @@ class CollisionChecker:
             res = pin.computeDistance(gm, gd, p)
             cp = gm.collisionPairs[p]
             n = np.asarray(res.normal, float)
-            if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+            p1, p2 = np.asarray(res.getNearestPoint1(), float), np.asarray(res.getNearestPoint2(), float)
+            unset = not np.all(np.isfinite(n)) or abs(float(np.linalg.norm(n)) - 1.0) > 1e-3
+            if unset and res.min_distance > 0 and np.linalg.norm(p2 - p1) > 1e-12:
+                n = p2 - p1   # coal leaves the normal unset for triangle meshes (BVH): the nearest points give it
+            elif not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
                 n = gd.oMg[cp.second].translation - gd.oMg[cp.first].translation
             n = n / max(float(np.linalg.norm(n)), 1e-12)
             if self._flip[p]:
                 n = -n
-            mid = 0.5 * (np.asarray(res.getNearestPoint1(), float) + np.asarray(res.getNearestPoint2(), float))
+            mid = 0.5 * (p1 + p2)
             out[row, :3] = n
             out[row, 3] = n @ mid
         return out

@@ -23,6 +23,7 @@ this module:
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
@@ -231,17 +232,45 @@ def closure_errors(robot: RobotModel, grasps_or_chain: dict[str, pin.SE3] | Chai
 
 
 def solve_grasp_ik(robot: RobotModel, object_pose: pin.SE3, grasps: dict[str, pin.SE3], q0: np.ndarray,
-                   options: IKOptions | None = None, data: pin.Data | None = None) -> IKResult:
+                   options: IKOptions | None = None, data: pin.Data | None = None, *,
+                   checker: Any = None, min_clearance: float = 0.0, restarts: int = 0,
+                   rng: np.random.Generator | None = None) -> IKResult:
     """Closed-chain IK: every arm in ``grasps`` puts its end-effector on
     ``object_pose * grasps[arm]`` (grasp frames in the object frame); damped least squares
-    (:class:`~optplan.model.ik.IKOptions`) from ``q0``."""
+    (:class:`~optplan.model.ik.IKOptions`) from ``q0``.
+
+    With a ``checker`` (:class:`~optplan.collision.checker.CollisionChecker`, e.g. of the scene
+    with the object held) a converged configuration closer than ``min_clearance`` [m] (exact
+    coal distance) is rejected: it is repaired by up to ``restarts`` solves from random
+    configurations (``rng``), and if none is clear the result has ``success`` False and
+    ``status`` ``"in_collision"`` (the closest-to-clear configuration found, its clearance)."""
     check_pose(object_pose, "solve_grasp_ik: object_pose")
     if not isinstance(grasps, dict) or not grasps:
         raise ConfigurationError(f"solve_grasp_ik: grasps: expected a dict {{arm: pinocchio.SE3}}, got {grasps!r}")
     for a, g in grasps.items():
         check_pose(g, f"solve_grasp_ik: grasps[{a!r}]")
+    if isinstance(restarts, bool) or not isinstance(restarts, (int, np.integer)) or restarts < 0:
+        raise ConfigurationError(f"solve_grasp_ik: restarts: expected an integer ≥ 0, got {restarts!r}")
+    if restarts and not isinstance(rng, np.random.Generator):
+        raise ConfigurationError(f"solve_grasp_ik: restarts={restarts} needs rng (a numpy.random.Generator), got {rng!r}")
     targets = [(a, object_pose * g) for a, g in grasps.items()]
-    return solve_multi(robot, data or robot.model.createData(), q0, targets, options or IKOptions())
+    data = data or robot.model.createData()
+    res = solve_multi(robot, data, q0, targets, options or IKOptions())
+    if checker is None:
+        return res
+    best: IKResult | None = None
+    for k in range(int(restarts) + 1):
+        if k:
+            assert rng is not None
+            res = solve_multi(robot, data, robot.random_configuration(rng), targets, options or IKOptions())
+        if not res.success:
+            continue
+        d = float(checker.min_distance(res.q)[0])
+        if d >= min_clearance:
+            return dataclasses.replace(res, clearance=d)
+        if best is None or d > best.clearance:
+            best = dataclasses.replace(res, success=False, status="in_collision", clearance=d)
+    return best if best is not None else res
 
 
 def manifold_resample(robot: RobotModel, path: Any, n: int, closed_chain: ChainLike | None = None) -> tuple[np.ndarray, bool]:

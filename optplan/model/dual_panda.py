@@ -36,6 +36,7 @@ import pinocchio as pin
 from ..errors import ModelError
 from ._robot_data import _require_dir
 from .robot import RobotModel
+from .robot_file import _floats, merge_capsules  # the general step, re-exported here
 
 __all__ = ["load_dual_panda", "merge_capsules", "pair_budget", "srdf_disabled_pairs", "BASE_OFFSET",
            "DUAL_PANDA_ARMS"]
@@ -48,56 +49,6 @@ PLATE_SIZE = (0.5, 1.1, 0.05)
 FINGER_OPENING = 0.04  # [m] per finger (fully open)
 SIDES = ("left", "right")
 DUAL_PANDA_ARMS = {s: [f"{s}_panda_joint{k}" for k in range(1, 8)] for s in SIDES}
-
-
-def _floats(s: str | None, default: str) -> np.ndarray:
-    return np.array([float(x) for x in (s or default).split()])
-
-
-def _origin(col: ET.Element) -> pin.SE3:
-    from ..geometry.spatial import rpy_to_matrix
-
-    o = col.find("origin")
-    xyz = _floats(o.get("xyz") if o is not None else None, "0 0 0")
-    rpy = _floats(o.get("rpy") if o is not None else None, "0 0 0")
-    return pin.SE3(rpy_to_matrix(*rpy), xyz)
-
-
-def merge_capsules(link: ET.Element, tol: float = 2e-3) -> int:
-    """In one URDF ``<link>``: every ``<cylinder>`` collision with a ``<sphere>`` collision of the
-    same radius (± ``tol`` [m]) centred at each end of its axis (± ``tol``) becomes one collision
-    named ``<link>_<k>_capsule`` (the union of the three is exactly that capsule) and the two
-    spheres are removed. Returns the number of capsules made."""
-    cols = link.findall("collision")
-    spheres = []
-    for c in cols:
-        s = c.find("geometry/sphere")
-        if s is not None:
-            spheres.append((c, float(s.attrib["radius"]), _origin(c).translation))
-    used: set[int] = set()
-    n = 0
-    for c in cols:
-        cyl = c.find("geometry/cylinder")
-        if cyl is None:
-            continue
-        r, L = float(cyl.attrib["radius"]), float(cyl.attrib["length"])
-        M = _origin(c)
-        ends = [M.translation + M.rotation @ np.array([0.0, 0.0, s * L / 2]) for s in (-1, 1)]
-        match = []
-        for e in ends:
-            k = next((i for i, (_, rs, p) in enumerate(spheres)
-                      if i not in used and i not in match and abs(rs - r) <= tol and np.linalg.norm(p - e) <= tol), None)
-            if k is None:
-                break
-            match.append(k)
-        if len(match) != 2:
-            continue
-        used.update(match)
-        c.set("name", f"{link.get('name')}_{n}_capsule")
-        n += 1
-    for i in sorted(used, reverse=True):
-        link.remove(spheres[i][0])
-    return n
 
 
 def _prefix_tree(root: ET.Element, prefix: str) -> list[ET.Element]:

@@ -35,7 +35,7 @@ from ..errors import ModelError
 from ._robot_data import _require_dir, example_robot_data_dir
 from .robot import RobotModel
 
-__all__ = ["example_robot_data_dir", "example_robots_available", "load_pr2", "load_baxter", "load_example_robot",
+__all__ = ["example_robot_data_dir", "example_robots_available", "known_robot_names", "load_robot", "load_pr2", "load_baxter", "load_example_robot",
            "EXAMPLE_ROBOTS", "PR2_ARM_JOINTS", "BAXTER_ARM_JOINTS"]
 log = logging.getLogger(__name__)
 
@@ -45,6 +45,21 @@ PR2_ARM_JOINTS = {s: [f"{p}_{j}_joint" for j in ("shoulder_pan", "shoulder_lift"
 BAXTER_ARM_JOINTS = {s: [f"{s}_{j}" for j in ("s0", "s1", "e0", "e1", "w0", "w1", "w2")] for s in ("left", "right")}
 PR2_TORSO_LIFT = 0.15   # [m] frozen torso lift (range 0 .. 0.31 m)
 EXAMPLE_ROBOTS = ("pr2", "baxter", "dual_panda")
+
+
+def known_robot_names() -> list[str]:
+    """Every robot loadable by name (:func:`load_robot`): shipped descriptions, example-robot-data's,
+    robot files in ``models/robots/files``."""
+    from .description import available_models
+    from .robot_file import available_robot_files
+
+    return list(available_models()) + list(EXAMPLE_ROBOTS) + available_robot_files()
+
+
+def load_robot(name: str) -> RobotModel:
+    """A robot by name or path: one of example-robot-data's (``pr2``, ``baxter``, ``dual_panda``)
+    or anything :meth:`RobotModel.from_name` loads (shipped, robot file, URDF path)."""
+    return load_example_robot(name) if name in EXAMPLE_ROBOTS else RobotModel.from_name(name)
 
 
 def example_robots_available() -> bool:

@@ -50,13 +50,22 @@ class IKOptions:
 
 @dataclass(frozen=True)
 class IKResult:
-    """``success``, the full configuration ``q``, iterations, final errors [m], [rad]."""
+    """``success``, the full configuration ``q``, iterations, final errors [m], [rad];
+    ``status``: ``"converged"``, ``"not_converged"``, or ``"in_collision"`` (converged, but
+    closer than the clearance asked for; :func:`~optplan.constraints.closed_chain.solve_grasp_ik`
+    with a checker); ``clearance`` [m]: the exact clearance of ``q`` when checked (else NaN)."""
 
     success: bool
     q: np.ndarray
     iterations: int
     position_error: float
     orientation_error: float
+    status: str = ""
+    clearance: float = float("nan")
+
+    def __post_init__(self) -> None:
+        if not self.status:
+            object.__setattr__(self, "status", "converged" if self.success else "not_converged")
 
 
 def pose_error(M: pin.SE3, goal: pin.SE3) -> np.ndarray:

@@ -1,5 +1,6 @@
-"""``optplan models info NAME``: what a shipped robot model is, read off its Pinocchio model
-(joints and limits, arms and end-effector frames, masses, collision geometry)."""
+"""``optplan models info NAME|PATH``: what a robot model is, read off its Pinocchio model
+(joints and limits, arms and end-effector frames, reach, masses, collision geometry, the fitted
+capsules and the self-collision pair budget)."""
 from __future__ import annotations
 
 import math
@@ -14,11 +15,11 @@ def _deg(x: float) -> float | None:
 
 
 def model_info(name: str) -> dict:
-    """A JSON-friendly description of the shipped model ``name`` (angles [deg], rates [deg/s],
-    masses [kg], lengths [m])."""
-    from .robot import RobotModel
+    """A JSON-friendly description of the robot ``name`` (a shipped model, a robot file or a URDF
+    path; angles [deg], rates [deg/s], masses [kg], lengths [m], volumes [m³])."""
+    from .example_robots import load_robot
 
-    robot = RobotModel.from_name(name)
+    robot = load_robot(name)
     m = robot.model
     joints = []
     for k, jn in enumerate(robot.joint_names):
@@ -37,9 +38,22 @@ def model_info(name: str) -> dict:
     kinds: dict = {}
     for g in geoms:
         kinds[type(g.geometry).__name__] = kinds.get(type(g.geometry).__name__, 0) + 1
+    if not robot.is_floating:
+        from .reach import arm_reach_estimate
+
+        for arm_name in robot.arms:
+            est, bound = arm_reach_estimate(robot, arm_name)
+            arms[arm_name]["reach_m"], arms[arm_name]["reach_bound_m"] = est, bound
+    judge = robot.judge
+    jk: dict = {}
+    for g in judge.collision_model.geometryObjects:
+        jk[type(g.geometry).__name__] = jk.get(type(g.geometry).__name__, 0) + 1
     return {"name": robot.name, "base": "floating" if robot.is_floating else "fixed", "nq": robot.nq, "nv": robot.nv,
             "n_joints": robot.nj, "total_mass_kg": total, "base_mass_kg": base_mass, "arms": arms, "joints": joints,
             "collision_geometry": kinds, "self_collision_pairs": len(robot.collision_pairs),
+            "verification_geometry": None if judge is robot else jk,
+            "pair_budget": getattr(robot, "pair_budget", None),
+            "fitted_primitives": getattr(robot, "primitive_report", None) or None,
             "urdf": None if robot.urdf_path is None else str(robot.urdf_path)}
 
 
@@ -49,9 +63,22 @@ def format_model_info(d: dict) -> str:
              f"  URDF {d['urdf']}",
              "  collision geometry: " + ", ".join(f"{v} {k}" for k, v in d["collision_geometry"].items())
              + f"; {d['self_collision_pairs']} self-collision pairs checked"]
+    if d.get("verification_geometry"):
+        lines.append("  verification geometry (exact): " + ", ".join(f"{v} {k}" for k, v in d["verification_geometry"].items()))
+    b = d.get("pair_budget")
+    if b:
+        lines.append("  pair budget: " + ", ".join(f"{k} {v}" for k, v in b.items() if not isinstance(v, list)))
+    fits = d.get("fitted_primitives")
+    if fits:
+        lines.append(f"  {'mesh':28s} {'capsules':>8s} {'vertices':>8s} {'volume ratio':>12s} {'radius [m]':>12s}")
+        for g, f_ in fits.items():
+            lines.append(f"  {g:28s} {f_['capsules']:8d} {f_['vertices']:8d} {f_['ratio']:12.2f} "
+                         f"{', '.join(f'{r:.4f}' for r in f_['radius_m']):>12s}")
     for a, info in d["arms"].items():
+        reach = "" if "reach_m" not in info else \
+            f", reach {info['reach_m']:.3f} m (sampled; bound {info['reach_bound_m']:.3f} m)"
         lines.append(f"  arm {a}: {len(info['joints'])} joints, end effector {info['ee_frame']!r}, "
-                     f"links {info['mass_kg']:.2f} kg")
+                     f"links {info['mass_kg']:.2f} kg{reach}")
     lines.append(f"  {'joint':16s} {'arm':>4s} {'lower [deg]':>12s} {'upper [deg]':>12s} {'rate [deg/s]':>13s} "
                  f"{'mass [kg]':>10s}")
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,6 +58,13 @@ class RobotModel:
     #: The self-collision pair filtering report, set only by loaders that filter the pairs
     #: (:func:`optplan.model.dual_panda.load_dual_panda`); a declaration, not a default.
     pair_budget: dict
+    #: The same robot with the exact (mesh) geometry, when this one plans on fitted primitives
+    #: (robot files, ``collision = "auto"``): :func:`optplan.verify` judges on it (:attr:`judge`).
+    exact: RobotModel
+    #: Per replaced mesh: its certified capsules and volumes (robot files; :mod:`.primitive_fit`).
+    primitive_report: dict
+    #: The robot file's settings this robot was loaded from (robot files only).
+    robot_file: dict
 
     def __init__(self, model: pin.Model, collision_model: pin.GeometryModel, arms: Mapping[str, Mapping],
                  *, name: str | None = None, floating: bool, urdf_path: Path | None = None):
@@ -97,8 +104,20 @@ class RobotModel:
     # ------------------------------------------------------------------ constructors
     @classmethod
     def from_name(cls, name: str) -> RobotModel:
-        """Load a shipped model (``models/robots/<name>.toml`` + ``urdf/<name>.urdf``)."""
+        """Load a shipped model (``models/robots/<name>.toml`` + ``urdf/<name>.urdf``), a robot
+        file (a path, or a name in ``models/robots/files``) or a bare URDF path
+        (:mod:`optplan.model.robot_file`)."""
+        from .robot_file import is_robot_path, load_robot_file
+
+        if isinstance(name, Path) or (isinstance(name, str) and is_robot_path(name)):
+            return load_robot_file(name, cls)
         if name not in available_models():
+            from .robot_file import available_robot_files, robot_files_dir
+
+            if name in available_robot_files():
+                return load_robot_file(robot_files_dir() / f"{name}.toml", cls)
+            raise UnknownNameError("robot model", name, available_models() + available_robot_files()
+                                   + ["a robot file (.toml) or URDF path"])
             raise UnknownNameError("robot model", name, available_models())
         desc = load_description(name)
         path = urdf_dir() / f"{name}.urdf"
@@ -114,7 +133,8 @@ class RobotModel:
 
     @classmethod
     def from_urdf(cls, path: str | Path, arms: Mapping[str, str | Mapping], *, floating: bool = False,
-                  name: str | None = None, mimic: bool = True) -> RobotModel:
+                  name: str | None = None, mimic: bool = True, package_dirs: Sequence[str | Path] | None = None,
+                  fixed_joints: Sequence[str] | Mapping[str, float] | None = None) -> RobotModel:
         """Load any URDF.
 
         Parameters
@@ -124,6 +144,11 @@ class RobotModel:
             without ``joints`` the arm is every 1-DoF joint from the root to the EE frame.
         floating: add a free-flyer root joint (free-floating base).
         mimic: read URDF ``<mimic>`` tags as coupled joints (``θ = multiplier · q + offset``).
+        package_dirs: where ``package://`` mesh names are looked up first (then
+            ``ROS_PACKAGE_PATH`` and installed packages, :func:`~.robot_file.package_search_dirs`);
+            relative mesh names are relative to the URDF.
+        fixed_joints: joints (names or fnmatch patterns, e.g. ``"*finger*"``) locked at 0, or
+            ``{name: value}`` [rad or m]: grippers and fingers that are not planning joints.
         """
         from .. import limits
 
@@ -137,6 +162,16 @@ class RobotModel:
         limits.check_file_size(path, limits.MAX_URDF_BYTES, "URDF", ModelError, "MAX_URDF_BYTES")
         norm = _arm_specs(arms)
         text = _read_text(path)
+        if package_dirs is not None or fixed_joints is not None or "package://" in text:
+            from .robot_file import _cached_urdf, _fix_joints, _resolve_meshes
+
+            root0 = ET.fromstring(text) if text.lstrip().startswith("<") else None
+            if root0 is not None and root0.tag == "robot":
+                _resolve_meshes(root0, path.parent, list(package_dirs or ()))
+                if fixed_joints is not None:
+                    _fix_joints(root0, fixed_joints)
+                text = ET.tostring(root0, encoding="unicode")
+                path = _cached_urdf(text, path.stem)
         try:
             root = ET.fromstring(text)
         except ET.ParseError as exc:
@@ -335,6 +370,28 @@ class RobotModel:
             else:
                 keep.append((a, b))
         return keep
+
+    def set_collision_pairs(self, pairs) -> None:
+        """Replace the self-collision pairs (geometry index pairs ``(a, b)``, ``a < b``)."""
+        n = len(self.collision_model.geometryObjects)
+        out = []
+        for a, b in pairs:
+            a, b = int(a), int(b)
+            if not (0 <= a < n and 0 <= b < n and a != b):
+                raise ModelError(f"collision pair ({a}, {b}): expected two different geometry indices in [0, {n})")
+            out.append((min(a, b), max(a, b)))
+        self.collision_pairs = sorted(set(out))
+        self.collision_model.removeAllCollisionPairs()
+        for a, b in self.collision_pairs:
+            self.collision_model.addCollisionPair(pin.CollisionPair(a, b))
+        self.collision_data = pin.GeometryData(self.collision_model)
+
+    @property
+    def judge(self) -> RobotModel:
+        """The robot :func:`optplan.verify` checks collisions on: the exact geometry when the
+        planning geometry is fitted primitives (``exact``, set by robot files with
+        ``collision = "auto"``), else this robot."""
+        return getattr(self, "exact", None) or self
 
     def self_distances(self, q) -> np.ndarray:
         """Exact (coal) distances [m] of every active self-collision pair at ``q`` (joints within

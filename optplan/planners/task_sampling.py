@@ -27,32 +27,11 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from ..model.reach import arm_reach, arm_reach_estimate
 from ..model.robot import RobotModel
 from ..scene import Scene
 
-__all__ = ["ObjectPoseFilter", "TaskSampler", "arm_reach", "object_lead_path"]
-
-
-def arm_reach(robot: RobotModel, arm: str) -> tuple[np.ndarray, float]:
-    """``(shoulder, reach)``: world position of the arm's first joint (fixed base, any q) and an
-    upper bound [m] on the distance from it to the end-effector frame (sum of the link offsets)."""
-    model = robot.model
-    a = robot.arm(arm)
-    fr = model.frames[a.ee_frame_id]
-    chain = []
-    j = int(fr.parentJoint)
-    while j > 0:
-        chain.append(j)
-        j = int(model.parents[j])
-    chain = chain[::-1]
-    first = chain[0]
-    data = model.createData()
-    pin.forwardKinematics(model, data, pin.neutral(model))
-    # the first joint's origin does not move with its own or any later joint
-    shoulder = np.array(data.oMi[first].translation)
-    reach = sum(float(np.linalg.norm(model.jointPlacements[k].translation)) for k in chain[1:])
-    reach += float(np.linalg.norm(fr.placement.translation))
-    return shoulder, reach
+__all__ = ["ObjectPoseFilter", "TaskSampler", "arm_reach", "arm_reach_estimate", "object_lead_path"]
 
 
 class ObjectPoseFilter:

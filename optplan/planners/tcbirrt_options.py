@@ -213,8 +213,9 @@ class TCBiRRTOptions:
     domain_radius: float = 1.0
     #: Draws per iteration with ``trap_adapt="domain"`` (the last one is extended toward regardless) [count].
     domain_tries: int = 10
-    #: Scale the default box's position part and the step size by the robot's mean arm reach /
-    #: :data:`PAPER_REACH` about its shoulders' midpoint (a box or step set explicitly is used as given).
+    #: Scale the default box's position part and the step size by the robot's mean sampled arm reach
+    #: (:func:`.task_sampling.arm_reach_estimate`) / :data:`PAPER_REACH_ESTIMATE` about its
+    #: shoulders' midpoint (a box or step set explicitly is used as given).
     scale_to_reach: bool = True
 
     def __post_init__(self) -> None:
@@ -303,6 +304,18 @@ class TCBiRRTOptions:
 
 #: [m] the paper robot's arm reach bound (:func:`.task_sampling.arm_reach` of ``tcbirrt_dual_arm``)
 PAPER_REACH = 2.938195019102723
+#: [m] the paper robot's sampled arm reach (:func:`.task_sampling.arm_reach_estimate` of
+#: ``tcbirrt_dual_arm``): the sampling box, the step and the trial perturbations scale with a
+#: robot's estimate over this
+PAPER_REACH_ESTIMATE = 2.703369268366084
+
+
+def reach_scale(robot: RobotModel) -> float:
+    """The robot's mean sampled arm reach / the paper robot's (exactly 1 for that robot)."""
+    from .task_sampling import arm_reach_estimate
+
+    scale = float(np.mean([arm_reach_estimate(robot, a)[0] for a in robot.arms])) / PAPER_REACH_ESTIMATE
+    return 1.0 if abs(scale - 1.0) < 1e-9 else scale
 
 
 def reach_scaled_workspace(robot: RobotModel, options: TCBiRRTOptions) -> tuple[np.ndarray, np.ndarray, float]:
@@ -316,10 +329,10 @@ def reach_scaled_workspace(robot: RobotModel, options: TCBiRRTOptions) -> tuple[
     if not (options.scale_to_reach and default) or robot.is_floating or not robot.arms:
         return lo, hi, step
     reach = [arm_reach(robot, a) for a in robot.arms]
-    scale = float(np.mean([r for _, r in reach])) / PAPER_REACH
+    scale = reach_scale(robot)
     centre = np.mean([sh for sh, _ in reach], axis=0)
     paper_centre = 0.5 * (lo[:3] + hi[:3])
-    if abs(scale - 1.0) < 1e-9 and np.allclose(centre, paper_centre, atol=1e-9):
+    if scale == 1.0 and np.allclose(centre, paper_centre, atol=1e-9):
         return lo, hi, step
     lo, hi = lo.copy(), hi.copy()
     half = 0.5 * (hi[:3] - lo[:3]) * scale

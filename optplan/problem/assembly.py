@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Assembly", "scatter"]
+__all__ = ["Assembly", "nonzeros", "scatter"]
 
 
 _C = (1 / 6, 4 / 6, 1 / 6)  # ∂q(t_k)/∂P_{k+a}, a = 0, 1, 2
@@ -94,7 +94,7 @@ class Assembly(RowAssembly):
         Jm = jfn.map(K)(Qsub, Nin, Sin)
         lr, jj = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())
         e = len(lr)
-        self.jsrc.append(Jm.nz[:])
+        self.jsrc.append(nonzeros(Jm))
         t: np.ndarray
         t, a, ee = np.meshgrid(np.arange(K), np.arange(3), np.arange(e), indexing="ij")
         pidx = knots[t] + a
@@ -129,7 +129,7 @@ class Assembly(RowAssembly):
             Hm = hfn.map(K)(Qsub, Nin, Sin, L)
             ii, jj = (np.asarray(v) for v in hfn.sparsity_out(0).get_triplet())
             e = len(ii)
-            hs.append(Hm.nz[:])
+            hs.append(nonzeros(Hm))
             t, a, b, ee = np.meshgrid(np.arange(K), np.arange(3), np.arange(3), np.arange(e), indexing="ij")
             pa, pb = knots[t] + a, knots[t] + b
             row, col = (pa - 3) * nj + ii[ee], (pb - 3) * nj + jj[ee]
@@ -147,6 +147,13 @@ class Assembly(RowAssembly):
         T = np.hstack(blocks)
         Hl = scatter(nx, nx, T[0].astype(int), T[1].astype(int), T[2].astype(int), T[3], src, off + 1)
         return G, Jg, Hl
+
+
+def nonzeros(M: ca.MX) -> ca.MX:
+    """The structural nonzeros of ``M`` as a column, in CasADi's column-major order. (``M.nz[:]``
+    keeps a row's shape: the output of a one-row kernel, e.g. a sphere's plane row, mapped over
+    the knots is a row, and a row cannot be stacked with the other families' columns.)"""
+    return ca.vec(M.nz[:])
 
 
 def scatter(nrow: int, ncol: int, rows: np.ndarray, cols: np.ndarray, src_idx: np.ndarray, weights: np.ndarray,

@@ -64,10 +64,14 @@ def witness_plane(checker: CollisionChecker, pair: Pair, obj_tf: coal.Transform3
     res = coal.DistanceResult()
     coal.distance(g1, t1, g2, t2, coal.DistanceRequest(), res)
     n = np.asarray(res.normal, float)
-    if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+    p1, p2 = np.asarray(res.getNearestPoint1(), float), np.asarray(res.getNearestPoint2(), float)
+    unset = not np.all(np.isfinite(n)) or abs(float(np.linalg.norm(n)) - 1.0) > 1e-3
+    if unset and res.min_distance > 0 and np.linalg.norm(p2 - p1) > 1e-12:
+        n = p2 - p1   # unset for triangle meshes (BVH): the nearest points of a separated pair give it
+    elif not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
         n = t2.getTranslation() - t1.getTranslation()
     n = n / max(np.linalg.norm(n), 1e-12)
-    mid = 0.5 * (np.asarray(res.getNearestPoint1()) + np.asarray(res.getNearestPoint2()))
+    mid = 0.5 * (p1 + p2)
     return np.r_[n, n @ mid]
 
 

@@ -65,7 +65,7 @@ import pinocchio as pin
 
 from ..constraints.closed_chain import relative_pose_residual
 from ..model.robot import RobotModel
-from .assembly import RowAssembly, scatter
+from .assembly import RowAssembly, nonzeros, scatter
 from .bspline import check_knot_guess, fit_interior, jerk_integral_reference, knot_values, rest_to_rest
 from .frame_terms import ClosedChain
 from .kernels import KernelCache
@@ -263,7 +263,7 @@ class _LocalAssembly(RowAssembly):
         # Jacobian: kernel entry (r, i) → (r0 + t m + r, x-slot of entry (i, s), w)
         jr, ji = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())
         e = len(jr)
-        self.jsrc.append(jfn.map(K)(Z).nz[:])
+        self.jsrc.append(nonzeros(jfn.map(K)(Z)))
         pe, pt = np.nonzero(ji[:, None] == ti[None, :])  # pairs (kernel entry, template entry)
         col = slots[:, ts[pt]]  # K × n_pairs
         t = np.broadcast_to(np.arange(K)[:, None], col.shape)
@@ -287,7 +287,7 @@ class _LocalAssembly(RowAssembly):
         hs, blocks, off = [], [], 0
         for hfn, K, Z, r0, m, template, slots in self._fams:
             L = ca.reshape(lam_g[r0:r0 + m * K], m, K)
-            hs.append(hfn.map(K)(Z, L).nz[:])
+            hs.append(nonzeros(hfn.map(K)(Z, L)))
             hi, hj = (np.asarray(v) for v in hfn.sparsity_out(0).get_triplet())
             e = len(hi)
             ti, ts, tw = template[:, 0].astype(int), template[:, 1].astype(int), template[:, 2]
