@@ -233,7 +233,8 @@ class TCBiRRT(RegraspMixin, Planner):
         self.options = options or TCBiRRTOptions()
         if not isinstance(self.options, TCBiRRTOptions):
             raise TypeError(f"options: expected TCBiRRTOptions, got {type(self.options).__name__}")
-        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
+        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin,
+                                                   kernel=self.options.validity_kernel)
         self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
         self.grasps = scene.object.grasps
         self._lo, self._hi, self.step_size = reach_scaled_workspace(robot, self.options)

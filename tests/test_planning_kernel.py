@@ -1,0 +1,158 @@
+"""The native planning kernel against independent references: its forward kinematics against
+Pinocchio's geometry placements, its primitive tests against coal's exact distances (a pair within
+reach is never called free), and its batch verdicts against the coal-based ValidityChecker on random
+configurations of the shipped scenes (no false "free"; the false "colliding" rate is reported)."""
+from __future__ import annotations
+
+import dataclasses
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.bench.hardscenes import nominal_configurations
+from optplan.constraints.closed_chain import ClosedChainKinematics
+from optplan.planners.kernel import KernelUnavailable, NativeKernel
+from optplan.planners.kernel.csource import KERNEL_EPS
+from optplan.planners.validity import ValidityChecker
+from optplan.scene import Obstacle, Scene
+
+def _kernel_or_skip(*args, **kw) -> NativeKernel:
+    try:
+        return NativeKernel(*args, **kw)
+    except KernelUnavailable as e:   # no C compiler on this machine
+        pytest.skip(str(e))
+
+
+def _random_pose(rng: np.random.Generator, spread: float) -> pin.SE3:
+    return pin.SE3(pin.exp3(rng.normal(0.0, 2.0, 3)), rng.uniform(-spread, spread, 3))
+
+
+def _shape(rng: np.random.Generator, kind: str) -> coal.CollisionGeometry:
+    if kind == "sphere":
+        return coal.Sphere(rng.uniform(0.02, 0.4))
+    if kind == "capsule":
+        return coal.Capsule(rng.uniform(0.02, 0.3), rng.uniform(0.0, 1.2))
+    if kind == "cylinder":
+        return coal.Cylinder(rng.uniform(0.02, 0.3), rng.uniform(0.05, 1.2))
+    return coal.Box(*rng.uniform(0.02, 1.0, 3))
+
+
+KINDS = ["sphere", "capsule", "box", "cylinder"]
+
+
+@pytest.mark.parametrize("ka", KINDS)
+@pytest.mark.parametrize("kb", KINDS)
+def test_primitive_pairs_against_coal_distance(ka, kb):
+    """Random placements of two primitives: whenever coal's exact distance is ≤ margin the kernel says
+    colliding; for the exact primitives (no cylinder) it says free whenever the distance exceeds
+    margin + 1e-6 m."""
+    rng = np.random.default_rng(100 * KINDS.index(ka) + KINDS.index(kb))
+    model = pin.Model()   # no joints: both geometries placed in the world
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
+    counts = {"hit": 0, "free": 0, "false_coll": 0}
+    for trial in range(150):
+        ga, gb = _shape(rng, ka), _shape(rng, kb)
+        Ma, Mb = _random_pose(rng, 0.8), _random_pose(rng, 0.8)
+        margin = float(rng.choice([0.0, 0.05]))
+        gm = pin.GeometryModel()
+        gm.addGeometryObject(pin.GeometryObject("a", 0, 0, Ma, ga))
+        gm.addGeometryObject(pin.GeometryObject("b", 0, 0, Mb, gb))
+        k = _kernel_or_skip(model, gm, [(0, 1)], margin=margin)
+        free = k.first_invalid(np.zeros((1, 0)), k.all_active()) < 0
+        res.clear()
+        d = coal.distance(ga, coal.Transform3s(Ma.rotation, Ma.translation), gb,
+                          coal.Transform3s(Mb.rotation, Mb.translation), req, res)
+        if d <= margin:
+            counts["hit"] += 1
+            assert not free, f"{ka}/{kb} trial {trial}: kernel says free at coal distance {d:.3g} m (margin {margin})"
+        else:
+            counts["free"] += 1
+            if not free:
+                counts["false_coll"] += 1
+                # exact primitives; two boxes with a margin are tested as boxes grown by it (a box, not rounded)
+                if "cylinder" not in (ka, kb) and not (ka == kb == "box" and margin > 0):
+                    assert d <= margin + 1e-6, f"{ka}/{kb} trial {trial}: colliding at distance {d:.3g} m"
+    assert counts["hit"] > 5 and counts["free"] > 5, counts   # both verdicts occur
+
+
+def test_forward_kinematics_matches_pinocchio(tcb):
+    scene = Scene.load("hard_bay")
+    vc = ValidityChecker(tcb, scene)
+    k = _kernel_or_skip(tcb.model, vc.gmodel, [])
+    data, gd = tcb.model.createData(), pin.GeometryData(vc.gmodel)
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        q = tcb.random_configuration(rng)
+        pin.updateGeometryPlacements(tcb.model, data, vc.gmodel, gd, q)
+        P = k.placements(q)
+        for g, M in enumerate(gd.oMg):
+            assert np.allclose(P[g, :9].reshape(3, 3), M.rotation, atol=1e-12)
+            assert np.allclose(P[g, 9:], M.translation, atol=1e-12)
+
+
+def test_floating_base_is_not_covered(eba):
+    with pytest.raises(KernelUnavailable, match="revolute and prismatic"):
+        NativeKernel(eba.model, eba.collision_model, [])
+
+
+def _with_round_obstacles(scene: Scene) -> Scene:
+    """``scene`` plus spheres and capsules of random placement around the robot (seeded)."""
+    rng = np.random.default_rng(21)
+    extra = []
+    for i in range(8):
+        M = pin.SE3(pin.exp3(rng.normal(0.0, 1.0, 3)), rng.uniform([-0.5, -2.5, 0.5], [3.0, 2.5, 4.0]))
+        if i % 2:
+            extra.append(Obstacle(f"ball_{i}", "sphere", M, radius=float(rng.uniform(0.1, 0.4))))
+        else:
+            extra.append(Obstacle(f"rod_{i}", "capsule", M, radius=float(rng.uniform(0.05, 0.2)),
+                                  length=float(rng.uniform(0.3, 1.5))))
+    return dataclasses.replace(scene, name=scene.name + "_round", obstacles=scene.obstacles + tuple(extra))
+
+
+@pytest.mark.parametrize("scene_name", ["hard_clutter_dense", "hard_bay", "ssps_scene1", "hard_window+round"])
+def test_batch_verdicts_never_free_where_coal_collides(tcb, scene_name):
+    """Random configurations (around the scene's start and goal and uniform in the limits), every mode:
+    no configuration the coal checker calls colliding is called free; the false "colliding" rate stays
+    below 1 % (all primitives of this robot and these scenes are exact in the kernel)."""
+    scene = Scene.load(scene_name.split("+")[0])
+    ref = ValidityChecker(tcb, scene, kernel="coal")
+    nat = ValidityChecker(tcb, scene, kernel="native")
+    if nat.kernel != "native":
+        pytest.skip("no native kernel here")
+    rng = np.random.default_rng(11)
+    qs, qg = nominal_configurations(tcb, scene)
+    if scene_name.endswith("+round"):
+        scene = _with_round_obstacles(scene)
+        ref, nat = ValidityChecker(tcb, scene, kernel="coal"), ValidityChecker(tcb, scene, kernel="native")
+    Q = np.vstack([np.clip(q0 + rng.normal(0.0, s, (150, tcb.model.nq)), tcb.lower, tcb.upper)
+                   for q0 in (qs, qg) for s in (0.05, 0.3)] + [np.array([tcb.random_configuration(rng) for _ in range(200)])])
+    modes = [("held", None), ("free", None),
+             ("fixed", ClosedChainKinematics(tcb, scene.object.grasps).object_pose(qs))]
+    for mode, pose in modes:
+        want = np.array([ref.first_invalid(q[None], mode, pose) < 0 for q in Q])
+        got = nat.valid_batch(Q, mode, pose)
+        assert not np.any(got & ~want), f"{scene_name}/{mode}: {int(np.sum(got & ~want))} false free verdicts"
+        assert np.mean(~got & want) <= 0.01, f"{scene_name}/{mode}: false colliding rate {np.mean(~got & want):.3f}"
+        assert 0.0 < np.mean(want) < 1.0 or mode == "free"
+
+
+def test_edge_and_first_invalid_agree(tcb):
+    scene = Scene.load("hard_clutter_dense")
+    vc = ValidityChecker(tcb, scene)
+    pairs = [(cp.first, cp.second) for cp in vc.gmodel.collisionPairs]
+    k = _kernel_or_skip(tcb.model, vc.gmodel, pairs)
+    act = np.array([bool(x) for x in vc._gd["held"].activeCollisionPairs], np.uint8)
+    rng = np.random.default_rng(3)
+    qs, qg = nominal_configurations(tcb, scene)
+    hits = 0
+    for _ in range(40):
+        a = np.clip(qs + rng.normal(0, 0.1, qs.size), tcb.lower, tcb.upper)
+        b = np.clip(qs + rng.normal(0, 0.1, qs.size), tcb.lower, tcb.upper)
+        f = rng.permutation(np.linspace(0.0, 1.0, 17))
+        i = k.edge_first_invalid(a, b, f, act)
+        assert i == k.first_invalid(a + f[:, None] * (b - a), act)
+        hits += i >= 0
+    assert 0 < hits < 40
+    assert KERNEL_EPS < 1e-6
