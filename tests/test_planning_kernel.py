@@ -18,6 +18,7 @@ from optplan.planners.kernel.csource import KERNEL_EPS
 from optplan.planners.validity import ValidityChecker
 from optplan.scene import Obstacle, Scene
 
+
 def _kernel_or_skip(*args, **kw) -> NativeKernel:
     try:
         return NativeKernel(*args, **kw)

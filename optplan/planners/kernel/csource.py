@@ -26,7 +26,7 @@ C_SOURCE = r"""
 
 #define KMAXJ 256
 #define KMAXG 1024
-#define KEPS %(eps).17g
+#define KEPS @KERNEL_EPS@
 
 typedef struct {
     int nq, nj, ng, npairs;
@@ -59,7 +59,7 @@ static void compose(const double *A, const double *B, double *C) {
    joint's x, y or z axis (jtype 3, 4, 5: two columns mixed), or translation along u (jtype 2) */
 static void joint_motion(const double *L, int type, const double *u, double x, double *O) {
     if (type >= 3) {
-        int a = (type - 2) %% 3, b = (type - 1) %% 3;   /* RX: columns y, z; RY: z, x; RZ: x, y */
+        int a = (type - 2) % 3, b = (type - 1) % 3;   /* RX: columns y, z; RY: z, x; RZ: x, y */
         double s = sin(x), c = cos(x);
         memcpy(O, L, 12*sizeof(double));
         for (int i = 0; i < 3; ++i) {
@@ -176,7 +176,7 @@ static int seg_box(const double *a, const double *b, const double *h, double r) 
     if (seg_hits_aabb(a, b, h)) return 1;
     /* not intersecting: the closest pair is an end point (done above) or the segment and a box edge */
     for (int ax = 0; ax < 3; ++ax) {
-        int u = (ax + 1) %% 3, v = (ax + 2) %% 3;
+        int u = (ax + 1) % 3, v = (ax + 2) % 3;
         for (int su = -1; su <= 1; su += 2)
             for (int sv = -1; sv <= 1; sv += 2) {
                 double e0[3], e1[3];
@@ -210,9 +210,9 @@ static int box_box(const double *A, const double *ha, const double *B, const dou
         if (fabs(t[0]*Rm[0][j] + t[1]*Rm[1][j] + t[2]*Rm[2][j]) > ra + hb[j] + r) return 0;
     }
     for (int i = 0; i < 3; ++i) {
-        int i1 = (i + 1) %% 3, i2 = (i + 2) %% 3;
+        int i1 = (i + 1) % 3, i2 = (i + 2) % 3;
         for (int j = 0; j < 3; ++j) {
-            int j1 = (j + 1) %% 3, j2 = (j + 2) %% 3;
+            int j1 = (j + 1) % 3, j2 = (j + 2) % 3;
             double len2 = 1.0 - Rm[i][j]*Rm[i][j];
             if (len2 < 1e-6) continue;   /* near-parallel edges: skipping an axis only makes the test more conservative */
             double ra = ha[i1]*AR[i2][j] + ha[i2]*AR[i1][j];
@@ -312,4 +312,4 @@ void kernel_placements(const kmodel *m, const double *q, const double *override_
     fk(m, q, override_pose, override_g, oMi, buf, pose);
     for (int g = 0; g < m->ng; ++g) memcpy(oMg + 12*g, pose[g], 12*sizeof(double));
 }
-""" % {"eps": KERNEL_EPS}
+""".replace("@KERNEL_EPS@", repr(KERNEL_EPS))
