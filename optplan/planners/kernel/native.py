@@ -205,6 +205,14 @@ class NativeKernel:
         return int(self.lib.kernel_edge_first_invalid(self._km_p, active.ctypes.data, self._pose_p, g,
                                                       a.ctypes.data, b.ctypes.data, f.size, f.ctypes.data))
 
+    def pose_free(self, g: int, R: np.ndarray, p: np.ndarray, active: np.ndarray) -> bool:
+        """A model without joints (``nq = 0``): the geometry ``g`` placed at ``(R, p)`` (rotation [-],
+        translation [m]; no offset: a sphere, capsule or box) free of every active pair."""
+        pose = self._pose
+        pose[:9] = R.reshape(9)
+        pose[9:] = p
+        return self.lib.kernel_first_invalid(self._km_p, active.ctypes.data, self._pose_p, g, 1, self._pose_p, None) < 0
+
     def placements(self, q: np.ndarray, override: tuple[int, pin.SE3] | None = None) -> np.ndarray:
         """World placements of the geometries' primitives at ``q`` (ng × 12: rotation row-major, then
         translation), for tests against Pinocchio's forward kinematics."""
