@@ -266,6 +266,8 @@ def feasibility(robot: Any, scene: Scene, *, seed: int = 0, lead_time: float = 1
     from ..trials import TrialGenerator
 
     assert scene.object is not None and scene.start is not None and scene.goal is not None
+    if not scene.obstacles:
+        return "no obstacles (all removed to clear the end configurations)"
     ck = ValidityChecker(robot, scene)
     gen = TrialGenerator(robot, scene)
     for key in ("q_start", "q_goal"):
