@@ -9,7 +9,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.bench.scenegen import FAMILIES, family_of, family_summary, feasibility, generate_scene, generate_scenes, scene_toml
+from optplan.bench.scenegen import (
+    FAMILIES,
+    family_of,
+    family_summary,
+    feasibility,
+    generate_scene,
+    generate_scenes,
+    scene_toml,
+)
 from optplan.scene import Obstacle, Scene
 
 
