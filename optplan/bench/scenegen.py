@@ -64,7 +64,8 @@ class GeneratedScene:
 
 def _box(name: str, size: Any, centre: Any, R: Any = None) -> Obstacle:
     R = np.eye(3) if R is None else np.asarray(R, float)
-    return Obstacle(name, "box", pin.SE3(R, np.asarray(centre, float)), size=tuple(float(x) for x in size))
+    sx, sy, sz = (float(x) for x in size)
+    return Obstacle(name, "box", pin.SE3(R, np.asarray(centre, float)), size=(sx, sy, sz))
 
 
 def _frame(n: np.ndarray) -> np.ndarray:
@@ -160,7 +161,7 @@ def _clutter(rng: np.random.Generator, s: pin.SE3, g: pin.SE3, half: np.ndarray)
         M = pin.SE3(np.asarray(pin.exp3(rng.normal(0.0, 1.5, 3))), rng.uniform(lo, hi))
         kind = rng.choice(["box", "sphere", "capsule"])
         if kind == "box":
-            out.append(Obstacle(f"clutter_{k}", "box", M, size=tuple(float(x) for x in rng.uniform(0.1, 0.5, 3))))
+            out.append(_box(f"clutter_{k}", rng.uniform(0.1, 0.5, 3), M.translation, M.rotation))
         elif kind == "sphere":
             out.append(Obstacle(f"clutter_{k}", "sphere", M, radius=float(rng.uniform(0.05, 0.25))))
         else:

@@ -92,7 +92,7 @@ class ObjectPoseFilter:
         self._native = _native_object_check(scene) if native else None
 
     def _object_free_native(self, R: np.ndarray, p: np.ndarray) -> bool:
-        kernel, g, active = cast(tuple, self._native)
+        kernel, g, active = cast(tuple[Any, int, np.ndarray], self._native)
         return bool(kernel.pose_free(g, R, p, active))
 
     def reachable(self, R: np.ndarray, p: np.ndarray) -> bool:
