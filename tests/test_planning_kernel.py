@@ -176,3 +176,25 @@ def test_object_pose_filter_native_matches_coal(tcb, scene_name):
     assert not np.any(got & ~want)
     assert np.mean(got != want) <= 0.002
     assert 0.2 < want.mean() < 0.95
+
+
+@pytest.mark.parametrize("planner,options", [("tcbirrt", {"variant": "improved", "max_iterations": 400}),
+                                             ("tcbirrt", {"variant": "paper", "max_iterations": 300}),
+                                             ("cbirrt2", {"max_iterations": 300}),
+                                             ("rrtconnect", {"max_iterations": 300})])
+def test_same_search_with_either_backend(tcb, planner, options):
+    """A planner with ``validity_kernel="native"`` and ``"coal"`` runs the same search on the same seed
+    (same status, node count and path): the kernel gives coal's verdicts on these primitives."""
+    from optplan.planners import make_planner
+    from optplan.trials import TrialGenerator
+
+    sc = Scene.load("hard_bay")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    out = []
+    for kind in ("native", "coal"):
+        pl = make_planner(planner, tcb, sc, validity_kernel=kind, **options)
+        if pl.checker.kernel != kind:
+            pytest.skip("no native kernel here")
+        res = pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=3)
+        out.append((res.status.value, res.stats["nodes"], res.path.shape, float(np.abs(res.path).sum())))
+    assert out[0] == out[1]
