@@ -570,7 +570,7 @@ class TCBiRRT(RegraspMixin, Planner):
                 or cast(float, o.geodesic_probability) > 0 or cast(float, o.lead_orientation_probability) > 0):
             return None
         if self._filter is None:
-            self._filter = ObjectPoseFilter(self.robot, self.scene)
+            self._filter = ObjectPoseFilter(self.robot, self.scene, native=o.validity_kernel == "native")
         need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
         return TaskSampler(self._filter if need else None,
                            self._lo, self._hi, bridge_probability=cast(float, o.bridge_probability),

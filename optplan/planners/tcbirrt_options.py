@@ -161,8 +161,9 @@ class TCBiRRTOptions:
     closure_tolerance: float = 1e-6
     #: Clearance counted as contact [m].
     margin: float = 0.0
-    #: Backend of the boolean collision checks: ``"native"`` (the compiled planning kernel,
-    #: :mod:`optplan.planners.kernel`; coal when it cannot be built) or ``"coal"`` (Pinocchio + coal).
+    #: Backend of the boolean collision checks and of the task-space filter's object test: ``"native"``
+    #: (the compiled planning kernel, :mod:`optplan.planners.kernel`; coal when it cannot be built) or
+    #: ``"coal"`` (Pinocchio + coal).
     validity_kernel: str = "native"
     #: Cap on Alg. 1 iterations [count] (0: only the time limit).
     max_iterations: int = 0
