@@ -3,6 +3,7 @@ holding the object) and whole TCBiRRT queries on the same trials and seeds with
 ``validity_kernel="native"`` and ``"coal"`` (alternating, CPU clock).
 
 ``python -m optplan.bench.planning_kernel --scene hard_bay,hard_window,ssps_scene1 --trials 0,1,2``
+(``--agreement``: only the two backends' verdicts on random configurations, per mode)
 
 Per query: status, CPU seconds, iterations, CPU per iteration; per scene the medians and the paired
 ratio coal / native of the CPU per iteration. The two backends give the same verdicts on the shipped
@@ -16,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["unit_costs", "paired_queries", "main"]
+__all__ = ["unit_costs", "paired_queries", "agreement", "main"]
 
 
 def unit_costs(robot: Any, scene: Any, n: int = 4000, seed: int = 0, repeats: int = 3) -> dict[str, float]:
@@ -46,6 +47,29 @@ def unit_costs(robot: Any, scene: Any, n: int = 4000, seed: int = 0, repeats: in
         out[f"{kind}_batch_us"] = 1e6 * best_b / max(len(ok), 1)
         out[f"{kind}_single_us"] = 1e6 * best_s / max(min(len(ok), 1000), 1)
         out["valid_configurations"] = float(len(ok))
+    return out
+
+
+def agreement(robot: Any, scene: Any, n: int = 4000, seed: int = 1) -> list[tuple[str, int, int, int, int]]:
+    """Verdicts of the two backends on ``n`` random configurations (three quarters around the start and
+    goal at three spreads, a quarter uniform in the joint limits), per mode: (mode, configurations, colliding
+    by coal, false "free" by the kernel, false "colliding" by the kernel)."""
+    from ..constraints.closed_chain import ClosedChainKinematics
+    from ..planners.validity import ValidityChecker
+    from .hardscenes import nominal_configurations
+
+    rng = np.random.default_rng(seed)
+    qs, qg = nominal_configurations(robot, scene)
+    m = n // 8
+    Q = np.vstack([np.clip(q0 + rng.normal(0.0, s, (m, qs.size)), robot.lower, robot.upper)
+                   for q0 in (qs, qg) for s in (0.05, 0.2, 0.5)] + [np.array([robot.random_configuration(rng) for _ in range(n - 6 * m)])])
+    ref, nat = ValidityChecker(robot, scene, kernel="coal"), ValidityChecker(robot, scene, kernel="native")
+    pose = ClosedChainKinematics(robot, scene.object.grasps).object_pose(qs)
+    out = []
+    for mode, M in (("held", None), ("free", None), ("fixed", pose)):
+        want = np.array([ref.first_invalid(q[None], mode, M) < 0 for q in Q])
+        got = nat.valid_batch(Q, mode, M)
+        out.append((mode, len(Q), int((~want).sum()), int(np.sum(got & ~want)), int(np.sum(~got & want))))
     return out
 
 
@@ -101,12 +125,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="trial seed")
     ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds per query [s]")
     ap.add_argument("--no-units", action="store_true", help="skip the unit costs")
+    ap.add_argument("--agreement", action="store_true",
+                    help="only compare the two backends' verdicts on random configurations of each scene")
     a = ap.parse_args(argv)
     from ..model.robot import RobotModel
     from ..scene import Scene
     from .tcbirrt import expand_scenes
 
     scenes = expand_scenes(a.scene.split(","))
+    if a.agreement:
+        robot = RobotModel.from_name("tcbirrt_dual_arm")
+        for sc in scenes:
+            for mode, n, coll, ff, fc in agreement(robot, Scene.load(sc)):
+                print(f"{sc} {mode:5s}: {n} configurations, {coll} colliding (coal); kernel: {ff} false free, "
+                      f"{fc} false colliding")
+        return 0
     if not a.no_units:
         robot = RobotModel.from_name("tcbirrt_dual_arm")
         for sc in scenes:
