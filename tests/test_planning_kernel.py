@@ -198,3 +198,29 @@ def test_same_search_with_either_backend(tcb, planner, options):
         res = pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=3)
         out.append((res.status.value, res.stats["nodes"], res.path.shape, float(np.abs(res.path).sum())))
     assert out[0] == out[1]
+
+
+def test_without_a_compiler_the_checker_falls_back_to_coal(tcb, monkeypatch, tmp_path):
+    """No C compiler and no cached library: the native kernel is unavailable, the checker (and the
+    task-space filter) use coal, and TCBiRRT runs the same search as with the kernel."""
+    from optplan.planners import make_planner
+    from optplan.planners.kernel import native
+    from optplan.planners.task_sampling import ObjectPoseFilter
+
+    monkeypatch.setattr(native, "_LIB", [])
+    monkeypatch.setenv("OPTPLAN_CACHE", str(tmp_path))
+    monkeypatch.setattr(native, "build_library", lambda *a, **k: "no C compiler")
+    scene = Scene.load("ssps_scene1")
+    with pytest.raises(KernelUnavailable, match="no C compiler"):
+        native.load_library()
+    ck = ValidityChecker(tcb, scene, kernel="native")
+    assert ck.kernel == "coal"
+    assert ObjectPoseFilter(tcb, scene)._native is None
+    from optplan.trials import TrialGenerator
+
+    tr = TrialGenerator(tcb, scene).generate(0, 0)
+    res = make_planner("tcbirrt", tcb, scene, checker=ck, variant="improved", max_iterations=1000).plan(
+        tr.q_start, tr.q_goal, time_limit=100, seed=0)
+    # the search tests/test_tree.py records for the same query with the native kernel
+    assert (res.status.value, res.stats["nodes"], len(res.path)) == ("exact", 114, 82)
+    assert float(np.abs(res.path).sum()) == pytest.approx(1904.9856439901168, rel=1e-9)
