@@ -92,7 +92,7 @@ class ObjectPoseFilter:
         self._native = _native_object_check(scene) if native else None
 
     def _object_free_native(self, R: np.ndarray, p: np.ndarray) -> bool:
-        kernel, g, active = cast(tuple[Any, int, np.ndarray], self._native)
+        kernel, g, active, _ = cast(tuple[Any, int, int, np.ndarray], self._native)
         return bool(kernel.pose_free(g, R, p, active))
 
     def reachable(self, R: np.ndarray, p: np.ndarray) -> bool:
@@ -124,9 +124,9 @@ class ObjectPoseFilter:
         return self.reachable(R, p) and self.object_free(R, p)
 
 
-def _native_object_check(scene: Scene) -> tuple[Any, int, np.ndarray] | None:
-    """(kernel, object geometry index, active mask) of a native object-vs-obstacles check, or None when
-    the kernel cannot be built here."""
+def _native_object_check(scene: Scene) -> tuple[Any, int, int, np.ndarray] | None:
+    """(kernel, object geometry index, address of the active mask, the mask) of a native
+    object-vs-obstacles check, or None when the kernel cannot be built here."""
     from .kernel import KernelUnavailable, NativeKernel
 
     assert scene.object is not None
@@ -138,7 +138,8 @@ def _native_object_check(scene: Scene) -> tuple[Any, int, np.ndarray] | None:
         kernel = NativeKernel(pin.Model(), gm, [(g, k) for k in range(g)])
     except KernelUnavailable:
         return None
-    return kernel, g, kernel.all_active()
+    mask = kernel.all_active()
+    return kernel, g, int(mask.ctypes.data), mask
 
 
 def _rpy_matrix(xi: np.ndarray) -> np.ndarray:

@@ -531,7 +531,7 @@ class ValidityChecker:
     def _collides(self, mode: str, q: np.ndarray) -> bool:
         """One configuration in ``mode`` (the still object's pose already set): any active pair in contact."""
         if self._native is not None:
-            return self._native.first_invalid(np.asarray(q, float).reshape(1, -1), mode) >= 0
+            return self._native.collides(q, mode)
         pool = self._pool.get(mode)
         if pool is not None:
             return bool(pin.computeCollisionsInParallel(1, pool, np.asarray(q, float).reshape(-1, 1), True, True)[0])
@@ -559,7 +559,7 @@ class ValidityChecker:
             return self.is_valid_free(q)
         self.n_checks += 1
         if self._native is not None:
-            return self._native.first_invalid(np.asarray(q, float).reshape(1, -1), "fixed", object_pose) < 0
+            return not self._native.collides(q, "fixed", object_pose)
         if "fixed" in self._pool:
             self._set_object_pose(object_pose)
             return not self._collides("fixed", q)

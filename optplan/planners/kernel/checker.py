@@ -27,6 +27,7 @@ class NativeValidity:
         pairs = [(int(cp.first), int(cp.second)) for cp in gmodel.collisionPairs]
         self.kernel = NativeKernel(model, gmodel, pairs, margin=margin)
         self.masks = {mode: np.array([bool(x) for x in gd.activeCollisionPairs], np.uint8) for mode, gd in gdata.items()}
+        self._mask_p = {mode: int(m.ctypes.data) for mode, m in self.masks.items()}   # the arrays live as long
         self.fixed_id = fixed_id
 
     def _override(self, mode: str, object_pose: pin.SE3 | None) -> tuple[int, pin.SE3] | None:
@@ -36,7 +37,11 @@ class NativeValidity:
 
     def first_invalid(self, Q: np.ndarray, mode: str, object_pose: pin.SE3 | None = None) -> int:
         """Index of the first row of ``Q`` in collision in ``mode``, −1 if none."""
-        return self.kernel.first_invalid(Q, self.masks[mode], self._override(mode, object_pose))
+        return self.kernel.first_invalid(Q, self._mask_p[mode], self._override(mode, object_pose))
+
+    def collides(self, q: np.ndarray, mode: str, object_pose: pin.SE3 | None = None) -> bool:
+        """One configuration ``q`` in collision in ``mode``."""
+        return self.kernel.collides(q, self._mask_p[mode], self._override(mode, object_pose))
 
     def valid(self, Q: np.ndarray, mode: str, object_pose: pin.SE3 | None = None) -> np.ndarray:
         """Validity of every row of ``Q`` in ``mode`` (booleans)."""

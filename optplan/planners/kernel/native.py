@@ -165,7 +165,9 @@ class NativeKernel:
         self._km_p = ctypes.addressof(self._km)
         self._pose = np.zeros(12)
         self._pose_p = self._pose.ctypes.data
-        self._out = np.zeros(0, np.uint8)
+        self._q1 = np.zeros(max(self.nq, 1))            # one configuration, copied in (cached pointer)
+        self._q1_p = self._q1.ctypes.data
+        self._first = self.lib.kernel_first_invalid
 
     def all_active(self) -> np.ndarray:
         """An ``active`` mask with every pair on."""
@@ -178,12 +180,21 @@ class NativeKernel:
         self._pose[:] = _pose12(M * self._offsets[g])
         return int(g)
 
-    def first_invalid(self, Q: np.ndarray, active: np.ndarray, override: tuple[int, pin.SE3] | None = None) -> int:
-        """Index of the first row of ``Q`` (M × nq, C-contiguous float64) in collision, −1 if none."""
+    def first_invalid(self, Q: np.ndarray, active: np.ndarray | int, override: tuple[int, pin.SE3] | None = None) -> int:
+        """Index of the first row of ``Q`` (M × nq, C-contiguous float64) in collision, −1 if none.
+        ``active``: the mask, or its data address (``mask.ctypes.data``, kept alive by the caller)."""
         Q = np.ascontiguousarray(Q, dtype=float)
         g = self._override(override)
-        return int(self.lib.kernel_first_invalid(self._km_p, active.ctypes.data, self._pose_p, g, Q.shape[0],
-                                                 Q.ctypes.data, None))
+        ap = active if isinstance(active, int) else active.ctypes.data
+        return int(self._first(self._km_p, ap, self._pose_p, g, Q.shape[0], Q.ctypes.data, None))
+
+    def collides(self, q: np.ndarray, active: np.ndarray | int, override: tuple[int, pin.SE3] | None = None) -> bool:
+        """One configuration ``q`` (nq values) in collision (copied into a preallocated buffer: the
+        cheapest single call)."""
+        self._q1[:self.nq] = q
+        g = -1 if override is None else self._override(override)
+        ap = active if isinstance(active, int) else active.ctypes.data
+        return self._first(self._km_p, ap, self._pose_p, g, 1, self._q1_p, None) >= 0
 
     def valid(self, Q: np.ndarray, active: np.ndarray, override: tuple[int, pin.SE3] | None = None) -> np.ndarray:
         """Boolean validity of EVERY row of ``Q`` (M × nq)."""
@@ -205,13 +216,14 @@ class NativeKernel:
         return int(self.lib.kernel_edge_first_invalid(self._km_p, active.ctypes.data, self._pose_p, g,
                                                       a.ctypes.data, b.ctypes.data, f.size, f.ctypes.data))
 
-    def pose_free(self, g: int, R: np.ndarray, p: np.ndarray, active: np.ndarray) -> bool:
+    def pose_free(self, g: int, R: np.ndarray, p: np.ndarray, active: np.ndarray | int) -> bool:
         """A model without joints (``nq = 0``): the geometry ``g`` placed at ``(R, p)`` (rotation [-],
         translation [m]; no offset: a sphere, capsule or box) free of every active pair."""
         pose = self._pose
         pose[:9] = R.reshape(9)
         pose[9:] = p
-        return self.lib.kernel_first_invalid(self._km_p, active.ctypes.data, self._pose_p, g, 1, self._pose_p, None) < 0
+        ap = active if isinstance(active, int) else active.ctypes.data
+        return self._first(self._km_p, ap, self._pose_p, g, 1, self._pose_p, None) < 0
 
     def placements(self, q: np.ndarray, override: tuple[int, pin.SE3] | None = None) -> np.ndarray:
         """World placements of the geometries' primitives at ``q`` (ng × 12: rotation row-major, then
