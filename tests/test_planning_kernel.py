@@ -224,3 +224,22 @@ def test_without_a_compiler_the_checker_falls_back_to_coal(tcb, monkeypatch, tmp
     # the search tests/test_tree.py records for the same query with the native kernel
     assert (res.status.value, res.stats["nodes"], len(res.path)) == ("exact", 114, 82)
     assert float(np.abs(res.path).sum()) == pytest.approx(1904.9856439901168, rel=1e-9)
+
+
+def test_a_damaged_cached_library_is_rebuilt(monkeypatch, tmp_path):
+    """A damaged file where the cached library should be (never one this process has loaded: it is
+    mapped) is replaced by a fresh build."""
+    import hashlib
+
+    from optplan.codegen import c_compiler
+    from optplan.planners.kernel import native
+    from optplan.planners.kernel.csource import C_SOURCE
+
+    if c_compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.setattr(native, "_LIB", [])
+    monkeypatch.setenv("OPTPLAN_CACHE", str(tmp_path))
+    so = tmp_path / f"optplan_planning_kernel_{hashlib.sha1(C_SOURCE.encode()).hexdigest()[:16]}.so"
+    so.write_bytes(b"not a shared library")
+    lib = native.load_library()
+    assert so.stat().st_size > 1000 and hasattr(lib, "kernel_first_invalid")

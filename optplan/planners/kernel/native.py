@@ -60,14 +60,24 @@ def load_library() -> Any:
         return _LIB[0]
     digest = hashlib.sha1(C_SOURCE.encode()).hexdigest()[:16]
     lib_path = cache_dir() / f"optplan_planning_kernel_{digest}.so"
-    if not lib_path.exists():
-        with tempfile.TemporaryDirectory() as tmp:
-            c_file = Path(tmp, "planning_kernel.c")
-            c_file.write_text(C_SOURCE)
-            err = build_library(c_file, lib_path, "-O3")
-        if err is not None:
-            raise KernelUnavailable(f"the native planning kernel could not be compiled: {err}")
-    lib = ctypes.CDLL(str(lib_path))
+    lib = None
+    for attempt in range(2):
+        if not lib_path.exists():
+            with tempfile.TemporaryDirectory() as tmp:
+                c_file = Path(tmp, "planning_kernel.c")
+                c_file.write_text(C_SOURCE)
+                err = build_library(c_file, lib_path, "-O3")
+            if err is not None:
+                raise KernelUnavailable(f"the native planning kernel could not be compiled: {err}")
+        try:
+            lib = ctypes.CDLL(str(lib_path))
+            break
+        except OSError as e:   # a damaged cache file: rebuilt once
+            if attempt:
+                raise KernelUnavailable(f"the native planning kernel {lib_path} cannot be loaded: {e}") from None
+            log.warning("the cached planning kernel %s cannot be loaded (%s); rebuilding it", lib_path, e)
+            lib_path.unlink(missing_ok=True)
+    assert lib is not None
     for name in ("kernel_first_invalid", "kernel_edge_first_invalid"):
         getattr(lib, name).restype = ctypes.c_longlong
     lib.kernel_first_invalid.argtypes = [_P, _P, _P, ctypes.c_int, ctypes.c_longlong, _P, _P]
