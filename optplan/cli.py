@@ -120,6 +120,18 @@ def _cmd_bench_tcbirrt(args) -> int:
             if name not in scenes:
                 scenes.append(name)
     scenes = scenes or [ca.check_scene("")]
+    out, trials = args.out, args.trials
+    if args.generated:   # fresh random draws of the scene families, reported apart from the fixed scenes
+        from pathlib import Path
+
+        from .bench.scenegen import generate_scenes, write_scenes
+        from .model.robot import RobotModel
+
+        drawn = generate_scenes(RobotModel.from_name("tcbirrt_dual_arm"), args.generated, args.seed)
+        out = str(Path(args.out) / "generated")
+        scenes = write_scenes(drawn, Path(out) / "scenes")
+        trials = 1
+        print(f"{len(drawn)} generated scenes (seed {args.seed}) in {out}/scenes, one trial each")
     planners = [p for p in args.planners.split(",") if p.strip()]
     for p in planners or [""]:
         try:
@@ -132,16 +144,20 @@ def _cmd_bench_tcbirrt(args) -> int:
         except OptplanError as exc:
             raise UsageError(f"--planners {args.planners!r}: {exc}") from None
     cfg = BenchConfig(scenes=scenes, planners=planners,
-                      trials=args.trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=args.out,
+                      trials=trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=out,
                       clock=args.clock, progress=not args.no_progress, plot=not args.no_plot,
                       first_trial=args.first_trial, merge=list(args.merge or []),
                       engine=args.engine, address=args.address)
     t0 = time.perf_counter()
     rows = run(cfg)
     print(format_summary(summarize(rows, cfg.time_limit)))
-    print(f"summary of {len(rows)} result lines ({args.out}/results.jsonl"
+    if args.generated:
+        from .bench.scenegen import family_summary
+
+        print(family_summary(rows))
+    print(f"summary of {len(rows)} result lines ({out}/results.jsonl"
           f"{' and merged runs' if cfg.merge else ''}); run time {time.perf_counter() - t0:.1f} s (clock: {cfg.clock}); "
-          f"figures {args.out}/success_curves.png, {args.out}/time_distributions.png")
+          f"figures {out}/success_curves.png, {out}/time_distributions.png")
     return 0
 
 
@@ -454,6 +470,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also summarize the result lines of another output directory (repeatable)")
     tb.add_argument("--no-progress", action="store_true")
     tb.add_argument("--no-plot", action="store_true")
+    tb.add_argument("--generated", type=ca.positive_int, default=None, metavar="N",
+                    help="instead of --scene: N fresh random scenes of the generator's families (seeded by --seed), "
+                         "one trial each, results in OUT/generated")
     _engine_args(tb)
     tb.set_defaults(func=_cmd_bench_tcbirrt)
 

@@ -137,11 +137,18 @@ def _worker_setup(robot_name: str, scenes: list[str], planners: list[str]):
         robot = robots[name]
         if scene.object is None:
             raise ValueError(f"scene {sc!r}: the TCBiRRT benchmark needs a held [object]")
-        checker = ValidityChecker(robot, scene)
+        # the path checks use coal (exact); a planner gets the checker of its validity_kernel option
+        checkers = {"coal": ValidityChecker(robot, scene, kernel="coal")}
         kin = ClosedChainKinematics(robot, scene.object.grasps)
-        _W[sc] = {"scene": scene, "robot": robot, "gen": TrialGenerator(robot, scene), "checker": checker,
-                  "planners": {p: make_planner(parse_planner_spec(p)[0], robot, scene, checker=checker, kinematics=kin,
-                                               **parse_planner_spec(p)[1]) for p in planners}}
+        built = {}
+        for p in planners:
+            kind, kw = parse_planner_spec(p)
+            backend = str(kw.get("validity_kernel", "native"))
+            if backend not in checkers:
+                checkers[backend] = ValidityChecker(robot, scene, kernel=backend)
+            built[p] = make_planner(kind, robot, scene, checker=checkers[backend], kinematics=kin, **kw)
+        _W[sc] = {"scene": scene, "robot": robot, "gen": TrialGenerator(robot, scene), "checker": checkers["coal"],
+                  "planners": built}
 
 
 def _path_checks(robot, scene, checker, res, resolution: float = 0.05, sweep: float = SWEEP_TOLERANCE) -> dict:

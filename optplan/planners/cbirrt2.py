@@ -54,6 +54,9 @@ class CBiRRT2Options:
     connect_distance: float = 1e-3
     #: Clearance counted as contact [m].
     margin: float = 0.0
+    #: Backend of the boolean collision checks: ``"native"`` (the compiled planning kernel,
+    #: :mod:`optplan.planners.kernel`; coal when it cannot be built) or ``"coal"`` (Pinocchio + coal).
+    validity_kernel: str = "native"
     #: Cap on the planner's iterations [count] (0: only the time limit).
     max_iterations: int = 0
     #: Certify every edge collision-free at every point: the straight joint segments between the edge's projected
@@ -73,6 +76,8 @@ class CBiRRT2Options:
             raise ValueError(f"CBiRRT2Options.damping: expected a number >= 0, got {self.damping!r}")
         if not (isinstance(self.margin, (int, float)) and self.margin >= 0):
             raise ValueError(f"CBiRRT2Options.margin: expected a number >= 0 m, got {self.margin!r}")
+        if self.validity_kernel not in ("native", "coal"):
+            raise ValueError(f"CBiRRT2Options.validity_kernel: expected 'native' or 'coal', got {self.validity_kernel!r}")
         if not isinstance(self.certified_edges, bool):
             raise ValueError(f"CBiRRT2Options.certified_edges: expected True/False, got {self.certified_edges!r}")
         if not (isinstance(self.edge_min_clearance, (int, float)) and math.isfinite(self.edge_min_clearance)
@@ -105,7 +110,8 @@ class CBiRRT2(Planner):
         self.options = options or CBiRRT2Options()
         if not isinstance(self.options, CBiRRT2Options):
             raise TypeError(f"options: expected CBiRRT2Options, got {type(self.options).__name__}")
-        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
+        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin,
+                                                   kernel=self.options.validity_kernel)
         self.constraint = constraint
         if constraint is None:
             self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)

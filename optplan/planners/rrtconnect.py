@@ -43,6 +43,9 @@ class RRTConnectOptions:
     shortcut_iterations: int = 100
     #: Clearance counted as contact by the validity checker [m].
     margin: float = 0.0
+    #: Backend of the boolean collision checks: ``"native"`` (the compiled planning kernel,
+    #: :mod:`optplan.planners.kernel`; coal when it cannot be built) or ``"coal"`` (Pinocchio + coal).
+    validity_kernel: str = "native"
 
     def __post_init__(self) -> None:
         for name in ("range", "resolution"):
@@ -55,6 +58,8 @@ class RRTConnectOptions:
                 raise ValueError(f"RRTConnectOptions.{name}: expected an int >= 0, got {v!r}")
         if not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin) and self.margin >= 0):
             raise ValueError(f"RRTConnectOptions.margin: expected a number >= 0 m, got {self.margin!r}")
+        if self.validity_kernel not in ("native", "coal"):
+            raise ValueError(f"RRTConnectOptions.validity_kernel: expected 'native' or 'coal', got {self.validity_kernel!r}")
 
 
 def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray], bool], resolution: float,
@@ -171,7 +176,8 @@ class RRTConnect(Planner):
         self.options = options or RRTConnectOptions()
         if not isinstance(self.options, RRTConnectOptions):
             raise TypeError(f"options: expected RRTConnectOptions, got {type(self.options).__name__}")
-        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
+        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin,
+                                                   kernel=self.options.validity_kernel)
 
     def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
               seed: int) -> PlanResult:

@@ -36,9 +36,11 @@ __all__ = ["ObjectPoseFilter", "TaskSampler", "arm_reach", "arm_reach_estimate",
 
 class ObjectPoseFilter:
     """Cheap necessary conditions on an object pose (no IK): object ∩ obstacles = ∅ and both grasp
-    points within reach. ``margin`` [m] shrinks the reach bound's slack (0: the exact bound)."""
+    points within reach. ``margin`` [m] shrinks the reach bound's slack (0: the exact bound). ``native``:
+    the object test in the native planning kernel (:mod:`optplan.planners.kernel`; exact box, sphere and
+    capsule tests) when it can be built, else coal."""
 
-    def __init__(self, robot: RobotModel, scene: Scene, margin: float = 0.0) -> None:
+    def __init__(self, robot: RobotModel, scene: Scene, margin: float = 0.0, native: bool = True) -> None:
         if scene.object is None:
             raise ValueError("ObjectPoseFilter needs a scene with an [object]")
         self.obj = scene.object.coal_geometry()
@@ -66,6 +68,11 @@ class ObjectPoseFilter:
         self._req = coal.CollisionRequest()
         self._res = coal.CollisionResult()
         self.n_calls = 0
+        self._native = _native_object_check(scene) if native else None
+
+    def _object_free_native(self, R: np.ndarray, p: np.ndarray) -> bool:
+        kernel, g, active, _ = cast(tuple[Any, int, int, np.ndarray], self._native)
+        return bool(kernel.pose_free(g, R, p, active))
 
     def reachable(self, R: np.ndarray, p: np.ndarray) -> bool:
         for _, t, sh, r in self.grasps:
@@ -77,6 +84,8 @@ class ObjectPoseFilter:
     def object_free(self, R: np.ndarray, p: np.ndarray) -> bool:
         if not len(self.radii):
             return True
+        if self._native is not None:
+            return self._object_free_native(R, p)
         d = np.linalg.norm(self.centres - p, axis=1)
         near = np.nonzero(d < self.radii + self.obj_radius)[0]
         if not near.size:
@@ -92,6 +101,24 @@ class ObjectPoseFilter:
     def __call__(self, R: np.ndarray, p: np.ndarray) -> bool:
         self.n_calls += 1
         return self.reachable(R, p) and self.object_free(R, p)
+
+
+def _native_object_check(scene: Scene) -> tuple[Any, int, int, np.ndarray] | None:
+    """(kernel, object geometry index, address of the active mask, the mask) of a native
+    object-vs-obstacles check, or None when the kernel cannot be built here."""
+    from .kernel import KernelUnavailable, NativeKernel
+
+    assert scene.object is not None
+    gm = pin.GeometryModel()
+    for o in scene.obstacles:
+        gm.addGeometryObject(pin.GeometryObject(f"obstacle/{o.name}", 0, 0, o.placement, o.coal_geometry()))
+    g = gm.addGeometryObject(pin.GeometryObject("object", 0, 0, pin.SE3.Identity(), scene.object.coal_geometry()))
+    try:
+        kernel = NativeKernel(pin.Model(), gm, [(g, k) for k in range(g)])
+    except KernelUnavailable:
+        return None
+    mask = kernel.all_active()
+    return kernel, g, int(mask.ctypes.data), mask
 
 
 def _rpy_matrix(xi: np.ndarray) -> np.ndarray:

@@ -233,7 +233,8 @@ class TCBiRRT(RegraspMixin, Planner):
         self.options = options or TCBiRRTOptions()
         if not isinstance(self.options, TCBiRRTOptions):
             raise TypeError(f"options: expected TCBiRRTOptions, got {type(self.options).__name__}")
-        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin)
+        self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin,
+                                                   kernel=self.options.validity_kernel)
         self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
         self.grasps = scene.object.grasps
         self._lo, self._hi, self.step_size = reach_scaled_workspace(robot, self.options)
@@ -569,7 +570,7 @@ class TCBiRRT(RegraspMixin, Planner):
                 or cast(float, o.geodesic_probability) > 0 or cast(float, o.lead_orientation_probability) > 0):
             return None
         if self._filter is None:
-            self._filter = ObjectPoseFilter(self.robot, self.scene)
+            self._filter = ObjectPoseFilter(self.robot, self.scene, native=o.validity_kernel == "native")
         need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
         return TaskSampler(self._filter if need else None,
                            self._lo, self._hi, bridge_probability=cast(float, o.bridge_probability),

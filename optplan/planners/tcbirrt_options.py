@@ -161,6 +161,10 @@ class TCBiRRTOptions:
     closure_tolerance: float = 1e-6
     #: Clearance counted as contact [m].
     margin: float = 0.0
+    #: Backend of the boolean collision checks and of the task-space filter's object test: ``"native"``
+    #: (the compiled planning kernel, :mod:`optplan.planners.kernel`; coal when it cannot be built) or
+    #: ``"coal"`` (Pinocchio + coal).
+    validity_kernel: str = "native"
     #: Cap on Alg. 1 iterations [count] (0: only the time limit).
     max_iterations: int = 0
     #: ``"paper"`` (the published algorithm) or ``"improved"`` (task-space sampling aids).
@@ -298,6 +302,8 @@ class TCBiRRTOptions:
         _pos("regrasp_tolerance", self.regrasp_tolerance, allow_zero=True)
         _pos("closure_tolerance", self.closure_tolerance)
         _pos("margin", self.margin, allow_zero=True)
+        if self.validity_kernel not in ("native", "coal"):
+            raise ValueError(f"TCBiRRTOptions.validity_kernel: expected 'native' or 'coal', got {self.validity_kernel!r}")
         if not (isinstance(self.max_iterations, int) and self.max_iterations >= 0):
             raise ValueError(f"TCBiRRTOptions.max_iterations: expected an int >= 0, got {self.max_iterations!r}")
 

@@ -61,6 +61,7 @@ from .edge_certify import EdgeCertifier
 
 if TYPE_CHECKING:
     from ..codegen import FastFunction
+    from .kernel.checker import NativeValidity
 
 __all__ = ["ValidityChecker", "ConfigValidity"]
 log = logging.getLogger(__name__)
@@ -133,12 +134,18 @@ class ValidityChecker:
     for contacts (:func:`optplan.collision.checker.exact_contact_requests`), so that a verdict agrees
     with the sign of the exact distance also where a capsule's segment touches a box's face (there
     Pinocchio's default requests report a capsule sunk by its radius as free); False: Pinocchio's
-    default requests.
+    default requests. ``kernel``: ``"native"`` (default) — the boolean checks (:meth:`is_valid`,
+    :meth:`first_invalid`, :meth:`edge_is_valid`, :meth:`valid_batch`) run in the compiled planning
+    kernel (:mod:`optplan.planners.kernel`: the same pairs on exact sphere/capsule/box primitives,
+    never free where coal collides, 3-6× cheaper per configuration), falling back to coal when it
+    cannot be built (no C compiler) or does not cover the robot; ``"coal"``: Pinocchio + coal as
+    above. :attr:`kernel` tells which one is in use. Diagnostics (:meth:`colliding_pairs`,
+    :meth:`grasp_contacts`) and certified edges always use coal.
     """
 
     def __init__(self, robot: RobotModel, scene: Scene | None = None, *, margin: float = 0.0,
                  object_arm: str | None = None, self_collision: bool = True, broadphase: bool = True,
-                 batch: bool = True, exact_contacts: bool = True):
+                 batch: bool = True, exact_contacts: bool = True, kernel: str = "native"):
         if robot.is_floating:
             raise ValueError("ValidityChecker: fixed-base robots only")
         if not (np.isfinite(margin) and margin >= 0.0):
@@ -212,6 +219,9 @@ class ValidityChecker:
             if self.fixed_id is not None:   # the still object's placement, set per query
                 self._pool_object = self._pool["fixed"].getGeometryModel(0).geometryObjects[self.fixed_id]
         self.n_checks = 0
+        self._native = self._native_backend(kernel)
+        #: the backend of the boolean checks in use: "native" or "coal"
+        self.kernel = "coal" if self._native is None else "native"
         self._sweep = {mode: self._sweep_bound(mode) for mode in ("held", "fixed", "free")}
         self._spheres = {mode: self._sweep_spheres(mode) for mode in ("held", "fixed", "free")}
         # the velocity (Jacobian) bound of edge_checkpoints assumes revolute 1-dof joints
@@ -220,6 +230,20 @@ class ValidityChecker:
         self._profile_fns: dict[Any, FastFunction | None] = {}
         self._certifiers: dict[float, EdgeCertifier] = {}
         self._exempted: dict[str, frozenset[int]] = {}   # per mode, the pairs exempt() has switched off
+
+    def _native_backend(self, kernel: str) -> NativeValidity | None:
+        """The native kernel for ``kernel == "native"`` (None for "coal", or when it cannot be built)."""
+        if kernel not in ("native", "coal"):
+            raise ValueError(f"kernel: expected 'native' or 'coal', got {kernel!r}")
+        if kernel == "coal":
+            return None
+        from .kernel import KernelUnavailable
+        from .kernel.checker import NativeValidity
+        try:
+            return NativeValidity(self.model, self.gmodel, self._gd, self.fixed_id, self.margin)
+        except KernelUnavailable as e:
+            log.info("validity checks stay with coal: %s", e)
+            return None
 
     def _sweep_bound(self, mode: str) -> np.ndarray:
         """One row per moving geometry of ``mode`` (:meth:`_moving_geometries`), one column per
@@ -455,6 +479,13 @@ class ValidityChecker:
             return False
         ts = self.edge_checkpoints(a, b, tolerance, mode)
         d = b - a
+        if self._native is not None:   # interpolation and checks in one native call, same order
+            if not len(ts):
+                return True
+            m = "free" if mode == "held" and self.object is None else mode
+            k = self._native.edge_first_invalid(a, b, ts[_bisection_indices(len(ts) + 1)], m, object_pose)
+            self.n_checks += len(ts) if k < 0 else k + 1
+            return k < 0
         if self._pool:   # the same points in the same order, one batch call
             if not len(ts):
                 return True
@@ -499,6 +530,8 @@ class ValidityChecker:
     # ------------------------------------------------------------------ queries
     def _collides(self, mode: str, q: np.ndarray) -> bool:
         """One configuration in ``mode`` (the still object's pose already set): any active pair in contact."""
+        if self._native is not None:
+            return self._native.collides(q, mode)
         pool = self._pool.get(mode)
         if pool is not None:
             return bool(pin.computeCollisionsInParallel(1, pool, np.asarray(q, float).reshape(-1, 1), True, True)[0])
@@ -525,6 +558,8 @@ class ValidityChecker:
         if self.object is None:
             return self.is_valid_free(q)
         self.n_checks += 1
+        if self._native is not None:
+            return not self._native.collides(q, "fixed", object_pose)
         if "fixed" in self._pool:
             self._set_object_pose(object_pose)
             return not self._collides("fixed", q)
@@ -555,6 +590,10 @@ class ValidityChecker:
         Q = np.asarray(Q, float)
         if Q.ndim != 2 or Q.shape[1] != self.model.nq:
             raise ValueError(f"first_invalid: expected an (M, {self.model.nq}) array of configurations, got shape {Q.shape}")
+        if self._native is not None:
+            k = self._native.first_invalid(Q, mode, object_pose) if len(Q) else -1
+            self.n_checks += len(Q) if k < 0 else k + 1
+            return k
         pool = self._pool.get(mode)
         if pool is None:   # no batch API: one query per row
             one: Callable[[np.ndarray], bool] = ((lambda x: self.is_valid_object_fixed(x, object_pose)) if mode == "fixed"
@@ -571,6 +610,23 @@ class ValidityChecker:
         k = int(np.argmax(hit)) if hit.any() else -1
         self.n_checks += len(Q) if k < 0 else k + 1
         return k
+
+    def valid_batch(self, Q: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None) -> np.ndarray:
+        """Validity (booleans) of EVERY row of ``Q`` (M × nq) in ``mode`` (as :meth:`first_invalid`);
+        ``n_checks`` grows by M."""
+        Q = np.asarray(Q, float)
+        if Q.ndim != 2 or Q.shape[1] != self.model.nq:
+            raise ValueError(f"valid_batch: expected an (M, {self.model.nq}) array of configurations, got shape {Q.shape}")
+        if mode == "held" and self.object is None or mode == "fixed" and self.object is None:
+            mode = "free"
+        if mode not in ("held", "fixed", "free"):
+            raise ValueError(f"valid_batch: mode must be 'held', 'fixed' or 'free', got {mode!r}")
+        if mode == "fixed" and object_pose is None:
+            raise ValueError("valid_batch: mode 'fixed' needs object_pose")
+        if self._native is not None:
+            self.n_checks += len(Q)
+            return self._native.valid(Q, mode, object_pose)
+        return np.array([self.first_invalid(q[None], mode, object_pose) < 0 for q in Q], dtype=bool)
 
     def validity(self, mode: str = "held", object_pose: pin.SE3 | None = None, base: np.ndarray | None = None,
                  joints: np.ndarray | None = None) -> ConfigValidity:
@@ -616,12 +672,16 @@ class ValidityChecker:
             for k in off:
                 g.deactivateCollisionPair(k)
         self._exempted[mode] = before | frozenset(off)   # the certifiers read it (their pair groups per set)
+        if self._native is not None:
+            self._native.set_active(mode, off, False)
         try:
             yield
         finally:
             for g in gds:
                 for k in off:
                     g.activateCollisionPair(k)
+            if self._native is not None:
+                self._native.set_active(mode, off, True)
             self._exempted[mode] = before
 
     def exempted(self, mode: str = "fixed") -> frozenset[int]:

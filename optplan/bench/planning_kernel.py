@@ -1,0 +1,160 @@
+"""The native planning kernel against coal, paired: unit costs of a configuration check (the dual arm
+holding the object) and whole TCBiRRT queries on the same trials and seeds with
+``validity_kernel="native"`` and ``"coal"`` (alternating, CPU clock).
+
+``python -m optplan.bench.planning_kernel --scene hard_bay,hard_window,ssps_scene1 --trials 0,1,2``
+(``--agreement``: only the two backends' verdicts on random configurations, per mode)
+
+Per query: status, CPU seconds, iterations, CPU per iteration; per scene the medians and the paired
+ratio coal / native of the CPU per iteration. The two backends give the same verdicts on the shipped
+scenes (tests/test_planning_kernel.py), so a paired query normally runs the same search.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+import numpy as np
+
+__all__ = ["unit_costs", "paired_queries", "agreement", "main"]
+
+
+def unit_costs(robot: Any, scene: Any, n: int = 4000, seed: int = 0, repeats: int = 3) -> dict[str, float]:
+    """CPU microseconds per check of a held-object configuration, for both backends: batches of the
+    configurations that are valid (every pair is checked: the expensive case) and single calls; random
+    configurations around the scene's start and goal (``n`` of them, seeded)."""
+    from ..planners.validity import ValidityChecker
+    from .hardscenes import nominal_configurations
+
+    rng = np.random.default_rng(seed)
+    qs, qg = nominal_configurations(robot, scene)
+    Q = np.vstack([np.clip(q0 + rng.normal(0.0, s, (n // 4, qs.size)), robot.lower, robot.upper)
+                   for q0 in (qs, qg) for s in (0.05, 0.3)])
+    out: dict[str, float] = {}
+    for kind in ("native", "coal"):
+        ck = ValidityChecker(robot, scene, kernel=kind)
+        ok = Q[ck.valid_batch(Q)]
+        best_b = best_s = np.inf
+        for _ in range(repeats):
+            t0 = time.process_time()
+            ck.first_invalid(ok, "held")
+            best_b = min(best_b, time.process_time() - t0)
+            t0 = time.process_time()
+            for q in ok[:1000]:
+                ck.is_valid(q)
+            best_s = min(best_s, time.process_time() - t0)
+        out[f"{kind}_batch_us"] = 1e6 * best_b / max(len(ok), 1)
+        out[f"{kind}_single_us"] = 1e6 * best_s / max(min(len(ok), 1000), 1)
+        out["valid_configurations"] = float(len(ok))
+    return out
+
+
+def agreement(robot: Any, scene: Any, n: int = 4000, seed: int = 1) -> list[tuple[str, int, int, int, int]]:
+    """Verdicts of the two backends on ``n`` random configurations (three quarters around the start and
+    goal at three spreads, a quarter uniform in the joint limits), per mode: (mode, configurations, colliding
+    by coal, false "free" by the kernel, false "colliding" by the kernel)."""
+    from ..constraints.closed_chain import ClosedChainKinematics
+    from ..planners.validity import ValidityChecker
+    from .hardscenes import nominal_configurations
+
+    rng = np.random.default_rng(seed)
+    qs, qg = nominal_configurations(robot, scene)
+    m = n // 8
+    Q = np.vstack([np.clip(q0 + rng.normal(0.0, s, (m, qs.size)), robot.lower, robot.upper)
+                   for q0 in (qs, qg) for s in (0.05, 0.2, 0.5)] + [np.array([robot.random_configuration(rng) for _ in range(n - 6 * m)])])
+    ref, nat = ValidityChecker(robot, scene, kernel="coal"), ValidityChecker(robot, scene, kernel="native")
+    pose = ClosedChainKinematics(robot, scene.object.grasps).object_pose(qs)
+    out = []
+    for mode, M in (("held", None), ("free", None), ("fixed", pose)):
+        want = np.array([ref.first_invalid(q[None], mode, M) < 0 for q in Q])
+        got = nat.valid_batch(Q, mode, M)
+        out.append((mode, len(Q), int((~want).sum()), int(np.sum(got & ~want)), int(np.sum(~got & want))))
+    return out
+
+
+def paired_queries(scenes: list[str], trials: list[int], planner: str = "tcbirrt:variant=improved", *,
+                   seed: int = 0, time_limit: float = 10.0, robot_name: str = "tcbirrt_dual_arm") -> list[dict[str, Any]]:
+    """Each trial of each scene planned with both backends (native first on even trials, coal first on
+    odd ones), same trial seed. One row per query."""
+    from .tcbirrt import _W, _worker_setup, expand_scenes
+
+    specs = {k: f"{planner}:validity_kernel={k}" for k in ("native", "coal")}
+    scenes = expand_scenes(scenes)
+    _worker_setup(robot_name, scenes, list(specs.values()))
+    rows = []
+    for sc in scenes:
+        w = _W[sc]
+        for i in trials:
+            t = w["gen"].generate(int(i), seed)
+            order = ("native", "coal") if i % 2 == 0 else ("coal", "native")
+            for kind in order:
+                c0 = time.process_time()
+                res = w["planners"][specs[kind]].plan(t.q_start, t.q_goal, time_limit=time_limit, seed=t.seed, clock="cpu")
+                cpu = time.process_time() - c0
+                it = int(res.stats.get("iterations") or 0)
+                rows.append({"scene": sc, "trial": int(i), "kernel": kind, "status": res.status.value, "cpu_s": cpu,
+                             "iterations": it, "cpu_per_iteration_ms": 1e3 * cpu / max(it, 1),
+                             "collision_checks": res.stats.get("collision_checks"), "nodes": res.stats.get("nodes")})
+    return rows
+
+
+def _summary(rows: list[dict[str, Any]]) -> str:
+    lines = [f"{'scene':22s} {'kernel':7s} {'success':>8s} {'median CPU s':>13s} {'median ms/iter':>15s}"]
+    for sc in dict.fromkeys(r["scene"] for r in rows):
+        per = {}
+        for kind in ("native", "coal"):
+            rr = [r for r in rows if r["scene"] == sc and r["kernel"] == kind]
+            per[kind] = rr
+            succ = np.mean([r["status"] == "exact" for r in rr])
+            lines.append(f"{sc:22s} {kind:7s} {succ:8.2f} {np.median([r['cpu_s'] for r in rr]):13.3f} "
+                         f"{np.median([r['cpu_per_iteration_ms'] for r in rr]):15.3f}")
+        ratio = [c["cpu_per_iteration_ms"] / n["cpu_per_iteration_ms"] for n, c in zip(per["native"], per["coal"])]
+        same = sum(n["iterations"] == c["iterations"] for n, c in zip(per["native"], per["coal"]))
+        lines.append(f"{sc:22s} paired coal/native CPU per iteration: median {np.median(ratio):.2f}x "
+                     f"(min {min(ratio):.2f}, max {max(ratio):.2f}); same iteration count in {same}/{len(ratio)}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m optplan.bench.planning_kernel",
+                                 description="native planning kernel vs coal: unit costs and paired TCBiRRT queries")
+    ap.add_argument("--scene", default="hard_bay,hard_window,ssps_scene1", help="comma-separated scenes")
+    ap.add_argument("--trials", default="0,1,2", help="comma-separated trial indices [index]")
+    ap.add_argument("--planners", default="tcbirrt:variant=improved", help="one planner spec")
+    ap.add_argument("--seed", type=int, default=0, help="trial seed")
+    ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds per query [s]")
+    ap.add_argument("--no-units", action="store_true", help="skip the unit costs")
+    ap.add_argument("--agreement", action="store_true",
+                    help="only compare the two backends' verdicts on random configurations of each scene")
+    a = ap.parse_args(argv)
+    from ..model.robot import RobotModel
+    from ..scene import Scene
+    from .tcbirrt import expand_scenes
+
+    scenes = expand_scenes(a.scene.split(","))
+    if a.agreement:
+        robot = RobotModel.from_name("tcbirrt_dual_arm")
+        for sc in scenes:
+            for mode, n, coll, ff, fc in agreement(robot, Scene.load(sc)):
+                print(f"{sc} {mode:5s}: {n} configurations, {coll} colliding (coal); kernel: {ff} false free, "
+                      f"{fc} false colliding")
+        return 0
+    if not a.no_units:
+        robot = RobotModel.from_name("tcbirrt_dual_arm")
+        for sc in scenes:
+            u = unit_costs(robot, Scene.load(sc))
+            print(f"{sc}: held-object check, CPU µs per valid configuration: native {u['native_batch_us']:.2f} batched / "
+                  f"{u['native_single_us']:.2f} single, coal {u['coal_batch_us']:.2f} batched / {u['coal_single_us']:.2f} single "
+                  f"({int(u['valid_configurations'])} configurations)")
+    rows = paired_queries(scenes, [int(x) for x in a.trials.split(",") if x.strip()], a.planners, seed=a.seed,
+                          time_limit=a.time_limit)
+    for r in rows:
+        print(f"{r['scene']} trial {r['trial']} {r['kernel']:6s}: {r['status']}, {r['cpu_s']:.3f} s CPU, "
+              f"{r['iterations']} iterations, {r['cpu_per_iteration_ms']:.3f} ms/iteration, {r['collision_checks']} checks")
+    print(_summary(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

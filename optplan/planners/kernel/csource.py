@@ -1,0 +1,315 @@
+"""The C source of the native planning kernel (:mod:`optplan.planners.kernel.native`).
+
+Kept as a string in a Python module so that it ships with the package without any packaging change;
+:func:`optplan.planners.kernel.native.load_library` compiles it with the system C compiler at first
+use and caches the shared library under :func:`optplan.codegen.cache_dir`, keyed by a hash of this
+text.
+
+What it computes, for a batch of configurations: the forward kinematics of a tree of 1-dof revolute
+and prismatic joints, the world placement of every geometry (spheres, capsules along local z, boxes;
+a geometry may have its placement given per call: the still object of a regrasp), then the listed
+geometry pairs in order — a bounding-sphere test, then the exact boolean test of the two primitives
+(distance ≤ margin + ``KERNEL_EPS`` counts as colliding, so the verdict never says free where the
+exact distance is ≤ margin) — stopping at the first configuration in collision.
+"""
+from __future__ import annotations
+
+__all__ = ["C_SOURCE", "KERNEL_EPS"]
+
+#: slack [m] added to every contact threshold: the kernel calls a pair colliding when its exact
+#: distance is below margin + this, so rounding never turns a contact into a free verdict
+KERNEL_EPS = 1e-7
+
+C_SOURCE = r"""
+#include <math.h>
+#include <string.h>
+
+#define KMAXJ 256
+#define KMAXG 1024
+#define KEPS @KERNEL_EPS@
+
+typedef struct {
+    int nq, nj, ng, npairs;
+    const int *jparent;      /* nj: parent joint (joint 0 = universe) */
+    const int *jtype;        /* nj: 0 none/universe, 1 revolute (axis), 2 prismatic, 3/4/5 revolute about x/y/z */
+    const int *jidx;         /* nj: index into q */
+    const double *jplace;    /* nj x 12: R row-major, p */
+    const double *jaxis;     /* nj x 3: unit axis in the joint frame */
+    const int *gparent;      /* ng: parent joint */
+    const int *gtype;        /* ng: 0 sphere, 1 capsule (z), 2 box */
+    const double *gplace;    /* ng x 12 */
+    const double *gparam;    /* ng x 3: sphere r; capsule r, half length; box half extents */
+    const double *grad;      /* ng: bounding-sphere radius about the geometry origin */
+    const int *pa, *pb;      /* npairs */
+    double margin;
+} kmodel;
+
+static void compose(const double *A, const double *B, double *C) {
+    /* C = A * B, poses as R row-major (9) then p (3) */
+    double R[9], p[3];
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j)
+            R[3*i+j] = A[3*i]*B[j] + A[3*i+1]*B[3+j] + A[3*i+2]*B[6+j];
+        p[i] = A[3*i]*B[9] + A[3*i+1]*B[10] + A[3*i+2]*B[11] + A[9+i];
+    }
+    memcpy(C, R, sizeof R); memcpy(C + 9, p, sizeof p);
+}
+
+/* joint transform after the placement L: rotation about the unit axis u by x (jtype 1), about the
+   joint's x, y or z axis (jtype 3, 4, 5: two columns mixed), or translation along u (jtype 2) */
+static void joint_motion(const double *L, int type, const double *u, double x, double *O) {
+    if (type >= 3) {
+        int a = (type - 2) % 3, b = (type - 1) % 3;   /* RX: columns y, z; RY: z, x; RZ: x, y */
+        double s = sin(x), c = cos(x);
+        memcpy(O, L, 12*sizeof(double));
+        for (int i = 0; i < 3; ++i) {
+            double la = L[3*i+a], lb = L[3*i+b];
+            O[3*i+a] = c*la + s*lb;
+            O[3*i+b] = -s*la + c*lb;
+        }
+    } else if (type == 1) {
+        double s = sin(x), c = cos(x), t = 1.0 - c;
+        double M[12] = {c + t*u[0]*u[0], t*u[0]*u[1] - s*u[2], t*u[0]*u[2] + s*u[1],
+                        t*u[0]*u[1] + s*u[2], c + t*u[1]*u[1], t*u[1]*u[2] - s*u[0],
+                        t*u[0]*u[2] - s*u[1], t*u[1]*u[2] + s*u[0], c + t*u[2]*u[2], 0, 0, 0};
+        compose(L, M, O);
+    } else if (type == 2) {
+        double M[12] = {1,0,0, 0,1,0, 0,0,1, u[0]*x, u[1]*x, u[2]*x};
+        compose(L, M, O);
+    } else {
+        memcpy(O, L, 12*sizeof(double));
+    }
+}
+
+/* world placements: joints into oMi, geometries into pose[g] (static geometries point to their
+   placement, the override geometry to override_pose, moving ones into oMg) */
+static void fk(const kmodel *m, const double *q, const double *override_pose, int override_g, double *oMi,
+               double *oMg, const double **pose) {
+    static const double I[12] = {1,0,0, 0,1,0, 0,0,1, 0,0,0};
+    memcpy(oMi, I, sizeof I);
+    for (int j = 1; j < m->nj; ++j) {
+        double L[12];
+        compose(oMi + 12*m->jparent[j], m->jplace + 12*j, L);
+        joint_motion(L, m->jtype[j], m->jaxis + 3*j, q[m->jidx[j]], oMi + 12*j);
+    }
+    for (int g = 0; g < m->ng; ++g) {
+        if (g == override_g) pose[g] = override_pose;
+        else if (m->gparent[g] == 0) pose[g] = m->gplace + 12*g;
+        else { compose(oMi + 12*m->gparent[g], m->gplace + 12*g, oMg + 12*g); pose[g] = oMg + 12*g; }
+    }
+}
+
+static double dot3(const double *a, const double *b) { return a[0]*b[0] + a[1]*b[1] + a[2]*b[2]; }
+static double clamp01(double x) { return x < 0.0 ? 0.0 : (x > 1.0 ? 1.0 : x); }
+
+/* squared distance between segments p1-q1 and p2-q2 (Ericson, Real-Time Collision Detection 5.1.9) */
+static double segseg2(const double *p1, const double *q1, const double *p2, const double *q2) {
+    double d1[3], d2[3], r[3], c1[3], c2[3];
+    for (int i = 0; i < 3; ++i) { d1[i] = q1[i]-p1[i]; d2[i] = q2[i]-p2[i]; r[i] = p1[i]-p2[i]; }
+    double a = dot3(d1, d1), e = dot3(d2, d2), f = dot3(d2, r), s, t;
+    if (a <= 1e-18 && e <= 1e-18) { s = t = 0.0; }
+    else if (a <= 1e-18) { s = 0.0; t = clamp01(f / e); }
+    else {
+        double c = dot3(d1, r);
+        if (e <= 1e-18) { t = 0.0; s = clamp01(-c / a); }
+        else {
+            double b = dot3(d1, d2), den = a*e - b*b;
+            s = den > 1e-18 ? clamp01((b*f - c*e) / den) : 0.0;
+            t = (b*s + f) / e;
+            if (t < 0.0) { t = 0.0; s = clamp01(-c / a); }
+            else if (t > 1.0) { t = 1.0; s = clamp01((b - c) / a); }
+        }
+    }
+    for (int i = 0; i < 3; ++i) { c1[i] = p1[i] + d1[i]*s; c2[i] = p2[i] + d2[i]*t; c1[i] -= c2[i]; }
+    return dot3(c1, c1);
+}
+
+/* squared distance from point x to segment p-q */
+static double ptseg2(const double *x, const double *p, const double *q) {
+    double d[3], w[3];
+    for (int i = 0; i < 3; ++i) { d[i] = q[i]-p[i]; w[i] = x[i]-p[i]; }
+    double dd = dot3(d, d), t = dd > 1e-18 ? clamp01(dot3(w, d) / dd) : 0.0;
+    for (int i = 0; i < 3; ++i) w[i] -= t*d[i];
+    return dot3(w, w);
+}
+
+/* point (box frame) to box of half extents h: squared distance (0 inside) */
+static double ptbox2(const double *x, const double *h) {
+    double s = 0.0;
+    for (int i = 0; i < 3; ++i) {
+        double v = fabs(x[i]) - h[i];
+        if (v > 0.0) s += v*v;
+    }
+    return s;
+}
+
+/* world point -> box frame */
+static void to_local(const double *P, const double *x, double *y) {
+    double d[3] = {x[0]-P[9], x[1]-P[10], x[2]-P[11]};
+    for (int i = 0; i < 3; ++i) y[i] = P[i]*d[0] + P[3+i]*d[1] + P[6+i]*d[2];
+}
+
+/* does the segment a-b (box frame) meet the axis-aligned box of half extents h (slab test) */
+static int seg_hits_aabb(const double *a, const double *b, const double *h) {
+    double t0 = 0.0, t1 = 1.0;
+    for (int i = 0; i < 3; ++i) {
+        double d = b[i] - a[i];
+        if (fabs(d) < 1e-15) {
+            if (a[i] < -h[i] || a[i] > h[i]) return 0;
+        } else {
+            double u = (-h[i] - a[i]) / d, v = (h[i] - a[i]) / d;
+            if (u > v) { double w = u; u = v; v = w; }
+            if (u > t0) t0 = u;
+            if (v < t1) t1 = v;
+            if (t0 > t1) return 0;
+        }
+    }
+    return 1;
+}
+
+/* segment a-b (box frame) within distance r of the box of half extents h */
+static int seg_box(const double *a, const double *b, const double *h, double r) {
+    double hr[3] = {h[0] + r, h[1] + r, h[2] + r};
+    if (!seg_hits_aabb(a, b, hr)) return 0;            /* beyond the inflated box: farther than r */
+    double r2 = r*r;
+    if (ptbox2(a, h) <= r2 || ptbox2(b, h) <= r2) return 1;
+    if (seg_hits_aabb(a, b, h)) return 1;
+    /* not intersecting: the closest pair is an end point (done above) or the segment and a box edge */
+    for (int ax = 0; ax < 3; ++ax) {
+        int u = (ax + 1) % 3, v = (ax + 2) % 3;
+        for (int su = -1; su <= 1; su += 2)
+            for (int sv = -1; sv <= 1; sv += 2) {
+                double e0[3], e1[3];
+                e0[ax] = -h[ax]; e1[ax] = h[ax];
+                e0[u] = e1[u] = su*h[u];
+                e0[v] = e1[v] = sv*h[v];
+                if (segseg2(a, b, e0, e1) <= r2) return 1;
+            }
+    }
+    return 0;
+}
+
+/* oriented boxes A, B (world poses, half extents) closer than r (separating axis test; conservative:
+   the boxes inflated by r as boxes) */
+static int box_box(const double *A, const double *ha, const double *B, const double *hb, double r) {
+    double Rm[3][3], AR[3][3], t[3], d[3] = {B[9]-A[9], B[10]-A[10], B[11]-A[11]};
+    /* Rm[i][j] = a_i . b_j (columns of the rotation matrices) */
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+            Rm[i][j] = A[i]*B[j] + A[3+i]*B[3+j] + A[6+i]*B[6+j];
+            AR[i][j] = fabs(Rm[i][j]) + 1e-12;
+        }
+        t[i] = A[i]*d[0] + A[3+i]*d[1] + A[6+i]*d[2];
+    }
+    for (int i = 0; i < 3; ++i) {
+        double rb = hb[0]*AR[i][0] + hb[1]*AR[i][1] + hb[2]*AR[i][2];
+        if (fabs(t[i]) > ha[i] + rb + r) return 0;
+    }
+    for (int j = 0; j < 3; ++j) {
+        double ra = ha[0]*AR[0][j] + ha[1]*AR[1][j] + ha[2]*AR[2][j];
+        if (fabs(t[0]*Rm[0][j] + t[1]*Rm[1][j] + t[2]*Rm[2][j]) > ra + hb[j] + r) return 0;
+    }
+    for (int i = 0; i < 3; ++i) {
+        int i1 = (i + 1) % 3, i2 = (i + 2) % 3;
+        for (int j = 0; j < 3; ++j) {
+            int j1 = (j + 1) % 3, j2 = (j + 2) % 3;
+            double len2 = 1.0 - Rm[i][j]*Rm[i][j];
+            if (len2 < 1e-6) continue;   /* near-parallel edges: skipping an axis only makes the test more conservative */
+            double ra = ha[i1]*AR[i2][j] + ha[i2]*AR[i1][j];
+            double rb = hb[j1]*AR[i][j2] + hb[j2]*AR[i][j1];
+            double s = fabs(t[i2]*Rm[i1][j] - t[i1]*Rm[i2][j]);
+            if (s > ra + rb + r*sqrt(len2)) return 0;
+        }
+    }
+    return 1;
+}
+
+static void capsule_ends(const double *P, const double *prm, double *a, double *b) {
+    double hl = prm[1];
+    for (int i = 0; i < 3; ++i) { a[i] = P[9+i] - hl*P[3*i+2]; b[i] = P[9+i] + hl*P[3*i+2]; }
+}
+
+/* one pair: 1 when the primitives are within margin (+ KEPS) of each other */
+static int pair_collides(const kmodel *m, const double **pose, int ga, int gb) {
+    const double *A = pose[ga], *B = pose[gb];
+    double thr = m->margin + KEPS;
+    double dx = A[9]-B[9], dy = A[10]-B[10], dz = A[11]-B[11];
+    double rr = m->grad[ga] + m->grad[gb] + thr;
+    if (dx*dx + dy*dy + dz*dz > rr*rr) return 0;
+    int ta = m->gtype[ga], tb = m->gtype[gb];
+    if (ta > tb) { int w = ga; ga = gb; gb = w; w = ta; ta = tb; tb = w; const double *X = A; A = B; B = X; }
+    const double *pa = m->gparam + 3*ga, *pb = m->gparam + 3*gb;
+    double a0[3], a1[3], b0[3], b1[3], x[3], y[3], r;
+    if (ta == 0 && tb == 0) {
+        r = pa[0] + pb[0] + thr;
+        return dx*dx + dy*dy + dz*dz <= r*r;
+    }
+    if (ta == 0 && tb == 1) {
+        capsule_ends(B, pb, b0, b1);
+        r = pa[0] + pb[0] + thr;
+        return ptseg2(A + 9, b0, b1) <= r*r;
+    }
+    if (ta == 0 && tb == 2) {
+        to_local(B, A + 9, x);
+        r = pa[0] + thr;
+        return ptbox2(x, pb) <= r*r;
+    }
+    if (ta == 1 && tb == 1) {
+        capsule_ends(A, pa, a0, a1); capsule_ends(B, pb, b0, b1);
+        r = pa[0] + pb[0] + thr;
+        return segseg2(a0, a1, b0, b1) <= r*r;
+    }
+    if (ta == 1 && tb == 2) {
+        capsule_ends(A, pa, a0, a1);
+        to_local(B, a0, x); to_local(B, a1, y);
+        return seg_box(x, y, pb, pa[0] + thr);
+    }
+    return box_box(A, pa, B, pb, thr);
+}
+
+/* 1 when configuration q is in collision (first active pair in contact) */
+static int config_collides(const kmodel *m, const unsigned char *active, const double *q,
+                           const double *override_pose, int override_g, double *oMi, double *oMg) {
+    const double *pose[KMAXG];
+    fk(m, q, override_pose, override_g, oMi, oMg, pose);
+    for (int k = 0; k < m->npairs; ++k)
+        if (active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) return 1;
+    return 0;
+}
+
+/* the rows of Q (M x nq, row-major) in order: index of the first in collision, or -1.
+   With out != NULL every row is checked and out[i] = 1 when row i is collision-free. */
+long long kernel_first_invalid(const kmodel *m, const unsigned char *active, const double *override_pose,
+                               int override_g, long long M, const double *Q, unsigned char *out) {
+    double oMi[12*KMAXJ], oMg[12*KMAXG];
+    if (m->nj > KMAXJ || m->ng > KMAXG) return -2;
+    long long first = -1;
+    for (long long i = 0; i < M; ++i) {
+        int hit = config_collides(m, active, Q + i*m->nq, override_pose, override_g, oMi, oMg);
+        if (out) out[i] = (unsigned char)!hit;
+        if (hit && first < 0) { first = i; if (!out) break; }
+    }
+    return first;
+}
+
+/* the edge a -> b at the fractions f[0..n-1] (in that order): index of the first in collision, or -1 */
+long long kernel_edge_first_invalid(const kmodel *m, const unsigned char *active, const double *override_pose,
+                                    int override_g, const double *a, const double *b, long long n, const double *f) {
+    double oMi[12*KMAXJ], oMg[12*KMAXG], q[KMAXJ];
+    if (m->nj > KMAXJ || m->ng > KMAXG || m->nq > KMAXJ) return -2;
+    for (long long i = 0; i < n; ++i) {
+        for (int k = 0; k < m->nq; ++k) q[k] = a[k] + f[i]*(b[k] - a[k]);
+        if (config_collides(m, active, q, override_pose, override_g, oMi, oMg)) return i;
+    }
+    return -1;
+}
+
+/* the world placements of every geometry at q (ng x 12), for tests */
+void kernel_placements(const kmodel *m, const double *q, const double *override_pose, int override_g, double *oMg) {
+    double oMi[12*KMAXJ], buf[12*KMAXG];
+    const double *pose[KMAXG];
+    if (m->nj > KMAXJ || m->ng > KMAXG) return;
+    fk(m, q, override_pose, override_g, oMi, buf, pose);
+    for (int g = 0; g < m->ng; ++g) memcpy(oMg + 12*g, pose[g], 12*sizeof(double));
+}
+""".replace("@KERNEL_EPS@", repr(KERNEL_EPS))

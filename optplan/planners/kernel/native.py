@@ -1,0 +1,245 @@
+"""The compiled planning kernel: a batch of configurations (or an edge's checkpoints) → validity,
+in one native call.
+
+:class:`NativeKernel` takes a Pinocchio model (1-dof revolute and prismatic joints), a Pinocchio
+``GeometryModel`` and a list of geometry pairs, and flattens them into arrays that the C code of
+:mod:`optplan.planners.kernel.csource` reads: per joint its parent, placement and axis; per geometry
+its parent joint, placement and primitive. Primitives: coal ``Sphere``, ``Capsule``, ``Box`` as
+they are (exact tests: sphere/capsule pairs by point/segment distances, capsule-box by the segment's
+distance to the box, box-box by separating axes); a ``Cylinder`` as the capsule that contains it; any
+other shape (meshes, convex hulls, ellipsoids ...) as the sphere that bounds its local AABB. Every
+approximation contains the shape it stands for, and a pair counts as colliding when its distance is
+at most ``margin`` + :data:`~optplan.planners.kernel.csource.KERNEL_EPS`: the kernel never calls free
+a configuration that coal calls colliding (the false "colliding" verdicts are limited to the
+approximated shapes and a 1e-7 m band).
+
+The library is compiled with the system C compiler at first use and cached (:func:`load_library`);
+without a compiler :class:`KernelUnavailable` is raised and the validity checker keeps coal.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import logging
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from ...codegen import build_library, cache_dir
+from ...errors import OptplanError
+from .csource import C_SOURCE
+
+__all__ = ["KernelUnavailable", "NativeKernel", "load_library"]
+log = logging.getLogger(__name__)
+
+_LIB: list[Any] = []   # the loaded library of this process (one)
+_P = ctypes.c_void_p
+
+
+class KernelUnavailable(OptplanError):
+    """The native kernel cannot be used here: no C compiler, a failed build, or a model the kernel
+    does not cover (a joint other than a 1-dof revolute or prismatic one)."""
+
+
+class _KModel(ctypes.Structure):
+    _fields_ = [("nq", ctypes.c_int), ("nj", ctypes.c_int), ("ng", ctypes.c_int), ("npairs", ctypes.c_int),
+                ("jparent", _P), ("jtype", _P), ("jidx", _P), ("jplace", _P), ("jaxis", _P),
+                ("gparent", _P), ("gtype", _P), ("gplace", _P), ("gparam", _P), ("grad", _P),
+                ("pa", _P), ("pb", _P), ("margin", ctypes.c_double)]
+
+
+def load_library() -> Any:
+    """The compiled kernel (``ctypes.CDLL``), built with the system C compiler at first use and cached
+    under :func:`optplan.codegen.cache_dir` by a hash of its source. Raises :class:`KernelUnavailable`
+    when it cannot be built."""
+    if _LIB:
+        return _LIB[0]
+    digest = hashlib.sha1(C_SOURCE.encode()).hexdigest()[:16]
+    lib_path = cache_dir() / f"optplan_planning_kernel_{digest}.so"
+    lib = None
+    for attempt in range(2):
+        if not lib_path.exists():
+            with tempfile.TemporaryDirectory() as tmp:
+                c_file = Path(tmp, "planning_kernel.c")
+                c_file.write_text(C_SOURCE)
+                err = build_library(c_file, lib_path, "-O3")
+            if err is not None:
+                raise KernelUnavailable(f"the native planning kernel could not be compiled: {err}")
+        try:
+            lib = ctypes.CDLL(str(lib_path))
+            break
+        except OSError as e:   # a damaged cache file: rebuilt once
+            if attempt:
+                raise KernelUnavailable(f"the native planning kernel {lib_path} cannot be loaded: {e}") from None
+            log.warning("the cached planning kernel %s cannot be loaded (%s); rebuilding it", lib_path, e)
+            lib_path.unlink(missing_ok=True)
+    assert lib is not None
+    for name in ("kernel_first_invalid", "kernel_edge_first_invalid"):
+        getattr(lib, name).restype = ctypes.c_longlong
+    lib.kernel_first_invalid.argtypes = [_P, _P, _P, ctypes.c_int, ctypes.c_longlong, _P, _P]
+    lib.kernel_edge_first_invalid.argtypes = [_P, _P, _P, ctypes.c_int, _P, _P, ctypes.c_longlong, _P]
+    lib.kernel_placements.restype = None
+    lib.kernel_placements.argtypes = [_P, _P, _P, ctypes.c_int, _P]
+    _LIB.append(lib)
+    return lib
+
+
+def _pose12(M: pin.SE3) -> np.ndarray:
+    return np.concatenate([np.asarray(M.rotation, float).ravel(), np.asarray(M.translation, float)])
+
+
+def _joint_kind(jm: Any) -> tuple[int, np.ndarray]:
+    """(1 revolute about an unaligned axis / 2 prismatic / 3, 4, 5 revolute about x, y, z; unit axis)
+    of a Pinocchio joint model."""
+    name = jm.shortname()
+    for prefix, kind in (("JointModelR", 1), ("JointModelP", 2)):
+        if name.startswith(prefix) and jm.nq == 1 and jm.nv == 1:
+            tail = name[len(prefix):]
+            if tail in ("X", "Y", "Z"):
+                axis = "XYZ".index(tail)
+                return (kind if kind == 2 else 3 + axis), np.eye(3)[axis]
+            if tail in ("evoluteUnaligned", "rismaticUnaligned"):
+                ax = np.asarray(jm.axis, float)
+                return kind, ax / np.linalg.norm(ax)
+    raise KernelUnavailable(f"the native planning kernel covers 1-dof revolute and prismatic joints, got {name}")
+
+
+def _primitive(go: Any) -> tuple[int, np.ndarray, pin.SE3, float]:
+    """(type 0 sphere / 1 capsule / 2 box, parameters, offset in the geometry frame, bounding radius
+    about the offset) of a geometry object; shapes other than the three are replaced by a shape that
+    contains them."""
+    g = go.geometry
+    if isinstance(g, coal.Sphere):
+        return 0, np.array([g.radius, 0.0, 0.0]), pin.SE3.Identity(), float(g.radius)
+    if isinstance(g, (coal.Capsule, coal.Cylinder)):   # a cylinder lies inside the capsule of its radius and axis
+        return 1, np.array([g.radius, g.halfLength, 0.0]), pin.SE3.Identity(), float(g.radius + g.halfLength)
+    if isinstance(g, coal.Box):
+        h = np.asarray(g.halfSide, float)
+        return 2, h.copy(), pin.SE3.Identity(), float(np.linalg.norm(h))
+    g.computeLocalAABB()
+    c, r = np.asarray(g.aabb_center, float), float(g.aabb_radius)
+    return 0, np.array([r, 0.0, 0.0]), pin.SE3(np.eye(3), c), r
+
+
+class NativeKernel:
+    """Batched validity of configurations of ``model`` for the pairs ``pairs`` of ``gmodel``'s
+    geometries (indices into ``gmodel.geometryObjects``; checked in this order), distance threshold
+    ``margin`` [m]. Each query takes ``active`` (one uint8 per pair: 0 skips it) and optionally the
+    world placement of one geometry (``override``: its index and pose), e.g. a still object.
+
+    Raises :class:`KernelUnavailable` when the model has other joints or no C compiler is found."""
+
+    def __init__(self, model: pin.Model, gmodel: pin.GeometryModel, pairs: list[tuple[int, int]], *,
+                 margin: float = 0.0) -> None:
+        self.lib = load_library()
+        nj = model.njoints
+        jparent = np.zeros(nj, np.int32)
+        jtype = np.zeros(nj, np.int32)
+        jidx = np.zeros(nj, np.int32)
+        jplace = np.zeros((nj, 12))
+        jaxis = np.zeros((nj, 3))
+        jplace[0] = _pose12(pin.SE3.Identity())
+        for j in range(1, nj):
+            kind, ax = _joint_kind(model.joints[j])
+            jparent[j], jtype[j], jidx[j] = model.parents[j], kind, model.joints[j].idx_q
+            jplace[j] = _pose12(model.jointPlacements[j])
+            jaxis[j] = ax
+        objs = list(gmodel.geometryObjects)
+        ng = len(objs)
+        gparent = np.zeros(ng, np.int32)
+        gtype = np.zeros(ng, np.int32)
+        gplace = np.zeros((ng, 12))
+        gparam = np.zeros((ng, 3))
+        grad = np.zeros(ng)
+        self._offsets: list[pin.SE3] = []
+        for g, go in enumerate(objs):
+            t, prm, off, rad = _primitive(go)
+            gparent[g], gtype[g], gparam[g], grad[g] = go.parentJoint, t, prm, rad
+            gplace[g] = _pose12(go.placement * off)
+            self._offsets.append(off)
+        pa = np.array([a for a, _ in pairs], np.int32)
+        pb = np.array([b for _, b in pairs], np.int32)
+        if len(pairs) and (min(pa.min(), pb.min()) < 0 or max(pa.max(), pb.max()) >= ng):
+            raise ValueError(f"NativeKernel: pair indices must lie in [0, {ng}), got {pairs!r}")
+        if not (np.isfinite(margin) and margin >= 0.0):
+            raise ValueError(f"margin: expected a number >= 0 m, got {margin!r}")
+        self.nq, self.ng, self.n_pairs = int(model.nq), ng, len(pairs)
+        self.types = gtype
+        self._arrays = (jparent, jtype, jidx, jplace, jaxis, gparent, gtype, gplace, gparam, grad, pa, pb)
+        ptr = [a.ctypes.data for a in self._arrays]
+        self._km = _KModel(int(model.nq), nj, ng, len(pairs), *ptr, float(margin))
+        self._km_p = ctypes.addressof(self._km)
+        self._pose = np.zeros(12)
+        self._pose_p = self._pose.ctypes.data
+        self._q1 = np.zeros(max(self.nq, 1))            # one configuration, copied in (cached pointer)
+        self._q1_p = self._q1.ctypes.data
+        self._first = self.lib.kernel_first_invalid
+
+    def all_active(self) -> np.ndarray:
+        """An ``active`` mask with every pair on."""
+        return np.ones(self.n_pairs, np.uint8)
+
+    def _override(self, override: tuple[int, pin.SE3] | None) -> int:
+        if override is None:
+            return -1
+        g, M = override
+        self._pose[:] = _pose12(M * self._offsets[g])
+        return int(g)
+
+    def first_invalid(self, Q: np.ndarray, active: np.ndarray | int, override: tuple[int, pin.SE3] | None = None) -> int:
+        """Index of the first row of ``Q`` (M × nq, C-contiguous float64) in collision, −1 if none.
+        ``active``: the mask, or its data address (``mask.ctypes.data``, kept alive by the caller)."""
+        Q = np.ascontiguousarray(Q, dtype=float)
+        g = self._override(override)
+        ap = active if isinstance(active, int) else active.ctypes.data
+        return int(self._first(self._km_p, ap, self._pose_p, g, Q.shape[0], Q.ctypes.data, None))
+
+    def collides(self, q: np.ndarray, active: np.ndarray | int, override: tuple[int, pin.SE3] | None = None) -> bool:
+        """One configuration ``q`` (nq values) in collision (copied into a preallocated buffer: the
+        cheapest single call)."""
+        self._q1[:self.nq] = q
+        g = -1 if override is None else self._override(override)
+        ap = active if isinstance(active, int) else active.ctypes.data
+        return self._first(self._km_p, ap, self._pose_p, g, 1, self._q1_p, None) >= 0
+
+    def valid(self, Q: np.ndarray, active: np.ndarray, override: tuple[int, pin.SE3] | None = None) -> np.ndarray:
+        """Boolean validity of EVERY row of ``Q`` (M × nq)."""
+        Q = np.ascontiguousarray(Q, dtype=float)
+        out = np.empty(Q.shape[0], np.uint8)
+        g = self._override(override)
+        self.lib.kernel_first_invalid(self._km_p, active.ctypes.data, self._pose_p, g, Q.shape[0], Q.ctypes.data,
+                                      out.ctypes.data)
+        return out.astype(bool)
+
+    def edge_first_invalid(self, a: np.ndarray, b: np.ndarray, fractions: np.ndarray, active: np.ndarray,
+                           override: tuple[int, pin.SE3] | None = None) -> int:
+        """The points ``a + f (b − a)`` for ``f`` in ``fractions`` (in that order): index of the first in
+        collision, −1 if none (one native call: interpolation and checks)."""
+        a = np.ascontiguousarray(a, dtype=float)
+        b = np.ascontiguousarray(b, dtype=float)
+        f = np.ascontiguousarray(fractions, dtype=float)
+        g = self._override(override)
+        return int(self.lib.kernel_edge_first_invalid(self._km_p, active.ctypes.data, self._pose_p, g,
+                                                      a.ctypes.data, b.ctypes.data, f.size, f.ctypes.data))
+
+    def pose_free(self, g: int, R: np.ndarray, p: np.ndarray, active: np.ndarray | int) -> bool:
+        """A model without joints (``nq = 0``): the geometry ``g`` placed at ``(R, p)`` (rotation [-],
+        translation [m]; no offset: a sphere, capsule or box) free of every active pair."""
+        pose = self._pose
+        pose[:9] = R.reshape(9)
+        pose[9:] = p
+        ap = active if isinstance(active, int) else active.ctypes.data
+        return self._first(self._km_p, ap, self._pose_p, g, 1, self._pose_p, None) < 0
+
+    def placements(self, q: np.ndarray, override: tuple[int, pin.SE3] | None = None) -> np.ndarray:
+        """World placements of the geometries' primitives at ``q`` (ng × 12: rotation row-major, then
+        translation), for tests against Pinocchio's forward kinematics."""
+        q = np.ascontiguousarray(q, dtype=float)
+        out = np.zeros((self.ng, 12))
+        g = self._override(override)
+        self.lib.kernel_placements(self._km_p, q.ctypes.data, self._pose_p, g, out.ctypes.data)
+        return out
