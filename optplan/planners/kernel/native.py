@@ -6,12 +6,12 @@ in one native call.
 :mod:`optplan.planners.kernel.csource` reads: per joint its parent, placement and axis; per geometry
 its parent joint, placement and primitive. Primitives: coal ``Sphere``, ``Capsule``, ``Box`` as
 they are (exact tests: sphere/capsule pairs by point/segment distances, capsule-box by the segment's
-distance to the box, box-box by separating axes); a ``Cylinder`` as the capsule that contains it; any
-other shape (meshes, convex hulls, ellipsoids ...) as the sphere that bounds its local AABB. Every
-approximation contains the shape it stands for, and a pair counts as colliding when its distance is
-at most ``margin`` + :data:`~optplan.planners.kernel.csource.KERNEL_EPS`: the kernel never calls free
-a configuration that coal calls colliding (the false "colliding" verdicts are limited to the
-approximated shapes and a 1e-7 m band).
+distance to the box, box-box by separating axes); a ``Cylinder`` as the capsule that contains it. A
+model with any other shape (meshes, convex hulls, ellipsoids ...) raises :class:`KernelUnavailable`
+and its checks stay with coal: a bounding sphere would call a mesh robot's tight but valid start
+configurations colliding (PR2's). A pair counts as colliding when its distance is at most ``margin`` +
+:data:`~optplan.planners.kernel.csource.KERNEL_EPS`: the kernel never calls free a configuration that
+coal calls colliding (the false "colliding" verdicts are limited to cylinders and a 1e-7 m band).
 
 The library is compiled with the system C compiler at first use and cached (:func:`load_library`);
 without a compiler :class:`KernelUnavailable` is raised and the validity checker keeps coal.
@@ -110,8 +110,8 @@ def _joint_kind(jm: Any) -> tuple[int, np.ndarray]:
 
 def _primitive(go: Any) -> tuple[int, np.ndarray, pin.SE3, float]:
     """(type 0 sphere / 1 capsule / 2 box, parameters, offset in the geometry frame, bounding radius
-    about the offset) of a geometry object; shapes other than the three are replaced by a shape that
-    contains them."""
+    about the offset) of a geometry object; a cylinder becomes the capsule that contains it. Other shapes
+    raise :class:`KernelUnavailable` (their checks stay with coal)."""
     g = go.geometry
     if isinstance(g, coal.Sphere):
         return 0, np.array([g.radius, 0.0, 0.0]), pin.SE3.Identity(), float(g.radius)
@@ -120,9 +120,8 @@ def _primitive(go: Any) -> tuple[int, np.ndarray, pin.SE3, float]:
     if isinstance(g, coal.Box):
         h = np.asarray(g.halfSide, float)
         return 2, h.copy(), pin.SE3.Identity(), float(np.linalg.norm(h))
-    g.computeLocalAABB()
-    c, r = np.asarray(g.aabb_center, float), float(g.aabb_radius)
-    return 0, np.array([r, 0.0, 0.0]), pin.SE3(np.eye(3), c), r
+    raise KernelUnavailable(f"the native planning kernel covers spheres, capsules, cylinders and boxes; "
+                            f"geometry {go.name!r} is a {type(g).__name__}")
 
 
 class NativeKernel:
