@@ -205,21 +205,6 @@ class FloatingKernels(KernelCache):
                 return cast("tuple[ca.Function, ...]", got)  # every entry compiled (checked above)
         return fns
 
-    def local_derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
-        """``(jac(z), hess(z, λ))`` of a kernel ``f(z)``: ``∂f/∂z`` and the upper triangle of
-        ``∂²(λᵀf)/∂z²`` (sparse)."""
-        def build_jac(name: str) -> ca.Function:
-            z = fn.sx_in(0)
-            return ca.Function(name, [z], [ca.jacobian(fn(z), z)])
-
-        def build_hess(name: str) -> ca.Function:
-            z = fn.sx_in(0)
-            r = fn(z)
-            lam = ca.SX.sym("lam", r.shape[0])
-            return ca.Function(name, [z, lam], [ca.triu(ca.hessian(ca.dot(lam, r), z)[0])])
-
-        return (self._get(("ljac", fn.name()), build_jac), self._get(("lhess_triu", fn.name()), build_hess))
-
 
 # --------------------------------------------------------------------------- assembly
 class _LocalAssembly(RowAssembly):
@@ -263,7 +248,7 @@ class _LocalAssembly(RowAssembly):
         # Jacobian: kernel entry (r, i) → (r0 + t m + r, x-slot of entry (i, s), w)
         jr, ji = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())
         e = len(jr)
-        self.jsrc.append(jfn.map(K)(Z).nz[:])
+        self.jsrc.append(ca.vec(jfn.map(K)(Z).nz[:]))
         pe, pt = np.nonzero(ji[:, None] == ti[None, :])  # pairs (kernel entry, template entry)
         col = slots[:, ts[pt]]  # K × n_pairs
         t = np.broadcast_to(np.arange(K)[:, None], col.shape)
@@ -287,7 +272,7 @@ class _LocalAssembly(RowAssembly):
         hs, blocks, off = [], [], 0
         for hfn, K, Z, r0, m, template, slots in self._fams:
             L = ca.reshape(lam_g[r0:r0 + m * K], m, K)
-            hs.append(hfn.map(K)(Z, L).nz[:])
+            hs.append(ca.vec(hfn.map(K)(Z, L).nz[:]))
             hi, hj = (np.asarray(v) for v in hfn.sparsity_out(0).get_triplet())
             e = len(hi)
             ti, ts, tw = template[:, 0].astype(int), template[:, 1].astype(int), template[:, 2]
@@ -313,6 +298,7 @@ class _LocalAssembly(RowAssembly):
 def _entry_pairs(hi: np.ndarray, hj: np.ndarray, ti: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For kernel-derivative entries ``(hi[e], hj[e])`` and template inputs ``ti``: every triple
     ``(e, a, b)`` with ``ti[a] == hi[e]`` and ``ti[b] == hj[e]`` (vectorised)."""
+    hi, hj = np.asarray(hi, int), np.asarray(hj, int)   # a linear kernel's Hessian has no entries
     order = np.argsort(ti, kind="stable")
     n_in = int(max(ti.max(), hi.max(initial=0), hj.max(initial=0))) + 1
     start = np.searchsorted(ti[order], np.arange(n_in), side="left")

@@ -226,6 +226,21 @@ class KernelCache:
 
         return (self._get(("jac", fn.name()), build_jac), self._get(("hess", fn.name()), build_hess))
 
+    def local_derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
+        """``(jac(z), hess(z, λ))`` of a kernel ``f(z)``: ``∂f/∂z`` and the upper triangle of
+        ``∂²(λᵀf)/∂z²`` (sparse)."""
+        def build_jac(name: str) -> ca.Function:
+            z = fn.sx_in(0)
+            return ca.Function(name, [z], [ca.jacobian(fn(z), z)])
+
+        def build_hess(name: str) -> ca.Function:
+            z = fn.sx_in(0)
+            r = fn(z)
+            lam = ca.SX.sym("lam", r.shape[0])
+            return ca.Function(name, [z, lam], [ca.triu(ca.hessian(ca.dot(lam, r), z)[0])])
+
+        return (self._get(("ljac", fn.name()), build_jac), self._get(("lhess_triu", fn.name()), build_hess))
+
     def closed_chain(self, cc: ClosedChain) -> ca.Function:
         rel = cc.relative
         assert rel is not None  # narrowing only: a ClosedChain without a relative pose failed below before too

@@ -35,8 +35,12 @@ from ..model.robot import RobotModel
 from ..solver_options import check_solve_arguments
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
+from .expressions import Parameter
 from .nlp import NlpSolver, SolveOutcome, SolverOptions
+from .problem_expr import ExpressionAPI
 from .solution import Solution
+from .spline_problem import ExprTerm, SplineEvaluator, knots_of
+from .spline_solve import SplineBackend
 from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
 from .transcription import Transcription
 
@@ -58,7 +62,7 @@ class TermHandle:
     weight: float = 1.0
 
 
-class OptProblem:
+class OptProblem(ExpressionAPI):
     """A trajectory optimization problem over ``n_intervals`` equal intervals.
 
     Parameters
@@ -71,11 +75,19 @@ class OptProblem:
         is at the start (zero momentum).
     n_sub: RK4 sub-steps per interval for the floating-base attitude (each adds 2 base-twist
         collocation points per interval).
+    transcription: ``"bspline"`` — the joint trajectory is a cubic B-spline and every term a
+        family of compiled per-point kernels (:mod:`.spline_core`; what expressions need);
+        ``"knots"`` — the knot transcription (:mod:`.transcription`: q, q̇, q̈, jerk per knot);
+        ``"auto"`` (default) — the B-spline whenever it has kernels for every term and N ≥ 4.
+    compile_kernels: the B-spline's kernels from C compiled once per robot and structure
+        (True: compile now where missing; "auto": use what an earlier run compiled, queue the
+        rest for a background compile; False: symbolic only).
     """
 
     def __init__(self, robot: RobotModel, n_intervals: int = 50, duration: float = 10.0, *,
                  free_time: bool = False, duration_bounds: tuple[float, float] = (1e-2, 1e4),
-                 base0: pin.SE3 | None = None, n_sub: int = 2):
+                 base0: pin.SE3 | None = None, n_sub: int = 2, transcription: str = "auto",
+                 compile_kernels: bool | str = "auto"):
         if int(n_intervals) < 1:
             raise ValueError(f"n_intervals: expected ≥ 1, got {n_intervals}")
         if not (np.isfinite(duration) and duration > 0):
@@ -95,7 +107,22 @@ class OptProblem:
         self._lam_g0: np.ndarray | None = None
         self._lam_x0: np.ndarray | None = None
         self._built: dict[str, Any] | None = None
-        self.tp = self._make_transcription()
+        if transcription not in ("auto", "bspline", "knots"):
+            raise OptionError(f"transcription: expected 'auto', 'bspline' or 'knots', got {transcription!r}")
+        if compile_kernels not in (True, False, "auto"):
+            raise OptionError(f"compile_kernels: expected True, False or 'auto', got {compile_kernels!r}")
+        self.transcription = transcription
+        self.compile_kernels = compile_kernels
+        self._tp: Transcription | None = None
+        self._params: list[Parameter] = []
+        self._spline = SplineBackend(self)
+
+    @property
+    def tp(self) -> Transcription:
+        """The knot transcription (made when first needed)."""
+        if self._tp is None:
+            self._tp = self._make_transcription()
+        return self._tp
 
     def _make_transcription(self) -> Transcription:
         quat0 = pin.SE3ToXYZQUAT(self.base0)[3:] if self.robot.is_floating else None
@@ -123,21 +150,52 @@ class OptProblem:
             final, i = f"{base}_{i}", i + 1
         h = TermHandle(final, term, role, float(weight))
         self._handles.append(h)
-        self._built = None
+        self._changed()
         return h
 
-    def add_cost(self, term: Term, weight: float = 1.0, name: str | None = None) -> TermHandle:
-        """Add ``weight · cost(term)`` to the objective; returns a named handle."""
-        return self._add(term, "cost", name, weight)
+    def _changed(self) -> None:
+        self._built = None
+        self._spline.core = None
 
-    def add_constraint(self, term: Term, name: str | None = None) -> TermHandle:
-        """Enforce ``lower ≤ residual ≤ upper`` of ``term``; returns a named handle."""
-        return self._add(term, "constraint", name, 1.0)
+    def add_cost(self, term: Any, weight: Any = 1.0, name: str | None = None, *,
+                 kind: str = "integral") -> TermHandle:
+        """Add ``weight · cost(term)`` to the objective; returns a named handle.
+
+        ``term`` may be an expression of the problem's quantities (``prob.qdd``,
+        ``prob.frame("a_ee").translation``, parameters): ``kind="integral"`` — ``weight · ∫ e dt``
+        (a vector expression: ``∫ ‖e‖² dt``; trapezoidal at the knots), ``kind="end"`` —
+        ``weight · e`` at T. ``weight`` may then be a parameter expression."""
+        if isinstance(term, Term):
+            return self._add(term, "cost", name, weight)
+        if kind not in ("integral", "end"):
+            raise OptionError(f"add_cost: kind: expected 'integral' or 'end', got {kind!r}")
+        if not isinstance(weight, ca.SX):
+            self._add(ExprTerm(expr=1.0), "cost", "__check__", weight)   # validates the weight
+            self._handles.pop()
+        return self._add(ExprTerm(expr=self._expression(term, "add_cost"), kind=kind, weight=weight), "cost", name, 1.0)
+
+    def add_constraint(self, term: Any, name: str | None = None, *, lower: Any = None, upper: Any = None,
+                       at: Any = "all") -> TermHandle:
+        """Enforce ``lower ≤ residual ≤ upper`` of ``term``; returns a named handle.
+
+        ``term`` may be an expression of the problem's quantities, with ``lower``/``upper``
+        (numbers, arrays or parameters; None: unbounded) at ``at``: "all" (every knot),
+        "start", "end", "interior" or knot indices."""
+        if isinstance(term, Term):
+            if lower is not None or upper is not None:
+                raise OptionError(f"add_constraint: {type(term).__name__} carries its own bounds; lower/upper are "
+                                  "for expressions")
+            return self._add(term, "constraint", name, 1.0)
+        if lower is None and upper is None:
+            raise OptionError("add_constraint: give lower and/or upper for an expression")
+        knots_of(at, self.N, name or "add_constraint")
+        return self._add(ExprTerm(expr=self._expression(term, "add_constraint"), lower=lower, upper=upper, at=at),
+                         "constraint", name, 1.0)
 
     def rebuild(self) -> None:
         """Rebuild the NLP at the next solve (after changing a term's settings, e.g. the
         collision pairs a :class:`CollisionAvoidance` activates)."""
-        self._built = None
+        self._changed()
 
     @property
     def terms(self) -> dict[str, TermHandle]:
@@ -154,8 +212,15 @@ class OptProblem:
           fixed-duration problem time-scales it to its own duration, a free-time one starts from
           the solution's).
         """
-        tp = self.tp
         Tg = float(T) if T is not None else self.duration
+        if solution is not None and solution.x_scale_h is None and solution.x is not None \
+                and len(solution.t) == self.N + 1 and isinstance(solution.evaluator, SplineEvaluator) \
+                and solution.evaluator.problem is self:
+            self._spline.x0 = np.array(solution.x, float)   # a solve of this problem: reused as it is
+            self._spline.lam = (solution.lam_g, solution.lam_x)
+            return
+        self._spline.x0 = self._spline.lam = None
+        tp = self.tp
         if solution is not None:
             same = (solution.x is not None and solution.x.size >= tp.x.shape[0] and len(solution.t) == self.N + 1
                     and solution.x_scale_h is not None and np.isclose(solution.x_scale_h, tp.h0, rtol=1e-12))
@@ -363,7 +428,7 @@ class OptProblem:
             raise TypeError(f"expected an optplan term (optplan.problem.terms), got {type(term).__name__}")
         new = TermHandle(old.name, term, old.role, old.weight)
         self._handles[self._handles.index(old)] = new
-        self._built = None
+        self._changed()
         return new
 
     def _reference_x(self) -> np.ndarray:
@@ -408,8 +473,6 @@ class OptProblem:
         :class:`~optplan.problem.nlp.SolverOptions`; its ``tol``/``max_iter``, when set, replace
         the arguments of the same name, its other fields and ``raw`` override the defaults.
         """
-        if self._x0 is None:
-            raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
         if options is not None and not isinstance(options, SolverOptions):
             raise OptionError(f"solve: options: expected a SolverOptions, got {type(options).__name__} {options!r}")
         if options is not None:
@@ -420,6 +483,11 @@ class OptProblem:
         sopts = SolverOptions.coerce(options if options is not None else ipopt_options)
         if options is not None and ipopt_options:
             sopts = sopts.replace(raw={**dict(ipopt_options), **dict(sopts.raw)})
+        if self._mode() == "bspline":
+            # exact Hessian from the kernels; the objective is scaled to 1 at the first guess
+            return self._spline.solve(tol, max_iter, sopts, self.compile_kernels)
+        if self._x0 is None:
+            raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
         t_setup = time.perf_counter()
         b = self._built or self._build()
         n_ineq = int(np.sum(b["lbg"] != b["ubg"]))
@@ -542,6 +610,8 @@ class OptProblem:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise ValueError(f"infeasibilities: n: expected an integer ≥ 0, got {n!r}")
         ev = sol.evaluator
+        if isinstance(ev, SplineEvaluator) and ev.problem is self:
+            return ev.infeasibilities(sol, int(n))
         if not isinstance(ev, TermEvaluator) or ev.problem is not self:
             raise ValueError("infeasibilities: the solution was not produced by this problem (or was loaded from "
                              "a file); solve this problem and pass its solution")
@@ -549,4 +619,8 @@ class OptProblem:
 
     @property
     def initial_guess(self) -> np.ndarray | None:
+        """The initial decision vector: a previous solution's of this problem (B-spline) as it
+        is, else the knot transcription's packed guess (None before ``set_initial``)."""
+        if self._spline.x0 is not None:
+            return np.array(self._spline.x0, float)
         return None if self._x0 is None else self._x0.copy()

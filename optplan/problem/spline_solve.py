@@ -1,0 +1,209 @@
+"""Build and solve an :class:`~optplan.problem.OptProblem` on the B-spline kernel core: the
+numbers of one solve (parameters, bounds, first guess) around the cached structure of
+:mod:`.spline_core`; a re-solve after ``set_value`` or ``set_initial(solution=...)`` only changes
+numbers."""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .bspline import knot_values
+from .expressions import Parameter
+from .nlp import NlpSolver, SolverOptions
+from .solution import Solution
+from .spline_core import Family, SplineCore
+from .spline_problem import SplineEvaluator, base_placements, families_of, seed_guess
+
+__all__ = ["SplineBackend"]
+
+
+class SplineBackend:
+    """The B-spline side of one problem: families (rebuilt when the terms change), parameters,
+    guess and solve."""
+
+    def __init__(self, prob: Any):
+        self.prob = prob
+        self.core: SplineCore | None = None
+        self.fams: list[Family] = []
+        self.owner: dict[str, list[str]] = {}
+        self.pbounds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self.x0: np.ndarray | None = None       # a guess in this core's variables
+        self.lam: tuple[Any, Any] | None = None
+        self.last_build_time = 0.0
+
+    # ------------------------------------------------------------------ structure
+    def prepare(self) -> None:
+        """Families of the problem's terms (raises spline_problem.Unsupported)."""
+        prob = self.prob
+        t0 = time.perf_counter()
+        params: list[Parameter] = prob._params
+        core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, sum(p.size for p in params))
+        self.fams, self.owner, self.pbounds = families_of(prob, core, params)
+        self.core = core
+        self.last_build_time = time.perf_counter() - t0
+
+    def _pvec(self, T: float, com0: np.ndarray, scale: float) -> np.ndarray:
+        core, prob = self.core, self.prob
+        assert core is not None
+        N = core.N
+        p = np.zeros(core.np)
+        p[core.p_s:core.p_s + N + 1] = np.arange(N + 1) / N
+        qw = np.ones(N + 1)
+        qw[[0, -1]] = 0.5
+        p[core.p_qw:core.p_qw + N + 1] = qw
+        p[core.p_one] = 1.0
+        p[core.p_T] = T
+        if core.fl:
+            p[core.p_xi0:core.p_xi0 + 4] = [0, 0, 0, 1.0]
+            p[core.p_b0:core.p_b0 + 4] = pin.Quaternion(prob.base0.rotation).coeffs()
+            p[core.p_c0:core.p_c0 + 3] = com0
+        off = core.p_par
+        for par in prob._params:
+            p[off:off + par.size] = np.asarray(par.value, float).ravel(order="F")
+            off += par.size
+        p[core.p_scale] = scale
+        return p
+
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        core, prob = self.core, self.prob
+        assert core is not None
+        lbx, ubx = np.full(core.nx, -np.inf), np.full(core.nx, np.inf)
+        nj = core.nj
+        for lo, hi in self.pbounds.values():
+            lbx[:core.nP] = np.maximum(lbx[:core.nP], np.tile(lo, core.N + 3))
+            ubx[:core.nP] = np.minimum(ubx[:core.nP], np.tile(hi, core.N + 3))
+        if core.free_time:
+            lbx[-1], ubx[-1] = prob.duration_bounds
+        assert nj > 0
+        return lbx, ubx
+
+    def _pinned(self) -> dict[int, np.ndarray]:
+        return self.prob._pinned_q()
+
+    def _com0(self, q_start: np.ndarray) -> np.ndarray:
+        prob = self.prob
+        if not prob.robot.is_floating:
+            return np.zeros(3)
+        model = prob.robot.model
+        c = pin.centerOfMass(model, model.createData(), np.r_[np.zeros(6), 1.0, q_start])
+        return prob.base0.translation + prob.base0.rotation @ c
+
+    def guess(self, T: float) -> np.ndarray:
+        """The guess in core variables: a previous solution's, the user's knots fitted, or seeded."""
+        core, prob = self.core, self.prob
+        assert core is not None
+        if self.x0 is not None and self.x0.size == core.nx:
+            return self.x0
+        if prob._x0 is not None:
+            u: dict[str, Any] = prob.tp.unpack(prob._x0)
+            Tg = float(u.get("T", T))
+            P = core.fit(u["q"], u["qd"][0], u["qd"][-1], Tg / core.N)
+            parts = [P.ravel()]
+            if core.fl:
+                parts.append(core.integrate_base(P))
+            if core.free_time:
+                parts.append(np.array([Tg]))
+            return np.concatenate(parts)
+        lbx, ubx = self._bounds()
+        lo, hi = lbx[:core.nj], ubx[:core.nj]
+        return seed_guess(core, self.fams, lambda q0: self._pvec(T, self._com0(q0) if q0 is not None else np.zeros(3),
+                                                                  1.0), T, lo, hi, self._pinned())
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, tol: float, max_iter: int, sopts: SolverOptions, compile_kernels: bool | str) -> Solution:
+        prob = self.prob
+        t_setup = time.perf_counter()
+        if self.core is None:
+            self.prepare()
+        core = self.core
+        assert core is not None
+        st = core.structure(self.fams, bool(self.pbounds), compile_kernels)
+        T = prob.duration
+        # the start configuration fixes the centre of mass of a floating robot: from the guess
+        x0 = self.guess(T)
+        p = self._pvec(T, self._com0(core.control_points(x0)[:3].T @ np.array([1, 4, 1]) / 6), 1.0)
+        f0 = abs(float(st["ffun"](x0, p)))
+        scale = 1.0 / f0 if np.isfinite(f0) and f0 > 1e-12 else 1.0
+        scale = float(10.0 ** (np.round(np.log10(np.clip(scale, 1e-8, 1e8)) * 2) / 2))
+        p[core.p_scale] = scale
+        lbx, ubx = self._bounds()
+        x0 = np.clip(x0, lbx, ubx)
+        lbg, ubg = core.row_bounds(st, self.fams)
+        n_ineq = int(np.sum(lbg != ubg))
+        defaults: dict[str, Any] = {
+            "ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
+            "ipopt.max_iter": int(max_iter),
+            "ipopt.mu_strategy": "adaptive" if n_ineq > 0.5 * (lbg.size - n_ineq) else "monotone",
+            "ipopt.jacobian_regularization_value": 1e-6}
+        if core.fl:
+            defaults.update({"ipopt.mumps_pivot_order": 6, "ipopt.mu_init": 1e-3})
+        warm = self.lam is not None and self.lam[0] is not None and np.size(self.lam[0]) == lbg.size \
+            and self.x0 is not None
+        if warm:
+            defaults.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
+                             "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
+                             "ipopt.warm_start_slack_bound_push": 1e-9})
+        okey = repr(sorted(sopts.casadi_options(defaults).items()))
+        solver = st["solvers"].get(okey)
+        setup = time.perf_counter() - t_setup
+        if solver is None:
+            extra = {**st["derivs"], "no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
+                     "calc_f": False, "calc_g": False}
+            solver = st["solvers"][okey] = NlpSolver("optproblem_spline", st["nlp"], sopts, defaults=defaults,
+                                                     casadi_options=extra)
+        args: dict[str, Any] = {}
+        if warm:
+            assert self.lam is not None
+            args["lam_g0"] = np.asarray(self.lam[0]) * scale   # the solver's multipliers are scaled
+            if self.lam[1] is not None and np.size(self.lam[1]) == core.nx:
+                args["lam_x0"] = np.asarray(self.lam[1]) * scale
+        out = solver.solve(x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, cost_scale=scale, extra_setup=setup, **args)
+        return self._solution(out, st, p, lbx, ubx, lbg, ubg, tol, scale)
+
+    def _solution(self, out: Any, st: dict[str, Any], p: np.ndarray, lbx: np.ndarray, ubx: np.ndarray,
+                  lbg: np.ndarray, ubg: np.ndarray, tol: float, scale: float) -> Solution:
+        core, prob = self.core, self.prob
+        assert core is not None
+        x = np.array(out.x, float)
+        g = np.array(st["gfun"](x, p)).ravel()
+        vv = np.maximum(np.maximum(lbg - g, g - ubg), 0.0)
+        viol = float(vv.max()) if vv.size else 0.0
+        viol = max(viol, float(np.max(np.maximum(np.maximum(lbx - x, x - ubx), 0.0))))
+        if not np.isfinite(viol):
+            viol = float("inf")
+        terms: dict[str, float] = {}
+        c = np.array(st["cfun"](x, p)).ravel()
+        for h in prob._handles:
+            fs = self.owner.get(h.name, [])
+            if h.role == "cost":
+                terms[h.name] = float(sum(c[st["cslices"][f]].sum() for f in fs))
+            else:
+                v = [float(vv[st["slices"][f]].max()) for f in fs if st["slices"][f].stop > st["slices"][f].start]
+                if h.name in self.pbounds:
+                    lo, hi = self.pbounds[h.name]
+                    P = core.control_points(x)
+                    v.append(float(np.max(np.maximum(np.maximum(lo - P, P - hi), 0.0))))
+                terms[h.name] = max(v) if v else 0.0
+        dyn = [float(vv[sl].max()) for n, sl in st["slices"].items()
+               if n.startswith(("momentum", "base_attitude_dynamics")) and sl.stop > sl.start]
+        terms["dynamics"] = max(dyn) if dyn else 0.0
+        T = float(x[-1]) if core.free_time else prob.duration
+        P = core.control_points(x)
+        kv = knot_values(P, T / core.N)
+        bq = bp = None
+        if core.fl:
+            bq, bp = base_placements(core, kv["q"], core.knot_xi(x), prob.base0, p[core.p_c0:core.p_c0 + 3])
+        success = bool(out.status.succeeded and viol <= max(tol, 1e-9) * 10)
+        self.x0, self.lam = None, None
+        ev = SplineEvaluator(prob, core, {**st, "lbg": lbg, "ubg": ubg}, self.fams, self.owner, self.pbounds, p)
+        lam_g = None if out.lam_g is None else np.asarray(out.lam_g) / scale   # multipliers of the unscaled cost
+        lam_x = None if out.lam_x is None else np.asarray(out.lam_x) / scale
+        return Solution(success=success, status=out.status, iterations=out.iterations, wall_time=out.wall_time,
+                        cost=out.cost, max_constraint_violation=viol, terms=terms,
+                        t=np.linspace(0.0, T, core.N + 1), q=kv["q"], qd=kv["qd"], qdd=kv["qdd"], jerk=kv["jerk"],
+                        joint_names=prob.robot.joint_names, base_quat=bq, base_position=bp, x=x,
+                        lam_g=lam_g, lam_x=lam_x, x_scale_h=None, setup_time=out.setup_time,
+                        cpu_time=out.cpu_time, attempts=(out,), evaluator=ev)
