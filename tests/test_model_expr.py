@@ -195,11 +195,8 @@ def test_bad_expressions_are_refused_by_name(tcb):
         prob.add_constraint(prob.q[0])
     with pytest.raises(ConfigurationError, match="knot indices"):
         prob.add_constraint(prob.q[0], lower=0, at=[99])
-    knots = OptProblem(tcb, n_intervals=6, duration=3.0, transcription="knots")
-    knots.add_constraint(prob.q[0], lower=0)
-    knots.set_initial(q=np.zeros((2, tcb.nj)))
-    with pytest.raises(ConfigurationError, match="B-spline"):
-        knots.solve()
+    with pytest.raises(ConfigurationError, match="n_intervals ≥ 4"):
+        OptProblem(tcb, n_intervals=3, duration=3.0, transcription="bspline").solve()
 
 
 def test_a_registered_quantity_is_one_function(tcb):
@@ -208,3 +205,29 @@ def test_a_registered_quantity_is_one_function(tcb):
     assert isinstance(prob.qd_squared, ca.SX) and prob.qd_squared.shape == (tcb.nj, 1)
     with pytest.raises(AttributeError):
         prob.no_such_quantity  # noqa: B018
+
+
+def test_expressions_on_the_knot_transcription_agree_with_the_bspline(tcb):
+    """The same one-line problem on both transcriptions (C2 cubics on the same grid): same
+    optimum; the expression's rows hold on each."""
+    rng = np.random.default_rng(4)
+    qa = tcb.random_joints(rng) * 0.3
+    qb = qa + 0.3
+    sols = {}
+    for tr in ("bspline", "knots"):
+        prob = OptProblem(tcb, n_intervals=8, duration=4.0, transcription=tr)
+        w = prob.parameter(1, 3.0)
+        prob.add_constraint(ca.vertcat(prob.q, prob.qd, prob.qdd), lower=np.r_[qa, 0 * qa, 0 * qa],
+                            upper=np.r_[qa, 0 * qa, 0 * qa], at="start")
+        prob.add_constraint(ca.vertcat(prob.q, prob.qd, prob.qdd), lower=np.r_[qb, 0 * qa, 0 * qa],
+                            upper=np.r_[qb, 0 * qa, 0 * qa], at="end")
+        h = prob.add_constraint(prob.qd[1], lower=-0.11, upper=0.11)
+        prob.add_cost(prob.qdd, weight=w)
+        if tr == "knots":
+            prob.set_initial_straight_line(qa, qb)
+        sol = prob.solve(tol=1e-9)
+        assert sol.success and prob.uses_bspline() == (tr == "bspline")
+        assert np.abs(sol.value(h)).max() <= 0.11 + 1e-8
+        sols[tr] = sol
+    assert sols["bspline"].cost == pytest.approx(sols["knots"].cost, rel=1e-5)
+    np.testing.assert_allclose(sols["bspline"].q, sols["knots"].q, atol=1e-5)

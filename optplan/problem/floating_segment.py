@@ -97,6 +97,7 @@ class FloatingKernels(KernelCache):
     ``∂²(λᵀf)/∂z²``. The kinematics are those of the base frame (base pose identity)."""
 
     _per_robot: weakref.WeakKeyDictionary[RobotModel, KernelCache] = weakref.WeakKeyDictionary()
+    _by_digest: weakref.WeakValueDictionary[bytes, KernelCache] = weakref.WeakValueDictionary()
 
     floating_base = True
     _digest_tag = b"floating-v1"

@@ -35,11 +35,12 @@ from ..model.robot import RobotModel
 from ..solver_options import check_solve_arguments
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
+from .expr_term import ExprTerm, knots_of
 from .expressions import Parameter
 from .nlp import NlpSolver, SolveOutcome, SolverOptions
 from .problem_expr import ExpressionAPI
 from .solution import Solution
-from .spline_problem import ExprTerm, SplineEvaluator, knots_of
+from .spline_problem import SplineEvaluator
 from .spline_solve import SplineBackend
 from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
 from .transcription import Transcription
@@ -172,7 +173,8 @@ class OptProblem(ExpressionAPI):
         if not isinstance(weight, ca.SX):
             self._add(ExprTerm(expr=1.0), "cost", "__check__", weight)   # validates the weight
             self._handles.pop()
-        return self._add(ExprTerm(expr=self._expression(term, "add_cost"), kind=kind, weight=weight), "cost", name, 1.0)
+        return self._add(ExprTerm(expr=self._expression(term, "add_cost"), kind=kind, weight=weight,
+                                  params=tuple(self._params)), "cost", name, 1.0)
 
     def add_constraint(self, term: Any, name: str | None = None, *, lower: Any = None, upper: Any = None,
                        at: Any = "all") -> TermHandle:
@@ -189,8 +191,8 @@ class OptProblem(ExpressionAPI):
         if lower is None and upper is None:
             raise OptionError("add_constraint: give lower and/or upper for an expression")
         knots_of(at, self.N, name or "add_constraint")
-        return self._add(ExprTerm(expr=self._expression(term, "add_constraint"), lower=lower, upper=upper, at=at),
-                         "constraint", name, 1.0)
+        return self._add(ExprTerm(expr=self._expression(term, "add_constraint"), lower=lower, upper=upper, at=at,
+                                  params=tuple(self._params)), "constraint", name, 1.0)
 
     def rebuild(self) -> None:
         """Rebuild the NLP at the next solve (after changing a term's settings, e.g. the
@@ -219,7 +221,7 @@ class OptProblem(ExpressionAPI):
             self._spline.x0 = np.array(solution.x, float)   # a solve of this problem: reused as it is
             self._spline.lam = (solution.lam_g, solution.lam_x)
             return
-        self._spline.x0 = self._spline.lam = None
+        self._spline.x0 = self._spline.lam = self._spline.scale = None
         tp = self.tp
         if solution is not None:
             same = (solution.x is not None and solution.x.size >= tp.x.shape[0] and len(solution.t) == self.N + 1

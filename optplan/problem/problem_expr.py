@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike
 from ..errors import ConfigurationError, OptionError
 from ..model.robot import RobotModel
 from .expressions import Base, Frame, Parameter, parameter_value, quantity, symbols_of
-from .spline_problem import ExprTerm, Unsupported
+from .spline_problem import Unsupported
 
 __all__ = ["ExpressionAPI"]
 
@@ -23,6 +23,7 @@ class ExpressionAPI:
 
     robot: RobotModel
     _params: list[Parameter]
+    _built: Any
     _handles: list[Any]
     _spline: Any
     transcription: str
@@ -108,6 +109,7 @@ class ExpressionAPI:
             if parameter is par.sym or (isinstance(parameter, ca.SX) and parameter.shape == par.sym.shape
                                         and ca.is_equal(parameter, par.sym)):
                 par.value = parameter_value(value, par.shape, "set_value: value")
+                self._built = None   # the knot transcription takes parameters as numbers
                 return
         raise OptionError(f"set_value: {parameter!r} is not a parameter of this problem (prob.parameter)")
 
@@ -116,11 +118,9 @@ class ExpressionAPI:
         return self._mode() == "bspline"
 
     def _mode(self) -> str:
-        expr = any(isinstance(h.term, ExprTerm) for h in self._handles)
-        if self.transcription == "knots" or (self.transcription == "auto" and self.N < 4 and not expr):
-            if expr:
-                raise ConfigurationError("expressions (prob.q, prob.frame(...), ...) need the B-spline "
-                                         "transcription; this problem has transcription='knots'")
+        """"bspline" or "knots" for the next solve (``transcription``; "auto": the B-spline
+        unless N < 4 or a term has no kernels there)."""
+        if self.transcription == "knots" or (self.transcription == "auto" and self.N < 4):
             return "knots"
         if self.N < 4:
             raise ConfigurationError(f"the B-spline transcription needs n_intervals ≥ 4, got {self.N}")
@@ -128,8 +128,8 @@ class ExpressionAPI:
             try:
                 self._spline.prepare()
             except Unsupported as exc:
-                if self.transcription == "bspline" or expr:
+                if self.transcription == "bspline":
                     raise ConfigurationError(f"the B-spline transcription has no kernels for {exc}; use "
-                                             "transcription='knots' (without expressions)") from None
+                                             "transcription='knots'") from None
                 return "knots"
         return "bspline"

@@ -85,6 +85,7 @@ class SplineCore:
         self.npar = int(npar)
         self.p_scale = self.p_par + self.npar
         self.np = self.p_scale + 1
+        self._input_maps: dict[tuple[int, Any], Any] = {}
 
     # ------------------------------------------------------------------ slots in [x; p]
     def slot_P(self, i: int) -> np.ndarray:
@@ -131,13 +132,15 @@ class SplineCore:
 
     def knot_inputs(self, x: np.ndarray, p: np.ndarray, k: int, cost: Any) -> np.ndarray:
         """The numeric kernel input of knot k (what the NLP feeds the kernel)."""
-        tm, _ = self.knot_template(cost)
-        xp = np.r_[x, p]
-        sl = self.knot_slots(k, cost)
-        z = np.zeros(int(tm[:, 0].max()) + 1)
-        for i, s, w in tm:
-            z[int(i)] += w * xp[sl[int(s)]]
-        return z
+        key = (k, cost)
+        W = self._input_maps.get(key)
+        if W is None:
+            tm, _ = self.knot_template(cost)
+            sl = self.knot_slots(k, cost)
+            W = self._input_maps[key] = sps.csr_matrix(
+                (tm[:, 2], (tm[:, 0].astype(int), sl[tm[:, 1].astype(int)])),
+                shape=(int(tm[:, 0].max()) + 1, self.nx + self.np))
+        return np.asarray(W @ np.r_[x, p]).ravel()
 
     def interval_template(self, kind: str) -> np.ndarray:
         nj = self.nj

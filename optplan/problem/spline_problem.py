@@ -4,7 +4,6 @@ rows (damped least squares on their own kernels: IK for frame targets) and, for 
 the zero-momentum base; the solution's rows are named in the user's language."""
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
@@ -15,6 +14,7 @@ from ..errors import ConfigurationError
 from ..geometry.spatial import pose_residual, vee_skew
 from ..geometry.splines import quintic_time_law
 from .evaluate import Infeasibility
+from .expr_term import ExprTerm, _bounds, knots_of
 from .expressions import Parameter, point_kernel
 from .frame_terms import BaseAttitude, ClosedChain, FramePose
 from .spline_core import Family, SplineCore
@@ -25,7 +25,6 @@ from .terms import (
     JointPositionLimits,
     JointVelocityLimits,
     Smoothness,
-    Term,
     _knots,
 )
 
@@ -36,91 +35,6 @@ _POSE = ("x", "y", "z", "rot_x", "rot_y", "rot_z", "trace")
 
 class Unsupported(Exception):
     """A term the B-spline core has no kernels for (the knot transcription takes the problem)."""
-
-
-@dataclass(eq=False)
-class ExprTerm(Term):
-    """A user expression (:mod:`.expressions`): a constraint ``lower ≤ expr ≤ upper`` at ``at``
-    or a cost ``weight · ∫ expr dt`` (``kind="integral"``, trapezoidal at the knots; a vector
-    expression's squared norm) or ``weight · expr(T)`` (``kind="end"``)."""
-
-    expr: Any = None
-    lower: Any = None
-    upper: Any = None
-    at: Any = "all"
-    kind: str = "constraint"
-    weight: Any = 1.0
-    default_name = "expr"
-
-    def _validate(self) -> None:
-        if self.kind not in ("constraint", "integral", "end"):
-            raise ConfigurationError(f"kind: expected 'integral' or 'end', got {self.kind!r}")
-
-    def rows(self, ctx: Any) -> Any:
-        raise ConfigurationError("expressions (prob.q, prob.frame(...), ...) are evaluated by the B-spline "
-                                 "transcription: use OptProblem(..., transcription='bspline')")
-
-    def cost_expr(self, ctx: Any) -> Any:
-        return self.rows(ctx)
-
-
-def knots_of(at: Any, N: int, what: str) -> list[int]:
-    """Knot indices of ``at``: "all", "start", "end", "interior", an index or a list."""
-    if isinstance(at, str):
-        table = {"all": list(range(N + 1)), "start": [0], "end": [N], "interior": list(range(1, N))}
-        if at not in table:
-            raise ConfigurationError(f"{what}: at: expected 'all', 'start', 'end', 'interior' or knot indices, "
-                                     f"got {at!r}")
-        return table[at]
-    ks = np.atleast_1d(np.asarray(at))
-    if ks.dtype.kind not in "iu" or ks.ndim != 1 or ks.size == 0 or ks.min() < -N - 1 or ks.max() > N:
-        raise ConfigurationError(f"{what}: at: expected knot indices in [0, {N}], got {at!r}")
-    return sorted({int(k) % (N + 1) for k in ks})
-
-
-def _bounds(term: ExprTerm, m: int, params: list[Parameter]) -> tuple[Any, np.ndarray, np.ndarray]:
-    """Rows and numeric bounds of a constraint expression; symbolic bounds (parameters) move
-    into the rows."""
-    expr = ca.vec(ca.SX(term.expr))
-    lo, hi = term.lower, term.upper
-    sym_lo = isinstance(lo, (ca.SX, Parameter))
-    sym_hi = isinstance(hi, (ca.SX, Parameter))
-    if isinstance(lo, Parameter):
-        lo = lo.sym
-    if isinstance(hi, Parameter):
-        hi = hi.sym
-    if sym_lo or sym_hi:
-        if lo is hi or (sym_lo and sym_hi and ca.is_equal(ca.SX(lo), ca.SX(hi), 2)):
-            return expr - ca.vec(ca.SX(lo)) * ca.DM.ones(m), np.zeros(m), np.zeros(m)
-        rows, l_, u_ = [], [], []
-        for b, sign in ((lo, 1.0), (hi, -1.0)):
-            if b is None:
-                continue
-            if isinstance(b, ca.SX):
-                rows.append(sign * (expr - ca.vec(b) * ca.DM.ones(m)))
-                l_.append(np.zeros(m))
-                u_.append(np.full(m, np.inf))
-            else:
-                bb = np.broadcast_to(np.asarray(b, float).ravel(order="F"), (m,))
-                rows.append(sign * expr)
-                l_.append(sign * bb)
-                u_.append(np.full(m, np.inf))
-        return ca.vertcat(*rows), np.concatenate(l_), np.concatenate(u_)
-
-    def num(b: Any, default: float) -> np.ndarray:
-        if b is None:
-            return np.full(m, default)
-        a = np.asarray(b, float).ravel(order="F")
-        if a.size not in (1, m) or np.any(np.isnan(a)):
-            raise ConfigurationError(f"bounds: expected a number or {m} numbers, got {b!r}")
-        return np.broadcast_to(a, (m,)).copy()
-
-    L, U = num(lo, -np.inf), num(hi, np.inf)
-    if lo is None and hi is None:
-        raise ConfigurationError("add_constraint: give lower and/or upper for an expression")
-    if np.any(L > U):
-        raise ConfigurationError(f"bounds: lower > upper at rows {np.flatnonzero(L > U).tolist()}")
-    return expr, L, U
 
 
 def families_of(prob: Any, core: SplineCore, params: list[Parameter]) -> tuple[list[Family], dict[str, list[str]],
@@ -320,6 +234,8 @@ def _dls(core: SplineCore, fams: list[Family], p: np.ndarray, T: float, k: int, 
             break
         dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(J.shape[0]), r)
         m = np.abs(dq).max()
+        if m < 1e-10:   # what is left does not depend on q here (e.g. the base attitude)
+            break
         if m > 0.3:
             dq *= 0.3 / m
         q = np.clip(q - dq, lower, upper)

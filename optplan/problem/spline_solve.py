@@ -32,6 +32,7 @@ class SplineBackend:
         self.pbounds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.x0: np.ndarray | None = None       # a guess in this core's variables
         self.lam: tuple[Any, Any] | None = None
+        self.scale: float | None = None          # the objective scale of the last solve
         self.last_build_time = 0.0
 
     # ------------------------------------------------------------------ structure
@@ -125,9 +126,12 @@ class SplineBackend:
         # the start configuration fixes the centre of mass of a floating robot: from the guess
         x0 = self.guess(T)
         p = self._pvec(T, self._com0(core.control_points(x0)[:3].T @ np.array([1, 4, 1]) / 6), 1.0)
-        f0 = abs(float(st["ffun"](x0, p)))
-        scale = 1.0 / f0 if np.isfinite(f0) and f0 > 1e-12 else 1.0
-        scale = float(10.0 ** (np.round(np.log10(np.clip(scale, 1e-8, 1e8)) * 2) / 2))
+        if self.x0 is not None and self.scale is not None:
+            scale = self.scale        # a previous solve's (its multipliers are in that scale)
+        else:
+            f0 = abs(float(st["ffun"](x0, p)))
+            scale = 1.0 / f0 if np.isfinite(f0) and f0 > 1e-12 else 1.0
+            scale = float(10.0 ** (np.round(np.log10(np.clip(scale, 1e-8, 1e8)) * 2) / 2))
         p[core.p_scale] = scale
         lbx, ubx = self._bounds()
         x0 = np.clip(x0, lbx, ubx)
@@ -197,7 +201,7 @@ class SplineBackend:
         if core.fl:
             bq, bp = base_placements(core, kv["q"], core.knot_xi(x), prob.base0, p[core.p_c0:core.p_c0 + 3])
         success = bool(out.status.succeeded and viol <= max(tol, 1e-9) * 10)
-        self.x0, self.lam = None, None
+        self.x0, self.lam, self.scale = None, None, scale
         ev = SplineEvaluator(prob, core, {**st, "lbg": lbg, "ubg": ubg}, self.fams, self.owner, self.pbounds, p)
         lam_g = None if out.lam_g is None else np.asarray(out.lam_g) / scale   # multipliers of the unscaled cost
         lam_x = None if out.lam_x is None else np.asarray(out.lam_x) / scale
