@@ -131,7 +131,9 @@ def segment_problem(robot: RobotModel, scene: Scene, q_start, q_end, n_intervals
     normals fixed when ``fixed_normals``), minimum jerk. The one builder of the transport NLP of
     the examples and of the pipeline's segments; returns ``(problem, collision term or None)``."""
     z = [0.0] * robot.nj
-    prob = OptProblem(robot, n_intervals=n_intervals, duration=duration)
+    # the knot transcription: collision avoidance has no kernels on OptProblem's B-spline core yet, and
+    # the pipeline's fallback is tuned on it (docs/decisions/0016-modelling-on-the-kernel-core.md)
+    prob = OptProblem(robot, n_intervals=n_intervals, duration=duration, transcription="knots")
     prob.add_constraint(JointBoundary("start", q=q_start, qd=z, qdd=z), name="start")
     prob.add_constraint(JointBoundary("end", q=q_end, qd=z, qdd=z), name=end_name)
     if closed_chain is not None:

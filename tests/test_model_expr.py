@@ -231,3 +231,15 @@ def test_expressions_on_the_knot_transcription_agree_with_the_bspline(tcb):
         sols[tr] = sol
     assert sols["bspline"].cost == pytest.approx(sols["knots"].cost, rel=1e-5)
     np.testing.assert_allclose(sols["bspline"].q, sols["knots"].q, atol=1e-5)
+
+
+def test_bench_modelling_refuses_an_unknown_task_and_formats_rows():
+    from optplan.bench.modelling import format_rows, main
+
+    with pytest.raises(SystemExit):
+        main(["--tasks", "reach,no_such_task"])
+    row = {"transcription": "bspline", "total_s": 1.0, "setup_s": 0.1, "solve_s": 0.8, "solve_cpu_s": 0.3,
+           "iterations": 23, "success": True, "hand_error_m": 2e-10, "resolve_overhead_s": 0.004,
+           "resolve_iterations": 0}
+    text = format_rows([{"task": "reach", "first": row, "warm": row}, {"task": "transport", "error": ["boom"]}])
+    assert "hand_error_m=2e-10" in text and "4.0 ms" in text and "error" in text

@@ -9,6 +9,8 @@ Tasks:
 
 * ``reach`` — free-floating ``eba_ffsr``: arm A's hand 0.3 m to a target in 20 s, arm B still,
   base attitude restored at the end (N = 20), written with expressions, no user guess.
+* ``reach_knots`` — the same on the knot transcription from a straight-line guess (the API
+  before the kernel core).
 * ``reach_free_time`` — the same with joint velocity/acceleration limits and free final time
   (minimum time plus a little jerk).
 * ``transport`` — the closed-chain transport (N = 50) with the shipped terms; ``transport_custom``:
@@ -30,11 +32,11 @@ import numpy as np
 
 __all__ = ["TASKS", "run_task", "run", "format_rows"]
 
-TASKS = ("reach", "reach_free_time", "transport", "transport_custom")
+TASKS = ("reach", "reach_knots", "reach_free_time", "transport", "transport_custom")
 Q0 = np.r_[[0.3, -0.6, 0.4, -1.2, 0.2, 0.7, 0.1] * 2]   # both arms of eba_ffsr, bent [rad]
 
 
-def _reach(free_time: bool) -> tuple[Any, Any]:
+def _reach(free_time: bool, transcription: str = "auto") -> tuple[Any, Any]:
     import pinocchio as pin
 
     from optplan import RobotModel
@@ -47,12 +49,14 @@ def _reach(free_time: bool) -> tuple[Any, Any]:
     pin.framesForwardKinematics(robot.model, data, robot.configuration(Q0))
     target = data.oMf[robot.model.getFrameId("a_ee")].translation + 0.3 * np.array([0.6, 0.0, 0.8])
     t0 = time.perf_counter()
-    prob = OptProblem(robot, n_intervals=20, duration=20.0, free_time=free_time, duration_bounds=(2.0, 60.0))
+    prob = OptProblem(robot, n_intervals=20, duration=20.0, free_time=free_time, duration_bounds=(2.0, 60.0),
+                      transcription=transcription)
     prob.add_constraint(prob.q, lower=Q0, upper=Q0, at="start")
     prob.add_constraint(prob.qd, lower=0, upper=0, at=[0, 20])
     prob.add_constraint(prob.qdd, lower=0, upper=0, at=[0, 20])
     prob.add_constraint(prob.qd[7:], lower=0, upper=0)                         # arm B still
-    prob.add_constraint(prob.frame("a_ee").translation, lower=target, upper=target, at="end")
+    goal = prob.parameter(3, target)                                            # a parameter: re-solves
+    prob.add_constraint(prob.frame("a_ee").translation - goal, lower=0, upper=0, at="end")
     prob.add_constraint(BaseAttitude(at="end"))
     if free_time:
         prob.add_constraint(JointVelocityLimits(limit=0.1))
@@ -61,6 +65,8 @@ def _reach(free_time: bool) -> tuple[Any, Any]:
         prob.add_cost(Smoothness("jerk"), weight=1e-2)
     else:
         prob.add_cost(Smoothness("jerk"))
+    if transcription == "knots":   # the knot transcription as before: a straight-line guess
+        prob.set_initial_straight_line(Q0, Q0)
     return prob, (robot, target, t0)
 
 
@@ -123,6 +129,7 @@ def run_task(name: str) -> dict[str, Any]:
     if name not in TASKS:
         raise ValueError(f"task: expected one of {TASKS}, got {name!r}")
     make, check = {"reach": (lambda: _reach(False), _check_reach),
+                   "reach_knots": (lambda: _reach(False, "knots"), _check_reach),
                    "reach_free_time": (lambda: _reach(True), _check_reach),
                    "transport": (lambda: _transport(False), _check_transport),
                    "transport_custom": (lambda: _transport(True), _check_transport)}[name]
@@ -138,11 +145,18 @@ def run_task(name: str) -> dict[str, Any]:
         built = time.perf_counter()
         sol = prob.solve()
         total = time.perf_counter() - t0
-        rows[run_] = {"total_s": total, "declare_s": built - t0, "setup_s": sol.setup_time, "solve_s": sol.wall_time,
+        rows[run_] = {"total_s": total, "declare_s": built - t0, "setup_s": sol.setup_time, "solve_s": sol.wall_time, "solve_cpu_s": sol.cpu_time,
                       "iterations": sol.iterations, "success": bool(sol.success), "status": sol.status.value,
                       "transcription": "bspline" if prob.uses_bspline() else "knots", **check(prob, sol, ctx)}
-        # a re-solve from the solution: what changing a parameter costs besides IPOPT
+        # re-solves: what a new parameter value / a warm start costs besides IPOPT
         if run_ == "warm" and prob.uses_bspline():
+            if prob._params:
+                prob.set_value(prob._params[0].sym, prob._params[0].value.ravel() + [0.0, 0.01, 0.0])
+                t1 = time.perf_counter()
+                s1 = prob.solve()
+                rows[run_]["set_value_overhead_s"] = time.perf_counter() - t1 - s1.wall_time
+                rows[run_]["set_value_iterations"] = s1.iterations
+                rows[run_]["set_value_success"] = bool(s1.success)
             prob.set_initial(solution=sol)
             t1 = time.perf_counter()
             s2 = prob.solve()
@@ -171,7 +185,8 @@ def run(tasks: list[str], cold: bool = True) -> list[dict[str, Any]]:
 
 
 def format_rows(rows: list[dict[str, Any]]) -> str:
-    lines = [f"{'task':18} {'run':6} {'tr':8} {'total s':>8} {'setup s':>8} {'solve s':>8} {'it':>4}  ok  check"]
+    lines = [f"{'task':18} {'run':6} {'tr':8} {'total s':>8} {'setup s':>8} {'solve s':>8} {'cpu s':>6} {'it':>4}  ok"
+             "  check"]
     for r in rows:
         if "error" in r:
             lines.append(f"{r['task']:18} error: {r['error']}")
@@ -180,10 +195,13 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
             x = r[run_]
             chk = ", ".join(f"{k}={v:.3g}" for k, v in x.items() if k.endswith(("_m", "_rad", "_cos", "residual",
                                                                                "_s2", "_rad_s")) or k == "duration_s")
-            extra = (f"; re-solve overhead {1e3 * x['resolve_overhead_s']:.1f} ms ({x['resolve_iterations']} it)"
-                     if "resolve_overhead_s" in x else "")
+            extra = (f"; re-solve from the solution: overhead {1e3 * x['resolve_overhead_s']:.1f} ms "
+                     f"({x['resolve_iterations']} it)" if "resolve_overhead_s" in x else "")
+            if "set_value_overhead_s" in x:
+                extra += (f"; after set_value (target +1 cm): overhead {1e3 * x['set_value_overhead_s']:.1f} ms "
+                          f"({x['set_value_iterations']} it, {'ok' if x['set_value_success'] else 'FAILED'})")
             lines.append(f"{r['task']:18} {run_:6} {x['transcription']:8} {x['total_s']:8.2f} {x['setup_s']:8.2f} "
-                         f"{x['solve_s']:8.2f} {x['iterations']:4d}  {'yes' if x['success'] else 'NO ':3} {chk}{extra}")
+                         f"{x['solve_s']:8.2f} {x['solve_cpu_s']:6.2f} {x['iterations']:4d}  {'yes' if x['success'] else 'NO ':3} {chk}{extra}")
     return "\n".join(lines)
 
 

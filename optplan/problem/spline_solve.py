@@ -33,6 +33,7 @@ class SplineBackend:
         self.x0: np.ndarray | None = None       # a guess in this core's variables
         self.lam: tuple[Any, Any] | None = None
         self.scale: float | None = None          # the objective scale of the last solve
+        self.last_x: np.ndarray | None = None    # the last converged solution (the next solve's start)
         self.last_build_time = 0.0
 
     # ------------------------------------------------------------------ structure
@@ -93,7 +94,8 @@ class SplineBackend:
         return prob.base0.translation + prob.base0.rotation @ c
 
     def guess(self, T: float) -> np.ndarray:
-        """The guess in core variables: a previous solution's, the user's knots fitted, or seeded."""
+        """The guess in core variables: a solution given to ``set_initial``, the user's knots
+        fitted, the last converged solution of this problem, or seeded from its rows."""
         core, prob = self.core, self.prob
         assert core is not None
         if self.x0 is not None and self.x0.size == core.nx:
@@ -108,6 +110,8 @@ class SplineBackend:
             if core.free_time:
                 parts.append(np.array([Tg]))
             return np.concatenate(parts)
+        if self.last_x is not None and self.last_x.size == core.nx:
+            return self.last_x     # a re-solve (e.g. after set_value) starts where the last one ended
         lbx, ubx = self._bounds()
         lo, hi = lbx[:core.nj], ubx[:core.nj]
         return seed_guess(core, self.fams, lambda q0: self._pvec(T, self._com0(q0) if q0 is not None else np.zeros(3),
@@ -202,6 +206,8 @@ class SplineBackend:
             bq, bp = base_placements(core, kv["q"], core.knot_xi(x), prob.base0, p[core.p_c0:core.p_c0 + 3])
         success = bool(out.status.succeeded and viol <= max(tol, 1e-9) * 10)
         self.x0, self.lam, self.scale = None, None, scale
+        if success:
+            self.last_x = x
         ev = SplineEvaluator(prob, core, {**st, "lbg": lbg, "ubg": ubg}, self.fams, self.owner, self.pbounds, p)
         lam_g = None if out.lam_g is None else np.asarray(out.lam_g) / scale   # multipliers of the unscaled cost
         lam_x = None if out.lam_x is None else np.asarray(out.lam_x) / scale
