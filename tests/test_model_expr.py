@@ -243,3 +243,31 @@ def test_bench_modelling_refuses_an_unknown_task_and_formats_rows():
            "resolve_iterations": 0}
     text = format_rows([{"task": "reach", "first": row, "warm": row}, {"task": "transport", "error": ["boom"]}])
     assert "hand_error_m=2e-10" in text and "4.0 ms" in text and "error" in text
+
+
+def test_transport_with_collision_and_two_custom_terms_on_the_kernel_core(tcb):
+    """The closed-chain transport (shipped terms, collision planes from the segment NLP's kernels)
+    plus "the object stays upright within 5°" and an acceleration cost, one line each: solved on
+    the B-spline core and checked independently (coal clearance and closed chain at 10× the knot
+    density; the upright row sampled between the knots)."""
+    from optplan.scene import Scene
+    from optplan.tasks import transport_initial_path, transport_problem
+    from optplan.verification import verify
+
+    scene = Scene.load("transport")
+    Q = transport_initial_path(tcb, scene, 16, np.random.default_rng(0))
+    assert Q is not None
+    prob, cc, _ = transport_problem(tcb, scene, Q, fixed_normals=True, transcription="auto")
+    G = scene.object.grasps["A"]
+    up = prob.add_constraint((prob.frame(_ee(tcb)).rotation @ ca.DM(G.rotation.T))[2, 2],
+                             lower=np.cos(np.radians(5.0)), name="upright")
+    prob.add_cost(prob.qdd, weight=1e-3, name="acceleration")
+    assert prob.uses_bspline()
+    sol = prob.solve()
+    assert sol.success, sol.status
+    rep = verify(tcb, sol, scene, closed_chain=cc)
+    assert rep.max_closed_chain_residual <= 1e-4 and rep.min_clearance_m >= 0.0   # chain: at the knots, ∝ h⁴ between
+    assert np.min(sol.value(up)) >= np.cos(np.radians(5.0)) - 1e-6
+    assert sol.terms["collision"] <= 1e-6
+    assert any(n.startswith("collision:") for n in prob._spline.owner["collision"])
+

@@ -13,8 +13,9 @@ Tasks:
   before the kernel core).
 * ``reach_free_time`` — the same with joint velocity/acceleration limits and free final time
   (minimum time plus a little jerk).
-* ``transport`` — the closed-chain transport (N = 50) with the shipped terms; ``transport_custom``:
-  the same plus two one-line terms: the object stays upright within 5° and an acceleration cost.
+* ``transport`` — the closed-chain transport (N = 50) with the shipped terms (collision planes
+  included) on the kernel core; ``transport_custom``: the same plus two one-line terms: the
+  object stays upright within 5° and an acceleration cost.
 
 rockit (``pip install rockit-meco``) is not run: see docs/decisions/0016-modelling-on-the-kernel-core.md.
 """
@@ -102,7 +103,7 @@ def _transport(custom: bool) -> tuple[Any, Any]:
     if Q is None:
         raise RuntimeError("transport: no initial path")
     t0 = time.perf_counter()
-    prob, cc, _ = transport_problem(robot, scene, Q)
+    prob, cc, _ = transport_problem(robot, scene, Q, fixed_normals=True, transcription="auto")
     if custom:
         assert scene.object is not None  # the transport scene holds an object
         G = scene.object.grasps["A"]

@@ -59,13 +59,16 @@ class Family:
     def rows_per_point(self) -> int:
         if self.kind == "velocity":
             return 2 * len(self.labels)
+        if self.kind == "pair":
+            return int(self.data["item"].nrow)
         return 1 if self.cost else int(self.lower.size)
 
 
 class SplineCore:
     """Layout, build and solve of one B-spline problem (see the module docstring)."""
 
-    def __init__(self, robot: RobotModel, N: int, free_time: bool, n_sub: int, npar: int):
+    def __init__(self, robot: RobotModel, N: int, free_time: bool, n_sub: int, npar: int, n_aux: int = 0,
+                 n_colp: int = 0):
         self.robot, self.N, self.free_time, self.n_sub = robot, int(N), bool(free_time), int(n_sub)
         self.sym: PointSymbols = symbols_of(robot)
         self.kc = self.sym.kc
@@ -75,6 +78,8 @@ class SplineCore:
         self.nP = (self.N + 3) * nj
         self.nW = 2 * self.n_sub * self.N + 1 if self.fl else 0
         self.nx = self.nP + (4 * self.N + 3 * self.nW if self.fl else 0) + (1 if self.free_time else 0)
+        self.x_aux = self.nx            # collision plane offsets of moving pairs (fixed T only)
+        self.nx += int(n_aux)
         N = self.N
         # p = [s (N+1) | qw (N+1) | one | T | xi0 (4) | base0 (4) | com0 (3) | params | scale]
         self.p_s, self.p_qw, self.p_one, self.p_T = 0, N + 1, 2 * N + 2, 2 * N + 3
@@ -84,7 +89,8 @@ class SplineCore:
         self.p_par = self.p_c0 + (3 if self.fl else 0)
         self.npar = int(npar)
         self.p_scale = self.p_par + self.npar
-        self.np = self.p_scale + 1
+        self.p_col = self.p_scale + 1   # collision plane normals and supports
+        self.np = self.p_col + int(n_colp)
         self._input_maps: dict[tuple[int, Any], Any] = {}
 
     # ------------------------------------------------------------------ slots in [x; p]
@@ -198,9 +204,14 @@ class SplineCore:
     # ------------------------------------------------------------------ build
     def structure(self, families: list[Family], P_bounded: bool, compiled: bool | str) -> Any:
         """The symbolic NLP of these families (memory cache per robot and structure)."""
+        state: Any = compiled
+        if compiled == "auto" and self.kc._dir is not None:   # which kernels an earlier run compiled
+            state = tuple(self.kc._dir.joinpath(f"{self.kc._name(('local', f.fn.name()))}-O1.so").exists()
+                          for f in families if f.fn is not None)
         key = ("optproblem_spline", self.kc._digest, self.N, self.n_sub, self.free_time, self.npar, P_bounded,
-               compiled, tuple((f.name, f.kind, None if f.fn is None else f.fn.name(), tuple(f.points), f.cost,
-                                None if f.kind != "velocity" else np.asarray(f.data, float).tobytes()) for f in families))
+               state, self.nx, self.np, tuple((f.name, f.kind, None if f.fn is None else f.fn.name(), tuple(f.points), f.cost,
+                                None if f.kind != "velocity" else np.asarray(f.data, float).tobytes(),
+                                f.data["item"].static if f.kind == "pair" else None) for f in families))
         st = self.kc.structure(key, lambda: self._build(families, compiled))
         kernel_compiler.launch()
         return st
@@ -235,13 +246,15 @@ class SplineCore:
             if fam.kind == "knot":
                 tm, _ = self.knot_template(fam.cost)
                 slots = np.array([self.knot_slots(k, fam.data if fam.cost else None) for k in fam.points])
+            elif fam.kind == "pair":
+                tm, slots = self._pair_slots(fam)
             else:
                 tm = self.interval_template(fam.kind)
                 slots = np.array([self.interval_slots(k) for k in fam.points])
             m = f.size1_out(0)
             K = len(fam.points)
-            lo = 0.0 if fam.cost else np.tile(fam.lower, K)
-            hi = 0.0 if fam.cost else np.tile(fam.upper, K)
+            lo = 0.0 if fam.cost or fam.kind == "pair" else np.tile(fam.lower, K)
+            hi = 0.0 if fam.cost or fam.kind == "pair" else np.tile(fam.upper, K)
             if m == 0:
                 continue
             target.family(fam.name, f, jf, hf, tm, slots, xp, lo, hi)
@@ -267,6 +280,20 @@ class SplineCore:
                 "slices": slices, "cslices": dict(casm.slices), "gfun": ca.Function("g", [x, p], [G]),
                 "cfun": ca.Function("c", [x, p], [C]), "ffun": ca.Function("f", [x, p], [fobj]),
                 "solvers": {}, "build_time": time.perf_counter() - t0}
+
+    def _pair_slots(self, fam: Family) -> tuple[np.ndarray, np.ndarray]:
+        """Template and slots of a collision pair's kernel ``f([q; n; s])`` at its knots."""
+        nj, nx = self.nj, self.nx
+        it, po, ao = fam.data["item"], fam.data["p_off"], fam.data["aux_off"]
+        K = len(fam.points)
+        tm = [(j, a * nj + j, w) for j in range(nj) for a, w in enumerate((1 / 6, 4 / 6, 1 / 6))]
+        tm += [(nj + c, 3 * nj + c, 1.0) for c in range(4)]
+        rows = []
+        for t, k in enumerate(fam.points):
+            n = nx + self.p_col + po + 3 * t + np.arange(3)
+            s = nx + self.p_col + po + 3 * K + t if it.static else self.x_aux + ao + t
+            rows.append(np.concatenate([self.slot_P(k), self.slot_P(k + 1), self.slot_P(k + 2), n, [s]]))
+        return np.array(tm, float), np.array(rows, int)
 
     def _dynamics(self, asm: _LocalAssembly, xp: ca.MX, compiled: bool | str) -> None:
         """Zero momentum at every twist point and the RK4 attitude steps (floating robots), from
@@ -311,6 +338,11 @@ class SplineCore:
         for fam in families:
             sl = st["slices"].get(fam.name)
             if sl is None or fam.cost or fam.kind == "velocity":
+                continue
+            if fam.kind == "pair":
+                it = fam.data["item"]
+                m = it.margins if it.static else it.margins / 2
+                lbg[sl], ubg[sl] = np.repeat(m, it.nrow), np.inf
                 continue
             K = len(fam.points)
             lbg[sl], ubg[sl] = np.tile(fam.lower, K), np.tile(fam.upper, K)

@@ -13,6 +13,7 @@ import pinocchio as pin
 from ..errors import ConfigurationError
 from ..geometry.spatial import pose_residual, vee_skew
 from ..geometry.splines import quintic_time_law
+from .collision_term import CollisionAvoidance
 from .evaluate import Infeasibility
 from .expr_term import ExprTerm, _bounds, knots_of
 from .expressions import Parameter, point_kernel
@@ -37,15 +38,17 @@ class Unsupported(Exception):
     """A term the B-spline core has no kernels for (the knot transcription takes the problem)."""
 
 
-def families_of(prob: Any, core: SplineCore, params: list[Parameter]) -> tuple[list[Family], dict[str, list[str]],
-                                                                                 dict[str, tuple[np.ndarray, np.ndarray]]]:
+def families_of(prob: Any, core: SplineCore, params: list[Parameter]
+                ) -> tuple[list[Family], dict[str, list[str]], dict[str, tuple[np.ndarray, np.ndarray]], list[Any]]:
     """Families of every term of ``prob`` (by handle name: the names of its families), and the
-    control-point bounds of position-limit terms. Raises :class:`Unsupported` for a term the
-    core has no kernels for."""
+    control-point bounds of position-limit terms, and the collision terms' handles (their
+    families need the first guess: :mod:`.spline_collision`). Raises :class:`Unsupported` for a
+    term the core has no kernels for."""
     robot, N, sym = prob.robot, prob.N, core.sym
     fams: list[Family] = []
     owner: dict[str, list[str]] = {}
     pbounds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    collisions: list[Any] = []
     jn = list(robot.joint_names)
     pinned = {}
     for h in prob._handles:
@@ -127,11 +130,17 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]) -> tuple[l
             E = ca.DM(t._target()).T @ sym.base_rotation()
             new.append(knot(name, ca.vertcat(vee_skew(E), ca.trace(E)), np.r_[0, 0, 0, 1.0],
                             np.r_[0, 0, 0, np.inf], _knots(t.at, N), ("rot_x", "rot_y", "rot_z", "trace")))
+        elif isinstance(t, CollisionAvoidance):
+            # the segment NLP's planes: fixed normals, its pair set (self-collision, held object)
+            if robot.is_floating or core.free_time or collisions or t.scene is None or not t.fixed_normals \
+                    or not t.self_collision or not t.held_object or t.margin_boost or t.activate_with:
+                raise Unsupported("CollisionAvoidance other than fixed normals on a fixed base with fixed T")
+            collisions.append(h)
         else:
             raise Unsupported(type(t).__name__)
         owner[name] = [f.name for f in new]
         fams += new
-    return fams, owner, pbounds
+    return fams, owner, pbounds, collisions
 
 
 def _base_frame(core: SplineCore, frame: str) -> tuple[Any, Any]:

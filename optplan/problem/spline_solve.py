@@ -15,7 +15,7 @@ from .expressions import Parameter
 from .nlp import NlpSolver, SolverOptions
 from .solution import Solution
 from .spline_core import Family, SplineCore
-from .spline_problem import SplineEvaluator, base_placements, families_of, seed_guess
+from .spline_problem import SplineEvaluator, _quintic, base_placements, families_of, seed_guess
 
 __all__ = ["SplineBackend"]
 
@@ -34,6 +34,8 @@ class SplineBackend:
         self.lam: tuple[Any, Any] | None = None
         self.scale: float | None = None          # the objective scale of the last solve
         self.last_x: np.ndarray | None = None    # the last converged solution (the next solve's start)
+        self.aux0, self.col_p = np.zeros(0), np.zeros(0)   # collision plane offsets / normals, supports
+        self.collision_model: Any = None
         self.last_build_time = 0.0
 
     # ------------------------------------------------------------------ structure
@@ -42,9 +44,36 @@ class SplineBackend:
         prob = self.prob
         t0 = time.perf_counter()
         params: list[Parameter] = prob._params
-        core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, sum(p.size for p in params))
-        self.fams, self.owner, self.pbounds = families_of(prob, core, params)
-        self.core = core
+        npar = sum(p.size for p in params)
+        core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar)
+        self.fams, self.owner, self.pbounds, cols = families_of(prob, core, params)
+        self.core, self.aux0, self.col_p = core, np.zeros(0), np.zeros(0)
+        if cols:   # the active pairs follow the first guess: plan them along it
+            from .spline_collision import plan_collision
+
+            x = self.guess(prob.duration)
+            Qk = core.M["q"] @ core.control_points(x)
+            lbx, ubx = self._bounds()
+            items, self.collision_model = plan_collision(prob, core, cols[0].term, Qk, lbx[:core.nj], ubx[:core.nj])
+            nb = sum(len(it.knots) for it in items if not it.static)
+            core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar, n_aux=nb,
+                              n_colp=sum(4 * len(it.knots) for it in items))
+            po = ao = 0
+            names, colp, aux = [], [], []
+            for it in items:
+                pair = it.name.removeprefix("collision:")
+                self.fams.append(Family(it.name, "pair", it.fn, it.knots,
+                                        labels=tuple(f"{pair}.point{i}" for i in range(it.nrow)),
+                                        data={"item": it, "p_off": po, "aux_off": ao}))
+                names.append(it.name)
+                colp += [it.normals.ravel(order="F"), it.offsets if it.static else np.zeros(len(it.knots))]
+                if not it.static:
+                    aux.append(it.offsets)
+                    ao += len(it.knots)
+                po += 4 * len(it.knots)
+            self.owner[cols[0].name] = names
+            self.core, self.aux0 = core, np.concatenate(aux) if aux else np.zeros(0)
+            self.col_p = np.concatenate(colp) if colp else np.zeros(0)
         self.last_build_time = time.perf_counter() - t0
 
     def _pvec(self, T: float, com0: np.ndarray, scale: float) -> np.ndarray:
@@ -67,6 +96,7 @@ class SplineBackend:
             p[off:off + par.size] = np.asarray(par.value, float).ravel(order="F")
             off += par.size
         p[core.p_scale] = scale
+        p[core.p_col:] = self.col_p
         return p
 
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -94,12 +124,20 @@ class SplineBackend:
         return prob.base0.translation + prob.base0.rotation @ c
 
     def guess(self, T: float) -> np.ndarray:
+        core = self.core
+        assert core is not None
+        x = self._guess(T)
+        n_aux = core.nx - core.x_aux
+        return x if x.size == core.nx else np.r_[x, self.aux0 if self.aux0.size == n_aux else np.zeros(n_aux)]
+
+    def _guess(self, T: float) -> np.ndarray:
         """The guess in core variables: a solution given to ``set_initial``, the user's knots
         fitted, the last converged solution of this problem, or seeded from its rows."""
         core, prob = self.core, self.prob
         assert core is not None
         if self.x0 is not None and self.x0.size == core.nx:
             return self.x0
+        nbase = core.x_aux     # the variables before the collision planes' offsets
         if prob._x0 is not None:
             u: dict[str, Any] = prob.tp.unpack(prob._x0)
             Tg = float(u.get("T", T))
@@ -111,7 +149,8 @@ class SplineBackend:
                 parts.append(np.array([Tg]))
             return np.concatenate(parts)
         if self.last_x is not None and self.last_x.size == core.nx:
-            return self.last_x     # a re-solve (e.g. after set_value) starts where the last one ended
+            return self.last_x
+        assert nbase == core.nx or not core.free_time     # a re-solve (e.g. after set_value) starts where the last one ended
         lbx, ubx = self._bounds()
         lo, hi = lbx[:core.nj], ubx[:core.nj]
         return seed_guess(core, self.fams, lambda q0: self._pvec(T, self._com0(q0) if q0 is not None else np.zeros(3),
@@ -133,7 +172,15 @@ class SplineBackend:
         if self.x0 is not None and self.scale is not None:
             scale = self.scale        # a previous solve's (its multipliers are in that scale)
         else:
-            f0 = abs(float(st["ffun"](x0, p)))
+            # the objective is scaled to 1 on the rest-to-rest quintic between the guess's end
+            # configurations (a planner path's jerk can be thousands of times the optimum's),
+            # else at the guess
+            Q = core.M["q"] @ core.control_points(x0)
+            xr = _quintic(core, Q[0], Q[-1], float(x0[core.nx - 1]) if core.free_time else T)
+            xr = np.r_[xr, x0[xr.size:]]
+            f0 = abs(float(st["ffun"](xr, p)))
+            if not (np.isfinite(f0) and f0 > 1e-12):
+                f0 = abs(float(st["ffun"](x0, p)))
             scale = 1.0 / f0 if np.isfinite(f0) and f0 > 1e-12 else 1.0
             scale = float(10.0 ** (np.round(np.log10(np.clip(scale, 1e-8, 1e8)) * 2) / 2))
         p[core.p_scale] = scale
@@ -148,6 +195,10 @@ class SplineBackend:
             "ipopt.jacobian_regularization_value": 1e-6}
         if core.fl:
             defaults.update({"ipopt.mumps_pivot_order": 6, "ipopt.mu_init": 1e-3})
+        if core.nx > core.x_aux or self.col_p.size:
+            # the segment NLP's settings for its plane rows (docs/decisions/0015-segment-nlp-stalls.md)
+            defaults.update({"ipopt.mu_strategy": "adaptive", "ipopt.theta_max_fact": 10.0,
+                             "ipopt.perturb_always_cd": "yes"})
         warm = self.lam is not None and self.lam[0] is not None and np.size(self.lam[0]) == lbg.size \
             and self.x0 is not None
         if warm:
