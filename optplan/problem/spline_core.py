@@ -18,6 +18,7 @@ problem of the same structure, or a re-solve after ``set_value``, builds nothing
 """
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -35,6 +36,7 @@ from .floating_segment import FloatingKernels, _LocalAssembly, spline_basis
 __all__ = ["Family", "SplineCore"]
 
 _ID_Q = np.array([0.0, 0.0, 0.0, 1.0])
+_FOUND_LIBS: set[str] = set()   # compiled kernel libraries seen in the cache (they are never removed)
 
 
 @dataclass
@@ -206,8 +208,7 @@ class SplineCore:
         """The symbolic NLP of these families (memory cache per robot and structure)."""
         state: Any = compiled
         if compiled == "auto" and self.kc._dir is not None:   # which kernels an earlier run compiled
-            state = tuple(self.kc._dir.joinpath(f"{self.kc._name(('local', f.fn.name()))}-O1.so").exists()
-                          for f in families if f.fn is not None)
+            state = tuple(self._compiled_exists(f.fn.name()) for f in families if f.fn is not None)
         key = ("optproblem_spline", self.kc._digest, self.N, self.n_sub, self.free_time, self.npar, P_bounded,
                state, self.nx, self.np, tuple((f.name, f.kind, None if f.fn is None else f.fn.name(), tuple(f.points), f.cost,
                                 None if f.kind != "velocity" else np.asarray(f.data, float).tobytes(),
@@ -280,6 +281,18 @@ class SplineCore:
                 "slices": slices, "cslices": dict(casm.slices), "gfun": ca.Function("g", [x, p], [G]),
                 "cfun": ca.Function("c", [x, p], [C]), "ffun": ca.Function("f", [x, p], [fobj]),
                 "solvers": {}, "build_time": time.perf_counter() - t0}
+
+    def _compiled_exists(self, name: str) -> bool:
+        """Whether the compiled library of local kernel ``name`` is in the cache (remembered once
+        found)."""
+        assert self.kc._dir is not None
+        lib = str(self.kc._dir.joinpath(f"{self.kc._name(('local', name))}-O1.so"))
+        if lib in _FOUND_LIBS:
+            return True
+        ok = os.path.exists(lib)
+        if ok:
+            _FOUND_LIBS.add(lib)
+        return ok
 
     def _pair_slots(self, fam: Family) -> tuple[np.ndarray, np.ndarray]:
         """Template and slots of a collision pair's kernel ``f([q; n; s])`` at its knots."""
