@@ -35,10 +35,9 @@ from ..model.robot import RobotModel
 from ..solver_options import check_solve_arguments
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
-from .expr_term import ExprTerm, knots_of
 from .expressions import Parameter
 from .nlp import NlpSolver, SolveOutcome, SolverOptions
-from .problem_expr import ExpressionAPI
+from .problem_expr import ExpressionAPI, check_weight
 from .solution import Solution
 from .spline_problem import SplineEvaluator
 from .spline_solve import SplineBackend
@@ -136,9 +135,7 @@ class OptProblem(ExpressionAPI):
             raise TypeError(f"expected an optplan term (optplan.problem.terms), got {type(term).__name__}")
         if role == "constraint" and term.cost_only:
             raise TypeError(f"{type(term).__name__} is a cost-only term; use add_cost")
-        if isinstance(weight, bool) or not isinstance(weight, (int, float, np.integer, np.floating)) \
-                or not np.isfinite(weight) or weight < 0:
-            raise OptionError(f"weight: expected a finite number ≥ 0, got {weight!r}")
+        check_weight(weight)
         for k, v in vars(term).items():   # poses given to a term (targets, relative poses) are true poses
             if isinstance(v, pin.SE3):
                 check_pose(v, f"{type(term).__name__}.{k}")
@@ -168,13 +165,7 @@ class OptProblem(ExpressionAPI):
         ``weight · e`` at T. ``weight`` may then be a parameter expression."""
         if isinstance(term, Term):
             return self._add(term, "cost", name, weight)
-        if kind not in ("integral", "end"):
-            raise OptionError(f"add_cost: kind: expected 'integral' or 'end', got {kind!r}")
-        if not isinstance(weight, ca.SX):
-            self._add(ExprTerm(expr=1.0), "cost", "__check__", weight)   # validates the weight
-            self._handles.pop()
-        return self._add(ExprTerm(expr=self._expression(term, "add_cost"), kind=kind, weight=weight,
-                                  params=tuple(self._params)), "cost", name, 1.0)
+        return self._add_expression("cost", term, name, kind=kind, weight=weight)
 
     def add_constraint(self, term: Any, name: str | None = None, *, lower: Any = None, upper: Any = None,
                        at: Any = "all") -> TermHandle:
@@ -188,11 +179,7 @@ class OptProblem(ExpressionAPI):
                 raise OptionError(f"add_constraint: {type(term).__name__} carries its own bounds; lower/upper are "
                                   "for expressions")
             return self._add(term, "constraint", name, 1.0)
-        if lower is None and upper is None:
-            raise OptionError("add_constraint: give lower and/or upper for an expression")
-        knots_of(at, self.N, name or "add_constraint")
-        return self._add(ExprTerm(expr=self._expression(term, "add_constraint"), lower=lower, upper=upper, at=at,
-                                  params=tuple(self._params)), "constraint", name, 1.0)
+        return self._add_expression("constraint", term, name, lower=lower, upper=upper, at=at)
 
     def rebuild(self) -> None:
         """Rebuild the NLP at the next solve (after changing a term's settings, e.g. the

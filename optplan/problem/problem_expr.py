@@ -12,10 +12,18 @@ from numpy.typing import ArrayLike
 
 from ..errors import ConfigurationError, OptionError
 from ..model.robot import RobotModel
+from .expr_term import ExprTerm, knots_of
 from .expressions import Base, Frame, Parameter, parameter_value, quantity, symbols_of
 from .spline_problem import Unsupported
 
-__all__ = ["ExpressionAPI"]
+__all__ = ["ExpressionAPI", "check_weight"]
+
+
+def check_weight(weight: Any) -> None:
+    """A cost weight: a finite number ≥ 0 (an OptionError naming it otherwise)."""
+    if isinstance(weight, bool) or not isinstance(weight, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(weight) or weight < 0:
+        raise OptionError(f"weight: expected a finite number ≥ 0, got {weight!r}")
 
 
 class ExpressionAPI:
@@ -31,6 +39,25 @@ class ExpressionAPI:
 
     def _changed(self) -> None:  # the problem's: forget what was built
         raise NotImplementedError
+
+    def _add(self, term: Any, role: str, name: str | None, weight: float) -> Any:  # the problem's
+        raise NotImplementedError
+
+    def _add_expression(self, role: str, e: Any, name: str | None, **kw: Any) -> Any:
+        """An :class:`ExprTerm` of expression ``e`` (``kw``: its bounds and knots, or its kind
+        and weight), checked and added under ``name``."""
+        what = "add_cost" if role == "cost" else "add_constraint"
+        if role == "cost":
+            if kw["kind"] not in ("integral", "end"):
+                raise OptionError(f"add_cost: kind: expected 'integral' or 'end', got {kw['kind']!r}")
+            if not isinstance(kw["weight"], ca.SX):
+                check_weight(kw["weight"])
+        else:
+            if kw["lower"] is None and kw["upper"] is None:
+                raise OptionError("add_constraint: give lower and/or upper for an expression")
+            knots_of(kw["at"], self.N, name or what)
+        term = ExprTerm(expr=self._expression(e, what), params=tuple(self._params), **kw)
+        return self._add(term, role, name, 1.0)
 
     def _expression(self, e: Any, what: str) -> ca.SX:
         if isinstance(e, Parameter):
