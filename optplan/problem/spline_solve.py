@@ -169,7 +169,8 @@ class SplineBackend:
         # the start configuration fixes the centre of mass of a floating robot: from the guess
         x0 = self.guess(T)
         p = self._pvec(T, self._com0(core.control_points(x0)[:3].T @ np.array([1, 4, 1]) / 6), 1.0)
-        if self.x0 is not None and self.scale is not None:
+        from_last = prob._x0 is None and self.last_x is not None and self.last_x.size == core.nx
+        if self.scale is not None and (self.x0 is not None or from_last):
             scale = self.scale        # a previous solve's (its multipliers are in that scale)
         else:
             # the objective is scaled to 1 on the rest-to-rest quintic between the guess's end
