@@ -161,6 +161,14 @@ def _cmd_bench_tcbirrt(args) -> int:
     return 0
 
 
+def _cmd_bench_modelling(args) -> int:
+    from .bench.modelling import main
+
+    argv = ["--tasks", args.tasks] + (["--warm-cache"] if args.warm_cache else []) + (["--json", args.json]
+                                                                                      if args.json else [])
+    return main(argv)
+
+
 def _cmd_bench_oc_rrt(args) -> int:
     from .bench.oc_rrt import command
 
@@ -451,6 +459,15 @@ def build_parser() -> argparse.ArgumentParser:
     rs.add_argument("--cases", default="free_end,end_constrained", help="comma-separated: free_end, end_constrained")
     rs.add_argument("--json", help="write the rows as JSON to this path")
     rs.set_defaults(func=_cmd_bench_restoration)
+
+    mo = bench.add_parser("modelling", help="problems written with the public OptProblem API (expressions, "
+                          "seeded guess): build and solve times, iterations, independent checks")
+    mo.add_argument("--tasks", default="reach,reach_knots,reach_free_time,transport,transport_custom",
+                    help="comma-separated: reach, reach_knots, reach_free_time, transport, transport_custom")
+    mo.add_argument("--warm-cache", action="store_true",
+                    help="keep the kernel cache (default: each task's first run with an empty cache)")
+    mo.add_argument("--json", help="write the rows as JSON to this path")
+    mo.set_defaults(func=_cmd_bench_modelling)
 
     tb = bench.add_parser("tcbirrt", help="TCBiRRT benchmark: planners x space-solar-power-station scenes x perturbed trials")
     tb.add_argument("--scene", default="1,2,3", help="comma-separated scenes (1, 2, 3 = ssps_scene1..3, names or TOML "

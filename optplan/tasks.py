@@ -122,7 +122,7 @@ def transport_initial_path(robot: RobotModel, scene: Scene, knots: int, rng: np.
 def segment_problem(robot: RobotModel, scene: Scene, q_start, q_end, n_intervals: int, duration: float, *,
                     closed_chain: ClosedChain | None = None, joint_limits=None, velocity_limits: bool = True,
                     collision: bool = True, margin: float = 0.02, object_arm: str | None = None,
-                    fixed_normals: bool | None = None, end_name: str = "end"
+                    fixed_normals: bool | None = None, end_name: str = "end", transcription: str = "knots"
                     ) -> tuple[OptProblem, CollisionAvoidance | None]:
     """The rest-to-rest NLP of one path segment: ``q_start`` → ``q_end`` at rest on
     ``n_intervals`` intervals over ``duration`` [s]; the ``closed_chain`` (when given), joint
@@ -131,7 +131,9 @@ def segment_problem(robot: RobotModel, scene: Scene, q_start, q_end, n_intervals
     normals fixed when ``fixed_normals``), minimum jerk. The one builder of the transport NLP of
     the examples and of the pipeline's segments; returns ``(problem, collision term or None)``."""
     z = [0.0] * robot.nj
-    prob = OptProblem(robot, n_intervals=n_intervals, duration=duration)
+    # the knot transcription by default: the pipeline's fallback is tuned on it (its retries change
+    # the collision term's pairs and normals; docs/decisions/0016-modelling-on-the-kernel-core.md)
+    prob = OptProblem(robot, n_intervals=n_intervals, duration=duration, transcription=transcription)
     prob.add_constraint(JointBoundary("start", q=q_start, qd=z, qdd=z), name="start")
     prob.add_constraint(JointBoundary("end", q=q_end, qd=z, qdd=z), name=end_name)
     if closed_chain is not None:
@@ -152,8 +154,9 @@ def segment_problem(robot: RobotModel, scene: Scene, q_start, q_end, n_intervals
 
 
 def transport_problem(robot: RobotModel, scene: Scene, Q: np.ndarray, *, duration: float = 60.0,
-                      margin: float = 0.02, velocity_limits: bool = True,
-                      collision: bool = True) -> tuple[OptProblem, ClosedChain, CollisionAvoidance | None]:
+                      margin: float = 0.02, velocity_limits: bool = True, collision: bool = True,
+                      fixed_normals: bool | None = None, transcription: str = "knots"
+                      ) -> tuple[OptProblem, ClosedChain, CollisionAvoidance | None]:
     """The closed-chain transport NLP on ``len(Q) − 1`` intervals (:func:`segment_problem`):
     boundary configurations of Q at rest, closed chain from the scene's grasps, joint position
     (and velocity) limits, collision avoidance with ``margin`` [m], minimum jerk; warm-started
@@ -162,6 +165,7 @@ def transport_problem(robot: RobotModel, scene: Scene, Q: np.ndarray, *, duratio
     arms = list(grasps)
     cc = ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
     prob, col = segment_problem(robot, scene, Q[0], Q[-1], len(Q) - 1, duration, closed_chain=cc,
-                                velocity_limits=velocity_limits, collision=collision, margin=margin, end_name="goal")
+                                velocity_limits=velocity_limits, collision=collision, margin=margin, end_name="goal",
+                                fixed_normals=fixed_normals, transcription=transcription)
     prob.set_initial(q=Q)
     return prob, cc, col

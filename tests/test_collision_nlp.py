@@ -283,7 +283,7 @@ def _transport_problem(tcb, transport, Q, **col_kw):
     """Rest-to-rest transport NLP through the knots Q: closed chain, limits, 20 mm collision
     margin, minimum jerk; returns (problem, closed chain, collision handle)."""
     z = np.zeros(tcb.nj)
-    prob = OptProblem(tcb, n_intervals=len(Q) - 1, duration=60.0)
+    prob = OptProblem(tcb, n_intervals=len(Q) - 1, duration=60.0, transcription="knots")  # its collision term
     prob.add_constraint(JointBoundary("start", q=Q[0], qd=z, qdd=z))
     prob.add_constraint(JointBoundary("end", q=Q[-1], qd=z, qdd=z))
     cc = ClosedChain.from_grasps(transport.object.grasps["A"], transport.object.grasps["B"])

@@ -10,7 +10,7 @@ import types
 import pytest
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
-PAGES = ["add_a_term.md", "add_a_planner.md", "architecture.md"]
+PAGES = ["add_a_term.md", "add_a_planner.md", "architecture.md", "tutorials/own-problem.md"]
 BLOCK = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
@@ -30,7 +30,7 @@ def test_code_blocks_run(page):
     if page != "architecture.md":
         assert blocks, f"{page}: no python code blocks"
     # a module of its own, registered while it runs (dataclasses look their module up in sys.modules)
-    module = types.ModuleType(f"_docs_{page.removesuffix('.md')}")
+    module = types.ModuleType("_docs_" + page.removesuffix(".md").replace("/", "_").replace("-", "_"))
     sys.modules[module.__name__] = module
     try:
         for i, code in enumerate(blocks):

@@ -452,13 +452,15 @@ def test_scaled_variables_round_trip_and_integration_rows_are_unit(tcb, ends):
 
 def test_solution_reuse_requires_the_same_scaling(tcb, ends):
     """A solution's raw vector is reused only by a problem with the same knots *and* interval;
-    otherwise it is resampled in physical units."""
+    otherwise it is resampled in physical units (the knot transcription's scaled variables)."""
     qa, qb = ends
     p = rest_to_rest(tcb, qa, qb, 8, "jerk", 3.0)
+    p.transcription = "knots"
     p.set_initial_straight_line(qa, qb)
     sol = p.solve()
     assert sol.success and sol.x_scale_h == pytest.approx(3.0 / 8)
     p2 = rest_to_rest(tcb, qa, qb, 8, "jerk", 6.0)
+    p2.transcription = "knots"
     p2.set_initial(solution=sol)
     u = p2.tp.unpack(p2.initial_guess)
     np.testing.assert_allclose(u["q"], sol.q, atol=1e-9)            # same shape in time

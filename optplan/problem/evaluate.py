@@ -38,8 +38,13 @@ class Infeasibility:
     lower: float
     upper: float
     violation: float
+    #: the row in the user's language (``closed_chain[k=12].rot_y at t=4.8 s``; "" when unnamed)
+    label: str = ""
 
     def __str__(self) -> str:
+        if self.label:
+            return (f"{self.label}: {self.value:.6g} not in [{self.lower:.6g}, {self.upper:.6g}] "
+                    f"(violation {self.violation:.3g})")
         at = "" if self.point is None else f" at {self.point}"
         return (f"{self.term}[{self.row}]{at}: {self.value:.6g} not in [{self.lower:.6g}, {self.upper:.6g}] "
                 f"(violation {self.violation:.3g})")

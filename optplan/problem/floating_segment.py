@@ -97,6 +97,7 @@ class FloatingKernels(KernelCache):
     ``∂²(λᵀf)/∂z²``. The kinematics are those of the base frame (base pose identity)."""
 
     _per_robot: weakref.WeakKeyDictionary[RobotModel, KernelCache] = weakref.WeakKeyDictionary()
+    _by_digest: weakref.WeakValueDictionary[bytes, KernelCache] = weakref.WeakValueDictionary()
 
     floating_base = True
     _digest_tag = b"floating-v1"
@@ -205,21 +206,6 @@ class FloatingKernels(KernelCache):
                 return cast("tuple[ca.Function, ...]", got)  # every entry compiled (checked above)
         return fns
 
-    def local_derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
-        """``(jac(z), hess(z, λ))`` of a kernel ``f(z)``: ``∂f/∂z`` and the upper triangle of
-        ``∂²(λᵀf)/∂z²`` (sparse)."""
-        def build_jac(name: str) -> ca.Function:
-            z = fn.sx_in(0)
-            return ca.Function(name, [z], [ca.jacobian(fn(z), z)])
-
-        def build_hess(name: str) -> ca.Function:
-            z = fn.sx_in(0)
-            r = fn(z)
-            lam = ca.SX.sym("lam", r.shape[0])
-            return ca.Function(name, [z, lam], [ca.triu(ca.hessian(ca.dot(lam, r), z)[0])])
-
-        return (self._get(("ljac", fn.name()), build_jac), self._get(("lhess_triu", fn.name()), build_hess))
-
 
 # --------------------------------------------------------------------------- assembly
 class _LocalAssembly(RowAssembly):
@@ -313,6 +299,7 @@ class _LocalAssembly(RowAssembly):
 def _entry_pairs(hi: np.ndarray, hj: np.ndarray, ti: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For kernel-derivative entries ``(hi[e], hj[e])`` and template inputs ``ti``: every triple
     ``(e, a, b)`` with ``ti[a] == hi[e]`` and ``ti[b] == hj[e]`` (vectorised)."""
+    hi, hj = np.asarray(hi, int), np.asarray(hj, int)   # a linear kernel's Hessian has no entries
     order = np.argsort(ti, kind="stable")
     n_in = int(max(ti.max(), hi.max(initial=0), hj.max(initial=0))) + 1
     start = np.searchsorted(ti[order], np.arange(n_in), side="left")

@@ -37,6 +37,7 @@ class KernelCache:
     of differentiating again (``disk=False``: memory only)."""
 
     _per_robot: weakref.WeakKeyDictionary[RobotModel, KernelCache] = weakref.WeakKeyDictionary()
+    _by_digest: weakref.WeakValueDictionary[bytes, KernelCache] = weakref.WeakValueDictionary()
 
     #: the base these kernels are for (:class:`~optplan.problem.floating_segment.FloatingKernels`
     #: is the free-floating subclass); added to the disk keys of a subclass
@@ -72,19 +73,24 @@ class KernelCache:
         return q
 
     def _robot_digest(self) -> bytes:
+        return self.kinematics_digest(self.robot)
+
+    @staticmethod
+    def kinematics_digest(robot: RobotModel) -> bytes:
+        """A hash of what the kernels of ``robot`` depend on (joints, frames)."""
         import hashlib
 
         from ..model.symbolic import _describe_joints
 
-        h = hashlib.sha1(str(self.robot.nj).encode())
-        for jt in _describe_joints(self.robot.model):
+        h = hashlib.sha1(str(robot.nj).encode())
+        for jt in _describe_joints(robot.model):
             if jt is None:
                 h.update(b"-")
                 continue
             h.update(repr((jt.kind, jt.parent, jt.q_index, jt.v_index, jt.scaling, jt.offset)).encode())
             for a in (jt.placement_R, jt.placement_p, jt.axis):
                 h.update(np.asarray(a, float).tobytes())
-        for f in self.robot.model.frames:
+        for f in robot.model.frames:
             h.update(repr((f.name, int(f.parentJoint))).encode() + np.asarray(f.placement.homogeneous).tobytes())
         return h.digest()
 
@@ -201,10 +207,17 @@ class KernelCache:
 
     @classmethod
     def of(cls, robot: RobotModel) -> KernelCache:
-        """The cache of ``robot`` (one per robot object)."""
+        """The cache of ``robot`` (one per robot object; a robot loaded again, with the same
+        kinematics, shares the cache of the first — its kernels and NLP structures)."""
         kc = cls._per_robot.get(robot)
         if kc is None:
-            kc = cls._per_robot[robot] = cls(robot)
+            if robot.is_floating != cls.floating_base:
+                return cls(robot)   # refused with the reason (the constructor's check)
+            digest = cls.kinematics_digest(robot) + cls._digest_tag
+            kc = cls._by_digest.get(digest)
+            if kc is None:
+                kc = cls._by_digest[digest] = cls(robot)
+            cls._per_robot[robot] = kc
         return kc
 
     def frame(self, fid: int) -> tuple[ca.SX, ca.SX]:
@@ -225,6 +238,21 @@ class KernelCache:
             return ca.Function(name, [q, n, s, lam], [ca.hessian(ca.dot(lam, r), q)[0]])
 
         return (self._get(("jac", fn.name()), build_jac), self._get(("hess", fn.name()), build_hess))
+
+    def local_derivatives(self, fn: ca.Function) -> tuple[ca.Function, ca.Function]:
+        """``(jac(z), hess(z, λ))`` of a kernel ``f(z)``: ``∂f/∂z`` and the upper triangle of
+        ``∂²(λᵀf)/∂z²`` (sparse)."""
+        def build_jac(name: str) -> ca.Function:
+            z = fn.sx_in(0)
+            return ca.Function(name, [z], [ca.jacobian(fn(z), z)])
+
+        def build_hess(name: str) -> ca.Function:
+            z = fn.sx_in(0)
+            r = fn(z)
+            lam = ca.SX.sym("lam", r.shape[0])
+            return ca.Function(name, [z, lam], [ca.triu(ca.hessian(ca.dot(lam, r), z)[0])])
+
+        return (self._get(("ljac", fn.name()), build_jac), self._get(("lhess_triu", fn.name()), build_hess))
 
     def closed_chain(self, cc: ClosedChain) -> ca.Function:
         rel = cc.relative

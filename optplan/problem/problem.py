@@ -36,9 +36,13 @@ from ..solver_options import check_solve_arguments
 from .boundary import pinned_collisions
 from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
+from .expressions import Parameter
 from .guarantees import GuaranteeOptions, enforce_between_knots
 from .nlp import IpoptStatus, NlpSolver, SolveOutcome, SolverOptions
+from .problem_expr import ExpressionAPI, check_weight
 from .solution import Solution
+from .spline_problem import SplineEvaluator
+from .spline_solve import SplineBackend
 from .terms import JointBoundary, JointPositionLimits, NumericTrajectory, Term
 from .transcription import Transcription
 
@@ -60,7 +64,7 @@ class TermHandle:
     weight: float = 1.0
 
 
-class OptProblem:
+class OptProblem(ExpressionAPI):
     """A trajectory optimization problem over ``n_intervals`` equal intervals.
 
     Parameters
@@ -73,11 +77,19 @@ class OptProblem:
         is at the start (zero momentum).
     n_sub: RK4 sub-steps per interval for the floating-base attitude (each adds 2 base-twist
         collocation points per interval).
+    transcription: ``"bspline"`` — the joint trajectory is a cubic B-spline and every term a
+        family of compiled per-point kernels (:mod:`.spline_core`; what expressions need);
+        ``"knots"`` — the knot transcription (:mod:`.transcription`: q, q̇, q̈, jerk per knot);
+        ``"auto"`` (default) — the B-spline whenever it has kernels for every term and N ≥ 4.
+    compile_kernels: the B-spline's kernels from C compiled once per robot and structure
+        (True: compile now where missing; "auto": use what an earlier run compiled, queue the
+        rest for a background compile; False: symbolic only).
     """
 
     def __init__(self, robot: RobotModel, n_intervals: int = 50, duration: float = 10.0, *,
                  free_time: bool = False, duration_bounds: tuple[float, float] = (1e-2, 1e4),
-                 base0: pin.SE3 | None = None, n_sub: int = 2):
+                 base0: pin.SE3 | None = None, n_sub: int = 2, transcription: str = "auto",
+                 compile_kernels: bool | str = "auto"):
         if not isinstance(robot, RobotModel):
             raise OptionError(f"OptProblem: robot: expected an optplan.RobotModel, got {type(robot).__name__}")
         n_intervals = check_int(n_intervals, "OptProblem: n_intervals (number of intervals)", minimum=1,
@@ -103,7 +115,22 @@ class OptProblem:
         self._lam_g0: np.ndarray | None = None
         self._lam_x0: np.ndarray | None = None
         self._built: dict[str, Any] | None = None
-        self.tp = self._make_transcription()
+        if transcription not in ("auto", "bspline", "knots"):
+            raise OptionError(f"transcription: expected 'auto', 'bspline' or 'knots', got {transcription!r}")
+        if compile_kernels not in (True, False, "auto"):
+            raise OptionError(f"compile_kernels: expected True, False or 'auto', got {compile_kernels!r}")
+        self.transcription = transcription
+        self.compile_kernels = compile_kernels
+        self._tp: Transcription | None = None
+        self._params: list[Parameter] = []
+        self._spline = SplineBackend(self)
+
+    @property
+    def tp(self) -> Transcription:
+        """The knot transcription (made when first needed)."""
+        if self._tp is None:
+            self._tp = self._make_transcription()
+        return self._tp
 
     def _make_transcription(self) -> Transcription:
         quat0 = pin.SE3ToXYZQUAT(self.base0)[3:] if self.robot.is_floating else None
@@ -116,9 +143,7 @@ class OptProblem:
             raise TypeError(f"expected an optplan term (optplan.problem.terms), got {type(term).__name__}")
         if role == "constraint" and term.cost_only:
             raise TypeError(f"{type(term).__name__} is a cost-only term; use add_cost")
-        if isinstance(weight, bool) or not isinstance(weight, (int, float, np.integer, np.floating)) \
-                or not np.isfinite(weight) or weight < 0:
-            raise OptionError(f"weight: expected a finite number ≥ 0, got {weight!r}")
+        check_weight(weight)
         for k, v in vars(term).items():   # poses given to a term (targets, relative poses) are true poses
             if isinstance(v, pin.SE3):
                 check_pose(v, f"{type(term).__name__}.{k}")
@@ -131,21 +156,43 @@ class OptProblem:
             final, i = f"{base}_{i}", i + 1
         h = TermHandle(final, term, role, float(weight))
         self._handles.append(h)
-        self._built = None
+        self._changed()
         return h
 
-    def add_cost(self, term: Term, weight: float = 1.0, name: str | None = None) -> TermHandle:
-        """Add ``weight · cost(term)`` to the objective; returns a named handle."""
-        return self._add(term, "cost", name, weight)
+    def _changed(self) -> None:
+        self._built = None
+        self._spline.core = None
 
-    def add_constraint(self, term: Term, name: str | None = None) -> TermHandle:
-        """Enforce ``lower ≤ residual ≤ upper`` of ``term``; returns a named handle."""
-        return self._add(term, "constraint", name, 1.0)
+    def add_cost(self, term: Any, weight: Any = 1.0, name: str | None = None, *,
+                 kind: str = "integral") -> TermHandle:
+        """Add ``weight · cost(term)`` to the objective; returns a named handle.
+
+        ``term`` may be an expression of the problem's quantities (``prob.qdd``,
+        ``prob.frame("a_ee").translation``, parameters): ``kind="integral"`` — ``weight · ∫ e dt``
+        (a vector expression: ``∫ ‖e‖² dt``; trapezoidal at the knots), ``kind="end"`` —
+        ``weight · e`` at T. ``weight`` may then be a parameter expression."""
+        if isinstance(term, Term):
+            return self._add(term, "cost", name, weight)
+        return self._add_expression("cost", term, name, kind=kind, weight=weight)
+
+    def add_constraint(self, term: Any, name: str | None = None, *, lower: Any = None, upper: Any = None,
+                       at: Any = "all") -> TermHandle:
+        """Enforce ``lower ≤ residual ≤ upper`` of ``term``; returns a named handle.
+
+        ``term`` may be an expression of the problem's quantities, with ``lower``/``upper``
+        (numbers, arrays or parameters; None: unbounded) at ``at``: "all" (every knot),
+        "start", "end", "interior" or knot indices."""
+        if isinstance(term, Term):
+            if lower is not None or upper is not None:
+                raise OptionError(f"add_constraint: {type(term).__name__} carries its own bounds; lower/upper are "
+                                  "for expressions")
+            return self._add(term, "constraint", name, 1.0)
+        return self._add_expression("constraint", term, name, lower=lower, upper=upper, at=at)
 
     def rebuild(self) -> None:
         """Rebuild the NLP at the next solve (after changing a term's settings, e.g. the
         collision pairs a :class:`CollisionAvoidance` activates)."""
-        self._built = None
+        self._changed()
 
     @property
     def terms(self) -> dict[str, TermHandle]:
@@ -162,8 +209,15 @@ class OptProblem:
           fixed-duration problem time-scales it to its own duration, a free-time one starts from
           the solution's).
         """
-        tp = self.tp
         Tg = check_real(T, "set_initial: T", minimum=0.0, strict_minimum=True, unit="s") if T is not None else self.duration
+        if solution is not None and solution.x_scale_h is None and solution.x is not None \
+                and len(solution.t) == self.N + 1 and isinstance(solution.evaluator, SplineEvaluator) \
+                and solution.evaluator.problem is self:
+            self._spline.x0 = np.array(solution.x, float)   # a solve of this problem: reused as it is
+            self._spline.lam = (solution.lam_g, solution.lam_x)
+            return
+        self._spline.x0 = self._spline.lam = self._spline.scale = None
+        tp = self.tp
         if solution is not None:
             same = (solution.x is not None and solution.x.size >= tp.x.shape[0] and len(solution.t) == self.N + 1
                     and solution.x_scale_h is not None and np.isclose(solution.x_scale_h, tp.h0, rtol=1e-12))
@@ -378,7 +432,7 @@ class OptProblem:
             raise TypeError(f"expected an optplan term (optplan.problem.terms), got {type(term).__name__}")
         new = TermHandle(old.name, term, old.role, old.weight)
         self._handles[self._handles.index(old)] = new
-        self._built = None
+        self._changed()
         return new
 
     def _reference_x(self) -> np.ndarray:
@@ -438,8 +492,6 @@ class OptProblem:
         :class:`~optplan.problem.nlp.SolverOptions`; its ``tol``/``max_iter``, when set, replace
         the arguments of the same name, its other fields and ``raw`` override the defaults.
         """
-        if self._x0 is None:
-            raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
         if options is not None and not isinstance(options, SolverOptions):
             raise OptionError(f"solve: options: expected a SolverOptions, got {type(options).__name__} {options!r}")
         if options is not None:
@@ -450,6 +502,11 @@ class OptProblem:
         sopts = SolverOptions.coerce(options if options is not None else ipopt_options)
         if options is not None and ipopt_options:
             sopts = sopts.replace(raw={**dict(ipopt_options), **dict(sopts.raw)})
+        if self._mode() == "bspline":
+            # exact Hessian from the kernels; the objective is scaled to 1 at the first guess
+            return self._spline.solve(tol, max_iter, sopts, self.compile_kernels)
+        if self._x0 is None:
+            raise ValueError("no initial guess: call set_initial(...) or set_initial_straight_line(...) first")
         t_setup = time.perf_counter()
         b = self._built or self._build()
         clash = pinned_collisions(self, b, self.BOUNDARY_PENETRATION_TOL)
@@ -581,6 +638,8 @@ class OptProblem:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise ValueError(f"infeasibilities: n: expected an integer ≥ 0, got {n!r}")
         ev = sol.evaluator
+        if isinstance(ev, SplineEvaluator) and ev.problem is self:
+            return ev.infeasibilities(sol, int(n))
         if not isinstance(ev, TermEvaluator) or ev.problem is not self:
             raise ValueError("infeasibilities: the solution was not produced by this problem (or was loaded from "
                              "a file); solve this problem and pass its solution")
@@ -588,4 +647,8 @@ class OptProblem:
 
     @property
     def initial_guess(self) -> np.ndarray | None:
+        """The initial decision vector: a previous solution's of this problem (B-spline) as it
+        is, else the knot transcription's packed guess (None before ``set_initial``)."""
+        if self._spline.x0 is not None:
+            return np.array(self._spline.x0, float)
         return None if self._x0 is None else self._x0.copy()

@@ -127,7 +127,8 @@ def build_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None 
     o = options or (NLPOptions.end_constrained() if scenario.closed_chain else NLPOptions.free_end())
     if o.transcription == "bspline":
         return _build_spline(robot, scenario, o)
-    prob = OptProblem(robot, o.n_intervals, o.duration, n_sub=o.n_sub)
+    # the paper's reproduction as measured (knots); "bspline" above is the kernel NLP
+    prob = OptProblem(robot, o.n_intervals, o.duration, n_sub=o.n_sub, transcription="knots")
     zero = np.zeros(robot.nj)
     prob.add_constraint(JointBoundary("start", q=scenario.theta0, qd=zero, qdd=zero))
     prob.add_constraint(JointBoundary("end", q=scenario.thetaf, qd=zero, qdd=zero))

@@ -492,7 +492,8 @@ def optimize(robot: RobotModel, task: SplineRRTTask, hands: dict, T: float, warm
     )
 
     o = options or OptimizeOptions()
-    prob = OptProblem(robot, o.n_intervals, T, n_sub=o.n_sub)
+    # the reproduction as measured on the knot transcription
+    prob = OptProblem(robot, o.n_intervals, T, n_sub=o.n_sub, transcription="knots")
     zero = np.zeros(robot.nj)
     prob.add_constraint(JointBoundary("start", q=task.q_start, qd=zero, qdd=zero))
     prob.add_constraint(JointBoundary("end", qd=zero))

@@ -1,0 +1,235 @@
+"""``optplan bench modelling``: trajectory problems a user writes with the public
+:class:`~optplan.problem.OptProblem` API — build and solve times, IPOPT iterations and an
+independent check of the result (Pinocchio, coal). Per task, in a new process: ``first`` — the
+first problem (by default with an empty kernel cache: symbolic kernels, nothing compiled);
+``warm`` — a second problem of the same structure after its kernels were compiled into the cache
+(what every later run of a script sees), and a re-solve from its solution.
+
+Tasks:
+
+* ``reach`` — free-floating ``eba_ffsr``: arm A's hand 0.3 m to a target in 20 s, arm B still,
+  base attitude restored at the end (N = 20), written with expressions, no user guess.
+* ``reach_knots`` — the same on the knot transcription from a straight-line guess (the API
+  before the kernel core).
+* ``reach_free_time`` — the same with joint velocity/acceleration limits and free final time
+  (minimum time plus a little jerk).
+* ``transport`` — the closed-chain transport (N = 50) with the shipped terms (collision planes
+  included) on the kernel core; ``transport_custom``: the same plus two one-line terms: the
+  object stays upright within 5° and an acceleration cost.
+
+rockit (``pip install rockit-meco``) is not run: see docs/decisions/0016-modelling-on-the-kernel-core.md.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Any
+
+import numpy as np
+
+__all__ = ["TASKS", "run_task", "run", "format_rows"]
+
+TASKS = ("reach", "reach_knots", "reach_free_time", "transport", "transport_custom")
+Q0 = np.r_[[0.3, -0.6, 0.4, -1.2, 0.2, 0.7, 0.1] * 2]   # both arms of eba_ffsr, bent [rad]
+
+
+def _reach(free_time: bool, transcription: str = "auto") -> tuple[Any, Any]:
+    import pinocchio as pin
+
+    from optplan import RobotModel
+    from optplan.problem import OptProblem
+    from optplan.problem.frame_terms import BaseAttitude
+    from optplan.problem.terms import Duration, JointAccelerationLimits, JointVelocityLimits, Smoothness
+
+    robot = RobotModel.from_name("eba_ffsr")
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.configuration(Q0))
+    target = data.oMf[robot.model.getFrameId("a_ee")].translation + 0.3 * np.array([0.6, 0.0, 0.8])
+    t0 = time.perf_counter()
+    prob = OptProblem(robot, n_intervals=20, duration=20.0, free_time=free_time, duration_bounds=(2.0, 60.0),
+                      transcription=transcription)
+    prob.add_constraint(prob.q, lower=Q0, upper=Q0, at="start")
+    prob.add_constraint(prob.qd, lower=0, upper=0, at=[0, 20])
+    prob.add_constraint(prob.qdd, lower=0, upper=0, at=[0, 20])
+    prob.add_constraint(prob.qd[7:], lower=0, upper=0)                         # arm B still
+    goal = prob.parameter(3, target)                                            # a parameter: re-solves
+    prob.add_constraint(prob.frame("a_ee").translation - goal, lower=0, upper=0, at="end")
+    prob.add_constraint(BaseAttitude(at="end"))
+    if free_time:
+        prob.add_constraint(JointVelocityLimits(limit=0.1))
+        prob.add_constraint(JointAccelerationLimits(limit=0.02))
+        prob.add_cost(Duration())
+        prob.add_cost(Smoothness("jerk"), weight=1e-2)
+    else:
+        prob.add_cost(Smoothness("jerk"))
+    if transcription == "knots":   # the knot transcription as before: a straight-line guess
+        prob.set_initial_straight_line(Q0, Q0)
+    return prob, (robot, target, t0)
+
+
+def _check_reach(prob: Any, sol: Any, ctx: Any) -> dict[str, float]:
+    import pinocchio as pin
+
+    robot, target, _ = ctx
+    data = robot.model.createData()
+    qf = np.r_[sol.base_position[-1], sol.base_quat[-1], sol.q[-1]]
+    pin.framesForwardKinematics(robot.model, data, qf)
+    hand = float(np.linalg.norm(data.oMf[robot.model.getFrameId("a_ee")].translation - target))
+    R = pin.Quaternion(sol.base_quat[-1][3], *sol.base_quat[-1][:3]).toRotationMatrix()
+    ts = np.linspace(0, sol.duration, 10 * (len(sol.t) - 1) + 1)
+    smp = sol.sample(ts)
+    out = {"hand_error_m": hand, "base_attitude_error_rad": float(np.linalg.norm(pin.log3(R))),
+           "arm_b_motion_rad": float(np.abs(smp["q"][:, 7:] - Q0[7:]).max()), "duration_s": sol.duration}
+    if prob.free_time:
+        out["max_velocity_rad_s"] = float(np.abs(smp["qd"]).max())
+        out["max_acceleration_rad_s2"] = float(np.abs(smp["qdd"]).max())
+    return out
+
+
+def _transport(custom: bool) -> tuple[Any, Any]:
+    import casadi as ca
+
+    from optplan import RobotModel
+    from optplan.scene import Scene
+    from optplan.tasks import transport_initial_path, transport_problem
+
+    robot = RobotModel.from_name("tcbirrt_dual_arm")
+    scene = Scene.load("transport")
+    Q = transport_initial_path(robot, scene, 50, np.random.default_rng(0))
+    if Q is None:
+        raise RuntimeError("transport: no initial path")
+    t0 = time.perf_counter()
+    prob, cc, _ = transport_problem(robot, scene, Q, fixed_normals=True, transcription="auto")
+    if custom:
+        assert scene.object is not None  # the transport scene holds an object
+        G = scene.object.grasps["A"]
+        R_obj = prob.frame(robot.model.frames[robot.arm("A").ee_frame_id].name).rotation @ ca.DM(G.rotation.T)
+        prob.add_constraint(R_obj[2, 2], lower=np.cos(np.radians(5.0)), name="upright")   # one line
+        prob.add_cost(prob.qdd, weight=1e-3, name="acceleration")                       # one line
+    return prob, (robot, scene, cc, t0)
+
+
+def _check_transport(prob: Any, sol: Any, ctx: Any) -> dict[str, float]:
+    from optplan.verification import verify
+
+    robot, scene, cc, _ = ctx
+    rep = verify(robot, sol, scene, closed_chain=cc)
+    out = {"closed_chain_residual": float(rep.max_closed_chain_residual), "min_clearance_m": float(rep.min_clearance_m)}
+    if "upright" in prob.terms:
+        ts = np.linspace(0, sol.duration, 10 * (len(sol.t) - 1) + 1)
+        out["min_upright_cos"] = float(np.min(sol.sample(ts, "upright")))
+    return out
+
+
+def run_task(name: str) -> dict[str, Any]:
+    """Build and solve task ``name`` twice in this process (the second: warm); the figures of both."""
+    if name not in TASKS:
+        raise ValueError(f"task: expected one of {TASKS}, got {name!r}")
+    make, check = {"reach": (lambda: _reach(False), _check_reach),
+                   "reach_knots": (lambda: _reach(False, "knots"), _check_reach),
+                   "reach_free_time": (lambda: _reach(True), _check_reach),
+                   "transport": (lambda: _transport(False), _check_transport),
+                   "transport_custom": (lambda: _transport(True), _check_transport)}[name]
+    rows = {}
+    for run_ in ("first", "warm"):
+        if run_ == "warm":   # the kernels of this structure compiled into the cache (not timed)
+            prob, ctx = make()
+            if prob.uses_bspline():
+                prob.compile_kernels = True
+                prob.solve()
+        prob, ctx = make()
+        t0 = ctx[-1]
+        built = time.perf_counter()
+        sol = prob.solve()
+        total = time.perf_counter() - t0
+        rows[run_] = {"total_s": total, "declare_s": built - t0, "setup_s": sol.setup_time, "solve_s": sol.wall_time, "solve_cpu_s": sol.cpu_time,
+                      "iterations": sol.iterations, "success": bool(sol.success), "status": sol.status.value,
+                      "transcription": "bspline" if prob.uses_bspline() else "knots", **check(prob, sol, ctx)}
+        # re-solves: what a new parameter value / a warm start costs besides IPOPT
+        if run_ == "warm" and prob.uses_bspline():
+            prob.set_initial(solution=sol)
+            t1 = time.perf_counter()
+            s2 = prob.solve()
+            rows[run_]["resolve_overhead_s"] = time.perf_counter() - t1 - s2.wall_time
+            rows[run_]["resolve_iterations"] = s2.iterations
+            if prob._params:
+                prob.set_value(prob._params[0].sym, prob._params[0].value.ravel() + [0.0, 0.01, 0.0])
+                t1 = time.perf_counter()
+                s1 = prob.solve()
+                rows[run_]["set_value_overhead_s"] = time.perf_counter() - t1 - s1.wall_time
+                rows[run_]["set_value_iterations"] = s1.iterations
+                rows[run_]["set_value_success"] = bool(s1.success)
+    return {"task": name, **rows}
+
+
+def run(tasks: list[str], cold: bool = True) -> list[dict[str, Any]]:
+    """Each task in a new process (``cold``: with an empty ``OPTPLAN_CACHE``, background compiles
+    off), its first and warm figures."""
+    out = []
+    for t in tasks:
+        env = dict(os.environ)
+        with tempfile.TemporaryDirectory() as tmp:
+            if cold:
+                env["OPTPLAN_CACHE"] = tmp
+                env["OPTPLAN_BACKGROUND_COMPILE"] = "0"
+            p = subprocess.run([sys.executable, "-m", "optplan.bench.modelling", "--one", t], env=env,
+                               capture_output=True, text=True, check=False)
+        if p.returncode != 0:
+            out.append({"task": t, "error": (p.stderr or p.stdout).strip().splitlines()[-1:]})
+            continue
+        out.append(json.loads(p.stdout.strip().splitlines()[-1]))
+    return out
+
+
+def format_rows(rows: list[dict[str, Any]]) -> str:
+    lines = [f"{'task':18} {'run':6} {'tr':8} {'total s':>8} {'setup s':>8} {'solve s':>8} {'cpu s':>6} {'it':>4}  ok"
+             "  check"]
+    for r in rows:
+        if "error" in r:
+            lines.append(f"{r['task']:18} error: {r['error']}")
+            continue
+        for run_ in ("first", "warm"):
+            x = r[run_]
+            chk = ", ".join(f"{k}={v:.3g}" for k, v in x.items() if k.endswith(("_m", "_rad", "_cos", "residual",
+                                                                               "_s2", "_rad_s")) or k == "duration_s")
+            extra = (f"; re-solve from the solution: overhead {1e3 * x['resolve_overhead_s']:.1f} ms "
+                     f"({x['resolve_iterations']} it)" if "resolve_overhead_s" in x else "")
+            if "set_value_overhead_s" in x:
+                extra += (f"; after set_value (target +1 cm): overhead {1e3 * x['set_value_overhead_s']:.1f} ms "
+                          f"({x['set_value_iterations']} it, {'ok' if x['set_value_success'] else 'FAILED'})")
+            lines.append(f"{r['task']:18} {run_:6} {x['transcription']:8} {x['total_s']:8.2f} {x['setup_s']:8.2f} "
+                         f"{x['solve_s']:8.2f} {x['solve_cpu_s']:6.2f} {x['iterations']:4d}  {'yes' if x['success'] else 'NO ':3} {chk}{extra}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="optplan bench modelling", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tasks", default=",".join(TASKS), help="comma-separated subset of " + ",".join(TASKS))
+    ap.add_argument("--warm-cache", action="store_true", help="keep the kernel cache (default: each task's "
+                    "first run in a new process with an empty cache)")
+    ap.add_argument("--json", help="write the rows as JSON to this path")
+    ap.add_argument("--one", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.one:
+        print(json.dumps(run_task(args.one)))
+        return 0
+    tasks = [t.strip() for t in args.tasks.split(",") if t.strip()]
+    bad = [t for t in tasks if t not in TASKS]
+    if bad:
+        ap.error(f"unknown tasks {bad}; choose from {', '.join(TASKS)}")
+    rows = run(tasks, cold=not args.warm_cache)
+    print(format_rows(rows))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(rows, f, indent=1)
+    return 0 if all("error" not in r and r["first"]["success"] and r["warm"]["success"] for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,175 @@
+"""A user expression as a term (:class:`ExprTerm`): per-point kernels on the B-spline core
+(:mod:`.spline_problem`), or rows at the knots of the knot transcription (parameters at their
+values of the build)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..errors import ConfigurationError
+from .expressions import Parameter, check_symbols, symbols_of
+from .terms import Term
+
+__all__ = ["ExprTerm", "knots_of"]
+
+
+@dataclass(eq=False)
+class ExprTerm(Term):
+    """A user expression (:mod:`.expressions`): a constraint ``lower ≤ expr ≤ upper`` at ``at``
+    or a cost ``weight · ∫ expr dt`` (``kind="integral"``, trapezoidal at the knots; a vector
+    expression's squared norm) or ``weight · expr(T)`` (``kind="end"``)."""
+
+    expr: Any = None
+    lower: Any = None
+    upper: Any = None
+    at: Any = "all"
+    kind: str = "constraint"
+    weight: Any = 1.0
+    params: tuple[Parameter, ...] = ()
+    default_name = "expr"
+
+    def _validate(self) -> None:
+        if self.kind not in ("constraint", "integral", "end"):
+            raise ConfigurationError(f"kind: expected 'integral' or 'end', got {self.kind!r}")
+
+    # ------------------------------------------------------------------ the knot transcription
+    def _function(self, robot: Any, expr: Any) -> ca.Function:
+        sym = symbols_of(robot)
+        check_symbols(sym, expr, list(self.params), self.default_name)
+        return ca.Function("expr", sym.inputs() + [p.sym for p in self.params], [ca.vec(expr)])
+
+    def _args(self, robot: Any, q: Any, qd: Any, qdd: Any, quat: Any, t: Any, T: Any, com0: Any) -> list[Any]:
+        """The point's arguments (a floating base: its world quaternion, start attitude identity)."""
+        fl = robot.is_floating
+        return [q, qd, qdd, quat if fl else ca.DM(0, 1), t, T, ca.DM([0, 0, 0, 1.0]) if fl else ca.DM(0, 1),
+                ca.DM(com0) if fl else ca.DM(0, 1)] + [ca.DM(p.value) for p in self.params]
+
+    def _knot_values(self, tp: Any, expr: Any, ks: list[int]) -> list[Any]:
+        f = self._function(tp.robot, expr)
+        com0 = tp.com0 if tp.floating else None
+        return [f(*self._args(tp.robot, tp.q(k), tp.qd(k), tp.qdd(k), tp.base_quat(k), tp.knot_time(k), tp.T, com0))
+                for k in ks]
+
+    def _weight(self) -> float:
+        w = self.weight
+        if isinstance(w, ca.SX):
+            fn = ca.Function("w", [p.sym for p in self.params], [w])
+            return float(fn(*[ca.DM(p.value) for p in self.params]))
+        return float(w)
+
+    def rows(self, ctx: Any) -> Any:
+        """The rows at the knots of the knot transcription (parameters at their current values)."""
+        from .build import TermData
+
+        tp = ctx.tp
+        m = ca.vec(ca.SX(self.expr)).shape[0]
+        expr, lo, hi = _bounds(self, m, list(self.params))
+        ks = knots_of(self.at, tp.N, self.default_name)
+        r = ca.vertcat(*self._knot_values(tp, expr, ks))
+        return TermData(residual=r, lower=np.tile(lo, len(ks)), upper=np.tile(hi, len(ks)), points=tuple(ks),
+                        point_rows=int(expr.shape[0]))
+
+    def _integrand(self) -> Any:
+        e = ca.SX(self.expr)
+        return e if e.numel() == 1 else ca.sumsqr(e)
+
+    def cost_expr(self, ctx: Any) -> Any:
+        tp = ctx.tp
+        if self.kind == "end":
+            return self._weight() * self._knot_values(tp, self._integrand(), [tp.N])[0]
+        v = self._knot_values(tp, self._integrand(), list(range(tp.N + 1)))
+        return self._weight() * tp.h * (sum(v[1:-1]) + (v[0] + v[-1]) / 2)
+
+    def _numeric_values(self, traj: Any, expr: Any, ks: list[int]) -> np.ndarray:
+        f = self._function(traj.robot, expr)
+        out = []
+        for k in ks:
+            quat = traj.base_quat[k] if traj.base_quat is not None else None
+            t = k * traj.T / traj.N
+            out.append(np.array(f(*self._args(traj.robot, traj.q[k], traj.qd[k], traj.qdd[k], quat, t, traj.T,
+                                              traj.com0))).ravel())
+        return np.concatenate(out) if out else np.zeros(0)
+
+    def numeric(self, traj: Any) -> np.ndarray:
+        m = ca.vec(ca.SX(self.expr)).shape[0]
+        expr, _, _ = _bounds(self, m, list(self.params))
+        return self._numeric_values(traj, expr, knots_of(self.at, traj.N, self.default_name))
+
+    def bounds_numeric(self, traj: Any) -> tuple[np.ndarray, np.ndarray]:
+        m = ca.vec(ca.SX(self.expr)).shape[0]
+        _, lo, hi = _bounds(self, m, list(self.params))
+        n = len(knots_of(self.at, traj.N, self.default_name))
+        return np.tile(lo, n), np.tile(hi, n)
+
+    def cost_numeric(self, traj: Any) -> float:
+        if self.kind == "end":
+            return self._weight() * float(self._numeric_values(traj, self._integrand(), [traj.N])[0])
+        v = self._numeric_values(traj, self._integrand(), list(range(traj.N + 1)))
+        return self._weight() * float(np.trapezoid(v, np.linspace(0, traj.T, traj.N + 1)))
+
+    def sampled(self) -> Term:
+        if self.at == "all":
+            return self
+        return super().sampled()
+
+
+def knots_of(at: Any, N: int, what: str) -> list[int]:
+    """Knot indices of ``at``: "all", "start", "end", "interior", an index or a list."""
+    if isinstance(at, str):
+        table = {"all": list(range(N + 1)), "start": [0], "end": [N], "interior": list(range(1, N))}
+        if at not in table:
+            raise ConfigurationError(f"{what}: at: expected 'all', 'start', 'end', 'interior' or knot indices, "
+                                     f"got {at!r}")
+        return table[at]
+    ks = np.atleast_1d(np.asarray(at))
+    if ks.dtype.kind not in "iu" or ks.ndim != 1 or ks.size == 0 or ks.min() < -N - 1 or ks.max() > N:
+        raise ConfigurationError(f"{what}: at: expected knot indices in [0, {N}], got {at!r}")
+    return sorted({int(k) % (N + 1) for k in ks})
+
+
+def _bounds(term: ExprTerm, m: int, params: list[Parameter]) -> tuple[Any, np.ndarray, np.ndarray]:
+    """Rows and numeric bounds of a constraint expression; symbolic bounds (parameters) move
+    into the rows."""
+    expr = ca.vec(ca.SX(term.expr))
+    lo, hi = term.lower, term.upper
+    sym_lo = isinstance(lo, (ca.SX, Parameter))
+    sym_hi = isinstance(hi, (ca.SX, Parameter))
+    if isinstance(lo, Parameter):
+        lo = lo.sym
+    if isinstance(hi, Parameter):
+        hi = hi.sym
+    if sym_lo or sym_hi:
+        if lo is hi or (sym_lo and sym_hi and ca.is_equal(ca.SX(lo), ca.SX(hi), 2)):
+            return expr - ca.vec(ca.SX(lo)) * ca.DM.ones(m), np.zeros(m), np.zeros(m)
+        rows, l_, u_ = [], [], []
+        for b, sign in ((lo, 1.0), (hi, -1.0)):
+            if b is None:
+                continue
+            if isinstance(b, ca.SX):
+                rows.append(sign * (expr - ca.vec(b) * ca.DM.ones(m)))
+                l_.append(np.zeros(m))
+                u_.append(np.full(m, np.inf))
+            else:
+                bb = np.broadcast_to(np.asarray(b, float).ravel(order="F"), (m,))
+                rows.append(sign * expr)
+                l_.append(sign * bb)
+                u_.append(np.full(m, np.inf))
+        return ca.vertcat(*rows), np.concatenate(l_), np.concatenate(u_)
+
+    def num(b: Any, default: float) -> np.ndarray:
+        if b is None:
+            return np.full(m, default)
+        a = np.asarray(b, float).ravel(order="F")
+        if a.size not in (1, m) or np.any(np.isnan(a)):
+            raise ConfigurationError(f"bounds: expected a number or {m} numbers, got {b!r}")
+        return np.broadcast_to(a, (m,)).copy()
+
+    L, U = num(lo, -np.inf), num(hi, np.inf)
+    if lo is None and hi is None:
+        raise ConfigurationError("add_constraint: give lower and/or upper for an expression")
+    if np.any(L > U):
+        raise ConfigurationError(f"bounds: lower > upper at rows {np.flatnonzero(L > U).tolist()}")
+    return expr, L, U

@@ -1,0 +1,67 @@
+"""`CollisionAvoidance` on the B-spline kernel core of `OptProblem`: the segment NLP's fixed-normal
+separating planes (:mod:`.segment`, decision 0003/0012) — active pairs and knots from the first
+guess, one kernel per pair ``f([q; n; s])`` with the plane normal ``n`` and the static side's
+support ``s`` as parameters (a moving pair's plane offset: a decision variable)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .collision_term import CollisionAvoidance
+from .frame_terms import ClosedChain
+
+__all__ = ["CollisionItem", "plan_collision"]
+
+
+@dataclass
+class CollisionItem:
+    """One active pair: its local kernel ``f([q; n; s])``, knots, per-knot normals (3 × K), static
+    supports or initial plane offsets (K), margins (K), rows per knot, static side or not."""
+
+    name: str
+    fn: ca.Function
+    knots: list[int]
+    normals: np.ndarray
+    offsets: np.ndarray
+    margins: np.ndarray
+    nrow: int
+    static: bool
+
+
+def plan_collision(prob: Any, core: Any, term: CollisionAvoidance, Qk: np.ndarray,
+                   lower: np.ndarray, upper: np.ndarray) -> tuple[list[CollisionItem], Any]:
+    """The active pairs along the knot configurations ``Qk`` ((N+1) × nj) and their kernels, by
+    the segment NLP's planner (:class:`~optplan.problem.segment.SplineSegmentProblem`)."""
+    from .segment import SegmentSpec, SplineSegmentProblem
+
+    robot, N = prob.robot, prob.N
+    pinned = prob._pinned_q()
+    cc = next((h.term for h in prob._handles if h.role == "constraint" and isinstance(h.term, ClosedChain)), None)
+    q0, q1 = pinned.get(0, Qk[0]), pinned.get(N, Qk[-1])
+    lo = np.where(np.isfinite(lower), lower, robot.lower)
+    hi = np.where(np.isfinite(upper), upper, robot.upper)
+    spec = SegmentSpec(N, prob.duration, q0, q1, cc, lower=lo, upper=hi, margin=term.margin,
+                       object_arm=term.object_arm, activation=term.activation, window=term.window)
+    seg = SplineSegmentProblem(robot, term.scene, spec)
+    Q = np.array(Qk, float)
+    Q[0], Q[-1] = q0, q1
+    plan = seg._plan_collision(Q)
+    planes = seg._plane_data(plan, Q)
+    seg._kernels_for(plan, planes, Q)
+    kc, nj = core.kc, robot.nj
+    items = []
+    for it, (Nrm, s0) in zip(plan, planes):
+        fn = it.fn
+
+        def build(name: str, fn: ca.Function = fn) -> ca.Function:
+            z = ca.SX.sym("z", nj + 4)
+            return ca.Function(name, [z], [fn(z[:nj], z[nj:nj + 3], z[nj + 3])])
+
+        local = kc._get(("local_pair", fn.name()), build)
+        items.append(CollisionItem(f"collision:{it.pair.name_a}|{it.pair.name_b}", local, list(it.knots),
+                                   np.asarray(Nrm, float), np.asarray(s0, float), np.asarray(it.margins, float),
+                                   int(it.nrow), bool(it.static)))
+    return items, seg.col

@@ -1,0 +1,441 @@
+"""OptProblem's terms and expressions on the B-spline kernel core (:mod:`.spline_core`): each
+term becomes one or more kernel families, a first guess is seeded from the boundary and target
+rows (damped least squares on their own kernels: IK for frame targets) and, for a floating robot,
+the zero-momentum base; the solution's rows are named in the user's language."""
+from __future__ import annotations
+
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ConfigurationError
+from ..geometry.spatial import pose_residual, vee_skew
+from ..geometry.splines import quintic_time_law
+from .collision_term import CollisionAvoidance
+from .evaluate import Infeasibility
+from .expr_term import ExprTerm, _bounds, knots_of
+from .expressions import Parameter, point_kernel
+from .frame_terms import BaseAttitude, ClosedChain, FramePose
+from .spline_core import Family, SplineCore
+from .terms import (
+    Duration,
+    JointAccelerationLimits,
+    JointBoundary,
+    JointPositionLimits,
+    JointVelocityLimits,
+    Smoothness,
+    _knots,
+)
+
+__all__ = ["ExprTerm", "Unsupported", "families_of", "SplineEvaluator", "seed_guess", "knots_of"]
+
+_POSE = ("x", "y", "z", "rot_x", "rot_y", "rot_z", "trace")
+
+
+class Unsupported(Exception):
+    """A term the B-spline core has no kernels for (the knot transcription takes the problem)."""
+
+
+def families_of(prob: Any, core: SplineCore, params: list[Parameter]
+                ) -> tuple[list[Family], dict[str, list[str]], dict[str, tuple[np.ndarray, np.ndarray]], list[Any]]:
+    """Families of every term of ``prob`` (by handle name: the names of its families), and the
+    control-point bounds of position-limit terms, and the collision terms' handles (their
+    families need the first guess: :mod:`.spline_collision`). Raises :class:`Unsupported` for a
+    term the core has no kernels for."""
+    robot, N, sym = prob.robot, prob.N, core.sym
+    fams: list[Family] = []
+    owner: dict[str, list[str]] = {}
+    pbounds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    collisions: list[Any] = []
+    jn = list(robot.joint_names)
+    pinned = {}
+    for h in prob._handles:
+        if h.role == "constraint" and isinstance(h.term, JointBoundary) and h.term.q is not None:
+            pinned[0 if h.term.at == "start" else N] = robot.check_joints(h.term.q, "JointBoundary.q")
+
+    def knot(name: str, expr: Any, lo: Any, hi: Any, ks: list[int], labels: tuple[str, ...]) -> Family:
+        fn = point_kernel(sym, expr, params, N, "point")
+        return Family(name, "knot", fn, ks, np.asarray(lo, float), np.asarray(hi, float), labels)
+
+    def cost(name: str, expr: Any, weight: Any, kind: str) -> Family:
+        e = ca.SX(expr)
+        if kind == "integral":
+            e = (e if e.numel() == 1 else ca.sumsqr(e)) * sym.T / N
+            fn = point_kernel(sym, e, params, N, "cost", weight)
+            return Family(name, "knot", fn, list(range(N + 1)), cost=True, data="quad")
+        fn = point_kernel(sym, e, params, N, "cost", weight)
+        return Family(name, "knot", fn, [N], cost=True, data="one")
+
+    for h in prob._handles:
+        t, name = h.term, h.name
+        new: list[Family] = []
+        if isinstance(t, ExprTerm):
+            if h.role == "cost":
+                new.append(cost(name, t.expr, t.weight, t.kind))
+            else:
+                m = ca.vec(ca.SX(t.expr)).shape[0]
+                expr, lo, hi = _bounds(t, m, params)
+                labels = tuple(f"[{i}]" if m > 1 else "" for i in range(expr.shape[0]))
+                new.append(knot(name, expr, lo, hi, knots_of(t.at, N, name), labels))
+        elif h.role == "cost":
+            if isinstance(t, Smoothness) and t.order in ("jerk", "acceleration"):
+                fn = core.smoothness_kernel(t.order, h.weight)
+                new.append(Family(name, t.order, fn, list(range(N)), cost=True))
+            elif isinstance(t, Duration):
+                new.append(cost(name, sym.T, h.weight, "end"))
+            else:
+                raise Unsupported(f"{type(t).__name__} as a cost")
+        elif isinstance(t, JointBoundary):
+            k, parts = t._parts(N)
+            ex = ca.vertcat(*[{"q": sym.q, "qd": sym.qd, "qdd": sym.qdd}[n] for n, _ in parts])
+            v = np.concatenate([robot.check_joints(val, f"JointBoundary.{n}") for n, val in parts])
+            new.append(knot(name, ex, v, v, [k], tuple(f"{n}[{j}]" for n, _ in parts for j in jn)))
+        elif isinstance(t, JointPositionLimits):
+            pbounds[name] = t.limits(robot)
+        elif isinstance(t, JointVelocityLimits):
+            lo, hi = t.limits(robot)
+            new.append(Family(name, "velocity", None, list(range(N + 2)), labels=tuple(jn),
+                              data=np.vstack([lo, hi])))
+        elif isinstance(t, JointAccelerationLimits):
+            lo, hi = t.limits(robot)
+            new.append(knot(name, sym.qdd, lo, hi, list(range(N + 1)), tuple(jn)))
+        elif isinstance(t, ClosedChain):
+            if t.relative is None or t.interior:
+                raise Unsupported("ClosedChain without a relative pose or with interior points")
+            fa = robot.model.frames[robot.arm(t.arm_a).ee_frame_id].name
+            fb = robot.model.frames[robot.arm(t.arm_b).ee_frame_id].name
+            Ra, pa = _base_frame(core, fa)
+            Rb, pb = _base_frame(core, fb)
+            Rt, pt = np.array(t.relative.rotation), np.array(t.relative.translation)
+            r, tr = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), Rt, ca.DM(pt))
+            ks = [k for k in range(N + 1)
+                  if not t.skip_pinned or k not in pinned or not _chain_holds(robot, t, pinned[k], t.pinned_tol)]
+            new.append(knot(name, ca.vertcat(r, tr), np.r_[np.zeros(6), 1.0], np.r_[np.zeros(6), np.inf], ks, _POSE))
+        elif isinstance(t, FramePose):
+            assert t.target is not None
+            fr = sym.frame(t.frame)
+            r, tr = pose_residual(fr.rotation, fr.translation, np.array(t.target.rotation),
+                                  ca.DM(t.target.translation))
+            ks = _knots(t.at, N)
+            if t.position_only:
+                new.append(knot(name, r[:3], np.zeros(3), np.zeros(3), ks, _POSE[:3]))
+            else:
+                new.append(knot(name, ca.vertcat(r, tr), np.r_[np.zeros(6), 1.0], np.r_[np.zeros(6), np.inf],
+                                ks, _POSE))
+        elif isinstance(t, BaseAttitude):
+            if not robot.is_floating:
+                raise ConfigurationError("BaseAttitude needs a free-floating robot")
+            E = ca.DM(t._target()).T @ sym.base_rotation()
+            new.append(knot(name, ca.vertcat(vee_skew(E), ca.trace(E)), np.r_[0, 0, 0, 1.0],
+                            np.r_[0, 0, 0, np.inf], _knots(t.at, N), ("rot_x", "rot_y", "rot_z", "trace")))
+        elif isinstance(t, CollisionAvoidance):
+            # the segment NLP's planes: fixed normals, its pair set (self-collision, held object)
+            if robot.is_floating or core.free_time or collisions or t.scene is None or not t.fixed_normals \
+                    or not t.self_collision or not t.held_object or t.margin_boost or t.activate_with:
+                raise Unsupported("CollisionAvoidance other than fixed normals on a fixed base with fixed T")
+            collisions.append(h)
+        else:
+            raise Unsupported(type(t).__name__)
+        owner[name] = [f.name for f in new]
+        fams += new
+    return fams, owner, pbounds, collisions
+
+
+def _base_frame(core: SplineCore, frame: str) -> tuple[Any, Any]:
+    """A frame's placement in the base frame (floating) or world (fixed), as SX of q."""
+    return core.kc.frame(core.robot.model.getFrameId(frame))
+
+
+def _chain_holds(robot: Any, cc: ClosedChain, q: np.ndarray, tol: float) -> bool:
+    from .terms import pose_residual_numeric
+
+    M = cc._relative_numeric(robot, robot.configuration(q) if robot.is_floating else q)
+    assert cc.relative is not None
+    r, tr = pose_residual_numeric(M, cc.relative)
+    return bool(np.abs(r).max() <= tol and tr >= 1.0)
+
+
+# --------------------------------------------------------------------------- first guess
+def seed_guess(core: SplineCore, fams: list[Family], p_of: Any, T: float, lower: np.ndarray,
+               upper: np.ndarray, pinned: dict[int, np.ndarray]) -> np.ndarray:
+    """A first guess: the start and end configurations from the problem's own equality rows at
+    those knots (damped least squares on their kernels — inverse kinematics for frame targets;
+    a JointBoundary's q as given), a rest-to-rest quintic between them, and for a floating robot
+    the zero-momentum base integrated along it (the end re-solved once with that base).
+    ``p_of(q_start)``: the parameter vector once the start (hence a floating robot's centre of
+    mass) is known."""
+    N = core.N
+    fin = np.isfinite(lower) & np.isfinite(upper)
+    mid = np.where(fin, (np.where(fin, lower, 0.0) + np.where(fin, upper, 0.0)) / 2, 0.0)
+    q0 = pinned.get(0)
+    if q0 is None:
+        q0 = _dls(core, fams, p_of(None), T, 0, np.clip(mid, lower, upper), lower, upper, None)
+    p = p_of(q0)
+    qN = pinned.get(N)
+    x = np.zeros(core.nx)
+    for rnd in range(3 if core.fl else 1):
+        if pinned.get(N) is None:
+            xiN = None if rnd == 0 else core.knot_xi(x)[N]
+            qN = _dls(core, fams, p, T, N, q0 if rnd == 0 or qN is None else qN, lower, upper, xiN, q_from=q0)
+        assert qN is not None  # pinned or solved for just above
+        x = _quintic(core, q0, qN, T)
+    return x
+
+
+def _quintic(core: SplineCore, q0: np.ndarray, q1: np.ndarray, T: float) -> np.ndarray:
+    N = core.N
+    s = np.linspace(0.0, 1.0, N + 1)
+    Q = q0 + quintic_time_law(s)[0][:, None] * (q1 - q0)
+    P = core.fit(Q, np.zeros(core.nj), np.zeros(core.nj), T / N)
+    parts = [P.ravel()]
+    if core.fl:
+        parts.append(core.integrate_base(P))
+    if core.free_time:
+        parts.append(np.array([T]))
+    return np.concatenate(parts)
+
+
+def _dls(core: SplineCore, fams: list[Family], p: np.ndarray, T: float, k: int, q: np.ndarray,
+         lower: np.ndarray, upper: np.ndarray, xi: np.ndarray | None, iters: int = 100,
+         q_from: np.ndarray | None = None) -> np.ndarray:
+    """Damped least squares on the equality rows at knot k (rest: dq/du = d²q/du² = 0). With
+    ``q_from`` (k = N), also the equality rows of the middle knot, evaluated where a rest-to-rest
+    quintic from ``q_from`` to q is there: halfway, at its peak speed (so that a row such as "these
+    joints do not move" keeps them)."""
+    nj, N = core.nj, core.N
+    km = N // 2
+    pts = [(k, f) for f in fams if f.kind == "knot" and not f.cost and k in f.points]
+    if q_from is not None:
+        pts += [(km, f) for f in fams if f.kind == "knot" and not f.cost and km in f.points]
+    q = np.array(q, float)
+    if not pts:
+        return q
+    sets = [(kk, f, core.kernel_set(f.fn, False)) for kk, f in pts if f.fn is not None]
+    x = np.zeros(core.nx)
+    if core.free_time:
+        x[-1] = T
+    for _ in range(iters):
+        res, jac = [], []
+        for kk, f, (fn, jfn, _h) in sets:
+            eq = (f.lower == f.upper) & np.isfinite(f.lower)
+            if not eq.any():
+                continue
+            mid = kk != k
+            qq = (q + q_from) / 2 if mid and q_from is not None else q
+            P = np.repeat(qq[None, :], core.N + 3, axis=0)
+            x[:core.nP] = P.ravel()
+            z = core.knot_inputs(x, p, kk, False)
+            if mid and q_from is not None:
+                z[nj:2 * nj] = 1.875 * (q - q_from) / N       # dq/du at the quintic's peak
+            if xi is not None and core.fl and not mid:
+                z[3 * nj:3 * nj + 4] = xi
+            r = np.asarray(fn(z)).ravel() - f.lower
+            Jz = np.asarray(ca.densify(jfn(z)))
+            J = Jz[:, :nj] * (0.5 if mid else 1.0) + (Jz[:, nj:2 * nj] * 1.875 / N if mid else 0.0)
+            res.append(r[eq])
+            jac.append(J[eq])
+        if not res:
+            return q
+        r, J = np.concatenate(res), np.vstack(jac)
+        if np.abs(r).max() < 1e-10:
+            break
+        dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(J.shape[0]), r)
+        m = np.abs(dq).max()
+        if m < 1e-10:   # what is left does not depend on q here (e.g. the base attitude)
+            break
+        if m > 0.3:
+            dq *= 0.3 / m
+        q = np.clip(q - dq, lower, upper)
+    return q
+
+
+# --------------------------------------------------------------------------- evaluation
+def _basis2(u: float) -> np.ndarray:
+    """Weights of P_k … P_k+3 in d²q/du² at fraction u of interval k."""
+    return np.array([1 - u, 3 * u - 2, 1 - 3 * u, u])
+
+
+class SplineEvaluator:
+    """Terms and expressions of one spline build, evaluated at its solutions (the
+    :class:`~optplan.problem.Solution` methods value/violation/dual/sample)."""
+
+    def __init__(self, problem: Any, core: SplineCore, st: dict[str, Any], fams: list[Family],
+                 owner: dict[str, list[str]], pbounds: dict[str, tuple[np.ndarray, np.ndarray]], p: np.ndarray):
+        self.problem, self.core, self.st, self.p = problem, core, st, p.copy()
+        self.fams = {f.name: f for f in fams}
+        self.owner, self.pbounds = owner, pbounds
+        self.handles = dict(problem.terms)
+        self.robot = problem.robot
+
+    def _handle(self, handle: Any) -> Any:
+        name = handle if isinstance(handle, str) else getattr(handle, "name", None)
+        if name not in self.handles:
+            raise KeyError(f"no term named {name!r} in the problem of this solution (terms: {sorted(self.handles)})")
+        return self.handles[name]
+
+    def _rows(self, name: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        if name in self.pbounds:
+            lo, hi = self.pbounds[name]
+            P = self.core.control_points(x)
+            return P, np.broadcast_to(lo, P.shape), np.broadcast_to(hi, P.shape), self.core.nj
+        vel = [self.fams[fn] for fn in self.owner[name] if self.fams[fn].kind == "velocity"]
+        if vel:   # velocity control points [rad/s] against their limits
+            lo, hi = np.asarray(vel[0].data)
+            V = np.diff(self.core.control_points(x), axis=0) * self.core.N / self._T(x)
+            return V, np.broadcast_to(lo, V.shape), np.broadcast_to(hi, V.shape), self.core.nj
+        vals, los, his, m = [], [], [], 0
+        g = np.array(self.st["gfun"](x, self.p)).ravel()
+        for fn in self.owner[name]:
+            sl = self.st["slices"][fn]
+            f = self.fams[fn]
+            vals.append(g[sl])
+            los.append(np.asarray(self.st["lbg"])[sl])
+            his.append(np.asarray(self.st["ubg"])[sl])
+            m = f.rows_per_point
+        v = np.concatenate(vals) if vals else np.zeros(0)
+        return v, np.concatenate(los) if los else v, np.concatenate(his) if his else v, max(m, 1)
+
+    def _T(self, x: np.ndarray) -> float:
+        return float(x[-1]) if self.core.free_time else float(self.p[self.core.p_T])
+
+    def value(self, handle: Any, sol: Any) -> Any:
+        h = self._handle(handle)
+        x = np.asarray(sol.x, float)
+        if h.role == "cost":
+            c = np.array(self.st["cfun"](x, self.p)).ravel()
+            return float(sum(c[self.st["cslices"][fn]].sum() for fn in self.owner[h.name]))
+        v, _, _, m = self._rows(h.name, x)
+        return v.reshape(-1, m)
+
+    def violation(self, handle: Any, sol: Any) -> np.ndarray:
+        h = self._handle(handle)
+        if h.role == "cost":
+            raise TypeError(f"violation: {h.name!r} is a cost (it has no rows); value() gives its cost")
+        v, lo, hi, m = self._rows(h.name, np.asarray(sol.x, float))
+        return np.maximum(np.maximum(lo - v, v - hi), 0.0).reshape(-1, m)
+
+    def dual(self, handle: Any, sol: Any) -> np.ndarray:
+        h = self._handle(handle)
+        if h.role == "cost":
+            raise TypeError(f"dual: {h.name!r} is a cost (it has no multipliers)")
+        if h.name in self.pbounds:
+            if sol.lam_x is None:
+                raise ValueError("dual: no bound multipliers in this solution")
+            return -np.asarray(sol.lam_x)[:self.core.nP].reshape(-1, self.core.nj)
+        if sol.lam_g is None:
+            raise ValueError(f"dual: no constraint multipliers in this solution (status {sol.status.value})")
+        lam = np.asarray(sol.lam_g)
+        if any(self.fams[fn].kind == "velocity" for fn in self.owner[h.name]):
+            # rows N ΔP − bound·T: per entry (upper, lower); ∂f*/∂bound [per rad/s] = −λ T
+            lv = lam[self.st["slices"][self.owner[h.name][0]]].reshape(-1, 2)
+            return -(lv.sum(axis=1) * self._T(np.asarray(sol.x, float))).reshape(-1, self.core.nj)
+        parts = [lam[self.st["slices"][fn]] for fn in self.owner[h.name]]
+        m = max(self.fams[fn].rows_per_point for fn in self.owner[h.name]) if self.owner[h.name] else 1
+        return -np.concatenate(parts).reshape(-1, m)
+
+    def sample(self, handle: Any, sol: Any, t: Any) -> np.ndarray:
+        """The term's per-point rows at times ``t`` [s], between the knots too (joints exact on the
+        B-spline; a floating base's attitude interpolated between its knots)."""
+        h = self._handle(handle)
+        fams = [self.fams[fn] for fn in self.owner.get(h.name, [])]
+        if h.name in self.pbounds:
+            return sol.sample(t)["q"]
+        if not fams or any(f.kind != "knot" or f.cost for f in fams):
+            raise TypeError(f"sample: {h.name!r} is not evaluated point by point")
+        core, x = self.core, np.asarray(sol.x, float)
+        t = np.atleast_1d(np.asarray(t, float))
+        T, N, nj = sol.duration, core.N, core.nj
+        if np.any(t < -1e-12) or np.any(t > T + 1e-12):
+            raise ValueError(f"sample: times must be in [0, {T}] s")
+        P = core.control_points(x)
+        xi = core.knot_xi(x)
+        out = []
+        for tt in t:
+            uu = np.clip(tt / T * N, 0.0, N)
+            k = min(int(uu), N - 1)
+            u = uu - k
+            b, db = spline_basis_np(u)
+            row = []
+            for f in fams:
+                z = core.knot_inputs(x, self.p, min(k, N), False)
+                z[:nj], z[nj:2 * nj], z[2 * nj:3 * nj] = b @ P[k:k + 4], db @ P[k:k + 4], _basis2(u) @ P[k:k + 4]
+                off = 3 * nj
+                if core.fl:
+                    a, c = xi[k], xi[k + 1] if np.dot(xi[k], xi[k + 1]) >= 0 else -xi[k + 1]
+                    qi = (1 - u) * a + u * c
+                    z[off:off + 4] = qi / np.linalg.norm(qi)
+                    off += 4
+                z[off] = tt / T
+                assert f.fn is not None
+                row.append(np.asarray(f.fn(z)).ravel())
+            out.append(np.concatenate(row))
+        return np.array(out)
+
+    def infeasibilities(self, sol: Any, n: int) -> list[Infeasibility]:
+        core, x = self.core, np.asarray(sol.x, float)
+        N, T = core.N, sol.duration
+        h = T / N
+        g = np.array(self.st["gfun"](x, self.p)).ravel()
+        lbg, ubg = np.asarray(self.st["lbg"]), np.asarray(self.st["ubg"])
+        viol = np.maximum(np.maximum(lbg - g, g - ubg), 0.0)
+        out = []
+        for fname, sl in self.st["slices"].items():
+            f = self.fams.get(fname)
+            term = next((hn for hn, fs in self.owner.items() if fname in fs), "dynamics")
+            v = viol[sl]
+            for i in np.flatnonzero(v > 0):
+                gi = sl.start + int(i)
+                if f is None:
+                    out.append(Infeasibility("dynamics", int(i), None, float(g[gi]), float(lbg[gi]), float(ubg[gi]),
+                                             float(v[i]), label=f"dynamics:{fname}[{i}]"))
+                    continue
+                m = f.rows_per_point
+                pt, c = divmod(int(i), m)
+                if f.kind == "velocity":   # in rad/s: the row is T·(v − bound)
+                    j, side = divmod(c, 2)
+                    k = f.points[pt]
+                    bound = float(np.asarray(f.data)[1 - side, j])
+                    lab = f"{term}[{f.labels[j]}].{'upper' if side == 0 else 'lower'} at t={min(max(k - 0.5, 0), N) * h:.3g} s"
+                    out.append(Infeasibility(term, int(i), k, float(g[gi]) / T + bound, bound if side else -np.inf,
+                                             bound if side == 0 else np.inf, float(v[i]) / T, label=lab))
+                    continue
+                else:
+                    k = f.points[pt]
+                    comp = f.labels[c] if c < len(f.labels) else f"[{c}]"
+                    sep = "." if comp and not comp.startswith("[") else ""
+                    lab = f"{term}[k={k}]{sep}{comp} at t={k * h:.3g} s"
+                out.append(Infeasibility(term, int(i), k, float(g[gi]), float(lbg[gi]), float(ubg[gi]), float(v[i]),
+                                         label=lab))
+        for name, (lo, hi) in self.pbounds.items():
+            P = core.control_points(x)
+            for i, j in zip(*np.nonzero((P < lo - 1e-12) | (P > hi + 1e-12))):
+                which = "upper" if P[i, j] > hi[j] else "lower"
+                vv = float(max(lo[j] - P[i, j], P[i, j] - hi[j]))
+                tc = min(max(i - 1, 0), N) * h   # the control point's Greville abscissa
+                out.append(Infeasibility(name, int(i * core.nj + j), int(i), float(P[i, j]), float(lo[j]), float(hi[j]),
+                                         vv, label=f"{name}[{self.robot.joint_names[j]}].{which} at t={tc:.3g} s"))
+        out.sort(key=lambda r: -r.violation)
+        return out[:n]
+
+
+def spline_basis_np(u: float) -> tuple[np.ndarray, np.ndarray]:
+    from .floating_segment import spline_basis
+
+    return spline_basis(u)
+
+
+def base_placements(core: SplineCore, Q: np.ndarray, xi: np.ndarray, base0: pin.SE3,
+                    com0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World base quaternions ((N+1) × 4, x y z w) and positions [m] with the centre of mass at
+    ``com0``."""
+    model, data = core.robot.model, core.robot.model.createData()
+    R0 = base0.rotation
+    quats, pos = [], []
+    for qk, xk in zip(Q, xi):
+        Rk = R0 @ pin.Quaternion(xk[3], *xk[:3]).normalized().toRotationMatrix()
+        c = pin.centerOfMass(model, data, np.r_[np.zeros(6), 1.0, qk])
+        quats.append(pin.Quaternion(Rk).coeffs().copy())
+        pos.append(com0 - Rk @ c)
+    return np.array(quats), np.array(pos)

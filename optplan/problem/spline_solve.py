@@ -1,0 +1,271 @@
+"""Build and solve an :class:`~optplan.problem.OptProblem` on the B-spline kernel core: the
+numbers of one solve (parameters, bounds, first guess) around the cached structure of
+:mod:`.spline_core`; a re-solve after ``set_value`` or ``set_initial(solution=...)`` only changes
+numbers."""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .bspline import knot_values
+from .expressions import Parameter
+from .nlp import NlpSolver, SolverOptions
+from .solution import Solution
+from .spline_core import Family, SplineCore
+from .spline_problem import SplineEvaluator, _quintic, base_placements, families_of, seed_guess
+
+__all__ = ["SplineBackend"]
+
+
+class SplineBackend:
+    """The B-spline side of one problem: families (rebuilt when the terms change), parameters,
+    guess and solve."""
+
+    def __init__(self, prob: Any):
+        self.prob = prob
+        self.core: SplineCore | None = None
+        self.fams: list[Family] = []
+        self.owner: dict[str, list[str]] = {}
+        self.pbounds: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self.x0: np.ndarray | None = None       # a guess in this core's variables
+        self.lam: tuple[Any, Any] | None = None
+        self.scale: float | None = None          # the objective scale of the last solve
+        self.last_x: np.ndarray | None = None    # the last converged solution (the next solve's start)
+        self.aux0, self.col_p = np.zeros(0), np.zeros(0)   # collision plane offsets / normals, supports
+        self.collision_model: Any = None
+        self.last_build_time = 0.0
+
+    # ------------------------------------------------------------------ structure
+    def prepare(self) -> None:
+        """Families of the problem's terms (raises spline_problem.Unsupported)."""
+        prob = self.prob
+        t0 = time.perf_counter()
+        params: list[Parameter] = prob._params
+        npar = sum(p.size for p in params)
+        core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar)
+        self.fams, self.owner, self.pbounds, cols = families_of(prob, core, params)
+        self.core, self.aux0, self.col_p = core, np.zeros(0), np.zeros(0)
+        if cols:   # the active pairs follow the first guess: plan them along it
+            from .spline_collision import plan_collision
+
+            x = self.guess(prob.duration)
+            Qk = core.M["q"] @ core.control_points(x)
+            lbx, ubx = self._bounds()
+            items, self.collision_model = plan_collision(prob, core, cols[0].term, Qk, lbx[:core.nj], ubx[:core.nj])
+            nb = sum(len(it.knots) for it in items if not it.static)
+            core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar, n_aux=nb,
+                              n_colp=sum(4 * len(it.knots) for it in items))
+            po = ao = 0
+            names, colp, aux = [], [], []
+            for it in items:
+                pair = it.name.removeprefix("collision:")
+                self.fams.append(Family(it.name, "pair", it.fn, it.knots,
+                                        labels=tuple(f"{pair}.point{i}" for i in range(it.nrow)),
+                                        data={"item": it, "p_off": po, "aux_off": ao}))
+                names.append(it.name)
+                colp += [it.normals.ravel(order="F"), it.offsets if it.static else np.zeros(len(it.knots))]
+                if not it.static:
+                    aux.append(it.offsets)
+                    ao += len(it.knots)
+                po += 4 * len(it.knots)
+            self.owner[cols[0].name] = names
+            self.core, self.aux0 = core, np.concatenate(aux) if aux else np.zeros(0)
+            self.col_p = np.concatenate(colp) if colp else np.zeros(0)
+        self.last_build_time = time.perf_counter() - t0
+
+    def _pvec(self, T: float, com0: np.ndarray, scale: float) -> np.ndarray:
+        core, prob = self.core, self.prob
+        assert core is not None
+        N = core.N
+        p = np.zeros(core.np)
+        p[core.p_s:core.p_s + N + 1] = np.arange(N + 1) / N
+        qw = np.ones(N + 1)
+        qw[[0, -1]] = 0.5
+        p[core.p_qw:core.p_qw + N + 1] = qw
+        p[core.p_one] = 1.0
+        p[core.p_T] = T
+        if core.fl:
+            p[core.p_xi0:core.p_xi0 + 4] = [0, 0, 0, 1.0]
+            p[core.p_b0:core.p_b0 + 4] = pin.Quaternion(prob.base0.rotation).coeffs()
+            p[core.p_c0:core.p_c0 + 3] = com0
+        off = core.p_par
+        for par in prob._params:
+            p[off:off + par.size] = np.asarray(par.value, float).ravel(order="F")
+            off += par.size
+        p[core.p_scale] = scale
+        p[core.p_col:] = self.col_p
+        return p
+
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        core, prob = self.core, self.prob
+        assert core is not None
+        lbx, ubx = np.full(core.nx, -np.inf), np.full(core.nx, np.inf)
+        nj = core.nj
+        for lo, hi in self.pbounds.values():
+            lbx[:core.nP] = np.maximum(lbx[:core.nP], np.tile(lo, core.N + 3))
+            ubx[:core.nP] = np.minimum(ubx[:core.nP], np.tile(hi, core.N + 3))
+        if core.free_time:
+            lbx[-1], ubx[-1] = prob.duration_bounds
+        assert nj > 0
+        return lbx, ubx
+
+    def _pinned(self) -> dict[int, np.ndarray]:
+        return self.prob._pinned_q()
+
+    def _com0(self, q_start: np.ndarray) -> np.ndarray:
+        prob = self.prob
+        if not prob.robot.is_floating:
+            return np.zeros(3)
+        model = prob.robot.model
+        c = pin.centerOfMass(model, model.createData(), np.r_[np.zeros(6), 1.0, q_start])
+        return prob.base0.translation + prob.base0.rotation @ c
+
+    def guess(self, T: float) -> np.ndarray:
+        core = self.core
+        assert core is not None
+        x = self._guess(T)
+        n_aux = core.nx - core.x_aux
+        return x if x.size == core.nx else np.r_[x, self.aux0 if self.aux0.size == n_aux else np.zeros(n_aux)]
+
+    def _guess(self, T: float) -> np.ndarray:
+        """The guess in core variables: a solution given to ``set_initial``, the user's knots
+        fitted, the last converged solution of this problem, or seeded from its rows."""
+        core, prob = self.core, self.prob
+        assert core is not None
+        if self.x0 is not None and self.x0.size == core.nx:
+            return self.x0
+        nbase = core.x_aux     # the variables before the collision planes' offsets
+        if prob._x0 is not None:
+            u: dict[str, Any] = prob.tp.unpack(prob._x0)
+            Tg = float(u.get("T", T))
+            P = core.fit(u["q"], u["qd"][0], u["qd"][-1], Tg / core.N)
+            parts = [P.ravel()]
+            if core.fl:
+                parts.append(core.integrate_base(P))
+            if core.free_time:
+                parts.append(np.array([Tg]))
+            return np.concatenate(parts)
+        if self.last_x is not None and self.last_x.size == core.nx:
+            return self.last_x
+        assert nbase == core.nx or not core.free_time     # a re-solve (e.g. after set_value) starts where the last one ended
+        lbx, ubx = self._bounds()
+        lo, hi = lbx[:core.nj], ubx[:core.nj]
+        return seed_guess(core, self.fams, lambda q0: self._pvec(T, self._com0(q0) if q0 is not None else np.zeros(3),
+                                                                  1.0), T, lo, hi, self._pinned())
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, tol: float, max_iter: int, sopts: SolverOptions, compile_kernels: bool | str) -> Solution:
+        prob = self.prob
+        t_setup = time.perf_counter()
+        if self.core is None:
+            self.prepare()
+        core = self.core
+        assert core is not None
+        st = core.structure(self.fams, bool(self.pbounds), compile_kernels)
+        T = prob.duration
+        # the start configuration fixes the centre of mass of a floating robot: from the guess
+        x0 = self.guess(T)
+        p = self._pvec(T, self._com0(core.control_points(x0)[:3].T @ np.array([1, 4, 1]) / 6), 1.0)
+        from_last = prob._x0 is None and self.last_x is not None and self.last_x.size == core.nx
+        if self.scale is not None and (self.x0 is not None or from_last):
+            scale = self.scale        # a previous solve's (its multipliers are in that scale)
+        else:
+            # the objective is scaled to 1 on the rest-to-rest quintic between the guess's end
+            # configurations (a planner path's jerk can be thousands of times the optimum's),
+            # else at the guess
+            Q = core.M["q"] @ core.control_points(x0)
+            xr = _quintic(core, Q[0], Q[-1], float(x0[core.nx - 1]) if core.free_time else T)
+            xr = np.r_[xr, x0[xr.size:]]
+            f0 = abs(float(st["ffun"](xr, p)))
+            if not (np.isfinite(f0) and f0 > 1e-12):
+                f0 = abs(float(st["ffun"](x0, p)))
+            scale = 1.0 / f0 if np.isfinite(f0) and f0 > 1e-12 else 1.0
+            scale = float(10.0 ** (np.round(np.log10(np.clip(scale, 1e-8, 1e8)) * 2) / 2))
+        p[core.p_scale] = scale
+        lbx, ubx = self._bounds()
+        x0 = np.clip(x0, lbx, ubx)
+        lbg, ubg = core.row_bounds(st, self.fams)
+        n_ineq = int(np.sum(lbg != ubg))
+        defaults: dict[str, Any] = {
+            "ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
+            "ipopt.max_iter": int(max_iter),
+            "ipopt.mu_strategy": "adaptive" if n_ineq > 0.5 * (lbg.size - n_ineq) else "monotone",
+            "ipopt.jacobian_regularization_value": 1e-6}
+        if core.fl:
+            defaults.update({"ipopt.mumps_pivot_order": 6, "ipopt.mu_init": 1e-3})
+        if core.nx > core.x_aux or self.col_p.size:
+            # the segment NLP's settings for its plane rows (docs/decisions/0015-segment-nlp-stalls.md)
+            defaults.update({"ipopt.mu_strategy": "adaptive", "ipopt.theta_max_fact": 10.0,
+                             "ipopt.perturb_always_cd": "yes"})
+        warm = self.lam is not None and self.lam[0] is not None and np.size(self.lam[0]) == lbg.size \
+            and self.x0 is not None
+        if warm:
+            defaults.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
+                             "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
+                             "ipopt.warm_start_slack_bound_push": 1e-9})
+        okey = repr(sorted(sopts.casadi_options(defaults).items()))
+        solver = st["solvers"].get(okey)
+        setup = time.perf_counter() - t_setup
+        if solver is None:
+            extra = {**st["derivs"], "no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
+                     "calc_f": False, "calc_g": False}
+            solver = st["solvers"][okey] = NlpSolver("optproblem_spline", st["nlp"], sopts, defaults=defaults,
+                                                     casadi_options=extra)
+        args: dict[str, Any] = {}
+        if warm:
+            assert self.lam is not None
+            args["lam_g0"] = np.asarray(self.lam[0]) * scale   # the solver's multipliers are scaled
+            if self.lam[1] is not None and np.size(self.lam[1]) == core.nx:
+                args["lam_x0"] = np.asarray(self.lam[1]) * scale
+        out = solver.solve(x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, cost_scale=scale, extra_setup=setup, **args)
+        return self._solution(out, st, p, lbx, ubx, lbg, ubg, tol, scale)
+
+    def _solution(self, out: Any, st: dict[str, Any], p: np.ndarray, lbx: np.ndarray, ubx: np.ndarray,
+                  lbg: np.ndarray, ubg: np.ndarray, tol: float, scale: float) -> Solution:
+        core, prob = self.core, self.prob
+        assert core is not None
+        x = np.array(out.x, float)
+        g = np.array(st["gfun"](x, p)).ravel()
+        vv = np.maximum(np.maximum(lbg - g, g - ubg), 0.0)
+        viol = float(vv.max()) if vv.size else 0.0
+        viol = max(viol, float(np.max(np.maximum(np.maximum(lbx - x, x - ubx), 0.0))))
+        if not np.isfinite(viol):
+            viol = float("inf")
+        terms: dict[str, float] = {}
+        c = np.array(st["cfun"](x, p)).ravel()
+        for h in prob._handles:
+            fs = self.owner.get(h.name, [])
+            if h.role == "cost":
+                terms[h.name] = float(sum(c[st["cslices"][f]].sum() for f in fs))
+            else:
+                v = [float(vv[st["slices"][f]].max()) for f in fs if st["slices"][f].stop > st["slices"][f].start]
+                if h.name in self.pbounds:
+                    lo, hi = self.pbounds[h.name]
+                    P = core.control_points(x)
+                    v.append(float(np.max(np.maximum(np.maximum(lo - P, P - hi), 0.0))))
+                terms[h.name] = max(v) if v else 0.0
+        dyn = [float(vv[sl].max()) for n, sl in st["slices"].items()
+               if n.startswith(("momentum", "base_attitude_dynamics")) and sl.stop > sl.start]
+        terms["dynamics"] = max(dyn) if dyn else 0.0
+        T = float(x[-1]) if core.free_time else prob.duration
+        P = core.control_points(x)
+        kv = knot_values(P, T / core.N)
+        bq = bp = None
+        if core.fl:
+            bq, bp = base_placements(core, kv["q"], core.knot_xi(x), prob.base0, p[core.p_c0:core.p_c0 + 3])
+        success = bool(out.status.succeeded and viol <= max(tol, 1e-9) * 10)
+        self.x0, self.lam, self.scale = None, None, scale
+        if success:
+            self.last_x = x
+        ev = SplineEvaluator(prob, core, {**st, "lbg": lbg, "ubg": ubg}, self.fams, self.owner, self.pbounds, p)
+        lam_g = None if out.lam_g is None else np.asarray(out.lam_g) / scale   # multipliers of the unscaled cost
+        lam_x = None if out.lam_x is None else np.asarray(out.lam_x) / scale
+        return Solution(success=success, status=out.status, iterations=out.iterations, wall_time=out.wall_time,
+                        cost=out.cost, max_constraint_violation=viol, terms=terms,
+                        t=np.linspace(0.0, T, core.N + 1), q=kv["q"], qd=kv["qd"], qdd=kv["qdd"], jerk=kv["jerk"],
+                        joint_names=prob.robot.joint_names, base_quat=bq, base_position=bp, x=x,
+                        lam_g=lam_g, lam_x=lam_x, x_scale_h=None, setup_time=out.setup_time,
+                        cpu_time=out.cpu_time, attempts=(out,), evaluator=ev)
