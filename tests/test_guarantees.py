@@ -191,7 +191,8 @@ def test_closed_chain_drift_is_refined_and_knot_terms_follow(tcb_arm):
     z = np.zeros(14)
 
     def problem():
-        prob = OptProblem(r, n_intervals=8, duration=4.0)
+        # the knot transcription: its closed chain drifts ∝ h⁴ between knots (the case refined here)
+        prob = OptProblem(r, n_intervals=8, duration=4.0, transcription="knots")
         prob.add_constraint(JointBoundary("start", q=qa, qd=z, qdd=z))
         prob.add_constraint(JointBoundary("end", q=qb, qd=z, qdd=z))
         prob.add_constraint(cc)
@@ -242,3 +243,33 @@ def test_dense_check_on_a_floating_robot():
     tau = np.array([joint_torques_numeric(r, *x) for x in zip(s["q"], s["qd"], s["qdd"])])
     np.testing.assert_allclose(sol.sample(ts, ht), tau, rtol=1e-9, atol=1e-9)
     assert check_between_knots(prob, sol) == []
+
+
+def test_bspline_core_solutions_are_checked_and_refined_between_knots(tcb_arm):
+    """On the B-spline core (the default), ``solve`` checks the closed chain densely too: a coarse
+    grid whose chain drifts between knots is refined (N grows) until it holds, or reported."""
+    from optplan.constraints.closed_chain import project_closed_chain
+    from optplan.problem import ClosedChain
+
+    r = tcb_arm
+    rng = np.random.default_rng(3)
+    qa = r.random_joints(rng) * 0.4
+    cc = ClosedChain.from_configuration(r, qa)
+    qb = project_closed_chain(r, qa + rng.normal(size=14) * 0.15, cc).q
+    z = np.zeros(14)
+    prob = OptProblem(r, n_intervals=6, duration=4.0)
+    prob.add_constraint(JointBoundary("start", q=qa, qd=z, qdd=z))
+    prob.add_constraint(JointBoundary("end", q=qb, qd=z, qdd=z))
+    prob.add_constraint(cc)
+    prob.add_cost(Smoothness("jerk"))
+    prob.set_initial_straight_line(qa, qb)
+    assert prob._mode() == "bspline"
+    o = GuaranteeOptions(tol=1e-5, rel_tol=0.0)
+    knots = prob.solve(guarantees=False)
+    drift = verify(r, knots, closed_chain=cc).max_closed_chain_residual
+    sol = prob.solve(guarantees=o)
+    res = verify(r, sol, closed_chain=cc).max_closed_chain_residual
+    assert knots.success and drift > 2 * o.tol          # the coarse grid drifts between knots
+    assert sol.success, (sol.status, sol.between_knots[:2])
+    assert prob.N > 6 and "refine" in [a.label for a in sol.attempts]
+    assert res <= 2 * o.tol, (drift, res)

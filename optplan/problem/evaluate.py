@@ -133,23 +133,8 @@ class TermEvaluator:
         return v.reshape(t.size, -1)
 
     def sampled_trajectory(self, sol: Solution, t: np.ndarray) -> NumericTrajectory:
-        """A :class:`NumericTrajectory` whose knots are the times ``t`` [s] of a solution (joints
-        exact; a floating base's quaternion normalised-linearly interpolated between knots)."""
-        s = sol.sample(t)
-        M = t.size
-        nj = s["q"].shape[1]
-        bq = None
-        if self.floating:
-            k = np.clip(np.searchsorted(sol.t, t, side="right") - 1, 0, len(sol.t) - 2)
-            f = ((t - sol.t[k]) / (sol.t[k + 1] - sol.t[k]))[:, None]
-            base_quat = np.asarray(sol.base_quat)          # a floating robot's solution has one
-            Q0, Q1 = base_quat[k], base_quat[k + 1]
-            Q1 = np.where((np.sum(Q0 * Q1, axis=1) < 0)[:, None], -Q1, Q1)
-            bq = (1 - f) * Q0 + f * Q1
-            bq /= np.linalg.norm(bq, axis=1, keepdims=True)
-        T = float(t[-1] - t[0]) if M > 1 and t[-1] > t[0] else 1.0
-        return NumericTrajectory(self.robot, s["q"], s["qd"], s["qdd"], np.zeros((max(M - 1, 0), nj)), T, bq,
-                                 self.com0)
+        """:func:`sampled_trajectory` of this evaluator's robot."""
+        return sampled_trajectory(self.robot, sol, t, self.com0)
 
     # ------------------------------------------------------------------ problem API
     def infeasibilities(self, sol: Solution, n: int) -> list[Infeasibility]:
@@ -172,3 +157,22 @@ class TermEvaluator:
                 out.append(Infeasibility(name, int(i), pts[i], float(r[i]), float(lo[i]), float(hi[i]), float(v[i])))
         out.sort(key=lambda r: -r.violation)
         return out[:n]
+
+
+def sampled_trajectory(robot: Any, sol: Solution, t: np.ndarray, com0: Any = None) -> NumericTrajectory:
+    """A :class:`NumericTrajectory` whose knots are the times ``t`` [s] of a solution (joints
+    exact; a floating base's quaternion normalised-linearly interpolated between knots)."""
+    s = sol.sample(t)
+    M = t.size
+    nj = s["q"].shape[1]
+    bq = None
+    if sol.base_quat is not None:
+        k = np.clip(np.searchsorted(sol.t, t, side="right") - 1, 0, len(sol.t) - 2)
+        f = ((t - sol.t[k]) / (sol.t[k + 1] - sol.t[k]))[:, None]
+        base_quat = np.asarray(sol.base_quat)
+        Q0, Q1 = base_quat[k], base_quat[k + 1]
+        Q1 = np.where((np.sum(Q0 * Q1, axis=1) < 0)[:, None], -Q1, Q1)
+        bq = (1 - f) * Q0 + f * Q1
+        bq /= np.linalg.norm(bq, axis=1, keepdims=True)
+    T = float(t[-1] - t[0]) if M > 1 and t[-1] > t[0] else 1.0
+    return NumericTrajectory(robot, s["q"], s["qd"], s["qdd"], np.zeros((max(M - 1, 0), nj)), T, bq, com0)

@@ -31,13 +31,15 @@ import dataclasses
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from ..errors import OptionError
-from .collision_term import CollisionAvoidance
+from .collision_term import CollisionAvoidance, CollisionModel
+from .evaluate import sampled_trajectory
 from .nlp import IpoptStatus
 from .solution import Solution
 
@@ -201,14 +203,16 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
     T = float(sol.t[-1] - sol.t[0])
     h = T / N
     t = np.linspace(0.0, T, o.density * N + 1)
-    traj = ev.sampled_trajectory(sol, t + sol.t[0])
+    traj = sampled_trajectory(problem.robot, sol, t + sol.t[0], getattr(ev, "com0", None))
     if traj.base_quat is not None:
         traj.base_quat = _base_attitudes(problem.robot, sol, t + sol.t[0], o.density)
+    spline = not hasattr(ev, "data")   # the B-spline core: no knot TermData
     out: list[Violation] = []
     for name, hd in ev.handles.items():
         if hd.role != "constraint":
             continue
-        term, data = hd.term, ev.data[name]
+        term = hd.term
+        data = _collision_data(term, problem.robot) if spline else ev.data[name]
         if isinstance(term, CollisionAvoidance):
             _collision(out, name, term, data, traj, t, h, N, o)
             continue
@@ -223,6 +227,15 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
     return out
 
 
+def _collision_data(term: Any, robot: Any) -> Any:
+    """What the dense check reads of a term's build on the B-spline core: for a collision term
+    its checker and constant pairs (a :class:`CollisionModel` of the term), else nothing."""
+    if not isinstance(term, CollisionAvoidance):
+        return None
+    m = CollisionModel(term, robot)
+    return SimpleNamespace(info={"model": m, "constant_pairs": tuple(m.constant_pairs), "relaxed": {}})
+
+
 # --------------------------------------------------------------------------- the refinement loop
 def _lineage(new: Any, old: Any) -> Any:
     """Mark ``new`` as derived from ``old`` (a user's handle to ``old`` keeps working)."""
@@ -233,6 +246,8 @@ def _lineage(new: Any, old: Any) -> Any:
 def _collision_retry(problem: Any, sol: Solution, viol: list[Violation], o: GuaranteeOptions) -> bool:
     """Activate pairs along the solution and raise margins around contacts; False if no collision
     term has a violation."""
+    if getattr(problem, "_mode", lambda: "knots")() == "bspline":
+        return False   # the B-spline core's pairs come from its guess: a finer grid from this solution
     names = {v.term for v in viol}
     changed = False
     t = np.linspace(sol.t[0], sol.t[-1], o.density * (len(sol.t) - 1) + 1)
@@ -289,10 +304,11 @@ def _refine(problem: Any, sol: Solution, o: GuaranteeOptions) -> bool:
             new = dataclasses.replace(term, activate_with=(), margin_boost={})
         if new is not None:
             problem.replace_term(hd, _lineage(new, term))
+    spline = getattr(problem, "_mode", lambda: "knots")() == "bspline"
     problem.N = N * f
-    problem.tp = problem._make_transcription()
-    problem._built = None
-    if problem.robot.is_floating:
+    problem._tp = None
+    problem._changed()
+    if spline or problem.robot.is_floating:
         problem.set_initial(solution=sol)   # base states re-integrated on the new grid
     else:
         # the solution itself, exactly: each interval split in f with the same constant jerk

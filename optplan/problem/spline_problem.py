@@ -14,7 +14,7 @@ from ..errors import ConfigurationError
 from ..geometry.spatial import pose_residual, vee_skew
 from ..geometry.splines import quintic_time_law
 from .collision_term import CollisionAvoidance
-from .evaluate import Infeasibility
+from .evaluate import Infeasibility, sampled_trajectory
 from .expr_term import ExprTerm, _bounds, knots_of
 from .expressions import Parameter, point_kernel
 from .frame_terms import BaseAttitude, ClosedChain, FramePose
@@ -268,6 +268,12 @@ class SplineEvaluator:
         self.owner, self.pbounds = owner, pbounds
         self.handles = dict(problem.terms)
         self.robot = problem.robot
+        #: a floating robot's fixed centre of mass [m] (where the base's position follows from); else None
+        self.com0 = np.array(p[core.p_c0:core.p_c0 + 3], float) if core.fl else None
+
+    def sampled_trajectory(self, sol: Any, t: np.ndarray) -> Any:
+        """The solution at the times ``t`` [s] as a :class:`NumericTrajectory` (joints exact)."""
+        return sampled_trajectory(self.robot, sol, t, self.com0)
 
     def _handle(self, handle: Any) -> Any:
         name = handle if isinstance(handle, str) else getattr(handle, "name", None)
