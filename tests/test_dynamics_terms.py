@@ -139,3 +139,32 @@ def test_active_torque_limit_holds_between_knots():
     dense = _dense_torque(robot, sol)                                          # 20× the knots
     assert np.abs(dense[:, 1]).max() <= allowed
     assert prob.N > 12 and sol.attempts[-1].label == "refine"
+
+
+# --------------------------------------------------------------------------- torques as expressions
+def test_tau_expression_matches_pinocchio_and_limits_it_on_the_kernel_core():
+    """``prob.tau`` is a one-line expression on the B-spline core: its values at the knots are
+    Pinocchio's ``rnea`` of the sampled solution, and a bound on it holds densely after ``solve``."""
+    robot = RobotModel.from_name("tcbirrt_dual_arm")
+    q0 = robot.neutral()
+    q1 = q0.copy()
+    q1[1] += 0.8
+    q1[3] += 0.6
+    z = np.zeros(robot.nj)
+    prob = OptProblem(robot, n_intervals=12, duration=1.0)
+    prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
+    prob.add_constraint(JointBoundary("end", q=q1, qd=z, qdd=z))
+    prob.add_cost(Smoothness("jerk"))
+    h = prob.add_constraint(prob.tau[1], lower=-LIMIT_J1, upper=LIMIT_J1, name="tau_j2")
+    prob.set_initial_straight_line(q0, q1)
+    assert prob._mode() == "bspline"
+    sol = prob.solve()
+    assert sol.success, (sol.status, sol.between_knots[:2])
+    tk = np.asarray(sol.value(h)).ravel()
+    ref = _dense_torque(robot, sol, per_interval=1)[:, 1]
+    np.testing.assert_allclose(tk, ref, rtol=1e-7, atol=1e-6)                 # the expression = Pinocchio
+    assert np.abs(tk).max() == pytest.approx(LIMIT_J1, abs=1.0)                # active
+    o = GuaranteeOptions()
+    assert np.abs(_dense_torque(robot, sol)[:, 1]).max() <= LIMIT_J1 + o.tol + o.rel_tol * LIMIT_J1
+    w = prob.base_wrench                                                          # fixed base: 6 rows per point
+    assert w.shape == (6, 1)

@@ -27,6 +27,7 @@ from ..errors import ConfigurationError
 from ..model.dynamics import SymbolicDynamics
 from ..model.robot import RobotModel
 from .build import BuildContext, TermData
+from .expressions import register_quantity
 from .terms import NumericTrajectory, Term, _frozen_vector, _set
 
 __all__ = ["JointTorqueLimits", "TorqueCost", "joint_torques_numeric", "effort_limits"]
@@ -234,3 +235,37 @@ class TorqueCost(Term):
             mid = f(q0 + s * v0 + s**2 / 2 * a0 + s**3 / 6 * j0, v0 + s * a0 + s**2 / 2 * j0, a0 + s * j0)
             tot += h / 6 * (knots[k] + 4 * mid + knots[k + 1])
         return tot
+
+
+# --------------------------------------------------------------------------- expressions
+_TWIN_CHECKED: weakref.WeakSet[RobotModel] = weakref.WeakSet()
+
+
+def _checked_torques(s: Any) -> Any:
+    """``prob.tau``: the joint torques [N·m or N] at a point (:meth:`SymbolicDynamics.tau`; a
+    free-floating base carries no external wrench), checked once per robot against
+    :func:`joint_torques_numeric` (Pinocchio) at a random state."""
+    robot = s.robot
+    f = dynamics_of(robot).tau
+    if robot not in _TWIN_CHECKED:
+        rng = np.random.default_rng(0)
+        lo = np.where(np.isfinite(robot.lower), robot.lower, -np.pi)
+        hi = np.where(np.isfinite(robot.upper), robot.upper, np.pi)
+        qj, vj, aj = rng.uniform(lo, hi), rng.normal(size=robot.nj), rng.normal(size=robot.nj)
+        got = np.asarray(f(qj, vj, aj), float).ravel()
+        ref = joint_torques_numeric(robot, qj, vj, aj)
+        if not np.allclose(got, ref, rtol=1e-8, atol=1e-8 * (1.0 + np.abs(ref).max())):
+            raise ConfigurationError(f"prob.tau: the symbolic joint torques of {robot.name!r} disagree with "
+                                     f"Pinocchio's (max |Δ| = {np.abs(got - ref).max():.3g})")
+        _TWIN_CHECKED.add(robot)
+    return f(s.q, s.qd, s.qdd)
+
+
+def _base_wrench(s: Any) -> Any:
+    """``prob.base_wrench``: ``[F [N]; n [N·m]]`` the robot exerts on its fixed mount
+    (:meth:`SymbolicDynamics.base_reaction_wrench`); a floating base has none (an error)."""
+    return dynamics_of(s.robot).base_reaction_wrench_function(s.q, s.qd, s.qdd)
+
+
+register_quantity("tau", _checked_torques)
+register_quantity("base_wrench", _base_wrench)
