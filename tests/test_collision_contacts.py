@@ -122,8 +122,9 @@ def test_checkers_agree_with_exact_distance_on_capsule_touching_box(tcb_touching
         for _ in range(3):
             tilt, spin, lateral = rng.uniform(-0.6, 0.6), rng.uniform(-np.pi, np.pi), rng.uniform(0.0, 0.025)
             scene = _touching_scene(robot, q, geometry, gap, tilt, spin, lateral)
-            cks = [ValidityChecker(robot, scene), ValidityChecker(robot, scene, batch=False),
-                   ValidityChecker(robot, scene, broadphase=False)]
+            # coal's checks (what this test is about: contacts requested so EPA runs)
+            cks = [ValidityChecker(robot, scene, kernel="coal"), ValidityChecker(robot, scene, batch=False, kernel="coal"),
+                   ValidityChecker(robot, scene, broadphase=False, kernel="coal")]
             dmin = min(_pair_distances(cks[0], "free", q).values())
             hit = dmin <= 0.0
             if gap < r:
@@ -134,6 +135,13 @@ def test_checkers_agree_with_exact_distance_on_capsule_touching_box(tcb_touching
                 assert ck.is_valid(q) == (not hit), f"gap {gap}, tilt {tilt:.2f}: exact distance {dmin:.3e}"
                 assert ck.first_invalid(np.array([q, q]), "free") == (0 if hit else -1)
             assert CollisionChecker(robot, scene).is_valid(q) == (not hit)
+            # the native planning kernel (the default) is conservative: never free where coal says hit,
+            # colliding where free only within its 1e-7 m band
+            nat = ValidityChecker(robot, scene)
+            if hit:
+                assert not nat.is_valid(q)
+            else:
+                assert nat.is_valid(q) or dmin <= 2e-7, f"gap {gap}: native kernel refuses at {dmin:.3e} m"
     assert n_hit >= 3 * len(GAPS) and n_free >= len(FREE)   # both verdicts were tested
 
 
