@@ -64,6 +64,10 @@ class ManifoldSampleSettings:
     walk_probability: float = 0.8
     #: Standard deviation of the perturbation of a walk candidate [rad].
     walk_sigma: float = 0.5
+    #: Start the walk from the scene's nominal start and goal configurations (``[extra] q_start``/``q_goal``
+    #: polished by IK, as the benchmark's trials do) when the scene has them, so that the set covers the
+    #: arm branches the tasks are posed on (they are not put in the set themselves) [-].
+    seed_from_scene: bool = True
 
     def __post_init__(self) -> None:
         for name in ("n", "max_projection_iterations", "max_draws_factor"):
@@ -79,6 +83,8 @@ class ManifoldSampleSettings:
                              f"got {self.walk_probability!r}")
         if not (isinstance(self.walk_sigma, (int, float)) and math.isfinite(self.walk_sigma) and self.walk_sigma > 0):
             raise ValueError(f"ManifoldSampleSettings.walk_sigma: expected a positive number [rad], got {self.walk_sigma!r}")
+        if not isinstance(self.seed_from_scene, bool):
+            raise ValueError(f"ManifoldSampleSettings.seed_from_scene: expected True/False, got {self.seed_from_scene!r}")
         if not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin) and self.margin >= 0):
             raise ValueError(f"ManifoldSampleSettings.margin: expected a number >= 0 m, got {self.margin!r}")
 
@@ -148,6 +154,7 @@ def generate_manifold_samples(robot: RobotModel, scene: Scene, settings: Manifol
     data = robot.model.createData()
     lo, hi = robot.lower, robot.upper
     out: list[np.ndarray] = []
+    pool = _scene_seeds(robot, scene, kin, ck) if s.seed_from_scene else []
     draws = fails = coll = 0
     t0 = time.perf_counter()
     bar = None
@@ -161,8 +168,9 @@ def generate_manifold_samples(robot: RobotModel, scene: Scene, settings: Manifol
                 raise ConfigurationError(f"scene {scene.name!r}: only {len(out)} of {s.n} valid on-manifold "
                                          f"configurations in {draws} draws (max_draws_factor={s.max_draws_factor})")
             draws += 1
-            if out and rng.random() < s.walk_probability:
-                x = out[int(rng.integers(len(out)))] + rng.normal(0.0, s.walk_sigma, robot.nq)
+            if (out or pool) and rng.random() < s.walk_probability:
+                base = out + pool
+                x = base[int(rng.integers(len(base)))] + rng.normal(0.0, s.walk_sigma, robot.nq)
             else:
                 x = rng.uniform(lo, hi)
             q = project_onto_chain(kin, np.clip(x, lo, hi), lo, hi, s.tolerance, s.max_projection_iterations)
@@ -184,6 +192,24 @@ def generate_manifold_samples(robot: RobotModel, scene: Scene, settings: Manifol
     return ManifoldSamples(np.array(out).reshape(-1, robot.nq), draws, fails, coll, time.perf_counter() - t0)
 
 
+def _scene_seeds(robot: RobotModel, scene: Scene, kin: ClosedChainKinematics, ck: ValidityChecker) -> list[np.ndarray]:
+    """The scene's nominal start / goal configurations, IK-polished onto the nominal object poses, that are valid."""
+    from ..constraints.closed_chain import IKSettings
+
+    out = []
+    ex = scene.extra or {}
+    for key, M in (("q_start", scene.start), ("q_goal", scene.goal)):
+        if key not in ex or M is None:
+            continue
+        q0 = np.asarray(ex[key], float) * (math.pi / 180.0 if ex.get("q_unit", "rad") == "deg" else 1.0)
+        if q0.shape != (robot.nq,):
+            continue
+        q, _ = kin.ik(q0, M.rotation, M.translation, IKSettings())
+        if q is not None and ck.in_limits(q) and ck.is_valid(q):
+            out.append(q)
+    return out
+
+
 def manifold_samples(robot: RobotModel, scene: Scene, settings: ManifoldSampleSettings | None = None, *,
                      checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None,
                      cache: bool = True, progress: bool = False) -> ManifoldSamples:
@@ -192,7 +218,7 @@ def manifold_samples(robot: RobotModel, scene: Scene, settings: ManifoldSampleSe
     from ..codegen import cache_dir
 
     s = settings or ManifoldSampleSettings()
-    digest = scene_digest(robot, scene, {"manifold_samples": asdict(s), "version": 1})
+    digest = scene_digest(robot, scene, {"manifold_samples": asdict(s), "version": 3})
     path = cache_dir() / "manifold" / f"{scene.name}_{digest}.npz"
     if cache and path.exists():
         try:
