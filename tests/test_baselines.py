@@ -187,3 +187,35 @@ def test_precomputed_graph_samples_from_its_set(tcb, scene1, kin, checker, trial
     assert np.array_equal(made.samples.Q, pg.samples.Q)       # read back from the cache
     with pytest.raises(ValueError, match="n_samples"):
         PrecomputedGraphOptions(n_samples=0)
+
+
+# ---------------------------------------------------------------------- Tables 2-3, Fig. 6
+def test_tables_and_fig6_from_rows(tmp_path):
+    from optplan.bench.tcbirrt import summarize
+    from optplan.bench.tcbirrt_tables import PAPER, PAPER_ORDER, expand_planners, format_tables, plot_fig6
+
+    assert expand_planners(["all"]) == list(PAPER_ORDER) and len(PAPER_ORDER) == 7 == len(PAPER)
+    assert expand_planners(["tcbirrt", "all", " "]) == ["tcbirrt", *[p for p in PAPER_ORDER if p != "tcbirrt"]]
+    rng = np.random.default_rng(0)
+    rows = []
+    for trial in range(20):
+        for p, rate in (("tcbirrt", 0.9), ("constrained-prm", 0.3)):
+            ok = bool(rng.random() < rate)
+            rows.append({"scene": "ssps_scene1", "trial": trial, "planner": p, "success": ok, "status":
+                         "exact" if ok else "timeout", "clock": "cpu", "cpu_time_s": float(rng.uniform(0, 10)) if ok
+                         else 10.0, "time_s": 1.0})
+    summ = summarize(rows, 10.0)
+    text = format_tables(summ, 10.0)
+    d = summ["ssps_scene1"]
+    nmin = d["n_min"]
+    assert nmin == 8                                             # 40 per 100 trials, 20 trials
+    times = sorted(r["cpu_time_s"] for r in rows if r["planner"] == "tcbirrt" and r["success"])
+    assert d["planners"]["tcbirrt"]["mean_fastest_nmin_s"] == pytest.approx(np.mean(times[:nmin]))   # Eq. 10
+    assert d["planners"]["tcbirrt"]["std_fastest_nmin_s"] == pytest.approx(np.std(times[:nmin], ddof=1))
+    n_ok = sum(r["success"] for r in rows if r["planner"] == "constrained-prm")
+    assert f"{n_ok / 20:.2f} ({n_ok}/20) [0.42]" in text           # Table 2 beside the paper's figure
+    if n_ok < nmin:
+        assert "/ [395.2±269]" in text                           # Table 3: too few successes, as the paper's "/"
+    assert "TCBiRRT" in text and "Constrained PRM" in text and "[0.94]" in text
+    plot_fig6(rows, tmp_path / "fig6.png", 10.0)
+    assert (tmp_path / "fig6.png").stat().st_size > 1000

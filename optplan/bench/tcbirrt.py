@@ -41,26 +41,13 @@ from typing import Any
 import numpy as np
 
 from .engine import map_unordered, parse_planner_spec, validate_engine
+from .tcbirrt_tables import PAPER, _time_of, format_tables, plot_fig6, success_curve
 
 __all__ = ["BenchConfig", "run", "parse_planner_spec", "expand_scenes", "load_results", "summarize", "format_summary", "plot_success", "scene_name",
            "PAPER", "N_MIN"]
 log = logging.getLogger(__name__)
 
 N_MIN = {"ssps_scene1": 40, "ssps_scene2": 30, "ssps_scene3": 15}   # per 100 trials (Section 5.3)
-PAPER: dict[str, dict[str, tuple[float, float | None, float | None]]] = {  # the TCBiRRT paper Tables 2-3 (t = 1000 s; times: mean ± std of the n_min fastest)
-    "tcbirrt": {"ssps_scene1": (0.94, 0.82, 0.65), "ssps_scene2": (0.96, 2.12, 0.94), "ssps_scene3": (0.93, 0.87, 0.38)},
-    "cbirrt2": {"ssps_scene1": (0.25, None, None), "ssps_scene2": (0.18, None, None), "ssps_scene3": (0.02, None, None)},
-    "precomputed-graph": {"ssps_scene1": (0.22, None, None), "ssps_scene2": (0.22, None, None),
-                          "ssps_scene3": (0.02, None, None)},
-    "constrained-prm": {"ssps_scene1": (0.42, 395.19, 269.03), "ssps_scene2": (0.30, 398.50, 287.88),
-                        "ssps_scene3": (0.18, 571.74, 288.31)},
-    "latent-sampling": {"ssps_scene1": (0.40, 474.61, 346.93), "ssps_scene2": (0.38, 301.33, 274.02),
-                        "ssps_scene3": (0.01, None, None)},
-    "lcbirrt": {"ssps_scene1": (0.65, 117.65, 108.59), "ssps_scene2": (0.37, 386.24, 244.36),
-                "ssps_scene3": (0.09, None, None)},
-    "lcbirrt-lpo": {"ssps_scene1": (0.92, 42.89, 45.89), "ssps_scene2": (0.63, 179.27, 130.62),
-                    "ssps_scene3": (0.15, 479.16, 301.04)},
-}
 #: [m] the bench's edge check of every returned path: no point of the robot or object moves farther
 #: between two checked configurations; a path with an edge in collision at this density is not a success
 SWEEP_TOLERANCE = 0.01
@@ -326,7 +313,6 @@ def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
     summ = summarize(rows, cfg.time_limit)
     with open(out / "summary.json", "w") as f:
         json.dump(summ, f, indent=2)
-    from .tcbirrt_tables import format_tables, plot_fig6
 
     (out / "summary.txt").write_text(format_summary(summ) + "\n\n" + format_tables(summ, cfg.time_limit, cfg.clock))
     if cfg.plot:
@@ -339,18 +325,6 @@ def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
 
 
 # ---------------------------------------------------------------------- metrics
-def _time_of(r: dict) -> float:
-    return float(r["cpu_time_s"] if r.get("clock") == "cpu" else r["time_s"])
-
-
-def success_curve(times: list[float], n: int, ts) -> list[float]:
-    """p(t) = n_t / n (Eq. 9): fraction of the n trials solved within t."""
-    arr = np.sort(np.asarray(times, float))
-    if n < 1:   # no trials: the fraction is undefined
-        return [float("nan") for _ in ts]
-    return [float(np.searchsorted(arr, t, side="right")) / n for t in ts]
-
-
 def summarize(rows: list[dict], time_limit: float) -> dict:
     """Per scene and planner: trials, successes, p(t), median, mean ± std of the n_min fastest
     (only planners with ≥ n_min successes, Eq. 10-11), regenerations, path checks."""

@@ -16,7 +16,35 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PAPER_ORDER", "PAPER_LABELS", "expand_planners", "format_tables", "plot_fig6"]
+__all__ = ["PAPER", "PAPER_ORDER", "PAPER_LABELS", "expand_planners", "format_tables", "plot_fig6", "success_curve"]
+
+PAPER: dict[str, dict[str, tuple[float, float | None, float | None]]] = {  # the TCBiRRT paper Tables 2-3 (t = 1000 s; times: mean ± std of the n_min fastest)
+    "tcbirrt": {"ssps_scene1": (0.94, 0.82, 0.65), "ssps_scene2": (0.96, 2.12, 0.94), "ssps_scene3": (0.93, 0.87, 0.38)},
+    "cbirrt2": {"ssps_scene1": (0.25, None, None), "ssps_scene2": (0.18, None, None), "ssps_scene3": (0.02, None, None)},
+    "precomputed-graph": {"ssps_scene1": (0.22, None, None), "ssps_scene2": (0.22, None, None),
+                          "ssps_scene3": (0.02, None, None)},
+    "constrained-prm": {"ssps_scene1": (0.42, 395.19, 269.03), "ssps_scene2": (0.30, 398.50, 287.88),
+                        "ssps_scene3": (0.18, 571.74, 288.31)},
+    "latent-sampling": {"ssps_scene1": (0.40, 474.61, 346.93), "ssps_scene2": (0.38, 301.33, 274.02),
+                        "ssps_scene3": (0.01, None, None)},
+    "lcbirrt": {"ssps_scene1": (0.65, 117.65, 108.59), "ssps_scene2": (0.37, 386.24, 244.36),
+                "ssps_scene3": (0.09, None, None)},
+    "lcbirrt-lpo": {"ssps_scene1": (0.92, 42.89, 45.89), "ssps_scene2": (0.63, 179.27, 130.62),
+                    "ssps_scene3": (0.15, 479.16, 301.04)},
+}
+
+
+def _time_of(r: dict) -> float:
+    return float(r["cpu_time_s"] if r.get("clock") == "cpu" else r["time_s"])
+
+
+def success_curve(times: list[float], n: int, ts) -> list[float]:
+    """p(t) = n_t / n (Eq. 9): fraction of the n trials solved within t."""
+    arr = np.sort(np.asarray(times, float))
+    if n < 1:   # no trials: the fraction is undefined
+        return [float("nan") for _ in ts]
+    return [float(np.searchsorted(arr, t, side="right")) / n for t in ts]
+
 
 #: the paper's Table 2 order (our planner names)
 PAPER_ORDER = ("cbirrt2", "precomputed-graph", "constrained-prm", "latent-sampling", "lcbirrt", "lcbirrt-lpo",
@@ -43,8 +71,6 @@ def _scenes(summ: dict[str, Any]) -> list[str]:
 
 def format_tables(summ: dict[str, Any], time_limit: float, clock: str = "cpu") -> str:
     """Tables 2 and 3 of ``summarize(rows)`` with the paper's figures in brackets."""
-    from .tcbirrt import PAPER
-
     scenes = _scenes(summ)
     planners = [p for p in PAPER_ORDER if any(p in summ[s]["planners"] for s in scenes)]
     planners += sorted({p for s in scenes for p in summ[s]["planners"]} - set(planners))
@@ -81,8 +107,6 @@ def plot_fig6(rows: list[dict[str, Any]], path: Any, time_limit: float) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from .tcbirrt import _time_of, success_curve
 
     scenes = sorted({r["scene"] for r in rows})
     if not scenes:

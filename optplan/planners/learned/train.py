@@ -81,15 +81,12 @@ def format_records(records: list[dict[str, Any]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..manifold_samples import __name__ as _  # noqa: F401  (import check before the long run)
-
     ap = argparse.ArgumentParser(prog="python -m optplan.planners.learned.train", description=__doc__)
     ap.add_argument("--scene", default="1,2,3", help="comma-separated scene names or SSPS numbers")
     ap.add_argument("--epochs", type=int, default=None, help="CVAE epochs (default: CVAESettings.epochs)")
     ap.add_argument("--out", default="learned_models", help="report folder")
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
-    from ...bench.tcbirrt import expand_scenes
     from .cvae import CVAESettings
 
     epochs = a.epochs if a.epochs is not None else CVAESettings.epochs
@@ -99,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     records = []
-    for sc in expand_scenes(a.scene.split(",")):
+    for sc in [f"ssps_scene{s.strip()}" if s.strip().isdigit() else s.strip() for s in a.scene.split(",") if s.strip()]:
         r = train_scene(sc, epochs, not a.no_progress)
         (out / f"learned_{r['scene']}.json").write_text(json.dumps(r, indent=1))
         records.append(r)
