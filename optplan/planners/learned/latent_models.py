@@ -5,8 +5,9 @@ TCBiRRT paper's Section 5.2 items 6-7, after Park et al. 2024 and Zhang et al. 2
   input) or signed distance [m] (the SDF input), exact for box, sphere and capsule obstacles.
 * :class:`LatentClassifier` — voxel encoder ``32³ → 2×512 (LeakyReLU) → 4`` and classifier
   ``[z, features] → 3×256 (ReLU) → logit``, trained jointly (binary cross-entropy, Adam, learning
-  rate 5e-4, batch 256, 150 epochs) on latent samples ``z ~ N(0, I)`` labelled by decoding,
-  projecting and collision-checking them (up to 1000 valid and 1000 invalid).
+  rate 5e-4, batch 256, 150 epochs) on latent samples — half ``z ~ N(0, I)``, half around the
+  encodings of the training configurations — labelled by decoding, projecting and collision-checking
+  them (up to 1000 valid and 1000 invalid).
 * :class:`LatentDistance` — SDF encoder ``32³ → 2×512 (LeakyReLU) → 16`` and distance network
   ``[z, features] → 3×1024 (ReLU) → d`` trained jointly (squared error, Adam, learning rate 3e-3,
   batch 64, 60 epochs) on on-manifold configurations (up to 1000 collision-free and 1000 in
@@ -239,22 +240,25 @@ def _decode_valid(cvae: CVAE, z: np.ndarray, robot: RobotModel, kin: Any, checke
     return x
 
 
-def _cache_path(robot: RobotModel, scene: Scene, kind: str, cvae: CVAE, s: LatentModelSettings) -> Path:
+def _cache_path(robot: RobotModel, scene: Scene, kind: str, cvae: CVAE, s: LatentModelSettings,
+                version: int = 1) -> Path:
     from ...codegen import cache_dir
 
     digest = scene_digest(robot, scene, {kind: asdict(s), "cvae": cvae.data_digest,
-                                         "cvae_settings": asdict(cvae.settings), "version": 1})
+                                         "cvae_settings": asdict(cvae.settings), "version": version})
     return cache_dir() / "learned" / f"{scene.name}_{kind}_{digest}.npz"
 
 
 def load_or_train_classifier(robot: RobotModel, scene: Scene, cvae: CVAE, kin: Any, checker: ValidityChecker,
-                             settings: LatentModelSettings | None = None, *, cache: bool = True,
-                             progress: bool = False) -> LatentClassifier:
-    """The scene's latent validity classifier (cached per scene, hash of the CVAE's data + settings)."""
+                             settings: LatentModelSettings | None = None, *, samples: np.ndarray | None = None,
+                             cache: bool = True, progress: bool = False) -> LatentClassifier:
+    """The scene's latent validity classifier (cached per scene, hash of the CVAE's data + settings);
+    ``samples``: the CVAE's on-manifold training configurations (half the latent draws are taken
+    around their encodings, ``N(0, 0.5²)``)."""
     s = settings or LatentModelSettings()
     assert scene.object is not None
     grid = scene_grid(scene, "occupancy")
-    path = _cache_path(robot, scene, "classifier", cvae, s)
+    path = _cache_path(robot, scene, "classifier", cvae, s, 2 if samples is not None else 1)
     if cache and path.exists():
         try:
             return LatentClassifier.load(path, grid)
@@ -266,9 +270,15 @@ def load_or_train_classifier(robot: RobotModel, scene: Scene, cvae: CVAE, kin: A
     good: list[np.ndarray] = []
     bad: list[np.ndarray] = []
     draws = 0
+    # half the draws from the prior (where the planner samples), half around the encodings of the training
+    # configurations (where the trials' start and goal encode: prior draws alone left them at p(valid) ~ 1e-4)
+    Zd = cvae.encode(samples) if samples is not None and len(samples) else None
     while (len(good) < s.n_classifier or len(bad) < s.n_classifier) and draws < s.max_draws:
         draws += 1
-        z = rng.standard_normal(cvae.latent_dim)
+        if Zd is not None and draws % 2 == 0:
+            z = Zd[int(rng.integers(len(Zd)))] + rng.normal(0.0, 0.5, cvae.latent_dim)
+        else:
+            z = rng.standard_normal(cvae.latent_dim)
         ok = _decode_valid(cvae, z, robot, kin, checker, scene.object.grasps, data) is not None
         (good if ok else bad).append(z)
     good, bad = good[:s.n_classifier], bad[:s.n_classifier]

@@ -234,12 +234,12 @@ class LCBiRRT(Planner):
         self.cvae = _cvae(robot, scene, o, self.checker, self.kin, progress)
         ms = LatentModelSettings(n_classifier=o.n_model_samples, classifier_epochs=o.classifier_epochs,
                                  n_distance=o.n_model_samples, distance_epochs=o.distance_epochs, seed=o.train_seed)
+        data = manifold_samples(robot, scene, ManifoldSampleSettings(n=o.n_data, seed=o.train_seed),
+                                checker=self.checker, kinematics=self.kin, cache=o.cache)
         self.classifier = load_or_train_classifier(robot, scene, self.cvae, self.kin, self.checker, ms,
-                                                   cache=o.cache, progress=progress)
+                                                   samples=data.Q, cache=o.cache, progress=progress)
         self.distance = None
         if o.lpo:
-            data = manifold_samples(robot, scene, ManifoldSampleSettings(n=o.n_data, seed=o.train_seed),
-                                    checker=self.checker, kinematics=self.kin, cache=o.cache)
             self.distance = load_or_train_distance(robot, scene, self.cvae, self.kin, self.checker, data.Q, ms,
                                                    cache=o.cache, progress=progress)
 
