@@ -127,6 +127,12 @@ def _cmd_bench_tcbirrt(args) -> int:
         except ValueError as exc:
             raise UsageError(f"--planners {args.planners!r}: {exc}") from None
         ca.check_planner(spec, "--planners")
+    from .planners.learned import LEARNED, available
+
+    learned = [p for p in planners if parse_planner_spec(p)[0].lower() in LEARNED]
+    if learned and not available():
+        raise UsageError(f"--planners {','.join(learned)}: the learned planners need the optional extra 'learned': "
+                         "pip install \"optplan[learned]\"")
     cfg = BenchConfig(scenes=scenes, planners=planners,
                       trials=args.trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=args.out,
                       clock=args.clock, progress=not args.no_progress, plot=not args.no_plot,

@@ -219,3 +219,14 @@ def test_tables_and_fig6_from_rows(tmp_path):
     assert "TCBiRRT" in text and "Constrained PRM" in text and "[0.94]" in text
     plot_fig6(rows, tmp_path / "fig6.png", 10.0)
     assert (tmp_path / "fig6.png").stat().st_size > 1000
+
+
+def test_bench_learned_without_the_extra_is_a_usage_error(capsys, monkeypatch, tmp_path):
+    import optplan.planners.learned as learned
+    from optplan import cli
+
+    monkeypatch.setattr(learned, "available", lambda: False)
+    rc = cli.main(["bench", "tcbirrt", "--scene", "1", "--trials", "1", "--planners", "all", "--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "optplan[learned]" in err and "lcbirrt-lpo" in err
+    assert not (tmp_path / "results.jsonl").exists()
