@@ -1,4 +1,4 @@
-"""Constrained PRM — a probabilistic roadmap on the closed-chain manifold (the TCBiRRT paper's
+"""Constrained PRM — a probabilistic roadmap on the closed-chain manifold (Jang et al. 2022; the TCBiRRT paper's
 Section 5.2 item 5: "handles closed-chain constraints by sampling the pose of the manipulated
 object; the sampling range is identical to that used in TCBiRRT; the collision checking step size
 is 0.2 rad").

@@ -1,5 +1,5 @@
 """Precomputed Graph — CBiRRT2 whose random targets come from a precomputed set of on-manifold
-configurations (the TCBiRRT paper's Section 5.2 item 3: "10,000 configurations satisfying the
+configurations (Şucan & Chitta 2012; the TCBiRRT paper's Section 5.2 item 3: "10,000 configurations satisfying the
 constraints are generated offline to form the graph. During planning, new nodes are sampled
 directly from this graph").
 

@@ -1,5 +1,5 @@
 """The conditional variational autoencoder of the latent baselines (the TCBiRRT paper's Section 5.2
-item 4, after Park et al. 2024): configurations on the closed-chain manifold ↔ an 8-dimensional latent
+item 4: Acar & Tee, ICRA 2021; the latent space of LCBiRRT, Park et al. 2024): configurations on the closed-chain manifold ↔ an 8-dimensional latent
 space whose standard normal prior, decoded and projected, samples near the manifold.
 
 Data: :func:`~optplan.planners.manifold_samples.manifold_samples` of the scene (10,000 valid

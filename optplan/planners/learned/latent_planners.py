@@ -1,6 +1,6 @@
 """The learned baselines of the TCBiRRT paper's comparison (Section 5.2 items 4, 6, 7):
 
-* :class:`LatentSampling` — CBiRRT2 whose random targets are latent samples ``z ~ N(0, I)`` of the
+* :class:`LatentSampling` (Acar & Tee 2021) — CBiRRT2 whose random targets are latent samples ``z ~ N(0, I)`` of the
   scene's CVAE, decoded and projected onto the manifold (Newton-Raphson; the decoded configuration
   itself when the projection fails); extension, projection and edges are CBiRRT2's.
 * :class:`LCBiRRT` — a bidirectional RRT **in the latent space** (Park et al. 2024): trees of latent
