@@ -120,6 +120,8 @@ def _cmd_bench_tcbirrt(args) -> int:
             if name not in scenes:
                 scenes.append(name)
     scenes = scenes or [ca.check_scene("")]
+    from .bench.tcbirrt_tables import expand_planners, format_tables
+
     out, trials = args.out, args.trials
     if args.generated:   # fresh random draws of the scene families, reported apart from the fixed scenes
         from pathlib import Path
@@ -132,7 +134,7 @@ def _cmd_bench_tcbirrt(args) -> int:
         scenes = write_scenes(drawn, Path(out) / "scenes")
         trials = 1
         print(f"{len(drawn)} generated scenes (seed {args.seed}) in {out}/scenes, one trial each")
-    planners = [p for p in args.planners.split(",") if p.strip()]
+    planners = expand_planners([p for p in args.planners.split(",") if p.strip()])
     for p in planners or [""]:
         try:
             spec, opts = parse_planner_spec(p)
@@ -143,6 +145,12 @@ def _cmd_bench_tcbirrt(args) -> int:
             check_planner_options(spec, **opts)
         except OptplanError as exc:
             raise UsageError(f"--planners {args.planners!r}: {exc}") from None
+    from .planners.learned import LEARNED, available
+
+    learned = [p for p in planners if parse_planner_spec(p)[0].lower() in LEARNED]
+    if learned and not available():
+        raise UsageError(f"--planners {','.join(learned)}: the learned planners need the optional extra 'learned': "
+                         "pip install \"optplan[learned]\"")
     cfg = BenchConfig(scenes=scenes, planners=planners,
                       trials=trials, time_limit=args.time_limit, seed=args.seed, jobs=args.jobs, out=out,
                       clock=args.clock, progress=not args.no_progress, plot=not args.no_plot,
@@ -150,14 +158,16 @@ def _cmd_bench_tcbirrt(args) -> int:
                       engine=args.engine, address=args.address)
     t0 = time.perf_counter()
     rows = run(cfg)
-    print(format_summary(summarize(rows, cfg.time_limit)))
+    summ = summarize(rows, cfg.time_limit)
+    print(format_summary(summ))
+    print(format_tables(summ, cfg.time_limit, cfg.clock))
     if args.generated:
         from .bench.scenegen import family_summary
 
         print(family_summary(rows))
     print(f"summary of {len(rows)} result lines ({out}/results.jsonl"
           f"{' and merged runs' if cfg.merge else ''}); run time {time.perf_counter() - t0:.1f} s (clock: {cfg.clock}); "
-          f"figures {out}/success_curves.png, {out}/time_distributions.png")
+          f"figures {out}/success_curves.png, {out}/fig6_success_rate.png, {out}/time_distributions.png")
     return 0
 
 
@@ -475,9 +485,12 @@ def build_parser() -> argparse.ArgumentParser:
     tb.add_argument("--trials", type=ca.positive_int, default=100, help="trials per scene")
     tb.add_argument("--first-trial", type=ca.nonnegative_int, default=0, help="index of the first trial")
     tb.add_argument("--planners", default="tcbirrt,cbirrt2,ompl-atlas",
-                    help="comma-separated: tcbirrt, cbirrt2, rrtconnect, ompl-<projected|atlas|tb>[-<planner>]; "
+                    help="comma-separated: tcbirrt, cbirrt2, constrained-prm, precomputed-graph, latent-sampling, "
+                         "lcbirrt, lcbirrt-lpo, rrtconnect, ompl-<projected|atlas|tb>[-<planner>]; 'all' = the paper's "
+                         "seven (the learned ones need optplan[learned]); "
                          "options after colons, e.g. ompl-atlas:tolerance=1e-4:range=0.5")
-    tb.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="per query [s]")
+    tb.add_argument("--time-limit", type=ca.positive_float, default=10.0,
+                    help="per query [s] (default 10 s, CI-sized; the paper's Tables 2-3 use 1000 s)")
     tb.add_argument("--seed", type=ca.nonnegative_int, default=0)
     tb.add_argument("--jobs", type=ca.positive_int, default=1, help="worker processes")
     tb.add_argument("--clock", choices=["cpu", "wall"], default="cpu",

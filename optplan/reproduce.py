@@ -65,12 +65,20 @@ def _py(*args) -> tuple:
 
 
 # --------------------------------------------------------------------------- TCBiRRT
+def _tcbirrt_planners() -> str:
+    """The paper's seven planners (Tables 2-3), less the learned ones when ``optplan[learned]`` is absent."""
+    from .bench.tcbirrt_tables import PAPER_ORDER
+    from .planners.learned import LEARNED, available
+
+    return ",".join(p for p in PAPER_ORDER if available() or p not in LEARNED)
+
+
 def _tcbirrt_steps(out: Path, quick: bool, ex: Path) -> list[Step]:
     bench = out / "bench"
     if quick:
-        args = ["--scene", "1,2,3", "--trials", "5", "--planners", "tcbirrt", "--time-limit", "10"]
+        args = ["--scene", "1,2,3", "--trials", "5", "--planners", _tcbirrt_planners(), "--time-limit", "10"]
     else:
-        args = ["--scene", "1,2,3", "--trials", "100", "--planners", "tcbirrt,cbirrt2", "--time-limit", "10",
+        args = ["--scene", "1,2,3", "--trials", "100", "--planners", _tcbirrt_planners(), "--time-limit", "10",
                 "--jobs", "2"]
     steps = [Step("bench", _py("-m", "optplan.cli", "bench", "tcbirrt", *args, "--out", bench, "--no-progress"),
                   json=str(bench / "summary.json"))]
@@ -108,22 +116,16 @@ def _tcbirrt_view(out: Path, quick: bool) -> list[Path]:
 
 
 def _tcbirrt_summary(out: Path, steps) -> list[str]:
-    from .bench.tcbirrt import PAPER
+    from .bench.tcbirrt_tables import format_tables
 
     p = out / "bench" / "summary.json"
     if not p.exists():
         return ["  (no benchmark summary)"]
     summ = json.loads(p.read_text())
-    lines = [f"  {'scene':12s} {'planner':8s} {'success (ours)':>15s} {'mean±std n_min fastest [s]':>27s}   "
-             f"{'paper success, mean±std [s]':>28s}"]
-    for sc, e in summ.items():
-        for pl, d in e["planners"].items():
-            pp = PAPER.get(pl, {}).get(sc)
-            mm = (f"{d['mean_fastest_nmin_s']:.3f} ± {d['std_fastest_nmin_s']:.3f}"
-                  if d.get("mean_fastest_nmin_s") is not None else "/")
-            ps = "/" if pp is None else f"{pp[0]:.2f}, " + ("/" if pp[1] is None else f"{pp[1]:.2f} ± {pp[2]:.2f}")
-            lines.append(f"  {sc:12s} {pl:8s} {d['successes']:>7d}/{d['n']:<3d} {d['success_rate']:4.2f} {mm:>27s}   "
-                         f"{ps:>28s}")
+    cfg_path = out / "bench" / "config.json"
+    cfg = json.loads(cfg_path.read_text()) if cfg_path.exists() else {}
+    lines = ["  " + ln for ln in format_tables(summ, float(cfg.get("time_limit", 10.0)), cfg.get("clock", "cpu")).splitlines()]
+    lines.append(f"  Fig. 6 (p(t) per scene): {out / 'bench' / 'fig6_success_rate.png'}")
     lines.append("  (ours: CPU seconds per query, this machine; paper: wall seconds at t = 1000 s, Python + "
                  "MuJoCo on an i9-10900K; our scene geometry is our own: the paper does not give it)")
     return lines

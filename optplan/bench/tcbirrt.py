@@ -2,7 +2,10 @@
 times (Eq. 9-11).
 
 ``optplan bench tcbirrt --scene 1,2,3 --trials 100 --planners tcbirrt,cbirrt2,ompl-atlas
---time-limit 10 --seed 0 --jobs 2 --out DIR``
+--time-limit 10 --seed 0 --jobs 2 --out DIR``; ``--planners all`` runs the paper's seven planners
+(:data:`optplan.bench.tcbirrt_tables.PAPER_ORDER`) and ``DIR/summary.txt`` ends with its Tables 2-3
+beside the paper's figures, ``DIR/fig6_success_rate.png`` is its Fig. 6. The default time limit,
+10 s, keeps a run CI-sized; the paper's is ``--time-limit 1000``.
 
 * Trials come from :class:`optplan.trials.TrialGenerator` (Section 5.1), one seed per
   trial (``SeedSequence(seed, spawn_key=(index,))``): results do not depend on ``--jobs`` or on
@@ -38,16 +41,13 @@ from typing import Any
 import numpy as np
 
 from .engine import map_unordered, parse_planner_spec, validate_engine
+from .tcbirrt_tables import PAPER, _time_of, format_tables, plot_fig6, success_curve
 
 __all__ = ["BenchConfig", "run", "parse_planner_spec", "expand_scenes", "load_results", "summarize", "format_summary", "plot_success", "scene_name",
            "PAPER", "N_MIN"]
 log = logging.getLogger(__name__)
 
 N_MIN = {"ssps_scene1": 40, "ssps_scene2": 30, "ssps_scene3": 15}   # per 100 trials (Section 5.3)
-PAPER: dict[str, dict[str, tuple[float, float | None, float | None]]] = {  # the TCBiRRT paper Tables 2-3 (t = 1000 s; times: mean ± std of the n_min fastest)
-    "tcbirrt": {"ssps_scene1": (0.94, 0.82, 0.65), "ssps_scene2": (0.96, 2.12, 0.94), "ssps_scene3": (0.93, 0.87, 0.38)},
-    "cbirrt2": {"ssps_scene1": (0.25, None, None), "ssps_scene2": (0.18, None, None), "ssps_scene3": (0.02, None, None)},
-}
 #: [m] the bench's edge check of every returned path: no point of the robot or object moves farther
 #: between two checked configurations; a path with an edge in collision at this density is not a success
 SWEEP_TOLERANCE = 0.01
@@ -320,28 +320,18 @@ def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
     summ = summarize(rows, cfg.time_limit)
     with open(out / "summary.json", "w") as f:
         json.dump(summ, f, indent=2)
-    (out / "summary.txt").write_text(format_summary(summ))
+
+    (out / "summary.txt").write_text(format_summary(summ) + "\n\n" + format_tables(summ, cfg.time_limit, cfg.clock))
     if cfg.plot:
         from ..viz.bench_plots import plot_time_distributions
 
         plot_success(rows, out / "success_curves.png", cfg.time_limit)
+        plot_fig6(rows, out / "fig6_success_rate.png", cfg.time_limit)
         plot_time_distributions(rows, out / "time_distributions.png", cfg.time_limit)
     return rows
 
 
 # ---------------------------------------------------------------------- metrics
-def _time_of(r: dict) -> float:
-    return float(r["cpu_time_s"] if r.get("clock") == "cpu" else r["time_s"])
-
-
-def success_curve(times: list[float], n: int, ts) -> list[float]:
-    """p(t) = n_t / n (Eq. 9): fraction of the n trials solved within t."""
-    arr = np.sort(np.asarray(times, float))
-    if n < 1:   # no trials: the fraction is undefined
-        return [float("nan") for _ in ts]
-    return [float(np.searchsorted(arr, t, side="right")) / n for t in ts]
-
-
 def summarize(rows: list[dict], time_limit: float) -> dict:
     """Per scene and planner: trials, successes, p(t), median, mean ± std of the n_min fastest
     (only planners with ≥ n_min successes, Eq. 10-11), regenerations, path checks."""

@@ -6,6 +6,12 @@ closed-chain flags, segments, stats) — see :mod:`optplan.planners.base`.
 
 * :class:`TCBiRRT` — the TCBiRRT paper's task-space constrained bidirectional RRT with regrasp;
 * :class:`CBiRRT2` — joint-space constrained BiRRT with Newton-Raphson projection;
+* :class:`~optplan.planners.constrained_prm.ConstrainedPRM` — a roadmap of object-pose samples solved by IK,
+  joined by a projection-based constrained local planner;
+* :class:`~optplan.planners.precomputed_graph.PrecomputedGraph` — CBiRRT2 drawing its targets from 10,000
+  precomputed on-manifold configurations of the scene (cached on disk);
+* :mod:`optplan.planners.learned` — the learned baselines (CVAE latent sampling, LCBiRRT, LCBiRRT-LPO; optional
+  extra ``learned``);
 * :class:`RRTConnect` — unconstrained joint-space RRTConnect (no object; also the regrasp planner);
 * :class:`~optplan.planners.ompl_peers.OMPLPeer` — OMPL's Projected / Atlas / TangentBundle state
   spaces with RRTConnect, BKPIECE1, ... (needs ``pip install ompl``).
@@ -50,9 +56,15 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
+#: the learned baselines of :mod:`optplan.planners.learned` (optional extra ``learned``)
+LEARNED_PLANNERS = ("latent-sampling", "lcbirrt", "lcbirrt-lpo")
+#: the seven planners of the TCBiRRT paper's comparison (Tables 2-3), in its order
+PAPER_PLANNERS = ("cbirrt2", "precomputed-graph", "constrained-prm", *LEARNED_PLANNERS, "tcbirrt")
+
+
 def planner_names() -> list[str]:
     """Names accepted by :func:`make_planner` (OMPL: ``ompl-<projected|atlas|tb>[-<planner>]``)."""
-    return ["tcbirrt", "cbirrt2", "rrtconnect", "ompl-projected", "ompl-atlas", "ompl-tb",
+    return ["tcbirrt", "cbirrt2", "constrained-prm", "precomputed-graph", *LEARNED_PLANNERS, "rrtconnect", "ompl-projected", "ompl-atlas", "ompl-tb",
             "ompl-projected-bkpiece1", "ompl-atlas-bkpiece1", "ompl-projected-kpiece1"]
 
 
@@ -83,7 +95,11 @@ def make_planner(name: str, robot: RobotModel, scene: Any, *, checker: ValidityC
     is an :class:`~optplan.errors.OptionError` listing the planner's options).
     ``checker``/``kinematics`` may be shared between planners of the same robot and scene."""
     key = name.lower()
-    cls = {"tcbirrt": TCBiRRTOptions, "cbirrt2": CBiRRT2Options, "rrtconnect": RRTConnectOptions}.get(key)
+    from .constrained_prm import ConstrainedPRMOptions
+    from .precomputed_graph import PrecomputedGraphOptions
+
+    cls = {"tcbirrt": TCBiRRTOptions, "cbirrt2": CBiRRT2Options, "rrtconnect": RRTConnectOptions,
+           "constrained-prm": ConstrainedPRMOptions, "precomputed-graph": PrecomputedGraphOptions}.get(key)
     if cls is not None:
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(options) - known)
@@ -96,6 +112,18 @@ def make_planner(name: str, robot: RobotModel, scene: Any, *, checker: ValidityC
         return CBiRRT2(robot, scene, CBiRRT2Options(**options), checker=checker, kinematics=kinematics)
     if key == "rrtconnect":
         return RRTConnect(robot, scene, RRTConnectOptions(**options), checker=checker)
+    if key == "constrained-prm":
+        from .constrained_prm import ConstrainedPRM
+
+        return ConstrainedPRM(robot, scene, ConstrainedPRMOptions(**options), checker=checker, kinematics=kinematics)
+    if key == "precomputed-graph":
+        from .precomputed_graph import PrecomputedGraph
+
+        return PrecomputedGraph(robot, scene, PrecomputedGraphOptions(**options), checker=checker, kinematics=kinematics)
+    if key in LEARNED_PLANNERS:
+        from .learned import make_learned_planner
+
+        return make_learned_planner(key, robot, scene, checker=checker, kinematics=kinematics, **options)
     if key.startswith("ompl-"):
         from .ompl_peers import make_ompl_peer
 

@@ -189,6 +189,11 @@ class CBiRRT2(Planner):
         return res, i_old
 
     # ------------------------------------------------------------------ main loop
+    def sample_target(self, rng: np.random.Generator, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+        """The target of an iteration's extension: uniform in the joint box (subclasses draw it
+        from a precomputed set or a learned sampler)."""
+        return rng.uniform(lower, upper)
+
     def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
               seed: int) -> PlanResult:
         o, ck = self.options, self.checker
@@ -213,7 +218,7 @@ class CBiRRT2(Planner):
             if o.max_iterations and st["iterations"] >= o.max_iterations:
                 break
             st["iterations"] += 1
-            q_rand = rng.uniform(lo, hi)
+            q_rand = self.sample_target(rng, lo, hi)
             _, i_a = self.extend(ta, ta.nearest(q_rand), q_rand, st, deadline)
             target = ta.X[i_a].copy()          # CBiRRT: connect to q_reached even when trapped at q_near
             res_b, i_b = self.extend(tb, tb.nearest(target), target, st, deadline)

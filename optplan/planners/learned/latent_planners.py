@@ -1,0 +1,375 @@
+"""The learned baselines of the TCBiRRT paper's comparison (Section 5.2 items 4, 6, 7):
+
+* :class:`LatentSampling` (Acar & Tee 2021) — CBiRRT2 whose random targets are latent samples ``z ~ N(0, I)`` of the
+  scene's CVAE, decoded and projected onto the manifold (Newton-Raphson; the decoded configuration
+  itself when the projection fails); extension, projection and edges are CBiRRT2's.
+* :class:`LCBiRRT` — a bidirectional RRT **in the latent space** (Park et al. 2024): trees of latent
+  vectors, each node also holding its configuration (decoded and projected). An extension steps
+  ``latent_step`` toward the target in the latent space; a step whose latent vector the validity
+  classifier rejects (``p(valid) < classifier_threshold``) ends it before any decoding; otherwise the
+  decoded configuration (anchored at the node's own configuration: ``decode(z) + q_i − decode(z_i)``,
+  ``anchored_decoding``) is projected, checked for collisions, and the joint-space edge from the
+  previous node is checked by the constrained local planner
+  (:func:`~optplan.planners.constrained_prm.constrained_edge`, every ``collision_step`` rad). The
+  trees alternate, as in CBiRRT; they are joined when a connect extension comes within
+  ``latent_step`` of the target node and the joint-space edge between the two configurations holds.
+* :class:`LCBiRRT` with ``lpo=True`` (name ``"lcbirrt-lpo"``) — plus local path optimisation in the
+  latent space (Zhang et al. 2025): every ``lpo_interval`` nodes a tree gains, the newest node and its
+  ``lpo_interval − 1`` ancestors (not the root) whose learned distance is below ``lpo_clearance``
+  are moved by gradient ascent on the learned distance, ``z ← z + γ ∇d(z)`` (γ = ``lpo_gamma``, at most
+  ``lpo_iterations`` steps); a moved node is kept only when its projected configuration is valid and
+  the edges to its parent and children hold.
+
+Every returned configuration is projected onto the closed chain and collision-checked by the shared
+:class:`~optplan.planners.validity.ValidityChecker`: the networks guide the search, they never decide
+validity.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ...constraints.closed_chain import ClosedChainKinematics, closure_error
+from ...errors import ConfigurationError
+from ..base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from ..cbirrt2 import CBiRRT2, CBiRRT2Options
+from ..constrained_prm import constrained_edge
+from ..manifold_samples import ManifoldSampleSettings, manifold_samples, project_onto_chain
+from ..validity import ValidityChecker
+from .cvae import CVAESettings, load_or_train_cvae
+from .latent_models import LatentModelSettings, load_or_train_classifier, load_or_train_distance
+
+__all__ = ["LatentSamplingOptions", "LatentSampling", "LCBiRRTOptions", "LCBiRRT", "TRAINING_FIELDS"]
+
+#: option fields that select the trained models (forwarded to :class:`CVAESettings`)
+TRAINING_FIELDS = ("cvae_epochs", "n_data", "train_seed", "cache")
+
+
+def _check_training(cls: str, o: Any) -> None:
+    for name in ("cvae_epochs", "n_data"):
+        v = getattr(o, name)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise ValueError(f"{cls}.{name}: expected an integer >= 1, got {v!r}")
+    if isinstance(o.train_seed, bool) or not isinstance(o.train_seed, int) or o.train_seed < 0:
+        raise ValueError(f"{cls}.train_seed: expected an integer >= 0, got {o.train_seed!r}")
+    if not isinstance(o.cache, bool):
+        raise ValueError(f"{cls}.cache: expected True/False, got {o.cache!r}")
+
+
+@dataclass(frozen=True)
+class LatentSamplingOptions(CBiRRT2Options):
+    """Options of :class:`LatentSampling`: CBiRRT2's and the CVAE's training selection."""
+
+    #: CVAE training epochs [count] (the paper: 1000; see :class:`~.cvae.CVAESettings`).
+    cvae_epochs: int = CVAESettings.epochs
+    #: On-manifold training configurations of the scene [count] (the paper: 10,000).
+    n_data: int = CVAESettings.n_data
+    #: Seed of the data and the training [-].
+    train_seed: int = 0
+    #: Read / write the data and the weights from / to the on-disk cache [-].
+    cache: bool = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check_training("LatentSamplingOptions", self)
+
+
+def _cvae(robot: Any, scene: Any, o: Any, checker: ValidityChecker, kin: ClosedChainKinematics, progress: bool) -> Any:
+    s = CVAESettings(epochs=o.cvae_epochs, n_data=o.n_data, data_seed=o.train_seed, seed=o.train_seed)
+    return load_or_train_cvae(robot, scene, s, checker=checker, kinematics=kin, cache=o.cache, progress=progress)
+
+
+class LatentSampling(CBiRRT2):
+    """CBiRRT2 with CVAE latent sampling (module docstring)."""
+
+    name = "latent-sampling"
+
+    def __init__(self, robot: Any, scene: Any, options: LatentSamplingOptions | None = None, *,
+                 checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None,
+                 progress: bool = False) -> None:
+        options = options or LatentSamplingOptions()
+        if not isinstance(options, LatentSamplingOptions):
+            raise TypeError(f"options: expected LatentSamplingOptions, got {type(options).__name__}")
+        super().__init__(robot, scene, options, checker=checker, kinematics=kinematics)
+        self.cvae = _cvae(robot, scene, options, self.checker, self.kin, progress)
+
+    def sample_target(self, rng: np.random.Generator, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+        """A decoded latent sample, projected when the projection converges."""
+        q = np.clip(self.cvae.decode(rng.standard_normal(self.cvae.latent_dim)), lower, upper)
+        x = project_onto_chain(self.kin, q, lower, upper, self.options.tolerance, self.options.max_projection_iterations)
+        return q if x is None else x
+
+
+@dataclass(frozen=True)
+class LCBiRRTOptions:
+    """Options of :class:`LCBiRRT` (LCBiRRT, and LCBiRRT-LPO with ``lpo=True``)."""
+
+    #: Largest latent step of an extension [latent units, standard normal prior].
+    latent_step: float = 0.3
+    #: A latent vector with a classifier probability below this is not expanded [-].
+    classifier_threshold: float = 0.5
+    #: Joint spacing of the projected, collision-checked points of an edge [rad] (the paper: 0.2).
+    collision_step: float = 0.2
+    #: Steps of one extension before it stops [count].
+    max_extend_steps: int = 20
+    #: Standard deviation of the latent sampling distribution [latent units].
+    sample_sigma: float = 1.0
+    #: Projection tolerance on the closed-chain residual, max |h| [m or rad per row].
+    tolerance: float = 1e-7
+    #: Decode a step as ``decode(z) + (q_parent − decode(z_parent))`` before the projection, so that the tree
+    #: follows the decoder's local motion from the node's actual configuration (a start or goal the CVAE
+    #: reconstructs poorly is still left smoothly); off: ``decode(z)`` alone [-].
+    anchored_decoding: bool = True
+    #: Local path optimisation in the latent space (LCBiRRT-LPO) [-].
+    lpo: bool = False
+    #: γ: gradient-ascent step on the learned distance [latent units per m] (the paper: 0.8).
+    lpo_gamma: float = 0.8
+    #: N_max: gradient-ascent iterations of one node [count] (the paper: 10).
+    lpo_iterations: int = 10
+    #: Optimise every this many new nodes of a tree [count] (the paper: 3).
+    lpo_interval: int = 3
+    #: Nodes whose learned distance is below this are optimised [m].
+    lpo_clearance: float = 0.05
+    #: Clearance counted as contact [m].
+    margin: float = 0.0
+    #: Cap on the iterations [count] (0: only the time limit).
+    max_iterations: int = 0
+    #: CVAE training epochs [count] (the paper: 1000; see :class:`~.cvae.CVAESettings`).
+    cvae_epochs: int = CVAESettings.epochs
+    #: On-manifold training configurations of the scene [count] (the paper: 10,000).
+    n_data: int = CVAESettings.n_data
+    #: Seed of the data and the training [-].
+    train_seed: int = 0
+    #: Read / write the data and the weights from / to the on-disk cache [-].
+    cache: bool = True
+    #: Valid and invalid latent samples (classifier), free and colliding configurations (distance), each [count]
+    #: (the paper: 1000).
+    n_model_samples: int = 1000
+    #: Classifier training epochs [count] (the paper: 150; reduced to fit 2 CPU cores, decision 0018).
+    classifier_epochs: int = 50
+    #: Distance network training epochs [count] (the paper: 60; reduced to fit 2 CPU cores, decision 0018).
+    distance_epochs: int = 20
+
+    def __post_init__(self) -> None:
+        for name in ("n_model_samples", "classifier_epochs", "distance_epochs"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"LCBiRRTOptions.{name}: expected an integer >= 1, got {v!r}")
+        for name in ("latent_step", "collision_step", "sample_sigma", "tolerance", "lpo_gamma"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"LCBiRRTOptions.{name}: expected a positive number, got {v!r}")
+        if not (isinstance(self.classifier_threshold, (int, float)) and 0 <= self.classifier_threshold < 1):
+            raise ValueError(f"LCBiRRTOptions.classifier_threshold: expected a number in [0, 1), "
+                             f"got {self.classifier_threshold!r}")
+        for name in ("max_extend_steps", "lpo_iterations", "lpo_interval"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"LCBiRRTOptions.{name}: expected an integer >= 1, got {v!r}")
+        if isinstance(self.max_iterations, bool) or not isinstance(self.max_iterations, int) or self.max_iterations < 0:
+            raise ValueError(f"LCBiRRTOptions.max_iterations: expected an integer >= 0, got {self.max_iterations!r}")
+        for name in ("lpo_clearance", "margin"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"LCBiRRTOptions.{name}: expected a number >= 0 m, got {v!r}")
+        if not isinstance(self.anchored_decoding, bool):
+            raise ValueError(f"LCBiRRTOptions.anchored_decoding: expected True/False, got {self.anchored_decoding!r}")
+        if not isinstance(self.lpo, bool):
+            raise ValueError(f"LCBiRRTOptions.lpo: expected True/False, got {self.lpo!r}")
+        _check_training("LCBiRRTOptions", self)
+
+
+class _LatentTree:
+    def __init__(self, z: np.ndarray, q: np.ndarray) -> None:
+        self.Z = [z]
+        self.Q = [q]
+        self.parent = [-1]
+        self.children: list[list[int]] = [[]]
+        self.edge: list[list[np.ndarray]] = [[]]   # projected points from the parent to the node
+        self.added = 0
+
+    def add(self, z: np.ndarray, q: np.ndarray, parent: int, edge: list[np.ndarray]) -> int:
+        self.Z.append(z)
+        self.Q.append(q)
+        self.parent.append(parent)
+        self.children.append([])
+        self.children[parent].append(len(self.Z) - 1)
+        self.edge.append(edge)
+        self.added += 1
+        return len(self.Z) - 1
+
+    def nearest(self, z: np.ndarray) -> int:
+        return int(np.argmin(np.linalg.norm(np.asarray(self.Z) - z, axis=1)))
+
+    def branch(self, i: int) -> list[np.ndarray]:
+        """Configurations from the root to node ``i``, edge points included."""
+        out: list[np.ndarray] = []
+        while i >= 0:
+            out[:0] = [*self.edge[i], self.Q[i]]
+            i = self.parent[i]
+        return out
+
+
+class LCBiRRT(Planner):
+    """LCBiRRT / LCBiRRT-LPO (module docstring)."""
+
+    name = "lcbirrt"
+
+    def __init__(self, robot: Any, scene: Any, options: LCBiRRTOptions | None = None, *,
+                 checker: ValidityChecker | None = None, kinematics: ClosedChainKinematics | None = None,
+                 progress: bool = False) -> None:
+        super().__init__(robot, scene)
+        if scene is None or scene.object is None or len(scene.object.grasps) != 2:
+            raise ConfigurationError("LCBiRRT needs a scene with an [object] grasped by two arms")
+        self.options = o = options or LCBiRRTOptions()
+        if not isinstance(o, LCBiRRTOptions):
+            raise TypeError(f"options: expected LCBiRRTOptions, got {type(o).__name__}")
+        self.name = "lcbirrt-lpo" if o.lpo else "lcbirrt"
+        self.checker = checker or ValidityChecker(robot, scene, margin=o.margin)
+        self.kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
+        self.grasps = scene.object.grasps
+        self.cvae = _cvae(robot, scene, o, self.checker, self.kin, progress)
+        ms = LatentModelSettings(n_classifier=o.n_model_samples, classifier_epochs=o.classifier_epochs,
+                                 n_distance=o.n_model_samples, distance_epochs=o.distance_epochs, seed=o.train_seed)
+        data = manifold_samples(robot, scene, ManifoldSampleSettings(n=o.n_data, seed=o.train_seed),
+                                checker=self.checker, kinematics=self.kin, cache=o.cache)
+        self.classifier = load_or_train_classifier(robot, scene, self.cvae, self.kin, self.checker, ms,
+                                                   samples=data.Q, cache=o.cache, progress=progress)
+        self.distance = None
+        if o.lpo:
+            self.distance = load_or_train_distance(robot, scene, self.cvae, self.kin, self.checker, data.Q, ms,
+                                                   cache=o.cache, progress=progress)
+
+    # ------------------------------------------------------------------ helpers
+    def _config(self, z: np.ndarray, z_near: np.ndarray, near: np.ndarray, st: dict[str, Any]) -> np.ndarray | None:
+        """Decoded (anchored at ``near``, the configuration of ``z_near``, see
+        :attr:`LCBiRRTOptions.anchored_decoding`), projected, valid configuration of ``z`` (None otherwise)."""
+        lo, hi = self.robot.lower, self.robot.upper
+        st["decodes"] += 1
+        q = self.cvae.decode(z)
+        if self.options.anchored_decoding:
+            q = q + (near - self.cvae.decode(z_near))
+        x = project_onto_chain(self.kin, np.clip(q, lo, hi), lo, hi, self.options.tolerance)
+        if x is None:
+            st["projection_failures"] += 1
+            return None
+        if not self.checker.is_valid(x):
+            st["collisions"] += 1
+            return None
+        return x
+
+    def _edge(self, a: np.ndarray, b: np.ndarray, st: dict[str, Any], deadline: Deadline) -> list[np.ndarray] | None:
+        st["edge_checks"] += 1
+        o = self.options
+        return constrained_edge(a, b, lambda x: project_onto_chain(self.kin, x, self.robot.lower, self.robot.upper,
+                                                                   o.tolerance), self.checker.is_valid,
+                                o.collision_step, deadline)
+
+    def extend(self, tree: _LatentTree, i: int, z_target: np.ndarray, st: dict[str, Any], deadline: Deadline,
+               ) -> tuple[bool, int]:
+        """Step from node ``i`` toward ``z_target``; ``(reached, last node)``."""
+        o = self.options
+        for _ in range(o.max_extend_steps):
+            if deadline.expired():
+                break
+            d = z_target - tree.Z[i]
+            dist = float(np.linalg.norm(d))
+            if dist < 1e-9:
+                return True, i
+            z = z_target.copy() if dist <= o.latent_step else tree.Z[i] + (o.latent_step / dist) * d
+            if float(self.classifier.probability(z)) < o.classifier_threshold:
+                st["classifier_rejects"] += 1
+                break
+            q = self._config(z, tree.Z[i], tree.Q[i], st)
+            if q is None:
+                break
+            edge = self._edge(tree.Q[i], q, st, deadline)
+            if edge is None:
+                break
+            i = tree.add(z, q, i, edge)
+            if o.lpo and tree.added % o.lpo_interval == 0:
+                self._optimize(tree, i, st, deadline)
+            if dist <= o.latent_step:
+                return True, i
+        return False, i
+
+    def _optimize(self, tree: _LatentTree, i: int, st: dict[str, Any], deadline: Deadline) -> None:
+        """Local path optimisation of node ``i`` and its ancestors (module docstring)."""
+        o = self.options
+        assert self.distance is not None
+        for _ in range(o.lpo_interval):
+            if i <= 0 or deadline.expired():
+                return
+            z = tree.Z[i].copy()
+            d0 = float(self.distance.distance(z))
+            if d0 < o.lpo_clearance:
+                st["lpo_nodes"] += 1
+                for _ in range(o.lpo_iterations):
+                    z = z + o.lpo_gamma * self.distance.gradient(z)
+                    if float(self.distance.distance(z)) >= o.lpo_clearance:
+                        break
+                q = self._config(z, tree.Z[i], tree.Q[i], st)
+                if q is not None:
+                    par = self._edge(tree.Q[tree.parent[i]], q, st, deadline)
+                    kids = [self._edge(q, tree.Q[c], st, deadline) for c in tree.children[i]] if par is not None else [None]
+                    if par is not None and all(k is not None for k in kids):
+                        tree.Z[i], tree.Q[i], tree.edge[i] = z, q, par
+                        for c, k in zip(tree.children[i], kids):
+                            tree.edge[c] = k   # type: ignore[assignment]  # None excluded above
+                        st["lpo_moves"] += 1
+            i = tree.parent[i]
+
+    # ------------------------------------------------------------------ main loop
+    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
+              seed: int) -> PlanResult:
+        o, ck = self.options, self.checker
+        st = {"iterations": 0, "decodes": 0, "projection_failures": 0, "collisions": 0, "classifier_rejects": 0,
+              "edge_checks": 0, "link_attempts": 0, "lpo_nodes": 0, "lpo_moves": 0}
+        c0 = ck.n_checks
+        for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
+            ep, eo = closure_error(self.robot, self.grasps, q)
+            if not ck.in_limits(q):
+                return self.empty_result(status, f"{which} outside the joint limits", **st)
+            if max(ep, eo) > 1e-6:
+                return self.empty_result(status, f"{which} off the closed-chain manifold ({max(ep, eo):.1e})", **st)
+            if not ck.is_valid(q):
+                return self.empty_result(status, f"{which} in collision", **st)
+        ta, tb = _LatentTree(self.cvae.encode(q_start), q_start), _LatentTree(self.cvae.encode(q_goal), q_goal)
+        a_is_start = True
+        found = None
+        while not deadline.expired():
+            if o.max_iterations and st["iterations"] >= o.max_iterations:
+                break
+            st["iterations"] += 1
+            z_rand = rng.normal(0.0, o.sample_sigma, self.cvae.latent_dim)
+            _, i_a = self.extend(ta, ta.nearest(z_rand), z_rand, st, deadline)
+            reached, i_b = self.extend(tb, tb.nearest(ta.Z[i_a]), ta.Z[i_a].copy(), st, deadline)
+            if not reached:   # the latent vectors agree only to the step: join the configurations in joint space
+                j = tb.nearest(ta.Z[i_a])
+                if float(np.linalg.norm(tb.Z[j] - ta.Z[i_a])) <= o.latent_step:
+                    reached, i_b = True, j
+            if reached:
+                st["link_attempts"] += 1
+                link = self._edge(ta.Q[i_a], tb.Q[i_b], st, deadline)
+                if link is not None:
+                    found = (i_a, i_b, link)
+                    break
+            ta, tb, a_is_start = tb, ta, not a_is_start
+        st["nodes"] = len(ta.Z) + len(tb.Z)
+        st["collision_checks"] = ck.n_checks - c0
+        if found is None:
+            if deadline.expired():
+                return self.empty_result(PlanStatus.TIMEOUT, "time limit reached", **st)
+            return self.empty_result(PlanStatus.FAILED, "iteration cap reached", **st)
+        i_a, i_b, link = found
+        P = ta.branch(i_a) + link + tb.branch(i_b)[::-1]
+        if not a_is_start:
+            P = P[::-1]
+        path = np.array(P)
+        path[0], path[-1] = q_start, q_goal
+        poses = [self.kin.object_pose(q) for q in path]
+        return PlanResult(PlanStatus.EXACT, self.name, path, poses, np.ones(len(path), bool),
+                          [PathSegment("constrained", 0, len(path) - 1)], st)

@@ -1,0 +1,165 @@
+"""The learned baselines (CVAE latent sampling, LCBiRRT, LCBiRRT-LPO): networks against JAX,
+grids against exact coal distances, the CVAE's decoded samples against uniform joints by the
+independent closed-chain and collision checks, the cache, and the planners' paths. Skipped without
+the optional extra ``learned``."""
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pytest
+
+pytest.importorskip("jax")
+pytest.importorskip("optax")
+
+from optplan.collision.checker import CollisionChecker  # noqa: E402
+from optplan.constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error  # noqa: E402
+from optplan.planners import PlanStatus, ValidityChecker, make_planner  # noqa: E402
+from optplan.planners.learned.cvae import CVAE, CVAESettings, load_or_train_cvae, validate_cvae  # noqa: E402
+from optplan.planners.learned.latent_models import scene_grid  # noqa: E402
+from optplan.planners.learned.latent_planners import LCBiRRTOptions  # noqa: E402
+from optplan.planners.learned.nets import flatten_params, init_mlp, mlp_jax, mlp_numpy, unflatten_params  # noqa: E402
+from optplan.planners.task_space import interpolate_task  # noqa: E402
+from optplan.scene import Scene  # noqa: E402
+from optplan.trials import TrialGenerator  # noqa: E402
+
+SMALL = {"n_data": 3000, "cvae_epochs": 40}
+# the small classifier of a test is not trusted to filter (threshold 0): the test is about the paths
+SMALL_LC = {**SMALL, "n_model_samples": 150, "classifier_epochs": 20, "distance_epochs": 10, "classifier_threshold": 0.0}
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    mp = pytest.MonkeyPatch()
+    d = tmp_path_factory.mktemp("optplan_cache")
+    mp.setenv("OPTPLAN_CACHE", str(d))
+    yield d
+    mp.undo()
+
+
+@pytest.fixture(scope="module")
+def scene1() -> Scene:
+    return Scene.load("ssps_scene1")
+
+
+@pytest.fixture(scope="module")
+def kin(tcb, scene1):
+    return ClosedChainKinematics(tcb, scene1.object.grasps)
+
+
+@pytest.fixture(scope="module")
+def checker(tcb, scene1):
+    return ValidityChecker(tcb, scene1)
+
+
+@pytest.fixture(scope="module")
+def cvae(tcb, scene1, kin, checker, cache) -> CVAE:
+    return load_or_train_cvae(tcb, scene1, CVAESettings(n_data=SMALL["n_data"], epochs=SMALL["cvae_epochs"]),
+                              checker=checker, kinematics=kin)
+
+
+@pytest.mark.parametrize("act", ["relu", "leaky_relu", "elu", "linear"])
+def test_numpy_forward_matches_jax_and_round_trips(act):
+    p = init_mlp([5, 7, 7, 3], seed=2)
+    x = np.random.default_rng(0).normal(size=(4, 5))
+    ref = np.asarray(mlp_jax(p, x.astype(np.float32), act))
+    assert np.allclose(mlp_numpy(p, x, act), ref, atol=1e-4)
+    back = unflatten_params("n", flatten_params("n", p))
+    assert all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) for a, b in zip(p, back))
+
+
+def test_scene_grid_sdf_matches_coal(scene1):
+    sdf = scene_grid(scene1, "sdf", n=8)
+    occ = scene_grid(scene1, "occupancy", n=8)
+    assert sdf.shape == occ.shape == (512,)
+    assert np.array_equal(occ > 0, sdf <= 0)
+    lo, hi = np.array([-3.0, -4.0, -1.0]), np.array([3.0, 4.0, 5.0])   # the ξ box ± 1 m
+    axes = [lo[k] + (np.arange(8) + 0.5) * (hi[k] - lo[k]) / 8 for k in range(3)]
+    P = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    ball = coal.Sphere(1e-9)
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
+    for k in np.random.default_rng(0).choice(len(P), 40, replace=False):
+        if sdf[k] <= 0 or sdf[k] >= 5.0:
+            continue
+        d = np.inf
+        for o in scene1.obstacles:
+            res.clear()
+            M = o.placement
+            d = min(d, coal.distance(ball, coal.Transform3s(np.eye(3), P[k]), o.coal_geometry(),
+                                     coal.Transform3s(M.rotation, M.translation), req, res))
+        assert abs(d - sdf[k]) < 1e-5
+
+
+def test_cvae_decodes_near_the_manifold_and_is_cached(tcb, scene1, kin, checker, cvae, cache):
+    h = cvae.history
+    assert len(h["train_loss"]) == SMALL["cvae_epochs"] and h["val_loss"][-1] < h["val_loss"][0]
+    m = cvae.metrics
+    dec, uni = m["decoded_prior"], m["uniform_joints"]
+    # decoded prior samples lie nearer the manifold than uniform joints and more of them project and are valid
+    assert dec["median_residual_before"] < uni["median_residual_before"]
+    assert dec["valid_rate"] > uni["valid_rate"] and dec["projection_rate"] > uni["projection_rate"]
+    # the same figures recomputed independently: Pinocchio closure error and exact coal distances
+    again = validate_cvae(cvae, tcb, scene1, kin, checker, n=100, seed=3)
+    assert again["decoded_prior"]["valid_rate"] > again["uniform_joints"]["valid_rate"]
+    Q = np.random.default_rng(0).uniform(tcb.lower, tcb.upper, (3, tcb.nq))
+    assert np.allclose(cvae.decode(cvae.encode(Q)).shape, Q.shape)
+    assert cvae.path is not None and cvae.path.exists()
+    loaded = load_or_train_cvae(tcb, scene1, CVAESettings(n_data=SMALL["n_data"], epochs=SMALL["cvae_epochs"]),
+                                checker=checker, kinematics=kin)
+    z = np.random.default_rng(1).normal(size=(5, cvae.latent_dim))
+    assert loaded.path == cvae.path and np.allclose(loaded.decode(z), cvae.decode(z))
+
+
+def test_settings_are_validated():
+    for bad in ({"epochs": 0}, {"activation": "tanh"}, {"val_fraction": 0.7}, {"kl_weight": -1.0}, {"augment": 1}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            CVAESettings(**bad)
+    for bad in ({"latent_step": 0.0}, {"classifier_threshold": 1.0}, {"lpo_interval": 0}, {"lpo": "yes"},
+                {"cvae_epochs": 0}, {"lpo_clearance": -1.0}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            LCBiRRTOptions(**bad)
+
+
+@pytest.fixture(scope="module")
+def query(tcb, scene1, kin, checker):
+    """Trial 0's start and a valid goal 0.3 m above it (IK continuation)."""
+    t = TrialGenerator(tcb, scene1).generate(0, 0)
+    M = t.object_start
+    for off in ([0, 0, 0.3], [0, 0, -0.3], [0.3, 0, 0], [-0.3, 0, 0]):
+        q = t.q_start
+        for R, p in interpolate_task(M.rotation, M.translation, M.rotation, M.translation + np.array(off, float), 10):
+            q, _ = kin.ik(q, R, p, IKSettings())
+            if q is None or not checker.is_valid(q):
+                break
+        if q is not None and checker.is_valid(q):
+            return t.q_start, q
+    pytest.fail("no valid goal near the start")
+
+
+@pytest.mark.parametrize("name", ["latent-sampling",
+                                  # training the 32³-input encoders takes minutes on 2 loaded cores
+                                  pytest.param("lcbirrt", marks=pytest.mark.slow),
+                                  pytest.param("lcbirrt-lpo", marks=pytest.mark.slow)])
+def test_learned_planners_return_valid_closed_chain_paths(tcb, scene1, kin, checker, cache, query, name):
+    opts = SMALL if name == "latent-sampling" else SMALL_LC
+    pl = make_planner(name, tcb, scene1, checker=checker, kinematics=kin, **opts)
+    assert pl.name == name
+    qs, qg = query
+    res = pl.plan(qs, qg, time_limit=60.0, seed=4, clock="cpu")
+    assert res.status is PlanStatus.EXACT, res.message
+    assert np.allclose(res.path[0], qs) and np.allclose(res.path[-1], qg)
+    exact = CollisionChecker(tcb, scene1)
+    for q in res.path:
+        assert max(closure_error(tcb, scene1.object.grasps, q)) <= 1e-6
+        assert exact.min_distance(q)[0] > 0.0
+    assert np.linalg.norm(np.diff(res.path, axis=0), axis=1).max() <= 0.6 + 1e-9
+    assert np.array_equal(pl.plan(qs, qg, time_limit=60.0, seed=4, clock="cpu").path, res.path)
+    off = qs.copy()
+    off[0] += 0.3
+    assert pl.plan(off, qg).status is PlanStatus.INVALID_START
+
+
+def test_unknown_learned_option_is_an_error(tcb, scene1, checker, kin):
+    from optplan.errors import OptionError
+
+    with pytest.raises(OptionError, match="lpo"):
+        make_planner("lcbirrt", tcb, scene1, checker=checker, kinematics=kin, lpo=True)
