@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time
 
 from . import cli_args as ca
+from . import interrupt
 from .errors import OptplanError, UsageError
 
 
@@ -59,8 +59,7 @@ def _cmd_models_info(args) -> int:
         return 2
     print(format_model_info(info))
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(info, f, indent=2)
+        _write_json(args.json, info)
     return 0
 
 
@@ -81,8 +80,7 @@ def _cmd_bench_kinematics(args) -> int:
     times = run(args.robot, args.calls)
     print(report(times))
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(times, f, indent=2)
+        _write_json(args.json, times)
     return 0
 
 
@@ -93,8 +91,7 @@ def _cmd_bench_transport(args) -> int:
     rows = run(knots, args.seed)
     print(report(rows, knots))
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(rows, f, indent=2)
+        _write_json(args.json, rows)
     return 0
 
 
@@ -248,6 +245,8 @@ def _cmd_plan(args) -> int:
                          "(its grasps and poses belong to that robot)")
     robot = _load_robot(args.robot or scene.robot or "tcbirrt_dual_arm")
     t0 = time.perf_counter()
+    files: list[str] = []   # outputs written so far (each complete: written atomically)
+    interrupt.progress(0, 1, "trials")
     try:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
         opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, plan_clock=args.clock,
@@ -255,13 +254,31 @@ def _cmd_plan(args) -> int:
                                compile_kernels=True if args.compile_kernels else "auto", workers=args.workers,
                                planner_options=_plan_planner_options(planner, args.variant))
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
-    except BaseException as exc:  # a failed run still writes what it has
+        interrupt.check()
+        out = res.to_dict()
+        out["wall_time_s"] = time.perf_counter() - t0
+        _plan_report(args, scene, out, res)
+        _plan_outputs(args, robot, scene, res, files)   # the files first, then the JSON that names them
+        interrupt.check()
+    except BaseException as exc:  # a failed or interrupted run still says what it has, never success
         if args.json:
-            _write_json(args.json, {"success": False, "error": f"{type(exc).__name__}: {exc}",
-                                    "wall_time_s": time.perf_counter() - t0})
+            sig = interrupt.received()
+            rec = {"success": False, "status": "interrupted" if sig is not None else "error",
+                   "error": f"{type(exc).__name__}: {exc}" if sig is None else f"interrupted by {exc}",
+                   "files": files, "wall_time_s": time.perf_counter() - t0}
+            try:
+                _write_json(args.json, rec)
+            except OptplanError:
+                pass   # the first error is the one reported
         raise
-    out = res.to_dict()
-    out["wall_time_s"] = time.perf_counter() - t0
+    interrupt.progress(1, 1, "trials")
+    if args.json:
+        out["files"] = files
+        _write_json(args.json, out)
+    return 0 if res.success else 1
+
+
+def _plan_report(args, scene, out: dict, res) -> None:
     print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}")
     for k in ("success", "plan_status", "plan_time_s", "n_regrasp", "opt_status", "opt_time_s", "opt_setup_time_s",
               "opt_iterations", "opt_wall_s", "opt_cpu_s", "max_closed_chain_residual", "min_clearance_m", "wall_time_s"):
@@ -271,21 +288,20 @@ def _cmd_plan(args) -> int:
         print(f"    segment {s.kind:11s} {s.arm or '':2s} {s.solution.status.value:28s} it={s.solution.total_iterations:4d} "
               f"ipopt={s.solution.total_wall_time:6.2f}s clearance={s.report.min_clearance_m:+.3f} m "
               f"attempts={'+'.join(a['reason'] for a in s.attempts)}")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(out, f, indent=2)
-    if args.save and res.segments:
-        res.save(args.save)
-        from .viz.html import save_metadata
 
-        save_metadata(args.save, robot=robot.name, scene=scene.name)
+
+def _plan_outputs(args, robot, scene, res, files: list[str]) -> None:
+    """``--save``, ``--html``, ``--plot`` of ``optplan plan``, each file written atomically and added
+    to ``files`` once complete."""
+    if args.save and res.segments:
+        files.append(str(res.save(args.save, robot=robot.name, scene=scene.name)))
     if (args.html or args.plot) and res.segments:
         from .viz.outputs import write_views
 
         for p in write_views(robot, scene, res.t, res.q, res.constrained, html=args.html, plot_dir=args.plot,
                              title=f"optplan plan: {scene.name}, trial {args.trial}"):
+            files.append(str(p))
             print(f"wrote {p}")
-    return 0 if res.success else 1
 
 
 def _cmd_view(args) -> int:
@@ -330,19 +346,38 @@ def _cmd_demo(args) -> int:
     print(f"  run time               {out['runtime_s']:.2f} s")
     print("  (the paper's tables do not reproduce its numbers exactly; see docs/models.md)")
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(out, f, indent=2)
+        _write_json(args.json, out)
     return 0 if out["max_momentum_residual"] < 1e-9 else 1
 
 
 def _write_json(path: str, data) -> None:
-    with open(path, "w") as f:
-        json.dump(data, f, indent=2)
+    """``data`` as JSON at ``path``, atomically (complete or absent; a failed write is one line, exit 2)."""
+    from ._io import write_json
+
+    write_json(path, data)
 
 
 # output-path options of each command, checked before the command runs
-_OUTPUT_FILES = ("json", "save")
-_OUTPUT_DIRS = ("out",)
+_OUTPUT_FILES = ("json", "save", "html")
+_OUTPUT_DIRS = ("out", "plot")
+#: free space an output folder needs before a run starts [B]
+MIN_FREE_BYTES = 5_000_000
+
+
+def _check_before_run(args) -> None:
+    """Before a long run: the kernel cache is a usable folder, and the output folders have room."""
+    from pathlib import Path
+
+    from . import _io
+    from .cache import check_cache_setting
+
+    if args.command in ("plan", "bench", "reproduce"):
+        check_cache_setting()
+    for opt in _OUTPUT_FILES + _OUTPUT_DIRS:
+        v = getattr(args, opt, None)
+        if isinstance(v, str) and v and not v.startswith("/dev/"):
+            folder = Path(v) if opt in _OUTPUT_DIRS and Path(v).is_dir() else Path(v).parent
+            _io.check_free_space(folder if folder.is_dir() else Path("."), MIN_FREE_BYTES, f"--{opt}")
 
 
 def _engine_args(p) -> None:
@@ -540,17 +575,27 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     prog = " ".join(["optplan"] + [str(getattr(args, k)) for k in ("command", "action", "what")
                                    if isinstance(getattr(args, k, None), str)])
-    try:
-        ca.check_root()
-        for opt in _OUTPUT_FILES:
-            ca.check_output_file(getattr(args, opt, None), f"--{opt}")
-        for opt in _OUTPUT_DIRS:
-            ca.check_output_dir(getattr(args, opt, None), f"--{opt}")
-        return int(args.func(args) or 0)
-    except OptplanError as exc:  # the user's input: one line, no traceback
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"{prog}: error: {msg}", file=sys.stderr)
-        return 2
+    with interrupt.handling(prog):   # Ctrl-C, SIGTERM, SIGHUP: one line, exit 128 + signal, no worker left
+        try:
+            ca.check_root()
+            for opt in _OUTPUT_FILES:
+                ca.check_output_file(getattr(args, opt, None), f"--{opt}")
+            for opt in _OUTPUT_DIRS:
+                ca.check_output_dir(getattr(args, opt, None), f"--{opt}")
+            _check_before_run(args)
+            code = int(args.func(args) or 0)
+            interrupt.check()   # a signal a library turned into its own error still ends as an interruption
+            return code
+        except OptplanError as exc:  # the user's input: one line, no traceback
+            if interrupt.received() is not None:
+                return interrupt.finish()
+            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            print(f"{prog}: error: {msg}", file=sys.stderr)
+            return 2
+        except BaseException:
+            if interrupt.received() is not None:
+                return interrupt.finish()
+            raise
 
 
 if __name__ == "__main__":

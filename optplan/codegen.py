@@ -21,14 +21,18 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from .cache import quarantine, usable
+
 __all__ = ["CompiledFunction", "FastFunction", "build_library", "c_compiler", "compile_function", "cache_dir"]
 log = logging.getLogger(__name__)
 
 
 def cache_dir() -> Path:
-    d = Path(os.environ.get("OPTPLAN_CACHE", Path.home() / ".cache" / "optplan"))
-    d.mkdir(parents=True, exist_ok=True)
-    return d
+    """The kernel cache folder (:func:`optplan.cache.cache_dir`: ``$OPTPLAN_CACHE``, default
+    ``~/.cache/optplan``; :class:`optplan.errors.CacheError` when it is not a usable folder)."""
+    from .cache import cache_dir as _cache_dir
+
+    return _cache_dir()
 
 
 class CompiledFunction:
@@ -131,6 +135,9 @@ def build_library(c_file: Path, lib: Path, opt: str) -> str | None:
                           capture_output=True, text=True)
     if proc.returncode != 0:
         return proc.stderr[-500:]
+    from .cache import record
+
+    record(tmp_lib, sidecar_for=lib)   # size + SHA-256, checked before every later load
     os.replace(tmp_lib, lib)
     return None
 
@@ -149,9 +156,15 @@ def compile_function(f: ca.Function, opt: str = "-O2"):
         code = Path(tmp, cname).read_bytes()
         digest = hashlib.sha1(code + opt.encode()).hexdigest()[:16]
         lib = cache_dir() / f"{f.name()}_{digest}.so"
-        if not lib.exists():
-            err = build_library(Path(tmp, cname), lib, opt)
-            if err is not None:
-                log.warning("compiling %s failed (%s); using the interpreted function", f.name(), err)
-                return f
-    return CompiledFunction(f, lib)
+        for _attempt in range(2):   # a damaged entry is quarantined and built once more
+            if not usable(lib):
+                err = build_library(Path(tmp, cname), lib, opt)
+                if err is not None:
+                    log.warning("compiling %s failed (%s); using the interpreted function", f.name(), err)
+                    return f
+            try:
+                return CompiledFunction(f, lib)
+            except (OSError, AttributeError) as exc:   # dlopen refused it, or a symbol is missing
+                quarantine(lib, f"does not load: {exc}")
+    log.warning("%s: the compiled library does not load; using the interpreted function", f.name())
+    return f

@@ -101,8 +101,11 @@ def _tcbirrt_view(out: Path, quick: bool) -> list[Path]:
         return []
     P = np.asarray(res.path, float)
     t = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1) / 0.5)])
-    np.savez(out / "traj" / "tcbirrt_path_scene1.npz", t=t, q=P, constrained=np.asarray(res.constrained, bool),
-             robot=np.array(robot.name), scene=np.array(scene.name))
+    from ._io import atomic_path
+
+    with atomic_path(out / "traj" / "tcbirrt_path_scene1.npz") as tmp, open(tmp, "wb") as f:
+        np.savez(f, t=t, q=P, constrained=np.asarray(res.constrained, bool),
+                 robot=np.array(robot.name), scene=np.array(scene.name))
     return [write_trajectory_html(out / "tcbirrt_path_scene1.html", robot, scene, t, P, constrained=res.constrained,
                                   options=ViewOptions(title="TCBiRRT path, ssps_scene1 trial 0 (before optimization)"))]
 
@@ -333,7 +336,9 @@ def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = Tru
         say(f"\n{p.title}: ours next to the paper's")
         for line in p.summary(out, steps):
             say(line)
-    (out / "reproduce.json").write_text(json.dumps(record, indent=2))
+    from ._io import write_json
+
+    write_json(out / "reproduce.json", record)   # last: after the files it lists
     html_files = [f for f in record["files"] if f.endswith(".html")]
     say(f"\nrun time {record['run_time_s']:.1f} s; {'all steps succeeded' if ok else 'SOME STEPS FAILED'}; "
           f"record {out / 'reproduce.json'}")

@@ -152,7 +152,9 @@ def write_urdf(desc: RobotDescription, out_dir: Path | None = None) -> Path:
     out_dir = Path(out_dir) if out_dir is not None else urdf_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f"{desc.name}.urdf"
-    path.write_text(urdf_string(desc))
+    from .._io import write_text
+
+    write_text(path, urdf_string(desc))
     return path
 
 

@@ -205,7 +205,9 @@ class PlanResult:
         """Write :meth:`to_json` to ``path``."""
         self.check()
         p = Path(path)
-        p.write_text(self.to_json())
+        from .._io import write_text
+
+        write_text(p, self.to_json())   # atomic: complete or absent
         return p
 
     @classmethod
