@@ -230,6 +230,7 @@ def _cmd_plan(args) -> int:
     from .scene import Scene
     from .trials import TrialGenerator
 
+    interrupt.progress(0, 1, "trials")
     scene_name = ca.check_scene(args.scene)
     planner = ca.check_planner(args.planner)
     scene = Scene.load(scene_name)
@@ -246,7 +247,6 @@ def _cmd_plan(args) -> int:
     robot = _load_robot(args.robot or scene.robot or "tcbirrt_dual_arm")
     t0 = time.perf_counter()
     files: list[str] = []   # outputs written so far (each complete: written atomically)
-    interrupt.progress(0, 1, "trials")
     try:
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
         opts = PipelineOptions(planner=planner, plan_time_limit=args.time_limit, plan_clock=args.clock,
@@ -575,7 +575,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     prog = " ".join(["optplan"] + [str(getattr(args, k)) for k in ("command", "action", "what")
                                    if isinstance(getattr(args, k, None), str)])
-    with interrupt.handling(prog):   # Ctrl-C, SIGTERM, SIGHUP: one line, exit 128 + signal, no worker left
+    with interrupt.handling(prog, quiet=not args.verbose):   # Ctrl-C, SIGTERM, SIGHUP: one line, exit 128 + signal, no worker left
         try:
             ca.check_root()
             for opt in _OUTPUT_FILES:
@@ -588,13 +588,13 @@ def main(argv: list[str] | None = None) -> int:
             return code
         except OptplanError as exc:  # the user's input: one line, no traceback
             if interrupt.received() is not None:
-                return interrupt.finish()
+                return interrupt.finish(exit_now=argv is None)
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             print(f"{prog}: error: {msg}", file=sys.stderr)
             return 2
         except BaseException:
             if interrupt.received() is not None:
-                return interrupt.finish()
+                return interrupt.finish(exit_now=argv is None)
             raise
 
 

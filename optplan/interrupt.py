@@ -6,7 +6,9 @@ swallows it), so the command unwinds through its ``finally`` blocks; the files i
 atomic (:mod:`optplan._io`), so each is complete or absent. :func:`finish` then stops the worker
 processes (SIGTERM, SIGKILL after :data:`STOP_S`), prints ONE line — ``interrupted by SIGINT after
 N of M trials; resume with the same command`` — and returns the exit status 128 + signal number
-(130 SIGINT, 143 SIGTERM, 129 SIGHUP). Further signals during that clean-up are ignored; if the
+(130 SIGINT, 143 SIGTERM, 129 SIGHUP). What the unwinding libraries would print to ``sys.stderr``
+after the signal (CasADi's ``KeyboardInterruptException`` warning, a worker pool's broken-pipe
+traceback) is dropped, unless ``quiet=False`` (``optplan -v``). Further signals during that clean-up are ignored; if the
 clean-up does not end within :data:`GRACE_S`, a watchdog stops the workers, removes partial files
 and ends the process with the same line and status.
 
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import logging
 import multiprocessing as mp
 import os
 import signal
@@ -26,9 +29,10 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
+from typing import Any
 
 __all__ = ["Interrupted", "handling", "received", "check", "progress", "finish", "stop_children",
-           "worker_init", "SIGNALS", "GRACE_S", "STOP_S"]
+           "stop_process", "die_with_parent", "worker_init", "SIGNALS", "GRACE_S", "STOP_S"]
 
 #: the signals handled
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -53,6 +57,23 @@ class _State:
     unit = "trials"
     prog = "optplan"
     watchdog: threading.Timer | None = None
+    stream: Any = None   # the stderr the interruption's line goes to
+
+
+class _QuietAfterSignal:
+    """``sys.stderr`` while a command runs: passes everything through until a signal arrives, then
+    drops what the unwinding code prints (the interruption's own line goes to the real stream)."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text):
+        if _state.signum is not None:
+            return len(text)
+        return self._stream.write(text)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
 
 
 _state = _State()
@@ -121,8 +142,10 @@ def _hard_exit() -> None:  # pragma: no cover - runs only when the main thread d
     stop_children(0.5)
     remove_partial_files()
     with contextlib.suppress(Exception):
-        sys.stderr.write(message() + "\n")
-        sys.stderr.flush()
+        stream = _state.stream if _state.stream is not None else sys.__stderr__
+        if stream is not None:
+            stream.write(message() + "\n")
+            stream.flush()
     os._exit(exit_code())
 
 
@@ -136,10 +159,15 @@ def _handler(signum, frame) -> None:
     raise Interrupted(signum)
 
 
+def _no_record_after_signal(record: logging.LogRecord) -> bool:
+    return _state.signum is None
+
+
 @contextlib.contextmanager
-def handling(prog: str = "optplan") -> Iterator[None]:
+def handling(prog: str = "optplan", quiet: bool = True) -> Iterator[None]:
     """Handle SIGINT/SIGTERM/SIGHUP while the block runs (main thread only; elsewhere a no-op);
-    the previous handlers are restored afterwards. ``prog`` starts the interruption's line."""
+    the previous handlers are restored afterwards. ``prog`` starts the interruption's line;
+    ``quiet``: drop what is printed to ``sys.stderr`` after the signal (see the module docstring)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -148,19 +176,32 @@ def handling(prog: str = "optplan") -> Iterator[None]:
     old = {s: signal.getsignal(s) for s in SIGNALS}
     for s in SIGNALS:
         signal.signal(s, _handler)
+    _state.stream = sys.stderr
+    handlers = list(logging.getLogger().handlers) if quiet else []
+    if quiet:
+        sys.stderr = _QuietAfterSignal(_state.stream)
+        for h in handlers:   # log records after the signal are dropped too
+            h.addFilter(_no_record_after_signal)
     try:
         yield
     finally:
-        for s, h in old.items():
-            signal.signal(s, h if h is not None else signal.SIG_DFL)
+        for h in handlers:
+            h.removeFilter(_no_record_after_signal)
+        if isinstance(sys.stderr, _QuietAfterSignal):
+            sys.stderr = _state.stream
+        for s, previous in old.items():
+            signal.signal(s, previous if previous is not None else signal.SIG_DFL)
         if _state.watchdog is not None:
             _state.watchdog.cancel()
             _state.watchdog = None
         _state.signum = None
 
 
-def finish() -> int:
-    """After an interruption: stop the workers, print the one line, return the exit status."""
+def finish(exit_now: bool = False) -> int:
+    """After an interruption: stop the workers, print the one line, return the exit status.
+    ``exit_now``: end the process here (``os._exit``, after flushing stdout and stderr) instead of
+    returning — for the command-line process, whose interpreter shutdown would otherwise join the
+    stopped pools' threads and print their broken-pipe errors."""
     for s in SIGNALS:   # the clean-up is not interrupted again
         signal.signal(s, signal.SIG_IGN)
     stop_children()
@@ -168,11 +209,57 @@ def finish() -> int:
 
     remove_partial_files()
     code = exit_code()
-    print(message(), file=sys.stderr, flush=True)
+    print(message(), file=_state.stream or sys.stderr, flush=True)
     if _state.watchdog is not None:
         _state.watchdog.cancel()
         _state.watchdog = None
+    if exit_now:
+        with contextlib.suppress(Exception):   # what multiprocessing does at exit (its semaphores released),
+            import multiprocessing.util as mpu  # without the thread joins of the interpreter's shutdown
+
+            mpu._exit_function()  # type: ignore[attr-defined]
+        for stream in (sys.stdout, _state.stream):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(code)
     return code
+
+
+@contextlib.contextmanager
+def spawned_children_ignore_interrupts() -> Iterator[None]:
+    """While the block starts processes by fork+exec (a ``spawn`` pool), SIGINT and SIGHUP are
+    ignored here, so the new interpreters start with them ignored (a disposition ``exec`` keeps) and
+    a Ctrl-C during their start prints no traceback; restored after the block (milliseconds; a
+    Ctrl-C in that window is lost, SIGTERM is not)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGHUP)}
+    for s in old:
+        signal.signal(s, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        for s, previous in old.items():
+            signal.signal(s, previous if previous is not None else signal.SIG_DFL)
+
+
+def die_with_parent() -> None:
+    """``preexec_fn`` of a child process: it gets SIGTERM when this process ends (``PR_SET_PDEATHSIG``)."""
+    with contextlib.suppress(Exception):
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM), 0, 0, 0)
+
+
+def stop_process(proc, timeout: float = STOP_S) -> None:
+    """End the ``subprocess.Popen`` ``proc``: SIGTERM, SIGKILL after ``timeout`` [s]."""
+    with contextlib.suppress(Exception):
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout)
+            except Exception:   # noqa: BLE001 - still running
+                proc.kill()
+                proc.wait(1.0)
 
 
 def worker_init(*then) -> None:

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
+from . import interrupt
+
 __all__ = ["PAPERS", "Paper", "Step", "ReproduceError", "examples_dir", "plan_steps", "reproduce"]
 
 
@@ -302,18 +304,23 @@ def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = Tru
     record: dict[str, Any] = {"paper": paper, "title": p.title, "quick": quick, "steps": [], "files": []}
     t_all = time.perf_counter()
     ok = True
-    for st in steps:
+    for k, st in enumerate(steps):
+        interrupt.progress(k, len(steps), "steps")
         say(f"\n$ python {' '.join(st.argv)}", flush=True)
         t0 = time.perf_counter()
         log_path = out / f"{st.name}.log"
         with open(log_path, "w") as log_file:
             proc = subprocess.Popen([sys.executable, *st.argv], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                    text=True, bufsize=1)
-            assert proc.stdout is not None   # stdout=PIPE
-            for line in proc.stdout:
-                sys.stdout.write(line)
-                log_file.write(line)
-            rc = proc.wait()
+                                    text=True, bufsize=1, preexec_fn=interrupt.die_with_parent)
+            try:
+                assert proc.stdout is not None   # stdout=PIPE
+                for line in proc.stdout:
+                    sys.stdout.write(line)
+                    log_file.write(line)
+                rc = proc.wait()
+            except BaseException:   # interrupted: the step's process ends with this one
+                interrupt.stop_process(proc)
+                raise
         dt = time.perf_counter() - t0
         ok &= rc == 0
         record["steps"].append({"name": st.name, "argv": list(st.argv), "exit_code": rc, "run_time_s": dt,
@@ -338,6 +345,7 @@ def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = Tru
             say(line)
     from ._io import write_json
 
+    interrupt.progress(len(steps), len(steps), "steps")
     write_json(out / "reproduce.json", record)   # last: after the files it lists
     html_files = [f for f in record["files"] if f.endswith(".html")]
     say(f"\nrun time {record['run_time_s']:.1f} s; {'all steps succeeded' if ok else 'SOME STEPS FAILED'}; "
