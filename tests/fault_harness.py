@@ -98,7 +98,7 @@ def case_sigint_plan(ctx, rng):
     r = run_interrupted(_PLAN + ["--json", "out.json", "--save", "traj.npz"], ctx["env"], float(rng.uniform(0.8, 2.0)),
                         signal.SIGINT, cwd=d)
     tb = traceback_lines(r["stderr"])
-    bad = tb > 0 or r["rc"] != 130 or bool(r["orphans"])
+    bad = tb > 0 or r["rc"] != 130 or bool(r["orphans"]) or len(r["stderr"].strip().splitlines()) != 1
     return bad, f"exit {r['rc']}, {tb} traceback lines, {len(r['stderr'].splitlines())} stderr lines, " \
                 f"{len(r['orphans'])} left, exited in {r['exit_s']:.1f} s"
 
@@ -109,8 +109,28 @@ def case_sigterm_plan_workers(ctx, rng):
     r = run_interrupted(_PLAN + ["--workers", "2", "--json", "out.json"], ctx["env"], float(rng.uniform(1.0, 2.0)),
                         signal.SIGTERM, cwd=d, group=False)
     tb = traceback_lines(r["stderr"])
-    bad = tb > 0 or r["rc"] != 143 or bool(r["orphans"])
-    return bad, f"exit {r['rc']}, {tb} traceback lines, {len(r['orphans'])} processes of its group alive 2 s later"
+    bad = tb > 0 or r["rc"] != 143 or bool(r["orphans"]) or len(r["stderr"].strip().splitlines()) != 1
+    return bad, f"exit {r['rc']}, {tb} traceback lines, {len(r['stderr'].splitlines())} stderr lines, " \
+                f"{len(r['orphans'])} processes of its group alive 2 s later"
+
+
+def _bench_interrupted(ctx, rng, sig, group, name):
+    d = ctx["tmp"] / name
+    d.mkdir()
+    r = run_interrupted(_BENCH + ["--jobs", "2", "--trials", "6", "--out", "b"], ctx["env"],
+                        float(rng.uniform(1.5, 3.0)), sig, cwd=d, group=group)
+    tb = traceback_lines(r["stderr"])
+    bad = tb > 0 or r["rc"] != 128 + sig or bool(r["orphans"]) or len(r["stderr"].strip().splitlines()) != 1
+    return bad, f"exit {r['rc']}, {tb} traceback lines, {len(r['stderr'].splitlines())} stderr lines, " \
+                f"{len(r['orphans'])} left, exited in {r['exit_s']:.1f} s"
+
+
+def case_sigint_bench_jobs2(ctx, rng):
+    return _bench_interrupted(ctx, rng, signal.SIGINT, True, "bench-sigint")
+
+
+def case_sigterm_bench_jobs2(ctx, rng):
+    return _bench_interrupted(ctx, rng, signal.SIGTERM, False, "bench-sigterm")
 
 
 def case_fsize_save(ctx, rng):
@@ -222,7 +242,7 @@ def case_foreign_lines(ctx, rng):
         f"exit {p.returncode}, {tb} traceback lines, {named} of 3 foreign lines reported by number"
 
 
-CASES = [case_sigint_plan, case_sigterm_plan_workers, case_fsize_save, case_dev_full, case_half_so,
+CASES = [case_sigint_plan, case_sigterm_plan_workers, case_sigint_bench_jobs2, case_sigterm_bench_jobs2, case_fsize_save, case_dev_full, case_half_so,
          case_garbage_so, case_empty_so, case_cache_is_file, case_two_writers, case_foreign_lines]
 
 
@@ -230,6 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pythonpath", help="a source tree to put first on sys.path (e.g. an exported commit)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--repeat", type=int, default=1, help="run every case this many times (moments drawn anew)")
     ap.add_argument("--only", help="comma-separated case names (without case_)")
     a = ap.parse_args(argv)
     rng = np.random.default_rng(a.seed)
@@ -237,15 +258,20 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="optplan-faults-") as tmp:
         ctx = {"tmp": Path(tmp)}
         ctx["env"] = _env(a.pythonpath, ctx["tmp"] / "cache")
-        for case in CASES:
-            name = case.__name__[5:]
-            if a.only and name not in a.only.split(","):
-                continue
-            t0 = time.monotonic()
-            bad, what = case(ctx, rng)
-            n_bad += bad
-            print(f"{name:22s} {'SYMPTOM' if bad else 'ok':8s} {time.monotonic() - t0:6.1f} s  {what}", flush=True)
-    print(f"{n_bad} case(s) with the symptom")
+        n_run = 0
+        for k in range(a.repeat):
+            for case in CASES:
+                name = case.__name__[5:]
+                if a.only and name not in a.only.split(","):
+                    continue
+                ctx["tmp"] = Path(tmp) / f"r{k}"
+                ctx["tmp"].mkdir(exist_ok=True)
+                t0 = time.monotonic()
+                bad, what = case(ctx, rng)
+                n_bad += bad
+                n_run += 1
+                print(f"{name:22s} {'SYMPTOM' if bad else 'ok':8s} {time.monotonic() - t0:6.1f} s  {what}", flush=True)
+    print(f"{n_bad} of {n_run} case runs with the symptom")
     return 0
 
 
