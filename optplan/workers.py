@@ -192,6 +192,7 @@ def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tu
         send()
     try:
         while (i := take(to_worker=False)) is not None:
+            interrupt.check()   # a signal a solver turned into its own error stops here, not after every job
             results[i] = fn(*context, *jobs[i])
     except BaseException:
         with lock:   # no further job goes to a worker
