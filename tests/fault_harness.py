@@ -133,6 +133,27 @@ def case_sigterm_bench_jobs2(ctx, rng):
     return _bench_interrupted(ctx, rng, signal.SIGTERM, False, "bench-sigterm")
 
 
+def case_sigint_warmstart(ctx, rng):
+    d = ctx["tmp"] / "warmstart-sigint"
+    d.mkdir()
+    r = run_interrupted(["bench", "warmstart", "--scene", "1,2", "--trials", "3", "--no-progress", "--out", "w"],
+                        ctx["env"], float(rng.uniform(3.0, 7.0)), signal.SIGINT, cwd=d)
+    tb = traceback_lines(r["stderr"])
+    bad = tb > 0 or r["rc"] != 130 or bool(r["orphans"]) or len(r["stderr"].strip().splitlines()) != 1
+    return bad, f"exit {r['rc']}, {tb} traceback lines, {len(r['stderr'].splitlines())} stderr lines, " \
+                f"{len(r['orphans'])} left, exited in {r['exit_s']:.1f} s"
+
+
+def case_sigterm_plan_late(ctx, rng):
+    d = ctx["tmp"] / "sigterm-late"
+    d.mkdir()
+    r = run_interrupted(["plan", "--scene", "2", "--workers", "2", "--json", "out.json"], ctx["env"],
+                        float(rng.uniform(2.0, 4.0)), signal.SIGTERM, cwd=d, group=False)
+    tb = traceback_lines(r["stderr"])
+    bad = tb > 0 or r["rc"] not in (0, 1, 143) or bool(r["orphans"])
+    return bad, f"exit {r['rc']}, {tb} traceback lines, {len(r['orphans'])} processes of its group alive 2 s later"
+
+
 def case_fsize_save(ctx, rng):
     d = ctx["tmp"] / "fsize"
     d.mkdir()
@@ -242,7 +263,8 @@ def case_foreign_lines(ctx, rng):
         f"exit {p.returncode}, {tb} traceback lines, {named} of 3 foreign lines reported by number"
 
 
-CASES = [case_sigint_plan, case_sigterm_plan_workers, case_sigint_bench_jobs2, case_sigterm_bench_jobs2, case_fsize_save, case_dev_full, case_half_so,
+CASES = [case_sigint_plan, case_sigterm_plan_workers, case_sigterm_plan_late, case_sigint_bench_jobs2,
+         case_sigterm_bench_jobs2, case_sigint_warmstart, case_fsize_save, case_dev_full, case_half_so,
          case_garbage_so, case_empty_so, case_cache_is_file, case_two_writers, case_foreign_lines]
 
 
