@@ -21,7 +21,7 @@ from typing import Any
 from .errors import OutputError
 
 __all__ = ["OutputError", "atomic_path", "write_text", "write_json", "append_line", "check_free_space",
-           "remove_partial_files"]
+           "check_output_space", "remove_partial_files", "MIN_FREE_BYTES"]
 
 #: temporary files being written right now (removed by :func:`remove_partial_files` on a hard exit)
 _PARTIAL: set[str] = set()
@@ -118,6 +118,21 @@ def check_free_space(folder: str | Path, need_bytes: int, what: str) -> None:
     if free < need_bytes:
         raise OutputError(f"{what} {str(folder)!r}: only {free / 1e6:.1f} MB free on its file system, "
                           f"expected at least {need_bytes / 1e6:.1f} MB")
+
+
+#: free space the folder of an output needs before a command's run starts [B]
+MIN_FREE_BYTES = 5_000_000
+
+
+def check_output_space(outputs: dict[str, str | None], need_bytes: int = MIN_FREE_BYTES) -> None:
+    """:func:`check_free_space` of the folder of every output (option → path, a file or a folder;
+    None and devices such as ``/dev/null`` are skipped; a folder still to be made: its parent)."""
+    for option, value in outputs.items():
+        if not isinstance(value, str) or not value or value.startswith("/dev/"):
+            continue
+        p = Path(value)
+        folder = p if p.is_dir() else p.parent
+        check_free_space(folder if folder.is_dir() else Path("."), need_bytes, option)
 
 
 def remove_partial_files() -> None:

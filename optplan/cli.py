@@ -360,24 +360,16 @@ def _write_json(path: str, data) -> None:
 # output-path options of each command, checked before the command runs
 _OUTPUT_FILES = ("json", "save", "html")
 _OUTPUT_DIRS = ("out", "plot")
-#: free space an output folder needs before a run starts [B]
-MIN_FREE_BYTES = 5_000_000
 
 
 def _check_before_run(args) -> None:
     """Before a long run: the kernel cache is a usable folder, and the output folders have room."""
-    from pathlib import Path
-
-    from . import _io
+    from ._io import check_output_space
     from .cache import check_cache_setting
 
     if args.command in ("plan", "bench", "reproduce"):
         check_cache_setting()
-    for opt in _OUTPUT_FILES + _OUTPUT_DIRS:
-        v = getattr(args, opt, None)
-        if isinstance(v, str) and v and not v.startswith("/dev/"):
-            folder = Path(v) if opt in _OUTPUT_DIRS and Path(v).is_dir() else Path(v).parent
-            _io.check_free_space(folder if folder.is_dir() else Path("."), MIN_FREE_BYTES, f"--{opt}")
+    check_output_space({f"--{o}": getattr(args, o, None) for o in _OUTPUT_FILES + _OUTPUT_DIRS})
 
 
 def _engine_args(p) -> None:

@@ -4,7 +4,8 @@ CasADi's Python call path costs ~20 µs per call whatever the function; a compil
 through ctypes costs ~1-3 µs plus the work itself, which is what hot loops (IK, collision checks,
 planners) need. The shared library is cached under ``$OPTPLAN_CACHE`` (default
 ``~/.cache/optplan``), keyed by a hash of the generated C code; a C compiler (``cc``) is needed the
-first time. :func:`compile_function` falls back to the plain CasADi function, with a logged
+first time. Each library is checked against the size and SHA-256 recorded when it was written
+before it is loaded; a damaged one is quarantined and rebuilt (:mod:`optplan.cache`). :func:`compile_function` falls back to the plain CasADi function, with a logged
 warning, when no compiler is available.
 """
 from __future__ import annotations

@@ -352,3 +352,20 @@ def test_bench_summary_counts_each_trial_once(warm, tmp_path):
     summ = json.loads((out / "summary.json").read_text())
     assert summ["ssps_scene1"]["planners"]["tcbirrt"]["n"] == 2
     assert re.search(r"tcbirrt +[0-2]/2 ", p.stdout), p.stdout
+
+
+def test_an_output_folder_without_room_is_refused_before_the_run(tmp_path, monkeypatch, capsys):
+    """Less than ``MIN_FREE_BYTES`` free where an output goes: exit 2 with one line, before any work."""
+    from types import SimpleNamespace
+
+    from optplan import _io
+    from optplan.cli import main
+
+    monkeypatch.setattr(_io.os, "statvfs", lambda p: SimpleNamespace(f_bavail=100, f_frsize=4096))
+    t0 = time.perf_counter()
+    assert main(["bench", "tcbirrt", "--scene", "1", "--trials", "1", "--out", str(tmp_path / "o")]) == 2
+    assert time.perf_counter() - t0 < 30
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"optplan bench tcbirrt: error: --out {str(tmp_path)!r}: only 0.4 MB free on its file system, "
+                   f"expected at least {_io.MIN_FREE_BYTES / 1e6:.1f} MB"]
+    assert not (tmp_path / "o").exists()
