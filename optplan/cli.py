@@ -558,6 +558,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run the command; a user error (bad argument, unknown name, unwritable output path, bad
     ``OPTPLAN_ROOT``, malformed description) prints one line and returns 2."""
+    if argv is None:   # the command line: a signal while the modules load ends it with one line too
+        interrupt.before_start()
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -567,7 +569,8 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     prog = " ".join(["optplan"] + [str(getattr(args, k)) for k in ("command", "action", "what")
                                    if isinstance(getattr(args, k, None), str)])
-    with interrupt.handling(prog, quiet=not args.verbose):   # Ctrl-C, SIGTERM, SIGHUP: one line, exit 128 + signal, no worker left
+    # Ctrl-C, SIGTERM, SIGHUP: one line, exit 128 + signal, no worker left
+    with interrupt.handling(prog, quiet=not args.verbose, ignore_after=argv is None):
         try:
             ca.check_root()
             for opt in _OUTPUT_FILES:

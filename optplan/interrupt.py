@@ -159,15 +159,32 @@ def _handler(signum, frame) -> None:
     raise Interrupted(signum)
 
 
+def before_start(prog: str = "optplan") -> None:
+    """Until :func:`handling` begins (the command's arguments are parsed, its modules imported):
+    a signal ends the process at once with one line (nothing has been written yet)."""
+    def stop(signum, frame):  # pragma: no cover - only in that short window
+        with contextlib.suppress(Exception):
+            sys.stderr.write(f"{prog}: interrupted by {signal.Signals(signum).name} before the command started\n")
+            sys.stderr.flush()
+        os._exit(128 + signum)
+
+    if threading.current_thread() is threading.main_thread():
+        for s in SIGNALS:
+            signal.signal(s, stop)
+
+
 def _no_record_after_signal(record: logging.LogRecord) -> bool:
     return _state.signum is None
 
 
 @contextlib.contextmanager
-def handling(prog: str = "optplan", quiet: bool = True) -> Iterator[None]:
+def handling(prog: str = "optplan", quiet: bool = True, ignore_after: bool = False) -> Iterator[None]:
     """Handle SIGINT/SIGTERM/SIGHUP while the block runs (main thread only; elsewhere a no-op);
     the previous handlers are restored afterwards. ``prog`` starts the interruption's line;
-    ``quiet``: drop what is printed to ``sys.stderr`` after the signal (see the module docstring)."""
+    ``quiet``: drop what is printed to ``sys.stderr`` after the signal (see the module docstring);
+    ``ignore_after``: ignore the signals after the block instead (the command-line process: its
+    work is done and written, and the interpreter's shutdown, joining worker pools, is not
+    interrupted into a signal death without a message)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -190,7 +207,7 @@ def handling(prog: str = "optplan", quiet: bool = True) -> Iterator[None]:
         if isinstance(sys.stderr, _QuietAfterSignal):
             sys.stderr = _state.stream
         for s, previous in old.items():
-            signal.signal(s, previous if previous is not None else signal.SIG_DFL)
+            signal.signal(s, signal.SIG_IGN if ignore_after else previous if previous is not None else signal.SIG_DFL)
         if _state.watchdog is not None:
             _state.watchdog.cancel()
             _state.watchdog = None

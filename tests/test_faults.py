@@ -34,8 +34,8 @@ from fault_harness import group_members, traceback_lines
 PLAN = ["plan", "--scene", "1", "--time-limit", "10"]
 BENCH = ["bench", "tcbirrt", "--scene", "1", "--planners", "tcbirrt", "--time-limit", "2", "--no-progress",
          "--no-plot"]
-INTERRUPT_LINE = re.compile(r"^optplan [a-z ]+: interrupted by (SIGINT|SIGTERM|SIGHUP)( after \d+ of \d+ [a-z ]+)?; "
-                            r"resume with the same command$")
+INTERRUPT_LINE = re.compile(r"^optplan( [a-z ]+)?: interrupted by (SIGINT|SIGTERM|SIGHUP)(( after \d+ of \d+ [a-z ]+)?; "
+                            r"resume with the same command| before the command started)$")
 
 
 def _env() -> dict:
