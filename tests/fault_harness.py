@@ -19,6 +19,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -278,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(a.seed)
     n_bad = 0
     with tempfile.TemporaryDirectory(prefix="optplan-faults-") as tmp:
-        ctx = {"tmp": Path(tmp)}
+        ctx: dict[str, Any] = {"tmp": Path(tmp)}
         ctx["env"] = _env(a.pythonpath, ctx["tmp"] / "cache")
         n_run = 0
         for k in range(a.repeat):
