@@ -10,11 +10,13 @@ warning, when no compiler is available.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
 import logging
 import os
 import shutil
+import signal
 import subprocess
 import tempfile
 from pathlib import Path
@@ -132,10 +134,22 @@ def build_library(c_file: Path, lib: Path, opt: str) -> str | None:
     if cc is None:
         return "no C compiler"
     tmp_lib = lib.with_name(f"{lib.name}.{os.getpid()}.tmp")
-    proc = subprocess.run([cc, opt, "-fPIC", "-shared", str(c_file), "-o", str(tmp_lib), "-lm"],
-                          capture_output=True, text=True)
+    # its own process group: an interruption stops the compiler's own children (cc1, as, ld) with it
+    proc = subprocess.Popen([cc, opt, "-fPIC", "-shared", str(c_file), "-o", str(tmp_lib), "-lm"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        _, stderr = proc.communicate()
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        with contextlib.suppress(OSError):
+            tmp_lib.unlink()
+        raise
     if proc.returncode != 0:
-        return proc.stderr[-500:]
+        with contextlib.suppress(OSError):
+            tmp_lib.unlink()
+        return stderr[-500:]
     from .cache import record
 
     record(tmp_lib, sidecar_for=lib)   # size + SHA-256, checked before every later load

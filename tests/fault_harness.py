@@ -39,19 +39,26 @@ def _cmd(args: list[str]) -> list[str]:
     return [sys.executable, "-m", "optplan.cli", *args]
 
 
-def group_members(pgid: int) -> list[int]:
-    """Live processes of process group ``pgid`` (zombies excluded)."""
+def group_members(pgid: int, cwd: Path | None = None) -> list[int]:
+    """Live processes of process group ``pgid`` (zombies excluded) and, with ``cwd``, every live
+    process working in that folder or below (children that left the group, e.g. a compiler in its
+    own session, still inherit the command's working folder)."""
     out = []
+    inside = str(Path(cwd).resolve()) if cwd is not None else None
     for d in Path("/proc").iterdir():
-        if not d.name.isdigit():
+        if not d.name.isdigit() or int(d.name) == os.getpid():
             continue
         try:
             stat = (d / "stat").read_text()
-        except OSError:
+            fields = stat[stat.rfind(")") + 2:].split()
+            if fields[0] == "Z":
+                continue
+            if int(fields[2]) == pgid:
+                out.append(int(d.name))
+            elif inside is not None and (os.readlink(d / "cwd") + "/").startswith(inside + "/"):
+                out.append(int(d.name))
+        except (OSError, IndexError, ValueError):
             continue
-        fields = stat[stat.rfind(")") + 2:].split()
-        if fields[0] != "Z" and int(fields[2]) == pgid:
-            out.append(int(d.name))
     return out
 
 
@@ -73,7 +80,7 @@ def run_interrupted(args: list[str], env: dict, delay: float, sig: int, *, cwd: 
         out, err = p.communicate()
     t_exit = time.monotonic() - t0
     time.sleep(2.0)
-    left = group_members(p.pid)
+    left = group_members(p.pid, cwd)
     for pid in left:
         try:
             os.kill(pid, signal.SIGKILL)

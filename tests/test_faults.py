@@ -64,7 +64,7 @@ def _interrupt(args, cwd, delay: float, sig: int, to_group: bool) -> dict:
             os.killpg(p.pid, signal.SIGKILL)
             p.communicate()
     time.sleep(2.0)
-    left = group_members(p.pid)
+    left = group_members(p.pid, cwd)
     for pid in left:   # pragma: no cover - only when the invariant fails
         os.kill(pid, signal.SIGKILL)
     return {"rc": p.returncode, "stderr": err, "orphans": left, "sent": sent, "exit_s": time.monotonic() - t0 - 2.0}
@@ -369,3 +369,54 @@ def test_an_output_folder_without_room_is_refused_before_the_run(tmp_path, monke
     assert err == [f"optplan bench tcbirrt: error: --out {str(tmp_path)!r}: only 0.4 MB free on its file system, "
                    f"expected at least {_io.MIN_FREE_BYTES / 1e6:.1f} MB"]
     assert not (tmp_path / "o").exists()
+
+
+def test_an_interrupted_kernel_compile_leaves_no_compiler_process(tmp_path, monkeypatch):
+    """The C compiler runs in its own process group: an interruption while it runs ends the
+    driver and its children (cc1, as, ld), and leaves no partial library."""
+    import subprocess as sp
+
+    from optplan import codegen
+
+    if codegen.c_compiler() is None:
+        pytest.skip("no C compiler")
+    body = "\n".join(f"  x = x * 1.0000001 + {i}.0 / (x + {i + 1}.0);" for i in range(40000))
+    src = tmp_path / "big.c"
+    src.write_text(f"double big(double x) {{\n{body}\n  return x;\n}}\n")
+    started: list[int] = []
+
+    class Recording(sp.Popen):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            started.append(self.pid)
+
+    class Stop(BaseException):
+        pass
+
+    def stop(signum, frame):
+        raise Stop
+
+    monkeypatch.setattr(codegen.subprocess, "Popen", Recording)
+    old = signal.signal(signal.SIGALRM, stop)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.5)
+        with pytest.raises(Stop):
+            codegen.build_library(src, tmp_path / "big.so", "-O2")
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+    time.sleep(0.3)
+
+    def compiling() -> list[int]:   # live processes with the source file on their command line (cc, cc1)
+        out = []
+        for d in Path("/proc").iterdir():
+            try:
+                if d.name.isdigit() and str(src).encode() in (d / "cmdline").read_bytes() \
+                        and (d / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z":
+                    out.append(int(d.name))
+            except OSError:
+                continue
+        return out
+
+    assert started and compiling() == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["big.c"]
