@@ -10,6 +10,8 @@ from . import cli_args as ca
 from . import interrupt
 from .errors import OptplanError, UsageError
 
+interrupt.ignore_in_spawned_child()   # a benchmark's spawned worker imports this module first: no Ctrl-C there
+
 
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: ``optplan plan: error: argument --trials: expected ...`` (exit 2)."""

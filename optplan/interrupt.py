@@ -242,23 +242,13 @@ def finish(exit_now: bool = False) -> int:
     return code
 
 
-@contextlib.contextmanager
-def spawned_children_ignore_interrupts() -> Iterator[None]:
-    """While the block starts processes by fork+exec (a ``spawn`` pool), SIGINT and SIGHUP are
-    ignored here, so the new interpreters start with them ignored (a disposition ``exec`` keeps) and
-    a Ctrl-C during their start prints no traceback; restored after the block (milliseconds; a
-    Ctrl-C in that window is lost, SIGTERM is not)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGHUP)}
-    for s in old:
-        signal.signal(s, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        for s, previous in old.items():
-            signal.signal(s, previous if previous is not None else signal.SIG_DFL)
+def ignore_in_spawned_child() -> None:
+    """In a process a ``spawn`` pool is starting (it imports the command's module before it runs
+    :func:`worker_init`): ignore SIGINT and SIGHUP from here on, so a Ctrl-C while the worker starts
+    prints no traceback there (the command's own process handles it). Elsewhere: nothing."""
+    if getattr(mp.current_process(), "_inheriting", False) and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
 
 
 def die_with_parent() -> None:

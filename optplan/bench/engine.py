@@ -94,12 +94,10 @@ def map_unordered(fn: Callable[[Any], Any], units: Sequence, *, engine: str = "l
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")
-        from ..interrupt import spawned_children_ignore_interrupts, worker_init
+        from ..interrupt import worker_init
 
         # workers ignore Ctrl-C (the terminal sends it to them too; this process stops them) and die with it
-        with spawned_children_ignore_interrupts():
-            pool = ctx.Pool(min(jobs, len(units)), initializer=worker_init, initargs=(initializer, *initargs))
-        with pool:
+        with ctx.Pool(min(jobs, len(units)), initializer=worker_init, initargs=(initializer, *initargs)) as pool:
             yield from pool.imap_unordered(fn, units, chunksize=1)
         return
     yield from _dask_map(fn, units, jobs=jobs, address=address, initializer=initializer, initargs=initargs,
