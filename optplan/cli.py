@@ -2,14 +2,16 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time
 from pathlib import Path
 
 from . import cli_args as ca
+from . import interrupt
 from .errors import ModelError, OptplanError, UsageError
+
+interrupt.ignore_in_spawned_child()   # a benchmark's spawned worker imports this module first: no Ctrl-C there
 
 
 class _Parser(argparse.ArgumentParser):
@@ -60,8 +62,7 @@ def _cmd_models_info(args) -> int:
         return 2
     print(format_model_info(info))
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(info, f, indent=2)
+        _write_json(args.json, info)
     return 0
 
 
@@ -82,8 +83,7 @@ def _cmd_bench_kinematics(args) -> int:
     times = run(args.robot, args.calls)
     print(report(times))
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(times, f, indent=2)
+        _write_json(args.json, times)
     return 0
 
 
@@ -94,8 +94,7 @@ def _cmd_bench_transport(args) -> int:
     rows = run(knots, args.seed)
     print(report(rows, knots))
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(rows, f, indent=2)
+        _write_json(args.json, rows)
     return 0
 
 
@@ -298,6 +297,7 @@ def _cmd_plan(args) -> int:
     from .scene import Scene
     from .trials import TrialGenerator
 
+    interrupt.progress(0, 1, "trials")
     scene_name = ca.check_scene(args.scene)
     planner = ca.check_planner(args.planner)
     scene = Scene.load(scene_name)
@@ -315,6 +315,7 @@ def _cmd_plan(args) -> int:
     robot_name = args.robot or scene.robot or "tcbirrt_dual_arm"
     robot = _load_robot(robot_name)
     t0 = time.perf_counter()
+    files: list[str] = []   # outputs written so far (each complete: written atomically)
     try:
         _check_fits(scene, robot, robot_name, given=bool(args.robot or scene.robot))
         trial = TrialGenerator(robot, scene).generate(args.trial, args.seed)
@@ -323,16 +324,35 @@ def _cmd_plan(args) -> int:
                                compile_kernels=True if args.compile_kernels else "auto", workers=args.workers,
                                planner_options=_plan_planner_options(planner, args.variant))
         res = run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed + args.trial)
-    except BaseException as exc:  # a failed run still writes what it has
-        if args.json:
-            _write_json(args.json, {"success": False, "error": f"{type(exc).__name__}: {exc}",
-                                    "wall_time_s": time.perf_counter() - t0})
-        raise
-    out = res.to_dict()
-    out["wall_time_s"] = time.perf_counter() - t0
-    from .collision.checker import pair_budget_counts
+        interrupt.check()
+        out = res.to_dict()
+        out["wall_time_s"] = time.perf_counter() - t0
+        from .collision.checker import pair_budget_counts
 
-    out["pairs"] = pc = pair_budget_counts(robot, scene)
+        out["pairs"] = pair_budget_counts(robot, scene)
+        _plan_report(args, scene, out, res, robot)
+        _plan_outputs(args, robot, scene, res, files)   # the files first, then the JSON that names them
+        interrupt.check()
+    except BaseException as exc:  # a failed or interrupted run still says what it has, never success
+        if args.json:
+            sig = interrupt.received()
+            rec = {"success": False, "status": "interrupted" if sig is not None else "error",
+                   "error": f"{type(exc).__name__}: {exc}" if sig is None else f"interrupted by {exc}",
+                   "files": files, "wall_time_s": time.perf_counter() - t0}
+            try:
+                _write_json(args.json, rec)
+            except OptplanError:
+                pass   # the first error is the one reported
+        raise
+    interrupt.progress(1, 1, "trials")
+    if args.json:
+        out["files"] = files
+        _write_json(args.json, out)
+    return 0 if res.success else 1
+
+
+def _plan_report(args, scene, out: dict, res, robot) -> None:
+    pc = out["pairs"]
     print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}, robot {robot.name!r}")
     print(f"  pairs checked: self {pc['self']}, robot-obstacle {pc['robot_obstacle']}, object-obstacle "
           f"{pc['object_obstacle']}, object-robot {pc['object_robot']} ({pc['object_robot_rigid']} rigid with a "
@@ -345,21 +365,20 @@ def _cmd_plan(args) -> int:
         print(f"    segment {s.kind:11s} {s.arm or '':2s} {s.solution.status.value:28s} it={s.solution.total_iterations:4d} "
               f"ipopt={s.solution.total_wall_time:6.2f}s clearance={s.report.min_clearance_m:+.3f} m "
               f"attempts={'+'.join(a['reason'] for a in s.attempts)}")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(out, f, indent=2)
-    if args.save and res.segments:
-        res.save(args.save)
-        from .viz.html import save_metadata
 
-        save_metadata(args.save, robot=robot.name, scene=scene.name)
+
+def _plan_outputs(args, robot, scene, res, files: list[str]) -> None:
+    """``--save``, ``--html``, ``--plot`` of ``optplan plan``, each file written atomically and added
+    to ``files`` once complete."""
+    if args.save and res.segments:
+        files.append(str(res.save(args.save, robot=robot.name, scene=scene.name)))
     if (args.html or args.plot) and res.segments:
         from .viz.outputs import write_views
 
         for p in write_views(robot, scene, res.t, res.q, res.constrained, html=args.html, plot_dir=args.plot,
                              title=f"optplan plan: {scene.name}, trial {args.trial}"):
+            files.append(str(p))
             print(f"wrote {p}")
-    return 0 if res.success else 1
 
 
 def _cmd_view(args) -> int:
@@ -404,19 +423,30 @@ def _cmd_demo(args) -> int:
     print(f"  run time               {out['runtime_s']:.2f} s")
     print("  (the paper's tables do not reproduce its numbers exactly; see docs/models.md)")
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(out, f, indent=2)
+        _write_json(args.json, out)
     return 0 if out["max_momentum_residual"] < 1e-9 else 1
 
 
 def _write_json(path: str, data) -> None:
-    with open(path, "w") as f:
-        json.dump(data, f, indent=2)
+    """``data`` as JSON at ``path``, atomically (complete or absent; a failed write is one line, exit 2)."""
+    from ._io import write_json
+
+    write_json(path, data)
 
 
 # output-path options of each command, checked before the command runs
-_OUTPUT_FILES = ("json", "save")
-_OUTPUT_DIRS = ("out",)
+_OUTPUT_FILES = ("json", "save", "html")
+_OUTPUT_DIRS = ("out", "plot")
+
+
+def _check_before_run(args) -> None:
+    """Before a long run: the kernel cache is a usable folder, and the output folders have room."""
+    from ._io import check_output_space
+    from .cache import check_cache_setting
+
+    if args.command in ("plan", "bench", "reproduce"):
+        check_cache_setting()
+    check_output_space({f"--{o}": getattr(args, o, None) for o in _OUTPUT_FILES + _OUTPUT_DIRS})
 
 
 def _engine_args(p) -> None:
@@ -620,6 +650,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run the command; a user error (bad argument, unknown name, unwritable output path, bad
     ``OPTPLAN_ROOT``, malformed description) prints one line and returns 2."""
+    if argv is None:   # the command line: a signal while the modules load ends it with one line too
+        interrupt.before_start()
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -629,17 +661,28 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     prog = " ".join(["optplan"] + [str(getattr(args, k)) for k in ("command", "action", "what")
                                    if isinstance(getattr(args, k, None), str)])
-    try:
-        ca.check_root()
-        for opt in _OUTPUT_FILES:
-            ca.check_output_file(getattr(args, opt, None), f"--{opt}")
-        for opt in _OUTPUT_DIRS:
-            ca.check_output_dir(getattr(args, opt, None), f"--{opt}")
-        return int(args.func(args) or 0)
-    except OptplanError as exc:  # the user's input: one line, no traceback
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"{prog}: error: {msg}", file=sys.stderr)
-        return 2
+    # Ctrl-C, SIGTERM, SIGHUP: one line, exit 128 + signal, no worker left
+    with interrupt.handling(prog, quiet=not args.verbose, ignore_after=argv is None):
+        try:
+            ca.check_root()
+            for opt in _OUTPUT_FILES:
+                ca.check_output_file(getattr(args, opt, None), f"--{opt}")
+            for opt in _OUTPUT_DIRS:
+                ca.check_output_dir(getattr(args, opt, None), f"--{opt}")
+            _check_before_run(args)
+            code = int(args.func(args) or 0)
+            interrupt.check()   # a signal a library turned into its own error still ends as an interruption
+            return code
+        except OptplanError as exc:  # the user's input: one line, no traceback
+            if interrupt.received() is not None:
+                return interrupt.finish(exit_now=argv is None)
+            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            print(f"{prog}: error: {msg}", file=sys.stderr)
+            return 2
+        except BaseException:
+            if interrupt.received() is not None:
+                return interrupt.finish(exit_now=argv is None)
+            raise
 
 
 if __name__ == "__main__":

@@ -4,16 +4,19 @@ CasADi's Python call path costs ~20 µs per call whatever the function; a compil
 through ctypes costs ~1-3 µs plus the work itself, which is what hot loops (IK, collision checks,
 planners) need. The shared library is cached under ``$OPTPLAN_CACHE`` (default
 ``~/.cache/optplan``), keyed by a hash of the generated C code; a C compiler (``cc``) is needed the
-first time. :func:`compile_function` falls back to the plain CasADi function, with a logged
+first time. Each library is checked against the size and SHA-256 recorded when it was written
+before it is loaded; a damaged one is quarantined and rebuilt (:mod:`optplan.cache`). :func:`compile_function` falls back to the plain CasADi function, with a logged
 warning, when no compiler is available.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
 import logging
 import os
 import shutil
+import signal
 import subprocess
 import tempfile
 from pathlib import Path
@@ -21,14 +24,18 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from .cache import quarantine, usable
+
 __all__ = ["CompiledFunction", "FastFunction", "build_library", "c_compiler", "compile_function", "cache_dir"]
 log = logging.getLogger(__name__)
 
 
 def cache_dir() -> Path:
-    d = Path(os.environ.get("OPTPLAN_CACHE", Path.home() / ".cache" / "optplan"))
-    d.mkdir(parents=True, exist_ok=True)
-    return d
+    """The kernel cache folder (:func:`optplan.cache.cache_dir`: ``$OPTPLAN_CACHE``, default
+    ``~/.cache/optplan``; :class:`optplan.errors.CacheError` when it is not a usable folder)."""
+    from .cache import cache_dir as _cache_dir
+
+    return _cache_dir()
 
 
 class CompiledFunction:
@@ -127,10 +134,25 @@ def build_library(c_file: Path, lib: Path, opt: str) -> str | None:
     if cc is None:
         return "no C compiler"
     tmp_lib = lib.with_name(f"{lib.name}.{os.getpid()}.tmp")
-    proc = subprocess.run([cc, opt, "-fPIC", "-shared", str(c_file), "-o", str(tmp_lib), "-lm"],
-                          capture_output=True, text=True)
+    # its own process group: an interruption stops the compiler's own children (cc1, as, ld) with it
+    proc = subprocess.Popen([cc, opt, "-fPIC", "-shared", str(c_file), "-o", str(tmp_lib), "-lm"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        _, stderr = proc.communicate()
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        with contextlib.suppress(OSError):
+            tmp_lib.unlink()
+        raise
     if proc.returncode != 0:
-        return proc.stderr[-500:]
+        with contextlib.suppress(OSError):
+            tmp_lib.unlink()
+        return stderr[-500:]
+    from .cache import record
+
+    record(tmp_lib, sidecar_for=lib)   # size + SHA-256, checked before every later load
     os.replace(tmp_lib, lib)
     return None
 
@@ -149,9 +171,15 @@ def compile_function(f: ca.Function, opt: str = "-O2"):
         code = Path(tmp, cname).read_bytes()
         digest = hashlib.sha1(code + opt.encode()).hexdigest()[:16]
         lib = cache_dir() / f"{f.name()}_{digest}.so"
-        if not lib.exists():
-            err = build_library(Path(tmp, cname), lib, opt)
-            if err is not None:
-                log.warning("compiling %s failed (%s); using the interpreted function", f.name(), err)
-                return f
-    return CompiledFunction(f, lib)
+        for _attempt in range(2):   # a damaged entry is quarantined and built once more
+            if not usable(lib):
+                err = build_library(Path(tmp, cname), lib, opt)
+                if err is not None:
+                    log.warning("compiling %s failed (%s); using the interpreted function", f.name(), err)
+                    return f
+            try:
+                return CompiledFunction(f, lib)
+            except (OSError, AttributeError) as exc:   # dlopen refused it, or a symbol is missing
+                quarantine(lib, f"does not load: {exc}")
+    log.warning("%s: the compiled library does not load; using the interpreted function", f.name())
+    return f

@@ -52,6 +52,20 @@ class OptionError(OptplanError, ValueError):
     """A solver or method option is unknown or has a value of the wrong type/range."""
 
 
+class OutputError(OptplanError, OSError):
+    """An output file or folder cannot be written (no space, file-size limit, permissions); the
+    message names the path and the operating system's error (the command exits with status 2)."""
+
+
+class CacheError(OptplanError, OSError):
+    """The kernel cache folder (``OPTPLAN_CACHE``) is not a usable folder; the message names it."""
+
+
+class FolderBusyError(OptplanError, OSError):
+    """Another process writes to the same benchmark output folder; the message names the folder and
+    that process's id."""
+
+
 def real_array(value, what: str, error: type | None = None) -> np.ndarray:
     """``value`` as a float array, refusing what would silently become numbers: strings, booleans,
     complex numbers (NumPy drops the imaginary part), None and other objects, ragged nesting.

@@ -28,7 +28,8 @@ import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -142,9 +143,22 @@ class PipelineResult:
                 "shortcut_time_s": self.shortcut_time_s, "opt_wall_s": self.opt_wall_s, "opt_cpu_s": self.opt_cpu_s,
                 "attempts": [len(s.attempts) for s in self.segments]}
 
-    def save(self, path) -> None:
-        """npz with ``t`` [s], ``q`` [rad] (M × nq, Pinocchio order), ``joint_names``, ``constrained``."""
-        np.savez(path, t=self.t, q=self.q, joint_names=np.array(self.joint_names), constrained=self.constrained)
+    def save(self, path, *, robot: str | None = None, scene: str | None = None) -> Path:
+        """npz with ``t`` [s], ``q`` [rad] (M × nq, Pinocchio order), ``joint_names``, ``constrained``,
+        and the ``robot`` and ``scene`` names when given (``optplan view`` then needs no ``--scene``).
+        ``.npz`` is appended to a path without it. Written atomically: the file is complete or
+        absent; a failed write raises :class:`optplan.errors.OutputError`. Returns the path written."""
+        from ._io import atomic_path
+
+        p = Path(path)
+        if p.suffix != ".npz" and (p.is_file() or not p.exists()):   # not a device such as /dev/null
+            p = p.with_name(p.name + ".npz")
+        arrays: dict[str, Any] = {"t": self.t, "q": self.q, "joint_names": np.array(self.joint_names),
+                  "constrained": self.constrained}
+        arrays.update({k: np.array(v) for k, v in (("robot", robot), ("scene", scene)) if v is not None})
+        with atomic_path(p) as tmp, open(tmp, "wb") as f:
+            np.savez(f, **arrays)
+        return p
 
 
 # --------------------------------------------------------------------------- shortcut

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
+from . import interrupt
+
 __all__ = ["PAPERS", "Paper", "Step", "ReproduceError", "examples_dir", "plan_steps", "reproduce"]
 
 
@@ -109,8 +111,11 @@ def _tcbirrt_view(out: Path, quick: bool) -> list[Path]:
         return []
     P = np.asarray(res.path, float)
     t = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1) / 0.5)])
-    np.savez(out / "traj" / "tcbirrt_path_scene1.npz", t=t, q=P, constrained=np.asarray(res.constrained, bool),
-             robot=np.array(robot.name), scene=np.array(scene.name))
+    from ._io import atomic_path
+
+    with atomic_path(out / "traj" / "tcbirrt_path_scene1.npz") as tmp, open(tmp, "wb") as f:
+        np.savez(f, t=t, q=P, constrained=np.asarray(res.constrained, bool),
+                 robot=np.array(robot.name), scene=np.array(scene.name))
     return [write_trajectory_html(out / "tcbirrt_path_scene1.html", robot, scene, t, P, constrained=res.constrained,
                                   options=ViewOptions(title="TCBiRRT path, ssps_scene1 trial 0 (before optimization)"))]
 
@@ -301,18 +306,23 @@ def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = Tru
     record: dict[str, Any] = {"paper": paper, "title": p.title, "quick": quick, "steps": [], "files": []}
     t_all = time.perf_counter()
     ok = True
-    for st in steps:
+    for k, st in enumerate(steps):
+        interrupt.progress(k, len(steps), "steps")
         say(f"\n$ python {' '.join(st.argv)}", flush=True)
         t0 = time.perf_counter()
         log_path = out / f"{st.name}.log"
         with open(log_path, "w") as log_file:
             proc = subprocess.Popen([sys.executable, *st.argv], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                    text=True, bufsize=1)
-            assert proc.stdout is not None   # stdout=PIPE
-            for line in proc.stdout:
-                sys.stdout.write(line)
-                log_file.write(line)
-            rc = proc.wait()
+                                    text=True, bufsize=1, preexec_fn=interrupt.die_with_parent)
+            try:
+                assert proc.stdout is not None   # stdout=PIPE
+                for line in proc.stdout:
+                    sys.stdout.write(line)
+                    log_file.write(line)
+                rc = proc.wait()
+            except BaseException:   # interrupted: the step's process ends with this one
+                interrupt.stop_process(proc)
+                raise
         dt = time.perf_counter() - t0
         ok &= rc == 0
         record["steps"].append({"name": st.name, "argv": list(st.argv), "exit_code": rc, "run_time_s": dt,
@@ -335,7 +345,10 @@ def reproduce(paper: str, out="reproduce", quick: bool = False, html: bool = Tru
         say(f"\n{p.title}: ours next to the paper's")
         for line in p.summary(out, steps):
             say(line)
-    (out / "reproduce.json").write_text(json.dumps(record, indent=2))
+    from ._io import write_json
+
+    interrupt.progress(len(steps), len(steps), "steps")
+    write_json(out / "reproduce.json", record)   # last: after the files it lists
     html_files = [f for f in record["files"] if f.endswith(".html")]
     say(f"\nrun time {record['run_time_s']:.1f} s; {'all steps succeeded' if ok else 'SOME STEPS FAILED'}; "
           f"record {out / 'reproduce.json'}")

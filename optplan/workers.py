@@ -29,6 +29,8 @@ from concurrent.futures import CancelledError, Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
+from . import interrupt
+
 __all__ = ["default_workers", "run_jobs", "shutdown"]
 log = logging.getLogger(__name__)
 
@@ -61,6 +63,22 @@ def shutdown() -> None:
         _CONTEXTS.pop(key, None)
 
 
+def _kill_all() -> None:
+    """On an interruption: end every worker process now (SIGKILL) and forget the pools."""
+    while _POOLS:
+        key, pool = _POOLS.popitem(last=False)
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            try:
+                proc.kill()
+            except (OSError, AttributeError):  # pragma: no cover - already gone
+                pass
+        pool.shutdown(wait=False, cancel_futures=True)
+        _CONTEXTS.pop(key, None)
+
+
+interrupt.register_stopper(_kill_all)
+
+
 def _pool(context: tuple[Any, ...], workers: int) -> tuple[tuple[int, ...], ProcessPoolExecutor] | None:
     if "fork" not in mp.get_all_start_methods():  # pragma: no cover - not on Linux
         return None
@@ -72,7 +90,7 @@ def _pool(context: tuple[Any, ...], workers: int) -> tuple[tuple[int, ...], Proc
         _POOLS.move_to_end(key)
         return key, pool
     _CONTEXTS[key] = context             # before the workers fork: they inherit it
-    pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"))
+    pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"), initializer=interrupt.worker_init)
     _POOLS[key] = pool
     while len(_POOLS) > MAX_POOLS:
         old, p = _POOLS.popitem(last=False)
@@ -174,6 +192,7 @@ def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tu
         send()
     try:
         while (i := take(to_worker=False)) is not None:
+            interrupt.check()   # a signal a solver turned into its own error stops here, not after every job
             results[i] = fn(*context, *jobs[i])
     except BaseException:
         with lock:   # no further job goes to a worker

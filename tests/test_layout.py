@@ -22,7 +22,8 @@ PKG = Path(__file__).resolve().parents[1] / "optplan"
 #: verification, viz → pipeline → paper reproductions → benchmarks → command line. The package
 #: ``optplan/__init__`` (lazy public names) counts as the top; importing it is no dependency.
 LAYERS = [
-    (0, ("optplan.errors", "optplan.limits", "optplan._compat", "optplan.geometry")),
+    (0, ("optplan.errors", "optplan.limits", "optplan._compat", "optplan.geometry", "optplan._io", "optplan.cache",
+         "optplan.interrupt")),   # files written atomically, the kernel cache's entries, interruption
     (1, ("optplan.codegen", "optplan.solver_options", "optplan.workers", "optplan.model")),
     (2, ("optplan.constraints", "optplan.collision", "optplan.scene")),
     (3, ("optplan.problem", "optplan.planners")),

@@ -18,7 +18,6 @@ can be benchmarked against the same peer by passing another callable.
 """
 from __future__ import annotations
 
-import json
 import logging
 import math
 import time
@@ -582,6 +581,6 @@ def save_json(rows: list[dict], path: str, command: str | None = None) -> None:
             return None
         return v
 
-    with open(path, "w") as f:
-        json.dump({"command": command, "rows": [clean(r) for r in rows], "summary": clean(summarize(rows))}, f,
-                  indent=2)
+    from .._io import write_json
+
+    write_json(path, {"command": command, "rows": [clean(r) for r in rows], "summary": clean(summarize(rows))})

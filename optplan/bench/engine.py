@@ -63,8 +63,9 @@ def engine_error(engine: str, jobs: int, address: str | None) -> str | None:
 
 def _run_with_init(fn: Callable, initializer: Callable | None, initargs: tuple, unit):
     """One unit on a worker: the (idempotent) initializer first, then the unit."""
-    if initializer is not None:
-        initializer(*initargs)
+    from ..interrupt import worker_init
+
+    worker_init(initializer, *initargs)
     return fn(unit)
 
 
@@ -93,7 +94,10 @@ def map_unordered(fn: Callable[[Any], Any], units: Sequence, *, engine: str = "l
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")
-        with ctx.Pool(min(jobs, len(units)), initializer=initializer, initargs=initargs) as pool:
+        from ..interrupt import worker_init
+
+        # workers ignore Ctrl-C (the terminal sends it to them too; this process stops them) and die with it
+        with ctx.Pool(min(jobs, len(units)), initializer=worker_init, initargs=(initializer, *initargs)) as pool:
             yield from pool.imap_unordered(fn, units, chunksize=1)
         return
     yield from _dask_map(fn, units, jobs=jobs, address=address, initializer=initializer, initargs=initargs,

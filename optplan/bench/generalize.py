@@ -27,13 +27,15 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from .. import interrupt
+from .._io import append_line, write_json, write_text
 
 if TYPE_CHECKING:
     pass
@@ -195,7 +197,15 @@ def _done(rows: list[dict], cfg: GeneralizeConfig) -> set:
 
 
 def run(cfg: GeneralizeConfig) -> list[dict]:
-    """Run (or resume) the benchmark; writes ``results.jsonl`` and ``summary.txt`` / ``.json``."""
+    """Run (or resume) the benchmark; writes ``results.jsonl`` and ``summary.txt`` / ``.json``. The
+    output folder is held for the run (one writer)."""
+    from .folder import folder_lock
+
+    with folder_lock(cfg.out):
+        return _run_locked(cfg)
+
+
+def _run_locked(cfg: GeneralizeConfig) -> list[dict]:
     from .tcbirrt import _repair_tail, load_results
 
     scenes = expand(cfg.scenes) if cfg.scenes else []
@@ -220,12 +230,12 @@ def run(cfg: GeneralizeConfig) -> list[dict]:
         from tqdm import tqdm
 
         bar = tqdm(total=len(units), desc="bench generalize", unit="trial")
+    n_all = len(scenes) * cfg.trials
     with open(path, "a") as f:
-        for s, i in units:
+        for k, (s, i) in enumerate(units):
+            interrupt.progress(n_all - len(units) + k, n_all, "trials")
             line = run_trial(s, i, cfg)
-            f.write(json.dumps(line) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
+            append_line(f, json.dumps(line), path)
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix_str(f"{s} #{i} {'ok' if line.get('success') else line.get('opt_status')}")
@@ -238,8 +248,8 @@ def run(cfg: GeneralizeConfig) -> list[dict]:
             keep[(r["scene"], int(r["trial"]))] = r
     rows = [keep[k] for k in sorted(keep)]
     summ = summarize(rows)
-    (out / "summary.json").write_text(json.dumps(summ, indent=2))
-    (out / "summary.txt").write_text(format_summary(summ) + "\n")
+    write_json(out / "summary.json", summ)
+    write_text(out / "summary.txt", format_summary(summ) + "\n")
     return rows
 
 

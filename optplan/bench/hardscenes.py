@@ -178,7 +178,9 @@ def make_witness(scene_name: str, *, planner: str = "tcbirrt:variant=improved:ed
                 p = witness_path(scene_name)
                 p.parent.mkdir(parents=True, exist_ok=True)
                 d = {"provenance": prov, "result": res.to_dict()}
-                with gzip.open(p, "wt") as f:
+                from .._io import atomic_path
+
+                with atomic_path(p) as tmp, gzip.open(tmp, "wt") as f:
                     json.dump(d, f)
             return res, prov
     raise RuntimeError(f"{scene_name}: no verified path with {planner} for seeds {list(seeds)}")

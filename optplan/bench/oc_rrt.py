@@ -19,13 +19,15 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .. import interrupt
+from .._io import append_line, atomic_path, write_json, write_text
+from .folder import dedupe, folder_lock
 from .tcbirrt import _repair_tail, load_results
 
 __all__ = ["OCBenchConfig", "SCENES", "PLANNERS", "OMPL_PEER", "run", "summarize", "format_table", "densify_linear",
@@ -162,14 +164,20 @@ def save_path(directory, scene: str, planner: str, dense: np.ndarray, joint_name
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     p = d / f"{scene}_{planner}.npz"
-    np.savez(p, t=np.arange(len(dense), dtype=float) * resolution, q=dense, joint_names=np.array(joint_names))
+    with atomic_path(p) as tmp, open(tmp, "wb") as f:
+        np.savez(f, t=np.arange(len(dense), dtype=float) * resolution, q=dense, joint_names=np.array(joint_names))
     return p
 
 
 def run(cfg: OCBenchConfig) -> list[dict]:
-    """Run (or resume) the benchmark; returns every line of ``cfg.out/results.jsonl`` for cfg."""
+    """Run (or resume) the benchmark; returns every line of ``cfg.out/results.jsonl`` for cfg (one
+    per scene, trial and planner). The output folder is held for the run (one writer)."""
+    with folder_lock(cfg.out):
+        return _run_locked(cfg)
+
+
+def _run_locked(cfg: OCBenchConfig) -> list[dict]:
     out = Path(cfg.out)
-    out.mkdir(parents=True, exist_ok=True)
     rp = out / "results.jsonl"
     _repair_tail(rp)
     match = lambda r: (r.get("seed") == cfg.seed and r.get("clock") == cfg.clock  # noqa: E731
@@ -183,12 +191,12 @@ def run(cfg: OCBenchConfig) -> list[dict]:
         bar = tqdm(total=len(todo), desc="bench oc_rrt", unit="run")
     saved = set()
     with open(rp, "a") as f:
-        for sc, i, p in todo:
+        n_all = len(todo) + len(done)
+        for k, (sc, i, p) in enumerate(todo):
+            interrupt.progress(len(done) + k, n_all, "trial runs")
             s = setup_scene(sc, cfg.planners)
             line, dense = _run_one(s, sc, p, i, cfg)
-            f.write(json.dumps(line) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
+            append_line(f, json.dumps(line), rp)
             if cfg.save_dir and dense is not None and (sc, p) not in saved:
                 save_path(cfg.save_dir, sc, p, dense, s["robot"].joint_names, cfg.resolution)
                 saved.add((sc, p))
@@ -197,11 +205,12 @@ def run(cfg: OCBenchConfig) -> list[dict]:
                 bar.set_postfix_str(f"{sc} #{i} {p} {line['status']}")
     if bar is not None:
         bar.close()
-    rows = [r for r in load_results(rp) if match(r) and r["scene"] in cfg.scenes and r["planner"] in cfg.planners
-            and int(r["trial"]) < cfg.trials]
+    rows = dedupe([r for r in load_results(rp) if match(r) and r["scene"] in cfg.scenes
+                   and r.get("planner") in cfg.planners and int(r["trial"]) < cfg.trials],
+                  lambda r: (r["scene"], int(r["trial"]), r["planner"]))
     summ = summarize(rows)
-    (out / "summary.json").write_text(json.dumps(summ, indent=2))
-    (out / "summary.txt").write_text(format_table(summ))
+    write_json(out / "summary.json", summ)
+    write_text(out / "summary.txt", format_table(summ))
     return rows
 
 
@@ -288,7 +297,8 @@ def plot_scene(directory, scene: str, dense: np.ndarray, constraint, joint_names
         ax.legend(fontsize=6)
     fig.tight_layout()
     p = d / f"{scene}_{label}.png"
-    fig.savefig(p, dpi=100)
+    with atomic_path(p) as tmp:
+        fig.savefig(tmp, dpi=100)
     plt.close(fig)
     return [p]
 
@@ -359,7 +369,7 @@ def _report(args, cfg: OCBenchConfig, rows: list[dict]) -> int:
         for sc, per in summ["speedup_of_each_oc_rrt"].items():
             for v, r in per.items():
                 js["scenes"][sc][v]["peer_median_time_ratios"] = r
-        Path(args.json).write_text(json.dumps(js, indent=2))
+        write_json(args.json, js)
         print(f"wrote {args.json}")
     if args.plot:
         for sc in cfg.scenes:

@@ -23,6 +23,8 @@ import os
 import tempfile
 from typing import Any, cast
 
+from .._io import write_json
+
 CASES = ("free_end", "end_constrained")
 TARGET_S = 1.0
 PAPER = {"free_end": "EBA ≈ 370 s, planned end attitude (0, 0, 0)°",
@@ -175,7 +177,6 @@ def accuracy(runs=ACCURACY_RUNS) -> list[dict]:
 
 def main(argv=None) -> int:
     import argparse
-    import json
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cases", default=",".join(CASES), help=f"comma-separated subset of {','.join(CASES)}")
@@ -190,14 +191,12 @@ def main(argv=None) -> int:
                   f"{r['max_knot_attitude_error_rad']:.2e} rad, end attitude (independent) "
                   f"{r['end_attitude_independent_rad']:.2e} rad, closed chain {r['closed_chain_residual']:.1e}")
         if args.json:
-            with open(args.json, "w") as f:
-                json.dump(rows, f, indent=2, default=float)
+            write_json(args.json, rows, default=float)
         return 0 if all(r["success"] for r in rows) else 1
     rows = run([c.strip() for c in args.cases.split(",") if c.strip()])
     print(report(rows))
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(rows, f, indent=2, default=float)
+        write_json(args.json, rows, default=float)
     return 0 if all(r["success"] for r in rows) else 1
 
 

@@ -10,7 +10,6 @@ per-trial results.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
 import shutil
@@ -113,7 +112,9 @@ def measure(workers=(1, 2), repeats: int = 3, engine: str = "dask", trials: int 
     res = {"engine": engine, "workers": list(workers), "repeats": repeats, "trials": trials, "scenes": list(scenes),
            "planners": list(planners), "time_limit_s": time_limit, "cores": os.cpu_count(), "runs": runs,
            "summary": summary, "all_results_identical": all(r["same_results"] for r in runs)}
-    (out / "scaling.json").write_text(json.dumps(res, indent=2))
+    from .._io import write_json
+
+    write_json(out / "scaling.json", res)
     return res
 
 

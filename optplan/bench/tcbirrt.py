@@ -32,7 +32,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,8 +39,11 @@ from typing import Any
 
 import numpy as np
 
+from .. import interrupt
+from .._io import append_line, atomic_path, write_json, write_text
 from .engine import map_unordered, parse_planner_spec, validate_engine
 from .tcbirrt_tables import PAPER, _time_of, format_tables, plot_fig6, success_curve
+from .folder import dedupe, folder_lock, read_result_lines
 
 __all__ = ["BenchConfig", "run", "parse_planner_spec", "expand_scenes", "load_results", "summarize", "format_summary", "plot_success", "scene_name",
            "PAPER", "N_MIN"]
@@ -223,23 +225,13 @@ def _init_pool(robot_name, scenes, planners):
 
 # ---------------------------------------------------------------------- results file
 def load_results(path) -> list[dict]:
-    """Lines of a results.jsonl (unparsable lines, e.g. a truncated last one, are skipped)."""
+    """Result lines of a results.jsonl (or of ``DIR/results.jsonl``); other lines (a truncated last
+    one, a foreign line) are skipped, each with a warning naming its line number
+    (:func:`optplan.bench.folder.read_result_lines`)."""
     p = Path(path)
     if p.is_dir():
         p = p / "results.jsonl"
-    rows: list[dict[str, Any]] = []
-    if not p.exists():
-        return rows
-    with open(p) as f:
-        for line in f:
-            line = line.strip()
-            if not line:
-                continue
-            try:
-                rows.append(json.loads(line))
-            except json.JSONDecodeError:
-                continue
-    return rows
+    return read_result_lines(p)
 
 
 def _repair_tail(p: Path) -> None:
@@ -250,7 +242,8 @@ def _repair_tail(p: Path) -> None:
     if data.endswith(b"\n"):
         return
     cut = data.rfind(b"\n")
-    p.write_bytes(data[:cut + 1] if cut >= 0 else b"")
+    with atomic_path(p) as tmp:
+        tmp.write_bytes(data[:cut + 1] if cut >= 0 else b"")
 
 
 def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
@@ -270,7 +263,15 @@ def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
     validate_engine(cfg.engine, cfg.jobs, cfg.address)
     scenes = expand_scenes(cfg.scenes)
     out = Path(cfg.out)
-    out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out):   # one writer per folder
+        return _run_locked(cfg, robot_name, scenes, out)
+
+
+def _key(r: dict) -> tuple:
+    return (r["scene"], int(r["trial"]), r.get("planner"))
+
+
+def _run_locked(cfg: BenchConfig, robot_name: str, scenes: list[str], out: Path) -> list[dict]:
     res_path = out / "results.jsonl"
     _repair_tail(res_path)
     done = {(r["scene"], int(r["trial"]), r["planner"]) for r in load_results(res_path)
@@ -281,9 +282,10 @@ def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
             todo = [p for p in cfg.planners if (sc, i, p) not in done]
             if todo:
                 units.append((robot_name, sc, i, todo, float(cfg.time_limit), int(cfg.seed), cfg.clock))
-    with open(out / "config.json", "w") as f:
-        json.dump({**cfg.__dict__, "scenes": scenes}, f, indent=2)
+    write_json(out / "config.json", {**cfg.__dict__, "scenes": scenes})
     n_runs = sum(len(u[3]) for u in units)
+    n_all, n_done = n_runs + len(done), len(done)
+    interrupt.progress(n_done, n_all, "trial runs")
     log.info("%d planner runs to do (%d already in %s)", n_runs, len(done), res_path)
     bar = None
     if cfg.progress and n_runs:
@@ -292,10 +294,11 @@ def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
         bar = tqdm(total=n_runs, desc="bench tcbirrt", unit="run", smoothing=0.05)
     with open(res_path, "a") as f:
         def write(lines):
+            nonlocal n_done
             for ln in lines:
-                f.write(json.dumps(ln) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
+                append_line(f, json.dumps(ln), res_path)
+            n_done += len(lines)
+            interrupt.progress(n_done, n_all, "trial runs")
             if bar is not None:
                 bar.update(len(lines))
                 ok = [ln for ln in lines if ln["success"]]
@@ -310,18 +313,17 @@ def run(cfg: BenchConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict]:
     rows = [r for r in load_results(res_path) if r.get("seed") == cfg.seed and r.get("clock") == cfg.clock
             and r.get("time_limit_s") == cfg.time_limit and r["scene"] in scenes and r["planner"] in cfg.planners
             and cfg.first_trial <= int(r["trial"]) < cfg.first_trial + cfg.trials]
-    seen = {(r["scene"], r["trial"], r["planner"]) for r in rows}
+    rows = dedupe(rows, _key)   # each trial counted once (the last line written wins)
+    seen = {_key(r) for r in rows}
     for other in cfg.merge:   # lines of other runs (same seed and clock) join the summary
         for r in load_results(other):
-            key = (r["scene"], r["trial"], r["planner"])
+            key = _key(r)
             if r.get("seed") == cfg.seed and r.get("clock") == cfg.clock and r["scene"] in scenes and key not in seen:
                 rows.append(r)
                 seen.add(key)
     summ = summarize(rows, cfg.time_limit)
-    with open(out / "summary.json", "w") as f:
-        json.dump(summ, f, indent=2)
-
-    (out / "summary.txt").write_text(format_summary(summ) + "\n\n" + format_tables(summ, cfg.time_limit, cfg.clock))
+    write_json(out / "summary.json", summ)
+    write_text(out / "summary.txt", format_summary(summ) + "\n\n" + format_tables(summ, cfg.time_limit, cfg.clock))
     if cfg.plot:
         from ..viz.bench_plots import plot_time_distributions
 
@@ -438,5 +440,6 @@ def plot_success(rows: list[dict], path, time_limit: float) -> None:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(loc="upper left", fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
     plt.close(fig)

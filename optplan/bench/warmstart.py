@@ -29,7 +29,6 @@ import hashlib
 import json
 import logging
 import math
-import os
 import resource
 import time
 from dataclasses import dataclass, field
@@ -38,7 +37,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .. import interrupt
+from .._io import append_line, write_json, write_text
 from .engine import map_unordered, validate_engine
+from .folder import folder_lock
 from .tcbirrt import _repair_tail, load_results, scene_name
 
 if TYPE_CHECKING:
@@ -285,12 +287,15 @@ def run(cfg: WarmstartConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict
     this configuration (scenes, trials, modes, seed, time limit)."""
     scenes = validate(cfg)
     out = Path(cfg.out)
-    out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out):   # one writer per folder
+        return _run_locked(cfg, robot_name, scenes, out)
+
+
+def _run_locked(cfg: WarmstartConfig, robot_name: str, scenes: list[str], out: Path) -> list[dict]:
     res_path = out / "results.jsonl"
     _repair_tail(res_path)
     units = pending_units(cfg, scenes, load_results(res_path), robot_name)
-    with open(out / "config.json", "w") as f:
-        json.dump({**cfg.__dict__, "modes": list(cfg.modes), "scenes": scenes, "robot": robot_name}, f, indent=2)
+    write_json(out / "config.json", {**cfg.__dict__, "modes": list(cfg.modes), "scenes": scenes, "robot": robot_name})
     n_all = len(scenes) * cfg.trials * len(cfg.modes)
     log.info("%d pipeline runs to do (%d of %d already in %s)", len(units), n_all - len(units), n_all, res_path)
     bar = None
@@ -298,14 +303,15 @@ def run(cfg: WarmstartConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict
         from tqdm import tqdm
 
         bar = tqdm(total=len(units), desc="bench warmstart", unit="run", smoothing=0.05)
-    n_ok = 0
+    n_ok, n_done = 0, n_all - len(units)
+    interrupt.progress(n_done, n_all, "trial runs")
     with open(res_path, "a") as f:
         def write(line):
-            nonlocal n_ok
-            f.write(json.dumps(line) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
+            nonlocal n_ok, n_done
+            append_line(f, json.dumps(line), res_path)
             n_ok += bool(line.get("success"))
+            n_done += 1
+            interrupt.progress(n_done, n_all, "trial runs")
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix_str(f"{line['scene']} #{line['trial']} {line['mode']} "
@@ -318,9 +324,8 @@ def run(cfg: WarmstartConfig, robot_name: str = "tcbirrt_dual_arm") -> list[dict
         bar.close()
     rows = select_rows(load_results(res_path), cfg, scenes)
     summ = summarize(rows)
-    with open(out / "summary.json", "w") as f:
-        json.dump(summ, f, indent=2)
-    (out / "summary.txt").write_text(format_summary(summ) + "\n")
+    write_json(out / "summary.json", summ)
+    write_text(out / "summary.txt", format_summary(summ) + "\n")
     if cfg.plot:
         from ..viz.bench_plots import plot_warmstart_distributions
 

@@ -170,7 +170,9 @@ def load_dual_panda() -> RobotModel:
     cache.mkdir(exist_ok=True)
     path = cache / "dual_panda.urdf"
     if not path.exists() or path.read_text() != text:
-        path.write_text(text)
+        from .._io import write_text
+
+        write_text(path, text)   # atomic: a concurrent process never reads half a URDF
     arms = {s: {"ee": f"{s}_panda_hand_tcp", "joints": DUAL_PANDA_ARMS[s]} for s in SIDES}
     robot = RobotModel.from_urdf(path, arms=arms, name="dual_panda")
     robot.pair_budget = pair_budget(robot, srdf_disabled_pairs(share))

@@ -175,7 +175,9 @@ def _load(kind: str) -> RobotModel:
     cache.mkdir(exist_ok=True)
     path = cache / f"{kind}_arms.urdf"
     if not path.exists() or path.read_text() != text:
-        path.write_text(text)
+        from .._io import write_text
+
+        write_text(path, text)   # atomic: a concurrent process never reads half a URDF
     # RobotModel builds its default self-collision pairs on the geometry it is given: convert the
     # meshes to hulls first by building, converting, then rebuilding the pair list.
     arms = {s: {"ee": ee[s], "joints": joints[s]} for s in ("left", "right")}

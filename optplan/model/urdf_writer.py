@@ -160,7 +160,9 @@ def write_urdf(desc: RobotDescription, out_dir: Path | None = None) -> Path:
     except OSError as exc:
         raise ModelError(f"cannot create the URDF folder {str(out_dir)!r}: {exc.strerror or exc}") from None
     path = out_dir / f"{desc.name}.urdf"
-    path.write_text(urdf_string(desc))
+    from .._io import write_text
+
+    write_text(path, urdf_string(desc))
     return path
 
 

@@ -229,7 +229,9 @@ class PlanResult:
 
         self.check()
         p = check_output_path(path, "PlanResult.save: file", ResultFileError)
-        p.write_text(self.to_json())
+        from .._io import write_text
+
+        write_text(p, self.to_json())   # atomic: complete or absent
         return p
 
     @classmethod

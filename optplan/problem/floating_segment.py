@@ -68,7 +68,7 @@ from ..model.robot import RobotModel
 from .assembly import RowAssembly, nonzeros, scatter
 from .bspline import check_knot_guess, fit_interior, jerk_integral_reference, knot_values, rest_to_rest
 from .frame_terms import ClosedChain
-from .kernels import KernelCache
+from .kernels import KernelCache, load_library
 from .solution import Solution
 from .transcription import quat_mul
 
@@ -195,9 +195,13 @@ class FloatingKernels(KernelCache):
                 for n, lib in zip(names, libs):
                     k = ("compiled", n, opt)
                     if k not in self._fns:
-                        self._fns[k] = ca.external(n, str(lib))
+                        ext = load_library(n, lib)   # None: damaged, quarantined (rebuilt below)
+                        if ext is None:
+                            break
+                        self._fns[k] = ext
                     out.append(self._fns[k])
-                return tuple(out)
+                else:
+                    return tuple(out)
         f = self._get(key, build)
         fns = (f, *self.local_derivatives(f))
         if compiled is True:

@@ -15,6 +15,7 @@ from typing import Any, TypeVar, cast
 import casadi as ca
 import numpy as np
 
+from ..cache import quarantine, record, usable
 from ..constraints.closed_chain import relative_pose_residual
 from ..model.robot import RobotModel
 from ..model.symbolic import SymbolicKinematics
@@ -22,9 +23,22 @@ from . import kernel_compiler as background
 from .frame_terms import ClosedChain
 from .kernel_compiler import compile_library
 
-__all__ = ["KernelCache", "geometry_points"]
+__all__ = ["KernelCache", "geometry_points", "load_library"]
 log = logging.getLogger(__name__)
 _T = TypeVar("_T")
+
+
+def load_library(name: str, lib: Path) -> ca.Function | None:
+    """The compiled kernel ``name`` from the shared library ``lib`` (``casadi.external``), or None
+    when there is none or it is damaged — checked against its recorded size and hash before it is
+    loaded (:mod:`optplan.cache`); a damaged one is quarantined, with a warning, to be rebuilt."""
+    if not usable(lib):
+        return None
+    try:
+        return ca.external(name, str(lib))
+    except RuntimeError as exc:   # dlopen refused it, or the symbol is missing
+        quarantine(lib, f"does not load: {str(exc).splitlines()[0] if str(exc) else exc}")
+        return None
 
 
 class KernelCache:
@@ -101,17 +115,18 @@ class KernelCache:
             return fn
         name = self._name(key)
         path = self._dir / f"{name}.casadi" if self._dir is not None else None
-        if path is not None and path.exists():
+        if path is not None and usable(path):
             try:
                 fn = ca.Function.load(str(path))
             except RuntimeError as exc:  # a damaged file: rebuild it
-                log.info("kernel %s not loaded (%s); rebuilding", path, exc)
+                quarantine(path, f"does not load: {str(exc).splitlines()[0] if str(exc) else exc}")
         if fn is None:
             fn = build(name)
             if path is not None:
                 tmp = path.with_suffix(f".{os.getpid()}.tmp")
                 try:
                     fn.save(str(tmp))
+                    record(tmp, sidecar_for=path)
                     os.replace(tmp, path)  # atomic: concurrent processes never read half a file
                 except (OSError, RuntimeError) as exc:
                     log.info("kernel %s not saved (%s)", path, exc)
@@ -128,8 +143,10 @@ class KernelCache:
         """The compiled library of the function ``name`` if an earlier run left it, else None."""
         key = ("compiled", name, opt)
         got = self._fns.get(key)
-        if got is None and self._dir is not None and (self._dir / f"{name}{opt}.so").exists():
-            got = self._fns[key] = ca.external(name, str(self._dir / f"{name}{opt}.so"))
+        if got is None and self._dir is not None:
+            got = load_library(name, self._dir / f"{name}{opt}.so")
+            if got is not None:
+                self._fns[key] = got
         return got
 
     def compiled(self, fn: ca.Function, opt: str = "-O1", build: bool = True) -> ca.Function | None:
@@ -144,7 +161,8 @@ class KernelCache:
         if got is not None:
             return got
         lib = None if self._dir is None else self._dir / f"{fn.name()}{opt}.so"
-        if lib is None or not lib.exists():
+        ext = None if lib is None else load_library(fn.name(), lib)   # a damaged library: quarantined, None
+        if ext is None:
             if not build:
                 return None
             if lib is None:
@@ -154,7 +172,9 @@ class KernelCache:
             if not compile_library(fn, lib, opt):
                 return fn
             log.info("compiled kernel %s in %.1f s", fn.name(), time.perf_counter() - t0)
-        ext = ca.external(fn.name(), str(lib))
+            ext = load_library(fn.name(), lib)
+            if ext is None:
+                return fn
         self._fns[key] = ext
         return ext
 

@@ -249,7 +249,9 @@ class Solution:
                 "attempts": [a.to_dict() for a in self.attempts]}
 
     def save(self, path: str | Path) -> Path:
-        """Save as ``.npz`` (arrays + JSON metadata) or ``.json`` (everything as lists)."""
+        """Save as ``.npz`` (arrays + JSON metadata) or ``.json`` (everything as lists), atomically
+        (complete or absent; a failed write raises :class:`optplan.errors.OutputError`)."""
+        from .._io import atomic_path, write_text
         from ..errors import ResultFileError
         from ..limits import check_output_path
 
@@ -257,12 +259,13 @@ class Solution:
         if path.suffix == ".json":
             d = self._meta()
             d.update({k: v.tolist() for k, v in self._arrays().items()})
-            path.write_text(json.dumps(d))
+            write_text(path, json.dumps(d))
         else:
-            np.savez(path, meta=json.dumps(self._meta()), joint_names=np.array(self.joint_names),
-                     **self._arrays())
-            if path.suffix != ".npz":
+            if path.suffix != ".npz" and (path.is_file() or not path.exists()):   # np.savez's naming
                 path = path.with_name(path.name + ".npz")
+            with atomic_path(path) as tmp, open(tmp, "wb") as f:
+                np.savez(f, meta=json.dumps(self._meta()), joint_names=np.array(self.joint_names),
+                         **self._arrays())
         return path
 
     @classmethod

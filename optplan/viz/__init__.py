@@ -14,7 +14,10 @@ def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
 
     fig.tight_layout()
     p = Path(path)
-    fig.savefig(p, dpi=dpi)
+    from .._io import atomic_path
+
+    with atomic_path(p) as tmp:   # complete or absent
+        fig.savefig(tmp, dpi=dpi)
     plt.close(fig)
     return p
 

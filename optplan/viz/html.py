@@ -380,7 +380,9 @@ def write_trajectory_html(path, robot, scene, t, q, *, constrained=None, options
     p = Path(path)
     page = trajectory_html(robot, scene, t, q, constrained=constrained, options=options)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(page, encoding="utf-8")
+    from .._io import write_text
+
+    write_text(p, page)   # atomic: complete or absent
     return p
 
 
@@ -525,7 +527,10 @@ def save_metadata(path, *, robot: str | None = None, scene: str | None = None) -
         arrays["robot"] = np.array(robot)
     if scene is not None:
         arrays["scene"] = np.array(scene)
-    np.savez(p, **arrays)
+    from .._io import atomic_path
+
+    with atomic_path(p) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **arrays)
 
 
 def resolve_scene(name_or_path: str | None):

@@ -33,11 +33,11 @@ def _external(fun: ca.Function, opt: str = "-O1"):
     import hashlib
     import os
     import shutil
-    import subprocess
     import tempfile
     from pathlib import Path
 
-    from ...codegen import cache_dir
+    from ...codegen import build_library, cache_dir
+    from ...problem.kernels import load_library
 
     cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
     if cc is None:
@@ -50,17 +50,16 @@ def _external(fun: ca.Function, opt: str = "-O1"):
         cg.generate(tmp + os.sep)
         code = Path(tmp, f"{name}.c").read_bytes()
         lib = cache_dir() / f"dshdasr_{name}_{hashlib.sha1(code + opt.encode()).hexdigest()[:16]}.so"
-        if not lib.exists():
+        ext = load_library(name, lib)   # checked first; a damaged library is quarantined (None)
+        if ext is None:
             t0 = time.perf_counter()
-            out = Path(tmp) / lib.name
-            proc = subprocess.run([cc, opt, "-fPIC", "-shared", str(Path(tmp, f"{name}.c")), "-o", str(out), "-lm"],
-                                  capture_output=True, text=True)
-            if proc.returncode != 0:
-                log.warning("compiling %s failed: %s", name, proc.stderr[-400:])
+            err = build_library(Path(tmp, f"{name}.c"), lib, opt)
+            if err is not None:
+                log.warning("compiling %s failed: %s", name, err[-400:])
                 return None
-            shutil.move(str(out), lib)
             log.info("compiled %s in %.1f s", name, time.perf_counter() - t0)
-    return ca.external(name, str(lib))
+            ext = load_library(name, lib)
+    return ext
 
 
 class ArcPlanner:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -293,7 +294,11 @@ class MethodResult:
     def save_npz(self, path, joint_names) -> None:
         """``t`` [s], ``q`` [rad] (joints only, Pinocchio order), ``qd``, ``joint_names``; the
         meeting sample appears once."""
-        np.savez(path, t=self.t, q=self.q, qd=self.qd, joint_names=np.array(joint_names))
+        from ..._io import atomic_path
+
+        p = Path(path) if str(path).endswith(".npz") else Path(f"{path}.npz")
+        with atomic_path(p) as tmp, open(tmp, "wb") as f:
+            np.savez(f, t=self.t, q=self.q, qd=self.qd, joint_names=np.array(joint_names))
 
 
 def hermite_segment(t, q, qd) -> Segment:
