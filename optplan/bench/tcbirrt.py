@@ -42,8 +42,8 @@ import numpy as np
 from .. import interrupt
 from .._io import append_line, atomic_path, write_json, write_text
 from .engine import map_unordered, parse_planner_spec, validate_engine
-from .tcbirrt_tables import PAPER, _time_of, format_tables, plot_fig6, success_curve
 from .folder import dedupe, folder_lock, read_result_lines
+from .tcbirrt_tables import PAPER, _time_of, format_tables, plot_fig6, success_curve
 
 __all__ = ["BenchConfig", "run", "parse_planner_spec", "expand_scenes", "load_results", "summarize", "format_summary", "plot_success", "scene_name",
            "PAPER", "N_MIN"]
