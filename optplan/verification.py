@@ -39,7 +39,8 @@ class VerifyReport:
     ``min_clearance_pair`` its pair; ``max_position_limit_violation`` [rad];
     ``max_velocity_limit_violation`` [rad/s]; ``max_momentum_residual``; ``base_attitude_mismatch_rad``:
     largest angle between the NLP's base attitude and the simulator's at the knots;
-    ``final_base_attitude_error_rad``: angle between final and initial base attitude (simulator).
+    ``final_base_attitude_error_rad``: angle between the final base attitude relative to the initial
+    one (simulator) and the target (``verify(end_attitude=...)``, default the identity).
     """
 
     n_samples: int
@@ -120,12 +121,14 @@ _angle = rotation_angle
 
 def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_chain=None,
            density: int = 10, held_object: bool = True, object_arm: str | None = None,
-           check_velocity: bool = True, base0: pin.SE3 | None = None) -> VerifyReport:
+           check_velocity: bool = True, base0: pin.SE3 | None = None, end_attitude=None) -> VerifyReport:
     """Check ``solution`` (anything with ``t``, ``sample(t)`` and, for floating robots,
     ``base_quat``) at ``density`` × its knot density. ``closed_chain`` is a
     :class:`~optplan.problem.terms.ClosedChain` (or None). ``base0``: the floating base's placement
     at the start (default the identity); the base along the motion is re-integrated from it with
-    zero momentum, whatever the solution says of the base."""
+    zero momentum, whatever the solution says of the base. ``end_attitude``: the final base attitude
+    relative to the initial one that the motion must reach (3 × 3 rotation; default the identity,
+    i.e. restoration): ``final_base_attitude_error_rad`` is the angle between the two."""
     if int(density) < 1:
         raise ValueError(f"density: expected ≥ 1, got {density}")
     N = len(solution.t) - 1
@@ -139,7 +142,10 @@ def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_ch
         qfull = sim.q
         mom = float(sim.momentum_residual.max())
         R0 = pin.XYZQUATToSE3(qfull[0, :7]).rotation
-        final_err = _angle(R0.T @ pin.XYZQUATToSE3(qfull[-1, :7]).rotation)
+        Rt = np.eye(3) if end_attitude is None else np.asarray(end_attitude, float)
+        if Rt.shape != (3, 3) or not np.allclose(Rt.T @ Rt, np.eye(3), atol=1e-9):
+            raise ValueError(f"end_attitude: expected a 3 × 3 rotation matrix, got {end_attitude!r}")
+        final_err = _angle(Rt.T @ R0.T @ pin.XYZQUATToSE3(qfull[-1, :7]).rotation)
         if getattr(solution, "base_quat", None) is not None:
             knots = np.arange(0, len(ts), int(density))
             mism = []
