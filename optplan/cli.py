@@ -296,6 +296,8 @@ def _cmd_plan(args) -> int:
                          "(its grasps and poses belong to that robot)")
     robot_name = args.robot or scene.robot or "tcbirrt_dual_arm"
     robot = _load_robot(robot_name)
+    if robot.is_floating:
+        return _cmd_plan_floating(args, robot, scene)
     t0 = time.perf_counter()
     try:
         _check_fits(scene, robot, robot_name, given=bool(args.robot or scene.robot))
@@ -341,6 +343,29 @@ def _cmd_plan(args) -> int:
         for p in write_views(robot, scene, res.t, res.q, res.constrained, html=args.html, plot_dir=args.plot,
                              title=f"optplan plan: {scene.name}, trial {args.trial}"):
             print(f"wrote {p}")
+    return 0 if res.success else 1
+
+
+def _cmd_plan_floating(args, robot, scene) -> int:
+    """``optplan plan`` for a free-floating robot: :func:`optplan.floating_pipeline.run_floating_pipeline`."""
+    from .floating_pipeline import (
+        FloatingPipelineOptions,
+        run_floating_pipeline,
+        scene_start,
+        summary_lines,
+        trial_goal,
+    )
+
+    res = run_floating_pipeline(robot, scene, scene_start(robot, scene), trial_goal(scene, args.trial, args.seed),
+                                FloatingPipelineOptions(plan_time_limit=args.time_limit), seed=args.seed + args.trial)
+    print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}, robot "
+          f"{robot.name!r} (free-floating base, zero momentum)")
+    print("\n".join(summary_lines(res)))
+    if args.json:
+        r = res.report
+        _write_json(args.json, {"success": res.success, "plan_status": res.plan.status.value,
+                                "report": r.to_dict() if r is not None else None, "attempts": res.attempts,
+                                "object_goal_error": list(res.goal_error)})
     return 0 if res.success else 1
 
 

@@ -156,3 +156,52 @@ def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE
     e = goal.actInv(M)
     res.goal_error = (float(np.linalg.norm(e.translation)), float(np.linalg.norm(pin.log3(e.rotation))))
     return res
+
+
+def trial_goal(scene: Scene, index: int, seed: int) -> pin.SE3:
+    """The object's goal of trial ``index``: the scene's [goal] for trial 0, else perturbed by the
+    scene's ``[extra] trial_position_range`` [m] / ``trial_angle_range`` [rad] (deterministic in
+    ``(seed, index)``); the start is the scene's ``[extra] q_start`` witness."""
+    from .trials import perturb_pose, trial_seed
+
+    if scene.goal is None:
+        raise ConfigurationError(f"scene {scene.name!r}: no [goal] pose for the object")
+    if index == 0:
+        return scene.goal
+    ex = scene.extra or {}
+    rng = np.random.default_rng(trial_seed(seed, index))
+    return perturb_pose(scene.goal, rng, float(ex.get("trial_position_range", 0.05)),
+                        float(ex.get("trial_angle_range", 0.1)))
+
+
+def scene_start(robot: RobotModel, scene: Scene) -> np.ndarray:
+    """The scene's ``[extra] q_start`` [rad] (``q_unit = "deg"`` allowed): joints holding the object at
+    [start] with the base at the origin."""
+    ex = scene.extra or {}
+    if "q_start" not in ex:
+        raise ConfigurationError(f"scene {scene.name!r}: a floating robot's scene needs [extra] q_start (the joints "
+                                 "holding the object at [start] with the base at the origin)")
+    q = np.asarray(ex["q_start"], float) * (np.pi / 180.0 if ex.get("q_unit", "rad") == "deg" else 1.0)
+    return robot.check_joints(q, f"scene {scene.name!r}: extra.q_start")
+
+
+def summary_lines(res: FloatingPipelineResult) -> list[str]:
+    """What ``optplan plan`` prints for a floating robot: statuses, figures, the base's path."""
+    rep, p = res.report, res.plan
+    out = [f"  {'success':28s} {res.success}", f"  {'plan_status':28s} {p.status.value}",
+           f"  {'plan_time_s':28s} {p.time_s:.3e}", f"  {'plan_drift_corrections':28s} {p.corrections}"]
+    if p.message:
+        out.append(f"  {'plan_message':28s} {p.message}")
+    for n, status, fails in res.attempts:
+        out.append(f"    optimize N={n:3d} {status:24s} {'verified' if not fails else '; '.join(fails)}")
+    if rep is not None:
+        out += [f"  {'opt_wall_s':28s} {res.opt_wall_s:.3e}",
+                f"  {'max_closed_chain_residual':28s} {rep.max_closed_chain_residual:.3e}",
+                f"  {'min_clearance_m':28s} {rep.min_clearance_m:.3e} ({rep.min_clearance_pair})",
+                f"  {'final_base_attitude_error':28s} {rep.final_base_attitude_error_rad:.3e} rad (vs the plan's end "
+                "attitude, independent integration)",
+                f"  {'object_goal_error':28s} {res.goal_error[0]:.3e} m, {res.goal_error[1]:.3e} rad"]
+        out.append("  base path (independent integration from zero momentum): t [s], position [m], rpy [deg]")
+        for t, pos, rpy in res.base_path(5):
+            out.append(f"    {t:7.2f}  {np.round(pos, 4).tolist()}  {np.round(np.degrees(rpy), 3).tolist()}")
+    return out

@@ -60,3 +60,29 @@ def test_options_are_checked():
         FloatingPipelineOptions(intervals=2)
     with pytest.raises(OptionError, match="duration_factor"):
         FloatingPipelineOptions(duration_factor=0.0)
+
+
+def test_optplan_plan_accepts_a_floating_scene(capsys, tmp_path):
+    """`optplan plan --scene floating_truss` runs the floating job (no traceback from the fixed-base
+    trial generator), prints the final attitude error and the base path, writes the JSON."""
+    import json
+
+    from optplan import cli
+
+    out = tmp_path / "r.json"
+    assert cli.main(["plan", "--scene", "floating_truss", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "final_base_attitude_error" in text and "base path" in text
+    d = json.loads(out.read_text())
+    assert d["success"] is True and d["report"]["min_clearance_m"] >= 0.0
+
+
+def test_a_floating_scene_without_a_start_witness_is_a_clear_error(eba):
+    from dataclasses import replace
+
+    from optplan.errors import ConfigurationError
+    from optplan.floating_pipeline import scene_start
+
+    scene = Scene.load("floating_truss")
+    with pytest.raises(ConfigurationError, match="q_start"):
+        scene_start(eba, replace(scene, extra={}))
