@@ -349,7 +349,7 @@ def _cmd_plan(args) -> int:
 def _cmd_plan_floating(args, robot, scene) -> int:
     """``optplan plan`` for a free-floating robot: :func:`optplan.floating_pipeline.run_floating_pipeline`."""
     from .floating_pipeline import (
-        FloatingPipelineOptions,
+        options_for_scene,
         run_floating_pipeline,
         scene_start,
         summary_lines,
@@ -357,7 +357,7 @@ def _cmd_plan_floating(args, robot, scene) -> int:
     )
 
     res = run_floating_pipeline(robot, scene, scene_start(robot, scene), trial_goal(scene, args.trial, args.seed),
-                                FloatingPipelineOptions(plan_time_limit=args.time_limit), seed=args.seed + args.trial)
+                                options_for_scene(scene, plan_time_limit=args.time_limit), seed=args.seed + args.trial)
     print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}, robot "
           f"{robot.name!r} (free-floating base, zero momentum)")
     print("\n".join(summary_lines(res)))

@@ -205,3 +205,13 @@ def summary_lines(res: FloatingPipelineResult) -> list[str]:
         for t, pos, rpy in res.base_path(5):
             out.append(f"    {t:7.2f}  {np.round(pos, 4).tolist()}  {np.round(np.degrees(rpy), 3).tolist()}")
     return out
+
+
+def options_for_scene(scene: Scene, **kwargs) -> FloatingPipelineOptions:
+    """:class:`FloatingPipelineOptions` (``kwargs``) with the scene's goal frame: ``[extra] target_frame``
+    = ``"world"`` (default) or ``"base"`` (the goal is the object's pose in the base frame)."""
+    from dataclasses import replace
+
+    frame = (scene.extra or {}).get("target_frame", "world")
+    opts = FloatingPipelineOptions(**kwargs)
+    return replace(opts, planner=replace(opts.planner, target_frame=frame))

@@ -62,15 +62,16 @@ def test_options_are_checked():
         FloatingPipelineOptions(duration_factor=0.0)
 
 
-def test_optplan_plan_accepts_a_floating_scene(capsys, tmp_path):
-    """`optplan plan --scene floating_truss` runs the floating job (no traceback from the fixed-base
+@pytest.mark.parametrize("scene_name", ["floating_truss", "floating_stow"])
+def test_optplan_plan_accepts_a_floating_scene(capsys, tmp_path, scene_name):
+    """`optplan plan --scene <floating scene>` runs the floating job (no traceback from the fixed-base
     trial generator), prints the final attitude error and the base path, writes the JSON."""
     import json
 
     from optplan import cli
 
     out = tmp_path / "r.json"
-    assert cli.main(["plan", "--scene", "floating_truss", "--json", str(out)]) == 0
+    assert cli.main(["plan", "--scene", scene_name, "--json", str(out)]) == 0
     text = capsys.readouterr().out
     assert "final_base_attitude_error" in text and "base path" in text
     d = json.loads(out.read_text())
@@ -86,3 +87,18 @@ def test_a_floating_scene_without_a_start_witness_is_a_clear_error(eba):
     scene = Scene.load("floating_truss")
     with pytest.raises(ConfigurationError, match="q_start"):
         scene_start(eba, replace(scene, extra={}))
+
+
+def test_stow_goal_is_in_the_base_frame(eba):
+    """floating_stow: the berth is on the robot's body; the module ends at its pose in the base frame
+    (by the independent integration the base has turned, so the world pose differs)."""
+    from optplan.floating_pipeline import options_for_scene
+
+    scene = Scene.load("floating_stow")
+    opts = options_for_scene(scene)
+    assert opts.planner.target_frame == "base"
+    res = run_floating_pipeline(eba, scene, np.radians(scene.extra["q_start"]), options=opts)
+    assert res.success, res.attempts
+    assert res.goal_error[0] < 1e-6 and res.goal_error[1] < 1e-6
+    t, Q = res.base
+    assert np.linalg.norm(pin.log3(pin.XYZQUATToSE3(Q[-1]).rotation)) > 0.005
