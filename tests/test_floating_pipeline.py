@@ -102,3 +102,57 @@ def test_stow_goal_is_in_the_base_frame(eba):
     assert res.goal_error[0] < 1e-6 and res.goal_error[1] < 1e-6
     t, Q = res.base
     assert np.linalg.norm(pin.log3(pin.XYZQUATToSE3(Q[-1]).rotation)) > 0.005
+
+
+def test_success_is_gated_by_every_check(truss_run):
+    """The result's success follows the verdict: a collision, a closed-chain or attitude miss, or an
+    object off its goal each make it False."""
+    from dataclasses import replace
+
+    _, res = truss_run
+    assert res.success
+    good = res.report
+    for bad in (replace(good, min_clearance_m=-1e-4), replace(good, max_closed_chain_residual=2e-6),
+                replace(good, final_base_attitude_error_rad=2e-6), replace(good, max_position_limit_violation=1e-3)):
+        res.report = bad
+        assert not res.success
+    res.report = good
+    err = res.goal_error
+    res.goal_error = (2e-3, 0.0)
+    assert not res.success
+    res.goal_error = err
+    assert res.success
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene_name", ["floating_truss", "floating_stow"])
+def test_no_floating_success_with_a_collision_or_an_attitude_miss(eba, scene_name):
+    """Property over seeded random goals: every `success` holds by independent checks — a finer
+    re-integration of the base (4 RK4 substeps, 40 samples per interval), exact coal clearance ≥ 0 along
+    it, the final attitude within 1e-6 rad of the target and the closed chain ≤ 1e-6."""
+    from optplan.collision.checker import CollisionChecker
+    from optplan.constraints.closed_chain import closure_errors
+    from optplan.floating_pipeline import options_for_scene, scene_start, trial_goal
+
+    scene = Scene.load(scene_name)
+    checker = CollisionChecker(eba, scene)
+    n_success = 0
+    for k in range(1, 7):
+        res = run_floating_pipeline(eba, scene, scene_start(eba, scene), trial_goal(scene, k, 7),
+                                    options_for_scene(scene), seed=k)
+        if not res.success:
+            continue
+        n_success += 1
+        sol = res.solution
+        t = np.linspace(sol.t[0], sol.t[-1], 40 * (len(sol.t) - 1) + 1)
+        smp = sol.sample(t)
+        Q = simulate_base(eba, (t, smp["q"], smp["qd"]), t, substeps=4).q
+        assert checker.min_distance_along(Q)[0] >= 0.0
+        Rf = pin.XYZQUATToSE3(Q[-1, :7]).rotation
+        assert np.linalg.norm(pin.log3(res.end_attitude.T @ Rf)) <= 1e-6
+        from optplan.problem.frame_terms import ClosedChain
+
+        cc = ClosedChain.from_configuration(eba, Q[0], "A", "B")
+        ep, er = closure_errors(eba, cc, Q)
+        assert ep.max() <= 1e-6 and er.max() <= 1e-6
+    assert n_success >= 3   # the property is exercised
