@@ -366,6 +366,13 @@ def _cmd_plan_floating(args, robot, scene) -> int:
         _write_json(args.json, {"success": res.success, "plan_status": res.plan.status.value,
                                 "report": r.to_dict() if r is not None else None, "attempts": res.attempts,
                                 "object_goal_error": list(res.goal_error)})
+    traj = res.trajectory()
+    if args.html and traj is not None:   # the view shows the base moving (full configurations)
+        from .viz.outputs import write_views
+
+        for p in write_views(robot, scene, traj[0], traj[1], html=args.html,
+                             title=f"optplan plan: {scene.name}, trial {args.trial}"):
+            print(f"wrote {p}")
     return 0 if res.success else 1
 
 

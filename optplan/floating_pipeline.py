@@ -91,6 +91,14 @@ class FloatingPipelineResult:
                     and self.report is not None and self.report.passed(self.tolerances)
                     and self.goal_error[0] <= self.goal_tol[0] and self.goal_error[1] <= self.goal_tol[1])
 
+    def trajectory(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(t [s], full configurations: the independently re-integrated base, then the joints) at 10
+        samples per knot interval; None without a solution."""
+        if self.base is None or self.solution is None:
+            return None
+        t, B = self.base
+        return t, np.hstack([B, self.solution.sample(t)["q"]])
+
     def base_path(self, n: int = 5) -> list[tuple[float, np.ndarray, np.ndarray]]:
         """``n`` samples (t [s], base position [m], base roll-pitch-yaw [rad]) of the independently
         re-integrated base along the solution (empty without a solution)."""

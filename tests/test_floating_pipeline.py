@@ -156,3 +156,17 @@ def test_no_floating_success_with_a_collision_or_an_attitude_miss(eba, scene_nam
         ep, er = closure_errors(eba, cc, Q)
         assert ep.max() <= 1e-6 and er.max() <= 1e-6
     assert n_success >= 3   # the property is exercised
+
+
+def test_the_view_gets_the_re_integrated_base(truss_run, eba, tmp_path):
+    """The trajectory handed to the HTML view carries the independently integrated base (it moves)."""
+    scene, res = truss_run
+    t, Q = res.trajectory()
+    assert Q.shape == (len(t), eba.nq)
+    np.testing.assert_array_equal(Q[:, :7], res.base[1])
+    assert np.linalg.norm(Q[-1, :3] - Q[0, :3]) > 0.01
+    pytest.importorskip("meshcat")
+    from optplan.viz.html import write_trajectory_html
+
+    p = write_trajectory_html(tmp_path / "v.html", eba, scene, t[::5], Q[::5])
+    assert p.exists() and '"floating": true' in p.read_text()
