@@ -158,26 +158,39 @@ class FloatingCarryPlanner:
 
     def hold(self, joints: np.ndarray, object_in_base: pin.SE3, iters: int = 200) -> np.ndarray | None:
         """Joints near ``joints`` with both hands at their grasps on the object at ``object_in_base``
-        (damped least squares per arm, clamped to the limits); None if it does not converge."""
+        (Levenberg–Marquardt per arm: a step is taken only if it reduces the hand's pose error, else
+        the damping grows; clamped to the limits); None if it does not converge."""
         m, d, r = self.robot.model, self._data, self.robot
         q = self._full(np.array(joints, float))
         nb = r.base_nq
         for arm_name in self.arm_names:
             arm = r.arm(arm_name)
             target = object_in_base * self.grasps[arm_name]
-            ok = False
+
+            def error(qq: np.ndarray) -> np.ndarray:
+                pin.framesForwardKinematics(m, d, qq)
+                return pin.log6(target.actInv(d.oMf[arm.ee_frame_id])).vector
+
+            err = error(q)
+            e, lam, ok = float(np.linalg.norm(err)), 1e-8, False
             for _ in range(iters):
-                pin.framesForwardKinematics(m, d, q)
-                err = pin.log6(target.actInv(d.oMf[arm.ee_frame_id])).vector
-                if float(np.linalg.norm(err)) < self.options.ik_tol:
+                if e < self.options.ik_tol:
                     ok = True
                     break
                 J = pin.computeFrameJacobian(m, d, q, arm.ee_frame_id, pin.LOCAL)[:, arm.v_idx]
-                step = J.T @ np.linalg.solve(J @ J.T + 1e-8 * np.eye(6), err)
+                step = J.T @ np.linalg.solve(J @ J.T + lam * np.eye(6), err)
                 n = float(np.max(np.abs(step)))
                 if n > 0.3:
                     step *= 0.3 / n
-                q[arm.q_idx] = np.clip(q[arm.q_idx] - step, r.lower[arm.j_idx], r.upper[arm.j_idx])
+                qt = q.copy()
+                qt[arm.q_idx] = np.clip(q[arm.q_idx] - step, r.lower[arm.j_idx], r.upper[arm.j_idx])
+                et = error(qt)
+                if float(np.linalg.norm(et)) < e:
+                    q, err, e, lam = qt, et, float(np.linalg.norm(et)), max(lam * 0.1, 1e-12)
+                else:
+                    lam *= 10.0
+                    if lam > 1e2:
+                        break
             if not ok:
                 return None
         return q[nb:].copy()
