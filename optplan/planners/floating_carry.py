@@ -167,9 +167,9 @@ class FloatingCarryPlanner:
             arm = r.arm(arm_name)
             target = object_in_base * self.grasps[arm_name]
 
-            def error(qq: np.ndarray) -> np.ndarray:
+            def error(qq: np.ndarray, target: pin.SE3 = target, fid: int = arm.ee_frame_id) -> np.ndarray:
                 pin.framesForwardKinematics(m, d, qq)
-                return pin.log6(target.actInv(d.oMf[arm.ee_frame_id])).vector
+                return pin.log6(target.actInv(d.oMf[fid])).vector
 
             err = error(q)
             e, lam, ok = float(np.linalg.norm(err)), 1e-8, False
