@@ -314,6 +314,8 @@ def _cmd_plan(args) -> int:
                          "(its grasps and poses belong to that robot)")
     robot_name = args.robot or scene.robot or "tcbirrt_dual_arm"
     robot = _load_robot(robot_name)
+    if getattr(robot, "is_floating", False):   # (a stand-in robot object of the tests has no base)
+        return _cmd_plan_floating(args, robot, scene)
     t0 = time.perf_counter()
     files: list[str] = []   # outputs written so far (each complete: written atomically)
     try:
@@ -379,6 +381,36 @@ def _plan_outputs(args, robot, scene, res, files: list[str]) -> None:
                              title=f"optplan plan: {scene.name}, trial {args.trial}"):
             files.append(str(p))
             print(f"wrote {p}")
+
+
+def _cmd_plan_floating(args, robot, scene) -> int:
+    """``optplan plan`` for a free-floating robot: :func:`optplan.floating_pipeline.run_floating_pipeline`."""
+    from .floating_pipeline import (
+        options_for_scene,
+        run_floating_pipeline,
+        scene_start,
+        summary_lines,
+        trial_goal,
+    )
+
+    res = run_floating_pipeline(robot, scene, scene_start(robot, scene), trial_goal(scene, args.trial, args.seed),
+                                options_for_scene(scene, plan_time_limit=args.time_limit), seed=args.seed + args.trial)
+    print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}, robot "
+          f"{robot.name!r} (free-floating base, zero momentum)")
+    print("\n".join(summary_lines(res)))
+    if args.json:
+        r = res.report
+        _write_json(args.json, {"success": res.success, "plan_status": res.plan.status.value,
+                                "report": r.to_dict() if r is not None else None, "attempts": res.attempts,
+                                "object_goal_error": list(res.goal_error)})
+    traj = res.trajectory()
+    if args.html and traj is not None:   # the view shows the base moving (full configurations)
+        from .viz.outputs import write_views
+
+        for p in write_views(robot, scene, traj[0], traj[1], html=args.html,
+                             title=f"optplan plan: {scene.name}, trial {args.trial}"):
+            print(f"wrote {p}")
+    return 0 if res.success else 1
 
 
 def _cmd_view(args) -> int:

@@ -233,8 +233,8 @@ class Scene:
                 self.object.check_robot(robot)
             for key in ("q_start", "q_goal"):
                 q = self.extra.get(key)
-                if q is not None and len(q) != robot.nq:
-                    raise ModelError(f"extra.{key} has {len(q)} joint values, the robot has {robot.nq} "
+                if q is not None and len(q) != robot.nj:   # a floating robot's witness: its joints, not the base
+                    raise ModelError(f"extra.{key} has {len(q)} joint values, the robot has {robot.nj} "
                                      f"({', '.join(robot.joint_names)})")
         except (ModelError, UnknownNameError) as exc:
             raise ModelError(f"scene {self.name!r} does not fit robot {robot.name!r}: {exc}") from None

@@ -28,7 +28,7 @@ LAYERS = [
     (2, ("optplan.constraints", "optplan.collision", "optplan.scene")),
     (3, ("optplan.problem", "optplan.planners")),
     (4, ("optplan.tasks", "optplan.trials", "optplan.verification", "optplan.viz", "optplan.shortcuts")),
-    (5, ("optplan.pipeline", "optplan.pipeline_options")),
+    (5, ("optplan.pipeline", "optplan.pipeline_options", "optplan.floating_pipeline")),
     (6, ("optplan.papers",)),
     (7, ("optplan.bench", "optplan.cli_args")),   # cli_args: argument checks shared with the bench commands
     (8, ("optplan.cli", "optplan.reproduce", "optplan.demo", "optplan")),

@@ -7,7 +7,9 @@ example-robot-data's, e.g. the two-Panda ``dual_panda``).
 
 * ``suite`` = the hard-scene suite (``hard_*``), ``stress`` = the stress scenes (``stress_*``),
   ``panda`` = the dual-Panda scenes (``panda_*``), ``own`` = the scenes of robots loaded from
-  robot files (``own_*``); any scene name works too. ``--robot`` runs every trial on that robot
+  robot files (``own_*``), ``floating`` = the free-floating carry scenes (``floating_*``: the job of
+  :mod:`optplan.floating_pipeline`, start = the scene's witness, goal perturbed per trial); any
+  scene name works too. ``--robot`` runs every trial on that robot
   (a robot file or URDF path; without ``--scene``, on the scenes made for it); the summary adds
   the process's peak memory.
 * Planner: TCBiRRT, ``variant="improved"`` (the hard scenes' planner), edges checked every 0.05 rad,
@@ -45,7 +47,7 @@ log = logging.getLogger(__name__)
 
 #: target: the optimizer succeeds (converged and verified) on this fraction of the planned trials
 TARGET_SUCCESS = 0.95
-GROUPS = {"suite": "hard_", "stress": "stress_", "panda": "panda_", "own": "own_"}
+GROUPS = {"suite": "hard_", "stress": "stress_", "panda": "panda_", "own": "own_", "floating": "floating_"}
 
 
 @dataclass
@@ -148,6 +150,8 @@ def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
             "n_collision_pairs": len(robot.collision_pairs), "time_limit_s": float(cfg.time_limit),
             "ipopt_max_wall_time_s": float(cfg.ipopt_max_wall_time), "planner_variant": cfg.planner_variant,
             "plan_clock": cfg.clock}
+    if robot.is_floating:
+        return {**line, **_floating_trial(robot, scene, index, cfg)}
     t0 = time.perf_counter()
     try:
         trial = TrialGenerator(robot, scene).generate(index, cfg.seed)
@@ -175,6 +179,31 @@ def run_trial(scene_name: str, index: int, cfg: GeneralizeConfig) -> dict:
                  "converged": bool(res.segments) and all(s.solution.success for s in res.segments),
                  "segments": _segment_rows(res), "error": None})
     return line
+
+
+def _floating_trial(robot, scene, index: int, cfg: GeneralizeConfig) -> dict:
+    """One trial of a free-floating scene (:func:`optplan.floating_pipeline.run_floating_pipeline`)."""
+    from ..floating_pipeline import options_for_scene, run_floating_pipeline, scene_start, trial_goal
+    from .warmstart import _finite
+
+    c0, w0 = time.process_time(), time.perf_counter()
+    res = run_floating_pipeline(robot, scene, scene_start(robot, scene), trial_goal(scene, index, cfg.seed),
+                                options_for_scene(scene, plan_time_limit=float(cfg.time_limit)),
+                                seed=int(cfg.seed) + int(index))
+    rep, sol = res.report, res.solution
+    return {"wall_time_s": time.perf_counter() - w0, "cpu_time_s": time.process_time() - c0,
+            "peak_rss_mb": _peak_rss_mb(), "success": res.success, "plan_ok": res.plan.success,
+            "plan_status": res.plan.status.value, "plan_time_s": _finite(res.plan.time_s),
+            "converged": bool(sol is not None and sol.success), "opt_status": sol.status.value if sol else "not_run",
+            "opt_wall_s": _finite(res.opt_wall_s), "opt_cpu_s": None,
+            "opt_iterations": sol.iterations if sol else None,
+            "max_closed_chain_residual": _finite(rep.max_closed_chain_residual) if rep else None,
+            "min_clearance_m": _finite(rep.min_clearance_m) if rep else None,
+            "final_base_attitude_error_rad": _finite(rep.final_base_attitude_error_rad) if rep else None,
+            "object_goal_error": [_finite(v) for v in res.goal_error],
+            "segments": [{"kind": "constrained", "attempts": [{"reason": f"N={n}"} for n, _, _ in res.attempts],
+                          "failure": res.attempts[-1][2] if res.attempts and res.attempts[-1][2] else []}],
+            "error": res.plan.message or None}
 
 
 def _peak_rss_mb() -> float | None:

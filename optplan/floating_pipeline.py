@@ -1,0 +1,225 @@
+"""The main job for a free-floating robot carrying an object with both hands: plan → optimize → verify.
+
+1. **Plan** with :class:`~optplan.planners.floating_carry.FloatingCarryPlanner`: joints, the base
+   integrated from zero momentum along each edge, collision checked with the base where momentum
+   puts it, the object's goal reached in the world.
+2. **Optimize** with :class:`~optplan.problem.floating_segment.FloatingSplineProblem`: the same
+   pinned ends, the closed chain at the knots, the base attitude integrated (RK4) from zero
+   momentum and constrained at the end to the plan's final attitude (so that the object lands at its
+   world goal: with zero momentum the base position follows from the joints and the attitude).
+   Initial guess: the plan's path resampled by arc length. The NLP has no collision rows: the
+   clearance is left to the verification.
+3. **Verify** (:func:`optplan.verify`, the judge): base re-integrated independently; closed chain,
+   clearance, joint limits and the final base attitude against :class:`~optplan.verification.VerifyTolerances`.
+   Retry policy: while the closed chain between the knots is the only failure, the number of
+   intervals doubles (the drift between knots falls ∝ h⁴), up to ``max_intervals``.
+
+``success`` only when the plan is exact, the NLP converged and the verification passes.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import ConfigurationError, OptionError
+from .model.floating import simulate_base
+from .model.robot import RobotModel
+from .planners.base import PlanStatus
+from .planners.floating_carry import FloatingCarryOptions, FloatingCarryPlan, FloatingCarryPlanner
+from .problem.floating_segment import FloatingSegmentSpec, FloatingSplineProblem
+from .problem.frame_terms import ClosedChain
+from .problem.solution import Solution
+from .scene import Scene
+from .verification import VerifyReport, VerifyTolerances, verify
+
+__all__ = ["FloatingPipelineOptions", "FloatingPipelineResult", "run_floating_pipeline"]
+
+
+@dataclass(frozen=True)
+class FloatingPipelineOptions:
+    """Options of :func:`run_floating_pipeline`."""
+
+    #: planner options (target frame, steps, tolerances).
+    planner: FloatingCarryOptions = field(default_factory=FloatingCarryOptions)
+    #: planning time limit [s].
+    plan_time_limit: float = 10.0
+    #: B-spline intervals of the first solve [count].
+    intervals: int = 16
+    #: most B-spline intervals of the retries [count].
+    max_intervals: int = 64
+    #: duration = this × the plan's joint path length / the smallest joint speed limit [s per (rad / (rad/s))].
+    duration_factor: float = 3.0
+    #: verification bounds (the final attitude is checked against the plan's final attitude).
+    tolerances: VerifyTolerances = field(default_factory=VerifyTolerances)
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.intervals, int) and 4 <= self.intervals <= self.max_intervals):
+            raise OptionError(f"FloatingPipelineOptions.intervals: expected an integer in [4, max_intervals = "
+                              f"{self.max_intervals}], got {self.intervals!r}")
+        for name in ("plan_time_limit", "duration_factor"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise OptionError(f"FloatingPipelineOptions.{name}: expected a positive number, got {v!r}")
+
+
+@dataclass
+class FloatingPipelineResult:
+    """``plan``; ``solution`` and ``report`` of the last optimization attempt (None when the plan
+    failed); ``attempts``: (intervals, NLP status, failures) of each solve; ``end_attitude``: the
+    final base attitude relative to the initial one that the solution must reach (the plan's)."""
+
+    plan: FloatingCarryPlan
+    solution: Solution | None = None
+    report: VerifyReport | None = None
+    attempts: list[tuple[int, str, list[str]]] = field(default_factory=list)
+    end_attitude: np.ndarray | None = None
+    opt_wall_s: float = float("nan")
+    tolerances: VerifyTolerances = field(default_factory=VerifyTolerances)
+
+    #: the object's final pose error against its goal (position [m], rotation [rad]), the base re-integrated
+    #: independently along the solution; ``base``: (t [s], base XYZ-quaternion) samples of that integration
+    goal_error: tuple[float, float] = (float("nan"), float("nan"))
+    base: tuple[np.ndarray, np.ndarray] | None = None
+    goal_tol: tuple[float, float] = (1e-3, 1e-3)
+
+    @property
+    def success(self) -> bool:
+        return bool(self.plan.success and self.solution is not None and self.solution.success
+                    and self.report is not None and self.report.passed(self.tolerances)
+                    and self.goal_error[0] <= self.goal_tol[0] and self.goal_error[1] <= self.goal_tol[1])
+
+    def trajectory(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(t [s], full configurations: the independently re-integrated base, then the joints) at 10
+        samples per knot interval; None without a solution."""
+        if self.base is None or self.solution is None:
+            return None
+        t, B = self.base
+        return t, np.hstack([B, self.solution.sample(t)["q"]])
+
+    def base_path(self, n: int = 5) -> list[tuple[float, np.ndarray, np.ndarray]]:
+        """``n`` samples (t [s], base position [m], base roll-pitch-yaw [rad]) of the independently
+        re-integrated base along the solution (empty without a solution)."""
+        if self.base is None:
+            return []
+        t, Q = self.base
+        idx = np.linspace(0, len(t) - 1, n).round().astype(int)
+        return [(float(t[i]), Q[i, :3].copy(), pin.rpy.matrixToRpy(pin.XYZQUATToSE3(Q[i]).rotation)) for i in idx]
+
+
+def _resample(J: np.ndarray, N: int) -> tuple[np.ndarray, float]:
+    L = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(J, axis=0), axis=1))]
+    s = np.linspace(0.0, L[-1], N + 1)
+    return np.array([np.interp(s, L, J[:, j]) for j in range(J.shape[1])]).T, float(L[-1])
+
+
+def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE3 | None = None,
+                          options: FloatingPipelineOptions | None = None, seed: int = 0) -> FloatingPipelineResult:
+    """Plan, optimize and verify (module docstring) from the joints ``q_start`` [rad] (holding the
+    object, base at the origin at rest) to the object's ``goal`` (default ``scene.goal``). Never
+    raises for a failed plan or solve: the statuses are in the result."""
+    if not robot.is_floating:
+        raise ConfigurationError(f"run_floating_pipeline needs a free-floating robot; {robot.name!r} has a fixed base")
+    opts = options or FloatingPipelineOptions()
+    goal = scene.goal if goal is None else goal
+    if goal is None:
+        raise ConfigurationError(f"scene {scene.name!r}: no [goal] pose for the object")
+    planner = FloatingCarryPlanner(robot, scene, opts.planner)
+    plan = planner.plan(q_start, goal, seed=seed, time_limit=opts.plan_time_limit)
+    res = FloatingPipelineResult(plan=plan, tolerances=opts.tolerances,
+                                 goal_tol=(opts.planner.goal_tol_m, opts.planner.goal_tol_rad))
+    if plan.status is not PlanStatus.EXACT:
+        return res
+    J = plan.joints
+    res.end_attitude = plan.final_base.rotation.copy()
+    cc = ClosedChain.from_configuration(robot, robot.configuration(J[0]), *planner.arm_names)
+    _, length = _resample(J, opts.intervals)
+    T = max(1.0, opts.duration_factor * length / float(np.min(robot.velocity_limit)))
+    t0 = time.perf_counter()
+    N = opts.intervals
+    while True:
+        prob = FloatingSplineProblem(robot, FloatingSegmentSpec(N, T, J[0], J[-1], end_attitude=res.end_attitude,
+                                                                closed_chain=cc))
+        prob.set_initial(_resample(J, N)[0])
+        sol = prob.solve()
+        rep = verify(robot, sol, scene, closed_chain=cc, end_attitude=res.end_attitude)
+        fails = rep.failures(opts.tolerances)
+        res.solution, res.report = sol, rep
+        res.attempts.append((N, sol.status.value, fails))
+        only_chain = bool(fails) and all(f.startswith("closed chain") for f in fails)
+        if not (sol.success and only_chain) or 2 * N > opts.max_intervals:
+            break
+        N *= 2
+    res.opt_wall_s = time.perf_counter() - t0
+    # the object's world pose at the end, with the base re-integrated along the solution (not the NLP's)
+    t = np.linspace(sol.t[0], sol.t[-1], 10 * (len(sol.t) - 1) + 1)
+    smp = sol.sample(t)
+    sim = simulate_base(robot, (t, smp["q"], smp["qd"]), t, substeps=2)
+    res.base = (t, sim.q[:, :7].copy())
+    M = sim.final_base * planner.object_in_base(smp["q"][-1])
+    if opts.planner.target_frame == "base":
+        M = planner.object_in_base(smp["q"][-1])
+    e = goal.actInv(M)
+    res.goal_error = (float(np.linalg.norm(e.translation)), float(np.linalg.norm(pin.log3(e.rotation))))
+    return res
+
+
+def trial_goal(scene: Scene, index: int, seed: int) -> pin.SE3:
+    """The object's goal of trial ``index``: the scene's [goal] for trial 0, else perturbed by the
+    scene's ``[extra] trial_position_range`` [m] / ``trial_angle_range`` [rad] (deterministic in
+    ``(seed, index)``); the start is the scene's ``[extra] q_start`` witness."""
+    from .trials import perturb_pose, trial_seed
+
+    if scene.goal is None:
+        raise ConfigurationError(f"scene {scene.name!r}: no [goal] pose for the object")
+    if index == 0:
+        return scene.goal
+    ex = scene.extra or {}
+    rng = np.random.default_rng(trial_seed(seed, index))
+    return perturb_pose(scene.goal, rng, float(ex.get("trial_position_range", 0.05)),
+                        float(ex.get("trial_angle_range", 0.1)))
+
+
+def scene_start(robot: RobotModel, scene: Scene) -> np.ndarray:
+    """The scene's ``[extra] q_start`` [rad] (``q_unit = "deg"`` allowed): joints holding the object at
+    [start] with the base at the origin."""
+    ex = scene.extra or {}
+    if "q_start" not in ex:
+        raise ConfigurationError(f"scene {scene.name!r}: a floating robot's scene needs [extra] q_start (the joints "
+                                 "holding the object at [start] with the base at the origin)")
+    q = np.asarray(ex["q_start"], float) * (np.pi / 180.0 if ex.get("q_unit", "rad") == "deg" else 1.0)
+    return robot.check_joints(q, f"scene {scene.name!r}: extra.q_start")
+
+
+def summary_lines(res: FloatingPipelineResult) -> list[str]:
+    """What ``optplan plan`` prints for a floating robot: statuses, figures, the base's path."""
+    rep, p = res.report, res.plan
+    out = [f"  {'success':28s} {res.success}", f"  {'plan_status':28s} {p.status.value}",
+           f"  {'plan_time_s':28s} {p.time_s:.3e}", f"  {'plan_drift_corrections':28s} {p.corrections}"]
+    if p.message:
+        out.append(f"  {'plan_message':28s} {p.message}")
+    for n, status, fails in res.attempts:
+        out.append(f"    optimize N={n:3d} {status:24s} {'verified' if not fails else '; '.join(fails)}")
+    if rep is not None:
+        out += [f"  {'opt_wall_s':28s} {res.opt_wall_s:.3e}",
+                f"  {'max_closed_chain_residual':28s} {rep.max_closed_chain_residual:.3e}",
+                f"  {'min_clearance_m':28s} {rep.min_clearance_m:.3e} ({rep.min_clearance_pair})",
+                f"  {'final_base_attitude_error':28s} {rep.final_base_attitude_error_rad:.3e} rad (vs the plan's end "
+                "attitude, independent integration)",
+                f"  {'object_goal_error':28s} {res.goal_error[0]:.3e} m, {res.goal_error[1]:.3e} rad"]
+        out.append("  base path (independent integration from zero momentum): t [s], position [m], rpy [deg]")
+        for t, pos, rpy in res.base_path(5):
+            out.append(f"    {t:7.2f}  {np.round(pos, 4).tolist()}  {np.round(np.degrees(rpy), 3).tolist()}")
+    return out
+
+
+def options_for_scene(scene: Scene, **kwargs) -> FloatingPipelineOptions:
+    """:class:`FloatingPipelineOptions` (``kwargs``) with the scene's goal frame: ``[extra] target_frame``
+    = ``"world"`` (default) or ``"base"`` (the goal is the object's pose in the base frame)."""
+    from dataclasses import replace
+
+    frame = (scene.extra or {}).get("target_frame", "world")
+    opts = FloatingPipelineOptions(**kwargs)
+    return replace(opts, planner=replace(opts.planner, target_frame=frame))
