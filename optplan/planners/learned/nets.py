@@ -28,7 +28,8 @@ def require_jax() -> Any:
     except ImportError as exc:   # pragma: no cover - exercised where the extra is absent
         raise ImportError("the learned planners need the optional extra 'learned': "
                           f"pip install \"optplan[learned]\" ({exc})") from exc
-    jax.config.update("jax_platforms", "cpu")   # type: ignore[no-untyped-call]  # jax.config is untyped
+    config: Any = jax.config   # untyped where jax is installed
+    config.update("jax_platforms", "cpu")
     return jax
 
 
