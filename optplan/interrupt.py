@@ -251,6 +251,23 @@ def ignore_in_spawned_child() -> None:
         signal.signal(signal.SIGHUP, signal.SIG_IGN)
 
 
+@contextlib.contextmanager
+def children_start_deaf() -> Iterator[None]:
+    """Block SIGINT and SIGHUP in this thread while worker processes are created in the block: a
+    child (forked, or spawned: the mask survives ``exec``) starts with them blocked, so a Ctrl-C
+    while it boots prints no traceback there; :func:`worker_init` then ignores them. A signal
+    that arrives meanwhile is delivered to this process when the block ends."""
+    sigs = {signal.SIGINT, signal.SIGHUP}
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def die_with_parent() -> None:
     """``preexec_fn`` of a child process: it gets SIGTERM when this process ends (``PR_SET_PDEATHSIG``)."""
     with contextlib.suppress(Exception):

@@ -156,7 +156,8 @@ def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tu
         if i is None:
             return
         try:
-            fut = pool.submit(_run_job, key, fn, tuple(jobs[i]))
+            with interrupt.children_start_deaf():   # a worker forked here starts with Ctrl-C blocked
+                fut = pool.submit(_run_job, key, fn, tuple(jobs[i]))
         except (BrokenProcessPool, RuntimeError):  # pragma: no cover - the pool is gone: run it here
             log.warning("worker processes unavailable; running the remaining jobs here")
             _POOLS.pop(key, None)

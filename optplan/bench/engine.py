@@ -94,10 +94,13 @@ def map_unordered(fn: Callable[[Any], Any], units: Sequence, *, engine: str = "l
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")
-        from ..interrupt import worker_init
+        from ..interrupt import children_start_deaf, worker_init
 
-        # workers ignore Ctrl-C (the terminal sends it to them too; this process stops them) and die with it
-        with ctx.Pool(min(jobs, len(units)), initializer=worker_init, initargs=(initializer, *initargs)) as pool:
+        # workers ignore Ctrl-C (the terminal sends it to them too; this process stops them) and die with it;
+        # they start with it blocked, so one that is still booting prints nothing either
+        with children_start_deaf():
+            pool = ctx.Pool(min(jobs, len(units)), initializer=worker_init, initargs=(initializer, *initargs))
+        with pool:
             yield from pool.imap_unordered(fn, units, chunksize=1)
         return
     yield from _dask_map(fn, units, jobs=jobs, address=address, initializer=initializer, initargs=initargs,
