@@ -24,6 +24,8 @@ from typing import Any
 import numpy as np
 
 _PLAN = ["plan", "--scene", "1", "--time-limit", "10"]
+# runs long enough (~10 s) for a signal at 1-3 s to land mid-run, now that scene 1 plans in ~2 s
+_PLAN_LONG = ["plan", "--scene", "hard_bay", "--time-limit", "10"]
 _BENCH = ["bench", "tcbirrt", "--scene", "1", "--trials", "4", "--planners", "tcbirrt", "--time-limit", "2",
           "--no-progress", "--no-plot"]
 
@@ -71,7 +73,8 @@ def run_interrupted(args: list[str], env: dict, delay: float, sig: int, *, cwd: 
                          start_new_session=True, text=True)
     time.sleep(delay)
     t0 = time.monotonic()
-    if p.poll() is None:
+    sent = p.poll() is None
+    if sent:
         (os.killpg if group else os.kill)(p.pid, sig)
     try:
         out, err = p.communicate(timeout=60)
@@ -86,7 +89,14 @@ def run_interrupted(args: list[str], env: dict, delay: float, sig: int, *, cwd: 
             os.kill(pid, signal.SIGKILL)
         except OSError:
             pass
-    return {"rc": p.returncode, "stdout": out, "stderr": err, "exit_s": t_exit, "orphans": left}
+    return {"rc": p.returncode, "stdout": out, "stderr": err, "exit_s": t_exit, "orphans": left, "sent": sent}
+
+
+def _untested(r: dict) -> tuple[None, str] | None:
+    """A run that ended before its signal was sent tests nothing (neither ok nor a symptom)."""
+    if r["sent"]:
+        return None
+    return None, f"exit {r['rc']}: finished before the signal was sent (inconclusive)"
 
 
 def _limit_fsize(nbytes: int):
@@ -103,8 +113,10 @@ def traceback_lines(text: str) -> int:
 def case_sigint_plan(ctx, rng):
     d = ctx["tmp"] / "sigint"
     d.mkdir()
-    r = run_interrupted(_PLAN + ["--json", "out.json", "--save", "traj.npz"], ctx["env"], float(rng.uniform(0.8, 2.0)),
+    r = run_interrupted(_PLAN_LONG + ["--json", "out.json", "--save", "traj.npz"], ctx["env"], float(rng.uniform(0.8, 2.0)),
                         signal.SIGINT, cwd=d)
+    if (u := _untested(r)) is not None:
+        return u
     tb = traceback_lines(r["stderr"])
     bad = tb > 0 or r["rc"] != 130 or bool(r["orphans"]) or len(r["stderr"].strip().splitlines()) != 1
     return bad, f"exit {r['rc']}, {tb} traceback lines, {len(r['stderr'].splitlines())} stderr lines, " \
@@ -114,8 +126,10 @@ def case_sigint_plan(ctx, rng):
 def case_sigterm_plan_workers(ctx, rng):
     d = ctx["tmp"] / "sigterm"
     d.mkdir()
-    r = run_interrupted(_PLAN + ["--workers", "2", "--json", "out.json"], ctx["env"], float(rng.uniform(1.0, 2.0)),
+    r = run_interrupted(_PLAN_LONG + ["--workers", "2", "--json", "out.json"], ctx["env"], float(rng.uniform(1.0, 2.0)),
                         signal.SIGTERM, cwd=d, group=False)
+    if (u := _untested(r)) is not None:
+        return u
     tb = traceback_lines(r["stderr"])
     bad = tb > 0 or r["rc"] != 143 or bool(r["orphans"]) or len(r["stderr"].strip().splitlines()) != 1
     return bad, f"exit {r['rc']}, {tb} traceback lines, {len(r['stderr'].splitlines())} stderr lines, " \
@@ -125,8 +139,11 @@ def case_sigterm_plan_workers(ctx, rng):
 def _bench_interrupted(ctx, rng, sig, group, name):
     d = ctx["tmp"] / name
     d.mkdir()
-    r = run_interrupted(_BENCH + ["--jobs", "2", "--trials", "6", "--out", "b"], ctx["env"],
+    r = run_interrupted(_BENCH + ["--scene", "hard_truss", "--time-limit", "10", "--jobs", "2", "--trials", "6",
+                                  "--out", "b"], ctx["env"],
                         float(rng.uniform(1.5, 3.0)), sig, cwd=d, group=group)
+    if (u := _untested(r)) is not None:
+        return u
     tb = traceback_lines(r["stderr"])
     bad = tb > 0 or r["rc"] != 128 + sig or bool(r["orphans"]) or len(r["stderr"].strip().splitlines()) != 1
     return bad, f"exit {r['rc']}, {tb} traceback lines, {len(r['stderr'].splitlines())} stderr lines, " \
@@ -146,6 +163,8 @@ def case_sigint_warmstart(ctx, rng):
     d.mkdir()
     r = run_interrupted(["bench", "warmstart", "--scene", "1,2", "--trials", "3", "--no-progress", "--out", "w"],
                         ctx["env"], float(rng.uniform(3.0, 7.0)), signal.SIGINT, cwd=d)
+    if (u := _untested(r)) is not None:
+        return u
     tb = traceback_lines(r["stderr"])
     bad = tb > 0 or r["rc"] != 130 or bool(r["orphans"]) or len(r["stderr"].strip().splitlines()) != 1
     return bad, f"exit {r['rc']}, {tb} traceback lines, {len(r['stderr'].splitlines())} stderr lines, " \
@@ -284,7 +303,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", help="comma-separated case names (without case_)")
     a = ap.parse_args(argv)
     rng = np.random.default_rng(a.seed)
-    n_bad = 0
+    n_bad = n_none = 0
     with tempfile.TemporaryDirectory(prefix="optplan-faults-") as tmp:
         ctx: dict[str, Any] = {"tmp": Path(tmp)}
         ctx["env"] = _env(a.pythonpath, ctx["tmp"] / "cache")
@@ -298,10 +317,15 @@ def main(argv: list[str] | None = None) -> int:
                 ctx["tmp"].mkdir(exist_ok=True)
                 t0 = time.monotonic()
                 bad, what = case(ctx, rng)
+                if bad is None:   # nothing tested (the run ended before its signal)
+                    n_none += 1
+                    print(f"{name:22s} {'untested':8s} {time.monotonic() - t0:6.1f} s  {what}", flush=True)
+                    continue
                 n_bad += bad
                 n_run += 1
                 print(f"{name:22s} {'SYMPTOM' if bad else 'ok':8s} {time.monotonic() - t0:6.1f} s  {what}", flush=True)
-    print(f"{n_bad} of {n_run} case runs with the symptom")
+    print(f"{n_bad} of {n_run} case runs with the symptom" + (f" ({n_none} more ended before their signal: untested)"
+                                                            if n_none else ""))
     return 0
 
 
