@@ -271,3 +271,42 @@ def test_transport_with_collision_and_two_custom_terms_on_the_kernel_core(tcb):
     assert sol.terms["collision"] <= 1e-6
     assert any(n.startswith("collision:") for n in prob._spline.owner["collision"])
 
+
+
+def test_velocity_rows_missed_by_the_guess_are_added_and_hold_everywhere(tcb):
+    """Fixed duration: velocity entries get rows only where the guess nears the limit. A guess
+    that moves only in its last interval leaves the middle without rows; the minimum-jerk motion
+    would exceed the limit there (peak 1.875 Δq/T), so the rows are added after the solve and the
+    re-solve holds the limit — checked on the dense joint velocity of the B-spline, against the
+    same problem with every entry given a row (free T pinned by its bounds)."""
+    from optplan.problem.terms import JointVelocityLimits
+
+    N, T, dq = 10, 2.0, 1.0
+    q0 = 0.2 * np.ones(tcb.nj)
+    q1 = q0.copy()
+    q1[0] += dq
+    lim = np.full(tcb.nj, 0.75)          # < 1.875·Δq/T = 0.94 rad/s: the limit binds
+    z = np.zeros(tcb.nj)
+
+    def make(free_time):
+        prob = OptProblem(tcb, n_intervals=N, duration=T, free_time=free_time, duration_bounds=(0.999 * T, T))
+        prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
+        prob.add_constraint(JointBoundary("end", q=q1, qd=z, qdd=z))
+        prob.add_constraint(JointVelocityLimits(limit=lim), name="vel")
+        prob.add_cost(Smoothness("jerk"))
+        Q = np.repeat(q0[None], N + 1, axis=0)
+        Q[-1] = q1
+        prob.set_initial(q=Q)
+        return prob
+
+    prob = make(False)
+    assert prob.uses_bspline()
+    sol = prob.solve()
+    assert sol.success, sol.status
+    assert len(sol.attempts) >= 2 and sol.attempts[-1].label == "velocity rows"
+    qd = sol.sample(np.linspace(0.0, T, 20 * N + 1))["qd"]
+    assert np.abs(qd).max() <= 0.75 + 1e-6 and np.abs(qd[:, 0]).max() >= 0.75 - 1e-3   # holds and binds
+    ref = make(True).solve()          # every entry has its rows (free duration: less jerk at T = upper bound)
+    assert ref.success and abs(ref.duration - T) <= 1e-6
+    assert abs(sol.cost - ref.cost) <= 1e-5 * abs(ref.cost)
+    assert sol.dual("vel").shape == (N + 2, tcb.nj)
