@@ -216,13 +216,13 @@ class SplineBackend:
         entry without a row exceeded its limit (:meth:`_missed_velocity`)."""
         sol = self._solve_once(tol, max_iter, sopts, compile_kernels)
         for _ in range(2):
-            if not sol.success or not self._missed_velocity(sol.x, max(tol, 1e-9)):
+            if not sol.success or sol.x is None or not self._missed_velocity(sol.x, max(tol, 1e-9)):
                 break
-            x_prev = sol.x
             prev = sol
-            self.x0, self.lam = np.asarray(x_prev, float), None
+            self.x0, self.lam = np.asarray(sol.x, float), None
             sol = self._solve_once(tol, max_iter, sopts, compile_kernels).labelled("velocity rows").after(prev)
-        if sol.success and self.core is not None and not self.core.free_time and self._velocity_families():
+        if sol.success and sol.x is not None and self.core is not None and not self.core.free_time \
+                and self._velocity_families():
             V = self._velocity_points(sol.x).ravel()
             for f in self._velocity_families():
                 lo, hi = (np.tile(b, self.core.N + 2) for b in np.asarray(f.data))
