@@ -462,8 +462,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     mo = bench.add_parser("modelling", help="problems written with the public OptProblem API (expressions, "
                           "seeded guess): build and solve times, iterations, independent checks")
-    mo.add_argument("--tasks", default="reach,reach_knots,reach_free_time,transport,transport_custom",
-                    help="comma-separated: reach, reach_knots, reach_free_time, transport, transport_custom")
+    mo.add_argument("--tasks", default="reach,reach_knots,reach_free_time,transport,transport_custom,ur5",
+                    help="comma-separated: reach, reach_knots, reach_free_time, transport, transport_custom, ur5 "
+                         "(ur5 needs example-robot-data)")
     mo.add_argument("--warm-cache", action="store_true",
                     help="keep the kernel cache (default: each task's first run with an empty cache)")
     mo.add_argument("--json", help="write the rows as JSON to this path")
