@@ -166,6 +166,7 @@ def _cmd_bench_modelling(args) -> int:
 
     argv = ["--tasks", args.tasks] + (["--warm-cache"] if args.warm_cache else []) + (["--json", args.json]
                                                                                       if args.json else [])
+    argv += ["--peer", args.peer] if args.peer else []
     return main(argv)
 
 
@@ -468,6 +469,7 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--warm-cache", action="store_true",
                     help="keep the kernel cache (default: each task's first run with an empty cache)")
     mo.add_argument("--json", help="write the rows as JSON to this path")
+    mo.add_argument("--peer", choices=["rockit"], help="also the tasks rockit can write, in rockit (extra 'rockit')")
     mo.set_defaults(func=_cmd_bench_modelling)
 
     tb = bench.add_parser("tcbirrt", help="TCBiRRT benchmark: planners x space-solar-power-station scenes x perturbed trials")

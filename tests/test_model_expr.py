@@ -310,3 +310,76 @@ def test_velocity_rows_missed_by_the_guess_are_added_and_hold_everywhere(tcb):
     assert ref.success and abs(ref.duration - T) <= 1e-6
     assert abs(sol.cost - ref.cost) <= 1e-5 * abs(ref.cost)
     assert sol.dual("vel").shape == (N + 2, tcb.nj)
+
+
+def test_bench_ur5_task_keeps_its_margin_or_skips_cleanly(monkeypatch):
+    """The UR5 from example-robot-data around one box: solved on the kernel core, the 0.02 m
+    margin held between the knots by coal on the meshes (verify); without the package the task
+    reports itself skipped."""
+    import optplan.model._robot_data as rd
+    from optplan.bench import modelling
+
+    if rd.example_robot_data_dir() is None:
+        assert modelling.run_task("ur5")["skipped"].startswith("example-robot-data")
+        pytest.skip("example-robot-data is not installed")
+    row = modelling.run_task("ur5")["warm"]
+    assert row["success"] and row["transcription"] == "bspline"
+    assert row["min_clearance_m"] >= 0.02 - 1e-4 and row["margin_held"] == 1.0
+    monkeypatch.setattr(rd, "example_robot_data_dir", lambda: None)
+    out = modelling.run_task("ur5")
+    assert "skipped" in out and "warm" not in out
+    assert "skipped" in modelling.format_rows([out])
+
+
+def test_rockit_solution_samples_its_exact_cubic(monkeypatch):
+    """The peer's solution between knots: q̇ and q̈ are the derivatives of q (finite differences),
+    and the knot values are reproduced; without rockit the peer reports itself skipped."""
+    from optplan.bench import rockit_peer
+    from optplan.bench.modelling import run_peer
+    from optplan.bench.rockit_peer import CubicSolution
+
+    monkeypatch.setattr(rockit_peer, "available", lambda: False)
+    assert "not installed" in run_peer("transport")["skipped"]
+
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 2.0, 5)
+    q0, v0, a0 = rng.normal(size=3), rng.normal(size=3), rng.normal(size=3)
+    J = rng.normal(size=(5, 3))
+    q, v, a = [q0], [v0], [a0]
+    for k in range(4):   # integrate the cubic exactly
+        h = t[k + 1] - t[k]
+        q.append(q[-1] + v[-1] * h + a[-1] * h**2 / 2 + J[k] * h**3 / 6)
+        v.append(v[-1] + a[-1] * h + J[k] * h**2 / 2)
+        a.append(a[-1] + J[k] * h)
+    sol = CubicSolution(t, np.array(q), np.array(v), np.array(a), J)
+    ts = np.linspace(0.01, 1.99, 37)
+    e = 1e-6
+    s, sp, sm = sol.sample(ts), sol.sample(ts + e), sol.sample(ts - e)
+    assert np.allclose((sp["q"] - sm["q"]) / (2 * e), s["qd"], atol=1e-6)
+    assert np.allclose((sp["qd"] - sm["qd"]) / (2 * e), s["qdd"], atol=1e-6)
+    assert np.allclose(sol.sample(t)["q"], q, atol=1e-12)
+
+
+def test_rockit_peer_transport_holds_the_closed_chain(tcb):
+    """The transport written in rockit (extra 'rockit'; skipped without it) on 16 intervals:
+    solved, and its closed chain checked by verify; the reach task reports why rockit has none."""
+    pytest.importorskip("rockit")
+    from optplan.bench import rockit_peer
+    from optplan.bench.modelling import format_peers, run_peer
+    from optplan.scene import Scene
+    from optplan.tasks import transport_initial_path, transport_problem
+    from optplan.verification import verify
+
+    scene = Scene.load("transport")
+    Q = transport_initial_path(tcb, scene, 16, np.random.default_rng(0))
+    assert Q is not None
+    _, cc, _ = transport_problem(tcb, scene, Q, fixed_normals=True, transcription="auto")
+    r = rockit_peer.transport(tcb, Q, cc)
+    assert r["success"] and r["iterations"] > 0
+    rep = verify(tcb, r["solution"], scene, closed_chain=cc, check_velocity=False)
+    assert rep.max_closed_chain_residual <= 1e-3          # at the grid points exactly, ∝ h⁴ between
+    assert "free-floating" in run_peer("reach")["skipped"]
+    text = format_peers([{"task": "transport", "peer": "rockit", **{k: v for k, v in r.items() if k != "solution"},
+                          "closed_chain_residual": 1e-7, "min_clearance_m": -0.3, "note": "no collision rows"}],
+                        [{"task": "transport", "first": {"total_cpu_s": 1.0}, "warm": {"total_cpu_s": 0.5}}])
+    assert "rockit cpu / ours" in text and "(warm)" in text

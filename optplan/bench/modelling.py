@@ -54,7 +54,7 @@ def _reach(free_time: bool, transcription: str = "auto") -> tuple[Any, Any]:
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, robot.configuration(Q0))
     target = data.oMf[robot.model.getFrameId("a_ee")].translation + 0.3 * np.array([0.6, 0.0, 0.8])
-    t0 = time.perf_counter()
+    t0 = (time.perf_counter(), time.process_time())   # wall [s], CPU [s]
     prob = OptProblem(robot, n_intervals=20, duration=20.0, free_time=free_time, duration_bounds=(2.0, 60.0),
                       transcription=transcription)
     prob.add_constraint(prob.q, lower=Q0, upper=Q0, at="start")
@@ -107,7 +107,7 @@ def _transport(custom: bool) -> tuple[Any, Any]:
     Q = transport_initial_path(robot, scene, 50, np.random.default_rng(0))
     if Q is None:
         raise RuntimeError("transport: no initial path")
-    t0 = time.perf_counter()
+    t0 = (time.perf_counter(), time.process_time())   # wall [s], CPU [s]
     prob, cc, _ = transport_problem(robot, scene, Q, fixed_normals=True, transcription="auto")
     if custom:
         assert scene.object is not None  # the transport scene holds an object
@@ -168,7 +168,7 @@ def _ur5() -> tuple[Any, Any]:
     scene = Scene.from_dict({"name": "ur5_box", "obstacles": [UR5_BOX]})
     q0, q1 = UR5_Q
     z = np.zeros(robot.nj)
-    t0 = time.perf_counter()
+    t0 = (time.perf_counter(), time.process_time())   # wall [s], CPU [s]
     prob = OptProblem(robot, n_intervals=20, duration=4.0)
     prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
     prob.add_constraint(JointBoundary("end", q=q1, qd=z, qdd=z))
@@ -208,9 +208,8 @@ def run_task(name: str) -> dict[str, Any]:
             if prob.uses_bspline():
                 prob.compile_kernels = True
                 prob.solve()
-        c0 = time.process_time()
         prob, ctx = make()
-        t0 = ctx[-1]
+        t0, c0 = ctx[-1]     # after loading the robot and scene, making the guess
         built = time.perf_counter()
         sol = prob.solve()
         total = time.perf_counter() - t0
@@ -232,6 +231,30 @@ def run_task(name: str) -> dict[str, Any]:
                 rows[run_]["set_value_iterations"] = s1.iterations
                 rows[run_]["set_value_success"] = bool(s1.success)
     return {"task": name, **rows}
+
+
+PEER_TASKS = ("reach", "transport")
+
+
+def run_peer(name: str) -> dict[str, Any]:
+    """Task ``name`` written in rockit (:mod:`optplan.bench.rockit_peer`), checked as ours."""
+    from . import rockit_peer
+
+    if name not in PEER_TASKS:
+        raise ValueError(f"peer task: expected one of {PEER_TASKS}, got {name!r}")
+    if not rockit_peer.available():
+        return {"task": name, "peer": "rockit", "skipped": "rockit is not installed (pip install \"optplan[rockit]\")"}
+    if name == "reach":
+        return {"task": name, "peer": "rockit", "skipped": rockit_peer.REACH_NOTE}
+    from optplan.verification import verify
+
+    prob, (robot, scene, cc, _) = _transport(False)
+    Q = prob.tp.unpack(prob._x0)["q"]           # the same guess as ours
+    r = rockit_peer.transport(robot, Q, cc, duration=prob.duration)
+    rep = verify(robot, r.pop("solution"), scene, closed_chain=cc)
+    return {"task": name, "peer": "rockit", **r, "closed_chain_residual": float(rep.max_closed_chain_residual),
+            "min_clearance_m": float(rep.min_clearance_m),
+            "note": "no collision rows (rockit has no collision model)"}
 
 
 def run(tasks: list[str], cold: bool = True) -> list[dict[str, Any]]:
@@ -279,6 +302,42 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def run_peers(tasks: list[str]) -> list[dict[str, Any]]:
+    """rockit's rows of ``tasks`` (those it has), each in a new process."""
+    out = []
+    for t in tasks:
+        if t not in PEER_TASKS:
+            continue
+        p = subprocess.run([sys.executable, "-m", "optplan.bench.modelling", "--one-peer", t],
+                           capture_output=True, text=True, check=False)
+        if p.returncode != 0:
+            out.append({"task": t, "peer": "rockit", "error": (p.stderr or p.stdout).strip().splitlines()[-1:]})
+            continue
+        out.append(json.loads(p.stdout.strip().splitlines()[-1]))
+    return out
+
+
+def format_peers(peers: list[dict[str, Any]], rows: list[dict[str, Any]]) -> str:
+    """rockit's rows and the ratio of its build + solve CPU time to ours (warm and first)."""
+    ours = {r["task"]: r for r in rows if "first" in r}
+    lines = []
+    for p in peers:
+        head = f"{p['task']:18} rockit "
+        if "skipped" in p or "error" in p:
+            lines.append(head + (f"skipped: {p['skipped']}" if "skipped" in p else f"error: {p['error']}"))
+            continue
+        line = (head + f"total {p['total_s']:.2f} s, cpu {p['total_cpu_s']:.2f} s, {p['iterations']} it, "
+                f"{'ok' if p['success'] else 'FAILED'}, closed_chain_residual={p['closed_chain_residual']:.3g}, "
+                f"min_clearance_m={p['min_clearance_m']:.3g} ({p['note']})")
+        o = ours.get(p["task"])
+        if o is not None:
+            line += "; rockit cpu / ours: " + ", ".join(
+                f"{p['total_cpu_s'] / o[r]['total_cpu_s']:.1f}x ({r})" for r in ("warm", "first")
+                if o[r].get("total_cpu_s"))
+        lines.append(line)
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
@@ -287,10 +346,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--warm-cache", action="store_true", help="keep the kernel cache (default: each task's "
                     "first run in a new process with an empty cache)")
     ap.add_argument("--json", help="write the rows as JSON to this path")
+    ap.add_argument("--peer", choices=["rockit"], help="also run the tasks rockit can write (reach, transport) "
+                    "in rockit (extra 'rockit'); skipped when it is not installed")
     ap.add_argument("--one", help=argparse.SUPPRESS)
+    ap.add_argument("--one-peer", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.one:
         print(json.dumps(run_task(args.one)))
+        return 0
+    if args.one_peer:
+        print(json.dumps(run_peer(args.one_peer)))
         return 0
     tasks = [t.strip() for t in args.tasks.split(",") if t.strip()]
     bad = [t for t in tasks if t not in TASKS]
@@ -298,9 +363,12 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown tasks {bad}; choose from {', '.join(TASKS)}")
     rows = run(tasks, cold=not args.warm_cache)
     print(format_rows(rows))
+    peers = run_peers(tasks) if args.peer else []
+    if peers:
+        print(format_peers(peers, rows))
     if args.json:
         with open(args.json, "w") as f:
-            json.dump(rows, f, indent=1)
+            json.dump(rows + peers, f, indent=1)
     return 0 if all("skipped" in r or ("error" not in r and r["first"]["success"] and r["warm"]["success"])
                     for r in rows) else 1
 
