@@ -362,10 +362,10 @@ def test_rockit_solution_samples_its_exact_cubic(monkeypatch):
 
 def test_rockit_peer_transport_holds_the_closed_chain(tcb):
     """The transport written in rockit (extra 'rockit'; skipped without it) on 16 intervals:
-    solved, and its closed chain checked by verify; the reach task reports why rockit has none."""
+    solved, and its closed chain checked by verify."""
     pytest.importorskip("rockit")
     from optplan.bench import rockit_peer
-    from optplan.bench.modelling import format_peers, run_peer
+    from optplan.bench.modelling import format_peers
     from optplan.scene import Scene
     from optplan.tasks import transport_initial_path, transport_problem
     from optplan.verification import verify
@@ -378,8 +378,25 @@ def test_rockit_peer_transport_holds_the_closed_chain(tcb):
     assert r["success"] and r["iterations"] > 0
     rep = verify(tcb, r["solution"], scene, closed_chain=cc, check_velocity=False)
     assert rep.max_closed_chain_residual <= 1e-3          # at the grid points exactly, ∝ h⁴ between
-    assert "free-floating" in run_peer("reach")["skipped"]
     text = format_peers([{"task": "transport", "peer": "rockit", **{k: v for k, v in r.items() if k != "solution"},
                           "closed_chain_residual": 1e-7, "min_clearance_m": -0.3, "note": "no collision rows"}],
                         [{"task": "transport", "first": {"total_cpu_s": 1.0}, "warm": {"total_cpu_s": 0.5}}])
     assert "rockit cpu / ours" in text and "(warm)" in text
+
+
+def test_rockit_peer_reach_keeps_zero_momentum(ffsr):
+    """The free-floating reach written in rockit by hand (zero momentum, attitude quaternion) on 6
+    intervals: the hand reaches the target (Pinocchio at the reconstructed base) and verify's own
+    integration of the base from the joint motion agrees with rockit's attitude."""
+    pytest.importorskip("rockit")
+    from optplan.bench import modelling, rockit_peer
+    from optplan.verification import verify
+
+    prob, ctx = modelling._reach(False)
+    robot, target, _ = ctx
+    r = rockit_peer.reach(robot, modelling.Q0, target, "a_ee", N=6)
+    assert r["success"]
+    chk = modelling._check_reach(prob, r["solution"], ctx)
+    assert chk["hand_error_m"] <= 1e-5 and chk["arm_b_motion_rad"] <= 1e-8
+    rep = verify(robot, r["solution"], None)
+    assert rep.max_momentum_residual <= 1e-8 and rep.base_attitude_mismatch_rad <= 5e-3   # RK4, 6 steps

@@ -244,9 +244,17 @@ def run_peer(name: str) -> dict[str, Any]:
         raise ValueError(f"peer task: expected one of {PEER_TASKS}, got {name!r}")
     if not rockit_peer.available():
         return {"task": name, "peer": "rockit", "skipped": "rockit is not installed (pip install \"optplan[rockit]\")"}
-    if name == "reach":
-        return {"task": name, "peer": "rockit", "skipped": rockit_peer.REACH_NOTE}
     from optplan.verification import verify
+
+    if name == "reach":
+        prob, ctx = _reach(False)
+        robot, target, _ = ctx
+        r = rockit_peer.reach(robot, Q0, target, "a_ee", N=prob.N, duration=prob.duration)
+        sol = r.pop("solution")
+        rep = verify(robot, sol, None)
+        return {"task": name, "peer": "rockit", **r, **_check_reach(prob, sol, ctx),
+                "verify_base_attitude_mismatch_rad": float(rep.base_attitude_mismatch_rad),
+                "note": rockit_peer.REACH_NOTE + "; guess: the start held"}
 
     prob, (robot, scene, cc, _) = _transport(False)
     Q = prob.tp.unpack(prob._x0)["q"]           # the same guess as ours
@@ -326,9 +334,9 @@ def format_peers(peers: list[dict[str, Any]], rows: list[dict[str, Any]]) -> str
         if "skipped" in p or "error" in p:
             lines.append(head + (f"skipped: {p['skipped']}" if "skipped" in p else f"error: {p['error']}"))
             continue
+        chk = ", ".join(f"{k}={v:.3g}" for k, v in p.items() if k.endswith(("_m", "_rad", "residual")))
         line = (head + f"total {p['total_s']:.2f} s, cpu {p['total_cpu_s']:.2f} s, {p['iterations']} it, "
-                f"{'ok' if p['success'] else 'FAILED'}, closed_chain_residual={p['closed_chain_residual']:.3g}, "
-                f"min_clearance_m={p['min_clearance_m']:.3g} ({p['note']})")
+                f"{'ok' if p['success'] else 'FAILED'}, {chk} ({p['note']})")
         o = ours.get(p["task"])
         if o is not None:
             line += "; rockit cpu / ours: " + ", ".join(

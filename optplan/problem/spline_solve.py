@@ -54,7 +54,7 @@ class SplineBackend:
         core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar)
         self.fams, self.owner, self.pbounds, cols = families_of(prob, core, params)
         self.core, self.aux0, self.col_p = core, np.zeros(0), np.zeros(0)
-        x = self.guess(prob.duration) if cols or self._velocity_families() else None
+        x = self.guess(prob.duration) if cols or (self._velocity_families() and not prob.free_time) else None
         if cols:   # the active pairs follow the first guess: plan them along it
             from .spline_collision import plan_collision
 
