@@ -141,6 +141,7 @@ def reach(robot: Any, q0: np.ndarray, target: np.ndarray, frame: str, N: int = 2
     nj = robot.nj
     c0, t0 = time.process_time(), time.perf_counter()
     kc = FloatingKernels.of(robot)
+    assert isinstance(kc, FloatingKernels)
     qs = kc._q
     R_h, p_h = kc.frame(robot.model.getFrameId(frame))          # in the base frame
     com = kc.sym.center_of_mass(kc._configuration(qs), kc._X)    # in the base frame
