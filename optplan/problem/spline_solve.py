@@ -42,7 +42,8 @@ class SplineBackend:
         self.aux0, self.col_p = np.zeros(0), np.zeros(0)   # collision plane offsets / normals, supports
         self.collision_model: Any = None
         self.last_build_time = 0.0
-        self.vel_extra: dict[str, set[int]] = {}   # velocity entries given rows after a solve
+        self.vel_extra: dict[str, set[int]] = {}   # velocity entries given rows after a solve (on vel_n intervals)
+        self.vel_n = 0
 
     # ------------------------------------------------------------------ structure
     def prepare(self) -> None:
@@ -102,9 +103,12 @@ class SplineBackend:
         this structure exceeded its limit there; the rest are checked after every solve
         (:meth:`_missed_velocity`). The velocity control points bound the velocity everywhere
         (convex hull), so the check is exact."""
+        assert self.core is not None
+        if self.vel_n != self.core.N:     # a new grid (refinement): the entries of the old one mean nothing
+            self.vel_extra, self.vel_n = {}, self.core.N
         V = self._velocity_points(x).ravel()
         for f in self._velocity_families():
-            lo, hi = (np.tile(b, self.core.N + 2) for b in np.asarray(f.data))  # type: ignore[union-attr]
+            lo, hi = (np.tile(b, self.core.N + 2) for b in np.asarray(f.data))
             on = (V >= VELOCITY_ACTIVATION * hi) | (V <= VELOCITY_ACTIVATION * lo)
             f.points = sorted(set(np.flatnonzero(on).tolist()) | self.vel_extra.get(f.name, set()))
 
