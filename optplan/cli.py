@@ -175,6 +175,7 @@ def _cmd_bench_modelling(args) -> int:
 
     argv = ["--tasks", args.tasks] + (["--warm-cache"] if args.warm_cache else []) + (["--json", args.json]
                                                                                       if args.json else [])
+    argv += ["--peer", args.peer] if args.peer else []
     return main(argv)
 
 
@@ -534,11 +535,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     mo = bench.add_parser("modelling", help="problems written with the public OptProblem API (expressions, "
                           "seeded guess): build and solve times, iterations, independent checks")
-    mo.add_argument("--tasks", default="reach,reach_knots,reach_free_time,transport,transport_custom",
-                    help="comma-separated: reach, reach_knots, reach_free_time, transport, transport_custom")
+    mo.add_argument("--tasks", default="reach,reach_knots,reach_free_time,transport,transport_custom,ur5",
+                    help="comma-separated: reach, reach_knots, reach_free_time, transport, transport_custom, ur5 "
+                         "(ur5 needs example-robot-data)")
     mo.add_argument("--warm-cache", action="store_true",
                     help="keep the kernel cache (default: each task's first run with an empty cache)")
     mo.add_argument("--json", help="write the rows as JSON to this path")
+    mo.add_argument("--peer", choices=["rockit"], help="also the tasks rockit can write, in rockit (extra 'rockit')")
     mo.set_defaults(func=_cmd_bench_modelling)
 
     tb = bench.add_parser("tcbirrt", help="TCBiRRT benchmark: planners x space-solar-power-station scenes x perturbed trials")

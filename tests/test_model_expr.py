@@ -271,3 +271,132 @@ def test_transport_with_collision_and_two_custom_terms_on_the_kernel_core(tcb):
     assert sol.terms["collision"] <= 1e-6
     assert any(n.startswith("collision:") for n in prob._spline.owner["collision"])
 
+
+
+def test_velocity_rows_missed_by_the_guess_are_added_and_hold_everywhere(tcb):
+    """Fixed duration: velocity entries get rows only where the guess nears the limit. A guess
+    that moves only in its last interval leaves the middle without rows; the minimum-jerk motion
+    would exceed the limit there (peak 1.875 Δq/T), so the rows are added after the solve and the
+    re-solve holds the limit — checked on the dense joint velocity of the B-spline, against the
+    same problem with every entry given a row (free T pinned by its bounds)."""
+    from optplan.problem.terms import JointVelocityLimits
+
+    N, T, dq = 10, 2.0, 1.0
+    q0 = 0.2 * np.ones(tcb.nj)
+    q1 = q0.copy()
+    q1[0] += dq
+    lim = np.full(tcb.nj, 0.75)          # < 1.875·Δq/T = 0.94 rad/s: the limit binds
+    z = np.zeros(tcb.nj)
+
+    def make(free_time):
+        prob = OptProblem(tcb, n_intervals=N, duration=T, free_time=free_time, duration_bounds=(0.999 * T, T))
+        prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
+        prob.add_constraint(JointBoundary("end", q=q1, qd=z, qdd=z))
+        prob.add_constraint(JointVelocityLimits(limit=lim), name="vel")
+        prob.add_cost(Smoothness("jerk"))
+        Q = np.repeat(q0[None], N + 1, axis=0)
+        Q[-1] = q1
+        prob.set_initial(q=Q)
+        return prob
+
+    prob = make(False)
+    assert prob.uses_bspline()
+    sol = prob.solve()
+    assert sol.success, sol.status
+    assert len(sol.attempts) >= 2 and sol.attempts[-1].label == "velocity rows"
+    qd = sol.sample(np.linspace(0.0, T, 20 * N + 1))["qd"]
+    assert np.abs(qd).max() <= 0.75 + 1e-6 and np.abs(qd[:, 0]).max() >= 0.75 - 1e-3   # holds and binds
+    ref = make(True).solve()          # every entry has its rows (free duration: less jerk at T = upper bound)
+    assert ref.success and abs(ref.duration - T) <= 1e-6
+    assert abs(sol.cost - ref.cost) <= 1e-5 * abs(ref.cost)
+    assert sol.dual("vel").shape == (N + 2, tcb.nj)
+
+
+def test_bench_ur5_task_keeps_its_margin_or_skips_cleanly(monkeypatch):
+    """The UR5 from example-robot-data around one box: solved on the kernel core, the 0.02 m
+    margin held between the knots by coal on the meshes (verify); without the package the task
+    reports itself skipped."""
+    import optplan.model._robot_data as rd
+    from optplan.bench import modelling
+
+    if rd.example_robot_data_dir() is None:
+        assert modelling.run_task("ur5")["skipped"].startswith("example-robot-data")
+        pytest.skip("example-robot-data is not installed")
+    row = modelling.run_task("ur5")["warm"]
+    assert row["success"] and row["transcription"] == "bspline"
+    assert row["min_clearance_m"] >= 0.02 - 1e-4 and row["margin_held"] == 1.0
+    monkeypatch.setattr(rd, "example_robot_data_dir", lambda: None)
+    out = modelling.run_task("ur5")
+    assert "skipped" in out and "warm" not in out
+    assert "skipped" in modelling.format_rows([out])
+
+
+def test_rockit_solution_samples_its_exact_cubic(monkeypatch):
+    """The peer's solution between knots: q̇ and q̈ are the derivatives of q (finite differences),
+    and the knot values are reproduced; without rockit the peer reports itself skipped."""
+    from optplan.bench import rockit_peer
+    from optplan.bench.modelling import run_peer
+    from optplan.bench.rockit_peer import CubicSolution
+
+    monkeypatch.setattr(rockit_peer, "available", lambda: False)
+    assert "not installed" in run_peer("transport")["skipped"]
+
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 2.0, 5)
+    q0, v0, a0 = rng.normal(size=3), rng.normal(size=3), rng.normal(size=3)
+    J = rng.normal(size=(5, 3))
+    q, v, a = [q0], [v0], [a0]
+    for k in range(4):   # integrate the cubic exactly
+        h = t[k + 1] - t[k]
+        q.append(q[-1] + v[-1] * h + a[-1] * h**2 / 2 + J[k] * h**3 / 6)
+        v.append(v[-1] + a[-1] * h + J[k] * h**2 / 2)
+        a.append(a[-1] + J[k] * h)
+    sol = CubicSolution(t, np.array(q), np.array(v), np.array(a), J)
+    ts = np.linspace(0.01, 1.99, 37)
+    e = 1e-6
+    s, sp, sm = sol.sample(ts), sol.sample(ts + e), sol.sample(ts - e)
+    assert np.allclose((sp["q"] - sm["q"]) / (2 * e), s["qd"], atol=1e-6)
+    assert np.allclose((sp["qd"] - sm["qd"]) / (2 * e), s["qdd"], atol=1e-6)
+    assert np.allclose(sol.sample(t)["q"], q, atol=1e-12)
+
+
+def test_rockit_peer_transport_holds_the_closed_chain(tcb):
+    """The transport written in rockit (extra 'rockit'; skipped without it) on 16 intervals:
+    solved, and its closed chain checked by verify."""
+    pytest.importorskip("rockit")
+    from optplan.bench import rockit_peer
+    from optplan.bench.modelling import format_peers
+    from optplan.scene import Scene
+    from optplan.tasks import transport_initial_path, transport_problem
+    from optplan.verification import verify
+
+    scene = Scene.load("transport")
+    Q = transport_initial_path(tcb, scene, 16, np.random.default_rng(0))
+    assert Q is not None
+    _, cc, _ = transport_problem(tcb, scene, Q, fixed_normals=True, transcription="auto")
+    r = rockit_peer.transport(tcb, Q, cc)
+    assert r["success"] and r["iterations"] > 0
+    rep = verify(tcb, r["solution"], scene, closed_chain=cc, check_velocity=False)
+    assert rep.max_closed_chain_residual <= 1e-3          # at the grid points exactly, ∝ h⁴ between
+    text = format_peers([{"task": "transport", "peer": "rockit", **{k: v for k, v in r.items() if k != "solution"},
+                          "closed_chain_residual": 1e-7, "min_clearance_m": -0.3, "note": "no collision rows"}],
+                        [{"task": "transport", "first": {"total_cpu_s": 1.0}, "warm": {"total_cpu_s": 0.5}}])
+    assert "rockit cpu / ours" in text and "(warm)" in text
+
+
+def test_rockit_peer_reach_keeps_zero_momentum(ffsr):
+    """The free-floating reach written in rockit by hand (zero momentum, attitude quaternion) on 6
+    intervals: the hand reaches the target (Pinocchio at the reconstructed base) and verify's own
+    integration of the base from the joint motion agrees with rockit's attitude."""
+    pytest.importorskip("rockit")
+    from optplan.bench import modelling, rockit_peer
+    from optplan.verification import verify
+
+    prob, ctx = modelling._reach(False)
+    robot, target, _ = ctx
+    r = rockit_peer.reach(robot, modelling.Q0, target, "a_ee", N=6)
+    assert r["success"]
+    chk = modelling._check_reach(prob, r["solution"], ctx)
+    assert chk["hand_error_m"] <= 1e-5 and chk["arm_b_motion_rad"] <= 1e-8
+    rep = verify(robot, r["solution"], None)
+    assert rep.max_momentum_residual <= 1e-8 and rep.base_attitude_mismatch_rad <= 5e-3   # RK4, 6 steps

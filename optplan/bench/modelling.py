@@ -17,7 +17,12 @@ Tasks:
   included) on the kernel core; ``transport_custom``: the same plus two one-line terms: the
   object stays upright within 5° and an acceleration cost.
 
-rockit (``pip install rockit-meco``) is not run: see docs/decisions/0016-modelling-on-the-kernel-core.md.
+* ``ur5`` — a UR5 from example-robot-data (its vendor URDF and meshes through a robot file, the
+  capsules fitted for planning) swinging its hand around one box, 0.02 m margin, checked by
+  ``verify`` (coal, meshes); skipped without example-robot-data (``pip install "optplan[robots]"``).
+
+``--peer rockit`` (extra ``rockit``: ``pip install rockit-meco``) also runs the reach and transport
+tasks written in rockit (:mod:`optplan.bench.rockit_peer`): the same problem, guess and checks.
 """
 from __future__ import annotations
 
@@ -33,7 +38,7 @@ import numpy as np
 
 __all__ = ["TASKS", "run_task", "run", "format_rows"]
 
-TASKS = ("reach", "reach_knots", "reach_free_time", "transport", "transport_custom")
+TASKS = ("reach", "reach_knots", "reach_free_time", "transport", "transport_custom", "ur5")
 Q0 = np.r_[[0.3, -0.6, 0.4, -1.2, 0.2, 0.7, 0.1] * 2]   # both arms of eba_ffsr, bent [rad]
 
 
@@ -49,7 +54,7 @@ def _reach(free_time: bool, transcription: str = "auto") -> tuple[Any, Any]:
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, robot.configuration(Q0))
     target = data.oMf[robot.model.getFrameId("a_ee")].translation + 0.3 * np.array([0.6, 0.0, 0.8])
-    t0 = time.perf_counter()
+    t0 = (time.perf_counter(), time.process_time())   # wall [s], CPU [s]
     prob = OptProblem(robot, n_intervals=20, duration=20.0, free_time=free_time, duration_bounds=(2.0, 60.0),
                       transcription=transcription)
     prob.add_constraint(prob.q, lower=Q0, upper=Q0, at="start")
@@ -102,7 +107,7 @@ def _transport(custom: bool) -> tuple[Any, Any]:
     Q = transport_initial_path(robot, scene, 50, np.random.default_rng(0))
     if Q is None:
         raise RuntimeError("transport: no initial path")
-    t0 = time.perf_counter()
+    t0 = (time.perf_counter(), time.process_time())   # wall [s], CPU [s]
     prob, cc, _ = transport_problem(robot, scene, Q, fixed_normals=True, transcription="auto")
     if custom:
         assert scene.object is not None  # the transport scene holds an object
@@ -125,6 +130,63 @@ def _check_transport(prob: Any, sol: Any, ctx: Any) -> dict[str, float]:
     return out
 
 
+UR5_FILE = """name = "ur5"
+urdf = "package://example-robot-data/robots/ur_description/urdf/ur5_joint_limited_robot.urdf"
+collision = "auto"
+
+[arms.arm]
+ee = "tool0"
+"""
+UR5_Q = (np.array([-0.9, -1.2, 1.6, -1.9, -1.57, 0.0]), np.array([0.9, -1.2, 1.6, -1.9, -1.57, 0.0]))   # [rad]
+UR5_BOX = {"name": "box", "shape": "box", "size": [0.12, 0.12, 0.3], "xyz": [0.62, 0.11, 0.15]}   # [m]
+
+
+class Skipped(Exception):
+    """A task whose optional dependency is not installed."""
+
+
+def _ur5_robot() -> Any:
+    from optplan import RobotModel
+    from optplan.model._robot_data import example_robot_data_dir
+
+    if example_robot_data_dir() is None:
+        raise Skipped("example-robot-data is not installed (pip install \"optplan[robots]\")")
+    d = tempfile.mkdtemp(prefix="optplan_ur5_")
+    path = os.path.join(d, "ur5.toml")
+    with open(path, "w") as f:
+        f.write(UR5_FILE)
+    return RobotModel.from_name(path)
+
+
+def _ur5() -> tuple[Any, Any]:
+    from optplan.problem import OptProblem
+    from optplan.problem.collision_term import CollisionAvoidance
+    from optplan.problem.terms import JointBoundary, Smoothness
+    from optplan.scene import Scene
+
+    robot = _ur5_robot()
+    scene = Scene.from_dict({"name": "ur5_box", "obstacles": [UR5_BOX]})
+    q0, q1 = UR5_Q
+    z = np.zeros(robot.nj)
+    t0 = (time.perf_counter(), time.process_time())   # wall [s], CPU [s]
+    prob = OptProblem(robot, n_intervals=20, duration=4.0)
+    prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
+    prob.add_constraint(JointBoundary("end", q=q1, qd=z, qdd=z))
+    prob.add_constraint(CollisionAvoidance(scene, margin=0.02, fixed_normals=True), name="collision")
+    prob.add_cost(Smoothness("jerk"))
+    prob.set_initial_straight_line(q0, q1)      # through the box
+    return prob, (robot, scene, None, t0)
+
+
+def _check_ur5(prob: Any, sol: Any, ctx: Any) -> dict[str, float]:
+    from optplan.verification import verify
+
+    robot, scene, _, _ = ctx
+    rep = verify(robot, sol, scene)
+    return {"min_clearance_m": float(rep.min_clearance_m), "intervals": float(len(sol.t) - 1),
+            "margin_held": float(rep.min_clearance_m >= 0.02 - 1e-4)}
+
+
 def run_task(name: str) -> dict[str, Any]:
     """Build and solve task ``name`` twice in this process (the second: warm); the figures of both."""
     if name not in TASKS:
@@ -133,7 +195,12 @@ def run_task(name: str) -> dict[str, Any]:
                    "reach_knots": (lambda: _reach(False, "knots"), _check_reach),
                    "reach_free_time": (lambda: _reach(True), _check_reach),
                    "transport": (lambda: _transport(False), _check_transport),
-                   "transport_custom": (lambda: _transport(True), _check_transport)}[name]
+                   "transport_custom": (lambda: _transport(True), _check_transport),
+                   "ur5": (_ur5, _check_ur5)}[name]
+    try:
+        make()
+    except Skipped as exc:
+        return {"task": name, "skipped": str(exc)}
     rows = {}
     for run_ in ("first", "warm"):
         if run_ == "warm":   # the kernels of this structure compiled into the cache (not timed)
@@ -142,12 +209,12 @@ def run_task(name: str) -> dict[str, Any]:
                 prob.compile_kernels = True
                 prob.solve()
         prob, ctx = make()
-        t0 = ctx[-1]
+        t0, c0 = ctx[-1]     # after loading the robot and scene, making the guess
         built = time.perf_counter()
         sol = prob.solve()
         total = time.perf_counter() - t0
-        rows[run_] = {"total_s": total, "declare_s": built - t0, "setup_s": sol.setup_time, "solve_s": sol.wall_time, "solve_cpu_s": sol.cpu_time,
-                      "iterations": sol.iterations, "success": bool(sol.success), "status": sol.status.value,
+        rows[run_] = {"total_s": total, "total_cpu_s": time.process_time() - c0, "declare_s": built - t0, "setup_s": sol.setup_time, "solve_s": sol.wall_time, "solve_cpu_s": sol.cpu_time,
+                      "iterations": sol.total_iterations, "attempts": len(sol.attempts), "success": bool(sol.success), "status": sol.status.value,
                       "transcription": "bspline" if prob.uses_bspline() else "knots", **check(prob, sol, ctx)}
         # re-solves: what a new parameter value / a warm start costs besides IPOPT
         if run_ == "warm" and prob.uses_bspline():
@@ -164,6 +231,38 @@ def run_task(name: str) -> dict[str, Any]:
                 rows[run_]["set_value_iterations"] = s1.iterations
                 rows[run_]["set_value_success"] = bool(s1.success)
     return {"task": name, **rows}
+
+
+PEER_TASKS = ("reach", "transport")
+
+
+def run_peer(name: str) -> dict[str, Any]:
+    """Task ``name`` written in rockit (:mod:`optplan.bench.rockit_peer`), checked as ours."""
+    from . import rockit_peer
+
+    if name not in PEER_TASKS:
+        raise ValueError(f"peer task: expected one of {PEER_TASKS}, got {name!r}")
+    if not rockit_peer.available():
+        return {"task": name, "peer": "rockit", "skipped": "rockit is not installed (pip install \"optplan[rockit]\")"}
+    from optplan.verification import verify
+
+    if name == "reach":
+        prob, ctx = _reach(False)
+        robot, target, _ = ctx
+        r = rockit_peer.reach(robot, Q0, target, "a_ee", N=prob.N, duration=prob.duration)
+        sol = r.pop("solution")
+        rep = verify(robot, sol, None)
+        return {"task": name, "peer": "rockit", **r, **_check_reach(prob, sol, ctx),
+                "verify_base_attitude_mismatch_rad": float(rep.base_attitude_mismatch_rad),
+                "note": rockit_peer.REACH_NOTE + "; guess: the start held"}
+
+    prob, (robot, scene, cc, _) = _transport(False)
+    Q = prob.tp.unpack(prob._x0)["q"]           # the same guess as ours
+    r = rockit_peer.transport(robot, Q, cc, duration=prob.duration)
+    rep = verify(robot, r.pop("solution"), scene, closed_chain=cc)
+    return {"task": name, "peer": "rockit", **r, "closed_chain_residual": float(rep.max_closed_chain_residual),
+            "min_clearance_m": float(rep.min_clearance_m),
+            "note": "no collision rows (rockit has no collision model)"}
 
 
 def run(tasks: list[str], cold: bool = True) -> list[dict[str, Any]]:
@@ -186,23 +285,64 @@ def run(tasks: list[str], cold: bool = True) -> list[dict[str, Any]]:
 
 
 def format_rows(rows: list[dict[str, Any]]) -> str:
-    lines = [f"{'task':18} {'run':6} {'tr':8} {'total s':>8} {'setup s':>8} {'solve s':>8} {'cpu s':>6} {'it':>4}  ok"
-             "  check"]
+    lines = [f"{'task':18} {'run':6} {'tr':8} {'total s':>8} {'cpu s':>6} {'setup s':>8} {'solve s':>8} {'cpu s':>6} "
+             f"{'it':>4}  ok  check"]
     for r in rows:
         if "error" in r:
             lines.append(f"{r['task']:18} error: {r['error']}")
             continue
+        if "skipped" in r:
+            lines.append(f"{r['task']:18} skipped: {r['skipped']}")
+            continue
         for run_ in ("first", "warm"):
             x = r[run_]
             chk = ", ".join(f"{k}={v:.3g}" for k, v in x.items() if k.endswith(("_m", "_rad", "_cos", "residual",
-                                                                               "_s2", "_rad_s")) or k == "duration_s")
+                                                                               "_s2", "_rad_s"))
+                            or k in ("duration_s", "intervals", "margin_held"))
             extra = (f"; re-solve from the solution: overhead {1e3 * x['resolve_overhead_s']:.1f} ms "
                      f"({x['resolve_iterations']} it)" if "resolve_overhead_s" in x else "")
             if "set_value_overhead_s" in x:
                 extra += (f"; after set_value (target +1 cm): overhead {1e3 * x['set_value_overhead_s']:.1f} ms "
                           f"({x['set_value_iterations']} it, {'ok' if x['set_value_success'] else 'FAILED'})")
-            lines.append(f"{r['task']:18} {run_:6} {x['transcription']:8} {x['total_s']:8.2f} {x['setup_s']:8.2f} "
+            lines.append(f"{r['task']:18} {run_:6} {x['transcription']:8} {x['total_s']:8.2f} "
+                         f"{x.get('total_cpu_s', float('nan')):6.2f} {x['setup_s']:8.2f} "
                          f"{x['solve_s']:8.2f} {x['solve_cpu_s']:6.2f} {x['iterations']:4d}  {'yes' if x['success'] else 'NO ':3} {chk}{extra}")
+    return "\n".join(lines)
+
+
+def run_peers(tasks: list[str]) -> list[dict[str, Any]]:
+    """rockit's rows of ``tasks`` (those it has), each in a new process."""
+    out = []
+    for t in tasks:
+        if t not in PEER_TASKS:
+            continue
+        p = subprocess.run([sys.executable, "-m", "optplan.bench.modelling", "--one-peer", t],
+                           capture_output=True, text=True, check=False)
+        if p.returncode != 0:
+            out.append({"task": t, "peer": "rockit", "error": (p.stderr or p.stdout).strip().splitlines()[-1:]})
+            continue
+        out.append(json.loads(p.stdout.strip().splitlines()[-1]))
+    return out
+
+
+def format_peers(peers: list[dict[str, Any]], rows: list[dict[str, Any]]) -> str:
+    """rockit's rows and the ratio of its build + solve CPU time to ours (warm and first)."""
+    ours = {r["task"]: r for r in rows if "first" in r}
+    lines = []
+    for p in peers:
+        head = f"{p['task']:18} rockit "
+        if "skipped" in p or "error" in p:
+            lines.append(head + (f"skipped: {p['skipped']}" if "skipped" in p else f"error: {p['error']}"))
+            continue
+        chk = ", ".join(f"{k}={v:.3g}" for k, v in p.items() if k.endswith(("_m", "_rad", "residual")))
+        line = (head + f"total {p['total_s']:.2f} s, cpu {p['total_cpu_s']:.2f} s, {p['iterations']} it, "
+                f"{'ok' if p['success'] else 'FAILED'}, {chk} ({p['note']})")
+        o = ours.get(p["task"])
+        if o is not None:
+            line += "; rockit cpu / ours: " + ", ".join(
+                f"{p['total_cpu_s'] / o[r]['total_cpu_s']:.1f}x ({r})" for r in ("warm", "first")
+                if o[r].get("total_cpu_s"))
+        lines.append(line)
     return "\n".join(lines)
 
 
@@ -214,10 +354,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--warm-cache", action="store_true", help="keep the kernel cache (default: each task's "
                     "first run in a new process with an empty cache)")
     ap.add_argument("--json", help="write the rows as JSON to this path")
+    ap.add_argument("--peer", choices=["rockit"], help="also run the tasks rockit can write (reach, transport) "
+                    "in rockit (extra 'rockit'); skipped when it is not installed")
     ap.add_argument("--one", help=argparse.SUPPRESS)
+    ap.add_argument("--one-peer", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.one:
         print(json.dumps(run_task(args.one)))
+        return 0
+    if args.one_peer:
+        print(json.dumps(run_peer(args.one_peer)))
         return 0
     tasks = [t.strip() for t in args.tasks.split(",") if t.strip()]
     bad = [t for t in tasks if t not in TASKS]
@@ -225,10 +371,14 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown tasks {bad}; choose from {', '.join(TASKS)}")
     rows = run(tasks, cold=not args.warm_cache)
     print(format_rows(rows))
+    peers = run_peers(tasks) if args.peer else []
+    if peers:
+        print(format_peers(peers, rows))
     if args.json:
         with open(args.json, "w") as f:
-            json.dump(rows, f, indent=1)
-    return 0 if all("error" not in r and r["first"]["success"] and r["warm"]["success"] for r in rows) else 1
+            json.dump(rows + peers, f, indent=1)
+    return 0 if all("skipped" in r or ("error" not in r and r["first"]["success"] and r["warm"]["success"])
+                    for r in rows) else 1
 
 
 if __name__ == "__main__":

@@ -1,7 +1,13 @@
 """`CollisionAvoidance` on the B-spline kernel core of `OptProblem`: the segment NLP's fixed-normal
 separating planes (:mod:`.segment`, decision 0003/0012) — active pairs and knots from the first
 guess, one kernel per pair ``f([q; n; s])`` with the plane normal ``n`` and the static side's
-support ``s`` as parameters (a moving pair's plane offset: a decision variable)."""
+support ``s`` as parameters (a moving pair's plane offset: a decision variable).
+
+Pair activation: a term left at the default ``activation`` takes the segment NLP's
+(:attr:`SegmentSpec.activation <optplan.problem.segment.SegmentSpec>`, 0.12 m — a third of the
+pairs and half the rows of 0.3 m on the transport, decision 0012); a pair it misses is found by
+the dense check after the solve (coal, every pair), which re-solves on a finer grid activated
+along the solution. An explicit ``activation`` is used as given."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -43,8 +49,10 @@ def plan_collision(prob: Any, core: Any, term: CollisionAvoidance, Qk: np.ndarra
     q0, q1 = pinned.get(0, Qk[0]), pinned.get(N, Qk[-1])
     lo = np.where(np.isfinite(lower), lower, robot.lower)
     hi = np.where(np.isfinite(upper), upper, robot.upper)
+    default = CollisionAvoidance.__dataclass_fields__["activation"].default
+    activation = SegmentSpec.activation if term.activation == default else term.activation
     spec = SegmentSpec(N, prob.duration, q0, q1, cc, lower=lo, upper=hi, margin=term.margin,
-                       object_arm=term.object_arm, activation=term.activation, window=term.window)
+                       object_arm=term.object_arm, activation=activation, window=term.window)
     seg = SplineSegmentProblem(robot, term.scene, spec)
     Q = np.array(Qk, float)
     Q[0], Q[-1] = q0, q1

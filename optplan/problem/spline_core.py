@@ -44,7 +44,8 @@ class Family:
     """One row family (constraint) or cost family: a kernel evaluated at ``points``.
 
     kind: "knot" (inputs of :func:`~.expressions.point_kernel` at knots), "jerk"/"acceleration"
-    (per interval, costs), "velocity" (linear rows on the velocity control points).
+    (per interval, costs), "velocity" (linear rows on the velocity control points; its points are
+    entries ``i·nj + j`` of the (N+2) × nj velocity control points, two rows each: upper, lower).
     ``lower``/``upper``: bounds per row of one point (constraints); ``labels``: component names."""
 
     name: str
@@ -60,7 +61,7 @@ class Family:
     @property
     def rows_per_point(self) -> int:
         if self.kind == "velocity":
-            return 2 * len(self.labels)
+            return 2
         if self.kind == "pair":
             return int(self.data["item"].nrow)
         return 1 if self.cost else int(self.lower.size)
@@ -232,13 +233,16 @@ class SplineCore:
                 lo, hi = fam.data
                 rows, cols, vals = [], [], []
                 r = 0
-                for i in range(N + 2):
-                    for j in range(nj):
-                        for bound in (hi[j], lo[j]):   # N ΔP − bound·T ≶ 0
-                            rows += [r, r, r]
-                            cols += [int(self.slot_P(i + 1)[j]), int(self.slot_P(i)[j]), self.slot_T()]
-                            vals += [float(N), -float(N), -float(bound)]
-                            r += 1
+                for e in fam.points:
+                    i, j = divmod(int(e), nj)
+                    for bound in (hi[j], lo[j]):   # N ΔP − bound·T ≶ 0
+                        rows += [r, r, r]
+                        cols += [int(self.slot_P(i + 1)[j]), int(self.slot_P(i)[j]), self.slot_T()]
+                        vals += [float(N), -float(N), -float(bound)]
+                        r += 1
+                if r == 0:   # no entry active (rows added after a solve if needed)
+                    asm.slices[fam.name] = slice(asm.ng, asm.ng)
+                    continue
                 A = sps.csr_matrix((vals, (rows, cols)), shape=(r, nx + npp))
                 asm.linear(fam.name, xp, A, np.tile([-np.inf, 0.0], r // 2), np.tile([0.0, np.inf], r // 2))
                 continue

@@ -96,7 +96,9 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
             pbounds[name] = t.limits(robot)
         elif isinstance(t, JointVelocityLimits):
             lo, hi = t.limits(robot)
-            new.append(Family(name, "velocity", None, list(range(N + 2)), labels=tuple(jn),
+            # every entry of the velocity control points; a fixed-duration build keeps those its
+            # guess brings near the limit (SplineBackend.prepare)
+            new.append(Family(name, "velocity", None, list(range((N + 2) * robot.nj)), labels=tuple(jn),
                               data=np.vstack([lo, hi])))
         elif isinstance(t, JointAccelerationLimits):
             lo, hi = t.limits(robot)
@@ -335,8 +337,11 @@ class SplineEvaluator:
         lam = np.asarray(sol.lam_g)
         if any(self.fams[fn].kind == "velocity" for fn in self.owner[h.name]):
             # rows N ΔP − bound·T: per entry (upper, lower); ∂f*/∂bound [per rad/s] = −λ T
-            lv = lam[self.st["slices"][self.owner[h.name][0]]].reshape(-1, 2)
-            return -(lv.sum(axis=1) * self._T(np.asarray(sol.x, float))).reshape(-1, self.core.nj)
+            f = self.fams[self.owner[h.name][0]]
+            lv = lam[self.st["slices"][f.name]].reshape(-1, 2)
+            full = np.zeros((self.core.N + 2) * self.core.nj)   # an entry without a row: 0
+            full[np.asarray(f.points, int)] = lv.sum(axis=1) * self._T(np.asarray(sol.x, float))
+            return -full.reshape(-1, self.core.nj)
         parts = [lam[self.st["slices"][fn]] for fn in self.owner[h.name]]
         m = max(self.fams[fn].rows_per_point for fn in self.owner[h.name]) if self.owner[h.name] else 1
         return -np.concatenate(parts).reshape(-1, m)
@@ -400,8 +405,8 @@ class SplineEvaluator:
                 m = f.rows_per_point
                 pt, c = divmod(int(i), m)
                 if f.kind == "velocity":   # in rad/s: the row is T·(v − bound)
-                    j, side = divmod(c, 2)
-                    k = f.points[pt]
+                    side = c
+                    k, j = divmod(int(f.points[pt]), core.nj)
                     bound = float(np.asarray(f.data)[1 - side, j])
                     lab = f"{term}[{f.labels[j]}].{'upper' if side == 0 else 'lower'} at t={min(max(k - 0.5, 0), N) * h:.3g} s"
                     out.append(Infeasibility(term, int(i), k, float(g[gi]) / T + bound, bound if side else -np.inf,

@@ -4,6 +4,7 @@ numbers of one solve (parameters, bounds, first guess) around the cached structu
 numbers."""
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -12,12 +13,16 @@ import pinocchio as pin
 
 from .bspline import knot_values
 from .expressions import Parameter
-from .nlp import NlpSolver, SolverOptions
+from .nlp import IpoptStatus, NlpSolver, SolverOptions
 from .solution import Solution
 from .spline_core import Family, SplineCore
 from .spline_problem import SplineEvaluator, _quintic, base_placements, families_of, seed_guess
 
-__all__ = ["SplineBackend"]
+__all__ = ["SplineBackend", "VELOCITY_ACTIVATION"]
+
+#: With a fixed duration, a velocity control point's entry gets its rows when the guess brings it
+#: past this fraction of its limit (the others are checked after the solve) [-].
+VELOCITY_ACTIVATION = 0.5
 
 
 class SplineBackend:
@@ -37,6 +42,8 @@ class SplineBackend:
         self.aux0, self.col_p = np.zeros(0), np.zeros(0)   # collision plane offsets / normals, supports
         self.collision_model: Any = None
         self.last_build_time = 0.0
+        self.vel_extra: dict[str, set[int]] = {}   # velocity entries given rows after a solve (on vel_n intervals)
+        self.vel_n = 0
 
     # ------------------------------------------------------------------ structure
     def prepare(self) -> None:
@@ -48,10 +55,11 @@ class SplineBackend:
         core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar)
         self.fams, self.owner, self.pbounds, cols = families_of(prob, core, params)
         self.core, self.aux0, self.col_p = core, np.zeros(0), np.zeros(0)
+        x = self.guess(prob.duration) if cols or (self._velocity_families() and not prob.free_time) else None
         if cols:   # the active pairs follow the first guess: plan them along it
             from .spline_collision import plan_collision
 
-            x = self.guess(prob.duration)
+            assert x is not None
             Qk = core.M["q"] @ core.control_points(x)
             lbx, ubx = self._bounds()
             items, self.collision_model = plan_collision(prob, core, cols[0].term, Qk, lbx[:core.nj], ubx[:core.nj])
@@ -74,7 +82,57 @@ class SplineBackend:
             self.owner[cols[0].name] = names
             self.core, self.aux0 = core, np.concatenate(aux) if aux else np.zeros(0)
             self.col_p = np.concatenate(colp) if colp else np.zeros(0)
+        if x is not None and not core.free_time:
+            self._select_velocity(x)
         self.last_build_time = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ velocity rows
+    def _velocity_families(self) -> list[Family]:
+        return [f for f in self.fams if f.kind == "velocity"]
+
+    def _velocity_points(self, x: np.ndarray) -> np.ndarray:
+        """Velocity control points [rad/s] of ``x``, (N+2) × nj."""
+        core = self.core
+        assert core is not None
+        T = float(x[core.nx - 1]) if core.free_time else self.prob.duration
+        return np.diff(core.control_points(x), axis=0) * core.N / T
+
+    def _select_velocity(self, x: np.ndarray) -> None:
+        """With a fixed duration, a velocity entry gets its two rows when the guess ``x`` brings it
+        past ``VELOCITY_ACTIVATION`` of its limit (as the segment NLP), or when an earlier solve of
+        this structure exceeded its limit there; the rest are checked after every solve
+        (:meth:`_missed_velocity`). The velocity control points bound the velocity everywhere
+        (convex hull), so the check is exact."""
+        assert self.core is not None
+        if self.vel_n != self.core.N:     # a new grid (refinement): the entries of the old one mean nothing
+            self.vel_extra, self.vel_n = {}, self.core.N
+        V = self._velocity_points(x).ravel()
+        for f in self._velocity_families():
+            lo, hi = (np.tile(b, self.core.N + 2) for b in np.asarray(f.data))
+            on = (V >= VELOCITY_ACTIVATION * hi) | (V <= VELOCITY_ACTIVATION * lo)
+            f.points = sorted(set(np.flatnonzero(on).tolist()) | self.vel_extra.get(f.name, set()))
+
+    def _missed_velocity(self, x: np.ndarray, tol: float) -> bool:
+        """After a solve: give rows to the entries without one that exceed their limit (and to
+        those past ``VELOCITY_ACTIVATION`` of it); True if any was added (the problem is re-solved)."""
+        core = self.core
+        assert core is not None
+        if core.free_time:
+            return False
+        V = self._velocity_points(x).ravel()
+        added = False
+        for f in self._velocity_families():
+            lo, hi = (np.tile(b, core.N + 2) for b in np.asarray(f.data))
+            has = np.zeros(V.size, bool)
+            has[np.asarray(f.points, int)] = True
+            if not np.any(~has & ((V > hi + tol) | (V < lo - tol))):
+                continue
+            on = ~has & ((V >= VELOCITY_ACTIVATION * hi) | (V <= VELOCITY_ACTIVATION * lo))
+            extra = self.vel_extra.setdefault(f.name, set())
+            extra.update(np.flatnonzero(on).tolist())
+            f.points = sorted(set(f.points) | extra)
+            added = True
+        return added
 
     def _pvec(self, T: float, com0: np.ndarray, scale: float) -> np.ndarray:
         core, prob = self.core, self.prob
@@ -158,6 +216,26 @@ class SplineBackend:
 
     # ------------------------------------------------------------------ solve
     def solve(self, tol: float, max_iter: int, sopts: SolverOptions, compile_kernels: bool | str) -> Solution:
+        """Solve; with a fixed duration, re-solve from the solution (at most twice) when a velocity
+        entry without a row exceeded its limit (:meth:`_missed_velocity`)."""
+        sol = self._solve_once(tol, max_iter, sopts, compile_kernels)
+        for _ in range(2):
+            if not sol.success or sol.x is None or not self._missed_velocity(sol.x, max(tol, 1e-9)):
+                break
+            prev = sol
+            self.x0, self.lam = np.asarray(sol.x, float), None
+            sol = self._solve_once(tol, max_iter, sopts, compile_kernels).labelled("velocity rows").after(prev)
+        if sol.success and sol.x is not None and self.core is not None and not self.core.free_time \
+                and self._velocity_families():
+            V = self._velocity_points(sol.x).ravel()
+            for f in self._velocity_families():
+                lo, hi = (np.tile(b, self.core.N + 2) for b in np.asarray(f.data))
+                if np.any((V > hi + max(tol, 1e-9) * 10) | (V < lo - max(tol, 1e-9) * 10)):
+                    # a limit missed after the re-solves: never success
+                    sol = dataclasses.replace(sol, success=False, status=IpoptStatus.VIOLATED_BETWEEN_KNOTS)
+        return sol
+
+    def _solve_once(self, tol: float, max_iter: int, sopts: SolverOptions, compile_kernels: bool | str) -> Solution:
         prob = self.prob
         t_setup = time.perf_counter()
         if self.core is None:
