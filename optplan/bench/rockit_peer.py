@@ -33,7 +33,7 @@ REACH_NOTE = "rockit has no free-floating base: zero momentum and the base attit
 def available() -> bool:
     """Whether rockit is installed."""
     try:
-        import rockit  # type: ignore[import-untyped]  # noqa: F401
+        import rockit  # noqa: F401
     except ImportError:
         return False
     return True
