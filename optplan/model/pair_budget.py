@@ -12,7 +12,10 @@ and :func:`optplan.verify` check.
    by the sum of the link offsets from that joint to the geometry plus the geometry's radius,
    so ``d(q) ≥ d(centre) − Σ ρ_k · half-width_k`` on every cell. A candidate is pruned only when
    every cell is certified (at most ``max_cells`` distance evaluations, at most
-   :data:`MAX_PATH_JOINTS` joints between the links); else it is kept.
+   :data:`MAX_PATH_JOINTS` joints between the links); else it is kept. Pairs of links that cannot
+   meet at all — their *reach balls* (centred on the first joint below their common ancestor, of
+   radius the link offsets down to the geometry plus its radius) are apart, e.g. links of two
+   arms mounted far apart — are certified by that alone, whatever the joints between them.
 
 (Pairs between the held object and the links rigidly attached to a holding hand need no rows:
 the trajectory NLP leaves them out while both hands hold; see the own-robot guide.)
@@ -26,7 +29,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["prune_pairs", "certify_pair", "joint_path", "sampled_min_distances", "MAX_CELLS", "MAX_PATH_JOINTS",
+__all__ = ["prune_pairs", "certify_pair", "certify_apart", "joint_path", "sampled_min_distances", "MAX_CELLS", "MAX_PATH_JOINTS",
            "SAMPLE_CLEARANCE"]
 
 #: pairs with more joints than this between their links are never certified (kept)
@@ -84,12 +87,48 @@ def _lever(model: pin.Model, side: list[int], g: pin.GeometryObject) -> dict[int
     return out
 
 
+def _reach_ball(model: pin.Model, data: pin.Data, side: list[int], g: pin.GeometryObject
+                ) -> tuple[np.ndarray, float] | None:
+    """A ball (centre in the world at the current configuration [m], radius [m]) that contains the
+    geometry ``g`` for every value of the joints ``side`` (its joint first, up to the joint whose
+    parent is the common ancestor): centred on the origin of that last joint, which those joints
+    cannot move, of radius the sum of the link offsets down to the geometry plus its own radius.
+    None when a joint of ``side`` is not revolute (a prismatic joint moves the origin)."""
+    if not side:
+        M = data.oMi[int(g.parentJoint)] * g.placement
+        return np.array(M.translation, float), _radius(g.geometry)
+    for k in side:
+        kind = model.joints[k].shortname()
+        if model.nvs[k] != 1 or "Prismatic" in kind or kind.startswith("JointModelP") or kind == "JointModelMimic":
+            return None
+    r = _lever(model, side, g)[side[-1]]
+    return np.array(data.oMi[side[-1]].translation, float), r
+
+
+def certify_apart(robot, a: int, b: int) -> bool:
+    """Are geometries ``a`` and ``b`` apart for EVERY joint configuration (no joint limits needed)?
+    True when their reach balls (:func:`_reach_ball`) do not meet — e.g. links of two arms mounted
+    far enough apart. Sound for any number of joints between them."""
+    model, gm = robot.model, robot.collision_model
+    oa, ob = gm.geometryObjects[a], gm.geometryObjects[b]
+    sa, sb = joint_path(model, int(oa.parentJoint), int(ob.parentJoint))
+    data = model.createData()
+    pin.forwardKinematics(model, data, robot.neutral())
+    ba, bb = _reach_ball(model, data, sa, oa), _reach_ball(model, data, sb, ob)
+    if ba is None or bb is None or not (math.isfinite(ba[1]) and math.isfinite(bb[1])):
+        return False
+    return bool(np.linalg.norm(ba[0] - bb[0]) > ba[1] + bb[1])
+
+
 def certify_pair(robot, a: int, b: int, max_cells: int = MAX_CELLS) -> bool:
-    """Is geometry pair (a, b) collision-free over the whole joint box? (module docstring)."""
+    """Is geometry pair (a, b) collision-free over the whole joint box? (module docstring; pairs
+    with more joints between them than :data:`MAX_PATH_JOINTS` only by :func:`certify_apart`)."""
     model, gm = robot.model, robot.collision_model
     oa, ob = gm.geometryObjects[a], gm.geometryObjects[b]
     sa, sb = joint_path(model, int(oa.parentJoint), int(ob.parentJoint))
     path = sa + sb
+    if path and certify_apart(robot, a, b):
+        return True
     if not path or len(path) > MAX_PATH_JOINTS:
         return False
     rho = {**_lever(model, sa, oa), **_lever(model, sb, ob)}
