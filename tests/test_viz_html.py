@@ -188,11 +188,13 @@ def test_browser_shows_robot_scene1(tmp_path, browser, dual, scene1):
     for _ in range(20):   # WebGL in software: the first frames may take a moment
         img = _screenshot(browser, "viewer_ssps_scene1.png")
         a, b = _color_pixels(img, ARM_COLORS[0]), _color_pixels(img, ARM_COLORS[1])
-        if a > 300 and b > 300:
+        if a > 150 and b > 300:
             break
         time.sleep(0.25)
     assert img.std() > 10.0   # not a blank canvas
-    assert a > 300 and b > 300, (a, b)   # both arms are drawn
+    # both arms are drawn (arm A sits behind a translucent beam of the truss from the default
+    # viewpoint, which framing the whole scene keeps: ~200 of its pixels keep their colour)
+    assert a > 150 and b > 300, (a, b)
     # play/pause and the slider drive the animation
     assert browser.execute_script("return viewer.animator.actions.length") > 0
     click = "document.getElementById('optplan-play').click(); return viewer.animator.playing"

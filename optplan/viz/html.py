@@ -257,15 +257,23 @@ def _shown_points(robot, scene, qs: np.ndarray, hand_points: np.ndarray, obj_pos
     return np.concatenate([p for p in pts if p.size])
 
 
-def _default_camera(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Camera target (centre of the points) and position (front, above) in the world [m], far
-    enough that the sphere around every point (plus 0.3 m for the link radii) fits the field of
-    view."""
+def _default_camera(points: np.ndarray, pad: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """Camera target (centre of the points) and position (front, above) in the world [m]: the
+    nearest distance along that direction at which every point, padded by ``pad`` [m] for the
+    link radii, projects inside the vertical field of view (:data:`CAMERA_FOV_DEG`; the same
+    angle sideways: the window is at least as wide as tall), plus 5 %."""
     c = (points.min(axis=0) + points.max(axis=0)) / 2
-    r = max(float(np.max(np.linalg.norm(points - c, axis=1))) + 0.3, 1.0)
     d = np.array([1.25, -1.0, 0.7])
-    dist = 1.05 * r / math.sin(math.radians(CAMERA_FOV_DEG) / 2)
-    return c, c + dist * d / np.linalg.norm(d)
+    d /= np.linalg.norm(d)
+    right = np.cross(np.array([0.0, 0.0, 1.0]), d)
+    right /= np.linalg.norm(right)
+    up = np.cross(d, right)
+    rel = points - c
+    lateral = np.maximum(np.abs(rel @ right), np.abs(rel @ up)) + pad
+    # a point at depth s - rel·d in front of the camera is in view when lateral ≤ depth · tan(fov/2)
+    need = rel @ d + pad + lateral / math.tan(math.radians(CAMERA_FOV_DEG) / 2)
+    dist = max(1.05 * float(np.max(need)), 1.0)
+    return c, c + dist * d
 
 
 # --------------------------------------------------------------------------- main entry points
