@@ -23,7 +23,6 @@ user would load theirs.
 """
 from __future__ import annotations
 
-import copy
 import logging
 import math
 import tempfile
@@ -37,6 +36,7 @@ from ..errors import ModelError
 from ._robot_data import _require_dir
 from .robot import RobotModel
 from .robot_file import _floats, merge_capsules  # the general step, re-exported here
+from .robot_file import _prefixed as _prefix_tree  # one URDF tree-prefixing step
 
 __all__ = ["load_dual_panda", "merge_capsules", "pair_budget", "srdf_disabled_pairs", "BASE_OFFSET",
            "DUAL_PANDA_ARMS"]
@@ -49,26 +49,6 @@ PLATE_SIZE = (0.5, 1.1, 0.05)
 FINGER_OPENING = 0.04  # [m] per finger (fully open)
 SIDES = ("left", "right")
 DUAL_PANDA_ARMS = {s: [f"{s}_panda_joint{k}" for k in range(1, 8)] for s in SIDES}
-
-
-def _prefix_tree(root: ET.Element, prefix: str) -> list[ET.Element]:
-    """Copies of ``root``'s links and joints with every link/joint name prefixed."""
-    out = []
-    for el in root:
-        if el.tag not in ("link", "joint"):
-            continue
-        e = copy.deepcopy(el)
-        e.set("name", prefix + e.attrib["name"])
-        if e.tag == "joint":
-            for tag in ("parent", "child"):
-                t = e.find(tag)
-                assert t is not None   # a URDF joint has a parent and a child
-                t.set("link", prefix + t.attrib["link"])
-            m = e.find("mimic")
-            if m is not None:
-                m.set("joint", prefix + m.attrib["joint"])
-        out.append(e)
-    return out
 
 
 def dual_panda_urdf(share: Path) -> str:

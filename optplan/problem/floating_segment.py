@@ -81,6 +81,21 @@ _IDENTITY_Q = np.array([0.0, 0.0, 0.0, 1.0])
 _KernelSpec = tuple[tuple[Any, ...], Callable[[str], ca.Function]]
 
 
+def momentum_template(bk: np.ndarray, dbk: np.ndarray, nj: int) -> np.ndarray:
+    """Scatter template ``(kernel input, local slot, weight)`` rows of a momentum kernel at one
+    point: q and dq/du from the 4 control points by the basis values ``bk`` and derivatives
+    ``dbk``, then the 3 slots of the quadrature weights passed through."""
+    tm = []
+    for a in range(4):
+        for j in range(nj):
+            if bk[a] != 0:
+                tm.append((j, a * nj + j, bk[a]))
+            if dbk[a] != 0:
+                tm.append((nj + j, a * nj + j, dbk[a]))
+    tm += [(2 * nj + c, 4 * nj + c, 1.0) for c in range(3)]
+    return np.array(tm, float)
+
+
 def spline_basis(u: float) -> tuple[np.ndarray, np.ndarray]:
     """Weights of ``P_k … P_{k+3}`` in ``q(t_k + u h)`` and in ``dq/du`` (uniform cubic B-spline)."""
     u = float(u)
@@ -505,16 +520,7 @@ class FloatingSplineProblem:
                                      [self._slot_w(m * N if (i == 0 and t == N) else m * k + i)])
                 slots.append(row)
                 if t == 0 or (i == 0 and t == N):
-                    tm = []
-                    for a in range(4):
-                        for j in range(nj):
-                            if bk[a] != 0:
-                                tm.append((j, a * nj + j, bk[a]))
-                            if dbk[a] != 0:
-                                tm.append((nj + j, a * nj + j, dbk[a]))
-                    for c in range(3):
-                        tm.append((2 * nj + c, 4 * nj + c, 1.0))
-                    tmpl.append(np.array(tm, float))
+                    tmpl.append(momentum_template(bk, dbk, nj))
             if i == 0:  # two templates (u = 0 and the last knot's u = 1): two families
                 asm.family("momentum@knots", fmom, jm, hm, tmpl[0], np.array(slots[:N]), xp, 0.0, 0.0)
                 asm.family("momentum@end", fmom, jm, hm, tmpl[1], np.array(slots[N:]), xp, 0.0, 0.0)

@@ -31,7 +31,7 @@ from ..model.robot import RobotModel
 from . import kernel_compiler
 from .bspline import knot_matrices
 from .expressions import PointSymbols, symbols_of
-from .floating_segment import FloatingKernels, _LocalAssembly, spline_basis
+from .floating_segment import FloatingKernels, _LocalAssembly, momentum_template, spline_basis
 
 __all__ = ["Family", "SplineCore"]
 
@@ -328,15 +328,7 @@ class SplineCore:
                 slots.append(np.concatenate([self.slot_P(k + a) for a in range(4)] +
                                             [self.slot_w(m * N if (i == 0 and t == N) else m * k + i)]))
                 if t == 0 or (i == 0 and t == N):
-                    tm = []
-                    for a in range(4):
-                        for j in range(nj):
-                            if bk[a] != 0:
-                                tm.append((j, a * nj + j, bk[a]))
-                            if dbk[a] != 0:
-                                tm.append((nj + j, a * nj + j, dbk[a]))
-                    tm += [(2 * nj + c, 4 * nj + c, 1.0) for c in range(3)]
-                    tmpl.append(np.array(tm, float))
+                    tmpl.append(momentum_template(bk, dbk, nj))
             if i == 0:
                 asm.family("momentum@knots", fmom, jm, hm, tmpl[0], np.array(slots[:N]), xp, 0.0, 0.0)
                 asm.family("momentum@end", fmom, jm, hm, tmpl[1], np.array(slots[N:]), xp, 0.0, 0.0)
