@@ -341,10 +341,13 @@ def format_summary(summ: dict) -> str:
     if a.get("planned"):
         met = a["success_rate"] >= TARGET_SUCCESS
         w = a["opt_wall_s"]
-        tmet = w["median"] is not None and w["median"] <= 1.0 and w["p95"] <= 3.0
+        # the floating-base carry's targets (momentum rows, restoration) are 2 / 6 s; the fixed base's 1 / 3 s
+        floating = all(k.startswith(GROUPS["floating"]) for k in summ if k != "all")
+        t_med, t_p95 = (2.0, 6.0) if floating else (1.0, 3.0)
+        tmet = w["median"] is not None and w["median"] <= t_med and w["p95"] <= t_p95
         lines.append(f"targets: verified {a['success']}/{a['planned']} = {100 * a['success_rate']:.0f}% of planned "
                      f"trials (target >= {100 * TARGET_SUCCESS:.0f}%: {'met' if met else 'NOT met'}); optimization "
-                     f"per trial median {f(w['median'])} s / p95 {f(w['p95'])} s wall (target <= 1 / 3 s: "
+                     f"per trial median {f(w['median'])} s / p95 {f(w['p95'])} s wall (target <= {t_med:g} / {t_p95:g} s: "
                      f"{'met' if tmet else 'NOT met'})")
     if a.get("peak_rss_mb") is not None:
         lines.append(f"peak memory of the process: {a['peak_rss_mb']:.0f} MB (target <= 1024 MB: "
