@@ -4,6 +4,7 @@ write constraints and costs with (``prob.q``, ``prob.frame("a_ee").translation``
 :func:`~optplan.problem.expressions.register_quantity`)."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import casadi as ca
@@ -37,11 +38,9 @@ class ExpressionAPI:
     transcription: str
     N: int
 
-    def _changed(self) -> None:  # the problem's: forget what was built
-        raise NotImplementedError
-
-    def _add(self, term: Any, role: str, name: str | None, weight: float) -> Any:  # the problem's
-        raise NotImplementedError
+    # the problem's own (OptProblem defines them): forget what was built; add a term under a name
+    _changed: Callable[[], None]
+    _add: Callable[[Any, str, str | None, float], Any]
 
     def _add_expression(self, role: str, e: Any, name: str | None, **kw: Any) -> Any:
         """An :class:`ExprTerm` of expression ``e`` (``kw``: its bounds and knots, or its kind
