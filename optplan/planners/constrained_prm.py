@@ -252,14 +252,9 @@ class ConstrainedPRM(Planner):
         st = {"iterations": 0, "projections": 0, "projection_failures": 0, "filtered_poses": 0, "ik_failures": 0, "invalid_samples": 0,
               "edge_attempts": 0, "edges": 0}
         c0 = ck.n_checks
-        for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
-            ep, eo = closure_error(self.robot, self.grasps, q)
-            if not ck.in_limits(q):
-                return self.empty_result(status, f"{which} outside the joint limits", **st)
-            if max(ep, eo) > 1e-6:
-                return self.empty_result(status, f"{which} off the closed-chain manifold ({max(ep, eo):.1e})", **st)
-            if not ck.is_valid(q):
-                return self.empty_result(status, f"{which} in collision", **st)
+        bad = invalid_endpoints(self, q_start, q_goal, st)
+        if bad is not None:
+            return bad
         rm = _Roadmap(self.robot.nq)
         rm.add(q_start)
         rm.add(q_goal)
@@ -284,3 +279,19 @@ class ConstrainedPRM(Planner):
         poses = [self.kin.object_pose(q) for q in P]
         return PlanResult(PlanStatus.EXACT, self.name, P, poses, np.ones(len(P), bool),
                           [PathSegment("constrained", 0, len(P) - 1)], st)
+
+
+def invalid_endpoints(planner: Any, q_start: np.ndarray, q_goal: np.ndarray, stats: dict[str, Any]) -> PlanResult | None:
+    """The result of a closed-chain planner (``planner``: ``robot``, ``grasps``, ``checker``,
+    ``empty_result``) whose start or goal is outside the joint limits, off the closed chain (>
+    1e-6) or in collision, with ``stats``; None when both are valid."""
+    ck = planner.checker
+    for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
+        ep, eo = closure_error(planner.robot, planner.grasps, q)
+        if not ck.in_limits(q):
+            return planner.empty_result(status, f"{which} outside the joint limits", **stats)
+        if max(ep, eo) > 1e-6:
+            return planner.empty_result(status, f"{which} off the closed-chain manifold ({max(ep, eo):.1e})", **stats)
+        if not ck.is_valid(q):
+            return planner.empty_result(status, f"{which} in collision", **stats)
+    return None

@@ -32,11 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from ...constraints.closed_chain import ClosedChainKinematics, closure_error
+from ...constraints.closed_chain import ClosedChainKinematics
 from ...errors import ConfigurationError
 from ..base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
 from ..cbirrt2 import CBiRRT2, CBiRRT2Options
-from ..constrained_prm import constrained_edge
+from ..constrained_prm import constrained_edge, invalid_endpoints
 from ..manifold_samples import ManifoldSampleSettings, manifold_samples, project_onto_chain
 from ..validity import ValidityChecker
 from .cvae import CVAESettings, load_or_train_cvae
@@ -329,14 +329,9 @@ class LCBiRRT(Planner):
         st = {"iterations": 0, "decodes": 0, "projection_failures": 0, "collisions": 0, "classifier_rejects": 0,
               "edge_checks": 0, "link_attempts": 0, "lpo_nodes": 0, "lpo_moves": 0}
         c0 = ck.n_checks
-        for which, q, status in (("start", q_start, PlanStatus.INVALID_START), ("goal", q_goal, PlanStatus.INVALID_GOAL)):
-            ep, eo = closure_error(self.robot, self.grasps, q)
-            if not ck.in_limits(q):
-                return self.empty_result(status, f"{which} outside the joint limits", **st)
-            if max(ep, eo) > 1e-6:
-                return self.empty_result(status, f"{which} off the closed-chain manifold ({max(ep, eo):.1e})", **st)
-            if not ck.is_valid(q):
-                return self.empty_result(status, f"{which} in collision", **st)
+        bad = invalid_endpoints(self, q_start, q_goal, st)
+        if bad is not None:
+            return bad
         ta, tb = _LatentTree(self.cvae.encode(q_start), q_start), _LatentTree(self.cvae.encode(q_goal), q_goal)
         a_is_start = True
         found = None
