@@ -300,6 +300,10 @@ class SplineCore:
 
     def _pair_slots(self, fam: Family) -> tuple[np.ndarray, np.ndarray]:
         """Template and slots of a collision pair's kernel ``f([q; n; s])`` at its knots."""
+        if fam.data.get("world"):   # a floating robot's plane fixed in the world
+            from .floating_collision import world_pair_slots
+
+            return world_pair_slots(self, fam)
         nj, nx = self.nj, self.nx
         it, po, ao = fam.data["item"], fam.data["p_off"], fam.data["aux_off"]
         K = len(fam.points)

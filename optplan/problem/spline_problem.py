@@ -134,9 +134,9 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
                             np.r_[0, 0, 0, np.inf], _knots(t.at, N), ("rot_x", "rot_y", "rot_z", "trace")))
         elif isinstance(t, CollisionAvoidance):
             # the segment NLP's planes: fixed normals, its pair set (self-collision, held object)
-            if robot.is_floating or core.free_time or collisions or t.scene is None or not t.fixed_normals \
+            if core.free_time or collisions or t.scene is None or not t.fixed_normals \
                     or not t.self_collision or not t.held_object or t.margin_boost or t.activate_with:
-                raise Unsupported("CollisionAvoidance other than fixed normals on a fixed base with fixed T")
+                raise Unsupported("CollisionAvoidance other than fixed normals with a fixed duration")
             collisions.append(h)
         else:
             raise Unsupported(type(t).__name__)

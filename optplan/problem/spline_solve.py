@@ -62,7 +62,15 @@ class SplineBackend:
             assert x is not None
             Qk = core.M["q"] @ core.control_points(x)
             lbx, ubx = self._bounds()
-            items, self.collision_model = plan_collision(prob, core, cols[0].term, Qk, lbx[:core.nj], ubx[:core.nj])
+            if core.fl:   # planes with the base pose (floating_collision)
+                from .floating_collision import plan_floating_collision
+
+                fitems, self.collision_model = plan_floating_collision(
+                    prob, core, cols[0].term, x, prob.base0, self._com0(Qk[0]), lbx[:core.nj], ubx[:core.nj])
+                items: list[Any] = list(fitems)
+            else:
+                items, self.collision_model = plan_collision(prob, core, cols[0].term, Qk, lbx[:core.nj],
+                                                             ubx[:core.nj])
             nb = sum(len(it.knots) for it in items if not it.static)
             core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar, n_aux=nb,
                               n_colp=sum(4 * len(it.knots) for it in items))
@@ -72,7 +80,8 @@ class SplineBackend:
                 pair = it.name.removeprefix("collision:")
                 self.fams.append(Family(it.name, "pair", it.fn, it.knots,
                                         labels=tuple(f"{pair}.point{i}" for i in range(it.nrow)),
-                                        data={"item": it, "p_off": po, "aux_off": ao}))
+                                        data={"item": it, "p_off": po, "aux_off": ao,
+                                              "world": bool(getattr(it, "world", False))}))
                 names.append(it.name)
                 colp += [it.normals.ravel(order="F"), it.offsets if it.static else np.zeros(len(it.knots))]
                 if not it.static:
