@@ -202,7 +202,8 @@ def plan_floating_collision(prob: Any, core: Any, term: CollisionAvoidance, x: n
                 continue   # both on the base body: constant distance
         mov, other = (sb, sa) if flip else (sa, sb)
         if other[0] == "base":   # static in the base frame: its base-frame points
-            other = ("base", None, _frame_points(robot, datas[0], int(other[1]), other[2]), other[3])
+            assert other[1] is not None  # a robot side has its frame
+            other = ("base", None, _frame_points(robot, datas[0], other[1], other[2]), other[3])
         ks = [k for k in col.knots_of(pair, N) if k != 0 and (world or k not in pinned)]
         if not ks:
             continue

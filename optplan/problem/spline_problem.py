@@ -134,8 +134,9 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
                             np.r_[0, 0, 0, np.inf], _knots(t.at, N), ("rot_x", "rot_y", "rot_z", "trace")))
         elif isinstance(t, CollisionAvoidance):
             # the segment NLP's planes: fixed normals, its pair set (self-collision, held object)
-            if core.free_time or collisions or t.scene is None or not t.fixed_normals \
-                    or not t.self_collision or not t.held_object or t.margin_boost or t.activate_with:
+            # (a floating robot's planner, floating_collision, reads the term's own pair set)
+            if core.free_time or collisions or t.scene is None or not t.fixed_normals or t.margin_boost \
+                    or t.activate_with or (not robot.is_floating and (not t.self_collision or not t.held_object)):
                 raise Unsupported("CollisionAvoidance other than fixed normals with a fixed duration")
             collisions.append(h)
         else:
