@@ -25,6 +25,7 @@ core), ``c(q)`` the centre of mass in the base frame and ``c0`` the fixed world 
 The exact Jacobian and Hessian come from the kernels (:meth:`SplineCore.kernel_set`)."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -154,6 +155,11 @@ def plan_floating_collision(prob: Any, core: Any, term: CollisionAvoidance, x: n
     xi = core.knot_xi(x)
     Qf = full_configurations(core, Qk, xi, base0, com0)
     quats = Qf[:, 3:7]
+    default = CollisionAvoidance.__dataclass_fields__["activation"].default
+    if term.activation == default:   # the segment NLP's activation (decision 0012), as spline_collision
+        from .segment import SegmentSpec
+
+        term = dataclasses.replace(term, activation=SegmentSpec.activation)
     col = term.model(robot)
     traj = NumericTrajectory(robot, Qk, Qk, Qk, Qk[:-1], prob.duration, base_quat=quats, com0=com0)
     active = col.activate(robot, traj)
