@@ -47,6 +47,17 @@ def test_floating_truss_end_to_end(eba, truss_run):
     assert len(path) == 3 and np.allclose(path[0][1], 0.0) and np.allclose(path[-1][1], Mb.translation, atol=1e-6)
 
 
+def test_the_carry_is_optimized_with_collision_rows_on_the_shared_core(truss_run):
+    """The optimizer is an OptProblem on the B-spline core with the collision rows (here the pairs
+    the carry brings within the activation distance: base against arm links, planes in the base
+    frame) and the end attitude; its rows hold at the solution."""
+    _, res = truss_run
+    sol = res.solution
+    assert any(f.kind == "pair" for f in sol.evaluator.fams.values()), "no collision row was active"
+    assert sol.terms["collision"] <= 1e-6 and sol.terms["base_attitude"] <= 1e-6
+    assert res.attempts[0][0] == 24
+
+
 def test_a_tighter_attitude_bound_than_reached_is_not_success(eba, truss_run):
     """The verdict follows the tolerances: no success with an attitude miss."""
     scene, res = truss_run
@@ -60,6 +71,10 @@ def test_options_are_checked():
         FloatingPipelineOptions(intervals=2)
     with pytest.raises(OptionError, match="duration_factor"):
         FloatingPipelineOptions(duration_factor=0.0)
+    with pytest.raises(OptionError, match="nlp"):
+        FloatingPipelineOptions(nlp="knots")
+    with pytest.raises(OptionError, match="margin"):
+        FloatingPipelineOptions(margin=-0.01)
 
 
 @pytest.mark.parametrize("scene_name", ["floating_truss", "floating_stow"])
