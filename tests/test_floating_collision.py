@@ -5,6 +5,7 @@ re-integrated independently by simulate_base — and an OptProblem whose collisi
 joint motion collides only because of the base drift is made clear (verify is the judge)."""
 from __future__ import annotations
 
+import casadi as ca
 import coal
 import numpy as np
 import pinocchio as pin
@@ -67,19 +68,13 @@ def test_world_rows_match_pinocchio_with_the_independently_integrated_base(eba):
             n = rng.normal(size=3)
             z = np.r_[qb, xi, b0, com0, n / np.linalg.norm(n), 0.3]
             f, jf, _ = core.kernel_set(fn, False)
-            J = np.asarray(ca_dense(jf(z)))
+            J = np.asarray(ca.densify(jf(z)))
             Jfd = np.zeros_like(J)
             for i in range(z.size):
                 dz = np.zeros(z.size)
                 dz[i] = 1e-6
                 Jfd[:, i] = (np.asarray(f(z + dz)).ravel() - np.asarray(f(z - dz)).ravel()) / 2e-6
             assert np.abs(J - Jfd).max() < 1e-6
-
-
-def ca_dense(m):
-    import casadi as ca
-
-    return ca.densify(m)
 
 
 def _probe_scene(eba):
