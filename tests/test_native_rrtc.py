@@ -191,3 +191,24 @@ def test_single_panda_queries_solved_and_valid():
         assert np.allclose(r["path"][0], START) and np.allclose(r["path"][-1], GOAL)
         assert _coal_valid_path(robot, sc, r["path"])
     assert pin.SE3 is not None
+
+
+def test_vamp_peer_without_vamp_says_so(monkeypatch, capsys):
+    from optplan.bench import vamp_peer
+
+    monkeypatch.setattr(vamp_peer, "vamp_available", lambda: None)
+    assert vamp_peer.main(["--queries", "1"]) == 0
+    assert "vamp is not importable" in capsys.readouterr().out
+
+
+def test_vamp_peer_pairs_when_vamp_is_there(capsys):
+    pytest.importorskip("vamp")
+    from optplan.example_robots import example_robots_available
+
+    if not example_robots_available():
+        pytest.skip("example-robot-data not installed (pip install 'optplan[robots]')")
+    from optplan.bench import vamp_peer
+
+    assert vamp_peer.main(["--queries", "2", "--scenes", "boxes"]) == 0
+    out = capsys.readouterr().out
+    assert "optplan / vamp" in out and "2/2 solved" in out
