@@ -52,15 +52,23 @@ BOX_SIZES = np.array([[0.3, 0.2, 0.3], [0.15, 0.3, 0.2], [0.2, 0.2, 0.25], [0.25
 FINGER_OPENING = 0.04  # [m]
 
 
-def load_single_panda() -> Any:
-    """One Panda (module docstring) as a :class:`~optplan.model.robot.RobotModel` (needs ``example-robot-data``)."""
+def load_single_panda(spheres_urdf: str | Path | None = None) -> Any:
+    """One Panda (module docstring) as a :class:`~optplan.model.robot.RobotModel` (needs ``example-robot-data``).
+
+    ``spheres_urdf``: another URDF of the Panda to take instead of the vendor's, e.g. VAMP's
+    ``resources/panda/panda_spherized.urdf`` (59 spheres: the robot VAMP checks); its visual
+    elements are dropped, its collision spheres kept as they are."""
     from ..model._robot_data import _require_dir
     from ..model.dual_panda import srdf_disabled_pairs
     from ..model.robot import RobotModel
     from ..model.robot_file import _floats, merge_capsules
 
     share = _require_dir()
-    root = ET.parse(share / "robots/panda_description/urdf/panda_collision.urdf").getroot()
+    src = Path(spheres_urdf) if spheres_urdf is not None else share / "robots/panda_description/urdf/panda_collision.urdf"
+    root = ET.parse(src).getroot()
+    for link in root.iter("link"):
+        for v in link.findall("visual"):
+            link.remove(v)
     for e in root:
         if e.tag == "joint" and e.get("type") == "prismatic":   # the fingers: frozen, open
             o, axis = e.find("origin"), e.find("axis")
@@ -77,16 +85,18 @@ def load_single_panda() -> Any:
         fn = m.get("filename", "")
         if fn.startswith("package://example-robot-data/"):
             m.set("filename", str(share / fn[len("package://example-robot-data/"):]))
-    path = Path(tempfile.gettempdir()) / "optplan_example_robots" / "single_panda.urdf"
+    name = "single_panda" if spheres_urdf is None else "single_panda_spheres"
+    path = Path(tempfile.gettempdir()) / "optplan_example_robots" / f"{name}.urdf"
     path.parent.mkdir(exist_ok=True)
     text = ET.tostring(root, encoding="unicode")
     if not path.exists() or path.read_text() != text:
         from .._io import write_text
 
         write_text(path, text)
-    robot = RobotModel.from_urdf(path, arms={"arm": {"ee": "panda_hand_tcp",
+    ee = "panda_hand_tcp" if spheres_urdf is None else "panda_hand"
+    robot = RobotModel.from_urdf(path, arms={"arm": {"ee": ee,
                                                      "joints": [f"panda_joint{k}" for k in range(1, 8)]}},
-                                 name="single_panda")
+                                 name=name)
     disabled = srdf_disabled_pairs(share)
     objs = robot.collision_model.geometryObjects
 
@@ -168,8 +178,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--range", type=float, default=1.0, help="largest extension [rad]")
     ap.add_argument("--resolution", type=float, default=0.03, help="edge check step [rad]")
     ap.add_argument("--time-limit", type=float, default=10.0, help="per query [s]")
+    ap.add_argument("--spheres-urdf", default=None,
+                    help="plan with this Panda URDF's collision spheres instead of the vendor's capsules, e.g. VAMP's "
+                         "resources/panda/panda_spherized.urdf (the robot VAMP checks)")
     args = ap.parse_args(argv)
-    robot = load_single_panda()
+    robot = load_single_panda(args.spheres_urdf)
     for kind in args.scenes.split(","):
         qs = queries(robot, kind, args.queries, args.seed)
         rows: dict[str, list[dict[str, Any]]] = {"native": [], "python": []}

@@ -75,7 +75,7 @@ def run_vamp(vamp: Any, env: Any, *, range_: float, vamp_defaults: bool = False)
     res = planner(list(START), list(GOAL), env, settings, sampler)
     cpu = time.process_time() - c0
     solved = bool(res.solved)
-    path = np.array([np.asarray(c.to_list() if hasattr(c, "to_list") else c, float) for c in res.path]) if solved else None
+    path = np.asarray(res.path.numpy(), dtype=float) if solved else None   # (a Path object cannot be iterated)
     return {"cpu_s": cpu, "own_s": float(res.nanoseconds) * 1e-9, "iterations": int(res.iterations),
             "status": "exact" if solved else "failed", "path": path}
 
@@ -88,6 +88,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--range", type=float, default=1.0, help="largest extension of both planners [rad]")
     ap.add_argument("--resolution", type=float, default=0.03, help="optplan's edge check step [rad]")
     ap.add_argument("--vamp-defaults", action="store_true", help="keep VAMP's dynamic domain and tree balancing")
+    ap.add_argument("--spheres-urdf", default=None,
+                    help="plan with this Panda URDF's collision spheres instead of the vendor's capsules, e.g. VAMP's "
+                         "resources/panda/panda_spherized.urdf (the robot VAMP checks)")
     args = ap.parse_args(argv)
     vamp = vamp_available()
     if vamp is None:
@@ -102,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     from ..planners.validity import ValidityChecker
     from .panda_rrtc import load_single_panda
 
-    robot = load_single_panda()
+    robot = load_single_panda(args.spheres_urdf)
     for kind in args.scenes.split(","):
         rows: dict[str, list[dict[str, Any]]] = {"vamp": [], "optplan": []}
         accepted = 0

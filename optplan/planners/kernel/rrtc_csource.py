@@ -14,6 +14,7 @@ What it computes (the algorithm of :func:`optplan.planners.rrtconnect.rrt_connec
 * samples are uniform in the box ``[lower, upper]`` from xoshiro256** (Blackman & Vigna) seeded by
   splitmix64 from one 64-bit seed (the Python side draws it from the planner's NumPy Generator);
 * nearest neighbour is a linear scan over a contiguous node array (squared Euclidean distance);
+* a configuration check tries the pair that collided last first (the same verdict);
 * an edge a → b is checked at ``n = max(1, ceil(max_j |b_j - a_j| / resolution))`` steps: the end b
   first, then the interior points ``a + (k/n)(b - a)`` in coarse-to-fine (bisection) order;
 * the time limit is an end time on ``CLOCK_MONOTONIC`` (Python's ``time.perf_counter``) or
@@ -92,7 +93,7 @@ typedef struct {
     int dim; const int *jidx; double *q; double *oMi, *oMg; double res;
     int *queue; long long qcap; double *x;
     long long checks;
-    int clock_kind; double end; int tick;
+    int clock_kind; double end; int tick; int hint;
 } rrtc_ctx;
 
 static double rrtc_now(int kind) {
@@ -106,10 +107,19 @@ static int rrtc_expired(rrtc_ctx *c) {
     return rrtc_now(c->clock_kind) >= c->end;
 }
 
+/* the kernel's configuration check, the pair that collided last tried first (the same verdict: any
+   active pair in contact; a blocked region is usually blocked by the same pair again) */
 static int rrtc_valid(rrtc_ctx *c, const double *x) {
+    const kmodel *m = c->m;
+    const double *pose[KMAXG];
     for (int k = 0; k < c->dim; ++k) c->q[c->jidx[k]] = x[k];
     c->checks++;
-    return !config_collides(c->m, c->active, c->q, c->opose, c->og, c->oMi, c->oMg);
+    fk(m, c->q, c->opose, c->og, c->oMi, c->oMg, pose);
+    int h = c->hint;
+    if (h >= 0 && c->active[h] && pair_collides(m, pose, m->pa[h], m->pb[h])) return 0;
+    for (int k = 0; k < m->npairs; ++k)
+        if (k != h && c->active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) { c->hint = k; return 0; }
+    return 1;
 }
 
 /* the straight edge a -> b: 1 valid, 0 not, -1 out of memory */
@@ -193,7 +203,7 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
     rrtc_ctx c;
     memset(&c, 0, sizeof c);
     c.m = m; c.active = active; c.opose = override_pose; c.og = override_g;
-    c.dim = dim; c.jidx = jidx; c.res = resolution; c.clock_kind = clock_kind; c.end = end_time;
+    c.dim = dim; c.jidx = jidx; c.res = resolution; c.clock_kind = clock_kind; c.end = end_time; c.hint = -1;
     double *work = (double *)malloc(sizeof(double) * (size_t)(12*KMAXJ + 12*KMAXG + KMAXJ + 4*dim));
     rrtc_tree ta, tb;
     memset(&ta, 0, sizeof ta); memset(&tb, 0, sizeof tb);
