@@ -212,3 +212,27 @@ def test_vamp_peer_pairs_when_vamp_is_there(capsys):
     assert vamp_peer.main(["--queries", "2", "--scenes", "boxes"]) == 0
     out = capsys.readouterr().out
     assert "optplan / vamp" in out and "2/2 solved" in out
+
+
+@pytest.mark.parametrize("mode", ["free", "fixed"])
+def test_broad_phase_gives_the_kernels_and_coals_verdicts(tcb, mode):
+    """The native search's check (groups of geometries bounded by spheres, then the kernel's pairs) on
+    random configurations near and far from collisions: the kernel's verdict on every one, and never free
+    where coal collides."""
+    from optplan.planners.kernel.rrtc import broad_phase_valid
+
+    sc = Scene.load("hard_clutter_dense")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    ck = ValidityChecker(tcb, sc)
+    _native_or_skip(ck)
+    rng = np.random.default_rng(7)
+    X = np.vstack([rng.uniform(tcb.lower, tcb.upper, (1500, tcb.nq)),
+                   tr.q_start + rng.normal(0.0, 0.15, (1500, tcb.nq))])
+    pose = tr.object_start if mode == "fixed" else None
+    f = ck.validity(mode, pose)
+    got = broad_phase_valid(f, X)
+    assert np.array_equal(got, ck.valid_batch(X, mode, pose))
+    coal_ck = ValidityChecker(tcb, sc, kernel="coal")
+    want = coal_ck.valid_batch(X, mode, pose)
+    assert not np.any(got & ~want)
+    assert 0.05 < got.mean() < 0.95

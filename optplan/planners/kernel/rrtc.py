@@ -15,6 +15,7 @@ import hashlib
 import logging
 import tempfile
 import time
+import weakref
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,14 +23,14 @@ import numpy as np
 
 from ...codegen import build_library, cache_dir
 from .csource import C_SOURCE
-from .native import KernelUnavailable
+from .native import KernelUnavailable, NativeKernel
 from .rrtc_csource import RRTC_SOURCE, RRTC_STATUS
 
 if TYPE_CHECKING:
     from ..base import Deadline
     from ..validity import ConfigValidity
 
-__all__ = ["NativeRRTCResult", "load_rrtc_library", "native_rrt_connect"]
+__all__ = ["NativeRRTCResult", "load_rrtc_library", "native_rrt_connect", "broad_phase_valid"]
 log = logging.getLogger(__name__)
 
 _LIB: list[Any] = []
@@ -37,6 +38,93 @@ _FAILED: list[str] = []
 _P = ctypes.c_void_p
 #: nodes of both trees at which a native query stops (status ``"node cap"``) [count]
 MAX_NODES = 2_000_000
+
+
+class _Groups(ctypes.Structure):
+    _fields_ = [("ngroups", ctypes.c_int), ("nblocks", ctypes.c_int), ("gkind", _P), ("gref", _P), ("gcenter", _P),
+                ("gradius", _P), ("bstart", _P), ("bga", _P), ("bgb", _P), ("perm", _P)]
+
+
+class BroadPhase:
+    """The broad phase of the native search's checks for one :class:`~.native.NativeKernel`: the
+    geometries of each joint form a group bounded by one sphere (centre in the joint frame, radius [m]);
+    a geometry on no joint, and ``override`` (the still object, placed per query), is a group on its own
+    (its bounding sphere); the kernel's pairs are sorted into blocks by their two groups, and a block is
+    skipped when the two groups' spheres are apart. The verdicts are the kernel's."""
+
+    def __init__(self, kern: NativeKernel, override: int | None) -> None:
+        jparent, jtype, jidx, jplace, jaxis, gparent, gtype, gplace, gparam, grad, pa, pb = kern._arrays
+        ng = kern.ng
+        group = np.empty(ng, np.int64)
+        kinds: list[int] = []
+        refs: list[int] = []
+        centers: list[np.ndarray] = []
+        radii: list[float] = []
+        joint_group: dict[int, int] = {}
+        members: dict[int, list[int]] = {}
+        for g in range(ng):
+            j = int(gparent[g])
+            if j == 0 or g == override:
+                group[g] = len(kinds)
+                kinds.append(0)
+                refs.append(g)
+                centers.append(np.zeros(3))
+                radii.append(float(grad[g]))
+            else:
+                if j not in joint_group:
+                    joint_group[j] = len(kinds)
+                    kinds.append(1)
+                    refs.append(j)
+                    centers.append(np.zeros(3))
+                    radii.append(0.0)
+                group[g] = joint_group[j]
+                members.setdefault(j, []).append(g)
+        for j, gs in members.items():   # the sphere around the members' bounding spheres
+            t = gplace[gs, 9:12]
+            c = t.mean(axis=0)
+            i = joint_group[j]
+            centers[i] = c
+            radii[i] = float(np.max(np.linalg.norm(t - c, axis=1) + grad[gs])) * (1 + 1e-12) + 1e-12
+        a = group[np.asarray(pa, np.int64)] if len(pa) else np.zeros(0, np.int64)
+        b = group[np.asarray(pb, np.int64)] if len(pb) else np.zeros(0, np.int64)
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        perm = np.lexsort((hi, lo)).astype(np.int32)
+        keys = lo[perm] * (len(kinds) + 1) + hi[perm]
+        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]) if len(perm) else np.zeros(0, np.int64)
+        self.arrays = (np.array(kinds, np.int32), np.array(refs, np.int32), np.ascontiguousarray(centers, float),
+                       np.array(radii, float), np.r_[starts, len(perm)].astype(np.int32),
+                       lo[perm][starts].astype(np.int32), hi[perm][starts].astype(np.int32), perm)
+        self.n_groups, self.n_blocks = len(kinds), len(starts)
+        self.struct = _Groups(self.n_groups, self.n_blocks, *(x.ctypes.data for x in self.arrays))
+        self.pointer = ctypes.addressof(self.struct)
+
+
+_BROAD: weakref.WeakKeyDictionary[NativeKernel, dict[int | None, BroadPhase]] = weakref.WeakKeyDictionary()
+
+
+def _broad_phase(kern: NativeKernel, override: int | None) -> BroadPhase:
+    per = _BROAD.setdefault(kern, {})
+    got = per.get(override)
+    if got is None:
+        got = per[override] = BroadPhase(kern, override)
+    return got
+
+
+def broad_phase_valid(validity: Any, Q: np.ndarray) -> np.ndarray:
+    """The native search's own check (broad phase, then the kernel's pair tests) of every row of ``Q``
+    (full configurations) in the mode of ``validity`` (a :class:`~optplan.planners.validity.ConfigValidity`
+    on the native kernel): booleans, for tests against the kernel's and coal's verdicts."""
+    lib = load_rrtc_library()
+    nat = validity.checker._native
+    mode, pose = _mode(validity)
+    kern = nat.kernel
+    g = kern._override(nat._override(mode, pose))
+    bp = _broad_phase(kern, nat.fixed_id)
+    Q = np.ascontiguousarray(Q, dtype=float)
+    out = np.zeros(len(Q), np.uint8)
+    lib.rrtc_check_batch(kern._km_p, nat.masks[mode].ctypes.data, kern._pose_p, g, bp.pointer, len(Q), Q.ctypes.data,
+                         out.ctypes.data)
+    return out.astype(bool)
 
 
 def load_rrtc_library() -> Any:
@@ -70,10 +158,12 @@ def load_rrtc_library() -> Any:
             lib_path.unlink(missing_ok=True)
     assert lib is not None
     lib.rrtc_plan.restype = ctypes.c_int
-    lib.rrtc_plan.argtypes = [_P, _P, _P, ctypes.c_int, ctypes.c_int, _P, _P, _P, _P, _P, _P, ctypes.c_double,
+    lib.rrtc_plan.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_int, _P, _P, _P, _P, _P, _P, ctypes.c_double,
                               ctypes.c_double, ctypes.c_longlong, ctypes.c_longlong, ctypes.c_int, ctypes.c_int,
                               ctypes.c_double, ctypes.c_ulonglong, ctypes.POINTER(ctypes.POINTER(ctypes.c_double)),
                               ctypes.POINTER(ctypes.c_int), _P]
+    lib.rrtc_check_batch.restype = None
+    lib.rrtc_check_batch.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_longlong, _P, _P]
     lib.rrtc_free.restype = None
     lib.rrtc_free.argtypes = [_P]
     _LIB.append(lib)
@@ -145,7 +235,8 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
     out = ctypes.POINTER(ctypes.c_double)()
     n_out = ctypes.c_int(0)
     stats = np.zeros(3, np.int64)
-    code = lib.rrtc_plan(kern._km_p, mask.ctypes.data, kern._pose_p, g, dim, jidx.ctypes.data, base.ctypes.data,
+    bp = _broad_phase(kern, nat.fixed_id)
+    code = lib.rrtc_plan(kern._km_p, mask.ctypes.data, kern._pose_p, g, bp.pointer, dim, jidx.ctypes.data, base.ctypes.data,
                          *(a.ctypes.data for a in arrays), float(range_), float(resolution), int(max_iterations),
                          MAX_NODES, int(shortcut_iterations), clock_kind, end, seed, ctypes.byref(out),
                          ctypes.byref(n_out), stats.ctypes.data)

@@ -88,8 +88,23 @@ static int rrtc_nearest(const rrtc_tree *t, const double *x) {
     return best;
 }
 
+/* the broad phase: the pairs sorted into blocks by the groups of their two geometries (a group is the
+   geometries of one joint, or one geometry on its own), each group bounded by one sphere; a block is
+   skipped when its two spheres are farther apart than their radii and the margin */
+typedef struct {
+    int ngroups, nblocks;
+    const int *gkind;        /* ngroups: 0 one geometry (its pose's origin), 1 the geometries of a joint */
+    const int *gref;         /* ngroups: the geometry (kind 0) or the joint (kind 1) */
+    const double *gcenter;   /* ngroups x 3: the centre in the joint frame (kind 1) */
+    const double *gradius;   /* ngroups: the radius [m] */
+    const int *bstart;       /* nblocks + 1: the block's range in perm */
+    const int *bga, *bgb;    /* nblocks: the block's groups */
+    const int *perm;         /* npairs: pair indices, block after block */
+} rrtc_groups;
+
 typedef struct {
     const kmodel *m; const unsigned char *active; const double *opose; int og;
+    const rrtc_groups *grp; double *gc;
     int dim; const int *jidx; double *q; double *oMi, *oMg; double res;
     int *queue; long long qcap; double *x;
     long long checks;
@@ -107,19 +122,55 @@ static int rrtc_expired(rrtc_ctx *c) {
     return rrtc_now(c->clock_kind) >= c->end;
 }
 
-/* the kernel's configuration check, the pair that collided last tried first (the same verdict: any
-   active pair in contact; a blocked region is usually blocked by the same pair again) */
+/* the kernel's configuration check (the same verdict: any active pair in contact), the pair that
+   collided last tried first (a blocked region is usually blocked by the same pair again), then the
+   blocks of the broad phase */
 static int rrtc_valid(rrtc_ctx *c, const double *x) {
     const kmodel *m = c->m;
+    const rrtc_groups *G = c->grp;
     const double *pose[KMAXG];
     for (int k = 0; k < c->dim; ++k) c->q[c->jidx[k]] = x[k];
     c->checks++;
     fk(m, c->q, c->opose, c->og, c->oMi, c->oMg, pose);
     int h = c->hint;
     if (h >= 0 && c->active[h] && pair_collides(m, pose, m->pa[h], m->pb[h])) return 0;
-    for (int k = 0; k < m->npairs; ++k)
-        if (k != h && c->active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) { c->hint = k; return 0; }
+    for (int i = 0; i < G->ngroups; ++i) {
+        double *o = c->gc + 3*i;
+        if (G->gkind[i] == 0) { const double *P = pose[G->gref[i]]; o[0] = P[9]; o[1] = P[10]; o[2] = P[11]; }
+        else {
+            const double *P = c->oMi + 12*G->gref[i], *l = G->gcenter + 3*i;
+            for (int r = 0; r < 3; ++r) o[r] = P[3*r]*l[0] + P[3*r+1]*l[1] + P[3*r+2]*l[2] + P[9+r];
+        }
+    }
+    double thr = m->margin + KEPS;
+    for (int b = 0; b < G->nblocks; ++b) {
+        int ga = G->bga[b], gb = G->bgb[b];
+        const double *A = c->gc + 3*ga, *B = c->gc + 3*gb;
+        double dx = A[0]-B[0], dy = A[1]-B[1], dz = A[2]-B[2], rr = G->gradius[ga] + G->gradius[gb] + thr;
+        if (dx*dx + dy*dy + dz*dz > rr*rr) continue;
+        for (int i = G->bstart[b]; i < G->bstart[b+1]; ++i) {
+            int k = G->perm[i];
+            if (k != h && c->active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) { c->hint = k; return 0; }
+        }
+    }
     return 1;
+}
+
+/* the broad-phase check of the configurations Q (M x nq), for tests: out[i] = 1 when row i is free */
+void rrtc_check_batch(const kmodel *m, const unsigned char *active, const double *override_pose, int override_g,
+                      const rrtc_groups *grp, long long M, const double *Q, unsigned char *out) {
+    double *work = (double *)malloc(sizeof(double) * (size_t)(12*KMAXJ + 12*KMAXG + 3*grp->ngroups + 1));
+    int *jidx = (int *)malloc(sizeof(int) * (size_t)(m->nq + 1));
+    if (!work || !jidx) { free(work); free(jidx); return; }
+    rrtc_ctx c;
+    memset(&c, 0, sizeof c);
+    c.m = m; c.active = active; c.opose = override_pose; c.og = override_g; c.grp = grp; c.hint = -1;
+    c.oMi = work; c.oMg = work + 12*KMAXJ; c.gc = c.oMg + 12*KMAXG; c.dim = m->nq; c.jidx = jidx;
+    for (int k = 0; k < m->nq; ++k) jidx[k] = k;
+    double q[KMAXJ];
+    c.q = q;
+    for (long long i = 0; i < M; ++i) out[i] = (unsigned char)rrtc_valid(&c, Q + i*m->nq);
+    free(work); free(jidx);
 }
 
 /* the straight edge a -> b: 1 valid, 0 not, -1 out of memory */
@@ -192,7 +243,7 @@ void rrtc_free(void *p) { free(p); }
    (free with rrtc_free) holds *path_len configurations of dim values, start to goal.
    stats[0] iterations, stats[1] nodes of both trees, stats[2] configurations checked. */
 int rrtc_plan(const kmodel *m, const unsigned char *active, const double *override_pose, int override_g,
-              int dim, const int *jidx, const double *base, const double *start, const double *goal,
+              const rrtc_groups *grp, int dim, const int *jidx, const double *base, const double *start, const double *goal,
               const double *lower, const double *upper, double range, double resolution,
               long long max_iterations, long long max_nodes, int shortcut_iterations,
               int clock_kind, double end_time, unsigned long long seed,
@@ -204,7 +255,7 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
     memset(&c, 0, sizeof c);
     c.m = m; c.active = active; c.opose = override_pose; c.og = override_g;
     c.dim = dim; c.jidx = jidx; c.res = resolution; c.clock_kind = clock_kind; c.end = end_time; c.hint = -1;
-    double *work = (double *)malloc(sizeof(double) * (size_t)(12*KMAXJ + 12*KMAXG + KMAXJ + 4*dim));
+    double *work = (double *)malloc(sizeof(double) * (size_t)(12*KMAXJ + 12*KMAXG + KMAXJ + 4*dim + 3*grp->ngroups));
     rrtc_tree ta, tb;
     memset(&ta, 0, sizeof ta); memset(&tb, 0, sizeof tb);
     int status = 4;
@@ -213,6 +264,7 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
     if (!work) goto done;
     c.oMi = work; c.oMg = work + 12*KMAXJ; c.q = c.oMg + 12*KMAXG; c.x = c.q + KMAXJ;
     double *xr = c.x + dim, *target = xr + dim, *xnew = target + dim;
+    c.grp = grp; c.gc = xnew + dim;
     memcpy(c.q, base, sizeof(double) * (size_t)m->nq);
     rrtc_rng rng;
     unsigned long long sm = seed;
