@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from ..base import Deadline
     from ..validity import ConfigValidity
 
-__all__ = ["NativeRRTCResult", "load_rrtc_library", "native_rrt_connect", "broad_phase_valid"]
+__all__ = ["NativeRRTCResult", "load_rrtc_library", "native_rrt_connect", "broad_phase_valid", "prepare_native_search"]
 log = logging.getLogger(__name__)
 
 _LIB: list[Any] = []
@@ -108,6 +108,22 @@ def _broad_phase(kern: NativeKernel, override: int | None) -> BroadPhase:
     if got is None:
         got = per[override] = BroadPhase(kern, override)
     return got
+
+
+def prepare_native_search(checker: Any) -> bool:
+    """Build, ahead of the first query, what the native search of ``checker`` (a
+    :class:`~optplan.planners.validity.ValidityChecker`) builds at its first use: the compiled library and
+    the broad phase of its kernel (a per-scene set-up, like the checker itself). False when the checker has
+    no native backend or the library cannot be built."""
+    nat = getattr(checker, "_native", None)
+    if nat is None:
+        return False
+    try:
+        load_rrtc_library()
+    except KernelUnavailable:
+        return False
+    _broad_phase(nat.kernel, nat.fixed_id)
+    return True
 
 
 def broad_phase_valid(validity: Any, Q: np.ndarray) -> np.ndarray:
