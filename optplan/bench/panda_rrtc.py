@@ -101,10 +101,10 @@ def load_single_panda(spheres_urdf: str | Path | None = None) -> Any:
     disabled = srdf_disabled_pairs(share)
     objs = robot.collision_model.geometryObjects
 
-    def link(g: int) -> str:
+    def link_of(g: int) -> str:
         return str(robot.model.frames[objs[g].parentFrame].name)
 
-    keep = [(a, b) for a, b in robot.collision_pairs if frozenset((link(a), link(b))) not in disabled]
+    keep = [(a, b) for a, b in robot.collision_pairs if frozenset((link_of(a), link_of(b))) not in disabled]
     robot.collision_pairs = keep
     robot.collision_model.removeAllCollisionPairs()
     for a, b in keep:
@@ -124,7 +124,7 @@ def panda_query(kind: str, rng: np.random.Generator, variation: float = 0.01) ->
     elif kind == "boxes":
         for k, (c, s) in enumerate(zip(BOX_CENTRES, BOX_SIZES)):
             p = c + rng.uniform(-2 * variation, 2 * variation, 3)
-            obs.append(Obstacle(f"box{k}", "box", pin.SE3(np.eye(3), p), size=tuple(float(v) for v in s)))
+            obs.append(Obstacle(f"box{k}", "box", pin.SE3(np.eye(3), p), size=(float(s[0]), float(s[1]), float(s[2]))))
     else:
         raise ValueError(f"panda_query: kind must be 'cage' or 'boxes', got {kind!r}")
     return Scene(name=f"panda_{kind}", robot=None, obstacles=tuple(obs))

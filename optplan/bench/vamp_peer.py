@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     if vamp is None:
         print("vamp is not importable here (pip install vamp-planner; its build fetches from GitHub): nothing to pair")
         return 0
-    from ..example_robots import example_robots_available
+    from ..model.example_robots import example_robots_available
 
     if not example_robots_available():
         print("example-robot-data is not installed (pip install 'optplan[robots]'): nothing to pair")
