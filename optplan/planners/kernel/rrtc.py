@@ -217,13 +217,9 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
     the deadline only). ``validity`` must be a :class:`~optplan.planners.validity.ConfigValidity` of a
     checker with the native backend, else None is returned (as when the library cannot be built).
     One 64-bit seed is drawn from ``rng``. The checker's ``n_checks`` grows by the configurations checked."""
-    from ..validity import ConfigValidity
-
-    if not isinstance(validity, ConfigValidity):
-        return None
-    ck = validity.checker
+    ck: Any = getattr(validity, "checker", None)   # a ConfigValidity (duck-typed: this layer does not import validity)
     nat = getattr(ck, "_native", None)
-    if nat is None:
+    if nat is None or not all(hasattr(validity, a) for a in ("mode", "object_pose", "base", "joints")):
         return None
     try:
         lib = load_rrtc_library()
