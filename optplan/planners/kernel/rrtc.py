@@ -91,9 +91,17 @@ class BroadPhase:
         perm = np.lexsort((hi, lo)).astype(np.int32)
         keys = lo[perm] * (len(kinds) + 1) + hi[perm]
         starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]) if len(perm) else np.zeros(0, np.int64)
-        self.arrays = (np.array(kinds, np.int32), np.array(refs, np.int32), np.ascontiguousarray(centers, float),
-                       np.array(radii, float), np.r_[starts, len(perm)].astype(np.int32),
-                       lo[perm][starts].astype(np.int32), hi[perm][starts].astype(np.int32), perm)
+        ends = np.r_[starts[1:], len(perm)].astype(np.int64)
+        # the blocks with a geometry on no joint (the obstacles) first: in clutter they hold most contacts
+        kind = np.array(kinds, np.int32)
+        bl, bh = lo[perm][starts], hi[perm][starts]
+        order = np.argsort((kind[bl] != 0) & (kind[bh] != 0), kind="stable")
+        perm = np.concatenate([perm[a:b] for a, b in zip(starts[order], ends[order])]).astype(np.int32) \
+            if len(perm) else perm
+        sizes = (ends - starts)[order]
+        bstart = np.r_[0, np.cumsum(sizes)].astype(np.int32)
+        self.arrays = (kind, np.array(refs, np.int32), np.ascontiguousarray(centers, float), np.array(radii, float),
+                       bstart, bl[order].astype(np.int32), bh[order].astype(np.int32), perm)
         self.n_groups, self.n_blocks = len(kinds), len(starts)
         self.struct = _Groups(self.n_groups, self.n_blocks, *(x.ctypes.data for x in self.arrays))
         self.pointer = ctypes.addressof(self.struct)
