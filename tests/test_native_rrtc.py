@@ -35,15 +35,17 @@ def _coal_valid_path(robot, scene, P, mode="free", pose=None, base=None, joints=
     return bool(f(P[0])) and all(edge_is_valid(a, b, f, FINE) for a, b in zip(P[:-1], P[1:]))
 
 
-@pytest.mark.parametrize("scene_name", ["hard_bay", "hard_clutter_dense"])
-def test_native_paths_are_valid_by_coal(tcb, scene_name):
+@pytest.mark.parametrize("scene_name,native", [("hard_bay", True), ("hard_clutter_dense", True),
+                                               ("hard_clutter_dense", False)])
+def test_paths_are_valid_by_coal(tcb, scene_name, native):
+    """Both searches' paths (after their shortcuts) re-checked by coal, exactly, at 0.004 rad."""
     sc = Scene.load(scene_name)
     tr = TrialGenerator(tcb, sc).generate(0, 0)
-    pl = make_planner("rrtconnect", tcb, sc, max_iterations=3000)
+    pl = make_planner("rrtconnect", tcb, sc, max_iterations=3000, native_search=native)
     _native_or_skip(pl.checker)
     for seed in range(3):
         res = pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=seed)
-        assert res.status.value == "exact" and res.stats["search"] == "native"
+        assert res.status.value == "exact" and res.stats["search"] == ("native" if native else "python")
         assert np.allclose(res.path[0], tr.q_start) and np.allclose(res.path[-1], tr.q_goal)
         assert np.all(res.path >= tcb.lower - 1e-12) and np.all(res.path <= tcb.upper + 1e-12)
         assert _coal_valid_path(tcb, sc, res.path)
