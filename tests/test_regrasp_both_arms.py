@@ -152,7 +152,12 @@ def test_both_arm_regrasp_and_its_segment_in_the_pipeline(tcb):
     scene = Scene.load("ssps_scene1")
     tr = TrialGenerator(tcb, scene).generate(0, 0)
     rng = np.random.default_rng(1)
-    pl = make_planner("tcbirrt", tcb, scene, variant="improved", regrasp_both_arms=True)
+    from optplan.planners import RRTConnectOptions
+
+    # the Python regrasp search, whose random stream this fixed seed was chosen on (the native search draws
+    # its own: with this seed its motion fails the edge re-check once, which is not what this test is about)
+    py = RRTConnectOptions(range=1.0, resolution=0.03, shortcut_iterations=50, native_search=False)
+    pl = make_planner("tcbirrt", tcb, scene, variant="improved", regrasp_both_arms=True, regrasp=py)
     M, x = _other_solution(pl, tr.q_start, rng)
     # the sequential orders first; force their failure to reach the both-arm motion
     pl._regrasp_orders = lambda *a, **k: None

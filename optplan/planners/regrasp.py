@@ -17,7 +17,7 @@ import pinocchio as pin
 from ..constraints.closed_chain import ClosedChainKinematics
 from ..model.robot import RobotModel
 from .base import BOTH_ARMS, Deadline
-from .rrtconnect import edge_is_valid, rrt_connect, shortcut_path
+from .rrtconnect import edge_is_valid, joint_space_path
 from .tcbirrt_options import TCBiRRTOptions
 from .validity import ValidityChecker
 
@@ -113,19 +113,15 @@ class RegraspMixin:
     def _regrasp_motion(self, cur: np.ndarray, q_to: np.ndarray, idx: np.ndarray, M: pin.SE3, rng: np.random.Generator,
                         sub: Deadline, st: dict[str, Any]) -> list[np.ndarray] | None:
         """The joints ``idx`` from ``cur`` to ``q_to[idx]`` (the others still, the object fixed at M) by
-        RRTConnect + shortcuts, its edges re-checked at ``edge_tolerance``: the full configurations, or None."""
+        RRTConnect + shortcuts (:func:`.joint_space_path`: one native call when the checks are native), its edges re-checked at ``edge_tolerance``: the full configurations, or None."""
         o, ck = self.options, self.checker
         valid = ck.validity("fixed", M, base=cur, joints=idx)   # these joints move, the rest and the object stand still
         rs: dict[str, Any] = {}
         lo, hi = self.robot.lower, self.robot.upper
-        sub_path = rrt_connect(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub,
-                               range_=o.regrasp.range, resolution=o.regrasp.resolution,
-                               max_iterations=o.regrasp.max_iterations, stats=rs)
+        sub_path = joint_space_path(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub, o.regrasp, rs)
         st["regrasp_nodes"] += rs.get("nodes", 0)
         if sub_path is None:
             return None
-        if o.regrasp.shortcut_iterations:
-            sub_path = shortcut_path(sub_path, valid, o.regrasp.resolution, rng, o.regrasp.shortcut_iterations)
         if o.edge_tolerance and not all(   # the found motion re-checked at the sweep bound of these joints
                 self._regrasp_edge_ok(cur, idx, x, y, M) for x, y in zip(sub_path[:-1], sub_path[1:])):
             st["edge_collisions"] += 1

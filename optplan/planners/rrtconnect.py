@@ -23,7 +23,7 @@ from .validity import ValidityChecker, _bisection_fractions, _bisection_order
 if TYPE_CHECKING:
     from ..scene import Scene
 
-__all__ = ["RRTConnectOptions", "RRTConnect", "rrt_connect", "shortcut_path", "edge_is_valid"]
+__all__ = ["RRTConnectOptions", "RRTConnect", "rrt_connect", "shortcut_path", "edge_is_valid", "joint_space_path"]
 log = logging.getLogger(__name__)
 
 TRAPPED, ADVANCED, REACHED = 0, 1, 2
@@ -46,6 +46,10 @@ class RRTConnectOptions:
     #: Backend of the boolean collision checks: ``"native"`` (the compiled planning kernel,
     #: :mod:`optplan.planners.kernel`; coal when it cannot be built) or ``"coal"`` (Pinocchio + coal).
     validity_kernel: str = "native"
+    #: Run the whole query (sampling, nearest neighbour, extensions, edge checks, shortcuts) as one call
+    #: of the compiled kernel when the checks are native (:mod:`optplan.planners.kernel.rrtc`); its random
+    #: stream is its own, seeded from the planner's generator. False, or a coal checker: the Python search.
+    native_search: bool = True
 
     def __post_init__(self) -> None:
         for name in ("range", "resolution"):
@@ -58,6 +62,8 @@ class RRTConnectOptions:
                 raise ValueError(f"RRTConnectOptions.{name}: expected an int >= 0, got {v!r}")
         if not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin) and self.margin >= 0):
             raise ValueError(f"RRTConnectOptions.margin: expected a number >= 0 m, got {self.margin!r}")
+        if not isinstance(self.native_search, bool):
+            raise ValueError(f"RRTConnectOptions.native_search: expected True or False, got {self.native_search!r}")
         if self.validity_kernel not in ("native", "coal"):
             raise ValueError(f"RRTConnectOptions.validity_kernel: expected 'native' or 'coal', got {self.validity_kernel!r}")
 
@@ -161,6 +167,40 @@ def shortcut_path(path: list[np.ndarray], is_valid: Callable[[np.ndarray], bool]
     return path
 
 
+def joint_space_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                     validity: Callable[[np.ndarray], bool], rng: np.random.Generator, deadline: Deadline,
+                     options: RRTConnectOptions, stats: dict[str, Any] | None = None) -> list[np.ndarray] | None:
+    """RRT-Connect from ``start`` to ``goal`` in the box ``[lower, upper]`` with ``options`` (range,
+    resolution, iteration cap) and then ``options.shortcut_iterations`` shortcuts: the path or None.
+
+    With ``options.native_search`` and a ``validity`` of a checker on the native kernel
+    (:meth:`ValidityChecker.validity`) the whole query is one native call
+    (:func:`optplan.planners.kernel.rrtc.native_rrt_connect`); else :func:`rrt_connect` and
+    :func:`shortcut_path`. ``stats`` receives ``iterations``, ``nodes`` (added) and ``search``
+    (``"native"`` or ``"python"``)."""
+    stats = stats if stats is not None else {}
+    o = options
+    if o.native_search:
+        from .kernel.rrtc import native_rrt_connect
+
+        got = native_rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range,
+                                 resolution=o.resolution, max_iterations=o.max_iterations,
+                                 shortcut_iterations=o.shortcut_iterations)
+        if got is not None:
+            stats["search"] = "native"
+            stats["iterations"] = stats.get("iterations", 0) + got.iterations
+            stats["nodes"] = stats.get("nodes", 0) + got.nodes
+            if got.status not in ("found", "iteration cap", "time limit"):
+                log.warning("native RRT-Connect stopped: %s", got.status)
+            return got.path
+    stats["search"] = "python"
+    path = rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range, resolution=o.resolution,
+                       max_iterations=o.max_iterations, stats=stats)
+    if path is not None and o.shortcut_iterations:
+        path = shortcut_path(path, validity, o.resolution, rng, o.shortcut_iterations)
+    return path
+
+
 class RRTConnect(Planner):
     """RRTConnect in the full joint space, without the held object (self-collision and obstacles).
 
@@ -189,13 +229,11 @@ class RRTConnect(Planner):
             return self.empty_result(PlanStatus.INVALID_GOAL, "goal out of limits or in collision")
         stats: dict[str, Any] = {}
         c0 = ck.n_checks
-        path = rrt_connect(q_start, q_goal, self.robot.lower, self.robot.upper, valid, rng, deadline,
-                           range_=o.range, resolution=o.resolution, max_iterations=o.max_iterations, stats=stats)
+        path = joint_space_path(q_start, q_goal, self.robot.lower, self.robot.upper, ck.validity("free"), rng, deadline,
+                                o, stats)
         if path is None:
             st = PlanStatus.TIMEOUT if deadline.expired() else PlanStatus.FAILED
             return self.empty_result(st, "no path", **stats, collision_checks=ck.n_checks - c0)
-        if o.shortcut_iterations:
-            path = shortcut_path(path, valid, o.resolution, rng, o.shortcut_iterations)
         P = np.array(path)
         stats["collision_checks"] = ck.n_checks - c0
         return PlanResult(PlanStatus.EXACT, self.name, P, [None] * len(P), np.zeros(len(P), bool),

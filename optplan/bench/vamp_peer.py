@@ -1,0 +1,142 @@
+"""optplan's RRT-Connect paired against VAMP's (vector-accelerated motion planning, Kavraki Lab) on the
+single-Panda queries of :mod:`optplan.bench.panda_rrtc`. Optional: needs the ``vamp`` module (PyPI
+``vamp-planner``; its sdist fetches its C++ dependencies from GitHub at build time) and
+``example-robot-data``; without them it says so and exits with status 0.
+
+The setup, per query (the two planners alternate which goes first):
+
+* the same obstacles (spheres as spheres; boxes as VAMP cuboids of the same centre and half edges),
+  the same start and goal, the same joint limits as the sampling box, the same ``range`` (largest
+  extension [rad]);
+* VAMP's RRT-Connect with ``dynamic_domain`` and ``balance`` off (optplan's RRT-Connect has neither;
+  ``--vamp-defaults`` keeps VAMP's own), its Halton sampler, no simplification; optplan's
+  :class:`~optplan.planners.rrtconnect.RRTConnect` with the native search, no shortcuts;
+* NOT the same robot model: VAMP's Panda is a set of spheres, optplan's the vendor's capsules; nor the
+  same edge checks: VAMP checks an edge at 32 points per unit of joint-space distance, optplan at every
+  ``resolution`` rad of the largest joint change. How many of VAMP's paths optplan's model (coal,
+  exact, at 0.01 rad) accepts is reported.
+
+Times are CPU seconds of this process around each call (``time.process_time``); VAMP's own
+``nanoseconds`` (wall, inside the call) are reported beside them.
+
+``python -m optplan.bench.vamp_peer --queries 25``
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import statistics
+import time
+from typing import Any
+
+import numpy as np
+
+from .panda_rrtc import GOAL, START, queries, run_optplan
+
+__all__ = ["vamp_available", "vamp_environment", "run_vamp", "main"]
+
+
+def vamp_available() -> Any:
+    """The ``vamp`` module, or None when it cannot be imported."""
+    try:
+        return importlib.import_module("vamp")
+    except ImportError:
+        return None
+
+
+def vamp_environment(vamp: Any, scene: Any) -> Any:
+    """The scene's spheres and boxes as a ``vamp.Environment``."""
+    env = vamp.Environment()
+    for o in scene.obstacles:
+        p = [float(v) for v in o.placement.translation]
+        if o.shape == "sphere":
+            env.add_sphere(vamp.Sphere(p, float(o.radius)))
+        elif o.shape == "box":
+            R = o.placement.rotation
+            if not np.allclose(R, np.eye(3)):
+                raise ValueError(f"vamp_environment: box {o.name!r} is rotated; only axis-aligned boxes are mapped")
+            env.add_cuboid(vamp.Cuboid(p, [0.0, 0.0, 0.0], [float(v) / 2 for v in o.size]))
+        else:
+            raise ValueError(f"vamp_environment: obstacle {o.name!r} is a {o.shape}; spheres and boxes are mapped")
+    return env
+
+
+def run_vamp(vamp: Any, env: Any, *, range_: float, vamp_defaults: bool = False) -> dict[str, Any]:
+    """One VAMP RRT-Connect query from START to GOAL: CPU seconds around the call, VAMP's own time,
+    iterations, solved and path."""
+    planner = vamp.panda.rrtc
+    settings = vamp.RRTCSettings()
+    settings.range = float(range_)
+    if not vamp_defaults:
+        settings.dynamic_domain = False
+        settings.balance = False
+    sampler = vamp.panda.halton()
+    c0 = time.process_time()
+    res = planner(list(START), list(GOAL), env, settings, sampler)
+    cpu = time.process_time() - c0
+    solved = bool(res.solved)
+    path = np.asarray(res.path.numpy(), dtype=float) if solved else None   # (a Path object cannot be iterated)
+    return {"cpu_s": cpu, "own_s": float(res.nanoseconds) * 1e-9, "iterations": int(res.iterations),
+            "status": "exact" if solved else "failed", "path": path}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m optplan.bench.vamp_peer", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenes", default="cage,boxes", help="comma-separated: cage, boxes")
+    ap.add_argument("--queries", type=int, default=25, help="queries per scene")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the scene perturbations and of optplan's planner")
+    ap.add_argument("--range", type=float, default=1.0, help="largest extension of both planners [rad]")
+    ap.add_argument("--resolution", type=float, default=0.03, help="optplan's edge check step [rad]")
+    ap.add_argument("--vamp-defaults", action="store_true", help="keep VAMP's dynamic domain and tree balancing")
+    ap.add_argument("--spheres-urdf", default=None,
+                    help="plan with this Panda URDF's collision spheres instead of the vendor's capsules, e.g. VAMP's "
+                         "resources/panda/panda_spherized.urdf (the robot VAMP checks)")
+    args = ap.parse_args(argv)
+    vamp = vamp_available()
+    if vamp is None:
+        print("vamp is not importable here (pip install vamp-planner; its build fetches from GitHub): nothing to pair")
+        return 0
+    from ..model.example_robots import example_robots_available
+
+    if not example_robots_available():
+        print("example-robot-data is not installed (pip install 'optplan[robots]'): nothing to pair")
+        return 0
+    from ..planners.rrtconnect import edge_is_valid
+    from ..planners.validity import ValidityChecker
+    from .panda_rrtc import load_single_panda
+
+    robot = load_single_panda(args.spheres_urdf)
+    for kind in args.scenes.split(","):
+        rows: dict[str, list[dict[str, Any]]] = {"vamp": [], "optplan": []}
+        accepted = 0
+        for k, (sc, ck) in enumerate(queries(robot, kind, args.queries, args.seed)):
+            env = vamp_environment(vamp, sc)
+            if not (vamp.panda.validate(list(START), env) and vamp.panda.validate(list(GOAL), env)):
+                continue
+            for name in (("vamp", "optplan") if k % 2 == 0 else ("optplan", "vamp")):
+                if name == "vamp":
+                    rows[name].append(run_vamp(vamp, env, range_=args.range, vamp_defaults=args.vamp_defaults))
+                else:
+                    rows[name].append(run_optplan(robot, sc, ck, args.seed + k, native=True, range_=args.range,
+                                                  resolution=args.resolution))
+            P = rows["vamp"][-1]["path"]
+            if P is not None:
+                f = ValidityChecker(robot, sc, kernel="coal").validity("free")
+                accepted += bool(f(P[0])) and all(edge_is_valid(a, b, f, 0.01) for a, b in zip(P[:-1], P[1:]))
+        med = {}
+        for name, rs in rows.items():
+            ok = [r for r in rs if r["status"] == "exact"]
+            med[name] = statistics.median(r["cpu_s"] for r in rs) * 1e3 if rs else float("nan")
+            per_it = [r["cpu_s"] / r["iterations"] * 1e6 for r in ok if r["iterations"] > 0]
+            extra = (f", VAMP's own median {statistics.median(r['own_s'] for r in rs) * 1e3:.3f} ms"
+                     if name == "vamp" and rs else "")
+            print(f"{kind:6s} {name:8s} {len(ok)}/{len(rs)} solved, median {med[name]:.3f} ms CPU per query, "
+                  f"{statistics.median(per_it) if per_it else float('nan'):.2f} us per iteration, median "
+                  f"{statistics.median(r['iterations'] for r in rs) if rs else float('nan'):.0f} iterations{extra}")
+        print(f"{kind:6s} optplan / vamp: {med['optplan'] / med['vamp']:.1f}x per query; "
+              f"VAMP paths valid in optplan's model: {accepted}/{len(rows['vamp'])}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

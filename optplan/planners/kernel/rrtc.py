@@ -1,0 +1,282 @@
+"""RRT-Connect as one native call: the search of :func:`optplan.planners.rrtconnect.rrt_connect` and
+the shortcuts of :func:`~optplan.planners.rrtconnect.shortcut_path` in C (:mod:`.rrtc_csource`), on the
+planning kernel's forward kinematics and exact primitive tests.
+
+:func:`native_rrt_connect` runs one query for a validity function of a
+:class:`~optplan.planners.validity.ValidityChecker` whose backend is the native kernel; it returns
+None when that is not the case (the caller then runs the Python search). The random stream is the
+kernel's own (xoshiro256**), seeded once per query by a 64-bit integer drawn from the caller's NumPy
+Generator: the same Generator state gives the same search, but not the Python search's.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import logging
+import tempfile
+import time
+import weakref
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...codegen import build_library, cache_dir
+from .csource import C_SOURCE
+from .native import KernelUnavailable, NativeKernel
+from .rrtc_csource import RRTC_SOURCE, RRTC_STATUS
+
+if TYPE_CHECKING:
+    from ..base import Deadline
+    from ..validity import ConfigValidity
+
+__all__ = ["NativeRRTCResult", "load_rrtc_library", "native_rrt_connect", "broad_phase_valid", "prepare_native_search"]
+log = logging.getLogger(__name__)
+
+_LIB: list[Any] = []
+_FAILED: list[str] = []
+_P = ctypes.c_void_p
+#: nodes of both trees at which a native query stops (status ``"node cap"``) [count]
+MAX_NODES = 2_000_000
+
+
+class _Groups(ctypes.Structure):
+    _fields_ = [("ngroups", ctypes.c_int), ("nblocks", ctypes.c_int), ("gkind", _P), ("gref", _P), ("gcenter", _P),
+                ("gradius", _P), ("bstart", _P), ("bga", _P), ("bgb", _P), ("perm", _P)]
+
+
+class BroadPhase:
+    """The broad phase of the native search's checks for one :class:`~.native.NativeKernel`: the
+    geometries of each joint form a group bounded by one sphere (centre in the joint frame, radius [m]);
+    a geometry on no joint, and ``override`` (the still object, placed per query), is a group on its own
+    (its bounding sphere); the kernel's pairs are sorted into blocks by their two groups, and a block is
+    skipped when the two groups' spheres are apart. The verdicts are the kernel's."""
+
+    def __init__(self, kern: NativeKernel, override: int | None) -> None:
+        jparent, jtype, jidx, jplace, jaxis, gparent, gtype, gplace, gparam, grad, pa, pb = kern._arrays
+        ng = kern.ng
+        group = np.empty(ng, np.int64)
+        kinds: list[int] = []
+        refs: list[int] = []
+        centers: list[np.ndarray] = []
+        radii: list[float] = []
+        joint_group: dict[int, int] = {}
+        members: dict[int, list[int]] = {}
+        for g in range(ng):
+            j = int(gparent[g])
+            if j == 0 or g == override:
+                group[g] = len(kinds)
+                kinds.append(0)
+                refs.append(g)
+                centers.append(np.zeros(3))
+                radii.append(float(grad[g]))
+            else:
+                if j not in joint_group:
+                    joint_group[j] = len(kinds)
+                    kinds.append(1)
+                    refs.append(j)
+                    centers.append(np.zeros(3))
+                    radii.append(0.0)
+                group[g] = joint_group[j]
+                members.setdefault(j, []).append(g)
+        for j, gs in members.items():   # the sphere around the members' bounding spheres
+            t = gplace[gs, 9:12]
+            c = t.mean(axis=0)
+            i = joint_group[j]
+            centers[i] = c
+            radii[i] = float(np.max(np.linalg.norm(t - c, axis=1) + grad[gs])) * (1 + 1e-12) + 1e-12
+        a = group[np.asarray(pa, np.int64)] if len(pa) else np.zeros(0, np.int64)
+        b = group[np.asarray(pb, np.int64)] if len(pb) else np.zeros(0, np.int64)
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        perm = np.lexsort((hi, lo)).astype(np.int32)
+        keys = lo[perm] * (len(kinds) + 1) + hi[perm]
+        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]) if len(perm) else np.zeros(0, np.int64)
+        ends = np.r_[starts[1:], len(perm)].astype(np.int64)
+        # the blocks with a geometry on no joint (the obstacles) first: in clutter they hold most contacts
+        kind = np.array(kinds, np.int32)
+        bl, bh = lo[perm][starts], hi[perm][starts]
+        order = np.argsort((kind[bl] != 0) & (kind[bh] != 0), kind="stable")
+        perm = np.concatenate([perm[a:b] for a, b in zip(starts[order], ends[order])]).astype(np.int32) \
+            if len(perm) else perm
+        sizes = (ends - starts)[order]
+        bstart = np.r_[0, np.cumsum(sizes)].astype(np.int32)
+        self.arrays = (kind, np.array(refs, np.int32), np.ascontiguousarray(centers, float), np.array(radii, float),
+                       bstart, bl[order].astype(np.int32), bh[order].astype(np.int32), perm)
+        self.n_groups, self.n_blocks = len(kinds), len(starts)
+        self.struct = _Groups(self.n_groups, self.n_blocks, *(x.ctypes.data for x in self.arrays))
+        self.pointer = ctypes.addressof(self.struct)
+
+
+_BROAD: weakref.WeakKeyDictionary[NativeKernel, dict[int | None, BroadPhase]] = weakref.WeakKeyDictionary()
+
+
+def _broad_phase(kern: NativeKernel, override: int | None) -> BroadPhase:
+    per = _BROAD.setdefault(kern, {})
+    got = per.get(override)
+    if got is None:
+        got = per[override] = BroadPhase(kern, override)
+    return got
+
+
+def prepare_native_search(checker: Any) -> bool:
+    """Build, ahead of the first query, what the native search of ``checker`` (a
+    :class:`~optplan.planners.validity.ValidityChecker`) builds at its first use: the compiled library and
+    the broad phase of its kernel (a per-scene set-up, like the checker itself). False when the checker has
+    no native backend or the library cannot be built."""
+    nat = getattr(checker, "_native", None)
+    if nat is None:
+        return False
+    try:
+        load_rrtc_library()
+    except KernelUnavailable:
+        return False
+    _broad_phase(nat.kernel, nat.fixed_id)
+    return True
+
+
+def broad_phase_valid(validity: Any, Q: np.ndarray) -> np.ndarray:
+    """The native search's own check (broad phase, then the kernel's pair tests) of every row of ``Q``
+    (full configurations) in the mode of ``validity`` (a :class:`~optplan.planners.validity.ConfigValidity`
+    on the native kernel): booleans, for tests against the kernel's and coal's verdicts."""
+    lib = load_rrtc_library()
+    nat = validity.checker._native
+    mode, pose = _mode(validity)
+    kern = nat.kernel
+    g = kern._override(nat._override(mode, pose))
+    bp = _broad_phase(kern, nat.fixed_id)
+    Q = np.ascontiguousarray(Q, dtype=float)
+    out = np.zeros(len(Q), np.uint8)
+    lib.rrtc_check_batch(kern._km_p, nat.masks[mode].ctypes.data, kern._pose_p, g, bp.pointer, len(Q), Q.ctypes.data,
+                         out.ctypes.data)
+    return out.astype(bool)
+
+
+def load_rrtc_library() -> Any:
+    """The compiled kernel with the RRT-Connect entry points (``ctypes.CDLL``), built at first use and
+    cached under :func:`optplan.codegen.cache_dir` by a hash of its source. Raises
+    :class:`~.native.KernelUnavailable` when it cannot be built."""
+    if _LIB:
+        return _LIB[0]
+    if _FAILED:
+        raise KernelUnavailable(_FAILED[0])
+    source = C_SOURCE + RRTC_SOURCE
+    digest = hashlib.sha1(source.encode()).hexdigest()[:16]
+    lib_path = cache_dir() / f"optplan_rrtc_kernel_{digest}.so"
+    lib = None
+    for attempt in range(2):
+        if not lib_path.exists():
+            with tempfile.TemporaryDirectory() as tmp:
+                c_file = Path(tmp, "rrtc_kernel.c")
+                c_file.write_text(source)
+                err = build_library(c_file, lib_path, "-O3")
+            if err is not None:
+                _FAILED.append(f"the native RRT-Connect could not be compiled: {err}")
+                raise KernelUnavailable(_FAILED[0])
+        try:
+            lib = ctypes.CDLL(str(lib_path))
+            break
+        except OSError as e:   # a damaged cache file: rebuilt once
+            if attempt:
+                raise KernelUnavailable(f"the native RRT-Connect library {lib_path} cannot be loaded: {e}") from None
+            log.warning("the cached RRT-Connect kernel %s cannot be loaded (%s); rebuilding it", lib_path, e)
+            lib_path.unlink(missing_ok=True)
+    assert lib is not None
+    lib.rrtc_plan.restype = ctypes.c_int
+    lib.rrtc_plan.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_int, _P, _P, _P, _P, _P, _P, ctypes.c_double,
+                              ctypes.c_double, ctypes.c_longlong, ctypes.c_longlong, ctypes.c_int, ctypes.c_int,
+                              ctypes.c_double, ctypes.c_ulonglong, ctypes.POINTER(ctypes.POINTER(ctypes.c_double)),
+                              ctypes.POINTER(ctypes.c_int), _P]
+    lib.rrtc_check_batch.restype = None
+    lib.rrtc_check_batch.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_longlong, _P, _P]
+    lib.rrtc_free.restype = None
+    lib.rrtc_free.argtypes = [_P]
+    _LIB.append(lib)
+    return lib
+
+
+class NativeRRTCResult:
+    """One native query: ``status`` (``"found"``, ``"iteration cap"``, ``"time limit"``, ``"node cap"``,
+    ``"out of memory"``), ``path`` (list of configurations of the searched joints, start to goal, after
+    the shortcuts; None unless found), ``iterations``, ``nodes`` (both trees) and ``checks``
+    (configurations checked) [counts]."""
+
+    __slots__ = ("status", "path", "iterations", "nodes", "checks")
+
+    def __init__(self, status: str, path: list[np.ndarray] | None, iterations: int, nodes: int, checks: int) -> None:
+        self.status, self.path, self.iterations, self.nodes, self.checks = status, path, iterations, nodes, checks
+
+
+def _clock(deadline: Deadline) -> tuple[int, float]:
+    """(0 CLOCK_MONOTONIC / 1 CLOCK_PROCESS_CPUTIME_ID, the deadline's end on that clock [s])."""
+    if deadline.clock is time.perf_counter:
+        return 0, float(deadline.end)
+    if deadline.clock is time.process_time:
+        return 1, float(deadline.end)
+    return 0, time.perf_counter() + float(deadline.remaining())
+
+
+def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                       validity: Any, rng: np.random.Generator, deadline: Deadline, *, range_: float,
+                       resolution: float, max_iterations: int = 0,
+                       shortcut_iterations: int = 0) -> NativeRRTCResult | None:
+    """RRT-Connect from ``start`` to ``goal`` in the box ``[lower, upper]`` and ``shortcut_iterations``
+    random shortcuts, in one native call; ``range_`` [rad] is the largest extension, ``resolution`` [rad]
+    the largest joint change between two checks of an edge, ``max_iterations`` the cap on samples (0:
+    the deadline only). ``validity`` must be a :class:`~optplan.planners.validity.ConfigValidity` of a
+    checker with the native backend, else None is returned (as when the library cannot be built).
+    One 64-bit seed is drawn from ``rng``. The checker's ``n_checks`` grows by the configurations checked."""
+    ck: Any = getattr(validity, "checker", None)   # a ConfigValidity (duck-typed: this layer does not import validity)
+    nat = getattr(ck, "_native", None)
+    if nat is None or not all(hasattr(validity, a) for a in ("mode", "object_pose", "base", "joints")):
+        return None
+    try:
+        lib = load_rrtc_library()
+    except KernelUnavailable as e:
+        log.debug("native RRT-Connect unavailable (%s): the Python search runs", e)
+        return None
+    mode, pose = _mode(validity)
+    nq = int(ck.model.nq)
+    if validity.base is None:
+        base = np.zeros(nq)
+        jidx = np.arange(nq, dtype=np.int32)
+    else:
+        base = np.ascontiguousarray(validity.base, dtype=float)
+        jidx = np.ascontiguousarray(validity.joints, dtype=np.int32)
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (start, goal, lower, upper)]
+    dim = int(jidx.size)
+    if any(a.shape != (dim,) for a in arrays):
+        raise ValueError(f"native_rrt_connect: start, goal, lower and upper must have {dim} values, got shapes "
+                         f"{[a.shape for a in arrays]}")
+    kern = nat.kernel
+    g = kern._override(nat._override(mode, pose))
+    mask = nat.masks[mode]
+    clock_kind, end = _clock(deadline)
+    seed = int(rng.integers(0, 2**63))
+    out = ctypes.POINTER(ctypes.c_double)()
+    n_out = ctypes.c_int(0)
+    stats = np.zeros(3, np.int64)
+    bp = _broad_phase(kern, nat.fixed_id)
+    code = lib.rrtc_plan(kern._km_p, mask.ctypes.data, kern._pose_p, g, bp.pointer, dim, jidx.ctypes.data, base.ctypes.data,
+                         *(a.ctypes.data for a in arrays), float(range_), float(resolution), int(max_iterations),
+                         MAX_NODES, int(shortcut_iterations), clock_kind, end, seed, ctypes.byref(out),
+                         ctypes.byref(n_out), stats.ctypes.data)
+    ck.n_checks += int(stats[2])
+    if code == -2:
+        return None
+    path = None
+    if code == 0:
+        try:
+            P = np.ctypeslib.as_array(out, shape=(n_out.value, dim)).copy()
+        finally:
+            lib.rrtc_free(out)
+        path = list(P)
+    return NativeRRTCResult(RRTC_STATUS.get(code, f"status {code}"), path, int(stats[0]), int(stats[1]), int(stats[2]))
+
+
+def _mode(validity: ConfigValidity) -> tuple[str, Any]:
+    """The checker mode and still-object pose a validity function's checks use (as
+    :meth:`~optplan.planners.validity.ValidityChecker.first_invalid` resolves them)."""
+    ck, mode, pose = validity.checker, validity.mode, validity.object_pose
+    if ck.object is None and mode in ("held", "fixed"):
+        return "free", None
+    return mode, (pose if mode == "fixed" else None)

@@ -1,0 +1,352 @@
+"""The C source of the native RRT-Connect (:mod:`optplan.planners.kernel.rrtc`).
+
+It is appended to the planning kernel's source (:data:`~optplan.planners.kernel.csource.C_SOURCE`:
+forward kinematics and the exact primitive tests) and compiled with it into one library, so that a
+whole query — sampling, nearest neighbour, extensions, connections, edge checks, path extraction and
+shortcuts — is one native call.
+
+What it computes (the algorithm of :func:`optplan.planners.rrtconnect.rrt_connect` and
+:func:`~optplan.planners.rrtconnect.shortcut_path`, edges checked as
+:func:`~optplan.planners.rrtconnect.edge_is_valid` without weights):
+
+* the search space is ``dim`` joints (indices ``jidx`` into the configuration); the others stay at
+  ``base`` (one arm of a regrasp), or all joints (``dim = nq``);
+* samples are uniform in the box ``[lower, upper]`` from xoshiro256** (Blackman & Vigna) seeded by
+  splitmix64 from one 64-bit seed (the Python side draws it from the planner's NumPy Generator);
+* nearest neighbour is a linear scan over a contiguous node array (squared Euclidean distance);
+* a configuration check tries the pair that collided last first (the same verdict);
+* an edge a → b is checked at ``n = max(1, ceil(max_j |b_j - a_j| / resolution))`` steps: the end b
+  first, then the interior points ``a + (k/n)(b - a)`` in coarse-to-fine (bisection) order;
+* the time limit is an end time on ``CLOCK_MONOTONIC`` (Python's ``time.perf_counter``) or
+  ``CLOCK_PROCESS_CPUTIME_ID`` (``time.process_time``), read every 8 iterations / connection steps.
+"""
+from __future__ import annotations
+
+__all__ = ["RRTC_SOURCE", "RRTC_STATUS"]
+
+#: the status codes of ``rrtc_plan`` (its return value)
+RRTC_STATUS = {0: "found", 1: "iteration cap", 2: "time limit", 3: "node cap", 4: "out of memory",
+               -2: "model too large for the kernel"}
+
+RRTC_SOURCE = r"""
+#include <stdlib.h>
+#include <time.h>
+
+typedef struct { unsigned long long s[4]; } rrtc_rng;
+
+static unsigned long long rrtc_splitmix(unsigned long long *x) {
+    unsigned long long z = (*x += 0x9e3779b97f4a7c15ULL);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return z ^ (z >> 31);
+}
+static unsigned long long rrtc_rotl(unsigned long long x, int k) { return (x << k) | (x >> (64 - k)); }
+static unsigned long long rrtc_next(rrtc_rng *r) {   /* xoshiro256** */
+    unsigned long long *s = r->s, out = rrtc_rotl(s[1] * 5, 7) * 9, t = s[1] << 17;
+    s[2] ^= s[0]; s[3] ^= s[1]; s[1] ^= s[2]; s[0] ^= s[3]; s[2] ^= t; s[3] = rrtc_rotl(s[3], 45);
+    return out;
+}
+static double rrtc_uniform(rrtc_rng *r) { return (double)(rrtc_next(r) >> 11) * 0x1.0p-53; }
+
+typedef struct { int dim, n, cap; double *X; int *parent; } rrtc_tree;
+
+static int rrtc_tree_init(rrtc_tree *t, int dim, const double *root) {
+    t->dim = dim; t->n = 0; t->cap = 256;
+    t->X = (double *)malloc(sizeof(double) * (size_t)dim * (size_t)t->cap);
+    t->parent = (int *)malloc(sizeof(int) * (size_t)t->cap);
+    if (!t->X || !t->parent) return -1;
+    memcpy(t->X, root, sizeof(double) * (size_t)dim);
+    t->parent[0] = -1; t->n = 1;
+    return 0;
+}
+static void rrtc_tree_free(rrtc_tree *t) { free(t->X); free(t->parent); t->X = NULL; t->parent = NULL; }
+
+static int rrtc_tree_add(rrtc_tree *t, const double *x, int parent) {
+    if (t->n == t->cap) {
+        int cap = 2 * t->cap;
+        double *X = (double *)realloc(t->X, sizeof(double) * (size_t)t->dim * (size_t)cap);
+        if (!X) return -1;
+        t->X = X;
+        int *P = (int *)realloc(t->parent, sizeof(int) * (size_t)cap);
+        if (!P) return -1;
+        t->parent = P; t->cap = cap;
+    }
+    memcpy(t->X + (size_t)t->dim * t->n, x, sizeof(double) * (size_t)t->dim);
+    t->parent[t->n] = parent;
+    return t->n++;
+}
+
+static int rrtc_nearest(const rrtc_tree *t, const double *x) {
+    int best = 0, dim = t->dim;
+    double bd = INFINITY;
+    for (int i = 0; i < t->n; ++i) {
+        const double *y = t->X + (size_t)dim * i;
+        double s = 0.0;
+        for (int k = 0; k < dim; ++k) { double d = y[k] - x[k]; s += d*d; }
+        if (s < bd) { bd = s; best = i; }
+    }
+    return best;
+}
+
+/* the broad phase: the pairs sorted into blocks by the groups of their two geometries (a group is the
+   geometries of one joint, or one geometry on its own), each group bounded by one sphere; a block is
+   skipped when its two spheres are farther apart than their radii and the margin */
+typedef struct {
+    int ngroups, nblocks;
+    const int *gkind;        /* ngroups: 0 one geometry (its pose's origin), 1 the geometries of a joint */
+    const int *gref;         /* ngroups: the geometry (kind 0) or the joint (kind 1) */
+    const double *gcenter;   /* ngroups x 3: the centre in the joint frame (kind 1) */
+    const double *gradius;   /* ngroups: the radius [m] */
+    const int *bstart;       /* nblocks + 1: the block's range in perm */
+    const int *bga, *bgb;    /* nblocks: the block's groups */
+    const int *perm;         /* npairs: pair indices, block after block */
+} rrtc_groups;
+
+typedef struct {
+    const kmodel *m; const unsigned char *active; const double *opose; int og;
+    const rrtc_groups *grp; double *gc;
+    int dim; const int *jidx; double *q; double *oMi, *oMg; double res;
+    int *queue; long long qcap; double *x;
+    long long checks;
+    int clock_kind; double end; int tick; int hint;
+} rrtc_ctx;
+
+static double rrtc_now(int kind) {
+    struct timespec ts;
+    clock_gettime(kind ? CLOCK_PROCESS_CPUTIME_ID : CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+/* the deadline, read every 8th call */
+static int rrtc_expired(rrtc_ctx *c) {
+    if ((c->tick++ & 7) != 0) return 0;
+    return rrtc_now(c->clock_kind) >= c->end;
+}
+
+/* the kernel's configuration check (the same verdict: any active pair in contact), the pair that
+   collided last tried first (a blocked region is usually blocked by the same pair again), then the
+   blocks of the broad phase */
+static int rrtc_valid(rrtc_ctx *c, const double *x) {
+    const kmodel *m = c->m;
+    const rrtc_groups *G = c->grp;
+    const double *pose[KMAXG];
+    for (int k = 0; k < c->dim; ++k) c->q[c->jidx[k]] = x[k];
+    c->checks++;
+    fk(m, c->q, c->opose, c->og, c->oMi, c->oMg, pose);
+    int h = c->hint;
+    if (h >= 0 && c->active[h] && pair_collides(m, pose, m->pa[h], m->pb[h])) return 0;
+    for (int i = 0; i < G->ngroups; ++i) {
+        double *o = c->gc + 3*i;
+        if (G->gkind[i] == 0) { const double *P = pose[G->gref[i]]; o[0] = P[9]; o[1] = P[10]; o[2] = P[11]; }
+        else {
+            const double *P = c->oMi + 12*G->gref[i], *l = G->gcenter + 3*i;
+            for (int r = 0; r < 3; ++r) o[r] = P[3*r]*l[0] + P[3*r+1]*l[1] + P[3*r+2]*l[2] + P[9+r];
+        }
+    }
+    double thr = m->margin + KEPS;
+    for (int b = 0; b < G->nblocks; ++b) {
+        int ga = G->bga[b], gb = G->bgb[b];
+        const double *A = c->gc + 3*ga, *B = c->gc + 3*gb;
+        double dx = A[0]-B[0], dy = A[1]-B[1], dz = A[2]-B[2], rr = G->gradius[ga] + G->gradius[gb] + thr;
+        if (dx*dx + dy*dy + dz*dz > rr*rr) continue;
+        for (int i = G->bstart[b]; i < G->bstart[b+1]; ++i) {
+            int k = G->perm[i];
+            if (k != h && c->active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) { c->hint = k; return 0; }
+        }
+    }
+    return 1;
+}
+
+/* the broad-phase check of the configurations Q (M x nq), for tests: out[i] = 1 when row i is free */
+void rrtc_check_batch(const kmodel *m, const unsigned char *active, const double *override_pose, int override_g,
+                      const rrtc_groups *grp, long long M, const double *Q, unsigned char *out) {
+    double *work = (double *)malloc(sizeof(double) * (size_t)(12*KMAXJ + 12*KMAXG + 3*grp->ngroups + 1));
+    int *jidx = (int *)malloc(sizeof(int) * (size_t)(m->nq + 1));
+    if (!work || !jidx) { free(work); free(jidx); return; }
+    rrtc_ctx c;
+    memset(&c, 0, sizeof c);
+    c.m = m; c.active = active; c.opose = override_pose; c.og = override_g; c.grp = grp; c.hint = -1;
+    c.oMi = work; c.oMg = work + 12*KMAXJ; c.gc = c.oMg + 12*KMAXG; c.dim = m->nq; c.jidx = jidx;
+    for (int k = 0; k < m->nq; ++k) jidx[k] = k;
+    double q[KMAXJ];
+    c.q = q;
+    for (long long i = 0; i < M; ++i) out[i] = (unsigned char)rrtc_valid(&c, Q + i*m->nq);
+    free(work); free(jidx);
+}
+
+/* the straight edge a -> b: 1 valid, 0 not, -1 out of memory */
+static int rrtc_edge(rrtc_ctx *c, const double *a, const double *b) {
+    int dim = c->dim;
+    double size = 0.0;
+    for (int k = 0; k < dim; ++k) { double d = fabs(b[k] - a[k]); if (d > size) size = d; }
+    double nn = ceil(size / c->res);
+    long long n = nn < 1.0 ? 1 : (long long)nn;
+    if (!rrtc_valid(c, b)) return 0;
+    if (n < 2) return 1;
+    if (4*n + 4 > c->qcap) {   /* at most 2n - 1 intervals are queued, two ints each */
+        int *qq = (int *)realloc(c->queue, sizeof(int) * (size_t)(4*n + 4));
+        if (!qq) return -1;
+        c->queue = qq; c->qcap = 4*n + 4;
+    }
+    /* coarse to fine: FIFO of intervals [lo, hi]; each with hi - lo >= 2 gives its midpoint, then its halves */
+    int *Q = c->queue;
+    long long head = 0, tail = 0;
+    Q[tail++] = 0; Q[tail++] = (int)n;
+    while (head < tail) {
+        int lo = Q[head++], hi = Q[head++];
+        if (hi - lo < 2) continue;
+        int mid = (lo + hi) / 2;
+        double f = (double)mid / (double)n;
+        for (int k = 0; k < dim; ++k) c->x[k] = a[k] + f*(b[k] - a[k]);
+        if (!rrtc_valid(c, c->x)) return 0;
+        Q[tail++] = lo; Q[tail++] = mid; Q[tail++] = mid; Q[tail++] = hi;
+    }
+    return 1;
+}
+
+#define RRTC_TRAPPED 0
+#define RRTC_ADVANCED 1
+#define RRTC_REACHED 2
+
+/* extend tree t toward target: RRTC_* and the new node's index in *inew (-1 when none); -1 on out of memory */
+static int rrtc_extend(rrtc_ctx *c, rrtc_tree *t, const double *target, double range, double *xnew, int *inew) {
+    int dim = c->dim, i = rrtc_nearest(t, target), res;
+    const double *xn = t->X + (size_t)dim * i;
+    double s = 0.0;
+    for (int k = 0; k < dim; ++k) { double d = target[k] - xn[k]; s += d*d; }
+    double dist = sqrt(s);
+    if (dist <= range) { memcpy(xnew, target, sizeof(double) * (size_t)dim); res = RRTC_REACHED; }
+    else {
+        double f = range / dist;
+        for (int k = 0; k < dim; ++k) xnew[k] = xn[k] + f*(target[k] - xn[k]);
+        res = RRTC_ADVANCED;
+    }
+    *inew = -1;
+    int ok = rrtc_edge(c, xn, xnew);
+    if (ok < 0) return -1;
+    if (!ok) return RRTC_TRAPPED;
+    int j = rrtc_tree_add(t, xnew, i);
+    if (j < 0) return -1;
+    *inew = j;
+    return res;
+}
+
+/* the node indices from node i of t up to its root, into idx; returns their count */
+static int rrtc_branch(const rrtc_tree *t, int i, int *idx) {
+    int n = 0;
+    while (i >= 0) { idx[n++] = i; i = t->parent[i]; }
+    return n;
+}
+
+void rrtc_free(void *p) { free(p); }
+
+/* One RRT-Connect query with shortcuts. Returns a status (RRTC_STATUS in Python); on success *path_out
+   (free with rrtc_free) holds *path_len configurations of dim values, start to goal.
+   stats[0] iterations, stats[1] nodes of both trees, stats[2] configurations checked. */
+int rrtc_plan(const kmodel *m, const unsigned char *active, const double *override_pose, int override_g,
+              const rrtc_groups *grp, int dim, const int *jidx, const double *base, const double *start, const double *goal,
+              const double *lower, const double *upper, double range, double resolution,
+              long long max_iterations, long long max_nodes, int shortcut_iterations,
+              int clock_kind, double end_time, unsigned long long seed,
+              double **path_out, int *path_len, long long *stats) {
+    *path_out = NULL; *path_len = 0;
+    stats[0] = stats[1] = stats[2] = 0;
+    if (m->nj > KMAXJ || m->ng > KMAXG || m->nq > KMAXJ || dim > KMAXJ) return -2;
+    rrtc_ctx c;
+    memset(&c, 0, sizeof c);
+    c.m = m; c.active = active; c.opose = override_pose; c.og = override_g;
+    c.dim = dim; c.jidx = jidx; c.res = resolution; c.clock_kind = clock_kind; c.end = end_time; c.hint = -1;
+    double *work = (double *)malloc(sizeof(double) * (size_t)(12*KMAXJ + 12*KMAXG + KMAXJ + 4*dim + 3*grp->ngroups));
+    rrtc_tree ta, tb;
+    memset(&ta, 0, sizeof ta); memset(&tb, 0, sizeof tb);
+    int status = 4;
+    int *idx = NULL;
+    double *path = NULL;
+    if (!work) goto done;
+    c.oMi = work; c.oMg = work + 12*KMAXJ; c.q = c.oMg + 12*KMAXG; c.x = c.q + KMAXJ;
+    double *xr = c.x + dim, *target = xr + dim, *xnew = target + dim;
+    c.grp = grp; c.gc = xnew + dim;
+    memcpy(c.q, base, sizeof(double) * (size_t)m->nq);
+    rrtc_rng rng;
+    unsigned long long sm = seed;
+    for (int k = 0; k < 4; ++k) rng.s[k] = rrtc_splitmix(&sm);
+
+    int plen = 0;
+    int ok = rrtc_edge(&c, start, goal);
+    if (ok < 0) goto done;
+    if (ok) {
+        path = (double *)malloc(sizeof(double) * (size_t)(2*dim));
+        if (!path) goto done;
+        memcpy(path, start, sizeof(double) * (size_t)dim); memcpy(path + dim, goal, sizeof(double) * (size_t)dim);
+        plen = 2; stats[1] = 2; status = 0;
+    } else {
+        if (rrtc_tree_init(&ta, dim, start) || rrtc_tree_init(&tb, dim, goal)) goto done;
+        rrtc_tree *A = &ta, *B = &tb;
+        int a_is_start = 1, fa = -1, fb = -1;
+        long long it = 0;
+        status = 2;
+        while (!rrtc_expired(&c)) {
+            if (max_iterations > 0 && it >= max_iterations) { status = 1; break; }
+            if (ta.n + tb.n >= max_nodes) { status = 3; break; }
+            it++;
+            for (int k = 0; k < dim; ++k) xr[k] = lower[k] + (upper[k] - lower[k]) * rrtc_uniform(&rng);
+            int ia, ib, res = rrtc_extend(&c, A, xr, range, xnew, &ia);
+            if (res < 0) { status = 4; break; }
+            if (res == RRTC_TRAPPED) { rrtc_tree *w = A; A = B; B = w; a_is_start = !a_is_start; continue; }
+            memcpy(target, A->X + (size_t)dim * ia, sizeof(double) * (size_t)dim);
+            for (;;) {
+                res = rrtc_extend(&c, B, target, range, xnew, &ib);
+                if (res != RRTC_ADVANCED || rrtc_expired(&c)) break;
+                if (ta.n + tb.n >= max_nodes) break;
+            }
+            if (res < 0) { status = 4; break; }
+            if (res == RRTC_REACHED) { fa = ia; fb = ib; status = 0; break; }
+            rrtc_tree *w = A; A = B; B = w; a_is_start = !a_is_start;
+        }
+        stats[0] = it;
+        stats[1] = ta.n + tb.n;
+        if (status == 0) {
+            idx = (int *)malloc(sizeof(int) * (size_t)(ta.n + tb.n));
+            path = (double *)malloc(sizeof(double) * (size_t)dim * (size_t)(ta.n + tb.n));
+            if (!idx || !path) { status = 4; goto done; }
+            /* A's root -> fa, then fb's parent in B -> B's root (fa and fb hold the same configuration) */
+            int na = rrtc_branch(A, fa, idx);
+            for (int k = 0; k < na; ++k)
+                memcpy(path + (size_t)dim * k, A->X + (size_t)dim * idx[na - 1 - k], sizeof(double) * (size_t)dim);
+            int nb = rrtc_branch(B, fb, idx);
+            for (int k = 1; k < nb; ++k)
+                memcpy(path + (size_t)dim * (na + k - 1), B->X + (size_t)dim * idx[k], sizeof(double) * (size_t)dim);
+            plen = na + nb - 1;
+            if (!a_is_start) {   /* reverse: start first */
+                for (int i = 0, j = plen - 1; i < j; ++i, --j)
+                    for (int k = 0; k < dim; ++k) {
+                        double w = path[(size_t)dim*i + k]; path[(size_t)dim*i + k] = path[(size_t)dim*j + k]; path[(size_t)dim*j + k] = w;
+                    }
+            }
+        }
+    }
+    if (status == 0) {
+        /* random shortcuts: two distinct nodes i < j with j - i >= 2, replaced by their straight edge when valid */
+        for (int s = 0; s < shortcut_iterations && plen > 2; ++s) {
+            int i = (int)(rrtc_uniform(&rng) * plen), j = (int)(rrtc_uniform(&rng) * (plen - 1));
+            if (i >= plen) i = plen - 1;
+            if (j >= plen - 1) j = plen - 2;
+            if (j >= i) j++;
+            if (i > j) { int w = i; i = j; j = w; }
+            if (j - i < 2) continue;
+            int e = rrtc_edge(&c, path + (size_t)dim * i, path + (size_t)dim * j);
+            if (e < 0) { status = 4; break; }
+            if (e) {
+                memmove(path + (size_t)dim * (i + 1), path + (size_t)dim * j, sizeof(double) * (size_t)dim * (size_t)(plen - j));
+                plen -= j - i - 1;
+            }
+        }
+    }
+done:
+    stats[2] = c.checks;
+    rrtc_tree_free(&ta); rrtc_tree_free(&tb);
+    free(idx); free(work); free(c.queue);
+    if (status == 0) { *path_out = path; *path_len = plen; }
+    else free(path);
+    return status;
+}
+"""

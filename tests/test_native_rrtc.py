@@ -1,0 +1,240 @@
+"""The native RRT-Connect (optplan.planners.kernel.rrtc): valid paths by coal's exact checks at a fine
+resolution, the same success statistics as the Python search, the regrasp's subspace search, statuses,
+fallback, and the single-Panda benchmark queries."""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.planners import make_planner
+from optplan.planners.base import Deadline
+from optplan.planners.rrtconnect import edge_is_valid
+from optplan.planners.validity import ValidityChecker
+from optplan.scene import Scene
+from optplan.trials import TrialGenerator
+
+FINE = 0.004   # [rad] the coal re-check's step, 7.5x finer than the planners' 0.03 rad
+
+
+def _native_or_skip(ck: ValidityChecker) -> None:
+    from optplan.planners.kernel import KernelUnavailable
+    from optplan.planners.kernel.rrtc import load_rrtc_library
+
+    if ck.kernel != "native":
+        pytest.skip("no native kernel here")
+    try:
+        load_rrtc_library()
+    except KernelUnavailable as e:
+        pytest.skip(str(e))
+
+
+def _coal_valid_path(robot, scene, P, mode="free", pose=None, base=None, joints=None) -> bool:
+    coal_ck = ValidityChecker(robot, scene, kernel="coal")
+    f = coal_ck.validity(mode, pose, base, joints)
+    return bool(f(P[0])) and all(edge_is_valid(a, b, f, FINE) for a, b in zip(P[:-1], P[1:]))
+
+
+@pytest.mark.parametrize("scene_name,native", [("hard_bay", True), ("hard_clutter_dense", True),
+                                               ("hard_clutter_dense", False)])
+def test_paths_are_valid_by_coal(tcb, scene_name, native):
+    """Both searches' paths (after their shortcuts) re-checked by coal, exactly, at 0.004 rad."""
+    sc = Scene.load(scene_name)
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    pl = make_planner("rrtconnect", tcb, sc, max_iterations=3000, native_search=native)
+    _native_or_skip(pl.checker)
+    for seed in range(3):
+        res = pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=seed)
+        assert res.status.value == "exact" and res.stats["search"] == ("native" if native else "python")
+        assert np.allclose(res.path[0], tr.q_start) and np.allclose(res.path[-1], tr.q_goal)
+        assert np.all(res.path >= tcb.lower - 1e-12) and np.all(res.path <= tcb.upper + 1e-12)
+        assert _coal_valid_path(tcb, sc, res.path)
+
+
+def test_same_seed_same_search_and_a_different_seed_another(tcb):
+    sc = Scene.load("hard_bay")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    pl = make_planner("rrtconnect", tcb, sc, max_iterations=3000)
+    _native_or_skip(pl.checker)
+    a, b, c = (pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=s) for s in (5, 5, 6))
+    assert a.stats["nodes"] == b.stats["nodes"] and np.array_equal(a.path, b.path)
+    assert not (a.path.shape == c.path.shape and np.array_equal(a.path, c.path))
+
+
+def test_success_statistics_match_the_python_search(tcb):
+    """Fixed seeds, a small iteration cap so that about a third of the queries succeed: the two searches
+    (different random streams, same algorithm) succeed equally often within sampling noise."""
+    sc = Scene.load("hard_bay")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    rates = {}
+    for native in (True, False):
+        pl = make_planner("rrtconnect", tcb, sc, max_iterations=15, shortcut_iterations=0, native_search=native)
+        if native:
+            _native_or_skip(pl.checker)
+        res = [pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=s) for s in range(120)]
+        assert {r.stats["search"] for r in res} == {"native" if native else "python"}
+        rates[native] = np.mean([r.status.value == "exact" for r in res])
+    assert 0.1 < rates[False] < 0.9
+    # two binomial proportions of 120 trials: a difference beyond 0.18 is > 3 standard deviations
+    assert abs(rates[True] - rates[False]) <= 0.18, rates
+
+
+def test_regrasp_subspace_with_the_object_fixed(tcb):
+    """One arm's joints moving, the rest and the still object fixed (the regrasp's search): the path of
+    the arm's joints is valid by coal in the same mode."""
+    from optplan.planners.kernel.rrtc import native_rrt_connect
+
+    sc = Scene.load("ssps_scene1")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    ck = ValidityChecker(tcb, sc)
+    _native_or_skip(ck)
+    from optplan.constraints.closed_chain import ClosedChainKinematics
+
+    kin = ClosedChainKinematics(tcb, sc.object.grasps)
+    idx = np.asarray(kin.idx[0])
+    M = tr.object_start
+    base = tr.q_start.copy()
+    rng = np.random.default_rng(0)
+    coal_ck = ValidityChecker(tcb, sc, kernel="coal")
+    pairs = tuple(sorted(ck.grasp_contacts(base, M)))   # the hands touch the object at their grasps
+    with ck.exempt(pairs), coal_ck.exempt(pairs):
+        f = ck.validity("fixed", M, base=base, joints=idx)
+        assert f(base[idx])
+        goal = None
+        for _ in range(2000):   # a valid goal for this arm
+            x = rng.uniform(tcb.lower[idx], tcb.upper[idx])
+            if f(x):
+                goal = x
+                break
+        assert goal is not None
+        got = native_rrt_connect(base[idx], goal, tcb.lower[idx], tcb.upper[idx], f, rng, Deadline(30.0), range_=1.0,
+                                 resolution=0.03, max_iterations=5000, shortcut_iterations=50)
+        assert got is not None and got.status == "found", got and got.status
+        P = np.array(got.path)
+        assert P.shape[1] == idx.size and np.allclose(P[0], base[idx]) and np.allclose(P[-1], goal)
+        g = coal_ck.validity("fixed", M, base, idx)
+        assert g(P[0]) and all(edge_is_valid(a, b, g, FINE) for a, b in zip(P[:-1], P[1:]))
+
+
+def test_statuses_iteration_cap_and_time_limit(tcb):
+    from optplan.planners.kernel.rrtc import native_rrt_connect
+
+    sc = Scene.load("hard_window")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    ck = ValidityChecker(tcb, sc)
+    _native_or_skip(ck)
+    f = ck.validity("free")
+    a = native_rrt_connect(tr.q_start, tr.q_goal, tcb.lower, tcb.upper, f, np.random.default_rng(0), Deadline(60.0),
+                           range_=1.0, resolution=0.03, max_iterations=3)
+    assert a is not None and a.status == "iteration cap" and a.iterations == 3 and a.path is None
+    b = native_rrt_connect(tr.q_start, tr.q_goal, tcb.lower, tcb.upper, f, np.random.default_rng(0), Deadline(0.0),
+                           range_=1.0, resolution=0.03)
+    assert b is not None and b.status == "time limit" and b.path is None and b.iterations <= 8
+    pl = make_planner("rrtconnect", tcb, sc, max_iterations=3)
+    res = pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=0)
+    assert res.status.value == "failed" and res.path.shape[0] == 0 and res.stats["search"] == "native"
+
+
+def test_coal_checker_falls_back_to_the_python_search(tcb):
+    sc = Scene.load("hard_bay")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    pl = make_planner("rrtconnect", tcb, sc, max_iterations=2000, validity_kernel="coal")
+    res = pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=0)
+    assert res.stats["search"] == "python" and res.status.value == "exact"
+
+
+def test_bad_native_search_option():
+    from optplan.planners import RRTConnectOptions
+
+    with pytest.raises(ValueError, match="native_search"):
+        RRTConnectOptions(native_search="yes")
+
+
+def test_tcbirrt_regrasps_run_natively(tcb):
+    """The improved TCBiRRT on an SSPS query: its regrasps use the native search and the query succeeds."""
+    sc = Scene.load("ssps_scene1")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    pl = make_planner("tcbirrt", tcb, sc, variant="improved", max_iterations=1000)
+    _native_or_skip(pl.checker)
+    calls = []
+    import optplan.planners.kernel.rrtc as rrtc
+
+    real = rrtc.native_rrt_connect
+
+    def spy(*a, **k):
+        got = real(*a, **k)
+        calls.append(got is not None)
+        return got
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(rrtc, "native_rrt_connect", spy)
+    try:
+        res = pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=0)
+    finally:
+        mp.undo()
+    assert res.status.value == "exact"
+    assert res.stats["regrasp_attempts"] > 0 and calls and all(calls)
+
+
+def test_single_panda_queries_solved_and_valid():
+    from optplan.example_robots import example_robots_available
+
+    if not example_robots_available():
+        pytest.skip("example-robot-data not installed (pip install 'optplan[robots]')")
+    from optplan.bench.panda_rrtc import GOAL, START, load_single_panda, queries, run_optplan
+
+    robot = load_single_panda()
+    assert robot.nq == 7
+    for kind in ("cage", "boxes"):
+        (sc, ck), = queries(robot, kind, 1, seed=0)
+        _native_or_skip(ck)
+        r = run_optplan(robot, sc, ck, 0, native=True, shortcut_iterations=20)
+        assert r["status"] == "exact" and r["search"] == "native"
+        assert np.allclose(r["path"][0], START) and np.allclose(r["path"][-1], GOAL)
+        assert _coal_valid_path(robot, sc, r["path"])
+    assert pin.SE3 is not None
+
+
+def test_vamp_peer_without_vamp_says_so(monkeypatch, capsys):
+    from optplan.bench import vamp_peer
+
+    monkeypatch.setattr(vamp_peer, "vamp_available", lambda: None)
+    assert vamp_peer.main(["--queries", "1"]) == 0
+    assert "vamp is not importable" in capsys.readouterr().out
+
+
+def test_vamp_peer_pairs_when_vamp_is_there(capsys):
+    pytest.importorskip("vamp")
+    from optplan.example_robots import example_robots_available
+
+    if not example_robots_available():
+        pytest.skip("example-robot-data not installed (pip install 'optplan[robots]')")
+    from optplan.bench import vamp_peer
+
+    assert vamp_peer.main(["--queries", "2", "--scenes", "boxes"]) == 0
+    out = capsys.readouterr().out
+    assert "optplan / vamp" in out and "2/2 solved" in out
+
+
+@pytest.mark.parametrize("mode", ["free", "fixed"])
+def test_broad_phase_gives_the_kernels_and_coals_verdicts(tcb, mode):
+    """The native search's check (groups of geometries bounded by spheres, then the kernel's pairs) on
+    random configurations near and far from collisions: the kernel's verdict on every one, and never free
+    where coal collides."""
+    from optplan.planners.kernel.rrtc import broad_phase_valid
+
+    sc = Scene.load("hard_clutter_dense")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    ck = ValidityChecker(tcb, sc)
+    _native_or_skip(ck)
+    rng = np.random.default_rng(7)
+    X = np.vstack([rng.uniform(tcb.lower, tcb.upper, (1500, tcb.nq)),
+                   tr.q_start + rng.normal(0.0, 0.15, (1500, tcb.nq))])
+    pose = tr.object_start if mode == "fixed" else None
+    f = ck.validity(mode, pose)
+    got = broad_phase_valid(f, X)
+    assert np.array_equal(got, ck.valid_batch(X, mode, pose))
+    coal_ck = ValidityChecker(tcb, sc, kernel="coal")
+    want = coal_ck.valid_batch(X, mode, pose)
+    assert not np.any(got & ~want)
+    assert 0.05 < got.mean() < 0.95
