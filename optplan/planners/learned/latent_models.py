@@ -12,7 +12,7 @@ TCBiRRT paper's Section 5.2 items 6-7, after Park et al. 2024 and Zhang et al. 2
   ``[z, features] → 3×1024 (ReLU) → d`` trained jointly (squared error, Adam, learning rate 3e-3,
   batch 64, 60 epochs) on on-manifold configurations (up to 1000 collision-free and 1000 in
   collision) with ``d`` their smallest robot/object/obstacle distance [m] (exact, coal; clipped to
-  [-0.2, 0.5] m), ``z`` their latent mean; :meth:`LatentDistance.gradient` is ∂d/∂z (JAX).
+  [-0.2, 0.5] m), ``z`` their latent mean; :meth:`LatentDistance.value_and_gradient` gives d and ∂d/∂z (JAX).
 
 With one model per scene the encoders' input is the same grid for every sample, as in the paper's
 per-scene training, so an encoder's output is one constant feature vector: training it can add
@@ -259,7 +259,7 @@ class _GridModel:
         self.features = np.asarray(features, np.float64)
         self.scale = float(meta.get("target_std", 1.0))
         self.offset = float(meta.get("target_mean", 0.0))
-        self._grad: Any = None
+        self._vg: Any = None
 
     def raw(self, z: np.ndarray) -> np.ndarray:
         """The head's output (the classifier's logit; the distance's standardised value)."""
@@ -305,17 +305,24 @@ class LatentDistance(_GridModel):
         """Predicted smallest distance [m] (``latent_dim`` or ``batch × latent_dim``)."""
         return self.raw(z) * self.scale + self.offset
 
-    def gradient(self, z: np.ndarray) -> np.ndarray:
-        """∂d/∂z at ``z`` (one latent vector), by JAX."""
-        if self._grad is None:
+    def value_and_gradient(self, z: np.ndarray) -> tuple[float, np.ndarray]:
+        """Predicted distance [m] and ∂d/∂z [m per latent unit] at ``z`` (one latent vector), by one
+        jitted JAX call: ~1 ms of CPU here, where numpy's float64 forward pass through the 3×1024 head
+        took ~12 ms for one vector (measured 2026-11-28, loaded machine)."""
+        if self._vg is None:
             jax = require_jax()
             import jax.numpy as jnp
 
-            head = [(jnp.asarray(W), jnp.asarray(b)) for W, b in self.head]
-            f = jnp.asarray(self.features)
+            head = [(jnp.asarray(W, jnp.float32), jnp.asarray(b, jnp.float32)) for W, b in self.head]
+            f = jnp.asarray(self.features, jnp.float32)
             act = self.head_act
-            self._grad = jax.jit(jax.grad(lambda x: mlp_jax(head, jnp.concatenate([x, f]), act)[0]))
-        return self.scale * np.asarray(self._grad(np.asarray(z, float)), float)
+            self._vg = jax.jit(jax.value_and_grad(lambda x: mlp_jax(head, jnp.concatenate([x, f]), act)[0]))
+        v, g = self._vg(np.asarray(z, np.float32))
+        return float(v) * self.scale + self.offset, self.scale * np.asarray(g, float)
+
+    def gradient(self, z: np.ndarray) -> np.ndarray:
+        """∂d/∂z [m per latent unit] at ``z`` (one latent vector; :meth:`value_and_gradient`)."""
+        return self.value_and_gradient(z)[1]
 
 
 def _decode_valid(cvae: CVAE, z: np.ndarray, robot: RobotModel, kin: Any, checker: ValidityChecker, grasps: dict[str, Any],

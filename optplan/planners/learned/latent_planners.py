@@ -304,12 +304,13 @@ class LCBiRRT(Planner):
             if i <= 0 or deadline.expired():
                 return
             z = tree.Z[i].copy()
-            d0 = float(self.distance.distance(z))
-            if d0 < o.lpo_clearance:
+            d, grad = self.distance.value_and_gradient(z)
+            if d < o.lpo_clearance:
                 st["lpo_nodes"] += 1
                 for _ in range(o.lpo_iterations):
-                    z = z + o.lpo_gamma * self.distance.gradient(z)
-                    if float(self.distance.distance(z)) >= o.lpo_clearance:
+                    z = z + o.lpo_gamma * grad
+                    d, grad = self.distance.value_and_gradient(z)
+                    if d >= o.lpo_clearance:
                         break
                 q = self._config(z, tree.Z[i], tree.Q[i], st)
                 if q is not None:
