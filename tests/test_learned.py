@@ -136,7 +136,7 @@ def query(tcb, scene1, kin, checker):
 
 
 @pytest.mark.parametrize("name", ["latent-sampling",
-                                  # training the 32³-input encoders takes minutes on 2 loaded cores
+                                  # a query may use its whole 60 s CPU limit on 2 loaded cores
                                   pytest.param("lcbirrt", marks=pytest.mark.slow),
                                   pytest.param("lcbirrt-lpo", marks=pytest.mark.slow)])
 def test_learned_planners_return_valid_closed_chain_paths(tcb, scene1, kin, checker, cache, query, name):

@@ -4,13 +4,13 @@ TCBiRRT paper's Section 5.2 items 6-7, after Park et al. 2024 and Zhang et al. 2
 * :func:`scene_grid` — the scene's obstacles on a 32³ grid over the workspace: occupancy (the voxel
   input) or signed distance [m] (the SDF input), exact for box, sphere and capsule obstacles.
 * :class:`LatentClassifier` — voxel encoder ``32³ → 2×512 (LeakyReLU) → 4`` and classifier
-  ``[z, features] → 3×256 (ReLU) → logit``, trained jointly (binary cross-entropy, Adam, learning
-  rate 5e-4, batch 256, 150 epochs) on latent samples — half ``z ~ N(0, I)``, half around the
+  ``[z, features] → 3×256 (ReLU) → logit``, trained (binary cross-entropy, Adam, learning
+  rate 5e-4, batch 256, at most 150 epochs) on latent samples — half ``z ~ N(0, I)``, half around the
   encodings of the training configurations — labelled by decoding, projecting and collision-checking
   them (up to 1000 valid and 1000 invalid).
 * :class:`LatentDistance` — SDF encoder ``32³ → 2×512 (LeakyReLU) → 16`` and distance network
-  ``[z, features] → 3×1024 (ReLU) → d`` trained jointly (squared error, Adam, learning rate 3e-3,
-  batch 64, 60 epochs) on on-manifold configurations (up to 1000 collision-free and 1000 in
+  ``[z, features] → 3×1024 (ReLU) → d`` trained (squared error on the standardised distance, Adam,
+  learning rate 3e-3, batch 64, at most 60 epochs) on on-manifold configurations (up to 1000 collision-free and 1000 in
   collision) with ``d`` their smallest robot/object/obstacle distance [m] (exact, coal; clipped to
   [-0.2, 0.5] m), ``z`` their latent mean; :meth:`LatentDistance.value_and_gradient` gives d and ∂d/∂z (JAX).
 
@@ -23,7 +23,7 @@ page): jointly trained on the raw SDF with the paper's learning rate 3e-3, Adam 
 encoder's 32,768 × 512 first-layer weights by ≈ the learning rate per step in one coherent direction
 (the input is the same every step), so a feature moves by up to ``lr · Σ|grid|`` per step — the loss
 started at 10⁷ m², spiked again at epoch 14, and the distance net ended uncorrelated with the exact
-distance (−0.10). The distance target is standardised (mean / standard deviation of the training
+distance (−0.10, on its own training rows). The distance target is standardised (mean / standard deviation of the training
 rows, undone at prediction). Both models keep the weights of the epoch with the lowest loss on a
 validation tenth (early stopping, ``patience`` epochs) and report their figures on a further held-out
 tenth that neither training nor stopping saw, next to a model-free reference: a 5-nearest-neighbour
