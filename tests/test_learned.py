@@ -136,7 +136,7 @@ def query(tcb, scene1, kin, checker):
 
 
 @pytest.mark.parametrize("name", ["latent-sampling",
-                                  # training the 32³-input encoders takes minutes on 2 loaded cores
+                                  # a query may use its whole 60 s CPU limit on 2 loaded cores
                                   pytest.param("lcbirrt", marks=pytest.mark.slow),
                                   pytest.param("lcbirrt-lpo", marks=pytest.mark.slow)])
 def test_learned_planners_return_valid_closed_chain_paths(tcb, scene1, kin, checker, cache, query, name):
@@ -163,3 +163,64 @@ def test_unknown_learned_option_is_an_error(tcb, scene1, checker, kin):
 
     with pytest.raises(OptionError, match="lpo"):
         make_planner("lcbirrt", tcb, scene1, checker=checker, kinematics=kin, lpo=True)
+
+
+@pytest.fixture(scope="module")
+def distance_model(tcb, scene1, kin, checker, cvae, cache):
+    from optplan.planners.learned.latent_models import LatentModelSettings, load_or_train_distance
+    from optplan.planners.manifold_samples import ManifoldSampleSettings, manifold_samples
+
+    data = manifold_samples(tcb, scene1, ManifoldSampleSettings(n=SMALL["n_data"], seed=0), checker=checker,
+                            kinematics=kin)
+    s = LatentModelSettings(n_distance=300, distance_epochs=40, patience=10)
+    return load_or_train_distance(tcb, scene1, cvae, kin, checker, data.Q, s), data.Q
+
+
+def test_learned_distance_predicts_exact_distances_on_fresh_configurations(tcb, scene1, kin, checker, cvae,
+                                                                           distance_model):
+    from optplan.planners.manifold_samples import project_onto_chain
+
+    model, Q = distance_model
+    held = model.meta["held_out"]
+    assert model.meta["epochs_run"] <= 40 and 1 <= model.meta["best_epoch"] <= model.meta["epochs_run"]
+    assert held["corr"] > 0.2, model.meta
+    # independent: fresh on-manifold configurations (not in the training rows), exact coal distances
+    rng = np.random.default_rng(123)
+    exact = CollisionChecker(tcb, scene1)
+    X, d = [], []
+    while len(X) < 150:
+        x = project_onto_chain(kin, np.clip(Q[int(rng.integers(len(Q)))] + rng.normal(0, 0.3, tcb.nq), tcb.lower,
+                                            tcb.upper), tcb.lower, tcb.upper)
+        if x is not None:
+            X.append(x)
+            d.append(float(np.clip(exact.min_distance(x)[0], -0.2, 0.5)))
+    pred = model.distance(cvae.encode(np.array(X)))
+    assert np.corrcoef(pred, d)[0, 1] > 0.2
+    # the gradient (JAX, scaled back to metres) against central finite differences of the numpy prediction
+    z = cvae.encode(np.array(X[:1]))[0]
+    g = model.gradient(z)
+    fd = np.array([(model.distance(z + 1e-4 * e) - model.distance(z - 1e-4 * e)) / 2e-4 for e in np.eye(len(z))])
+    assert np.allclose(g, fd, rtol=1e-3, atol=1e-5)
+
+
+def test_fixed_encoder_is_cached_as_its_features(tcb, scene1, kin, checker, cvae, distance_model):
+    from optplan.planners.learned.latent_models import LatentDistance
+
+    model, _ = distance_model
+    assert model.path is not None and model.meta["encoder_trained"] is False
+    with np.load(model.path) as z:
+        assert "enc_W0" not in z and z["features"].shape == (16,)
+    loaded = LatentDistance.load(model.path, scene_grid(scene1, "sdf"))
+    Z = np.random.default_rng(2).normal(size=(4, cvae.latent_dim))
+    assert np.allclose(loaded.distance(Z), model.distance(Z))
+
+
+def test_classifier_beats_chance_on_held_out_latent_samples(tcb, scene1, kin, checker, cvae, distance_model):
+    from optplan.planners.learned.latent_models import LatentModelSettings, load_or_train_classifier
+
+    _, Q = distance_model
+    s = LatentModelSettings(n_classifier=300, classifier_epochs=60, patience=10)
+    clf = load_or_train_classifier(tcb, scene1, cvae, kin, checker, s, samples=Q)
+    m = clf.meta
+    assert m["n_valid"] == m["n_invalid"] == 300        # balanced: chance is 0.5
+    assert m["held_out"]["accuracy"] > 0.6, m

@@ -148,10 +148,10 @@ class LCBiRRTOptions:
     #: Valid and invalid latent samples (classifier), free and colliding configurations (distance), each [count]
     #: (the paper: 1000).
     n_model_samples: int = 1000
-    #: Classifier training epochs [count] (the paper: 150; reduced to fit 2 CPU cores, decision 0018).
-    classifier_epochs: int = 50
-    #: Distance network training epochs [count] (the paper: 60; reduced to fit 2 CPU cores, decision 0018).
-    distance_epochs: int = 20
+    #: Classifier training epochs at most [count] (the paper: 150; early stopping, :class:`~.latent_models.LatentModelSettings`).
+    classifier_epochs: int = 150
+    #: Distance network training epochs at most [count] (the paper: 60; early stopping as the classifier).
+    distance_epochs: int = 60
 
     def __post_init__(self) -> None:
         for name in ("n_model_samples", "classifier_epochs", "distance_epochs"):
@@ -304,12 +304,13 @@ class LCBiRRT(Planner):
             if i <= 0 or deadline.expired():
                 return
             z = tree.Z[i].copy()
-            d0 = float(self.distance.distance(z))
-            if d0 < o.lpo_clearance:
+            d, grad = self.distance.value_and_gradient(z)
+            if d < o.lpo_clearance:
                 st["lpo_nodes"] += 1
                 for _ in range(o.lpo_iterations):
-                    z = z + o.lpo_gamma * self.distance.gradient(z)
-                    if float(self.distance.distance(z)) >= o.lpo_clearance:
+                    z = z + o.lpo_gamma * grad
+                    d, grad = self.distance.value_and_gradient(z)
+                    if d >= o.lpo_clearance:
                         break
                 q = self._config(z, tree.Z[i], tree.Q[i], st)
                 if q is not None:
