@@ -378,14 +378,17 @@ class SplineCore:
             z = ca.SX.sym("z", f.size1_in(0))
             J = ca.jacobian(f(z), z)
             fn = kc._fns[("fb_momentum_linear",)] = ca.Function("mom_lin", [z], [J[:, 2 * nj:], f(z)])
-        W = np.zeros((self.nW, 3))
-        for c in range(self.nW):
-            k, i = divmod(c, m)
-            if k == N:
-                k, i = N - 1, m
-            b, db = spline_basis(i / m)
-            Aw, r = fn(np.r_[b @ P[k:k + 4], db @ P[k:k + 4], np.zeros(3)])
-            W[c] = -np.linalg.solve(np.asarray(Aw), np.asarray(r).ravel())
+        # every twist point at once: q, dq/du from the basis, then one mapped call and a batched solve
+        c = np.arange(self.nW)
+        k, i = np.divmod(c, m)
+        k, i = np.where(k == N, N - 1, k), np.where(k == N, m, i)
+        B = np.array([np.concatenate(spline_basis(j / m)) for j in range(m + 1)])[i]   # nW × 8
+        Pk = P[k[:, None] + np.arange(4)]                                              # nW × 4 × nj
+        Z = np.hstack([np.einsum("ca,caj->cj", B[:, :4], Pk), np.einsum("ca,caj->cj", B[:, 4:], Pk),
+                       np.zeros((self.nW, 3))])
+        Aw, r = fn.map(self.nW)(Z.T)
+        Aw = np.asarray(Aw).reshape(3, 3, self.nW, order="F").transpose(2, 0, 1)        # nW × 3 × 3
+        W = -np.linalg.solve(Aw, np.asarray(r).T[:, :, None])[:, :, 0]
         xi = _ID_Q.copy()
         out = []
         step = kc.attitude_step(self.n_sub)
