@@ -379,11 +379,10 @@ class SplineCore:
             J = ca.jacobian(f(z), z)
             fn = kc._fns[("fb_momentum_linear",)] = ca.Function("mom_lin", [z], [J[:, 2 * nj:], f(z)])
         # every twist point at once: q, dq/du from the basis, then one mapped call and a batched solve
-        c = np.arange(self.nW)
-        k, i = np.divmod(c, m)
-        k, i = np.where(k == N, N - 1, k), np.where(k == N, m, i)
-        B = np.array([np.concatenate(spline_basis(j / m)) for j in range(m + 1)])[i]   # nW × 8
-        Pk = P[k[:, None] + np.arange(4)]                                              # nW × 4 × nj
+        kk, ii = np.divmod(np.arange(self.nW), m)
+        kk, ii = np.where(kk == N, N - 1, kk), np.where(kk == N, m, ii)
+        B = np.array([np.concatenate(spline_basis(j / m)) for j in range(m + 1)])[ii]   # nW × 8
+        Pk = P[kk[:, None] + np.arange(4)]                                               # nW × 4 × nj
         Z = np.hstack([np.einsum("ca,caj->cj", B[:, :4], Pk), np.einsum("ca,caj->cj", B[:, 4:], Pk),
                        np.zeros((self.nW, 3))])
         Aw, r = fn.map(self.nW)(Z.T)
