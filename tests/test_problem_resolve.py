@@ -9,10 +9,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.problem import OptProblem
+from optplan.problem import OptProblem, spline_core, spline_solve
 from optplan.problem import kernels as kernels_mod
 from optplan.problem import nlp as nlp_mod
-from optplan.problem import spline_core, spline_solve
 from optplan.problem.terms import JointBoundary, Smoothness
 
 
