@@ -239,10 +239,16 @@ def test_bench_modelling_refuses_an_unknown_task_and_formats_rows():
     with pytest.raises(SystemExit):
         main(["--tasks", "reach,no_such_task"])
     row = {"transcription": "bspline", "total_s": 1.0, "setup_s": 0.1, "solve_s": 0.8, "solve_cpu_s": 0.3,
-           "iterations": 23, "success": True, "hand_error_m": 2e-10, "resolve_overhead_s": 0.004,
-           "resolve_iterations": 0}
-    text = format_rows([{"task": "reach", "first": row, "warm": row}, {"task": "transport", "error": ["boom"]}])
+           "iterations": 23, "success": True, "hand_error_m": 2e-10,
+           "resolve": {"overhead_s": 0.004, "overhead_cpu_s": 0.003, "check_s": 0.002, "iterations": 0,
+                       "success": True}}
+    warm = {**row, "repeats": {k: [0.2, 0.3, 0.25] for k in ("total_s", "total_cpu_s", "build_s", "solve_s",
+                                                            "solve_cpu_s")}}
+    text = format_rows([{"task": "reach", "first": row, "warm": warm}, {"task": "transport", "error": ["boom"]}])
     assert "hand_error_m=2e-10" in text and "4.0 ms" in text and "error" in text
+    assert "3 warm problems" in text and "0.250 [0.200-0.300]" in text
+    with pytest.raises(SystemExit):
+        main(["--repeat", "0", "--tasks", "reach"])
 
 
 def test_transport_with_collision_and_two_custom_terms_on_the_kernel_core(tcb):
