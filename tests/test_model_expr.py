@@ -406,3 +406,20 @@ def test_rockit_peer_reach_keeps_zero_momentum(ffsr):
     assert chk["hand_error_m"] <= 1e-5 and chk["arm_b_motion_rad"] <= 1e-8
     rep = verify(robot, r["solution"], None)
     assert rep.max_momentum_residual <= 1e-8 and rep.base_attitude_mismatch_rad <= 5e-3   # RK4, 6 steps
+
+
+def test_rockit_peer_free_time_reach_keeps_its_limits_at_the_grid(ffsr):
+    """The free-final-time reach in rockit (``FreeTime``, extra 'rockit'; skipped without it) on 6
+    intervals: solved, the duration within its bounds, the hand on target (Pinocchio) and the
+    limits held at the grid points (between them rockit's cubic may exceed a velocity limit)."""
+    pytest.importorskip("rockit")
+    from optplan.bench import modelling, rockit_peer
+
+    prob, ctx = modelling._reach(True)
+    robot, target, _ = ctx
+    r = rockit_peer.reach(robot, modelling.Q0, target, "a_ee", N=6, free_time=True, duration_bounds=(2.0, 60.0))
+    assert r["success"]
+    sol = r["solution"]
+    assert 2.0 <= sol.duration <= 60.0
+    assert modelling._check_reach(prob, sol, ctx)["hand_error_m"] <= 1e-5
+    assert np.abs(sol.qd).max() <= 0.1 + 1e-6 and np.abs(sol.qdd).max() <= 0.02 + 1e-6
