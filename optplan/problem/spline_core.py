@@ -188,6 +188,12 @@ class SplineCore:
         """``(f, ∂f/∂z, triu ∂²(λᵀf)/∂z²)`` of a local kernel: from C when an earlier run compiled
         them (``compiled`` "auto"/True), else symbolic (and queued for a background compile)."""
         kc = self.kc
+        if compiled is not False and kc._dir is not None:   # compiled earlier: the symbolic forms are not loaded
+            name = kc._name(("local", fn.name()))
+            libs = [kc._compiled_by_name(n, "-O1") for n in (name, kc._name(("ljac", name)),
+                                                               kc._name(("lhess_triu", name)))]
+            if all(lib is not None for lib in libs):
+                return libs[0], libs[1], libs[2]  # type: ignore[return-value]  # checked just above
         f = kc._get(("local", fn.name()), lambda name: ca.Function(name, [fn.sx_in(0)], [fn(fn.sx_in(0))]))
         jfn, hfn = kc.local_derivatives(f)
         fns = (f, jfn, hfn)
