@@ -176,6 +176,7 @@ def _cmd_bench_modelling(args) -> int:
     argv = ["--tasks", args.tasks] + (["--warm-cache"] if args.warm_cache else []) + (["--json", args.json]
                                                                                       if args.json else [])
     argv += ["--peer", args.peer] if args.peer else []
+    argv += ["--repeat", str(args.repeat)]
     return main(argv)
 
 
@@ -541,6 +542,8 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--warm-cache", action="store_true",
                     help="keep the kernel cache (default: each task's first run with an empty cache)")
     mo.add_argument("--json", help="write the rows as JSON to this path")
+    mo.add_argument("--repeat", type=int, default=1,
+                    help="warm problems per task (median and spread of wall and CPU time; default 1)")
     mo.add_argument("--peer", choices=["rockit"], help="also the tasks rockit can write, in rockit (extra 'rockit')")
     mo.set_defaults(func=_cmd_bench_modelling)
 

@@ -239,10 +239,16 @@ def test_bench_modelling_refuses_an_unknown_task_and_formats_rows():
     with pytest.raises(SystemExit):
         main(["--tasks", "reach,no_such_task"])
     row = {"transcription": "bspline", "total_s": 1.0, "setup_s": 0.1, "solve_s": 0.8, "solve_cpu_s": 0.3,
-           "iterations": 23, "success": True, "hand_error_m": 2e-10, "resolve_overhead_s": 0.004,
-           "resolve_iterations": 0}
-    text = format_rows([{"task": "reach", "first": row, "warm": row}, {"task": "transport", "error": ["boom"]}])
+           "iterations": 23, "success": True, "hand_error_m": 2e-10,
+           "resolve": {"overhead_s": 0.004, "overhead_cpu_s": 0.003, "check_s": 0.002, "iterations": 0,
+                       "success": True}}
+    warm = {**row, "repeats": {k: [0.2, 0.3, 0.25] for k in ("total_s", "total_cpu_s", "build_s", "solve_s",
+                                                            "solve_cpu_s")}}
+    text = format_rows([{"task": "reach", "first": row, "warm": warm}, {"task": "transport", "error": ["boom"]}])
     assert "hand_error_m=2e-10" in text and "4.0 ms" in text and "error" in text
+    assert "3 warm problems" in text and "0.250 [0.200-0.300]" in text
+    with pytest.raises(SystemExit):
+        main(["--repeat", "0", "--tasks", "reach"])
 
 
 def test_transport_with_collision_and_two_custom_terms_on_the_kernel_core(tcb):
@@ -400,3 +406,20 @@ def test_rockit_peer_reach_keeps_zero_momentum(ffsr):
     assert chk["hand_error_m"] <= 1e-5 and chk["arm_b_motion_rad"] <= 1e-8
     rep = verify(robot, r["solution"], None)
     assert rep.max_momentum_residual <= 1e-8 and rep.base_attitude_mismatch_rad <= 5e-3   # RK4, 6 steps
+
+
+def test_rockit_peer_free_time_reach_keeps_its_limits_at_the_grid(ffsr):
+    """The free-final-time reach in rockit (``FreeTime``, extra 'rockit'; skipped without it) on 6
+    intervals: solved, the duration within its bounds, the hand on target (Pinocchio) and the
+    limits held at the grid points (between them rockit's cubic may exceed a velocity limit)."""
+    pytest.importorskip("rockit")
+    from optplan.bench import modelling, rockit_peer
+
+    prob, ctx = modelling._reach(True)
+    robot, target, _ = ctx
+    r = rockit_peer.reach(robot, modelling.Q0, target, "a_ee", N=6, free_time=True, duration_bounds=(2.0, 60.0))
+    assert r["success"]
+    sol = r["solution"]
+    assert 2.0 <= sol.duration <= 60.0
+    assert modelling._check_reach(prob, sol, ctx)["hand_error_m"] <= 1e-5
+    assert np.abs(sol.qd).max() <= 0.1 + 1e-6 and np.abs(sol.qdd).max() <= 0.02 + 1e-6

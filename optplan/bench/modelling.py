@@ -21,8 +21,10 @@ Tasks:
   capsules fitted for planning) swinging its hand around one box, 0.02 m margin, checked by
   ``verify`` (coal, meshes); skipped without example-robot-data (``pip install "optplan[robots]"``).
 
-``--peer rockit`` (extra ``rockit``: ``pip install rockit-meco``) also runs the reach and transport
-tasks written in rockit (:mod:`optplan.bench.rockit_peer`): the same problem, guess and checks.
+``--peer rockit`` (extra ``rockit``: ``pip install rockit-meco``) also runs ``reach``,
+``reach_free_time``, ``transport`` and ``transport_custom`` written in rockit
+(:mod:`optplan.bench.rockit_peer`): the same problem, guess and checks, and prints the ratio of
+rockit's build + solve CPU time to ours.
 """
 from __future__ import annotations
 
@@ -125,8 +127,7 @@ def _check_transport(prob: Any, sol: Any, ctx: Any) -> dict[str, float]:
     rep = verify(robot, sol, scene, closed_chain=cc)
     out = {"closed_chain_residual": float(rep.max_closed_chain_residual), "min_clearance_m": float(rep.min_clearance_m)}
     if "upright" in prob.terms:
-        ts = np.linspace(0, sol.duration, 10 * (len(sol.t) - 1) + 1)
-        out["min_upright_cos"] = float(np.min(sol.sample(ts, "upright")))
+        out["min_upright_cos"] = _upright_min(robot, scene, sol)
     return out
 
 
@@ -187,8 +188,51 @@ def _check_ur5(prob: Any, sol: Any, ctx: Any) -> dict[str, float]:
             "margin_held": float(rep.min_clearance_m >= 0.02 - 1e-4)}
 
 
-def run_task(name: str) -> dict[str, Any]:
-    """Build and solve task ``name`` twice in this process (the second: warm); the figures of both."""
+def _forget_memory() -> None:
+    """Drop what this process keeps in memory of the kernels and NLP structures (the disk cache
+    stays): the next problem is built as in a new process with a warm cache."""
+    from optplan.problem.floating_segment import FloatingKernels
+    from optplan.problem.kernels import KernelCache
+
+    for cls in (KernelCache, FloatingKernels):
+        for kc in list(cls._by_digest.values()):
+            kc._structures.clear()
+            kc._fns.clear()
+
+
+def _solve_row(prob: Any, ctx: Any, check: Any) -> tuple[dict[str, Any], Any]:
+    """Solve ``prob`` (made by a task's maker, ``ctx[-1]`` its start times) and its figures."""
+    t0, c0 = ctx[-1]     # after loading the robot and scene, making the guess
+    built = time.perf_counter()
+    sol = prob.solve()
+    total = time.perf_counter() - t0
+    row = {"total_s": total, "total_cpu_s": time.process_time() - c0, "declare_s": built - t0,
+           "setup_s": sol.setup_time, "build_s": built - t0 + sol.setup_time, "solve_s": sol.wall_time,
+           "solve_cpu_s": sol.cpu_time, "iterations": sol.total_iterations, "attempts": len(sol.attempts),
+           "success": bool(sol.success), "status": sol.status.value,
+           "transcription": "bspline" if prob.uses_bspline() else "knots", **check(prob, sol, ctx)}
+    return row, sol
+
+
+def _resolve(prob: Any) -> dict[str, float]:
+    """One re-solve of ``prob`` as it stands: its overhead besides IPOPT [s], split into the
+    dense check between knots (timed again on its own) and the rest (setup, solution)."""
+    from optplan.problem.guarantees import check_between_knots
+
+    t1, c1 = time.perf_counter(), time.process_time()
+    s = prob.solve()
+    wall, cpu = time.perf_counter() - t1, time.process_time() - c1
+    t2, c2 = time.perf_counter(), time.process_time()
+    check_between_knots(prob, s)
+    chk, chk_cpu = time.perf_counter() - t2, time.process_time() - c2
+    return {"overhead_s": wall - s.wall_time, "overhead_cpu_s": cpu - s.cpu_time, "check_s": chk,
+            "check_cpu_s": chk_cpu, "iterations": s.total_iterations, "success": bool(s.success)}
+
+
+def run_task(name: str, repeat: int = 1) -> dict[str, Any]:
+    """Task ``name`` in this process: the first problem, then ``repeat`` warm ones (the kernels
+    compiled into the cache, the memory of them dropped before each: as a new process with a warm
+    cache), with re-solves after ``set_initial(solution=...)`` and ``set_value``."""
     if name not in TASKS:
         raise ValueError(f"task: expected one of {TASKS}, got {name!r}")
     make, check = {"reach": (lambda: _reach(False), _check_reach),
@@ -201,39 +245,36 @@ def run_task(name: str) -> dict[str, Any]:
         make()
     except Skipped as exc:
         return {"task": name, "skipped": str(exc)}
-    rows = {}
-    for run_ in ("first", "warm"):
-        if run_ == "warm":   # the kernels of this structure compiled into the cache (not timed)
-            prob, ctx = make()
-            if prob.uses_bspline():
-                prob.compile_kernels = True
-                prob.solve()
+    rows: dict[str, Any] = {}
+    prob, ctx = make()
+    rows["first"], _ = _solve_row(prob, ctx, check)
+    prob, ctx = make()               # the kernels of this structure compiled into the cache (not timed)
+    if prob.uses_bspline():
+        prob.compile_kernels = True
+        prob.solve()
+    reps = []
+    for _ in range(max(1, int(repeat))):
+        _forget_memory()
         prob, ctx = make()
-        t0, c0 = ctx[-1]     # after loading the robot and scene, making the guess
-        built = time.perf_counter()
-        sol = prob.solve()
-        total = time.perf_counter() - t0
-        rows[run_] = {"total_s": total, "total_cpu_s": time.process_time() - c0, "declare_s": built - t0, "setup_s": sol.setup_time, "solve_s": sol.wall_time, "solve_cpu_s": sol.cpu_time,
-                      "iterations": sol.total_iterations, "attempts": len(sol.attempts), "success": bool(sol.success), "status": sol.status.value,
-                      "transcription": "bspline" if prob.uses_bspline() else "knots", **check(prob, sol, ctx)}
-        # re-solves: what a new parameter value / a warm start costs besides IPOPT
-        if run_ == "warm" and prob.uses_bspline():
-            prob.set_initial(solution=sol)
-            t1 = time.perf_counter()
-            s2 = prob.solve()
-            rows[run_]["resolve_overhead_s"] = time.perf_counter() - t1 - s2.wall_time
-            rows[run_]["resolve_iterations"] = s2.iterations
-            if prob._params:
-                prob.set_value(prob._params[0].sym, prob._params[0].value.ravel() + [0.0, 0.01, 0.0])
-                t1 = time.perf_counter()
-                s1 = prob.solve()
-                rows[run_]["set_value_overhead_s"] = time.perf_counter() - t1 - s1.wall_time
-                rows[run_]["set_value_iterations"] = s1.iterations
-                rows[run_]["set_value_success"] = bool(s1.success)
+        row, sol = _solve_row(prob, ctx, check)
+        reps.append(row)
+    rows["warm"] = dict(reps[0])
+    if len(reps) > 1:
+        rows["warm"]["repeats"] = {k: [r[k] for r in reps] for k in ("total_s", "total_cpu_s", "build_s",
+                                                                     "solve_s", "solve_cpu_s")}
+    # re-solves: what a warm start / a new parameter value costs besides IPOPT (the last warm problem)
+    if prob.uses_bspline():
+        prob.set_initial(solution=sol)
+        rows["warm"]["resolve"] = _resolve(prob)
+        prob.set_initial(solution=sol)            # again: the warm-start IPOPT instance exists now
+        rows["warm"]["resolve_again"] = _resolve(prob)
+        if prob._params:
+            prob.set_value(prob._params[0].sym, prob._params[0].value.ravel() + [0.0, 0.01, 0.0])
+            rows["warm"]["set_value"] = _resolve(prob)
     return {"task": name, **rows}
 
 
-PEER_TASKS = ("reach", "transport")
+PEER_TASKS = ("reach", "reach_free_time", "transport", "transport_custom")
 
 
 def run_peer(name: str) -> dict[str, Any]:
@@ -246,28 +287,55 @@ def run_peer(name: str) -> dict[str, Any]:
         return {"task": name, "peer": "rockit", "skipped": "rockit is not installed (pip install \"optplan[rockit]\")"}
     from optplan.verification import verify
 
-    if name == "reach":
-        prob, ctx = _reach(False)
+    if name in ("reach", "reach_free_time"):
+        free = name == "reach_free_time"
+        prob, ctx = _reach(free)
         robot, target, _ = ctx
-        r = rockit_peer.reach(robot, Q0, target, "a_ee", N=prob.N, duration=prob.duration)
+        r = rockit_peer.reach(robot, Q0, target, "a_ee", N=prob.N, duration=prob.duration, free_time=free,
+                              duration_bounds=prob.duration_bounds)
         sol = r.pop("solution")
         rep = verify(robot, sol, None)
         return {"task": name, "peer": "rockit", **r, **_check_reach(prob, sol, ctx),
                 "verify_base_attitude_mismatch_rad": float(rep.base_attitude_mismatch_rad),
-                "note": rockit_peer.REACH_NOTE + "; guess: the start held"}
+                "note": rockit_peer.REACH_NOTE + "; guess: the start held" + ("; FreeTime" if free else "")}
 
-    prob, (robot, scene, cc, _) = _transport(False)
+    custom = name == "transport_custom"
+    prob, (robot, scene, cc, _) = _transport(custom)
     Q = prob.tp.unpack(prob._x0)["q"]           # the same guess as ours
-    r = rockit_peer.transport(robot, Q, cc, duration=prob.duration)
-    rep = verify(robot, r.pop("solution"), scene, closed_chain=cc)
-    return {"task": name, "peer": "rockit", **r, "closed_chain_residual": float(rep.max_closed_chain_residual),
-            "min_clearance_m": float(rep.min_clearance_m),
-            "note": "no collision rows (rockit has no collision model)"}
+    upright = None
+    if custom:
+        assert scene.object is not None  # the transport scene holds an object
+        upright = (robot.arm("A").ee_frame_id, scene.object.grasps["A"].rotation, float(np.cos(np.radians(5.0))))
+    r = rockit_peer.transport(robot, Q, cc, duration=prob.duration, upright=upright,
+                              acceleration_weight=1e-3 if custom else 0.0)
+    sol = r.pop("solution")
+    rep = verify(robot, sol, scene, closed_chain=cc)
+    out = {"task": name, "peer": "rockit", **r, "closed_chain_residual": float(rep.max_closed_chain_residual),
+           "min_clearance_m": float(rep.min_clearance_m), "note": "no collision rows (rockit has no collision model)"}
+    if custom:
+        out["min_upright_cos"] = _upright_min(robot, scene, sol)
+    return out
 
 
-def run(tasks: list[str], cold: bool = True) -> list[dict[str, Any]]:
+def _upright_min(robot: Any, scene: Any, sol: Any) -> float:
+    """The smallest ``(R_hand R_graspᵀ)[2, 2]`` of arm A along ``sol`` (10 samples per interval,
+    Pinocchio): the upright check of ``transport_custom`` for a solution without our terms."""
+    import pinocchio as pin
+
+    G = scene.object.grasps["A"]
+    fid = robot.arm("A").ee_frame_id
+    data = robot.model.createData()
+    ts = np.linspace(0, sol.duration, 10 * (len(sol.t) - 1) + 1)
+    out = []
+    for q in sol.sample(ts)["q"]:
+        pin.framesForwardKinematics(robot.model, data, q)
+        out.append(float((data.oMf[fid].rotation @ np.asarray(G.rotation).T)[2, 2]))
+    return min(out)
+
+
+def run(tasks: list[str], cold: bool = True, repeat: int = 1) -> list[dict[str, Any]]:
     """Each task in a new process (``cold``: with an empty ``OPTPLAN_CACHE``, background compiles
-    off), its first and warm figures."""
+    off), its first and warm figures (``repeat`` warm problems)."""
     out = []
     for t in tasks:
         env = dict(os.environ)
@@ -275,8 +343,8 @@ def run(tasks: list[str], cold: bool = True) -> list[dict[str, Any]]:
             if cold:
                 env["OPTPLAN_CACHE"] = tmp
                 env["OPTPLAN_BACKGROUND_COMPILE"] = "0"
-            p = subprocess.run([sys.executable, "-m", "optplan.bench.modelling", "--one", t], env=env,
-                               capture_output=True, text=True, check=False)
+            p = subprocess.run([sys.executable, "-m", "optplan.bench.modelling", "--one", t, "--repeat", str(repeat)],
+                               env=env, capture_output=True, text=True, check=False)
         if p.returncode != 0:
             out.append({"task": t, "error": (p.stderr or p.stdout).strip().splitlines()[-1:]})
             continue
@@ -284,8 +352,13 @@ def run(tasks: list[str], cold: bool = True) -> list[dict[str, Any]]:
     return out
 
 
+def _spread(v: list[float]) -> str:
+    """``median [min–max]`` of ``v``."""
+    return f"{np.median(v):.3f} [{min(v):.3f}-{max(v):.3f}]"
+
+
 def format_rows(rows: list[dict[str, Any]]) -> str:
-    lines = [f"{'task':18} {'run':6} {'tr':8} {'total s':>8} {'cpu s':>6} {'setup s':>8} {'solve s':>8} {'cpu s':>6} "
+    lines = [f"{'task':18} {'run':6} {'tr':8} {'total s':>8} {'cpu s':>6} {'build s':>8} {'solve s':>8} {'cpu s':>6} "
              f"{'it':>4}  ok  check"]
     for r in rows:
         if "error" in r:
@@ -296,17 +369,26 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
             continue
         for run_ in ("first", "warm"):
             x = r[run_]
-            chk = ", ".join(f"{k}={v:.3g}" for k, v in x.items() if k.endswith(("_m", "_rad", "_cos", "residual",
-                                                                               "_s2", "_rad_s"))
-                            or k in ("duration_s", "intervals", "margin_held"))
-            extra = (f"; re-solve from the solution: overhead {1e3 * x['resolve_overhead_s']:.1f} ms "
-                     f"({x['resolve_iterations']} it)" if "resolve_overhead_s" in x else "")
-            if "set_value_overhead_s" in x:
-                extra += (f"; after set_value (target +1 cm): overhead {1e3 * x['set_value_overhead_s']:.1f} ms "
-                          f"({x['set_value_iterations']} it, {'ok' if x['set_value_success'] else 'FAILED'})")
+            chk = ", ".join(f"{k}={v:.3g}" for k, v in x.items() if isinstance(v, float) and (
+                k.endswith(("_m", "_rad", "_cos", "residual", "_s2", "_rad_s")) or k in ("duration_s", "intervals",
+                                                                                      "margin_held")))
+            build = x.get("build_s", x.get("declare_s", 0.0) + x["setup_s"])
             lines.append(f"{r['task']:18} {run_:6} {x['transcription']:8} {x['total_s']:8.2f} "
-                         f"{x.get('total_cpu_s', float('nan')):6.2f} {x['setup_s']:8.2f} "
-                         f"{x['solve_s']:8.2f} {x['solve_cpu_s']:6.2f} {x['iterations']:4d}  {'yes' if x['success'] else 'NO ':3} {chk}{extra}")
+                         f"{x.get('total_cpu_s', float('nan')):6.2f} {build:8.2f} "
+                         f"{x['solve_s']:8.2f} {x['solve_cpu_s']:6.2f} {x['iterations']:4d}  {'yes' if x['success'] else 'NO ':3} {chk}")
+            if "repeats" in x:
+                rp = x["repeats"]
+                lines.append(f"{'':18} {len(rp['total_s'])} warm problems, median [min-max]: total {_spread(rp['total_s'])} s, "
+                             f"cpu {_spread(rp['total_cpu_s'])} s, build {_spread(rp['build_s'])} s, "
+                             f"IPOPT {_spread(rp['solve_s'])} s (cpu {_spread(rp['solve_cpu_s'])} s)")
+            for key, what in (("resolve", "re-solve from its solution"), ("resolve_again", "again"),
+                              ("set_value", "after set_value (target +1 cm)")):
+                if key in x:
+                    v = x[key]
+                    lines.append(f"{'':18} {what}: overhead besides IPOPT {1e3 * v['overhead_s']:.1f} ms, "
+                                 f"cpu {1e3 * v['overhead_cpu_s']:.1f} ms (of it the dense check between knots "
+                                 f"{1e3 * v['check_s']:.1f} ms, cpu {1e3 * v.get('check_cpu_s', float('nan')):.1f} ms), "
+                                 f"{v['iterations']} it, {'ok' if v['success'] else 'FAILED'}")
     return "\n".join(lines)
 
 
@@ -325,8 +407,14 @@ def run_peers(tasks: list[str]) -> list[dict[str, Any]]:
     return out
 
 
+def _median_cpu(x: dict[str, Any]) -> float:
+    """Build + solve CPU time [s] of a row: the median of its warm problems if repeated."""
+    return float(np.median(x["repeats"]["total_cpu_s"])) if "repeats" in x else float(x.get("total_cpu_s", 0.0))
+
+
 def format_peers(peers: list[dict[str, Any]], rows: list[dict[str, Any]]) -> str:
-    """rockit's rows and the ratio of its build + solve CPU time to ours (warm and first)."""
+    """rockit's rows and the ratio of its build + solve CPU time to ours (warm: the median of the
+    warm problems; first), with whether both verified the same checks."""
     ours = {r["task"]: r for r in rows if "first" in r}
     lines = []
     for p in peers:
@@ -334,14 +422,15 @@ def format_peers(peers: list[dict[str, Any]], rows: list[dict[str, Any]]) -> str
         if "skipped" in p or "error" in p:
             lines.append(head + (f"skipped: {p['skipped']}" if "skipped" in p else f"error: {p['error']}"))
             continue
-        chk = ", ".join(f"{k}={v:.3g}" for k, v in p.items() if k.endswith(("_m", "_rad", "residual")))
+        chk = ", ".join(f"{k}={v:.3g}" for k, v in p.items() if isinstance(v, float) and (
+            k.endswith(("_m", "_rad", "residual", "_cos", "_s2", "_rad_s")) or k == "duration_s"))
         line = (head + f"total {p['total_s']:.2f} s, cpu {p['total_cpu_s']:.2f} s, {p['iterations']} it, "
                 f"{'ok' if p['success'] else 'FAILED'}, {chk} ({p['note']})")
         o = ours.get(p["task"])
         if o is not None:
+            cpu = {r: _median_cpu(o[r]) for r in ("warm", "first")}
             line += "; rockit cpu / ours: " + ", ".join(
-                f"{p['total_cpu_s'] / o[r]['total_cpu_s']:.1f}x ({r})" for r in ("warm", "first")
-                if o[r].get("total_cpu_s"))
+                f"{p['total_cpu_s'] / c:.1f}x ({r})" for r, c in cpu.items() if c > 0)
         lines.append(line)
     return "\n".join(lines)
 
@@ -353,14 +442,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tasks", default=",".join(TASKS), help="comma-separated subset of " + ",".join(TASKS))
     ap.add_argument("--warm-cache", action="store_true", help="keep the kernel cache (default: each task's "
                     "first run in a new process with an empty cache)")
+    ap.add_argument("--repeat", type=int, default=1, help="warm problems per task (median and spread printed; "
+                    "default 1)")
     ap.add_argument("--json", help="write the rows as JSON to this path")
-    ap.add_argument("--peer", choices=["rockit"], help="also run the tasks rockit can write (reach, transport) "
-                    "in rockit (extra 'rockit'); skipped when it is not installed")
+    ap.add_argument("--peer", choices=["rockit"], help="also run the tasks rockit can write ("
+                    + ", ".join(PEER_TASKS) + ") in rockit (extra 'rockit'); skipped when it is not installed")
     ap.add_argument("--one", help=argparse.SUPPRESS)
     ap.add_argument("--one-peer", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.one:
-        print(json.dumps(run_task(args.one)))
+        print(json.dumps(run_task(args.one, args.repeat)))
         return 0
     if args.one_peer:
         print(json.dumps(run_peer(args.one_peer)))
@@ -369,7 +460,9 @@ def main(argv: list[str] | None = None) -> int:
     bad = [t for t in tasks if t not in TASKS]
     if bad:
         ap.error(f"unknown tasks {bad}; choose from {', '.join(TASKS)}")
-    rows = run(tasks, cold=not args.warm_cache)
+    if args.repeat < 1:
+        ap.error(f"--repeat: expected an integer ≥ 1, got {args.repeat}")
+    rows = run(tasks, cold=not args.warm_cache, repeat=args.repeat)
     print(format_rows(rows))
     peers = run_peers(tasks) if args.peer else []
     if peers:

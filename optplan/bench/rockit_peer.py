@@ -59,10 +59,13 @@ class CubicSolution:
                 "qdd": self.qdd[k] + j * tau, "jerk": j}
 
 
-def transport(robot: Any, Q: np.ndarray, cc: Any, duration: float = 60.0, tol: float = 1e-6) -> dict[str, Any]:
+def transport(robot: Any, Q: np.ndarray, cc: Any, duration: float = 60.0, tol: float = 1e-6,
+              upright: tuple[int, np.ndarray, float] | None = None, acceleration_weight: float = 0.0) -> dict[str, Any]:
     """The transport of :func:`optplan.tasks.transport_problem` (without collision rows) in
     rockit, from the knot path ``Q`` ((N+1) × nj); the build and solve times [s], IPOPT
-    iterations, success and the solution (:class:`CubicSolution`)."""
+    iterations, success and the solution (:class:`CubicSolution`). ``upright = (frame id,
+    R_grasp, c_min)``: also ``(R_frame R_graspᵀ)[2, 2] ≥ c_min`` at the grid points (the object
+    stays upright); ``acceleration_weight``: also ``w ∫‖q̈‖² dt`` [1/s³]."""
     from rockit import MultipleShooting, Ocp
 
     from ..geometry.spatial import pose_residual
@@ -95,6 +98,12 @@ def transport(robot: Any, Q: np.ndarray, cc: Any, duration: float = 60.0, tol: f
     ocp.subject_to(robot.lower <= (q <= robot.upper))
     ocp.subject_to(-robot.velocity_limit <= (qd <= robot.velocity_limit))
     ocp.add_objective(ocp.integral(ca.sumsqr(jerk)))
+    if upright is not None:            # one line each in rockit too
+        fid, Rg, cmin = upright
+        up = ca.Function("upright", [kc._q], [(kc.frame(fid)[0] @ ca.DM(np.asarray(Rg).T))[2, 2]])
+        ocp.subject_to(up(q) >= cmin)
+    if acceleration_weight:
+        ocp.add_objective(acceleration_weight * ocp.integral(ca.sumsqr(qdd)))
     h = duration / N
     V = np.gradient(Q, h, axis=0)
     A = np.gradient(V, h, axis=0)
@@ -130,11 +139,16 @@ def _qmul_w(xi: Any, w: Any) -> Any:
 
 
 def reach(robot: Any, q0: np.ndarray, target: np.ndarray, frame: str, N: int = 20, duration: float = 20.0,
-          still: slice = slice(7, None), tol: float = 1e-6) -> dict[str, Any]:
+          still: slice = slice(7, None), tol: float = 1e-6, free_time: bool = False,
+          duration_bounds: tuple[float, float] = (2.0, 60.0), velocity_limit: float = 0.1,
+          acceleration_limit: float = 0.02, jerk_weight: float = 1e-2) -> dict[str, Any]:
     """The free-floating reach of ``optplan bench modelling`` in rockit: ``frame`` to ``target``
     [m] (world; base starts at the identity), joints ``still`` at rest throughout, rest at both
-    ends, base attitude back to the start at the end, minimum jerk."""
-    from rockit import MultipleShooting, Ocp
+    ends, base attitude back to the start at the end, minimum jerk. ``free_time``: the duration
+    free within ``duration_bounds`` [s] (rockit's ``FreeTime``, guess ``duration``),
+    ``|q̇| ≤ velocity_limit`` [rad/s] and ``|q̈| ≤ acceleration_limit`` [rad/s²] at the grid
+    points, cost ``T + jerk_weight ∫‖j‖² dt``."""
+    from rockit import FreeTime, MultipleShooting, Ocp
 
     from ..problem.floating_segment import FloatingKernels
 
@@ -153,7 +167,7 @@ def reach(robot: Any, q0: np.ndarray, target: np.ndarray, frame: str, N: int = 2
     hand_rel = ca.Function("hand_rel", [qs], [p_h - com])
     com0 = np.asarray(ca.Function("c", [qs], [com])(q0)).ravel()
 
-    ocp = Ocp(T=float(duration))
+    ocp = Ocp(T=FreeTime(float(duration)) if free_time else float(duration))
     q, qd, qdd = ocp.state(nj), ocp.state(nj), ocp.state(nj)
     xi = ocp.state(4)
     jerk = ocp.control(nj)
@@ -174,7 +188,13 @@ def reach(robot: Any, q0: np.ndarray, target: np.ndarray, frame: str, N: int = 2
                    ca.horzcat(2 * (x * zz - y * w), 2 * (y * zz + x * w), 1 - 2 * (x * x + y * y)))
     ocp.subject_to(ocp.at_tf(com0 + R @ hand_rel(q)) == target)
     ocp.subject_to(ocp.at_tf(xi[:3]) == 0)
-    ocp.add_objective(ocp.integral(ca.sumsqr(jerk)))
+    if free_time:
+        ocp.subject_to(duration_bounds[0] <= (ocp.T <= duration_bounds[1]))
+        ocp.subject_to(-velocity_limit <= (qd <= velocity_limit))
+        ocp.subject_to(-acceleration_limit <= (qdd <= acceleration_limit))
+        ocp.add_objective(ocp.T + jerk_weight * ocp.integral(ca.sumsqr(jerk)))
+    else:
+        ocp.add_objective(ocp.integral(ca.sumsqr(jerk)))
     ocp.set_initial(q, q0)
     ocp.set_initial(xi, np.array([0, 0, 0, 1.0]))
     ocp.solver("ipopt", {"expand": True, "print_time": False,

@@ -20,7 +20,8 @@ from ..errors import ConfigurationError, check_vector
 from ..geometry.spatial import check_pose
 from .robot import RobotModel
 
-__all__ = ["FloatingResult", "simulate_base", "joint_trajectory_from_samples", "rk4_step"]
+__all__ = ["FloatingResult", "simulate_base", "joint_trajectory_from_samples", "rk4_step", "zero_momentum_twists",
+           "attitudes_on_intervals"]
 log = logging.getLogger(__name__)
 
 JointTrajectory = Callable[[float], tuple[np.ndarray, np.ndarray]]
@@ -178,3 +179,72 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
     res = np.max(np.abs(H - h0), axis=1)
     log.debug("simulate_base: %d samples, max momentum residual %.3g", N, res.max())
     return FloatingResult(t_grid.copy(), Q, V, H, res)
+
+
+def zero_momentum_twists(robot: RobotModel, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """(M, 6) base twists ``[v; ω]`` [m/s; rad/s] in the base frame with zero momentum, at the
+    joint states ``q``, ``q̇`` (M × nj) [rad, rad/s]. With zero momentum the base-frame twist does
+    not depend on the base placement (the centroidal map turns with the base), so it is solved
+    once per state, with the base at the identity, by Pinocchio's centroidal map."""
+    q, qd = np.atleast_2d(np.asarray(q, float)), np.atleast_2d(np.asarray(qd, float))
+    if q.shape != qd.shape or q.shape[1] != robot.nj:
+        raise ConfigurationError(f"zero_momentum_twists: expected q and qd of shape (M, {robot.nj}), got "
+                                 f"{q.shape} and {qd.shape}")
+    model, data = robot.model, robot.model.createData()
+    full = robot.configuration(np.zeros(robot.nj))
+    A = np.empty((q.shape[0], 6, 6))
+    b = np.empty((q.shape[0], 6))
+    for i in range(q.shape[0]):
+        full[7:] = q[i]
+        Ag = pin.computeCentroidalMap(model, data, full)
+        A[i] = Ag[:, :6]
+        b[i] = -Ag[:, 6:] @ qd[i]
+    return np.linalg.solve(A, b[:, :, None])[:, :, 0]
+
+
+def _quat_mul_rows(a: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Row-wise ``a ⊗ [w; 0]`` of quaternions ``a`` (K × 4, x y z w) and rates ``w`` (K × 3)."""
+    v, s = a[:, :3], a[:, 3:]
+    return np.hstack([s * w + np.cross(v, w), -np.sum(v * w, axis=1, keepdims=True)])
+
+
+def attitudes_on_intervals(robot: RobotModel, joints: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+                           t: np.ndarray, quat0: np.ndarray, density: int, substeps: int = 2) -> np.ndarray:
+    """Zero-momentum base quaternions (x y z w) at the sample times ``t`` [s] (``density`` samples
+    per interval: ``t[k·density]`` starts interval k), each interval integrated from its own start
+    quaternion ``quat0[k]`` along the joint trajectory ``joints(ts) -> (q, q̇)`` (vectorised over
+    the times ``ts``, (M, nj) each). The same RK4 scheme as :func:`simulate_base` (``substeps``
+    steps per sample, quaternion renormalised after each) on all intervals at once; the last row
+    is ``quat0[-1]`` (the end knot's own quaternion)."""
+    t = np.asarray(t, float)
+    q0 = np.asarray(quat0, float)
+    K = q0.shape[0] - 1
+    if t.ndim != 1 or t.size != K * density + 1 or density < 1 or substeps < 1:
+        raise ConfigurationError(f"attitudes_on_intervals: expected {K} intervals of {density} samples "
+                                 f"({K * density + 1} times) and substeps ≥ 1, got {t.shape} times, substeps {substeps}")
+    m = 2 * substeps                  # RK4 evaluates the rate at the start, middle and end of each step
+    frac = np.arange(m) / m
+    fine = np.r_[(t[:-1, None] + np.diff(t)[:, None] * frac).ravel(), t[-1]]
+    qs, qds = joints(fine)
+    W = zero_momentum_twists(robot, qs, qds)[:, 3:]
+    x = q0[:-1] / np.linalg.norm(q0[:-1], axis=1, keepdims=True)
+    out = np.empty((t.size, 4))
+    starts = np.arange(K) * density   # the first sample of each interval
+
+    def f(xi: np.ndarray, w: np.ndarray) -> np.ndarray:
+        return 0.5 * _quat_mul_rows(xi / np.linalg.norm(xi, axis=1, keepdims=True), w)
+
+    for j in range(density):
+        out[starts + j] = x
+        i = starts + j                 # the sample interval each trajectory is on
+        dt = (t[i + 1] - t[i])[:, None] / substeps
+        for s in range(substeps):
+            w0, wm, w1 = (W[i * m + 2 * s + c] for c in range(3))
+            k1 = f(x, w0)
+            k2 = f(x + dt / 2 * k1, wm)
+            k3 = f(x + dt / 2 * k2, wm)
+            k4 = f(x + dt * k3, w1)
+            x = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x /= np.linalg.norm(x, axis=1, keepdims=True)
+    out[-1] = q0[-1] / np.linalg.norm(q0[-1])
+    return out

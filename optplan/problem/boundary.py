@@ -4,18 +4,28 @@ or end in collision would come back as a converged solve. :func:`pinned_collisio
 before IPOPT runs; :meth:`OptProblem.solve` then reports ``IpoptStatus.BOUNDARY_IN_COLLISION``."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 import pinocchio as pin
 
-if TYPE_CHECKING:
-    from .problem import OptProblem
+from ..model.robot import RobotModel
 
 __all__ = ["pinned_collisions"]
 
 
-def pinned_collisions(problem: OptProblem, built: dict[str, Any], tol: float) -> str:
+class PinnedProblem(Protocol):
+    """What :func:`pinned_collisions` reads of a problem (an ``OptProblem``)."""
+
+    robot: RobotModel
+    N: int
+    base0: pin.SE3
+    _handles: list[Any]
+
+    def _pinned_q(self) -> dict[int, np.ndarray]: ...
+
+
+def pinned_collisions(problem: PinnedProblem, built: dict[str, Any], tol: float) -> str:
     """The first configuration pinned by a JointBoundary at which a pair of a CollisionAvoidance
     term is in collision (exact coal distance < −``tol`` [m]), as a message naming the knot, the pair
     and the depth; "" when there is none. The pairs checked are the term's own: the ones its

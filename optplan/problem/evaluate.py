@@ -15,7 +15,7 @@ from .build import TermData
 from .terms import NumericTrajectory
 
 if TYPE_CHECKING:
-    from .problem import TermHandle
+    from .handles import TermHandle
     from .solution import Solution
 
 #: what names a term: its handle or its name

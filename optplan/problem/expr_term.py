@@ -84,14 +84,21 @@ class ExprTerm(Term):
         return self._weight() * tp.h * (sum(v[1:-1]) + (v[0] + v[-1]) / 2)
 
     def _numeric_values(self, traj: Any, expr: Any, ks: list[int]) -> np.ndarray:
+        """The expression at the points ``ks`` of ``traj``, point after point (one mapped call)."""
+        if not ks:
+            return np.zeros(0)
         f = self._function(traj.robot, expr)
-        out = []
-        for k in ks:
-            quat = traj.base_quat[k] if traj.base_quat is not None else None
-            t = k * traj.T / traj.N
-            out.append(np.array(f(*self._args(traj.robot, traj.q[k], traj.qd[k], traj.qdd[k], quat, t, traj.T,
-                                              traj.com0))).ravel())
-        return np.concatenate(out) if out else np.zeros(0)
+        k = np.asarray(ks, int)
+
+        def cols(a: Any) -> ca.DM:
+            return ca.DM(np.asarray(a, float)[k].T)
+
+        quat = cols(traj.base_quat) if traj.base_quat is not None else None
+        args = self._args(traj.robot, cols(traj.q), cols(traj.qd), cols(traj.qdd), quat,
+                          ca.DM((k * traj.T / traj.N)[None, :]), traj.T, traj.com0)
+        if not traj.robot.is_floating:
+            args[3] = args[6] = args[7] = ca.DM(0, k.size)
+        return np.asarray(f.map(k.size)(*args)).ravel(order="F")
 
     def numeric(self, traj: Any) -> np.ndarray:
         m = ca.vec(ca.SX(self.expr)).shape[0]

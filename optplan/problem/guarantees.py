@@ -35,7 +35,6 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from ..errors import OptionError
 from .collision_term import CollisionAvoidance, CollisionModel
@@ -170,24 +169,17 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
 
 def _base_attitudes(robot: Any, sol: Solution, t: np.ndarray, density: int) -> np.ndarray:
     """Base quaternions of a free-floating robot at the sample times ``t`` (``density`` per
-    interval): integrated with zero momentum (:func:`~optplan.model.floating.simulate_base`)
-    from each knot's attitude over its interval, along the exact joint trajectory."""
-    from ..model.floating import simulate_base
+    interval): integrated with zero momentum (Pinocchio's centroidal map, the RK4 scheme of
+    :func:`~optplan.model.floating.simulate_base`) from each knot's attitude over its interval,
+    along the exact joint trajectory; all intervals at once
+    (:func:`~optplan.model.floating.attitudes_on_intervals`)."""
+    from ..model.floating import attitudes_on_intervals
 
-    def joints(tt: float) -> tuple[np.ndarray, np.ndarray]:
-        s = sol.sample(tt)
-        return s["q"][0], s["qd"][0]
+    def joints(ts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        s = sol.sample(np.clip(ts, sol.t[0], sol.t[-1]))
+        return s["q"], s["qd"]
 
-    bq = np.asarray(sol.base_quat, float)
-    out = np.empty((t.size, 4))
-    for k in range(len(sol.t) - 1):
-        i0 = k * density
-        x, y, z, w = bq[k] / np.linalg.norm(bq[k])
-        base0 = pin.SE3(pin.Quaternion(w, x, y, z).toRotationMatrix(), np.zeros(3))
-        res = simulate_base(robot, joints, t[i0:i0 + density + 1], base0=base0, substeps=2)
-        out[i0:i0 + density] = res.q[:-1, 3:7]
-    out[-1] = bq[-1] / np.linalg.norm(bq[-1])
-    return out
+    return attitudes_on_intervals(robot, joints, t, np.asarray(sol.base_quat, float), density, substeps=2)
 
 
 def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions | None = None) -> list[Violation]:

@@ -19,7 +19,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import casadi as ca
@@ -38,6 +37,7 @@ from .build import BuildContext, TermData
 from .evaluate import Infeasibility, TermEvaluator
 from .expressions import Parameter
 from .guarantees import GuaranteeOptions, enforce_between_knots
+from .handles import TermHandle
 from .nlp import IpoptStatus, NlpSolver, SolveOutcome, SolverOptions
 from .problem_expr import ExpressionAPI, check_weight
 from .solution import Solution
@@ -51,17 +51,6 @@ if TYPE_CHECKING:
 
 __all__ = ["OptProblem", "TermHandle", "Infeasibility"]
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class TermHandle:
-    """Named handle returned by ``add_cost`` / ``add_constraint`` (the binding of a term to a
-    problem): pass it to ``Solution.value/violation/dual/sample`` and ``OptProblem.term_data``."""
-
-    name: str
-    term: Term
-    role: str  # "cost" | "constraint"
-    weight: float = 1.0
 
 
 class OptProblem(ExpressionAPI):

@@ -188,6 +188,12 @@ class SplineCore:
         """``(f, ∂f/∂z, triu ∂²(λᵀf)/∂z²)`` of a local kernel: from C when an earlier run compiled
         them (``compiled`` "auto"/True), else symbolic (and queued for a background compile)."""
         kc = self.kc
+        if compiled is not False and kc._dir is not None:   # compiled earlier: the symbolic forms are not loaded
+            name = kc._name(("local", fn.name()))
+            libs = [kc._compiled_by_name(n, "-O1") for n in (name, kc._name(("ljac", name)),
+                                                               kc._name(("lhess_triu", name)))]
+            if all(lib is not None for lib in libs):
+                return libs[0], libs[1], libs[2]  # type: ignore[return-value]  # checked just above
         f = kc._get(("local", fn.name()), lambda name: ca.Function(name, [fn.sx_in(0)], [fn(fn.sx_in(0))]))
         jfn, hfn = kc.local_derivatives(f)
         fns = (f, jfn, hfn)
@@ -382,14 +388,16 @@ class SplineCore:
             z = ca.SX.sym("z", f.size1_in(0))
             J = ca.jacobian(f(z), z)
             fn = kc._fns[("fb_momentum_linear",)] = ca.Function("mom_lin", [z], [J[:, 2 * nj:], f(z)])
-        W = np.zeros((self.nW, 3))
-        for c in range(self.nW):
-            k, i = divmod(c, m)
-            if k == N:
-                k, i = N - 1, m
-            b, db = spline_basis(i / m)
-            Aw, r = fn(np.r_[b @ P[k:k + 4], db @ P[k:k + 4], np.zeros(3)])
-            W[c] = -np.linalg.solve(np.asarray(Aw), np.asarray(r).ravel())
+        # every twist point at once: q, dq/du from the basis, then one mapped call and a batched solve
+        kk, ii = np.divmod(np.arange(self.nW), m)
+        kk, ii = np.where(kk == N, N - 1, kk), np.where(kk == N, m, ii)
+        B = np.array([np.concatenate(spline_basis(j / m)) for j in range(m + 1)])[ii]   # nW × 8
+        Pk = P[kk[:, None] + np.arange(4)]                                               # nW × 4 × nj
+        Z = np.hstack([np.einsum("ca,caj->cj", B[:, :4], Pk), np.einsum("ca,caj->cj", B[:, 4:], Pk),
+                       np.zeros((self.nW, 3))])
+        Aw, r = fn.map(self.nW)(Z.T)
+        Aw = np.asarray(Aw).reshape(3, 3, self.nW, order="F").transpose(2, 0, 1)        # nW × 3 × 3
+        W = -np.linalg.solve(Aw, np.asarray(r).T[:, :, None])[:, :, 0]
         xi = _ID_Q.copy()
         out = []
         step = kc.attitude_step(self.n_sub)

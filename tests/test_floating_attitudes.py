@@ -1,0 +1,75 @@
+"""The vectorised zero-momentum base attitudes of the dense check between knots
+(optplan.model.floating.attitudes_on_intervals, zero_momentum_twists) against the
+step-by-step simulation :func:`simulate_base` and momentum conservation."""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan import RobotModel
+from optplan.model.floating import attitudes_on_intervals, simulate_base, zero_momentum_twists
+
+
+@pytest.fixture(scope="module")
+def eba():
+    return RobotModel.from_name("eba_ffsr")
+
+
+def _poly(rng, nj, T):
+    """A random quintic per joint on [0, T], vectorised over times: t -> (q, q̇) (M × nj)."""
+    C = rng.normal(size=(6, nj)) * np.array([1.0, 0.5, 0.5, 0.3, 0.2, 0.1])[:, None]
+
+    def traj(t):
+        tau = np.atleast_1d(np.asarray(t, float))[:, None] / T
+        q = sum(C[k] * tau ** k for k in range(6))
+        qd = sum(k * C[k] * tau ** (k - 1) for k in range(1, 6)) / T
+        return q, qd
+    return traj
+
+
+def _random_quat(rng):
+    v = rng.normal(size=4)
+    return v / np.linalg.norm(v)
+
+
+def test_twists_conserve_zero_momentum_at_any_base_placement(eba):
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-2, 2, size=(6, eba.nj))
+    qd = rng.normal(size=(6, eba.nj))
+    V = zero_momentum_twists(eba, q, qd)
+    data = eba.model.createData()
+    for i in range(6):
+        x = _random_quat(rng)
+        base = pin.SE3(pin.Quaternion(x[3], *x[:3]).toRotationMatrix(), rng.normal(size=3))
+        h = pin.computeCentroidalMomentum(eba.model, data, eba.configuration(q[i], base), np.r_[V[i], qd[i]])
+        assert np.abs(np.r_[h.linear, h.angular]).max() < 1e-9 * (1 + np.abs(qd[i]).max())
+        assert np.abs(V[i]).max() > 1e-3          # the arms do move the base
+
+
+def test_attitudes_match_simulate_base_per_interval(eba):
+    rng = np.random.default_rng(7)
+    K, density, T = 5, 4, 6.0
+    traj = _poly(rng, eba.nj, T)
+    t = np.linspace(0.0, T, K * density + 1)
+    quat0 = np.array([_random_quat(rng) for _ in range(K + 1)])
+    got = attitudes_on_intervals(eba, traj, t, quat0, density, substeps=2)
+    for k in range(K):
+        x = quat0[k]
+        base0 = pin.SE3(pin.Quaternion(x[3], *x[:3]).toRotationMatrix(), np.zeros(3))
+        ref = simulate_base(eba, lambda tt: tuple(a[0] for a in traj(tt)), t[k * density:(k + 1) * density + 1],
+                            base0=base0, substeps=2)
+        # the quaternion's sign is free: compare rotations
+        for j in range(density):
+            a, b = got[k * density + j], ref.q[j, 3:7]
+            assert min(np.abs(a - b).max(), np.abs(a + b).max()) < 1e-12
+        assert np.abs(ref.q[-1, 3:7] - quat0[k]).max() > 1e-3    # the base turned over the interval
+    assert np.allclose(got[-1], quat0[-1])
+
+
+def test_attitudes_reject_a_grid_that_does_not_fit(eba):
+    from optplan.errors import ConfigurationError
+
+    with pytest.raises(ConfigurationError, match="intervals"):
+        attitudes_on_intervals(eba, _poly(np.random.default_rng(0), eba.nj, 1.0), np.linspace(0, 1, 7),
+                               np.tile([0, 0, 0, 1.0], (3, 1)), 4)
