@@ -135,7 +135,7 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
         elif isinstance(t, CollisionAvoidance):
             # the segment NLP's planes: fixed normals, its pair set (self-collision, held object)
             if robot.is_floating or core.free_time or collisions or t.scene is None or not t.fixed_normals \
-                    or not t.self_collision or not t.held_object or t.margin_boost or t.activate_with:
+                    or not t.self_collision or not t.held_object:
                 raise Unsupported("CollisionAvoidance other than fixed normals on a fixed base with fixed T")
             collisions.append(h)
         else:

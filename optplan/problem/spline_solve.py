@@ -12,6 +12,8 @@ import numpy as np
 import pinocchio as pin
 
 from .bspline import knot_values
+from .build import TermData
+from .collision_term import CollisionAvoidance
 from .expressions import Parameter
 from .nlp import IpoptStatus, NlpSolver, SolverOptions
 from .solution import Solution
@@ -90,6 +92,27 @@ class SplineBackend:
     def _velocity_families(self) -> list[Family]:
         return [f for f in self.fams if f.kind == "velocity"]
 
+    def _activation(self, f: Family) -> float:
+        """The velocity activation [fraction of the limit] of the term that owns family ``f``."""
+        for h in self.prob._handles:
+            if f.name in self.owner.get(h.name, ()):
+                a = getattr(h.term, "activation", None)
+                return VELOCITY_ACTIVATION if a is None else float(a)
+        return VELOCITY_ACTIVATION
+
+    def term_data(self, handle: Any) -> TermData:
+        """What this build decided for a term (:meth:`OptProblem.term_data`): for a collision
+        term its :class:`~optplan.problem.collision_term.CollisionModel` (``info["model"]``:
+        checker, active pairs and knots, relaxed margins — what ``with_boost`` reads), else nothing."""
+        if self.core is None:
+            self.prepare()
+        m = self.collision_model
+        if not isinstance(handle.term, CollisionAvoidance) or m is None:
+            return TermData()
+        return TermData(info={"model": m, "active_pairs": tuple(m.active_pairs),
+                              "constant_pairs": tuple(m.constant_pairs), "relaxed": dict(m.relaxed),
+                              "active_knots": dict(m.active_knots)})
+
     def _velocity_points(self, x: np.ndarray) -> np.ndarray:
         """Velocity control points [rad/s] of ``x``, (N+2) × nj."""
         core = self.core
@@ -109,7 +132,8 @@ class SplineBackend:
         V = self._velocity_points(x).ravel()
         for f in self._velocity_families():
             lo, hi = (np.tile(b, self.core.N + 2) for b in np.asarray(f.data))
-            on = (V >= VELOCITY_ACTIVATION * hi) | (V <= VELOCITY_ACTIVATION * lo)
+            a = self._activation(f)
+            on = (V >= a * hi) | (V <= a * lo)
             f.points = sorted(set(np.flatnonzero(on).tolist()) | self.vel_extra.get(f.name, set()))
 
     def _missed_velocity(self, x: np.ndarray, tol: float) -> bool:
@@ -127,7 +151,8 @@ class SplineBackend:
             has[np.asarray(f.points, int)] = True
             if not np.any(~has & ((V > hi + tol) | (V < lo - tol))):
                 continue
-            on = ~has & ((V >= VELOCITY_ACTIVATION * hi) | (V <= VELOCITY_ACTIVATION * lo))
+            a = self._activation(f)
+            on = ~has & ((V >= a * hi) | (V <= a * lo))
             extra = self.vel_extra.setdefault(f.name, set())
             extra.update(np.flatnonzero(on).tolist())
             f.points = sorted(set(f.points) | extra)
