@@ -188,13 +188,13 @@ def test_fixed_normal_failure_falls_back_to_free_normals(tcb, monkeypatch):
 
 
 def _fake_policy(tcb, monkeypatch, reports):
-    """Scene 1's first constrained segment, with SplineSegmentProblem.solve and verify faked: each
+    """Scene 1's first constrained segment, with OptProblem.solve and verify faked: each
     solve converges in 7 iterations at its initial guess, each verify returns the next (clearance,
     closed-chain residual) of ``reports``. Returns (scene, segment path, intervals of every solve)."""
     from types import SimpleNamespace
 
     import optplan.pipeline as PL
-    from optplan.problem.segment import SplineSegmentProblem
+    from optplan.problem import OptProblem
     from optplan.problem.solution import IpoptStatus, Solution
 
     sc, plan = _scene1_plan(tcb)
@@ -205,16 +205,16 @@ def _fake_policy(tcb, monkeypatch, reports):
 
     def fake_solve(self, ipopt=None, **kw):
         Ns.append(self.N)
-        Q = self.knot_configurations()
+        Q = self.tp.unpack(self.initial_guess)["q"]
         z = np.zeros_like(Q)
-        return Solution(True, IpoptStatus.SOLVE_SUCCEEDED, 7, 0.1, 1.0, 0.0, {}, np.linspace(0, self.T, self.N + 1),
+        return Solution(True, IpoptStatus.SOLVE_SUCCEEDED, 7, 0.1, 1.0, 0.0, {}, np.linspace(0, self.duration, self.N + 1),
                         Q, z, z, z[:-1], tcb.joint_names, setup_time=0.05)
 
     def fake_verify(robot, sol, scene, closed_chain=None, object_arm=None):
         c, r = next(reports)
         return SimpleNamespace(min_clearance_m=c, max_closed_chain_residual=r, min_clearance_pair="x")
 
-    monkeypatch.setattr(SplineSegmentProblem, "solve", fake_solve)
+    monkeypatch.setattr(OptProblem, "solve", fake_solve)
     monkeypatch.setattr(PL, "verify", fake_verify)
     return sc, seg_path, Ns
 
