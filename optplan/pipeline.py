@@ -345,6 +345,9 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
                                   fixed_normals=True, transcription="bspline",
                                   velocity_activation=opts.spline_velocity_activation)
         prob.compile_kernels = opts.compile_kernels
+        prob._spline.velocity_retries = opts.velocity_retries   # (0) of the retry policy, inside the solve
+        if opts.segment_terms is not None:   # the user's own terms
+            opts.segment_terms(prob, kind)
         if initial is not None:   # another grid's solution at this grid's knots (projected: drift between its knots)
             Q = initial.sample(np.linspace(initial.t[0], initial.t[-1], int(N) + 1))["q"]
             prob.set_initial(q=_project_knots(robot, Q, cc) if project else Q)

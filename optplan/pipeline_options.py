@@ -2,7 +2,9 @@
 grids and margins, and the ordered retry policy's limits."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 __all__ = ["PipelineOptions", "PLANNER_DEFAULTS"]
 
@@ -84,8 +86,8 @@ class PipelineOptions:
     #: Hold the separating-plane normals at coal's witness normals along the warm start
     #: (:attr:`CollisionAvoidance.fixed_normals`); see docs/decisions/0003-fixed-plane-normals.md.
     fixed_plane_normals: bool = True
-    #: ``"bspline"``: each segment a :class:`~optplan.problem.segment.SplineSegmentProblem` (joint-space
-    #: B-spline control points, closed chain and fixed-normal planes at the knots, limits on the control
+    #: ``"bspline"``: each segment an :class:`~optplan.problem.OptProblem` on the B-spline kernel core
+    #: (joint-space control points, closed chain and fixed-normal planes at the knots, limits on the control
     #: points); ``"knots"``: the :class:`~optplan.problem.OptProblem` knot-state transcription.
     transcription: str = "bspline"
     #: A constrained B-spline segment gets ⌈joint path length / spline_interval_step⌉ intervals [rad] (a
@@ -106,7 +108,7 @@ class PipelineOptions:
     #: (see docs/decisions/0012-segment-nlp-rows.md for the iteration counts this is set from).
     spline_max_iterations: int = 200
     #: Weight of the jerk penalty that smooths the B-spline warm start before IPOPT
-    #: (:meth:`SplineSegmentProblem.smooth_initial`) [-]; 0: off.
+    #: (:meth:`OptProblem.smooth_initial <optplan.problem.OptProblem.smooth_initial>`) [-]; 0: off.
     smooth_warm_start: float = 0.0
     #: Only velocity control points the warm start brings past this fraction of their joint's limit get rows
     #: [fraction, 0-1].
@@ -124,6 +126,11 @@ class PipelineOptions:
     #: inherit the robot, scene and caches; :mod:`optplan.workers`) [count]; None: 2 on a machine with at least
     #: 2 CPUs, else 1. The results do not depend on it.
     workers: int | None = None
+    #: Your own terms on every B-spline segment NLP: called as ``segment_terms(problem, kind)`` with the
+    #: segment's :class:`~optplan.problem.OptProblem` (``kind``: "constrained" or "regrasp") right after
+    #: it is built, before its first guess and solve, on every grid the retry policy builds; add
+    #: constraints and costs with ``problem.add_constraint`` / ``problem.add_cost``. None: none.
+    segment_terms: Callable[[Any, str], None] | None = None
 
     def planner_kwargs(self) -> dict:
         """Keyword options for :func:`~optplan.planners.make_planner` (module defaults when
@@ -136,6 +143,9 @@ class PipelineOptions:
             raise ValueError(f"PipelineOptions: invalid values {self}")
         if self.plan_clock not in ("wall", "cpu"):
             raise ValueError(f"PipelineOptions.plan_clock: expected 'wall' or 'cpu', got {self.plan_clock!r}")
+        if self.segment_terms is not None and not callable(self.segment_terms):
+            raise ValueError(f"PipelineOptions.segment_terms: expected a callable (problem, kind) or None, got "
+                             f"{self.segment_terms!r}")
         if self.transcription not in ("bspline", "knots"):
             raise ValueError(f"PipelineOptions.transcription: expected 'bspline' or 'knots', got {self.transcription!r}")
         if not (self.spline_interval_step > 0 and 4 <= self.spline_min_intervals <= self.spline_max_intervals):

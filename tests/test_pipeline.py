@@ -293,3 +293,37 @@ def test_coarse_to_fine_records_the_coarse_attempt_and_verifies():
     assert cons and all(s.attempts[0]["reason"] == "coarse" and s.attempts[1]["reason"] == "initial"
                         and s.attempts[0]["N"] == -(-s.attempts[1]["N"] // 3) for s in cons)
     assert all(s.attempts[0]["reason"] != "coarse" for s in res.segments if s.kind == "regrasp")
+
+
+def test_pipeline_segment_nlp_is_an_optproblem_that_honours_a_user_term(tcb):
+    """The pipeline's segment NLP is an OptProblem on the B-spline core (every grid of the retry
+    policy); a constraint the user adds through ``PipelineOptions.segment_terms`` holds in the
+    verified result, where the same segment without it runs past the bound (so the test can fail)."""
+    import optplan.pipeline as PL
+    from optplan.problem import OptProblem
+
+    sc, plan = _scene1_plan(tcb)
+    seg = next(s for s in plan.segments if s.kind == "constrained")
+    path = np.asarray(plan.path[seg.start:seg.stop + 1])
+    seen: list[tuple[OptProblem, str]] = []
+    opts = PipelineOptions(shortcut_attempts=0, segment_terms=lambda p, kind: seen.append((p, kind)))
+    sol0, rep0, _ = PL._spline_segment(tcb, sc, path, "constrained", None, opts, dict(opts.ipopt_options))
+    assert sol0.success and rep0.min_clearance_m >= 0.0
+    assert seen and all(isinstance(p, OptProblem) and p.uses_bspline() and k == "constrained" for p, k in seen)
+    # the joint that overshoots its end values most: cap it at half of that overshoot
+    Q = sol0.sample(np.linspace(0.0, sol0.duration, 20 * (len(sol0.t) - 1) + 1))["q"]
+    top = np.maximum(path[0], path[-1])
+    j = int(np.argmax(Q.max(axis=0) - top))
+    over = float(Q[:, j].max() - top[j])
+    assert over > 1e-3, "the segment should overshoot an end value somewhere"
+    cap = float(top[j] + 0.5 * over)
+
+    def cap_joint(p: OptProblem, kind: str) -> None:
+        p.add_constraint(p.q[j], upper=cap, name="user_cap")
+
+    opts1 = PipelineOptions(shortcut_attempts=0, segment_terms=cap_joint)
+    sol1, rep1, _ = PL._spline_segment(tcb, sc, path, "constrained", None, opts1, dict(opts1.ipopt_options))
+    assert sol1.success and rep1.min_clearance_m >= 0.0
+    assert float(sol1.q[:, j].max()) <= cap + 1e-6            # at the knots, where the row holds
+    assert float(Q[:, j].max()) > cap + 0.25 * over           # without it the bound is passed
+    assert "user_cap" in sol1.terms

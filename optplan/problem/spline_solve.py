@@ -46,6 +46,8 @@ class SplineBackend:
         self.last_build_time = 0.0
         self.vel_extra: dict[str, set[int]] = {}   # velocity entries given rows after a solve (on vel_n intervals)
         self.vel_n = 0
+        #: re-solves with the velocity rows a solve missed (:meth:`_missed_velocity`) [count]
+        self.velocity_retries = 2
 
     # ------------------------------------------------------------------ structure
     def prepare(self) -> None:
@@ -241,10 +243,11 @@ class SplineBackend:
 
     # ------------------------------------------------------------------ solve
     def solve(self, tol: float, max_iter: int, sopts: SolverOptions, compile_kernels: bool | str) -> Solution:
-        """Solve; with a fixed duration, re-solve from the solution (at most twice) when a velocity
+        """Solve; with a fixed duration, re-solve from the solution (at most ``velocity_retries``
+        times) when a velocity
         entry without a row exceeded its limit (:meth:`_missed_velocity`)."""
         sol = self._solve_once(tol, max_iter, sopts, compile_kernels)
-        for _ in range(2):
+        for _ in range(int(self.velocity_retries)):
             if not sol.success or sol.x is None or not self._missed_velocity(sol.x, max(tol, 1e-9)):
                 break
             prev = sol
