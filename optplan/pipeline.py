@@ -289,6 +289,7 @@ def _activate(prob: OptProblem, knots: list[np.ndarray], T: float) -> None:
     knot configurations, e.g. solutions coal found colliding)."""
     if knots:
         h = prob.terms["collision"]
+        assert isinstance(h.term, CollisionAvoidance)   # segment_problem's collision term
         prob.replace_term(h, h.term.with_activation(*[_knot_trajectory(prob.robot, Q, T) for Q in knots]))
 
 
@@ -438,7 +439,9 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         # the pairs the previous grid had rows for stay active (its guess and every colliding
         # solution): activated along the solution alone, a pair whose rows held it > 0.12 m away lost
         # them, and the refined solve went 64 mm into it (decision 0015)
-        Qp = prev.tp.unpack(prev.initial_guess)["q"]   # the previous grid's first guess at its knots
+        x0p = prev.initial_guess
+        assert x0p is not None   # build() set it
+        Qp = prev.tp.unpack(x0p)["q"]   # the previous grid's first guess at its knots
         tq = np.linspace(0.0, 1.0, N + 1)
         tp = np.linspace(0.0, 1.0, len(Qp))
         _activate(prob, [np.column_stack([np.interp(tq, tp, Qp[:, j]) for j in range(Qp.shape[1])])]

@@ -145,7 +145,9 @@ def _spline_warm_start(robot: RobotModel, scene: Scene, seg_path: np.ndarray, op
     prob.set_initial_path(seg_path, cc)
     if opts.smooth_warm_start > 0:
         prob.smooth_initial(opts.smooth_warm_start, cc)
-    return prob.tp.unpack(prob.initial_guess)["q"], float(T)
+    x0 = prob.initial_guess
+    assert x0 is not None   # set_initial_path set it
+    return prob.tp.unpack(x0)["q"], float(T)
 
 
 def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, robot: RobotModel | None = None,

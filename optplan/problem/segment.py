@@ -89,7 +89,7 @@ class SplineSegmentProblem:
         prob.add_constraint(JointBoundary("end", q=self.q1, qd=z, qdd=z), name="end")
         if spec.closed_chain is not None:
             prob.add_constraint(spec.closed_chain, name="closed_chain")
-        prob.add_constraint(JointPositionLimits(lower=self.lower, upper=self.upper), name="joint_limits")
+        prob.add_constraint(JointPositionLimits(lower=self.lower.tolist(), upper=self.upper.tolist()), name="joint_limits")
         prob.add_constraint(JointVelocityLimits(limit=spec.velocity_limit, activation=float(va)), name="velocity_limits")
         if scene is not None:
             term = CollisionAvoidance(scene, margin=spec.margin, activation=spec.activation, window=spec.window,
@@ -167,6 +167,7 @@ class SplineSegmentProblem:
             return
         Q = np.asarray(q_knots, float)
         h = self.problem.terms["collision"]
+        assert isinstance(h.term, CollisionAvoidance)   # the term this builder added
         self.problem.replace_term(h, h.term.with_activation(NumericTrajectory(self.robot, Q, Q, Q, Q[:-1], self.T)))
 
     def boost_between_knots(self, traj_t: ArrayLike, traj_q: ArrayLike, knot_t: ArrayLike) -> int:
@@ -176,6 +177,7 @@ class SplineSegmentProblem:
         if self.scene is None:
             return 0
         h = self.problem.terms["collision"]
+        assert isinstance(h.term, CollisionAvoidance)   # the term this builder added
         col, n = h.term.with_boost(self.problem.term_data(h), np.asarray(traj_t, float), traj_q, knot_t)
         self.problem.replace_term(h, col)
         return n
