@@ -18,8 +18,9 @@ class PipelineOptions:
     """Options of :func:`run_pipeline`: plan → shortcut → one trajectory NLP per segment → verify.
 
     Retry policy of a B-spline segment, in order (each attempt is recorded in ``SegmentResult.attempts``):
-    (0) ``velocity``: after any solve, a velocity control point beyond its joint's limit → rows added,
-    re-solve (≤ ``velocity_retries``); (1) ``collision``: coal finds a contact after a converged solve →
+    (0) velocity rows: after any solve, a velocity control point beyond its joint's limit → rows added,
+    re-solve within the same solve call (≤ ``velocity_retries``; listed as ``velocity rows`` in the
+    solution's attempts); (1) ``collision``: coal finds a contact after a converged solve →
     pairs activated along the solution, margins raised between knots
     (:meth:`CollisionAvoidance.boost_between_knots`), re-solve (≤ ``collision_retries``); (2)
     ``finer-grid``: IPOPT failed or a contact remains → 1.6× the intervals from the same initial guess,
