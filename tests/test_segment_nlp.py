@@ -157,7 +157,8 @@ def test_transport_segment_solves_and_verifies(seg, tcb, transport):
     rep = verify(tcb, sol, transport, closed_chain=cc)
     assert rep.min_clearance_m >= 0.0, rep
     assert rep.max_closed_chain_residual <= 1e-5, rep
-    assert rep.max_velocity_limit_violation <= 1e-9 and rep.max_position_limit_violation <= 1e-9
+    # position limits on the control points: IPOPT relaxes variable bounds by 1e-8 (relative)
+    assert rep.max_velocity_limit_violation <= 1e-9 and rep.max_position_limit_violation <= 1e-7
     np.testing.assert_allclose(sol.q[[0, -1]], Q[[0, -1]], atol=1e-12)
     # rest at the ends: equality rows of the core, held to IPOPT's tolerance (1e-6)
     np.testing.assert_allclose(sol.qd[[0, -1]], 0.0, atol=1e-6)

@@ -299,10 +299,7 @@ class SplineBackend:
             "ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
             "ipopt.max_iter": int(max_iter),
             "ipopt.mu_strategy": "adaptive" if n_ineq > 0.5 * (lbg.size - n_ineq) else "monotone",
-            "ipopt.jacobian_regularization_value": 1e-6,
-            # the final point projected back into the variable bounds IPOPT relaxes by 1e-8 (relative):
-            # control-point bounds are the joint limits everywhere (convex hull), to the last digit
-            "ipopt.honor_original_bounds": "yes"}
+            "ipopt.jacobian_regularization_value": 1e-6}
         if core.fl:
             defaults.update({"ipopt.mumps_pivot_order": 6, "ipopt.mu_init": 1e-3})
         if core.nx > core.x_aux or self.col_p.size:
