@@ -87,9 +87,9 @@ class PipelineOptions:
     #: Hold the separating-plane normals at coal's witness normals along the warm start
     #: (:attr:`CollisionAvoidance.fixed_normals`); see docs/decisions/0003-fixed-plane-normals.md.
     fixed_plane_normals: bool = True
-    #: ``"bspline"``: each segment an :class:`~optplan.problem.OptProblem` on the B-spline kernel core
-    #: (joint-space control points, closed chain and fixed-normal planes at the knots, limits on the control
-    #: points); ``"knots"``: the :class:`~optplan.problem.OptProblem` knot-state transcription.
+    #: ``"bspline"``: each segment a joint-space B-spline NLP (control points, closed chain and fixed-normal
+    #: planes at the knots, limits on the control points; implementation: ``segment_nlp``); ``"knots"``: the
+    #: :class:`~optplan.problem.OptProblem` knot-state transcription.
     transcription: str = "bspline"
     #: A constrained B-spline segment gets ⌈joint path length / spline_interval_step⌉ intervals [rad] (a
     #: regrasp: ⌈length / free_interval_step⌉).
@@ -127,11 +127,17 @@ class PipelineOptions:
     #: inherit the robot, scene and caches; :mod:`optplan.workers`) [count]; None: 2 on a machine with at least
     #: 2 CPUs, else 1. The results do not depend on it.
     workers: int | None = None
-    #: Your own terms on every B-spline segment NLP: called as ``segment_terms(problem, kind)`` with the
+    #: Your own terms on every B-spline segment NLP (with ``segment_nlp = "optproblem"``): called as ``segment_terms(problem, kind)`` with the
     #: segment's :class:`~optplan.problem.OptProblem` (``kind``: "constrained" or "regrasp") right after
     #: it is built, before its first guess and solve, on every grid the retry policy builds; add
     #: constraints and costs with ``problem.add_constraint`` / ``problem.add_cost``. None: none.
     segment_terms: Callable[[Any, str], None] | None = None
+    #: The B-spline segment NLP: ``"closed"`` (default) — the closed segment class
+    #: (:class:`~optplan.problem.segment_closed.ClosedSegmentProblem`), 1.3-1.4× faster in CPU on the
+    #: warm-start and generalization benchmarks; ``"optproblem"`` — an :class:`~optplan.problem.OptProblem`
+    #: on the shared B-spline core (:func:`optplan.tasks.segment_problem`), which ``segment_terms`` needs.
+    #: Same rows, same retry policy; see docs/decisions/0021-pipeline-on-the-shared-core.md.
+    segment_nlp: str = "closed"
 
     def planner_kwargs(self) -> dict:
         """Keyword options for :func:`~optplan.planners.make_planner` (module defaults when
@@ -147,6 +153,11 @@ class PipelineOptions:
         if self.segment_terms is not None and not callable(self.segment_terms):
             raise ValueError(f"PipelineOptions.segment_terms: expected a callable (problem, kind) or None, got "
                              f"{self.segment_terms!r}")
+        if self.segment_nlp not in ("closed", "optproblem"):
+            raise ValueError(f"PipelineOptions.segment_nlp: expected 'closed' or 'optproblem', got {self.segment_nlp!r}")
+        if self.segment_terms is not None and self.segment_nlp != "optproblem":
+            raise ValueError("PipelineOptions.segment_terms: your own terms need segment_nlp='optproblem' (the closed "
+                             "segment NLP takes no term)")
         if self.transcription not in ("bspline", "knots"):
             raise ValueError(f"PipelineOptions.transcription: expected 'bspline' or 'knots', got {self.transcription!r}")
         if not (self.spline_interval_step > 0 and 4 <= self.spline_min_intervals <= self.spline_max_intervals):
