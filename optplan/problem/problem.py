@@ -35,6 +35,7 @@ from ..model.robot import RobotModel
 from ..solver_options import check_solve_arguments
 from .boundary import pinned_collisions
 from .build import BuildContext, TermData
+from .collision_term import CollisionAvoidance
 from .evaluate import Infeasibility, TermEvaluator
 from .expressions import Parameter
 from .guarantees import GuaranteeOptions, enforce_between_knots
@@ -430,8 +431,8 @@ class OptProblem(ExpressionAPI):
         """The built :class:`TermData` of a term (rows, bounds, auxiliary variables, ``info`` such
         as a collision term's active pairs); builds the NLP if needed."""
         h = self._handle(handle)
-        if self._mode() == "bspline":
-            return self._spline.term_data(h)
+        if self._built is None and isinstance(h.term, CollisionAvoidance) and self._mode() == "bspline":
+            return self._spline.term_data(h)   # the B-spline build's collision model (pairs, margins)
         b = self._built or self._build()
         return b["data"][h.name]
 
