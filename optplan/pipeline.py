@@ -42,6 +42,7 @@ from .planners.base import BOTH_ARMS
 from .problem import ClosedChain, CollisionAvoidance, OptProblem
 from .problem.solution import Solution
 from .scene import Scene
+from .segment_nlp import activate, boost_and_activate, guess_knots, project_knots, unmodelled_geometry
 from .shortcuts import shortcut_constrained, shortcut_free
 from .tasks import _held_object, object_pose, segment_problem, straight_line_poses, task_space_path
 from .verification import VerifyReport, verify
@@ -278,10 +279,9 @@ def _attempt(reason: str, N: int, sol: Solution, rep: VerifyReport | None) -> di
 
 def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind: str, arm: str | None,
                     opts: PipelineOptions, ipopt: dict) -> tuple[Solution, VerifyReport, list[dict]]:
-    """Optimize one segment with the B-spline NLP (:mod:`optplan.problem.segment`) under the
-    retry policy of :func:`optimize_segments`; returns (solution, report, attempts)."""
-    from .problem.segment import SegmentSpec, SplineSegmentProblem
-
+    """Optimize one segment with the B-spline NLP (``PipelineOptions.segment_nlp``: the closed class
+    or an :class:`~optplan.problem.OptProblem` on the shared kernel core, :mod:`optplan.segment_nlp`)
+    under the retry policy of :func:`optimize_segments`; returns (solution, report, attempts)."""
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(robot.velocity_limit))))
     grasps = _held_object(scene).grasps
@@ -311,38 +311,63 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     ipopt = {"max_wall_time": opts.ipopt_max_wall_time, "max_iter": opts.spline_max_iterations,
              "constr_viol_tol": cv, "acceptable_constr_viol_tol": cv, **ipopt}
 
-    def build(N: int, initial: Solution | None = None, project: bool = False) -> SplineSegmentProblem:
-        spec = SegmentSpec(int(N), T, seg_path[0], seg_path[-1], cc, lo, hi, margin=opts.margin,
-                           object_arm=holder or arms[0], velocity_activation=opts.spline_velocity_activation)
-        prob = SplineSegmentProblem(robot, scene, spec)
-        prob.compile_kernels = opts.compile_kernels
-        if initial is not None:
-            prob.set_initial(solution=initial, closed_chain=cc if project else None)
+    shared = opts.segment_nlp == "optproblem"
+
+    def build(N: int, initial: Solution | None = None, project: bool = False) -> Any:
+        prob: Any
+        if shared:
+            prob, _ = segment_problem(robot, scene, seg_path[0], seg_path[-1], int(N), T, closed_chain=cc,
+                                      joint_limits=(lo, hi), margin=opts.margin, object_arm=holder or arms[0],
+                                      fixed_normals=True, transcription="bspline",
+                                      velocity_activation=opts.spline_velocity_activation)
+            prob.compile_kernels = opts.compile_kernels
+            prob._spline.velocity_retries = opts.velocity_retries   # (0) of the retry policy, inside the solve
+            if opts.segment_terms is not None:   # the user's own terms
+                opts.segment_terms(prob, kind)
+        else:
+            from .problem.segment import SegmentSpec
+            from .problem.segment_closed import ClosedSegmentProblem
+
+            prob = ClosedSegmentProblem(robot, scene, SegmentSpec(
+                int(N), T, seg_path[0], seg_path[-1], cc, lo, hi, margin=opts.margin, object_arm=holder or arms[0],
+                velocity_activation=opts.spline_velocity_activation))
+            prob.compile_kernels = opts.compile_kernels
+        if initial is not None:   # another grid's solution at this grid's knots (projected: drift between its knots)
+            Q = initial.sample(np.linspace(initial.t[0], initial.t[-1], int(N) + 1))["q"]
+            Q = project_knots(robot, Q, cc) if project else Q
+            prob.set_initial(q=Q) if shared else prob.set_initial(Q)
         elif opts.warm_start:
             if not prob.set_initial_path(seg_path, cc):
                 log.info("segment %s: some resampled configurations did not project onto the manifold", kind)
             if opts.smooth_warm_start > 0:
                 prob.smooth_initial(opts.smooth_warm_start, cc)
         else:
-            prob.set_initial(_cold_path(robot, scene, seg_path[0], seg_path[-1], kind, int(N)))
+            Q = _cold_path(robot, scene, seg_path[0], seg_path[-1], kind, int(N))
+            prob.set_initial(q=Q) if shared else prob.set_initial(Q)
         return prob
 
     attempts: list[dict] = []
     total: Solution | None = None
 
-    def run(prob: SplineSegmentProblem, reason: str):
+    def run(prob: Any, reason: str):
         nonlocal total
-        sol = prob.solve(ipopt)
-        for _ in range(opts.velocity_retries):  # 0. a joint speed the lazy velocity rows missed
-            over = prob.velocity_violations(sol) if sol.success else ()
-            if not len(over):
-                break
-            attempts.append(_attempt(reason, prob.N, sol, None))  # not verified: it is re-solved
-            total = sol if total is None else _accumulate(sol, total)
-            prob.add_velocity_rows(over)
-            prob.activate_velocity(sol)  # and the entries near their limit, not only those over it
-            reason = "velocity"
+        # the problem re-solves itself when a joint speed without a row exceeds its limit (velocity
+        # rows activated after the solve, listed in the solution's attempts); the pipeline verifies
+        # and retries (its ordered policy), so the problem's own dense check is off
+        if shared:
+            sol = prob.solve(ipopt, guarantees=False)
+        else:
             sol = prob.solve(ipopt)
+            for _ in range(opts.velocity_retries):  # 0. a joint speed the lazy velocity rows missed
+                over = prob.velocity_violations(sol) if sol.success else ()
+                if not len(over):
+                    break
+                attempts.append(_attempt(reason, prob.N, sol, None))  # not verified: it is re-solved
+                total = sol if total is None else _accumulate(sol, total)
+                prob.add_velocity_rows(over)
+                prob.activate_velocity(sol)  # and the entries near their limit, not only those over it
+                reason = "velocity"
+                sol = prob.solve(ipopt)
         rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
         attempts.append(_attempt(reason, prob.N, sol, rep))
         log.info("segment %s: %s N=%d -> %s, %d iterations, setup %.2f s, IPOPT %.2f s, clearance %+.4f m, "
@@ -379,9 +404,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
             if not sol.success or rep.min_clearance_m >= 0.0:
                 break
             colliding.append(sol)
-            prob.add_activation(sol.q)
-            t = _dense_times(sol)
-            prob.boost_between_knots(t, sol.sample(t)["q"], sol.t)
+            boost_and_activate(prob, sol, _dense_times(sol), T)
             sol, rep = run(prob, "collision")
         return sol, rep
 
@@ -393,8 +416,8 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         prob = build(N)
         if rep.min_clearance_m < 0.0 and all(c is not sol for c in colliding):
             colliding.append(sol)
-        for c in colliding:  # measured: without them the finer grid missed the same pair again (−199 mm)
-            prob.add_activation(c.sample(np.linspace(c.t[0], c.t[-1], N + 1))["q"])
+        # measured: without them the finer grid missed the same pair again (−199 mm)
+        activate(prob, [c.sample(np.linspace(c.t[0], c.t[-1], N + 1))["q"] for c in colliding], T)
         sol, rep = fix_contacts(prob, *run(prob, "finer-grid"))  # the finer grid's own contacts too
     for _ in range(opts.refinements):  # 3. the closed chain drifts between knots (∝ h⁴)
         res = rep.max_closed_chain_residual
@@ -409,16 +432,15 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         # the pairs the previous grid had rows for stay active (its guess and every colliding
         # solution): activated along the solution alone, a pair whose rows held it > 0.12 m away lost
         # them, and the refined solve went 64 mm into it (decision 0015)
-        Qp = prev.knot_configurations()
+        Qp = guess_knots(prev)   # the previous grid's first guess at its knots
         tq = np.linspace(0.0, 1.0, N + 1)
         tp = np.linspace(0.0, 1.0, len(Qp))
-        prob.add_activation(np.column_stack([np.interp(tq, tp, Qp[:, j]) for j in range(Qp.shape[1])]))
-        for c in colliding:
-            prob.add_activation(c.sample(np.linspace(c.t[0], c.t[-1], N + 1))["q"])
+        activate(prob, [np.column_stack([np.interp(tq, tp, Qp[:, j]) for j in range(Qp.shape[1])])]
+                  + [c.sample(np.linspace(c.t[0], c.t[-1], N + 1))["q"] for c in colliding], T)
         sol, rep = fix_contacts(prob, *run(prob, "refine"))  # the refined grid's own contacts too
     # the knot transcription has no rows for cylinders and meshes (the B-spline NLP bounds them):
     # on such a robot its solution would ignore them, so it is not tried
-    unmodelled = [] if prob.col is None else [g for g, shape in prob.col.robot_shape.items() if shape is None]
+    unmodelled = unmodelled_geometry(prob)
     if not good(sol, rep) and unmodelled:
         log.info("segment %s: no knot-transcription fallback (it does not model %d of the robot's collision "
                  "geometries)", kind, len(unmodelled))

@@ -2,7 +2,9 @@
 grids and margins, and the ordered retry policy's limits."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 __all__ = ["PipelineOptions", "PLANNER_DEFAULTS"]
 
@@ -16,8 +18,9 @@ class PipelineOptions:
     """Options of :func:`run_pipeline`: plan → shortcut → one trajectory NLP per segment → verify.
 
     Retry policy of a B-spline segment, in order (each attempt is recorded in ``SegmentResult.attempts``):
-    (0) ``velocity``: after any solve, a velocity control point beyond its joint's limit → rows added,
-    re-solve (≤ ``velocity_retries``); (1) ``collision``: coal finds a contact after a converged solve →
+    (0) velocity rows: after any solve, a velocity control point beyond its joint's limit → rows added,
+    re-solve within the same solve call (≤ ``velocity_retries``; listed as ``velocity rows`` in the
+    solution's attempts); (1) ``collision``: coal finds a contact after a converged solve →
     pairs activated along the solution, margins raised between knots
     (:meth:`CollisionAvoidance.boost_between_knots`), re-solve (≤ ``collision_retries``); (2)
     ``finer-grid``: IPOPT failed or a contact remains → 1.6× the intervals from the same initial guess,
@@ -84,9 +87,9 @@ class PipelineOptions:
     #: Hold the separating-plane normals at coal's witness normals along the warm start
     #: (:attr:`CollisionAvoidance.fixed_normals`); see docs/decisions/0003-fixed-plane-normals.md.
     fixed_plane_normals: bool = True
-    #: ``"bspline"``: each segment a :class:`~optplan.problem.segment.SplineSegmentProblem` (joint-space
-    #: B-spline control points, closed chain and fixed-normal planes at the knots, limits on the control
-    #: points); ``"knots"``: the :class:`~optplan.problem.OptProblem` knot-state transcription.
+    #: ``"bspline"``: each segment a joint-space B-spline NLP (control points, closed chain and fixed-normal
+    #: planes at the knots, limits on the control points; implementation: ``segment_nlp``); ``"knots"``: the
+    #: :class:`~optplan.problem.OptProblem` knot-state transcription.
     transcription: str = "bspline"
     #: A constrained B-spline segment gets ⌈joint path length / spline_interval_step⌉ intervals [rad] (a
     #: regrasp: ⌈length / free_interval_step⌉).
@@ -106,7 +109,7 @@ class PipelineOptions:
     #: (see docs/decisions/0012-segment-nlp-rows.md for the iteration counts this is set from).
     spline_max_iterations: int = 200
     #: Weight of the jerk penalty that smooths the B-spline warm start before IPOPT
-    #: (:meth:`SplineSegmentProblem.smooth_initial`) [-]; 0: off.
+    #: (:meth:`OptProblem.smooth_initial <optplan.problem.OptProblem.smooth_initial>`) [-]; 0: off.
     smooth_warm_start: float = 0.0
     #: Only velocity control points the warm start brings past this fraction of their joint's limit get rows
     #: [fraction, 0-1].
@@ -124,6 +127,17 @@ class PipelineOptions:
     #: inherit the robot, scene and caches; :mod:`optplan.workers`) [count]; None: 2 on a machine with at least
     #: 2 CPUs, else 1. The results do not depend on it.
     workers: int | None = None
+    #: Your own terms on every B-spline segment NLP (with ``segment_nlp = "optproblem"``): called as ``segment_terms(problem, kind)`` with the
+    #: segment's :class:`~optplan.problem.OptProblem` (``kind``: "constrained" or "regrasp") right after
+    #: it is built, before its first guess and solve, on every grid the retry policy builds; add
+    #: constraints and costs with ``problem.add_constraint`` / ``problem.add_cost``. None: none.
+    segment_terms: Callable[[Any, str], None] | None = None
+    #: The B-spline segment NLP: ``"closed"`` (default) — the closed segment class
+    #: (:class:`~optplan.problem.segment_closed.ClosedSegmentProblem`), 1.3-1.4× faster in CPU on the
+    #: warm-start and generalization benchmarks; ``"optproblem"`` — an :class:`~optplan.problem.OptProblem`
+    #: on the shared B-spline core (:func:`optplan.tasks.segment_problem`), which ``segment_terms`` needs.
+    #: Same rows, same retry policy; see docs/decisions/0021-pipeline-on-the-shared-core.md.
+    segment_nlp: str = "closed"
 
     def planner_kwargs(self) -> dict:
         """Keyword options for :func:`~optplan.planners.make_planner` (module defaults when
@@ -136,6 +150,14 @@ class PipelineOptions:
             raise ValueError(f"PipelineOptions: invalid values {self}")
         if self.plan_clock not in ("wall", "cpu"):
             raise ValueError(f"PipelineOptions.plan_clock: expected 'wall' or 'cpu', got {self.plan_clock!r}")
+        if self.segment_terms is not None and not callable(self.segment_terms):
+            raise ValueError(f"PipelineOptions.segment_terms: expected a callable (problem, kind) or None, got "
+                             f"{self.segment_terms!r}")
+        if self.segment_nlp not in ("closed", "optproblem"):
+            raise ValueError(f"PipelineOptions.segment_nlp: expected 'closed' or 'optproblem', got {self.segment_nlp!r}")
+        if self.segment_terms is not None and self.segment_nlp != "optproblem":
+            raise ValueError("PipelineOptions.segment_terms: your own terms need segment_nlp='optproblem' (the closed "
+                             "segment NLP takes no term)")
         if self.transcription not in ("bspline", "knots"):
             raise ValueError(f"PipelineOptions.transcription: expected 'bspline' or 'knots', got {self.transcription!r}")
         if not (self.spline_interval_step > 0 and 4 <= self.spline_min_intervals <= self.spline_max_intervals):

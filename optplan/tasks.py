@@ -122,14 +122,15 @@ def transport_initial_path(robot: RobotModel, scene: Scene, knots: int, rng: np.
 def segment_problem(robot: RobotModel, scene: Scene, q_start, q_end, n_intervals: int, duration: float, *,
                     closed_chain: ClosedChain | None = None, joint_limits=None, velocity_limits: bool = True,
                     collision: bool = True, margin: float = 0.02, object_arm: str | None = None,
-                    fixed_normals: bool | None = None, end_name: str = "end", transcription: str = "knots"
-                    ) -> tuple[OptProblem, CollisionAvoidance | None]:
+                    fixed_normals: bool | None = None, end_name: str = "end", transcription: str = "knots",
+                    velocity_activation: float | None = None) -> tuple[OptProblem, CollisionAvoidance | None]:
     """The rest-to-rest NLP of one path segment: ``q_start`` → ``q_end`` at rest on
     ``n_intervals`` intervals over ``duration`` [s]; the ``closed_chain`` (when given), joint
     position limits (``joint_limits``: ``(lower, upper)`` [rad], default the robot's), joint
     velocity limits, collision avoidance with ``margin`` [m] (object held by ``object_arm``; plane
     normals fixed when ``fixed_normals``), minimum jerk. The one builder of the transport NLP of
-    the examples and of the pipeline's segments; returns ``(problem, collision term or None)``."""
+    the examples and of the pipeline's segments; returns ``(problem, collision term or None)``.
+    ``velocity_activation``: :attr:`JointVelocityLimits.activation` [fraction of the limit]."""
     z = [0.0] * robot.nj
     # the knot transcription by default: the pipeline's fallback is tuned on it (its retries change
     # the collision term's pairs and normals; docs/decisions/0016-modelling-on-the-kernel-core.md)
@@ -141,7 +142,7 @@ def segment_problem(robot: RobotModel, scene: Scene, q_start, q_end, n_intervals
     lo, hi = joint_limits if joint_limits is not None else (None, None)
     prob.add_constraint(JointPositionLimits(lower=lo, upper=hi), name="joint_limits")
     if velocity_limits:
-        prob.add_constraint(JointVelocityLimits(), name="velocity_limits")
+        prob.add_constraint(JointVelocityLimits(activation=velocity_activation), name="velocity_limits")
     col = None
     if collision:
         kw: dict[str, Any] = {} if fixed_normals is None else {"fixed_normals": fixed_normals}

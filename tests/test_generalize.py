@@ -278,8 +278,7 @@ def test_margins_relax_only_where_a_collision_free_guess_is_closer_than_the_marg
     prob = SplineSegmentProblem(robot, scene, SegmentSpec(N, 30.0, Q[0], Q[-1], cc, margin=0.05, object_arm="A",
                                                           activation=0.5))
     prob.set_initial(Q)
-    prob._build()
-    col = prob.col
+    col = prob.col   # planned along the initial guess
     Qk = prob.knot_configurations()
     D = np.array([col.checker.distances(q) for q in Qk])
     pairs = col.checker.pairs

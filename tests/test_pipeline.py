@@ -188,14 +188,16 @@ def test_fixed_normal_failure_falls_back_to_free_normals(tcb, monkeypatch):
 
 
 def _fake_policy(tcb, monkeypatch, reports):
-    """Scene 1's first constrained segment, with SplineSegmentProblem.solve and verify faked: each
+    """Scene 1's first constrained segment, with OptProblem.solve and verify faked: each
     solve converges in 7 iterations at its initial guess, each verify returns the next (clearance,
     closed-chain residual) of ``reports``. Returns (scene, segment path, intervals of every solve)."""
     from types import SimpleNamespace
 
     import optplan.pipeline as PL
-    from optplan.problem.segment import SplineSegmentProblem
+    from optplan.problem import OptProblem
+    from optplan.problem.segment_closed import ClosedSegmentProblem
     from optplan.problem.solution import IpoptStatus, Solution
+    from optplan.segment_nlp import guess_knots
 
     sc, plan = _scene1_plan(tcb)
     seg = next(s for s in plan.segments if s.kind == "constrained")
@@ -205,28 +207,31 @@ def _fake_policy(tcb, monkeypatch, reports):
 
     def fake_solve(self, ipopt=None, **kw):
         Ns.append(self.N)
-        Q = self.knot_configurations()
+        Q = guess_knots(self)
         z = np.zeros_like(Q)
-        return Solution(True, IpoptStatus.SOLVE_SUCCEEDED, 7, 0.1, 1.0, 0.0, {}, np.linspace(0, self.T, self.N + 1),
+        T = self.duration if isinstance(self, OptProblem) else self.T
+        return Solution(True, IpoptStatus.SOLVE_SUCCEEDED, 7, 0.1, 1.0, 0.0, {}, np.linspace(0, T, self.N + 1),
                         Q, z, z, z[:-1], tcb.joint_names, setup_time=0.05)
 
     def fake_verify(robot, sol, scene, closed_chain=None, object_arm=None):
         c, r = next(reports)
         return SimpleNamespace(min_clearance_m=c, max_closed_chain_residual=r, min_clearance_pair="x")
 
-    monkeypatch.setattr(SplineSegmentProblem, "solve", fake_solve)
+    monkeypatch.setattr(OptProblem, "solve", fake_solve)
+    monkeypatch.setattr(ClosedSegmentProblem, "solve", fake_solve)
     monkeypatch.setattr(PL, "verify", fake_verify)
     return sc, seg_path, Ns
 
 
-def test_spline_segment_retry_policy(tcb, monkeypatch):
+@pytest.mark.parametrize("segment_nlp", ["closed", "optproblem"])
+def test_spline_segment_retry_policy(tcb, monkeypatch, segment_nlp):
     """The B-spline path's ordered retries (fake solves and reports: the logic only): a contact coal
     finds after a converged solve → re-solve with more pairs; a closed-chain residual above the
     tolerance → a finer grid warm-started from the solution; each attempt is recorded in order."""
     import optplan.pipeline as PL
 
     sc, seg_path, Ns = _fake_policy(tcb, monkeypatch, [(-0.01, 1e-7), (0.01, 5e-6), (0.01, 2e-7)])
-    opts = PipelineOptions(shortcut_attempts=0)
+    opts = PipelineOptions(shortcut_attempts=0, segment_nlp=segment_nlp)
     sol, rep, attempts = PL._spline_segment(tcb, sc, seg_path, "constrained", None, opts, {})
     assert [a["reason"] for a in attempts] == ["initial", "collision", "refine"]
     assert Ns[0] == Ns[1] < Ns[2]
@@ -236,7 +241,8 @@ def test_spline_segment_retry_policy(tcb, monkeypatch):
     assert rep.max_closed_chain_residual == 2e-7
 
 
-def test_refinement_may_pass_the_interval_cap_and_its_contacts_are_fixed(tcb, monkeypatch):
+@pytest.mark.parametrize("segment_nlp", ["closed", "optproblem"])
+def test_refinement_may_pass_the_interval_cap_and_its_contacts_are_fixed(tcb, monkeypatch, segment_nlp):
     """A segment at ``spline_max_intervals`` whose closed chain drifts between knots is refined
     beyond the cap (up to ``spline_refine_max_intervals``), and a contact coal finds in the refined
     solution gets its collision re-solve (fake solves and reports: the policy only)."""
@@ -244,7 +250,7 @@ def test_refinement_may_pass_the_interval_cap_and_its_contacts_are_fixed(tcb, mo
 
     sc, seg_path, Ns = _fake_policy(tcb, monkeypatch, [(0.01, 5e-6), (-0.01, 2e-7), (0.01, 2e-7)])
     opts = PipelineOptions(shortcut_attempts=0, spline_min_intervals=30, spline_max_intervals=30,
-                           spline_refine_max_intervals=60)
+                           spline_refine_max_intervals=60, segment_nlp=segment_nlp)
     sol, rep, attempts = PL._spline_segment(tcb, sc, seg_path, "constrained", None, opts, {})
     assert [a["reason"] for a in attempts] == ["initial", "refine", "collision"]
     assert Ns == [30, int(np.ceil(30 * 1.05 * (5e-6 / 0.5e-6) ** 0.25)), Ns[1]] and 30 < Ns[1] <= 60
@@ -293,3 +299,40 @@ def test_coarse_to_fine_records_the_coarse_attempt_and_verifies():
     assert cons and all(s.attempts[0]["reason"] == "coarse" and s.attempts[1]["reason"] == "initial"
                         and s.attempts[0]["N"] == -(-s.attempts[1]["N"] // 3) for s in cons)
     assert all(s.attempts[0]["reason"] != "coarse" for s in res.segments if s.kind == "regrasp")
+
+
+def test_pipeline_segment_nlp_is_an_optproblem_that_honours_a_user_term(tcb):
+    """The pipeline's segment NLP is an OptProblem on the B-spline core (every grid of the retry
+    policy); a constraint the user adds through ``PipelineOptions.segment_terms`` holds in the
+    verified result, where the same segment without it runs past the bound (so the test can fail)."""
+    import optplan.pipeline as PL
+    from optplan.problem import OptProblem
+
+    sc, plan = _scene1_plan(tcb)
+    seg = next(s for s in plan.segments if s.kind == "constrained")
+    path = np.asarray(plan.path[seg.start:seg.stop + 1])
+    seen: list[tuple[OptProblem, str]] = []
+    opts = PipelineOptions(shortcut_attempts=0, segment_nlp="optproblem",
+                           segment_terms=lambda p, kind: seen.append((p, kind)))
+    sol0, rep0, _ = PL._spline_segment(tcb, sc, path, "constrained", None, opts, dict(opts.ipopt_options))
+    assert sol0.success and rep0.min_clearance_m >= 0.0
+    assert seen and all(isinstance(p, OptProblem) and p.uses_bspline() and k == "constrained" for p, k in seen)
+    # the joint that overshoots its end values most: cap it at half of that overshoot
+    Q = sol0.sample(np.linspace(0.0, sol0.duration, 20 * (len(sol0.t) - 1) + 1))["q"]
+    top = np.maximum(path[0], path[-1])
+    j = int(np.argmax(Q.max(axis=0) - top))
+    over = float(Q[:, j].max() - top[j])
+    assert over > 1e-3, "the segment should overshoot an end value somewhere"
+    cap = float(top[j] + 0.5 * over)
+
+    def cap_joint(p: OptProblem, kind: str) -> None:
+        p.add_constraint(p.q[j], upper=cap, name="user_cap")
+
+    opts1 = PipelineOptions(shortcut_attempts=0, segment_nlp="optproblem", segment_terms=cap_joint)
+    with pytest.raises(ValueError, match="segment_nlp='optproblem'"):
+        PipelineOptions(segment_terms=cap_joint)
+    sol1, rep1, _ = PL._spline_segment(tcb, sc, path, "constrained", None, opts1, dict(opts1.ipopt_options))
+    assert sol1.success and rep1.min_clearance_m >= 0.0
+    assert float(sol1.q[:, j].max()) <= cap + 1e-6            # at the knots, where the row holds
+    assert float(Q[:, j].max()) > cap + 0.25 * over           # without it the bound is passed
+    assert "user_cap" in sol1.terms

@@ -5,7 +5,7 @@
 * ``segment_stress_shelf_filter.npz`` (scene ``stress_shelf``, a 10.2 rad path on 160 intervals):
   with IPOPT's default filter bound (``theta_max_fact`` = 10⁴) a step to a closed-chain residual of
   3.3 was accepted at iteration 17 and the solve never came back (200 iterations, then the knot
-  fallback failed too); the segment NLP's bound (10) keeps the iterates near the manifold.
+  fallback failed too); the plane-row NLP's bound (10) keeps the iterates near the manifold.
 * ``segment_ssps_scene3_ends.npz`` (scene ``ssps_scene3``): the planner's start configuration is
   2.1e-7 m off the closed-chain manifold, above the rows' tolerance (1.4e-7); IPOPT stalled at a
   violation of 1.5e-7 next to the pinned start until its iteration limit. The pipeline now holds the
@@ -24,8 +24,9 @@ import optplan.pipeline as PL
 from optplan.constraints.closed_chain import closure_errors
 from optplan.pipeline_options import PipelineOptions
 from optplan.problem import ClosedChain
-from optplan.problem.segment import SegmentSpec, SplineSegmentProblem
+from optplan.problem.segment_closed import ClosedSegmentProblem
 from optplan.scene import Scene
+from optplan.tasks import segment_problem
 
 DATA = Path(__file__).parent / "data"
 
@@ -51,20 +52,21 @@ def test_filter_bound_keeps_a_long_segment_near_the_manifold(tcb):
     assert first["iterations"] <= 100, attempts
     assert rep.min_clearance_m >= 0.0 and rep.max_closed_chain_residual <= opts.closed_chain_tol, rep
 
-    # the same NLP, with the pipeline's IPOPT options, under IPOPT's own bound leaves the manifold
+    # the same NLP with the pipeline's IPOPT options, 30 iterations: the filter bound holds the
+    # iterates near the manifold. (On the closed segment NLP, IPOPT's own bound, 10⁴, accepted a step
+    # to a residual of 3.3 here; the shared core's NLP — every control point free, the ends as rows —
+    # stays at 4e-4 under either bound, measured 2026-11-28.)
     grasps, cc, arms = _chain(scene)
     length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
     N = int(np.clip(np.ceil(length / opts.spline_interval_step), opts.spline_min_intervals, opts.spline_max_intervals))
     T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(tcb.velocity_limit))))
-    prob = SplineSegmentProblem(tcb, scene, SegmentSpec(N, T, path[0], path[-1], cc, margin=opts.margin,
-                                                        object_arm=arms[0],
-                                                        velocity_activation=opts.spline_velocity_activation))
+    prob, _ = segment_problem(tcb, scene, path[0], path[-1], N, T, closed_chain=cc, margin=opts.margin,
+                              object_arm=arms[0], fixed_normals=True, transcription="bspline",
+                              velocity_activation=opts.spline_velocity_activation)
     prob.set_initial_path(path, cc)
     cv = 0.5 * opts.closed_chain_tol / (2.0 * np.sqrt(3.0))
     ipopt = {**dict(opts.ipopt_options), "constr_viol_tol": cv, "acceptable_constr_viol_tol": cv}
-    loose = prob.solve({**ipopt, "theta_max_fact": 1e4}, max_iter=30)
-    bounded = prob.solve(ipopt, max_iter=30)
-    assert not loose.success and loose.terms["closed_chain"] > 0.1, loose.terms
+    bounded = prob.solve(ipopt, max_iter=30, guarantees=False)
     assert bounded.terms["closed_chain"] < 1e-2, bounded.terms
 
 
@@ -79,13 +81,13 @@ def test_rows_next_to_pinned_ends_are_held_to_what_the_ends_allow(tcb, monkeypat
     assert end > quarter, "the saved path should start off the manifold by more than the rows' usual tolerance"
 
     seen = []
-    solve = SplineSegmentProblem.solve
+    solve = ClosedSegmentProblem.solve
 
     def spy(self, ipopt_options=None, **kw):
         seen.append(dict(ipopt_options or {}))
         return solve(self, ipopt_options, **kw)
 
-    monkeypatch.setattr(SplineSegmentProblem, "solve", spy)
+    monkeypatch.setattr(ClosedSegmentProblem, "solve", spy)
     sol, rep, attempts = PL._spline_segment(tcb, scene, path, kind, None, opts, {})
     assert all(o["constr_viol_tol"] >= min(2 * end, opts.closed_chain_tol / (2 * np.sqrt(3))) for o in seen), seen
     first = attempts[0]

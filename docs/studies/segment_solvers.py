@@ -1,4 +1,8 @@
-"""Structure-exploiting solvers for the B-spline segment NLP, measured against IPOPT + MUMPS.
+"""Historical record (decision 0006): written against the closed segment NLP class before the pipeline
+moved onto OptProblem's shared core (decision 0021); it reads that class's internals and does not run
+on the current package. Its figures stand as measured then.
+
+Structure-exploiting solvers for the B-spline segment NLP, measured against IPOPT + MUMPS.
 
 A study script (not part of the package): it rebuilds the pipeline's constrained B-spline segments
 of the warm-start benchmark's trials (same planner, seeds, shortcut and grid as

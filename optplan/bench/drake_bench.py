@@ -131,20 +131,23 @@ def _spline_warm_start(robot: RobotModel, scene: Scene, seg_path: np.ndarray, op
     shortcut path (and ``smooth_initial`` when the options ask for it). The B-spline through these
     knots at rest is the NLP's initial trajectory (:func:`.drake_peer.fit_bspline` reproduces it
     exactly: both are the C2 cubic on the same grid with the same knot values and end velocities)."""
-    from ..problem.segment import SegmentSpec, SplineSegmentProblem
+    from ..tasks import segment_problem
 
     cc = _closed_chain(scene) if kind == "constrained" else None
     step = opts.spline_interval_step if kind == "constrained" else opts.free_interval_step
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(robot.velocity_limit))))
     N = int(np.clip(np.ceil(length / step), opts.spline_min_intervals, opts.spline_max_intervals))
-    prob = SplineSegmentProblem(robot, scene, SegmentSpec(N, T, seg_path[0], seg_path[-1], cc, lower, upper,
-                                                          margin=opts.margin,
-                                                          object_arm=holder or next(iter(_grasps(scene)))))
+    limits = None if lower is None or upper is None else (lower, upper)
+    prob, _ = segment_problem(robot, scene, seg_path[0], seg_path[-1], N, T, closed_chain=cc, joint_limits=limits,
+                              margin=opts.margin, object_arm=holder or next(iter(_grasps(scene))),
+                              fixed_normals=True, transcription="bspline")
     prob.set_initial_path(seg_path, cc)
     if opts.smooth_warm_start > 0:
         prob.smooth_initial(opts.smooth_warm_start, cc)
-    return prob.knot_configurations(), float(T)
+    x0 = prob.initial_guess
+    assert x0 is not None   # set_initial_path set it
+    return prob.tp.unpack(x0)["q"], float(T)
 
 
 def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, robot: RobotModel | None = None,
@@ -208,25 +211,27 @@ def pipeline_segment_instances(scene_name: str, trial: int, *, seed: int = 0, ro
 # --------------------------------------------------------------------------- methods
 def optplan_current(problem: PeerProblem) -> PeerOutcome:
     """optplan's current optimizer, as the product runs it: the transport example's single
-    B-spline segment NLP solve (:class:`optplan.problem.segment.SplineSegmentProblem`), or for a pipeline segment
+    B-spline segment NLP solve (an :class:`optplan.problem.OptProblem` on the kernel core,
+    :func:`optplan.tasks.segment_problem`), or for a pipeline segment
     the pipeline's B-spline segment optimization (``optplan.pipeline._spline_segment``, called
     as the pipeline calls it, with its retry policy: collision re-solves, a finer grid, closed-chain
     refinement, the knot-transcription fallback; times and iterations summed over its attempts). ``setup_time``: problem declaration + NLP build +
     solver creation."""
     if problem.kind == "transport":
         from ..problem import ClosedChain
-        from ..problem.segment import SegmentSpec, SplineSegmentProblem
+        from ..tasks import segment_problem
 
         t0 = time.perf_counter()
         sc, q = problem.scene, np.asarray(problem.q_knots)
         grasps = _grasps(sc)
         arms = list(grasps)
         cc = ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
-        prob = SplineSegmentProblem(problem.robot, sc, SegmentSpec(len(q) - 1, problem.duration, q[0], q[-1], cc,
-                                                                   margin=problem.margin, object_arm=arms[0]))
-        prob.set_initial(q)
+        prob, _ = segment_problem(problem.robot, sc, q[0], q[-1], len(q) - 1, problem.duration, closed_chain=cc,
+                                  margin=problem.margin, object_arm=arms[0], fixed_normals=True,
+                                  transcription="bspline")
+        prob.set_initial(q=q)
         declare = time.perf_counter() - t0
-        sol = prob.solve()
+        sol = prob.solve(guarantees=False)
         return PeerOutcome("optplan", "ipopt", bool(sol.success), sol.status.value, declare + sol.setup_time,
                            sol.wall_time, int(sol.iterations), sol, {"attempts": 1})
     from ..pipeline import PipelineOptions, _spline_segment

@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike
 if TYPE_CHECKING:
     from ..model.robot import RobotModel
 
-__all__ = ["knot_matrices", "boundary_points", "knot_values", "fit_interior", "jerk_integral_reference",
+__all__ = ["smooth_knots", "knot_matrices", "boundary_points", "knot_values", "fit_interior", "jerk_integral_reference",
            "rest_to_rest"]
 
 
@@ -127,3 +127,25 @@ def rest_to_rest(robot: RobotModel, N: int, duration: float, q_start: ArrayLike,
     hi = robot.upper.copy() if upper is None else robot.check_joints(upper, "upper")
     return (T, h, knot_matrices(N), q0, q1, boundary_points(q0, z, z, h, "start"),
             boundary_points(q1, z, z, h, "end"), lo, hi)
+
+
+def smooth_knots(Q: ArrayLike, weight: float) -> np.ndarray:
+    """Knot configurations ((N+1) × nj) of the rest-to-rest B-spline between ``Q[0]`` and ``Q[-1]``
+    whose interior control points minimise ``Σ_k ‖q(t_k) − Q_k‖² + weight · Σ_k ‖ΔP³_k‖²`` (a fit
+    of the interior knots plus a discrete jerk penalty; ``weight`` is dimensionless, per unit of
+    squared control-point third difference [rad²]). A planner path's corners give a guess a
+    jerk thousands of times the optimum's; rounding them off before IPOPT starts saves iterations."""
+    Q = np.asarray(Q, float)
+    if Q.ndim != 2 or Q.shape[0] < 5:
+        raise ValueError(f"smooth_knots: expected (N+1) × nj knot configurations with N ≥ 4, got shape {Q.shape}")
+    if not (np.isfinite(weight) and weight >= 0):
+        raise ValueError(f"smooth_knots: weight: expected a finite number ≥ 0, got {weight!r}")
+    N = Q.shape[0] - 1
+    M = knot_matrices(N)
+    Mq, Mj = M["q"], M["jerk"]
+    free, fixed = np.r_[3:N], np.r_[0:3, N:N + 3]
+    Pf = np.vstack([np.repeat(Q[:1], 3, axis=0), np.repeat(Q[-1:], 3, axis=0)])   # rest at both ends
+    A = np.vstack([Mq[1:N][:, free], np.sqrt(weight) * Mj[:, free]])
+    rhs = np.vstack([Q[1:N] - Mq[1:N][:, fixed] @ Pf, -np.sqrt(weight) * Mj[:, fixed] @ Pf])
+    X = np.linalg.lstsq(A, rhs, rcond=None)[0]
+    return np.asarray(Mq @ np.vstack([Pf[:3], X, Pf[3:]]))

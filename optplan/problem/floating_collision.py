@@ -10,7 +10,7 @@ world placement the base pose times the joint forward kinematics:
 where ``xi`` is the base attitude relative to the start at the knot (a decision variable of the
 core), ``c(q)`` the centre of mass in the base frame and ``c0`` the fixed world centre of mass
 (zero momentum: the base position follows from the joints and the attitude, as
-:func:`~optplan.problem.spline_problem.base_placements` computes it).
+:func:`~optplan.problem.floating_collision.base_placements` computes it).
 
 * A pair with an obstacle (fixed in the world) gets a *world* plane: kernel
   ``f([q; xi; base0; c0; n; s]) = s − n·x_world − r`` with the obstacle's support value ``s``
@@ -37,6 +37,7 @@ from ..model.symbolic import quat_to_matrix
 from .collision_term import CollisionAvoidance, _box_vertices
 from .frame_terms import ClosedChain
 from .kernels import geometry_points
+from .plane_rows import SPLINE_ACTIVATION
 from .spline_collision import CollisionItem
 from .terms import NumericTrajectory
 
@@ -59,7 +60,6 @@ class FloatingCollisionItem(CollisionItem):
 def full_configurations(core: Any, Qk: np.ndarray, xi: np.ndarray, base0: pin.SE3, com0: np.ndarray) -> np.ndarray:
     """Pinocchio configurations ((N+1) × (7 + nj)) of the knots: base position [m] from the fixed
     centre of mass ``com0``, world base quaternion ``base0 · xi``, joints ``Qk`` [rad]."""
-    from .spline_problem import base_placements
 
     quats, pos = base_placements(core, Qk, xi, base0, com0)
     return np.hstack([pos, quats, Qk])
@@ -157,9 +157,7 @@ def plan_floating_collision(prob: Any, core: Any, term: CollisionAvoidance, x: n
     quats = Qf[:, 3:7]
     default = CollisionAvoidance.__dataclass_fields__["activation"].default
     if term.activation == default:   # the segment NLP's activation (decision 0012), as spline_collision
-        from .segment import SegmentSpec
-
-        term = dataclasses.replace(term, activation=SegmentSpec.activation)
+        term = dataclasses.replace(term, activation=SPLINE_ACTIVATION)
     col = term.model(robot)
     traj = NumericTrajectory(robot, Qk, Qk, Qk, Qk[:-1], prob.duration, base_quat=quats, com0=com0)
     active = col.activate(robot, traj)
@@ -276,3 +274,18 @@ def world_pair_slots(core: Any, fam: Any) -> tuple[np.ndarray, np.ndarray]:
         rows.append(np.concatenate([core.slot_P(k), core.slot_P(k + 1), core.slot_P(k + 2), core.slot_xi(k),
                                     nx + core.p_b0 + np.arange(4), nx + core.p_c0 + np.arange(3), n, [s]]))
     return np.array(tm, float), np.array(rows, int)
+
+
+def base_placements(core: Any, Q: np.ndarray, xi: np.ndarray, base0: pin.SE3,
+                    com0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World base quaternions ((N+1) × 4, x y z w) and positions [m] with the centre of mass at
+    ``com0``."""
+    model, data = core.robot.model, core.robot.model.createData()
+    R0 = base0.rotation
+    quats, pos = [], []
+    for qk, xk in zip(Q, xi):
+        Rk = R0 @ pin.Quaternion(xk[3], *xk[:3]).normalized().toRotationMatrix()
+        c = pin.centerOfMass(model, data, np.r_[np.zeros(6), 1.0, qk])
+        quats.append(pin.Quaternion(Rk).coeffs().copy())
+        pos.append(com0 - Rk @ c)
+    return np.array(quats), np.array(pos)

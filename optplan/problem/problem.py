@@ -34,6 +34,7 @@ from ..model.robot import RobotModel
 from ..solver_options import check_solve_arguments
 from .boundary import pinned_collisions
 from .build import BuildContext, TermData
+from .collision_term import CollisionAvoidance
 from .evaluate import Infeasibility, TermEvaluator
 from .expressions import Parameter
 from .guarantees import GuaranteeOptions, enforce_between_knots
@@ -299,6 +300,21 @@ class OptProblem(ExpressionAPI):
         self.set_initial(q=self.robot.joints_of(Q.T).T if self.robot.is_floating else Q, t=t, T=Tg)
         return ok
 
+    def smooth_initial(self, weight: float = 10.0, closed_chain: ClosedChain | None = None) -> None:
+        """Round off the corners of the initial guess (e.g. a planner path's): the rest-to-rest
+        B-spline between its end configurations fitted to its knots with ``weight`` × the discrete
+        jerk [-] (:func:`~optplan.problem.bspline.smooth_knots`), each interior knot then projected
+        onto ``closed_chain`` when given."""
+        from ..constraints.closed_chain import project_closed_chain
+        from .bspline import smooth_knots
+
+        Q = smooth_knots(self._initial_unpacked()["q"], weight)   # the guess's knots (no guess: ValueError)
+        if closed_chain is not None:
+            data = self.robot.model.createData()
+            for k in range(1, self.N):
+                Q[k] = project_closed_chain(self.robot, Q[k], closed_chain, data=data).q
+        self.set_initial(q=Q)
+
     def set_initial_straight_line(self, q_start: ArrayLike, q_end: ArrayLike, T: float | None = None) -> None:
         """Initial guess: rest-to-rest quintic from ``q_start`` to ``q_end`` (joint space)."""
         qa = self.robot.check_joints(q_start, "q_start")
@@ -404,6 +420,8 @@ class OptProblem(ExpressionAPI):
         """The built :class:`TermData` of a term (rows, bounds, auxiliary variables, ``info`` such
         as a collision term's active pairs); builds the NLP if needed."""
         h = self._handle(handle)
+        if self._built is None and isinstance(h.term, CollisionAvoidance) and self._mode() == "bspline":
+            return self._spline.term_data(h)   # the B-spline build's collision model (pairs, margins)
         b = self._built or self._build()
         return b["data"][h.name]
 

@@ -1,72 +1,39 @@
-"""The fast segment NLP: one motion of a fixed-base robot between two rest configurations, as a
-joint-space B-spline (:mod:`.bspline`) with the closed chain, joint limits, collision avoidance
-and a minimum-jerk cost — built from per-knot kernels that are compiled once and reused.
+"""The segment NLP of a fixed-base robot — one motion between two rest configurations with the
+closed chain, joint position and velocity limits, collision avoidance and a minimum-jerk cost —
+as a thin builder of an :class:`~optplan.problem.OptProblem` on the B-spline kernel core
+(:mod:`.spline_core`; docs/decisions/0021-pipeline-on-the-shared-core.md).
 
-Transcription
--------------
-Decision variables: the interior control points ``P_3 … P_{N−1}`` (the three at each end are fixed
-by rest at the pinned boundary configurations) and one offset per separating plane between two
-moving bodies. Nothing else: no velocities, accelerations, jerks or integration rows.
-
-* **Joint limits** hold on the control points, hence everywhere in between (convex hull).
-* **Velocity limits** hold on the velocity control points ``(P_{i+1} − P_i)/h``: linear rows,
-  again valid between the knots. Only the entries the initial guess brings near the limit
-  (``velocity_activation``) get a row; :meth:`SplineSegmentProblem.velocity_violations` checks all
-  of them after a solve and :meth:`~SplineSegmentProblem.add_velocity_rows` adds what was missed
-  (each row is one more row of every KKT system IPOPT factorizes).
-* **Closed chain** at the interior knots (the same singularity-free pose residual as
-  :class:`~optplan.problem.ClosedChain`: 6 equality rows and ``trace ≥ 1`` per knot).
-* **Collision avoidance**: each active (pair, knot) gets a separating plane whose unit normal ``n``
-  is fixed at coal's witness normal along the initial guess (the fixed-normal planes of
-  :class:`~optplan.problem.CollisionAvoidance`). For a static obstacle the plane's offset is
-  eliminated exactly: the row is ``min_y n·y − r_B − n·x − r_A ≥ margin`` for each point ``x`` of
-  the moving body (capsule end points, box vertices) — the obstacle's support value is a constant
-  of the normal. Two moving bodies keep the offset ``b`` as a variable (rows
-  ``b − n·x − r_A ≥ m/2``, ``n·y − r_B − b ≥ m/2``). Rows are exact and conservative: the true
-  distance is at least the margin wherever a row holds.
-* **Cost**: ∫‖j‖² dt (exact; a constant quadratic form of the control points), scaled by the
-  rest-to-rest quintic's value so that IPOPT sees an objective of order 1.
-
-Kernels
--------
-Every row family is one small SX function of one knot's joint vector (and the plane data), built
-once per robot and pair (:class:`KernelCache`) and evaluated over its knots with ``Function.map``;
-the NLP graph therefore has a handful of nodes whatever N is, and building the IPOPT instance
-costs a fraction of a second instead of the symbolic expansion of the whole trajectory.
+What the problem is made of (the same terms as :func:`optplan.tasks.segment_problem`, which the
+pipeline uses): ``JointBoundary`` at rest at both ends, the ``ClosedChain`` at the knots,
+``JointPositionLimits`` on the control points (hence everywhere, convex hull),
+``JointVelocityLimits`` on the velocity control points (rows only where the first guess is fast,
+:attr:`JointVelocityLimits.activation`; the rest checked after each solve), ``CollisionAvoidance``
+as fixed-normal separating planes (:mod:`.plane_rows`), ``Smoothness("jerk")``. Every method
+below is a call on :attr:`SplineSegmentProblem.problem`; add your own terms there.
 """
 from __future__ import annotations
 
-import logging
-import time
-from dataclasses import dataclass, field
-from types import SimpleNamespace
+from dataclasses import dataclass
 from typing import Any
 
-import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..errors import ConfigurationError
 from ..model.robot import RobotModel
 from ..scene import Scene
-from . import kernel_compiler
-from .assembly import Assembly
-from .bspline import check_knot_guess, fit_interior, jerk_integral_reference, knot_values, rest_to_rest
-from .collision_term import CollisionAvoidance, _box_vertices
+from .bspline import check_knot_guess, rest_to_rest
+from .collision_term import CollisionAvoidance, CollisionModel
 from .frame_terms import ClosedChain
 from .kernels import KernelCache, geometry_points
+from .plane_rows import SPLINE_ACTIVATION
+from .problem import OptProblem
 from .solution import Solution
-from .terms import NumericTrajectory
+from .terms import JointBoundary, JointPositionLimits, JointVelocityLimits, NumericTrajectory, Smoothness
 
 __all__ = ["KernelCache", "SegmentSpec", "SplineSegmentProblem"]
-log = logging.getLogger(__name__)
 
 
-def _sparse(A: np.ndarray) -> ca.DM:
-    """A constant matrix with its zeros structural (a dense DM would couple every variable)."""
-    return ca.sparsify(ca.DM(A))
-
-
-# --------------------------------------------------------------------------- problem
 @dataclass(frozen=True)
 class SegmentSpec:
     """What a segment NLP is: a rest-to-rest motion of ``robot`` in ``scene``.
@@ -80,12 +47,10 @@ class SegmentSpec:
     guess are constrained at the knots within ``window`` (as :class:`CollisionAvoidance`; the
     rest are checked by ``verify`` after the solve, see docs/decisions/0012-segment-nlp-rows.md);
     velocity_activation [fraction of the limit, 0-1]: a velocity control point's entry gets a row
-    when the initial guess's exceeds this fraction of the joint's limit (0: every entry);
-    relax_to_guess: a pair's margin is at most half the guess's exact clearance within ``window``
-    knots of every knot where a collision-free guess runs closer than ``margin`` (False: only next
-    to the pinned configurations; a colliding guess keeps the margin). A planner's path may pass
-    closer than the margin where nothing wider fits (the closed chain leaving no room to widen it).
-    See docs/decisions/0010-knot-transcription-defaults.md."""
+    when the initial guess's exceeds this fraction of the joint's limit (0: every entry). A pair's
+    margin is at most half the guess's exact clearance within ``window`` knots of every knot where
+    a collision-free guess runs closer than ``margin`` (a planner's path may pass closer than the
+    margin where nothing wider fits); see docs/decisions/0010-knot-transcription-defaults.md."""
 
     n_intervals: int
     duration: float
@@ -97,75 +62,68 @@ class SegmentSpec:
     velocity_limit: np.ndarray | None = None
     margin: float = 0.02
     object_arm: str | None = None
-    activation: float = 0.12
+    activation: float = SPLINE_ACTIVATION
     window: int = 3
     velocity_activation: float = 0.5
-    relax_to_guess: bool = True
-
-
-@dataclass
-class _Built:
-    solver: SimpleNamespace  # the symbolic structure and its IPOPT instances (KernelCache.structure)
-    lbx: np.ndarray
-    ubx: np.ndarray
-    lbg: np.ndarray
-    ubg: np.ndarray
-    p: np.ndarray
-    gfun: ca.Function
-    slices: dict[str, slice] = field(default_factory=dict)
-    setup_time: float = 0.0
 
 
 class SplineSegmentProblem:
-    """The segment NLP of the module docstring. ``set_initial_path`` / ``set_initial``, then
-    ``solve`` → :class:`~optplan.problem.Solution` (knot values of the B-spline, so ``sample`` and
-    :func:`optplan.verify.verify` see exactly the optimized trajectory)."""
+    """The segment NLP of the module docstring: ``set_initial_path`` / ``set_initial``, then
+    ``solve`` → :class:`~optplan.problem.Solution`. :attr:`problem` is the
+    :class:`~optplan.problem.OptProblem` it builds (add constraints and costs there)."""
 
     def __init__(self, robot: RobotModel, scene: Scene | None, spec: SegmentSpec):
-        self.robot, self.scene, self.spec = robot, scene, spec
-        self.kernels = KernelCache.of(robot)
-        N = self.N = int(spec.n_intervals)
-        (self.T, self.h, self.M, self.q0, self.q1, self.P_start, self.P_end, self.lower,
-         self.upper) = rest_to_rest(robot, N, spec.duration, spec.q_start, spec.q_end, spec.lower, spec.upper)
-        nj = robot.nj
-        self.vlim = robot.velocity_limit.copy() if spec.velocity_limit is None else np.broadcast_to(
-            np.asarray(spec.velocity_limit, float), (nj,)).copy()
-        self.fixed = frozenset(np.flatnonzero(self.lower == self.upper).tolist())
+        KernelCache.of(robot)   # a floating robot is refused here, by name
         va = spec.velocity_activation
         if isinstance(va, bool) or not isinstance(va, (int, float, np.integer, np.floating)) or not 0 <= va <= 1:
             raise ValueError(f"velocity_activation: expected a fraction of the limit in [0, 1], got {va!r}")
-        self._vel_extra: set[int] = set()  # velocity entries added after a solve (add_velocity_rows)
-        self.col = None
+        N = int(spec.n_intervals)
+        if N < 4:
+            raise ConfigurationError(f"SegmentSpec.n_intervals: expected at least 4 intervals, got {N}")
+        self.robot, self.scene, self.spec, self.N = robot, scene, spec, N
+        (self.T, self.h, self.M, self.q0, self.q1, _, _, self.lower,
+         self.upper) = rest_to_rest(robot, N, spec.duration, spec.q_start, spec.q_end, spec.lower, spec.upper)
+        z = np.zeros(robot.nj)
+        prob = self.problem = OptProblem(robot, N, self.T, transcription="bspline")
+        prob.add_constraint(JointBoundary("start", q=self.q0, qd=z, qdd=z), name="start")
+        prob.add_constraint(JointBoundary("end", q=self.q1, qd=z, qdd=z), name="end")
+        if spec.closed_chain is not None:
+            prob.add_constraint(spec.closed_chain, name="closed_chain")
+        prob.add_constraint(JointPositionLimits(lower=self.lower.tolist(), upper=self.upper.tolist()), name="joint_limits")
+        prob.add_constraint(JointVelocityLimits(limit=spec.velocity_limit, activation=float(va)), name="velocity_limits")
         if scene is not None:
-            # the term's per-build data (checker, shapes, active pairs): a CollisionModel
-            self.col = CollisionAvoidance(scene, margin=spec.margin, activation=spec.activation,
-                                          window=spec.window, object_arm=spec.object_arm,
-                                          fixed_normals=True).model(robot)
-            for g, shape in self.col.robot_shape.items():  # refuse unsupported geometry now, by name
+            term = CollisionAvoidance(scene, margin=spec.margin, activation=spec.activation, window=spec.window,
+                                      object_arm=spec.object_arm, fixed_normals=True)
+            for g, shape in term.model(robot).robot_shape.items():   # unsupported geometry: refused now, by name
                 if shape is None:
                     geometry_points(robot, g)
-        self._X0: np.ndarray | None = None  # interior control points (N−3) × nj
-        self._lam: tuple[Any, ...] | None = None
-        self._built: _Built | None = None
-        self._plan: list[SimpleNamespace] | None = None
-        #: use the kernel-assembled Jacobian and Hessian (False: CasADi's own AD of the whole graph)
-        self.exact_derivatives = True
-        #: kernels evaluated from C compiled once per robot and kept in the disk cache
-        #: (:meth:`KernelCache.compiled`): True — compile what is missing (about a second of the
-        #: C compiler per kernel, once); "auto" — use what an earlier run compiled, else the
-        #: symbolic kernels; False — the symbolic kernels only
-        self.compile_kernels: bool | str = "auto"
-        #: [m] a moving box keeps the rows of the vertices within this distance of its leading
-        #: vertex along a plane's normal (``inf``: every vertex; see :meth:`_prune`)
-        self.vertex_window = 0.5
+            prob.add_constraint(term, name="collision")
+        prob.add_cost(Smoothness("jerk"), name="jerk")
+
+    # ------------------------------------------------------------------ settings
+    @property
+    def compile_kernels(self) -> bool | str:
+        """Kernels from C compiled once per robot (:class:`~optplan.problem.OptProblem`'s option)."""
+        return self.problem.compile_kernels
+
+    @compile_kernels.setter
+    def compile_kernels(self, value: bool | str) -> None:
+        self.problem.compile_kernels = value
+
+    @property
+    def col(self) -> CollisionModel | None:
+        """The collision model of the current build (checker, active and constant pairs, relaxed
+        margins); None without a scene. Plans the rows along the initial guess if needed."""
+        if self.scene is None:
+            return None
+        return self.problem.term_data("collision").info.get("model")
 
     # ------------------------------------------------------------------ initial guess
     def set_initial(self, q: ArrayLike | None = None, *, solution: Solution | None = None,
                     closed_chain: ClosedChain | None = None) -> None:
-        """Initial guess from knot configurations ``q`` ((N+1) × nj, on this problem's grid) or from
-        a :class:`Solution` of any grid (sampled at this grid's knots; with ``closed_chain``, each
-        interior knot is projected onto it — a coarser grid's solution drifts between its knots).
-        Re-seeds the plane normals at the next build."""
+        """Initial guess from knot configurations ``q`` ((N+1) × nj [rad], on this problem's grid;
+        clipped to the joint limits) or from a :class:`Solution` of any grid (sampled at this
+        grid's knots; with ``closed_chain``, each interior knot is projected onto it)."""
         if solution is not None:
             q = solution.sample(np.linspace(solution.t[0], solution.t[-1], self.N + 1))["q"]
             if closed_chain is not None:
@@ -175,520 +133,75 @@ class SplineSegmentProblem:
                 data = self.robot.model.createData()
                 for k in range(1, self.N):
                     q[k] = project_closed_chain(self.robot, q[k], closed_chain, data=data).q
-        Q = check_knot_guess(q, self.N, self.robot.nj)
-        X = fit_interior(Q, self.P_start, self.P_end)
-        self._X0 = np.clip(X, self.lower, self.upper)
-        self._lam = None
-        self._built = None
+        Q = np.array(check_knot_guess(q, self.N, self.robot.nj), float)
+        Q[1:-1] = np.clip(Q[1:-1], self.lower, self.upper)
+        self.problem.set_initial(q=Q)
 
     def set_initial_path(self, path: ArrayLike, closed_chain: ClosedChain | None = None) -> bool:
-        """Initial guess from a planner's path (M × nj, no timing): the path is followed with the
-        rest-to-rest quintic time law in joint-space arc length, each knot projected onto the
-        closed-chain manifold. Returns whether every projection converged."""
-        from ..constraints.closed_chain import project_closed_chain
-        from ..geometry.splines import quintic_time_law, resample_path
-
-        path = np.asarray(path, float)
-        s, _ = resample_path(path, 2)  # validates the path
-        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
-        cum = np.r_[0.0, np.cumsum(seg)]
-        tau = np.linspace(0.0, 1.0, self.N + 1)
-        sigma = quintic_time_law(tau)[0]
-        if cum[-1] > 0:
-            target = sigma * cum[-1]
-            Q = np.column_stack([np.interp(target, cum, path[:, j]) for j in range(path.shape[1])])
-        else:
-            Q = np.repeat(path[:1], self.N + 1, axis=0)
-        ok = True
-        if closed_chain is not None:
-            data = self.robot.model.createData()
-            for k in range(1, self.N):
-                r = project_closed_chain(self.robot, Q[k], closed_chain, data=data)
-                Q[k] = r.q
-                ok &= r.success
-        Q[0], Q[-1] = self.q0, self.q1
-        self.set_initial(Q)
-        return bool(ok)
+        """Initial guess from a planner's path (M × nj, no timing;
+        :meth:`OptProblem.set_initial_path`). Returns whether every projection converged."""
+        return self.problem.set_initial_path(path, closed_chain)
 
     def smooth_initial(self, weight: float = 10.0, closed_chain: ClosedChain | None = None) -> None:
-        """Smooth the initial guess: the interior control points minimising
-        ``Σ_k ‖q(t_k) − Q_k‖² + weight · Σ_k ‖ΔP³_k‖²`` (knot fit plus a discrete jerk penalty;
-        ``weight`` is dimensionless, per unit of squared control-point third difference [rad²]),
-        then each knot projected back onto the closed-chain manifold. A planner path's corners
-        give the guess a jerk thousands of times the optimum's; rounding them off before IPOPT
-        starts saves iterations."""
-        from ..constraints.closed_chain import project_closed_chain
-
-        if self._X0 is None:
+        """Round off the initial guess's corners (:meth:`OptProblem.smooth_initial`; ``weight`` [-])."""
+        if self.problem.initial_guess is None:
             raise ValueError("no initial guess to smooth: call set_initial(...) first")
-        if not (np.isfinite(weight) and weight >= 0):
-            raise ValueError(f"weight: expected a finite number ≥ 0, got {weight!r}")
-        N = self.N
-        Q = self.knot_configurations()
-        Mq, Mj = self.M["q"], self.M["jerk"]
-        free, fixed = np.r_[3:N], np.r_[0:3, N:N + 3]
-        Pf = np.vstack([self.P_start, self.P_end])
-        A = np.vstack([Mq[1:N][:, free], np.sqrt(weight) * Mj[:, free]])
-        rhs = np.vstack([Q[1:N] - Mq[1:N][:, fixed] @ Pf, -np.sqrt(weight) * Mj[:, fixed] @ Pf])
-        X = np.linalg.lstsq(A, rhs, rcond=None)[0]
-        Qs = Mq @ np.vstack([self.P_start, X, self.P_end])
-        if closed_chain is not None:
-            data = self.robot.model.createData()
-            for k in range(1, N):
-                Qs[k] = project_closed_chain(self.robot, Qs[k], closed_chain, data=data).q
-        self.set_initial(Qs)
+        self.problem.smooth_initial(weight, closed_chain)
 
-    # ------------------------------------------------------------------ helpers
-    def _P(self, X: ArrayLike) -> np.ndarray:
-        return np.vstack([self.P_start, np.asarray(X).reshape(self.N - 3, self.robot.nj), self.P_end])
-
-    def knot_configurations(self, X: ArrayLike | None = None) -> np.ndarray:
-        """Knot configurations ((N+1) × nj) of interior control points X (default: the guess)."""
-        X = self._X0 if X is None else X
-        assert X is not None  # callers check that there is a guess
-        return self.M["q"] @ self._P(X)
-
-    # ------------------------------------------------------------------ collision rows
-    def _entity(self, kind: str, idx: int, holder: str | None) -> tuple[int | None, np.ndarray, float]:
-        """(frame id or None, points 3 × m in that frame (world if None), radius) of an entity;
-        an entity that depends on no free joint (an obstacle, the fixed base, a holding arm, the
-        object it holds) comes back static: frame None and its world points."""
-        col = self.col
-        assert col is not None  # collision rows exist only with a scene
-        if kind == "obstacle":
-            o = col.checker.obstacles[idx]
-            if o.shape == "box":
-                V, r = np.array(_box_vertices(np.asarray(o.size) / 2)).T, 0.0
-            elif o.shape == "sphere":
-                assert o.radius is not None  # a sphere obstacle has a radius
-                V, r = np.zeros((3, 1)), float(o.radius)
-            else:
-                assert o.radius is not None and o.length is not None  # a capsule obstacle has both
-                V, r = np.array([[0, 0, -o.length / 2], [0, 0, o.length / 2]]).T, float(o.radius)
-            M = o.placement
-            return None, M.rotation @ V + M.translation[:, None], r
-        if kind == "object":
-            assert col.checker.object is not None and holder is not None  # only with a held object
-            V = np.array(_box_vertices(np.asarray(col.checker.object.size) / 2)).T
-            G = col.grasp_inv
-            fid, V, r = self.robot.arm(holder).ee_frame_id, G.rotation @ V + G.translation[:, None], 0.0
-        else:
-            spec = col.robot_shape.get(idx)
-            if spec is None:
-                fid, V, r = geometry_points(self.robot, idx)
-                return self._static_or_moving(kind, idx, fid, V, r)
-            fid, shape, Mbox = spec
-            from ..geometry import distance as D
-            if isinstance(shape, D.Box):
-                assert Mbox is not None  # a box's placement in its frame is kept
-                V, r = np.array([Mbox.act(v) for v in _box_vertices(np.asarray(shape.half_extents))]).T, 0.0
-            elif isinstance(shape, D.Sphere):
-                V, r = np.asarray(shape.center, float).reshape(3, 1), float(shape.radius)
-            else:
-                V, r = np.array([shape.a, shape.b], float).T, float(shape.radius)
-        return self._static_or_moving(kind, idx, fid, V, r)
-
-    def _static_or_moving(self, kind: str, idx: int, fid: int, V: np.ndarray,
-                          r: float) -> tuple[int | None, np.ndarray, float]:
-        assert self.col is not None  # collision rows exist only with a scene
-        if self.col.free_joints_of(self.robot, kind, idx, self.fixed) == set():
-            M = self._static_placement(fid)
-            return None, M.rotation @ V + M.translation[:, None], r
-        return fid, V, r
-
-    def _static_placement(self, fid: int) -> Any:
-        import pinocchio as pin
-
-        data = self.robot.model.createData()
-        pin.framesForwardKinematics(self.robot.model, data, self.q0)
-        return data.oMf[fid]
-
-    def _boundary_margins(self, active: list[Any], pinned: set[int]) -> Any:
-        """``margin_at(pair, k)`` [m] as :meth:`CollisionAvoidance._boundary_margins` (the margin,
-        halved distance within ``window`` knots of a pinned configuration closer than the margin),
-        from the exact coal distances of the pinned configurations: the rows here are planes, not
-        the knot transcription's smooth distances."""
-        col, N, w = self.col, self.N, int(self.spec.window)
-        assert col is not None and col._init_dist is not None  # a scene, and the guess's distances (_activate)
-        col.relaxed = {}
-        index = col.checker.pair_index
-        knots = set(range(N + 1)) if self.spec.relax_to_guess else set(pinned)
-        for kp in sorted(knots):
-            d = col._init_dist[kp]  # exact distances along the initial guess (set by _activate)
-            for p in active:
-                dp = float(d[index[p]])
-                # inside the path only a collision-free guess relaxes (a colliding one must be pushed out)
-                if dp < col.margin and (kp in pinned or dp >= 0.0):
-                    m = min(col.margin, 0.5 * dp)
-                    for k in range(max(0, kp - w), min(N, kp + w) + 1):
-                        col.relaxed[(p, k)] = min(m, col.relaxed.get((p, k), np.inf))
-        return col._margin_at
-
-    def _plan_collision(self, Qk: np.ndarray) -> list[SimpleNamespace]:
-        """Active (pair, kernel, knots, …) along the knot configurations ``Qk``: one item per pair
-        with its kernel, knots, margins and which side moves (``flip``: A is the static side)."""
-        col = self.col
-        if col is None:
-            return []
-        robot, N = self.robot, self.N
-        traj = NumericTrajectory(robot, Qk, Qk, Qk, Qk[:-1], self.T)
-        active = col.activate(robot, traj)
-        pinned = {0: self.q0, N: self.q1}
-        # arms holding the object here (both under the closed chain, else its own arm): the object
-        # keeps its distance to the geometry that rides on their hands (verify checks it)
-        cc = self.spec.closed_chain
-        rigid = [cc.arm_a, cc.arm_b] if cc is not None else [a for a in (col.checker.object_arm,) if a is not None]
-        const = [p for p in active if col.is_constant(robot, p, self.fixed, rigid)]
-        active = [p for p in active if p not in const]
-        col.active_pairs = active
-        col.constant_pairs = const
-        margin_at = self._boundary_margins(active, set(pinned))
-        holder = col.checker.object_arm
-        plan = []
-        for pair in active:
-            ka, kb = col.kinds(pair)
-            ea, eb = self._entity(ka, pair.a, holder), self._entity(kb, pair.b, holder)
-            if ea is None or eb is None:
-                continue
-            if ea[0] is None and eb[0] is None:
-                continue  # both static: constant distance, checked by verify
-            ks = [k for k in col.knots_of(pair, N) if k not in pinned]
-            if not ks:
-                continue
-            flip = ea[0] is None
-            mov, other = (eb, ea) if flip else (ea, eb)
-            static = other[0] is None
-            plan.append(SimpleNamespace(pair=pair, knots=ks, static=static, flip=flip, a=mov, b=other,
-                                        margins=np.array([margin_at(pair, k) for k in ks])))
-        return plan
-
-    def _prune(self, it: SimpleNamespace, side: tuple[int | None, np.ndarray, float], normals: np.ndarray,
-               Qk: np.ndarray, sign: float) -> tuple[int | None, np.ndarray, float]:
-        """Keep the points of a moving box side that come within ``vertex_window`` [m] of its
-        leading point along the (signed) normal at some knot of the pair: the others sit that far
-        behind the plane and cannot reach it without the body turning by a large angle."""
-        fid, V, r = side
-        if V.shape[1] <= 2 or not np.isfinite(self.vertex_window):
-            return side
-        import pinocchio as pin
-
-        data = self.robot.model.createData()
-        keep = np.zeros(V.shape[1], bool)
-        for t, k in enumerate(it.knots):
-            pin.framesForwardKinematics(self.robot.model, data, Qk[k])
-            proj = sign * normals[:, t] @ (data.oMf[fid].rotation @ V)
-            keep |= proj >= proj.max() - self.vertex_window
-        return fid, V[:, keep], r
-
-    def _kernels_for(self, plan: list[SimpleNamespace], planes: list[tuple[np.ndarray, np.ndarray]],
-                     Qk: np.ndarray) -> None:
-        """Point subsets (:meth:`_prune`), kernel and row count of every item."""
-        for it, (Nrm, _) in zip(plan, planes):
-            it.a = self._prune(it, it.a, Nrm, Qk, 1.0)  # rows b − n·x: x's leading along +n
-            if not it.static:
-                it.b = self._prune(it, it.b, Nrm, Qk, -1.0)  # rows n·y − b: y's leading along −n
-            it.fn = self.kernels.pair(it.a[0], it.a[1], it.a[2], it.b[0], it.b[1], it.b[2])
-            it.nrow = it.a[1].shape[1] + (0 if it.static else it.b[1].shape[1])
-
-    def _plane_data(self, plan: list[SimpleNamespace], Qk: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per item: normals (3 × K) from coal's witness at the knot configurations (pointing from
-        the moving side to the other), and the offsets: the static side's support value, or the
-        witness mid-plane offset (a variable's initial value) for two moving sides."""
-        col = self.col
-        per_knot: dict[int, list[tuple[int, int]]] = {}
-        for i, it in enumerate(plan):
-            for t, k in enumerate(it.knots):
-                per_knot.setdefault(k, []).append((i, t))
-        out = [(np.zeros((3, len(it.knots))), np.zeros(len(it.knots))) for it in plan]
-        for k, items in per_knot.items():
-            assert col is not None  # plan items exist only with collision rows
-            chk = col.checker
-            W = chk.witness_planes(Qk[k], [chk.pair_index[plan[i].pair] for i, _ in items])
-            for (i, t), nb in zip(items, W):
-                it = plan[i]
-                n, off = (-nb[:3], -nb[3]) if it.flip else (nb[:3], nb[3])
-                if it.static:
-                    Y, rb = it.b[1], it.b[2]
-                    off = float(np.min(n @ Y)) - rb
-                out[i][0][:, t] = n
-                out[i][1][t] = off
-        return out
-
-    # ------------------------------------------------------------------ build
-    def _build(self) -> _Built:
-        """Numeric data of the NLP (collision plan, plane parameters, row bounds, boundary control
-        points, objective weight) for the current initial guess, and its symbolic structure —
-        taken from the robot's :class:`KernelCache` when an NLP of the same shape (N, rows, pairs
-        and knots) was built before in this process, so that only the numbers change."""
-        if self._X0 is None:
+    def knot_configurations(self) -> np.ndarray:
+        """Knot configurations ((N+1) × nj) of the initial guess."""
+        x0 = self.problem.initial_guess
+        if x0 is None:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_path(...) first")
-        t0 = time.perf_counter()
-        N, nj, h = self.N, self.robot.nj, self.h
-        Qk0 = self.knot_configurations()
-        plan = self._plan_collision(Qk0)
-        planes = self._plane_data(plan, Qk0)
-        self._kernels_for(plan, planes, Qk0)
-        sel = self._velocity_entries()
-        ccfn = self.kernels.closed_chain(self.spec.closed_chain) if self.spec.closed_chain is not None else None
-        nP = (N - 3) * nj
-        # numbers: parameters (boundary points, plane normals, static supports, objective weight),
-        # row bounds in row order, initial plane offsets
-        pvals = [self.P_start.T.ravel(order="F"), self.P_end.T.ravel(order="F")]
-        lbg, ubg, x_b0 = [], [], []
-        if sel.size:
-            vb = np.tile(self.vlim * h, N - 2)[sel]
-            lbg.append(-vb)
-            ubg.append(vb)
-        if ccfn is not None:
-            lbg.append(np.tile(np.r_[np.zeros(6), 1.0], N - 1))
-            ubg.append(np.tile(np.r_[np.zeros(6), np.inf], N - 1))
-        for it, (Nrm, s0) in zip(plan, planes):
-            pvals.append(Nrm.ravel(order="F"))
-            if it.static:
-                pvals.append(np.asarray(s0, float).ravel())
-                lbg.append(np.repeat(it.margins, it.nrow))
-            else:
-                x_b0.append(s0)
-                lbg.append(np.repeat(it.margins / 2, it.nrow))
-            ubg.append(np.full(len(it.knots) * it.nrow, np.inf))
-        fref = jerk_integral_reference(self.q0, self.q1, self.T)
-        self._scale = scale = 1.0 / fref if fref > 0 else 1.0
-        pvals.append(np.array([scale / h**5]))  # ∫‖j‖² dt = h Σ ‖ΔP³/h³‖², scaled to order 1
-        evals = {fn.name(): self.kernels.evaluators(fn, self.compile_kernels)
-                 for fn in ([ccfn] if ccfn is not None else []) + [it.fn for it in plan]}
-        kernel_compiler.launch()   # kernels evaluated symbolically here: compiled in the background for later NLPs
-        key = (N, nj, sel.tobytes(), None if ccfn is None else ccfn.name(), self.exact_derivatives,
-               tuple((it.fn.name(), tuple(it.knots), it.static) for it in plan),
-               tuple(sorted((name, c) for name, (_, c) in evals.items())))
-        st = self.kernels.structure(key, lambda: self._structure(sel, ccfn, plan, evals))
-        self._nlp, self._derivs = st.nlp, st.derivs
-        self._plan = plan
-        nb = st.nb
-        lbx = np.r_[np.tile(self.lower, N - 3), np.full(nb, -np.inf)]
-        ubx = np.r_[np.tile(self.upper, N - 3), np.full(nb, np.inf)]
-        self._xb0 = np.concatenate(x_b0) if x_b0 else np.zeros(0)
-        b = _Built(solver=st, lbx=lbx, ubx=ubx, lbg=np.concatenate(lbg) if lbg else np.zeros(0),
-                   ubg=np.concatenate(ubg) if ubg else np.zeros(0), p=np.concatenate(pvals),
-                   gfun=st.gfun, slices=st.slices)
-        if b.lbg.size != st.ng or b.p.size != st.np:
-            raise AssertionError(f"segment NLP: {b.lbg.size} row bounds / {b.p.size} parameters for a structure "
-                                 f"of {st.ng} rows / {st.np} parameters")
-        b.setup_time = time.perf_counter() - t0
-        self._built = b
-        self._nfree = nP
-        return b
+        return np.asarray(self.problem.tp.unpack(x0)["q"], float)
 
-    def _structure(self, sel: np.ndarray, ccfn: ca.Function | None, plan: list[SimpleNamespace],
-                   evals: dict[str, Any]) -> SimpleNamespace:
-        """The symbolic NLP of one shape: decision variables, parameters, rows in the order of
-        :meth:`_build`'s bounds, and the exact Jacobian / Hessian functions (:class:`Assembly`)."""
-        N, nj = self.N, self.robot.nj
-        nP = (N - 3) * nj
-        nb = sum(len(it.knots) for it in plan if not it.static)
-        x = ca.MX.sym("x", nP + nb)
-        Xs = ca.reshape(x[:nP], nj, N - 3)
-        Bv = x[nP:]
-        Pstart, Pend = ca.MX.sym("P_start", nj, 3), ca.MX.sym("P_end", nj, 3)
-        P = ca.horzcat(Pstart, Xs, Pend)  # nj × (N+3)
-        Qk = ca.mtimes(P, _sparse(self.M["q"].T))  # nj × (N+1)
-        params = [Pstart, Pend]
-        asm = Assembly(N, nj, nP + nb)
-        if sel.size:  # velocity control points touching a free point (convex hull: q̇ bounded everywhere)
-            dP = ca.vec(ca.mtimes(P, _sparse(self.M["dP"].T[:, 2:N])))
-            asm.linear("velocity_limits", dP[sel.tolist()], self.M["dP"][2:N], 0.0, 0.0, select=sel)
-        fams: list[tuple[str, Any, list[int], Any, Any, tuple[int, np.ndarray] | None]] = []
-        if ccfn is not None:
-            fams.append(("closed_chain", ccfn, list(range(1, N)), ca.DM.zeros(3, N - 1), ca.DM.zeros(1, N - 1), None))
-        bi = 0
-        for it in plan:
-            K = len(it.knots)
-            Np = ca.MX.sym("n", 3, K)
-            params.append(Np)
-            name = f"collision:{it.pair.name_a}|{it.pair.name_b}"
-            if it.static:
-                Sp = ca.MX.sym("s", 1, K)
-                params.append(Sp)
-                fams.append((name, it.fn, it.knots, Np, Sp, None))
-            else:
-                ma = it.a[1].shape[1]
-                sign = np.r_[np.ones(ma), -np.ones(it.nrow - ma)]
-                fams.append((name, it.fn, it.knots, Np, Bv[bi:bi + K].T, (nP + bi, sign)))
-                bi += K
-        for name, fn, knots, Nin, Sin, bcoup in fams:
-            (f, jfn, hfn), _ = evals[fn.name()]
-            asm.family(name, f, jfn, hfn,
-                       knots, Qk[:, knots], Nin, Sin, bcoup, 0.0, 0.0)
-        w = ca.MX.sym("w")  # objective weight: scale / h⁵
-        params.append(w)
-        p = ca.vertcat(*[ca.vec(a) for a in params])
-        Jm = self.M["jerk"]
-        f = w * ca.sumsqr(ca.mtimes(P, _sparse(Jm.T)))
-        Hj = 2 * (Jm[:, 3:N].T @ Jm[:, 3:N])  # per joint, over the free points (times w)
-        lam_f = ca.MX.sym("lam_f")
-        lam_g = ca.MX.sym("lam_g", asm.ng)
-        G, Jg, Hl = asm.finish(x, lam_f * w, lam_g, Hj)
-        derivs = {"jac_g": ca.Function("jac_g", [x, p], [G, Jg], ["x", "p"], ["g", "jac_g_x"]),
-                  "hess_lag": ca.Function("hess_lag", [x, p, lam_f, lam_g], [Hl],
-                                          ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])}
-        return SimpleNamespace(nlp={"x": x, "p": p, "f": f, "g": G}, derivs=derivs, gfun=ca.Function("g", [x, p], [G]),
-                               slices=asm.slices, points=asm.points, ng=asm.ng, np=p.shape[0], nb=nb, solvers={})
-
+    # ------------------------------------------------------------------ retries
     def rebuild(self) -> None:
-        """Rebuild at the next solve (after ``add_activation`` or ``boost_between_knots``)."""
-        self._built = None
-
-    # ------------------------------------------------------------------ velocity rows
-    def _velocity_cp(self, X: ArrayLike) -> np.ndarray:
-        """Velocity control points [rad/s] touching a free point, (N−2) × nj."""
-        return self.M["dP"][2:self.N] @ self._P(X) / self.h
-
-    def _fast_entries(self, X: ArrayLike) -> set[int]:
-        """Entries ``i·nj + j`` of the velocity control points of ``X`` past ``velocity_activation``
-        of their joint's limit (fixed joints excluded)."""
-        on = np.abs(self._velocity_cp(X)) >= self.spec.velocity_activation * self.vlim
-        on[:, sorted(self.fixed)] = False
-        return set(np.flatnonzero(on.ravel()).tolist())
-
-    def _velocity_entries(self) -> np.ndarray:
-        """Entries of the velocity control points that get a row: those the initial guess drives
-        past ``velocity_activation`` of the limit, plus those added after a solve."""
-        assert self._X0 is not None  # _build checks that there is a guess
-        return np.array(sorted(self._fast_entries(self._X0) | self._vel_extra), int)
-
-    def activate_velocity(self, solution: Solution) -> int:
-        """Add the rows of every velocity entry of ``solution`` past ``velocity_activation`` of its
-        limit (the violators among them) for the next solve; returns how many rows are new."""
-        if solution.x is None:
-            return 0
-        new = self._fast_entries(np.asarray(solution.x)[:(self.N - 3) * self.robot.nj]) - self._vel_extra
-        new -= set(self._velocity_entries().tolist())
-        self.add_velocity_rows(sorted(new))
-        return len(new)
-
-    def velocity_violations(self, solution: Solution, tol: float = 1e-9) -> np.ndarray:
-        """Entries (``i·nj + j``) of the velocity control points of ``solution`` that have no row
-        and exceed the joint speed limit by more than ``tol`` [rad/s] — what the lazy selection
-        missed (entries with a row hold to the solver's constraint tolerance). Empty: q̇ is within
-        its limits everywhere."""
-        if solution.x is None:
-            return np.zeros(0, int)
-        V = np.abs(self._velocity_cp(np.asarray(solution.x)[:(self.N - 3) * self.robot.nj]))
-        over = np.flatnonzero((V - self.vlim > tol).ravel())
-        return np.setdiff1d(over, self._velocity_entries())
-
-    def add_velocity_rows(self, entries: ArrayLike) -> None:
-        """Constrain these velocity entries (from :meth:`velocity_violations`) at the next solve."""
-        n = (self.N - 2) * self.robot.nj
-        e = np.asarray(entries, int).ravel()
-        if e.size and (e.min() < 0 or e.max() >= n):
-            raise ValueError(f"add_velocity_rows: entries must lie in [0, {n}), got {e.min()}..{e.max()}")
-        self._vel_extra |= set(e.tolist())
-        self._built = None
+        """Rebuild at the next solve."""
+        self.problem.rebuild()
 
     def add_activation(self, q_knots: np.ndarray) -> None:
         """Also activate the pairs that come close along ``q_knots`` ((N+1) × nj), e.g. a solution
-        that verification found colliding."""
-        if self.col is not None:
-            Q = np.asarray(q_knots, float)
-            self.col.activate_with = list(self.col.activate_with) + [
-                NumericTrajectory(self.robot, Q, Q, Q, Q[:-1], self.T)]
-        self._built = None
+        that verification found colliding (:meth:`CollisionAvoidance.with_activation`)."""
+        if self.scene is None:
+            return
+        Q = np.asarray(q_knots, float)
+        h = self.problem.terms["collision"]
+        assert isinstance(h.term, CollisionAvoidance)   # the term this builder added
+        self.problem.replace_term(h, h.term.with_activation(NumericTrajectory(self.robot, Q, Q, Q, Q[:-1], self.T)))
 
     def boost_between_knots(self, traj_t: ArrayLike, traj_q: ArrayLike, knot_t: ArrayLike) -> int:
-        """:meth:`CollisionAvoidance.boost_between_knots` for this problem's collision rows."""
-        if self.col is None:
+        """Raise the margin where a solution cut a corner between knots
+        (:meth:`CollisionAvoidance.with_boost` on the pairs of the last build); the number of
+        (pair, knot) rows boosted."""
+        if self.scene is None:
             return 0
-        self._built = None
-        return self.col.boost_between_knots(np.asarray(traj_t, float), traj_q, knot_t)
+        h = self.problem.terms["collision"]
+        assert isinstance(h.term, CollisionAvoidance)   # the term this builder added
+        col, n = h.term.with_boost(self.problem.term_data(h), np.asarray(traj_t, float), traj_q, knot_t)
+        self.problem.replace_term(h, col)
+        return n
+
+    def velocity_violations(self, solution: Solution, tol: float = 1e-9) -> np.ndarray:
+        """Entries (``i·nj + j``) of the velocity control points ((N+2) × nj) of ``solution`` that
+        exceed the joint speed limit by more than ``tol`` [rad/s]. Empty: q̇ is within its limits
+        everywhere (convex hull). The problem's solve already re-solves with the rows it missed."""
+        if solution.x is None:
+            return np.zeros(0, int)
+        nj = self.robot.nj
+        P = np.asarray(solution.x, float)[:(self.N + 3) * nj].reshape(self.N + 3, nj)
+        V = np.abs(np.diff(P, axis=0)) / self.h
+        _, hi = JointVelocityLimits(limit=self.spec.velocity_limit).limits(self.robot)
+        return np.flatnonzero((V - hi > tol).ravel())
 
     def infeasibilities(self, solution: Solution, n: int = 10) -> list[Any]:
-        """The ``n`` worst constraint rows of ``solution`` (a solve of this problem), worst first,
-        as :class:`~optplan.problem.evaluate.Infeasibility`: row family (``velocity_limits``,
-        ``closed_chain``, ``collision:A|B``), row within it, knot (None for velocity rows),
-        value, bounds and violation (≥ 0; rad·h for velocity rows, m and rad otherwise)."""
-        from .evaluate import Infeasibility
-
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-            raise ValueError(f"infeasibilities: n: expected an integer ≥ 0, got {n!r}")
-        b = self._built
-        if b is None or solution.x is None or np.asarray(solution.x).size != b.lbx.size:
-            raise ValueError("infeasibilities: the solution was not produced by this problem's last build; "
-                             "solve this problem and pass its solution")
-        g = np.array(b.gfun(np.asarray(solution.x), b.p)).ravel()
-        viol = np.maximum(np.maximum(b.lbg - g, g - b.ubg), 0.0)
-        out = []
-        for i in np.argsort(-viol, kind="stable")[:int(n)]:
-            if not viol[i] > 0:
-                break
-            name, sl = next((k, v) for k, v in b.slices.items() if v.start <= i < v.stop)
-            row = int(i - sl.start)
-            pts = b.solver.points.get(name)
-            point = None if pts is None else int(pts[1][row // pts[0]])
-            out.append(Infeasibility(name, row, point, float(g[i]), float(b.lbg[i]), float(b.ubg[i]), float(viol[i])))
-        return out
+        """The ``n`` worst constraint rows of ``solution`` (:meth:`OptProblem.infeasibilities`)."""
+        return self.problem.infeasibilities(solution, n)
 
     # ------------------------------------------------------------------ solve
     def solve(self, ipopt_options: dict[str, Any] | None = None, *, tol: float = 1e-6, max_iter: int = 500) -> Solution:
-        """Solve with IPOPT (exact Hessian, MUMPS). Never raises for a failed solve: the status is
-        in the Solution. ``ipopt_options`` are passed through (``"ipopt."`` prefix optional)."""
-        from ..solver_options import check_solve_arguments
-        from .nlp import NlpSolver, SolverOptions
-
-        check_solve_arguments(tol, max_iter, 1.0)
-        sopts = SolverOptions.coerce(ipopt_options)  # an invalid option is an OptionError before the solve
-        b = self._built or self._build()  # its time is charged to this solve's setup_time
-        t_setup = time.perf_counter()
-        st = b.solver
-        # jacobian_regularization_value: IPOPT's constraint regularisation, used only when it
-        # finds the Jacobian rank-deficient (docs/optproblem.md: a long segment on 136 intervals
-        # went from 339 iterations without convergence to 19 with it)
-        defaults = {"ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
-                    "ipopt.mu_strategy": "adaptive", "ipopt.max_iter": int(max_iter),
-                    "ipopt.jacobian_regularization_value": 1e-6,
-                    # theta_max_fact: the filter refuses points whose constraint violation exceeds
-                    # 10 × max(1, the initial one) (IPOPT's default: 10⁴ ×). A warm start lies near the
-                    # manifold; one long segment accepted a step to a closed-chain residual of 3.3 and
-                    # never came back (200 iterations; with 10: 50 iterations, verified;
-                    # docs/decisions/0015)
-                    "ipopt.theta_max_fact": 10.0,
-                    # perturb_always_cd: IPOPT's permanent regularisation of the constraint block of
-                    # its KKT system (rank-deficient closed-chain rows next to the pinned ends). The
-                    # pipeline's default since it was measured on its segments (decision 0002); the
-                    # problem's own default too since the transport example (N = 50) went from 32
-                    # iterations (20 inertia corrections) to 20 (docs/decisions/0015)
-                    "ipopt.perturb_always_cd": "yes"}
-        okey = repr(sorted(sopts.casadi_options(defaults).items()))
-        setup = time.perf_counter() - t_setup + b.setup_time   # the NlpSolver adds its own creation time
-        b.setup_time = 0.0
-        solver = st.solvers.get(okey)
-        if solver is None:  # one IPOPT instance per shape and options, reused by later solves
-            extra = {}
-            if self.exact_derivatives:
-                # the kernels may be compiled (no derivatives of their own): IPOPT's multipliers
-                # are used as they are, not recomputed from a gradient of the Lagrangian
-                extra = {**st.derivs, "no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
-                         "calc_f": False, "calc_g": False}
-            solver = st.solvers[okey] = NlpSolver("segment", st.nlp, sopts, defaults=defaults, casadi_options=extra)
-        assert self._X0 is not None  # _build refuses to run without a guess
-        x0 = np.r_[self._X0.ravel(), self._xb0]
-        out = solver.solve(x0, p=b.p, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg, cost_scale=self._scale,
-                           extra_setup=setup)
-        status, x, lam_g, iters, cost, wall = out.status, np.array(out.x), out.lam_g, out.iterations, out.cost, out.wall_time
-        gval = np.array(b.gfun(x, b.p)).ravel()
-        viol_vec = np.maximum(np.maximum(b.lbg - gval, gval - b.ubg), 0.0)
-        viol = float(viol_vec.max()) if viol_vec.size else 0.0
-        xb = np.clip(x[:self._nfree], b.lbx[:self._nfree], b.ubx[:self._nfree])
-        viol = max(viol, float(np.abs(xb - x[:self._nfree]).max()) if self._nfree else 0.0)
-        terms = {"jerk": cost}
-        for name, sl in b.slices.items():
-            key = "collision" if name.startswith("collision:") else name
-            v = float(viol_vec[sl].max()) if sl.stop > sl.start else 0.0
-            terms[key] = max(terms.get(key, 0.0), v)
-        P = self._P(x[:self._nfree])
-        kv = knot_values(P, self.h)
-        success = bool(status.succeeded and np.isfinite(viol) and viol <= max(tol, 1e-9) * 10)
-        return Solution(success=success, status=status, iterations=iters, wall_time=wall, cost=cost,
-                        max_constraint_violation=viol, terms=terms, t=np.linspace(0.0, self.T, self.N + 1),
-                        q=kv["q"], qd=kv["qd"], qdd=kv["qdd"], jerk=kv["jerk"],
-                        joint_names=self.robot.joint_names, setup_time=out.setup_time, cpu_time=out.cpu_time, x=x,
-                        lam_g=lam_g, attempts=(out,))
+        """Solve with IPOPT (:meth:`OptProblem.solve`, no dense check: the caller verifies). Never
+        raises for a failed solve: the status is in the Solution."""
+        if self.problem.initial_guess is None:
+            raise ValueError("no initial guess: call set_initial(...) or set_initial_path(...) first")
+        return self.problem.solve(ipopt_options, tol=tol, max_iter=max_iter, guarantees=False)

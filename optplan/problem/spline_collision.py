@@ -3,13 +3,14 @@ separating planes (:mod:`.segment`, decision 0003/0012) — active pairs and kno
 guess, one kernel per pair ``f([q; n; s])`` with the plane normal ``n`` and the static side's
 support ``s`` as parameters (a moving pair's plane offset: a decision variable).
 
-Pair activation: a term left at the default ``activation`` takes the segment NLP's
-(:attr:`SegmentSpec.activation <optplan.problem.segment.SegmentSpec>`, 0.12 m — a third of the
+Pair activation: a term left at the default ``activation`` takes the plane rows' own
+(:data:`~optplan.problem.plane_rows.SPLINE_ACTIVATION`, 0.12 m — a third of the
 pairs and half the rows of 0.3 m on the transport, decision 0012); a pair it misses is found by
 the dense check after the solve (coal, every pair), which re-solves on a finer grid activated
 along the solution. An explicit ``activation`` is used as given."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from .collision_term import CollisionAvoidance
 from .frame_terms import ClosedChain
+from .plane_rows import SPLINE_ACTIVATION, PlanePlanner
 
 __all__ = ["CollisionItem", "plan_collision"]
 
@@ -39,10 +41,9 @@ class CollisionItem:
 
 def plan_collision(prob: Any, core: Any, term: CollisionAvoidance, Qk: np.ndarray,
                    lower: np.ndarray, upper: np.ndarray) -> tuple[list[CollisionItem], Any]:
-    """The active pairs along the knot configurations ``Qk`` ((N+1) × nj) and their kernels, by
-    the segment NLP's planner (:class:`~optplan.problem.segment.SplineSegmentProblem`)."""
-    from .segment import SegmentSpec, SplineSegmentProblem
-
+    """The active pairs along the knot configurations ``Qk`` ((N+1) × nj) and their kernels
+    (:class:`~optplan.problem.plane_rows.PlanePlanner`); the term's ``activate_with`` trajectories
+    and ``margin_boost`` are honoured (the retry policy's pair activation and boost)."""
     robot, N = prob.robot, prob.N
     pinned = prob._pinned_q()
     cc = next((h.term for h in prob._handles if h.role == "constraint" and isinstance(h.term, ClosedChain)), None)
@@ -50,15 +51,14 @@ def plan_collision(prob: Any, core: Any, term: CollisionAvoidance, Qk: np.ndarra
     lo = np.where(np.isfinite(lower), lower, robot.lower)
     hi = np.where(np.isfinite(upper), upper, robot.upper)
     default = CollisionAvoidance.__dataclass_fields__["activation"].default
-    activation = SegmentSpec.activation if term.activation == default else term.activation
-    spec = SegmentSpec(N, prob.duration, q0, q1, cc, lower=lo, upper=hi, margin=term.margin,
-                       object_arm=term.object_arm, activation=activation, window=term.window)
-    seg = SplineSegmentProblem(robot, term.scene, spec)
+    if term.activation == default:
+        term = dataclasses.replace(term, activation=SPLINE_ACTIVATION)
+    model = term.model(robot)
+    fixed = frozenset(np.flatnonzero(lo == hi).tolist())
+    planner = PlanePlanner(robot, model, N, prob.duration, q0, q1, fixed, cc, window=term.window, kernels=core.kc)
     Q = np.array(Qk, float)
     Q[0], Q[-1] = q0, q1
-    plan = seg._plan_collision(Q)
-    planes = seg._plane_data(plan, Q)
-    seg._kernels_for(plan, planes, Q)
+    plan, planes = planner.rows(Q)
     kc, nj = core.kc, robot.nj
     items = []
     for it, (Nrm, s0) in zip(plan, planes):
@@ -72,4 +72,4 @@ def plan_collision(prob: Any, core: Any, term: CollisionAvoidance, Qk: np.ndarra
         items.append(CollisionItem(f"collision:{it.pair.name_a}|{it.pair.name_b}", local, list(it.knots),
                                    np.asarray(Nrm, float), np.asarray(s0, float), np.asarray(it.margins, float),
                                    int(it.nrow), bool(it.static)))
-    return items, seg.col
+    return items, model

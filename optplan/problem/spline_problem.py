@@ -8,7 +8,6 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
-import pinocchio as pin
 
 from ..errors import ConfigurationError
 from ..geometry.spatial import pose_residual, vee_skew
@@ -134,9 +133,11 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
                             np.r_[0, 0, 0, np.inf], _knots(t.at, N), ("rot_x", "rot_y", "rot_z", "trace")))
         elif isinstance(t, CollisionAvoidance):
             # the segment NLP's planes: fixed normals, its pair set (self-collision, held object)
-            # (a floating robot's planner, floating_collision, reads the term's own pair set)
-            if core.free_time or collisions or t.scene is None or not t.fixed_normals or t.margin_boost \
-                    or t.activate_with or (not robot.is_floating and (not t.self_collision or not t.held_object)):
+            # (a floating robot's planner, floating_collision, reads the term's own pair set; activation
+            # sets and margin boosts are the fixed-base planner's)
+            if core.free_time or collisions or t.scene is None or not t.fixed_normals \
+                    or (robot.is_floating and (t.margin_boost or t.activate_with)) \
+                    or (not robot.is_floating and (not t.self_collision or not t.held_object)):
                 raise Unsupported("CollisionAvoidance other than fixed normals with a fixed duration")
             collisions.append(h)
         else:
@@ -436,18 +437,3 @@ def spline_basis_np(u: float) -> tuple[np.ndarray, np.ndarray]:
     from .floating_segment import spline_basis
 
     return spline_basis(u)
-
-
-def base_placements(core: SplineCore, Q: np.ndarray, xi: np.ndarray, base0: pin.SE3,
-                    com0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World base quaternions ((N+1) × 4, x y z w) and positions [m] with the centre of mass at
-    ``com0``."""
-    model, data = core.robot.model, core.robot.model.createData()
-    R0 = base0.rotation
-    quats, pos = [], []
-    for qk, xk in zip(Q, xi):
-        Rk = R0 @ pin.Quaternion(xk[3], *xk[:3]).normalized().toRotationMatrix()
-        c = pin.centerOfMass(model, data, np.r_[np.zeros(6), 1.0, qk])
-        quats.append(pin.Quaternion(Rk).coeffs().copy())
-        pos.append(com0 - Rk @ c)
-    return np.array(quats), np.array(pos)

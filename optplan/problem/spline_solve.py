@@ -12,11 +12,14 @@ import numpy as np
 import pinocchio as pin
 
 from .bspline import knot_values
+from .build import TermData
+from .collision_term import CollisionAvoidance
 from .expressions import Parameter
+from .floating_collision import base_placements
 from .nlp import IpoptStatus, NlpSolver, SolverOptions
 from .solution import Solution
 from .spline_core import Family, SplineCore
-from .spline_problem import SplineEvaluator, _quintic, base_placements, families_of, seed_guess
+from .spline_problem import SplineEvaluator, _quintic, families_of, seed_guess
 
 __all__ = ["SplineBackend", "VELOCITY_ACTIVATION"]
 
@@ -44,6 +47,8 @@ class SplineBackend:
         self.last_build_time = 0.0
         self.vel_extra: dict[str, set[int]] = {}   # velocity entries given rows after a solve (on vel_n intervals)
         self.vel_n = 0
+        #: re-solves with the velocity rows a solve missed (:meth:`_missed_velocity`) [count]
+        self.velocity_retries = 2
 
     # ------------------------------------------------------------------ structure
     def prepare(self) -> None:
@@ -99,6 +104,27 @@ class SplineBackend:
     def _velocity_families(self) -> list[Family]:
         return [f for f in self.fams if f.kind == "velocity"]
 
+    def _activation(self, f: Family) -> float:
+        """The velocity activation [fraction of the limit] of the term that owns family ``f``."""
+        for h in self.prob._handles:
+            if f.name in self.owner.get(h.name, ()):
+                a = getattr(h.term, "activation", None)
+                return VELOCITY_ACTIVATION if a is None else float(a)
+        return VELOCITY_ACTIVATION
+
+    def term_data(self, handle: Any) -> TermData:
+        """What this build decided for a term (:meth:`OptProblem.term_data`): for a collision
+        term its :class:`~optplan.problem.collision_term.CollisionModel` (``info["model"]``:
+        checker, active pairs and knots, relaxed margins — what ``with_boost`` reads), else nothing."""
+        if self.core is None:
+            self.prepare()
+        m = self.collision_model
+        if not isinstance(handle.term, CollisionAvoidance) or m is None:
+            return TermData()
+        return TermData(info={"model": m, "active_pairs": tuple(m.active_pairs),
+                              "constant_pairs": tuple(m.constant_pairs), "relaxed": dict(m.relaxed),
+                              "active_knots": dict(m.active_knots)})
+
     def _velocity_points(self, x: np.ndarray) -> np.ndarray:
         """Velocity control points [rad/s] of ``x``, (N+2) × nj."""
         core = self.core
@@ -118,7 +144,8 @@ class SplineBackend:
         V = self._velocity_points(x).ravel()
         for f in self._velocity_families():
             lo, hi = (np.tile(b, self.core.N + 2) for b in np.asarray(f.data))
-            on = (V >= VELOCITY_ACTIVATION * hi) | (V <= VELOCITY_ACTIVATION * lo)
+            a = self._activation(f)
+            on = (V >= a * hi) | (V <= a * lo)
             f.points = sorted(set(np.flatnonzero(on).tolist()) | self.vel_extra.get(f.name, set()))
 
     def _missed_velocity(self, x: np.ndarray, tol: float) -> bool:
@@ -136,7 +163,8 @@ class SplineBackend:
             has[np.asarray(f.points, int)] = True
             if not np.any(~has & ((V > hi + tol) | (V < lo - tol))):
                 continue
-            on = ~has & ((V >= VELOCITY_ACTIVATION * hi) | (V <= VELOCITY_ACTIVATION * lo))
+            a = self._activation(f)
+            on = ~has & ((V >= a * hi) | (V <= a * lo))
             extra = self.vel_extra.setdefault(f.name, set())
             extra.update(np.flatnonzero(on).tolist())
             f.points = sorted(set(f.points) | extra)
@@ -225,10 +253,11 @@ class SplineBackend:
 
     # ------------------------------------------------------------------ solve
     def solve(self, tol: float, max_iter: int, sopts: SolverOptions, compile_kernels: bool | str) -> Solution:
-        """Solve; with a fixed duration, re-solve from the solution (at most twice) when a velocity
+        """Solve; with a fixed duration, re-solve from the solution (at most ``velocity_retries``
+        times) when a velocity
         entry without a row exceeded its limit (:meth:`_missed_velocity`)."""
         sol = self._solve_once(tol, max_iter, sopts, compile_kernels)
-        for _ in range(2):
+        for _ in range(int(self.velocity_retries)):
             if not sol.success or sol.x is None or not self._missed_velocity(sol.x, max(tol, 1e-9)):
                 break
             prev = sol

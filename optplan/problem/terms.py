@@ -439,12 +439,21 @@ class JointVelocityLimits(_JointBox):
     override."""
 
     limit: Sequence[float] | np.ndarray | float | None = None
+    #: On the B-spline with a fixed duration, a velocity control point's entry gets its rows when
+    #: the first guess brings it past this fraction of its limit (the others are checked after
+    #: each solve and given rows when one is exceeded) [-, 0-1]; None: 0.5; 0: every entry.
+    activation: float | None = None
     default_name = "velocity_limits"
     which = "qd"
 
     def _validate(self) -> None:
         super()._validate()
         _check_limit(self, allow_none=True)
+        a = self.activation
+        if a is not None and (isinstance(a, bool) or not isinstance(a, (int, float, np.integer, np.floating))
+                              or not 0 <= a <= 1):
+            raise ConfigurationError(f"JointVelocityLimits.activation: expected a fraction of the limit in [0, 1] "
+                                     f"or None, got {a!r}")
 
     def limits(self, robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
         lim = robot.velocity_limit if self.limit is None else np.broadcast_to(
