@@ -4,6 +4,7 @@ Python, and the validity checker's edge checks."""
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from optplan.planners.kernel.extend import nearest, nearest_available
@@ -54,3 +55,105 @@ def test_tree_uses_the_native_scan_with_the_same_answers():
     for _ in range(100):
         x = rng.normal(size=6)
         assert t.nearest(x) == _brute(t.X, t.n, x, t.alive)
+
+
+def _planners(robot, scene, **options):
+    """A TCBiRRT with the native extension and one with the Python extension, sharing the checker and
+    the kinematics."""
+    from optplan.constraints.closed_chain import ClosedChainKinematics
+    from optplan.planners import TCBiRRT, TCBiRRTOptions, ValidityChecker
+
+    ck, kin = ValidityChecker(robot, scene), ClosedChainKinematics(robot, scene.object.grasps)
+    nat = TCBiRRT(robot, scene, TCBiRRTOptions(extension="native", **options), checker=ck, kinematics=kin)
+    py = TCBiRRT(robot, scene, TCBiRRTOptions(extension="python", **options), checker=ck, kinematics=kin)
+    if nat._ext is None:
+        pytest.skip("the native extension is not available here (kernel or IK not compiled)")
+    assert py._ext is None
+    return nat, py
+
+
+def test_interpolation_matches_interpolate_task(tcb):
+    from optplan.planners.task_space import interpolate_task
+    from optplan.scene import Scene
+
+    nat, _ = _planners(tcb, Scene.load("ssps_scene1"))
+    rng = np.random.default_rng(5)
+    for k in range(300):
+        R0 = np.asarray(pin.exp3(rng.normal(size=3) * 2.0))
+        w = rng.normal(size=3) * (1e-7 if k % 5 == 0 else 1.0)
+        if k % 7 == 0:   # a relative half turn, less a hair: the log's branch near π
+            w = np.pi * (1 - 1e-9) * w / np.linalg.norm(w)
+        R1 = R0 @ np.asarray(pin.exp3(w))
+        p0, p1 = rng.normal(size=3), rng.normal(size=3)
+        P = nat._ext.interpolate(R0, p0, R1, p1, 5)
+        for j, (R, p) in enumerate(interpolate_task(R0, p0, R1, p1, 5)):
+            assert np.abs(P[j, :9] - R.ravel()).max() < 1e-9 and np.abs(P[j, 9:] - p).max() < 1e-12
+        assert np.array_equal(P[-1, :9], R1.ravel()) and np.array_equal(P[-1, 9:], p1)
+
+
+@pytest.mark.parametrize("variant", ["improved", "paper"])
+def test_one_extension_matches_the_python_one(tcb, variant):
+    """Random extensions from valid configurations of hard_bay: the same accepted configurations (to
+    rounding), the same counters and the same draws from the generator (restarts) as the Python code."""
+    from optplan.planners.task_space import interpolate_task, pose_from_xi, xi_from_pose
+    from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
+
+    sc = Scene.load("hard_bay")
+    nat, py = _planners(tcb, sc, variant=variant)
+    rng = np.random.default_rng(8)
+    kinds = set()
+    for t in range(4):
+        tr = TrialGenerator(tcb, sc).generate(t, 0)
+        for q0 in (tr.q_start, tr.q_goal):
+            M = nat.kin.object_pose(q0)
+            xi0 = xi_from_pose(M)
+            for _ in range(25):
+                xi = xi0 + rng.normal(0.0, 1.0, 6) * np.r_[[0.15] * 3, [0.3] * 3]
+                Rs, ps = pose_from_xi(xi)
+                out = []
+                for pl in (nat, py):
+                    pl._rng = np.random.default_rng(1)
+                    st = {k: 0 for k in ("ik_calls", "ik_iterations", "ik_restarts", "ik_failures", "ik_jumps",
+                                         "collisions", "edge_checks", "edge_collisions")}
+                    n0 = pl.checker.n_checks
+                    if pl is nat:
+                        from optplan.planners.tcbirrt_native import native_extend
+
+                        _, Q = native_extend(pl, M.rotation, M.translation, Rs, ps, q0, st, bool(pl.options.keep_prefix))
+                    else:
+                        poses = interpolate_task(M.rotation, M.translation, Rs, ps, pl.options.n_interp)
+                        Q = pl.path_ik(poses, q0, st, prefix=bool(pl.options.keep_prefix))
+                    out.append((None if Q is None else np.array(Q), st, pl.checker.n_checks - n0, pl._rng.random()))
+                (Qn, stn, cn, rn), (Qp, stp, cp, rp) = out
+                assert stn == stp and cn == cp and rn == rp
+                assert (Qn is None) == (Qp is None)
+                if Qn is not None:
+                    assert Qn.shape == Qp.shape and (Qn.size == 0 or np.abs(Qn - Qp).max() < 1e-9)
+                kinds.add("none" if Qn is None else ("full" if len(Qn) == nat.options.n_interp else "prefix"))
+                kinds.update(k for k in ("ik_restarts", "ik_failures", "collisions", "edge_collisions") if stn[k])
+    assert {"full"} <= kinds and len(kinds) >= 3   # the cases the comparison covered
+
+
+@pytest.mark.parametrize("variant,seed", [("improved", 2), ("paper", 1)])
+def test_same_search_with_the_native_and_the_python_extension(tcb, variant, seed):
+    from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
+
+    sc = Scene.load("hard_bay")
+    tr = TrialGenerator(tcb, sc).generate(1, 0)
+    out = []
+    for pl in _planners(tcb, sc, variant=variant, max_iterations=250):
+        res = pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=seed)
+        s = res.stats
+        out.append((res.status.value, s["iterations"], s["nodes"], s["ik_iterations"], s["collision_checks"],
+                    None if res.path is None else len(res.path),
+                    None if res.path is None else round(float(np.abs(res.path).sum()), 6)))
+    assert out[0] == out[1]
+
+
+def test_extension_option_is_checked():
+    from optplan.planners import TCBiRRTOptions
+
+    with pytest.raises(ValueError, match="extension: expected 'native' or 'python', got 'c'"):
+        TCBiRRTOptions(extension="c")

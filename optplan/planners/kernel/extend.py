@@ -177,6 +177,8 @@ class NativeExtender:
         if prof is not None:
             c.prof, c.prof_iw, c.prof_w, c.nprof = prof[0], prof[1].ctypes.data, prof[2].ctypes.data, prof[3]
         self._ctx = c
+        #: the edges between an extension's configurations are checked here (else by the caller)
+        self.edge_on = bool(edge_tolerance)
         self._cp = ctypes.addressof(c)
         self.cnt = np.zeros(len(COUNTERS), np.int64)
         self._cnt_p = self.cnt.ctypes.data
