@@ -157,3 +157,42 @@ def test_extension_option_is_checked():
 
     with pytest.raises(ValueError, match="extension: expected 'native' or 'python', got 'c'"):
         TCBiRRTOptions(extension="c")
+
+
+@pytest.mark.parametrize("scene_name", ["hard_window", "hard_clutter_dense"])
+def test_native_pose_filter_matches_the_python_filter(tcb, scene_name):
+    """ObjectPoseFilter's ξ test, its bridge classes and its segment test in one native call against the
+    same filter in Python (rotation from Pinocchio's RPY, reach in numpy, the kernel's object check)."""
+    from optplan.planners.rrtconnect import edge_is_valid
+    from optplan.planners.task_sampling import ObjectPoseFilter, _rpy_matrix
+    from optplan.planners.tcbirrt_options import TCBiRRTOptions, reach_scaled_workspace
+    from optplan.scene import Scene
+
+    sc = Scene.load(scene_name)
+    f = ObjectPoseFilter(tcb, sc)
+    if f._xi_native is None:
+        pytest.skip("no native filter here")
+    lo, hi, _ = reach_scaled_workspace(tcb, TCBiRRTOptions())
+    rng = np.random.default_rng(2)
+    seen = set()
+    for _ in range(3000):
+        xi = rng.uniform(lo, hi)
+        R = _rpy_matrix(xi)
+        want = 0 if not f.reachable(R, xi[:3]) else (2 if f.object_free(R, xi[:3]) else 1)
+        assert f.xi_class(xi) == want
+        assert f.xi_class(xi, reach=False) == (2 if f.object_free(R, xi[:3]) else 1)
+        assert f.xi_ok(xi) == (want == 2)
+        seen.add(want)
+    assert seen == {0, 1, 2}
+    both = set()
+    for _ in range(300):
+        a = rng.uniform(lo, hi)
+        b = a + rng.normal(0.0, 0.3, 6)
+        n0 = f.n_calls
+        got = f.segment_ok(a, b, 0.04)
+        n_native = f.n_calls - n0
+        n0 = f.n_calls
+        want = edge_is_valid(a, b, lambda x: f(_rpy_matrix(x), x[:3]), 0.04)
+        assert got == want and n_native == f.n_calls - n0
+        both.add(got)
+    assert both == {True, False}

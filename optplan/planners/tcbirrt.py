@@ -579,6 +579,8 @@ class TCBiRRT(RegraspMixin, Planner):
             return None
         if self._filter is None:
             self._filter = ObjectPoseFilter(self.robot, self.scene, native=o.validity_kernel == "native")
+            if o.extension == "python":
+                self._filter._xi_native = None   # the filter's pose test in Python too (native object check)
         need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
         return TaskSampler(self._filter if need else None,
                            self._lo, self._hi, bridge_probability=cast(float, o.bridge_probability),

@@ -165,9 +165,10 @@ class TCBiRRTOptions:
     #: (the compiled planning kernel, :mod:`optplan.planners.kernel`; coal when it cannot be built) or
     #: ``"coal"`` (Pinocchio + coal).
     validity_kernel: str = "native"
-    #: Where a constrained extension runs (pose interpolation, path IK, configuration and edge checks):
-    #: ``"native"`` (one call into compiled code per extension, :mod:`.tcbirrt_native`; the Python code when
-    #: a part is not compiled or with ``validity_kernel="coal"``) or ``"python"``. Same search either way.
+    #: Where a constrained extension runs (pose interpolation, path IK, configuration and edge checks) and the
+    #: task-space filter's pose test (reach and object, per pose and per lead-path segment): ``"native"`` (one
+    #: call into compiled code per extension or test, :mod:`.tcbirrt_native`; the Python code when a part is
+    #: not compiled or with ``validity_kernel="coal"``) or ``"python"``. Same search either way.
     extension: str = "native"
     #: Cap on Alg. 1 iterations [count] (0: only the time limit).
     max_iterations: int = 0

@@ -34,7 +34,7 @@ from .csource import C_SOURCE
 from .extend_csource import EXTEND_SOURCE
 from .native import KernelUnavailable
 
-__all__ = ["NativeExtender", "load_extend_library", "nearest", "nearest_available"]
+__all__ = ["NativeExtender", "NativePoseFilter", "load_extend_library", "nearest", "nearest_available"]
 log = logging.getLogger(__name__)
 
 _P = ctypes.c_void_p
@@ -96,6 +96,10 @@ def load_extend_library() -> Any:
     lib.tcb_path_ik.argtypes = [_P, _P, _P, _LL, _LL, _P, _P]
     lib.tcb_edges.restype = _LL
     lib.tcb_edges.argtypes = [_P, _P, _P, _LL, _P]
+    lib.tcb_filter_xi.restype = ctypes.c_int
+    lib.tcb_filter_xi.argtypes = [_P, _P, ctypes.c_int]
+    lib.tcb_filter_segment.restype = ctypes.c_int
+    lib.tcb_filter_segment.argtypes = [_P, _P, _P, ctypes.c_double, ctypes.c_int, _P]
     lib.tcb_extend.restype = _LL
     lib.tcb_extend.argtypes = [_P, _P, _P, _P, _P, _LL, _P, _P, _P, _P, _P]
     _LIB.append(lib)
@@ -122,6 +126,60 @@ def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = Non
                          f"0 <= n <= {len(X)}, got {X.dtype} {X.shape} and n = {n}")
     ap = None if alive is None else alive.ctypes.data
     return int(lib.tcb_nearest(X.ctypes.data, n, x.size, ap, x.ctypes.data))
+
+
+class _Filt(ctypes.Structure):
+    _fields_ = [("km", _P), ("active", _P), ("g", ctypes.c_int), ("nobs", ctypes.c_int), ("ngrasp", ctypes.c_int),
+                ("gt", _P), ("sh", _P), ("reach", _P)]
+
+
+class NativePoseFilter:
+    """The test of :class:`~optplan.planners.task_sampling.ObjectPoseFilter` on ξ = (position [m], roll,
+    pitch, yaw [rad]) in one native call: each grasp point within its arm's reach bound, then the object
+    free of the obstacles (the filter's native object model). ``kernel``, ``g``, ``active``: the filter's
+    obstacle model, object geometry and pair mask; ``grasps``: (grasp point in the object frame [m],
+    shoulder [m], reach bound [m]) per arm; ``n_obstacles``: 0 skips the object test."""
+
+    #: :meth:`check` results
+    UNREACHABLE, COLLIDES, FREE = 0, 1, 2
+
+    def __init__(self, kernel: Any, g: int, active: np.ndarray, grasps: list[tuple[np.ndarray, np.ndarray, float]],
+                 n_obstacles: int) -> None:
+        self.lib = load_extend_library()
+        self._gt = np.ascontiguousarray([t for t, _, _ in grasps], dtype=float).reshape(-1, 3)
+        self._sh = np.ascontiguousarray([s for _, s, _ in grasps], dtype=float).reshape(-1, 3)
+        self._r = np.ascontiguousarray([r for _, _, r in grasps], dtype=float)
+        self._keep = (kernel, active)
+        f = _Filt()
+        f.km, f.active, f.g, f.nobs, f.ngrasp = kernel._km_p, active.ctypes.data, int(g), int(n_obstacles), len(grasps)
+        f.gt, f.sh, f.reach = self._gt.ctypes.data, self._sh.ctypes.data, self._r.ctypes.data
+        self._f = f
+        self._fp = ctypes.addressof(f)
+        self._xi = np.zeros(6)
+        self._b = np.zeros(6)
+        self._n = _LL(0)
+        self._np = ctypes.addressof(self._n)
+        self._check = self.lib.tcb_filter_xi
+
+    def check(self, xi: np.ndarray, reach: bool = True) -> int:
+        """:attr:`UNREACHABLE`, :attr:`COLLIDES` or :attr:`FREE` for the pose ``xi`` (``reach`` False: the
+        object test alone, never UNREACHABLE)."""
+        b = self._xi
+        b[:] = xi
+        return int(self._check(self._fp, b.ctypes.data, int(reach)))
+
+    def segment(self, a: np.ndarray, b: np.ndarray, resolution: float, check_end: bool = True) -> tuple[bool, int]:
+        """The straight ξ segment ``a → b`` passes at every point of
+        :func:`~optplan.planners.rrtconnect.edge_is_valid` (largest coordinate change ``resolution`` between
+        checks, coarse-to-fine, ``b`` first with ``check_end``): ``(passes, filter calls made)``."""
+        xa, xb = self._xi, self._b
+        xa[:] = a
+        xb[:] = b
+        ok = self.lib.tcb_filter_segment(self._fp, xa.ctypes.data, xb.ctypes.data, float(resolution), int(check_end),
+                                         self._np)
+        if ok < 0:
+            raise KernelUnavailable("the native filter refused the model (too many geometries)")
+        return bool(ok), int(self._n.value)
 
 
 def _cfun(ff: Any) -> tuple[int, Any, Any, int] | None:

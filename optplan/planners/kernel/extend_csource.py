@@ -21,7 +21,11 @@ What one extension computes (the same steps, in the same order, as the Python co
   caller can run its random restarts there;
 * ``tcb_edges``: the joint-space segments between consecutive configurations checked at the spacing of
   ``edge_checkpoints`` (the compiled speed profile, or the configuration-free bound), in bisection order;
-* ``tcb_nearest``: the first live row of ``X`` with the least squared Euclidean distance to ``x``.
+* ``tcb_nearest``: the first live row of ``X`` with the least squared Euclidean distance to ``x``;
+* ``tcb_filter_xi`` / ``tcb_filter_segment``: the task-space filter of
+  :class:`~optplan.planners.task_sampling.ObjectPoseFilter` (each grasp point within its arm's reach
+  bound, then the object free of the obstacles) at one pose ξ = (position, roll, pitch, yaw), or at the
+  points of a straight ξ segment in the order of :func:`~optplan.planners.rrtconnect.edge_is_valid`.
 """
 from __future__ import annotations
 
@@ -240,6 +244,75 @@ long long tcb_edges(const tcb_ctx *c, const double *q_prev, const double *Q, lon
         a = Q + k*c->nq;
     }
     return n;
+}
+
+typedef struct {
+    const kmodel *km;               /* the object (geometry g, placed per call) and the obstacles, no joints */
+    const unsigned char *active;
+    int g, nobs, ngrasp;
+    const double *gt;               /* ngrasp x 3: grasp point in the object frame */
+    const double *sh;               /* ngrasp x 3: shoulder */
+    const double *reach;            /* ngrasp: reach bound [m] */
+} tcb_filt;
+
+static void tcb_rpy(const double *xi, double *P) {   /* R = Rz(yaw) Ry(pitch) Rx(roll), row-major; then p */
+    double cr = cos(xi[3]), sr = sin(xi[3]), cp = cos(xi[4]), sp = sin(xi[4]), cy = cos(xi[5]), sy = sin(xi[5]);
+    P[0] = cy*cp; P[1] = cy*sp*sr - sy*cr; P[2] = cy*sp*cr + sy*sr;
+    P[3] = sy*cp; P[4] = sy*sp*sr + cy*cr; P[5] = sy*sp*cr - cy*sr;
+    P[6] = -sp;   P[7] = cp*sr;            P[8] = cp*cr;
+    P[9] = xi[0]; P[10] = xi[1]; P[11] = xi[2];
+}
+
+/* ObjectPoseFilter: 0 unreachable, 1 reachable (or not tested) but the object collides, 2 passes */
+static int tcb_filter_pose(const tcb_filt *f, const double *P, int reach) {
+    for (int k = 0; reach && k < f->ngrasp; ++k) {
+        const double *t = f->gt + 3*k, *s = f->sh + 3*k;
+        double v[3];
+        for (int i = 0; i < 3; ++i) v[i] = P[9+i] + P[3*i]*t[0] + P[3*i+1]*t[1] + P[3*i+2]*t[2] - s[i];
+        if (sqrt(dot3(v, v)) > f->reach[k]) return 0;
+    }
+    if (f->nobs == 0) return 2;
+    double oMi[12*KMAXJ], oMg[12*KMAXG];
+    if (f->km->ng > KMAXG || f->km->nj > KMAXJ) return -2;
+    return config_collides(f->km, f->active, P, P, f->g, oMi, oMg) ? 1 : 2;
+}
+
+int tcb_filter_xi(const tcb_filt *f, const double *xi, int reach) {
+    double P[12];
+    tcb_rpy(xi, P);
+    return tcb_filter_pose(f, P, reach);
+}
+
+/* rrtconnect.edge_is_valid(a, b, filter, resolution, check_end) over xi: 1 when every point passes;
+   *ncalls = filter calls made */
+int tcb_filter_segment(const tcb_filt *f, const double *a, const double *b, double resolution, int check_end,
+                       long long *ncalls) {
+    double d[6], x[6], size = 0.0;
+    for (int i = 0; i < 6; ++i) { d[i] = b[i] - a[i]; if (fabs(d[i]) > size) size = fabs(d[i]); }
+    long long n = (long long)ceil(size / resolution);
+    if (n < 1) n = 1;
+    *ncalls = 0;
+    if (check_end) { *ncalls += 1; if (tcb_filter_xi(f, b, 1) != 2) return 0; }
+    if (n < 2) return 1;
+    long long *lo = (long long *)malloc((size_t)(2*n + 4) * sizeof(long long));
+    long long *hi = (long long *)malloc((size_t)(2*n + 4) * sizeof(long long));
+    if (!lo || !hi) { free(lo); free(hi); return -2; }
+    long long head = 0, tail = 0;
+    int ok = 1;
+    lo[tail] = 0; hi[tail] = n; ++tail;
+    while (head < tail) {
+        long long l = lo[head], h = hi[head]; ++head;
+        if (h - l < 2) continue;
+        long long mid = (l + h) / 2;
+        double s = (double)mid / (double)n;
+        for (int i = 0; i < 6; ++i) x[i] = a[i] + s*d[i];
+        *ncalls += 1;
+        if (tcb_filter_xi(f, x, 1) != 2) { ok = 0; break; }
+        lo[tail] = l; hi[tail] = mid; ++tail;
+        lo[tail] = mid; hi[tail] = h; ++tail;
+    }
+    free(lo); free(hi);
+    return ok;
 }
 
 /* one extension: the poses (into P, n x 12), the path IK from q_near (into Q) and, when every waypoint
