@@ -249,6 +249,7 @@ class TaskSampler:
                  lead_orientation_probability: float = 0.0) -> None:
         self.filt = filt
         self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
+        self._span = self.hi - self.lo
         self.filter_tries = int(filter_tries)
         self.p_bridge = float(bridge_probability)
         self.sigma = np.r_[[bridge_sigma[0]] * 3, [bridge_sigma[1]] * 3]
@@ -279,7 +280,9 @@ class TaskSampler:
         probability ``lead_orientation_probability`` (once a lead path is known) the orientation is that of
         the lead path's pose nearest in position, perturbed the same way — the orientation the passage
         there lets the object through with."""
-        xi = rng.uniform(self.lo, self.hi)
+        # lo + (hi − lo) u with u = rng.random(6): Generator.uniform's own formula and draws, bit for bit,
+        # without its per-call argument checks (7 µs → 1 µs)
+        xi = self.lo + self._span * rng.random(self.lo.size)
         if self.p_lead > 0.0 and self.guide is not None and rng.random() < self.p_lead:
             d = self.guide[:, :3] - xi[:3]
             g = self.guide[int(np.argmin(np.einsum("ij,ij->i", d, d)))]

@@ -554,7 +554,8 @@ class TCBiRRT(RegraspMixin, Planner):
         outside its nearest node's dynamic domain is drawn again (up to ``domain_tries`` draws)."""
         o = self.options
         for _ in range(o.domain_tries if o.trap_adapt == "domain" else 1):
-            xi_rand = rng.uniform(self._lo, self._hi) if sampler is None else sampler.sample(rng, tb.alive_xi())
+            # lo + (hi − lo) u: Generator.uniform's formula and draws, without its argument checks
+            xi_rand = self._lo + (self._hi - self._lo) * rng.random(6) if sampler is None else sampler.sample(rng, tb.alive_xi())
             i_near = ta.nearest(xi_rand)
             if o.trap_adapt != "domain" or float(np.sum((xi_rand - ta.xi[i_near]) ** 2)) <= ta.dom[i_near] ** 2:
                 break
