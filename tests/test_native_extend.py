@@ -91,8 +91,8 @@ def test_interpolation_matches_interpolate_task(tcb):
         assert np.array_equal(P[-1, :9], R1.ravel()) and np.array_equal(P[-1, 9:], p1)
 
 
-@pytest.mark.parametrize("variant", ["improved", "paper"])
-def test_one_extension_matches_the_python_one(tcb, variant):
+@pytest.mark.parametrize("variant,extra", [("improved", {}), ("paper", {}), ("improved", {"edge_resolution": 0.05})])
+def test_one_extension_matches_the_python_one(tcb, variant, extra):
     """Random extensions from valid configurations of hard_bay: the same accepted configurations (to
     rounding), the same counters and the same draws from the generator (restarts) as the Python code."""
     from optplan.planners.task_space import interpolate_task, pose_from_xi, xi_from_pose
@@ -100,7 +100,7 @@ def test_one_extension_matches_the_python_one(tcb, variant):
     from optplan.trials import TrialGenerator
 
     sc = Scene.load("hard_bay")
-    nat, py = _planners(tcb, sc, variant=variant)
+    nat, py = _planners(tcb, sc, variant=variant, **extra)
     rng = np.random.default_rng(8)
     kinds = set()
     for t in range(4):
@@ -135,15 +135,16 @@ def test_one_extension_matches_the_python_one(tcb, variant):
     assert {"full"} <= kinds and len(kinds) >= 3   # the cases the comparison covered
 
 
-@pytest.mark.parametrize("variant,seed", [("improved", 2), ("paper", 1)])
-def test_same_search_with_the_native_and_the_python_extension(tcb, variant, seed):
+@pytest.mark.parametrize("variant,seed,extra", [("improved", 2, {}), ("paper", 1, {}),
+                                                ("improved", 0, {"edge_resolution": 0.05})])
+def test_same_search_with_the_native_and_the_python_extension(tcb, variant, seed, extra):
     from optplan.scene import Scene
     from optplan.trials import TrialGenerator
 
     sc = Scene.load("hard_bay")
     tr = TrialGenerator(tcb, sc).generate(1, 0)
     out = []
-    for pl in _planners(tcb, sc, variant=variant, max_iterations=250):
+    for pl in _planners(tcb, sc, variant=variant, max_iterations=250, **extra):
         res = pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=seed)
         s = res.stats
         out.append((res.status.value, s["iterations"], s["nodes"], s["ik_iterations"], s["collision_checks"],

@@ -3,7 +3,7 @@
 :func:`make_extender` builds the :class:`~optplan.planners.kernel.extend.NativeExtender` of a
 :class:`~optplan.planners.tcbirrt.TCBiRRT` planner when its parts are compiled (the validity checker's
 native kernel, the closed-chain IK block, the edge speed profile) and its options are ones the C code
-covers (no ``edge_resolution``); otherwise the planner keeps its Python extension. :func:`native_extend`
+covers; otherwise the planner keeps its Python extension. :func:`native_extend`
 and :func:`native_path_ik` are the planner's ``interpolate_task`` + :meth:`~.TCBiRRT.path_ik` with the
 same results: the C code runs the waypoints until one fails, the random restarts of that waypoint run
 here with the planner's generator (the same draws as the Python extension), and the C code goes on from
@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from .kernel.native import KernelUnavailable
+from .rrtconnect import edge_is_valid
 
 if TYPE_CHECKING:
     from .kernel.extend import NativeExtender
@@ -32,14 +33,12 @@ _ST_KEYS = ("ik_calls", "ik_iterations", "ik_failures", "ik_jumps", "collisions"
 def make_extender(pl: TCBiRRT) -> NativeExtender | None:
     """The native extension of planner ``pl`` (None: the Python one; why is logged)."""
     o = pl.options
-    if o.edge_resolution is not None:
-        return None
     native_edges = bool(o.edge_tolerance) and not o.lazy_edges and o.edge_bound == "jacobian"
     try:
         from .kernel.extend import NativeExtender
 
         return NativeExtender(pl.checker, pl.kin, o.ik, cast(float, o.max_joint_step),
-                              cast(float, o.edge_tolerance) if native_edges else 0.0)
+                              cast(float, o.edge_tolerance) if native_edges else 0.0, o.edge_resolution)
     except KernelUnavailable as e:
         log.info("TCBiRRT extends in Python: %s", e)
         return None
@@ -92,13 +91,17 @@ def native_path_ik(pl: TCBiRRT, P: np.ndarray, q_near: np.ndarray, st: dict[str,
         q = q_near if r == 0 else Q[r - 1]
         R, p = P[r, :9].reshape(3, 3), P[r, 9:]
         qn = None
-        for _ in range(cast(int, o.ik_restarts)):
+        for _ in range(0 if ext.terminal() else cast(int, o.ik_restarts)):   # no restarts after a failed segment
             st["ik_restarts"] += 1
             x, its = kin.ik(q + pl._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, o.ik)
             st["ik_iterations"] += its
             if x is not None and float(np.abs(x - q).max()) <= mjs and ck.in_limits(x) and ck.is_valid(x):
                 qn = x
                 break
+        if qn is not None and o.edge_resolution is not None and \
+                not edge_is_valid(q, qn, ck.is_valid, o.edge_resolution, False):
+            st["collisions"] += 1
+            qn = None
         if qn is None:
             if not prefix:
                 _merge(st, ext)

@@ -43,7 +43,7 @@ _LIB: list[Any] = []        # the loaded library (one per process), or [None] af
 SOURCE = C_SOURCE + EXTEND_SOURCE
 #: counters of one native call, in the order of the C code
 COUNTERS = ("ik_calls", "ik_iterations", "ik_failures", "ik_jumps", "collisions", "checks", "edge_checks",
-            "edge_collisions")
+            "edge_collisions", "terminal")
 
 
 class _Ctx(ctypes.Structure):
@@ -54,7 +54,7 @@ class _Ctx(ctypes.Structure):
                 ("max_joint_step", ctypes.c_double),
                 ("edge_on", ctypes.c_int), ("edge_tol", ctypes.c_double),
                 ("W", _P), ("nw", ctypes.c_int),
-                ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int)]
+                ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int), ("edge_res", ctypes.c_double)]
 
 
 def load_extend_library() -> Any:
@@ -197,11 +197,14 @@ class NativeExtender:
     ``kin``: :class:`~optplan.constraints.closed_chain.ClosedChainKinematics` (compiled);
     ``ik``: :class:`~optplan.constraints.closed_chain.IKSettings`; ``max_joint_step`` [rad];
     ``edge_tolerance`` [m] (0: no edge checks) with the Jacobian spacing of
-    :meth:`~optplan.planners.validity.ValidityChecker.edge_checkpoints`.
+    :meth:`~optplan.planners.validity.ValidityChecker.edge_checkpoints`; ``edge_resolution`` [rad] (None: off):
+    each new waypoint's segment from the previous one checked every ``edge_resolution`` of its largest joint
+    change, right after the waypoint (TCBiRRT's ``edge_resolution`` option).
 
     Raises :class:`~optplan.planners.kernel.native.KernelUnavailable` when any part is not compiled."""
 
-    def __init__(self, checker: Any, kin: Any, ik: Any, max_joint_step: float, edge_tolerance: float) -> None:
+    def __init__(self, checker: Any, kin: Any, ik: Any, max_joint_step: float, edge_tolerance: float,
+                 edge_resolution: float | None = None) -> None:
         self.lib = load_extend_library()
         nv = getattr(checker, "_native", None)
         if nv is None:
@@ -234,6 +237,7 @@ class NativeExtender:
         c.W, c.nw = self._W.ctypes.data, int(self._W.shape[0])
         if prof is not None:
             c.prof, c.prof_iw, c.prof_w, c.nprof = prof[0], prof[1].ctypes.data, prof[2].ctypes.data, prof[3]
+        c.edge_res = float(edge_resolution or 0.0)
         self._ctx = c
         #: the edges between an extension's configurations are checked here (else by the caller)
         self.edge_on = bool(edge_tolerance)
@@ -256,6 +260,12 @@ class NativeExtender:
         self.cnt[:] = 0
         self.checker.n_checks += out["checks"]
         return out
+
+    def terminal(self) -> bool:
+        """Whether the last failing waypoint failed its ``edge_resolution`` segment (then no restarts); reset."""
+        t = bool(self.cnt[-1])
+        self.cnt[-1] = 0
+        return t
 
     def extend(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int,
                q_near: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]:

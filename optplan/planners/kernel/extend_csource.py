@@ -46,10 +46,12 @@ typedef struct {
     int edge_on; double edge_tol;
     const double *W; int nw;                              /* nw x nq sweep weights (row-major) */
     tcb_cfun prof; long long *prof_iw; double *prof_w; int nprof;   /* (a, b) -> nprof cumulative bounds; NULL: none */
+    double edge_res;              /* > 0: each new waypoint's segment from the previous one checked every edge_res
+                                     rad of its largest joint change (rrtconnect.edge_is_valid), no restarts after */
 } tcb_ctx;
 
 /* counters: 0 ik_calls, 1 ik_iterations, 2 ik_failures, 3 ik_jumps, 4 collisions, 5 checks, 6 edge_checks,
-   7 edge_collisions */
+   7 edge_collisions, 8 set to 1 when the failing waypoint failed its edge_res segment (no restarts) */
 
 long long tcb_nearest(const double *X, long long n, int dim, const unsigned char *alive, const double *x) {
     long long best = -1;
@@ -160,6 +162,33 @@ long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *P, l
         if (m > c->max_joint_step) { cnt[3] += 1; return j; }
         cnt[5] += 1;
         if (tcb_collides(c, qn)) { cnt[4] += 1; return j; }
+        if (c->edge_res > 0) {
+            double d[KMAXJ], size = 0.0, x[KMAXJ];
+            for (int k = 0; k < nq; ++k) { d[k] = qn[k] - q[k]; if (fabs(d[k]) > size) size = fabs(d[k]); }
+            long long ns = (long long)ceil(size / c->edge_res);
+            if (ns < 1) ns = 1;
+            if (ns >= 2) {
+                long long *lo = (long long *)malloc((size_t)(2*ns + 4) * sizeof(long long));
+                long long *hi = (long long *)malloc((size_t)(2*ns + 4) * sizeof(long long));
+                if (!lo || !hi) { free(lo); free(hi); return -2; }
+                long long head = 0, tail = 0;
+                int bad = 0;
+                lo[tail] = 0; hi[tail] = ns; ++tail;
+                while (head < tail) {
+                    long long l = lo[head], h = hi[head]; ++head;
+                    if (h - l < 2) continue;
+                    long long mid = (l + h) / 2;
+                    double f = (double)mid / (double)ns;
+                    for (int k = 0; k < nq; ++k) x[k] = q[k] + f*d[k];
+                    cnt[5] += 1;
+                    if (tcb_collides(c, x)) { bad = 1; break; }
+                    lo[tail] = l; hi[tail] = mid; ++tail;
+                    lo[tail] = mid; hi[tail] = h; ++tail;
+                }
+                free(lo); free(hi);
+                if (bad) { cnt[4] += 1; cnt[8] = 1; return j; }
+            }
+        }
         q = qn;
     }
     return n;
