@@ -157,6 +157,7 @@ class NativePoseFilter:
         self._fp = ctypes.addressof(f)
         self._xi = np.zeros(6)
         self._b = np.zeros(6)
+        self._xi_p, self._b_p = self._xi.ctypes.data, self._b.ctypes.data   # cached: .ctypes.data costs ~1 µs
         self._n = _LL(0)
         self._np = ctypes.addressof(self._n)
         self._check = self.lib.tcb_filter_xi
@@ -164,9 +165,8 @@ class NativePoseFilter:
     def check(self, xi: np.ndarray, reach: bool = True) -> int:
         """:attr:`UNREACHABLE`, :attr:`COLLIDES` or :attr:`FREE` for the pose ``xi`` (``reach`` False: the
         object test alone, never UNREACHABLE)."""
-        b = self._xi
-        b[:] = xi
-        return int(self._check(self._fp, b.ctypes.data, int(reach)))
+        self._xi[:] = xi
+        return int(self._check(self._fp, self._xi_p, int(reach)))
 
     def segment(self, a: np.ndarray, b: np.ndarray, resolution: float, check_end: bool = True) -> tuple[bool, int]:
         """The straight ξ segment ``a → b`` passes at every point of
@@ -175,8 +175,7 @@ class NativePoseFilter:
         xa, xb = self._xi, self._b
         xa[:] = a
         xb[:] = b
-        ok = self.lib.tcb_filter_segment(self._fp, xa.ctypes.data, xb.ctypes.data, float(resolution), int(check_end),
-                                         self._np)
+        ok = self.lib.tcb_filter_segment(self._fp, self._xi_p, self._b_p, float(resolution), int(check_end), self._np)
         if ok < 0:
             raise KernelUnavailable("the native filter refused the model (too many geometries)")
         return bool(ok), int(self._n.value)
@@ -290,19 +289,17 @@ class NativeExtender:
 
     def path_ik(self, P: np.ndarray, j0: int, q_prev: np.ndarray, Q: np.ndarray) -> int:
         """Waypoints ``j0..n−1`` of the poses ``P`` into ``Q`` seeded by ``q_prev``: the first that fails, or n."""
-        qb = self._qn
-        qb[:] = q_prev
-        r = self.lib.tcb_path_ik(self._cp, qb.ctypes.data, P.ctypes.data, j0, P.shape[0], Q.ctypes.data, self._cnt_p)
+        self._qn[:] = q_prev
+        r = self.lib.tcb_path_ik(self._cp, self._bufs[4], P.ctypes.data, j0, P.shape[0], Q.ctypes.data, self._cnt_p)
         if r < -1:
             raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
         return int(r)
 
     def edges(self, q_prev: np.ndarray, Q: np.ndarray, n: int) -> int:
         """The edges ``q_prev → Q[0] → … → Q[n−1]``: the first in collision, or n."""
-        qb = self._qn
-        qb[:] = q_prev
+        self._qn[:] = q_prev
         Q = np.ascontiguousarray(Q, dtype=float)
-        r = self.lib.tcb_edges(self._cp, qb.ctypes.data, Q.ctypes.data, n, self._cnt_p)
+        r = self.lib.tcb_edges(self._cp, self._bufs[4], Q.ctypes.data, n, self._cnt_p)
         if r < -1:
             raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
         return int(r)
