@@ -197,3 +197,21 @@ def test_native_pose_filter_matches_the_python_filter(tcb, scene_name):
         assert got == want and n_native == f.n_calls - n0
         both.add(got)
     assert both == {True, False}
+
+
+def test_bench_summary_and_python_nearest_context():
+    from optplan.bench import tcbirrt_native as bn
+    from optplan.planners import tree
+
+    rows = [{"scene": "s", "trial": i, "kind": k, "status": "exact", "cpu_s": c, "iterations": it,
+             "cpu_per_iteration_ms": 1e3 * c / it, "nodes": nd, "native": True}
+            for i, (k, c, it, nd) in enumerate([("native", 0.1, 100, 10), ("python", 0.3, 100, 10),
+                                                ("native", 0.2, 50, 5), ("python", 0.2, 60, 5)])]
+    for r in rows:
+        r["trial"] //= 2
+    out = bn.summary(rows)
+    assert "median 1.92x (min 0.83, max 3.00)" in out and "same search in 1/2" in out
+    before = list(tree._NATIVE_NN)
+    with bn.python_nearest():
+        assert tree._NATIVE_NN == [None]
+    assert tree._NATIVE_NN == before and tree._NATIVE_NN[0] is not None

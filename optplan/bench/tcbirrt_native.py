@@ -4,6 +4,7 @@ scan) and ``extension="python"`` (and numpy's), alternating which runs first, CP
 native collision kernel (``validity_kernel="native"``), today's default.
 
 ``python -m optplan.bench.tcbirrt_native --scene hard_bay,hard_window,ssps_scene1 --trials 0,1,2``
+(``--units``: only the CPU per extension of the two, on the same random extensions)
 
 Per query: status, CPU seconds, iterations, CPU per iteration; per scene the medians, the paired ratio
 python / native of the CPU per iteration, and in how many pairs the two ran the same search (same
@@ -19,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["paired_queries", "python_nearest", "main"]
+__all__ = ["extension_costs", "paired_queries", "python_nearest", "main"]
 
 KINDS = ("native", "python")
 
@@ -65,6 +66,56 @@ def paired_queries(scenes: list[str], trials: list[int], planner: str = "tcbirrt
     return rows
 
 
+def extension_costs(scene_name: str, n: int = 100, repeats: int = 3, seed: int = 0,
+                    robot_name: str = "tcbirrt_dual_arm") -> dict[str, float]:
+    """CPU microseconds per constrained extension (improved variant: interpolation, path IK with restarts,
+    configuration and edge checks), native and Python, on the same extensions: ``n`` random targets around
+    the object pose of each start and goal configuration of trials 0-2 (position σ 0.1 m, angles σ 0.2 rad),
+    best of ``repeats`` alternating passes; also the IK iterations and edge checks of one pass."""
+    from ..constraints.closed_chain import ClosedChainKinematics
+    from ..model.robot import RobotModel
+    from ..planners.task_space import interpolate_task, pose_from_xi, xi_from_pose
+    from ..planners.tcbirrt import TCBiRRT, TCBiRRTOptions
+    from ..planners.tcbirrt_native import native_extend
+    from ..planners.validity import ValidityChecker
+    from ..scene import Scene
+    from ..trials import TrialGenerator
+
+    robot = RobotModel.from_name(robot_name)
+    sc = Scene.load(scene_name)
+    assert sc.object is not None
+    ck, kin = ValidityChecker(robot, sc), ClosedChainKinematics(robot, sc.object.grasps)
+    pls = {k: TCBiRRT(robot, sc, TCBiRRTOptions(variant="improved", extension=k), checker=ck, kinematics=kin)
+           for k in KINDS}
+    rng = np.random.default_rng(seed)
+    cases = []
+    for t in range(3):
+        tr = TrialGenerator(robot, sc).generate(t, seed)
+        for q0 in (tr.q_start, tr.q_goal):
+            M = kin.object_pose(q0)
+            for _ in range(n):
+                xi = xi_from_pose(M) + rng.normal(0.0, 1.0, 6) * np.r_[[0.1] * 3, [0.2] * 3]
+                cases.append((q0, M, pose_from_xi(xi)))
+    best: dict[str, float] = {}
+    st: dict[str, int] = {}
+    for rep in range(repeats):
+        for kind in (KINDS if rep % 2 == 0 else KINDS[::-1]):
+            pl = pls[kind]
+            pl._rng = np.random.default_rng(1)
+            st = {k: 0 for k in ("ik_calls", "ik_iterations", "ik_restarts", "ik_failures", "ik_jumps", "collisions",
+                                 "edge_checks", "edge_collisions")}
+            c0 = time.process_time()
+            for q0, M, (Rs, ps) in cases:
+                if kind == "native" and pl._ext is not None:
+                    native_extend(pl, M.rotation, M.translation, Rs, ps, q0, st, True)
+                else:
+                    pl.path_ik(interpolate_task(M.rotation, M.translation, Rs, ps, pl.options.n_interp), q0, st, prefix=True)
+            best[kind] = min(best.get(kind, np.inf), time.process_time() - c0)
+    return {"native_us": 1e6 * best["native"] / len(cases), "python_us": 1e6 * best["python"] / len(cases),
+            "extensions": float(len(cases)), "ik_iterations": float(st["ik_iterations"]),
+            "edge_checks": float(st["edge_checks"]), "native_available": float(pls["native"]._ext is not None)}
+
+
 def summary(rows: list[dict[str, Any]]) -> str:
     """Per scene: success, median CPU and CPU per iteration of each kind, the paired ratio, same searches."""
     lines = [f"{'scene':22s} {'kind':7s} {'success':>8s} {'median CPU s':>13s} {'median ms/iter':>15s}"]
@@ -91,8 +142,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--planners", default="tcbirrt:variant=improved", help="one planner spec")
     ap.add_argument("--seed", type=int, default=0, help="trial seed")
     ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds per query [s]")
+    ap.add_argument("--units", action="store_true", help="only the CPU per extension, native vs Python")
     a = ap.parse_args(argv)
     from .tcbirrt import expand_scenes
+
+    if a.units:
+        for sc in expand_scenes(a.scene.split(",")):
+            u = extension_costs(sc, seed=a.seed)
+            print(f"{sc}: {int(u['extensions'])} extensions ({int(u['ik_iterations'])} IK iterations, "
+                  f"{int(u['edge_checks'])} edge checks): native {u['native_us']:.0f} µs, Python {u['python_us']:.0f} µs "
+                  f"per extension ({u['python_us'] / u['native_us']:.2f}x)"
+                  + ("" if u["native_available"] else " (native extension unavailable: Python ran twice)"))
+        return 0
 
     rows = paired_queries(expand_scenes(a.scene.split(",")), [int(x) for x in a.trials.split(",") if x.strip()],
                           a.planners, seed=a.seed, time_limit=a.time_limit)
