@@ -216,3 +216,4 @@ def test_bench_summary_and_python_nearest_context():
     with bn.python_nearest():
         assert tree._NATIVE_NN == [None]
     assert tree._NATIVE_NN == before and tree._NATIVE_NN[0] is not None
+
