@@ -27,7 +27,6 @@ if TYPE_CHECKING:
 __all__ = ["make_extender", "native_extend", "native_path_ik", "poses_array"]
 log = logging.getLogger(__name__)
 
-_ST_KEYS = ("ik_calls", "ik_iterations", "ik_failures", "ik_jumps", "collisions", "edge_checks", "edge_collisions")
 
 
 def make_extender(pl: TCBiRRT) -> NativeExtender | None:
@@ -59,9 +58,18 @@ def pose_list(P: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def _merge(st: dict[str, Any], ext: NativeExtender) -> None:
-    c = ext.take_counts()
-    for k in _ST_KEYS:
-        st[k] += c[k]
+    """The native counters into the planner's statistics (and the checks into the checker's count); reset."""
+    cnt = ext.cnt
+    c = cnt.tolist()
+    cnt[:] = 0
+    st["ik_calls"] += c[0]
+    st["ik_iterations"] += c[1]
+    st["ik_failures"] += c[2]
+    st["ik_jumps"] += c[3]
+    st["collisions"] += c[4]
+    st["edge_checks"] += c[6]
+    st["edge_collisions"] += c[7]
+    ext.checker.n_checks += c[5]
 
 
 def native_extend(pl: TCBiRRT, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, q_near: np.ndarray,
