@@ -283,13 +283,15 @@ def _same_robot(a: str, b: str) -> bool:
     return a == b
 
 
-def _plan_planner_options(planner: str, variant: str) -> tuple | None:
-    """``--variant`` is a TCBiRRT option; other planners take the pipeline's defaults."""
+def _plan_planner_options(planner: str, variant: str | None) -> tuple | None:
+    """``--variant`` is a TCBiRRT option (default: the improved variant, which plans more of the hard and the
+    generated scenes, see docs/decisions/0019-native-planning-kernel.md); other planners take the pipeline's
+    defaults."""
     from .pipeline import PLANNER_DEFAULTS
 
     if planner == "tcbirrt":
-        return PLANNER_DEFAULTS["tcbirrt"] + (("variant", variant),)
-    if variant != "paper":
+        return PLANNER_DEFAULTS["tcbirrt"] + (("variant", variant or "improved"),)
+    if variant not in (None, "paper"):
         raise UsageError(f"--variant {variant!r}: only the tcbirrt planner has variants, not {planner!r}")
     return None
 
@@ -552,7 +554,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "paths; 'suite' = the hard-scene suite hard_*, 'ssps' = scenes 1-3)")
     tb.add_argument("--trials", type=ca.positive_int, default=100, help="trials per scene")
     tb.add_argument("--first-trial", type=ca.nonnegative_int, default=0, help="index of the first trial")
-    tb.add_argument("--planners", default="tcbirrt,cbirrt2,ompl-atlas",
+    tb.add_argument("--planners", default="tcbirrt:variant=improved,cbirrt2,ompl-atlas",
                     help="comma-separated: tcbirrt, cbirrt2, constrained-prm, precomputed-graph, latent-sampling, "
                          "lcbirrt, lcbirrt-lpo, rrtconnect, ompl-<projected|atlas|tb>[-<planner>]; 'all' = the paper's "
                          "seven (the learned ones need optplan[learned]); "
@@ -640,8 +642,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--planner", default="tcbirrt")
     pl.add_argument("--robot", default=None, help="robot model (default: the scene's robot, else tcbirrt_dual_arm); "
                     "also example-robot-data's pr2, baxter, dual_panda (extra 'robots')")
-    pl.add_argument("--variant", choices=["paper", "improved"], default="paper",
-                    help="TCBiRRT variant: the paper's algorithm or the improved sampler (hard scenes)")
+    pl.add_argument("--variant", choices=["paper", "improved"], default=None,
+                    help="TCBiRRT variant: the improved sampler (default) or the paper's algorithm")
     pl.add_argument("--time-limit", type=ca.positive_float, default=10.0, help="planning time limit [s]")
     pl.add_argument("--clock", choices=["wall", "cpu"], default="wall",
                     help="the planning time limit in wall-clock seconds (default) or CPU seconds of the planner "

@@ -41,6 +41,7 @@ import numpy as np
 
 from .. import interrupt
 from .._io import append_line, atomic_path, write_json, write_text
+from ..errors import UnreachableError
 from .engine import map_unordered, parse_planner_spec, validate_engine
 from .folder import dedupe, folder_lock, read_result_lines
 from .tcbirrt_tables import PAPER, _time_of, format_tables, plot_fig6, success_curve
@@ -195,7 +196,16 @@ def _run_unit(args) -> list[dict]:
     robot_name, scene, index, planners, time_limit, seed, clock = args
     w = _W[scene]   # set up by _init_pool
     t0 = time.perf_counter()
-    trial = w["gen"].generate(index, seed)
+    try:
+        trial = w["gen"].generate(index, seed)
+    except UnreachableError as exc:
+        # no start/goal for this trial (a generated scene passed its feasibility check with another seed): a
+        # failed query of every planner, not the end of the benchmark
+        return [{"scene": scene, "trial": index, "planner": name, "seed": seed, "planner_seed": None,
+                 "status": "no_trial", "success": False, "planner_success": False, "time_s": None, "cpu_time_s": None,
+                 "clock": clock, "time_limit_s": time_limit, "n_regrasp": 0, "n_configurations": 0,
+                 "message": str(exc), "regenerations": 0, "trial_generation_s": time.perf_counter() - t0,
+                 "stats": {}, "checks": {}, "task": None} for name in planners]
     gen_time = time.perf_counter() - t0
     out = []
     for name in planners:

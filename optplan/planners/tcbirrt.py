@@ -113,6 +113,7 @@ from .regrasp import RegraspMixin
 from .rrtconnect import edge_is_valid
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
+from .tcbirrt_native import make_extender, native_extend, native_path_ik, poses_array
 from .tcbirrt_options import (
     PAPER_REACH,
     PAPER_XI_LOWER,
@@ -247,6 +248,8 @@ class TCBiRRT(RegraspMixin, Planner):
                 self.checker.certifier(self.options.edge_min_clearance).prepare(("held", "fixed"))
         self._cb: CBiRRT2 | None = None
         self._rng = np.random.default_rng(0)
+        #: the extension step in native code (:mod:`.tcbirrt_native`), None: in Python
+        self._ext = make_extender(self) if self.checker.kernel == "native" and self.options.extension == "native" else None
 
     # ------------------------------------------------------------------ public helpers
     def check_endpoint(self, q: np.ndarray) -> str | None:
@@ -266,6 +269,8 @@ class TCBiRRT(RegraspMixin, Planner):
         """PathInverseKinematics + CollisionFree of Alg. 2: IK of every pose seeded by the previous
         solution; None at the first failure (IK, continuity or collision) — or, with ``prefix``,
         the solutions before it (possibly empty)."""
+        if self._ext is not None:
+            return native_path_ik(self, poses_array(poses), q_near, st, prefix)
         o, kin, ck = self.options, self.kin, self.checker
         out, q = [], q_near  # type: list[np.ndarray], np.ndarray
         fail = None if not prefix else out
@@ -507,8 +512,11 @@ class TCBiRRT(RegraspMixin, Planner):
         Rs, ps = pose_from_xi(xi_s)
         q_near = tree.q[i_near]
         if dist > 0.0:
-            poses = interpolate_task(R0, p0, Rs, ps, o.n_interp, o.interpolation)
-            Q = self.path_ik(poses, q_near, st, prefix=cast(bool, o.keep_prefix))
+            if self._ext is not None and o.interpolation == "geodesic":   # one native call
+                poses, Q = native_extend(self, R0, p0, Rs, ps, q_near, st, cast(bool, o.keep_prefix))
+            else:
+                poses = interpolate_task(R0, p0, Rs, ps, o.n_interp, o.interpolation)
+                Q = self.path_ik(poses, q_near, st, prefix=cast(bool, o.keep_prefix))
             if not Q:
                 st["trapped"] += 1
                 return TRAPPED, -1, None
@@ -546,7 +554,8 @@ class TCBiRRT(RegraspMixin, Planner):
         outside its nearest node's dynamic domain is drawn again (up to ``domain_tries`` draws)."""
         o = self.options
         for _ in range(o.domain_tries if o.trap_adapt == "domain" else 1):
-            xi_rand = rng.uniform(self._lo, self._hi) if sampler is None else sampler.sample(rng, tb.alive_xi())
+            # lo + (hi − lo) u: Generator.uniform's formula and draws, without its argument checks
+            xi_rand = self._lo + (self._hi - self._lo) * rng.random(6) if sampler is None else sampler.sample(rng, tb.alive_xi())
             i_near = ta.nearest(xi_rand)
             if o.trap_adapt != "domain" or float(np.sum((xi_rand - ta.xi[i_near]) ** 2)) <= ta.dom[i_near] ** 2:
                 break
@@ -571,6 +580,8 @@ class TCBiRRT(RegraspMixin, Planner):
             return None
         if self._filter is None:
             self._filter = ObjectPoseFilter(self.robot, self.scene, native=o.validity_kernel == "native")
+            if o.extension == "python":
+                self._filter._xi_native = None   # the filter's pose test in Python too (native object check)
         need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
         return TaskSampler(self._filter if need else None,
                            self._lo, self._hi, bridge_probability=cast(float, o.bridge_probability),

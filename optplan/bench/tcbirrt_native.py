@@ -1,0 +1,169 @@
+"""TCBiRRT's extension step and nearest neighbour in native code against the Python ones, paired: whole
+queries on the same trials and seeds with ``extension="native"`` (and the trees' native nearest-neighbour
+scan) and ``extension="python"`` (and numpy's), alternating which runs first, CPU clock. Both use the
+native collision kernel (``validity_kernel="native"``), today's default.
+
+``python -m optplan.bench.tcbirrt_native --scene hard_bay,hard_window,ssps_scene1 --trials 0,1,2``
+(``--units``: only the CPU per extension of the two, on the same random extensions)
+
+Per query: status, CPU seconds, iterations, CPU per iteration; per scene the medians, the paired ratio
+python / native of the CPU per iteration, and in how many pairs the two ran the same search (same
+iteration and node counts: they should, up to rounding in the last bits of the pose interpolation).
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+__all__ = ["extension_costs", "paired_queries", "python_nearest", "main"]
+
+KINDS = ("native", "python")
+
+
+@contextlib.contextmanager
+def python_nearest() -> Iterator[None]:
+    """Inside: :meth:`optplan.planners.tree.Tree.nearest` uses numpy's search (the native scan off)."""
+    from ..planners import tree
+
+    tree._native_nearest()
+    saved = list(tree._NATIVE_NN)
+    tree._NATIVE_NN[:] = [None]
+    try:
+        yield
+    finally:
+        tree._NATIVE_NN[:] = saved
+
+
+def paired_queries(scenes: list[str], trials: list[int], planner: str = "tcbirrt:variant=improved", *,
+                   seed: int = 0, time_limit: float = 10.0, robot_name: str = "tcbirrt_dual_arm") -> list[dict[str, Any]]:
+    """Each trial of each scene planned both ways (native first on even trials, Python first on odd ones),
+    same trial seed. One row per query."""
+    from .tcbirrt import _W, _worker_setup, expand_scenes
+
+    specs = {k: f"{planner}:extension={k}" for k in KINDS}
+    scenes = expand_scenes(scenes)
+    _worker_setup(robot_name, scenes, list(specs.values()))
+    rows = []
+    for sc in scenes:
+        w = _W[sc]
+        for i in trials:
+            t = w["gen"].generate(int(i), seed)
+            for kind in (KINDS if i % 2 == 0 else KINDS[::-1]):
+                pl = w["planners"][specs[kind]]
+                with python_nearest() if kind == "python" else contextlib.nullcontext():
+                    c0 = time.process_time()
+                    res = pl.plan(t.q_start, t.q_goal, time_limit=time_limit, seed=t.seed, clock="cpu")
+                    cpu = time.process_time() - c0
+                it = int(res.stats.get("iterations") or 0)
+                rows.append({"scene": sc, "trial": int(i), "kind": kind, "status": res.status.value, "cpu_s": cpu,
+                             "iterations": it, "cpu_per_iteration_ms": 1e3 * cpu / max(it, 1),
+                             "nodes": res.stats.get("nodes"), "native": getattr(pl, "_ext", None) is not None})
+    return rows
+
+
+def extension_costs(scene_name: str, n: int = 100, repeats: int = 3, seed: int = 0,
+                    robot_name: str = "tcbirrt_dual_arm") -> dict[str, float]:
+    """CPU microseconds per constrained extension (improved variant: interpolation, path IK with restarts,
+    configuration and edge checks), native and Python, on the same extensions: ``n`` random targets around
+    the object pose of each start and goal configuration of trials 0-2 (position σ 0.1 m, angles σ 0.2 rad),
+    best of ``repeats`` alternating passes; also the IK iterations and edge checks of one pass."""
+    from ..constraints.closed_chain import ClosedChainKinematics
+    from ..model.robot import RobotModel
+    from ..planners.task_space import interpolate_task, pose_from_xi, xi_from_pose
+    from ..planners.tcbirrt import TCBiRRT, TCBiRRTOptions
+    from ..planners.tcbirrt_native import native_extend
+    from ..planners.validity import ValidityChecker
+    from ..scene import Scene
+    from ..trials import TrialGenerator
+
+    robot = RobotModel.from_name(robot_name)
+    sc = Scene.load(scene_name)
+    assert sc.object is not None
+    ck, kin = ValidityChecker(robot, sc), ClosedChainKinematics(robot, sc.object.grasps)
+    pls = {k: TCBiRRT(robot, sc, TCBiRRTOptions(variant="improved", extension=k), checker=ck, kinematics=kin)
+           for k in KINDS}
+    rng = np.random.default_rng(seed)
+    cases = []
+    for t in range(3):
+        tr = TrialGenerator(robot, sc).generate(t, seed)
+        for q0 in (tr.q_start, tr.q_goal):
+            M = kin.object_pose(q0)
+            for _ in range(n):
+                xi = xi_from_pose(M) + rng.normal(0.0, 1.0, 6) * np.r_[[0.1] * 3, [0.2] * 3]
+                cases.append((q0, M, pose_from_xi(xi)))
+    best: dict[str, float] = {}
+    st: dict[str, int] = {}
+    for rep in range(repeats):
+        for kind in (KINDS if rep % 2 == 0 else KINDS[::-1]):
+            pl = pls[kind]
+            pl._rng = np.random.default_rng(1)
+            st = {k: 0 for k in ("ik_calls", "ik_iterations", "ik_restarts", "ik_failures", "ik_jumps", "collisions",
+                                 "edge_checks", "edge_collisions")}
+            c0 = time.process_time()
+            for q0, M, (Rs, ps) in cases:
+                if kind == "native" and pl._ext is not None:
+                    native_extend(pl, M.rotation, M.translation, Rs, ps, q0, st, True)
+                else:
+                    pl.path_ik(interpolate_task(M.rotation, M.translation, Rs, ps, pl.options.n_interp), q0, st, prefix=True)
+            best[kind] = min(best.get(kind, np.inf), time.process_time() - c0)
+    return {"native_us": 1e6 * best["native"] / len(cases), "python_us": 1e6 * best["python"] / len(cases),
+            "extensions": float(len(cases)), "ik_iterations": float(st["ik_iterations"]),
+            "edge_checks": float(st["edge_checks"]), "native_available": float(pls["native"]._ext is not None)}
+
+
+def summary(rows: list[dict[str, Any]]) -> str:
+    """Per scene: success, median CPU and CPU per iteration of each kind, the paired ratio, same searches."""
+    lines = [f"{'scene':22s} {'kind':7s} {'success':>8s} {'median CPU s':>13s} {'median ms/iter':>15s}"]
+    for sc in dict.fromkeys(r["scene"] for r in rows):
+        per = {}
+        for kind in KINDS:
+            rr = [r for r in rows if r["scene"] == sc and r["kind"] == kind]
+            per[kind] = rr
+            succ = np.mean([r["status"] == "exact" for r in rr])
+            lines.append(f"{sc:22s} {kind:7s} {succ:8.2f} {np.median([r['cpu_s'] for r in rr]):13.3f} "
+                         f"{np.median([r['cpu_per_iteration_ms'] for r in rr]):15.3f}")
+        ratio = [p["cpu_per_iteration_ms"] / n["cpu_per_iteration_ms"] for n, p in zip(per["native"], per["python"])]
+        same = sum(n["iterations"] == p["iterations"] and n["nodes"] == p["nodes"] for n, p in zip(per["native"], per["python"]))
+        lines.append(f"{sc:22s} paired python/native CPU per iteration: median {np.median(ratio):.2f}x "
+                     f"(min {min(ratio):.2f}, max {max(ratio):.2f}); same search in {same}/{len(ratio)}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m optplan.bench.tcbirrt_native",
+                                 description="TCBiRRT's native extension step vs the Python one: paired queries")
+    ap.add_argument("--scene", default="hard_bay,hard_window,ssps_scene1", help="comma-separated scenes")
+    ap.add_argument("--trials", default="0,1,2", help="comma-separated trial indices [index]")
+    ap.add_argument("--planners", default="tcbirrt:variant=improved", help="one planner spec")
+    ap.add_argument("--seed", type=int, default=0, help="trial seed")
+    ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds per query [s]")
+    ap.add_argument("--units", action="store_true", help="only the CPU per extension, native vs Python")
+    a = ap.parse_args(argv)
+    from .tcbirrt import expand_scenes
+
+    if a.units:
+        for sc in expand_scenes(a.scene.split(",")):
+            u = extension_costs(sc, seed=a.seed)
+            print(f"{sc}: {int(u['extensions'])} extensions ({int(u['ik_iterations'])} IK iterations, "
+                  f"{int(u['edge_checks'])} edge checks): native {u['native_us']:.0f} µs, Python {u['python_us']:.0f} µs "
+                  f"per extension ({u['python_us'] / u['native_us']:.2f}x)"
+                  + ("" if u["native_available"] else " (native extension unavailable: Python ran twice)"))
+        return 0
+
+    rows = paired_queries(expand_scenes(a.scene.split(",")), [int(x) for x in a.trials.split(",") if x.strip()],
+                          a.planners, seed=a.seed, time_limit=a.time_limit)
+    for r in rows:
+        print(f"{r['scene']} trial {r['trial']} {r['kind']:6s}: {r['status']}, {r['cpu_s']:.3f} s CPU, "
+              f"{r['iterations']} iterations, {r['nodes']} nodes, {r['cpu_per_iteration_ms']:.3f} ms/iteration"
+              + ("" if r["native"] or r["kind"] == "python" else " (native extension unavailable: Python ran)"))
+    print(summary(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,317 @@
+"""TCBiRRT's extension step and the trees' nearest-neighbour scan in native code.
+
+:class:`NativeExtender` runs one constrained extension of TCBiRRT (Alg. 2 of the TCBiRRT paper: the
+object poses between two tree nodes, the closed-chain path IK of both arms along them, the collision
+check of every configuration, and the edge checks between consecutive ones) in one C call
+(:mod:`optplan.planners.kernel.extend_csource`). It reuses what is already compiled: the planning
+kernel's collision model (:class:`~optplan.planners.kernel.checker.NativeValidity` of the planner's
+:class:`~optplan.planners.validity.ValidityChecker`), the IK block of
+:class:`~optplan.constraints.closed_chain.ClosedChainKinematics` and the checker's edge speed profile,
+called by address. The random restarts of a failed waypoint stay in Python (they draw from the
+planner's ``numpy.random.Generator``, so the search for a seed is the Python one's).
+
+:func:`nearest` is the first live row of ``X`` nearest a point (squared Euclidean distance), a linear
+scan in C: :meth:`optplan.planners.tree.Tree.nearest` uses it when the library is available.
+
+The library (the planning kernel's C source followed by this one) is built with the system C compiler
+at first use and cached like the kernel's (:func:`load_extend_library`); without a compiler
+:class:`~optplan.planners.kernel.native.KernelUnavailable` is raised and the callers keep their
+Python code.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import logging
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...codegen import build_library, cache_dir
+from .csource import C_SOURCE
+from .extend_csource import EXTEND_SOURCE
+from .native import KernelUnavailable
+
+__all__ = ["NativeExtender", "NativePoseFilter", "load_extend_library", "nearest", "nearest_available"]
+log = logging.getLogger(__name__)
+
+_P = ctypes.c_void_p
+_LL = ctypes.c_longlong
+_LIB: list[Any] = []        # the loaded library (one per process), or [None] after a failed build
+SOURCE = C_SOURCE + EXTEND_SOURCE
+#: counters of one native call, in the order of the C code
+COUNTERS = ("ik_calls", "ik_iterations", "ik_failures", "ik_jumps", "collisions", "checks", "edge_checks",
+            "edge_collisions", "terminal")
+
+
+class _Ctx(ctypes.Structure):
+    _fields_ = [("km", _P), ("active", _P), ("nq", ctypes.c_int),
+                ("ik", _P), ("ik_iw", _P), ("ik_w", _P),
+                ("damping", ctypes.c_double), ("tol_p", ctypes.c_double), ("tol_o", ctypes.c_double),
+                ("gain", ctypes.c_double), ("max_step", ctypes.c_double), ("max_it", ctypes.c_int),
+                ("max_joint_step", ctypes.c_double),
+                ("edge_on", ctypes.c_int), ("edge_tol", ctypes.c_double),
+                ("W", _P), ("nw", ctypes.c_int),
+                ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int), ("edge_res", ctypes.c_double)]
+
+
+def load_extend_library() -> Any:
+    """The compiled extension library (``ctypes.CDLL``), built at first use and cached under
+    :func:`optplan.codegen.cache_dir` by a hash of its source. Raises
+    :class:`~optplan.planners.kernel.native.KernelUnavailable` when it cannot be built (and remembers
+    that for the process)."""
+    if _LIB:
+        if _LIB[0] is None:
+            raise KernelUnavailable("the native extension library could not be built in this process")
+        return _LIB[0]
+    digest = hashlib.sha1(SOURCE.encode()).hexdigest()[:16]
+    lib_path = cache_dir() / f"optplan_tcb_extend_{digest}.so"
+    lib = None
+    for attempt in range(2):
+        if not lib_path.exists():
+            with tempfile.TemporaryDirectory() as tmp:
+                c_file = Path(tmp, "tcb_extend.c")
+                c_file.write_text(SOURCE)
+                err = build_library(c_file, lib_path, "-O3")
+            if err is not None:
+                _LIB.append(None)
+                raise KernelUnavailable(f"the native extension library could not be compiled: {err}")
+        try:
+            lib = ctypes.CDLL(str(lib_path))
+            break
+        except OSError as e:   # a damaged cache file: rebuilt once
+            if attempt:
+                _LIB.append(None)
+                raise KernelUnavailable(f"the native extension library {lib_path} cannot be loaded: {e}") from None
+            log.warning("the cached extension library %s cannot be loaded (%s); rebuilding it", lib_path, e)
+            lib_path.unlink(missing_ok=True)
+    assert lib is not None
+    lib.tcb_nearest.restype = _LL
+    lib.tcb_nearest.argtypes = [_P, _LL, ctypes.c_int, _P, _P]
+    lib.tcb_interpolate.restype = None
+    lib.tcb_interpolate.argtypes = [_P, _P, _P, _P, ctypes.c_int, _P]
+    lib.tcb_path_ik.restype = _LL
+    lib.tcb_path_ik.argtypes = [_P, _P, _P, _LL, _LL, _P, _P]
+    lib.tcb_edges.restype = _LL
+    lib.tcb_edges.argtypes = [_P, _P, _P, _LL, _P]
+    lib.tcb_filter_xi.restype = ctypes.c_int
+    lib.tcb_filter_xi.argtypes = [_P, _P, ctypes.c_int]
+    lib.tcb_filter_segment.restype = ctypes.c_int
+    lib.tcb_filter_segment.argtypes = [_P, _P, _P, ctypes.c_double, ctypes.c_int, _P]
+    lib.tcb_extend.restype = _LL
+    lib.tcb_extend.argtypes = [_P, _P, _P, _P, _P, _LL, _P, _P, _P, _P, _P]
+    _LIB.append(lib)
+    return lib
+
+
+def nearest_available() -> bool:
+    """Whether :func:`nearest` runs in C here (the library builds and loads)."""
+    try:
+        load_extend_library()
+    except (KernelUnavailable, OSError):
+        return False
+    return True
+
+
+def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = None) -> int:
+    """Index of the row of ``X[:n]`` (C-contiguous float64, rows of ``x.size``) nearest ``x`` in squared
+    Euclidean distance, the first among equals; rows with ``alive[i]`` False are skipped (``alive``:
+    a boolean array, or None). −1 when no row is live."""
+    lib = load_extend_library()
+    x = np.ascontiguousarray(x, dtype=float)
+    if X.dtype != np.float64 or not X.flags.c_contiguous or X.ndim != 2 or x.size != X.shape[1] or not 0 <= n <= len(X):
+        raise ValueError(f"nearest: expected a C-contiguous float64 array of rows of {x.size} values and "
+                         f"0 <= n <= {len(X)}, got {X.dtype} {X.shape} and n = {n}")
+    ap = None if alive is None else alive.ctypes.data
+    return int(lib.tcb_nearest(X.ctypes.data, n, x.size, ap, x.ctypes.data))
+
+
+class _Filt(ctypes.Structure):
+    _fields_ = [("km", _P), ("active", _P), ("g", ctypes.c_int), ("nobs", ctypes.c_int), ("ngrasp", ctypes.c_int),
+                ("gt", _P), ("sh", _P), ("reach", _P)]
+
+
+class NativePoseFilter:
+    """The test of :class:`~optplan.planners.task_sampling.ObjectPoseFilter` on ξ = (position [m], roll,
+    pitch, yaw [rad]) in one native call: each grasp point within its arm's reach bound, then the object
+    free of the obstacles (the filter's native object model). ``kernel``, ``g``, ``active``: the filter's
+    obstacle model, object geometry and pair mask; ``grasps``: (grasp point in the object frame [m],
+    shoulder [m], reach bound [m]) per arm; ``n_obstacles``: 0 skips the object test."""
+
+    #: :meth:`check` results
+    UNREACHABLE, COLLIDES, FREE = 0, 1, 2
+
+    def __init__(self, kernel: Any, g: int, active: np.ndarray, grasps: list[tuple[np.ndarray, np.ndarray, float]],
+                 n_obstacles: int) -> None:
+        self.lib = load_extend_library()
+        self._gt = np.ascontiguousarray([t for t, _, _ in grasps], dtype=float).reshape(-1, 3)
+        self._sh = np.ascontiguousarray([s for _, s, _ in grasps], dtype=float).reshape(-1, 3)
+        self._r = np.ascontiguousarray([r for _, _, r in grasps], dtype=float)
+        self._keep = (kernel, active)
+        f = _Filt()
+        f.km, f.active, f.g, f.nobs, f.ngrasp = kernel._km_p, active.ctypes.data, int(g), int(n_obstacles), len(grasps)
+        f.gt, f.sh, f.reach = self._gt.ctypes.data, self._sh.ctypes.data, self._r.ctypes.data
+        self._f = f
+        self._fp = ctypes.addressof(f)
+        self._xi = np.zeros(6)
+        self._b = np.zeros(6)
+        self._xi_p, self._b_p = self._xi.ctypes.data, self._b.ctypes.data   # cached: .ctypes.data costs ~1 µs
+        self._n = _LL(0)
+        self._np = ctypes.addressof(self._n)
+        self._check = self.lib.tcb_filter_xi
+
+    def check(self, xi: np.ndarray, reach: bool = True) -> int:
+        """:attr:`UNREACHABLE`, :attr:`COLLIDES` or :attr:`FREE` for the pose ``xi`` (``reach`` False: the
+        object test alone, never UNREACHABLE)."""
+        self._xi[:] = xi
+        return int(self._check(self._fp, self._xi_p, int(reach)))
+
+    def segment(self, a: np.ndarray, b: np.ndarray, resolution: float, check_end: bool = True) -> tuple[bool, int]:
+        """The straight ξ segment ``a → b`` passes at every point of
+        :func:`~optplan.planners.rrtconnect.edge_is_valid` (largest coordinate change ``resolution`` between
+        checks, coarse-to-fine, ``b`` first with ``check_end``): ``(passes, filter calls made)``."""
+        xa, xb = self._xi, self._b
+        xa[:] = a
+        xb[:] = b
+        ok = self.lib.tcb_filter_segment(self._fp, self._xi_p, self._b_p, float(resolution), int(check_end), self._np)
+        if ok < 0:
+            raise KernelUnavailable("the native filter refused the model (too many geometries)")
+        return bool(ok), int(self._n.value)
+
+
+def _cfun(ff: Any) -> tuple[int, Any, Any, int] | None:
+    """(function address, iw, w, output size) of a compiled :class:`~optplan.codegen.FastFunction`, or None."""
+    cf = getattr(ff, "_cf", None)
+    if cf is None or len(cf._arg) > 64 or len(cf._res) > 64:
+        return None
+    return ctypes.cast(cf._fn, ctypes.c_void_p).value or 0, cf._iw, cf._w, int(ff.n_out)
+
+
+class NativeExtender:
+    """One TCBiRRT extension per native call for a planner's checker, kinematics and options.
+
+    ``checker``: a :class:`~optplan.planners.validity.ValidityChecker` with the native backend;
+    ``kin``: :class:`~optplan.constraints.closed_chain.ClosedChainKinematics` (compiled);
+    ``ik``: :class:`~optplan.constraints.closed_chain.IKSettings`; ``max_joint_step`` [rad];
+    ``edge_tolerance`` [m] (0: no edge checks) with the Jacobian spacing of
+    :meth:`~optplan.planners.validity.ValidityChecker.edge_checkpoints`; ``edge_resolution`` [rad] (None: off):
+    each new waypoint's segment from the previous one checked every ``edge_resolution`` of its largest joint
+    change, right after the waypoint (TCBiRRT's ``edge_resolution`` option).
+
+    Raises :class:`~optplan.planners.kernel.native.KernelUnavailable` when any part is not compiled."""
+
+    def __init__(self, checker: Any, kin: Any, ik: Any, max_joint_step: float, edge_tolerance: float,
+                 edge_resolution: float | None = None) -> None:
+        self.lib = load_extend_library()
+        nv = getattr(checker, "_native", None)
+        if nv is None:
+            raise KernelUnavailable("the validity checker does not use the native kernel")
+        if checker.object is None:
+            raise KernelUnavailable("the native extension needs a held object")
+        block = _cfun(kin._block)
+        if block is None:
+            raise KernelUnavailable("the closed-chain IK block is not compiled")
+        self.nq = int(kin.nq)
+        if self.nq != nv.kernel.nq:
+            raise KernelUnavailable("the kinematics and the checker have different configurations")
+        prof = None
+        if edge_tolerance:
+            fn = checker._profile_function("held")
+            if fn is not None:
+                prof = _cfun(fn)
+                if prof is None or prof[3] > 64:
+                    raise KernelUnavailable("the edge speed profile is not compiled")
+        self._W = np.ascontiguousarray(checker._sweep["held"], dtype=float)
+        self._keep = (nv, block, prof)   # the buffers the C code points into stay alive with this object
+        self.checker = checker
+        c = _Ctx()
+        c.km, c.active, c.nq = nv.kernel._km_p, nv._mask_p["held"], self.nq
+        c.ik, c.ik_iw, c.ik_w = block[0], block[1].ctypes.data, block[2].ctypes.data
+        c.damping, c.tol_p, c.tol_o, c.gain, c.max_step = ik.damping, ik.tol_position, ik.tol_orientation, ik.gain, ik.max_step
+        c.max_it = int(ik.max_iterations)
+        c.max_joint_step = float(max_joint_step)
+        c.edge_on, c.edge_tol = int(bool(edge_tolerance)), float(edge_tolerance or 0.0)
+        c.W, c.nw = self._W.ctypes.data, int(self._W.shape[0])
+        if prof is not None:
+            c.prof, c.prof_iw, c.prof_w, c.nprof = prof[0], prof[1].ctypes.data, prof[2].ctypes.data, prof[3]
+        c.edge_res = float(edge_resolution or 0.0)
+        self._ctx = c
+        #: the edges between an extension's configurations are checked here (else by the caller)
+        self.edge_on = bool(edge_tolerance)
+        self._cp = ctypes.addressof(c)
+        self.cnt = np.zeros(len(COUNTERS), np.int64)
+        self._cnt_p = self.cnt.ctypes.data
+        self._edge_k = _LL(-1)
+        self._edge_kp = ctypes.addressof(self._edge_k)
+        self._R0 = np.zeros(9)
+        self._p0 = np.zeros(3)
+        self._R1 = np.zeros(9)
+        self._p1 = np.zeros(3)
+        self._qn = np.zeros(self.nq)
+        self._bufs = [ctypes.addressof(x) if isinstance(x, ctypes.Structure) else x.ctypes.data
+                      for x in (self._R0, self._p0, self._R1, self._p1, self._qn)]
+
+    def take_counts(self) -> dict[str, int]:
+        """The counters since the last call (reset); ``checks`` are also added to the checker's ``n_checks``."""
+        out = dict(zip(COUNTERS, (int(v) for v in self.cnt)))
+        self.cnt[:] = 0
+        self.checker.n_checks += out["checks"]
+        return out
+
+    def terminal(self) -> bool:
+        """Whether the last failing waypoint failed its ``edge_resolution`` segment (then no restarts); reset."""
+        t = bool(self.cnt[-1])
+        self.cnt[-1] = 0
+        return t
+
+    def extend(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int,
+               q_near: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]:
+        """The poses ``j = 1..n`` from ``(R0, p0)`` to ``(R1, p1)`` (``P``: n × 12, rotation row-major then
+        position [m]), the path IK from ``q_near`` into ``Q`` (n × nq) and, when every waypoint passes, the
+        edge checks: ``(P, Q, r, e)`` with ``r`` the waypoints accepted (``r < n``: waypoint ``r`` failed)
+        and ``e`` the first edge in collision (``n``: none; −1: not checked)."""
+        R0b, p0b, R1b, p1b, qb = self._R0, self._p0, self._R1, self._p1, self._qn
+        R0b[:] = R0.reshape(9)
+        p0b[:] = p0
+        R1b[:] = R1.reshape(9)
+        p1b[:] = p1
+        qb[:] = q_near
+        P = np.empty((n, 12))
+        Q = np.empty((n, self.nq))
+        a = self._bufs
+        r = self.lib.tcb_extend(self._cp, a[0], a[1], a[2], a[3], n, a[4], P.ctypes.data, Q.ctypes.data,
+                                self._cnt_p, self._edge_kp)
+        if r < -1:
+            raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
+        return P, Q, int(r), int(self._edge_k.value)
+
+    def path_ik(self, P: np.ndarray, j0: int, q_prev: np.ndarray, Q: np.ndarray) -> int:
+        """Waypoints ``j0..n−1`` of the poses ``P`` into ``Q`` seeded by ``q_prev``: the first that fails, or n."""
+        self._qn[:] = q_prev
+        r = self.lib.tcb_path_ik(self._cp, self._bufs[4], P.ctypes.data, j0, P.shape[0], Q.ctypes.data, self._cnt_p)
+        if r < -1:
+            raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
+        return int(r)
+
+    def edges(self, q_prev: np.ndarray, Q: np.ndarray, n: int) -> int:
+        """The edges ``q_prev → Q[0] → … → Q[n−1]``: the first in collision, or n."""
+        self._qn[:] = q_prev
+        Q = np.ascontiguousarray(Q, dtype=float)
+        r = self.lib.tcb_edges(self._cp, self._bufs[4], Q.ctypes.data, n, self._cnt_p)
+        if r < -1:
+            raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
+        return int(r)
+
+    def interpolate(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int) -> np.ndarray:
+        """The poses ``j = 1..n`` (n × 12) of :meth:`extend` alone."""
+        R0b, p0b, R1b, p1b = self._R0, self._p0, self._R1, self._p1
+        R0b[:] = R0.reshape(9)
+        p0b[:] = p0
+        R1b[:] = R1.reshape(9)
+        p1b[:] = p1
+        P = np.empty((n, 12))
+        a = self._bufs
+        self.lib.tcb_interpolate(a[0], a[1], a[2], a[3], n, P.ctypes.data)
+        return P

@@ -1,0 +1,358 @@
+"""The C source of TCBiRRT's native extension step and nearest-neighbour scan
+(:mod:`optplan.planners.kernel.extend`).
+
+It is appended to the planning kernel's own source (:data:`~optplan.planners.kernel.csource.C_SOURCE`:
+forward kinematics and the primitive collision tests) and compiled into a library of its own, so the
+collision checks of an extension run without leaving C. The closed-chain IK is not generated again:
+the caller passes the address of the compiled CasADi function that
+:class:`~optplan.constraints.closed_chain.ClosedChainKinematics` already uses (and of the edge speed
+profile of :meth:`~optplan.planners.validity.ValidityChecker.edge_checkpoints`), with their work
+buffers, and this code calls them through the CasADi calling convention.
+
+What one extension computes (the same steps, in the same order, as the Python code of
+:meth:`optplan.planners.tcbirrt.TCBiRRT.path_ik`):
+
+* ``tcb_interpolate``: the object poses ``j = 1..n`` from ``(R0, p0)`` to ``(R1, p1)``, position
+  linear, orientation ``R0 exp(j/n log(R0ᵀ R1))`` (the geodesic interpolation of Eq. 4), the last pose
+  exactly ``(R1, p1)``;
+* ``tcb_path_ik``: per pose the damped-least-squares IK of both hands seeded by the previous solution
+  (the compiled block of iterations, repeated until converged or out of iterations), the joint-jump
+  bound and the configuration's collision check; it stops at the first waypoint that fails, so the
+  caller can run its random restarts there;
+* ``tcb_edges``: the joint-space segments between consecutive configurations checked at the spacing of
+  ``edge_checkpoints`` (the compiled speed profile, or the configuration-free bound), in bisection order;
+* ``tcb_nearest``: the first live row of ``X`` with the least squared Euclidean distance to ``x``;
+* ``tcb_filter_xi`` / ``tcb_filter_segment``: the task-space filter of
+  :class:`~optplan.planners.task_sampling.ObjectPoseFilter` (each grasp point within its arm's reach
+  bound, then the object free of the obstacles) at one pose ξ = (position, roll, pitch, yaw), or at the
+  points of a straight ξ segment in the order of :func:`~optplan.planners.rrtconnect.edge_is_valid`.
+"""
+from __future__ import annotations
+
+__all__ = ["EXTEND_SOURCE"]
+
+EXTEND_SOURCE = r"""
+#include <stdlib.h>
+
+typedef int (*tcb_cfun)(const double **arg, double **res, long long *iw, double *w, int mem);
+
+typedef struct {
+    const kmodel *km;
+    const unsigned char *active;   /* the checker's "held" mask (live: a regrasp exemption shows) */
+    int nq;
+    tcb_cfun ik; long long *ik_iw; double *ik_w;        /* occ_ik_block: (q, vec(R) col-major, p, par) -> q, 4 errors, its */
+    double damping, tol_p, tol_o, gain, max_step; int max_it;
+    double max_joint_step;
+    int edge_on; double edge_tol;
+    const double *W; int nw;                              /* nw x nq sweep weights (row-major) */
+    tcb_cfun prof; long long *prof_iw; double *prof_w; int nprof;   /* (a, b) -> nprof cumulative bounds; NULL: none */
+    double edge_res;              /* > 0: each new waypoint's segment from the previous one checked every edge_res
+                                     rad of its largest joint change (rrtconnect.edge_is_valid), no restarts after */
+} tcb_ctx;
+
+/* counters: 0 ik_calls, 1 ik_iterations, 2 ik_failures, 3 ik_jumps, 4 collisions, 5 checks, 6 edge_checks,
+   7 edge_collisions, 8 set to 1 when the failing waypoint failed its edge_res segment (no restarts) */
+
+long long tcb_nearest(const double *X, long long n, int dim, const unsigned char *alive, const double *x) {
+    long long best = -1;
+    double bd = 0.0;
+    for (long long i = 0; i < n; ++i) {
+        if (alive && !alive[i]) continue;
+        const double *r = X + i*dim;
+        double s = 0.0;
+        for (int k = 0; k < dim; ++k) { double d = r[k] - x[k]; s += d*d; }
+        if (best < 0 || s < bd) { best = i; bd = s; }
+    }
+    return best;
+}
+
+static void tcb_log3(const double *R, double *w) {
+    double v[3] = {0.5*(R[7]-R[5]), 0.5*(R[2]-R[6]), 0.5*(R[3]-R[1])};
+    double s = sqrt(dot3(v, v)), c = 0.5*(R[0] + R[4] + R[8] - 1.0);
+    if (c > 1.0) c = 1.0;
+    if (c < -1.0) c = -1.0;
+    double th = atan2(s, c);
+    if (s < 1e-12 && c > 0) { w[0] = w[1] = w[2] = 0.0; return; }
+    if (c > -0.9) { double f = th / s; w[0] = v[0]*f; w[1] = v[1]*f; w[2] = v[2]*f; return; }
+    double B[9];
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            B[3*i+j] = (0.5*(R[3*i+j] + R[3*j+i]) - (i == j ? c : 0.0)) / (1.0 - c);
+    int k = 0;
+    if (B[4] > B[0]) k = 1;
+    if (B[8] > B[4*k]) k = 2;
+    double nk = sqrt(B[4*k] > 1e-300 ? B[4*k] : 1e-300);
+    double u[3] = {B[k]/nk, B[3+k]/nk, B[6+k]/nk};
+    if (dot3(u, v) < 0) { u[0] = -u[0]; u[1] = -u[1]; u[2] = -u[2]; }
+    w[0] = u[0]*th; w[1] = u[1]*th; w[2] = u[2]*th;
+}
+
+static void tcb_exp3(const double *w, double *E) {
+    double t2 = dot3(w, w), t = sqrt(t2), a, b, c;
+    if (t < 1e-4) { a = 1.0 - t2/6.0; b = 0.5 - t2/24.0; c = 1.0 - 0.5*t2; }
+    else { a = sin(t)/t; b = (1.0 - cos(t))/t2; c = cos(t); }
+    E[0] = c + b*w[0]*w[0];      E[1] = b*w[0]*w[1] - a*w[2]; E[2] = b*w[0]*w[2] + a*w[1];
+    E[3] = b*w[0]*w[1] + a*w[2]; E[4] = c + b*w[1]*w[1];      E[5] = b*w[1]*w[2] - a*w[0];
+    E[6] = b*w[0]*w[2] - a*w[1]; E[7] = b*w[1]*w[2] + a*w[0]; E[8] = c + b*w[2]*w[2];
+}
+
+/* poses j = 1..n (n x 12: R row-major, p) */
+void tcb_interpolate(const double *R0, const double *p0, const double *R1, const double *p1, int n, double *out) {
+    double Rr[9], w[3];
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            Rr[3*i+j] = R0[i]*R1[j] + R0[3+i]*R1[3+j] + R0[6+i]*R1[6+j];   /* R0^T R1 */
+    tcb_log3(Rr, w);
+    for (int j = 1; j <= n; ++j) {
+        double *P = out + 12*(j-1);
+        if (j == n) { memcpy(P, R1, 9*sizeof(double)); memcpy(P + 9, p1, 3*sizeof(double)); break; }
+        double s = (double)j / (double)n, ws[3] = {s*w[0], s*w[1], s*w[2]}, E[9];
+        tcb_exp3(ws, E);
+        for (int a = 0; a < 3; ++a) {
+            for (int b = 0; b < 3; ++b) P[3*a+b] = R0[3*a]*E[b] + R0[3*a+1]*E[3+b] + R0[3*a+2]*E[6+b];
+            P[9+a] = p0[a] + s*(p1[a] - p0[a]);
+        }
+    }
+}
+
+/* ClosedChainKinematics.ik: 1 when converged (q in qout), its = iterations used */
+static int tcb_ik(const tcb_ctx *c, const double *seed, const double *P, double *qout, long long *its) {
+    int nq = c->nq;
+    double Rf[9], par[6], out[KMAXJ + 8], qin[KMAXJ];
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) Rf[3*j+i] = P[3*i+j];
+    par[0] = c->damping; par[1] = c->tol_p; par[2] = c->tol_o; par[3] = c->gain; par[4] = c->max_step;
+    memcpy(qin, seed, nq*sizeof(double));
+    const double *arg[64] = {qin, Rf, P + 9, par};
+    double *res[64] = {out};
+    long long n = 0;
+    for (;;) {
+        par[5] = (double)(c->max_it - n);
+        if (c->ik(arg, res, c->ik_iw, c->ik_w, 0) != 0) { *its = n; return 0; }
+        memcpy(qin, out, nq*sizeof(double));
+        n += (long long)out[nq + 4];
+        if (out[nq] < c->tol_p && out[nq+1] < c->tol_o && out[nq+2] < c->tol_p && out[nq+3] < c->tol_o) {
+            memcpy(qout, out, nq*sizeof(double)); *its = n; return 1;
+        }
+        if (n >= c->max_it) { *its = n; return 0; }
+    }
+}
+
+static int tcb_collides(const tcb_ctx *c, const double *q) {
+    double oMi[12*KMAXJ], oMg[12*KMAXG];
+    return config_collides(c->km, c->active, q, NULL, -1, oMi, oMg);
+}
+
+/* waypoints j0..n-1 of the poses P (n x 12), each seeded by the previous solution (q_prev for j0);
+   solutions into Q (n x nq). Returns the first waypoint that fails (its reason counted), or n. */
+long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *P, long long j0, long long n, double *Q,
+                      long long *cnt) {
+    int nq = c->nq;
+    if (nq > KMAXJ || c->km->nj > KMAXJ || c->km->ng > KMAXG) return -2;
+    const double *q = q_prev;
+    for (long long j = j0; j < n; ++j) {
+        double *qn = Q + j*nq;
+        long long its = 0;
+        cnt[0] += 1;
+        int ok = tcb_ik(c, q, P + 12*j, qn, &its);
+        cnt[1] += its;
+        if (!ok) { cnt[2] += 1; return j; }
+        double m = 0.0;
+        for (int k = 0; k < nq; ++k) { double d = fabs(qn[k] - q[k]); if (d > m) m = d; }
+        if (m > c->max_joint_step) { cnt[3] += 1; return j; }
+        cnt[5] += 1;
+        if (tcb_collides(c, qn)) { cnt[4] += 1; return j; }
+        if (c->edge_res > 0) {
+            double d[KMAXJ], size = 0.0, x[KMAXJ];
+            for (int k = 0; k < nq; ++k) { d[k] = qn[k] - q[k]; if (fabs(d[k]) > size) size = fabs(d[k]); }
+            long long ns = (long long)ceil(size / c->edge_res);
+            if (ns < 1) ns = 1;
+            if (ns >= 2) {
+                long long *lo = (long long *)malloc((size_t)(2*ns + 4) * sizeof(long long));
+                long long *hi = (long long *)malloc((size_t)(2*ns + 4) * sizeof(long long));
+                if (!lo || !hi) { free(lo); free(hi); return -2; }
+                long long head = 0, tail = 0;
+                int bad = 0;
+                lo[tail] = 0; hi[tail] = ns; ++tail;
+                while (head < tail) {
+                    long long l = lo[head], h = hi[head]; ++head;
+                    if (h - l < 2) continue;
+                    long long mid = (l + h) / 2;
+                    double f = (double)mid / (double)ns;
+                    for (int k = 0; k < nq; ++k) x[k] = q[k] + f*d[k];
+                    cnt[5] += 1;
+                    if (tcb_collides(c, x)) { bad = 1; break; }
+                    lo[tail] = l; hi[tail] = mid; ++tail;
+                    lo[tail] = mid; hi[tail] = h; ++tail;
+                }
+                free(lo); free(hi);
+                if (bad) { cnt[4] += 1; cnt[8] = 1; return j; }
+            }
+        }
+        q = qn;
+    }
+    return n;
+}
+
+/* ValidityChecker.edge_checkpoints + edge_is_valid ("held", native): 1 when the segment a -> b is free */
+static int tcb_edge_ok(const tcb_ctx *c, const double *a, const double *b, long long *cnt) {
+    int nq = c->nq;
+    double d[KMAXJ], smax = 0.0, tol = c->edge_tol;
+    for (int k = 0; k < nq; ++k) d[k] = fabs(b[k] - a[k]);
+    for (int g = 0; g < c->nw; ++g) {
+        double s = 0.0;
+        for (int k = 0; k < nq; ++k) s += c->W[g*nq + k] * d[k];
+        if (s > smax) smax = s;
+    }
+    long long n_static = smax > 0 ? (long long)ceil(smax / tol) : 1, m;
+    double *ts;
+    int uniform = 1;
+    double C[64];
+    long long n = 0;
+    if (n_static > 5 && c->prof != NULL && c->nprof <= 64) {
+        const double *arg[64] = {a, b};
+        double *res[64] = {C};
+        if (c->prof(arg, res, c->prof_iw, c->prof_w, 0) != 0) return -1;
+        n = (long long)ceil(C[c->nprof - 1] / tol);
+        if (n < 1) n = 1;
+        if (n < n_static) uniform = 0;
+    }
+    m = uniform ? n_static - 1 : n - 1;
+    if (m <= 0) return 1;
+    ts = (double *)malloc((size_t)m * sizeof(double));
+    long long *lo = (long long *)malloc((size_t)(2*m + 4) * sizeof(long long));
+    long long *hi = (long long *)malloc((size_t)(2*m + 4) * sizeof(long long));
+    if (!ts || !lo || !hi) { free(ts); free(lo); free(hi); return -1; }
+    if (uniform) {
+        for (long long k = 1; k <= m; ++k) ts[k-1] = (double)k / (double)n_static;
+    } else {
+        int np = c->nprof;
+        long long j = 0;
+        for (long long k = 1; k <= m; ++k) {   /* np.interp(k tol, C, linspace(0, 1, np)) */
+            double x = (double)k * tol;
+            if (x <= C[0]) { ts[k-1] = 0.0; continue; }
+            if (x >= C[np-1]) { ts[k-1] = 1.0; continue; }
+            while (j + 1 < np - 1 && C[j+1] <= x) ++j;
+            while (j > 0 && C[j] > x) --j;
+            double fj = (double)j / (double)(np - 1), fj1 = (double)(j + 1) / (double)(np - 1);
+            if (x == C[j]) ts[k-1] = fj;
+            else ts[k-1] = (fj1 - fj) / (C[j+1] - C[j]) * (x - C[j]) + fj;
+        }
+    }
+    /* bisection order over the n_pts = m + 1 intervals: FIFO of [lo, hi], midpoints */
+    long long head = 0, tail = 0, nchk = 0;
+    int free_ = 1;
+    double q[KMAXJ];
+    lo[tail] = 0; hi[tail] = m + 1; ++tail;
+    double oMi[12*KMAXJ], oMg[12*KMAXG];
+    while (head < tail) {
+        long long l = lo[head], h = hi[head]; ++head;
+        if (h - l < 2) continue;
+        long long mid = (l + h) / 2;
+        double f = ts[mid - 1];
+        for (int k = 0; k < nq; ++k) q[k] = a[k] + f*(b[k] - a[k]);
+        ++nchk;
+        if (config_collides(c->km, c->active, q, NULL, -1, oMi, oMg)) { free_ = 0; break; }
+        lo[tail] = l; hi[tail] = mid; ++tail;
+        lo[tail] = mid; hi[tail] = h; ++tail;
+    }
+    cnt[5] += nchk;
+    free(ts); free(lo); free(hi);
+    return free_;
+}
+
+/* the edges q_prev -> Q[0] -> ... -> Q[n-1]: index of the first in collision, or n */
+long long tcb_edges(const tcb_ctx *c, const double *q_prev, const double *Q, long long n, long long *cnt) {
+    if (c->nq > KMAXJ || c->km->nj > KMAXJ || c->km->ng > KMAXG) return -2;
+    const double *a = q_prev;
+    for (long long k = 0; k < n; ++k) {
+        cnt[6] += 1;
+        int ok = tcb_edge_ok(c, a, Q + k*c->nq, cnt);
+        if (ok < 0) return -2;
+        if (!ok) { cnt[7] += 1; return k; }
+        a = Q + k*c->nq;
+    }
+    return n;
+}
+
+typedef struct {
+    const kmodel *km;               /* the object (geometry g, placed per call) and the obstacles, no joints */
+    const unsigned char *active;
+    int g, nobs, ngrasp;
+    const double *gt;               /* ngrasp x 3: grasp point in the object frame */
+    const double *sh;               /* ngrasp x 3: shoulder */
+    const double *reach;            /* ngrasp: reach bound [m] */
+} tcb_filt;
+
+static void tcb_rpy(const double *xi, double *P) {   /* R = Rz(yaw) Ry(pitch) Rx(roll), row-major; then p */
+    double cr = cos(xi[3]), sr = sin(xi[3]), cp = cos(xi[4]), sp = sin(xi[4]), cy = cos(xi[5]), sy = sin(xi[5]);
+    P[0] = cy*cp; P[1] = cy*sp*sr - sy*cr; P[2] = cy*sp*cr + sy*sr;
+    P[3] = sy*cp; P[4] = sy*sp*sr + cy*cr; P[5] = sy*sp*cr - cy*sr;
+    P[6] = -sp;   P[7] = cp*sr;            P[8] = cp*cr;
+    P[9] = xi[0]; P[10] = xi[1]; P[11] = xi[2];
+}
+
+/* ObjectPoseFilter: 0 unreachable, 1 reachable (or not tested) but the object collides, 2 passes */
+static int tcb_filter_pose(const tcb_filt *f, const double *P, int reach) {
+    for (int k = 0; reach && k < f->ngrasp; ++k) {
+        const double *t = f->gt + 3*k, *s = f->sh + 3*k;
+        double v[3];
+        for (int i = 0; i < 3; ++i) v[i] = P[9+i] + P[3*i]*t[0] + P[3*i+1]*t[1] + P[3*i+2]*t[2] - s[i];
+        if (sqrt(dot3(v, v)) > f->reach[k]) return 0;
+    }
+    if (f->nobs == 0) return 2;
+    double oMi[12*KMAXJ], oMg[12*KMAXG];
+    if (f->km->ng > KMAXG || f->km->nj > KMAXJ) return -2;
+    return config_collides(f->km, f->active, P, P, f->g, oMi, oMg) ? 1 : 2;
+}
+
+int tcb_filter_xi(const tcb_filt *f, const double *xi, int reach) {
+    double P[12];
+    tcb_rpy(xi, P);
+    return tcb_filter_pose(f, P, reach);
+}
+
+/* rrtconnect.edge_is_valid(a, b, filter, resolution, check_end) over xi: 1 when every point passes;
+   *ncalls = filter calls made */
+int tcb_filter_segment(const tcb_filt *f, const double *a, const double *b, double resolution, int check_end,
+                       long long *ncalls) {
+    double d[6], x[6], size = 0.0;
+    for (int i = 0; i < 6; ++i) { d[i] = b[i] - a[i]; if (fabs(d[i]) > size) size = fabs(d[i]); }
+    long long n = (long long)ceil(size / resolution);
+    if (n < 1) n = 1;
+    *ncalls = 0;
+    if (check_end) { *ncalls += 1; if (tcb_filter_xi(f, b, 1) != 2) return 0; }
+    if (n < 2) return 1;
+    long long *lo = (long long *)malloc((size_t)(2*n + 4) * sizeof(long long));
+    long long *hi = (long long *)malloc((size_t)(2*n + 4) * sizeof(long long));
+    if (!lo || !hi) { free(lo); free(hi); return -2; }
+    long long head = 0, tail = 0;
+    int ok = 1;
+    lo[tail] = 0; hi[tail] = n; ++tail;
+    while (head < tail) {
+        long long l = lo[head], h = hi[head]; ++head;
+        if (h - l < 2) continue;
+        long long mid = (l + h) / 2;
+        double s = (double)mid / (double)n;
+        for (int i = 0; i < 6; ++i) x[i] = a[i] + s*d[i];
+        *ncalls += 1;
+        if (tcb_filter_xi(f, x, 1) != 2) { ok = 0; break; }
+        lo[tail] = l; hi[tail] = mid; ++tail;
+        lo[tail] = mid; hi[tail] = h; ++tail;
+    }
+    free(lo); free(hi);
+    return ok;
+}
+
+/* one extension: the poses (into P, n x 12), the path IK from q_near (into Q) and, when every waypoint
+   passes and the edges are on, their edge checks. Returns the waypoints accepted (< n: the first failing
+   one, for the caller's restarts); *edge_k = the first failing edge, n when they pass, -1 when not run */
+long long tcb_extend(const tcb_ctx *c, const double *R0, const double *p0, const double *R1, const double *p1,
+                     long long n, const double *q_near, double *P, double *Q, long long *cnt, long long *edge_k) {
+    tcb_interpolate(R0, p0, R1, p1, (int)n, P);
+    long long r = tcb_path_ik(c, q_near, P, 0, n, Q, cnt);
+    *edge_k = -1;
+    if (r == n && c->edge_on) *edge_k = tcb_edges(c, q_near, Q, n, cnt);
+    return r;
+}
+"""
