@@ -49,6 +49,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError, OptionError
+from ..model.kinematics import Kinematics
 from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PlanStatus
@@ -87,18 +88,27 @@ class FloatingTreeOptions:
     goal_seed_spread_rad: float = 0.6
     #: times the goal tree is re-rooted at the real arrival base when the world-goal correction fails [count].
     max_reroots: int = 4
+    #: iterations without a join after which the goal tree gains another root (another joint
+    #: solution of the goal pose: another IK branch) [count].
+    root_interval: int = 60
+    #: most roots of the goal tree [count].
+    max_goal_roots: int = 6
+    #: Newton steps of the generalized-Jacobian correction of the world goal [count].
+    correction_steps: int = 12
+    #: largest joint change of one correction step [rad].
+    correction_step_rad: float = 0.1
     #: the clock of the time limit: "cpu" (this process's CPU time) or "wall".
     clock: str = "cpu"
 
     def __post_init__(self) -> None:
         for name in ("extend_m", "extend_rad", "sample_margin_m", "sample_angle_rad", "max_joint_step",
-                     "join_step_rad", "rotation_weight_m", "goal_seed_spread_rad"):
+                     "join_step_rad", "rotation_weight_m", "goal_seed_spread_rad", "correction_step_rad"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise OptionError(f"FloatingTreeOptions.{name}: expected a positive finite number, got {v!r}")
         if not (isinstance(self.goal_bias, (int, float)) and 0.0 <= self.goal_bias <= 1.0):
             raise OptionError(f"FloatingTreeOptions.goal_bias: expected a probability in [0, 1], got {self.goal_bias!r}")
-        for name in ("goal_seeds", "max_reroots"):
+        for name in ("goal_seeds", "max_reroots", "root_interval", "max_goal_roots", "correction_steps"):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 0):
                 raise OptionError(f"FloatingTreeOptions.{name}: expected an integer ≥ 0, got {v!r}")
@@ -109,7 +119,7 @@ class FloatingTreeOptions:
 class FloatingTree:
     """One tree: per node the joints [rad], the object's pose in the base frame, the base's world
     pose (exact for the start tree, relative to the root's estimate for the goal tree) and the parent
-    index (−1 at the root)."""
+    index (−1 at a root; the goal tree may have several roots: joint solutions of the same goal pose)."""
 
     def __init__(self, joints: np.ndarray, obj: pin.SE3, base: pin.SE3) -> None:
         self.joints: list[np.ndarray] = [np.array(joints, float)]
@@ -122,7 +132,12 @@ class FloatingTree:
     def __len__(self) -> int:
         return len(self.joints)
 
+    @property
+    def roots(self) -> list[int]:
+        return [k for k, p in enumerate(self.parent) if p < 0]
+
     def add(self, joints: np.ndarray, obj: pin.SE3, base: pin.SE3, parent: int) -> int:
+        """A node (``parent`` −1: another root)."""
         self.joints.append(np.array(joints, float))
         self.objs.append(obj)
         self.bases.append(base)
@@ -159,6 +174,8 @@ class FloatingTCBiRRT:
         self.tree_options = tree or FloatingTreeOptions()
         self.arm_names = self.carry.arm_names
         self.validity = ValidityChecker(robot, scene)
+        self._kin = Kinematics(robot)
+        self._data = robot.model.createData()
         #: statistics of the last query: nodes per tree, joins tried / rejected at re-integration, re-roots
         self.stats: dict[str, int] = {}
 
@@ -241,14 +258,16 @@ class FloatingTCBiRRT:
 
     # ------------------------------------------------------------------ goal configurations
     def _goal_joints(self, seed_joints: list[np.ndarray], target_b: pin.SE3, base: pin.SE3,
-                     rng: np.random.Generator, deadline: Deadline) -> np.ndarray | None:
+                     rng: np.random.Generator, deadline: Deadline, tries: int | None = None) -> np.ndarray | None:
         """A collision-free (base at ``base``) joint solution holding the object at ``target_b``:
-        IK from each of ``seed_joints``, then from random seeds around the first."""
-        to = self.tree_options
+        IK from each of ``seed_joints``, then from ``tries`` (default ``goal_seeds``) random seeds
+        (around the first seed, or uniform in [−π, π] without one)."""
+        to, r = self.tree_options, self.robot
         seeds = list(seed_joints)
-        for _ in range(to.goal_seeds):
-            seeds.append(np.clip(seed_joints[0] + rng.normal(0.0, to.goal_seed_spread_rad, self.robot.nj),
-                                 self.robot.lower, self.robot.upper))
+        for _ in range(to.goal_seeds if tries is None else tries):
+            s = (seed_joints[0] + rng.normal(0.0, to.goal_seed_spread_rad, r.nj) if seed_joints
+                 else rng.uniform(-math.pi, math.pi, r.nj))
+            seeds.append(np.clip(s, r.lower, r.upper))
         for s in seeds:
             if deadline.expired():
                 return None
@@ -271,13 +290,14 @@ class FloatingTCBiRRT:
         """Plan from the joints ``q_start`` [rad] (holding the object; base at ``base0``, default the
         identity, at rest) to the object's ``goal`` (world, or base frame with
         ``options.target_frame = "base"``) within ``time_limit`` [s] on ``tree.clock``."""
-        r, o, to = self.robot, self.options, self.tree_options
+        r, to = self.robot, self.tree_options
         t0 = time.perf_counter()
         deadline = Deadline(float(time_limit), to.clock)
         q0 = r.check_joints(np.asarray(q_start, float), "q_start")
         base0 = pin.SE3.Identity() if base0 is None else base0
         rng = np.random.default_rng(seed)
-        self.stats = {"nodes_start": 0, "nodes_goal": 0, "joins": 0, "joins_rejected": 0, "reroots": 0}
+        self.stats = {"iterations": 0, "nodes_start": 1, "nodes_goal": 0, "goal_roots": 0, "reached": 0,
+                      "joins": 0, "joins_rejected": 0, "corrections_failed": 0, "reroots": 0}
         qp = self.carry.hold(q0, self.carry.object_in_base(q0))
         if qp is None or float(np.max(np.abs(qp - q0))) > 1e-3:
             return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
@@ -286,48 +306,59 @@ class FloatingTCBiRRT:
         if not self.validity.is_valid(self.carry._full(q0, base0)):
             return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
                                       "start in collision")
-        world = o.target_frame == "world"
         start = FloatingTree(q0, self.carry.object_in_base(q0), base0)
         b_est = base0
-        goal_tree = self._root_goal_tree(start, goal, b_est, [q0], rng, deadline)
+        goal_tree = self._root_goal_tree(goal, b_est, [q0], rng, deadline)
         if goal_tree is None:
             status = PlanStatus.TIMEOUT if deadline.expired() else PlanStatus.INVALID_GOAL
             return self.carry._result(status, [q0], [base0], float("nan"), t0, goal, 0,
-                                      "no collision-free joint solution of the goal pose found")
+                                      f"no collision-free joint solution of the goal pose found ({to.goal_seeds + 1} IK seeds)")
         trees = [start, goal_tree]
+        since_join = 0
         while not deadline.expired():
-            if rng.uniform() < to.goal_bias:
-                target = trees[1].objs[0]
-            else:
-                target = self._sample(rng, start.objs[0], goal_tree.objs[0])
+            self.stats["iterations"] += 1
+            since_join += 1
+            if since_join >= to.root_interval and len(goal_tree.roots) < to.max_goal_roots:
+                since_join = 0   # another IK branch of the goal pose
+                q = self._goal_joints([], goal_tree.objs[0], goal_tree.bases[0], rng, deadline, tries=to.goal_seeds)
+                if q is not None:
+                    goal_tree.add(q, goal_tree.objs[0], goal_tree.bases[0], -1)
+            target = goal_tree.objs[0] if rng.uniform() < to.goal_bias else self._sample(rng, start.objs[0], goal_tree.objs[0])
             a, b = trees
             n_before = len(a)
             ka, _ = self._extend(a, target)
             if len(a) > n_before or ka == 0:
                 kb, reached = self._connect(b, a.objs[ka], deadline)
+                kb2 = None
                 if reached:
+                    self.stats["reached"] += 1
                     kb2 = self._join(b, kb, a.joints[ka])
-                    if kb2 is not None:
-                        ks, kg = (ka, kb2) if a is start else (kb2, ka)
-                        out = self._finish(start, ks, goal_tree, kg, goal, base0, rng, deadline, t0)
-                        if isinstance(out, FloatingCarryPlan):
-                            return out
-                        if out == "reroot" and world and self.stats["reroots"] < to.max_reroots:
-                            self.stats["reroots"] += 1
-                            b_est = self._arrival_base(start, ks, goal_tree, kg, base0)
-                            new = self._root_goal_tree(start, goal, b_est, [goal_tree.joints[0], q0], rng, deadline)
-                            if new is not None:
-                                goal_tree = new
-                                trees = [start, goal_tree]
-                                continue
+                if kb2 is not None:
+                    since_join = 0
+                    ks, kg = (ka, kb2) if a is start else (kb2, ka)
+                    out = self._finish(start, ks, goal_tree, kg, goal, base0, rng, deadline, t0)
+                    if isinstance(out, FloatingCarryPlan):
+                        return out
+                    if out == "reroot" and self.stats["reroots"] < to.max_reroots:
+                        self.stats["reroots"] += 1
+                        b_est = self._integrate_path(self._joint_path(start, ks, goal_tree, kg), base0)[1][-1]
+                        new = self._root_goal_tree(goal, b_est, [goal_tree.joints[goal_tree.path_to_root(kg)[-1]], q0],
+                                                   rng, deadline)
+                        if new is not None:
+                            goal_tree = new
+                            trees = [start, goal_tree]
+                            continue
             trees = [trees[1], trees[0]]
-        self.stats.update(nodes_start=len(start), nodes_goal=len(goal_tree))
+        self.stats.update(nodes_start=len(start), nodes_goal=len(goal_tree), goal_roots=len(goal_tree.roots))
+        st = self.stats
         return self.carry._result(PlanStatus.TIMEOUT, [q0], [base0], float("nan"), t0, goal, 0,
-                                  f"time limit ({len(start)} + {len(goal_tree)} nodes, {self.stats['joins']} joins, "
-                                  f"{self.stats['joins_rejected']} rejected at the re-integration)")
+                                  f"time limit ({len(start)} + {len(goal_tree)} nodes, {st['goal_roots']} goal roots, "
+                                  f"{st['reached']} connections reached a node's pose, {st['joins']} joined, "
+                                  f"{st['joins_rejected']} rejected at the re-integration, {st['corrections_failed']} "
+                                  "world-goal corrections failed)")
 
-    def _root_goal_tree(self, start: FloatingTree, goal: pin.SE3, b_est: pin.SE3, seeds: list[np.ndarray],
-                        rng: np.random.Generator, deadline: Deadline) -> FloatingTree | None:
+    def _root_goal_tree(self, goal: pin.SE3, b_est: pin.SE3, seeds: list[np.ndarray], rng: np.random.Generator,
+                        deadline: Deadline) -> FloatingTree | None:
         target_b = b_est.actInv(goal) if self.options.target_frame == "world" else goal
         qg = self._goal_joints(seeds, target_b, b_est, rng, deadline)
         if qg is None:
@@ -352,8 +383,46 @@ class FloatingTCBiRRT:
             bases.append(base)
         return (np.vstack(rows) if rows else np.empty((0, self.robot.nq))), bases
 
-    def _arrival_base(self, start: FloatingTree, ks: int, goal_tree: FloatingTree, kg: int, base0: pin.SE3) -> pin.SE3:
-        return self._integrate_path(self._joint_path(start, ks, goal_tree, kg), base0)[1][-1]
+    def _correct(self, q: np.ndarray, base: pin.SE3, goal: pin.SE3,
+                 deadline: Deadline) -> tuple[list[np.ndarray], list[pin.SE3]] | None:
+        """Closed-chain correction of the world goal from ``(q, base)``: Newton steps on both hands'
+        world poses with the generalized Jacobian (zero momentum), each step's joints re-closed on
+        the chain in the base frame, then integrated and collision-checked as an edge. Returns the
+        new waypoints and bases, or None when it does not reach the goal tolerance."""
+        o, to = self.options, self.tree_options
+        m, d = self.robot.model, self._data
+        ws: list[np.ndarray] = []
+        bs: list[pin.SE3] = []
+        for _ in range(to.correction_steps + 1):
+            full = self.carry._full(q, base)
+            pin.framesForwardKinematics(m, d, full)
+            errs = []
+            for a in self.arm_names:
+                H, T = d.oMf[self.robot.arm(a).ee_frame_id], goal * self.carry.grasps[a]
+                errs.append(np.r_[H.translation - T.translation, pin.log3(H.rotation @ T.rotation.T)])
+            ep, er = self.carry._goal_error(q, base, goal)
+            if ep <= o.goal_tol_m and er <= o.goal_tol_rad:
+                return ws, bs
+            if deadline.expired():
+                return None
+            G = self._kin.generalized_jacobians(full)
+            J = np.vstack([G[a] for a in self.arm_names])
+            e = np.concatenate(errs)
+            dq = -J.T @ np.linalg.solve(J @ J.T + 1e-8 * np.eye(len(e)), e)
+            n = float(np.max(np.abs(dq)))
+            if n > to.correction_step_rad:
+                dq *= to.correction_step_rad / n
+            q_lin = np.clip(q + dq, self.robot.lower, self.robot.upper)
+            qn = self.carry.hold(q_lin, self.carry.object_in_base(q_lin))
+            if qn is None or float(np.max(np.abs(qn - q))) > to.max_joint_step:
+                return None
+            Q, ok = self._edge(base, q, qn)
+            if not ok:
+                return None
+            q, base = qn, pin.XYZQUATToSE3(Q[-1, :7])
+            ws.append(q)
+            bs.append(base)
+        return None
 
     def _finish(self, start: FloatingTree, ks: int, goal_tree: FloatingTree, kg: int, goal: pin.SE3, base0: pin.SE3,
                 rng: np.random.Generator, deadline: Deadline, t0: float) -> FloatingCarryPlan | str:
@@ -366,28 +435,17 @@ class FloatingTCBiRRT:
         if self.validity.first_invalid(rows) >= 0:
             self.stats["joins_rejected"] += 1
             return "collides"
-        corrections = 0
+        n_wp = len(joints)
         if o.target_frame == "world":
-            while True:
-                ep, er = self.carry._goal_error(joints[-1], bases[-1], goal)
-                if ep <= o.goal_tol_m and er <= o.goal_tol_rad:
-                    break
-                if corrections >= o.max_corrections or deadline.expired():
-                    return "reroot"
-                corrections += 1
-                got = self.carry._move(joints[-1], bases[-1], bases[-1].actInv(goal))
-                tries = 0
-                while got is None and tries < o.via_tries and not deadline.expired():
-                    tries += 1
-                    got = self.carry._via(joints[-1], bases[-1], bases[-1].actInv(goal), rng)
-                if got is None:
-                    return "reroot"
-                joints += got[0]
-                bases += got[1]
+            got = self._correct(joints[-1], bases[-1], goal, deadline)
+            if got is None:
+                self.stats["corrections_failed"] += 1
+                return "reroot"
+            joints += got[0]
             rows, bases = self._integrate_path(joints, base0)   # one integration of the whole path
         dmin, _, _ = self.carry.checker.min_distance_along(np.vstack([self.carry._full(joints[0], base0), rows]))
         if dmin < 0.0:   # the boolean checks and the exact distances disagree: reject rather than return it
             self.stats["joins_rejected"] += 1
             return "collides"
-        self.stats.update(nodes_start=len(start), nodes_goal=len(goal_tree))
-        return self.carry._result(PlanStatus.EXACT, joints, bases, float(dmin), t0, goal, corrections, "")
+        self.stats.update(nodes_start=len(start), nodes_goal=len(goal_tree), goal_roots=len(goal_tree.roots))
+        return self.carry._result(PlanStatus.EXACT, joints, bases, float(dmin), t0, goal, len(joints) - n_wp, "")
