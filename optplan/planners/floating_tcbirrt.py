@@ -54,6 +54,7 @@ from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PlanStatus
 from .floating_carry import FloatingCarryOptions, FloatingCarryPlan, FloatingCarryPlanner, integrate_edge
+from .floating_reach import zero_momentum_ik
 from .task_space import interpolate_task
 from .validity import ValidityChecker
 
@@ -87,7 +88,7 @@ class FloatingTreeOptions:
     #: joint spread of those seeds around the start (normal, per joint) [rad].
     goal_seed_spread_rad: float = 0.6
     #: times the goal tree is re-rooted at the real arrival base when the world-goal correction fails [count].
-    max_reroots: int = 4
+    max_reroots: int = 8
     #: iterations without a join after which the goal tree gains another root (another joint
     #: solution of the goal pose: another IK branch) [count].
     root_interval: int = 60
@@ -191,12 +192,20 @@ class FloatingTCBiRRT:
         Q = integrate_edge(self.robot, base, qa, qb, n)
         return Q, self.validity.first_invalid(Q[1:]) < 0
 
-    def _grow(self, tree: FloatingTree, k: int, poses: list[pin.SE3]) -> tuple[int, bool]:
+    def _grow(self, tree: FloatingTree, k: int, poses: list[pin.SE3],
+              toward: np.ndarray | None = None) -> tuple[int, bool]:
         """Path IK through ``poses`` (object in the base frame) from node ``k``, each waypoint a new
-        node; returns (last node, whether every pose was reached)."""
+        node; returns (last node, whether every pose was reached). With ``toward`` (joints), each
+        waypoint's IK is seeded a share of the way toward them (the arms' self-motion drifts toward
+        that configuration while the object follows its path)."""
         q, last = tree.joints[k], k
-        for M in poses:
-            qn = self.carry.hold(q, M)
+        half = 0.5 * self.tree_options.max_joint_step
+        for j, M in enumerate(poses):
+            seed = q
+            if toward is not None:
+                step = (toward - q) / (len(poses) - j)
+                seed = q + step * min(1.0, half / max(float(np.max(np.abs(step))), 1e-12))
+            qn = self.carry.hold(seed, M)
             if qn is None or float(np.max(np.abs(qn - q))) > self.tree_options.max_joint_step:
                 return last, False
             Q, ok = self._edge(tree.bases[last], q, qn)
@@ -206,9 +215,10 @@ class FloatingTCBiRRT:
             q = qn
         return last, True
 
-    def _extend(self, tree: FloatingTree, target: pin.SE3) -> tuple[int, bool]:
-        """ConstrainedExtend: from the nearest node at most one extension step toward ``target``;
-        returns (last node added or the nearest, whether the target pose was reached)."""
+    def _extend(self, tree: FloatingTree, target: pin.SE3, toward: np.ndarray | None = None) -> tuple[int, bool]:
+        """ConstrainedExtend: from the nearest node at most one extension step toward ``target``
+        (``toward``: the joints the IK seeds lean to, :meth:`_grow`); returns (last node added or the
+        nearest, whether the target pose was reached)."""
         o, to = self.options, self.tree_options
         k = tree.nearest(target, to.rotation_weight_m)
         M0 = tree.objs[k]
@@ -222,14 +232,16 @@ class FloatingTCBiRRT:
         p1 = M0.translation + s * (target.translation - M0.translation)
         n = max(1, math.ceil(max(s * dp / o.task_step_m, s * dr / o.task_step_rad)))
         poses = [pin.SE3(R, p) for R, p in interpolate_task(M0.rotation, M0.translation, R1, p1, n)]
-        last, ok = self._grow(tree, k, poses)
+        last, ok = self._grow(tree, k, poses, toward if s >= 1.0 else None)
         return last, ok and s >= 1.0
 
-    def _connect(self, tree: FloatingTree, node_pose: pin.SE3, deadline: Deadline) -> tuple[int, bool]:
-        """Extend ``tree`` toward ``node_pose`` until trapped or reached."""
+    def _connect(self, tree: FloatingTree, node_pose: pin.SE3, node_joints: np.ndarray,
+                 deadline: Deadline) -> tuple[int, bool]:
+        """Extend ``tree`` toward the other tree's node (``node_pose``; the last extension's IK seeds
+        lean to ``node_joints``) until trapped or reached."""
         last, prev = -1, -2
         while not deadline.expired():
-            last, reached = self._extend(tree, node_pose)
+            last, reached = self._extend(tree, node_pose, node_joints)
             if reached:
                 return last, True
             if last == prev:
@@ -237,7 +249,7 @@ class FloatingTCBiRRT:
             prev = last
         return last, False
 
-    def _join(self, tree: FloatingTree, k: int, q_target: np.ndarray) -> int | None:
+    def _join(self, tree: FloatingTree, k: int, q_target: np.ndarray, deadline: Deadline) -> int | None:
         """Joints from node ``k`` to ``q_target`` (both holding the object at node ``k``'s pose): a
         direct edge when close, else a self-motion join (interpolated joints projected onto the
         closed chain, the object held still); returns the node at ``q_target`` or None."""
@@ -247,6 +259,8 @@ class FloatingTCBiRRT:
         n = max(1, math.ceil(gap / to.join_step_rad))
         last, q = k, q0
         for i in range(1, n + 1):
+            if deadline.expired():
+                return None
             qn = q_target if i == n else self.carry.hold(q0 + (i / n) * (q_target - q0), M)
             if qn is None or float(np.max(np.abs(qn - q))) > to.max_joint_step:
                 return None
@@ -257,20 +271,37 @@ class FloatingTCBiRRT:
         return last
 
     # ------------------------------------------------------------------ goal configurations
+    def _path_ik(self, q: np.ndarray, target_b: pin.SE3) -> np.ndarray | None:
+        """Joints holding the object at ``target_b`` reached by path IK along the straight task-space
+        motion from ``q`` (collisions ignored): a solution on the same IK branch as ``q``."""
+        o = self.options
+        M0 = self.carry.object_in_base(q)
+        dp = float(np.linalg.norm(target_b.translation - M0.translation))
+        dr = float(np.linalg.norm(pin.log3(M0.rotation.T @ target_b.rotation)))
+        n = max(1, math.ceil(max(dp / o.task_step_m, dr / o.task_step_rad)))
+        for R, p in interpolate_task(M0.rotation, M0.translation, target_b.rotation, target_b.translation, n):
+            qn = self.carry.hold(q, pin.SE3(R, p))
+            if qn is None or float(np.max(np.abs(qn - q))) > self.tree_options.max_joint_step:
+                return None
+            q = qn
+        return q
+
     def _goal_joints(self, seed_joints: list[np.ndarray], target_b: pin.SE3, base: pin.SE3,
                      rng: np.random.Generator, deadline: Deadline, tries: int | None = None) -> np.ndarray | None:
         """A collision-free (base at ``base``) joint solution holding the object at ``target_b``:
-        IK from each of ``seed_joints``, then from ``tries`` (default ``goal_seeds``) random seeds
-        (around the first seed, or uniform in [−π, π] without one)."""
+        path IK from the first of ``seed_joints`` (the same IK branch), IK from each of them, then
+        from ``tries`` (default ``goal_seeds``) random seeds around them."""
         to, r = self.tree_options, self.robot
-        seeds = list(seed_joints)
-        for _ in range(to.goal_seeds if tries is None else tries):
-            s = (seed_joints[0] + rng.normal(0.0, to.goal_seed_spread_rad, r.nj) if seed_joints
-                 else rng.uniform(-math.pi, math.pi, r.nj))
-            seeds.append(np.clip(s, r.lower, r.upper))
+        seeds: list[np.ndarray | None] = [self._path_ik(seed_joints[0], target_b)] + list(seed_joints)
+        base_seeds = [q for q in seeds if q is not None]
+        for k in range(to.goal_seeds if tries is None else tries):
+            s0 = base_seeds[k % len(base_seeds)]
+            seeds.append(np.clip(s0 + rng.normal(0.0, to.goal_seed_spread_rad, r.nj), r.lower, r.upper))
         for s in seeds:
             if deadline.expired():
                 return None
+            if s is None:
+                continue
             q = self.carry.hold(s, target_b)
             if q is not None and self.validity.is_valid(self.carry._full(q, base)):
                 return q
@@ -307,8 +338,9 @@ class FloatingTCBiRRT:
             return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
                                       "start in collision")
         start = FloatingTree(q0, self.carry.object_in_base(q0), base0)
-        b_est = base0
-        goal_tree = self._root_goal_tree(goal, b_est, [q0], rng, deadline)
+        goal_tree = self._world_goal_tree(q0, goal, base0, rng) if self.options.target_frame == "world" else None
+        if goal_tree is None:
+            goal_tree = self._root_goal_tree(goal, base0, [q0], rng, deadline)
         if goal_tree is None:
             status = PlanStatus.TIMEOUT if deadline.expired() else PlanStatus.INVALID_GOAL
             return self.carry._result(status, [q0], [base0], float("nan"), t0, goal, 0,
@@ -320,7 +352,8 @@ class FloatingTCBiRRT:
             since_join += 1
             if since_join >= to.root_interval and len(goal_tree.roots) < to.max_goal_roots:
                 since_join = 0   # another IK branch of the goal pose
-                q = self._goal_joints([], goal_tree.objs[0], goal_tree.bases[0], rng, deadline, tries=to.goal_seeds)
+                q = self._goal_joints([goal_tree.joints[0], q0], goal_tree.objs[0], goal_tree.bases[0], rng, deadline,
+                                      tries=to.goal_seeds)
                 if q is not None:
                     goal_tree.add(q, goal_tree.objs[0], goal_tree.bases[0], -1)
             target = goal_tree.objs[0] if rng.uniform() < to.goal_bias else self._sample(rng, start.objs[0], goal_tree.objs[0])
@@ -328,11 +361,11 @@ class FloatingTCBiRRT:
             n_before = len(a)
             ka, _ = self._extend(a, target)
             if len(a) > n_before or ka == 0:
-                kb, reached = self._connect(b, a.objs[ka], deadline)
+                kb, reached = self._connect(b, a.objs[ka], a.joints[ka], deadline)
                 kb2 = None
                 if reached:
                     self.stats["reached"] += 1
-                    kb2 = self._join(b, kb, a.joints[ka])
+                    kb2 = self._join(b, kb, a.joints[ka], deadline)
                 if kb2 is not None:
                     since_join = 0
                     ks, kg = (ka, kb2) if a is start else (kb2, ka)
@@ -341,9 +374,12 @@ class FloatingTCBiRRT:
                         return out
                     if out == "reroot" and self.stats["reroots"] < to.max_reroots:
                         self.stats["reroots"] += 1
-                        b_est = self._integrate_path(self._joint_path(start, ks, goal_tree, kg), base0)[1][-1]
-                        new = self._root_goal_tree(goal, b_est, [goal_tree.joints[goal_tree.path_to_root(kg)[-1]], q0],
-                                                   rng, deadline)
+                        b_est = self._integrate_path(self._joint_path(start, ks, goal_tree, kg)[len(start.path_to_root(ks)) - 1:],
+                                                     start.bases[ks])[1][-1]
+                        old_root = goal_tree.joints[goal_tree.path_to_root(kg)[-1]]
+                        new = self._world_goal_tree(q0, goal, base0, rng, attitude=b_est, seeds=[old_root])
+                        if new is None:
+                            new = self._root_goal_tree(goal, b_est, [old_root, q0], rng, deadline)
                         if new is not None:
                             goal_tree = new
                             trees = [start, goal_tree]
@@ -356,6 +392,26 @@ class FloatingTCBiRRT:
                                   f"{st['reached']} connections reached a node's pose, {st['joins']} joined, "
                                   f"{st['joins_rejected']} rejected at the re-integration, {st['corrections_failed']} "
                                   "world-goal corrections failed)")
+
+    def _world_goal_tree(self, q0: np.ndarray, goal: pin.SE3, base0: pin.SE3, rng: np.random.Generator,
+                         attitude: pin.SE3 | None = None, seeds: list[np.ndarray] | None = None) -> FloatingTree | None:
+        """The goal tree of a world goal rooted at a zero-momentum IK solution
+        (:func:`~optplan.planners.floating_reach.zero_momentum_ik`: the centre of mass stays put, so
+        the base's arrival POSITION is known for a given attitude; the attitude is searched near
+        ``attitude``: the start's, or after a join the attitude that join arrived with), or None
+        when it does not converge or collides."""
+        com = pin.centerOfMass(self.robot.model, self._data, self.carry._full(q0, base0))
+        if seeds is None:
+            seed = self._path_ik(q0, base0.actInv(goal))
+            seeds = [q0] if seed is None else [seed, q0]
+        q, b_est, res = zero_momentum_ik(self.robot, self.carry.grasps, goal, seeds, com, rng,
+                                         attitude=base0 if attitude is None else attitude, n_random=2)
+        if res > self.options.ik_tol:
+            return None
+        qg = self.carry.hold(q, b_est.actInv(goal))   # onto the chain to the IK tolerance, in the base frame
+        if qg is None or not self.validity.is_valid(self.carry._full(qg, b_est)):
+            return None
+        return FloatingTree(qg, b_est.actInv(goal), b_est)
 
     def _root_goal_tree(self, goal: pin.SE3, b_est: pin.SE3, seeds: list[np.ndarray], rng: np.random.Generator,
                         deadline: Deadline) -> FloatingTree | None:
@@ -431,7 +487,10 @@ class FloatingTCBiRRT:
         o = self.options
         self.stats["joins"] += 1
         joints = self._joint_path(start, ks, goal_tree, kg)
-        rows, bases = self._integrate_path(joints, base0)
+        fwd = list(reversed(start.path_to_root(ks)))
+        # the start tree's part is exact already; the goal tree's part re-integrated from the join
+        rows, back = self._integrate_path(joints[len(fwd) - 1:], start.bases[ks])
+        bases = [start.bases[i] for i in fwd] + back[1:]
         if self.validity.first_invalid(rows) >= 0:
             self.stats["joins_rejected"] += 1
             return "collides"
@@ -442,7 +501,8 @@ class FloatingTCBiRRT:
                 self.stats["corrections_failed"] += 1
                 return "reroot"
             joints += got[0]
-            rows, bases = self._integrate_path(joints, base0)   # one integration of the whole path
+            bases += got[1]
+        rows, bases = self._integrate_path(joints, base0)   # one integration of the whole path, edge by edge
         dmin, _, _ = self.carry.checker.min_distance_along(np.vstack([self.carry._full(joints[0], base0), rows]))
         if dmin < 0.0:   # the boolean checks and the exact distances disagree: reject rather than return it
             self.stats["joins_rejected"] += 1
