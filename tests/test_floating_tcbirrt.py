@@ -148,3 +148,23 @@ def test_bad_input_and_failures_are_statuses(robot):
     assert res.status.value == "invalid_goal" and "goal pose" in res.message
     res = planner.plan(q0, scene.goal, base0=pin.SE3(np.eye(3), np.array([1.5, 0.0, 0.0])))
     assert res.status.value == "invalid_start"
+
+
+def test_zero_momentum_ik_keeps_the_centre_of_mass(robot):
+    # truss trial 17: no two-arm IK solution holds the module at this world goal with the base at the
+    # origin, but one does with the base where the unmoved centre of mass puts it
+    from optplan.planners.floating_reach import zero_momentum_ik
+
+    scene = Scene.load("floating_truss")
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 17, 0)
+    planner = FloatingCarryPlanner(robot, scene)
+    assert planner.hold(q0, goal) is None                     # base at the origin: out of reach
+    m, d = robot.model, robot.model.createData()
+    com = pin.centerOfMass(m, d, np.r_[pin.SE3ToXYZQUAT(pin.SE3.Identity()), q0]).copy()
+    q, base, res = zero_momentum_ik(robot, scene.object.grasps, goal, [q0], com, np.random.default_rng(0))
+    assert res <= 1e-10
+    full = np.r_[pin.SE3ToXYZQUAT(base), q]
+    np.testing.assert_allclose(pin.centerOfMass(m, d, full), com, atol=1e-9)   # Pinocchio's CoM, recomputed
+    for arm, h in zip(("A", "B"), _hands(robot, full)):
+        assert np.linalg.norm(pin.log6((goal * scene.object.grasps[arm]).actInv(h)).vector) < 1e-9
+    assert np.linalg.norm(base.translation) > 0.02               # the base had to move for it
