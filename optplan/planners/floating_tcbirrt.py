@@ -338,7 +338,7 @@ class FloatingTCBiRRT:
             return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
                                       "start in collision")
         start = FloatingTree(q0, self.carry.object_in_base(q0), base0)
-        goal_tree = self._world_goal_tree(q0, goal, base0, rng) if self.options.target_frame == "world" else None
+        goal_tree = self._world_goal_tree(q0, goal, base0, rng, deadline) if self.options.target_frame == "world" else None
         if goal_tree is None:
             goal_tree = self._root_goal_tree(goal, base0, [q0], rng, deadline)
         if goal_tree is None:
@@ -377,7 +377,7 @@ class FloatingTCBiRRT:
                         b_est = self._integrate_path(self._joint_path(start, ks, goal_tree, kg)[len(start.path_to_root(ks)) - 1:],
                                                      start.bases[ks])[1][-1]
                         old_root = goal_tree.joints[goal_tree.path_to_root(kg)[-1]]
-                        new = self._world_goal_tree(q0, goal, base0, rng, attitude=b_est, seeds=[old_root])
+                        new = self._world_goal_tree(q0, goal, base0, rng, deadline, attitude=b_est, seeds=[old_root])
                         if new is None:
                             new = self._root_goal_tree(goal, b_est, [old_root, q0], rng, deadline)
                         if new is not None:
@@ -394,7 +394,7 @@ class FloatingTCBiRRT:
                                   "world-goal corrections failed)")
 
     def _world_goal_tree(self, q0: np.ndarray, goal: pin.SE3, base0: pin.SE3, rng: np.random.Generator,
-                         attitude: pin.SE3 | None = None, seeds: list[np.ndarray] | None = None) -> FloatingTree | None:
+                         deadline: Deadline, attitude: pin.SE3 | None = None, seeds: list[np.ndarray] | None = None) -> FloatingTree | None:
         """The goal tree of a world goal rooted at a zero-momentum IK solution
         (:func:`~optplan.planners.floating_reach.zero_momentum_ik`: the centre of mass stays put, so
         the base's arrival POSITION is known for a given attitude; the attitude is searched near
@@ -404,14 +404,20 @@ class FloatingTCBiRRT:
         if seeds is None:
             seed = self._path_ik(q0, base0.actInv(goal))
             seeds = [q0] if seed is None else [seed, q0]
-        q, b_est, res = zero_momentum_ik(self.robot, self.carry.grasps, goal, seeds, com, rng,
-                                         attitude=base0 if attitude is None else attitude, n_random=2)
-        if res > self.options.ik_tol:
-            return None
-        qg = self.carry.hold(q, b_est.actInv(goal))   # onto the chain to the IK tolerance, in the base frame
-        if qg is None or not self.validity.is_valid(self.carry._full(qg, b_est)):
-            return None
-        return FloatingTree(qg, b_est.actInv(goal), b_est)
+        for attempt in range(1 + self.tree_options.goal_seeds // 4):   # more seeds while it collides
+            if deadline.expired():
+                return None
+            trial = seeds if attempt == 0 else [
+                np.clip(seeds[0] + rng.normal(0.0, self.tree_options.goal_seed_spread_rad, self.robot.nj),
+                        self.robot.lower, self.robot.upper)]
+            q, b_est, res = zero_momentum_ik(self.robot, self.carry.grasps, goal, trial, com, rng,
+                                             attitude=base0 if attitude is None else attitude, n_random=2)
+            if res > self.options.ik_tol:
+                continue
+            qg = self.carry.hold(q, b_est.actInv(goal))   # onto the chain to the IK tolerance, in the base frame
+            if qg is not None and self.validity.is_valid(self.carry._full(qg, b_est)):
+                return FloatingTree(qg, b_est.actInv(goal), b_est)
+        return None
 
     def _root_goal_tree(self, goal: pin.SE3, b_est: pin.SE3, seeds: list[np.ndarray], rng: np.random.Generator,
                         deadline: Deadline) -> FloatingTree | None:
