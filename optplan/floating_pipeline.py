@@ -1,8 +1,9 @@
 """The main job for a free-floating robot carrying an object with both hands: plan → optimize → verify.
 
-1. **Plan** with :class:`~optplan.planners.floating_carry.FloatingCarryPlanner`: joints, the base
-   integrated from zero momentum along each edge, collision checked with the base where momentum
-   puts it, the object's goal reached in the world.
+1. **Plan** with :class:`~optplan.planners.floating_tcbirrt.FloatingTCBiRRT` (default; or
+   :class:`~optplan.planners.floating_carry.FloatingCarryPlanner`, ``planner_name="carry"``): joints, the
+   base integrated from zero momentum along each edge, collision checked with the base where
+   momentum puts it, the object's goal reached in the world (or in the base frame).
 2. **Optimize** an :class:`~optplan.problem.OptProblem` on the B-spline kernel core (the shared
    modelling core): the same pinned ends at rest, joint position and velocity limits, the closed
    chain at the knots, the base attitude integrated (RK4) from zero momentum and constrained at the
@@ -36,6 +37,7 @@ from .model.floating import simulate_base
 from .model.robot import RobotModel
 from .planners.base import PlanStatus
 from .planners.floating_carry import FloatingCarryOptions, FloatingCarryPlan, FloatingCarryPlanner
+from .planners.floating_tcbirrt import FloatingTCBiRRT, FloatingTreeOptions
 from .problem.floating_segment import FloatingSegmentSpec, FloatingSplineProblem
 from .problem.frame_terms import ClosedChain
 from .problem.solution import Solution
@@ -51,6 +53,11 @@ class FloatingPipelineOptions:
 
     #: planner options (target frame, steps, tolerances).
     planner: FloatingCarryOptions = field(default_factory=FloatingCarryOptions)
+    #: the planner: "tcbirrt" (:class:`~optplan.planners.floating_tcbirrt.FloatingTCBiRRT`, bidirectional
+    #: trees) or "carry" (:class:`~optplan.planners.floating_carry.FloatingCarryPlanner`, straight + via poses).
+    planner_name: str = "tcbirrt"
+    #: the trees' options of the "tcbirrt" planner (its time limit runs on their ``clock``, CPU by default).
+    tree: FloatingTreeOptions = field(default_factory=FloatingTreeOptions)
     #: planning time limit [s].
     plan_time_limit: float = 10.0
     #: B-spline intervals of the first solve [count] (24: the closed chain of the shipped scenes holds
@@ -71,6 +78,8 @@ class FloatingPipelineOptions:
     n_sub: int = 1
 
     def __post_init__(self) -> None:
+        if self.planner_name not in ("tcbirrt", "carry"):
+            raise OptionError(f"FloatingPipelineOptions.planner_name: expected 'tcbirrt' or 'carry', got {self.planner_name!r}")
         if not (isinstance(self.intervals, int) and 4 <= self.intervals <= self.max_intervals):
             raise OptionError(f"FloatingPipelineOptions.intervals: expected an integer in [4, max_intervals = "
                               f"{self.max_intervals}], got {self.intervals!r}")
@@ -147,7 +156,9 @@ def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE
     goal = scene.goal if goal is None else goal
     if goal is None:
         raise ConfigurationError(f"scene {scene.name!r}: no [goal] pose for the object")
-    planner = FloatingCarryPlanner(robot, scene, opts.planner)
+    planner: FloatingCarryPlanner | FloatingTCBiRRT = (
+        FloatingTCBiRRT(robot, scene, opts.planner, opts.tree) if opts.planner_name == "tcbirrt"
+        else FloatingCarryPlanner(robot, scene, opts.planner))
     plan = planner.plan(q_start, goal, seed=seed, time_limit=opts.plan_time_limit)
     res = FloatingPipelineResult(plan=plan, tolerances=opts.tolerances,
                                  goal_tol=(opts.planner.goal_tol_m, opts.planner.goal_tol_rad))

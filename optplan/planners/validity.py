@@ -141,13 +141,20 @@ class ValidityChecker:
     cannot be built (no C compiler) or does not cover the robot; ``"coal"``: Pinocchio + coal as
     above. :attr:`kernel` tells which one is in use. Diagnostics (:meth:`colliding_pairs`,
     :meth:`grasp_contacts`) and certified edges always use coal.
+
+    A free-floating robot: its configurations carry the base pose (XYZ-quaternion first), so the
+    checks place every geometry where that base puts it; only the configuration checks
+    (:meth:`is_valid`, :meth:`first_invalid`, :meth:`valid_batch`) apply, on coal (the edge bounds
+    and the compiled kernel assume a fixed base and revolute joints).
     """
 
     def __init__(self, robot: RobotModel, scene: Scene | None = None, *, margin: float = 0.0,
                  object_arm: str | None = None, self_collision: bool = True, broadphase: bool = True,
                  batch: bool = True, exact_contacts: bool = True, kernel: str = "native"):
         if robot.is_floating:
-            raise ValueError("ValidityChecker: fixed-base robots only")
+            # the base pose is part of each configuration (XYZ-quaternion first) and so of every
+            # geometry's placement; the compiled kernel and the edge bounds cover fixed bases only
+            kernel = "coal"
         if not (np.isfinite(margin) and margin >= 0.0):
             raise ValueError(f"margin: expected a number >= 0 m, got {margin!r}")
         self.robot = robot

@@ -1,0 +1,82 @@
+"""Where a free-floating robot can hold an object: the zero-momentum world IK.
+
+With zero momentum the system's centre of mass does not move, so the base POSITION follows from the
+joints and the base attitude: ``p_base = c0 − R_base · c_b(q)`` (``c_b``: the centre of mass in the
+base frame). :func:`zero_momentum_ik` finds joints and a base attitude that put every hand at its
+grasp on the object at a world pose with the centre of mass at ``c0`` (Levenberg–Marquardt on
+``(q, log R_base)``, finite-difference Jacobian, from several seeds). The base attitude along a path
+is path-dependent, so a solution says where the arms CAN hold the object (a reachable world goal,
+and the base pose to expect on arrival), not that a given path ends there.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+
+from ..model.robot import RobotModel
+
+__all__ = ["zero_momentum_ik"]
+
+
+def _full(robot: RobotModel, q: np.ndarray, base: pin.SE3) -> np.ndarray:
+    return np.concatenate([pin.SE3ToXYZQUAT(base), q])
+
+
+def zero_momentum_ik(robot: RobotModel, grasps: dict[str, pin.SE3], goal: pin.SE3, seeds: list[np.ndarray],
+                     com: np.ndarray, rng: np.random.Generator, *, attitude: pin.SE3 | None = None,
+                     n_random: int = 8, spread_rad: float = 0.6, iters: int = 100,
+                     tol: float = 1e-10) -> tuple[np.ndarray, pin.SE3, float]:
+    """Joints [rad] and base pose holding the object at the world ``goal`` (each arm's hand at
+    ``goal · grasps[arm]``) with the centre of mass at ``com`` [m, world]; attitudes are searched
+    around ``attitude`` (default identity). Seeds: ``seeds``, then ``n_random`` normal draws
+    (``spread_rad`` per joint) around the first. Returns ``(q, base, residual)`` of the best solution
+    found (residual = norm of the hands' log-SE(3) errors [m, rad]; ≤ ``tol`` when it converged)."""
+    m, d = robot.model, robot.model.createData()
+    R0 = np.eye(3) if attitude is None else attitude.rotation
+    targets = [goal * grasps[a] for a in grasps]
+    fids = [robot.arm(a).ee_frame_id for a in grasps]
+    nj, ident = robot.nj, pin.SE3.Identity()
+
+    def state(x: np.ndarray) -> tuple[np.ndarray, pin.SE3]:
+        q = np.clip(x[:nj], robot.lower, robot.upper)
+        R = R0 @ pin.exp3(x[nj:])
+        cb = pin.centerOfMass(m, d, _full(robot, q, ident))
+        return q, pin.SE3(R, np.asarray(com, float) - R @ cb)
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        q, base = state(x)
+        pin.framesForwardKinematics(m, d, _full(robot, q, base))
+        return np.concatenate([pin.log6(T.actInv(d.oMf[f])).vector for T, f in zip(targets, fids)])
+
+    best: tuple[float, np.ndarray] = (math.inf, np.r_[seeds[0], np.zeros(3)])
+    starts = list(seeds) + [seeds[0] + rng.normal(0.0, spread_rad, nj) for _ in range(n_random)]
+    h = 1e-7
+    for s in starts:
+        x = np.r_[np.clip(s, robot.lower, robot.upper), np.zeros(3)]
+        r = residual(x)
+        e, lam = float(np.linalg.norm(r)), 1e-3
+        for _ in range(iters):
+            if e <= tol:
+                break
+            J = np.empty((len(r), len(x)))
+            for k in range(len(x)):
+                xk = x.copy()
+                xk[k] += h
+                J[:, k] = (residual(xk) - r) / h
+            xt = x - np.linalg.solve(J.T @ J + lam * np.eye(len(x)), J.T @ r)
+            rt = residual(xt)
+            et = float(np.linalg.norm(rt))
+            if et < e:
+                x, r, e, lam = xt, rt, et, max(lam * 0.3, 1e-12)
+            else:
+                lam *= 10.0
+                if lam > 1e4:
+                    break
+        if e < best[0]:
+            best = (e, x)
+        if e <= tol:
+            break
+    q, base = state(best[1])
+    return q, base, best[0]

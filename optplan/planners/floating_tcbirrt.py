@@ -1,0 +1,517 @@
+"""Closed-chain bidirectional RRT for a free-floating robot whose base drifts by momentum conservation.
+
+TCBiRRT's task-space extension (the object's pose interpolated, position linear and rotation along
+the geodesic, both hands solved by IK seeded with the previous waypoint) run in the joints of a
+free-floating robot. The closed chain does not depend on the base, so the object's poses are
+expressed in the BASE frame; the base pose is not free but integrated from zero momentum along every
+edge (a straight line in the joints between two closed-chain waypoints), and collision is checked in
+the world with the base where momentum puts it (:class:`~optplan.planners.validity.ValidityChecker`,
+the base pose being part of each configuration, so of every geometry's placement).
+
+Joining two trees with drift. With zero momentum the base's motion along a joint path is
+left-invariant: an edge moves the base by a displacement that depends on the joints only, not on
+where the base is. So each tree is a tree of joint paths, and a node's base pose is its tree root's
+base composed with the displacements along the path from the root:
+
+* the start tree is rooted at the start with the base where it really is: its base poses are exact;
+* the goal tree is rooted at a joint solution of the goal. With a goal in the base frame (a servicer
+  moving a module on its own body) that root is the goal. With a world goal, the root holds the
+  object at the goal as seen from an ESTIMATE of the base pose at arrival (first the start's base);
+  the goal tree integrates its edges from that estimate, so its collision checks are provisional;
+* the trees are joined where a connection reaches a node's object pose (base frame) with joints
+  within ``join_step_rad``, or by a self-motion join at that pose (interpolated joints projected on
+  the closed chain with the object held still);
+* a joined path is re-integrated as a whole from the start's base and every collision sample is
+  checked again with the base where that integration puts it (a collision there rejects the
+  join, the search goes on); with a world goal, the object then misses the goal by the difference
+  between the estimate and the real arrival pose: short closed-chain motions re-targeted from the
+  drifted base correct it (as :class:`~optplan.planners.floating_carry.FloatingCarryPlanner` does).
+  When the correction fails, the goal tree is re-rooted with the real arrival pose as the new
+  estimate (``max_reroots`` times) while the start tree is kept.
+
+What an ``EXACT`` plan guarantees: the closed chain holds to the IK tolerance at every waypoint; the
+returned base poses are those of one integration from the start's base along the whole joint path
+(RK4 edge by edge, the same map as :func:`~optplan.model.floating.simulate_base`); the
+configurations sampled along every edge (joint steps ≤ ``check_step_rad``) at those base poses are
+collision-free (ValidityChecker, and the smallest exact coal distance over them is ≥ 0,
+``min_clearance_m``); the object's pose at the end is within the goal tolerance in the goal's frame.
+Between the samples, and between the waypoints (where the joint-linear edge leaves the closed chain
+by a second-order amount), nothing is guaranteed: :func:`optplan.verify` judges the optimized
+trajectory. Not complete: no regrasps (a hand never lets go).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ConfigurationError, OptionError
+from ..model.kinematics import Kinematics
+from ..model.robot import RobotModel
+from ..scene import Scene
+from .base import Deadline, PlanStatus
+from .floating_carry import FloatingCarryOptions, FloatingCarryPlan, FloatingCarryPlanner, integrate_edge
+from .floating_reach import zero_momentum_ik
+from .task_space import interpolate_task
+from .validity import ValidityChecker
+
+__all__ = ["FloatingTreeOptions", "FloatingTCBiRRT", "FloatingTree"]
+
+
+@dataclass(frozen=True)
+class FloatingTreeOptions:
+    """Options of :class:`FloatingTCBiRRT`'s trees (the steps, tolerances and goal frame are the
+    :class:`~optplan.planners.floating_carry.FloatingCarryOptions` it is given)."""
+
+    #: largest object translation of one extension (TCBiRRT's s_ξ) [m].
+    extend_m: float = 0.25
+    #: largest object rotation of one extension [rad].
+    extend_rad: float = 0.5
+    #: probability that a sample is the other tree's root pose [probability].
+    goal_bias: float = 0.1
+    #: the sampling box: start and goal object positions (base frame) widened by this, per axis [m].
+    sample_margin_m: float = 0.4
+    #: range of a sample's rotation offset from the start-goal geodesic, per RPY angle [rad].
+    sample_angle_rad: float = 0.6
+    #: largest joint change between consecutive closed-chain waypoints (path-IK continuity) [rad].
+    max_joint_step: float = 0.3
+    #: a connection that reaches a node's object pose joins it directly within this joint distance
+    #: (max norm), else by a self-motion join at that pose [rad].
+    join_step_rad: float = 0.05
+    #: rotation weight of the nearest-neighbour distance [m/rad].
+    rotation_weight_m: float = 0.3
+    #: random IK seeds tried for a joint solution of the goal pose [count].
+    goal_seeds: int = 20
+    #: joint spread of those seeds around the start (normal, per joint) [rad].
+    goal_seed_spread_rad: float = 0.6
+    #: times the goal tree is re-rooted at the real arrival base when the world-goal correction fails [count].
+    max_reroots: int = 8
+    #: iterations without a join after which the goal tree gains another root (another joint
+    #: solution of the goal pose: another IK branch) [count].
+    root_interval: int = 60
+    #: most roots of the goal tree [count].
+    max_goal_roots: int = 6
+    #: Newton steps of the generalized-Jacobian correction of the world goal [count].
+    correction_steps: int = 12
+    #: largest joint change of one correction step [rad].
+    correction_step_rad: float = 0.1
+    #: the clock of the time limit: "cpu" (this process's CPU time) or "wall".
+    clock: str = "cpu"
+
+    def __post_init__(self) -> None:
+        for name in ("extend_m", "extend_rad", "sample_margin_m", "sample_angle_rad", "max_joint_step",
+                     "join_step_rad", "rotation_weight_m", "goal_seed_spread_rad", "correction_step_rad"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise OptionError(f"FloatingTreeOptions.{name}: expected a positive finite number, got {v!r}")
+        if not (isinstance(self.goal_bias, (int, float)) and 0.0 <= self.goal_bias <= 1.0):
+            raise OptionError(f"FloatingTreeOptions.goal_bias: expected a probability in [0, 1], got {self.goal_bias!r}")
+        for name in ("goal_seeds", "max_reroots", "root_interval", "max_goal_roots", "correction_steps"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 0):
+                raise OptionError(f"FloatingTreeOptions.{name}: expected an integer ≥ 0, got {v!r}")
+        if self.clock not in ("cpu", "wall"):
+            raise OptionError(f"FloatingTreeOptions.clock: expected 'cpu' or 'wall', got {self.clock!r}")
+
+
+class FloatingTree:
+    """One tree: per node the joints [rad], the object's pose in the base frame, the base's world
+    pose (exact for the start tree, relative to the root's estimate for the goal tree) and the parent
+    index (−1 at a root; the goal tree may have several roots: joint solutions of the same goal pose)."""
+
+    def __init__(self, joints: np.ndarray, obj: pin.SE3, base: pin.SE3) -> None:
+        self.joints: list[np.ndarray] = [np.array(joints, float)]
+        self.objs: list[pin.SE3] = [obj]
+        self.bases: list[pin.SE3] = [base]
+        self.parent: list[int] = [-1]
+        self._p = [np.array(obj.translation)]
+        self._R = [np.array(obj.rotation)]
+
+    def __len__(self) -> int:
+        return len(self.joints)
+
+    @property
+    def roots(self) -> list[int]:
+        return [k for k, p in enumerate(self.parent) if p < 0]
+
+    def add(self, joints: np.ndarray, obj: pin.SE3, base: pin.SE3, parent: int) -> int:
+        """A node (``parent`` −1: another root)."""
+        self.joints.append(np.array(joints, float))
+        self.objs.append(obj)
+        self.bases.append(base)
+        self.parent.append(int(parent))
+        self._p.append(np.array(obj.translation))
+        self._R.append(np.array(obj.rotation))
+        return len(self.joints) - 1
+
+    def nearest(self, M: pin.SE3, w_rot: float) -> int:
+        """The node whose object pose is nearest ``M``: position distance + ``w_rot`` × rotation angle."""
+        P, R = np.asarray(self._p), np.asarray(self._R)
+        dp = np.linalg.norm(P - M.translation, axis=1)
+        c = np.clip((np.einsum("nij,ij->n", R, M.rotation) - 1.0) / 2.0, -1.0, 1.0)
+        return int(np.argmin(dp + w_rot * np.arccos(c)))
+
+    def path_to_root(self, k: int) -> list[int]:
+        out = [k]
+        while self.parent[out[-1]] >= 0:
+            out.append(self.parent[out[-1]])
+        return out
+
+
+class FloatingTCBiRRT:
+    """Bidirectional closed-chain RRT with base drift (module docstring). ``options``: the shared
+    steps, tolerances and goal frame (:class:`FloatingCarryOptions`); ``tree``: the trees' options."""
+
+    def __init__(self, robot: RobotModel, scene: Scene, options: FloatingCarryOptions | None = None,
+                 tree: FloatingTreeOptions | None = None):
+        if not robot.is_floating:
+            raise ConfigurationError(f"FloatingTCBiRRT needs a free-floating robot; {robot.name!r} has a fixed base")
+        self.carry = FloatingCarryPlanner(robot, scene, options)   # closed chain, corrections, results
+        self.robot, self.scene = robot, scene
+        self.options = self.carry.options
+        self.tree_options = tree or FloatingTreeOptions()
+        self.arm_names = self.carry.arm_names
+        self.validity = ValidityChecker(robot, scene)
+        self._kin = Kinematics(robot)
+        self._data = robot.model.createData()
+        #: statistics of the last query: nodes per tree, joins tried / rejected at re-integration, re-roots
+        self.stats: dict[str, int] = {}
+
+    def object_in_base(self, joints: np.ndarray) -> pin.SE3:
+        """The object's pose in the base frame (read from the first arm's hand)."""
+        return self.carry.object_in_base(joints)
+
+    # ------------------------------------------------------------------ edges and extensions
+    def _edge(self, base: pin.SE3, qa: np.ndarray, qb: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The edge ``qa → qb`` integrated from ``base`` (rows every ≤ ``check_step_rad``) and
+        whether every row after the first is collision-free."""
+        n = max(1, math.ceil(float(np.max(np.abs(qb - qa))) / self.options.check_step_rad))
+        Q = integrate_edge(self.robot, base, qa, qb, n)
+        return Q, self.validity.first_invalid(Q[1:]) < 0
+
+    def _grow(self, tree: FloatingTree, k: int, poses: list[pin.SE3],
+              toward: np.ndarray | None = None) -> tuple[int, bool]:
+        """Path IK through ``poses`` (object in the base frame) from node ``k``, each waypoint a new
+        node; returns (last node, whether every pose was reached). With ``toward`` (joints), each
+        waypoint's IK is seeded a share of the way toward them (the arms' self-motion drifts toward
+        that configuration while the object follows its path)."""
+        q, last = tree.joints[k], k
+        half = 0.5 * self.tree_options.max_joint_step
+        for j, M in enumerate(poses):
+            seed = q
+            if toward is not None:
+                step = (toward - q) / (len(poses) - j)
+                seed = q + step * min(1.0, half / max(float(np.max(np.abs(step))), 1e-12))
+            qn = self.carry.hold(seed, M)
+            if qn is None or float(np.max(np.abs(qn - q))) > self.tree_options.max_joint_step:
+                return last, False
+            Q, ok = self._edge(tree.bases[last], q, qn)
+            if not ok:
+                return last, False
+            last = tree.add(qn, M, pin.XYZQUATToSE3(Q[-1, :7]), last)
+            q = qn
+        return last, True
+
+    def _extend(self, tree: FloatingTree, target: pin.SE3, toward: np.ndarray | None = None) -> tuple[int, bool]:
+        """ConstrainedExtend: from the nearest node at most one extension step toward ``target``
+        (``toward``: the joints the IK seeds lean to, :meth:`_grow`); returns (last node added or the
+        nearest, whether the target pose was reached)."""
+        o, to = self.options, self.tree_options
+        k = tree.nearest(target, to.rotation_weight_m)
+        M0 = tree.objs[k]
+        dp = float(np.linalg.norm(target.translation - M0.translation))
+        dr = float(np.linalg.norm(pin.log3(M0.rotation.T @ target.rotation)))
+        if dp < 1e-9 and dr < 1e-9:
+            return k, True
+        s = min(1.0, to.extend_m / max(dp, 1e-12), to.extend_rad / max(dr, 1e-12))
+        w = pin.log3(M0.rotation.T @ target.rotation)
+        R1 = M0.rotation @ pin.exp3(s * w) if s < 1.0 else target.rotation
+        p1 = M0.translation + s * (target.translation - M0.translation)
+        n = max(1, math.ceil(max(s * dp / o.task_step_m, s * dr / o.task_step_rad)))
+        poses = [pin.SE3(R, p) for R, p in interpolate_task(M0.rotation, M0.translation, R1, p1, n)]
+        last, ok = self._grow(tree, k, poses, toward if s >= 1.0 else None)
+        return last, ok and s >= 1.0
+
+    def _connect(self, tree: FloatingTree, node_pose: pin.SE3, node_joints: np.ndarray,
+                 deadline: Deadline) -> tuple[int, bool]:
+        """Extend ``tree`` toward the other tree's node (``node_pose``; the last extension's IK seeds
+        lean to ``node_joints``) until trapped or reached."""
+        last, prev = -1, -2
+        while not deadline.expired():
+            last, reached = self._extend(tree, node_pose, node_joints)
+            if reached:
+                return last, True
+            if last == prev:
+                return last, False
+            prev = last
+        return last, False
+
+    def _join(self, tree: FloatingTree, k: int, q_target: np.ndarray, deadline: Deadline) -> int | None:
+        """Joints from node ``k`` to ``q_target`` (both holding the object at node ``k``'s pose): a
+        direct edge when close, else a self-motion join (interpolated joints projected onto the
+        closed chain, the object held still); returns the node at ``q_target`` or None."""
+        to = self.tree_options
+        q0, M = tree.joints[k], tree.objs[k]
+        gap = float(np.max(np.abs(q_target - q0)))
+        n = max(1, math.ceil(gap / to.join_step_rad))
+        last, q = k, q0
+        for i in range(1, n + 1):
+            if deadline.expired():
+                return None
+            qn = q_target if i == n else self.carry.hold(q0 + (i / n) * (q_target - q0), M)
+            if qn is None or float(np.max(np.abs(qn - q))) > to.max_joint_step:
+                return None
+            Q, ok = self._edge(tree.bases[last], q, qn)
+            if not ok:
+                return None
+            last, q = tree.add(qn, M, pin.XYZQUATToSE3(Q[-1, :7]), last), qn
+        return last
+
+    # ------------------------------------------------------------------ goal configurations
+    def _path_ik(self, q: np.ndarray, target_b: pin.SE3) -> np.ndarray | None:
+        """Joints holding the object at ``target_b`` reached by path IK along the straight task-space
+        motion from ``q`` (collisions ignored): a solution on the same IK branch as ``q``."""
+        o = self.options
+        M0 = self.carry.object_in_base(q)
+        dp = float(np.linalg.norm(target_b.translation - M0.translation))
+        dr = float(np.linalg.norm(pin.log3(M0.rotation.T @ target_b.rotation)))
+        n = max(1, math.ceil(max(dp / o.task_step_m, dr / o.task_step_rad)))
+        for R, p in interpolate_task(M0.rotation, M0.translation, target_b.rotation, target_b.translation, n):
+            qn = self.carry.hold(q, pin.SE3(R, p))
+            if qn is None or float(np.max(np.abs(qn - q))) > self.tree_options.max_joint_step:
+                return None
+            q = qn
+        return q
+
+    def _goal_joints(self, seed_joints: list[np.ndarray], target_b: pin.SE3, base: pin.SE3,
+                     rng: np.random.Generator, deadline: Deadline, tries: int | None = None) -> np.ndarray | None:
+        """A collision-free (base at ``base``) joint solution holding the object at ``target_b``:
+        path IK from the first of ``seed_joints`` (the same IK branch), IK from each of them, then
+        from ``tries`` (default ``goal_seeds``) random seeds around them."""
+        to, r = self.tree_options, self.robot
+        seeds: list[np.ndarray | None] = [self._path_ik(seed_joints[0], target_b)] + list(seed_joints)
+        base_seeds = [q for q in seeds if q is not None]
+        for k in range(to.goal_seeds if tries is None else tries):
+            s0 = base_seeds[k % len(base_seeds)]
+            seeds.append(np.clip(s0 + rng.normal(0.0, to.goal_seed_spread_rad, r.nj), r.lower, r.upper))
+        for s in seeds:
+            if deadline.expired():
+                return None
+            if s is None:
+                continue
+            q = self.carry.hold(s, target_b)
+            if q is not None and self.validity.is_valid(self.carry._full(q, base)):
+                return q
+        return None
+
+    def _sample(self, rng: np.random.Generator, a: pin.SE3, b: pin.SE3) -> pin.SE3:
+        to = self.tree_options
+        lo = np.minimum(a.translation, b.translation) - to.sample_margin_m
+        hi = np.maximum(a.translation, b.translation) + to.sample_margin_m
+        R = a.rotation @ pin.exp3(rng.uniform() * pin.log3(a.rotation.T @ b.rotation))
+        off = pin.rpy.rpyToMatrix(*rng.uniform(-to.sample_angle_rad, to.sample_angle_rad, 3))
+        return pin.SE3(R @ off, rng.uniform(lo, hi))
+
+    # ------------------------------------------------------------------ the query
+    def plan(self, q_start: np.ndarray, goal: pin.SE3, *, base0: pin.SE3 | None = None, seed: int = 0,
+             time_limit: float = 10.0) -> FloatingCarryPlan:
+        """Plan from the joints ``q_start`` [rad] (holding the object; base at ``base0``, default the
+        identity, at rest) to the object's ``goal`` (world, or base frame with
+        ``options.target_frame = "base"``) within ``time_limit`` [s] on ``tree.clock``."""
+        r, to = self.robot, self.tree_options
+        t0 = time.perf_counter()
+        deadline = Deadline(float(time_limit), to.clock)
+        q0 = r.check_joints(np.asarray(q_start, float), "q_start")
+        base0 = pin.SE3.Identity() if base0 is None else base0
+        rng = np.random.default_rng(seed)
+        self.stats = {"iterations": 0, "nodes_start": 1, "nodes_goal": 0, "goal_roots": 0, "reached": 0,
+                      "joins": 0, "joins_rejected": 0, "corrections_failed": 0, "reroots": 0}
+        qp = self.carry.hold(q0, self.carry.object_in_base(q0))
+        if qp is None or float(np.max(np.abs(qp - q0))) > 1e-3:
+            return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
+                                      "q_start does not hold the object with both hands (closed chain off by > 1e-3 rad)")
+        q0 = qp
+        if not self.validity.is_valid(self.carry._full(q0, base0)):
+            return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
+                                      "start in collision")
+        start = FloatingTree(q0, self.carry.object_in_base(q0), base0)
+        goal_tree = self._world_goal_tree(q0, goal, base0, rng, deadline) if self.options.target_frame == "world" else None
+        if goal_tree is None:
+            goal_tree = self._root_goal_tree(goal, base0, [q0], rng, deadline)
+        if goal_tree is None:
+            status = PlanStatus.TIMEOUT if deadline.expired() else PlanStatus.INVALID_GOAL
+            return self.carry._result(status, [q0], [base0], float("nan"), t0, goal, 0,
+                                      f"no collision-free joint solution of the goal pose found ({to.goal_seeds + 1} IK seeds)")
+        trees = [start, goal_tree]
+        since_join = 0
+        while not deadline.expired():
+            self.stats["iterations"] += 1
+            since_join += 1
+            if since_join >= to.root_interval and len(goal_tree.roots) < to.max_goal_roots:
+                since_join = 0   # another IK branch of the goal pose
+                q = self._goal_joints([goal_tree.joints[0], q0], goal_tree.objs[0], goal_tree.bases[0], rng, deadline,
+                                      tries=to.goal_seeds)
+                if q is not None:
+                    goal_tree.add(q, goal_tree.objs[0], goal_tree.bases[0], -1)
+            target = goal_tree.objs[0] if rng.uniform() < to.goal_bias else self._sample(rng, start.objs[0], goal_tree.objs[0])
+            a, b = trees
+            n_before = len(a)
+            ka, _ = self._extend(a, target)
+            if len(a) > n_before or ka == 0:
+                kb, reached = self._connect(b, a.objs[ka], a.joints[ka], deadline)
+                kb2 = None
+                if reached:
+                    self.stats["reached"] += 1
+                    kb2 = self._join(b, kb, a.joints[ka], deadline)
+                if kb2 is not None:
+                    since_join = 0
+                    ks, kg = (ka, kb2) if a is start else (kb2, ka)
+                    out = self._finish(start, ks, goal_tree, kg, goal, base0, rng, deadline, t0)
+                    if isinstance(out, FloatingCarryPlan):
+                        return out
+                    if out == "reroot" and self.stats["reroots"] < to.max_reroots:
+                        self.stats["reroots"] += 1
+                        b_est = self._integrate_path(self._joint_path(start, ks, goal_tree, kg)[len(start.path_to_root(ks)) - 1:],
+                                                     start.bases[ks])[1][-1]
+                        old_root = goal_tree.joints[goal_tree.path_to_root(kg)[-1]]
+                        new = self._world_goal_tree(q0, goal, base0, rng, deadline, attitude=b_est, seeds=[old_root])
+                        if new is None:
+                            new = self._root_goal_tree(goal, b_est, [old_root, q0], rng, deadline)
+                        if new is not None:
+                            goal_tree = new
+                            trees = [start, goal_tree]
+                            continue
+            trees = [trees[1], trees[0]]
+        self.stats.update(nodes_start=len(start), nodes_goal=len(goal_tree), goal_roots=len(goal_tree.roots))
+        st = self.stats
+        return self.carry._result(PlanStatus.TIMEOUT, [q0], [base0], float("nan"), t0, goal, 0,
+                                  f"time limit ({len(start)} + {len(goal_tree)} nodes, {st['goal_roots']} goal roots, "
+                                  f"{st['reached']} connections reached a node's pose, {st['joins']} joined, "
+                                  f"{st['joins_rejected']} rejected at the re-integration, {st['corrections_failed']} "
+                                  "world-goal corrections failed)")
+
+    def _world_goal_tree(self, q0: np.ndarray, goal: pin.SE3, base0: pin.SE3, rng: np.random.Generator,
+                         deadline: Deadline, attitude: pin.SE3 | None = None, seeds: list[np.ndarray] | None = None) -> FloatingTree | None:
+        """The goal tree of a world goal rooted at a zero-momentum IK solution
+        (:func:`~optplan.planners.floating_reach.zero_momentum_ik`: the centre of mass stays put, so
+        the base's arrival POSITION is known for a given attitude; the attitude is searched near
+        ``attitude``: the start's, or after a join the attitude that join arrived with), or None
+        when it does not converge or collides."""
+        com = pin.centerOfMass(self.robot.model, self._data, self.carry._full(q0, base0))
+        if seeds is None:
+            seed = self._path_ik(q0, base0.actInv(goal))
+            seeds = [q0] if seed is None else [seed, q0]
+        for attempt in range(1 + self.tree_options.goal_seeds // 4):   # more seeds while it collides
+            if deadline.expired():
+                return None
+            trial = seeds if attempt == 0 else [
+                np.clip(seeds[0] + rng.normal(0.0, self.tree_options.goal_seed_spread_rad, self.robot.nj),
+                        self.robot.lower, self.robot.upper)]
+            q, b_est, res = zero_momentum_ik(self.robot, self.carry.grasps, goal, trial, com, rng,
+                                             attitude=base0 if attitude is None else attitude, n_random=2)
+            if res > self.options.ik_tol:
+                continue
+            qg = self.carry.hold(q, b_est.actInv(goal))   # onto the chain to the IK tolerance, in the base frame
+            if qg is not None and self.validity.is_valid(self.carry._full(qg, b_est)):
+                return FloatingTree(qg, b_est.actInv(goal), b_est)
+        return None
+
+    def _root_goal_tree(self, goal: pin.SE3, b_est: pin.SE3, seeds: list[np.ndarray], rng: np.random.Generator,
+                        deadline: Deadline) -> FloatingTree | None:
+        target_b = b_est.actInv(goal) if self.options.target_frame == "world" else goal
+        qg = self._goal_joints(seeds, target_b, b_est, rng, deadline)
+        if qg is None:
+            return None
+        return FloatingTree(qg, target_b, b_est)
+
+    def _joint_path(self, start: FloatingTree, ks: int, goal_tree: FloatingTree, kg: int) -> list[np.ndarray]:
+        """Joints from the start to the goal tree's root through the join ``ks`` ~ ``kg`` (same joints)."""
+        fwd = [start.joints[i] for i in reversed(start.path_to_root(ks))]
+        back = [goal_tree.joints[i] for i in goal_tree.path_to_root(kg)]
+        return fwd + back[1:]
+
+    def _integrate_path(self, joints: list[np.ndarray], base0: pin.SE3) -> tuple[np.ndarray, list[pin.SE3]]:
+        """Every collision sample of the joint path (rows, base integrated from ``base0`` edge by
+        edge) and the base at each waypoint."""
+        rows, bases, base = [], [base0], base0
+        for qa, qb in zip(joints[:-1], joints[1:]):
+            n = max(1, math.ceil(float(np.max(np.abs(qb - qa))) / self.options.check_step_rad))
+            Q = integrate_edge(self.robot, base, qa, qb, n)
+            rows.append(Q[1:])
+            base = pin.XYZQUATToSE3(Q[-1, :7])
+            bases.append(base)
+        return (np.vstack(rows) if rows else np.empty((0, self.robot.nq))), bases
+
+    def _correct(self, q: np.ndarray, base: pin.SE3, goal: pin.SE3,
+                 deadline: Deadline) -> tuple[list[np.ndarray], list[pin.SE3]] | None:
+        """Closed-chain correction of the world goal from ``(q, base)``: Newton steps on both hands'
+        world poses with the generalized Jacobian (zero momentum), each step's joints re-closed on
+        the chain in the base frame, then integrated and collision-checked as an edge. Returns the
+        new waypoints and bases, or None when it does not reach the goal tolerance."""
+        o, to = self.options, self.tree_options
+        m, d = self.robot.model, self._data
+        ws: list[np.ndarray] = []
+        bs: list[pin.SE3] = []
+        for _ in range(to.correction_steps + 1):
+            full = self.carry._full(q, base)
+            pin.framesForwardKinematics(m, d, full)
+            errs = []
+            for a in self.arm_names:
+                H, T = d.oMf[self.robot.arm(a).ee_frame_id], goal * self.carry.grasps[a]
+                errs.append(np.r_[H.translation - T.translation, pin.log3(H.rotation @ T.rotation.T)])
+            ep, er = self.carry._goal_error(q, base, goal)
+            if ep <= o.goal_tol_m and er <= o.goal_tol_rad:
+                return ws, bs
+            if deadline.expired():
+                return None
+            G = self._kin.generalized_jacobians(full)
+            J = np.vstack([G[a] for a in self.arm_names])
+            e = np.concatenate(errs)
+            dq = -J.T @ np.linalg.solve(J @ J.T + 1e-8 * np.eye(len(e)), e)
+            n = float(np.max(np.abs(dq)))
+            if n > to.correction_step_rad:
+                dq *= to.correction_step_rad / n
+            q_lin = np.clip(q + dq, self.robot.lower, self.robot.upper)
+            qn = self.carry.hold(q_lin, self.carry.object_in_base(q_lin))
+            if qn is None or float(np.max(np.abs(qn - q))) > to.max_joint_step:
+                return None
+            Q, ok = self._edge(base, q, qn)
+            if not ok:
+                return None
+            q, base = qn, pin.XYZQUATToSE3(Q[-1, :7])
+            ws.append(q)
+            bs.append(base)
+        return None
+
+    def _finish(self, start: FloatingTree, ks: int, goal_tree: FloatingTree, kg: int, goal: pin.SE3, base0: pin.SE3,
+                rng: np.random.Generator, deadline: Deadline, t0: float) -> FloatingCarryPlan | str:
+        """A joined path: re-integrated from ``base0`` as a whole and re-checked, then (world goal)
+        corrected for the drift. Returns the plan, ``"collides"`` or ``"reroot"``."""
+        o = self.options
+        self.stats["joins"] += 1
+        joints = self._joint_path(start, ks, goal_tree, kg)
+        fwd = list(reversed(start.path_to_root(ks)))
+        # the start tree's part is exact already; the goal tree's part re-integrated from the join
+        rows, back = self._integrate_path(joints[len(fwd) - 1:], start.bases[ks])
+        bases = [start.bases[i] for i in fwd] + back[1:]
+        if self.validity.first_invalid(rows) >= 0:
+            self.stats["joins_rejected"] += 1
+            return "collides"
+        n_wp = len(joints)
+        if o.target_frame == "world":
+            got = self._correct(joints[-1], bases[-1], goal, deadline)
+            if got is None:
+                self.stats["corrections_failed"] += 1
+                return "reroot"
+            joints += got[0]
+            bases += got[1]
+        rows, bases = self._integrate_path(joints, base0)   # one integration of the whole path, edge by edge
+        dmin, _, _ = self.carry.checker.min_distance_along(np.vstack([self.carry._full(joints[0], base0), rows]))
+        if dmin < 0.0:   # the boolean checks and the exact distances disagree: reject rather than return it
+            self.stats["joins_rejected"] += 1
+            return "collides"
+        self.stats.update(nodes_start=len(start), nodes_goal=len(goal_tree), goal_roots=len(goal_tree.roots))
+        return self.carry._result(PlanStatus.EXACT, joints, bases, float(dmin), t0, goal, len(joints) - n_wp, "")

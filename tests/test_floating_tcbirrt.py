@@ -1,0 +1,170 @@
+"""The bidirectional closed-chain RRT of a free-floating robot (optplan.planners.floating_tcbirrt),
+judged independently: one simulate_base run along the whole joint path (finer RK4 than the
+planner's edge-by-edge integration) gives the base, Pinocchio FK the closed chain, coal's exact
+distances the clearance at that base, and the object's pose at the end the goal error."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.collision.checker import CollisionChecker
+from optplan.errors import ConfigurationError, OptionError
+from optplan.floating_pipeline import FloatingPipelineOptions, options_for_scene, scene_start, trial_goal
+from optplan.model.floating import simulate_base
+from optplan.model.robot import RobotModel
+from optplan.planners.floating_carry import FloatingCarryOptions, FloatingCarryPlanner
+from optplan.planners.floating_tcbirrt import FloatingTCBiRRT, FloatingTreeOptions
+from optplan.planners.validity import ValidityChecker
+from optplan.scene import Scene
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return RobotModel.from_name("eba_ffsr")
+
+
+def _whole_path(robot, joints, base0, per_edge=20):
+    """The joint path re-integrated in one run from ``base0``, with another timing than the planner's:
+    each edge traversed with the smoothstep 3τ² − 2τ³ (at rest at every waypoint, so the trajectory is
+    C¹ and RK4 steps across waypoints stay 4th order). With zero momentum the base depends on the
+    path only, not on its timing."""
+    s = np.linspace(0.0, len(joints) - 1, (len(joints) - 1) * per_edge + 1)
+
+    def traj(t):
+        k = min(int(t), len(joints) - 2)
+        tau = t - k
+        d = joints[k + 1] - joints[k]
+        return joints[k] + (3 * tau**2 - 2 * tau**3) * d, (6 * tau - 6 * tau**2) * d
+
+    return s, simulate_base(robot, traj, s, base0=base0, substeps=4)
+
+
+def _hands(robot, q):
+    d = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, d, q)
+    return [d.oMf[robot.arm(a).ee_frame_id].copy() for a in ("A", "B")]
+
+
+def _judge(robot, scene, res, base0=None):
+    """Every property the planner claims, checked independently; returns the re-integration."""
+    base0 = pin.SE3.Identity() if base0 is None else base0
+    assert res.success, res.message
+    s, sim = _whole_path(robot, res.joints, base0)
+    for k, i in enumerate(range(0, len(s), 20)):   # the plan's base poses = the independent integration
+        e = pin.XYZQUATToSE3(res.q[k, :7]).actInv(pin.XYZQUATToSE3(sim.q[i, :7]))
+        assert np.linalg.norm(pin.log6(e).vector) < 1e-6
+    assert np.max(sim.momentum_residual) < 1e-8    # zero momentum along the whole path
+    ga, gb = scene.object.grasps["A"], scene.object.grasps["B"]
+    for q in res.q:                                 # closed chain at every waypoint
+        hA, hB = _hands(robot, q)
+        rel = (hA * ga.inverse()).actInv(hB * gb.inverse())
+        assert np.linalg.norm(pin.log6(rel).vector) < 1e-8
+    dmin, _, _ = CollisionChecker(robot, scene).min_distance_along(sim.q)   # exact, at the re-integrated base
+    assert dmin >= 0.0
+    return sim
+
+
+def test_world_goal_with_drift_is_reached(robot):
+    # trial 10 of floating_truss: the first join misses the world goal by the drift; the goal tree is
+    # re-rooted and the generalized-Jacobian correction lands the object (the straight planner fails here)
+    scene = Scene.load("floating_truss")
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 10, 0)
+    planner = FloatingTCBiRRT(robot, scene)
+    res = planner.plan(q0, goal, seed=10, time_limit=20.0)
+    sim = _judge(robot, scene, res)
+    hA, _ = _hands(robot, sim.q[-1])
+    err = goal.actInv(hA * scene.object.grasps["A"].inverse())
+    assert np.linalg.norm(err.translation) <= 1e-3 and np.linalg.norm(pin.log3(err.rotation)) <= 1e-3
+    assert np.degrees(np.linalg.norm(pin.log3(sim.final_base.rotation))) > 1.0   # the base really turned
+    qfix = np.concatenate([pin.SE3ToXYZQUAT(pin.SE3.Identity()), res.joints[-1]])   # without the drift: a miss
+    assert np.linalg.norm(goal.actInv(_hands(robot, qfix)[0] * scene.object.grasps["A"].inverse()).translation) > 0.01
+    assert res.min_clearance_m >= 0.0
+
+
+def test_goal_in_the_base_frame_where_the_straight_planner_fails(robot):
+    # trial 9 of floating_stow (a servicer stowing a module on its own body): the straight motion and
+    # its via poses collide; the trees find a path
+    scene = Scene.load("floating_stow")
+    opts = options_for_scene(scene).planner
+    assert opts.target_frame == "base"
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 9, 0)
+    assert not FloatingCarryPlanner(robot, scene, opts).plan(q0, goal, seed=9).success
+    planner = FloatingTCBiRRT(robot, scene, opts)
+    res = planner.plan(q0, goal, seed=9, time_limit=20.0)
+    _judge(robot, scene, res)
+    e = goal.actInv(planner.object_in_base(res.joints[-1]))   # base frame: no drift correction
+    assert np.linalg.norm(e.translation) < 1e-8 and res.corrections == 0
+
+
+def test_start_elsewhere_in_the_world(robot):
+    # the base starts away from the origin, turned: the planner's poses follow it (left-invariance)
+    scene = Scene.load("floating_stow")
+    opts = options_for_scene(scene).planner
+    base0 = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, 0.3), np.array([-1.0, 0.5, 0.0]))
+    free = dataclasses.replace(scene, obstacles=())   # the shipped obstacles are placed for a base at the origin
+    res = FloatingTCBiRRT(robot, free, opts).plan(scene_start(robot, scene), scene.goal, base0=base0, seed=0)
+    _judge(robot, free, res, base0)
+
+
+def test_validity_checker_places_the_floating_base(robot):
+    scene = Scene.load("floating_truss")
+    vc, cc = ValidityChecker(robot, scene), CollisionChecker(robot, scene)
+    assert vc.kernel == "coal"
+    rng = np.random.default_rng(3)
+    q0 = scene_start(robot, scene)
+    Q = []
+    for _ in range(150):
+        b = pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-0.4, 0.4, 3)), rng.uniform(-0.4, 0.4, 3))
+        Q.append(np.r_[pin.SE3ToXYZQUAT(b), q0 + rng.normal(0.0, 0.2, robot.nj)])
+    Q = np.array(Q)
+    exact = np.array([cc.min_distance(q)[0] >= 0.0 for q in Q])
+    assert 10 < exact.sum() < len(Q) - 10          # both verdicts occur
+    np.testing.assert_array_equal(vc.valid_batch(Q), exact)
+    # the same joints, the base moved onto the truss's beam: the base pose is part of the placement
+    q = Q[np.flatnonzero(exact)[0]].copy()
+    q[:3] = [1.95, -0.2, 0.0]
+    assert not vc.is_valid(q) and cc.min_distance(q)[0] < 0.0
+
+
+def test_bad_input_and_failures_are_statuses(robot):
+    scene = Scene.load("floating_truss")
+    with pytest.raises(OptionError, match="extend_m"):
+        FloatingTreeOptions(extend_m=0.0)
+    with pytest.raises(OptionError, match="clock"):
+        FloatingTreeOptions(clock="gpu")
+    with pytest.raises(OptionError, match="goal_bias"):
+        FloatingTreeOptions(goal_bias=1.5)
+    with pytest.raises(OptionError, match="planner_name"):
+        FloatingPipelineOptions(planner_name="prm")
+    with pytest.raises(ConfigurationError, match="free-floating"):
+        FloatingTCBiRRT(RobotModel.from_name("tcbirrt_dual_arm"), scene)
+    planner = FloatingTCBiRRT(robot, scene, FloatingCarryOptions(), FloatingTreeOptions(goal_seeds=3))
+    q0 = scene_start(robot, scene)
+    far = pin.SE3(np.eye(3), np.array([4.0, 0.0, 0.0]))     # out of the arms' reach
+    res = planner.plan(q0, far, seed=0, time_limit=5.0)
+    assert res.status.value == "invalid_goal" and "goal pose" in res.message
+    res = planner.plan(q0, scene.goal, base0=pin.SE3(np.eye(3), np.array([1.5, 0.0, 0.0])))
+    assert res.status.value == "invalid_start"
+
+
+def test_zero_momentum_ik_keeps_the_centre_of_mass(robot):
+    # truss trial 17: no two-arm IK solution holds the module at this world goal with the base at the
+    # origin, but one does with the base where the unmoved centre of mass puts it
+    from optplan.planners.floating_reach import zero_momentum_ik
+
+    scene = Scene.load("floating_truss")
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 17, 0)
+    planner = FloatingCarryPlanner(robot, scene)
+    assert planner.hold(q0, goal) is None                     # base at the origin: out of reach
+    m, d = robot.model, robot.model.createData()
+    com = pin.centerOfMass(m, d, np.r_[pin.SE3ToXYZQUAT(pin.SE3.Identity()), q0]).copy()
+    q, base, res = zero_momentum_ik(robot, scene.object.grasps, goal, [q0], com, np.random.default_rng(0))
+    assert res <= 1e-10
+    full = np.r_[pin.SE3ToXYZQUAT(base), q]
+    np.testing.assert_allclose(pin.centerOfMass(m, d, full), com, atol=1e-9)   # Pinocchio's CoM, recomputed
+    for arm, h in zip(("A", "B"), _hands(robot, full)):
+        assert np.linalg.norm(pin.log6((goal * scene.object.grasps[arm]).actInv(h)).vector) < 1e-9
+    assert np.linalg.norm(base.translation) > 0.02               # the base had to move for it
