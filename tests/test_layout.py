@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from import_graph import cycles as _cycles
 
 PKG = Path(__file__).resolve().parents[1] / "optplan"
 
@@ -108,48 +109,6 @@ def test_no_upward_imports(graph):
             if t != "optplan" and _layer(t) > _layer(m):
                 bad.append(f"{m}:{line} imports {t} (layer {_layer(m)} -> {_layer(t)})")
     assert not bad, "upward imports:\n" + "\n".join(bad)
-
-
-def _cycles(adj: dict[str, set[str]]) -> list[list[str]]:
-    """Strongly connected components with more than one module (Tarjan, iterative)."""
-    index, low, on, stack, out, counter = {}, {}, set(), [], [], [0]
-    for root in adj:
-        if root in index:
-            continue
-        work = [(root, iter(sorted(adj[root])))]
-        index[root] = low[root] = counter[0]
-        counter[0] += 1
-        stack.append(root)
-        on.add(root)
-        while work:
-            v, it = work[-1]
-            w = next(it, None)
-            if w is not None:
-                if w not in adj:
-                    continue
-                if w not in index:
-                    index[w] = low[w] = counter[0]
-                    counter[0] += 1
-                    stack.append(w)
-                    on.add(w)
-                    work.append((w, iter(sorted(adj[w]))))
-                elif w in on:
-                    low[v] = min(low[v], index[w])
-                continue
-            work.pop()
-            if work:
-                low[work[-1][0]] = min(low[work[-1][0]], low[v])
-            if low[v] == index[v]:
-                comp = []
-                while True:
-                    w = stack.pop()
-                    on.discard(w)
-                    comp.append(w)
-                    if w == v:
-                        break
-                if len(comp) > 1:
-                    out.append(sorted(comp))
-    return out
 
 
 def test_cycle_finder_finds_a_cycle():

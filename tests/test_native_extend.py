@@ -210,7 +210,7 @@ def test_bench_summary_and_python_nearest_context():
     for r in rows:
         r["trial"] //= 2
     out = bn.summary(rows)
-    assert "median 1.92x (min 0.83, max 3.00)" in out and "same search in 1/2" in out
+    assert "median 1.92x (min 0.83, max 3.00)" in out and "same iterations/nodes in 1/2" in out
     tree._native_nearest()
     before = list(tree._NATIVE_NN)
     with bn.python_nearest():

@@ -12,7 +12,9 @@ scenes (tests/test_planning_kernel.py), so a paired query normally runs the same
 from __future__ import annotations
 
 import argparse
+import contextlib
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -73,13 +75,16 @@ def agreement(robot: Any, scene: Any, n: int = 4000, seed: int = 1) -> list[tupl
     return out
 
 
-def paired_queries(scenes: list[str], trials: list[int], planner: str = "tcbirrt:variant=improved", *,
-                   seed: int = 0, time_limit: float = 10.0, robot_name: str = "tcbirrt_dual_arm") -> list[dict[str, Any]]:
-    """Each trial of each scene planned with both backends (native first on even trials, coal first on
-    odd ones), same trial seed. One row per query."""
+def paired_rows(scenes: list[str], trials: list[int], specs: dict[str, str], *, key: str, seed: int = 0,
+                time_limit: float = 10.0, robot_name: str = "tcbirrt_dual_arm",
+                context: Callable[[str], Any] | None = None) -> list[dict[str, Any]]:
+    """Each trial of each scene planned with every planner spec of ``specs`` (``{kind: spec}``; the
+    first kind first on even trials, the order reversed on odd ones), same trial seed, CPU clock
+    [s]. ``context(kind)`` (optional) is entered around each query. One row per query, the kind
+    under ``key``."""
     from .tcbirrt import _W, _worker_setup, expand_scenes
 
-    specs = {k: f"{planner}:validity_kernel={k}" for k in ("native", "coal")}
+    kinds = list(specs)
     scenes = expand_scenes(scenes)
     _worker_setup(robot_name, scenes, list(specs.values()))
     rows = []
@@ -87,33 +92,51 @@ def paired_queries(scenes: list[str], trials: list[int], planner: str = "tcbirrt
         w = _W[sc]
         for i in trials:
             t = w["gen"].generate(int(i), seed)
-            order = ("native", "coal") if i % 2 == 0 else ("coal", "native")
-            for kind in order:
-                c0 = time.process_time()
-                res = w["planners"][specs[kind]].plan(t.q_start, t.q_goal, time_limit=time_limit, seed=t.seed, clock="cpu")
-                cpu = time.process_time() - c0
+            for kind in (kinds if i % 2 == 0 else kinds[::-1]):
+                pl = w["planners"][specs[kind]]
+                with context(kind) if context is not None else contextlib.nullcontext():
+                    c0 = time.process_time()
+                    res = pl.plan(t.q_start, t.q_goal, time_limit=time_limit, seed=t.seed, clock="cpu")
+                    cpu = time.process_time() - c0
                 it = int(res.stats.get("iterations") or 0)
-                rows.append({"scene": sc, "trial": int(i), "kernel": kind, "status": res.status.value, "cpu_s": cpu,
+                rows.append({"scene": sc, "trial": int(i), key: kind, "status": res.status.value, "cpu_s": cpu,
                              "iterations": it, "cpu_per_iteration_ms": 1e3 * cpu / max(it, 1),
-                             "collision_checks": res.stats.get("collision_checks"), "nodes": res.stats.get("nodes")})
+                             "collision_checks": res.stats.get("collision_checks"), "nodes": res.stats.get("nodes"),
+                             "native": getattr(pl, "_ext", None) is not None})
     return rows
 
 
-def _summary(rows: list[dict[str, Any]]) -> str:
-    lines = [f"{'scene':22s} {'kernel':7s} {'success':>8s} {'median CPU s':>13s} {'median ms/iter':>15s}"]
+def paired_summary(rows: list[dict[str, Any]], key: str, fast: str, slow: str,
+                   same_fields: tuple[str, ...] = ("iterations",)) -> str:
+    """Per scene: success, median CPU [s] and CPU per iteration [ms] of each kind, the paired
+    ``slow``/``fast`` ratio per iteration, and how many pairs agree on ``same_fields``."""
+    lines = [f"{'scene':22s} {key:7s} {'success':>8s} {'median CPU s':>13s} {'median ms/iter':>15s}"]
     for sc in dict.fromkeys(r["scene"] for r in rows):
         per = {}
-        for kind in ("native", "coal"):
-            rr = [r for r in rows if r["scene"] == sc and r["kernel"] == kind]
+        for kind in (fast, slow):
+            rr = [r for r in rows if r["scene"] == sc and r[key] == kind]
             per[kind] = rr
             succ = np.mean([r["status"] == "exact" for r in rr])
             lines.append(f"{sc:22s} {kind:7s} {succ:8.2f} {np.median([r['cpu_s'] for r in rr]):13.3f} "
                          f"{np.median([r['cpu_per_iteration_ms'] for r in rr]):15.3f}")
-        ratio = [c["cpu_per_iteration_ms"] / n["cpu_per_iteration_ms"] for n, c in zip(per["native"], per["coal"])]
-        same = sum(n["iterations"] == c["iterations"] for n, c in zip(per["native"], per["coal"]))
-        lines.append(f"{sc:22s} paired coal/native CPU per iteration: median {np.median(ratio):.2f}x "
-                     f"(min {min(ratio):.2f}, max {max(ratio):.2f}); same iteration count in {same}/{len(ratio)}")
+        pairs = list(zip(per[fast], per[slow]))
+        ratio = [b["cpu_per_iteration_ms"] / a["cpu_per_iteration_ms"] for a, b in pairs]
+        same = sum(all(a[f] == b[f] for f in same_fields) for a, b in pairs)
+        lines.append(f"{sc:22s} paired {slow}/{fast} CPU per iteration: median {np.median(ratio):.2f}x "
+                     f"(min {min(ratio):.2f}, max {max(ratio):.2f}); same {'/'.join(same_fields)} in {same}/{len(ratio)}")
     return "\n".join(lines)
+
+
+def paired_queries(scenes: list[str], trials: list[int], planner: str = "tcbirrt:variant=improved", *,
+                   seed: int = 0, time_limit: float = 10.0, robot_name: str = "tcbirrt_dual_arm") -> list[dict[str, Any]]:
+    """Each trial of each scene planned with both backends (native first on even trials, coal first on
+    odd ones), same trial seed. One row per query."""
+    specs = {k: f"{planner}:validity_kernel={k}" for k in ("native", "coal")}
+    return paired_rows(scenes, trials, specs, key="kernel", seed=seed, time_limit=time_limit, robot_name=robot_name)
+
+
+def _summary(rows: list[dict[str, Any]]) -> str:
+    return paired_summary(rows, "kernel", "native", "coal")
 
 
 def main(argv: list[str] | None = None) -> int:

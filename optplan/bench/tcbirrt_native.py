@@ -43,27 +43,15 @@ def paired_queries(scenes: list[str], trials: list[int], planner: str = "tcbirrt
                    seed: int = 0, time_limit: float = 10.0, robot_name: str = "tcbirrt_dual_arm") -> list[dict[str, Any]]:
     """Each trial of each scene planned both ways (native first on even trials, Python first on odd ones),
     same trial seed. One row per query."""
-    from .tcbirrt import _W, _worker_setup, expand_scenes
+    from .planning_kernel import paired_rows
 
     specs = {k: f"{planner}:extension={k}" for k in KINDS}
-    scenes = expand_scenes(scenes)
-    _worker_setup(robot_name, scenes, list(specs.values()))
-    rows = []
-    for sc in scenes:
-        w = _W[sc]
-        for i in trials:
-            t = w["gen"].generate(int(i), seed)
-            for kind in (KINDS if i % 2 == 0 else KINDS[::-1]):
-                pl = w["planners"][specs[kind]]
-                with python_nearest() if kind == "python" else contextlib.nullcontext():
-                    c0 = time.process_time()
-                    res = pl.plan(t.q_start, t.q_goal, time_limit=time_limit, seed=t.seed, clock="cpu")
-                    cpu = time.process_time() - c0
-                it = int(res.stats.get("iterations") or 0)
-                rows.append({"scene": sc, "trial": int(i), "kind": kind, "status": res.status.value, "cpu_s": cpu,
-                             "iterations": it, "cpu_per_iteration_ms": 1e3 * cpu / max(it, 1),
-                             "nodes": res.stats.get("nodes"), "native": getattr(pl, "_ext", None) is not None})
-    return rows
+
+    def context(kind: str) -> Any:
+        return python_nearest() if kind == "python" else contextlib.nullcontext()
+
+    return paired_rows(scenes, trials, specs, key="kind", seed=seed, time_limit=time_limit, robot_name=robot_name,
+                       context=context)
 
 
 def extension_costs(scene_name: str, n: int = 100, repeats: int = 3, seed: int = 0,
@@ -118,20 +106,9 @@ def extension_costs(scene_name: str, n: int = 100, repeats: int = 3, seed: int =
 
 def summary(rows: list[dict[str, Any]]) -> str:
     """Per scene: success, median CPU and CPU per iteration of each kind, the paired ratio, same searches."""
-    lines = [f"{'scene':22s} {'kind':7s} {'success':>8s} {'median CPU s':>13s} {'median ms/iter':>15s}"]
-    for sc in dict.fromkeys(r["scene"] for r in rows):
-        per = {}
-        for kind in KINDS:
-            rr = [r for r in rows if r["scene"] == sc and r["kind"] == kind]
-            per[kind] = rr
-            succ = np.mean([r["status"] == "exact" for r in rr])
-            lines.append(f"{sc:22s} {kind:7s} {succ:8.2f} {np.median([r['cpu_s'] for r in rr]):13.3f} "
-                         f"{np.median([r['cpu_per_iteration_ms'] for r in rr]):15.3f}")
-        ratio = [p["cpu_per_iteration_ms"] / n["cpu_per_iteration_ms"] for n, p in zip(per["native"], per["python"])]
-        same = sum(n["iterations"] == p["iterations"] and n["nodes"] == p["nodes"] for n, p in zip(per["native"], per["python"]))
-        lines.append(f"{sc:22s} paired python/native CPU per iteration: median {np.median(ratio):.2f}x "
-                     f"(min {min(ratio):.2f}, max {max(ratio):.2f}); same search in {same}/{len(ratio)}")
-    return "\n".join(lines)
+    from .planning_kernel import paired_summary
+
+    return paired_summary(rows, "kind", "native", "python", ("iterations", "nodes"))
 
 
 def main(argv: list[str] | None = None) -> int:
