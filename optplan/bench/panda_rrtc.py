@@ -62,7 +62,7 @@ def load_single_panda(spheres_urdf: str | Path | None = None) -> Any:
     from ..model._robot_data import _require_dir
     from ..model.dual_panda import srdf_disabled_pairs
     from ..model.robot import RobotModel
-    from ..model.robot_file import _floats, merge_capsules
+    from ..model.robot_file import freeze_prismatic, merge_capsules
 
     share = _require_dir()
     src = Path(spheres_urdf) if spheres_urdf is not None else share / "robots/panda_description/urdf/panda_collision.urdf"
@@ -71,15 +71,7 @@ def load_single_panda(spheres_urdf: str | Path | None = None) -> Any:
         for v in link.findall("visual"):
             link.remove(v)
     for e in root:
-        if e.tag == "joint" and e.get("type") == "prismatic":   # the fingers: frozen, open
-            o, axis = e.find("origin"), e.find("axis")
-            assert o is not None and axis is not None
-            ax = _floats(axis.get("xyz"), "1 0 0")
-            o.set("xyz", " ".join(repr(float(v)) for v in _floats(o.get("xyz"), "0 0 0") + FINGER_OPENING * ax))
-            e.set("type", "fixed")
-            for tag in ("limit", "mimic", "dynamics", "axis", "safety_controller"):
-                for x in e.findall(tag):
-                    e.remove(x)
+        freeze_prismatic(e, FINGER_OPENING)   # the fingers: frozen, open
         if e.tag == "link":
             merge_capsules(e)
     for m in root.iter("mesh"):

@@ -35,8 +35,8 @@ import pinocchio as pin
 from ..errors import ModelError
 from ._robot_data import _require_dir
 from .robot import RobotModel
-from .robot_file import _floats, merge_capsules  # the general step, re-exported here
 from .robot_file import _prefixed as _prefix_tree  # one URDF tree-prefixing step
+from .robot_file import freeze_prismatic, merge_capsules  # the general steps, re-exported here
 
 __all__ = ["load_dual_panda", "merge_capsules", "pair_budget", "srdf_disabled_pairs", "BASE_OFFSET",
            "DUAL_PANDA_ARMS"]
@@ -68,15 +68,7 @@ def dual_panda_urdf(share: Path) -> str:
                                                            ("1", "0", "0", "1", "0", "1"))})
     for side, y in zip(SIDES, (BASE_OFFSET, -BASE_OFFSET)):
         for e in _prefix_tree(arm, f"{side}_"):
-            if e.tag == "joint" and e.get("type") == "prismatic":  # the fingers: frozen, open
-                o, axis = e.find("origin"), e.find("axis")
-                assert o is not None and axis is not None   # the Panda's finger joints have both
-                ax = _floats(axis.get("xyz"), "1 0 0")
-                o.set("xyz", " ".join(repr(float(v)) for v in _floats(o.get("xyz"), "0 0 0") + FINGER_OPENING * ax))
-                e.set("type", "fixed")
-                for tag in ("limit", "mimic", "dynamics", "axis", "safety_controller"):
-                    for x in e.findall(tag):
-                        e.remove(x)
+            freeze_prismatic(e, FINGER_OPENING)  # the fingers: frozen, open
             if e.tag == "link":
                 merge_capsules(e)
             robot.append(e)

@@ -156,6 +156,22 @@ def _floats(s: str | None, default: str) -> np.ndarray:
     return np.array([float(x) for x in (s or default).split()])
 
 
+def freeze_prismatic(e: ET.Element, opening: float) -> None:
+    """A prismatic joint element made fixed, its origin moved by ``opening`` [m] along its axis (a
+    gripper's finger frozen open); any other element is left alone."""
+    if e.tag != "joint" or e.get("type") != "prismatic":
+        return
+    o, axis = e.find("origin"), e.find("axis")
+    if o is None:
+        o = ET.SubElement(e, "origin")
+    ax = _floats(axis.get("xyz") if axis is not None else None, "1 0 0")
+    o.set("xyz", " ".join(repr(float(v)) for v in _floats(o.get("xyz"), "0 0 0") + opening * ax))
+    e.set("type", "fixed")
+    for tag in ("limit", "mimic", "dynamics", "axis", "safety_controller"):
+        for x in e.findall(tag):
+            e.remove(x)
+
+
 def _origin(col: ET.Element) -> pin.SE3:
     o = col.find("origin")
     xyz = _floats(o.get("xyz") if o is not None else None, "0 0 0")

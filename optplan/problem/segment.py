@@ -31,7 +31,22 @@ from .problem import OptProblem
 from .solution import Solution
 from .terms import JointBoundary, JointPositionLimits, JointVelocityLimits, NumericTrajectory, Smoothness
 
-__all__ = ["KernelCache", "SegmentSpec", "SplineSegmentProblem"]
+__all__ = ["KernelCache", "SegmentSpec", "SplineSegmentProblem", "knots_from_solution"]
+
+
+def knots_from_solution(robot: RobotModel, solution: Solution, N: int,
+                        closed_chain: ClosedChain | None = None) -> np.ndarray:
+    """A solution of any grid sampled at the N + 1 knots of a grid of the same duration ((N+1) × nj
+    [rad]); with ``closed_chain`` each interior knot is projected onto it (a coarser grid's solution
+    drifts between its knots)."""
+    q = np.array(solution.sample(np.linspace(solution.t[0], solution.t[-1], N + 1))["q"], float)
+    if closed_chain is not None:
+        from ..constraints.closed_chain import project_closed_chain
+
+        data = robot.model.createData()
+        for k in range(1, N):
+            q[k] = project_closed_chain(robot, q[k], closed_chain, data=data).q
+    return q
 
 
 @dataclass(frozen=True)
@@ -125,14 +140,7 @@ class SplineSegmentProblem:
         clipped to the joint limits) or from a :class:`Solution` of any grid (sampled at this
         grid's knots; with ``closed_chain``, each interior knot is projected onto it)."""
         if solution is not None:
-            q = solution.sample(np.linspace(solution.t[0], solution.t[-1], self.N + 1))["q"]
-            if closed_chain is not None:
-                from ..constraints.closed_chain import project_closed_chain
-
-                q = np.array(q, float)
-                data = self.robot.model.createData()
-                for k in range(1, self.N):
-                    q[k] = project_closed_chain(self.robot, q[k], closed_chain, data=data).q
+            q = knots_from_solution(self.robot, solution, self.N, closed_chain)
         Q = np.array(check_knot_guess(q, self.N, self.robot.nj), float)
         Q[1:-1] = np.clip(Q[1:-1], self.lower, self.upper)
         self.problem.set_initial(q=Q)

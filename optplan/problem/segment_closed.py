@@ -61,7 +61,7 @@ from .collision_term import CollisionAvoidance, CollisionModel
 from .frame_terms import ClosedChain
 from .kernels import KernelCache
 from .plane_rows import PlanePlanner
-from .segment import SegmentSpec
+from .segment import SegmentSpec, knots_from_solution
 from .solution import Solution
 from .terms import NumericTrajectory
 
@@ -147,14 +147,7 @@ class ClosedSegmentProblem:
         interior knot is projected onto it — a coarser grid's solution drifts between its knots).
         Re-seeds the plane normals at the next build."""
         if solution is not None:
-            q = solution.sample(np.linspace(solution.t[0], solution.t[-1], self.N + 1))["q"]
-            if closed_chain is not None:
-                from ..constraints.closed_chain import project_closed_chain
-
-                q = np.array(q, float)
-                data = self.robot.model.createData()
-                for k in range(1, self.N):
-                    q[k] = project_closed_chain(self.robot, q[k], closed_chain, data=data).q
+            q = knots_from_solution(self.robot, solution, self.N, closed_chain)
         Q = check_knot_guess(q, self.N, self.robot.nj)
         X = fit_interior(Q, self.P_start, self.P_end)
         self._X0 = np.clip(X, self.lower, self.upper)
