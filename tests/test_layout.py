@@ -33,7 +33,7 @@ LAYERS = [
     (5, ("optplan.pipeline", "optplan.pipeline_options", "optplan.floating_pipeline")),
     (6, ("optplan.papers",)),
     (7, ("optplan.bench", "optplan.cli_args")),   # cli_args: argument checks shared with the bench commands
-    (8, ("optplan.cli", "optplan._entry", "optplan.reproduce", "optplan.demo", "optplan")),
+    (8, ("optplan.cli", "optplan.cli_bench", "optplan._entry", "optplan.reproduce", "optplan.demo", "optplan")),
 ]
 
 
