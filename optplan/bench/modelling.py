@@ -191,7 +191,7 @@ def _check_ur5(prob: Any, sol: Any, ctx: Any) -> dict[str, float]:
 def _forget_memory() -> None:
     """Drop what this process keeps in memory of the kernels and NLP structures (the disk cache
     stays): the next problem is built as in a new process with a warm cache."""
-    from optplan.problem.floating_segment import FloatingKernels
+    from optplan.problem.floating_kernels import FloatingKernels
     from optplan.problem.kernels import KernelCache
 
     for cls in (KernelCache, FloatingKernels):

@@ -150,7 +150,7 @@ def reach(robot: Any, q0: np.ndarray, target: np.ndarray, frame: str, N: int = 2
     points, cost ``T + jerk_weight ∫‖j‖² dt``."""
     from rockit import FreeTime, MultipleShooting, Ocp
 
-    from ..problem.floating_segment import FloatingKernels
+    from ..problem.floating_kernels import FloatingKernels
 
     nj = robot.nj
     c0, t0 = time.process_time(), time.perf_counter()

@@ -100,7 +100,7 @@ class PointSymbols:
     mass [m], world)."""
 
     def __init__(self, robot: RobotModel):
-        from .floating_segment import FloatingKernels
+        from .floating_kernels import FloatingKernels
         from .kernels import KernelCache
 
         self.robot = robot

@@ -53,7 +53,7 @@ class KernelCache:
     _per_robot: weakref.WeakKeyDictionary[RobotModel, KernelCache] = weakref.WeakKeyDictionary()
     _by_digest: weakref.WeakValueDictionary[bytes, KernelCache] = weakref.WeakValueDictionary()
 
-    #: the base these kernels are for (:class:`~optplan.problem.floating_segment.FloatingKernels`
+    #: the base these kernels are for (:class:`~optplan.problem.floating_kernels.FloatingKernels`
     #: is the free-floating subclass); added to the disk keys of a subclass
     floating_base = False
     _digest_tag = b""

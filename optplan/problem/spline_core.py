@@ -1,6 +1,6 @@
 """The B-spline kernel transcription of :class:`~optplan.problem.OptProblem`: every constraint
 and cost is a family of per-point kernels mapped over its points, with the exact Jacobian and
-Hessian assembled by constant scatters (:class:`~optplan.problem.floating_segment._LocalAssembly`).
+Hessian assembled by constant scatters (:class:`~optplan.problem.floating_kernels._LocalAssembly`).
 
 Decision variables ``x``: all ``N + 3`` control points of the joint B-spline (:mod:`.bspline`;
 boundary states are constraints like any other), for a floating robot the base attitude at the
@@ -32,7 +32,7 @@ from ..model.robot import RobotModel
 from . import kernel_compiler
 from .bspline import knot_matrices
 from .expressions import PointSymbols, symbols_of
-from .floating_segment import FloatingKernels, _LocalAssembly, momentum_template, spline_basis
+from .floating_kernels import FloatingKernels, _LocalAssembly, momentum_template, spline_basis
 
 __all__ = ["Family", "SplineCore"]
 

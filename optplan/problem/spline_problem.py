@@ -434,6 +434,6 @@ class SplineEvaluator:
 
 
 def spline_basis_np(u: float) -> tuple[np.ndarray, np.ndarray]:
-    from .floating_segment import spline_basis
+    from .floating_kernels import spline_basis
 
     return spline_basis(u)
