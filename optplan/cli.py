@@ -201,7 +201,7 @@ def _cmd_bench_warmstart(args) -> int:
                           ipopt_max_wall_time=args.ipopt_max_wall_time,
                           free_plane_normals=args.free_plane_normals, transcription=args.transcription,
                           compile_kernels=args.compile_kernels, engine=args.engine, address=args.address,
-                          segment_workers=args.segment_workers)
+                          segment_workers=args.segment_workers, segment_nlp=args.segment_nlp)
     try:
         validate(cfg)
     except ValueError as exc:
@@ -601,6 +601,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "with 2 or more CPUs when --jobs is 1, else 1)")
     ws.add_argument("--transcription", choices=["bspline", "knots"], default="bspline",
                     help="trajectory NLP: B-spline control points (default) or the knot-state transcription")
+    ws.add_argument("--segment-nlp", choices=["closed", "optproblem"], default="closed",
+                    help="the B-spline segment NLP: the closed class (default) or an OptProblem on the shared core "
+                         "(PipelineOptions.segment_nlp)")
     ws.add_argument("--free-plane-normals", action="store_true",
                     help="let IPOPT move the separating-plane normals (PipelineOptions.fixed_plane_normals=False)")
     ws.add_argument("--out", default="bench_warmstart", help="output directory (results.jsonl, summary.txt/json)")

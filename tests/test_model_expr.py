@@ -137,7 +137,7 @@ def test_the_assembled_derivatives_equal_casadis_own(ffsr):
     prob.add_constraint(prob.com[0] ** 2 + prob.qdd[2] * prob.qd[3], upper=5.0)
     prob.uses_bspline()
     core, be = prob._spline.core, prob._spline
-    st = core.structure(be.fams, bool(be.pbounds), False)
+    st = core.structure(be.row_families(), bool(be.pbounds), False)
     nlp = st["nlp"]
     rng = np.random.default_rng(1)
     x = rng.normal(size=core.nx) * 0.3

@@ -19,7 +19,8 @@ from .floating_collision import base_placements
 from .nlp import IpoptStatus, NlpSolver, SolverOptions
 from .solution import Solution
 from .spline_core import Family, SplineCore
-from .spline_problem import SplineEvaluator, _quintic, families_of, seed_guess
+from .spline_problem import SplineEvaluator, _quintic, families_of, fixed_boundary, seed_guess
+from .terms import JointBoundary
 
 __all__ = ["SplineBackend", "VELOCITY_ACTIVATION"]
 
@@ -45,6 +46,9 @@ class SplineBackend:
         self.aux0, self.col_p = np.zeros(0), np.zeros(0)   # collision plane offsets / normals, supports
         self.collision_model: Any = None
         self.last_build_time = 0.0
+        #: boundary families whose end control points are fixed by bounds instead of rows:
+        #: family name -> (variable indices, values, 3 × 3 map) (:func:`~.spline_problem.fixed_boundary`)
+        self.fixed: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.vel_extra: dict[str, set[int]] = {}   # velocity entries given rows after a solve (on vel_n intervals)
         self.vel_n = 0
         #: re-solves with the velocity rows a solve missed (:meth:`_missed_velocity`) [count]
@@ -60,13 +64,14 @@ class SplineBackend:
         core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar)
         self.fams, self.owner, self.pbounds, cols = families_of(prob, core, params)
         self.core, self.aux0, self.col_p = core, np.zeros(0), np.zeros(0)
+        self.fixed = self._fixed_families(core)
         x = self.guess(prob.duration) if cols or (self._velocity_families() and not prob.free_time) else None
         if cols:   # the active pairs follow the first guess: plan them along it
             from .spline_collision import plan_collision
 
             assert x is not None
             Qk = core.M["q"] @ core.control_points(x)
-            lbx, ubx = self._bounds()
+            lbx, ubx = self._bounds(fixed=False)
             if core.fl:   # planes with the base pose (floating_collision)
                 from .floating_collision import plan_floating_collision
 
@@ -99,6 +104,26 @@ class SplineBackend:
         if x is not None and not core.free_time:
             self._select_velocity(x)
         self.last_build_time = time.perf_counter() - t0
+
+    def _fixed_families(self, core: SplineCore) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """The ``JointBoundary`` families that determine their end's three control points
+        exactly (q, q̇ and q̈ given; with a free duration only at rest): those points become fixed
+        variables (equal bounds, removed by IPOPT) and the family has no rows."""
+        out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        if not self.prob.fix_boundary_points:
+            return out
+        for h in self.prob._handles:
+            if h.role != "constraint" or not isinstance(h.term, JointBoundary):
+                continue
+            got = fixed_boundary(core, h.term, self.prob.duration)
+            if got is not None:
+                for name in self.owner.get(h.name, ()):
+                    out[name] = got
+        return out
+
+    def row_families(self) -> list[Family]:
+        """The families that have rows in the NLP (those fixed by bounds have none)."""
+        return [f for f in self.fams if f.name not in self.fixed]
 
     # ------------------------------------------------------------------ velocity rows
     def _velocity_families(self) -> list[Family]:
@@ -194,7 +219,9 @@ class SplineBackend:
         p[core.p_col:] = self.col_p
         return p
 
-    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+    def _bounds(self, fixed: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Variable bounds: the control points' position limits, a free duration's range and
+        (``fixed``) the end control points fixed by a boundary (:meth:`_fixed_families`)."""
         core, prob = self.core, self.prob
         assert core is not None
         lbx, ubx = np.full(core.nx, -np.inf), np.full(core.nx, np.inf)
@@ -204,6 +231,9 @@ class SplineBackend:
             ubx[:core.nP] = np.minimum(ubx[:core.nP], np.tile(hi, core.N + 3))
         if core.free_time:
             lbx[-1], ubx[-1] = prob.duration_bounds
+        if fixed:
+            for idx, val, _ in self.fixed.values():
+                lbx[idx], ubx[idx] = val, val
         assert nj > 0
         return lbx, ubx
 
@@ -246,7 +276,7 @@ class SplineBackend:
         if self.last_x is not None and self.last_x.size == core.nx:
             return self.last_x
         assert nbase == core.nx or not core.free_time     # a re-solve (e.g. after set_value) starts where the last one ended
-        lbx, ubx = self._bounds()
+        lbx, ubx = self._bounds(fixed=False)
         lo, hi = lbx[:core.nj], ubx[:core.nj]
         return seed_guess(core, self.fams, lambda q0: self._pvec(T, self._com0(q0) if q0 is not None else np.zeros(3),
                                                                   1.0), T, lo, hi, self._pinned())
@@ -280,7 +310,9 @@ class SplineBackend:
             self.prepare()
         core = self.core
         assert core is not None
-        st = core.structure(self.fams, bool(self.pbounds), compile_kernels)
+        self.fixed = self._fixed_families(core)   # the duration or the option may have changed
+        rows = self.row_families()
+        st = core.structure(rows, bool(self.pbounds), compile_kernels)
         T = prob.duration
         # the start configuration fixes the centre of mass of a floating robot: from the guess
         x0 = self.guess(T)
@@ -303,7 +335,7 @@ class SplineBackend:
         p[core.p_scale] = scale
         lbx, ubx = self._bounds()
         x0 = np.clip(x0, lbx, ubx)
-        lbg, ubg = core.row_bounds(st, self.fams)
+        lbg, ubg = core.row_bounds(st, rows)
         n_ineq = int(np.sum(lbg != ubg))
         defaults: dict[str, Any] = {
             "ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
@@ -357,7 +389,9 @@ class SplineBackend:
             if h.role == "cost":
                 terms[h.name] = float(sum(c[st["cslices"][f]].sum() for f in fs))
             else:
-                v = [float(vv[st["slices"][f]].max()) for f in fs if st["slices"][f].stop > st["slices"][f].start]
+                v = [float(vv[st["slices"][f]].max()) for f in fs
+                     if f in st["slices"] and st["slices"][f].stop > st["slices"][f].start]
+                v += [float(np.max(np.abs(x[self.fixed[f][0]] - self.fixed[f][1]))) for f in fs if f in self.fixed]
                 if h.name in self.pbounds:
                     lo, hi = self.pbounds[h.name]
                     P = core.control_points(x)
@@ -376,7 +410,7 @@ class SplineBackend:
         self.x0, self.lam, self.scale = None, None, scale
         if success:
             self.last_x = x
-        ev = SplineEvaluator(prob, core, {**st, "lbg": lbg, "ubg": ubg}, self.fams, self.owner, self.pbounds, p)
+        ev = SplineEvaluator(prob, core, {**st, "lbg": lbg, "ubg": ubg, "fixed": dict(self.fixed)}, self.fams, self.owner, self.pbounds, p)
         lam_g = None if out.lam_g is None else np.asarray(out.lam_g) / scale   # multipliers of the unscaled cost
         lam_x = None if out.lam_x is None else np.asarray(out.lam_x) / scale
         return Solution(success=success, status=out.status, iterations=out.iterations, wall_time=out.wall_time,
