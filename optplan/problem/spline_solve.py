@@ -109,7 +109,7 @@ class SplineBackend:
         """The ``JointBoundary`` families that determine their end's three control points
         exactly (q, q̇ and q̈ given; with a free duration only at rest): those points become fixed
         variables (equal bounds, removed by IPOPT) and the family has no rows."""
-        out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        out: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         if not self.prob.fix_boundary_points:
             return out
         for h in self.prob._handles:
