@@ -326,7 +326,9 @@ class SplineEvaluator:
             f = self.fams[fn]
             sl = self.st["slices"].get(fn)
             m = f.rows_per_point
-            if sl is None:   # a boundary fixed by bounds (no rows): its kernel at its knots
+            if sl is None or fn in self.st.get("row_points", {}):
+                # a boundary fixed by bounds (no rows), or a family some of whose knots had constant
+                # rows left out of the NLP: its kernel at every knot
                 assert f.fn is not None
                 for k in f.points:
                     vals.append(np.asarray(f.fn(self.core.knot_inputs(x, self.p, k, False))).ravel())
@@ -379,7 +381,16 @@ class SplineEvaluator:
         fixed = self.st.get("fixed", {})
         if any(fn in fixed for fn in self.owner[h.name]):
             return self._fixed_dual(fixed[self.owner[h.name][0]], np.asarray(sol.x, float), lam)
-        parts = [lam[self.st["slices"][fn]] for fn in self.owner[h.name]]
+        parts = []
+        for fn in self.owner[h.name]:
+            lf = lam[self.st["slices"][fn]]
+            rp = self.st.get("row_points", {}).get(fn)
+            if rp is not None:   # knots whose rows were constants left out of the NLP: no multiplier (NaN)
+                f = self.fams[fn]
+                full = np.full((len(f.points), f.rows_per_point), np.nan)
+                full[[f.points.index(k) for k in rp]] = lf.reshape(-1, f.rows_per_point)
+                lf = full.ravel()
+            parts.append(lf)
         m = max(self.fams[fn].rows_per_point for fn in self.owner[h.name]) if self.owner[h.name] else 1
         return -np.concatenate(parts).reshape(-1, m)
 
@@ -462,7 +473,7 @@ class SplineEvaluator:
                                              bound if side == 0 else np.inf, float(v[i]) / T, label=lab))
                     continue
                 else:
-                    k = f.points[pt]
+                    k = self.st.get("row_points", {}).get(fname, f.points)[pt]
                     comp = f.labels[c] if c < len(f.labels) else f"[{c}]"
                     sep = "." if comp and not comp.startswith("[") else ""
                     lab = f"{term}[k={k}]{sep}{comp} at t={k * h:.3g} s"
