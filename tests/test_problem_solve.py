@@ -518,3 +518,39 @@ def test_boundary_with_free_time_is_fixed_only_at_rest(tcb, ends):
     assert list(p._spline.fixed) == p._spline.owner[h_end.name]
     np.testing.assert_allclose(sol.qd[0], v0, atol=1e-6)
     np.testing.assert_allclose(sol.q[-1], qb, atol=1e-12)
+
+
+def test_rows_at_a_fixed_end_that_hold_leave_the_nlp_and_are_still_reported(tcb):
+    """The closed chain at two pinned rest ends that satisfy it: its rows there have no variable
+    left (the ends are fixed by bounds) and leave the NLP; the optimum is the one with every row
+    (an independent formulation), and ``violation``/``value`` still cover every knot."""
+    from optplan.constraints.closed_chain import project_closed_chain
+
+    rng = np.random.default_rng(5)
+    qa = tcb.random_joints(rng) * 0.4
+    cc = ClosedChain.from_configuration(tcb, qa)
+    qb = project_closed_chain(tcb, qa + 0.1, cc).q
+    Q = np.array([project_closed_chain(tcb, qa + s * (qb - qa), cc).q for s in np.linspace(0, 1, 7)])
+
+    def make(fix):
+        p = OptProblem(tcb, n_intervals=6, duration=3.0)
+        p.fix_boundary_points = fix
+        p.add_constraint(JointBoundary("start", q=qa, qd=Z, qdd=Z))
+        p.add_constraint(JointBoundary("end", q=qb, qd=Z, qdd=Z))
+        # the reference: boundary rows, the chain's rows left out at the pinned knots by the term
+        # itself (with them the rows version's Jacobian is rank-deficient and IPOPT stalls)
+        h = p.add_constraint(cc if fix else dataclasses.replace(cc, skip_pinned=True))
+        p.add_cost(Smoothness("jerk"))
+        p.set_initial(q=Q)
+        return p, h
+
+    (p_b, h_b), (p_r, h_r) = make(True), make(False)
+    s_b, s_r = p_b.solve(tol=1e-9), p_r.solve(tol=1e-9)
+    assert s_b.success, s_b.status
+    assert s_r.success, s_r.status
+    assert p_b._spline.constant == {p_b._spline.owner[h_b.name][0]: {0, 6}}
+    assert s_r.lam_g.size - s_b.lam_g.size == 2 * 3 * 14
+    np.testing.assert_allclose(s_b.q, s_r.q, atol=1e-7)
+    assert s_b.violation(h_b).shape == (7, 7) and s_b.violation(h_b).max() <= 1e-8
+    np.testing.assert_allclose(s_b.value(h_b)[1:-1], s_r.value(h_r), atol=1e-7)
+    assert np.isnan(s_b.dual(h_b)[[0, -1]]).all() and np.isfinite(s_b.dual(h_b)[1:-1]).all()
