@@ -138,10 +138,10 @@ class SplineBackend:
         idx = set().union(*[set(v[0].tolist()) for v in fixed.values()]) if fixed else set()
         if N < 4 or not idx.issuperset(range(3 * nj)) or not idx.issuperset(range(N * nj, (N + 3) * nj)):
             return P
-        Pf = P.ravel().copy()
+        flat = P.ravel().copy()
         for i, v, _ in fixed.values():
-            Pf[i] = v
-        Pf = Pf.reshape(N + 3, nj)
+            flat[i] = v
+        Pf = flat.reshape(N + 3, nj)
         A = sps.csr_matrix(core.M["q"][1:N])
         rhs = Q[1:N] - A[:, np.r_[0:3, N:N + 3]] @ Pf[np.r_[0:3, N:N + 3]]
         B = A[:, 3:N]
