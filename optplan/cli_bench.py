@@ -134,7 +134,7 @@ def _cmd_bench_warmstart(args) -> int:
                           ipopt_max_wall_time=args.ipopt_max_wall_time,
                           free_plane_normals=args.free_plane_normals, transcription=args.transcription,
                           compile_kernels=args.compile_kernels, engine=args.engine, address=args.address,
-                          segment_workers=args.segment_workers)
+                          segment_workers=args.segment_workers, segment_nlp=args.segment_nlp)
     try:
         validate(cfg)
     except ValueError as exc:

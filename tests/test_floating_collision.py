@@ -132,7 +132,7 @@ def test_a_collision_due_to_the_base_drift_is_removed(eba, probe):
     b = p._spline
     core = b.core
     x = np.asarray(sol.x, float)
-    st = core.structure(b.fams, bool(b.pbounds), "auto")
+    st = core.structure(b.row_families(), bool(b.pbounds), "auto")
     pv = b._pvec(T, b._com0(Q0), 1.0)
     g = np.asarray(st["gfun"](x, pv)).ravel()
     Qf = full_configurations(core, core.M["q"] @ core.control_points(x), core.knot_xi(x), p.base0,

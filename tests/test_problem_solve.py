@@ -465,3 +465,92 @@ def test_solution_reuse_requires_the_same_scaling(tcb, ends):
     u = p2.tp.unpack(p2.initial_guess)
     np.testing.assert_allclose(u["q"], sol.q, atol=1e-9)            # same shape in time
     np.testing.assert_allclose(u["qd"], sol.qd / 2, atol=1e-6)       # twice as slow
+
+
+# --------------------------------------------------------------------------- boundary as bounds
+def _moving_ends(tcb, qa, qb, fix, free_time=False):
+    """Rest-free ends (given q̇ and q̈) between which a jerk optimum moves; fixed ends by bounds or rows."""
+    rng = np.random.default_rng(5)
+    v0, a0 = rng.uniform(-0.2, 0.2, 14), rng.uniform(-0.3, 0.3, 14)
+    kw = {"free_time": True, "duration_bounds": (1.0, 6.0)} if free_time else {}
+    p = OptProblem(tcb, n_intervals=12, duration=3.0, **kw)
+    p.fix_boundary_points = fix
+    p.add_constraint(JointBoundary("start", q=qa, qd=v0, qdd=a0))
+    h = p.add_constraint(JointBoundary("end", q=qb, qd=Z, qdd=Z))
+    p.add_cost(Smoothness("jerk"))
+    if free_time:
+        p.add_cost(Duration(), weight=1.0)
+    return p, h, v0, a0
+
+
+def test_boundary_fixed_by_bounds_is_the_rows_optimum_and_exact(tcb, ends):
+    """A boundary that gives q, q̇ and q̈ fixes its end's three control points by bounds: the
+    optimum is the one the equality rows give (an independent formulation), the boundary holds to
+    rounding, the NLP has 3·nj rows fewer per end, and the handle still reports values,
+    violations and the dual (checked against the rows' multipliers)."""
+    qa, qb = ends
+    p_b, h_b, v0, a0 = _moving_ends(tcb, qa, qb, fix=True)
+    p_r, h_r, _, _ = _moving_ends(tcb, qa, qb, fix=False)
+    for p in (p_b, p_r):
+        p.set_initial_straight_line(qa, qb)
+    s_b, s_r = p_b.solve(tol=1e-10), p_r.solve(tol=1e-10)
+    assert s_b.success and s_r.success
+    assert len(p_b._spline.fixed) == 2 and not p_r._spline.fixed
+    np.testing.assert_allclose(s_b.q, s_r.q, atol=1e-7)
+    assert s_b.cost == pytest.approx(s_r.cost, rel=1e-8)
+    np.testing.assert_allclose(s_b.q[0], qa, atol=1e-12)
+    np.testing.assert_allclose(s_b.qd[0], v0, atol=1e-12)
+    np.testing.assert_allclose(s_b.qdd[0], a0, atol=1e-11)
+    np.testing.assert_allclose(s_b.qd[-1], 0.0, atol=1e-12)
+    assert s_b.lam_g is not None and s_r.lam_g is not None and s_r.lam_g.size - s_b.lam_g.size == 2 * 3 * 14
+    np.testing.assert_allclose(s_b.value(h_b), s_r.value(h_r), atol=1e-7)
+    assert s_b.violation(h_b).max() <= 1e-12 and s_b.terms[h_b.name] <= 1e-12
+    np.testing.assert_allclose(s_b.dual(h_b), s_r.dual(h_r), rtol=1e-5, atol=1e-6 * np.abs(s_r.dual(h_r)).max())
+
+
+def test_boundary_with_free_time_is_fixed_only_at_rest(tcb, ends):
+    """With a free duration a moving end's points depend on T: only the rest end is fixed."""
+    qa, qb = ends
+    p, h_end, v0, _ = _moving_ends(tcb, qa, qb, fix=True, free_time=True)
+    p.set_initial_straight_line(qa, qb)
+    sol = p.solve()
+    assert sol.success
+    assert list(p._spline.fixed) == p._spline.owner[h_end.name]
+    np.testing.assert_allclose(sol.qd[0], v0, atol=1e-6)
+    np.testing.assert_allclose(sol.q[-1], qb, atol=1e-12)
+
+
+def test_rows_at_a_fixed_end_that_hold_leave_the_nlp_and_are_still_reported(tcb):
+    """The closed chain at two pinned rest ends that satisfy it: its rows there have no variable
+    left (the ends are fixed by bounds) and leave the NLP; the optimum is the one with every row
+    (an independent formulation), and ``violation``/``value`` still cover every knot."""
+    from optplan.constraints.closed_chain import project_closed_chain
+
+    rng = np.random.default_rng(5)
+    qa = tcb.random_joints(rng) * 0.4
+    cc = ClosedChain.from_configuration(tcb, qa)
+    qb = project_closed_chain(tcb, qa + 0.1, cc).q
+    Q = np.array([project_closed_chain(tcb, qa + s * (qb - qa), cc).q for s in np.linspace(0, 1, 7)])
+
+    def make(fix):
+        p = OptProblem(tcb, n_intervals=6, duration=3.0)
+        p.fix_boundary_points = fix
+        p.add_constraint(JointBoundary("start", q=qa, qd=Z, qdd=Z))
+        p.add_constraint(JointBoundary("end", q=qb, qd=Z, qdd=Z))
+        # the reference: boundary rows, the chain's rows left out at the pinned knots by the term
+        # itself (with them the rows version's Jacobian is rank-deficient and IPOPT stalls)
+        h = p.add_constraint(cc if fix else dataclasses.replace(cc, skip_pinned=True))
+        p.add_cost(Smoothness("jerk"))
+        p.set_initial(q=Q)
+        return p, h
+
+    (p_b, h_b), (p_r, h_r) = make(True), make(False)
+    s_b, s_r = p_b.solve(tol=1e-9), p_r.solve(tol=1e-9)
+    assert s_b.success, s_b.status
+    assert s_r.success, s_r.status
+    assert p_b._spline.constant == {p_b._spline.owner[h_b.name][0]: {0, 6}}
+    assert s_r.lam_g.size - s_b.lam_g.size == 2 * 3 * 14
+    np.testing.assert_allclose(s_b.q, s_r.q, atol=1e-7)
+    assert s_b.violation(h_b).shape == (7, 7) and s_b.violation(h_b).max() <= 1e-8
+    np.testing.assert_allclose(s_b.value(h_b)[1:-1], s_r.value(h_r), atol=1e-7)
+    assert np.isnan(s_b.dual(h_b)[[0, -1]]).all() and np.isfinite(s_b.dual(h_b)[1:-1]).all()

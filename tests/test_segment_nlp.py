@@ -89,7 +89,7 @@ def _core(prob):
     op = prob.problem
     assert op.uses_bspline()
     be = op._spline
-    st = be.core.structure(be.fams, bool(be.pbounds), False)
+    st = be.core.structure(be.row_families(), bool(be.pbounds), False)
     return be, st, be._pvec(op.duration, np.zeros(3), 1.0), be.guess(op.duration)
 
 
@@ -348,7 +348,7 @@ def _transport_problem(tcb, transport, Q, cc, duration=60.0, **spec_kw):
 
 def _structure(prob):
     be = prob.problem._spline
-    return be.core.structure(be.fams, bool(be.pbounds), prob.compile_kernels)
+    return be.core.structure(be.row_families(), bool(be.pbounds), prob.compile_kernels)
 
 
 def test_same_shape_reuses_the_structure_and_only_numbers_change(tcb, transport):

@@ -91,6 +91,9 @@ class WarmstartConfig:
     #: Processes per trial that optimize its segments side by side (``PipelineOptions.workers``) [count]; None: the
     #: pipeline's default with ``jobs`` = 1, else 1 (the trials already run side by side). Recorded per result line.
     segment_workers: int | None = None
+    #: ``PipelineOptions.segment_nlp``: the segment NLP's implementation, ``"closed"`` or ``"optproblem"``
+    #: (result lines record it).
+    segment_nlp: str = "closed"
     #: Write ``DIR/time_distributions.png`` (IPOPT time and iterations per trial).
     plot: bool = True
     #: ``"local"`` (a process pool of ``jobs``) or ``"dask"`` (:mod:`optplan.bench.engine`).
@@ -111,6 +114,8 @@ def validate(cfg: WarmstartConfig) -> list[str]:
     if cfg.segment_workers is not None and (isinstance(cfg.segment_workers, bool)
                                             or not isinstance(cfg.segment_workers, int) or cfg.segment_workers < 1):
         raise ValueError(f"--segment-workers: expected an integer >= 1, got {cfg.segment_workers!r}")
+    if cfg.segment_nlp not in ("closed", "optproblem"):
+        raise ValueError(f"--segment-nlp: expected 'closed' or 'optproblem', got {cfg.segment_nlp!r}")
     validate_engine(cfg.engine, cfg.jobs, cfg.address)
     if not isinstance(cfg.first_trial, int) or cfg.first_trial < 0:
         raise ValueError(f"--first-trial: expected an integer >= 0, got {cfg.first_trial!r}")
@@ -205,7 +210,8 @@ def _run_unit(args) -> dict:
 
     robot_name, scene, index, mode, time_limit, seed, max_wall, fixed_normals, transcription, compile_kernels = args[:10]
     seg_workers = args[10] if len(args) > 10 else None
-    line = {"scene": scene, "trial": int(index), "mode": mode, "seed": int(seed), "time_limit_s": float(time_limit),
+    segment_nlp = args[11] if len(args) > 11 else "closed"
+    line = {"segment_nlp": segment_nlp, "scene": scene, "trial": int(index), "mode": mode, "seed": int(seed), "time_limit_s": float(time_limit),
             "ipopt_max_wall_time_s": max_wall, "fixed_plane_normals": bool(fixed_normals),
             "transcription": transcription, "compile_kernels": bool(compile_kernels)}
     w = _state(robot_name, scene)
@@ -222,7 +228,7 @@ def _run_unit(args) -> dict:
     opts = PipelineOptions(plan_time_limit=float(time_limit), warm_start=(mode == "warm"),
                            fixed_plane_normals=bool(fixed_normals), transcription=transcription,
                            compile_kernels=True if compile_kernels else "auto", workers=seg_workers,
-                           ipopt_options=PipelineOptions.ipopt_options
+                           segment_nlp=segment_nlp, ipopt_options=PipelineOptions.ipopt_options
                            + (() if max_wall is None else (("max_wall_time", float(max_wall)),)))
     c0, ch0, w0 = time.process_time(), resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
     res, err = None, None
@@ -266,18 +272,19 @@ def _matches(r: dict, cfg: WarmstartConfig) -> bool:
             and r.get("ipopt_max_wall_time_s") == mw
             and r.get("fixed_plane_normals", False) == (not cfg.free_plane_normals)
             and r.get("transcription", "knots") == cfg.transcription
-            and r.get("compile_kernels", False) == bool(cfg.compile_kernels))
+            and r.get("compile_kernels", False) == bool(cfg.compile_kernels)
+            and r.get("segment_nlp", "closed") == cfg.segment_nlp)
 
 
 def pending_units(cfg: WarmstartConfig, scenes: list[str], rows: list[dict],
                   robot_name: str = "tcbirrt_dual_arm") -> list[tuple]:
     """The (robot, scene, trial, mode, time_limit, seed, ipopt_max_wall_time, fixed_plane_normals,
-    transcription, compile_kernels, segment_workers) units not yet in ``rows``."""
+    transcription, compile_kernels, segment_workers, segment_nlp) units not yet in ``rows``."""
     done = {_key(r) for r in rows if _matches(r, cfg)}
     mw = None if cfg.ipopt_max_wall_time is None else float(cfg.ipopt_max_wall_time)
     seg_workers = cfg.segment_workers if cfg.segment_workers is not None else (None if cfg.jobs == 1 else 1)
     return [(robot_name, sc, i, m, float(cfg.time_limit), int(cfg.seed), mw, not cfg.free_plane_normals,
-             cfg.transcription, bool(cfg.compile_kernels), seg_workers)
+             cfg.transcription, bool(cfg.compile_kernels), seg_workers, cfg.segment_nlp)
             for sc in scenes for i in range(cfg.first_trial, cfg.first_trial + cfg.trials) for m in cfg.modes
             if (sc, i, m) not in done]
 

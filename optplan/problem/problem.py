@@ -575,6 +575,9 @@ class OptProblem(ExpressionAPI):
 
     #: penetration [m] beyond which a pinned boundary configuration counts as in collision
     BOUNDARY_PENETRATION_TOL = 1e-4
+    #: B-spline: a ``JointBoundary`` that gives q [rad], q̇ [rad/s] and q̈ [rad/s²] at an end fixes
+    #: that end's three control points by equal bounds instead of rows (False: rows, with multipliers)
+    fix_boundary_points = True
 
     def _make_solution(self, out: SolveOutcome, tol: float) -> Solution:
         b, tp = self._built, self.tp

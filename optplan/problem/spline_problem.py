@@ -28,7 +28,7 @@ from .terms import (
     _knots,
 )
 
-__all__ = ["ExprTerm", "Unsupported", "families_of", "SplineEvaluator", "seed_guess", "knots_of"]
+__all__ = ["ExprTerm", "Unsupported", "families_of", "fixed_boundary", "SplineEvaluator", "seed_guess", "knots_of"]
 
 _POSE = ("x", "y", "z", "rot_x", "rot_y", "rot_z", "trace")
 
@@ -145,6 +145,31 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
         owner[name] = [f.name for f in new]
         fams += new
     return fams, owner, pbounds, collisions
+
+
+def fixed_boundary(core: SplineCore, term: JointBoundary, T: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The end control points a boundary determines exactly, as ``(variable indices, values, A)``
+    (A: the 3 × 3 map from the three points to [q; q̇; q̈] of each joint):
+    q [rad], q̇ [rad/s] and q̈ [rad/s²] at knot 0 fix P_0 … P_2 (at knot N: P_N … P_N+2) through
+    ``knot_values``' 3 × 3 map per joint (duration ``T`` [s]); with a free duration only at rest
+    (q̇ = q̈ = 0: the three points equal q whatever the duration). None when the boundary leaves
+    some of them free (a q alone) or sits at an interior knot."""
+    N, nj = core.N, core.nj
+    k, parts = term._parts(N)
+    given = dict(parts)
+    if set(given) != {"q", "qd", "qdd"} or k not in (0, N):
+        return None
+    q, qd, qdd = (core.robot.check_joints(given[n], f"JointBoundary.{n}") for n in ("q", "qd", "qdd"))
+    if core.free_time and (np.any(qd != 0.0) or np.any(qdd != 0.0)):
+        return None
+    h = T / N
+    M = core.M
+    cols = np.arange(3) + (0 if k == 0 else N)
+    A = np.vstack([M["q"][k, cols], M["qd"][k, cols] / h, M["qdd"][k, cols] / h**2])
+    P = np.linalg.solve(A, np.vstack([q, qd, qdd]))           # 3 × nj
+    idx = (cols[:, None] * nj + np.arange(nj)[None, :]).ravel()
+    return idx, P.ravel(), A
 
 
 def _base_frame(core: SplineCore, frame: str) -> tuple[Any, Any]:
@@ -298,12 +323,21 @@ class SplineEvaluator:
         vals, los, his, m = [], [], [], 0
         g = np.array(self.st["gfun"](x, self.p)).ravel()
         for fn in self.owner[name]:
-            sl = self.st["slices"][fn]
             f = self.fams[fn]
+            sl = self.st["slices"].get(fn)
+            m = f.rows_per_point
+            if sl is None or fn in self.st.get("row_points", {}):
+                # a boundary fixed by bounds (no rows), or a family some of whose knots had constant
+                # rows left out of the NLP: its kernel at every knot
+                assert f.fn is not None
+                for k in f.points:
+                    vals.append(np.asarray(f.fn(self.core.knot_inputs(x, self.p, k, False))).ravel())
+                    los.append(f.lower)
+                    his.append(f.upper)
+                continue
             vals.append(g[sl])
             los.append(np.asarray(self.st["lbg"])[sl])
             his.append(np.asarray(self.st["ubg"])[sl])
-            m = f.rows_per_point
         v = np.concatenate(vals) if vals else np.zeros(0)
         return v, np.concatenate(los) if los else v, np.concatenate(his) if his else v, max(m, 1)
 
@@ -344,9 +378,33 @@ class SplineEvaluator:
             full = np.zeros((self.core.N + 2) * self.core.nj)   # an entry without a row: 0
             full[np.asarray(f.points, int)] = lv.sum(axis=1) * self._T(np.asarray(sol.x, float))
             return -full.reshape(-1, self.core.nj)
-        parts = [lam[self.st["slices"][fn]] for fn in self.owner[h.name]]
+        fixed = self.st.get("fixed", {})
+        if any(fn in fixed for fn in self.owner[h.name]):
+            return self._fixed_dual(fixed[self.owner[h.name][0]], np.asarray(sol.x, float), lam)
+        parts = []
+        for fn in self.owner[h.name]:
+            lf = lam[self.st["slices"][fn]]
+            rp = self.st.get("row_points", {}).get(fn)
+            if rp is not None:   # knots whose rows were constants left out of the NLP: no multiplier (NaN)
+                f = self.fams[fn]
+                full = np.full((len(f.points), f.rows_per_point), np.nan)
+                full[[f.points.index(k) for k in rp]] = lf.reshape(-1, f.rows_per_point)
+                lf = full.ravel()
+            parts.append(lf)
         m = max(self.fams[fn].rows_per_point for fn in self.owner[h.name]) if self.owner[h.name] else 1
         return -np.concatenate(parts).reshape(-1, m)
+
+    def _fixed_dual(self, fixed: tuple[np.ndarray, np.ndarray, np.ndarray], x: np.ndarray,
+                    lam: np.ndarray) -> np.ndarray:
+        """∂f*/∂b of a boundary fixed by bounds (b = [q; q̇; q̈] at its end): the fixed points'
+        reduced gradient ∂L/∂P = ∇f + Jᵀλ (the negated multipliers of their bounds) mapped by A⁻ᵀ."""
+        idx, _, A = fixed
+        sc = float(self.p[self.core.p_scale])
+        grad = np.asarray(self.st["derivs"]["grad_f"](x, self.p)[1]).ravel() / sc
+        if lam.size:
+            grad = grad + np.asarray(ca.densify(self.st["derivs"]["jac_g"](x, self.p)[1])).T @ lam
+        gP = grad[idx].reshape(3, self.core.nj)
+        return np.linalg.solve(A.T, gP).reshape(1, -1)
 
     def sample(self, handle: Any, sol: Any, t: Any) -> np.ndarray:
         """The term's per-point rows at times ``t`` [s], between the knots too (joints exact on the
@@ -415,7 +473,7 @@ class SplineEvaluator:
                                              bound if side == 0 else np.inf, float(v[i]) / T, label=lab))
                     continue
                 else:
-                    k = f.points[pt]
+                    k = self.st.get("row_points", {}).get(fname, f.points)[pt]
                     comp = f.labels[c] if c < len(f.labels) else f"[{c}]"
                     sep = "." if comp and not comp.startswith("[") else ""
                     lab = f"{term}[k={k}]{sep}{comp} at t={k * h:.3g} s"

@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
+import scipy.sparse as sps
+import scipy.sparse.linalg as spsl
 
 from .bspline import knot_values
 from .build import TermData
@@ -19,7 +21,8 @@ from .floating_collision import base_placements
 from .nlp import IpoptStatus, NlpSolver, SolverOptions
 from .solution import Solution
 from .spline_core import Family, SplineCore
-from .spline_problem import SplineEvaluator, _quintic, families_of, seed_guess
+from .spline_problem import SplineEvaluator, _quintic, families_of, fixed_boundary, seed_guess
+from .terms import JointBoundary
 
 __all__ = ["SplineBackend", "VELOCITY_ACTIVATION"]
 
@@ -45,6 +48,12 @@ class SplineBackend:
         self.aux0, self.col_p = np.zeros(0), np.zeros(0)   # collision plane offsets / normals, supports
         self.collision_model: Any = None
         self.last_build_time = 0.0
+        #: boundary families whose end control points are fixed by bounds instead of rows:
+        #: family name -> (variable indices, values, 3 × 3 map) (:func:`~.spline_problem.fixed_boundary`)
+        self.fixed: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        #: knot rows left out because their inputs are all fixed and they hold: family name -> knots
+        self.constant: dict[str, set[int]] = {}
+        self.constant_violation = 0.0   # the largest violation of those rows (within the tolerance)
         self.vel_extra: dict[str, set[int]] = {}   # velocity entries given rows after a solve (on vel_n intervals)
         self.vel_n = 0
         #: re-solves with the velocity rows a solve missed (:meth:`_missed_velocity`) [count]
@@ -60,13 +69,14 @@ class SplineBackend:
         core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar)
         self.fams, self.owner, self.pbounds, cols = families_of(prob, core, params)
         self.core, self.aux0, self.col_p = core, np.zeros(0), np.zeros(0)
+        self.fixed = self._fixed_families(core)
         x = self.guess(prob.duration) if cols or (self._velocity_families() and not prob.free_time) else None
         if cols:   # the active pairs follow the first guess: plan them along it
             from .spline_collision import plan_collision
 
             assert x is not None
             Qk = core.M["q"] @ core.control_points(x)
-            lbx, ubx = self._bounds()
+            lbx, ubx = self._bounds(fixed=False)
             if core.fl:   # planes with the base pose (floating_collision)
                 from .floating_collision import plan_floating_collision
 
@@ -99,6 +109,89 @@ class SplineBackend:
         if x is not None and not core.free_time:
             self._select_velocity(x)
         self.last_build_time = time.perf_counter() - t0
+
+    def _fixed_families(self, core: SplineCore) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """The ``JointBoundary`` families that determine their end's three control points
+        exactly (q, q̇ and q̈ given; with a free duration only at rest): those points become fixed
+        variables (equal bounds, removed by IPOPT) and the family has no rows."""
+        out: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        if not self.prob.fix_boundary_points:
+            return out
+        for h in self.prob._handles:
+            if h.role != "constraint" or not isinstance(h.term, JointBoundary):
+                continue
+            got = fixed_boundary(core, h.term, self.prob.duration)
+            if got is not None:
+                for name in self.owner.get(h.name, ()):
+                    out[name] = got
+        return out
+
+    def _fit_between_fixed(self, P: np.ndarray, Q: np.ndarray) -> np.ndarray:
+        """With both ends' control points fixed (:meth:`_fixed_families`, the duration of the
+        guess the problem's): the interior points P_3 … P_N−1 whose knot values are closest (least
+        squares) to the guess's knots ``Q`` [rad] between those ends, as the fixed variables will
+        have them (an interpolation ringing up to the fixed ends costs the solve iterations)."""
+        core = self.core
+        assert core is not None
+        fixed = self._fixed_families(core)
+        N, nj = core.N, core.nj
+        idx = set().union(*[set(v[0].tolist()) for v in fixed.values()]) if fixed else set()
+        if N < 4 or not idx.issuperset(range(3 * nj)) or not idx.issuperset(range(N * nj, (N + 3) * nj)):
+            return P
+        flat = P.ravel().copy()
+        for i, v, _ in fixed.values():
+            flat[i] = v
+        Pf = flat.reshape(N + 3, nj)
+        A = sps.csr_matrix(core.M["q"][1:N])
+        rhs = Q[1:N] - A[:, np.r_[0:3, N:N + 3]] @ Pf[np.r_[0:3, N:N + 3]]
+        B = A[:, 3:N]
+        # normal equations of a banded system: sparse (a dense solve is slow under a loaded BLAS)
+        Pf[3:N] = np.asarray(spsl.spsolve(sps.csc_matrix(B.T @ B), B.T @ rhs), float).reshape(N - 3, nj)
+        return Pf
+
+    def row_families(self) -> list[Family]:
+        """The families that have rows in the NLP: those fixed by bounds have none, and a knot
+        whose inputs are all fixed loses the rows :meth:`_constant_rows` found held."""
+        out = []
+        for f in self.fams:
+            if f.name in self.fixed:
+                continue
+            drop = self.constant.get(f.name)
+            out.append(f if not drop else dataclasses.replace(f, points=[k for k in f.points if k not in drop]))
+        return out
+
+    def _fixed_knots(self) -> list[int]:
+        """Knots whose every kernel input is fixed: an end whose three control points a boundary
+        fixes, with a fixed duration, and for a floating robot only the start (the end's base
+        attitude is a variable)."""
+        core = self.core
+        assert core is not None
+        if core.free_time or not self.fixed:
+            return []
+        idx = set().union(*[set(v[0].tolist()) for v in self.fixed.values()])
+        nj, N = core.nj, core.N
+        ends = [(0, range(0, 3 * nj))] + ([] if core.fl else [(N, range(N * nj, (N + 3) * nj))])
+        return [k for k, r in ends if idx.issuperset(r)]
+
+    def _constant_rows(self, x: np.ndarray, p: np.ndarray, tol: float) -> dict[str, set[int]]:
+        """Rows of knot families at :meth:`_fixed_knots` are constants (no variable left in
+        them): those that hold within ``tol`` are left out of the NLP (empty rows make its
+        Jacobian rank-deficient), by family name → knots; one that does not hold keeps its rows,
+        so that the solve reports the problem infeasible. ``x`` has the fixed values."""
+        core = self.core
+        assert core is not None
+        out: dict[str, set[int]] = {}
+        self.constant_violation = 0.0
+        for k in self._fixed_knots():
+            for f in self.fams:
+                if f.kind != "knot" or f.cost or f.fn is None or f.name in self.fixed or k not in f.points:
+                    continue
+                v = np.asarray(f.fn(core.knot_inputs(x, p, k, False))).ravel()
+                viol = float(np.max(np.maximum(np.maximum(f.lower - v, v - f.upper), 0.0), initial=0.0))
+                if viol <= tol:
+                    out.setdefault(f.name, set()).add(k)
+                    self.constant_violation = max(self.constant_violation, viol)
+        return out
 
     # ------------------------------------------------------------------ velocity rows
     def _velocity_families(self) -> list[Family]:
@@ -194,7 +287,9 @@ class SplineBackend:
         p[core.p_col:] = self.col_p
         return p
 
-    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+    def _bounds(self, fixed: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Variable bounds: the control points' position limits, a free duration's range and
+        (``fixed``) the end control points fixed by a boundary (:meth:`_fixed_families`)."""
         core, prob = self.core, self.prob
         assert core is not None
         lbx, ubx = np.full(core.nx, -np.inf), np.full(core.nx, np.inf)
@@ -204,6 +299,9 @@ class SplineBackend:
             ubx[:core.nP] = np.minimum(ubx[:core.nP], np.tile(hi, core.N + 3))
         if core.free_time:
             lbx[-1], ubx[-1] = prob.duration_bounds
+        if fixed:
+            for idx, val, _ in self.fixed.values():
+                lbx[idx], ubx[idx] = val, val
         assert nj > 0
         return lbx, ubx
 
@@ -237,6 +335,7 @@ class SplineBackend:
             u: dict[str, Any] = prob.tp.unpack(prob._x0)
             Tg = float(u.get("T", T))
             P = core.fit(u["q"], u["qd"][0], u["qd"][-1], Tg / core.N)
+            P = self._fit_between_fixed(P, np.asarray(u["q"], float))
             parts = [P.ravel()]
             if core.fl:
                 parts.append(core.integrate_base(P))
@@ -246,7 +345,7 @@ class SplineBackend:
         if self.last_x is not None and self.last_x.size == core.nx:
             return self.last_x
         assert nbase == core.nx or not core.free_time     # a re-solve (e.g. after set_value) starts where the last one ended
-        lbx, ubx = self._bounds()
+        lbx, ubx = self._bounds(fixed=False)
         lo, hi = lbx[:core.nj], ubx[:core.nj]
         return seed_guess(core, self.fams, lambda q0: self._pvec(T, self._com0(q0) if q0 is not None else np.zeros(3),
                                                                   1.0), T, lo, hi, self._pinned())
@@ -280,11 +379,16 @@ class SplineBackend:
             self.prepare()
         core = self.core
         assert core is not None
-        st = core.structure(self.fams, bool(self.pbounds), compile_kernels)
+        self.fixed = self._fixed_families(core)   # the duration or the option may have changed
         T = prob.duration
+        lbx, ubx = self._bounds()
         # the start configuration fixes the centre of mass of a floating robot: from the guess
-        x0 = self.guess(T)
+        x0 = np.clip(self.guess(T), lbx, ubx)
         p = self._pvec(T, self._com0(core.control_points(x0)[:3].T @ np.array([1, 4, 1]) / 6), 1.0)
+        ctol = float(sopts.casadi_options({"ipopt.constr_viol_tol": tol}).get("ipopt.constr_viol_tol", tol))
+        self.constant = self._constant_rows(x0, p, ctol)
+        rows = self.row_families()
+        st = core.structure(rows, bool(self.pbounds), compile_kernels)
         from_last = prob._x0 is None and self.last_x is not None and self.last_x.size == core.nx
         if self.scale is not None and (self.x0 is not None or from_last):
             scale = self.scale        # a previous solve's (its multipliers are in that scale)
@@ -301,9 +405,7 @@ class SplineBackend:
             scale = 1.0 / f0 if np.isfinite(f0) and f0 > 1e-12 else 1.0
             scale = float(10.0 ** (np.round(np.log10(np.clip(scale, 1e-8, 1e8)) * 2) / 2))
         p[core.p_scale] = scale
-        lbx, ubx = self._bounds()
-        x0 = np.clip(x0, lbx, ubx)
-        lbg, ubg = core.row_bounds(st, self.fams)
+        lbg, ubg = core.row_bounds(st, rows)
         n_ineq = int(np.sum(lbg != ubg))
         defaults: dict[str, Any] = {
             "ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
@@ -337,10 +439,10 @@ class SplineBackend:
             if self.lam[1] is not None and np.size(self.lam[1]) == core.nx:
                 args["lam_x0"] = np.asarray(self.lam[1]) * scale
         out = solver.solve(x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, cost_scale=scale, extra_setup=setup, **args)
-        return self._solution(out, st, p, lbx, ubx, lbg, ubg, tol, scale)
+        return self._solution(out, st, rows, p, lbx, ubx, lbg, ubg, tol, scale)
 
-    def _solution(self, out: Any, st: dict[str, Any], p: np.ndarray, lbx: np.ndarray, ubx: np.ndarray,
-                  lbg: np.ndarray, ubg: np.ndarray, tol: float, scale: float) -> Solution:
+    def _solution(self, out: Any, st: dict[str, Any], rows: list[Family], p: np.ndarray, lbx: np.ndarray,
+                  ubx: np.ndarray, lbg: np.ndarray, ubg: np.ndarray, tol: float, scale: float) -> Solution:
         core, prob = self.core, self.prob
         assert core is not None
         x = np.array(out.x, float)
@@ -357,7 +459,10 @@ class SplineBackend:
             if h.role == "cost":
                 terms[h.name] = float(sum(c[st["cslices"][f]].sum() for f in fs))
             else:
-                v = [float(vv[st["slices"][f]].max()) for f in fs if st["slices"][f].stop > st["slices"][f].start]
+                v = [float(vv[st["slices"][f]].max()) for f in fs
+                     if f in st["slices"] and st["slices"][f].stop > st["slices"][f].start]
+                v += [float(np.max(np.abs(x[self.fixed[f][0]] - self.fixed[f][1]))) for f in fs if f in self.fixed]
+                v += [self.constant_violation for f in fs if self.constant.get(f)]
                 if h.name in self.pbounds:
                     lo, hi = self.pbounds[h.name]
                     P = core.control_points(x)
@@ -376,7 +481,10 @@ class SplineBackend:
         self.x0, self.lam, self.scale = None, None, scale
         if success:
             self.last_x = x
-        ev = SplineEvaluator(prob, core, {**st, "lbg": lbg, "ubg": ubg}, self.fams, self.owner, self.pbounds, p)
+        # the knots of the families that lost constant rows (_constant_rows), for the evaluator
+        row_points = {f.name: list(f.points) for f in rows if self.constant.get(f.name)}
+        ev = SplineEvaluator(prob, core, {**st, "lbg": lbg, "ubg": ubg, "fixed": dict(self.fixed),
+                                          "row_points": row_points}, self.fams, self.owner, self.pbounds, p)
         lam_g = None if out.lam_g is None else np.asarray(out.lam_g) / scale   # multipliers of the unscaled cost
         lam_x = None if out.lam_x is None else np.asarray(out.lam_x) / scale
         return Solution(success=success, status=out.status, iterations=out.iterations, wall_time=out.wall_time,
