@@ -93,8 +93,9 @@ def generated_case(robot, base_scene, rng: np.random.Generator):
                                start=start, goal=goal, extra={**free.extra, "target_frame": "world"}), q0, goal
 
 
-def run_trial(robot, scene, q0: np.ndarray, goal: pin.SE3, seed: int, time_limit: float, frame: str) -> dict:
-    """Each planner on one query, and the goal's reachability."""
+def run_trial(robot, scene, q0: np.ndarray, goal: pin.SE3, seed: int, time_limit: float, frame: str,
+              planners: tuple[str, ...] = ("tcbirrt", "carry")) -> dict:
+    """Each of ``planners`` on one query, and the goal's reachability."""
     from ..planners.floating_carry import FloatingCarryOptions, FloatingCarryPlanner
     from ..planners.floating_tcbirrt import FloatingTCBiRRT
 
@@ -102,6 +103,8 @@ def run_trial(robot, scene, q0: np.ndarray, goal: pin.SE3, seed: int, time_limit
     tcb = FloatingTCBiRRT(robot, scene, opts)
     row: dict = {"seed": seed}
     for name, planner in (("tcbirrt", tcb), ("carry", FloatingCarryPlanner(robot, scene, opts))):
+        if name not in planners:
+            continue
         c0 = time.process_time()
         res = planner.plan(q0, goal, seed=seed, time_limit=time_limit)
         cpu = time.process_time() - c0
@@ -131,8 +134,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--generated", type=int, default=0, help="generated cases [count]")
     ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds per query [s]")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--planners", default="tcbirrt,carry", help="comma-separated: tcbirrt, carry")
     ap.add_argument("--out", required=True, help="results (JSON lines), appended")
     a = ap.parse_args(argv)
+    planners = tuple(p for p in a.planners.split(",") if p)
+    if not planners or any(p not in ("tcbirrt", "carry") for p in planners):
+        ap.error(f"--planners: expected a comma-separated subset of tcbirrt,carry, got {a.planners!r}")
     robot = RobotModel.from_name("eba_ffsr")
     out = Path(a.out)
     with out.open("a") as f:
@@ -141,7 +148,8 @@ def main(argv: list[str] | None = None) -> None:
             frame = options_for_scene(scene).planner.target_frame
             q0 = scene_start(robot, scene)
             for i in range(a.first_trial, a.first_trial + a.trials):
-                row = run_trial(robot, scene, q0, trial_goal(scene, i, a.seed), a.seed + i, a.time_limit, frame)
+                row = run_trial(robot, scene, q0, trial_goal(scene, i, a.seed), a.seed + i, a.time_limit, frame,
+                                planners)
                 f.write(json.dumps({"case": name, "trial": i, **row}) + "\n")
                 f.flush()
         rng = np.random.default_rng(a.seed)
@@ -152,7 +160,7 @@ def main(argv: list[str] | None = None) -> None:
             if case is None:
                 continue
             scene, q0, goal = case
-            row = run_trial(robot, scene, q0, goal, a.seed + made, a.time_limit, "world")
+            row = run_trial(robot, scene, q0, goal, a.seed + made, a.time_limit, "world", planners)
             row["obstacles"] = len(scene.obstacles)
             f.write(json.dumps({"case": "generated", "trial": made, **row}) + "\n")
             f.flush()

@@ -117,6 +117,38 @@ class FloatingTreeOptions:
             raise OptionError(f"FloatingTreeOptions.clock: expected 'cpu' or 'wall', got {self.clock!r}")
 
 
+def limited_step(J: np.ndarray, e: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                 max_step: float, damping: float = 1e-6, centring: float = 0.1) -> np.ndarray:
+    """A joint step ``dq`` [rad] with ``J dq ≈ e`` that keeps ``q + dq`` within ``[lower, upper]``:
+    damped least squares (``damping``) on the free joints; a joint whose step would cross its limit
+    is moved to the limit and held there while the others are re-solved (active set, at most one
+    pass per joint); the redundancy left pulls the free joints toward the middle of their range
+    (null-space term, ``centring`` × the offset per step); scaled so that no joint moves more than
+    ``max_step`` [rad]. A plain Newton step clipped at a limit is another, inconsistent step: near a
+    limit it drives the arm into the singularity the limit makes."""
+    n = len(q)
+    free = np.ones(n, bool)
+    fixed = np.zeros(n)
+    mid = 0.5 * (lower + upper)
+    dq = np.zeros(n)
+    for _ in range(n):
+        if not free.any():
+            break
+        Jf = J[:, free]
+        A = Jf @ Jf.T + damping * np.eye(len(e))
+        pull = centring * (mid[free] - q[free])
+        step_f = Jf.T @ np.linalg.solve(A, e - J @ fixed) + pull - Jf.T @ np.linalg.solve(A, Jf @ pull)
+        dq = fixed.copy()
+        dq[free] = step_f
+        dq *= min(1.0, max_step / max(float(np.max(np.abs(dq))), 1e-12))
+        over = free & ((q + dq > upper) | (q + dq < lower))
+        if not over.any():
+            return dq
+        fixed[over] = np.clip(q + dq, lower, upper)[over] - q[over]
+        free &= ~over
+    return np.clip(q + dq, lower, upper) - q
+
+
 class FloatingTree:
     """One tree: per node the joints [rad], the object's pose in the base frame, the base's world
     pose (exact for the start tree, relative to the root's estimate for the goal tree) and the parent
@@ -398,8 +430,8 @@ class FloatingTCBiRRT:
         """The goal tree of a world goal rooted at a zero-momentum IK solution
         (:func:`~optplan.planners.floating_reach.zero_momentum_ik`: the centre of mass stays put, so
         the base's arrival POSITION is known for a given attitude; the attitude is searched near
-        ``attitude``: the start's, or after a join the attitude that join arrived with), or None
-        when it does not converge or collides."""
+        the start's, or after a join first held at the attitude that join arrived with, then
+        searched near it), or None when it does not converge or collides."""
         com = pin.centerOfMass(self.robot.model, self._data, self.carry._full(q0, base0))
         if seeds is None:
             seed = self._path_ik(q0, base0.actInv(goal))
@@ -410,8 +442,15 @@ class FloatingTCBiRRT:
             trial = seeds if attempt == 0 else [
                 np.clip(seeds[0] + rng.normal(0.0, self.tree_options.goal_seed_spread_rad, self.robot.nj),
                         self.robot.lower, self.robot.upper)]
-            q, b_est, res = zero_momentum_ik(self.robot, self.carry.grasps, goal, trial, com, rng,
-                                             attitude=base0 if attitude is None else attitude, n_random=2)
+            res = math.inf
+            # after a join: first the attitude that join arrived with, held (else the search drifts
+            # back toward the seed's attitude and the re-rooting creeps), then searched near it
+            for fix in ((True, False) if attitude is not None else (False,)):
+                q, b_est, res = zero_momentum_ik(self.robot, self.carry.grasps, goal, trial, com, rng,
+                                                 attitude=base0 if attitude is None else attitude, n_random=2,
+                                                 fix_attitude=fix)
+                if res <= self.options.ik_tol:
+                    break
             if res > self.options.ik_tol:
                 continue
             qg = self.carry.hold(q, b_est.actInv(goal))   # onto the chain to the IK tolerance, in the base frame
@@ -469,11 +508,8 @@ class FloatingTCBiRRT:
                 return None
             G = self._kin.generalized_jacobians(full)
             J = np.vstack([G[a] for a in self.arm_names])
-            e = np.concatenate(errs)
-            dq = -J.T @ np.linalg.solve(J @ J.T + 1e-8 * np.eye(len(e)), e)
-            n = float(np.max(np.abs(dq)))
-            if n > to.correction_step_rad:
-                dq *= to.correction_step_rad / n
+            dq = limited_step(J, -np.concatenate(errs), q, self.robot.lower, self.robot.upper,
+                              to.correction_step_rad)
             q_lin = np.clip(q + dq, self.robot.lower, self.robot.upper)
             qn = self.carry.hold(q_lin, self.carry.object_in_base(q_lin))
             if qn is None or float(np.max(np.abs(qn - q))) > to.max_joint_step:
