@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["world_reachable", "generated_case", "run_trial", "main"]
+__all__ = ["world_reachable", "arrival_diagnosis", "generated_case", "run_trial", "main"]
 
 
 def world_reachable(planner, goal: pin.SE3, seeds: list[np.ndarray], rng: np.random.Generator,
@@ -50,6 +50,27 @@ def world_reachable(planner, goal: pin.SE3, seeds: list[np.ndarray], rng: np.ran
     _, _, res = zero_momentum_ik(robot, planner.carry.grasps, goal, seeds, com, rng, attitude=base0,
                                  n_random=n_random, iters=150)
     return bool(res <= 1e-9), float(res)
+
+
+def arrival_diagnosis(planner, goal: pin.SE3, q0: np.ndarray, seed: int) -> dict:
+    """Of a failed world-goal query, the first join that reached the goal tree's root: the object's
+    miss there (position [m], rotation [rad]), whether the zero-momentum IK holds the module at the
+    goal with the base attitude HELD at that arrival attitude (its residual [m, rad]), and how far
+    [rad] from the arrival the attitude of a free zero-momentum IK solution lies. Not reachable with
+    the attitude held: the joined paths arrive at an attitude from which no closed-chain correction
+    lands the goal; only a path that turns the base otherwise can."""
+    from ..planners.floating_reach import zero_momentum_ik
+
+    q, b = planner.first_arrival
+    robot = planner.robot
+    com = pin.centerOfMass(robot.model, robot.model.createData(), planner.carry._full(q0))
+    _, _, r_held = zero_momentum_ik(robot, planner.carry.grasps, goal, [q], com, np.random.default_rng(seed),
+                                    attitude=b, n_random=8, fix_attitude=True)
+    _, bf, r_free = zero_momentum_ik(robot, planner.carry.grasps, goal, [q], com, np.random.default_rng(seed),
+                                     attitude=b, n_random=8)
+    ep, er = planner.carry._goal_error(q, b, goal)
+    return {"miss_m": ep, "miss_rad": er, "held_residual": float(r_held), "held_reachable": bool(r_held <= 1e-9),
+            "free_residual": float(r_free), "free_attitude_gap_rad": float(np.linalg.norm(pin.log3(b.rotation.T @ bf.rotation)))}
 
 
 def generated_case(robot, base_scene, rng: np.random.Generator):
@@ -111,6 +132,8 @@ def run_trial(robot, scene, q0: np.ndarray, goal: pin.SE3, seed: int, time_limit
         row[name] = {"status": res.status.value, "cpu_s": cpu, "ok": bool(res.success and cpu <= time_limit),
                      "waypoints": len(res.joints), "corrections": res.corrections, "message": res.message[:300],
                      **({"stats": dict(tcb.stats)} if name == "tcbirrt" else {})}
+    if frame == "world" and "tcbirrt" in row and not row["tcbirrt"]["ok"] and tcb.first_arrival is not None:
+        row["tcbirrt"]["arrival"] = arrival_diagnosis(tcb, goal, q0, seed)
     if frame == "world":
         ok, resid = world_reachable(tcb, goal, [q0], np.random.default_rng(seed))
     else:

@@ -211,6 +211,9 @@ class FloatingTCBiRRT:
         self._data = robot.model.createData()
         #: statistics of the last query: nodes per tree, joins tried / rejected at re-integration, re-roots
         self.stats: dict[str, int] = {}
+        #: the last query's first join that reached the end of the goal tree with a world goal: its
+        #: joints [rad] and real arrival base pose (before the drift correction), or None
+        self.first_arrival: tuple[np.ndarray, pin.SE3] | None = None
 
     def object_in_base(self, joints: np.ndarray) -> pin.SE3:
         """The object's pose in the base frame (read from the first arm's hand)."""
@@ -359,6 +362,7 @@ class FloatingTCBiRRT:
         q0 = r.check_joints(np.asarray(q_start, float), "q_start")
         base0 = pin.SE3.Identity() if base0 is None else base0
         rng = np.random.default_rng(seed)
+        self.first_arrival = None
         self.stats = {"iterations": 0, "nodes_start": 1, "nodes_goal": 0, "goal_roots": 0, "reached": 0,
                       "joins": 0, "joins_rejected": 0, "corrections_failed": 0, "reroots": 0}
         qp = self.carry.hold(q0, self.carry.object_in_base(q0))
@@ -538,6 +542,8 @@ class FloatingTCBiRRT:
             return "collides"
         n_wp = len(joints)
         if o.target_frame == "world":
+            if self.first_arrival is None:
+                self.first_arrival = (joints[-1].copy(), bases[-1].copy())
             got = self._correct(joints[-1], bases[-1], goal, deadline)
             if got is None:
                 self.stats["corrections_failed"] += 1
