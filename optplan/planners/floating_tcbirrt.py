@@ -26,8 +26,12 @@ base composed with the displacements along the path from the root:
   join, the search goes on); with a world goal, the object then misses the goal by the difference
   between the estimate and the real arrival pose: short closed-chain motions re-targeted from the
   drifted base correct it (as :class:`~optplan.planners.floating_carry.FloatingCarryPlanner` does).
-  When the correction fails, the goal tree is re-rooted with the real arrival pose as the new
-  estimate (``max_reroots`` times) while the start tree is kept.
+  The correction's Newton steps keep the joints within their limits (:func:`limited_step`: a
+  joint at its limit is held there and the others re-solved). When the correction fails, the goal
+  tree is re-rooted with the real arrival pose as the new estimate (``max_reroots`` times) while
+  the start tree is kept: the zero-momentum IK first holds the base attitude at that arrival (else
+  its search drifts back toward the old root's attitude and the re-rooting only creeps), then
+  searches near it.
 
 What an ``EXACT`` plan guarantees: the closed chain holds to the IK tolerance at every waypoint; the
 returned base poses are those of one integration from the start's base along the whole joint path
