@@ -168,3 +168,58 @@ def test_zero_momentum_ik_keeps_the_centre_of_mass(robot):
     for arm, h in zip(("A", "B"), _hands(robot, full)):
         assert np.linalg.norm(pin.log6((goal * scene.object.grasps[arm]).actInv(h)).vector) < 1e-9
     assert np.linalg.norm(base.translation) > 0.02               # the base had to move for it
+
+
+def test_zero_momentum_ik_with_the_attitude_held(robot):
+    # the re-rooting after a join asks where the arms hold the module for THAT arrival attitude:
+    # the returned base keeps it exactly, the centre of mass stays put, the hands are at the goal
+    from optplan.planners.floating_reach import zero_momentum_ik
+
+    scene = Scene.load("floating_truss")
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 13, 0)
+    m, d = robot.model, robot.model.createData()
+    com = pin.centerOfMass(m, d, np.r_[pin.SE3ToXYZQUAT(pin.SE3.Identity()), q0]).copy()
+    q_f, free_base, res_f = zero_momentum_ik(robot, scene.object.grasps, goal, [q0], com, np.random.default_rng(1))
+    assert res_f <= 1e-10
+    # 0.01 rad away from the attitude the free search found: the joints must absorb it
+    att = pin.SE3(free_base.rotation @ pin.rpy.rpyToMatrix(0.004, -0.006, 0.007), np.zeros(3))
+    q, base, res = zero_momentum_ik(robot, scene.object.grasps, goal, [q_f], com, np.random.default_rng(1),
+                                    attitude=att, fix_attitude=True)
+    assert res <= 1e-10
+    assert np.linalg.norm(pin.log3(att.rotation.T @ base.rotation)) < 1e-12   # attitude held
+    full = np.r_[pin.SE3ToXYZQUAT(base), q]
+    np.testing.assert_allclose(pin.centerOfMass(m, d, full), com, atol=1e-9)
+    for arm, h in zip(("A", "B"), _hands(robot, full)):
+        assert np.linalg.norm(pin.log6((goal * scene.object.grasps[arm]).actInv(h)).vector) < 1e-9
+    assert np.max(np.abs(q - q_f)) > 1e-3          # other joints than the free solution's
+
+
+def test_limited_step_respects_limits_and_solves_the_free_joints():
+    from optplan.planners.floating_tcbirrt import limited_step
+
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(6, 9))
+    lower, upper = -np.ones(9), np.ones(9)
+    q = rng.uniform(-0.5, 0.5, 9)
+    e = 0.01 * rng.normal(size=6)
+    # far from the limits and below the step cap: J dq = e to the damping (checked against lstsq)
+    dq = limited_step(J, e, q, lower, upper, max_step=1.0, centring=0.0)
+    np.testing.assert_allclose(J @ dq, e, atol=1e-6)
+    np.testing.assert_allclose(dq, np.linalg.lstsq(J, e, rcond=None)[0], atol=1e-6)   # the min-norm step
+    # the centring term lives in the null space: the task is unchanged
+    dq_c = limited_step(J, e, q, lower, upper, max_step=1.0, centring=0.1)
+    np.testing.assert_allclose(J @ dq_c, e, atol=1e-6)
+    # one joint at its upper limit where the min-norm step pushes it further: it stays within the
+    # limits and the other joints still solve the task (rank 6 with 8 free joints)
+    k = int(np.argmax(np.abs(dq)))
+    q_lim = q.copy()
+    q_lim[k] = upper[k] if dq[k] > 0 else lower[k]
+    dq_l = limited_step(J, e, q_lim, lower, upper, max_step=1.0, centring=0.0)
+    assert np.all(q_lim + dq_l <= upper + 1e-15) and np.all(q_lim + dq_l >= lower - 1e-15)
+    assert abs(dq_l[k]) < 1e-15
+    np.testing.assert_allclose(J @ dq_l, e, atol=1e-6)
+    # a plain step clipped at the limit misses the task by the clipped part
+    clipped = np.clip(q_lim + dq, lower, upper) - q_lim
+    assert np.linalg.norm(J @ clipped - e) > 10 * np.linalg.norm(J @ dq_l - e)
+    # the step cap [rad]
+    assert np.max(np.abs(limited_step(J, 100 * e, q, lower, upper, max_step=0.05))) <= 0.05 + 1e-15

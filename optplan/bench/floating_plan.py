@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["world_reachable", "generated_case", "run_trial", "main"]
+__all__ = ["world_reachable", "arrival_diagnosis", "generated_case", "run_trial", "main"]
 
 
 def world_reachable(planner, goal: pin.SE3, seeds: list[np.ndarray], rng: np.random.Generator,
@@ -50,6 +50,27 @@ def world_reachable(planner, goal: pin.SE3, seeds: list[np.ndarray], rng: np.ran
     _, _, res = zero_momentum_ik(robot, planner.carry.grasps, goal, seeds, com, rng, attitude=base0,
                                  n_random=n_random, iters=150)
     return bool(res <= 1e-9), float(res)
+
+
+def arrival_diagnosis(planner, goal: pin.SE3, q0: np.ndarray, seed: int) -> dict:
+    """Of a failed world-goal query, the first join that reached the goal tree's root: the object's
+    miss there (position [m], rotation [rad]), whether the zero-momentum IK holds the module at the
+    goal with the base attitude HELD at that arrival attitude (its residual [m, rad]), and how far
+    [rad] from the arrival the attitude of a free zero-momentum IK solution lies. Not reachable with
+    the attitude held: the joined paths arrive at an attitude from which no closed-chain correction
+    lands the goal; only a path that turns the base otherwise can."""
+    from ..planners.floating_reach import zero_momentum_ik
+
+    q, b = planner.first_arrival
+    robot = planner.robot
+    com = pin.centerOfMass(robot.model, robot.model.createData(), planner.carry._full(q0))
+    _, _, r_held = zero_momentum_ik(robot, planner.carry.grasps, goal, [q], com, np.random.default_rng(seed),
+                                    attitude=b, n_random=8, fix_attitude=True)
+    _, bf, r_free = zero_momentum_ik(robot, planner.carry.grasps, goal, [q], com, np.random.default_rng(seed),
+                                     attitude=b, n_random=8)
+    ep, er = planner.carry._goal_error(q, b, goal)
+    return {"miss_m": ep, "miss_rad": er, "held_residual": float(r_held), "held_reachable": bool(r_held <= 1e-9),
+            "free_residual": float(r_free), "free_attitude_gap_rad": float(np.linalg.norm(pin.log3(b.rotation.T @ bf.rotation)))}
 
 
 def generated_case(robot, base_scene, rng: np.random.Generator):
@@ -93,8 +114,9 @@ def generated_case(robot, base_scene, rng: np.random.Generator):
                                start=start, goal=goal, extra={**free.extra, "target_frame": "world"}), q0, goal
 
 
-def run_trial(robot, scene, q0: np.ndarray, goal: pin.SE3, seed: int, time_limit: float, frame: str) -> dict:
-    """Each planner on one query, and the goal's reachability."""
+def run_trial(robot, scene, q0: np.ndarray, goal: pin.SE3, seed: int, time_limit: float, frame: str,
+              planners: tuple[str, ...] = ("tcbirrt", "carry")) -> dict:
+    """Each of ``planners`` on one query, and the goal's reachability."""
     from ..planners.floating_carry import FloatingCarryOptions, FloatingCarryPlanner
     from ..planners.floating_tcbirrt import FloatingTCBiRRT
 
@@ -102,12 +124,16 @@ def run_trial(robot, scene, q0: np.ndarray, goal: pin.SE3, seed: int, time_limit
     tcb = FloatingTCBiRRT(robot, scene, opts)
     row: dict = {"seed": seed}
     for name, planner in (("tcbirrt", tcb), ("carry", FloatingCarryPlanner(robot, scene, opts))):
+        if name not in planners:
+            continue
         c0 = time.process_time()
         res = planner.plan(q0, goal, seed=seed, time_limit=time_limit)
         cpu = time.process_time() - c0
         row[name] = {"status": res.status.value, "cpu_s": cpu, "ok": bool(res.success and cpu <= time_limit),
                      "waypoints": len(res.joints), "corrections": res.corrections, "message": res.message[:300],
                      **({"stats": dict(tcb.stats)} if name == "tcbirrt" else {})}
+    if frame == "world" and "tcbirrt" in row and not row["tcbirrt"]["ok"] and tcb.first_arrival is not None:
+        row["tcbirrt"]["arrival"] = arrival_diagnosis(tcb, goal, q0, seed)
     if frame == "world":
         ok, resid = world_reachable(tcb, goal, [q0], np.random.default_rng(seed))
     else:
@@ -131,8 +157,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--generated", type=int, default=0, help="generated cases [count]")
     ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds per query [s]")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--planners", default="tcbirrt,carry", help="comma-separated: tcbirrt, carry")
     ap.add_argument("--out", required=True, help="results (JSON lines), appended")
     a = ap.parse_args(argv)
+    planners = tuple(p for p in a.planners.split(",") if p)
+    if not planners or any(p not in ("tcbirrt", "carry") for p in planners):
+        ap.error(f"--planners: expected a comma-separated subset of tcbirrt,carry, got {a.planners!r}")
     robot = RobotModel.from_name("eba_ffsr")
     out = Path(a.out)
     with out.open("a") as f:
@@ -141,7 +171,8 @@ def main(argv: list[str] | None = None) -> None:
             frame = options_for_scene(scene).planner.target_frame
             q0 = scene_start(robot, scene)
             for i in range(a.first_trial, a.first_trial + a.trials):
-                row = run_trial(robot, scene, q0, trial_goal(scene, i, a.seed), a.seed + i, a.time_limit, frame)
+                row = run_trial(robot, scene, q0, trial_goal(scene, i, a.seed), a.seed + i, a.time_limit, frame,
+                                planners)
                 f.write(json.dumps({"case": name, "trial": i, **row}) + "\n")
                 f.flush()
         rng = np.random.default_rng(a.seed)
@@ -152,7 +183,7 @@ def main(argv: list[str] | None = None) -> None:
             if case is None:
                 continue
             scene, q0, goal = case
-            row = run_trial(robot, scene, q0, goal, a.seed + made, a.time_limit, "world")
+            row = run_trial(robot, scene, q0, goal, a.seed + made, a.time_limit, "world", planners)
             row["obstacles"] = len(scene.obstacles)
             f.write(json.dumps({"case": "generated", "trial": made, **row}) + "\n")
             f.flush()

@@ -27,12 +27,15 @@ def _full(robot: RobotModel, q: np.ndarray, base: pin.SE3) -> np.ndarray:
 def zero_momentum_ik(robot: RobotModel, grasps: dict[str, pin.SE3], goal: pin.SE3, seeds: list[np.ndarray],
                      com: np.ndarray, rng: np.random.Generator, *, attitude: pin.SE3 | None = None,
                      n_random: int = 8, spread_rad: float = 0.6, iters: int = 100,
-                     tol: float = 1e-10) -> tuple[np.ndarray, pin.SE3, float]:
+                     tol: float = 1e-10, fix_attitude: bool = False) -> tuple[np.ndarray, pin.SE3, float]:
     """Joints [rad] and base pose holding the object at the world ``goal`` (each arm's hand at
     ``goal · grasps[arm]``) with the centre of mass at ``com`` [m, world]; attitudes are searched
     around ``attitude`` (default identity). Seeds: ``seeds``, then ``n_random`` normal draws
     (``spread_rad`` per joint) around the first. Returns ``(q, base, residual)`` of the best solution
-    found (residual = norm of the hands' log-SE(3) errors [m, rad]; ≤ ``tol`` when it converged)."""
+    found (residual = norm of the hands' log-SE(3) errors [m, rad]; ≤ ``tol`` when it converged).
+    With ``fix_attitude`` the base attitude is held at ``attitude`` and only the joints are solved
+    (the arms' redundancy absorbs it): the solution is where the arms hold the object for THAT
+    arrival attitude, not for one the search drifted to."""
     m, d = robot.model, robot.model.createData()
     R0 = np.eye(3) if attitude is None else attitude.rotation
     targets = [goal * grasps[a] for a in grasps]
@@ -60,8 +63,9 @@ def zero_momentum_ik(robot: RobotModel, grasps: dict[str, pin.SE3], goal: pin.SE
         for _ in range(iters):
             if e <= tol:
                 break
-            J = np.empty((len(r), len(x)))
-            for k in range(len(x)):
+            nx = nj if fix_attitude else len(x)
+            J = np.zeros((len(r), len(x)))
+            for k in range(nx):
                 xk = x.copy()
                 xk[k] += h
                 J[:, k] = (residual(xk) - r) / h

@@ -26,8 +26,12 @@ base composed with the displacements along the path from the root:
   join, the search goes on); with a world goal, the object then misses the goal by the difference
   between the estimate and the real arrival pose: short closed-chain motions re-targeted from the
   drifted base correct it (as :class:`~optplan.planners.floating_carry.FloatingCarryPlanner` does).
-  When the correction fails, the goal tree is re-rooted with the real arrival pose as the new
-  estimate (``max_reroots`` times) while the start tree is kept.
+  The correction's Newton steps keep the joints within their limits (:func:`limited_step`: a
+  joint at its limit is held there and the others re-solved). When the correction fails, the goal
+  tree is re-rooted with the real arrival pose as the new estimate (``max_reroots`` times) while
+  the start tree is kept: the zero-momentum IK first holds the base attitude at that arrival (else
+  its search drifts back toward the old root's attitude and the re-rooting only creeps), then
+  searches near it.
 
 What an ``EXACT`` plan guarantees: the closed chain holds to the IK tolerance at every waypoint; the
 returned base poses are those of one integration from the start's base along the whole joint path
@@ -117,6 +121,38 @@ class FloatingTreeOptions:
             raise OptionError(f"FloatingTreeOptions.clock: expected 'cpu' or 'wall', got {self.clock!r}")
 
 
+def limited_step(J: np.ndarray, e: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                 max_step: float, damping: float = 1e-6, centring: float = 0.1) -> np.ndarray:
+    """A joint step ``dq`` [rad] with ``J dq ≈ e`` that keeps ``q + dq`` within ``[lower, upper]``:
+    damped least squares (``damping``) on the free joints; a joint whose step would cross its limit
+    is moved to the limit and held there while the others are re-solved (active set, at most one
+    pass per joint); the redundancy left pulls the free joints toward the middle of their range
+    (null-space term, ``centring`` × the offset per step); scaled so that no joint moves more than
+    ``max_step`` [rad]. A plain Newton step clipped at a limit is another, inconsistent step: near a
+    limit it drives the arm into the singularity the limit makes."""
+    n = len(q)
+    free = np.ones(n, bool)
+    fixed = np.zeros(n)
+    mid = 0.5 * (lower + upper)
+    dq = np.zeros(n)
+    for _ in range(n):
+        if not free.any():
+            break
+        Jf = J[:, free]
+        A = Jf @ Jf.T + damping * np.eye(len(e))
+        pull = centring * (mid[free] - q[free])
+        step_f = Jf.T @ np.linalg.solve(A, e - J @ fixed) + pull - Jf.T @ np.linalg.solve(A, Jf @ pull)
+        dq = fixed.copy()
+        dq[free] = step_f
+        dq *= min(1.0, max_step / max(float(np.max(np.abs(dq))), 1e-12))
+        over = free & ((q + dq > upper) | (q + dq < lower))
+        if not over.any():
+            return dq
+        fixed[over] = np.clip(q + dq, lower, upper)[over] - q[over]
+        free &= ~over
+    return np.clip(q + dq, lower, upper) - q
+
+
 class FloatingTree:
     """One tree: per node the joints [rad], the object's pose in the base frame, the base's world
     pose (exact for the start tree, relative to the root's estimate for the goal tree) and the parent
@@ -179,6 +215,9 @@ class FloatingTCBiRRT:
         self._data = robot.model.createData()
         #: statistics of the last query: nodes per tree, joins tried / rejected at re-integration, re-roots
         self.stats: dict[str, int] = {}
+        #: the last query's first join that reached the end of the goal tree with a world goal: its
+        #: joints [rad] and real arrival base pose (before the drift correction), or None
+        self.first_arrival: tuple[np.ndarray, pin.SE3] | None = None
 
     def object_in_base(self, joints: np.ndarray) -> pin.SE3:
         """The object's pose in the base frame (read from the first arm's hand)."""
@@ -327,6 +366,7 @@ class FloatingTCBiRRT:
         q0 = r.check_joints(np.asarray(q_start, float), "q_start")
         base0 = pin.SE3.Identity() if base0 is None else base0
         rng = np.random.default_rng(seed)
+        self.first_arrival = None
         self.stats = {"iterations": 0, "nodes_start": 1, "nodes_goal": 0, "goal_roots": 0, "reached": 0,
                       "joins": 0, "joins_rejected": 0, "corrections_failed": 0, "reroots": 0}
         qp = self.carry.hold(q0, self.carry.object_in_base(q0))
@@ -398,8 +438,8 @@ class FloatingTCBiRRT:
         """The goal tree of a world goal rooted at a zero-momentum IK solution
         (:func:`~optplan.planners.floating_reach.zero_momentum_ik`: the centre of mass stays put, so
         the base's arrival POSITION is known for a given attitude; the attitude is searched near
-        ``attitude``: the start's, or after a join the attitude that join arrived with), or None
-        when it does not converge or collides."""
+        the start's, or after a join first held at the attitude that join arrived with, then
+        searched near it), or None when it does not converge or collides."""
         com = pin.centerOfMass(self.robot.model, self._data, self.carry._full(q0, base0))
         if seeds is None:
             seed = self._path_ik(q0, base0.actInv(goal))
@@ -410,8 +450,15 @@ class FloatingTCBiRRT:
             trial = seeds if attempt == 0 else [
                 np.clip(seeds[0] + rng.normal(0.0, self.tree_options.goal_seed_spread_rad, self.robot.nj),
                         self.robot.lower, self.robot.upper)]
-            q, b_est, res = zero_momentum_ik(self.robot, self.carry.grasps, goal, trial, com, rng,
-                                             attitude=base0 if attitude is None else attitude, n_random=2)
+            res = math.inf
+            # after a join: first the attitude that join arrived with, held (else the search drifts
+            # back toward the seed's attitude and the re-rooting creeps), then searched near it
+            for fix in ((True, False) if attitude is not None else (False,)):
+                q, b_est, res = zero_momentum_ik(self.robot, self.carry.grasps, goal, trial, com, rng,
+                                                 attitude=base0 if attitude is None else attitude, n_random=2,
+                                                 fix_attitude=fix)
+                if res <= self.options.ik_tol:
+                    break
             if res > self.options.ik_tol:
                 continue
             qg = self.carry.hold(q, b_est.actInv(goal))   # onto the chain to the IK tolerance, in the base frame
@@ -469,11 +516,8 @@ class FloatingTCBiRRT:
                 return None
             G = self._kin.generalized_jacobians(full)
             J = np.vstack([G[a] for a in self.arm_names])
-            e = np.concatenate(errs)
-            dq = -J.T @ np.linalg.solve(J @ J.T + 1e-8 * np.eye(len(e)), e)
-            n = float(np.max(np.abs(dq)))
-            if n > to.correction_step_rad:
-                dq *= to.correction_step_rad / n
+            dq = limited_step(J, -np.concatenate(errs), q, self.robot.lower, self.robot.upper,
+                              to.correction_step_rad)
             q_lin = np.clip(q + dq, self.robot.lower, self.robot.upper)
             qn = self.carry.hold(q_lin, self.carry.object_in_base(q_lin))
             if qn is None or float(np.max(np.abs(qn - q))) > to.max_joint_step:
@@ -502,6 +546,8 @@ class FloatingTCBiRRT:
             return "collides"
         n_wp = len(joints)
         if o.target_frame == "world":
+            if self.first_arrival is None:
+                self.first_arrival = (joints[-1].copy(), bases[-1].copy())
             got = self._correct(joints[-1], bases[-1], goal, deadline)
             if got is None:
                 self.stats["corrections_failed"] += 1
