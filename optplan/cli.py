@@ -411,6 +411,10 @@ def build_parser() -> argparse.ArgumentParser:
     tb.add_argument("--generated", type=ca.positive_int, default=None, metavar="N",
                     help="instead of --scene: N fresh random scenes of the generator's families (seeded by --seed), "
                          "one trial each, results in OUT/generated")
+    tb.add_argument("--witness-time", type=float,
+                    default=30.0, metavar="S",
+                    help="with --generated: CPU seconds [s] of the independent search for each scene's witness path "
+                         "(a scene without a certified witness is redrawn; 0: no witness, object-only check)")
     _engine_args(tb)
     tb.set_defaults(func=_cmd_bench_tcbirrt)
 

@@ -58,14 +58,22 @@ def _cmd_bench_tcbirrt(args) -> int:
     if args.generated:   # fresh random draws of the scene families, reported apart from the fixed scenes
         from pathlib import Path
 
-        from .bench.scenegen import generate_scenes, write_scenes
+        from .bench.scenegen import generate_scenes, rejection_summary, write_scenes
         from .model.robot import RobotModel
 
-        drawn = generate_scenes(RobotModel.from_name("tcbirrt_dual_arm"), args.generated, args.seed)
+        if not (args.witness_time >= 0 and args.witness_time < float("inf")):
+            raise UsageError(f"--witness-time {args.witness_time!r}: expected CPU seconds >= 0")
+        rejected: list = []
+        drawn = generate_scenes(RobotModel.from_name("tcbirrt_dual_arm"), args.generated, args.seed,
+                                witness_time=args.witness_time, rejections=rejected)
         out = str(Path(args.out) / "generated")
         scenes = write_scenes(drawn, Path(out) / "scenes")
         trials = 1
-        print(f"{len(drawn)} generated scenes (seed {args.seed}) in {out}/scenes, one trial each")
+        print(f"{len(drawn)} generated scenes (seed {args.seed}) in {out}/scenes, one trial each; each kept "
+              f"with a certified witness path (search budget {args.witness_time:g} s CPU)" if args.witness_time > 0
+              else f"{len(drawn)} generated scenes (seed {args.seed}) in {out}/scenes, one trial each; "
+              "NO witness (--witness-time 0): some may be infeasible for the robot")
+        print(rejection_summary(drawn, rejected))
     planners = expand_planners([p for p in args.planners.split(",") if p.strip()])
     for p in planners or [""]:
         try:

@@ -9,6 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from optplan.bench.scene_witness import certify_witness, load_witness
 from optplan.bench.scenegen import (
     FAMILIES,
     family_of,
@@ -16,7 +17,9 @@ from optplan.bench.scenegen import (
     feasibility,
     generate_scene,
     generate_scenes,
+    rejection_summary,
     scene_toml,
+    write_scenes,
 )
 from optplan.scene import Obstacle, Scene
 
@@ -50,7 +53,7 @@ def test_family_draws_are_seeded_and_round_trip(tcb, family, tmp_path):
 
 
 def test_generated_scenes_pass_feasibility(tcb):
-    got = generate_scenes(tcb, 2, seed=5, families=("bay", "overhang"))
+    got = generate_scenes(tcb, 2, seed=5, families=("bay", "overhang"), witness_time=0)
     assert [g.family for g in got] == ["bay", "overhang"]
     for g in got:
         assert feasibility(tcb, g.scene, seed=1) is None
@@ -74,3 +77,57 @@ def test_family_summary_counts():
             {"planner": "p", "scene": "/d/gen_0_001_wall.toml", "success": False, "cpu_time_s": 10.0, "time_limit_s": 10}]
     text = family_summary(rows)
     assert "wall" in text and "1/2" in text and "5.250" in text
+
+
+def test_kept_scene_has_a_certified_witness_for_the_benchmark_query(tcb, tmp_path):
+    from optplan.constraints.closed_chain import closure_error
+    from optplan.planners.validity import ValidityChecker
+    from optplan.trials import TrialGenerator
+
+    rej: list = []
+    got = generate_scenes(tcb, 1, seed=5, families=("overhang",), witness_time=10, rejections=rej)
+    assert len(got) == 1 and got[0].witness is not None
+    g, w = got[0], got[0].witness
+    trial = TrialGenerator(tcb, g.scene).generate(0, 5)          # the benchmark's query (base seed 5, trial 0)
+    assert np.allclose(w.path[0], trial.q_start) and np.allclose(w.path[-1], trial.q_goal)
+    assert w.seed != trial.seed                                  # its own seed stream, not the planner's
+    ck = ValidityChecker(tcb, g.scene, kernel="coal")             # independent: exact coal, Pinocchio FK
+    data = tcb.model.createData()
+    for q, c in zip(w.path, w.constrained):
+        if c:
+            assert max(closure_error(tcb, g.scene.object.grasps, q, data)) < 1e-3
+            assert ck.is_valid(q)
+    write_scenes(got, tmp_path)
+    back = load_witness(tmp_path / f"{g.scene.name}.witness.npz")
+    assert np.array_equal(back.path, w.path) and back.seed == w.seed
+
+
+def test_draws_without_a_witness_are_rejected_and_counted(tcb):
+    rej: list = []
+    got = generate_scenes(tcb, 1, seed=5, families=("overhang",), max_draws=2, witness_time=1e-4, rejections=rej)
+    assert got == [] and len(rej) == 2
+    assert all(r.family == "overhang" and r.index == 0 for r in rej)
+    assert all(r.reason.startswith("witness search") or not r.reason.startswith("witness") for r in rej)
+    text = rejection_summary(got, rej)
+    line = next(ln for ln in text.splitlines() if ln.startswith("overhang"))
+    assert line.split()[1:4] == ["0", "2", "1"]                # kept, rejected draws, skipped
+
+
+def test_certify_rejects_a_path_through_an_obstacle(tcb):
+    from optplan.planners import make_planner
+    from optplan.trials import TrialGenerator
+
+    sc = generate_scenes(tcb, 1, seed=5, families=("overhang",), witness_time=10)[0].scene
+    trial = TrialGenerator(tcb, sc).generate(0, 5)
+    res = make_planner("tcbirrt", tcb, sc, variant="improved").plan(trial.q_start, trial.q_goal, time_limit=10,
+                                                                      seed=1, clock="cpu")
+    assert res.success
+    assert certify_witness(tcb, sc, res)[0] is None
+    # a sphere on the object's centre half-way along the path: the certificate must now fail
+    from optplan.constraints.closed_chain import ClosedChainKinematics
+
+    M = ClosedChainKinematics(tcb, sc.object.grasps).object_pose(res.path[len(res.path) // 2])
+    block = Obstacle("block", "sphere", pin.SE3(np.eye(3), M.translation), radius=0.05)
+    bad = dataclasses.replace(sc, obstacles=sc.obstacles + (block,))
+    why, _ = certify_witness(tcb, bad, res)
+    assert why is not None and "collision" in why

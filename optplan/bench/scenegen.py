@@ -20,10 +20,16 @@ Families (obstacles placed relative to the start and goal object poses ``s``, ``
   post beside the way.
 
 Start and goal come from a shipped scene of the same robot and object (a hard-suite or SSPS scene:
-its object poses and their configurations), possibly swapped. :func:`feasibility` is a necessary
-condition only: both end configurations collision-free, a trial generated, and a path of the object
-ALONE (with both grasp points within reach) found; a draw that fails it is redrawn. A generated scene
-may still be infeasible for the arms; the benchmark reports success on the draws as they are.
+its object poses and their configurations), possibly swapped.
+
+A draw is kept only when it is *feasible for the robot*: first the cheap necessary conditions of
+:func:`feasibility` (both end configurations collision-free, a trial generated, a path of the object
+alone found), then a WITNESS (:mod:`optplan.bench.scene_witness`): a path of the dual arm for the
+benchmark's own query on the scene (trial 0 of the benchmark's base seed), planned by an independent
+search (improved TCBiRRT, its own seed stream, a 30 s CPU budget) and certified by exact coal
+distances along every edge (no point moving more than 1 cm between checks) and the closed-chain
+residual. A draw without a witness is redrawn; the rejections are counted per family and reason
+(:func:`rejection_summary`). The selection never looks at how the planners under test fare.
 
 ``optplan bench tcbirrt --generated N --seed S`` writes ``N`` fresh draws as TOML to
 ``OUT/generated/`` and runs the benchmark on them (one trial each), reported separately from the
@@ -40,10 +46,12 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ..errors import OptionError
 from ..scene import Obstacle, Scene
+from .scene_witness import WITNESS_TIME_LIMIT, Witness, plan_witness, save_witness
 
-__all__ = ["FAMILIES", "POOL", "GeneratedScene", "generate_scene", "generate_scenes", "feasibility", "scene_toml",
-           "write_scenes", "family_summary"]
+__all__ = ["FAMILIES", "POOL", "GeneratedScene", "Rejection", "generate_scene", "generate_scenes", "feasibility",
+           "scene_toml", "write_scenes", "family_summary", "rejection_summary"]
 
 FAMILIES = ("wall", "bay", "corridor", "clutter", "truss", "overhang")
 #: shipped scenes whose object, start/goal poses and end configurations the generated scenes reuse
@@ -53,13 +61,25 @@ POOL = ("hard_bay", "hard_window", "hard_corridor", "hard_flip", "hard_truss", "
 
 @dataclass(frozen=True)
 class GeneratedScene:
-    """A feasible draw: the scene, its family, the index of the draw and how many draws were rejected."""
+    """A feasible draw: the scene, its family, the index of the draw, how many draws were rejected before
+    it, the CPU seconds [s] spent on it and its witness (None when drawn without one)."""
 
     scene: Scene
     family: str
     index: int
     rejected: int
     seconds: float
+    witness: Witness | None = None
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """A rejected draw: its family, index, draw number and why (the check that failed)."""
+
+    family: str
+    index: int
+    draw: int
+    reason: str
 
 
 def _box(name: str, size: Any, centre: Any, R: Any = None) -> Obstacle:
@@ -288,12 +308,20 @@ def feasibility(robot: Any, scene: Scene, *, seed: int = 0, lead_time: float = 1
 
 
 def generate_scenes(robot: Any, n: int, seed: int, families: tuple[str, ...] = FAMILIES,
-                    max_draws: int = 20) -> list[GeneratedScene]:
+                    max_draws: int = 20, *, trial_seed: int | None = None,
+                    witness_time: float = WITNESS_TIME_LIMIT,
+                    rejections: list[Rejection] | None = None) -> list[GeneratedScene]:
     """``n`` feasible draws, the families in turn, from ``numpy.random.default_rng(seed)``; each family
-    draw is redrawn up to ``max_draws`` times until :func:`feasibility` passes (else skipped)."""
+    draw is redrawn up to ``max_draws`` times until it passes :func:`feasibility` and has a certified
+    witness for trial 0 of base seed ``trial_seed`` (default ``seed``: the benchmark's query) found
+    within ``witness_time`` CPU seconds [s] (0: no witness, the object-only check alone); an index
+    whose every draw fails is skipped. Each rejected draw is appended to ``rejections``."""
     for f in families:
         if f not in _BUILDERS:
             raise ValueError(f"scene family: expected one of {FAMILIES}, got {f!r}")
+    if not (isinstance(witness_time, (int, float)) and math.isfinite(witness_time) and witness_time >= 0):
+        raise OptionError(f"witness_time: expected a number of CPU seconds >= 0, got {witness_time!r}")
+    tseed = seed if trial_seed is None else trial_seed
     rng = np.random.default_rng(seed)
     out = []
     for i in range(n):
@@ -301,10 +329,39 @@ def generate_scenes(robot: Any, n: int, seed: int, families: tuple[str, ...] = F
         t0 = time.process_time()
         for k in range(max_draws):
             sc = generate_scene(fam, rng, f"gen_{seed}_{i:03d}_{fam}", robot)
-            if feasibility(robot, sc, seed=int(rng.integers(2**31))) is None:
-                out.append(GeneratedScene(sc, fam, i, k, time.process_time() - t0))
+            why = feasibility(robot, sc, seed=int(rng.integers(2**31)))
+            witness_seed = int(rng.integers(2**31))   # drawn always: the stream does not depend on the outcomes
+            w = None
+            if why is None and witness_time > 0:
+                w, why = plan_witness(robot, sc, tseed, witness_seed, witness_time)
+            if why is None:
+                out.append(GeneratedScene(sc, fam, i, k, time.process_time() - t0, w))
                 break
+            if rejections is not None:
+                rejections.append(Rejection(fam, i, k, why))
     return out
+
+
+def _reason_kind(reason: str) -> str:
+    return "no witness" if reason.startswith("witness") else reason.split(":")[0]
+
+
+def rejection_summary(kept: list[GeneratedScene], rejections: list[Rejection]) -> str:
+    """Per family: scenes kept, draws rejected (by reason) and indices skipped (every draw rejected)."""
+    lines = [f"{'family':9s} {'kept':>5s} {'rejected draws':>15s} {'skipped':>8s}  reasons"]
+    for fam in FAMILIES:
+        rr = [r for r in rejections if r.family == fam]
+        kk = [g for g in kept if g.family == fam]
+        if not rr and not kk:
+            continue
+        kept_idx = {g.index for g in kk}
+        skipped = len({r.index for r in rr} - kept_idx)
+        reasons: dict[str, int] = {}
+        for r in rr:
+            reasons[_reason_kind(r.reason)] = reasons.get(_reason_kind(r.reason), 0) + 1
+        text = ", ".join(f"{k} {v}" for k, v in sorted(reasons.items(), key=lambda kv: -kv[1]))
+        lines.append(f"{fam:9s} {len(kk):5d} {len(rr):15d} {skipped:8d}  {text}")
+    return "\n".join(lines)
 
 
 def _fmt(v: Any) -> str:
@@ -354,13 +411,16 @@ def scene_toml(scene: Scene) -> str:
 
 
 def write_scenes(scenes: list[GeneratedScene], directory: str | Path) -> list[str]:
-    """Write each draw as ``directory/<name>.toml``; the paths, in order."""
+    """Write each draw as ``directory/<name>.toml`` (its witness, if any, as ``<name>.witness.npz``);
+    the paths of the TOML files, in order."""
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     paths = []
     for gs in scenes:
         p = d / f"{gs.scene.name}.toml"
         p.write_text(scene_toml(gs.scene), encoding="utf-8")
+        if gs.witness is not None:
+            save_witness(gs.witness, d / f"{gs.scene.name}.witness.npz")
         paths.append(str(p))
     return paths
 
