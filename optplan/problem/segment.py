@@ -157,10 +157,16 @@ class SplineSegmentProblem:
         self.problem.smooth_initial(weight, closed_chain)
 
     def knot_configurations(self) -> np.ndarray:
-        """Knot configurations ((N+1) × nj) of the initial guess."""
+        """Knot configurations ((N+1) × nj [rad]) of the initial guess the NLP starts from: on the
+        B-spline core, the spline fitted to the given knots between the fixed ends (the guess the
+        collision rows were planned along)."""
         x0 = self.problem.initial_guess
         if x0 is None:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_path(...) first")
+        backend = getattr(self.problem, "_spline", None)
+        core = getattr(backend, "core", None)
+        if core is not None:
+            return np.asarray(core.M["q"] @ core.control_points(backend.guess(self.spec.duration)), float)
         return np.asarray(self.problem.tp.unpack(x0)["q"], float)
 
     # ------------------------------------------------------------------ retries
