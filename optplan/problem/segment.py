@@ -165,7 +165,7 @@ class SplineSegmentProblem:
             raise ValueError("no initial guess: call set_initial(...) or set_initial_path(...) first")
         backend = getattr(self.problem, "_spline", None)
         core = getattr(backend, "core", None)
-        if core is not None:
+        if backend is not None and core is not None:
             return np.asarray(core.M["q"] @ core.control_points(backend.guess(self.spec.duration)), float)
         return np.asarray(self.problem.tp.unpack(x0)["q"], float)
 
