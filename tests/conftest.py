@@ -37,3 +37,27 @@ def tcb() -> RobotModel:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+@pytest.fixture
+def deadline_gaps(monkeypatch):
+    """``deadline_gaps()`` patches :class:`optplan.planners.base.Deadline` so that every ``expired()`` call
+    records the clock time since the previous call of the same deadline (the longest stretch a planner
+    runs without looking at its limit), and returns the list it fills."""
+    from optplan.planners.base import Deadline
+
+    def install() -> list[float]:
+        gaps: list[float] = []
+        last: dict[int, float] = {}
+        orig = Deadline.expired
+
+        def expired(self) -> bool:
+            now = self.clock()
+            gaps.append(now - last.get(id(self), self.t0))
+            last[id(self)] = now
+            return orig(self)
+
+        monkeypatch.setattr(Deadline, "expired", expired)
+        return gaps
+
+    return install

@@ -230,3 +230,19 @@ def test_bench_learned_without_the_extra_is_a_usage_error(capsys, monkeypatch, t
     err = capsys.readouterr().err
     assert rc == 2 and "optplan[learned]" in err and "lcbirrt-lpo" in err
     assert not (tmp_path / "results.jsonl").exists()
+
+
+# ---------------------------------------------------------------------- time limits
+@pytest.mark.parametrize("name", ["constrained-prm", "precomputed-graph", "cbirrt2", "tcbirrt"])
+def test_planners_respect_the_cpu_time_limit(tcb, scene1, kin, checker, trial, name, tmp_path, monkeypatch,
+                                             deadline_gaps):
+    """A full trial at 0.4 s of CPU: the planner looks at its deadline at least every 0.1 s of CPU and
+    returns within 0.1 s of the limit (a failed query is a TIMEOUT, not an overrun)."""
+    monkeypatch.setenv("OPTPLAN_CACHE", str(tmp_path))
+    kw = {"n_samples": 300} if name == "precomputed-graph" else {}
+    pl = make_planner(name, tcb, scene1, checker=checker, kinematics=kin, **kw)
+    gaps = deadline_gaps()
+    res = pl.plan(trial.q_start, trial.q_goal, time_limit=0.4, seed=3, clock="cpu")
+    assert res.status in (PlanStatus.TIMEOUT, PlanStatus.EXACT), res.message
+    assert gaps and max(gaps) < 0.1, (name, max(gaps, default=None))
+    assert res.stats["cpu_time_s"] <= 0.4 + 0.1, res.stats

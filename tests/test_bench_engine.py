@@ -45,7 +45,7 @@ def distributed():
 
 def _strip(r: dict) -> dict:
     """A tcbirrt result line without its timings (the part that must not depend on the engine)."""
-    drop = {"time_s", "cpu_time_s", "trial_generation_s"}
+    drop = {"time_s", "cpu_time_s", "cpu_user_s", "cpu_system_s", "trial_generation_s"}
     out = {k: v for k, v in r.items() if k not in drop}
     out["stats"] = {k: v for k, v in r["stats"].items() if "time" not in k}
     return out

@@ -224,3 +224,46 @@ def test_classifier_beats_chance_on_held_out_latent_samples(tcb, scene1, kin, ch
     m = clf.meta
     assert m["n_valid"] == m["n_invalid"] == 300        # balanced: chance is 0.5
     assert m["held_out"]["accuracy"] > 0.6, m
+
+
+class _RefusingClassifier:
+    """A classifier that scores every latent vector invalid (the gating logic under test, not a model)."""
+
+    def probability(self, z):
+        return np.zeros(np.shape(z)[:-1]) if np.ndim(z) > 1 else 0.0
+
+
+def test_classifier_does_not_veto_steps_out_of_a_verified_node(tcb, scene1, kin, checker, cache, query):
+    """Where the classifier scores a tree's verified node invalid, a step out of it is decided by the
+    decode + projection + collision check: with a classifier that refuses everything, the trees still
+    grow (every step checked for real); the strict setting never grows them."""
+    import dataclasses
+
+    qs, qg = query
+    pl = make_planner("lcbirrt", tcb, scene1, checker=checker, kinematics=kin,
+                      **{**SMALL_LC, "classifier_threshold": 0.5, "max_iterations": 20})
+    pl.classifier = _RefusingClassifier()
+    res = pl.plan(qs, qg, time_limit=60.0, seed=1, clock="cpu")
+    st = res.stats
+    assert st["classifier_rejects"] == 0 and st["classifier_overruled"] > 0 and st["decodes"] > 0
+    assert st["nodes"] > 2 or res.status is PlanStatus.EXACT, st
+    assert st["start_tree_nodes"] + st["goal_tree_nodes"] == st["nodes"]
+    assert st["start_root_probability"] == st["goal_root_probability"] == 0.0
+    pl.options = dataclasses.replace(pl.options, classifier_trusts_verified=False)
+    strict = pl.plan(qs, qg, time_limit=60.0, seed=1, clock="cpu").stats
+    assert strict["start_tree_nodes"] == strict["goal_tree_nodes"] == 1
+    assert strict["classifier_rejects"] > 0 and strict["decodes"] == 0
+    with pytest.raises(ValueError, match="classifier_trusts_verified"):
+        LCBiRRTOptions(classifier_trusts_verified=1)
+
+
+@pytest.mark.parametrize("name", ["latent-sampling", "lcbirrt", "lcbirrt-lpo"])
+def test_learned_planners_respect_the_cpu_time_limit(tcb, scene1, kin, checker, cache, deadline_gaps, name):
+    """Trial 0 (a hard query) at 0.4 s of CPU: deadline looked at every < 0.1 s, returned within 0.1 s."""
+    t = TrialGenerator(tcb, scene1).generate(0, 0)
+    pl = make_planner(name, tcb, scene1, checker=checker, kinematics=kin,
+                      **(SMALL if name == "latent-sampling" else SMALL_LC))
+    gaps = deadline_gaps()
+    res = pl.plan(t.q_start, t.q_goal, time_limit=0.4, seed=3, clock="cpu")
+    assert res.status in (PlanStatus.TIMEOUT, PlanStatus.EXACT), res.message
+    assert gaps and max(gaps) < 0.1 and res.stats["cpu_time_s"] <= 0.5, (max(gaps), res.stats)

@@ -32,6 +32,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -210,12 +211,16 @@ def _run_unit(args) -> list[dict]:
     out = []
     for name in planners:
         pl = w["planners"][name]
+        os0 = os.times()
         res = pl.plan(trial.q_start, trial.q_goal, time_limit=time_limit, seed=trial.seed, clock=clock)
+        os1 = os.times()
         checks = _path_checks(w["robot"], w["scene"], w["checker"], res)
         clean = res.success and checks.get("swept_invalid_edges", 0) == 0
         line = {"scene": scene, "trial": index, "planner": name, "seed": seed, "planner_seed": trial.seed,
                 "status": res.status.value, "success": clean, "planner_success": res.success, "time_s": res.stats.get("time_s"),
                 "cpu_time_s": res.stats.get("cpu_time_s"), "clock": clock, "time_limit_s": time_limit,
+                # user / system split of the query's CPU time [s] (system time: page faults, memory pressure)
+                "cpu_user_s": os1.user - os0.user, "cpu_system_s": os1.system - os0.system,
                 "n_regrasp": res.n_regrasp, "n_configurations": len(res.path), "message": res.message,
                 "regenerations": trial.regenerations, "trial_generation_s": gen_time,
                 "stats": {k: v for k, v in res.to_dict(include_path=False)["stats"].items()

@@ -6,13 +6,18 @@
 * :class:`LCBiRRT` — a bidirectional RRT **in the latent space** (Park et al. 2024): trees of latent
   vectors, each node also holding its configuration (decoded and projected). An extension steps
   ``latent_step`` toward the target in the latent space; a step whose latent vector the validity
-  classifier rejects (``p(valid) < classifier_threshold``) ends it before any decoding; otherwise the
+  classifier rejects (``p(valid) < classifier_threshold``) ends it before any decoding — unless the
+  classifier also scores the step's parent, a verified node, below the threshold
+  (``classifier_trusts_verified``: there the classifier is known to be wrong, e.g. around a start whose
+  latent code lies where its training samples were mostly invalid); otherwise the
   decoded configuration (anchored at the node's own configuration: ``decode(z) + q_i − decode(z_i)``,
   ``anchored_decoding``) is projected, checked for collisions, and the joint-space edge from the
   previous node is checked by the constrained local planner
   (:func:`~optplan.planners.constrained_prm.constrained_edge`, every ``collision_step`` rad). The
   trees alternate, as in CBiRRT; they are joined when a connect extension comes within
   ``latent_step`` of the target node and the joint-space edge between the two configurations holds.
+  ``stats`` count the nodes of each tree (``start_tree_nodes``, ``goal_tree_nodes``), the classifier's
+  score of each root and the steps it refused (``classifier_rejects``) or was overruled on.
 * :class:`LCBiRRT` with ``lpo=True`` (name ``"lcbirrt-lpo"``) — plus local path optimisation in the
   latent space (Zhang et al. 2025): every ``lpo_interval`` nodes a tree gains, the newest node and its
   ``lpo_interval − 1`` ancestors (not the root) whose learned distance is below ``lpo_clearance``
@@ -111,6 +116,13 @@ class LCBiRRTOptions:
     latent_step: float = 0.3
     #: A latent vector with a classifier probability below this is not expanded [-].
     classifier_threshold: float = 0.5
+    #: The classifier refuses a step only when it also scores the step's parent node as valid: a node in a tree
+    #: has been decoded, projected and collision-checked, so where the classifier scores it below the threshold
+    #: (e.g. a start whose latent code lies where the classifier's training samples were mostly invalid) it is
+    #: known to be wrong there, and the step is decided by the decode + projection + collision check alone.
+    #: Off: every step below the threshold is refused — a tree whose root the classifier scores invalid then
+    #: never grows [-].
+    classifier_trusts_verified: bool = True
     #: Joint spacing of the projected, collision-checked points of an edge [rad] (the paper: 0.2).
     collision_step: float = 0.2
     #: Steps of one extension before it stops [count].
@@ -175,6 +187,9 @@ class LCBiRRTOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"LCBiRRTOptions.{name}: expected a number >= 0 m, got {v!r}")
+        if not isinstance(self.classifier_trusts_verified, bool):
+            raise ValueError(f"LCBiRRTOptions.classifier_trusts_verified: expected True/False, "
+                             f"got {self.classifier_trusts_verified!r}")
         if not isinstance(self.anchored_decoding, bool):
             raise ValueError(f"LCBiRRTOptions.anchored_decoding: expected True/False, got {self.anchored_decoding!r}")
         if not isinstance(self.lpo, bool):
@@ -183,17 +198,19 @@ class LCBiRRTOptions:
 
 
 class _LatentTree:
-    def __init__(self, z: np.ndarray, q: np.ndarray) -> None:
+    def __init__(self, z: np.ndarray, q: np.ndarray, p: float) -> None:
         self.Z = [z]
         self.Q = [q]
+        self.P = [p]   # the classifier's probability of each node's latent vector
         self.parent = [-1]
         self.children: list[list[int]] = [[]]
         self.edge: list[list[np.ndarray]] = [[]]   # projected points from the parent to the node
         self.added = 0
 
-    def add(self, z: np.ndarray, q: np.ndarray, parent: int, edge: list[np.ndarray]) -> int:
+    def add(self, z: np.ndarray, q: np.ndarray, p: float, parent: int, edge: list[np.ndarray]) -> int:
         self.Z.append(z)
         self.Q.append(q)
+        self.P.append(p)
         self.parent.append(parent)
         self.children.append([])
         self.children[parent].append(len(self.Z) - 1)
@@ -242,6 +259,8 @@ class LCBiRRT(Planner):
         if o.lpo:
             self.distance = load_or_train_distance(robot, scene, self.cvae, self.kin, self.checker, data.Q, ms,
                                                    cache=o.cache, progress=progress)
+            # JAX compiles the jitted gradient on its first call (~0.3 s of CPU): at construction, not in a query's budget
+            self.distance.value_and_gradient(np.zeros(self.cvae.latent_dim))
 
     # ------------------------------------------------------------------ helpers
     def _config(self, z: np.ndarray, z_near: np.ndarray, near: np.ndarray, st: dict[str, Any]) -> np.ndarray | None:
@@ -280,16 +299,20 @@ class LCBiRRT(Planner):
             if dist < 1e-9:
                 return True, i
             z = z_target.copy() if dist <= o.latent_step else tree.Z[i] + (o.latent_step / dist) * d
-            if float(self.classifier.probability(z)) < o.classifier_threshold:
-                st["classifier_rejects"] += 1
-                break
+            p = float(self.classifier.probability(z))
+            if p < o.classifier_threshold:
+                if o.classifier_trusts_verified and tree.P[i] < o.classifier_threshold:
+                    st["classifier_overruled"] += 1   # the parent is valid where the classifier says not
+                else:
+                    st["classifier_rejects"] += 1
+                    break
             q = self._config(z, tree.Z[i], tree.Q[i], st)
             if q is None:
                 break
             edge = self._edge(tree.Q[i], q, st, deadline)
             if edge is None:
                 break
-            i = tree.add(z, q, i, edge)
+            i = tree.add(z, q, p, i, edge)
             if o.lpo and tree.added % o.lpo_interval == 0:
                 self._optimize(tree, i, st, deadline)
             if dist <= o.latent_step:
@@ -318,6 +341,7 @@ class LCBiRRT(Planner):
                     kids = [self._edge(q, tree.Q[c], st, deadline) for c in tree.children[i]] if par is not None else [None]
                     if par is not None and all(k is not None for k in kids):
                         tree.Z[i], tree.Q[i], tree.edge[i] = z, q, par
+                        tree.P[i] = float(self.classifier.probability(z))
                         for c, k in zip(tree.children[i], kids):
                             tree.edge[c] = k   # type: ignore[assignment]  # None excluded above
                         st["lpo_moves"] += 1
@@ -327,13 +351,18 @@ class LCBiRRT(Planner):
     def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
               seed: int) -> PlanResult:
         o, ck = self.options, self.checker
-        st = {"iterations": 0, "decodes": 0, "projection_failures": 0, "collisions": 0, "classifier_rejects": 0,
-              "edge_checks": 0, "link_attempts": 0, "lpo_nodes": 0, "lpo_moves": 0}
+        st: dict[str, Any] = {"iterations": 0, "decodes": 0, "projection_failures": 0, "collisions": 0, "classifier_rejects": 0,
+              "classifier_overruled": 0, "edge_checks": 0, "link_attempts": 0, "lpo_nodes": 0, "lpo_moves": 0}
         c0 = ck.n_checks
         bad = invalid_endpoints(self, q_start, q_goal, st)
         if bad is not None:
             return bad
-        ta, tb = _LatentTree(self.cvae.encode(q_start), q_start), _LatentTree(self.cvae.encode(q_goal), q_goal)
+        roots = []
+        for q in (q_start, q_goal):
+            z = self.cvae.encode(q)
+            roots.append(_LatentTree(z, q, float(self.classifier.probability(z))))
+        ta, tb = roots
+        st["start_root_probability"], st["goal_root_probability"] = ta.P[0], tb.P[0]
         a_is_start = True
         found = None
         while not deadline.expired():
@@ -355,6 +384,8 @@ class LCBiRRT(Planner):
                     break
             ta, tb, a_is_start = tb, ta, not a_is_start
         st["nodes"] = len(ta.Z) + len(tb.Z)
+        t_start, t_goal = (ta, tb) if a_is_start else (tb, ta)
+        st["start_tree_nodes"], st["goal_tree_nodes"] = len(t_start.Z), len(t_goal.Z)
         st["collision_checks"] = ck.n_checks - c0
         if found is None:
             if deadline.expired():
