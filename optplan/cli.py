@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
 import time
@@ -183,10 +184,8 @@ def _cmd_plan(args) -> int:
             rec = {"success": False, "status": "interrupted" if sig is not None else "error",
                    "error": f"{type(exc).__name__}: {exc}" if sig is None else f"interrupted by {exc}",
                    "files": files, "wall_time_s": time.perf_counter() - t0}
-            try:
+            with contextlib.suppress(OptplanError):   # the first error is the one reported
                 _write_json(args.json, rec)
-            except OptplanError:
-                pass   # the first error is the one reported
         raise
     interrupt.progress(1, 1, "trials")
     if args.json:

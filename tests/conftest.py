@@ -1,6 +1,8 @@
 """Shared fixtures of the optplan test-suite.
 
 * ``eba`` / ``tcb``: the two shipped robots (session-scoped: loading builds collision pairs).
+* ``scene1`` / ``kin`` / ``checker``: SSPS scene 1, the closed-chain kinematics of its grasps on
+  ``tcb`` and its validity checker (module-scoped; a test module may define its own).
 * ``rng``: a fresh ``np.random.default_rng(12345)`` for every test, so a test draws the same
   numbers whether it runs alone or inside the whole suite.
 * ``OPTPLAN_CACHE`` points to a session temporary directory, so compiled CasADi code never
@@ -13,6 +15,7 @@ import numpy as np
 import pytest
 
 from optplan.model.robot import RobotModel
+from optplan.scene import Scene
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -32,6 +35,25 @@ def eba() -> RobotModel:
 @pytest.fixture(scope="session")
 def tcb() -> RobotModel:
     return RobotModel.from_name("tcbirrt_dual_arm")
+
+
+@pytest.fixture(scope="module")
+def scene1() -> Scene:
+    return Scene.load("ssps_scene1")
+
+
+@pytest.fixture(scope="module")
+def kin(tcb, scene1):
+    from optplan.constraints.closed_chain import ClosedChainKinematics
+
+    return ClosedChainKinematics(tcb, scene1.object.grasps)
+
+
+@pytest.fixture(scope="module")
+def checker(tcb, scene1):
+    from optplan.planners import ValidityChecker
+
+    return ValidityChecker(tcb, scene1)
 
 
 @pytest.fixture

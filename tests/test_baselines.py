@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from optplan.collision.checker import CollisionChecker
-from optplan.constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error
-from optplan.planners import PlanStatus, ValidityChecker, make_planner
+from optplan.constraints.closed_chain import IKSettings, closure_error
+from optplan.planners import PlanStatus, make_planner
 from optplan.planners.constrained_prm import ConstrainedPRM, ConstrainedPRMOptions, _Roadmap, constrained_edge
 from optplan.planners.manifold_samples import (
     ManifoldSampleSettings,
@@ -22,21 +22,6 @@ from optplan.scene import Scene
 from optplan.trials import TrialGenerator
 
 IK_TOL = 1e-6
-
-
-@pytest.fixture(scope="module")
-def scene1() -> Scene:
-    return Scene.load("ssps_scene1")
-
-
-@pytest.fixture(scope="module")
-def kin(tcb, scene1):
-    return ClosedChainKinematics(tcb, scene1.object.grasps)
-
-
-@pytest.fixture(scope="module")
-def checker(tcb, scene1):
-    return ValidityChecker(tcb, scene1)
 
 
 @pytest.fixture(scope="module")

@@ -12,14 +12,13 @@ pytest.importorskip("jax")
 pytest.importorskip("optax")
 
 from optplan.collision.checker import CollisionChecker  # noqa: E402
-from optplan.constraints.closed_chain import ClosedChainKinematics, IKSettings, closure_error  # noqa: E402
-from optplan.planners import PlanStatus, ValidityChecker, make_planner  # noqa: E402
+from optplan.constraints.closed_chain import IKSettings, closure_error  # noqa: E402
+from optplan.planners import PlanStatus, make_planner  # noqa: E402
 from optplan.planners.learned.cvae import CVAE, CVAESettings, load_or_train_cvae, validate_cvae  # noqa: E402
 from optplan.planners.learned.latent_models import scene_grid  # noqa: E402
 from optplan.planners.learned.latent_planners import LCBiRRTOptions  # noqa: E402
 from optplan.planners.learned.nets import flatten_params, init_mlp, mlp_jax, mlp_numpy, unflatten_params  # noqa: E402
 from optplan.planners.task_space import interpolate_task  # noqa: E402
-from optplan.scene import Scene  # noqa: E402
 from optplan.trials import TrialGenerator  # noqa: E402
 
 SMALL = {"n_data": 3000, "cvae_epochs": 40}
@@ -34,21 +33,6 @@ def cache(tmp_path_factory):
     mp.setenv("OPTPLAN_CACHE", str(d))
     yield d
     mp.undo()
-
-
-@pytest.fixture(scope="module")
-def scene1() -> Scene:
-    return Scene.load("ssps_scene1")
-
-
-@pytest.fixture(scope="module")
-def kin(tcb, scene1):
-    return ClosedChainKinematics(tcb, scene1.object.grasps)
-
-
-@pytest.fixture(scope="module")
-def checker(tcb, scene1):
-    return ValidityChecker(tcb, scene1)
 
 
 @pytest.fixture(scope="module")
