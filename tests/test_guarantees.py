@@ -6,8 +6,6 @@ apart from the dense check) and exact coal distances; the knot-only solve (``sol
 """
 from __future__ import annotations
 
-import re
-
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -27,28 +25,15 @@ from optplan.verification import verify
 def _ur5(tmp_path_factory) -> RobotModel:
     """UR5 of example-robot-data, each collision mesh replaced by its bounding box (the NLP's
     collision rows model boxes and capsules, not meshes)."""
-    import coal
-
     from optplan.model._robot_data import example_robot_data_dir
+    from optplan.model.mesh_boxes import collision_meshes_as_boxes
 
     share = example_robot_data_dir()
     urdf = None if share is None else share / "robots/ur_description/urdf/ur5_robot.urdf"
     if urdf is None or not urdf.exists():
         pytest.skip("example-robot-data is not installed (extra 'robots')")
-    loader = coal.MeshLoader()
-
-    def box(m: re.Match) -> str:
-        bvh = loader.load(m.group(1).replace("package://example-robot-data/", f"{share}/"), np.ones(3))
-        bvh.computeLocalAABB()
-        lo, hi = np.array(bvh.aabb_local.min_), np.array(bvh.aabb_local.max_)
-        c, s = (lo + hi) / 2, hi - lo
-        return f'<origin xyz="{c[0]} {c[1]} {c[2]}" rpy="0 0 0"/><geometry><box size="{s[0]} {s[1]} {s[2]}"/></geometry>'
-
-    text = re.sub(r'<geometry>\s*<mesh filename="([^"]+collision[^"]+)"\s*/>\s*</geometry>', box, urdf.read_text())
-    text = re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
-    path = tmp_path_factory.mktemp("ur5") / "ur5_boxes.urdf"
-    path.write_text(text)
-    return RobotModel.from_urdf(path, arms={"A": "tool0"}, name="ur5")
+    return RobotModel.from_urdf(collision_meshes_as_boxes(urdf, package_dirs=[share]), arms={"A": "tool0"},
+                                name="ur5")
 
 
 Q0 = np.array([-1.2, -1.2, 1.5, -1.9, -1.57, 0.0])

@@ -25,9 +25,6 @@ from .terms import NumericTrajectory
 from .transcription import Expr, Transcription
 
 __all__ = ["CollisionModel", "object_capsules", "witness_plane"]
-log = logging.getLogger("optplan.problem.collision_term")
-
-
 def _ro(a: ArrayLike) -> np.ndarray:
     a = np.array(a, float)
     a.flags.writeable = False
