@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError, check_vector
 from ..geometry.spatial import check_pose
@@ -77,6 +76,7 @@ def joint_trajectory_from_samples(t, q_joints, qd_joints=None) -> JointTrajector
     if np.any(np.diff(t) <= 0):
         raise ConfigurationError("samples: times must be strictly increasing")
     if qd_joints is None:
+        from scipy.interpolate import CubicSpline  # lazy: 0.13 s of import
         sp = CubicSpline(t, Q, axis=0)
         dsp = sp.derivative()
         return lambda tt: (sp(tt), dsp(tt))

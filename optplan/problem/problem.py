@@ -25,7 +25,6 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
-from scipy.interpolate import CubicSpline
 
 from ..errors import ConfigurationError, OptionError, check_int, check_real, real_array
 from ..geometry.spatial import check_pose
@@ -242,6 +241,8 @@ class OptProblem(ExpressionAPI):
             raise ConfigurationError(f"set_initial: t must be strictly increasing with {q.shape[0]} entries")
         t = (t - t[0]) * (Tg / (t[-1] - t[0]))
         tk = np.linspace(0.0, Tg, self.N + 1)
+        from scipy.interpolate import CubicSpline  # lazy: 0.13 s of import
+
         if q.shape[0] >= 3:
             sp = CubicSpline(t, q, axis=0, bc_type="clamped")
         else:
