@@ -195,7 +195,7 @@ def _floating_trial(robot, scene, index: int, cfg: GeneralizeConfig) -> dict:
             "peak_rss_mb": _peak_rss_mb(), "success": res.success, "plan_ok": res.plan.success,
             "plan_status": res.plan.status.value, "plan_time_s": _finite(res.plan.time_s),
             "converged": bool(sol is not None and sol.success), "opt_status": sol.status.value if sol else "not_run",
-            "opt_wall_s": _finite(res.opt_wall_s), "opt_cpu_s": None,
+            "opt_wall_s": _finite(res.opt_wall_s), "opt_cpu_s": _finite(res.opt_cpu_s),
             "opt_iterations": sol.iterations if sol else None,
             "max_closed_chain_residual": _finite(rep.max_closed_chain_residual) if rep else None,
             "min_clearance_m": _finite(rep.min_clearance_m) if rep else None,

@@ -13,6 +13,10 @@ Tasks:
   before the kernel core).
 * ``reach_free_time`` — the same with joint velocity/acceleration limits and free final time
   (minimum time plus a little jerk).
+* ``reach_free_time_collision`` — the same plus ``CollisionAvoidance`` (0.01 m margin) with a
+  sphere where arm A's wrist passes on the solution without it (:func:`reach_probe_scene`),
+  checked by ``verify`` (coal, the base re-integrated); ``reach_free_time_collision_knots``: the
+  same on the knot transcription.
 * ``transport`` — the closed-chain transport (N = 50) with the shipped terms (collision planes
   included) on the kernel core; ``transport_custom``: the same plus two one-line terms: the
   object stays upright within 5° and an acceleration cost.
@@ -40,15 +44,31 @@ import numpy as np
 
 __all__ = ["TASKS", "run_task", "run", "format_rows"]
 
-TASKS = ("reach", "reach_knots", "reach_free_time", "transport", "transport_custom", "ur5")
+TASKS = ("reach", "reach_knots", "reach_free_time", "reach_free_time_collision", "reach_free_time_collision_knots",
+         "transport", "transport_custom", "ur5")
 Q0 = np.r_[[0.3, -0.6, 0.4, -1.2, 0.2, 0.7, 0.1] * 2]   # both arms of eba_ffsr, bent [rad]
+#: The obstacle of ``reach_free_time_collision``: a sphere's centre [m] (world) and radius [m],
+#: 0.12 m above where arm A's link 6 is halfway through the solution of ``reach_free_time``
+#: (whose link 7 then passes 0.035 m inside it).
+REACH_PROBE = (np.array([1.158, 0.439, 2.118]), 0.05)
 
 
-def _reach(free_time: bool, transcription: str = "auto") -> tuple[Any, Any]:
+def reach_probe_scene() -> Any:
+    """The scene of ``reach_free_time_collision``: ``eba_ffsr`` and the sphere :data:`REACH_PROBE`."""
+    import pinocchio as pin
+
+    from optplan.scene import Obstacle, Scene
+
+    c, r = REACH_PROBE
+    return Scene(name="reach_probe", robot="eba_ffsr",
+                 obstacles=(Obstacle(name="probe", shape="sphere", placement=pin.SE3(np.eye(3), c), radius=r),))
+
+
+def _reach(free_time: bool, transcription: str = "auto", collision: bool = False) -> tuple[Any, Any]:
     import pinocchio as pin
 
     from optplan import RobotModel
-    from optplan.problem import OptProblem
+    from optplan.problem import CollisionAvoidance, OptProblem
     from optplan.problem.frame_terms import BaseAttitude
     from optplan.problem.terms import Duration, JointAccelerationLimits, JointVelocityLimits, Smoothness
 
@@ -73,6 +93,8 @@ def _reach(free_time: bool, transcription: str = "auto") -> tuple[Any, Any]:
         prob.add_cost(Smoothness("jerk"), weight=1e-2)
     else:
         prob.add_cost(Smoothness("jerk"))
+    if collision:
+        prob.add_constraint(CollisionAvoidance(reach_probe_scene(), margin=0.01, held_object=False, fixed_normals=True))
     if transcription == "knots":   # the knot transcription as before: a straight-line guess
         prob.set_initial_straight_line(Q0, Q0)
     return prob, (robot, target, t0)
@@ -94,6 +116,10 @@ def _check_reach(prob: Any, sol: Any, ctx: Any) -> dict[str, float]:
     if prob.free_time:
         out["max_velocity_rad_s"] = float(np.abs(smp["qd"]).max())
         out["max_acceleration_rad_s2"] = float(np.abs(smp["qdd"]).max())
+    if "collision" in prob.terms:
+        from optplan.verification import verify
+
+        out["min_clearance_m"] = float(verify(robot, sol, reach_probe_scene(), held_object=False).min_clearance_m)
     return out
 
 
@@ -238,6 +264,8 @@ def run_task(name: str, repeat: int = 1) -> dict[str, Any]:
     make, check = {"reach": (lambda: _reach(False), _check_reach),
                    "reach_knots": (lambda: _reach(False, "knots"), _check_reach),
                    "reach_free_time": (lambda: _reach(True), _check_reach),
+                   "reach_free_time_collision": (lambda: _reach(True, collision=True), _check_reach),
+                   "reach_free_time_collision_knots": (lambda: _reach(True, "knots", collision=True), _check_reach),
                    "transport": (lambda: _transport(False), _check_transport),
                    "transport_custom": (lambda: _transport(True), _check_transport),
                    "ur5": (_ur5, _check_ur5)}[name]

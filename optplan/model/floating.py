@@ -9,6 +9,7 @@ system is driftless: the final base pose depends only on the joint *path*, not o
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -113,6 +114,7 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
     """
     if not robot.is_floating:
         raise ConfigurationError(f"simulate_base needs a free-floating robot; {robot.name!r} has a fixed base")
+    vectorised = isinstance(trajectory, tuple)   # our own spline: evaluated at many times at once
     if isinstance(trajectory, tuple):
         trajectory = joint_trajectory_from_samples(*trajectory)
     t_grid = np.asarray(t_grid, float)
@@ -134,6 +136,8 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
     q_first, qd_first = trajectory(float(t_grid[0]))
     robot.check_joints(q_first, f"trajectory({t_grid[0]}) joint values")
     robot.check_joints(qd_first, f"trajectory({t_grid[0]}) joint rates")
+    if not np.any(h0):
+        return _simulate_zero_momentum(robot, trajectory, t_grid, x, int(substeps), vectorised)
 
     def twist(tt: float, xb: np.ndarray):
         qj, qdj = trajectory(tt)
@@ -177,6 +181,85 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
         raise ConfigurationError(f"simulate_base: non-finite state at t = {t_grid[bad]} s (the joint trajectory "
                                  "returned NaN/inf or a singular momentum map was met)")
     res = np.max(np.abs(H - h0), axis=1)
+    log.debug("simulate_base: %d samples, max momentum residual %.3g", N, res.max())
+    return FloatingResult(t_grid.copy(), Q, V, H, res)
+
+
+def _base_rate(x: list[float], w: list[float]) -> list[float]:
+    """``[R v; ½ quat ⊗ [ω; 0]]`` of the base state ``x`` = [p; quat (x y z w)] (the quaternion
+    normalised first) and the base-frame twist ``w`` = [v; ω], in plain floats (one call per RK4
+    stage: numpy's per-call overhead on 7-vectors is most of the cost)."""
+    qx, qy, qz, qw = x[3], x[4], x[5], x[6]
+    n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+    qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
+    vx, vy, vz, ox, oy, oz = w
+    # R v = v + 2 qw (u × v) + 2 u × (u × v), u = (qx, qy, qz)
+    cx, cy, cz = qy * vz - qz * vy, qz * vx - qx * vz, qx * vy - qy * vx
+    ddx, ddy, ddz = qy * cz - qz * cy, qz * cx - qx * cz, qx * cy - qy * cx
+    return [vx + 2 * (qw * cx + ddx), vy + 2 * (qw * cy + ddy), vz + 2 * (qw * cz + ddz),
+            0.5 * (qw * ox + qy * oz - qz * oy), 0.5 * (qw * oy + qz * ox - qx * oz),
+            0.5 * (qw * oz + qx * oy - qy * ox), -0.5 * (qx * ox + qy * oy + qz * oz)]
+
+
+def _rk4_base(x: list[float], w0: list[float], wm: list[float], w1: list[float], dt: float) -> list[float]:
+    """One RK4 step of the base state over ``dt`` [s] with the twists at its start, middle and
+    end (as :func:`rk4_step` on ``_base_rate``), the quaternion renormalised after it."""
+    k1 = _base_rate(x, w0)
+    k2 = _base_rate([a + dt / 2 * b for a, b in zip(x, k1)], wm)
+    k3 = _base_rate([a + dt / 2 * b for a, b in zip(x, k2)], wm)
+    k4 = _base_rate([a + dt * b for a, b in zip(x, k3)], w1)
+    y = [a + dt / 6.0 * (b1 + 2 * b2 + 2 * b3 + b4) for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4)]
+    n = math.sqrt(y[3] * y[3] + y[4] * y[4] + y[5] * y[5] + y[6] * y[6])
+    return y[:3] + [y[3] / n, y[4] / n, y[5] / n, y[6] / n]
+
+
+def _simulate_zero_momentum(robot: RobotModel, trajectory: JointTrajectory, t_grid: np.ndarray, x: np.ndarray,
+                            substeps: int, vectorised: bool) -> FloatingResult:
+    """:func:`simulate_base` with zero momentum: the same RK4 scheme on the same times, with the
+    base-frame twist of every time the scheme evaluates solved first (with zero momentum it does
+    not depend on the base pose: :func:`zero_momentum_twists`, Pinocchio's centroidal map), the
+    joint trajectory evaluated once per time (all at once when ``vectorised``: a spline of ours).
+    The momentum at each output sample is then Pinocchio's recursive ``computeCentroidalMomentum``
+    at the integrated base pose, as in the general case."""
+    model, data = robot.model, robot.model.createData()
+    nj, N, m = robot.nj, t_grid.size, 2 * substeps
+    # RK4 evaluates the rate at the start, middle and end of each step: m times per interval + the last
+    frac = np.arange(m) / m
+    fine = np.r_[(t_grid[:-1, None] + np.diff(t_grid)[:, None] * frac).ravel(), t_grid[-1]]
+    if vectorised:
+        qs, qds = (np.asarray(a, float).reshape(fine.size, nj) for a in trajectory(fine))
+    else:
+        ev = [trajectory(float(tt)) for tt in fine]
+        qs = np.array([np.asarray(a, float).reshape(nj) for a, _ in ev])
+        qds = np.array([np.asarray(b, float).reshape(nj) for _, b in ev])
+    if not (np.all(np.isfinite(qs)) and np.all(np.isfinite(qds))):
+        bad = int(np.flatnonzero(~(np.all(np.isfinite(qs), axis=1) & np.all(np.isfinite(qds), axis=1)))[0])
+        raise ConfigurationError(f"simulate_base: non-finite state at t = {fine[bad]} s (the joint trajectory "
+                                 "returned NaN/inf or a singular momentum map was met)")
+    W = zero_momentum_twists(robot, qs, qds)          # (M, 6) base-frame [v; ω]
+
+    Wl = W.tolist()
+    X = np.empty((N, 7))
+    X[0] = x
+    xs = [float(v) for v in x]
+    for k in range(N - 1):
+        dt = (t_grid[k + 1] - t_grid[k]) / substeps
+        for s in range(substeps):
+            j = k * m + 2 * s
+            xs = _rk4_base(xs, Wl[j], Wl[j + 1], Wl[j + 2], dt)
+        X[k + 1] = xs
+    idx = np.arange(N) * m
+    Q = np.hstack([X, qs[idx]])
+    V = np.hstack([W[idx], qds[idx]])
+    H = np.empty((N, 6))
+    for k in range(N):
+        h = pin.computeCentroidalMomentum(model, data, Q[k], V[k])
+        H[k] = np.concatenate([h.linear, h.angular])
+    if not np.all(np.isfinite(Q)):
+        bad = int(np.flatnonzero(~np.all(np.isfinite(Q), axis=1))[0])
+        raise ConfigurationError(f"simulate_base: non-finite state at t = {t_grid[bad]} s (the joint trajectory "
+                                 "returned NaN/inf or a singular momentum map was met)")
+    res = np.max(np.abs(H), axis=1)
     log.debug("simulate_base: %d samples, max momentum residual %.3g", N, res.max())
     return FloatingResult(t_grid.copy(), Q, V, H, res)
 

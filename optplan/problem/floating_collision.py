@@ -141,13 +141,16 @@ def _prune(V: np.ndarray, placed: list[np.ndarray], normals: np.ndarray, sign: f
 
 
 def plan_floating_collision(prob: Any, core: Any, term: CollisionAvoidance, x: np.ndarray, base0: pin.SE3,
-                            com0: np.ndarray, lower: np.ndarray, upper: np.ndarray
+                            com0: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                            boost: dict[tuple[Any, int], float] | None = None
                             ) -> tuple[list[FloatingCollisionItem], Any]:
     """The active pairs of a floating robot along the guess ``x`` (core variables: the joint
     B-spline and the base attitude at the knots) and their kernels; also the term's
     :class:`~optplan.problem.collision_term.CollisionModel` (checker, active and constant pairs,
-    relaxed margins)."""
+    relaxed margins). ``boost``: (pair, knot) → margin added there [m] (a pair with a boost is
+    active at that knot)."""
     robot, N = prob.robot, core.N
+    boost = dict(boost or {})
     Qk = core.M["q"] @ core.control_points(x)
     pinned = prob._pinned_q()
     for k, q in pinned.items():
@@ -161,6 +164,14 @@ def plan_floating_collision(prob: Any, core: Any, term: CollisionAvoidance, x: n
     col = term.model(robot)
     traj = NumericTrajectory(robot, Qk, Qk, Qk, Qk[:-1], prob.duration, base_quat=quats, com0=com0)
     active = col.activate(robot, traj)
+    for pair, k in boost:   # a boosted row is always constrained
+        if pair not in col.checker.pair_index or not 0 <= k <= N:
+            continue
+        ks0 = col.active_knots.get(pair, [])
+        if pair not in active:
+            active.append(pair)
+        if ks0 is not None and k not in ks0:
+            col.active_knots[pair] = sorted([*ks0, k])
     fixed = frozenset(np.flatnonzero(np.isfinite(lower) & (lower == upper)).tolist())
     cc = next((h.term for h in prob._handles if h.role == "constraint" and isinstance(h.term, ClosedChain)), None)
     rigid = [cc.arm_a, cc.arm_b] if cc is not None else [a for a in (col.checker.object_arm,) if a is not None]
@@ -233,7 +244,7 @@ def plan_floating_collision(prob: Any, core: Any, term: CollisionAvoidance, x: n
         if static:
             Y, rb = other[2], other[3]
             off = np.min(Nrm.T @ Y, axis=1) - rb   # the static side's support along each normal
-        margins = np.array([relaxed.get((pair, k), margin) for k in ks])
+        margins = np.array([relaxed.get((pair, k), margin) + boost.get((pair, k), 0.0) for k in ks])
         name = f"collision:{pair.name_a}|{pair.name_b}"
         if world:
             fn = _world_kernel(core, fid, V, r)

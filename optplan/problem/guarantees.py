@@ -238,9 +238,15 @@ def _lineage(new: Any, old: Any) -> Any:
 def _collision_retry(problem: Any, sol: Solution, viol: list[Violation], o: GuaranteeOptions) -> bool:
     """Activate pairs along the solution and raise margins around contacts; False if no collision
     term has a violation."""
-    if getattr(problem, "_mode", lambda: "knots")() == "bspline":
-        return False   # the B-spline core's pairs come from its guess: a finer grid from this solution
     names = {v.term for v in viol}
+    if getattr(problem, "_mode", lambda: "knots")() == "bspline":
+        # the B-spline core plans its pairs along a trajectory: along this solution, on the same
+        # grid, if it missed a pair; else a finer grid from this solution
+        hits = [v for v in viol if v.term in problem.terms and isinstance(problem.terms[v.term].term, CollisionAvoidance)]
+        if not problem._spline.replan_collision(sol, hits):
+            return False
+        log.info("between knots: collision rows planned again along the solution; re-solving")
+        return True
     changed = False
     t = np.linspace(sol.t[0], sol.t[-1], o.density * (len(sol.t) - 1) + 1)
     for name, hd in list(problem.terms.items()):

@@ -82,7 +82,9 @@ class SplineCore:
         self.nP = (self.N + 3) * nj
         self.nW = 2 * self.n_sub * self.N + 1 if self.fl else 0
         self.nx = self.nP + (4 * self.N + 3 * self.nW if self.fl else 0) + (1 if self.free_time else 0)
-        self.x_aux = self.nx            # collision plane offsets of moving pairs (fixed T only)
+        #: index of the duration T in x (free duration; before the collision planes' offsets), else None
+        self.i_T: int | None = self.nx - 1 if self.free_time else None
+        self.x_aux = self.nx            # collision plane offsets of moving pairs
         self.nx += int(n_aux)
         N = self.N
         # p = [s (N+1) | qw (N+1) | one | T | xi0 (4) | base0 (4) | com0 (3) | params | scale]
@@ -110,7 +112,11 @@ class SplineCore:
         return self.nP + 4 * self.N + 3 * c + np.arange(3)
 
     def slot_T(self) -> int:
-        return self.nx - 1 if self.free_time else self.nx + self.p_T
+        return self.i_T if self.i_T is not None else self.nx + self.p_T
+
+    def duration_of(self, x: np.ndarray, T: float) -> float:
+        """The duration [s] of the core variables ``x``: their T when it is free, else ``T``."""
+        return float(x[self.i_T]) if self.i_T is not None else float(T)
 
     def _tail_slots(self, k: int, cost: Any) -> np.ndarray:
         """Slots of the inputs after q, dq/du, d²q/du²: xi, s, T, base0, com0, params[, w]."""

@@ -135,10 +135,12 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
             # the segment NLP's planes: fixed normals, its pair set (self-collision, held object)
             # (a floating robot's planner, floating_collision, reads the term's own pair set; activation
             # sets and margin boosts are the fixed-base planner's)
-            if core.free_time or collisions or t.scene is None or not t.fixed_normals \
+            # (a fixed base with a free duration: not measured on the core, the knot transcription takes it)
+            if collisions or t.scene is None or not t.fixed_normals \
                     or (robot.is_floating and (t.margin_boost or t.activate_with)) \
-                    or (not robot.is_floating and (not t.self_collision or not t.held_object)):
-                raise Unsupported("CollisionAvoidance other than fixed normals with a fixed duration")
+                    or (not robot.is_floating and (core.free_time or not t.self_collision or not t.held_object)):
+                raise Unsupported("CollisionAvoidance other than one term with fixed normals and a scene "
+                                  "(and a floating robot if the duration is free)")
             collisions.append(h)
         else:
             raise Unsupported(type(t).__name__)
@@ -243,8 +245,8 @@ def _dls(core: SplineCore, fams: list[Family], p: np.ndarray, T: float, k: int, 
         return q
     sets = [(kk, f, core.kernel_set(f.fn, False)) for kk, f in pts if f.fn is not None]
     x = np.zeros(core.nx)
-    if core.free_time:
-        x[-1] = T
+    if core.i_T is not None:
+        x[core.i_T] = T
     for _ in range(iters):
         res, jac = [], []
         for kk, f, (fn, jfn, _h) in sets:
@@ -342,7 +344,7 @@ class SplineEvaluator:
         return v, np.concatenate(los) if los else v, np.concatenate(his) if his else v, max(m, 1)
 
     def _T(self, x: np.ndarray) -> float:
-        return float(x[-1]) if self.core.free_time else float(self.p[self.core.p_T])
+        return self.core.duration_of(x, float(self.p[self.core.p_T]))
 
     def value(self, handle: Any, sol: Any) -> Any:
         h = self._handle(handle)

@@ -56,6 +56,13 @@ class SplineBackend:
         self.constant_violation = 0.0   # the largest violation of those rows (within the tolerance)
         self.vel_extra: dict[str, set[int]] = {}   # velocity entries given rows after a solve (on vel_n intervals)
         self.vel_n = 0
+        #: core variables (without collision plane offsets) the next :meth:`prepare` plans the
+        #: collision rows along, instead of the first guess (:meth:`replan_collision`)
+        self.plan_along: np.ndarray | None = None
+        #: a floating robot's margins raised after a solve collided between the knots:
+        #: (pair, knot) -> added margin [m], on a grid of ``boost_n`` intervals (:meth:`replan_collision`)
+        self.margin_boost: dict[tuple[Any, int], float] = {}
+        self.boost_n = 0
         #: re-solves with the velocity rows a solve missed (:meth:`_missed_velocity`) [count]
         self.velocity_retries = 2
 
@@ -70,7 +77,11 @@ class SplineBackend:
         self.fams, self.owner, self.pbounds, cols = families_of(prob, core, params)
         self.core, self.aux0, self.col_p = core, np.zeros(0), np.zeros(0)
         self.fixed = self._fixed_families(core)
-        x = self.guess(prob.duration) if cols or (self._velocity_families() and not prob.free_time) else None
+        along, self.plan_along = self.plan_along, None
+        if along is not None and along.size != core.nx:
+            along = None
+        x = along if along is not None else \
+            self.guess(prob.duration) if cols or (self._velocity_families() and not prob.free_time) else None
         if cols:   # the active pairs follow the first guess: plan them along it
             from .spline_collision import plan_collision
 
@@ -80,8 +91,10 @@ class SplineBackend:
             if core.fl:   # planes with the base pose (floating_collision)
                 from .floating_collision import plan_floating_collision
 
+                boost = self.margin_boost if self.boost_n == core.N else {}
                 fitems, self.collision_model = plan_floating_collision(
-                    prob, core, cols[0].term, x, prob.base0, self._com0(Qk[0]), lbx[:core.nj], ubx[:core.nj])
+                    prob, core, cols[0].term, x, prob.base0, self._com0(Qk[0]), lbx[:core.nj], ubx[:core.nj],
+                    boost)
                 items: list[Any] = list(fitems)
             else:
                 items, self.collision_model = plan_collision(prob, core, cols[0].term, Qk, lbx[:core.nj],
@@ -106,9 +119,38 @@ class SplineBackend:
             self.owner[cols[0].name] = names
             self.core, self.aux0 = core, np.concatenate(aux) if aux else np.zeros(0)
             self.col_p = np.concatenate(colp) if colp else np.zeros(0)
+            if along is not None:   # the next solve starts from the trajectory the rows were planned along
+                self.x0 = np.r_[along, self.aux0]
         if x is not None and not core.free_time:
             self._select_velocity(x)
         self.last_build_time = time.perf_counter() - t0
+
+    def replan_collision(self, sol: Any, violations: list[Any]) -> bool:
+        """After a solve whose collision rows ``violations`` (:class:`~.guarantees.Violation`,
+        component ``"a | b"``) found violated between the knots: plan the rows again along the
+        solution ``sol`` of this build, on the same grid — pairs activated where it brings them
+        close, planes from coal's witnesses along it — and start the next solve from it. A pair
+        that already had rows gets, for a floating robot, its margin raised by the violation at
+        the two knots around it (as the segment NLP's margin boost). False (nothing changed) when
+        this build has no collision rows, or every violated pair had rows and the robot has a
+        fixed base — a finer grid is then what helps."""
+        core, m = self.core, self.collision_model
+        if core is None or m is None or sol.x is None or np.size(sol.x) != core.nx:
+            return False
+        names = {f"{p.name_a} | {p.name_b}": p for p in m.active_pairs}
+        missed = {v.component for v in violations} - set(names)
+        if not missed:
+            if not core.fl:
+                return False
+            if self.boost_n != core.N:
+                self.margin_boost, self.boost_n = {}, core.N
+            for v in violations:
+                pair = names[v.component]
+                for k in (v.interval, v.interval + 1):
+                    self.margin_boost[(pair, k)] = self.margin_boost.get((pair, k), 0.0) + float(v.amount)
+        self.plan_along = np.array(sol.x[:core.x_aux], float)
+        self.core = None
+        return True
 
     def _fixed_families(self, core: SplineCore) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """The ``JointBoundary`` families that determine their end's three control points
@@ -222,7 +264,7 @@ class SplineBackend:
         """Velocity control points [rad/s] of ``x``, (N+2) × nj."""
         core = self.core
         assert core is not None
-        T = float(x[core.nx - 1]) if core.free_time else self.prob.duration
+        T = core.duration_of(x, self.prob.duration)
         return np.diff(core.control_points(x), axis=0) * core.N / T
 
     def _select_velocity(self, x: np.ndarray) -> None:
@@ -298,7 +340,8 @@ class SplineBackend:
             lbx[:core.nP] = np.maximum(lbx[:core.nP], np.tile(lo, core.N + 3))
             ubx[:core.nP] = np.minimum(ubx[:core.nP], np.tile(hi, core.N + 3))
         if core.free_time:
-            lbx[-1], ubx[-1] = prob.duration_bounds
+            assert core.i_T is not None
+            lbx[core.i_T], ubx[core.i_T] = prob.duration_bounds
         if fixed:
             for idx, val, _ in self.fixed.values():
                 lbx[idx], ubx[idx] = val, val
@@ -330,7 +373,6 @@ class SplineBackend:
         assert core is not None
         if self.x0 is not None and self.x0.size == core.nx:
             return self.x0
-        nbase = core.x_aux     # the variables before the collision planes' offsets
         if prob._x0 is not None:
             u: dict[str, Any] = prob.tp.unpack(prob._x0)
             Tg = float(u.get("T", T))
@@ -344,7 +386,6 @@ class SplineBackend:
             return np.concatenate(parts)
         if self.last_x is not None and self.last_x.size == core.nx:
             return self.last_x
-        assert nbase == core.nx or not core.free_time     # a re-solve (e.g. after set_value) starts where the last one ended
         lbx, ubx = self._bounds(fixed=False)
         lo, hi = lbx[:core.nj], ubx[:core.nj]
         return seed_guess(core, self.fams, lambda q0: self._pvec(T, self._com0(q0) if q0 is not None else np.zeros(3),
@@ -397,7 +438,7 @@ class SplineBackend:
             # configurations (a planner path's jerk can be thousands of times the optimum's),
             # else at the guess
             Q = core.M["q"] @ core.control_points(x0)
-            xr = _quintic(core, Q[0], Q[-1], float(x0[core.nx - 1]) if core.free_time else T)
+            xr = _quintic(core, Q[0], Q[-1], core.duration_of(x0, T))
             xr = np.r_[xr, x0[xr.size:]]
             f0 = abs(float(st["ffun"](xr, p)))
             if not (np.isfinite(f0) and f0 > 1e-12):
@@ -471,7 +512,7 @@ class SplineBackend:
         dyn = [float(vv[sl].max()) for n, sl in st["slices"].items()
                if n.startswith(("momentum", "base_attitude_dynamics")) and sl.stop > sl.start]
         terms["dynamics"] = max(dyn) if dyn else 0.0
-        T = float(x[-1]) if core.free_time else prob.duration
+        T = core.duration_of(x, prob.duration)
         P = core.control_points(x)
         kv = knot_values(P, T / core.N)
         bq = bp = None
