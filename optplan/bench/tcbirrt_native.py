@@ -40,12 +40,13 @@ def python_nearest() -> Iterator[None]:
 
 
 def paired_queries(scenes: list[str], trials: list[int], planner: str = "tcbirrt:variant=improved", *,
-                   seed: int = 0, time_limit: float = 10.0, robot_name: str = "tcbirrt_dual_arm") -> list[dict[str, Any]]:
-    """Each trial of each scene planned both ways (native first on even trials, Python first on odd ones),
-    same trial seed. One row per query."""
+                   seed: int = 0, time_limit: float = 10.0, robot_name: str = "tcbirrt_dual_arm",
+                   kinds: tuple[str, str] = KINDS) -> list[dict[str, Any]]:
+    """Each trial of each scene planned both ways (``kinds``: two ``extension`` values, the first runs first on
+    even trials, the second on odd ones), same trial seed. One row per query."""
     from .planning_kernel import paired_rows
 
-    specs = {k: f"{planner}:extension={k}" for k in KINDS}
+    specs = {k: f"{planner}:extension={k}" for k in kinds}
 
     def context(kind: str) -> Any:
         return python_nearest() if kind == "python" else contextlib.nullcontext()
@@ -104,11 +105,12 @@ def extension_costs(scene_name: str, n: int = 100, repeats: int = 3, seed: int =
             "edge_checks": float(st["edge_checks"]), "native_available": float(pls["native"]._ext is not None)}
 
 
-def summary(rows: list[dict[str, Any]]) -> str:
-    """Per scene: success, median CPU and CPU per iteration of each kind, the paired ratio, same searches."""
+def summary(rows: list[dict[str, Any]], kinds: tuple[str, str] = KINDS) -> str:
+    """Per scene: success, median CPU and CPU per iteration of each kind, the paired ratio (second / first),
+    same searches."""
     from .planning_kernel import paired_summary
 
-    return paired_summary(rows, "kind", "native", "python", ("iterations", "nodes"))
+    return paired_summary(rows, "kind", kinds[0], kinds[1], ("iterations", "nodes"))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -120,6 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="trial seed")
     ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds per query [s]")
     ap.add_argument("--units", action="store_true", help="only the CPU per extension, native vs Python")
+    ap.add_argument("--kinds", default="native,python",
+                    help="the two 'extension' values paired (loop, native, python); the ratio is second / first")
     a = ap.parse_args(argv)
     from .tcbirrt import expand_scenes
 
@@ -132,13 +136,16 @@ def main(argv: list[str] | None = None) -> int:
                   + ("" if u["native_available"] else " (native extension unavailable: Python ran twice)"))
         return 0
 
+    kinds = tuple(k.strip() for k in a.kinds.split(","))
+    if len(kinds) != 2 or any(k not in ("loop", "native", "python") for k in kinds) or kinds[0] == kinds[1]:
+        ap.error(f"--kinds: expected two different values of loop, native, python, got {a.kinds!r}")
     rows = paired_queries(expand_scenes(a.scene.split(",")), [int(x) for x in a.trials.split(",") if x.strip()],
-                          a.planners, seed=a.seed, time_limit=a.time_limit)
+                          a.planners, seed=a.seed, time_limit=a.time_limit, kinds=(kinds[0], kinds[1]))
     for r in rows:
         print(f"{r['scene']} trial {r['trial']} {r['kind']:6s}: {r['status']}, {r['cpu_s']:.3f} s CPU, "
               f"{r['iterations']} iterations, {r['nodes']} nodes, {r['cpu_per_iteration_ms']:.3f} ms/iteration"
               + ("" if r["native"] or r["kind"] == "python" else " (native extension unavailable: Python ran)"))
-    print(summary(rows))
+    print(summary(rows, (kinds[0], kinds[1])))
     return 0
 
 

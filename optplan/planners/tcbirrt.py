@@ -249,7 +249,9 @@ class TCBiRRT(RegraspMixin, Planner):
         self._cb: CBiRRT2 | None = None
         self._rng = np.random.default_rng(0)
         #: the extension step in native code (:mod:`.tcbirrt_native`), None: in Python
-        self._ext = make_extender(self) if self.checker.kernel == "native" and self.options.extension == "native" else None
+        self._ext = make_extender(self) if self.checker.kernel == "native" and self.options.extension != "python" else None
+        #: ``extension="loop"``: the query's native random stream (sampler, lead path, restarts), None: NumPy's
+        self._nrng: Any = None
 
     # ------------------------------------------------------------------ public helpers
     def check_endpoint(self, q: np.ndarray) -> str | None:
@@ -548,11 +550,16 @@ class TCBiRRT(RegraspMixin, Planner):
             i_s = i_near
         return (REACHED if reach else ADVANCED), i_s, reg
 
-    def _sample_near(self, ta: _TaskTree, tb: _TaskTree, sampler: TaskSampler | None, rng: np.random.Generator,
+    def _sample_near(self, ta: _TaskTree, tb: _TaskTree, sampler: Any, rng: np.random.Generator,
                      st: dict[str, Any]) -> tuple[np.ndarray, int]:
         """Alg. 1 lines 3-4: ξ_rand and the node of ``ta`` to extend from. With ``trap_adapt="domain"`` a sample
-        outside its nearest node's dynamic domain is drawn again (up to ``domain_tries`` draws)."""
+        outside its nearest node's dynamic domain is drawn again (up to ``domain_tries`` draws). A native sampler
+        (``extension="loop"``) draws and finds the nearest node in one call."""
         o = self.options
+        if self._nrng is not None and o.trap_adapt != "domain":
+            xi_rand, i_near = sampler.sample_near(ta.X, ta.n, ta.alive if ta.n_dead else None,
+                                                  tb.X, tb.n, tb.alive if tb.n_dead else None)
+            return xi_rand, ta.twin_nearest(i_near, None, rng)
         for _ in range(o.domain_tries if o.trap_adapt == "domain" else 1):
             # lo + (hi − lo) u: Generator.uniform's formula and draws, without its argument checks
             xi_rand = self._lo + (self._hi - self._lo) * rng.random(6) if sampler is None else sampler.sample(rng, tb.alive_xi())
@@ -572,9 +579,16 @@ class TCBiRRT(RegraspMixin, Planner):
             cur = self.step_size if not np.isfinite(tree.dom[i]) else float(tree.dom[i])
             tree.dom[i] = max(cur * 0.5, self.step_size / 8.0) if res == TRAPPED else min(cur * 2.0, self.step_size)
 
-    def _sampler(self) -> TaskSampler | None:
-        """The improved variant's ξ sampler (None: the paper's uniform box)."""
+    def _sampler(self) -> Any:
+        """The improved variant's ξ sampler (None: the paper's uniform box); with ``extension="loop"`` the
+        native sampler (:class:`~optplan.planners.kernel.sampler.NativeTaskSampler`, for the paper's box too)
+        when it can be built, and then :attr:`_nrng` is the query's native random stream."""
         o = self.options
+        self._nrng = None
+        if self._ext is not None and o.extension == "loop":
+            got = self._native_sampler()
+            if got is not None:
+                return got
         if not (o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.goal_bias) > 0 or cast(float, o.guide_probability) > 0
                 or cast(float, o.geodesic_probability) > 0 or cast(float, o.lead_orientation_probability) > 0):
             return None
@@ -590,6 +604,34 @@ class TCBiRRT(RegraspMixin, Planner):
                            guide_sigma=o.guide_sigma, geodesic_probability=cast(float, o.geodesic_probability),
                            geodesic_sigma=o.geodesic_sigma,
                            lead_orientation_probability=cast(float, o.lead_orientation_probability))
+
+    def _native_sampler(self) -> Any:
+        """The native sampler with the options' probabilities, seeded by one draw of the planner's generator
+        (None: the filter has no native pose test); the extension's restarts draw from the same stream."""
+        from .kernel.native import KernelUnavailable
+        from .kernel.sampler import NativeRandom, NativeTaskSampler
+
+        o = self.options
+        need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
+        if need and self._filter is None:
+            self._filter = ObjectPoseFilter(self.robot, self.scene, native=True)
+        try:
+            nrng = NativeRandom(self._rng)
+            smp = NativeTaskSampler(self._filter if need else None, self._lo, self._hi, nrng,
+                                    bridge_probability=cast(float, o.bridge_probability), bridge_sigma=o.bridge_sigma,
+                                    goal_bias=cast(float, o.goal_bias), filter_tries=30 if o.sample_filter else 0,
+                                    guide_probability=cast(float, o.guide_probability), guide_sigma=o.guide_sigma,
+                                    geodesic_probability=cast(float, o.geodesic_probability),
+                                    geodesic_sigma=o.geodesic_sigma,
+                                    lead_orientation_probability=cast(float, o.lead_orientation_probability))
+        except KernelUnavailable as e:
+            log.info("TCBiRRT samples in Python: %s", e)
+            return None
+        self._nrng = nrng
+        ext = cast(Any, self._ext)
+        ext.restarts_in_c(nrng, cast(int, o.ik_restarts), o.ik_restart_sigma, self.robot.lower - 1e-9,
+                          self.robot.upper + 1e-9)
+        return smp
 
     # ------------------------------------------------------------------ Alg. 1
     def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator, seed: int) -> PlanResult:
@@ -641,7 +683,8 @@ class TCBiRRT(RegraspMixin, Planner):
                     and guide_time < o.guide_time_limit and st["iterations"] % 25 == 0):
                 sub = deadline.sub(min(o.guide_attempt_time, o.guide_time_limit - guide_time))
                 sampler.guide = object_lead_path(cast(ObjectPoseFilter, self._filter), ta.xi[0] if a_is_start else tb.xi[0],
-                                                 tb.xi[0] if a_is_start else ta.xi[0], self._lo, self._hi, rng, sub)
+                                                 tb.xi[0] if a_is_start else ta.xi[0], self._lo, self._hi, rng, sub,
+                                                 native_rng=self._nrng)
                 guide_time += sub.elapsed()
                 st["guide_attempts"] += 1
                 st["guide_waypoints"] = 0 if sampler.guide is None else len(sampler.guide)
@@ -701,6 +744,8 @@ class TCBiRRT(RegraspMixin, Planner):
             st["distance_calls"] = cert.n_distance_calls - n_dist0   # certified edges: exact group distances
         if sampler is not None:
             st.update(sampler.stats)
+            if self._nrng is not None:
+                sampler.sync_filter_calls()
         if found is None:
             if deadline.expired():
                 return self.empty_result(PlanStatus.TIMEOUT, "time limit reached", **st)

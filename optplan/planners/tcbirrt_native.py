@@ -69,6 +69,7 @@ def _merge(st: dict[str, Any], ext: NativeExtender) -> None:
     st["collisions"] += c[4]
     st["edge_checks"] += c[6]
     st["edge_collisions"] += c[7]
+    st["ik_restarts"] += c[9]
     ext.checker.n_checks += c[5]
 
 
@@ -99,7 +100,8 @@ def native_path_ik(pl: TCBiRRT, P: np.ndarray, q_near: np.ndarray, st: dict[str,
         q = q_near if r == 0 else Q[r - 1]
         R, p = P[r, :9].reshape(3, 3), P[r, 9:]
         qn = None
-        for _ in range(0 if ext.terminal() else cast(int, o.ik_restarts)):   # no restarts after a failed segment
+        terminal = ext.terminal() or ext.native_restarts   # no restarts after a failed segment, or run in C
+        for _ in range(0 if terminal else cast(int, o.ik_restarts)):
             st["ik_restarts"] += 1
             x, its = kin.ik(q + pl._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, o.ik)
             st["ik_iterations"] += its
