@@ -113,7 +113,7 @@ from .regrasp import RegraspMixin
 from .rrtconnect import edge_is_valid
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
-from .tcbirrt_native import make_extender, native_extend, native_path_ik, poses_array
+from .tcbirrt_native import loop_extend, make_extender, native_extend, native_path_ik, poses_array
 from .tcbirrt_options import (
     PAPER_REACH,
     PAPER_XI_LOWER,
@@ -514,7 +514,9 @@ class TCBiRRT(RegraspMixin, Planner):
         Rs, ps = pose_from_xi(xi_s)
         q_near = tree.q[i_near]
         if dist > 0.0:
-            if self._ext is not None and o.interpolation == "geodesic":   # one native call
+            if self._nrng is not None and self._ext is not None and self._ext.edge_on and o.interpolation == "geodesic":
+                poses, Q = loop_extend(self, R0, p0, Rs, ps, q_near, st, cast(bool, o.keep_prefix))   # restarts in C
+            elif self._ext is not None and o.interpolation == "geodesic":   # one native call
                 poses, Q = native_extend(self, R0, p0, Rs, ps, q_near, st, cast(bool, o.keep_prefix))
             else:
                 poses = interpolate_task(R0, p0, Rs, ps, o.n_interp, o.interpolation)

@@ -104,6 +104,8 @@ def load_extend_library() -> Any:
     lib.tcb_filter_segment.argtypes = [_P, _P, _P, ctypes.c_double, ctypes.c_int, _P]
     lib.tcb_extend.restype = _LL
     lib.tcb_extend.argtypes = [_P, _P, _P, _P, _P, _LL, _P, _P, _P, _P, _P]
+    lib.tcb_extend_prefix.restype = _LL
+    lib.tcb_extend_prefix.argtypes = [_P, _P, _P, _P, _P, _LL, _P, _P, _P, _P, ctypes.c_int]
     _declare_sampler_functions(lib)
     _LIB.append(lib)
     return lib
@@ -323,6 +325,26 @@ class NativeExtender:
         if r < -1:
             raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
         return P, Q, int(r), int(self._edge_k.value)
+
+    def extend_prefix(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int,
+                      q_near: np.ndarray, prefix: bool) -> tuple[np.ndarray, np.ndarray, int]:
+        """:meth:`extend` with the restarts in C (:meth:`restarts_in_c`) and the edges of the accepted
+        configurations checked: ``(P, Q, k)`` with ``Q[:k]`` the configurations kept (with ``prefix``: the valid
+        prefix, ``k`` possibly 0; without it ``k`` is n, or −1 when the extension fails)."""
+        R0b, p0b, R1b, p1b, qb = self._R0, self._p0, self._R1, self._p1, self._qn
+        R0b[:] = R0.reshape(9)
+        p0b[:] = p0
+        R1b[:] = R1.reshape(9)
+        p1b[:] = p1
+        qb[:] = q_near
+        P = np.empty((n, 12))
+        Q = np.empty((n, self.nq))
+        a = self._bufs
+        k = self.lib.tcb_extend_prefix(self._cp, a[0], a[1], a[2], a[3], n, a[4], P.ctypes.data, Q.ctypes.data,
+                                       self._cnt_p, int(prefix))
+        if k < -1:
+            raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
+        return P, Q, int(k)
 
     def path_ik(self, P: np.ndarray, j0: int, q_prev: np.ndarray, Q: np.ndarray) -> int:
         """Waypoints ``j0..n−1`` of the poses ``P`` into ``Q`` seeded by ``q_prev``: the first that fails, or n."""

@@ -402,4 +402,22 @@ long long tcb_extend(const tcb_ctx *c, const double *R0, const double *p0, const
     if (r == n && c->edge_on) *edge_k = tcb_edges(c, q_near, Q, n, cnt);
     return r;
 }
+
+/* one extension as TCBiRRT.constrained_extend takes it (restarts in C, Jacobian-spaced edges on): the poses
+   (into P), the path IK with restarts (into Q), the edges of the accepted configurations. Returns the number of
+   configurations kept (with prefix: the valid prefix, possibly 0), -1 when the extension fails without prefix,
+   -2 when the model is too large */
+long long tcb_extend_prefix(const tcb_ctx *c, const double *R0, const double *p0, const double *R1, const double *p1,
+                            long long n, const double *q_near, double *P, double *Q, long long *cnt, int prefix) {
+    tcb_interpolate(R0, p0, R1, p1, (int)n, P);
+    long long r = tcb_path_ik(c, q_near, P, 0, n, Q, cnt);
+    if (r < -1) return r;
+    if (r < n && !prefix) return -1;
+    if (c->edge_on && r > 0) {
+        long long e = tcb_edges(c, q_near, Q, r, cnt);
+        if (e < -1) return e;
+        if (e < r) { if (!prefix) return -1; r = e; }
+    }
+    return r;
+}
 """
