@@ -25,8 +25,8 @@ __all__ = ["FAMILIES", "profile_queries", "families", "format_families"]
 FAMILIES: tuple[tuple[str, str, str, str], ...] = (
     ("whole queries (TCBiRRT._plan)", "cum", "planners/tcbirrt.py", "_plan"),
     ("constrained extensions (Alg. 2, with the connection regrasps)", "cum", "planners/tcbirrt.py", "constrained_extend"),
-    ("  native extension calls (interpolation, path IK, restarts, edges in C)", "self", "planners/kernel/extend.py", "extend_prefix"),
-    ("  native extension calls (interpolation, path IK, restarts, edges in C)", "self", "planners/kernel/extend.py", "extend"),
+    ("  native extension calls, self time (C)", "self", "planners/kernel/extend.py", "extend_prefix"),
+    ("  native extension calls, self time (C)", "self", "planners/kernel/extend.py", "extend"),
     ("  path IK: compiled IK (ClosedChainKinematics.ik)", "cum", "constraints/closed_chain.py", "ik"),
     ("  edge checks of new constrained edges", "cum", "planners/tcbirrt_edges.py", "_edges_prefix"),
     ("  pose interpolation (interpolate_task)", "cum", "planners/task_space.py", "interpolate_task"),

@@ -481,4 +481,9 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             if deadline.expired():
                 return self.empty_result(PlanStatus.TIMEOUT, "time limit reached", **st)
             return self.empty_result(PlanStatus.FAILED, "iteration cap reached", **st)
+        return self._extract(ta, tb, a_is_start, found, st)
+
+    def _extract(self, ta: _TaskTree, tb: _TaskTree, a_is_start: bool,
+                 found: tuple[int, int, Sequence[tuple[str | None, list[np.ndarray]]] | None], st: dict[str, Any]) -> PlanResult:
+        """ExtractPath (:func:`.tcbirrt_tree.extract_path`)."""
         return extract_path(self, ta, tb, a_is_start, found, st)
