@@ -217,3 +217,12 @@ def test_loop_success_and_path_length_no_worse_than_the_python_sampler_paired(tc
     ln = np.median([_path_length(got["loop"][i]) for i in both])
     lp = np.median([_path_length(got["native"][i]) for i in both])
     assert ln <= 1.1 * lp
+
+
+def test_bench_lead_path_costs_rows():
+    from optplan.bench.tcbirrt_native import lead_path_costs
+
+    got = lead_path_costs("ssps_scene1", trials=2, budget=2.0)
+    assert set(got) == {"native", "python"}
+    for v in got.values():
+        assert v["found"] == 2 and v["median_ms"] > 0 and v["median_waypoints"] >= 2
