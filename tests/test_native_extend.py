@@ -156,7 +156,7 @@ def test_same_search_with_the_native_and_the_python_extension(tcb, variant, seed
 def test_extension_option_is_checked():
     from optplan.planners import TCBiRRTOptions
 
-    with pytest.raises(ValueError, match="extension: expected 'native' or 'python', got 'c'"):
+    with pytest.raises(ValueError, match="extension: expected 'loop', 'native' or 'python', got 'c'"):
         TCBiRRTOptions(extension="c")
 
 

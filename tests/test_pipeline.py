@@ -101,7 +101,9 @@ def _scene1_plan(tcb):
 
     sc = Scene.load("ssps_scene1")
     tr = TrialGenerator(tcb, sc).generate(4, 0)
-    plan = make_planner("tcbirrt", tcb, sc).plan(tr.q_start, tr.q_goal, time_limit=10.0, seed=int(tr.seed))
+    # the search of the NumPy-stream sampler ("native" = "python"): the tests below read this plan's segments
+    plan = make_planner("tcbirrt", tcb, sc, extension="native").plan(tr.q_start, tr.q_goal, time_limit=10.0,
+                                                                     seed=int(tr.seed))
     assert plan.success
     return sc, plan
 

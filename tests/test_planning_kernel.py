@@ -190,7 +190,8 @@ def test_same_search_with_either_backend(tcb, planner, options):
 
     if planner == "tcbirrt":
         options = dict(options, regrasp=RRTConnectOptions(range=1.0, resolution=0.03, shortcut_iterations=50,
-                                                          native_search=False))
+                                                          native_search=False),
+                       extension="native")   # the native loop ("loop") draws from a stream of its own
     from optplan.trials import TrialGenerator
 
     sc = Scene.load("hard_bay")

@@ -105,8 +105,9 @@ def test_tcbirrt_unchanged_on_fixed_seeds(tcb, variant, seed):
     # recorded before the improved variant took its orientations from the lead path (lead_orientation_probability)
     from optplan.planners import RRTConnectOptions
 
+    # extension="python" (and "native", the same search) is the golden reference: "loop" draws from its own stream
     o = TCBiRRTOptions(variant=variant, max_iterations=300, lead_orientation_probability=0.0,
-                       regrasp=RRTConnectOptions(**PY_REGRASP))
+                       regrasp=RRTConnectOptions(**PY_REGRASP), extension="python")
     pl = TCBiRRT(tcb, sc, o,
                  checker=ValidityChecker(tcb, sc), kinematics=ClosedChainKinematics(tcb, sc.object.grasps))
     _check(pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=seed), GOLDEN_TCB[(variant, seed)])
@@ -122,7 +123,8 @@ def test_tcbirrt_improved_defaults_unchanged_on_a_fixed_seed(tcb):
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     from optplan.planners import RRTConnectOptions
 
-    pl = TCBiRRT(tcb, sc, TCBiRRTOptions(variant="improved", max_iterations=1000, regrasp=RRTConnectOptions(**PY_REGRASP)))
+    pl = TCBiRRT(tcb, sc, TCBiRRTOptions(variant="improved", max_iterations=1000, regrasp=RRTConnectOptions(**PY_REGRASP),
+                                         extension="python"))
     _check(pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=0), ("exact", 114, 82, 1904.9856439901168))
 
 

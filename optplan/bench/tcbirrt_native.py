@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["extension_costs", "paired_queries", "python_nearest", "main"]
+__all__ = ["extension_costs", "lead_path_costs", "loop_costs", "paired_queries", "python_nearest", "main"]
 
 KINDS = ("native", "python")
 
@@ -40,12 +40,13 @@ def python_nearest() -> Iterator[None]:
 
 
 def paired_queries(scenes: list[str], trials: list[int], planner: str = "tcbirrt:variant=improved", *,
-                   seed: int = 0, time_limit: float = 10.0, robot_name: str = "tcbirrt_dual_arm") -> list[dict[str, Any]]:
-    """Each trial of each scene planned both ways (native first on even trials, Python first on odd ones),
-    same trial seed. One row per query."""
+                   seed: int = 0, time_limit: float = 10.0, robot_name: str = "tcbirrt_dual_arm",
+                   kinds: tuple[str, str] = KINDS) -> list[dict[str, Any]]:
+    """Each trial of each scene planned both ways (``kinds``: two ``extension`` values, the first runs first on
+    even trials, the second on odd ones), same trial seed. One row per query."""
     from .planning_kernel import paired_rows
 
-    specs = {k: f"{planner}:extension={k}" for k in KINDS}
+    specs = {k: f"{planner}:extension={k}" for k in kinds}
 
     def context(kind: str) -> Any:
         return python_nearest() if kind == "python" else contextlib.nullcontext()
@@ -104,11 +105,115 @@ def extension_costs(scene_name: str, n: int = 100, repeats: int = 3, seed: int =
             "edge_checks": float(st["edge_checks"]), "native_available": float(pls["native"]._ext is not None)}
 
 
-def summary(rows: list[dict[str, Any]]) -> str:
-    """Per scene: success, median CPU and CPU per iteration of each kind, the paired ratio, same searches."""
+def loop_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
+               robot_name: str = "tcbirrt_dual_arm") -> dict[str, float]:
+    """CPU µs per extension and per sample with its nearest node, ``extension="loop"`` against ``"native"`` on
+    identical work: the same ``n`` random extensions around each start and goal configuration of trials 0-2
+    (position σ 0.15 m, angles σ 0.3 rad), and 2,000 samples toward 500-node trees around trial 0's end poses
+    (lead path: the straight ξ segment between them); best of ``repeats`` alternating passes."""
+    from ..constraints.closed_chain import ClosedChainKinematics
+    from ..model.robot import RobotModel
+    from ..planners.task_space import pose_from_xi, xi_from_pose
+    from ..planners.tcbirrt import TCBiRRT, TCBiRRTOptions
+    from ..planners.tcbirrt_native import loop_extend, native_extend
+    from ..planners.tcbirrt_tree import _TaskTree
+    from ..planners.validity import ValidityChecker
+    from ..scene import Scene
+    from ..trials import TrialGenerator
+
+    robot = RobotModel.from_name(robot_name)
+    sc = Scene.load(scene_name)
+    assert sc.object is not None
+    ck, kin = ValidityChecker(robot, sc), ClosedChainKinematics(robot, sc.object.grasps)
+    pls = {k: TCBiRRT(robot, sc, TCBiRRTOptions(variant="improved", extension=k), checker=ck, kinematics=kin)
+           for k in ("loop", "native")}
+    smp: dict[str, Any] = {}
+    for k, pl in pls.items():
+        pl._rng = np.random.default_rng(seed + 1)
+        smp[k] = pl._sampler()
+    if pls["loop"]._nrng is None:
+        return {"available": 0.0}
+    rng = np.random.default_rng(seed)
+    trs = [TrialGenerator(robot, sc).generate(t, seed) for t in range(3)]
+    cases = []
+    for tr in trs:
+        for q0 in (tr.q_start, tr.q_goal):
+            M = kin.object_pose(q0)
+            for _ in range(n):
+                xi = xi_from_pose(M) + rng.normal(0.0, 1.0, 6) * np.r_[[0.15] * 3, [0.3] * 3]
+                cases.append((q0, M, pose_from_xi(xi)))
+    xa, xb = xi_from_pose(kin.object_pose(trs[0].q_start)), xi_from_pose(kin.object_pose(trs[0].q_goal))
+    ta = _TaskTree(trs[0].q_start, xa, np.eye(3), xa[:3], cap=1024)
+    tb = _TaskTree(trs[0].q_goal, xb, np.eye(3), xb[:3], cap=1024)
+    for _ in range(499):
+        ta.add(trs[0].q_start, xa + rng.normal(size=6) * 0.3, np.eye(3), xa[:3], 0, [], [])
+        tb.add(trs[0].q_goal, xb + rng.normal(size=6) * 0.3, np.eye(3), xb[:3], 0, [], [])
+    for smp_k in smp.values():
+        smp_k.set_endpoints(xa, xb)
+        smp_k.guide = np.linspace(xa, xb, 40)
+    best: dict[str, float] = {}
+    counters = ("ik_calls", "ik_iterations", "ik_restarts", "ik_failures", "ik_jumps", "collisions", "edge_checks",
+                "edge_collisions")
+    for rep in range(repeats):
+        for k in (("loop", "native") if rep % 2 == 0 else ("native", "loop")):
+            pl = pls[k]
+            st = {c: 0 for c in counters}
+            ext_fn = loop_extend if k == "loop" else native_extend
+            c0 = time.process_time()
+            for q0, M, (Rs, ps) in cases:
+                ext_fn(pl, M.rotation, M.translation, Rs, ps, q0, st, True)
+            best[k + "_extension_us"] = min(best.get(k + "_extension_us", np.inf), 1e6 * (time.process_time() - c0) / len(cases))
+            srng = np.random.default_rng(seed + 2)
+            c0 = time.process_time()
+            for _ in range(2000):
+                if k == "loop":
+                    smp[k].sample_near(ta.X, ta.n, None, tb.X, tb.n, None)
+                else:
+                    ta.nearest(smp[k].sample(srng, tb.alive_xi()))
+            best[k + "_sample_us"] = min(best.get(k + "_sample_us", np.inf), 1e6 * (time.process_time() - c0) / 2000)
+    return dict(best, extensions=float(len(cases)), available=1.0)
+
+
+def lead_path_costs(scene_name: str, trials: int = 10, budget: float = 2.0, seed: int = 0,
+                    robot_name: str = "tcbirrt_dual_arm") -> dict[str, dict[str, float]]:
+    """The object lead path between the object poses of the start and goal of trials ``0..trials−1``, native
+    (one C call) and Python, alternating which runs first, ``budget`` CPU seconds each: per kind the paths found,
+    the median CPU [ms] and the median waypoints."""
+    from ..constraints.closed_chain import ClosedChainKinematics
+    from ..model.robot import RobotModel
+    from ..planners.base import Deadline
+    from ..planners.kernel.sampler import NativeRandom
+    from ..planners.task_sampling import ObjectPoseFilter, object_lead_path
+    from ..planners.task_space import xi_from_pose
+    from ..planners.tcbirrt_options import TCBiRRTOptions, reach_scaled_workspace
+    from ..scene import Scene
+    from ..trials import TrialGenerator
+
+    robot = RobotModel.from_name(robot_name)
+    sc = Scene.load(scene_name)
+    assert sc.object is not None
+    lo, hi, _ = reach_scaled_workspace(robot, TCBiRRTOptions())
+    filt = ObjectPoseFilter(robot, sc)
+    kin = ClosedChainKinematics(robot, sc.object.grasps)
+    runs: dict[str, list[tuple[float, bool, int]]] = {"native": [], "python": []}
+    for t in range(trials):
+        tr = TrialGenerator(robot, sc).generate(t, seed)
+        a, b = xi_from_pose(kin.object_pose(tr.q_start)), xi_from_pose(kin.object_pose(tr.q_goal))
+        for k in (("native", "python") if t % 2 == 0 else ("python", "native")):
+            c0 = time.process_time()
+            p = object_lead_path(filt, a, b, lo, hi, np.random.default_rng(t), Deadline(budget, "cpu"),
+                                 native_rng=NativeRandom(t) if k == "native" else None)
+            runs[k].append((time.process_time() - c0, p is not None, 0 if p is None else len(p)))
+    return {k: {"found": float(sum(x[1] for x in v)), "median_ms": 1e3 * float(np.median([x[0] for x in v])),
+                "median_waypoints": float(np.median([x[2] for x in v]))} for k, v in runs.items()}
+
+
+def summary(rows: list[dict[str, Any]], kinds: tuple[str, str] = KINDS) -> str:
+    """Per scene: success, median CPU and CPU per iteration of each kind, the paired ratio (second / first),
+    same searches."""
     from .planning_kernel import paired_summary
 
-    return paired_summary(rows, "kind", "native", "python", ("iterations", "nodes"))
+    return paired_summary(rows, "kind", kinds[0], kinds[1], ("iterations", "nodes"))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -120,6 +225,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="trial seed")
     ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds per query [s]")
     ap.add_argument("--units", action="store_true", help="only the CPU per extension, native vs Python")
+    ap.add_argument("--loop-units", action="store_true",
+                    help="only the CPU per extension and per sample, extension='loop' vs 'native', on identical work")
+    ap.add_argument("--lead-path", action="store_true",
+                    help="only the object lead path, native vs Python (10 trials per scene, 2 s CPU each)")
+    ap.add_argument("--kinds", default="native,python",
+                    help="the two 'extension' values paired (loop, native, python); the ratio is second / first")
     a = ap.parse_args(argv)
     from .tcbirrt import expand_scenes
 
@@ -132,13 +243,33 @@ def main(argv: list[str] | None = None) -> int:
                   + ("" if u["native_available"] else " (native extension unavailable: Python ran twice)"))
         return 0
 
+    if a.lead_path:
+        for sc in expand_scenes(a.scene.split(",")):
+            for k, v in lead_path_costs(sc, seed=a.seed).items():
+                print(f"{sc} {k}: found {int(v['found'])}/10, median CPU {v['median_ms']:.1f} ms, "
+                      f"median waypoints {v['median_waypoints']:.0f}")
+        return 0
+    if a.loop_units:
+        for sc in expand_scenes(a.scene.split(",")):
+            u = loop_costs(sc, seed=a.seed)
+            if not u["available"]:
+                print(f"{sc}: the native loop is not available here")
+                continue
+            print(f"{sc}: {int(u['extensions'])} extensions: loop {u['loop_extension_us']:.0f} µs, native "
+                  f"{u['native_extension_us']:.0f} µs ({u['native_extension_us'] / u['loop_extension_us']:.2f}x); "
+                  f"sample + nearest node: loop {u['loop_sample_us']:.1f} µs, native {u['native_sample_us']:.1f} µs "
+                  f"({u['native_sample_us'] / u['loop_sample_us']:.2f}x)")
+        return 0
+    kinds = tuple(k.strip() for k in a.kinds.split(","))
+    if len(kinds) != 2 or any(k not in ("loop", "native", "python") for k in kinds) or kinds[0] == kinds[1]:
+        ap.error(f"--kinds: expected two different values of loop, native, python, got {a.kinds!r}")
     rows = paired_queries(expand_scenes(a.scene.split(",")), [int(x) for x in a.trials.split(",") if x.strip()],
-                          a.planners, seed=a.seed, time_limit=a.time_limit)
+                          a.planners, seed=a.seed, time_limit=a.time_limit, kinds=(kinds[0], kinds[1]))
     for r in rows:
         print(f"{r['scene']} trial {r['trial']} {r['kind']:6s}: {r['status']}, {r['cpu_s']:.3f} s CPU, "
               f"{r['iterations']} iterations, {r['nodes']} nodes, {r['cpu_per_iteration_ms']:.3f} ms/iteration"
               + ("" if r["native"] or r["kind"] == "python" else " (native extension unavailable: Python ran)"))
-    print(summary(rows))
+    print(summary(rows, (kinds[0], kinds[1])))
     return 0
 
 

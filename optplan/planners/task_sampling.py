@@ -177,11 +177,13 @@ def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
                      rng: np.random.Generator, deadline: Any, *, resolution: float = 0.04, range_: float = 0.3,
                      spacing: float = 0.1, shortcut_iterations: int = 50, bridge_probability: float = 0.5,
                      bridge_sigma: tuple[float, float] = (0.3, 0.4),
-                     geodesic_probability: float = 0.5) -> np.ndarray | None:
+                     geodesic_probability: float = 0.5, native_rng: Any = None) -> np.ndarray | None:
     """Rigid-body path of the object alone in ξ: RRTConnect (straight ξ segments checked every
     ``resolution`` by ``filt``) whose samples are bridge-test poses with probability
     ``bridge_probability`` (else uniform in the box), shortcut, then resampled every ``spacing``;
-    ``(n, 6)`` or None (deadline)."""
+    ``(n, 6)`` or None (deadline). With ``native_rng`` (a
+    :class:`~optplan.planners.kernel.sampler.NativeRandom`) and the filter's native pose test, the search and
+    the shortcuts are one native call drawing from it (``rng`` is then not used)."""
     from .rrtconnect import shortcut_path
     from .tree import Tree
 
@@ -189,6 +191,14 @@ def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
 
     lo = np.minimum(np.asarray(lo, float), np.minimum(xi_start, xi_goal))
     hi = np.maximum(np.asarray(hi, float), np.maximum(xi_start, xi_goal))
+    if native_rng is not None and filt._xi_native is not None:
+        from .kernel.sampler import native_lead_path
+
+        got = native_lead_path(filt, xi_start, xi_goal, lo, hi, native_rng, deadline, resolution=resolution,
+                               range_=range_, shortcut_iterations=shortcut_iterations,
+                               bridge_probability=bridge_probability, bridge_sigma=bridge_sigma,
+                               geodesic_probability=geodesic_probability)
+        return None if got is None else _resample(got, spacing)
     sampler = TaskSampler(filt, lo, hi, filter_tries=0, bridge_probability=bridge_probability,
                           bridge_sigma=bridge_sigma, bridge_tries=20, geodesic_probability=geodesic_probability,
                           endpoints=(xi_start, xi_goal))
@@ -229,6 +239,11 @@ def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
         path = path[::-1]
     if shortcut_iterations:
         path = shortcut_path(path, valid, resolution, rng, shortcut_iterations)
+    return _resample(path, spacing)
+
+
+def _resample(path: list[np.ndarray], spacing: float) -> np.ndarray:
+    """The poses of ``path`` with each segment cut into pieces no longer than ``spacing``."""
     out = [path[0]]
     for a, b in zip(path[:-1], path[1:]):
         n = max(1, int(np.ceil(float(np.linalg.norm(b - a)) / spacing)))

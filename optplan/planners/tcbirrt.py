@@ -106,14 +106,14 @@ from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from ..errors import ConfigurationError
 from ..model.robot import RobotModel
 from ..scene import Scene
-from .base import Deadline, PathSegment, Planner, PlanResult, PlanStatus
+from .base import Deadline, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2
 from .frontier_graft import frontier_graft
-from .regrasp import RegraspMixin
 from .rrtconnect import edge_is_valid
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
-from .tcbirrt_native import make_extender, native_extend, native_path_ik, poses_array
+from .tcbirrt_edges import EdgeCheckMixin
+from .tcbirrt_native import loop_extend, make_extender, native_extend, native_path_ik, poses_array
 from .tcbirrt_options import (
     PAPER_REACH,
     PAPER_XI_LOWER,
@@ -122,7 +122,8 @@ from .tcbirrt_options import (
     TCBiRRTOptions,
     reach_scaled_workspace,
 )
-from .tree import Tree
+from .tcbirrt_tree import _TaskTree as _TaskTree  # re-exported: frontier_graft types its trees with it
+from .tcbirrt_tree import extract_path
 from .validity import ValidityChecker
 
 __all__ = ["TCBiRRTOptions", "TCBiRRT", "exp_coordinates", "rotation_from_exp", "interpolate_task",
@@ -134,89 +135,8 @@ TRAPPED, ADVANCED, REACHED = "trapped", "advanced", "reached"
 PARTIAL = "partial"
 
 
-# ---------------------------------------------------------------------- tree
-class _TaskTree(Tree):
-    """Nodes keyed by ξ (nearest neighbour), their configurations ``q``, object poses and, per
-    node, the edge from its parent: intermediate configurations and object poses (j = 1..N−1)
-    of PathInverseKinematics; ``checked``: edge from the parent verified (lazy edges)."""
-
-    q: np.ndarray       # columns the base class creates with setattr
-    checked: np.ndarray
-    dom: np.ndarray     # per node: its dynamic domain radius or its step (``trap_adapt``); inf: unset
-    edge: list[Any]     # always kept (edges=True)
-
-    def __init__(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, cap: int = 512):
-        super().__init__(xi, cap, edges=True, q=q, checked=True, dom=np.inf)
-        self.pose = [(R, p)]
-        self.edge[0] = ([], [])
-        #: graft node → its regrasp motions from the parent's configuration (object fixed at the node's pose)
-        self.graft: dict[int, list[tuple[str, list[np.ndarray]]]] = {}
-        #: node → the live and dead nodes at the same object pose (itself included), for nodes that have grafts
-        self.twins: dict[int, list[int]] = {}
-
-    @property
-    def xi(self) -> np.ndarray:
-        return self.X
-
-    def add(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, parent: int, edge_q: list[np.ndarray], edge_poses: list[tuple[np.ndarray, np.ndarray]]) -> int:  # type: ignore[override]  # a task node needs its q and object pose too; never used as a plain Tree
-        self.pose.append((R, p))
-        return super().add(xi, parent, (edge_q, edge_poses), q=q, checked=False, dom=np.inf)
-
-    def add_graft(self, i: int, q: np.ndarray, motions: list[tuple[str, list[np.ndarray]]]) -> int:
-        """A node at node i's object pose with another joint solution ``q``, reached from node i's
-        configuration by the regrasp ``motions``: a second IK branch of the same tree."""
-        R, p = self.pose[i]
-        self.pose.append((R, p))
-        k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=False, dom=np.inf)
-        self.graft[k] = motions
-        group = self.twins.setdefault(i, [i])
-        group.append(k)
-        self.twins[k] = group
-        return k
-
-    def twin_nearest(self, i: int, q: np.ndarray | None, rng: np.random.Generator) -> int:
-        """Among node i and the live nodes at its pose (other IK branches): the one whose configuration
-        is nearest ``q``, or a random one when ``q`` is None."""
-        group = self.twins.get(i)
-        if group is None:
-            return i
-        if self.alive is not None:
-            group = [k for k in group if self.alive[k]]
-        if q is None:
-            return int(group[int(rng.integers(len(group)))])
-        return int(min(group, key=lambda k: float(np.sum((self.q[k] - q) ** 2))))
-
-    def pieces(self, i: int) -> list[tuple[Any, ...]]:
-        """The motion from the root to node i: ``("c", configurations, poses)`` (a constrained edge,
-        both ends included) and ``("r", arm, configurations, pose)`` (one arm's regrasp motion)."""
-        out: list[tuple[Any, ...]] = []
-        idx = self.indices(i)
-        for a, k in zip(idx[:-1], idx[1:]):
-            if k in self.graft:
-                out.extend(("r", arm, full, self.pose[k]) for arm, full in self.graft[k])
-            else:
-                eq, ep = self.edge[k]
-                out.append(("c", [self.q[a].copy(), *(x.copy() for x in eq), self.q[k].copy()],
-                            [self.pose[a], *ep, self.pose[k]]))
-        return out
-
-    def alive_xi(self) -> np.ndarray:
-        return self.live_keys()
-
-    def branch(self, i: int) -> tuple[list[np.ndarray], list[tuple[np.ndarray, np.ndarray]]]:  # type: ignore[override]  # configurations and poses; never used as a plain Tree
-        """Configurations and poses from the root to node i (edge intermediates included)."""
-        qs, ps = [], []  # type: list[np.ndarray], list[tuple[np.ndarray, np.ndarray]]
-        for k in self.indices(i):
-            eq, ep = self.edge[k]
-            qs.extend(x.copy() for x in eq)
-            ps.extend(ep)
-            qs.append(self.q[k].copy())
-            ps.append(self.pose[k])
-        return qs, ps
-
-
 # ---------------------------------------------------------------------- planner
-class TCBiRRT(RegraspMixin, Planner):
+class TCBiRRT(EdgeCheckMixin, Planner):
     """TCBiRRT for a robot holding ``scene.object`` with two arms (``scene.object.grasps``).
 
     ``plan(q_start, q_goal, time_limit=10, seed=0)``: both configurations must hold the object
@@ -249,7 +169,9 @@ class TCBiRRT(RegraspMixin, Planner):
         self._cb: CBiRRT2 | None = None
         self._rng = np.random.default_rng(0)
         #: the extension step in native code (:mod:`.tcbirrt_native`), None: in Python
-        self._ext = make_extender(self) if self.checker.kernel == "native" and self.options.extension == "native" else None
+        self._ext = make_extender(self) if self.checker.kernel == "native" and self.options.extension != "python" else None
+        #: ``extension="loop"``: the query's native random stream (sampler, lead path, restarts), None: NumPy's
+        self._nrng: Any = None
 
     # ------------------------------------------------------------------ public helpers
     def check_endpoint(self, q: np.ndarray) -> str | None:
@@ -303,197 +225,6 @@ class TCBiRRT(RegraspMixin, Planner):
             q = qn
         return self._edges_prefix(q_near, out, fail, st)
 
-    def _edges_prefix(self, q_near: np.ndarray, out: list[np.ndarray], fail: list[np.ndarray] | None, st: dict[str, Any]) -> list[np.ndarray] | None:
-        """Eager edge checks after the waypoints' own checks (a failing waypoint costs no edge check):
-        ``out`` if every edge passes, else the prefix before the first failing edge (or None)."""
-        o = self.options
-        if not o.edge_tolerance or o.lazy_edges:
-            return out
-        prev = q_near
-        for k, x in enumerate(out):
-            if not self._edge_ok(prev, x, st):
-                return None if fail is None else out[:k]
-            prev = x
-        return out
-
-    def _edge_ok(self, a: np.ndarray, b: np.ndarray, st: dict[str, Any]) -> bool:
-        """The straight joint segment a → b (object held) at ``edge_tolerance`` (ends not checked)."""
-        st["edge_checks"] += 1
-        o = self.options
-        if o.edge_bound == "certified":
-            ok = self.checker.edge_is_certified(a, b, "held", min_clearance=o.edge_min_clearance, cache=True)
-        elif o.edge_bound == "jacobian":
-            ok = self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "held")
-        else:
-            ok = edge_is_valid(a, b, self.checker.validity("held"), cast(float, o.edge_tolerance), False, self._w_held)
-        if ok:
-            return True
-        st["edge_collisions"] += 1
-        return False
-
-    def _static_edge_ok(self, a: np.ndarray, b: np.ndarray, st: dict[str, Any], object_pose: pin.SE3 | None = None) -> bool:
-        """The segment a → b at ``edge_tolerance`` with the configuration-free bound's uniform spacing
-        (object held, or fixed at ``object_pose``); ends not checked."""
-        st["path_verified_edges"] += 1
-        if object_pose is None:
-            return edge_is_valid(a, b, self.checker.validity("held"), cast(float, self.options.edge_tolerance), False, self._w_held)
-        return edge_is_valid(a, b, self.checker.validity("fixed", object_pose),
-                             cast(float, self.options.edge_tolerance), False, self._w_fixed)
-
-    def _verify_branch(self, tree: _TaskTree, i: int, st: dict[str, Any]) -> int | None:
-        """``verify_path``: every not yet verified edge from the root to node i at the uniform
-        spacing; the first node whose edge fails, or None (verified edges are marked)."""
-        chain: list[int] = []
-        while i > 0 and not tree.checked[i]:
-            chain.append(i)
-            i = tree.parent[i]
-        for k in reversed(chain):
-            if k in tree.graft:   # a graft's regrasp motions, object fixed at the node's pose
-                M = pin.SE3(*tree.pose[k])
-                with self._grasp_exempt(M, tree.q[tree.parent[k]], tree.q[k]):
-                    ok = all(self._static_edge_ok(a, b, st, M) for _, full in tree.graft[k]
-                             for a, b in zip(full[:-1], full[1:]))
-            else:
-                eq, _ = tree.edge[k]
-                qs = [tree.q[tree.parent[k]], *eq, tree.q[k]]
-                ok = all(self._static_edge_ok(a, b, st) for a, b in zip(qs[:-1], qs[1:]))
-            if not ok:
-                return k
-            tree.checked[k] = True
-        return None
-
-    def _verify_connection(self, ta: _TaskTree, i_a: int, reg: Sequence[tuple[str | None, list[np.ndarray]]] | None,
-                           st: dict[str, Any]) -> bool:
-        """``verify_path``: the regrasp motions (object fixed at tree a's node pose) and joint-space
-        connections of a connection at the uniform spacing."""
-        M = pin.SE3(*ta.pose[i_a])
-        for arm, full in reg or []:
-            if arm is None:
-                ok = all(self._static_edge_ok(a, b, st) for a, b in zip(full[:-1], full[1:]))
-            else:
-                with self._grasp_exempt(M, full[0], full[-1]):
-                    ok = all(self._static_edge_ok(a, b, st, M) for a, b in zip(full[:-1], full[1:]))
-            if not ok:
-                return False
-        return True
-
-    def _branch_ok(self, tree: _TaskTree, i: int, st: dict[str, Any], deadline: Deadline) -> int | None:
-        """Lazy edges: verify every unchecked edge from the root to node i (root side first); a
-        straight segment in collision is repaired, when ``joint_connect`` is on, by a joint-space
-        constrained path between its ends (:meth:`joint_connect`), spliced into the node's edge.
-        Returns the first node whose edge cannot be made valid, or None when all pass."""
-        chain = []
-        while i > 0 and not tree.checked[i]:
-            chain.append(i)
-            i = tree.parent[i]
-        for k in reversed(chain):
-            if k in tree.graft:      # regrasp motions: checked at edge_tolerance when planned
-                tree.checked[k] = True
-                continue
-            eq, ep = tree.edge[k]
-            qs = [tree.q[tree.parent[k]], *eq, tree.q[k]]
-            new_q, new_p = [], []
-            for j, (a, b) in enumerate(zip(qs[:-1], qs[1:])):
-                if not self._edge_ok(a, b, st):
-                    jp = self.joint_connect(a, b, deadline, st) if self.options.joint_connect else None
-                    if jp is None:
-                        return k
-                    st["edge_repairs"] = st.get("edge_repairs", 0) + 1
-                    for x in jp[:-1]:
-                        M = self.kin.object_pose(x)
-                        new_q.append(x)
-                        new_p.append((M.rotation.copy(), M.translation.copy()))
-                if j < len(eq):
-                    new_q.append(eq[j])
-                    new_p.append(ep[j])
-            tree.edge[k] = (new_q, new_p)
-            tree.checked[k] = True
-        return None
-
-    def joint_connect(self, q_from: np.ndarray, q_to: np.ndarray, deadline: Deadline, st: dict[str, Any]) -> list[np.ndarray] | None:
-        """CBiRRT2's ConstrainedExtend in joint space from ``q_from`` to ``q_to`` (both on the closed
-        chain); the configurations after ``q_from`` up to ``q_to`` (its edges checked at
-        ``edge_tolerance`` when set), or None when trapped."""
-        from .cbirrt2 import REACHED as CB_REACHED
-
-        if self._cb is None:
-            self._cb = CBiRRT2(self.robot, self.scene, self.options.joint_connect_options, checker=self.checker,
-                               kinematics=self.kin)
-        st["joint_connect_attempts"] += 1
-        cst = {"projections": 0, "projection_failures": 0}
-        tree = Tree(np.asarray(q_from, float), 512, edges=True)
-        res, i = self._cb.extend(tree, 0, np.asarray(q_to, float), cst, deadline)
-        st["joint_connect_projections"] += cst["projections"]
-        if res != CB_REACHED:
-            return None
-        path = tree.branch(i)[1:] + [np.asarray(q_to, float).copy()]
-        if self.options.edge_tolerance:
-            prev = q_from
-            for x in path:
-                if not self._edge_ok(prev, x, st):
-                    return None
-                prev = x
-        st["joint_connect_successes"] += 1
-        return path
-
-    def _graft(self, tree: _TaskTree, i: int | None, other: _TaskTree, deadline: Deadline, st: dict[str, Any]) -> int | None:
-        """``branch_grafts``: another IK branch at node i of ``tree`` (when None: the node nearest a random
-        live node of ``other``):
-        IK of its object pose seeded from ``other``'s configuration nearest in ξ; a valid solution at
-        least ``graft_min_distance`` from the node's joins the tree by a regrasp. The new node, or None."""
-        o, ck, kin = self.options, self.checker, self.kin
-        rng = self._rng
-        if i is None:
-            if o.graft_node == "any" or (o.graft_node == "mixed" and rng.random() < 0.5):   # a random live node
-                live = np.flatnonzero(tree.alive[:tree.n]) if tree.alive is not None else np.arange(tree.n)
-                i = int(live[int(rng.integers(live.size))])
-            else:   # the node nearest a random node of the other tree: where the trees meet, more often
-                live = np.flatnonzero(other.alive[:other.n]) if other.alive is not None else np.arange(other.n)
-                i = tree.nearest(other.xi[int(live[int(rng.integers(live.size))])])
-        if i in tree.graft:
-            return None
-        st["graft_attempts"] += 1
-        R, p = tree.pose[i]
-        q_i = tree.q[i]
-        seed = other.q[other.nearest(tree.xi[i])]
-        branches = [other.q[0], *(other.q[g] for g in other.graft)] if o.graft_branch_seeds else []
-        for k in range(-len(branches), o.graft_seeds):
-            if k < 0:      # the other tree's branches: its root's and its grafts' configurations
-                q0 = branches[k]
-            elif k == 0:
-                q0 = seed
-            elif k % 2:
-                q0 = seed + rng.normal(0.0, o.ik_restart_sigma, seed.size)
-            else:          # a random configuration: a branch neither tree has
-                q0 = rng.uniform(self.robot.lower, self.robot.upper)
-            x, its = kin.ik(q0, R, p, o.ik)
-            st["ik_iterations"] += its
-            if x is None:
-                st["graft_ik_failures"] = st.get("graft_ik_failures", 0) + 1
-                continue
-            cands = [x]
-            if o.graft_single_arm:   # each arm's IK is independent at a fixed object pose: one arm's new branch alone
-                for idx in kin.idx:
-                    y = q_i.copy()
-                    y[idx] = x[idx]
-                    cands.append(y)
-            for y in cands:
-                if float(np.linalg.norm(y - q_i)) < o.graft_min_distance:
-                    st["graft_same_branch"] = st.get("graft_same_branch", 0) + 1
-                    continue
-                if not ck.in_limits(y) or not ck.is_valid(y):
-                    st["graft_collisions"] = st.get("graft_collisions", 0) + 1
-                    continue
-                if any(float(np.linalg.norm(tree.q[j] - y)) < o.graft_min_distance for j in tree.twins.get(i, ())):
-                    continue   # a branch this pose already has
-                reg = self.regrasp(q_i, y, R, p, rng, deadline.sub(o.graft_time_limit), st)
-                if reg is None:
-                    st["graft_regrasp_failures"] = st.get("graft_regrasp_failures", 0) + 1
-                    continue
-                st["grafts"] += 1   # its regrasp motions are verified (verify_path) once on a start-goal path
-                return tree.add_graft(i, y, reg)
-        return None
-
     # ------------------------------------------------------------------ Alg. 2
     def constrained_extend(self, tree: _TaskTree, i_near: int, xi_rand: np.ndarray, q_rand: np.ndarray | None,
                            rng: np.random.Generator, deadline: Deadline, st: dict[str, Any],
@@ -512,7 +243,9 @@ class TCBiRRT(RegraspMixin, Planner):
         Rs, ps = pose_from_xi(xi_s)
         q_near = tree.q[i_near]
         if dist > 0.0:
-            if self._ext is not None and o.interpolation == "geodesic":   # one native call
+            if self._nrng is not None and self._ext is not None and self._ext.edge_on and o.interpolation == "geodesic":
+                poses, Q = loop_extend(self, R0, p0, Rs, ps, q_near, st, cast(bool, o.keep_prefix))   # restarts in C
+            elif self._ext is not None and o.interpolation == "geodesic":   # one native call
                 poses, Q = native_extend(self, R0, p0, Rs, ps, q_near, st, cast(bool, o.keep_prefix))
             else:
                 poses = interpolate_task(R0, p0, Rs, ps, o.n_interp, o.interpolation)
@@ -548,11 +281,16 @@ class TCBiRRT(RegraspMixin, Planner):
             i_s = i_near
         return (REACHED if reach else ADVANCED), i_s, reg
 
-    def _sample_near(self, ta: _TaskTree, tb: _TaskTree, sampler: TaskSampler | None, rng: np.random.Generator,
+    def _sample_near(self, ta: _TaskTree, tb: _TaskTree, sampler: Any, rng: np.random.Generator,
                      st: dict[str, Any]) -> tuple[np.ndarray, int]:
         """Alg. 1 lines 3-4: ξ_rand and the node of ``ta`` to extend from. With ``trap_adapt="domain"`` a sample
-        outside its nearest node's dynamic domain is drawn again (up to ``domain_tries`` draws)."""
+        outside its nearest node's dynamic domain is drawn again (up to ``domain_tries`` draws). A native sampler
+        (``extension="loop"``) draws and finds the nearest node in one call."""
         o = self.options
+        if self._nrng is not None and o.trap_adapt != "domain":
+            xi_rand, i_near = sampler.sample_near(ta.X, ta.n, ta.alive if ta.n_dead else None,
+                                                  tb.X, tb.n, tb.alive if tb.n_dead else None)
+            return xi_rand, ta.twin_nearest(i_near, None, rng)
         for _ in range(o.domain_tries if o.trap_adapt == "domain" else 1):
             # lo + (hi − lo) u: Generator.uniform's formula and draws, without its argument checks
             xi_rand = self._lo + (self._hi - self._lo) * rng.random(6) if sampler is None else sampler.sample(rng, tb.alive_xi())
@@ -572,9 +310,16 @@ class TCBiRRT(RegraspMixin, Planner):
             cur = self.step_size if not np.isfinite(tree.dom[i]) else float(tree.dom[i])
             tree.dom[i] = max(cur * 0.5, self.step_size / 8.0) if res == TRAPPED else min(cur * 2.0, self.step_size)
 
-    def _sampler(self) -> TaskSampler | None:
-        """The improved variant's ξ sampler (None: the paper's uniform box)."""
+    def _sampler(self) -> Any:
+        """The improved variant's ξ sampler (None: the paper's uniform box); with ``extension="loop"`` the
+        native sampler (:class:`~optplan.planners.kernel.sampler.NativeTaskSampler`, for the paper's box too)
+        when it can be built, and then :attr:`_nrng` is the query's native random stream."""
         o = self.options
+        self._nrng = None
+        if self._ext is not None and o.extension == "loop":
+            got = self._native_sampler()
+            if got is not None:
+                return got
         if not (o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.goal_bias) > 0 or cast(float, o.guide_probability) > 0
                 or cast(float, o.geodesic_probability) > 0 or cast(float, o.lead_orientation_probability) > 0):
             return None
@@ -590,6 +335,34 @@ class TCBiRRT(RegraspMixin, Planner):
                            guide_sigma=o.guide_sigma, geodesic_probability=cast(float, o.geodesic_probability),
                            geodesic_sigma=o.geodesic_sigma,
                            lead_orientation_probability=cast(float, o.lead_orientation_probability))
+
+    def _native_sampler(self) -> Any:
+        """The native sampler with the options' probabilities, seeded by one draw of the planner's generator
+        (None: the filter has no native pose test); the extension's restarts draw from the same stream."""
+        from .kernel.native import KernelUnavailable
+        from .kernel.sampler import NativeRandom, NativeTaskSampler
+
+        o = self.options
+        need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
+        if need and self._filter is None:
+            self._filter = ObjectPoseFilter(self.robot, self.scene, native=True)
+        try:
+            nrng = NativeRandom(self._rng)
+            smp = NativeTaskSampler(self._filter if need else None, self._lo, self._hi, nrng,
+                                    bridge_probability=cast(float, o.bridge_probability), bridge_sigma=o.bridge_sigma,
+                                    goal_bias=cast(float, o.goal_bias), filter_tries=30 if o.sample_filter else 0,
+                                    guide_probability=cast(float, o.guide_probability), guide_sigma=o.guide_sigma,
+                                    geodesic_probability=cast(float, o.geodesic_probability),
+                                    geodesic_sigma=o.geodesic_sigma,
+                                    lead_orientation_probability=cast(float, o.lead_orientation_probability))
+        except KernelUnavailable as e:
+            log.info("TCBiRRT samples in Python: %s", e)
+            return None
+        self._nrng = nrng
+        ext = cast(Any, self._ext)
+        ext.restarts_in_c(nrng, cast(int, o.ik_restarts), o.ik_restart_sigma, self.robot.lower - 1e-9,
+                          self.robot.upper + 1e-9)
+        return smp
 
     # ------------------------------------------------------------------ Alg. 1
     def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator, seed: int) -> PlanResult:
@@ -641,7 +414,8 @@ class TCBiRRT(RegraspMixin, Planner):
                     and guide_time < o.guide_time_limit and st["iterations"] % 25 == 0):
                 sub = deadline.sub(min(o.guide_attempt_time, o.guide_time_limit - guide_time))
                 sampler.guide = object_lead_path(cast(ObjectPoseFilter, self._filter), ta.xi[0] if a_is_start else tb.xi[0],
-                                                 tb.xi[0] if a_is_start else ta.xi[0], self._lo, self._hi, rng, sub)
+                                                 tb.xi[0] if a_is_start else ta.xi[0], self._lo, self._hi, rng, sub,
+                                                 native_rng=self._nrng)
                 guide_time += sub.elapsed()
                 st["guide_attempts"] += 1
                 st["guide_waypoints"] = 0 if sampler.guide is None else len(sampler.guide)
@@ -701,65 +475,15 @@ class TCBiRRT(RegraspMixin, Planner):
             st["distance_calls"] = cert.n_distance_calls - n_dist0   # certified edges: exact group distances
         if sampler is not None:
             st.update(sampler.stats)
+            if self._nrng is not None:
+                sampler.sync_filter_calls()
         if found is None:
             if deadline.expired():
                 return self.empty_result(PlanStatus.TIMEOUT, "time limit reached", **st)
             return self.empty_result(PlanStatus.FAILED, "iteration cap reached", **st)
         return self._extract(ta, tb, a_is_start, found, st)
 
-    def _extract(self, ta: _TaskTree, tb: _TaskTree, a_is_start: bool, found: tuple[int, int, Sequence[tuple[str | None, list[np.ndarray]]] | None], st: dict[str, Any]) -> PlanResult:
-        """ExtractPath: tree-a branch, regrasp (q_b of tree b → q_a of tree a, reversed so the path
-        runs start → goal), reversed tree-b branch; regrasp motions of grafts inside either branch
-        become ``"regrasp"`` segments too."""
-        i_a, i_b, reg = found
-        M_I = ta.pose[i_a]
-        moves: list[tuple[Any, ...]] = ta.pieces(i_a)
-        n_joint = 0
-        # the connection was planned from tree b's solution (q_s) to tree a's (q_rand): reversed
-        for arm, full in reversed(reg or []):
-            full = full[::-1]
-            if arm is None:         # joint-space constrained connection (joint_connect): a constrained move
-                n_joint += 1
-                poses = []
-                for x in full:
-                    M = self.kin.object_pose(x)
-                    poses.append((M.rotation.copy(), M.translation.copy()))
-                moves.append(("c", full, poses))
-            else:
-                moves.append(("r", arm, full, M_I))
-        moves.extend(_reverse_move(m) for m in reversed(tb.pieces(i_b)))
-        q0, pose0 = ta.q[0].copy(), ta.pose[0]
-        if not a_is_start:   # tree a grew from the goal: flip everything
-            moves = [_reverse_move(m) for m in reversed(moves)]
-            q0, pose0 = tb.q[0].copy(), tb.pose[0]
-        qs, poses, flags = [q0], [pose0], [True]
-        segs: list[tuple[str, int, int, str | None, Any]] = []
-        run0 = 0                    # start of the current constrained run
-        for m in moves:
-            if m[0] == "c":
-                qs.extend(m[1][1:])
-                poses.extend(m[2][1:])
-                flags.extend([True] * (len(m[1]) - 1))
-                continue
-            _, arm, full, M = m
-            i0 = len(qs) - 1
-            segs.append(("constrained", run0, i0, None, None))
-            qs.extend(full[1:])
-            poses.extend([M] * (len(full) - 1))
-            flags.extend([False] * (len(full) - 2) + [True])
-            segs.append(("regrasp", i0, len(qs) - 1, arm, pin.SE3(np.asarray(M[0]), np.asarray(M[1]))))
-            run0 = len(qs) - 1
-        segs.append(("constrained", run0, len(qs) - 1, None, None))
-        out_segs = [PathSegment(k, a, b, arm, M) for k, a, b, arm, M in segs if b > a]
-        st["n_regrasp"] = sum(1 for m in moves if m[0] == "r")
-        st["joint_connections"] = n_joint
-        return PlanResult(PlanStatus.EXACT, self.name, np.array(qs),
-                          [pin.SE3(np.asarray(R), np.asarray(p)) for R, p in poses], np.array(flags, dtype=bool),
-                          out_segs, st)
-
-
-def _reverse_move(m: tuple[Any, ...]) -> tuple[Any, ...]:
-    """A move of :meth:`_TaskTree.pieces` run backwards."""
-    if m[0] == "c":
-        return ("c", m[1][::-1], m[2][::-1])
-    return ("r", m[1], m[2][::-1], m[3])
+    def _extract(self, ta: _TaskTree, tb: _TaskTree, a_is_start: bool,
+                 found: tuple[int, int, Sequence[tuple[str | None, list[np.ndarray]]] | None], st: dict[str, Any]) -> PlanResult:
+        """ExtractPath (:func:`.tcbirrt_tree.extract_path`)."""
+        return extract_path(self, ta, tb, a_is_start, found, st)

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from .kernel.extend import NativeExtender
     from .tcbirrt import TCBiRRT
 
-__all__ = ["make_extender", "native_extend", "native_path_ik", "poses_array"]
+__all__ = ["make_extender", "loop_extend", "native_extend", "native_path_ik", "poses_array"]
 log = logging.getLogger(__name__)
 
 
@@ -69,6 +69,7 @@ def _merge(st: dict[str, Any], ext: NativeExtender) -> None:
     st["collisions"] += c[4]
     st["edge_checks"] += c[6]
     st["edge_collisions"] += c[7]
+    st["ik_restarts"] += c[9]
     ext.checker.n_checks += c[5]
 
 
@@ -80,6 +81,16 @@ def native_extend(pl: TCBiRRT, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p
     n = pl.options.n_interp
     P, Q, r, edge_k = ext.extend(R0, p0, R1, p1, n, q_near)
     return pose_list(P), native_path_ik(pl, P, q_near, st, prefix, (Q, r, edge_k))
+
+
+def loop_extend(pl: TCBiRRT, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, q_near: np.ndarray,
+                st: dict[str, Any], prefix: bool) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray] | None]:
+    """:func:`native_extend` in one call for ``extension="loop"`` (restarts in C, Jacobian-spaced edges):
+    ``(poses, configurations)`` as the Python code returns them."""
+    ext = cast("NativeExtender", pl._ext)
+    P, Q, k = ext.extend_prefix(R0, p0, R1, p1, pl.options.n_interp, q_near, prefix)
+    _merge(st, ext)
+    return pose_list(P), (None if k < 0 else list(Q[:k]))
 
 
 def native_path_ik(pl: TCBiRRT, P: np.ndarray, q_near: np.ndarray, st: dict[str, Any], prefix: bool = False,
@@ -99,7 +110,8 @@ def native_path_ik(pl: TCBiRRT, P: np.ndarray, q_near: np.ndarray, st: dict[str,
         q = q_near if r == 0 else Q[r - 1]
         R, p = P[r, :9].reshape(3, 3), P[r, 9:]
         qn = None
-        for _ in range(0 if ext.terminal() else cast(int, o.ik_restarts)):   # no restarts after a failed segment
+        terminal = ext.terminal() or ext.native_restarts   # no restarts after a failed segment, or run in C
+        for _ in range(0 if terminal else cast(int, o.ik_restarts)):
             st["ik_restarts"] += 1
             x, its = kin.ik(q + pl._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, o.ik)
             st["ik_iterations"] += its

@@ -165,11 +165,14 @@ class TCBiRRTOptions:
     #: (the compiled planning kernel, :mod:`optplan.planners.kernel`; coal when it cannot be built) or
     #: ``"coal"`` (Pinocchio + coal).
     validity_kernel: str = "native"
-    #: Where a constrained extension runs (pose interpolation, path IK, configuration and edge checks) and the
-    #: task-space filter's pose test (reach and object, per pose and per lead-path segment): ``"native"`` (one
-    #: call into compiled code per extension or test, :mod:`.tcbirrt_native`; the Python code when a part is
-    #: not compiled or with ``validity_kernel="coal"``) or ``"python"``. Same search either way.
-    extension: str = "native"
+    #: Where an iteration runs: ``"loop"`` (compiled code for the sampler — task-space draws, filter, bridge
+    #: tests, goal bias, lead-path poses — fused with the nearest-neighbour search, the object lead path, and each
+    #: extension with its IK restarts; the random draws of these from a native generator seeded by the
+    #: planner's, so a seed gives another search than ``"python"``'s), ``"native"`` (one call into compiled code
+    #: per extension and per filter test, :mod:`.tcbirrt_native`; the sampler and restarts in Python on the
+    #: planner's generator: the same search as ``"python"``) or ``"python"``. Without a compiler or with
+    #: ``validity_kernel="coal"`` the Python code runs.
+    extension: str = "loop"
     #: Cap on Alg. 1 iterations [count] (0: only the time limit).
     max_iterations: int = 0
     #: ``"paper"`` (the published algorithm) or ``"improved"`` (task-space sampling aids).
@@ -309,8 +312,8 @@ class TCBiRRTOptions:
         _pos("margin", self.margin, allow_zero=True)
         if self.validity_kernel not in ("native", "coal"):
             raise ValueError(f"TCBiRRTOptions.validity_kernel: expected 'native' or 'coal', got {self.validity_kernel!r}")
-        if self.extension not in ("native", "python"):
-            raise ValueError(f"TCBiRRTOptions.extension: expected 'native' or 'python', got {self.extension!r}")
+        if self.extension not in ("loop", "native", "python"):
+            raise ValueError(f"TCBiRRTOptions.extension: expected 'loop', 'native' or 'python', got {self.extension!r}")
         if not (isinstance(self.max_iterations, int) and self.max_iterations >= 0):
             raise ValueError(f"TCBiRRTOptions.max_iterations: expected an int >= 0, got {self.max_iterations!r}")
 

@@ -33,6 +33,7 @@ from ...codegen import build_library, cache_dir
 from .csource import C_SOURCE
 from .extend_csource import EXTEND_SOURCE
 from .native import KernelUnavailable
+from .sampler_csource import RNG_SOURCE, SAMPLER_SOURCE
 
 __all__ = ["NativeExtender", "NativePoseFilter", "load_extend_library", "nearest", "nearest_available"]
 log = logging.getLogger(__name__)
@@ -40,10 +41,10 @@ log = logging.getLogger(__name__)
 _P = ctypes.c_void_p
 _LL = ctypes.c_longlong
 _LIB: list[Any] = []        # the loaded library (one per process), or [None] after a failed build
-SOURCE = C_SOURCE + EXTEND_SOURCE
+SOURCE = C_SOURCE + RNG_SOURCE + EXTEND_SOURCE + SAMPLER_SOURCE
 #: counters of one native call, in the order of the C code
 COUNTERS = ("ik_calls", "ik_iterations", "ik_failures", "ik_jumps", "collisions", "checks", "edge_checks",
-            "edge_collisions", "terminal")
+            "edge_collisions", "terminal", "ik_restarts")
 
 
 class _Ctx(ctypes.Structure):
@@ -54,7 +55,8 @@ class _Ctx(ctypes.Structure):
                 ("max_joint_step", ctypes.c_double),
                 ("edge_on", ctypes.c_int), ("edge_tol", ctypes.c_double),
                 ("W", _P), ("nw", ctypes.c_int),
-                ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int), ("edge_res", ctypes.c_double)]
+                ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int), ("edge_res", ctypes.c_double),
+                ("rng", _P), ("restarts", ctypes.c_int), ("restart_sigma", ctypes.c_double), ("lower", _P), ("upper", _P)]
 
 
 def load_extend_library() -> Any:
@@ -102,8 +104,31 @@ def load_extend_library() -> Any:
     lib.tcb_filter_segment.argtypes = [_P, _P, _P, ctypes.c_double, ctypes.c_int, _P]
     lib.tcb_extend.restype = _LL
     lib.tcb_extend.argtypes = [_P, _P, _P, _P, _P, _LL, _P, _P, _P, _P, _P]
+    lib.tcb_extend_prefix.restype = _LL
+    lib.tcb_extend_prefix.argtypes = [_P, _P, _P, _P, _P, _LL, _P, _P, _P, _P, ctypes.c_int]
+    _declare_sampler_functions(lib)
     _LIB.append(lib)
     return lib
+
+
+def _declare_sampler_functions(lib: Any) -> None:
+    """The ctypes signatures of the sampler's C functions (:mod:`.sampler`)."""
+    _D = ctypes.c_double
+    lib.tcb_rng_seed.restype = None
+    lib.tcb_rng_seed.argtypes = [_P, ctypes.c_ulonglong]
+    lib.tcb_rng_uniform.restype = _D
+    lib.tcb_rng_uniform.argtypes = [_P]
+    lib.tcb_rng_normal.restype = _D
+    lib.tcb_rng_normal.argtypes = [_P]
+    lib.tcb_sample.restype = None
+    lib.tcb_sample.argtypes = [_P, _P, _LL, _P, _P]
+    lib.tcb_sample_near.restype = _LL
+    lib.tcb_sample_near.argtypes = [_P, _P, _LL, _P, _P, _LL, _P, _P]
+    lib.tcb_lead_path.restype = _LL
+    lib.tcb_lead_path.argtypes = [_P, _P, _P, _D, _D, ctypes.c_int, ctypes.c_int, _D, ctypes.POINTER(ctypes.POINTER(_D)),
+                                  ctypes.POINTER(_LL)]
+    lib.tcb_free.restype = None
+    lib.tcb_free.argtypes = [_P]
 
 
 def nearest_available() -> bool:
@@ -238,6 +263,8 @@ class NativeExtender:
             c.prof, c.prof_iw, c.prof_w, c.nprof = prof[0], prof[1].ctypes.data, prof[2].ctypes.data, prof[3]
         c.edge_res = float(edge_resolution or 0.0)
         self._ctx = c
+        #: a failing waypoint's random restarts run in C, drawn from :meth:`restarts_in_c`'s generator
+        self.native_restarts = False
         #: the edges between an extension's configurations are checked here (else by the caller)
         self.edge_on = bool(edge_tolerance)
         self._cp = ctypes.addressof(c)
@@ -253,6 +280,18 @@ class NativeExtender:
         self._bufs = [ctypes.addressof(x) if isinstance(x, ctypes.Structure) else x.ctypes.data
                       for x in (self._R0, self._p0, self._R1, self._p1, self._qn)]
 
+    def restarts_in_c(self, rng: Any, restarts: int, sigma: float, lower: np.ndarray, upper: np.ndarray) -> None:
+        """Run a failing waypoint's random restarts in C: ``restarts`` IK attempts [count] from the previous
+        configuration perturbed by ``N(0, sigma²)`` [rad] per joint, drawn from ``rng`` (a
+        :class:`~optplan.planners.kernel.sampler.NativeRandom`), accepted inside ``[lower, upper]`` [rad], within
+        the joint-jump bound and collision-free (what :meth:`~optplan.planners.tcbirrt.TCBiRRT.path_ik` does with
+        the planner's NumPy generator)."""
+        self._lim = (np.ascontiguousarray(lower, dtype=float), np.ascontiguousarray(upper, dtype=float), rng)
+        c = self._ctx
+        c.rng, c.restarts, c.restart_sigma = rng.address, int(restarts), float(sigma)
+        c.lower, c.upper = self._lim[0].ctypes.data, self._lim[1].ctypes.data
+        self.native_restarts = True
+
     def take_counts(self) -> dict[str, int]:
         """The counters since the last call (reset); ``checks`` are also added to the checker's ``n_checks``."""
         out = dict(zip(COUNTERS, (int(v) for v in self.cnt)))
@@ -262,8 +301,8 @@ class NativeExtender:
 
     def terminal(self) -> bool:
         """Whether the last failing waypoint failed its ``edge_resolution`` segment (then no restarts); reset."""
-        t = bool(self.cnt[-1])
-        self.cnt[-1] = 0
+        t = bool(self.cnt[8])
+        self.cnt[8] = 0
         return t
 
     def extend(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int,
@@ -286,6 +325,26 @@ class NativeExtender:
         if r < -1:
             raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
         return P, Q, int(r), int(self._edge_k.value)
+
+    def extend_prefix(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int,
+                      q_near: np.ndarray, prefix: bool) -> tuple[np.ndarray, np.ndarray, int]:
+        """:meth:`extend` with the restarts in C (:meth:`restarts_in_c`) and the edges of the accepted
+        configurations checked: ``(P, Q, k)`` with ``Q[:k]`` the configurations kept (with ``prefix``: the valid
+        prefix, ``k`` possibly 0; without it ``k`` is n, or −1 when the extension fails)."""
+        R0b, p0b, R1b, p1b, qb = self._R0, self._p0, self._R1, self._p1, self._qn
+        R0b[:] = R0.reshape(9)
+        p0b[:] = p0
+        R1b[:] = R1.reshape(9)
+        p1b[:] = p1
+        qb[:] = q_near
+        P = np.empty((n, 12))
+        Q = np.empty((n, self.nq))
+        a = self._bufs
+        k = self.lib.tcb_extend_prefix(self._cp, a[0], a[1], a[2], a[3], n, a[4], P.ctypes.data, Q.ctypes.data,
+                                       self._cnt_p, int(prefix))
+        if k < -1:
+            raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
+        return P, Q, int(k)
 
     def path_ik(self, P: np.ndarray, j0: int, q_prev: np.ndarray, Q: np.ndarray) -> int:
         """Waypoints ``j0..n−1`` of the poses ``P`` into ``Q`` seeded by ``q_prev``: the first that fails, or n."""

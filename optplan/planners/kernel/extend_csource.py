@@ -48,10 +48,14 @@ typedef struct {
     tcb_cfun prof; long long *prof_iw; double *prof_w; int nprof;   /* (a, b) -> nprof cumulative bounds; NULL: none */
     double edge_res;              /* > 0: each new waypoint's segment from the previous one checked every edge_res
                                      rad of its largest joint change (rrtconnect.edge_is_valid), no restarts after */
+    tcb_rng *rng;                 /* non-NULL: a failing waypoint's random restarts run here, drawn from it */
+    int restarts; double restart_sigma;
+    const double *lower, *upper;  /* joint limits of a restart's solution */
 } tcb_ctx;
 
 /* counters: 0 ik_calls, 1 ik_iterations, 2 ik_failures, 3 ik_jumps, 4 collisions, 5 checks, 6 edge_checks,
-   7 edge_collisions, 8 set to 1 when the failing waypoint failed its edge_res segment (no restarts) */
+   7 edge_collisions, 8 set to 1 when the failing waypoint failed its edge_res segment (no restarts),
+   9 ik_restarts */
 
 long long tcb_nearest(const double *X, long long n, int dim, const unsigned char *alive, const double *x) {
     long long best = -1;
@@ -143,8 +147,64 @@ static int tcb_collides(const tcb_ctx *c, const double *q) {
     return config_collides(c->km, c->active, q, NULL, -1, oMi, oMg);
 }
 
+/* the edge_res segment q -> qn (midpoints in bisection order): 1 free, 0 colliding, -2 out of memory */
+static int tcb_segment_ok(const tcb_ctx *c, const double *q, const double *qn, long long *cnt) {
+    int nq = c->nq;
+    double d[KMAXJ], size = 0.0, x[KMAXJ];
+    for (int k = 0; k < nq; ++k) { d[k] = qn[k] - q[k]; if (fabs(d[k]) > size) size = fabs(d[k]); }
+    long long ns = (long long)ceil(size / c->edge_res);
+    if (ns < 2) return 1;
+    long long *lo = (long long *)malloc((size_t)(2*ns + 4) * sizeof(long long));
+    long long *hi = (long long *)malloc((size_t)(2*ns + 4) * sizeof(long long));
+    if (!lo || !hi) { free(lo); free(hi); return -2; }
+    long long head = 0, tail = 0;
+    int ok = 1;
+    lo[tail] = 0; hi[tail] = ns; ++tail;
+    while (head < tail) {
+        long long l = lo[head], h = hi[head]; ++head;
+        if (h - l < 2) continue;
+        long long mid = (l + h) / 2;
+        double f = (double)mid / (double)ns;
+        for (int k = 0; k < nq; ++k) x[k] = q[k] + f*d[k];
+        cnt[5] += 1;
+        if (tcb_collides(c, x)) { ok = 0; break; }
+        lo[tail] = l; hi[tail] = mid; ++tail;
+        lo[tail] = mid; hi[tail] = h; ++tail;
+    }
+    free(lo); free(hi);
+    return ok;
+}
+
+/* the random restarts of a failing waypoint (TCBiRRT.path_ik): IK from q + N(0, sigma^2), accepted within the
+   joint-jump bound, the joint limits and collision-free; 1 with the solution in qn */
+static int tcb_restarts(const tcb_ctx *c, const double *q, const double *P, double *qn, long long *cnt) {
+    int nq = c->nq;
+    double seed[KMAXJ], x[KMAXJ];
+    for (int r = 0; r < c->restarts; ++r) {
+        cnt[9] += 1;
+        for (int k = 0; k < nq; ++k) seed[k] = q[k] + c->restart_sigma*tcb_normal(c->rng);
+        long long its = 0;
+        int ok = tcb_ik(c, seed, P, x, &its);
+        cnt[1] += its;
+        if (!ok) continue;
+        double m = 0.0;
+        int inside = 1;
+        for (int k = 0; k < nq; ++k) {
+            double d = fabs(x[k] - q[k]); if (d > m) m = d;
+            if (x[k] < c->lower[k] || x[k] > c->upper[k]) inside = 0;
+        }
+        if (m > c->max_joint_step || !inside) continue;
+        cnt[5] += 1;
+        if (tcb_collides(c, x)) continue;
+        memcpy(qn, x, nq*sizeof(double));
+        return 1;
+    }
+    return 0;
+}
+
 /* waypoints j0..n-1 of the poses P (n x 12), each seeded by the previous solution (q_prev for j0);
-   solutions into Q (n x nq). Returns the first waypoint that fails (its reason counted), or n. */
+   solutions into Q (n x nq). Returns the first waypoint that fails (its reason counted), or n. With
+   c->rng, a failing waypoint's restarts run here first (cnt[8] is then never set). */
 long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *P, long long j0, long long n, double *Q,
                       long long *cnt) {
     int nq = c->nq;
@@ -156,38 +216,25 @@ long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *P, l
         cnt[0] += 1;
         int ok = tcb_ik(c, q, P + 12*j, qn, &its);
         cnt[1] += its;
-        if (!ok) { cnt[2] += 1; return j; }
-        double m = 0.0;
-        for (int k = 0; k < nq; ++k) { double d = fabs(qn[k] - q[k]); if (d > m) m = d; }
-        if (m > c->max_joint_step) { cnt[3] += 1; return j; }
-        cnt[5] += 1;
-        if (tcb_collides(c, qn)) { cnt[4] += 1; return j; }
+        if (!ok) cnt[2] += 1;
+        if (ok) {
+            double m = 0.0;
+            for (int k = 0; k < nq; ++k) { double d = fabs(qn[k] - q[k]); if (d > m) m = d; }
+            if (m > c->max_joint_step) { cnt[3] += 1; ok = 0; }
+        }
+        if (ok) {
+            cnt[5] += 1;
+            if (tcb_collides(c, qn)) { cnt[4] += 1; ok = 0; }
+        }
+        int restarted = 0;
+        if (!ok) {
+            if (!c->rng || c->restarts <= 0 || !tcb_restarts(c, q, P + 12*j, qn, cnt)) return j;
+            restarted = 1;
+        }
         if (c->edge_res > 0) {
-            double d[KMAXJ], size = 0.0, x[KMAXJ];
-            for (int k = 0; k < nq; ++k) { d[k] = qn[k] - q[k]; if (fabs(d[k]) > size) size = fabs(d[k]); }
-            long long ns = (long long)ceil(size / c->edge_res);
-            if (ns < 1) ns = 1;
-            if (ns >= 2) {
-                long long *lo = (long long *)malloc((size_t)(2*ns + 4) * sizeof(long long));
-                long long *hi = (long long *)malloc((size_t)(2*ns + 4) * sizeof(long long));
-                if (!lo || !hi) { free(lo); free(hi); return -2; }
-                long long head = 0, tail = 0;
-                int bad = 0;
-                lo[tail] = 0; hi[tail] = ns; ++tail;
-                while (head < tail) {
-                    long long l = lo[head], h = hi[head]; ++head;
-                    if (h - l < 2) continue;
-                    long long mid = (l + h) / 2;
-                    double f = (double)mid / (double)ns;
-                    for (int k = 0; k < nq; ++k) x[k] = q[k] + f*d[k];
-                    cnt[5] += 1;
-                    if (tcb_collides(c, x)) { bad = 1; break; }
-                    lo[tail] = l; hi[tail] = mid; ++tail;
-                    lo[tail] = mid; hi[tail] = h; ++tail;
-                }
-                free(lo); free(hi);
-                if (bad) { cnt[4] += 1; cnt[8] = 1; return j; }
-            }
+            int sok = tcb_segment_ok(c, q, qn, cnt);
+            if (sok < 0) return -2;
+            if (!sok) { cnt[4] += 1; if (!restarted && !c->rng) cnt[8] = 1; return j; }
         }
         q = qn;
     }
@@ -353,6 +400,24 @@ long long tcb_extend(const tcb_ctx *c, const double *R0, const double *p0, const
     long long r = tcb_path_ik(c, q_near, P, 0, n, Q, cnt);
     *edge_k = -1;
     if (r == n && c->edge_on) *edge_k = tcb_edges(c, q_near, Q, n, cnt);
+    return r;
+}
+
+/* one extension as TCBiRRT.constrained_extend takes it (restarts in C, Jacobian-spaced edges on): the poses
+   (into P), the path IK with restarts (into Q), the edges of the accepted configurations. Returns the number of
+   configurations kept (with prefix: the valid prefix, possibly 0), -1 when the extension fails without prefix,
+   -2 when the model is too large */
+long long tcb_extend_prefix(const tcb_ctx *c, const double *R0, const double *p0, const double *R1, const double *p1,
+                            long long n, const double *q_near, double *P, double *Q, long long *cnt, int prefix) {
+    tcb_interpolate(R0, p0, R1, p1, (int)n, P);
+    long long r = tcb_path_ik(c, q_near, P, 0, n, Q, cnt);
+    if (r < -1) return r;
+    if (r < n && !prefix) return -1;
+    if (c->edge_on && r > 0) {
+        long long e = tcb_edges(c, q_near, Q, r, cnt);
+        if (e < -1) return e;
+        if (e < r) { if (!prefix) return -1; r = e; }
+    }
     return r;
 }
 """
