@@ -135,9 +135,12 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
             # the segment NLP's planes: fixed normals, its pair set (self-collision, held object)
             # (a floating robot's planner, floating_collision, reads the term's own pair set; activation
             # sets and margin boosts are the fixed-base planner's)
-            if core.free_time or collisions or t.scene is None or not t.fixed_normals \
+            # a floating robot may have several terms (each its own pairs and margin) and one
+            # without a scene (its own bodies only)
+            if core.free_time or not t.fixed_normals \
                     or (robot.is_floating and (t.margin_boost or t.activate_with)) \
-                    or (not robot.is_floating and (not t.self_collision or not t.held_object)):
+                    or (not robot.is_floating and (collisions or t.scene is None or not t.self_collision
+                                                   or not t.held_object)):
                 raise Unsupported("CollisionAvoidance other than fixed normals with a fixed duration")
             collisions.append(h)
         else:
