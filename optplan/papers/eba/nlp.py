@@ -6,18 +6,22 @@
     [hands keep their relative pose at every knot]       (ClosedChain, end-constrained case)
     min ∫‖d³θ/dt³‖² dt                                   (Smoothness("jerk"))
 
-Two transcriptions of the same problem (``NLPOptions.transcription``):
+Three builders of the same problem (``NLPOptions.transcription``):
 
-* ``"bspline"`` (default): :class:`optplan.problem.floating_segment.FloatingSplineProblem` — the
-  joints as a uniform cubic B-spline (control points are the only joint variables; limits hold
-  between the knots too), the base attitude from zero momentum by RK4 per interval, every row
-  family a per-point kernel built once per robot and cached on disk, exact derivatives assembled
-  from the mapped kernels.
-* ``"knots"``: :class:`optplan.problem.OptProblem` (see :mod:`optplan.problem.transcription`):
-  the state (q, q̇, q̈) and jerk at every knot, the same C2 piecewise cubic, the base quaternion
-  by RK4 between knots; the NLP is one expanded symbolic graph (slower to build).
+* ``"bspline"`` (default): an :class:`optplan.problem.OptProblem` on the B-spline kernel core — the
+  joints as a uniform cubic B-spline (control points are the joint variables, the rest ends fix
+  theirs; limits hold between the knots too), the base attitude from zero momentum by RK4 per
+  interval, every row family a per-point kernel built once per robot and cached on disk, exact
+  derivatives assembled from the mapped kernels.
+* ``"closed"``: the same NLP by the former closed builder
+  (:class:`optplan.problem.floating_segment.FloatingSplineProblem`), kept for comparisons
+  (docs/decisions/0022-papers-on-the-shared-core.md).
+* ``"knots"``: :class:`optplan.problem.OptProblem` on the knot transcription
+  (see :mod:`optplan.problem.transcription`): the state (q, q̇, q̈) and jerk at every knot, the same
+  C2 piecewise cubic, the base quaternion by RK4 between knots; the NLP is one expanded symbolic
+  graph (slower to build).
 
-Both give the same trajectory space (C2 piecewise cubics on the grid) and the same constraints;
+All give the same trajectory space (C2 piecewise cubics on the grid) and the same constraints;
 the warm start is the joint-space quintic (free end) or its knot-wise projection onto the
 closed-chain manifold.
 """
@@ -25,7 +29,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -76,8 +80,9 @@ class NLPOptions:
     max_iter: int = 500
     #: Samples per interval of the returned trajectory [count].
     sample_density: int = 10
-    #: ``"bspline"`` (:class:`~optplan.problem.floating_segment.FloatingSplineProblem`) or ``"knots"``
-    #: (:class:`~optplan.problem.OptProblem`).
+    #: ``"bspline"`` (:class:`~optplan.problem.OptProblem` on the B-spline kernel core), ``"closed"``
+    #: (the former :class:`~optplan.problem.floating_segment.FloatingSplineProblem`) or ``"knots"``
+    #: (:class:`~optplan.problem.OptProblem` on the knot transcription).
     transcription: str = "bspline"
     #: B-spline kernels from compiled C: True, False or ``"auto"`` (what an earlier run compiled).
     compile_kernels: bool | str = "auto"
@@ -100,8 +105,9 @@ class NLPOptions:
             raise ValueError(f"NLPOptions.coarse_intervals: expected None or an integer ≥ 4, got {c!r}")
         if self.compile_kernels not in (True, False, "auto"):
             raise ValueError(f"NLPOptions.compile_kernels: expected True, False or 'auto', got {self.compile_kernels!r}")
-        if self.transcription not in ("bspline", "knots"):
-            raise ValueError(f"NLPOptions.transcription: expected 'bspline' or 'knots', got {self.transcription!r}")
+        if self.transcription not in ("bspline", "closed", "knots"):
+            raise ValueError(f"NLPOptions.transcription: expected 'bspline', 'closed' or 'knots', got "
+                             f"{self.transcription!r}")
         if self.smoothness not in ("jerk", "acceleration"):
             raise ValueError(f"NLPOptions.smoothness: expected 'jerk' or 'acceleration', got {self.smoothness!r}")
 
@@ -121,11 +127,11 @@ class NLPOptions:
 
 
 def build_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None = None):
-    """The problem (with its warm start) and the :class:`ClosedChain` term (or None): a
-    :class:`FloatingSplineProblem` (``transcription="bspline"``) or an :class:`OptProblem`
-    (``"knots"``)."""
+    """The problem (with its warm start) and the :class:`ClosedChain` term (or None): an
+    :class:`OptProblem` (``transcription="bspline"`` or ``"knots"``) or a
+    :class:`FloatingSplineProblem` (``"closed"``)."""
     o = options or (NLPOptions.end_constrained() if scenario.closed_chain else NLPOptions.free_end())
-    if o.transcription == "bspline":
+    if o.transcription in ("bspline", "closed"):
         return _build_spline(robot, scenario, o)
     # the paper's reproduction as measured (knots); "bspline" above is the kernel NLP
     prob = OptProblem(robot, o.n_intervals, o.duration, n_sub=o.n_sub, transcription="knots")
@@ -142,8 +148,8 @@ def build_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None 
         # at the two pinned end knots the closed chain holds already: leave those rows out (measured:
         # with them IPOPT ended "acceptable" after 60 iterations before the variable scaling, and
         # 20 iterations / 3.0 s vs 26 / 2.8 s now)
-        cc = ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B")
-        cc.skip_pinned = True
+        cc = replace(ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B"),
+                     skip_pinned=True)
         prob.add_constraint(cc)
         t, Q = closed_chain_reference(robot, scenario, o.n_intervals, o.duration)
         prob.set_initial(q=Q, t=t)
@@ -162,7 +168,42 @@ def _warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions) -> np.ndar
     return scenario.theta0 + s[:, None] * (scenario.thetaf - scenario.theta0)
 
 
+def _build_shared(robot: RobotModel, scenario: Scenario, o: NLPOptions, warm_start=None):
+    """The restoration NLP as an :class:`OptProblem` on the B-spline kernel core: the rest ends fix
+    their control points, the closed chain's rows at the pinned ends are left out."""
+    prob = OptProblem(robot, o.n_intervals, o.duration, n_sub=o.n_sub, transcription="bspline",
+                      compile_kernels=o.compile_kernels)
+    zero = np.zeros(robot.nj)
+    prob.add_constraint(JointBoundary("start", q=scenario.theta0, qd=zero, qdd=zero))
+    prob.add_constraint(JointBoundary("end", q=scenario.thetaf, qd=zero, qdd=zero))
+    prob.add_constraint(BaseAttitude(at="end"))
+    if o.position_limits:
+        prob.add_constraint(JointPositionLimits())
+    if o.velocity_limits:
+        prob.add_constraint(JointVelocityLimits())
+    cc = None
+    if scenario.closed_chain:
+        cc = replace(ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B"),
+                     skip_pinned=True)
+        prob.add_constraint(cc)
+    prob.add_cost(Smoothness(o.smoothness))
+    Q = _warm_start(robot, scenario, o) if warm_start is None else warm_start
+    prob.set_initial(q=Q, t=np.linspace(0.0, o.duration, o.n_intervals + 1))
+    return prob, cc
+
+
+def _solve(prob: Any, o: NLPOptions):
+    """Solve either builder's problem with the options' tolerances."""
+    if isinstance(prob, FloatingSplineProblem):
+        return prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter, max_wall_time=o.max_wall_time)
+    # the dense check between knots is verify's (run_nlp): the closed chain drifts ∝ h⁴ by design
+    return prob.solve({"tol": o.dual_tol, "max_wall_time": o.max_wall_time}, tol=o.tol, max_iter=o.max_iter,
+                      guarantees=False)
+
+
 def _build_spline(robot: RobotModel, scenario: Scenario, o: NLPOptions, warm_start=None):
+    if o.transcription == "bspline":
+        return _build_shared(robot, scenario, o, warm_start)
     cc = None
     if scenario.closed_chain:
         cc = ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B")
@@ -178,12 +219,10 @@ def _coarse_warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions):
     """Solve the NLP on ``o.coarse_intervals`` intervals; return (knot configurations of its
     solution on the fine grid, projected onto the closed chain, or None if it failed; the coarse
     Solution)."""
-    from dataclasses import replace
-
     assert o.coarse_intervals is not None   # the caller checks
     oc = replace(o, n_intervals=o.coarse_intervals, coarse_intervals=None)
     prob, _ = _build_spline(robot, scenario, oc)
-    sol = prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter, max_wall_time=o.max_wall_time)
+    sol = _solve(prob, o)
     if not sol.success:
         return None, sol
     Q = sol.sample(np.linspace(0.0, o.duration, o.n_intervals + 1))["q"]
@@ -205,14 +244,14 @@ def run_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None = 
     o = options or (NLPOptions.end_constrained() if scenario.closed_chain else NLPOptions.free_end())
     t0, c0 = time.perf_counter(), time.process_time()
     coarse = None
-    if o.transcription == "bspline" and o.coarse_intervals is not None and o.coarse_intervals < o.n_intervals:
+    if o.transcription != "knots" and o.coarse_intervals is not None and o.coarse_intervals < o.n_intervals:
         Q, coarse = _coarse_warm_start(robot, scenario, o)
         prob, cc = _build_spline(robot, scenario, o, warm_start=Q)
     else:
         prob, cc = build_nlp(robot, scenario, o)
     t_decl = time.perf_counter() - t0 - (coarse.wall_time if coarse is not None else 0.0)
-    if o.transcription == "bspline":
-        sol = prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter, max_wall_time=o.max_wall_time)
+    if o.transcription != "knots":
+        sol = _solve(prob, o)
     else:
         sol = prob.solve(tol=o.tol, max_iter=o.max_iter, ipopt_options={"tol": o.dual_tol})
     cpu = time.process_time() - c0
