@@ -209,6 +209,27 @@ def test_knots_transcription_is_kept_as_an_option(robot):
     assert isinstance(prob, OptProblem) and cc is None
 
 
+def test_the_shared_core_solves_the_restoration_as_the_closed_builder(robot):
+    """The EBA restoration (free end, N = 20) through OptProblem (the default) and through
+    FloatingSplineProblem ("closed"): the same optimum, knot by knot, and the same end attitude by
+    the independent simulator."""
+    from optplan.problem import OptProblem
+
+    sc = eba.free_end_scenario()
+    out = {}
+    for tr in ("bspline", "closed"):
+        res = eba.run_nlp(robot, sc, eba.NLPOptions.free_end(transcription=tr))
+        assert res.success, (tr, res.message)
+        out[tr] = res
+    assert isinstance(eba.build_nlp(robot, sc, eba.NLPOptions.free_end())[0], OptProblem)
+    a, b = out["bspline"], out["closed"]
+    assert a.info["cost"] == pytest.approx(b.info["cost"], rel=1e-6)
+    assert np.abs(a.raw.q - b.raw.q).max() < 1e-5
+    for r in (a, b):
+        assert eba.evaluate(robot, r, sc).final_base_attitude_error_deg < 1e-3
+        assert r.info["verify_max_velocity_limit_violation"] <= 1e-8
+
+
 def test_compiled_kernels_equal_the_symbolic_ones(kernels, tmp_path):
     """The C-compiled form (a small kernel, -O0 to keep the test quick) evaluates as the SX one."""
     import shutil

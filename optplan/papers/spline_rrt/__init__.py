@@ -36,7 +36,7 @@ from ...model.kinematics import Kinematics
 from ...model.robot import RobotModel
 from ...planners.spline_rrt import CoordinatedPlan, CoordinatedRRTStar, CoordinatedRRTStarOptions
 from ...scene import Scene
-from .optimized import EndOrientation, InteriorVelocityLimits, OptimizeOptions, optimize
+from .optimized import EndOrientation, InteriorVelocityLimits, OptimizeOptions, knot_selector, optimize
 from .tracking import (
     BezierOrientation,
     HandTrajectory,
@@ -49,7 +49,7 @@ from .tracking import (
 )
 
 __all__ = ["SplineRRTTask", "BezierOrientation", "HandTrajectory", "smooth_hand_paths", "TrackingOptions",
-           "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "InteriorVelocityLimits", "optimize", "SplineRRTResult", "run_spline_rrt", "hand_separation", "PAPER"]
+           "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "InteriorVelocityLimits", "optimize", "knot_selector", "SplineRRTResult", "run_spline_rrt", "hand_separation", "PAPER"]
 log = logging.getLogger(__name__)
 
 #: the paper's figures (Section 4)
