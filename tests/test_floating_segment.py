@@ -110,30 +110,32 @@ def small_problem(robot):
     from optplan.papers.eba.baselines import closed_chain_reference
 
     prob.set_initial(closed_chain_reference(robot, sc, N, 20.0)[1])
-    prob._build()
     return prob
 
 
 def test_assembled_derivatives_match_finite_differences(small_problem):
-    prob = small_problem
-    b = prob._built
+    """The builder's NLP (the OptProblem's B-spline core: momentum, RK4 attitude, closed chain,
+    end attitude, jerk): the assembled Jacobian and Lagrangian Hessian against central differences."""
+    import casadi as ca
+
+    sp = small_problem.problem._spline
+    sp.prepare()
+    core = sp.core
+    b = core.structure(sp.row_families(), bool(sp.pbounds), False)
     rng = np.random.default_rng(14)
-    x = np.r_[prob._X0.ravel(), prob._B0] + rng.normal(scale=1e-2, size=prob.nx)
-    p = prob._p()
-    jac = b["derivs"]["jac_g"]
-    g0, J = (np.asarray(v) for v in jac(x, p))
-    J = np.asarray(ca_dense(J))
+    nx = core.nx
+    x = sp.guess(20.0) + rng.normal(scale=1e-2, size=nx)
+    p = sp._pvec(20.0, sp._com0(small_problem.spec.q_start), 1.0)
+    g0, J = (np.asarray(ca_dense(v)) for v in b["derivs"]["jac_g"](x, p))
     gfun = b["gfun"]
     eps = 1e-6
     Jfd = np.zeros_like(J)
-    for i in range(prob.nx):
-        e = np.zeros(prob.nx)
+    for i in range(nx):
+        e = np.zeros(nx)
         e[i] = eps
         Jfd[:, i] = (np.asarray(gfun(x + e, p)).ravel() - np.asarray(gfun(x - e, p)).ravel()) / (2 * eps)
     assert np.abs(J - Jfd).max() < 1e-6 * max(1.0, np.abs(J).max())
     # Hessian of the Lagrangian: finite differences of ∇(σ f + λᵀ g)
-    import casadi as ca
-
     lam = rng.normal(size=g0.size)
     sigma = 0.7
     xs = b["nlp"]["x"]
@@ -142,8 +144,8 @@ def test_assembled_derivatives_match_finite_differences(small_problem):
     H = ca_dense(b["derivs"]["hess_lag"](x, p, sigma, lam))
     H = np.triu(H) + np.triu(H, 1).T
     Hfd = np.zeros_like(H)
-    for i in range(prob.nx):
-        e = np.zeros(prob.nx)
+    for i in range(nx):
+        e = np.zeros(nx)
         e[i] = eps
         Hfd[:, i] = (np.asarray(grad(x + e, p)).ravel() - np.asarray(grad(x - e, p)).ravel()) / (2 * eps)
     assert np.abs(H - Hfd).max() < 1e-5 * max(1.0, np.abs(H).max())
@@ -207,27 +209,6 @@ def test_knots_transcription_is_kept_as_an_option(robot):
     from optplan.problem import OptProblem
 
     assert isinstance(prob, OptProblem) and cc is None
-
-
-def test_the_shared_core_solves_the_restoration_as_the_closed_builder(robot):
-    """The EBA restoration (free end, N = 20) through OptProblem (the default) and through
-    FloatingSplineProblem ("closed"): the same optimum, knot by knot, and the same end attitude by
-    the independent simulator."""
-    from optplan.problem import OptProblem
-
-    sc = eba.free_end_scenario()
-    out = {}
-    for tr in ("bspline", "closed"):
-        res = eba.run_nlp(robot, sc, eba.NLPOptions.free_end(transcription=tr))
-        assert res.success, (tr, res.message)
-        out[tr] = res
-    assert isinstance(eba.build_nlp(robot, sc, eba.NLPOptions.free_end())[0], OptProblem)
-    a, b = out["bspline"], out["closed"]
-    assert a.info["cost"] == pytest.approx(b.info["cost"], rel=1e-6)
-    assert np.abs(a.raw.q - b.raw.q).max() < 1e-5
-    for r in (a, b):
-        assert eba.evaluate(robot, r, sc).final_base_attitude_error_deg < 1e-3
-        assert r.info["verify_max_velocity_limit_violation"] <= 1e-8
 
 
 def test_compiled_kernels_equal_the_symbolic_ones(kernels, tmp_path):

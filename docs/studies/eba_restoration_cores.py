@@ -1,7 +1,10 @@
-"""The EBA restoration NLP on the shared core (``OptProblem``) against the closed builder
-(``FloatingSplineProblem``), interleaved in one process on the same scenarios (decision 0022).
+"""The EBA restoration NLP's builders interleaved in one process on the same scenarios (decision
+0022: the shared core ``OptProblem`` against the former closed ``FloatingSplineProblem``).
 
     python docs/studies/eba_restoration_cores.py [--repeat 2] [--cases free_end,end_constrained]
+        [--builders bspline,knots]
+
+The closed builder was ``--builders closed,bspline`` at commit 246b6d1 (the option left with it).
 
 A first untimed run of each builder warms the kernel cache; then, per repeat, each case with each
 builder: process CPU of build + solve, IPOPT's iterations (coarse + fine), build and IPOPT wall
@@ -37,7 +40,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--cases", default="free_end,end_constrained")
-    ap.add_argument("--builders", default="closed,bspline")
+    ap.add_argument("--builders", default="bspline")
     args = ap.parse_args()
     robot = RobotModel.from_name("eba_ffsr")
     cases, builders = args.cases.split(","), args.builders.split(",")

@@ -6,16 +6,14 @@
     [hands keep their relative pose at every knot]       (ClosedChain, end-constrained case)
     min ∫‖d³θ/dt³‖² dt                                   (Smoothness("jerk"))
 
-Three builders of the same problem (``NLPOptions.transcription``):
+Two transcriptions of the same problem (``NLPOptions.transcription``):
 
 * ``"bspline"`` (default): an :class:`optplan.problem.OptProblem` on the B-spline kernel core — the
   joints as a uniform cubic B-spline (control points are the joint variables, the rest ends fix
   theirs; limits hold between the knots too), the base attitude from zero momentum by RK4 per
   interval, every row family a per-point kernel built once per robot and cached on disk, exact
-  derivatives assembled from the mapped kernels.
-* ``"closed"``: the same NLP by the former closed builder
-  (:class:`optplan.problem.floating_segment.FloatingSplineProblem`), kept for comparisons
-  (docs/decisions/0022-papers-on-the-shared-core.md).
+  derivatives assembled from the mapped kernels (the former closed builder
+  ``FloatingSplineProblem`` measured equal: docs/decisions/0022-papers-on-the-shared-core.md).
 * ``"knots"``: :class:`optplan.problem.OptProblem` on the knot transcription
   (see :mod:`optplan.problem.transcription`): the state (q, q̇, q̈) and jerk at every knot, the same
   C2 piecewise cubic, the base quaternion by RK4 between knots; the NLP is one expanded symbolic
@@ -46,7 +44,6 @@ from ...problem import (
     OptProblem,
     Smoothness,
 )
-from ...problem.floating_segment import FloatingSegmentSpec, FloatingSplineProblem
 from ...verification import verify
 from .baselines import closed_chain_reference
 from .core import MethodResult, Scenario, hermite_segment
@@ -80,8 +77,7 @@ class NLPOptions:
     max_iter: int = 500
     #: Samples per interval of the returned trajectory [count].
     sample_density: int = 10
-    #: ``"bspline"`` (:class:`~optplan.problem.OptProblem` on the B-spline kernel core), ``"closed"``
-    #: (the former :class:`~optplan.problem.floating_segment.FloatingSplineProblem`) or ``"knots"``
+    #: ``"bspline"`` (:class:`~optplan.problem.OptProblem` on the B-spline kernel core) or ``"knots"``
     #: (:class:`~optplan.problem.OptProblem` on the knot transcription).
     transcription: str = "bspline"
     #: B-spline kernels from compiled C: True, False or ``"auto"`` (what an earlier run compiled).
@@ -105,9 +101,8 @@ class NLPOptions:
             raise ValueError(f"NLPOptions.coarse_intervals: expected None or an integer ≥ 4, got {c!r}")
         if self.compile_kernels not in (True, False, "auto"):
             raise ValueError(f"NLPOptions.compile_kernels: expected True, False or 'auto', got {self.compile_kernels!r}")
-        if self.transcription not in ("bspline", "closed", "knots"):
-            raise ValueError(f"NLPOptions.transcription: expected 'bspline', 'closed' or 'knots', got "
-                             f"{self.transcription!r}")
+        if self.transcription not in ("bspline", "knots"):
+            raise ValueError(f"NLPOptions.transcription: expected 'bspline' or 'knots', got {self.transcription!r}")
         if self.smoothness not in ("jerk", "acceleration"):
             raise ValueError(f"NLPOptions.smoothness: expected 'jerk' or 'acceleration', got {self.smoothness!r}")
 
@@ -128,10 +123,10 @@ class NLPOptions:
 
 def build_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None = None):
     """The problem (with its warm start) and the :class:`ClosedChain` term (or None): an
-    :class:`OptProblem` (``transcription="bspline"`` or ``"knots"``) or a
-    :class:`FloatingSplineProblem` (``"closed"``)."""
+    :class:`OptProblem` on the B-spline kernel core (``transcription="bspline"``) or on the knot
+    transcription (``"knots"``)."""
     o = options or (NLPOptions.end_constrained() if scenario.closed_chain else NLPOptions.free_end())
-    if o.transcription in ("bspline", "closed"):
+    if o.transcription == "bspline":
         return _build_spline(robot, scenario, o)
     # the paper's reproduction as measured (knots); "bspline" above is the kernel NLP
     prob = OptProblem(robot, o.n_intervals, o.duration, n_sub=o.n_sub, transcription="knots")
@@ -168,7 +163,7 @@ def _warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions) -> np.ndar
     return scenario.theta0 + s[:, None] * (scenario.thetaf - scenario.theta0)
 
 
-def _build_shared(robot: RobotModel, scenario: Scenario, o: NLPOptions, warm_start=None):
+def _build_spline(robot: RobotModel, scenario: Scenario, o: NLPOptions, warm_start=None):
     """The restoration NLP as an :class:`OptProblem` on the B-spline kernel core: the rest ends fix
     their control points, the closed chain's rows at the pinned ends are left out."""
     prob = OptProblem(robot, o.n_intervals, o.duration, n_sub=o.n_sub, transcription="bspline",
@@ -192,27 +187,11 @@ def _build_shared(robot: RobotModel, scenario: Scenario, o: NLPOptions, warm_sta
     return prob, cc
 
 
-def _solve(prob: Any, o: NLPOptions):
-    """Solve either builder's problem with the options' tolerances."""
-    if isinstance(prob, FloatingSplineProblem):
-        return prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter, max_wall_time=o.max_wall_time)
-    # the dense check between knots is verify's (run_nlp): the closed chain drifts ∝ h⁴ by design
+def _solve(prob: OptProblem, o: NLPOptions):
+    """Solve the B-spline problem with the options' tolerances; the dense check between knots is
+    verify's (run_nlp): the closed chain drifts ∝ h⁴ there by design."""
     return prob.solve({"tol": o.dual_tol, "max_wall_time": o.max_wall_time}, tol=o.tol, max_iter=o.max_iter,
                       guarantees=False)
-
-
-def _build_spline(robot: RobotModel, scenario: Scenario, o: NLPOptions, warm_start=None):
-    if o.transcription == "bspline":
-        return _build_shared(robot, scenario, o, warm_start)
-    cc = None
-    if scenario.closed_chain:
-        cc = ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B")
-    spec = FloatingSegmentSpec(o.n_intervals, o.duration, scenario.theta0, scenario.thetaf, closed_chain=cc,
-                               velocity_limit=None if o.velocity_limits else False, n_sub=o.n_sub,
-                               position_limits=o.position_limits, smoothness=o.smoothness)
-    prob = FloatingSplineProblem(robot, spec, compile_kernels=o.compile_kernels)
-    prob.set_initial(_warm_start(robot, scenario, o) if warm_start is None else warm_start)
-    return prob, cc
 
 
 def _coarse_warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions):
