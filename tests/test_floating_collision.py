@@ -150,3 +150,32 @@ def test_a_collision_due_to_the_base_drift_is_removed(eba, probe):
             d = chk.distances(Qf[k])[i]
             assert row.min() <= d + 1e-9
             assert row.min() >= f.data["item"].margins[list(f.points).index(k)] - 1e-6
+
+
+def test_two_collision_terms_keep_their_own_pairs_and_margins(eba, probe):
+    """A link clearance (no scene: the robot's own bodies) and an obstacle clearance with another
+    margin on one floating problem: each term plans its own pairs, its rows carry its margin, and
+    the solution clears the probe (verify, with the base integrated independently)."""
+    p = OptProblem(eba, n_intervals=16, duration=T, transcription="bspline")
+    p.add_constraint(JointBoundary("start", q=Q0, qd=Z, qdd=Z))
+    p.add_constraint(JointBoundary("end", q=QF, qd=Z, qdd=Z))
+    links = p.add_constraint(CollisionAvoidance(None, margin=0.002, held_object=False, fixed_normals=True,
+                                                activation=0.5), name="links")
+    obst = p.add_constraint(CollisionAvoidance(probe, margin=0.005, self_collision=False, held_object=False,
+                                               fixed_normals=True), name="probe_clearance")
+    p.add_cost(Smoothness("jerk"))
+    sol = p.solve()
+    assert sol.success, sol.status
+    rep = verify(eba, sol, probe, held_object=False)
+    assert rep.passed(VerifyTolerances(final_base_attitude_rad=None)) and rep.min_clearance_m >= 0.0
+    pairs = {h.name: p.term_data(h).info["active_pairs"] for h in (links, obst)}
+    assert pairs["probe_clearance"] and all("probe" in (q.name_a, q.name_b) for q in pairs["probe_clearance"])
+    assert pairs["links"] and not any("probe" in (q.name_a, q.name_b) for q in pairs["links"])
+    fams = {f.name: f for f in p._spline.fams if f.kind == "pair"}
+    for term, margin in (("links", 0.002), ("probe_clearance", 0.005)):
+        mine = [f for n, f in fams.items() if n.startswith(f"collision:{term}:")]
+        assert mine, term
+        # a margin is the term's own, or halved next to a guess closer than it (relaxation)
+        assert all(np.all(f.data["item"].margins <= margin + 1e-15) for f in mine)
+        assert any(np.any(f.data["item"].margins == margin) for f in mine)
+    assert len(fams) == sum(len(v) for v in (p._spline.owner["links"], p._spline.owner["probe_clearance"]))

@@ -110,30 +110,32 @@ def small_problem(robot):
     from optplan.papers.eba.baselines import closed_chain_reference
 
     prob.set_initial(closed_chain_reference(robot, sc, N, 20.0)[1])
-    prob._build()
     return prob
 
 
 def test_assembled_derivatives_match_finite_differences(small_problem):
-    prob = small_problem
-    b = prob._built
+    """The builder's NLP (the OptProblem's B-spline core: momentum, RK4 attitude, closed chain,
+    end attitude, jerk): the assembled Jacobian and Lagrangian Hessian against central differences."""
+    import casadi as ca
+
+    sp = small_problem.problem._spline
+    sp.prepare()
+    core = sp.core
+    b = core.structure(sp.row_families(), bool(sp.pbounds), False)
     rng = np.random.default_rng(14)
-    x = np.r_[prob._X0.ravel(), prob._B0] + rng.normal(scale=1e-2, size=prob.nx)
-    p = prob._p()
-    jac = b["derivs"]["jac_g"]
-    g0, J = (np.asarray(v) for v in jac(x, p))
-    J = np.asarray(ca_dense(J))
+    nx = core.nx
+    x = sp.guess(20.0) + rng.normal(scale=1e-2, size=nx)
+    p = sp._pvec(20.0, sp._com0(small_problem.spec.q_start), 1.0)
+    g0, J = (np.asarray(ca_dense(v)) for v in b["derivs"]["jac_g"](x, p))
     gfun = b["gfun"]
     eps = 1e-6
     Jfd = np.zeros_like(J)
-    for i in range(prob.nx):
-        e = np.zeros(prob.nx)
+    for i in range(nx):
+        e = np.zeros(nx)
         e[i] = eps
         Jfd[:, i] = (np.asarray(gfun(x + e, p)).ravel() - np.asarray(gfun(x - e, p)).ravel()) / (2 * eps)
     assert np.abs(J - Jfd).max() < 1e-6 * max(1.0, np.abs(J).max())
     # Hessian of the Lagrangian: finite differences of ∇(σ f + λᵀ g)
-    import casadi as ca
-
     lam = rng.normal(size=g0.size)
     sigma = 0.7
     xs = b["nlp"]["x"]
@@ -142,8 +144,8 @@ def test_assembled_derivatives_match_finite_differences(small_problem):
     H = ca_dense(b["derivs"]["hess_lag"](x, p, sigma, lam))
     H = np.triu(H) + np.triu(H, 1).T
     Hfd = np.zeros_like(H)
-    for i in range(prob.nx):
-        e = np.zeros(prob.nx)
+    for i in range(nx):
+        e = np.zeros(nx)
         e[i] = eps
         Hfd[:, i] = (np.asarray(grad(x + e, p)).ravel() - np.asarray(grad(x - e, p)).ravel()) / (2 * eps)
     assert np.abs(H - Hfd).max() < 1e-5 * max(1.0, np.abs(H).max())

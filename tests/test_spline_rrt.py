@@ -313,3 +313,33 @@ def test_figures_of_a_result_without_evaluation_is_a_clear_error():
     failed = SimpleNamespace(evaluation=None, hands={"left": None}, T=float("nan"))
     with pytest.raises(ValueError, match="no evaluation"):
         SplineRRTResult.figures(failed)  # type: ignore[arg-type]
+
+
+def test_knot_selector_picks_the_knot_value_at_every_knot():
+    """The hat functions the B-spline builder selects per-knot path samples with: one at their
+    knot, zero at the others (so P @ w is P's column exactly), linear in between."""
+    import casadi as ca
+
+    from optplan.papers.spline_rrt import knot_selector
+
+    N, T = 7, 3.3
+    t = ca.SX.sym("t")
+    f = ca.Function("w", [t], [knot_selector(t, T, N)])
+    P = np.random.default_rng(3).normal(size=(3, N + 1))
+    for k in range(N + 1):
+        w = np.asarray(f(T * k / N)).ravel()
+        assert np.abs(w - np.eye(N + 1)[k]).max() < 1e-12
+        assert np.abs(P @ w - P[:, k]).max() < 1e-12
+    w = np.asarray(f(T * 2.25 / N)).ravel()
+    assert np.allclose(w[[2, 3]], [0.75, 0.25], atol=1e-12) and abs(w.sum() - 1.0) < 1e-12
+
+
+def test_optimize_options_are_checked():
+    from optplan.errors import OptionError
+    from optplan.papers.spline_rrt import OptimizeOptions
+
+    with pytest.raises(OptionError, match="transcription"):
+        OptimizeOptions(transcription="collocation")
+    with pytest.raises(OptionError, match="n_intervals"):
+        OptimizeOptions(n_intervals=3)
+    assert OptimizeOptions().transcription == "knots"

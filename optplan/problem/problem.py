@@ -251,7 +251,10 @@ class OptProblem(ExpressionAPI):
         h = Tg / self.N
         J = np.diff(A, axis=0) / h
         base_quat = None
-        if self.robot.is_floating:
+        if self.robot.is_floating and self.transcription == "bspline":
+            # the core fits its control points to the knots and integrates the base itself
+            base_quat, base_twist = np.tile([0.0, 0.0, 0.0, 1.0], (self.N + 1, 1)), None
+        elif self.robot.is_floating:
             from ..model.floating import simulate_base
 
             m = 2 * self.n_sub

@@ -135,12 +135,15 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
             # the segment NLP's planes: fixed normals, its pair set (self-collision, held object)
             # (a floating robot's planner, floating_collision, reads the term's own pair set; activation
             # sets and margin boosts are the fixed-base planner's)
-            # (a fixed base with a free duration: not measured on the core, the knot transcription takes it)
-            if collisions or t.scene is None or not t.fixed_normals \
+            # a floating robot may have several terms (each its own pairs and margin), one without a
+            # scene (its own bodies only), and a free duration; a fixed base with a free duration is not
+            # measured on the core (the knot transcription takes it)
+            if not t.fixed_normals \
                     or (robot.is_floating and (t.margin_boost or t.activate_with)) \
-                    or (not robot.is_floating and (core.free_time or not t.self_collision or not t.held_object)):
-                raise Unsupported("CollisionAvoidance other than one term with fixed normals and a scene "
-                                  "(and a floating robot if the duration is free)")
+                    or (not robot.is_floating and (collisions or t.scene is None or core.free_time
+                                                   or not t.self_collision or not t.held_object)):
+                raise Unsupported("CollisionAvoidance other than fixed normals (a fixed base: one term with a "
+                                  "scene and a fixed duration)")
             collisions.append(h)
         else:
             raise Unsupported(type(t).__name__)

@@ -47,6 +47,7 @@ class SplineBackend:
         self.last_x: np.ndarray | None = None    # the last converged solution (the next solve's start)
         self.aux0, self.col_p = np.zeros(0), np.zeros(0)   # collision plane offsets / normals, supports
         self.collision_model: Any = None
+        self.collision_models: dict[str, Any] = {}   # by term name (several on a floating robot)
         self.last_build_time = 0.0
         #: boundary families whose end control points are fixed by bounds instead of rows:
         #: family name -> (variable indices, values, 3 × 3 map) (:func:`~.spline_problem.fixed_boundary`)
@@ -74,6 +75,7 @@ class SplineBackend:
         params: list[Parameter] = prob._params
         npar = sum(p.size for p in params)
         core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar)
+        self.collision_models = {}
         self.fams, self.owner, self.pbounds, cols = families_of(prob, core, params)
         self.core, self.aux0, self.col_p = core, np.zeros(0), np.zeros(0)
         self.fixed = self._fixed_families(core)
@@ -88,35 +90,45 @@ class SplineBackend:
             assert x is not None
             Qk = core.M["q"] @ core.control_points(x)
             lbx, ubx = self._bounds(fixed=False)
-            if core.fl:   # planes with the base pose (floating_collision)
+            owners: list[str] = []   # the term of each item
+            if core.fl:   # planes with the base pose (floating_collision); one plan per term
                 from .floating_collision import plan_floating_collision
 
                 boost = self.margin_boost if self.boost_n == core.N else {}
-                fitems, self.collision_model = plan_floating_collision(
-                    prob, core, cols[0].term, x, prob.base0, self._com0(Qk[0]), lbx[:core.nj], ubx[:core.nj],
-                    boost)
-                items: list[Any] = list(fitems)
+                items: list[Any] = []
+                for h in cols:
+                    fitems, m = plan_floating_collision(prob, core, h.term, x, prob.base0, self._com0(Qk[0]),
+                                                        lbx[:core.nj], ubx[:core.nj], boost)
+                    self.collision_models[h.name] = m
+                    items += fitems
+                    owners += [h.name] * len(fitems)
+                self.collision_model = self.collision_models[cols[0].name]
             else:
                 items, self.collision_model = plan_collision(prob, core, cols[0].term, Qk, lbx[:core.nj],
                                                              ubx[:core.nj])
+                self.collision_models[cols[0].name] = self.collision_model
+                owners = [cols[0].name] * len(items)
             nb = sum(len(it.knots) for it in items if not it.static)
             core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar, n_aux=nb,
                               n_colp=sum(4 * len(it.knots) for it in items))
             po = ao = 0
-            names, colp, aux = [], [], []
-            for it in items:
+            colp, aux = [], []
+            for h in cols:
+                self.owner[h.name] = []
+            for it, own in zip(items, owners):
                 pair = it.name.removeprefix("collision:")
+                if len(cols) > 1:   # family names stay unique when two terms hold the same pair
+                    it.name = f"collision:{own}:{pair}"
                 self.fams.append(Family(it.name, "pair", it.fn, it.knots,
                                         labels=tuple(f"{pair}.point{i}" for i in range(it.nrow)),
                                         data={"item": it, "p_off": po, "aux_off": ao,
                                               "world": bool(getattr(it, "world", False))}))
-                names.append(it.name)
+                self.owner[own].append(it.name)
                 colp += [it.normals.ravel(order="F"), it.offsets if it.static else np.zeros(len(it.knots))]
                 if not it.static:
                     aux.append(it.offsets)
                     ao += len(it.knots)
                 po += 4 * len(it.knots)
-            self.owner[cols[0].name] = names
             self.core, self.aux0 = core, np.concatenate(aux) if aux else np.zeros(0)
             self.col_p = np.concatenate(colp) if colp else np.zeros(0)
             if along is not None:   # the next solve starts from the trajectory the rows were planned along
@@ -137,7 +149,8 @@ class SplineBackend:
         core, m = self.core, self.collision_model
         if core is None or m is None or sol.x is None or np.size(sol.x) != core.nx:
             return False
-        names = {f"{p.name_a} | {p.name_b}": p for p in m.active_pairs}
+        models = list(self.collision_models.values()) or [m]   # every term's (several on a floating robot)
+        names = {f"{p.name_a} | {p.name_b}": p for mm in models for p in mm.active_pairs}
         missed = {v.component for v in violations} - set(names)
         if not missed:
             if not core.fl:
@@ -253,7 +266,7 @@ class SplineBackend:
         checker, active pairs and knots, relaxed margins — what ``with_boost`` reads), else nothing."""
         if self.core is None:
             self.prepare()
-        m = self.collision_model
+        m = self.collision_models.get(handle.name, self.collision_model)
         if not isinstance(handle.term, CollisionAvoidance) or m is None:
             return TermData()
         return TermData(info={"model": m, "active_pairs": tuple(m.active_pairs),

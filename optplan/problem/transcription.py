@@ -36,6 +36,7 @@ symbolically) cost 15-80 s of setup at N = 10.
 """
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import casadi as ca
@@ -45,6 +46,10 @@ from ..model.robot import RobotModel
 from ..model.symbolic import SymbolicKinematics, quat_to_matrix
 
 __all__ = ["Transcription", "quat_mul"]
+
+#: a floating robot's base functions (momentum, base CoM, RK4 attitude step), built once per robot
+_BASE_FUNCTIONS: weakref.WeakKeyDictionary[RobotModel, tuple[ca.Function, ca.Function, ca.Function]] = \
+    weakref.WeakKeyDictionary()
 
 #: a CasADi expression (MX, SX or DM)
 Expr = Any
@@ -240,14 +245,20 @@ class Transcription:
     def _build_base_functions(self) -> None:
         if not self.floating:
             return
+        got = _BASE_FUNCTIONS.get(self.robot)
+        if got is None:   # symbolic momentum and RK4 step: once per robot (a problem's set_initial makes one)
+            got = _BASE_FUNCTIONS[self.robot] = self._base_functions()
+        self.momentum_fn, self.base_com_fn, self.quat_step_fn = got
+
+    def _base_functions(self) -> tuple[ca.Function, ca.Function, ca.Function]:
         nj = self.nj
         qj, qdj, u = ca.SX.sym("qj", nj), ca.SX.sym("qdj", nj), ca.SX.sym("u", 6)
         qfull = ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), qj)
         X = self.sym.joint_placements(qfull)
         h = self.sym.momentum(qfull, ca.vertcat(u, qdj), X)
-        self.momentum_fn = ca.Function("momentum", [qj, u, qdj], [h], ["qj", "u", "qdj"], ["h"])
+        momentum_fn = ca.Function("momentum", [qj, u, qdj], [h], ["qj", "u", "qdj"], ["h"])
         com_b = self.sym.center_of_mass(qfull, X)
-        self.base_com_fn = ca.Function("base_com", [qj], [com_b], ["qj"], ["com_b"])
+        base_com_fn = ca.Function("base_com", [qj], [com_b], ["qj"], ["com_b"])
         quat, w0, wm, w1, hs = (ca.SX.sym(n, m) for n, m in (("quat", 4), ("w0", 3), ("wm", 3), ("w1", 3), ("h", 1)))
 
         def f(x: Expr, w: Expr) -> Expr:
@@ -258,7 +269,7 @@ class Transcription:
         k3 = f(quat + hs / 2 * k2, wm)
         k4 = f(quat + hs * k3, w1)
         x = quat + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        self.quat_step_fn = ca.Function("quat_step", [quat, w0, wm, w1, hs], [x / ca.norm_2(x)])
+        return momentum_fn, base_com_fn, ca.Function("quat_step", [quat, w0, wm, w1, hs], [x / ca.norm_2(x)])
 
     def base_quat(self, k: int) -> Expr:
         if not self.floating:

@@ -8,16 +8,18 @@
 
 Two transcriptions of the same problem (``NLPOptions.transcription``):
 
-* ``"bspline"`` (default): :class:`optplan.problem.floating_segment.FloatingSplineProblem` — the
-  joints as a uniform cubic B-spline (control points are the only joint variables; limits hold
-  between the knots too), the base attitude from zero momentum by RK4 per interval, every row
-  family a per-point kernel built once per robot and cached on disk, exact derivatives assembled
-  from the mapped kernels.
-* ``"knots"``: :class:`optplan.problem.OptProblem` (see :mod:`optplan.problem.transcription`):
-  the state (q, q̇, q̈) and jerk at every knot, the same C2 piecewise cubic, the base quaternion
-  by RK4 between knots; the NLP is one expanded symbolic graph (slower to build).
+* ``"bspline"`` (default): an :class:`optplan.problem.OptProblem` on the B-spline kernel core — the
+  joints as a uniform cubic B-spline (control points are the joint variables, the rest ends fix
+  theirs; limits hold between the knots too), the base attitude from zero momentum by RK4 per
+  interval, every row family a per-point kernel built once per robot and cached on disk, exact
+  derivatives assembled from the mapped kernels (the former closed builder
+  ``FloatingSplineProblem`` measured equal: docs/decisions/0022-papers-on-the-shared-core.md).
+* ``"knots"``: :class:`optplan.problem.OptProblem` on the knot transcription
+  (see :mod:`optplan.problem.transcription`): the state (q, q̇, q̈) and jerk at every knot, the same
+  C2 piecewise cubic, the base quaternion by RK4 between knots; the NLP is one expanded symbolic
+  graph (slower to build).
 
-Both give the same trajectory space (C2 piecewise cubics on the grid) and the same constraints;
+All give the same trajectory space (C2 piecewise cubics on the grid) and the same constraints;
 the warm start is the joint-space quintic (free end) or its knot-wise projection onto the
 closed-chain manifold.
 """
@@ -25,7 +27,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -42,7 +44,6 @@ from ...problem import (
     OptProblem,
     Smoothness,
 )
-from ...problem.floating_segment import FloatingSegmentSpec, FloatingSplineProblem
 from ...verification import verify
 from .baselines import closed_chain_reference
 from .core import MethodResult, Scenario, hermite_segment
@@ -76,8 +77,8 @@ class NLPOptions:
     max_iter: int = 500
     #: Samples per interval of the returned trajectory [count].
     sample_density: int = 10
-    #: ``"bspline"`` (:class:`~optplan.problem.floating_segment.FloatingSplineProblem`) or ``"knots"``
-    #: (:class:`~optplan.problem.OptProblem`).
+    #: ``"bspline"`` (:class:`~optplan.problem.OptProblem` on the B-spline kernel core) or ``"knots"``
+    #: (:class:`~optplan.problem.OptProblem` on the knot transcription).
     transcription: str = "bspline"
     #: B-spline kernels from compiled C: True, False or ``"auto"`` (what an earlier run compiled).
     compile_kernels: bool | str = "auto"
@@ -121,9 +122,9 @@ class NLPOptions:
 
 
 def build_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None = None):
-    """The problem (with its warm start) and the :class:`ClosedChain` term (or None): a
-    :class:`FloatingSplineProblem` (``transcription="bspline"``) or an :class:`OptProblem`
-    (``"knots"``)."""
+    """The problem (with its warm start) and the :class:`ClosedChain` term (or None): an
+    :class:`OptProblem` on the B-spline kernel core (``transcription="bspline"``) or on the knot
+    transcription (``"knots"``)."""
     o = options or (NLPOptions.end_constrained() if scenario.closed_chain else NLPOptions.free_end())
     if o.transcription == "bspline":
         return _build_spline(robot, scenario, o)
@@ -142,8 +143,8 @@ def build_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None 
         # at the two pinned end knots the closed chain holds already: leave those rows out (measured:
         # with them IPOPT ended "acceptable" after 60 iterations before the variable scaling, and
         # 20 iterations / 3.0 s vs 26 / 2.8 s now)
-        cc = ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B")
-        cc.skip_pinned = True
+        cc = replace(ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B"),
+                     skip_pinned=True)
         prob.add_constraint(cc)
         t, Q = closed_chain_reference(robot, scenario, o.n_intervals, o.duration)
         prob.set_initial(q=Q, t=t)
@@ -163,27 +164,44 @@ def _warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions) -> np.ndar
 
 
 def _build_spline(robot: RobotModel, scenario: Scenario, o: NLPOptions, warm_start=None):
+    """The restoration NLP as an :class:`OptProblem` on the B-spline kernel core: the rest ends fix
+    their control points, the closed chain's rows at the pinned ends are left out."""
+    prob = OptProblem(robot, o.n_intervals, o.duration, n_sub=o.n_sub, transcription="bspline",
+                      compile_kernels=o.compile_kernels)
+    zero = np.zeros(robot.nj)
+    prob.add_constraint(JointBoundary("start", q=scenario.theta0, qd=zero, qdd=zero))
+    prob.add_constraint(JointBoundary("end", q=scenario.thetaf, qd=zero, qdd=zero))
+    prob.add_constraint(BaseAttitude(at="end"))
+    if o.position_limits:
+        prob.add_constraint(JointPositionLimits())
+    if o.velocity_limits:
+        prob.add_constraint(JointVelocityLimits())
     cc = None
     if scenario.closed_chain:
-        cc = ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B")
-    spec = FloatingSegmentSpec(o.n_intervals, o.duration, scenario.theta0, scenario.thetaf, closed_chain=cc,
-                               velocity_limit=None if o.velocity_limits else False, n_sub=o.n_sub,
-                               position_limits=o.position_limits, smoothness=o.smoothness)
-    prob = FloatingSplineProblem(robot, spec, compile_kernels=o.compile_kernels)
-    prob.set_initial(_warm_start(robot, scenario, o) if warm_start is None else warm_start)
+        cc = replace(ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B"),
+                     skip_pinned=True)
+        prob.add_constraint(cc)
+    prob.add_cost(Smoothness(o.smoothness))
+    Q = _warm_start(robot, scenario, o) if warm_start is None else warm_start
+    prob.set_initial(q=Q, t=np.linspace(0.0, o.duration, o.n_intervals + 1))
     return prob, cc
+
+
+def _solve(prob: OptProblem, o: NLPOptions):
+    """Solve the B-spline problem with the options' tolerances; the dense check between knots is
+    verify's (run_nlp): the closed chain drifts ∝ h⁴ there by design."""
+    return prob.solve({"tol": o.dual_tol, "max_wall_time": o.max_wall_time}, tol=o.tol, max_iter=o.max_iter,
+                      guarantees=False)
 
 
 def _coarse_warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions):
     """Solve the NLP on ``o.coarse_intervals`` intervals; return (knot configurations of its
     solution on the fine grid, projected onto the closed chain, or None if it failed; the coarse
     Solution)."""
-    from dataclasses import replace
-
     assert o.coarse_intervals is not None   # the caller checks
     oc = replace(o, n_intervals=o.coarse_intervals, coarse_intervals=None)
     prob, _ = _build_spline(robot, scenario, oc)
-    sol = prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter, max_wall_time=o.max_wall_time)
+    sol = _solve(prob, o)
     if not sol.success:
         return None, sol
     Q = sol.sample(np.linspace(0.0, o.duration, o.n_intervals + 1))["q"]
@@ -205,14 +223,14 @@ def run_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None = 
     o = options or (NLPOptions.end_constrained() if scenario.closed_chain else NLPOptions.free_end())
     t0, c0 = time.perf_counter(), time.process_time()
     coarse = None
-    if o.transcription == "bspline" and o.coarse_intervals is not None and o.coarse_intervals < o.n_intervals:
+    if o.transcription != "knots" and o.coarse_intervals is not None and o.coarse_intervals < o.n_intervals:
         Q, coarse = _coarse_warm_start(robot, scenario, o)
         prob, cc = _build_spline(robot, scenario, o, warm_start=Q)
     else:
         prob, cc = build_nlp(robot, scenario, o)
     t_decl = time.perf_counter() - t0 - (coarse.wall_time if coarse is not None else 0.0)
-    if o.transcription == "bspline":
-        sol = prob.solve(tol=o.tol, dual_tol=o.dual_tol, max_iter=o.max_iter, max_wall_time=o.max_wall_time)
+    if o.transcription != "knots":
+        sol = _solve(prob, o)
     else:
         sol = prob.solve(tol=o.tol, max_iter=o.max_iter, ipopt_options={"tol": o.dual_tol})
     cpu = time.process_time() - c0

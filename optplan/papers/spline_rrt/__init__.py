@@ -28,7 +28,6 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import casadi as ca
 import numpy as np
 import pinocchio as pin
 
@@ -36,8 +35,8 @@ from ...geometry.spatial import rpy_to_matrix
 from ...model.kinematics import Kinematics
 from ...model.robot import RobotModel
 from ...planners.spline_rrt import CoordinatedPlan, CoordinatedRRTStar, CoordinatedRRTStarOptions
-from ...problem.terms import Term, pose_residual, pose_residual_numeric
 from ...scene import Scene
+from .optimized import EndOrientation, InteriorVelocityLimits, OptimizeOptions, knot_selector, optimize
 from .tracking import (
     BezierOrientation,
     HandTrajectory,
@@ -50,7 +49,7 @@ from .tracking import (
 )
 
 __all__ = ["SplineRRTTask", "BezierOrientation", "HandTrajectory", "smooth_hand_paths", "TrackingOptions",
-           "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "InteriorVelocityLimits", "optimize", "SplineRRTResult", "run_spline_rrt", "hand_separation", "PAPER"]
+           "TrackingResult", "track", "link_distances", "evaluate", "OptimizeOptions", "EndOrientation", "InteriorVelocityLimits", "optimize", "knot_selector", "SplineRRTResult", "run_spline_rrt", "hand_separation", "PAPER"]
 log = logging.getLogger(__name__)
 
 #: the paper's figures (Section 4)
@@ -101,149 +100,6 @@ class SplineRRTTask:
                                  f"{res.position_error:.3g} m, {res.orientation_error:.3g} rad)")
             q = res.q
         return cls(robot, scene, start, goal, robot.joints_of(q).copy())
-
-
-# --------------------------------------------------------------------------- optimized variant
-@dataclass
-class EndOrientation(Term):
-    """A frame's world orientation at the last knot equals ``target`` (3 × 3): ``FramePose``
-    without its position rows, which would repeat the last ``FramePath`` position rows and make
-    the equality Jacobian rank-deficient. Residual and bounds as ``FramePose``."""
-
-    frame: str = ""
-    target: np.ndarray | None = None
-    default_name = "end_orientation"
-
-    def residual(self, tp):
-        R, p = tp.frame(self.frame, tp.N)
-        r, tr = pose_residual(R, p, np.asarray(self.target, float), p)
-        return ca.vertcat(r[3:], tr), np.r_[0.0, 0.0, 0.0, 1.0], np.r_[0.0, 0.0, 0.0, np.inf]
-
-    def numeric(self, traj):
-        M = traj.frame(self.frame, traj.N)
-        r, tr = pose_residual_numeric(M, pin.SE3(np.asarray(self.target, float), M.translation))
-        return np.r_[r[3:], tr]
-
-    def bounds_numeric(self, traj):
-        return np.r_[0.0, 0.0, 0.0, 1.0], np.r_[0.0, 0.0, 0.0, np.inf]
-
-
-@dataclass
-class InteriorVelocityLimits(Term):
-    """``|q̇| ≤ scale · robot.velocity_limit`` [rad/s] at the interior fractions ``fractions`` of every
-    interval (``JointVelocityLimits`` holds at the knots only; q̇ is quadratic between them and
-    overshoots the limit between knots without this term). See docs/decisions/0011-paper-reproduction-grids-and-guards.md."""
-
-    fractions: tuple = (1 / 6, 1 / 3, 1 / 2, 2 / 3, 5 / 6)
-    scale: float = 1.0
-    default_name = "interior_velocity_limits"
-
-    def residual(self, tp):
-        lim = self.scale * tp.robot.velocity_limit
-        rows = []
-        for k in range(tp.N):
-            for f in self.fractions:
-                tau = f * tp.h
-                rows.append(tp.qd(k) + tau * tp.qdd(k) + tau ** 2 / 2 * tp.jerk(k))
-        n = len(rows)
-        return ca.vertcat(*rows), np.tile(-lim, n), np.tile(lim, n)
-
-    def numeric(self, traj):
-        out = []
-        for k in range(traj.N):
-            for f in self.fractions:
-                tau = f * traj.h
-                out.append(traj.qd[k] + tau * traj.qdd[k] + tau ** 2 / 2 * traj.jerk[k])
-        return np.concatenate(out)
-
-    def bounds_numeric(self, traj):
-        n = traj.N * len(self.fractions)
-        lim = self.scale * traj.robot.velocity_limit
-        return np.tile(-lim, n), np.tile(lim, n)
-
-
-@dataclass(frozen=True)
-class OptimizeOptions:
-    """Options of the optimized variant (:func:`optimize`)."""
-
-    #: N: intervals of the grid [count].
-    n_intervals: int = 30
-    #: RK4 sub-steps of the base per interval [count].
-    n_sub: int = 2
-    #: Its duration is this times the Spline-RRT* duration [-] (> 1: the same hand paths run slower, leaving the
-    #: joint-rate limits room for the self-motion that restores the attitude).
-    duration_factor: float = 1.5
-    #: Joint acceleration limit at the knots [rad/s²] (q̈ is piecewise linear).
-    joint_accel_limit: float = 0.1
-    #: The NLP's joint-rate limits are this times the robot's [-] (the interior points sample the rate, and the
-    #: executed motion deviates slightly from the NLP's between knots).
-    rate_margin: float = 0.995
-    #: Clearance between the robot's links [m].
-    link_margin: float = 0.1
-    #: Clearance to the obstacles [m].
-    obstacle_margin: float = 0.0
-    #: Base attitude at T equal to the start's as a hard constraint (False: minimised as a cost).
-    restore_attitude: bool = True
-    #: Hand paths as position constraints with the orientation constrained at the goal only (False: full poses
-    #: at every knot).
-    position_only: bool = True
-    #: Weight of the squared deviation from the Bézier orientation (a cost, with ``position_only``) [1/rad²].
-    orientation_weight: float = 1.0
-    #: IPOPT's constraint tolerance [-].
-    tol: float = 1e-8
-    #: IPOPT iterations, at most [count].
-    max_iter: int = 300
-
-
-def optimize(robot: RobotModel, task: SplineRRTTask, hands: dict, T: float, warm: TrackingResult,
-             options: OptimizeOptions | None = None):
-    """The Spline-RRT* task as an :class:`~optplan.problem.OptProblem` on the floating base (base at
-    the origin, zero momentum), warm-started from the tracked joint trajectory ``warm``: hands on
-    their planned paths at every knot (``FramePath``), start at rest from ``task.q_start``, rest at
-    T, joint position/velocity limits, link–link distance ≥ ``link_margin`` (``CollisionAvoidance``),
-    base attitude restored at T, minimum jerk. Returns ``(Solution, OptProblem)``."""
-    from ...problem import (
-        BaseAttitude,
-        CollisionAvoidance,
-        FramePath,
-        JointAccelerationLimits,
-        JointBoundary,
-        JointPositionLimits,
-        JointVelocityLimits,
-        OptProblem,
-        Smoothness,
-    )
-
-    o = options or OptimizeOptions()
-    # the reproduction as measured on the knot transcription
-    prob = OptProblem(robot, o.n_intervals, T, n_sub=o.n_sub, transcription="knots")
-    zero = np.zeros(robot.nj)
-    prob.add_constraint(JointBoundary("start", q=task.q_start, qd=zero, qdd=zero))
-    prob.add_constraint(JointBoundary("end", qd=zero))
-    for a, h in hands.items():
-        fr = robot.arm(a).ee_frame
-        prob.add_constraint(FramePath(fr, h.pose, position_only=o.position_only), name=f"path_{a}")
-        if o.position_only:
-            prob.add_constraint(EndOrientation(fr, h.pose(T).rotation), name=f"goal_orientation_{a}")
-            if o.orientation_weight > 0:
-                prob.add_cost(FramePath(fr, h.pose), weight=o.orientation_weight, name=f"orientation_{a}")
-    if o.restore_attitude:
-        prob.add_constraint(BaseAttitude(at="end"))
-    else:
-        prob.add_cost(BaseAttitude(at="end"), weight=1e4)
-    prob.add_constraint(JointPositionLimits())
-    prob.add_constraint(JointVelocityLimits(limit=o.rate_margin * robot.velocity_limit))
-    prob.add_constraint(InteriorVelocityLimits(scale=o.rate_margin))
-    prob.add_constraint(JointAccelerationLimits(limit=o.joint_accel_limit))
-    prob.add_constraint(CollisionAvoidance(None, margin=o.link_margin, self_collision=True, held_object=False),
-                        name="links")
-    if task.scene.obstacles:
-        prob.add_constraint(CollisionAvoidance(task.scene, margin=o.obstacle_margin, self_collision=False,
-                                               held_object=False), name="obstacles")
-    prob.add_cost(Smoothness("jerk"))
-    prob.set_initial(q=warm.joints, t=warm.t)
-    sol = prob.solve(tol=o.tol, max_iter=o.max_iter)
-    return sol, prob
 
 
 def _time_scaled(hands: dict, T_old: float, T_new: float) -> dict:
