@@ -32,7 +32,7 @@ from ..model.robot import RobotModel
 from . import kernel_compiler
 from .bspline import knot_matrices
 from .expressions import PointSymbols, symbols_of
-from .floating_kernels import FloatingKernels, _LocalAssembly, momentum_template, spline_basis
+from .floating_kernels import FloatingKernels, _dm, _LocalAssembly, momentum_template, spline_basis
 
 __all__ = ["Family", "SplineCore"]
 
@@ -234,7 +234,10 @@ class SplineCore:
         slices: dict[str, slice] = {}
         if self.fl:
             self._dynamics(asm, xp, compiled)
+        quad = [f for f in families if self.is_quadratic(f)]
         for fam in families:
+            if self.is_quadratic(fam):   # below: one constant quadratic form
+                continue
             target = casm if fam.cost else asm
             if fam.kind == "velocity":
                 lo, hi = fam.data
@@ -273,14 +276,41 @@ class SplineCore:
         lam_f = ca.MX.sym("lam_f")
         lam_g = ca.MX.sym("lam_g", asm.ng)
         zero = sps.csr_matrix((nx, nx))
-        G, Jg, Hg = _finish(asm, nx, lam_f, lam_g, zero)
         sc = p[self.p_scale]
+        # quadratic costs xᵀQx · T^-e: value, gradient and a constant Hessian pattern (its first
+        # exponent's group rides on the rows' Hessian scatter, weighted by lam_f · sc · T^-e)
+        qvals, qgrad, qhess = [], ca.MX.zeros(nx, 1), []
+        groups: dict[int, Any] = {}
+        for fam in quad:
+            Qf, e = self.quadratic_form(fam)
+            Ti = xp[self.slot_T()] ** (-e)
+            Qd = _dm(Qf)
+            Qx = ca.mtimes(Qd, x)
+            qvals.append(Ti * ca.dot(x, Qx))
+            qgrad = qgrad + 2 * Ti * Qx
+            groups[e] = Qf if e not in groups else groups[e] + Qf
+        Hq_first, coef_first = zero, lam_f
+        for i, (e, Qf) in enumerate(groups.items()):
+            Hu = 2 * sps.triu(Qf).tocsr()
+            if i == 0 and asm.ng:
+                Hq_first, coef_first = Hu, lam_f * sc * xp[self.slot_T()] ** (-e)
+            else:
+                qhess.append(lam_f * sc * xp[self.slot_T()] ** (-e) * _dm(Hu))
+        G, Jg, Hg = _finish(asm, nx, coef_first, lam_g, Hq_first)
         nc = casm.ng
         C, Jc, Hc = _finish(casm, nx, lam_f, ca.repmat(lam_f * sc, nc, 1), zero)
-        fobj = sc * ca.sum1(C) if nc else ca.MX(0)
+        fobj = sc * (ca.sum1(C) if nc else 0) + (sc * ca.sum1(ca.vertcat(*qvals)) if qvals else 0)
+        fobj = ca.MX(fobj) if not isinstance(fobj, ca.MX) else fobj
         # dense: IPOPT reads every entry of the gradient (a structural zero would be stale memory)
-        grad = ca.densify(sc * ca.sum1(Jc).T) if nc else ca.MX.zeros(nx, 1)
+        grad = ca.densify((sc * ca.sum1(Jc).T if nc else ca.MX.zeros(nx, 1)) + (sc * qgrad if quad else 0))
         H = Hg + Hc
+        for hq in qhess:
+            H = H + hq
+        # the cost values per family (reports): the kernel families' rows, then one per quadratic family
+        cslices = dict(casm.slices)
+        for i, fam in enumerate(quad):
+            cslices[fam.name] = slice(nc + i, nc + i + 1)
+        C = ca.vertcat(C, *qvals)
         derivs = {"grad_f": ca.Function("grad_f", [x, p], [fobj, grad], ["x", "p"], ["f", "grad_f_x"]),
                   "jac_g": ca.Function("jac_g", [x, p], [G, Jg], ["x", "p"], ["g", "jac_g_x"]),
                   "hess_lag": ca.Function("hess_lag", [x, p, lam_f, lam_g], [H],
@@ -289,9 +319,41 @@ class SplineCore:
         lbg = np.asarray(asm.lbg, float) if asm.ng else np.zeros(0)
         ubg = np.asarray(asm.ubg, float) if asm.ng else np.zeros(0)
         return {"nlp": {"x": x, "p": p, "f": fobj, "g": G}, "derivs": derivs, "lbg": lbg, "ubg": ubg,
-                "slices": slices, "cslices": dict(casm.slices), "gfun": ca.Function("g", [x, p], [G]),
+                "slices": slices, "cslices": cslices, "gfun": ca.Function("g", [x, p], [G]),
                 "cfun": ca.Function("c", [x, p], [C]), "ffun": ca.Function("f", [x, p], [fobj]),
                 "solvers": {}, "build_time": time.perf_counter() - t0}
+
+    def is_quadratic(self, fam: Family) -> bool:
+        """Whether cost family ``fam`` is a quadratic form of the control points (``Smoothness``
+        jerk / acceleration with a fixed duration): it then enters the NLP as ``xᵀQx · T^-e`` with
+        its exact, constant Hessian pattern instead of a kernel family (:meth:`quadratic_form`)."""
+        return fam.cost and fam.kind in ("jerk", "acceleration") and not self.free_time and fam.fn is not None
+
+    def quadratic_form(self, fam: Family) -> tuple[sps.csr_matrix, int]:
+        """``(Q, e)`` with ``Σ_k fam.fn(z_k) = xᵀQx · T^-e`` (Q: nx × nx, symmetric): the kernel's
+        constant Hessian in its control-point inputs (evaluated at T = 1), scattered by the
+        interval template over the family's intervals."""
+        assert fam.fn is not None
+        e = 5 if fam.kind == "jerk" else 3
+        tm = self.interval_template(fam.kind)
+        z = ca.SX.sym("z", fam.fn.size1_in(0))
+        nz = z.numel() - 1   # the last input is T
+        H0 = np.array(ca.Function("h", [z], [ca.hessian(fam.fn(z), z)[0]])(np.r_[np.zeros(nz), 1.0]))[:nz, :nz]
+        ti, ts, tw = tm[:, 0].astype(int), tm[:, 1].astype(int), tm[:, 2]
+        keep = ti < nz
+        ti, ts, tw = ti[keep], ts[keep], tw[keep]
+        rows, cols, vals = [], [], []
+        for t, k in enumerate(fam.points):   # W_k: the control-point inputs of interval k
+            sl = self.interval_slots(k)
+            rows.append(t * nz + ti)
+            cols.append(sl[ts])
+            vals.append(tw)
+        W = sps.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                           shape=(len(fam.points) * nz, self.nx))
+        Hb = sps.kron(sps.identity(len(fam.points)), sps.csr_matrix(H0))
+        Q = (0.5 * (W.T @ Hb @ W)).tocsr()
+        Q.eliminate_zeros()
+        return Q, e
 
     def _compiled_exists(self, name: str) -> bool:
         """Whether the compiled library of local kernel ``name`` is in the cache (remembered once
