@@ -46,7 +46,9 @@ class Family:
 
     kind: "knot" (inputs of :func:`~.expressions.point_kernel` at knots), "jerk"/"acceleration"
     (per interval, costs), "velocity" (linear rows on the velocity control points; its points are
-    entries ``i·nj + j`` of the (N+2) × nj velocity control points, two rows each: upper, lower).
+    entries ``i·nj + j`` of the (N+2) × nj velocity control points, ``sides`` rows each: one
+    two-sided row ``N ΔP`` within ``[lower, upper]·T`` with a fixed duration, else two one-sided
+    rows ``N ΔP − bound·T``, upper then lower).
     ``lower``/``upper``: bounds per row of one point (constraints); ``labels``: component names."""
 
     name: str
@@ -58,11 +60,12 @@ class Family:
     labels: tuple[str, ...] = ()
     cost: bool = False
     data: Any = None       # kind-specific (velocity: (lower, upper) per joint [rad/s])
+    sides: int = 2         # velocity: rows per entry (1: two-sided, fixed duration)
 
     @property
     def rows_per_point(self) -> int:
         if self.kind == "velocity":
-            return 2
+            return self.sides
         if self.kind == "pair":
             return int(self.data["item"].nrow)
         return 1 if self.cost else int(self.lower.size)
@@ -245,6 +248,12 @@ class SplineCore:
                 r = 0
                 for e in fam.points:
                     i, j = divmod(int(e), nj)
+                    if fam.sides == 1:   # N ΔP within [lo, hi]·T (T fixed: row_bounds)
+                        rows += [r, r]
+                        cols += [int(self.slot_P(i + 1)[j]), int(self.slot_P(i)[j])]
+                        vals += [float(N), -float(N)]
+                        r += 1
+                        continue
                     for bound in (hi[j], lo[j]):   # N ΔP − bound·T ≶ 0
                         rows += [r, r, r]
                         cols += [int(self.slot_P(i + 1)[j]), int(self.slot_P(i)[j]), self.slot_T()]
@@ -254,7 +263,10 @@ class SplineCore:
                     asm.slices[fam.name] = slice(asm.ng, asm.ng)
                     continue
                 A = sps.csr_matrix((vals, (rows, cols)), shape=(r, nx + npp))
-                asm.linear(fam.name, xp, A, np.tile([-np.inf, 0.0], r // 2), np.tile([0.0, np.inf], r // 2))
+                if fam.sides == 1:
+                    asm.linear(fam.name, xp, A, np.full(r, -np.inf), np.full(r, np.inf))
+                else:
+                    asm.linear(fam.name, xp, A, np.tile([-np.inf, 0.0], r // 2), np.tile([0.0, np.inf], r // 2))
                 continue
             assert fam.fn is not None
             f, jf, hf = self.kernel_set(fam.fn, compiled)
@@ -414,12 +426,22 @@ class SplineCore:
         asm.family("base_attitude_dynamics", fat, ja, ha, np.array([(i, i, 1.0) for i in range(nin)]), slots_a,
                    xp, 0.0, 0.0)
 
-    def row_bounds(self, st: dict[str, Any], families: list[Family]) -> tuple[np.ndarray, np.ndarray]:
-        """``(lbg, ubg)`` of these families' rows (the structure keeps only their shape)."""
+    def row_bounds(self, st: dict[str, Any], families: list[Family], T: float | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """``(lbg, ubg)`` of these families' rows (the structure keeps only their shape); ``T``
+        [s]: the fixed duration (the bounds of two-sided velocity rows)."""
         lbg, ubg = np.array(st["lbg"], float), np.array(st["ubg"], float)
         for fam in families:
             sl = st["slices"].get(fam.name)
-            if sl is None or fam.cost or fam.kind == "velocity":
+            if sl is None or fam.cost:
+                continue
+            if fam.kind == "velocity":
+                if fam.sides == 1 and sl.stop > sl.start:
+                    if T is None:
+                        raise ValueError(f"row_bounds: the velocity rows of {fam.name!r} need the duration T")
+                    j = np.asarray(fam.points, int) % self.nj
+                    lo, hi = np.asarray(fam.data, float)
+                    lbg[sl], ubg[sl] = lo[j] * T, hi[j] * T
                 continue
             if fam.kind == "pair":
                 it = fam.data["item"]

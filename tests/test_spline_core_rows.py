@@ -1,13 +1,18 @@
-"""Quadratic costs on the B-spline core: ``Smoothness`` jerk / acceleration with a fixed duration
-enter the NLP as one constant quadratic form of the control points (no kernel family). Checked
-against numpy integrals of the spline's own jerk and acceleration (:func:`bspline.knot_values`),
-and the assembled gradient and Hessian against central finite differences of that integral."""
+"""Costs and rows of the B-spline core with a fixed duration.
+
+* ``Smoothness`` jerk / acceleration enter the NLP as one constant quadratic form of the control
+  points (no kernel family): checked against numpy integrals of the spline's own jerk and
+  acceleration (:func:`bspline.knot_values`), the assembled gradient and Hessian against central
+  finite differences of that integral.
+* ``JointVelocityLimits`` is one two-sided row per velocity control point entry: its violations are
+  reported in rad/s against the velocity control points computed from the solution's own
+  control points."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from optplan.problem import JointBoundary, OptProblem, Smoothness
+from optplan.problem import JointBoundary, JointVelocityLimits, OptProblem, Smoothness
 from optplan.problem.bspline import knot_values
 
 
@@ -83,3 +88,33 @@ def test_a_free_duration_keeps_the_kernel_family(tcb):
     assert prob.uses_bspline()
     be = prob._spline
     assert not any(be.core.is_quadratic(f) for f in be.fams)
+
+
+def test_two_sided_velocity_rows_report_violations_in_rad_per_s(tcb):
+    """Ends 0.6 rad apart in 1 s under a 0.3 rad/s limit on one joint: infeasible; the worst rows
+    are that joint's velocity entries, valued as the velocity control points of the solution."""
+    N, T = 6, 1.0
+    q0 = np.zeros(tcb.nj)
+    q1 = q0.copy()
+    q1[1] = 0.6
+    hi = np.full(tcb.nj, 10.0)
+    hi[1] = 0.3
+    prob = OptProblem(tcb, n_intervals=N, duration=T, transcription="bspline")
+    prob.compile_kernels = False
+    prob.add_constraint(JointBoundary("start", q=q0, qd=0 * q0, qdd=0 * q0))
+    prob.add_constraint(JointBoundary("end", q=q1, qd=0 * q0, qdd=0 * q0))
+    prob.add_constraint(JointVelocityLimits(limit=hi, activation=0.0))
+    prob.add_cost(Smoothness("jerk"))
+    sol = prob.solve(max_iter=60, guarantees=False)
+    assert not sol.success
+    fam = next(f for f in prob._spline.fams if f.kind == "velocity")
+    assert fam.rows_per_point == 1
+    V = np.diff(prob._spline.core.control_points(np.asarray(sol.x)), axis=0) * N / T   # (N+2) × nj
+    bad = [r for r in prob.infeasibilities(sol, 50) if r.term == "velocity_limits"]
+    assert bad
+    jn = tcb.joint_names[1]
+    for r in bad:
+        assert r.label.startswith(f"velocity_limits[{jn}].upper at t="), r.label
+        i = int(r.point)
+        assert r.value == pytest.approx(V[i, 1], abs=1e-9)
+        assert r.violation == pytest.approx(V[i, 1] - 0.3, abs=1e-9)
