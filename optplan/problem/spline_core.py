@@ -47,7 +47,7 @@ class Family:
     kind: "knot" (inputs of :func:`~.expressions.point_kernel` at knots), "jerk"/"acceleration"
     (per interval, costs), "velocity" (linear rows on the velocity control points; its points are
     entries ``i·nj + j`` of the (N+2) × nj velocity control points, ``sides`` rows each: one
-    two-sided row ``N ΔP`` within ``[lower, upper]·T`` with a fixed duration, else two one-sided
+    two-sided row ``ΔP`` within ``[lower, upper]·h`` with a fixed duration, else two one-sided
     rows ``N ΔP − bound·T``, upper then lower).
     ``lower``/``upper``: bounds per row of one point (constraints); ``labels``: component names."""
 
@@ -248,10 +248,12 @@ class SplineCore:
                 r = 0
                 for e in fam.points:
                     i, j = divmod(int(e), nj)
-                    if fam.sides == 1:   # N ΔP within [lo, hi]·T (T fixed: row_bounds)
+                    if fam.sides == 1:   # ΔP within [lo, hi]·h (h fixed: row_bounds); a row of unit
+                        # coefficients, as the closed-chain rows' scale (N ΔP took IPOPT 1.4-2.5× the
+                        # iterations on some pipeline segments, measured 2026-11-28)
                         rows += [r, r]
                         cols += [int(self.slot_P(i + 1)[j]), int(self.slot_P(i)[j])]
-                        vals += [float(N), -float(N)]
+                        vals += [1.0, -1.0]
                         r += 1
                         continue
                     for bound in (hi[j], lo[j]):   # N ΔP − bound·T ≶ 0
@@ -441,7 +443,7 @@ class SplineCore:
                         raise ValueError(f"row_bounds: the velocity rows of {fam.name!r} need the duration T")
                     j = np.asarray(fam.points, int) % self.nj
                     lo, hi = np.asarray(fam.data, float)
-                    lbg[sl], ubg[sl] = lo[j] * T, hi[j] * T
+                    lbg[sl], ubg[sl] = lo[j] * (T / self.N), hi[j] * (T / self.N)
                 continue
             if fam.kind == "pair":
                 it = fam.data["item"]

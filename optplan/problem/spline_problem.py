@@ -372,12 +372,13 @@ class SplineEvaluator:
             raise ValueError(f"dual: no constraint multipliers in this solution (status {sol.status.value})")
         lam = np.asarray(sol.lam_g)
         if any(self.fams[fn].kind == "velocity" for fn in self.owner[h.name]):
-            # rows N ΔP − bound·T per entry (upper, lower), or N ΔP within [lower, upper]·T (fixed
-            # duration): ∂f*/∂bound [per rad/s] = −λ T
+            # rows N ΔP − bound·T per entry (upper, lower), or ΔP within [lower, upper]·h (fixed
+            # duration): ∂f*/∂bound [per rad/s] = −λ T (−λ h)
             f = self.fams[self.owner[h.name][0]]
             lv = lam[self.st["slices"][f.name]].reshape(-1, f.sides)
             full = np.zeros((self.core.N + 2) * self.core.nj)   # an entry without a row: 0
-            full[np.asarray(f.points, int)] = lv.sum(axis=1) * self._T(np.asarray(sol.x, float))
+            T = self._T(np.asarray(sol.x, float))
+            full[np.asarray(f.points, int)] = lv.sum(axis=1) * (T if f.sides == 2 else T / self.core.N)
             return -full.reshape(-1, self.core.nj)
         fixed = self.st.get("fixed", {})
         if any(fn in fixed for fn in self.owner[h.name]):
@@ -465,14 +466,15 @@ class SplineEvaluator:
                     continue
                 m = f.rows_per_point
                 pt, c = divmod(int(i), m)
-                if f.kind == "velocity":   # in rad/s: the row is T·(v − bound), or T·v (two-sided)
+                if f.kind == "velocity":   # in rad/s: the row is T·(v − bound), or h·v (two-sided)
                     side = c if f.sides == 2 else int(g[gi] < lbg[gi])
                     k, j = divmod(int(f.points[pt]), core.nj)
                     bound = float(np.asarray(f.data)[1 - side, j])
-                    gv = float(g[gi]) if f.sides == 2 else float(g[gi]) - bound * T
+                    rs = T if f.sides == 2 else h
+                    gv = float(g[gi]) if f.sides == 2 else float(g[gi]) - bound * rs
                     lab = f"{term}[{f.labels[j]}].{'upper' if side == 0 else 'lower'} at t={min(max(k - 0.5, 0), N) * h:.3g} s"
-                    out.append(Infeasibility(term, int(i), k, gv / T + bound, bound if side else -np.inf,
-                                             bound if side == 0 else np.inf, float(v[i]) / T, label=lab))
+                    out.append(Infeasibility(term, int(i), k, gv / rs + bound, bound if side else -np.inf,
+                                             bound if side == 0 else np.inf, float(v[i]) / rs, label=lab))
                     continue
                 else:
                     k = self.st.get("row_points", {}).get(fname, f.points)[pt]
