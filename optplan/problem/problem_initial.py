@@ -145,18 +145,36 @@ class InitialGuessAPI:
 
     def set_initial_path(self, path: ArrayLike, closed_chain: ClosedChain | None = None,
                          T: float | None = None) -> bool:
-        """Initial guess from a planner's path (M × nq configurations, no timing): resampled
-        uniformly in joint-space arc length onto the knots and, with ``closed_chain``, projected
-        back onto the closed-chain manifold (:func:`optplan.constraints.closed_chain.manifold_resample`); timed by
-        a rest-to-rest quintic time law over T. Returns whether every projection converged."""
-        from ..constraints.closed_chain import manifold_resample
+        """Initial guess from a planner's path (M × nq configurations, no timing), timed by the
+        rest-to-rest quintic time law over T. Fixed base: knot k is the path's point at the time
+        law's arc length σ(k/N)·L (linear along the path), projected onto ``closed_chain`` when
+        given — the knots lie on the manifold. Free-floating base: resampled uniformly in
+        joint-space arc length (:func:`optplan.constraints.closed_chain.manifold_resample`), then
+        timed. Returns whether every projection converged."""
+        from ..constraints.closed_chain import manifold_resample, project_closed_chain
 
-        Q, ok = manifold_resample(self.robot, path, self.N + 1, closed_chain)
         Tg = check_real(T, "set_initial: T", minimum=0.0, strict_minimum=True, unit="s") if T is not None else self.duration
+        if not self.robot.is_floating:
+            manifold_resample(self.robot, path, 2)   # validates the path: (M ≥ 2, nq)
+            P, ok = np.asarray(path, float), True
+            cum = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))]
+            arc = quintic_time_law(np.linspace(0.0, 1.0, self.N + 1))[0] * cum[-1]
+            Q = np.column_stack([np.interp(arc, cum, P[:, j]) for j in range(P.shape[1])]) if cum[-1] > 0 \
+                else np.repeat(P[:1], self.N + 1, axis=0)
+            if closed_chain is not None:
+                data = self.robot.model.createData()
+                for k in range(1, self.N):
+                    r = project_closed_chain(self.robot, Q[k], closed_chain, data=data)
+                    Q[k] = r.q
+                    ok &= bool(r.success)
+            Q[0], Q[-1] = P[0], P[-1]
+            self.set_initial(q=Q, T=Tg)
+            return ok
+        Q, ok = manifold_resample(self.robot, path, self.N + 1, closed_chain)
         tau = np.linspace(0.0, 1.0, 2001)
         t = Tg * np.interp(np.linspace(0.0, 1.0, self.N + 1), quintic_time_law(tau)[0], tau)
         t[0], t[-1] = 0.0, Tg
-        self.set_initial(q=self.robot.joints_of(Q.T).T if self.robot.is_floating else Q, t=t, T=Tg)
+        self.set_initial(q=self.robot.joints_of(Q.T).T, t=t, T=Tg)
         return ok
 
     def smooth_initial(self, weight: float = 10.0, closed_chain: ClosedChain | None = None) -> None:
