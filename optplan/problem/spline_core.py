@@ -32,7 +32,7 @@ from ..model.robot import RobotModel
 from . import kernel_compiler
 from .bspline import knot_matrices
 from .expressions import PointSymbols, symbols_of
-from .floating_kernels import FloatingKernels, _LocalAssembly, momentum_template, spline_basis
+from .floating_kernels import FloatingKernels, _dm, _LocalAssembly, momentum_template, spline_basis
 
 __all__ = ["Family", "SplineCore"]
 
@@ -46,7 +46,9 @@ class Family:
 
     kind: "knot" (inputs of :func:`~.expressions.point_kernel` at knots), "jerk"/"acceleration"
     (per interval, costs), "velocity" (linear rows on the velocity control points; its points are
-    entries ``i·nj + j`` of the (N+2) × nj velocity control points, two rows each: upper, lower).
+    entries ``i·nj + j`` of the (N+2) × nj velocity control points, ``sides`` rows each: one
+    two-sided row ``ΔP`` within ``[lower, upper]·h`` with a fixed duration, else two one-sided
+    rows ``N ΔP − bound·T``, upper then lower).
     ``lower``/``upper``: bounds per row of one point (constraints); ``labels``: component names."""
 
     name: str
@@ -58,11 +60,12 @@ class Family:
     labels: tuple[str, ...] = ()
     cost: bool = False
     data: Any = None       # kind-specific (velocity: (lower, upper) per joint [rad/s])
+    sides: int = 2         # velocity: rows per entry (1: two-sided, fixed duration)
 
     @property
     def rows_per_point(self) -> int:
         if self.kind == "velocity":
-            return 2
+            return self.sides
         if self.kind == "pair":
             return int(self.data["item"].nrow)
         return 1 if self.cost else int(self.lower.size)
@@ -240,7 +243,10 @@ class SplineCore:
         slices: dict[str, slice] = {}
         if self.fl:
             self._dynamics(asm, xp, compiled)
+        quad = [f for f in families if self.is_quadratic(f)]
         for fam in families:
+            if self.is_quadratic(fam):   # below: one constant quadratic form
+                continue
             target = casm if fam.cost else asm
             if fam.kind == "velocity":
                 lo, hi = fam.data
@@ -248,6 +254,14 @@ class SplineCore:
                 r = 0
                 for e in fam.points:
                     i, j = divmod(int(e), nj)
+                    if fam.sides == 1:   # ΔP within [lo, hi]·h (h fixed: row_bounds); a row of unit
+                        # coefficients, as the closed-chain rows' scale (N ΔP took IPOPT 1.4-2.5× the
+                        # iterations on some pipeline segments, measured 2026-11-28)
+                        rows += [r, r]
+                        cols += [int(self.slot_P(i + 1)[j]), int(self.slot_P(i)[j])]
+                        vals += [1.0, -1.0]
+                        r += 1
+                        continue
                     for bound in (hi[j], lo[j]):   # N ΔP − bound·T ≶ 0
                         rows += [r, r, r]
                         cols += [int(self.slot_P(i + 1)[j]), int(self.slot_P(i)[j]), self.slot_T()]
@@ -257,7 +271,10 @@ class SplineCore:
                     asm.slices[fam.name] = slice(asm.ng, asm.ng)
                     continue
                 A = sps.csr_matrix((vals, (rows, cols)), shape=(r, nx + npp))
-                asm.linear(fam.name, xp, A, np.tile([-np.inf, 0.0], r // 2), np.tile([0.0, np.inf], r // 2))
+                if fam.sides == 1:
+                    asm.linear(fam.name, xp, A, np.full(r, -np.inf), np.full(r, np.inf))
+                else:
+                    asm.linear(fam.name, xp, A, np.tile([-np.inf, 0.0], r // 2), np.tile([0.0, np.inf], r // 2))
                 continue
             assert fam.fn is not None
             f, jf, hf = self.kernel_set(fam.fn, compiled)
@@ -279,14 +296,41 @@ class SplineCore:
         lam_f = ca.MX.sym("lam_f")
         lam_g = ca.MX.sym("lam_g", asm.ng)
         zero = sps.csr_matrix((nx, nx))
-        G, Jg, Hg = _finish(asm, nx, lam_f, lam_g, zero)
         sc = p[self.p_scale]
+        # quadratic costs xᵀQx · T^-e: value, gradient and a constant Hessian pattern (its first
+        # exponent's group rides on the rows' Hessian scatter, weighted by lam_f · sc · T^-e)
+        qvals, qgrad, qhess = [], ca.MX.zeros(nx, 1), []
+        groups: dict[int, Any] = {}
+        for fam in quad:
+            Qf, e = self.quadratic_form(fam)
+            Ti = xp[self.slot_T()] ** (-e)
+            Qd = _dm(Qf)
+            Qx = ca.mtimes(Qd, x)
+            qvals.append(Ti * ca.dot(x, Qx))
+            qgrad = qgrad + 2 * Ti * Qx
+            groups[e] = Qf if e not in groups else groups[e] + Qf
+        Hq_first, coef_first = zero, lam_f
+        for i, (e, Qf) in enumerate(groups.items()):
+            Hu = 2 * sps.triu(Qf).tocsr()
+            if i == 0 and asm.ng:
+                Hq_first, coef_first = Hu, lam_f * sc * xp[self.slot_T()] ** (-e)
+            else:
+                qhess.append(lam_f * sc * xp[self.slot_T()] ** (-e) * _dm(Hu))
+        G, Jg, Hg = _finish(asm, nx, coef_first, lam_g, Hq_first)
         nc = casm.ng
         C, Jc, Hc = _finish(casm, nx, lam_f, ca.repmat(lam_f * sc, nc, 1), zero)
-        fobj = sc * ca.sum1(C) if nc else ca.MX(0)
+        fobj = sc * (ca.sum1(C) if nc else 0) + (sc * ca.sum1(ca.vertcat(*qvals)) if qvals else 0)
+        fobj = ca.MX(fobj) if not isinstance(fobj, ca.MX) else fobj
         # dense: IPOPT reads every entry of the gradient (a structural zero would be stale memory)
-        grad = ca.densify(sc * ca.sum1(Jc).T) if nc else ca.MX.zeros(nx, 1)
+        grad = ca.densify((sc * ca.sum1(Jc).T if nc else ca.MX.zeros(nx, 1)) + (sc * qgrad if quad else 0))
         H = Hg + Hc
+        for hq in qhess:
+            H = H + hq
+        # the cost values per family (reports): the kernel families' rows, then one per quadratic family
+        cslices = dict(casm.slices)
+        for i, fam in enumerate(quad):
+            cslices[fam.name] = slice(nc + i, nc + i + 1)
+        C = ca.vertcat(C, *qvals)
         derivs = {"grad_f": ca.Function("grad_f", [x, p], [fobj, grad], ["x", "p"], ["f", "grad_f_x"]),
                   "jac_g": ca.Function("jac_g", [x, p], [G, Jg], ["x", "p"], ["g", "jac_g_x"]),
                   "hess_lag": ca.Function("hess_lag", [x, p, lam_f, lam_g], [H],
@@ -295,9 +339,41 @@ class SplineCore:
         lbg = np.asarray(asm.lbg, float) if asm.ng else np.zeros(0)
         ubg = np.asarray(asm.ubg, float) if asm.ng else np.zeros(0)
         return {"nlp": {"x": x, "p": p, "f": fobj, "g": G}, "derivs": derivs, "lbg": lbg, "ubg": ubg,
-                "slices": slices, "cslices": dict(casm.slices), "gfun": ca.Function("g", [x, p], [G]),
+                "slices": slices, "cslices": cslices, "gfun": ca.Function("g", [x, p], [G]),
                 "cfun": ca.Function("c", [x, p], [C]), "ffun": ca.Function("f", [x, p], [fobj]),
                 "solvers": {}, "build_time": time.perf_counter() - t0}
+
+    def is_quadratic(self, fam: Family) -> bool:
+        """Whether cost family ``fam`` is a quadratic form of the control points (``Smoothness``
+        jerk / acceleration with a fixed duration): it then enters the NLP as ``xᵀQx · T^-e`` with
+        its exact, constant Hessian pattern instead of a kernel family (:meth:`quadratic_form`)."""
+        return fam.cost and fam.kind in ("jerk", "acceleration") and not self.free_time and fam.fn is not None
+
+    def quadratic_form(self, fam: Family) -> tuple[sps.csr_matrix, int]:
+        """``(Q, e)`` with ``Σ_k fam.fn(z_k) = xᵀQx · T^-e`` (Q: nx × nx, symmetric): the kernel's
+        constant Hessian in its control-point inputs (evaluated at T = 1), scattered by the
+        interval template over the family's intervals."""
+        assert fam.fn is not None
+        e = 5 if fam.kind == "jerk" else 3
+        tm = self.interval_template(fam.kind)
+        z = ca.SX.sym("z", fam.fn.size1_in(0))
+        nz = z.numel() - 1   # the last input is T
+        H0 = np.array(ca.Function("h", [z], [ca.hessian(fam.fn(z), z)[0]])(np.r_[np.zeros(nz), 1.0]))[:nz, :nz]
+        ti, ts, tw = tm[:, 0].astype(int), tm[:, 1].astype(int), tm[:, 2]
+        keep = ti < nz
+        ti, ts, tw = ti[keep], ts[keep], tw[keep]
+        rows, cols, vals = [], [], []
+        for t, k in enumerate(fam.points):   # W_k: the control-point inputs of interval k
+            sl = self.interval_slots(k)
+            rows.append(t * nz + ti)
+            cols.append(sl[ts])
+            vals.append(tw)
+        W = sps.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                           shape=(len(fam.points) * nz, self.nx))
+        Hb = sps.kron(sps.identity(len(fam.points)), sps.csr_matrix(H0))
+        Q = (0.5 * (W.T @ Hb @ W)).tocsr()
+        Q.eliminate_zeros()
+        return Q, e
 
     def _compiled_exists(self, name: str) -> bool:
         """Whether the compiled library of local kernel ``name`` is in the cache (remembered once
@@ -358,12 +434,22 @@ class SplineCore:
         asm.family("base_attitude_dynamics", fat, ja, ha, np.array([(i, i, 1.0) for i in range(nin)]), slots_a,
                    xp, 0.0, 0.0)
 
-    def row_bounds(self, st: dict[str, Any], families: list[Family]) -> tuple[np.ndarray, np.ndarray]:
-        """``(lbg, ubg)`` of these families' rows (the structure keeps only their shape)."""
+    def row_bounds(self, st: dict[str, Any], families: list[Family], T: float | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """``(lbg, ubg)`` of these families' rows (the structure keeps only their shape); ``T``
+        [s]: the fixed duration (the bounds of two-sided velocity rows)."""
         lbg, ubg = np.array(st["lbg"], float), np.array(st["ubg"], float)
         for fam in families:
             sl = st["slices"].get(fam.name)
-            if sl is None or fam.cost or fam.kind == "velocity":
+            if sl is None or fam.cost:
+                continue
+            if fam.kind == "velocity":
+                if fam.sides == 1 and sl.stop > sl.start:
+                    if T is None:
+                        raise ValueError(f"row_bounds: the velocity rows of {fam.name!r} need the duration T")
+                    j = np.asarray(fam.points, int) % self.nj
+                    lo, hi = np.asarray(fam.data, float)
+                    lbg[sl], ubg[sl] = lo[j] * (T / self.N), hi[j] * (T / self.N)
                 continue
             if fam.kind == "pair":
                 it = fam.data["item"]

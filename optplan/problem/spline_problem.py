@@ -98,7 +98,7 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
             # every entry of the velocity control points; a fixed-duration build keeps those its
             # guess brings near the limit (SplineBackend.prepare)
             new.append(Family(name, "velocity", None, list(range((N + 2) * robot.nj)), labels=tuple(jn),
-                              data=np.vstack([lo, hi])))
+                              data=np.vstack([lo, hi]), sides=2 if core.free_time else 1))
         elif isinstance(t, JointAccelerationLimits):
             lo, hi = t.limits(robot)
             new.append(knot(name, sym.qdd, lo, hi, list(range(N + 1)), tuple(jn)))
@@ -377,11 +377,13 @@ class SplineEvaluator:
             raise ValueError(f"dual: no constraint multipliers in this solution (status {sol.status.value})")
         lam = np.asarray(sol.lam_g)
         if any(self.fams[fn].kind == "velocity" for fn in self.owner[h.name]):
-            # rows N ΔP − bound·T: per entry (upper, lower); ∂f*/∂bound [per rad/s] = −λ T
+            # rows N ΔP − bound·T per entry (upper, lower), or ΔP within [lower, upper]·h (fixed
+            # duration): ∂f*/∂bound [per rad/s] = −λ T (−λ h)
             f = self.fams[self.owner[h.name][0]]
-            lv = lam[self.st["slices"][f.name]].reshape(-1, 2)
+            lv = lam[self.st["slices"][f.name]].reshape(-1, f.sides)
             full = np.zeros((self.core.N + 2) * self.core.nj)   # an entry without a row: 0
-            full[np.asarray(f.points, int)] = lv.sum(axis=1) * self._T(np.asarray(sol.x, float))
+            T = self._T(np.asarray(sol.x, float))
+            full[np.asarray(f.points, int)] = lv.sum(axis=1) * (T if f.sides == 2 else T / self.core.N)
             return -full.reshape(-1, self.core.nj)
         fixed = self.st.get("fixed", {})
         if any(fn in fixed for fn in self.owner[h.name]):
@@ -469,13 +471,15 @@ class SplineEvaluator:
                     continue
                 m = f.rows_per_point
                 pt, c = divmod(int(i), m)
-                if f.kind == "velocity":   # in rad/s: the row is T·(v − bound)
-                    side = c
+                if f.kind == "velocity":   # in rad/s: the row is T·(v − bound), or h·v (two-sided)
+                    side = c if f.sides == 2 else int(g[gi] < lbg[gi])
                     k, j = divmod(int(f.points[pt]), core.nj)
                     bound = float(np.asarray(f.data)[1 - side, j])
+                    rs = T if f.sides == 2 else h
+                    gv = float(g[gi]) if f.sides == 2 else float(g[gi]) - bound * rs
                     lab = f"{term}[{f.labels[j]}].{'upper' if side == 0 else 'lower'} at t={min(max(k - 0.5, 0), N) * h:.3g} s"
-                    out.append(Infeasibility(term, int(i), k, float(g[gi]) / T + bound, bound if side else -np.inf,
-                                             bound if side == 0 else np.inf, float(v[i]) / T, label=lab))
+                    out.append(Infeasibility(term, int(i), k, gv / rs + bound, bound if side else -np.inf,
+                                             bound if side == 0 else np.inf, float(v[i]) / rs, label=lab))
                     continue
                 else:
                     k = self.st.get("row_points", {}).get(fname, f.points)[pt]

@@ -459,7 +459,7 @@ class SplineBackend:
             scale = 1.0 / f0 if np.isfinite(f0) and f0 > 1e-12 else 1.0
             scale = float(10.0 ** (np.round(np.log10(np.clip(scale, 1e-8, 1e8)) * 2) / 2))
         p[core.p_scale] = scale
-        lbg, ubg = core.row_bounds(st, rows)
+        lbg, ubg = core.row_bounds(st, rows, None if core.free_time else T)
         n_ineq = int(np.sum(lbg != ubg))
         defaults: dict[str, Any] = {
             "ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.acceptable_constr_viol_tol": tol,
