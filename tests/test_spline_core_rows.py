@@ -118,3 +118,35 @@ def test_two_sided_velocity_rows_report_violations_in_rad_per_s(tcb):
         i = int(r.point)
         assert r.value == pytest.approx(V[i, 1], abs=1e-9)
         assert r.violation == pytest.approx(V[i, 1] - 0.3, abs=1e-9)
+
+
+@pytest.mark.parametrize("kind", ["velocity", "acceleration"])
+def test_own_lower_and_upper_override_the_symmetric_limit(tcb, kind):
+    """``lower``/``upper`` of a velocity or acceleration limit are the bounds the solve keeps
+    (they used to be ignored): an asymmetric box, a rest-to-rest move whose straight-line
+    velocity breaks it, and the solution's densely sampled q̇ / q̈ inside it."""
+    from optplan.problem import JointAccelerationLimits
+
+    nj = tcb.nj
+    vel = kind == "velocity"
+    T = 2.0 if vel else 3.0   # straight quintic: peak q̇ 0.56 rad/s > 0.5, peak q̈ 0.19 rad/s² > 0.15
+    q0, q1 = np.zeros(nj), np.full(nj, 0.6 if vel else 0.3)
+    lo, hi = np.full(nj, -0.05 if vel else -0.5), np.full(nj, 0.5 if vel else 0.15)
+    term = (JointVelocityLimits(limit=5.0, lower=lo, upper=hi) if vel
+            else JointAccelerationLimits(limit=5.0, lower=lo, upper=hi))
+    got_lo, got_hi = term.limits(tcb)
+    assert np.allclose(got_hi, hi) and np.all(got_lo < 0) and np.all(got_lo > -5.0)
+    prob = OptProblem(tcb, n_intervals=10, duration=T, transcription="bspline")
+    prob.compile_kernels = False
+    prob.add_constraint(JointBoundary("start", q=q0, qd=np.zeros(nj), qdd=np.zeros(nj)))
+    prob.add_constraint(JointBoundary("end", q=q1, qd=np.zeros(nj), qdd=np.zeros(nj)))
+    prob.add_constraint(term)
+    prob.add_cost(Smoothness("jerk"))
+    sol = prob.solve()
+    assert sol.success, sol.status
+    key = "qd" if kind == "velocity" else "qdd"
+    v = sol.sample(np.linspace(0.0, T, 401))[key]
+    assert v.max() <= hi.max() + 1e-6 and v.min() >= got_lo.min() - 1e-6
+    assert v.max() > 0.9 * hi.max()   # the upper bound is active: 5.0 would have left it free
+    with pytest.raises(Exception, match="lower > upper"):
+        JointVelocityLimits(lower=hi, upper=lo)

@@ -423,6 +423,16 @@ class JointPositionLimits(_JointBox):
         return lo, hi
 
 
+def _override(obj: _JointBox, robot: RobotModel, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(lower, upper)``: the term's own ``lower``/``upper`` where given, else ``lo``/``hi``."""
+    lo = lo if obj.lower is None else robot.check_joints(obj.lower, f"{type(obj).__name__}.lower")
+    hi = hi if obj.upper is None else robot.check_joints(obj.upper, f"{type(obj).__name__}.upper")
+    if np.any(lo > hi):
+        raise ConfigurationError(f"{type(obj).__name__}: lower > upper at joints {np.flatnonzero(lo > hi).tolist()} "
+                                 f"(lower {lo.tolist()}, upper {hi.tolist()})")
+    return np.asarray(lo, float), np.asarray(hi, float)
+
+
 def _check_limit(obj: JointVelocityLimits | JointAccelerationLimits, allow_none: bool) -> None:
     name = type(obj).__name__
     if obj.limit is None and allow_none:
@@ -458,12 +468,13 @@ class JointVelocityLimits(_JointBox):
     def limits(self, robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
         lim = robot.velocity_limit if self.limit is None else np.broadcast_to(
             np.asarray(self.limit, float), (robot.nj,))
-        return -lim, lim
+        return _override(self, robot, -lim, lim)
 
 
 @dataclass(eq=False)
 class JointAccelerationLimits(_JointBox):
-    """``|q̈_k| ≤ limit`` [rad/s²] at every knot (q̈ is piecewise linear, so knots bound it)."""
+    """``|q̈_k| ≤ limit`` [rad/s²] at every knot (q̈ is piecewise linear, so knots bound it);
+    ``lower``/``upper`` override."""
 
     limit: Sequence[float] | float = 1.0
     default_name = "acceleration_limits"
@@ -475,7 +486,7 @@ class JointAccelerationLimits(_JointBox):
 
     def limits(self, robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
         lim = np.broadcast_to(np.asarray(self.limit, float), (robot.nj,))
-        return -lim, lim
+        return _override(self, robot, -lim, lim)
 
 
 # --------------------------------------------------------------------------- cost-only terms
