@@ -17,7 +17,7 @@ import pinocchio as pin
 
 from ..model.robot import RobotModel
 
-__all__ = ["zero_momentum_ik"]
+__all__ = ["zero_momentum_ik", "nearest_held_attitude"]
 
 
 def _full(robot: RobotModel, q: np.ndarray, base: pin.SE3) -> np.ndarray:
@@ -84,3 +84,33 @@ def zero_momentum_ik(robot: RobotModel, grasps: dict[str, pin.SE3], goal: pin.SE
             break
     q, base = state(best[1])
     return q, base, best[0]
+
+
+def nearest_held_attitude(robot: RobotModel, grasps: dict[str, pin.SE3], goal: pin.SE3, seeds: list[np.ndarray],
+                          com: np.ndarray, rng: np.random.Generator, attitude: pin.SE3, *, steps: int = 8,
+                          margin_steps: int = 1, tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray] | None:
+    """A base attitude near ``attitude`` (3×3 world rotation) at which the arms hold the object at the
+    world ``goal`` with the centre of mass at ``com``, and the joints [rad] doing it, or None.
+
+    A free :func:`zero_momentum_ik` from ``attitude`` may land far from it (the search moves the
+    attitude as freely as the joints); this walks the geodesic from ``attitude`` to that free
+    solution's attitude in ``steps`` equal steps, holding the attitude at each
+    (``fix_attitude``), and returns the first attitude ``margin_steps`` steps past the first one
+    that holds the goal (a margin: the motion that lands the goal turns the base too)."""
+    q_f, b_f, res = zero_momentum_ik(robot, grasps, goal, seeds, com, rng, attitude=attitude, n_random=4)
+    if res > tol:
+        return None
+    w = np.asarray(pin.log3(attitude.rotation.T @ b_f.rotation))
+    seeds = list(seeds) + [q_f]
+    first = None
+    for i in range(1, steps + 1):
+        R = attitude.rotation @ pin.exp3((i / steps) * w)
+        q, _, r = zero_momentum_ik(robot, grasps, goal, seeds, com, rng, attitude=pin.SE3(R, np.zeros(3)),
+                                   n_random=0, fix_attitude=True)
+        if r <= tol:
+            if first is None:
+                first = i
+            if i >= min(steps, first + margin_steps):
+                return R, q
+            seeds = [q] + seeds
+    return None

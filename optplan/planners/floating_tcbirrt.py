@@ -58,7 +58,8 @@ from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PlanStatus
 from .floating_carry import FloatingCarryOptions, FloatingCarryPlan, FloatingCarryPlanner, integrate_edge
-from .floating_reach import zero_momentum_ik
+from .floating_reach import nearest_held_attitude, zero_momentum_ik
+from .floating_steer import AttitudeSteerer, SteerOptions
 from .task_space import interpolate_task
 from .validity import ValidityChecker
 
@@ -202,7 +203,7 @@ class FloatingTCBiRRT:
     steps, tolerances and goal frame (:class:`FloatingCarryOptions`); ``tree``: the trees' options."""
 
     def __init__(self, robot: RobotModel, scene: Scene, options: FloatingCarryOptions | None = None,
-                 tree: FloatingTreeOptions | None = None):
+                 tree: FloatingTreeOptions | None = None, steer: SteerOptions | None = None):
         if not robot.is_floating:
             raise ConfigurationError(f"FloatingTCBiRRT needs a free-floating robot; {robot.name!r} has a fixed base")
         self.carry = FloatingCarryPlanner(robot, scene, options)   # closed chain, corrections, results
@@ -211,6 +212,9 @@ class FloatingTCBiRRT:
         self.tree_options = tree or FloatingTreeOptions()
         self.arm_names = self.carry.arm_names
         self.validity = ValidityChecker(robot, scene)
+        #: the attitude steering (closed object loops) used when the world goal is out of reach at
+        #: the attitude a joined path arrives with
+        self.steerer = AttitudeSteerer(self.carry, self.validity, steer)
         self._kin = Kinematics(robot)
         self._data = robot.model.createData()
         #: statistics of the last query: nodes per tree, joins tried / rejected at re-integration, re-roots
@@ -368,7 +372,8 @@ class FloatingTCBiRRT:
         rng = np.random.default_rng(seed)
         self.first_arrival = None
         self.stats = {"iterations": 0, "nodes_start": 1, "nodes_goal": 0, "goal_roots": 0, "reached": 0,
-                      "joins": 0, "joins_rejected": 0, "corrections_failed": 0, "reroots": 0}
+                      "joins": 0, "joins_rejected": 0, "corrections_failed": 0, "reroots": 0,
+                      "steers": 0, "steers_landed": 0, "steer_loops": 0}
         qp = self.carry.hold(q0, self.carry.object_in_base(q0))
         if qp is None or float(np.max(np.abs(qp - q0))) > 1e-3:
             return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
@@ -530,6 +535,40 @@ class FloatingTCBiRRT:
             bs.append(base)
         return None
 
+    def _steer(self, joints: list[np.ndarray], bases: list[pin.SE3], goal: pin.SE3, base0: pin.SE3, k_join: int,
+               rng: np.random.Generator, deadline: Deadline
+               ) -> tuple[list[np.ndarray], list[pin.SE3], tuple[list[np.ndarray], list[pin.SE3]]] | None:
+        """Attitude steering of a joined path whose arrival cannot land the world goal: an attitude
+        near the arrival's at which the goal can be held (:func:`nearest_held_attitude`), closed
+        object loops (:class:`~optplan.planners.floating_steer.AttitudeSteerer`) inserted at the
+        arrival, else at the join, else at the start, that turn the arrival to it (the rest of the
+        path moves the base by a displacement of its joints only), then the correction. Returns the
+        new joints, bases and the correction's waypoints, or None."""
+        self.stats["steers"] += 1
+        com = pin.centerOfMass(self.robot.model, self._data, self.carry._full(joints[0], base0))
+        tgt = nearest_held_attitude(self.robot, self.carry.grasps, goal, [joints[-1]], com, rng, bases[-1])
+        if tgt is None or deadline.expired():
+            return None
+        R_t = tgt[0]
+        for k in dict.fromkeys((len(joints) - 1, k_join, 0)):
+            wanted = bases[k].rotation.T @ R_t @ (bases[k].rotation.T @ bases[-1].rotation).T
+            s = self.steerer.steer(joints[k], bases[k], wanted, rng, deadline)
+            if s is None or s.error_rad > 0.5 * float(np.linalg.norm(pin.log3(wanted))):
+                continue
+            rest = joints[k + 1:]
+            rows, tail = self._integrate_path([joints[k]] + rest, s.bases[-1])
+            if rest and self.validity.first_invalid(rows) >= 0:
+                continue
+            new_j, new_b = joints[:k + 1] + s.joints + rest, bases[:k + 1] + s.bases + tail[1:]
+            got = self._correct(new_j[-1], new_b[-1], goal, deadline)
+            if got is not None:
+                self.stats["steers_landed"] += 1
+                self.stats["steer_loops"] += s.loops
+                return new_j, new_b, got
+            if deadline.expired():
+                break
+        return None
+
     def _finish(self, start: FloatingTree, ks: int, goal_tree: FloatingTree, kg: int, goal: pin.SE3, base0: pin.SE3,
                 rng: np.random.Generator, deadline: Deadline, t0: float) -> FloatingCarryPlan | str:
         """A joined path: re-integrated from ``base0`` as a whole and re-checked, then (world goal)
@@ -550,8 +589,11 @@ class FloatingTCBiRRT:
                 self.first_arrival = (joints[-1].copy(), bases[-1].copy())
             got = self._correct(joints[-1], bases[-1], goal, deadline)
             if got is None:
-                self.stats["corrections_failed"] += 1
-                return "reroot"
+                steered = self._steer(joints, bases, goal, base0, len(fwd) - 1, rng, deadline)
+                if steered is None:
+                    self.stats["corrections_failed"] += 1
+                    return "reroot"
+                joints, bases, got = steered
             joints += got[0]
             bases += got[1]
         rows, bases = self._integrate_path(joints, base0)   # one integration of the whole path, edge by edge
