@@ -33,7 +33,7 @@ from .floating_carry import FloatingCarryPlanner, integrate_edge
 from .task_space import interpolate_task
 from .validity import ValidityChecker
 
-__all__ = ["SteerOptions", "SteerResult", "AttitudeSteerer", "path_displacement"]
+__all__ = ["SteerOptions", "SteerResult", "AttitudeSteerer", "path_displacement", "left_multiply"]
 
 
 @dataclass(frozen=True)
@@ -73,13 +73,18 @@ class SteerResult:
     """The manoeuvre: ``joints`` the waypoints after the start (the last one equals the start's
     joints), ``bases`` the base pose after each; ``rotation`` the base rotation it makes in the
     base frame (``R_start⁻¹ R_end``); ``error_rad`` the angle left to the wanted rotation;
-    ``loops`` loop traversals used."""
+    ``loops`` loop traversals used; ``rows`` every collision sample (nq) after the start with the
+    base relative to the start's (the manoeuvre from the identity: from any other base ``B`` the
+    same samples are ``B`` times these, by left-invariance)."""
 
     joints: list[np.ndarray]
     bases: list[pin.SE3]
     rotation: np.ndarray
     error_rad: float
     loops: int
+    rows: np.ndarray
+    #: the base pose the manoeuvre starts from.
+    start: pin.SE3
 
 
 def path_displacement(robot, joints: list[np.ndarray],
@@ -98,7 +103,7 @@ def path_displacement(robot, joints: list[np.ndarray],
     return out, (np.vstack(rows) if rows else np.empty((0, robot.nq)))
 
 
-def _moved(rows: np.ndarray, B: pin.SE3) -> np.ndarray:
+def left_multiply(rows: np.ndarray, B: pin.SE3) -> np.ndarray:
     """The rows with their base poses left-multiplied by ``B`` (the same joint path from base ``B``)."""
     out = rows.copy()
     for i in range(len(rows)):
@@ -168,7 +173,8 @@ class AttitudeSteerer:
         pool: list[_Loop] = []
         joints: list[np.ndarray] = []
         bases: list[pin.SE3] = []
-        B, loops = base, 0
+        rows: list[np.ndarray] = []
+        B, loops, base_inv = base, 0, base.inverse()
         for _ in range(o.max_rounds):
             if err <= o.tol_rad or deadline.expired():
                 break
@@ -201,7 +207,7 @@ class AttitudeSteerer:
                 X = lp.X if sign > 0 else [D * x for x in [pin.SE3.Identity()] + lp.X[:-1]][::-1]
                 Bk, ok, new_b = B, True, []
                 for _ in range(k):
-                    if self.validity.first_invalid(_moved(rows0, Bk)) >= 0:
+                    if self.validity.first_invalid(left_multiply(rows0, Bk)) >= 0:
                         ok = False
                         break
                     new_b.append(Bk)
@@ -212,6 +218,7 @@ class AttitudeSteerer:
                 for Bs in new_b:   # the waypoints' bases of every repetition
                     joints += [np.array(j) for j in path[1:]]
                     bases += [Bs * x for x in X]
+                    rows.append(left_multiply(rows0, base_inv * Bs))
                 B = bases[-1]
                 P = base.rotation.T @ B.rotation
                 err, loops, done = e, loops + k, True
@@ -222,7 +229,8 @@ class AttitudeSteerer:
         if not joints:
             return None
         return SteerResult(joints, bases, base.rotation.T @ bases[-1].rotation,
-                           float(np.linalg.norm(pin.log3(bases[-1].rotation.T @ base.rotation @ wanted))), loops)
+                           float(np.linalg.norm(pin.log3(bases[-1].rotation.T @ base.rotation @ wanted))), loops,
+                           np.vstack(rows), base)
 
 
 def _reversed_rows(lp: _Loop) -> np.ndarray:
@@ -230,6 +238,6 @@ def _reversed_rows(lp: _Loop) -> np.ndarray:
     forward traversal reaches with displacement ``X`` is reached backwards with ``D⁻¹ X``."""
     full = np.vstack([np.r_[pin.SE3ToXYZQUAT(pin.SE3.Identity()), lp.joints[0]], lp.rows])
     Dinv = lp.D.inverse()
-    out = _moved(full[::-1], Dinv)
+    out = left_multiply(full[::-1], Dinv)
     return out[1:]
 

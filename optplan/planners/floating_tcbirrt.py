@@ -59,7 +59,7 @@ from ..scene import Scene
 from .base import Deadline, PlanStatus
 from .floating_carry import FloatingCarryOptions, FloatingCarryPlan, FloatingCarryPlanner, integrate_edge
 from .floating_reach import nearest_held_attitude, zero_momentum_ik
-from .floating_steer import AttitudeSteerer, SteerOptions
+from .floating_steer import AttitudeSteerer, SteerOptions, SteerResult, left_multiply
 from .task_space import interpolate_task
 from .validity import ValidityChecker
 
@@ -485,11 +485,24 @@ class FloatingTCBiRRT:
         back = [goal_tree.joints[i] for i in goal_tree.path_to_root(kg)]
         return fwd + back[1:]
 
-    def _integrate_path(self, joints: list[np.ndarray], base0: pin.SE3) -> tuple[np.ndarray, list[pin.SE3]]:
+    def _integrate_path(self, joints: list[np.ndarray], base0: pin.SE3,
+                        known: tuple[int, SteerResult] | None = None) -> tuple[np.ndarray, list[pin.SE3]]:
         """Every collision sample of the joint path (rows, base integrated from ``base0`` edge by
-        edge) and the base at each waypoint."""
+        edge) and the base at each waypoint. ``known = (k, steer)``: the waypoints after ``k`` are
+        the manoeuvre ``steer``, its samples and bases composed from the base at ``k``
+        (left-invariance: the same as integrating its edges, to rounding)."""
         rows, bases, base = [], [base0], base0
-        for qa, qb in zip(joints[:-1], joints[1:]):
+        i = 0
+        while i < len(joints) - 1:
+            if known is not None and i == known[0]:
+                s, to_here = known[1], base * known[1].start.inverse()
+                rows.append(left_multiply(s.rows, base))
+                bases += [to_here * b for b in s.bases]
+                base = bases[-1]
+                i += len(s.joints)
+                continue
+            qa, qb = joints[i], joints[i + 1]
+            i += 1
             n = max(1, math.ceil(float(np.max(np.abs(qb - qa))) / self.options.check_step_rad))
             Q = integrate_edge(self.robot, base, qa, qb, n)
             rows.append(Q[1:])
@@ -562,6 +575,7 @@ class FloatingTCBiRRT:
             new_j, new_b = joints[:k + 1] + s.joints + rest, bases[:k + 1] + s.bases + tail[1:]
             got = self._correct(new_j[-1], new_b[-1], goal, deadline)
             if got is not None:
+                self._known = (k, s)
                 self.stats["steers_landed"] += 1
                 self.stats["steer_loops"] += s.loops
                 return new_j, new_b, got
@@ -575,6 +589,7 @@ class FloatingTCBiRRT:
         corrected for the drift. Returns the plan, ``"collides"`` or ``"reroot"``."""
         o = self.options
         self.stats["joins"] += 1
+        self._known: tuple[int, SteerResult] | None = None
         joints = self._joint_path(start, ks, goal_tree, kg)
         fwd = list(reversed(start.path_to_root(ks)))
         # the start tree's part is exact already; the goal tree's part re-integrated from the join
@@ -596,7 +611,8 @@ class FloatingTCBiRRT:
                 joints, bases, got = steered
             joints += got[0]
             bases += got[1]
-        rows, bases = self._integrate_path(joints, base0)   # one integration of the whole path, edge by edge
+        # one integration of the whole path, edge by edge (a steering manoeuvre composed)
+        rows, bases = self._integrate_path(joints, base0, self._known)
         dmin, _, _ = self.carry.checker.min_distance_along(np.vstack([self.carry._full(joints[0], base0), rows]))
         if dmin < 0.0:   # the boolean checks and the exact distances disagree: reject rather than return it
             self.stats["joins_rejected"] += 1
