@@ -84,6 +84,24 @@ def test_world_goal_with_drift_is_reached(robot):
     assert res.min_clearance_m >= 0.0
 
 
+def test_world_goal_out_of_reach_at_the_arrival_attitude_is_steered(robot):
+    # trial 13 of floating_truss: the joined path arrives at a base attitude from which the arms cannot
+    # hold the module at its world goal (the correction fails); closed object loops turn the base
+    # until they can. Without steering the same query does not land in the same time.
+    scene = Scene.load("floating_truss")
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 13, 0)
+    planner = FloatingTCBiRRT(robot, scene)
+    res = planner.plan(q0, goal, seed=13, time_limit=20.0)
+    assert planner.stats["steers_landed"] == 1 and planner.stats["steer_loops"] >= 2
+    sim = _judge(robot, scene, res)
+    hA, _ = _hands(robot, sim.q[-1])
+    err = goal.actInv(hA * scene.object.grasps["A"].inverse())
+    assert np.linalg.norm(err.translation) <= 1e-3 and np.linalg.norm(pin.log3(err.rotation)) <= 1e-3
+    plain = FloatingTCBiRRT(robot, scene, tree=FloatingTreeOptions(steer_attitude=False))
+    assert not plain.plan(q0, goal, seed=13, time_limit=3.0).success
+    assert plain.stats["corrections_failed"] >= 1
+
+
 def test_goal_in_the_base_frame_where_the_straight_planner_fails(robot):
     # trial 9 of floating_stow (a servicer stowing a module on its own body): the straight motion and
     # its via poses collide; the trees find a path

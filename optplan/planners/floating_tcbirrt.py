@@ -105,6 +105,9 @@ class FloatingTreeOptions:
     correction_step_rad: float = 0.1
     #: the clock of the time limit: "cpu" (this process's CPU time) or "wall".
     clock: str = "cpu"
+    #: steer the base attitude (closed object loops) when a joined path arrives at an attitude from
+    #: which the correction cannot land the world goal.
+    steer_attitude: bool = True
 
     def __post_init__(self) -> None:
         for name in ("extend_m", "extend_rad", "sample_margin_m", "sample_angle_rad", "max_joint_step",
@@ -603,12 +606,13 @@ class FloatingTCBiRRT:
             if self.first_arrival is None:
                 self.first_arrival = (joints[-1].copy(), bases[-1].copy())
             got = self._correct(joints[-1], bases[-1], goal, deadline)
-            if got is None:
+            if got is None and self.tree_options.steer_attitude:
                 steered = self._steer(joints, bases, goal, base0, len(fwd) - 1, rng, deadline)
-                if steered is None:
-                    self.stats["corrections_failed"] += 1
-                    return "reroot"
-                joints, bases, got = steered
+                if steered is not None:
+                    joints, bases, got = steered
+            if got is None:
+                self.stats["corrections_failed"] += 1
+                return "reroot"
             joints += got[0]
             bases += got[1]
         # one integration of the whole path, edge by edge (a steering manoeuvre composed)
