@@ -58,7 +58,7 @@ from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PlanStatus
 from .floating_carry import FloatingCarryOptions, FloatingCarryPlan, FloatingCarryPlanner, integrate_edge
-from .floating_reach import nearest_held_attitude, zero_momentum_ik
+from .floating_reach import limited_step, nearest_held_attitude, self_motion_clear, zero_momentum_ik
 from .floating_steer import AttitudeSteerer, SteerOptions, SteerResult, left_multiply
 from .task_space import interpolate_task
 from .validity import ValidityChecker
@@ -123,38 +123,6 @@ class FloatingTreeOptions:
                 raise OptionError(f"FloatingTreeOptions.{name}: expected an integer ≥ 0, got {v!r}")
         if self.clock not in ("cpu", "wall"):
             raise OptionError(f"FloatingTreeOptions.clock: expected 'cpu' or 'wall', got {self.clock!r}")
-
-
-def limited_step(J: np.ndarray, e: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                 max_step: float, damping: float = 1e-6, centring: float = 0.1) -> np.ndarray:
-    """A joint step ``dq`` [rad] with ``J dq ≈ e`` that keeps ``q + dq`` within ``[lower, upper]``:
-    damped least squares (``damping``) on the free joints; a joint whose step would cross its limit
-    is moved to the limit and held there while the others are re-solved (active set, at most one
-    pass per joint); the redundancy left pulls the free joints toward the middle of their range
-    (null-space term, ``centring`` × the offset per step); scaled so that no joint moves more than
-    ``max_step`` [rad]. A plain Newton step clipped at a limit is another, inconsistent step: near a
-    limit it drives the arm into the singularity the limit makes."""
-    n = len(q)
-    free = np.ones(n, bool)
-    fixed = np.zeros(n)
-    mid = 0.5 * (lower + upper)
-    dq = np.zeros(n)
-    for _ in range(n):
-        if not free.any():
-            break
-        Jf = J[:, free]
-        A = Jf @ Jf.T + damping * np.eye(len(e))
-        pull = centring * (mid[free] - q[free])
-        step_f = Jf.T @ np.linalg.solve(A, e - J @ fixed) + pull - Jf.T @ np.linalg.solve(A, Jf @ pull)
-        dq = fixed.copy()
-        dq[free] = step_f
-        dq *= min(1.0, max_step / max(float(np.max(np.abs(dq))), 1e-12))
-        over = free & ((q + dq > upper) | (q + dq < lower))
-        if not over.any():
-            return dq
-        fixed[over] = np.clip(q + dq, lower, upper)[over] - q[over]
-        free &= ~over
-    return np.clip(q + dq, lower, upper) - q
 
 
 class FloatingTree:
@@ -335,15 +303,17 @@ class FloatingTCBiRRT:
     def _goal_joints(self, seed_joints: list[np.ndarray], target_b: pin.SE3, base: pin.SE3,
                      rng: np.random.Generator, deadline: Deadline, tries: int | None = None) -> np.ndarray | None:
         """A collision-free (base at ``base``) joint solution holding the object at ``target_b``:
-        path IK from the first of ``seed_joints`` (the same IK branch), IK from each of them, then
-        from ``tries`` (default ``goal_seeds``) random seeds around them."""
+        path IK from the first of ``seed_joints`` (the same IK branch), IK from each of them (when
+        such a solution collides, a collision-free one on its self-motion,
+        :func:`~optplan.planners.floating_reach.self_motion_clear`), then from ``tries`` (default
+        ``goal_seeds``) random seeds around them."""
         to, r = self.tree_options, self.robot
         seeds: list[np.ndarray | None] = [self._path_ik(seed_joints[0], target_b)] + list(seed_joints)
         base_seeds = [q for q in seeds if q is not None]
         for k in range(to.goal_seeds if tries is None else tries):
             s0 = base_seeds[k % len(base_seeds)]
             seeds.append(np.clip(s0 + rng.normal(0.0, to.goal_seed_spread_rad, r.nj), r.lower, r.upper))
-        for s in seeds:
+        for i, s in enumerate(seeds):
             if deadline.expired():
                 return None
             if s is None:
@@ -351,6 +321,10 @@ class FloatingTCBiRRT:
             q = self.carry.hold(s, target_b)
             if q is not None and self.validity.is_valid(self.carry._full(q, base)):
                 return q
+            if q is not None and i <= len(seed_joints):   # on the seeds' own IK branch: its self-motion
+                qc = self_motion_clear(self.carry, self.validity, q, target_b, base, rng)
+                if qc is not None:
+                    return qc
         return None
 
     def _sample(self, rng: np.random.Generator, a: pin.SE3, b: pin.SE3) -> pin.SE3:
