@@ -117,6 +117,31 @@ def test_goal_in_the_base_frame_where_the_straight_planner_fails(robot):
     assert np.linalg.norm(e.translation) < 1e-8 and res.corrections == 0
 
 
+def test_goal_root_on_the_start_branch_by_self_motion(robot):
+    # trial 68 of floating_stow: the goal pose's solution on the start's IK branch (path IK) collides;
+    # roots from other seeds are other branches, which the trees reach but cannot join with the object
+    # held still. A collision-free point of that solution's self-motion roots the goal tree instead.
+    from optplan.planners.floating_reach import self_motion_clear
+
+    scene = Scene.load("floating_stow")
+    opts = options_for_scene(scene).planner
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 68, 0)
+    planner = FloatingTCBiRRT(robot, scene, opts)
+    qp = planner._path_ik(q0, goal)
+    assert qp is not None and not planner.validity.is_valid(planner.carry._full(qp))
+    qc = self_motion_clear(planner.carry, planner.validity, qp, goal, pin.SE3.Identity(), np.random.default_rng(0))
+    assert qc is not None and float(np.max(np.abs(qc - qp))) > 0.05
+    full = planner.carry._full(qc)
+    for a in ("A", "B"):   # both hands still at their grasps on the object at the goal (base frame)
+        hand = _hands(robot, full)[0 if a == "A" else 1]
+        assert np.linalg.norm(pin.log6((goal * scene.object.grasps[a]).actInv(hand)).vector) < 1e-8
+    dmin, _ = CollisionChecker(robot, scene).min_distance(full)
+    assert dmin >= 0.0
+    res = planner.plan(q0, goal, seed=68, time_limit=20.0)
+    _judge(robot, scene, res)
+    assert np.linalg.norm(goal.actInv(planner.object_in_base(res.joints[-1])).translation) < 1e-8
+
+
 def test_start_elsewhere_in_the_world(robot):
     # the base starts away from the origin, turned: the planner's poses follow it (left-invariance)
     scene = Scene.load("floating_stow")
@@ -213,7 +238,7 @@ def test_zero_momentum_ik_with_the_attitude_held(robot):
 
 
 def test_limited_step_respects_limits_and_solves_the_free_joints():
-    from optplan.planners.floating_tcbirrt import limited_step
+    from optplan.planners.floating_reach import limited_step
 
     rng = np.random.default_rng(3)
     J = rng.normal(size=(6, 9))
