@@ -102,6 +102,31 @@ def test_world_goal_out_of_reach_at_the_arrival_attitude_is_steered(robot):
     assert plain.stats["corrections_failed"] >= 1
 
 
+@pytest.mark.slow
+def test_world_goal_with_the_initial_attitude_restored(robot):
+    # trial 2 of floating_truss with the base attitude restored: the goal tree is rooted where the arms
+    # hold the module at its world goal with the base at its initial attitude; the joined path arrives
+    # turned and closed object loops turn it back. The independent integration ends at the initial
+    # attitude (≤ 1e-6 rad) with the module at its world goal.
+    scene = Scene.load("floating_truss")
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 2, 0)
+    planner = FloatingTCBiRRT(robot, scene, tree=FloatingTreeOptions(restore_attitude=True))
+    res = planner.plan(q0, goal, seed=2, time_limit=30.0)
+    assert planner.stats["steers_landed"] == 1
+    sim = _judge(robot, scene, res)
+    assert np.linalg.norm(pin.log3(sim.final_base.rotation)) <= 1e-6
+    hA, _ = _hands(robot, sim.q[-1])
+    err = goal.actInv(hA * scene.object.grasps["A"].inverse())
+    assert np.linalg.norm(err.translation) <= 1e-6 and np.linalg.norm(pin.log3(err.rotation)) <= 1e-6
+    # the same query without restoration ends turned
+    plain = FloatingTCBiRRT(robot, scene).plan(q0, goal, seed=2, time_limit=30.0)
+    assert np.linalg.norm(pin.log3(plain.final_base.rotation)) > 1e-2
+    # a world goal the arms cannot hold at the initial attitude is a status, not an exception
+    far = pin.SE3(goal.rotation, goal.translation + np.array([0.0, 0.0, 3.0]))
+    bad = planner.plan(q0, far, seed=0, time_limit=5.0)
+    assert not bad.success and "initial attitude" in bad.message
+
+
 def test_goal_in_the_base_frame_where_the_straight_planner_fails(robot):
     # trial 9 of floating_stow (a servicer stowing a module on its own body): the straight motion and
     # its via poses collide; the trees find a path

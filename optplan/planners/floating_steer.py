@@ -56,13 +56,15 @@ class SteerOptions:
     max_joint_step: float = 0.3
     #: joint step of the self-motion join that closes a loop [rad].
     join_step_rad: float = 0.05
+    #: most rounds of scaled loops for the small rotation left after the whole loops [count].
+    refine_rounds: int = 8
 
     def __post_init__(self) -> None:
         for name in ("loop_m", "loop_rad", "tol_rad", "max_joint_step", "join_step_rad"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise OptionError(f"SteerOptions.{name}: expected a positive finite number, got {v!r}")
-        for name in ("new_loops", "max_repeat", "max_rounds"):
+        for name in ("new_loops", "max_repeat", "max_rounds", "refine_rounds"):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 1):
                 raise OptionError(f"SteerOptions.{name}: expected an integer ≥ 1, got {v!r}")
@@ -116,6 +118,8 @@ class _Loop:
     joints: list[np.ndarray]   # q, ..., q
     X: list[pin.SE3]           # displacement at each waypoint after the first (forward)
     rows: np.ndarray           # its samples from the identity base (after the first point)
+    xis: np.ndarray            # the via poses' offsets (2 × 6), before the scale
+    scale: float               # the via poses are M·exp(scale·ξ)
 
     @property
     def D(self) -> pin.SE3:
@@ -133,11 +137,18 @@ class AttitudeSteerer:
         self.robot = carry.robot
         self.options = options or SteerOptions()
 
-    def _loop(self, q: np.ndarray, rng: np.random.Generator) -> _Loop | None:
+    def _loop(self, q: np.ndarray, rng: np.random.Generator | None, xis: np.ndarray | None = None,
+              scale: float = 1.0) -> _Loop | None:
+        """A closed loop from ``q``: the object through the via poses ``M·exp(scale·ξ)`` (``xis``:
+        the two ξ, default random) and back, then a self-motion join to ``q``; None when the IK
+        fails or jumps."""
         o, co = self.options, self.carry.options
         M = self.carry.object_in_base(q)
-        vias = [M * pin.exp6(pin.Motion(np.r_[rng.uniform(-o.loop_m, o.loop_m, 3),
-                                                rng.uniform(-o.loop_rad, o.loop_rad, 3)])) for _ in range(2)]
+        if xis is None:
+            assert rng is not None
+            xis = np.array([np.r_[rng.uniform(-o.loop_m, o.loop_m, 3), rng.uniform(-o.loop_rad, o.loop_rad, 3)]
+                            for _ in range(2)])
+        vias = [M * pin.exp6(pin.Motion(scale * xi)) for xi in xis]
         qs = [q]
         for A, B in zip([M] + vias, vias + [M]):
             dp = float(np.linalg.norm(B.translation - A.translation))
@@ -160,29 +171,27 @@ class AttitudeSteerer:
             return None
         qs.append(np.array(q, float))
         X, rows = path_displacement(self.robot, qs, co.check_step_rad)
-        return _Loop(qs, X, rows)
+        return _Loop(qs, X, rows, xis, scale)
 
     def steer(self, q: np.ndarray, base: pin.SE3, wanted: np.ndarray, rng: np.random.Generator,
-              deadline: Deadline) -> SteerResult | None:
+              deadline: Deadline, tol_rad: float | None = None) -> SteerResult | None:
         """Loops from the joints ``q`` [rad] (holding the object; base at ``base``) whose product
         turns the base by the rotation ``wanted`` (3×3, base frame: the end attitude is
-        ``R_base · wanted``). None when no collision-free loop brings the rotation nearer."""
+        ``R_base · wanted``) to within ``tol_rad`` (default ``options.tol_rad``) [rad]: greedy
+        whole loops, then (:meth:`_refine`) loops scaled to the small rotation left. None when no
+        collision-free loop brings the rotation nearer."""
         o = self.options
-        P = np.eye(3)
-        err = float(np.linalg.norm(pin.log3(wanted)))
+        tol = o.tol_rad if tol_rad is None else float(tol_rad)
+        st = _State(base, wanted)
         pool: list[_Loop] = []
-        joints: list[np.ndarray] = []
-        bases: list[pin.SE3] = []
-        rows: list[np.ndarray] = []
-        B, loops, base_inv = base, 0, base.inverse()
         for _ in range(o.max_rounds):
-            if err <= o.tol_rad or deadline.expired():
+            if st.err <= tol or deadline.expired():
                 break
             for _ in range(o.new_loops):
                 lp = self._loop(q, rng)
                 if lp is not None:
                     pool.append(lp)
-            E = P.T @ wanted   # the rotation still wanted
+            E = st.P.T @ wanted   # the rotation still wanted
             options = []
             for i, lp in enumerate(pool):
                 for sign in (1, -1):
@@ -190,47 +199,97 @@ class AttitudeSteerer:
                     Lk = np.eye(3)
                     for k in range(1, o.max_repeat + 1):
                         Lk = Lk @ L
-                        e = float(np.linalg.norm(pin.log3(Lk.T @ E)))
-                        options.append((e, i, sign, k))
+                        options.append((float(np.linalg.norm(pin.log3(Lk.T @ E))), i, sign, k))
             options.sort()
-            done = False
             bad: set[int] = set()
             for e, i, sign, k in options:
-                if e >= err:
+                if e >= st.err:
                     break
                 if i in bad:
                     continue
-                lp = pool[i]
-                path = lp.joints if sign > 0 else lp.joints[::-1]
-                D = lp.D if sign > 0 else lp.D.inverse()
-                rows0 = lp.rows if sign > 0 else _reversed_rows(lp)
-                X = lp.X if sign > 0 else [D * x for x in [pin.SE3.Identity()] + lp.X[:-1]][::-1]
-                Bk, ok, new_b = B, True, []
-                for _ in range(k):
-                    if self.validity.first_invalid(left_multiply(rows0, Bk)) >= 0:
-                        ok = False
-                        break
-                    new_b.append(Bk)
-                    Bk = Bk * D
-                if not ok:
-                    bad.add(i)
-                    continue
-                for Bs in new_b:   # the waypoints' bases of every repetition
-                    joints += [np.array(j) for j in path[1:]]
-                    bases += [Bs * x for x in X]
-                    rows.append(left_multiply(rows0, base_inv * Bs))
-                B = bases[-1]
-                P = base.rotation.T @ B.rotation
-                err, loops, done = e, loops + k, True
-                break
+                if self._append(st, pool[i], sign, k):
+                    break
+                bad.add(i)
             pool = [lp for i, lp in enumerate(pool) if i not in bad]
-            if not done and not pool:
-                continue
-        if not joints:
+        if st.err > tol and len(pool) >= 3:
+            self._refine(st, q, pool, tol, deadline)
+        if not st.joints:
             return None
-        return SteerResult(joints, bases, base.rotation.T @ bases[-1].rotation,
-                           float(np.linalg.norm(pin.log3(bases[-1].rotation.T @ base.rotation @ wanted))), loops,
-                           np.vstack(rows), base)
+        return SteerResult(st.joints, st.bases, base.rotation.T @ st.bases[-1].rotation, st.err, st.loops,
+                           np.vstack(st.rows), base)
+
+    def _append(self, st: _State, lp: _Loop, sign: int, k: int) -> bool:
+        """``k`` traversals of ``lp`` (backwards for ``sign`` −1) appended to the manoeuvre when every
+        one is collision-free with the base where momentum puts it."""
+        path = lp.joints if sign > 0 else lp.joints[::-1]
+        D = lp.D if sign > 0 else lp.D.inverse()
+        rows0 = lp.rows if sign > 0 else _reversed_rows(lp)
+        X = lp.X if sign > 0 else [D * x for x in [pin.SE3.Identity()] + lp.X[:-1]][::-1]
+        Bk, new_b = st.B, []
+        for _ in range(k):
+            if self.validity.first_invalid(left_multiply(rows0, Bk)) >= 0:
+                return False
+            new_b.append(Bk)
+            Bk = Bk * D
+        for Bs in new_b:   # the waypoints' bases of every repetition
+            st.joints += [np.array(j) for j in path[1:]]
+            st.bases += [Bs * x for x in X]
+            st.rows.append(left_multiply(rows0, st.base_inv * Bs))
+        st.B = st.bases[-1]
+        st.P = st.base.rotation.T @ st.B.rotation
+        st.err = float(np.linalg.norm(pin.log3(st.P.T @ st.wanted)))
+        st.loops += k
+        return True
+
+    def _refine(self, st: _State, q: np.ndarray, pool: list[_Loop], tol: float, deadline: Deadline) -> None:
+        """The small rotation left, ``r``, by three loops of the pool scaled: a loop's holonomy
+        grows with the square of its size (``s²·b`` to leading order), so ``r = Σ cᵢ bᵢ`` gives
+        each loop's scale ``√|cᵢ|`` and direction (the sign of ``cᵢ``); repeated while it converges
+        (the neglected terms are of higher order in the scale)."""
+        b = np.array([pin.log3(lp.D.rotation) for lp in pool])
+        nrm = np.linalg.norm(b, axis=1)
+        i0 = int(np.argmax(nrm))
+        u = b / np.maximum(nrm, 1e-12)[:, None]
+        i1 = int(np.argmax(np.linalg.norm(np.cross(u, u[i0]), axis=1) * nrm))
+        i2 = int(np.argmax(np.abs(u @ np.cross(u[i0], u[i1])) * nrm))
+        trio = [pool[i] for i in (i0, i1, i2)]
+        Bm = np.array([b[i] for i in (i0, i1, i2)]).T
+        if abs(np.linalg.det(Bm / np.maximum(np.linalg.norm(Bm, axis=0), 1e-12))) < 0.05:
+            return
+        for _ in range(self.options.refine_rounds):
+            if st.err <= tol or deadline.expired():
+                return
+            r = np.asarray(pin.log3(st.P.T @ st.wanted))
+            c = np.linalg.solve(Bm, r)
+            err0 = st.err
+            for ci, lp in zip(c, trio):
+                s = lp.scale * math.sqrt(min(abs(float(ci)), 1.0))
+                if s < 1e-6:
+                    continue
+                sl = self._loop(q, None, lp.xis, s)
+                if sl is None or not self._append(st, sl, 1 if ci > 0 else -1, 1):
+                    return
+            if st.err >= err0:
+                return
+
+
+@dataclass
+class _State:
+    """The manoeuvre being built: waypoints, bases, samples (relative to ``base``), the current base
+    ``B``, the rotation made ``P`` (base frame) and the angle ``err`` left to ``wanted``."""
+
+    base: pin.SE3
+    wanted: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.base_inv = self.base.inverse()
+        self.joints: list[np.ndarray] = []
+        self.bases: list[pin.SE3] = []
+        self.rows: list[np.ndarray] = []
+        self.B = self.base
+        self.P = np.eye(3)
+        self.err = float(np.linalg.norm(pin.log3(self.wanted)))
+        self.loops = 0
 
 
 def _reversed_rows(lp: _Loop) -> np.ndarray:

@@ -108,10 +108,17 @@ class FloatingTreeOptions:
     #: steer the base attitude (closed object loops) when a joined path arrives at an attitude from
     #: which the correction cannot land the world goal.
     steer_attitude: bool = True
+    #: with a world goal, end with the base at its INITIAL attitude: the goal tree is rooted where the
+    #: arms hold the object at the goal with that attitude, and the joined path is steered to it
+    #: (closed object loops) within ``restore_tol_rad``.
+    restore_attitude: bool = False
+    #: the restored attitude's tolerance [rad].
+    restore_tol_rad: float = 1e-7
 
     def __post_init__(self) -> None:
         for name in ("extend_m", "extend_rad", "sample_margin_m", "sample_angle_rad", "max_joint_step",
-                     "join_step_rad", "rotation_weight_m", "goal_seed_spread_rad", "correction_step_rad"):
+                     "join_step_rad", "rotation_weight_m", "goal_seed_spread_rad", "correction_step_rad",
+                     "restore_tol_rad"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise OptionError(f"FloatingTreeOptions.{name}: expected a positive finite number, got {v!r}")
@@ -193,6 +200,8 @@ class FloatingTCBiRRT:
         #: the last query's first join that reached the end of the goal tree with a world goal: its
         #: joints [rad] and real arrival base pose (before the drift correction), or None
         self.first_arrival: tuple[np.ndarray, pin.SE3] | None = None
+        self._restore = False
+        self._known: tuple[int, SteerResult] | None = None
 
     def object_in_base(self, joints: np.ndarray) -> pin.SE3:
         """The object's pose in the base frame (read from the first arm's hand)."""
@@ -360,7 +369,16 @@ class FloatingTCBiRRT:
             return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
                                       "start in collision")
         start = FloatingTree(q0, self.carry.object_in_base(q0), base0)
-        goal_tree = self._world_goal_tree(q0, goal, base0, rng, deadline) if self.options.target_frame == "world" else None
+        self._restore = to.restore_attitude and self.options.target_frame == "world"
+        if self._restore:   # the goal held with the base at its initial attitude, or no plan
+            goal_tree = self._world_goal_tree(q0, goal, base0, rng, deadline, attitude=base0, held_only=True)
+            if goal_tree is None:
+                return self.carry._result(PlanStatus.TIMEOUT if deadline.expired() else PlanStatus.INVALID_GOAL,
+                                          [q0], [base0], float("nan"), t0, goal, 0,
+                                          "the arms cannot hold the object at its world goal with the base at its "
+                                          "initial attitude (zero-momentum IK with the attitude held)")
+        else:
+            goal_tree = self._world_goal_tree(q0, goal, base0, rng, deadline) if self.options.target_frame == "world" else None
         if goal_tree is None:
             goal_tree = self._root_goal_tree(goal, base0, [q0], rng, deadline)
         if goal_tree is None:
@@ -394,7 +412,7 @@ class FloatingTCBiRRT:
                     out = self._finish(start, ks, goal_tree, kg, goal, base0, rng, deadline, t0)
                     if isinstance(out, FloatingCarryPlan):
                         return out
-                    if out == "reroot" and self.stats["reroots"] < to.max_reroots:
+                    if out == "reroot" and not self._restore and self.stats["reroots"] < to.max_reroots:
                         self.stats["reroots"] += 1
                         b_est = self._integrate_path(self._joint_path(start, ks, goal_tree, kg)[len(start.path_to_root(ks)) - 1:],
                                                      start.bases[ks])[1][-1]
@@ -416,7 +434,8 @@ class FloatingTCBiRRT:
                                   "world-goal corrections failed)")
 
     def _world_goal_tree(self, q0: np.ndarray, goal: pin.SE3, base0: pin.SE3, rng: np.random.Generator,
-                         deadline: Deadline, attitude: pin.SE3 | None = None, seeds: list[np.ndarray] | None = None) -> FloatingTree | None:
+                         deadline: Deadline, attitude: pin.SE3 | None = None, seeds: list[np.ndarray] | None = None,
+                         held_only: bool = False) -> FloatingTree | None:
         """The goal tree of a world goal rooted at a zero-momentum IK solution
         (:func:`~optplan.planners.floating_reach.zero_momentum_ik`: the centre of mass stays put, so
         the base's arrival POSITION is known for a given attitude; the attitude is searched near
@@ -435,7 +454,7 @@ class FloatingTCBiRRT:
             res = math.inf
             # after a join: first the attitude that join arrived with, held (else the search drifts
             # back toward the seed's attitude and the re-rooting creeps), then searched near it
-            for fix in ((True, False) if attitude is not None else (False,)):
+            for fix in ((True,) if held_only else (True, False) if attitude is not None else (False,)):
                 q, b_est, res = zero_momentum_ik(self.robot, self.carry.grasps, goal, trial, com, rng,
                                                  attitude=base0 if attitude is None else attitude, n_random=2,
                                                  fix_attitude=fix)
@@ -535,22 +554,32 @@ class FloatingTCBiRRT:
         path moves the base by a displacement of its joints only), then the correction. Returns the
         new joints, bases and the correction's waypoints, or None."""
         self.stats["steers"] += 1
-        com = pin.centerOfMass(self.robot.model, self._data, self.carry._full(joints[0], base0))
-        tgt = nearest_held_attitude(self.robot, self.carry.grasps, goal, [joints[-1]], com, rng, bases[-1])
-        if tgt is None or deadline.expired():
-            return None
-        R_t = tgt[0]
+        o = self.options
+        tol: float | None = None
+        if self._restore:   # to the initial attitude, where the goal tree's root holds the goal
+            R_t, tol = base0.rotation, self.tree_options.restore_tol_rad
+        else:
+            com = pin.centerOfMass(self.robot.model, self._data, self.carry._full(joints[0], base0))
+            tgt = nearest_held_attitude(self.robot, self.carry.grasps, goal, [joints[-1]], com, rng, bases[-1])
+            if tgt is None or deadline.expired():
+                return None
+            R_t = tgt[0]
         for k in dict.fromkeys((len(joints) - 1, k_join, 0)):
             wanted = bases[k].rotation.T @ R_t @ (bases[k].rotation.T @ bases[-1].rotation).T
-            s = self.steerer.steer(joints[k], bases[k], wanted, rng, deadline)
-            if s is None or s.error_rad > 0.5 * float(np.linalg.norm(pin.log3(wanted))):
+            s = self.steerer.steer(joints[k], bases[k], wanted, rng, deadline, tol_rad=tol)
+            if s is None or s.error_rad > (tol if tol is not None else 0.5 * float(np.linalg.norm(pin.log3(wanted)))):
                 continue
             rest = joints[k + 1:]
             rows, tail = self._integrate_path([joints[k]] + rest, s.bases[-1])
             if rest and self.validity.first_invalid(rows) >= 0:
                 continue
             new_j, new_b = joints[:k + 1] + s.joints + rest, bases[:k + 1] + s.bases + tail[1:]
-            got = self._correct(new_j[-1], new_b[-1], goal, deadline)
+            if self._restore:
+                ep, er = self.carry._goal_error(new_j[-1], new_b[-1], goal)
+                got: tuple[list[np.ndarray], list[pin.SE3]] | None = (
+                    ([], []) if ep <= o.goal_tol_m and er <= o.goal_tol_rad else None)
+            else:
+                got = self._correct(new_j[-1], new_b[-1], goal, deadline)
             if got is not None:
                 self._known = (k, s)
                 self.stats["steers_landed"] += 1
@@ -566,7 +595,7 @@ class FloatingTCBiRRT:
         corrected for the drift. Returns the plan, ``"collides"`` or ``"reroot"``."""
         o = self.options
         self.stats["joins"] += 1
-        self._known: tuple[int, SteerResult] | None = None
+        self._known = None
         joints = self._joint_path(start, ks, goal_tree, kg)
         fwd = list(reversed(start.path_to_root(ks)))
         # the start tree's part is exact already; the goal tree's part re-integrated from the join
@@ -579,8 +608,11 @@ class FloatingTCBiRRT:
         if o.target_frame == "world":
             if self.first_arrival is None:
                 self.first_arrival = (joints[-1].copy(), bases[-1].copy())
-            got = self._correct(joints[-1], bases[-1], goal, deadline)
-            if got is None and self.tree_options.steer_attitude:
+            miss = float(np.linalg.norm(pin.log3(base0.rotation.T @ bases[-1].rotation)))
+            got = (None if not self._restore else ([], []) if miss <= self.tree_options.restore_tol_rad else None)
+            if not self._restore:
+                got = self._correct(joints[-1], bases[-1], goal, deadline)
+            if got is None and (self.tree_options.steer_attitude or self._restore):
                 steered = self._steer(joints, bases, goal, base0, len(fwd) - 1, rng, deadline)
                 if steered is not None:
                     joints, bases, got = steered
