@@ -11,11 +11,16 @@ and the base pose to expect on arrival), not that a given path ends there.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from ..model.robot import RobotModel
+
+if TYPE_CHECKING:
+    from .floating_carry import FloatingCarryPlanner
+    from .validity import ValidityChecker
 
 __all__ = ["zero_momentum_ik", "nearest_held_attitude", "limited_step", "self_motion_clear"]
 
@@ -148,7 +153,7 @@ def limited_step(J: np.ndarray, e: np.ndarray, q: np.ndarray, lower: np.ndarray,
     return np.clip(q + dq, lower, upper) - q
 
 
-def self_motion_clear(carry, validity, q: np.ndarray, object_in_base: pin.SE3, base: pin.SE3,
+def self_motion_clear(carry: FloatingCarryPlanner, validity: ValidityChecker, q: np.ndarray, object_in_base: pin.SE3, base: pin.SE3,
                       rng: np.random.Generator, *, directions: int = 8, steps: int = 16,
                       step_rad: float = 0.12) -> np.ndarray | None:
     """Joints on the SAME self-motion component as ``q`` (both hands holding the object still at

@@ -28,6 +28,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import OptionError
+from ..model.robot import RobotModel
 from .base import Deadline
 from .floating_carry import FloatingCarryPlanner, integrate_edge
 from .task_space import interpolate_task
@@ -89,7 +90,7 @@ class SteerResult:
     start: pin.SE3
 
 
-def path_displacement(robot, joints: list[np.ndarray],
+def path_displacement(robot: RobotModel, joints: list[np.ndarray],
                       check_step_rad: float) -> tuple[list[pin.SE3], np.ndarray]:
     """The base displacements (base frame, from the identity) at every waypoint of the joint path
     after the first (the last one is the path's displacement ``D``) and every sample row (nq) of its

@@ -608,9 +608,11 @@ class FloatingTCBiRRT:
         if o.target_frame == "world":
             if self.first_arrival is None:
                 self.first_arrival = (joints[-1].copy(), bases[-1].copy())
-            miss = float(np.linalg.norm(pin.log3(base0.rotation.T @ bases[-1].rotation)))
-            got = (None if not self._restore else ([], []) if miss <= self.tree_options.restore_tol_rad else None)
-            if not self._restore:
+            got: tuple[list[np.ndarray], list[pin.SE3]] | None = None
+            if self._restore:   # already at the initial attitude (within its tolerance): nothing to steer
+                miss = float(np.linalg.norm(pin.log3(base0.rotation.T @ bases[-1].rotation)))
+                got = ([], []) if miss <= self.tree_options.restore_tol_rad else None
+            else:
                 got = self._correct(joints[-1], bases[-1], goal, deadline)
             if got is None and (self.tree_options.steer_attitude or self._restore):
                 steered = self._steer(joints, bases, goal, base0, len(fwd) - 1, rng, deadline)
