@@ -60,6 +60,7 @@ from .base import Deadline, PlanStatus
 from .floating_carry import FloatingCarryOptions, FloatingCarryPlan, FloatingCarryPlanner, integrate_edge
 from .floating_reach import limited_step, nearest_held_attitude, self_motion_clear, zero_momentum_ik
 from .floating_steer import AttitudeSteerer, SteerOptions, SteerResult, left_multiply
+from .floating_tree import FloatingTree
 from .task_space import interpolate_task
 from .validity import ValidityChecker
 
@@ -130,50 +131,6 @@ class FloatingTreeOptions:
                 raise OptionError(f"FloatingTreeOptions.{name}: expected an integer ≥ 0, got {v!r}")
         if self.clock not in ("cpu", "wall"):
             raise OptionError(f"FloatingTreeOptions.clock: expected 'cpu' or 'wall', got {self.clock!r}")
-
-
-class FloatingTree:
-    """One tree: per node the joints [rad], the object's pose in the base frame, the base's world
-    pose (exact for the start tree, relative to the root's estimate for the goal tree) and the parent
-    index (−1 at a root; the goal tree may have several roots: joint solutions of the same goal pose)."""
-
-    def __init__(self, joints: np.ndarray, obj: pin.SE3, base: pin.SE3) -> None:
-        self.joints: list[np.ndarray] = [np.array(joints, float)]
-        self.objs: list[pin.SE3] = [obj]
-        self.bases: list[pin.SE3] = [base]
-        self.parent: list[int] = [-1]
-        self._p = [np.array(obj.translation)]
-        self._R = [np.array(obj.rotation)]
-
-    def __len__(self) -> int:
-        return len(self.joints)
-
-    @property
-    def roots(self) -> list[int]:
-        return [k for k, p in enumerate(self.parent) if p < 0]
-
-    def add(self, joints: np.ndarray, obj: pin.SE3, base: pin.SE3, parent: int) -> int:
-        """A node (``parent`` −1: another root)."""
-        self.joints.append(np.array(joints, float))
-        self.objs.append(obj)
-        self.bases.append(base)
-        self.parent.append(int(parent))
-        self._p.append(np.array(obj.translation))
-        self._R.append(np.array(obj.rotation))
-        return len(self.joints) - 1
-
-    def nearest(self, M: pin.SE3, w_rot: float) -> int:
-        """The node whose object pose is nearest ``M``: position distance + ``w_rot`` × rotation angle."""
-        P, R = np.asarray(self._p), np.asarray(self._R)
-        dp = np.linalg.norm(P - M.translation, axis=1)
-        c = np.clip((np.einsum("nij,ij->n", R, M.rotation) - 1.0) / 2.0, -1.0, 1.0)
-        return int(np.argmin(dp + w_rot * np.arccos(c)))
-
-    def path_to_root(self, k: int) -> list[int]:
-        out = [k]
-        while self.parent[out[-1]] >= 0:
-            out.append(self.parent[out[-1]])
-        return out
 
 
 class FloatingTCBiRRT:
@@ -359,7 +316,8 @@ class FloatingTCBiRRT:
         self.first_arrival = None
         self.stats = {"iterations": 0, "nodes_start": 1, "nodes_goal": 0, "goal_roots": 0, "reached": 0,
                       "joins": 0, "joins_rejected": 0, "corrections_failed": 0, "reroots": 0,
-                      "steers": 0, "steers_landed": 0, "steer_loops": 0}
+                      "steers": 0, "steers_landed": 0, "steer_loops": 0, "steer_no_target": 0, "steer_short": 0,
+                      "steer_rest_collides": 0, "steer_not_landed": 0}
         qp = self.carry.hold(q0, self.carry.object_in_base(q0))
         if qp is None or float(np.max(np.abs(qp - q0))) > 1e-3:
             return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
@@ -554,24 +512,31 @@ class FloatingTCBiRRT:
         path moves the base by a displacement of its joints only), then the correction. Returns the
         new joints, bases and the correction's waypoints, or None."""
         self.stats["steers"] += 1
-        o = self.options
-        tol: float | None = None
         if self._restore:   # to the initial attitude, where the goal tree's root holds the goal
-            R_t, tol = base0.rotation, self.tree_options.restore_tol_rad
-        else:
-            com = pin.centerOfMass(self.robot.model, self._data, self.carry._full(joints[0], base0))
-            tgt = nearest_held_attitude(self.robot, self.carry.grasps, goal, [joints[-1]], com, rng, bases[-1])
-            if tgt is None or deadline.expired():
-                return None
-            R_t = tgt[0]
+            return self._steer_to(joints, bases, goal, base0.rotation, k_join, rng, deadline)
+        com = pin.centerOfMass(self.robot.model, self._data, self.carry._full(joints[0], base0))
+        tgt = nearest_held_attitude(self.robot, self.carry.grasps, goal, [joints[-1]], com, rng, bases[-1])
+        if tgt is None or deadline.expired():
+            self.stats["steer_no_target"] += 1
+            return None
+        return self._steer_to(joints, bases, goal, tgt[0], k_join, rng, deadline)
+
+    def _steer_to(self, joints: list[np.ndarray], bases: list[pin.SE3], goal: pin.SE3, R_t: np.ndarray, k_join: int,
+                  rng: np.random.Generator, deadline: Deadline
+                  ) -> tuple[list[np.ndarray], list[pin.SE3], tuple[list[np.ndarray], list[pin.SE3]]] | None:
+        """:meth:`_steer` to the world attitude ``R_t`` (3×3) at the path's end."""
+        o = self.options
+        tol = self.tree_options.restore_tol_rad if self._restore else None
         for k in dict.fromkeys((len(joints) - 1, k_join, 0)):
             wanted = bases[k].rotation.T @ R_t @ (bases[k].rotation.T @ bases[-1].rotation).T
             s = self.steerer.steer(joints[k], bases[k], wanted, rng, deadline, tol_rad=tol)
             if s is None or s.error_rad > (tol if tol is not None else 0.5 * float(np.linalg.norm(pin.log3(wanted)))):
+                self.stats["steer_short"] += 1
                 continue
             rest = joints[k + 1:]
             rows, tail = self._integrate_path([joints[k]] + rest, s.bases[-1])
             if rest and self.validity.first_invalid(rows) >= 0:
+                self.stats["steer_rest_collides"] += 1
                 continue
             new_j, new_b = joints[:k + 1] + s.joints + rest, bases[:k + 1] + s.bases + tail[1:]
             if self._restore:
@@ -585,6 +550,7 @@ class FloatingTCBiRRT:
                 self.stats["steers_landed"] += 1
                 self.stats["steer_loops"] += s.loops
                 return new_j, new_b, got
+            self.stats["steer_not_landed"] += 1
             if deadline.expired():
                 break
         return None
