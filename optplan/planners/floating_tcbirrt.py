@@ -27,11 +27,15 @@ base composed with the displacements along the path from the root:
   between the estimate and the real arrival pose: short closed-chain motions re-targeted from the
   drifted base correct it (as :class:`~optplan.planners.floating_carry.FloatingCarryPlanner` does).
   The correction's Newton steps keep the joints within their limits (:func:`limited_step`: a
-  joint at its limit is held there and the others re-solved). When the correction fails, the goal
-  tree is re-rooted with the real arrival pose as the new estimate (``max_reroots`` times) while
-  the start tree is kept: the zero-momentum IK first holds the base attitude at that arrival (else
-  its search drifts back toward the old root's attitude and the re-rooting only creeps), then
-  searches near it.
+  joint at its limit is held there and the others re-solved). When the correction fails because
+  the goal is out of reach at the arrival attitude, the path is STEERED: closed object loops
+  (:mod:`~optplan.planners.floating_steer`) turn the base to the nearest attitude at which the arms
+  hold the goal (:func:`~optplan.planners.floating_reach.nearest_held_attitude`), then the
+  correction lands it. When that fails too, the goal tree is re-rooted with the real arrival pose as
+  the new estimate (``max_reroots`` times) while the start tree is kept: the zero-momentum IK first
+  holds the base attitude at that arrival, then searches near it.
+* with ``restore_attitude`` the goal tree is rooted where the arms hold the goal with the base at
+  its INITIAL attitude and the joined path is steered back to that attitude.
 
 What an ``EXACT`` plan guarantees: the closed chain holds to the IK tolerance at every waypoint; the
 returned base poses are those of one integration from the start's base along the whole joint path
