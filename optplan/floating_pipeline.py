@@ -99,7 +99,8 @@ class FloatingPipelineOptions:
 class FloatingPipelineResult:
     """``plan``; ``solution`` and ``report`` of the last optimization attempt (None when the plan
     failed); ``attempts``: (intervals, NLP status, failures) of each solve; ``end_attitude``: the
-    final base attitude relative to the initial one that the solution must reach (the plan's)."""
+    final base attitude relative to the initial one that the solution must reach (the plan's, or the
+    identity with ``tree.restore_attitude``)."""
 
     plan: FloatingCarryPlan
     solution: Solution | None = None
@@ -167,7 +168,9 @@ def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE
     if plan.status is not PlanStatus.EXACT:
         return res
     J = plan.joints
-    res.end_attitude = plan.final_base.rotation.copy()
+    restore = opts.planner_name == "tcbirrt" and opts.tree.restore_attitude and opts.planner.target_frame == "world"
+    # the plan's end attitude; restored: exactly the initial one (the plan reaches it within restore_tol_rad)
+    res.end_attitude = np.eye(3) if restore else plan.final_base.rotation.copy()
     cc = ClosedChain.from_configuration(robot, robot.configuration(J[0]), *planner.arm_names)
     _, length = _resample(J, opts.intervals)
     T = max(1.0, opts.duration_factor * length / float(np.min(robot.velocity_limit)))

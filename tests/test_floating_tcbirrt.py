@@ -84,6 +84,49 @@ def test_world_goal_with_drift_is_reached(robot):
     assert res.min_clearance_m >= 0.0
 
 
+def test_world_goal_out_of_reach_at_the_arrival_attitude_is_steered(robot):
+    # trial 13 of floating_truss: the joined path arrives at a base attitude from which the arms cannot
+    # hold the module at its world goal (the correction fails); closed object loops turn the base
+    # until they can. Without steering the same query does not land in the same time.
+    scene = Scene.load("floating_truss")
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 13, 0)
+    planner = FloatingTCBiRRT(robot, scene)
+    res = planner.plan(q0, goal, seed=13, time_limit=20.0)
+    assert planner.stats["steers_landed"] == 1 and planner.stats["steer_loops"] >= 2
+    sim = _judge(robot, scene, res)
+    hA, _ = _hands(robot, sim.q[-1])
+    err = goal.actInv(hA * scene.object.grasps["A"].inverse())
+    assert np.linalg.norm(err.translation) <= 1e-3 and np.linalg.norm(pin.log3(err.rotation)) <= 1e-3
+    plain = FloatingTCBiRRT(robot, scene, tree=FloatingTreeOptions(steer_attitude=False))
+    assert not plain.plan(q0, goal, seed=13, time_limit=3.0).success
+    assert plain.stats["corrections_failed"] >= 1
+
+
+@pytest.mark.slow
+def test_world_goal_with_the_initial_attitude_restored(robot):
+    # trial 2 of floating_truss with the base attitude restored: the goal tree is rooted where the arms
+    # hold the module at its world goal with the base at its initial attitude; the joined path arrives
+    # turned and closed object loops turn it back. The independent integration ends at the initial
+    # attitude (≤ 1e-6 rad) with the module at its world goal.
+    scene = Scene.load("floating_truss")
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 2, 0)
+    planner = FloatingTCBiRRT(robot, scene, tree=FloatingTreeOptions(restore_attitude=True))
+    res = planner.plan(q0, goal, seed=2, time_limit=30.0)
+    assert planner.stats["steers_landed"] == 1
+    sim = _judge(robot, scene, res)
+    assert np.linalg.norm(pin.log3(sim.final_base.rotation)) <= 1e-6
+    hA, _ = _hands(robot, sim.q[-1])
+    err = goal.actInv(hA * scene.object.grasps["A"].inverse())
+    assert np.linalg.norm(err.translation) <= 1e-6 and np.linalg.norm(pin.log3(err.rotation)) <= 1e-6
+    # the same query without restoration ends turned
+    plain = FloatingTCBiRRT(robot, scene).plan(q0, goal, seed=2, time_limit=30.0)
+    assert np.linalg.norm(pin.log3(plain.final_base.rotation)) > 1e-2
+    # a world goal the arms cannot hold at the initial attitude is a status, not an exception
+    far = pin.SE3(goal.rotation, goal.translation + np.array([0.0, 0.0, 3.0]))
+    bad = planner.plan(q0, far, seed=0, time_limit=5.0)
+    assert not bad.success and "initial attitude" in bad.message
+
+
 def test_goal_in_the_base_frame_where_the_straight_planner_fails(robot):
     # trial 9 of floating_stow (a servicer stowing a module on its own body): the straight motion and
     # its via poses collide; the trees find a path
@@ -97,6 +140,31 @@ def test_goal_in_the_base_frame_where_the_straight_planner_fails(robot):
     _judge(robot, scene, res)
     e = goal.actInv(planner.object_in_base(res.joints[-1]))   # base frame: no drift correction
     assert np.linalg.norm(e.translation) < 1e-8 and res.corrections == 0
+
+
+def test_goal_root_on_the_start_branch_by_self_motion(robot):
+    # trial 68 of floating_stow: the goal pose's solution on the start's IK branch (path IK) collides;
+    # roots from other seeds are other branches, which the trees reach but cannot join with the object
+    # held still. A collision-free point of that solution's self-motion roots the goal tree instead.
+    from optplan.planners.floating_reach import self_motion_clear
+
+    scene = Scene.load("floating_stow")
+    opts = options_for_scene(scene).planner
+    q0, goal = scene_start(robot, scene), trial_goal(scene, 68, 0)
+    planner = FloatingTCBiRRT(robot, scene, opts)
+    qp = planner._path_ik(q0, goal)
+    assert qp is not None and not planner.validity.is_valid(planner.carry._full(qp))
+    qc = self_motion_clear(planner.carry, planner.validity, qp, goal, pin.SE3.Identity(), np.random.default_rng(0))
+    assert qc is not None and float(np.max(np.abs(qc - qp))) > 0.05
+    full = planner.carry._full(qc)
+    for a in ("A", "B"):   # both hands still at their grasps on the object at the goal (base frame)
+        hand = _hands(robot, full)[0 if a == "A" else 1]
+        assert np.linalg.norm(pin.log6((goal * scene.object.grasps[a]).actInv(hand)).vector) < 1e-8
+    dmin, _ = CollisionChecker(robot, scene).min_distance(full)
+    assert dmin >= 0.0
+    res = planner.plan(q0, goal, seed=68, time_limit=20.0)
+    _judge(robot, scene, res)
+    assert np.linalg.norm(goal.actInv(planner.object_in_base(res.joints[-1])).translation) < 1e-8
 
 
 def test_start_elsewhere_in_the_world(robot):
@@ -195,7 +263,7 @@ def test_zero_momentum_ik_with_the_attitude_held(robot):
 
 
 def test_limited_step_respects_limits_and_solves_the_free_joints():
-    from optplan.planners.floating_tcbirrt import limited_step
+    from optplan.planners.floating_reach import limited_step
 
     rng = np.random.default_rng(3)
     J = rng.normal(size=(6, 9))

@@ -115,13 +115,15 @@ def generated_case(robot, base_scene, rng: np.random.Generator):
 
 
 def run_trial(robot, scene, q0: np.ndarray, goal: pin.SE3, seed: int, time_limit: float, frame: str,
-              planners: tuple[str, ...] = ("tcbirrt", "carry")) -> dict:
-    """Each of ``planners`` on one query, and the goal's reachability."""
+              planners: tuple[str, ...] = ("tcbirrt", "carry"), restore: bool = False) -> dict:
+    """Each of ``planners`` on one query, and the goal's reachability. ``restore``: ``tcbirrt`` ends
+    with the base at its initial attitude (``FloatingTreeOptions.restore_attitude``); the row then
+    has the plan's final attitude error [rad]."""
     from ..planners.floating_carry import FloatingCarryOptions, FloatingCarryPlanner
-    from ..planners.floating_tcbirrt import FloatingTCBiRRT
+    from ..planners.floating_tcbirrt import FloatingTCBiRRT, FloatingTreeOptions
 
     opts = FloatingCarryOptions(target_frame=frame)
-    tcb = FloatingTCBiRRT(robot, scene, opts)
+    tcb = FloatingTCBiRRT(robot, scene, opts, FloatingTreeOptions(restore_attitude=restore))
     row: dict = {"seed": seed}
     for name, planner in (("tcbirrt", tcb), ("carry", FloatingCarryPlanner(robot, scene, opts))):
         if name not in planners:
@@ -131,7 +133,9 @@ def run_trial(robot, scene, q0: np.ndarray, goal: pin.SE3, seed: int, time_limit
         cpu = time.process_time() - c0
         row[name] = {"status": res.status.value, "cpu_s": cpu, "ok": bool(res.success and cpu <= time_limit),
                      "waypoints": len(res.joints), "corrections": res.corrections, "message": res.message[:300],
-                     **({"stats": dict(tcb.stats)} if name == "tcbirrt" else {})}
+                     **({"stats": dict(tcb.stats)} if name == "tcbirrt" else {}),
+                     "final_attitude_rad": float(np.linalg.norm(pin.log3(res.final_base.rotation))),
+                     "goal_error": list(res.goal_error)}
     if frame == "world" and "tcbirrt" in row and not row["tcbirrt"]["ok"] and tcb.first_arrival is not None:
         row["tcbirrt"]["arrival"] = arrival_diagnosis(tcb, goal, q0, seed)
     if frame == "world":
@@ -158,6 +162,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds per query [s]")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--planners", default="tcbirrt,carry", help="comma-separated: tcbirrt, carry")
+    ap.add_argument("--restore", action="store_true",
+                    help="tcbirrt ends with the base at its initial attitude (world goals)")
     ap.add_argument("--out", required=True, help="results (JSON lines), appended")
     a = ap.parse_args(argv)
     planners = tuple(p for p in a.planners.split(",") if p)
@@ -172,7 +178,7 @@ def main(argv: list[str] | None = None) -> None:
             q0 = scene_start(robot, scene)
             for i in range(a.first_trial, a.first_trial + a.trials):
                 row = run_trial(robot, scene, q0, trial_goal(scene, i, a.seed), a.seed + i, a.time_limit, frame,
-                                planners)
+                                planners, a.restore)
                 f.write(json.dumps({"case": name, "trial": i, **row}) + "\n")
                 f.flush()
         rng = np.random.default_rng(a.seed)
@@ -183,7 +189,7 @@ def main(argv: list[str] | None = None) -> None:
             if case is None:
                 continue
             scene, q0, goal = case
-            row = run_trial(robot, scene, q0, goal, a.seed + made, a.time_limit, "world", planners)
+            row = run_trial(robot, scene, q0, goal, a.seed + made, a.time_limit, "world", planners, a.restore)
             row["obstacles"] = len(scene.obstacles)
             f.write(json.dumps({"case": "generated", "trial": made, **row}) + "\n")
             f.flush()

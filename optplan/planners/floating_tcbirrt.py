@@ -27,11 +27,15 @@ base composed with the displacements along the path from the root:
   between the estimate and the real arrival pose: short closed-chain motions re-targeted from the
   drifted base correct it (as :class:`~optplan.planners.floating_carry.FloatingCarryPlanner` does).
   The correction's Newton steps keep the joints within their limits (:func:`limited_step`: a
-  joint at its limit is held there and the others re-solved). When the correction fails, the goal
-  tree is re-rooted with the real arrival pose as the new estimate (``max_reroots`` times) while
-  the start tree is kept: the zero-momentum IK first holds the base attitude at that arrival (else
-  its search drifts back toward the old root's attitude and the re-rooting only creeps), then
-  searches near it.
+  joint at its limit is held there and the others re-solved). When the correction fails because
+  the goal is out of reach at the arrival attitude, the path is STEERED: closed object loops
+  (:mod:`~optplan.planners.floating_steer`) turn the base to the nearest attitude at which the arms
+  hold the goal (:func:`~optplan.planners.floating_reach.nearest_held_attitude`), then the
+  correction lands it. When that fails too, the goal tree is re-rooted with the real arrival pose as
+  the new estimate (``max_reroots`` times) while the start tree is kept: the zero-momentum IK first
+  holds the base attitude at that arrival, then searches near it.
+* with ``restore_attitude`` the goal tree is rooted where the arms hold the goal with the base at
+  its INITIAL attitude and the joined path is steered back to that attitude.
 
 What an ``EXACT`` plan guarantees: the closed chain holds to the IK tolerance at every waypoint; the
 returned base poses are those of one integration from the start's base along the whole joint path
@@ -58,7 +62,9 @@ from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, PlanStatus
 from .floating_carry import FloatingCarryOptions, FloatingCarryPlan, FloatingCarryPlanner, integrate_edge
-from .floating_reach import zero_momentum_ik
+from .floating_reach import limited_step, nearest_held_attitude, self_motion_clear, zero_momentum_ik
+from .floating_steer import AttitudeSteerer, SteerOptions, SteerResult, left_multiply
+from .floating_tree import FloatingTree
 from .task_space import interpolate_task
 from .validity import ValidityChecker
 
@@ -104,10 +110,20 @@ class FloatingTreeOptions:
     correction_step_rad: float = 0.1
     #: the clock of the time limit: "cpu" (this process's CPU time) or "wall".
     clock: str = "cpu"
+    #: steer the base attitude (closed object loops) when a joined path arrives at an attitude from
+    #: which the correction cannot land the world goal.
+    steer_attitude: bool = True
+    #: with a world goal, end with the base at its INITIAL attitude: the goal tree is rooted where the
+    #: arms hold the object at the goal with that attitude, and the joined path is steered to it
+    #: (closed object loops) within ``restore_tol_rad``.
+    restore_attitude: bool = False
+    #: the restored attitude's tolerance [rad].
+    restore_tol_rad: float = 1e-7
 
     def __post_init__(self) -> None:
         for name in ("extend_m", "extend_rad", "sample_margin_m", "sample_angle_rad", "max_joint_step",
-                     "join_step_rad", "rotation_weight_m", "goal_seed_spread_rad", "correction_step_rad"):
+                     "join_step_rad", "rotation_weight_m", "goal_seed_spread_rad", "correction_step_rad",
+                     "restore_tol_rad"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise OptionError(f"FloatingTreeOptions.{name}: expected a positive finite number, got {v!r}")
@@ -121,88 +137,12 @@ class FloatingTreeOptions:
             raise OptionError(f"FloatingTreeOptions.clock: expected 'cpu' or 'wall', got {self.clock!r}")
 
 
-def limited_step(J: np.ndarray, e: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                 max_step: float, damping: float = 1e-6, centring: float = 0.1) -> np.ndarray:
-    """A joint step ``dq`` [rad] with ``J dq ≈ e`` that keeps ``q + dq`` within ``[lower, upper]``:
-    damped least squares (``damping``) on the free joints; a joint whose step would cross its limit
-    is moved to the limit and held there while the others are re-solved (active set, at most one
-    pass per joint); the redundancy left pulls the free joints toward the middle of their range
-    (null-space term, ``centring`` × the offset per step); scaled so that no joint moves more than
-    ``max_step`` [rad]. A plain Newton step clipped at a limit is another, inconsistent step: near a
-    limit it drives the arm into the singularity the limit makes."""
-    n = len(q)
-    free = np.ones(n, bool)
-    fixed = np.zeros(n)
-    mid = 0.5 * (lower + upper)
-    dq = np.zeros(n)
-    for _ in range(n):
-        if not free.any():
-            break
-        Jf = J[:, free]
-        A = Jf @ Jf.T + damping * np.eye(len(e))
-        pull = centring * (mid[free] - q[free])
-        step_f = Jf.T @ np.linalg.solve(A, e - J @ fixed) + pull - Jf.T @ np.linalg.solve(A, Jf @ pull)
-        dq = fixed.copy()
-        dq[free] = step_f
-        dq *= min(1.0, max_step / max(float(np.max(np.abs(dq))), 1e-12))
-        over = free & ((q + dq > upper) | (q + dq < lower))
-        if not over.any():
-            return dq
-        fixed[over] = np.clip(q + dq, lower, upper)[over] - q[over]
-        free &= ~over
-    return np.clip(q + dq, lower, upper) - q
-
-
-class FloatingTree:
-    """One tree: per node the joints [rad], the object's pose in the base frame, the base's world
-    pose (exact for the start tree, relative to the root's estimate for the goal tree) and the parent
-    index (−1 at a root; the goal tree may have several roots: joint solutions of the same goal pose)."""
-
-    def __init__(self, joints: np.ndarray, obj: pin.SE3, base: pin.SE3) -> None:
-        self.joints: list[np.ndarray] = [np.array(joints, float)]
-        self.objs: list[pin.SE3] = [obj]
-        self.bases: list[pin.SE3] = [base]
-        self.parent: list[int] = [-1]
-        self._p = [np.array(obj.translation)]
-        self._R = [np.array(obj.rotation)]
-
-    def __len__(self) -> int:
-        return len(self.joints)
-
-    @property
-    def roots(self) -> list[int]:
-        return [k for k, p in enumerate(self.parent) if p < 0]
-
-    def add(self, joints: np.ndarray, obj: pin.SE3, base: pin.SE3, parent: int) -> int:
-        """A node (``parent`` −1: another root)."""
-        self.joints.append(np.array(joints, float))
-        self.objs.append(obj)
-        self.bases.append(base)
-        self.parent.append(int(parent))
-        self._p.append(np.array(obj.translation))
-        self._R.append(np.array(obj.rotation))
-        return len(self.joints) - 1
-
-    def nearest(self, M: pin.SE3, w_rot: float) -> int:
-        """The node whose object pose is nearest ``M``: position distance + ``w_rot`` × rotation angle."""
-        P, R = np.asarray(self._p), np.asarray(self._R)
-        dp = np.linalg.norm(P - M.translation, axis=1)
-        c = np.clip((np.einsum("nij,ij->n", R, M.rotation) - 1.0) / 2.0, -1.0, 1.0)
-        return int(np.argmin(dp + w_rot * np.arccos(c)))
-
-    def path_to_root(self, k: int) -> list[int]:
-        out = [k]
-        while self.parent[out[-1]] >= 0:
-            out.append(self.parent[out[-1]])
-        return out
-
-
 class FloatingTCBiRRT:
     """Bidirectional closed-chain RRT with base drift (module docstring). ``options``: the shared
     steps, tolerances and goal frame (:class:`FloatingCarryOptions`); ``tree``: the trees' options."""
 
     def __init__(self, robot: RobotModel, scene: Scene, options: FloatingCarryOptions | None = None,
-                 tree: FloatingTreeOptions | None = None):
+                 tree: FloatingTreeOptions | None = None, steer: SteerOptions | None = None):
         if not robot.is_floating:
             raise ConfigurationError(f"FloatingTCBiRRT needs a free-floating robot; {robot.name!r} has a fixed base")
         self.carry = FloatingCarryPlanner(robot, scene, options)   # closed chain, corrections, results
@@ -211,6 +151,9 @@ class FloatingTCBiRRT:
         self.tree_options = tree or FloatingTreeOptions()
         self.arm_names = self.carry.arm_names
         self.validity = ValidityChecker(robot, scene)
+        #: the attitude steering (closed object loops) used when the world goal is out of reach at
+        #: the attitude a joined path arrives with
+        self.steerer = AttitudeSteerer(self.carry, self.validity, steer)
         self._kin = Kinematics(robot)
         self._data = robot.model.createData()
         #: statistics of the last query: nodes per tree, joins tried / rejected at re-integration, re-roots
@@ -218,6 +161,8 @@ class FloatingTCBiRRT:
         #: the last query's first join that reached the end of the goal tree with a world goal: its
         #: joints [rad] and real arrival base pose (before the drift correction), or None
         self.first_arrival: tuple[np.ndarray, pin.SE3] | None = None
+        self._restore = False
+        self._known: tuple[int, SteerResult] | None = None
 
     def object_in_base(self, joints: np.ndarray) -> pin.SE3:
         """The object's pose in the base frame (read from the first arm's hand)."""
@@ -328,15 +273,17 @@ class FloatingTCBiRRT:
     def _goal_joints(self, seed_joints: list[np.ndarray], target_b: pin.SE3, base: pin.SE3,
                      rng: np.random.Generator, deadline: Deadline, tries: int | None = None) -> np.ndarray | None:
         """A collision-free (base at ``base``) joint solution holding the object at ``target_b``:
-        path IK from the first of ``seed_joints`` (the same IK branch), IK from each of them, then
-        from ``tries`` (default ``goal_seeds``) random seeds around them."""
+        path IK from the first of ``seed_joints`` (the same IK branch), IK from each of them (when
+        such a solution collides, a collision-free one on its self-motion,
+        :func:`~optplan.planners.floating_reach.self_motion_clear`), then from ``tries`` (default
+        ``goal_seeds``) random seeds around them."""
         to, r = self.tree_options, self.robot
         seeds: list[np.ndarray | None] = [self._path_ik(seed_joints[0], target_b)] + list(seed_joints)
         base_seeds = [q for q in seeds if q is not None]
         for k in range(to.goal_seeds if tries is None else tries):
             s0 = base_seeds[k % len(base_seeds)]
             seeds.append(np.clip(s0 + rng.normal(0.0, to.goal_seed_spread_rad, r.nj), r.lower, r.upper))
-        for s in seeds:
+        for i, s in enumerate(seeds):
             if deadline.expired():
                 return None
             if s is None:
@@ -344,6 +291,10 @@ class FloatingTCBiRRT:
             q = self.carry.hold(s, target_b)
             if q is not None and self.validity.is_valid(self.carry._full(q, base)):
                 return q
+            if q is not None and i <= len(seed_joints):   # on the seeds' own IK branch: its self-motion
+                qc = self_motion_clear(self.carry, self.validity, q, target_b, base, rng)
+                if qc is not None:
+                    return qc
         return None
 
     def _sample(self, rng: np.random.Generator, a: pin.SE3, b: pin.SE3) -> pin.SE3:
@@ -368,7 +319,9 @@ class FloatingTCBiRRT:
         rng = np.random.default_rng(seed)
         self.first_arrival = None
         self.stats = {"iterations": 0, "nodes_start": 1, "nodes_goal": 0, "goal_roots": 0, "reached": 0,
-                      "joins": 0, "joins_rejected": 0, "corrections_failed": 0, "reroots": 0}
+                      "joins": 0, "joins_rejected": 0, "corrections_failed": 0, "reroots": 0,
+                      "steers": 0, "steers_landed": 0, "steer_loops": 0, "steer_no_target": 0, "steer_short": 0,
+                      "steer_rest_collides": 0, "steer_not_landed": 0}
         qp = self.carry.hold(q0, self.carry.object_in_base(q0))
         if qp is None or float(np.max(np.abs(qp - q0))) > 1e-3:
             return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
@@ -378,7 +331,16 @@ class FloatingTCBiRRT:
             return self.carry._result(PlanStatus.INVALID_START, [q0], [base0], float("nan"), t0, goal, 0,
                                       "start in collision")
         start = FloatingTree(q0, self.carry.object_in_base(q0), base0)
-        goal_tree = self._world_goal_tree(q0, goal, base0, rng, deadline) if self.options.target_frame == "world" else None
+        self._restore = to.restore_attitude and self.options.target_frame == "world"
+        if self._restore:   # the goal held with the base at its initial attitude, or no plan
+            goal_tree = self._world_goal_tree(q0, goal, base0, rng, deadline, attitude=base0, held_only=True)
+            if goal_tree is None:
+                return self.carry._result(PlanStatus.TIMEOUT if deadline.expired() else PlanStatus.INVALID_GOAL,
+                                          [q0], [base0], float("nan"), t0, goal, 0,
+                                          "the arms cannot hold the object at its world goal with the base at its "
+                                          "initial attitude (zero-momentum IK with the attitude held)")
+        else:
+            goal_tree = self._world_goal_tree(q0, goal, base0, rng, deadline) if self.options.target_frame == "world" else None
         if goal_tree is None:
             goal_tree = self._root_goal_tree(goal, base0, [q0], rng, deadline)
         if goal_tree is None:
@@ -412,7 +374,7 @@ class FloatingTCBiRRT:
                     out = self._finish(start, ks, goal_tree, kg, goal, base0, rng, deadline, t0)
                     if isinstance(out, FloatingCarryPlan):
                         return out
-                    if out == "reroot" and self.stats["reroots"] < to.max_reroots:
+                    if out == "reroot" and not self._restore and self.stats["reroots"] < to.max_reroots:
                         self.stats["reroots"] += 1
                         b_est = self._integrate_path(self._joint_path(start, ks, goal_tree, kg)[len(start.path_to_root(ks)) - 1:],
                                                      start.bases[ks])[1][-1]
@@ -434,7 +396,8 @@ class FloatingTCBiRRT:
                                   "world-goal corrections failed)")
 
     def _world_goal_tree(self, q0: np.ndarray, goal: pin.SE3, base0: pin.SE3, rng: np.random.Generator,
-                         deadline: Deadline, attitude: pin.SE3 | None = None, seeds: list[np.ndarray] | None = None) -> FloatingTree | None:
+                         deadline: Deadline, attitude: pin.SE3 | None = None, seeds: list[np.ndarray] | None = None,
+                         held_only: bool = False) -> FloatingTree | None:
         """The goal tree of a world goal rooted at a zero-momentum IK solution
         (:func:`~optplan.planners.floating_reach.zero_momentum_ik`: the centre of mass stays put, so
         the base's arrival POSITION is known for a given attitude; the attitude is searched near
@@ -453,7 +416,7 @@ class FloatingTCBiRRT:
             res = math.inf
             # after a join: first the attitude that join arrived with, held (else the search drifts
             # back toward the seed's attitude and the re-rooting creeps), then searched near it
-            for fix in ((True, False) if attitude is not None else (False,)):
+            for fix in ((True,) if held_only else (True, False) if attitude is not None else (False,)):
                 q, b_est, res = zero_momentum_ik(self.robot, self.carry.grasps, goal, trial, com, rng,
                                                  attitude=base0 if attitude is None else attitude, n_random=2,
                                                  fix_attitude=fix)
@@ -480,11 +443,24 @@ class FloatingTCBiRRT:
         back = [goal_tree.joints[i] for i in goal_tree.path_to_root(kg)]
         return fwd + back[1:]
 
-    def _integrate_path(self, joints: list[np.ndarray], base0: pin.SE3) -> tuple[np.ndarray, list[pin.SE3]]:
+    def _integrate_path(self, joints: list[np.ndarray], base0: pin.SE3,
+                        known: tuple[int, SteerResult] | None = None) -> tuple[np.ndarray, list[pin.SE3]]:
         """Every collision sample of the joint path (rows, base integrated from ``base0`` edge by
-        edge) and the base at each waypoint."""
+        edge) and the base at each waypoint. ``known = (k, steer)``: the waypoints after ``k`` are
+        the manoeuvre ``steer``, its samples and bases composed from the base at ``k``
+        (left-invariance: the same as integrating its edges, to rounding)."""
         rows, bases, base = [], [base0], base0
-        for qa, qb in zip(joints[:-1], joints[1:]):
+        i = 0
+        while i < len(joints) - 1:
+            if known is not None and i == known[0]:
+                s, to_here = known[1], base * known[1].start.inverse()
+                rows.append(left_multiply(s.rows, base))
+                bases += [to_here * b for b in s.bases]
+                base = bases[-1]
+                i += len(s.joints)
+                continue
+            qa, qb = joints[i], joints[i + 1]
+            i += 1
             n = max(1, math.ceil(float(np.max(np.abs(qb - qa))) / self.options.check_step_rad))
             Q = integrate_edge(self.robot, base, qa, qb, n)
             rows.append(Q[1:])
@@ -530,12 +506,66 @@ class FloatingTCBiRRT:
             bs.append(base)
         return None
 
+    def _steer(self, joints: list[np.ndarray], bases: list[pin.SE3], goal: pin.SE3, base0: pin.SE3, k_join: int,
+               rng: np.random.Generator, deadline: Deadline
+               ) -> tuple[list[np.ndarray], list[pin.SE3], tuple[list[np.ndarray], list[pin.SE3]]] | None:
+        """Attitude steering of a joined path whose arrival cannot land the world goal: an attitude
+        near the arrival's at which the goal can be held (:func:`nearest_held_attitude`), closed
+        object loops (:class:`~optplan.planners.floating_steer.AttitudeSteerer`) inserted at the
+        arrival, else at the join, else at the start, that turn the arrival to it (the rest of the
+        path moves the base by a displacement of its joints only), then the correction. Returns the
+        new joints, bases and the correction's waypoints, or None."""
+        self.stats["steers"] += 1
+        if self._restore:   # to the initial attitude, where the goal tree's root holds the goal
+            return self._steer_to(joints, bases, goal, base0.rotation, k_join, rng, deadline)
+        com = pin.centerOfMass(self.robot.model, self._data, self.carry._full(joints[0], base0))
+        tgt = nearest_held_attitude(self.robot, self.carry.grasps, goal, [joints[-1]], com, rng, bases[-1])
+        if tgt is None or deadline.expired():
+            self.stats["steer_no_target"] += 1
+            return None
+        return self._steer_to(joints, bases, goal, tgt[0], k_join, rng, deadline)
+
+    def _steer_to(self, joints: list[np.ndarray], bases: list[pin.SE3], goal: pin.SE3, R_t: np.ndarray, k_join: int,
+                  rng: np.random.Generator, deadline: Deadline
+                  ) -> tuple[list[np.ndarray], list[pin.SE3], tuple[list[np.ndarray], list[pin.SE3]]] | None:
+        """:meth:`_steer` to the world attitude ``R_t`` (3×3) at the path's end."""
+        o = self.options
+        tol = self.tree_options.restore_tol_rad if self._restore else None
+        for k in dict.fromkeys((len(joints) - 1, k_join, 0)):
+            wanted = bases[k].rotation.T @ R_t @ (bases[k].rotation.T @ bases[-1].rotation).T
+            s = self.steerer.steer(joints[k], bases[k], wanted, rng, deadline, tol_rad=tol)
+            if s is None or s.error_rad > (tol if tol is not None else 0.5 * float(np.linalg.norm(pin.log3(wanted)))):
+                self.stats["steer_short"] += 1
+                continue
+            rest = joints[k + 1:]
+            rows, tail = self._integrate_path([joints[k]] + rest, s.bases[-1])
+            if rest and self.validity.first_invalid(rows) >= 0:
+                self.stats["steer_rest_collides"] += 1
+                continue
+            new_j, new_b = joints[:k + 1] + s.joints + rest, bases[:k + 1] + s.bases + tail[1:]
+            if self._restore:
+                ep, er = self.carry._goal_error(new_j[-1], new_b[-1], goal)
+                got: tuple[list[np.ndarray], list[pin.SE3]] | None = (
+                    ([], []) if ep <= o.goal_tol_m and er <= o.goal_tol_rad else None)
+            else:
+                got = self._correct(new_j[-1], new_b[-1], goal, deadline)
+            if got is not None:
+                self._known = (k, s)
+                self.stats["steers_landed"] += 1
+                self.stats["steer_loops"] += s.loops
+                return new_j, new_b, got
+            self.stats["steer_not_landed"] += 1
+            if deadline.expired():
+                break
+        return None
+
     def _finish(self, start: FloatingTree, ks: int, goal_tree: FloatingTree, kg: int, goal: pin.SE3, base0: pin.SE3,
                 rng: np.random.Generator, deadline: Deadline, t0: float) -> FloatingCarryPlan | str:
         """A joined path: re-integrated from ``base0`` as a whole and re-checked, then (world goal)
         corrected for the drift. Returns the plan, ``"collides"`` or ``"reroot"``."""
         o = self.options
         self.stats["joins"] += 1
+        self._known = None
         joints = self._joint_path(start, ks, goal_tree, kg)
         fwd = list(reversed(start.path_to_root(ks)))
         # the start tree's part is exact already; the goal tree's part re-integrated from the join
@@ -548,13 +578,23 @@ class FloatingTCBiRRT:
         if o.target_frame == "world":
             if self.first_arrival is None:
                 self.first_arrival = (joints[-1].copy(), bases[-1].copy())
-            got = self._correct(joints[-1], bases[-1], goal, deadline)
+            got: tuple[list[np.ndarray], list[pin.SE3]] | None = None
+            if self._restore:   # already at the initial attitude (within its tolerance): nothing to steer
+                miss = float(np.linalg.norm(pin.log3(base0.rotation.T @ bases[-1].rotation)))
+                got = ([], []) if miss <= self.tree_options.restore_tol_rad else None
+            else:
+                got = self._correct(joints[-1], bases[-1], goal, deadline)
+            if got is None and (self.tree_options.steer_attitude or self._restore):
+                steered = self._steer(joints, bases, goal, base0, len(fwd) - 1, rng, deadline)
+                if steered is not None:
+                    joints, bases, got = steered
             if got is None:
                 self.stats["corrections_failed"] += 1
                 return "reroot"
             joints += got[0]
             bases += got[1]
-        rows, bases = self._integrate_path(joints, base0)   # one integration of the whole path, edge by edge
+        # one integration of the whole path, edge by edge (a steering manoeuvre composed)
+        rows, bases = self._integrate_path(joints, base0, self._known)
         dmin, _, _ = self.carry.checker.min_distance_along(np.vstack([self.carry._full(joints[0], base0), rows]))
         if dmin < 0.0:   # the boolean checks and the exact distances disagree: reject rather than return it
             self.stats["joins_rejected"] += 1

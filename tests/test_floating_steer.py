@@ -1,0 +1,126 @@
+"""Attitude steering of a free-floating base by closed loops of the held object
+(optplan.planners.floating_steer), judged independently: one simulate_base run along the whole
+joint path with another timing and finer RK4 steps gives the base, Pinocchio FK the closed chain,
+coal's exact distances the clearance."""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.collision.checker import CollisionChecker
+from optplan.errors import OptionError
+from optplan.floating_pipeline import options_for_scene, scene_start
+from optplan.model.floating import simulate_base
+from optplan.model.robot import RobotModel
+from optplan.planners.base import Deadline
+from optplan.planners.floating_reach import nearest_held_attitude, zero_momentum_ik
+from optplan.planners.floating_steer import AttitudeSteerer, SteerOptions, left_multiply
+from optplan.planners.floating_tcbirrt import FloatingTCBiRRT
+from optplan.scene import Scene
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return RobotModel.from_name("eba_ffsr")
+
+
+@pytest.fixture(scope="module")
+def truss(robot):
+    scene = Scene.load("floating_truss")
+    pl = FloatingTCBiRRT(robot, scene, options_for_scene(scene).planner)
+    q0 = scene_start(robot, scene)
+    return scene, pl.carry.hold(q0, pl.object_in_base(q0)), pl   # the witness onto the chain (1e-10)
+
+
+def _reintegrate(robot, joints, base0, per_edge=10):
+    """The joint path in one simulate_base run, each edge with the smoothstep timing."""
+    s = np.linspace(0.0, len(joints) - 1, (len(joints) - 1) * per_edge + 1)
+
+    def traj(t):
+        k = min(int(t), len(joints) - 2)
+        tau = t - k
+        d = joints[k + 1] - joints[k]
+        return joints[k] + (3 * tau**2 - 2 * tau**3) * d, (6 * tau - 6 * tau**2) * d
+
+    return s, simulate_base(robot, traj, s, base0=base0, substeps=2)
+
+
+def test_loops_turn_the_base_by_the_wanted_rotation(robot, truss):
+    scene, q0, pl = truss
+    base0 = pin.SE3(pin.rpy.rpyToMatrix(0.1, -0.2, 0.3), np.array([0.2, -0.1, 0.05]))
+    steer = AttitudeSteerer(pl.carry, pl.validity)
+    wanted = pin.exp3(np.array([0.0, 0.01, 0.03]))
+    res = steer.steer(q0, pin.SE3.Identity(), wanted, np.random.default_rng(3), Deadline(60.0, "cpu"))
+    assert res is not None and res.loops >= 2
+    assert res.error_rad <= steer.options.tol_rad
+    assert np.array_equal(res.joints[-1], q0)                       # the joints come back exactly
+    joints = [q0] + res.joints
+    s, sim = _reintegrate(robot, joints, pin.SE3.Identity())
+    R_end = sim.final_base.rotation
+    assert np.linalg.norm(pin.log3(R_end.T @ wanted)) <= steer.options.tol_rad + 1e-6
+    assert np.linalg.norm(pin.log3(R_end)) > 0.02                   # it really turned
+    for k in range(0, len(res.bases), 37):                           # the manoeuvre's bases = the integration
+        e = res.bases[k].actInv(pin.XYZQUATToSE3(sim.q[(k + 1) * 10, :7]))
+        assert np.linalg.norm(pin.log6(e).vector) < 1e-6
+    # the base position follows the centre of mass, which did not move
+    d = robot.model.createData()
+    c0 = pin.centerOfMass(robot.model, d, sim.q[0])
+    assert np.linalg.norm(pin.centerOfMass(robot.model, d, sim.q[-1]) - c0) < 1e-8
+    assert np.max(sim.momentum_residual) < 1e-8
+    ga, gb = scene.object.grasps["A"], scene.object.grasps["B"]
+    for q in sim.q[::10][::25]:                                      # closed chain at waypoints
+        pin.framesForwardKinematics(robot.model, d, q)
+        hA, hB = (d.oMf[robot.arm(a).ee_frame_id] for a in ("A", "B"))
+        rel = (hA * ga.inverse()).actInv(hB * gb.inverse())
+        assert np.linalg.norm(pin.log6(rel).vector) < 1e-8
+    dmin, _, _ = CollisionChecker(robot, scene).min_distance_along(sim.q[::2])   # the shipped truss, base from the origin
+    assert dmin >= 0.0
+    # from another base: the same manoeuvre composed by left-invariance (the samples moved by base0)
+    s2, sim2 = _reintegrate(robot, joints, base0)
+    e = (base0 * sim.final_base).actInv(sim2.final_base)
+    assert np.linalg.norm(pin.log6(e).vector) < 1e-8
+    assert len(res.rows) > len(res.joints)
+    moved = left_multiply(res.rows[-1:], base0)
+    assert np.linalg.norm(pin.log6(pin.XYZQUATToSE3(moved[0, :7]).actInv(sim2.final_base)).vector) < 1e-6
+
+
+def test_a_loop_backwards_undoes_it(robot, truss):
+    # driftless and reversible: the reversed joint loop moves the base by the inverse displacement
+    _, q0, pl = truss
+    steer = AttitudeSteerer(pl.carry, pl.validity)
+    rng = np.random.default_rng(0)
+    loop = next(lp for lp in (steer._loop(q0, rng) for _ in range(20)) if lp is not None)
+    _, fwd = _reintegrate(robot, loop.joints, pin.SE3.Identity())
+    _, back = _reintegrate(robot, loop.joints[::-1], pin.SE3.Identity())
+    assert np.linalg.norm(pin.log3(fwd.final_base.rotation)) > 1e-4
+    assert np.linalg.norm(pin.log6(fwd.final_base * back.final_base).vector) < 1e-8
+    assert np.linalg.norm(pin.log6(loop.D.actInv(fwd.final_base)).vector) < 1e-6
+
+
+def test_nearest_held_attitude_holds_the_goal(robot, truss):
+    scene, q0, pl = truss
+    d = robot.model.createData()
+    com = pin.centerOfMass(robot.model, d, pl.carry._full(q0))
+    goal = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, 0.25), scene.goal.translation + np.array([0.0, 0.1, 0.0]))
+    got = nearest_held_attitude(robot, pl.carry.grasps, goal, [q0], com, np.random.default_rng(0), pin.SE3.Identity())
+    assert got is not None
+    R, q = got
+    # at that attitude, with the base where the centre of mass puts it, both hands are at their grasps
+    q_full_id = pl.carry._full(q)
+    cb = pin.centerOfMass(robot.model, d, q_full_id)
+    base = pin.SE3(R, com - R @ cb)
+    pin.framesForwardKinematics(robot.model, d, pl.carry._full(q, base))
+    for a in ("A", "B"):
+        e = (goal * scene.object.grasps[a]).actInv(d.oMf[robot.arm(a).ee_frame_id])
+        assert np.linalg.norm(pin.log6(e).vector) < 1e-8
+    # the free solution's attitude is not nearer than this one by more than a step of the walk
+    _, bf, _ = zero_momentum_ik(robot, pl.carry.grasps, goal, [q0], com, np.random.default_rng(0), n_random=4)
+    assert np.linalg.norm(pin.log3(R)) <= np.linalg.norm(pin.log3(bf.rotation)) + 1e-9
+
+
+def test_steer_options_are_checked():
+    with pytest.raises(OptionError, match="loop_m"):
+        SteerOptions(loop_m=-0.1)
+    with pytest.raises(OptionError, match="max_rounds"):
+        SteerOptions(max_rounds=0)
