@@ -13,7 +13,8 @@ What it computes (the algorithm of :func:`optplan.planners.rrtconnect.rrt_connec
   ``base`` (one arm of a regrasp), or all joints (``dim = nq``);
 * samples are uniform in the box ``[lower, upper]`` from xoshiro256** (Blackman & Vigna) seeded by
   splitmix64 from one 64-bit seed (the Python side draws it from the planner's NumPy Generator);
-* nearest neighbour is a linear scan over a contiguous node array (squared Euclidean distance);
+* nearest neighbour is a linear scan over a contiguous node array (squared Euclidean distance), except
+  in a connection's steps after the first, where the node the previous step added is the nearest;
 * a configuration check tries the pair that collided last first (the same verdict);
 * an edge a → b is checked at ``n = max(1, ceil(max_j |b_j - a_j| / resolution))`` steps: the end b
   first, then the interior points ``a + (k/n)(b - a)`` in coarse-to-fine (bisection) order;
@@ -207,9 +208,10 @@ static int rrtc_edge(rrtc_ctx *c, const double *a, const double *b) {
 #define RRTC_ADVANCED 1
 #define RRTC_REACHED 2
 
-/* extend tree t toward target: RRTC_* and the new node's index in *inew (-1 when none); -1 on out of memory */
-static int rrtc_extend(rrtc_ctx *c, rrtc_tree *t, const double *target, double range, double *xnew, int *inew) {
-    int dim = c->dim, i = rrtc_nearest(t, target), res;
+/* extend tree t toward target from its nearest node (near: that node when known, -1: the linear scan finds
+   it): RRTC_* and the new node's index in *inew (-1 when none); -1 on out of memory */
+static int rrtc_extend(rrtc_ctx *c, rrtc_tree *t, const double *target, double range, double *xnew, int *inew, int near) {
+    int dim = c->dim, i = near >= 0 ? near : rrtc_nearest(t, target), res;
     const double *xn = t->X + (size_t)dim * i;
     double s = 0.0;
     for (int k = 0; k < dim; ++k) { double d = target[k] - xn[k]; s += d*d; }
@@ -289,12 +291,15 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
             if (ta.n + tb.n >= max_nodes) { status = 3; break; }
             it++;
             for (int k = 0; k < dim; ++k) xr[k] = lower[k] + (upper[k] - lower[k]) * rrtc_uniform(&rng);
-            int ia, ib, res = rrtc_extend(&c, A, xr, range, xnew, &ia);
+            int ia, ib = -1, res = rrtc_extend(&c, A, xr, range, xnew, &ia, -1);
             if (res < 0) { status = 4; break; }
             if (res == RRTC_TRAPPED) { rrtc_tree *w = A; A = B; B = w; a_is_start = !a_is_start; continue; }
             memcpy(target, A->X + (size_t)dim * ia, sizeof(double) * (size_t)dim);
+            /* connect: after an ADVANCED step the node just added is B's nearest to the target (it lies
+               range closer to it than the previous nearest, and every other node is at least as far as that
+               one), so the scan runs only for the first step: the same search, without a scan per step */
             for (;;) {
-                res = rrtc_extend(&c, B, target, range, xnew, &ib);
+                res = rrtc_extend(&c, B, target, range, xnew, &ib, ib);
                 if (res != RRTC_ADVANCED || rrtc_expired(&c)) break;
                 if (ta.n + tb.n >= max_nodes) break;
             }
