@@ -151,6 +151,18 @@ def test_witness_planner_names_are_checked():
             check_witness_planners(bad)
 
 
+def test_cbirrt2_witness_search_is_cbirrt2_with_certified_edges(tcb):
+    from optplan.bench.scene_witness import plan_witness, witness_planner
+    from optplan.planners import CBiRRT2
+
+    sc = Scene.load("hard_corridor")
+    pl = witness_planner(tcb, sc, "cbirrt2")
+    assert isinstance(pl, CBiRRT2) and pl.options.certified_edges
+    w, why = plan_witness(tcb, sc, 0, 1, time_limit=1e-3, planner="cbirrt2")
+    assert w is None and why is not None and why.startswith("witness search")
+
+
+@pytest.mark.slow
 def test_cbirrt2_witness_is_certified_independently(tcb, tmp_path):
     """A scene kept by the CBiRRT2 witness (another algorithm than the planner under test: joint-space
     trees, no regrasps) has a path whose held configurations close the chain (Pinocchio) and are free
