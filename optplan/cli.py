@@ -414,6 +414,10 @@ def build_parser() -> argparse.ArgumentParser:
                     default=30.0, metavar="S",
                     help="with --generated: CPU seconds [s] of the independent search for each scene's witness path "
                          "(a scene without a certified witness is redrawn; 0: no witness, object-only check)")
+    tb.add_argument("--witness", default="tcbirrt", metavar="PLANNERS",
+                    help="with --generated: comma-separated witness searches, tcbirrt (improved variant) and/or "
+                         "cbirrt2 (joint space, certified edges); each runs with --witness-time, a scene is kept "
+                         "when any certifies it, and the success is also reported per witness")
     _engine_args(tb)
     tb.set_defaults(func=_cmd_bench_tcbirrt)
 

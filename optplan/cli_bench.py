@@ -63,17 +63,28 @@ def _cmd_bench_tcbirrt(args) -> int:
 
         if not (args.witness_time >= 0 and args.witness_time < float("inf")):
             raise UsageError(f"--witness-time {args.witness_time!r}: expected CPU seconds >= 0")
+        from .bench.scene_witness import check_witness_planners
+
+        try:
+            wplanners = check_witness_planners(args.witness)
+        except OptplanError as exc:
+            raise UsageError(f"--witness {args.witness!r}: {exc}") from None
         rejected: list = []
         drawn = generate_scenes(RobotModel.from_name("tcbirrt_dual_arm"), args.generated, args.seed,
-                                witness_time=args.witness_time, rejections=rejected)
+                                witness_time=args.witness_time, rejections=rejected, witnesses=wplanners)
         out = str(Path(args.out) / "generated")
         scenes = write_scenes(drawn, Path(out) / "scenes")
         trials = 1
         print(f"{len(drawn)} generated scenes (seed {args.seed}) in {out}/scenes, one trial each; each kept "
-              f"with a certified witness path (search budget {args.witness_time:g} s CPU)" if args.witness_time > 0
+              f"with a certified witness path ({' or '.join(wplanners)}, search budget {args.witness_time:g} s CPU "
+              "each)" if args.witness_time > 0
               else f"{len(drawn)} generated scenes (seed {args.seed}) in {out}/scenes, one trial each; "
               "NO witness (--witness-time 0): some may be infeasible for the robot")
         print(rejection_summary(drawn, rejected))
+        certified = {p: g.certified_by for p, g in zip(scenes, drawn)}
+        if len(wplanners) > 1:
+            print("certified by: " + ", ".join(f"{w} {sum(w in g.certified_by for g in drawn)}" for w in wplanners)
+                  + f" of {len(drawn)}")
     planners = expand_planners([p for p in args.planners.split(",") if p.strip()])
     for p in planners or [""]:
         try:
@@ -104,7 +115,7 @@ def _cmd_bench_tcbirrt(args) -> int:
     if args.generated:
         from .bench.scenegen import family_summary
 
-        print(family_summary(rows))
+        print(family_summary(rows, certified))
     print(f"summary of {len(rows)} result lines ({out}/results.jsonl"
           f"{' and merged runs' if cfg.merge else ''}); run time {time.perf_counter() - t0:.1f} s (clock: {cfg.clock}); "
           f"figures {out}/success_curves.png, {out}/fig6_success_rate.png, {out}/time_distributions.png")

@@ -51,6 +51,7 @@ USER_ERRORS = [
     (["bench", "tcbirrt", "--jobs", "0"], "'0'"),
     (["bench", "tcbirrt", "--time-limit", "0"], "'0'"),
     (["bench", "tcbirrt", "--scene", "7"], "'7'"),
+    (["bench", "tcbirrt", "--generated", "2", "--witness", "rrt"], "'rrt'"),
     (["bench", "tcbirrt", "--planners", "nope"], "nope"),
     (["bench", "tcbirrt", "--planners", "tcbirrt:range"], "range"),
     (["bench", "tcbirrt", "--out", "{file}/sub"], "sub"),

@@ -131,3 +131,56 @@ def test_certify_rejects_a_path_through_an_obstacle(tcb):
     bad = dataclasses.replace(sc, obstacles=sc.obstacles + (block,))
     why, _ = certify_witness(tcb, bad, res)
     assert why is not None and "collision" in why
+
+
+def test_family_summary_per_witness():
+    rows = [{"planner": "p", "scene": "/d/gen_0_000_wall.toml", "success": True, "cpu_time_s": 0.5, "time_limit_s": 10},
+            {"planner": "p", "scene": "/d/gen_0_001_wall.toml", "success": False, "cpu_time_s": 10.0, "time_limit_s": 10}]
+    text = family_summary(rows, {"/d/gen_0_000_wall.toml": ("cbirrt2", "tcbirrt"), "/d/gen_0_001_wall.toml": ("tcbirrt",)})
+    rate = {(ln.split()[1], ln.split()[2]): ln.split()[3] for ln in text.splitlines()[1:]}
+    assert rate[("any", "wall")] == "1/2" and rate[("tcbirrt", "wall")] == "1/2" and rate[("cbirrt2", "wall")] == "1/1"
+
+
+def test_witness_planner_names_are_checked():
+    from optplan.bench.scene_witness import check_witness_planners
+    from optplan.errors import OptionError
+
+    assert check_witness_planners("cbirrt2, tcbirrt") == ("cbirrt2", "tcbirrt")
+    for bad in ("", "rrt", "tcbirrt,tcbirrt", ()):
+        with pytest.raises(OptionError, match="witness planners"):
+            check_witness_planners(bad)
+
+
+def test_cbirrt2_witness_search_is_cbirrt2_with_certified_edges(tcb):
+    from optplan.bench.scene_witness import plan_witness, witness_planner
+    from optplan.planners import CBiRRT2
+
+    sc = Scene.load("hard_corridor")
+    pl = witness_planner(tcb, sc, "cbirrt2")
+    assert isinstance(pl, CBiRRT2) and pl.options.certified_edges
+    w, why = plan_witness(tcb, sc, 0, 1, time_limit=1e-3, planner="cbirrt2")
+    assert w is None and why is not None and why.startswith("witness search")
+
+
+@pytest.mark.slow
+def test_cbirrt2_witness_is_certified_independently(tcb, tmp_path):
+    """A scene kept by the CBiRRT2 witness (another algorithm than the planner under test: joint-space
+    trees, no regrasps) has a path whose held configurations close the chain (Pinocchio) and are free
+    by exact coal; the witness records its planner and survives the round trip."""
+    from optplan.constraints.closed_chain import closure_error
+    from optplan.planners.validity import ValidityChecker
+    from optplan.trials import TrialGenerator
+
+    got = generate_scenes(tcb, 1, seed=5, families=("overhang",), witness_time=15, witnesses=("cbirrt2",))
+    assert len(got) == 1 and got[0].certified_by == ("cbirrt2",)
+    g, w = got[0], got[0].witness
+    assert w is not None and w.planner == "cbirrt2"
+    trial = TrialGenerator(tcb, g.scene).generate(0, 5)
+    assert np.allclose(w.path[0], trial.q_start) and np.allclose(w.path[-1], trial.q_goal)
+    assert w.constrained.all()                                   # CBiRRT2 never lets go of the object
+    ck, data = ValidityChecker(tcb, g.scene, kernel="coal"), tcb.model.createData()
+    for q in w.path:
+        assert max(closure_error(tcb, g.scene.object.grasps, q, data)) < 1e-3 and ck.is_valid(q)
+    write_scenes(got, tmp_path)
+    assert load_witness(tmp_path / f"{g.scene.name}.witness.npz").planner == "cbirrt2"
+    assert Scene.load(tmp_path / f"{g.scene.name}.toml").extra["certified_by"] == ["cbirrt2"]

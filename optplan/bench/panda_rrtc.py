@@ -141,12 +141,14 @@ def queries(robot: Any, kind: str, n: int, seed: int, kernel: str = "native") ->
 
 
 def run_optplan(robot: Any, sc: Scene, ck: Any, seed: int, *, native: bool, range_: float = 1.0,
-                resolution: float = 0.03, time_limit: float = 10.0, shortcut_iterations: int = 0) -> dict[str, Any]:
-    """One RRT-Connect query: CPU and wall time [s], iterations, nodes, status and path."""
+                resolution: float = 0.03, time_limit: float = 10.0, shortcut_iterations: int = 0,
+                sampler: str = "uniform") -> dict[str, Any]:
+    """One RRT-Connect query (``sampler``: :attr:`.RRTConnectOptions.sampler`): CPU and wall time [s],
+    iterations, nodes, status and path."""
     from ..planners import RRTConnect, RRTConnectOptions
 
     pl = RRTConnect(robot, sc, RRTConnectOptions(range=range_, resolution=resolution, native_search=native,
-                                                 shortcut_iterations=shortcut_iterations), checker=ck)
+                                                 shortcut_iterations=shortcut_iterations, sampler=sampler), checker=ck)
     t0, c0 = time.perf_counter(), time.process_time()
     res = pl.plan(START, GOAL, time_limit=time_limit, seed=seed)
     cpu, wall = time.process_time() - c0, time.perf_counter() - t0
@@ -173,6 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--range", type=float, default=1.0, help="largest extension [rad]")
     ap.add_argument("--resolution", type=float, default=0.03, help="edge check step [rad]")
     ap.add_argument("--time-limit", type=float, default=10.0, help="per query [s]")
+    ap.add_argument("--sampler", default="uniform", choices=("uniform", "halton"), help="the planners' sampler")
     ap.add_argument("--spheres-urdf", default=None,
                     help="plan with this Panda URDF's collision spheres instead of the vendor's capsules, e.g. VAMP's "
                          "resources/panda/panda_spherized.urdf (the robot VAMP checks)")
@@ -185,7 +188,8 @@ def main(argv: list[str] | None = None) -> int:
             order = ("native", "python") if k % 2 == 0 else ("python", "native")   # alternate
             for name in order:
                 rows[name].append(run_optplan(robot, sc, ck, args.seed + k, native=name == "native", range_=args.range,
-                                              resolution=args.resolution, time_limit=args.time_limit))
+                                              resolution=args.resolution, time_limit=args.time_limit,
+                                              sampler=args.sampler))
         s = {name: summary(r) for name, r in rows.items()}
         for name, v in s.items():
             print(f"{kind:6s} {name:7s} {v['success']}/{v['n']} solved  median {v['median_ms']:.3f} ms CPU per query, "

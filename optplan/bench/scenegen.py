@@ -48,7 +48,7 @@ import pinocchio as pin
 
 from ..errors import OptionError
 from ..scene import Obstacle, Scene
-from .scene_witness import WITNESS_TIME_LIMIT, Witness, plan_witness, save_witness
+from .scene_witness import WITNESS_TIME_LIMIT, Witness, check_witness_planners, plan_witness, save_witness
 
 __all__ = ["FAMILIES", "POOL", "GeneratedScene", "Rejection", "generate_scene", "generate_scenes", "feasibility",
            "scene_toml", "write_scenes", "family_summary", "rejection_summary"]
@@ -62,7 +62,8 @@ POOL = ("hard_bay", "hard_window", "hard_corridor", "hard_flip", "hard_truss", "
 @dataclass(frozen=True)
 class GeneratedScene:
     """A feasible draw: the scene, its family, the index of the draw, how many draws were rejected before
-    it, the CPU seconds [s] spent on it and its witness (None when drawn without one)."""
+    it, the CPU seconds [s] spent on it, its witness (None when drawn without one; the first certified
+    in the order of the witness planners) and the witness planners that certified it."""
 
     scene: Scene
     family: str
@@ -70,6 +71,7 @@ class GeneratedScene:
     rejected: int
     seconds: float
     witness: Witness | None = None
+    certified_by: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -310,17 +312,24 @@ def feasibility(robot: Any, scene: Scene, *, seed: int = 0, lead_time: float = 1
 def generate_scenes(robot: Any, n: int, seed: int, families: tuple[str, ...] = FAMILIES,
                     max_draws: int = 20, *, trial_seed: int | None = None,
                     witness_time: float = WITNESS_TIME_LIMIT,
-                    rejections: list[Rejection] | None = None) -> list[GeneratedScene]:
+                    rejections: list[Rejection] | None = None,
+                    witnesses: tuple[str, ...] | str = ("tcbirrt",)) -> list[GeneratedScene]:
     """``n`` feasible draws, the families in turn, from ``numpy.random.default_rng(seed)``; each family
     draw is redrawn up to ``max_draws`` times until it passes :func:`feasibility` and has a certified
     witness for trial 0 of base seed ``trial_seed`` (default ``seed``: the benchmark's query) found
-    within ``witness_time`` CPU seconds [s] (0: no witness, the object-only check alone); an index
-    whose every draw fails is skipped. Each rejected draw is appended to ``rejections``."""
+    within ``witness_time`` CPU seconds [s] per witness search (0: no witness, the object-only check
+    alone); an index whose every draw fails is skipped. Each rejected draw is appended to ``rejections``.
+
+    ``witnesses`` names the witness searches (:data:`.scene_witness.WITNESS_PLANNERS`, e.g.
+    ``("cbirrt2", "tcbirrt")``): every one runs on each draw, with the same witness seed, and a draw is
+    kept when any certifies it; :attr:`GeneratedScene.certified_by` lists which did. The random stream
+    of the draws does not depend on this choice."""
     for f in families:
         if f not in _BUILDERS:
             raise ValueError(f"scene family: expected one of {FAMILIES}, got {f!r}")
     if not (isinstance(witness_time, (int, float)) and math.isfinite(witness_time) and witness_time >= 0):
         raise OptionError(f"witness_time: expected a number of CPU seconds >= 0, got {witness_time!r}")
+    wplanners = check_witness_planners(witnesses)
     tseed = seed if trial_seed is None else trial_seed
     rng = np.random.default_rng(seed)
     out = []
@@ -331,11 +340,19 @@ def generate_scenes(robot: Any, n: int, seed: int, families: tuple[str, ...] = F
             sc = generate_scene(fam, rng, f"gen_{seed}_{i:03d}_{fam}", robot)
             why = feasibility(robot, sc, seed=int(rng.integers(2**31)))
             witness_seed = int(rng.integers(2**31))   # drawn always: the stream does not depend on the outcomes
-            w = None
+            w, by = None, []
             if why is None and witness_time > 0:
-                w, why = plan_witness(robot, sc, tseed, witness_seed, witness_time)
+                whys = []
+                for wp in wplanners:
+                    wk, why_k = plan_witness(robot, sc, tseed, witness_seed, witness_time, planner=wp)
+                    if wk is not None:
+                        w = wk if w is None else w
+                        by.append(wp)
+                    else:
+                        whys.append(why_k if len(wplanners) == 1 else f"{why_k} ({wp})")
+                why = None if by else "; ".join(str(x) for x in whys)
             if why is None:
-                out.append(GeneratedScene(sc, fam, i, k, time.process_time() - t0, w))
+                out.append(GeneratedScene(sc, fam, i, k, time.process_time() - t0, w, tuple(by)))
                 break
             if rejections is not None:
                 rejections.append(Rejection(fam, i, k, why))
@@ -411,14 +428,16 @@ def scene_toml(scene: Scene) -> str:
 
 
 def write_scenes(scenes: list[GeneratedScene], directory: str | Path) -> list[str]:
-    """Write each draw as ``directory/<name>.toml`` (its witness, if any, as ``<name>.witness.npz``);
-    the paths of the TOML files, in order."""
+    """Write each draw as ``directory/<name>.toml`` (its witness, if any, as ``<name>.witness.npz``; the
+    witness planners that certified it as ``certified_by`` in its ``[extra]``); the paths of the TOML
+    files, in order."""
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     paths = []
     for gs in scenes:
         p = d / f"{gs.scene.name}.toml"
-        p.write_text(scene_toml(gs.scene), encoding="utf-8")
+        sc = replace(gs.scene, extra={**gs.scene.extra, "certified_by": list(gs.certified_by)}) if gs.certified_by else gs.scene
+        p.write_text(scene_toml(sc), encoding="utf-8")
         if gs.witness is not None:
             save_witness(gs.witness, d / f"{gs.scene.name}.witness.npz")
         paths.append(str(p))
@@ -431,17 +450,22 @@ def family_of(scene: str) -> str:
     return stem.rsplit("_", 1)[-1] if stem.startswith("gen_") else "fixed"
 
 
-def family_summary(rows: list[dict[str, Any]]) -> str:
+def family_summary(rows: list[dict[str, Any]], certified_by: dict[str, tuple[str, ...]] | None = None) -> str:
     """Per planner and family: successes / queries and the median CPU seconds of all queries (a failed
-    query counts its time limit), then all families together."""
-    lines = [f"{'planner':34s} {'family':9s} {'success':>9s} {'rate':>5s} {'median CPU s':>13s}"]
+    query counts its time limit), then all families together. With ``certified_by`` (scene name → the
+    witness planners that certified it, :attr:`GeneratedScene.certified_by`) the same again over the
+    scenes each witness certified (column ``witness``; ``any``: every scene)."""
+    by = {Path(str(k)).stem: tuple(v) for k, v in (certified_by or {}).items()}
+    witnesses = ["any", *dict.fromkeys(w for v in by.values() for w in v)] if by else ["any"]
+    lines = [f"{'planner':34s} {'witness':8s} {'family':9s} {'success':>9s} {'rate':>5s} {'median CPU s':>13s}"]
     for pl in dict.fromkeys(r["planner"] for r in rows):
-        mine = [r for r in rows if r["planner"] == pl]
-        for fam in (*FAMILIES, "all"):
-            rr = [r for r in mine if fam == "all" or family_of(r["scene"]) == fam]
-            if not rr:
-                continue
-            ok = sum(bool(r["success"]) for r in rr)
-            cpu = [float(r["cpu_time_s"]) if r["success"] else float(r["time_limit_s"]) for r in rr]
-            lines.append(f"{pl:34s} {fam:9s} {ok:4d}/{len(rr):<4d} {ok / len(rr):5.2f} {np.median(cpu):13.3f}")
+        for wit in witnesses:
+            mine = [r for r in rows if r["planner"] == pl and (wit == "any" or wit in by.get(Path(str(r["scene"])).stem, ()))]
+            for fam in (*FAMILIES, "all"):
+                rr = [r for r in mine if fam == "all" or family_of(r["scene"]) == fam]
+                if not rr:
+                    continue
+                ok = sum(bool(r["success"]) for r in rr)
+                cpu = [float(r["cpu_time_s"]) if r["success"] else float(r["time_limit_s"]) for r in rr]
+                lines.append(f"{pl:34s} {wit:8s} {fam:9s} {ok:4d}/{len(rr):<4d} {ok / len(rr):5.2f} {np.median(cpu):13.3f}")
     return "\n".join(lines)

@@ -10,7 +10,9 @@ The setup, per query (the two planners alternate which goes first):
   extension [rad]);
 * VAMP's RRT-Connect with ``dynamic_domain`` and ``balance`` off (optplan's RRT-Connect has neither;
   ``--vamp-defaults`` keeps VAMP's own), its Halton sampler, no simplification; optplan's
-  :class:`~optplan.planners.rrtconnect.RRTConnect` with the native search, no shortcuts;
+  :class:`~optplan.planners.rrtconnect.RRTConnect` with the native search, no shortcuts, and by default
+  its Halton sampler too (``--sampler uniform``: independent uniform draws; optplan's Halton points are
+  shifted by a random vector per query, VAMP's sequence is fixed);
 * NOT the same robot model: VAMP's Panda is a set of spheres, optplan's the vendor's capsules; nor the
   same edge checks: VAMP checks an edge at 32 points per unit of joint-space distance, optplan at every
   ``resolution`` rad of the largest joint change. How many of VAMP's paths optplan's model (coal,
@@ -88,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--range", type=float, default=1.0, help="largest extension of both planners [rad]")
     ap.add_argument("--resolution", type=float, default=0.03, help="optplan's edge check step [rad]")
     ap.add_argument("--vamp-defaults", action="store_true", help="keep VAMP's dynamic domain and tree balancing")
+    ap.add_argument("--sampler", default="halton", choices=("uniform", "halton"),
+                    help="optplan's sampler (default halton: the same kind of sequence as VAMP's sampler)")
     ap.add_argument("--spheres-urdf", default=None,
                     help="plan with this Panda URDF's collision spheres instead of the vendor's capsules, e.g. VAMP's "
                          "resources/panda/panda_spherized.urdf (the robot VAMP checks)")
@@ -118,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
                     rows[name].append(run_vamp(vamp, env, range_=args.range, vamp_defaults=args.vamp_defaults))
                 else:
                     rows[name].append(run_optplan(robot, sc, ck, args.seed + k, native=True, range_=args.range,
-                                                  resolution=args.resolution))
+                                                  resolution=args.resolution, sampler=args.sampler))
             P = rows["vamp"][-1]["path"]
             if P is not None:
                 f = ValidityChecker(robot, sc, kernel="coal").validity("free")

@@ -23,7 +23,8 @@ from .validity import ValidityChecker, _bisection_fractions, _bisection_order
 if TYPE_CHECKING:
     from ..scene import Scene
 
-__all__ = ["RRTConnectOptions", "RRTConnect", "rrt_connect", "shortcut_path", "edge_is_valid", "joint_space_path"]
+__all__ = ["RRTConnectOptions", "RRTConnect", "rrt_connect", "shortcut_path", "edge_is_valid", "joint_space_path",
+           "SAMPLERS", "halton_point"]
 log = logging.getLogger(__name__)
 
 TRAPPED, ADVANCED, REACHED = 0, 1, 2
@@ -50,6 +51,10 @@ class RRTConnectOptions:
     #: of the compiled kernel when the checks are native (:mod:`optplan.planners.kernel.rrtc`); its random
     #: stream is its own, seeded from the planner's generator. False, or a coal checker: the Python search.
     native_search: bool = True
+    #: How the samples are drawn in the joint box: ``"uniform"`` (independent uniform draws) or ``"halton"``
+    #: (the Halton sequence shifted by one uniform random vector modulo 1, :func:`halton_point`: a
+    #: low-discrepancy sequence, each query its own; fewer iterations where a narrow region must be hit).
+    sampler: str = "uniform"
 
     def __post_init__(self) -> None:
         for name in ("range", "resolution"):
@@ -66,6 +71,31 @@ class RRTConnectOptions:
             raise ValueError(f"RRTConnectOptions.native_search: expected True or False, got {self.native_search!r}")
         if self.validity_kernel not in ("native", "coal"):
             raise ValueError(f"RRTConnectOptions.validity_kernel: expected 'native' or 'coal', got {self.validity_kernel!r}")
+        if self.sampler not in SAMPLERS:
+            raise ValueError(f"RRTConnectOptions.sampler: expected one of {SAMPLERS}, got {self.sampler!r}")
+
+
+#: the samplers of :attr:`RRTConnectOptions.sampler`
+SAMPLERS = ("uniform", "halton")
+_PRIMES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53, 59, 61, 67, 71, 73, 79, 83, 89, 97, 101, 103,
+           107, 109, 113, 127, 131, 137, 139, 149, 151, 157, 163, 167, 173)
+
+
+def halton_point(i: int, shift: np.ndarray) -> np.ndarray:
+    """Point ``i`` (>= 1) of the Halton sequence in ``len(shift)`` dimensions (coordinate k: the radical
+    inverse of ``i`` in the k-th prime base) plus ``shift`` modulo 1: a point of the unit cube [-]."""
+    if len(shift) > len(_PRIMES):
+        raise ValueError(f"halton_point: at most {len(_PRIMES)} dimensions, got {len(shift)}")
+    out = np.empty(len(shift))
+    for k, b in enumerate(_PRIMES[:len(shift)]):
+        f, r, j = 1.0, 0.0, i
+        while j > 0:
+            f /= b
+            r += f * (j % b)
+            j //= b
+        u = r + float(shift[k])
+        out[k] = u - 1.0 if u >= 1.0 else u
+    return out
 
 
 def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray], bool], resolution: float,
@@ -93,8 +123,10 @@ def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray],
 def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                 is_valid: Callable[[np.ndarray], bool], rng: np.random.Generator, deadline: Deadline, *,
                 range_: float = 1.0, resolution: float = 0.03, max_iterations: int = 0,
-                stats: dict[str, Any] | None = None, weights: np.ndarray | None = None) -> list[np.ndarray] | None:
-    """RRTConnect between two valid points of the box ``[lower, upper]``.
+                stats: dict[str, Any] | None = None, weights: np.ndarray | None = None,
+                sampler: str = "uniform") -> list[np.ndarray] | None:
+    """RRTConnect between two valid points of the box ``[lower, upper]``, its samples drawn by ``sampler``
+    (:attr:`RRTConnectOptions.sampler`).
 
     Returns the list of tree nodes from ``start`` to ``goal`` (consecutive nodes joined by valid
     straight edges, checked as :func:`edge_is_valid` with ``resolution`` and ``weights``) or None
@@ -111,6 +143,8 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
     ta, tb = Tree(start), Tree(goal)
     a_is_start = True
     it = 0
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    shift = rng.uniform(size=len(lower)) if sampler == "halton" else None
 
     def extend(tree: Tree, target: np.ndarray) -> tuple[int, int]:
         i = tree.nearest(target)
@@ -128,7 +162,7 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
     found = None
     while not deadline.expired() and (max_iterations <= 0 or it < max_iterations):
         it += 1
-        xr = rng.uniform(lower, upper)
+        xr = rng.uniform(lower, upper) if shift is None else lower + (upper - lower) * halton_point(it, shift)
         res, ia = extend(ta, xr)
         if res == TRAPPED:
             ta, tb, a_is_start = tb, ta, not a_is_start
@@ -185,7 +219,7 @@ def joint_space_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upp
 
         got = native_rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range,
                                  resolution=o.resolution, max_iterations=o.max_iterations,
-                                 shortcut_iterations=o.shortcut_iterations)
+                                 shortcut_iterations=o.shortcut_iterations, sampler=o.sampler)
         if got is not None:
             stats["search"] = "native"
             stats["iterations"] = stats.get("iterations", 0) + got.iterations
@@ -195,7 +229,7 @@ def joint_space_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upp
             return got.path
     stats["search"] = "python"
     path = rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range, resolution=o.resolution,
-                       max_iterations=o.max_iterations, stats=stats)
+                       max_iterations=o.max_iterations, stats=stats, sampler=o.sampler)
     if path is not None and o.shortcut_iterations:
         path = shortcut_path(path, validity, o.resolution, rng, o.shortcut_iterations)
     return path

@@ -184,7 +184,7 @@ def load_rrtc_library() -> Any:
     lib.rrtc_plan.restype = ctypes.c_int
     lib.rrtc_plan.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_int, _P, _P, _P, _P, _P, _P, ctypes.c_double,
                               ctypes.c_double, ctypes.c_longlong, ctypes.c_longlong, ctypes.c_int, ctypes.c_int,
-                              ctypes.c_double, ctypes.c_ulonglong, ctypes.POINTER(ctypes.POINTER(ctypes.c_double)),
+                              ctypes.c_double, ctypes.c_ulonglong, ctypes.c_int, ctypes.POINTER(ctypes.POINTER(ctypes.c_double)),
                               ctypes.POINTER(ctypes.c_int), _P]
     lib.rrtc_check_batch.restype = None
     lib.rrtc_check_batch.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_longlong, _P, _P]
@@ -218,11 +218,11 @@ def _clock(deadline: Deadline) -> tuple[int, float]:
 def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                        validity: Any, rng: np.random.Generator, deadline: Deadline, *, range_: float,
                        resolution: float, max_iterations: int = 0,
-                       shortcut_iterations: int = 0) -> NativeRRTCResult | None:
+                       shortcut_iterations: int = 0, sampler: str = "uniform") -> NativeRRTCResult | None:
     """RRT-Connect from ``start`` to ``goal`` in the box ``[lower, upper]`` and ``shortcut_iterations``
     random shortcuts, in one native call; ``range_`` [rad] is the largest extension, ``resolution`` [rad]
     the largest joint change between two checks of an edge, ``max_iterations`` the cap on samples (0:
-    the deadline only). ``validity`` must be a :class:`~optplan.planners.validity.ConfigValidity` of a
+    the deadline only), ``sampler`` ``"uniform"`` or ``"halton"`` (:class:`.RRTConnectOptions`). ``validity`` must be a :class:`~optplan.planners.validity.ConfigValidity` of a
     checker with the native backend, else None is returned (as when the library cannot be built).
     One 64-bit seed is drawn from ``rng``. The checker's ``n_checks`` grows by the configurations checked."""
     ck: Any = getattr(validity, "checker", None)   # a ConfigValidity (duck-typed: this layer does not import validity)
@@ -258,7 +258,7 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
     bp = _broad_phase(kern, nat.fixed_id)
     code = lib.rrtc_plan(kern._km_p, mask.ctypes.data, kern._pose_p, g, bp.pointer, dim, jidx.ctypes.data, base.ctypes.data,
                          *(a.ctypes.data for a in arrays), float(range_), float(resolution), int(max_iterations),
-                         MAX_NODES, int(shortcut_iterations), clock_kind, end, seed, ctypes.byref(out),
+                         MAX_NODES, int(shortcut_iterations), clock_kind, end, seed, int(sampler == "halton"), ctypes.byref(out),
                          ctypes.byref(n_out), stats.ctypes.data)
     ck.n_checks += int(stats[2])
     if code == -2:

@@ -12,8 +12,12 @@ What it computes (the algorithm of :func:`optplan.planners.rrtconnect.rrt_connec
 * the search space is ``dim`` joints (indices ``jidx`` into the configuration); the others stay at
   ``base`` (one arm of a regrasp), or all joints (``dim = nq``);
 * samples are uniform in the box ``[lower, upper]`` from xoshiro256** (Blackman & Vigna) seeded by
-  splitmix64 from one 64-bit seed (the Python side draws it from the planner's NumPy Generator);
-* nearest neighbour is a linear scan over a contiguous node array (squared Euclidean distance);
+  splitmix64 from one 64-bit seed (the Python side draws it from the planner's NumPy Generator), or
+  (``sampler`` 1) the Halton sequence (radical inverses in the first ``dim`` prime bases, point ``i`` at
+  iteration ``i``) shifted by one uniform random vector modulo 1 (a Cranley-Patterson rotation: each
+  query its own low-discrepancy sequence);
+* nearest neighbour is a linear scan over a contiguous node array (squared Euclidean distance), except
+  in a connection's steps after the first, where the node the previous step added is the nearest;
 * a configuration check tries the pair that collided last first (the same verdict);
 * an edge a → b is checked at ``n = max(1, ceil(max_j |b_j - a_j| / resolution))`` steps: the end b
   first, then the interior points ``a + (k/n)(b - a)`` in coarse-to-fine (bisection) order;
@@ -47,6 +51,16 @@ static unsigned long long rrtc_next(rrtc_rng *r) {   /* xoshiro256** */
     return out;
 }
 static double rrtc_uniform(rrtc_rng *r) { return (double)(rrtc_next(r) >> 11) * 0x1.0p-53; }
+
+/* the Halton sequence: coordinate k of point i is the radical inverse of i in the k-th prime base */
+#define RRTC_NPRIMES 40
+static const int rrtc_primes[RRTC_NPRIMES] = {2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53, 59, 61, 67,
+    71, 73, 79, 83, 89, 97, 101, 103, 107, 109, 113, 127, 131, 137, 139, 149, 151, 157, 163, 167, 173};
+static double rrtc_radical_inverse(int b, unsigned long long i) {
+    double f = 1.0, r = 0.0, inv = 1.0 / (double)b;
+    while (i > 0) { f *= inv; r += f * (double)(i % (unsigned long long)b); i /= (unsigned long long)b; }
+    return r;
+}
 
 typedef struct { int dim, n, cap; double *X; int *parent; } rrtc_tree;
 
@@ -207,9 +221,10 @@ static int rrtc_edge(rrtc_ctx *c, const double *a, const double *b) {
 #define RRTC_ADVANCED 1
 #define RRTC_REACHED 2
 
-/* extend tree t toward target: RRTC_* and the new node's index in *inew (-1 when none); -1 on out of memory */
-static int rrtc_extend(rrtc_ctx *c, rrtc_tree *t, const double *target, double range, double *xnew, int *inew) {
-    int dim = c->dim, i = rrtc_nearest(t, target), res;
+/* extend tree t toward target from its nearest node (near: that node when known, -1: the linear scan finds
+   it): RRTC_* and the new node's index in *inew (-1 when none); -1 on out of memory */
+static int rrtc_extend(rrtc_ctx *c, rrtc_tree *t, const double *target, double range, double *xnew, int *inew, int near) {
+    int dim = c->dim, i = near >= 0 ? near : rrtc_nearest(t, target), res;
     const double *xn = t->X + (size_t)dim * i;
     double s = 0.0;
     for (int k = 0; k < dim; ++k) { double d = target[k] - xn[k]; s += d*d; }
@@ -246,11 +261,12 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
               const rrtc_groups *grp, int dim, const int *jidx, const double *base, const double *start, const double *goal,
               const double *lower, const double *upper, double range, double resolution,
               long long max_iterations, long long max_nodes, int shortcut_iterations,
-              int clock_kind, double end_time, unsigned long long seed,
+              int clock_kind, double end_time, unsigned long long seed, int sampler,
               double **path_out, int *path_len, long long *stats) {
     *path_out = NULL; *path_len = 0;
     stats[0] = stats[1] = stats[2] = 0;
     if (m->nj > KMAXJ || m->ng > KMAXG || m->nq > KMAXJ || dim > KMAXJ) return -2;
+    if (sampler && dim > RRTC_NPRIMES) return -2;
     rrtc_ctx c;
     memset(&c, 0, sizeof c);
     c.m = m; c.active = active; c.opose = override_pose; c.og = override_g;
@@ -283,18 +299,27 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
         rrtc_tree *A = &ta, *B = &tb;
         int a_is_start = 1, fa = -1, fb = -1;
         long long it = 0;
+        double hshift[RRTC_NPRIMES];   /* sampler 1: the Halton points shifted by one uniform vector (mod 1) */
+        if (sampler) for (int k = 0; k < dim; ++k) hshift[k] = rrtc_uniform(&rng);
         status = 2;
         while (!rrtc_expired(&c)) {
             if (max_iterations > 0 && it >= max_iterations) { status = 1; break; }
             if (ta.n + tb.n >= max_nodes) { status = 3; break; }
             it++;
-            for (int k = 0; k < dim; ++k) xr[k] = lower[k] + (upper[k] - lower[k]) * rrtc_uniform(&rng);
-            int ia, ib, res = rrtc_extend(&c, A, xr, range, xnew, &ia);
+            for (int k = 0; k < dim; ++k) {
+                double u = sampler ? rrtc_radical_inverse(rrtc_primes[k], (unsigned long long)it) + hshift[k] : rrtc_uniform(&rng);
+                if (u >= 1.0) u -= 1.0;
+                xr[k] = lower[k] + (upper[k] - lower[k]) * u;
+            }
+            int ia, ib = -1, res = rrtc_extend(&c, A, xr, range, xnew, &ia, -1);
             if (res < 0) { status = 4; break; }
             if (res == RRTC_TRAPPED) { rrtc_tree *w = A; A = B; B = w; a_is_start = !a_is_start; continue; }
             memcpy(target, A->X + (size_t)dim * ia, sizeof(double) * (size_t)dim);
+            /* connect: after an ADVANCED step the node just added is B's nearest to the target (it lies
+               range closer to it than the previous nearest, and every other node is at least as far as that
+               one), so the scan runs only for the first step: the same search, without a scan per step */
             for (;;) {
-                res = rrtc_extend(&c, B, target, range, xnew, &ib);
+                res = rrtc_extend(&c, B, target, range, xnew, &ib, ib);
                 if (res != RRTC_ADVANCED || rrtc_expired(&c)) break;
                 if (ta.n + tb.n >= max_nodes) break;
             }
