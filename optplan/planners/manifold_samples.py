@@ -75,7 +75,7 @@ class ManifoldSampleSettings:
     #: ``region_walk_length`` steps of ``N(0, region_walk_sigma²)`` per joint, each projected and
     #: collision-checked (a failed step is retried from the same configuration). 0: the uniform / walk
     #: draws above only. Needs the scene's ``[extra] q_start`` / ``q_goal``.
-    region_fraction: float = 0.3
+    region_fraction: float = 0.0
     #: Per-joint standard deviation of one step of a region walk [rad].
     region_walk_sigma: float = 0.1
     #: Valid steps of one region walk before the next starts from a new start or goal pose [count].
