@@ -4,20 +4,28 @@
   scene's CVAE, decoded and projected onto the manifold (Newton-Raphson; the decoded configuration
   itself when the projection fails); extension, projection and edges are CBiRRT2's.
 * :class:`LCBiRRT` — a bidirectional RRT **in the latent space** (Park et al. 2024): trees of latent
-  vectors, each node also holding its configuration (decoded and projected). An extension steps
-  ``latent_step`` toward the target in the latent space; a step whose latent vector the validity
-  classifier rejects (``p(valid) < classifier_threshold``) ends it before any decoding — unless the
-  classifier also scores the step's parent, a verified node, below the threshold
-  (``classifier_trusts_verified``: there the classifier is known to be wrong, e.g. around a start whose
-  latent code lies where its training samples were mostly invalid); otherwise the
-  decoded configuration (anchored at the node's own configuration: ``decode(z) + q_i − decode(z_i)``,
-  ``anchored_decoding``) is projected, checked for collisions, and the joint-space edge from the
-  previous node is checked by the constrained local planner
-  (:func:`~optplan.planners.constrained_prm.constrained_edge`, every ``collision_step`` rad). The
-  trees alternate, as in CBiRRT; they are joined when a connect extension comes within
-  ``latent_step`` of the target node and the joint-space edge between the two configurations holds.
-  ``stats`` count the nodes of each tree (``start_tree_nodes``, ``goal_tree_nodes``), the classifier's
-  score of each root and the steps it refused (``classifier_rejects``) or was overruled on.
+  vectors, each node also holding its configuration. An extension steps ``latent_step`` toward the target
+  in the latent space; a step whose latent vector the validity classifier rejects
+  (``p(valid) < classifier_threshold``) ends it before any decoding — unless the classifier also scores the
+  step's parent, a verified node, below the threshold (``classifier_trusts_verified``: there the classifier
+  is known to be wrong, e.g. around a start whose latent code lies where its training samples were mostly
+  invalid). A step's configuration is ``project(decode(z))`` (projected, collision-checked), the same in
+  either tree, so two trees that reach the same latent vector hold the same configuration. From a decoded
+  node the joint-space edge to it is checked by the constrained local planner
+  (:func:`~optplan.planners.constrained_prm.constrained_edge`, every ``collision_step`` rad); from a node
+  whose configuration is not its decoding — the start, the goal (the encoder's code of a configuration
+  decodes only near it) or a jump node — it is reached by a **latent jump**: CBiRRT's constrained extension
+  in joint space (:meth:`LCBiRRT.connect_q`, steps of ``joint_step`` rad), whose intermediate configurations
+  join the tree with their encodings as latent vectors; where the step's own decoding is invalid there, the
+  jump aims at the extension target's decoding. The trees alternate, as in CBiRRT; they are **linked in
+  joint space**: when a connect extension reaches the other tree's new node in the latent space (or ends
+  within ``latent_step`` of it) by a constrained joint-space connect between the two configurations (empty
+  when both are decodings of the same vector), and otherwise when the new node's configuration is within
+  ``link_distance`` rad of the other tree's nearest configuration. ``stats`` count the nodes of each tree,
+  the classifier's score of each root, the steps it refused (``classifier_rejects``) or was overruled on,
+  latent jumps and jump nodes, and the link attempts (``link_attempts`` latent, ``q_link_attempts`` joint
+  space), their successes and the smallest joint-space gap tried (``link_gap_min``).
+  ``anchored_decoding`` restores the earlier per-tree decoding ``decode(z) + q_i − decode(z_i)``.
 * :class:`LCBiRRT` with ``lpo=True`` (name ``"lcbirrt-lpo"``) — plus local path optimisation in the
   latent space (Zhang et al. 2025): every ``lpo_interval`` nodes a tree gains, the newest node and its
   ``lpo_interval − 1`` ancestors (not the root) whose learned distance is below ``lpo_clearance``
@@ -50,7 +58,7 @@ from .latent_models import LatentModelSettings, load_or_train_classifier, load_o
 __all__ = ["LatentSamplingOptions", "LatentSampling", "LCBiRRTOptions", "LCBiRRT", "TRAINING_FIELDS"]
 
 #: option fields that select the trained models (forwarded to :class:`CVAESettings`)
-TRAINING_FIELDS = ("cvae_epochs", "n_data", "train_seed", "cache")
+TRAINING_FIELDS = ("cvae_epochs", "n_data", "train_seed", "cache", "data_region_fraction")
 
 
 def _check_training(cls: str, o: Any) -> None:
@@ -62,6 +70,8 @@ def _check_training(cls: str, o: Any) -> None:
         raise ValueError(f"{cls}.train_seed: expected an integer >= 0, got {o.train_seed!r}")
     if not isinstance(o.cache, bool):
         raise ValueError(f"{cls}.cache: expected True/False, got {o.cache!r}")
+    if not (isinstance(o.data_region_fraction, (int, float)) and 0 <= o.data_region_fraction <= 1):
+        raise ValueError(f"{cls}.data_region_fraction: expected a number in [0, 1], got {o.data_region_fraction!r}")
 
 
 @dataclass(frozen=True)
@@ -76,6 +86,9 @@ class LatentSamplingOptions(CBiRRT2Options):
     train_seed: int = 0
     #: Read / write the data and the weights from / to the on-disk cache [-].
     cache: bool = True
+    #: Share of the training data drawn by constrained random walks in the task's start and goal regions [-]
+    #: (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.region_fraction`; 0: as the paper).
+    data_region_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -83,7 +96,8 @@ class LatentSamplingOptions(CBiRRT2Options):
 
 
 def _cvae(robot: Any, scene: Any, o: Any, checker: ValidityChecker, kin: ClosedChainKinematics, progress: bool) -> Any:
-    s = CVAESettings(epochs=o.cvae_epochs, n_data=o.n_data, data_seed=o.train_seed, seed=o.train_seed)
+    s = CVAESettings(epochs=o.cvae_epochs, n_data=o.n_data, data_seed=o.train_seed, seed=o.train_seed,
+                     data_region_fraction=o.data_region_fraction)
     return load_or_train_cvae(robot, scene, s, checker=checker, kinematics=kin, cache=o.cache, progress=progress)
 
 
@@ -164,6 +178,9 @@ class LCBiRRTOptions:
     train_seed: int = 0
     #: Read / write the data and the weights from / to the on-disk cache [-].
     cache: bool = True
+    #: Share of the training data drawn by constrained random walks in the task's start and goal regions [-]
+    #: (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.region_fraction`; 0: as the paper).
+    data_region_fraction: float = 0.0
     #: Valid and invalid latent samples (classifier), free and colliding configurations (distance), each [count]
     #: (the paper: 1000).
     n_model_samples: int = 1000
@@ -271,7 +288,8 @@ class LCBiRRT(Planner):
         self.cvae = _cvae(robot, scene, o, self.checker, self.kin, progress)
         ms = LatentModelSettings(n_classifier=o.n_model_samples, classifier_epochs=o.classifier_epochs,
                                  n_distance=o.n_model_samples, distance_epochs=o.distance_epochs, seed=o.train_seed)
-        data = manifold_samples(robot, scene, ManifoldSampleSettings(n=o.n_data, seed=o.train_seed),
+        data = manifold_samples(robot, scene, ManifoldSampleSettings(n=o.n_data, seed=o.train_seed,
+                                                                     region_fraction=o.data_region_fraction),
                                 checker=self.checker, kinematics=self.kin, cache=o.cache)
         self.classifier = load_or_train_classifier(robot, scene, self.cvae, self.kin, self.checker, ms,
                                                    samples=data.Q, cache=o.cache, progress=progress)
