@@ -240,6 +240,8 @@ def _region_walks(robot: RobotModel, scene: Scene, kin: ClosedChainKinematics, c
     if not nominal:
         raise ConfigurationError(f"scene {scene.name!r}: region_fraction > 0 needs the scene's [extra] q_start / "
                                  f"q_goal and its start / goal object poses")
+    assert scene.object is not None   # checked by the caller
+    grasps = scene.object.grasps
     dp = float(ex.get("trial_position_range", 0.2))
     da = float(ex.get("trial_angle_range", 0.5))
     data = robot.model.createData()
@@ -252,13 +254,14 @@ def _region_walks(robot: RobotModel, scene: Scene, kin: ClosedChainKinematics, c
         if draws >= n * s.max_draws_factor:
             raise ConfigurationError(f"scene {scene.name!r}: only {len(out)} of {n} region-walk configurations "
                                      f"in {draws} draws (max_draws_factor={s.max_draws_factor})")
-        M0, q = nominal[k % len(nominal)]
+        M0, q0 = nominal[k % len(nominal)]
         k += 1
+        q: np.ndarray | None = q0
         M = M0 * pin.SE3(rpy_to_matrix(*rng.uniform(-da, da, 3)), rng.uniform(-dp, dp, 3))
         for R, p in interpolate_task(M0.rotation, M0.translation, M.rotation, M.translation, 10):
-            q, _ = kin.ik(q, R, p, ik)
             if q is None:
                 break
+            q, _ = kin.ik(q, R, p, ik)
         if q is None or not ck.in_limits(q) or not ck.is_valid(q):
             draws += 1   # a start or goal pose without a valid configuration counts as a failed draw
             fails += 1
@@ -268,7 +271,7 @@ def _region_walks(robot: RobotModel, scene: Scene, kin: ClosedChainKinematics, c
             draws += 1
             x = project_onto_chain(kin, np.clip(q + rng.normal(0.0, s.region_walk_sigma, robot.nq), lo, hi), lo, hi,
                                    s.tolerance, s.max_projection_iterations)
-            if x is None or max(closure_error(robot, scene.object.grasps, x, data)) > 10 * s.tolerance:
+            if x is None or max(closure_error(robot, grasps, x, data)) > 10 * s.tolerance:
                 fails += 1
                 continue
             if not ck.is_valid(x):

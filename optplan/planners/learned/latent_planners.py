@@ -487,6 +487,9 @@ class LCBiRRT(Planner):
             ta, tb, a_is_start = tb, ta, not a_is_start
         if not math.isfinite(st["link_gap_min"]):
             st["link_gap_min"] = None
+        # how far apart the trees stayed: the closest pair of nodes in joint space [rad] and in the latent space
+        st["tree_gap_q"] = min(float(np.linalg.norm(np.asarray(tb.Q) - q, axis=1).min()) for q in ta.Q)
+        st["tree_gap_z"] = min(float(np.linalg.norm(np.asarray(tb.Z) - z, axis=1).min()) for z in ta.Z)
         st["nodes"] = len(ta.Z) + len(tb.Z)
         t_start, t_goal = (ta, tb) if a_is_start else (tb, ta)
         st["start_tree_nodes"], st["goal_tree_nodes"] = len(t_start.Z), len(t_goal.Z)
