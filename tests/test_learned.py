@@ -251,3 +251,46 @@ def test_learned_planners_respect_the_cpu_time_limit(tcb, scene1, kin, checker, 
     res = pl.plan(t.q_start, t.q_goal, time_limit=0.4, seed=3, clock="cpu")
     assert res.status in (PlanStatus.TIMEOUT, PlanStatus.EXACT), res.message
     assert gaps and max(gaps) < 0.1 and res.stats["cpu_time_s"] <= 0.5, (max(gaps), res.stats)
+
+
+def test_lcbirrt_trees_meeting_in_latent_space_meet_in_joint_space(tcb, scene1, kin, checker, cache, query):
+    """A latent node's configuration is project(decode(z)) in either tree, so where the start tree and the goal
+    tree reach the same latent vector they hold the same configuration and the link is that point; with a
+    per-tree decoding offset (anchored_decoding) the two configurations differ."""
+    import dataclasses
+
+    from optplan.planners.base import Deadline
+    from optplan.planners.learned.latent_planners import _LatentTree
+
+    qs, qg = query
+    pl = make_planner("lcbirrt", tcb, scene1, checker=checker, kinematics=kin, **{**SMALL_LC, "max_extend_steps": 60})
+    rng = np.random.default_rng(0)
+    zs, zg = pl.cvae.encode(qs), pl.cvae.encode(qg)
+    results = {}
+    for anchored in (False, True):
+        pl.options = dataclasses.replace(pl.options, anchored_decoding=anchored)
+        for _ in range(40):   # a shared target between the two roots whose decoding is valid
+            z = 0.5 * (zs + zg) + 0.3 * rng.standard_normal(zs.shape)
+            st = dict.fromkeys(("decodes", "projection_failures", "collisions"), 0)
+            if pl._config(z, z, pl.cvae.decode(z), st) is not None:
+                break
+        st = {k: 0 for k in ("decodes", "projection_failures", "collisions", "classifier_rejects", "classifier_overruled",
+                             "edge_checks", "latent_jumps", "jump_nodes", "link_attempts", "q_link_attempts",
+                             "link_successes", "lpo_nodes", "lpo_moves")}
+        st["link_gap_min"] = np.inf
+        ta, tb = _LatentTree(zs, qs, 1.0), _LatentTree(zg, qg, 1.0)
+        dl = Deadline(60.0, "cpu")
+        ra, ia = pl.extend(ta, 0, z, st, dl)
+        rb, ib = pl.extend(tb, 0, z, st, dl)
+        assert ra and rb, st
+        assert np.array_equal(ta.Z[ia], tb.Z[ib])
+        results[anchored] = float(np.linalg.norm(ta.Q[ia] - tb.Q[ib]))
+        if not anchored:
+            assert ta.decoded[ia] and tb.decoded[ib]
+            link = pl._link(ta, ia, tb, ib, st, dl)
+            assert link is not None and link[2] == [] and st["link_successes"] == 1
+            for tree, i in ((ta, ia), (tb, ib)):   # every branch point on the chain and valid
+                for q in tree.branch(i):
+                    assert max(closure_error(tcb, scene1.object.grasps, q)) <= 1e-6 and checker.is_valid(q)
+    assert results[False] == 0.0
+    assert results[True] > 1e-3, results

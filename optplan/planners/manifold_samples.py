@@ -68,6 +68,18 @@ class ManifoldSampleSettings:
     #: polished by IK, as the benchmark's trials do) when the scene has them, so that the set covers the
     #: arm branches the tasks are posed on (they are not put in the set themselves) [-].
     seed_from_scene: bool = True
+    #: Share of the set drawn by constrained random walks in the task's start and goal regions [-]: each walk
+    #: starts from the scene's nominal start or goal object pose perturbed as the benchmark's trials are
+    #: (position uniform in ±``[extra] trial_position_range``, default 0.2 m, RPY in ±``trial_angle_range``,
+    #: default 0.5 rad, per axis), solved by IK continuation from the nominal configuration, and takes
+    #: ``region_walk_length`` steps of ``N(0, region_walk_sigma²)`` per joint, each projected and
+    #: collision-checked (a failed step is retried from the same configuration). 0: the uniform / walk
+    #: draws above only. Needs the scene's ``[extra] q_start`` / ``q_goal``.
+    region_fraction: float = 0.0
+    #: Per-joint standard deviation of one step of a region walk [rad].
+    region_walk_sigma: float = 0.1
+    #: Valid steps of one region walk before the next starts from a new start or goal pose [count].
+    region_walk_length: int = 50
 
     def __post_init__(self) -> None:
         for name in ("n", "max_projection_iterations", "max_draws_factor"):
@@ -83,6 +95,16 @@ class ManifoldSampleSettings:
                              f"got {self.walk_probability!r}")
         if not (isinstance(self.walk_sigma, (int, float)) and math.isfinite(self.walk_sigma) and self.walk_sigma > 0):
             raise ValueError(f"ManifoldSampleSettings.walk_sigma: expected a positive number [rad], got {self.walk_sigma!r}")
+        if not (isinstance(self.region_fraction, (int, float)) and 0 <= self.region_fraction <= 1):
+            raise ValueError(f"ManifoldSampleSettings.region_fraction: expected a number in [0, 1], "
+                             f"got {self.region_fraction!r}")
+        if not (isinstance(self.region_walk_sigma, (int, float)) and math.isfinite(self.region_walk_sigma)
+                and self.region_walk_sigma > 0):
+            raise ValueError(f"ManifoldSampleSettings.region_walk_sigma: expected a positive number [rad], "
+                             f"got {self.region_walk_sigma!r}")
+        v = self.region_walk_length
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise ValueError(f"ManifoldSampleSettings.region_walk_length: expected an integer >= 1, got {v!r}")
         if not isinstance(self.seed_from_scene, bool):
             raise ValueError(f"ManifoldSampleSettings.seed_from_scene: expected True/False, got {self.seed_from_scene!r}")
         if not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin) and self.margin >= 0):
@@ -162,6 +184,13 @@ def generate_manifold_samples(robot: RobotModel, scene: Scene, settings: Manifol
         from tqdm import tqdm
 
         bar = tqdm(total=s.n, desc=f"on-manifold samples {scene.name}", unit="q")
+    n_region = int(round(s.region_fraction * s.n))
+    if n_region:
+        region = _region_walks(robot, scene, kin, ck, s, n_region, np.random.default_rng([s.seed, 1]))
+        out.extend(region.pop("Q"))
+        draws, fails, coll = region["draws"], region["fails"], region["coll"]
+        if bar is not None:
+            bar.update(len(out))
     try:
         while len(out) < s.n:
             if draws >= s.n * s.max_draws_factor:
@@ -192,6 +221,68 @@ def generate_manifold_samples(robot: RobotModel, scene: Scene, settings: Manifol
     return ManifoldSamples(np.array(out).reshape(-1, robot.nq), draws, fails, coll, time.perf_counter() - t0)
 
 
+def _region_walks(robot: RobotModel, scene: Scene, kin: ClosedChainKinematics, ck: ValidityChecker,
+                  s: ManifoldSampleSettings, n: int, rng: np.random.Generator) -> dict[str, Any]:
+    """``n`` configurations of constrained random walks in the start and goal regions (``region_fraction``)."""
+    import pinocchio as pin
+
+    from ..constraints.closed_chain import IKSettings
+    from ..geometry.spatial import rpy_to_matrix
+    from .task_space import interpolate_task
+
+    ex = scene.extra or {}
+    nominal = []
+    for key, M in (("q_start", scene.start), ("q_goal", scene.goal)):
+        if key in ex and M is not None:
+            q0 = np.asarray(ex[key], float) * (math.pi / 180.0 if ex.get("q_unit", "rad") == "deg" else 1.0)
+            if q0.shape == (robot.nq,):
+                nominal.append((M, q0))
+    if not nominal:
+        raise ConfigurationError(f"scene {scene.name!r}: region_fraction > 0 needs the scene's [extra] q_start / "
+                                 f"q_goal and its start / goal object poses")
+    assert scene.object is not None   # checked by the caller
+    grasps = scene.object.grasps
+    dp = float(ex.get("trial_position_range", 0.2))
+    da = float(ex.get("trial_angle_range", 0.5))
+    data = robot.model.createData()
+    lo, hi = robot.lower, robot.upper
+    ik = IKSettings()
+    out: list[np.ndarray] = []
+    draws = fails = coll = 0
+    k = 0
+    while len(out) < n:
+        if draws >= n * s.max_draws_factor:
+            raise ConfigurationError(f"scene {scene.name!r}: only {len(out)} of {n} region-walk configurations "
+                                     f"in {draws} draws (max_draws_factor={s.max_draws_factor})")
+        M0, q0 = nominal[k % len(nominal)]
+        k += 1
+        q: np.ndarray | None = q0
+        M = M0 * pin.SE3(rpy_to_matrix(*rng.uniform(-da, da, 3)), rng.uniform(-dp, dp, 3))
+        for R, p in interpolate_task(M0.rotation, M0.translation, M.rotation, M.translation, 10):
+            if q is None:
+                break
+            q, _ = kin.ik(q, R, p, ik)
+        if q is None or not ck.in_limits(q) or not ck.is_valid(q):
+            draws += 1   # a start or goal pose without a valid configuration counts as a failed draw
+            fails += 1
+            continue
+        steps = 0
+        while steps < s.region_walk_length and len(out) < n and draws < n * s.max_draws_factor:
+            draws += 1
+            x = project_onto_chain(kin, np.clip(q + rng.normal(0.0, s.region_walk_sigma, robot.nq), lo, hi), lo, hi,
+                                   s.tolerance, s.max_projection_iterations)
+            if x is None or max(closure_error(robot, grasps, x, data)) > 10 * s.tolerance:
+                fails += 1
+                continue
+            if not ck.is_valid(x):
+                coll += 1
+                continue
+            out.append(x)
+            q = x
+            steps += 1
+    return {"Q": out, "draws": draws, "fails": fails, "coll": coll}
+
+
 def _scene_seeds(robot: RobotModel, scene: Scene, kin: ClosedChainKinematics, ck: ValidityChecker) -> list[np.ndarray]:
     """The scene's nominal start / goal configurations, IK-polished onto the nominal object poses, that are valid."""
     from ..constraints.closed_chain import IKSettings
@@ -218,7 +309,11 @@ def manifold_samples(robot: RobotModel, scene: Scene, settings: ManifoldSampleSe
     from ..codegen import cache_dir
 
     s = settings or ManifoldSampleSettings()
-    digest = scene_digest(robot, scene, {"manifold_samples": asdict(s), "version": 3})
+    d = asdict(s)
+    if not s.region_fraction:   # the sets drawn before region walks existed keep their cache files
+        for k in ("region_fraction", "region_walk_sigma", "region_walk_length"):
+            d.pop(k)
+    digest = scene_digest(robot, scene, {"manifold_samples": d, "version": 3})
     path = cache_dir() / "manifold" / f"{scene.name}_{digest}.npz"
     if cache and path.exists():
         try:

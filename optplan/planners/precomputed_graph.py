@@ -36,6 +36,9 @@ class PrecomputedGraphOptions(CBiRRT2Options):
     samples_seed: int = 0
     #: Read / write the offline set from / to the on-disk cache [-].
     cache: bool = True
+    #: Share of the set drawn by constrained random walks in the task's start and goal regions [-]
+    #: (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.region_fraction`; 0: as before).
+    region_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -61,7 +64,8 @@ class PrecomputedGraph(CBiRRT2):
         super().__init__(robot, scene, options, checker=checker, kinematics=kinematics)
         o = options
         settings = ManifoldSampleSettings(n=o.n_samples, seed=o.samples_seed, tolerance=o.tolerance,
-                                          max_projection_iterations=o.max_projection_iterations, margin=o.margin)
+                                          max_projection_iterations=o.max_projection_iterations, margin=o.margin,
+                                          region_fraction=o.region_fraction)
         self.samples: ManifoldSamples = manifold_samples(robot, scene, settings, checker=self.checker,
                                                          kinematics=self.kin, cache=o.cache, progress=progress)
 

@@ -55,6 +55,9 @@ class CVAESettings:
     n_data: int = 10_000
     #: Seed of the data set [-].
     data_seed: int = 0
+    #: Share of the data drawn by constrained random walks in the task's start and goal regions [-]
+    #: (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.region_fraction`; 0: as the paper).
+    data_region_fraction: float = 0.0
     #: Tangent-space augmentation: one projected, valid neighbour per configuration [-].
     augment: bool = True
     #: Standard deviation of the tangent-space step of the augmentation [rad].
@@ -97,6 +100,9 @@ class CVAESettings:
             raise ValueError(f"CVAESettings.val_fraction: expected a number in (0, 0.5), got {self.val_fraction!r}")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"CVAESettings.activation: expected one of {', '.join(ACTIVATIONS)}, got {self.activation!r}")
+        if not (isinstance(self.data_region_fraction, (int, float)) and 0 <= self.data_region_fraction <= 1):
+            raise ValueError(f"CVAESettings.data_region_fraction: expected a number in [0, 1], "
+                             f"got {self.data_region_fraction!r}")
         if not isinstance(self.augment, bool):
             raise ValueError(f"CVAESettings.augment: expected True/False, got {self.augment!r}")
 
@@ -294,9 +300,13 @@ def load_or_train_cvae(robot: RobotModel, scene: Scene, settings: CVAESettings |
         raise ConfigurationError(f"scene {scene.name!r}: the CVAE needs an [object] grasped by two arms")
     kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
     ck = checker or ValidityChecker(robot, scene)
-    data = manifold_samples(robot, scene, ManifoldSampleSettings(n=s.n_data, seed=s.data_seed), checker=ck,
+    data = manifold_samples(robot, scene, ManifoldSampleSettings(n=s.n_data, seed=s.data_seed,
+                                                                 region_fraction=s.data_region_fraction), checker=ck,
                             kinematics=kin, cache=cache, progress=progress)
-    digest = scene_digest(robot, scene, {"cvae": asdict(s), "data": _array_digest(data.Q), "version": 1})
+    d = asdict(s)
+    if not s.data_region_fraction:   # models trained before the option existed keep their cache files
+        d.pop("data_region_fraction")
+    digest = scene_digest(robot, scene, {"cvae": d, "data": _array_digest(data.Q), "version": 1})
     path = cache_dir() / "learned" / f"{scene.name}_cvae_{digest}.npz"
     if cache and path.exists():
         try:

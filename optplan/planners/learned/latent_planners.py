@@ -4,20 +4,28 @@
   scene's CVAE, decoded and projected onto the manifold (Newton-Raphson; the decoded configuration
   itself when the projection fails); extension, projection and edges are CBiRRT2's.
 * :class:`LCBiRRT` — a bidirectional RRT **in the latent space** (Park et al. 2024): trees of latent
-  vectors, each node also holding its configuration (decoded and projected). An extension steps
-  ``latent_step`` toward the target in the latent space; a step whose latent vector the validity
-  classifier rejects (``p(valid) < classifier_threshold``) ends it before any decoding — unless the
-  classifier also scores the step's parent, a verified node, below the threshold
-  (``classifier_trusts_verified``: there the classifier is known to be wrong, e.g. around a start whose
-  latent code lies where its training samples were mostly invalid); otherwise the
-  decoded configuration (anchored at the node's own configuration: ``decode(z) + q_i − decode(z_i)``,
-  ``anchored_decoding``) is projected, checked for collisions, and the joint-space edge from the
-  previous node is checked by the constrained local planner
-  (:func:`~optplan.planners.constrained_prm.constrained_edge`, every ``collision_step`` rad). The
-  trees alternate, as in CBiRRT; they are joined when a connect extension comes within
-  ``latent_step`` of the target node and the joint-space edge between the two configurations holds.
-  ``stats`` count the nodes of each tree (``start_tree_nodes``, ``goal_tree_nodes``), the classifier's
-  score of each root and the steps it refused (``classifier_rejects``) or was overruled on.
+  vectors, each node also holding its configuration. An extension steps ``latent_step`` toward the target
+  in the latent space; a step whose latent vector the validity classifier rejects
+  (``p(valid) < classifier_threshold``) ends it before any decoding — unless the classifier also scores the
+  step's parent, a verified node, below the threshold (``classifier_trusts_verified``: there the classifier
+  is known to be wrong, e.g. around a start whose latent code lies where its training samples were mostly
+  invalid). A step's configuration is ``project(decode(z))`` (projected, collision-checked), the same in
+  either tree, so two trees that reach the same latent vector hold the same configuration. From a decoded
+  node the joint-space edge to it is checked by the constrained local planner
+  (:func:`~optplan.planners.constrained_prm.constrained_edge`, every ``collision_step`` rad); from a node
+  whose configuration is not its decoding — the start, the goal (the encoder's code of a configuration
+  decodes only near it) or a jump node — it is reached by a **latent jump**: CBiRRT's constrained extension
+  in joint space (:meth:`LCBiRRT.connect_q`, steps of ``joint_step`` rad), whose intermediate configurations
+  join the tree with their encodings as latent vectors; where the step's own decoding is invalid there, the
+  jump aims at the extension target's decoding. The trees alternate, as in CBiRRT; they are **linked in
+  joint space**: when a connect extension reaches the other tree's new node in the latent space (or ends
+  within ``latent_step`` of it) by a constrained joint-space connect between the two configurations (empty
+  when both are decodings of the same vector), and otherwise when the new node's configuration is within
+  ``link_distance`` rad of the other tree's nearest configuration. ``stats`` count the nodes of each tree,
+  the classifier's score of each root, the steps it refused (``classifier_rejects``) or was overruled on,
+  latent jumps and jump nodes, and the link attempts (``link_attempts`` latent, ``q_link_attempts`` joint
+  space), their successes and the smallest joint-space gap tried (``link_gap_min``).
+  ``anchored_decoding`` restores the earlier per-tree decoding ``decode(z) + q_i − decode(z_i)``.
 * :class:`LCBiRRT` with ``lpo=True`` (name ``"lcbirrt-lpo"``) — plus local path optimisation in the
   latent space (Zhang et al. 2025): every ``lpo_interval`` nodes a tree gains, the newest node and its
   ``lpo_interval − 1`` ancestors (not the root) whose learned distance is below ``lpo_clearance``
@@ -50,7 +58,7 @@ from .latent_models import LatentModelSettings, load_or_train_classifier, load_o
 __all__ = ["LatentSamplingOptions", "LatentSampling", "LCBiRRTOptions", "LCBiRRT", "TRAINING_FIELDS"]
 
 #: option fields that select the trained models (forwarded to :class:`CVAESettings`)
-TRAINING_FIELDS = ("cvae_epochs", "n_data", "train_seed", "cache")
+TRAINING_FIELDS = ("cvae_epochs", "n_data", "train_seed", "cache", "data_region_fraction")
 
 
 def _check_training(cls: str, o: Any) -> None:
@@ -62,6 +70,8 @@ def _check_training(cls: str, o: Any) -> None:
         raise ValueError(f"{cls}.train_seed: expected an integer >= 0, got {o.train_seed!r}")
     if not isinstance(o.cache, bool):
         raise ValueError(f"{cls}.cache: expected True/False, got {o.cache!r}")
+    if not (isinstance(o.data_region_fraction, (int, float)) and 0 <= o.data_region_fraction <= 1):
+        raise ValueError(f"{cls}.data_region_fraction: expected a number in [0, 1], got {o.data_region_fraction!r}")
 
 
 @dataclass(frozen=True)
@@ -76,6 +86,9 @@ class LatentSamplingOptions(CBiRRT2Options):
     train_seed: int = 0
     #: Read / write the data and the weights from / to the on-disk cache [-].
     cache: bool = True
+    #: Share of the training data drawn by constrained random walks in the task's start and goal regions [-]
+    #: (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.region_fraction`; 0: as the paper).
+    data_region_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -83,7 +96,8 @@ class LatentSamplingOptions(CBiRRT2Options):
 
 
 def _cvae(robot: Any, scene: Any, o: Any, checker: ValidityChecker, kin: ClosedChainKinematics, progress: bool) -> Any:
-    s = CVAESettings(epochs=o.cvae_epochs, n_data=o.n_data, data_seed=o.train_seed, seed=o.train_seed)
+    s = CVAESettings(epochs=o.cvae_epochs, n_data=o.n_data, data_seed=o.train_seed, seed=o.train_seed,
+                     data_region_fraction=o.data_region_fraction)
     return load_or_train_cvae(robot, scene, s, checker=checker, kinematics=kin, cache=o.cache, progress=progress)
 
 
@@ -131,10 +145,17 @@ class LCBiRRTOptions:
     sample_sigma: float = 1.0
     #: Projection tolerance on the closed-chain residual, max |h| [m or rad per row].
     tolerance: float = 1e-7
-    #: Decode a step as ``decode(z) + (q_parent − decode(z_parent))`` before the projection, so that the tree
-    #: follows the decoder's local motion from the node's actual configuration (a start or goal the CVAE
-    #: reconstructs poorly is still left smoothly); off: ``decode(z)`` alone [-].
-    anchored_decoding: bool = True
+    #: Decode a step as ``decode(z) + (q_parent − decode(z_parent))`` before the projection (each tree then
+    #: carries its own decoding offset, so two trees that share a latent vector hold different configurations
+    #: and rarely join); off (the default): every latent node's configuration is ``project(decode(z))``, the
+    #: same in both trees, and nodes away from the decoder's image are reached by joint-space jumps [-].
+    anchored_decoding: bool = False
+    #: Step of the constrained joint-space extension that leaves a start, goal or jump node for the decoded
+    #: configuration of a latent step, and that links the trees in joint space [rad].
+    joint_step: float = 0.6
+    #: The trees are linked in joint space when a new node comes this close to the other tree's nearest
+    #: configuration (a constrained joint-space connect to it is then tried) [rad].
+    link_distance: float = 1.0
     #: Local path optimisation in the latent space (LCBiRRT-LPO) [-].
     lpo: bool = False
     #: γ: gradient-ascent step on the learned distance [latent units per m] (the paper: 0.8).
@@ -157,6 +178,9 @@ class LCBiRRTOptions:
     train_seed: int = 0
     #: Read / write the data and the weights from / to the on-disk cache [-].
     cache: bool = True
+    #: Share of the training data drawn by constrained random walks in the task's start and goal regions [-]
+    #: (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.region_fraction`; 0: as the paper).
+    data_region_fraction: float = 0.0
     #: Valid and invalid latent samples (classifier), free and colliding configurations (distance), each [count]
     #: (the paper: 1000).
     n_model_samples: int = 1000
@@ -170,7 +194,8 @@ class LCBiRRTOptions:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"LCBiRRTOptions.{name}: expected an integer >= 1, got {v!r}")
-        for name in ("latent_step", "collision_step", "sample_sigma", "tolerance", "lpo_gamma"):
+        for name in ("latent_step", "collision_step", "sample_sigma", "tolerance", "lpo_gamma", "joint_step",
+                     "link_distance"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"LCBiRRTOptions.{name}: expected a positive number, got {v!r}")
@@ -198,19 +223,26 @@ class LCBiRRTOptions:
 
 
 class _LatentTree:
+    """Nodes with a latent vector ``Z``, a projected, valid configuration ``Q`` and ``decoded``: whether
+    ``Q`` is ``project(decode(Z))`` (a latent node, the same configuration in either tree) or a configuration
+    reached in joint space whose ``Z`` is its encoding (a root or a jump node)."""
+
     def __init__(self, z: np.ndarray, q: np.ndarray, p: float) -> None:
         self.Z = [z]
         self.Q = [q]
         self.P = [p]   # the classifier's probability of each node's latent vector
+        self.decoded = [False]
         self.parent = [-1]
         self.children: list[list[int]] = [[]]
         self.edge: list[list[np.ndarray]] = [[]]   # projected points from the parent to the node
         self.added = 0
 
-    def add(self, z: np.ndarray, q: np.ndarray, p: float, parent: int, edge: list[np.ndarray]) -> int:
+    def add(self, z: np.ndarray, q: np.ndarray, p: float, parent: int, edge: list[np.ndarray],
+            decoded: bool = True) -> int:
         self.Z.append(z)
         self.Q.append(q)
         self.P.append(p)
+        self.decoded.append(decoded)
         self.parent.append(parent)
         self.children.append([])
         self.children[parent].append(len(self.Z) - 1)
@@ -220,6 +252,11 @@ class _LatentTree:
 
     def nearest(self, z: np.ndarray) -> int:
         return int(np.argmin(np.linalg.norm(np.asarray(self.Z) - z, axis=1)))
+
+    def nearest_q(self, q: np.ndarray) -> tuple[int, float]:
+        d = np.linalg.norm(np.asarray(self.Q) - q, axis=1)
+        j = int(np.argmin(d))
+        return j, float(d[j])
 
     def branch(self, i: int) -> list[np.ndarray]:
         """Configurations from the root to node ``i``, edge points included."""
@@ -251,7 +288,8 @@ class LCBiRRT(Planner):
         self.cvae = _cvae(robot, scene, o, self.checker, self.kin, progress)
         ms = LatentModelSettings(n_classifier=o.n_model_samples, classifier_epochs=o.classifier_epochs,
                                  n_distance=o.n_model_samples, distance_epochs=o.distance_epochs, seed=o.train_seed)
-        data = manifold_samples(robot, scene, ManifoldSampleSettings(n=o.n_data, seed=o.train_seed),
+        data = manifold_samples(robot, scene, ManifoldSampleSettings(n=o.n_data, seed=o.train_seed,
+                                                                     region_fraction=o.data_region_fraction),
                                 checker=self.checker, kinematics=self.kin, cache=o.cache)
         self.classifier = load_or_train_classifier(robot, scene, self.cvae, self.kin, self.checker, ms,
                                                    samples=data.Q, cache=o.cache, progress=progress)
@@ -264,8 +302,8 @@ class LCBiRRT(Planner):
 
     # ------------------------------------------------------------------ helpers
     def _config(self, z: np.ndarray, z_near: np.ndarray, near: np.ndarray, st: dict[str, Any]) -> np.ndarray | None:
-        """Decoded (anchored at ``near``, the configuration of ``z_near``, see
-        :attr:`LCBiRRTOptions.anchored_decoding`), projected, valid configuration of ``z`` (None otherwise)."""
+        """Projected, valid configuration of ``z`` (None otherwise): ``project(decode(z))``, or with
+        :attr:`LCBiRRTOptions.anchored_decoding` the decoding anchored at ``near``, the configuration of ``z_near``."""
         lo, hi = self.robot.lower, self.robot.upper
         st["decodes"] += 1
         q = self.cvae.decode(z)
@@ -287,9 +325,38 @@ class LCBiRRT(Planner):
                                                                    o.tolerance), self.checker.is_valid,
                                 o.collision_step, deadline)
 
+    def connect_q(self, tree: _LatentTree, i: int, target: np.ndarray, st: dict[str, Any], deadline: Deadline,
+                  ) -> tuple[list[np.ndarray] | None, int]:
+        """Constrained joint-space extension from node ``i`` toward the configuration ``target`` (on the
+        manifold and valid), CBiRRT's: steps of at most ``joint_step`` rad, each projected, collision-checked
+        and joined by the constrained local planner; every intermediate configuration becomes a node of
+        ``tree`` (latent vector: its encoding). ``(edge points to target, last node)`` when it arrives,
+        ``(None, last node)`` when it is trapped (a failed projection or edge, no progress, the deadline)."""
+        o = self.options
+        lo, hi = self.robot.lower, self.robot.upper
+        for _ in range(o.max_extend_steps + int(np.linalg.norm(target - tree.Q[i]) / o.joint_step)):
+            if deadline.expired():
+                break
+            d = target - tree.Q[i]
+            dist = float(np.linalg.norm(d))
+            if dist <= o.joint_step:
+                return self._edge(tree.Q[i], target, st, deadline), i
+            x = project_onto_chain(self.kin, tree.Q[i] + (o.joint_step / dist) * d, lo, hi, o.tolerance)
+            if x is None or float(np.linalg.norm(target - x)) >= dist - 1e-9 or not self.checker.is_valid(x):
+                break
+            edge = self._edge(tree.Q[i], x, st, deadline)
+            if edge is None:
+                break
+            z = self.cvae.encode(x)
+            st["jump_nodes"] += 1
+            i = tree.add(z, x, float(self.classifier.probability(z)), i, edge, decoded=False)
+        return None, i
+
     def extend(self, tree: _LatentTree, i: int, z_target: np.ndarray, st: dict[str, Any], deadline: Deadline,
                ) -> tuple[bool, int]:
-        """Step from node ``i`` toward ``z_target``; ``(reached, last node)``."""
+        """Step from node ``i`` toward ``z_target`` in the latent space; ``(reached, last node)``. A step's
+        configuration is ``project(decode(z))``; from a node whose configuration is not its decoding (a root,
+        a jump node) it is reached by :meth:`connect_q` (a latent jump), from a decoded node by one edge."""
         o = self.options
         for _ in range(o.max_extend_steps):
             if deadline.expired():
@@ -307,17 +374,49 @@ class LCBiRRT(Planner):
                     st["classifier_rejects"] += 1
                     break
             q = self._config(z, tree.Z[i], tree.Q[i], st)
+            if q is None and not (o.anchored_decoding or tree.decoded[i]):
+                # around a root or jump node the decoder's image may be invalid (the CVAE reconstructs the node
+                # poorly): jump in joint space toward the target's own decoded configuration instead
+                if dist > o.latent_step:
+                    z, p = z_target.copy(), float(self.classifier.probability(z_target))
+                    q = self._config(z, tree.Z[i], tree.Q[i], st)
+                    dist = 0.0
             if q is None:
                 break
-            edge = self._edge(tree.Q[i], q, st, deadline)
+            if o.anchored_decoding or tree.decoded[i]:
+                edge = self._edge(tree.Q[i], q, st, deadline)
+            else:
+                st["latent_jumps"] += 1
+                edge, i = self.connect_q(tree, i, q, st, deadline)
             if edge is None:
                 break
-            i = tree.add(z, q, p, i, edge)
+            i = tree.add(z, q, p, i, edge, decoded=not o.anchored_decoding)
             if o.lpo and tree.added % o.lpo_interval == 0:
                 self._optimize(tree, i, st, deadline)
             if dist <= o.latent_step:
                 return True, i
         return False, i
+
+    def _link(self, ta: _LatentTree, i_a: int, tb: _LatentTree, i_b: int | None, st: dict[str, Any],
+              deadline: Deadline) -> tuple[int, int, list[np.ndarray]] | None:
+        """Join node ``i_a`` of ``ta`` to ``tb`` in joint space: to ``i_b`` (the connect extension's node, which
+        reached ``ta.Z[i_a]`` in the latent space) when given, else to ``tb``'s nearest configuration when it is
+        within ``link_distance`` rad; a constrained joint-space connect from ``tb`` to ``ta.Q[i_a]``.
+        ``(i_a, last node of tb, edge points from ta.Q[i_a] to it)`` or None."""
+        if i_b is None:
+            i_b, gap = tb.nearest_q(ta.Q[i_a])
+            if gap > self.options.link_distance:
+                return None
+            st["q_link_attempts"] += 1
+        else:
+            gap = float(np.linalg.norm(tb.Q[i_b] - ta.Q[i_a]))
+            st["link_attempts"] += 1
+        st["link_gap_min"] = min(st["link_gap_min"], gap)
+        edge, j = self.connect_q(tb, i_b, ta.Q[i_a], st, deadline)
+        if edge is None:
+            return None
+        st["link_successes"] += 1
+        return i_a, j, edge[::-1]
 
     def _optimize(self, tree: _LatentTree, i: int, st: dict[str, Any], deadline: Deadline) -> None:
         """Local path optimisation of node ``i`` and its ancestors (module docstring)."""
@@ -342,6 +441,7 @@ class LCBiRRT(Planner):
                     if par is not None and all(k is not None for k in kids):
                         tree.Z[i], tree.Q[i], tree.edge[i] = z, q, par
                         tree.P[i] = float(self.classifier.probability(z))
+                        tree.decoded[i] = not o.anchored_decoding
                         for c, k in zip(tree.children[i], kids):
                             tree.edge[c] = k   # type: ignore[assignment]  # None excluded above
                         st["lpo_moves"] += 1
@@ -352,7 +452,8 @@ class LCBiRRT(Planner):
               seed: int) -> PlanResult:
         o, ck = self.options, self.checker
         st: dict[str, Any] = {"iterations": 0, "decodes": 0, "projection_failures": 0, "collisions": 0, "classifier_rejects": 0,
-              "classifier_overruled": 0, "edge_checks": 0, "link_attempts": 0, "lpo_nodes": 0, "lpo_moves": 0}
+              "classifier_overruled": 0, "edge_checks": 0, "link_attempts": 0, "q_link_attempts": 0, "link_successes": 0,
+              "link_gap_min": math.inf, "latent_jumps": 0, "jump_nodes": 0, "lpo_nodes": 0, "lpo_moves": 0}
         c0 = ck.n_checks
         bad = invalid_endpoints(self, q_start, q_goal, st)
         if bad is not None:
@@ -370,6 +471,7 @@ class LCBiRRT(Planner):
                 break
             st["iterations"] += 1
             z_rand = rng.normal(0.0, o.sample_sigma, self.cvae.latent_dim)
+            n_a = len(ta.Z)
             _, i_a = self.extend(ta, ta.nearest(z_rand), z_rand, st, deadline)
             reached, i_b = self.extend(tb, tb.nearest(ta.Z[i_a]), ta.Z[i_a].copy(), st, deadline)
             if not reached:   # the latent vectors agree only to the step: join the configurations in joint space
@@ -377,12 +479,20 @@ class LCBiRRT(Planner):
                 if float(np.linalg.norm(tb.Z[j] - ta.Z[i_a])) <= o.latent_step:
                     reached, i_b = True, j
             if reached:
-                st["link_attempts"] += 1
-                link = self._edge(ta.Q[i_a], tb.Q[i_b], st, deadline)
-                if link is not None:
-                    found = (i_a, i_b, link)
-                    break
+                found = self._link(ta, i_a, tb, i_b, st, deadline)
+            if found is None and len(ta.Z) > n_a:   # the new node may lie near the other tree in joint space
+                found = self._link(ta, i_a, tb, None, st, deadline)
+            if found is not None:
+                break
             ta, tb, a_is_start = tb, ta, not a_is_start
+        if not math.isfinite(st["link_gap_min"]):
+            st["link_gap_min"] = None
+        # how far apart the trees stayed: the closest pair of nodes in joint space [rad] and in the latent space
+        # (at most 100 nodes of the smaller tree against the larger, so that it costs milliseconds after the limit)
+        small, big = (ta, tb) if len(ta.Z) <= len(tb.Z) else (tb, ta)
+        pick = range(0, len(small.Z), max(1, len(small.Z) // 100))
+        st["tree_gap_q"] = min(float(np.linalg.norm(np.asarray(big.Q) - small.Q[k], axis=1).min()) for k in pick)
+        st["tree_gap_z"] = min(float(np.linalg.norm(np.asarray(big.Z) - small.Z[k], axis=1).min()) for k in pick)
         st["nodes"] = len(ta.Z) + len(tb.Z)
         t_start, t_goal = (ta, tb) if a_is_start else (tb, ta)
         st["start_tree_nodes"], st["goal_tree_nodes"] = len(t_start.Z), len(t_goal.Z)
