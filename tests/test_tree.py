@@ -97,7 +97,8 @@ def _check(res, golden):
 @pytest.mark.parametrize("variant,seed", sorted(GOLDEN_TCB))
 def test_tcbirrt_unchanged_on_fixed_seeds(tcb, variant, seed):
     from optplan.bench.trials import TrialGenerator
-    from optplan.planners import ClosedChainKinematics, TCBiRRT, TCBiRRTOptions, ValidityChecker
+    from optplan.constraints.closed_chain import ClosedChainKinematics
+    from optplan.planners import TCBiRRT, TCBiRRTOptions, ValidityChecker
     from optplan.scene import Scene
 
     sc = Scene.load("ssps_scene1")
