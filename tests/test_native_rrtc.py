@@ -177,7 +177,7 @@ def test_tcbirrt_regrasps_run_natively(tcb):
 
 
 def test_single_panda_queries_solved_and_valid():
-    from optplan.example_robots import example_robots_available
+    from optplan.model.example_robots import example_robots_available
 
     if not example_robots_available():
         pytest.skip("example-robot-data not installed (pip install 'optplan[robots]')")
@@ -205,7 +205,7 @@ def test_vamp_peer_without_vamp_says_so(monkeypatch, capsys):
 
 def test_vamp_peer_pairs_when_vamp_is_there(capsys):
     pytest.importorskip("vamp")
-    from optplan.example_robots import example_robots_available
+    from optplan.model.example_robots import example_robots_available
 
     if not example_robots_available():
         pytest.skip("example-robot-data not installed (pip install 'optplan[robots]')")

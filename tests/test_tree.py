@@ -96,10 +96,10 @@ def _check(res, golden):
 
 @pytest.mark.parametrize("variant,seed", sorted(GOLDEN_TCB))
 def test_tcbirrt_unchanged_on_fixed_seeds(tcb, variant, seed):
-    from optplan.bench.trials import TrialGenerator
     from optplan.constraints.closed_chain import ClosedChainKinematics
     from optplan.planners import TCBiRRT, TCBiRRTOptions, ValidityChecker
     from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
 
     sc = Scene.load("ssps_scene1")
     tr = TrialGenerator(tcb, sc).generate(0, 0)
@@ -116,9 +116,9 @@ def test_tcbirrt_unchanged_on_fixed_seeds(tcb, variant, seed):
 
 def test_tcbirrt_improved_defaults_unchanged_on_a_fixed_seed(tcb):
     """The improved variant's own defaults (lead-path orientations included), recorded 2026-11-24."""
-    from optplan.bench.trials import TrialGenerator
     from optplan.planners import TCBiRRT, TCBiRRTOptions
     from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
 
     sc = Scene.load("ssps_scene1")
     tr = TrialGenerator(tcb, sc).generate(0, 0)
@@ -131,7 +131,7 @@ def test_tcbirrt_improved_defaults_unchanged_on_a_fixed_seed(tcb):
 
 @pytest.mark.parametrize("scene_name,planner,seed", sorted(GOLDEN_PR2))
 def test_pr2_planners_unchanged_on_fixed_seeds(scene_name, planner, seed):
-    from optplan.example_robots import example_robots_available
+    from optplan.model.example_robots import example_robots_available
 
     if not example_robots_available():
         pytest.skip("example-robot-data not installed (pip install 'optplan[robots]')")
