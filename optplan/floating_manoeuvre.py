@@ -28,7 +28,7 @@ from scipy.interpolate import CubicSpline
 
 from .errors import OptionError
 
-__all__ = ["manoeuvre_spans", "ManoeuvreMotion", "ChainedMotion", "MotionPart"]
+__all__ = ["manoeuvre_spans", "sharp_corners", "ManoeuvreMotion", "ChainedMotion", "MotionPart"]
 
 
 def manoeuvre_spans(joints: np.ndarray) -> list[tuple[int, int]]:
@@ -48,6 +48,21 @@ def manoeuvre_spans(joints: np.ndarray) -> list[tuple[int, int]]:
     return out
 
 
+def sharp_corners(joints: np.ndarray, min_cos: float, spans: list[tuple[int, int]] = ()) -> list[int]:
+    """Interior waypoints of ``joints`` (M × nj) [rad] where the cosine between the incoming and the
+    outgoing joint direction is below ``min_cos`` [1], outside the ``spans`` (their ends excluded)."""
+    J = np.asarray(joints, float)
+    d = np.diff(J, axis=0)
+    n = np.linalg.norm(d, axis=1)
+    out = []
+    for k in range(1, len(J) - 1):
+        if n[k - 1] == 0 or n[k] == 0 or any(a <= k <= b for a, b in spans):
+            continue
+        if float(d[k - 1] @ d[k]) / (n[k - 1] * n[k]) < min_cos:
+            out.append(k)
+    return out
+
+
 def _law(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Quintic rest-to-rest law s(τ) and ds/dτ on [0, 1]."""
     return tau**3 * (10 - 15 * tau + 6 * tau**2), 30 * tau**2 * (1 - tau) ** 2
@@ -59,12 +74,13 @@ class ManoeuvreMotion:
     ``project(q)`` returns ``q`` put back on the closed chain (or None when it cannot); each edge
     gets ``ceil(max |Δq| / step_rad)`` (≥ 4) projected points; its duration is
     ``duration_factor × max |Δq| / speed`` [s] (≥ ``min_edge_s``), so that the peak joint speed is
-    about 1.9 / ``duration_factor`` of ``speed`` [rad/s]. ``t`` [s]: the knots (``knots_per_edge``
-    per edge) that set the density of :func:`optplan.verify`'s samples. ``ok`` is False when a
+    about 1.9 / ``duration_factor`` of ``speed`` [rad/s]. ``t`` [s]: the knots, as many per edge as
+    put :func:`optplan.verify`'s samples (10 per knot interval) at most ``sample_step_rad`` apart in
+    the joints (the planner's own check step by default). ``ok`` is False when a
     point could not be projected (the edge is then kept straight)."""
 
     def __init__(self, joints: np.ndarray, project: Callable[[np.ndarray], np.ndarray | None], speed: float,
-                 duration_factor: float = 3.0, step_rad: float = 0.01, knots_per_edge: int = 2,
+                 duration_factor: float = 3.0, step_rad: float = 0.02, sample_step_rad: float = 0.02,
                  min_edge_s: float = 0.05):
         J = np.asarray(joints, float)
         if J.ndim != 2 or len(J) < 2:
@@ -91,7 +107,9 @@ class ManoeuvreMotion:
         self._t0 = np.r_[0.0, np.cumsum(durs)]
         self._dur = np.asarray(durs)
         self.duration = float(self._t0[-1])
-        self.t = np.concatenate([np.linspace(self._t0[e], self._t0[e + 1], knots_per_edge + 1)[:-1]
+        # knots: verify's 10 samples per knot interval at most sample_step_rad apart in the joints
+        per = [max(1, math.ceil(float(np.max(np.abs(b - a))) / (10 * sample_step_rad))) for a, b in zip(J[:-1], J[1:])]
+        self.t = np.concatenate([np.linspace(self._t0[e], self._t0[e + 1], per[e] + 1)[:-1]
                                  for e in range(len(durs))] + [self._t0[-1:]])
 
     def sample(self, t) -> dict[str, np.ndarray]:

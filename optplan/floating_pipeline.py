@@ -16,8 +16,8 @@
    Retry policy: the dense check between knots is verify's (every pair by coal, the closed chain,
    the limits, the base integrated from the start at 10 samples per interval); while its only
    failures are the closed chain or the clearance between knots, the grid is refined
-   (:mod:`optplan.problem.guarantees`' refinement: twice the intervals; the closed chain's drift
-   falls ∝ h⁴; the planes re-seeded along the plan's path on the new grid), up to ``max_intervals``.
+   (:mod:`optplan.problem.guarantees`' refinement: twice the intervals, the last step up to the cap;
+   the closed chain's drift falls ∝ h⁴; the planes re-seeded along the plan's path on the new grid), up to ``max_intervals``.
 
 ``nlp = "floating_segment"`` keeps the former optimizer (:class:`~optplan.problem.floating_segment.FloatingSplineProblem`,
 no collision rows; the clearance left to the verification) for comparisons.
@@ -33,7 +33,7 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import ConfigurationError, OptionError
-from .floating_manoeuvre import ChainedMotion, ManoeuvreMotion, MotionPart, manoeuvre_spans
+from .floating_manoeuvre import ChainedMotion, ManoeuvreMotion, MotionPart, manoeuvre_spans, sharp_corners
 from .model.floating import simulate_base
 from .model.robot import RobotModel
 from .planners.base import PlanStatus
@@ -80,6 +80,10 @@ class FloatingPipelineOptions:
     #: keep the plan's attitude-steering manoeuvres as planned (timed, not re-optimized) and optimize
     #: only the pieces between them (:mod:`optplan.floating_manoeuvre`); ``"optproblem"`` only.
     keep_manoeuvres: bool = True
+    #: the path is cut (a stop at rest, each piece optimized on its own) at a waypoint where the
+    #: joint direction turns by more than the angle of this cosine [1] (a B-spline cannot follow
+    #: the corner on the closed chain); ``"optproblem"`` only; -1: never.
+    corner_cos: float = -1.0
 
     def __post_init__(self) -> None:
         if self.planner_name not in ("tcbirrt", "carry"):
@@ -93,6 +97,8 @@ class FloatingPipelineOptions:
             raise OptionError(f"FloatingPipelineOptions.n_sub: expected an integer ≥ 1, got {self.n_sub!r}")
         if not (isinstance(self.margin, (int, float)) and np.isfinite(self.margin) and self.margin >= 0):
             raise OptionError(f"FloatingPipelineOptions.margin: expected a number ≥ 0 [m], got {self.margin!r}")
+        if not (isinstance(self.corner_cos, (int, float)) and -1.0 <= self.corner_cos <= 1.0):
+            raise OptionError(f"FloatingPipelineOptions.corner_cos: expected a cosine in [-1, 1], got {self.corner_cos!r}")
         for name in ("plan_time_limit", "duration_factor"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
@@ -178,8 +184,9 @@ def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE
     cc = ClosedChain.from_configuration(robot, robot.configuration(J[0]), *planner.arm_names)
     t0, c0 = time.perf_counter(), time.process_time()
     spans = manoeuvre_spans(J) if opts.nlp == "optproblem" and opts.keep_manoeuvres else []
-    if spans:
-        sol, rep = _steered(robot, scene, plan, spans, cc, res, opts, getattr(planner, "carry", planner))
+    corners = sharp_corners(J, opts.corner_cos, spans) if opts.nlp == "optproblem" else []
+    if spans or corners:
+        sol, rep = _chained(robot, scene, plan, spans, corners, cc, res, opts, getattr(planner, "carry", planner))
     else:
         sol, rep = _solve_piece(robot, scene, J, pin.SE3.Identity(), res.end_attitude, cc, opts, res.attempts)
     res.solution, res.report = sol, rep
@@ -223,11 +230,11 @@ def _solve_piece(robot: RobotModel, scene: Scene, J: np.ndarray, base0: pin.SE3,
         between = bool(fails) and all(f.startswith(("closed chain", "clearance")) for f in fails)
         if opts.nlp != "optproblem":
             between = bool(fails) and all(f.startswith("closed chain") for f in fails)
-        if not (sol.success and between) or 2 * n_sol > opts.max_intervals:
+        if not (sol.success and between) or n_sol >= opts.max_intervals:
             return sol, rep
         # the plan's path again on the finer grid: a start at the coarser optimum (its inequalities
         # active, no multipliers) costs IPOPT an order of magnitude more iterations
-        N = 2 * n_sol
+        N = min(2 * n_sol, opts.max_intervals)
         guess = _resample(J, N)[0]
 
 
@@ -239,21 +246,22 @@ def _end_base(robot: RobotModel, motion, base0: pin.SE3) -> pin.SE3:
     return simulate_base(robot, (t, smp["q"], smp["qd"]), t, base0=base0, substeps=2).final_base
 
 
-def _steered(robot: RobotModel, scene: Scene, plan: FloatingCarryPlan, spans: list[tuple[int, int]], cc: ClosedChain,
-             res: FloatingPipelineResult, opts: FloatingPipelineOptions, carry: FloatingCarryPlanner
-             ) -> tuple[ChainedMotion, VerifyReport]:
-    """A plan with steering manoeuvres (``spans`` of its waypoints): each manoeuvre kept as planned
-    (:class:`~optplan.floating_manoeuvre.ManoeuvreMotion`), each piece between them optimized rest to
-    rest from the base where the parts before it leave it, to the plan's attitude at its end (the
-    last piece: ``res.end_attitude``); the chained motion verified as a whole."""
+def _chained(robot: RobotModel, scene: Scene, plan: FloatingCarryPlan, spans: list[tuple[int, int]],
+             corners: list[int], cc: ClosedChain, res: FloatingPipelineResult, opts: FloatingPipelineOptions,
+             carry: FloatingCarryPlanner) -> tuple[ChainedMotion, VerifyReport]:
+    """A plan with steering manoeuvres (``spans`` of its waypoints) or sharp ``corners``: each
+    manoeuvre kept as planned (:class:`~optplan.floating_manoeuvre.ManoeuvreMotion`), each piece
+    between them and the corners optimized rest to rest from the base where the parts before it
+    leave it, to the plan's attitude at its end (the last piece: ``res.end_attitude``); the chained
+    motion verified as a whole."""
     J, speed = plan.joints, float(np.min(robot.velocity_limit))
-    cuts = [0] + [k for sp in spans for k in sp] + [len(J) - 1]
+    cuts = sorted({0, len(J) - 1, *corners, *(k for sp in spans for k in sp)})
     parts: list[MotionPart] = []
     base = pin.SE3.Identity()
     for a, b in zip(cuts[:-1], cuts[1:]):
         if (a, b) in spans:
             mm = ManoeuvreMotion(J[a:b + 1], lambda q: carry.hold(q, carry.object_in_base(q)), speed,
-                                 duration_factor=opts.duration_factor)
+                                 duration_factor=opts.duration_factor, sample_step_rad=opts.planner.check_step_rad)
             res.attempts.append((len(mm.t) - 1, "kept manoeuvre", [] if mm.ok else ["closed chain: not projected"]))
             parts.append(MotionPart(mm, success=mm.ok))
             base = base * _end_base(robot, mm, pin.SE3.Identity())   # left-invariant: the same from any base
