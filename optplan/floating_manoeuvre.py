@@ -20,8 +20,9 @@ coarse B-spline that cannot follow its loops:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -48,7 +49,7 @@ def manoeuvre_spans(joints: np.ndarray) -> list[tuple[int, int]]:
     return out
 
 
-def sharp_corners(joints: np.ndarray, min_cos: float, spans: list[tuple[int, int]] = ()) -> list[int]:
+def sharp_corners(joints: np.ndarray, min_cos: float, spans: Sequence[tuple[int, int]] = ()) -> list[int]:
     """Interior waypoints of ``joints`` (M × nj) [rad] where the cosine between the incoming and the
     outgoing joint direction is below ``min_cos`` [1], outside the ``spans`` (their ends excluded)."""
     J = np.asarray(joints, float)
@@ -134,7 +135,7 @@ class MotionPart:
     ``sample``; ``success``/``status``/``iterations`` of its optimization (a kept manoeuvre: True,
     None, 0)."""
 
-    motion: object
+    motion: Any
     success: bool = True
     status: object = None
     iterations: int = 0
@@ -152,7 +153,7 @@ class ChainedMotion:
         self.parts = parts
         offs, knots, t = [], [], 0.0
         for p in parts:
-            pt = np.asarray(p.motion.t, float)   # type: ignore[attr-defined]
+            pt = np.asarray(p.motion.t, dtype=float)
             offs.append(t - pt[0])
             knots.append(pt[:-1] - pt[0] + t)
             t += float(pt[-1] - pt[0])
@@ -169,13 +170,13 @@ class ChainedMotion:
         """Joint positions ``q`` [rad] and velocities ``qd`` [rad/s] at times ``t`` [s]."""
         t = np.clip(np.atleast_1d(np.asarray(t, float)), self.t[0], self.t[-1])
         idx = np.clip(np.searchsorted(self._start, t, side="right") - 1, 0, len(self.parts) - 1)
-        q = qd = None
+        q: np.ndarray = np.empty(0)
+        qd: np.ndarray = np.empty(0)
         for k in np.unique(idx):
             m = idx == k
             mo = self.parts[k].motion
-            tl = np.clip(t[m] - self._off[k], mo.t[0], mo.t[-1])   # type: ignore[attr-defined]
-            s = mo.sample(tl)   # type: ignore[attr-defined]
-            if q is None:
+            s = mo.sample(np.clip(t[m] - self._off[k], mo.t[0], mo.t[-1]))
+            if q.size == 0:
                 q, qd = np.empty((len(t), s["q"].shape[1])), np.empty((len(t), s["q"].shape[1]))
             q[m], qd[m] = s["q"], s["qd"]
         return {"t": t, "q": q, "qd": qd}

@@ -113,7 +113,9 @@ class FloatingPipelineResult:
     identity with ``tree.restore_attitude``)."""
 
     plan: FloatingCarryPlan
-    solution: Solution | None = None
+    #: a :class:`~optplan.problem.solution.Solution`, or a :class:`~optplan.floating_manoeuvre.ChainedMotion`
+    #: (optimized pieces and kept manoeuvres) for a plan with steering manoeuvres.
+    solution: Solution | ChainedMotion | None = None
     report: VerifyReport | None = None
     attempts: list[tuple[int, str, list[str]]] = field(default_factory=list)
     end_attitude: np.ndarray | None = None
@@ -185,8 +187,9 @@ def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE
     t0, c0 = time.perf_counter(), time.process_time()
     spans = manoeuvre_spans(J) if opts.nlp == "optproblem" and opts.keep_manoeuvres else []
     corners = sharp_corners(J, opts.corner_cos, spans) if opts.nlp == "optproblem" else []
+    sol: Solution | ChainedMotion
     if spans or corners:
-        sol, rep = _chained(robot, scene, plan, spans, corners, cc, res, opts, getattr(planner, "carry", planner))
+        sol, rep = _chained(robot, scene, plan, spans, corners, cc, res, opts, planner.carry if isinstance(planner, FloatingTCBiRRT) else planner)
     else:
         sol, rep = _solve_piece(robot, scene, J, pin.SE3.Identity(), res.end_attitude, cc, opts, res.attempts)
     res.solution, res.report = sol, rep
