@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from enum import Enum
 from typing import Any
 
 import numpy as np
@@ -29,7 +30,15 @@ from scipy.interpolate import CubicSpline
 
 from .errors import OptionError
 
-__all__ = ["manoeuvre_spans", "sharp_corners", "ManoeuvreMotion", "ChainedMotion", "MotionPart"]
+__all__ = ["manoeuvre_spans", "sharp_corners", "ManoeuvreMotion", "ChainedMotion", "MotionPart", "KeptStatus"]
+
+
+class KeptStatus(str, Enum):
+    """Status of a kept manoeuvre (no NLP ran on it)."""
+
+    KEPT = "Kept_Manoeuvre"
+    #: a point of an edge could not be put back on the closed chain
+    NOT_PROJECTED = "Manoeuvre_Not_Projected"
 
 
 def manoeuvre_spans(joints: np.ndarray) -> list[tuple[int, int]]:
@@ -132,12 +141,12 @@ class ManoeuvreMotion:
 @dataclass
 class MotionPart:
     """One part of a :class:`ChainedMotion`: anything with ``t`` (its knots [s], from 0) and
-    ``sample``; ``success``/``status``/``iterations`` of its optimization (a kept manoeuvre: True,
-    None, 0)."""
+    ``sample``; ``success``/``status``/``iterations`` of its optimization (a kept manoeuvre:
+    :class:`KeptStatus`, 0 iterations)."""
 
     motion: Any
     success: bool = True
-    status: object = None
+    status: Any = KeptStatus.KEPT
     iterations: int = 0
 
 
@@ -161,9 +170,10 @@ class ChainedMotion:
         self._start = np.r_[[k[0] for k in knots], t]
         self.t = np.r_[np.concatenate(knots), t]
         self.success = all(p.success for p in parts)
-        bad = [p for p in parts if not p.success]
-        named = [p for p in (bad or parts) if p.status is not None]
-        self.status = named[-1].status if named else None
+        #: the first failed part's status, else the last optimized part's, else KEPT
+        bad = [p.status for p in parts if not p.success]
+        nlp = [p.status for p in parts if not isinstance(p.status, KeptStatus)]
+        self.status = bad[0] if bad else (nlp[-1] if nlp else KeptStatus.KEPT)
         self.iterations = int(sum(p.iterations for p in parts))
 
     def sample(self, t) -> dict[str, np.ndarray]:

@@ -33,7 +33,14 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import ConfigurationError, OptionError
-from .floating_manoeuvre import ChainedMotion, ManoeuvreMotion, MotionPart, manoeuvre_spans, sharp_corners
+from .floating_manoeuvre import (
+    ChainedMotion,
+    KeptStatus,
+    ManoeuvreMotion,
+    MotionPart,
+    manoeuvre_spans,
+    sharp_corners,
+)
 from .model.floating import simulate_base
 from .model.robot import RobotModel
 from .planners.base import PlanStatus
@@ -265,8 +272,9 @@ def _chained(robot: RobotModel, scene: Scene, plan: FloatingCarryPlan, spans: li
         if (a, b) in spans:
             mm = ManoeuvreMotion(J[a:b + 1], lambda q: carry.hold(q, carry.object_in_base(q)), speed,
                                  duration_factor=opts.duration_factor, sample_step_rad=opts.planner.check_step_rad)
-            res.attempts.append((len(mm.t) - 1, "kept manoeuvre", [] if mm.ok else ["closed chain: not projected"]))
-            parts.append(MotionPart(mm, success=mm.ok))
+            st = KeptStatus.KEPT if mm.ok else KeptStatus.NOT_PROJECTED
+            res.attempts.append((len(mm.t) - 1, st.value, [] if mm.ok else ["closed chain: a point not projected"]))
+            parts.append(MotionPart(mm, success=mm.ok, status=st))
             base = base * _end_base(robot, mm, pin.SE3.Identity())   # left-invariant: the same from any base
             continue
         if b == a or np.array_equal(J[a], J[b]) and b - a == 1:

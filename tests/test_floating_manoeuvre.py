@@ -44,7 +44,7 @@ def test_manoeuvre_time_law_and_chaining():
     assert np.allclose(mm.sample(t)["qd"], fd, atol=1e-6)
     assert np.max(np.abs(mm.sample(np.linspace(0, mm.duration, 400))["qd"])) <= 1.875 / 3.0 + 1e-9
     ch = ChainedMotion([MotionPart(mm), MotionPart(ManoeuvreMotion(J[::-1], lambda q: q, speed=1.0))])
-    assert ch.t[-1] == pytest.approx(2 * mm.duration) and ch.success
+    assert ch.t[-1] == pytest.approx(2 * mm.duration) and ch.success and ch.status.value == "Kept_Manoeuvre"
     assert np.allclose(ch.sample([mm.duration + 0.9])["q"], J[1])
     with pytest.raises(OptionError, match="waypoints"):
         ManoeuvreMotion(J[:1], lambda q: q, speed=1.0)
@@ -67,7 +67,8 @@ def test_a_steered_plan_is_verified_end_to_end(steered):
     robot, scene, goal, res = steered
     spans = manoeuvre_spans(res.plan.joints)
     assert spans and spans[0][1] - spans[0][0] > 20, "trial 13 is no longer a steered plan"
-    assert any(a[1] == "kept manoeuvre" for a in res.attempts)
+    assert any(a[1] == "Kept_Manoeuvre" for a in res.attempts)
+    assert res.solution.status.value == "Solve_Succeeded" and res.solution.iterations > 0
     assert res.success, res.attempts
     # independent: the base re-integrated at 4× verify's density with finer RK4 steps
     sol = res.solution
