@@ -16,8 +16,8 @@
    Retry policy: the dense check between knots is verify's (every pair by coal, the closed chain,
    the limits, the base integrated from the start at 10 samples per interval); while its only
    failures are the closed chain or the clearance between knots, the grid is refined
-   (:mod:`optplan.problem.guarantees`' refinement: twice the intervals; the closed chain's drift
-   falls ∝ h⁴; the planes re-seeded along the plan's path on the new grid), up to ``max_intervals``.
+   (:mod:`optplan.problem.guarantees`' refinement: twice the intervals, the last step up to the cap;
+   the closed chain's drift falls ∝ h⁴; the planes re-seeded along the plan's path on the new grid), up to ``max_intervals``.
 
 ``nlp = "floating_segment"`` keeps the former optimizer (:class:`~optplan.problem.floating_segment.FloatingSplineProblem`,
 no collision rows; the clearance left to the verification) for comparisons.
@@ -33,6 +33,14 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import ConfigurationError, OptionError
+from .floating_manoeuvre import (
+    ChainedMotion,
+    KeptStatus,
+    ManoeuvreMotion,
+    MotionPart,
+    manoeuvre_spans,
+    sharp_corners,
+)
 from .model.floating import simulate_base
 from .model.robot import RobotModel
 from .planners.base import PlanStatus
@@ -76,6 +84,13 @@ class FloatingPipelineOptions:
     nlp: str = "optproblem"
     #: RK4 steps of the base attitude per interval [count].
     n_sub: int = 1
+    #: keep the plan's attitude-steering manoeuvres as planned (timed, not re-optimized) and optimize
+    #: only the pieces between them (:mod:`optplan.floating_manoeuvre`); ``"optproblem"`` only.
+    keep_manoeuvres: bool = True
+    #: the path is cut (a stop at rest, each piece optimized on its own) at a waypoint where the
+    #: joint direction turns by more than the angle of this cosine [1] (a B-spline cannot follow
+    #: the corner on the closed chain); ``"optproblem"`` only; -1: never.
+    corner_cos: float = -1.0
 
     def __post_init__(self) -> None:
         if self.planner_name not in ("tcbirrt", "carry"):
@@ -89,6 +104,8 @@ class FloatingPipelineOptions:
             raise OptionError(f"FloatingPipelineOptions.n_sub: expected an integer ≥ 1, got {self.n_sub!r}")
         if not (isinstance(self.margin, (int, float)) and np.isfinite(self.margin) and self.margin >= 0):
             raise OptionError(f"FloatingPipelineOptions.margin: expected a number ≥ 0 [m], got {self.margin!r}")
+        if not (isinstance(self.corner_cos, (int, float)) and -1.0 <= self.corner_cos <= 1.0):
+            raise OptionError(f"FloatingPipelineOptions.corner_cos: expected a cosine in [-1, 1], got {self.corner_cos!r}")
         for name in ("plan_time_limit", "duration_factor"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
@@ -103,7 +120,9 @@ class FloatingPipelineResult:
     identity with ``tree.restore_attitude``)."""
 
     plan: FloatingCarryPlan
-    solution: Solution | None = None
+    #: a :class:`~optplan.problem.solution.Solution`, or a :class:`~optplan.floating_manoeuvre.ChainedMotion`
+    #: (optimized pieces and kept manoeuvres) for a plan with steering manoeuvres.
+    solution: Solution | ChainedMotion | None = None
     report: VerifyReport | None = None
     attempts: list[tuple[int, str, list[str]]] = field(default_factory=list)
     end_attitude: np.ndarray | None = None
@@ -172,33 +191,15 @@ def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE
     # the plan's end attitude; restored: exactly the initial one (the plan reaches it within restore_tol_rad)
     res.end_attitude = np.eye(3) if restore else plan.final_base.rotation.copy()
     cc = ClosedChain.from_configuration(robot, robot.configuration(J[0]), *planner.arm_names)
-    _, length = _resample(J, opts.intervals)
-    T = max(1.0, opts.duration_factor * length / float(np.min(robot.velocity_limit)))
     t0, c0 = time.perf_counter(), time.process_time()
-    N = opts.intervals
-    guess = _resample(J, N)[0]
-    while True:
-        if opts.nlp == "optproblem":
-            sol = _optimize(robot, scene, J, guess, N, T, cc, res.end_attitude, opts)
-        else:
-            prob = FloatingSplineProblem(robot, FloatingSegmentSpec(N, T, J[0], J[-1], end_attitude=res.end_attitude,
-                                                                    closed_chain=cc, n_sub=opts.n_sub))
-            prob.set_initial(guess)
-            sol = prob.solve()
-        rep = verify(robot, sol, scene, closed_chain=cc, end_attitude=res.end_attitude)
-        fails = rep.failures(opts.tolerances)
-        res.solution, res.report = sol, rep
-        n_sol = len(sol.t) - 1
-        res.attempts.append((n_sol, sol.status.value, fails))
-        between = bool(fails) and all(f.startswith(("closed chain", "clearance")) for f in fails)
-        if opts.nlp != "optproblem":
-            between = bool(fails) and all(f.startswith("closed chain") for f in fails)
-        if not (sol.success and between) or 2 * n_sol > opts.max_intervals:
-            break
-        # the plan's path again on the finer grid: a start at the coarser optimum (its inequalities
-        # active, no multipliers) costs IPOPT an order of magnitude more iterations
-        N = 2 * n_sol
-        guess = _resample(J, N)[0]
+    spans = manoeuvre_spans(J) if opts.nlp == "optproblem" and opts.keep_manoeuvres else []
+    corners = sharp_corners(J, opts.corner_cos, spans) if opts.nlp == "optproblem" else []
+    sol: Solution | ChainedMotion
+    if spans or corners:
+        sol, rep = _chained(robot, scene, plan, spans, corners, cc, res, opts, planner.carry if isinstance(planner, FloatingTCBiRRT) else planner)
+    else:
+        sol, rep = _solve_piece(robot, scene, J, pin.SE3.Identity(), res.end_attitude, cc, opts, res.attempts)
+    res.solution, res.report = sol, rep
     res.opt_wall_s = time.perf_counter() - t0
     res.opt_cpu_s = time.process_time() - c0
     # the object's world pose at the end, with the base re-integrated along the solution (not the NLP's)
@@ -214,8 +215,85 @@ def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE
     return res
 
 
+def _solve_piece(robot: RobotModel, scene: Scene, J: np.ndarray, base0: pin.SE3, end_attitude: np.ndarray,
+                 cc: ClosedChain, opts: FloatingPipelineOptions, attempts: list) -> tuple[Solution, VerifyReport]:
+    """Optimize and verify the joint path ``J`` (rest to rest) from the base placement ``base0`` to the
+    base attitude ``end_attitude`` relative to ``base0``, with the refinement of the module docstring;
+    each attempt appended to ``attempts``. Returns the last solution and its verification."""
+    _, length = _resample(J, opts.intervals)
+    T = max(1.0, opts.duration_factor * length / float(np.min(robot.velocity_limit)))
+    N = opts.intervals
+    guess = _resample(J, N)[0]
+    while True:
+        if opts.nlp == "optproblem":
+            # the core's attitude is the world's (base0 · ξ): its target too
+            sol = _optimize(robot, scene, J, guess, N, T, cc, base0.rotation @ end_attitude, opts, base0)
+        else:
+            prob = FloatingSplineProblem(robot, FloatingSegmentSpec(N, T, J[0], J[-1], end_attitude=end_attitude,
+                                                                    closed_chain=cc, n_sub=opts.n_sub))
+            prob.set_initial(guess)
+            sol = prob.solve()
+        rep = verify(robot, sol, scene, closed_chain=cc, end_attitude=end_attitude, base0=base0)
+        fails = rep.failures(opts.tolerances)
+        n_sol = len(sol.t) - 1
+        attempts.append((n_sol, sol.status.value, fails))
+        between = bool(fails) and all(f.startswith(("closed chain", "clearance")) for f in fails)
+        if opts.nlp != "optproblem":
+            between = bool(fails) and all(f.startswith("closed chain") for f in fails)
+        if not (sol.success and between) or n_sol >= opts.max_intervals:
+            return sol, rep
+        # the plan's path again on the finer grid: a start at the coarser optimum (its inequalities
+        # active, no multipliers) costs IPOPT an order of magnitude more iterations
+        N = min(2 * n_sol, opts.max_intervals)
+        guess = _resample(J, N)[0]
+
+
+def _end_base(robot: RobotModel, motion, base0: pin.SE3) -> pin.SE3:
+    """The base placement at the end of ``motion`` (``t``, ``sample``) from ``base0``, integrated from
+    zero momentum at verify's density."""
+    t = np.linspace(motion.t[0], motion.t[-1], 10 * (len(motion.t) - 1) + 1)
+    smp = motion.sample(t)
+    return simulate_base(robot, (t, smp["q"], smp["qd"]), t, base0=base0, substeps=2).final_base
+
+
+def _chained(robot: RobotModel, scene: Scene, plan: FloatingCarryPlan, spans: list[tuple[int, int]],
+             corners: list[int], cc: ClosedChain, res: FloatingPipelineResult, opts: FloatingPipelineOptions,
+             carry: FloatingCarryPlanner) -> tuple[ChainedMotion, VerifyReport]:
+    """A plan with steering manoeuvres (``spans`` of its waypoints) or sharp ``corners``: each
+    manoeuvre kept as planned (:class:`~optplan.floating_manoeuvre.ManoeuvreMotion`), each piece
+    between them and the corners optimized rest to rest from the base where the parts before it
+    leave it, to the plan's attitude at its end (the last piece: ``res.end_attitude``); the chained
+    motion verified as a whole."""
+    J, speed = plan.joints, float(np.min(robot.velocity_limit))
+    cuts = sorted({0, len(J) - 1, *corners, *(k for sp in spans for k in sp)})
+    parts: list[MotionPart] = []
+    base = pin.SE3.Identity()
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        if (a, b) in spans:
+            mm = ManoeuvreMotion(J[a:b + 1], lambda q: carry.hold(q, carry.object_in_base(q)), speed,
+                                 duration_factor=opts.duration_factor, sample_step_rad=opts.planner.check_step_rad)
+            st = KeptStatus.KEPT if mm.ok else KeptStatus.NOT_PROJECTED
+            res.attempts.append((len(mm.t) - 1, st.value, [] if mm.ok else ["closed chain: a point not projected"]))
+            parts.append(MotionPart(mm, success=mm.ok, status=st))
+            base = base * _end_base(robot, mm, pin.SE3.Identity())   # left-invariant: the same from any base
+            continue
+        if b == a or np.array_equal(J[a], J[b]) and b - a == 1:
+            continue
+        R_end = res.end_attitude if b == len(J) - 1 else pin.XYZQUATToSE3(plan.q[b, :7]).rotation
+        sol, rep = _solve_piece(robot, scene, J[a:b + 1], base, base.rotation.T @ R_end, cc, opts, res.attempts)
+        ok = bool(sol.success and rep.passed(opts.tolerances))
+        parts.append(MotionPart(sol, success=ok, status=sol.status, iterations=sol.iterations))
+        if not ok:
+            break
+        base = _end_base(robot, sol, base)
+    motion = ChainedMotion(parts)
+    rep = verify(robot, motion, scene, closed_chain=cc, end_attitude=res.end_attitude)
+    res.attempts.append((len(motion.t) - 1, "chained", rep.failures(opts.tolerances)))
+    return motion, rep
+
+
 def _optimize(robot: RobotModel, scene: Scene, J: np.ndarray, guess: np.ndarray, N: int, T: float, cc: ClosedChain,
-              end_attitude: np.ndarray, opts: FloatingPipelineOptions) -> Solution:
+              end_attitude: np.ndarray, opts: FloatingPipelineOptions, base0: pin.SE3 | None = None) -> Solution:
     """One optimization of the carry on the shared modelling core (module docstring, step 2): the
     joint knots ``guess`` ((N+1) × nj) as the first guess; the dense check between knots and its
     refinement inside the solve (a clearance below 0 between knots, the closed chain)."""
@@ -225,7 +303,7 @@ def _optimize(robot: RobotModel, scene: Scene, J: np.ndarray, guess: np.ndarray,
     from .problem.terms import JointBoundary, JointPositionLimits, JointVelocityLimits, Smoothness
 
     z = np.zeros(robot.nj)
-    prob = OptProblem(robot, n_intervals=N, duration=T, n_sub=opts.n_sub, transcription="bspline")
+    prob = OptProblem(robot, n_intervals=N, duration=T, n_sub=opts.n_sub, transcription="bspline", base0=base0)
     prob.add_constraint(JointBoundary("start", q=J[0], qd=z, qdd=z))
     prob.add_constraint(JointBoundary("end", q=J[-1], qd=z, qdd=z))
     prob.add_constraint(JointPositionLimits())

@@ -1,0 +1,192 @@
+"""Attitude-steering manoeuvres of a floating plan kept as planned, and the chained motion.
+
+With zero momentum the base's rotation along a joint path depends on the path only, not on its
+timing. A steering manoeuvre of :class:`~optplan.planners.floating_tcbirrt.FloatingTCBiRRT` (closed
+joint loops with the object held, tens of them) is therefore kept as the planner's waypoints — its
+exact, collision-checked samples — with a smooth time law, instead of being approximated by a
+coarse B-spline that cannot follow its loops:
+
+* :func:`manoeuvre_spans` finds the manoeuvres in a plan's joint waypoints: every loop of a
+  manoeuvre brings the joints back EXACTLY to its start, so a manoeuvre is the span from a waypoint
+  to the last waypoint with the very same joints;
+* :class:`ManoeuvreMotion` moves along each straight joint edge of the manoeuvre with a quintic
+  rest-to-rest time law (zero velocity and acceleration at every waypoint, where the path has its
+  corners); the edge's points are put back on the closed chain (the second hand solved onto the
+  object held by the first: the straight joint edge leaves the chain by a second-order amount) and
+  joined by a cubic spline in the edge's parameter;
+* :class:`ChainedMotion` concatenates timed parts (optimized pieces and manoeuvres) into one
+  trajectory with the interface :func:`optplan.verify` judges (``t``, ``sample``).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from .errors import OptionError
+
+__all__ = ["manoeuvre_spans", "sharp_corners", "ManoeuvreMotion", "ChainedMotion", "MotionPart", "KeptStatus"]
+
+
+class KeptStatus(str, Enum):
+    """Status of a kept manoeuvre (no NLP ran on it)."""
+
+    KEPT = "Kept_Manoeuvre"
+    #: a point of an edge could not be put back on the closed chain
+    NOT_PROJECTED = "Manoeuvre_Not_Projected"
+
+
+def manoeuvre_spans(joints: np.ndarray) -> list[tuple[int, int]]:
+    """``(i, j)`` index pairs of the waypoints ``joints`` (M × nj) [rad] where the joints at ``j`` are
+    exactly those at ``i`` (``j > i + 1`` the last such waypoint): the closed loops of a steering
+    manoeuvre. Spans do not overlap; in order."""
+    J = np.asarray(joints, float)
+    out, i = [], 0
+    while i < len(J) - 1:
+        same = np.flatnonzero(np.all(J[i + 1:] == J[i], axis=1))
+        if len(same) and same[-1] > 0:   # a repeated waypoint alone is no loop
+            j = i + 1 + int(same[-1])
+            out.append((i, j))
+            i = j
+        else:
+            i += 1
+    return out
+
+
+def sharp_corners(joints: np.ndarray, min_cos: float, spans: Sequence[tuple[int, int]] = ()) -> list[int]:
+    """Interior waypoints of ``joints`` (M × nj) [rad] where the cosine between the incoming and the
+    outgoing joint direction is below ``min_cos`` [1], outside the ``spans`` (their ends excluded)."""
+    J = np.asarray(joints, float)
+    d = np.diff(J, axis=0)
+    n = np.linalg.norm(d, axis=1)
+    out = []
+    for k in range(1, len(J) - 1):
+        if n[k - 1] == 0 or n[k] == 0 or any(a <= k <= b for a, b in spans):
+            continue
+        if float(d[k - 1] @ d[k]) / (n[k - 1] * n[k]) < min_cos:
+            out.append(k)
+    return out
+
+
+def _law(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Quintic rest-to-rest law s(τ) and ds/dτ on [0, 1]."""
+    return tau**3 * (10 - 15 * tau + 6 * tau**2), 30 * tau**2 * (1 - tau) ** 2
+
+
+class ManoeuvreMotion:
+    """The joint waypoints ``joints`` (M × nj) [rad] timed edge by edge (module docstring).
+
+    ``project(q)`` returns ``q`` put back on the closed chain (or None when it cannot); each edge
+    gets ``ceil(max |Δq| / step_rad)`` (≥ 4) projected points; its duration is
+    ``duration_factor × max |Δq| / speed`` [s] (≥ ``min_edge_s``), so that the peak joint speed is
+    about 1.9 / ``duration_factor`` of ``speed`` [rad/s]. ``t`` [s]: the knots, as many per edge as
+    put :func:`optplan.verify`'s samples (10 per knot interval) at most ``sample_step_rad`` apart in
+    the joints (the planner's own check step by default). ``ok`` is False when a
+    point could not be projected (the edge is then kept straight)."""
+
+    def __init__(self, joints: np.ndarray, project: Callable[[np.ndarray], np.ndarray | None], speed: float,
+                 duration_factor: float = 3.0, step_rad: float = 0.02, sample_step_rad: float = 0.02,
+                 min_edge_s: float = 0.05):
+        J = np.asarray(joints, float)
+        if J.ndim != 2 or len(J) < 2:
+            raise OptionError(f"ManoeuvreMotion: expected at least 2 joint waypoints (M × nj), got shape {J.shape}")
+        if not (speed > 0 and step_rad > 0 and duration_factor > 0):
+            raise OptionError(f"ManoeuvreMotion: speed [rad/s], step_rad [rad] and duration_factor must be positive, "
+                              f"got {speed!r}, {step_rad!r}, {duration_factor!r}")
+        self.ok = True
+        self._splines: list[CubicSpline] = []
+        durs = []
+        for a, b in zip(J[:-1], J[1:]):
+            d = float(np.max(np.abs(b - a)))
+            n = max(4, math.ceil(d / step_rad))
+            s = np.linspace(0.0, 1.0, n + 1)
+            P = a + s[:, None] * (b - a)
+            for k in range(1, n):
+                p = project(P[k])
+                if p is None:
+                    self.ok = False
+                else:
+                    P[k] = p
+            self._splines.append(CubicSpline(s, P, axis=0))
+            durs.append(max(min_edge_s, duration_factor * d / speed))
+        self._t0 = np.r_[0.0, np.cumsum(durs)]
+        self._dur = np.asarray(durs)
+        self.duration = float(self._t0[-1])
+        # knots: verify's 10 samples per knot interval at most sample_step_rad apart in the joints
+        per = [max(1, math.ceil(float(np.max(np.abs(b - a))) / (10 * sample_step_rad))) for a, b in zip(J[:-1], J[1:])]
+        self.t = np.concatenate([np.linspace(self._t0[e], self._t0[e + 1], per[e] + 1)[:-1]
+                                 for e in range(len(durs))] + [self._t0[-1:]])
+
+    def sample(self, t) -> dict[str, np.ndarray]:
+        """Joint positions ``q`` [rad] and velocities ``qd`` [rad/s] at times ``t`` [s] in [0, duration]."""
+        t = np.clip(np.atleast_1d(np.asarray(t, float)), 0.0, self.duration)
+        e = np.clip(np.searchsorted(self._t0, t, side="right") - 1, 0, len(self._splines) - 1)
+        q = np.empty((len(t), self._splines[0].c.shape[-1]))
+        qd = np.empty_like(q)
+        for k in np.unique(e):
+            m = e == k
+            tau = np.clip((t[m] - self._t0[k]) / self._dur[k], 0.0, 1.0)
+            s, ds = _law(tau)
+            sp = self._splines[k]
+            q[m] = sp(s)
+            qd[m] = sp(s, 1) * (ds / self._dur[k])[:, None]
+        return {"t": t, "q": q, "qd": qd}
+
+
+@dataclass
+class MotionPart:
+    """One part of a :class:`ChainedMotion`: anything with ``t`` (its knots [s], from 0) and
+    ``sample``; ``success``/``status``/``iterations`` of its optimization (a kept manoeuvre:
+    :class:`KeptStatus`, 0 iterations)."""
+
+    motion: Any
+    success: bool = True
+    status: Any = KeptStatus.KEPT
+    iterations: int = 0
+
+
+class ChainedMotion:
+    """Parts played one after the other (each starts where and when the previous one stops, at
+    rest): ``t`` the union of their knots [s], ``sample(t)`` → ``q`` [rad], ``qd`` [rad/s]."""
+
+    base_quat = None   # no base of its own: verify re-integrates it
+
+    def __init__(self, parts: list[MotionPart]):
+        if not parts:
+            raise OptionError("ChainedMotion: expected at least one part, got none")
+        self.parts = parts
+        offs, knots, t = [], [], 0.0
+        for p in parts:
+            pt = np.asarray(p.motion.t, dtype=float)
+            offs.append(t - pt[0])
+            knots.append(pt[:-1] - pt[0] + t)
+            t += float(pt[-1] - pt[0])
+        self._off = np.asarray(offs)
+        self._start = np.r_[[k[0] for k in knots], t]
+        self.t = np.r_[np.concatenate(knots), t]
+        self.success = all(p.success for p in parts)
+        #: the first failed part's status, else the last optimized part's, else KEPT
+        bad = [p.status for p in parts if not p.success]
+        nlp = [p.status for p in parts if not isinstance(p.status, KeptStatus)]
+        self.status = bad[0] if bad else (nlp[-1] if nlp else KeptStatus.KEPT)
+        self.iterations = int(sum(p.iterations for p in parts))
+
+    def sample(self, t) -> dict[str, np.ndarray]:
+        """Joint positions ``q`` [rad] and velocities ``qd`` [rad/s] at times ``t`` [s]."""
+        t = np.clip(np.atleast_1d(np.asarray(t, float)), self.t[0], self.t[-1])
+        idx = np.clip(np.searchsorted(self._start, t, side="right") - 1, 0, len(self.parts) - 1)
+        q: np.ndarray = np.empty(0)
+        qd: np.ndarray = np.empty(0)
+        for k in np.unique(idx):
+            m = idx == k
+            mo = self.parts[k].motion
+            s = mo.sample(np.clip(t[m] - self._off[k], mo.t[0], mo.t[-1]))
+            if q.size == 0:
+                q, qd = np.empty((len(t), s["q"].shape[1])), np.empty((len(t), s["q"].shape[1]))
+            q[m], qd[m] = s["q"], s["qd"]
+        return {"t": t, "q": q, "qd": qd}

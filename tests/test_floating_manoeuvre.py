@@ -1,0 +1,95 @@
+"""Steering manoeuvres kept as planned (optplan.floating_manoeuvre) and a steered plan verified end to
+end by optplan.floating_pipeline, judged independently: a finer re-integration of the base from zero
+momentum (another density and RK4 step), Pinocchio FK for the closed chain and the object's goal,
+coal's exact distances for the clearance."""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.collision.checker import CollisionChecker
+from optplan.errors import OptionError
+from optplan.floating_manoeuvre import ChainedMotion, ManoeuvreMotion, MotionPart, manoeuvre_spans, sharp_corners
+from optplan.floating_pipeline import options_for_scene, run_floating_pipeline, scene_start, trial_goal
+from optplan.model.floating import simulate_base
+from optplan.model.robot import RobotModel
+from optplan.scene import Scene
+
+
+def test_spans_are_exact_returns_of_the_joints():
+    rng = np.random.default_rng(1)
+    J = rng.normal(size=(9, 3))
+    J[6] = J[2]          # a loop 2 → 6
+    J[4] = J[2]          # inside it
+    J[8] = J[7]          # a repeated waypoint alone: no loop
+    assert manoeuvre_spans(J) == [(2, 6)]
+    assert manoeuvre_spans(J + 1e-12 * (np.arange(9) == 6)[:, None]) == [(2, 4)]
+    corners = sharp_corners(np.array([[0, 0], [1, 0], [2, 0], [2, 1], [1, 1.0]]), 0.5)
+    assert corners == [2, 3]
+    assert sharp_corners(np.array([[0, 0], [1, 0], [2, 0], [2, 1], [1, 1.0]]), 0.5, [(1, 3)]) == []
+
+
+def test_manoeuvre_time_law_and_chaining():
+    """Rest at every waypoint, through every waypoint, velocities = finite differences; the chain
+    plays its parts one after the other."""
+    J = np.array([[0.0, 0.0], [0.3, -0.1], [0.1, 0.2]])
+    mm = ManoeuvreMotion(J, lambda q: q, speed=1.0, duration_factor=3.0, step_rad=0.05)
+    assert mm.ok and mm.duration == pytest.approx(3.0 * (0.3 + 0.3))
+    s = mm.sample([0.0, 0.9, mm.duration])
+    assert np.allclose(s["q"], J, atol=1e-12) and np.allclose(s["qd"], 0.0, atol=1e-12)
+    t = np.linspace(0.01, mm.duration - 0.01, 50)
+    h = 1e-6
+    fd = (mm.sample(t + h)["q"] - mm.sample(t - h)["q"]) / (2 * h)
+    assert np.allclose(mm.sample(t)["qd"], fd, atol=1e-6)
+    assert np.max(np.abs(mm.sample(np.linspace(0, mm.duration, 400))["qd"])) <= 1.875 / 3.0 + 1e-9
+    ch = ChainedMotion([MotionPart(mm), MotionPart(ManoeuvreMotion(J[::-1], lambda q: q, speed=1.0))])
+    assert ch.t[-1] == pytest.approx(2 * mm.duration) and ch.success and ch.status.value == "Kept_Manoeuvre"
+    assert np.allclose(ch.sample([mm.duration + 0.9])["q"], J[1])
+    with pytest.raises(OptionError, match="waypoints"):
+        ManoeuvreMotion(J[:1], lambda q: q, speed=1.0)
+    with pytest.raises(OptionError, match="at least one part"):
+        ChainedMotion([])
+
+
+@pytest.fixture(scope="module")
+def steered():
+    """Trial 13 of ``optplan bench generalize --scene floating`` (seed 0): a plan with a steering
+    manoeuvre, as the benchmark runs it."""
+    robot = RobotModel.from_name("eba_ffsr")
+    scene = Scene.load("floating_truss")
+    goal = trial_goal(scene, 13, 0)
+    res = run_floating_pipeline(robot, scene, scene_start(robot, scene), goal, options_for_scene(scene), seed=13)
+    return robot, scene, goal, res
+
+
+def test_a_steered_plan_is_verified_end_to_end(steered):
+    robot, scene, goal, res = steered
+    spans = manoeuvre_spans(res.plan.joints)
+    assert spans and spans[0][1] - spans[0][0] > 20, "trial 13 is no longer a steered plan"
+    assert any(a[1] == "Kept_Manoeuvre" for a in res.attempts)
+    assert res.solution.status.value == "Solve_Succeeded" and res.solution.iterations > 0
+    assert res.success, res.attempts
+    # independent: the base re-integrated at 4× verify's density with finer RK4 steps
+    sol = res.solution
+    t = np.linspace(sol.t[0], sol.t[-1], 40 * (len(sol.t) - 1) + 1)
+    smp = sol.sample(t)
+    sim = simulate_base(robot, (t, smp["q"], smp["qd"]), t, substeps=4)
+    assert float(np.linalg.norm(pin.log3(res.end_attitude.T @ sim.final_base.rotation))) <= 1e-6
+    d = robot.model.createData()
+    grasp = scene.object.grasps
+    rel = []
+    for q in sim.q[::7]:
+        pin.framesForwardKinematics(robot.model, d, q)
+        MA = d.oMf[robot.arm("A").ee_frame_id] * grasp["A"].inverse()
+        MB = d.oMf[robot.arm("B").ee_frame_id] * grasp["B"].inverse()
+        rel.append(MA.actInv(MB))
+    err = [max(np.linalg.norm(r.translation - rel[0].translation), np.linalg.norm(pin.log3(rel[0].rotation.T @ r.rotation)))
+           for r in rel]
+    assert max(err) <= 2e-6     # the object held by both hands all along (1e-6 each from the grasp)
+    pin.framesForwardKinematics(robot.model, d, sim.q[-1])
+    e = goal.actInv(d.oMf[robot.arm("A").ee_frame_id] * grasp["A"].inverse())
+    assert np.linalg.norm(e.translation) <= 1e-3 and np.linalg.norm(pin.log3(e.rotation)) <= 1e-3
+    dmin, _, _ = CollisionChecker(robot, scene).min_distance_along(sim.q[::3])
+    assert dmin >= 0.0
+    assert np.all(smp["q"] >= robot.lower - 1e-12) and np.all(smp["q"] <= robot.upper + 1e-12)
