@@ -31,7 +31,7 @@ class InitialGuessAPI:
     n_sub: int
     duration: float
     free_time: bool
-    transcription: str   # "bspline" or "knots"
+    transcription: str   # "auto", "bspline" or "knots" (as given)
     base0: Any
     _spline: Any
     _built: Any
