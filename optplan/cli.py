@@ -159,6 +159,9 @@ def _cmd_plan(args) -> int:
     robot = _load_robot(robot_name)
     if getattr(robot, "is_floating", False):   # (a stand-in robot object of the tests has no base)
         return _cmd_plan_floating(args, robot, scene)
+    if getattr(args, "restore_attitude", False):
+        raise UsageError(f"--restore-attitude: robot {robot_name!r} has a fixed base (the option is for a "
+                         "free-floating robot's base attitude)")
     t0 = time.perf_counter()
     files: list[str] = []   # outputs written so far (each complete: written atomically)
     try:
@@ -235,7 +238,8 @@ def _cmd_plan_floating(args, robot, scene) -> int:
     )
 
     res = run_floating_pipeline(robot, scene, scene_start(robot, scene), trial_goal(scene, args.trial, args.seed),
-                                options_for_scene(scene, plan_time_limit=args.time_limit), seed=args.seed + args.trial)
+                                options_for_scene(scene, restore_attitude=True if args.restore_attitude else None,
+                                                  plan_time_limit=args.time_limit), seed=args.seed + args.trial)
     print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}, robot "
           f"{robot.name!r} (free-floating base, zero momentum)")
     print("\n".join(summary_lines(res)))
@@ -497,6 +501,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the planning time limit in wall-clock seconds (default) or CPU seconds of the planner "
                          "(a seeded plan then hardly depends on how busy the machine is)")
     pl.add_argument("--cold", action="store_true", help="cold start: IPOPT from straight lines, not the plan")
+    pl.add_argument("--restore-attitude", action="store_true",
+                    help="free-floating robot: end at the initial base attitude with the world goal (default: the "
+                         "scene's [extra] restore_attitude, else the plan's arrival attitude)")
     pl.add_argument("--compile-kernels", action="store_true",
                     help="compile the optimizer's kernels to C where an earlier run has not (once per robot and "
                          "collision pair, about a second each; later runs use them automatically)")

@@ -368,11 +368,26 @@ def summary_lines(res: FloatingPipelineResult) -> list[str]:
     return out
 
 
-def options_for_scene(scene: Scene, **kwargs) -> FloatingPipelineOptions:
+def options_for_scene(scene: Scene, restore_attitude: bool | None = None, **kwargs) -> FloatingPipelineOptions:
     """:class:`FloatingPipelineOptions` (``kwargs``) with the scene's goal frame: ``[extra] target_frame``
-    = ``"world"`` (default) or ``"base"`` (the goal is the object's pose in the base frame)."""
+    = ``"world"`` (default) or ``"base"`` (the goal is the object's pose in the base frame).
+
+    ``restore_attitude``: end at the INITIAL base attitude with the world goal (the planner steers the
+    base back, :attr:`~optplan.planners.floating_tcbirrt.FloatingTreeOptions.restore_attitude`, and
+    the optimizer's end-attitude constraint is the initial attitude); None: the scene's
+    ``[extra] restore_attitude`` (default false: the end attitude is the plan's arrival attitude)."""
     from dataclasses import replace
 
-    frame = (scene.extra or {}).get("target_frame", "world")
+    extra = scene.extra or {}
+    frame = extra.get("target_frame", "world")
+    if restore_attitude is None:
+        restore_attitude = extra.get("restore_attitude", False)
+    if not isinstance(restore_attitude, bool):
+        raise ConfigurationError(f"scene {scene.name!r}: [extra] restore_attitude: expected true or false, "
+                                 f"got {restore_attitude!r}")
+    if restore_attitude and frame != "world":
+        raise ConfigurationError(f"scene {scene.name!r}: restore_attitude needs a goal in the world "
+                                 f"(target_frame = 'world'), got target_frame = {frame!r}")
     opts = FloatingPipelineOptions(**kwargs)
-    return replace(opts, planner=replace(opts.planner, target_frame=frame))
+    return replace(opts, planner=replace(opts.planner, target_frame=frame),
+                   tree=replace(opts.tree, restore_attitude=restore_attitude))

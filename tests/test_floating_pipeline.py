@@ -185,3 +185,23 @@ def test_the_view_gets_the_re_integrated_base(truss_run, eba, tmp_path):
 
     p = write_trajectory_html(tmp_path / "v.html", eba, scene, t[::5], Q[::5])
     assert p.exists() and '"floating": true' in p.read_text()
+
+
+def test_restore_attitude_option_from_the_scene_and_the_call():
+    """``restore_attitude``: the call's value wins, else the scene's ``[extra]``; a base-frame goal or a
+    non-boolean value is a clear error."""
+    from dataclasses import replace
+
+    from optplan.errors import ConfigurationError
+    from optplan.floating_pipeline import options_for_scene
+
+    truss = Scene.load("floating_truss")
+    assert options_for_scene(truss).tree.restore_attitude is False
+    assert options_for_scene(truss, restore_attitude=True).tree.restore_attitude is True
+    on = replace(truss, extra={**(truss.extra or {}), "restore_attitude": True})
+    assert options_for_scene(on).tree.restore_attitude is True
+    assert options_for_scene(on, restore_attitude=False).tree.restore_attitude is False
+    with pytest.raises(ConfigurationError, match="restore_attitude: expected true or false"):
+        options_for_scene(replace(truss, extra={**(truss.extra or {}), "restore_attitude": "yes"}))
+    with pytest.raises(ConfigurationError, match="needs a goal in the world"):
+        options_for_scene(Scene.load("floating_stow"), restore_attitude=True)

@@ -78,6 +78,9 @@ class GeneralizeConfig:
     #: The robot of every trial: a robot file or URDF path, or a model name (None: each scene's own
     #: robot). With a robot and no scenes given, the scenes in ``models/scenes`` made for it.
     robot: str | None = None
+    #: Floating scenes: end at the initial base attitude with the world goal (restoration; None: each
+    #: scene's ``[extra] restore_attitude``).
+    restore_attitude: bool | None = None
 
 
 def scenes_for_robot(robot: str) -> list[str]:
@@ -188,7 +191,8 @@ def _floating_trial(robot, scene, index: int, cfg: GeneralizeConfig) -> dict:
 
     c0, w0 = time.process_time(), time.perf_counter()
     res = run_floating_pipeline(robot, scene, scene_start(robot, scene), trial_goal(scene, index, cfg.seed),
-                                options_for_scene(scene, plan_time_limit=float(cfg.time_limit)),
+                                options_for_scene(scene, restore_attitude=cfg.restore_attitude,
+                                                  plan_time_limit=float(cfg.time_limit)),
                                 seed=int(cfg.seed) + int(index))
     rep, sol = res.report, res.solution
     return {"wall_time_s": time.perf_counter() - w0, "cpu_time_s": time.process_time() - c0,
@@ -361,7 +365,7 @@ def command(args) -> int:
     cfg = GeneralizeConfig(scenes=[s for s in scene_arg.split(",") if s.strip()], trials=args.trials,
                            first_trial=args.first_trial, seed=args.seed, out=args.out, time_limit=args.time_limit,
                            ipopt_max_wall_time=args.ipopt_max_wall_time, clock=args.clock, progress=not args.no_progress,
-                           robot=args.robot)
+                           robot=args.robot, restore_attitude=True if args.restore_attitude else None)
     try:
         if cfg.scenes:
             expand(cfg.scenes)
@@ -397,4 +401,7 @@ def add_arguments(p) -> None:
     p.add_argument("--ipopt-max-wall-time", type=ca.positive_float, default=60.0, metavar="S",
                    help="cap every IPOPT solve at S seconds (default 60)")
     p.add_argument("--out", default="bench_generalize", help="output directory (results.jsonl, summary.txt/json)")
+    p.add_argument("--restore-attitude", action="store_true",
+                   help="floating scenes: end at the initial base attitude with the world goal (default: each "
+                        "scene's [extra] restore_attitude, else the plan's arrival attitude)")
     p.add_argument("--no-progress", action="store_true")
