@@ -78,8 +78,8 @@ class GeneralizeConfig:
     #: The robot of every trial: a robot file or URDF path, or a model name (None: each scene's own
     #: robot). With a robot and no scenes given, the scenes in ``models/scenes`` made for it.
     robot: str | None = None
-    #: Floating scenes: end at the initial base attitude with the world goal (restoration; None: each
-    #: scene's ``[extra] restore_attitude``).
+    #: Floating scenes with a goal in the world: end at the initial base attitude (restoration; None:
+    #: each scene's ``[extra] restore_attitude``); scenes with a base-frame goal keep their own.
     restore_attitude: bool | None = None
 
 
@@ -189,9 +189,12 @@ def _floating_trial(robot, scene, index: int, cfg: GeneralizeConfig) -> dict:
     from ..floating_pipeline import options_for_scene, run_floating_pipeline, scene_start, trial_goal
     from .warmstart import _finite
 
+    # restoration is for a goal in the world; a scene whose goal is in the base frame keeps its own
+    world = (scene.extra or {}).get("target_frame", "world") == "world"
+    restore = cfg.restore_attitude if world else None
     c0, w0 = time.process_time(), time.perf_counter()
     res = run_floating_pipeline(robot, scene, scene_start(robot, scene), trial_goal(scene, index, cfg.seed),
-                                options_for_scene(scene, restore_attitude=cfg.restore_attitude,
+                                options_for_scene(scene, restore_attitude=restore,
                                                   plan_time_limit=float(cfg.time_limit)),
                                 seed=int(cfg.seed) + int(index))
     rep, sol = res.report, res.solution
@@ -402,6 +405,6 @@ def add_arguments(p) -> None:
                    help="cap every IPOPT solve at S seconds (default 60)")
     p.add_argument("--out", default="bench_generalize", help="output directory (results.jsonl, summary.txt/json)")
     p.add_argument("--restore-attitude", action="store_true",
-                   help="floating scenes: end at the initial base attitude with the world goal (default: each "
+                   help="floating scenes with a goal in the world: end at the initial base attitude (default: each "
                         "scene's [extra] restore_attitude, else the plan's arrival attitude)")
     p.add_argument("--no-progress", action="store_true")
