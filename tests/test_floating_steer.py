@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from floating_paths import reintegrate
 
 from optplan.collision.checker import CollisionChecker
 from optplan.errors import OptionError
 from optplan.floating_pipeline import options_for_scene, scene_start
-from optplan.model.floating import simulate_base
 from optplan.model.robot import RobotModel
 from optplan.planners.base import Deadline
 from optplan.planners.floating_reach import nearest_held_attitude, zero_momentum_ik
@@ -34,16 +34,8 @@ def truss(robot):
 
 
 def _reintegrate(robot, joints, base0, per_edge=10):
-    """The joint path in one simulate_base run, each edge with the smoothstep timing."""
-    s = np.linspace(0.0, len(joints) - 1, (len(joints) - 1) * per_edge + 1)
-
-    def traj(t):
-        k = min(int(t), len(joints) - 2)
-        tau = t - k
-        d = joints[k + 1] - joints[k]
-        return joints[k] + (3 * tau**2 - 2 * tau**3) * d, (6 * tau - 6 * tau**2) * d
-
-    return s, simulate_base(robot, traj, s, base0=base0, substeps=2)
+    """:func:`floating_paths.reintegrate` (smoothstep timing per edge, one simulate_base run)."""
+    return reintegrate(robot, joints, base0, per_edge=per_edge, substeps=2)
 
 
 def test_loops_turn_the_base_by_the_wanted_rotation(robot, truss):

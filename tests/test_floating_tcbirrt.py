@@ -9,11 +9,11 @@ import dataclasses
 import numpy as np
 import pinocchio as pin
 import pytest
+from floating_paths import reintegrate
 
 from optplan.collision.checker import CollisionChecker
 from optplan.errors import ConfigurationError, OptionError
 from optplan.floating_pipeline import FloatingPipelineOptions, options_for_scene, scene_start, trial_goal
-from optplan.model.floating import simulate_base
 from optplan.model.robot import RobotModel
 from optplan.planners.floating_carry import FloatingCarryOptions, FloatingCarryPlanner
 from optplan.planners.floating_tcbirrt import FloatingTCBiRRT, FloatingTreeOptions
@@ -27,19 +27,8 @@ def robot():
 
 
 def _whole_path(robot, joints, base0, per_edge=20):
-    """The joint path re-integrated in one run from ``base0``, with another timing than the planner's:
-    each edge traversed with the smoothstep 3τ² − 2τ³ (at rest at every waypoint, so the trajectory is
-    C¹ and RK4 steps across waypoints stay 4th order). With zero momentum the base depends on the
-    path only, not on its timing."""
-    s = np.linspace(0.0, len(joints) - 1, (len(joints) - 1) * per_edge + 1)
-
-    def traj(t):
-        k = min(int(t), len(joints) - 2)
-        tau = t - k
-        d = joints[k + 1] - joints[k]
-        return joints[k] + (3 * tau**2 - 2 * tau**3) * d, (6 * tau - 6 * tau**2) * d
-
-    return s, simulate_base(robot, traj, s, base0=base0, substeps=4)
+    """:func:`floating_paths.reintegrate` (smoothstep timing per edge, one simulate_base run)."""
+    return reintegrate(robot, joints, base0, per_edge=per_edge, substeps=4)
 
 
 def _hands(robot, q):

@@ -130,6 +130,20 @@ def build_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None 
         return _build_spline(robot, scenario, o)
     # the paper's reproduction as measured (knots); "bspline" above is the kernel NLP
     prob = OptProblem(robot, o.n_intervals, o.duration, n_sub=o.n_sub, transcription="knots")
+    cc = _restoration_terms(prob, robot, scenario, o)
+    if cc is not None:
+        t, Q = closed_chain_reference(robot, scenario, o.n_intervals, o.duration)
+        prob.set_initial(q=Q, t=t)
+    else:
+        prob.set_initial_straight_line(scenario.theta0, scenario.thetaf)
+    prob.add_cost(Smoothness(o.smoothness))
+    return prob, cc
+
+
+def _restoration_terms(prob: OptProblem, robot: RobotModel, scenario: Scenario, o: NLPOptions) -> ClosedChain | None:
+    """The restoration NLP's constraints on ``prob`` (either transcription): rest at both ends at the
+    scenario's joints, the base attitude restored at the end, the limits the options ask for and,
+    for a closed-chain scenario, the closed chain (returned; None otherwise)."""
     zero = np.zeros(robot.nj)
     prob.add_constraint(JointBoundary("start", q=scenario.theta0, qd=zero, qdd=zero))
     prob.add_constraint(JointBoundary("end", q=scenario.thetaf, qd=zero, qdd=zero))
@@ -138,20 +152,15 @@ def build_nlp(robot: RobotModel, scenario: Scenario, options: NLPOptions | None 
         prob.add_constraint(JointPositionLimits())
     if o.velocity_limits:
         prob.add_constraint(JointVelocityLimits())
-    cc = None
-    if scenario.closed_chain:
-        # at the two pinned end knots the closed chain holds already: leave those rows out (measured:
-        # with them IPOPT ended "acceptable" after 60 iterations before the variable scaling, and
-        # 20 iterations / 3.0 s vs 26 / 2.8 s now)
-        cc = replace(ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B"),
-                     skip_pinned=True)
-        prob.add_constraint(cc)
-        t, Q = closed_chain_reference(robot, scenario, o.n_intervals, o.duration)
-        prob.set_initial(q=Q, t=t)
-    else:
-        prob.set_initial_straight_line(scenario.theta0, scenario.thetaf)
-    prob.add_cost(Smoothness(o.smoothness))
-    return prob, cc
+    if not scenario.closed_chain:
+        return None
+    # at the two pinned end knots the closed chain holds already: leave those rows out (measured:
+    # with them IPOPT ended "acceptable" after 60 iterations before the variable scaling, and
+    # 20 iterations / 3.0 s vs 26 / 2.8 s now)
+    cc = replace(ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B"),
+                 skip_pinned=True)
+    prob.add_constraint(cc)
+    return cc
 
 
 def _warm_start(robot: RobotModel, scenario: Scenario, o: NLPOptions) -> np.ndarray:
@@ -168,19 +177,7 @@ def _build_spline(robot: RobotModel, scenario: Scenario, o: NLPOptions, warm_sta
     their control points, the closed chain's rows at the pinned ends are left out."""
     prob = OptProblem(robot, o.n_intervals, o.duration, n_sub=o.n_sub, transcription="bspline",
                       compile_kernels=o.compile_kernels)
-    zero = np.zeros(robot.nj)
-    prob.add_constraint(JointBoundary("start", q=scenario.theta0, qd=zero, qdd=zero))
-    prob.add_constraint(JointBoundary("end", q=scenario.thetaf, qd=zero, qdd=zero))
-    prob.add_constraint(BaseAttitude(at="end"))
-    if o.position_limits:
-        prob.add_constraint(JointPositionLimits())
-    if o.velocity_limits:
-        prob.add_constraint(JointVelocityLimits())
-    cc = None
-    if scenario.closed_chain:
-        cc = replace(ClosedChain.from_configuration(robot, robot.configuration(scenario.theta0), "A", "B"),
-                     skip_pinned=True)
-        prob.add_constraint(cc)
+    cc = _restoration_terms(prob, robot, scenario, o)
     prob.add_cost(Smoothness(o.smoothness))
     Q = _warm_start(robot, scenario, o) if warm_start is None else warm_start
     prob.set_initial(q=Q, t=np.linspace(0.0, o.duration, o.n_intervals + 1))

@@ -305,20 +305,23 @@ class NativeExtender:
         self.cnt[8] = 0
         return t
 
+    def _load(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, q_near: np.ndarray,
+              n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The end poses and ``q_near`` into the call's buffers; fresh outputs ``P`` (n × 12), ``Q`` (n × nq)."""
+        self._R0[:] = R0.reshape(9)
+        self._p0[:] = p0
+        self._R1[:] = R1.reshape(9)
+        self._p1[:] = p1
+        self._qn[:] = q_near
+        return np.empty((n, 12)), np.empty((n, self.nq))
+
     def extend(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int,
                q_near: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]:
         """The poses ``j = 1..n`` from ``(R0, p0)`` to ``(R1, p1)`` (``P``: n × 12, rotation row-major then
         position [m]), the path IK from ``q_near`` into ``Q`` (n × nq) and, when every waypoint passes, the
         edge checks: ``(P, Q, r, e)`` with ``r`` the waypoints accepted (``r < n``: waypoint ``r`` failed)
         and ``e`` the first edge in collision (``n``: none; −1: not checked)."""
-        R0b, p0b, R1b, p1b, qb = self._R0, self._p0, self._R1, self._p1, self._qn
-        R0b[:] = R0.reshape(9)
-        p0b[:] = p0
-        R1b[:] = R1.reshape(9)
-        p1b[:] = p1
-        qb[:] = q_near
-        P = np.empty((n, 12))
-        Q = np.empty((n, self.nq))
+        P, Q = self._load(R0, p0, R1, p1, q_near, n)
         a = self._bufs
         r = self.lib.tcb_extend(self._cp, a[0], a[1], a[2], a[3], n, a[4], P.ctypes.data, Q.ctypes.data,
                                 self._cnt_p, self._edge_kp)
@@ -331,14 +334,7 @@ class NativeExtender:
         """:meth:`extend` with the restarts in C (:meth:`restarts_in_c`) and the edges of the accepted
         configurations checked: ``(P, Q, k)`` with ``Q[:k]`` the configurations kept (with ``prefix``: the valid
         prefix, ``k`` possibly 0; without it ``k`` is n, or −1 when the extension fails)."""
-        R0b, p0b, R1b, p1b, qb = self._R0, self._p0, self._R1, self._p1, self._qn
-        R0b[:] = R0.reshape(9)
-        p0b[:] = p0
-        R1b[:] = R1.reshape(9)
-        p1b[:] = p1
-        qb[:] = q_near
-        P = np.empty((n, 12))
-        Q = np.empty((n, self.nq))
+        P, Q = self._load(R0, p0, R1, p1, q_near, n)
         a = self._bufs
         k = self.lib.tcb_extend_prefix(self._cp, a[0], a[1], a[2], a[3], n, a[4], P.ctypes.data, Q.ctypes.data,
                                        self._cnt_p, int(prefix))
@@ -365,12 +361,7 @@ class NativeExtender:
 
     def interpolate(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int) -> np.ndarray:
         """The poses ``j = 1..n`` (n × 12) of :meth:`extend` alone."""
-        R0b, p0b, R1b, p1b = self._R0, self._p0, self._R1, self._p1
-        R0b[:] = R0.reshape(9)
-        p0b[:] = p0
-        R1b[:] = R1.reshape(9)
-        p1b[:] = p1
-        P = np.empty((n, 12))
+        P, _ = self._load(R0, p0, R1, p1, self._qn, n)
         a = self._bufs
         self.lib.tcb_interpolate(a[0], a[1], a[2], a[3], n, P.ctypes.data)
         return P
