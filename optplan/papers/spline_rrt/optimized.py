@@ -159,26 +159,31 @@ def knot_selector(t: Any, T: Any, N: int) -> Any:
     return ca.vertcat(*[ca.fmax(0, 1 - ca.fabs(u - k)) for k in range(N + 1)])
 
 
-def _common(prob: Any, robot: RobotModel, task: Any, o: OptimizeOptions) -> None:
-    """The terms both transcriptions share (boundary, attitude, limits, collision, jerk)."""
-    from ...problem import (
-        BaseAttitude,
-        JointAccelerationLimits,
-        JointBoundary,
-        JointPositionLimits,
-        JointVelocityLimits,
-        Smoothness,
-    )
+def _attitude_and_limits(prob: Any, robot: RobotModel, o: OptimizeOptions) -> None:
+    """The base attitude at the end (restored: a constraint; else a cost of weight 1e4) and the
+    joint position and velocity limits (velocity: ``rate_margin`` × the robot's), in this order."""
+    from ...problem import BaseAttitude, JointPositionLimits, JointVelocityLimits
 
-    zero = np.zeros(robot.nj)
-    prob.add_constraint(JointBoundary("start", q=task.q_start, qd=zero, qdd=zero))
-    prob.add_constraint(JointBoundary("end", qd=zero))
     if o.restore_attitude:
         prob.add_constraint(BaseAttitude(at="end"))
     else:
         prob.add_cost(BaseAttitude(at="end"), weight=1e4)
     prob.add_constraint(JointPositionLimits())
     prob.add_constraint(JointVelocityLimits(limit=o.rate_margin * robot.velocity_limit))
+
+
+def _common(prob: Any, robot: RobotModel, task: Any, o: OptimizeOptions) -> None:
+    """The terms both transcriptions share (boundary, attitude, limits, collision, jerk)."""
+    from ...problem import (
+        JointAccelerationLimits,
+        JointBoundary,
+        Smoothness,
+    )
+
+    zero = np.zeros(robot.nj)
+    prob.add_constraint(JointBoundary("start", q=task.q_start, qd=zero, qdd=zero))
+    prob.add_constraint(JointBoundary("end", qd=zero))
+    _attitude_and_limits(prob, robot, o)
     prob.add_constraint(JointAccelerationLimits(limit=o.joint_accel_limit))
     prob.add_cost(Smoothness("jerk"))
 
@@ -223,13 +228,10 @@ def _spline_problem(robot: RobotModel, task: Any, hands: dict, T: float, o: Opti
 def _knot_problem(robot: RobotModel, task: Any, hands: dict, T: float, o: OptimizeOptions) -> Any:
     """The reproduction as first measured (the term order kept: IPOPT's path depends on it)."""
     from ...problem import (
-        BaseAttitude,
         CollisionAvoidance,
         FramePath,
         JointAccelerationLimits,
         JointBoundary,
-        JointPositionLimits,
-        JointVelocityLimits,
         OptProblem,
         Smoothness,
     )
@@ -245,12 +247,7 @@ def _knot_problem(robot: RobotModel, task: Any, hands: dict, T: float, o: Optimi
             prob.add_constraint(EndOrientation(fr, h.pose(T).rotation), name=f"goal_orientation_{a}")
             if o.orientation_weight > 0:
                 prob.add_cost(FramePath(fr, h.pose), weight=o.orientation_weight, name=f"orientation_{a}")
-    if o.restore_attitude:
-        prob.add_constraint(BaseAttitude(at="end"))
-    else:
-        prob.add_cost(BaseAttitude(at="end"), weight=1e4)
-    prob.add_constraint(JointPositionLimits())
-    prob.add_constraint(JointVelocityLimits(limit=o.rate_margin * robot.velocity_limit))
+    _attitude_and_limits(prob, robot, o)
     prob.add_constraint(InteriorVelocityLimits(scale=o.rate_margin))
     prob.add_constraint(JointAccelerationLimits(limit=o.joint_accel_limit))
     prob.add_constraint(CollisionAvoidance(None, margin=o.link_margin, self_collision=True, held_object=False),
