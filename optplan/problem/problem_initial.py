@@ -45,9 +45,10 @@ class InitialGuessAPI:
     numeric_trajectory: Callable[[ArrayLike], Any]
     _initial_unpacked: Callable[[], dict[str, np.ndarray]]
 
-    @property
-    def tp(self) -> Transcription:
-        raise NotImplementedError   # OptProblem.tp
+    if TYPE_CHECKING:   # OptProblem.tp: the problem's knot transcription
+        @property
+        def tp(self) -> Transcription: ...
+
     def set_initial(self, q: ArrayLike | None = None, t: ArrayLike | None = None, *, solution: Solution | None = None, T: float | None = None) -> None:
         """Initial guess.
 
