@@ -337,9 +337,15 @@ def _resteer_end(robot: RobotModel, scene: Scene, planner: FloatingTCBiRRT, moti
         whole = steerer.options
         # a small rotation: whole loops overshoot it, so a few rounds of new loops are enough for the
         # scaled-loop refinement (a full search spends its rounds looking for whole loops)
-        steerer.options = replace(whole, max_rounds=4)
+        # (the full search when that finds nothing)
+        st = None
         try:
-            st = steerer.steer(q_end, base_end, wanted, rng, Deadline(opts.resteer_time_s, clock="cpu"), tol_rad=0.1 * tol)
+            for rounds in dict.fromkeys((min(4, whole.max_rounds), whole.max_rounds)):
+                steerer.options = replace(whole, max_rounds=rounds)
+                st = steerer.steer(q_end, base_end, wanted, rng, Deadline(opts.resteer_time_s, clock="cpu"),
+                                   tol_rad=0.1 * tol)
+                if st is not None:
+                    break
         finally:
             steerer.options = whole
         if st is None:
