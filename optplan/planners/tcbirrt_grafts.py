@@ -104,12 +104,11 @@ class BranchMixin(RegraspMixin):
             if y is None:
                 st["root_branch_collisions"] = st.get("root_branch_collisions", 0) + 1
                 continue
-            st["graft_attempts"] += 1
+            st["root_branch_attempts"] = st.get("root_branch_attempts", 0) + 1
             reg = self.regrasp(q0, y, R, p, self._rng, deadline.sub(o.graft_time_limit), st)
             if reg is None:
-                st["graft_regrasp_failures"] = st.get("graft_regrasp_failures", 0) + 1
+                st["root_branch_regrasp_failures"] = st.get("root_branch_regrasp_failures", 0) + 1
                 continue
-            st["grafts"] += 1
             st["root_branch"] = side
             g = tree.add_graft(0, y, reg)
             tree.prefer[0] = tree.prefer[g] = g   # the root's extensions grow from the shared branch
