@@ -106,20 +106,16 @@ def test_tcbirrt_unchanged_on_fixed_seeds(tcb, variant, seed):
     # recorded before the improved variant took its orientations from the lead path (lead_orientation_probability)
     from optplan.planners import RRTConnectOptions
 
-    # extension="python" (and "native", the same search) is the golden reference: "loop" draws from its own stream;
-    # recorded before the improved variant re-grasped the goal root onto the start's IK branch (branch_roots) and
-    # tried frontier grafts when the trees stop approaching (stall_iterations): both off here
+    # extension="python" (and "native", the same search) is the golden reference: "loop" draws from its own stream
     o = TCBiRRTOptions(variant=variant, max_iterations=300, lead_orientation_probability=0.0,
-                       regrasp=RRTConnectOptions(**PY_REGRASP), extension="python", branch_roots=False,
-                       stall_iterations=0)
+                       regrasp=RRTConnectOptions(**PY_REGRASP), extension="python")
     pl = TCBiRRT(tcb, sc, o,
                  checker=ValidityChecker(tcb, sc), kinematics=ClosedChainKinematics(tcb, sc.object.grasps))
     _check(pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=seed), GOLDEN_TCB[(variant, seed)])
 
 
 def test_tcbirrt_improved_defaults_unchanged_on_a_fixed_seed(tcb):
-    """The improved variant's own defaults (lead-path orientations included), recorded 2026-11-24, before the
-    variant took ``branch_roots`` and ``stall_iterations`` (both off here: the recorded search)."""
+    """The improved variant's own defaults (lead-path orientations included), recorded 2026-11-24."""
     from optplan.planners import TCBiRRT, TCBiRRTOptions
     from optplan.scene import Scene
     from optplan.trials import TrialGenerator
@@ -129,7 +125,7 @@ def test_tcbirrt_improved_defaults_unchanged_on_a_fixed_seed(tcb):
     from optplan.planners import RRTConnectOptions
 
     pl = TCBiRRT(tcb, sc, TCBiRRTOptions(variant="improved", max_iterations=1000, regrasp=RRTConnectOptions(**PY_REGRASP),
-                                         extension="python", branch_roots=False, stall_iterations=0))
+                                         extension="python"))
     _check(pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=0), ("exact", 114, 82, 1904.9856439901168))
 
 

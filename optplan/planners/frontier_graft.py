@@ -65,12 +65,10 @@ def frontier_graft(pl: TCBiRRT, tree: _TaskTree, other: _TaskTree, deadline: Dea
     poses = interpolate_task(R, p, Rs, ps, o.n_interp, o.interpolation)
     twins = [tree.q[k] for k in tree.twins.get(i, [i])]
     step = cast(float, o.max_joint_step)   # resolved from the variant
-    for k in range(-1, o.frontier_seeds):
+    for _ in range(o.frontier_seeds):
         if deadline.expired():
             return None
-        # first the other tree's configuration there (its IK branch: the trees can then meet without a regrasp),
-        # then ``frontier_seeds`` random seeds
-        x, its = kin.ik(other.q[j] if k < 0 else rng.uniform(pl.robot.lower, pl.robot.upper), R, p, o.ik)
+        x, its = kin.ik(rng.uniform(pl.robot.lower, pl.robot.upper), R, p, o.ik)
         st["ik_iterations"] += its
         if x is None:
             continue

@@ -71,6 +71,14 @@ Deviations from the paper, all options (defaults in brackets):
   passes; the solution is a graft node, the step's end a node below it, and tree b is connected to it
   (:mod:`.frontier_graft`). Where the arms, not the object, block a passage, each tree's arms stop in a
   self-motion position that collides one step further on; the look-ahead picks one that does not.
+* ``branch_roots`` [False in both variants; measured in docs/planners.md]: before the search, the goal tree's
+  root is re-grasped onto the start's IK branch at the goal's object pose (arm by arm; the branch found by path IK
+  along the straight start-goal object motion, :meth:`~.tcbirrt_grafts.BranchMixin.branch_at`), or, where that
+  configuration collides, the start's root onto the goal's branch; the tree grows from that graft. Trees on one
+  branch can meet without a regrasp of a whole branch change.
+* ``stall_iterations`` [0 (off) in both variants; measured in docs/planners.md]: a frontier graft is also tried
+  when the smallest ξ gap a connection has left between the trees (0 once a connection reached the other tree's
+  pose and only its regrasp failed) has not shrunk by 1 % for that many iterations, before ``graft_after``.
 * ``edge_tolerance`` [paper 0: off; improved 0.01 m]: the straight joint-space segments between consecutive
   configurations (constrained edges and regrasp motions) are checked so densely that no point of
   the arms or the object moves farther than this between two checks (per-joint sweep bound of
@@ -449,9 +457,10 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                     i_nb = tb.twin_nearest(tb.nearest(target_xi), target_q, rng)
                     n_reg = st["regrasp_attempts"]
                     res, i_b, reg = self.constrained_extend(tb, i_nb, target_xi, target_q, rng, deadline, st)
-                    i_gap = i_b if res in (ADVANCED, PARTIAL) else i_nb
-                    gap = min(gap, 0.0 if res == REACHED or st["regrasp_attempts"] > n_reg   # met: a failed regrasp
-                              else float(np.linalg.norm(tb.xi[i_gap] - target_xi)))
+                    if o.stall_iterations:
+                        i_gap = i_b if res in (ADVANCED, PARTIAL) else i_nb
+                        gap = min(gap, 0.0 if res == REACHED or st["regrasp_attempts"] > n_reg   # met: a failed regrasp
+                                  else float(np.linalg.norm(tb.xi[i_gap] - target_xi)))
                     if res not in (ADVANCED, PARTIAL) or deadline.expired():
                         break
                 if gap < 0.99 * best_gap:

@@ -124,7 +124,7 @@ class BranchMixin(RegraspMixin):
         sets = [arms] + ([[a] for a in arms] if len(arms) > 1 else [])
         for k in range(len(sets) + o.graft_seeds):
             use = sets[min(k, len(sets) - 1)] if k < len(sets) else arms
-            src = x
+            src: np.ndarray | None = x
             if k >= len(sets):   # another point of the same self-motion
                 src, _ = kin.ik(x + self._rng.normal(0.0, o.ik_restart_sigma, x.size), R, p, o.ik)
                 if src is None or any(float(np.linalg.norm(src[i] - x[i])) >= float(np.linalg.norm(src[i] - q0[i]))
@@ -132,7 +132,7 @@ class BranchMixin(RegraspMixin):
                     continue
             y = q0.copy()
             for idx in use:
-                y[idx] = src[idx]
+                y[idx] = cast(np.ndarray, src)[idx]
             if ck.in_limits(y) and ck.is_valid(y):
                 return y
         return None

@@ -30,7 +30,7 @@ VARIANTS = {
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
-                 "branch_roots": True, "stall_iterations": 100},
+                 "branch_roots": False, "stall_iterations": 0},
 }
 
 
@@ -152,12 +152,13 @@ class TCBiRRTOptions:
     #: A frontier graft is also tried, at any iteration, when the trees have stopped approaching: the smallest
     #: ξ distance a connection has left between them (0 when it reached the other tree's pose but its regrasp
     #: failed) has not shrunk by 1 % for this many iterations [count] (None: the variant's value,
-    #: :data:`VARIANTS`: paper 0, improved 100; 0: off). The count restarts after each such attempt.
+    #: :data:`VARIANTS`: 0 in both, see docs/planners.md; 0: off). The count restarts after each such attempt.
     stall_iterations: int | None = None
     #: Before the search, re-grasp the goal tree's root onto the start's IK branch at the goal pose (arm by arm; the
     #: branch found by path IK along the straight start-goal object motion), or, where that configuration
     #: collides, the start tree's root onto the goal's branch; the tree then grows from that branch, so that the
-    #: trees can meet without a regrasp (None: the variant's value, :data:`VARIANTS`: paper False, improved True).
+    #: trees can meet without a regrasp (None: the variant's value, :data:`VARIANTS`: False in both, see
+    #: docs/planners.md).
     branch_roots: bool | None = None
     #: Random IK seeds per frontier-graft attempt [count].
     frontier_seeds: int = 6
