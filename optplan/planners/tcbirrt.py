@@ -71,6 +71,14 @@ Deviations from the paper, all options (defaults in brackets):
   passes; the solution is a graft node, the step's end a node below it, and tree b is connected to it
   (:mod:`.frontier_graft`). Where the arms, not the object, block a passage, each tree's arms stop in a
   self-motion position that collides one step further on; the look-ahead picks one that does not.
+* ``branch_roots`` [False in both variants; measured in docs/planners.md]: before the search, the goal tree's
+  root is re-grasped onto the start's IK branch at the goal's object pose (arm by arm; the branch found by path IK
+  along the straight start-goal object motion, :meth:`~.tcbirrt_grafts.BranchMixin.branch_at`), or, where that
+  configuration collides, the start's root onto the goal's branch; the tree grows from that graft. Trees on one
+  branch can meet without a regrasp of a whole branch change.
+* ``stall_iterations`` [0 (off) in both variants; measured in docs/planners.md]: a frontier graft is also tried
+  when the smallest ξ gap a connection has left between the trees (0 once a connection reached the other tree's
+  pose and only its regrasp failed) has not shrunk by 1 % for that many iterations, before ``graft_after``.
 * ``edge_tolerance`` [paper 0: off; improved 0.01 m]: the straight joint-space segments between consecutive
   configurations (constrained edges and regrasp motions) are checked so densely that no point of
   the arms or the object moves farther than this between two checks (per-joint sweep bound of
@@ -396,6 +404,9 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             st["guide_attempts"] = st["guide_waypoints"] = 0
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
         fronts = {id(ta): 0, id(tb): 0}
+        if o.branch_roots:
+            self._root_branches(ta, tb, deadline, st)
+        best_gap, since_gap = np.inf, 0   # stall_iterations: the smallest gap a connection left, iterations since it shrank
         if o.branch_grafts and o.root_grafts_first and not o.graft_after:
             for tr, other in ((ta, tb), (tb, ta)):
                 self._graft(tr, 0, other, deadline, st)
@@ -423,8 +434,13 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             st["iterations"] += 1
             k_front = st["iterations"] - o.graft_after
             i_front = None
-            if o.frontier_grafts and k_front > 0 and k_front % o.frontier_interval == 0 and \
+            since_gap += 1
+            stalled = bool(o.stall_iterations) and since_gap > cast(int, o.stall_iterations)
+            if o.frontier_grafts and (stalled or (k_front > 0 and k_front % o.frontier_interval == 0)) and \
                     fronts[id(ta)] < o.frontier_grafts:   # tree a re-grasps at its frontier (.frontier_graft)
+                if stalled:
+                    st["stall_attempts"] = st.get("stall_attempts", 0) + 1
+                    since_gap = 0
                 i_front = frontier_graft(self, ta, tb, deadline, st)
                 fronts[id(ta)] += i_front is not None
             if i_front is not None:       # the step beyond the frontier graft: connect tree b to it
@@ -436,11 +452,19 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 self._trap_update(ta, i_near, res)
             if res != TRAPPED:
                 target_xi, target_q = ta.xi[i_a].copy(), ta.q[i_a].copy()
+                gap = np.inf
                 while True:                                                              # lines 7-11
                     i_nb = tb.twin_nearest(tb.nearest(target_xi), target_q, rng)
+                    n_reg = st["regrasp_attempts"]
                     res, i_b, reg = self.constrained_extend(tb, i_nb, target_xi, target_q, rng, deadline, st)
+                    if o.stall_iterations:
+                        i_gap = i_b if res in (ADVANCED, PARTIAL) else i_nb
+                        gap = min(gap, 0.0 if res == REACHED or st["regrasp_attempts"] > n_reg   # met: a failed regrasp
+                                  else float(np.linalg.norm(tb.xi[i_gap] - target_xi)))
                     if res not in (ADVANCED, PARTIAL) or deadline.expired():
                         break
+                if gap < 0.99 * best_gap:
+                    best_gap, since_gap = gap, 0
                 if res == TRAPPED and o.joint_connect and not deadline.expired():
                     i_nb = tb.nearest(target_xi)
                     if float(np.linalg.norm(tb.xi[i_nb] - target_xi)) <= o.joint_connect_radius and \

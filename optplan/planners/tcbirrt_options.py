@@ -23,12 +23,14 @@ VARIANTS = {
               "guide_probability": 0.0, "geodesic_probability": 0.0, "ik_restarts": 0,
               "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
-              "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0},
+              "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
+              "branch_roots": False, "stall_iterations": 0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
-                 "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5},
+                 "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
+                 "branch_roots": False, "stall_iterations": 0},
 }
 
 
@@ -147,6 +149,17 @@ class TCBiRRTOptions:
     frontier_grafts: int | None = None
     #: Iterations between two frontier-graft attempts (the trees take turns) [count].
     frontier_interval: int = 50
+    #: A frontier graft is also tried, at any iteration, when the trees have stopped approaching: the smallest
+    #: ξ distance a connection has left between them (0 when it reached the other tree's pose but its regrasp
+    #: failed) has not shrunk by 1 % for this many iterations [count] (None: the variant's value,
+    #: :data:`VARIANTS`: 0 in both, see docs/planners.md; 0: off). The count restarts after each such attempt.
+    stall_iterations: int | None = None
+    #: Before the search, re-grasp the goal tree's root onto the start's IK branch at the goal pose (arm by arm; the
+    #: branch found by path IK along the straight start-goal object motion), or, where that configuration
+    #: collides, the start tree's root onto the goal's branch; the tree then grows from that branch, so that the
+    #: trees can meet without a regrasp (None: the variant's value, :data:`VARIANTS`: False in both, see
+    #: docs/planners.md).
+    branch_roots: bool | None = None
     #: Random IK seeds per frontier-graft attempt [count].
     frontier_seeds: int = 6
     #: Random node pairs of which a frontier graft takes the closest in ξ [count].
@@ -262,8 +275,8 @@ class TCBiRRTOptions:
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
         for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds", "frontier_grafts", "frontier_interval",
-                     "frontier_seeds", "frontier_pairs"):
-            v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after", "frontier_grafts") else 1)
+                     "frontier_seeds", "frontier_pairs", "stall_iterations"):
+            v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after", "frontier_grafts", "stall_iterations") else 1)
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
         _pos("graft_time_limit", self.graft_time_limit)
@@ -278,7 +291,7 @@ class TCBiRRTOptions:
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
                      "regrasp_share_orders", "verify_path", "graft_single_arm", "regrasp_both_arms", "regrasp_backoff", "root_grafts_first",
-                     "graft_branch_seeds"):
+                     "graft_branch_seeds", "branch_roots"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)

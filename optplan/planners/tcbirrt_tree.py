@@ -34,6 +34,8 @@ class _TaskTree(Tree):
         self.graft: dict[int, list[tuple[str, list[np.ndarray]]]] = {}
         #: node → the live and dead nodes at the same object pose (itself included), for nodes that have grafts
         self.twins: dict[int, list[int]] = {}
+        #: node → the twin an extension from that pose grows from (``branch_roots``: the root's shared-branch graft)
+        self.prefer: dict[int, int] = {}
 
     @property
     def xi(self) -> np.ndarray:
@@ -57,13 +59,16 @@ class _TaskTree(Tree):
 
     def twin_nearest(self, i: int, q: np.ndarray | None, rng: np.random.Generator) -> int:
         """Among node i and the live nodes at its pose (other IK branches): the one whose configuration
-        is nearest ``q``, or a random one when ``q`` is None."""
+        is nearest ``q``, or when ``q`` is None the pose's preferred twin (:attr:`prefer`) if live, else a random one."""
         group = self.twins.get(i)
         if group is None:
             return i
         if self.alive is not None:
             group = [k for k in group if self.alive[k]]
         if q is None:
+            k = self.prefer.get(i)
+            if k is not None and k in group:
+                return k
             return int(group[int(rng.integers(len(group)))])
         return int(min(group, key=lambda k: float(np.sum((self.q[k] - q) ** 2))))
 

@@ -1,0 +1,126 @@
+"""TCBiRRT's branch consistency (``branch_roots``: the goal tree's root re-grasped onto the start's IK branch) and
+the stall-triggered frontier graft (``stall_iterations``). Checked against Pinocchio FK (the closed chain), the
+checker's collision queries at every configuration and the bench's 1 cm sweep spacing along every straight edge."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
+from optplan.planners import TCBiRRT, TCBiRRTOptions
+from optplan.planners.base import Deadline
+from optplan.planners.rrtconnect import edge_is_valid
+from optplan.planners.task_space import xi_from_pose
+from optplan.planners.tcbirrt import _TaskTree
+from optplan.planners.validity import ValidityChecker
+from optplan.scene import Scene
+
+SWEEP = 0.01   # [m] the bench's sweep spacing
+
+
+@pytest.fixture(scope="module")
+def truss(tcb):
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load("hard_truss")
+    ck = ValidityChecker(tcb, scene)
+    kin = ClosedChainKinematics(tcb, scene.object.grasps)
+    return scene, ck, kin, TrialGenerator(tcb, scene)
+
+
+def _tree(kin, q):
+    M = kin.object_pose(q)
+    return _TaskTree(q, xi_from_pose(M), M.rotation.copy(), M.translation.copy())
+
+
+def _stats():
+    return {k: 0 for k in ("ik_iterations", "ik_calls", "ik_failures", "ik_jumps", "collisions", "ik_restarts",
+                           "edge_checks", "edge_collisions", "regrasp_attempts", "regrasp_failures", "regrasp_nodes")}
+
+
+def test_branch_at_holds_the_object_on_the_start_branch(tcb, truss):
+    """Path IK from the start to the goal's object pose: both hands on the object at the goal pose (Pinocchio FK);
+    continued back to the start's pose it returns to the start's configuration (the same branch), while the
+    goal's own configuration of that pose is another branch in at least one arm."""
+    scene, ck, kin, gen = truss
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved"), checker=ck, kinematics=kin)
+    t = gen.generate(0, 0)
+    Mg, Ms = kin.object_pose(t.q_goal), kin.object_pose(t.q_start)
+    x = pl.branch_at(t.q_start, Mg.rotation, Mg.translation)
+    assert x is not None
+    assert max(closure_error(tcb, scene.object.grasps, x)) <= 1e-6
+    M = kin.object_pose(x)
+    assert np.allclose(M.homogeneous, Mg.homogeneous, atol=1e-6)
+    back = pl.branch_at(x, Ms.rotation, Ms.translation)
+    assert back is not None and float(np.abs(back - t.q_start).max()) < 0.5
+    assert max(float(np.linalg.norm(x[i] - t.q_goal[i])) for i in kin.idx) >= pl.options.graft_min_distance
+
+
+def test_root_branches_regrasp_the_goal_root_onto_the_start_branch(tcb, truss):
+    """The goal tree's root gets a graft at the goal pose: free, closing the chain, its switched arms on the
+    start's branch (nearer the start branch's solution than the goal's), the others the goal's; its regrasp
+    motions move one arm at a time with the object fixed and pass the 1 cm sweep check; the root's extensions
+    grow from it."""
+    scene, ck, kin, gen = truss
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved"), checker=ck, kinematics=kin)
+    pl._rng = np.random.default_rng(0)
+    t = gen.generate(0, 0)
+    ta, tb = _tree(kin, t.q_start), _tree(kin, t.q_goal)
+    st = _stats()
+    pl._root_branches(ta, tb, Deadline(10.0, "cpu"), st)
+    assert st.get("root_branch") == "goal" and st["root_branch_attempts"] == 1, st
+    assert list(tb.graft) == [1] and tb.parent[1] == 0 and ta.n == 1
+    y = tb.q[1]
+    assert ck.in_limits(y) and ck.is_valid(y) and max(closure_error(tcb, scene.object.grasps, y)) <= 1e-6
+    Mg = kin.object_pose(t.q_goal)
+    x = pl.branch_at(t.q_start, Mg.rotation, Mg.translation)
+    moved = [i for i in kin.idx if not np.array_equal(y[i], t.q_goal[i])]
+    assert moved
+    for i in moved:
+        assert np.linalg.norm(y[i] - x[i]) < np.linalg.norm(y[i] - t.q_goal[i])
+    w_fixed = ck.sweep_weights("fixed", per_geometry=True)
+    prev = t.q_goal
+    for arm, full in tb.graft[1]:
+        idx = kin.idx[kin.arm_names.index(arm)]
+        other = np.setdiff1d(np.arange(tcb.nq), idx)
+        assert np.allclose(full[0], prev) and all(np.array_equal(q[other], prev[other]) for q in full)
+        for q0, q1 in zip(full[:-1], full[1:]):
+            assert edge_is_valid(q0, q1, lambda z: ck.is_valid_object_fixed(z, Mg), SWEEP, weights=w_fixed)
+        prev = full[-1]
+    assert np.allclose(prev, y)
+    rng = np.random.default_rng(1)
+    assert all(tb.twin_nearest(k, None, rng) == 1 for k in (0, 1) for _ in range(5))
+
+
+def test_planner_with_branch_roots_and_stall_grafts_returns_a_verified_path(tcb, truss):
+    """With frontier grafts only on a stall (``graft_after`` beyond the search) the search tries them and
+    returns a path whose constrained configurations close the chain (Pinocchio FK) and are free and whose
+    every straight edge passes the bench's independent 1 cm sweep check; the goal root was re-grasped."""
+    from optplan.bench.tcbirrt import _path_checks
+
+    scene, ck, kin, gen = truss
+    t = gen.generate(1, 0)
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", graft_after=10**6, stall_iterations=20, branch_roots=True),
+                 checker=ck, kinematics=kin)
+    res = pl.plan(t.q_start, t.q_goal, time_limit=30.0, seed=t.seed, clock="cpu")
+    assert res.success, res.message
+    s = res.stats
+    assert s["root_branch"] == "goal" and s["stall_attempts"] >= 1 and s["frontier_attempts"] == s["stall_attempts"]
+    assert np.allclose(res.path[0], t.q_start) and np.allclose(res.path[-1], t.q_goal)
+    for q, c in zip(res.path, res.constrained):
+        assert ck.in_limits(q)
+        if c:
+            assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q)
+    chk = _path_checks(tcb, scene, ck, res)
+    assert chk["swept_invalid_edges"] == 0 and chk["max_closed_chain_residual"] <= 1e-6
+
+
+def test_branch_root_and_stall_options_are_checked():
+    # measured and left off in both variants (window paths longer, see docs/planners.md)
+    assert TCBiRRTOptions(variant="improved").branch_roots is False and TCBiRRTOptions().branch_roots is False
+    assert TCBiRRTOptions(variant="improved").stall_iterations == 0 and TCBiRRTOptions().stall_iterations == 0
+    o = TCBiRRTOptions(variant="improved", branch_roots=True, stall_iterations=100)
+    assert o.branch_roots is True and o.stall_iterations == 100
+    for bad in (dict(stall_iterations=-1), dict(stall_iterations=2.5), dict(branch_roots=1)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            TCBiRRTOptions(**bad)
