@@ -48,7 +48,7 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=4)
     args = ap.parse_args()
     OptProblem.solve = _solve          # type: ignore[method-assign]
-    fp._optimize = _optimize           # type: ignore[assignment]
+    fp._optimize = _optimize
     robot = RobotModel.from_name("eba_ffsr")
     for name in args.scenes:
         scene = Scene.load(name)

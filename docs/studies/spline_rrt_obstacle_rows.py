@@ -21,7 +21,7 @@ from optplan.papers.spline_rrt import OptimizeOptions, SplineRRTTask, _time_scal
 from optplan.papers.spline_rrt.optimized import _spline_problem
 from optplan.planners.spline_rrt import CoordinatedRRTStarOptions
 
-VARIANTS = {
+VARIANTS: dict[str, dict[str, object]] = {
     "default": {},
     "cd": {"perturb_always_cd": "yes"},
     "nocd": {"perturb_always_cd": "no"},
@@ -50,6 +50,7 @@ def main() -> None:
         for v in args.variants.split(","):
             c0 = time.process_time()
             prob = _spline_problem(robot, task, hands, T, oo)
+            assert res.tracking is not None   # a successful plan is tracked
             prob.set_initial(q=res.tracking.joints, t=res.tracking.t)
             sol = prob.solve(dict(VARIANTS[v]), tol=oo.tol, max_iter=args.max_iter, guarantees=False)
             cpu = time.process_time() - c0
