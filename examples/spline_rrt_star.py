@@ -50,6 +50,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-optimize", action="store_true", help="skip the optimized variant")
     ap.add_argument("--intervals", type=int, default=OptimizeOptions.n_intervals,
                     help=f"knot intervals of the optimized variant (default {OptimizeOptions.n_intervals})")
+    ap.add_argument("--transcription", choices=["bspline", "knots"], default=OptimizeOptions.transcription,
+                    help="the optimized variant's NLP: the B-spline kernel core (default) or the knot transcription")
     ap.add_argument("--compare-unseparated", type=int, default=0, metavar="N",
                     help="also plan N seeds with and without separated sampling and compare the hands' closest approach")
     ap.add_argument("--json", type=Path, help="write the figures as JSON to this file")
@@ -61,7 +63,8 @@ def main(argv=None) -> int:
     res = run_spline_rrt(plan_options=CoordinatedRRTStarOptions(hand_radius=0.15, max_iterations=args.iterations,
                                                                 seed=args.seed, time_limit=args.time_limit),
                          optimize_durations=args.optimize_durations, run_optimizer=not args.no_optimize,
-                         optimize_options=OptimizeOptions(n_intervals=args.intervals))
+                         optimize_options=OptimizeOptions(n_intervals=args.intervals,
+                                                          transcription=args.transcription))
     out = {"plan_status": res.plan.status.value, "plan_time_s": res.timings.get("plan_s")}
     if not res.success:
         print(f"planning failed: {res.plan.status.value}: {res.plan.message}")
@@ -98,7 +101,7 @@ def main(argv=None) -> int:
         def final_ori(ev):
             return float(max(ev[f"tracking_orientation_rad_{a}"][-1] for a in arms))
         extra["optimized"] = {
-            "success": bool(sol.success), "iterations": sol.iterations, "duration_factor": T_opt / res.T,
+            "success": bool(sol.success), "iterations": sol.total_iterations, "duration_factor": T_opt / res.T,
             "max_constraint_violation": sol.max_constraint_violation,
             "nlp_knots": {**res.figures(kn, T_opt), "max_joint_rate_deg_s": float(np.degrees(kn["max_joint_rate_rad_s"])),
                           "max_joint_accel_deg_s2": float(np.degrees(kn["max_joint_accel_rad_s2"])),
@@ -135,7 +138,7 @@ def main(argv=None) -> int:
     if res.optimized is not None:
         o, xo = out["optimized"], extra["optimized"]
         kn, dn, ex = xo["nlp_knots"], xo["nlp_dense"], xo["executed"]
-        print(f"\noptimized variant (OptProblem, N = {args.intervals}, T = {o['duration_s']:.2f} s = "
+        print(f"\noptimized variant (OptProblem, {args.transcription}, N = {args.intervals}, T = {o['duration_s']:.2f} s = "
               f"{xo['duration_factor']:.2f} × Spline-RRT*): {o['plan_status']}, {xo['iterations']} iterations, "
               f"{o['plan_time_s']:.1f} s")
         print(f"{'':32s} {'NLP knots':>12s} {'NLP dense':>12s} {'executed':>12s} {'Spline-RRT*':>12s}  target")

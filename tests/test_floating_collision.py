@@ -179,3 +179,16 @@ def test_two_collision_terms_keep_their_own_pairs_and_margins(eba, probe):
         assert all(np.all(f.data["item"].margins <= margin + 1e-15) for f in mine)
         assert any(np.any(f.data["item"].margins == margin) for f in mine)
     assert len(fams) == sum(len(v) for v in (p._spline.owner["links"], p._spline.owner["probe_clearance"]))
+
+
+def test_floating_plane_rows_solve_without_a_permanent_constraint_regularisation(eba, probe):
+    """IPOPT's ``perturb_always_cd`` (the fixed-base segment NLP's setting for plane rows) is not
+    used with a floating robot's momentum and attitude rows: it stalled the Spline-RRT* variant at
+    a primal infeasibility ~1e-3 (docs/decisions/0022-papers-on-the-shared-core.md); the other
+    plane-row settings stay."""
+    p = _problem(eba, probe, True)
+    p.solve(max_iter=2, guarantees=False)
+    st = p._spline.core.structure(p._spline.row_families(), bool(p._spline.pbounds), "auto")
+    keys = list(st["solvers"])
+    assert keys and any("'ipopt.theta_max_fact', 10.0" in k for k in keys), keys
+    assert not any("perturb_always_cd" in k for k in keys), keys

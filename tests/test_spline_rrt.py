@@ -342,4 +342,4 @@ def test_optimize_options_are_checked():
         OptimizeOptions(transcription="collocation")
     with pytest.raises(OptionError, match="n_intervals"):
         OptimizeOptions(n_intervals=3)
-    assert OptimizeOptions().transcription == "knots"
+    assert OptimizeOptions().transcription == "bspline"

@@ -73,7 +73,7 @@ def main() -> None:
             sol, prob = optimize(robot, task, hands, T_opt, res.tracking, oo)
             cpu, wall = time.process_time() - c0, time.perf_counter() - w0
             f = figures(robot, task, hands, T_opt, sol)
-            print(f"seed {seed} {tr:8s} {sol.status.value:>12s} success={sol.success} it={sol.iterations} "
+            print(f"seed {seed} {tr:8s} {sol.status.value:>12s} success={sol.success} it={sol.total_iterations} "
                   f"cpu={cpu:.2f}s wall={wall:.2f}s setup={sol.setup_time:.2f}s ipopt_wall={sol.wall_time:.2f}s "
                   f"cost={sol.cost:.6g}", flush=True)
             for k, v in f.items():

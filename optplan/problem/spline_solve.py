@@ -469,9 +469,12 @@ class SplineBackend:
         if core.fl:
             defaults.update({"ipopt.mumps_pivot_order": 6, "ipopt.mu_init": 1e-3})
         if core.nx > core.x_aux or self.col_p.size:
-            # the segment NLP's settings for its plane rows (docs/decisions/0015-segment-nlp-stalls.md)
-            defaults.update({"ipopt.mu_strategy": "adaptive", "ipopt.theta_max_fact": 10.0,
-                             "ipopt.perturb_always_cd": "yes"})
+            # the segment NLP's settings for its plane rows (docs/decisions/0015-segment-nlp-stalls.md);
+            # a floating robot's NLP without IPOPT's permanent constraint regularisation: with the
+            # momentum and attitude rows it stalled at a primal infeasibility ~1e-3 (decision 0022)
+            defaults.update({"ipopt.mu_strategy": "adaptive", "ipopt.theta_max_fact": 10.0})
+            if not core.fl:
+                defaults["ipopt.perturb_always_cd"] = "yes"
         warm = self.lam is not None and self.lam[0] is not None and np.size(self.lam[0]) == lbg.size \
             and self.x0 is not None
         if warm:

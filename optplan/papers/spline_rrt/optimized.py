@@ -3,13 +3,14 @@ constraints on the free-floating robot, the links apart, the base attitude resto
 
 Two transcriptions of the same task (``OptimizeOptions.transcription``):
 
-* ``"bspline"``: an :class:`~optplan.problem.OptProblem` on the B-spline kernel core. The hand
-  paths are per-point expressions of ``prob.frame(ee)`` against the path sampled at the knots (a
-  parameter, selected at each knot by the hat function of ``prob.t``); the goal orientation an
-  expression at the end; the joint-rate limit holds everywhere by the convex hull of the velocity
-  control points, so no interior samples are needed.
-* ``"knots"`` (default): the knot transcription with two custom terms (:class:`EndOrientation`,
-  :class:`InteriorVelocityLimits`: the rate sampled inside every interval).
+* ``"bspline"`` (default): an :class:`~optplan.problem.OptProblem` on the B-spline kernel core.
+  The hand paths are per-point expressions of ``prob.frame(ee)`` against the path sampled at the
+  knots (a parameter, selected at each knot by the hat function of ``prob.t``); the goal
+  orientation an expression at the end; the joint-rate limit holds everywhere by the convex hull
+  of the velocity control points, so no interior samples are needed.
+* ``"knots"``: the knot transcription with two custom terms (:class:`EndOrientation`,
+  :class:`InteriorVelocityLimits`: the rate sampled inside every interval), kept as the measured
+  comparison.
 
 See docs/decisions/0022-papers-on-the-shared-core.md for the measured comparison.
 """
@@ -119,10 +120,10 @@ class OptimizeOptions:
     tol: float = 1e-8
     #: IPOPT iterations, at most [count].
     max_iter: int = 300
-    #: ``"bspline"``: the B-spline kernel core (joint velocity limits hold everywhere by the convex hull of
-    #: the velocity control points, the hand paths as per-point expressions); ``"knots"``: the knot
+    #: ``"bspline"`` (default): the B-spline kernel core (joint velocity limits hold everywhere by the convex
+    #: hull of the velocity control points, the hand paths as per-point expressions); ``"knots"``: the knot
     #: transcription (the state at every knot, the rate limits sampled inside the intervals).
-    transcription: str = "knots"
+    transcription: str = "bspline"
 
     def __post_init__(self):
         if self.transcription not in ("bspline", "knots"):
