@@ -106,11 +106,17 @@ class ManoeuvreMotion:
             n = max(4, math.ceil(d / step_rad))
             s = np.linspace(0.0, 1.0, n + 1)
             P = a + s[:, None] * (b - a)
+            # each point projected from the straight one plus the correction extrapolated from the
+            # two points before (the correction is smooth along the edge, zero at its ends): the
+            # projection then starts within a few 1e-7 of the chain and converges in an iteration
+            c1 = c2 = np.zeros_like(a)
             for k in range(1, n):
-                p = project(P[k])
+                p = project(P[k] + (2.0 * c1 - c2 if k > 1 else c1))
                 if p is None:
                     self.ok = False
+                    c1 = c2 = np.zeros_like(a)
                 else:
+                    c2, c1 = c1, p - P[k]
                     P[k] = p
             self._splines.append(CubicSpline(s, P, axis=0))
             durs.append(max(min_edge_s, duration_factor * d / speed))
@@ -128,8 +134,9 @@ class ManoeuvreMotion:
         e = np.clip(np.searchsorted(self._t0, t, side="right") - 1, 0, len(self._splines) - 1)
         q = np.empty((len(t), self._splines[0].c.shape[-1]))
         qd = np.empty_like(q)
-        for k in np.unique(e):
-            m = e == k
+        order = np.argsort(e, kind="stable")   # the times of each edge, without a pass per edge
+        ks, starts = np.unique(e[order], return_index=True)
+        for k, m in zip(ks, np.split(order, starts[1:])):
             tau = np.clip((t[m] - self._t0[k]) / self._dur[k], 0.0, 1.0)
             s, ds = _law(tau)
             sp = self._splines[k]
@@ -157,6 +164,9 @@ class ChainedMotion:
     base_quat = None   # no base of its own: verify re-integrates it
 
     def __init__(self, parts: list[MotionPart]):
+        #: the base placement at the end from the identity, when the builder integrated it part by
+        #: part (pinocchio.SE3); None: not known
+        self.end_base: Any = None
         if not parts:
             raise OptionError("ChainedMotion: expected at least one part, got none")
         self.parts = parts
