@@ -318,7 +318,7 @@ def _chained(robot: RobotModel, scene: Scene, plan: FloatingCarryPlan, spans: li
     base = pin.SE3.Identity()
     for a, b in zip(cuts[:-1], cuts[1:]):
         if (a, b) in spans:
-            mm = ManoeuvreMotion(J[a:b + 1], lambda q: carry.hold(q, carry.object_in_base(q)), speed,
+            mm = ManoeuvreMotion(J[a:b + 1], carry.onto_chain, speed,
                                  duration_factor=opts.duration_factor, sample_step_rad=opts.planner.check_step_rad)
             st = KeptStatus.KEPT if mm.ok else KeptStatus.NOT_PROJECTED
             res.attempts.append((len(mm.t) - 1, st.value, [] if mm.ok else ["closed chain: a point not projected"]))
@@ -386,7 +386,7 @@ def _resteer_end(robot: RobotModel, scene: Scene, planner: FloatingTCBiRRT, moti
         if st is None:
             res.attempts.append((0, "resteer", ["no collision-free loop turns the base the rest of the way"]))
             break
-        mm = ManoeuvreMotion(np.vstack([q_end, *st.joints]), lambda q: carry.hold(q, carry.object_in_base(q)), speed,
+        mm = ManoeuvreMotion(np.vstack([q_end, *st.joints]), carry.onto_chain, speed,
                              duration_factor=opts.duration_factor, sample_step_rad=opts.planner.check_step_rad)
         parts.append(MotionPart(mm, success=mm.ok, status=KeptStatus.KEPT if mm.ok else KeptStatus.NOT_PROJECTED))
         base_end = _end_base(robot, mm, base_end)
