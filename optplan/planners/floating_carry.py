@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -143,7 +144,7 @@ class FloatingCarryPlanner:
         self.checker = CollisionChecker(robot, scene)
         self._data = robot.model.createData()
         self._base_id = pin.SE3ToXYZQUAT(pin.SE3.Identity())
-        self._chain: tuple | None = None   # onto_chain's indices, built on first use
+        self._chain: tuple[Any, ...] | None = None   # onto_chain's indices, built on first use
 
     # ------------------------------------------------------------------ closed chain in the base frame
     def _full(self, joints: np.ndarray, base: pin.SE3 | None = None) -> np.ndarray:
