@@ -131,18 +131,15 @@ class ManoeuvreMotion:
         the straight edge ``a → b`` [rad], its ``n − 1`` inner points projected."""
         s = np.linspace(0.0, 1.0, n + 1)
         P = a + s[:, None] * (b - a)
-        # each point projected from the straight one plus the correction extrapolated from the
-        # two points before (the correction is smooth along the edge, zero at its ends): the
-        # projection then starts near the chain and converges in fewer steps
-        c1 = c2 = np.zeros_like(a)
+        # each point projected from the straight one (a start extrapolated from the points before
+        # carries the redundant arm's self-motion along the edge, and the spline then misses the
+        # chain by more between the points)
         for k in range(1, n):
             self.projections += 1
-            p = project(P[k] + (2.0 * c1 - c2 if k > 1 else c1))
+            p = project(P[k])
             if p is None:
                 self.ok = False
-                c1 = c2 = np.zeros_like(a)
             else:
-                c2, c1 = c1, p - P[k]
                 P[k] = p
         return PPoly.construct_fast(np.einsum("kij,jd->kid", _spline_map(n), P), s)
 
