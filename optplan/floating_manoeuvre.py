@@ -19,6 +19,7 @@ coarse B-spline that cannot follow its loops:
 """
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -26,7 +27,7 @@ from enum import Enum
 from typing import Any
 
 import numpy as np
-from scipy.interpolate import CubicSpline
+from scipy.interpolate import CubicSpline, PPoly
 
 from .errors import OptionError
 
@@ -73,6 +74,16 @@ def sharp_corners(joints: np.ndarray, min_cos: float, spans: Sequence[tuple[int,
     return out
 
 
+@functools.lru_cache(maxsize=64)
+def _spline_map(n: int) -> np.ndarray:
+    """(4, n, n + 1): the not-a-knot cubic spline's coefficients on the uniform grid of ``n`` intervals
+    of [0, 1] as a linear map of the ``n + 1`` values (scipy's ``CubicSpline`` on the unit vectors):
+    the spline of an edge's points without solving its system again."""
+    c = CubicSpline(np.linspace(0.0, 1.0, n + 1), np.eye(n + 1), axis=0).c
+    c.setflags(write=False)
+    return c
+
+
 def _law(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Quintic rest-to-rest law s(τ) and ds/dτ on [0, 1]."""
     return tau**3 * (10 - 15 * tau + 6 * tau**2), 30 * tau**2 * (1 - tau) ** 2
@@ -99,20 +110,13 @@ class ManoeuvreMotion:
             raise OptionError(f"ManoeuvreMotion: speed [rad/s], step_rad [rad] and duration_factor must be positive, "
                               f"got {speed!r}, {step_rad!r}, {duration_factor!r}")
         self.ok = True
-        self._splines: list[CubicSpline] = []
+        self._splines: list[PPoly] = []
+        #: points projected onto the closed chain [count]
+        self.projections = 0
         durs = []
         for a, b in zip(J[:-1], J[1:]):
             d = float(np.max(np.abs(b - a)))
-            n = max(4, math.ceil(d / step_rad))
-            s = np.linspace(0.0, 1.0, n + 1)
-            P = a + s[:, None] * (b - a)
-            for k in range(1, n):
-                p = project(P[k])
-                if p is None:
-                    self.ok = False
-                else:
-                    P[k] = p
-            self._splines.append(CubicSpline(s, P, axis=0))
+            self._splines.append(self._edge(a, b, max(4, math.ceil(d / step_rad)), project))
             durs.append(max(min_edge_s, duration_factor * d / speed))
         self._t0 = np.r_[0.0, np.cumsum(durs)]
         self._dur = np.asarray(durs)
@@ -122,14 +126,32 @@ class ManoeuvreMotion:
         self.t = np.concatenate([np.linspace(self._t0[e], self._t0[e + 1], per[e] + 1)[:-1]
                                  for e in range(len(durs))] + [self._t0[-1:]])
 
+    def _edge(self, a: np.ndarray, b: np.ndarray, n: int, project: Callable[[np.ndarray], np.ndarray | None]) -> PPoly:
+        """The spline (in the edge's parameter s ∈ [0, 1]) through ``n + 1`` evenly spaced points of
+        the straight edge ``a → b`` [rad], its ``n − 1`` inner points projected."""
+        s = np.linspace(0.0, 1.0, n + 1)
+        P = a + s[:, None] * (b - a)
+        # each point projected from the straight one (a start extrapolated from the points before
+        # carries the redundant arm's self-motion along the edge, and the spline then misses the
+        # chain by more between the points)
+        for k in range(1, n):
+            self.projections += 1
+            p = project(P[k])
+            if p is None:
+                self.ok = False
+            else:
+                P[k] = p
+        return PPoly.construct_fast(np.einsum("kij,jd->kid", _spline_map(n), P), s)
+
     def sample(self, t) -> dict[str, np.ndarray]:
         """Joint positions ``q`` [rad] and velocities ``qd`` [rad/s] at times ``t`` [s] in [0, duration]."""
         t = np.clip(np.atleast_1d(np.asarray(t, float)), 0.0, self.duration)
         e = np.clip(np.searchsorted(self._t0, t, side="right") - 1, 0, len(self._splines) - 1)
         q = np.empty((len(t), self._splines[0].c.shape[-1]))
         qd = np.empty_like(q)
-        for k in np.unique(e):
-            m = e == k
+        order = np.argsort(e, kind="stable")   # the times of each edge, without a pass per edge
+        ks, starts = np.unique(e[order], return_index=True)
+        for k, m in zip(ks, np.split(order, starts[1:])):
             tau = np.clip((t[m] - self._t0[k]) / self._dur[k], 0.0, 1.0)
             s, ds = _law(tau)
             sp = self._splines[k]
@@ -157,6 +179,9 @@ class ChainedMotion:
     base_quat = None   # no base of its own: verify re-integrates it
 
     def __init__(self, parts: list[MotionPart]):
+        #: the base placement at the end from the identity, when the builder integrated it part by
+        #: part (pinocchio.SE3); None: not known
+        self.end_base: Any = None
         if not parts:
             raise OptionError("ChainedMotion: expected at least one part, got none")
         self.parts = parts

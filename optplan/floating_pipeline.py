@@ -91,6 +91,14 @@ class FloatingPipelineOptions:
     #: joint direction turns by more than the angle of this cosine [1] (a B-spline cannot follow
     #: the corner on the closed chain); ``"optproblem"`` only; -1: never.
     corner_cos: float = -1.0
+    #: when a solve does not converge (IPOPT's iteration limit, a local infeasibility), the plan is
+    #: optimized once more, cut also where the joint direction turns by more than the angle of this
+    #: cosine [1], with the knots' clearance margin lowered to half the plan's smallest clearance (a
+    #: margin the plan's own path does not keep leaves the NLP no feasible point near its guess).
+    retry_corner_cos: float = 0.9
+    #: IPOPT's iteration limit per ``"optproblem"`` solve [count] (the converging solves of the shipped scenes take
+    #: ≤ ~45 iterations; one that has not converged by then goes to the retry sooner).
+    max_iter: int = 150
     #: a plan ending with a kept manoeuvre whose end attitude misses: rounds of steering the rest off
     #: from the real end (each a kept manoeuvre, verified again) [count]; 0: none.
     resteer_rounds: int = 5
@@ -113,12 +121,16 @@ class FloatingPipelineOptions:
                               f"{self.max_intervals}], got {self.intervals!r}")
         if self.nlp not in ("optproblem", "floating_segment"):
             raise OptionError(f"FloatingPipelineOptions.nlp: expected 'optproblem' or 'floating_segment', got {self.nlp!r}")
+        if isinstance(self.max_iter, bool) or not (isinstance(self.max_iter, int) and self.max_iter >= 1):
+            raise OptionError(f"FloatingPipelineOptions.max_iter: expected an integer ≥ 1, got {self.max_iter!r}")
         if not (isinstance(self.n_sub, int) and self.n_sub >= 1):
             raise OptionError(f"FloatingPipelineOptions.n_sub: expected an integer ≥ 1, got {self.n_sub!r}")
         if not (isinstance(self.margin, (int, float)) and np.isfinite(self.margin) and self.margin >= 0):
             raise OptionError(f"FloatingPipelineOptions.margin: expected a number ≥ 0 [m], got {self.margin!r}")
-        if not (isinstance(self.corner_cos, (int, float)) and -1.0 <= self.corner_cos <= 1.0):
-            raise OptionError(f"FloatingPipelineOptions.corner_cos: expected a cosine in [-1, 1], got {self.corner_cos!r}")
+        for name in ("corner_cos", "retry_corner_cos"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and -1.0 <= v <= 1.0):
+                raise OptionError(f"FloatingPipelineOptions.{name}: expected a cosine in [-1, 1], got {v!r}")
         for name in ("plan_time_limit", "duration_factor"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
@@ -208,13 +220,20 @@ def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE
     spans = manoeuvre_spans(J) if opts.nlp == "optproblem" and opts.keep_manoeuvres else []
     corners = sharp_corners(J, opts.corner_cos, spans) if opts.nlp == "optproblem" else []
     sol: Solution | ChainedMotion
+    carry = planner.carry if isinstance(planner, FloatingTCBiRRT) else planner
     if spans or corners:
-        sol, rep = _chained(robot, scene, plan, spans, corners, cc, res, opts, planner.carry if isinstance(planner, FloatingTCBiRRT) else planner)
-        if isinstance(planner, FloatingTCBiRRT) and isinstance(sol, ChainedMotion) and spans \
-                and spans[-1][1] == len(J) - 1:
-            sol, rep = _resteer_end(robot, scene, planner, sol, rep, cc, res, opts, seed)
+        sol, rep = _chained(robot, scene, plan, spans, corners, cc, res, opts, carry)
     else:
         sol, rep = _solve_piece(robot, scene, J, pin.SE3.Identity(), res.end_attitude, cc, opts, res.attempts)
+    if not sol.success and opts.nlp == "optproblem":
+        # the retry after a solve that did not converge: cut at the milder corners, a margin the plan keeps
+        retry = replace(opts, corner_cos=max(opts.corner_cos, opts.retry_corner_cos),
+                        margin=min(opts.margin, 0.5 * max(float(plan.min_clearance_m), 0.0)))
+        corners2 = sharp_corners(J, retry.corner_cos, spans)
+        if corners2 != corners or retry.margin < opts.margin:
+            sol, rep = _chained(robot, scene, plan, spans, corners2, cc, res, retry, carry)
+    if isinstance(planner, FloatingTCBiRRT) and isinstance(sol, ChainedMotion) and spans and spans[-1][1] == len(J) - 1:
+        sol, rep = _resteer_end(robot, scene, planner, sol, rep, cc, res, opts, seed)
     res.solution, res.report = sol, rep
     res.opt_wall_s = time.perf_counter() - t0
     res.opt_cpu_s = time.process_time() - c0
@@ -260,8 +279,21 @@ def _solve_piece(robot: RobotModel, scene: Scene, J: np.ndarray, base0: pin.SE3,
             return sol, rep
         # the plan's path again on the finer grid: a start at the coarser optimum (its inequalities
         # active, no multipliers) costs IPOPT an order of magnitude more iterations
-        N = min(2 * n_sol, opts.max_intervals)
+        N = _refined_intervals(n_sol, rep, opts)
         guess = _resample(J, N)[0]
+
+
+def _refined_intervals(n: int, rep: VerifyReport, opts: FloatingPipelineOptions) -> int:
+    """The intervals of the next attempt after ``n`` failed between the knots: twice as many, or,
+    when the closed chain is what failed, as many as its drift (∝ h⁴) predicts for half the
+    tolerance (one solve instead of a doubling that falls short), rounded up to a multiple of 8; at
+    most ``opts.max_intervals``."""
+    tol = float(opts.tolerances.closed_chain)
+    res = float(rep.max_closed_chain_residual)
+    N = 2 * n
+    if np.isfinite(res) and res > tol:
+        N = max(N, 8 * int(np.ceil(n * (2.0 * res / tol) ** 0.25 / 8.0)))
+    return min(N, opts.max_intervals)
 
 
 def _end_base(robot: RobotModel, motion, base0: pin.SE3) -> pin.SE3:
@@ -286,7 +318,7 @@ def _chained(robot: RobotModel, scene: Scene, plan: FloatingCarryPlan, spans: li
     base = pin.SE3.Identity()
     for a, b in zip(cuts[:-1], cuts[1:]):
         if (a, b) in spans:
-            mm = ManoeuvreMotion(J[a:b + 1], lambda q: carry.hold(q, carry.object_in_base(q)), speed,
+            mm = ManoeuvreMotion(J[a:b + 1], carry.onto_chain, speed,
                                  duration_factor=opts.duration_factor, sample_step_rad=opts.planner.check_step_rad)
             st = KeptStatus.KEPT if mm.ok else KeptStatus.NOT_PROJECTED
             res.attempts.append((len(mm.t) - 1, st.value, [] if mm.ok else ["closed chain: a point not projected"]))
@@ -303,6 +335,8 @@ def _chained(robot: RobotModel, scene: Scene, plan: FloatingCarryPlan, spans: li
             break
         base = _end_base(robot, sol, base)
     motion = ChainedMotion(parts)
+    if all(p.success for p in parts):
+        motion.end_base = base   # integrated part by part: the re-steering starts from it
     rep = verify(robot, motion, scene, closed_chain=cc, end_attitude=res.end_attitude)
     res.attempts.append((len(motion.t) - 1, "chained", rep.failures(opts.tolerances)))
     return motion, rep
@@ -328,7 +362,8 @@ def _resteer_end(robot: RobotModel, scene: Scene, planner: FloatingTCBiRRT, moti
     carry = planner.carry
     parts = list(motion.parts)
     q_end = np.asarray(motion.sample(np.array([motion.t[-1]]))["q"][-1], float)
-    base_end = _end_base(robot, motion, pin.SE3.Identity())   # left-invariant: each new part from here
+    # left-invariant: each new part from here (the parts' own integrations, not the whole motion again)
+    base_end = motion.end_base if motion.end_base is not None else _end_base(robot, motion, pin.SE3.Identity())
     for _ in range(opts.resteer_rounds):
         wanted = base_end.rotation.T @ res.end_attitude
         if float(np.linalg.norm(pin.log3(wanted))) <= 0.5 * tol:
@@ -351,7 +386,7 @@ def _resteer_end(robot: RobotModel, scene: Scene, planner: FloatingTCBiRRT, moti
         if st is None:
             res.attempts.append((0, "resteer", ["no collision-free loop turns the base the rest of the way"]))
             break
-        mm = ManoeuvreMotion(np.vstack([q_end, *st.joints]), lambda q: carry.hold(q, carry.object_in_base(q)), speed,
+        mm = ManoeuvreMotion(np.vstack([q_end, *st.joints]), carry.onto_chain, speed,
                              duration_factor=opts.duration_factor, sample_step_rad=opts.planner.check_step_rad)
         parts.append(MotionPart(mm, success=mm.ok, status=KeptStatus.KEPT if mm.ok else KeptStatus.NOT_PROJECTED))
         base_end = _end_base(robot, mm, base_end)
@@ -388,7 +423,7 @@ def _optimize(robot: RobotModel, scene: Scene, J: np.ndarray, guess: np.ndarray,
     prob.set_initial(guess)
     # no dense check inside the solve: verify (the judge) samples the same trajectory at the same
     # density with the base integrated from the start, and its findings drive the refinement
-    return prob.solve(guarantees=False)
+    return prob.solve(guarantees=False, max_iter=opts.max_iter)
 
 
 def trial_goal(scene: Scene, index: int, seed: int) -> pin.SE3:

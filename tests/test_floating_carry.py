@@ -105,3 +105,27 @@ def test_bad_input(setup):
         FloatingCarryPlanner(RobotModel.from_name("tcbirrt_dual_arm"), scene)
     res = FloatingCarryPlanner(robot, scene).plan(q0 + 0.0, scene.goal, base0=pin.SE3(np.eye(3), np.array([1.5, 0, 0])))
     assert res.status.value == "invalid_start"   # the base moved onto the module: a status, not an exception
+
+
+def test_onto_chain_is_hold_onto_the_first_hands_object(setup):
+    """The manoeuvres' chain projection gives what ``hold`` gives (the second hand on its grasp on
+    the object the first hand holds, the first arm unchanged), judged by Pinocchio FK."""
+    robot, scene, q0 = setup
+    pl = FloatingCarryPlanner(robot, scene)
+    q0 = pl.hold(q0, pl.object_in_base(q0))
+    rng = np.random.default_rng(5)
+    ga, gb = scene.object.grasps["A"], scene.object.grasps["B"]
+    d = robot.model.createData()
+    first = robot.arm("A").j_idx
+    for _ in range(4):
+        q = np.clip(q0 + rng.normal(0.0, 0.03, robot.nj), robot.lower, robot.upper)
+        a, b = pl.hold(q, pl.object_in_base(q)), pl.onto_chain(q)
+        assert a is not None and b is not None
+        assert np.max(np.abs(a - b)) < 1e-9
+        assert np.array_equal(b[first], q[first])
+        pin.framesForwardKinematics(robot.model, d, robot.configuration(b))
+        hA, hB = (d.oMf[robot.arm(n).ee_frame_id] for n in ("A", "B"))
+        assert np.linalg.norm(pin.log6((hA * ga.inverse()).actInv(hB * gb.inverse())).vector) < 1e-9
+    far = q0.copy()
+    far[robot.arm("B").j_idx] = robot.lower[robot.arm("B").j_idx]   # the second arm at its limits: no hold
+    assert pl.onto_chain(far) is None

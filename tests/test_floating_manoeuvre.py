@@ -30,6 +30,30 @@ def test_spans_are_exact_returns_of_the_joints():
     assert sharp_corners(np.array([[0, 0], [1, 0], [2, 0], [2, 1], [1, 1.0]]), 0.5, [(1, 3)]) == []
 
 
+def test_edge_splines_are_scipys_not_a_knot_splines():
+    """The edges' splines built from the cached linear map are scipy's CubicSpline of the same points."""
+    from scipy.interpolate import CubicSpline
+
+    rng = np.random.default_rng(4)
+    J = np.cumsum(rng.normal(0.0, 0.1, size=(6, 3)), axis=0)
+    pts: list[np.ndarray] = []
+
+    def bend(q):   # a smooth, point-dependent "projection"
+        p = q + 0.01 * np.sin(3.0 * q[::-1])
+        pts.append(p)
+        return p
+
+    mm = ManoeuvreMotion(J, bend, speed=1.0, step_rad=0.03)
+    assert mm.projections == len(pts) > 0
+    for k, (a, b) in enumerate(zip(J[:-1], J[1:])):
+        sp = mm._splines[k]
+        s = sp.x
+        ref = CubicSpline(s, sp(s), axis=0)
+        u = np.linspace(0.0, 1.0, 57)
+        assert np.allclose(sp(u), ref(u), atol=1e-13) and np.allclose(sp(u, 1), ref(u, 1), atol=1e-11)
+        assert np.allclose(sp(s[[0, -1]]), [a, b], atol=1e-14)
+
+
 def test_manoeuvre_time_law_and_chaining():
     """Rest at every waypoint, through every waypoint, velocities = finite differences; the chain
     plays its parts one after the other."""
@@ -130,3 +154,50 @@ def test_resteer_options_are_checked():
         FloatingPipelineOptions(resteer_rounds=-1)
     with pytest.raises(OptionError, match="resteer_time_s"):
         FloatingPipelineOptions(resteer_time_s=0.0)
+    with pytest.raises(OptionError, match="retry_corner_cos"):
+        FloatingPipelineOptions(retry_corner_cos=1.5)
+    with pytest.raises(OptionError, match="max_iter"):
+        FloatingPipelineOptions(max_iter=0)
+
+
+def test_refinement_goes_to_the_intervals_the_chain_drift_predicts():
+    """Twice the intervals, or as many as the h⁴ drift of the closed chain predicts for half the
+    tolerance (multiple of 8), never past the cap."""
+    from types import SimpleNamespace
+
+    from optplan.floating_pipeline import FloatingPipelineOptions, _refined_intervals
+
+    o = FloatingPipelineOptions(max_intervals=128)
+    rep = lambda r: SimpleNamespace(max_closed_chain_residual=r)   # noqa: E731
+    assert _refined_intervals(24, rep(2e-6), o) == 48            # 24 · 4^¼ = 34 < 48
+    assert _refined_intervals(24, rep(float("nan")), o) == 48    # a clearance failure: doubled
+    n = _refined_intervals(24, rep(3.2e-5), o)                   # 24 · 64^¼ = 67.9
+    assert n == 72 and 3.2e-5 * (24 / n) ** 4 <= 0.5e-6
+    assert _refined_intervals(24, rep(3.2e-5), FloatingPipelineOptions()) == 64
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene_name, index", [("floating_stow", 9), ("floating_truss", 17)])
+def test_former_failures_are_verified(scene_name, index):
+    """Stow trial 9 (its first solve does not converge: the retry cuts the corners and lowers the
+    knots' margin to what the plan keeps) and truss trial 17 (a steering manoeuvre that grazed a
+    beam: the loops now keep a clearance). Judged independently: the base re-integrated at 4×
+    verify's density, coal clearance ≥ 0, the object at its goal."""
+    robot = RobotModel.from_name("eba_ffsr")
+    scene = Scene.load(scene_name)
+    goal = trial_goal(scene, index, 0)
+    res = run_floating_pipeline(robot, scene, scene_start(robot, scene), goal, options_for_scene(scene), seed=index)
+    assert res.success, res.attempts
+    sol = res.solution
+    t = np.linspace(sol.t[0], sol.t[-1], 40 * (len(sol.t) - 1) + 1)
+    smp = sol.sample(t)
+    sim = simulate_base(robot, (t, smp["q"], smp["qd"]), t, substeps=4)
+    assert float(np.linalg.norm(pin.log3(res.end_attitude.T @ sim.final_base.rotation))) <= 1e-6
+    dmin, _, _ = CollisionChecker(robot, scene).min_distance_along(sim.q[::2])
+    assert dmin >= 0.0
+    d = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, d, sim.q[-1])
+    M = d.oMf[robot.arm("A").ee_frame_id] * scene.object.grasps["A"].inverse()
+    world = (scene.extra or {}).get("target_frame", "world") == "world"   # stow: a goal in the base frame
+    e = goal.actInv(M if world else sim.final_base.actInv(M))   # sim.q holds the base: oMf is in the world
+    assert np.linalg.norm(e.translation) <= 1e-3 and np.linalg.norm(pin.log3(e.rotation)) <= 1e-3

@@ -67,7 +67,7 @@ def test_loops_turn_the_base_by_the_wanted_rotation(robot, truss):
         rel = (hA * ga.inverse()).actInv(hB * gb.inverse())
         assert np.linalg.norm(pin.log6(rel).vector) < 1e-8
     dmin, _, _ = CollisionChecker(robot, scene).min_distance_along(sim.q[::2])   # the shipped truss, base from the origin
-    assert dmin >= 0.0
+    assert dmin >= 0.5 * steer.options.clearance_m    # the loops keep their margin (≥ 0 between the samples)
     # from another base: the same manoeuvre composed by left-invariance (the samples moved by base0)
     s2, sim2 = _reintegrate(robot, joints, base0)
     e = (base0 * sim.final_base).actInv(sim2.final_base)
@@ -116,3 +116,6 @@ def test_steer_options_are_checked():
         SteerOptions(loop_m=-0.1)
     with pytest.raises(OptionError, match="max_rounds"):
         SteerOptions(max_rounds=0)
+    with pytest.raises(OptionError, match="clearance_m"):
+        SteerOptions(clearance_m=-1e-3)
+    assert SteerOptions(clearance_m=0).clearance_m == 0

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -143,6 +144,7 @@ class FloatingCarryPlanner:
         self.checker = CollisionChecker(robot, scene)
         self._data = robot.model.createData()
         self._base_id = pin.SE3ToXYZQUAT(pin.SE3.Identity())
+        self._chain: tuple[Any, ...] | None = None   # onto_chain's indices, built on first use
 
     # ------------------------------------------------------------------ closed chain in the base frame
     def _full(self, joints: np.ndarray, base: pin.SE3 | None = None) -> np.ndarray:
@@ -194,6 +196,48 @@ class FloatingCarryPlanner:
             if not ok:
                 return None
         return q[nb:].copy()
+
+    def onto_chain(self, joints: np.ndarray, iters: int = 50) -> np.ndarray | None:
+        """``joints`` [rad] with the second hand put on its grasp on the object held by the first
+        (the first arm's joints unchanged): what ``hold(joints, object_in_base(joints))`` returns,
+        the same damped steps, one kinematics pass (placements and Jacobians) per step; None if it
+        does not converge."""
+        m, d, r = self.robot.model, self._data, self.robot
+        if self._chain is None:   # the arms' indices and the hands' relative grasp, once
+            first, second = (r.arm(n) for n in self.arm_names)
+            self._chain = (first.ee_frame_id, second.ee_frame_id, second.q_idx, second.v_idx,
+                           self.grasps[self.arm_names[0]].inverse() * self.grasps[self.arm_names[1]],
+                           r.lower[second.j_idx].copy(), r.upper[second.j_idx].copy())
+        f1, f2, q_idx, v_idx, rel, lo, hi = self._chain
+        q = self._full(np.array(joints, float))
+
+        def error(qq: np.ndarray) -> np.ndarray:
+            pin.computeJointJacobians(m, d, qq)
+            pin.updateFramePlacements(m, d)
+            return pin.log6((d.oMf[f1] * rel).actInv(d.oMf[f2])).vector
+
+        err = error(q)
+        e, lam = float(np.linalg.norm(err)), 1e-8
+        J = pin.getFrameJacobian(m, d, f2, pin.LOCAL)[:, v_idx]
+        eye = np.eye(6)
+        for _ in range(iters):
+            if e < self.options.ik_tol:
+                return q[r.base_nq:].copy()
+            step = J.T @ np.linalg.solve(J @ J.T + lam * eye, err)
+            n = float(np.max(np.abs(step)))
+            if n > 0.3:
+                step *= 0.3 / n
+            qt = q.copy()
+            qt[q_idx] = np.clip(q[q_idx] - step, lo, hi)
+            et = error(qt)
+            if float(np.linalg.norm(et)) < e:
+                q, err, e, lam = qt, et, float(np.linalg.norm(et)), max(lam * 0.1, 1e-12)
+                J = pin.getFrameJacobian(m, d, f2, pin.LOCAL)[:, v_idx]
+            else:
+                lam *= 10.0
+                if lam > 1e2:
+                    return None
+        return q[r.base_nq:].copy() if e < self.options.ik_tol else None
 
     # ------------------------------------------------------------------ one task-space motion
     def _edge(self, base: pin.SE3, qa: np.ndarray, qb: np.ndarray) -> tuple[np.ndarray, float]:

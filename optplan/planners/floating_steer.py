@@ -59,6 +59,10 @@ class SteerOptions:
     join_step_rad: float = 0.05
     #: most rounds of scaled loops for the small rotation left after the whole loops [count].
     refine_rounds: int = 8
+    #: smallest clearance of every checked sample of a loop [m]. A kept manoeuvre runs between the
+    #: checked samples and off the planner's straight edges (put back on the closed chain), where
+    #: the clearance may dip below the samples' by micrometres: this margin keeps it clear. 0: none.
+    clearance_m: float = 1e-3
 
     def __post_init__(self) -> None:
         for name in ("loop_m", "loop_rad", "tol_rad", "max_joint_step", "join_step_rad"):
@@ -69,6 +73,8 @@ class SteerOptions:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 1):
                 raise OptionError(f"SteerOptions.{name}: expected an integer ≥ 1, got {v!r}")
+        if not (isinstance(self.clearance_m, (int, float)) and math.isfinite(self.clearance_m) and self.clearance_m >= 0):
+            raise OptionError(f"SteerOptions.clearance_m: expected a number ≥ 0 [m], got {self.clearance_m!r}")
 
 
 @dataclass
@@ -131,12 +137,21 @@ class _Loop:
 class AttitudeSteerer:
     """Closed object loops that turn a free-floating base (module docstring). ``carry`` supplies the
     closed-chain IK (:meth:`~optplan.planners.floating_carry.FloatingCarryPlanner.hold`) and the
-    collision-check step; ``validity`` checks each repetition with the base where momentum puts it."""
+    collision-check step; ``validity`` checks each repetition with the base where momentum puts it
+    (with ``options.clearance_m`` > 0: a checker of the same scene with that margin)."""
 
     def __init__(self, carry: FloatingCarryPlanner, validity: ValidityChecker, options: SteerOptions | None = None):
         self.carry, self.validity = carry, validity
         self.robot = carry.robot
         self.options = options or SteerOptions()
+        self._margined: dict[float, ValidityChecker] = {float(validity.margin): validity}
+
+    def _checker(self) -> ValidityChecker:
+        """The collision checker with the margin ``options.clearance_m`` (built once per margin)."""
+        m = float(self.options.clearance_m)
+        if m not in self._margined:
+            self._margined[m] = ValidityChecker(self.robot, self.carry.scene, margin=m)
+        return self._margined[m]
 
     def _loop(self, q: np.ndarray, rng: np.random.Generator | None, xis: np.ndarray | None = None,
               scale: float = 1.0) -> _Loop | None:
@@ -228,7 +243,7 @@ class AttitudeSteerer:
         X = lp.X if sign > 0 else [D * x for x in [pin.SE3.Identity()] + lp.X[:-1]][::-1]
         Bk, new_b = st.B, []
         for _ in range(k):
-            if self.validity.first_invalid(left_multiply(rows0, Bk)) >= 0:
+            if self._checker().first_invalid(left_multiply(rows0, Bk)) >= 0:
                 return False
             new_b.append(Bk)
             Bk = Bk * D
