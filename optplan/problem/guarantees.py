@@ -148,7 +148,12 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
     margin = float(term.margin)
     constant = set(data.info.get("constant_pairs", ()))
     relaxed: Mapping[Any, float] = data.info.get("relaxed", {})
-    rows, idx, dist = checker.distances_below(Q, margin)
+    # a re-solve of the same problem starts from the previous check's distance bounds (kept with
+    # the term's model for the check): only pairs its motion may have brought close are computed
+    keep = isinstance(data, SimpleNamespace)
+    rows, idx, dist, prev = checker.distance_bounds_below(Q, margin, previous=getattr(data, "previous", None))
+    if keep:
+        data.previous = prev
     k = np.clip((t / h).astype(int), 0, N - 1)
     best: dict[tuple[int, int], tuple[int, float, float]] = {}
     for r_, p_, d_ in zip(rows.tolist(), idx.tolist(), dist.tolist()):
