@@ -154,6 +154,27 @@ def test_distances_below_match_every_pair_at_every_row(tcb, scene1, rng, thresho
     np.testing.assert_allclose(dist, D[r_ref, p_ref], rtol=0, atol=1e-9)
 
 
+@pytest.mark.parametrize("step", [0.0, 1e-3, 3e-2, 0.3])
+def test_distances_below_from_an_earlier_call_match_every_pair_at_every_row(tcb, scene1, rng, step):
+    """A later call that starts from an earlier call's bounds (a re-solve's dense check) finds
+    the same (row, pair) entries as every pair at every row, however far the rows moved."""
+    chk = CollisionChecker(tcb, scene1)
+    Q0 = _smooth_path(tcb, rng, np.zeros(tcb.nq), n=151, scale=1.5)
+    _, _, _, prev = chk.distance_bounds_below(Q0, 0.05)
+    Q = Q0 + step * rng.normal(size=Q0.shape)
+    for threshold in (0.0, 0.05):
+        D = np.array([chk.distances(q) for q in Q])
+        r_ref, p_ref = np.nonzero(D < threshold)
+        rows, pairs, dist, nxt = chk.distance_bounds_below(Q, threshold, previous=prev)
+        assert len(r_ref) > 0
+        np.testing.assert_array_equal(rows, r_ref)
+        np.testing.assert_array_equal(pairs, p_ref)
+        # coal's penetration depth (EPA) differs between its one-pair and all-pair queries by ~1e-7
+        np.testing.assert_allclose(dist, D[r_ref, p_ref], rtol=0, atol=1e-6)
+        excess = nxt[1] - D.T
+        assert excess.max() <= 1e-6, f"a bound handed on exceeds the distance by {excess.max():.3g} m"
+
+
 def test_shared_checker_is_reused_per_robot_scene_and_options(tcb, scene1):
     a = CollisionChecker.shared(tcb, scene1)
     assert CollisionChecker.shared(tcb, scene1) is a

@@ -368,29 +368,57 @@ class CollisionChecker:
         ``(rows, pair indices, distances [m])`` — the same entries as ``distances`` at every row
         filtered by the threshold, with the anchor bounds of :meth:`min_distance_along` sparing
         the pairs that cannot be that close."""
+        r_, p_, d_, _ = self.distance_bounds_below(Q, threshold, anchor_every)
+        return r_, p_, d_
+
+    def distance_bounds_below(self, Q, threshold: float, anchor_every: int = 10, previous: Any = None
+                              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
+        """:meth:`distances_below` and, as a fourth value, what a later call on configurations
+        near ``Q`` can start from (``previous``; None for a robot without the sweep bound): a
+        lower bound on every pair's distance at every row (pairs × rows [m]; exact where computed).
+        Given ``previous`` of an earlier call with as many rows, a pair's distance at row i is
+        bounded by its bound there minus how far its two geometries can have moved from that
+        call's row i to ``Q[i]`` (the sweep bound of :meth:`min_distance_along`), and only the
+        pairs whose bound is below ``threshold`` are computed — the same entries, fewer coal calls
+        when ``Q`` moved little (a re-solve)."""
         Q = self._check_rows(Q, anchor_every)
         if not self.pairs or not len(Q):
-            return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
+            return np.zeros(0, int), np.zeros(0, int), np.zeros(0), None
         thr = float(threshold)
         if self.model.nq != self.model.nv:        # no bound: every row
             D = np.array([self.distances(q) for q in Q])
             r_, p_ = np.nonzero(D < thr)
-            return r_, p_, D[r_, p_]
-        anchors, D, lower = self._anchor_bounds(Q, int(anchor_every))
-        ra, pa_ = np.nonzero(D < thr)
-        rows, pairs, dist = [np.asarray(anchors)[ra]], [pa_], [D[ra, pa_]]
+            return r_, p_, D[r_, p_], None
+        rows: list[np.ndarray] = []
+        pairs: list[np.ndarray] = []
+        dist: list[np.ndarray] = []
+        anchors: list[int] = []
+        if previous is not None and previous[0].shape == Q.shape and self._sweep is not None:
+            Q0, L0 = previous
+            W, pa, pb = self._sweep
+            m = W @ np.abs(Q - Q0).T                                  # geometries × rows
+            lower = L0 - m[pa] - m[pb]
+        else:
+            anchors, D, lower = self._anchor_bounds(Q, int(anchor_every))   # inf at the anchors
+            ra, pa_ = np.nonzero(D < thr)
+            rows, pairs, dist = [np.asarray(anchors)[ra]], [pa_], [D[ra, pa_]]
         gm, gd = self._cgm, self._cgd
         for i in np.nonzero((lower < thr).any(axis=0))[0].tolist():
             pin.updateGeometryPlacements(self.model, self.data, gm, gd, Q[i])
             for p in np.nonzero(lower[:, i] < thr)[0].tolist():
                 d = pin.computeDistance(gm, gd, p).min_distance
+                lower[p, i] = d
                 if d < thr:
                     rows.append(np.array([i]))
                     pairs.append(np.array([p]))
                     dist.append(np.array([d]))
-        r_, p_, d_ = np.concatenate(rows).astype(int), np.concatenate(pairs).astype(int), np.concatenate(dist)
+        if anchors:
+            lower[:, anchors] = D.T   # exact at the anchors
+        r_ = np.concatenate(rows).astype(int) if rows else np.zeros(0, int)
+        p_ = np.concatenate(pairs).astype(int) if pairs else np.zeros(0, int)
+        d_ = np.concatenate(dist) if dist else np.zeros(0)
         order = np.lexsort((p_, r_))
-        return r_[order], p_[order], d_[order]
+        return r_[order], p_[order], d_[order], (Q.copy(), lower)
 
     def min_distance_along(self, Q, anchor_every: int = 10) -> tuple[float, Pair | None, int]:
         """Exactly the smallest :meth:`min_distance` over the configurations ``Q`` (M × nq) and

@@ -18,7 +18,7 @@ from ..errors import ConfigurationError
 from ..geometry.spatial import check_pose, pose_residual, vee_skew
 from ..model.robot import RobotModel
 from .build import TermData
-from .terms import Term, _check_at, _knots, _set, pose_residual_numeric
+from .terms import Term, _check_at, _knots, _set, pose_residual_numeric, pose_residuals
 
 if TYPE_CHECKING:
     from .build import BuildContext
@@ -82,11 +82,10 @@ class FramePose(Term):
         return ca.vertcat(*rs), np.array(lo), np.array(hi)
 
     def numeric(self, traj: NumericTrajectory) -> np.ndarray:
-        out = []
-        for k in _knots(self.at, traj.N):
-            r, tr = pose_residual_numeric(traj.frame(self.frame, k), self.target)
-            out.append(r[:3] if self.position_only else np.r_[r, tr])
-        return np.concatenate(out)
+        assert self.target is not None  # an SE3 after _validate
+        ((R, p),) = traj.placements([self.frame], _knots(self.at, traj.N))
+        r = pose_residuals(R, p, self.target.rotation, self.target.translation)
+        return (r[:, :3] if self.position_only else r).ravel()
 
     def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         n = len(_knots(self.at, traj.N))
@@ -158,11 +157,10 @@ class FramePath(Term):
         return ca.vertcat(*rs), np.zeros(n), np.zeros(n)
 
     def numeric(self, traj: NumericTrajectory) -> np.ndarray:
-        out = []
-        for k, M in enumerate(self._targets(traj.N, traj.T)):
-            r, _ = pose_residual_numeric(traj.frame(self.frame, k), M)
-            out.append(r[:3] if self.position_only else r)
-        return np.concatenate(out)
+        targets = self._targets(traj.N, traj.T)
+        ((R, p),) = traj.placements([self.frame], range(traj.N + 1))
+        r = pose_residuals(R, p, np.array([M.rotation for M in targets]), np.array([M.translation for M in targets]))
+        return (r[:, :3] if self.position_only else r[:, :6]).ravel()
 
     def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         n = (traj.N + 1) * (3 if self.position_only else 6)
@@ -273,13 +271,15 @@ class ClosedChain(Term):
         return dataclasses.replace(self, interior=0, skip_pinned=False)
 
     def numeric(self, traj: NumericTrajectory) -> np.ndarray:
-        fa, fb = self._frames(traj.robot)
-        out = []
-        for k in self._points(traj.N, traj.robot, traj.pinned_q):
-            Ma, Mb = traj.frame(fa, k), traj.frame(fb, k)
-            r, tr = pose_residual_numeric(Ma.actInv(Mb), self.relative)
-            out.append(np.r_[r, tr])
-        return np.concatenate(out) if out else np.zeros(0)
+        pts = self._points(traj.N, traj.robot, traj.pinned_q)
+        if not pts:
+            return np.zeros(0)
+        assert self.relative is not None  # narrowing only: checked by the build
+        (Ra, pa), (Rb, pb) = traj.placements(self._frames(traj.robot), pts)
+        # Ma⁻¹ Mb point by point: (Raᵀ Rb, Raᵀ (pb − pa))
+        R = np.einsum("nji,njk->nik", Ra, Rb)
+        p = np.einsum("nji,nj->ni", Ra, pb - pa)
+        return pose_residuals(R, p, self.relative.rotation, self.relative.translation).ravel()
 
     def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         n = len(self._points(traj.N, traj.robot, traj.pinned_q))
@@ -328,7 +328,8 @@ class OrientationConstraint(Term):
 
     def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         a, b = self._axes()
-        return np.array([traj.frame(self.frame, k).rotation @ a @ b for k in range(traj.N + 1)])
+        ((R, _),) = traj.placements([self.frame], range(traj.N + 1))
+        return R @ a @ b
 
     def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         return np.full(traj.N + 1, np.cos(self.max_angle)), np.full(traj.N + 1, np.inf)

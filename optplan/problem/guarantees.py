@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import weakref
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -41,6 +42,7 @@ from .collision_term import CollisionAvoidance, CollisionModel
 from .evaluate import sampled_trajectory
 from .nlp import IpoptStatus
 from .solution import Solution
+from .terms import JointAccelerationLimits, JointPositionLimits, JointVelocityLimits
 
 __all__ = ["GuaranteeOptions", "Violation", "check_between_knots", "enforce_between_knots"]
 log = logging.getLogger(__name__)
@@ -146,7 +148,12 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
     margin = float(term.margin)
     constant = set(data.info.get("constant_pairs", ()))
     relaxed: Mapping[Any, float] = data.info.get("relaxed", {})
-    rows, idx, dist = checker.distances_below(Q, margin)
+    # a re-solve of the same problem starts from the previous check's distance bounds (kept with
+    # the term's model for the check): only pairs its motion may have brought close are computed
+    keep = isinstance(data, SimpleNamespace)
+    rows, idx, dist, prev = checker.distance_bounds_below(Q, margin, previous=getattr(data, "previous", None))
+    if keep:
+        data.previous = prev
     k = np.clip((t / h).astype(int), 0, N - 1)
     best: dict[tuple[int, int], tuple[int, float, float]] = {}
     for r_, p_, d_ in zip(rows.tolist(), idx.tolist(), dist.tolist()):
@@ -204,6 +211,8 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
         if hd.role != "constraint":
             continue
         term = hd.term
+        if spline and sol.success and isinstance(term, _HULL_GUARANTEED):
+            continue   # holds between knots by construction (below)
         data = _collision_data(term, problem.robot) if spline else ev.data[name]
         if isinstance(term, CollisionAvoidance):
             _collision(out, name, term, data, traj, t, h, N, o)
@@ -219,13 +228,29 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
     return out
 
 
+#: Terms a converged solve on the B-spline core satisfies between knots by construction: position
+#: limits bound every control point (the convex hull holds the spline), acceleration limits hold at
+#: every knot and q̈ is linear between knots, velocity limits bound the velocity control points
+#: (entries without rows are checked exactly after the solve, :mod:`.spline_solve`).
+_HULL_GUARANTEED = (JointPositionLimits, JointVelocityLimits, JointAccelerationLimits)
+#: a collision term's model for the dense check, kept per term (terms are frozen) and robot:
+#: re-solves of one problem build it once
+_MODELS: weakref.WeakKeyDictionary[Any, tuple[Any, SimpleNamespace]] = weakref.WeakKeyDictionary()
+
+
 def _collision_data(term: Any, robot: Any) -> Any:
     """What the dense check reads of a term's build on the B-spline core: for a collision term
-    its checker and constant pairs (a :class:`CollisionModel` of the term), else nothing."""
+    its checker and constant pairs (a :class:`CollisionModel` of the term, made once per term
+    and robot), else nothing."""
     if not isinstance(term, CollisionAvoidance):
         return None
+    got = _MODELS.get(term)
+    if got is not None and got[0]() is robot:
+        return got[1]
     m = CollisionModel(term, robot)
-    return SimpleNamespace(info={"model": m, "constant_pairs": tuple(m.constant_pairs), "relaxed": {}})
+    ns = SimpleNamespace(info={"model": m, "constant_pairs": tuple(m.constant_pairs), "relaxed": {}})
+    _MODELS[term] = (weakref.ref(robot), ns)
+    return ns
 
 
 # --------------------------------------------------------------------------- the refinement loop

@@ -34,7 +34,7 @@ from .transcription import Expr, Transcription
 
 __all__ = [
     "Term", "JointBoundary", "JointPositionLimits", "JointVelocityLimits", "JointAccelerationLimits", "Smoothness",
-    "PathLength", "Duration", "NumericTrajectory", "pose_residual", "pose_residual_numeric", "BuildContext",
+    "PathLength", "Duration", "NumericTrajectory", "pose_residual", "pose_residual_numeric", "pose_residuals", "BuildContext",
     "TermData",
 ]
 
@@ -92,17 +92,47 @@ class NumericTrajectory:
             self._data = self.robot.model.createData()
         return self._data
 
-    def frame(self, frame: str | int, k: int | tuple[int, float]) -> pin.SE3:
-        """Frame placement at knot k (int) or interior point (interval, fraction) (fixed base)."""
-        fid = self.robot.frame_id(frame)
+    def _point_q(self, k: int | tuple[int, float]) -> np.ndarray:
+        """The configuration (Pinocchio layout) at knot k or interior point (interval, fraction)."""
         if isinstance(k, tuple):
             i, f = k
             tau = f * self.h
-            q = self.q[i] + tau * self.qd[i] + tau**2 / 2 * self.qdd[i] + tau**3 / 6 * self.jerk[i]
-        else:
-            q = self.q_full(k)
-        pin.framesForwardKinematics(self.robot.model, self.data, q)
+            return self.q[i] + tau * self.qd[i] + tau**2 / 2 * self.qdd[i] + tau**3 / 6 * self.jerk[i]
+        return self.q_full(k)
+
+    def frame(self, frame: str | int, k: int | tuple[int, float]) -> pin.SE3:
+        """Frame placement at knot k (int) or interior point (interval, fraction) (fixed base)."""
+        fid = self.robot.frame_id(frame)
+        pin.framesForwardKinematics(self.robot.model, self.data, self._point_q(k))
         return self.data.oMf[fid].copy()
+
+    def placements(self, frames: Sequence[str | int], points: Sequence[int | tuple[int, float]]
+                   ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """World placements of ``frames`` at ``points`` (knots or (interval, fraction)), one
+        forward kinematics per point for all frames (Pinocchio): per frame ``(R (n, 3, 3), p (n, 3)
+        [m])`` — what :meth:`frame` gives point by point, for vectorised residuals."""
+        model, data = self.robot.model, self.data
+        fids = [self.robot.frame_id(f) for f in frames]
+        n = len(points)
+        R = np.empty((len(fids), n, 3, 3))
+        P = np.empty((len(fids), n, 3))
+        for i, k in enumerate(points):
+            pin.forwardKinematics(model, data, self._point_q(k))
+            for j, fid in enumerate(fids):
+                M = pin.updateFramePlacement(model, data, fid)
+                R[j, i] = M.rotation
+                P[j, i] = M.translation
+        return [(R[j], P[j]) for j in range(len(fids))]
+
+
+def pose_residuals(R: np.ndarray, p: np.ndarray, R_target: np.ndarray, p_target: np.ndarray) -> np.ndarray:
+    """:func:`~optplan.geometry.spatial.pose_residual` of n placements at once: rows
+    ``[p − p_t (3) [m]; vee_skew(E) (3); trace(E)]`` (n × 7) with ``E = R_tᵀ R``; ``R`` (n, 3, 3),
+    ``p`` (n, 3), a target (3, 3), (3,) or one per placement (n, 3, 3), (n, 3)."""
+    Rt = np.asarray(R_target, float)
+    E = np.einsum("ji,njk->nik", Rt, R) if Rt.ndim == 2 else np.einsum("nji,njk->nik", Rt, R)
+    vee = 0.5 * np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]], axis=1)
+    return np.hstack([p - np.asarray(p_target, float), vee, np.trace(E, axis1=1, axis2=2)[:, None]])
 
 
 def _check_at(at: Any, what: str, allowed: tuple[str, ...] = ("all", "start", "end")
