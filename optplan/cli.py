@@ -27,7 +27,30 @@ interrupt.ignore_in_spawned_child()   # a benchmark's spawned worker imports thi
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``optplan plan: error: argument --trials: expected ...`` (exit 2)."""
+    """argparse with one-line errors: ``optplan plan: error: argument --trials: expected ...`` (exit 2).
+    ``fill``: a function that adds this parser's arguments when it is first used (parsing or help),
+    so that a command does not build, nor import the modules of, the others' arguments."""
+
+    def __init__(self, *args, fill=None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._fill = fill
+
+    def _filled(self) -> None:
+        fill, self._fill = self._fill, None
+        if fill is not None:
+            fill(self)
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._filled()
+        return super().parse_known_args(args, namespace)
+
+    def format_help(self):
+        self._filled()
+        return super().format_help()
+
+    def format_usage(self):
+        self._filled()
+        return super().format_usage()
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message}\n")
@@ -341,24 +364,9 @@ def _version() -> str:
     return __version__
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="optplan", description="Motion planning and trajectory optimization "
-                                "for dual-arm space robots")
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
-    p.add_argument("--version", action="version", version=f"optplan {_version()}")
-    sub = p.add_subparsers(dest="command", required=True)
-
-    models = sub.add_parser("models", help="robot descriptions").add_subparsers(dest="action", required=True)
-    b = models.add_parser("build", help="regenerate urdf/<name>.urdf from models/robots/<name>.toml")
-    b.add_argument("--check", action="store_true", help="only check that the URDFs are up to date")
-    b.set_defaults(func=_cmd_models_build)
-    models.add_parser("list", help="list robot descriptions").set_defaults(func=_cmd_models_list)
-    mi = models.add_parser("info", help="joints, limits, arms and masses of a robot model")
-    mi.add_argument("name", help="model name (see `optplan models list`)")
-    mi.add_argument("--json", help="write the description as JSON to this path")
-    mi.set_defaults(func=_cmd_models_info)
-
-    bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="what", required=True)
+def _bench_parsers(bp: argparse.ArgumentParser) -> None:
+    """The ``bench`` sub-commands and their arguments (their modules are imported only for them)."""
+    bench = bp.add_subparsers(dest="what", required=True)
     k = bench.add_parser("kinematics", help="per-call times of numeric and CasADi kinematics")
     k.add_argument("--robot", default="eba_ffsr")
     k.add_argument("--calls", type=ca.positive_int, default=5000)
@@ -486,6 +494,26 @@ def build_parser() -> argparse.ArgumentParser:
                     help="Drake: closed-chain and distance constraints per B-spline interval (1 = at the knots)")
     dk.add_argument("--json", help="write the result rows as JSON to this path")
     dk.set_defaults(func=_cmd_bench_drake)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="optplan", description="Motion planning and trajectory optimization "
+                                "for dual-arm space robots")
+    p.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
+    p.add_argument("--version", action="version", version=f"optplan {_version()}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    models = sub.add_parser("models", help="robot descriptions").add_subparsers(dest="action", required=True)
+    b = models.add_parser("build", help="regenerate urdf/<name>.urdf from models/robots/<name>.toml")
+    b.add_argument("--check", action="store_true", help="only check that the URDFs are up to date")
+    b.set_defaults(func=_cmd_models_build)
+    models.add_parser("list", help="list robot descriptions").set_defaults(func=_cmd_models_list)
+    mi = models.add_parser("info", help="joints, limits, arms and masses of a robot model")
+    mi.add_argument("name", help="model name (see `optplan models list`)")
+    mi.add_argument("--json", help="write the description as JSON to this path")
+    mi.set_defaults(func=_cmd_models_info)
+
+    sub.add_parser("bench", help="benchmarks", fill=_bench_parsers)   # built when `bench` is used
 
     pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene (the main job)")
     pl.add_argument("--scene", default="1", help="1, 2, 3 (ssps_scene<N>) or a scene name")

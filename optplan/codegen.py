@@ -7,6 +7,12 @@ planners) need. The shared library is cached under ``$OPTPLAN_CACHE`` (default
 first time. Each library is checked against the size and SHA-256 recorded when it was written
 before it is loaded; a damaged one is quarantined and rebuilt (:mod:`optplan.cache`). :func:`compile_function` falls back to the plain CasADi function, with a logged
 warning, when no compiler is available.
+
+Building the symbolic functions and generating their C code to find the library costs ~0.1 s per
+kernel at every start. :func:`memo_functions` stores the built functions as set-up memos
+(:mod:`optplan.cache`: keyed by the caller's inputs and the optplan source), and
+``compile_function(..., memo=...)`` remembers which library a memo's function compiled to, so a
+later process loads both without building or generating anything.
 """
 from __future__ import annotations
 
@@ -19,14 +25,17 @@ import shutil
 import signal
 import subprocess
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from .cache import quarantine, usable
+from .cache import memo_dir, memo_name, quarantine, read_memo, record, usable, write_memo
+from .errors import CacheError
 
-__all__ = ["CompiledFunction", "FastFunction", "build_library", "c_compiler", "compile_function", "cache_dir"]
+__all__ = ["CompiledFunction", "FastFunction", "build_library", "c_compiler", "compile_function", "cache_dir",
+           "memo_functions"]
 log = logging.getLogger(__name__)
 
 
@@ -101,12 +110,12 @@ class FastFunction:
     (:func:`compile_function`) and called with the inputs copied into preallocated buffers and no
     shape checks (inputs already flat, column-major); falls back to the interpreted function."""
 
-    def __init__(self, f: ca.Function, opt: str = "-O2"):
+    def __init__(self, f: ca.Function, opt: str = "-O2", memo: str | None = None):
         if not f.sparsity_out(0).is_dense():
             raise ValueError(f"{f.name()}: the output must be dense")
         self.f = f
         self.n_out = int(f.nnz_out(0))
-        cf = compile_function(f, opt)
+        cf = compile_function(f, opt, memo=memo)
         self.compiled = isinstance(cf, CompiledFunction)
         self._cf = cf if self.compiled else None
 
@@ -157,12 +166,19 @@ def build_library(c_file: Path, lib: Path, opt: str) -> str | None:
     return None
 
 
-def compile_function(f: ca.Function, opt: str = "-O2"):
+def compile_function(f: ca.Function, opt: str = "-O2", memo: str | None = None):
     """Compile ``f`` (cached) and return a :class:`CompiledFunction`, or ``f`` itself when no C
-    compiler is available (a warning is logged once)."""
+    compiler is available (a warning is logged once). ``memo``: the name :func:`memo_functions`
+    returned for the memo ``f`` belongs to; the library it compiles to is then remembered, and a
+    later call loads it without generating the C code again."""
     if c_compiler() is None:
         log.warning("no C compiler found: %s stays an interpreted casadi.Function", f.name())
         return f
+    lib_memo = memo_name("library", memo, f.name(), opt) if memo is not None else None
+    if lib_memo is not None:
+        got = _memo_library(f, lib_memo)
+        if got is not None:
+            return got
     with tempfile.TemporaryDirectory() as tmp:
         cname = f"{f.name()}.c"
         cg = ca.CodeGenerator(cname, {"with_header": False, "casadi_int": "long long int"})
@@ -178,8 +194,78 @@ def compile_function(f: ca.Function, opt: str = "-O2"):
                     log.warning("compiling %s failed (%s); using the interpreted function", f.name(), err)
                     return f
             try:
-                return CompiledFunction(f, lib)
+                cf = CompiledFunction(f, lib)
             except (OSError, AttributeError) as exc:   # dlopen refused it, or a symbol is missing
                 quarantine(lib, f"does not load: {exc}")
+                continue
+            if lib_memo is not None:
+                write_memo(lib_memo, {"library": lib.name})
+            return cf
     log.warning("%s: the compiled library does not load; using the interpreted function", f.name())
     return f
+
+
+def _memo_library(f: ca.Function, lib_memo: str) -> CompiledFunction | None:
+    """The library a memo says ``f`` compiled to, loaded; None when there is no memo, or the library
+    is missing, damaged (quarantined) or does not load."""
+    got = read_memo(lib_memo)
+    name = got.get("library") if got is not None else None
+    if not isinstance(name, str) or os.sep in name or not name.endswith(".so"):
+        return None
+    lib = cache_dir() / name
+    if not usable(lib):
+        return None
+    try:
+        return CompiledFunction(f, lib)
+    except (OSError, AttributeError) as exc:
+        quarantine(lib, f"does not load: {exc}")
+        return None
+
+
+def memo_functions(kind: str, key: tuple, build: Callable[[], dict[str, ca.Function]]
+                   ) -> tuple[dict[str, ca.Function], str]:
+    """``(build(), memo name)``, where the functions ``build`` returns are stored as a set-up memo
+    (:mod:`optplan.cache`): a later process whose ``kind`` and ``key`` (everything the functions
+    depend on: the robot's :func:`~optplan.model.digest.kinematics_digest`, settings, bounds) and
+    optplan source are the same loads them (``casadi.Function.load``, ~10 ms for a kernel that
+    takes ~0.1 s to build) instead of building them. Pass the memo name on to
+    :class:`FastFunction` / :func:`compile_function` to skip the code generation too. A damaged
+    entry is quarantined and the functions built again."""
+    name = memo_name(kind, ca.__version__, *key)  # type: ignore[attr-defined]  # casadi's stubs omit __version__
+    got = read_memo(name)
+    files = got.get("functions") if got is not None else None
+    if isinstance(files, dict) and files:
+        fns: dict[str, ca.Function] = {}
+        for fname, file in files.items():
+            path = memo_dir() / str(file)   # (read_memo found the folder usable)
+            if os.sep in str(file) or not usable(path):
+                break
+            try:
+                fns[str(fname)] = ca.Function.load(str(path))
+            except RuntimeError as exc:   # a damaged file: build them all again
+                quarantine(path, f"does not load: {str(exc).splitlines()[0] if str(exc) else exc}")
+                break
+        else:
+            return fns, name
+    fns = build()
+    try:
+        folder = memo_dir()
+    except (CacheError, OSError) as exc:   # no usable cache: built every time
+        log.info("memo %s not stored (%s)", name, exc)
+        return fns, name
+    stored: dict[str, str] = {}
+    for fname, fn in fns.items():
+        path = folder / f"{name}_{fname}.casadi"
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        try:
+            fn.save(str(tmp))
+            record(tmp, sidecar_for=path)
+            os.replace(tmp, path)   # atomic: a concurrent process never reads half a file
+        except (OSError, RuntimeError) as exc:
+            log.info("memo %s not stored (%s)", path, exc)
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            return fns, name
+        stored[fname] = path.name
+    write_memo(name, {"functions": stored})
+    return fns, name
