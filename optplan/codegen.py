@@ -25,7 +25,7 @@ import shutil
 import signal
 import subprocess
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import casadi as ca
@@ -34,8 +34,8 @@ import numpy as np
 from .cache import memo_dir, memo_name, quarantine, read_memo, record, usable, write_memo
 from .errors import CacheError
 
-__all__ = ["CompiledFunction", "FastFunction", "build_library", "c_compiler", "compile_function", "cache_dir",
-           "memo_functions"]
+__all__ = ["CompiledFunction", "FastFunction", "MemoFunctions", "build_library", "c_compiler", "compile_function",
+           "cache_dir", "memo_functions"]
 log = logging.getLogger(__name__)
 
 
@@ -54,9 +54,19 @@ class CompiledFunction:
     dense arrays (vectors as 1-D, matrices as 2-D). Not thread-safe (shared work buffers).
     """
 
-    def __init__(self, f: ca.Function, lib_path: Path):
-        self.f = f  # the interpreted function (same values)
-        self.name = f.name()
+    def __init__(self, f: ca.Function | None, lib_path: Path, signature: dict | None = None,
+                 loader: Callable[[], ca.Function] | None = None):
+        """``f``: the function; or None with its :func:`signature` and a ``loader`` that gives it
+        when :attr:`f` is first read (a library found through a set-up memo needs no function)."""
+        if signature is None:
+            if f is None:
+                raise ValueError("CompiledFunction: give the function, or its signature and a loader")
+            signature = _signature(f)
+        elif f is None and loader is None:
+            raise ValueError("CompiledFunction: a signature without the function needs a loader")
+        sig = signature
+        self._f, self._loader = f, loader
+        self.name = str(sig["name"])
         self.lib = ctypes.CDLL(str(lib_path))
         self._fn = getattr(self.lib, self.name)
         sz_arg, sz_res, sz_iw, sz_w = (ctypes.c_longlong() for _ in range(4))
@@ -64,18 +74,16 @@ class CompiledFunction:
                                                 ctypes.byref(sz_iw), ctypes.byref(sz_w))
         self._iw = np.zeros(max(sz_iw.value, 1), dtype=np.int64)
         self._w = np.zeros(max(sz_w.value, 1), dtype=np.float64)
-        self.n_in, self.n_out = f.n_in(), f.n_out()
-        self._in_shapes = [f.size_in(i) for i in range(self.n_in)]
-        self._in_bufs = [np.zeros(f.nnz_in(i)) for i in range(self.n_in)]
-        for i in range(self.n_in):
-            if not f.sparsity_in(i).is_dense():
+        ins, outs = sig["in"], sig["out"]
+        self.n_in, self.n_out = len(ins), len(outs)
+        self._in_shapes = [(int(r), int(c)) for r, c, _, _ in ins]
+        self._in_bufs = [np.zeros(int(nnz)) for _, _, nnz, _ in ins]
+        for i, (_, _, _, dense) in enumerate(ins):
+            if not dense:
                 raise ValueError(f"{self.name}: input {i} must be dense")
-        self._out_bufs = [np.zeros(max(f.nnz_out(i), 1)) for i in range(self.n_out)]
-        self._out_map = []
-        for i in range(self.n_out):
-            sp = f.sparsity_out(i)
-            rows, cols = sp.get_triplet()
-            self._out_map.append((sp.shape, np.array(rows, dtype=np.intp), np.array(cols, dtype=np.intp)))
+        self._out_bufs = [np.zeros(max(len(rows), 1)) for _, _, rows, _ in outs]
+        self._out_map = [((int(r), int(c)), np.array(rows, dtype=np.intp), np.array(cols, dtype=np.intp))
+                         for r, c, rows, cols in outs]
         self._arg = (ctypes.c_void_p * max(sz_arg.value, self.n_in))()
         self._res = (ctypes.c_void_p * max(sz_res.value, self.n_out))()
         for i, b in enumerate(self._in_bufs):
@@ -86,6 +94,14 @@ class CompiledFunction:
         self._w_p = self._w.ctypes.data_as(ctypes.c_void_p)
         self._fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
         self._fn.restype = ctypes.c_int
+
+    @property
+    def f(self) -> ca.Function:
+        """The interpreted function (same values)."""
+        if self._f is None:
+            assert self._loader is not None
+            self._f = self._loader()
+        return self._f
 
     def __call__(self, *inputs):
         if len(inputs) != self.n_in:
@@ -105,19 +121,55 @@ class CompiledFunction:
         return tuple(outs)
 
 
+def _signature(f: ca.Function) -> dict:
+    """What :class:`CompiledFunction` needs of ``f`` besides its library (JSON): name, inputs
+    ``[rows, cols, nnz, dense]``, outputs ``[rows, cols, row indices, column indices]``."""
+    ins = [[*f.size_in(i), int(f.nnz_in(i)), bool(f.sparsity_in(i).is_dense())] for i in range(f.n_in())]
+    outs = []
+    for i in range(f.n_out()):
+        sp = f.sparsity_out(i)
+        rows, cols = sp.get_triplet()
+        outs.append([*sp.shape, [int(r) for r in rows], [int(c) for c in cols]])
+    return {"name": f.name(), "in": ins, "out": outs}
+
+
 class FastFunction:
     """A CasADi function with dense inputs and ONE dense vector output for hot loops: compiled
     (:func:`compile_function`) and called with the inputs copied into preallocated buffers and no
-    shape checks (inputs already flat, column-major); falls back to the interpreted function."""
+    shape checks (inputs already flat, column-major); falls back to the interpreted function.
+    :meth:`of` makes one from a set-up memo (:func:`memo_functions`)."""
 
     def __init__(self, f: ca.Function, opt: str = "-O2", memo: str | None = None):
         if not f.sparsity_out(0).is_dense():
             raise ValueError(f"{f.name()}: the output must be dense")
-        self.f = f
+        self._f: ca.Function | None = f
         self.n_out = int(f.nnz_out(0))
         cf = compile_function(f, opt, memo=memo)
         self.compiled = isinstance(cf, CompiledFunction)
         self._cf = cf if self.compiled else None
+
+    @classmethod
+    def of(cls, functions: MemoFunctions, key: str, opt: str = "-O2") -> FastFunction:
+        """The function ``key`` of a set-up memo, compiled. When an earlier process compiled it, its
+        library is loaded through the memo's record and the function itself is read from disk only if
+        :attr:`f` is used (the interpreted fallback)."""
+        memo = f"{functions.name}/{key}"
+        if c_compiler() is not None:
+            got = _memo_library(memo, opt, lambda: functions[key])
+            if got is not None and len(got._out_map) == 1 and len(got._out_map[0][1]) == np.prod(got._out_map[0][0]):
+                self = cls.__new__(cls)
+                self._f, self._cf, self.compiled = None, got, True
+                self.n_out = len(got._out_map[0][1])
+                return self
+        return cls(functions[key], opt, memo=memo)
+
+    @property
+    def f(self) -> ca.Function:
+        """The interpreted function."""
+        if self._f is None:
+            assert self._cf is not None
+            self._f = self._cf.f
+        return self._f
 
     def __call__(self, *inputs) -> np.ndarray:
         cf = self._cf
@@ -126,7 +178,7 @@ class FastFunction:
         for b, x in zip(cf._in_bufs, inputs):
             b[:] = x
         if cf._fn(cf._arg, cf._res, cf._iw_p, cf._w_p, 0) != 0:
-            raise RuntimeError(f"{self.f.name()}: evaluation failed")
+            raise RuntimeError(f"{cf.name}: evaluation failed")
         return cf._out_bufs[0][:self.n_out].copy()
 
 
@@ -174,9 +226,8 @@ def compile_function(f: ca.Function, opt: str = "-O2", memo: str | None = None):
     if c_compiler() is None:
         log.warning("no C compiler found: %s stays an interpreted casadi.Function", f.name())
         return f
-    lib_memo = memo_name("library", memo, f.name(), opt) if memo is not None else None
-    if lib_memo is not None:
-        got = _memo_library(f, lib_memo)
+    if memo is not None:
+        got = _memo_library(memo, opt, lambda: f, f)
         if got is not None:
             return got
     with tempfile.TemporaryDirectory() as tmp:
@@ -198,62 +249,76 @@ def compile_function(f: ca.Function, opt: str = "-O2", memo: str | None = None):
             except (OSError, AttributeError) as exc:   # dlopen refused it, or a symbol is missing
                 quarantine(lib, f"does not load: {exc}")
                 continue
-            if lib_memo is not None:
-                write_memo(lib_memo, {"library": lib.name})
+            if memo is not None:
+                write_memo(memo_name("library", memo, opt), {"library": lib.name, "signature": _signature(f)})
             return cf
     log.warning("%s: the compiled library does not load; using the interpreted function", f.name())
     return f
 
 
-def _memo_library(f: ca.Function, lib_memo: str) -> CompiledFunction | None:
-    """The library a memo says ``f`` compiled to, loaded; None when there is no memo, or the library
-    is missing, damaged (quarantined) or does not load."""
-    got = read_memo(lib_memo)
+def _memo_library(memo: str, opt: str, loader: Callable[[], ca.Function], f: ca.Function | None = None
+                  ) -> CompiledFunction | None:
+    """The library that the function of ``memo`` compiled to with ``opt``, loaded through the memo's
+    record (with its signature: ``f`` need not be given); None when there is no record, or the
+    library is missing, damaged (quarantined) or does not load."""
+    got = read_memo(memo_name("library", memo, opt))
     name = got.get("library") if got is not None else None
-    if not isinstance(name, str) or os.sep in name or not name.endswith(".so"):
+    sig = got.get("signature") if got is not None else None
+    if not isinstance(name, str) or os.sep in name or not name.endswith(".so") or not isinstance(sig, dict):
         return None
     lib = cache_dir() / name
     if not usable(lib):
         return None
     try:
-        return CompiledFunction(f, lib)
+        return CompiledFunction(f, lib, signature=sig, loader=loader)
     except (OSError, AttributeError) as exc:
         quarantine(lib, f"does not load: {exc}")
         return None
+    except (KeyError, TypeError, ValueError):   # a record of another form: compile as without it
+        return None
 
 
-def memo_functions(kind: str, key: tuple, build: Callable[[], dict[str, ca.Function]]
-                   ) -> tuple[dict[str, ca.Function], str]:
-    """``(build(), memo name)``, where the functions ``build`` returns are stored as a set-up memo
-    (:mod:`optplan.cache`): a later process whose ``kind`` and ``key`` (everything the functions
-    depend on: the robot's :func:`~optplan.model.digest.kinematics_digest`, settings, bounds) and
-    optplan source are the same loads them (``casadi.Function.load``, ~10 ms for a kernel that
-    takes ~0.1 s to build) instead of building them. Pass the memo name on to
-    :class:`FastFunction` / :func:`compile_function` to skip the code generation too. A damaged
-    entry is quarantined and the functions built again."""
-    name = memo_name(kind, ca.__version__, *key)  # type: ignore[attr-defined]  # casadi's stubs omit __version__
-    got = read_memo(name)
-    files = got.get("functions") if got is not None else None
-    if isinstance(files, dict) and files:
-        fns: dict[str, ca.Function] = {}
-        for fname, file in files.items():
-            path = memo_dir() / str(file)   # (read_memo found the folder usable)
-            if os.sep in str(file) or not usable(path):
-                break
+class MemoFunctions(Mapping):
+    """The functions of a set-up memo by key (:func:`memo_functions`), each read from disk when it is
+    first used; ``name``: the memo's name."""
+
+    def __init__(self, name: str, files: dict[str, Path], build: Callable[[], dict[str, ca.Function]]):
+        self.name = name
+        self._files = files
+        self._build = build
+        self._fns: dict[str, ca.Function] = {}
+
+    def __getitem__(self, key: str) -> ca.Function:
+        fn = self._fns.get(key)
+        if fn is not None:
+            return fn
+        path = self._files[key]
+        if usable(path):
             try:
-                fns[str(fname)] = ca.Function.load(str(path))
-            except RuntimeError as exc:   # a damaged file: build them all again
+                fn = self._fns[key] = ca.Function.load(str(path))
+                return fn
+            except RuntimeError as exc:   # a damaged file: build them again
                 quarantine(path, f"does not load: {str(exc).splitlines()[0] if str(exc) else exc}")
-                break
-        else:
-            return fns, name
-    fns = build()
+        built = self._build()
+        self._fns.update(built)
+        _store(self.name, built)
+        return self._fns[key]
+
+    def __iter__(self):
+        return iter(self._files)
+
+    def __len__(self) -> int:
+        return len(self._files)
+
+
+def _store(name: str, fns: dict[str, ca.Function]) -> dict[str, Path] | None:
+    """Save the functions of memo ``name`` and its record; their paths, or None when not stored."""
     try:
         folder = memo_dir()
     except (CacheError, OSError) as exc:   # no usable cache: built every time
         log.info("memo %s not stored (%s)", name, exc)
-        return fns, name
-    stored: dict[str, str] = {}
+        return None
+    stored: dict[str, Path] = {}
     for fname, fn in fns.items():
         path = folder / f"{name}_{fname}.casadi"
         tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
@@ -265,7 +330,29 @@ def memo_functions(kind: str, key: tuple, build: Callable[[], dict[str, ca.Funct
             log.info("memo %s not stored (%s)", path, exc)
             with contextlib.suppress(OSError):
                 tmp.unlink()
-            return fns, name
-        stored[fname] = path.name
-    write_memo(name, {"functions": stored})
-    return fns, name
+            return None
+        stored[fname] = path
+    write_memo(name, {"functions": {k: p.name for k, p in stored.items()}})
+    return stored
+
+
+def memo_functions(kind: str, key: tuple, build: Callable[[], dict[str, ca.Function]]) -> MemoFunctions:
+    """The functions ``build`` returns (by key), stored as a set-up memo (:mod:`optplan.cache`): a
+    later process whose ``kind`` and ``key`` (everything the functions depend on: the robot's
+    :func:`~optplan.model.digest.kinematics_digest`, settings, bounds) and optplan source are the
+    same reads each function from disk when it is first used (``casadi.Function.load``, ~10 ms for a
+    kernel that takes ~0.1 s to build) instead of building them; :meth:`FastFunction.of` loads a
+    compiled one without reading it at all. A damaged entry is quarantined and the functions built again."""
+    name = memo_name(kind, ca.__version__, *key)  # type: ignore[attr-defined]  # casadi's stubs omit __version__
+    got = read_memo(name)
+    files = got.get("functions") if got is not None else None
+    if isinstance(files, dict) and files and all(isinstance(v, str) and os.sep not in v for v in files.values()):
+        folder = memo_dir()   # (read_memo found the folder usable)
+        return MemoFunctions(name, {str(k): folder / v for k, v in files.items()}, build)
+    fns = build()
+    stored = _store(name, fns)
+    out = MemoFunctions(name, stored or {}, build)
+    out._fns.update(fns)
+    if stored is None:
+        out._files = {k: Path(os.devnull) for k in fns}   # (never read: every function is in memory)
+    return out

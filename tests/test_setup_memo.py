@@ -88,32 +88,35 @@ def test_memo_functions_and_their_library_are_loaded_without_building_or_generat
 
     def build():
         built.append(1)
-        return {"f": _function()}
+        return {"f": _function(), "g": _function("memo_g")}
 
-    fns, memo = codegen.memo_functions("test_fn", ("key", 1), build)
-    ref = codegen.FastFunction(fns["f"], "-O1", memo=memo)
+    fns = codegen.memo_functions("test_fn", ("key", 1), build)
+    ref = codegen.FastFunction.of(fns, "f", "-O1")
     assert built == [1] and ref.compiled
-    # a later process: the functions come from the memo and the library from its record (no C generated)
-    again, memo2 = codegen.memo_functions("test_fn", ("key", 1), _fail)
-    assert memo2 == memo
+    # a later process: the library comes from the memo's record, no function is read, built or generated
+    again = codegen.memo_functions("test_fn", ("key", 1), _fail)
+    assert again.name == fns.name and sorted(again) == ["f", "g"]
     monkeypatch.setattr(codegen.ca, "CodeGenerator", _fail)
-    fast = codegen.FastFunction(again["f"], "-O1", memo=memo)
-    assert fast.compiled
+    monkeypatch.setattr(codegen.ca.Function, "load", _fail)
+    fast = codegen.FastFunction.of(again, "f", "-O1")
+    assert fast.compiled and not again._fns
     for x in rng.normal(size=(5, 3)):
         want = np.asarray(_function()(x), float).ravel()
         assert np.array_equal(fast(x), want) and np.array_equal(ref(x), want)
-    # other inputs: another memo
-    assert codegen.memo_functions("test_fn", ("key", 2), build)[1] != memo and built == [1, 1]
-    # a damaged saved function: quarantined, built again
     monkeypatch.undo()
     monkeypatch.setenv("OPTPLAN_CACHE", str(fresh_cache))
-    (saved,) = (fresh_cache / "memo").glob(f"{memo}_f.casadi")
+    x = rng.normal(size=3)   # the interpreted function, read when asked for
+    assert np.array_equal(np.asarray(fast.f(x), float), np.asarray(_function()(x), float))
+    assert np.array_equal(np.asarray(again["g"](x), float), np.asarray(_function("memo_g")(x), float))
+    # other inputs: another memo
+    assert codegen.memo_functions("test_fn", ("key", 2), build).name != fns.name and built == [1, 1]
+    # a damaged saved function: quarantined, built again
+    (saved,) = (fresh_cache / "memo").glob(f"{fns.name}_g.casadi")
     saved.write_bytes(saved.read_bytes()[:100])
     with caplog.at_level(logging.WARNING, logger="optplan.cache"):
-        fns3, _ = codegen.memo_functions("test_fn", ("key", 1), build)
+        g = codegen.memo_functions("test_fn", ("key", 1), build)["g"]
     assert built == [1, 1, 1] and caplog.text.count("is damaged") == 1
-    x = rng.normal(size=3)
-    assert np.array_equal(np.asarray(fns3["f"](x), float), np.asarray(_function()(x), float))
+    assert np.array_equal(np.asarray(g(x), float), np.asarray(_function("memo_g")(x), float))
 
 
 def test_planner_kernels_from_the_memo_give_the_same_ik_and_edge_checks(fresh_cache, tcb, scene1, monkeypatch, rng):

@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from ..codegen import FastFunction, memo_functions
+from ..codegen import FastFunction, MemoFunctions, memo_functions
 from ..errors import ConfigurationError
 from ..geometry.spatial import check_pose, pose_residual, rotation_angle, skew, vee_skew
 from ..geometry.splines import resample_path
@@ -145,8 +145,8 @@ def _compiled_residual(robot: RobotModel, arm_a: str, arm_b: str) -> FastFunctio
             return {"hj": ca.Function("closed_chain_hj", [q, ca.vec(Rt), pt],
                                       [ca.vertcat(h, ca.vec(ca.densify(ca.jacobian(h, q))))])}
 
-        fns, memo = memo_functions("closed_chain_hj", (kinematics_digest(robot), arm_a, arm_b), build)
-        fast = FastFunction(fns["hj"], "-O1", memo=memo)
+        fast = FastFunction.of(memo_functions("closed_chain_hj", (kinematics_digest(robot), arm_a, arm_b), build),
+                               "hj", "-O1")
         fn = fast if fast.compiled else None
     _RESIDUAL_FNS[key] = (robot.model, fn)      # the model is kept alive so that its id stays unique
     return fn
@@ -364,8 +364,7 @@ class ClosedChainKinematics:
         self.T21 = ga.actInv(gb)   # hand 2 in hand 1 (Eq. 1)
         self._grasp1_inv = ga.inverse()
         self._data = robot.model.createData()
-        self._fun: dict[str, ca.Function]
-        self._memo: str | None = None
+        self._fun: MemoFunctions
         self._fast: dict[str, FastFunction]
         self._block: FastFunction
         key = (id(robot.model), self.arm_names,
@@ -374,9 +373,9 @@ class ClosedChainKinematics:
         if built is None:
             self._build()
             # the model is kept alive so that its id stays unique
-            ClosedChainKinematics._BUILT[key] = (robot.model, self._fun, self._fast, self._block, self._memo)
+            ClosedChainKinematics._BUILT[key] = (robot.model, self._fun, self._fast, self._block)
         else:
-            _, self._fun, self._fast, self._block, self._memo = built
+            _, self._fun, self._fast, self._block = built
             self.compiled = self._block.compiled
         self._par = np.zeros(6)
 
@@ -409,11 +408,9 @@ class ClosedChainKinematics:
         key = (kinematics_digest(self.robot), self.arm_names, self.UNROLL,
                *(np.asarray(self.grasps[a].homogeneous, float).tobytes() for a in self.arm_names),
                np.asarray(self.lower, float).tobytes(), np.asarray(self.upper, float).tobytes())
-        fns, memo = memo_functions("closed_chain_ik", key, self._functions)
-        self._fun = {k: fns[k] for k in ("step", "h", "hj")}
+        self._fun = memo_functions("closed_chain_ik", key, self._functions)   # each read when first used
         self._fast = {}
-        self._memo = memo
-        self._block = FastFunction(fns["block"], "-O1", memo=memo)   # -O1: a third less compile time than -O2, same speed here
+        self._block = FastFunction.of(self._fun, "block", "-O1")   # -O1: a third less compile time than -O2, same speed here
         self.compiled = self._block.compiled
         if not self.compiled:
             log.warning("closed-chain kinematics run interpreted (no C compiler): planners will be slow")
@@ -472,7 +469,7 @@ class ClosedChainKinematics:
         """Compiled on first use (only the IK block is needed by TCBiRRT)."""
         f = self._fast.get(name)
         if f is None:
-            f = self._fast[name] = FastFunction(self._fun[name], memo=self._memo)
+            f = self._fast[name] = FastFunction.of(self._fun, name)
         return f
 
     # ------------------------------------------------------------------ IK (Alg. 4)

@@ -133,8 +133,8 @@ class EdgeSweepMixin:
 
             rel = self._relative_pairs(mode) if what == "cells" else []
             memo_key = (kinematics_digest(self.robot), mode, what, self.CELLS, tuple(rel), *key[3:])
-            fns, memo = memo_functions("sweep", memo_key, lambda: self._sweep_functions(mode, what, rel))
-            fn = FastFunction(fns[what], "-O1", memo=memo)
+            fn = FastFunction.of(memo_functions("sweep", memo_key, lambda: self._sweep_functions(mode, what, rel)),
+                                 what, "-O1")
         self._profile_fns[key_fn] = fn
         _PROFILE_CACHE[key] = (self.model, fn)     # the model is kept alive so that its id stays unique
         return fn
