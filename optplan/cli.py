@@ -29,7 +29,7 @@ interrupt.ignore_in_spawned_child()   # a benchmark's spawned worker imports thi
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: ``optplan plan: error: argument --trials: expected ...`` (exit 2).
     ``fill``: a function that adds this parser's arguments when it is first used (parsing or help),
-    so that a command does not build, nor import the modules of, the others' arguments."""
+    so that a command does not import the modules of the others' arguments."""
 
     def __init__(self, *args, fill=None, **kwargs):
         super().__init__(*args, **kwargs)
@@ -358,15 +358,42 @@ def _engine_args(p) -> None:
     p.add_argument("--address", metavar="URL", help="Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --engine dask)")
 
 
+def _oc_rrt_arguments(p) -> None:
+    from .bench.oc_rrt import add_arguments
+
+    add_arguments(p)
+
+
+def _generalize_arguments(p) -> None:
+    from .bench.generalize import add_arguments
+
+    add_arguments(p)
+
+
 def _version() -> str:
     from . import __version__
 
     return __version__
 
 
-def _bench_parsers(bp: argparse.ArgumentParser) -> None:
-    """The ``bench`` sub-commands and their arguments (their modules are imported only for them)."""
-    bench = bp.add_subparsers(dest="what", required=True)
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="optplan", description="Motion planning and trajectory optimization "
+                                "for dual-arm space robots")
+    p.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
+    p.add_argument("--version", action="version", version=f"optplan {_version()}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    models = sub.add_parser("models", help="robot descriptions").add_subparsers(dest="action", required=True)
+    b = models.add_parser("build", help="regenerate urdf/<name>.urdf from models/robots/<name>.toml")
+    b.add_argument("--check", action="store_true", help="only check that the URDFs are up to date")
+    b.set_defaults(func=_cmd_models_build)
+    models.add_parser("list", help="list robot descriptions").set_defaults(func=_cmd_models_list)
+    mi = models.add_parser("info", help="joints, limits, arms and masses of a robot model")
+    mi.add_argument("name", help="model name (see `optplan models list`)")
+    mi.add_argument("--json", help="write the description as JSON to this path")
+    mi.set_defaults(func=_cmd_models_info)
+
+    bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="what", required=True)
     k = bench.add_parser("kinematics", help="per-call times of numeric and CasADi kinematics")
     k.add_argument("--robot", default="eba_ffsr")
     k.add_argument("--calls", type=ca.positive_int, default=5000)
@@ -433,10 +460,8 @@ def _bench_parsers(bp: argparse.ArgumentParser) -> None:
     _engine_args(tb)
     tb.set_defaults(func=_cmd_bench_tcbirrt)
 
-    oc = bench.add_parser("oc-rrt", help="OC-RRT vs CBiRRT vs OMPL: orientation-constrained dual-arm PR2 scenes")
-    from .bench.oc_rrt import add_arguments as _oc_args
-
-    _oc_args(oc)
+    oc = bench.add_parser("oc-rrt", help="OC-RRT vs CBiRRT vs OMPL: orientation-constrained dual-arm PR2 scenes",
+                          fill=_oc_rrt_arguments)   # its module is imported only for this command
     oc.set_defaults(func=_cmd_bench_oc_rrt)
 
     ws = bench.add_parser("warmstart", help="IPOPT from the TCBiRRT path (warm) vs from a straight line "
@@ -469,10 +494,8 @@ def _bench_parsers(bp: argparse.ArgumentParser) -> None:
     ws.set_defaults(func=_cmd_bench_warmstart)
 
     ge = bench.add_parser("generalize", help="plan -> optimize -> verify on scenes not tuned on (hard-scene suite, "
-                          "stress scenes, a dual-Panda robot from example-robot-data): success among planned trials")
-    from .bench.generalize import add_arguments as _ge_args
-
-    _ge_args(ge)
+                          "stress scenes, a dual-Panda robot from example-robot-data): success among planned trials",
+                          fill=_generalize_arguments)   # its module is imported only for this command
     ge.set_defaults(func=_cmd_bench_generalize)
 
     dk = bench.add_parser("drake", help="optplan vs Drake's KinematicTrajectoryOptimization (SNOPT, IPOPT) on the "
@@ -494,26 +517,6 @@ def _bench_parsers(bp: argparse.ArgumentParser) -> None:
                     help="Drake: closed-chain and distance constraints per B-spline interval (1 = at the knots)")
     dk.add_argument("--json", help="write the result rows as JSON to this path")
     dk.set_defaults(func=_cmd_bench_drake)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="optplan", description="Motion planning and trajectory optimization "
-                                "for dual-arm space robots")
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
-    p.add_argument("--version", action="version", version=f"optplan {_version()}")
-    sub = p.add_subparsers(dest="command", required=True)
-
-    models = sub.add_parser("models", help="robot descriptions").add_subparsers(dest="action", required=True)
-    b = models.add_parser("build", help="regenerate urdf/<name>.urdf from models/robots/<name>.toml")
-    b.add_argument("--check", action="store_true", help="only check that the URDFs are up to date")
-    b.set_defaults(func=_cmd_models_build)
-    models.add_parser("list", help="list robot descriptions").set_defaults(func=_cmd_models_list)
-    mi = models.add_parser("info", help="joints, limits, arms and masses of a robot model")
-    mi.add_argument("name", help="model name (see `optplan models list`)")
-    mi.add_argument("--json", help="write the description as JSON to this path")
-    mi.set_defaults(func=_cmd_models_info)
-
-    sub.add_parser("bench", help="benchmarks", fill=_bench_parsers)   # built when `bench` is used
 
     pl = sub.add_parser("plan", help="TCBiRRT -> IPOPT -> verify on an assembly scene (the main job)")
     pl.add_argument("--scene", default="1", help="1, 2, 3 (ssps_scene<N>) or a scene name")
