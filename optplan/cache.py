@@ -14,6 +14,13 @@ cut short is mapped past the end of its file: SIGBUS), so an entry is checked be
 ``OPTPLAN_CACHE`` that is not a usable folder (a file, a folder that cannot be created or written)
 is an error, :class:`optplan.errors.CacheError`, whose one line names the setting — no silent
 fallback, since a cache elsewhere would be rebuilt (seconds per kernel) on every run.
+
+**Set-up memos.** What a run computes from the robot alone before it plans (an arm's sampled reach,
+the symbolic functions behind the compiled planner kernels) is stored as a *memo* under ``memo/``:
+:func:`memo_name` keys it by a hash of the caller's inputs (robot kinematics, settings) and of
+:func:`source_fingerprint` — the optplan source that computed it — so an edited or upgraded
+optplan never reads a value an older one wrote. Memos are written and checked like the other
+entries (:func:`write_memo` atomically with a sidecar, :func:`read_memo` quarantines a damaged one).
 """
 from __future__ import annotations
 
@@ -28,7 +35,8 @@ from pathlib import Path
 
 from .errors import CacheError
 
-__all__ = ["cache_dir", "check_cache_setting", "record", "usable", "verify", "quarantine", "SIDECAR"]
+__all__ = ["cache_dir", "check_cache_setting", "record", "usable", "verify", "quarantine", "SIDECAR",
+           "source_fingerprint", "memo_name", "memo_dir", "read_memo", "write_memo"]
 log = logging.getLogger(__name__)
 
 #: the sidecar's suffix: ``<entry>.sha256`` holds ``{"size": bytes, "sha256": hex}``
@@ -181,3 +189,88 @@ def usable(path: str | Path) -> bool:
         return True
     quarantine(p, why)
     return False
+
+
+# --------------------------------------------------------------------------- set-up memos
+_FINGERPRINT: list[str] = []
+
+
+def source_fingerprint() -> str:
+    """A hash of the optplan package's source files (relative path, size and modification time of
+    every ``.py`` file; computed once per process, ~2 ms): a memo written by other source is not read."""
+    if not _FINGERPRINT:
+        root = Path(__file__).resolve().parent
+        h = hashlib.sha256()
+        for dirpath, dirs, files in os.walk(root):
+            dirs.sort()
+            for name in sorted(files):
+                if name.endswith(".py"):
+                    path = os.path.join(dirpath, name)
+                    try:
+                        st = os.stat(path)
+                    except OSError:   # pragma: no cover - removed while walking
+                        continue
+                    h.update(f"{os.path.relpath(path, root)}:{st.st_size}:{st.st_mtime_ns};".encode())
+        _FINGERPRINT.append(h.hexdigest()[:16])
+    return _FINGERPRINT[0]
+
+
+def memo_name(kind: str, *parts: object) -> str:
+    """The memo name of ``kind`` (a short word, e.g. ``"reach"``) for the inputs ``parts`` (bytes,
+    or anything whose ``repr`` is exact: strings, ints, floats, tuples of them) and this optplan
+    source (:func:`source_fingerprint`): ``<kind>_<hash>``."""
+    if not kind.isidentifier():
+        raise ValueError(f"memo kind: expected a short identifier, got {kind!r}")
+    h = hashlib.sha256(f"{kind}:{source_fingerprint()}".encode())
+    for p in parts:
+        b = p if isinstance(p, bytes) else repr(p).encode()
+        h.update(len(b).to_bytes(8, "little") + b)
+    return f"{kind}_{h.hexdigest()[:20]}"
+
+
+def memo_dir() -> Path:
+    """The memo folder ``memo/`` of the cache folder (created if missing)."""
+    d = cache_dir() / "memo"
+    d.mkdir(exist_ok=True)
+    return d
+
+
+def read_memo(name: str) -> dict | None:
+    """The memo ``name`` (:func:`memo_name`) written by :func:`write_memo`, or None when there is none,
+    the cache is unusable, or the entry is damaged (then quarantined, with one warning)."""
+    try:
+        path = memo_dir() / f"{name}.json"
+    except (CacheError, OSError):
+        return None
+    if not usable(path):
+        return None
+    try:
+        value = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        quarantine(path, f"not readable JSON ({exc})")
+        return None
+    if not isinstance(value, dict):
+        quarantine(path, f"expected a JSON object, got {type(value).__name__}")
+        return None
+    return value
+
+
+def write_memo(name: str, value: dict) -> None:
+    """Store ``value`` (JSON) as memo ``name``: written to a temporary file, recorded (size and
+    SHA-256) and renamed, so a concurrent reader sees the whole entry or none. Failures are logged
+    only (the value is then computed again next time)."""
+    try:
+        path = memo_dir() / f"{name}.json"
+        text = json.dumps(value)
+    except (CacheError, OSError, TypeError, ValueError) as exc:
+        log.info("memo %s not stored (%s)", name, exc)
+        return
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(text)
+        record(tmp, sidecar_for=path)
+        os.replace(tmp, path)
+    except OSError as exc:
+        log.info("memo %s not stored (%s)", name, exc)
+        with contextlib.suppress(OSError):
+            tmp.unlink()

@@ -27,7 +27,30 @@ interrupt.ignore_in_spawned_child()   # a benchmark's spawned worker imports thi
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``optplan plan: error: argument --trials: expected ...`` (exit 2)."""
+    """argparse with one-line errors: ``optplan plan: error: argument --trials: expected ...`` (exit 2).
+    ``fill``: a function that adds this parser's arguments when it is first used (parsing or help),
+    so that a command does not import the modules of the others' arguments."""
+
+    def __init__(self, *args, fill=None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._fill = fill
+
+    def _filled(self) -> None:
+        fill, self._fill = self._fill, None
+        if fill is not None:
+            fill(self)
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._filled()
+        return super().parse_known_args(args, namespace)
+
+    def format_help(self):
+        self._filled()
+        return super().format_help()
+
+    def format_usage(self):
+        self._filled()
+        return super().format_usage()
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message}\n")
@@ -335,6 +358,18 @@ def _engine_args(p) -> None:
     p.add_argument("--address", metavar="URL", help="Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --engine dask)")
 
 
+def _oc_rrt_arguments(p) -> None:
+    from .bench.oc_rrt import add_arguments
+
+    add_arguments(p)
+
+
+def _generalize_arguments(p) -> None:
+    from .bench.generalize import add_arguments
+
+    add_arguments(p)
+
+
 def _version() -> str:
     from . import __version__
 
@@ -425,10 +460,8 @@ def build_parser() -> argparse.ArgumentParser:
     _engine_args(tb)
     tb.set_defaults(func=_cmd_bench_tcbirrt)
 
-    oc = bench.add_parser("oc-rrt", help="OC-RRT vs CBiRRT vs OMPL: orientation-constrained dual-arm PR2 scenes")
-    from .bench.oc_rrt import add_arguments as _oc_args
-
-    _oc_args(oc)
+    oc = bench.add_parser("oc-rrt", help="OC-RRT vs CBiRRT vs OMPL: orientation-constrained dual-arm PR2 scenes",
+                          fill=_oc_rrt_arguments)   # its module is imported only for this command
     oc.set_defaults(func=_cmd_bench_oc_rrt)
 
     ws = bench.add_parser("warmstart", help="IPOPT from the TCBiRRT path (warm) vs from a straight line "
@@ -461,10 +494,8 @@ def build_parser() -> argparse.ArgumentParser:
     ws.set_defaults(func=_cmd_bench_warmstart)
 
     ge = bench.add_parser("generalize", help="plan -> optimize -> verify on scenes not tuned on (hard-scene suite, "
-                          "stress scenes, a dual-Panda robot from example-robot-data): success among planned trials")
-    from .bench.generalize import add_arguments as _ge_args
-
-    _ge_args(ge)
+                          "stress scenes, a dual-Panda robot from example-robot-data): success among planned trials",
+                          fill=_generalize_arguments)   # its module is imported only for this command
     ge.set_defaults(func=_cmd_bench_generalize)
 
     dk = bench.add_parser("drake", help="optplan vs Drake's KinematicTrajectoryOptimization (SNOPT, IPOPT) on the "

@@ -123,9 +123,8 @@ def check_output_dir(path: str | None, option: str) -> None:
 def check_scene(text: str, option: str = "--scene", *, needs_task: bool = True) -> str:
     """A scene name (or 1, 2, 3, or a ``.toml`` path) that loads; with ``needs_task`` it has an object,
     a start and a goal. Returns the name or path to pass to :meth:`Scene.load`."""
-    from .bench.tcbirrt import scene_name
     from .errors import OptplanError
-    from .scene import Scene, available_scenes
+    from .scene import Scene, available_scenes, scene_name
 
     name = scene_name(str(text).strip())
     if not name.endswith(".toml") and name not in available_scenes():

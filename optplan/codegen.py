@@ -7,6 +7,12 @@ planners) need. The shared library is cached under ``$OPTPLAN_CACHE`` (default
 first time. Each library is checked against the size and SHA-256 recorded when it was written
 before it is loaded; a damaged one is quarantined and rebuilt (:mod:`optplan.cache`). :func:`compile_function` falls back to the plain CasADi function, with a logged
 warning, when no compiler is available.
+
+Building the symbolic functions and generating their C code to find the library costs ~0.1 s per
+kernel at every start. :func:`memo_functions` stores the built functions as set-up memos
+(:mod:`optplan.cache`: keyed by the caller's inputs and the optplan source), and
+``compile_function(..., memo=...)`` remembers which library a memo's function compiled to, so a
+later process loads both without building or generating anything.
 """
 from __future__ import annotations
 
@@ -19,14 +25,17 @@ import shutil
 import signal
 import subprocess
 import tempfile
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from .cache import quarantine, usable
+from .cache import memo_dir, memo_name, quarantine, read_memo, record, usable, write_memo
+from .errors import CacheError
 
-__all__ = ["CompiledFunction", "FastFunction", "build_library", "c_compiler", "compile_function", "cache_dir"]
+__all__ = ["CompiledFunction", "FastFunction", "MemoFunctions", "build_library", "c_compiler", "compile_function",
+           "cache_dir", "memo_functions"]
 log = logging.getLogger(__name__)
 
 
@@ -45,9 +54,19 @@ class CompiledFunction:
     dense arrays (vectors as 1-D, matrices as 2-D). Not thread-safe (shared work buffers).
     """
 
-    def __init__(self, f: ca.Function, lib_path: Path):
-        self.f = f  # the interpreted function (same values)
-        self.name = f.name()
+    def __init__(self, f: ca.Function | None, lib_path: Path, signature: dict | None = None,
+                 loader: Callable[[], ca.Function] | None = None):
+        """``f``: the function; or None with its :func:`signature` and a ``loader`` that gives it
+        when :attr:`f` is first read (a library found through a set-up memo needs no function)."""
+        if signature is None:
+            if f is None:
+                raise ValueError("CompiledFunction: give the function, or its signature and a loader")
+            signature = _signature(f)
+        elif f is None and loader is None:
+            raise ValueError("CompiledFunction: a signature without the function needs a loader")
+        sig = signature
+        self._f, self._loader = f, loader
+        self.name = str(sig["name"])
         self.lib = ctypes.CDLL(str(lib_path))
         self._fn = getattr(self.lib, self.name)
         sz_arg, sz_res, sz_iw, sz_w = (ctypes.c_longlong() for _ in range(4))
@@ -55,18 +74,16 @@ class CompiledFunction:
                                                 ctypes.byref(sz_iw), ctypes.byref(sz_w))
         self._iw = np.zeros(max(sz_iw.value, 1), dtype=np.int64)
         self._w = np.zeros(max(sz_w.value, 1), dtype=np.float64)
-        self.n_in, self.n_out = f.n_in(), f.n_out()
-        self._in_shapes = [f.size_in(i) for i in range(self.n_in)]
-        self._in_bufs = [np.zeros(f.nnz_in(i)) for i in range(self.n_in)]
-        for i in range(self.n_in):
-            if not f.sparsity_in(i).is_dense():
+        ins, outs = sig["in"], sig["out"]
+        self.n_in, self.n_out = len(ins), len(outs)
+        self._in_shapes = [(int(r), int(c)) for r, c, _, _ in ins]
+        self._in_bufs = [np.zeros(int(nnz)) for _, _, nnz, _ in ins]
+        for i, (_, _, _, dense) in enumerate(ins):
+            if not dense:
                 raise ValueError(f"{self.name}: input {i} must be dense")
-        self._out_bufs = [np.zeros(max(f.nnz_out(i), 1)) for i in range(self.n_out)]
-        self._out_map = []
-        for i in range(self.n_out):
-            sp = f.sparsity_out(i)
-            rows, cols = sp.get_triplet()
-            self._out_map.append((sp.shape, np.array(rows, dtype=np.intp), np.array(cols, dtype=np.intp)))
+        self._out_bufs = [np.zeros(max(len(rows), 1)) for _, _, rows, _ in outs]
+        self._out_map = [((int(r), int(c)), np.array(rows, dtype=np.intp), np.array(cols, dtype=np.intp))
+                         for r, c, rows, cols in outs]
         self._arg = (ctypes.c_void_p * max(sz_arg.value, self.n_in))()
         self._res = (ctypes.c_void_p * max(sz_res.value, self.n_out))()
         for i, b in enumerate(self._in_bufs):
@@ -77,6 +94,14 @@ class CompiledFunction:
         self._w_p = self._w.ctypes.data_as(ctypes.c_void_p)
         self._fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
         self._fn.restype = ctypes.c_int
+
+    @property
+    def f(self) -> ca.Function:
+        """The interpreted function (same values)."""
+        if self._f is None:
+            assert self._loader is not None
+            self._f = self._loader()
+        return self._f
 
     def __call__(self, *inputs):
         if len(inputs) != self.n_in:
@@ -96,19 +121,55 @@ class CompiledFunction:
         return tuple(outs)
 
 
+def _signature(f: ca.Function) -> dict:
+    """What :class:`CompiledFunction` needs of ``f`` besides its library (JSON): name, inputs
+    ``[rows, cols, nnz, dense]``, outputs ``[rows, cols, row indices, column indices]``."""
+    ins = [[*f.size_in(i), int(f.nnz_in(i)), bool(f.sparsity_in(i).is_dense())] for i in range(f.n_in())]
+    outs = []
+    for i in range(f.n_out()):
+        sp = f.sparsity_out(i)
+        rows, cols = sp.get_triplet()
+        outs.append([*sp.shape, [int(r) for r in rows], [int(c) for c in cols]])
+    return {"name": f.name(), "in": ins, "out": outs}
+
+
 class FastFunction:
     """A CasADi function with dense inputs and ONE dense vector output for hot loops: compiled
     (:func:`compile_function`) and called with the inputs copied into preallocated buffers and no
-    shape checks (inputs already flat, column-major); falls back to the interpreted function."""
+    shape checks (inputs already flat, column-major); falls back to the interpreted function.
+    :meth:`of` makes one from a set-up memo (:func:`memo_functions`)."""
 
-    def __init__(self, f: ca.Function, opt: str = "-O2"):
+    def __init__(self, f: ca.Function, opt: str = "-O2", memo: str | None = None):
         if not f.sparsity_out(0).is_dense():
             raise ValueError(f"{f.name()}: the output must be dense")
-        self.f = f
+        self._f: ca.Function | None = f
         self.n_out = int(f.nnz_out(0))
-        cf = compile_function(f, opt)
+        cf = compile_function(f, opt, memo=memo)
         self.compiled = isinstance(cf, CompiledFunction)
         self._cf = cf if self.compiled else None
+
+    @classmethod
+    def of(cls, functions: MemoFunctions, key: str, opt: str = "-O2") -> FastFunction:
+        """The function ``key`` of a set-up memo, compiled. When an earlier process compiled it, its
+        library is loaded through the memo's record and the function itself is read from disk only if
+        :attr:`f` is used (the interpreted fallback)."""
+        memo = f"{functions.name}/{key}"
+        if c_compiler() is not None:
+            got = _memo_library(memo, opt, lambda: functions[key])
+            if got is not None and len(got._out_map) == 1 and len(got._out_map[0][1]) == np.prod(got._out_map[0][0]):
+                self = cls.__new__(cls)
+                self._f, self._cf, self.compiled = None, got, True
+                self.n_out = len(got._out_map[0][1])
+                return self
+        return cls(functions[key], opt, memo=memo)
+
+    @property
+    def f(self) -> ca.Function:
+        """The interpreted function."""
+        if self._f is None:
+            assert self._cf is not None
+            self._f = self._cf.f
+        return self._f
 
     def __call__(self, *inputs) -> np.ndarray:
         cf = self._cf
@@ -117,7 +178,7 @@ class FastFunction:
         for b, x in zip(cf._in_bufs, inputs):
             b[:] = x
         if cf._fn(cf._arg, cf._res, cf._iw_p, cf._w_p, 0) != 0:
-            raise RuntimeError(f"{self.f.name()}: evaluation failed")
+            raise RuntimeError(f"{cf.name}: evaluation failed")
         return cf._out_bufs[0][:self.n_out].copy()
 
 
@@ -157,12 +218,18 @@ def build_library(c_file: Path, lib: Path, opt: str) -> str | None:
     return None
 
 
-def compile_function(f: ca.Function, opt: str = "-O2"):
+def compile_function(f: ca.Function, opt: str = "-O2", memo: str | None = None):
     """Compile ``f`` (cached) and return a :class:`CompiledFunction`, or ``f`` itself when no C
-    compiler is available (a warning is logged once)."""
+    compiler is available (a warning is logged once). ``memo``: the name :func:`memo_functions`
+    returned for the memo ``f`` belongs to; the library it compiles to is then remembered, and a
+    later call loads it without generating the C code again."""
     if c_compiler() is None:
         log.warning("no C compiler found: %s stays an interpreted casadi.Function", f.name())
         return f
+    if memo is not None:
+        got = _memo_library(memo, opt, lambda: f, f)
+        if got is not None:
+            return got
     with tempfile.TemporaryDirectory() as tmp:
         cname = f"{f.name()}.c"
         cg = ca.CodeGenerator(cname, {"with_header": False, "casadi_int": "long long int"})
@@ -178,8 +245,114 @@ def compile_function(f: ca.Function, opt: str = "-O2"):
                     log.warning("compiling %s failed (%s); using the interpreted function", f.name(), err)
                     return f
             try:
-                return CompiledFunction(f, lib)
+                cf = CompiledFunction(f, lib)
             except (OSError, AttributeError) as exc:   # dlopen refused it, or a symbol is missing
                 quarantine(lib, f"does not load: {exc}")
+                continue
+            if memo is not None:
+                write_memo(memo_name("library", memo, opt), {"library": lib.name, "signature": _signature(f)})
+            return cf
     log.warning("%s: the compiled library does not load; using the interpreted function", f.name())
     return f
+
+
+def _memo_library(memo: str, opt: str, loader: Callable[[], ca.Function], f: ca.Function | None = None
+                  ) -> CompiledFunction | None:
+    """The library that the function of ``memo`` compiled to with ``opt``, loaded through the memo's
+    record (with its signature: ``f`` need not be given); None when there is no record, or the
+    library is missing, damaged (quarantined) or does not load."""
+    got = read_memo(memo_name("library", memo, opt))
+    name = got.get("library") if got is not None else None
+    sig = got.get("signature") if got is not None else None
+    if not isinstance(name, str) or os.sep in name or not name.endswith(".so") or not isinstance(sig, dict):
+        return None
+    lib = cache_dir() / name
+    if not usable(lib):
+        return None
+    try:
+        return CompiledFunction(f, lib, signature=sig, loader=loader)
+    except (OSError, AttributeError) as exc:
+        quarantine(lib, f"does not load: {exc}")
+        return None
+    except (KeyError, TypeError, ValueError):   # a record of another form: compile as without it
+        return None
+
+
+class MemoFunctions(Mapping):
+    """The functions of a set-up memo by key (:func:`memo_functions`), each read from disk when it is
+    first used; ``name``: the memo's name."""
+
+    def __init__(self, name: str, files: dict[str, Path], build: Callable[[], dict[str, ca.Function]]):
+        self.name = name
+        self._files = files
+        self._build = build
+        self._fns: dict[str, ca.Function] = {}
+
+    def __getitem__(self, key: str) -> ca.Function:
+        fn = self._fns.get(key)
+        if fn is not None:
+            return fn
+        path = self._files[key]
+        if usable(path):
+            try:
+                fn = self._fns[key] = ca.Function.load(str(path))
+                return fn
+            except RuntimeError as exc:   # a damaged file: build them again
+                quarantine(path, f"does not load: {str(exc).splitlines()[0] if str(exc) else exc}")
+        built = self._build()
+        self._fns.update(built)
+        _store(self.name, built)
+        return self._fns[key]
+
+    def __iter__(self):
+        return iter(self._files)
+
+    def __len__(self) -> int:
+        return len(self._files)
+
+
+def _store(name: str, fns: dict[str, ca.Function]) -> dict[str, Path] | None:
+    """Save the functions of memo ``name`` and its record; their paths, or None when not stored."""
+    try:
+        folder = memo_dir()
+    except (CacheError, OSError) as exc:   # no usable cache: built every time
+        log.info("memo %s not stored (%s)", name, exc)
+        return None
+    stored: dict[str, Path] = {}
+    for fname, fn in fns.items():
+        path = folder / f"{name}_{fname}.casadi"
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        try:
+            fn.save(str(tmp))
+            record(tmp, sidecar_for=path)
+            os.replace(tmp, path)   # atomic: a concurrent process never reads half a file
+        except (OSError, RuntimeError) as exc:
+            log.info("memo %s not stored (%s)", path, exc)
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            return None
+        stored[fname] = path
+    write_memo(name, {"functions": {k: p.name for k, p in stored.items()}})
+    return stored
+
+
+def memo_functions(kind: str, key: tuple, build: Callable[[], dict[str, ca.Function]]) -> MemoFunctions:
+    """The functions ``build`` returns (by key), stored as a set-up memo (:mod:`optplan.cache`): a
+    later process whose ``kind`` and ``key`` (everything the functions depend on: the robot's
+    :func:`~optplan.model.digest.kinematics_digest`, settings, bounds) and optplan source are the
+    same reads each function from disk when it is first used (``casadi.Function.load``, ~10 ms for a
+    kernel that takes ~0.1 s to build) instead of building them; :meth:`FastFunction.of` loads a
+    compiled one without reading it at all. A damaged entry is quarantined and the functions built again."""
+    name = memo_name(kind, ca.__version__, *key)  # type: ignore[attr-defined]  # casadi's stubs omit __version__
+    got = read_memo(name)
+    files = got.get("functions") if got is not None else None
+    if isinstance(files, dict) and files and all(isinstance(v, str) and os.sep not in v for v in files.values()):
+        folder = memo_dir()   # (read_memo found the folder usable)
+        return MemoFunctions(name, {str(k): folder / v for k, v in files.items()}, build)
+    fns = build()
+    stored = _store(name, fns)
+    out = MemoFunctions(name, stored or {}, build)
+    out._fns.update(fns)
+    if stored is None:
+        out._files = {k: Path(os.devnull) for k in fns}   # (never read: every function is in memory)
+    return out

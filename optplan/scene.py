@@ -42,11 +42,17 @@ from .errors import ModelError, UnknownNameError
 from .geometry.spatial import rpy_to_matrix
 from .model.description import models_dir, read_model_toml
 
-__all__ = ["Obstacle", "GraspedObject", "Scene", "available_scenes"]
+__all__ = ["Obstacle", "GraspedObject", "Scene", "available_scenes", "scene_name"]
 
 
 def available_scenes() -> list[str]:
     return sorted(p.stem for p in (models_dir() / "scenes").glob("*.toml"))
+
+
+def scene_name(s: str) -> str:
+    """``"1"`` → ``"ssps_scene1"`` (the space-solar-power-station scenes by number); other names unchanged."""
+    s = str(s).strip()
+    return f"ssps_scene{s}" if s.isdigit() else s
 
 
 @dataclass(frozen=True)

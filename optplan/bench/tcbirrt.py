@@ -48,6 +48,7 @@ import numpy as np
 from .. import interrupt
 from .._io import append_line, atomic_path, write_json, write_text
 from ..errors import UnreachableError
+from ..scene import scene_name
 from .engine import map_unordered, parse_planner_spec, validate_engine
 from .folder import dedupe, folder_lock, read_result_lines
 from .tcbirrt_tables import PAPER, _time_of, format_tables, plot_fig6, success_curve
@@ -64,12 +65,6 @@ SWEEP_TOLERANCE = 0.01
 #: options the benchmark gives a planner unless its spec sets them: TCBiRRT checks its edges at the bench's density
 BENCH_PLANNER_DEFAULTS: dict[str, dict[str, Any]] = {"tcbirrt": {"edge_tolerance": SWEEP_TOLERANCE, "verify_path": True}}
 T_GRID = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 60.0, 100.0, 1000.0)
-
-
-def scene_name(s: str) -> str:
-    """``"1"`` → ``"ssps_scene1"``; other names unchanged."""
-    s = str(s).strip()
-    return f"ssps_scene{s}" if s.isdigit() else s
 
 
 def expand_scenes(names) -> list[str]:

@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from ..codegen import FastFunction
+from ..codegen import FastFunction, MemoFunctions, memo_functions
 from ..errors import ConfigurationError
 from ..geometry.spatial import check_pose, pose_residual, rotation_angle, skew, vee_skew
 from ..geometry.splines import resample_path
@@ -132,15 +132,21 @@ def _compiled_residual(robot: RobotModel, arm_a: str, arm_b: str) -> FastFunctio
         return got[1]
     fn = None
     if not robot.is_floating and robot.model.nq == robot.model.nv:
-        sk = SymbolicKinematics(robot)
-        q = ca.SX.sym("q", robot.nq)
-        Rt, pt = ca.SX.sym("Rt", 3, 3), ca.SX.sym("pt", 3)
-        X = sk.joint_placements(q)
-        Ra, pa = sk.frame_placement(q, robot.arm(arm_a).ee_frame_id, X)
-        Rb, pb = sk.frame_placement(q, robot.arm(arm_b).ee_frame_id, X)
-        h, _ = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), Rt, pt)
-        f = ca.Function("closed_chain_hj", [q, ca.vec(Rt), pt], [ca.vertcat(h, ca.vec(ca.densify(ca.jacobian(h, q))))])
-        fast = FastFunction(f, "-O1")
+        from ..model.digest import kinematics_digest
+
+        def build() -> dict[str, ca.Function]:
+            sk = SymbolicKinematics(robot)
+            q = ca.SX.sym("q", robot.nq)
+            Rt, pt = ca.SX.sym("Rt", 3, 3), ca.SX.sym("pt", 3)
+            X = sk.joint_placements(q)
+            Ra, pa = sk.frame_placement(q, robot.arm(arm_a).ee_frame_id, X)
+            Rb, pb = sk.frame_placement(q, robot.arm(arm_b).ee_frame_id, X)
+            h, _ = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), Rt, pt)
+            return {"hj": ca.Function("closed_chain_hj", [q, ca.vec(Rt), pt],
+                                      [ca.vertcat(h, ca.vec(ca.densify(ca.jacobian(h, q))))])}
+
+        fast = FastFunction.of(memo_functions("closed_chain_hj", (kinematics_digest(robot), arm_a, arm_b), build),
+                               "hj", "-O1")
         fn = fast if fast.compiled else None
     _RESIDUAL_FNS[key] = (robot.model, fn)      # the model is kept alive so that its id stays unique
     return fn
@@ -358,7 +364,7 @@ class ClosedChainKinematics:
         self.T21 = ga.actInv(gb)   # hand 2 in hand 1 (Eq. 1)
         self._grasp1_inv = ga.inverse()
         self._data = robot.model.createData()
-        self._fun: dict[str, ca.Function]
+        self._fun: MemoFunctions
         self._fast: dict[str, FastFunction]
         self._block: FastFunction
         key = (id(robot.model), self.arm_names,
@@ -395,6 +401,23 @@ class ClosedChainKinematics:
         return out
 
     def _build(self) -> None:
+        """The compiled IK block and the interpreted step and residual functions: built once per robot,
+        grasps and joint limits, then loaded from the set-up memo (:func:`optplan.codegen.memo_functions`)."""
+        from ..model.digest import kinematics_digest
+
+        key = (kinematics_digest(self.robot), self.arm_names, self.UNROLL,
+               *(np.asarray(self.grasps[a].homogeneous, float).tobytes() for a in self.arm_names),
+               np.asarray(self.lower, float).tobytes(), np.asarray(self.upper, float).tobytes())
+        self._fun = memo_functions("closed_chain_ik", key, self._functions)   # each read when first used
+        self._fast = {}
+        self._block = FastFunction.of(self._fun, "block", "-O1")   # -O1: a third less compile time than -O2, same speed here
+        self.compiled = self._block.compiled
+        if not self.compiled:
+            log.warning("closed-chain kinematics run interpreted (no C compiler): planners will be slow")
+        self._par = np.zeros(6)
+
+    def _functions(self) -> dict[str, ca.Function]:
+        """The symbolic functions of :meth:`_build`: ``step``, ``block`` (``UNROLL`` iterations), ``h``, ``hj``."""
         robot = self.robot
         sk = SymbolicKinematics(robot)
         nq = robot.nq
@@ -440,19 +463,13 @@ class ClosedChainKinematics:
         Jh = ca.jacobian(h, q)
         hfun = ca.Function("occ_h", [q], [h])
         hjfun = ca.Function("occ_hj", [q], [ca.vertcat(h, ca.vec(ca.densify(Jh)))])
-        self._fun = {"step": step, "h": hfun, "hj": hjfun}
-        self._fast = {}
-        self._block = FastFunction(block, "-O1")   # -O1: a third less compile time than -O2, same speed here
-        self.compiled = self._block.compiled
-        if not self.compiled:
-            log.warning("closed-chain kinematics run interpreted (no C compiler): planners will be slow")
-        self._par = np.zeros(6)
+        return {"step": step, "block": block, "h": hfun, "hj": hjfun}
 
     def _get(self, name: str) -> FastFunction:
         """Compiled on first use (only the IK block is needed by TCBiRRT)."""
         f = self._fast.get(name)
         if f is None:
-            f = self._fast[name] = FastFunction(self._fun[name])
+            f = self._fast[name] = FastFunction.of(self._fun, name)
         return f
 
     # ------------------------------------------------------------------ IK (Alg. 4)

@@ -19,7 +19,6 @@ from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
-from scipy.linalg import solve_banded
 
 __all__ = [
     "quintic_time_law",
@@ -442,6 +441,8 @@ def quartic_spline(times: ArrayLike, waypoints: ArrayLike, v0: ArrayLike | None 
     rhs[base] = x[:-1]
     rhs[base + 1] = x[1:]
     rhs[5 * m - 1] = vfv * h[-1]
+    from scipy.linalg import solve_banded  # lazy: scipy.linalg is ~0.07 s of import, needed only here
+
     try:
         p = solve_banded((_KL, _KU), ab, rhs, overwrite_ab=True, overwrite_b=True, check_finite=False)
     except np.linalg.LinAlgError as exc:  # pragma: no cover - never observed for durations h > 0

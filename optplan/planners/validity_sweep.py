@@ -128,92 +128,102 @@ class EdgeSweepMixin:
             return self._profile_fns[key_fn]
         fn = None
         if self._revolute_only:
-            import casadi as ca
+            from ..codegen import FastFunction, memo_functions
+            from ..model.digest import kinematics_digest
 
-            from ..codegen import FastFunction
-            from ..model.symbolic import SymbolicKinematics
-
-            sk = SymbolicKinematics(self.robot)
-            n, m, G = self.model.nq, self.CELLS, W.shape[0]
-            q, d = ca.SX.sym("q", n), ca.SX.sym("d", n)
-            X = sk.joint_placements(q)
-            twist = {}
-            for j in joints:                       # spatial velocity (ω, v at the world origin) of each body
-                w, v = ca.SX.zeros(3), ca.SX.zeros(3)
-                for k in sk._support(int(j)):
-                    for vi, wk, vk in sk._columns(k, X):
-                        w, v = w + wk * d[vi], v + vk * d[vi]
-                twist[int(j)] = (w, v)
-            speed, centre = [], []
-            for g in range(G):                     # |v_c| + |ω| ρ of each bounding sphere
-                j = int(joints[row[g]])
-                R, p = X[j]
-                w, v = twist[j]
-                centre.append(R @ ca.DM(c[g]) + p)
-                speed.append(ca.norm_2(v + ca.cross(w, centre[g])) + ca.norm_2(w) * float(rad[g]))
             rel = self._relative_pairs(mode) if what == "cells" else []
-            rel_speed, rel_gap = [], []
-            for gO, gL in rel:                     # the speed of gO's sphere in gL's frame; centre distance
-                (wO, vO), (wL, vL) = twist[int(joints[row[gO]])], twist[int(joints[row[gL]])]
-                dw = wO - wL
-                rel_speed.append(ca.norm_2(vO - vL + ca.cross(dw, centre[gO])) + ca.norm_2(dw) * float(rad[gO]))
-                rel_gap.append(ca.norm_2(centre[gO] - centre[gL]))
-            f1 = ca.Function("sweep_speed", [q, d], [ca.vertcat(*speed, *rel_speed, *rel_gap)])
-            a, b = ca.SX.sym("a", n), ca.SX.sym("b", n)
-            dd = b - a
-            Q = ca.horzcat(*[a + (i / m) * dd for i in range(m + 1)])
-            SS = f1.map(m + 1)(Q, ca.repmat(dd, 1, m + 1))         # speeds (and pair terms) at the cell ends
-            S = SS[:G, :]                                           # G × (m+1): speed at the cell ends
-            D = ca.fabs(dd)
-            r2: Any = []
-            static: Any = []
-            accs, anc_sum, anc_pairs = [], [], []
-            for g in range(G):                     # rate of change of the speed bound; configuration-free bound
-                anc = [k for k in range(n) if W[g, k] > 0.0]
-                acc: Any = 0
-                before: Any = 0
-                pairs: Any = 0
-                for k in anc:
-                    acc = acc + W[g, k] * D[k] * (D[k] + 2 * before)
-                    pairs = pairs + D[k] * before
-                    before = before + D[k]
-                r2.append(acc + float(rad[g]) * pairs)
-                static.append(ca.dot(ca.DM(W[g]), D))
-                accs.append(acc)
-                anc_sum.append(before)
-                anc_pairs.append(pairs)
-            r2, static = ca.vertcat(*r2), ca.vertcat(*static)
-            # per cell i and geometry g: the speed bound min(static, (s_i + s_i+1 + r/m)/2)
-            cells = [ca.fmin(static, 0.5 * (S[:, i] + S[:, i + 1] + r2 / m)) for i in range(m)]
-            if rel:
-                # relative speed of gO's points in gL's frame, u = ẋ_O(x) − (v_L + ω_L × x), bounded by
-                # |u(c_O)| + |ω_O − ω_L| ρ_O. Its rate of change: d/dt (v_L + ω_L × c_O) = ÿ − ω_L × ẏ + ω_L × ċ_O
-                # with y the point of gL's body at c_O, so ≤ |ẍ_O(c_O)| + |ÿ| + |ω_L| (|ẏ| + |ċ_O|)
-                # + ρ_O (|ω̇_O| + |ω̇_L|); |ÿ| ≤ Σ_jk |d_j||d_k| dist(c_O, axis_max(j,k)) and |ẏ| ≤ Σ_j |d_j|
-                # dist(c_O, axis_j) over gL's joints, with dist(c_O, axis_j) ≤ |c_O − c_L| + W_L[j]
-                # (|c_O − c_L| bounded on a cell by its values at the cell ends and the centres' speeds)
-                P = len(rel)
-                RS, RG = SS[G:G + P, :], SS[G + P:G + 2 * P, :]
-                for i in range(m):
-                    col = []
-                    for p_, (gO, gL) in enumerate(rel):
-                        vmax = static[gO] + static[gL]
-                        gap = 0.5 * (RG[p_, i] + RG[p_, i + 1] + vmax / m)
-                        rr = (accs[gO] + accs[gL] + gap * anc_sum[gL] ** 2
-                              + anc_sum[gL] * (static[gO] + static[gL] + gap * anc_sum[gL])
-                              + float(rad[gO]) * (anc_pairs[gO] + anc_pairs[gL]))
-                        col.append(ca.fmin(vmax, 0.5 * (RS[p_, i] + RS[p_, i + 1] + rr / m)))
-                    cells[i] = ca.vertcat(cells[i], *col)
-            if what == "profile":
-                cum: list[Any] = [ca.SX(0.0)]
-                for i in range(m):                 # ∫ over cell i of max_g of the cell's bound
-                    cum.append(cum[-1] + ca.mmax(cells[i]) / m)
-                fn = FastFunction(ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)]), "-O1")
-            else:
-                fn = FastFunction(ca.Function(f"sweep_cells_{mode}", [a, b], [ca.vertcat(*cells)]), "-O1")
+            memo_key = (kinematics_digest(self.robot), mode, what, self.CELLS, tuple(rel), *key[3:])
+            fn = FastFunction.of(memo_functions("sweep", memo_key, lambda: self._sweep_functions(mode, what, rel)),
+                                 what, "-O1")
         self._profile_fns[key_fn] = fn
         _PROFILE_CACHE[key] = (self.model, fn)     # the model is kept alive so that its id stays unique
         return fn
+
+    def _sweep_functions(self, mode: str, what: str, rel: list[tuple[int, int]]) -> dict[str, Any]:
+        """The symbolic function of :meth:`_compiled_sweep` (``{what: casadi.Function}``); ``rel``:
+        :meth:`_relative_pairs` for ``"cells"``, else empty."""
+        import casadi as ca
+
+        from ..model.symbolic import SymbolicKinematics
+
+        row, c, rad, joints = self._spheres[mode]
+        W = self._sweep[mode]
+        sk = SymbolicKinematics(self.robot)
+        n, m, G = self.model.nq, self.CELLS, W.shape[0]
+        q, d = ca.SX.sym("q", n), ca.SX.sym("d", n)
+        X = sk.joint_placements(q)
+        twist = {}
+        for j in joints:                       # spatial velocity (ω, v at the world origin) of each body
+            w, v = ca.SX.zeros(3), ca.SX.zeros(3)
+            for k in sk._support(int(j)):
+                for vi, wk, vk in sk._columns(k, X):
+                    w, v = w + wk * d[vi], v + vk * d[vi]
+            twist[int(j)] = (w, v)
+        speed, centre = [], []
+        for g in range(G):                     # |v_c| + |ω| ρ of each bounding sphere
+            j = int(joints[row[g]])
+            R, p = X[j]
+            w, v = twist[j]
+            centre.append(R @ ca.DM(c[g]) + p)
+            speed.append(ca.norm_2(v + ca.cross(w, centre[g])) + ca.norm_2(w) * float(rad[g]))
+        rel_speed, rel_gap = [], []
+        for gO, gL in rel:                     # the speed of gO's sphere in gL's frame; centre distance
+            (wO, vO), (wL, vL) = twist[int(joints[row[gO]])], twist[int(joints[row[gL]])]
+            dw = wO - wL
+            rel_speed.append(ca.norm_2(vO - vL + ca.cross(dw, centre[gO])) + ca.norm_2(dw) * float(rad[gO]))
+            rel_gap.append(ca.norm_2(centre[gO] - centre[gL]))
+        f1 = ca.Function("sweep_speed", [q, d], [ca.vertcat(*speed, *rel_speed, *rel_gap)])
+        a, b = ca.SX.sym("a", n), ca.SX.sym("b", n)
+        dd = b - a
+        Q = ca.horzcat(*[a + (i / m) * dd for i in range(m + 1)])
+        SS = f1.map(m + 1)(Q, ca.repmat(dd, 1, m + 1))         # speeds (and pair terms) at the cell ends
+        S = SS[:G, :]                                           # G × (m+1): speed at the cell ends
+        D = ca.fabs(dd)
+        r2: Any = []
+        static: Any = []
+        accs, anc_sum, anc_pairs = [], [], []
+        for g in range(G):                     # rate of change of the speed bound; configuration-free bound
+            anc = [k for k in range(n) if W[g, k] > 0.0]
+            acc: Any = 0
+            before: Any = 0
+            pairs: Any = 0
+            for k in anc:
+                acc = acc + W[g, k] * D[k] * (D[k] + 2 * before)
+                pairs = pairs + D[k] * before
+                before = before + D[k]
+            r2.append(acc + float(rad[g]) * pairs)
+            static.append(ca.dot(ca.DM(W[g]), D))
+            accs.append(acc)
+            anc_sum.append(before)
+            anc_pairs.append(pairs)
+        r2, static = ca.vertcat(*r2), ca.vertcat(*static)
+        # per cell i and geometry g: the speed bound min(static, (s_i + s_i+1 + r/m)/2)
+        cells = [ca.fmin(static, 0.5 * (S[:, i] + S[:, i + 1] + r2 / m)) for i in range(m)]
+        if rel:
+            # relative speed of gO's points in gL's frame, u = ẋ_O(x) − (v_L + ω_L × x), bounded by
+            # |u(c_O)| + |ω_O − ω_L| ρ_O. Its rate of change: d/dt (v_L + ω_L × c_O) = ÿ − ω_L × ẏ + ω_L × ċ_O
+            # with y the point of gL's body at c_O, so ≤ |ẍ_O(c_O)| + |ÿ| + |ω_L| (|ẏ| + |ċ_O|)
+            # + ρ_O (|ω̇_O| + |ω̇_L|); |ÿ| ≤ Σ_jk |d_j||d_k| dist(c_O, axis_max(j,k)) and |ẏ| ≤ Σ_j |d_j|
+            # dist(c_O, axis_j) over gL's joints, with dist(c_O, axis_j) ≤ |c_O − c_L| + W_L[j]
+            # (|c_O − c_L| bounded on a cell by its values at the cell ends and the centres' speeds)
+            P = len(rel)
+            RS, RG = SS[G:G + P, :], SS[G + P:G + 2 * P, :]
+            for i in range(m):
+                col = []
+                for p_, (gO, gL) in enumerate(rel):
+                    vmax = static[gO] + static[gL]
+                    gap = 0.5 * (RG[p_, i] + RG[p_, i + 1] + vmax / m)
+                    rr = (accs[gO] + accs[gL] + gap * anc_sum[gL] ** 2
+                          + anc_sum[gL] * (static[gO] + static[gL] + gap * anc_sum[gL])
+                          + float(rad[gO]) * (anc_pairs[gO] + anc_pairs[gL]))
+                    col.append(ca.fmin(vmax, 0.5 * (RS[p_, i] + RS[p_, i + 1] + rr / m)))
+                cells[i] = ca.vertcat(cells[i], *col)
+        if what == "profile":
+            cum: list[Any] = [ca.SX(0.0)]
+            for i in range(m):                 # ∫ over cell i of max_g of the cell's bound
+                cum.append(cum[-1] + ca.mmax(cells[i]) / m)
+            return {what: ca.Function(f"sweep_profile_{mode}", [a, b], [ca.vertcat(*cum)])}
+        return {what: ca.Function(f"sweep_cells_{mode}", [a, b], [ca.vertcat(*cells)])}
 
     def prepare_edge_checks(self, modes: tuple[str, ...] = ("held", "fixed")) -> None:
         """Build (or load from the compile cache) the compiled speed profiles of
