@@ -104,6 +104,47 @@ def test_region_walks_cover_the_trials_ends(tcb, scene1, kin, checker):
             ManifoldSampleSettings(**bad)
 
 
+def test_task_space_exploration_grows_a_tree_over_object_poses(tcb, scene1, kin, checker):
+    """The task-space exploration's configurations are on the chain, in the limits and collision-free (exact
+    distances), seeded, and form a tree in the object pose: each one's ξ (from Pinocchio FK) lies within one step
+    (``task_step``: position within it, rotation angle within √3 times it, as an RPY step of that length turns
+    the object by at most that) of an earlier configuration or of a root (the scene's nominal configurations),
+    and the tree reaches object positions farther than two steps from every root."""
+    import pinocchio as pin
+
+    from optplan.planners.manifold_samples import _scene_seeds
+
+    ts = ManifoldSampleSettings(n=120, seed=3, task_fraction=1.0)
+    task = generate_manifold_samples(tcb, scene1, ts, checker=checker, kinematics=kin)
+    assert task.Q.shape == (120, tcb.nq) and task.draws >= 120
+    assert np.array_equal(task.Q, generate_manifold_samples(tcb, scene1, ts, checker=checker, kinematics=kin).Q)
+    exact = CollisionChecker(tcb, scene1)
+    for q in task.Q[::10]:
+        assert max(closure_error(tcb, scene1.object.grasps, q)) <= IK_TOL
+        assert np.all(q >= tcb.lower) and np.all(q <= tcb.upper) and exact.min_distance(q)[0] > 0.0
+    arm, G = next(iter(scene1.object.grasps.items()))
+    frame = tcb.arm(arm).ee_frame_id
+    data = tcb.model.createData()
+
+    def pose(q):
+        pin.framesForwardKinematics(tcb.model, data, q)
+        return data.oMf[frame] * G.inverse()
+
+    def near(A, B):
+        return (np.linalg.norm(A.translation - B.translation) <= ts.task_step + 1e-6
+                and np.linalg.norm(pin.log3(A.rotation.T @ B.rotation)) <= np.sqrt(3) * ts.task_step + 1e-6)
+
+    roots = [pose(q) for q in _scene_seeds(tcb, scene1, kin, checker)]
+    X = roots + [pose(q) for q in task.Q]
+    for k in range(len(roots), len(X)):
+        assert any(near(X[k], X[i]) for i in range(k))
+    assert max(min(np.linalg.norm(x.translation - r.translation) for r in roots) for x in X) > 2 * ts.task_step
+    for bad in ({"task_fraction": -0.1}, {"task_step": 0.0}, {"task_waypoints": 0},
+                {"task_fraction": 0.6, "region_fraction": 0.6}):
+        with pytest.raises(ValueError, match="task_"):
+            ManifoldSampleSettings(**bad)
+
+
 def test_scene_digest_tracks_scene_and_settings(tcb, scene1):
     d = scene_digest(tcb, scene1, {"n": 1})
     assert d == scene_digest(tcb, scene1, {"n": 1})

@@ -98,9 +98,31 @@ def test_settings_are_validated():
         with pytest.raises(ValueError, match=next(iter(bad))):
             CVAESettings(**bad)
     for bad in ({"latent_step": 0.0}, {"classifier_threshold": 1.0}, {"lpo_interval": 0}, {"lpo": "yes"},
-                {"cvae_epochs": 0}, {"lpo_clearance": -1.0}):
+                {"cvae_epochs": 0}, {"lpo_clearance": -1.0}, {"data_task_fraction": 1.5}):
         with pytest.raises(ValueError, match=next(iter(bad))):
             LCBiRRTOptions(**bad)
+    with pytest.raises(ValueError, match="data_task_fraction"):
+        CVAESettings(data_task_fraction=-0.5)
+    with pytest.raises(ValueError, match="data_region_fraction \\+ data_task_fraction"):
+        LCBiRRTOptions(data_region_fraction=0.5, data_task_fraction=0.6)
+
+
+def test_path_coverage_matches_brute_force_nearest_distances():
+    """The coverage measurement's k-d tree distances equal the brute-force nearest distances (numpy)."""
+    from optplan.planners.learned.coverage import coverage_table, path_coverage
+
+    rng = np.random.default_rng(5)
+    Q = rng.uniform(-3, 3, (400, 14))
+    paths = [rng.uniform(-3, 3, (n, 14)) for n in (7, 12)]
+    masks = [np.arange(7) % 2 == 0, np.ones(12, bool)]
+    for mk in (None, masks):
+        got = path_coverage(Q, paths, mk)
+        for k, P in enumerate(paths):
+            d = np.linalg.norm(P[:, None, :] - Q[None], axis=2).min(axis=1)
+            m = d if mk is None else d[mk[k]]
+            assert got[k]["start"] == pytest.approx(d[0]) and got[k]["goal"] == pytest.approx(d[-1])
+            assert got[k]["median"] == pytest.approx(np.median(m)) and got[k]["max"] == pytest.approx(m.max())
+    assert "2" in coverage_table({"x": path_coverage(Q, paths)}).splitlines()[1]
 
 
 @pytest.fixture(scope="module")

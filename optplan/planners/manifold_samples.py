@@ -11,7 +11,10 @@ configuration found), Newton-Raphson projection onto ``h(q) = 0`` (the projectio
 spurious zero of the residual at a relative rotation of π, which a far start can reach, is rejected
 by the independent :func:`~optplan.constraints.closed_chain.closure_error`), then the limits and the shared
 :class:`~optplan.planners.validity.ValidityChecker` (object held). Everything is seeded by one
-``numpy.random.Generator``: the same settings give the same set.
+``numpy.random.Generator``: the same settings give the same set. Parts of the set can instead be drawn
+by constrained random walks in the start and goal regions (``region_fraction``) or as the nodes of a
+task-space exploration over the object's whole workspace (``task_fraction``,
+:mod:`~optplan.planners.manifold_explore`).
 
 :func:`manifold_samples` caches the set under ``$OPTPLAN_CACHE/manifold/`` (default
 ``~/.cache/optplan``), keyed by a hash of the scene (obstacles, object, grasps), the robot (name,
@@ -80,9 +83,21 @@ class ManifoldSampleSettings:
     region_walk_sigma: float = 0.1
     #: Valid steps of one region walk before the next starts from a new start or goal pose [count].
     region_walk_length: int = 50
+    #: Share of the set drawn as the nodes of a **task-space exploration** [-]
+    #: (:func:`~optplan.planners.manifold_explore.task_space_exploration`): an RRT over the object pose,
+    #: ξ_rand uniform in TCBiRRT's ξ box (the object's whole reachable workspace, not a query's start or
+    #: goal), both hands solved by IK continuation along the step from the nearest node, rooted at the
+    #: scene's nominal configurations. 0: the draws above only. Needs the scene's ``[extra] q_start`` / ``q_goal``.
+    task_fraction: float = 0.0
+    #: Largest step of one exploration extension in ξ (TCBiRRT's s_ξ) [m and rad, Euclidean in ξ].
+    task_step: float = 0.6
+    #: Object poses interpolated along one extension, each solved by IK (TCBiRRT's N) [count].
+    task_waypoints: int = 5
+    #: Draws of ξ_rand while the object alone collides or a grasp point is out of reach [count].
+    task_filter_tries: int = 20
 
     def __post_init__(self) -> None:
-        for name in ("n", "max_projection_iterations", "max_draws_factor"):
+        for name in ("n", "max_projection_iterations", "max_draws_factor", "task_waypoints", "task_filter_tries"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"ManifoldSampleSettings.{name}: expected an integer >= 1, got {v!r}")
@@ -95,13 +110,20 @@ class ManifoldSampleSettings:
                              f"got {self.walk_probability!r}")
         if not (isinstance(self.walk_sigma, (int, float)) and math.isfinite(self.walk_sigma) and self.walk_sigma > 0):
             raise ValueError(f"ManifoldSampleSettings.walk_sigma: expected a positive number [rad], got {self.walk_sigma!r}")
-        if not (isinstance(self.region_fraction, (int, float)) and 0 <= self.region_fraction <= 1):
-            raise ValueError(f"ManifoldSampleSettings.region_fraction: expected a number in [0, 1], "
-                             f"got {self.region_fraction!r}")
         if not (isinstance(self.region_walk_sigma, (int, float)) and math.isfinite(self.region_walk_sigma)
                 and self.region_walk_sigma > 0):
             raise ValueError(f"ManifoldSampleSettings.region_walk_sigma: expected a positive number [rad], "
                              f"got {self.region_walk_sigma!r}")
+        for name in ("region_fraction", "task_fraction"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 1):
+                raise ValueError(f"ManifoldSampleSettings.{name}: expected a number in [0, 1], got {v!r}")
+        if self.region_fraction + self.task_fraction > 1:
+            raise ValueError(f"ManifoldSampleSettings: region_fraction + task_fraction must be <= 1, got "
+                             f"{self.region_fraction!r} + {self.task_fraction!r}")
+        if not (isinstance(self.task_step, (int, float)) and math.isfinite(self.task_step) and self.task_step > 0):
+            raise ValueError(f"ManifoldSampleSettings.task_step: expected a positive number [m, rad], "
+                             f"got {self.task_step!r}")
         v = self.region_walk_length
         if isinstance(v, bool) or not isinstance(v, int) or v < 1:
             raise ValueError(f"ManifoldSampleSettings.region_walk_length: expected an integer >= 1, got {v!r}")
@@ -191,6 +213,14 @@ def generate_manifold_samples(robot: RobotModel, scene: Scene, settings: Manifol
         draws, fails, coll = region["draws"], region["fails"], region["coll"]
         if bar is not None:
             bar.update(len(out))
+    n_task = min(int(round(s.task_fraction * s.n)), s.n - len(out))
+    if n_task:
+        from .manifold_explore import task_space_exploration
+
+        roots = pool or _scene_seeds(robot, scene, kin, ck)
+        task = task_space_exploration(robot, scene, kin, ck, s, n_task, np.random.default_rng([s.seed, 2]), roots, bar)
+        out.extend(task.pop("Q"))
+        draws, fails, coll = draws + task["draws"], fails + task["fails"], coll + task["coll"]
     try:
         while len(out) < s.n:
             if draws >= s.n * s.max_draws_factor:
@@ -312,6 +342,9 @@ def manifold_samples(robot: RobotModel, scene: Scene, settings: ManifoldSampleSe
     d = asdict(s)
     if not s.region_fraction:   # the sets drawn before region walks existed keep their cache files
         for k in ("region_fraction", "region_walk_sigma", "region_walk_length"):
+            d.pop(k)
+    if not s.task_fraction:     # ... and those drawn before the task-space exploration existed
+        for k in ("task_fraction", "task_step", "task_waypoints", "task_filter_tries"):
             d.pop(k)
     digest = scene_digest(robot, scene, {"manifold_samples": d, "version": 3})
     path = cache_dir() / "manifold" / f"{scene.name}_{digest}.npz"

@@ -58,6 +58,9 @@ class CVAESettings:
     #: Share of the data drawn by constrained random walks in the task's start and goal regions [-]
     #: (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.region_fraction`; 0: as the paper).
     data_region_fraction: float = 0.0
+    #: Share of the data drawn as the nodes of a task-space exploration over the object's whole workspace [-]
+    #: (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.task_fraction`; 0: projected joint draws).
+    data_task_fraction: float = 0.0
     #: Tangent-space augmentation: one projected, valid neighbour per configuration [-].
     augment: bool = True
     #: Standard deviation of the tangent-space step of the augmentation [rad].
@@ -100,9 +103,10 @@ class CVAESettings:
             raise ValueError(f"CVAESettings.val_fraction: expected a number in (0, 0.5), got {self.val_fraction!r}")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"CVAESettings.activation: expected one of {', '.join(ACTIVATIONS)}, got {self.activation!r}")
-        if not (isinstance(self.data_region_fraction, (int, float)) and 0 <= self.data_region_fraction <= 1):
-            raise ValueError(f"CVAESettings.data_region_fraction: expected a number in [0, 1], "
-                             f"got {self.data_region_fraction!r}")
+        for name in ("data_region_fraction", "data_task_fraction"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 1):
+                raise ValueError(f"CVAESettings.{name}: expected a number in [0, 1], got {v!r}")
         if not isinstance(self.augment, bool):
             raise ValueError(f"CVAESettings.augment: expected True/False, got {self.augment!r}")
 
@@ -301,11 +305,13 @@ def load_or_train_cvae(robot: RobotModel, scene: Scene, settings: CVAESettings |
     kin = kinematics or ClosedChainKinematics(robot, scene.object.grasps)
     ck = checker or ValidityChecker(robot, scene)
     data = manifold_samples(robot, scene, ManifoldSampleSettings(n=s.n_data, seed=s.data_seed,
-                                                                 region_fraction=s.data_region_fraction), checker=ck,
-                            kinematics=kin, cache=cache, progress=progress)
+                                                                 region_fraction=s.data_region_fraction,
+                                                                 task_fraction=s.data_task_fraction),
+                            checker=ck, kinematics=kin, cache=cache, progress=progress)
     d = asdict(s)
-    if not s.data_region_fraction:   # models trained before the option existed keep their cache files
-        d.pop("data_region_fraction")
+    for k in ("data_region_fraction", "data_task_fraction"):   # models trained before an option existed keep their files
+        if not d[k]:
+            d.pop(k)
     digest = scene_digest(robot, scene, {"cvae": d, "data": _array_digest(data.Q), "version": 1})
     path = cache_dir() / "learned" / f"{scene.name}_cvae_{digest}.npz"
     if cache and path.exists():

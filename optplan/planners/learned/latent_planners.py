@@ -58,7 +58,7 @@ from .latent_models import LatentModelSettings, load_or_train_classifier, load_o
 __all__ = ["LatentSamplingOptions", "LatentSampling", "LCBiRRTOptions", "LCBiRRT", "TRAINING_FIELDS"]
 
 #: option fields that select the trained models (forwarded to :class:`CVAESettings`)
-TRAINING_FIELDS = ("cvae_epochs", "n_data", "train_seed", "cache", "data_region_fraction")
+TRAINING_FIELDS = ("cvae_epochs", "n_data", "train_seed", "cache", "data_region_fraction", "data_task_fraction")
 
 
 def _check_training(cls: str, o: Any) -> None:
@@ -70,8 +70,13 @@ def _check_training(cls: str, o: Any) -> None:
         raise ValueError(f"{cls}.train_seed: expected an integer >= 0, got {o.train_seed!r}")
     if not isinstance(o.cache, bool):
         raise ValueError(f"{cls}.cache: expected True/False, got {o.cache!r}")
-    if not (isinstance(o.data_region_fraction, (int, float)) and 0 <= o.data_region_fraction <= 1):
-        raise ValueError(f"{cls}.data_region_fraction: expected a number in [0, 1], got {o.data_region_fraction!r}")
+    for name in ("data_region_fraction", "data_task_fraction"):
+        v = getattr(o, name)
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 1):
+            raise ValueError(f"{cls}.{name}: expected a number in [0, 1], got {v!r}")
+    if o.data_region_fraction + o.data_task_fraction > 1:
+        raise ValueError(f"{cls}: data_region_fraction + data_task_fraction must be <= 1, got "
+                         f"{o.data_region_fraction!r} + {o.data_task_fraction!r}")
 
 
 @dataclass(frozen=True)
@@ -89,6 +94,10 @@ class LatentSamplingOptions(CBiRRT2Options):
     #: Share of the training data drawn by constrained random walks in the task's start and goal regions [-]
     #: (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.region_fraction`; 0: as the paper).
     data_region_fraction: float = 0.0
+    #: Share of the training data drawn as the nodes of a task-space exploration over the object's whole
+    #: workspace [-] (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.task_fraction`; 0: projected
+    #: joint draws only).
+    data_task_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -97,7 +106,7 @@ class LatentSamplingOptions(CBiRRT2Options):
 
 def _cvae(robot: Any, scene: Any, o: Any, checker: ValidityChecker, kin: ClosedChainKinematics, progress: bool) -> Any:
     s = CVAESettings(epochs=o.cvae_epochs, n_data=o.n_data, data_seed=o.train_seed, seed=o.train_seed,
-                     data_region_fraction=o.data_region_fraction)
+                     data_region_fraction=o.data_region_fraction, data_task_fraction=o.data_task_fraction)
     return load_or_train_cvae(robot, scene, s, checker=checker, kinematics=kin, cache=o.cache, progress=progress)
 
 
@@ -181,6 +190,10 @@ class LCBiRRTOptions:
     #: Share of the training data drawn by constrained random walks in the task's start and goal regions [-]
     #: (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.region_fraction`; 0: as the paper).
     data_region_fraction: float = 0.0
+    #: Share of the training data drawn as the nodes of a task-space exploration over the object's whole
+    #: workspace [-] (:attr:`~optplan.planners.manifold_samples.ManifoldSampleSettings.task_fraction`; 0: projected
+    #: joint draws only).
+    data_task_fraction: float = 0.0
     #: Valid and invalid latent samples (classifier), free and colliding configurations (distance), each [count]
     #: (the paper: 1000).
     n_model_samples: int = 1000
@@ -289,7 +302,8 @@ class LCBiRRT(Planner):
         ms = LatentModelSettings(n_classifier=o.n_model_samples, classifier_epochs=o.classifier_epochs,
                                  n_distance=o.n_model_samples, distance_epochs=o.distance_epochs, seed=o.train_seed)
         data = manifold_samples(robot, scene, ManifoldSampleSettings(n=o.n_data, seed=o.train_seed,
-                                                                     region_fraction=o.data_region_fraction),
+                                                                     region_fraction=o.data_region_fraction,
+                                                                     task_fraction=o.data_task_fraction),
                                 checker=self.checker, kinematics=self.kin, cache=o.cache)
         self.classifier = load_or_train_classifier(robot, scene, self.cvae, self.kin, self.checker, ms,
                                                    samples=data.Q, cache=o.cache, progress=progress)

@@ -1,5 +1,6 @@
 """Train (or read from the cache) every scene's learned models and report them:
-``python -m optplan.planners.learned.train --scene 1,2,3 --out DIR [--epochs N] [--no-progress]``.
+``python -m optplan.planners.learned.train --scene 1,2,3 --out DIR [--epochs N] [--data-task-fraction F]
+[--data-region-fraction F] [--no-progress]``.
 
 Per scene: the on-manifold data set, the CVAE (loss curves, held-out reconstruction error, decoded
 prior samples' closed-chain residual before/after projection, projection and validity rates next to
@@ -19,9 +20,11 @@ from typing import Any
 __all__ = ["train_scene", "main"]
 
 
-def train_scene(scene_name: str, epochs: int, progress: bool = True, robot_name: str = "tcbirrt_dual_arm") -> dict[str, Any]:
+def train_scene(scene_name: str, epochs: int, progress: bool = True, robot_name: str = "tcbirrt_dual_arm",
+                **data: float) -> dict[str, Any]:
     """Build LCBiRRT-LPO for the scene (which trains or loads the CVAE, the classifier and the
-    distance network) and return their records."""
+    distance network) and return their records; ``data``: ``data_task_fraction`` / ``data_region_fraction``
+    (:class:`~.latent_planners.LCBiRRTOptions`)."""
     from ...model.robot import RobotModel
     from ...scene import Scene
     from . import make_learned_planner
@@ -29,9 +32,11 @@ def train_scene(scene_name: str, epochs: int, progress: bool = True, robot_name:
     scene = Scene.load(scene_name)
     robot = RobotModel.from_name(scene.robot or robot_name)
     t0 = time.perf_counter()
-    pl = make_learned_planner("lcbirrt-lpo", robot, scene, cvae_epochs=epochs, progress=progress)
+    c0 = time.process_time()
+    pl = make_learned_planner("lcbirrt-lpo", robot, scene, cvae_epochs=epochs, progress=progress, **data)
     cv = pl.cvae
-    return {"scene": scene.name, "wall_s": time.perf_counter() - t0, "cvae_epochs": epochs,
+    return {"scene": scene.name, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
+            "cvae_epochs": epochs, "data": data,
             "cvae": {"history": cv.history, "metrics": cv.metrics, "file": str(cv.path)},
             "classifier": {**pl.classifier.meta, "file": str(pl.classifier.path)},
             "distance": {**pl.distance.meta, "file": str(pl.distance.path)} if pl.distance is not None else None}
@@ -90,6 +95,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scene", default="1,2,3", help="comma-separated scene names or SSPS numbers")
     ap.add_argument("--epochs", type=int, default=None, help="CVAE epochs (default: CVAESettings.epochs)")
     ap.add_argument("--out", default="learned_models", help="report folder")
+    ap.add_argument("--data-task-fraction", type=float, default=0.0,
+                    help="share of the data from the task-space exploration (ManifoldSampleSettings.task_fraction)")
+    ap.add_argument("--data-region-fraction", type=float, default=0.0,
+                    help="share of the data from start / goal region walks (ManifoldSampleSettings.region_fraction)")
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
     from .cvae import CVAESettings
@@ -98,11 +107,16 @@ def main(argv: list[str] | None = None) -> int:
     if epochs < 1:
         print(f"--epochs: expected an integer >= 1, got {epochs}", file=sys.stderr)
         return 2
+    fr = {"data_task_fraction": a.data_task_fraction, "data_region_fraction": a.data_region_fraction}
+    if not all(0.0 <= v <= 1.0 for v in fr.values()) or sum(fr.values()) > 1.0:
+        print(f"--data-task-fraction / --data-region-fraction: expected numbers in [0, 1] summing to <= 1, got "
+              f"{a.data_task_fraction}, {a.data_region_fraction}", file=sys.stderr)
+        return 2
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     records = []
     for sc in [f"ssps_scene{s.strip()}" if s.strip().isdigit() else s.strip() for s in a.scene.split(",") if s.strip()]:
-        r = train_scene(sc, epochs, not a.no_progress)
+        r = train_scene(sc, epochs, not a.no_progress, **{k: v for k, v in fr.items() if v})
         (out / f"learned_{r['scene']}.json").write_text(json.dumps(r, indent=1))
         records.append(r)
     _plot(records, out / "learned_loss_curves.png")
