@@ -133,8 +133,8 @@ class PipelineOptions:
     #: constraints and costs with ``problem.add_constraint`` / ``problem.add_cost``. None: none.
     segment_terms: Callable[[Any, str], None] | None = None
     #: The B-spline segment NLP: ``"closed"`` (default) — the closed segment class
-    #: (:class:`~optplan.problem.segment_closed.ClosedSegmentProblem`), 1.1-1.2× faster in CPU on the
-    #: warm-start and generalization benchmarks (same iterations); ``"optproblem"`` — an :class:`~optplan.problem.OptProblem`
+    #: (:class:`~optplan.problem.segment_closed.ClosedSegmentProblem`), 1.05-1.07× faster in CPU on the
+    #: warm-start and generalization benchmarks (same iterations and plans); ``"optproblem"`` — an :class:`~optplan.problem.OptProblem`
     #: on the shared B-spline core (:func:`optplan.tasks.segment_problem`), which ``segment_terms`` needs.
     #: Same rows, same retry policy; see docs/decisions/0021-pipeline-on-the-shared-core.md.
     segment_nlp: str = "closed"
