@@ -121,20 +121,20 @@ def test_pending_units_order_and_keys():
     assert len(units) == 7
     assert units[0] == ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None,
                         "optproblem")
-    assert ("tcbirrt_dual_arm", "ssps_scene2", 4, "cold", 4.0, 7, 60.0, True, "bspline", False, None, "closed") not in units
-    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "cold", 4.0, 7, 60.0, True, "bspline", False, None, "closed") in units
-    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None, "closed") in units
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 4, "cold", 4.0, 7, 60.0, True, "bspline", False, None, "optproblem") not in units
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "cold", 4.0, 7, 60.0, True, "bspline", False, None, "optproblem") in units
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None, "optproblem") in units
     # lines without the key (written before the option existed) were solved with free normals
     old = {k: v for k, v in _line("ssps_scene1", 3, "warm", seed=7, time_limit=4.0, max_wall=60.0).items()
            if k != "fixed_plane_normals"}
-    assert ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None, "closed") in ws.pending_units(
+    assert ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None, "optproblem") in ws.pending_units(
         cfg, ["ssps_scene1"], [old])
     # ... with the knot transcription (lines without the key predate the B-spline one)
     old = {k: v for k, v in old.items() if k != "transcription"}
     free = ws.WarmstartConfig(scenes=["1"], trials=1, first_trial=3, seed=7, time_limit=4.0, ipopt_max_wall_time=60,
                               free_plane_normals=True, transcription="knots")
     assert ws.pending_units(free, ["ssps_scene1"], [old]) == [
-        ("tcbirrt_dual_arm", "ssps_scene1", 3, "cold", 4.0, 7, 60.0, False, "knots", False, None, "closed")]
+        ("tcbirrt_dual_arm", "ssps_scene1", 3, "cold", 4.0, 7, 60.0, False, "knots", False, None, "optproblem")]
     spline_free = ws.WarmstartConfig(scenes=["1"], trials=1, first_trial=3, seed=7, time_limit=4.0,
                                      ipopt_max_wall_time=60, free_plane_normals=True)
     assert len(ws.pending_units(spline_free, ["ssps_scene1"], [old])) == 2
