@@ -132,12 +132,13 @@ class PipelineOptions:
     #: it is built, before its first guess and solve, on every grid the retry policy builds; add
     #: constraints and costs with ``problem.add_constraint`` / ``problem.add_cost``. None: none.
     segment_terms: Callable[[Any, str], None] | None = None
-    #: The B-spline segment NLP: ``"closed"`` (default) — the closed segment class
-    #: (:class:`~optplan.problem.segment_closed.ClosedSegmentProblem`), 1.1-1.2× faster in CPU on the
-    #: warm-start and generalization benchmarks (same iterations); ``"optproblem"`` — an :class:`~optplan.problem.OptProblem`
-    #: on the shared B-spline core (:func:`optplan.tasks.segment_problem`), which ``segment_terms`` needs.
-    #: Same rows, same retry policy; see docs/decisions/0021-pipeline-on-the-shared-core.md.
-    segment_nlp: str = "closed"
+    #: The B-spline segment NLP: ``"optproblem"`` (default) — an :class:`~optplan.problem.OptProblem`
+    #: on the shared B-spline core (:func:`optplan.tasks.segment_problem`), which ``segment_terms``
+    #: needs; ``"closed"`` — the closed segment class
+    #: (:class:`~optplan.problem.segment_closed.ClosedSegmentProblem`), same rows, iterations and plans,
+    #: 1.00-1.03× the CPU on the warm-start and generalization benchmarks (a few scenes still favour it).
+    #: See docs/decisions/0021-pipeline-on-the-shared-core.md.
+    segment_nlp: str = "optproblem"
 
     def planner_kwargs(self) -> dict:
         """Keyword options for :func:`~optplan.planners.make_planner` (module defaults when

@@ -1,7 +1,7 @@
 """The segment NLP behind the pipeline's retry policy, on either implementation: the
-:class:`~optplan.problem.OptProblem` on the shared B-spline core (:func:`optplan.tasks.segment_problem`;
-user terms through ``PipelineOptions.segment_terms``) or the closed class
-(:class:`~optplan.problem.segment_closed.ClosedSegmentProblem`, the default while it is faster;
+:class:`~optplan.problem.OptProblem` on the shared B-spline core (the default,
+:func:`optplan.tasks.segment_problem`; user terms through ``PipelineOptions.segment_terms``) or the closed class
+(:class:`~optplan.problem.segment_closed.ClosedSegmentProblem`, kept as an option;
 docs/decisions/0021-pipeline-on-the-shared-core.md). The policy's operations — activate pairs along
 knot configurations, raise margins where a solution cut a corner, the first guess's knots, the
 geometry without plane rows — are one function each here, for both."""

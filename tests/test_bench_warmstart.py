@@ -18,7 +18,8 @@ def _line(scene="ssps_scene1", trial=0, mode="warm", seed=0, time_limit=10.0, ma
          "opt_iterations": iters if plan_ok else 0, "opt_time_s": t if plan_ok else 0.0,
          "opt_setup_time_s": setup if plan_ok else 0.0, "max_closed_chain_residual": 1e-7 if plan_ok else None,
          "min_clearance_m": 0.01 if plan_ok else None, "wall_time_s": 10.0, "cpu_time_s": 9.0,
-         "plan_hash": plan_hash if plan_ok else None, "segments": segments or [], "error": None}
+         "plan_hash": plan_hash if plan_ok else None, "segments": segments or [], "error": None,
+         "segment_nlp": "optproblem"}   # the default segment NLP, recorded on every line
     d.update(kw)
     return d
 
@@ -30,8 +31,9 @@ def fake_runner(monkeypatch):
     def fake(args):
         robot, scene, index, mode, time_limit, seed, max_wall, fixed, transcription, _compile = args[:10]
         calls.append((scene, index, mode))
-        return _line(scene, index, mode, seed, time_limit, max_wall, iters=10 if mode == "warm" else 40,
+        line = _line(scene, index, mode, seed, time_limit, max_wall, iters=10 if mode == "warm" else 40,
                      t=0.2 if mode == "warm" else 1.0, fixed=fixed, transcription=transcription)
+        return {**line, "segment_nlp": args[11]}   # as the real unit records it
 
     monkeypatch.setattr(ws, "_run_unit", fake)
     return calls
@@ -117,21 +119,22 @@ def test_pending_units_order_and_keys():
             _line("ssps_scene2", 3, "warm", seed=7, time_limit=4.0, max_wall=60.0, fixed=False)]  # free normals
     units = ws.pending_units(cfg, ["ssps_scene1", "ssps_scene2"], rows)
     assert len(units) == 7
-    assert units[0] == ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None, "closed")
-    assert ("tcbirrt_dual_arm", "ssps_scene2", 4, "cold", 4.0, 7, 60.0, True, "bspline", False, None, "closed") not in units
-    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "cold", 4.0, 7, 60.0, True, "bspline", False, None, "closed") in units
-    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None, "closed") in units
+    assert units[0] == ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None,
+                        "optproblem")
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 4, "cold", 4.0, 7, 60.0, True, "bspline", False, None, "optproblem") not in units
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "cold", 4.0, 7, 60.0, True, "bspline", False, None, "optproblem") in units
+    assert ("tcbirrt_dual_arm", "ssps_scene2", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None, "optproblem") in units
     # lines without the key (written before the option existed) were solved with free normals
     old = {k: v for k, v in _line("ssps_scene1", 3, "warm", seed=7, time_limit=4.0, max_wall=60.0).items()
            if k != "fixed_plane_normals"}
-    assert ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None, "closed") in ws.pending_units(
+    assert ("tcbirrt_dual_arm", "ssps_scene1", 3, "warm", 4.0, 7, 60.0, True, "bspline", False, None, "optproblem") in ws.pending_units(
         cfg, ["ssps_scene1"], [old])
     # ... with the knot transcription (lines without the key predate the B-spline one)
     old = {k: v for k, v in old.items() if k != "transcription"}
     free = ws.WarmstartConfig(scenes=["1"], trials=1, first_trial=3, seed=7, time_limit=4.0, ipopt_max_wall_time=60,
                               free_plane_normals=True, transcription="knots")
     assert ws.pending_units(free, ["ssps_scene1"], [old]) == [
-        ("tcbirrt_dual_arm", "ssps_scene1", 3, "cold", 4.0, 7, 60.0, False, "knots", False, None, "closed")]
+        ("tcbirrt_dual_arm", "ssps_scene1", 3, "cold", 4.0, 7, 60.0, False, "knots", False, None, "optproblem")]
     spline_free = ws.WarmstartConfig(scenes=["1"], trials=1, first_trial=3, seed=7, time_limit=4.0,
                                      ipopt_max_wall_time=60, free_plane_normals=True)
     assert len(ws.pending_units(spline_free, ["ssps_scene1"], [old])) == 2

@@ -331,8 +331,9 @@ def test_pipeline_segment_nlp_is_an_optproblem_that_honours_a_user_term(tcb):
         p.add_constraint(p.q[j], upper=cap, name="user_cap")
 
     opts1 = PipelineOptions(shortcut_attempts=0, segment_nlp="optproblem", segment_terms=cap_joint)
+    assert PipelineOptions(segment_terms=cap_joint).segment_nlp == "optproblem"   # the default
     with pytest.raises(ValueError, match="segment_nlp='optproblem'"):
-        PipelineOptions(segment_terms=cap_joint)
+        PipelineOptions(segment_nlp="closed", segment_terms=cap_joint)
     sol1, rep1, _ = PL._spline_segment(tcb, sc, path, "constrained", None, opts1, dict(opts1.ipopt_options))
     assert sol1.success and rep1.min_clearance_m >= 0.0
     assert float(sol1.q[:, j].max()) <= cap + 1e-6            # at the knots, where the row holds

@@ -377,6 +377,41 @@ def test_same_shape_reuses_the_structure_and_only_numbers_change(tcb, transport)
     assert s4.cost == pytest.approx(s3.cost, rel=1e-10) and not s3.cost == pytest.approx(s1.cost, rel=1e-3)
 
 
+def test_a_segment_of_the_same_kinds_builds_no_point_kernel_and_fits_its_guess_once(tcb, transport, monkeypatch):
+    """A second segment with the same kinds of terms (the same closed chain, rest at two other
+    ends) reuses the first one's boundary and closed-chain kernels — the same functions, other
+    bounds — and fits its first guess once for the collision planning and the solve together
+    (the same numbers as a fit from scratch)."""
+    import optplan.problem.spline_problem as SPM
+    from optplan.problem.spline_solve import SplineBackend
+
+    Q, cc = _straight_segment(tcb, transport)
+    p1 = _transport_problem(tcb, transport, Q, cc)
+    p1.problem._spline.prepare()
+    built: list[object] = []
+    fits: list[int] = []
+    real_kernel, real_fit = SPM.point_kernel, SplineBackend._fit_between_fixed
+    monkeypatch.setattr(SPM, "point_kernel", lambda *a, **k: built.append(a) or real_kernel(*a, **k))
+    monkeypatch.setattr(SplineBackend, "_fit_between_fixed",
+                        lambda self, P, Qk: fits.append(1) or real_fit(self, P, Qk))
+    p2 = _transport_problem(tcb, transport, Q[::-1].copy(), cc)   # other ends
+    be = p2.problem._spline
+    be.prepare()
+    assert built == []
+    k1 = {f.name: f for f in p1.problem._spline.fams if f.kind == "knot"}
+    k2 = {f.name: f for f in be.fams if f.kind == "knot"}
+    assert set(k1) == set(k2) == {"start", "end", "closed_chain"}
+    assert all(k2[n].fn is k1[n].fn for n in k1)
+    for n in ("start", "end"):               # q, q̇, q̈ at the ends: other numbers, as bounds
+        assert not np.array_equal(k1[n].lower, k2[n].lower)
+    assert len(fits) == 1                     # prepare planned the collision rows along the fitted guess
+    x = be.guess(p2.problem.duration)
+    assert len(fits) == 1                     # the solve's guess: the same fit
+    be._fitted = None
+    np.testing.assert_array_equal(be.guess(p2.problem.duration), x)
+    assert len(fits) == 2
+
+
 def _velocity_rows(prob):
     sl = _structure(prob)["slices"].get("velocity_limits", slice(0, 0))
     return sl.stop - sl.start

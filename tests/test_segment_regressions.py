@@ -23,8 +23,7 @@ import pytest
 import optplan.pipeline as PL
 from optplan.constraints.closed_chain import closure_errors
 from optplan.pipeline_options import PipelineOptions
-from optplan.problem import ClosedChain
-from optplan.problem.segment_closed import ClosedSegmentProblem
+from optplan.problem import ClosedChain, OptProblem
 from optplan.scene import Scene
 from optplan.tasks import segment_problem
 
@@ -83,15 +82,16 @@ def test_rows_next_to_pinned_ends_are_held_to_what_the_ends_allow(tcb, monkeypat
     assert end > quarter, "the saved path should start off the manifold by more than the rows' usual tolerance"
 
     seen = []
-    solve = ClosedSegmentProblem.solve
+    solve = OptProblem.solve
 
-    def spy(self, ipopt_options=None, **kw):
-        seen.append(dict(ipopt_options or {}))
-        return solve(self, ipopt_options, **kw)
+    def spy(self, ipopt=None, **kw):
+        seen.append(dict(ipopt or {}))
+        return solve(self, ipopt, **kw)
 
-    monkeypatch.setattr(ClosedSegmentProblem, "solve", spy)
+    monkeypatch.setattr(OptProblem, "solve", spy)
     sol, rep, attempts = PL._spline_segment(tcb, scene, path, kind, None, opts, {})
-    assert all(o["constr_viol_tol"] >= min(2 * end, opts.closed_chain_tol / (2 * np.sqrt(3))) for o in seen), seen
+    assert seen and all(o["constr_viol_tol"] >= min(2 * end, opts.closed_chain_tol / (2 * np.sqrt(3)))
+                        for o in seen), seen
     first = attempts[0]
     assert first["status"] == "Solve_Succeeded" and first["iterations"] <= 60, attempts
     assert sol.success and rep.min_clearance_m >= 0.0 and rep.max_closed_chain_residual <= opts.closed_chain_tol, rep

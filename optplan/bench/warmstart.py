@@ -93,7 +93,7 @@ class WarmstartConfig:
     segment_workers: int | None = None
     #: ``PipelineOptions.segment_nlp``: the segment NLP's implementation, ``"closed"`` or ``"optproblem"``
     #: (result lines record it).
-    segment_nlp: str = "closed"
+    segment_nlp: str = "optproblem"
     #: Write ``DIR/time_distributions.png`` (IPOPT time and iterations per trial).
     plot: bool = True
     #: ``"local"`` (a process pool of ``jobs``) or ``"dask"`` (:mod:`optplan.bench.engine`).
@@ -210,7 +210,7 @@ def _run_unit(args) -> dict:
 
     robot_name, scene, index, mode, time_limit, seed, max_wall, fixed_normals, transcription, compile_kernels = args[:10]
     seg_workers = args[10] if len(args) > 10 else None
-    segment_nlp = args[11] if len(args) > 11 else "closed"
+    segment_nlp = args[11] if len(args) > 11 else "optproblem"
     line = {"segment_nlp": segment_nlp, "scene": scene, "trial": int(index), "mode": mode, "seed": int(seed), "time_limit_s": float(time_limit),
             "ipopt_max_wall_time_s": max_wall, "fixed_plane_normals": bool(fixed_normals),
             "transcription": transcription, "compile_kernels": bool(compile_kernels)}

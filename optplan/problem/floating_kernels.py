@@ -207,15 +207,18 @@ class _LocalAssembly(RowAssembly):
         K = slots.shape[0]
         nz, m = fn.size1_in(0), fn.size1_out(0)
         ti, ts, tw = template[:, 0].astype(int), template[:, 1].astype(int), template[:, 2]
-        # kernel inputs Z (nz × K) = M @ xp
+        # kernel inputs Z (nz × K) = M @ xp, only the inputs the kernel depends on (the structural
+        # columns of its Jacobian; the others stay zero): a closed chain reads q, not q̇, q̈ or the
+        # time — a third of the entries of M, which every callback evaluates
+        jr, ji = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())
+        used = np.isin(ti, ji)
         g = slots[:, ts]  # K × n_entries
         rows = (np.arange(K)[:, None] * nz + ti[None, :])
-        ok = g >= 0
+        ok = (g >= 0) & used[None, :]
         M = sps.csr_matrix((np.broadcast_to(tw, g.shape)[ok], (rows[ok], g[ok])), shape=(K * nz, self.nx + self.np))
         Z = ca.reshape(ca.mtimes(_dm(M), xp), nz, K)
         r0 = self._rows(name, ca.vec(fn.map(K)(Z)), lo, hi)
         # Jacobian: kernel entry (r, i) → (r0 + t m + r, x-slot of entry (i, s), w)
-        jr, ji = (np.asarray(v) for v in jfn.sparsity_out(0).get_triplet())
         e = len(jr)
         self.jsrc.append(nonzeros(jfn.map(K)(Z)))
         pe, pt = np.nonzero(ji[:, None] == ti[None, :])  # pairs (kernel entry, template entry)

@@ -38,6 +38,8 @@ __all__ = ["Family", "SplineCore"]
 
 _ID_Q = np.array([0.0, 0.0, 0.0, 1.0])
 _FOUND_LIBS: set[str] = set()   # compiled kernel libraries seen in the cache (they are never removed)
+#: per smoothness kernel (by name: robot, kind, N and weight): its local quadratic block over P_k … P_k+3
+_QUAD_BLOCKS: dict[str, Any] = {}
 
 
 @dataclass
@@ -101,6 +103,7 @@ class SplineCore:
         self.p_col = self.p_scale + 1   # collision plane normals and supports
         self.np = self.p_col + int(n_colp)
         self._input_maps: dict[tuple[int, Any], Any] = {}
+        self._quad_blocks = _QUAD_BLOCKS
 
     # ------------------------------------------------------------------ slots in [x; p]
     def slot_P(self, i: int) -> np.ndarray:
@@ -352,26 +355,32 @@ class SplineCore:
     def quadratic_form(self, fam: Family) -> tuple[sps.csr_matrix, int]:
         """``(Q, e)`` with ``Σ_k fam.fn(z_k) = xᵀQx · T^-e`` (Q: nx × nx, symmetric): the kernel's
         constant Hessian in its control-point inputs (evaluated at T = 1), scattered by the
-        interval template over the family's intervals."""
+        interval template over the family's intervals. Interval k's inputs are the control points
+        P_k … P_k+3, so one local block ``L = Wᵀ H W`` (4·nj × 4·nj, cached per kernel) is added at
+        offset k·nj for every interval — one vectorised scatter."""
         assert fam.fn is not None
         e = 5 if fam.kind == "jerk" else 3
-        tm = self.interval_template(fam.kind)
-        z = ca.SX.sym("z", fam.fn.size1_in(0))
-        nz = z.numel() - 1   # the last input is T
-        H0 = np.array(ca.Function("h", [z], [ca.hessian(fam.fn(z), z)[0]])(np.r_[np.zeros(nz), 1.0]))[:nz, :nz]
-        ti, ts, tw = tm[:, 0].astype(int), tm[:, 1].astype(int), tm[:, 2]
-        keep = ti < nz
-        ti, ts, tw = ti[keep], ts[keep], tw[keep]
-        rows, cols, vals = [], [], []
-        for t, k in enumerate(fam.points):   # W_k: the control-point inputs of interval k
-            sl = self.interval_slots(k)
-            rows.append(t * nz + ti)
-            cols.append(sl[ts])
-            vals.append(tw)
-        W = sps.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                           shape=(len(fam.points) * nz, self.nx))
-        Hb = sps.kron(sps.identity(len(fam.points)), sps.csr_matrix(H0))
-        Q = (0.5 * (W.T @ Hb @ W)).tocsr()
+        nj = self.nj
+        L = self._quad_blocks.get(fam.fn.name())
+        if L is None:
+            tm = self.interval_template(fam.kind)
+            z = ca.SX.sym("z", fam.fn.size1_in(0))
+            nz = z.numel() - 1   # the last input is T
+            H0 = np.array(ca.Function("h", [z], [ca.hessian(fam.fn(z), z)[0]])(np.r_[np.zeros(nz), 1.0]))[:nz, :nz]
+            ti, ts, tw = tm[:, 0].astype(int), tm[:, 1].astype(int), tm[:, 2]
+            keep = ti < nz
+            ti, ts, tw = ti[keep], ts[keep], tw[keep]
+            assert ts.max() < 4 * nj   # the control-point inputs: slots of P_k … P_k+3 (interval_slots)
+            W = np.zeros((nz, 4 * nj))
+            np.add.at(W, (ti, ts), tw)
+            L = 0.5 * W.T @ H0 @ W
+            L[np.abs(L) < 1e-14 * max(1.0, float(np.abs(L).max()))] = 0.0
+            L = self._quad_blocks[fam.fn.name()] = sps.coo_matrix(L)
+        k = np.asarray(fam.points, int)
+        off = (k * nj)[:, None]
+        Q = sps.coo_matrix((np.tile(L.data, k.size), ((off + L.row).ravel(), (off + L.col).ravel())),
+                           shape=(self.nx, self.nx)).tocsr()
+        Q.sum_duplicates()
         Q.eliminate_zeros()
         return Q, e
 

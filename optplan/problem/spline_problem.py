@@ -31,6 +31,9 @@ from .terms import (
 __all__ = ["ExprTerm", "Unsupported", "families_of", "fixed_boundary", "SplineEvaluator", "seed_guess", "knots_of"]
 
 _POSE = ("x", "y", "z", "rot_x", "rot_y", "rot_z", "trace")
+#: point kernels of boundaries and closed chains, by robot, N, parameter shapes and what their
+#: expression holds (a kind, frames and constants): a later build of the same kind reuses them
+_KNOT_KERNELS: dict[tuple[Any, ...], Any] = {}
 
 
 class Unsupported(Exception):
@@ -54,8 +57,20 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
         if h.role == "constraint" and isinstance(h.term, JointBoundary) and h.term.q is not None:
             pinned[0 if h.term.at == "start" else N] = robot.check_joints(h.term.q, "JointBoundary.q")
 
-    def knot(name: str, expr: Any, lo: Any, hi: Any, ks: list[int], labels: tuple[str, ...]) -> Family:
-        fn = point_kernel(sym, expr, params, N, "point")
+    def knot(name: str, expr: Any, lo: Any, hi: Any, ks: list[int], labels: tuple[str, ...],
+             key: tuple[Any, ...] | None = None) -> Family:
+        # ``key``: what determines the kernel (its expression, constants included), so that a
+        # segment after another with the same chain or boundary kinds builds no kernel again
+        fn = None
+        if key is not None:
+            key = (core.kc._digest, N, tuple(p.shape for p in params), *key)
+            fn = _KNOT_KERNELS.get(key)
+        if fn is None:
+            fn = point_kernel(sym, expr() if callable(expr) else expr, params, N, "point")
+            if key is not None:
+                _KNOT_KERNELS[key] = fn
+                while len(_KNOT_KERNELS) > 256:
+                    _KNOT_KERNELS.pop(next(iter(_KNOT_KERNELS)))
         return Family(name, "knot", fn, ks, np.asarray(lo, float), np.asarray(hi, float), labels)
 
     def cost(name: str, expr: Any, weight: Any, kind: str) -> Family:
@@ -90,7 +105,8 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
             k, parts = t._parts(N)
             ex = ca.vertcat(*[{"q": sym.q, "qd": sym.qd, "qdd": sym.qdd}[n] for n, _ in parts])
             v = np.concatenate([robot.check_joints(val, f"JointBoundary.{n}") for n, val in parts])
-            new.append(knot(name, ex, v, v, [k], tuple(f"{n}[{j}]" for n, _ in parts for j in jn)))
+            new.append(knot(name, ex, v, v, [k], tuple(f"{n}[{j}]" for n, _ in parts for j in jn),
+                            key=("boundary", tuple(n for n, _ in parts))))
         elif isinstance(t, JointPositionLimits):
             pbounds[name] = t.limits(robot)
         elif isinstance(t, JointVelocityLimits):
@@ -107,13 +123,18 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
                 raise Unsupported("ClosedChain without a relative pose or with interior points")
             fa = robot.model.frames[robot.arm(t.arm_a).ee_frame_id].name
             fb = robot.model.frames[robot.arm(t.arm_b).ee_frame_id].name
-            Ra, pa = _base_frame(core, fa)
-            Rb, pb = _base_frame(core, fb)
-            Rt, pt = np.array(t.relative.rotation), np.array(t.relative.translation)
-            r, tr = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), Rt, ca.DM(pt))
+            Rt, pt = np.array(t.relative.rotation, float), np.array(t.relative.translation, float)
+
+            def chain(fa: str = fa, fb: str = fb, Rt: np.ndarray = Rt, pt: np.ndarray = pt) -> Any:
+                Ra, pa = _base_frame(core, fa)
+                Rb, pb = _base_frame(core, fb)
+                r, tr = pose_residual(Ra.T @ Rb, Ra.T @ (pb - pa), Rt, ca.DM(pt))
+                return ca.vertcat(r, tr)
+
             ks = [k for k in range(N + 1)
                   if not t.skip_pinned or k not in pinned or not _chain_holds(robot, t, pinned[k], t.pinned_tol)]
-            new.append(knot(name, ca.vertcat(r, tr), np.r_[np.zeros(6), 1.0], np.r_[np.zeros(6), np.inf], ks, _POSE))
+            new.append(knot(name, chain, np.r_[np.zeros(6), 1.0], np.r_[np.zeros(6), np.inf], ks, _POSE,
+                            key=("closed_chain", fa, fb, Rt.tobytes(), pt.tobytes())))
         elif isinstance(t, FramePose):
             assert t.target is not None
             fr = sym.frame(t.frame)

@@ -66,12 +66,15 @@ class SplineBackend:
         self.boost_n = 0
         #: re-solves with the velocity rows a solve missed (:meth:`_missed_velocity`) [count]
         self.velocity_retries = 2
+        # (key, core variables) of the last guess fitted to the user's knots (:meth:`_guess`)
+        self._fitted: tuple[tuple[Any, ...], np.ndarray] | None = None
 
     # ------------------------------------------------------------------ structure
     def prepare(self) -> None:
         """Families of the problem's terms (raises spline_problem.Unsupported)."""
         prob = self.prob
         t0 = time.perf_counter()
+        self._fitted = None   # the boundary terms may have changed: fit the guess again
         params: list[Parameter] = prob._params
         npar = sum(p.size for p in params)
         core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar)
@@ -387,6 +390,12 @@ class SplineBackend:
         if self.x0 is not None and self.x0.size == core.nx:
             return self.x0
         if prob._x0 is not None:
+            # the fit of the user's knots: the same numbers give the same guess (prepare plans the
+            # collision rows along it and the solve starts from it: one fit, not two)
+            key = (core.N, core.nP, core.fl, core.free_time, float(T), float(prob.duration),
+                   np.asarray(prob._x0, float).tobytes())
+            if self._fitted is not None and self._fitted[0] == key:
+                return self._fitted[1].copy()
             u: dict[str, Any] = prob.tp.unpack(prob._x0)
             Tg = float(u.get("T", T))
             P = core.fit(u["q"], u["qd"][0], u["qd"][-1], Tg / core.N)
@@ -396,7 +405,9 @@ class SplineBackend:
                 parts.append(core.integrate_base(P))
             if core.free_time:
                 parts.append(np.array([Tg]))
-            return np.concatenate(parts)
+            x = np.concatenate(parts)
+            self._fitted = (key, x.copy())
+            return x
         if self.last_x is not None and self.last_x.size == core.nx:
             return self.last_x
         lbx, ubx = self._bounds(fixed=False)

@@ -1,0 +1,126 @@
+"""The pipeline's segment NLP, closed class against the shared core, on the same segments in one
+process (decision 0021): record the segments ``pipeline._spline_segment`` receives in
+``bench warmstart`` trials, then optimize each with both implementations, alternating which goes
+first, and compare process CPU, iterations and IPOPT's callback CPU.
+
+    python docs/studies/segment_nlp_pair.py record segs.pkl --trials 3     # 3 scenes x 3 trials: 36 segments
+    python docs/studies/segment_nlp_pair.py replay segs.pkl --reps 2 [--out pairs.jsonl]
+
+The machine's load changes CPU times: compare the two implementations within one run only
+(the last repetition's sums; the first pays for kernel loading and structure builds).
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import pickle
+import time
+
+import numpy as np
+
+import optplan.pipeline as PL
+import optplan.problem.nlp as NLP
+from optplan.bench import warmstart as W
+from optplan.pipeline_options import PipelineOptions
+
+ROBOT = "tcbirrt_dual_arm"
+SCENES = ("ssps_scene1", "ssps_scene2", "ssps_scene3")
+CALLBACKS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
+
+
+def record(out: str, trials: int) -> None:
+    segs: list[dict] = []
+    orig = PL._spline_segment
+    cur: list[tuple[str, int]] = [("", 0)]
+
+    def rec(robot, scene, seg_path, kind, arm, opts, ipopt):
+        segs.append({"scene": scene.name, "path": np.array(seg_path), "kind": kind, "arm": arm,
+                     "ipopt": dict(ipopt), "trial": cur[0]})
+        return orig(robot, scene, seg_path, kind, arm, opts, ipopt)
+
+    PL._spline_segment = rec
+    cfg = W.WarmstartConfig(trials=trials, modes=("warm",), segment_workers=1)
+    try:
+        for scene in SCENES:
+            for i in range(trials):
+                cur[0] = (scene, i)
+                line = W._run_unit((ROBOT, scene, i, "warm", cfg.time_limit, cfg.seed, None, True, "bspline", False,
+                                    1, "closed"))
+                print(scene, i, line.get("success"), sum(s["trial"] == cur[0] for s in segs), flush=True)
+    finally:
+        PL._spline_segment = orig
+    with open(out, "wb") as f:
+        pickle.dump(segs, f)
+    print(f"{len(segs)} segments -> {out}")
+
+
+def replay(path: str, reps: int, out: str | None, impls: tuple[str, str] = ("closed", "optproblem")) -> None:
+    with open(path, "rb") as f:
+        segs = pickle.load(f)
+    acc: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+    cur = [impls[0]]
+    orig = NLP.NlpSolver.solve
+
+    def spy(self, x0, **kw):
+        c0 = time.process_time()
+        o = orig(self, x0, **kw)
+        st = self.stats()
+        acc[cur[0]]["ipopt"] += time.process_time() - c0
+        for k in CALLBACKS:
+            acc[cur[0]][k] += st.get("t_proc_" + k, 0.0)
+        return o
+
+    NLP.NlpSolver.solve = spy
+    fout = open(out, "w") if out else None
+    try:
+        for r in range(reps):
+            tot: collections.Counter = collections.Counter()
+            its: collections.Counter = collections.Counter()
+            for n, s in enumerate(segs):
+                w = W._state(ROBOT, s["scene"])
+                res = {}
+                for impl in (impls if (n + r) % 2 == 0 else impls[::-1]):
+                    cur[0] = impl
+                    c0 = time.process_time()
+                    sol, rep, att = PL._spline_segment(w["gen"].robot, w["scene"], s["path"], s["kind"], s["arm"],
+                                                       PipelineOptions(segment_nlp=impl), s["ipopt"])
+                    c = time.process_time() - c0
+                    it = sum(a["iterations"] for a in att)
+                    res[impl] = [c, it, bool(sol.success and rep.min_clearance_m >= 0.0)]
+                    tot[impl] += c
+                    its[impl] += it
+                if fout:
+                    fout.write(json.dumps({"rep": r, "seg": n, "scene": s["scene"], "kind": s["kind"], **res}) + "\n")
+            a, b = impls
+            print(f"repetition {r}: CPU {a} {tot[a]:.2f} s, {b} {tot[b]:.2f} s, ratio {tot[b] / tot[a]:.3f}; "
+                  f"iterations {its[a]} / {its[b]}", flush=True)
+    finally:
+        NLP.NlpSolver.solve = orig
+        if fout:
+            fout.close()
+    for k, c in acc.items():
+        cb = sum(c[x] for x in CALLBACKS)
+        print(f"{k} (all repetitions): IPOPT {c['ipopt']:.2f} s, callbacks {cb:.2f} s "
+              f"(Jacobian {c['nlp_jac_g']:.2f}, Hessian {c['nlp_hess_l']:.2f}, g {c['nlp_g']:.2f})")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("record")
+    r.add_argument("out")
+    r.add_argument("--trials", type=int, default=3)
+    p = sub.add_parser("replay")
+    p.add_argument("segments")
+    p.add_argument("--reps", type=int, default=2)
+    p.add_argument("--out", default=None)
+    a = ap.parse_args()
+    if a.cmd == "record":
+        record(a.out, a.trials)
+    else:
+        replay(a.segments, a.reps, a.out)
+
+
+if __name__ == "__main__":
+    main()
