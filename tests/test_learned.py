@@ -109,7 +109,7 @@ def test_settings_are_validated():
 
 def test_path_coverage_matches_brute_force_nearest_distances():
     """The coverage measurement's k-d tree distances equal the brute-force nearest distances (numpy)."""
-    from optplan.planners.learned.coverage import coverage_table, path_coverage
+    from optplan.bench.learned_coverage import coverage_table, path_coverage
 
     rng = np.random.default_rng(5)
     Q = rng.uniform(-3, 3, (400, 14))

@@ -22,7 +22,7 @@ passes through. Seeded by one ``numpy.random.Generator``.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -30,23 +30,20 @@ from ..constraints.closed_chain import ClosedChainKinematics, IKSettings, closur
 from ..errors import ConfigurationError
 from ..model.robot import RobotModel
 from ..scene import Scene
+from .chain_projection import project_onto_chain
 from .validity import ValidityChecker
-
-if TYPE_CHECKING:   # the settings' module imports this one
-    from .manifold_samples import ManifoldSampleSettings
 
 __all__ = ["task_space_exploration"]
 
 
 def task_space_exploration(robot: RobotModel, scene: Scene, kin: ClosedChainKinematics, ck: ValidityChecker,
-                           s: ManifoldSampleSettings, n: int, rng: np.random.Generator,
+                           s: Any, n: int, rng: np.random.Generator,   # s: ManifoldSampleSettings
                            roots: list[np.ndarray], bar: Any = None) -> dict[str, Any]:
     """``n`` valid configurations, the nodes of a task-space exploration tree grown from ``roots``
     (module docstring); ``draws`` counts extensions, ``fails`` those trapped at their first waypoint by
     IK, ``coll`` those trapped there by a collision or the limits."""
     import pinocchio as pin
 
-    from .manifold_samples import project_onto_chain
     from .task_sampling import ObjectPoseFilter
     from .task_space import interpolate_task, pose_from_xi, xi_from_pose
     from .tcbirrt_options import TCBiRRTOptions, reach_scaled_workspace

@@ -1,5 +1,5 @@
 """How well an on-manifold data set covers the configurations a task-space planner passes through:
-``python -m optplan.planners.learned.coverage --scene 1 --trials 20 --data default,region,task``.
+``python -m optplan.bench.learned_coverage --scene 1 --trials 20 --data default,region,task``.
 
 For trials ``0..trials-1`` of the benchmark (seed 0 unless told), TCBiRRT with the benchmark's edge checks
 plans each query; every configuration of each returned path is measured against the data set by the joint-space
@@ -62,13 +62,13 @@ def planner_paths(scene_name: str, trials: int, time_limit: float, seed: int = 0
     """The configurations of ``planner``'s successful paths on trials ``0..trials-1`` (the benchmark's planner
     options, trials and seeds; CPU-time limit ``time_limit`` [s]) and, per path, which are on the closed chain
     (TCBiRRT's regrasps let one hand go: those configurations are off the manifold the data sample)."""
-    from ...bench.tcbirrt import BENCH_PLANNER_DEFAULTS
-    from ...constraints.closed_chain import ClosedChainKinematics
-    from ...model.robot import RobotModel
-    from ...scene import Scene
-    from ...trials import TrialGenerator
-    from .. import make_planner
-    from ..validity import ValidityChecker
+    from ..constraints.closed_chain import ClosedChainKinematics
+    from ..model.robot import RobotModel
+    from ..planners import make_planner
+    from ..planners.validity import ValidityChecker
+    from ..scene import Scene
+    from ..trials import TrialGenerator
+    from .tcbirrt import BENCH_PLANNER_DEFAULTS
 
     scene = Scene.load(scene_name)
     robot = RobotModel.from_name(scene.robot or "tcbirrt_dual_arm")
@@ -91,9 +91,9 @@ def planner_paths(scene_name: str, trials: int, time_limit: float, seed: int = 0
 
 def data_set(scene_name: str, name: str, n: int = 10_000, progress: bool = False) -> Any:
     """The cached (or generated) data set ``name`` of :data:`DATA_SETS` for the scene."""
-    from ...model.robot import RobotModel
-    from ...scene import Scene
-    from ..manifold_samples import ManifoldSampleSettings, manifold_samples
+    from ..model.robot import RobotModel
+    from ..planners.manifold_samples import ManifoldSampleSettings, manifold_samples
+    from ..scene import Scene
 
     if name not in DATA_SETS:
         raise ValueError(f"data set {name!r}: expected one of {', '.join(DATA_SETS)}")
@@ -103,7 +103,7 @@ def data_set(scene_name: str, name: str, n: int = 10_000, progress: bool = False
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m optplan.planners.learned.coverage", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m optplan.bench.learned_coverage", description=__doc__)
     ap.add_argument("--scene", default="1", help="scene name or SSPS number")
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--time-limit", type=float, default=2.0, help="TCBiRRT's CPU-time limit per query [s]")
