@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from graft_paths import check_regrasp_moves
 
 from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
 from optplan.planners import TCBiRRT, TCBiRRTOptions
 from optplan.planners.base import Deadline
-from optplan.planners.rrtconnect import edge_is_valid
 from optplan.planners.task_space import xi_from_pose
 from optplan.planners.tcbirrt import _TaskTree
 from optplan.planners.validity import ValidityChecker
@@ -79,14 +79,8 @@ def test_root_branches_regrasp_the_goal_root_onto_the_start_branch(tcb, truss):
     for i in moved:
         assert np.linalg.norm(y[i] - x[i]) < np.linalg.norm(y[i] - t.q_goal[i])
     w_fixed = ck.sweep_weights("fixed", per_geometry=True)
-    prev = t.q_goal
-    for arm, full in tb.graft[1]:
-        idx = kin.idx[kin.arm_names.index(arm)]
-        other = np.setdiff1d(np.arange(tcb.nq), idx)
-        assert np.allclose(full[0], prev) and all(np.array_equal(q[other], prev[other]) for q in full)
-        for q0, q1 in zip(full[:-1], full[1:]):
-            assert edge_is_valid(q0, q1, lambda z: ck.is_valid_object_fixed(z, Mg), SWEEP, weights=w_fixed)
-        prev = full[-1]
+    prev = check_regrasp_moves(kin, tcb.nq, tb.graft[1], t.q_goal, lambda z: ck.is_valid_object_fixed(z, Mg),
+                               SWEEP, w_fixed)
     assert np.allclose(prev, y)
     rng = np.random.default_rng(1)
     assert all(tb.twin_nearest(k, None, rng) == 1 for k in (0, 1) for _ in range(5))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from graft_paths import check_regrasp_moves
 
 from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
 from optplan.planners import TCBiRRT, TCBiRRTOptions
@@ -74,14 +75,8 @@ def test_frontier_graft_regrasps_into_a_configuration_that_steps_toward_the_othe
     assert np.allclose(a.xi[n], a.xi[0] + pl.step_size * d / np.linalg.norm(d), atol=1e-9)
     w_fixed, w_held = ck.sweep_weights("fixed", per_geometry=True), ck.sweep_weights("held", per_geometry=True)
     M0 = kin.object_pose(t.q_start)
-    prev = t.q_start
-    for arm, full in a.graft[g]:
-        idx = kin.idx[kin.arm_names.index(arm)]
-        other = np.setdiff1d(np.arange(tcb.nq), idx)
-        assert np.allclose(full[0], prev) and all(np.array_equal(x[other], prev[other]) for x in full)
-        for x0, x1 in zip(full[:-1], full[1:]):
-            assert edge_is_valid(x0, x1, lambda z: ck.is_valid_object_fixed(z, M0), SWEEP, weights=w_fixed)
-        prev = full[-1]
+    prev = check_regrasp_moves(kin, tcb.nq, a.graft[g], t.q_start, lambda z: ck.is_valid_object_fixed(z, M0),
+                               SWEEP, w_fixed)
     assert np.allclose(prev, y)
     qs = [y, *a.edge[n][0], a.q[n]]
     for q in qs:   # both hands on the object (Pinocchio FK) and free
