@@ -82,8 +82,11 @@ class PipelineOptions:
     #: IPOPT options as ``(name, value)`` pairs, passed to the solve. Default: stop at IPOPT's "acceptable"
     #: level (overall error 1e-4 for 5 iterations; the constraint tolerance stays 1e-6) and ``perturb_always_cd
     #: = yes`` (a permanent constraint regularisation of the KKT system); see
-    #: docs/decisions/0002-warm-start-and-ipopt-settings.md.
-    ipopt_options: tuple = (("acceptable_tol", 1e-4), ("acceptable_iter", 5), ("perturb_always_cd", "yes"))
+    #: docs/decisions/0002-warm-start-and-ipopt-settings.md; and IPOPT's own globalization of the adaptive μ
+    #: (``obj-constr-filter``, not the modelling core's ``never-monotone-mode``: with it a segment whose ends
+    #: sit off the closed chain ran into the iteration limit; docs/decisions/0021-pipeline-on-the-shared-core.md).
+    ipopt_options: tuple = (("acceptable_tol", 1e-4), ("acceptable_iter", 5), ("perturb_always_cd", "yes"),
+                            ("adaptive_mu_globalization", "obj-constr-filter"))
     #: Hold the separating-plane normals at coal's witness normals along the warm start
     #: (:attr:`CollisionAvoidance.fixed_normals`); see docs/decisions/0003-fixed-plane-normals.md.
     fixed_plane_normals: bool = True

@@ -45,7 +45,7 @@ def test_filter_bound_keeps_a_long_segment_near_the_manifold(tcb):
     path, scene_name, kind = _load("segment_stress_shelf_filter.npz")
     scene = Scene.load(scene_name)
     opts = PipelineOptions(failure_retries=0)
-    sol, rep, attempts = PL._spline_segment(tcb, scene, path, kind, None, opts, {})
+    sol, rep, attempts = PL._spline_segment(tcb, scene, path, kind, None, opts, dict(opts.ipopt_options))  # as the pipeline calls it
     first = attempts[0]
     assert first["reason"] == "initial" and first["status"] == "Solve_Succeeded", attempts
     assert first["iterations"] <= 100, attempts
@@ -89,7 +89,7 @@ def test_rows_next_to_pinned_ends_are_held_to_what_the_ends_allow(tcb, monkeypat
         return solve(self, ipopt, **kw)
 
     monkeypatch.setattr(OptProblem, "solve", spy)
-    sol, rep, attempts = PL._spline_segment(tcb, scene, path, kind, None, opts, {})
+    sol, rep, attempts = PL._spline_segment(tcb, scene, path, kind, None, opts, dict(opts.ipopt_options))  # as the pipeline calls it
     assert seen and all(o["constr_viol_tol"] >= min(2 * end, opts.closed_chain_tol / (2 * np.sqrt(3)))
                         for o in seen), seen
     first = attempts[0]

@@ -486,14 +486,12 @@ class SplineBackend:
             defaults.update({"ipopt.mu_strategy": "adaptive", "ipopt.theta_max_fact": 10.0})
             if not core.fl:
                 defaults["ipopt.perturb_always_cd"] = "yes"
-        if defaults["ipopt.mu_strategy"] == "adaptive" and "ipopt.perturb_always_cd" not in defaults:
+        if defaults["ipopt.mu_strategy"] == "adaptive":
             # the adaptive μ's fallback to monotone mode let one inactive inequality family (a user's
             # "upright within 5°" on the transport) send IPOPT 9.6 m off at iteration 10: 45-48
             # iterations instead of 20. Never switching: 20; the same or fewer iterations on every
             # converged benchmark problem measured (docs/decisions/0016-modelling-on-the-kernel-core.md).
-            # Not with a fixed base's plane rows (the pipeline's segments): there a saved segment whose
-            # ends sit off the closed chain (tests/test_segment_regressions.py) then ran into the
-            # iteration limit (200) where the fallback converges in ≤ 60 (decision 0021, fourth addendum)
+            # The pipeline's segments ask for IPOPT's own globalization (PipelineOptions.ipopt_options).
             defaults["ipopt.adaptive_mu_globalization"] = "never-monotone-mode"
         warm = self.lam is not None and self.lam[0] is not None and np.size(self.lam[0]) == lbg.size \
             and self.x0 is not None
