@@ -311,8 +311,14 @@ def zero_momentum_twists(robot: RobotModel, q: np.ndarray, qd: np.ndarray) -> np
 
 def _quat_mul_rows(a: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Row-wise ``a ⊗ [w; 0]`` of quaternions ``a`` (K × 4, x y z w) and rates ``w`` (K × 3)."""
-    v, s = a[:, :3], a[:, 3:]
-    return np.hstack([s * w + np.cross(v, w), -np.sum(v * w, axis=1, keepdims=True)])
+    ax, ay, az, aw = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
+    wx, wy, wz = w[:, 0], w[:, 1], w[:, 2]
+    out = np.empty((a.shape[0], 4))
+    out[:, 0] = aw * wx + ay * wz - az * wy        # s w + v × w, written out (np.cross costs ~30 µs a call)
+    out[:, 1] = aw * wy + az * wx - ax * wz
+    out[:, 2] = aw * wz + ax * wy - ay * wx
+    out[:, 3] = -(ax * wx + ay * wy + az * wz)
+    return out
 
 
 def attitudes_on_intervals(robot: RobotModel, joints: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
@@ -339,7 +345,7 @@ def attitudes_on_intervals(robot: RobotModel, joints: Callable[[np.ndarray], tup
     starts = np.arange(K) * density   # the first sample of each interval
 
     def f(xi: np.ndarray, w: np.ndarray) -> np.ndarray:
-        return 0.5 * _quat_mul_rows(xi / np.linalg.norm(xi, axis=1, keepdims=True), w)
+        return 0.5 * _quat_mul_rows(xi / np.sqrt((xi * xi).sum(axis=1))[:, None], w)
 
     for j in range(density):
         out[starts + j] = x
@@ -352,6 +358,6 @@ def attitudes_on_intervals(robot: RobotModel, joints: Callable[[np.ndarray], tup
             k3 = f(x + dt / 2 * k2, wm)
             k4 = f(x + dt * k3, w1)
             x = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-            x /= np.linalg.norm(x, axis=1, keepdims=True)
+            x /= np.sqrt((x * x).sum(axis=1))[:, None]
     out[-1] = q0[-1] / np.linalg.norm(q0[-1])
     return out
