@@ -23,3 +23,19 @@ def check_regrasp_moves(kin, nq: int, moves, start: np.ndarray, valid: Callable[
             assert edge_is_valid(q0, q1, valid, sweep, weights=weights)
         prev = full[-1]
     return prev
+
+
+def check_planned_path(tcb, scene, ck, res, q_start: np.ndarray, q_goal: np.ndarray) -> None:
+    """A planner's returned path: from ``q_start`` to ``q_goal``, every configuration in the joint
+    limits, the constrained ones on the closed chain (Pinocchio FK, ≤ 1e-6) and collision-free, and the
+    benchmark's sweep of every edge valid."""
+    from optplan.bench.tcbirrt import _path_checks
+    from optplan.constraints.closed_chain import closure_error
+
+    assert np.allclose(res.path[0], q_start) and np.allclose(res.path[-1], q_goal)
+    for q, c in zip(res.path, res.constrained):
+        assert ck.in_limits(q)
+        if c:
+            assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q)
+    chk = _path_checks(tcb, scene, ck, res)
+    assert chk["swept_invalid_edges"] == 0 and chk["max_closed_chain_residual"] <= 1e-6

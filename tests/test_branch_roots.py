@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from graft_paths import check_regrasp_moves
+from graft_paths import check_planned_path, check_regrasp_moves
 
 from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
 from optplan.planners import TCBiRRT, TCBiRRTOptions
@@ -90,7 +90,6 @@ def test_planner_with_branch_roots_and_stall_grafts_returns_a_verified_path(tcb,
     """With frontier grafts only on a stall (``graft_after`` beyond the search) the search tries them and
     returns a path whose constrained configurations close the chain (Pinocchio FK) and are free and whose
     every straight edge passes the bench's independent 1 cm sweep check; the goal root was re-grasped."""
-    from optplan.bench.tcbirrt import _path_checks
 
     scene, ck, kin, gen = truss
     t = gen.generate(1, 0)
@@ -100,13 +99,7 @@ def test_planner_with_branch_roots_and_stall_grafts_returns_a_verified_path(tcb,
     assert res.success, res.message
     s = res.stats
     assert s["root_branch"] == "goal" and s["stall_attempts"] >= 1 and s["frontier_attempts"] == s["stall_attempts"]
-    assert np.allclose(res.path[0], t.q_start) and np.allclose(res.path[-1], t.q_goal)
-    for q, c in zip(res.path, res.constrained):
-        assert ck.in_limits(q)
-        if c:
-            assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q)
-    chk = _path_checks(tcb, scene, ck, res)
-    assert chk["swept_invalid_edges"] == 0 and chk["max_closed_chain_residual"] <= 1e-6
+    check_planned_path(tcb, scene, ck, res, t.q_start, t.q_goal)
 
 
 def test_branch_root_and_stall_options_are_checked():

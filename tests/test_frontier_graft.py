@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from graft_paths import check_regrasp_moves
+from graft_paths import check_planned_path, check_regrasp_moves
 
 from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
 from optplan.planners import TCBiRRT, TCBiRRTOptions
@@ -100,7 +100,6 @@ def test_planner_with_frontier_grafts_returns_a_verified_path(tcb, truss):
     whose trees stop at the grid from either side: a path from start to goal whose constrained configurations
     close the chain (Pinocchio FK) and are free, every straight edge passes the bench's independent 1 cm sweep
     check, and each regrasp segment moves one arm with the object still."""
-    from optplan.bench.tcbirrt import _path_checks
     from optplan.trials import TrialGenerator
 
     scene, ck, kin, _ = truss
@@ -110,13 +109,7 @@ def test_planner_with_frontier_grafts_returns_a_verified_path(tcb, truss):
     res = pl.plan(t.q_start, t.q_goal, time_limit=30.0, seed=t.seed, clock="cpu")
     assert res.success, res.message
     assert res.stats["frontier_attempts"] >= 1 and res.stats["grafts"] == 0
-    assert np.allclose(res.path[0], t.q_start) and np.allclose(res.path[-1], t.q_goal)
-    for q, c in zip(res.path, res.constrained):
-        assert ck.in_limits(q)
-        if c:
-            assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q)
-    chk = _path_checks(tcb, scene, ck, res)
-    assert chk["swept_invalid_edges"] == 0 and chk["max_closed_chain_residual"] <= 1e-6
+    check_planned_path(tcb, scene, ck, res, t.q_start, t.q_goal)
     regs = [s for s in res.segments if s.kind == "regrasp"]
     assert len(regs) == res.n_regrasp >= 2
     for s in regs:
