@@ -3,6 +3,8 @@ Precomputed Graph. Every returned configuration is checked independently of the 
 Pinocchio FK of both hands (``closure_error``) and exact coal distances (``CollisionChecker``)."""
 from __future__ import annotations
 
+import gc
+
 import numpy as np
 import pytest
 
@@ -294,7 +296,15 @@ def test_planners_respect_the_cpu_time_limit(tcb, scene1, kin, checker, trial, n
     kw = {"n_samples": 300} if name == "precomputed-graph" else {}
     pl = make_planner(name, tcb, scene1, checker=checker, kinematics=kin, **kw)
     gaps = deadline_gaps()
-    res = pl.plan(trial.q_start, trial.q_goal, time_limit=0.4, seed=3, clock="cpu")
+    # the interpreter's own pauses are not the planner's: in the full suite's large heap one cyclic
+    # garbage collection inside the planning loop measured 0.12-0.16 s of CPU (the planner's own
+    # longest stretch here: 1-18 ms)
+    gc.collect()
+    gc.disable()
+    try:
+        res = pl.plan(trial.q_start, trial.q_goal, time_limit=0.4, seed=3, clock="cpu")
+    finally:
+        gc.enable()
     assert res.status in (PlanStatus.TIMEOUT, PlanStatus.EXACT), res.message
     assert gaps and max(gaps) < 0.1, (name, max(gaps, default=None))
     assert res.stats["cpu_time_s"] <= 0.4 + 0.1, res.stats
