@@ -42,6 +42,18 @@ typedef struct {
     const double *grad;      /* ng: bounding-sphere radius about the geometry origin */
     const int *pa, *pb;      /* npairs */
     double margin;
+    /* the broad phase (nstat = 0: none, the pair loop alone). Moving geometries (parent joint != 0) in
+       groups (a few consecutive links of a chain); static ones (parent joint 0) with their world AABB
+       inflated by margin + KEPS. A check without an override: the AABB of each group, then of each
+       moving geometry, against every static AABB (branch-free loops over the statics), the exact test
+       only where the boxes overlap; then the remaining pairs (moving-moving) in their order. */
+    int nmov, nstat, ngrp, nrest;
+    const int *mov;          /* nmov: moving geometries, group after group */
+    const int *grp;          /* ngrp + 1: group g is mov[grp[g] .. grp[g+1]) */
+    const double *saabb;     /* 6 x nstat: lo x, lo y, lo z, hi x, hi y, hi z of each static geometry */
+    const int *ms_pair;      /* nmov x nstat: the pair index of (mov[i], static j), -1 when not a pair */
+    const int *rest;         /* nrest: the pairs not in ms_pair, in their order */
+    int *hint;               /* 1: the pair that collided last (tried first), -1 none; may be NULL */
 } kmodel;
 
 static void compose(const double *A, const double *B, double *C) {
@@ -170,6 +182,8 @@ static int seg_hits_aabb(const double *a, const double *b, const double *h) {
 /* segment a-b (box frame) within distance r of the box of half extents h */
 static int seg_box(const double *a, const double *b, const double *h, double r) {
     double hr[3] = {h[0] + r, h[1] + r, h[2] + r};
+    for (int i = 0; i < 3; ++i)                        /* the segment's box in the box frame: no division */
+        if ((a[i] < b[i] ? a[i] : b[i]) > hr[i] || (a[i] > b[i] ? a[i] : b[i]) < -hr[i]) return 0;
     if (!seg_hits_aabb(a, b, hr)) return 0;            /* beyond the inflated box: farther than r */
     double r2 = r*r;
     if (ptbox2(a, h) <= r2 || ptbox2(b, h) <= r2) return 1;
@@ -267,13 +281,74 @@ static int pair_collides(const kmodel *m, const double **pose, int ga, int gb) {
     return box_box(A, pa, B, pb, thr);
 }
 
-/* 1 when configuration q is in collision (first active pair in contact) */
+/* world AABB of geometry g at pose P, into b (lo[3], hi[3]) */
+static void geom_aabb(const kmodel *m, int g, const double *P, double *b) {
+    const double *prm = m->gparam + 3*g;
+    double e[3];
+    int t = m->gtype[g];
+    for (int i = 0; i < 3; ++i) {
+        if (t == 0) e[i] = prm[0];
+        else if (t == 1) e[i] = prm[0] + prm[1]*fabs(P[3*i+2]);
+        else e[i] = fabs(P[3*i])*prm[0] + fabs(P[3*i+1])*prm[1] + fabs(P[3*i+2])*prm[2];
+        e[i] += 1e-12;                                  /* rounding of the bound itself */
+        b[i] = P[9+i] - e[i]; b[3+i] = P[9+i] + e[i];
+    }
+}
+
+/* the broad phase (see kmodel): 1 when an active pair with a static geometry is in contact */
+static int static_pairs_collide(const kmodel *m, const unsigned char *active, const double **pose) {
+    enum { KMAXS = 4096 };
+    double mb[6*KMAXG], gb[6];
+    unsigned char hit[KMAXS];
+    int ns = m->nstat;
+    const double *S = m->saabb;
+    for (int i = 0; i < m->nmov; ++i) geom_aabb(m, m->mov[i], pose[m->mov[i]], mb + 6*i);
+    for (int g = 0; g < m->ngrp; ++g) {
+        for (int c = 0; c < 6; ++c) gb[c] = mb[6*m->grp[g] + c];
+        for (int i = m->grp[g] + 1; i < m->grp[g+1]; ++i)
+            for (int c = 0; c < 3; ++c) {
+                if (mb[6*i+c] < gb[c]) gb[c] = mb[6*i+c];
+                if (mb[6*i+3+c] > gb[3+c]) gb[3+c] = mb[6*i+3+c];
+            }
+        int any = 0;
+        for (int j = 0; j < ns; ++j) {                   /* branch-free: vectorised by the compiler */
+            hit[j] = (unsigned char)((gb[0] <= S[3*ns+j]) & (gb[3] >= S[j]) & (gb[1] <= S[4*ns+j])
+                                     & (gb[4] >= S[ns+j]) & (gb[2] <= S[5*ns+j]) & (gb[5] >= S[2*ns+j]));
+            any |= hit[j];
+        }
+        if (!any) continue;
+        for (int j = 0; j < ns; ++j) {
+            if (!hit[j]) continue;
+            for (int i = m->grp[g]; i < m->grp[g+1]; ++i) {
+                int k = m->ms_pair[i*ns + j];
+                const double *b = mb + 6*i;
+                if (k < 0 || !active[k]) continue;
+                if (b[0] > S[3*ns+j] || b[3] < S[j] || b[1] > S[4*ns+j] || b[4] < S[ns+j]
+                    || b[2] > S[5*ns+j] || b[5] < S[2*ns+j]) continue;
+                if (pair_collides(m, pose, m->pa[k], m->pb[k])) { if (m->hint) *m->hint = k; return 1; }
+            }
+        }
+    }
+    return 0;
+}
+
+/* 1 when configuration q is in collision (an active pair in contact) */
 static int config_collides(const kmodel *m, const unsigned char *active, const double *q,
                            const double *override_pose, int override_g, double *oMi, double *oMg) {
     const double *pose[KMAXG];
     fk(m, q, override_pose, override_g, oMi, oMg, pose);
-    for (int k = 0; k < m->npairs; ++k)
-        if (active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) return 1;
+    if (m->nstat <= 0 || override_g >= 0 || m->nstat > 4096) {   /* no broad phase: every pair in order */
+        for (int k = 0; k < m->npairs; ++k)
+            if (active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) return 1;
+        return 0;
+    }
+    int h = m->hint ? *m->hint : -1;
+    if (h >= 0 && h < m->npairs && active[h] && pair_collides(m, pose, m->pa[h], m->pb[h])) return 1;
+    if (static_pairs_collide(m, active, pose)) return 1;
+    for (int r = 0; r < m->nrest; ++r) {
+        int k = m->rest[r];
+        if (active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) { if (m->hint) *m->hint = k; return 1; }
+    }
     return 0;
 }
 
