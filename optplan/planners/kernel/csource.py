@@ -52,8 +52,13 @@ typedef struct {
     const int *grp;          /* ngrp + 1: group g is mov[grp[g] .. grp[g+1]) */
     const double *saabb;     /* 6 x nstat: lo x, lo y, lo z, hi x, hi y, hi z of each static geometry */
     const int *ms_pair;      /* nmov x nstat: the pair index of (mov[i], static j), -1 when not a pair */
-    const int *rest;         /* nrest: the pairs not in ms_pair, in their order */
+    const int *rest;         /* nrest: the pairs in neither ms_pair nor a bucket, in their order */
     int *hint;               /* 1: the pair that collided last (tried first), -1 none; may be NULL */
+    int nbuck;               /* pairs of two moving geometries, in buckets by their two groups */
+    const int *bstart;       /* nbuck + 1: bucket b is bperm[bstart[b] .. bstart[b+1]) */
+    const int *bga, *bgb;    /* nbuck: its two groups */
+    const int *bperm;        /* the pair indices, bucket after bucket */
+    const int *mrow;         /* ng: a geometry's row in mov, -1 for a static one */
 } kmodel;
 
 static void compose(const double *A, const double *B, double *C) {
@@ -295,23 +300,24 @@ static void geom_aabb(const kmodel *m, int g, const double *P, double *b) {
     }
 }
 
-/* the broad phase (see kmodel): 1 when an active pair with a static geometry is in contact */
-static int static_pairs_collide(const kmodel *m, const unsigned char *active, const double **pose) {
+/* 1 when the boxes A and B (lo[3], hi[3]) are more than thr apart along an axis */
+static int boxes_apart(const double *A, const double *B, double thr) {
+    return A[0] - B[3] > thr || B[0] - A[3] > thr || A[1] - B[4] > thr || B[1] - A[4] > thr
+           || A[2] - B[5] > thr || B[2] - A[5] > thr;
+}
+
+/* the broad phase (see kmodel), static pairs: 1 when an active pair with a static geometry is in contact;
+   mb: the moving geometries' boxes, gbx: the groups' */
+static int static_pairs_collide(const kmodel *m, const unsigned char *active, const double **pose,
+                                const double *mb, const double *gbx) {
     enum { KMAXS = 4096 };
-    double mb[6*KMAXG], gb[6];
     double sep[KMAXS];
     int ns = m->nstat;
     const double *S = m->saabb;
     const double *restrict x0 = S, *restrict y0 = S + ns, *restrict z0 = S + 2*ns;
     const double *restrict x1 = S + 3*ns, *restrict y1 = S + 4*ns, *restrict z1 = S + 5*ns;
-    for (int i = 0; i < m->nmov; ++i) geom_aabb(m, m->mov[i], pose[m->mov[i]], mb + 6*i);
     for (int g = 0; g < m->ngrp; ++g) {
-        for (int c = 0; c < 6; ++c) gb[c] = mb[6*m->grp[g] + c];
-        for (int i = m->grp[g] + 1; i < m->grp[g+1]; ++i)
-            for (int c = 0; c < 3; ++c) {
-                if (mb[6*i+c] < gb[c]) gb[c] = mb[6*i+c];
-                if (mb[6*i+3+c] > gb[3+c]) gb[3+c] = mb[6*i+3+c];
-            }
+        const double *gb = gbx + 6*g;
         double ax0 = gb[0], ay0 = gb[1], az0 = gb[2], ax1 = gb[3], ay1 = gb[4], az1 = gb[5];
         /* the largest gap between the boxes along an axis (> 0: apart; a - b > 0 exactly when a > b);
            branch-free, vectorised by the compiler even for the baseline x86-64 (SSE2) */
@@ -330,10 +336,26 @@ static int static_pairs_collide(const kmodel *m, const unsigned char *active, co
                 int k = m->ms_pair[i*ns + j];
                 const double *b = mb + 6*i;
                 if (k < 0 || !active[k]) continue;
-                if (b[0] > S[3*ns+j] || b[3] < S[j] || b[1] > S[4*ns+j] || b[4] < S[ns+j]
-                    || b[2] > S[5*ns+j] || b[5] < S[2*ns+j]) continue;
+                if (b[0] > x1[j] || b[3] < x0[j] || b[1] > y1[j] || b[4] < y0[j] || b[2] > z1[j] || b[5] < z0[j])
+                    continue;
                 if (pair_collides(m, pose, m->pa[k], m->pb[k])) { if (m->hint) *m->hint = k; return 1; }
             }
+        }
+    }
+    return 0;
+}
+
+/* the broad phase, pairs of moving geometries: bucket by bucket (the pairs of two groups), skipped when
+   the groups' boxes are apart by more than the threshold, then each pair's two boxes */
+static int moving_pairs_collide(const kmodel *m, const unsigned char *active, const double **pose,
+                                const double *mb, const double *gbx) {
+    double thr = m->margin + KEPS;
+    for (int b = 0; b < m->nbuck; ++b) {
+        if (boxes_apart(gbx + 6*m->bga[b], gbx + 6*m->bgb[b], thr)) continue;
+        for (int i = m->bstart[b]; i < m->bstart[b+1]; ++i) {
+            int k = m->bperm[i];
+            if (!active[k] || boxes_apart(mb + 6*m->mrow[m->pa[k]], mb + 6*m->mrow[m->pb[k]], thr)) continue;
+            if (pair_collides(m, pose, m->pa[k], m->pb[k])) { if (m->hint) *m->hint = k; return 1; }
         }
     }
     return 0;
@@ -343,15 +365,26 @@ static int static_pairs_collide(const kmodel *m, const unsigned char *active, co
 static int config_collides(const kmodel *m, const unsigned char *active, const double *q,
                            const double *override_pose, int override_g, double *oMi, double *oMg) {
     const double *pose[KMAXG];
+    double mb[6*KMAXG], gbx[6*KMAXG];
     fk(m, q, override_pose, override_g, oMi, oMg, pose);
-    if (m->nstat <= 0 || override_g >= 0 || m->nstat > 4096) {   /* no broad phase: every pair in order */
+    if (m->ngrp <= 0 || override_g >= 0 || m->nstat > 4096) {   /* no broad phase: every pair in order */
         for (int k = 0; k < m->npairs; ++k)
             if (active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) return 1;
         return 0;
     }
     int h = m->hint ? *m->hint : -1;
     if (h >= 0 && h < m->npairs && active[h] && pair_collides(m, pose, m->pa[h], m->pb[h])) return 1;
-    if (static_pairs_collide(m, active, pose)) return 1;
+    for (int i = 0; i < m->nmov; ++i) geom_aabb(m, m->mov[i], pose[m->mov[i]], mb + 6*i);
+    for (int g = 0; g < m->ngrp; ++g) {
+        double *gb = gbx + 6*g;
+        for (int c = 0; c < 6; ++c) gb[c] = mb[6*m->grp[g] + c];
+        for (int i = m->grp[g] + 1; i < m->grp[g+1]; ++i)
+            for (int c = 0; c < 3; ++c) {
+                if (mb[6*i+c] < gb[c]) gb[c] = mb[6*i+c];
+                if (mb[6*i+3+c] > gb[3+c]) gb[3+c] = mb[6*i+3+c];
+            }
+    }
+    if (static_pairs_collide(m, active, pose, mb, gbx) || moving_pairs_collide(m, active, pose, mb, gbx)) return 1;
     for (int r = 0; r < m->nrest; ++r) {
         int k = m->rest[r];
         if (active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) { if (m->hint) *m->hint = k; return 1; }

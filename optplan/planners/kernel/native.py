@@ -51,7 +51,8 @@ class _KModel(ctypes.Structure):
                 ("gparent", _P), ("gtype", _P), ("gplace", _P), ("gparam", _P), ("grad", _P),
                 ("pa", _P), ("pb", _P), ("margin", ctypes.c_double),
                 ("nmov", ctypes.c_int), ("nstat", ctypes.c_int), ("ngrp", ctypes.c_int), ("nrest", ctypes.c_int),
-                ("mov", _P), ("grp", _P), ("saabb", _P), ("ms_pair", _P), ("rest", _P), ("hint", _P)]
+                ("mov", _P), ("grp", _P), ("saabb", _P), ("ms_pair", _P), ("rest", _P), ("hint", _P),
+                ("nbuck", ctypes.c_int), ("bstart", _P), ("bga", _P), ("bgb", _P), ("bperm", _P), ("mrow", _P)]
 
 #: most moving geometries in one group of the broad phase (consecutive links of a chain share one
 #: bounding box, tested against every obstacle's before the links' own boxes)
@@ -89,20 +90,34 @@ def broad_phase(jparent: np.ndarray, gparent: np.ndarray, gtype: np.ndarray, gpl
     grp.append(len(mov_all))
     col = {g: j for j, g in enumerate(stat)}
     row = {g: i for i, g in enumerate(mov_all)}
+    group = np.zeros(len(mov_all), np.int32)
+    for gi in range(len(grp) - 1):
+        group[grp[gi]:grp[gi + 1]] = gi
     ms = -np.ones((len(mov_all), len(stat)), np.int32)
-    rest = []
+    rest: list[int] = []
+    buckets: dict[tuple[int, int], list[int]] = {}
     for k, (a, b) in enumerate(pairs):
         m_, s_ = (a, b) if gparent[b] == 0 else (b, a)
         if gparent[m_] != 0 and gparent[s_] == 0 and ms[row[m_], col[s_]] < 0:
             ms[row[m_], col[s_]] = k
+        elif gparent[a] != 0 and gparent[b] != 0:
+            ga, gb = sorted((int(group[row[a]]), int(group[row[b]])))
+            buckets.setdefault((ga, gb), []).append(k)
         else:
             rest.append(k)
+    keys = sorted(buckets)
+    mrow = -np.ones(ng, np.int32)
+    for g, i in row.items():
+        mrow[g] = i
     box = np.array([_aabb(int(gtype[g]), gparam[g], gplace[g]) for g in stat]).reshape(-1, 6)
     box[:, :3] -= threshold + 1e-12
     box[:, 3:] += threshold + 1e-12
     return {"mov": np.array(mov_all, np.int32), "grp": np.array(grp if mov_all else [0], np.int32),
             "saabb": np.ascontiguousarray(box.T), "ms_pair": np.ascontiguousarray(ms),
-            "rest": np.array(rest, np.int32)}
+            "rest": np.array(rest, np.int32),
+            "bstart": np.cumsum([0] + [len(buckets[k]) for k in keys]).astype(np.int32),
+            "bga": np.array([k[0] for k in keys], np.int32), "bgb": np.array([k[1] for k in keys], np.int32),
+            "bperm": np.array([p for k in keys for p in buckets[k]], np.int32), "mrow": mrow}
 
 
 def load_library() -> Any:
@@ -226,10 +241,12 @@ class NativeKernel:
         bp = broad_phase(jparent, gparent, gtype, gplace, gparam, list(pairs), float(margin) + KERNEL_EPS)
         self._hint = np.full(1, -1, np.int32)   # the pair that collided last, shared by every call
         self._broad = (bp["mov"], bp["grp"], bp["saabb"], bp["ms_pair"], bp["rest"], self._hint)
+        self._buckets = (bp["bstart"], bp["bga"], bp["bgb"], bp["bperm"], bp["mrow"])
         nstat = bp["saabb"].shape[1] if bp["ms_pair"].size else 0
         self._km = _KModel(int(model.nq), nj, ng, len(pairs), *ptr, float(margin),
                            len(bp["mov"]), nstat, len(bp["grp"]) - 1, len(bp["rest"]),
-                           *[a.ctypes.data for a in self._broad])
+                           *[a.ctypes.data for a in self._broad], len(bp["bga"]),
+                           *[a.ctypes.data for a in self._buckets])
         self._km_p = ctypes.addressof(self._km)
         self._pose = np.zeros(12)
         self._pose_p = self._pose.ctypes.data
