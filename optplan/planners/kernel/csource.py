@@ -99,9 +99,11 @@ static void joint_motion(const double *L, int type, const double *u, double x, d
 }
 
 /* world placements: joints into oMi, geometries into pose[g] (static geometries point to their
-   placement, the override geometry to override_pose, moving ones into oMg) */
-static void fk(const kmodel *m, const double *q, const double *override_pose, int override_g, double *oMi,
-               double *oMg, const double **pose) {
+   placement, the override geometry to override_pose, moving ones into oMg). Unless full, a moving
+   sphere's pose holds only its position and a moving capsule's only its position and axis (the third
+   column of R): all that the tests read of them. */
+static void fk_(const kmodel *m, const double *q, const double *override_pose, int override_g, double *oMi,
+                double *oMg, const double **pose, int full) {
     static const double I[12] = {1,0,0, 0,1,0, 0,0,1, 0,0,0};
     memcpy(oMi, I, sizeof I);
     for (int j = 1; j < m->nj; ++j) {
@@ -112,8 +114,24 @@ static void fk(const kmodel *m, const double *q, const double *override_pose, in
     for (int g = 0; g < m->ng; ++g) {
         if (g == override_g) pose[g] = override_pose;
         else if (m->gparent[g] == 0) pose[g] = m->gplace + 12*g;
-        else { compose(oMi + 12*m->gparent[g], m->gplace + 12*g, oMg + 12*g); pose[g] = oMg + 12*g; }
+        else {
+            const double *P = oMi + 12*m->gparent[g], *G = m->gplace + 12*g;
+            double *O = oMg + 12*g;
+            int t = m->gtype[g];
+            if (full || t > 1) compose(P, G, O);
+            else
+                for (int i = 0; i < 3; ++i) {
+                    O[9+i] = P[3*i]*G[9] + P[3*i+1]*G[10] + P[3*i+2]*G[11] + P[9+i];
+                    if (t == 1) O[3*i+2] = P[3*i]*G[2] + P[3*i+1]*G[5] + P[3*i+2]*G[8];
+                }
+            pose[g] = O;
+        }
     }
+}
+
+static void fk(const kmodel *m, const double *q, const double *override_pose, int override_g, double *oMi,
+               double *oMg, const double **pose) {
+    fk_(m, q, override_pose, override_g, oMi, oMg, pose, 0);
 }
 
 static double dot3(const double *a, const double *b) { return a[0]*b[0] + a[1]*b[1] + a[2]*b[2]; }
@@ -424,7 +442,7 @@ void kernel_placements(const kmodel *m, const double *q, const double *override_
     double oMi[12*KMAXJ], buf[12*KMAXG];
     const double *pose[KMAXG];
     if (m->nj > KMAXJ || m->ng > KMAXG) return;
-    fk(m, q, override_pose, override_g, oMi, buf, pose);
+    fk_(m, q, override_pose, override_g, oMi, buf, pose, 1);
     for (int g = 0; g < m->ng; ++g) memcpy(oMg + 12*g, pose[g], 12*sizeof(double));
 }
 """.replace("@KERNEL_EPS@", repr(KERNEL_EPS))
