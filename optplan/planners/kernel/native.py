@@ -71,7 +71,7 @@ def _aabb(gtype: int, prm: np.ndarray, P: np.ndarray) -> np.ndarray:
     return np.concatenate([p - e, p + e])
 
 
-def broad_phase(jparent: np.ndarray, gparent: np.ndarray, gtype: np.ndarray, gplace: np.ndarray,
+def broad_phase_arrays(jparent: np.ndarray, gparent: np.ndarray, gtype: np.ndarray, gplace: np.ndarray,
                 gparam: np.ndarray, pairs: list[tuple[int, int]], threshold: float,
                 group_size: int = BROAD_GROUP_SIZE) -> dict[str, np.ndarray]:
     """The kernel's broad-phase arrays (see ``kmodel`` in :mod:`~optplan.planners.kernel.csource`):
@@ -198,10 +198,15 @@ class NativeKernel:
     ``margin`` [m]. Each query takes ``active`` (one uint8 per pair: 0 skips it) and optionally the
     world placement of one geometry (``override``: its index and pose), e.g. a still object.
 
+    ``broad_phase`` (default True): a query without an override first compares axis-aligned boxes —
+    chains of a few links against every static geometry, then each link, and the pairs of two moving
+    geometries bucket by bucket of their chains — and runs the exact test only where they overlap; the
+    pair that collided last is tried first. The verdicts are those of the plain pair loop (False).
+
     Raises :class:`KernelUnavailable` when the model has other joints or no C compiler is found."""
 
     def __init__(self, model: pin.Model, gmodel: pin.GeometryModel, pairs: list[tuple[int, int]], *,
-                 margin: float = 0.0) -> None:
+                 margin: float = 0.0, broad_phase: bool = True) -> None:
         self.lib = load_library()
         nj = model.njoints
         jparent = np.zeros(nj, np.int32)
@@ -238,13 +243,13 @@ class NativeKernel:
         self.types = gtype
         self._arrays = (jparent, jtype, jidx, jplace, jaxis, gparent, gtype, gplace, gparam, grad, pa, pb)
         ptr = [a.ctypes.data for a in self._arrays]
-        bp = broad_phase(jparent, gparent, gtype, gplace, gparam, list(pairs), float(margin) + KERNEL_EPS)
+        bp = broad_phase_arrays(jparent, gparent, gtype, gplace, gparam, list(pairs), float(margin) + KERNEL_EPS)
         self._hint = np.full(1, -1, np.int32)   # the pair that collided last, shared by every call
         self._broad = (bp["mov"], bp["grp"], bp["saabb"], bp["ms_pair"], bp["rest"], self._hint)
         self._buckets = (bp["bstart"], bp["bga"], bp["bgb"], bp["bperm"], bp["mrow"])
         nstat = bp["saabb"].shape[1] if bp["ms_pair"].size else 0
         self._km = _KModel(int(model.nq), nj, ng, len(pairs), *ptr, float(margin),
-                           len(bp["mov"]), nstat, len(bp["grp"]) - 1, len(bp["rest"]),
+                           len(bp["mov"]), nstat, len(bp["grp"]) - 1 if broad_phase else 0, len(bp["rest"]),
                            *[a.ctypes.data for a in self._broad], len(bp["bga"]),
                            *[a.ctypes.data for a in self._buckets])
         self._km_p = ctypes.addressof(self._km)
