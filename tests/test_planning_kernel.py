@@ -334,3 +334,20 @@ def test_a_damaged_cached_library_is_rebuilt(monkeypatch, tmp_path):
     so.write_bytes(b"not a shared library")
     lib = native.load_library()
     assert so.stat().st_size > 1000 and hasattr(lib, "kernel_first_invalid")
+
+
+def test_counters_of_the_profiling_build(tcb):
+    """``bench.planning_kernel.counters``: the profiling build finds the same free configurations with the
+    broad phase on and off, the plain loop tests every active pair of a free configuration, and the
+    broad phase leaves a fraction of them to the pair test."""
+    from optplan.bench.planning_kernel import counters
+
+    if ValidityChecker(tcb, Scene.load("hard_flip")).kernel != "native":
+        pytest.skip("no native kernel here")
+    c = counters(tcb, Scene.load("hard_clutter_dense"), n=400, seed=2)
+    vc = ValidityChecker(tcb, Scene.load("hard_clutter_dense"))
+    n_active = sum(bool(x) for x in vc._gd["held"].activeCollisionPairs)
+    assert c["broad all"]["free"] == c["plain all"]["free"] == c["plain valid"]["configurations"] > 0
+    assert c["plain valid"]["pairs tested"] == pytest.approx(n_active)
+    assert c["broad valid"]["pairs tested"] < 0.1 * n_active
+    assert c["broad valid"]["chain-obstacle box tests"] > 0 and c["plain valid"]["chain-obstacle box tests"] == 0

@@ -28,6 +28,16 @@ C_SOURCE = r"""
 #define KMAXG 1024
 #define KEPS @KERNEL_EPS@
 
+/* counters of a profiling build (KCOUNT defined: optplan.bench.planning_kernel --counters): checks,
+   pairs tested, exact tests, group-obstacle box tests, link-obstacle box tests, bucket tests,
+   link-link box tests */
+#ifdef KCOUNT
+long long kcount[8];
+#define KCNT(i, n) (kcount[i] += (n))
+#else
+#define KCNT(i, n) ((void)0)
+#endif
+
 typedef struct {
     int nq, nj, ng, npairs;
     const int *jparent;      /* nj: parent joint (joint 0 = universe) */
@@ -272,7 +282,9 @@ static int pair_collides(const kmodel *m, const double **pose, int ga, int gb) {
     double thr = m->margin + KEPS;
     double dx = A[9]-B[9], dy = A[10]-B[10], dz = A[11]-B[11];
     double rr = m->grad[ga] + m->grad[gb] + thr;
+    KCNT(1, 1);
     if (dx*dx + dy*dy + dz*dz > rr*rr) return 0;
+    KCNT(2, 1);
     int ta = m->gtype[ga], tb = m->gtype[gb];
     if (ta > tb) { int w = ga; ga = gb; gb = w; w = ta; ta = tb; tb = w; const double *X = A; A = B; B = X; }
     const double *pa = m->gparam + 3*ga, *pb = m->gparam + 3*gb;
@@ -339,6 +351,7 @@ static int static_pairs_collide(const kmodel *m, const unsigned char *active, co
         double ax0 = gb[0], ay0 = gb[1], az0 = gb[2], ax1 = gb[3], ay1 = gb[4], az1 = gb[5];
         /* the largest gap between the boxes along an axis (> 0: apart; a - b > 0 exactly when a > b);
            branch-free, vectorised by the compiler even for the baseline x86-64 (SSE2) */
+        KCNT(3, ns);
         for (int j = 0; j < ns; ++j) {
             double s = ax0 - x1[j], t;
             t = x0[j] - ax1; s = s > t ? s : t;
@@ -354,6 +367,7 @@ static int static_pairs_collide(const kmodel *m, const unsigned char *active, co
                 int k = m->ms_pair[i*ns + j];
                 const double *b = mb + 6*i;
                 if (k < 0 || !active[k]) continue;
+                KCNT(4, 1);
                 if (b[0] > x1[j] || b[3] < x0[j] || b[1] > y1[j] || b[4] < y0[j] || b[2] > z1[j] || b[5] < z0[j])
                     continue;
                 if (pair_collides(m, pose, m->pa[k], m->pb[k])) { if (m->hint) *m->hint = k; return 1; }
@@ -369,9 +383,11 @@ static int moving_pairs_collide(const kmodel *m, const unsigned char *active, co
                                 const double *mb, const double *gbx) {
     double thr = m->margin + KEPS;
     for (int b = 0; b < m->nbuck; ++b) {
+        KCNT(5, 1);
         if (boxes_apart(gbx + 6*m->bga[b], gbx + 6*m->bgb[b], thr)) continue;
         for (int i = m->bstart[b]; i < m->bstart[b+1]; ++i) {
             int k = m->bperm[i];
+            KCNT(6, active[k] != 0);
             if (!active[k] || boxes_apart(mb + 6*m->mrow[m->pa[k]], mb + 6*m->mrow[m->pb[k]], thr)) continue;
             if (pair_collides(m, pose, m->pa[k], m->pb[k])) { if (m->hint) *m->hint = k; return 1; }
         }
@@ -384,6 +400,7 @@ static int config_collides(const kmodel *m, const unsigned char *active, const d
                            const double *override_pose, int override_g, double *oMi, double *oMg) {
     const double *pose[KMAXG];
     double mb[6*KMAXG], gbx[6*KMAXG];
+    KCNT(0, 1);
     fk(m, q, override_pose, override_g, oMi, oMg, pose);
     if (m->ngrp <= 0 || override_g >= 0 || m->nstat > 4096) {   /* no broad phase: every pair in order */
         for (int k = 0; k < m->npairs; ++k)
