@@ -69,6 +69,8 @@ typedef struct {
     const int *bga, *bgb;    /* nbuck: its two groups */
     const int *bperm;        /* the pair indices, bucket after bucket */
     const int *mrow;         /* ng: a geometry's row in mov, -1 for a static one */
+    const int *jperm;        /* nj x 3, may be NULL: when the rotation of a joint's placement is a signed
+                                permutation, column c is +-(row jperm[c] - 1) of the identity; else 0 0 0 */
 } kmodel;
 
 static void compose(const double *A, const double *B, double *C) {
@@ -118,7 +120,15 @@ static void fk_(const kmodel *m, const double *q, const double *override_pose, i
     memcpy(oMi, I, sizeof I);
     for (int j = 1; j < m->nj; ++j) {
         double L[12];
-        compose(oMi + 12*m->jparent[j], m->jplace + 12*j, L);
+        const double *P = oMi + 12*m->jparent[j], *B = m->jplace + 12*j;
+        const int *pm = m->jperm ? m->jperm + 3*j : 0;
+        if (pm && pm[0]) {   /* a signed permutation: the parent's columns, no products */
+            for (int c = 0; c < 3; ++c) {
+                int r = (pm[c] > 0 ? pm[c] : -pm[c]) - 1;
+                for (int i = 0; i < 3; ++i) L[3*i+c] = pm[c] > 0 ? P[3*i+r] : -P[3*i+r];
+            }
+            for (int i = 0; i < 3; ++i) L[9+i] = P[3*i]*B[9] + P[3*i+1]*B[10] + P[3*i+2]*B[11] + P[9+i];
+        } else compose(P, B, L);
         joint_motion(L, m->jtype[j], m->jaxis + 3*j, q[m->jidx[j]], oMi + 12*j);
     }
     for (int g = 0; g < m->ng; ++g) {

@@ -52,7 +52,22 @@ class _KModel(ctypes.Structure):
                 ("pa", _P), ("pb", _P), ("margin", ctypes.c_double),
                 ("nmov", ctypes.c_int), ("nstat", ctypes.c_int), ("ngrp", ctypes.c_int), ("nrest", ctypes.c_int),
                 ("mov", _P), ("grp", _P), ("saabb", _P), ("ms_pair", _P), ("rest", _P), ("hint", _P),
-                ("nbuck", ctypes.c_int), ("bstart", _P), ("bga", _P), ("bgb", _P), ("bperm", _P), ("mrow", _P)]
+                ("nbuck", ctypes.c_int), ("bstart", _P), ("bga", _P), ("bgb", _P), ("bperm", _P), ("mrow", _P),
+                ("jperm", _P)]
+
+
+def _signed_permutation(R: np.ndarray, tol: float = 1e-12) -> np.ndarray:
+    """(3,) int32: for each column c of the rotation ``R``, ±(1 + the row of its ±1 entry) when ``R`` is a
+    signed permutation (entries within ``tol`` of 0 and ±1: URDF placements turned by right angles), else
+    zeros."""
+    out = np.zeros(3, np.int32)
+    A = np.abs(R)
+    if not (np.all((A < tol) | (np.abs(A - 1.0) < tol)) and np.all(np.sum(A > 0.5, axis=0) == 1)):
+        return out
+    for c in range(3):
+        r = int(np.argmax(A[:, c]))
+        out[c] = (r + 1) * (1 if R[r, c] > 0 else -1)
+    return out
 
 #: most moving geometries in one group of the broad phase (consecutive links of a chain share one
 #: bounding box, tested against every obstacle's before the links' own boxes)
@@ -246,7 +261,8 @@ class NativeKernel:
         bp = broad_phase_arrays(jparent, gparent, gtype, gplace, gparam, list(pairs), float(margin) + KERNEL_EPS)
         self._hint = np.full(1, -1, np.int32)   # the pair that collided last, shared by every call
         self._broad = (bp["mov"], bp["grp"], bp["saabb"], bp["ms_pair"], bp["rest"], self._hint)
-        self._buckets = (bp["bstart"], bp["bga"], bp["bgb"], bp["bperm"], bp["mrow"])
+        jperm = np.array([_signed_permutation(jplace[j, :9].reshape(3, 3)) for j in range(nj)], np.int32).reshape(nj, 3)
+        self._buckets = (bp["bstart"], bp["bga"], bp["bgb"], bp["bperm"], bp["mrow"], jperm)
         nstat = bp["saabb"].shape[1] if bp["ms_pair"].size else 0
         self._km = _KModel(int(model.nq), nj, ng, len(pairs), *ptr, float(margin),
                            len(bp["mov"]), nstat, len(bp["grp"]) - 1 if broad_phase else 0, len(bp["rest"]),
