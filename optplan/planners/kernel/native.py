@@ -69,6 +69,7 @@ def _signed_permutation(R: np.ndarray, tol: float = 1e-12) -> np.ndarray:
         out[c] = (r + 1) * (1 if R[r, c] > 0 else -1)
     return out
 
+
 #: most moving geometries in one group of the broad phase (consecutive links of a chain share one
 #: bounding box, tested against every obstacle's before the links' own boxes)
 BROAD_GROUP_SIZE = 4
@@ -87,8 +88,8 @@ def _aabb(gtype: int, prm: np.ndarray, P: np.ndarray) -> np.ndarray:
 
 
 def broad_phase_arrays(jparent: np.ndarray, gparent: np.ndarray, gtype: np.ndarray, gplace: np.ndarray,
-                gparam: np.ndarray, pairs: list[tuple[int, int]], threshold: float,
-                group_size: int = BROAD_GROUP_SIZE) -> dict[str, np.ndarray]:
+                       gparam: np.ndarray, pairs: list[tuple[int, int]], threshold: float,
+                       group_size: int = BROAD_GROUP_SIZE) -> dict[str, np.ndarray]:
     """The kernel's broad-phase arrays (see ``kmodel`` in :mod:`~optplan.planners.kernel.csource`):
     the moving geometries (parent joint ≠ 0) in groups of at most ``group_size`` consecutive links of
     one chain, the static geometries' world boxes inflated by ``threshold`` [m] (margin + slack), the
@@ -259,7 +260,9 @@ class NativeKernel:
         self._arrays = (jparent, jtype, jidx, jplace, jaxis, gparent, gtype, gplace, gparam, grad, pa, pb)
         ptr = [a.ctypes.data for a in self._arrays]
         bp = broad_phase_arrays(jparent, gparent, gtype, gplace, gparam, list(pairs), float(margin) + KERNEL_EPS)
-        self._hint = np.full(1, -1, np.int32)   # the pair that collided last, shared by every call
+        # the pair that collided last, shared by every call of this kernel (one thread at a time: a racing
+        # write leaves some valid pair index, which only orders the tests, never changes a verdict)
+        self._hint = np.full(1, -1, np.int32)
         self._broad = (bp["mov"], bp["grp"], bp["saabb"], bp["ms_pair"], bp["rest"], self._hint)
         jperm = np.array([_signed_permutation(jplace[j, :9].reshape(3, 3)) for j in range(nj)], np.int32).reshape(nj, 3)
         self._buckets = (bp["bstart"], bp["bga"], bp["bgb"], bp["bperm"], bp["mrow"], jperm)
