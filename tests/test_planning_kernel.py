@@ -78,6 +78,49 @@ def test_primitive_pairs_against_coal_distance(ka, kb):
     assert counts["hit"] > 5 and counts["free"] > 5, counts   # both verdicts occur
 
 
+@pytest.mark.parametrize("moving", ["one", "both"])
+@pytest.mark.parametrize("ka", KINDS)
+@pytest.mark.parametrize("kb", KINDS)
+def test_primitive_pairs_near_the_margin_through_the_broad_phase(ka, kb, moving):
+    """Two primitives on joints (``moving="both"``: a pair of moving geometries, bucketed; ``"one"``: one
+    moving, one static, culled by the obstacle's box) placed at random and then moved along coal's
+    separation direction to within two margins of each other: whenever coal's exact distance is ≤ the
+    margin the kernel says colliding, and for exact primitives it says free beyond margin + 1e-6 m."""
+    rng = np.random.default_rng(1000 + 100 * KINDS.index(ka) + KINDS.index(kb) + (7 if moving == "both" else 0))
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
+    counts = {"hit": 0, "free": 0}
+    for trial in range(60):
+        ga, gb = _shape(rng, ka), _shape(rng, kb)
+        Ma, Mb = _random_pose(rng, 0.8), _random_pose(rng, 0.8)
+        margin = 0.05
+        res.clear()
+        d0 = coal.distance(ga, coal.Transform3s(Ma.rotation, Ma.translation), gb,
+                           coal.Transform3s(Mb.rotation, Mb.translation), req, res)
+        if d0 > 1e-9:   # within two margins along the separation direction, on any side of the box
+            n = (res.getNearestPoint2() - res.getNearestPoint1()) / d0
+            Mb = pin.SE3(Mb.rotation, Mb.translation - (d0 - rng.uniform(0.0, 2.0 * margin)) * n)
+        res.clear()
+        d = coal.distance(ga, coal.Transform3s(Ma.rotation, Ma.translation), gb,
+                          coal.Transform3s(Mb.rotation, Mb.translation), req, res)
+        model = pin.Model()
+        ja = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "ja")
+        jb = model.addJoint(0, pin.JointModelRX(), pin.SE3.Identity(), "jb") if moving == "both" else 0
+        gm = pin.GeometryModel()
+        gm.addGeometryObject(pin.GeometryObject("a", ja, ja, Ma, ga))
+        gm.addGeometryObject(pin.GeometryObject("b", jb, jb, Mb, gb))
+        k = _kernel_or_skip(model, gm, [(0, 1)], margin=margin)
+        assert k._km.ngrp >= 1
+        free = k.first_invalid(np.zeros((1, model.nq)), k.all_active()) < 0
+        if d <= margin:
+            counts["hit"] += 1
+            assert not free, f"{ka}/{kb} trial {trial}: kernel says free at coal distance {d:.3g} m (margin {margin})"
+        else:
+            counts["free"] += 1
+            if not free and "cylinder" not in (ka, kb) and not (ka == kb == "box"):
+                assert d <= margin + 1e-6, f"{ka}/{kb} trial {trial}: colliding at distance {d:.3g} m"
+    assert counts["hit"] > 5 and counts["free"] > 5, counts
+
+
 def test_forward_kinematics_matches_pinocchio(tcb):
     scene = Scene.load("hard_bay")
     vc = ValidityChecker(tcb, scene)
@@ -137,6 +180,48 @@ def test_batch_verdicts_never_free_where_coal_collides(tcb, scene_name):
         assert not np.any(got & ~want), f"{scene_name}/{mode}: {int(np.sum(got & ~want))} false free verdicts"
         assert np.mean(~got & want) <= 0.01, f"{scene_name}/{mode}: false colliding rate {np.mean(~got & want):.3f}"
         assert 0.0 < np.mean(want) < 1.0 or mode == "free"
+
+
+def _with_turned_boxes(scene: Scene, rng: np.random.Generator) -> Scene:
+    """``scene`` with every box obstacle turned by a random rotation about its centre (their world
+    boxes are then loose bounds) plus the spheres and capsules of :func:`_with_round_obstacles`."""
+    obs = tuple(dataclasses.replace(o, placement=pin.SE3(pin.exp3(rng.normal(0.0, 0.6, 3)) @ o.placement.rotation,
+                                                         o.placement.translation)) if o.shape == "box" else o
+                for o in scene.obstacles)
+    return _with_round_obstacles(dataclasses.replace(scene, obstacles=obs))
+
+
+@pytest.mark.parametrize("scene_name,margin", [("hard_truss", 0.0), ("hard_clutter_dense", 0.05),
+                                               ("ssps_scene3", 0.02)])
+def test_broad_phase_gives_the_pair_loops_verdicts(tcb, scene_name, margin):
+    """The broad phase (boxes of chains and links against the obstacles' boxes, buckets of self pairs, the
+    last colliding pair first) culls pairs, never verdicts: on turned boxes, spheres and capsules, with a
+    margin, in every mode and in either order of the configurations, the verdicts equal the plain pair
+    loop's; and no configuration that coal (with the same margin) calls colliding is called free."""
+    rng = np.random.default_rng(29)
+    scene = _with_turned_boxes(Scene.load(scene_name), rng)
+    ref = ValidityChecker(tcb, scene, kernel="coal", margin=margin)
+    vc = ValidityChecker(tcb, scene, margin=margin)
+    if vc.kernel != "native":
+        pytest.skip("no native kernel here")
+    pairs = [(cp.first, cp.second) for cp in vc.gmodel.collisionPairs]
+    fast = _kernel_or_skip(tcb.model, vc.gmodel, pairs, margin=margin)
+    plain = _kernel_or_skip(tcb.model, vc.gmodel, pairs, margin=margin, broad_phase=False)
+    assert fast._km.ngrp > 1 and fast._km.nstat > 0 and fast._km.nbuck > 1 and plain._km.ngrp == 0
+    qs, qg = nominal_configurations(tcb, scene)
+    Q = np.vstack([np.clip(q0 + rng.normal(0.0, s, (120, tcb.model.nq)), tcb.lower, tcb.upper)
+                   for q0 in (qs, qg) for s in (0.05, 0.3)] + [np.array([tcb.random_configuration(rng) for _ in range(120)])])
+    perm = rng.permutation(len(Q))
+    for mode in ("held", "free"):
+        act = np.array([bool(x) for x in vc._gd[mode].activeCollisionPairs], np.uint8)
+        want = plain.valid(Q, act)
+        got = fast.valid(Q, act)
+        assert np.array_equal(got, want), f"{scene_name}/{mode}: {int(np.sum(got != want))} verdicts differ"
+        assert np.array_equal(fast.valid(Q[perm], act), want[perm])
+        assert all((fast.first_invalid(Q[i:i + 9], act) >= 0) == (not want[i:i + 9].all()) for i in range(0, 90, 9))
+        exact = np.array([ref.first_invalid(q[None], mode) < 0 for q in Q])
+        assert not np.any(got & ~exact), f"{scene_name}/{mode}: {int(np.sum(got & ~exact))} false free verdicts"
+        assert 0.05 < np.mean(exact) < 0.95 or mode == "free"
 
 
 def test_edge_and_first_invalid_agree(tcb):
@@ -249,3 +334,20 @@ def test_a_damaged_cached_library_is_rebuilt(monkeypatch, tmp_path):
     so.write_bytes(b"not a shared library")
     lib = native.load_library()
     assert so.stat().st_size > 1000 and hasattr(lib, "kernel_first_invalid")
+
+
+def test_counters_of_the_profiling_build(tcb):
+    """``bench.planning_kernel.counters``: the profiling build finds the same free configurations with the
+    broad phase on and off, the plain loop tests every active pair of a free configuration, and the
+    broad phase leaves a fraction of them to the pair test."""
+    from optplan.bench.planning_kernel import counters
+
+    if ValidityChecker(tcb, Scene.load("hard_flip")).kernel != "native":
+        pytest.skip("no native kernel here")
+    c = counters(tcb, Scene.load("hard_clutter_dense"), n=400, seed=2)
+    vc = ValidityChecker(tcb, Scene.load("hard_clutter_dense"))
+    n_active = sum(bool(x) for x in vc._gd["held"].activeCollisionPairs)
+    assert c["broad all"]["free"] == c["plain all"]["free"] == c["plain valid"]["configurations"] > 0
+    assert c["plain valid"]["pairs tested"] == pytest.approx(n_active)
+    assert c["broad valid"]["pairs tested"] < 0.1 * n_active
+    assert c["broad valid"]["chain-obstacle box tests"] > 0 and c["plain valid"]["chain-obstacle box tests"] == 0

@@ -3,7 +3,9 @@ holding the object) and whole TCBiRRT queries on the same trials and seeds with
 ``validity_kernel="native"`` and ``"coal"`` (alternating, CPU clock).
 
 ``python -m optplan.bench.planning_kernel --scene hard_bay,hard_window,ssps_scene1 --trials 0,1,2``
-(``--agreement``: only the two backends' verdicts on random configurations, per mode)
+(``--agreement``: only the two backends' verdicts on random configurations, per mode; ``--units-only``:
+only the unit costs, with the kernel's broad phase on and off paired; ``--counters``: the kernel's
+counters per check — pairs tested, exact tests, box tests — from a profiling build)
 
 Per query: status, CPU seconds, iterations, CPU per iteration; per scene the medians and the paired
 ratio coal / native of the CPU per iteration. The two backends give the same verdicts on the shipped
@@ -19,22 +21,32 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["unit_costs", "paired_queries", "agreement", "main"]
+__all__ = ["COUNTERS", "unit_costs", "counters", "paired_queries", "agreement", "main"]
 
 
-def unit_costs(robot: Any, scene: Any, n: int = 4000, seed: int = 0, repeats: int = 3) -> dict[str, float]:
-    """CPU microseconds per check of a held-object configuration, for both backends: batches of the
-    configurations that are valid (every pair is checked: the expensive case) and single calls; random
-    configurations around the scene's start and goal (``n`` of them, seeded)."""
-    from ..planners.validity import ValidityChecker
+def _unit_configurations(robot: Any, scene: Any, n: int, seed: int) -> np.ndarray:
+    """``n`` random configurations around the scene's start and goal (two spreads each, seeded)."""
     from .hardscenes import nominal_configurations
 
     rng = np.random.default_rng(seed)
     qs, qg = nominal_configurations(robot, scene)
-    Q = np.vstack([np.clip(q0 + rng.normal(0.0, s, (n // 4, qs.size)), robot.lower, robot.upper)
-                   for q0 in (qs, qg) for s in (0.05, 0.3)])
+    return np.vstack([np.clip(q0 + rng.normal(0.0, s, (n // 4, qs.size)), robot.lower, robot.upper)
+                      for q0 in (qs, qg) for s in (0.05, 0.3)])
+
+
+def unit_costs(robot: Any, scene: Any, n: int = 4000, seed: int = 0, repeats: int = 3,
+               kinds: tuple[str, ...] = ("native", "coal")) -> dict[str, float]:
+    """CPU microseconds per check of a held-object configuration, for each backend of ``kinds``:
+    batches of the configurations that are valid (every pair is checked: the expensive case) and single
+    calls; random configurations around the scene's start and goal (``n`` of them, seeded). With the
+    native backend also ``plain_batch_us``: the same batch through the kernel without its broad phase
+    (the plain pair loop), alternating with it."""
+    from ..planners.kernel import NativeKernel
+    from ..planners.validity import ValidityChecker
+
+    Q = _unit_configurations(robot, scene, n, seed)
     out: dict[str, float] = {}
-    for kind in ("native", "coal"):
+    for kind in kinds:
         ck = ValidityChecker(robot, scene, kernel=kind)
         ok = Q[ck.valid_batch(Q)]
         best_b = best_s = np.inf
@@ -49,6 +61,68 @@ def unit_costs(robot: Any, scene: Any, n: int = 4000, seed: int = 0, repeats: in
         out[f"{kind}_batch_us"] = 1e6 * best_b / max(len(ok), 1)
         out[f"{kind}_single_us"] = 1e6 * best_s / max(min(len(ok), 1000), 1)
         out["valid_configurations"] = float(len(ok))
+        if kind == "native" and ck.kernel == "native":
+            pairs = [(cp.first, cp.second) for cp in ck.gmodel.collisionPairs]
+            fast = NativeKernel(robot.model, ck.gmodel, pairs, margin=ck.margin)
+            plain = NativeKernel(robot.model, ck.gmodel, pairs, margin=ck.margin, broad_phase=False)
+            act = np.array([bool(x) for x in ck._gd["held"].activeCollisionPairs], np.uint8)
+            best = {"fast": np.inf, "plain": np.inf}
+            for _ in range(repeats):
+                for name, k in (("fast", fast), ("plain", plain)):
+                    t0 = time.process_time()
+                    k.first_invalid(ok, act)
+                    best[name] = min(best[name], time.process_time() - t0)
+            out["broad_batch_us"] = 1e6 * best["fast"] / max(len(ok), 1)
+            out["plain_batch_us"] = 1e6 * best["plain"] / max(len(ok), 1)
+    return out
+
+
+#: the kernel's profiling counters (a build with ``KCOUNT`` defined), in the order of ``kcount``
+COUNTERS = ("checks", "pairs tested", "exact tests", "chain-obstacle box tests", "link-obstacle box tests",
+            "bucket tests", "link-link box tests")
+
+
+def counters(robot: Any, scene: Any, n: int = 4000, seed: int = 0) -> dict[str, dict[str, float]]:
+    """Per check, on the valid configurations of :func:`unit_costs` and on all of them (held object):
+    the counts of :data:`COUNTERS` with and without the broad phase, from a profiling build of the
+    kernel (compiled into a temporary folder, not the cache)."""
+    import ctypes
+    import tempfile
+    from pathlib import Path
+
+    from ..codegen import build_library
+    from ..planners.kernel import NativeKernel
+    from ..planners.kernel.csource import C_SOURCE
+    from ..planners.validity import ValidityChecker
+
+    Q = _unit_configurations(robot, scene, n, seed)
+    ck = ValidityChecker(robot, scene, kernel="native")
+    ok = np.ascontiguousarray(Q[ck.valid_batch(Q)])
+    pairs = [(cp.first, cp.second) for cp in ck.gmodel.collisionPairs]
+    act = np.array([bool(x) for x in ck._gd["held"].activeCollisionPairs], np.uint8)
+    out: dict[str, dict[str, float]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        c_file, lib_file = Path(tmp, "kcount.c"), Path(tmp, "kcount.so")
+        c_file.write_text("#define KCOUNT 1\n" + C_SOURCE)
+        err = build_library(c_file, lib_file, "-O3")
+        if err is not None:
+            raise RuntimeError(f"the profiling build failed: {err}")
+        lib = ctypes.CDLL(str(lib_file))
+        lib.kernel_first_invalid.restype = ctypes.c_longlong
+        cnt = (ctypes.c_longlong * 8).in_dll(lib, "kcount")
+        for broad in (True, False):
+            k = NativeKernel(robot.model, ck.gmodel, pairs, margin=ck.margin, broad_phase=broad)
+            for name, X in (("valid", ok), ("all", np.ascontiguousarray(Q))):
+                for i in range(8):
+                    cnt[i] = 0
+                res = np.empty(len(X), np.uint8)
+                lib.kernel_first_invalid(ctypes.c_void_p(k._km_p), ctypes.c_void_p(act.ctypes.data), None, -1,
+                                         ctypes.c_longlong(len(X)), ctypes.c_void_p(X.ctypes.data),
+                                         ctypes.c_void_p(res.ctypes.data))
+                c = max(cnt[0], 1)
+                row = {"configurations": float(len(X)), "free": float(res.sum())}
+                row.update({label: cnt[i] / c for i, label in enumerate(COUNTERS) if i})
+                out[f"{'broad' if broad else 'plain'} {name}"] = row
     return out
 
 
@@ -148,6 +222,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="trial seed")
     ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds per query [s]")
     ap.add_argument("--no-units", action="store_true", help="skip the unit costs")
+    ap.add_argument("--units-only", action="store_true",
+                    help="only the unit costs (with the broad phase on and off), no queries")
+    ap.add_argument("--native-only", action="store_true", help="unit costs of the native kernel only (not coal)")
+    ap.add_argument("--counters", action="store_true",
+                    help="only the kernel's counters per check (pairs tested, exact tests, box tests)")
     ap.add_argument("--agreement", action="store_true",
                     help="only compare the two backends' verdicts on random configurations of each scene")
     a = ap.parse_args(argv)
@@ -163,13 +242,28 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{sc} {mode:5s}: {n} configurations, {coll} colliding (coal); kernel: {ff} false free, "
                       f"{fc} false colliding")
         return 0
-    if not a.no_units:
+    if a.counters:
         robot = RobotModel.from_name("tcbirrt_dual_arm")
         for sc in scenes:
-            u = unit_costs(robot, Scene.load(sc))
-            print(f"{sc}: held-object check, CPU µs per valid configuration: native {u['native_batch_us']:.2f} batched / "
-                  f"{u['native_single_us']:.2f} single, coal {u['coal_batch_us']:.2f} batched / {u['coal_single_us']:.2f} single "
-                  f"({int(u['valid_configurations'])} configurations)")
+            for name, row in counters(robot, Scene.load(sc)).items():
+                print(f"{sc} {name}: {int(row['configurations'])} configurations ({int(row['free'])} free); per check "
+                      + ", ".join(f"{label} {row[label]:.1f}" for label in COUNTERS[1:]))
+        return 0
+    if not a.no_units:
+        robot = RobotModel.from_name("tcbirrt_dual_arm")
+        kinds = ("native",) if a.native_only else ("native", "coal")
+        for sc in scenes:
+            u = unit_costs(robot, Scene.load(sc), kinds=kinds)
+            line = (f"{sc}: held-object check, CPU µs per valid configuration: native {u['native_batch_us']:.2f} batched / "
+                    f"{u['native_single_us']:.2f} single")
+            if "coal_batch_us" in u:
+                line += f", coal {u['coal_batch_us']:.2f} batched / {u['coal_single_us']:.2f} single"
+            if "plain_batch_us" in u:
+                line += (f"; paired, broad phase {u['broad_batch_us']:.2f} / plain pair loop {u['plain_batch_us']:.2f} "
+                         f"({u['plain_batch_us'] / u['broad_batch_us']:.2f}x)")
+            print(line + f" ({int(u['valid_configurations'])} configurations)", flush=True)
+        if a.units_only:
+            return 0
     rows = paired_queries(scenes, [int(x) for x in a.trials.split(",") if x.strip()], a.planners, seed=a.seed,
                           time_limit=a.time_limit)
     for r in rows:

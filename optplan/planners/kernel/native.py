@@ -31,7 +31,7 @@ import pinocchio as pin
 
 from ...codegen import build_library, cache_dir
 from ...errors import OptplanError
-from .csource import C_SOURCE
+from .csource import C_SOURCE, KERNEL_EPS
 
 __all__ = ["KernelUnavailable", "NativeKernel", "load_library"]
 log = logging.getLogger(__name__)
@@ -49,7 +49,91 @@ class _KModel(ctypes.Structure):
     _fields_ = [("nq", ctypes.c_int), ("nj", ctypes.c_int), ("ng", ctypes.c_int), ("npairs", ctypes.c_int),
                 ("jparent", _P), ("jtype", _P), ("jidx", _P), ("jplace", _P), ("jaxis", _P),
                 ("gparent", _P), ("gtype", _P), ("gplace", _P), ("gparam", _P), ("grad", _P),
-                ("pa", _P), ("pb", _P), ("margin", ctypes.c_double)]
+                ("pa", _P), ("pb", _P), ("margin", ctypes.c_double),
+                ("nmov", ctypes.c_int), ("nstat", ctypes.c_int), ("ngrp", ctypes.c_int), ("nrest", ctypes.c_int),
+                ("mov", _P), ("grp", _P), ("saabb", _P), ("ms_pair", _P), ("rest", _P), ("hint", _P),
+                ("nbuck", ctypes.c_int), ("bstart", _P), ("bga", _P), ("bgb", _P), ("bperm", _P), ("mrow", _P),
+                ("jperm", _P)]
+
+
+def _signed_permutation(R: np.ndarray, tol: float = 1e-12) -> np.ndarray:
+    """(3,) int32: for each column c of the rotation ``R``, ±(1 + the row of its ±1 entry) when ``R`` is a
+    signed permutation (entries within ``tol`` of 0 and ±1: URDF placements turned by right angles), else
+    zeros."""
+    out = np.zeros(3, np.int32)
+    A = np.abs(R)
+    if not (np.all((A < tol) | (np.abs(A - 1.0) < tol)) and np.all(np.sum(A > 0.5, axis=0) == 1)):
+        return out
+    for c in range(3):
+        r = int(np.argmax(A[:, c]))
+        out[c] = (r + 1) * (1 if R[r, c] > 0 else -1)
+    return out
+
+
+#: most moving geometries in one group of the broad phase (consecutive links of a chain share one
+#: bounding box, tested against every obstacle's before the links' own boxes)
+BROAD_GROUP_SIZE = 4
+
+
+def _aabb(gtype: int, prm: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """World axis-aligned box (lo[3], hi[3]) [m] of a primitive at the pose ``P`` (12 values)."""
+    R, p = P[:9].reshape(3, 3), P[9:]
+    if gtype == 0:
+        e = np.full(3, prm[0])
+    elif gtype == 1:
+        e = prm[0] + prm[1] * np.abs(R[:, 2])
+    else:
+        e = np.abs(R) @ prm
+    return np.concatenate([p - e, p + e])
+
+
+def broad_phase_arrays(jparent: np.ndarray, gparent: np.ndarray, gtype: np.ndarray, gplace: np.ndarray,
+                       gparam: np.ndarray, pairs: list[tuple[int, int]], threshold: float,
+                       group_size: int = BROAD_GROUP_SIZE) -> dict[str, np.ndarray]:
+    """The kernel's broad-phase arrays (see ``kmodel`` in :mod:`~optplan.planners.kernel.csource`):
+    the moving geometries (parent joint ≠ 0) in groups of at most ``group_size`` consecutive links of
+    one chain, the static geometries' world boxes inflated by ``threshold`` [m] (margin + slack), the
+    pair index of each (moving, static) couple and the remaining pairs in their order."""
+    ng = len(gparent)
+    mov_all = sorted((g for g in range(ng) if gparent[g] != 0), key=lambda g: (int(gparent[g]), g))
+    stat = sorted({g for a, b in pairs for g in (a, b) if gparent[g] == 0
+                   and gparent[b if g == a else a] != 0})
+    grp = [0]
+    for i in range(1, len(mov_all)):   # a new group when the chain breaks or the group is full
+        j, jp = int(gparent[mov_all[i]]), int(gparent[mov_all[i - 1]])
+        if (j != jp and jparent[j] != jp) or i - grp[-1] >= group_size:
+            grp.append(i)
+    grp.append(len(mov_all))
+    col = {g: j for j, g in enumerate(stat)}
+    row = {g: i for i, g in enumerate(mov_all)}
+    group = np.zeros(len(mov_all), np.int32)
+    for gi in range(len(grp) - 1):
+        group[grp[gi]:grp[gi + 1]] = gi
+    ms = -np.ones((len(mov_all), len(stat)), np.int32)
+    rest: list[int] = []
+    buckets: dict[tuple[int, int], list[int]] = {}
+    for k, (a, b) in enumerate(pairs):
+        m_, s_ = (a, b) if gparent[b] == 0 else (b, a)
+        if gparent[m_] != 0 and gparent[s_] == 0 and ms[row[m_], col[s_]] < 0:
+            ms[row[m_], col[s_]] = k
+        elif gparent[a] != 0 and gparent[b] != 0:
+            ga, gb = sorted((int(group[row[a]]), int(group[row[b]])))
+            buckets.setdefault((ga, gb), []).append(k)
+        else:
+            rest.append(k)
+    keys = sorted(buckets)
+    mrow = -np.ones(ng, np.int32)
+    for g, i in row.items():
+        mrow[g] = i
+    box = np.array([_aabb(int(gtype[g]), gparam[g], gplace[g]) for g in stat]).reshape(-1, 6)
+    box[:, :3] -= threshold + 1e-12
+    box[:, 3:] += threshold + 1e-12
+    return {"mov": np.array(mov_all, np.int32), "grp": np.array(grp if mov_all else [0], np.int32),
+            "saabb": np.ascontiguousarray(box.T), "ms_pair": np.ascontiguousarray(ms),
+            "rest": np.array(rest, np.int32),
+            "bstart": np.cumsum([0] + [len(buckets[k]) for k in keys]).astype(np.int32),
+            "bga": np.array([k[0] for k in keys], np.int32), "bgb": np.array([k[1] for k in keys], np.int32),
+            "bperm": np.array([p for k in keys for p in buckets[k]], np.int32), "mrow": mrow}
 
 
 def load_library() -> Any:
@@ -130,10 +214,15 @@ class NativeKernel:
     ``margin`` [m]. Each query takes ``active`` (one uint8 per pair: 0 skips it) and optionally the
     world placement of one geometry (``override``: its index and pose), e.g. a still object.
 
+    ``broad_phase`` (default True): a query without an override first compares axis-aligned boxes —
+    chains of a few links against every static geometry, then each link, and the pairs of two moving
+    geometries bucket by bucket of their chains — and runs the exact test only where they overlap; the
+    pair that collided last is tried first. The verdicts are those of the plain pair loop (False).
+
     Raises :class:`KernelUnavailable` when the model has other joints or no C compiler is found."""
 
     def __init__(self, model: pin.Model, gmodel: pin.GeometryModel, pairs: list[tuple[int, int]], *,
-                 margin: float = 0.0) -> None:
+                 margin: float = 0.0, broad_phase: bool = True) -> None:
         self.lib = load_library()
         nj = model.njoints
         jparent = np.zeros(nj, np.int32)
@@ -170,7 +259,18 @@ class NativeKernel:
         self.types = gtype
         self._arrays = (jparent, jtype, jidx, jplace, jaxis, gparent, gtype, gplace, gparam, grad, pa, pb)
         ptr = [a.ctypes.data for a in self._arrays]
-        self._km = _KModel(int(model.nq), nj, ng, len(pairs), *ptr, float(margin))
+        bp = broad_phase_arrays(jparent, gparent, gtype, gplace, gparam, list(pairs), float(margin) + KERNEL_EPS)
+        # the pair that collided last, shared by every call of this kernel (one thread at a time: a racing
+        # write leaves some valid pair index, which only orders the tests, never changes a verdict)
+        self._hint = np.full(1, -1, np.int32)
+        self._broad = (bp["mov"], bp["grp"], bp["saabb"], bp["ms_pair"], bp["rest"], self._hint)
+        jperm = np.array([_signed_permutation(jplace[j, :9].reshape(3, 3)) for j in range(nj)], np.int32).reshape(nj, 3)
+        self._buckets = (bp["bstart"], bp["bga"], bp["bgb"], bp["bperm"], bp["mrow"], jperm)
+        nstat = bp["saabb"].shape[1] if bp["ms_pair"].size else 0
+        self._km = _KModel(int(model.nq), nj, ng, len(pairs), *ptr, float(margin),
+                           len(bp["mov"]), nstat, len(bp["grp"]) - 1 if broad_phase else 0, len(bp["rest"]),
+                           *[a.ctypes.data for a in self._broad], len(bp["bga"]),
+                           *[a.ctypes.data for a in self._buckets])
         self._km_p = ctypes.addressof(self._km)
         self._pose = np.zeros(12)
         self._pose_p = self._pose.ctypes.data
