@@ -11,6 +11,9 @@ first, and compare process CPU, iterations and IPOPT's callback CPU.
 groups ``suite``, ``stress``, ``panda``: every scene with its own robot). ``replay`` prints the sums per
 segment kind (constrained / regrasp) as well.
 
+The closed class was retired by docs/decisions/0023-one-stack.md: this comparison runs at commit
+527f399 (the last with ``segment_nlp="closed"``); ``record`` still runs on later commits.
+
 The machine's load changes CPU times: compare the two implementations within one run only
 (the last repetition's sums; the first pays for kernel loading and structure builds).
 """
