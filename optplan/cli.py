@@ -306,9 +306,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "with 2 or more CPUs when --jobs is 1, else 1)")
     ws.add_argument("--transcription", choices=["bspline", "knots"], default="bspline",
                     help="trajectory NLP: B-spline control points (default) or the knot-state transcription")
-    ws.add_argument("--segment-nlp", choices=["closed", "optproblem"], default="optproblem",
-                    help="the B-spline segment NLP: an OptProblem on the shared core (default) or the closed class "
-                         "(PipelineOptions.segment_nlp)")
+    ws.add_argument("--segment-nlp", default="optproblem", metavar="optproblem",
+                    help="the B-spline segment NLP: an OptProblem on the shared core, the only one ('closed', the "
+                         "former closed class, was removed; PipelineOptions.segment_nlp)")
     ws.add_argument("--free-plane-normals", action="store_true",
                     help="let IPOPT move the separating-plane normals (PipelineOptions.fixed_plane_normals=False)")
     ws.add_argument("--out", default="bench_warmstart", help="output directory (results.jsonl, summary.txt/json)")

@@ -279,9 +279,9 @@ def _attempt(reason: str, N: int, sol: Solution, rep: VerifyReport | None) -> di
 
 def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind: str, arm: str | None,
                     opts: PipelineOptions, ipopt: dict) -> tuple[Solution, VerifyReport, list[dict]]:
-    """Optimize one segment with the B-spline NLP (``PipelineOptions.segment_nlp``: the closed class
-    or an :class:`~optplan.problem.OptProblem` on the shared kernel core, :mod:`optplan.segment_nlp`)
-    under the retry policy of :func:`optimize_segments`; returns (solution, report, attempts)."""
+    """Optimize one segment with the B-spline NLP (an :class:`~optplan.problem.OptProblem` on the
+    shared kernel core, :mod:`optplan.segment_nlp`) under the retry policy of
+    :func:`optimize_segments`; returns (solution, report, attempts)."""
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(robot.velocity_limit))))
     grasps = _held_object(scene).grasps
@@ -311,31 +311,19 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     ipopt = {"max_wall_time": opts.ipopt_max_wall_time, "max_iter": opts.spline_max_iterations,
              "constr_viol_tol": cv, "acceptable_constr_viol_tol": cv, **ipopt}
 
-    shared = opts.segment_nlp == "optproblem"
-
     def build(N: int, initial: Solution | None = None, project: bool = False) -> Any:
-        prob: Any
-        if shared:
-            prob, _ = segment_problem(robot, scene, seg_path[0], seg_path[-1], int(N), T, closed_chain=cc,
-                                      joint_limits=(lo, hi), margin=opts.margin, object_arm=holder or arms[0],
-                                      fixed_normals=True, transcription="bspline",
-                                      velocity_activation=opts.spline_velocity_activation)
-            prob.compile_kernels = opts.compile_kernels
-            prob._spline.velocity_retries = opts.velocity_retries   # (0) of the retry policy, inside the solve
-            if opts.segment_terms is not None:   # the user's own terms
-                opts.segment_terms(prob, kind)
-        else:
-            from .problem.segment import SegmentSpec
-            from .problem.segment_closed import ClosedSegmentProblem
-
-            prob = ClosedSegmentProblem(robot, scene, SegmentSpec(
-                int(N), T, seg_path[0], seg_path[-1], cc, lo, hi, margin=opts.margin, object_arm=holder or arms[0],
-                velocity_activation=opts.spline_velocity_activation))
-            prob.compile_kernels = opts.compile_kernels
+        prob, _ = segment_problem(robot, scene, seg_path[0], seg_path[-1], int(N), T, closed_chain=cc,
+                                  joint_limits=(lo, hi), margin=opts.margin, object_arm=holder or arms[0],
+                                  fixed_normals=True, transcription="bspline",
+                                  velocity_activation=opts.spline_velocity_activation)
+        prob.compile_kernels = opts.compile_kernels
+        prob._spline.velocity_retries = opts.velocity_retries   # (0) of the retry policy, inside the solve
+        if opts.segment_terms is not None:   # the user's own terms
+            opts.segment_terms(prob, kind)
         if initial is not None:   # another grid's solution at this grid's knots (projected: drift between its knots)
             Q = initial.sample(np.linspace(initial.t[0], initial.t[-1], int(N) + 1))["q"]
             Q = project_knots(robot, Q, cc) if project else Q
-            prob.set_initial(q=Q) if shared else prob.set_initial(Q)
+            prob.set_initial(q=Q)
         elif opts.warm_start:
             if not prob.set_initial_path(seg_path, cc):
                 log.info("segment %s: some resampled configurations did not project onto the manifold", kind)
@@ -343,7 +331,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
                 prob.smooth_initial(opts.smooth_warm_start, cc)
         else:
             Q = _cold_path(robot, scene, seg_path[0], seg_path[-1], kind, int(N))
-            prob.set_initial(q=Q) if shared else prob.set_initial(Q)
+            prob.set_initial(q=Q)
         return prob
 
     attempts: list[dict] = []
@@ -354,20 +342,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         # the problem re-solves itself when a joint speed without a row exceeds its limit (velocity
         # rows activated after the solve, listed in the solution's attempts); the pipeline verifies
         # and retries (its ordered policy), so the problem's own dense check is off
-        if shared:
-            sol = prob.solve(ipopt, guarantees=False)
-        else:
-            sol = prob.solve(ipopt)
-            for _ in range(opts.velocity_retries):  # 0. a joint speed the lazy velocity rows missed
-                over = prob.velocity_violations(sol) if sol.success else ()
-                if not len(over):
-                    break
-                attempts.append(_attempt(reason, prob.N, sol, None))  # not verified: it is re-solved
-                total = sol if total is None else _accumulate(sol, total)
-                prob.add_velocity_rows(over)
-                prob.activate_velocity(sol)  # and the entries near their limit, not only those over it
-                reason = "velocity"
-                sol = prob.solve(ipopt)
+        sol = prob.solve(ipopt, guarantees=False)
         rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
         attempts.append(_attempt(reason, prob.N, sol, rep))
         log.info("segment %s: %s N=%d -> %s, %d iterations, setup %.2f s, IPOPT %.2f s, clearance %+.4f m, "

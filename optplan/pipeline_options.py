@@ -6,11 +6,24 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["PipelineOptions", "PLANNER_DEFAULTS"]
+from .errors import OptionError
+
+__all__ = ["PipelineOptions", "PLANNER_DEFAULTS", "check_segment_nlp"]
 
 
 #: the pipeline's planner options when ``PipelineOptions.planner_options`` is None, per planner
 PLANNER_DEFAULTS: dict[str, tuple] = {"tcbirrt": (("edge_resolution", 0.05),)}
+
+
+def check_segment_nlp(value: Any, name: str) -> None:
+    """Raise :class:`~optplan.errors.OptionError` naming ``name`` unless ``value`` is ``"optproblem"``
+    (the removed ``"closed"`` gets a message saying so and what to use)."""
+    if value == "closed":
+        raise OptionError(f"{name}: 'closed' was removed — the closed segment class is retired and every segment NLP "
+                          "is an OptProblem on the shared B-spline core; use 'optproblem' (the default) or leave the "
+                          "option out (docs/decisions/0023-one-stack.md)")
+    if value != "optproblem":
+        raise OptionError(f"{name}: expected 'optproblem', got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -130,17 +143,14 @@ class PipelineOptions:
     #: inherit the robot, scene and caches; :mod:`optplan.workers`) [count]; None: 2 on a machine with at least
     #: 2 CPUs, else 1. The results do not depend on it.
     workers: int | None = None
-    #: Your own terms on every B-spline segment NLP (with ``segment_nlp = "optproblem"``): called as ``segment_terms(problem, kind)`` with the
+    #: Your own terms on every B-spline segment NLP: called as ``segment_terms(problem, kind)`` with the
     #: segment's :class:`~optplan.problem.OptProblem` (``kind``: "constrained" or "regrasp") right after
     #: it is built, before its first guess and solve, on every grid the retry policy builds; add
     #: constraints and costs with ``problem.add_constraint`` / ``problem.add_cost``. None: none.
     segment_terms: Callable[[Any, str], None] | None = None
-    #: The B-spline segment NLP: ``"optproblem"`` (default) — an :class:`~optplan.problem.OptProblem`
-    #: on the shared B-spline core (:func:`optplan.tasks.segment_problem`), which ``segment_terms``
-    #: needs; ``"closed"`` — the closed segment class
-    #: (:class:`~optplan.problem.segment_closed.ClosedSegmentProblem`), same rows, iterations and plans,
-    #: 1.00-1.03× the CPU on the warm-start and generalization benchmarks (a few scenes still favour it).
-    #: See docs/decisions/0021-pipeline-on-the-shared-core.md.
+    #: The B-spline segment NLP: ``"optproblem"``, the only one — an :class:`~optplan.problem.OptProblem`
+    #: on the shared B-spline core (:func:`optplan.tasks.segment_problem`). The closed segment class
+    #: (``"closed"``) was removed: it measured no faster (docs/decisions/0023-one-stack.md).
     segment_nlp: str = "optproblem"
 
     def planner_kwargs(self) -> dict:
@@ -157,11 +167,7 @@ class PipelineOptions:
         if self.segment_terms is not None and not callable(self.segment_terms):
             raise ValueError(f"PipelineOptions.segment_terms: expected a callable (problem, kind) or None, got "
                              f"{self.segment_terms!r}")
-        if self.segment_nlp not in ("closed", "optproblem"):
-            raise ValueError(f"PipelineOptions.segment_nlp: expected 'closed' or 'optproblem', got {self.segment_nlp!r}")
-        if self.segment_terms is not None and self.segment_nlp != "optproblem":
-            raise ValueError("PipelineOptions.segment_terms: your own terms need segment_nlp='optproblem' (the closed "
-                             "segment NLP takes no term)")
+        check_segment_nlp(self.segment_nlp, "PipelineOptions.segment_nlp")
         if self.transcription not in ("bspline", "knots"):
             raise ValueError(f"PipelineOptions.transcription: expected 'bspline' or 'knots', got {self.transcription!r}")
         if not (self.spline_interval_step > 0 and 4 <= self.spline_min_intervals <= self.spline_max_intervals):

@@ -1,13 +1,10 @@
-"""The segment NLP behind the pipeline's retry policy, on either implementation: the
-:class:`~optplan.problem.OptProblem` on the shared B-spline core (the default,
-:func:`optplan.tasks.segment_problem`; user terms through ``PipelineOptions.segment_terms``) or the closed class
-(:class:`~optplan.problem.segment_closed.ClosedSegmentProblem`, kept as an option;
-docs/decisions/0021-pipeline-on-the-shared-core.md). The policy's operations — activate pairs along
-knot configurations, raise margins where a solution cut a corner, the first guess's knots, the
-geometry without plane rows — are one function each here, for both."""
+"""The segment NLP behind the pipeline's retry policy: the :class:`~optplan.problem.OptProblem` on
+the shared B-spline core (:func:`optplan.tasks.segment_problem`; user terms through
+``PipelineOptions.segment_terms``; docs/decisions/0021-pipeline-on-the-shared-core.md and
+0023-one-stack.md). The policy's operations — activate pairs along knot configurations, raise
+margins where a solution cut a corner, the first guess's knots, the geometry without plane rows —
+are one function each here, through the problem's public API."""
 from __future__ import annotations
-
-from typing import Any
 
 import numpy as np
 
@@ -26,47 +23,37 @@ def _knot_trajectory(robot: RobotModel, Q: np.ndarray, T: float) -> NumericTraje
     return NumericTrajectory(robot, Q, Q, Q, Q[:-1], T)
 
 
-def activate(prob: Any, knots: list[np.ndarray], T: float) -> None:
+def activate(prob: OptProblem, knots: list[np.ndarray], T: float) -> None:
     """Also activate the collision pairs that come close along each of ``knots`` (this grid's
     knot configurations [rad], e.g. solutions coal found colliding; T [s])."""
     if not knots:
         return
-    if isinstance(prob, OptProblem):
-        h = prob.terms["collision"]
-        assert isinstance(h.term, CollisionAvoidance)   # segment_problem's collision term
-        prob.replace_term(h, h.term.with_activation(*[_knot_trajectory(prob.robot, Q, T) for Q in knots]))
-    else:
-        for Q in knots:
-            prob.add_activation(Q)
+    h = prob.terms["collision"]
+    assert isinstance(h.term, CollisionAvoidance)   # segment_problem's collision term
+    prob.replace_term(h, h.term.with_activation(*[_knot_trajectory(prob.robot, Q, T) for Q in knots]))
 
 
-def boost_and_activate(prob: Any, sol: Solution, t: np.ndarray, T: float) -> None:
+def boost_and_activate(prob: OptProblem, sol: Solution, t: np.ndarray, T: float) -> None:
     """After coal found ``sol`` in contact: the margin raised where it cut a corner between knots
     (on the pairs the solved NLP had rows for; ``t`` [s]: its dense sample times) and the pairs
     close along it activated."""
     q = sol.sample(t)["q"]
-    if isinstance(prob, OptProblem):
-        h = prob.terms["collision"]
-        assert isinstance(h.term, CollisionAvoidance)   # segment_problem's collision term
-        col, _ = h.term.with_boost(prob.term_data(h), t, q, sol.t)
-        prob.replace_term(h, col.with_activation(_knot_trajectory(prob.robot, sol.q, T)))
-    else:
-        prob.add_activation(sol.q)
-        prob.boost_between_knots(t, q, sol.t)
+    h = prob.terms["collision"]
+    assert isinstance(h.term, CollisionAvoidance)   # segment_problem's collision term
+    col, _ = h.term.with_boost(prob.term_data(h), t, q, sol.t)
+    prob.replace_term(h, col.with_activation(_knot_trajectory(prob.robot, sol.q, T)))
 
 
-def guess_knots(prob: Any) -> np.ndarray:
+def guess_knots(prob: OptProblem) -> np.ndarray:
     """Knot configurations ((N+1) × nj) [rad] of the problem's first guess."""
-    if isinstance(prob, OptProblem):
-        x0 = prob.initial_guess
-        assert x0 is not None   # the pipeline sets a guess when it builds a problem
-        return np.asarray(prob.tp.unpack(x0)["q"], float)
-    return np.asarray(prob.knot_configurations(), float)
+    x0 = prob.initial_guess
+    assert x0 is not None   # the pipeline sets a guess when it builds a problem
+    return np.asarray(prob.tp.unpack(x0)["q"], float)
 
 
-def unmodelled_geometry(prob: Any) -> list[int]:
+def unmodelled_geometry(prob: OptProblem) -> list[int]:
     """The robot's collision geometries the plane rows have no model for (cylinders, meshes)."""
-    model = prob.term_data("collision").info.get("model") if isinstance(prob, OptProblem) else prob.col
+    model = prob.term_data("collision").info.get("model")
     return [] if model is None else [g for g, shape in model.robot_shape.items() if shape is None]
 
 

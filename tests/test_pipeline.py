@@ -68,6 +68,25 @@ def test_options_validated():
         PipelineOptions(plan_clock="sun")
 
 
+def test_removed_closed_segment_nlp_is_a_clear_option_error():
+    """The closed segment class is retired: asking for it (options or the benchmark's flag) is an
+    OptionError that says it was removed and what to use; any other value is named too."""
+    import importlib
+
+    from optplan.bench.warmstart import WarmstartConfig, validate
+    from optplan.errors import OptionError
+
+    with pytest.raises(OptionError, match=r"segment_nlp: 'closed' was removed.*use 'optproblem'"):
+        PipelineOptions(segment_nlp="closed")
+    with pytest.raises(OptionError, match=r"--segment-nlp: 'closed' was removed"):
+        validate(WarmstartConfig(segment_nlp="closed"))
+    with pytest.raises(OptionError, match=r"expected 'optproblem', got 'knots'"):
+        PipelineOptions(segment_nlp="knots")
+    assert PipelineOptions().segment_nlp == "optproblem"
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("optplan.problem.segment_closed")
+
+
 def test_pipeline_scene1_trial(tcb, tmp_path):
     """The README's main job end to end (one trial of scene 1, ~15-30 s): planned (on the CPU
     clock: the planner gets the clock), every segment solved, the closed chain held to 1e-6 and
@@ -197,7 +216,6 @@ def _fake_policy(tcb, monkeypatch, reports):
 
     import optplan.pipeline as PL
     from optplan.problem import OptProblem
-    from optplan.problem.segment_closed import ClosedSegmentProblem
     from optplan.problem.solution import IpoptStatus, Solution
     from optplan.segment_nlp import guess_knots
 
@@ -211,8 +229,7 @@ def _fake_policy(tcb, monkeypatch, reports):
         Ns.append(self.N)
         Q = guess_knots(self)
         z = np.zeros_like(Q)
-        T = self.duration if isinstance(self, OptProblem) else self.T
-        return Solution(True, IpoptStatus.SOLVE_SUCCEEDED, 7, 0.1, 1.0, 0.0, {}, np.linspace(0, T, self.N + 1),
+        return Solution(True, IpoptStatus.SOLVE_SUCCEEDED, 7, 0.1, 1.0, 0.0, {}, np.linspace(0, self.duration, self.N + 1),
                         Q, z, z, z[:-1], tcb.joint_names, setup_time=0.05)
 
     def fake_verify(robot, sol, scene, closed_chain=None, object_arm=None):
@@ -220,20 +237,18 @@ def _fake_policy(tcb, monkeypatch, reports):
         return SimpleNamespace(min_clearance_m=c, max_closed_chain_residual=r, min_clearance_pair="x")
 
     monkeypatch.setattr(OptProblem, "solve", fake_solve)
-    monkeypatch.setattr(ClosedSegmentProblem, "solve", fake_solve)
     monkeypatch.setattr(PL, "verify", fake_verify)
     return sc, seg_path, Ns
 
 
-@pytest.mark.parametrize("segment_nlp", ["closed", "optproblem"])
-def test_spline_segment_retry_policy(tcb, monkeypatch, segment_nlp):
+def test_spline_segment_retry_policy(tcb, monkeypatch):
     """The B-spline path's ordered retries (fake solves and reports: the logic only): a contact coal
     finds after a converged solve → re-solve with more pairs; a closed-chain residual above the
     tolerance → a finer grid warm-started from the solution; each attempt is recorded in order."""
     import optplan.pipeline as PL
 
     sc, seg_path, Ns = _fake_policy(tcb, monkeypatch, [(-0.01, 1e-7), (0.01, 5e-6), (0.01, 2e-7)])
-    opts = PipelineOptions(shortcut_attempts=0, segment_nlp=segment_nlp)
+    opts = PipelineOptions(shortcut_attempts=0)
     sol, rep, attempts = PL._spline_segment(tcb, sc, seg_path, "constrained", None, opts, {})
     assert [a["reason"] for a in attempts] == ["initial", "collision", "refine"]
     assert Ns[0] == Ns[1] < Ns[2]
@@ -243,8 +258,7 @@ def test_spline_segment_retry_policy(tcb, monkeypatch, segment_nlp):
     assert rep.max_closed_chain_residual == 2e-7
 
 
-@pytest.mark.parametrize("segment_nlp", ["closed", "optproblem"])
-def test_refinement_may_pass_the_interval_cap_and_its_contacts_are_fixed(tcb, monkeypatch, segment_nlp):
+def test_refinement_may_pass_the_interval_cap_and_its_contacts_are_fixed(tcb, monkeypatch):
     """A segment at ``spline_max_intervals`` whose closed chain drifts between knots is refined
     beyond the cap (up to ``spline_refine_max_intervals``), and a contact coal finds in the refined
     solution gets its collision re-solve (fake solves and reports: the policy only)."""
@@ -252,7 +266,7 @@ def test_refinement_may_pass_the_interval_cap_and_its_contacts_are_fixed(tcb, mo
 
     sc, seg_path, Ns = _fake_policy(tcb, monkeypatch, [(0.01, 5e-6), (-0.01, 2e-7), (0.01, 2e-7)])
     opts = PipelineOptions(shortcut_attempts=0, spline_min_intervals=30, spline_max_intervals=30,
-                           spline_refine_max_intervals=60, segment_nlp=segment_nlp)
+                           spline_refine_max_intervals=60)
     sol, rep, attempts = PL._spline_segment(tcb, sc, seg_path, "constrained", None, opts, {})
     assert [a["reason"] for a in attempts] == ["initial", "refine", "collision"]
     assert Ns == [30, int(np.ceil(30 * 1.05 * (5e-6 / 0.5e-6) ** 0.25)), Ns[1]] and 30 < Ns[1] <= 60
@@ -332,8 +346,6 @@ def test_pipeline_segment_nlp_is_an_optproblem_that_honours_a_user_term(tcb):
 
     opts1 = PipelineOptions(shortcut_attempts=0, segment_nlp="optproblem", segment_terms=cap_joint)
     assert PipelineOptions(segment_terms=cap_joint).segment_nlp == "optproblem"   # the default
-    with pytest.raises(ValueError, match="segment_nlp='optproblem'"):
-        PipelineOptions(segment_nlp="closed", segment_terms=cap_joint)
     sol1, rep1, _ = PL._spline_segment(tcb, sc, path, "constrained", None, opts1, dict(opts1.ipopt_options))
     assert sol1.success and rep1.min_clearance_m >= 0.0
     assert float(sol1.q[:, j].max()) <= cap + 1e-6            # at the knots, where the row holds

@@ -4,7 +4,15 @@ process (decision 0021): record the segments ``pipeline._spline_segment`` receiv
 first, and compare process CPU, iterations and IPOPT's callback CPU.
 
     python docs/studies/segment_nlp_pair.py record segs.pkl --trials 3     # 3 scenes x 3 trials: 36 segments
+    python docs/studies/segment_nlp_pair.py record gen.pkl --bench generalize --scenes suite,stress,panda --trials 2
     python docs/studies/segment_nlp_pair.py replay segs.pkl --reps 2 [--out pairs.jsonl]
+
+``record --bench generalize`` records the segments of ``bench generalize`` trials (the fixed-base scene
+groups ``suite``, ``stress``, ``panda``: every scene with its own robot). ``replay`` prints the sums per
+segment kind (constrained / regrasp) as well.
+
+The closed class was retired by docs/decisions/0023-one-stack.md: this comparison runs at commit
+527f399 (the last with ``segment_nlp="closed"``); ``record`` still runs on later commits.
 
 The machine's load changes CPU times: compare the two implementations within one run only
 (the last repetition's sums; the first pays for kernel loading and structure builds).
@@ -29,7 +37,7 @@ SCENES = ("ssps_scene1", "ssps_scene2", "ssps_scene3")
 CALLBACKS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
 
 
-def record(out: str, trials: int) -> None:
+def record(out: str, trials: int, bench: str = "warmstart", scenes: str = ",".join(SCENES)) -> None:
     segs: list[dict] = []
     orig = PL._spline_segment
     cur: list[tuple[str, int]] = [("", 0)]
@@ -41,12 +49,22 @@ def record(out: str, trials: int) -> None:
 
     PL._spline_segment = rec
     cfg = W.WarmstartConfig(trials=trials, modes=("warm",), segment_workers=1)
+    names = scenes.split(",")
+    if bench == "generalize":
+        from optplan.bench import generalize as G
+
+        names = G.expand(names)
+        gcfg = G.GeneralizeConfig(trials=trials, progress=False)
+        PL.default_workers = lambda: 1   # one process: the recording sees every segment
     try:
-        for scene in SCENES:
+        for scene in names:
             for i in range(trials):
                 cur[0] = (scene, i)
-                line = W._run_unit((ROBOT, scene, i, "warm", cfg.time_limit, cfg.seed, None, True, "bspline", False,
-                                    1, "closed"))
+                if bench == "generalize":
+                    line = G.run_trial(scene, i, gcfg)
+                else:
+                    line = W._run_unit((ROBOT, scene, i, "warm", cfg.time_limit, cfg.seed, None, True, "bspline",
+                                        False, 1, "closed"))
                 print(scene, i, line.get("success"), sum(s["trial"] == cur[0] for s in segs), flush=True)
     finally:
         PL._spline_segment = orig
@@ -59,6 +77,7 @@ def replay(path: str, reps: int, out: str | None, impls: tuple[str, str] = ("clo
     with open(path, "rb") as f:
         segs = pickle.load(f)
     acc: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+    kinds: dict[tuple[str, str], collections.Counter] = collections.defaultdict(collections.Counter)
     cur = [impls[0]]
     orig = NLP.NlpSolver.solve
 
@@ -90,6 +109,8 @@ def replay(path: str, reps: int, out: str | None, impls: tuple[str, str] = ("clo
                     res[impl] = [c, it, bool(sol.success and rep.min_clearance_m >= 0.0)]
                     tot[impl] += c
                     its[impl] += it
+                    if r == reps - 1:
+                        kinds[(s["kind"], impl)].update({"cpu": c, "it": it, "n": 1, "ok": int(res[impl][2])})
                 if fout:
                     fout.write(json.dumps({"rep": r, "seg": n, "scene": s["scene"], "kind": s["kind"], **res}) + "\n")
             a, b = impls
@@ -99,6 +120,12 @@ def replay(path: str, reps: int, out: str | None, impls: tuple[str, str] = ("clo
         NLP.NlpSolver.solve = orig
         if fout:
             fout.close()
+    a, b = impls
+    for kind in sorted({k for k, _ in kinds}):
+        ka, kb = kinds[(kind, a)], kinds[(kind, b)]
+        print(f"{kind} (last repetition, {ka['n']} segments): {a} {ka['it']} iterations, {ka['cpu']:.2f} s CPU, "
+              f"{ka['ok']} verified; {b} {kb['it']} iterations, {kb['cpu']:.2f} s CPU, {kb['ok']} verified; "
+              f"CPU ratio {kb['cpu'] / ka['cpu']:.3f}")
     for k, c in acc.items():
         cb = sum(c[x] for x in CALLBACKS)
         print(f"{k} (all repetitions): IPOPT {c['ipopt']:.2f} s, callbacks {cb:.2f} s "
@@ -111,13 +138,16 @@ def main() -> None:
     r = sub.add_parser("record")
     r.add_argument("out")
     r.add_argument("--trials", type=int, default=3)
+    r.add_argument("--bench", choices=["warmstart", "generalize"], default="warmstart")
+    r.add_argument("--scenes", default=None, help="comma-separated scenes (generalize: groups too)")
     p = sub.add_parser("replay")
     p.add_argument("segments")
     p.add_argument("--reps", type=int, default=2)
     p.add_argument("--out", default=None)
     a = ap.parse_args()
     if a.cmd == "record":
-        record(a.out, a.trials)
+        record(a.out, a.trials, a.bench, a.scenes or (",".join(SCENES) if a.bench == "warmstart"
+                                                       else "suite,stress,panda"))
     else:
         replay(a.segments, a.reps, a.out)
 

@@ -91,8 +91,8 @@ class WarmstartConfig:
     #: Processes per trial that optimize its segments side by side (``PipelineOptions.workers``) [count]; None: the
     #: pipeline's default with ``jobs`` = 1, else 1 (the trials already run side by side). Recorded per result line.
     segment_workers: int | None = None
-    #: ``PipelineOptions.segment_nlp``: the segment NLP's implementation, ``"closed"`` or ``"optproblem"``
-    #: (result lines record it).
+    #: ``PipelineOptions.segment_nlp``: the segment NLP's implementation, ``"optproblem"`` (the only one since
+    #: the closed class was removed; result lines record it, lines without it were the closed class's).
     segment_nlp: str = "optproblem"
     #: Write ``DIR/time_distributions.png`` (IPOPT time and iterations per trial).
     plot: bool = True
@@ -105,6 +105,7 @@ class WarmstartConfig:
 def validate(cfg: WarmstartConfig) -> list[str]:
     """Check the configuration; returns the resolved scene names. Raises ``ValueError`` with a
     message naming the bad argument."""
+    from ..pipeline_options import check_segment_nlp
     from ..scene import Scene, available_scenes
 
     if not isinstance(cfg.trials, int) or cfg.trials < 1:
@@ -114,8 +115,7 @@ def validate(cfg: WarmstartConfig) -> list[str]:
     if cfg.segment_workers is not None and (isinstance(cfg.segment_workers, bool)
                                             or not isinstance(cfg.segment_workers, int) or cfg.segment_workers < 1):
         raise ValueError(f"--segment-workers: expected an integer >= 1, got {cfg.segment_workers!r}")
-    if cfg.segment_nlp not in ("closed", "optproblem"):
-        raise ValueError(f"--segment-nlp: expected 'closed' or 'optproblem', got {cfg.segment_nlp!r}")
+    check_segment_nlp(cfg.segment_nlp, "--segment-nlp")
     validate_engine(cfg.engine, cfg.jobs, cfg.address)
     if not isinstance(cfg.first_trial, int) or cfg.first_trial < 0:
         raise ValueError(f"--first-trial: expected an integer >= 0, got {cfg.first_trial!r}")
