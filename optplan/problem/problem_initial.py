@@ -102,7 +102,7 @@ class InitialGuessAPI:
             raise ConfigurationError(f"set_initial: t must be strictly increasing with {q.shape[0]} entries")
         t = (t - t[0]) * (Tg / (t[-1] - t[0]))
         tk = np.linspace(0.0, Tg, self.N + 1)
-        Q, V, A = clamped_cubic(t, q, tk)   # the cubic spline through the samples, at rest at both ends
+        Q, V, A = clamped_cubic(np.asarray(t, float), q, tk)   # the cubic spline through the samples, at rest at both ends
         h = Tg / self.N
         J = np.diff(A, axis=0) / h
         base_quat = None
