@@ -39,7 +39,7 @@ from .model.ik import IKOptions
 from .model.robot import RobotModel
 from .pipeline_options import PLANNER_DEFAULTS, PipelineOptions
 from .planners.base import BOTH_ARMS
-from .problem import ClosedChain, CollisionAvoidance, OptProblem
+from .problem import ClosedChain, CollisionAvoidance, IpoptStatus, OptProblem
 from .problem.solution import Solution
 from .scene import Scene
 from .segment_nlp import activate, boost_and_activate, guess_knots, project_knots, unmodelled_geometry
@@ -337,12 +337,26 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     attempts: list[dict] = []
     total: Solution | None = None
 
+    retry_ipopt = {**ipopt, **dict(opts.globalization_retry_options)} if opts.globalization_retry_options else None
+
+    current = [ipopt]   # the segment's IPOPT options: the retry's from its first use on
+
     def run(prob: Any, reason: str):
         nonlocal total
         # the problem re-solves itself when a joint speed without a row exceeds its limit (velocity
         # rows activated after the solve, listed in the solution's attempts); the pipeline verifies
         # and retries (its ordered policy), so the problem's own dense check is off
-        sol = prob.solve(ipopt, guarantees=False)
+        sol = prob.solve(current[0], guarantees=False)
+        if not sol.success and retry_ipopt is not None and current[0] is not retry_ipopt \
+                and sol.status is not IpoptStatus.MAXIMUM_WALLTIME_EXCEEDED:
+            # the same NLP from the same first guess with the retry's μ globalization, and so every
+            # later NLP of this segment (decision 0021)
+            attempts.append(_attempt(reason, prob.N, sol, None))  # not verified: it is re-solved
+            total = sol if total is None else _accumulate(sol, total)
+            log.info("segment %s: %s N=%d -> %s after %d iterations; re-solving with %s", kind, reason, prob.N,
+                     sol.status.value, sol.iterations, opts.globalization_retry_options)
+            current[0], reason = retry_ipopt, "globalization"
+            sol = prob.solve(retry_ipopt, guarantees=False)
         rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
         attempts.append(_attempt(reason, prob.N, sol, rep))
         log.info("segment %s: %s N=%d -> %s, %d iterations, setup %.2f s, IPOPT %.2f s, clearance %+.4f m, "

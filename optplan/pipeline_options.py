@@ -33,7 +33,8 @@ class PipelineOptions:
     Retry policy of a B-spline segment, in order (each attempt is recorded in ``SegmentResult.attempts``):
     (0) velocity rows: after any solve, a velocity control point beyond its joint's limit → rows added,
     re-solve within the same solve call (≤ ``velocity_retries``; listed as ``velocity rows`` in the
-    solution's attempts); (1) ``collision``: coal finds a contact after a converged solve →
+    solution's attempts); after any solve that ends without converging, ``globalization``: the same NLP
+    again from the same first guess with ``globalization_retry_options``; (1) ``collision``: coal finds a contact after a converged solve →
     pairs activated along the solution, margins raised between knots
     (:meth:`CollisionAvoidance.boost_between_knots`), re-solve (≤ ``collision_retries``); (2)
     ``finer-grid``: IPOPT failed or a contact remains → 1.6× the intervals from the same initial guess,
@@ -95,11 +96,18 @@ class PipelineOptions:
     #: IPOPT options as ``(name, value)`` pairs, passed to the solve. Default: stop at IPOPT's "acceptable"
     #: level (overall error 1e-4 for 5 iterations; the constraint tolerance stays 1e-6) and ``perturb_always_cd
     #: = yes`` (a permanent constraint regularisation of the KKT system); see
-    #: docs/decisions/0002-warm-start-and-ipopt-settings.md; and IPOPT's own globalization of the adaptive μ
-    #: (``obj-constr-filter``, not the modelling core's ``never-monotone-mode``: with it a segment whose ends
-    #: sit off the closed chain ran into the iteration limit; docs/decisions/0021-pipeline-on-the-shared-core.md).
+    #: docs/decisions/0002-warm-start-and-ipopt-settings.md; and the adaptive μ that never falls back to its
+    #: monotone mode (``never-monotone-mode``, the modelling core's default; a solve that does not converge
+    #: with it is repeated with ``globalization_retry_options``; docs/decisions/0021-pipeline-on-the-shared-core.md).
     ipopt_options: tuple = (("acceptable_tol", 1e-4), ("acceptable_iter", 5), ("perturb_always_cd", "yes"),
-                            ("adaptive_mu_globalization", "obj-constr-filter"))
+                            ("adaptive_mu_globalization", "never-monotone-mode"))
+    #: IPOPT options as ``(name, value)`` pairs, laid over ``ipopt_options`` for one re-solve of the same
+    #: B-spline NLP from the same first guess when a solve ends without converging (the iteration limit, a
+    #: restoration failure, ...), before the rest of the retry policy (a ``globalization`` attempt). Default:
+    #: IPOPT's own globalization of the adaptive μ, which falls back to a monotone μ when progress stalls (a
+    #: segment whose ends sit off the closed chain converged with it where never-monotone μ ran into the
+    #: iteration limit). ``()``: no such re-solve.
+    globalization_retry_options: tuple = (("adaptive_mu_globalization", "obj-constr-filter"),)
     #: Hold the separating-plane normals at coal's witness normals along the warm start
     #: (:attr:`CollisionAvoidance.fixed_normals`); see docs/decisions/0003-fixed-plane-normals.md.
     fixed_plane_normals: bool = True
@@ -191,6 +199,11 @@ class PipelineOptions:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"PipelineOptions.{name}: expected an integer >= 0, got {v!r}")
+        for name in ("ipopt_options", "globalization_retry_options"):
+            v = getattr(self, name)
+            if not isinstance(v, tuple) or not all(isinstance(kv, tuple) and len(kv) == 2 and isinstance(kv[0], str)
+                                                   for kv in v):
+                raise OptionError(f"PipelineOptions.{name}: expected a tuple of (name, value) pairs, got {v!r}")
         if not self.ipopt_max_wall_time > 0:
             raise ValueError(f"PipelineOptions.ipopt_max_wall_time: expected a positive time [s], got "
                              f"{self.ipopt_max_wall_time}")

@@ -60,3 +60,17 @@ def test_spline_max_iterations_is_checked(bad):
 
     with pytest.raises(ValueError, match="spline_max_iterations"):
         PipelineOptions(spline_max_iterations=bad)
+
+
+@pytest.mark.parametrize("name", ["ipopt_options", "globalization_retry_options"])
+@pytest.mark.parametrize("bad", [{"max_iter": 5}, (("max_iter",),), ((5, "x"),), "max_iter=5"])
+def test_ipopt_option_pairs_are_checked(name, bad):
+    with pytest.raises(OptionError, match=name):
+        PipelineOptions(**{name: bad})
+
+
+def test_the_segments_use_never_monotone_mu_and_retry_with_the_filter():
+    opts = PipelineOptions()
+    assert dict(opts.ipopt_options)["adaptive_mu_globalization"] == "never-monotone-mode"
+    assert dict(opts.globalization_retry_options) == {"adaptive_mu_globalization": "obj-constr-filter"}
+    assert PipelineOptions(globalization_retry_options=()).globalization_retry_options == ()

@@ -333,3 +333,25 @@ def test_error_path_helpers():
         time_grid_from_path(np.zeros((3, 2)), 0.0)
     with pytest.raises(ValueError, match="min_fraction"):
         time_grid_from_path(np.zeros((3, 2)), 1.0, min_fraction=2.0)
+
+
+@pytest.mark.parametrize("m", [1, 2, 3, 40])
+def test_clamped_cubic_matches_scipys_clamped_cubic_spline(m):
+    """The warm start's cubic spline (no scipy.interpolate at start-up) against scipy's CubicSpline with
+    zero end velocities: positions, velocities and accelerations, at and between the knots and past the
+    ends."""
+    from scipy.interpolate import CubicSpline
+
+    from optplan.geometry.splines import clamped_cubic
+
+    rng = np.random.default_rng(m)
+    t = 3.0 + np.cumsum(rng.uniform(0.05, 2.0, m + 1))
+    y = rng.normal(size=(m + 1, 4))
+    at = np.r_[np.linspace(t[0] - 0.5, t[-1] + 0.5, 201), t]
+    ref = CubicSpline(t, y, axis=0, bc_type=((1, np.zeros(4)), (1, np.zeros(4))))
+    for got, k in zip(clamped_cubic(t, y, at), range(3)):
+        np.testing.assert_allclose(got, ref(at, k), rtol=0, atol=1e-10 * max(1.0, np.abs(ref(at, k)).max()))
+    with pytest.raises(ValueError, match="y: expected shape"):
+        clamped_cubic(t, y[:-1], at)
+    with pytest.raises(ValueError):
+        clamped_cubic(t[::-1], y, at)

@@ -89,3 +89,41 @@ def test_set_initial_path_then_solve(tcb, cc, rng):
 def test_bad_path_shape(tcb, cc):
     with pytest.raises(ValueError, match="expected"):
         manifold_resample(tcb, np.zeros((3, 5)), 10, cc)
+
+
+_SEGMENT_WARM_START = """
+import sys
+from pathlib import Path
+import numpy as np
+import optplan.pipeline as PL
+from optplan.pipeline_options import PipelineOptions
+from optplan.problem import ClosedChain
+from optplan.model.robot import RobotModel
+from optplan.scene import Scene
+from optplan.tasks import segment_problem
+d = np.load(Path(%r) / "data" / "segment_ssps_scene3_ends.npz")
+path, scene = np.asarray(d["path"], float), Scene.load(str(d["scene"]))
+robot = RobotModel.from_name("tcbirrt_dual_arm")
+grasps = PL._held_object(scene).grasps
+a, b = list(grasps)
+cc = ClosedChain.from_grasps(grasps[a], grasps[b], a, b)
+prob, _ = segment_problem(robot, scene, path[0], path[-1], 40, 20.0, closed_chain=cc, margin=0.02, object_arm=a,
+                          fixed_normals=True, transcription="bspline")
+assert prob.set_initial_path(path, cc)
+print(" ".join(sorted(m for m in sys.modules if m.split(".")[:2] in (["scipy", "interpolate"], ["scipy", "optimize"]))))
+"""
+
+
+def test_a_segments_warm_start_does_not_import_scipy_interpolate(tmp_path):
+    """The pipeline's warm start (a clamped cubic spline through the planner's samples) needs neither
+    scipy.interpolate nor what it imports (scipy.optimize, ...): 0.1-0.2 s of every plan's start-up."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    env = dict(os.environ, OPTPLAN_CACHE=str(tmp_path), OPTPLAN_BACKGROUND_COMPILE="0")
+    out = subprocess.run([sys.executable, "-c", _SEGMENT_WARM_START % str(Path(__file__).parent)], env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "", f"imported: {out.stdout.strip()}"

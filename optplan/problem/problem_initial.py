@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import ConfigurationError, check_real, real_array
-from ..geometry.splines import quintic_time_law
+from ..geometry.splines import clamped_cubic, quintic_time_law
 from ..model.robot import RobotModel
 from .solution import Solution
 from .spline_problem import SplineEvaluator
@@ -102,13 +102,7 @@ class InitialGuessAPI:
             raise ConfigurationError(f"set_initial: t must be strictly increasing with {q.shape[0]} entries")
         t = (t - t[0]) * (Tg / (t[-1] - t[0]))
         tk = np.linspace(0.0, Tg, self.N + 1)
-        from scipy.interpolate import CubicSpline  # lazy: 0.13 s of import
-
-        if q.shape[0] >= 3:
-            sp = CubicSpline(t, q, axis=0, bc_type="clamped")
-        else:
-            sp = CubicSpline(t, q, axis=0, bc_type=((1, np.zeros(q.shape[1])), (1, np.zeros(q.shape[1]))))
-        Q, V, A = sp(tk), sp(tk, 1), sp(tk, 2)
+        Q, V, A = clamped_cubic(np.asarray(t, float), q, tk)   # the cubic spline through the samples, at rest at both ends
         h = Tg / self.N
         J = np.diff(A, axis=0) / h
         base_quat = None
