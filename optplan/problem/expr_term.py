@@ -85,7 +85,7 @@ class ExprTerm(Term):
         v = self._knot_values(tp, self._integrand(), list(range(tp.N + 1)))
         return self._weight() * tp.h * (sum(v[1:-1]) + (v[0] + v[-1]) / 2)
 
-    def _numeric_function(self, robot: Any, what: str) -> tuple[ca.Function, dict[int, ca.Function]]:
+    def _numeric_function(self, robot: Any, what: str) -> tuple[ca.Function, dict[Any, Any]]:
         """The function of this term's rows (``what="rows"``) or integrand (``"integrand"``) at one
         point, and its maps by number of points: made once per term and robot (a re-solve's
         dense check and ``sample`` build no Function)."""
@@ -107,8 +107,11 @@ class ExprTerm(Term):
         mass do, joint quantities do not."""
         if not robot.is_floating:
             return False
-        f, _ = self._numeric_function(robot, "rows" if self.kind == "constraint" else "integrand")
-        return any(f.which_depends(f.name_in(i), [f.name_out(0)], 1, True)[0] for i in (3, 6, 7))
+        what = "rows" if self.kind == "constraint" else "integrand"
+        f, maps = self._numeric_function(robot, what)
+        if "base" not in maps:   # kept with the function's maps (keys: numbers of points)
+            maps["base"] = any(f.which_depends(f.name_in(i), [f.name_out(0)], 1, True)[0] for i in (3, 6, 7))
+        return bool(maps["base"])
 
     def _numeric_values(self, traj: Any, what: str, ks: list[int]) -> np.ndarray:
         """The rows (``what="rows"``) or integrand of the expression at the points ``ks`` of
@@ -135,8 +138,13 @@ class ExprTerm(Term):
         return self._numeric_values(traj, "rows", knots_of(self.at, traj.N, self.default_name))
 
     def bounds_numeric(self, traj: Any) -> tuple[np.ndarray, np.ndarray]:
-        m = ca.vec(ca.SX(self.expr)).shape[0]
-        _, lo, hi = _bounds(self, m, list(self.params))
+        per = _NUMERIC.get(self)
+        if per is None:
+            per = _NUMERIC[self] = {}
+        got = per.get((0, "bounds"))   # numbers of the term's fields: made once
+        if got is None:
+            got = per[(0, "bounds")] = (None, *_bounds(self, ca.vec(ca.SX(self.expr)).shape[0], list(self.params))[1:])
+        lo, hi = got[1], got[2]
         n = len(knots_of(self.at, traj.N, self.default_name))
         return np.tile(lo, n), np.tile(hi, n)
 
@@ -153,9 +161,9 @@ class ExprTerm(Term):
 
 
 #: the numeric functions of an expression term, per term: (id(robot), what) -> (robot, the
-#: function at one point, its maps by number of points) (:meth:`ExprTerm._numeric_function`)
-_NUMERIC: weakref.WeakKeyDictionary[ExprTerm, dict[tuple[int, str], tuple[Any, ca.Function, dict[int, ca.Function]]]] = \
-    weakref.WeakKeyDictionary()
+#: function at one point, its maps by number of points) (:meth:`ExprTerm._numeric_function`);
+#: (0, "bounds") -> (None, lower, upper) of the rows
+_NUMERIC: weakref.WeakKeyDictionary[ExprTerm, dict[tuple[int, str], tuple[Any, Any, Any]]] = weakref.WeakKeyDictionary()
 
 
 def knots_of(at: Any, N: int, what: str) -> list[int]:
