@@ -318,6 +318,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
                                   velocity_activation=opts.spline_velocity_activation)
         prob.compile_kernels = opts.compile_kernels
         prob._spline.velocity_retries = opts.velocity_retries   # (0) of the retry policy, inside the solve
+        prob.prepare_warm_start = False   # solved once from a guess: no warm-started re-solve
         if opts.segment_terms is not None:   # the user's own terms
             opts.segment_terms(prob, kind)
         if initial is not None:   # another grid's solution at this grid's knots (projected: drift between its knots)

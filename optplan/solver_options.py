@@ -3,7 +3,7 @@
 IPOPT and CasADi refuse unknown names and out-of-range values only when the solver instance is
 created, as a ``RuntimeError`` whose text names neither the value nor, for range errors, the
 option. :func:`check_ipopt_options` creates a one-variable IPOPT instance per option (about a
-millisecond each) and turns a refusal into :class:`~optplan.errors.OptionError` naming the option,
+millisecond each; once per accepted value in a process) and turns a refusal into :class:`~optplan.errors.OptionError` naming the option,
 the value and what IPOPT accepts.
 """
 from __future__ import annotations
@@ -44,6 +44,10 @@ def _quiet_stdout():
         os.close(saved)
 
 
+#: (option name, value type, repr of the value) IPOPT accepted in this process
+_ACCEPTED: set[tuple[str, str, str]] = set()
+
+
 def check_ipopt_options(options: dict | None) -> None:
     """Raise :class:`OptionError` for an option name IPOPT/CasADi does not know or a value it refuses."""
     if options is None:
@@ -59,10 +63,14 @@ def check_ipopt_options(options: dict | None) -> None:
         if isinstance(value, float) and not math.isfinite(value):
             raise OptionError(f"ipopt_options[{key!r}] = {value!r}: expected a finite number")
         name = casadi_option_name(key)
+        seen = (name, type(value).__name__, repr(value))
+        if seen in _ACCEPTED:
+            continue   # IPOPT took this value before: a solve that passes its options again checks nothing
         opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", name: value}
         try:
             with _quiet_stdout():
                 ca.nlpsol("optplan_option_check", "ipopt", {"x": x, "f": x * x}, opts)
+            _ACCEPTED.add(seen)
         except (RuntimeError, TypeError, NotImplementedError) as exc:
             text = str(exc).strip().splitlines()
             why = text[-1] if text else type(exc).__name__

@@ -1,10 +1,12 @@
 """A re-solve of an :class:`OptProblem` on the B-spline core after ``set_value`` or
 ``set_initial(solution=...)`` builds nothing: no kernel made or loaded, no families, no NLP
-structure (counted by wrapping the builders), and its answer is checked by Pinocchio."""
+structure, no IPOPT instance, no CasADi Function (the dense check between knots included) —
+counted by wrapping the builders — and its answer is checked by Pinocchio."""
 from __future__ import annotations
 
 from collections import Counter
 
+import casadi as ca
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -39,6 +41,14 @@ def counts(monkeypatch):
     wrap(spline_solve.SplineBackend, "prepare")                                  # families of the terms
     wrap(kernels_mod.KernelCache, "_get", lambda self, key, build: key not in self._fns)   # a kernel made/loaded
     wrap(nlp_mod.NlpSolver, "__init__")                                          # an IPOPT instance
+    wrap(ca.Function, "__init__", lambda self, *a, **k: bool(a))                 # a Function made from expressions
+    wrap(ca.Function, "map")                                                     # a mapped Function
+    nlpsol = ca.nlpsol
+
+    def counted_nlpsol(*a, **k):   # any IPOPT instance, the option checks' included
+        n["nlpsol"] += 1
+        return nlpsol(*a, **k)
+    monkeypatch.setattr(ca, "nlpsol", counted_nlpsol)
     return n
 
 
@@ -51,27 +61,64 @@ def test_resolves_after_set_value_and_set_initial_build_nothing(tcb, counts):
     goal = prob.parameter(3, _hand(tcb, q0) + [0.05, 0.0, 0.05])
     ee = tcb.model.frames[tcb.arm("A").ee_frame_id].name
     prob.add_constraint(prob.frame(ee).translation - goal, lower=0, upper=0, at="end")
+    prob.add_constraint(prob.qd[0], lower=-2.0, upper=2.0, name="slow")   # checked between knots
     prob.add_cost(Smoothness("jerk"))
     assert prob.uses_bspline()
-    s1 = prob.solve()
+    s1 = prob.solve(ipopt_options={"max_iter": 200})
     assert s1.success, s1.status
     assert counts["_build"] == 1 and counts["prepare"] == 1 and counts["_get"] > 0   # the counters see builds
+    assert counts["__init__"] >= 1 and counts["nlpsol"] >= 1                        # ... and instances
     counts.clear()
 
     new = goal_value = prob._params[0].value.ravel() + np.array([0.0, 0.03, -0.02])
     prob.set_value(goal, goal_value)
-    s2 = prob.solve()
+    s2 = prob.solve(ipopt_options={"max_iter": 200})
     assert s2.success, s2.status
     assert np.linalg.norm(_hand(tcb, s2.q[-1]) - new) < 1e-6           # Pinocchio: the new target is reached
     assert not counts, f"a re-solve after set_value built {dict(counts)}"
 
     prob.set_initial(solution=s2)
-    s3 = prob.solve()
+    s3 = prob.solve(ipopt_options={"max_iter": 200})
     assert s3.success and s3.iterations <= 3
     np.testing.assert_allclose(s3.q, s2.q, atol=1e-6)
-    # the warm-started IPOPT takes other options: its one instance is made once, then reused
-    assert set(counts) <= {"__init__"} and counts["__init__"] <= 1, dict(counts)
-    counts.clear()
+    # the warm-started IPOPT takes other options: its instance was made with the first build
+    assert not counts, f"the first warm re-solve built {dict(counts)}"
     prob.set_initial(solution=s3)
-    s4 = prob.solve()
+    s4 = prob.solve(ipopt_options={"max_iter": 200})
     assert s4.success and not counts, f"a second warm re-solve built {dict(counts)}"
+    # the dense check ran on every re-solve, with the expression's function of the first solve
+    assert np.abs(s4.sample(np.linspace(0.0, 4.0, 81), "slow")).max() <= 2.0 + 1e-6
+
+
+def test_a_problem_solved_once_makes_one_ipopt_instance(tcb, counts):
+    """``prepare_warm_start = False`` (the pipeline's segments): the first build makes only the
+    instance it solves with; the warm-started one waits for a warm re-solve."""
+    z = np.zeros(tcb.nj)
+    q0 = np.r_[[0.3, -0.6, 0.4, -1.2, 0.2, 0.7, 0.1] * 2][:tcb.nj]
+    prob = OptProblem(tcb, n_intervals=6, duration=3.0, compile_kernels=False)
+    prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
+    prob.add_constraint(JointBoundary("end", q=q0 + 0.2, qd=z, qdd=z))
+    prob.add_cost(Smoothness("jerk"))
+    prob.prepare_warm_start = False
+    s1 = prob.solve()
+    assert s1.success and counts["nlpsol"] == 1, dict(counts)
+    counts.clear()
+    prob.set_initial(solution=s1)
+    assert prob.solve().success and counts["nlpsol"] == 1, dict(counts)
+
+
+def test_terms_say_whether_they_read_the_base_attitude(tcb):
+    from optplan import RobotModel
+    from optplan.problem.terms import JointPositionLimits
+
+    ff = RobotModel.from_name("eba_ffsr")
+    prob = OptProblem(ff, n_intervals=4, duration=2.0)
+    joint = prob.add_constraint(prob.qd[7:], lower=0, upper=0)
+    hand = prob.add_constraint(prob.frame("a_ee").translation, lower=-5, upper=5)
+    com = prob.add_constraint(prob.com, lower=-5, upper=5)
+    assert not joint.term.reads_base_attitude(ff)
+    assert hand.term.reads_base_attitude(ff) and com.term.reads_base_attitude(ff)
+    assert not JointPositionLimits().reads_base_attitude(ff)
+    fixed = OptProblem(tcb, n_intervals=4, duration=2.0)
+    ee = tcb.model.frames[tcb.arm("A").ee_frame_id].name
+    assert not fixed.add_constraint(fixed.frame(ee).translation, lower=-5, upper=5).term.reads_base_attitude(tcb)

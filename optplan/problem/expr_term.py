@@ -3,6 +3,7 @@
 values of the build)."""
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,6 +35,7 @@ class ExprTerm(Term):
     def _validate(self) -> None:
         if self.kind not in ("constraint", "integral", "end"):
             raise ConfigurationError(f"kind: expected 'integral' or 'end', got {self.kind!r}")
+        _NUMERIC.pop(self, None)   # a field changed in place (deprecated): its functions are made again
 
     # ------------------------------------------------------------------ the knot transcription
     def _function(self, robot: Any, expr: Any) -> ca.Function:
@@ -83,12 +85,44 @@ class ExprTerm(Term):
         v = self._knot_values(tp, self._integrand(), list(range(tp.N + 1)))
         return self._weight() * tp.h * (sum(v[1:-1]) + (v[0] + v[-1]) / 2)
 
-    def _numeric_values(self, traj: Any, expr: Any, ks: list[int]) -> np.ndarray:
-        """The expression at the points ``ks`` of ``traj``, point after point (one mapped call)."""
+    def _numeric_function(self, robot: Any, what: str) -> tuple[ca.Function, dict[Any, Any]]:
+        """The function of this term's rows (``what="rows"``) or integrand (``"integrand"``) at one
+        point, and its maps by number of points: made once per term and robot (a re-solve's
+        dense check and ``sample`` build no Function)."""
+        per = _NUMERIC.get(self)
+        if per is None:
+            per = _NUMERIC[self] = {}
+        got = per.get((id(robot), what))
+        if got is None or got[0]() is not robot:
+            if what == "rows":
+                expr = _bounds(self, ca.vec(ca.SX(self.expr)).shape[0], list(self.params))[0]
+            else:
+                expr = self._integrand()
+            got = per[(id(robot), what)] = (weakref.ref(robot), self._function(robot, expr), {})
+        return got[1], got[2]
+
+    def reads_base_attitude(self, robot: Any) -> bool:
+        """Whether the expression depends on a floating base's attitude (its world quaternion,
+        the start attitude or the centre of mass that places the base): frames and the centre of
+        mass do, joint quantities do not."""
+        if not robot.is_floating:
+            return False
+        what = "rows" if self.kind == "constraint" else "integrand"
+        f, maps = self._numeric_function(robot, what)
+        if "base" not in maps:   # kept with the function's maps (keys: numbers of points)
+            maps["base"] = any(f.which_depends(f.name_in(i), [f.name_out(0)], 1, True)[0] for i in (3, 6, 7))
+        return bool(maps["base"])
+
+    def _numeric_values(self, traj: Any, what: str, ks: list[int]) -> np.ndarray:
+        """The rows (``what="rows"``) or integrand of the expression at the points ``ks`` of
+        ``traj``, point after point (one mapped call)."""
         if not ks:
             return np.zeros(0)
-        f = self._function(traj.robot, expr)
+        f, maps = self._numeric_function(traj.robot, what)
         k = np.asarray(ks, int)
+        fm = maps.get(k.size)
+        if fm is None:
+            fm = maps[k.size] = f.map(k.size)
 
         def cols(a: Any) -> ca.DM:
             return ca.DM(np.asarray(a, float)[k].T)
@@ -98,29 +132,38 @@ class ExprTerm(Term):
                           ca.DM((k * traj.T / traj.N)[None, :]), traj.T, traj.com0)
         if not traj.robot.is_floating:
             args[3] = args[6] = args[7] = ca.DM(0, k.size)
-        return np.asarray(f.map(k.size)(*args)).ravel(order="F")
+        return np.asarray(fm(*args)).ravel(order="F")
 
     def numeric(self, traj: Any) -> np.ndarray:
-        m = ca.vec(ca.SX(self.expr)).shape[0]
-        expr, _, _ = _bounds(self, m, list(self.params))
-        return self._numeric_values(traj, expr, knots_of(self.at, traj.N, self.default_name))
+        return self._numeric_values(traj, "rows", knots_of(self.at, traj.N, self.default_name))
 
     def bounds_numeric(self, traj: Any) -> tuple[np.ndarray, np.ndarray]:
-        m = ca.vec(ca.SX(self.expr)).shape[0]
-        _, lo, hi = _bounds(self, m, list(self.params))
+        per = _NUMERIC.get(self)
+        if per is None:
+            per = _NUMERIC[self] = {}
+        got = per.get((0, "bounds"))   # numbers of the term's fields: made once
+        if got is None:
+            got = per[(0, "bounds")] = (None, *_bounds(self, ca.vec(ca.SX(self.expr)).shape[0], list(self.params))[1:])
+        lo, hi = got[1], got[2]
         n = len(knots_of(self.at, traj.N, self.default_name))
         return np.tile(lo, n), np.tile(hi, n)
 
     def cost_numeric(self, traj: Any) -> float:
         if self.kind == "end":
-            return self._weight() * float(self._numeric_values(traj, self._integrand(), [traj.N])[0])
-        v = self._numeric_values(traj, self._integrand(), list(range(traj.N + 1)))
+            return self._weight() * float(self._numeric_values(traj, "integrand", [traj.N])[0])
+        v = self._numeric_values(traj, "integrand", list(range(traj.N + 1)))
         return self._weight() * float(np.trapezoid(v, np.linspace(0, traj.T, traj.N + 1)))
 
     def sampled(self) -> Term:
         if self.at == "all":
             return self
         return super().sampled()
+
+
+#: the numeric functions of an expression term, per term: (id(robot), what) -> (robot, the
+#: function at one point, its maps by number of points) (:meth:`ExprTerm._numeric_function`);
+#: (0, "bounds") -> (None, lower, upper) of the rows
+_NUMERIC: weakref.WeakKeyDictionary[ExprTerm, dict[tuple[int, str], tuple[Any, Any, Any]]] = weakref.WeakKeyDictionary()
 
 
 def knots_of(at: Any, N: int, what: str) -> list[int]:

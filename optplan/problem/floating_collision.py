@@ -292,11 +292,19 @@ def base_placements(core: Any, Q: np.ndarray, xi: np.ndarray, base0: pin.SE3,
     """World base quaternions ((N+1) × 4, x y z w) and positions [m] with the centre of mass at
     ``com0``."""
     model, data = core.robot.model, core.robot.model.createData()
-    R0 = base0.rotation
-    quats, pos = [], []
-    for qk, xk in zip(Q, xi):
-        Rk = R0 @ pin.Quaternion(xk[3], *xk[:3]).normalized().toRotationMatrix()
-        c = pin.centerOfMass(model, data, np.r_[np.zeros(6), 1.0, qk])
-        quats.append(pin.Quaternion(Rk).coeffs().copy())
-        pos.append(com0 - Rk @ c)
-    return np.array(quats), np.array(pos)
+    xi = np.asarray(xi, float)
+    x, y, z, w = (xi / np.linalg.norm(xi, axis=1, keepdims=True)).T
+    # R(xi) of every knot at once (the unit quaternion's matrix), then R0 · R(xi)
+    Rx = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
+                   np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
+                   np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)], axis=1)
+    R = np.einsum("ij,njk->nik", base0.rotation, Rx)
+    full = np.zeros(model.nq)
+    full[6] = 1.0
+    c = np.empty((len(Q), 3))
+    quats = np.empty((len(Q), 4))
+    for k, qk in enumerate(Q):
+        full[7:] = qk
+        c[k] = pin.centerOfMass(model, data, full)
+        quats[k] = pin.Quaternion(R[k]).coeffs()
+    return quats, np.asarray(com0, float) - np.einsum("nij,nj->ni", R, c)

@@ -203,26 +203,30 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
     h = T / N
     t = np.linspace(0.0, T, o.density * N + 1)
     traj = sampled_trajectory(problem.robot, sol, t + sol.t[0], getattr(ev, "com0", None))
-    if traj.base_quat is not None:
-        traj.base_quat = _base_attitudes(problem.robot, sol, t + sol.t[0], o.density)
     spline = not hasattr(ev, "data")   # the B-spline core: no knot TermData
-    out: list[Violation] = []
+    todo: list[tuple[str, Any, Any]] = []   # (name, term, its build's data): what is checked
     for name, hd in ev.handles.items():
         if hd.role != "constraint":
             continue
         term = hd.term
         if spline and sol.success and isinstance(term, _HULL_GUARANTEED):
             continue   # holds between knots by construction (below)
-        data = _collision_data(term, problem.robot) if spline else ev.data[name]
+        if not isinstance(term, CollisionAvoidance):
+            try:
+                term = term.sampled()
+            except TypeError:
+                continue   # tied to given knots: holds there by construction
+        todo.append((name, term, _collision_data(term, problem.robot) if spline else ev.data[name]))
+    # the base attitude between knots is integrated only when a checked term reads it
+    if traj.base_quat is not None and any(term.reads_base_attitude(problem.robot) for _, term, _ in todo):
+        traj.base_quat = _base_attitudes(problem.robot, sol, t + sol.t[0], o.density)
+    out: list[Violation] = []
+    for name, term, data in todo:
         if isinstance(term, CollisionAvoidance):
             _collision(out, name, term, data, traj, t, h, N, o)
             continue
-        try:
-            s = term.sampled()
-        except TypeError:
-            continue   # tied to given knots: holds there by construction
-        v = np.asarray(s.numeric_built(traj, data), float).reshape(t.size, -1)
-        lo, hi = (np.asarray(b, float).reshape(t.size, -1) for b in s.bounds_numeric(traj))
+        v = np.asarray(term.numeric_built(traj, data), float).reshape(t.size, -1)
+        lo, hi = (np.asarray(b, float).reshape(t.size, -1) for b in term.bounds_numeric(traj))
         _worst(out, name, t, h, N, _components(v.shape[1], problem.robot), v, lo, hi, o)
     out.sort(key=lambda x: -x.amount)
     return out

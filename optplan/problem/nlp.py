@@ -346,6 +346,12 @@ class NlpSolver:
         self.setup_time = time.perf_counter() - t0
         self._setup_pending = self.setup_time
 
+    def take_setup_time(self) -> float:
+        """The creation time [s] not yet charged to a solve, which the caller now charges to its
+        own (an instance made with another solve's build); the next :meth:`solve` charges none."""
+        t, self._setup_pending = self._setup_pending, 0.0
+        return t
+
     def solve(self, x0: Any, *, lbx: Any = None, ubx: Any = None, lbg: Any = None, ubg: Any = None, p: Any = None,
               lam_g0: Any = None, lam_x0: Any = None,
               cost_scale: float = 1.0, label: str = "", extra_setup: float = 0.0) -> SolveOutcome:

@@ -439,6 +439,10 @@ class OptProblem(InitialGuessAPI, ExpressionAPI):
     #: B-spline: a ``JointBoundary`` that gives q [rad], q̇ [rad/s] and q̈ [rad/s²] at an end fixes
     #: that end's three control points by equal bounds instead of rows (False: rows, with multipliers)
     fix_boundary_points = True
+    #: B-spline: the first solve of a structure also makes the IPOPT instance a warm-started
+    #: re-solve (after ``set_initial(solution=...)``) takes, so that re-solve creates nothing; its
+    #: ~1 ms is the build's. False for problems solved once (the pipeline's segments) [bool]
+    prepare_warm_start = True
 
     def _make_solution(self, out: SolveOutcome, tol: float) -> Solution:
         b, tp = self._built, self.tp

@@ -31,6 +31,19 @@ __all__ = ["SplineBackend", "VELOCITY_ACTIVATION"]
 VELOCITY_ACTIVATION = 0.5
 
 
+#: IPOPT's options of a solve started from a previous solution and its multipliers
+_WARM_START: dict[str, Any] = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
+                               "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
+                               "ipopt.warm_start_slack_bound_push": 1e-9}
+
+
+def _new_solver(st: dict[str, Any], sopts: SolverOptions, defaults: dict[str, Any]) -> NlpSolver:
+    """An IPOPT instance of the structure ``st`` (its derivative Functions) with ``defaults``."""
+    extra = {**st["derivs"], "no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
+             "calc_f": False, "calc_g": False}
+    return NlpSolver("optproblem_spline", st["nlp"], sopts, defaults=defaults, casadi_options=extra)
+
+
 class SplineBackend:
     """The B-spline side of one problem: families (rebuilt when the terms change), parameters,
     guess and solve."""
@@ -496,17 +509,20 @@ class SplineBackend:
         warm = self.lam is not None and self.lam[0] is not None and np.size(self.lam[0]) == lbg.size \
             and self.x0 is not None
         if warm:
-            defaults.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
-                             "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
-                             "ipopt.warm_start_slack_bound_push": 1e-9})
+            defaults.update(_WARM_START)
         okey = repr(sorted(sopts.casadi_options(defaults).items()))
         solver = st["solvers"].get(okey)
-        setup = time.perf_counter() - t_setup
+        setup = time.perf_counter() - t_setup   # the solver adds its own creation time
         if solver is None:
-            extra = {**st["derivs"], "no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
-                     "calc_f": False, "calc_g": False}
-            solver = st["solvers"][okey] = NlpSolver("optproblem_spline", st["nlp"], sopts, defaults=defaults,
-                                                     casadi_options=extra)
+            solver = st["solvers"][okey] = _new_solver(st, sopts, defaults)
+            if not warm and prob.prepare_warm_start:
+                # the warm-started instance too, with the build: a re-solve after
+                # set_initial(solution=...) then creates nothing (its creation is this build's)
+                wd = {**defaults, **_WARM_START}
+                wkey = repr(sorted(sopts.casadi_options(wd).items()))
+                if wkey not in st["solvers"]:
+                    twin = st["solvers"][wkey] = _new_solver(st, sopts, wd)
+                    setup += twin.take_setup_time()
         args: dict[str, Any] = {}
         if warm:
             assert self.lam is not None

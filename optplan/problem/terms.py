@@ -224,6 +224,12 @@ class Term:
         lo, hi = self.bounds_numeric(traj)
         return float(np.sum(np.where(lo == hi, r - lo, np.maximum(r - hi, 0) + np.minimum(r - lo, 0)) ** 2))
 
+    def reads_base_attitude(self, robot: RobotModel) -> bool:
+        """Whether :meth:`numeric` reads a floating base's attitude (``traj.base_quat``): the
+        dense check integrates the base between knots only for terms that do. Joint terms do not;
+        the default (True) is the safe answer for a term that places frames in the world."""
+        return bool(robot.is_floating)
+
     def sampled(self) -> Term:
         """The term evaluated point by point along a trajectory (what ``Solution.sample`` runs
         ``numeric`` of, on a trajectory whose knots are the sample times). Terms tied to given
@@ -338,6 +344,9 @@ class _JointBox(Term):
 
     def numeric(self, traj: NumericTrajectory) -> np.ndarray:
         return getattr(traj, self.which).reshape(-1)
+
+    def reads_base_attitude(self, robot: RobotModel) -> bool:
+        return False
 
     def bounds_numeric(self, traj: NumericTrajectory) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self.limits(traj.robot)
