@@ -504,7 +504,8 @@ class SplineBackend:
             # "upright within 5°" on the transport) send IPOPT 9.6 m off at iteration 10: 45-48
             # iterations instead of 20. Never switching: 20; the same or fewer iterations on every
             # converged benchmark problem measured (docs/decisions/0016-modelling-on-the-kernel-core.md).
-            # The pipeline's segments ask for IPOPT's own globalization (PipelineOptions.ipopt_options).
+            # The pipeline's segments use it too, and re-solve once with IPOPT's own globalization when a
+            # solve does not converge (PipelineOptions.globalization_retry_options, decision 0021).
             defaults["ipopt.adaptive_mu_globalization"] = "never-monotone-mode"
         warm = self.lam is not None and self.lam[0] is not None and np.size(self.lam[0]) == lbg.size \
             and self.x0 is not None
