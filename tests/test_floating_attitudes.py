@@ -47,6 +47,28 @@ def test_twists_conserve_zero_momentum_at_any_base_placement(eba):
         assert np.abs(V[i]).max() > 1e-3          # the arms do move the base
 
 
+@pytest.mark.parametrize("M", [16, 37, 300])
+def test_compiled_twists_match_pinocchio_s_centroidal_map(eba, M):
+    """Many states at once (the compiled map over chunks, the last padded) against Pinocchio's
+    centroidal map per state, and zero momentum by Pinocchio's recursive algorithm."""
+    from optplan.model import floating
+
+    rng = np.random.default_rng(11 + M)
+    q = rng.uniform(eba.lower, eba.upper, size=(M, eba.nj))
+    qd = rng.normal(size=(M, eba.nj))
+    V = zero_momentum_twists(eba, q, qd)
+    ref = zero_momentum_twists(eba, q, qd, compiled=False)
+    if floating._twist_kernels(eba) is None:
+        pytest.skip("no C compiler: the twists are Pinocchio's")
+    assert np.abs(V - ref).max() <= 1e-10 * (1 + np.abs(ref).max())
+    data = eba.model.createData()
+    for i in rng.choice(M, size=8, replace=False):
+        x = _random_quat(rng)
+        base = pin.SE3(pin.Quaternion(x[3], *x[:3]).toRotationMatrix(), rng.normal(size=3))
+        h = pin.computeCentroidalMomentum(eba.model, data, eba.configuration(q[i], base), np.r_[V[i], qd[i]])
+        assert np.abs(np.r_[h.linear, h.angular]).max() < 1e-9 * (1 + np.abs(qd[i]).max())
+
+
 def test_attitudes_match_simulate_base_per_interval(eba):
     rng = np.random.default_rng(7)
     K, density, T = 5, 4, 6.0

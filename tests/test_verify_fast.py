@@ -181,3 +181,57 @@ def test_shared_checker_is_reused_per_robot_scene_and_options(tcb, scene1):
     assert CollisionChecker.shared(tcb, scene1, held_object=False) is not a
     other = Scene.load("ssps_scene1")                   # another scene object: its own checker
     assert CollisionChecker.shared(tcb, other) is not a
+
+
+@pytest.mark.parametrize("scale", [0.05, 0.4])
+def test_min_distance_along_a_floating_base_is_the_exact_minimum(rng, scale):
+    """A free-flyer root: the bound carries the base's translation and rotation (pairs against the
+    world) and leaves the robot's own pairs to the joints; the base path is arbitrary here (not
+    zero momentum), turning by up to ~0.6 rad, so every term of the bound is exercised."""
+    from optplan.model.robot import RobotModel
+
+    eba = RobotModel.from_name("eba_ffsr")
+    scene = Scene.load("floating_truss")
+    chk = CollisionChecker(eba, scene)
+    assert chk._floating_base()
+    q0 = np.asarray(scene.extra["q_start"], float) * np.pi / 180.0
+    t = np.linspace(0.0, 1.0, 301)[:, None]
+    for _ in range(3):
+        amp = rng.normal(scale=scale, size=(3, eba.nj))
+        J = np.clip(q0 + sum(amp[k] * np.sin((k + 1) * np.pi * t) / (k + 1) for k in range(3)),
+                    eba.lower, eba.upper)
+        axis = rng.normal(size=3)
+        rows = []
+        for k, tk in enumerate(t[:, 0]):
+            B = pin.SE3(pin.exp3(axis / np.linalg.norm(axis) * 0.6 * scale / 0.4 * np.sin(np.pi * tk)),
+                        np.array([0.2, -0.1, 0.05]) * np.sin(2 * np.pi * tk) * scale / 0.4)
+            rows.append(np.r_[pin.SE3ToXYZQUAT(B), J[k]])
+        Q = np.array(rows)
+        ref = [chk.min_distance(q) for q in Q]
+        i = int(np.argmin([d for d, _ in ref]))
+        d, pair, n = chk.min_distance_along(Q)
+        assert d == ref[i][0] and pair == ref[i][1]
+        assert n <= len(Q) * len(chk.pairs)
+    assert n < 0.5 * len(Q) * len(chk.pairs)     # the bounds spare most pair distances
+
+
+def test_a_floating_base_bound_covers_the_real_displacement(rng):
+    """The per-pair motion bound of a segment is never below the real change of a pair's distance."""
+    from optplan.model.robot import RobotModel
+
+    eba = RobotModel.from_name("eba_ffsr")
+    scene = Scene.load("floating_truss")
+    chk = CollisionChecker(eba, scene)
+    q0 = np.asarray(scene.extra["q_start"], float) * np.pi / 180.0
+    worst = 0.0
+    for _ in range(100):
+        B0 = pin.SE3(pin.exp3(rng.normal(scale=0.3, size=3)), rng.normal(scale=0.2, size=3))
+        B1 = B0 * pin.SE3(pin.exp3(rng.normal(scale=0.3, size=3)), rng.normal(scale=0.1, size=3))
+        a = np.r_[pin.SE3ToXYZQUAT(B0), np.clip(q0 + rng.normal(scale=0.2, size=eba.nj), eba.lower, eba.upper)]
+        b = np.r_[pin.SE3ToXYZQUAT(B1), np.clip(q0 + rng.normal(scale=0.2, size=eba.nj), eba.lower, eba.upper)]
+        Q = np.vstack([a, b])
+        bound = chk._segment_motion(Q, np.array([0]), np.array([1]), np.array([0]), np.array([0]))[:, 0]
+        change = np.abs(chk.distances(b) - chk.distances(a))
+        assert np.all(change <= bound + 1e-12)
+        worst = max(worst, float(np.max(change / bound)))
+    assert worst > 0.1          # the bound is not vacuous

@@ -194,6 +194,7 @@ class CollisionChecker:
         self._creq = coal.CollisionRequest()
         self._cres = coal.CollisionResult()
         self._sweep: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None   # see min_distance_along
+        self._on_robot: np.ndarray | None = None   # per combined geometry: attached to the robot (not the world)
 
     #: checkers of :meth:`shared`, most recently used last (key: robot, scene, options)
     _SHARED: OrderedDict[tuple[Any, ...], tuple[Any, Any, CollisionChecker]] = OrderedDict()
@@ -426,14 +427,17 @@ class CollisionChecker:
         the last) gets all pair distances; in between, a pair's distance is bounded from below by
         its distance at the anchors on either side minus how far its two geometries can have moved
         since (:func:`optplan.collision.sweep.sweep_weights`), and only the pairs whose bound is
-        below the smallest distance found so far are computed, rows with the lowest bound first.
+        below the smallest distance found so far are computed, rows with the lowest bound first
+        (a free-flyer root: :meth:`_min_distance_floating`).
         Returns ``(distance [m], pair, pair distances computed)`` (``inf, None, 0`` without pairs or
         rows)."""
         Q = self._check_rows(Q, anchor_every)
         if not self.pairs or not len(Q):
             return float("inf"), None, 0
         n_pairs = len(self.pairs)
-        if self.model.nq != self.model.nv:        # a free-flyer or other non-1-dof joints: no bound, every row
+        if self.model.nq != self.model.nv and self._floating_base():
+            return self._min_distance_floating(Q, int(anchor_every))
+        if self.model.nq != self.model.nv:        # other non-1-dof joints: no bound, every row
             best_d, best_p = float("inf"), None
             for q in Q:
                 d, p = self.min_distance(q)
@@ -457,6 +461,109 @@ class CollisionChecker:
                 n += 1
                 if d < dmin:
                     dmin, ibest = float(d), k
+        return dmin, self.pairs[ibest], n
+
+    def _floating_base(self) -> bool:
+        """The model is a free-flyer root (``q[:7]`` = position, quaternion x y z w) with 1-dof
+        joints after it: the non-1-dof layout :meth:`min_distance_along` bounds."""
+        m = self.model
+        if m.njoints < 2 or m.joints[1].shortname() != "JointModelFreeFlyer" or m.nq != m.nv + 1:
+            return False
+        return all(m.joints[j].nq == 1 and m.joints[j].nv == 1 for j in range(2, m.njoints))
+
+    def _segment_motion(self, Q: np.ndarray, A: np.ndarray, inner: np.ndarray, seg: np.ndarray,
+                        ref: np.ndarray) -> np.ndarray:
+        """(pairs × segments) How much each pair's distance can have changed between the anchor row
+        ``ref[s]`` of segment ``s`` and ANY of its inner rows [m] (the rows ``inner`` of ``Q``, grouped
+        by segment: ``seg`` their first positions): the farthest any point of its two geometries can
+        have moved, summed. The joints' part: ``W_j max|q_j − ref_j|`` per geometry (``W`` ≥ 0: the
+        largest change of each joint over the segment bounds every row's); for a pair with ONE side
+        on the robot (against the world), the base's part of that side, ``max|Δp| + ρ max θ`` (``Δp``
+        the base translation, ``θ`` the base rotation angle from the anchor's, ``ρ`` the geometry's
+        farthest point from the base origin: the free-flyer's column of ``W``). Two geometries on the
+        robot move together with the base, which does not change their distance."""
+        W, pa, pb = self._sweep_data()
+        R, X = Q[ref], Q[inner]
+        dj = np.maximum.reduceat(np.abs(X[:, 7:] - R[:, 7:]), seg, axis=0)             # segments × joints
+        dp = np.maximum.reduceat(np.linalg.norm(X[:, :3] - R[:, :3], axis=1), seg)
+        a = R[:, 3:7] / np.linalg.norm(R[:, 3:7], axis=1)[:, None]
+        b = X[:, 3:7] / np.linalg.norm(X[:, 3:7], axis=1)[:, None]
+        ax, ay, az, aw = a.T
+        bx, by, bz, bw = b.T
+        # the rotation angle 2 atan2(|vec(r)|, |w(r)|) of r = a⁻¹ ⊗ b (stable at small angles)
+        vx = aw * bx - ax * bw - ay * bz + az * by
+        vy = aw * by + ax * bz - ay * bw - az * bx
+        vz = aw * bz - ax * by + ay * bx - az * bw
+        w = aw * bw + ax * bx + ay * by + az * bz
+        th = np.maximum.reduceat(2.0 * np.arctan2(np.sqrt(vx * vx + vy * vy + vz * vz), np.abs(w)), seg)
+        if self._on_robot is None:
+            self._on_robot = np.array([go.parentJoint != 0 for go in self._cgm.geometryObjects])
+        on = self._on_robot
+        m = W[:, 6:] @ dj.T                                                             # geometries × segments
+        base = on[:, None] * (dp[None, :] + W[:, :1] * th[None, :])
+        mixed = (on[pa] != on[pb])[:, None]
+        return m[pa] + m[pb] + mixed * (base[pa] + base[pb])
+
+    def _sweep_data(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(W, pa, pb)``: the sweep weights (:func:`optplan.collision.sweep.sweep_weights`) and the
+        combined model's two geometries of every pair, built once."""
+        if self._sweep is None:
+            from .sweep import sweep_weights
+
+            W = sweep_weights(self.model, self._cgm)
+            pa = np.array([cp.first for cp in self._cgm.collisionPairs], dtype=int)
+            pb = np.array([cp.second for cp in self._cgm.collisionPairs], dtype=int)
+            self._sweep = (W, pa, pb)
+        return self._sweep
+
+    def _min_distance_floating(self, Q: np.ndarray, every: int) -> tuple[float, Pair | None, int]:
+        """:meth:`min_distance_along` for a free-flyer root: all pair distances at every
+        ``every``-th row (and the last); between two such anchors a pair is bounded from below on
+        the whole segment by the larger of its anchor distances minus how far its geometries can
+        have moved from that anchor (:meth:`_segment_motion`), and only the (segment, pair)
+        entries whose bound is below the smallest distance found so far are computed at the
+        segment's rows, the lowest bounds first. Exactly the smallest distance: every entry left
+        out is bounded above it."""
+        M, n_pairs = len(Q), len(self.pairs)
+        anchors = list(range(0, M, every))
+        if anchors[-1] != M - 1:
+            anchors.append(M - 1)
+        A = np.asarray(anchors)
+        D = np.array([self.distances(Q[i]) for i in anchors])      # anchors × pairs
+        amin = D.min(axis=1)
+        r = int(amin.argmin())
+        dmin, ibest = float(amin[r]), int(D[r].argmin())
+        n = len(anchors) * n_pairs
+        inner = np.setdiff1d(np.arange(M), A, assume_unique=True)
+        if not len(inner):
+            return dmin, self.pairs[ibest], n
+        left = np.searchsorted(A, inner, side="right") - 1            # each inner row's segment (its left anchor)
+        segs, seg = np.unique(left, return_index=True)
+        lower = np.maximum(D[segs].T - self._segment_motion(Q, A, inner, seg, A[left]),
+                           D[segs + 1].T - self._segment_motion(Q, A, inner, seg, A[left + 1]))   # pairs × segments
+        seg_low = lower.min(axis=0)
+        ends = np.r_[seg[1:], len(inner)]
+        gm, gd = self._cgm, self._cgd
+        for s in np.argsort(seg_low, kind="stable").tolist():
+            if seg_low[s] >= dmin:
+                break
+            for i in inner[seg[s]:ends[s]].tolist():
+                ks = np.nonzero(lower[:, s] < dmin)[0].tolist()
+                if not ks:
+                    break
+                if len(ks) > n_pairs // 8:   # many pairs: all of them in one C++ call is cheaper
+                    d_all = self.distances(Q[i])
+                    n += n_pairs
+                    k = int(d_all.argmin())
+                    if d_all[k] < dmin:
+                        dmin, ibest = float(d_all[k]), k
+                    continue
+                pin.updateGeometryPlacements(self.model, self.data, gm, gd, Q[i])
+                for k in ks:
+                    d = pin.computeDistance(gm, gd, k).min_distance
+                    n += 1
+                    if d < dmin:
+                        dmin, ibest = float(d), k
         return dmin, self.pairs[ibest], n
 
     def is_valid(self, q, margin: float = 0.0) -> bool:

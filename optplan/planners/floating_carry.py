@@ -125,7 +125,11 @@ def integrate_edge(robot: RobotModel, base: pin.SE3, qa: np.ndarray, qb: np.ndar
     qa, qb = np.asarray(qa, float), np.asarray(qb, float)
     d = qb - qa
     s = np.linspace(0.0, 1.0, int(n) + 1)
-    return simulate_base(robot, lambda t: (qa + t * d, d), s, base0=base, substeps=2).q
+
+    def line(t: Any) -> tuple[np.ndarray, np.ndarray]:   # vectorised over times: the same numbers as one time at a time
+        t = np.asarray(t, float)
+        return qa + t[..., None] * d, np.broadcast_to(d, t.shape + d.shape)
+    return simulate_base(robot, line, s, base0=base, substeps=2, vectorised=True).q
 
 
 class FloatingCarryPlanner:
