@@ -19,6 +19,9 @@ and edge checked as in the search). Only then are the arms re-grasped to it (the
 one arm at a time, an RRTConnect in the arm's joint space, the object fixed; ``graft_time_limit``); the
 solution becomes a graft node (another branch of the tree at the same pose) and the step's end a node
 below it, which the search then tries to connect to the other tree.
+
+The same look-ahead graft (:func:`lookahead_graft`) serves ``trap_grafts``: there the node is one whose
+extensions have been trapped ``trap_graft_count`` times, and the step goes toward ``trap_graft_target``.
 """
 from __future__ import annotations
 
@@ -32,7 +35,7 @@ if TYPE_CHECKING:   # the planner and its tree; imported only for the type check
     from .base import Deadline
     from .tcbirrt import TCBiRRT, _TaskTree
 
-__all__ = ["closest_pair", "frontier_graft"]
+__all__ = ["closest_pair", "frontier_graft", "lookahead_graft"]
 
 
 def closest_pair(tree: _TaskTree, other: _TaskTree, rng: np.random.Generator, pairs: int) -> tuple[int, int]:
@@ -51,16 +54,30 @@ def closest_pair(tree: _TaskTree, other: _TaskTree, rng: np.random.Generator, pa
 def frontier_graft(pl: TCBiRRT, tree: _TaskTree, other: _TaskTree, deadline: Deadline, st: dict[str, Any]) -> int | None:
     """One frontier-graft attempt of ``tree`` toward ``other`` (module docstring). The new node one step
     beyond the graft, or None."""
-    o, ck, kin, rng = pl.options, pl.checker, pl.kin, pl._rng
-    i, j = closest_pair(tree, other, rng, o.frontier_pairs)
-    d = other.xi[j] - tree.xi[i]
-    dist = float(np.linalg.norm(d))
+    o = pl.options
+    i, j = closest_pair(tree, other, pl._rng, o.frontier_pairs)
+    dist = float(np.linalg.norm(other.xi[j] - tree.xi[i]))
     if dist <= 1e-9 or (o.frontier_radius and dist > o.frontier_radius):
         return None
-    st["frontier_attempts"] = st.get("frontier_attempts", 0) + 1
+    return lookahead_graft(pl, tree, i, other.xi[j], deadline, st, "frontier")
+
+
+def lookahead_graft(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray, deadline: Deadline,
+                    st: dict[str, Any], kind: str) -> int | None:
+    """Re-grasp the arms at node ``i`` of ``tree`` into an IK solution (``frontier_seeds`` random seeds; one arm
+    moved, or both) that is valid and from which one constrained step (``step_size``, ξ) toward ``xi_target``
+    passes; the solution becomes a graft node and the step's end a node below it, which is returned (None:
+    no such solution, or its regrasp failed). ``kind`` names the counters (``<kind>_attempts``,
+    ``<kind>_grafts``, ``<kind>_lookahead_failures``, ``<kind>_regrasp_failures``)."""
+    o, ck, kin, rng = pl.options, pl.checker, pl.kin, pl._rng
+    d = np.asarray(xi_target, float) - tree.xi[i]
+    dist = float(np.linalg.norm(d))
+    if dist <= 1e-9:
+        return None
+    st[f"{kind}_attempts"] = st.get(f"{kind}_attempts", 0) + 1
     R, p = tree.pose[i]
     q_i = tree.q[i]
-    xi_s = other.xi[j].copy() if dist <= pl.step_size else tree.xi[i] + (pl.step_size / dist) * d
+    xi_s = np.array(xi_target, float) if dist <= pl.step_size else tree.xi[i] + (pl.step_size / dist) * d
     Rs, ps = pose_from_xi(xi_s)
     poses = interpolate_task(R, p, Rs, ps, o.n_interp, o.interpolation)
     twins = [tree.q[k] for k in tree.twins.get(i, [i])]
@@ -83,15 +100,15 @@ def frontier_graft(pl: TCBiRRT, tree: _TaskTree, other: _TaskTree, deadline: Dea
                 continue   # the node's own configuration (or one of its grafts'), give or take a restart
             if not ck.in_limits(y) or not ck.is_valid(y):
                 continue
-            Q = pl.path_ik(poses, y, st)   # the look-ahead: one constrained step toward the other tree
+            Q = pl.path_ik(poses, y, st)   # the look-ahead: one constrained step toward the target
             if not Q or len(Q) < len(poses):
-                st["frontier_lookahead_failures"] = st.get("frontier_lookahead_failures", 0) + 1
+                st[f"{kind}_lookahead_failures"] = st.get(f"{kind}_lookahead_failures", 0) + 1
                 continue
             reg = pl.regrasp(q_i, y, R, p, rng, deadline.sub(o.graft_time_limit), st)
             if reg is None:
-                st["frontier_regrasp_failures"] = st.get("frontier_regrasp_failures", 0) + 1
+                st[f"{kind}_regrasp_failures"] = st.get(f"{kind}_regrasp_failures", 0) + 1
                 continue
-            st["frontier_grafts"] = st.get("frontier_grafts", 0) + 1
+            st[f"{kind}_grafts"] = st.get(f"{kind}_grafts", 0) + 1
             g = tree.add_graft(i, y, reg)
             return tree.add(Q[-1], xi_s, Rs, ps, g, Q[:-1], poses[:-1])
     return None

@@ -71,6 +71,12 @@ Deviations from the paper, all options (defaults in brackets):
   passes; the solution is a graft node, the step's end a node below it, and tree b is connected to it
   (:mod:`.frontier_graft`). Where the arms, not the object, block a passage, each tree's arms stop in a
   self-motion position that collides one step further on; the look-ahead picks one that does not.
+* ``trap_grafts`` [0 (off) in both variants; measured in docs/generalization.md]: a node from which the extension
+  toward a sample has been trapped ``trap_graft_count`` times gets, once, a look-ahead graft
+  (:func:`.frontier_graft.lookahead_graft`): the arms re-grasp at its pose into an IK solution from which one
+  constrained step toward ``trap_graft_target`` (the other tree's nearest node, or the trapping sample) passes.
+  Unlike the frontier grafts it does not wait for ``graft_after``: it aims at the node where the tree is stuck
+  (in a deep bay, the arms of the goal's IK branch cannot carry the object out).
 * ``branch_roots`` [False in both variants; measured in docs/planners.md]: before the search, the goal tree's
   root is re-grasped onto the start's IK branch at the goal's object pose (arm by arm; the branch found by path IK
   along the straight start-goal object motion, :meth:`~.tcbirrt_grafts.BranchMixin.branch_at`), or, where that
@@ -116,7 +122,7 @@ from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2
-from .frontier_graft import frontier_graft
+from .frontier_graft import frontier_graft, lookahead_graft
 from .rrtconnect import edge_is_valid
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
@@ -318,6 +324,23 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             cur = self.step_size if not np.isfinite(tree.dom[i]) else float(tree.dom[i])
             tree.dom[i] = max(cur * 0.5, self.step_size / 8.0) if res == TRAPPED else min(cur * 2.0, self.step_size)
 
+    def _trap_graft(self, tree: _TaskTree, i: int, xi_rand: np.ndarray, other: _TaskTree, trap: list[Any],
+                    deadline: Deadline, st: dict[str, Any]) -> int | None:
+        """``trap_grafts``: count a trapped extension from node i of ``tree`` (toward ``xi_rand``); at its
+        ``trap_graft_count``-th, the arms re-grasp at the node into a branch from which a step toward
+        ``trap_graft_target`` (``other``'s node nearest in ξ, or ``xi_rand``) passes
+        (:func:`.frontier_graft.lookahead_graft`). ``trap``: the tree's ``[traps per node, grafts made]``. The node
+        one step beyond the graft, or None."""
+        counts = trap[0]
+        k = counts.get(i, 0) + 1
+        counts[i] = k
+        if k != self.options.trap_graft_count:
+            return None
+        target = other.xi[other.nearest(tree.xi[i])] if self.options.trap_graft_target == "other" else xi_rand
+        got = lookahead_graft(self, tree, i, target, deadline, st, "trap")
+        trap[1] += got is not None
+        return got
+
     def _sampler(self) -> Any:
         """The improved variant's ξ sampler (None: the paper's uniform box); with ``extension="loop"`` the
         native sampler (:class:`~optplan.planners.kernel.sampler.NativeTaskSampler`, for the paper's box too)
@@ -404,6 +427,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             st["guide_attempts"] = st["guide_waypoints"] = 0
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
         fronts = {id(ta): 0, id(tb): 0}
+        traps: dict[int, list[Any]] = {id(ta): [{}, 0], id(tb): [{}, 0]}   # trap_grafts: traps per node, grafts made
         if o.branch_roots:
             self._root_branches(ta, tb, deadline, st)
         best_gap, since_gap = np.inf, 0   # stall_iterations: the smallest gap a connection left, iterations since it shrank
@@ -450,6 +474,10 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 step = float(ta.dom[i_near]) if o.trap_adapt == "step" and np.isfinite(ta.dom[i_near]) else None
                 res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st, step)   # line 5
                 self._trap_update(ta, i_near, res)
+                if res == TRAPPED and o.trap_grafts and traps[id(ta)][1] < o.trap_grafts:
+                    i_trap = self._trap_graft(ta, i_near, xi_rand, tb, traps[id(ta)], deadline, st)
+                    if i_trap is not None:   # the step beyond the trap graft: connect tree b to it
+                        res, i_a = ADVANCED, i_trap
             if res != TRAPPED:
                 target_xi, target_q = ta.xi[i_a].copy(), ta.q[i_a].copy()
                 gap = np.inf

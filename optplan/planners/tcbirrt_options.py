@@ -24,13 +24,13 @@ VARIANTS = {
               "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
               "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
-              "branch_roots": False, "stall_iterations": 0},
+              "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
-                 "branch_roots": False, "stall_iterations": 0},
+                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0},
 }
 
 
@@ -160,7 +160,17 @@ class TCBiRRTOptions:
     #: trees can meet without a regrasp (None: the variant's value, :data:`VARIANTS`: False in both, see
     #: docs/planners.md).
     branch_roots: bool | None = None
-    #: Random IK seeds per frontier-graft attempt [count].
+    #: Trap grafts per tree [count] (None: the variant's value, :data:`VARIANTS`; 0: off): when the extension from one
+    #: node of the tree growing toward a sample has been trapped ``trap_graft_count`` times, the arms re-grasp at that
+    #: node into an IK solution from which one constrained step passes (the look-ahead
+    #: graft of :mod:`.frontier_graft`; toward ``trap_graft_target``), at any iteration; each node is tried once.
+    trap_grafts: int | None = None
+    #: Trapped extensions from one node that trigger its trap graft [count].
+    trap_graft_count: int = 20
+    #: The look-ahead step of a trap graft goes toward ``"other"`` (the other tree's node nearest in ξ: where the trees
+    #: must meet) or ``"sample"`` (the sample that trapped the extension).
+    trap_graft_target: str = "other"
+    #: Random IK seeds per frontier-graft (and trap-graft) attempt [count].
     frontier_seeds: int = 6
     #: Random node pairs of which a frontier graft takes the closest in ξ [count].
     frontier_pairs: int = 8
@@ -275,11 +285,14 @@ class TCBiRRTOptions:
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
         for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds", "frontier_grafts", "frontier_interval",
-                     "frontier_seeds", "frontier_pairs", "stall_iterations"):
-            v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after", "frontier_grafts", "stall_iterations") else 1)
+                     "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count"):
+            v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after", "frontier_grafts", "stall_iterations",
+                                                         "trap_grafts") else 1)
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
         _pos("graft_time_limit", self.graft_time_limit)
+        if self.trap_graft_target not in ("other", "sample"):
+            raise ValueError(f"TCBiRRTOptions.trap_graft_target: expected 'other' or 'sample', got {self.trap_graft_target!r}")
         if self.graft_node not in ("meet", "any", "mixed"):
             raise ValueError(f"TCBiRRTOptions.graft_node: expected 'meet', 'any' or 'mixed', got {self.graft_node!r}")
         _pos("graft_min_distance", self.graft_min_distance)

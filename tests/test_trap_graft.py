@@ -1,0 +1,109 @@
+"""Trap grafts of TCBiRRT (``TCBiRRTOptions.trap_grafts``): after a node's ``trap_graft_count``-th trapped
+extension, the arms re-grasp at that node into an IK solution from which one constrained step passes
+(:func:`optplan.planners.frontier_graft.lookahead_graft`). Checked against Pinocchio FK (the closed chain),
+the checker's exact collision queries at every configuration and the bench's 1 cm sweep spacing along every
+straight edge."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from graft_paths import check_planned_path, check_regrasp_moves
+
+from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
+from optplan.planners import TCBiRRT, TCBiRRTOptions
+from optplan.planners.base import Deadline
+from optplan.planners.rrtconnect import edge_is_valid
+from optplan.planners.task_space import xi_from_pose
+from optplan.planners.tcbirrt import _TaskTree
+from optplan.planners.validity import ValidityChecker
+from optplan.scene import Scene
+
+SWEEP = 0.01   # [m] the bench's sweep spacing (no point of the robot or object moves farther between checks)
+
+
+@pytest.fixture(scope="module")
+def truss(tcb):
+    from optplan.trials import TrialGenerator
+
+    scene = Scene.load("hard_truss")
+    ck = ValidityChecker(tcb, scene)
+    kin = ClosedChainKinematics(tcb, scene.object.grasps)
+    return scene, ck, kin, TrialGenerator(tcb, scene)
+
+
+def _tree(kin, q):
+    M = kin.object_pose(q)
+    return _TaskTree(q, xi_from_pose(M), M.rotation.copy(), M.translation.copy())
+
+
+def _stats():
+    return {"ik_iterations": 0, "ik_calls": 0, "ik_failures": 0, "ik_jumps": 0, "collisions": 0, "ik_restarts": 0,
+            "edge_checks": 0, "edge_collisions": 0, "regrasp_attempts": 0, "regrasp_failures": 0, "regrasp_nodes": 0}
+
+
+def test_trap_graft_fires_once_at_the_count_and_steps_toward_the_other_tree(tcb, truss):
+    """A node's trapped extensions are counted; only the ``trap_graft_count``-th tries a graft (never before, and
+    not again for that node). The graft found at the start of a truss trial: a configuration at the start's pose
+    that closes the chain, is free and is not the start's (beyond one restart's joint step), joined to the start by
+    one-arm regrasp motions with the object fixed; below it a node one step (``step_size`` in ξ) toward the other
+    tree's nearest node, every edge passing the 1 cm sweep check."""
+    scene, ck, kin, gen = truss
+    t = gen.generate(6, 0)
+    count = 3
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", trap_grafts=4, trap_graft_count=count), checker=ck,
+                 kinematics=kin)
+    pl._rng = np.random.default_rng(3)
+    b = _tree(kin, t.q_goal)
+    xi_far = np.full(6, 9.0)   # the trapping sample: unused with trap_graft_target="other"
+    n, tries = None, 0
+    while n is None and tries < 10:   # a fresh tree and counter per try: the graft's random seeds may all fail
+        a, st, trap = _tree(kin, t.q_start), _stats(), [{}, 0]
+        for k in range(1, count):
+            assert pl._trap_graft(a, 0, xi_far, b, trap, Deadline(5.0, "cpu"), st) is None
+            assert "trap_attempts" not in st and trap[0][0] == k
+        n = pl._trap_graft(a, 0, xi_far, b, trap, Deadline(5.0, "cpu"), st)
+        assert st["trap_attempts"] == 1
+        assert pl._trap_graft(a, 0, xi_far, b, trap, Deadline(5.0, "cpu"), st) is None and st["trap_attempts"] == 1
+        tries += 1
+    assert n is not None and trap[1] == 1 and st["trap_grafts"] == 1
+    g = int(a.parent[n])
+    assert g in a.graft and a.parent[g] == 0 and np.array_equal(a.xi[g], a.xi[0])
+    y = a.q[g]
+    assert float(np.abs(y - t.q_start).max()) > pl.options.max_joint_step
+    d = b.xi[0] - a.xi[0]
+    assert np.allclose(a.xi[n], a.xi[0] + pl.step_size * d / np.linalg.norm(d), atol=1e-9)
+    w_fixed, w_held = ck.sweep_weights("fixed", per_geometry=True), ck.sweep_weights("held", per_geometry=True)
+    M0 = kin.object_pose(t.q_start)
+    prev = check_regrasp_moves(kin, tcb.nq, a.graft[g], t.q_start, lambda z: ck.is_valid_object_fixed(z, M0),
+                               SWEEP, w_fixed)
+    assert np.allclose(prev, y)
+    qs = [y, *a.edge[n][0], a.q[n]]
+    for q in qs:   # both hands on the object (Pinocchio FK) and free
+        assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q) and ck.in_limits(q)
+    for x0, x1 in zip(qs[:-1], qs[1:]):
+        assert edge_is_valid(x0, x1, ck.is_valid, SWEEP, weights=w_held)
+
+
+def test_trap_graft_options_are_checked():
+    for variant in ("paper", "improved"):
+        o = TCBiRRTOptions(variant=variant)
+        assert o.trap_grafts == 0 and o.trap_graft_count == 20 and o.trap_graft_target == "other"
+    assert TCBiRRTOptions(variant="improved", trap_grafts=3).trap_grafts == 3
+    for bad in (dict(trap_grafts=-1), dict(trap_grafts=1.5), dict(trap_graft_count=0), dict(trap_graft_target="goal")):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            TCBiRRTOptions(**bad)
+
+
+def test_planner_with_trap_grafts_returns_a_verified_path(tcb, truss):
+    """The search with trap grafts after 5 traps of a node (branch and frontier grafts off) on a truss trial whose
+    trees stop at the grid from either side: trap grafts are tried, and the path runs from start to goal, its
+    constrained configurations close the chain (Pinocchio FK) and are free, and every straight edge passes the
+    bench's independent 1 cm sweep check."""
+    scene, ck, kin, gen = truss
+    t = gen.generate(18, 0)
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", branch_grafts=0, frontier_grafts=0, trap_grafts=4,
+                                            trap_graft_count=5), checker=ck, kinematics=kin)
+    res = pl.plan(t.q_start, t.q_goal, time_limit=30.0, seed=t.seed, clock="cpu")
+    assert res.success, res.message
+    assert res.stats["trap_attempts"] >= 1 and res.stats["grafts"] == 0 and "frontier_attempts" not in res.stats
+    check_planned_path(tcb, scene, ck, res, t.q_start, t.q_goal)
