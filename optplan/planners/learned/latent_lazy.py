@@ -161,6 +161,31 @@ def _repair(pl: Any, z: np.ndarray, st: dict[str, Any]) -> tuple[np.ndarray, np.
     return None
 
 
+def _check_node(pl: Any, z: np.ndarray, q_par: np.ndarray, st: dict[str, Any], deadline: Deadline,
+                ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None:
+    """A node's real check: ``project(decode(z))`` valid and joined to ``q_par`` by the constrained local planner;
+    with LPO, a failing node repaired by :func:`_repair`. ``(z, q, edge points)`` or None."""
+    st["validated_nodes"] += 1
+    q = pl._config(z, z, z, st)
+    edge = None
+    if q is not None:
+        edge = pl._edge(q_par, q, st, deadline)
+        if edge is None:
+            st["edge_failures"] += 1
+    if edge is None and pl.distance is not None:
+        fixed = _repair(pl, z, st)
+        if fixed is not None:
+            z, q = fixed
+            edge = pl._edge(q_par, q, st, deadline)
+            if edge is not None:
+                st["lpo_moves"] += 1
+    if edge is None or q is None:
+        st["validation_failures"] += 1
+        return None
+    st["validated_valid"] += 1
+    return z, q, edge
+
+
 def _validate(pl: Any, tree: LazyLatentTree, i: int, st: dict[str, Any], deadline: Deadline) -> tuple[bool, int]:
     """Validate the branch from the root to node ``i``; ``(True, i)`` or ``(False, last valid node)`` after removing
     the first node that fails (and its subtree)."""
@@ -171,29 +196,14 @@ def _validate(pl: Any, tree: LazyLatentTree, i: int, st: dict[str, Any], deadlin
             continue
         if deadline.expired():
             return False, tree.parent[k]
-        st["validated_nodes"] += 1
-        z = tree.Z[k].copy()
         par = tree.parent[k]
         q_par = tree.Q[par]
         assert q_par is not None
-        q = pl._config(z, z, z, st)
-        edge = None
-        if q is not None:
-            edge = pl._edge(q_par, q, st, deadline)
-            if edge is None:
-                st["edge_failures"] += 1
-        if edge is None and pl.distance is not None:
-            fixed = _repair(pl, z, st)
-            if fixed is not None:
-                z, q = fixed
-                edge = pl._edge(q_par, q, st, deadline)
-                if edge is not None:
-                    st["lpo_moves"] += 1
-        if edge is None or q is None:
-            st["validation_failures"] += 1
+        got = _check_node(pl, tree.Z[k].copy(), q_par, st, deadline)
+        if got is None:
             st["removed_nodes"] += tree.remove(k)
             return False, par
-        st["validated_valid"] += 1
+        z, q, edge = got
         tree.set_valid(k, z, q, edge, float(pl.classifier.probability(z)))
     return True, i
 
@@ -218,18 +228,13 @@ def _grow(pl: Any, tree: LazyLatentTree, z_target: np.ndarray, other: LazyLatent
             return "trapped", i, None
         # the classifier is wrong around this verified node: the real checks decide, now
         st["classifier_overruled"] += 1
-        st["validated_nodes"] += 1
         q_par = tree.Q[i]
         assert q_par is not None
-        q = pl._config(z, z, z, st)
-        edge = pl._edge(q_par, q, st, deadline) if q is not None else None
-        if q is not None and edge is None:
-            st["edge_failures"] += 1
-        if q is None or edge is None:   # a failed validation: the latent jump follows
-            st["validation_failures"] += 1
+        got = _check_node(pl, z, q_par, st, deadline)
+        if got is None:   # a failed validation: the latent jump follows
             return "trapped", i, _jump(pl, tree, i, other, st, deadline, rng)
-        st["validated_valid"] += 1
-        j = tree.add(z, q, p, i, edge, decoded=True)
+        z, q, edge = got
+        j = tree.add(z, q, float(pl.classifier.probability(z)), i, edge, decoded=True)
     else:
         j = tree.add_latent(z, p, i)
     st["latent_nodes"] += 1
@@ -256,6 +261,8 @@ def _jump(pl: Any, ta: LazyLatentTree, i: int, tb: LazyLatentTree, st: dict[str,
         st["random_jumps"] += 1
         pl.connect_q(ta, i, rng.uniform(pl.robot.lower, pl.robot.upper), st, deadline, max_steps=1)
     return None
+
+
 def _join(pl: Any, ta: LazyLatentTree, ia: int, tb: LazyLatentTree, ib: int, st: dict[str, Any],
           deadline: Deadline, rng: np.random.Generator) -> tuple[int, int, list[np.ndarray]] | None:
     """Validate the two branches that met in the latent space and join them (module docstring)."""

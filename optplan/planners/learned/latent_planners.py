@@ -3,8 +3,11 @@
 * :class:`LatentSampling` (Acar & Tee 2021) — CBiRRT2 whose random targets are latent samples ``z ~ N(0, I)`` of the
   scene's CVAE, decoded and projected onto the manifold (Newton-Raphson; the decoded configuration
   itself when the projection fails); extension, projection and edges are CBiRRT2's.
-* :class:`LCBiRRT` — a bidirectional RRT **in the latent space** (Park et al. 2024): trees of latent
-  vectors, each node also holding its configuration. An extension steps ``latent_step`` toward the target
+* :class:`LCBiRRT` — a bidirectional RRT **in the latent space** (Park et al. 2024). By default (``lazy``) its
+  trees grow as Park et al.'s: by the classifier alone, with a branch decoded, projected and checked only when the
+  trees meet in the latent space, a failed node removed and followed by a latent jump (:mod:`.latent_lazy`).
+  With ``lazy=False`` (the eager variant, described here) they are trees of latent
+  vectors, each node also holding its configuration as it is added. An extension steps ``latent_step`` toward the target
   in the latent space; a step whose latent vector the validity classifier rejects
   (``p(valid) < classifier_threshold``) ends it before any decoding — unless the classifier also scores the
   step's parent, a verified node, below the threshold (``classifier_trusts_verified``: there the classifier
