@@ -78,3 +78,11 @@ def test_lazy_validation_keeps_valid_decodings_and_removes_the_first_failure(tcb
         assert max(closure_error(tcb, scene1.object.grasps, q)) <= 1e-6 and checker.is_valid(q)
     assert _validate(pl, t, n1, st, dl) == (True, n1)   # a validated branch is not checked again
     assert st["validated_nodes"] == 2
+
+
+def test_learned_ends_refuses_bad_arguments(capsys):
+    from optplan.bench.learned_ends import main
+
+    assert main(["--trials", "0"]) == 2
+    assert main(["--data-task-fraction", "1.5"]) == 2
+    assert "--data-task-fraction in [0, 1] (got 1.5)" in capsys.readouterr().err
