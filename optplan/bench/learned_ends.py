@@ -36,7 +36,7 @@ def end_codes(scene_name: str, trials: int, radii: tuple[float, ...] = (0.0, 0.3
     assert scene.object is not None
     kin = ClosedChainKinematics(robot, scene.object.grasps)
     ck = ValidityChecker(robot, scene)
-    pl = make_planner("lcbirrt", robot, scene, checker=ck, kinematics=kin, data_task_fraction=data_task_fraction)
+    pl: Any = make_planner("lcbirrt", robot, scene, checker=ck, kinematics=kin, data_task_fraction=data_task_fraction)
     lo, hi = robot.lower, robot.upper
     rng = np.random.default_rng(seed)
 
@@ -59,7 +59,7 @@ def end_codes(scene_name: str, trials: int, radii: tuple[float, ...] = (0.0, 0.3
             for r in radii:
                 e["valid"][r].append(sum(valid(z0 + r * rng.standard_normal(len(z0)) / np.sqrt(len(z0)))[0]
                                          for _ in range(draws)))
-    out["prior_valid"] = sum(valid(rng.standard_normal(pl.cvae.latent_dim))[0] for _ in range(10 * draws))
+    out["prior_valid"] = sum(valid(np.asarray(rng.standard_normal(pl.cvae.latent_dim)))[0] for _ in range(10 * draws))
     out["draws"], out["trials"] = draws, trials
     return out
 
