@@ -290,7 +290,7 @@ def test_lcbirrt_trees_meeting_in_latent_space_meet_in_joint_space(tcb, scene1, 
     zs, zg = pl.cvae.encode(qs), pl.cvae.encode(qg)
     results = {}
     for anchored in (False, True):
-        pl.options = dataclasses.replace(pl.options, anchored_decoding=anchored)
+        pl.options = dataclasses.replace(pl.options, anchored_decoding=anchored, lazy=False)
         for _ in range(40):   # a shared target between the two roots whose decoding is valid
             z = 0.5 * (zs + zg) + 0.3 * rng.standard_normal(zs.shape)
             st = dict.fromkeys(("decodes", "projection_failures", "collisions"), 0)

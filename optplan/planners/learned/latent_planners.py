@@ -3,8 +3,11 @@
 * :class:`LatentSampling` (Acar & Tee 2021) — CBiRRT2 whose random targets are latent samples ``z ~ N(0, I)`` of the
   scene's CVAE, decoded and projected onto the manifold (Newton-Raphson; the decoded configuration
   itself when the projection fails); extension, projection and edges are CBiRRT2's.
-* :class:`LCBiRRT` — a bidirectional RRT **in the latent space** (Park et al. 2024): trees of latent
-  vectors, each node also holding its configuration. An extension steps ``latent_step`` toward the target
+* :class:`LCBiRRT` — a bidirectional RRT **in the latent space** (Park et al. 2024). By default (``lazy``) its
+  trees grow as Park et al.'s: by the classifier alone, with a branch decoded, projected and checked only when the
+  trees meet in the latent space, a failed node removed and followed by a latent jump (:mod:`.latent_lazy`).
+  With ``lazy=False`` (the eager variant, described here) they are trees of latent
+  vectors, each node also holding its configuration as it is added. An extension steps ``latent_step`` toward the target
   in the latent space; a step whose latent vector the validity classifier rejects
   (``p(valid) < classifier_threshold``) ends it before any decoding — unless the classifier also scores the
   step's parent, a verified node, below the threshold (``classifier_trusts_verified``: there the classifier
@@ -53,6 +56,7 @@ from ..constrained_prm import constrained_edge, invalid_endpoints
 from ..manifold_samples import ManifoldSampleSettings, manifold_samples, project_onto_chain
 from ..validity import ValidityChecker
 from .cvae import CVAESettings, load_or_train_cvae
+from .latent_lazy import plan_lazy
 from .latent_models import LatentModelSettings, load_or_train_classifier, load_or_train_distance
 
 __all__ = ["LatentSamplingOptions", "LatentSampling", "LCBiRRTOptions", "LCBiRRT", "TRAINING_FIELDS"]
@@ -150,6 +154,12 @@ class LCBiRRTOptions:
     collision_step: float = 0.2
     #: Steps of one extension before it stops [count].
     max_extend_steps: int = 20
+    #: Park et al.'s lazy growth (:mod:`~.latent_lazy`): the trees grow in the latent space by the classifier alone
+    #: and a branch is decoded, projected and checked when the trees meet, a failed node removed and followed by a
+    #: latent jump; off: every step is decoded, projected and checked as it is added (the eager variant) [-].
+    lazy: bool = True
+    #: Joint-space steps of a latent jump after a failed validation (lazy growth) [count].
+    jump_steps: int = 2
     #: Standard deviation of the latent sampling distribution [latent units].
     sample_sigma: float = 1.0
     #: Projection tolerance on the closed-chain residual, max |h| [m or rad per row].
@@ -215,7 +225,7 @@ class LCBiRRTOptions:
         if not (isinstance(self.classifier_threshold, (int, float)) and 0 <= self.classifier_threshold < 1):
             raise ValueError(f"LCBiRRTOptions.classifier_threshold: expected a number in [0, 1), "
                              f"got {self.classifier_threshold!r}")
-        for name in ("max_extend_steps", "lpo_iterations", "lpo_interval"):
+        for name in ("max_extend_steps", "lpo_iterations", "lpo_interval", "jump_steps"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"LCBiRRTOptions.{name}: expected an integer >= 1, got {v!r}")
@@ -230,8 +240,12 @@ class LCBiRRTOptions:
                              f"got {self.classifier_trusts_verified!r}")
         if not isinstance(self.anchored_decoding, bool):
             raise ValueError(f"LCBiRRTOptions.anchored_decoding: expected True/False, got {self.anchored_decoding!r}")
-        if not isinstance(self.lpo, bool):
-            raise ValueError(f"LCBiRRTOptions.lpo: expected True/False, got {self.lpo!r}")
+        for name in ("lpo", "lazy"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"LCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
+        if self.lazy and self.anchored_decoding:
+            raise ValueError("LCBiRRTOptions: anchored_decoding needs lazy=False (the lazy trees decode each latent "
+                             "vector on its own)")
         _check_training("LCBiRRTOptions", self)
 
 
@@ -278,6 +292,22 @@ class _LatentTree:
             out[:0] = [*self.edge[i], self.Q[i]]
             i = self.parent[i]
         return out
+
+
+def _alive(t: Any, k: int) -> bool:
+    return bool(t.alive[k]) if hasattr(t, "alive") else True
+
+
+def _verified(t: Any) -> list[int]:
+    return list(t.verified) if hasattr(t, "verified") else list(range(len(t.Q)))
+
+
+def _gap(A: np.ndarray, B: np.ndarray) -> float:
+    """Smallest distance between a row of ``A`` and a row of ``B`` (every row of the larger, at most 100 of the
+    smaller)."""
+    small, big = (A, B) if len(A) <= len(B) else (B, A)
+    pick = small[::max(1, len(small) // 100)]
+    return min(float(np.linalg.norm(big - x, axis=1).min()) for x in pick)
 
 
 class LCBiRRT(Planner):
@@ -339,16 +369,18 @@ class LCBiRRT(Planner):
                                                                    o.tolerance), self.checker.is_valid,
                                 o.collision_step, deadline)
 
-    def connect_q(self, tree: _LatentTree, i: int, target: np.ndarray, st: dict[str, Any], deadline: Deadline,
-                  ) -> tuple[list[np.ndarray] | None, int]:
+    def connect_q(self, tree: Any, i: int, target: np.ndarray, st: dict[str, Any], deadline: Deadline,
+                  max_steps: int | None = None) -> tuple[list[np.ndarray] | None, int]:
         """Constrained joint-space extension from node ``i`` toward the configuration ``target`` (on the
         manifold and valid), CBiRRT's: steps of at most ``joint_step`` rad, each projected, collision-checked
         and joined by the constrained local planner; every intermediate configuration becomes a node of
         ``tree`` (latent vector: its encoding). ``(edge points to target, last node)`` when it arrives,
-        ``(None, last node)`` when it is trapped (a failed projection or edge, no progress, the deadline)."""
+        ``(None, last node)`` when it is trapped (a failed projection or edge, no progress, the deadline) or has
+        taken ``max_steps`` steps (default: ``max_extend_steps`` + the distance in steps)."""
         o = self.options
         lo, hi = self.robot.lower, self.robot.upper
-        for _ in range(o.max_extend_steps + int(np.linalg.norm(target - tree.Q[i]) / o.joint_step)):
+        n = max_steps + 1 if max_steps is not None else o.max_extend_steps + int(np.linalg.norm(target - tree.Q[i]) / o.joint_step)
+        for _ in range(n):
             if deadline.expired():
                 break
             d = target - tree.Q[i]
@@ -462,16 +494,10 @@ class LCBiRRT(Planner):
             i = tree.parent[i]
 
     # ------------------------------------------------------------------ main loop
-    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
-              seed: int) -> PlanResult:
-        o, ck = self.options, self.checker
-        st: dict[str, Any] = {"iterations": 0, "decodes": 0, "projection_failures": 0, "collisions": 0, "classifier_rejects": 0,
-              "classifier_overruled": 0, "edge_checks": 0, "link_attempts": 0, "q_link_attempts": 0, "link_successes": 0,
-              "link_gap_min": math.inf, "latent_jumps": 0, "jump_nodes": 0, "lpo_nodes": 0, "lpo_moves": 0}
-        c0 = ck.n_checks
-        bad = invalid_endpoints(self, q_start, q_goal, st)
-        if bad is not None:
-            return bad
+    def _plan_eager(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
+                    st: dict[str, Any]) -> tuple[Any, Any, bool, tuple[int, int, list[np.ndarray]] | None]:
+        """The eager search: every latent step decoded, projected and checked as it is added."""
+        o = self.options
         roots = []
         for q in (q_start, q_goal):
             z = self.cvae.encode(q)
@@ -501,15 +527,30 @@ class LCBiRRT(Planner):
             ta, tb, a_is_start = tb, ta, not a_is_start
         if not math.isfinite(st["link_gap_min"]):
             st["link_gap_min"] = None
-        # how far apart the trees stayed: the closest pair of nodes in joint space [rad] and in the latent space
-        # (at most 100 nodes of the smaller tree against the larger, so that it costs milliseconds after the limit)
-        small, big = (ta, tb) if len(ta.Z) <= len(tb.Z) else (tb, ta)
-        pick = range(0, len(small.Z), max(1, len(small.Z) // 100))
-        st["tree_gap_q"] = min(float(np.linalg.norm(np.asarray(big.Q) - small.Q[k], axis=1).min()) for k in pick)
-        st["tree_gap_z"] = min(float(np.linalg.norm(np.asarray(big.Z) - small.Z[k], axis=1).min()) for k in pick)
-        st["nodes"] = len(ta.Z) + len(tb.Z)
+        return ta, tb, a_is_start, found
+
+    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
+              seed: int) -> PlanResult:
+        o, ck = self.options, self.checker
+        st: dict[str, Any] = {"iterations": 0, "decodes": 0, "projection_failures": 0, "collisions": 0, "classifier_rejects": 0,
+              "classifier_overruled": 0, "edge_checks": 0, "link_attempts": 0, "q_link_attempts": 0, "link_successes": 0,
+              "link_gap_min": math.inf, "latent_jumps": 0, "jump_nodes": 0, "lpo_nodes": 0, "lpo_moves": 0}
+        c0 = ck.n_checks
+        bad = invalid_endpoints(self, q_start, q_goal, st)
+        if bad is not None:
+            return bad
+        if o.lazy:
+            ta, tb, a_is_start, found = plan_lazy(self, q_start, q_goal, deadline, rng, st)
+        else:
+            ta, tb, a_is_start, found = self._plan_eager(q_start, q_goal, deadline, rng, st)
+        # how far apart the trees stayed: the closest pair of nodes in joint space [rad] (verified nodes) and in the
+        # latent space (at most 100 nodes of the smaller tree against the larger: milliseconds after the limit)
+        st["tree_gap_q"] = _gap(*(np.asarray([t.Q[k] for k in _verified(t)]) for t in (ta, tb)))
+        st["tree_gap_z"] = _gap(*(np.asarray(t.Z)[[k for k in range(len(t.Z)) if _alive(t, k)]] for t in (ta, tb)))
         t_start, t_goal = (ta, tb) if a_is_start else (tb, ta)
-        st["start_tree_nodes"], st["goal_tree_nodes"] = len(t_start.Z), len(t_goal.Z)
+        st["start_tree_nodes"], st["goal_tree_nodes"] = (sum(_alive(t, k) for k in range(len(t.Z))) for t in (t_start, t_goal))
+        st["nodes"] = st["start_tree_nodes"] + st["goal_tree_nodes"]
+        st["start_tree_verified"], st["goal_tree_verified"] = len(_verified(t_start)), len(_verified(t_goal))
         st["collision_checks"] = ck.n_checks - c0
         if found is None:
             if deadline.expired():
