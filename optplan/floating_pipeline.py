@@ -421,6 +421,7 @@ def _optimize(robot: RobotModel, scene: Scene, J: np.ndarray, guess: np.ndarray,
         prob.add_constraint(CollisionAvoidance(scene, margin=float(opts.margin), fixed_normals=True))
     prob.add_cost(Smoothness("jerk"))
     prob.set_initial(guess)
+    prob.prepare_warm_start = False   # solved once; a refinement is a new problem
     # no dense check inside the solve: verify (the judge) samples the same trajectory at the same
     # density with the base integrated from the start, and its findings drive the refinement
     return prob.solve(guarantees=False, max_iter=opts.max_iter)
