@@ -5,37 +5,23 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from graft_paths import check_planned_path, check_regrasp_moves
+from graft_paths import (
+    SWEEP,
+    check_planned_path,
+    check_regrasp_moves,
+    extension_stats,
+    task_tree,
+    truss_case,
+)
 
-from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
+from optplan.constraints.closed_chain import closure_error
 from optplan.planners import TCBiRRT, TCBiRRTOptions
 from optplan.planners.base import Deadline
-from optplan.planners.task_space import xi_from_pose
-from optplan.planners.tcbirrt import _TaskTree
-from optplan.planners.validity import ValidityChecker
-from optplan.scene import Scene
-
-SWEEP = 0.01   # [m] the bench's sweep spacing
 
 
 @pytest.fixture(scope="module")
 def truss(tcb):
-    from optplan.trials import TrialGenerator
-
-    scene = Scene.load("hard_truss")
-    ck = ValidityChecker(tcb, scene)
-    kin = ClosedChainKinematics(tcb, scene.object.grasps)
-    return scene, ck, kin, TrialGenerator(tcb, scene)
-
-
-def _tree(kin, q):
-    M = kin.object_pose(q)
-    return _TaskTree(q, xi_from_pose(M), M.rotation.copy(), M.translation.copy())
-
-
-def _stats():
-    return {k: 0 for k in ("ik_iterations", "ik_calls", "ik_failures", "ik_jumps", "collisions", "ik_restarts",
-                           "edge_checks", "edge_collisions", "regrasp_attempts", "regrasp_failures", "regrasp_nodes")}
+    return truss_case(tcb)
 
 
 def test_branch_at_holds_the_object_on_the_start_branch(tcb, truss):
@@ -65,8 +51,8 @@ def test_root_branches_regrasp_the_goal_root_onto_the_start_branch(tcb, truss):
     pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved"), checker=ck, kinematics=kin)
     pl._rng = np.random.default_rng(0)
     t = gen.generate(0, 0)
-    ta, tb = _tree(kin, t.q_start), _tree(kin, t.q_goal)
-    st = _stats()
+    ta, tb = task_tree(kin, t.q_start), task_tree(kin, t.q_goal)
+    st = extension_stats()
     pl._root_branches(ta, tb, Deadline(10.0, "cpu"), st)
     assert st.get("root_branch") == "goal" and st["root_branch_attempts"] == 1, st
     assert list(tb.graft) == [1] and tb.parent[1] == 0 and ta.n == 1

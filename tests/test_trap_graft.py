@@ -7,38 +7,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from graft_paths import check_planned_path, check_regrasp_moves
+from graft_paths import (
+    check_graft_node,
+    check_planned_path,
+    extension_stats,
+    task_tree,
+    truss_case,
+)
 
-from optplan.constraints.closed_chain import ClosedChainKinematics, closure_error
 from optplan.planners import TCBiRRT, TCBiRRTOptions
 from optplan.planners.base import Deadline
-from optplan.planners.rrtconnect import edge_is_valid
-from optplan.planners.task_space import xi_from_pose
-from optplan.planners.tcbirrt import _TaskTree
-from optplan.planners.validity import ValidityChecker
-from optplan.scene import Scene
-
-SWEEP = 0.01   # [m] the bench's sweep spacing (no point of the robot or object moves farther between checks)
 
 
 @pytest.fixture(scope="module")
 def truss(tcb):
-    from optplan.trials import TrialGenerator
-
-    scene = Scene.load("hard_truss")
-    ck = ValidityChecker(tcb, scene)
-    kin = ClosedChainKinematics(tcb, scene.object.grasps)
-    return scene, ck, kin, TrialGenerator(tcb, scene)
-
-
-def _tree(kin, q):
-    M = kin.object_pose(q)
-    return _TaskTree(q, xi_from_pose(M), M.rotation.copy(), M.translation.copy())
-
-
-def _stats():
-    return {"ik_iterations": 0, "ik_calls": 0, "ik_failures": 0, "ik_jumps": 0, "collisions": 0, "ik_restarts": 0,
-            "edge_checks": 0, "edge_collisions": 0, "regrasp_attempts": 0, "regrasp_failures": 0, "regrasp_nodes": 0}
+    return truss_case(tcb)
 
 
 def test_trap_graft_fires_once_at_the_count_and_steps_toward_the_other_tree(tcb, truss):
@@ -53,11 +36,11 @@ def test_trap_graft_fires_once_at_the_count_and_steps_toward_the_other_tree(tcb,
     pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", trap_grafts=4, trap_graft_count=count), checker=ck,
                  kinematics=kin)
     pl._rng = np.random.default_rng(3)
-    b = _tree(kin, t.q_goal)
+    b = task_tree(kin, t.q_goal)
     xi_far = np.full(6, 9.0)   # the trapping sample: unused with trap_graft_target="other"
     n, tries = None, 0
     while n is None and tries < 10:   # a fresh tree and counter per try: the graft's random seeds may all fail
-        a, st, trap = _tree(kin, t.q_start), _stats(), [{}, 0]
+        a, st, trap = task_tree(kin, t.q_start), extension_stats(), [{}, 0]
         for k in range(1, count):
             assert pl._trap_graft(a, 0, xi_far, b, trap, Deadline(5.0, "cpu"), st) is None
             assert "trap_attempts" not in st and trap[0][0] == k
@@ -66,22 +49,7 @@ def test_trap_graft_fires_once_at_the_count_and_steps_toward_the_other_tree(tcb,
         assert pl._trap_graft(a, 0, xi_far, b, trap, Deadline(5.0, "cpu"), st) is None and st["trap_attempts"] == 1
         tries += 1
     assert n is not None and trap[1] == 1 and st["trap_grafts"] == 1
-    g = int(a.parent[n])
-    assert g in a.graft and a.parent[g] == 0 and np.array_equal(a.xi[g], a.xi[0])
-    y = a.q[g]
-    assert float(np.abs(y - t.q_start).max()) > pl.options.max_joint_step
-    d = b.xi[0] - a.xi[0]
-    assert np.allclose(a.xi[n], a.xi[0] + pl.step_size * d / np.linalg.norm(d), atol=1e-9)
-    w_fixed, w_held = ck.sweep_weights("fixed", per_geometry=True), ck.sweep_weights("held", per_geometry=True)
-    M0 = kin.object_pose(t.q_start)
-    prev = check_regrasp_moves(kin, tcb.nq, a.graft[g], t.q_start, lambda z: ck.is_valid_object_fixed(z, M0),
-                               SWEEP, w_fixed)
-    assert np.allclose(prev, y)
-    qs = [y, *a.edge[n][0], a.q[n]]
-    for q in qs:   # both hands on the object (Pinocchio FK) and free
-        assert max(closure_error(tcb, scene.object.grasps, q)) <= 1e-6 and ck.is_valid(q) and ck.in_limits(q)
-    for x0, x1 in zip(qs[:-1], qs[1:]):
-        assert edge_is_valid(x0, x1, ck.is_valid, SWEEP, weights=w_held)
+    check_graft_node(pl, tcb, scene, ck, kin, t.q_start, a, b, n)
 
 
 def test_trap_graft_options_are_checked():
