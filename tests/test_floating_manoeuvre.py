@@ -87,6 +87,17 @@ def steered():
     return robot, scene, goal, res
 
 
+
+def _reintegrated(robot, res):
+    """The result's base re-integrated independently at 4× verify's density with finer RK4 steps;
+    its final attitude checked against the result's target (≤ 1e-6 rad); the simulation and the samples."""
+    sol = res.solution
+    t = np.linspace(sol.t[0], sol.t[-1], 40 * (len(sol.t) - 1) + 1)
+    smp = sol.sample(t)
+    sim = simulate_base(robot, (t, smp["q"], smp["qd"]), t, substeps=4)
+    assert float(np.linalg.norm(pin.log3(res.end_attitude.T @ sim.final_base.rotation))) <= 1e-6
+    return sim, smp
+
 def test_a_steered_plan_is_verified_end_to_end(steered):
     robot, scene, goal, res = steered
     spans = manoeuvre_spans(res.plan.joints)
@@ -95,11 +106,7 @@ def test_a_steered_plan_is_verified_end_to_end(steered):
     assert res.solution.status.value == "Solve_Succeeded" and res.solution.iterations > 0
     assert res.success, res.attempts
     # independent: the base re-integrated at 4× verify's density with finer RK4 steps
-    sol = res.solution
-    t = np.linspace(sol.t[0], sol.t[-1], 40 * (len(sol.t) - 1) + 1)
-    smp = sol.sample(t)
-    sim = simulate_base(robot, (t, smp["q"], smp["qd"]), t, substeps=4)
-    assert float(np.linalg.norm(pin.log3(res.end_attitude.T @ sim.final_base.rotation))) <= 1e-6
+    sim, smp = _reintegrated(robot, res)
     d = robot.model.createData()
     grasp = scene.object.grasps
     rel = []
@@ -188,11 +195,7 @@ def test_former_failures_are_verified(scene_name, index):
     goal = trial_goal(scene, index, 0)
     res = run_floating_pipeline(robot, scene, scene_start(robot, scene), goal, options_for_scene(scene), seed=index)
     assert res.success, res.attempts
-    sol = res.solution
-    t = np.linspace(sol.t[0], sol.t[-1], 40 * (len(sol.t) - 1) + 1)
-    smp = sol.sample(t)
-    sim = simulate_base(robot, (t, smp["q"], smp["qd"]), t, substeps=4)
-    assert float(np.linalg.norm(pin.log3(res.end_attitude.T @ sim.final_base.rotation))) <= 1e-6
+    sim, smp = _reintegrated(robot, res)
     dmin, _, _ = CollisionChecker(robot, scene).min_distance_along(sim.q[::2])
     assert dmin >= 0.0
     d = robot.model.createData()
