@@ -23,7 +23,6 @@ import pinocchio as pin
 from .collision.checker import CollisionChecker
 from .constraints.closed_chain import closure_errors
 from .geometry.spatial import rotation_angle
-from .model.floating import simulate_base
 from .model.robot import RobotModel
 from .scene import Scene
 
@@ -138,6 +137,9 @@ def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_ch
     data = robot.model.createData()
     base_mismatch = final_err = mom = float("nan")
     if robot.is_floating:
+        # (imported here: a fixed-base robot's verification does not load it)
+        from .model.floating import simulate_base
+
         sim = simulate_base(robot, (ts, Q, QD), ts, base0=base0, substeps=2)
         qfull = sim.q
         mom = float(sim.momentum_residual.max())

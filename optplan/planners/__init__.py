@@ -95,11 +95,11 @@ def make_planner(name: str, robot: RobotModel, scene: Any, *, checker: ValidityC
     is an :class:`~optplan.errors.OptionError` listing the planner's options).
     ``checker``/``kinematics`` may be shared between planners of the same robot and scene."""
     key = name.lower()
-    from .constrained_prm import ConstrainedPRMOptions
-    from .precomputed_graph import PrecomputedGraphOptions
-
-    cls = {"tcbirrt": TCBiRRTOptions, "cbirrt2": CBiRRT2Options, "rrtconnect": RRTConnectOptions,
-           "constrained-prm": ConstrainedPRMOptions, "precomputed-graph": PrecomputedGraphOptions}.get(key)
+    cls: Any = {"tcbirrt": TCBiRRTOptions, "cbirrt2": CBiRRT2Options, "rrtconnect": RRTConnectOptions}.get(key)
+    if key == "constrained-prm":   # imported for these planners only (their modules load the manifold samples)
+        from .constrained_prm import ConstrainedPRMOptions as cls
+    elif key == "precomputed-graph":
+        from .precomputed_graph import PrecomputedGraphOptions as cls
     if cls is not None:
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(options) - known)
@@ -115,11 +115,11 @@ def make_planner(name: str, robot: RobotModel, scene: Any, *, checker: ValidityC
     if key == "constrained-prm":
         from .constrained_prm import ConstrainedPRM
 
-        return ConstrainedPRM(robot, scene, ConstrainedPRMOptions(**options), checker=checker, kinematics=kinematics)
+        return ConstrainedPRM(robot, scene, cls(**options), checker=checker, kinematics=kinematics)
     if key == "precomputed-graph":
         from .precomputed_graph import PrecomputedGraph
 
-        return PrecomputedGraph(robot, scene, PrecomputedGraphOptions(**options), checker=checker, kinematics=kinematics)
+        return PrecomputedGraph(robot, scene, cls(**options), checker=checker, kinematics=kinematics)
     if key in LEARNED_PLANNERS:
         from .learned import make_learned_planner
 

@@ -1,0 +1,139 @@
+"""Where the wall time of ``optplan plan`` goes: one fresh process, the command's steps timed in
+sections (wall ``perf_counter`` and this process's CPU time, both [s]).
+
+``python -m optplan.bench.plan_wall [--scene 1] [--seed 0] [--html FILE] [--save FILE]``
+
+Sections, in order: the modules the ``optplan`` command imports (``optplan.cli``), the modules
+the plan command imports (the pipeline, the scene, the trials), the scene and the robot loaded,
+the trial, the planner made (collision checker, planner kernels), planning, the shortcuts, per
+segment NLP set-up (its build: kernel loading included) and IPOPT, the verification by coal, the
+report, the output files. ``kernel cache`` is the part of the set-up spent verifying and loading
+the cached compiled kernels (already inside the set-up rows, not added again). The segments are
+solved in this process one after the other (``workers = 1``) so that the sections add up; the
+command's default solves them in two processes where the machine has two CPUs. What the
+interpreter itself spends before the first line and at exit is not in the sections: time the
+whole command from outside for that (``farm-bench -- optplan plan --scene 1``).
+"""
+from __future__ import annotations
+
+import time
+
+_T0, _C0 = time.perf_counter(), time.process_time()   # before any optplan module but this one
+
+import argparse  # noqa: E402
+import contextlib  # noqa: E402
+import importlib  # noqa: E402
+import sys  # noqa: E402
+from collections import defaultdict  # noqa: E402
+
+
+class Sections:
+    """Wall and CPU seconds per named section, in the order they were first entered."""
+
+    def __init__(self) -> None:
+        self.rows: dict[str, list[float]] = defaultdict(lambda: [0.0, 0.0, 0])
+
+    @contextlib.contextmanager
+    def __call__(self, name: str):
+        t, c = time.perf_counter(), time.process_time()
+        try:
+            yield
+        finally:
+            row = self.rows[name]
+            row[0] += time.perf_counter() - t
+            row[1] += time.process_time() - c
+            row[2] += 1
+
+    def add(self, name: str, wall: float, cpu: float = float("nan")) -> None:
+        row = self.rows[name]
+        row[0] += wall
+        row[1] += cpu
+        row[2] += 1
+
+
+def _wrap(sec: Sections, name: str, owner, attr: str) -> None:
+    """Time every call of ``owner.attr`` as section ``name``."""
+    fn = getattr(owner, attr)
+
+    def timed(*a, **k):
+        with sec(name):
+            return fn(*a, **k)
+
+    setattr(owner, attr, timed)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m optplan.bench.plan_wall", description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", default="1")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--html", help="also write the 3D view (as optplan plan --html)")
+    ap.add_argument("--save", help="also write the trajectory npz (as optplan plan --save)")
+    args = ap.parse_args(argv)
+    sec = Sections()
+    # what the `optplan` command imports first (by name: a benchmark does not depend on the command line)
+    sec.add("import optplan.cli", *_since(_T0, _C0, lambda: importlib.import_module("optplan.cli")))
+    with sec("import the plan command's modules"):
+        from optplan import pipeline
+        from optplan.cli_args import check_scene
+        from optplan.model.example_robots import load_robot
+        from optplan.scene import Scene
+        from optplan.trials import TrialGenerator
+    import optplan.cache
+    import optplan.codegen
+    import optplan.planners
+    import optplan.problem.kernels as kernels
+
+    for owner in (optplan.cache, optplan.codegen, kernels):   # each module's own name of it
+        _wrap(sec, "  kernel cache: verify entries", owner, "usable")
+    _wrap(sec, "  kernel cache: verify and load libraries", kernels, "load_library")
+    _wrap(sec, "verify (coal, 10 samples per interval)", pipeline, "verify")
+    _wrap(sec, "planner made (checker, kernels)", optplan.planners, "make_planner")
+    with sec("scene load"):
+        scene = Scene.load(check_scene(args.scene))
+    with sec("robot load"):
+        robot = load_robot(scene.robot or "tcbirrt_dual_arm")
+    with sec("trial"):
+        trial = TrialGenerator(robot, scene).generate(0, args.seed)
+    # the command's options: its TCBiRRT variant (improved), one process
+    planner_options = pipeline.PLANNER_DEFAULTS["tcbirrt"] + (("variant", "improved"),)
+    opts = pipeline.PipelineOptions(planner_options=planner_options, workers=1)
+    t, c = time.perf_counter(), time.process_time()
+    res = pipeline.run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed)
+    run_wall, run_cpu = time.perf_counter() - t, time.process_time() - c
+    sec.add("planning", res.plan_time_s)
+    sec.add("shortcuts", res.shortcut_time_s)
+    for i, s in enumerate(res.segments):
+        for a in s.attempts:
+            sec.add(f"segment {i} {s.kind} {a['reason']}: NLP set-up", a["setup_s"])
+            sec.add(f"segment {i} {s.kind} {a['reason']}: IPOPT ({a['iterations']} it)", a["ipopt_s"])
+    with sec("report (figures, pair counts)"):
+        from optplan.collision.checker import pair_budget_counts
+
+        out = res.to_dict()
+        out["pairs"] = pair_budget_counts(robot, scene)
+    with sec("outputs (--save, --html)"):
+        if args.save:
+            res.save(args.save, robot=robot.name, scene=scene.name)
+        if args.html:
+            from optplan.viz.outputs import write_views
+
+            write_views(robot, scene, res.t, res.q, res.constrained, html=args.html, title="plan_wall")
+    total_wall, total_cpu = time.perf_counter() - _T0, time.process_time() - _C0
+    print(f"optplan plan --scene {args.scene} --seed {args.seed} --workers 1: success {res.success}, "
+          f"{res.iterations} IPOPT iterations")
+    print(f"{'section':58s} {'wall s':>8s} {'cpu s':>8s} {'calls':>6s}")
+    for name, (w, cp, n) in sec.rows.items():
+        print(f"{name:58s} {w:8.3f} {cp:8.3f} {n:6d}")
+    print(f"{'run_pipeline (all of its rows above)':58s} {run_wall:8.3f} {run_cpu:8.3f}")
+    print(f"{'total since this module started':58s} {total_wall:8.3f} {total_cpu:8.3f}")
+    return 0 if res.success else 1
+
+
+def _since(t0: float, c0: float, fn) -> tuple[float, float]:
+    """(wall, CPU) seconds from (t0, c0) to the end of ``fn()``."""
+    fn()
+    return time.perf_counter() - t0, time.process_time() - c0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
