@@ -394,7 +394,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
             if not sol.success or rep.min_clearance_m >= 0.0:
                 break
             colliding.append(sol)
-            boost_and_activate(prob, sol, _dense_times(sol), T)
+            boost_and_activate(prob, sol, _dense_times(sol), T, restart=opts.collision_warm_start)
             sol, rep = run(prob, "collision")
         return sol, rep
 

@@ -33,15 +33,34 @@ def activate(prob: OptProblem, knots: list[np.ndarray], T: float) -> None:
     prob.replace_term(h, h.term.with_activation(*[_knot_trajectory(prob.robot, Q, T) for Q in knots]))
 
 
-def boost_and_activate(prob: OptProblem, sol: Solution, t: np.ndarray, T: float) -> None:
+def boost_and_activate(prob: OptProblem, sol: Solution, t: np.ndarray, T: float, restart: bool = False) -> bool:
     """After coal found ``sol`` in contact: the margin raised where it cut a corner between knots
     (on the pairs the solved NLP had rows for; ``t`` [s]: its dense sample times) and the pairs
-    close along it activated."""
+    close along it activated.
+
+    ``restart`` (``PipelineOptions.collision_warm_start``): the next solve starts from ``sol``'s
+    control points (a converged solve of this build of ``prob``) instead of the first guess, its
+    rows planned as before (along the first guess) and their plane offsets where they are planned.
+    Returns whether it does (False: ``sol`` is not a solution of this build; the first guess then
+    stays). The solution is verified by coal afterwards as any other."""
+    spline = prob._spline   # the B-spline backend (the build's variables: control points, plane offsets)
+    core = spline.core
+    along = None
+    if restart and core is not None and sol.x is not None and np.size(sol.x) == core.nx:
+        along = np.array(sol.x[:core.x_aux], float)
     q = sol.sample(t)["q"]
     h = prob.terms["collision"]
     assert isinstance(h.term, CollisionAvoidance)   # segment_problem's collision term
     col, _ = h.term.with_boost(prob.term_data(h), t, q, sol.t)
     prob.replace_term(h, col.with_activation(_knot_trajectory(prob.robot, sol.q, T)))
+    if along is None:
+        return False
+    spline.prepare()   # the new build's rows, as the next solve would plan them
+    assert spline.core is not None
+    if along.size != spline.core.x_aux:
+        return False
+    spline.x0 = np.r_[along, spline.aux0]
+    return True
 
 
 def guess_knots(prob: OptProblem) -> np.ndarray:
