@@ -154,7 +154,10 @@ def test_planner_kernels_from_the_memo_give_the_same_ik_and_edge_checks(fresh_ca
 
 
 _HEAVY = ("matplotlib", "dask", "distributed", "jax", "optax", "meshcat", "example_robot_data", "torch", "pydrake",
-          "ompl", "rockit", "tqdm", "optplan.bench", "optplan.viz", "optplan.papers", "xml.sax", "http", "ssl")
+          "ompl", "rockit", "tqdm", "optplan.bench", "optplan.viz", "optplan.papers", "xml.sax", "http", "ssl",
+          # the roadmap planners and the floating-base simulation (another planner's, a floating robot's)
+          "optplan.planners.constrained_prm", "optplan.planners.manifold_samples",
+          "optplan.planners.precomputed_graph", "optplan.model.floating")
 #: the benchmark engines' names (standard library only) that the argument parser offers
 _LIGHT = ("optplan.bench", "optplan.bench.engine")
 
