@@ -190,7 +190,7 @@ class AttitudeSteerer:
         return _Loop(qs, X, rows, xis, scale)
 
     def steer(self, q: np.ndarray, base: pin.SE3, wanted: np.ndarray, rng: np.random.Generator,
-              deadline: Deadline, tol_rad: float | None = None, pool: list | None = None) -> SteerResult | None:
+              deadline: Deadline, tol_rad: float | None = None, pool: list[_Loop] | None = None) -> SteerResult | None:
         """Loops from the joints ``q`` [rad] (holding the object; base at ``base``) whose product
         turns the base by the rotation ``wanted`` (3×3, base frame: the end attitude is
         ``R_base · wanted``) to within ``tol_rad`` (default ``options.tol_rad``) [rad]: greedy
