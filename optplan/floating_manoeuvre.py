@@ -98,7 +98,9 @@ class ManoeuvreMotion:
     about 1.9 / ``duration_factor`` of ``speed`` [rad/s]. ``t`` [s]: the knots, as many per edge as
     put :func:`optplan.verify`'s samples (10 per knot interval) at most ``sample_step_rad`` apart in
     the joints (the planner's own check step by default). ``ok`` is False when a
-    point could not be projected (the edge is then kept straight)."""
+    point could not be projected (the edge is then kept straight). An edge with the very same end
+    joints as an earlier one (a repeated loop) reuses that edge's spline: ``project`` must depend
+    on its argument alone."""
 
     def __init__(self, joints: np.ndarray, project: Callable[[np.ndarray], np.ndarray | None], speed: float,
                  duration_factor: float = 3.0, step_rad: float = 0.02, sample_step_rad: float = 0.02,
@@ -113,10 +115,26 @@ class ManoeuvreMotion:
         self._splines: list[PPoly] = []
         #: points projected onto the closed chain [count]
         self.projections = 0
+        #: edges whose spline was that of an earlier edge with the very same ends [count]
+        self.repeated_edges = 0
+        # a steering manoeuvre repeats its loops (each up to ``max_repeat`` times): an edge with the
+        # very same end joints as an earlier one gets that edge's spline (the projection is a
+        # function of the points alone), so each distinct edge is projected once
+        seen: dict[tuple[bytes, bytes, int], tuple[PPoly, bool]] = {}
         durs = []
         for a, b in zip(J[:-1], J[1:]):
             d = float(np.max(np.abs(b - a)))
-            self._splines.append(self._edge(a, b, max(4, math.ceil(d / step_rad)), project))
+            n = max(4, math.ceil(d / step_rad))
+            key = (a.tobytes(), b.tobytes(), n)
+            got = seen.get(key)
+            if got is None:
+                ok0, self.ok = self.ok, True
+                got = seen[key] = (self._edge(a, b, n, project), self.ok)
+                self.ok = ok0 and self.ok
+            else:
+                self.repeated_edges += 1
+                self.ok = self.ok and got[1]
+            self._splines.append(got[0])
             durs.append(max(min_edge_s, duration_factor * d / speed))
         self._t0 = np.r_[0.0, np.cumsum(durs)]
         self._dur = np.asarray(durs)

@@ -221,8 +221,12 @@ def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE
     corners = sharp_corners(J, opts.corner_cos, spans) if opts.nlp == "optproblem" else []
     sol: Solution | ChainedMotion
     carry = planner.carry if isinstance(planner, FloatingTCBiRRT) else planner
+    # a plan ending with a kept manoeuvre is re-steered when its end attitude misses (below): the
+    # verification of the chained motion then waits for the re-steered one (verify judges that)
+    resteers = isinstance(planner, FloatingTCBiRRT) and bool(spans) and spans[-1][1] == len(J) - 1 \
+        and opts.resteer_rounds > 0
     if spans or corners:
-        sol, rep = _chained(robot, scene, plan, spans, corners, cc, res, opts, carry)
+        sol, rep = _chained(robot, scene, plan, spans, corners, cc, res, opts, carry, defer=resteers)
     else:
         sol, rep = _solve_piece(robot, scene, J, pin.SE3.Identity(), res.end_attitude, cc, opts, res.attempts)
     if not sol.success and opts.nlp == "optproblem":
@@ -231,20 +235,27 @@ def run_floating_pipeline(robot: RobotModel, scene: Scene, q_start, goal: pin.SE
                         margin=min(opts.margin, 0.5 * max(float(plan.min_clearance_m), 0.0)))
         corners2 = sharp_corners(J, retry.corner_cos, spans)
         if corners2 != corners or retry.margin < opts.margin:
-            sol, rep = _chained(robot, scene, plan, spans, corners2, cc, res, retry, carry)
-    if isinstance(planner, FloatingTCBiRRT) and isinstance(sol, ChainedMotion) and spans and spans[-1][1] == len(J) - 1:
+            sol, rep = _chained(robot, scene, plan, spans, corners2, cc, res, retry, carry, defer=resteers)
+    if resteers and isinstance(planner, FloatingTCBiRRT) and isinstance(sol, ChainedMotion):
         sol, rep = _resteer_end(robot, scene, planner, sol, rep, cc, res, opts, seed)
+    assert rep is not None   # a deferred verification is done by the re-steering
     res.solution, res.report = sol, rep
     res.opt_wall_s = time.perf_counter() - t0
     res.opt_cpu_s = time.process_time() - c0
-    # the object's world pose at the end, with the base re-integrated along the solution (not the NLP's)
+    # the object's world pose at the end, with the base re-integrated along the solution (not the
+    # NLP's): verify's own integration of it (from the identity, 10 samples per knot interval, 2 RK4
+    # steps each), else the same again
     t = np.linspace(sol.t[0], sol.t[-1], 10 * (len(sol.t) - 1) + 1)
-    smp = sol.sample(t)
-    sim = simulate_base(robot, (t, smp["q"], smp["qd"]), t, substeps=2)
-    res.base = (t, sim.q[:, :7].copy())
-    M = sim.final_base * planner.object_in_base(smp["q"][-1])
+    if rep.samples is not None and rep.samples[0].shape == t.shape and np.array_equal(rep.samples[0], t):
+        qf = rep.samples[1]
+    else:
+        smp = sol.sample(t)
+        qf = simulate_base(robot, (t, smp["q"], smp["qd"]), t, substeps=2).q
+    res.base = (t, qf[:, :7].copy())
+    q_last = qf[-1, robot.base_nq:]
+    M = pin.XYZQUATToSE3(qf[-1, :7]) * planner.object_in_base(q_last)
     if opts.planner.target_frame == "base":
-        M = planner.object_in_base(smp["q"][-1])
+        M = planner.object_in_base(q_last)
     e = goal.actInv(M)
     res.goal_error = (float(np.linalg.norm(e.translation)), float(np.linalg.norm(pin.log3(e.rotation))))
     return res
@@ -306,12 +317,14 @@ def _end_base(robot: RobotModel, motion, base0: pin.SE3) -> pin.SE3:
 
 def _chained(robot: RobotModel, scene: Scene, plan: FloatingCarryPlan, spans: list[tuple[int, int]],
              corners: list[int], cc: ClosedChain, res: FloatingPipelineResult, opts: FloatingPipelineOptions,
-             carry: FloatingCarryPlanner) -> tuple[ChainedMotion, VerifyReport]:
+             carry: FloatingCarryPlanner, defer: bool = False) -> tuple[ChainedMotion, VerifyReport | None]:
     """A plan with steering manoeuvres (``spans`` of its waypoints) or sharp ``corners``: each
     manoeuvre kept as planned (:class:`~optplan.floating_manoeuvre.ManoeuvreMotion`), each piece
     between them and the corners optimized rest to rest from the base where the parts before it
     leave it, to the plan's attitude at its end (the last piece: ``res.end_attitude``); the chained
-    motion verified as a whole."""
+    motion verified as a whole. ``defer``: when every part succeeded and the end attitude,
+    integrated part by part, misses the target by more than half the tolerance, the verification
+    is left to the re-steering that follows (:func:`_resteer_end`; the report is then None)."""
     J, speed = plan.joints, float(np.min(robot.velocity_limit))
     cuts = sorted({0, len(J) - 1, *corners, *(k for sp in spans for k in sp)})
     parts: list[MotionPart] = []
@@ -337,25 +350,33 @@ def _chained(robot: RobotModel, scene: Scene, plan: FloatingCarryPlan, spans: li
     motion = ChainedMotion(parts)
     if all(p.success for p in parts):
         motion.end_base = base   # integrated part by part: the re-steering starts from it
+        left = float(np.linalg.norm(pin.log3(base.rotation.T @ res.end_attitude)))
+        if defer and left > 0.5 * float(opts.tolerances.final_base_attitude_rad or 1e-6):
+            res.attempts.append((len(motion.t) - 1, "chained", [f"end attitude {left:.3g} rad from the target "
+                                                                "(integrated part by part; verified after the re-steering)"]))
+            return motion, None
     rep = verify(robot, motion, scene, closed_chain=cc, end_attitude=res.end_attitude)
     res.attempts.append((len(motion.t) - 1, "chained", rep.failures(opts.tolerances)))
     return motion, rep
 
 
-def _resteer_end(robot: RobotModel, scene: Scene, planner: FloatingTCBiRRT, motion: ChainedMotion, rep: VerifyReport,
-                 cc: ClosedChain, res: FloatingPipelineResult, opts: FloatingPipelineOptions, seed: int
-                 ) -> tuple[ChainedMotion, VerifyReport]:
+def _resteer_end(robot: RobotModel, scene: Scene, planner: FloatingTCBiRRT, motion: ChainedMotion,
+                 rep: VerifyReport | None, cc: ClosedChain, res: FloatingPipelineResult, opts: FloatingPipelineOptions,
+                 seed: int) -> tuple[ChainedMotion, VerifyReport]:
     """A plan that ENDS with a kept manoeuvre misses its end attitude by what putting the manoeuvre
     back on the closed chain changed (~1e-4-1e-3 rad; no optimized piece follows to take it out):
     steer the rest off from the real end (the planner's steering, loops scaled to the small
     rotation left) and keep that manoeuvre too, up to ``opts.resteer_rounds`` times until the end
     attitude, integrated part by part from zero momentum, is within half the tolerance; then
-    verify the whole motion once more (the judge)."""
+    verify the whole motion once more (the judge). ``rep`` None: the chained motion was not
+    verified (its parts succeeded, its end attitude integrated part by part misses: :func:`_chained`);
+    the re-steered motion is."""
     from .planners.base import Deadline
 
-    fails = rep.failures(opts.tolerances)
-    if opts.resteer_rounds == 0 or not fails or not all(f.startswith("final base attitude") for f in fails):
-        return motion, rep
+    if rep is not None:
+        fails = rep.failures(opts.tolerances)
+        if opts.resteer_rounds == 0 or not fails or not all(f.startswith("final base attitude") for f in fails):
+            return motion, rep
     tol = float(opts.tolerances.final_base_attitude_rad or 1e-6)
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(7,)))
     speed = float(np.min(robot.velocity_limit))
@@ -364,21 +385,27 @@ def _resteer_end(robot: RobotModel, scene: Scene, planner: FloatingTCBiRRT, moti
     q_end = np.asarray(motion.sample(np.array([motion.t[-1]]))["q"][-1], float)
     # left-invariant: each new part from here (the parts' own integrations, not the whole motion again)
     base_end = motion.end_base if motion.end_base is not None else _end_base(robot, motion, pin.SE3.Identity())
+    # the loops drawn from q_end, kept for the next rounds: a kept manoeuvre ends at its start joints
+    # (its end points are not projected), so every round steers from the very same joints
+    pool: list = []
+    q_pool = q_end.copy()
     for _ in range(opts.resteer_rounds):
         wanted = base_end.rotation.T @ res.end_attitude
         if float(np.linalg.norm(pin.log3(wanted))) <= 0.5 * tol:
             break
         steerer = planner.steerer
         whole = steerer.options
-        # a small rotation: whole loops overshoot it, so a few rounds of new loops are enough for the
-        # scaled-loop refinement (a full search spends its rounds looking for whole loops)
-        # (the full search when that finds nothing)
+        # a small rotation: whole loops overshoot it, so one round of new loops (three of them make
+        # the trio of the scaled-loop refinement) is tried first, then a few rounds, then the full
+        # search (a full search spends its rounds looking for whole loops); the loops found are kept
+        if not np.array_equal(q_end, q_pool):
+            pool, q_pool = [], q_end.copy()
         st = None
         try:
-            for rounds in dict.fromkeys((min(4, whole.max_rounds), whole.max_rounds)):
+            for rounds in dict.fromkeys((1, min(4, whole.max_rounds), whole.max_rounds)):
                 steerer.options = replace(whole, max_rounds=rounds)
                 st = steerer.steer(q_end, base_end, wanted, rng, Deadline(opts.resteer_time_s, clock="cpu"),
-                                   tol_rad=0.1 * tol)
+                                   tol_rad=0.1 * tol, pool=pool)
                 if st is not None:
                     break
         finally:

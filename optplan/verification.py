@@ -15,7 +15,7 @@ into a verdict against :class:`VerifyTolerances`.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -53,9 +53,14 @@ class VerifyReport:
     max_momentum_residual: float
     base_attitude_mismatch_rad: float
     final_base_attitude_error_rad: float
+    #: a floating robot: (sample times [s], full configurations — the re-integrated base
+    #: (XYZ-quaternion), then the joints) of the check; None for a fixed base. Not in :meth:`to_dict`.
+    samples: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        out.pop("samples")
+        return out
 
     def failures(self, tol: VerifyTolerances | None = None) -> list[str]:
         """The checks this report fails against ``tol`` (default :class:`VerifyTolerances`), each
@@ -177,4 +182,5 @@ def verify(robot: RobotModel, solution, scene: Scene | None = None, *, closed_ch
         max_closed_chain_position_error_m=cc_p, max_closed_chain_rotation_error_rad=cc_r,
         min_clearance_m=dmin, min_clearance_pair=pair_name, max_position_limit_violation=pos_v,
         max_velocity_limit_violation=vel_v, max_momentum_residual=mom,
-        base_attitude_mismatch_rad=base_mismatch, final_base_attitude_error_rad=final_err)
+        base_attitude_mismatch_rad=base_mismatch, final_base_attitude_error_rad=final_err,
+        samples=(ts, qfull) if robot.is_floating else None)

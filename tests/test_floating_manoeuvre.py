@@ -54,6 +54,34 @@ def test_edge_splines_are_scipys_not_a_knot_splines():
         assert np.allclose(sp(s[[0, -1]]), [a, b], atol=1e-14)
 
 
+def test_repeated_loop_edges_are_projected_once():
+    """A loop traversed three times: each distinct edge projected once, and the motion equal, edge by
+    edge, to that of the loop traversed once (its own projections); a failed projection of a
+    repeated edge leaves the motion not ok."""
+    rng = np.random.default_rng(5)
+    loop = np.vstack([np.zeros(3), np.cumsum(rng.normal(0.0, 0.1, size=(3, 3)), axis=0), np.zeros(3)])
+    J = np.vstack([loop, loop[1:], loop[1:]])
+    calls: list[np.ndarray] = []
+
+    def bend(q):
+        calls.append(q.copy())
+        return q + 0.01 * np.sin(3.0 * q[::-1])
+
+    once = ManoeuvreMotion(loop, bend, speed=1.0, step_rad=0.03)
+    n_once = len(calls)
+    thrice = ManoeuvreMotion(J, bend, speed=1.0, step_rad=0.03)
+    assert thrice.projections == once.projections == n_once == len(calls) - n_once > 0
+    assert thrice.repeated_edges == 2 * (len(loop) - 1) and thrice.ok
+    assert thrice.duration == pytest.approx(3 * once.duration)
+    t = np.linspace(0.0, once.duration, 101)
+    for k in range(3):
+        a, b = once.sample(t), thrice.sample(t + k * once.duration)
+        assert np.allclose(a["q"], b["q"], atol=1e-12) and np.allclose(a["qd"], b["qd"], atol=1e-10)
+    fail_at = loop[2] + 0.5 * (loop[3] - loop[2])
+    bad = ManoeuvreMotion(J, lambda q: None if np.allclose(q, fail_at) else q, speed=1.0, step_rad=0.03)
+    assert not bad.ok and bad.repeated_edges == 2 * (len(loop) - 1)
+
+
 def test_manoeuvre_time_law_and_chaining():
     """Rest at every waypoint, through every waypoint, velocities = finite differences; the chain
     plays its parts one after the other."""

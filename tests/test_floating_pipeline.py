@@ -45,6 +45,9 @@ def test_floating_truss_end_to_end(eba, truss_run):
     assert np.degrees(np.linalg.norm(pin.log3(Mb.rotation))) > 1.0   # the base did turn on the way
     path = res.base_path(3)
     assert len(path) == 3 and np.allclose(path[0][1], 0.0) and np.allclose(path[-1][1], Mb.translation, atol=1e-6)
+    # the base path is the judge's own integration (not a second one), and stays out of the JSON
+    assert rep.samples is not None and np.array_equal(rep.samples[1][:, :7], res.base[1])
+    assert "samples" not in rep.to_dict() and "final_base_attitude_error_rad" in rep.to_json()
 
 
 def test_the_carry_is_optimized_with_collision_rows_on_the_shared_core(truss_run):

@@ -169,30 +169,34 @@ class FloatingCarryPlanner:
         m, d, r = self.robot.model, self._data, self.robot
         q = self._full(np.array(joints, float))
         nb = r.base_nq
+        eye, tol = np.eye(6), self.options.ik_tol
         for arm_name in self.arm_names:
             arm = r.arm(arm_name)
             target = object_in_base * self.grasps[arm_name]
+            fid, q_idx, v_idx = arm.ee_frame_id, arm.q_idx, arm.v_idx
+            lo, hi = r.lower[arm.j_idx], r.upper[arm.j_idx]
 
-            def error(qq: np.ndarray, target: pin.SE3 = target, fid: int = arm.ee_frame_id) -> np.ndarray:
-                pin.framesForwardKinematics(m, d, qq)
-                return pin.log6(target.actInv(d.oMf[fid])).vector
+            def error(qq: np.ndarray, target: pin.SE3 = target, fid: int = fid) -> np.ndarray:
+                pin.forwardKinematics(m, d, qq)   # the one frame needed: the same numbers as all frames
+                return pin.log6(target.actInv(pin.updateFramePlacement(m, d, fid))).vector
 
             err = error(q)
-            e, lam, ok = float(np.linalg.norm(err)), 1e-8, False
+            e, lam, ok = math.sqrt(err @ err), 1e-8, False   # = np.linalg.norm, bit for bit
             for _ in range(iters):
-                if e < self.options.ik_tol:
+                if e < tol:
                     ok = True
                     break
-                J = pin.computeFrameJacobian(m, d, q, arm.ee_frame_id, pin.LOCAL)[:, arm.v_idx]
-                step = J.T @ np.linalg.solve(J @ J.T + lam * np.eye(6), err)
-                n = float(np.max(np.abs(step)))
+                J = pin.computeFrameJacobian(m, d, q, fid, pin.LOCAL)[:, v_idx]
+                step = J.T @ np.linalg.solve(J @ J.T + lam * eye, err)
+                n = float(np.abs(step).max())
                 if n > 0.3:
                     step *= 0.3 / n
                 qt = q.copy()
-                qt[arm.q_idx] = np.clip(q[arm.q_idx] - step, r.lower[arm.j_idx], r.upper[arm.j_idx])
+                qt[q_idx] = np.clip(q[q_idx] - step, lo, hi)
                 et = error(qt)
-                if float(np.linalg.norm(et)) < e:
-                    q, err, e, lam = qt, et, float(np.linalg.norm(et)), max(lam * 0.1, 1e-12)
+                et_n = math.sqrt(et @ et)
+                if et_n < e:
+                    q, err, e, lam = qt, et, et_n, max(lam * 0.1, 1e-12)
                 else:
                     lam *= 10.0
                     if lam > 1e2:
@@ -216,32 +220,32 @@ class FloatingCarryPlanner:
         q = self._full(np.array(joints, float))
 
         def error(qq: np.ndarray) -> np.ndarray:
-            pin.computeJointJacobians(m, d, qq)
-            pin.updateFramePlacements(m, d)
-            return pin.log6((d.oMf[f1] * rel).actInv(d.oMf[f2])).vector
+            pin.computeJointJacobians(m, d, qq)   # the two hands' frames only: the same numbers as all frames
+            return pin.log6((pin.updateFramePlacement(m, d, f1) * rel).actInv(pin.updateFramePlacement(m, d, f2))).vector
 
         err = error(q)
-        e, lam = float(np.linalg.norm(err)), 1e-8
+        e, lam = math.sqrt(err @ err), 1e-8   # = np.linalg.norm, bit for bit
         J = pin.getFrameJacobian(m, d, f2, pin.LOCAL)[:, v_idx]
-        eye = np.eye(6)
+        eye, tol = np.eye(6), self.options.ik_tol
         for _ in range(iters):
-            if e < self.options.ik_tol:
+            if e < tol:
                 return q[r.base_nq:].copy()
             step = J.T @ np.linalg.solve(J @ J.T + lam * eye, err)
-            n = float(np.max(np.abs(step)))
+            n = float(np.abs(step).max())
             if n > 0.3:
                 step *= 0.3 / n
             qt = q.copy()
             qt[q_idx] = np.clip(q[q_idx] - step, lo, hi)
             et = error(qt)
-            if float(np.linalg.norm(et)) < e:
-                q, err, e, lam = qt, et, float(np.linalg.norm(et)), max(lam * 0.1, 1e-12)
+            et_n = math.sqrt(et @ et)
+            if et_n < e:
+                q, err, e, lam = qt, et, et_n, max(lam * 0.1, 1e-12)
                 J = pin.getFrameJacobian(m, d, f2, pin.LOCAL)[:, v_idx]
             else:
                 lam *= 10.0
                 if lam > 1e2:
                     return None
-        return q[r.base_nq:].copy() if e < self.options.ik_tol else None
+        return q[r.base_nq:].copy() if e < tol else None
 
     # ------------------------------------------------------------------ one task-space motion
     def _edge(self, base: pin.SE3, qa: np.ndarray, qb: np.ndarray) -> tuple[np.ndarray, float]:

@@ -190,16 +190,18 @@ class AttitudeSteerer:
         return _Loop(qs, X, rows, xis, scale)
 
     def steer(self, q: np.ndarray, base: pin.SE3, wanted: np.ndarray, rng: np.random.Generator,
-              deadline: Deadline, tol_rad: float | None = None) -> SteerResult | None:
+              deadline: Deadline, tol_rad: float | None = None, pool: list[_Loop] | None = None) -> SteerResult | None:
         """Loops from the joints ``q`` [rad] (holding the object; base at ``base``) whose product
         turns the base by the rotation ``wanted`` (3×3, base frame: the end attitude is
         ``R_base · wanted``) to within ``tol_rad`` (default ``options.tol_rad``) [rad]: greedy
         whole loops, then (:meth:`_refine`) loops scaled to the small rotation left. None when no
-        collision-free loop brings the rotation nearer."""
+        collision-free loop brings the rotation nearer. ``pool``: loops from these very joints ``q``
+        found by an earlier call (used first; the new ones are added to it, the colliding ones
+        removed: a caller steering from ``q`` again reuses them instead of drawing new ones)."""
         o = self.options
         tol = o.tol_rad if tol_rad is None else float(tol_rad)
         st = _State(base, wanted)
-        pool: list[_Loop] = []
+        pool = [] if pool is None else pool
         for _ in range(o.max_rounds):
             if st.err <= tol or deadline.expired():
                 break
@@ -226,7 +228,7 @@ class AttitudeSteerer:
                 if self._append(st, pool[i], sign, k):
                     break
                 bad.add(i)
-            pool = [lp for i, lp in enumerate(pool) if i not in bad]
+            pool[:] = [lp for i, lp in enumerate(pool) if i not in bad]
         if st.err > tol and len(pool) >= 3:
             self._refine(st, q, pool, tol, deadline)
         if not st.joints:

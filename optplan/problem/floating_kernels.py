@@ -66,6 +66,13 @@ class FloatingKernels(KernelCache):
     floating_base = True
     _digest_tag = b"floating-v1"
 
+    #: how many NLP structures (:meth:`~optplan.problem.kernels.KernelCache.structure`) stay in
+    #: memory [count]. A floating carry's NLP has its collision rows' pairs and knots in its shape,
+    #: so one trial's structures are not met again by the next; each holds its IPOPT instances and
+    #: compiled maps (~10-35 MB measured on ``floating_truss``): the fixed base's 32 let a run of
+    #: trials grow by that much per trial. 4 keeps a problem's re-solves and its refinement.
+    max_structures = 4
+
     def _configuration(self, q: ca.SX) -> ca.SX:
         return ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), q)  # base frame: the base pose is the identity
 
