@@ -315,7 +315,8 @@ def outcome_from_stats(stats: Mapping[str, Any], out: Mapping[str, Any] | None, 
         v = out.get(k)
         if v is None:
             return None
-        return v.full().ravel() if hasattr(v, "full") else np.array(v, dtype=float).ravel()  # DM: fast path
+        # a DM's elements (column-major) as a list: ~2× faster than DM.full() for a vector
+        return np.array(v.elements(), dtype=float) if hasattr(v, "elements") else np.array(v, dtype=float).ravel()
 
     fa = arr("f")
     cost = float(fa[0]) / cost_scale if fa is not None and fa.size == 1 else float("nan")

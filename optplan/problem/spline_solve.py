@@ -13,6 +13,7 @@ import pinocchio as pin
 import scipy.sparse as sps
 import scipy.sparse.linalg as spsl
 
+from ..codegen import call_dense
 from .bspline import knot_values
 from .build import TermData
 from .collision_term import CollisionAvoidance
@@ -385,7 +386,10 @@ class SplineBackend:
         if not prob.robot.is_floating:
             return np.zeros(3)
         model = prob.robot.model
-        c = pin.centerOfMass(model, model.createData(), np.r_[np.zeros(6), 1.0, q_start])
+        full = np.zeros(model.nq)
+        full[6] = 1.0
+        full[7:] = q_start
+        c = pin.centerOfMass(model, prob.robot.data, full)
         return prob.base0.translation + prob.base0.rotation @ c
 
     def guess(self, T: float) -> np.ndarray:
@@ -538,14 +542,14 @@ class SplineBackend:
         core, prob = self.core, self.prob
         assert core is not None
         x = np.array(out.x, float)
-        g = np.array(st["gfun"](x, p)).ravel()
+        g = call_dense(st["gfun"], x, p)[0].ravel()
         vv = np.maximum(np.maximum(lbg - g, g - ubg), 0.0)
         viol = float(vv.max()) if vv.size else 0.0
         viol = max(viol, float(np.max(np.maximum(np.maximum(lbx - x, x - ubx), 0.0))))
         if not np.isfinite(viol):
             viol = float("inf")
         terms: dict[str, float] = {}
-        c = np.array(st["cfun"](x, p)).ravel()
+        c = call_dense(st["cfun"], x, p)[0].ravel()
         for h in prob._handles:
             fs = self.owner.get(h.name, [])
             if h.role == "cost":
@@ -565,7 +569,7 @@ class SplineBackend:
         terms["dynamics"] = max(dyn) if dyn else 0.0
         T = core.duration_of(x, prob.duration)
         P = core.control_points(x)
-        kv = knot_values(P, T / core.N)
+        kv = knot_values(P, T / core.N, core.M)
         bq = bp = None
         if core.fl:
             bq, bp = base_placements(core, kv["q"], core.knot_xi(x), prob.base0, p[core.p_c0:core.p_c0 + 3])
