@@ -82,6 +82,8 @@ class SplineBackend:
         self.velocity_retries = 2
         # (key, core variables) of the last guess fitted to the user's knots (:meth:`_guess`)
         self._fitted: tuple[tuple[Any, ...], np.ndarray] | None = None
+        # the violation of a fixed knot's rows by (family, knot, kernel inputs and bounds) (:meth:`_constant_rows`)
+        self._constant_memo: dict[tuple[str, int, bytes], float] = {}
 
     # ------------------------------------------------------------------ structure
     def prepare(self) -> None:
@@ -89,6 +91,7 @@ class SplineBackend:
         prob = self.prob
         t0 = time.perf_counter()
         self._fitted = None   # the boundary terms may have changed: fit the guess again
+        self._constant_memo = {}   # the families (their kernels and bounds) are made again
         params: list[Parameter] = prob._params
         npar = sum(p.size for p in params)
         core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar)
@@ -258,8 +261,14 @@ class SplineBackend:
             for f in self.fams:
                 if f.kind != "knot" or f.cost or f.fn is None or f.name in self.fixed or k not in f.points:
                     continue
-                v = np.asarray(f.fn(core.knot_inputs(x, p, k, False))).ravel()
-                viol = float(np.max(np.maximum(np.maximum(f.lower - v, v - f.upper), 0.0), initial=0.0))
+                inputs = np.asarray(core.knot_inputs(x, p, k, False), float)
+                # a kernel is a function of its inputs: the same inputs and bounds, the same violation
+                key = (f.name, k, inputs.tobytes() + np.asarray(f.lower, float).tobytes() + np.asarray(f.upper, float).tobytes())
+                viol = self._constant_memo.get(key)
+                if viol is None:
+                    v = np.asarray(f.fn(inputs)).ravel()
+                    viol = float(np.max(np.maximum(np.maximum(f.lower - v, v - f.upper), 0.0), initial=0.0))
+                    self._constant_memo[key] = viol
                 if viol <= tol:
                     out.setdefault(f.name, set()).add(k)
                     self.constant_violation = max(self.constant_violation, viol)
