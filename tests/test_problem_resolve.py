@@ -187,3 +187,30 @@ def test_floating_resolves_make_no_data_twins_or_matrices(counts, monkeypatch):
     t = np.linspace(0.0, 20.0, 161)
     assert np.abs(s3.sample(t)["qd"][:, 7:]).max() <= 1e-6
     assert np.abs(s3.sample(t, still)).max() <= 1e-6
+
+
+def test_the_dense_checks_twin_is_kept_per_term_and_made_again_after_a_change(tcb):
+    """The dense check's twin of a term (``Term.sampled``) is made once per term — and again when a
+    field of the term is set in place; a term that is its own twin is not kept alive by it."""
+    import gc
+    import weakref
+
+    from optplan.problem import ClosedChain
+    from optplan.problem.guarantees import _sampled
+    from optplan.problem.terms import JointBoundary
+
+    cc = ClosedChain("A", "B", relative=pin.SE3(np.eye(3), np.array([0.0, 0.4, 0.0])), interior=1, skip_pinned=True)
+    twin = _sampled(cc)
+    assert twin.interior == 0 and not twin.skip_pinned and _sampled(cc) is twin
+    with pytest.warns(DeprecationWarning):
+        cc.relative = pin.SE3(np.eye(3), np.array([0.0, 0.5, 0.0]))
+    again = _sampled(cc)
+    assert again is not twin and np.allclose(again.relative.translation, [0.0, 0.5, 0.0])
+    assert _sampled(JointBoundary("start", q=np.zeros(3))) is None   # tied to given knots
+    prob = OptProblem(tcb, n_intervals=4, duration=2.0)
+    own = prob.add_constraint(prob.qd[0], lower=-1.0, upper=1.0).term   # along the whole trajectory: its own twin
+    assert _sampled(own) is own and _sampled(own) is own
+    refs = [weakref.ref(cc), weakref.ref(own)]
+    del cc, twin, again, own, prob
+    gc.collect()
+    assert all(r() is None for r in refs), "the kept twins hold their terms alive"
