@@ -214,3 +214,34 @@ def test_the_dense_checks_twin_is_kept_per_term_and_made_again_after_a_change(tc
     del cc, twin, again, own, prob
     gc.collect()
     assert all(r() is None for r in refs), "the kept twins hold their terms alive"
+
+
+def test_a_closed_chain_resolve_makes_no_pinocchio_data_or_twin(tcb, counts, monkeypatch):
+    """The dense check of a closed chain (Pinocchio placements of both hands at every sample)
+    works in the robot's own ``Data`` and the term's kept twin: a re-solve makes neither; the
+    check still ran (the chain holds between the knots, by Pinocchio)."""
+    from optplan.problem import ClosedChain
+    from optplan.problem.terms import Term
+
+    z = np.zeros(tcb.nj)
+    q0 = np.r_[[0.3, -0.6, 0.4, -1.2, 0.2, 0.7, 0.1] * 2][:tcb.nj]
+    prob = OptProblem(tcb, n_intervals=6, duration=3.0, compile_kernels=False)
+    prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
+    prob.add_constraint(prob.qd[0], lower=0.05, upper=0.2, at=3)        # the arms move
+    cc = prob.add_constraint(ClosedChain.from_configuration(tcb, tcb.configuration(q0)))
+    prob.add_cost(Smoothness("jerk"))
+    s1 = prob.solve()
+    assert s1.success, s1.status
+    for owner, name, key in ((pin.Model, "createData", "pinocchio Data"), (Term, "__post_init__", "term made")):
+        orig = getattr(owner, name)
+
+        def f(*a, _orig=orig, _key=key, **k):
+            counts[_key] += 1
+            return _orig(*a, **k)
+        monkeypatch.setattr(owner, name, f)
+    counts.clear()
+    prob.set_initial(solution=s1)
+    s2 = prob.solve()
+    assert s2.success and not counts, f"a closed-chain re-solve made {dict(counts)}"
+    assert np.abs(s2.sample(np.linspace(0.0, 3.0, 121), cc)[:, :6]).max() < 1e-3   # the chain between the knots
+    assert np.ptp(s2.q[:, 0]) > 0.01
