@@ -122,3 +122,126 @@ def test_terms_say_whether_they_read_the_base_attitude(tcb):
     fixed = OptProblem(tcb, n_intervals=4, duration=2.0)
     ee = tcb.model.frames[tcb.arm("A").ee_frame_id].name
     assert not fixed.add_constraint(fixed.frame(ee).translation, lower=-5, upper=5).term.reads_base_attitude(tcb)
+
+
+def test_floating_resolves_make_no_data_twins_or_matrices(counts, monkeypatch):
+    """The free-floating reach (a frame target as a parameter, arm B still, the base attitude
+    restored): its re-solves build nothing (the counters above) and the numbers of the solve path
+    are made once too — no Pinocchio ``Data``, no B-spline knot matrices, no term twin for the
+    dense check (made and validated with the first solve), no CasADi matrix from an array of a
+    sampled trajectory or a solution (the numbers go through function buffers). Its answers are
+    checked by Pinocchio."""
+    from optplan import RobotModel
+    from optplan.problem import bspline
+    from optplan.problem.frame_terms import BaseAttitude
+    from optplan.problem.terms import Term
+
+    ff = RobotModel.from_name("eba_ffsr")
+    q0 = np.r_[[0.3, -0.6, 0.4, -1.2, 0.2, 0.7, 0.1] * 2]
+    data = ff.model.createData()   # the test's own, made before the counters
+
+    def wrap(owner, name, key, counted=None):
+        orig = getattr(owner, name)
+
+        def f(*a, **k):
+            if counted is None or counted(*a, **k):
+                counts[key] += 1
+            return orig(*a, **k)
+        monkeypatch.setattr(owner, name, f)
+
+    wrap(pin.Model, "createData", "pinocchio Data")
+    wrap(bspline, "knot_matrices", "knot matrices")
+    wrap(Term, "__post_init__", "term made")
+    wrap(ca.DM, "__init__", "DM of > 64 numbers",
+         lambda self, *a: any(isinstance(v, (np.ndarray, list)) and np.size(v) > 64 for v in a))
+
+    def hand(sol, k):
+        pin.framesForwardKinematics(ff.model, data, np.r_[sol.base_position[k], sol.base_quat[k], sol.q[k]])
+        return data.oMf[ff.model.getFrameId("a_ee")].translation.copy()
+
+    prob = OptProblem(ff, n_intervals=20, duration=20.0, compile_kernels=False)
+    prob.add_constraint(prob.q, lower=q0, upper=q0, at="start")
+    prob.add_constraint(prob.qd, lower=0, upper=0, at=[0, 20])
+    prob.add_constraint(prob.qdd, lower=0, upper=0, at=[0, 20])
+    still = prob.add_constraint(prob.qd[7:], lower=0, upper=0)        # checked between knots
+    pin.framesForwardKinematics(ff.model, data, ff.configuration(q0))
+    target = data.oMf[ff.model.getFrameId("a_ee")].translation + 0.3 * np.array([0.6, 0.0, 0.8])
+    goal = prob.parameter(3, target)
+    prob.add_constraint(prob.frame("a_ee").translation - goal, lower=0, upper=0, at="end")
+    prob.add_constraint(BaseAttitude(at="end"))
+    prob.add_cost(Smoothness("jerk"))
+    s1 = prob.solve()
+    assert s1.success, s1.status
+    assert counts["pinocchio Data"] > 0 and counts["term made"] > 0 and counts["_build"] == 1   # the counters see
+    counts.clear()
+
+    prob.set_value(goal, target + np.array([0.0, 0.02, 0.0]))
+    s2 = prob.solve()
+    assert s2.success, s2.status
+    assert np.linalg.norm(hand(s2, -1) - (target + [0.0, 0.02, 0.0])) < 1e-5     # Pinocchio: the new target
+    prob.set_initial(solution=s2)
+    s3 = prob.solve()
+    assert s3.success and s3.iterations <= 5
+    assert not counts, f"re-solves of the floating reach made {dict(counts)}"
+    # the dense check still ran, on the first solve's twin: arm B is still between the knots
+    t = np.linspace(0.0, 20.0, 161)
+    assert np.abs(s3.sample(t)["qd"][:, 7:]).max() <= 1e-6
+    assert np.abs(s3.sample(t, still)).max() <= 1e-6
+
+
+def test_the_dense_checks_twin_is_kept_per_term_and_made_again_after_a_change(tcb):
+    """The dense check's twin of a term (``Term.sampled``) is made once per term — and again when a
+    field of the term is set in place; a term that is its own twin is not kept alive by it."""
+    import gc
+    import weakref
+
+    from optplan.problem import ClosedChain
+    from optplan.problem.guarantees import _sampled
+    from optplan.problem.terms import JointBoundary
+
+    cc = ClosedChain("A", "B", relative=pin.SE3(np.eye(3), np.array([0.0, 0.4, 0.0])), interior=1, skip_pinned=True)
+    twin = _sampled(cc)
+    assert twin.interior == 0 and not twin.skip_pinned and _sampled(cc) is twin
+    with pytest.warns(DeprecationWarning):
+        cc.relative = pin.SE3(np.eye(3), np.array([0.0, 0.5, 0.0]))
+    again = _sampled(cc)
+    assert again is not twin and np.allclose(again.relative.translation, [0.0, 0.5, 0.0])
+    assert _sampled(JointBoundary("start", q=np.zeros(3))) is None   # tied to given knots
+    prob = OptProblem(tcb, n_intervals=4, duration=2.0)
+    own = prob.add_constraint(prob.qd[0], lower=-1.0, upper=1.0).term   # along the whole trajectory: its own twin
+    assert _sampled(own) is own and _sampled(own) is own
+    refs = [weakref.ref(cc), weakref.ref(own)]
+    del cc, twin, again, own, prob
+    gc.collect()
+    assert all(r() is None for r in refs), "the kept twins hold their terms alive"
+
+
+def test_a_closed_chain_resolve_makes_no_pinocchio_data_or_twin(tcb, counts, monkeypatch):
+    """The dense check of a closed chain (Pinocchio placements of both hands at every sample)
+    works in the robot's own ``Data`` and the term's kept twin: a re-solve makes neither; the
+    check still ran (the chain holds between the knots, by Pinocchio)."""
+    from optplan.problem import ClosedChain
+    from optplan.problem.terms import Term
+
+    z = np.zeros(tcb.nj)
+    q0 = np.r_[[0.3, -0.6, 0.4, -1.2, 0.2, 0.7, 0.1] * 2][:tcb.nj]
+    prob = OptProblem(tcb, n_intervals=6, duration=3.0, compile_kernels=False)
+    prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
+    prob.add_constraint(prob.qd[0], lower=0.05, upper=0.2, at=3)        # the arms move
+    cc = prob.add_constraint(ClosedChain.from_configuration(tcb, tcb.configuration(q0)))
+    prob.add_cost(Smoothness("jerk"))
+    s1 = prob.solve()
+    assert s1.success, s1.status
+    for owner, name, key in ((pin.Model, "createData", "pinocchio Data"), (Term, "__post_init__", "term made")):
+        orig = getattr(owner, name)
+
+        def f(*a, _orig=orig, _key=key, **k):
+            counts[_key] += 1
+            return _orig(*a, **k)
+        monkeypatch.setattr(owner, name, f)
+    counts.clear()
+    prob.set_initial(solution=s1)
+    s2 = prob.solve()
+    assert s2.success and not counts, f"a closed-chain re-solve made {dict(counts)}"
+    assert np.abs(s2.sample(np.linspace(0.0, 3.0, 121), cc)[:, :6]).max() < 1e-3   # the chain between the knots
+    assert np.ptp(s2.q[:, 0]) > 0.01

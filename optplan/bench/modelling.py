@@ -255,10 +255,12 @@ def _resolve(prob: Any) -> dict[str, float]:
             "check_cpu_s": chk_cpu, "iterations": s.total_iterations, "success": bool(s.success)}
 
 
-def run_task(name: str, repeat: int = 1) -> dict[str, Any]:
+def run_task(name: str, repeat: int = 1, resolves: int = 1) -> dict[str, Any]:
     """Task ``name`` in this process: the first problem, then ``repeat`` warm ones (the kernels
     compiled into the cache, the memory of them dropped before each: as a new process with a warm
-    cache), with re-solves after ``set_initial(solution=...)`` and ``set_value``."""
+    cache), with re-solves after ``set_initial(solution=...)`` and ``set_value``: ``resolves``
+    rounds of (from the solution, again, after ``set_value``; the target moved by +1 cm and back
+    in turn), all kept in ``warm["resolves"]`` for their distribution."""
     if name not in TASKS:
         raise ValueError(f"task: expected one of {TASKS}, got {name!r}")
     make, check = {"reach": (lambda: _reach(False), _check_reach),
@@ -292,13 +294,21 @@ def run_task(name: str, repeat: int = 1) -> dict[str, Any]:
                                                                      "solve_s", "solve_cpu_s")}
     # re-solves: what a warm start / a new parameter value costs besides IPOPT (the last warm problem)
     if prob.uses_bspline():
-        prob.set_initial(solution=sol)
-        rows["warm"]["resolve"] = _resolve(prob)
-        prob.set_initial(solution=sol)            # again: the warm-start IPOPT instance exists now
-        rows["warm"]["resolve_again"] = _resolve(prob)
-        if prob._params:
-            prob.set_value(prob._params[0].sym, prob._params[0].value.ravel() + [0.0, 0.01, 0.0])
-            rows["warm"]["set_value"] = _resolve(prob)
+        every: dict[str, list[dict[str, float]]] = {"resolve": [], "resolve_again": [], "set_value": []}
+        target = prob._params[0].value.ravel().copy() if prob._params else None
+        for i in range(max(1, int(resolves))):
+            prob.set_initial(solution=sol)
+            every["resolve"].append(_resolve(prob))
+            prob.set_initial(solution=sol)            # again: the warm-start IPOPT instance exists now
+            every["resolve_again"].append(_resolve(prob))
+            if target is not None:
+                prob.set_value(prob._params[0].sym, target + [0.0, 0.01 if i % 2 == 0 else 0.0, 0.0])
+                every["set_value"].append(_resolve(prob))
+        for key, v in every.items():
+            if v:
+                rows["warm"][key] = v[0]
+        if resolves > 1:
+            rows["warm"]["resolves"] = {key: {k: [r[k] for r in v] for k in v[0]} for key, v in every.items() if v}
     return {"task": name, **rows}
 
 
@@ -361,9 +371,9 @@ def _upright_min(robot: Any, scene: Any, sol: Any) -> float:
     return min(out)
 
 
-def run(tasks: list[str], cold: bool = True, repeat: int = 1) -> list[dict[str, Any]]:
+def run(tasks: list[str], cold: bool = True, repeat: int = 1, resolves: int = 1) -> list[dict[str, Any]]:
     """Each task in a new process (``cold``: with an empty ``OPTPLAN_CACHE``, background compiles
-    off), its first and warm figures (``repeat`` warm problems)."""
+    off), its first and warm figures (``repeat`` warm problems, ``resolves`` rounds of re-solves)."""
     out = []
     for t in tasks:
         env = dict(os.environ)
@@ -371,7 +381,8 @@ def run(tasks: list[str], cold: bool = True, repeat: int = 1) -> list[dict[str, 
             if cold:
                 env["OPTPLAN_CACHE"] = tmp
                 env["OPTPLAN_BACKGROUND_COMPILE"] = "0"
-            p = subprocess.run([sys.executable, "-m", "optplan.bench.modelling", "--one", t, "--repeat", str(repeat)],
+            p = subprocess.run([sys.executable, "-m", "optplan.bench.modelling", "--one", t, "--repeat", str(repeat),
+                                "--resolves", str(resolves)],
                                env=env, capture_output=True, text=True, check=False)
         if p.returncode != 0:
             out.append({"task": t, "error": (p.stderr or p.stdout).strip().splitlines()[-1:]})
@@ -409,6 +420,13 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
                 lines.append(f"{'':18} {len(rp['total_s'])} warm problems, median [min-max]: total {_spread(rp['total_s'])} s, "
                              f"cpu {_spread(rp['total_cpu_s'])} s, build {_spread(rp['build_s'])} s, "
                              f"IPOPT {_spread(rp['solve_s'])} s (cpu {_spread(rp['solve_cpu_s'])} s)")
+            for key, v in x.get("resolves", {}).items():
+                o, oc, ck = (1e3 * np.array(v[k]) for k in ("overhead_s", "overhead_cpu_s", "check_s"))
+                lines.append(f"{'':18} {len(o)} re-solves ({key}): overhead besides IPOPT median {np.median(o):.1f} ms "
+                             f"[{o.min():.1f}-{o.max():.1f}], p90 {np.percentile(o, 90):.1f}, {int(np.sum(o <= 10.0))}/"
+                             f"{len(o)} <= 10 ms; cpu median {np.median(oc):.1f} ms [{oc.min():.1f}-{oc.max():.1f}]; "
+                             f"dense check median {np.median(ck):.1f} ms; it {min(v['iterations'])}-"
+                             f"{max(v['iterations'])}, {sum(v['success'])}/{len(o)} ok")
             for key, what in (("resolve", "re-solve from its solution"), ("resolve_again", "again"),
                               ("set_value", "after set_value (target +1 cm)")):
                 if key in x:
@@ -472,6 +490,8 @@ def main(argv: list[str] | None = None) -> int:
                     "first run in a new process with an empty cache)")
     ap.add_argument("--repeat", type=int, default=1, help="warm problems per task (median and spread printed; "
                     "default 1)")
+    ap.add_argument("--resolves", type=int, default=1, help="rounds of re-solves of the last warm problem (from "
+                    "its solution, again, after set_value), their overhead's distribution printed (default 1)")
     ap.add_argument("--json", help="write the rows as JSON to this path")
     ap.add_argument("--peer", choices=["rockit"], help="also run the tasks rockit can write ("
                     + ", ".join(PEER_TASKS) + ") in rockit (extra 'rockit'); skipped when it is not installed")
@@ -479,7 +499,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--one-peer", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.one:
-        print(json.dumps(run_task(args.one, args.repeat)))
+        print(json.dumps(run_task(args.one, args.repeat, args.resolves)))
         return 0
     if args.one_peer:
         print(json.dumps(run_peer(args.one_peer)))
@@ -490,7 +510,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown tasks {bad}; choose from {', '.join(TASKS)}")
     if args.repeat < 1:
         ap.error(f"--repeat: expected an integer ≥ 1, got {args.repeat}")
-    rows = run(tasks, cold=not args.warm_cache, repeat=args.repeat)
+    if args.resolves < 1:
+        ap.error(f"--resolves: expected an integer ≥ 1, got {args.resolves}")
+    rows = run(tasks, cold=not args.warm_cache, repeat=args.repeat, resolves=args.resolves)
     print(format_rows(rows))
     peers = run_peers(tasks) if args.peer else []
     if peers:

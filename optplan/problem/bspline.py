@@ -69,11 +69,12 @@ def boundary_points(q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, h: float, at: s
     return np.vstack([lo, mid, hi])
 
 
-def knot_values(P: np.ndarray, h: float) -> dict[str, np.ndarray]:
+def knot_values(P: np.ndarray, h: float, M: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
     """Knot arrays in physical units from control points ``P`` ((N+3) × nj): ``q`` [rad],
-    ``qd`` [rad/s], ``qdd`` [rad/s²] ((N+1) × nj) and ``jerk`` [rad/s³] (N × nj)."""
+    ``qd`` [rad/s], ``qdd`` [rad/s²] ((N+1) × nj) and ``jerk`` [rad/s³] (N × nj). ``M``: the
+    :func:`knot_matrices` of this N when the caller keeps them (made here otherwise)."""
     P = np.asarray(P, float)
-    M = knot_matrices(P.shape[0] - 3)
+    M = M if M is not None else knot_matrices(P.shape[0] - 3)
     return {"q": M["q"] @ P, "qd": M["qd"] @ P / h, "qdd": M["qdd"] @ P / h**2, "jerk": M["jerk"] @ P / h**3}
 
 

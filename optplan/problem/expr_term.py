@@ -10,6 +10,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..codegen import call_dense
 from ..errors import ConfigurationError
 from .expressions import Parameter, check_symbols, symbols_of
 from .terms import Term
@@ -124,15 +125,16 @@ class ExprTerm(Term):
         if fm is None:
             fm = maps[k.size] = f.map(k.size)
 
-        def cols(a: Any) -> ca.DM:
-            return ca.DM(np.asarray(a, float)[k].T)
+        def cols(a: Any) -> np.ndarray:
+            return np.asarray(a, float)[k].T
 
-        quat = cols(traj.base_quat) if traj.base_quat is not None else None
-        args = self._args(traj.robot, cols(traj.q), cols(traj.qd), cols(traj.qdd), quat,
-                          ca.DM((k * traj.T / traj.N)[None, :]), traj.T, traj.com0)
-        if not traj.robot.is_floating:
-            args[3] = args[6] = args[7] = ca.DM(0, k.size)
-        return np.asarray(fm(*args)).ravel(order="F")
+        fl = traj.robot.is_floating
+        none = np.zeros((0, k.size))
+        args = [cols(traj.q), cols(traj.qd), cols(traj.qdd),
+                cols(traj.base_quat) if fl and traj.base_quat is not None else none, (k * traj.T / traj.N)[None, :],
+                traj.T, np.array([0, 0, 0, 1.0]) if fl else none, np.asarray(traj.com0, float) if fl else none]
+        args += [np.asarray(p.value, float) for p in self.params]
+        return call_dense(fm, *args)[0].ravel(order="F")
 
     def numeric(self, traj: Any) -> np.ndarray:
         return self._numeric_values(traj, "rows", knots_of(self.at, traj.N, self.default_name))

@@ -290,21 +290,24 @@ def world_pair_slots(core: Any, fam: Any) -> tuple[np.ndarray, np.ndarray]:
 def base_placements(core: Any, Q: np.ndarray, xi: np.ndarray, base0: pin.SE3,
                     com0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World base quaternions ((N+1) × 4, x y z w) and positions [m] with the centre of mass at
-    ``com0``."""
-    model, data = core.robot.model, core.robot.model.createData()
+    ``com0``: the attitude R0 · R(xi) of every knot at once (the quaternion product b0 ⊗ xi, with
+    the sign Pinocchio's conversion of the matrix gives: w > 0 when the trace is > 0, else the
+    component of the largest diagonal entry > 0)."""
+    model, data = core.robot.model, core.robot.data
     xi = np.asarray(xi, float)
-    x, y, z, w = (xi / np.linalg.norm(xi, axis=1, keepdims=True)).T
-    # R(xi) of every knot at once (the unit quaternion's matrix), then R0 · R(xi)
-    Rx = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
-                   np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
-                   np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)], axis=1)
-    R = np.einsum("ij,njk->nik", base0.rotation, Rx)
+    bx, by, bz, bw = pin.Quaternion(base0.rotation).coeffs()
+    left = np.array([[bw, -bz, by, bx], [bz, bw, -bx, by], [-by, bx, bw, bz], [-bx, -by, -bz, bw]])
+    quats = (xi / np.linalg.norm(xi, axis=1, keepdims=True)) @ left.T
+    n = len(quats)
+    lead = np.where(4.0 * quats[:, 3] ** 2 > 1.0, 3, np.argmax(np.abs(quats[:, :3]), axis=1))
+    quats[quats[np.arange(n), lead] < 0] *= -1.0
     full = np.zeros(model.nq)
     full[6] = 1.0
-    c = np.empty((len(Q), 3))
-    quats = np.empty((len(Q), 4))
-    for k, qk in enumerate(Q):
+    c = np.empty((n, 3))
+    for k, qk in enumerate(np.asarray(Q, float)):
         full[7:] = qk
         c[k] = pin.centerOfMass(model, data, full)
-        quats[k] = pin.Quaternion(R[k]).coeffs()
-    return quats, np.asarray(com0, float) - np.einsum("nij,nj->ni", R, c)
+    # R c by the quaternion: c + w t + v × t with t = 2 v × c
+    v = quats[:, :3]
+    t = 2.0 * np.cross(v, c)
+    return quats, np.asarray(com0, float) - (c + quats[:, 3:] * t + np.cross(v, t))

@@ -211,6 +211,8 @@ class ClosedChain(Term):
                 r, tr = pose_residual_numeric(M, self.relative)
                 if np.abs(r).max() <= self.pinned_tol and tr >= 1.0:
                     skip.add(int(k))
+        if self.interior == 0:
+            return [k for k in range(N + 1) if k not in skip]
         pts: list[_Point] = []
         for k in range(N + 1):
             if k not in skip:

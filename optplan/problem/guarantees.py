@@ -144,7 +144,7 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
     if model is None:
         return
     checker = model.checker
-    Q = np.array([traj.q_full(i) for i in range(traj.N + 1)])
+    Q = np.array([traj.q_full(i) for i in range(traj.N + 1)]) if traj.robot.is_floating else np.asarray(traj.q, float)
     margin = float(term.margin)
     constant = set(data.info.get("constant_pairs", ()))
     relaxed: Mapping[Any, float] = data.info.get("relaxed", {})
@@ -212,9 +212,8 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
         if spline and sol.success and isinstance(term, _HULL_GUARANTEED):
             continue   # holds between knots by construction (below)
         if not isinstance(term, CollisionAvoidance):
-            try:
-                term = term.sampled()
-            except TypeError:
+            term = _sampled(term)
+            if term is None:
                 continue   # tied to given knots: holds there by construction
         todo.append((name, term, _collision_data(term, problem.robot) if spline else ev.data[name]))
     # the base attitude between knots is integrated only when a checked term reads it
@@ -237,6 +236,27 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
 #: every knot and q̈ is linear between knots, velocity limits bound the velocity control points
 #: (entries without rows are checked exactly after the solve, :mod:`.spline_solve`).
 _HULL_GUARANTEED = (JointPositionLimits, JointVelocityLimits, JointAccelerationLimits)
+#: a term's twin along the trajectory (``Term.sampled``), kept per term with the field values it
+#: was made from: re-solves of one problem make (and validate) it once; None: tied to given knots
+_SAMPLED: weakref.WeakKeyDictionary[Any, tuple[tuple[Any, ...], Any]] = weakref.WeakKeyDictionary()
+_ITSELF = object()   # the term is its own twin
+
+
+def _sampled(term: Any) -> Any:
+    """``term.sampled()``, or None for a term tied to given knots; made again when a field of
+    ``term`` was set since (an in-place change replaces the field's value)."""
+    fields = tuple(term.__dict__.values())
+    got = _SAMPLED.get(term)
+    if got is not None and len(got[0]) == len(fields) and all(a is b for a, b in zip(got[0], fields)):
+        return term if got[1] is _ITSELF else got[1]
+    try:
+        twin = term.sampled()
+    except TypeError:
+        twin = None
+    _SAMPLED[term] = (fields, _ITSELF if twin is term else twin)   # never a strong reference to the key
+    return twin
+
+
 #: a collision term's model for the dense check, kept per term (terms are frozen) and robot:
 #: re-solves of one problem build it once
 _MODELS: weakref.WeakKeyDictionary[Any, tuple[Any, SimpleNamespace]] = weakref.WeakKeyDictionary()

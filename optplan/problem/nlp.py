@@ -315,7 +315,8 @@ def outcome_from_stats(stats: Mapping[str, Any], out: Mapping[str, Any] | None, 
         v = out.get(k)
         if v is None:
             return None
-        return v.full().ravel() if hasattr(v, "full") else np.array(v, dtype=float).ravel()  # DM: fast path
+        # a DM's elements (column-major) as a list: ~2× faster than DM.full() for a vector
+        return np.array(v.elements(), dtype=float) if hasattr(v, "elements") else np.array(v, dtype=float).ravel()
 
     fa = arr("f")
     cost = float(fa[0]) / cost_scale if fa is not None and fa.size == 1 else float("nan")
@@ -345,6 +346,9 @@ class NlpSolver:
         self.solver = ca.nlpsol(name, "ipopt", dict(nlp), opts)
         self.setup_time = time.perf_counter() - t0
         self._setup_pending = self.setup_time
+        self._names = (list(self.solver.name_in()), list(self.solver.name_out()))
+        self._buffer: Any = None            # (CasADi function buffer, its call), made with the first solve
+        self._stats: dict[str, Any] | None = None
 
     def take_setup_time(self) -> float:
         """The creation time [s] not yet charged to a solve, which the caller now charges to its
@@ -368,8 +372,12 @@ class NlpSolver:
         self._setup_pending = 0.0
         t0, c0 = time.perf_counter(), time.process_time()
         try:
-            out = self.solver(**args)
-            stats = self.solver.stats()
+            got = self._call_buffered(args)
+            if got is None:
+                out = self.solver(**args)
+                stats = self._stats = dict(self.solver.stats())
+            else:
+                out, stats = got
         except RuntimeError as exc:  # IPOPT/CasADi evaluation errors become a status
             log.warning("IPOPT raised: %s", exc)
             return SolveOutcome(IpoptStatus.INTERNAL_ERROR, -1, time.perf_counter() - t0,
@@ -378,5 +386,46 @@ class NlpSolver:
         return outcome_from_stats(stats, out, wall_time=time.perf_counter() - t0, cpu_time=time.process_time() - c0,
                                   setup_time=setup, cost_scale=cost_scale, label=label)
 
+    def _call_buffered(self, args: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]] | None:
+        """The solver called through one CasADi function buffer kept with the instance (one
+        IPOPT memory, as the ordinary call's): the numbers pass as arrays, no ``DM`` made (~0.1 µs
+        per number each way). ``(outputs, stats)``, or None (the ordinary call) when CasADi has
+        no buffers or an argument is not a vector of its input's size."""
+        f = self.solver
+        names = self._names
+        if self._buffer is None:
+            try:
+                self._buffer = f.buffer()
+            except (AttributeError, NotImplementedError, RuntimeError):
+                self._buffer = False
+        if self._buffer is False:
+            return None
+        ins = []
+        for i, name in enumerate(names[0]):
+            n = int(f.nnz_in(i))
+            v = args.get(name)
+            a = np.full(n, float(f.default_in(i))) if v is None else np.array(v, dtype=float).reshape(-1)
+            if a.size != n:
+                if a.size != 1:
+                    return None
+                a = np.full(n, float(a[0]))
+            ins.append(a)
+        outs = [np.empty(int(f.nnz_out(i))) for i in range(len(names[1]))]
+        buf, run = self._buffer
+        try:
+            for i, a in enumerate(ins):
+                buf.set_arg(i, a.data)
+            for i, o in enumerate(outs):
+                buf.set_res(i, o.data)
+        except (NotImplementedError, TypeError):   # another buffer signature: the ordinary call from now on
+            self._buffer = False
+            return None
+        run()   # ``ins`` and ``outs`` hold the memory the buffer points to until here
+        if buf.ret() != 0:
+            raise RuntimeError(f"{f.name()}: evaluation failed (return code {buf.ret()})")
+        self._stats = dict(buf.stats())
+        return dict(zip(names[1], outs)), self._stats
+
     def stats(self) -> dict[str, Any]:
-        return dict(self.solver.stats())
+        """IPOPT's statistics of the last solve."""
+        return dict(self._stats) if self._stats is not None else dict(self.solver.stats())

@@ -13,6 +13,7 @@ import pinocchio as pin
 import scipy.sparse as sps
 import scipy.sparse.linalg as spsl
 
+from ..codegen import call_dense
 from .bspline import knot_values
 from .build import TermData
 from .collision_term import CollisionAvoidance
@@ -81,6 +82,8 @@ class SplineBackend:
         self.velocity_retries = 2
         # (key, core variables) of the last guess fitted to the user's knots (:meth:`_guess`)
         self._fitted: tuple[tuple[Any, ...], np.ndarray] | None = None
+        # the violation of a fixed knot's rows by (family, knot, kernel inputs and bounds) (:meth:`_constant_rows`)
+        self._constant_memo: dict[tuple[str, int, bytes], float] = {}
 
     # ------------------------------------------------------------------ structure
     def prepare(self) -> None:
@@ -88,6 +91,7 @@ class SplineBackend:
         prob = self.prob
         t0 = time.perf_counter()
         self._fitted = None   # the boundary terms may have changed: fit the guess again
+        self._constant_memo = {}   # the families (their kernels and bounds) are made again
         params: list[Parameter] = prob._params
         npar = sum(p.size for p in params)
         core = SplineCore(prob.robot, prob.N, prob.free_time, prob.n_sub, npar)
@@ -257,8 +261,14 @@ class SplineBackend:
             for f in self.fams:
                 if f.kind != "knot" or f.cost or f.fn is None or f.name in self.fixed or k not in f.points:
                     continue
-                v = np.asarray(f.fn(core.knot_inputs(x, p, k, False))).ravel()
-                viol = float(np.max(np.maximum(np.maximum(f.lower - v, v - f.upper), 0.0), initial=0.0))
+                inputs = np.asarray(core.knot_inputs(x, p, k, False), float)
+                # a kernel is a function of its inputs: the same inputs and bounds, the same violation
+                key = (f.name, k, inputs.tobytes() + np.asarray(f.lower, float).tobytes() + np.asarray(f.upper, float).tobytes())
+                viol = self._constant_memo.get(key)
+                if viol is None:
+                    v = np.asarray(f.fn(inputs)).ravel()
+                    viol = float(np.max(np.maximum(np.maximum(f.lower - v, v - f.upper), 0.0), initial=0.0))
+                    self._constant_memo[key] = viol
                 if viol <= tol:
                     out.setdefault(f.name, set()).add(k)
                     self.constant_violation = max(self.constant_violation, viol)
@@ -385,7 +395,10 @@ class SplineBackend:
         if not prob.robot.is_floating:
             return np.zeros(3)
         model = prob.robot.model
-        c = pin.centerOfMass(model, model.createData(), np.r_[np.zeros(6), 1.0, q_start])
+        full = np.zeros(model.nq)
+        full[6] = 1.0
+        full[7:] = q_start
+        c = pin.centerOfMass(model, prob.robot.data, full)
         return prob.base0.translation + prob.base0.rotation @ c
 
     def guess(self, T: float) -> np.ndarray:
@@ -538,14 +551,14 @@ class SplineBackend:
         core, prob = self.core, self.prob
         assert core is not None
         x = np.array(out.x, float)
-        g = np.array(st["gfun"](x, p)).ravel()
+        g = call_dense(st["gfun"], x, p)[0].ravel()
         vv = np.maximum(np.maximum(lbg - g, g - ubg), 0.0)
         viol = float(vv.max()) if vv.size else 0.0
         viol = max(viol, float(np.max(np.maximum(np.maximum(lbx - x, x - ubx), 0.0))))
         if not np.isfinite(viol):
             viol = float("inf")
         terms: dict[str, float] = {}
-        c = np.array(st["cfun"](x, p)).ravel()
+        c = call_dense(st["cfun"], x, p)[0].ravel()
         for h in prob._handles:
             fs = self.owner.get(h.name, [])
             if h.role == "cost":
@@ -565,7 +578,7 @@ class SplineBackend:
         terms["dynamics"] = max(dyn) if dyn else 0.0
         T = core.duration_of(x, prob.duration)
         P = core.control_points(x)
-        kv = knot_values(P, T / core.N)
+        kv = knot_values(P, T / core.N, core.M)
         bq = bp = None
         if core.fl:
             bq, bp = base_placements(core, kv["q"], core.knot_xi(x), prob.base0, p[core.p_c0:core.p_c0 + 3])
