@@ -245,6 +245,9 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--json", help="write the rows as JSON to this path")
     mo.add_argument("--repeat", type=int, default=1,
                     help="warm problems per task (median and spread of wall and CPU time; default 1)")
+    mo.add_argument("--resolves", type=int, default=1,
+                    help="rounds of re-solves per warm problem (from its solution, again, after set_value); "
+                         "their overhead besides IPOPT as a distribution when > 1 (default 1)")
     mo.add_argument("--peer", choices=["rockit"], help="also the tasks rockit can write, in rockit (extra 'rockit')")
     mo.set_defaults(func=_cmd_bench_modelling)
 

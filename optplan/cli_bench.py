@@ -128,7 +128,7 @@ def _cmd_bench_modelling(args) -> int:
     argv = ["--tasks", args.tasks] + (["--warm-cache"] if args.warm_cache else []) + (["--json", args.json]
                                                                                       if args.json else [])
     argv += ["--peer", args.peer] if args.peer else []
-    argv += ["--repeat", str(args.repeat)]
+    argv += ["--repeat", str(args.repeat), "--resolves", str(args.resolves)]
     return main(argv)
 
 
