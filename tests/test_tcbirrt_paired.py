@@ -1,0 +1,60 @@
+"""The paired TCBiRRT benchmark (optplan.bench.tcbirrt_paired): the object's path length against Pinocchio FK of
+the returned configurations, and the paired statistics against counts made by hand."""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.bench.tcbirrt_paired import paired_summary, run_query, task_length
+
+
+def test_task_length_of_known_poses():
+    """1 m along x in 10 steps while turning 0.5 rad about z; configurations without the object (None) skipped."""
+    poses = [pin.SE3(pin.exp3(np.array([0.0, 0.0, 0.05 * k])), np.array([0.1 * k, 0.0, 0.0])) for k in range(11)]
+    tr, rot = task_length(poses[:4] + [None, None] + poses[4:])
+    assert tr == pytest.approx(1.0, abs=1e-12) and rot == pytest.approx(0.5, abs=1e-12)
+    assert task_length([None, poses[0]]) == (0.0, 0.0)
+
+
+def test_run_query_lengths_match_forward_kinematics(tcb):
+    """Both planners solve ssps_scene1's trial 0; the path's object length recomputed by Pinocchio FK of arm A's hand
+    at its held configurations agrees with the recorded one (IK tolerance), and the joint length is the path's."""
+    from optplan.bench.tcbirrt import _W
+    from optplan.scene import Scene
+    from optplan.tasks import object_pose
+
+    out = run_query("ssps_scene1", 0, 0, 10.0)
+    assert set(out) == {"a", "b"} and all(out[k]["success"] for k in out)
+    w = _W["ssps_scene1"]
+    t = w["gen"].generate(0, 0)
+    pl = w["planners"]["tcbirrt:variant=improved:branch_roots=false"]
+    res = pl.plan(t.q_start, t.q_goal, time_limit=10.0, seed=t.seed, clock="cpu")
+    assert res.success
+    sc = Scene.load("ssps_scene1")
+    held = [M if c else None for M, c in zip(res.object_poses, res.constrained)]
+    fk = [object_pose(tcb, sc, q, "A") if c else None for q, c in zip(res.path, res.constrained)]
+    tr, rot = task_length(res.object_poses)
+    assert task_length(held) == pytest.approx((tr, rot), abs=1e-9)   # a pose during a regrasp is the held one's
+    tr_fk, rot_fk = task_length(fk)
+    n = int(np.sum(res.constrained))
+    assert tr == pytest.approx(tr_fk, abs=2e-3 * n) and rot == pytest.approx(rot_fk, abs=2e-3 * n)
+    assert tr > 0.1
+
+
+def _row(group, a, b, ca=1.0, cb=1.0, la=10.0, lb=10.0):
+    q = lambda ok, c, L: {"success": ok, "status": "exact" if ok else "timeout", "cpu_s": c, "iterations": 1,  # noqa: E731
+                          "joint_len": L, "task_len_m": L / 10, "task_rot_rad": L / 20, "n_regrasp": 2, "n_conf": 5}
+    return {"group": group, "a": q(a, ca, la), "b": q(b, cb, lb)}
+
+
+def test_paired_summary_counts():
+    rows = [_row("bay", False, True, 5.0, 1.0), _row("bay", False, True, 5.0, 2.0), _row("bay", True, False, 0.5, 5.0),
+            _row("wall", True, True, 1.0, 0.5, 10.0, 12.0), _row("wall", True, True, 2.0, 1.0, 10.0, 12.0),
+            {"group": "wall", "skipped": True}]
+    s = paired_summary(rows, 5.0)
+    assert "indices without a certified draw 1" in s
+    assert "all: 5 queries; success a 3/5, b 4/5 (b wins 2, loses 1;" in s
+    assert "bay: 3 queries; success a 1/3, b 2/3 (b wins 2, loses 1;" in s
+    assert "joint length [rad]: median a 10.00, b 12.00; b/a geometric mean 1.200" in s
+    assert "failures: {'a timeout': 2, 'b timeout': 1}" in s
