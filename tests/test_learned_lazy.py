@@ -162,3 +162,18 @@ def test_lpo_repairs_every_interval_th_meeting_from_the_first(monkeypatch):
     flags.clear()
     LL._join(pl, None, 0, None, 0, st, None, None)
     assert flags == [False]
+
+
+def test_cdf_tree_measures_in_the_prior_cdf():
+    """With the CDF metric the nearest node and the distance are those of Φ(z) (Park et al.'s ``distance_z``)."""
+    import math
+
+    t = LazyLatentTree(np.array([3.0]), np.zeros(2), 0.9, metric="cdf")
+    t.add_latent(np.array([-0.5]), 0.9, 0)
+    lin = LazyLatentTree(np.array([3.0]), np.zeros(2), 0.9)
+    lin.add_latent(np.array([-0.5]), 0.9, 0)
+    z = np.array([0.8])
+    phi = [0.5 * (1.0 + math.erf(x / math.sqrt(2.0))) for x in (0.8, 3.0)]
+    assert t.nearest(z) == 0 and lin.nearest(z) == 1
+    assert t.distance(0, z) == pytest.approx(abs(phi[1] - phi[0]), abs=1e-12)
+    assert lin.distance(0, z) == pytest.approx(2.2)

@@ -53,9 +53,12 @@ class LazyLatentTree:
     node, whose ``Z`` is its configuration's encoding), ``alive``, ``parent``, ``children`` and ``edge`` (the
     projected points from the parent's configuration to the node's)."""
 
-    def __init__(self, z: np.ndarray, q: np.ndarray, p: float, cap: int = 1024) -> None:
+    def __init__(self, z: np.ndarray, q: np.ndarray, p: float, cap: int = 1024, metric: str = "linear") -> None:
+        self.metric = metric   # the latent distance: "linear" (Euclidean in z) or "cdf" (Euclidean in Φ(z))
         self._Z = np.full((cap, len(z)), _FAR)
         self._Z[0] = z
+        self._M = np.full((cap, len(z)), _FAR)   # the nodes in the metric's coordinates
+        self._M[0] = self.coords(z)
         self.n = 1
         self.Q: list[np.ndarray | None] = [q]
         self.P = [p]
@@ -72,12 +75,22 @@ class LazyLatentTree:
     def Z(self) -> np.ndarray:
         return self._Z[:self.n]
 
+    def coords(self, z: np.ndarray) -> np.ndarray:
+        """``z`` in the coordinates of the tree's latent metric (``z`` itself, or ``Φ(z)`` for ``"cdf"``)."""
+        return np.asarray(ndtr(z), dtype=float) if self.metric == "cdf" else z
+
+    def distance(self, i: int, z: np.ndarray) -> float:
+        """The latent distance from node ``i`` to ``z`` [latent units, or prior-CDF units for ``"cdf"``]."""
+        return float(np.linalg.norm(self.coords(z) - self._M[i]))
+
     def _append(self, z: np.ndarray, q: np.ndarray | None, p: float, parent: int, edge: list[np.ndarray],
                 checked: bool, decoded: bool) -> int:
         if self.n == len(self._Z):
             self._Z = np.concatenate([self._Z, np.full_like(self._Z, _FAR)])
+            self._M = np.concatenate([self._M, np.full_like(self._M, _FAR)])
         i = self.n
         self._Z[i] = z
+        self._M[i] = self.coords(z)
         self.n += 1
         self.Q.append(q)
         self.P.append(p)
@@ -104,6 +117,7 @@ class LazyLatentTree:
 
     def set_valid(self, i: int, z: np.ndarray, q: np.ndarray, edge: list[np.ndarray], p: float) -> None:
         self._Z[i] = z
+        self._M[i] = self.coords(z)
         self.Q[i], self.edge[i], self.P[i], self.checked[i], self.decoded[i] = q, edge, p, True, True
         self.verified.append(i)
 
@@ -116,6 +130,7 @@ class LazyLatentTree:
                 continue
             self.alive[k] = False
             self._Z[k] = _FAR
+            self._M[k] = _FAR
             stack.extend(self.children[k])
             count += 1
         par = self.parent[i]
@@ -128,7 +143,8 @@ class LazyLatentTree:
         return sum(self.alive)
 
     def nearest(self, z: np.ndarray) -> int:
-        d = self.Z - z
+        """The node nearest to ``z`` in the tree's latent metric."""
+        d = self._M[:self.n] - self.coords(z)
         return int(np.argmin(np.einsum("ij,ij->i", d, d)))
 
     def nearest_q(self, q: np.ndarray) -> tuple[int, float]:
@@ -273,8 +289,7 @@ def _grow(pl: Any, tree: LazyLatentTree, z_target: np.ndarray, other: LazyLatent
     and the latent jump that follows reached ``other``."""
     o = pl.options
     i = tree.nearest(z_target)
-    d = z_target - tree.Z[i]
-    dist = float(np.linalg.norm(d))
+    dist = tree.distance(i, z_target)
     if dist < 1e-12:
         return "reached", i, None
     reached = dist <= o.latent_step
@@ -374,7 +389,7 @@ def plan_lazy(pl: Any, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadli
     roots = []
     for q in (q_start, q_goal):
         z = pl.cvae.encode(q)
-        roots.append(LazyLatentTree(z, q, float(pl.classifier.probability(z))))
+        roots.append(LazyLatentTree(z, q, float(pl.classifier.probability(z)), metric=o.latent_interpolation))
     ta, tb = roots
     st["start_root_probability"], st["goal_root_probability"] = ta.P[0], tb.P[0]
     a_is_start, found = True, None

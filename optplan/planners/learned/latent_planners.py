@@ -140,11 +140,11 @@ class LatentSampling(CBiRRT2):
 class LCBiRRTOptions:
     """Options of :class:`LCBiRRT` (LCBiRRT, and LCBiRRT-LPO with ``lpo=True``)."""
 
-    #: Largest latent step of an extension [latent units, standard normal prior] (Park et al.'s: 0.1; the eager
-    #: variant was measured with 0.3).
+    #: Largest latent step of an extension [latent units; prior-CDF units with ``latent_interpolation="cdf"``]
+    #: (Park et al.'s: 0.1 in the prior's CDF; the eager variant and the linear metric were measured with 0.3).
     latent_step: float = 0.1
-    #: How a lazy step interpolates toward its target: ``"cdf"`` on the straight line between the prior's CDF images
-    #: (Park et al.'s), ``"linear"`` in the latent space itself [-].
+    #: The lazy trees' latent metric: ``"cdf"`` — distances, nearest nodes and steps between the prior's CDF images
+    #: ``Φ(z)`` (Park et al.'s), ``"linear"`` — in the latent space itself [-].
     latent_interpolation: str = "cdf"
     #: Probability per iteration of one joint-space step of a tree toward a uniform random configuration (lazy
     #: growth; Park et al.'s: 0.001) [-].
