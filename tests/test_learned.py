@@ -98,7 +98,8 @@ def test_settings_are_validated():
         with pytest.raises(ValueError, match=next(iter(bad))):
             CVAESettings(**bad)
     for bad in ({"latent_step": 0.0}, {"classifier_threshold": 1.0}, {"lpo_interval": 0}, {"lpo": "yes"},
-                {"cvae_epochs": 0}, {"lpo_clearance": -1.0}, {"data_task_fraction": 1.5}):
+                {"cvae_epochs": 0}, {"lpo_clearance": -1.0}, {"data_task_fraction": 1.5},
+                {"latent_interpolation": "spline"}, {"random_growth": 1.5}, {"random_growth": True}):
         with pytest.raises(ValueError, match=next(iter(bad))):
             LCBiRRTOptions(**bad)
     with pytest.raises(ValueError, match="data_task_fraction"):

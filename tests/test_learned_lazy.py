@@ -86,3 +86,94 @@ def test_learned_ends_refuses_bad_arguments(capsys):
     assert main(["--trials", "0"]) == 2
     assert main(["--data-task-fraction", "1.5"]) == 2
     assert "--data-task-fraction in [0, 1] (got 1.5)" in capsys.readouterr().err
+
+
+def test_cdf_step_is_a_straight_line_in_the_prior_cdf():
+    """Park et al.'s latent step: Φ of the interpolated vector is the same fraction of the way between Φ of the two
+    ends, coordinate by coordinate (Φ from math.erf, independent of scipy's ndtr)."""
+    import math
+
+    from optplan.planners.learned.latent_lazy import _toward
+
+    phi = np.vectorize(lambda x: 0.5 * (1.0 + math.erf(x / math.sqrt(2.0))))
+    a, b = np.array([-2.0, 0.0, 0.5, 1.5]), np.array([1.0, 0.3, 0.5, -2.5])
+    for r in (0.0, 0.1, 0.5, 1.0):
+        z = _toward(a, b, r, "cdf")
+        np.testing.assert_allclose(phi(z), (1 - r) * phi(a) + r * phi(b), atol=1e-12)
+        np.testing.assert_allclose(_toward(a, b, r, "linear"), a + r * (b - a), atol=1e-15)
+    z = _toward(a, b, 0.1, "cdf")
+    assert np.all((z - a) * (b - a) >= 0)   # every coordinate moves toward the target
+
+
+class _FakeLPO:
+    """A stand-in planner whose decodings follow a script: 'p' a failed projection, 'c' a collision, 'v' valid."""
+
+    class _Dist:
+        def value_and_gradient(self, z):
+            return 0.0, np.ones_like(z)
+
+    def __init__(self, script, interval=3):
+        import types
+
+        self.options = types.SimpleNamespace(lpo_iterations=10, lpo_gamma=0.8, lpo_interval=interval)
+        self.distance = self._Dist()
+        self.script = list(script)
+        self.calls = 0
+
+    def _config(self, z, z_near, near, st):
+        self.calls += 1
+        what = self.script.pop(0)
+        if what == "p":
+            st["projection_failures"] += 1
+            return None
+        if what == "c":
+            st["collisions"] += 1
+            return None
+        return z.copy()
+
+
+def test_lpo_repair_stops_at_a_failed_projection_and_keeps_the_first_valid_step():
+    from optplan.planners.learned.latent_lazy import _repair
+
+    st = dict.fromkeys(("projection_failures", "collisions", "lpo_nodes", "lpo_moves"), 0)
+    pl = _FakeLPO("ccv")
+    z, q = _repair(pl, np.zeros(2), st)
+    np.testing.assert_allclose(z, [2.4, 2.4])   # three steps of γ · ∇d = 0.8 · 1
+    assert pl.calls == 3 and st["lpo_moves"] == 1
+    pl = _FakeLPO("cpv")
+    assert _repair(pl, np.zeros(2), st) is None and pl.calls == 2   # abandoned at the failed projection
+    pl = _FakeLPO("c" * 10)
+    assert _repair(pl, np.zeros(2), st) is None and pl.calls == 10   # N_max steps at most
+    assert st["lpo_nodes"] == 3 and st["lpo_moves"] == 1
+
+
+def test_lpo_repairs_every_interval_th_meeting_from_the_first(monkeypatch):
+    import optplan.planners.learned.latent_lazy as LL
+
+    flags = []
+    monkeypatch.setattr(LL, "_validate", lambda pl, t, i, st, dl, repair=False: (flags.append(repair), (False, 0))[1])
+    monkeypatch.setattr(LL, "_jump", lambda *a: None)
+    st = {"meetings": 0, "lpo_checks": 0}
+    pl = _FakeLPO("", interval=3)
+    for _ in range(7):
+        assert LL._join(pl, None, 0, None, 0, st, None, None) is None
+    assert flags == [True, False, False, True, False, False, True] and st["lpo_checks"] == 3
+    pl.distance = None   # LCBiRRT: never
+    flags.clear()
+    LL._join(pl, None, 0, None, 0, st, None, None)
+    assert flags == [False]
+
+
+def test_cdf_tree_measures_in_the_prior_cdf():
+    """With the CDF metric the nearest node and the distance are those of Φ(z) (Park et al.'s ``distance_z``)."""
+    import math
+
+    t = LazyLatentTree(np.array([3.0]), np.zeros(2), 0.9, metric="cdf")
+    t.add_latent(np.array([-0.5]), 0.9, 0)
+    lin = LazyLatentTree(np.array([3.0]), np.zeros(2), 0.9)
+    lin.add_latent(np.array([-0.5]), 0.9, 0)
+    z = np.array([0.8])
+    phi = [0.5 * (1.0 + math.erf(x / math.sqrt(2.0))) for x in (0.8, 3.0)]
+    assert t.nearest(z) == 0 and lin.nearest(z) == 1
+    assert t.distance(0, z) == pytest.approx(abs(phi[1] - phi[0]), abs=1e-12)
+    assert lin.distance(0, z) == pytest.approx(2.2)

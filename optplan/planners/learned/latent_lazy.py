@@ -1,29 +1,35 @@
 """LCBiRRT's lazy latent trees (Park et al. 2024), the growth :class:`~.latent_planners.LCBiRRT` uses by default.
 
-The two trees grow **in the latent space alone**: a step (``latent_step``) is added when the latent validity
-classifier accepts it, without decoding, projecting or collision-checking it. When a connect extension of one
-tree reaches the other tree's new latent vector, the two branches that meet there are **validated lazily**, from
-the roots outward: each unchecked node's configuration is ``project(decode(z))``, collision-checked, and joined
-to its parent's configuration by the constrained local planner. A node that fails is removed with its subtree;
-with LPO (Zhang et al. 2025) it is first moved by gradient ascent on the learned distance,
-``z ← z + γ ∇d(z)`` (at most ``lpo_iterations`` steps, kept at the first step whose projection is valid and whose
-edge to the parent holds). From the last valid node of a failed branch a **latent jump** follows: a constrained
+The two trees grow **in the latent space alone**: a step (``latent_step``, interpolated in the prior's CDF as Park
+et al.'s) is added when the latent validity classifier accepts it, without decoding, projecting or collision-checking
+it. When a connect extension of one tree reaches the other tree's new latent vector, the two branches that meet there
+are **validated lazily**, from the roots outward: each unchecked node's configuration is ``project(decode(z))``,
+collision-checked, and joined to its parent's configuration by the constrained local planner. A node that fails is
+removed with its subtree. From the last valid node of a failed branch a **latent jump** follows: a constrained
 joint-space extension of at most ``jump_steps`` steps of ``joint_step`` rad toward the other tree's nearest
 verified configuration, whose nodes enter the tree with their encodings (and lead the latent tree into the
 encoder's image of a new region). When both branches hold, the trees are joined where they met (the same latent
 vector: the same configuration when both are decodings) or, when one end is a root or jump node, by a
 constrained joint-space connect between the two configurations; a jump that reaches the other tree's
-configuration joins them too.
+configuration joins them too. With probability ``random_growth`` per iteration a tree also takes one joint-space
+step toward a uniform random configuration (Park et al.'s).
+
+LPO (Zhang et al. 2025), as its authors' code: every ``lpo_interval``-th meeting (the first included) the two
+branches are validated with the **repair** — a node whose projection holds but collides is moved by gradient
+ascent on the learned distance, ``z ← z + γ ∇d(z)`` (at most ``lpo_iterations`` steps, kept at the first
+collision-free projection, abandoned at the first failed projection), and an edge that fails is cut every
+``collision_step`` rad and its cuts moved the same way. The other meetings are checked as LCBiRRT's. (Their LPO
+code also turns the latent jump off; here it stays on, without it no start tree grows on our scenes.)
 
 Where the classifier scores a verified node (a root, a jump node, a validated node) below the threshold it is
 known to be wrong there (``classifier_trusts_verified``): a step out of such a node is then not refused but
-validated at once, so that a tree can leave a start the classifier calls invalid.
+validated at once (without the repair), so that a tree can leave a start the classifier calls invalid.
 
-What the reference implementations add that this one does not: their random joint-space growth (one iteration
-in 1000) and the LPO authors' periodic whole-path check. Counters (``stats``): ``latent_nodes`` added,
-``validations`` of branches and ``validation_failures`` with their reason (``projection_failures``,
-``collisions``, ``edge_failures``), ``validated_nodes`` / ``validated_valid`` (how often a decoded node near the
-trees' frontier is valid), ``removed_nodes``, ``latent_jumps`` and the jump nodes, ``lpo_nodes`` / ``lpo_moves``.
+Counters (``stats``): ``latent_nodes`` added, ``meetings`` and ``validations`` of branches and
+``validation_failures`` with their reason (``projection_failures``, ``collisions``, ``edge_failures``),
+``validated_nodes`` / ``validated_valid`` (how often a decoded node near the trees' frontier is valid),
+``removed_nodes``, ``latent_jumps`` and the jump nodes, ``random_growths``; LPO: ``lpo_checks`` (meetings checked
+with the repair), ``lpo_nodes`` / ``lpo_moves`` (repairs tried / kept), ``lpo_edges`` / ``lpo_edge_moves``.
 """
 from __future__ import annotations
 
@@ -31,8 +37,10 @@ import math
 from typing import Any
 
 import numpy as np
+from scipy.special import ndtr, ndtri
 
 from ..base import Deadline
+from ..manifold_samples import project_onto_chain
 
 __all__ = ["LazyLatentTree", "plan_lazy"]
 
@@ -45,9 +53,12 @@ class LazyLatentTree:
     node, whose ``Z`` is its configuration's encoding), ``alive``, ``parent``, ``children`` and ``edge`` (the
     projected points from the parent's configuration to the node's)."""
 
-    def __init__(self, z: np.ndarray, q: np.ndarray, p: float, cap: int = 1024) -> None:
+    def __init__(self, z: np.ndarray, q: np.ndarray, p: float, cap: int = 1024, metric: str = "linear") -> None:
+        self.metric = metric   # the latent distance: "linear" (Euclidean in z) or "cdf" (Euclidean in Φ(z))
         self._Z = np.full((cap, len(z)), _FAR)
         self._Z[0] = z
+        self._M = np.full((cap, len(z)), _FAR)   # the nodes in the metric's coordinates
+        self._M[0] = self.coords(z)
         self.n = 1
         self.Q: list[np.ndarray | None] = [q]
         self.P = [p]
@@ -64,12 +75,22 @@ class LazyLatentTree:
     def Z(self) -> np.ndarray:
         return self._Z[:self.n]
 
+    def coords(self, z: np.ndarray) -> np.ndarray:
+        """``z`` in the coordinates of the tree's latent metric (``z`` itself, or ``Φ(z)`` for ``"cdf"``)."""
+        return np.asarray(ndtr(z), dtype=float) if self.metric == "cdf" else z
+
+    def distance(self, i: int, z: np.ndarray) -> float:
+        """The latent distance from node ``i`` to ``z`` [latent units, or prior-CDF units for ``"cdf"``]."""
+        return float(np.linalg.norm(self.coords(z) - self._M[i]))
+
     def _append(self, z: np.ndarray, q: np.ndarray | None, p: float, parent: int, edge: list[np.ndarray],
                 checked: bool, decoded: bool) -> int:
         if self.n == len(self._Z):
             self._Z = np.concatenate([self._Z, np.full_like(self._Z, _FAR)])
+            self._M = np.concatenate([self._M, np.full_like(self._M, _FAR)])
         i = self.n
         self._Z[i] = z
+        self._M[i] = self.coords(z)
         self.n += 1
         self.Q.append(q)
         self.P.append(p)
@@ -96,6 +117,7 @@ class LazyLatentTree:
 
     def set_valid(self, i: int, z: np.ndarray, q: np.ndarray, edge: list[np.ndarray], p: float) -> None:
         self._Z[i] = z
+        self._M[i] = self.coords(z)
         self.Q[i], self.edge[i], self.P[i], self.checked[i], self.decoded[i] = q, edge, p, True, True
         self.verified.append(i)
 
@@ -108,6 +130,7 @@ class LazyLatentTree:
                 continue
             self.alive[k] = False
             self._Z[k] = _FAR
+            self._M[k] = _FAR
             stack.extend(self.children[k])
             count += 1
         par = self.parent[i]
@@ -120,7 +143,8 @@ class LazyLatentTree:
         return sum(self.alive)
 
     def nearest(self, z: np.ndarray) -> int:
-        d = self.Z - z
+        """The node nearest to ``z`` in the tree's latent metric."""
+        d = self._M[:self.n] - self.coords(z)
         return int(np.argmin(np.einsum("ij,ij->i", d, d)))
 
     def nearest_q(self, q: np.ndarray) -> tuple[int, float]:
@@ -149,36 +173,76 @@ class LazyLatentTree:
 
 
 def _repair(pl: Any, z: np.ndarray, st: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
-    """LPO's node repair: gradient ascent on the learned distance from ``z`` until the projected decoding is valid."""
+    """LPO's node repair (the LPO authors' ``node_dis``): gradient ascent on the learned distance from ``z``,
+    ``z ← z + γ ∇d(z)``, at most ``lpo_iterations`` steps; kept at the first step whose projected decoding is
+    collision-free, abandoned at the first step whose projection fails. ``(z, q)`` or None."""
     o = pl.options
     st["lpo_nodes"] += 1
     for _ in range(o.lpo_iterations):
         _, grad = pl.distance.value_and_gradient(z)
         z = z + o.lpo_gamma * grad
+        failed = st["projection_failures"]
         q = pl._config(z, z, z, st)
         if q is not None:
+            st["lpo_moves"] += 1
             return z, q
+        if st["projection_failures"] > failed:
+            return None
     return None
 
 
+def _repair_edge(pl: Any, q_par: np.ndarray, q: np.ndarray, st: dict[str, Any], deadline: Deadline,
+                 ) -> list[np.ndarray] | None:
+    """LPO's repair of an edge that failed its check (the LPO authors' whole-path check): the segment is cut every
+    ``collision_step`` rad, each cut projected, its encoding moved by :func:`_repair`, and the pieces between the
+    moved configurations checked by the constrained local planner; the edge points (moved configurations included)
+    or None."""
+    o = pl.options
+    lo, hi = pl.robot.lower, pl.robot.upper
+    st["lpo_edges"] += 1
+    n = max(1, int(float(np.linalg.norm(q - q_par)) / o.collision_step))
+    pts = [q_par]
+    for j in range(n):
+        x = project_onto_chain(pl.kin, q_par + (j + 1) / (n + 1) * (q - q_par), lo, hi, o.tolerance)
+        if x is None:
+            return None
+        moved = _repair(pl, pl.cvae.encode(x), st)
+        if moved is None:
+            return None
+        pts.append(moved[1])
+    pts.append(q)
+    out: list[np.ndarray] = []
+    for a, b in zip(pts[:-1], pts[1:]):
+        if deadline.expired():
+            return None
+        e = pl._edge(a, b, st, deadline)
+        if e is None:
+            return None
+        out += [*e, b]
+    st["lpo_edge_moves"] += 1
+    return out[:-1]
+
+
 def _check_node(pl: Any, z: np.ndarray, q_par: np.ndarray, st: dict[str, Any], deadline: Deadline,
-                ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None:
-    """A node's real check: ``project(decode(z))`` valid and joined to ``q_par`` by the constrained local planner;
-    with LPO, a failing node repaired by :func:`_repair`. ``(z, q, edge points)`` or None."""
+                repair: bool = False) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None:
+    """A node's real check: ``project(decode(z))`` valid and joined to ``q_par`` by the constrained local planner.
+    With ``repair`` (LPO's whole-path check): a node whose projection holds but collides is moved by
+    :func:`_repair`, and an edge that fails is repaired by :func:`_repair_edge`; a failed projection is not
+    repaired (as the LPO authors'). ``(z, q, edge points)`` or None."""
     st["validated_nodes"] += 1
+    failed = st["projection_failures"]
     q = pl._config(z, z, z, st)
+    if q is None and repair and st["projection_failures"] == failed:
+        moved = _repair(pl, z, st)
+        if moved is not None:
+            z, q = moved
     edge = None
     if q is not None:
         edge = pl._edge(q_par, q, st, deadline)
         if edge is None:
             st["edge_failures"] += 1
-    if edge is None and pl.distance is not None:
-        fixed = _repair(pl, z, st)
-        if fixed is not None:
-            z, q = fixed
-            edge = pl._edge(q_par, q, st, deadline)
-            if edge is not None:
-                st["lpo_moves"] += 1
+            if repair:
+                edge = _repair_edge(pl, q_par, q, st, deadline)
     if edge is None or q is None:
         st["validation_failures"] += 1
         return None
@@ -186,9 +250,10 @@ def _check_node(pl: Any, z: np.ndarray, q_par: np.ndarray, st: dict[str, Any], d
     return z, q, edge
 
 
-def _validate(pl: Any, tree: LazyLatentTree, i: int, st: dict[str, Any], deadline: Deadline) -> tuple[bool, int]:
-    """Validate the branch from the root to node ``i``; ``(True, i)`` or ``(False, last valid node)`` after removing
-    the first node that fails (and its subtree)."""
+def _validate(pl: Any, tree: LazyLatentTree, i: int, st: dict[str, Any], deadline: Deadline,
+              repair: bool = False) -> tuple[bool, int]:
+    """Validate the branch from the root to node ``i`` (with ``repair``: LPO's whole-path check, :func:`_check_node`);
+    ``(True, i)`` or ``(False, last valid node)`` after removing the first node that fails (and its subtree)."""
     st["validations"] += 1
     path = tree.path_to(i)
     for k in path[1:]:
@@ -199,13 +264,22 @@ def _validate(pl: Any, tree: LazyLatentTree, i: int, st: dict[str, Any], deadlin
         par = tree.parent[k]
         q_par = tree.Q[par]
         assert q_par is not None
-        got = _check_node(pl, tree.Z[k].copy(), q_par, st, deadline)
+        got = _check_node(pl, tree.Z[k].copy(), q_par, st, deadline, repair)
         if got is None:
             st["removed_nodes"] += tree.remove(k)
             return False, par
         z, q, edge = got
         tree.set_valid(k, z, q, edge, float(pl.classifier.probability(z)))
     return True, i
+
+
+def _toward(z_from: np.ndarray, z_to: np.ndarray, ratio: float, how: str) -> np.ndarray:
+    """The latent vector ``ratio`` of the way from ``z_from`` to ``z_to``: on the straight line (``"linear"``) or,
+    as Park et al.'s, on the straight line between the two vectors' images under the prior's CDF, mapped back
+    (``"cdf"``: each coordinate ``Φ⁻¹((1 − ratio) Φ(a) + ratio Φ(b))``, so that a step covers equal prior mass)."""
+    if how == "linear":
+        return z_from + ratio * (z_to - z_from)
+    return np.asarray(ndtri((1.0 - ratio) * ndtr(z_from) + ratio * ndtr(z_to)), dtype=float)
 
 
 def _grow(pl: Any, tree: LazyLatentTree, z_target: np.ndarray, other: LazyLatentTree, st: dict[str, Any],
@@ -215,12 +289,11 @@ def _grow(pl: Any, tree: LazyLatentTree, z_target: np.ndarray, other: LazyLatent
     and the latent jump that follows reached ``other``."""
     o = pl.options
     i = tree.nearest(z_target)
-    d = z_target - tree.Z[i]
-    dist = float(np.linalg.norm(d))
+    dist = tree.distance(i, z_target)
     if dist < 1e-12:
         return "reached", i, None
     reached = dist <= o.latent_step
-    z = z_target.copy() if reached else tree.Z[i] + (o.latent_step / dist) * d
+    z = z_target.copy() if reached else _toward(tree.Z[i], z_target, o.latent_step / dist, o.latent_interpolation)
     p = float(pl.classifier.probability(z))
     if p < o.classifier_threshold:
         if not (o.classifier_trusts_verified and tree.checked[i] and tree.P[i] < o.classifier_threshold):
@@ -265,11 +338,15 @@ def _jump(pl: Any, ta: LazyLatentTree, i: int, tb: LazyLatentTree, st: dict[str,
 
 def _join(pl: Any, ta: LazyLatentTree, ia: int, tb: LazyLatentTree, ib: int, st: dict[str, Any],
           deadline: Deadline, rng: np.random.Generator) -> tuple[int, int, list[np.ndarray]] | None:
-    """Validate the two branches that met in the latent space and join them (module docstring)."""
-    ok, last = _validate(pl, ta, ia, st, deadline)
+    """Validate the two branches that met in the latent space and join them (module docstring); with LPO, every
+    ``lpo_interval``-th meeting (the first included) validates them with the repair (:func:`_check_node`)."""
+    repair = pl.distance is not None and st["meetings"] % pl.options.lpo_interval == 0
+    st["meetings"] += 1
+    st["lpo_checks"] += repair
+    ok, last = _validate(pl, ta, ia, st, deadline, repair)
     if not ok:
         return _jump(pl, ta, last, tb, st, deadline, rng)
-    ok, last = _validate(pl, tb, ib, st, deadline)
+    ok, last = _validate(pl, tb, ib, st, deadline, repair)
     if not ok:
         found = _jump(pl, tb, last, ta, st, deadline, rng)
         return None if found is None else (found[1], found[0], found[2][::-1])
@@ -306,12 +383,13 @@ def plan_lazy(pl: Any, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadli
     a is the start tree, join or None)`` with the join as in :meth:`~.latent_planners.LCBiRRT._link`."""
     o = pl.options
     for key in ("latent_nodes", "validations", "validation_failures", "validated_nodes", "validated_valid",
-                "edge_failures", "removed_nodes", "sample_rejects", "random_jumps"):
+                "edge_failures", "removed_nodes", "sample_rejects", "random_jumps", "meetings", "lpo_checks",
+                "lpo_edges", "lpo_edge_moves", "random_growths"):
         st[key] = 0
     roots = []
     for q in (q_start, q_goal):
         z = pl.cvae.encode(q)
-        roots.append(LazyLatentTree(z, q, float(pl.classifier.probability(z))))
+        roots.append(LazyLatentTree(z, q, float(pl.classifier.probability(z)), metric=o.latent_interpolation))
     ta, tb = roots
     st["start_root_probability"], st["goal_root_probability"] = ta.P[0], tb.P[0]
     a_is_start, found = True, None
@@ -335,6 +413,12 @@ def plan_lazy(pl: Any, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadli
                 found = _join(pl, ta, ia, tb, ib, st, deadline, rng)
                 if found is not None:
                     break
+        if o.random_growth > 0 and rng.random() < o.random_growth and not deadline.expired():
+            # Park et al.'s occasional joint-space growth: one step from the nearest verified node toward a uniform
+            # random configuration
+            st["random_growths"] += 1
+            q_rand = rng.uniform(pl.robot.lower, pl.robot.upper)
+            pl.connect_q(ta, ta.nearest_q(q_rand)[0], q_rand, st, deadline, max_steps=1)
         ta, tb, a_is_start = tb, ta, not a_is_start
     if not math.isfinite(st["link_gap_min"]):
         st["link_gap_min"] = None

@@ -30,7 +30,8 @@
   space), their successes and the smallest joint-space gap tried (``link_gap_min``).
   ``anchored_decoding`` restores the earlier per-tree decoding ``decode(z) + q_i − decode(z_i)``.
 * :class:`LCBiRRT` with ``lpo=True`` (name ``"lcbirrt-lpo"``) — plus local path optimisation in the
-  latent space (Zhang et al. 2025): every ``lpo_interval`` nodes a tree gains, the newest node and its
+  latent space (Zhang et al. 2025). Lazy (default): every ``lpo_interval``-th meeting of the trees the branches
+  are checked with the LPO authors' repair (:mod:`.latent_lazy`). Eager: every ``lpo_interval`` nodes a tree gains, the newest node and its
   ``lpo_interval − 1`` ancestors (not the root) whose learned distance is below ``lpo_clearance``
   are moved by gradient ascent on the learned distance, ``z ← z + γ ∇d(z)`` (γ = ``lpo_gamma``, at most
   ``lpo_iterations`` steps); a moved node is kept only when its projected configuration is valid and
@@ -139,8 +140,15 @@ class LatentSampling(CBiRRT2):
 class LCBiRRTOptions:
     """Options of :class:`LCBiRRT` (LCBiRRT, and LCBiRRT-LPO with ``lpo=True``)."""
 
-    #: Largest latent step of an extension [latent units, standard normal prior].
-    latent_step: float = 0.3
+    #: Largest latent step of an extension [latent units; prior-CDF units with ``latent_interpolation="cdf"``]
+    #: (Park et al.'s: 0.1 in the prior's CDF; the eager variant and the linear metric were measured with 0.3).
+    latent_step: float = 0.1
+    #: The lazy trees' latent metric: ``"cdf"`` — distances, nearest nodes and steps between the prior's CDF images
+    #: ``Φ(z)`` (Park et al.'s), ``"linear"`` — in the latent space itself [-].
+    latent_interpolation: str = "cdf"
+    #: Probability per iteration of one joint-space step of a tree toward a uniform random configuration (lazy
+    #: growth; Park et al.'s: 0.001) [-].
+    random_growth: float = 0.001
     #: A latent vector with a classifier probability below this is not expanded [-].
     classifier_threshold: float = 0.5
     #: The classifier refuses a step only when it also scores the step's parent node as valid: a node in a tree
@@ -181,9 +189,11 @@ class LCBiRRTOptions:
     lpo_gamma: float = 0.8
     #: N_max: gradient-ascent iterations of one node [count] (the paper: 10).
     lpo_iterations: int = 10
-    #: Optimise every this many new nodes of a tree [count] (the paper: 3).
+    #: Lazy growth: every this many meetings of the trees (the first included) the branches are checked with LPO's
+    #: repair (the LPO authors' whole-path check interval); eager: optimise every this many new nodes [count]
+    #: (the paper's path optimisation interval: 3).
     lpo_interval: int = 3
-    #: Nodes whose learned distance is below this are optimised [m].
+    #: Nodes whose learned distance is below this are optimised (eager variant) [m].
     lpo_clearance: float = 0.05
     #: Clearance counted as contact [m].
     margin: float = 0.0
@@ -240,6 +250,12 @@ class LCBiRRTOptions:
                              f"got {self.classifier_trusts_verified!r}")
         if not isinstance(self.anchored_decoding, bool):
             raise ValueError(f"LCBiRRTOptions.anchored_decoding: expected True/False, got {self.anchored_decoding!r}")
+        if self.latent_interpolation not in ("cdf", "linear"):
+            raise ValueError(f"LCBiRRTOptions.latent_interpolation: expected 'cdf' or 'linear', "
+                             f"got {self.latent_interpolation!r}")
+        if not (isinstance(self.random_growth, (int, float)) and not isinstance(self.random_growth, bool)
+                and 0 <= self.random_growth <= 1):
+            raise ValueError(f"LCBiRRTOptions.random_growth: expected a probability in [0, 1], got {self.random_growth!r}")
         for name in ("lpo", "lazy"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"LCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
