@@ -12,7 +12,9 @@ groups ``suite``, ``stress``, ``panda``: every scene with its own robot). ``repl
 segment kind (constrained / regrasp) as well.
 
 The closed class was retired by docs/decisions/0023-one-stack.md: this comparison runs at commit
-527f399 (the last with ``segment_nlp="closed"``); ``record`` still runs on later commits.
+527f399 (the last with ``segment_nlp="closed"``): run that commit's copy of this file
+(``git show 527f399:docs/studies/segment_nlp_pair.py``). On later commits ``record`` is
+``segment_knotmap.py``'s, which records the same segments.
 
 The machine's load changes CPU times: compare the two implementations within one run only
 (the last repetition's sums; the first pays for kernel loading and structure builds).
@@ -25,52 +27,12 @@ import json
 import pickle
 import time
 
-import numpy as np
+from segment_knotmap import CALLBACKS, ROBOT, SCENES, record  # noqa: E402  (this directory: the same recording)
 
 import optplan.pipeline as PL
 import optplan.problem.nlp as NLP
 from optplan.bench import warmstart as W
 from optplan.pipeline_options import PipelineOptions
-
-ROBOT = "tcbirrt_dual_arm"
-SCENES = ("ssps_scene1", "ssps_scene2", "ssps_scene3")
-CALLBACKS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
-
-
-def record(out: str, trials: int, bench: str = "warmstart", scenes: str = ",".join(SCENES)) -> None:
-    segs: list[dict] = []
-    orig = PL._spline_segment
-    cur: list[tuple[str, int]] = [("", 0)]
-
-    def rec(robot, scene, seg_path, kind, arm, opts, ipopt):
-        segs.append({"scene": scene.name, "path": np.array(seg_path), "kind": kind, "arm": arm,
-                     "ipopt": dict(ipopt), "trial": cur[0]})
-        return orig(robot, scene, seg_path, kind, arm, opts, ipopt)
-
-    PL._spline_segment = rec
-    cfg = W.WarmstartConfig(trials=trials, modes=("warm",), segment_workers=1)
-    names = scenes.split(",")
-    if bench == "generalize":
-        from optplan.bench import generalize as G
-
-        names = G.expand(names)
-        gcfg = G.GeneralizeConfig(trials=trials, progress=False)
-        PL.default_workers = lambda: 1   # one process: the recording sees every segment
-    try:
-        for scene in names:
-            for i in range(trials):
-                cur[0] = (scene, i)
-                if bench == "generalize":
-                    line = G.run_trial(scene, i, gcfg)
-                else:
-                    line = W._run_unit((ROBOT, scene, i, "warm", cfg.time_limit, cfg.seed, None, True, "bspline",
-                                        False, 1, "closed"))
-                print(scene, i, line.get("success"), sum(s["trial"] == cur[0] for s in segs), flush=True)
-    finally:
-        PL._spline_segment = orig
-    with open(out, "wb") as f:
-        pickle.dump(segs, f)
-    print(f"{len(segs)} segments -> {out}")
 
 
 def replay(path: str, reps: int, out: str | None, impls: tuple[str, str] = ("closed", "optproblem")) -> None:
