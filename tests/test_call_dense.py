@@ -39,3 +39,42 @@ def test_sparse_output_and_wrong_sizes():
     np.testing.assert_array_equal(call_dense(g, v)[0], np.diag(v))
     with pytest.raises(RuntimeError):                   # too few numbers: CasADi's error, no read past them
         call_dense(_f().map(5), np.zeros((3, 4)), np.zeros((2, 2)), 1.0, np.zeros((0, 5)))
+
+
+class _NoStats:
+    """A solver wrapper whose function buffer has no ``stats`` (as CasADi 3.6's)."""
+
+    def __init__(self, solver):
+        self._s = solver
+
+    def buffer(self):
+        buf, run = self._s.buffer()
+
+        class B:   # the buffer's calls, without statistics
+            set_arg, set_res, ret = buf.set_arg, buf.set_res, buf.ret
+
+        return B(), run
+
+    def __getattr__(self, name):
+        return getattr(self._s, name)
+
+    def __call__(self, **kw):
+        return self._s(**kw)
+
+
+@pytest.mark.parametrize("no_stats", [False, True])
+def test_ipopt_call_with_and_without_buffer_statistics(no_stats):
+    """The solver gives the same solution and statistics whether IPOPT is called through a buffer or,
+    where the buffer has no statistics (older CasADi), by the ordinary call."""
+    from optplan.problem.nlp import NlpSolver
+
+    x = ca.SX.sym("x", 2)
+    nlp = {"x": x, "f": (x[0] - 1) ** 2 + (x[1] + 2) ** 2, "g": x[0] + x[1]}
+    s = NlpSolver("t", nlp, {"print_level": 0})
+    buffered = hasattr(s.solver.buffer()[0], "stats") and not no_stats   # CasADi 3.6's buffers have none
+    if no_stats:
+        s.solver = _NoStats(s.solver)
+    out = s.solve(np.zeros(2), lbg=[-10.0], ubg=[10.0])
+    np.testing.assert_allclose(np.ravel(out.x), [1.0, -2.0], atol=1e-7)
+    assert out.iterations >= 1 and s.stats()["success"]
+    assert (s._buffer is not False) == buffered

@@ -396,6 +396,8 @@ class NlpSolver:
         if self._buffer is None:
             try:
                 self._buffer = f.buffer()
+                if not hasattr(self._buffer[0], "stats"):   # older CasADi (3.6): no statistics from a buffer
+                    self._buffer = False
             except (AttributeError, NotImplementedError, RuntimeError):
                 self._buffer = False
         if self._buffer is False:
