@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 __all__ = ["Interrupted", "handling", "received", "check", "progress", "finish", "stop_children",
-           "stop_process", "die_with_parent", "worker_init", "SIGNALS", "GRACE_S", "STOP_S"]
+           "stop_process", "die_with_parent", "worker_init", "deferred", "SIGNALS", "GRACE_S", "STOP_S"]
 
 #: the signals handled
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -58,6 +58,7 @@ class _State:
     prog = "optplan"
     watchdog: threading.Timer | None = None
     stream: Any = None   # the stderr the interruption's line goes to
+    defer = 0            # > 0 inside :func:`deferred`: a signal is recorded, raised when the block ends
 
 
 class _QuietAfterSignal:
@@ -89,6 +90,20 @@ def register_stopper(fn: Callable[[], None]) -> None:
 def progress(done: int, total: int, unit: str = "trials") -> None:
     """Record how far the command is, for the interruption's line (``after done of total unit``)."""
     _state.done, _state.total, _state.unit = int(done), int(total), unit
+
+
+@contextlib.contextmanager
+def deferred() -> Iterator[None]:
+    """A block a signal does not cut: one arriving inside is recorded and raised as
+    :class:`Interrupted` when the block ends (writing a result line and counting it in
+    :func:`progress`, so that the interruption's line counts exactly the lines written)."""
+    _state.defer += 1
+    try:
+        yield
+    finally:
+        _state.defer -= 1
+    if _state.defer == 0:
+        check()
 
 
 def received() -> int | None:
@@ -156,6 +171,8 @@ def _handler(signum, frame) -> None:
     _state.watchdog = threading.Timer(GRACE_S, _hard_exit)
     _state.watchdog.daemon = True
     _state.watchdog.start()
+    if _state.defer:   # inside deferred(): raised when that block ends
+        return
     raise Interrupted(signum)
 
 

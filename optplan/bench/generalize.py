@@ -271,7 +271,9 @@ def _run_locked(cfg: GeneralizeConfig) -> list[dict]:
         for k, (s, i) in enumerate(units):
             interrupt.progress(n_all - len(units) + k, n_all, "trials")
             line = run_trial(s, i, cfg)
-            append_line(f, json.dumps(line), path)
+            with interrupt.deferred():   # the line written and the count the interruption prints agree
+                append_line(f, json.dumps(line), path)
+                interrupt.progress(n_all - len(units) + k + 1, n_all, "trials")
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix_str(f"{s} #{i} {'ok' if line.get('success') else line.get('opt_status')}")

@@ -196,7 +196,9 @@ def _run_locked(cfg: OCBenchConfig) -> list[dict]:
             interrupt.progress(len(done) + k, n_all, "trial runs")
             s = setup_scene(sc, cfg.planners)
             line, dense = _run_one(s, sc, p, i, cfg)
-            append_line(f, json.dumps(line), rp)
+            with interrupt.deferred():   # the line written and the count the interruption prints agree
+                append_line(f, json.dumps(line), rp)
+                interrupt.progress(len(done) + k + 1, n_all, "trial runs")
             if cfg.save_dir and dense is not None and (sc, p) not in saved:
                 save_path(cfg.save_dir, sc, p, dense, s["robot"].joint_names, cfg.resolution)
                 saved.add((sc, p))

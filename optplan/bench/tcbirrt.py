@@ -314,10 +314,11 @@ def _run_locked(cfg: BenchConfig, robot_name: str, scenes: list[str], out: Path)
     with open(res_path, "a") as f:
         def write(lines):
             nonlocal n_done
-            for ln in lines:
-                append_line(f, json.dumps(ln), res_path)
-            n_done += len(lines)
-            interrupt.progress(n_done, n_all, "trial runs")
+            with interrupt.deferred():   # the lines written and the count the interruption prints agree
+                for ln in lines:
+                    append_line(f, json.dumps(ln), res_path)
+                n_done += len(lines)
+                interrupt.progress(n_done, n_all, "trial runs")
             if bar is not None:
                 bar.update(len(lines))
                 ok = [ln for ln in lines if ln["success"]]

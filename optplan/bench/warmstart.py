@@ -315,10 +315,11 @@ def _run_locked(cfg: WarmstartConfig, robot_name: str, scenes: list[str], out: P
     with open(res_path, "a") as f:
         def write(line):
             nonlocal n_ok, n_done
-            append_line(f, json.dumps(line), res_path)
-            n_ok += bool(line.get("success"))
-            n_done += 1
-            interrupt.progress(n_done, n_all, "trial runs")
+            with interrupt.deferred():   # the line written and the count the interruption prints agree
+                append_line(f, json.dumps(line), res_path)
+                n_ok += bool(line.get("success"))
+                n_done += 1
+                interrupt.progress(n_done, n_all, "trial runs")
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix_str(f"{line['scene']} #{line['trial']} {line['mode']} "
