@@ -181,8 +181,10 @@ def compare(a: str, b: str) -> None:
               f"{np.median(r):.3f} (quartiles {np.quantile(r, 0.25):.3f} / {np.quantile(r, 0.75):.3f})")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def parser(doc: str) -> tuple[argparse.ArgumentParser, argparse._SubParsersAction, argparse.ArgumentParser]:
+    """The studies' command line: ``record`` (as :func:`record`) and ``replay``; returns the parser,
+    its sub-parsers and the replay parser, for a study to add its own options and commands."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("record")
     r.add_argument("out")
@@ -193,6 +195,16 @@ def main() -> None:
     p.add_argument("segments")
     p.add_argument("--reps", type=int, default=2)
     p.add_argument("--out", default=None)
+    return ap, sub, p
+
+
+def record_from(a: argparse.Namespace) -> None:
+    """:func:`record` with the parsed ``record`` options (default scenes per benchmark)."""
+    record(a.out, a.trials, a.bench, a.scenes or (",".join(SCENES) if a.bench == "warmstart" else "suite,stress,panda"))
+
+
+def main() -> None:
+    ap, sub, p = parser(__doc__)
     p.add_argument("--profile", default=None, help="cProfile of the last repetition (process CPU) to this file")
     p.add_argument("--ipopt", default="", help="extra IPOPT options of every solve: name=value,name=value")
     c = sub.add_parser("compare")
@@ -200,8 +212,7 @@ def main() -> None:
     c.add_argument("b")
     a = ap.parse_args()
     if a.cmd == "record":
-        record(a.out, a.trials, a.bench, a.scenes or (",".join(SCENES) if a.bench == "warmstart"
-                                                       else "suite,stress,panda"))
+        record_from(a)
     elif a.cmd == "replay":
         replay(a.segments, a.reps, a.out, a.profile, a.ipopt)
     else:

@@ -21,13 +21,12 @@ The machine's load changes CPU times: compare the two implementations within one
 """
 from __future__ import annotations
 
-import argparse
 import collections
 import json
 import pickle
 import time
 
-from segment_knotmap import CALLBACKS, ROBOT, SCENES, record  # noqa: E402  (this directory: the same recording)
+from segment_knotmap import CALLBACKS, ROBOT, parser, record_from  # noqa: E402  (this directory: the same recording)
 
 import optplan.pipeline as PL
 import optplan.problem.nlp as NLP
@@ -95,21 +94,10 @@ def replay(path: str, reps: int, out: str | None, impls: tuple[str, str] = ("clo
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("record")
-    r.add_argument("out")
-    r.add_argument("--trials", type=int, default=3)
-    r.add_argument("--bench", choices=["warmstart", "generalize"], default="warmstart")
-    r.add_argument("--scenes", default=None, help="comma-separated scenes (generalize: groups too)")
-    p = sub.add_parser("replay")
-    p.add_argument("segments")
-    p.add_argument("--reps", type=int, default=2)
-    p.add_argument("--out", default=None)
+    ap, _, _ = parser(__doc__)
     a = ap.parse_args()
     if a.cmd == "record":
-        record(a.out, a.trials, a.bench, a.scenes or (",".join(SCENES) if a.bench == "warmstart"
-                                                       else "suite,stress,panda"))
+        record_from(a)
     else:
         replay(a.segments, a.reps, a.out)
 
