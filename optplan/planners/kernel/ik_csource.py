@@ -59,14 +59,13 @@ static void tik_chain_fk(const tcb_ikm *m, int a, const double *q, double *oMi) 
     }
 }
 
-/* the hand of arm a at q against the object pose P (R row-major, p): |e_p|, |e_o|, e = (e_p, e_o) and the
-   hand position (for the Jacobian); oMi holds the chain */
-static void tik_errors(const tcb_ikm *m, int a, const double *q, const double *P, double *oMi, double *e,
+/* the hand of arm a at q against its grasp target G (= P * grasp: R_g = R_o R_G, p_g = p_o + R_o t_G):
+   |e_p|, |e_o|, e = (e_p, e_o) and the hand position (for the Jacobian); oMi holds the chain */
+static void tik_errors(const tcb_ikm *m, int a, const double *q, const double *G, double *oMi, double *e,
                        double *pe, double *np_, double *no_) {
     tik_chain_fk(m, a, q, oMi);
-    double H[12], G[12];
+    double H[12];
     compose(oMi + 12*m->eej[a], m->eeplace + 12*a, H);
-    compose(P, m->grasp + 12*a, G);                  /* R_g = R_o R_G, p_g = p_o + R_o t_G */
     double M[9];                                     /* R^T R_g */
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) M[3*i+j] = H[i]*G[j] + H[3+i]*G[3+j] + H[6+i]*G[6+j];
@@ -106,10 +105,11 @@ static void tik_jacobian(const tcb_ikm *m, int a, const double *oMi, const doubl
     }
 }
 
-/* the damped step of arm a into dq (its columns): J^T (J J^T + d^2 I)^-1 e */
-static void tik_step(const tcb_ikm *m, int a, const double *oMi, const double *e, const double *pe, double d2,
-                     double *dq) {
-    int na = m->na[a];
+/* the damped step of arm a into dq (its columns): J^T (J J^T + d^2 I)^-1 e; na = m->na[a] (inlined with a
+   constant na for the usual 6- and 7-joint arms: the compiler then unrolls the products) */
+static inline __attribute__((always_inline)) void tik_step_n(const tcb_ikm *m, int a, const double *oMi,
+                                                             const double *e, const double *pe, double d2,
+                                                             double *dq, const int na) {
     double J[6*TIK_MAXC];
     tik_jacobian(m, a, oMi, pe, J);
     double A[36], x[6];
@@ -139,15 +139,24 @@ static void tik_step(const tcb_ikm *m, int a, const double *oMi, const double *e
     }
 }
 
+static void tik_step(const tcb_ikm *m, int a, const double *oMi, const double *e, const double *pe, double d2,
+                     double *dq) {
+    int na = m->na[a];
+    if (na == 7) tik_step_n(m, a, oMi, e, pe, d2, dq, 7);
+    else if (na == 6) tik_step_n(m, a, oMi, e, pe, d2, dq, 6);
+    else tik_step_n(m, a, oMi, e, pe, d2, dq, na);
+}
+
 /* Alg. 4 for both arms from seed toward the object pose P: 1 when converged (q in qout); *its = iterations */
 static int tik_solve(const tcb_ikm *m, int nq, const double *seed, const double *P, double damping, double tol_p,
                      double tol_o, double gain, double max_step, int max_it, double *qout, long long *its) {
-    double q[KMAXJ], oMi[2][12*KMAXJ], e[2][6], pe[2][3], dq[TIK_MAXC];
+    double q[KMAXJ], oMi[2][12*KMAXJ], e[2][6], pe[2][3], dq[TIK_MAXC], G[2][12];
     int conv[2];
     memcpy(q, seed, (size_t)nq * sizeof(double));
     for (int a = 0; a < 2; ++a) {
         double ep, eo;
-        tik_errors(m, a, q, P, oMi[a], e[a], pe[a], &ep, &eo);
+        compose(P, m->grasp + 12*a, G[a]);
+        tik_errors(m, a, q, G[a], oMi[a], e[a], pe[a], &ep, &eo);
         conv[a] = ep < tol_p && eo < tol_o;
     }
     long long n = 0;
@@ -172,7 +181,7 @@ static int tik_solve(const tcb_ikm *m, int nq, const double *seed, const double 
         for (int a = 0; a < 2; ++a) {
             if (conv[a]) continue;
             double ep, eo;
-            tik_errors(m, a, q, P, oMi[a], e[a], pe[a], &ep, &eo);
+            tik_errors(m, a, q, G[a], oMi[a], e[a], pe[a], &ep, &eo);
             conv[a] = ep < tol_p && eo < tol_o;
         }
     }
@@ -186,8 +195,9 @@ int tik_solve_api(const tcb_ikm *m, int nq, const double *seed, const double *P,
 
 /* for the tests: the errors (e_p, e_o) and the 6 x na Jacobian (row-major) of arm a at q */
 void tik_jacobian_api(const tcb_ikm *m, int a, const double *q, const double *P, double *e, double *J) {
-    double oMi[12*KMAXJ], pe[3], ep, eo;
-    tik_errors(m, a, q, P, oMi, e, pe, &ep, &eo);
+    double oMi[12*KMAXJ], pe[3], ep, eo, G[12];
+    compose(P, m->grasp + 12*a, G);
+    tik_errors(m, a, q, G, oMi, e, pe, &ep, &eo);
     tik_jacobian(m, a, oMi, pe, J);
 }
 """
