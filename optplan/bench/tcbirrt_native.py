@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["extension_costs", "ik_costs", "lead_path_costs", "loop_costs", "paired_queries", "python_nearest", "main"]
+__all__ = ["extension_costs", "ik_costs", "lead_path_costs", "loop_costs", "regrasp_search_costs", "paired_queries", "python_nearest", "main"]
 
 KINDS = ("native", "python")
 
@@ -229,6 +229,57 @@ def ik_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
     return dict(out, extensions=float(len(cases)), available=1.0)
 
 
+def regrasp_search_costs(scene_name: str, trials: int = 4, goals: int = 3, seed: int = 0,
+                         robot_name: str = "tcbirrt_dual_arm") -> dict[str, float]:
+    """CPU µs per configuration check of the native RRT-Connect on regrasp queries (one arm of each trial's start
+    configuration moving, the other arm and the object still, ``goals`` random valid goals per arm, 3,000-iteration
+    cap, 50 shortcuts) with the still part placed once (the default) and with the whole model computed at every
+    check (``rrtc_use_static_part = 0``), the two alternating on the same queries and seeds; also the checks of each
+    (equal: the same searches)."""
+    import ctypes
+
+    from ..constraints.closed_chain import ClosedChainKinematics
+    from ..model.robot import RobotModel
+    from ..planners.base import Deadline
+    from ..planners.kernel.rrtc import load_rrtc_library, native_rrt_connect
+    from ..planners.validity import ValidityChecker
+    from ..scene import Scene
+    from ..trials import TrialGenerator
+
+    robot = RobotModel.from_name(robot_name)
+    sc = Scene.load(scene_name)
+    assert sc.object is not None
+    ck, kin = ValidityChecker(robot, sc), ClosedChainKinematics(robot, sc.object.grasps)
+    if ck._native is None:
+        return {"available": 0.0}
+    flag = ctypes.c_int.in_dll(load_rrtc_library(), "rrtc_use_static_part")
+    cpu = {1: 0.0, 0: 0.0}
+    checks = {1: 0, 0: 0}
+    try:
+        for t in range(trials):
+            tr = TrialGenerator(robot, sc).generate(t, seed)
+            base, M = tr.q_start.copy(), tr.object_start
+            for arm in (0, 1):
+                idx = np.asarray(kin.idx[arm])
+                lo, hi = robot.lower[idx], robot.upper[idx]
+                with ck.exempt(tuple(sorted(ck.grasp_contacts(base, M)))):
+                    f = ck.validity("fixed", M, base=base, joints=idx)
+                    rng = np.random.default_rng(seed + t)
+                    gs = [x for x in (rng.uniform(lo, hi) for _ in range(3000)) if f(x)][:goals]
+                    for k, g in enumerate(gs):
+                        for on in ((1, 0) if k % 2 == 0 else (0, 1)):
+                            flag.value = on
+                            c0 = time.process_time()
+                            got = native_rrt_connect(base[idx], g, lo, hi, f, np.random.default_rng(seed + 5), Deadline(30.0),
+                                                     range_=1.0, resolution=0.03, max_iterations=3000, shortcut_iterations=50)
+                            cpu[on] += time.process_time() - c0
+                            checks[on] += 0 if got is None else got.checks
+    finally:
+        flag.value = 1
+    return {"available": 1.0, "static_us": 1e6 * cpu[1] / max(checks[1], 1), "whole_us": 1e6 * cpu[0] / max(checks[0], 1),
+            "static_checks": float(checks[1]), "whole_checks": float(checks[0])}
+
+
 def lead_path_costs(scene_name: str, trials: int = 10, budget: float = 2.0, seed: int = 0,
                     robot_name: str = "tcbirrt_dual_arm") -> dict[str, dict[str, float]]:
     """The object lead path between the object poses of the start and goal of trials ``0..trials−1``, native
@@ -284,6 +335,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="only the CPU per extension and per sample, extension='loop' vs 'native', on identical work")
     ap.add_argument("--ik-units", action="store_true",
                     help="only the CPU per extension with the hand-written C IK vs the CasADi IK block, on identical work")
+    ap.add_argument("--regrasp-units", action="store_true",
+                    help="only the CPU per check of the regrasps' native RRT-Connect, the still part placed once vs "
+                         "the whole model at every check, on the same queries")
     ap.add_argument("--lead-path", action="store_true",
                     help="only the object lead path, native vs Python (10 trials per scene, 2 s CPU each)")
     ap.add_argument("--kinds", default="native,python",
@@ -312,6 +366,16 @@ def main(argv: list[str] | None = None) -> int:
                   f"(CasADi), checks {u['c_checks']:.0f} / {u['casadi_checks']:.0f}: C IK {u['c_extension_us']:.0f} µs, "
                   f"CasADi block {u['casadi_extension_us']:.0f} µs per extension "
                   f"({u['casadi_extension_us'] / u['c_extension_us']:.2f}x; {saved:.2f} µs saved per IK iteration)")
+        return 0
+    if a.regrasp_units:
+        for sc in expand_scenes(a.scene.split(",")):
+            u = regrasp_search_costs(sc, seed=a.seed)
+            if not u["available"]:
+                print(f"{sc}: the native kernel is not available here")
+                continue
+            print(f"{sc}: checks {u['static_checks']:.0f} / {u['whole_checks']:.0f}; µs per check with the still part "
+                  f"placed once {u['static_us']:.2f}, the whole model {u['whole_us']:.2f} "
+                  f"({u['whole_us'] / u['static_us']:.2f}x)")
         return 0
     if a.lead_path:
         for sc in expand_scenes(a.scene.split(",")):
