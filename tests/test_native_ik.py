@@ -136,3 +136,16 @@ def test_bad_input(tcb):
         nik.solve(np.zeros(3), np.eye(3), np.zeros(3), IKSettings())
     with pytest.raises(OptplanError, match="arm: expected 0 or 1"):
         nik.jacobian(2, np.zeros(14), np.eye(3), np.zeros(3))
+
+
+def test_benchmarks_compare_identical_work():
+    """`python -m optplan.bench.tcbirrt_native --ik-units` / `--regrasp-units`: both sides do the same work."""
+    from optplan.bench.tcbirrt_native import ik_costs, regrasp_search_costs
+
+    u = ik_costs("ssps_scene1", n=5, repeats=1)
+    if not u["available"]:
+        pytest.skip("the native loop is not available here")
+    assert u["c_ik_iterations"] == u["casadi_ik_iterations"] > 0 and u["c_checks"] == u["casadi_checks"] > 0
+    assert u["c_extension_us"] > 0 and u["casadi_extension_us"] > 0
+    r = regrasp_search_costs("ssps_scene1", trials=1, goals=1)
+    assert r["static_checks"] == r["whole_checks"] > 0 and r["static_us"] > 0 and r["whole_us"] > 0
