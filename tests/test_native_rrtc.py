@@ -271,3 +271,57 @@ def test_halton_sampler_paths_valid_and_seeded(tcb, native):
         assert _coal_valid_path(tcb, sc, r.path)
     assert np.array_equal(a.path, b.path)
     assert not (a.path.shape == c.path.shape and np.array_equal(a.path, c.path))
+
+
+@pytest.mark.parametrize("collide_static", [False, True])
+def test_static_part_gives_the_same_search(tcb, collide_static):
+    """A regrasp's search (one arm, the other arm and the object still): placing the still part once and
+    checking its pairs once gives the same search as checking the whole model every time — the same status,
+    counts and path; with an obstacle on the still arm every configuration collides."""
+    import ctypes
+    import dataclasses
+
+    from optplan.planners.kernel.rrtc import load_rrtc_library, native_rrt_connect
+    from optplan.scene import Obstacle
+
+    sc = Scene.load("hard_window")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    from optplan.constraints.closed_chain import ClosedChainKinematics
+
+    kin = ClosedChainKinematics(tcb, sc.object.grasps)
+    base = tr.q_start.copy()
+    if collide_static:   # a sphere on the still arm's elbow link
+        data = tcb.model.createData()
+        pin.forwardKinematics(tcb.model, data, base)
+        j = int(np.flatnonzero(np.asarray(tcb.model.idx_qs) == int(kin.idx[1][3]))[0])
+        sc = dataclasses.replace(sc, obstacles=(*sc.obstacles, Obstacle(
+            "on_still_arm", "sphere", pin.SE3(np.eye(3), data.oMi[j].translation), radius=0.05)))
+    ck = ValidityChecker(tcb, sc)
+    _native_or_skip(ck)
+    idx = np.asarray(kin.idx[0])
+    M = tr.object_start
+    flag = ctypes.c_int.in_dll(load_rrtc_library(), "rrtc_use_static_part")
+    pairs = tuple(sorted(ck.grasp_contacts(base, M)))
+    out = []
+    with ck.exempt(pairs):
+        f = ck.validity("fixed", M, base=base, joints=idx)
+        assert f(base[idx]) != collide_static
+        rng = np.random.default_rng(1)
+        goal = next(x for x in (rng.uniform(tcb.lower[idx], tcb.upper[idx]) for _ in range(5000))
+                    if collide_static or f(x))
+        for on in (1, 0):
+            flag.value = on
+            try:
+                got = native_rrt_connect(base[idx], goal, tcb.lower[idx], tcb.upper[idx], f, np.random.default_rng(3),
+                                         Deadline(30.0), range_=1.0, resolution=0.03, max_iterations=3000,
+                                         shortcut_iterations=20)
+            finally:
+                flag.value = 1
+            assert got is not None
+            out.append(got)
+    a, b = out
+    assert (a.status, a.iterations, a.nodes, a.checks) == (b.status, b.iterations, b.nodes, b.checks)
+    assert (a.path is None) == (b.path is None)
+    if a.path is not None:
+        assert np.array_equal(np.array(a.path), np.array(b.path))
+    assert a.status == ("iteration cap" if collide_static else "found")

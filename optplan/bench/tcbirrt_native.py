@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["extension_costs", "lead_path_costs", "loop_costs", "paired_queries", "python_nearest", "main"]
+__all__ = ["extension_costs", "ik_costs", "lead_path_costs", "loop_costs", "regrasp_search_costs", "paired_queries", "python_nearest", "main"]
 
 KINDS = ("native", "python")
 
@@ -174,6 +174,112 @@ def loop_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
     return dict(best, extensions=float(len(cases)), available=1.0)
 
 
+def ik_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
+             robot_name: str = "tcbirrt_dual_arm") -> dict[str, float]:
+    """CPU µs per extension (``extension="loop"``: path IK with restarts, checks, edges, one C call) with the
+    hand-written C IK against the compiled CasADi block (:attr:`~optplan.planners.kernel.extend.NativeExtender.native_ik`),
+    on identical work: the extensions of :func:`loop_costs`, the restarts' stream reseeded before each pass;
+    best of ``repeats`` alternating passes, with each pass's counters (equal when the two IKs agree)."""
+    from ..constraints.closed_chain import ClosedChainKinematics
+    from ..model.robot import RobotModel
+    from ..planners.task_space import pose_from_xi, xi_from_pose
+    from ..planners.tcbirrt import TCBiRRT, TCBiRRTOptions
+    from ..planners.tcbirrt_native import loop_extend
+    from ..planners.validity import ValidityChecker
+    from ..scene import Scene
+    from ..trials import TrialGenerator
+
+    robot = RobotModel.from_name(robot_name)
+    sc = Scene.load(scene_name)
+    assert sc.object is not None
+    ck, kin = ValidityChecker(robot, sc), ClosedChainKinematics(robot, sc.object.grasps)
+    pl = TCBiRRT(robot, sc, TCBiRRTOptions(variant="improved", extension="loop"), checker=ck, kinematics=kin)
+    pl._rng = np.random.default_rng(seed + 1)
+    pl._sampler()
+    ext = pl._ext
+    if pl._nrng is None or ext is None or ext._ik is None:
+        return {"available": 0.0}
+    rng = np.random.default_rng(seed)
+    cases = []
+    for t in range(3):
+        tr = TrialGenerator(robot, sc).generate(t, seed)
+        for q0 in (tr.q_start, tr.q_goal):
+            M = kin.object_pose(q0)
+            for _ in range(n):
+                xi = xi_from_pose(M) + rng.normal(0.0, 1.0, 6) * np.r_[[0.15] * 3, [0.3] * 3]
+                cases.append((q0, M, pose_from_xi(xi)))
+    counters = ("ik_calls", "ik_iterations", "ik_restarts", "ik_failures", "ik_jumps", "collisions", "edge_checks",
+                "edge_collisions")
+    out: dict[str, float] = {}
+    for rep in range(repeats):
+        for k in (("c", "casadi") if rep % 2 == 0 else ("casadi", "c")):
+            ext.native_ik = k == "c"
+            pl._nrng.lib.tcb_rng_seed(pl._nrng.address, seed + 7)
+            st = {c: 0 for c in counters}
+            n_checks = ck.n_checks
+            c0 = time.process_time()
+            for q0, M, (Rs, ps) in cases:
+                loop_extend(pl, M.rotation, M.translation, Rs, ps, q0, st, True)
+            us = 1e6 * (time.process_time() - c0) / len(cases)
+            out[k + "_extension_us"] = min(out.get(k + "_extension_us", np.inf), us)
+            for c in ("ik_iterations", "ik_restarts", "edge_checks"):
+                out[f"{k}_{c}"] = float(st[c])
+            out[k + "_checks"] = float(ck.n_checks - n_checks)
+    ext.native_ik = True
+    return dict(out, extensions=float(len(cases)), available=1.0)
+
+
+def regrasp_search_costs(scene_name: str, trials: int = 4, goals: int = 3, seed: int = 0,
+                         robot_name: str = "tcbirrt_dual_arm") -> dict[str, float]:
+    """CPU µs per configuration check of the native RRT-Connect on regrasp queries (one arm of each trial's start
+    configuration moving, the other arm and the object still, ``goals`` random valid goals per arm, 3,000-iteration
+    cap, 50 shortcuts) with the still part placed once (the default) and with the whole model computed at every
+    check (``rrtc_use_static_part = 0``), the two alternating on the same queries and seeds; also the checks of each
+    (equal: the same searches)."""
+    import ctypes
+
+    from ..constraints.closed_chain import ClosedChainKinematics
+    from ..model.robot import RobotModel
+    from ..planners.base import Deadline
+    from ..planners.kernel.rrtc import load_rrtc_library, native_rrt_connect
+    from ..planners.validity import ValidityChecker
+    from ..scene import Scene
+    from ..trials import TrialGenerator
+
+    robot = RobotModel.from_name(robot_name)
+    sc = Scene.load(scene_name)
+    assert sc.object is not None
+    ck, kin = ValidityChecker(robot, sc), ClosedChainKinematics(robot, sc.object.grasps)
+    if ck._native is None:
+        return {"available": 0.0}
+    flag = ctypes.c_int.in_dll(load_rrtc_library(), "rrtc_use_static_part")
+    cpu = {1: 0.0, 0: 0.0}
+    checks = {1: 0, 0: 0}
+    try:
+        for t in range(trials):
+            tr = TrialGenerator(robot, sc).generate(t, seed)
+            base, M = tr.q_start.copy(), tr.object_start
+            for arm in (0, 1):
+                idx = np.asarray(kin.idx[arm])
+                lo, hi = robot.lower[idx], robot.upper[idx]
+                with ck.exempt(tuple(sorted(ck.grasp_contacts(base, M)))):
+                    f = ck.validity("fixed", M, base=base, joints=idx)
+                    rng = np.random.default_rng(seed + t)
+                    gs = [x for x in (rng.uniform(lo, hi) for _ in range(3000)) if f(x)][:goals]
+                    for k, g in enumerate(gs):
+                        for on in ((1, 0) if k % 2 == 0 else (0, 1)):
+                            flag.value = on
+                            c0 = time.process_time()
+                            got = native_rrt_connect(base[idx], g, lo, hi, f, np.random.default_rng(seed + 5), Deadline(30.0),
+                                                     range_=1.0, resolution=0.03, max_iterations=3000, shortcut_iterations=50)
+                            cpu[on] += time.process_time() - c0
+                            checks[on] += 0 if got is None else got.checks
+    finally:
+        flag.value = 1
+    return {"available": 1.0, "static_us": 1e6 * cpu[1] / max(checks[1], 1), "whole_us": 1e6 * cpu[0] / max(checks[0], 1),
+            "static_checks": float(checks[1]), "whole_checks": float(checks[0])}
+
+
 def lead_path_costs(scene_name: str, trials: int = 10, budget: float = 2.0, seed: int = 0,
                     robot_name: str = "tcbirrt_dual_arm") -> dict[str, dict[str, float]]:
     """The object lead path between the object poses of the start and goal of trials ``0..trials−1``, native
@@ -227,6 +333,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--units", action="store_true", help="only the CPU per extension, native vs Python")
     ap.add_argument("--loop-units", action="store_true",
                     help="only the CPU per extension and per sample, extension='loop' vs 'native', on identical work")
+    ap.add_argument("--ik-units", action="store_true",
+                    help="only the CPU per extension with the hand-written C IK vs the CasADi IK block, on identical work")
+    ap.add_argument("--regrasp-units", action="store_true",
+                    help="only the CPU per check of the regrasps' native RRT-Connect, the still part placed once vs "
+                         "the whole model at every check, on the same queries")
     ap.add_argument("--lead-path", action="store_true",
                     help="only the object lead path, native vs Python (10 trials per scene, 2 s CPU each)")
     ap.add_argument("--kinds", default="native,python",
@@ -243,6 +354,29 @@ def main(argv: list[str] | None = None) -> int:
                   + ("" if u["native_available"] else " (native extension unavailable: Python ran twice)"))
         return 0
 
+    if a.ik_units:
+        for sc in expand_scenes(a.scene.split(",")):
+            u = ik_costs(sc, seed=a.seed)
+            if not u["available"]:
+                print(f"{sc}: the native loop or the C IK is not available here")
+                continue
+            n = u["extensions"]
+            saved = (u["casadi_extension_us"] - u["c_extension_us"]) * n / max(u["c_ik_iterations"], 1.0)
+            print(f"{sc}: {int(n)} extensions, IK iterations {u['c_ik_iterations']:.0f} (C) / {u['casadi_ik_iterations']:.0f} "
+                  f"(CasADi), checks {u['c_checks']:.0f} / {u['casadi_checks']:.0f}: C IK {u['c_extension_us']:.0f} µs, "
+                  f"CasADi block {u['casadi_extension_us']:.0f} µs per extension "
+                  f"({u['casadi_extension_us'] / u['c_extension_us']:.2f}x; {saved:.2f} µs saved per IK iteration)")
+        return 0
+    if a.regrasp_units:
+        for sc in expand_scenes(a.scene.split(",")):
+            u = regrasp_search_costs(sc, seed=a.seed)
+            if not u["available"]:
+                print(f"{sc}: the native kernel is not available here")
+                continue
+            print(f"{sc}: checks {u['static_checks']:.0f} / {u['whole_checks']:.0f}; µs per check with the still part "
+                  f"placed once {u['static_us']:.2f}, the whole model {u['whole_us']:.2f} "
+                  f"({u['whole_us'] / u['static_us']:.2f}x)")
+        return 0
     if a.lead_path:
         for sc in expand_scenes(a.scene.split(",")):
             for k, v in lead_path_costs(sc, seed=a.seed).items():

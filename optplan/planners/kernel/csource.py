@@ -114,39 +114,46 @@ static void joint_motion(const double *L, int type, const double *u, double x, d
    placement, the override geometry to override_pose, moving ones into oMg). Unless full, a moving
    sphere's pose holds only its position and a moving capsule's only its position and axis (the third
    column of R): all that the tests read of them. */
+/* joint j's world placement into oMi from its parent's (already there) and q */
+static inline void fk_joint(const kmodel *m, const double *q, double *oMi, int j) {
+    double L[12];
+    const double *P = oMi + 12*m->jparent[j], *B = m->jplace + 12*j;
+    const int *pm = m->jperm ? m->jperm + 3*j : 0;
+    if (pm && pm[0]) {   /* a signed permutation: the parent's columns, no products */
+        for (int c = 0; c < 3; ++c) {
+            int r = (pm[c] > 0 ? pm[c] : -pm[c]) - 1;
+            for (int i = 0; i < 3; ++i) L[3*i+c] = pm[c] > 0 ? P[3*i+r] : -P[3*i+r];
+        }
+        for (int i = 0; i < 3; ++i) L[9+i] = P[3*i]*B[9] + P[3*i+1]*B[10] + P[3*i+2]*B[11] + P[9+i];
+    } else compose(P, B, L);
+    joint_motion(L, m->jtype[j], m->jaxis + 3*j, q[m->jidx[j]], oMi + 12*j);
+}
+
+/* geometry g's world pose into pose[g] (see fk_) */
+static inline void fk_geom(const kmodel *m, const double *override_pose, int override_g, const double *oMi,
+                           double *oMg, const double **pose, int full, int g) {
+    if (g == override_g) pose[g] = override_pose;
+    else if (m->gparent[g] == 0) pose[g] = m->gplace + 12*g;
+    else {
+        const double *P = oMi + 12*m->gparent[g], *G = m->gplace + 12*g;
+        double *O = oMg + 12*g;
+        int t = m->gtype[g];
+        if (full || t > 1) compose(P, G, O);
+        else
+            for (int i = 0; i < 3; ++i) {
+                O[9+i] = P[3*i]*G[9] + P[3*i+1]*G[10] + P[3*i+2]*G[11] + P[9+i];
+                if (t == 1) O[3*i+2] = P[3*i]*G[2] + P[3*i+1]*G[5] + P[3*i+2]*G[8];
+            }
+        pose[g] = O;
+    }
+}
+
 static void fk_(const kmodel *m, const double *q, const double *override_pose, int override_g, double *oMi,
                 double *oMg, const double **pose, int full) {
     static const double I[12] = {1,0,0, 0,1,0, 0,0,1, 0,0,0};
     memcpy(oMi, I, sizeof I);
-    for (int j = 1; j < m->nj; ++j) {
-        double L[12];
-        const double *P = oMi + 12*m->jparent[j], *B = m->jplace + 12*j;
-        const int *pm = m->jperm ? m->jperm + 3*j : 0;
-        if (pm && pm[0]) {   /* a signed permutation: the parent's columns, no products */
-            for (int c = 0; c < 3; ++c) {
-                int r = (pm[c] > 0 ? pm[c] : -pm[c]) - 1;
-                for (int i = 0; i < 3; ++i) L[3*i+c] = pm[c] > 0 ? P[3*i+r] : -P[3*i+r];
-            }
-            for (int i = 0; i < 3; ++i) L[9+i] = P[3*i]*B[9] + P[3*i+1]*B[10] + P[3*i+2]*B[11] + P[9+i];
-        } else compose(P, B, L);
-        joint_motion(L, m->jtype[j], m->jaxis + 3*j, q[m->jidx[j]], oMi + 12*j);
-    }
-    for (int g = 0; g < m->ng; ++g) {
-        if (g == override_g) pose[g] = override_pose;
-        else if (m->gparent[g] == 0) pose[g] = m->gplace + 12*g;
-        else {
-            const double *P = oMi + 12*m->gparent[g], *G = m->gplace + 12*g;
-            double *O = oMg + 12*g;
-            int t = m->gtype[g];
-            if (full || t > 1) compose(P, G, O);
-            else
-                for (int i = 0; i < 3; ++i) {
-                    O[9+i] = P[3*i]*G[9] + P[3*i+1]*G[10] + P[3*i+2]*G[11] + P[9+i];
-                    if (t == 1) O[3*i+2] = P[3*i]*G[2] + P[3*i+1]*G[5] + P[3*i+2]*G[8];
-                }
-            pose[g] = O;
-        }
-    }
+    for (int j = 1; j < m->nj; ++j) fk_joint(m, q, oMi, j);
+    for (int g = 0; g < m->ng; ++g) fk_geom(m, override_pose, override_g, oMi, oMg, pose, full, g);
 }
 
 static void fk(const kmodel *m, const double *q, const double *override_pose, int override_g, double *oMi,

@@ -32,6 +32,7 @@ import numpy as np
 from ...codegen import build_library, cache_dir
 from .csource import C_SOURCE
 from .extend_csource import EXTEND_SOURCE
+from .ik_csource import IK_SOURCE
 from .native import KernelUnavailable
 from .sampler_csource import RNG_SOURCE, SAMPLER_SOURCE
 
@@ -41,7 +42,7 @@ log = logging.getLogger(__name__)
 _P = ctypes.c_void_p
 _LL = ctypes.c_longlong
 _LIB: list[Any] = []        # the loaded library (one per process), or [None] after a failed build
-SOURCE = C_SOURCE + RNG_SOURCE + EXTEND_SOURCE + SAMPLER_SOURCE
+SOURCE = C_SOURCE + RNG_SOURCE + IK_SOURCE + EXTEND_SOURCE + SAMPLER_SOURCE
 #: counters of one native call, in the order of the C code
 COUNTERS = ("ik_calls", "ik_iterations", "ik_failures", "ik_jumps", "collisions", "checks", "edge_checks",
             "edge_collisions", "terminal", "ik_restarts")
@@ -56,7 +57,8 @@ class _Ctx(ctypes.Structure):
                 ("edge_on", ctypes.c_int), ("edge_tol", ctypes.c_double),
                 ("W", _P), ("nw", ctypes.c_int),
                 ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int), ("edge_res", ctypes.c_double),
-                ("rng", _P), ("restarts", ctypes.c_int), ("restart_sigma", ctypes.c_double), ("lower", _P), ("upper", _P)]
+                ("rng", _P), ("restarts", ctypes.c_int), ("restart_sigma", ctypes.c_double), ("lower", _P), ("upper", _P),
+                ("ikm", _P)]
 
 
 def load_extend_library() -> Any:
@@ -263,6 +265,14 @@ class NativeExtender:
             c.prof, c.prof_iw, c.prof_w, c.nprof = prof[0], prof[1].ctypes.data, prof[2].ctypes.data, prof[3]
         c.edge_res = float(edge_resolution or 0.0)
         self._ctx = c
+        self._ik: Any = None
+        try:
+            from .ik import NativeIK
+
+            self._ik = NativeIK(nv.kernel, kin)
+        except KernelUnavailable as e:
+            log.info("the native extension calls the CasADi IK block: %s", e)
+        self.native_ik = self._ik is not None
         #: a failing waypoint's random restarts run in C, drawn from :meth:`restarts_in_c`'s generator
         self.native_restarts = False
         #: the edges between an extension's configurations are checked here (else by the caller)
@@ -279,6 +289,20 @@ class NativeExtender:
         self._qn = np.zeros(self.nq)
         self._bufs = [ctypes.addressof(x) if isinstance(x, ctypes.Structure) else x.ctypes.data
                       for x in (self._R0, self._p0, self._R1, self._p1, self._qn)]
+
+    @property
+    def native_ik(self) -> bool:
+        """Whether the path IK runs the hand-written C IK (:class:`~optplan.planners.kernel.ik.NativeIK`; the
+        default when the arms are serial chains of the kernel's model) rather than the compiled CasADi block of
+        :class:`~optplan.constraints.closed_chain.ClosedChainKinematics` (False; the same iterates up to
+        round-off). Settable, e.g. to compare the two."""
+        return bool(self._ctx.ikm)
+
+    @native_ik.setter
+    def native_ik(self, on: bool) -> None:
+        if on and self._ik is None:
+            raise KernelUnavailable("the hand-written IK does not cover these arms")
+        self._ctx.ikm = self._ik.address if on else None
 
     def restarts_in_c(self, rng: Any, restarts: int, sigma: float, lower: np.ndarray, upper: np.ndarray) -> None:
         """Run a failing waypoint's random restarts in C: ``restarts`` IK attempts [count] from the previous

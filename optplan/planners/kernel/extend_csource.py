@@ -16,7 +16,8 @@ What one extension computes (the same steps, in the same order, as the Python co
   linear, orientation ``R0 exp(j/n log(R0ᵀ R1))`` (the geodesic interpolation of Eq. 4), the last pose
   exactly ``(R1, p1)``;
 * ``tcb_path_ik``: per pose the damped-least-squares IK of both hands seeded by the previous solution
-  (the compiled block of iterations, repeated until converged or out of iterations), the joint-jump
+  (the hand-written IK of :mod:`~optplan.planners.kernel.ik_csource` when the context has one, else the
+  compiled CasADi block of iterations, repeated until converged or out of iterations), the joint-jump
   bound and the configuration's collision check; it stops at the first waypoint that fails, so the
   caller can run its random restarts there;
 * ``tcb_edges``: the joint-space segments between consecutive configurations checked at the spacing of
@@ -51,6 +52,7 @@ typedef struct {
     tcb_rng *rng;                 /* non-NULL: a failing waypoint's random restarts run here, drawn from it */
     int restarts; double restart_sigma;
     const double *lower, *upper;  /* joint limits of a restart's solution */
+    const tcb_ikm *ikm;           /* non-NULL: the hand-written IK (ik_csource) instead of the CasADi block */
 } tcb_ctx;
 
 /* counters: 0 ik_calls, 1 ik_iterations, 2 ik_failures, 3 ik_jumps, 4 collisions, 5 checks, 6 edge_checks,
@@ -122,6 +124,8 @@ void tcb_interpolate(const double *R0, const double *p0, const double *R1, const
 /* ClosedChainKinematics.ik: 1 when converged (q in qout), its = iterations used */
 static int tcb_ik(const tcb_ctx *c, const double *seed, const double *P, double *qout, long long *its) {
     int nq = c->nq;
+    if (c->ikm)
+        return tik_solve(c->ikm, nq, seed, P, c->damping, c->tol_p, c->tol_o, c->gain, c->max_step, c->max_it, qout, its);
     double Rf[9], par[6], out[KMAXJ + 8], qin[KMAXJ];
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) Rf[3*j+i] = P[3*i+j];

@@ -19,6 +19,10 @@ What it computes (the algorithm of :func:`optplan.planners.rrtconnect.rrt_connec
 * nearest neighbour is a linear scan over a contiguous node array (squared Euclidean distance), except
   in a connection's steps after the first, where the node the previous step added is the nearest;
 * a configuration check tries the pair that collided last first (the same verdict);
+* the joints that no searched joint moves (the other arm of a regrasp), the geometries on them and a fixed
+  object are placed once per query, and the pairs of two such geometries checked once: every configuration
+  of the query collides when one of them does, and none of them is tested again otherwise (the same
+  verdicts, with the forward kinematics of the moving chain only);
 * an edge a → b is checked at ``n = max(1, ceil(max_j |b_j - a_j| / resolution))`` steps: the end b
   first, then the interior points ``a + (k/n)(b - a)`` in coarse-to-fine (bisection) order;
 * the time limit is an end time on ``CLOCK_MONOTONIC`` (Python's ``time.perf_counter``) or
@@ -123,6 +127,13 @@ typedef struct {
     int *queue; long long qcap; double *x;
     long long checks;
     int clock_kind; double end; int tick; int hint;
+    /* the static part (NULL smov: none, every check computes everything): joints and geometries that no
+       searched joint moves keep the placements of the first full FK; blocks of two static groups are
+       checked once (static_hit: one of their pairs collides, so every configuration does) */
+    const double **pose;          /* the geometries' poses, kept between checks */
+    int nmj, nmg; int *mj, *mg;   /* the moving joints (parents first) and moving geometries */
+    unsigned char *smov;          /* ngroups: 1 when the group moves */
+    int static_hit;
 } rrtc_ctx;
 
 static double rrtc_now(int kind) {
@@ -142,13 +153,19 @@ static int rrtc_expired(rrtc_ctx *c) {
 static int rrtc_valid(rrtc_ctx *c, const double *x) {
     const kmodel *m = c->m;
     const rrtc_groups *G = c->grp;
-    const double *pose[KMAXG];
+    const double *pose_local[KMAXG];
+    const double **pose = c->smov ? c->pose : pose_local;
     for (int k = 0; k < c->dim; ++k) c->q[c->jidx[k]] = x[k];
     c->checks++;
-    fk(m, c->q, c->opose, c->og, c->oMi, c->oMg, pose);
+    if (c->smov) {
+        if (c->static_hit) return 0;
+        for (int t = 0; t < c->nmj; ++t) fk_joint(m, c->q, c->oMi, c->mj[t]);
+        for (int t = 0; t < c->nmg; ++t) fk_geom(m, c->opose, c->og, c->oMi, c->oMg, pose, 0, c->mg[t]);
+    } else fk(m, c->q, c->opose, c->og, c->oMi, c->oMg, pose);
     int h = c->hint;
     if (h >= 0 && c->active[h] && pair_collides(m, pose, m->pa[h], m->pb[h])) return 0;
     for (int i = 0; i < G->ngroups; ++i) {
+        if (c->smov && !c->smov[i]) continue;
         double *o = c->gc + 3*i;
         if (G->gkind[i] == 0) { const double *P = pose[G->gref[i]]; o[0] = P[9]; o[1] = P[10]; o[2] = P[11]; }
         else {
@@ -159,6 +176,7 @@ static int rrtc_valid(rrtc_ctx *c, const double *x) {
     double thr = m->margin + KEPS;
     for (int b = 0; b < G->nblocks; ++b) {
         int ga = G->bga[b], gb = G->bgb[b];
+        if (c->smov && !c->smov[ga] && !c->smov[gb]) continue;
         const double *A = c->gc + 3*ga, *B = c->gc + 3*gb;
         double dx = A[0]-B[0], dy = A[1]-B[1], dz = A[2]-B[2], rr = G->gradius[ga] + G->gradius[gb] + thr;
         if (dx*dx + dy*dy + dz*dz > rr*rr) continue;
@@ -168,6 +186,63 @@ static int rrtc_valid(rrtc_ctx *c, const double *x) {
         }
     }
     return 1;
+}
+
+/* 0: every check computes the whole model (for comparisons; the verdicts are the same) */
+int rrtc_use_static_part = 1;
+
+/* the static part of a query that searches the joints jidx[0..dim) with the others at c->q: one full FK, the
+   moving joints and geometries listed, the static groups' centres placed and the blocks of two static groups
+   checked once. 0, or -1 out of memory (then c->smov stays NULL: every check computes everything) */
+static int rrtc_static_setup(rrtc_ctx *c) {
+    const kmodel *m = c->m;
+    const rrtc_groups *G = c->grp;
+    size_t bytes = sizeof(const double *) * (size_t)m->ng + sizeof(int) * (size_t)(m->nj + m->ng)
+                   + (size_t)G->ngroups + (size_t)m->nj + (size_t)m->nq + 16;
+    char *mem = (char *)malloc(bytes);
+    if (!mem) return -1;
+    c->pose = (const double **)mem;
+    c->mj = (int *)(mem + sizeof(const double *) * (size_t)m->ng);
+    c->mg = c->mj + m->nj;
+    unsigned char *smov = (unsigned char *)(c->mg + m->ng), *jmov = smov + G->ngroups, *qmov = jmov + m->nj;
+    memset(qmov, 0, (size_t)m->nq);
+    for (int k = 0; k < c->dim; ++k) qmov[c->jidx[k]] = 1;
+    c->nmj = 0; c->nmg = 0;
+    jmov[0] = 0;
+    for (int j = 1; j < m->nj; ++j) {
+        jmov[j] = (unsigned char)(jmov[m->jparent[j]] || (m->jtype[j] != 0 && qmov[m->jidx[j]]));
+        if (jmov[j]) c->mj[c->nmj++] = j;
+    }
+    for (int g = 0; g < m->ng; ++g)
+        if (g != c->og && m->gparent[g] != 0 && jmov[m->gparent[g]]) c->mg[c->nmg++] = g;
+    fk(m, c->q, c->opose, c->og, c->oMi, c->oMg, c->pose);
+    for (int i = 0; i < G->ngroups; ++i) {
+        int r = G->gref[i];
+        smov[i] = G->gkind[i] == 0 ? (unsigned char)(r != c->og && m->gparent[r] != 0 && jmov[m->gparent[r]])
+                                   : jmov[r];
+        if (smov[i]) continue;
+        double *o = c->gc + 3*i;
+        if (G->gkind[i] == 0) { const double *P = c->pose[r]; o[0] = P[9]; o[1] = P[10]; o[2] = P[11]; }
+        else {
+            const double *P = c->oMi + 12*r, *l = G->gcenter + 3*i;
+            for (int k = 0; k < 3; ++k) o[k] = P[3*k]*l[0] + P[3*k+1]*l[1] + P[3*k+2]*l[2] + P[9+k];
+        }
+    }
+    double thr = m->margin + KEPS;
+    c->static_hit = 0;
+    for (int b = 0; b < G->nblocks && !c->static_hit; ++b) {
+        int ga = G->bga[b], gb = G->bgb[b];
+        if (smov[ga] || smov[gb]) continue;
+        const double *A = c->gc + 3*ga, *B = c->gc + 3*gb;
+        double dx = A[0]-B[0], dy = A[1]-B[1], dz = A[2]-B[2], rr = G->gradius[ga] + G->gradius[gb] + thr;
+        if (dx*dx + dy*dy + dz*dz > rr*rr) continue;
+        for (int i = G->bstart[b]; i < G->bstart[b+1]; ++i) {
+            int k = G->perm[i];
+            if (c->active[k] && pair_collides(m, c->pose, m->pa[k], m->pb[k])) { c->static_hit = 1; break; }
+        }
+    }
+    c->smov = smov;
+    return 0;
 }
 
 /* the broad-phase check of the configurations Q (M x nq), for tests: out[i] = 1 when row i is free */
@@ -282,6 +357,7 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
     double *xr = c.x + dim, *target = xr + dim, *xnew = target + dim;
     c.grp = grp; c.gc = xnew + dim;
     memcpy(c.q, base, sizeof(double) * (size_t)m->nq);
+    if (rrtc_use_static_part && rrtc_static_setup(&c) != 0) goto done;
     rrtc_rng rng;
     unsigned long long sm = seed;
     for (int k = 0; k < 4; ++k) rng.s[k] = rrtc_splitmix(&sm);
@@ -369,7 +445,7 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
 done:
     stats[2] = c.checks;
     rrtc_tree_free(&ta); rrtc_tree_free(&tb);
-    free(idx); free(work); free(c.queue);
+    free(idx); free(work); free(c.queue); free((void *)c.pose);
     if (status == 0) { *path_out = path; *path_len = plen; }
     else free(path);
     return status;
