@@ -6,7 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optplan.planners.kernel.extend import nearest_available
+from optplan.planners.kernel.extend import load_extend_library, nearest_available
 
 pytestmark = pytest.mark.skipif(not nearest_available(), reason="no C compiler: the native extension is not built")
 
@@ -24,7 +24,7 @@ def _setup(robot, name):
     kin = ClosedChainKinematics(robot, sc.object.grasps)
     if not kin.compiled:
         pytest.skip("the closed-chain IK block is not compiled here")
-    return sc, kin, NativeIK(ck._native.kernel, kin)
+    return sc, kin, NativeIK(ck._native.kernel, kin, load_extend_library())
 
 
 @pytest.mark.parametrize("scene", ["hard_bay", "ssps_scene1"])

@@ -269,7 +269,7 @@ class NativeExtender:
         try:
             from .ik import NativeIK
 
-            self._ik = NativeIK(nv.kernel, kin)
+            self._ik = NativeIK(nv.kernel, kin, load_extend_library())
         except KernelUnavailable as e:
             log.info("the native extension calls the CasADi IK block: %s", e)
         self.native_ik = self._ik is not None

@@ -37,15 +37,14 @@ def _pose12(M: Any) -> np.ndarray:
 
 class NativeIK:
     """The arms of ``kin`` (:class:`~optplan.constraints.closed_chain.ClosedChainKinematics`, fixed base) on
-    the joint model of ``kernel`` (:class:`~optplan.planners.kernel.native.NativeKernel` of the same robot).
+    the joint model of ``kernel`` (:class:`~optplan.planners.kernel.native.NativeKernel` of the same robot),
+    run by ``lib``, the extension library (:func:`optplan.planners.kernel.extend.load_extend_library`).
 
     Raises :class:`~optplan.planners.kernel.native.KernelUnavailable` when the arms are not serial chains of
     1-dof joints (at most 32 per arm) of the kernel's model or the library cannot be built."""
 
-    def __init__(self, kernel: Any, kin: Any) -> None:
-        from .extend import load_extend_library
-
-        self.lib = load_extend_library()
+    def __init__(self, kernel: Any, kin: Any, lib: Any) -> None:
+        self.lib = lib
         model = kin.robot.model
         jparent, jtype = kernel._arrays[0], kernel._arrays[1]
         if len(jparent) != model.njoints or model.nq != model.nv or int(kin.nq) != model.nq:
