@@ -3,8 +3,9 @@ sections (wall ``perf_counter`` and this process's CPU time, both [s]).
 
 ``python -m optplan.bench.plan_wall [--scene 1] [--seed 0] [--html FILE] [--save FILE]``
 
-Sections, in order: the modules the ``optplan`` command imports (``optplan.cli``), the modules
-the plan command imports (the pipeline, the scene, the trials), the scene and the robot loaded,
+Sections, in order: the modules the ``optplan`` command imports (``optplan.cli``, NumPy with it),
+the libraries the plan command loads (``scipy.sparse``, CasADi, coal, Pinocchio, one by one), the
+plan command's own modules (the pipeline, the scene, the trials), the scene and the robot loaded,
 the trial, the planner made (collision checker, planner kernels), planning, the shortcuts, per
 segment NLP set-up (its build: kernel loading included) and IPOPT, the verification by coal, the
 report, the output files. ``kernel cache`` is the part of the set-up spent verifying and loading
@@ -25,6 +26,10 @@ import contextlib  # noqa: E402
 import importlib  # noqa: E402
 import sys  # noqa: E402
 from collections import defaultdict  # noqa: E402
+
+#: third-party modules the plan command loads, timed one by one before optplan's own (NumPy already
+#: with ``optplan.cli``); ``scipy.sparse`` includes the NumPy submodules SciPy's array-API layer loads
+_LIBRARIES = ("scipy.sparse", "casadi", "coal", "pinocchio")
 
 
 class Sections:
@@ -72,7 +77,12 @@ def main(argv: list[str] | None = None) -> int:
     sec = Sections()
     # what the `optplan` command imports first (by name: a benchmark does not depend on the command line)
     sec.add("import optplan.cli", *_since(_T0, _C0, lambda: importlib.import_module("optplan.cli")))
-    with sec("import the plan command's modules"):
+    # the libraries the plan command's modules load, each before them (its CPU with what it needs that
+    # is not loaded yet); then optplan's own modules, which find them loaded
+    for lib in _LIBRARIES:
+        with sec(f"import {lib}"):
+            importlib.import_module(lib)
+    with sec("import the plan command's modules (optplan's own)"):
         from optplan import pipeline
         from optplan.cli_args import check_scene
         from optplan.model.example_robots import load_robot
