@@ -3,8 +3,9 @@ sections (wall ``perf_counter`` and this process's CPU time, both [s]).
 
 ``python -m optplan.bench.plan_wall [--scene 1] [--seed 0] [--html FILE] [--save FILE]``
 
-Sections, in order: the modules the ``optplan`` command imports (``optplan.cli``), the modules
-the plan command imports (the pipeline, the scene, the trials), the scene and the robot loaded,
+Sections, in order: the modules the ``optplan`` command imports (``optplan.cli``, NumPy with it),
+the libraries the plan command loads (``scipy.sparse``, CasADi, coal, Pinocchio, one by one), the
+plan command's own modules (the pipeline, the scene, the trials), the scene and the robot loaded,
 the trial, the planner made (collision checker, planner kernels), planning, the shortcuts, per
 segment NLP set-up (its build: kernel loading included) and IPOPT, the verification by coal, the
 report, the output files. ``kernel cache`` is the part of the set-up spent verifying and loading
@@ -25,6 +26,10 @@ import contextlib  # noqa: E402
 import importlib  # noqa: E402
 import sys  # noqa: E402
 from collections import defaultdict  # noqa: E402
+
+#: third-party modules the plan command loads, timed one by one before optplan's own (NumPy already
+#: with ``optplan.cli``); ``scipy.sparse`` includes the NumPy submodules SciPy's array-API layer loads
+_LIBRARIES = ("scipy.sparse", "casadi", "coal", "pinocchio")
 
 
 class Sections:
@@ -72,7 +77,12 @@ def main(argv: list[str] | None = None) -> int:
     sec = Sections()
     # what the `optplan` command imports first (by name: a benchmark does not depend on the command line)
     sec.add("import optplan.cli", *_since(_T0, _C0, lambda: importlib.import_module("optplan.cli")))
-    with sec("import the plan command's modules"):
+    # the libraries the plan command's modules load, each before them (its CPU with what it needs that
+    # is not loaded yet); then optplan's own modules, which find them loaded
+    for lib in _LIBRARIES:
+        with sec(f"import {lib}"):
+            importlib.import_module(lib)
+    with sec("import the plan command's modules (optplan's own)"):
         from optplan import pipeline
         from optplan.cli_args import check_scene
         from optplan.model.example_robots import load_robot
@@ -88,6 +98,10 @@ def main(argv: list[str] | None = None) -> int:
     _wrap(sec, "  kernel cache: verify and load libraries", kernels, "load_library")
     _wrap(sec, "verify (coal, 10 samples per interval)", pipeline, "verify")
     _wrap(sec, "planner made (checker, kernels)", optplan.planners, "make_planner")
+    _PlannerOf(sec, optplan.planners)
+    for name in ("shortcut_constrained", "shortcut_free"):
+        _wrap(sec, "shortcuts", pipeline, name)
+    segs = _SegmentCpu(pipeline)
     with sec("scene load"):
         scene = Scene.load(check_scene(args.scene))
     with sec("robot load"):
@@ -100,12 +114,14 @@ def main(argv: list[str] | None = None) -> int:
     t, c = time.perf_counter(), time.process_time()
     res = pipeline.run_pipeline(robot, scene, trial.q_start, trial.q_goal, opts, seed=args.seed)
     run_wall, run_cpu = time.perf_counter() - t, time.process_time() - c
-    sec.add("planning", res.plan_time_s)
-    sec.add("shortcuts", res.shortcut_time_s)
-    for i, s in enumerate(res.segments):
-        for a in s.attempts:
-            sec.add(f"segment {i} {s.kind} {a['reason']}: NLP set-up", a["setup_s"])
-            sec.add(f"segment {i} {s.kind} {a['reason']}: IPOPT ({a['iterations']} it)", a["ipopt_s"])
+    for i, (s, (seg_cpu, ipopt_cpu, callback_cpu, verify_cpu)) in enumerate(zip(res.segments, segs.rows)):
+        setup_s = sum(a["setup_s"] for a in s.attempts)
+        ipopt_s = sum(a["ipopt_s"] for a in s.attempts)
+        label = f"segment {i} {s.kind} ({'+'.join(a['reason'] for a in s.attempts)})"
+        # its CPU: the segment's own less IPOPT's and the verification's (a row of its own above)
+        sec.add(f"{label}: NLP set-up", setup_s, seg_cpu - ipopt_cpu - verify_cpu)
+        sec.add(f"{label}: IPOPT ({s.solution.total_iterations} it)", ipopt_s, ipopt_cpu)
+        sec.add(f"{label}:   of which callbacks (CasADi functions)", float("nan"), callback_cpu)
     with sec("report (figures, pair counts)"):
         from optplan.collision.checker import pair_budget_counts
 
@@ -127,6 +143,57 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'run_pipeline (all of its rows above)':58s} {run_wall:8.3f} {run_cpu:8.3f}")
     print(f"{'total since this module started':58s} {total_wall:8.3f} {total_cpu:8.3f}")
     return 0 if res.success else 1
+
+
+class _PlannerOf:
+    """``make_planner`` whose planners' ``plan`` calls are timed as one section (wall and CPU)."""
+
+    def __init__(self, sec: Sections, planners) -> None:
+        self.sec, self.make = sec, planners.make_planner
+        planners.make_planner = self.make_planner
+
+    def make_planner(self, *a, **k):
+        planner = self.make(*a, **k)
+        _wrap(self.sec, "planning", planner, "plan")
+        return planner
+
+
+class _SegmentCpu:
+    """Per segment optimized in this process: its CPU [s] in all, in IPOPT, in IPOPT's callbacks
+    (the CasADi functions' own ``t_proc_*``) and in the verification, in the order solved."""
+
+    def __init__(self, pipeline) -> None:
+        from optplan.problem import nlp
+
+        self.rows: list[list[float]] = []
+        seg_fn, solve_fn, verify_fn = pipeline._spline_segment, nlp.NlpSolver.solve, pipeline.verify
+
+        def segment(*a, **k):
+            self.rows.append([0.0, 0.0, 0.0, 0.0])
+            c = time.process_time()
+            try:
+                return seg_fn(*a, **k)
+            finally:
+                self.rows[-1][0] = time.process_time() - c
+
+        def solve(solver, *a, **k):
+            out = solve_fn(solver, *a, **k)
+            if self.rows:
+                stats = getattr(solver, "_stats", None) or {}
+                self.rows[-1][1] += out.cpu_time
+                self.rows[-1][2] += sum(v for n, v in stats.items() if n.startswith("t_proc_nlp_"))
+            return out
+
+        def verify(*a, **k):
+            c = time.process_time()
+            try:
+                return verify_fn(*a, **k)
+            finally:
+                if self.rows:
+                    self.rows[-1][3] += time.process_time() - c
+
+        pipeline._spline_segment, pipeline.verify = segment, verify
+        setattr(nlp.NlpSolver, "solve", solve)   # noqa: B010 - a benchmark times the method in place
 
 
 def _since(t0: float, c0: float, fn) -> tuple[float, float]:

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from .banded import solve_banded
+
 __all__ = [
     "quintic_time_law",
     "PiecewisePolynomial",
@@ -442,10 +444,10 @@ def quartic_spline(times: ArrayLike, waypoints: ArrayLike, v0: ArrayLike | None 
     rhs[base] = x[:-1]
     rhs[base + 1] = x[1:]
     rhs[5 * m - 1] = vfv * h[-1]
-    from scipy.linalg import solve_banded  # lazy: scipy.linalg is ~0.07 s of import, needed only here
+    from scipy.linalg import solve_banded as scipy_solve_banded  # lazy: scipy.linalg is ~0.07 s of import
 
     try:
-        p = solve_banded((_KL, _KU), ab, rhs, overwrite_ab=True, overwrite_b=True, check_finite=False)
+        p = scipy_solve_banded((_KL, _KU), ab, rhs, overwrite_ab=True, overwrite_b=True, check_finite=False)
     except np.linalg.LinAlgError as exc:  # pragma: no cover - never observed for durations h > 0
         raise ValueError(f"quartic spline system is singular for durations {h.tolist()}") from exc
     p = p.reshape(m, 5, n)
@@ -456,7 +458,7 @@ def quartic_spline(times: ArrayLike, waypoints: ArrayLike, v0: ArrayLike | None 
 def clamped_cubic(t: ArrayLike, y: ArrayLike, at: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The C2 cubic spline through ``y`` ((m+1) × n) at strictly increasing times ``t`` (m+1,) [s]
     with zero velocity at both ends (scipy's ``CubicSpline(t, y, axis=0, bc_type="clamped")``,
-    without importing scipy.interpolate, 0.1-0.2 s of start-up), evaluated at the times ``at``
+    without importing scipy.interpolate or scipy.linalg, 0.1-0.2 s of start-up), evaluated at the times ``at``
     (k,) [s]: positions, velocities [unit/s] and accelerations [unit/s²], each k × n. Times outside
     ``[t_0, t_m]`` extrapolate the end pieces."""
     t = _strictly_increasing(t, "t")
@@ -475,9 +477,7 @@ def clamped_cubic(t: ArrayLike, y: ArrayLike, at: ArrayLike) -> tuple[np.ndarray
         ab[1] = 2.0 * (h[:-1] + h[1:])
         ab[2, :-1] = h[2:]                          # sub-diagonal: h_i (row i, column i-1)
         rhs = 3.0 * (h[1:, None] * d[:-1] + h[:-1, None] * d[1:])
-        from scipy.linalg import solve_banded  # (scipy.linalg: already loaded by the kinematics)
-
-        slope[1:-1] = solve_banded((1, 1), ab, rhs, check_finite=False)
+        slope[1:-1] = solve_banded((1, 1), ab, rhs)   # numpy alone: scipy.linalg is not imported for a plan
     i = np.clip(np.searchsorted(t, at, side="right") - 1, 0, m - 1)
     s = (at - t[i])[:, None]
     hi = h[i][:, None]

@@ -12,9 +12,10 @@ Frames and units
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pinocchio as pin
-from scipy.linalg.lapack import dgesv
 
 from ..errors import ConfigurationError, OptionError, check_vector
 from .robot import Arm, RobotModel
@@ -27,11 +28,20 @@ REFERENCE_FRAMES = {
     "world": pin.ReferenceFrame.WORLD,
 }
 
+#: LAPACK's dgesv, imported on first use
+_dgesv: Any = None
+
 
 def _base_coupling(Ag: np.ndarray) -> np.ndarray:
     """``Ag_b⁻¹ Ag_m`` (6 × nj) with LAPACK's dgesv directly (numpy.linalg.solve costs ~2× more
-    for a 6 × 6 system, which dominates the generalized Jacobian)."""
-    _, _, K, info = dgesv(Ag[:, :6], Ag[:, 6:])
+    for a 6 × 6 system, which dominates the generalized Jacobian); scipy.linalg imported here, on
+    first use (~0.1 s of start-up that a fixed-base plan does not need)."""
+    global _dgesv
+    if _dgesv is None:
+        from scipy.linalg.lapack import dgesv
+
+        _dgesv = dgesv
+    _, _, K, info = _dgesv(Ag[:, :6], Ag[:, 6:])
     if info != 0:
         raise np.linalg.LinAlgError(f"singular base block of the centroidal map (dgesv info={info})")
     return K

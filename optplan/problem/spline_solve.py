@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 import scipy.sparse as sps
-import scipy.sparse.linalg as spsl
 
 from ..codegen import call_dense
+from ..geometry.banded import solve_banded_dense
 from .bspline import knot_values
 from .build import TermData
 from .collision_term import CollisionAvoidance
@@ -220,8 +220,8 @@ class SplineBackend:
         A = sps.csr_matrix(core.M["q"][1:N])
         rhs = Q[1:N] - A[:, np.r_[0:3, N:N + 3]] @ Pf[np.r_[0:3, N:N + 3]]
         B = A[:, 3:N]
-        # normal equations of a banded system: sparse (a dense solve is slow under a loaded BLAS)
-        Pf[3:N] = np.asarray(spsl.spsolve(sps.csc_matrix(B.T @ B), B.T @ rhs), float).reshape(N - 3, nj)
+        # normal equations of a banded system: banded (a dense solve is slow under a loaded BLAS)
+        Pf[3:N] = solve_banded_dense((B.T @ B).toarray(), B.T @ rhs).reshape(N - 3, nj)
         return Pf
 
     def row_families(self) -> list[Family]:
