@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import OptionError
+from .blas_threads import limited_blas_threads
 
 __all__ = ["IpoptStatus", "SolverOptions", "SolveOutcome", "NlpSolver", "outcome_from_stats"]
 log = logging.getLogger(__name__)
@@ -128,6 +129,11 @@ class SolverOptions:
     linear_solver: str | None = None
     #: ``"exact"`` or ``"limited-memory"`` (L-BFGS).
     hessian: str | None = None
+    #: Threads of the BLAS under IPOPT's linear solver (the OpenBLAS CasADi ships, which MUMPS
+    #: calls) during a solve [count] (integer ≥ 1); ``None`` leaves the library's own count (one per
+    #: core, whose idle threads spin after each factorization). Restored after the solve
+    #: (:mod:`optplan.problem.blas_threads`).
+    blas_threads: int | None = 1
     #: Any other IPOPT option (``"mu_strategy"`` or ``"ipopt.mu_strategy"``) or CasADi nlpsol option
     #: (``"expand"``, ``"print_time"``), applied last: it overrides everything, the fields above included.
     #: Checked against IPOPT when the options are created.
@@ -144,6 +150,8 @@ class SolverOptions:
             if getattr(self, name) is not None:
                 _number(getattr(self, name), f"{name} [s]")
         _number(self.print_level, "print_level", integer=True, allow_zero=True)
+        if self.blas_threads is not None:
+            _number(self.blas_threads, "blas_threads [count]", integer=True)
         if not 0 <= int(self.print_level) <= 12:
             raise OptionError(f"SolverOptions.print_level: expected an integer in 0..12, got {self.print_level!r}")
         if self.hessian is not None and self.hessian not in _HESSIANS:
@@ -372,12 +380,13 @@ class NlpSolver:
         self._setup_pending = 0.0
         t0, c0 = time.perf_counter(), time.process_time()
         try:
-            got = self._call_buffered(args)
-            if got is None:
-                out = self.solver(**args)
-                stats = self._stats = dict(self.solver.stats())
-            else:
-                out, stats = got
+            with limited_blas_threads(self.options.blas_threads):
+                got = self._call_buffered(args)
+                if got is None:
+                    out = self.solver(**args)
+                    stats = self._stats = dict(self.solver.stats())
+                else:
+                    out, stats = got
         except RuntimeError as exc:  # IPOPT/CasADi evaluation errors become a status
             log.warning("IPOPT raised: %s", exc)
             return SolveOutcome(IpoptStatus.INTERNAL_ERROR, -1, time.perf_counter() - t0,
