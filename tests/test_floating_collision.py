@@ -152,28 +152,6 @@ def test_a_collision_due_to_the_base_drift_is_removed(eba, probe):
             assert row.min() >= f.data["item"].margins[list(f.points).index(k)] - 1e-6
 
 
-def test_world_pair_kernels_are_reused_across_problems(eba, probe):
-    """A pair with an obstacle keeps every vertex of its moving side (the base box: 8), so that two
-    problems whose guesses give other planes use the very same kernel (no new function per
-    problem). The rows' meaning (a lower bound of coal's distance, every vertex) is checked above."""
-    fams = []
-    for bump in (0.0, 0.08):
-        p = _problem(eba, probe, True)
-        s = np.linspace(0.0, 1.0, 17)[:, None]
-        p.set_initial(Q0 + s * (QF - Q0) + bump * np.sin(np.pi * s))
-        p.solve(guarantees=False, max_iter=3)   # the rows are planned before IPOPT runs
-        world = [f for f in p._spline.fams if f.kind == "pair" and f.data["world"]]
-        assert world
-        fams.append({f.name: f.data["item"] for f in world})
-    common = set(fams[0]) & set(fams[1])
-    assert common
-    for name in common:
-        a, b = fams[0][name], fams[1][name]
-        assert a.fn is b.fn and a.nrow == b.nrow == 8
-    assert any(not np.allclose(fams[0][n].normals[:, :1], fams[1][n].normals[:, :1]) or
-               len(fams[0][n].knots) != len(fams[1][n].knots) for n in common)   # other planes, same kernel
-
-
 def test_two_collision_terms_keep_their_own_pairs_and_margins(eba, probe):
     """A link clearance (no scene: the robot's own bodies) and an obstacle clearance with another
     margin on one floating problem: each term plans its own pairs, its rows carry its margin, and

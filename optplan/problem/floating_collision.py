@@ -2,8 +2,7 @@
 
 The rows are the fixed-base segment NLP's separating planes (decision 0003/0012: normals fixed at
 coal's witness normal along the first guess, the pairs that guess brings within ``activation``,
-margins relaxed next to the given boundary configurations, box vertices pruned — but a pair with
-an obstacle keeps every vertex of its moving side, so that its kernel is reused), with each body's
+margins relaxed next to the given boundary configurations, box vertices pruned), with each body's
 world placement the base pose times the joint forward kinematics:
 
     x_world = R_w(xi) · (p_f(q) + R_f(q) v − c(q)) + c0,   R_w = R(base0) · R(xi)
@@ -194,6 +193,7 @@ def plan_floating_collision(prob: Any, core: Any, term: CollisionAvoidance, x: n
                     relaxed[(p, k)] = min(min(margin, 0.5 * d), relaxed.get((p, k), np.inf))
     col.relaxed = relaxed
     holder = col.checker.object_arm
+    data = robot.model.createData()
     datas = []
     for k in range(N + 1):
         d = robot.model.createData()
@@ -233,13 +233,13 @@ def plan_floating_collision(prob: Any, core: Any, term: CollisionAvoidance, x: n
             Nrm[:, t], off[t] = n, b
         fid, V, r = mov[1], mov[2], mov[3]
         assert fid is not None
-        placed = [] if world else [_frame_points(robot, datas[k], fid, V) for k in ks]
-        if not world:
-            # a world pair keeps every point of its moving side: its kernel is then one per geometry,
-            # reused by every later problem (a pruned set, which changes with the normals, built a
-            # new kernel for many trials); the extra rows are of points ≥ VERTEX_WINDOW behind the
-            # leading one, the separating-plane condition of the whole convex body
-            V = V[:, _prune(V, placed, Nrm, 1.0)]
+        if world:
+            placed = [Rb[k] @ (_frame_points(robot, datas[k], fid, V)
+                               - pin.centerOfMass(robot.model, data, robot.configuration(Qk[k]))[:, None])
+                      for k in ks]
+        else:
+            placed = [_frame_points(robot, datas[k], fid, V) for k in ks]
+        V = V[:, _prune(V, placed, Nrm, 1.0)]
         static = other[0] != "moving"
         if static:
             Y, rb = other[2], other[3]
