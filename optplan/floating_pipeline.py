@@ -365,8 +365,10 @@ def _resteer_end(robot: RobotModel, scene: Scene, planner: FloatingTCBiRRT, moti
                  seed: int) -> tuple[ChainedMotion, VerifyReport]:
     """A plan that ENDS with a kept manoeuvre misses its end attitude by what putting the manoeuvre
     back on the closed chain changed (~1e-4-1e-3 rad; no optimized piece follows to take it out):
-    steer the rest off from the real end (the planner's steering, loops scaled to the small
-    rotation left) and keep that manoeuvre too, up to ``opts.resteer_rounds`` times until the end
+    steer the rest off from the real end (the planner's steerer: the loop that makes the small
+    rotation left solved for from three measured probe loops,
+    :meth:`~optplan.planners.floating_steer.AttitudeSteerer.steer_small`; its loop search only when
+    that finds nothing) and keep that manoeuvre too, up to ``opts.resteer_rounds`` times until the end
     attitude, integrated part by part from zero momentum, is within half the tolerance; then
     verify the whole motion once more (the judge). ``rep`` None: the chained motion was not
     verified (its parts succeeded, its end attitude integrated part by part misses: :func:`_chained`);
@@ -395,19 +397,21 @@ def _resteer_end(robot: RobotModel, scene: Scene, planner: FloatingTCBiRRT, moti
             break
         steerer = planner.steerer
         whole = steerer.options
-        # a small rotation: whole loops overshoot it, so one round of new loops (three of them make
-        # the trio of the scaled-loop refinement) is tried first, then a few rounds, then the full
-        # search (a full search spends its rounds looking for whole loops); the loops found are kept
         if not np.array_equal(q_end, q_pool):
             pool, q_pool = [], q_end.copy()
-        st = None
+        # the small rotation left solved for: three small probe loops measured, one loop of the size
+        # and orientation that makes it (AttitudeSteerer.steer_small); only when that finds nothing,
+        # the search: one round of new loops (three of them make the trio of the scaled-loop
+        # refinement), then a few rounds, then the full search; the loops found are kept
+        st = steerer.steer_small(q_end, base_end, wanted, rng, Deadline(opts.resteer_time_s, clock="cpu"),
+                                 tol_rad=0.1 * tol, pool=pool)
         try:
             for rounds in dict.fromkeys((1, min(4, whole.max_rounds), whole.max_rounds)):
+                if st is not None:
+                    break
                 steerer.options = replace(whole, max_rounds=rounds)
                 st = steerer.steer(q_end, base_end, wanted, rng, Deadline(opts.resteer_time_s, clock="cpu"),
                                    tol_rad=0.1 * tol, pool=pool)
-                if st is not None:
-                    break
         finally:
             steerer.options = whole
         if st is None:

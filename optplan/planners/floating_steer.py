@@ -21,8 +21,10 @@ no loop brings it nearer (then it returns what it reached, and the caller decide
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -63,13 +65,21 @@ class SteerOptions:
     #: checked samples and off the planner's straight edges (put back on the closed chain), where
     #: the clearance may dip below the samples' by micrometres: this margin keeps it clear. 0: none.
     clearance_m: float = 1e-3
+    #: size of the probe loops of :meth:`AttitudeSteerer.steer_small` relative to ``loop_m`` /
+    #: ``loop_rad`` [1] (a loop's holonomy grows with the square of its size: the probes are measured,
+    #: not kept, and the loops kept are scaled from them).
+    probe_scale: float = 0.3
+    #: most probe loops drawn by :meth:`AttitudeSteerer.steer_small` [count].
+    max_probes: int = 16
 
     def __post_init__(self) -> None:
         for name in ("loop_m", "loop_rad", "tol_rad", "max_joint_step", "join_step_rad"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise OptionError(f"SteerOptions.{name}: expected a positive finite number, got {v!r}")
-        for name in ("new_loops", "max_repeat", "max_rounds", "refine_rounds"):
+        if not (isinstance(self.probe_scale, (int, float)) and 0 < self.probe_scale <= 1):
+            raise OptionError(f"SteerOptions.probe_scale: expected a number in (0, 1], got {self.probe_scale!r}")
+        for name in ("new_loops", "max_repeat", "max_rounds", "refine_rounds", "max_probes"):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 1):
                 raise OptionError(f"SteerOptions.{name}: expected an integer ≥ 1, got {v!r}")
@@ -259,21 +269,124 @@ class AttitudeSteerer:
         st.loops += k
         return True
 
-    def _refine(self, st: _State, q: np.ndarray, pool: list[_Loop], tol: float, deadline: Deadline) -> None:
-        """The small rotation left, ``r``, by three loops of the pool scaled: a loop's holonomy
-        grows with the square of its size (``s²·b`` to leading order), so ``r = Σ cᵢ bᵢ`` gives
-        each loop's scale ``√|cᵢ|`` and direction (the sign of ``cᵢ``); repeated while it converges
-        (the neglected terms are of higher order in the scale)."""
+    def steer_small(self, q: np.ndarray, base: pin.SE3, wanted: np.ndarray, rng: np.random.Generator,
+                    deadline: Deadline, tol_rad: float | None = None,
+                    pool: list[_Loop] | None = None) -> SteerResult | None:
+        """Like :meth:`steer` for a rotation ``wanted`` well below one whole loop's (a re-steering's
+        1e-6-1e-3 rad), solved for instead of searched: no search for whole loops (they overshoot).
+
+        A small loop's holonomy is, to leading order, bilinear and antisymmetric in its two via
+        offsets: ``b(ξ₁, ξ₂) ≈ s²·Ω(ξ₁, ξ₂)`` (the connection's curvature on the loop's area
+        bivector ``½ ξ₁ ∧ ξ₂``). Three probe loops sharing ``ξ₁`` (size ``options.probe_scale``)
+        with independent holonomies ``bᵢ`` are measured (integrated, never kept); the rotation left
+        ``r = Σ cᵢ bᵢ`` is then made by ONE loop with the second offset ``Σ cᵢ ξ₂ᵢ`` (the two offsets
+        rescaled to a common size, their product kept; repeated ``k`` times when it would exceed
+        a whole loop), and again on the rotation still left while it shrinks (the neglected terms
+        are of higher order in the size). When that loop fails its IK or collides, three probes are
+        scaled instead (:meth:`_refine`). ``pool``: loops from these very joints ``q`` (reused: the
+        probes drawn are added). None when no three independent probes are found within
+        ``options.max_probes`` draws or no loop brings the rotation nearer."""
+        o = self.options
+        tol = o.tol_rad if tol_rad is None else float(tol_rad)
+        st = _State(base, wanted)
+        pool = [] if pool is None else pool
+        fam = self._family(q, rng, pool, deadline)
+        if fam is not None and st.err > tol:
+            xi1, X2, Bm = fam
+            lim = float(np.linalg.norm([o.loop_m] * 3 + [o.loop_rad] * 3))   # a whole loop's largest offset
+            for _ in range(o.refine_rounds):
+                if st.err <= tol or deadline.expired():
+                    break
+                r = np.asarray(pin.log3(st.P.T @ st.wanted))
+                xi2 = X2 @ np.linalg.solve(Bm, r)
+                n1, n2 = float(np.linalg.norm(xi1)), float(np.linalg.norm(xi2))
+                if n2 < 1e-15:
+                    break
+                g = math.sqrt(n1 * n2)   # both offsets of size √(n₁n₂): the same bivector
+                k = max(1, math.ceil((o.probe_scale * g / lim) ** 2))   # k loops, each 1/k of r
+                f = 1.0 / math.sqrt(k)
+                xis = np.array([xi1 * (g / n1) * f, xi2 * (g / n2) * f])
+                sl = self._loop(q, None, xis, o.probe_scale)
+                # kept only when it brings the rotation nearer (and is collision-free)
+                if sl is None or _angle(st.P @ np.linalg.matrix_power(sl.D.rotation, k), st.wanted) >= st.err \
+                        or not self._append(st, sl, 1, k):
+                    break
+        if st.err > tol:
+            mark = st.mark()
+            self._refine(st, q, pool, tol, deadline)
+            if st.err >= mark[-1]:
+                st.restore(mark)   # the scaled trio did not help: not kept
+        if not st.joints:
+            return None
+        return SteerResult(st.joints, st.bases, base.rotation.T @ st.bases[-1].rotation, st.err, st.loops,
+                           np.vstack(st.rows), base)
+
+    def _family(self, q: np.ndarray, rng: np.random.Generator, pool: list[_Loop],
+                deadline: Deadline) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Three probe loops from ``q`` sharing the first via offset ``ξ₁`` whose holonomies are
+        independent (:meth:`_trio`): ``(ξ₁, [ξ₂ᵢ] as the columns of a 6 × 3 matrix, [bᵢ] as the
+        columns of a 3 × 3 one)``, the probes' own size ``options.probe_scale``; those in ``pool``
+        are reused, the new ones added to it. A first offset whose first four probes all fail is
+        replaced. None after ``options.max_probes`` draws."""
+        o = self.options
+
+        def fam_of(xi1: np.ndarray) -> list[_Loop]:
+            return [lp for lp in pool if lp.scale == o.probe_scale and np.array_equal(lp.xis[0], xi1)]
+
+        firsts = [lp.xis[0] for lp in pool if lp.scale == o.probe_scale]
+        xi1 = firsts[0] if firsts else None
+        tried = 0
+        best = None
+        for _ in range(o.max_probes + 1):
+            if xi1 is not None:
+                got = _best_trio(fam_of(xi1))
+                if got is not None and (best is None or got[0] > best[0]):
+                    best = (got[0], xi1, got[1], got[2])
+                if best is not None and best[0] >= 0.3:
+                    break
+            if deadline.expired():
+                break
+            if xi1 is None or (tried >= 4 and not fam_of(xi1)):
+                xi1, tried = np.r_[rng.uniform(-o.loop_m, o.loop_m, 3), rng.uniform(-o.loop_rad, o.loop_rad, 3)], 0
+            xi2 = np.r_[rng.uniform(-o.loop_m, o.loop_m, 3), rng.uniform(-o.loop_rad, o.loop_rad, 3)]
+            tried += 1
+            lp = self._loop(q, None, np.array([xi1, xi2]), o.probe_scale)
+            if lp is not None:
+                pool.append(lp)
+        if best is None or best[0] < 0.05:
+            return None
+        _, xi1, trio, Bm = best
+        return xi1, np.array([lp.xis[1] for lp in trio]).T, Bm
+
+    @staticmethod
+    def _trio(pool: list[_Loop]) -> tuple[list[_Loop], np.ndarray] | None:
+        """Three loops of ``pool`` whose holonomies (rotation vectors ``b``, the columns of the 3 × 3
+        matrix returned) are independent enough to compose any small rotation (the normalised
+        determinant ≥ 0.05): the largest, the one most across it, the one most out of their plane.
+        None when the pool has no such three."""
+        if len(pool) < 3:
+            return None
         b = np.array([pin.log3(lp.D.rotation) for lp in pool])
         nrm = np.linalg.norm(b, axis=1)
         i0 = int(np.argmax(nrm))
         u = b / np.maximum(nrm, 1e-12)[:, None]
         i1 = int(np.argmax(np.linalg.norm(np.cross(u, u[i0]), axis=1) * nrm))
         i2 = int(np.argmax(np.abs(u @ np.cross(u[i0], u[i1])) * nrm))
-        trio = [pool[i] for i in (i0, i1, i2)]
         Bm = np.array([b[i] for i in (i0, i1, i2)]).T
         if abs(np.linalg.det(Bm / np.maximum(np.linalg.norm(Bm, axis=0), 1e-12))) < 0.05:
+            return None
+        return [pool[i] for i in (i0, i1, i2)], Bm
+
+    def _refine(self, st: _State, q: np.ndarray, pool: list[_Loop], tol: float, deadline: Deadline) -> None:
+        """The small rotation left, ``r``, by three loops of the pool scaled: a loop's holonomy
+        grows with the square of its size (``s²·b`` to leading order), so ``r = Σ cᵢ bᵢ`` gives
+        each loop's scale ``√|cᵢ|`` times its own (at most the whole loop, scale 1) and direction
+        (the sign of ``cᵢ``); repeated while it converges (the neglected terms are of higher order
+        in the scale)."""
+        got = self._trio(pool)
+        if got is None:
             return
+        trio, Bm = got
         for _ in range(self.options.refine_rounds):
             if st.err <= tol or deadline.expired():
                 return
@@ -281,7 +394,7 @@ class AttitudeSteerer:
             c = np.linalg.solve(Bm, r)
             err0 = st.err
             for ci, lp in zip(c, trio):
-                s = lp.scale * math.sqrt(min(abs(float(ci)), 1.0))
+                s = min(lp.scale * math.sqrt(abs(float(ci))), 1.0)
                 if s < 1e-6:
                     continue
                 sl = self._loop(q, None, lp.xis, s)
@@ -289,6 +402,23 @@ class AttitudeSteerer:
                     return
             if st.err >= err0:
                 return
+
+
+def _best_trio(loops: list[_Loop]) -> tuple[float, list[_Loop], np.ndarray] | None:
+    """The three of ``loops`` whose holonomies (rotation vectors) are the most independent: (the
+    normalised determinant |det [b̂₁ b̂₂ b̂₃]| [1], the loops, the 3 × 3 matrix of their ``b`` as
+    columns); None with fewer than three loops."""
+    if len(loops) < 3:
+        return None
+    b = np.array([pin.log3(lp.D.rotation) for lp in loops])
+    u = b / np.maximum(np.linalg.norm(b, axis=1), 1e-300)[:, None]
+    d, ijk = max((abs(float(np.linalg.det(u[list(c)]))), c) for c in itertools.combinations(range(len(loops)), 3))
+    return d, [loops[i] for i in ijk], b[list(ijk)].T
+
+
+def _angle(P: np.ndarray, wanted: np.ndarray) -> float:
+    """The angle between the rotations ``P`` and ``wanted`` [rad]."""
+    return float(np.linalg.norm(pin.log3(P.T @ wanted)))
 
 
 @dataclass
@@ -308,6 +438,15 @@ class _State:
         self.P = np.eye(3)
         self.err = float(np.linalg.norm(pin.log3(self.wanted)))
         self.loops = 0
+
+    def mark(self) -> tuple[Any, ...]:
+        """What :meth:`restore` needs to undo the loops appended after this call (``err`` last)."""
+        return len(self.joints), len(self.bases), len(self.rows), self.B, self.P, self.loops, self.err
+
+    def restore(self, mark: tuple[Any, ...]) -> None:
+        """The manoeuvre as it was at :meth:`mark`."""
+        nj, nb, nr, self.B, self.P, self.loops, self.err = mark
+        del self.joints[nj:], self.bases[nb:], self.rows[nr:]
 
 
 def _reversed_rows(lp: _Loop) -> np.ndarray:
