@@ -182,14 +182,15 @@ def main(argv: list[str] | None = None) -> int:
 
         if a.from_dir:
             for line in (Path(a.from_dir) / "scenes.jsonl").read_text().splitlines():
-                rec = json.loads(line) if line.strip() else {}
-                if rec.get("key") in done or not rec:
+                drawn_rec: dict[str, Any] = json.loads(line) if line.strip() else {}
+                if not drawn_rec or drawn_rec.get("key") in done:
                     continue
-                if rec.get("skipped"):
-                    emit(rec)
+                if drawn_rec.get("skipped"):
+                    emit(drawn_rec)
                     continue
-                order = KEYS if rec["index"] % 2 == 0 else KEYS[::-1]
-                emit({**rec, "order": order, **run_query(rec["scene"], 0, a.base_seed, a.time_limit, specs, order)})
+                order = KEYS if drawn_rec["index"] % 2 == 0 else KEYS[::-1]
+                emit({**drawn_rec, "order": order,
+                      **run_query(drawn_rec["scene"], 0, a.base_seed, a.time_limit, specs, order)})
             return 0
         if a.scenes:
             from .tcbirrt import expand_scenes

@@ -24,13 +24,13 @@ VARIANTS = {
               "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
               "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
-              "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0},
+              "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
-                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0},
+                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 5000},
 }
 
 
@@ -196,8 +196,15 @@ class TCBiRRTOptions:
     #: planner's generator: the same search as ``"python"``) or ``"python"``. Without a compiler or with
     #: ``validity_kernel="coal"`` the Python code runs.
     extension: str = "loop"
-    #: Cap on Alg. 1 iterations [count] (0: only the time limit).
+    #: Cap on Alg. 1 iterations [count] (0: only the time limit), over all restarts.
     max_iterations: int = 0
+    #: Restart the search from the two roots (new trees; the lead path kept; the query's random stream going on)
+    #: when it has run this many iterations without a path [count] (None: the variant's value, :data:`VARIANTS`:
+    #: paper 0, improved 5000; 0: off). Search times of one query are heavy-tailed across random streams (a search that
+    #: commits its trees to a dead end rarely recovers); a restart cuts that tail.
+    restart_iterations: int | None = None
+    #: Each restart's iteration budget is the previous one's times this [-] (>= 1).
+    restart_growth: float = 1.5
     #: ``"paper"`` (the published algorithm) or ``"improved"`` (task-space sampling aids).
     variant: str = "paper"
     #: Probability that ξ_rand is the pose of a random node of the other tree [-] (None: the variant's value,
@@ -285,12 +292,16 @@ class TCBiRRTOptions:
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
         for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds", "frontier_grafts", "frontier_interval",
-                     "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count"):
+                     "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count",
+                     "restart_iterations"):
             v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after", "frontier_grafts", "stall_iterations",
-                                                         "trap_grafts") else 1)
+                                                         "trap_grafts", "restart_iterations") else 1)
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
         _pos("graft_time_limit", self.graft_time_limit)
+        if not (isinstance(self.restart_growth, (int, float)) and not isinstance(self.restart_growth, bool)
+                and math.isfinite(self.restart_growth) and self.restart_growth >= 1.0):
+            raise ValueError(f"TCBiRRTOptions.restart_growth: expected a number >= 1, got {self.restart_growth!r}")
         if self.trap_graft_target not in ("other", "sample"):
             raise ValueError(f"TCBiRRTOptions.trap_graft_target: expected 'other' or 'sample', got {self.trap_graft_target!r}")
         if self.graft_node not in ("meet", "any", "mixed"):
