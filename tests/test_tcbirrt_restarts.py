@@ -1,4 +1,5 @@
-"""TCBiRRT's restarts (``restart_iterations``, ``restart_growth``): the iteration schedule, the counters summed
+"""TCBiRRT's restarts (``restart_iterations``, ``restart_growth``, ``restart_branch_roots``): the iteration schedule,
+every second search with branch-consistent roots, the counters summed
 over the searches, the same search as without restarts until the first restart, and a path found after restarts
 checked independently (Pinocchio FK for the closed chain, the checker at every configuration and the bench's 1 cm
 sweep along every straight edge)."""
@@ -34,6 +35,12 @@ def test_restart_schedule_and_summed_counters(tcb, truss):
     res = TCBiRRT(tcb, sc, o, checker=ck).plan(t.q_start, t.q_goal, time_limit=60.0, seed=3, clock="cpu")
     assert res.status == PlanStatus.FAILED and "iteration cap" in res.message
     assert res.stats["restarts"] == 3 and res.stats["iterations"] == 40
+    # the 4th search (the 3rd restart) is one of every second: its goal root re-grasped onto the start's branch
+    assert "root_branch" in res.stats
+    no_flip = TCBiRRTOptions(variant="improved", restart_iterations=5, restart_growth=2.0, max_iterations=40,
+                             restart_branch_roots=False)
+    plain = TCBiRRT(tcb, sc, no_flip, checker=ck).plan(t.q_start, t.q_goal, time_limit=60.0, seed=3, clock="cpu")
+    assert plain.stats["restarts"] == 3 and "root_branch" not in plain.stats
     one = TCBiRRT(tcb, sc, TCBiRRTOptions(variant="improved", restart_iterations=0, max_iterations=5), checker=ck)
     first = one.plan(t.q_start, t.q_goal, time_limit=60.0, seed=3, clock="cpu")
     assert first.stats["iterations"] == 5 and "restarts" not in first.stats
@@ -66,9 +73,10 @@ def test_path_found_after_restarts_is_valid(tcb, ssps):
 
 
 def test_restart_options_are_checked():
-    assert TCBiRRTOptions().restart_iterations == 0
+    assert TCBiRRTOptions().restart_iterations == 0 and TCBiRRTOptions().restart_branch_roots is False
     assert TCBiRRTOptions(variant="improved").restart_iterations > 0
+    assert TCBiRRTOptions(variant="improved").restart_branch_roots is True
     for bad in (dict(restart_iterations=-1), dict(restart_iterations=2.5), dict(restart_growth=0.5),
-                dict(restart_growth=float("inf"))):
+                dict(restart_growth=float("inf")), dict(restart_branch_roots=1)):
         with pytest.raises(ValueError, match=next(iter(bad))):
             TCBiRRTOptions(**bad)

@@ -400,14 +400,15 @@ class TCBiRRT(EdgeCheckMixin, Planner):
     # ------------------------------------------------------------------ restarts
     def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator, seed: int) -> PlanResult:
         """Alg. 1 (:meth:`_search`); with ``restart_iterations`` the search starts again from the two roots (new
-        trees; the object's lead path, once found, kept), on the query's random stream as it has gone on, each time a search has run its iteration budget without a path
+        trees; the object's lead path, once found, kept; with ``restart_branch_roots`` every second search with
+        ``branch_roots`` the other way), on the query's random stream as it has gone on, each time a search has run its iteration budget without a path
         (the budget grows by ``restart_growth`` per restart; the last one ends at ``max_iterations`` or the time
         limit). Counters of ``stats`` are summed over the searches; ``restarts`` counts the searches abandoned."""
         o = self.options
         budget = float(cast(int, o.restart_iterations))
         self._lead = (None, 0.0)
         if not budget:
-            return self._search(q_start, q_goal, deadline, rng, seed, o.max_iterations)
+            return self._search(q_start, q_goal, deadline, rng, seed, o.max_iterations, bool(o.branch_roots))
         done: dict[str, float] = {}
         n_restarts = 0
         while True:
@@ -415,7 +416,8 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             last = bool(o.max_iterations) and done.get("iterations", 0) + cap >= o.max_iterations
             if last:
                 cap = o.max_iterations - int(done.get("iterations", 0))
-            res = self._search(q_start, q_goal, deadline, rng, seed, cap)
+            roots = bool(o.branch_roots) != (bool(o.restart_branch_roots) and n_restarts % 2 == 1)
+            res = self._search(q_start, q_goal, deadline, rng, seed, cap, roots)
             for k, v in done.items():   # the counters of the abandoned searches
                 if isinstance(res.stats.get(k, 0), (int, float)) and not isinstance(v, bool):
                     res.stats[k] = res.stats.get(k, 0) + v
@@ -429,8 +431,9 @@ class TCBiRRT(EdgeCheckMixin, Planner):
 
     # ------------------------------------------------------------------ Alg. 1
     def _search(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator, seed: int,
-                max_iterations: int) -> PlanResult:
-        """Alg. 1 from the two roots; at most ``max_iterations`` iterations (0: until the deadline)."""
+                max_iterations: int, branch_roots: bool) -> PlanResult:
+        """Alg. 1 from the two roots; at most ``max_iterations`` iterations (0: until the deadline); ``branch_roots``:
+        the goal root re-grasped onto the start's IK branch first (:meth:`_root_branches`)."""
         o = self.options
         self._rng = rng
         st: dict[str, Any] = {k: 0 for k in ("iterations", "extensions", "trapped", "partial", "ik_calls", "ik_iterations", "ik_restarts",
@@ -464,7 +467,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
         fronts = {id(ta): 0, id(tb): 0}
         traps: dict[int, list[Any]] = {id(ta): [{}, 0], id(tb): [{}, 0]}   # trap_grafts: traps per node, grafts made
-        if o.branch_roots:
+        if branch_roots:
             self._root_branches(ta, tb, deadline, st)
         best_gap, since_gap = np.inf, 0   # stall_iterations: the smallest gap a connection left, iterations since it shrank
         if o.branch_grafts and o.root_grafts_first and not o.graft_after:

@@ -24,13 +24,15 @@ VARIANTS = {
               "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
               "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
-              "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0},
+              "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
+              "restart_branch_roots": False},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
-                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 5000},
+                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 5000,
+                 "restart_branch_roots": True},
 }
 
 
@@ -205,6 +207,10 @@ class TCBiRRTOptions:
     restart_iterations: int | None = None
     #: Each restart's iteration budget is the previous one's times this [-] (>= 1).
     restart_growth: float = 1.5
+    #: Every second search after a restart (the 2nd, 4th, ...) runs with ``branch_roots`` the other way: a search
+    #: whose roots sit on IK branches that cannot meet is followed by one whose roots share a branch, and the
+    #: other way round (None: the variant's value, :data:`VARIANTS`: paper False, improved True).
+    restart_branch_roots: bool | None = None
     #: ``"paper"`` (the published algorithm) or ``"improved"`` (task-space sampling aids).
     variant: str = "paper"
     #: Probability that ξ_rand is the pose of a random node of the other tree [-] (None: the variant's value,
@@ -315,7 +321,7 @@ class TCBiRRTOptions:
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
                      "regrasp_share_orders", "verify_path", "graft_single_arm", "regrasp_both_arms", "regrasp_backoff", "root_grafts_first",
-                     "graft_branch_seeds", "branch_roots"):
+                     "graft_branch_seeds", "branch_roots", "restart_branch_roots"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
