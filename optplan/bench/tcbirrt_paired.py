@@ -165,6 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if a.summary:
         rows = [json.loads(x) for d in a.summary for x in (Path(d) / "paired.jsonl").read_text().splitlines() if x.strip()]
+        rows = list({r["key"]: r for r in rows[::-1]}.values())[::-1]   # a key written twice counts once (its first line)
         print(paired_summary(rows, a.time_limit))
         return 0
     specs = tuple(s.strip() for s in a.planners.split(","))

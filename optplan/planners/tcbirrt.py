@@ -82,6 +82,9 @@ Deviations from the paper, all options (defaults in brackets):
   along the straight start-goal object motion, :meth:`~.tcbirrt_grafts.BranchMixin.branch_at`), or, where that
   configuration collides, the start's root onto the goal's branch; the tree grows from that graft. Trees on one
   branch can meet without a regrasp of a whole branch change.
+* ``restart_iterations`` [0 (off) in both variants; measured in docs/planners.md]: a search without a path after
+  that many iterations starts again from the two roots (lead path kept; the budget grows ``restart_growth``× per
+  restart); with ``restart_branch_roots`` every second search has ``branch_roots`` the other way.
 * ``stall_iterations`` [0 (off) in both variants; measured in docs/planners.md]: a frontier graft is also tried
   when the smallest ξ gap a connection has left between the trees (0 once a connection reached the other tree's
   pose and only its regrasp failed) has not shrunk by 1 % for that many iterations, before ``graft_after``.

@@ -31,8 +31,8 @@ VARIANTS = {
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
-                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 5000,
-                 "restart_branch_roots": True},
+                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
+                 "restart_branch_roots": False},
 }
 
 
@@ -202,14 +202,14 @@ class TCBiRRTOptions:
     max_iterations: int = 0
     #: Restart the search from the two roots (new trees; the lead path kept; the query's random stream going on)
     #: when it has run this many iterations without a path [count] (None: the variant's value, :data:`VARIANTS`:
-    #: paper 0, improved 5000; 0: off). Search times of one query are heavy-tailed across random streams (a search that
-    #: commits its trees to a dead end rarely recovers); a restart cuts that tail.
+    #: 0 (off) in both; 5000 measured on fresh generated scenes and left off, see docs/planners.md). A restart cuts
+    #: the heavy tail of one query's search times across random streams, and loses searches that needed more.
     restart_iterations: int | None = None
     #: Each restart's iteration budget is the previous one's times this [-] (>= 1).
     restart_growth: float = 1.5
     #: Every second search after a restart (the 2nd, 4th, ...) runs with ``branch_roots`` the other way: a search
     #: whose roots sit on IK branches that cannot meet is followed by one whose roots share a branch, and the
-    #: other way round (None: the variant's value, :data:`VARIANTS`: paper False, improved True).
+    #: other way round (None: the variant's value, :data:`VARIANTS`: False in both).
     restart_branch_roots: bool | None = None
     #: ``"paper"`` (the published algorithm) or ``"improved"`` (task-space sampling aids).
     variant: str = "paper"
