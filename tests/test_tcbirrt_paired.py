@@ -58,3 +58,27 @@ def test_paired_summary_counts():
     assert "bay: 3 queries; success a 1/3, b 2/3 (b wins 2, loses 1;" in s
     assert "joint length [rad]: median a 10.00, b 12.00; b/a geometric mean 1.200" in s
     assert "failures: {'a timeout': 2, 'b timeout': 1}" in s
+
+
+def test_from_and_summary_count_each_key_once(tmp_path, capsys):
+    """``--from`` carries a generated index without a certified draw over as skipped (no planning), and
+    ``--summary`` counts a key written twice once (its first line)."""
+    import json
+
+    from optplan.bench.tcbirrt_paired import main
+
+    drawn = tmp_path / "drawn"
+    drawn.mkdir()
+    (drawn / "scenes.jsonl").write_text(json.dumps({"key": "7_0", "index": 0, "group": "bay", "skipped": True}) + "\n")
+    out = tmp_path / "out"
+    assert main(["--from", str(drawn), "--out", str(out), "--base-seed", "7"]) == 0
+    assert main(["--from", str(drawn), "--out", str(out), "--base-seed", "7"]) == 0   # resumes: nothing new
+    lines = [json.loads(x) for x in (out / "paired.jsonl").read_text().splitlines()]
+    assert len(lines) == 1 and lines[0]["skipped"] and lines[0]["group"] == "bay"
+    first, again = {**_row("wall", True, False, 1.0, 5.0), "key": "k"}, {**_row("wall", True, True, 1.0, 0.5), "key": "k"}
+    (out / "paired.jsonl").write_text("".join(json.dumps(r) + "\n" for r in (first, again, *lines)))
+    capsys.readouterr()
+    assert main(["--summary", str(out), "--time-limit", "5"]) == 0
+    s = capsys.readouterr().out
+    assert s.startswith("2 lines; indices without a certified draw 1")
+    assert "all: 1 queries; success a 1/1, b 0/1 (b wins 0, loses 1;" in s

@@ -16,6 +16,11 @@ translation [m] and rotation angle [rad] summed over consecutive held poses.
 
 ``python -m optplan.bench.tcbirrt_paired --summary OUT --time-limit 5`` prints the paired statistics
 (:func:`paired_summary`).
+
+Drawing and certifying scenes does not depend on the two planners: ``--generate-only`` draws and writes the
+certified scenes (one JSON line per index in ``OUT/scenes.jsonl``) without planning, and ``--from DIR`` later pairs
+two planners on the scenes written there (each grouped by its family), so that scenes certified by one version of
+the code can be paired by another.
 """
 from __future__ import annotations
 
@@ -153,24 +158,41 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--first-trial", type=int, default=0, help="first trial of the fixed scenes")
     ap.add_argument("--out", help="output directory (paired.jsonl, scenes/)")
     ap.add_argument("--summary", nargs="+", metavar="DIR", help="print the paired statistics of these outputs")
+    ap.add_argument("--generate-only", action="store_true",
+                    help="draw and certify the generated scenes only (OUT/scenes.jsonl, OUT/scenes/), no planning")
+    ap.add_argument("--from", dest="from_dir", metavar="DIR",
+                    help="pair on the scenes a --generate-only run wrote to DIR (in its index order)")
     a = ap.parse_args(argv)
     if a.summary:
         rows = [json.loads(x) for d in a.summary for x in (Path(d) / "paired.jsonl").read_text().splitlines() if x.strip()]
+        rows = list({r["key"]: r for r in rows[::-1]}.values())[::-1]   # a key written twice counts once (its first line)
         print(paired_summary(rows, a.time_limit))
         return 0
     specs = tuple(s.strip() for s in a.planners.split(","))
-    if len(specs) != 2 or not a.out:
+    if (len(specs) != 2 and not a.generate_only) or not a.out:
         ap.error("--planners: expected two comma-separated specs, and --out")
     logging.getLogger("optplan").setLevel(logging.ERROR)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = out / "paired.jsonl"
+    path = out / ("scenes.jsonl" if a.generate_only else "paired.jsonl")
     done = {json.loads(x)["key"] for x in path.read_text().splitlines() if x.strip()} if path.exists() else set()
     with path.open("a") as f:
         def emit(rec: dict[str, Any]) -> None:
             f.write(json.dumps({**rec, "specs": specs, "time_limit_s": a.time_limit}) + "\n")
             f.flush()
 
+        if a.from_dir:
+            for line in (Path(a.from_dir) / "scenes.jsonl").read_text().splitlines():
+                drawn_rec: dict[str, Any] = json.loads(line) if line.strip() else {}
+                if not drawn_rec or drawn_rec.get("key") in done:
+                    continue
+                if drawn_rec.get("skipped"):
+                    emit(drawn_rec)
+                    continue
+                order = KEYS if drawn_rec["index"] % 2 == 0 else KEYS[::-1]
+                emit({**drawn_rec, "order": order,
+                      **run_query(drawn_rec["scene"], 0, a.base_seed, a.time_limit, specs, order)})
+            return 0
         if a.scenes:
             from .tcbirrt import expand_scenes
 
@@ -201,6 +223,9 @@ def main(argv: list[str] | None = None) -> int:
             g = drawn[0]
             g = replace(g, scene=replace(g.scene, name=f"gen_{a.base_seed}_{i:03d}_{fam}"))
             sc = write_scenes([g], out / "scenes")[0]
+            if a.generate_only:
+                emit({**rec, "scene": str(Path(sc).resolve()), "witness_cpu_s": g.witness.cpu_time_s if g.witness else None})
+                continue
             order = KEYS if i % 2 == 0 else KEYS[::-1]
             emit({**rec, "scene": sc, "witness_cpu_s": g.witness.cpu_time_s if g.witness else None, "order": order,
                   **run_query(sc, 0, a.base_seed, a.time_limit, specs, order)})

@@ -82,6 +82,9 @@ Deviations from the paper, all options (defaults in brackets):
   along the straight start-goal object motion, :meth:`~.tcbirrt_grafts.BranchMixin.branch_at`), or, where that
   configuration collides, the start's root onto the goal's branch; the tree grows from that graft. Trees on one
   branch can meet without a regrasp of a whole branch change.
+* ``restart_iterations`` [0 (off) in both variants; measured in docs/planners.md]: a search without a path after
+  that many iterations starts again from the two roots (lead path kept; the budget grows ``restart_growth``× per
+  restart); with ``restart_branch_roots`` every second search has ``branch_roots`` the other way.
 * ``stall_iterations`` [0 (off) in both variants; measured in docs/planners.md]: a frontier graft is also tried
   when the smallest ξ gap a connection has left between the trees (0 once a connection reached the other tree's
   pose and only its regrasp failed) has not shrunk by 1 % for that many iterations, before ``graft_after``.
@@ -186,6 +189,8 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         self._ext = make_extender(self) if self.checker.kernel == "native" and self.options.extension != "python" else None
         #: ``extension="loop"``: the query's native random stream (sampler, lead path, restarts), None: NumPy's
         self._nrng: Any = None
+        #: restarts: the object's lead path found by an earlier search of the query and the time spent on it [s]
+        self._lead: tuple[Any, float] = (None, 0.0)
 
     # ------------------------------------------------------------------ public helpers
     def check_endpoint(self, q: np.ndarray) -> str | None:
@@ -395,8 +400,43 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                           self.robot.upper + 1e-9)
         return smp
 
-    # ------------------------------------------------------------------ Alg. 1
+    # ------------------------------------------------------------------ restarts
     def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator, seed: int) -> PlanResult:
+        """Alg. 1 (:meth:`_search`); with ``restart_iterations`` the search starts again from the two roots (new
+        trees; the object's lead path, once found, kept; with ``restart_branch_roots`` every second search with
+        ``branch_roots`` the other way), on the query's random stream as it has gone on, each time a search has run its iteration budget without a path
+        (the budget grows by ``restart_growth`` per restart; the last one ends at ``max_iterations`` or the time
+        limit). Counters of ``stats`` are summed over the searches; ``restarts`` counts the searches abandoned."""
+        o = self.options
+        budget = float(cast(int, o.restart_iterations))
+        self._lead = (None, 0.0)
+        if not budget:
+            return self._search(q_start, q_goal, deadline, rng, seed, o.max_iterations, bool(o.branch_roots))
+        done: dict[str, float] = {}
+        n_restarts = 0
+        while True:
+            cap = max(1, int(round(budget)))
+            last = bool(o.max_iterations) and done.get("iterations", 0) + cap >= o.max_iterations
+            if last:
+                cap = o.max_iterations - int(done.get("iterations", 0))
+            roots = bool(o.branch_roots) != (bool(o.restart_branch_roots) and n_restarts % 2 == 1)
+            res = self._search(q_start, q_goal, deadline, rng, seed, cap, roots)
+            for k, v in done.items():   # the counters of the abandoned searches
+                if isinstance(res.stats.get(k, 0), (int, float)) and not isinstance(v, bool):
+                    res.stats[k] = res.stats.get(k, 0) + v
+            res.stats["restarts"] = n_restarts
+            if res.status != PlanStatus.FAILED or last or deadline.expired() or "iteration cap" not in res.message:
+                return res
+            done = {k: v for k, v in res.stats.items() if isinstance(v, (int, float)) and not isinstance(v, bool)
+                    and k not in ("restarts", "guide_waypoints")}
+            n_restarts += 1
+            budget *= o.restart_growth
+
+    # ------------------------------------------------------------------ Alg. 1
+    def _search(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator, seed: int,
+                max_iterations: int, branch_roots: bool) -> PlanResult:
+        """Alg. 1 from the two roots; at most ``max_iterations`` iterations (0: until the deadline); ``branch_roots``:
+        the goal root re-grasped onto the start's IK branch first (:meth:`_root_branches`)."""
         o = self.options
         self._rng = rng
         st: dict[str, Any] = {k: 0 for k in ("iterations", "extensions", "trapped", "partial", "ik_calls", "ik_iterations", "ik_restarts",
@@ -421,14 +461,16 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         tb = _TaskTree(q_goal, xi_from_pose(Mg), Mg.rotation.copy(), Mg.translation.copy())
         a_is_start = True
         found = None
-        guide_time = 0.0
+        guide_time, (lead, lead_time) = 0.0, self._lead   # a restarted search reuses the lead path found before
         if sampler is not None:
             sampler.set_endpoints(ta.xi[0], tb.xi[0])
+            if lead is not None:
+                sampler.guide = lead
             st["guide_attempts"] = st["guide_waypoints"] = 0
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
         fronts = {id(ta): 0, id(tb): 0}
         traps: dict[int, list[Any]] = {id(ta): [{}, 0], id(tb): [{}, 0]}   # trap_grafts: traps per node, grafts made
-        if o.branch_roots:
+        if branch_roots:
             self._root_branches(ta, tb, deadline, st)
         best_gap, since_gap = np.inf, 0   # stall_iterations: the smallest gap a connection left, iterations since it shrank
         if o.branch_grafts and o.root_grafts_first and not o.graft_after:
@@ -436,7 +478,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 self._graft(tr, 0, other, deadline, st)
                 root_grafted[id(tr)] = True
         while not deadline.expired():
-            if o.max_iterations and st["iterations"] >= o.max_iterations:
+            if max_iterations and st["iterations"] >= max_iterations:
                 break
             k_graft = st["iterations"] - o.graft_after
             if o.branch_grafts and k_graft > 0 and k_graft % o.graft_interval == 0:
@@ -446,8 +488,8 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                     self._graft(tr, None if root_grafted[id(tr)] else 0, other, deadline, st)   # the root's first
                     root_grafted[id(tr)] = True
             if (sampler is not None and cast(float, o.guide_probability) > 0 and sampler.guide is None
-                    and guide_time < o.guide_time_limit and st["iterations"] % 25 == 0):
-                sub = deadline.sub(min(o.guide_attempt_time, o.guide_time_limit - guide_time))
+                    and lead_time + guide_time < o.guide_time_limit and st["iterations"] % 25 == 0):
+                sub = deadline.sub(min(o.guide_attempt_time, o.guide_time_limit - lead_time - guide_time))
                 sampler.guide = object_lead_path(cast(ObjectPoseFilter, self._filter), ta.xi[0] if a_is_start else tb.xi[0],
                                                  tb.xi[0] if a_is_start else ta.xi[0], self._lo, self._hi, rng, sub,
                                                  native_rng=self._nrng)
@@ -522,6 +564,8 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                     break
             ta, tb, a_is_start = tb, ta, not a_is_start                                  # line 15
         st["nodes"] = ta.n + tb.n
+        if sampler is not None:
+            self._lead = (sampler.guide, lead_time + guide_time)
         st["collision_checks"] = self.checker.n_checks - c0
         if cert is not None:
             st["distance_calls"] = cert.n_distance_calls - n_dist0   # certified edges: exact group distances

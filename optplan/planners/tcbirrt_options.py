@@ -24,13 +24,15 @@ VARIANTS = {
               "edge_tolerance": 0.0, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.5,
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
               "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
-              "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0},
+              "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
+              "restart_branch_roots": False},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
-                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0},
+                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
+                 "restart_branch_roots": False},
 }
 
 
@@ -196,8 +198,19 @@ class TCBiRRTOptions:
     #: planner's generator: the same search as ``"python"``) or ``"python"``. Without a compiler or with
     #: ``validity_kernel="coal"`` the Python code runs.
     extension: str = "loop"
-    #: Cap on Alg. 1 iterations [count] (0: only the time limit).
+    #: Cap on Alg. 1 iterations [count] (0: only the time limit), over all restarts.
     max_iterations: int = 0
+    #: Restart the search from the two roots (new trees; the lead path kept; the query's random stream going on)
+    #: when it has run this many iterations without a path [count] (None: the variant's value, :data:`VARIANTS`:
+    #: 0 (off) in both; 5000 measured on fresh generated scenes and left off, see docs/planners.md). A restart cuts
+    #: the heavy tail of one query's search times across random streams, and loses searches that needed more.
+    restart_iterations: int | None = None
+    #: Each restart's iteration budget is the previous one's times this [-] (>= 1).
+    restart_growth: float = 1.5
+    #: Every second search after a restart (the 2nd, 4th, ...) runs with ``branch_roots`` the other way: a search
+    #: whose roots sit on IK branches that cannot meet is followed by one whose roots share a branch, and the
+    #: other way round (None: the variant's value, :data:`VARIANTS`: False in both).
+    restart_branch_roots: bool | None = None
     #: ``"paper"`` (the published algorithm) or ``"improved"`` (task-space sampling aids).
     variant: str = "paper"
     #: Probability that ξ_rand is the pose of a random node of the other tree [-] (None: the variant's value,
@@ -285,12 +298,16 @@ class TCBiRRTOptions:
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
         for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds", "frontier_grafts", "frontier_interval",
-                     "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count"):
+                     "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count",
+                     "restart_iterations"):
             v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after", "frontier_grafts", "stall_iterations",
-                                                         "trap_grafts") else 1)
+                                                         "trap_grafts", "restart_iterations") else 1)
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
         _pos("graft_time_limit", self.graft_time_limit)
+        if not (isinstance(self.restart_growth, (int, float)) and not isinstance(self.restart_growth, bool)
+                and math.isfinite(self.restart_growth) and self.restart_growth >= 1.0):
+            raise ValueError(f"TCBiRRTOptions.restart_growth: expected a number >= 1, got {self.restart_growth!r}")
         if self.trap_graft_target not in ("other", "sample"):
             raise ValueError(f"TCBiRRTOptions.trap_graft_target: expected 'other' or 'sample', got {self.trap_graft_target!r}")
         if self.graft_node not in ("meet", "any", "mixed"):
@@ -304,7 +321,7 @@ class TCBiRRTOptions:
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
                      "regrasp_share_orders", "verify_path", "graft_single_arm", "regrasp_both_arms", "regrasp_backoff", "root_grafts_first",
-                     "graft_branch_seeds", "branch_roots"):
+                     "graft_branch_seeds", "branch_roots", "restart_branch_roots"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
