@@ -52,7 +52,9 @@ def counts(monkeypatch):
     return n
 
 
-def test_resolves_after_set_value_and_set_initial_build_nothing(tcb, counts):
+def _reach_problem(tcb):
+    """Arm A's hand to a parameter target, at rest at the end, one joint rate bounded (checked
+    between knots), jerk cost: the re-solve tests' problem and its target parameter."""
     z = np.zeros(tcb.nj)
     q0 = np.r_[[0.3, -0.6, 0.4, -1.2, 0.2, 0.7, 0.1] * 2][:tcb.nj]
     prob = OptProblem(tcb, n_intervals=8, duration=4.0, compile_kernels=False)
@@ -63,6 +65,11 @@ def test_resolves_after_set_value_and_set_initial_build_nothing(tcb, counts):
     prob.add_constraint(prob.frame(ee).translation - goal, lower=0, upper=0, at="end")
     prob.add_constraint(prob.qd[0], lower=-2.0, upper=2.0, name="slow")   # checked between knots
     prob.add_cost(Smoothness("jerk"))
+    return prob, goal
+
+
+def test_resolves_after_set_value_and_set_initial_build_nothing(tcb, counts):
+    prob, goal = _reach_problem(tcb)
     assert prob.uses_bspline()
     s1 = prob.solve(ipopt_options={"max_iter": 200})
     assert s1.success, s1.status
@@ -104,16 +111,7 @@ def test_resolves_leave_no_reference_cycles(tcb):
     ``set_value`` 2-5 ms)."""
     import gc
 
-    z = np.zeros(tcb.nj)
-    q0 = np.r_[[0.3, -0.6, 0.4, -1.2, 0.2, 0.7, 0.1] * 2][:tcb.nj]
-    prob = OptProblem(tcb, n_intervals=8, duration=4.0, compile_kernels=False)
-    prob.add_constraint(JointBoundary("start", q=q0, qd=z, qdd=z))
-    prob.add_constraint(prob.qd, lower=0, upper=0, at="end")
-    goal = prob.parameter(3, _hand(tcb, q0) + [0.05, 0.0, 0.05])
-    ee = tcb.model.frames[tcb.arm("A").ee_frame_id].name
-    prob.add_constraint(prob.frame(ee).translation - goal, lower=0, upper=0, at="end")
-    prob.add_constraint(prob.qd[0], lower=-2.0, upper=2.0, name="slow")   # checked between knots
-    prob.add_cost(Smoothness("jerk"))
+    prob, goal = _reach_problem(tcb)
     sol = prob.solve()
     prob.set_initial(solution=sol)
     assert sol.success and prob.solve().success          # both IPOPT instances used once
