@@ -291,3 +291,15 @@ def test_margins_relax_only_where_a_collision_free_guess_is_closer_than_the_marg
         d = D[near, pairs.index(p)]
         cand = [0.5 * x for j, x in zip(near, d) if x < 0.05 and (x >= 0 or j in (0, N))]
         assert cand and m == pytest.approx(min(min(cand), 0.05), abs=1e-12)
+
+
+def test_summary_pools_many_grid_sizes_into_one_range():
+    from optplan.bench.generalize import _attempts_text
+
+    few = {"N=24": 3, "N=48": 1}
+    assert _attempts_text(few) == "N=24 3, N=48 1"
+    many = {f"N={n}": 1 for n in (8, 10, 1005, 2592, 24, 48, 700)}
+    many["N=24"] = 23
+    text = _attempts_text(many)
+    assert text == "N=8-2592 29 (7 sizes)", text
+    assert _attempts_text({**many, "collision": 2}).endswith(", collision 2")

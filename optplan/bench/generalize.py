@@ -331,6 +331,18 @@ def summarize(rows: list[dict]) -> dict:
     return out
 
 
+
+def _attempts_text(attempts: dict, max_listed: int = 6) -> str:
+    """The NLP attempts of a summary row, ``reason count`` each; past ``max_listed`` distinct grid sizes
+    (``N=<intervals>``, one per trial when the grid follows the path's length) the sizes are pooled
+    into their range and total so that the row stays one line."""
+    sizes = {k: v for k, v in attempts.items() if k.startswith("N=") and k[2:].isdigit()}
+    if len(sizes) <= max_listed:
+        return ", ".join(f"{k} {v}" for k, v in attempts.items())
+    ns = sorted(int(k[2:]) for k in sizes)
+    rest = [f"{k} {v}" for k, v in attempts.items() if k not in sizes]
+    return ", ".join([f"N={ns[0]}-{ns[-1]} {sum(sizes.values())} ({len(ns)} sizes)"] + rest)
+
 def format_summary(summ: dict) -> str:
     f = lambda v, fmt=".2f": "/" if v is None else format(v, fmt)  # noqa: E731
     hdr = (f"{'scene':20s} {'robot':16s} {'pairs':>5s} {'planned':>7s} {'conv':>5s} {'verified':>8s} "
@@ -343,7 +355,7 @@ def format_summary(summ: dict) -> str:
                      f"{f(g['opt_wall_s']['median']):>8s}/{f(g['opt_wall_s']['p95']):<9s} "
                      f"{f(g['opt_cpu_s']['median']):>8s}/{f(g['opt_cpu_s']['p95']):<8s} "
                      f"{f(g['iterations']['median'], '.0f'):>5s}/{f(g['iterations']['p95'], '.0f'):<6s} "
-                     + ", ".join(f"{k} {v}" for k, v in g["attempts"].items()))
+                     + _attempts_text(g["attempts"]))
         if g["failures"] and s != "all":
             lines.append(f"{'':20s} failures: " + ", ".join(f"{k} {v}" for k, v in g["failures"].items()))
     a = summ.get("all", {})
