@@ -310,7 +310,13 @@ def test_two_bench_commands_on_one_folder(warm, tmp_path):
     t0 = time.monotonic()
     while not (lock.exists() and lock.read_text().strip()) and time.monotonic() - t0 < 60:
         time.sleep(0.05)
-    second = _optplan(BENCH + ["--trials", "2", "--out", str(out)], tmp_path)
+    # the first run holds the folder while the second starts: paused (alive, lock kept) so that a
+    # fast first run cannot end before the second has imported
+    os.kill(first.pid, signal.SIGSTOP)
+    try:
+        second = _optplan(BENCH + ["--trials", "2", "--out", str(out)], tmp_path)
+    finally:
+        os.kill(first.pid, signal.SIGCONT)
     first.communicate(timeout=300)
     assert first.returncode == 0
     assert second.returncode == 2 and traceback_lines(second.stderr) == 0
