@@ -322,6 +322,46 @@ def summary(rows: list[dict[str, Any]], kinds: tuple[str, str] = KINDS) -> str:
     return paired_summary(rows, "kind", kinds[0], kinds[1], ("iterations", "nodes"))
 
 
+def _fmt_units(sc: str, u: dict[str, Any]) -> str:
+    return (f"{sc}: {int(u['extensions'])} extensions ({int(u['ik_iterations'])} IK iterations, "
+            f"{int(u['edge_checks'])} edge checks): native {u['native_us']:.0f} µs, Python {u['python_us']:.0f} µs "
+            f"per extension ({u['python_us'] / u['native_us']:.2f}x)"
+            + ("" if u["native_available"] else " (native extension unavailable: Python ran twice)"))
+
+
+def _fmt_ik(sc: str, u: dict[str, Any]) -> str:
+    if not u["available"]:
+        return f"{sc}: the native loop or the C IK is not available here"
+    n = u["extensions"]
+    saved = (u["casadi_extension_us"] - u["c_extension_us"]) * n / max(u["c_ik_iterations"], 1.0)
+    return (f"{sc}: {int(n)} extensions, IK iterations {u['c_ik_iterations']:.0f} (C) / {u['casadi_ik_iterations']:.0f} "
+            f"(CasADi), checks {u['c_checks']:.0f} / {u['casadi_checks']:.0f}: C IK {u['c_extension_us']:.0f} µs, "
+            f"CasADi block {u['casadi_extension_us']:.0f} µs per extension "
+            f"({u['casadi_extension_us'] / u['c_extension_us']:.2f}x; {saved:.2f} µs saved per IK iteration)")
+
+
+def _fmt_regrasp(sc: str, u: dict[str, Any]) -> str:
+    if not u["available"]:
+        return f"{sc}: the native kernel is not available here"
+    return (f"{sc}: checks {u['static_checks']:.0f} / {u['whole_checks']:.0f}; µs per check with the still part "
+            f"placed once {u['static_us']:.2f}, the whole model {u['whole_us']:.2f} "
+            f"({u['whole_us'] / u['static_us']:.2f}x)")
+
+
+def _fmt_lead(sc: str, costs: dict[str, Any]) -> str:
+    return "\n".join(f"{sc} {k}: found {int(v['found'])}/10, median CPU {v['median_ms']:.1f} ms, "
+                     f"median waypoints {v['median_waypoints']:.0f}" for k, v in costs.items())
+
+
+def _fmt_loop(sc: str, u: dict[str, Any]) -> str:
+    if not u["available"]:
+        return f"{sc}: the native loop is not available here"
+    return (f"{sc}: {int(u['extensions'])} extensions: loop {u['loop_extension_us']:.0f} µs, native "
+            f"{u['native_extension_us']:.0f} µs ({u['native_extension_us'] / u['loop_extension_us']:.2f}x); "
+            f"sample + nearest node: loop {u['loop_sample_us']:.1f} µs, native {u['native_sample_us']:.1f} µs "
+            f"({u['native_sample_us'] / u['loop_sample_us']:.2f}x)")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m optplan.bench.tcbirrt_native",
                                  description="TCBiRRT's native extension step vs the Python one: paired queries")
@@ -345,55 +385,14 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     from .tcbirrt import expand_scenes
 
-    if a.units:
-        for sc in expand_scenes(a.scene.split(",")):
-            u = extension_costs(sc, seed=a.seed)
-            print(f"{sc}: {int(u['extensions'])} extensions ({int(u['ik_iterations'])} IK iterations, "
-                  f"{int(u['edge_checks'])} edge checks): native {u['native_us']:.0f} µs, Python {u['python_us']:.0f} µs "
-                  f"per extension ({u['python_us'] / u['native_us']:.2f}x)"
-                  + ("" if u["native_available"] else " (native extension unavailable: Python ran twice)"))
-        return 0
-
-    if a.ik_units:
-        for sc in expand_scenes(a.scene.split(",")):
-            u = ik_costs(sc, seed=a.seed)
-            if not u["available"]:
-                print(f"{sc}: the native loop or the C IK is not available here")
-                continue
-            n = u["extensions"]
-            saved = (u["casadi_extension_us"] - u["c_extension_us"]) * n / max(u["c_ik_iterations"], 1.0)
-            print(f"{sc}: {int(n)} extensions, IK iterations {u['c_ik_iterations']:.0f} (C) / {u['casadi_ik_iterations']:.0f} "
-                  f"(CasADi), checks {u['c_checks']:.0f} / {u['casadi_checks']:.0f}: C IK {u['c_extension_us']:.0f} µs, "
-                  f"CasADi block {u['casadi_extension_us']:.0f} µs per extension "
-                  f"({u['casadi_extension_us'] / u['c_extension_us']:.2f}x; {saved:.2f} µs saved per IK iteration)")
-        return 0
-    if a.regrasp_units:
-        for sc in expand_scenes(a.scene.split(",")):
-            u = regrasp_search_costs(sc, seed=a.seed)
-            if not u["available"]:
-                print(f"{sc}: the native kernel is not available here")
-                continue
-            print(f"{sc}: checks {u['static_checks']:.0f} / {u['whole_checks']:.0f}; µs per check with the still part "
-                  f"placed once {u['static_us']:.2f}, the whole model {u['whole_us']:.2f} "
-                  f"({u['whole_us'] / u['static_us']:.2f}x)")
-        return 0
-    if a.lead_path:
-        for sc in expand_scenes(a.scene.split(",")):
-            for k, v in lead_path_costs(sc, seed=a.seed).items():
-                print(f"{sc} {k}: found {int(v['found'])}/10, median CPU {v['median_ms']:.1f} ms, "
-                      f"median waypoints {v['median_waypoints']:.0f}")
-        return 0
-    if a.loop_units:
-        for sc in expand_scenes(a.scene.split(",")):
-            u = loop_costs(sc, seed=a.seed)
-            if not u["available"]:
-                print(f"{sc}: the native loop is not available here")
-                continue
-            print(f"{sc}: {int(u['extensions'])} extensions: loop {u['loop_extension_us']:.0f} µs, native "
-                  f"{u['native_extension_us']:.0f} µs ({u['native_extension_us'] / u['loop_extension_us']:.2f}x); "
-                  f"sample + nearest node: loop {u['loop_sample_us']:.1f} µs, native {u['native_sample_us']:.1f} µs "
-                  f"({u['native_sample_us'] / u['loop_sample_us']:.2f}x)")
-        return 0
+    unit_modes = ((a.units, extension_costs, _fmt_units), (a.ik_units, ik_costs, _fmt_ik),
+                  (a.regrasp_units, regrasp_search_costs, _fmt_regrasp), (a.lead_path, lead_path_costs, _fmt_lead),
+                  (a.loop_units, loop_costs, _fmt_loop))
+    for chosen, measure, fmt in unit_modes:
+        if chosen:
+            for sc in expand_scenes(a.scene.split(",")):
+                print(fmt(sc, measure(sc, seed=a.seed)))
+            return 0
     kinds = tuple(k.strip() for k in a.kinds.split(","))
     if len(kinds) != 2 or any(k not in ("loop", "native", "python") for k in kinds) or kinds[0] == kinds[1]:
         ap.error(f"--kinds: expected two different values of loop, native, python, got {a.kinds!r}")
