@@ -144,7 +144,7 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
     if model is None:
         return
     checker = model.checker
-    Q = np.array([traj.q_full(i) for i in range(traj.N + 1)]) if traj.robot.is_floating else np.asarray(traj.q, float)
+    Q = traj.configurations()
     margin = float(term.margin)
     constant = set(data.info.get("constant_pairs", ()))
     relaxed: Mapping[Any, float] = data.info.get("relaxed", {})
