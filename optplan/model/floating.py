@@ -379,18 +379,6 @@ def _twists_compiled(kernels: Any, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
     return out
 
 
-def _quat_mul_rows(a: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Row-wise ``a ⊗ [w; 0]`` of quaternions ``a`` (K × 4, x y z w) and rates ``w`` (K × 3)."""
-    ax, ay, az, aw = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
-    wx, wy, wz = w[:, 0], w[:, 1], w[:, 2]
-    out = np.empty((a.shape[0], 4))
-    out[:, 0] = aw * wx + ay * wz - az * wy        # s w + v × w, written out (np.cross costs ~30 µs a call)
-    out[:, 1] = aw * wy + az * wx - ax * wz
-    out[:, 2] = aw * wz + ax * wy - ay * wx
-    out[:, 3] = -(ax * wx + ay * wy + az * wz)
-    return out
-
-
 def attitudes_on_intervals(robot: RobotModel, joints: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
                            t: np.ndarray, quat0: np.ndarray, density: int, substeps: int = 2) -> np.ndarray:
     """Zero-momentum base quaternions (x y z w) at the sample times ``t`` [s] (``density`` samples
@@ -413,20 +401,29 @@ def attitudes_on_intervals(robot: RobotModel, joints: Callable[[np.ndarray], tup
     x = q0[:-1] / np.linalg.norm(q0[:-1], axis=1, keepdims=True)
     out = np.empty((t.size, 4))
     starts = np.arange(K) * density   # the first sample of each interval
+    # ½ x ⊗ [w; 0] = Ω(w) x, with Ω(w) of every rate at once: each RK4 stage is then one batched
+    # product (the stages' normalisation kept as in simulate_base)
+    wx, wy, wz = W[:, 0], W[:, 1], W[:, 2]
+    Om = np.zeros((W.shape[0], 4, 4))
+    Om[:, 0, 1], Om[:, 0, 2], Om[:, 0, 3] = wz, -wy, wx
+    Om[:, 1, 0], Om[:, 1, 2], Om[:, 1, 3] = -wz, wx, wy
+    Om[:, 2, 0], Om[:, 2, 1], Om[:, 2, 3] = wy, -wx, wz
+    Om[:, 3, 0], Om[:, 3, 1], Om[:, 3, 2] = -wx, -wy, -wz
+    Om *= 0.5
 
-    def f(xi: np.ndarray, w: np.ndarray) -> np.ndarray:
-        return 0.5 * _quat_mul_rows(xi / np.sqrt((xi * xi).sum(axis=1))[:, None], w)
+    def f(xi: np.ndarray, om: np.ndarray) -> np.ndarray:
+        return np.matmul(om, (xi / np.sqrt((xi * xi).sum(axis=1))[:, None])[:, :, None])[:, :, 0]
 
     for j in range(density):
         out[starts + j] = x
         i = starts + j                 # the sample interval each trajectory is on
         dt = (t[i + 1] - t[i])[:, None] / substeps
         for s in range(substeps):
-            w0, wm, w1 = (W[i * m + 2 * s + c] for c in range(3))
-            k1 = f(x, w0)
-            k2 = f(x + dt / 2 * k1, wm)
-            k3 = f(x + dt / 2 * k2, wm)
-            k4 = f(x + dt * k3, w1)
+            o0, om, o1 = (Om[i * m + 2 * s + c] for c in range(3))
+            k1 = f(x, o0)
+            k2 = f(x + dt / 2 * k1, om)
+            k3 = f(x + dt / 2 * k2, om)
+            k4 = f(x + dt * k3, o1)
             x = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
             x /= np.sqrt((x * x).sum(axis=1))[:, None]
     out[-1] = q0[-1] / np.linalg.norm(q0[-1])
