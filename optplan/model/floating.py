@@ -379,7 +379,7 @@ def _twists_compiled(kernels: Any, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
     return out
 
 
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _quat_mul_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Quaternion products ``a ⊗ b`` (x y z w, the last axis), broadcast over the others."""
     ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
     bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
@@ -424,7 +424,7 @@ def attitudes_on_intervals(robot: RobotModel, joints: Callable[[np.ndarray], tup
     one = np.array([0.0, 0.0, 0.0, 1.0])
 
     def stage(b: np.ndarray, w: np.ndarray) -> np.ndarray:
-        return _quat_mul(b, w) / (2.0 * np.sqrt((b * b).sum(axis=-1, keepdims=True)))
+        return _quat_mul_rows(b, w) / (2.0 * np.sqrt((b * b).sum(axis=-1, keepdims=True)))
 
     a1 = 0.5 * w0
     a2 = stage(one + h / 2 * a1, wm)
