@@ -176,3 +176,17 @@ def test_floating_distances_below_match_every_pair_at_every_row(step):
             np.testing.assert_allclose(dist, D[r_ref, p_ref], rtol=0, atol=1e-6)
             assert (nxt[1] - D.T).max() <= 1e-6
     assert len(np.nonzero(D < 0.05)[0]) > 0
+
+
+@pytest.mark.slow
+def test_dense_check_breakdown_counts_fewer_coal_calls_than_it_checks():
+    """``python -m optplan.bench.dense_check``: the collision reach is checked with fewer coal
+    distances than samples × pairs, a re-check with fewer still."""
+    from optplan.bench.dense_check import breakdown
+
+    out = breakdown(repeat=1)
+    assert out["success"]
+    rows, pairs = out["samples x pairs"]
+    single, every = out["coal calls, first check (single pair, all pairs)"]
+    assert every == 21 and single + every * pairs < rows * pairs
+    assert sum(out["coal calls, re-check (single pair, all pairs)"]) < single
