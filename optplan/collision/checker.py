@@ -381,11 +381,18 @@ class CollisionChecker:
         bounded by its bound there minus how far its two geometries can have moved from that
         call's row i to ``Q[i]`` (the sweep bound of :meth:`min_distance_along`), and only the
         pairs whose bound is below ``threshold`` are computed — the same entries, fewer coal calls
-        when ``Q`` moved little (a re-solve)."""
+        when ``Q`` moved little (a re-solve). A free-flyer root (base position and quaternion,
+        then 1-dof joints) is bounded the same way with the base's motion added
+        (:func:`~optplan.collision.motion_bounds.floating_distance_bounds_below`); other non-1-dof
+        joints: every pair at every row."""
         Q = self._check_rows(Q, anchor_every)
         if not self.pairs or not len(Q):
             return np.zeros(0, int), np.zeros(0, int), np.zeros(0), None
         thr = float(threshold)
+        if self.model.nq != self.model.nv and self._floating_base():
+            from .motion_bounds import floating_distance_bounds_below
+
+            return floating_distance_bounds_below(self, Q, thr, int(anchor_every), previous)
         if self.model.nq != self.model.nv:        # no bound: every row
             D = np.array([self.distances(q) for q in Q])
             r_, p_ = np.nonzero(D < thr)
@@ -475,34 +482,19 @@ class CollisionChecker:
                         ref: np.ndarray) -> np.ndarray:
         """(pairs × segments) How much each pair's distance can have changed between the anchor row
         ``ref[s]`` of segment ``s`` and ANY of its inner rows [m] (the rows ``inner`` of ``Q``, grouped
-        by segment: ``seg`` their first positions): the farthest any point of its two geometries can
-        have moved, summed. The joints' part: ``W_j max|q_j − ref_j|`` per geometry (``W`` ≥ 0: the
-        largest change of each joint over the segment bounds every row's); for a pair with ONE side
-        on the robot (against the world), the base's part of that side, ``max|Δp| + ρ max θ`` (``Δp``
-        the base translation, ``θ`` the base rotation angle from the anchor's, ``ρ`` the geometry's
-        farthest point from the base origin: the free-flyer's column of ``W``). Two geometries on the
-        robot move together with the base, which does not change their distance."""
+        by segment: ``seg`` their first positions): :func:`~optplan.collision.motion_bounds.pair_motion`
+        (the joints' sweep plus, for a pair with ONE side on the robot, the base's translation and
+        rotation)."""
+        from .motion_bounds import pair_motion
+
         W, pa, pb = self._sweep_data()
-        R, X = Q[ref], Q[inner]
-        dj = np.maximum.reduceat(np.abs(X[:, 7:] - R[:, 7:]), seg, axis=0)             # segments × joints
-        dp = np.maximum.reduceat(np.linalg.norm(X[:, :3] - R[:, :3], axis=1), seg)
-        a = R[:, 3:7] / np.linalg.norm(R[:, 3:7], axis=1)[:, None]
-        b = X[:, 3:7] / np.linalg.norm(X[:, 3:7], axis=1)[:, None]
-        ax, ay, az, aw = a.T
-        bx, by, bz, bw = b.T
-        # the rotation angle 2 atan2(|vec(r)|, |w(r)|) of r = a⁻¹ ⊗ b (stable at small angles)
-        vx = aw * bx - ax * bw - ay * bz + az * by
-        vy = aw * by + ax * bz - ay * bw - az * bx
-        vz = aw * bz - ax * by + ay * bx - az * bw
-        w = aw * bw + ax * bx + ay * by + az * bz
-        th = np.maximum.reduceat(2.0 * np.arctan2(np.sqrt(vx * vx + vy * vy + vz * vz), np.abs(w)), seg)
+        return pair_motion(W, pa, pb, self._on_robot_mask(), Q[ref], Q[inner], seg)
+
+    def _on_robot_mask(self) -> np.ndarray:
+        """Per combined geometry: attached to the robot (not the world), built once."""
         if self._on_robot is None:
             self._on_robot = np.array([go.parentJoint != 0 for go in self._cgm.geometryObjects])
-        on = self._on_robot
-        m = W[:, 6:] @ dj.T                                                             # geometries × segments
-        base = on[:, None] * (dp[None, :] + W[:, :1] * th[None, :])
-        mixed = (on[pa] != on[pb])[:, None]
-        return m[pa] + m[pb] + mixed * (base[pa] + base[pb])
+        return self._on_robot
 
     def _sweep_data(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(W, pa, pb)``: the sweep weights (:func:`optplan.collision.sweep.sweep_weights`) and the

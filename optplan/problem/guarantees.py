@@ -9,7 +9,12 @@ samples the exact piecewise-cubic trajectory at ``density`` points per interval 
 constraint that is imposed along the trajectory with its numeric twin (Pinocchio, coal):
 
 * collision: exact coal distances of **every** checked pair (not only the pairs the NLP activated)
-  against the term's margin (relaxed next to a given boundary configuration as in the NLP);
+  against the term's margin (relaxed next to a given boundary configuration as in the NLP). A
+  (sample, pair) entry is computed unless a lower bound puts it at or above the margin: its
+  distance at a knot (or at the previous check's sample) minus how far its two geometries can
+  have moved since (:meth:`CollisionChecker.distance_bounds_below`,
+  :mod:`optplan.collision.motion_bounds`), so the entries found are those of every pair at every
+  sample;
 * every other term whose rows are imposed along the trajectory (joint limits, torque limits, closed
   chain, orientation, frame poses at every knot, ...): its rows against its bounds.
 
@@ -144,7 +149,7 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
     if model is None:
         return
     checker = model.checker
-    Q = np.array([traj.q_full(i) for i in range(traj.N + 1)]) if traj.robot.is_floating else np.asarray(traj.q, float)
+    Q = traj.configurations()
     margin = float(term.margin)
     constant = set(data.info.get("constant_pairs", ()))
     relaxed: Mapping[Any, float] = data.info.get("relaxed", {})

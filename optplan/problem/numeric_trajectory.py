@@ -59,6 +59,32 @@ class NumericTrajectory:
         qf[:3] = (self.com0 if self.com0 is not None else np.zeros(3)) - R @ c_b
         return qf
 
+    def configurations(self) -> np.ndarray:
+        """Every point's configuration in Pinocchio's layout, (N+1, nq): :meth:`q_full` of every
+        point at once (one Pinocchio centre of mass per point of a floating robot, the rest
+        vectorised)."""
+        r = self.robot
+        if not r.is_floating:
+            return np.asarray(self.q, float)
+        assert self.base_quat is not None  # narrowing only: a floating robot's trajectory has base_quat
+        n = self.q.shape[0]
+        quat = np.asarray(self.base_quat, float)
+        quat = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+        out = np.empty((n, 7 + self.q.shape[1]))
+        out[:, :6] = 0.0
+        out[:, 6] = 1.0
+        out[:, 7:] = self.q
+        model, data, com = r.model, self.data, pin.centerOfMass
+        c_b = np.array([com(model, data, qi) for qi in out])          # the CoM in the base frame
+        x, y, z, w = quat.T
+        # R(quat) c_b = c_b + 2 w (v × c_b) + 2 v × (v × c_b), v = (x, y, z)
+        v = quat[:, :3]
+        vc = np.cross(v, c_b)
+        out[:, :3] = (self.com0 if self.com0 is not None else np.zeros(3)) - (c_b + 2.0 * w[:, None] * vc
+                                                                             + 2.0 * np.cross(v, vc))
+        out[:, 3:7] = quat
+        return out
+
     @property
     def data(self) -> pin.Data:
         """The Pinocchio ``Data`` the kinematics are computed in: the robot's own scratch ``Data``
