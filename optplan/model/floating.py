@@ -131,7 +131,7 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
     if int(substeps) < 1:
         raise ValueError(f"substeps: expected ≥ 1, got {substeps}")
     h0 = np.zeros(6) if h0 is None else check_vector(h0, 6, "h0 (momentum [p; L])")
-    model, data = robot.model, robot.model.createData()
+    model = robot.model
     nj = robot.nj
     base0 = pin.SE3.Identity() if base0 is None else base0
     if not isinstance(base0, pin.SE3):
@@ -146,6 +146,7 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
     robot.check_joints(qd_first, f"trajectory({t_grid[0]}) joint rates")
     if not np.any(h0):
         return _simulate_zero_momentum(robot, trajectory, t_grid, x, int(substeps), vectorised, bool(momentum))
+    data = model.createData()   # (not made for zero momentum: its twists need none)
 
     def twist(tt: float, xb: np.ndarray):
         qj, qdj = trajectory(tt)
@@ -258,7 +259,6 @@ def _simulate_zero_momentum(robot: RobotModel, trajectory: JointTrajectory, t_gr
     joint trajectory evaluated once per time (all at once when ``vectorised``: a spline of ours).
     The momentum at each output sample is then Pinocchio's recursive ``computeCentroidalMomentum``
     at the integrated base pose, as in the general case."""
-    model, data = robot.model, robot.model.createData()
     nj, N, m = robot.nj, t_grid.size, 2 * substeps
     # RK4 evaluates the rate at the start, middle and end of each step: m times per interval + the last
     frac = np.arange(m) / m
@@ -289,6 +289,7 @@ def _simulate_zero_momentum(robot: RobotModel, trajectory: JointTrajectory, t_gr
                                  "returned NaN/inf or a singular momentum map was met)")
     H = np.full((N, 6), np.nan)
     if momentum:
+        model, data = robot.model, robot.model.createData()
         for k in range(N):
             h = pin.computeCentroidalMomentum(model, data, Q[k], V[k])
             H[k] = np.concatenate([h.linear, h.angular])
