@@ -136,6 +136,12 @@ class ManoeuvreMotion:
                 self.ok = self.ok and got[1]
             self._splines.append(got[0])
             durs.append(max(min_edge_s, duration_factor * d / speed))
+        # every edge's cubic pieces in one table, evaluated for all times at once (sample)
+        nseg = np.array([len(sp.x) - 1 for sp in self._splines])
+        self._first = np.r_[0, np.cumsum(nseg)[:-1]]
+        self._nseg = nseg
+        self._coef = np.concatenate([sp.c for sp in self._splines], axis=1)      # (4, pieces, nj)
+        self._brk = np.concatenate([sp.x[:-1] for sp in self._splines])         # each piece's start in s
         self._t0 = np.r_[0.0, np.cumsum(durs)]
         self._dur = np.asarray(durs)
         self.duration = float(self._t0[-1])
@@ -165,16 +171,15 @@ class ManoeuvreMotion:
         """Joint positions ``q`` [rad] and velocities ``qd`` [rad/s] at times ``t`` [s] in [0, duration]."""
         t = np.clip(np.atleast_1d(np.asarray(t, float)), 0.0, self.duration)
         e = np.clip(np.searchsorted(self._t0, t, side="right") - 1, 0, len(self._splines) - 1)
-        q = np.empty((len(t), self._splines[0].c.shape[-1]))
-        qd = np.empty_like(q)
-        order = np.argsort(e, kind="stable")   # the times of each edge, without a pass per edge
-        ks, starts = np.unique(e[order], return_index=True)
-        for k, m in zip(ks, np.split(order, starts[1:])):
-            tau = np.clip((t[m] - self._t0[k]) / self._dur[k], 0.0, 1.0)
-            s, ds = _law(tau)
-            sp = self._splines[k]
-            q[m] = sp(s)
-            qd[m] = sp(s, 1) * (ds / self._dur[k])[:, None]
+        dur = self._dur[e]
+        s, ds = _law(np.clip((t - self._t0[e]) / dur, 0.0, 1.0))
+        # the piece of each edge's spline holding s (its pieces evenly spaced on [0, 1]), Horner
+        n = self._nseg[e]
+        piece = self._first[e] + np.minimum((s * n).astype(int), n - 1)
+        x = (s - self._brk[piece])[:, None]
+        c = self._coef[:, piece]
+        q = ((c[0] * x + c[1]) * x + c[2]) * x + c[3]
+        qd = ((3.0 * c[0] * x + 2.0 * c[1]) * x + c[2]) * (ds / dur)[:, None]
         return {"t": t, "q": q, "qd": qd}
 
 

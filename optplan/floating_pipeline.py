@@ -312,7 +312,8 @@ def _end_base(robot: RobotModel, motion, base0: pin.SE3) -> pin.SE3:
     zero momentum at verify's density."""
     t = np.linspace(motion.t[0], motion.t[-1], 10 * (len(motion.t) - 1) + 1)
     smp = motion.sample(t)
-    return simulate_base(robot, (t, smp["q"], smp["qd"]), t, base0=base0, substeps=2).final_base
+    # the same integration as verify's (its base poses), without its momentum cross-check
+    return simulate_base(robot, (t, smp["q"], smp["qd"]), t, base0=base0, substeps=2, momentum=False).final_base
 
 
 def _chained(robot: RobotModel, scene: Scene, plan: FloatingCarryPlan, spans: list[tuple[int, int]],

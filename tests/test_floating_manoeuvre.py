@@ -54,6 +54,27 @@ def test_edge_splines_are_scipys_not_a_knot_splines():
         assert np.allclose(sp(s[[0, -1]]), [a, b], atol=1e-14)
 
 
+def test_sampling_all_times_at_once_equals_each_edges_spline():
+    """``sample`` evaluates every edge's pieces from one table: the same positions and velocities as
+    each edge's scipy ``PPoly`` at its time-law parameter (edges of different point counts, repeated
+    edges, times at the waypoints and outside the motion)."""
+    rng = np.random.default_rng(6)
+    loop = np.vstack([np.zeros(4), np.cumsum(rng.normal(0.0, 0.15, size=(4, 4)), axis=0), np.zeros(4)])
+    J = np.vstack([loop, loop[1:], [0.4, -0.2, 0.1, 0.3]])
+    mm = ManoeuvreMotion(J, lambda q: q + 0.01 * np.sin(3.0 * q[::-1]), speed=0.7, step_rad=0.04)
+    assert mm.repeated_edges > 0 and len({len(sp.x) for sp in mm._splines}) > 1
+    t = np.r_[rng.uniform(-0.1, mm.duration + 0.1, 2000), mm._t0]   # and the waypoints, and beyond the ends
+    got = mm.sample(t)
+    tc = np.clip(t, 0.0, mm.duration)
+    e = np.clip(np.searchsorted(mm._t0, tc, side="right") - 1, 0, len(mm._splines) - 1)
+    for k in range(len(tc)):
+        sp, d = mm._splines[e[k]], mm._dur[e[k]]
+        tau = np.clip((tc[k] - mm._t0[e[k]]) / d, 0.0, 1.0)
+        s, ds = tau**3 * (10 - 15 * tau + 6 * tau**2), 30 * tau**2 * (1 - tau) ** 2
+        assert np.allclose(got["q"][k], sp(s), rtol=0, atol=1e-13)
+        assert np.allclose(got["qd"][k], sp(s, 1) * ds / d, rtol=0, atol=1e-12)
+
+
 def test_repeated_loop_edges_are_projected_once():
     """A loop traversed three times: each distinct edge projected once, and the motion equal, edge by
     edge, to that of the loop traversed once (its own projections); a failed projection of a

@@ -233,5 +233,8 @@ def test_a_floating_base_bound_covers_the_real_displacement(rng):
         bound = chk._segment_motion(Q, np.array([0]), np.array([1]), np.array([0]), np.array([0]))[:, 0]
         change = np.abs(chk.distances(b) - chk.distances(a))
         assert np.all(change <= bound + 1e-12)
+        sub = rng.choice(len(chk.pairs), size=17, replace=False)   # a subset of the pairs: their rows
+        assert np.array_equal(chk._segment_motion(Q, None, np.array([1]), np.array([0]), np.array([0]), sub)[:, 0],
+                              bound[sub])
         worst = max(worst, float(np.max(change / bound)))
     assert worst > 0.1          # the bound is not vacuous

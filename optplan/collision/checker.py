@@ -479,15 +479,17 @@ class CollisionChecker:
         return all(m.joints[j].nq == 1 and m.joints[j].nv == 1 for j in range(2, m.njoints))
 
     def _segment_motion(self, Q: np.ndarray, A: np.ndarray, inner: np.ndarray, seg: np.ndarray,
-                        ref: np.ndarray) -> np.ndarray:
+                        ref: np.ndarray, pairs: np.ndarray | None = None) -> np.ndarray:
         """(pairs × segments) How much each pair's distance can have changed between the anchor row
         ``ref[s]`` of segment ``s`` and ANY of its inner rows [m] (the rows ``inner`` of ``Q``, grouped
         by segment: ``seg`` their first positions): :func:`~optplan.collision.motion_bounds.pair_motion`
         (the joints' sweep plus, for a pair with ONE side on the robot, the base's translation and
-        rotation)."""
+        rotation). ``pairs``: only these pairs (indices), in this order (default all)."""
         from .motion_bounds import pair_motion
 
         W, pa, pb = self._sweep_data()
+        if pairs is not None:
+            pa, pb = pa[pairs], pb[pairs]
         return pair_motion(W, pa, pb, self._on_robot_mask(), Q[ref], Q[inner], seg)
 
     def _on_robot_mask(self) -> np.ndarray:
@@ -512,10 +514,12 @@ class CollisionChecker:
         """:meth:`min_distance_along` for a free-flyer root: all pair distances at every
         ``every``-th row (and the last); between two such anchors a pair is bounded from below on
         the whole segment by the larger of its anchor distances minus how far its geometries can
-        have moved from that anchor (:meth:`_segment_motion`), and only the (segment, pair)
-        entries whose bound is below the smallest distance found so far are computed at the
-        segment's rows, the lowest bounds first. Exactly the smallest distance: every entry left
-        out is bounded above it."""
+        have moved from that anchor (:meth:`_segment_motion`); the pairs whose bound is below the
+        smallest distance found in some segment are then bounded at each row on its own (its own
+        motion from either anchor: tighter than the segment's largest), and only the (row, pair)
+        entries whose bound is below the smallest distance found so far are computed, the rows
+        with the lowest bounds first. Exactly the smallest distance: every entry left out is
+        bounded above it."""
         M, n_pairs = len(Q), len(self.pairs)
         anchors = list(range(0, M, every))
         if anchors[-1] != M - 1:
@@ -533,29 +537,35 @@ class CollisionChecker:
         segs, seg = np.unique(left, return_index=True)
         lower = np.maximum(D[segs].T - self._segment_motion(Q, A, inner, seg, A[left]),
                            D[segs + 1].T - self._segment_motion(Q, A, inner, seg, A[left + 1]))   # pairs × segments
-        seg_low = lower.min(axis=0)
-        ends = np.r_[seg[1:], len(inner)]
+        live = np.nonzero(lower.min(axis=1) < dmin)[0]      # the pairs some segment cannot rule out
+        if not len(live):
+            return dmin, self.pairs[ibest], n
+        # those pairs bounded at each inner row on its own (its motion from each of its two anchors,
+        # not the segment's largest: tighter): inner rows × live pairs
+        own = np.arange(len(inner))
+        lower = np.maximum(D[np.ix_(left, live)] - self._segment_motion(Q, A, inner, own, A[left], live).T,
+                           D[np.ix_(left + 1, live)] - self._segment_motion(Q, A, inner, own, A[left + 1], live).T)
+        lower = np.ascontiguousarray(lower)
+        row_low = lower.min(axis=1)
         gm, gd = self._cgm, self._cgd
-        for s in np.argsort(seg_low, kind="stable").tolist():
-            if seg_low[s] >= dmin:
+        for j in np.argsort(row_low, kind="stable").tolist():
+            if row_low[j] >= dmin:
                 break
-            for i in inner[seg[s]:ends[s]].tolist():
-                ks = np.nonzero(lower[:, s] < dmin)[0].tolist()
-                if not ks:
-                    break
-                if len(ks) > n_pairs // 8:   # many pairs: all of them in one C++ call is cheaper
-                    d_all = self.distances(Q[i])
-                    n += n_pairs
-                    k = int(d_all.argmin())
-                    if d_all[k] < dmin:
-                        dmin, ibest = float(d_all[k]), k
-                    continue
-                pin.updateGeometryPlacements(self.model, self.data, gm, gd, Q[i])
-                for k in ks:
-                    d = pin.computeDistance(gm, gd, k).min_distance
-                    n += 1
-                    if d < dmin:
-                        dmin, ibest = float(d), k
+            ks = live[lower[j] < dmin].tolist()
+            i = int(inner[j])
+            if len(ks) > n_pairs // 8:   # many pairs: all of them in one C++ call is cheaper
+                d_all = self.distances(Q[i])
+                n += n_pairs
+                k = int(d_all.argmin())
+                if d_all[k] < dmin:
+                    dmin, ibest = float(d_all[k]), k
+                continue
+            pin.updateGeometryPlacements(self.model, self.data, gm, gd, Q[i])
+            for k in ks:
+                d = pin.computeDistance(gm, gd, k).min_distance
+                n += 1
+                if d < dmin:
+                    dmin, ibest = float(d), k
         return dmin, self.pairs[ibest], n
 
     def is_valid(self, q, margin: float = 0.0) -> bool:

@@ -101,7 +101,8 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid,
-                  base0: pin.SE3 | None = None, h0=None, substeps: int = 4, vectorised: bool = False) -> FloatingResult:
+                  base0: pin.SE3 | None = None, h0=None, substeps: int = 4, vectorised: bool = False,
+                  momentum: bool = True) -> FloatingResult:
     """Integrate the free-floating base along a joint trajectory.
 
     Parameters
@@ -115,6 +116,9 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
     substeps: RK4 steps per interval of ``t_grid``.
     vectorised: the callable ``trajectory`` also takes an array of M times and returns (M × nj)
         arrays (then, with zero momentum, it is called once for all times; samples are always).
+    momentum: with zero momentum, False leaves out the cross-check (Pinocchio's recursive momentum
+        at every output sample: ``momentum`` and ``momentum_residual`` are then NaN) when only the
+        base poses are wanted; the base poses are the same.
     """
     if not robot.is_floating:
         raise ConfigurationError(f"simulate_base needs a free-floating robot; {robot.name!r} has a fixed base")
@@ -127,7 +131,7 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
     if int(substeps) < 1:
         raise ValueError(f"substeps: expected ≥ 1, got {substeps}")
     h0 = np.zeros(6) if h0 is None else check_vector(h0, 6, "h0 (momentum [p; L])")
-    model, data = robot.model, robot.model.createData()
+    model = robot.model
     nj = robot.nj
     base0 = pin.SE3.Identity() if base0 is None else base0
     if not isinstance(base0, pin.SE3):
@@ -141,7 +145,8 @@ def simulate_base(robot: RobotModel, trajectory: JointTrajectory | tuple, t_grid
     robot.check_joints(q_first, f"trajectory({t_grid[0]}) joint values")
     robot.check_joints(qd_first, f"trajectory({t_grid[0]}) joint rates")
     if not np.any(h0):
-        return _simulate_zero_momentum(robot, trajectory, t_grid, x, int(substeps), vectorised)
+        return _simulate_zero_momentum(robot, trajectory, t_grid, x, int(substeps), vectorised, bool(momentum))
+    data = model.createData()   # (not made for zero momentum: its twists need none)
 
     def twist(tt: float, xb: np.ndarray):
         qj, qdj = trajectory(tt)
@@ -247,14 +252,13 @@ def _rk4_base_steps(x0: np.ndarray, W: np.ndarray, dts: np.ndarray) -> np.ndarra
 
 
 def _simulate_zero_momentum(robot: RobotModel, trajectory: JointTrajectory, t_grid: np.ndarray, x: np.ndarray,
-                            substeps: int, vectorised: bool) -> FloatingResult:
+                            substeps: int, vectorised: bool, momentum: bool = True) -> FloatingResult:
     """:func:`simulate_base` with zero momentum: the same RK4 scheme on the same times, with the
     base-frame twist of every time the scheme evaluates solved first (with zero momentum it does
     not depend on the base pose: :func:`zero_momentum_twists`, Pinocchio's centroidal map), the
     joint trajectory evaluated once per time (all at once when ``vectorised``: a spline of ours).
     The momentum at each output sample is then Pinocchio's recursive ``computeCentroidalMomentum``
     at the integrated base pose, as in the general case."""
-    model, data = robot.model, robot.model.createData()
     nj, N, m = robot.nj, t_grid.size, 2 * substeps
     # RK4 evaluates the rate at the start, middle and end of each step: m times per interval + the last
     frac = np.arange(m) / m
@@ -279,14 +283,16 @@ def _simulate_zero_momentum(robot: RobotModel, trajectory: JointTrajectory, t_gr
     idx = np.arange(N) * m
     Q = np.hstack([X, qs[idx]])
     V = np.hstack([W[idx], qds[idx]])
-    H = np.empty((N, 6))
-    for k in range(N):
-        h = pin.computeCentroidalMomentum(model, data, Q[k], V[k])
-        H[k] = np.concatenate([h.linear, h.angular])
     if not np.all(np.isfinite(Q)):
         bad = int(np.flatnonzero(~np.all(np.isfinite(Q), axis=1))[0])
         raise ConfigurationError(f"simulate_base: non-finite state at t = {t_grid[bad]} s (the joint trajectory "
                                  "returned NaN/inf or a singular momentum map was met)")
+    H = np.full((N, 6), np.nan)
+    if momentum:
+        model, data = robot.model, robot.model.createData()
+        for k in range(N):
+            h = pin.computeCentroidalMomentum(model, data, Q[k], V[k])
+            H[k] = np.concatenate([h.linear, h.angular])
     res = np.max(np.abs(H), axis=1)
     log.debug("simulate_base: %d samples, max momentum residual %.3g", N, res.max())
     return FloatingResult(t_grid.copy(), Q, V, H, res)
