@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +44,7 @@ from .scene import Scene
 from .scene import held_object as _held_object
 from .shortcuts import shortcut_constrained, shortcut_free
 from .verification import VerifyReport, verify
-from .workers import default_workers, run_jobs, start_workers
+from .workers import default_workers, run_jobs, start_workers, workers_started
 
 # the optimization stack (optplan.problem, SciPy's sparse matrices, the NLP modules) is imported where a
 # segment is optimized, not here: ``optplan plan`` plans while a forked worker imports it (warm_worker)
@@ -468,8 +469,6 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
     time [s]) and, with ``with_cpu``, the shortcut's CPU time [s] and the CPU time [s] worker
     processes spent on segments (``opts.workers``) too."""
     checker = checker or CollisionChecker(robot, scene)
-    if opts.transcription == "bspline":   # (run_pipeline started it before planning: then nothing to do)
-        start_workers((robot, scene), _workers(opts, plan), warm_worker)
     results, t0, t_short, c_short = [], 0.0, 0.0, 0.0
     ipopt = dict(opts.ipopt_options)
     jobs: list[tuple[np.ndarray, str, str | None]] = []
@@ -497,6 +496,9 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
         # the segments are independent NLPs: solved side by side (same results in any process)
         cost = [float(np.abs(np.diff(p, axis=0)).sum()) * (3.0 if k == "constrained" else 1.0) for p, k, _ in jobs]
         workers = _workers(opts)
+        if not workers_started((robot, scene), min(workers, len(jobs))):
+            # a worker forked by run_jobs now inherits the optimization stack from this process
+            _import_optimization_stack()
         solved, worker_cpu = run_jobs((robot, scene), _spline_segment,
                                       [(p, k, a, opts, ipopt) for p, k, a in jobs], cost, workers)
         for (_, kind, arm), (sol, rep, attempts) in zip(jobs, solved):
@@ -555,23 +557,35 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
     return (results, t_short, c_short, 0.0) if with_cpu else (results, t_short)
 
 
-def _workers(opts: PipelineOptions, plan: PlanResult | None = None) -> int:
-    """Processes for the segments: ``opts.workers`` (None: :func:`default_workers`), at most one per
-    segment of ``plan`` when it is given (the same count :func:`optplan.workers.run_jobs` uses)."""
-    n = opts.workers if opts.workers is not None else default_workers()
-    return n if plan is None else max(1, min(n, len(plan.segments)))
+def _workers(opts: PipelineOptions) -> int:
+    """Processes for the segments: ``opts.workers`` (None: :func:`default_workers`)."""
+    return opts.workers if opts.workers is not None else default_workers()
 
 
-def warm_worker(robot: RobotModel, scene: Scene) -> None:
-    """In a segment worker forked before planning (:func:`optplan.workers.start_workers`): import the
-    optimization stack and load IPOPT while the parent process plans, so that the first segment's
-    NLP is built without that wait. Changes no result."""
+def _a_core_is_free() -> bool:
+    """Does the 1-minute load average leave one of this process's CPUs free?"""
+    try:
+        return os.getloadavg()[0] <= len(os.sched_getaffinity(0)) - 1.0
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return False
+
+
+def _import_optimization_stack() -> None:
+    """Import what a segment's optimization needs (optplan.problem with SciPy's sparse matrices, the
+    NLP modules) and load IPOPT."""
     import casadi
 
     from . import segment_nlp, tasks  # noqa: F401 - imported for their import time
     from .problem import nlp  # noqa: F401
 
     casadi.load_nlpsol("ipopt")
+
+
+def warm_worker(robot: RobotModel, scene: Scene) -> None:
+    """In a segment worker forked before planning (:func:`optplan.workers.start_workers`,
+    ``PipelineOptions.early_worker``): import the optimization stack and load IPOPT while the parent
+    process plans, so that the first segment's NLP is built without that wait. Changes no result."""
+    _import_optimization_stack()
 
 
 def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: PipelineOptions | None = None,
@@ -584,7 +598,8 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     rng = np.random.default_rng(seed)
     checker = CollisionChecker(robot, scene)
     planner = make_planner(opts.planner, robot, scene, **opts.planner_kwargs())
-    if opts.transcription == "bspline":
+    early = opts.early_worker if opts.early_worker is not None else _a_core_is_free()
+    if opts.transcription == "bspline" and early:
         # the segment worker forked now imports the optimization stack while this process plans
         # (the jobs find it by the same robot and scene objects: optimize_segments' run_jobs)
         start_workers((robot, scene), _workers(opts), warm_worker)

@@ -31,7 +31,7 @@ from typing import Any
 
 from . import interrupt
 
-__all__ = ["default_workers", "run_jobs", "shutdown", "start_workers"]
+__all__ = ["default_workers", "run_jobs", "shutdown", "start_workers", "workers_started"]
 log = logging.getLogger(__name__)
 
 #: contexts the forked workers inherit: key -> the context objects (kept alive while a pool uses them)
@@ -125,6 +125,12 @@ def start_workers(context: tuple[Any, ...], workers: int, warm: Callable[..., An
                 return False
             fut.add_done_callback(_log_warm_failure)
     return True
+
+
+def workers_started(context: tuple[Any, ...], workers: int) -> bool:
+    """Are the worker processes :func:`run_jobs` would use for this ``context`` and ``workers`` already
+    running (:func:`start_workers`, or an earlier :func:`run_jobs`)? False with ``workers`` < 2."""
+    return workers > 1 and (*(id(c) for c in context), workers - 1) in _POOLS
 
 
 def _log_warm_failure(fut: Future) -> None:
