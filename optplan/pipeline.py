@@ -595,14 +595,14 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     from .planners import make_planner
 
     opts = options or PipelineOptions()
+    early = opts.early_worker if opts.early_worker is not None else _a_core_is_free()
+    if opts.transcription == "bspline" and early:
+        # the segment worker forked now imports the optimization stack while this process makes its
+        # planner and plans (the jobs find it by the same robot and scene objects: optimize_segments' run_jobs)
+        start_workers((robot, scene), _workers(opts), warm_worker)
     rng = np.random.default_rng(seed)
     checker = CollisionChecker(robot, scene)
     planner = make_planner(opts.planner, robot, scene, **opts.planner_kwargs())
-    early = opts.early_worker if opts.early_worker is not None else _a_core_is_free()
-    if opts.transcription == "bspline" and early:
-        # the segment worker forked now imports the optimization stack while this process plans
-        # (the jobs find it by the same robot and scene objects: optimize_segments' run_jobs)
-        start_workers((robot, scene), _workers(opts), warm_worker)
     t0 = time.perf_counter()
     plan = planner.plan(q_start, q_goal, time_limit=opts.plan_time_limit, seed=seed, clock=opts.plan_clock)
     res = PipelineResult(plan=plan, plan_time_s=float(plan.stats.get("time_s", time.perf_counter() - t0)),

@@ -55,11 +55,12 @@ def default_workers() -> int:
     return 2 if n >= 2 else 1
 
 
-def shutdown() -> None:
-    """Stop every worker process (they are also stopped when the interpreter exits)."""
+def shutdown(wait: bool = False) -> None:
+    """Stop every worker process (they are also stopped when the interpreter exits); ``wait``: until
+    they and the pools' threads have ended."""
     while _POOLS:
         key, pool = _POOLS.popitem(last=False)
-        pool.shutdown(wait=False, cancel_futures=True)
+        pool.shutdown(wait=wait, cancel_futures=True)
         _CONTEXTS.pop(key, None)
 
 
@@ -105,11 +106,16 @@ def start_workers(context: tuple[Any, ...], workers: int, warm: Callable[..., An
     so that a worker prepares (imports, loads) while this process goes on with other work — the
     pipeline plans while its worker imports the optimization stack. A worker forked now inherits this
     process's memory as it is now, not as it will be when the jobs come. Returns False (nothing
-    started; :func:`run_jobs` works as without it) with ``workers`` < 2 or where :func:`run_jobs` would
-    run the jobs here. ``warm`` runs once per worker process when the pool has one worker (the
+    started; :func:`run_jobs` works as without it) with ``workers`` < 2, where :func:`run_jobs` would
+    run the jobs here, or while another thread runs in this process (a fork copies the locks it holds). ``warm`` runs once per worker process when the pool has one worker (the
     default); with more it is sent ``workers − 1`` times, to whichever workers take it."""
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    if threading.active_count() > 1:
+        # another thread (e.g. an earlier pool's, still shutting down) may hold a lock the child would
+        # inherit held: fork early only from a process with one thread (a fresh command's); run_jobs
+        # forks when the jobs come, as without this call
+        return False
     fresh = (*(id(c) for c in context), workers - 1) not in _POOLS
     got = _pool(context, workers - 1) if workers > 1 else None
     if got is None:

@@ -141,6 +141,7 @@ def test_started_workers_are_prepared_before_their_jobs_and_reused():
     preparation runs in the worker before any job: a job sent there sees what the preparation left."""
     from optplan.workers import start_workers
 
+    shutdown(wait=True)                                       # no pool thread left: a fork may be early
     ctx = (3.0, 1.0)
     assert start_workers(ctx, 1, _prepare) is False          # one process: nothing to start
     assert start_workers(ctx, 2, _prepare) is True
