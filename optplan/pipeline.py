@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,17 +40,18 @@ from .model.ik import IKOptions
 from .model.robot import RobotModel
 from .pipeline_options import PLANNER_DEFAULTS, PipelineOptions
 from .planners.base import BOTH_ARMS
-from .problem import ClosedChain, CollisionAvoidance, IpoptStatus, OptProblem
-from .problem.solution import Solution
 from .scene import Scene
-from .segment_nlp import activate, boost_and_activate, guess_knots, project_knots, unmodelled_geometry
+from .scene import held_object as _held_object
 from .shortcuts import shortcut_constrained, shortcut_free
-from .tasks import _held_object, object_pose, segment_problem, straight_line_poses, task_space_path
 from .verification import VerifyReport, verify
-from .workers import default_workers, run_jobs
+from .workers import default_workers, run_jobs, start_workers, workers_started
 
+# the optimization stack (optplan.problem, SciPy's sparse matrices, the NLP modules) is imported where a
+# segment is optimized, not here: ``optplan plan`` plans while a forked worker imports it (warm_worker)
 if TYPE_CHECKING:
     from .planners.base import PlanResult
+    from .problem import ClosedChain, OptProblem
+    from .problem.solution import Solution
 
 __all__ = ["PipelineOptions", "PLANNER_DEFAULTS", "SegmentResult", "PipelineResult", "run_pipeline", "shortcut_constrained",
            "shortcut_free"]
@@ -167,6 +169,9 @@ class PipelineResult:
 def _segment_problem(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind: str, arm: str | None,
                      opts: PipelineOptions, n_intervals: int | None = None, fixed_normals: bool | None = None
                      ) -> tuple[OptProblem, ClosedChain | None, str | None]:
+    from .problem import ClosedChain
+    from .tasks import segment_problem
+
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     vmin = float(np.min(robot.velocity_limit))
     T = max(opts.min_duration, length / (opts.speed_fraction * vmin))
@@ -199,6 +204,8 @@ def _regrasp_scene(robot: RobotModel, scene: Scene, seg_path: np.ndarray, arm: s
 
     obj = _held_object(scene)
     if arm == BOTH_ARMS:
+        from .tasks import object_pose
+
         first = next(iter(obj.grasps))
         M = object_pose(robot, scene, np.asarray(seg_path[0], float), first, robot.model.createData())
         sx, sy, sz = (float(v) for v in obj.size)
@@ -214,6 +221,8 @@ def _regrasp_scene(robot: RobotModel, scene: Scene, seg_path: np.ndarray, arm: s
 def _cold_path(robot: RobotModel, scene: Scene, q0: np.ndarray, q1: np.ndarray, kind: str, n: int) -> np.ndarray:
     """Cold start: task-space straight line through IK (constrained) or the joint-space line."""
     if kind == "constrained":
+        from .tasks import object_pose, straight_line_poses, task_space_path
+
         arm = next(iter(_held_object(scene).grasps))
         data = robot.model.createData()
         M0, M1 = object_pose(robot, scene, q0, arm, data), object_pose(robot, scene, q1, arm, data)
@@ -249,6 +258,8 @@ def _solve_verified(robot, scene, prob: OptProblem, cc, holder, opts: PipelineOp
     """Solve and verify; re-solve with more collision pairs when coal finds a collision the
     NLP's active pairs missed (at most ``opts.collision_retries`` times). The pipeline verifies and
     retries itself (its ordered policy), so the problem's own dense check is off here."""
+    from .problem import CollisionAvoidance
+
     sol = prob.solve(ipopt, guarantees=False)
     rep = verify(robot, sol, scene, closed_chain=cc, object_arm=holder)
     for _ in range(opts.collision_retries):
@@ -282,6 +293,10 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     """Optimize one segment with the B-spline NLP (an :class:`~optplan.problem.OptProblem` on the
     shared kernel core, :mod:`optplan.segment_nlp`) under the retry policy of
     :func:`optimize_segments`; returns (solution, report, attempts)."""
+    from .problem import ClosedChain, IpoptStatus
+    from .segment_nlp import activate, boost_and_activate, guess_knots, project_knots, unmodelled_geometry
+    from .tasks import segment_problem
+
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(robot.velocity_limit))))
     grasps = _held_object(scene).grasps
@@ -480,7 +495,10 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
     if opts.transcription == "bspline":
         # the segments are independent NLPs: solved side by side (same results in any process)
         cost = [float(np.abs(np.diff(p, axis=0)).sum()) * (3.0 if k == "constrained" else 1.0) for p, k, _ in jobs]
-        workers = opts.workers if opts.workers is not None else default_workers()
+        workers = _workers(opts)
+        if not workers_started((robot, scene), min(workers, len(jobs))):
+            # a worker forked by run_jobs now inherits the optimization stack from this process
+            _import_optimization_stack()
         solved, worker_cpu = run_jobs((robot, scene), _spline_segment,
                                       [(p, k, a, opts, ipopt) for p, k, a in jobs], cost, workers)
         for (_, kind, arm), (sol, rep, attempts) in zip(jobs, solved):
@@ -539,6 +557,37 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
     return (results, t_short, c_short, 0.0) if with_cpu else (results, t_short)
 
 
+def _workers(opts: PipelineOptions) -> int:
+    """Processes for the segments: ``opts.workers`` (None: :func:`default_workers`)."""
+    return opts.workers if opts.workers is not None else default_workers()
+
+
+def _a_core_is_free() -> bool:
+    """Does the 1-minute load average leave one of this process's CPUs free?"""
+    try:
+        return os.getloadavg()[0] <= len(os.sched_getaffinity(0)) - 1.0
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return False
+
+
+def _import_optimization_stack() -> None:
+    """Import what a segment's optimization needs (optplan.problem with SciPy's sparse matrices, the
+    NLP modules) and load IPOPT."""
+    import casadi
+
+    from . import segment_nlp, tasks  # noqa: F401 - imported for their import time
+    from .problem import nlp  # noqa: F401
+
+    casadi.load_nlpsol("ipopt")
+
+
+def warm_worker(robot: RobotModel, scene: Scene) -> None:
+    """In a segment worker forked before planning (:func:`optplan.workers.start_workers`,
+    ``PipelineOptions.early_worker``): import the optimization stack and load IPOPT while the parent
+    process plans, so that the first segment's NLP is built without that wait. Changes no result."""
+    _import_optimization_stack()
+
+
 def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: PipelineOptions | None = None,
                  seed: int = 0) -> PipelineResult:
     """Plan, shortcut, resample, optimize and verify (module docstring). Never raises for a failed
@@ -546,6 +595,11 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     from .planners import make_planner
 
     opts = options or PipelineOptions()
+    early = opts.early_worker if opts.early_worker is not None else _a_core_is_free()
+    if opts.transcription == "bspline" and early:
+        # the segment worker forked now imports the optimization stack while this process makes its
+        # planner and plans (the jobs find it by the same robot and scene objects: optimize_segments' run_jobs)
+        start_workers((robot, scene), _workers(opts), warm_worker)
     rng = np.random.default_rng(seed)
     checker = CollisionChecker(robot, scene)
     planner = make_planner(opts.planner, robot, scene, **opts.planner_kwargs())

@@ -157,6 +157,13 @@ class PipelineOptions:
     #: inherit the robot, scene and caches; :mod:`optplan.workers`) [count]; None: 2 on a machine with at least
     #: 2 CPUs, else 1. The results do not depend on it.
     workers: int | None = None
+    #: Fork the segment worker before planning, to import the optimization stack (SciPy's sparse
+    #: matrices, the NLP modules: ~0.2 s of CPU) while this process plans, instead of after planning,
+    #: inheriting it from this process (:func:`optplan.pipeline.warm_worker`). It saves that time of the wall
+    #: on a machine with a core to spare and costs that much CPU more in all (both processes import);
+    #: None: only when the 1-minute load average leaves a core free (``os.getloadavg``). The results do not
+    #: depend on it.
+    early_worker: bool | None = None
     #: Your own terms on every B-spline segment NLP: called as ``segment_terms(problem, kind)`` with the
     #: segment's :class:`~optplan.problem.OptProblem` (``kind``: "constrained" or "regrasp") right after
     #: it is built, before its first guess and solve, on every grid the retry policy builds; add
@@ -191,6 +198,9 @@ class PipelineOptions:
         if self.workers is not None and (isinstance(self.workers, bool) or not isinstance(self.workers, int)
                                          or self.workers < 1):
             raise ValueError(f"PipelineOptions.workers: expected an integer >= 1 or None, got {self.workers!r}")
+        if self.early_worker not in (None, True, False):
+            raise OptionError(f"PipelineOptions.early_worker: expected True, False or None (when a core is free), got "
+                              f"{self.early_worker!r}")
         if self.compile_kernels not in (True, False, "auto"):
             raise ValueError(f"PipelineOptions.compile_kernels: expected True, False or 'auto', got "
                              f"{self.compile_kernels!r}")

@@ -42,7 +42,7 @@ from .errors import ModelError, UnknownNameError
 from .geometry.spatial import rpy_to_matrix
 from .model.description import models_dir, read_model_toml
 
-__all__ = ["Obstacle", "GraspedObject", "Scene", "available_scenes", "scene_name"]
+__all__ = ["Obstacle", "GraspedObject", "Scene", "available_scenes", "held_object", "scene_name"]
 
 
 def available_scenes() -> list[str]:
@@ -250,6 +250,13 @@ class Scene:
             if o.name == name:
                 return o
         raise UnknownNameError("obstacle", name, [o.name for o in self.obstacles])
+
+
+def held_object(scene: Scene) -> GraspedObject:
+    """The scene's held object; a ValueError naming the scene when it has none."""
+    if scene.object is None:
+        raise ValueError(f"scene {scene.name!r} has no [object] with grasps")
+    return scene.object
 
 
 def _vec(v, n: int, where: str, bound: float | None = None) -> np.ndarray:

@@ -8,9 +8,7 @@ import numpy as np
 
 from .collision.checker import CollisionChecker
 from .model.robot import RobotModel
-from .problem import ClosedChain
-from .scene import Scene
-from .tasks import _held_object
+from .scene import Scene, held_object
 
 __all__ = ["shortcut_constrained", "shortcut_free"]
 
@@ -25,12 +23,10 @@ def shortcut_constrained(robot: RobotModel, scene: Scene, path: np.ndarray, rng:
     and the path gets shorter. (Joint space rather than task space: with 14 joints and 12 closure
     equations a pose does not fix the configuration, and IK continuation drifts along the
     self-motion manifold.)"""
-    from .constraints.closed_chain import project_closed_chain
+    from .constraints.closed_chain import ChainSpec, project_closed_chain
 
     checker = checker or CollisionChecker(robot, scene)
-    grasps = _held_object(scene).grasps
-    arms = list(grasps)
-    cc = ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
+    cc = ChainSpec.from_grasps(held_object(scene).grasps)   # (no import of the optimization stack)
     data = robot.model.createData()
     path = np.array(path, float)
     seglen = lambda P: float(np.linalg.norm(np.diff(P, axis=0), axis=1).sum())  # noqa: E731

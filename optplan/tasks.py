@@ -23,20 +23,14 @@ from .problem import (
     OptProblem,
     Smoothness,
 )
-from .scene import GraspedObject, Scene
+from .scene import Scene
+from .scene import held_object as _held_object
 
 __all__ = ["GraspIK", "grasp_configuration", "task_space_path", "transport_initial_path", "transport_problem",
            "segment_problem", "object_pose"]
 log = logging.getLogger(__name__)
 
 _PRECISE = IKOptions(tol_position=1e-10, tol_orientation=1e-10, max_iterations=300)
-
-
-def _held_object(scene: Scene) -> GraspedObject:
-    """The scene's held object; a ValueError naming the scene when it has none."""
-    if scene.object is None:
-        raise ValueError(f"scene {scene.name!r} has no [object] with grasps")
-    return scene.object
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ from typing import Any
 
 from . import interrupt
 
-__all__ = ["default_workers", "run_jobs", "shutdown"]
+__all__ = ["default_workers", "run_jobs", "shutdown", "start_workers", "workers_started"]
 log = logging.getLogger(__name__)
 
 #: contexts the forked workers inherit: key -> the context objects (kept alive while a pool uses them)
@@ -55,11 +55,12 @@ def default_workers() -> int:
     return 2 if n >= 2 else 1
 
 
-def shutdown() -> None:
-    """Stop every worker process (they are also stopped when the interpreter exits)."""
+def shutdown(wait: bool = False) -> None:
+    """Stop every worker process (they are also stopped when the interpreter exits); ``wait``: until
+    they and the pools' threads have ended."""
     while _POOLS:
         key, pool = _POOLS.popitem(last=False)
-        pool.shutdown(wait=False, cancel_futures=True)
+        pool.shutdown(wait=wait, cancel_futures=True)
         _CONTEXTS.pop(key, None)
 
 
@@ -97,6 +98,51 @@ def _pool(context: tuple[Any, ...], workers: int) -> tuple[tuple[int, ...], Proc
         p.shutdown(wait=False, cancel_futures=True)
         _CONTEXTS.pop(old, None)
     return key, pool
+
+
+def start_workers(context: tuple[Any, ...], workers: int, warm: Callable[..., Any] | None = None) -> bool:
+    """Fork now the ``workers − 1`` worker processes that :func:`run_jobs` will use for this ``context``
+    and ``workers`` (the same objects: the pool is found by them), each to run ``warm(*context)`` first,
+    so that a worker prepares (imports, loads) while this process goes on with other work — the
+    pipeline plans while its worker imports the optimization stack. A worker forked now inherits this
+    process's memory as it is now, not as it will be when the jobs come. Returns False (nothing
+    started; :func:`run_jobs` works as without it) with ``workers`` < 2, where :func:`run_jobs` would
+    run the jobs here, or while another thread runs in this process (a fork copies the locks it holds). ``warm`` runs once per worker process when the pool has one worker (the
+    default); with more it is sent ``workers − 1`` times, to whichever workers take it."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    if threading.active_count() > 1:
+        # another thread (e.g. an earlier pool's, still shutting down) may hold a lock the child would
+        # inherit held: fork early only from a process with one thread (a fresh command's); run_jobs
+        # forks when the jobs come, as without this call
+        return False
+    fresh = (*(id(c) for c in context), workers - 1) not in _POOLS
+    got = _pool(context, workers - 1) if workers > 1 else None
+    if got is None:
+        return False
+    key, pool = got
+    if warm is not None and fresh:   # (a pool already running was prepared when it started)
+        for _ in range(workers - 1):
+            try:
+                with interrupt.children_start_deaf():   # a worker forked here starts with Ctrl-C blocked
+                    fut = pool.submit(_run_job, key, warm, ())
+            except (BrokenProcessPool, RuntimeError):  # pragma: no cover - the pool is gone: run_jobs copes
+                _POOLS.pop(key, None)
+                return False
+            fut.add_done_callback(_log_warm_failure)
+    return True
+
+
+def workers_started(context: tuple[Any, ...], workers: int) -> bool:
+    """Are the worker processes :func:`run_jobs` would use for this ``context`` and ``workers`` already
+    running (:func:`start_workers`, or an earlier :func:`run_jobs`)? False with ``workers`` < 2."""
+    return workers > 1 and (*(id(c) for c in context), workers - 1) in _POOLS
+
+
+def _log_warm_failure(fut: Future) -> None:
+    """A worker's preparation failed: say so (its jobs still run; they import what they need themselves)."""
+    if not fut.cancelled() and fut.exception() is not None:
+        log.warning("a worker's preparation failed: %r", fut.exception())
 
 
 def _run_job(key: tuple[int, ...], fn: Callable[..., Any], args: tuple[Any, ...]

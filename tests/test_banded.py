@@ -88,3 +88,20 @@ def test_the_plan_commands_modules_and_spline_fits_do_not_import_scipy_linalg(tm
     out = subprocess.run([sys.executable, "-c", _NO_LINALG], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip() == "", f"imported: {out.stdout.strip()}"
+
+
+_NO_OPT_STACK = """
+import sys
+import optplan.cli, optplan.cli_plan, optplan.pipeline, optplan.shortcuts, optplan.trials, optplan.verification
+import optplan.planners.tcbirrt
+print(" ".join(m for m in ("scipy.sparse", "optplan.problem", "optplan.tasks", "optplan.segment_nlp")
+               if m in sys.modules))
+"""
+
+
+def test_the_plan_commands_planning_modules_do_not_import_the_optimization_stack():
+    """``optplan plan`` plans and shortcuts while its segment worker imports the optimization stack
+    (scipy.sparse, optplan.problem: ~0.2 s CPU): the modules it needs up to then must not import it."""
+    out = subprocess.run([sys.executable, "-c", _NO_OPT_STACK], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "", f"imported: {out.stdout.strip()}"

@@ -351,3 +351,39 @@ def test_pipeline_segment_nlp_is_an_optproblem_that_honours_a_user_term(tcb):
     assert float(sol1.q[:, j].max()) <= cap + 1e-6            # at the knots, where the row holds
     assert float(Q[:, j].max()) > cap + 0.25 * over           # without it the bound is passed
     assert "user_cap" in sol1.terms
+
+
+def test_the_early_segment_worker_changes_no_result(tcb, monkeypatch):
+    """``optplan plan --scene 1``'s job with its segment worker forked before planning (it imports the
+    optimization stack while the plan is made), forked after it, and in one process: the same
+    trajectory and iterations, verified."""
+    import optplan.pipeline as PL
+    from optplan import workers
+    from optplan.pipeline import PLANNER_DEFAULTS, run_pipeline
+    from optplan.trials import TrialGenerator
+
+    sc = Scene.load("ssps_scene1")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    po = PLANNER_DEFAULTS["tcbirrt"] + (("variant", "improved"),)
+    runs, started = [], []
+    start = PL.start_workers
+
+    def start_workers(*a, **k):
+        started.append(start(*a, **k))
+        return started[-1]
+
+    monkeypatch.setattr(PL, "start_workers", start_workers)
+    for workers_, early in ((2, True), (2, False), (1, None)):
+        workers.shutdown(wait=True)   # (an early fork needs this process to have one thread)
+        opts = PipelineOptions(planner_options=po, workers=workers_, early_worker=early, plan_clock="cpu")
+        res = run_pipeline(tcb, sc, tr.q_start, tr.q_goal, opts, seed=0)
+        assert res.success, res.to_dict()
+        if workers_ == 2:
+            assert workers.workers_started((tcb, sc), 2)   # the pool the segments used (this context)
+        runs.append(res)
+    workers.shutdown(wait=True)
+    assert started == [True]                                 # forked before planning in the first run only
+    for res in runs[1:]:
+        assert [s.solution.total_iterations for s in res.segments] == \
+            [s.solution.total_iterations for s in runs[0].segments]
+        np.testing.assert_array_equal(res.q, runs[0].q)

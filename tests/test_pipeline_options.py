@@ -74,3 +74,12 @@ def test_the_segments_use_never_monotone_mu_and_retry_with_the_filter():
     assert dict(opts.ipopt_options)["adaptive_mu_globalization"] == "never-monotone-mode"
     assert dict(opts.globalization_retry_options) == {"adaptive_mu_globalization": "obj-constr-filter"}
     assert PipelineOptions(globalization_retry_options=()).globalization_retry_options == ()
+
+
+def test_early_worker_takes_a_bool_or_none():
+    from optplan.errors import OptionError
+
+    for ok in (None, True, False):
+        PipelineOptions(early_worker=ok)
+    with pytest.raises(OptionError, match="early_worker.*'yes'"):
+        PipelineOptions(early_worker="yes")

@@ -121,3 +121,41 @@ def test_inside_a_daemonic_process_the_jobs_run_there():
     values, all_here, cpu = q.get(timeout=60)
     p.join(timeout=60)
     assert values == [3.0, 5.0] and all_here and cpu == 0.0
+
+
+_PREPARED: dict[str, int] = {}
+
+
+def _prepare(scale, offset):
+    """A worker's preparation: remembers in its process that it ran (and for which context)."""
+    _PREPARED["pid"] = os.getpid()
+    _PREPARED["scale"] = int(scale)
+
+
+def _prepared_job(scale, offset, x):
+    return scale * x + offset, os.getpid(), dict(_PREPARED)
+
+
+def test_started_workers_are_prepared_before_their_jobs_and_reused():
+    """start_workers forks the pool run_jobs then finds (same context objects, same count), and its
+    preparation runs in the worker before any job: a job sent there sees what the preparation left."""
+    from optplan.workers import start_workers
+
+    shutdown(wait=True)                                       # no pool thread left: a fork may be early
+    ctx = (3.0, 1.0)
+    assert start_workers(ctx, 1, _prepare) is False          # one process: nothing to start
+    assert start_workers(ctx, 2, _prepare) is True
+    _PREPARED.clear()                                         # this process never ran it
+    jobs = [(x,) for x in range(4)]
+    out, _ = run_jobs(ctx, _prepared_job, jobs, cost=[4.0, 3.0, 2.0, 1.0], workers=2)
+    assert [r[0] for r in out] == [3.0 * x + 1.0 for x in range(4)]
+    in_worker = [r for r in out if r[1] != os.getpid()]
+    assert in_worker, "no job ran in the worker"
+    for _, pid, prepared in in_worker:
+        assert prepared == {"pid": pid, "scale": 3}            # prepared in that very process, first
+    for _, pid, prepared in out:
+        if pid == os.getpid():
+            assert prepared == {}
+    with pytest.raises(ValueError, match="workers"):
+        start_workers(ctx, 0)
+    shutdown()
