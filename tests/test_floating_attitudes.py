@@ -147,3 +147,20 @@ def test_dense_check_reuses_attitudes_only_for_identical_inputs(eba):
     G._ATTITUDES.clear()
     fresh = G._base_attitudes(eba, sol, ts, density)
     assert np.array_equal(c, fresh) and not np.allclose(b, c, atol=1e-9, rtol=0)
+
+
+def test_compiled_base_frame_coms_match_pinocchio(eba):
+    """The compiled centre of mass in the base frame (the dense check's configurations) against
+    Pinocchio's centerOfMass per state, to 1e-12; too few rows: None (Pinocchio per row)."""
+    from optplan.model.floating import _twist_kernels, base_frame_coms
+
+    rng = np.random.default_rng(31)
+    q = rng.uniform(eba.lower, eba.upper, size=(40, eba.nj))
+    assert base_frame_coms(eba, q[:3]) is None
+    if _twist_kernels(eba, "com") is None:
+        pytest.skip("no C compiler: the centres of mass are Pinocchio's")
+    c = base_frame_coms(eba, q)
+    data = eba.model.createData()
+    ref = np.array([pin.centerOfMass(eba.model, data, eba.configuration(qi)) for qi in q])
+    assert c.shape == (40, 3)
+    assert np.abs(c - ref).max() <= 1e-12

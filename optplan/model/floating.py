@@ -337,7 +337,7 @@ _TWIST_LOCK = threading.Lock()
 
 def _zero_momentum_function(robot: RobotModel, part: str) -> Any:
     """The symbolic zero-momentum base rate ``(q_j, q̇_j) ->`` the twist ``[v; ω]`` (``part =
-    "twist"``) or only ``ω`` (``"omega"``). With ``A = Ag[:, :6] = [[A11, A12], [A21, A22]]`` and
+    "twist"``) or only ``ω`` (``"omega"``); ``"com"``: the centre of mass in the base frame. With ``A = Ag[:, :6] = [[A11, A12], [A21, A22]]`` and
     ``b = −Ag[:, 6:] q̇``, ``ω`` is the solution of the Schur complement system
     ``(A22 − A21 A11⁻¹ A12) ω = b2 − A21 A11⁻¹ b1`` (``A11 = m I``: the linear momentum of the
     base's own translation), which skips the linear velocity's back-substitution."""
@@ -348,6 +348,9 @@ def _zero_momentum_function(robot: RobotModel, part: str) -> Any:
     sk = SymbolicKinematics(robot)
     qj, qdj = ca.SX.sym("qj", robot.nj), ca.SX.sym("qdj", robot.nj)
     Ag = sk.centroidal_map(ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), qj))
+    if part == "com":   # the centre of mass [m] in the base frame (q̇ unused)
+        com = sk.center_of_mass(ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), qj))
+        return ca.Function("base_frame_com", [qj, qdj], [com])
     A, b = Ag[:, :6], -Ag[:, 6:] @ qdj
     if part == "twist":
         return ca.Function("zero_momentum_twist", [qj, qdj], [ca.solve(A, b)])
@@ -359,7 +362,7 @@ def _zero_momentum_function(robot: RobotModel, part: str) -> Any:
 def _twist_kernels(robot: RobotModel, part: str = "twist") -> Any:
     """``{chunk: FastFunction}``: ``(q_j (nj × chunk), q̇_j (nj × chunk)) -> rates (r × chunk)``
     compiled (set-up memo keyed by the robot's kinematics digest and ``part``: ``"twist"``, r = 6,
-    or ``"omega"``, r = 3, :func:`_zero_momentum_function`); None without a C compiler."""
+    ``"omega"`` or ``"com"``, r = 3, :func:`_zero_momentum_function`); None without a C compiler."""
     key = (id(robot.model), part)
     got = _TWIST_FNS.get(key)
     if got is not None and got[0] is robot.model:
@@ -403,6 +406,20 @@ def _twists_compiled(kernels: Any, q: np.ndarray, qd: np.ndarray, rows: int = 6)
             out[a:a + m] = kernels[n](qc.ravel(), qdc.ravel()).reshape(n, rows)[:m]
             a += m
     return out
+
+
+def base_frame_coms(robot: RobotModel, q: np.ndarray) -> np.ndarray | None:
+    """(M, 3) the centre of mass [m] in the base frame at the joint positions ``q`` (M × nj)
+    [rad], through a compiled kernel (the symbolic centre of mass, equal to Pinocchio's
+    ``centerOfMass`` to rounding); None when fewer than a small chunk of rows are asked or no C
+    compiler is there (the caller then asks Pinocchio per row)."""
+    q = np.atleast_2d(np.asarray(q, float))
+    if q.shape[0] < _SMALL_CHUNK or q.shape[1] != robot.nj:
+        return None
+    kernels = _twist_kernels(robot, "com")
+    if kernels is None:
+        return None
+    return _twists_compiled(kernels, q, np.zeros_like(q), rows=3)
 
 
 def zero_momentum_rates(robot: RobotModel, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
