@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import threading
 import weakref
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -184,6 +185,7 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
 #: (warm starts from one solution, parameters set back) reuses them
 _ATTITUDES: dict[int, tuple[Any, dict[bytes, np.ndarray]]] = {}
 _ATTITUDES_KEPT = 4
+_ATTITUDES_LOCK = threading.Lock()
 
 
 def _attitude_inputs(sol: Solution, t: np.ndarray, density: int) -> bytes:
@@ -206,22 +208,24 @@ def _base_attitudes(robot: Any, sol: Solution, t: np.ndarray, density: int) -> n
     from ..model.floating import attitudes_on_intervals
 
     key = _attitude_inputs(sol, t, density)
-    got = _ATTITUDES.get(id(robot.model))
-    if got is None or got[0] is not robot.model:
-        got = _ATTITUDES[id(robot.model)] = (robot.model, {})
-    kept = got[1]
-    if key in kept:
-        kept[key] = kept.pop(key)          # the most recent now
-        return kept[key].copy()
+    with _ATTITUDES_LOCK:
+        got = _ATTITUDES.get(id(robot.model))
+        if got is None or got[0] is not robot.model:
+            got = _ATTITUDES[id(robot.model)] = (robot.model, {})
+        kept = got[1]
+        if key in kept:
+            kept[key] = kept.pop(key)          # the most recent now
+            return kept[key].copy()
 
     def joints(ts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         s = sol.sample(np.clip(ts, sol.t[0], sol.t[-1]))
         return s["q"], s["qd"]
 
     out = attitudes_on_intervals(robot, joints, t, np.asarray(sol.base_quat, float), density, substeps=2)
-    kept[key] = out.copy()
-    while len(kept) > _ATTITUDES_KEPT:
-        kept.pop(next(iter(kept)))
+    with _ATTITUDES_LOCK:
+        kept[key] = out.copy()
+        while len(kept) > _ATTITUDES_KEPT:
+            kept.pop(next(iter(kept)))
     return out
 
 
