@@ -95,3 +95,72 @@ def test_attitudes_reject_a_grid_that_does_not_fit(eba):
     with pytest.raises(ConfigurationError, match="intervals"):
         attitudes_on_intervals(eba, _poly(np.random.default_rng(0), eba.nj, 1.0), np.linspace(0, 1, 7),
                                np.tile([0, 0, 0, 1.0], (3, 1)), 4)
+
+
+@pytest.mark.parametrize("M", [16, 37, 300])
+def test_compiled_angular_rates_match_pinocchio(eba, M):
+    """The kernel of ω alone (Schur complement of the base's linear rows) against Pinocchio's
+    centroidal map and a 6 × 6 solve per state, to 1e-12."""
+    from optplan.model import floating
+
+    rng = np.random.default_rng(29 + M)
+    q = rng.uniform(eba.lower, eba.upper, size=(M, eba.nj))
+    qd = rng.normal(size=(M, eba.nj))
+    if floating._twist_kernels(eba, "omega") is None:
+        pytest.skip("no C compiler: the rates are Pinocchio's")
+    W = floating.zero_momentum_rates(eba, q, qd)
+    ref = zero_momentum_twists(eba, q, qd, compiled=False)[:, 3:]
+    assert W.shape == (M, 3)
+    assert np.abs(W - ref).max() <= 1e-12 * (1 + np.abs(ref).max())
+
+
+def test_dense_check_reuses_attitudes_only_for_identical_inputs(eba):
+    """The dense check's attitudes are reused only when every input is the same bit for bit; a
+    changed solution is integrated again (and agrees with a fresh integration)."""
+    from types import SimpleNamespace
+
+    from optplan.problem import guarantees as G
+
+    rng = np.random.default_rng(5)
+    K, density = 4, 5
+    t = np.linspace(0.0, 4.0, K + 1)
+    n = eba.nj
+    sol = SimpleNamespace(t=t, q=rng.normal(size=(K + 1, n)) * 0.3, qd=rng.normal(size=(K + 1, n)) * 0.1,
+                          qdd=rng.normal(size=(K + 1, n)) * 0.05, jerk=rng.normal(size=(K, n)) * 0.01,
+                          base_quat=np.array([_random_quat(rng) for _ in range(K + 1)]))
+
+    def sample(ts):
+        k = np.clip((ts / 1.0).astype(int), 0, K - 1)
+        tau = (ts - sol.t[k])[:, None]
+        return {"q": sol.q[k] + tau * sol.qd[k] + tau**2 / 2 * sol.qdd[k] + tau**3 / 6 * sol.jerk[k],
+                "qd": sol.qd[k] + tau * sol.qdd[k] + tau**2 / 2 * sol.jerk[k]}
+    sol.sample = sample
+    ts = np.linspace(0.0, 4.0, K * density + 1)
+    G._ATTITUDES.clear()
+    a = G._base_attitudes(eba, sol, ts, density)
+    a[:] = np.nan                                   # the caller's copy: the kept one is untouched
+    b = G._base_attitudes(eba, sol, ts, density)
+    assert np.isfinite(b).all()
+    sol.qd = sol.qd.copy()
+    sol.qd[2, 0] += 1e-3                            # one input changed: integrated again
+    c = G._base_attitudes(eba, sol, ts, density)
+    G._ATTITUDES.clear()
+    fresh = G._base_attitudes(eba, sol, ts, density)
+    assert np.array_equal(c, fresh) and not np.allclose(b, c, atol=1e-9, rtol=0)
+
+
+def test_compiled_base_frame_coms_match_pinocchio(eba):
+    """The compiled centre of mass in the base frame (the dense check's configurations) against
+    Pinocchio's centerOfMass per state, to 1e-12; too few rows: None (Pinocchio per row)."""
+    from optplan.model.floating import _twist_kernels, base_frame_coms
+
+    rng = np.random.default_rng(31)
+    q = rng.uniform(eba.lower, eba.upper, size=(40, eba.nj))
+    assert base_frame_coms(eba, q[:3]) is None
+    if _twist_kernels(eba, "com") is None:
+        pytest.skip("no C compiler: the centres of mass are Pinocchio's")
+    c = base_frame_coms(eba, q)
+    data = eba.model.createData()
+    ref = np.array([pin.centerOfMass(eba.model, data, eba.configuration(qi)) for qi in q])
+    assert c.shape == (40, 3)
+    assert np.abs(c - ref).max() <= 1e-12

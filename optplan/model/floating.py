@@ -23,7 +23,7 @@ from ..geometry.spatial import check_pose
 from .robot import RobotModel
 
 __all__ = ["FloatingResult", "simulate_base", "joint_trajectory_from_samples", "rk4_step", "zero_momentum_twists",
-           "attitudes_on_intervals"]
+           "zero_momentum_rates", "attitudes_on_intervals"]
 log = logging.getLogger(__name__)
 
 JointTrajectory = Callable[[float], tuple[np.ndarray, np.ndarray]]
@@ -330,47 +330,70 @@ def zero_momentum_twists(robot: RobotModel, q: np.ndarray, qd: np.ndarray, compi
 
 #: states per call of the compiled twist functions (a large chunk for the bulk, a small one for the rest)
 _BIG_CHUNK, _SMALL_CHUNK = 256, 16
-#: per robot model: (the model, kept alive so that its id stays unique; the compiled functions, or None)
-_TWIST_FNS: dict[int, tuple[Any, Any]] = {}
+#: per (robot model, part): (the model, kept alive so that its id stays unique; the compiled functions, or None)
+_TWIST_FNS: dict[tuple[int, str], tuple[Any, Any]] = {}
 _TWIST_LOCK = threading.Lock()
 
 
-def _twist_kernels(robot: RobotModel) -> Any:
-    """``(lock, {chunk: FastFunction})``: ``(q_j (nj × chunk), q̇_j (nj × chunk)) -> twists (6 × chunk)``
-    compiled (set-up memo keyed by the robot's kinematics digest); None without a C compiler."""
-    key = id(robot.model)
+def _zero_momentum_function(robot: RobotModel, part: str) -> Any:
+    """The symbolic zero-momentum base rate ``(q_j, q̇_j) ->`` the twist ``[v; ω]`` (``part =
+    "twist"``) or only ``ω`` (``"omega"``); ``"com"``: the centre of mass in the base frame. With ``A = Ag[:, :6] = [[A11, A12], [A21, A22]]`` and
+    ``b = −Ag[:, 6:] q̇``, ``ω`` is the solution of the Schur complement system
+    ``(A22 − A21 A11⁻¹ A12) ω = b2 − A21 A11⁻¹ b1`` (``A11 = m I``: the linear momentum of the
+    base's own translation), which skips the linear velocity's back-substitution."""
+    import casadi as ca
+
+    from .symbolic import SymbolicKinematics
+
+    sk = SymbolicKinematics(robot)
+    qj, qdj = ca.SX.sym("qj", robot.nj), ca.SX.sym("qdj", robot.nj)
+    Ag = sk.centroidal_map(ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), qj))
+    if part == "com":   # the centre of mass [m] in the base frame (q̇ unused)
+        com = sk.center_of_mass(ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), qj))
+        return ca.Function("base_frame_com", [qj, qdj], [com])
+    A, b = Ag[:, :6], -Ag[:, 6:] @ qdj
+    if part == "twist":
+        return ca.Function("zero_momentum_twist", [qj, qdj], [ca.solve(A, b)])
+    S = A[3:, 3:] - A[3:, :3] @ ca.solve(A[:3, :3], A[:3, 3:])
+    r = b[3:] - A[3:, :3] @ ca.solve(A[:3, :3], b[:3])
+    return ca.Function("zero_momentum_omega", [qj, qdj], [ca.solve(S, r)])
+
+
+def _twist_kernels(robot: RobotModel, part: str = "twist") -> Any:
+    """``{chunk: FastFunction}``: ``(q_j (nj × chunk), q̇_j (nj × chunk)) -> rates (r × chunk)``
+    compiled (set-up memo keyed by the robot's kinematics digest and ``part``: ``"twist"``, r = 6,
+    ``"omega"`` or ``"com"``, r = 3, :func:`_zero_momentum_function`); None without a C compiler."""
+    key = (id(robot.model), part)
     got = _TWIST_FNS.get(key)
     if got is not None and got[0] is robot.model:
         return got[1]
     from ..codegen import FastFunction, memo_functions
     from .digest import kinematics_digest
-    from .symbolic import SymbolicKinematics
+
+    name = f"zero_momentum_{part}"
 
     def build() -> dict[str, Any]:
-        import casadi as ca
-
-        sk = SymbolicKinematics(robot)
-        qj, qdj = ca.SX.sym("qj", robot.nj), ca.SX.sym("qdj", robot.nj)
-        Ag = sk.centroidal_map(ca.vertcat(ca.DM([0, 0, 0, 0, 0, 0, 1.0]), qj))
-        f = ca.Function("zero_momentum_twist", [qj, qdj], [ca.solve(Ag[:, :6], -Ag[:, 6:] @ qdj)])
-        return {f"map{n}": f.map(f"zero_momentum_twist_{n}", "serial", n, [], []) for n in (_BIG_CHUNK, _SMALL_CHUNK)}
+        f = _zero_momentum_function(robot, part)
+        return {f"map{n}": f.map(f"{name}_{n}", "serial", n, [], []) for n in (_BIG_CHUNK, _SMALL_CHUNK)}
 
     fns: Any = None
     try:
-        memo = memo_functions("zero_momentum_twist", (kinematics_digest(robot),), build)
+        memo = memo_functions(name, (kinematics_digest(robot),), build)
         fast = {n: FastFunction.of(memo, f"map{n}", "-O1") for n in (_BIG_CHUNK, _SMALL_CHUNK)}
         if all(f.compiled for f in fast.values()):
             fns = fast
     except Exception as exc:   # noqa: BLE001 - any failure to build or compile: Pinocchio per state
-        log.warning("zero_momentum_twists: the compiled twists are not available (%s); Pinocchio per state", exc)
+        log.warning("zero_momentum_twists: the compiled %s rates are not available (%s); Pinocchio per state",
+                    part, exc)
     _TWIST_FNS[key] = (robot.model, fns)
     return fns
 
 
-def _twists_compiled(kernels: Any, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """:func:`zero_momentum_twists` through the compiled chunks (the last one padded with zeros)."""
+def _twists_compiled(kernels: Any, q: np.ndarray, qd: np.ndarray, rows: int = 6) -> np.ndarray:
+    """:func:`zero_momentum_twists` (``rows`` = 6) or its angular rows (3) through the compiled
+    chunks (the last one padded with zeros)."""
     M = q.shape[0]
-    out = np.empty((M, 6))
+    out = np.empty((M, rows))
     with _TWIST_LOCK:   # the compiled functions' work buffers are shared
         a = 0
         while a < M:
@@ -380,9 +403,38 @@ def _twists_compiled(kernels: Any, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
             if m < n:
                 qc = np.vstack([qc, np.zeros((n - m, q.shape[1]))])
                 qdc = np.vstack([qdc, np.zeros((n - m, q.shape[1]))])
-            out[a:a + m] = kernels[n](qc.ravel(), qdc.ravel()).reshape(n, 6)[:m]
+            out[a:a + m] = kernels[n](qc.ravel(), qdc.ravel()).reshape(n, rows)[:m]
             a += m
     return out
+
+
+def base_frame_coms(robot: RobotModel, q: np.ndarray) -> np.ndarray | None:
+    """(M, 3) the centre of mass [m] in the base frame at the joint positions ``q`` (M × nj)
+    [rad], through a compiled kernel (the symbolic centre of mass, equal to Pinocchio's
+    ``centerOfMass`` to rounding); None when fewer than a small chunk of rows are asked or no C
+    compiler is there (the caller then asks Pinocchio per row)."""
+    q = np.atleast_2d(np.asarray(q, float))
+    if q.shape[0] < _SMALL_CHUNK or q.shape[1] != robot.nj:
+        return None
+    kernels = _twist_kernels(robot, "com")
+    if kernels is None:
+        return None
+    return _twists_compiled(kernels, q, np.zeros_like(q), rows=3)
+
+
+def zero_momentum_rates(robot: RobotModel, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """(M, 3) the angular rows ``ω`` [rad/s] of :func:`zero_momentum_twists` (base frame), at the
+    joint states ``q``, ``q̇`` (M × nj) [rad, rad/s]: through a compiled kernel of ``ω`` alone
+    (the Schur complement of the base's linear rows, :func:`_zero_momentum_function`) when many
+    states are asked and a C compiler is there, else the full twists' angular rows."""
+    q, qd = np.atleast_2d(np.asarray(q, float)), np.atleast_2d(np.asarray(qd, float))
+    if q.shape != qd.shape or q.shape[1] != robot.nj:
+        raise ConfigurationError(f"zero_momentum_rates: expected q and qd of shape (M, {robot.nj}), got "
+                                 f"{q.shape} and {qd.shape}")
+    kernels = _twist_kernels(robot, "omega") if q.shape[0] >= _SMALL_CHUNK else None
+    if kernels is not None:
+        return _twists_compiled(kernels, q, qd, rows=3)
+    return zero_momentum_twists(robot, q, qd)[:, 3:]
 
 
 def _quat_mul_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -413,7 +465,7 @@ def attitudes_on_intervals(robot: RobotModel, joints: Callable[[np.ndarray], tup
     frac = np.arange(m) / m
     fine = np.r_[(t[:-1, None] + np.diff(t)[:, None] * frac).ravel(), t[-1]]
     qs, qds = joints(fine)
-    W = zero_momentum_twists(robot, qs, qds)[:, 3:]
+    W = zero_momentum_rates(robot, qs, qds)
     x = q0[:-1] / np.linalg.norm(q0[:-1], axis=1, keepdims=True)
     out = np.empty((t.size, 4))
     starts = np.arange(K) * density   # the first sample of each interval

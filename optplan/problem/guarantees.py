@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import threading
 import weakref
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -179,19 +180,53 @@ def _collision(out: list[Violation], name: str, term: CollisionAvoidance, data: 
                              float(amount)))
 
 
+#: per robot model: (the model, kept alive so that its id stays unique; the last few attitudes'
+#: inputs as bytes -> those attitudes, oldest first): a re-solve whose solution did not change
+#: (warm starts from one solution, parameters set back) reuses them
+_ATTITUDES: dict[int, tuple[Any, dict[bytes, np.ndarray]]] = {}
+_ATTITUDES_KEPT = 4
+_ATTITUDES_LOCK = threading.Lock()
+
+
+def _attitude_inputs(sol: Solution, t: np.ndarray, density: int) -> bytes:
+    """Everything :func:`_base_attitudes` reads, as bytes (equal bytes: the same attitudes)."""
+    arrays = (sol.t, sol.q, sol.qd, sol.qdd, sol.jerk, sol.base_quat, t)
+    parts = [np.asarray([density], np.int64).tobytes()]
+    for a in arrays:
+        a = np.ascontiguousarray(a, float)
+        parts += [np.asarray(a.shape, np.int64).tobytes(), a.tobytes()]
+    return b"".join(parts)
+
+
 def _base_attitudes(robot: Any, sol: Solution, t: np.ndarray, density: int) -> np.ndarray:
     """Base quaternions of a free-floating robot at the sample times ``t`` (``density`` per
     interval): integrated with zero momentum (Pinocchio's centroidal map, the RK4 scheme of
     :func:`~optplan.model.floating.simulate_base`) from each knot's attitude over its interval,
     along the exact joint trajectory; all intervals at once
-    (:func:`~optplan.model.floating.attitudes_on_intervals`)."""
+    (:func:`~optplan.model.floating.attitudes_on_intervals`). The same inputs bit for bit as the
+    last call for this robot (a re-solve that did not move the solution): that call's attitudes."""
     from ..model.floating import attitudes_on_intervals
+
+    key = _attitude_inputs(sol, t, density)
+    with _ATTITUDES_LOCK:
+        got = _ATTITUDES.get(id(robot.model))
+        if got is None or got[0] is not robot.model:
+            got = _ATTITUDES[id(robot.model)] = (robot.model, {})
+        kept = got[1]
+        if key in kept:
+            kept[key] = kept.pop(key)          # the most recent now
+            return kept[key].copy()
 
     def joints(ts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         s = sol.sample(np.clip(ts, sol.t[0], sol.t[-1]))
         return s["q"], s["qd"]
 
-    return attitudes_on_intervals(robot, joints, t, np.asarray(sol.base_quat, float), density, substeps=2)
+    out = attitudes_on_intervals(robot, joints, t, np.asarray(sol.base_quat, float), density, substeps=2)
+    with _ATTITUDES_LOCK:
+        kept[key] = out.copy()
+        while len(kept) > _ATTITUDES_KEPT:
+            kept.pop(next(iter(kept)))
+    return out
 
 
 def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions | None = None) -> list[Violation]:

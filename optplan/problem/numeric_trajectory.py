@@ -11,6 +11,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..geometry.spatial import pose_residual
+from ..model.floating import base_frame_coms
 from ..model.robot import RobotModel
 
 __all__ = ["NumericTrajectory", "pose_residual_numeric", "pose_residuals"]
@@ -61,7 +62,8 @@ class NumericTrajectory:
 
     def configurations(self) -> np.ndarray:
         """Every point's configuration in Pinocchio's layout, (N+1, nq): :meth:`q_full` of every
-        point at once (one Pinocchio centre of mass per point of a floating robot, the rest
+        point at once (the centre of mass of a floating robot's points by one compiled kernel,
+        :func:`~optplan.model.floating.base_frame_coms`, or Pinocchio per point; the rest
         vectorised)."""
         r = self.robot
         if not r.is_floating:
@@ -75,7 +77,9 @@ class NumericTrajectory:
         out[:, 6] = 1.0
         out[:, 7:] = self.q
         model, data, com = r.model, self.data, pin.centerOfMass
-        c_b = np.array([com(model, data, qi) for qi in out])          # the CoM in the base frame
+        c_b = base_frame_coms(r, self.q)                              # the CoM in the base frame
+        if c_b is None:
+            c_b = np.array([com(model, data, qi) for qi in out])
         x, y, z, w = quat.T
         # R(quat) c_b = c_b + 2 w (v × c_b) + 2 v × (v × c_b), v = (x, y, z)
         v = quat[:, :3]
