@@ -373,6 +373,9 @@ def test_the_early_segment_worker_changes_no_result(tcb, monkeypatch):
         return started[-1]
 
     monkeypatch.setattr(PL, "start_workers", start_workers)
+    # threads other tests of this process left (a progress bar's monitor) would stop the early fork;
+    # its guard is tested in test_workers.py
+    monkeypatch.setattr(workers.threading, "active_count", lambda: 1)
     for workers_, early in ((2, True), (2, False), (1, None)):
         workers.shutdown(wait=True)   # (an early fork needs this process to have one thread)
         opts = PipelineOptions(planner_options=po, workers=workers_, early_worker=early, plan_clock="cpu")

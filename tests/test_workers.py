@@ -136,12 +136,16 @@ def _prepared_job(scale, offset, x):
     return scale * x + offset, os.getpid(), dict(_PREPARED)
 
 
-def test_started_workers_are_prepared_before_their_jobs_and_reused():
+def test_started_workers_are_prepared_before_their_jobs_and_reused(monkeypatch):
     """start_workers forks the pool run_jobs then finds (same context objects, same count), and its
     preparation runs in the worker before any job: a job sent there sees what the preparation left."""
+    import optplan.workers as W
     from optplan.workers import start_workers
 
     shutdown(wait=True)                                       # no pool thread left: a fork may be early
+    # other tests of this process may have left threads of their own (a progress bar's monitor):
+    # the one-thread guard is tested below; here the preparation is
+    monkeypatch.setattr(W.threading, "active_count", lambda: 1)
     ctx = (3.0, 1.0)
     assert start_workers(ctx, 1, _prepare) is False          # one process: nothing to start
     assert start_workers(ctx, 2, _prepare) is True
@@ -159,3 +163,26 @@ def test_started_workers_are_prepared_before_their_jobs_and_reused():
     with pytest.raises(ValueError, match="workers"):
         start_workers(ctx, 0)
     shutdown()
+
+
+def test_no_early_fork_while_another_thread_runs():
+    """start_workers does not fork while another thread of this process runs (the child would inherit
+    the locks that thread holds): False, nothing started, and run_jobs still runs the jobs."""
+    import threading
+
+    from optplan.workers import start_workers, workers_started
+
+    shutdown(wait=True)
+    stop = threading.Event()
+    t = threading.Thread(target=stop.wait, daemon=True)
+    t.start()
+    try:
+        ctx = (5.0, 2.0)
+        assert start_workers(ctx, 2, _prepare) is False
+        assert not workers_started(ctx, 2)
+        out, _ = run_jobs(ctx, _prepared_job, [(1.0,), (2.0,)], cost=[1.0, 1.0], workers=2)
+        assert [r[0] for r in out] == [7.0, 12.0]
+    finally:
+        stop.set()
+        t.join()
+        shutdown(wait=True)
