@@ -308,3 +308,22 @@ def test_planners_respect_the_cpu_time_limit(tcb, scene1, kin, checker, trial, n
     assert res.status in (PlanStatus.TIMEOUT, PlanStatus.EXACT), res.message
     assert gaps and max(gaps) < 0.1, (name, max(gaps, default=None))
     assert res.stats["cpu_time_s"] <= 0.4 + 0.1, res.stats
+
+
+def test_tables_name_a_spec_with_options_by_its_planner_with_the_papers_figures():
+    """A row run with options (``lcbirrt:data_task_fraction=1.0``) is the paper's LCBiRRT in Tables 2-3:
+    its paper figures beside it, in the paper's order, marked, and the spec named below the tables."""
+    from optplan.bench.tcbirrt import summarize
+    from optplan.bench.tcbirrt_tables import format_tables
+
+    rows = [{"scene": "ssps_scene1", "trial": t, "planner": p, "success": ok, "status": "exact" if ok else "timeout",
+             "clock": "cpu", "cpu_time_s": 1.0 + t if ok else 10.0, "time_s": 1.0}
+            for t in range(10) for p, ok in (("tcbirrt", True), ("lcbirrt:data_task_fraction=1.0", t < 3),
+                                             ("cbirrt2", t < 5))]
+    text = format_tables(summarize(rows, 10.0), 10.0)
+    lines = text.splitlines()
+    row = next(ln for ln in lines if ln.startswith("LCBiRRT *"))
+    assert "0.30 (3/10) [0.65]" in row                                # the paper's LCBiRRT figure beside ours
+    assert "LCBiRRT *: lcbirrt:data_task_fraction=1.0" in lines
+    order = [ln.split()[0] for ln in lines[2:5]]
+    assert order == ["CBiRRT2", "LCBiRRT", "TCBiRRT"]                  # the paper's table order

@@ -72,8 +72,7 @@ def _scenes(summ: dict[str, Any]) -> list[str]:
 def format_tables(summ: dict[str, Any], time_limit: float, clock: str = "cpu") -> str:
     """Tables 2 and 3 of ``summarize(rows)`` with the paper's figures in brackets."""
     scenes = _scenes(summ)
-    planners = [p for p in PAPER_ORDER if any(p in summ[s]["planners"] for s in scenes)]
-    planners += sorted({p for s in scenes for p in summ[s]["planners"]} - set(planners))
+    planners = _ordered({p for s in scenes for p in summ[s]["planners"]})
     w = 22
     head = f"{'planner':26s}" + "".join(f"{s:>{w}s}" for s in scenes)
     lines = [f"Table 2: success rate at t = {time_limit:g} s ({clock} clock), ours (paper at 1000 s)", head]
@@ -81,10 +80,10 @@ def format_tables(summ: dict[str, Any], time_limit: float, clock: str = "cpu") -
         cells = []
         for s in scenes:
             d = summ[s]["planners"].get(p)
-            pp = PAPER.get(p, {}).get(s)
+            pp = PAPER.get(_base(p), {}).get(s)
             ours = "-" if d is None else f"{d['success_rate']:.2f} ({d['successes']}/{d['n']})"
             cells.append(f"{ours} [{pp[0]:.2f}]" if pp else ours)
-        lines.append(f"{PAPER_LABELS.get(p, p):26s}" + "".join(f"{c:>{w}s}" for c in cells))
+        lines.append(f"{_label(p):26s}" + "".join(f"{c:>{w}s}" for c in cells))
     nmins = ", ".join(f"{s} {summ[s]['n_min']}" for s in scenes)
     lines += ["", f"Table 3: mean ± std of the n_min fastest successful times [s] (n_min: {nmins}), ours [paper]",
               head]
@@ -92,13 +91,31 @@ def format_tables(summ: dict[str, Any], time_limit: float, clock: str = "cpu") -
         cells = []
         for s in scenes:
             d = summ[s]["planners"].get(p)
-            pp = PAPER.get(p, {}).get(s)
+            pp = PAPER.get(_base(p), {}).get(s)
             ours = "-" if d is None else ("/" if d.get("mean_fastest_nmin_s") is None else
                                           f"{d['mean_fastest_nmin_s']:.2f}±{d['std_fastest_nmin_s']:.2f}")
             paper = "" if pp is None else (" [/]" if pp[1] is None else f" [{pp[1]:.4g}±{pp[2]:.4g}]")
             cells.append(ours + paper)
-        lines.append(f"{PAPER_LABELS.get(p, p):26s}" + "".join(f"{c:>{w + 6}s}" for c in cells))
+        lines.append(f"{_label(p):26s}" + "".join(f"{c:>{w + 6}s}" for c in cells))
+    lines += [f"{_label(p)}: {p}" for p in planners if ":" in p]   # the options behind a marked row
     return "\n".join(lines)
+
+
+def _base(spec: str) -> str:
+    """The planner's name in a spec (``"lcbirrt:data_task_fraction=1.0"`` → ``"lcbirrt"``)."""
+    return spec.split(":", 1)[0].strip().lower()
+
+
+def _label(spec: str) -> str:
+    """The paper's name of a spec's planner; marked ``*`` when the spec sets options."""
+    base = _base(spec)
+    return PAPER_LABELS.get(base, base) + (" *" if ":" in spec else "")
+
+
+def _ordered(specs: set[str]) -> list[str]:
+    """Specs in the paper's table order (by planner name), then the others, by name."""
+    rank = {p: i for i, p in enumerate(PAPER_ORDER)}
+    return sorted(specs, key=lambda p: (rank.get(_base(p), len(rank)), p))
 
 
 def plot_fig6(rows: list[dict[str, Any]], path: Any, time_limit: float) -> None:
@@ -116,10 +133,10 @@ def plot_fig6(rows: list[dict[str, Any]], path: Any, time_limit: float) -> None:
     for ax, sc in zip(axes[0], scenes):
         rs = [r for r in rows if r["scene"] == sc]
         present = {r["planner"] for r in rs}
-        for p in [x for x in PAPER_ORDER if x in present] + sorted(present - set(PAPER_ORDER)):
+        for p in _ordered(present):
             pr = [r for r in rs if r["planner"] == p]
             times = [_time_of(r) for r in pr if r["success"]]
-            ax.step(ts, success_curve(times, len(pr), ts), where="post", label=f"{PAPER_LABELS.get(p, p)} ({len(pr)})",
+            ax.step(ts, success_curve(times, len(pr), ts), where="post", label=f"{_label(p)} ({len(pr)})",
                     lw=2.2 if p == "tcbirrt" else 1.3)
         ax.set_xlim(0, time_limit)
         ax.set_ylim(-0.02, 1.02)
