@@ -320,9 +320,14 @@ def test_tables_name_a_spec_with_options_by_its_planner_with_the_papers_figures(
              "clock": "cpu", "cpu_time_s": 1.0 + t if ok else 10.0, "time_s": 1.0}
             for t in range(10) for p, ok in (("tcbirrt", True), ("lcbirrt:data_task_fraction=1.0", t < 3),
                                              ("cbirrt2", t < 5))]
-    text = format_tables(summarize(rows, 10.0), 10.0)
+    summ = summarize(rows, 10.0)
+    text = format_tables(summ, 10.0)
     lines = text.splitlines()
     row = next(ln for ln in lines if ln.startswith("LCBiRRT *"))
+    from optplan.bench.tcbirrt import format_summary
+
+    per_scene = next(ln for ln in format_summary(summ).splitlines() if "lcbirrt:data_task_fraction" in ln)
+    assert per_scene.rstrip().endswith("0.65, 117.65 ± 108.59")   # the paper's column too
     assert "0.30 (3/10) [0.65]" in row                                # the paper's LCBiRRT figure beside ours
     assert "LCBiRRT *: lcbirrt:data_task_fraction=1.0" in lines
     order = [ln.split()[0] for ln in lines[2:5]]

@@ -411,7 +411,7 @@ def format_summary(summ: dict) -> str:
             med = d["median_time_successful_s"]
             mm = (f"{d['mean_fastest_nmin_s']:.3f} ± {d['std_fastest_nmin_s']:.3f}"
                   if d["mean_fastest_nmin_s"] is not None else "/")
-            pp = PAPER.get(p, {}).get(sc)
+            pp = PAPER.get(p.split(":", 1)[0].strip().lower(), {}).get(sc)
             ps = "" if pp is None else (f"{pp[0]:.2f}, " + (f"{pp[1]:.2f} ± {pp[2]:.2f}" if pp[1] is not None else "/"))
             lines.append(f"  {p:26s} {d['successes']:3d}/{d['n']:<3d} " + " ".join(f"{v:8.2f}" for v in d["p_t"].values())
                          + f" {f'{med:.3f}' if med is not None else '/':>9s} {mm:>24s} {ps:>24s}")
