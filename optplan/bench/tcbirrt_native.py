@@ -55,6 +55,25 @@ def paired_queries(scenes: list[str], trials: list[int], planner: str = "tcbirrt
                        context=context)
 
 
+def _pose_cases(robot: Any, sc: Any, kin: Any, n: int, seed: int, rng: np.random.Generator, lin: float,
+                ang: float) -> tuple[list[tuple[Any, Any, Any]], list[Any]]:
+    """Extension cases ``(q0, M0, M_target)``: from the start and goal of trials 0-2, ``n`` object targets
+    each, the pose's twist coordinates perturbed by normal noise of ``lin`` [m] and ``ang`` [rad] per
+    component; and the three trials."""
+    from ..planners.task_space import pose_from_xi, xi_from_pose
+    from ..trials import TrialGenerator
+
+    trs = [TrialGenerator(robot, sc).generate(t, seed) for t in range(3)]
+    cases = []
+    for tr in trs:
+        for q0 in (tr.q_start, tr.q_goal):
+            M = kin.object_pose(q0)
+            for _ in range(n):
+                xi = xi_from_pose(M) + rng.normal(0.0, 1.0, 6) * np.r_[[lin] * 3, [ang] * 3]
+                cases.append((q0, M, pose_from_xi(xi)))
+    return cases, trs
+
+
 def extension_costs(scene_name: str, n: int = 100, repeats: int = 3, seed: int = 0,
                     robot_name: str = "tcbirrt_dual_arm") -> dict[str, float]:
     """CPU microseconds per constrained extension (improved variant: interpolation, path IK with restarts,
@@ -63,12 +82,11 @@ def extension_costs(scene_name: str, n: int = 100, repeats: int = 3, seed: int =
     best of ``repeats`` alternating passes; also the IK iterations and edge checks of one pass."""
     from ..constraints.closed_chain import ClosedChainKinematics
     from ..model.robot import RobotModel
-    from ..planners.task_space import interpolate_task, pose_from_xi, xi_from_pose
+    from ..planners.task_space import interpolate_task
     from ..planners.tcbirrt import TCBiRRT, TCBiRRTOptions
     from ..planners.tcbirrt_native import native_extend
     from ..planners.validity import ValidityChecker
     from ..scene import Scene
-    from ..trials import TrialGenerator
 
     robot = RobotModel.from_name(robot_name)
     sc = Scene.load(scene_name)
@@ -77,14 +95,7 @@ def extension_costs(scene_name: str, n: int = 100, repeats: int = 3, seed: int =
     pls = {k: TCBiRRT(robot, sc, TCBiRRTOptions(variant="improved", extension=k), checker=ck, kinematics=kin)
            for k in KINDS}
     rng = np.random.default_rng(seed)
-    cases = []
-    for t in range(3):
-        tr = TrialGenerator(robot, sc).generate(t, seed)
-        for q0 in (tr.q_start, tr.q_goal):
-            M = kin.object_pose(q0)
-            for _ in range(n):
-                xi = xi_from_pose(M) + rng.normal(0.0, 1.0, 6) * np.r_[[0.1] * 3, [0.2] * 3]
-                cases.append((q0, M, pose_from_xi(xi)))
+    cases, _ = _pose_cases(robot, sc, kin, n, seed, rng, 0.1, 0.2)
     best: dict[str, float] = {}
     st: dict[str, int] = {}
     for rep in range(repeats):
@@ -113,13 +124,12 @@ def loop_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
     (lead path: the straight ξ segment between them); best of ``repeats`` alternating passes."""
     from ..constraints.closed_chain import ClosedChainKinematics
     from ..model.robot import RobotModel
-    from ..planners.task_space import pose_from_xi, xi_from_pose
+    from ..planners.task_space import xi_from_pose
     from ..planners.tcbirrt import TCBiRRT, TCBiRRTOptions
     from ..planners.tcbirrt_native import loop_extend, native_extend
     from ..planners.tcbirrt_tree import _TaskTree
     from ..planners.validity import ValidityChecker
     from ..scene import Scene
-    from ..trials import TrialGenerator
 
     robot = RobotModel.from_name(robot_name)
     sc = Scene.load(scene_name)
@@ -134,14 +144,7 @@ def loop_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
     if pls["loop"]._nrng is None:
         return {"available": 0.0}
     rng = np.random.default_rng(seed)
-    trs = [TrialGenerator(robot, sc).generate(t, seed) for t in range(3)]
-    cases = []
-    for tr in trs:
-        for q0 in (tr.q_start, tr.q_goal):
-            M = kin.object_pose(q0)
-            for _ in range(n):
-                xi = xi_from_pose(M) + rng.normal(0.0, 1.0, 6) * np.r_[[0.15] * 3, [0.3] * 3]
-                cases.append((q0, M, pose_from_xi(xi)))
+    cases, trs = _pose_cases(robot, sc, kin, n, seed, rng, 0.15, 0.3)
     xa, xb = xi_from_pose(kin.object_pose(trs[0].q_start)), xi_from_pose(kin.object_pose(trs[0].q_goal))
     ta = _TaskTree(trs[0].q_start, xa, np.eye(3), xa[:3], cap=1024)
     tb = _TaskTree(trs[0].q_goal, xb, np.eye(3), xb[:3], cap=1024)
@@ -182,12 +185,10 @@ def ik_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
     best of ``repeats`` alternating passes, with each pass's counters (equal when the two IKs agree)."""
     from ..constraints.closed_chain import ClosedChainKinematics
     from ..model.robot import RobotModel
-    from ..planners.task_space import pose_from_xi, xi_from_pose
     from ..planners.tcbirrt import TCBiRRT, TCBiRRTOptions
     from ..planners.tcbirrt_native import loop_extend
     from ..planners.validity import ValidityChecker
     from ..scene import Scene
-    from ..trials import TrialGenerator
 
     robot = RobotModel.from_name(robot_name)
     sc = Scene.load(scene_name)
@@ -200,14 +201,7 @@ def ik_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
     if pl._nrng is None or ext is None or ext._ik is None:
         return {"available": 0.0}
     rng = np.random.default_rng(seed)
-    cases = []
-    for t in range(3):
-        tr = TrialGenerator(robot, sc).generate(t, seed)
-        for q0 in (tr.q_start, tr.q_goal):
-            M = kin.object_pose(q0)
-            for _ in range(n):
-                xi = xi_from_pose(M) + rng.normal(0.0, 1.0, 6) * np.r_[[0.15] * 3, [0.3] * 3]
-                cases.append((q0, M, pose_from_xi(xi)))
+    cases, _ = _pose_cases(robot, sc, kin, n, seed, rng, 0.15, 0.3)
     counters = ("ik_calls", "ik_iterations", "ik_restarts", "ik_failures", "ik_jumps", "collisions", "edge_checks",
                 "edge_collisions")
     out: dict[str, float] = {}
