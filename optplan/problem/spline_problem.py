@@ -66,7 +66,13 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
             key = (core.kc._digest, N, tuple(p.shape for p in params), *key)
             fn = _KNOT_KERNELS.get(key)
         if fn is None:
-            fn = point_kernel(sym, expr() if callable(expr) else expr, params, N, "point")
+            def build(_name: str) -> Any:
+                return point_kernel(sym, expr() if callable(expr) else expr, params, N, "point")
+
+            # a kernel of a known kind is kept on disk too (the kernel cache's file, by its key;
+            # the function keeps its own name, which its compiled libraries are named after): a new
+            # process builds neither the expression nor the robot's symbolic kinematics under it
+            fn = build("") if key is None else core.kc._get(("knot_kernel", *key[1:]), build)
             if key is not None:
                 _KNOT_KERNELS[key] = fn
                 while len(_KNOT_KERNELS) > 256:
