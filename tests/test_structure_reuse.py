@@ -89,3 +89,18 @@ def test_new_process_builds_no_symbolic_kinematics_and_a_damaged_kernel_file_is_
     for k in first:
         assert np.allclose(np.asarray(rebuilt[k](z[:first[k].size1_in(0)])),
                            np.asarray(first[k](z[:first[k].size1_in(0)])), atol=1e-14, rtol=0)
+
+
+def test_an_edited_formulation_never_reads_an_older_knot_kernel_file(new_process, tmp_path, monkeypatch):
+    from optplan import RobotModel
+    from optplan.problem import spline_problem
+
+    fresh, calls = new_process
+    robot = RobotModel.from_name("tcbirrt_dual_arm")
+    _families(robot)
+    before = set(tmp_path.rglob("knot_kernel_*.casadi"))
+    fresh()
+    monkeypatch.setattr(spline_problem, "_KNOT_SOURCE", ["edited"])   # as after an edit of the source
+    _families(robot)
+    assert calls[0] == 2                                                # built again, not read
+    assert len(set(tmp_path.rglob("knot_kernel_*.casadi")) - before) == len(before)
