@@ -216,8 +216,11 @@ def _check_ur5(prob: Any, sol: Any, ctx: Any) -> dict[str, float]:
 
 
 def _forget_memory() -> None:
-    """Drop what this process keeps in memory of the kernels and NLP structures (the disk cache
-    stays): the next problem is built as in a new process with a warm cache."""
+    """Drop what this process keeps in memory of the kernels, the robots' symbols and the NLP
+    structures (the disk cache stays): the next problem is built as in a new process with a warm
+    cache, but for the imports, the libraries the dynamic loader keeps and the memory the process
+    already touched (the ``first`` row of ``--warm-cache`` is a new process's first problem)."""
+    from optplan.problem import expressions, spline_core, spline_problem
     from optplan.problem.floating_kernels import FloatingKernels
     from optplan.problem.kernels import KernelCache
 
@@ -225,6 +228,12 @@ def _forget_memory() -> None:
         for kc in list(cls._by_digest.values()):
             kc._structures.clear()
             kc._fns.clear()
+        cls._per_robot.clear()
+        cls._by_digest.clear()
+    expressions._SYMBOLS.clear()
+    spline_problem._KNOT_KERNELS.clear()
+    spline_core._QUAD_BLOCKS.clear()
+    spline_core._FOUND_LIBS.clear()
 
 
 def _solve_row(prob: Any, ctx: Any, check: Any) -> tuple[dict[str, Any], Any]:

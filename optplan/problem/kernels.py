@@ -67,7 +67,7 @@ class KernelCache:
         self.robot = robot
         self.sym = SymbolicKinematics(robot)
         self._q = ca.SX.sym("q", robot.nj)
-        self._X = self.sym.joint_placements(self._configuration(self._q))
+        self._X_sym: Any = None   # the joint placements of ``_q``, built on first use (:attr:`_X`)
         self._fns: dict[tuple[Any, ...], ca.Function] = {}
         self._structures: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
         self._digest = self._robot_digest() + self._digest_tag
@@ -85,6 +85,15 @@ class KernelCache:
     def _configuration(self, q: ca.SX) -> ca.SX:
         """The model configuration the kernels see for joint vector ``q`` (fixed base: ``q``)."""
         return q
+
+    @property
+    def _X(self) -> Any:
+        """The symbolic world placements of every joint for the kernel input ``_q`` (SX), built
+        on first use: a process whose kernels all load from the disk cache never needs them (their
+        recursion cost ~8 ms per robot and process on the transport's dual arm)."""
+        if self._X_sym is None:
+            self._X_sym = self.sym.joint_placements(self._configuration(self._q))
+        return self._X_sym
 
     def _robot_digest(self) -> bytes:
         return self.kinematics_digest(self.robot)

@@ -4,6 +4,7 @@ rows (damped least squares on their own kernels: IK for frame targets) and, for 
 the zero-momentum base; the solution's rows are named in the user's language."""
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import casadi as ca
@@ -34,6 +35,28 @@ _POSE = ("x", "y", "z", "rot_x", "rot_y", "rot_z", "trace")
 #: point kernels of boundaries and closed chains, by robot, N, parameter shapes and what their
 #: expression holds (a kind, frames and constants): a later build of the same kind reuses them
 _KNOT_KERNELS: dict[tuple[Any, ...], Any] = {}
+_KNOT_SOURCE: list[str] = []
+
+
+def _knot_source() -> str:
+    """A hash of the source that writes the knot kernels' expressions (their files in the kernel
+    cache are keyed by it: an edited formulation is never read from an older file): size and
+    modification time of the modules involved, computed once per process."""
+    if not _KNOT_SOURCE:
+        import hashlib
+        import sys
+
+        h = hashlib.sha1()
+        for mod in (__name__, "optplan.problem.expressions", "optplan.geometry.spatial", "optplan.model.symbolic",
+                    "optplan.problem.kernels"):
+            path = getattr(sys.modules.get(mod), "__file__", None)
+            try:
+                st = os.stat(path) if path else None
+            except OSError:
+                st = None
+            h.update(f"{mod}:{st.st_size if st else -1}:{st.st_mtime_ns if st else -1};".encode())
+        _KNOT_SOURCE.append(h.hexdigest()[:12])
+    return _KNOT_SOURCE[0]
 
 
 class Unsupported(Exception):
@@ -66,7 +89,13 @@ def families_of(prob: Any, core: SplineCore, params: list[Parameter]
             key = (core.kc._digest, N, tuple(p.shape for p in params), *key)
             fn = _KNOT_KERNELS.get(key)
         if fn is None:
-            fn = point_kernel(sym, expr() if callable(expr) else expr, params, N, "point")
+            def build(_name: str) -> Any:
+                return point_kernel(sym, expr() if callable(expr) else expr, params, N, "point")
+
+            # a kernel of a known kind is kept on disk too (the kernel cache's file, by its key;
+            # the function keeps its own name, which its compiled libraries are named after): a new
+            # process builds neither the expression nor the robot's symbolic kinematics under it
+            fn = build("") if key is None else core.kc._get(("knot_kernel", _knot_source(), *key[1:]), build)
             if key is not None:
                 _KNOT_KERNELS[key] = fn
                 while len(_KNOT_KERNELS) > 256:

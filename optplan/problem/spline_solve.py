@@ -505,8 +505,9 @@ class SplineBackend:
             "ipopt.jacobian_regularization_value": 1e-6,
             # no residuals computed to verify each search direction, no least-squares estimate of the
             # first multipliers (a factorization; the transport's iterates are unchanged): IPOPT CPU
-            # 0.87-0.96×, the same iterations ±3 % (docs/optproblem.md, "The transport's solve, by section")
-            "ipopt.fast_step_computation": "yes", "ipopt.constr_mult_init_max": 0.0}
+            # 0.87-0.96×, the same iterations ±3 % (docs/optproblem.md, "The transport's solve, by section");
+            # MUMPS's workspace 2× its estimate, not 11×: pipeline system time ~0.7× ("The transport's first build")
+            "ipopt.fast_step_computation": "yes", "ipopt.constr_mult_init_max": 0.0, "ipopt.mumps_mem_percent": 100}
         if core.fl:
             defaults.update({"ipopt.mumps_pivot_order": 6, "ipopt.mu_init": 1e-3})
         if core.nx > core.x_aux or self.col_p.size:
