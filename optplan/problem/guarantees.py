@@ -274,7 +274,7 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
 #: Terms a converged solve on the B-spline core satisfies between knots by construction: position
 #: limits bound every control point (the convex hull holds the spline), acceleration limits hold at
 #: every knot and q̈ is linear between knots, velocity limits bound the velocity control points
-#: (entries without rows are checked exactly after the solve, :mod:`.spline_solve`).
+#: (entries without rows are checked exactly after the solve, :mod:`.spline_rows`).
 _HULL_GUARANTEED = (JointPositionLimits, JointVelocityLimits, JointAccelerationLimits)
 #: a term's twin along the trajectory (``Term.sampled``), kept per term with the field values it
 #: was made from: re-solves of one problem make (and validate) it once; None: tied to given knots
