@@ -21,6 +21,10 @@ constraint that is imposed along the trajectory with its numeric twin (Pinocchio
 Terms tied to given knots (boundaries, a pose at one knot) hold there by construction and are not
 sampled. A free-floating base's attitude between knots is integrated with zero momentum from each
 knot's attitude along the exact joint trajectory. A row is violated when it leaves its bounds by more than ``tol + rel_tol · |bound|``.
+On the B-spline core a problem keeps its last four checks: a check whose inputs are equal bit for
+bit to a kept one's (the solution, the parameters' values, the checked terms and their fields, the
+options) returns its violations without computing them again — a re-solve that reproduced an
+earlier solution; any other check is computed.
 
 :func:`enforce_between_knots` is the loop ``OptProblem.solve`` runs after a converged solve,
 in the pipeline's order: (1) **collision** — pairs activated along the solution and margins
@@ -258,11 +262,12 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
     memo = _checks_of(problem) if spline else None
     key = _check_inputs(problem, sol, o) if memo is not None else b""
     if memo is not None:
-        got = memo.get(key)
-        if got is not None and _same_terms(got[0], todo):
-            memo[key] = memo.pop(key)          # the most recent now
-            COUNTS["reused"] += 1
-            return list(got[1])
+        with _CHECKS_LOCK:
+            got = memo.get(key)
+            if got is not None and _same_terms(got[0], todo):
+                memo[key] = memo.pop(key)          # the most recent now
+                COUNTS["reused"] += 1
+                return list(got[1])
     COUNTS["computed"] += 1
     traj = sampled_trajectory(problem.robot, sol, t + sol.t[0], getattr(ev, "com0", None))
     # the base attitude between knots is integrated only when a checked term reads it
@@ -278,9 +283,10 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
         _worst(out, name, t, h, N, _components(v.shape[1], problem.robot), v, lo, hi, o)
     out.sort(key=lambda x: -x.amount)
     if memo is not None:
-        memo[key] = (tuple((nm, type(tm), tuple(tm.__dict__.values())) for nm, tm, _ in todo), tuple(out))
-        while len(memo) > _CHECKS_KEPT:
-            memo.pop(next(iter(memo)))
+        with _CHECKS_LOCK:
+            memo[key] = (tuple((nm, type(tm), tuple(tm.__dict__.values())) for nm, tm, _ in todo), tuple(out))
+            while len(memo) > max(_CHECKS_KEPT, 0):
+                memo.pop(next(iter(memo)))
     return out
 
 
@@ -292,6 +298,7 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
 _CHECKS: weakref.WeakKeyDictionary[Any, dict[bytes, tuple[tuple[Any, ...], tuple[Violation, ...]]]] = \
     weakref.WeakKeyDictionary()
 _CHECKS_KEPT = 4
+_CHECKS_LOCK = threading.Lock()
 #: checks computed / returned from :data:`_CHECKS` in this process [count] (what tests read)
 COUNTS = {"computed": 0, "reused": 0}
 
@@ -300,12 +307,13 @@ def _checks_of(problem: Any) -> dict[bytes, Any] | None:
     """The kept checks of ``problem`` (None when none can be kept: 0 kept, or not weakly referable)."""
     if _CHECKS_KEPT <= 0:
         return None
-    try:
-        got = _CHECKS.get(problem)
-        if got is None:
-            got = _CHECKS[problem] = {}
-    except TypeError:
-        return None
+    with _CHECKS_LOCK:
+        try:
+            got = _CHECKS.get(problem)
+            if got is None:
+                got = _CHECKS[problem] = {}
+        except TypeError:
+            return None
     return got
 
 
