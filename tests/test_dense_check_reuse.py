@@ -116,3 +116,18 @@ def test_kept_checks_keep_no_problem_alive(tcb):
     del prob
     gc.collect()
     assert ref() is None
+
+
+def test_an_array_bound_changed_in_place_is_checked_again(tcb):
+    """A term's array field changed in place (the same object): its numbers are in the inputs."""
+    prob, _, _ = _problem(tcb)
+    both = prob.add_constraint(prob.qd[:2], lower=np.array([-2.0, -2.0]), upper=np.array([2.0, 2.0]), name="both")
+    sol = prob.solve()
+    assert sol.success and isinstance(both.term.upper, np.ndarray)
+    assert _count(lambda: check_between_knots(prob, sol))[1] == {"computed": 0, "reused": 1}
+    peak = float(np.abs(sol.sample(np.linspace(0.0, 4.0, 161))["qd"][:, 0]).max())
+    assert peak > 0.003
+    both.term.upper[0] = 0.2 * peak            # the same array object, another number
+    got, n = _count(lambda: check_between_knots(prob, sol))
+    assert n == {"computed": 1, "reused": 0}   # not the kept answer: whatever the term reads now
+    assert got == _fresh(prob, sol)

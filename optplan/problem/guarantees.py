@@ -260,7 +260,7 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
                 continue   # tied to given knots: holds there by construction
         todo.append((name, term, _collision_data(term, problem.robot) if spline else ev.data[name]))
     memo = _checks_of(problem) if spline else None
-    key = _check_inputs(problem, sol, o) if memo is not None else b""
+    key = _check_inputs(problem, sol, o, [tm for _, tm, _ in todo]) if memo is not None else b""
     if memo is not None:
         with _CHECKS_LOCK:
             got = memo.get(key)
@@ -317,14 +317,16 @@ def _checks_of(problem: Any) -> dict[bytes, Any] | None:
     return got
 
 
-def _check_inputs(problem: Any, sol: Solution, o: GuaranteeOptions) -> bytes:
-    """Everything a check on the B-spline core reads besides its terms, as bytes: the options,
-    the robot, whether ``sol`` converged (the hull-guaranteed terms are skipped only then), the
-    solution's knots, trajectory and base, its variables and parameter vector, and the
-    parameters' current values (an expression term reads them)."""
+def _check_inputs(problem: Any, sol: Solution, o: GuaranteeOptions, terms: list[Any]) -> bytes:
+    """Everything a check on the B-spline core reads, as bytes, besides which term objects it
+    checks (:func:`_same_terms`): the options, the robot, whether ``sol`` converged (the
+    hull-guaranteed terms are skipped only then), the solution's knots, trajectory and base, its
+    variables and parameter vector, the parameters' current values (an expression term reads
+    them) and the numbers of the terms' array fields (an array changed in place)."""
     ev = sol.evaluator
     arrays = [sol.t, sol.q, sol.qd, sol.qdd, sol.jerk, sol.x, getattr(ev, "p", None), getattr(ev, "com0", None),
-              sol.base_quat, sol.base_position] + [p.value for p in getattr(problem, "_params", ())]
+              sol.base_quat, sol.base_position] + [p.value for p in getattr(problem, "_params", ())] \
+        + [v for tm in terms for v in tm.__dict__.values() if isinstance(v, np.ndarray) and v.dtype.kind in "biuf"]
     parts = [repr(o).encode(), np.asarray([id(problem.robot.model), int(bool(sol.success))], np.int64).tobytes()]
     for a in arrays:
         if a is None:
