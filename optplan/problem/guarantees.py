@@ -21,6 +21,10 @@ constraint that is imposed along the trajectory with its numeric twin (Pinocchio
 Terms tied to given knots (boundaries, a pose at one knot) hold there by construction and are not
 sampled. A free-floating base's attitude between knots is integrated with zero momentum from each
 knot's attitude along the exact joint trajectory. A row is violated when it leaves its bounds by more than ``tol + rel_tol · |bound|``.
+On the B-spline core a problem keeps its last four checks: a check whose inputs are equal bit for
+bit to a kept one's (the solution, the parameters' values, the checked terms and their fields, the
+options) returns its violations without computing them again — a re-solve that reproduced an
+earlier solution; any other check is computed.
 
 :func:`enforce_between_knots` is the loop ``OptProblem.solve`` runs after a converged solve,
 in the pipeline's order: (1) **collision** — pairs activated along the solution and margins
@@ -242,7 +246,6 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
     T = float(sol.t[-1] - sol.t[0])
     h = T / N
     t = np.linspace(0.0, T, o.density * N + 1)
-    traj = sampled_trajectory(problem.robot, sol, t + sol.t[0], getattr(ev, "com0", None))
     spline = not hasattr(ev, "data")   # the B-spline core: no knot TermData
     todo: list[tuple[str, Any, Any]] = []   # (name, term, its build's data): what is checked
     for name, hd in ev.handles.items():
@@ -256,6 +259,17 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
             if term is None:
                 continue   # tied to given knots: holds there by construction
         todo.append((name, term, _collision_data(term, problem.robot) if spline else ev.data[name]))
+    memo = _checks_of(problem) if spline else None
+    key = _check_inputs(problem, sol, o, [tm for _, tm, _ in todo]) if memo is not None else b""
+    if memo is not None:
+        with _CHECKS_LOCK:
+            got = memo.get(key)
+            if got is not None and _same_terms(got[0], todo):
+                memo[key] = memo.pop(key)          # the most recent now
+                COUNTS["reused"] += 1
+                return list(got[1])
+    COUNTS["computed"] += 1
+    traj = sampled_trajectory(problem.robot, sol, t + sol.t[0], getattr(ev, "com0", None))
     # the base attitude between knots is integrated only when a checked term reads it
     if traj.base_quat is not None and any(term.reads_base_attitude(problem.robot) for _, term, _ in todo):
         traj.base_quat = _base_attitudes(problem.robot, sol, t + sol.t[0], o.density)
@@ -268,13 +282,75 @@ def check_between_knots(problem: Any, sol: Solution, options: GuaranteeOptions |
         lo, hi = (np.asarray(b, float).reshape(t.size, -1) for b in term.bounds_numeric(traj))
         _worst(out, name, t, h, N, _components(v.shape[1], problem.robot), v, lo, hi, o)
     out.sort(key=lambda x: -x.amount)
+    if memo is not None:
+        with _CHECKS_LOCK:
+            memo[key] = (tuple((nm, type(tm), tuple(tm.__dict__.values())) for nm, tm, _ in todo), tuple(out))
+            while len(memo) > max(_CHECKS_KEPT, 0):
+                memo.pop(next(iter(memo)))
     return out
+
+
+#: per problem on the B-spline core: the last few checks, by their inputs as bytes
+#: (:func:`_check_inputs`) -> (the checked terms with their field values, the violations),
+#: oldest first. A check whose inputs are equal bit for bit (a re-solve that reproduced an
+#: earlier solution: a warm start IPOPT leaves where it was, a parameter set back to an earlier
+#: value) returns the kept violations; anything else is checked again.
+_CHECKS: weakref.WeakKeyDictionary[Any, dict[bytes, tuple[tuple[Any, ...], tuple[Violation, ...]]]] = \
+    weakref.WeakKeyDictionary()
+_CHECKS_KEPT = 4
+_CHECKS_LOCK = threading.Lock()
+#: checks computed / returned from :data:`_CHECKS` in this process [count] (what tests read)
+COUNTS = {"computed": 0, "reused": 0}
+
+
+def _checks_of(problem: Any) -> dict[bytes, Any] | None:
+    """The kept checks of ``problem`` (None when none can be kept: 0 kept, or not weakly referable)."""
+    if _CHECKS_KEPT <= 0:
+        return None
+    with _CHECKS_LOCK:
+        try:
+            got = _CHECKS.get(problem)
+            if got is None:
+                got = _CHECKS[problem] = {}
+        except TypeError:
+            return None
+    return got
+
+
+def _check_inputs(problem: Any, sol: Solution, o: GuaranteeOptions, terms: list[Any]) -> bytes:
+    """Everything a check on the B-spline core reads, as bytes, besides which term objects it
+    checks (:func:`_same_terms`): the options, the robot, whether ``sol`` converged (the
+    hull-guaranteed terms are skipped only then), the solution's knots, trajectory and base, its
+    variables and parameter vector, the parameters' current values (an expression term reads
+    them) and the numbers of the terms' array fields (an array changed in place)."""
+    ev = sol.evaluator
+    arrays = [sol.t, sol.q, sol.qd, sol.qdd, sol.jerk, sol.x, getattr(ev, "p", None), getattr(ev, "com0", None),
+              sol.base_quat, sol.base_position] + [p.value for p in getattr(problem, "_params", ())] \
+        + [v for tm in terms for v in tm.__dict__.values() if isinstance(v, np.ndarray) and v.dtype.kind in "biuf"]
+    parts = [repr(o).encode(), np.asarray([id(problem.robot.model), int(bool(sol.success))], np.int64).tobytes()]
+    for a in arrays:
+        if a is None:
+            parts.append(b"-")
+            continue
+        a = np.ascontiguousarray(a, float)
+        parts += [np.asarray(a.shape, np.int64).tobytes(), a.tobytes()]
+    return b"".join(parts)
+
+
+def _same_terms(kept: tuple[Any, ...], todo: list[tuple[str, Any, Any]]) -> bool:
+    """Whether the checked terms are those of a kept check: the same names and types, each field
+    the same object (an in-place change replaces the field's value; the kept check holds the
+    field values, not the terms: nothing of the problem is kept alive by it)."""
+    return len(kept) == len(todo) and all(
+        nm == n2 and typ is type(t2) and len(f) == len(t2.__dict__)
+        and all(a is b for a, b in zip(f, t2.__dict__.values()))
+        for (nm, typ, f), (n2, t2, _) in zip(kept, todo))
 
 
 #: Terms a converged solve on the B-spline core satisfies between knots by construction: position
 #: limits bound every control point (the convex hull holds the spline), acceleration limits hold at
 #: every knot and q̈ is linear between knots, velocity limits bound the velocity control points
-#: (entries without rows are checked exactly after the solve, :mod:`.spline_solve`).
+#: (entries without rows are checked exactly after the solve, :mod:`.spline_rows`).
 _HULL_GUARANTEED = (JointPositionLimits, JointVelocityLimits, JointAccelerationLimits)
 #: a term's twin along the trajectory (``Term.sampled``), kept per term with the field values it
 #: was made from: re-solves of one problem make (and validate) it once; None: tied to given knots

@@ -37,7 +37,9 @@ from .floating_kernels import FloatingKernels, _dm, _LocalAssembly, momentum_tem
 __all__ = ["Family", "SplineCore"]
 
 _ID_Q = np.array([0.0, 0.0, 0.0, 1.0])
-_FOUND_LIBS: set[str] = set()   # compiled kernel libraries seen in the cache (they are never removed)
+#: local kernels whose compiled library was seen in the cache, by (robot digest, cache directory,
+#: kernel name) (the libraries are never removed)
+_FOUND_LIBS: set[tuple[bytes, str, str]] = set()
 #: per smoothness kernel (by name: robot, kind, N and weight): its local quadratic block over P_k … P_k+3
 _QUAD_BLOCKS: dict[str, Any] = {}
 
@@ -388,12 +390,12 @@ class SplineCore:
         """Whether the compiled library of local kernel ``name`` is in the cache (remembered once
         found)."""
         assert self.kc._dir is not None
-        lib = str(self.kc._dir.joinpath(f"{self.kc._name(('local', name))}-O1.so"))
-        if lib in _FOUND_LIBS:
+        if (self.kc._digest, str(self.kc._dir), name) in _FOUND_LIBS:   # a re-solve: no name hashed, no path made
             return True
+        lib = str(self.kc._dir.joinpath(f"{self.kc._name(('local', name))}-O1.so"))
         ok = os.path.exists(lib)
         if ok:
-            _FOUND_LIBS.add(lib)
+            _FOUND_LIBS.add((self.kc._digest, str(self.kc._dir), name))
         return ok
 
     def _pair_slots(self, fam: Family) -> tuple[np.ndarray, np.ndarray]:

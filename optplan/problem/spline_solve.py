@@ -10,10 +10,8 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-import scipy.sparse as sps
 
 from ..codegen import call_dense
-from ..geometry.banded import solve_banded_dense
 from .bspline import knot_values
 from .build import TermData
 from .collision_term import CollisionAvoidance
@@ -22,14 +20,10 @@ from .floating_collision import base_placements
 from .nlp import IpoptStatus, NlpSolver, SolverOptions
 from .solution import Solution
 from .spline_core import Family, SplineCore
-from .spline_problem import SplineEvaluator, _quintic, families_of, fixed_boundary, seed_guess
-from .terms import JointBoundary
+from .spline_problem import SplineEvaluator, _quintic, families_of, seed_guess
+from .spline_rows import VELOCITY_ACTIVATION, RowSelection
 
 __all__ = ["SplineBackend", "VELOCITY_ACTIVATION"]
-
-#: With a fixed duration, a velocity control point's entry gets its rows when the guess brings it
-#: past this fraction of its limit (the others are checked after the solve) [-].
-VELOCITY_ACTIVATION = 0.5
 
 
 #: IPOPT's options of a solve started from a previous solution and its multipliers
@@ -45,11 +39,12 @@ def _new_solver(st: dict[str, Any], sopts: SolverOptions, defaults: dict[str, An
     return NlpSolver("optproblem_spline", st["nlp"], sopts, defaults=defaults, casadi_options=extra)
 
 
-class SplineBackend:
+class SplineBackend(RowSelection):
     """The B-spline side of one problem: families (rebuilt when the terms change), parameters,
-    guess and solve."""
+    guess and solve; which rows a solve has is :class:`~.spline_rows.RowSelection`'s."""
 
     def __init__(self, prob: Any):
+        super().__init__()
         self.prob = prob
         self.core: SplineCore | None = None
         self.fams: list[Family] = []
@@ -63,14 +58,6 @@ class SplineBackend:
         self.collision_model: Any = None
         self.collision_models: dict[str, Any] = {}   # by term name (several on a floating robot)
         self.last_build_time = 0.0
-        #: boundary families whose end control points are fixed by bounds instead of rows:
-        #: family name -> (variable indices, values, 3 × 3 map) (:func:`~.spline_problem.fixed_boundary`)
-        self.fixed: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        #: knot rows left out because their inputs are all fixed and they hold: family name -> knots
-        self.constant: dict[str, set[int]] = {}
-        self.constant_violation = 0.0   # the largest violation of those rows (within the tolerance)
-        self.vel_extra: dict[str, set[int]] = {}   # velocity entries given rows after a solve (on vel_n intervals)
-        self.vel_n = 0
         #: core variables (without collision plane offsets) the next :meth:`prepare` plans the
         #: collision rows along, instead of the first guess (:meth:`replan_collision`)
         self.plan_along: np.ndarray | None = None
@@ -82,8 +69,6 @@ class SplineBackend:
         self.velocity_retries = 2
         # (key, core variables) of the last guess fitted to the user's knots (:meth:`_guess`)
         self._fitted: tuple[tuple[Any, ...], np.ndarray] | None = None
-        # the violation of a fixed knot's rows by (family, knot, kernel inputs and bounds) (:meth:`_constant_rows`)
-        self._constant_memo: dict[tuple[str, int, bytes], float] = {}
 
     # ------------------------------------------------------------------ structure
     def prepare(self) -> None:
@@ -185,107 +170,6 @@ class SplineBackend:
         self.core = None
         return True
 
-    def _fixed_families(self, core: SplineCore) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """The ``JointBoundary`` families that determine their end's three control points
-        exactly (q, q̇ and q̈ given; with a free duration only at rest): those points become fixed
-        variables (equal bounds, removed by IPOPT) and the family has no rows."""
-        out: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        if not self.prob.fix_boundary_points:
-            return out
-        for h in self.prob._handles:
-            if h.role != "constraint" or not isinstance(h.term, JointBoundary):
-                continue
-            got = fixed_boundary(core, h.term, self.prob.duration)
-            if got is not None:
-                for name in self.owner.get(h.name, ()):
-                    out[name] = got
-        return out
-
-    def _fit_between_fixed(self, P: np.ndarray, Q: np.ndarray) -> np.ndarray:
-        """With both ends' control points fixed (:meth:`_fixed_families`, the duration of the
-        guess the problem's): the interior points P_3 … P_N−1 whose knot values are closest (least
-        squares) to the guess's knots ``Q`` [rad] between those ends, as the fixed variables will
-        have them (an interpolation ringing up to the fixed ends costs the solve iterations)."""
-        core = self.core
-        assert core is not None
-        fixed = self._fixed_families(core)
-        N, nj = core.N, core.nj
-        idx = set().union(*[set(v[0].tolist()) for v in fixed.values()]) if fixed else set()
-        if N < 4 or not idx.issuperset(range(3 * nj)) or not idx.issuperset(range(N * nj, (N + 3) * nj)):
-            return P
-        flat = P.ravel().copy()
-        for i, v, _ in fixed.values():
-            flat[i] = v
-        Pf = flat.reshape(N + 3, nj)
-        A = sps.csr_matrix(core.M["q"][1:N])
-        rhs = Q[1:N] - A[:, np.r_[0:3, N:N + 3]] @ Pf[np.r_[0:3, N:N + 3]]
-        B = A[:, 3:N]
-        # normal equations of a banded system: banded (a dense solve is slow under a loaded BLAS)
-        Pf[3:N] = solve_banded_dense((B.T @ B).toarray(), B.T @ rhs).reshape(N - 3, nj)
-        return Pf
-
-    def row_families(self) -> list[Family]:
-        """The families that have rows in the NLP: those fixed by bounds have none, and a knot
-        whose inputs are all fixed loses the rows :meth:`_constant_rows` found held."""
-        out = []
-        for f in self.fams:
-            if f.name in self.fixed:
-                continue
-            drop = self.constant.get(f.name)
-            out.append(f if not drop else dataclasses.replace(f, points=[k for k in f.points if k not in drop]))
-        return out
-
-    def _fixed_knots(self) -> list[int]:
-        """Knots whose every kernel input is fixed: an end whose three control points a boundary
-        fixes, with a fixed duration, and for a floating robot only the start (the end's base
-        attitude is a variable)."""
-        core = self.core
-        assert core is not None
-        if core.free_time or not self.fixed:
-            return []
-        idx = set().union(*[set(v[0].tolist()) for v in self.fixed.values()])
-        nj, N = core.nj, core.N
-        ends = [(0, range(0, 3 * nj))] + ([] if core.fl else [(N, range(N * nj, (N + 3) * nj))])
-        return [k for k, r in ends if idx.issuperset(r)]
-
-    def _constant_rows(self, x: np.ndarray, p: np.ndarray, tol: float) -> dict[str, set[int]]:
-        """Rows of knot families at :meth:`_fixed_knots` are constants (no variable left in
-        them): those that hold within ``tol`` are left out of the NLP (empty rows make its
-        Jacobian rank-deficient), by family name → knots; one that does not hold keeps its rows,
-        so that the solve reports the problem infeasible. ``x`` has the fixed values."""
-        core = self.core
-        assert core is not None
-        out: dict[str, set[int]] = {}
-        self.constant_violation = 0.0
-        for k in self._fixed_knots():
-            for f in self.fams:
-                if f.kind != "knot" or f.cost or f.fn is None or f.name in self.fixed or k not in f.points:
-                    continue
-                inputs = np.asarray(core.knot_inputs(x, p, k, False), float)
-                # a kernel is a function of its inputs: the same inputs and bounds, the same violation
-                key = (f.name, k, inputs.tobytes() + np.asarray(f.lower, float).tobytes() + np.asarray(f.upper, float).tobytes())
-                viol = self._constant_memo.get(key)
-                if viol is None:
-                    v = np.asarray(f.fn(inputs)).ravel()
-                    viol = float(np.max(np.maximum(np.maximum(f.lower - v, v - f.upper), 0.0), initial=0.0))
-                    self._constant_memo[key] = viol
-                if viol <= tol:
-                    out.setdefault(f.name, set()).add(k)
-                    self.constant_violation = max(self.constant_violation, viol)
-        return out
-
-    # ------------------------------------------------------------------ velocity rows
-    def _velocity_families(self) -> list[Family]:
-        return [f for f in self.fams if f.kind == "velocity"]
-
-    def _activation(self, f: Family) -> float:
-        """The velocity activation [fraction of the limit] of the term that owns family ``f``."""
-        for h in self.prob._handles:
-            if f.name in self.owner.get(h.name, ()):
-                a = getattr(h.term, "activation", None)
-                return VELOCITY_ACTIVATION if a is None else float(a)
-        return VELOCITY_ACTIVATION
-
     def term_data(self, handle: Any) -> TermData:
         """What this build decided for a term (:meth:`OptProblem.term_data`): for a collision
         term its :class:`~optplan.problem.collision_term.CollisionModel` (``info["model"]``:
@@ -298,52 +182,6 @@ class SplineBackend:
         return TermData(info={"model": m, "active_pairs": tuple(m.active_pairs),
                               "constant_pairs": tuple(m.constant_pairs), "relaxed": dict(m.relaxed),
                               "active_knots": dict(m.active_knots)})
-
-    def _velocity_points(self, x: np.ndarray) -> np.ndarray:
-        """Velocity control points [rad/s] of ``x``, (N+2) × nj."""
-        core = self.core
-        assert core is not None
-        T = core.duration_of(x, self.prob.duration)
-        return np.diff(core.control_points(x), axis=0) * core.N / T
-
-    def _select_velocity(self, x: np.ndarray) -> None:
-        """With a fixed duration, a velocity entry gets its two rows when the guess ``x`` brings it
-        past ``VELOCITY_ACTIVATION`` of its limit (as the segment NLP), or when an earlier solve of
-        this structure exceeded its limit there; the rest are checked after every solve
-        (:meth:`_missed_velocity`). The velocity control points bound the velocity everywhere
-        (convex hull), so the check is exact."""
-        assert self.core is not None
-        if self.vel_n != self.core.N:     # a new grid (refinement): the entries of the old one mean nothing
-            self.vel_extra, self.vel_n = {}, self.core.N
-        V = self._velocity_points(x).ravel()
-        for f in self._velocity_families():
-            lo, hi = (np.tile(b, self.core.N + 2) for b in np.asarray(f.data))
-            a = self._activation(f)
-            on = (V >= a * hi) | (V <= a * lo)
-            f.points = sorted(set(np.flatnonzero(on).tolist()) | self.vel_extra.get(f.name, set()))
-
-    def _missed_velocity(self, x: np.ndarray, tol: float) -> bool:
-        """After a solve: give rows to the entries without one that exceed their limit (and to
-        those past ``VELOCITY_ACTIVATION`` of it); True if any was added (the problem is re-solved)."""
-        core = self.core
-        assert core is not None
-        if core.free_time:
-            return False
-        V = self._velocity_points(x).ravel()
-        added = False
-        for f in self._velocity_families():
-            lo, hi = (np.tile(b, core.N + 2) for b in np.asarray(f.data))
-            has = np.zeros(V.size, bool)
-            has[np.asarray(f.points, int)] = True
-            if not np.any(~has & ((V > hi + tol) | (V < lo - tol))):
-                continue
-            a = self._activation(f)
-            on = ~has & ((V >= a * hi) | (V <= a * lo))
-            extra = self.vel_extra.setdefault(f.name, set())
-            extra.update(np.flatnonzero(on).tolist())
-            f.points = sorted(set(f.points) | extra)
-            added = True
-        return added
 
     def _pvec(self, T: float, com0: np.ndarray, scale: float) -> np.ndarray:
         core, prob = self.core, self.prob
