@@ -357,7 +357,7 @@ def test_the_early_segment_worker_changes_no_result(tcb, monkeypatch):
     """``optplan plan --scene 1``'s job with its segment worker forked before planning (it imports the
     optimization stack while the plan is made), forked after it, and in one process: the same
     trajectory and iterations, verified."""
-    import optplan.pipeline as PL
+    import optplan.pipeline_workers as PW
     from optplan import workers
     from optplan.pipeline import PLANNER_DEFAULTS, run_pipeline
     from optplan.trials import TrialGenerator
@@ -366,13 +366,13 @@ def test_the_early_segment_worker_changes_no_result(tcb, monkeypatch):
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     po = PLANNER_DEFAULTS["tcbirrt"] + (("variant", "improved"),)
     runs, started = [], []
-    start = PL.start_workers
+    start = PW.start_workers
 
     def start_workers(*a, **k):
         started.append(start(*a, **k))
         return started[-1]
 
-    monkeypatch.setattr(PL, "start_workers", start_workers)
+    monkeypatch.setattr(PW, "start_workers", start_workers)
     # threads other tests of this process left (a progress bar's monitor) would stop the early fork;
     # its guard is tested in test_workers.py
     monkeypatch.setattr(workers.threading, "active_count", lambda: 1)
