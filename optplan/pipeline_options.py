@@ -104,9 +104,11 @@ class PipelineOptions:
     #: = yes`` (a permanent constraint regularisation of the KKT system); see
     #: docs/decisions/0002-warm-start-and-ipopt-settings.md; and the adaptive μ that never falls back to its
     #: monotone mode (``never-monotone-mode``, the modelling core's default; a solve that does not converge
-    #: with it is repeated with ``globalization_retry_options``; docs/decisions/0021-pipeline-on-the-shared-core.md).
+    #: with it is repeated with ``globalization_retry_options``; docs/decisions/0021-pipeline-on-the-shared-core.md);
+    #: ``mumps_mem_percent`` 100 (MUMPS's workspace at 2 × its estimate instead of IPOPT's 11 ×: the same
+    #: iterations without ~36,000 page faults per factorization of a long segment); docs/concepts/pipeline.md.
     ipopt_options: tuple = (("acceptable_tol", 1e-4), ("acceptable_iter", 5), ("perturb_always_cd", "yes"),
-                            ("adaptive_mu_globalization", "never-monotone-mode"))
+                            ("adaptive_mu_globalization", "never-monotone-mode"), ("mumps_mem_percent", 100))
     #: IPOPT options as ``(name, value)`` pairs, laid over ``ipopt_options`` for one re-solve of the same
     #: B-spline NLP from the same first guess when a solve ends without converging (the iteration limit, a
     #: restoration failure, ...), before the rest of the retry policy (a ``globalization`` attempt). Default:
