@@ -305,10 +305,8 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     lo, hi = robot.lower.copy(), robot.upper.copy()
     if kind == "constrained":
         cc = ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
-        step = opts.spline_interval_step
     else:  # regrasp: the holding arm's joints stay where they are, so the object does too
         scene, holder = _regrasp_scene(robot, scene, seg_path, arm, lo, hi)
-        step = opts.free_interval_step
     # the closed-chain rows hold per component to constr_viol_tol; verify measures the norm of the
     # position error (and the rotation angle), up to √3 times that: hold the rows to a quarter of
     # closed_chain_tol / √3 so that knots pass with room for the drift between them (measured: a
@@ -386,7 +384,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         return bool(sol.success and rep.min_clearance_m >= 0.0
                     and (kind != "constrained" or res <= opts.closed_chain_tol))
 
-    N = int(np.clip(np.ceil(length / step), opts.spline_min_intervals, opts.spline_max_intervals))
+    N = opts.spline_intervals(length, kind)   # the first grid: ⌈length / step⌉ up to spline_first_max_intervals
     prob = None
     Nc = int(np.ceil(N / opts.coarse_factor)) if opts.coarse_factor >= 2 else 0
     if kind == "constrained" and opts.warm_start and Nc >= 8:

@@ -2,6 +2,7 @@
 grids and margins, and the ordered retry policy's limits."""
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -130,6 +131,11 @@ class PipelineOptions:
     spline_min_intervals: int = 30
     #: Most intervals of a B-spline segment [count] (first solve, collision re-solves, finer grid).
     spline_max_intervals: int = 160
+    #: Most intervals of a B-spline segment's first grid [count] (its first solve and collision re-solves; within
+    #: ``spline_max_intervals``): a segment longer than this many steps starts with its knots further apart
+    #: than ``spline_interval_step`` (cheaper factorizations); the finer-grid and refinement re-solves still go
+    #: up to ``spline_max_intervals`` / ``spline_refine_max_intervals`` (docs/concepts/pipeline.md).
+    spline_first_max_intervals: int = 100
     #: Most intervals of the refinement re-solve [count] (≥ ``spline_max_intervals``): when the
     #: closed chain drifts too far between knots of a segment already at ``spline_max_intervals``,
     #: the grid is refined beyond it, warm-started from the solution.
@@ -182,6 +188,14 @@ class PipelineOptions:
         opts = PLANNER_DEFAULTS.get(self.planner.lower(), ()) if self.planner_options is None else self.planner_options
         return dict(opts)
 
+    def spline_intervals(self, length: float, kind: str) -> int:
+        """Intervals of a B-spline segment's first grid for a joint path of ``length`` [rad]: ⌈length /
+        step⌉ (``spline_interval_step`` for a ``kind`` "constrained" segment, else ``free_interval_step``)
+        within ``spline_min_intervals`` and ``min(spline_first_max_intervals, spline_max_intervals)`` [count]."""
+        step = self.spline_interval_step if kind == "constrained" else self.free_interval_step
+        hi = max(self.spline_min_intervals, min(self.spline_first_max_intervals, self.spline_max_intervals))
+        return int(min(max(math.ceil(length / step), self.spline_min_intervals), hi))
+
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
             raise ValueError(f"PipelineOptions: invalid values {self}")
@@ -197,6 +211,10 @@ class PipelineOptions:
             raise ValueError("PipelineOptions: expected spline_interval_step > 0 and 4 ≤ spline_min_intervals ≤ "
                              f"spline_max_intervals, got {self.spline_interval_step}, {self.spline_min_intervals}, "
                              f"{self.spline_max_intervals}")
+        if isinstance(self.spline_first_max_intervals, bool) or not isinstance(self.spline_first_max_intervals, int) \
+                or self.spline_first_max_intervals < 4:
+            raise OptionError(f"PipelineOptions.spline_first_max_intervals: expected an integer >= 4, got "
+                              f"{self.spline_first_max_intervals!r}")
         if self.workers is not None and (isinstance(self.workers, bool) or not isinstance(self.workers, int)
                                          or self.workers < 1):
             raise ValueError(f"PipelineOptions.workers: expected an integer >= 1 or None, got {self.workers!r}")

@@ -275,6 +275,24 @@ def test_refinement_may_pass_the_interval_cap_and_its_contacts_are_fixed(tcb, mo
         PipelineOptions(spline_max_intervals=160, spline_refine_max_intervals=100)
 
 
+def test_first_grid_cap_leaves_the_finer_grid_its_room(tcb, monkeypatch):
+    """A long segment starts on ``spline_first_max_intervals`` intervals, not ⌈length / step⌉; when coal
+    still finds a contact after the collision re-solves, the finer grid goes past that cap (1.6 ×, up to
+    ``spline_max_intervals``) — fake solves and reports: the policy only."""
+    import optplan.pipeline as PL
+
+    opts = PipelineOptions(shortcut_attempts=0, spline_first_max_intervals=40, spline_max_intervals=160)
+    reports = [(-0.01, 1e-7)] * (1 + opts.collision_retries) + [(0.01, 1e-7)] * 4
+    sc, seg_path, Ns = _fake_policy(tcb, monkeypatch, reports)
+    length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
+    assert np.ceil(length / opts.spline_interval_step) > 40            # a segment the cap shortens
+    sol, rep, attempts = PL._spline_segment(tcb, sc, seg_path, "constrained", None, opts, {})
+    reasons = [a["reason"] for a in attempts]
+    assert reasons == ["initial"] + ["collision"] * opts.collision_retries + ["finer-grid"]
+    assert Ns == [40] * (1 + opts.collision_retries) + [64]
+    assert rep.min_clearance_m == 0.01
+
+
 def test_compare_pipeline_options_example_pairs_variants_and_rejects_bad_json(capsys):
     """examples/compare_pipeline_options.py: bad --variants is exit 2 with one line; two variants
     that differ only in a setting the trial does not exercise give the same plan and optimum."""
