@@ -129,7 +129,7 @@ class PipelineOptions:
     spline_interval_step: float = 0.05
     #: Fewest intervals of a B-spline segment [count].
     spline_min_intervals: int = 30
-    #: Most intervals of a B-spline segment [count] (first solve, collision re-solves, finer grid).
+    #: Most intervals of a B-spline segment [count] (the finer-grid re-solves; the first grid: ``spline_first_max_intervals``).
     spline_max_intervals: int = 160
     #: Most intervals of a B-spline segment's first grid [count] (its first solve and collision re-solves; within
     #: ``spline_max_intervals``): a segment longer than this many steps starts with its knots further apart

@@ -293,6 +293,25 @@ def test_first_grid_cap_leaves_the_finer_grid_its_room(tcb, monkeypatch):
     assert rep.min_clearance_m == 0.01
 
 
+def test_mumps_workspace_of_the_segments_changes_no_result(tcb):
+    """``mumps_mem_percent`` 100 in the pipeline's IPOPT options (MUMPS's workspace, not the method):
+    a segment's solve against IPOPT's own 1000 takes the same iterations to the same trajectory."""
+    import optplan.pipeline as PL
+
+    assert dict(PipelineOptions().ipopt_options)["mumps_mem_percent"] == 100
+    sc, plan = _scene1_plan(tcb)
+    seg = max((s for s in plan.segments if s.kind == "constrained"), key=lambda s: s.stop - s.start)
+    path = np.asarray(plan.path[seg.start:seg.stop + 1])
+    opts = PipelineOptions(shortcut_attempts=0)
+    runs = [PL._spline_segment(tcb, sc, path, "constrained", None, opts, {**dict(opts.ipopt_options),
+                                                                          "mumps_mem_percent": m})
+            for m in (100, 1000)]
+    (s0, r0, a0), (s1, r1, a1) = runs
+    assert s0.success and r0.min_clearance_m >= 0.0 and r0.max_closed_chain_residual <= opts.closed_chain_tol
+    assert [a["iterations"] for a in a0] == [a["iterations"] for a in a1] and a0[0]["iterations"] > 3
+    np.testing.assert_allclose(s0.q, s1.q, rtol=0, atol=1e-9)
+
+
 def test_compare_pipeline_options_example_pairs_variants_and_rejects_bad_json(capsys):
     """examples/compare_pipeline_options.py: bad --variants is exit 2 with one line; two variants
     that differ only in a setting the trial does not exercise give the same plan and optimum."""
