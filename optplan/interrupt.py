@@ -29,9 +29,9 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import Any, NoReturn
 
-__all__ = ["Interrupted", "handling", "received", "check", "progress", "finish", "stop_children",
+__all__ = ["Interrupted", "handling", "received", "check", "progress", "finish", "end_now", "stop_children",
            "stop_process", "die_with_parent", "worker_init", "deferred", "SIGNALS", "GRACE_S", "STOP_S"]
 
 #: the signals handled
@@ -248,15 +248,23 @@ def finish(exit_now: bool = False) -> int:
         _state.watchdog.cancel()
         _state.watchdog = None
     if exit_now:
-        with contextlib.suppress(Exception):   # what multiprocessing does at exit (its semaphores released),
-            import multiprocessing.util as mpu  # without the thread joins of the interpreter's shutdown
-
-            mpu._exit_function()  # type: ignore[attr-defined]
-        for stream in (sys.stdout, _state.stream):
-            with contextlib.suppress(Exception):
-                stream.flush()
-        os._exit(code)
+        end_now(code)
     return code
+
+
+def end_now(code: int) -> NoReturn:
+    """End this process with status ``code`` without the interpreter's shutdown: what multiprocessing
+    does at exit (its semaphores released), stdout and stderr flushed, then ``os._exit``. For the
+    command-line process once its children are stopped (:func:`stop_children`)."""
+    with contextlib.suppress(Exception):   # without the thread joins of the interpreter's shutdown
+        import multiprocessing.util as mpu
+
+        mpu._exit_function()  # type: ignore[attr-defined]
+    for stream in (sys.stdout, _state.stream, sys.stderr):
+        with contextlib.suppress(Exception):
+            if stream is not None:
+                stream.flush()
+    os._exit(code)
 
 
 def ignore_in_spawned_child() -> None:

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,15 +38,16 @@ from .errors import ConfigurationError
 from .model.ik import IKOptions
 from .model.robot import RobotModel
 from .pipeline_options import PLANNER_DEFAULTS, PipelineOptions
+from .pipeline_workers import solve_segments, start_early_worker
+from .pipeline_workers import warm_worker as warm_worker  # (where it was; the worker's preparation)
 from .planners.base import BOTH_ARMS
 from .scene import Scene
 from .scene import held_object as _held_object
 from .shortcuts import shortcut_constrained, shortcut_free
 from .verification import VerifyReport, verify
-from .workers import default_workers, run_jobs, start_workers, workers_started
 
 # the optimization stack (optplan.problem, SciPy's sparse matrices, the NLP modules) is imported where a
-# segment is optimized, not here: ``optplan plan`` plans while a forked worker imports it (warm_worker)
+# segment is optimized, not here: ``optplan plan`` plans while a forked worker imports it (pipeline_workers)
 if TYPE_CHECKING:
     from .planners.base import PlanResult
     from .problem import ClosedChain, OptProblem
@@ -305,10 +305,8 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     lo, hi = robot.lower.copy(), robot.upper.copy()
     if kind == "constrained":
         cc = ClosedChain.from_grasps(grasps[arms[0]], grasps[arms[1]], arms[0], arms[1])
-        step = opts.spline_interval_step
     else:  # regrasp: the holding arm's joints stay where they are, so the object does too
         scene, holder = _regrasp_scene(robot, scene, seg_path, arm, lo, hi)
-        step = opts.free_interval_step
     # the closed-chain rows hold per component to constr_viol_tol; verify measures the norm of the
     # position error (and the rotation angle), up to √3 times that: hold the rows to a quarter of
     # closed_chain_tol / √3 so that knots pass with room for the drift between them (measured: a
@@ -386,7 +384,7 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
         return bool(sol.success and rep.min_clearance_m >= 0.0
                     and (kind != "constrained" or res <= opts.closed_chain_tol))
 
-    N = int(np.clip(np.ceil(length / step), opts.spline_min_intervals, opts.spline_max_intervals))
+    N = opts.spline_intervals(length, kind)   # the first grid: ⌈length / step⌉ up to spline_first_max_intervals
     prob = None
     Nc = int(np.ceil(N / opts.coarse_factor)) if opts.coarse_factor >= 2 else 0
     if kind == "constrained" and opts.warm_start and Nc >= 8:
@@ -495,12 +493,8 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
     if opts.transcription == "bspline":
         # the segments are independent NLPs: solved side by side (same results in any process)
         cost = [float(np.abs(np.diff(p, axis=0)).sum()) * (3.0 if k == "constrained" else 1.0) for p, k, _ in jobs]
-        workers = _workers(opts)
-        if not workers_started((robot, scene), min(workers, len(jobs))):
-            # a worker forked by run_jobs now inherits the optimization stack from this process
-            _import_optimization_stack()
-        solved, worker_cpu = run_jobs((robot, scene), _spline_segment,
-                                      [(p, k, a, opts, ipopt) for p, k, a in jobs], cost, workers)
+        solved, worker_cpu = solve_segments(robot, scene, _spline_segment, [(p, k, a, opts, ipopt) for p, k, a in jobs],
+                                            cost, opts)
         for (_, kind, arm), (sol, rep, attempts) in zip(jobs, solved):
             results.append(SegmentResult(kind, arm, sol, rep, t0, attempts))
             t0 += sol.duration
@@ -557,37 +551,6 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
     return (results, t_short, c_short, 0.0) if with_cpu else (results, t_short)
 
 
-def _workers(opts: PipelineOptions) -> int:
-    """Processes for the segments: ``opts.workers`` (None: :func:`default_workers`)."""
-    return opts.workers if opts.workers is not None else default_workers()
-
-
-def _a_core_is_free() -> bool:
-    """Does the 1-minute load average leave one of this process's CPUs free?"""
-    try:
-        return os.getloadavg()[0] <= len(os.sched_getaffinity(0)) - 1.0
-    except (AttributeError, OSError):  # pragma: no cover - not Linux
-        return False
-
-
-def _import_optimization_stack() -> None:
-    """Import what a segment's optimization needs (optplan.problem with SciPy's sparse matrices, the
-    NLP modules) and load IPOPT."""
-    import casadi
-
-    from . import segment_nlp, tasks  # noqa: F401 - imported for their import time
-    from .problem import nlp  # noqa: F401
-
-    casadi.load_nlpsol("ipopt")
-
-
-def warm_worker(robot: RobotModel, scene: Scene) -> None:
-    """In a segment worker forked before planning (:func:`optplan.workers.start_workers`,
-    ``PipelineOptions.early_worker``): import the optimization stack and load IPOPT while the parent
-    process plans, so that the first segment's NLP is built without that wait. Changes no result."""
-    _import_optimization_stack()
-
-
 def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: PipelineOptions | None = None,
                  seed: int = 0) -> PipelineResult:
     """Plan, shortcut, resample, optimize and verify (module docstring). Never raises for a failed
@@ -595,11 +558,9 @@ def run_pipeline(robot: RobotModel, scene: Scene, q_start, q_goal, options: Pipe
     from .planners import make_planner
 
     opts = options or PipelineOptions()
-    early = opts.early_worker if opts.early_worker is not None else _a_core_is_free()
-    if opts.transcription == "bspline" and early:
-        # the segment worker forked now imports the optimization stack while this process makes its
-        # planner and plans (the jobs find it by the same robot and scene objects: optimize_segments' run_jobs)
-        start_workers((robot, scene), _workers(opts), warm_worker)
+    # the segment worker forked now (when a core is free) imports the optimization stack while this
+    # process makes its planner and plans
+    start_early_worker(robot, scene, opts)
     rng = np.random.default_rng(seed)
     checker = CollisionChecker(robot, scene)
     planner = make_planner(opts.planner, robot, scene, **opts.planner_kwargs())

@@ -2,6 +2,7 @@
 grids and margins, and the ordered retry policy's limits."""
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -104,9 +105,11 @@ class PipelineOptions:
     #: = yes`` (a permanent constraint regularisation of the KKT system); see
     #: docs/decisions/0002-warm-start-and-ipopt-settings.md; and the adaptive μ that never falls back to its
     #: monotone mode (``never-monotone-mode``, the modelling core's default; a solve that does not converge
-    #: with it is repeated with ``globalization_retry_options``; docs/decisions/0021-pipeline-on-the-shared-core.md).
+    #: with it is repeated with ``globalization_retry_options``; docs/decisions/0021-pipeline-on-the-shared-core.md);
+    #: ``mumps_mem_percent`` 100 (MUMPS's workspace at 2 × its estimate instead of IPOPT's 11 ×: the same
+    #: iterations without ~36,000 page faults per factorization of a long segment); docs/concepts/pipeline.md.
     ipopt_options: tuple = (("acceptable_tol", 1e-4), ("acceptable_iter", 5), ("perturb_always_cd", "yes"),
-                            ("adaptive_mu_globalization", "never-monotone-mode"))
+                            ("adaptive_mu_globalization", "never-monotone-mode"), ("mumps_mem_percent", 100))
     #: IPOPT options as ``(name, value)`` pairs, laid over ``ipopt_options`` for one re-solve of the same
     #: B-spline NLP from the same first guess when a solve ends without converging (the iteration limit, a
     #: restoration failure, ...), before the rest of the retry policy (a ``globalization`` attempt). Default:
@@ -126,8 +129,13 @@ class PipelineOptions:
     spline_interval_step: float = 0.05
     #: Fewest intervals of a B-spline segment [count].
     spline_min_intervals: int = 30
-    #: Most intervals of a B-spline segment [count] (first solve, collision re-solves, finer grid).
+    #: Most intervals of a B-spline segment [count] (the finer-grid re-solves; the first grid: ``spline_first_max_intervals``).
     spline_max_intervals: int = 160
+    #: Most intervals of a B-spline segment's first grid [count] (its first solve and collision re-solves; within
+    #: ``spline_max_intervals``): a segment longer than this many steps starts with its knots further apart
+    #: than ``spline_interval_step`` (cheaper factorizations); the finer-grid and refinement re-solves still go
+    #: up to ``spline_max_intervals`` / ``spline_refine_max_intervals`` (docs/concepts/pipeline.md).
+    spline_first_max_intervals: int = 100
     #: Most intervals of the refinement re-solve [count] (≥ ``spline_max_intervals``): when the
     #: closed chain drifts too far between knots of a segment already at ``spline_max_intervals``,
     #: the grid is refined beyond it, warm-started from the solution.
@@ -159,7 +167,7 @@ class PipelineOptions:
     workers: int | None = None
     #: Fork the segment worker before planning, to import the optimization stack (SciPy's sparse
     #: matrices, the NLP modules: ~0.2 s of CPU) while this process plans, instead of after planning,
-    #: inheriting it from this process (:func:`optplan.pipeline.warm_worker`). It saves that time of the wall
+    #: inheriting it from this process (:func:`optplan.pipeline_workers.warm_worker`). It saves that time of the wall
     #: on a machine with a core to spare and costs that much CPU more in all (both processes import);
     #: None: only when the 1-minute load average leaves a core free (``os.getloadavg``). The results do not
     #: depend on it.
@@ -180,6 +188,14 @@ class PipelineOptions:
         opts = PLANNER_DEFAULTS.get(self.planner.lower(), ()) if self.planner_options is None else self.planner_options
         return dict(opts)
 
+    def spline_intervals(self, length: float, kind: str) -> int:
+        """Intervals of a B-spline segment's first grid for a joint path of ``length`` [rad]: ⌈length /
+        step⌉ (``spline_interval_step`` for a ``kind`` "constrained" segment, else ``free_interval_step``)
+        within ``spline_min_intervals`` and ``min(spline_first_max_intervals, spline_max_intervals)`` [count]."""
+        step = self.spline_interval_step if kind == "constrained" else self.free_interval_step
+        hi = max(self.spline_min_intervals, min(self.spline_first_max_intervals, self.spline_max_intervals))
+        return int(min(max(math.ceil(length / step), self.spline_min_intervals), hi))
+
     def __post_init__(self):
         if self.plan_time_limit <= 0 or self.n_intervals < 2 or not 0 < self.speed_fraction <= 1:
             raise ValueError(f"PipelineOptions: invalid values {self}")
@@ -195,6 +211,10 @@ class PipelineOptions:
             raise ValueError("PipelineOptions: expected spline_interval_step > 0 and 4 ≤ spline_min_intervals ≤ "
                              f"spline_max_intervals, got {self.spline_interval_step}, {self.spline_min_intervals}, "
                              f"{self.spline_max_intervals}")
+        if isinstance(self.spline_first_max_intervals, bool) or not isinstance(self.spline_first_max_intervals, int) \
+                or self.spline_first_max_intervals < 4:
+            raise OptionError(f"PipelineOptions.spline_first_max_intervals: expected an integer >= 4, got "
+                              f"{self.spline_first_max_intervals!r}")
         if self.workers is not None and (isinstance(self.workers, bool) or not isinstance(self.workers, int)
                                          or self.workers < 1):
             raise ValueError(f"PipelineOptions.workers: expected an integer >= 1 or None, got {self.workers!r}")

@@ -30,7 +30,7 @@ LAYERS = [
     (3, ("optplan.problem", "optplan.planners")),
     (4, ("optplan.tasks", "optplan.trials", "optplan.verification", "optplan.viz", "optplan.shortcuts",
          "optplan.segment_nlp", "optplan.floating_manoeuvre")),   # a kept manoeuvre: a motion verify reads
-    (5, ("optplan.pipeline", "optplan.pipeline_options", "optplan.floating_pipeline")),
+    (5, ("optplan.pipeline", "optplan.pipeline_options", "optplan.pipeline_workers", "optplan.floating_pipeline")),
     (6, ("optplan.papers",)),
     (7, ("optplan.bench", "optplan.cli_args")),   # cli_args: argument checks shared with the bench commands
     (8, ("optplan.cli", "optplan.cli_bench", "optplan.cli_plan", "optplan._entry", "optplan.reproduce", "optplan.demo", "optplan")),

@@ -275,6 +275,43 @@ def test_refinement_may_pass_the_interval_cap_and_its_contacts_are_fixed(tcb, mo
         PipelineOptions(spline_max_intervals=160, spline_refine_max_intervals=100)
 
 
+def test_first_grid_cap_leaves_the_finer_grid_its_room(tcb, monkeypatch):
+    """A long segment starts on ``spline_first_max_intervals`` intervals, not ⌈length / step⌉; when coal
+    still finds a contact after the collision re-solves, the finer grid goes past that cap (1.6 ×, up to
+    ``spline_max_intervals``) — fake solves and reports: the policy only."""
+    import optplan.pipeline as PL
+
+    opts = PipelineOptions(shortcut_attempts=0, spline_first_max_intervals=40, spline_max_intervals=160)
+    reports = [(-0.01, 1e-7)] * (1 + opts.collision_retries) + [(0.01, 1e-7)] * 4
+    sc, seg_path, Ns = _fake_policy(tcb, monkeypatch, reports)
+    length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
+    assert np.ceil(length / opts.spline_interval_step) > 40            # a segment the cap shortens
+    sol, rep, attempts = PL._spline_segment(tcb, sc, seg_path, "constrained", None, opts, {})
+    reasons = [a["reason"] for a in attempts]
+    assert reasons == ["initial"] + ["collision"] * opts.collision_retries + ["finer-grid"]
+    assert Ns == [40] * (1 + opts.collision_retries) + [64]
+    assert rep.min_clearance_m == 0.01
+
+
+def test_mumps_workspace_of_the_segments_changes_no_result(tcb):
+    """``mumps_mem_percent`` 100 in the pipeline's IPOPT options (MUMPS's workspace, not the method):
+    a segment's solve against IPOPT's own 1000 takes the same iterations to the same trajectory."""
+    import optplan.pipeline as PL
+
+    assert dict(PipelineOptions().ipopt_options)["mumps_mem_percent"] == 100
+    sc, plan = _scene1_plan(tcb)
+    seg = max((s for s in plan.segments if s.kind == "constrained"), key=lambda s: s.stop - s.start)
+    path = np.asarray(plan.path[seg.start:seg.stop + 1])
+    opts = PipelineOptions(shortcut_attempts=0)
+    runs = [PL._spline_segment(tcb, sc, path, "constrained", None, opts, {**dict(opts.ipopt_options),
+                                                                          "mumps_mem_percent": m})
+            for m in (100, 1000)]
+    (s0, r0, a0), (s1, r1, a1) = runs
+    assert s0.success and r0.min_clearance_m >= 0.0 and r0.max_closed_chain_residual <= opts.closed_chain_tol
+    assert [a["iterations"] for a in a0] == [a["iterations"] for a in a1] and a0[0]["iterations"] > 3
+    np.testing.assert_allclose(s0.q, s1.q, rtol=0, atol=1e-9)
+
+
 def test_compare_pipeline_options_example_pairs_variants_and_rejects_bad_json(capsys):
     """examples/compare_pipeline_options.py: bad --variants is exit 2 with one line; two variants
     that differ only in a setting the trial does not exercise give the same plan and optimum."""
@@ -357,7 +394,7 @@ def test_the_early_segment_worker_changes_no_result(tcb, monkeypatch):
     """``optplan plan --scene 1``'s job with its segment worker forked before planning (it imports the
     optimization stack while the plan is made), forked after it, and in one process: the same
     trajectory and iterations, verified."""
-    import optplan.pipeline as PL
+    import optplan.pipeline_workers as PW
     from optplan import workers
     from optplan.pipeline import PLANNER_DEFAULTS, run_pipeline
     from optplan.trials import TrialGenerator
@@ -366,13 +403,13 @@ def test_the_early_segment_worker_changes_no_result(tcb, monkeypatch):
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     po = PLANNER_DEFAULTS["tcbirrt"] + (("variant", "improved"),)
     runs, started = [], []
-    start = PL.start_workers
+    start = PW.start_workers
 
     def start_workers(*a, **k):
         started.append(start(*a, **k))
         return started[-1]
 
-    monkeypatch.setattr(PL, "start_workers", start_workers)
+    monkeypatch.setattr(PW, "start_workers", start_workers)
     # threads other tests of this process left (a progress bar's monitor) would stop the early fork;
     # its guard is tested in test_workers.py
     monkeypatch.setattr(workers.threading, "active_count", lambda: 1)

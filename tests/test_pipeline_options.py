@@ -83,3 +83,20 @@ def test_early_worker_takes_a_bool_or_none():
         PipelineOptions(early_worker=ok)
     with pytest.raises(OptionError, match="early_worker.*'yes'"):
         PipelineOptions(early_worker="yes")
+
+
+def test_first_grid_of_a_segment_follows_its_length_up_to_its_cap():
+    """⌈length / step⌉ intervals between ``spline_min_intervals`` and the first grid's cap (itself within
+    ``spline_max_intervals``); a regrasp steps by ``free_interval_step``."""
+    o = PipelineOptions()
+    assert (o.spline_interval_step, o.spline_min_intervals, o.spline_first_max_intervals) == (0.05, 30, 100)
+    assert o.spline_intervals(0.2, "constrained") == 30                 # short: the floor
+    assert o.spline_intervals(3.01, "constrained") == 61                # ⌈3.01 / 0.05⌉
+    assert o.spline_intervals(6.73, "constrained") == 100               # scene 1's long segment: 135 → the cap
+    assert o.spline_intervals(6.73, "regrasp") == 45                    # ⌈6.73 / 0.15⌉
+    assert PipelineOptions(spline_first_max_intervals=160).spline_intervals(6.73, "constrained") == 135
+    assert PipelineOptions(spline_max_intervals=60).spline_intervals(6.73, "constrained") == 60
+    assert PipelineOptions(spline_min_intervals=120, spline_max_intervals=160).spline_intervals(1.0, "constrained") == 120
+    for bad in (3, 2.5, True, "100"):
+        with pytest.raises(OptionError, match="spline_first_max_intervals.*" + repr(bad).replace("(", r"\(")):
+            PipelineOptions(spline_first_max_intervals=bad)

@@ -134,10 +134,9 @@ def _spline_warm_start(robot: RobotModel, scene: Scene, seg_path: np.ndarray, op
     from ..tasks import segment_problem
 
     cc = _closed_chain(scene) if kind == "constrained" else None
-    step = opts.spline_interval_step if kind == "constrained" else opts.free_interval_step
     length = float(np.linalg.norm(np.diff(seg_path, axis=0), axis=1).sum())
     T = max(opts.min_duration, length / (opts.speed_fraction * float(np.min(robot.velocity_limit))))
-    N = int(np.clip(np.ceil(length / step), opts.spline_min_intervals, opts.spline_max_intervals))
+    N = opts.spline_intervals(length, kind)
     limits = None if lower is None or upper is None else (lower, upper)
     prob, _ = segment_problem(robot, scene, seg_path[0], seg_path[-1], N, T, closed_chain=cc, joint_limits=limits,
                               margin=opts.margin, object_arm=holder or next(iter(_grasps(scene))),

@@ -21,6 +21,7 @@ import argparse  # noqa: E402
 import importlib  # noqa: E402
 import os  # noqa: E402
 import sys  # noqa: E402
+from typing import Any  # noqa: E402
 
 #: the write end of the pipe the processes report their events to (inherited by the forked worker)
 _FD: list[int] = []
@@ -77,14 +78,21 @@ def main(argv: list[str] | None = None) -> int:
     _event("optplan.cli and the plan command's modules imported")
     _SEGMENT.append(pipeline._spline_segment)
     pipeline._spline_segment = _timed_segment
-    run_jobs, main_pid = pipeline.run_jobs, os.getpid()
-    # (an older tree, for a paired comparison, forks its worker in run_jobs and prepares nothing)
-    start = getattr(pipeline, "start_workers", None)
+    main_pid = os.getpid()
+    # where the segment workers are prepared and sent: their own module, or (an older tree, for a paired
+    # comparison) the pipeline itself; the oldest forks its worker in run_jobs and prepares nothing
+    sched: Any
+    try:
+        sched = importlib.import_module("optplan.pipeline_workers")
+    except ImportError:
+        sched = pipeline
+    run_jobs = sched.run_jobs
+    start = getattr(sched, "start_workers", None)
     if start is not None:
-        _WARM.append(pipeline.warm_worker)
-        pipeline.warm_worker = _timed_warm
+        _WARM.append(sched.warm_worker)
+        sched.warm_worker = _timed_warm
         if args.early_worker != "auto":   # the command's default (None) asks this function
-            pipeline._a_core_is_free = lambda: args.early_worker == "on"
+            sched._a_core_is_free = lambda: args.early_worker == "on"
 
     def start_workers(*a, **k):
         _event("start_workers (fork)")
@@ -97,9 +105,9 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             _event("segments back")
 
-    pipeline.run_jobs = timed_run_jobs
+    sched.run_jobs = timed_run_jobs
     if start is not None:
-        pipeline.start_workers = start_workers
+        sched.start_workers = start_workers
     # the plan command's steps and options (its TCBiRRT variant, improved; its segment processes)
     scene = Scene.load(check_scene(args.scene))
     robot = load_robot(scene.robot or "tcbirrt_dual_arm")
