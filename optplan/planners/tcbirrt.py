@@ -131,6 +131,7 @@ from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
 from .tcbirrt_edges import EdgeCheckMixin
 from .tcbirrt_native import loop_extend, make_extender, native_extend, native_path_ik, poses_array
+from .tcbirrt_object_step import first_waypoint_free
 from .tcbirrt_options import (
     PAPER_REACH,
     PAPER_XI_LOWER,
@@ -319,6 +320,19 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             st["domain_rejections"] = st.get("domain_rejections", 0) + 1
         return xi_rand, ta.twin_nearest(i_near, None, rng)
 
+    def _first_waypoint_free(self, tree: _TaskTree, i: int, xi_rand: np.ndarray) -> bool:
+        """``object_step_tries``: the object alone free at the first waypoint of the extension from node i toward
+        ``xi_rand`` (:mod:`.tcbirrt_object_step`)."""
+        if self._filter is None:
+            self._filter = self._make_filter(self.options.validity_kernel == "native")
+        R0, p0 = tree.pose[i]
+        step = float(tree.dom[i]) if self.options.trap_adapt == "step" and np.isfinite(tree.dom[i]) else self.step_size
+        return first_waypoint_free(self._filter, R0, p0, tree.xi[i], xi_rand, step, self.options.n_interp)
+
+    def _make_filter(self, native: bool) -> ObjectPoseFilter:
+        """The task-space filter of the samples and the lead path (``filter_robot_body``: the robot's fixed body too)."""
+        return ObjectPoseFilter(self.robot, self.scene, native=native, robot_body=bool(self.options.filter_robot_body))
+
     def _trap_update(self, tree: _TaskTree, i: int, res: str) -> None:
         """``trap_adapt``: after an extension from node i, its dynamic domain (set when trapped) or its step
         (halved when trapped, down to s_ξ/8; doubled back, up to s_ξ, when not)."""
@@ -360,7 +374,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 or cast(float, o.geodesic_probability) > 0 or cast(float, o.lead_orientation_probability) > 0):
             return None
         if self._filter is None:
-            self._filter = ObjectPoseFilter(self.robot, self.scene, native=o.validity_kernel == "native")
+            self._filter = self._make_filter(o.validity_kernel == "native")
             if o.extension == "python":
                 self._filter._xi_native = None   # the filter's pose test in Python too (native object check)
         need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
@@ -381,7 +395,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         o = self.options
         need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
         if need and self._filter is None:
-            self._filter = ObjectPoseFilter(self.robot, self.scene, native=True)
+            self._filter = self._make_filter(True)
         try:
             nrng = NativeRandom(self._rng)
             smp = NativeTaskSampler(self._filter if need else None, self._lo, self._hi, nrng,
@@ -513,6 +527,11 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 res, i_a = ADVANCED, i_front
             else:
                 xi_rand, i_near = self._sample_near(ta, tb, sampler, rng, st)              # lines 3-4
+                for _ in range(cast(int, o.object_step_tries) - 1):   # redraw while the object alone is trapped
+                    if self._first_waypoint_free(ta, i_near, xi_rand):
+                        break
+                    st["object_step_redraws"] = st.get("object_step_redraws", 0) + 1
+                    xi_rand, i_near = self._sample_near(ta, tb, sampler, rng, st)
                 step = float(ta.dom[i_near]) if o.trap_adapt == "step" and np.isfinite(ta.dom[i_near]) else None
                 res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st, step)   # line 5
                 self._trap_update(ta, i_near, res)
