@@ -1,16 +1,15 @@
-"""The robot's own fixed body in TCBiRRT's task-space filter (``TCBiRRTOptions.filter_robot_body``) and the
-object-step redraws (``object_step_tries``). Checked against coal's exact collision tests with the geometry
-placed by Pinocchio's own forward kinematics, and against the planner's interpolation (Eq. 3-4)."""
+"""The robot's own fixed body in TCBiRRT's task-space filter and lead path (``TCBiRRTOptions.filter_robot_body``).
+Checked against coal's exact collision tests with the geometry placed by Pinocchio's own forward kinematics, and a
+search with it against the bench's independent path checks."""
 from __future__ import annotations
 
 import coal
 import numpy as np
 import pinocchio as pin
+import pytest
 
 from optplan.planners import TCBiRRT, TCBiRRTOptions
 from optplan.planners.task_sampling import ObjectPoseFilter, _rpy_matrix, robot_body_obstacles
-from optplan.planners.task_space import interpolate_task, pose_from_xi
-from optplan.planners.tcbirrt_object_step import first_waypoint, first_waypoint_free
 from optplan.scene import Scene
 
 
@@ -81,27 +80,11 @@ def test_floating_robot_has_no_fixed_body():
     assert robot.is_floating and robot_body_obstacles(robot) == ()
 
 
-def test_first_waypoint_is_the_extensions_first_interpolated_pose(tcb):
-    """The pose the redraw tests is the first of the ``n_interp`` poses the planner's extension interpolates (Eq. 4)
-    toward ξ_s of Eq. 3 — near and far samples alike."""
-    rng = np.random.default_rng(2)
-    for _ in range(20):
-        xi_near = np.r_[rng.uniform(-1, 1, 3), rng.uniform(-3, 3, 3)]
-        xi_rand = xi_near + rng.normal(0.0, rng.choice([0.1, 2.0]), 6)
-        R0, p0 = pose_from_xi(xi_near)
-        step, n = 0.6, 5
-        d = xi_rand - xi_near
-        dist = float(np.linalg.norm(d))
-        xi_s = xi_rand if dist <= step else xi_near + step / dist * d
-        R1, p1 = interpolate_task(R0, p0, *pose_from_xi(xi_s), n)[0]
-        R, p = first_waypoint(R0, p0, xi_near, xi_rand, step, n)
-        assert np.allclose(R, R1, atol=1e-12) and np.allclose(p, p1, atol=1e-12)
-
-
-def test_object_step_redraws_leave_no_object_trapped_first_waypoint(tcb):
-    """With ``object_step_tries`` the extensions of tree a start where the object alone is free at the first
-    waypoint (checked by coal on the scene's obstacles) unless the draws ran out; the search still returns a path
-    that passes the bench's checks."""
+@pytest.mark.slow
+def test_search_with_the_robot_body_keeps_the_lead_off_the_base(tcb):
+    """With ``filter_robot_body`` the object's lead path keeps the object off the robot's base at every one of its
+    poses (coal, the base placed by Pinocchio FK), and the search returns a path that passes the bench's checks
+    (closed chain by Pinocchio FK, collision-free, every edge at the 1 cm sweep)."""
     from graft_paths import check_planned_path
 
     from optplan.planners.validity import ValidityChecker
@@ -110,13 +93,15 @@ def test_object_step_redraws_leave_no_object_trapped_first_waypoint(tcb):
     scene = Scene.load("hard_bay")
     ck = ValidityChecker(tcb, scene)
     t = TrialGenerator(tcb, scene).generate(0, 0)
-    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", object_step_tries=10), checker=ck)
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", filter_robot_body=True), checker=ck)
     res = pl.plan(t.q_start, t.q_goal, time_limit=30.0, seed=t.seed, clock="cpu")
     assert res.success, res.message
-    assert res.stats["object_step_redraws"] > 0
     check_planned_path(tcb, scene, ck, res, t.q_start, t.q_goal)
-    filt = ObjectPoseFilter(tcb, scene, native=False)   # coal
-    R0, p0 = pose_from_xi(np.array([0.0, 0.0, 2.0, 0.0, 0.0, 0.0]))
-    assert first_waypoint_free(filt, R0, p0, np.array([0.0, 0.0, 2.0, 0, 0, 0]), np.array([0.3, 0, 2.0, 0, 0, 0]),
-                               0.6, 5) == filt.object_free(*first_waypoint(R0, p0, np.array([0.0, 0.0, 2.0, 0, 0, 0]),
-                                                                           np.array([0.3, 0, 2.0, 0, 0, 0]), 0.6, 5))
+    lead = pl._lead[0]
+    assert lead is not None and len(lead) > 2
+    obj, req = scene.object.coal_geometry(), coal.CollisionRequest()
+    (geo, M), = _fixed_geometries_placed(tcb)
+    for xi in lead:
+        res_c = coal.CollisionResult()
+        assert not coal.collide(obj, coal.Transform3s(_rpy_matrix(xi), xi[:3]), geo,
+                                coal.Transform3s(M.rotation, M.translation), req, res_c)

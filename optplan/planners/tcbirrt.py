@@ -131,7 +131,6 @@ from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
 from .tcbirrt_edges import EdgeCheckMixin
 from .tcbirrt_native import loop_extend, make_extender, native_extend, native_path_ik, poses_array
-from .tcbirrt_object_step import first_waypoint_free
 from .tcbirrt_options import (
     PAPER_REACH,
     PAPER_XI_LOWER,
@@ -319,15 +318,6 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 break
             st["domain_rejections"] = st.get("domain_rejections", 0) + 1
         return xi_rand, ta.twin_nearest(i_near, None, rng)
-
-    def _first_waypoint_free(self, tree: _TaskTree, i: int, xi_rand: np.ndarray) -> bool:
-        """``object_step_tries``: the object alone free at the first waypoint of the extension from node i toward
-        ``xi_rand`` (:mod:`.tcbirrt_object_step`)."""
-        if self._filter is None:
-            self._filter = self._make_filter(self.options.validity_kernel == "native")
-        R0, p0 = tree.pose[i]
-        step = float(tree.dom[i]) if self.options.trap_adapt == "step" and np.isfinite(tree.dom[i]) else self.step_size
-        return first_waypoint_free(self._filter, R0, p0, tree.xi[i], xi_rand, step, self.options.n_interp)
 
     def _make_filter(self, native: bool) -> ObjectPoseFilter:
         """The task-space filter of the samples and the lead path (``filter_robot_body``: the robot's fixed body too)."""
@@ -527,11 +517,6 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 res, i_a = ADVANCED, i_front
             else:
                 xi_rand, i_near = self._sample_near(ta, tb, sampler, rng, st)              # lines 3-4
-                for _ in range(cast(int, o.object_step_tries) - 1):   # redraw while the object alone is trapped
-                    if self._first_waypoint_free(ta, i_near, xi_rand):
-                        break
-                    st["object_step_redraws"] = st.get("object_step_redraws", 0) + 1
-                    xi_rand, i_near = self._sample_near(ta, tb, sampler, rng, st)
                 step = float(ta.dom[i_near]) if o.trap_adapt == "step" and np.isfinite(ta.dom[i_near]) else None
                 res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st, step)   # line 5
                 self._trap_update(ta, i_near, res)

@@ -25,14 +25,14 @@ VARIANTS = {
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
               "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
               "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
-              "restart_branch_roots": False, "object_step_tries": 0, "filter_robot_body": False},
+              "restart_branch_roots": False, "filter_robot_body": False},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
                  "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
-                 "restart_branch_roots": False, "object_step_tries": 0, "filter_robot_body": False},
+                 "restart_branch_roots": False, "filter_robot_body": False},
 }
 
 
@@ -211,10 +211,6 @@ class TCBiRRTOptions:
     #: whose roots sit on IK branches that cannot meet is followed by one whose roots share a branch, and the
     #: other way round (None: the variant's value, :data:`VARIANTS`: False in both).
     restart_branch_roots: bool | None = None
-    #: Draws of ξ_rand per iteration while the object alone collides at the first waypoint of tree a's extension
-    #: toward it (:mod:`.tcbirrt_object_step`; the last draw is extended toward regardless) [count] (None: the
-    #: variant's value, :data:`VARIANTS`; 0 or 1: off).
-    object_step_tries: int | None = None
     #: The task-space filter — of the samples (``sample_filter``) and of the object's lead path — counts the robot's
     #: own body fixed to the world (a fixed base's geometry, :func:`.task_sampling.robot_body_obstacles`) as an
     #: obstacle of the object (None: the variant's value, :data:`VARIANTS`).
@@ -307,9 +303,9 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
         for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds", "frontier_grafts", "frontier_interval",
                      "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count",
-                     "restart_iterations", "object_step_tries"):
+                     "restart_iterations"):
             v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after", "frontier_grafts", "stall_iterations",
-                                                         "trap_grafts", "restart_iterations", "object_step_tries") else 1)
+                                                         "trap_grafts", "restart_iterations") else 1)
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
         _pos("graft_time_limit", self.graft_time_limit)
