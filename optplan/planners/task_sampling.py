@@ -45,12 +45,13 @@ class ObjectPoseFilter:
 
     def __init__(self, robot: RobotModel, scene: Scene, margin: float = 0.0, native: bool = True,
                  robot_body: bool = False) -> None:
-        if scene.object is None:
+        held = scene.object
+        if held is None:
             raise ValueError("ObjectPoseFilter needs a scene with an [object]")
         if robot_body:   # the robot's own fixed body is an obstacle of the object too
             scene = replace(scene, obstacles=tuple(scene.obstacles) + robot_body_obstacles(robot))
-        self.obj = scene.object.coal_geometry()
-        half = np.asarray(scene.object.size, float) / 2
+        self.obj = held.coal_geometry()
+        half = np.asarray(held.size, float) / 2
         self.obj_radius = float(np.linalg.norm(half))
         self.obs = []
         centres, radii = [], []
@@ -68,7 +69,7 @@ class ObjectPoseFilter:
         self.centres = np.asarray(centres, float).reshape(-1, 3)
         self.radii = np.asarray(radii, float)
         self.grasps = []
-        for arm, G in scene.object.grasps.items():
+        for arm, G in held.grasps.items():
             sh, r = arm_reach(robot, arm)
             self.grasps.append((np.asarray(G.rotation), np.asarray(G.translation), sh, r - margin))
         self._req = coal.CollisionRequest()
@@ -155,7 +156,8 @@ def robot_body_obstacles(robot: RobotModel) -> tuple[Obstacle, ...]:
             continue
         geo, M = g.geometry, pin.SE3(g.placement)
         if isinstance(geo, coal.Box):
-            out.append(Obstacle(f"robot/{g.name}", "box", M, size=tuple(float(x) for x in 2.0 * np.asarray(geo.halfSide))))
+            hx, hy, hz = (float(x) for x in np.asarray(geo.halfSide))
+            out.append(Obstacle(f"robot/{g.name}", "box", M, size=(2.0 * hx, 2.0 * hy, 2.0 * hz)))
         elif isinstance(geo, coal.Sphere):
             out.append(Obstacle(f"robot/{g.name}", "sphere", M, radius=float(geo.radius)))
         elif isinstance(geo, coal.Capsule):
