@@ -6,7 +6,7 @@ at a time, or the fixed scenes; success, CPU seconds and path lengths (joint spa
 Generated scenes: index ``i`` draws family ``FAMILIES[i % 6]`` from ``generate_scenes(..., seed=base_seed * 1000 + i,
 trial_seed=base_seed)`` (:mod:`optplan.bench.scenegen`: a scene is kept only with a certified witness path,
 ``--witness-time`` CPU seconds [s] per search, at most ``--max-draws`` draws; an index whose every draw fails is
-recorded as skipped), writes it to ``OUT/scenes`` and runs both planners on trial 0 of ``base_seed`` (the query the
+recorded as skipped; ``--families bay,wall`` keeps only the indices of those families), writes it to ``OUT/scenes`` and runs both planners on trial 0 of ``base_seed`` (the query the
 witness certified), in alternating order, with the same planner seed. Fixed scenes (``--scenes suite,ssps
 --trials N``): each trial of each scene the same way. One JSON line per query in ``OUT/paired.jsonl``; a run
 resumes where the file ends. A path counts only when it passes the benchmark's 1 cm sweep check

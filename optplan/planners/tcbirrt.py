@@ -85,6 +85,9 @@ Deviations from the paper, all options (defaults in brackets):
 * ``restart_iterations`` [0 (off) in both variants; measured in docs/planners.md]: a search without a path after
   that many iterations starts again from the two roots (lead path kept; the budget grows ``restart_growth``× per
   restart); with ``restart_branch_roots`` every second search has ``branch_roots`` the other way.
+* ``filter_robot_body`` [False in both variants; measured in docs/generalization.md]: the task-space filter, and so the
+  object's lead path, counts the robot's fixed body (its base) as an obstacle: in a bay opening towards the robot the
+  object-only lead otherwise runs the object through the base, and the trees follow it until the arms cannot.
 * ``stall_iterations`` [0 (off) in both variants; measured in docs/planners.md]: a frontier graft is also tried
   when the smallest ξ gap a connection has left between the trees (0 once a connection reached the other tree's
   pose and only its regrasp failed) has not shrunk by 1 % for that many iterations, before ``graft_after``.
