@@ -82,3 +82,27 @@ def test_from_and_summary_count_each_key_once(tmp_path, capsys):
     s = capsys.readouterr().out
     assert s.startswith("2 lines; indices without a certified draw 1")
     assert "all: 1 queries; success a 1/1, b 0/1 (b wins 0, loses 1;" in s
+
+
+def test_families_draws_only_those_indices(tmp_path, monkeypatch):
+    """``--families bay`` draws only the indices whose family (``FAMILIES[i % 6]``) is a bay, each with its own seed
+    ``base_seed * 1000 + i``; an unknown family is refused."""
+    import json
+
+    from optplan.bench import scenegen
+    from optplan.bench.tcbirrt_paired import main
+
+    calls = []
+
+    def fake(robot, n, seed, families, **kw):
+        calls.append((seed, families))
+        return []   # no certified draw: recorded as skipped
+
+    monkeypatch.setattr(scenegen, "generate_scenes", fake)
+    out = tmp_path / "g"
+    assert main(["--generate-only", "--families", "bay", "--base-seed", "5", "--n", "14", "--out", str(out)]) == 0
+    assert calls == [(5001, ("bay",)), (5007, ("bay",)), (5013, ("bay",))]
+    keys = [json.loads(x)["key"] for x in (out / "scenes.jsonl").read_text().splitlines()]
+    assert keys == ["5_1", "5_7", "5_13"]
+    with pytest.raises(SystemExit):
+        main(["--generate-only", "--families", "bays", "--n", "2", "--out", str(tmp_path / "h")])

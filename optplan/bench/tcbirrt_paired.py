@@ -6,7 +6,7 @@ at a time, or the fixed scenes; success, CPU seconds and path lengths (joint spa
 Generated scenes: index ``i`` draws family ``FAMILIES[i % 6]`` from ``generate_scenes(..., seed=base_seed * 1000 + i,
 trial_seed=base_seed)`` (:mod:`optplan.bench.scenegen`: a scene is kept only with a certified witness path,
 ``--witness-time`` CPU seconds [s] per search, at most ``--max-draws`` draws; an index whose every draw fails is
-recorded as skipped), writes it to ``OUT/scenes`` and runs both planners on trial 0 of ``base_seed`` (the query the
+recorded as skipped; ``--families bay,wall`` keeps only the indices of those families), writes it to ``OUT/scenes`` and runs both planners on trial 0 of ``base_seed`` (the query the
 witness certified), in alternating order, with the same planner seed. Fixed scenes (``--scenes suite,ssps
 --trials N``): each trial of each scene the same way. One JSON line per query in ``OUT/paired.jsonl``; a run
 resumes where the file ends. A path counts only when it passes the benchmark's 1 cm sweep check
@@ -152,6 +152,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--time-limit", type=float, default=10.0, help="CPU seconds [s] per query")
     ap.add_argument("--witness-time", type=float, default=10.0, help="CPU seconds [s] per witness search")
     ap.add_argument("--max-draws", type=int, default=4, help="draws per generated index")
+    ap.add_argument("--families", default="",
+                    help="only the generated indices of these families (comma-separated; default all)")
     ap.add_argument("--planners", default=",".join(SPECS), help="the two planner specs a,b")
     ap.add_argument("--scenes", default="", help="instead of generated scenes: fixed scenes (suite, ssps, names)")
     ap.add_argument("--trials", type=int, default=0, help="trials per fixed scene")
@@ -207,10 +209,14 @@ def main(argv: list[str] | None = None) -> int:
         from .scenegen import FAMILIES, generate_scenes, write_scenes
 
         robot = RobotModel.from_name("tcbirrt_dual_arm")
+        wanted = tuple(x.strip() for x in a.families.split(",") if x.strip()) or FAMILIES
+        bad = [x for x in wanted if x not in FAMILIES]
+        if bad:
+            ap.error(f"--families: unknown {bad}; expected some of {FAMILIES}")
         rej: list[Any]
         for i in range(a.first, a.first + a.n):
             fam, key = FAMILIES[i % len(FAMILIES)], f"{a.base_seed}_{i}"
-            if key in done:
+            if key in done or fam not in wanted:
                 continue
             c0, rej = time.process_time(), []
             drawn = generate_scenes(robot, 1, seed=a.base_seed * 1000 + i, families=(fam,), trial_seed=a.base_seed,

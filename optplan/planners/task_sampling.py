@@ -21,6 +21,7 @@ costs microseconds where one ConstrainedExtend costs tenths of a millisecond or 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any, cast
 
 import coal
@@ -29,22 +30,28 @@ import pinocchio as pin
 
 from ..model.reach import arm_reach, arm_reach_estimate
 from ..model.robot import RobotModel
-from ..scene import Scene
+from ..scene import Obstacle, Scene
 
-__all__ = ["ObjectPoseFilter", "TaskSampler", "arm_reach", "arm_reach_estimate", "object_lead_path"]
+__all__ = ["ObjectPoseFilter", "TaskSampler", "arm_reach", "arm_reach_estimate", "object_lead_path",
+           "robot_body_obstacles"]
 
 
 class ObjectPoseFilter:
     """Cheap necessary conditions on an object pose (no IK): object ∩ obstacles = ∅ and both grasp
     points within reach. ``margin`` [m] shrinks the reach bound's slack (0: the exact bound). ``native``:
     the object test in the native planning kernel (:mod:`optplan.planners.kernel`; exact box, sphere and
-    capsule tests) when it can be built, else coal."""
+    capsule tests) when it can be built, else coal. ``robot_body``: the robot's geometries fixed to the world
+    (:func:`robot_body_obstacles`: a fixed base's body, which no configuration moves) count as obstacles too."""
 
-    def __init__(self, robot: RobotModel, scene: Scene, margin: float = 0.0, native: bool = True) -> None:
-        if scene.object is None:
+    def __init__(self, robot: RobotModel, scene: Scene, margin: float = 0.0, native: bool = True,
+                 robot_body: bool = False) -> None:
+        held = scene.object
+        if held is None:
             raise ValueError("ObjectPoseFilter needs a scene with an [object]")
-        self.obj = scene.object.coal_geometry()
-        half = np.asarray(scene.object.size, float) / 2
+        if robot_body:   # the robot's own fixed body is an obstacle of the object too
+            scene = replace(scene, obstacles=tuple(scene.obstacles) + robot_body_obstacles(robot))
+        self.obj = held.coal_geometry()
+        half = np.asarray(held.size, float) / 2
         self.obj_radius = float(np.linalg.norm(half))
         self.obs = []
         centres, radii = [], []
@@ -62,7 +69,7 @@ class ObjectPoseFilter:
         self.centres = np.asarray(centres, float).reshape(-1, 3)
         self.radii = np.asarray(radii, float)
         self.grasps = []
-        for arm, G in scene.object.grasps.items():
+        for arm, G in held.grasps.items():
             sh, r = arm_reach(robot, arm)
             self.grasps.append((np.asarray(G.rotation), np.asarray(G.translation), sh, r - margin))
         self._req = coal.CollisionRequest()
@@ -135,6 +142,27 @@ class ObjectPoseFilter:
         ok, n = nf.segment(a, b, resolution)
         self.n_calls += n
         return ok
+
+
+def robot_body_obstacles(robot: RobotModel) -> tuple[Obstacle, ...]:
+    """The robot's collision geometries fixed to the world (on its universe joint; none for a floating base) as
+    scene obstacles (boxes, spheres and capsules; other shapes are left out): the object can never pass through
+    them, whatever the arms do."""
+    if robot.is_floating:
+        return ()
+    out = []
+    for g in robot.collision_model.geometryObjects:
+        if g.parentJoint != 0:
+            continue
+        geo, M = g.geometry, pin.SE3(g.placement)
+        if isinstance(geo, coal.Box):
+            hx, hy, hz = (float(x) for x in np.asarray(geo.halfSide))
+            out.append(Obstacle(f"robot/{g.name}", "box", M, size=(2.0 * hx, 2.0 * hy, 2.0 * hz)))
+        elif isinstance(geo, coal.Sphere):
+            out.append(Obstacle(f"robot/{g.name}", "sphere", M, radius=float(geo.radius)))
+        elif isinstance(geo, coal.Capsule):
+            out.append(Obstacle(f"robot/{g.name}", "capsule", M, radius=float(geo.radius), length=2.0 * float(geo.halfLength)))
+    return tuple(out)
 
 
 def _native_object_check(scene: Scene) -> tuple[Any, int, int, np.ndarray] | None:

@@ -85,6 +85,9 @@ Deviations from the paper, all options (defaults in brackets):
 * ``restart_iterations`` [0 (off) in both variants; measured in docs/planners.md]: a search without a path after
   that many iterations starts again from the two roots (lead path kept; the budget grows ``restart_growth``× per
   restart); with ``restart_branch_roots`` every second search has ``branch_roots`` the other way.
+* ``filter_robot_body`` [False in both variants; measured in docs/generalization.md]: the task-space filter, and so the
+  object's lead path, counts the robot's fixed body (its base) as an obstacle: in a bay opening towards the robot the
+  object-only lead otherwise runs the object through the base, and the trees follow it until the arms cannot.
 * ``stall_iterations`` [0 (off) in both variants; measured in docs/planners.md]: a frontier graft is also tried
   when the smallest ξ gap a connection has left between the trees (0 once a connection reached the other tree's
   pose and only its regrasp failed) has not shrunk by 1 % for that many iterations, before ``graft_after``.
@@ -319,6 +322,10 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             st["domain_rejections"] = st.get("domain_rejections", 0) + 1
         return xi_rand, ta.twin_nearest(i_near, None, rng)
 
+    def _make_filter(self, native: bool) -> ObjectPoseFilter:
+        """The task-space filter of the samples and the lead path (``filter_robot_body``: the robot's fixed body too)."""
+        return ObjectPoseFilter(self.robot, self.scene, native=native, robot_body=bool(self.options.filter_robot_body))
+
     def _trap_update(self, tree: _TaskTree, i: int, res: str) -> None:
         """``trap_adapt``: after an extension from node i, its dynamic domain (set when trapped) or its step
         (halved when trapped, down to s_ξ/8; doubled back, up to s_ξ, when not)."""
@@ -360,7 +367,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 or cast(float, o.geodesic_probability) > 0 or cast(float, o.lead_orientation_probability) > 0):
             return None
         if self._filter is None:
-            self._filter = ObjectPoseFilter(self.robot, self.scene, native=o.validity_kernel == "native")
+            self._filter = self._make_filter(o.validity_kernel == "native")
             if o.extension == "python":
                 self._filter._xi_native = None   # the filter's pose test in Python too (native object check)
         need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
@@ -381,7 +388,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         o = self.options
         need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
         if need and self._filter is None:
-            self._filter = ObjectPoseFilter(self.robot, self.scene, native=True)
+            self._filter = self._make_filter(True)
         try:
             nrng = NativeRandom(self._rng)
             smp = NativeTaskSampler(self._filter if need else None, self._lo, self._hi, nrng,

@@ -25,14 +25,14 @@ VARIANTS = {
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
               "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
               "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
-              "restart_branch_roots": False},
+              "restart_branch_roots": False, "filter_robot_body": False},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
                  "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
-                 "restart_branch_roots": False},
+                 "restart_branch_roots": False, "filter_robot_body": False},
 }
 
 
@@ -211,6 +211,10 @@ class TCBiRRTOptions:
     #: whose roots sit on IK branches that cannot meet is followed by one whose roots share a branch, and the
     #: other way round (None: the variant's value, :data:`VARIANTS`: False in both).
     restart_branch_roots: bool | None = None
+    #: The task-space filter — of the samples (``sample_filter``) and of the object's lead path — counts the robot's
+    #: own body fixed to the world (a fixed base's geometry, :func:`.task_sampling.robot_body_obstacles`) as an
+    #: obstacle of the object (None: the variant's value, :data:`VARIANTS`).
+    filter_robot_body: bool | None = None
     #: ``"paper"`` (the published algorithm) or ``"improved"`` (task-space sampling aids).
     variant: str = "paper"
     #: Probability that ξ_rand is the pose of a random node of the other tree [-] (None: the variant's value,
@@ -321,7 +325,7 @@ class TCBiRRTOptions:
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
                      "regrasp_share_orders", "verify_path", "graft_single_arm", "regrasp_both_arms", "regrasp_backoff", "root_grafts_first",
-                     "graft_branch_seeds", "branch_roots", "restart_branch_roots"):
+                     "graft_branch_seeds", "branch_roots", "restart_branch_roots", "filter_robot_body"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
         _pos("step_size", self.step_size)
