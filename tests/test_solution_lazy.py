@@ -16,6 +16,16 @@ from optplan.problem.solution import LazyTerms
 from optplan.problem.terms import JointBoundary, Smoothness
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _forget_kernels():
+    """After these tests the process forgets the kernels they made (the disk cache stays): a
+    later test that counts the kernels a first build makes sees its own."""
+    yield
+    from optplan.bench.modelling import _forget_memory
+
+    _forget_memory()
+
+
 def _hand(robot, q):
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, q)
