@@ -312,9 +312,11 @@ class SolveOutcome:
 
 
 def outcome_from_stats(stats: Mapping[str, Any], out: Mapping[str, Any] | None, *, wall_time: float, cpu_time: float = 0.0,
-                       setup_time: float = 0.0, cost_scale: float = 1.0, label: str = "") -> SolveOutcome:
+                       setup_time: float = 0.0, cost_scale: float = 1.0, label: str = "",
+                       copy: bool = True) -> SolveOutcome:
     """A :class:`SolveOutcome` from ``solver.stats()`` and the solver's output dict (for NLPs
-    that call a ``casadi.nlpsol`` of their own). ``cost_scale`` divides the returned ``f``."""
+    that call a ``casadi.nlpsol`` of their own). ``cost_scale`` divides the returned ``f``;
+    ``copy=False``: float vectors of ``out`` are kept, not copied (outputs made for this call alone)."""
     status = IpoptStatus.from_string(stats.get("return_status", "Unknown"))
     iters = int(stats.get("iter_count", -1))
     if out is None:
@@ -323,6 +325,8 @@ def outcome_from_stats(stats: Mapping[str, Any], out: Mapping[str, Any] | None, 
         v = out.get(k)
         if v is None:
             return None
+        if not copy and isinstance(v, np.ndarray) and v.dtype == np.float64 and v.ndim == 1:
+            return v
         # a DM's elements (column-major) as a list: ~2× faster than DM.full() for a vector
         return np.array(v.elements(), dtype=float) if hasattr(v, "elements") else np.array(v, dtype=float).ravel()
 
@@ -382,6 +386,7 @@ class NlpSolver:
         try:
             with limited_blas_threads(self.options.blas_threads):
                 got = self._call_buffered(args)
+                fresh = got is not None   # the buffered call's outputs: arrays made for this call
                 if got is None:
                     out = self.solver(**args)
                     stats = self._stats = dict(self.solver.stats())
@@ -393,7 +398,7 @@ class NlpSolver:
                                 time.process_time() - c0, setup, float("nan"), np.array(x0, float).ravel(),
                                 label=label, message=str(exc).strip().splitlines()[-1] if str(exc).strip() else "")
         return outcome_from_stats(stats, out, wall_time=time.perf_counter() - t0, cpu_time=time.process_time() - c0,
-                                  setup_time=setup, cost_scale=cost_scale, label=label)
+                                  setup_time=setup, cost_scale=cost_scale, label=label, copy=not fresh)
 
     def _call_buffered(self, args: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]] | None:
         """The solver called through one CasADi function buffer kept with the instance (one

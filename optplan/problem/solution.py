@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import threading
 import types
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,52 @@ import numpy as np
 
 from .nlp import IpoptStatus, SolveOutcome
 
-__all__ = ["IpoptStatus", "Solution"]
+__all__ = ["IpoptStatus", "LazyTerms", "Solution"]
+
+
+class LazyTerms(Mapping[str, float]):
+    """A read-only mapping of term names to values computed by ``compute`` (a callable returning
+    the mapping) on its first read, once: what a :class:`Solution` on the B-spline core holds as
+    :attr:`Solution.terms`, so that a re-solve whose terms are never read does not evaluate the
+    cost terms (the same numbers as computing them at once). ``computed``: whether it was read."""
+
+    __slots__ = ("_compute", "_values", "_lock")
+
+    def __init__(self, compute: Callable[[], Mapping[str, float]]):
+        self._compute: Callable[[], Mapping[str, float]] | None = compute
+        self._values: dict[str, float] | None = None
+        self._lock = threading.Lock()
+
+    @property
+    def computed(self) -> bool:
+        return self._values is not None
+
+    def _get(self) -> dict[str, float]:
+        v = self._values
+        if v is None:
+            with self._lock:
+                if self._values is None:
+                    assert self._compute is not None
+                    self._values = {str(k): float(x) for k, x in dict(self._compute()).items()}
+                    self._compute = None   # the arrays it read are released
+                v = self._values
+        return v
+
+    def __getitem__(self, key: str) -> float:
+        return self._get()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._get())
+
+    def __len__(self) -> int:
+        return len(self._get())
+
+    def __repr__(self) -> str:
+        return repr(self._get())
+
+    def __reduce__(self) -> Any:   # pickled (process pools) as the plain values
+        return (dict, (self._get(),))
+
 
 _ARRAYS = ("t", "q", "qd", "qdd", "jerk", "base_quat", "base_position", "x", "lam_g", "lam_x")
 
@@ -35,7 +81,8 @@ class Solution:
     ``base_quat`` (N+1, 4) and ``base_position`` (N+1, 3) for a floating robot. ``terms`` maps each
     named term to its value (cost terms: weighted cost; constraints: max violation), plus
     ``"dynamics"``: the max violation of the transcription's own constraints (integration,
-    momentum, base attitude).
+    momentum, base attitude); on the B-spline core it is computed when first read
+    (:class:`LazyTerms`).
 
     A Solution returned by :meth:`OptProblem.solve` evaluates the problem's terms through their
     handles: :meth:`value`, :meth:`violation`, :meth:`dual`, :meth:`sample` (a loaded Solution
@@ -48,7 +95,7 @@ class Solution:
     wall_time: float
     cost: float
     max_constraint_violation: float
-    terms: dict[str, float]  # read-only mapping
+    terms: Mapping[str, float]  # read-only mapping
     t: np.ndarray
     q: np.ndarray
     qd: np.ndarray
@@ -77,7 +124,8 @@ class Solution:
         if not isinstance(self.status, IpoptStatus):
             set_("status", IpoptStatus.from_string(self.status))
         set_("joint_names", tuple(self.joint_names))
-        set_("terms", types.MappingProxyType({str(k): float(v) for k, v in dict(self.terms).items()}))
+        if not isinstance(self.terms, LazyTerms):   # a lazy mapping is read-only and computed once
+            set_("terms", types.MappingProxyType({str(k): float(v) for k, v in dict(self.terms).items()}))
         for k in _ARRAYS:
             a = getattr(self, k)
             if a is not None:

@@ -18,12 +18,17 @@ from .collision_term import CollisionAvoidance
 from .expressions import Parameter
 from .floating_collision import base_placements
 from .nlp import IpoptStatus, NlpSolver, SolverOptions
-from .solution import Solution
+from .solution import LazyTerms, Solution
 from .spline_core import Family, SplineCore
 from .spline_problem import SplineEvaluator, _quintic, families_of, seed_guess
 from .spline_rows import VELOCITY_ACTIVATION, RowSelection
 
-__all__ = ["SplineBackend", "VELOCITY_ACTIVATION"]
+__all__ = ["COUNTS", "SplineBackend", "VELOCITY_ACTIVATION"]
+
+#: what solves on the B-spline core computed in this process [count] (what tests read): builds
+#: (``prepared``), IPOPT instances created, solutions made, and their ``terms`` evaluated (only
+#: when read: :class:`~optplan.problem.solution.LazyTerms`)
+COUNTS = {"prepared": 0, "solvers_created": 0, "solutions": 0, "terms_computed": 0}
 
 
 #: IPOPT's options of a solve started from a previous solution and its multipliers
@@ -34,6 +39,7 @@ _WARM_START: dict[str, Any] = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_i
 
 def _new_solver(st: dict[str, Any], sopts: SolverOptions, defaults: dict[str, Any]) -> NlpSolver:
     """An IPOPT instance of the structure ``st`` (its derivative Functions) with ``defaults``."""
+    COUNTS["solvers_created"] += 1
     extra = {**st["derivs"], "no_nlp_grad": True, "calc_lam_x": False, "calc_lam_p": False,
              "calc_f": False, "calc_g": False}
     return NlpSolver("optproblem_spline", st["nlp"], sopts, defaults=defaults, casadi_options=extra)
@@ -75,6 +81,7 @@ class SplineBackend(RowSelection):
         """Families of the problem's terms (raises spline_problem.Unsupported)."""
         prob = self.prob
         t0 = time.perf_counter()
+        COUNTS["prepared"] += 1
         self._fitted = None   # the boundary terms may have changed: fit the guess again
         self._constant_memo = {}   # the families (their kernels and bounds) are made again
         params: list[Parameter] = prob._params
@@ -394,31 +401,14 @@ class SplineBackend(RowSelection):
         core, prob = self.core, self.prob
         assert core is not None
         x = np.array(out.x, float)
-        g = call_dense(st["gfun"], x, p)[0].ravel()
+        COUNTS["solutions"] += 1
+        g = self._g_at(st["gfun"], x, p)
         vv = np.maximum(np.maximum(lbg - g, g - ubg), 0.0)
         viol = float(vv.max()) if vv.size else 0.0
         viol = max(viol, float(np.max(np.maximum(np.maximum(lbx - x, x - ubx), 0.0))))
         if not np.isfinite(viol):
             viol = float("inf")
-        terms: dict[str, float] = {}
-        c = call_dense(st["cfun"], x, p)[0].ravel()
-        for h in prob._handles:
-            fs = self.owner.get(h.name, [])
-            if h.role == "cost":
-                terms[h.name] = float(sum(c[st["cslices"][f]].sum() for f in fs))
-            else:
-                v = [float(vv[st["slices"][f]].max()) for f in fs
-                     if f in st["slices"] and st["slices"][f].stop > st["slices"][f].start]
-                v += [float(np.max(np.abs(x[self.fixed[f][0]] - self.fixed[f][1]))) for f in fs if f in self.fixed]
-                v += [self.constant_violation for f in fs if self.constant.get(f)]
-                if h.name in self.pbounds:
-                    lo, hi = self.pbounds[h.name]
-                    P = core.control_points(x)
-                    v.append(float(np.max(np.maximum(np.maximum(lo - P, P - hi), 0.0))))
-                terms[h.name] = max(v) if v else 0.0
-        dyn = [float(vv[sl].max()) for n, sl in st["slices"].items()
-               if n.startswith(("momentum", "base_attitude_dynamics")) and sl.stop > sl.start]
-        terms["dynamics"] = max(dyn) if dyn else 0.0
+        terms = LazyTerms(self._terms_of(x, p, vv, st))
         T = core.duration_of(x, prob.duration)
         P = core.control_points(x)
         kv = knot_values(P, T / core.N, core.M)
@@ -441,3 +431,66 @@ class SplineBackend(RowSelection):
                         joint_names=prob.robot.joint_names, base_quat=bq, base_position=bp, x=x,
                         lam_g=lam_g, lam_x=lam_x, x_scale_h=None, setup_time=out.setup_time,
                         cpu_time=out.cpu_time, attempts=(out,), evaluator=ev)
+
+    def _g_at(self, gfun: Any, x: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """The rows ``g(x, p)`` (a copy), through a CasADi function buffer kept with this backend
+        for ``gfun`` (``call_dense`` makes one per call: the same numbers)."""
+        kept = getattr(self, "_gbuf", None)
+        if kept is None or kept[0] is not gfun or kept[1].size != x.size or kept[2].size != p.size:
+            kept = None
+            if gfun.n_in() == 2 and gfun.nnz_in(0) == x.size and gfun.nnz_in(1) == p.size and gfun.n_out() == 1 \
+                    and all(gfun.sparsity_in(i).is_dense() for i in range(2)) and gfun.sparsity_out(0).is_dense():
+                try:
+                    buf, run = gfun.buffer()
+                    xb, pb, gb = np.zeros(x.size), np.zeros(p.size), np.zeros(gfun.nnz_out(0))
+                    buf.set_arg(0, xb.data)
+                    buf.set_arg(1, pb.data)
+                    buf.set_res(0, gb.data)
+                    kept = (gfun, xb, pb, gb, buf, run)
+                except (AttributeError, NotImplementedError, RuntimeError, TypeError):
+                    kept = None
+            self._gbuf = kept
+        if kept is None:
+            return call_dense(gfun, x, p)[0].ravel()
+        _, xb, pb, gb, buf, run = kept
+        xb[:] = x
+        pb[:] = p
+        run()
+        if buf.ret() != 0:
+            raise RuntimeError(f"{gfun.name()}: evaluation failed (return code {buf.ret()})")
+        return gb.copy()
+
+    def _terms_of(self, x: np.ndarray, p: np.ndarray, vv: np.ndarray, st: dict[str, Any]) -> Any:
+        """The computation of a solution's ``terms`` (cost terms: weighted cost; constraints: max
+        violation; ``"dynamics"``) from this solve's numbers, for :class:`LazyTerms`: what it reads
+        of this backend is taken now (a later solve replaces it)."""
+        core, prob = self.core, self.prob
+        assert core is not None
+        handles = [(h.name, h.role) for h in prob._handles]
+        owner, fixed, constant = dict(self.owner), dict(self.fixed), dict(self.constant)
+        pbounds, cviol = dict(self.pbounds), self.constant_violation
+        cfun, slices, cslices = st["cfun"], st["slices"], st["cslices"]
+
+        def compute() -> dict[str, float]:
+            COUNTS["terms_computed"] += 1
+            terms: dict[str, float] = {}
+            c = call_dense(cfun, x, p)[0].ravel()
+            for name, role in handles:
+                fs = owner.get(name, [])
+                if role == "cost":
+                    terms[name] = float(sum(c[cslices[f]].sum() for f in fs))
+                else:
+                    v = [float(vv[slices[f]].max()) for f in fs if f in slices and slices[f].stop > slices[f].start]
+                    v += [float(np.max(np.abs(x[fixed[f][0]] - fixed[f][1]))) for f in fs if f in fixed]
+                    v += [cviol for f in fs if constant.get(f)]
+                    if name in pbounds:
+                        lo, hi = pbounds[name]
+                        P = core.control_points(x)
+                        v.append(float(np.max(np.maximum(np.maximum(lo - P, P - hi), 0.0))))
+                    terms[name] = max(v) if v else 0.0
+            dyn = [float(vv[sl].max()) for n, sl in slices.items()
+                   if n.startswith(("momentum", "base_attitude_dynamics")) and sl.stop > sl.start]
+            terms["dynamics"] = max(dyn) if dyn else 0.0
+            return terms
+
+        return compute
