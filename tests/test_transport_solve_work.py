@@ -39,7 +39,7 @@ def _transport(seed: int):
 
 
 def test_transport_solves_in_few_iterations_with_one_evaluation_per_iteration(ipopt_stats):
-    """The bench's transport (N = 50, its first guess from seed 0): 20 IPOPT iterations (IPOPT
+    """The bench's transport (N = 50, its first guess from seed 0): 18 IPOPT iterations (IPOPT
     3.14.19, MUMPS 5.8.2; at most 22 allowed), one Hessian per iteration, at most two extra
     Jacobians, on average at most one extra objective/constraint evaluation per iteration (line
     search); the solution holds its 0.02 m margin and the closed chain (coal, Pinocchio)."""
