@@ -182,9 +182,9 @@ class CollisionModel:
             band, spread = self.steady
             lo, hi = Dm.min(axis=0), Dm.max(axis=0)   # +inf where a knot is past the threshold
             var = hi - np.where(np.isfinite(lo), lo, 0.0)
-            for i in np.flatnonzero(close.any(axis=0) & (lo >= float(self.margin) + band) & (var <= spread)):
-                close[:, i] = False
-                self.steady_pairs.append(pairs[i])
+            for j in np.flatnonzero(close.any(axis=0) & (lo >= float(self.margin) + band) & (var <= spread)).tolist():
+                close[:, j] = False
+                self.steady_pairs.append(pairs[j])
         for (p, k) in self.margin_boost:  # boosted rows are always constrained
             if p in pairs and 0 <= k <= initial.N:
                 close[k, self.checker.pair_index[p]] = True
