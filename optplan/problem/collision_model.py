@@ -107,6 +107,13 @@ class CollisionModel:
         self._fns: dict[tuple[str, str], ca.Function | None] = {}
         self._pfns: dict[tuple[bytes, float, bytes, float], ca.Function] = {}
         self._init_dist: np.ndarray | None = None
+        #: ``(band, spread)`` [m] or None: :meth:`activate` leaves out the *steady* pairs — those
+        #: whose exact distance along the initial guess stays at least ``band`` above the margin
+        #: and varies by at most ``spread`` (set by the B-spline core for a term at its default
+        #: activation; never with ``activate_with`` or ``margin_boost``)
+        self.steady: tuple[float, float] | None = None
+        #: the pairs :meth:`activate` left out as steady (checked after the solve like every pair)
+        self.steady_pairs: list[Pair] = []
         self._setup(robot)
 
     def __getattr__(self, name: str) -> Any:  # the configuration (margin, scene, window …) is the term's
@@ -170,6 +177,14 @@ class CollisionModel:
         for tr in self.activate_with:  # e.g. a previous solution that verification found colliding
             Dm = np.minimum(Dm, below(tr))
         close = Dm < self.activation
+        self.steady_pairs = []
+        if self.steady is not None and not self.activate_with and not self.margin_boost:
+            band, spread = self.steady
+            lo, hi = Dm.min(axis=0), Dm.max(axis=0)   # +inf where a knot is past the threshold
+            var = hi - np.where(np.isfinite(lo), lo, 0.0)
+            for j in np.flatnonzero(close.any(axis=0) & (lo >= float(self.margin) + band) & (var <= spread)).tolist():
+                close[:, j] = False
+                self.steady_pairs.append(pairs[j])
         for (p, k) in self.margin_boost:  # boosted rows are always constrained
             if p in pairs and 0 <= k <= initial.N:
                 close[k, self.checker.pair_index[p]] = True

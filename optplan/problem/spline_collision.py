@@ -5,9 +5,11 @@ support ``s`` as parameters (a moving pair's plane offset: a decision variable).
 
 Pair activation: a term left at the default ``activation`` takes the plane rows' own
 (:data:`~optplan.problem.plane_rows.SPLINE_ACTIVATION`, 0.12 m — a third of the
-pairs and half the rows of 0.3 m on the transport, decision 0012); a pair it misses is found by
-the dense check after the solve (coal, every pair), which re-solves on a finer grid activated
-along the solution. An explicit ``activation`` is used as given."""
+pairs and half the rows of 0.3 m on the transport, decision 0012) and leaves out the *steady*
+pairs (:data:`STEADY_PAIRS`: far above the margin at a nearly constant distance all along the
+guess); a pair it misses is found by the dense check after the solve (coal, every pair), which
+plans the rows again along the solution (steady pairs included) or re-solves on a finer grid. An
+explicit ``activation`` is used as given, with every pair below it."""
 from __future__ import annotations
 
 import dataclasses
@@ -21,7 +23,13 @@ from .collision_term import CollisionAvoidance
 from .frame_terms import ClosedChain
 from .plane_rows import SPLINE_ACTIVATION, PlanePlanner
 
-__all__ = ["CollisionItem", "plan_collision"]
+__all__ = ["CollisionItem", "plan_collision", "STEADY_PAIRS"]
+
+#: ``(band, spread)`` [m]: a term at its default activation gets no rows for a pair whose exact
+#: distance at every knot of the guess is at least the margin + ``band`` and varies by at most
+#: ``spread`` along it — e.g. a wrist link beside the object its own hand holds, whose distance
+#: only the wrist joints change (on the transport 3 of its 4 pairs, 816 of its 1128 plane rows).
+STEADY_PAIRS = (0.02, 0.005)
 
 
 @dataclass
@@ -40,10 +48,12 @@ class CollisionItem:
 
 
 def plan_collision(prob: Any, core: Any, term: CollisionAvoidance, Qk: np.ndarray,
-                   lower: np.ndarray, upper: np.ndarray) -> tuple[list[CollisionItem], Any]:
+                   lower: np.ndarray, upper: np.ndarray, steady: bool = True) -> tuple[list[CollisionItem], Any]:
     """The active pairs along the knot configurations ``Qk`` ((N+1) × nj) and their kernels
     (:class:`~optplan.problem.plane_rows.PlanePlanner`); the term's ``activate_with`` trajectories
-    and ``margin_boost`` are honoured (the retry policy's pair activation and boost)."""
+    and ``margin_boost`` are honoured (the retry policy's pair activation and boost). ``steady``:
+    a term at its default activation leaves out the steady pairs (:data:`STEADY_PAIRS`); False
+    when the rows are planned again along a solution that missed a pair."""
     robot, N = prob.robot, prob.N
     pinned = prob._pinned_q()
     cc = next((h.term for h in prob._handles if h.role == "constraint" and isinstance(h.term, ClosedChain)), None)
@@ -51,9 +61,12 @@ def plan_collision(prob: Any, core: Any, term: CollisionAvoidance, Qk: np.ndarra
     lo = np.where(np.isfinite(lower), lower, robot.lower)
     hi = np.where(np.isfinite(upper), upper, robot.upper)
     default = CollisionAvoidance.__dataclass_fields__["activation"].default
-    if term.activation == default:
+    at_default = term.activation == default
+    if at_default:
         term = dataclasses.replace(term, activation=SPLINE_ACTIVATION)
     model = term.model(robot)
+    if at_default and steady:
+        model.steady = STEADY_PAIRS
     fixed = frozenset(np.flatnonzero(lo == hi).tolist())
     planner = PlanePlanner(robot, model, N, prob.duration, q0, q1, fixed, cc, window=term.window, kernels=core.kc)
     Q = np.array(Qk, float)

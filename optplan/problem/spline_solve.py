@@ -117,7 +117,7 @@ class SplineBackend(RowSelection):
                 self.collision_model = self.collision_models[cols[0].name]
             else:
                 items, self.collision_model = plan_collision(prob, core, cols[0].term, Qk, lbx[:core.nj],
-                                                             ubx[:core.nj])
+                                                             ubx[:core.nj], steady=along is None)
                 self.collision_models[cols[0].name] = self.collision_model
                 owners = [cols[0].name] * len(items)
             nb = sum(len(it.knots) for it in items if not it.static)
