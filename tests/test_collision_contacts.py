@@ -17,6 +17,7 @@ import pytest
 
 from optplan.collision.checker import CollisionChecker, exact_contact_requests
 from optplan.model.example_robots import example_robot_data_dir
+from optplan.planners.kernel.csource import KERNEL_EPS
 from optplan.planners.validity import ValidityChecker
 from optplan.scene import Obstacle, Scene
 
@@ -136,12 +137,12 @@ def test_checkers_agree_with_exact_distance_on_capsule_touching_box(tcb_touching
                 assert ck.first_invalid(np.array([q, q]), "free") == (0 if hit else -1)
             assert CollisionChecker(robot, scene).is_valid(q) == (not hit)
             # the native planning kernel (the default) is conservative: never free where coal says hit,
-            # colliding where free only within its 1e-7 m band
+            # colliding where free only within its KERNEL_EPS band
             nat = ValidityChecker(robot, scene)
             if hit:
                 assert not nat.is_valid(q)
             else:
-                assert nat.is_valid(q) or dmin <= 2e-7, f"gap {gap}: native kernel refuses at {dmin:.3e} m"
+                assert nat.is_valid(q) or dmin <= 2 * KERNEL_EPS, f"gap {gap}: native kernel refuses at {dmin:.3e} m"
     assert n_hit >= 3 * len(GAPS) and n_free >= len(FREE)   # both verdicts were tested
 
 

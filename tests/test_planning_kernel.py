@@ -241,7 +241,7 @@ def test_edge_and_first_invalid_agree(tcb):
         assert i == k.first_invalid(a + f[:, None] * (b - a), act)
         hits += i >= 0
     assert 0 < hits < 40
-    assert KERNEL_EPS < 1e-6
+    assert KERNEL_EPS <= 1e-4   # a slack far below any clearance (tests/test_kernel_coal_band.py: above coal's tolerance)
 
 
 @pytest.mark.parametrize("scene_name", ["hard_window", "stress_posts"])

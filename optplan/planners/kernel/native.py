@@ -11,7 +11,8 @@ model with any other shape (meshes, convex hulls, ellipsoids ...) raises :class:
 and its checks stay with coal: a bounding sphere would call a mesh robot's tight but valid start
 configurations colliding (PR2's). A pair counts as colliding when its distance is at most ``margin`` +
 :data:`~optplan.planners.kernel.csource.KERNEL_EPS`: the kernel never calls free a configuration that
-coal calls colliding (the false "colliding" verdicts are limited to cylinders and a 1e-7 m band).
+coal calls colliding, coal's GJK tolerance (1e-6 m) included (the false "colliding" verdicts are limited to
+cylinders and a 1e-5 m band).
 
 The library is compiled with the system C compiler at first use and cached (:func:`load_library`);
 without a compiler :class:`KernelUnavailable` is raised and the validity checker keeps coal.
