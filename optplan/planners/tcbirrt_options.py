@@ -213,7 +213,8 @@ class TCBiRRTOptions:
     restart_branch_roots: bool | None = None
     #: The task-space filter — of the samples (``sample_filter``) and of the object's lead path — counts the robot's
     #: own body fixed to the world (a fixed base's geometry, :func:`.task_sampling.robot_body_obstacles`) as an
-    #: obstacle of the object (None: the variant's value, :data:`VARIANTS`).
+    #: obstacle of the object (None: the variant's value, :data:`VARIANTS`: False in both; measured on fresh generated
+    #: scenes and the suite and left off, see docs/planners.md).
     filter_robot_body: bool | None = None
     #: ``"paper"`` (the published algorithm) or ``"improved"`` (task-space sampling aids).
     variant: str = "paper"
