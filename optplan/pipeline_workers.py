@@ -59,10 +59,11 @@ def start_early_worker(robot: RobotModel, scene: Scene, opts: PipelineOptions) -
     leaves a core free) to run :func:`warm_worker` while this process plans. Only for the B-spline
     transcription (the one whose segments go to workers). The jobs find that worker by the same robot
     and scene objects (:func:`solve_segments`). Returns whether a worker was started."""
-    early = opts.early_worker if opts.early_worker is not None else _a_core_is_free()
-    if opts.transcription != "bspline" or not early:
+    n = segment_workers(opts)
+    if opts.transcription != "bspline" or n < 2:   # one process: the segments are solved here, no fork
         return False
-    return start_workers((robot, scene), segment_workers(opts), warm_worker)
+    early = opts.early_worker if opts.early_worker is not None else _a_core_is_free()
+    return start_workers((robot, scene), n, warm_worker) if early else False
 
 
 def solve_segments(robot: RobotModel, scene: Scene, fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]],

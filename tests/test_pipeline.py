@@ -427,3 +427,22 @@ def test_the_early_segment_worker_changes_no_result(tcb, monkeypatch):
         assert [s.solution.total_iterations for s in res.segments] == \
             [s.solution.total_iterations for s in runs[0].segments]
         np.testing.assert_array_equal(res.q, runs[0].q)
+
+
+@pytest.mark.parametrize("core_free", [True, False])
+def test_no_early_fork_when_the_segments_run_in_this_process(monkeypatch, core_free):
+    """With one segment process nothing is forked before planning, whatever the load; with two the
+    default (``early_worker=None``) forks exactly when a core is free, and an explicit choice wins."""
+    from optplan import pipeline_workers as PW
+
+    calls = []
+    monkeypatch.setattr(PW, "_a_core_is_free", lambda: core_free)
+    monkeypatch.setattr(PW, "start_workers", lambda ctx, n, warm: calls.append(n) or True)
+    robot, scene = object(), object()
+    for early in (None, True, False):
+        assert PW.start_early_worker(robot, scene, PipelineOptions(workers=1, early_worker=early)) is False
+    assert calls == []
+    assert PW.start_early_worker(robot, scene, PipelineOptions(workers=2)) is core_free
+    assert PW.start_early_worker(robot, scene, PipelineOptions(workers=2, early_worker=True)) is True
+    assert PW.start_early_worker(robot, scene, PipelineOptions(workers=2, early_worker=False)) is False
+    assert calls == [2] * (1 + core_free)
