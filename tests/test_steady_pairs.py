@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from transport_case import transport
 
 from optplan.problem import spline_collision
 
@@ -26,19 +27,6 @@ def plans(monkeypatch):
     return seen
 
 
-def _transport(seed: int = 0):
-    from optplan import RobotModel
-    from optplan.scene import Scene
-    from optplan.tasks import transport_initial_path, transport_problem
-
-    robot = RobotModel.from_name("tcbirrt_dual_arm")
-    scene = Scene.load("transport")
-    Q = transport_initial_path(robot, scene, 50, np.random.default_rng(seed))
-    assert Q is not None
-    prob, cc, _ = transport_problem(robot, scene, Q, fixed_normals=True, transcription="auto")
-    return robot, scene, prob, cc
-
-
 def test_transport_leaves_out_exactly_the_steady_pairs_and_keeps_its_margin(plans):
     """On the transport's guess the pairs left out are exactly those whose coal distance (every
     pair, every knot, computed here) stays below the activation, at least margin + band and
@@ -47,7 +35,7 @@ def test_transport_leaves_out_exactly_the_steady_pairs_and_keeps_its_margin(plan
     from optplan.problem.plane_rows import SPLINE_ACTIVATION
     from optplan.verification import verify
 
-    robot, scene, prob, cc = _transport(0)
+    robot, scene, prob, cc = transport(0)
     sol = prob.solve()
     assert sol.success and len(sol.attempts) == 1, sol.status
     assert len(plans) == 1
@@ -78,7 +66,7 @@ def test_a_pair_left_out_wrongly_is_planned_again_along_the_solution(plans, monk
     from optplan.verification import verify
 
     monkeypatch.setattr(spline_collision, "STEADY_PAIRS", (-1.0, np.inf))
-    robot, scene, prob, cc = _transport(0)
+    robot, scene, prob, cc = transport(0)
     sol = prob.solve()
     assert sol.success, sol.status
     assert len(plans) >= 2 and len(sol.attempts) >= 2

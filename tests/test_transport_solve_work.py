@@ -4,8 +4,8 @@ and the derivative callbacks per iteration, with the result checked independentl
 clearance, the closed chain through Pinocchio: ``verify``)."""
 from __future__ import annotations
 
-import numpy as np
 import pytest
+from transport_case import transport
 
 from optplan.problem import nlp as nlp_mod
 
@@ -25,19 +25,6 @@ def ipopt_stats(monkeypatch):
     return seen
 
 
-def _transport(seed: int):
-    from optplan import RobotModel
-    from optplan.scene import Scene
-    from optplan.tasks import transport_initial_path, transport_problem
-
-    robot = RobotModel.from_name("tcbirrt_dual_arm")
-    scene = Scene.load("transport")
-    Q = transport_initial_path(robot, scene, 50, np.random.default_rng(seed))
-    assert Q is not None
-    prob, cc, _ = transport_problem(robot, scene, Q, fixed_normals=True, transcription="auto")
-    return robot, scene, prob, cc
-
-
 def test_transport_solves_in_few_iterations_with_one_evaluation_per_iteration(ipopt_stats):
     """The bench's transport (N = 50, its first guess from seed 0): 18 IPOPT iterations (IPOPT
     3.14.19, MUMPS 5.8.2; at most 22 allowed), one Hessian per iteration, at most two extra
@@ -49,7 +36,7 @@ def test_transport_solves_in_few_iterations_with_one_evaluation_per_iteration(ip
     # a structure built earlier in this process shares its compiled functions, whose call counts
     # (solver.stats()) add up over the solves: built afresh, as in a new process
     _forget_memory()
-    robot, scene, prob, cc = _transport(0)
+    robot, scene, prob, cc = transport(0)
     sol = prob.solve()
     assert sol.success and sol.attempts and len(sol.attempts) == 1, sol.status
     it = sol.total_iterations
