@@ -74,6 +74,9 @@ typedef struct {
     const int *mrow;         /* ng: a geometry's row in mov, -1 for a static one */
     const int *jperm;        /* nj x 3, may be NULL: when the rotation of a joint's placement is a signed
                                 permutation, column c is +-(row jperm[c] - 1) of the identity; else 0 0 0 */
+    const int *scol;         /* ng, may be NULL: a static geometry's column in saabb / ms_pair, -1 otherwise. With
+                                it a check that places a static geometry per call (the still object) keeps the
+                                broad phase: that column's box is the placed geometry's, made per call */
 } kmodel;
 
 static void compose(const double *A, const double *B, double *C) {
@@ -357,9 +360,10 @@ static int boxes_apart(const double *A, const double *B, double thr) {
 }
 
 /* the broad phase (see kmodel), static pairs: 1 when an active pair with a static geometry is in contact;
-   mb: the moving geometries' boxes, gbx: the groups' */
+   mb: the moving geometries' boxes, gbx: the groups'; js >= 0: static column js has the box ob (a static
+   geometry placed by this call) instead of its stored one */
 static int static_pairs_collide(const kmodel *m, const unsigned char *active, const double **pose,
-                                const double *mb, const double *gbx) {
+                                const double *mb, const double *gbx, int js, const double *ob) {
     enum { KMAXS = 4096 };
     double sep[KMAXS];
     int ns = m->nstat;
@@ -381,14 +385,25 @@ static int static_pairs_collide(const kmodel *m, const unsigned char *active, co
             t = z0[j] - az1; s = s > t ? s : t;
             sep[j] = s;
         }
+        if (js >= 0) {   /* the same gap to the placed box */
+            double s = ax0 - ob[3], t;
+            t = ob[0] - ax1; s = s > t ? s : t;
+            t = ay0 - ob[4]; s = s > t ? s : t;
+            t = ob[1] - ay1; s = s > t ? s : t;
+            t = az0 - ob[5]; s = s > t ? s : t;
+            t = ob[2] - az1; s = s > t ? s : t;
+            sep[js] = s;
+        }
         for (int j = 0; j < ns; ++j) {
             if (sep[j] > 0.0) continue;
+            double X0 = x0[j], Y0 = y0[j], Z0 = z0[j], X1 = x1[j], Y1 = y1[j], Z1 = z1[j];
+            if (j == js) { X0 = ob[0]; Y0 = ob[1]; Z0 = ob[2]; X1 = ob[3]; Y1 = ob[4]; Z1 = ob[5]; }
             for (int i = m->grp[g]; i < m->grp[g+1]; ++i) {
                 int k = m->ms_pair[i*ns + j];
                 const double *b = mb + 6*i;
                 if (k < 0 || !active[k]) continue;
                 KCNT(4, 1);
-                if (b[0] > x1[j] || b[3] < x0[j] || b[1] > y1[j] || b[4] < y0[j] || b[2] > z1[j] || b[5] < z0[j])
+                if (b[0] > X1 || b[3] < X0 || b[1] > Y1 || b[4] < Y0 || b[2] > Z1 || b[5] < Z0)
                     continue;
                 if (pair_collides(m, pose, m->pa[k], m->pb[k])) { if (m->hint) *m->hint = k; return 1; }
             }
@@ -422,7 +437,16 @@ static int config_collides(const kmodel *m, const unsigned char *active, const d
     double mb[6*KMAXG], gbx[6*KMAXG];
     KCNT(0, 1);
     fk(m, q, override_pose, override_g, oMi, oMg, pose);
-    if (m->ngrp <= 0 || override_g >= 0 || m->nstat > 4096) {   /* no broad phase: every pair in order */
+    int js = -1;
+    double ob[6];
+    if (override_g >= 0 && m->scol && m->ngrp > 0) {   /* a static geometry placed by this call: its box now */
+        js = m->scol[override_g];
+        if (js >= 0) {
+            geom_aabb(m, override_g, pose[override_g], ob);
+            for (int c = 0; c < 3; ++c) { ob[c] -= m->margin + KEPS + 1e-12; ob[3+c] += m->margin + KEPS + 1e-12; }
+        }
+    }
+    if (m->ngrp <= 0 || (override_g >= 0 && !m->scol) || m->nstat > 4096) {   /* no broad phase: every pair in order */
         for (int k = 0; k < m->npairs; ++k)
             if (active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) return 1;
         return 0;
@@ -439,7 +463,7 @@ static int config_collides(const kmodel *m, const unsigned char *active, const d
                 if (mb[6*i+3+c] > gb[3+c]) gb[3+c] = mb[6*i+3+c];
             }
     }
-    if (static_pairs_collide(m, active, pose, mb, gbx) || moving_pairs_collide(m, active, pose, mb, gbx)) return 1;
+    if (static_pairs_collide(m, active, pose, mb, gbx, js, ob) || moving_pairs_collide(m, active, pose, mb, gbx)) return 1;
     for (int r = 0; r < m->nrest; ++r) {
         int k = m->rest[r];
         if (active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) { if (m->hint) *m->hint = k; return 1; }

@@ -54,7 +54,7 @@ class _KModel(ctypes.Structure):
                 ("nmov", ctypes.c_int), ("nstat", ctypes.c_int), ("ngrp", ctypes.c_int), ("nrest", ctypes.c_int),
                 ("mov", _P), ("grp", _P), ("saabb", _P), ("ms_pair", _P), ("rest", _P), ("hint", _P),
                 ("nbuck", ctypes.c_int), ("bstart", _P), ("bga", _P), ("bgb", _P), ("bperm", _P), ("mrow", _P),
-                ("jperm", _P)]
+                ("jperm", _P), ("scol", _P)]
 
 
 def _signed_permutation(R: np.ndarray, tol: float = 1e-12) -> np.ndarray:
@@ -126,6 +126,9 @@ def broad_phase_arrays(jparent: np.ndarray, gparent: np.ndarray, gtype: np.ndarr
     mrow = -np.ones(ng, np.int32)
     for g, i in row.items():
         mrow[g] = i
+    scol = -np.ones(ng, np.int32)   # a static geometry's column (the still object's box is made per call)
+    for g, j in col.items():
+        scol[g] = j
     box = np.array([_aabb(int(gtype[g]), gparam[g], gplace[g]) for g in stat]).reshape(-1, 6)
     box[:, :3] -= threshold + 1e-12
     box[:, 3:] += threshold + 1e-12
@@ -134,7 +137,7 @@ def broad_phase_arrays(jparent: np.ndarray, gparent: np.ndarray, gtype: np.ndarr
             "rest": np.array(rest, np.int32),
             "bstart": np.cumsum([0] + [len(buckets[k]) for k in keys]).astype(np.int32),
             "bga": np.array([k[0] for k in keys], np.int32), "bgb": np.array([k[1] for k in keys], np.int32),
-            "bperm": np.array([p for k in keys for p in buckets[k]], np.int32), "mrow": mrow}
+            "bperm": np.array([p for k in keys for p in buckets[k]], np.int32), "mrow": mrow, "scol": scol}
 
 
 def load_library() -> Any:
@@ -215,7 +218,8 @@ class NativeKernel:
     ``margin`` [m]. Each query takes ``active`` (one uint8 per pair: 0 skips it) and optionally the
     world placement of one geometry (``override``: its index and pose), e.g. a still object.
 
-    ``broad_phase`` (default True): a query without an override first compares axis-aligned boxes —
+    ``broad_phase`` (default True): a query (also one whose override places a static geometry, as the
+    still object of the ``"fixed"`` mode: that geometry's box is then made from the placement per call) first compares axis-aligned boxes —
     chains of a few links against every static geometry, then each link, and the pairs of two moving
     geometries bucket by bucket of their chains — and runs the exact test only where they overlap; the
     pair that collided last is tried first. The verdicts are those of the plain pair loop (False).
@@ -266,7 +270,7 @@ class NativeKernel:
         self._hint = np.full(1, -1, np.int32)
         self._broad = (bp["mov"], bp["grp"], bp["saabb"], bp["ms_pair"], bp["rest"], self._hint)
         jperm = np.array([_signed_permutation(jplace[j, :9].reshape(3, 3)) for j in range(nj)], np.int32).reshape(nj, 3)
-        self._buckets = (bp["bstart"], bp["bga"], bp["bgb"], bp["bperm"], bp["mrow"], jperm)
+        self._buckets = (bp["bstart"], bp["bga"], bp["bgb"], bp["bperm"], bp["mrow"], jperm, bp["scol"])
         nstat = bp["saabb"].shape[1] if bp["ms_pair"].size else 0
         self._km = _KModel(int(model.nq), nj, ng, len(pairs), *ptr, float(margin),
                            len(bp["mov"]), nstat, len(bp["grp"]) - 1 if broad_phase else 0, len(bp["rest"]),
