@@ -60,10 +60,10 @@ class EdgeCheckMixin(BranchMixin):
         """The segment a → b at ``edge_tolerance`` with the configuration-free bound's uniform spacing
         (object held, or fixed at ``object_pose``); ends not checked."""
         st["path_verified_edges"] += 1
+        tol = cast(float, self.options.edge_tolerance)
         if object_pose is None:
-            return edge_is_valid(a, b, self.checker.validity("held"), cast(float, self.options.edge_tolerance), False, self._w_held)
-        return edge_is_valid(a, b, self.checker.validity("fixed", object_pose),
-                             cast(float, self.options.edge_tolerance), False, self._w_fixed)
+            return self.checker.uniform_edge_is_valid(a, b, tol, self._w_held, "held")
+        return self.checker.uniform_edge_is_valid(a, b, tol, self._w_fixed, "fixed", object_pose)
 
     def _verify_branch(self, tree: _TaskTree, i: int, st: dict[str, Any]) -> int | None:
         """``verify_path``: every not yet verified edge from the root to node i at the uniform

@@ -49,6 +49,7 @@ class EdgeSweepMixin:
     _certifiers: dict[float, EdgeCertifier]
     exempted: Callable[..., frozenset[int]]
     first_invalid: Callable[..., int]
+    validity: Callable[..., Any]
     is_valid: Callable[[np.ndarray], bool]
     is_valid_free: Callable[[np.ndarray], bool]
     is_valid_object_fixed: Callable[[np.ndarray, pin.SE3], bool]
@@ -312,6 +313,27 @@ class EdgeSweepMixin:
             if not fn(a + ts[k - 1] * d):
                 return False
         return True
+
+    def uniform_edge_is_valid(self, a: np.ndarray, b: np.ndarray, tolerance: float, weights: np.ndarray,
+                              mode: str = "held", object_pose: pin.SE3 | None = None) -> bool:
+        """The interior points ``a + (k/n)(b − a)``, ``k = 1 … n−1``, ``n = ⌈max(weights @ |b − a|) / tolerance⌉``,
+        all collision-free: the same points, hence the same verdict, as :func:`optplan.planners.rrtconnect.edge_is_valid`
+        with ``weights`` (e.g. :meth:`sweep_weights` per geometry) and ``check_end=False``. With the native kernel
+        the points are checked in index order, interpolated in one native call (no coarse-to-fine order to build:
+        for edges that are expected to pass, as a found path's re-check, the order changes nothing but the cost)."""
+        a = np.asarray(a, float)
+        b = np.asarray(b, float)
+        if self._native is None or (mode == "fixed" and (object_pose is None or self.object is None)):
+            from .rrtconnect import edge_is_valid  # here: rrtconnect imports the checker
+            return edge_is_valid(a, b, self.validity(mode, object_pose), tolerance, False, weights)
+        size = float(np.max(weights @ np.abs(b - a)))
+        n = max(1, int(math.ceil(size / tolerance)))
+        if n < 2:
+            return True
+        m = "free" if mode == "held" and self.object is None else mode
+        k = self._native.edge_first_invalid(a, b, np.arange(1, n) / n, m, object_pose)
+        self.n_checks += n - 1 if k < 0 else k + 1
+        return k < 0
 
     def certifier(self, min_clearance: float = 1e-3) -> EdgeCertifier:
         """The :class:`~optplan.planners.edge_certify.EdgeCertifier` of this checker for
