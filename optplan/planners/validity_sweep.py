@@ -49,7 +49,6 @@ class EdgeSweepMixin:
     _certifiers: dict[float, EdgeCertifier]
     exempted: Callable[..., frozenset[int]]
     first_invalid: Callable[..., int]
-    validity: Callable[..., Any]
     is_valid: Callable[[np.ndarray], bool]
     is_valid_free: Callable[[np.ndarray], bool]
     is_valid_object_fixed: Callable[[np.ndarray, pin.SE3], bool]
@@ -323,13 +322,12 @@ class EdgeSweepMixin:
         for edges that are expected to pass, as a found path's re-check, the order changes nothing but the cost)."""
         a = np.asarray(a, float)
         b = np.asarray(b, float)
-        if self._native is None or (mode == "fixed" and (object_pose is None or self.object is None)):
-            from .rrtconnect import edge_is_valid  # here: rrtconnect imports the checker
-            return edge_is_valid(a, b, self.validity(mode, object_pose), tolerance, False, weights)
         size = float(np.max(weights @ np.abs(b - a)))
         n = max(1, int(math.ceil(size / tolerance)))
         if n < 2:
             return True
+        if self._native is None or (mode == "fixed" and (object_pose is None or self.object is None)):
+            return self.first_invalid(a + (np.arange(1, n) / n)[:, None] * (b - a), mode, object_pose) < 0
         m = "free" if mode == "held" and self.object is None else mode
         k = self._native.edge_first_invalid(a, b, np.arange(1, n) / n, m, object_pose)
         self.n_checks += n - 1 if k < 0 else k + 1
