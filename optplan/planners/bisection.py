@@ -26,14 +26,18 @@ def _bisection_array(n: int) -> np.ndarray:
     if got is None:
         # level by level, each interval [lo, hi] (hi − lo ≥ 2) gives its midpoint, then its two halves in
         # order; the midpoints lie strictly inside disjoint intervals, so none repeats
-        lo, hi = np.array([0]), np.array([int(n)])
+        lo, hi = np.zeros(1, np.int64), np.full(1, int(n), np.int64)
         out: list[np.ndarray] = []
         while lo.size:
             keep = hi - lo >= 2
-            lo, hi = lo[keep], hi[keep]
+            if not keep.all():
+                lo, hi = lo[keep], hi[keep]
             mid = (lo + hi) // 2
             out.append(mid)
-            lo, hi = np.stack([lo, mid], 1).ravel(), np.stack([mid, hi], 1).ravel()
+            # the halves [lo, mid], [mid, hi] of each interval, interleaved (slices: cheaper than np.stack)
+            nlo, nhi = np.empty(2 * lo.size, np.int64), np.empty(2 * lo.size, np.int64)
+            nlo[0::2], nlo[1::2], nhi[0::2], nhi[1::2] = lo, mid, mid, hi
+            lo, hi = nlo, nhi
         got = _ORDER_ARRAY[n] = np.concatenate(out)
     return got
 
