@@ -189,6 +189,7 @@ class ValidityChecker(EdgeSweepMixin):
         self._profile_fns: dict[Any, FastFunction | None] = {}
         self._certifiers: dict[float, EdgeCertifier] = {}
         self._exempted: dict[str, frozenset[int]] = {}   # per mode, the pairs exempt() has switched off
+        self._contacts: dict[tuple[Any, ...], tuple[int, ...]] = {}   # grasp_contacts' answers
 
     def _native_backend(self, kernel: str) -> NativeValidity | None:
         """The native kernel for ``kernel == "native"`` (None for "coal", or when it cannot be built)."""
@@ -321,6 +322,18 @@ class ValidityChecker(EdgeSweepMixin):
         excl = set(self.object.exclude_links)
         if not excl:
             return ()
+        # a regrasp asks at its ends, and verify_path again at the same ends: the answer per configuration, pose
+        # and exempted pairs (the pairs it reads) is kept (a few hundred at most)
+        key = (np.asarray(q, float).tobytes(), object_pose.homogeneous.tobytes(), self._exempted.get("fixed", frozenset()))
+        got = self._contacts.get(key)
+        if got is not None:
+            return got
+        if len(self._contacts) >= 256:
+            self._contacts.clear()
+        got = self._contacts[key] = self._grasp_contacts(q, object_pose, excl)
+        return got
+
+    def _grasp_contacts(self, q: np.ndarray, object_pose: pin.SE3, excl: set[str]) -> tuple[int, ...]:
         gd = self._gd["fixed"]
         pin.updateGeometryPlacements(self.model, self.data, self.gmodel, gd, q)
         gd.oMg[self.fixed_id] = object_pose
