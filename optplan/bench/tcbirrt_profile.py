@@ -24,6 +24,9 @@ __all__ = ["FAMILIES", "profile_queries", "families", "format_families"]
 #: "self" (time spent in the function itself); several rows of one label add up
 FAMILIES: tuple[tuple[str, str, str, str], ...] = (
     ("whole queries (TCBiRRT._plan)", "cum", "planners/tcbirrt.py", "_plan"),
+    ("set-up: end-point checks (check_endpoint)", "cum", "planners/tcbirrt.py", "check_endpoint"),
+    ("set-up: the query's sampler (TCBiRRT._sampler)", "cum", "planners/tcbirrt.py", "_sampler"),
+    ("result packing (ExtractPath)", "cum", "planners/tcbirrt_tree.py", "extract_path"),
     ("constrained extensions (Alg. 2, with the connection regrasps)", "cum", "planners/tcbirrt.py", "constrained_extend"),
     ("  native extension calls, self time (C)", "self", "planners/kernel/extend.py", "extend_prefix"),
     ("  native extension calls, self time (C)", "self", "planners/kernel/extend.py", "extend"),
