@@ -57,7 +57,7 @@ typedef struct {
     double margin;
     /* the broad phase (nstat = 0: none, the pair loop alone). Moving geometries (parent joint != 0) in
        groups (a few consecutive links of a chain); static ones (parent joint 0) with their world AABB
-       inflated by margin + KEPS. A check without an override: the AABB of each group, then of each
+       inflated by margin + KEPS. A check (also one placing a static geometry: its box made per call, scol): the AABB of each group, then of each
        moving geometry, against every static AABB (branch-free loops over the statics), the exact test
        only where the boxes overlap; then the remaining pairs (moving-moving) in their order. */
     int nmov, nstat, ngrp, nrest;
