@@ -103,6 +103,11 @@ class TCBiRRTOptions:
                                                                                  shortcut_iterations=50))
     #: Time limit per regrasp attempt [s].
     regrasp_time_limit: float = 2.0
+    #: A regrasp motion's RRT-Connect gives up when one of its two trees has added no node for this many
+    #: iterations [count] (0: ``regrasp.stall_iterations``, by default never): the moving arm's start or goal is
+    #: walled in, and the search would otherwise spend the whole ``regrasp_time_limit`` (or ``graft_time_limit``)
+    #: failing; the counter ``regrasp_stalled`` counts such motions.
+    regrasp_stall_iterations: int = 0
     #: When neither one-arm-at-a-time order of a regrasp passes, move both arms at once (RRTConnect in the two
     #: arms' joints, the object standing still at its pose: a released object in orbit stays where it is), in
     #: what is left of the regrasp's time (None: the variant's value, :data:`VARIANTS`: off in both; a path with such a
@@ -302,10 +307,10 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.domain_tries: expected an int >= 1, got {self.domain_tries!r}")
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
-        for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds", "frontier_grafts", "frontier_interval",
-                     "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count",
+        for name in ("regrasp_stall_iterations", "branch_grafts", "graft_after", "graft_interval", "graft_seeds",
+                     "frontier_grafts", "frontier_interval", "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count",
                      "restart_iterations"):
-            v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after", "frontier_grafts", "stall_iterations",
+            v, low = getattr(self, name), (0 if name in ("regrasp_stall_iterations", "branch_grafts", "graft_after", "frontier_grafts", "stall_iterations",
                                                          "trap_grafts", "restart_iterations") else 1)
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
