@@ -143,6 +143,10 @@ class TCBiRRTOptions:
     graft_seeds: int = 4
     #: A graft may also move one arm only to its new IK solution (the other keeps its own) [bool].
     graft_single_arm: bool = False
+    #: A branch graft does not regrasp from a node to a joint solution within ``graft_min_distance`` of one whose
+    #: regrasp from that node already failed (the same branch: the same search again, which fails again at
+    #: ``graft_time_limit``); counted as ``graft_repeats_skipped`` [bool].
+    graft_skip_failed: bool = False
     #: Seed a graft's IK first with the other tree's branches — its root's configuration and its own grafts' — before
     #: the configuration nearest in ξ (the other tree's branch is usually free away from where the trees meet, where
     #: the nearest configuration's IK solution collides) [bool].
@@ -330,7 +334,7 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
-                     "regrasp_share_orders", "verify_path", "graft_single_arm", "regrasp_both_arms", "regrasp_backoff", "root_grafts_first",
+                     "regrasp_share_orders", "verify_path", "graft_single_arm", "graft_skip_failed", "regrasp_both_arms", "regrasp_backoff", "root_grafts_first",
                      "graft_branch_seeds", "branch_roots", "restart_branch_roots", "filter_robot_body"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")
