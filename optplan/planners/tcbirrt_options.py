@@ -145,8 +145,9 @@ class TCBiRRTOptions:
     graft_single_arm: bool = False
     #: A branch graft does not regrasp from a node to a joint solution within ``graft_min_distance`` of one whose
     #: regrasp from that node already failed (the same branch: the same search again, which fails again at
-    #: ``graft_time_limit``); counted as ``graft_repeats_skipped`` [bool].
-    graft_skip_failed: bool = False
+    #: ``graft_time_limit``); counted as ``graft_repeats_skipped`` [bool] (on by a rule stated before its measurement:
+    #: decision 0019, addendum 2026-11-29).
+    graft_skip_failed: bool = True
     #: Seed a graft's IK first with the other tree's branches — its root's configuration and its own grafts' — before
     #: the configuration nearest in ξ (the other tree's branch is usually free away from where the trees meet, where
     #: the nearest configuration's IK solution collides) [bool].
