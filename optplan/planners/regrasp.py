@@ -9,6 +9,7 @@ closed-chain kinematics, validity checker and sweep weights.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any, cast
 
 import numpy as np
@@ -113,13 +114,18 @@ class RegraspMixin:
     def _regrasp_motion(self, cur: np.ndarray, q_to: np.ndarray, idx: np.ndarray, M: pin.SE3, rng: np.random.Generator,
                         sub: Deadline, st: dict[str, Any]) -> list[np.ndarray] | None:
         """The joints ``idx`` from ``cur`` to ``q_to[idx]`` (the others still, the object fixed at M) by
-        RRTConnect + shortcuts (:func:`.joint_space_path`: one native call when the checks are native), its edges re-checked at ``edge_tolerance``: the full configurations, or None."""
+        RRTConnect + shortcuts (:func:`.joint_space_path`: one native call when the checks are native; it gives up
+        early when a tree stalls, ``regrasp_stall_iterations``), its edges re-checked at ``edge_tolerance``: the
+        full configurations, or None."""
         o, ck = self.options, self.checker
         valid = ck.validity("fixed", M, base=cur, joints=idx)   # these joints move, the rest and the object stand still
         rs: dict[str, Any] = {}
         lo, hi = self.robot.lower, self.robot.upper
-        sub_path = joint_space_path(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub, o.regrasp, rs)
+        ro = o.regrasp if not o.regrasp_stall_iterations else replace(o.regrasp, stall_iterations=o.regrasp_stall_iterations)
+        sub_path = joint_space_path(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub, ro, rs)
         st["regrasp_nodes"] += rs.get("nodes", 0)
+        if rs.get("stalled"):
+            st["regrasp_stalled"] = st.get("regrasp_stalled", 0) + 1
         if sub_path is None:
             return None
         if o.edge_tolerance and not all(   # the found motion re-checked at the sweep bound of these joints

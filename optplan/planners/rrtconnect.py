@@ -40,6 +40,9 @@ class RRTConnectOptions:
     resolution: float = 0.03
     #: Cap on sample iterations [count] (0: only the time limit).
     max_iterations: int = 0
+    #: Give up when one of the two trees has added no node for this many iterations [count] (0: never): its
+    #: root is walled in (a pocket the tree cannot leave), and the search would run to its time limit.
+    stall_iterations: int = 0
     #: Random shortcut attempts on the found path [count] (0: the raw tree path).
     shortcut_iterations: int = 100
     #: Clearance counted as contact by the validity checker [m].
@@ -61,7 +64,7 @@ class RRTConnectOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"RRTConnectOptions.{name}: expected a positive number, got {v!r}")
-        for name in ("max_iterations", "shortcut_iterations"):
+        for name in ("max_iterations", "stall_iterations", "shortcut_iterations"):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 0):
                 raise ValueError(f"RRTConnectOptions.{name}: expected an int >= 0, got {v!r}")
@@ -124,14 +127,14 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
                 is_valid: Callable[[np.ndarray], bool], rng: np.random.Generator, deadline: Deadline, *,
                 range_: float = 1.0, resolution: float = 0.03, max_iterations: int = 0,
                 stats: dict[str, Any] | None = None, weights: np.ndarray | None = None,
-                sampler: str = "uniform") -> list[np.ndarray] | None:
+                sampler: str = "uniform", stall_iterations: int = 0) -> list[np.ndarray] | None:
     """RRTConnect between two valid points of the box ``[lower, upper]``, its samples drawn by ``sampler``
     (:attr:`RRTConnectOptions.sampler`).
 
     Returns the list of tree nodes from ``start`` to ``goal`` (consecutive nodes joined by valid
     straight edges, checked as :func:`edge_is_valid` with ``resolution`` and ``weights``) or None
-    (deadline / iteration cap). ``stats`` (optional dict) receives
-    ``iterations`` and ``nodes``.
+    (deadline / iteration cap / ``stall_iterations`` > 0 iterations in which one tree added no node).
+    ``stats`` (optional dict) receives ``iterations``, ``nodes`` and, when the search stalled, ``stalled``.
     """
     start = np.asarray(start, float)
     goal = np.asarray(goal, float)
@@ -160,7 +163,15 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
         return res, tree.add(xnew, i)
 
     found = None
+    grew, n_prev = [0, 0], [1, 1]   # the last iteration each tree (start's, goal's) grew; its size then
     while not deadline.expired() and (max_iterations <= 0 or it < max_iterations):
+        if it > 0 and stall_iterations > 0:
+            for k, t in enumerate((ta, tb) if a_is_start else (tb, ta)):
+                if t.n != n_prev[k]:
+                    grew[k], n_prev[k] = it, t.n
+            if it - min(grew) >= stall_iterations:
+                stats["stalled"] = stats.get("stalled", 0) + 1
+                break
         it += 1
         xr = rng.uniform(lower, upper) if shift is None else lower + (upper - lower) * halton_point(it, shift)
         res, ia = extend(ta, xr)
@@ -219,17 +230,21 @@ def joint_space_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upp
 
         got = native_rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range,
                                  resolution=o.resolution, max_iterations=o.max_iterations,
+                                 stall_iterations=o.stall_iterations,
                                  shortcut_iterations=o.shortcut_iterations, sampler=o.sampler)
         if got is not None:
             stats["search"] = "native"
             stats["iterations"] = stats.get("iterations", 0) + got.iterations
             stats["nodes"] = stats.get("nodes", 0) + got.nodes
-            if got.status not in ("found", "iteration cap", "time limit"):
+            if got.status == "stalled":
+                stats["stalled"] = stats.get("stalled", 0) + 1
+            elif got.status not in ("found", "iteration cap", "time limit"):
                 log.warning("native RRT-Connect stopped: %s", got.status)
             return got.path
     stats["search"] = "python"
     path = rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range, resolution=o.resolution,
-                       max_iterations=o.max_iterations, stats=stats, sampler=o.sampler)
+                       max_iterations=o.max_iterations, stats=stats, sampler=o.sampler,
+                       stall_iterations=o.stall_iterations)
     if path is not None and o.shortcut_iterations:
         path = shortcut_path(path, validity, o.resolution, rng, o.shortcut_iterations)
     return path

@@ -187,9 +187,15 @@ class BranchMixin(RegraspMixin):
                     continue
                 if any(float(np.linalg.norm(tree.q[j] - y)) < o.graft_min_distance for j in tree.twins.get(i, ())):
                     continue   # a branch this pose already has
+                if o.graft_skip_failed and any(float(np.linalg.norm(f - y)) < o.graft_min_distance
+                                               for f in tree.failed_grafts.get(i, ())):
+                    st["graft_repeats_skipped"] = st.get("graft_repeats_skipped", 0) + 1
+                    continue   # a branch this node's regrasp already failed to reach
                 reg = self.regrasp(q_i, y, R, p, rng, deadline.sub(o.graft_time_limit), st)
                 if reg is None:
                     st["graft_regrasp_failures"] = st.get("graft_regrasp_failures", 0) + 1
+                    if o.graft_skip_failed:
+                        tree.failed_grafts.setdefault(i, []).append(y.copy())
                     continue
                 st["grafts"] += 1   # its regrasp motions are verified (verify_path) once on a start-goal path
                 return tree.add_graft(i, y, reg)

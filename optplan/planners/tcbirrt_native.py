@@ -90,7 +90,9 @@ def loop_extend(pl: TCBiRRT, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1:
     ext = cast("NativeExtender", pl._ext)
     P, Q, k = ext.extend_prefix(R0, p0, R1, p1, pl.options.n_interp, q_near, prefix)
     _merge(st, ext)
-    return pose_list(P), (None if k < 0 else list(Q[:k]))
+    if k <= 0:   # trapped (most extensions on the hard scenes): the caller reads no pose
+        return [], (None if k < 0 else [])
+    return pose_list(P), list(Q[:k])
 
 
 def native_path_ik(pl: TCBiRRT, P: np.ndarray, q_near: np.ndarray, st: dict[str, Any], prefix: bool = False,

@@ -103,6 +103,11 @@ class TCBiRRTOptions:
                                                                                  shortcut_iterations=50))
     #: Time limit per regrasp attempt [s].
     regrasp_time_limit: float = 2.0
+    #: A regrasp motion's RRT-Connect gives up when one of its two trees has added no node for this many
+    #: iterations [count] (0: ``regrasp.stall_iterations``, by default never): the moving arm's start or goal is
+    #: walled in, and the search would otherwise spend the whole ``regrasp_time_limit`` (or ``graft_time_limit``)
+    #: failing; the counter ``regrasp_stalled`` counts such motions.
+    regrasp_stall_iterations: int = 0
     #: When neither one-arm-at-a-time order of a regrasp passes, move both arms at once (RRTConnect in the two
     #: arms' joints, the object standing still at its pose: a released object in orbit stays where it is), in
     #: what is left of the regrasp's time (None: the variant's value, :data:`VARIANTS`: off in both; a path with such a
@@ -138,6 +143,11 @@ class TCBiRRTOptions:
     graft_seeds: int = 4
     #: A graft may also move one arm only to its new IK solution (the other keeps its own) [bool].
     graft_single_arm: bool = False
+    #: A branch graft does not regrasp from a node to a joint solution within ``graft_min_distance`` of one whose
+    #: regrasp from that node already failed (the same branch: the same search again, which fails again at
+    #: ``graft_time_limit``); counted as ``graft_repeats_skipped`` [bool] (on by a rule stated before its measurement:
+    #: decision 0019, addendum 2026-11-29).
+    graft_skip_failed: bool = True
     #: Seed a graft's IK first with the other tree's branches — its root's configuration and its own grafts' — before
     #: the configuration nearest in ξ (the other tree's branch is usually free away from where the trees meet, where
     #: the nearest configuration's IK solution collides) [bool].
@@ -302,10 +312,10 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.domain_tries: expected an int >= 1, got {self.domain_tries!r}")
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
-        for name in ("branch_grafts", "graft_after", "graft_interval", "graft_seeds", "frontier_grafts", "frontier_interval",
-                     "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count",
+        for name in ("regrasp_stall_iterations", "branch_grafts", "graft_after", "graft_interval", "graft_seeds",
+                     "frontier_grafts", "frontier_interval", "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count",
                      "restart_iterations"):
-            v, low = getattr(self, name), (0 if name in ("branch_grafts", "graft_after", "frontier_grafts", "stall_iterations",
+            v, low = getattr(self, name), (0 if name in ("regrasp_stall_iterations", "branch_grafts", "graft_after", "frontier_grafts", "stall_iterations",
                                                          "trap_grafts", "restart_iterations") else 1)
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
@@ -325,7 +335,7 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.joint_connect_options: expected CBiRRT2Options, "
                              f"got {type(self.joint_connect_options).__name__}")
         for name in ("sample_filter", "keep_prefix", "scale_to_reach", "lazy_edges", "joint_connect",
-                     "regrasp_share_orders", "verify_path", "graft_single_arm", "regrasp_both_arms", "regrasp_backoff", "root_grafts_first",
+                     "regrasp_share_orders", "verify_path", "graft_single_arm", "graft_skip_failed", "regrasp_both_arms", "regrasp_backoff", "root_grafts_first",
                      "graft_branch_seeds", "branch_roots", "restart_branch_roots", "filter_robot_body"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected True/False, got {getattr(self, name)!r}")

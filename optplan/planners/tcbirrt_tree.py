@@ -36,6 +36,8 @@ class _TaskTree(Tree):
         self.twins: dict[int, list[int]] = {}
         #: node → the twin an extension from that pose grows from (``branch_roots``: the root's shared-branch graft)
         self.prefer: dict[int, int] = {}
+        #: node → the joint solutions a branch graft's regrasp from it failed to reach (``graft_skip_failed``)
+        self.failed_grafts: dict[int, list[np.ndarray]] = {}
 
     @property
     def xi(self) -> np.ndarray:

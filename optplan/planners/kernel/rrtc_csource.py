@@ -25,6 +25,9 @@ What it computes (the algorithm of :func:`optplan.planners.rrtconnect.rrt_connec
   verdicts, with the forward kinematics of the moving chain only);
 * an edge a → b is checked at ``n = max(1, ceil(max_j |b_j - a_j| / resolution))`` steps: the end b
   first, then the interior points ``a + (k/n)(b - a)`` in coarse-to-fine (bisection) order;
+* with ``stall_iterations`` > 0 the search gives up (status 5, "stalled") when one of the two trees has
+  added no node for that many iterations (the goal or the start of the moving arm walled in: its tree
+  cannot leave a pocket, while the other fills the free space; a check of two counters per iteration);
 * the time limit is an end time on ``CLOCK_MONOTONIC`` (Python's ``time.perf_counter``) or
   ``CLOCK_PROCESS_CPUTIME_ID`` (``time.process_time``), read every 8 iterations / connection steps.
 """
@@ -33,7 +36,7 @@ from __future__ import annotations
 __all__ = ["RRTC_SOURCE", "RRTC_STATUS"]
 
 #: the status codes of ``rrtc_plan`` (its return value)
-RRTC_STATUS = {0: "found", 1: "iteration cap", 2: "time limit", 3: "node cap", 4: "out of memory",
+RRTC_STATUS = {0: "found", 1: "iteration cap", 2: "time limit", 3: "node cap", 4: "out of memory", 5: "stalled",
                -2: "model too large for the kernel"}
 
 RRTC_SOURCE = r"""
@@ -331,15 +334,18 @@ void rrtc_free(void *p) { free(p); }
 
 /* One RRT-Connect query with shortcuts. Returns a status (RRTC_STATUS in Python); on success *path_out
    (free with rrtc_free) holds *path_len configurations of dim values, start to goal.
-   stats[0] iterations, stats[1] nodes of both trees, stats[2] configurations checked. */
+   stats[0] iterations, stats[1] nodes of both trees, stats[2] configurations checked, stats[3] and stats[4]
+   the nodes of the start's and the goal's tree, stats[5] the longest run of iterations in which one tree
+   added no node (up to the last iteration). With stall_iterations > 0 the search stops (status 5) when
+   that run reaches stall_iterations. */
 int rrtc_plan(const kmodel *m, const unsigned char *active, const double *override_pose, int override_g,
               const rrtc_groups *grp, int dim, const int *jidx, const double *base, const double *start, const double *goal,
               const double *lower, const double *upper, double range, double resolution,
-              long long max_iterations, long long max_nodes, int shortcut_iterations,
+              long long max_iterations, long long max_nodes, long long stall_iterations, int shortcut_iterations,
               int clock_kind, double end_time, unsigned long long seed, int sampler,
               double **path_out, int *path_len, long long *stats) {
     *path_out = NULL; *path_len = 0;
-    stats[0] = stats[1] = stats[2] = 0;
+    stats[0] = stats[1] = stats[2] = stats[3] = stats[4] = stats[5] = 0;
     if (m->nj > KMAXJ || m->ng > KMAXG || m->nq > KMAXJ || dim > KMAXJ) return -2;
     if (sampler && dim > RRTC_NPRIMES) return -2;
     rrtc_ctx c;
@@ -374,13 +380,21 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
         if (rrtc_tree_init(&ta, dim, start) || rrtc_tree_init(&tb, dim, goal)) goto done;
         rrtc_tree *A = &ta, *B = &tb;
         int a_is_start = 1, fa = -1, fb = -1;
-        long long it = 0;
+        long long it = 0, grew_a = 0, grew_b = 0, longest = 0;   /* the last iteration each tree grew */
+        int na_prev = 1, nb_prev = 1;
         double hshift[RRTC_NPRIMES];   /* sampler 1: the Halton points shifted by one uniform vector (mod 1) */
         if (sampler) for (int k = 0; k < dim; ++k) hshift[k] = rrtc_uniform(&rng);
         status = 2;
         while (!rrtc_expired(&c)) {
             if (max_iterations > 0 && it >= max_iterations) { status = 1; break; }
             if (ta.n + tb.n >= max_nodes) { status = 3; break; }
+            if (it > 0) {   /* did each tree grow in iteration it? */
+                if (ta.n != na_prev) { grew_a = it; na_prev = ta.n; }
+                if (tb.n != nb_prev) { grew_b = it; nb_prev = tb.n; }
+                long long run = it - (grew_a < grew_b ? grew_a : grew_b);
+                if (run > longest) longest = run;
+                if (stall_iterations > 0 && run >= stall_iterations) { status = 5; break; }
+            }
             it++;
             for (int k = 0; k < dim; ++k) {
                 double u = sampler ? rrtc_radical_inverse(rrtc_primes[k], (unsigned long long)it) + hshift[k] : rrtc_uniform(&rng);
@@ -405,6 +419,7 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
         }
         stats[0] = it;
         stats[1] = ta.n + tb.n;
+        stats[3] = ta.n; stats[4] = tb.n; stats[5] = longest;
         if (status == 0) {
             idx = (int *)malloc(sizeof(int) * (size_t)(ta.n + tb.n));
             path = (double *)malloc(sizeof(double) * (size_t)dim * (size_t)(ta.n + tb.n));
