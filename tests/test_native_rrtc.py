@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from native_rrtc_case import native_or_skip, one_arm_case
 
 from optplan.planners import make_planner
 from optplan.planners.base import Deadline
@@ -15,18 +16,6 @@ from optplan.scene import Scene
 from optplan.trials import TrialGenerator
 
 FINE = 0.004   # [rad] the coal re-check's step, 7.5x finer than the planners' 0.03 rad
-
-
-def _native_or_skip(ck: ValidityChecker) -> None:
-    from optplan.planners.kernel import KernelUnavailable
-    from optplan.planners.kernel.rrtc import load_rrtc_library
-
-    if ck.kernel != "native":
-        pytest.skip("no native kernel here")
-    try:
-        load_rrtc_library()
-    except KernelUnavailable as e:
-        pytest.skip(str(e))
 
 
 def _coal_valid_path(robot, scene, P, mode="free", pose=None, base=None, joints=None) -> bool:
@@ -42,7 +31,7 @@ def test_paths_are_valid_by_coal(tcb, scene_name, native):
     sc = Scene.load(scene_name)
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     pl = make_planner("rrtconnect", tcb, sc, max_iterations=3000, native_search=native)
-    _native_or_skip(pl.checker)
+    native_or_skip(pl.checker)
     for seed in range(3):
         res = pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=seed)
         assert res.status.value == "exact" and res.stats["search"] == ("native" if native else "python")
@@ -55,7 +44,7 @@ def test_same_seed_same_search_and_a_different_seed_another(tcb):
     sc = Scene.load("hard_bay")
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     pl = make_planner("rrtconnect", tcb, sc, max_iterations=3000)
-    _native_or_skip(pl.checker)
+    native_or_skip(pl.checker)
     a, b, c = (pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=s) for s in (5, 5, 6))
     assert a.stats["nodes"] == b.stats["nodes"] and np.array_equal(a.path, b.path)
     assert not (a.path.shape == c.path.shape and np.array_equal(a.path, c.path))
@@ -70,7 +59,7 @@ def test_success_statistics_match_the_python_search(tcb):
     for native in (True, False):
         pl = make_planner("rrtconnect", tcb, sc, max_iterations=15, shortcut_iterations=0, native_search=native)
         if native:
-            _native_or_skip(pl.checker)
+            native_or_skip(pl.checker)
         res = [pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=s) for s in range(120)]
         assert {r.stats["search"] for r in res} == {"native" if native else "python"}
         rates[native] = np.mean([r.status.value == "exact" for r in res])
@@ -84,17 +73,7 @@ def test_regrasp_subspace_with_the_object_fixed(tcb):
     the arm's joints is valid by coal in the same mode."""
     from optplan.planners.kernel.rrtc import native_rrt_connect
 
-    sc = Scene.load("ssps_scene1")
-    tr = TrialGenerator(tcb, sc).generate(0, 0)
-    ck = ValidityChecker(tcb, sc)
-    _native_or_skip(ck)
-    from optplan.constraints.closed_chain import ClosedChainKinematics
-
-    kin = ClosedChainKinematics(tcb, sc.object.grasps)
-    idx = np.asarray(kin.idx[0])
-    M = tr.object_start
-    base = tr.q_start.copy()
-    rng = np.random.default_rng(0)
+    sc, tr, ck, idx, M, base, rng = one_arm_case(tcb, "ssps_scene1", 0)
     coal_ck = ValidityChecker(tcb, sc, kernel="coal")
     pairs = tuple(sorted(ck.grasp_contacts(base, M)))   # the hands touch the object at their grasps
     with ck.exempt(pairs), coal_ck.exempt(pairs):
@@ -122,7 +101,7 @@ def test_statuses_iteration_cap_and_time_limit(tcb):
     sc = Scene.load("hard_window")
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     ck = ValidityChecker(tcb, sc)
-    _native_or_skip(ck)
+    native_or_skip(ck)
     f = ck.validity("free")
     a = native_rrt_connect(tr.q_start, tr.q_goal, tcb.lower, tcb.upper, f, np.random.default_rng(0), Deadline(60.0),
                            range_=1.0, resolution=0.03, max_iterations=3)
@@ -155,7 +134,7 @@ def test_tcbirrt_regrasps_run_natively(tcb):
     sc = Scene.load("ssps_scene1")
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     pl = make_planner("tcbirrt", tcb, sc, variant="improved", max_iterations=1000)
-    _native_or_skip(pl.checker)
+    native_or_skip(pl.checker)
     calls = []
     import optplan.planners.kernel.rrtc as rrtc
 
@@ -187,7 +166,7 @@ def test_single_panda_queries_solved_and_valid():
     assert robot.nq == 7
     for kind in ("cage", "boxes"):
         (sc, ck), = queries(robot, kind, 1, seed=0)
-        _native_or_skip(ck)
+        native_or_skip(ck)
         r = run_optplan(robot, sc, ck, 0, native=True, shortcut_iterations=20)
         assert r["status"] == "exact" and r["search"] == "native"
         assert np.allclose(r["path"][0], START) and np.allclose(r["path"][-1], GOAL)
@@ -226,7 +205,7 @@ def test_broad_phase_gives_the_kernels_and_coals_verdicts(tcb, mode):
     sc = Scene.load("hard_clutter_dense")
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     ck = ValidityChecker(tcb, sc)
-    _native_or_skip(ck)
+    native_or_skip(ck)
     rng = np.random.default_rng(7)
     X = np.vstack([rng.uniform(tcb.lower, tcb.upper, (1500, tcb.nq)),
                    tr.q_start + rng.normal(0.0, 0.15, (1500, tcb.nq))])
@@ -264,7 +243,7 @@ def test_halton_sampler_paths_valid_and_seeded(tcb, native):
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     pl = make_planner("rrtconnect", tcb, sc, max_iterations=3000, sampler="halton", native_search=native)
     if native:
-        _native_or_skip(pl.checker)
+        native_or_skip(pl.checker)
     a, b, c = (pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=s) for s in (5, 5, 6))
     for r in (a, c):
         assert r.status.value == "exact" and r.stats["search"] == ("native" if native else "python")
@@ -297,7 +276,7 @@ def test_static_part_gives_the_same_search(tcb, collide_static):
         sc = dataclasses.replace(sc, obstacles=(*sc.obstacles, Obstacle(
             "on_still_arm", "sphere", pin.SE3(np.eye(3), data.oMi[j].translation), radius=0.05)))
     ck = ValidityChecker(tcb, sc)
-    _native_or_skip(ck)
+    native_or_skip(ck)
     idx = np.asarray(kin.idx[0])
     M = tr.object_start
     flag = ctypes.c_int.in_dll(load_rrtc_library(), "rrtc_use_static_part")

@@ -6,43 +6,23 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from native_rrtc_case import native_or_skip, one_arm_case
 
 from optplan.planners import make_planner
 from optplan.planners.base import Deadline
 from optplan.planners.rrtconnect import RRTConnectOptions, rrt_connect
 from optplan.planners.tcbirrt_options import TCBiRRTOptions
-from optplan.planners.validity import ValidityChecker
 from optplan.scene import Scene
 from optplan.trials import TrialGenerator
-
-
-def _native_or_skip(ck: ValidityChecker) -> None:
-    from optplan.planners.kernel import KernelUnavailable
-    from optplan.planners.kernel.rrtc import load_rrtc_library
-
-    if ck.kernel != "native":
-        pytest.skip("no native kernel here")
-    try:
-        load_rrtc_library()
-    except KernelUnavailable as e:
-        pytest.skip(str(e))
 
 
 def test_native_stall_stop_is_the_same_search_below_the_longest_stall_and_stops_at_it(tcb):
     """The regrasp's kind of query (one arm moving, the rest and the object still) on hard_truss: with the stop
     one iteration above the search's own longest stall the result is identical; at the longest stall the search
     ends "stalled" after fewer iterations, without a path."""
-    from optplan.constraints.closed_chain import ClosedChainKinematics
     from optplan.planners.kernel.rrtc import native_rrt_connect
 
-    sc = Scene.load("hard_truss")
-    tr = TrialGenerator(tcb, sc).generate(0, 0)
-    ck = ValidityChecker(tcb, sc)
-    _native_or_skip(ck)
-    kin = ClosedChainKinematics(tcb, sc.object.grasps)
-    idx = np.asarray(kin.idx[0])
-    M, base = tr.object_start, tr.q_start.copy()
-    rng = np.random.default_rng(1)
+    sc, tr, ck, idx, M, base, rng = one_arm_case(tcb, "hard_truss", 1)
     with ck.exempt(tuple(sorted(ck.grasp_contacts(base, M)))):
         f = ck.validity("fixed", M, base=base, joints=idx)
         goals = []
@@ -121,7 +101,7 @@ def test_a_stalled_regrasp_is_a_failed_regrasp_not_an_error(tcb):
     sc = Scene.load("hard_bay")
     tr = TrialGenerator(tcb, sc).generate(2, 0)
     pl = make_planner("tcbirrt", tcb, sc, variant="improved", regrasp_stall_iterations=1)
-    _native_or_skip(pl.checker)
+    native_or_skip(pl.checker)
     res = pl.plan(tr.q_start, tr.q_goal, time_limit=1.0, seed=tr.seed, clock="cpu")
     st = res.stats
     assert res.status.value in ("exact", "timeout", "failed")
