@@ -116,6 +116,7 @@ Deviations from the paper, all options (defaults in brackets):
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Sequence
 from typing import Any, cast
 
@@ -256,7 +257,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         step = self.step_size if step is None else step
         xi_near = tree.xi[i_near]
         d = xi_rand - xi_near
-        dist = float(np.sqrt(d @ d))
+        dist = math.sqrt(d @ d)   # the float np.sqrt gives (both round the square root correctly)
         if dist <= step:
             xi_s, reach = xi_rand.copy(), True           # ξ_s = ξ_rand exactly
         else:
@@ -266,7 +267,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         q_near = tree.q[i_near]
         if dist > 0.0:
             if self._nrng is not None and self._ext is not None and self._ext.edge_on and o.interpolation == "geodesic":
-                poses, Q = loop_extend(self, R0, p0, Rs, ps, q_near, st, cast(bool, o.keep_prefix))   # restarts in C
+                poses, Q = loop_extend(self, R0, p0, Rs, ps, q_near, st, o.keep_prefix)   # type: ignore[arg-type]  # restarts in C
             elif self._ext is not None and o.interpolation == "geodesic":   # one native call
                 poses, Q = native_extend(self, R0, p0, Rs, ps, q_near, st, cast(bool, o.keep_prefix))
             else:

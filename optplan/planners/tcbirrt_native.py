@@ -61,7 +61,7 @@ def _merge(st: dict[str, Any], ext: NativeExtender) -> None:
     """The native counters into the planner's statistics (and the checks into the checker's count); reset."""
     cnt = ext.cnt
     c = cnt.tolist()
-    cnt[:] = 0
+    cnt.fill(0)
     st["ik_calls"] += c[0]
     st["ik_iterations"] += c[1]
     st["ik_failures"] += c[2]
@@ -87,7 +87,7 @@ def loop_extend(pl: TCBiRRT, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1:
                 st: dict[str, Any], prefix: bool) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray] | None]:
     """:func:`native_extend` in one call for ``extension="loop"`` (restarts in C, Jacobian-spaced edges):
     ``(poses, configurations)`` as the Python code returns them."""
-    ext = cast("NativeExtender", pl._ext)
+    ext: NativeExtender = pl._ext   # type: ignore[assignment]  # set when the loop runs (no cast per call)
     P, Q, k = ext.extend_prefix(R0, p0, R1, p1, pl.options.n_interp, q_near, prefix)
     _merge(st, ext)
     if k <= 0:   # trapped (most extensions on the hard scenes): the caller reads no pose

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from ...codegen import build_library, cache_dir
+from .addresses import AddressCache
 from .csource import C_SOURCE
 from .extend_csource import EXTEND_SOURCE
 from .ik_csource import IK_SOURCE
@@ -151,8 +152,11 @@ def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = Non
     if X.dtype != np.float64 or not X.flags.c_contiguous or X.ndim != 2 or x.size != X.shape[1] or not 0 <= n <= len(X):
         raise ValueError(f"nearest: expected a C-contiguous float64 array of rows of {x.size} values and "
                          f"0 <= n <= {len(X)}, got {X.dtype} {X.shape} and n = {n}")
-    ap = None if alive is None else alive.ctypes.data
-    return int(lib.tcb_nearest(X.ctypes.data, n, x.size, ap, x.ctypes.data))
+    return int(lib.tcb_nearest(_ADDR(X), n, x.size, _ADDR(alive), x.ctypes.data))
+
+
+#: the trees' key arrays and masks, passed to :func:`nearest` at every call
+_ADDR = AddressCache()
 
 
 class _Filt(ctypes.Structure):
@@ -289,6 +293,9 @@ class NativeExtender:
         self._qn = np.zeros(self.nq)
         self._bufs = [ctypes.addressof(x) if isinstance(x, ctypes.Structure) else x.ctypes.data
                       for x in (self._R0, self._p0, self._R1, self._p1, self._qn)]
+        self._R0m, self._R1m = self._R0.reshape(3, 3), self._R1.reshape(3, 3)   # views: no reshape per call
+        #: :meth:`extend_prefix`'s output arrays and their addresses while no caller holds them (None: make new)
+        self._out: tuple[np.ndarray, np.ndarray, int, int] | None = None
 
     @property
     def native_ik(self) -> bool:
@@ -332,12 +339,22 @@ class NativeExtender:
     def _load(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, q_near: np.ndarray,
               n: int) -> tuple[np.ndarray, np.ndarray]:
         """The end poses and ``q_near`` into the call's buffers; fresh outputs ``P`` (n × 12), ``Q`` (n × nq)."""
-        self._R0[:] = R0.reshape(9)
+        self._fill(R0, p0, R1, p1, q_near)
+        return np.empty((n, 12)), np.empty((n, self.nq))
+
+    def _fill(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, q_near: np.ndarray) -> None:
+        """The end poses (3 × 3 or 9 rotation values, row-major) and ``q_near`` into the call's buffers."""
+        if R0.shape == (3, 3):
+            self._R0m[:] = R0
+        else:
+            self._R0[:] = R0.reshape(9)
         self._p0[:] = p0
-        self._R1[:] = R1.reshape(9)
+        if R1.shape == (3, 3):
+            self._R1m[:] = R1
+        else:
+            self._R1[:] = R1.reshape(9)
         self._p1[:] = p1
         self._qn[:] = q_near
-        return np.empty((n, 12)), np.empty((n, self.nq))
 
     def extend(self, R0: np.ndarray, p0: np.ndarray, R1: np.ndarray, p1: np.ndarray, n: int,
                q_near: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]:
@@ -358,12 +375,19 @@ class NativeExtender:
         """:meth:`extend` with the restarts in C (:meth:`restarts_in_c`) and the edges of the accepted
         configurations checked: ``(P, Q, k)`` with ``Q[:k]`` the configurations kept (with ``prefix``: the valid
         prefix, ``k`` possibly 0; without it ``k`` is n, or −1 when the extension fails)."""
-        P, Q = self._load(R0, p0, R1, p1, q_near, n)
+        self._fill(R0, p0, R1, p1, q_near)
+        out = self._out
+        if out is None or out[0].shape[0] != n:
+            P, Q = np.empty((n, 12)), np.empty((n, self.nq))
+            out = (P, Q, P.ctypes.data, Q.ctypes.data)
+        P, Q, pp, qp = out
         a = self._bufs
-        k = self.lib.tcb_extend_prefix(self._cp, a[0], a[1], a[2], a[3], n, a[4], P.ctypes.data, Q.ctypes.data,
-                                       self._cnt_p, int(prefix))
+        k = self.lib.tcb_extend_prefix(self._cp, a[0], a[1], a[2], a[3], n, a[4], pp, qp, self._cnt_p, int(prefix))
         if k < -1:
             raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
+        # kept for the next call only when no configuration is returned (k ≤ 0: a trapped extension, whose
+        # arrays the caller reads no further); else the caller owns them and the next call makes new ones
+        self._out = out if k <= 0 else None
         return P, Q, int(k)
 
     def path_ik(self, P: np.ndarray, j0: int, q_prev: np.ndarray, Q: np.ndarray) -> int:

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .addresses import AddressCache
 from .native import KernelUnavailable
 from .sampler_csource import SAMPLER_STATS
 
@@ -115,6 +116,7 @@ class NativeTaskSampler:
         self._guide: np.ndarray | None = None
         self._out = np.zeros(6)
         self._out_p = self._out.ctypes.data
+        self._addr = AddressCache()   # the trees' key arrays and masks, the same at most calls
         self._calls0 = 0
         if endpoints is not None:
             self.set_endpoints(*endpoints)
@@ -171,8 +173,9 @@ class NativeTaskSampler:
         """One ξ_rand (goal bias toward the live rows of ``X_b[:n_b]``) and the index of the live row of
         ``X_a[:n_a]`` nearest it; ``X_a``, ``X_b``: C-contiguous float64 arrays of 6 columns (a tree's keys);
         ``alive_*``: boolean masks or None."""
-        i = self.lib.tcb_sample_near(self._sp, X_b.ctypes.data, n_b, None if alive_b is None else alive_b.ctypes.data,
-                                     X_a.ctypes.data, n_a, None if alive_a is None else alive_a.ctypes.data, self._out_p)
+        ad = self._addr
+        i = self.lib.tcb_sample_near(self._sp, ad(X_b), n_b, None if alive_b is None else ad(alive_b), ad(X_a), n_a,
+                                     None if alive_a is None else ad(alive_a), self._out_p)
         return self._out.copy(), int(i)
 
 
