@@ -56,8 +56,11 @@ def test_trap_graft_options_are_checked():
     for variant in ("paper", "improved"):
         o = TCBiRRTOptions(variant=variant)
         assert o.trap_grafts == 0 and o.trap_graft_count == 20 and o.trap_graft_target == "other"
+        assert o.trap_graft_after is None
     assert TCBiRRTOptions(variant="improved", trap_grafts=3).trap_grafts == 3
-    for bad in (dict(trap_grafts=-1), dict(trap_grafts=1.5), dict(trap_graft_count=0), dict(trap_graft_target="goal")):
+    assert TCBiRRTOptions(variant="improved", trap_graft_after=1500).trap_graft_after == 1500
+    for bad in (dict(trap_grafts=-1), dict(trap_grafts=1.5), dict(trap_graft_count=0), dict(trap_graft_target="goal"),
+                dict(trap_graft_after=-1), dict(trap_graft_after=2.5), dict(trap_graft_after=True)):
         with pytest.raises(ValueError, match=next(iter(bad))):
             TCBiRRTOptions(**bad)
 
@@ -75,3 +78,34 @@ def test_planner_with_trap_grafts_returns_a_verified_path(tcb, truss):
     assert res.success, res.message
     assert res.stats["trap_attempts"] >= 1 and res.stats["grafts"] == 0 and "frontier_attempts" not in res.stats
     check_planned_path(tcb, scene, ck, res, t.q_start, t.q_goal)
+
+
+def _same_search(r0, r1) -> None:
+    """Two results of the same search: status, path, object poses and every counter but the clocks."""
+    assert r0.status == r1.status and r0.path.shape == r1.path.shape and np.array_equal(r0.path, r1.path)
+    assert np.array_equal(r0.constrained, r1.constrained)
+    clocks = {k for k in set(r0.stats) | set(r1.stats) if k.endswith("time_s")}
+    assert {k: v for k, v in r0.stats.items() if k not in clocks} == {k: v for k, v in r1.stats.items() if k not in clocks}
+
+
+@pytest.mark.parametrize("trial, max_iterations", [(6, 0), (18, 300)])
+def test_no_trap_graft_before_trap_graft_after(tcb, truss, trial, max_iterations):
+    """A search that ends by ``trap_graft_after`` is the search with trap grafts off — the same path, iterations
+    and counters, though a trap graft would fire at a node's first trapped extension (``trap_graft_count=1``):
+    truss trial 6 is solved in about 1,000 iterations, trial 18 is cut at 300 (lead paths off, so that no step
+    depends on the clock). With the start earlier than the search's end, trap grafts are attempted."""
+    scene, ck, kin, gen = truss
+    t = gen.generate(trial, 0)
+
+    def plan(**kw):
+        o = TCBiRRTOptions(variant="improved", guide_probability=0.0, trap_graft_count=1,
+                           max_iterations=max_iterations, **kw)
+        return TCBiRRT(tcb, scene, o, checker=ck, kinematics=kin).plan(t.q_start, t.q_goal, time_limit=30.0,
+                                                                        seed=t.seed, clock="cpu")
+    off = plan(trap_grafts=0)
+    n = off.stats["iterations"]
+    assert off.stats["trapped"] > 100 and "trap_attempts" not in off.stats
+    assert off.success == (max_iterations == 0) and n >= 300
+    _same_search(off, plan(trap_grafts=4, trap_graft_after=n))
+    late = plan(trap_grafts=4, trap_graft_after=n // 2)
+    assert late.stats["trap_attempts"] >= 1

@@ -75,8 +75,8 @@ Deviations from the paper, all options (defaults in brackets):
   toward a sample has been trapped ``trap_graft_count`` times gets, once, a look-ahead graft
   (:func:`.frontier_graft.lookahead_graft`): the arms re-grasp at its pose into an IK solution from which one
   constrained step toward ``trap_graft_target`` (the other tree's nearest node, or the trapping sample) passes.
-  Unlike the frontier grafts it does not wait for ``graft_after``: it aims at the node where the tree is stuck
-  (in a deep bay, the arms of the goal's IK branch cannot carry the object out).
+  Unlike the frontier grafts it does not wait for ``graft_after`` (unless ``trap_graft_after`` is set): it aims at
+  the node where the tree is stuck (in a deep bay, the arms of the goal's IK branch cannot carry the object out).
 * ``branch_roots`` [False in both variants; measured in docs/planners.md]: before the search, the goal tree's
   root is re-grasped onto the start's IK branch at the goal's object pose (arm by arm; the branch found by path IK
   along the straight start-goal object motion, :meth:`~.tcbirrt_grafts.BranchMixin.branch_at`), or, where that
@@ -524,7 +524,8 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 step = float(ta.dom[i_near]) if o.trap_adapt == "step" and np.isfinite(ta.dom[i_near]) else None
                 res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st, step)   # line 5
                 self._trap_update(ta, i_near, res)
-                if res == TRAPPED and o.trap_grafts and traps[id(ta)][1] < o.trap_grafts:
+                if res == TRAPPED and o.trap_grafts and traps[id(ta)][1] < o.trap_grafts and \
+                        st["iterations"] > (o.trap_graft_after or 0):   # no trap counted before trap_graft_after
                     i_trap = self._trap_graft(ta, i_near, xi_rand, tb, traps[id(ta)], deadline, st)
                     if i_trap is not None:   # the step beyond the trap graft: connect tree b to it
                         res, i_a = ADVANCED, i_trap

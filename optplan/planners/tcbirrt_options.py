@@ -182,6 +182,9 @@ class TCBiRRTOptions:
     #: The look-ahead step of a trap graft goes toward ``"other"`` (the other tree's node nearest in ξ: where the trees
     #: must meet) or ``"sample"`` (the sample that trapped the extension).
     trap_graft_target: str = "other"
+    #: Iterations before which no trap graft is attempted and no trapped extension is counted for one [count]
+    #: (None: 0, trap grafts from the first iteration). A search that ends by then is identical to ``trap_grafts=0``.
+    trap_graft_after: int | None = None
     #: Random IK seeds per frontier-graft (and trap-graft) attempt [count].
     frontier_seeds: int = 6
     #: Random node pairs of which a frontier graft takes the closest in ξ [count].
@@ -323,6 +326,9 @@ class TCBiRRTOptions:
         if not (isinstance(self.restart_growth, (int, float)) and not isinstance(self.restart_growth, bool)
                 and math.isfinite(self.restart_growth) and self.restart_growth >= 1.0):
             raise ValueError(f"TCBiRRTOptions.restart_growth: expected a number >= 1, got {self.restart_growth!r}")
+        if self.trap_graft_after is not None and not (isinstance(self.trap_graft_after, int)
+                                                      and not isinstance(self.trap_graft_after, bool) and self.trap_graft_after >= 0):
+            raise ValueError(f"TCBiRRTOptions.trap_graft_after: expected None or an int >= 0, got {self.trap_graft_after!r}")
         if self.trap_graft_target not in ("other", "sample"):
             raise ValueError(f"TCBiRRTOptions.trap_graft_target: expected 'other' or 'sample', got {self.trap_graft_target!r}")
         if self.graft_node not in ("meet", "any", "mixed"):
