@@ -70,7 +70,7 @@ def summary(path: Path) -> list[str]:
     rows = [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
     out = ["| scene | queries | success a / b | median CPU s a / b | median iterations a / b | CPU a/b per query: "
            "median, geo. mean | same search |", "|---|---|---|---|---|---|---|"]
-    for sc in sorted({r["scene"] for r in rows}, key=lambda s: [r["scene"] for r in rows].index(s)):
+    for sc in dict.fromkeys(r["scene"] for r in rows):   # scenes in the order of their first row
         R = [r for r in rows if r["scene"] == sc]
         both = [r for r in R if r["a"]["success"] and r["b"]["success"]]
         ratio = np.array([r["a"]["cpu_s"] / r["b"]["cpu_s"] for r in both])
