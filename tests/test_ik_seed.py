@@ -97,3 +97,17 @@ def test_secant_takes_fewer_iterations_per_waypoint(tcb):
         assert st["ik_calls"] >= 120
         per_call[predictor] = st["ik_path_iterations"] / st["ik_calls"]
     assert per_call["secant"] < 0.9 * per_call["none"], per_call
+
+
+def test_benchmark_compares_identical_extensions():
+    """`python -m optplan.bench.ik_predictor`: both predictors on the same extensions, the secant with fewer waypoint
+    IK iterations per call, and a positive IK cost per iteration."""
+    from optplan.bench.ik_predictor import predictor_costs
+
+    r = predictor_costs("ssps_scene1", n=4, repeats=1)
+    if not r["available"]:
+        pytest.skip("the native loop is not available here")
+    a, b = r["none"], r["secant"]
+    assert a["ik_calls"] > 0 and b["ik_calls"] > 0 and r["extensions"] == 24
+    assert b["ik_path_iterations"] / b["ik_calls"] < a["ik_path_iterations"] / a["ik_calls"]
+    assert r["ik_fit"]["b_us_per_iteration"] > 0
