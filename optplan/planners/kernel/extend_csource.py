@@ -16,8 +16,9 @@ What one extension computes (the same steps, in the same order, as the Python co
   linear, orientation ``R0 exp(j/n log(R0ᵀ R1))`` (the geodesic interpolation of Eq. 4), the last pose
   exactly ``(R1, p1)``;
 * ``tcb_path_ik``: per pose the damped-least-squares IK of both hands seeded by the previous solution, or
-  with ``predictor`` by the secant prediction from the two previous solutions (the hand-written IK of :mod:`~optplan.planners.kernel.ik_csource` when the context has one, else the
-  compiled CasADi block of iterations, repeated until converged or out of iterations), the joint-jump
+  with ``predictor`` by the secant prediction from the two previous solutions (the hand-written IK of
+  :mod:`~optplan.planners.kernel.ik_csource` when the context has one, else the compiled CasADi block of
+  iterations, repeated until converged or out of iterations), the joint-jump
   bound and the configuration's collision check; it stops at the first waypoint that fails, so the
   caller can run its random restarts there;
 * ``tcb_edges``: the joint-space segments between consecutive configurations checked at the spacing of
