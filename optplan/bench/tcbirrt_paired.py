@@ -78,7 +78,8 @@ def run_query(scene: str, trial: int, seed: int, time_limit: float, specs: tuple
         out[key] = {"success": bool(res.success and checks.get("swept_invalid_edges", 0) == 0),
                     "status": res.status.value, "cpu_s": float(res.stats.get("cpu_time_s", float("nan"))),
                     "iterations": int(res.stats.get("iterations") or 0), "joint_len": checks.get("joint_path_length_rad"),
-                    "task_len_m": tl, "task_rot_rad": rl, "n_regrasp": res.n_regrasp, "n_conf": len(res.path)}
+                    "task_len_m": tl, "task_rot_rad": rl, "n_regrasp": res.n_regrasp, "n_conf": len(res.path),
+                    **{k: int(res.stats.get(k) or 0) for k in ("ik_calls", "ik_path_iterations", "ik_iterations")}}
     return out
 
 

@@ -130,6 +130,7 @@ from ..scene import Scene
 from .base import Deadline, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2
 from .frontier_graft import frontier_graft, lookahead_graft
+from .ik_seed import predicted_seed
 from .rrtconnect import edge_is_valid
 from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
@@ -217,12 +218,13 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         if self._ext is not None:
             return native_path_ik(self, poses_array(poses), q_near, st, prefix)
         o, kin, ck = self.options, self.kin, self.checker
-        out, q = [], q_near  # type: list[np.ndarray], np.ndarray
+        out, q, qpp = [], q_near, None  # type: list[np.ndarray], np.ndarray, np.ndarray | None
         fail = None if not prefix else out
         for R, p in poses:
             st["ik_calls"] += 1
-            qn, its = kin.ik(q, R, p, o.ik)
+            qn, its = kin.ik(predicted_seed(cast(str, o.ik_predictor), q, qpp, kin.lower, kin.upper), R, p, o.ik)
             st["ik_iterations"] += its
+            st["ik_path_iterations"] = st.get("ik_path_iterations", 0) + its   # absent in a caller's own counters
             if qn is None:
                 st["ik_failures"] += 1
             elif float(np.abs(qn - q).max()) > cast(float, o.max_joint_step):
@@ -245,7 +247,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 st["collisions"] += 1
                 return self._edges_prefix(q_near, out, fail, st) if fail is not None else None
             out.append(qn)
-            q = qn
+            qpp, q = q, qn
         return self._edges_prefix(q_near, out, fail, st)
 
     # ------------------------------------------------------------------ Alg. 2

@@ -11,6 +11,7 @@ import numpy as np
 from ..constraints.closed_chain import IKSettings
 from ..model.robot import RobotModel
 from .cbirrt2 import CBiRRT2Options
+from .ik_seed import PREDICTORS
 from .rrtconnect import RRTConnectOptions
 
 __all__ = ["TCBiRRTOptions", "VARIANTS", "PAPER_XI_LOWER", "PAPER_XI_UPPER", "PAPER_REACH", "reach_scaled_workspace"]
@@ -25,14 +26,14 @@ VARIANTS = {
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
               "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
               "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
-              "restart_branch_roots": False, "filter_robot_body": False},
+              "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none"},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
                  "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
-                 "restart_branch_roots": False, "filter_robot_body": False},
+                 "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none"},
 }
 
 
@@ -270,6 +271,10 @@ class TCBiRRTOptions:
     ik_restarts: int | None = None
     #: Standard deviation of an IK restart's perturbation, per joint [rad].
     ik_restart_sigma: float = 0.3
+    #: The path IK's seed of a waypoint after the first (:mod:`.ik_seed`): ``"none"`` (the previous solution, Alg. 3)
+    #: or ``"secant"`` (``q_{k−1} + (q_{k−1} − q_{k−2})`` clamped to the joint limits; the joint-jump bound stays
+    #: relative to ``q_{k−1}``) (None: the variant's value, :data:`VARIANTS`).
+    ik_predictor: str | None = None
     #: What a trapped extension changes at the node it started from: ``"off"``; ``"step"`` (adaptive step size:
     #: the node's s_ξ is halved, down to s_ξ/8, and doubled back after an extension that is not trapped); or
     #: ``"domain"`` (dynamic domain: from then on a sample farther than ``domain_radius`` · s_ξ from the node,
@@ -376,6 +381,8 @@ class TCBiRRTOptions:
         _pos("margin", self.margin, allow_zero=True)
         if self.validity_kernel not in ("native", "coal"):
             raise ValueError(f"TCBiRRTOptions.validity_kernel: expected 'native' or 'coal', got {self.validity_kernel!r}")
+        if self.ik_predictor not in PREDICTORS:
+            raise ValueError(f"TCBiRRTOptions.ik_predictor: expected one of {PREDICTORS}, got {self.ik_predictor!r}")
         if self.extension not in ("loop", "native", "python"):
             raise ValueError(f"TCBiRRTOptions.extension: expected 'loop', 'native' or 'python', got {self.extension!r}")
         if not (isinstance(self.max_iterations, int) and self.max_iterations >= 0):
