@@ -102,8 +102,11 @@ class TCBiRRTOptions:
     #: RRTConnect options of a regrasp motion (one arm, 7-D, object fixed).
     regrasp: RRTConnectOptions = field(default_factory=lambda: RRTConnectOptions(range=1.0, resolution=0.03,
                                                                                  shortcut_iterations=50))
-    #: Time limit per regrasp attempt [s].
-    regrasp_time_limit: float = 2.0
+    #: Time limit per regrasp attempt [s]: a backstop of ``regrasp_iterations`` (docs/planners.md, "Reproducible searches").
+    regrasp_time_limit: float = 20.0
+    #: Work budget of one regrasp: RRT-Connect iterations of its motions, shared by the arm orders as the time is
+    #: [count] (0: none, the time limit alone). It ends the regrasp at the same point on any machine and load.
+    regrasp_iterations: int = 15000
     #: A regrasp motion's RRT-Connect gives up when one of its two trees has added no node for this many
     #: iterations [count] (0: ``regrasp.stall_iterations``, by default never): the moving arm's start or goal is
     #: walled in, and the search would otherwise spend the whole ``regrasp_time_limit`` (or ``graft_time_limit``)
@@ -117,8 +120,10 @@ class TCBiRRTOptions:
     #: Halve a regrasp's time limit after each failed regrasp of the query, down to ``regrasp_min_time_limit``; a
     #: successful regrasp restores ``regrasp_time_limit`` (None: the variant's value: off in both; see docs/generalization.md).
     regrasp_backoff: bool | None = None
-    #: Smallest regrasp time limit of ``regrasp_backoff`` [s].
-    regrasp_min_time_limit: float = 0.05
+    #: Smallest regrasp time limit of ``regrasp_backoff`` [s] (a backstop of ``regrasp_min_iterations``).
+    regrasp_min_time_limit: float = 0.5
+    #: Smallest regrasp work budget of ``regrasp_backoff`` (halved with the time limit) [count].
+    regrasp_min_iterations: int = 380
     #: An arm whose two solutions differ by less than this (max-norm) does not move [rad].
     regrasp_tolerance: float = 1e-4
     #: The two arm orders of a regrasp (A first, B first) each get an equal share of ``regrasp_time_limit``
@@ -138,8 +143,10 @@ class TCBiRRTOptions:
     #: Try a graft at both roots before the search (with ``graft_after`` 0) (instead of after the first ``graft_interval`` iterations,
     #: which leaves queries solved quickly without grafts untouched) [bool].
     root_grafts_first: bool = True
-    #: Time limit of one branch graft's regrasp [s].
-    graft_time_limit: float = 0.5
+    #: Time limit of one graft's regrasp (branch, frontier, trap and root grafts) [s]: a backstop of ``graft_iterations``.
+    graft_time_limit: float = 5.0
+    #: Work budget of one graft's regrasp: RRT-Connect iterations [count] (0: none, the time limit alone).
+    graft_iterations: int = 3800
     #: IK seeds per branch-graft attempt (the other tree's configuration, then perturbed by ``ik_restart_sigma``) [count].
     graft_seeds: int = 4
     #: A graft may also move one arm only to its new IK solution (the other keeps its own) [bool].
@@ -252,10 +259,14 @@ class TCBiRRTOptions:
     guide_probability: float | None = None
     #: Noise of a lead-path sample: (position [m], angle [rad]).
     guide_sigma: tuple[float, float] = (0.05, 0.05)
-    #: Time spent on the object's lead path per query, at most [s].
-    guide_time_limit: float = 3.0
-    #: Time of one lead-path attempt (restarted while none is found) [s].
-    guide_attempt_time: float = 0.3
+    #: Time spent on the object's lead path per query, at most [s]: a backstop of ``guide_iterations``.
+    guide_time_limit: float = 30.0
+    #: Time of one lead-path attempt (restarted while none is found) [s]: a backstop of ``guide_attempt_iterations``.
+    guide_attempt_time: float = 3.0
+    #: Work budget of the object's lead path per query: its RRT-Connect iterations [count] (0: none, the time alone).
+    guide_iterations: int = 42000
+    #: Work budget of one lead-path attempt: RRT-Connect iterations [count] (0: none, the time alone).
+    guide_attempt_iterations: int = 4200
     #: Probability that a sample's orientation is drawn on the start-goal rotation geodesic, perturbed by
     #: ``geodesic_sigma`` [-] (None: the variant's value, :data:`VARIANTS`): paper 0, improved 0.5.
     geodesic_probability: float | None = None
@@ -328,6 +339,10 @@ class TCBiRRTOptions:
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
         _pos("graft_time_limit", self.graft_time_limit)
+        for name in ("regrasp_iterations", "regrasp_min_iterations", "graft_iterations", "guide_iterations",
+                     "guide_attempt_iterations"):   # work budgets of sub-searches (0: none)
+            if not (isinstance(getattr(self, name), int) and not isinstance(getattr(self, name), bool) and getattr(self, name) >= 0):
+                raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= 0 (iterations; 0: no budget), got {getattr(self, name)!r}")
         if not (isinstance(self.restart_growth, (int, float)) and not isinstance(self.restart_growth, bool)
                 and math.isfinite(self.restart_growth) and self.restart_growth >= 1.0):
             raise ValueError(f"TCBiRRTOptions.restart_growth: expected a number >= 1, got {self.restart_growth!r}")

@@ -129,7 +129,7 @@ def _declare_sampler_functions(lib: Any) -> None:
     lib.tcb_sample_near.restype = _LL
     lib.tcb_sample_near.argtypes = [_P, _P, _LL, _P, _P, _LL, _P, _P]
     lib.tcb_lead_path.restype = _LL
-    lib.tcb_lead_path.argtypes = [_P, _P, _P, _D, _D, ctypes.c_int, ctypes.c_int, _D, ctypes.POINTER(ctypes.POINTER(_D)),
+    lib.tcb_lead_path.argtypes = [_P, _P, _P, _D, _D, ctypes.c_int, ctypes.c_int, _D, _LL, ctypes.POINTER(ctypes.POINTER(_D)),
                                   ctypes.POINTER(_LL)]
     lib.tcb_free.restype = None
     lib.tcb_free.argtypes = [_P]
