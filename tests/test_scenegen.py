@@ -117,8 +117,9 @@ def test_certify_rejects_a_path_through_an_obstacle(tcb):
     from optplan.planners import make_planner
     from optplan.trials import TrialGenerator
 
-    sc = generate_scenes(tcb, 1, seed=5, families=("overhang",), witness_time=10)[0].scene
-    trial = TrialGenerator(tcb, sc).generate(0, 5)
+    # a draw whose witness search takes ~0.1 s (seed 5's took ~10 s, at its limit: a scene that depended on the load)
+    sc = generate_scenes(tcb, 1, seed=1, families=("overhang",), witness_time=10)[0].scene
+    trial = TrialGenerator(tcb, sc).generate(0, 1)
     res = make_planner("tcbirrt", tcb, sc, variant="improved").plan(trial.q_start, trial.q_goal, time_limit=10,
                                                                       seed=1, clock="cpu")
     assert res.success
@@ -184,3 +185,21 @@ def test_cbirrt2_witness_is_certified_independently(tcb, tmp_path):
     write_scenes(got, tmp_path)
     assert load_witness(tmp_path / f"{g.scene.name}.witness.npz").planner == "cbirrt2"
     assert Scene.load(tmp_path / f"{g.scene.name}.toml").extra["certified_by"] == ["cbirrt2"]
+
+
+def test_feasibility_lead_path_is_bounded_by_iterations_not_seconds(tcb, monkeypatch):
+    """The object-only lead path of the feasibility check ends at its iteration budget: the same verdict when the
+    CPU clock runs 50x fast (the seconds are a backstop), and a budget of one iteration cannot find a path."""
+    import time
+
+    from optplan.errors import OptionError
+    from optplan.planners import base
+
+    sc = generate_scene("overhang", np.random.default_rng(1), robot=tcb)
+    assert feasibility(tcb, sc, seed=3) is None
+    assert feasibility(tcb, sc, seed=3, lead_iterations=1) == "no path of the object alone"
+    t0 = time.process_time()
+    monkeypatch.setitem(base.CLOCKS, "cpu", lambda: t0 + 50.0 * (time.process_time() - t0))
+    assert feasibility(tcb, sc, seed=3) is None
+    with pytest.raises(OptionError, match="lead_iterations"):
+        feasibility(tcb, sc, lead_iterations=0)
