@@ -185,6 +185,10 @@ class TCBiRRTOptions:
     #: Iterations before which no trap graft is attempted and no trapped extension is counted for one [count]
     #: (None: 0, trap grafts from the first iteration). A search that ends by then is identical to ``trap_grafts=0``.
     trap_graft_after: int | None = None
+    #: The random streams a trap-graft attempt draws from (its IK seeds, look-ahead restarts and regrasp): ``"search"``
+    #: (the search's own) or ``"own"`` (each tree's own, seeded by the query's seed): then a failed attempt leaves the
+    #: search as it was, and a search whose attempts all fail is ``trap_grafts=0``'s, plus the attempts' CPU.
+    trap_graft_stream: str = "search"
     #: Random IK seeds per frontier-graft (and trap-graft) attempt [count].
     frontier_seeds: int = 6
     #: Random node pairs of which a frontier graft takes the closest in ξ [count].
@@ -329,6 +333,8 @@ class TCBiRRTOptions:
         if self.trap_graft_after is not None and not (isinstance(self.trap_graft_after, int)
                                                       and not isinstance(self.trap_graft_after, bool) and self.trap_graft_after >= 0):
             raise ValueError(f"TCBiRRTOptions.trap_graft_after: expected None or an int >= 0, got {self.trap_graft_after!r}")
+        if self.trap_graft_stream not in ("search", "own"):
+            raise ValueError(f"TCBiRRTOptions.trap_graft_stream: expected 'search' or 'own', got {self.trap_graft_stream!r}")
         if self.trap_graft_target not in ("other", "sample"):
             raise ValueError(f"TCBiRRTOptions.trap_graft_target: expected 'other' or 'sample', got {self.trap_graft_target!r}")
         if self.graft_node not in ("meet", "any", "mixed"):
