@@ -71,7 +71,8 @@ Deviations from the paper, all options (defaults in brackets):
   passes; the solution is a graft node, the step's end a node below it, and tree b is connected to it
   (:mod:`.frontier_graft`). Where the arms, not the object, block a passage, each tree's arms stop in a
   self-motion position that collides one step further on; the look-ahead picks one that does not.
-* ``trap_grafts`` [0 (off) in both variants; measured in docs/generalization.md]: a node from which the extension
+* ``trap_grafts`` [paper 0 (off); improved 4, toward the sample, on own streams, after 1,500 iterations; see
+  docs/generalization.md]: a node from which the extension
   toward a sample has been trapped ``trap_graft_count`` times gets, once, a look-ahead graft
   (:func:`.frontier_graft.lookahead_graft`): the arms re-grasp at its pose into an IK solution from which one
   constrained step toward ``trap_graft_target`` (the other tree's nearest node, or the trapping sample) passes.
