@@ -91,7 +91,9 @@ def test_interpolation_matches_interpolate_task(tcb):
         assert np.array_equal(P[-1, :9], R1.ravel()) and np.array_equal(P[-1, 9:], p1)
 
 
-@pytest.mark.parametrize("variant,extra", [("improved", {}), ("paper", {}), ("improved", {"edge_resolution": 0.05})])
+@pytest.mark.parametrize("variant,extra", [("improved", {}), ("paper", {}), ("improved", {"edge_resolution": 0.05}),
+                                           ("improved", {"ik_predictor": "secant"}),
+                                           ("paper", {"ik_predictor": "secant", "edge_resolution": 0.05})])
 def test_one_extension_matches_the_python_one(tcb, variant, extra):
     """Random extensions from valid configurations of hard_bay: the same accepted configurations (to
     rounding), the same counters and the same draws from the generator (restarts) as the Python code."""
@@ -136,7 +138,8 @@ def test_one_extension_matches_the_python_one(tcb, variant, extra):
 
 
 @pytest.mark.parametrize("variant,seed,extra", [("improved", 2, {}), ("paper", 1, {}),
-                                                ("improved", 0, {"edge_resolution": 0.05})])
+                                                ("improved", 0, {"edge_resolution": 0.05}),
+                                                ("improved", 2, {"ik_predictor": "secant"})])
 def test_same_search_with_the_native_and_the_python_extension(tcb, variant, seed, extra):
     from optplan.scene import Scene
     from optplan.trials import TrialGenerator

@@ -80,7 +80,8 @@ def run_query(scene: str, trial: int, seed: int, time_limit: float, specs: tuple
                     "status": res.status.value, "cpu_s": float(res.stats.get("cpu_time_s", float("nan"))),
                     "iterations": int(res.stats.get("iterations") or 0), "joint_len": checks.get("joint_path_length_rad"),
                     "task_len_m": tl, "task_rot_rad": rl, "n_regrasp": res.n_regrasp, "n_conf": len(res.path),
-                    **{k: int(res.stats.get(k) or 0) for k in ("trap_attempts", "trap_grafts")}}
+                    **{k: int(res.stats.get(k) or 0) for k in ("ik_calls", "ik_path_iterations", "ik_iterations",
+                                                               "trap_attempts", "trap_grafts")}}
     return out
 
 

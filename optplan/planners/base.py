@@ -27,6 +27,7 @@ import abc
 import enum
 import json
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -273,9 +274,13 @@ CLOCKS = {"wall": time.perf_counter, "cpu": time.process_time}
 class Deadline:
     """A time budget: ``Deadline(seconds, clock="wall")``; ``expired()``, ``remaining()``,
     ``elapsed()``. ``clock="cpu"`` counts this process's CPU time (``time.process_time``), which
-    does not grow while other processes hold the cores."""
+    does not grow while other processes hold the cores.
 
-    __slots__ = ("t0", "limit", "end", "clock")
+    A sub-deadline (:meth:`sub`) may also carry a work budget, ``work`` [count, in the unit of the sub-search
+    that spends it: :meth:`spend`]: it is expired when either runs out, so a sub-search bounded by its work ends
+    at the same point of its search on any machine and load (the seconds are then a backstop)."""
+
+    __slots__ = ("t0", "limit", "end", "clock", "work", "up")
 
     def __init__(self, seconds: float, clock: str = "wall") -> None:
         if clock not in CLOCKS:
@@ -284,9 +289,11 @@ class Deadline:
         self.t0 = self.clock()
         self.limit = float(seconds)
         self.end = self.t0 + self.limit
+        self.work: float = math.inf
+        self.up: Deadline | None = None
 
     def expired(self) -> bool:
-        return self.clock() >= self.end
+        return self.work <= 0 or self.clock() >= self.end
 
     def remaining(self) -> float:
         return self.end - self.clock()
@@ -294,13 +301,27 @@ class Deadline:
     def elapsed(self) -> float:
         return self.clock() - self.t0
 
-    def sub(self, seconds: float) -> Deadline:
-        """A deadline on the same clock ending at the earlier of ``seconds`` from now and this one."""
+    def sub(self, seconds: float, work: float = math.inf) -> Deadline:
+        """A deadline on the same clock ending at the earlier of ``seconds`` from now and this one, with the
+        smaller of ``work`` and this one's work left (``math.inf``: no work budget)."""
         d = Deadline.__new__(Deadline)
         d.clock, d.t0 = self.clock, self.clock()
         d.limit = max(0.0, min(float(seconds), self.end - d.t0))
         d.end = d.t0 + d.limit
+        d.work, d.up = min(float(work), self.work), self
         return d
+
+    def spend(self, n: float) -> None:
+        """``n`` units of work done: taken from this deadline's work budget and from those it is a sub-deadline of."""
+        d: Deadline | None = self
+        while d is not None:
+            d.work -= n
+            d = d.up
+
+    def work_cap(self) -> int:
+        """The work left as an iteration cap of a search: 0 when there is no work budget (call only while not
+        :meth:`expired`)."""
+        return 0 if math.isinf(self.work) else max(1, int(math.ceil(self.work)))
 
 
 class Planner(abc.ABC):

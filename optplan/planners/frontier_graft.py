@@ -105,7 +105,7 @@ def lookahead_graft(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray,
             if not Q or len(Q) < len(poses):
                 st[f"{kind}_lookahead_failures"] = st.get(f"{kind}_lookahead_failures", 0) + 1
                 continue
-            reg = pl.regrasp(q_i, y, R, p, rng, deadline.sub(o.graft_time_limit), st)
+            reg = pl.regrasp(q_i, y, R, p, rng, pl.graft_deadline(deadline), st)
             if reg is None:
                 st[f"{kind}_regrasp_failures"] = st.get(f"{kind}_regrasp_failures", 0) + 1
                 continue

@@ -9,6 +9,7 @@ closed-chain kinematics, validity checker and sweep weights.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from typing import Any, cast
 
@@ -43,8 +44,10 @@ class RegraspMixin:
 
         A hand geometry on the object's ``exclude_links`` that touches the object at either end (at its
         grasp) is not checked against the object during the regrasp (:meth:`.ValidityChecker.grasp_contacts`).
-        The time limit is ``regrasp_time_limit``, halved after each failed regrasp of the query with
-        ``regrasp_backoff`` (down to ``regrasp_min_time_limit``; a success restores it)."""
+        The regrasp ends when its work budget ``regrasp_iterations`` (RRT-Connect iterations) or its time limit
+        ``regrasp_time_limit`` (a backstop) is spent, or at ``deadline`` (a graft's, with its own budget); both halved
+        after each failed regrasp of the query with ``regrasp_backoff`` (down to ``regrasp_min_iterations`` and
+        ``regrasp_min_time_limit``; a success restores them)."""
         o, kin = self.options, self.kin
         moving = [(name, idx) for name, idx in zip(kin.arm_names, kin.idx)
                   if float(np.abs(q_to[idx] - q_from[idx]).max()) > o.regrasp_tolerance]
@@ -52,10 +55,12 @@ class RegraspMixin:
             return []
         st["regrasp_attempts"] += 1
         M = pin.SE3(R, p)
-        limit = o.regrasp_time_limit
+        limit, work = o.regrasp_time_limit, float(o.regrasp_iterations or math.inf)
         if o.regrasp_backoff:
-            limit = max(o.regrasp_min_time_limit, limit * 0.5 ** st.get("regrasp_failure_run", 0))
-        sub = deadline.sub(limit)
+            f = 0.5 ** st.get("regrasp_failure_run", 0)
+            limit = max(o.regrasp_min_time_limit, limit * f)
+            work = max(o.regrasp_min_iterations, 1, math.floor(work * f)) if o.regrasp_iterations else work
+        sub = deadline.sub(limit, work)
         t0 = sub.clock()
         with self._grasp_exempt(M, q_from, q_to):
             out = self._regrasp_orders(q_from, q_to, M, moving, rng, sub, st)
@@ -73,6 +78,10 @@ class RegraspMixin:
             st["regrasp_failure_run"] = 0
         return out
 
+    def graft_deadline(self, deadline: Deadline) -> Deadline:
+        """The deadline of one graft's regrasp: ``graft_iterations`` RRT-Connect iterations, ``graft_time_limit`` a backstop."""
+        return deadline.sub(self.options.graft_time_limit, float(self.options.graft_iterations or math.inf))
+
     def _grasp_exempt(self, M: pin.SE3, *qs: np.ndarray) -> Any:
         """Context: the object-fixed checks skip the grasp contacts of the configurations ``qs``."""
         pairs: set[int] = set()
@@ -87,7 +96,7 @@ class RegraspMixin:
         orders = [moving] if len(moving) == 1 else [moving, moving[::-1]]
         for n_order, order in enumerate(orders):
             if o.regrasp_share_orders:   # this order's share of what is left of the regrasp's budget
-                sub_o = sub.sub(sub.remaining() / (len(orders) - n_order))
+                sub_o = sub.sub(sub.remaining() / (len(orders) - n_order), sub.work / (len(orders) - n_order))
             else:
                 sub_o = sub
             cur = q_from.copy()
@@ -118,11 +127,18 @@ class RegraspMixin:
         early when a tree stalls, ``regrasp_stall_iterations``), its edges re-checked at ``edge_tolerance``: the
         full configurations, or None."""
         o, ck = self.options, self.checker
+        if sub.expired():   # the work budget or the time spent
+            return None
         valid = ck.validity("fixed", M, base=cur, joints=idx)   # these joints move, the rest and the object stand still
         rs: dict[str, Any] = {}
         lo, hi = self.robot.lower, self.robot.upper
         ro = o.regrasp if not o.regrasp_stall_iterations else replace(o.regrasp, stall_iterations=o.regrasp_stall_iterations)
+        cap = sub.work_cap()   # the work left: the RRT-Connect's iteration cap
+        if cap and not 0 < ro.max_iterations <= cap:
+            ro = replace(ro, max_iterations=cap)
         sub_path = joint_space_path(cur[idx], q_to[idx], lo[idx], hi[idx], valid, rng, sub, ro, rs)
+        sub.spend(rs.get("iterations", 0))
+        st["regrasp_iterations"] = st.get("regrasp_iterations", 0) + rs.get("iterations", 0)
         st["regrasp_nodes"] += rs.get("nodes", 0)
         if rs.get("stalled"):
             st["regrasp_stalled"] = st.get("regrasp_stalled", 0) + 1

@@ -209,7 +209,7 @@ def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
     """Rigid-body path of the object alone in ξ: RRTConnect (straight ξ segments checked every
     ``resolution`` by ``filt``) whose samples are bridge-test poses with probability
     ``bridge_probability`` (else uniform in the box), shortcut, then resampled every ``spacing``;
-    ``(n, 6)`` or None (deadline). With ``native_rng`` (a
+    ``(n, 6)`` or None (at the deadline: its time, or its work budget, the iterations it spends). With ``native_rng`` (a
     :class:`~optplan.planners.kernel.sampler.NativeRandom`) and the filter's native pose test, the search and
     the shortcuts are one native call drawing from it (``rng`` is then not used)."""
     from .rrtconnect import shortcut_path
@@ -252,6 +252,7 @@ def object_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
 
     found = None
     while not deadline.expired():
+        deadline.spend(1)
         xi = sampler.sample(rng)
         ia, _ = extend(ta, xi, True)
         ib, reached = extend(tb, ta.X[ia].copy(), True)

@@ -131,10 +131,12 @@ from ..scene import Scene
 from .base import Deadline, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2
 from .frontier_graft import frontier_graft, trap_lookahead
+from .ik_seed import predicted_seed
 from .rrtconnect import edge_is_valid
-from .task_sampling import ObjectPoseFilter, TaskSampler, object_lead_path
+from .task_sampling import ObjectPoseFilter, TaskSampler
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
 from .tcbirrt_edges import EdgeCheckMixin
+from .tcbirrt_lead import LeadState, lead_attempt
 from .tcbirrt_native import loop_extend, make_extender, native_extend, native_path_ik, poses_array
 from .tcbirrt_options import (
     PAPER_REACH,
@@ -194,8 +196,8 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         self._ext = make_extender(self) if self.checker.kernel == "native" and self.options.extension != "python" else None
         #: ``extension="loop"``: the query's native random stream (sampler, lead path, restarts), None: NumPy's
         self._nrng: Any = None
-        #: restarts: the object's lead path found by an earlier search of the query and the time spent on it [s]
-        self._lead: tuple[Any, float] = (None, 0.0)
+        #: restarts: the object's lead path found by an earlier search of the query and what was spent on it
+        self._lead = LeadState()
 
     # ------------------------------------------------------------------ public helpers
     def check_endpoint(self, q: np.ndarray) -> str | None:
@@ -218,12 +220,13 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         if self._ext is not None:
             return native_path_ik(self, poses_array(poses), q_near, st, prefix)
         o, kin, ck = self.options, self.kin, self.checker
-        out, q = [], q_near  # type: list[np.ndarray], np.ndarray
+        out, q, qpp = [], q_near, None  # type: list[np.ndarray], np.ndarray, np.ndarray | None
         fail = None if not prefix else out
         for R, p in poses:
             st["ik_calls"] += 1
-            qn, its = kin.ik(q, R, p, o.ik)
+            qn, its = kin.ik(predicted_seed(cast(str, o.ik_predictor), q, qpp, kin.lower, kin.upper), R, p, o.ik)
             st["ik_iterations"] += its
+            st["ik_path_iterations"] = st.get("ik_path_iterations", 0) + its   # absent in a caller's own counters
             if qn is None:
                 st["ik_failures"] += 1
             elif float(np.abs(qn - q).max()) > cast(float, o.max_joint_step):
@@ -246,7 +249,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 st["collisions"] += 1
                 return self._edges_prefix(q_near, out, fail, st) if fail is not None else None
             out.append(qn)
-            q = qn
+            qpp, q = q, qn
         return self._edges_prefix(q_near, out, fail, st)
 
     # ------------------------------------------------------------------ Alg. 2
@@ -418,7 +421,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         limit). Counters of ``stats`` are summed over the searches; ``restarts`` counts the searches abandoned."""
         o = self.options
         budget = float(cast(int, o.restart_iterations))
-        self._lead = (None, 0.0)
+        self._lead = LeadState()
         if not budget:
             return self._search(q_start, q_goal, deadline, rng, seed, o.max_iterations, bool(o.branch_roots))
         done: dict[str, float] = {}
@@ -470,11 +473,11 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         tb = _TaskTree(q_goal, xi_from_pose(Mg), Mg.rotation.copy(), Mg.translation.copy())
         a_is_start = True
         found = None
-        guide_time, (lead, lead_time) = 0.0, self._lead   # a restarted search reuses the lead path found before
+        lead = self._lead   # a restarted search reuses the lead path found before (.tcbirrt_lead)
         if sampler is not None:
             sampler.set_endpoints(ta.xi[0], tb.xi[0])
-            if lead is not None:
-                sampler.guide = lead
+            if lead.path is not None:
+                sampler.guide = lead.path
             st["guide_attempts"] = st["guide_waypoints"] = 0
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
         fronts = {id(ta): 0, id(tb): 0}
@@ -497,15 +500,9 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                     self._graft(tr, None if root_grafted[id(tr)] else 0, other, deadline, st)   # the root's first
                     root_grafted[id(tr)] = True
             if (sampler is not None and cast(float, o.guide_probability) > 0 and sampler.guide is None
-                    and lead_time + guide_time < o.guide_time_limit and st["iterations"] % 25 == 0):
-                sub = deadline.sub(min(o.guide_attempt_time, o.guide_time_limit - lead_time - guide_time))
-                sampler.guide = object_lead_path(cast(ObjectPoseFilter, self._filter), ta.xi[0] if a_is_start else tb.xi[0],
-                                                 tb.xi[0] if a_is_start else ta.xi[0], self._lo, self._hi, rng, sub,
-                                                 native_rng=self._nrng)
-                guide_time += sub.elapsed()
-                st["guide_attempts"] += 1
-                st["guide_waypoints"] = 0 if sampler.guide is None else len(sampler.guide)
-                st["guide_time_s"] = guide_time
+                    and st["iterations"] % 25 == 0 and lead.budget_left(self)):
+                lead_attempt(self, sampler, lead, (ta if a_is_start else tb).xi[0], (tb if a_is_start else ta).xi[0], rng,
+                             deadline, st)
             st["iterations"] += 1
             k_front = st["iterations"] - o.graft_after
             i_front = None
@@ -574,8 +571,6 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                     break
             ta, tb, a_is_start = tb, ta, not a_is_start                                  # line 15
         st["nodes"] = ta.n + tb.n
-        if sampler is not None:
-            self._lead = (sampler.guide, lead_time + guide_time)
         st["collision_checks"] = self.checker.n_checks - c0
         if cert is not None:
             st["distance_calls"] = cert.n_distance_calls - n_dist0   # certified edges: exact group distances

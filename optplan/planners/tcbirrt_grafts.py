@@ -105,7 +105,7 @@ class BranchMixin(RegraspMixin):
                 st["root_branch_collisions"] = st.get("root_branch_collisions", 0) + 1
                 continue
             st["root_branch_attempts"] = st.get("root_branch_attempts", 0) + 1
-            reg = self.regrasp(q0, y, R, p, self._rng, deadline.sub(o.graft_time_limit), st)
+            reg = self.regrasp(q0, y, R, p, self._rng, self.graft_deadline(deadline), st)
             if reg is None:
                 st["root_branch_regrasp_failures"] = st.get("root_branch_regrasp_failures", 0) + 1
                 continue
@@ -191,7 +191,7 @@ class BranchMixin(RegraspMixin):
                                                for f in tree.failed_grafts.get(i, ())):
                     st["graft_repeats_skipped"] = st.get("graft_repeats_skipped", 0) + 1
                     continue   # a branch this node's regrasp already failed to reach
-                reg = self.regrasp(q_i, y, R, p, rng, deadline.sub(o.graft_time_limit), st)
+                reg = self.regrasp(q_i, y, R, p, rng, self.graft_deadline(deadline), st)
                 if reg is None:
                     st["graft_regrasp_failures"] = st.get("graft_regrasp_failures", 0) + 1
                     if o.graft_skip_failed:

@@ -37,7 +37,8 @@ def make_extender(pl: TCBiRRT) -> NativeExtender | None:
         from .kernel.extend import NativeExtender
 
         return NativeExtender(pl.checker, pl.kin, o.ik, cast(float, o.max_joint_step),
-                              cast(float, o.edge_tolerance) if native_edges else 0.0, o.edge_resolution)
+                              cast(float, o.edge_tolerance) if native_edges else 0.0, o.edge_resolution,
+                              cast(str, o.ik_predictor))
     except KernelUnavailable as e:
         log.info("TCBiRRT extends in Python: %s", e)
         return None
@@ -70,6 +71,7 @@ def _merge(st: dict[str, Any], ext: NativeExtender) -> None:
     st["edge_checks"] += c[6]
     st["edge_collisions"] += c[7]
     st["ik_restarts"] += c[9]
+    st["ik_path_iterations"] = st.get("ik_path_iterations", 0) + c[10]   # absent in a caller's own counters
     ext.checker.n_checks += c[5]
 
 
@@ -131,7 +133,7 @@ def native_path_ik(pl: TCBiRRT, P: np.ndarray, q_near: np.ndarray, st: dict[str,
             n = r                      # the valid prefix
             break
         Q[r] = qn
-        r = ext.path_ik(P, r + 1, qn, Q)
+        r = ext.path_ik(P, r + 1, qn, Q, q)
         edge_k = -1
     out = list(Q[:n])
     if ext.edge_on:

@@ -11,6 +11,7 @@ import numpy as np
 from ..constraints.closed_chain import IKSettings
 from ..model.robot import RobotModel
 from .cbirrt2 import CBiRRT2Options
+from .ik_seed import PREDICTORS
 from .rrtconnect import RRTConnectOptions
 
 __all__ = ["TCBiRRTOptions", "VARIANTS", "PAPER_XI_LOWER", "PAPER_XI_UPPER", "PAPER_REACH", "reach_scaled_workspace"]
@@ -25,16 +26,16 @@ VARIANTS = {
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
               "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
               "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
-              "restart_branch_roots": False, "filter_robot_body": False, "trap_graft_target": "other",
-              "trap_graft_stream": "search", "trap_graft_after": 0},
+              "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
+              "trap_graft_target": "other", "trap_graft_stream": "search", "trap_graft_after": 0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
                  "branch_roots": False, "stall_iterations": 0, "trap_grafts": 4, "restart_iterations": 0,
-                 "restart_branch_roots": False, "filter_robot_body": False, "trap_graft_target": "sample",
-                 "trap_graft_stream": "own", "trap_graft_after": 1500},
+                 "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
+                 "trap_graft_target": "sample", "trap_graft_stream": "own", "trap_graft_after": 1500},
 }
 
 
@@ -103,8 +104,11 @@ class TCBiRRTOptions:
     #: RRTConnect options of a regrasp motion (one arm, 7-D, object fixed).
     regrasp: RRTConnectOptions = field(default_factory=lambda: RRTConnectOptions(range=1.0, resolution=0.03,
                                                                                  shortcut_iterations=50))
-    #: Time limit per regrasp attempt [s].
-    regrasp_time_limit: float = 2.0
+    #: Time limit per regrasp attempt [s]: a backstop of ``regrasp_iterations`` (docs/planners.md, "Reproducible searches").
+    regrasp_time_limit: float = 20.0
+    #: Work budget of one regrasp: RRT-Connect iterations of its motions, shared by the arm orders as the time is
+    #: [count] (0: none, the time limit alone). It ends the regrasp at the same point on any machine and load.
+    regrasp_iterations: int = 15000
     #: A regrasp motion's RRT-Connect gives up when one of its two trees has added no node for this many
     #: iterations [count] (0: ``regrasp.stall_iterations``, by default never): the moving arm's start or goal is
     #: walled in, and the search would otherwise spend the whole ``regrasp_time_limit`` (or ``graft_time_limit``)
@@ -118,8 +122,10 @@ class TCBiRRTOptions:
     #: Halve a regrasp's time limit after each failed regrasp of the query, down to ``regrasp_min_time_limit``; a
     #: successful regrasp restores ``regrasp_time_limit`` (None: the variant's value: off in both; see docs/generalization.md).
     regrasp_backoff: bool | None = None
-    #: Smallest regrasp time limit of ``regrasp_backoff`` [s].
-    regrasp_min_time_limit: float = 0.05
+    #: Smallest regrasp time limit of ``regrasp_backoff`` [s] (a backstop of ``regrasp_min_iterations``).
+    regrasp_min_time_limit: float = 0.5
+    #: Smallest regrasp work budget of ``regrasp_backoff`` (halved with the time limit) [count].
+    regrasp_min_iterations: int = 380
     #: An arm whose two solutions differ by less than this (max-norm) does not move [rad].
     regrasp_tolerance: float = 1e-4
     #: The two arm orders of a regrasp (A first, B first) each get an equal share of ``regrasp_time_limit``
@@ -139,8 +145,10 @@ class TCBiRRTOptions:
     #: Try a graft at both roots before the search (with ``graft_after`` 0) (instead of after the first ``graft_interval`` iterations,
     #: which leaves queries solved quickly without grafts untouched) [bool].
     root_grafts_first: bool = True
-    #: Time limit of one branch graft's regrasp [s].
-    graft_time_limit: float = 0.5
+    #: Time limit of one graft's regrasp (branch, frontier, trap and root grafts) [s]: a backstop of ``graft_iterations``.
+    graft_time_limit: float = 5.0
+    #: Work budget of one graft's regrasp: RRT-Connect iterations [count] (0: none, the time limit alone).
+    graft_iterations: int = 3800
     #: IK seeds per branch-graft attempt (the other tree's configuration, then perturbed by ``ik_restart_sigma``) [count].
     graft_seeds: int = 4
     #: A graft may also move one arm only to its new IK solution (the other keeps its own) [bool].
@@ -261,10 +269,14 @@ class TCBiRRTOptions:
     guide_probability: float | None = None
     #: Noise of a lead-path sample: (position [m], angle [rad]).
     guide_sigma: tuple[float, float] = (0.05, 0.05)
-    #: Time spent on the object's lead path per query, at most [s].
-    guide_time_limit: float = 3.0
-    #: Time of one lead-path attempt (restarted while none is found) [s].
-    guide_attempt_time: float = 0.3
+    #: Time spent on the object's lead path per query, at most [s]: a backstop of ``guide_iterations``.
+    guide_time_limit: float = 30.0
+    #: Time of one lead-path attempt (restarted while none is found) [s]: a backstop of ``guide_attempt_iterations``.
+    guide_attempt_time: float = 3.0
+    #: Work budget of the object's lead path per query: its RRT-Connect iterations [count] (0: none, the time alone).
+    guide_iterations: int = 42000
+    #: Work budget of one lead-path attempt: RRT-Connect iterations [count] (0: none, the time alone).
+    guide_attempt_iterations: int = 4200
     #: Probability that a sample's orientation is drawn on the start-goal rotation geodesic, perturbed by
     #: ``geodesic_sigma`` [-] (None: the variant's value, :data:`VARIANTS`): paper 0, improved 0.5.
     geodesic_probability: float | None = None
@@ -280,6 +292,10 @@ class TCBiRRTOptions:
     ik_restarts: int | None = None
     #: Standard deviation of an IK restart's perturbation, per joint [rad].
     ik_restart_sigma: float = 0.3
+    #: The path IK's seed of a waypoint after the first (:mod:`.ik_seed`): ``"none"`` (the previous solution, Alg. 3)
+    #: or ``"secant"`` (``q_{k−1} + (q_{k−1} − q_{k−2})`` clamped to the joint limits; the joint-jump bound stays
+    #: relative to ``q_{k−1}``) (None: the variant's value, :data:`VARIANTS`).
+    ik_predictor: str | None = None
     #: What a trapped extension changes at the node it started from: ``"off"``; ``"step"`` (adaptive step size:
     #: the node's s_ξ is halved, down to s_ξ/8, and doubled back after an extension that is not trapped); or
     #: ``"domain"`` (dynamic domain: from then on a sample farther than ``domain_radius`` · s_ξ from the node,
@@ -333,6 +349,10 @@ class TCBiRRTOptions:
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
         _pos("graft_time_limit", self.graft_time_limit)
+        for name in ("regrasp_iterations", "regrasp_min_iterations", "graft_iterations", "guide_iterations",
+                     "guide_attempt_iterations"):   # work budgets of sub-searches (0: none)
+            if not (isinstance(getattr(self, name), int) and not isinstance(getattr(self, name), bool) and getattr(self, name) >= 0):
+                raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= 0 (iterations; 0: no budget), got {getattr(self, name)!r}")
         if not (isinstance(self.restart_growth, (int, float)) and not isinstance(self.restart_growth, bool)
                 and math.isfinite(self.restart_growth) and self.restart_growth >= 1.0):
             raise ValueError(f"TCBiRRTOptions.restart_growth: expected a number >= 1, got {self.restart_growth!r}")
@@ -388,6 +408,8 @@ class TCBiRRTOptions:
         _pos("margin", self.margin, allow_zero=True)
         if self.validity_kernel not in ("native", "coal"):
             raise ValueError(f"TCBiRRTOptions.validity_kernel: expected 'native' or 'coal', got {self.validity_kernel!r}")
+        if self.ik_predictor not in PREDICTORS:
+            raise ValueError(f"TCBiRRTOptions.ik_predictor: expected one of {PREDICTORS}, got {self.ik_predictor!r}")
         if self.extension not in ("loop", "native", "python"):
             raise ValueError(f"TCBiRRTOptions.extension: expected 'loop', 'native' or 'python', got {self.extension!r}")
         if not (isinstance(self.max_iterations, int) and self.max_iterations >= 0):

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from ...codegen import build_library, cache_dir
+from ..ik_seed import PREDICTORS
 from .addresses import AddressCache
 from .csource import C_SOURCE
 from .extend_csource import EXTEND_SOURCE
@@ -46,7 +47,7 @@ _LIB: list[Any] = []        # the loaded library (one per process), or [None] af
 SOURCE = C_SOURCE + RNG_SOURCE + IK_SOURCE + EXTEND_SOURCE + SAMPLER_SOURCE
 #: counters of one native call, in the order of the C code
 COUNTERS = ("ik_calls", "ik_iterations", "ik_failures", "ik_jumps", "collisions", "checks", "edge_checks",
-            "edge_collisions", "terminal", "ik_restarts")
+            "edge_collisions", "terminal", "ik_restarts", "ik_path_iterations")
 
 
 class _Ctx(ctypes.Structure):
@@ -59,7 +60,7 @@ class _Ctx(ctypes.Structure):
                 ("W", _P), ("nw", ctypes.c_int),
                 ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int), ("edge_res", ctypes.c_double),
                 ("rng", _P), ("restarts", ctypes.c_int), ("restart_sigma", ctypes.c_double), ("lower", _P), ("upper", _P),
-                ("ikm", _P)]
+                ("ikm", _P), ("predictor", ctypes.c_int), ("qlo", _P), ("qhi", _P)]
 
 
 def load_extend_library() -> Any:
@@ -98,7 +99,7 @@ def load_extend_library() -> Any:
     lib.tcb_interpolate.restype = None
     lib.tcb_interpolate.argtypes = [_P, _P, _P, _P, ctypes.c_int, _P]
     lib.tcb_path_ik.restype = _LL
-    lib.tcb_path_ik.argtypes = [_P, _P, _P, _LL, _LL, _P, _P]
+    lib.tcb_path_ik.argtypes = [_P, _P, _P, _P, _LL, _LL, _P, _P]
     lib.tcb_edges.restype = _LL
     lib.tcb_edges.argtypes = [_P, _P, _P, _LL, _P]
     lib.tcb_filter_xi.restype = ctypes.c_int
@@ -128,7 +129,7 @@ def _declare_sampler_functions(lib: Any) -> None:
     lib.tcb_sample_near.restype = _LL
     lib.tcb_sample_near.argtypes = [_P, _P, _LL, _P, _P, _LL, _P, _P]
     lib.tcb_lead_path.restype = _LL
-    lib.tcb_lead_path.argtypes = [_P, _P, _P, _D, _D, ctypes.c_int, ctypes.c_int, _D, ctypes.POINTER(ctypes.POINTER(_D)),
+    lib.tcb_lead_path.argtypes = [_P, _P, _P, _D, _D, ctypes.c_int, ctypes.c_int, _D, _LL, ctypes.POINTER(ctypes.POINTER(_D)),
                                   ctypes.POINTER(_LL)]
     lib.tcb_free.restype = None
     lib.tcb_free.argtypes = [_P]
@@ -229,12 +230,15 @@ class NativeExtender:
     ``edge_tolerance`` [m] (0: no edge checks) with the Jacobian spacing of
     :meth:`~optplan.planners.validity.ValidityChecker.edge_checkpoints`; ``edge_resolution`` [rad] (None: off):
     each new waypoint's segment from the previous one checked every ``edge_resolution`` of its largest joint
-    change, right after the waypoint (TCBiRRT's ``edge_resolution`` option).
+    change, right after the waypoint (TCBiRRT's ``edge_resolution`` option); ``ik_predictor``: a waypoint's IK
+    seed, ``"none"`` (the previous solution) or ``"secant"`` (TCBiRRT's ``ik_predictor`` option).
 
     Raises :class:`~optplan.planners.kernel.native.KernelUnavailable` when any part is not compiled."""
 
     def __init__(self, checker: Any, kin: Any, ik: Any, max_joint_step: float, edge_tolerance: float,
-                 edge_resolution: float | None = None) -> None:
+                 edge_resolution: float | None = None, ik_predictor: str = "none") -> None:
+        if ik_predictor not in PREDICTORS:
+            raise ValueError(f"ik_predictor: expected one of {PREDICTORS}, got {ik_predictor!r}")
         self.lib = load_extend_library()
         nv = getattr(checker, "_native", None)
         if nv is None:
@@ -268,6 +272,8 @@ class NativeExtender:
         if prof is not None:
             c.prof, c.prof_iw, c.prof_w, c.nprof = prof[0], prof[1].ctypes.data, prof[2].ctypes.data, prof[3]
         c.edge_res = float(edge_resolution or 0.0)
+        self._qlim = (np.ascontiguousarray(kin.lower, dtype=float), np.ascontiguousarray(kin.upper, dtype=float))
+        c.predictor, c.qlo, c.qhi = PREDICTORS.index(ik_predictor), self._qlim[0].ctypes.data, self._qlim[1].ctypes.data
         self._ctx = c
         self._ik: Any = None
         try:
@@ -390,10 +396,13 @@ class NativeExtender:
         self._out = out if k <= 0 else None
         return P, Q, int(k)
 
-    def path_ik(self, P: np.ndarray, j0: int, q_prev: np.ndarray, Q: np.ndarray) -> int:
-        """Waypoints ``j0..n−1`` of the poses ``P`` into ``Q`` seeded by ``q_prev``: the first that fails, or n."""
+    def path_ik(self, P: np.ndarray, j0: int, q_prev: np.ndarray, Q: np.ndarray, q_pp: np.ndarray | None = None) -> int:
+        """Waypoints ``j0..n−1`` of the poses ``P`` into ``Q`` seeded by ``q_prev`` (``q_pp``: the solution before
+        it, for the predictor; None: none): the first that fails, or n."""
         self._qn[:] = q_prev
-        r = self.lib.tcb_path_ik(self._cp, self._bufs[4], P.ctypes.data, j0, P.shape[0], Q.ctypes.data, self._cnt_p)
+        pp = None if q_pp is None else np.ascontiguousarray(q_pp, dtype=float)
+        r = self.lib.tcb_path_ik(self._cp, self._bufs[4], None if pp is None else pp.ctypes.data, P.ctypes.data, j0,
+                                 P.shape[0], Q.ctypes.data, self._cnt_p)
         if r < -1:
             raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
         return int(r)

@@ -15,9 +15,10 @@ What one extension computes (the same steps, in the same order, as the Python co
 * ``tcb_interpolate``: the object poses ``j = 1..n`` from ``(R0, p0)`` to ``(R1, p1)``, position
   linear, orientation ``R0 exp(j/n log(R0ᵀ R1))`` (the geodesic interpolation of Eq. 4), the last pose
   exactly ``(R1, p1)``;
-* ``tcb_path_ik``: per pose the damped-least-squares IK of both hands seeded by the previous solution
-  (the hand-written IK of :mod:`~optplan.planners.kernel.ik_csource` when the context has one, else the
-  compiled CasADi block of iterations, repeated until converged or out of iterations), the joint-jump
+* ``tcb_path_ik``: per pose the damped-least-squares IK of both hands seeded by the previous solution, or
+  with ``predictor`` by the secant prediction from the two previous solutions (the hand-written IK of
+  :mod:`~optplan.planners.kernel.ik_csource` when the context has one, else the compiled CasADi block of
+  iterations, repeated until converged or out of iterations), the joint-jump
   bound and the configuration's collision check; it stops at the first waypoint that fails, so the
   caller can run its random restarts there;
 * ``tcb_edges``: the joint-space segments between consecutive configurations checked at the spacing of
@@ -53,11 +54,13 @@ typedef struct {
     int restarts; double restart_sigma;
     const double *lower, *upper;  /* joint limits of a restart's solution */
     const tcb_ikm *ikm;           /* non-NULL: the hand-written IK (ik_csource) instead of the CasADi block */
+    int predictor;                /* a waypoint's IK seed: 0 the previous solution, 1 the secant prediction */
+    const double *qlo, *qhi;      /* joint limits of the IK (a predicted seed is clamped to them) */
 } tcb_ctx;
 
 /* counters: 0 ik_calls, 1 ik_iterations, 2 ik_failures, 3 ik_jumps, 4 collisions, 5 checks, 6 edge_checks,
    7 edge_collisions, 8 set to 1 when the failing waypoint failed its edge_res segment (no restarts),
-   9 ik_restarts */
+   9 ik_restarts, 10 ik_path_iterations (the iterations of the waypoints' first IK, restarts not counted) */
 
 long long tcb_nearest(const double *X, long long n, int dim, const unsigned char *alive, const double *x) {
     long long best = -1;
@@ -206,20 +209,31 @@ static int tcb_restarts(const tcb_ctx *c, const double *q, const double *P, doub
     return 0;
 }
 
-/* waypoints j0..n-1 of the poses P (n x 12), each seeded by the previous solution (q_prev for j0);
-   solutions into Q (n x nq). Returns the first waypoint that fails (its reason counted), or n. With
-   c->rng, a failing waypoint's restarts run here first (cnt[8] is then never set). */
-long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *P, long long j0, long long n, double *Q,
-                      long long *cnt) {
+/* the IK seed of a waypoint after q (the previous solution; q_pp the one before it, NULL: none): q itself, or with
+   c->predictor == 1 and q_pp the secant prediction q + (q - q_pp) clamped to the joint limits (into buf) */
+static const double *tcb_seed(const tcb_ctx *c, const double *q, const double *q_pp, double *buf) {
+    if (c->predictor != 1 || !q_pp) return q;
+    for (int k = 0; k < c->nq; ++k) buf[k] = fmin(fmax(q[k] + (q[k] - q_pp[k]), c->qlo[k]), c->qhi[k]);
+    return buf;
+}
+
+/* waypoints j0..n-1 of the poses P (n x 12), each seeded by the previous solution (q_prev for j0; q_pp the
+   solution before q_prev, NULL: none) or its prediction (c->predictor); solutions into Q (n x nq). Returns the
+   first waypoint that fails (its reason counted), or n. With c->rng, a failing waypoint's restarts run here
+   first (cnt[8] is then never set). The joint-jump bound and the restarts are relative to the previous solution. */
+long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *q_pp, const double *P, long long j0,
+                      long long n, double *Q, long long *cnt) {
     int nq = c->nq;
     if (nq > KMAXJ || c->km->nj > KMAXJ || c->km->ng > KMAXG) return -2;
-    const double *q = q_prev;
+    const double *q = q_prev, *qpp = q_pp;
+    double seed[KMAXJ];
     for (long long j = j0; j < n; ++j) {
         double *qn = Q + j*nq;
         long long its = 0;
         cnt[0] += 1;
-        int ok = tcb_ik(c, q, P + 12*j, qn, &its);
+        int ok = tcb_ik(c, tcb_seed(c, q, qpp, seed), P + 12*j, qn, &its);
         cnt[1] += its;
+        cnt[10] += its;
         if (!ok) cnt[2] += 1;
         if (ok) {
             double m = 0.0;
@@ -240,6 +254,7 @@ long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *P, l
             if (sok < 0) return -2;
             if (!sok) { cnt[4] += 1; if (!restarted && !c->rng) cnt[8] = 1; return j; }
         }
+        qpp = q;
         q = qn;
     }
     return n;
@@ -401,7 +416,7 @@ int tcb_filter_segment(const tcb_filt *f, const double *a, const double *b, doub
 long long tcb_extend(const tcb_ctx *c, const double *R0, const double *p0, const double *R1, const double *p1,
                      long long n, const double *q_near, double *P, double *Q, long long *cnt, long long *edge_k) {
     tcb_interpolate(R0, p0, R1, p1, (int)n, P);
-    long long r = tcb_path_ik(c, q_near, P, 0, n, Q, cnt);
+    long long r = tcb_path_ik(c, q_near, NULL, P, 0, n, Q, cnt);
     *edge_k = -1;
     if (r == n && c->edge_on) *edge_k = tcb_edges(c, q_near, Q, n, cnt);
     return r;
@@ -414,7 +429,7 @@ long long tcb_extend(const tcb_ctx *c, const double *R0, const double *p0, const
 long long tcb_extend_prefix(const tcb_ctx *c, const double *R0, const double *p0, const double *R1, const double *p1,
                             long long n, const double *q_near, double *P, double *Q, long long *cnt, int prefix) {
     tcb_interpolate(R0, p0, R1, p1, (int)n, P);
-    long long r = tcb_path_ik(c, q_near, P, 0, n, Q, cnt);
+    long long r = tcb_path_ik(c, q_near, NULL, P, 0, n, Q, cnt);
     if (r < -1) return r;
     if (r < n && !prefix) return -1;
     if (c->edge_on && r > 0) {

@@ -193,7 +193,8 @@ def native_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
                      bridge_probability: float, bridge_sigma: tuple[float, float],
                      geodesic_probability: float) -> list[np.ndarray] | None:
     """The search and shortcuts of :func:`~optplan.planners.task_sampling.object_lead_path` in one native call
-    (``lo``/``hi`` already include the end poses): the path's poses, or None at the deadline."""
+    (``lo``/``hi`` already include the end poses): the path's poses, or None at the deadline (its time, or its work
+    budget in iterations, :meth:`~optplan.planners.base.Deadline.spend`)."""
     sampler = NativeTaskSampler(filt, lo, hi, rng, filter_tries=0, bridge_probability=bridge_probability,
                                 bridge_sigma=bridge_sigma, bridge_tries=20, geodesic_probability=geodesic_probability,
                                 endpoints=(xi_start, xi_goal))
@@ -203,7 +204,9 @@ def native_lead_path(filt: ObjectPoseFilter, xi_start: np.ndarray, xi_goal: np.n
     out = ctypes.POINTER(_D)()
     iters = _LL(0)
     n = sampler.lib.tcb_lead_path(sampler._sp, a.ctypes.data, b.ctypes.data, float(range_), float(resolution),
-                                  int(shortcut_iterations), kind, end, ctypes.byref(out), ctypes.byref(iters))
+                                  int(shortcut_iterations), kind, end, deadline.work_cap(), ctypes.byref(out),
+                                  ctypes.byref(iters))
+    deadline.spend(int(iters.value))
     sampler.sync_filter_calls()
     if n < 0:
         raise MemoryError("the native object lead path ran out of memory")

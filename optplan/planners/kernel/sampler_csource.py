@@ -17,7 +17,8 @@ What it computes (the algorithms of :class:`optplan.planners.task_sampling.TaskS
 * ``tcb_sample_near``: ``tcb_sample`` and the nearest live node of the tree being extended;
 * ``tcb_lead_path``: RRT-Connect of the object alone in ξ (straight segments checked by the filter every
   ``resolution`` of the largest coordinate change, end first then coarse-to-fine), then random shortcuts;
-  the time limit is an end time on ``CLOCK_MONOTONIC`` or ``CLOCK_PROCESS_CPUTIME_ID``.
+  the time limit is an end time on ``CLOCK_MONOTONIC`` or ``CLOCK_PROCESS_CPUTIME_ID``, the work budget a cap on
+  its iterations (0: none).
 """
 from __future__ import annotations
 
@@ -241,15 +242,16 @@ static long long tcb_lead_extend(tcb_sampler *s, tcb_xtree *t, const double *tar
 
 /* object_lead_path's search: RRT-Connect in xi from xs to xg with the sampler s (which has a filter), then
    `shortcuts` random shortcuts. Returns the number of path rows written into a malloc'ed *out (free with
-   tcb_free), 0 at the time limit, -1 when out of memory; *iters = iterations */
+   tcb_free), 0 at the time limit or after max_iters iterations (0: no cap), -1 when out of memory;
+   *iters = iterations */
 long long tcb_lead_path(tcb_sampler *s, const double *xs, const double *xg, double range, double resolution,
-                        int shortcuts, int clock_kind, double end, double **out, long long *iters) {
+                        int shortcuts, int clock_kind, double end, long long max_iters, double **out, long long *iters) {
     tcb_xtree A = {0}, B = {0}, *ta = &A, *tb = &B;
     long long ia = -1, ib = -1, np = 0;
     int a_first = 1, found = 0, reached = 0;
     *out = NULL; *iters = 0;
     if (tcb_xtree_add(&A, xs, -1) < 0 || tcb_xtree_add(&B, xg, -1) < 0) goto oom;
-    while (tcb_clock(clock_kind) < end) {
+    while ((max_iters <= 0 || *iters < max_iters) && tcb_clock(clock_kind) < end) {
         double xi[6], tgt[6];
         *iters += 1;
         tcb_sample(s, NULL, 0, NULL, xi);
