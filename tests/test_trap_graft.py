@@ -33,7 +33,8 @@ def test_trap_graft_fires_once_at_the_count_and_steps_toward_the_other_tree(tcb,
     scene, ck, kin, gen = truss
     t = gen.generate(6, 0)
     count = 3
-    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", trap_grafts=4, trap_graft_count=count), checker=ck,
+    pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", trap_grafts=4, trap_graft_count=count,
+                                            trap_graft_target="other", trap_graft_stream="search"), checker=ck,
                  kinematics=kin)
     pl._rng = np.random.default_rng(3)
     b = task_tree(kin, t.q_goal)
@@ -53,14 +54,17 @@ def test_trap_graft_fires_once_at_the_count_and_steps_toward_the_other_tree(tcb,
 
 
 def test_trap_graft_options_are_checked():
-    for variant in ("paper", "improved"):
-        o = TCBiRRTOptions(variant=variant)
-        assert o.trap_grafts == 0 and o.trap_graft_count == 20 and o.trap_graft_target == "other"
-        assert o.trap_graft_after is None
+    o = TCBiRRTOptions(variant="paper")
+    assert o.trap_grafts == 0 and o.trap_graft_count == 20 and o.trap_graft_target == "other"
+    assert o.trap_graft_after == 0 and o.trap_graft_stream == "search"
+    o = TCBiRRTOptions(variant="improved")   # decided on fresh seed 16001 (docs/generalization.md)
+    assert o.trap_grafts == 4 and o.trap_graft_count == 20 and o.trap_graft_target == "sample"
+    assert o.trap_graft_after == 1500 and o.trap_graft_stream == "own"
     assert TCBiRRTOptions(variant="improved", trap_grafts=3).trap_grafts == 3
     assert TCBiRRTOptions(variant="improved", trap_graft_after=1500).trap_graft_after == 1500
     for bad in (dict(trap_grafts=-1), dict(trap_grafts=1.5), dict(trap_graft_count=0), dict(trap_graft_target="goal"),
-                dict(trap_graft_after=-1), dict(trap_graft_after=2.5), dict(trap_graft_after=True)):
+                dict(trap_graft_after=-1), dict(trap_graft_after=2.5), dict(trap_graft_after=True),
+                dict(trap_graft_stream="shared")):
         with pytest.raises(ValueError, match=next(iter(bad))):
             TCBiRRTOptions(**bad)
 
@@ -73,7 +77,8 @@ def test_planner_with_trap_grafts_returns_a_verified_path(tcb, truss):
     scene, ck, kin, gen = truss
     t = gen.generate(18, 0)
     pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", branch_grafts=0, frontier_grafts=0, trap_grafts=4,
-                                            trap_graft_count=5), checker=ck, kinematics=kin)
+                                            trap_graft_count=5, trap_graft_target="other", trap_graft_stream="search",
+                                            trap_graft_after=0), checker=ck, kinematics=kin)
     res = pl.plan(t.q_start, t.q_goal, time_limit=30.0, seed=t.seed, clock="cpu")
     assert res.success, res.message
     assert res.stats["trap_attempts"] >= 1 and res.stats["grafts"] == 0 and "frontier_attempts" not in res.stats
@@ -109,3 +114,27 @@ def test_no_trap_graft_before_trap_graft_after(tcb, truss, trial, max_iterations
     _same_search(off, plan(trap_grafts=4, trap_graft_after=n))
     late = plan(trap_grafts=4, trap_graft_after=n // 2)
     assert late.stats["trap_attempts"] >= 1
+
+
+def test_trap_graft_own_stream_leaves_the_search_when_attempts_fail(tcb, truss):
+    """With ``trap_graft_stream="own"`` a trap-graft attempt draws from the tree's own random streams, so a search
+    whose attempts all fail (here: a truss trial cut at 300 iterations, lead paths off so that no step depends on
+    the clock) is the search with trap grafts off — the same path and iterations, extensions, trapped extensions,
+    nodes — although attempts were made; the default stream's attempts change the search's random stream."""
+    scene, ck, kin, gen = truss
+    t = gen.generate(18, 0)
+
+    def plan(**kw):
+        o = TCBiRRTOptions(variant="improved", guide_probability=0.0, trap_graft_count=1, max_iterations=300,
+                           trap_graft_after=0, **kw)
+        return TCBiRRT(tcb, scene, o, checker=ck, kinematics=kin).plan(t.q_start, t.q_goal, time_limit=30.0,
+                                                                        seed=t.seed, clock="cpu")
+    off = plan(trap_grafts=0)
+    own = plan(trap_grafts=4, trap_graft_target="sample", trap_graft_stream="own")
+    assert own.stats["trap_attempts"] >= 5 and own.stats.get("trap_grafts", 0) == 0
+    assert own.status == off.status and np.array_equal(own.path, off.path)
+    for k in ("iterations", "extensions", "trapped", "partial", "grafts", "graft_attempts"):
+        assert own.stats[k] == off.stats[k], k
+    shared = plan(trap_grafts=4, trap_graft_target="sample", trap_graft_stream="search")
+    assert shared.stats["trap_attempts"] >= 1
+    assert any(shared.stats[k] != off.stats[k] for k in ("extensions", "trapped", "partial"))

@@ -12,7 +12,8 @@ witness certified), in alternating order, with the same planner seed. Fixed scen
 resumes where the file ends. A path counts only when it passes the benchmark's 1 cm sweep check
 (:func:`optplan.bench.tcbirrt._path_checks`). Lengths are of the path the planner returns (its regrasp motions
 shortcut by the regrasp RRT-Connect; the held path is not shortcut): joint space [rad], and the held object's
-translation [m] and rotation angle [rad] summed over consecutive held poses.
+translation [m] and rotation angle [rad] summed over consecutive held poses. Each row also carries the search's
+trap-graft attempts and grafts made (``trap_attempts``, ``trap_grafts``; 0 with trap grafts off).
 
 ``python -m optplan.bench.tcbirrt_paired --summary OUT --time-limit 5`` prints the paired statistics
 (:func:`paired_summary`).
@@ -79,7 +80,8 @@ def run_query(scene: str, trial: int, seed: int, time_limit: float, specs: tuple
                     "status": res.status.value, "cpu_s": float(res.stats.get("cpu_time_s", float("nan"))),
                     "iterations": int(res.stats.get("iterations") or 0), "joint_len": checks.get("joint_path_length_rad"),
                     "task_len_m": tl, "task_rot_rad": rl, "n_regrasp": res.n_regrasp, "n_conf": len(res.path),
-                    **{k: int(res.stats.get(k) or 0) for k in ("ik_calls", "ik_path_iterations", "ik_iterations")}}
+                    **{k: int(res.stats.get(k) or 0) for k in ("ik_calls", "ik_path_iterations", "ik_iterations",
+                                                               "trap_attempts", "trap_grafts")}}
     return out
 
 

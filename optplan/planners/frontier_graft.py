@@ -21,7 +21,8 @@ solution becomes a graft node (another branch of the tree at the same pose) and 
 below it, which the search then tries to connect to the other tree.
 
 The same look-ahead graft (:func:`lookahead_graft`) serves ``trap_grafts``: there the node is one whose
-extensions have been trapped ``trap_graft_count`` times, and the step goes toward ``trap_graft_target``.
+extensions have been trapped ``trap_graft_count`` times, and the step goes toward ``trap_graft_target``
+(:func:`trap_lookahead`; with ``trap_graft_stream="own"`` from the tree's own random streams).
 """
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ if TYPE_CHECKING:   # the planner and its tree; imported only for the type check
     from .base import Deadline
     from .tcbirrt import TCBiRRT, _TaskTree
 
-__all__ = ["closest_pair", "frontier_graft", "lookahead_graft"]
+__all__ = ["closest_pair", "frontier_graft", "lookahead_graft", "trap_lookahead"]
 
 
 def closest_pair(tree: _TaskTree, other: _TaskTree, rng: np.random.Generator, pairs: int) -> tuple[int, int]:
@@ -112,3 +113,32 @@ def lookahead_graft(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray,
             g = tree.add_graft(i, y, reg)
             return tree.add(Q[-1], xi_s, Rs, ps, g, Q[:-1], poses[:-1])
     return None
+
+
+def trap_lookahead(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray, trap: list[Any], deadline: Deadline,
+                   st: dict[str, Any]) -> int | None:
+    """A trap graft's :func:`lookahead_graft` (counters ``trap_*``). With ``trap_graft_stream="own"`` its IK seeds,
+    look-ahead restarts (the native ones too) and regrasp draw from the tree's own streams — ``trap[2]``: at the
+    first attempt ``(query seed, tree)``, then the streams — and the search's are restored after it, untouched."""
+    if pl.options.trap_graft_stream != "own":
+        return lookahead_graft(pl, tree, i, xi_target, deadline, st, "trap")
+    if isinstance(trap[2], tuple):   # the tree's first attempt: its streams, from the query's seed
+        from .kernel.sampler import NativeRandom
+
+        g = np.random.default_rng([0x7A9, *(abs(int(v)) for v in trap[2])])
+        trap[2] = [g, NativeRandom(g) if pl._nrng is not None else None]
+    o, ext, rng, nrng = pl.options, pl._ext, pl._rng, pl._nrng
+    native = ext is not None and ext.native_restarts and trap[2][1] is not None and nrng is not None
+
+    def restarts(r: Any) -> None:   # the extension's restarts in C draw from ``r``
+        cast(Any, ext).restarts_in_c(r, cast(int, o.ik_restarts), o.ik_restart_sigma, pl.robot.lower - 1e-9,
+                                     pl.robot.upper + 1e-9)
+    pl._rng = trap[2][0]
+    if native:
+        restarts(trap[2][1])
+    try:
+        return lookahead_graft(pl, tree, i, xi_target, deadline, st, "trap")
+    finally:
+        pl._rng = rng
+        if native:
+            restarts(nrng)

@@ -71,7 +71,8 @@ Deviations from the paper, all options (defaults in brackets):
   passes; the solution is a graft node, the step's end a node below it, and tree b is connected to it
   (:mod:`.frontier_graft`). Where the arms, not the object, block a passage, each tree's arms stop in a
   self-motion position that collides one step further on; the look-ahead picks one that does not.
-* ``trap_grafts`` [0 (off) in both variants; measured in docs/generalization.md]: a node from which the extension
+* ``trap_grafts`` [paper 0 (off); improved 4, toward the sample, on own streams, after 1,500 iterations; see
+  docs/generalization.md]: a node from which the extension
   toward a sample has been trapped ``trap_graft_count`` times gets, once, a look-ahead graft
   (:func:`.frontier_graft.lookahead_graft`): the arms re-grasp at its pose into an IK solution from which one
   constrained step toward ``trap_graft_target`` (the other tree's nearest node, or the trapping sample) passes.
@@ -129,7 +130,7 @@ from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2
-from .frontier_graft import frontier_graft, lookahead_graft
+from .frontier_graft import frontier_graft, trap_lookahead
 from .ik_seed import predicted_seed
 from .rrtconnect import edge_is_valid
 from .task_sampling import ObjectPoseFilter, TaskSampler
@@ -345,7 +346,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         """``trap_grafts``: count a trapped extension from node i of ``tree`` (toward ``xi_rand``); at its
         ``trap_graft_count``-th, the arms re-grasp at the node into a branch from which a step toward
         ``trap_graft_target`` (``other``'s node nearest in ξ, or ``xi_rand``) passes
-        (:func:`.frontier_graft.lookahead_graft`). ``trap``: the tree's ``[traps per node, grafts made]``. The node
+        (:func:`.frontier_graft.trap_lookahead`). ``trap``: the tree's ``[traps per node, grafts made, stream]``. The node
         one step beyond the graft, or None."""
         counts = trap[0]
         k = counts.get(i, 0) + 1
@@ -353,7 +354,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         if k != self.options.trap_graft_count:
             return None
         target = other.xi[other.nearest(tree.xi[i])] if self.options.trap_graft_target == "other" else xi_rand
-        got = lookahead_graft(self, tree, i, target, deadline, st, "trap")
+        got = trap_lookahead(self, tree, i, target, trap, deadline, st)
         trap[1] += got is not None
         return got
 
@@ -480,7 +481,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             st["guide_attempts"] = st["guide_waypoints"] = 0
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
         fronts = {id(ta): 0, id(tb): 0}
-        traps: dict[int, list[Any]] = {id(ta): [{}, 0], id(tb): [{}, 0]}   # trap_grafts: traps per node, grafts made
+        traps: dict[int, list[Any]] = {id(ta): [{}, 0, (seed, 0)], id(tb): [{}, 0, (seed, 1)]}   # trap_grafts (_trap_graft)
         if branch_roots:
             self._root_branches(ta, tb, deadline, st)
         best_gap, since_gap = np.inf, 0   # stall_iterations: the smallest gap a connection left, iterations since it shrank

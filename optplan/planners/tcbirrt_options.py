@@ -26,14 +26,16 @@ VARIANTS = {
               "regrasp_share_orders": False, "verify_path": False, "branch_grafts": 0, "frontier_grafts": 0,
               "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
               "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
-              "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none"},
+              "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
+              "trap_graft_target": "other", "trap_graft_stream": "search", "trap_graft_after": 0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
                  "regrasp_share_orders": False, "verify_path": True, "branch_grafts": 4, "frontier_grafts": 4,
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
-                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
-                 "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none"},
+                 "branch_roots": False, "stall_iterations": 0, "trap_grafts": 4, "restart_iterations": 0,
+                 "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
+                 "trap_graft_target": "sample", "trap_graft_stream": "own", "trap_graft_after": 1500},
 }
 
 
@@ -180,7 +182,8 @@ class TCBiRRTOptions:
     #: trees can meet without a regrasp (None: the variant's value, :data:`VARIANTS`: False in both, see
     #: docs/planners.md).
     branch_roots: bool | None = None
-    #: Trap grafts per tree [count] (None: the variant's value, :data:`VARIANTS`; 0: off): when the extension from one
+    #: Trap grafts per tree [count] (None: the variant's value, :data:`VARIANTS`: paper 0, improved 4, see
+    #: docs/generalization.md; 0: off): when the extension from one
     #: node of the tree growing toward a sample has been trapped ``trap_graft_count`` times, the arms re-grasp at that
     #: node into an IK solution from which one constrained step passes (the look-ahead
     #: graft of :mod:`.frontier_graft`; toward ``trap_graft_target``), at any iteration; each node is tried once.
@@ -188,11 +191,18 @@ class TCBiRRTOptions:
     #: Trapped extensions from one node that trigger its trap graft [count].
     trap_graft_count: int = 20
     #: The look-ahead step of a trap graft goes toward ``"other"`` (the other tree's node nearest in ξ: where the trees
-    #: must meet) or ``"sample"`` (the sample that trapped the extension).
-    trap_graft_target: str = "other"
+    #: must meet) or ``"sample"`` (the sample that trapped the extension) (None: the variant's value, :data:`VARIANTS`:
+    #: paper ``"other"``, improved ``"sample"``).
+    trap_graft_target: str | None = None
     #: Iterations before which no trap graft is attempted and no trapped extension is counted for one [count]
-    #: (None: 0, trap grafts from the first iteration). A search that ends by then is identical to ``trap_grafts=0``.
+    #: (None: the variant's value, :data:`VARIANTS`: paper 0, improved 1500 = ``graft_after``; 0: from the first
+    #: iteration). A search that ends by then is identical to ``trap_grafts=0``.
     trap_graft_after: int | None = None
+    #: The random streams a trap-graft attempt draws from (its IK seeds, look-ahead restarts and regrasp): ``"search"``
+    #: (the search's own) or ``"own"`` (each tree's own, seeded by the query's seed): then a failed attempt leaves the
+    #: search as it was, and a search whose attempts all fail is ``trap_grafts=0``'s, plus the attempts' CPU (None: the
+    #: variant's value, :data:`VARIANTS`: paper ``"search"``, improved ``"own"``).
+    trap_graft_stream: str | None = None
     #: Random IK seeds per frontier-graft (and trap-graft) attempt [count].
     frontier_seeds: int = 6
     #: Random node pairs of which a frontier graft takes the closest in ξ [count].
@@ -349,6 +359,8 @@ class TCBiRRTOptions:
         if self.trap_graft_after is not None and not (isinstance(self.trap_graft_after, int)
                                                       and not isinstance(self.trap_graft_after, bool) and self.trap_graft_after >= 0):
             raise ValueError(f"TCBiRRTOptions.trap_graft_after: expected None or an int >= 0, got {self.trap_graft_after!r}")
+        if self.trap_graft_stream not in ("search", "own"):
+            raise ValueError(f"TCBiRRTOptions.trap_graft_stream: expected 'search' or 'own', got {self.trap_graft_stream!r}")
         if self.trap_graft_target not in ("other", "sample"):
             raise ValueError(f"TCBiRRTOptions.trap_graft_target: expected 'other' or 'sample', got {self.trap_graft_target!r}")
         if self.graft_node not in ("meet", "any", "mixed"):
