@@ -30,41 +30,21 @@ COUNTERS = ("ik_calls", "ik_iterations", "ik_path_iterations", "ik_restarts", "i
 def predictor_costs(scene_name: str, n: int = 30, repeats: int = 3, seed: int = 0,
                     robot_name: str = "tcbirrt_dual_arm") -> dict[str, Any]:
     """The measurements of the module docstring for one scene (``n`` targets per start/goal configuration)."""
-    from ..constraints.closed_chain import ClosedChainKinematics
-    from ..model.robot import RobotModel
     from ..planners.ik_seed import PREDICTORS
-    from ..planners.tcbirrt import TCBiRRT, TCBiRRTOptions
-    from ..planners.tcbirrt_native import loop_extend
-    from ..planners.validity import ValidityChecker
-    from ..scene import Scene
-    from .tcbirrt_native import _pose_cases
+    from .tcbirrt_native import loop_extension_setup, timed_extensions
 
-    robot = RobotModel.from_name(robot_name)
-    sc = Scene.load(scene_name)
-    assert sc.object is not None
-    ck, kin = ValidityChecker(robot, sc), ClosedChainKinematics(robot, sc.object.grasps)
-    pl = TCBiRRT(robot, sc, TCBiRRTOptions(variant="improved", extension="loop"), checker=ck, kinematics=kin)
-    pl._rng = np.random.default_rng(seed + 1)
-    pl._sampler()
-    ext = pl._ext
-    if pl._nrng is None or ext is None or ext._ik is None:
+    setup = loop_extension_setup(scene_name, n, seed, robot_name)
+    if setup is None:
         return {"available": False}
-    rng = np.random.default_rng(seed)
-    cases, _ = _pose_cases(robot, sc, kin, n, seed, rng, 0.15, 0.3)
+    pl, ck, kin, ext, cases = setup
     out: dict[str, Any] = {"available": True, "extensions": len(cases)}
     for rep in range(repeats):
         for k in (PREDICTORS if rep % 2 == 0 else PREDICTORS[::-1]):
             ext._ctx.predictor = PREDICTORS.index(k)
-            pl._nrng.lib.tcb_rng_seed(pl._nrng.address, seed + 7)
-            st = {c: 0 for c in COUNTERS}
-            n_checks = ck.n_checks
-            c0 = time.process_time()
-            for q0, M, (Rs, ps) in cases:
-                loop_extend(pl, M.rotation, M.translation, Rs, ps, q0, st, True)
-            us = 1e6 * (time.process_time() - c0) / len(cases)
+            us, st, checks = timed_extensions(pl, ck, cases, COUNTERS, seed)
             row = out.setdefault(k, {})
             row["extension_us"] = min(row.get("extension_us", np.inf), us)
-            row.update({c: st.get(c, 0) for c in COUNTERS}, checks=ck.n_checks - n_checks)
+            row.update({c: st.get(c, 0) for c in COUNTERS}, checks=checks)
     ext._ctx.predictor = PREDICTORS.index(pl.options.ik_predictor)
     out["ik_fit"] = _ik_cost_fit(ext, kin, pl.options, cases)
     return out

@@ -177,16 +177,14 @@ def loop_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
     return dict(best, extensions=float(len(cases)), available=1.0)
 
 
-def ik_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
-             robot_name: str = "tcbirrt_dual_arm") -> dict[str, float]:
-    """CPU µs per extension (``extension="loop"``: path IK with restarts, checks, edges, one C call) with the
-    hand-written C IK against the compiled CasADi block (:attr:`~optplan.planners.kernel.extend.NativeExtender.native_ik`),
-    on identical work: the extensions of :func:`loop_costs`, the restarts' stream reseeded before each pass;
-    best of ``repeats`` alternating passes, with each pass's counters (equal when the two IKs agree)."""
+def loop_extension_setup(scene_name: str, n: int, seed: int, robot_name: str = "tcbirrt_dual_arm") -> tuple | None:
+    """The improved variant's planner with the native loop extension (``extension="loop"``) and its native IK set
+    up on ``scene_name`` (its sampler built, seeded from ``seed``), and ``n`` extension cases per start/goal
+    configuration (:func:`_pose_cases`): ``(planner, checker, kinematics, extender, cases)``, or None when the
+    native extension or IK is not available here."""
     from ..constraints.closed_chain import ClosedChainKinematics
     from ..model.robot import RobotModel
     from ..planners.tcbirrt import TCBiRRT, TCBiRRTOptions
-    from ..planners.tcbirrt_native import loop_extend
     from ..planners.validity import ValidityChecker
     from ..scene import Scene
 
@@ -199,26 +197,46 @@ def ik_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
     pl._sampler()
     ext = pl._ext
     if pl._nrng is None or ext is None or ext._ik is None:
+        return None
+    cases, _ = _pose_cases(robot, sc, kin, n, seed, np.random.default_rng(seed), 0.15, 0.3)
+    return pl, ck, kin, ext, cases
+
+
+def timed_extensions(pl: Any, ck: Any, cases: list[Any], counters: tuple[str, ...], seed: int) -> tuple[float, dict, int]:
+    """One pass of the native loop extension over ``cases`` (the restarts' stream reseeded from ``seed`` first, so that
+    passes do identical work): CPU µs per extension, the counters ``counters`` and the configuration checks made."""
+    from ..planners.tcbirrt_native import loop_extend
+
+    pl._nrng.lib.tcb_rng_seed(pl._nrng.address, seed + 7)
+    st = {c: 0 for c in counters}
+    n_checks = ck.n_checks
+    c0 = time.process_time()
+    for q0, M, (Rs, ps) in cases:
+        loop_extend(pl, M.rotation, M.translation, Rs, ps, q0, st, True)
+    return 1e6 * (time.process_time() - c0) / len(cases), st, ck.n_checks - n_checks
+
+
+def ik_costs(scene_name: str, n: int = 200, repeats: int = 3, seed: int = 0,
+             robot_name: str = "tcbirrt_dual_arm") -> dict[str, float]:
+    """CPU µs per extension (``extension="loop"``: path IK with restarts, checks, edges, one C call) with the
+    hand-written C IK against the compiled CasADi block (:attr:`~optplan.planners.kernel.extend.NativeExtender.native_ik`),
+    on identical work: the extensions of :func:`loop_costs`, the restarts' stream reseeded before each pass;
+    best of ``repeats`` alternating passes, with each pass's counters (equal when the two IKs agree)."""
+    setup = loop_extension_setup(scene_name, n, seed, robot_name)
+    if setup is None:
         return {"available": 0.0}
-    rng = np.random.default_rng(seed)
-    cases, _ = _pose_cases(robot, sc, kin, n, seed, rng, 0.15, 0.3)
+    pl, ck, kin, ext, cases = setup
     counters = ("ik_calls", "ik_iterations", "ik_restarts", "ik_failures", "ik_jumps", "collisions", "edge_checks",
                 "edge_collisions")
     out: dict[str, float] = {}
     for rep in range(repeats):
         for k in (("c", "casadi") if rep % 2 == 0 else ("casadi", "c")):
             ext.native_ik = k == "c"
-            pl._nrng.lib.tcb_rng_seed(pl._nrng.address, seed + 7)
-            st = {c: 0 for c in counters}
-            n_checks = ck.n_checks
-            c0 = time.process_time()
-            for q0, M, (Rs, ps) in cases:
-                loop_extend(pl, M.rotation, M.translation, Rs, ps, q0, st, True)
-            us = 1e6 * (time.process_time() - c0) / len(cases)
+            us, st, checks = timed_extensions(pl, ck, cases, counters, seed)
             out[k + "_extension_us"] = min(out.get(k + "_extension_us", np.inf), us)
             for c in ("ik_iterations", "ik_restarts", "edge_checks"):
                 out[f"{k}_{c}"] = float(st[c])
-            out[k + "_checks"] = float(ck.n_checks - n_checks)
+            out[k + "_checks"] = float(checks)
     ext.native_ik = True
     return dict(out, extensions=float(len(cases)), available=1.0)
 
