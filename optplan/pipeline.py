@@ -46,7 +46,7 @@ from .scene import held_object as _held_object
 from .shortcuts import shortcut_constrained, shortcut_free
 from .verification import VerifyReport, verify
 
-# the optimization stack (optplan.problem, SciPy's sparse matrices, the NLP modules) is imported where a
+# the optimization stack (optplan.problem, the NLP modules) is imported where a
 # segment is optimized, not here: ``optplan plan`` plans while a forked worker imports it (pipeline_workers)
 if TYPE_CHECKING:
     from .planners.base import PlanResult

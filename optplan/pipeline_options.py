@@ -165,8 +165,8 @@ class PipelineOptions:
     #: inherit the robot, scene and caches; :mod:`optplan.workers`) [count]; None: 2 on a machine with at least
     #: 2 CPUs, else 1. The results do not depend on it.
     workers: int | None = None
-    #: Fork the segment worker before planning, to import the optimization stack (SciPy's sparse
-    #: matrices, the NLP modules: ~0.2 s of CPU) while this process plans, instead of after planning,
+    #: Fork the segment worker before planning, to import the optimization stack (the problem and
+    #: NLP modules, IPOPT) while this process plans, instead of after planning,
     #: inheriting it from this process (:func:`optplan.pipeline_workers.warm_worker`). It saves that time of the wall
     #: on a machine with a core to spare and costs that much CPU more in all (both processes import);
     #: None: only when the 1-minute load average leaves a core free (``os.getloadavg``). The results do not

@@ -1,7 +1,7 @@
 """The pipeline's segment workers: how many processes optimize a plan's segments, the early fork
 that prepares a worker while the plan is made, and the hand-out of the segment NLPs to them.
 
-The optimization stack (:mod:`optplan.problem` with SciPy's sparse matrices, the NLP modules, IPOPT)
+The optimization stack (:mod:`optplan.problem`, the NLP modules, IPOPT; no SciPy)
 is not imported by the planning modules. With ``PipelineOptions.early_worker`` the segment worker is
 forked before planning and imports it (:func:`warm_worker`) while this process plans; otherwise this
 process imports it just before the segments are sent, so that a worker forked then inherits it.
@@ -37,8 +37,7 @@ def _a_core_is_free() -> bool:
 
 
 def _import_optimization_stack() -> None:
-    """Import what a segment's optimization needs (optplan.problem with SciPy's sparse matrices, the
-    NLP modules) and load IPOPT."""
+    """Import what a segment's optimization needs (optplan.problem, the NLP modules) and load IPOPT."""
     import casadi
 
     from . import segment_nlp, tasks  # noqa: F401 - imported for their import time

@@ -70,7 +70,7 @@ def test_b_spline_fit_system_as_the_segment_nlp_builds_it():
 _NO_LINALG = """
 import sys
 import numpy as np
-import scipy.sparse          # needed by the segment NLP; older scipy imports its linalg modules with it
+import scipy.sparse          # what it imports itself (older releases: scipy.linalg) is not the plan's doing
 before = set(sys.modules)
 import optplan.cli, optplan.pipeline, optplan.model.kinematics
 from optplan.geometry.splines import clamped_cubic
@@ -101,7 +101,7 @@ print(" ".join(m for m in ("scipy.sparse", "optplan.problem", "optplan.tasks", "
 
 def test_the_plan_commands_planning_modules_do_not_import_the_optimization_stack():
     """``optplan plan`` plans and shortcuts while its segment worker imports the optimization stack
-    (scipy.sparse, optplan.problem: ~0.2 s CPU): the modules it needs up to then must not import it."""
+    (optplan.problem, the NLP modules, IPOPT): the modules it needs up to then must not import it."""
     out = subprocess.run([sys.executable, "-c", _NO_OPT_STACK], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip() == "", f"imported: {out.stdout.strip()}"

@@ -4,7 +4,7 @@ sections (wall ``perf_counter`` and this process's CPU time, both [s]).
 ``python -m optplan.bench.plan_wall [--scene 1] [--seed 0] [--html FILE] [--save FILE]``
 
 Sections, in order: the modules the ``optplan`` command imports (``optplan.cli``, NumPy with it),
-the libraries the plan command loads (``scipy.sparse``, CasADi, coal, Pinocchio, one by one), the
+the libraries the plan command loads (CasADi, coal, Pinocchio, one by one; no SciPy), the
 plan command's own modules (the pipeline, the scene, the trials), the scene and the robot loaded,
 the trial, the planner made (collision checker, planner kernels), planning, the shortcuts, per
 segment NLP set-up (its build: kernel loading included) and IPOPT, the verification by coal, the
@@ -28,8 +28,8 @@ import sys  # noqa: E402
 from collections import defaultdict  # noqa: E402
 
 #: third-party modules the plan command loads, timed one by one before optplan's own (NumPy already
-#: with ``optplan.cli``); ``scipy.sparse`` includes the NumPy submodules SciPy's array-API layer loads
-_LIBRARIES = ("scipy.sparse", "casadi", "coal", "pinocchio")
+#: with ``optplan.cli``)
+_LIBRARIES = ("casadi", "coal", "pinocchio")
 
 
 class Sections:

@@ -10,6 +10,8 @@ import casadi as ca
 import numpy as np
 import numpy.typing as npt
 
+from .sparse import SparseMatrix
+
 __all__ = ["RowAssembly", "nonzeros", "scatter"]
 
 
@@ -50,8 +52,6 @@ def nonzeros(M: ca.MX) -> ca.MX:
 def scatter(nrow: int, ncol: int, rows: np.ndarray, cols: np.ndarray, src_idx: np.ndarray, weights: np.ndarray,
             src: ca.MX, nsrc: int) -> ca.MX:
     """Sparse ``nrow × ncol`` MX whose entry (rows[i], cols[i]) sums ``weights[i]·src[src_idx[i]]``."""
-    import scipy.sparse as sps
-
     key = cols.astype(np.int64) * nrow + rows
     uniq, inv = np.unique(key, return_inverse=True)  # sorted column-major = CCS order
     ucol, urow = uniq // nrow, uniq % nrow
@@ -65,11 +65,10 @@ def scatter(nrow: int, ncol: int, rows: np.ndarray, cols: np.ndarray, src_idx: n
         picked = ca.vec(src[np.asarray(src_idx)[order].astype(int).tolist()])
         w = np.asarray(weights, float)[order]
         return ca.MX(sp, picked if np.all(w == 1.0) else picked * ca.DM(w.tolist()))
-    S = sps.csc_matrix((weights, (inv, src_idx)), shape=(len(uniq), nsrc))
-    S.sum_duplicates()  # CasADi < 3.7 needs sorted, unique row indices per column
-    S.sort_indices()
+    # sorted, unique row indices per column (CasADi < 3.7 needs them)
+    S = SparseMatrix(weights, np.asarray(inv).ravel(), src_idx, (len(uniq), nsrc))
     # nonzeros as a list: CasADi converts a Python list ~1.6x faster than an ndarray (measured, 477k entries)
-    Sd = ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.indptr.tolist(), S.indices.tolist()), S.data.tolist())
+    Sd = ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.colind().tolist(), S.row.tolist()), S.data.tolist())
     return ca.MX(sp, ca.mtimes(Sd, src))
 
 

@@ -21,6 +21,7 @@ from ..model.robot import RobotModel
 from .assembly import RowAssembly, nonzeros, scatter
 from .frame_terms import ClosedChain
 from .kernels import KernelCache, load_library
+from .sparse import SparseMatrix, as_sparse, to_dm
 from .transcription import quat_mul
 
 __all__ = ["FloatingKernels", "momentum_template", "spline_basis"]
@@ -198,19 +199,15 @@ class _LocalAssembly(RowAssembly):
 
     def linear(self, name: str, xp: ca.MX, A: Any, lo: npt.ArrayLike, hi: npt.ArrayLike) -> None:
         """Rows ``A @ [x; p]`` (A: rows × (nx + np), dense or sparse)."""
-        import scipy.sparse as sps
-
-        A = sps.csr_matrix(A)
+        A = as_sparse(A)
         r0 = self._rows(name, ca.mtimes(_dm(A), xp), lo, hi)
-        Ax = A[:, :self.nx].tocoo()
+        Ax = A.columns(self.nx)
         self.jt.append(np.array([r0 + Ax.row, Ax.col, np.full(Ax.nnz, -1), Ax.data], float))
 
     def family(self, name: str, fn: ca.Function, jfn: ca.Function, hfn: ca.Function, template: np.ndarray,
                slots: np.ndarray, xp: ca.MX, lo: npt.ArrayLike, hi: npt.ArrayLike) -> None:
         """``template``: (n_entries, 3) rows ``(input i, slot s, weight)``; ``slots``: (K, n_slots)
         global indices into ``[x; p]`` (−1: zero)."""
-        import scipy.sparse as sps
-
         K = slots.shape[0]
         nz, m = fn.size1_in(0), fn.size1_out(0)
         ti, ts, tw = template[:, 0].astype(int), template[:, 1].astype(int), template[:, 2]
@@ -222,7 +219,7 @@ class _LocalAssembly(RowAssembly):
         g = slots[:, ts]  # K × n_entries
         rows = (np.arange(K)[:, None] * nz + ti[None, :])
         ok = (g >= 0) & used[None, :]
-        M = sps.csr_matrix((np.broadcast_to(tw, g.shape)[ok], (rows[ok], g[ok])), shape=(K * nz, self.nx + self.np))
+        M = SparseMatrix(np.broadcast_to(tw, g.shape)[ok], rows[ok], g[ok], (K * nz, self.nx + self.np))
         Z = ca.reshape(ca.mtimes(_dm(M), xp), nz, K)
         r0 = self._rows(name, ca.vec(fn.map(K)(Z)), lo, hi)
         # Jacobian: kernel entry (r, i) → (r0 + t m + r, x-slot of entry (i, s), w)
@@ -239,8 +236,6 @@ class _LocalAssembly(RowAssembly):
 
     def finish(self, lam_f: ca.MX, lam_g: ca.MX, Hf: Any) -> tuple[ca.MX, ca.MX, ca.MX]:
         """``(g, ∂g/∂x, triu ∇²L)``; ``Hf``: the objective's constant Hessian (nx × nx, sparse)."""
-        import scipy.sparse as sps
-
         nx = self.nx
         G = ca.vertcat(*self.g)
         self.lbg, self.ubg = np.concatenate(self.lbg), np.concatenate(self.ubg)
@@ -266,7 +261,7 @@ class _LocalAssembly(RowAssembly):
             w = np.broadcast_to(tw[pa] * tw[pb], va.shape) * np.where(offd & (va == vb), 2.0, 1.0)
             blocks.append(np.array([ca_[ok], cb_[ok], (off + t * e + pe)[ok], w[ok]], float))
             off += K * e
-        Hu = sps.triu(sps.coo_matrix(Hf)).tocoo()
+        Hu = as_sparse(Hf).triu()
         blocks.append(np.array([Hu.row, Hu.col, np.full(Hu.nnz, off), Hu.data], float))
         T = np.hstack(blocks)
         Hl = scatter(nx, nx, T[0].astype(int), T[1].astype(int), T[2].astype(int), T[3],
@@ -293,10 +288,5 @@ def _entry_pairs(hi: np.ndarray, hj: np.ndarray, ti: np.ndarray) -> tuple[np.nda
 
 
 def _dm(A: Any) -> ca.DM:
-    """A scipy sparse matrix as a CasADi DM with the same structural nonzeros."""
-    import scipy.sparse as sps
-
-    A = sps.csc_matrix(A)
-    A.sum_duplicates()
-    A.sort_indices()
-    return ca.DM(ca.Sparsity(A.shape[0], A.shape[1], A.indptr.tolist(), A.indices.tolist()), A.data)
+    """A sparse (or dense) matrix as a CasADi DM with the same structural nonzeros (:func:`.sparse.to_dm`)."""
+    return to_dm(A)

@@ -25,7 +25,6 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
-import scipy.sparse as sps
 
 from ..geometry.banded import solve_banded_dense
 from ..model.robot import RobotModel
@@ -33,6 +32,7 @@ from . import kernel_compiler
 from .bspline import knot_matrices
 from .expressions import PointSymbols, symbols_of
 from .floating_kernels import FloatingKernels, _dm, _LocalAssembly, momentum_template, spline_basis
+from .sparse import SparseMatrix
 
 __all__ = ["Family", "SplineCore"]
 
@@ -161,9 +161,8 @@ class SplineCore:
         if W is None:
             tm, _ = self.knot_template(cost)
             sl = self.knot_slots(k, cost)
-            W = self._input_maps[key] = sps.csr_matrix(
-                (tm[:, 2], (tm[:, 0].astype(int), sl[tm[:, 1].astype(int)])),
-                shape=(int(tm[:, 0].max()) + 1, self.nx + self.np))
+            W = self._input_maps[key] = SparseMatrix(tm[:, 2], tm[:, 0].astype(int), sl[tm[:, 1].astype(int)],
+                                                     (int(tm[:, 0].max()) + 1, self.nx + self.np))
         return np.asarray(W @ np.r_[x, p]).ravel()
 
     def interval_template(self, kind: str) -> np.ndarray:
@@ -275,7 +274,7 @@ class SplineCore:
                 if r == 0:   # no entry active (rows added after a solve if needed)
                     asm.slices[fam.name] = slice(asm.ng, asm.ng)
                     continue
-                A = sps.csr_matrix((vals, (rows, cols)), shape=(r, nx + npp))
+                A = SparseMatrix(vals, rows, cols, (r, nx + npp))
                 if fam.sides == 1:
                     asm.linear(fam.name, xp, A, np.full(r, -np.inf), np.full(r, np.inf))
                 else:
@@ -300,7 +299,7 @@ class SplineCore:
             target.family(fam.name, f, jf, hf, tm, slots, xp, lo, hi)
         lam_f = ca.MX.sym("lam_f")
         lam_g = ca.MX.sym("lam_g", asm.ng)
-        zero = sps.csr_matrix((nx, nx))
+        zero = SparseMatrix.zeros((nx, nx))
         sc = p[self.p_scale]
         # quadratic costs xᵀQx · T^-e: value, gradient and a constant Hessian pattern (its first
         # exponent's group rides on the rows' Hessian scatter, weighted by lam_f · sc · T^-e)
@@ -316,7 +315,7 @@ class SplineCore:
             groups[e] = Qf if e not in groups else groups[e] + Qf
         Hq_first, coef_first = zero, lam_f
         for i, (e, Qf) in enumerate(groups.items()):
-            Hu = 2 * sps.triu(Qf).tocsr()
+            Hu = 2 * Qf.triu()
             if i == 0 and asm.ng:
                 Hq_first, coef_first = Hu, lam_f * sc * xp[self.slot_T()] ** (-e)
             else:
@@ -354,7 +353,7 @@ class SplineCore:
         its exact, constant Hessian pattern instead of a kernel family (:meth:`quadratic_form`)."""
         return fam.cost and fam.kind in ("jerk", "acceleration") and not self.free_time and fam.fn is not None
 
-    def quadratic_form(self, fam: Family) -> tuple[sps.csr_matrix, int]:
+    def quadratic_form(self, fam: Family) -> tuple[SparseMatrix, int]:
         """``(Q, e)`` with ``Σ_k fam.fn(z_k) = xᵀQx · T^-e`` (Q: nx × nx, symmetric): the kernel's
         constant Hessian in its control-point inputs (evaluated at T = 1), scattered by the
         interval template over the family's intervals. Interval k's inputs are the control points
@@ -377,14 +376,11 @@ class SplineCore:
             np.add.at(W, (ti, ts), tw)
             L = 0.5 * W.T @ H0 @ W
             L[np.abs(L) < 1e-14 * max(1.0, float(np.abs(L).max()))] = 0.0
-            L = self._quad_blocks[fam.fn.name()] = sps.coo_matrix(L)
+            L = self._quad_blocks[fam.fn.name()] = SparseMatrix.from_dense(L)
         k = np.asarray(fam.points, int)
         off = (k * nj)[:, None]
-        Q = sps.coo_matrix((np.tile(L.data, k.size), ((off + L.row).ravel(), (off + L.col).ravel())),
-                           shape=(self.nx, self.nx)).tocsr()
-        Q.sum_duplicates()
-        Q.eliminate_zeros()
-        return Q, e
+        Q = SparseMatrix(np.tile(L.data, k.size), (off + L.row).ravel(), (off + L.col).ravel(), (self.nx, self.nx))
+        return Q.eliminate_zeros(), e
 
     def _compiled_exists(self, name: str) -> bool:
         """Whether the compiled library of local kernel ``name`` is in the cache (remembered once

@@ -9,7 +9,6 @@ import dataclasses
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sps
 
 from ..geometry.banded import solve_banded_dense
 from .spline_core import Family, SplineCore
@@ -77,11 +76,11 @@ class RowSelection:
         for i, v, _ in fixed.values():
             flat[i] = v
         Pf = flat.reshape(N + 3, nj)
-        A = sps.csr_matrix(core.M["q"][1:N])
+        A = np.asarray(core.M["q"][1:N], float)
         rhs = Q[1:N] - A[:, np.r_[0:3, N:N + 3]] @ Pf[np.r_[0:3, N:N + 3]]
         B = A[:, 3:N]
         # normal equations of a banded system: banded (a dense solve is slow under a loaded BLAS)
-        Pf[3:N] = solve_banded_dense((B.T @ B).toarray(), B.T @ rhs).reshape(N - 3, nj)
+        Pf[3:N] = solve_banded_dense(B.T @ B, B.T @ rhs).reshape(N - 3, nj)
         return Pf
 
     def row_families(self) -> list[Family]:
