@@ -2,6 +2,7 @@
 grids and margins, and the ordered retry policy's limits."""
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -240,6 +241,16 @@ class PipelineOptions:
             if not isinstance(v, tuple) or not all(isinstance(kv, tuple) and len(kv) == 2 and isinstance(kv[0], str)
                                                    for kv in v):
                 raise OptionError(f"PipelineOptions.{name}: expected a tuple of (name, value) pairs, got {v!r}")
+            # the pairs a user gave (not the defaults): checked by IPOPT now, not at the first segment's solve
+            default = {f.name: f.default for f in dataclasses.fields(self)}[name]
+            given = {k: val for k, val in v if (k, val) not in default}
+            if given:
+                from .solver_options import check_ipopt_options
+
+                try:
+                    check_ipopt_options(given)
+                except OptionError as exc:
+                    raise OptionError(f"PipelineOptions.{name}: {exc}") from None
         if not isinstance(self.collision_warm_start, bool):
             raise OptionError(f"PipelineOptions.collision_warm_start: expected True or False, got "
                               f"{self.collision_warm_start!r}")

@@ -44,8 +44,10 @@ def _quiet_stdout():
         os.close(saved)
 
 
-#: (option name, value type, repr of the value) IPOPT accepted in this process
-_ACCEPTED: set[tuple[str, str, str]] = set()
+#: (option name, value type, repr of the value[, library options]) IPOPT accepted in this process
+_ACCEPTED: set[tuple[str, ...]] = set()
+#: options naming the library a linear solver loads
+_LIBRARY_OPTIONS = ("hsllib", "pardisolib")
 
 
 def check_ipopt_options(options: dict | None) -> None:
@@ -57,19 +59,33 @@ def check_ipopt_options(options: dict | None) -> None:
     import casadi as ca
 
     x = ca.SX.sym("x")
+    # the libraries a linear solver loads at the first solve (HSL's, Pardiso's): checked with it
+    libs = {casadi_option_name(k): v for k, v in options.items() if isinstance(k, str) and k.split(".")[-1] in _LIBRARY_OPTIONS}
     for key, value in options.items():
         if not isinstance(key, str):
             raise OptionError(f"ipopt_options: option names are strings, got {key!r}")
         if isinstance(value, float) and not math.isfinite(value):
             raise OptionError(f"ipopt_options[{key!r}] = {value!r}: expected a finite number")
         name = casadi_option_name(key)
-        seen = (name, type(value).__name__, repr(value))
+        seen: tuple[str, ...] = (name, type(value).__name__, repr(value))
         if seen in _ACCEPTED:
             continue   # IPOPT took this value before: a solve that passes its options again checks nothing
         opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", name: value}
+        solve = name == "ipopt.linear_solver"
+        if solve:
+            opts.update(libs)
+            seen = seen + (repr(sorted(libs.items())),)
+            if seen in _ACCEPTED:
+                continue
         try:
             with _quiet_stdout():
-                ca.nlpsol("optplan_option_check", "ipopt", {"x": x, "f": x * x}, opts)
+                solver = ca.nlpsol("optplan_option_check", "ipopt", {"x": x, "f": (x - 1) * (x - 1)}, opts)
+                if solve:   # IPOPT takes any linear solver's name and loads its library only when it solves
+                    solver(x0=0.0)
+            if solve and solver.stats().get("return_status") == "Invalid_Option":
+                raise OptionError(f"ipopt_options[{key!r}] = {value!r}: this IPOPT cannot load that linear solver "
+                                  f"(its library is not installed{'' if libs else ', or not named by hsllib / pardisolib'}); "
+                                  "'mumps' is always available, 'spral' in CasADi's own build")
             _ACCEPTED.add(seen)
         except (RuntimeError, TypeError, NotImplementedError) as exc:
             text = str(exc).strip().splitlines()

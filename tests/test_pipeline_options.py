@@ -69,6 +69,33 @@ def test_ipopt_option_pairs_are_checked(name, bad):
         PipelineOptions(**{name: bad})
 
 
+@pytest.mark.parametrize("name", ["ipopt_options", "globalization_retry_options"])
+@pytest.mark.parametrize("pair, says", [(("linear_solvr", "mumps"), "unknown IPOPT"),
+                                        (("mu_strategy", "fast"), "refused by IPOPT"),
+                                        (("tol", -1.0), "refused by IPOPT")])
+def test_ipopt_option_names_and_values_are_checked_by_ipopt_when_the_options_are_made(name, pair, says):
+    """A misspelt option or a refused value is a clear error before any planning, not a status of
+    every segment's solve."""
+    with pytest.raises(OptionError, match=f"PipelineOptions.{name}.*{pair[0]}.*{says}"):
+        PipelineOptions(**{name: (pair,)})
+    assert PipelineOptions(**{name: (("tol", 1e-7),)})   # a value IPOPT takes
+
+
+def test_a_linear_solver_ipopt_cannot_load_is_named_when_the_options_are_made():
+    """IPOPT accepts any linear solver's name and fails at the first solve when its library (HSL's,
+    Pardiso's) is missing, with an unset iteration counter: the options say so instead."""
+    from optplan.problem.nlp import IpoptStatus, outcome_from_stats
+    from optplan.solver_options import check_ipopt_options
+
+    with pytest.raises(OptionError, match="linear_solver.*ma27.*cannot load"):
+        PipelineOptions(ipopt_options=(("linear_solver", "ma27"),))
+    with pytest.raises(OptionError, match="ma57.*cannot load"):
+        check_ipopt_options({"linear_solver": "ma57", "hsllib": "/nonexistent/libhsl.so"})
+    check_ipopt_options({"linear_solver": "mumps"})   # always available
+    bad = outcome_from_stats({"return_status": "Invalid_Option", "iter_count": 10878976}, None, wall_time=0.0)
+    assert bad.status is IpoptStatus.INVALID_OPTION and bad.iterations == 0
+
+
 def test_the_segments_use_never_monotone_mu_and_retry_with_the_filter():
     opts = PipelineOptions()
     assert dict(opts.ipopt_options)["adaptive_mu_globalization"] == "never-monotone-mode"

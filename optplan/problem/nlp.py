@@ -85,6 +85,9 @@ class IpoptStatus(str, Enum):
 
 
 _STATUS_BY_NAME = {m.value.lower(): m for m in IpoptStatus}
+#: statuses of a run IPOPT ends before its first iteration
+_NOT_STARTED = frozenset({IpoptStatus.INVALID_OPTION, IpoptStatus.INVALID_PROBLEM_DEFINITION,
+                          IpoptStatus.NOT_ENOUGH_DEGREES_OF_FREEDOM})
 _HESSIANS = ("exact", "limited-memory")
 #: (name, type, value) of raw options IPOPT already accepted in this process (checking one creates
 #: a solver instance: about a millisecond)
@@ -252,7 +255,8 @@ class SolverOptions:
 class SolveOutcome:
     """One IPOPT run.
 
-    status: :class:`IpoptStatus`; iterations: IPOPT iterations (−1 when IPOPT did not run);
+    status: :class:`IpoptStatus`; iterations: IPOPT iterations (−1 when IPOPT did not run, 0 when it
+    refused to start: an invalid option or problem);
     wall_time / cpu_time [s]: the run; setup_time [s]: building the NLP and creating the solver
     before it (0 when a built solver was reused); cost: the objective at ``x`` (the problem's
     own, unscaled objective); x, lam_g, lam_x: primal and multipliers (CasADi's convention:
@@ -318,7 +322,9 @@ def outcome_from_stats(stats: Mapping[str, Any], out: Mapping[str, Any] | None, 
     that call a ``casadi.nlpsol`` of their own). ``cost_scale`` divides the returned ``f``;
     ``copy=False``: float vectors of ``out`` are kept, not copied (outputs made for this call alone)."""
     status = IpoptStatus.from_string(stats.get("return_status", "Unknown"))
-    iters = int(stats.get("iter_count", -1))
+    # a run IPOPT refused before its first iteration leaves its counter unset (measured: 10878976,
+    # -919633488 for a linear solver whose library is missing): no iterations
+    iters = 0 if status in _NOT_STARTED else int(stats.get("iter_count", -1))
     if out is None:
         return SolveOutcome(status, iters, wall_time, cpu_time, setup_time, label=label)
     def arr(k: str) -> np.ndarray | None:
