@@ -116,3 +116,27 @@ def test_a_spline_nlp_is_built_and_solved_without_importing_scipy():
     out = subprocess.run([sys.executable, "-c", _NO_SCIPY], capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip() == "", f"imported: {out.stdout.strip()}"
+
+
+@pytest.mark.parametrize("N", [7, 49, 100, 135])
+def test_the_spline_fits_products_equal_scipys_to_the_last_bit(N):
+    """The least-squares fit between fixed ends (``spline_rows``) forms ``A_ends @ P``, ``BᵀB`` and
+    ``Bᵀ r`` of the B-spline knot matrix: summed in SciPy's order, so its guesses (and the solves
+    that start from them) are the same numbers as with SciPy's sparse products."""
+    from optplan.problem.bspline import knot_matrices
+    from optplan.problem.sparse import gram
+
+    rng = np.random.default_rng(N)
+    A = knot_matrices(N)["q"][1:N]
+    ends = np.r_[0:3, N:N + 3]
+    P = rng.normal(size=(N + 3, 14))
+    Q = rng.normal(size=(N - 1, 14))
+    S = sps.csr_matrix(A)
+    rhs_ref = Q - S[:, ends] @ P[ends]
+    rhs = Q - SparseMatrix.from_dense(A[:, ends]) @ P[ends]
+    np.testing.assert_array_equal(rhs, rhs_ref)
+    B = S[:, 3:N]
+    np.testing.assert_array_equal(gram(A[:, 3:N]), (B.T @ B).toarray())
+    np.testing.assert_array_equal(gram(A[:, 3:N], rhs), B.T @ rhs)
+    with pytest.raises(ValueError, match="gram"):
+        gram(np.ones((3, 2)), np.ones((4, 2)))

@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["SparseMatrix", "as_sparse", "to_dm"]
+__all__ = ["SparseMatrix", "as_sparse", "gram", "to_dm"]
 
 
 class SparseMatrix:
@@ -139,3 +139,20 @@ def to_dm(A: Any) -> ca.DM:
     """``A`` (:func:`as_sparse`) as a CasADi ``DM`` with the same structural nonzeros."""
     S = as_sparse(A)
     return ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.colind().tolist(), S.row.tolist()), S.data)
+
+
+def gram(B: npt.ArrayLike, R: npt.ArrayLike | None = None) -> np.ndarray:
+    """``Bᵀ B`` (or ``Bᵀ R``) of a dense ``B`` (m × n) that is mostly zeros, summed row after row of
+    ``B`` as a sparse product sums it (so the same numbers to the last bit as SciPy's ``B.T @ B`` of
+    its CSR matrix; BLAS sums in another order)."""
+    B = np.asarray(B, float)
+    R = B if R is None else np.asarray(R, float)
+    if B.ndim != 2 or R.ndim != 2 or R.shape[0] != B.shape[0]:
+        raise ValueError(f"gram: expected 2-D arrays with one row count, got {B.shape} and {R.shape}")
+    out = np.zeros((B.shape[1], R.shape[1]))
+    for k in range(B.shape[0]):
+        nz = np.flatnonzero(B[k])
+        if nz.size:
+            rk = R[k]
+            out[nz] += B[k, nz, None] * rk[None, :]
+    return out

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry.banded import solve_banded_dense
+from .sparse import SparseMatrix, gram
 from .spline_core import Family, SplineCore
 from .spline_problem import fixed_boundary
 from .terms import JointBoundary
@@ -77,10 +78,12 @@ class RowSelection:
             flat[i] = v
         Pf = flat.reshape(N + 3, nj)
         A = np.asarray(core.M["q"][1:N], float)
-        rhs = Q[1:N] - A[:, np.r_[0:3, N:N + 3]] @ Pf[np.r_[0:3, N:N + 3]]
+        ends = np.r_[0:3, N:N + 3]
+        rhs = Q[1:N] - SparseMatrix.from_dense(A[:, ends]) @ Pf[ends]
         B = A[:, 3:N]
-        # normal equations of a banded system: banded (a dense solve is slow under a loaded BLAS)
-        Pf[3:N] = solve_banded_dense(B.T @ B, B.T @ rhs).reshape(N - 3, nj)
+        # normal equations of a banded system: banded (a dense solve is slow under a loaded BLAS);
+        # the products summed in the order of a sparse product (over B's rows), not BLAS's
+        Pf[3:N] = solve_banded_dense(gram(B), gram(B, rhs)).reshape(N - 3, nj)
         return Pf
 
     def row_families(self) -> list[Family]:
