@@ -13,14 +13,14 @@ import os
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from .workers import default_workers, run_jobs, start_workers, workers_started
+from .workers import default_workers, run_jobs, send_early, start_workers, workers_started
 
 if TYPE_CHECKING:
     from .model.robot import RobotModel
     from .pipeline_options import PipelineOptions
     from .scene import Scene
 
-__all__ = ["segment_workers", "start_early_worker", "solve_segments", "warm_worker"]
+__all__ = ["segment_workers", "send_segment_early", "start_early_worker", "solve_segments", "warm_worker"]
 
 
 def segment_workers(opts: PipelineOptions) -> int:
@@ -65,13 +65,23 @@ def start_early_worker(robot: RobotModel, scene: Scene, opts: PipelineOptions) -
     return start_workers((robot, scene), n, warm_worker) if early else False
 
 
+def send_segment_early(robot: RobotModel, scene: Scene, fn: Callable[..., Any], job: tuple[Any, ...],
+                       opts: PipelineOptions) -> Any:
+    """Send one segment (the plan's longest, known before the others are shortcut) to the worker
+    started before planning, now: it starts while this process shortcuts the rest. The future for
+    :func:`solve_segments`' ``early``, or None (no such worker; the segment goes with the others)."""
+    return send_early((robot, scene), segment_workers(opts), fn, job)
+
+
 def solve_segments(robot: RobotModel, scene: Scene, fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]],
-                   cost: Sequence[float], opts: PipelineOptions) -> tuple[list[Any], float]:
+                   cost: Sequence[float], opts: PipelineOptions, early: dict[int, Any] | None = None
+                   ) -> tuple[list[Any], float]:
     """``[fn(robot, scene, *job) for job in jobs]`` in this process and the segment workers
-    (:func:`optplan.workers.run_jobs`, longest ``cost`` first); returns the results in job order and
-    the CPU time [s] the workers spent. A worker not started before planning is forked now, after this
-    process imported the optimization stack, so it inherits it."""
+    (:func:`optplan.workers.run_jobs`, longest ``cost`` first; ``early``: jobs sent already,
+    :func:`send_segment_early`); returns the results in job order and the CPU time [s] the workers
+    spent. A worker not started before planning is forked now, after this process imported the
+    optimization stack, so it inherits it."""
     workers = segment_workers(opts)
-    if not workers_started((robot, scene), min(workers, len(jobs))):
+    if not early and not workers_started((robot, scene), min(workers, len(jobs))):
         _import_optimization_stack()
-    return run_jobs((robot, scene), fn, jobs, cost, workers)
+    return run_jobs((robot, scene), fn, jobs, cost, workers, early=early)

@@ -31,7 +31,7 @@ from typing import Any
 
 from . import interrupt
 
-__all__ = ["default_workers", "run_jobs", "shutdown", "start_workers", "workers_started"]
+__all__ = ["default_workers", "run_jobs", "send_early", "shutdown", "start_workers", "workers_started"]
 log = logging.getLogger(__name__)
 
 #: contexts the forked workers inherit: key -> the context objects (kept alive while a pool uses them)
@@ -152,24 +152,44 @@ def _run_job(key: tuple[int, ...], fn: Callable[..., Any], args: tuple[Any, ...]
     return fn(*_CONTEXTS[key], *args), time.process_time() - c0
 
 
+def send_early(context: tuple[Any, ...], workers: int, fn: Callable[..., Any], job: tuple[Any, ...]) -> Future | None:
+    """Hand one job to the worker of a pool :func:`start_workers` started for this ``context`` and
+    ``workers`` before the other jobs are known: the job the caller knows will be the longest (the
+    first :func:`run_jobs` would send a worker). Pass the returned future to :func:`run_jobs` as
+    ``early`` with that job's index. None (nothing sent; :func:`run_jobs` sends it as usual) unless
+    exactly one worker process is running for them."""
+    if workers != 2 or not workers_started(context, workers):
+        return None
+    key = (*(id(c) for c in context), workers - 1)
+    pool = _POOLS[key]
+    try:
+        with interrupt.children_start_deaf():
+            return pool.submit(_run_job, key, fn, tuple(job))
+    except (BrokenProcessPool, RuntimeError):  # pragma: no cover - the pool is gone: run_jobs copes
+        _POOLS.pop(key, None)
+        return None
+
+
 def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]],
-             cost: Sequence[float], workers: int) -> tuple[list[Any], float]:
+             cost: Sequence[float], workers: int, early: dict[int, Future] | None = None) -> tuple[list[Any], float]:
     """``[fn(*context, *job) for job in jobs]`` computed by this process and ``workers − 1``
     forked worker processes (see the module docstring). ``cost``: an estimate per job. The jobs are
     handed out longest estimate first, each to the first process that is free (this one takes the
     next job whenever it finishes one; a worker is sent the next as soon as it returns one), so a
-    wrong estimate leaves no process idle while jobs wait. Returns the results in job order and the
-    CPU time [s] the workers spent (this process's own is its ``process_time``)."""
+    wrong estimate leaves no process idle while jobs wait. ``early``: jobs already sent to the worker
+    (:func:`send_early`), by index. Returns the results in job order and the CPU time [s] the workers
+    spent (this process's own is its ``process_time``)."""
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
     if len(cost) != len(jobs):
         raise ValueError(f"cost: expected one estimate per job ({len(jobs)}), got {len(cost)}")
-    n_proc = min(workers, len(jobs))
+    early = dict(early or {})
+    n_proc = max(min(workers, len(jobs)), 2 if early else 1)
     got = _pool(context, n_proc - 1) if n_proc > 1 else None
     if got is None:
         return [fn(*context, *job) for job in jobs], 0.0
     key, pool = got
-    order = sorted(range(len(jobs)), key=lambda i: -float(cost[i]))
+    order = sorted((i for i in range(len(jobs)) if i not in early), key=lambda i: -float(cost[i]))
     lock = threading.Lock()
     nxt, pending, worker_cpu = [0], [0], [0.0]   # next job of ``order``, jobs at the workers, their CPU [s]
     here: list[int] = []                         # jobs a failed worker hands back to this process
@@ -235,7 +255,12 @@ def run_jobs(context: tuple[Any, ...], fn: Callable[..., Any], jobs: Sequence[tu
                 send()
         settle()
 
-    for _ in range(n_proc - 1):
+    for j, fut in early.items():   # sent before: pending at the worker from now on
+        with lock:
+            pending[0] += 1
+            sent[j] = fut
+        fut.add_done_callback(functools.partial(returned, i=j))
+    for _ in range(n_proc - 1 - len(early)):
         send()
     try:
         while (i := take(to_worker=False)) is not None:

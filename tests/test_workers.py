@@ -186,3 +186,63 @@ def test_no_early_fork_while_another_thread_runs():
         stop.set()
         t.join()
         shutdown(wait=True)
+
+
+def test_a_job_sent_early_runs_in_the_started_worker_and_the_rest_are_shared(monkeypatch):
+    """send_early hands one job to a worker start_workers started, before the other jobs exist;
+    run_jobs counts it as sent (its result in its place, the worker given more when it returns) and
+    runs the rest as usual. Without a started worker nothing is sent and run_jobs does it all."""
+    import optplan.workers as W
+    from optplan.workers import send_early, start_workers
+
+    shutdown(wait=True)
+    monkeypatch.setattr(W.threading, "active_count", lambda: 1)
+    ctx = (2.0, 0.5)
+    assert send_early(ctx, 2, _job, (9.0,)) is None            # no worker started for this context
+    assert start_workers(ctx, 2) is True
+    assert send_early(ctx, 1, _job, (9.0,)) is None            # one process: nothing to send to
+    fut = send_early(ctx, 2, _job, (0.0, 0.3))                 # the long one, before the others are known
+    assert fut is not None
+    jobs = [(0.0, 0.3), (1.0, 0.0), (2.0, 0.0), (3.0, 0.2), (4.0, 0.0)]
+    out, cpu = run_jobs(ctx, _job, jobs, cost=[5.0, 1.0, 1.0, 4.0, 1.0], workers=2, early={0: fut})
+    assert [r[0] for r in out] == [2.0 * x + 0.5 for x in range(5)]
+    assert out[0][1] != os.getpid()                            # the early job ran in the worker
+    assert out[3][1] == os.getpid()                            # the next longest here, meanwhile
+    assert cpu > 0.25
+    # a single job sent early: still collected (run_jobs uses the worker, not this process alone)
+    fut = send_early(ctx, 2, _job, (7.0,))
+    out, _ = run_jobs(ctx, _job, [(7.0,)], cost=[1.0], workers=2, early={0: fut})
+    assert out[0][0] == 14.5 and out[0][1] != os.getpid()
+    shutdown()
+
+
+def test_pipeline_same_trajectory_with_the_longest_segment_sent_early(tcb, monkeypatch):
+    """The pipeline sends its longest constrained segment to the worker started before planning as
+    soon as it is shortcut: the same trajectory as one process solving every segment."""
+    import optplan.pipeline as PL
+    from optplan.pipeline import PipelineOptions, run_pipeline
+    from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
+
+    shutdown(wait=True)
+    monkeypatch.setattr("optplan.workers.threading.active_count", lambda: 1)
+    sent = []
+    real = PL.send_segment_early
+
+    def spy(*a, **k):
+        fut = real(*a, **k)
+        sent.append(fut is not None)
+        return fut
+
+    monkeypatch.setattr(PL, "send_segment_early", spy)
+    scene = Scene.load("ssps_scene1")
+    trial = TrialGenerator(tcb, scene).generate(2, 0)
+    a = run_pipeline(tcb, scene, trial.q_start, trial.q_goal, PipelineOptions(workers=1), seed=int(trial.seed))
+    assert not any(sent)
+    b = run_pipeline(tcb, scene, trial.q_start, trial.q_goal, PipelineOptions(workers=2, early_worker=True),
+                     seed=int(trial.seed))
+    assert sent and sent[-1], "the two-process run sent no segment early"
+    assert a.success and b.success and len(a.segments) == len(b.segments) >= 2
+    np.testing.assert_array_equal(a.q, b.q)
+    assert a.iterations == b.iterations
+    shutdown()
