@@ -2,9 +2,9 @@
 
 IPOPT and CasADi refuse unknown names and out-of-range values only when the solver instance is
 created, as a ``RuntimeError`` whose text names neither the value nor, for range errors, the
-option. :func:`check_ipopt_options` creates a one-variable IPOPT instance per option (about a
-millisecond each; once per accepted value in a process) and turns a refusal into :class:`~optplan.errors.OptionError` naming the option,
-the value and what IPOPT accepts.
+option. :func:`check_ipopt_options` creates one one-variable IPOPT instance with the options not accepted
+before in this process (about 2 ms), one per option only when IPOPT refuses the set, and turns a
+refusal into :class:`~optplan.errors.OptionError` naming the option, the value and what IPOPT accepts.
 """
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import contextlib
 import math
 import os
 import sys
+from typing import Any
 
 from .errors import OptionError
 
@@ -51,16 +52,17 @@ _LIBRARY_OPTIONS = ("hsllib", "pardisolib")
 
 
 def check_ipopt_options(options: dict | None) -> None:
-    """Raise :class:`OptionError` for an option name IPOPT/CasADi does not know or a value it refuses."""
+    """Raise :class:`OptionError` for an option name IPOPT/CasADi does not know or a value it refuses.
+
+    The options not accepted before in this process are tried together in one IPOPT instance (~2 ms);
+    only when IPOPT refuses them is each tried alone, to name the one it refuses."""
     if options is None:
         return
     if not isinstance(options, dict):
         raise OptionError(f"ipopt_options: expected a dict {{name: value}}, got {type(options).__name__} {options!r}")
-    import casadi as ca
-
-    x = ca.SX.sym("x")
     # the libraries a linear solver loads at the first solve (HSL's, Pardiso's): checked with it
     libs = {casadi_option_name(k): v for k, v in options.items() if isinstance(k, str) and k.split(".")[-1] in _LIBRARY_OPTIONS}
+    todo: list[tuple[str, object, str, tuple[str, ...]]] = []   # (key, value, CasADi name, record)
     for key, value in options.items():
         if not isinstance(key, str):
             raise OptionError(f"ipopt_options: option names are strings, got {key!r}")
@@ -68,25 +70,25 @@ def check_ipopt_options(options: dict | None) -> None:
             raise OptionError(f"ipopt_options[{key!r}] = {value!r}: expected a finite number")
         name = casadi_option_name(key)
         seen: tuple[str, ...] = (name, type(value).__name__, repr(value))
-        if seen in _ACCEPTED:
-            continue   # IPOPT took this value before: a solve that passes its options again checks nothing
-        opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", name: value}
-        solve = name == "ipopt.linear_solver"
-        if solve:
-            opts.update(libs)
+        if name == "ipopt.linear_solver":
             seen = seen + (repr(sorted(libs.items())),)
-            if seen in _ACCEPTED:
-                continue
+        if seen not in _ACCEPTED:   # IPOPT took this value before: a solve that passes its options again checks nothing
+            todo.append((key, value, name, seen))
+    if not todo:
+        return
+    if len(todo) > 1:
         try:
-            with _quiet_stdout():
-                solver = ca.nlpsol("optplan_option_check", "ipopt", {"x": x, "f": (x - 1) * (x - 1)}, opts)
-                if solve:   # IPOPT takes any linear solver's name and loads its library only when it solves
-                    solver(x0=0.0)
-            if solve and solver.stats().get("return_status") == "Invalid_Option":
-                raise OptionError(f"ipopt_options[{key!r}] = {value!r}: this IPOPT cannot load that linear solver "
-                                  f"(its library is not installed{'' if libs else ', or not named by hsllib / pardisolib'}); "
-                                  "'mumps' is always available, 'spral' in CasADi's own build")
-            _ACCEPTED.add(seen)
+            _try_options({name: value for _, value, name, _ in todo}, libs)
+        except (RuntimeError, TypeError, NotImplementedError, OptionError):
+            pass   # one of them is refused: each alone below names it
+        else:
+            _ACCEPTED.update(seen for *_, seen in todo)
+            return
+    for key, value, name, seen in todo:
+        try:
+            _try_options({name: value}, libs)
+        except OptionError as exc:
+            raise OptionError(f"ipopt_options[{key!r}] = {value!r}: {exc}") from None
         except (RuntimeError, TypeError, NotImplementedError) as exc:
             text = str(exc).strip().splitlines()
             why = text[-1] if text else type(exc).__name__
@@ -95,6 +97,28 @@ def check_ipopt_options(options: dict | None) -> None:
                                   "documentation, e.g. tol, max_iter, mu_strategy, print_level)") from None
             raise OptionError(f"ipopt_options[{key!r}] = {value!r}: refused by IPOPT (wrong type or out of range; "
                               f"{why.split(':')[-1].strip()})") from None
+        _ACCEPTED.add(seen)
+
+
+def _try_options(named: dict[str, object], libs: dict[str, object]) -> None:
+    """Create a one-variable IPOPT instance with ``named`` (CasADi names); with a linear solver among
+    them, also solve once (IPOPT takes any linear solver's name and loads its library only when it
+    solves). Raises what CasADi raises, or :class:`OptionError` for a linear solver it cannot load."""
+    import casadi as ca
+
+    x = ca.SX.sym("x")
+    opts: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", **named}
+    solve = "ipopt.linear_solver" in named
+    if solve:
+        opts.update(libs)
+    with _quiet_stdout():
+        solver = ca.nlpsol("optplan_option_check", "ipopt", {"x": x, "f": (x - 1) * (x - 1)}, opts)
+        if solve:
+            solver(x0=0.0)
+    if solve and solver.stats().get("return_status") == "Invalid_Option":
+        raise OptionError("this IPOPT cannot load that linear solver (its library is not installed"
+                          f"{'' if libs else ', or not named by hsllib / pardisolib'}); "
+                          "'mumps' is always available, 'spral' in CasADi's own build")
 
 
 def check_solve_arguments(tol, max_iter, objective_scaling) -> None:

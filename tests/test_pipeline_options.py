@@ -127,3 +127,29 @@ def test_first_grid_of_a_segment_follows_its_length_up_to_its_cap():
     for bad in (3, 2.5, True, "100"):
         with pytest.raises(OptionError, match="spline_first_max_intervals.*" + repr(bad).replace("(", r"\(")):
             PipelineOptions(spline_first_max_intervals=bad)
+
+
+def test_options_are_checked_together_and_a_refused_one_is_still_named(monkeypatch):
+    """Options IPOPT has not taken before in this process are tried in one instance (the pipeline's
+    ~13 per segment: one IPOPT creation, not 13); when IPOPT refuses the set, each is tried alone and
+    the one it refuses is named."""
+    import casadi as ca
+
+    import optplan.solver_options as so
+
+    monkeypatch.setattr(so, "_ACCEPTED", set())
+    made = []
+    real = ca.nlpsol
+
+    def counting(*a, **k):
+        made.append(a[3] if len(a) > 3 else k.get("opts"))
+        return real(*a, **k)
+
+    monkeypatch.setattr(ca, "nlpsol", counting)
+    good = {"tol": 1.25e-7, "max_iter": 321, "mu_strategy": "adaptive", "acceptable_iter": 7}
+    so.check_ipopt_options(good)
+    assert len(made) == 1 and all(f"ipopt.{k}" in made[0] for k in good)
+    so.check_ipopt_options(good)   # accepted before: nothing made
+    assert len(made) == 1
+    with pytest.raises(OptionError, match=r"ipopt_options\['acceptable_tol'\] = -2.0: refused"):
+        so.check_ipopt_options({"tol": 1.5e-7, "acceptable_tol": -2.0, "max_iter": 99})
