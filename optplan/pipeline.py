@@ -38,7 +38,7 @@ from .errors import ConfigurationError
 from .model.ik import IKOptions
 from .model.robot import RobotModel
 from .pipeline_options import PLANNER_DEFAULTS, PipelineOptions
-from .pipeline_workers import send_segment_early, solve_segments, start_early_worker
+from .pipeline_workers import segment_cost, send_if_longest, solve_segments, start_early_worker
 from .pipeline_workers import warm_worker as warm_worker  # (where it was; the worker's preparation)
 from .planners.base import BOTH_ARMS
 from .scene import Scene
@@ -461,12 +461,6 @@ def _spline_segment(robot: RobotModel, scene: Scene, seg_path: np.ndarray, kind:
     return total, rep, attempts
 
 
-def _segment_cost(path: np.ndarray, kind: str) -> float:
-    """The estimate by which the segments are handed out, longest first: the path's joint-space
-    length (L1) [rad], three times for a constrained segment (its closed-chain rows)."""
-    return float(np.abs(np.diff(path, axis=0)).sum()) * (3.0 if kind == "constrained" else 1.0) if len(path) > 1 else 0.0
-
-
 def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptions, rng: np.random.Generator,
                       checker: CollisionChecker | None = None, with_cpu: bool = False):
     """Shortcut, resample and optimize every segment of a plan; returns (results, shortcut wall
@@ -478,15 +472,12 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
     jobs: list[tuple[np.ndarray, str, str | None]] = []
     free_rng = rng.spawn(1)[0]  # its own stream: the constrained shortcuts draw as before
     paths = [np.asarray(plan.path[seg.start:seg.stop + 1]) for seg in plan.segments]
-    # each segment's cost before its shortcut (an estimate of its cost after it)
-    raw = [_segment_cost(p, "constrained" if seg.kind == "constrained" else "regrasp")
-           for p, seg in zip(paths, plan.segments)]
+    kinds = ["constrained" if seg.kind == "constrained" else "regrasp" for seg in plan.segments]
     early: dict[int, Any] = {}
     for n, seg in enumerate(plan.segments):
-        seg_path = paths[n]
+        seg_path, kind = paths[n], kinds[n]
         if len(seg_path) < 2 or np.abs(seg_path[-1] - seg_path[0]).max() < 1e-9:
             continue
-        kind = "constrained" if seg.kind == "constrained" else "regrasp"
         if kind == "constrained" and opts.warm_start:
             ts, cs = time.perf_counter(), time.process_time()
             seg_path = shortcut_constrained(robot, scene, seg_path, rng, opts.shortcut_attempts, checker)
@@ -501,17 +492,12 @@ def optimize_segments(robot: RobotModel, scene: Scene, plan, opts: PipelineOptio
             t_short += time.perf_counter() - ts
             c_short += time.process_time() - cs
         jobs.append((seg_path, kind, seg.arm))
-        if opts.transcription == "bspline" and not early and kind == "constrained":
-            # the longest segment goes to the worker now, while this process shortcuts the rest: the
-            # worker would take it first anyway (longest first); the results do not depend on it
-            others = [_segment_cost(p, k) for p, k, _ in jobs[:-1]] + raw[n + 1:]
-            if _segment_cost(seg_path, kind) > max(others, default=0.0):
-                fut = send_segment_early(robot, scene, _spline_segment, (seg_path, kind, seg.arm, opts, ipopt), opts)
-                if fut is not None:
-                    early[len(jobs) - 1] = fut
+        if not early:   # the longest segment to the worker now, while this process shortcuts the rest
+            early = send_if_longest(robot, scene, _spline_segment, jobs, list(zip(paths[n + 1:], kinds[n + 1:])),
+                                    (opts, ipopt), opts)
     if opts.transcription == "bspline":
         # the segments are independent NLPs: solved side by side (same results in any process)
-        cost = [_segment_cost(p, k) for p, k, _ in jobs]
+        cost = [segment_cost(p, k) for p, k, _ in jobs]
         solved, worker_cpu = solve_segments(robot, scene, _spline_segment, [(p, k, a, opts, ipopt) for p, k, a in jobs],
                                             cost, opts, early=early)
         for (_, kind, arm), (sol, rep, attempts) in zip(jobs, solved):

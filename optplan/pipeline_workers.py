@@ -13,6 +13,8 @@ import os
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from .workers import default_workers, run_jobs, send_early, start_workers, workers_started
 
 if TYPE_CHECKING:
@@ -20,7 +22,8 @@ if TYPE_CHECKING:
     from .pipeline_options import PipelineOptions
     from .scene import Scene
 
-__all__ = ["segment_workers", "send_segment_early", "start_early_worker", "solve_segments", "warm_worker"]
+__all__ = ["segment_cost", "segment_workers", "send_if_longest", "send_segment_early", "start_early_worker",
+           "solve_segments", "warm_worker"]
 
 
 def segment_workers(opts: PipelineOptions) -> int:
@@ -71,6 +74,30 @@ def send_segment_early(robot: RobotModel, scene: Scene, fn: Callable[..., Any], 
     started before planning, now: it starts while this process shortcuts the rest. The future for
     :func:`solve_segments`' ``early``, or None (no such worker; the segment goes with the others)."""
     return send_early((robot, scene), segment_workers(opts), fn, job)
+
+
+def segment_cost(path: np.ndarray, kind: str) -> float:
+    """The estimate by which the segments are handed out, longest first: the path's joint-space
+    length (L1) [rad], three times for a constrained segment (its closed-chain rows)."""
+    return float(np.abs(np.diff(path, axis=0)).sum()) * (3.0 if kind == "constrained" else 1.0) if len(path) > 1 else 0.0
+
+
+def send_if_longest(robot: RobotModel, scene: Scene, fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]],
+                    later: Sequence[tuple[np.ndarray, str]], extra: tuple[Any, ...], opts: PipelineOptions
+                    ) -> dict[int, Any]:
+    """While the segments are shortcut one by one: send the one just shortcut, ``jobs[-1]`` = (path,
+    kind, arm), to the worker started before planning (:func:`send_segment_early`, with the further
+    arguments ``extra``) when it is a constrained segment longer than every other can be — the jobs
+    before it, and ``later``'s (path, kind) as they are before their shortcut. The worker would take it
+    first anyway; the results do not depend on it. ``{its index: future}``, or {} (not sent)."""
+    path, kind, arm = jobs[-1]
+    if opts.transcription != "bspline" or kind != "constrained":
+        return {}
+    others = [segment_cost(p, k) for p, k, *_ in jobs[:-1]] + [segment_cost(p, k) for p, k in later]
+    if segment_cost(path, kind) <= max(others, default=0.0):
+        return {}
+    fut = send_segment_early(robot, scene, fn, (path, kind, arm, *extra), opts)
+    return {len(jobs) - 1: fut} if fut is not None else {}
 
 
 def solve_segments(robot: RobotModel, scene: Scene, fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]],

