@@ -324,13 +324,12 @@ def test_a_damaged_cached_library_is_rebuilt(monkeypatch, tmp_path):
 
     from optplan.codegen import c_compiler
     from optplan.planners.kernel import native
-    from optplan.planners.kernel.csource import C_SOURCE
 
     if c_compiler() is None:
         pytest.skip("no C compiler")
     monkeypatch.setattr(native, "_LIB", [])
     monkeypatch.setenv("OPTPLAN_CACHE", str(tmp_path))
-    so = tmp_path / f"optplan_planning_kernel_{hashlib.sha1(C_SOURCE.encode()).hexdigest()[:16]}.so"
+    so = tmp_path / f"optplan_planning_kernel_{hashlib.sha1(native.SOURCE.encode()).hexdigest()[:16]}.so"
     so.write_bytes(b"not a shared library")
     lib = native.load_library()
     assert so.stat().st_size > 1000 and hasattr(lib, "kernel_first_invalid")

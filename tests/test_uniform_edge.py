@@ -39,7 +39,10 @@ def test_uniform_edge_gives_the_batch_verdicts(tcb, scene_name, kernel):
                 want = edge_is_valid(a, b, vc.validity(mode, pose), 0.01, False, w)
                 assert got == want, f"{scene_name}/{mode} edge {i}: {got} != {want}"
                 n = max(1, int(np.ceil(np.max(w @ np.abs(b - a)) / 0.01)))
-                assert got is False or n_checked == n - 1   # a free edge: every interior point checked once
+                if kernel == "coal":   # a free edge: every interior point checked once
+                    assert got is False or n_checked == n - 1
+                else:                  # the native kernel proves most points free by their clearance (safe steps)
+                    assert got is False or 1 <= n_checked <= n - 1
                 verdicts.append(got)
     assert 0 < sum(verdicts) < len(verdicts)   # both verdicts occur
 

@@ -165,6 +165,6 @@ class RegraspMixin:
             if o.edge_bound == "certified":
                 return self.checker.edge_is_certified(a, b, "fixed", object_pose=M, min_clearance=o.edge_min_clearance,
                                                       cache=True)
-            return self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "fixed", object_pose=M)
+            return self.checker.edge_is_valid(a, b, cast(float, o.edge_tolerance), "fixed", object_pose=M, expect_free=True)
         return edge_is_valid(x, y, self.checker.validity("fixed", M, base=base, joints=idx), cast(float, o.edge_tolerance),
                              False, self._w_fixed[:, idx])

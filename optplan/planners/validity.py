@@ -190,6 +190,7 @@ class ValidityChecker(EdgeSweepMixin):
         self._certifiers: dict[float, EdgeCertifier] = {}
         self._exempted: dict[str, frozenset[int]] = {}   # per mode, the pairs exempt() has switched off
         self._contacts: dict[tuple[Any, ...], tuple[int, ...]] = {}   # grasp_contacts' answers
+        self._contact_gd: tuple[Any, tuple[int, ...]] | None = None   # its pairs' GeometryData (made at first use)
 
     def _native_backend(self, kernel: str) -> NativeValidity | None:
         """The native kernel for ``kernel == "native"`` (None for "coal", or when it cannot be built)."""
@@ -334,18 +335,31 @@ class ValidityChecker(EdgeSweepMixin):
         return got
 
     def _grasp_contacts(self, q: np.ndarray, object_pose: pin.SE3, excl: set[str]) -> tuple[int, ...]:
-        gd = self._gd["fixed"]
-        pin.updateGeometryPlacements(self.model, self.data, self.gmodel, gd, q)
-        gd.oMg[self.fixed_id] = object_pose
-        pin.computeCollisions(self.gmodel, gd, False)
-        objs, out = self.gmodel.geometryObjects, []
-        for k, cp in enumerate(self.gmodel.collisionPairs):
-            if self._pair_group[k] != "fixed" or not gd.activeCollisionPairs[k] or not gd.collisionResults[k].isCollision():
-                continue
-            g = cp.first if cp.second == self.fixed_id else cp.second
-            if self.model.frames[objs[g].parentFrame].name in excl:
-                out.append(k)
-        return tuple(out)
+        # only the candidate pairs (the still object and a geometry on an exclude link) are computed, in a
+        # GeometryData of their own with the "fixed" mode's requests; the mode's exemptions filter the answer
+        if self._contact_gd is None:
+            objs = self.gmodel.geometryObjects
+            cand: list[int] = []
+            for k, cp in enumerate(self.gmodel.collisionPairs):
+                g = cp.first if cp.second == self.fixed_id else cp.second
+                if self._pair_group[k] == "fixed" and self.model.frames[objs[g].parentFrame].name in excl:
+                    cand.append(k)
+            cgd = pin.GeometryData(self.gmodel)
+            keep = set(cand)
+            for k in range(len(self.gmodel.collisionPairs)):
+                if k not in keep:
+                    cgd.deactivateCollisionPair(k)
+                elif self.margin > 0:
+                    cgd.collisionRequests[k].security_margin = self.margin
+            if self.exact_contacts:
+                exact_contact_requests(cgd)
+            self._contact_gd = (cgd, tuple(cand))
+        cgd, ks = self._contact_gd
+        pin.updateGeometryPlacements(self.model, self.data, self.gmodel, cgd, q)
+        cgd.oMg[cast(int, self.fixed_id)] = object_pose
+        pin.computeCollisions(self.gmodel, cgd, False)
+        active = self._gd["fixed"].activeCollisionPairs
+        return tuple(k for k in ks if active[k] and cgd.collisionResults[k].isCollision())
 
     @contextmanager
     def exempt(self, pairs: tuple[int, ...], mode: str = "fixed") -> Iterator[None]:

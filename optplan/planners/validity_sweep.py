@@ -274,12 +274,15 @@ class EdgeSweepMixin:
     CELLS = 8
 
     def edge_is_valid(self, a: np.ndarray, b: np.ndarray, tolerance: float, mode: str = "held",
-                      object_pose: pin.SE3 | None = None, check_end: bool = False) -> bool:
+                      object_pose: pin.SE3 | None = None, check_end: bool = False, expect_free: bool = False) -> bool:
         """The straight joint segment ``a → b`` collision-free at the checkpoints of
         :meth:`edge_checkpoints` (no point of the checked geometry travels farther than ``tolerance``
         [m] between two checks), checked coarse-to-fine; ``a`` itself is not checked, ``b`` only with
         ``check_end``. ``mode``: ``"held"`` (:meth:`is_valid`), ``"fixed"``
-        (:meth:`is_valid_object_fixed` at ``object_pose``) or ``"free"``."""
+        (:meth:`is_valid_object_fixed` at ``object_pose``) or ``"free"``. ``expect_free``: for an edge
+        expected to pass (a found path's re-check), the native kernel checks the points in order and proves
+        most of them free by the pairs' clearance at a checked one
+        (:meth:`~optplan.planners.kernel.native.NativeKernel.edge_first_invalid_skip`); the same verdict."""
         fn: Callable[[np.ndarray], bool]
         if mode == "held":
             fn = self.is_valid if self.object is not None else self.is_valid_free
@@ -301,6 +304,10 @@ class EdgeSweepMixin:
             if not len(ts):
                 return True
             m = "free" if mode == "held" and self.object is None else mode
+            if expect_free:   # in order, most points proven free by the clearance at a checked one
+                k, checked = self._native.edge_first_invalid_skip(a, b, ts, m, object_pose)
+                self.n_checks += checked
+                return k < 0
             k = self._native.edge_first_invalid(a, b, ts[_bisection_indices(len(ts) + 1)], m, object_pose)
             self.n_checks += len(ts) if k < 0 else k + 1
             return k < 0
@@ -319,7 +326,10 @@ class EdgeSweepMixin:
         all collision-free: the same points, hence the same verdict, as :func:`optplan.planners.rrtconnect.edge_is_valid`
         with ``weights`` (e.g. :meth:`sweep_weights` per geometry) and ``check_end=False``. With the native kernel
         the points are checked in index order, interpolated in one native call (no coarse-to-fine order to build:
-        for edges that are expected to pass, as a found path's re-check, the order changes nothing but the cost)."""
+        for edges that are expected to pass, as a found path's re-check, the order changes nothing but the cost),
+        and most of them are proven free by the pairs' clearance at a checked point and the sweep weights of the
+        kernel's primitives, not checked (:meth:`~optplan.planners.kernel.native.NativeKernel.edge_first_invalid_skip`:
+        the same verdict; ``n_checks`` counts the points checked)."""
         a = np.asarray(a, float)
         b = np.asarray(b, float)
         size = float(np.max(weights @ np.abs(b - a)))
@@ -329,8 +339,8 @@ class EdgeSweepMixin:
         if self._native is None or (mode == "fixed" and (object_pose is None or self.object is None)):
             return self.first_invalid(a + (np.arange(1, n) / n)[:, None] * (b - a), mode, object_pose) < 0
         m = "free" if mode == "held" and self.object is None else mode
-        k = self._native.edge_first_invalid(a, b, np.arange(1, n) / n, m, object_pose)
-        self.n_checks += n - 1 if k < 0 else k + 1
+        k, checked = self._native.uniform_edge_first_invalid(a, b, n, m, object_pose)
+        self.n_checks += checked
         return k < 0
 
     def certifier(self, min_clearance: float = 1e-3) -> EdgeCertifier:

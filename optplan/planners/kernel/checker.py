@@ -53,6 +53,18 @@ class NativeValidity:
         collision, −1 if none."""
         return self.kernel.edge_first_invalid(a, b, fractions, self.masks[mode], self._override(mode, object_pose))
 
+    def edge_first_invalid_skip(self, a: np.ndarray, b: np.ndarray, fractions: np.ndarray, mode: str,
+                                object_pose: pin.SE3 | None = None) -> tuple[int, int]:
+        """The points ``a + f (b − a)``, ``f`` in ``fractions`` (ascending) in order: (index of the first in
+        collision or −1, points checked); see :meth:`.NativeKernel.edge_first_invalid_skip`."""
+        return self.kernel.edge_first_invalid_skip(a, b, fractions, self.masks[mode], self._override(mode, object_pose))
+
+    def uniform_edge_first_invalid(self, a: np.ndarray, b: np.ndarray, n: int, mode: str,
+                                   object_pose: pin.SE3 | None = None) -> tuple[int, int]:
+        """The points ``a + (k/n)(b − a)``, ``k = 1 … n − 1``: (index of the first in collision or −1,
+        points checked); see :meth:`.NativeKernel.uniform_edge_first_invalid`."""
+        return self.kernel.uniform_edge_first_invalid(a, b, n, self.masks[mode], self._override(mode, object_pose))
+
     def set_active(self, mode: str, pairs: list[int], on: bool) -> None:
         """Switch the pairs ``pairs`` (indices) of ``mode`` on or off."""
         self.masks[mode][list(pairs)] = 1 if on else 0

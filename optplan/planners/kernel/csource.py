@@ -10,7 +10,9 @@ and prismatic joints, the world placement of every geometry (spheres, capsules a
 a geometry may have its placement given per call: the still object of a regrasp), then the listed
 geometry pairs in order — a bounding-sphere test, then the exact boolean test of the two primitives
 (distance ≤ margin + ``KERNEL_EPS`` counts as colliding, so the verdict never says free where the
-exact distance is ≤ margin, nor where coal calls the pair colliding within its 1e-6 m GJK tolerance) — stopping at the first configuration in collision.
+exact distance is ≤ margin, nor where coal calls the pair colliding within its 1e-6 m GJK tolerance; box-box
+pairs: separating axes, the world axes first, so that a pair tried first — the last one in collision — gets
+the verdict the broad phase's boxes give it) — stopping at the first configuration in collision.
 """
 from __future__ import annotations
 
@@ -335,6 +337,14 @@ static int pair_collides(const kmodel *m, const double **pose, int ga, int gb) {
         capsule_ends(A, pa, a0, a1);
         to_local(B, a0, x); to_local(B, a1, y);
         return seg_box(x, y, pb, pa[0] + thr);
+    }
+    /* the world axes first, as the broad phase's boxes test them: so that a box pair tried first (the hint) or
+       in the plain pair loop gets the verdict the broad phase gives it (separating axes alone are conservative
+       near edges and corners, where the boxes can be apart along a world axis) */
+    for (int i = 0; i < 3; ++i) {
+        double ea = fabs(A[3*i])*pa[0] + fabs(A[3*i+1])*pa[1] + fabs(A[3*i+2])*pa[2];
+        double eb = fabs(B[3*i])*pb[0] + fabs(B[3*i+1])*pb[1] + fabs(B[3*i+2])*pb[2];
+        if (fabs(A[9+i] - B[9+i]) - ea - eb > thr + 4e-12) return 0;
     }
     return box_box(A, pa, B, pb, thr);
 }

@@ -32,12 +32,15 @@ import pinocchio as pin
 
 from ...codegen import build_library, cache_dir
 from ...errors import OptplanError
+from .clearance_csource import CLEARANCE_SOURCE
 from .csource import C_SOURCE, KERNEL_EPS
 
-__all__ = ["KernelUnavailable", "NativeKernel", "load_library"]
+__all__ = ["KernelUnavailable", "NativeKernel", "load_library", "primitive_sweep_weights"]
 log = logging.getLogger(__name__)
 
 _LIB: list[Any] = []   # the loaded library of this process (one)
+#: the C source of this library: the checks, and the uniform edge check with safe steps
+SOURCE = C_SOURCE + CLEARANCE_SOURCE
 _P = ctypes.c_void_p
 
 
@@ -140,20 +143,51 @@ def broad_phase_arrays(jparent: np.ndarray, gparent: np.ndarray, gtype: np.ndarr
             "bperm": np.array([p for k in keys for p in buckets[k]], np.int32), "mrow": mrow, "scol": scol}
 
 
+def primitive_sweep_weights(jparent: np.ndarray, jidx: np.ndarray, jplace: np.ndarray, gparent: np.ndarray,
+                            gplace: np.ndarray, grad: np.ndarray, pa: np.ndarray, pb: np.ndarray,
+                            nq: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-joint displacement bounds [m/rad] of the kernel's primitives (revolute joints): ``Wg`` (geometries
+    × nq), as :func:`optplan.collision.sweep.sweep_weights` but with each primitive's own bounding radius
+    (a cylinder's capsule is longer than the cylinder), so that between any two configurations no point
+    of primitive g moves farther than ``Wg[g] @ |q' − q|``; and ``Wp`` (pairs × nq): ``Wg[a] + Wg[b]``
+    without the joints that carry both geometries (they move the pair rigidly), a bound on how fast the
+    pair's distance changes."""
+    ng = len(gparent)
+    wg = np.zeros((ng, nq))
+    chains: list[set[int]] = []
+    for g in range(ng):
+        j = int(gparent[g])
+        chain: set[int] = set()
+        length = float(np.linalg.norm(gplace[g, 9:])) + float(grad[g])
+        while j > 0:
+            wg[g, jidx[j]] = length
+            chain.add(j)
+            length += float(np.linalg.norm(jplace[j, 9:]))
+            j = int(jparent[j])
+        chains.append(chain)
+    wp = np.zeros((len(pa), nq))
+    for k, (a, b) in enumerate(zip(pa, pb)):
+        wp[k] = wg[a] + wg[b]
+        for j in chains[a] & chains[b]:
+            wp[k, jidx[j]] = 0.0
+    return np.ascontiguousarray(wg), np.ascontiguousarray(wp)
+
+
 def load_library() -> Any:
     """The compiled kernel (``ctypes.CDLL``), built with the system C compiler at first use and cached
     under :func:`optplan.codegen.cache_dir` by a hash of its source. Raises :class:`KernelUnavailable`
     when it cannot be built."""
     if _LIB:
         return _LIB[0]
-    digest = hashlib.sha1(C_SOURCE.encode()).hexdigest()[:16]
+    source = SOURCE
+    digest = hashlib.sha1(source.encode()).hexdigest()[:16]
     lib_path = cache_dir() / f"optplan_planning_kernel_{digest}.so"
     lib = None
     for attempt in range(2):
         if not lib_path.exists():
             with tempfile.TemporaryDirectory() as tmp:
                 c_file = Path(tmp, "planning_kernel.c")
-                c_file.write_text(C_SOURCE)
+                c_file.write_text(source)
                 err = build_library(c_file, lib_path, "-O3")
             if err is not None:
                 raise KernelUnavailable(f"the native planning kernel could not be compiled: {err}")
@@ -170,6 +204,10 @@ def load_library() -> Any:
         getattr(lib, name).restype = ctypes.c_longlong
     lib.kernel_first_invalid.argtypes = [_P, _P, _P, ctypes.c_int, ctypes.c_longlong, _P, _P]
     lib.kernel_edge_first_invalid.argtypes = [_P, _P, _P, ctypes.c_int, _P, _P, ctypes.c_longlong, _P]
+    lib.kernel_edge_first_invalid_skip.restype = ctypes.c_longlong
+    lib.kernel_edge_first_invalid_skip.argtypes = [_P, _P, _P, ctypes.c_int, _P, _P, ctypes.c_longlong, _P, _P, _P, _P]
+    lib.kernel_pair_slacks.restype = None
+    lib.kernel_pair_slacks.argtypes = [_P, _P, _P, ctypes.c_int, _P]
     lib.kernel_placements.restype = None
     lib.kernel_placements.argtypes = [_P, _P, _P, ctypes.c_int, _P]
     _LIB.append(lib)
@@ -282,6 +320,13 @@ class NativeKernel:
         self._q1 = np.zeros(max(self.nq, 1))            # one configuration, copied in (cached pointer)
         self._q1_p = self._q1.ctypes.data
         self._first = self.lib.kernel_first_invalid
+        # the sweep weights of the kernel's own primitives, per geometry and per pair (uniform edges' safe steps);
+        # None with a prismatic joint (its travel lengthens the arms above it: no configuration-free bound here)
+        self._wg: np.ndarray | None = None
+        self._wp: np.ndarray | None = None
+        if not np.any(jtype == 2):
+            self._wg, self._wp = primitive_sweep_weights(jparent, jidx, jplace, gparent, gplace, grad, pa, pb, int(model.nq))
+        self._evaluated = np.zeros(1, np.int64)
 
     def all_active(self) -> np.ndarray:
         """An ``active`` mask with every pair on."""
@@ -329,6 +374,45 @@ class NativeKernel:
         g = self._override(override)
         return int(self.lib.kernel_edge_first_invalid(self._km_p, active.ctypes.data, self._pose_p, g,
                                                       a.ctypes.data, b.ctypes.data, f.size, f.ctypes.data))
+
+    def edge_first_invalid_skip(self, a: np.ndarray, b: np.ndarray, fractions: np.ndarray, active: np.ndarray,
+                                override: tuple[int, pin.SE3] | None = None) -> tuple[int, int]:
+        """The points ``a + f (b − a)`` for ``f`` in ``fractions`` (ascending), in order: ``(index of the first
+        in collision or −1, points checked)``. The index is that of :meth:`edge_first_invalid`; most points are
+        proven free by the pairs' clearance at a checked point and their sweep weights, and not checked
+        (:mod:`~optplan.planners.kernel.clearance_csource`). A model with a prismatic joint checks every point."""
+        f = np.ascontiguousarray(fractions, dtype=float)
+        if f.size == 0:
+            return -1, 0
+        if self._wg is None or self._wp is None:
+            k = self.edge_first_invalid(a, b, f, active, override)
+            return k, (f.size if k < 0 else k + 1)
+        a = np.ascontiguousarray(a, dtype=float)
+        b = np.ascontiguousarray(b, dtype=float)
+        g = self._override(override)
+        k = int(self.lib.kernel_edge_first_invalid_skip(self._km_p, active.ctypes.data, self._pose_p, g,
+                                                        a.ctypes.data, b.ctypes.data, f.size, f.ctypes.data,
+                                                        self._wg.ctypes.data, self._wp.ctypes.data,
+                                                        self._evaluated.ctypes.data))
+        if k < -1:
+            raise KernelUnavailable(f"the native planning kernel cannot hold this model ({self.nq} joints, {self.ng} geometries)")
+        return k, int(self._evaluated[0])
+
+    def uniform_edge_first_invalid(self, a: np.ndarray, b: np.ndarray, n: int, active: np.ndarray,
+                                   override: tuple[int, pin.SE3] | None = None) -> tuple[int, int]:
+        """:meth:`edge_first_invalid_skip` at the fractions ``k / n``, ``k = 1 … n − 1``."""
+        if n < 2:
+            return -1, 0
+        return self.edge_first_invalid_skip(a, b, np.arange(1, n) / n, active, override)
+
+    def pair_slacks(self, q: np.ndarray, override: tuple[int, pin.SE3] | None = None) -> np.ndarray:
+        """Every pair's lower bound on its distance minus the contact threshold [m] at ``q`` (exact for
+        sphere, capsule and capsule-box pairs; the separating-axis distance for box-box pairs), for tests."""
+        q = np.ascontiguousarray(q, dtype=float)
+        out = np.zeros(self.n_pairs)
+        g = self._override(override)
+        self.lib.kernel_pair_slacks(self._km_p, q.ctypes.data, self._pose_p, g, out.ctypes.data)
+        return out
 
     def pose_free(self, g: int, R: np.ndarray, p: np.ndarray, active: np.ndarray | int) -> bool:
         """A model without joints (``nq = 0``): the geometry ``g`` placed at ``(R, p)`` (rotation [-],
