@@ -236,3 +236,28 @@ def test_expected_free_edges_get_the_coarse_to_fine_verdicts(tcb):
             verdicts.append(want)
     assert 0 < sum(verdicts) < len(verdicts)
     assert fewer > 0.5 * sum(verdicts)
+
+
+def test_a_prismatic_joint_checks_every_point():
+    """A prismatic joint lengthens the arm above it, so the configuration-free sweep weights do not bound it: every
+    point is checked, with the every-point answer."""
+    import coal
+
+    model = pin.Model()
+    j1 = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "turn")
+    j2 = model.addJoint(j1, pin.JointModelPX(), pin.SE3.Identity(), "slide")
+    gm = pin.GeometryModel()
+    gm.addGeometryObject(pin.GeometryObject("hand", j2, j2, pin.SE3(np.eye(3), np.array([0.7, 0.0, 0.0])), coal.Sphere(0.1)))
+    gm.addGeometryObject(pin.GeometryObject("post", 0, 0, pin.SE3(np.eye(3), np.array([0.0, 1.0, 0.0])), coal.Box(0.2, 0.2, 0.2)))
+    try:
+        k = NativeKernel(model, gm, [(0, 1)])
+    except KernelUnavailable as e:
+        pytest.skip(str(e))
+    assert k._wg is None
+    act = k.all_active()
+    a, b = np.array([0.0, 0.0]), np.array([np.pi, 0.5])
+    want = k.edge_first_invalid(a, b, np.arange(1, 50) / 50, act)
+    got, checked = k.uniform_edge_first_invalid(a, b, 50, act)
+    assert want >= 0 and got == want and checked == want + 1
+    free = np.array([0.0, -0.4]), np.array([0.3, -0.4])
+    assert k.uniform_edge_first_invalid(*free, 50, act) == (-1, 49)
