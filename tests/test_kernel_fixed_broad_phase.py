@@ -3,17 +3,16 @@ regrasps and of ``verify_path``): the placed object's box is made per call, so t
 there too — the verdicts must stay those of the plain pair loop, and never free where coal collides."""
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pinocchio as pin
 import pytest
+from kernel_scenes import with_turned_boxes_and_balls
 
 from optplan.bench.hardscenes import nominal_configurations
 from optplan.constraints.closed_chain import ClosedChainKinematics
 from optplan.planners.kernel import KernelUnavailable, NativeKernel
 from optplan.planners.validity import ValidityChecker
-from optplan.scene import Obstacle, Scene
+from optplan.scene import Scene
 
 
 def _kernel_or_skip(*args, **kw) -> NativeKernel:
@@ -23,26 +22,13 @@ def _kernel_or_skip(*args, **kw) -> NativeKernel:
         pytest.skip(str(e))
 
 
-def _with_turned_boxes_and_balls(scene: Scene, rng: np.random.Generator) -> Scene:
-    """Every box obstacle turned about its centre (its world box a loose bound) and six random spheres and
-    capsules around the robot."""
-    obs = [dataclasses.replace(o, placement=pin.SE3(pin.exp3(rng.normal(0.0, 0.6, 3)) @ o.placement.rotation,
-                                                    o.placement.translation)) if o.shape == "box" else o
-           for o in scene.obstacles]
-    for i in range(6):
-        M = pin.SE3(pin.exp3(rng.normal(0.0, 1.0, 3)), rng.uniform([-0.5, -2.5, 0.5], [3.0, 2.5, 4.0]))
-        obs.append(Obstacle(f"ball_{i}", "sphere", M, radius=float(rng.uniform(0.1, 0.4))) if i % 2 else
-                   Obstacle(f"rod_{i}", "capsule", M, radius=float(rng.uniform(0.05, 0.2)), length=float(rng.uniform(0.3, 1.5))))
-    return dataclasses.replace(scene, name=scene.name + "_turned", obstacles=tuple(obs))
-
-
 @pytest.mark.parametrize("scene_name,margin,turned", [("ssps_scene1", 0.0, False), ("hard_window", 0.0, False),
                                                       ("hard_clutter_dense", 0.03, True)])
 def test_fixed_mode_broad_phase_gives_the_pair_loops_verdicts(tcb, scene_name, margin, turned):
     rng = np.random.default_rng(2911)
     scene = Scene.load(scene_name)
     if turned:
-        scene = _with_turned_boxes_and_balls(scene, rng)
+        scene = with_turned_boxes_and_balls(scene, rng)
     vc = ValidityChecker(tcb, scene, margin=margin)
     if vc.kernel != "native":
         pytest.skip("no native kernel here")

@@ -4,30 +4,16 @@ lower bounds on the exact (coal) distances, and the sweep weights it advances by
 distances change."""
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pinocchio as pin
 import pytest
+from kernel_scenes import with_turned_boxes_and_balls
 
 from optplan.bench.hardscenes import nominal_configurations
 from optplan.constraints.closed_chain import ClosedChainKinematics
 from optplan.planners.kernel import KernelUnavailable, NativeKernel
 from optplan.planners.validity import ValidityChecker
-from optplan.scene import Obstacle, Scene
-
-
-def _with_balls_and_rods(scene: Scene, rng: np.random.Generator) -> Scene:
-    """Every box obstacle turned about its centre and six random spheres and capsules around the robot: every
-    primitive pair type occurs."""
-    obs = [dataclasses.replace(o, placement=pin.SE3(pin.exp3(rng.normal(0.0, 0.6, 3)) @ o.placement.rotation,
-                                                    o.placement.translation)) if o.shape == "box" else o
-           for o in scene.obstacles]
-    for i in range(6):
-        M = pin.SE3(pin.exp3(rng.normal(0.0, 1.0, 3)), rng.uniform([-0.5, -2.5, 0.5], [3.0, 2.5, 4.0]))
-        obs.append(Obstacle(f"ball_{i}", "sphere", M, radius=float(rng.uniform(0.1, 0.4))) if i % 2 else
-                   Obstacle(f"rod_{i}", "capsule", M, radius=float(rng.uniform(0.05, 0.2)), length=float(rng.uniform(0.3, 1.5))))
-    return dataclasses.replace(scene, name=scene.name + "_balls", obstacles=tuple(obs))
+from optplan.scene import Scene
 
 
 def _extreme_points(gtype: int, prm: np.ndarray) -> np.ndarray:
@@ -44,7 +30,7 @@ def _extreme_points(gtype: int, prm: np.ndarray) -> np.ndarray:
 def _checker(tcb, scene_name: str, margin: float, balls: bool, rng: np.random.Generator) -> ValidityChecker:
     scene = Scene.load(scene_name)
     if balls:
-        scene = _with_balls_and_rods(scene, rng)
+        scene = with_turned_boxes_and_balls(scene, rng)
     vc = ValidityChecker(tcb, scene, margin=margin)
     if vc.kernel != "native":
         pytest.skip("no native kernel here (no C compiler)")

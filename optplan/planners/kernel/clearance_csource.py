@@ -32,19 +32,8 @@ static double segbox2(const double *a, const double *b, const double *h) {
     if (seg_hits_aabb(a, b, h)) return 0.0;
     double d = ptbox2(a, h), e = ptbox2(b, h);
     if (e < d) d = e;
-    for (int ax = 0; ax < 3; ++ax) {
-        int u = (ax + 1) % 3, v = (ax + 2) % 3;
-        for (int su = -1; su <= 1; su += 2)
-            for (int sv = -1; sv <= 1; sv += 2) {
-                double e0[3], e1[3];
-                e0[ax] = -h[ax]; e1[ax] = h[ax];
-                e0[u] = e1[u] = su*h[u];
-                e0[v] = e1[v] = sv*h[v];
-                e = segseg2(a, b, e0, e1);
-                if (e < d) d = e;
-            }
-    }
-    return d;
+    e = seg_box_edges2(a, b, h, -1.0);
+    return e < d ? e : d;
 }
 
 /* the separation of the box A (world pose, half extents ha) from the box S (hs) along S's three face normals
@@ -94,17 +83,6 @@ static double pair_slack(const kmodel *m, const double **pose, int ga, int gb) {
     return g - thr;
 }
 
-/* the largest gap between two boxes (lo[3], hi[3]) along an axis (> 0: apart by at least that) */
-static inline double box_gap(const double *A, const double *B) {
-    double s = A[0] - B[3], t;
-    t = B[0] - A[3]; s = s > t ? s : t;
-    t = A[1] - B[4]; s = s > t ? s : t;
-    t = B[1] - A[4]; s = s > t ? s : t;
-    t = A[2] - B[5]; s = s > t ? s : t;
-    t = B[2] - A[5]; s = s > t ? s : t;
-    return s;
-}
-
 /* the stretch of the edge parameter (at most cap) over which a pair with this slack [m] and rate [m per unit of
    the parameter] stays free beyond this point */
 static inline double free_len(double slack, double rate, double cap) {
@@ -143,33 +121,14 @@ static double config_free_len(const kmodel *m, const unsigned char *active, cons
     /* the pair that limited the last point's steps first: a small bound early prunes most of the rest */
     if (*lim >= 0 && active[*lim]) J = free_len(pair_slack(m, pose, m->pa[*lim], m->pb[*lim]), vpair[*lim], J);
 #define KLOWER(f_, k_) do { double f__ = (f_); if (f__ < J) { J = f__; *lim = (k_); } } while (0)
-    for (int i = 0; i < m->nmov; ++i) geom_aabb(m, m->mov[i], pose[m->mov[i]], mb + 6*i);
-    for (int g = 0; g < m->ngrp; ++g) {
-        double *gb = gbx + 6*g;
-        for (int c = 0; c < 6; ++c) gb[c] = mb[6*m->grp[g] + c];
-        for (int i = m->grp[g] + 1; i < m->grp[g+1]; ++i)
-            for (int c = 0; c < 3; ++c) {
-                if (mb[6*i+c] < gb[c]) gb[c] = mb[6*i+c];
-                if (mb[6*i+3+c] > gb[3+c]) gb[3+c] = mb[6*i+3+c];
-            }
-    }
+    broad_boxes(m, pose, mb, gbx);
     /* pairs of a moving and a static geometry: group boxes against every static box, then each link's */
     int ns = m->nstat;
     const double *S = m->saabb;
-    const double *restrict x0 = S, *restrict y0 = S + ns, *restrict z0 = S + 2*ns;
-    const double *restrict x1 = S + 3*ns, *restrict y1 = S + 4*ns, *restrict z1 = S + 5*ns;
     for (int g = 0; g < m->ngrp; ++g) {
         const double *gb = gbx + 6*g;
-        double vg = vgrp[g], ax0 = gb[0], ay0 = gb[1], az0 = gb[2], ax1 = gb[3], ay1 = gb[4], az1 = gb[5];
-        for (int j = 0; j < ns; ++j) {   /* branch-free, as in static_pairs_collide */
-            double s = ax0 - x1[j], t;
-            t = x0[j] - ax1; s = s > t ? s : t;
-            t = ay0 - y1[j]; s = s > t ? s : t;
-            t = y0[j] - ay1; s = s > t ? s : t;
-            t = az0 - z1[j]; s = s > t ? s : t;
-            t = z0[j] - az1; s = s > t ? s : t;
-            sep[j] = s;
-        }
+        double vg = vgrp[g];
+        static_gaps(m, gb, sep);
         if (js >= 0) sep[js] = box_gap(gb, ob);
         for (int j = 0; j < ns; ++j) {
             if (sep[j] > 0.0 && (J <= 0.0 || vg <= 0.0 || sep[j] - KRESERVE > J*vg)) continue;

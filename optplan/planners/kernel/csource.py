@@ -237,6 +237,25 @@ static int seg_hits_aabb(const double *a, const double *b, const double *h) {
     return 1;
 }
 
+/* the smallest squared distance from the segment a-b (box frame) to the 12 edges of the box of half extents h,
+   returned early at the first at most stop */
+static double seg_box_edges2(const double *a, const double *b, const double *h, double stop) {
+    double d = 1e300;
+    for (int ax = 0; ax < 3; ++ax) {
+        int u = (ax + 1) % 3, v = (ax + 2) % 3;
+        for (int su = -1; su <= 1; su += 2)
+            for (int sv = -1; sv <= 1; sv += 2) {
+                double e0[3], e1[3];
+                e0[ax] = -h[ax]; e1[ax] = h[ax];
+                e0[u] = e1[u] = su*h[u];
+                e0[v] = e1[v] = sv*h[v];
+                double e = segseg2(a, b, e0, e1);
+                if (e < d) { d = e; if (d <= stop) return d; }
+            }
+    }
+    return d;
+}
+
 /* segment a-b (box frame) within distance r of the box of half extents h */
 static int seg_box(const double *a, const double *b, const double *h, double r) {
     double hr[3] = {h[0] + r, h[1] + r, h[2] + r};
@@ -247,18 +266,7 @@ static int seg_box(const double *a, const double *b, const double *h, double r) 
     if (ptbox2(a, h) <= r2 || ptbox2(b, h) <= r2) return 1;
     if (seg_hits_aabb(a, b, h)) return 1;
     /* not intersecting: the closest pair is an end point (done above) or the segment and a box edge */
-    for (int ax = 0; ax < 3; ++ax) {
-        int u = (ax + 1) % 3, v = (ax + 2) % 3;
-        for (int su = -1; su <= 1; su += 2)
-            for (int sv = -1; sv <= 1; sv += 2) {
-                double e0[3], e1[3];
-                e0[ax] = -h[ax]; e1[ax] = h[ax];
-                e0[u] = e1[u] = su*h[u];
-                e0[v] = e1[v] = sv*h[v];
-                if (segseg2(a, b, e0, e1) <= r2) return 1;
-            }
-    }
-    return 0;
+    return seg_box_edges2(a, b, h, r2) <= r2;
 }
 
 /* oriented boxes A, B (world poses, half extents) closer than r (separating axis test; conservative:
@@ -369,6 +377,50 @@ static int boxes_apart(const double *A, const double *B, double thr) {
            || A[2] - B[5] > thr || B[2] - A[5] > thr;
 }
 
+/* the largest gap between two boxes (lo[3], hi[3]) along an axis (> 0: apart by at least that) */
+static inline double box_gap(const double *A, const double *B) {
+    double s = A[0] - B[3], t;
+    t = B[0] - A[3]; s = s > t ? s : t;
+    t = A[1] - B[4]; s = s > t ? s : t;
+    t = B[1] - A[4]; s = s > t ? s : t;
+    t = A[2] - B[5]; s = s > t ? s : t;
+    t = B[2] - A[5]; s = s > t ? s : t;
+    return s;
+}
+
+/* the world boxes of the moving geometries (mb, 6 per row of mov) and of their groups (gbx, 6 per group) */
+static void broad_boxes(const kmodel *m, const double **pose, double *mb, double *gbx) {
+    for (int i = 0; i < m->nmov; ++i) geom_aabb(m, m->mov[i], pose[m->mov[i]], mb + 6*i);
+    for (int g = 0; g < m->ngrp; ++g) {
+        double *gb = gbx + 6*g;
+        for (int c = 0; c < 6; ++c) gb[c] = mb[6*m->grp[g] + c];
+        for (int i = m->grp[g] + 1; i < m->grp[g+1]; ++i)
+            for (int c = 0; c < 3; ++c) {
+                if (mb[6*i+c] < gb[c]) gb[c] = mb[6*i+c];
+                if (mb[6*i+3+c] > gb[3+c]) gb[3+c] = mb[6*i+3+c];
+            }
+    }
+}
+
+/* the largest gap between the box gb (lo[3], hi[3]) and each static box along an axis, into sep (> 0: apart;
+   a - b > 0 exactly when a > b); branch-free, vectorised by the compiler even for the baseline x86-64 (SSE2) */
+static void static_gaps(const kmodel *m, const double *gb, double *sep) {
+    int ns = m->nstat;
+    const double *S = m->saabb;
+    const double *restrict x0 = S, *restrict y0 = S + ns, *restrict z0 = S + 2*ns;
+    const double *restrict x1 = S + 3*ns, *restrict y1 = S + 4*ns, *restrict z1 = S + 5*ns;
+    double ax0 = gb[0], ay0 = gb[1], az0 = gb[2], ax1 = gb[3], ay1 = gb[4], az1 = gb[5];
+    for (int j = 0; j < ns; ++j) {
+        double s = ax0 - x1[j], t;
+        t = x0[j] - ax1; s = s > t ? s : t;
+        t = ay0 - y1[j]; s = s > t ? s : t;
+        t = y0[j] - ay1; s = s > t ? s : t;
+        t = az0 - z1[j]; s = s > t ? s : t;
+        t = z0[j] - az1; s = s > t ? s : t;
+        sep[j] = s;
+    }
+}
+
 /* the broad phase (see kmodel), static pairs: 1 when an active pair with a static geometry is in contact;
    mb: the moving geometries' boxes, gbx: the groups'; js >= 0: static column js has the box ob (a static
    geometry placed by this call) instead of its stored one */
@@ -382,28 +434,9 @@ static int static_pairs_collide(const kmodel *m, const unsigned char *active, co
     const double *restrict x1 = S + 3*ns, *restrict y1 = S + 4*ns, *restrict z1 = S + 5*ns;
     for (int g = 0; g < m->ngrp; ++g) {
         const double *gb = gbx + 6*g;
-        double ax0 = gb[0], ay0 = gb[1], az0 = gb[2], ax1 = gb[3], ay1 = gb[4], az1 = gb[5];
-        /* the largest gap between the boxes along an axis (> 0: apart; a - b > 0 exactly when a > b);
-           branch-free, vectorised by the compiler even for the baseline x86-64 (SSE2) */
         KCNT(3, ns);
-        for (int j = 0; j < ns; ++j) {
-            double s = ax0 - x1[j], t;
-            t = x0[j] - ax1; s = s > t ? s : t;
-            t = ay0 - y1[j]; s = s > t ? s : t;
-            t = y0[j] - ay1; s = s > t ? s : t;
-            t = az0 - z1[j]; s = s > t ? s : t;
-            t = z0[j] - az1; s = s > t ? s : t;
-            sep[j] = s;
-        }
-        if (js >= 0) {   /* the same gap to the placed box */
-            double s = ax0 - ob[3], t;
-            t = ob[0] - ax1; s = s > t ? s : t;
-            t = ay0 - ob[4]; s = s > t ? s : t;
-            t = ob[1] - ay1; s = s > t ? s : t;
-            t = az0 - ob[5]; s = s > t ? s : t;
-            t = ob[2] - az1; s = s > t ? s : t;
-            sep[js] = s;
-        }
+        static_gaps(m, gb, sep);
+        if (js >= 0) sep[js] = box_gap(gb, ob);   /* the same gap to the placed box */
         for (int j = 0; j < ns; ++j) {
             if (sep[j] > 0.0) continue;
             double X0 = x0[j], Y0 = y0[j], Z0 = z0[j], X1 = x1[j], Y1 = y1[j], Z1 = z1[j];
@@ -463,16 +496,7 @@ static int config_collides(const kmodel *m, const unsigned char *active, const d
     }
     int h = m->hint ? *m->hint : -1;
     if (h >= 0 && h < m->npairs && active[h] && pair_collides(m, pose, m->pa[h], m->pb[h])) return 1;
-    for (int i = 0; i < m->nmov; ++i) geom_aabb(m, m->mov[i], pose[m->mov[i]], mb + 6*i);
-    for (int g = 0; g < m->ngrp; ++g) {
-        double *gb = gbx + 6*g;
-        for (int c = 0; c < 6; ++c) gb[c] = mb[6*m->grp[g] + c];
-        for (int i = m->grp[g] + 1; i < m->grp[g+1]; ++i)
-            for (int c = 0; c < 3; ++c) {
-                if (mb[6*i+c] < gb[c]) gb[c] = mb[6*i+c];
-                if (mb[6*i+3+c] > gb[3+c]) gb[3+c] = mb[6*i+3+c];
-            }
-    }
+    broad_boxes(m, pose, mb, gbx);
     if (static_pairs_collide(m, active, pose, mb, gbx, js, ob) || moving_pairs_collide(m, active, pose, mb, gbx)) return 1;
     for (int r = 0; r < m->nrest; ++r) {
         int k = m->rest[r];
