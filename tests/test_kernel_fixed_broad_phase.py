@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from kernel_scenes import with_turned_boxes_and_balls
+from kernel_scenes import native_checker
 
 from optplan.bench.hardscenes import nominal_configurations
 from optplan.constraints.closed_chain import ClosedChainKinematics
@@ -26,12 +26,8 @@ def _kernel_or_skip(*args, **kw) -> NativeKernel:
                                                       ("hard_clutter_dense", 0.03, True)])
 def test_fixed_mode_broad_phase_gives_the_pair_loops_verdicts(tcb, scene_name, margin, turned):
     rng = np.random.default_rng(2911)
-    scene = Scene.load(scene_name)
-    if turned:
-        scene = with_turned_boxes_and_balls(scene, rng)
-    vc = ValidityChecker(tcb, scene, margin=margin)
-    if vc.kernel != "native":
-        pytest.skip("no native kernel here")
+    vc = native_checker(tcb, scene_name, margin, turned, rng)
+    scene = vc.scene
     ref = ValidityChecker(tcb, scene, kernel="coal", margin=margin)
     pairs = [(cp.first, cp.second) for cp in vc.gmodel.collisionPairs]
     fast = _kernel_or_skip(tcb.model, vc.gmodel, pairs, margin=margin)

@@ -7,13 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from kernel_scenes import with_turned_boxes_and_balls
+from kernel_scenes import native_checker
 
 from optplan.bench.hardscenes import nominal_configurations
 from optplan.constraints.closed_chain import ClosedChainKinematics
 from optplan.planners.kernel import KernelUnavailable, NativeKernel
-from optplan.planners.validity import ValidityChecker
-from optplan.scene import Scene
 
 
 def _extreme_points(gtype: int, prm: np.ndarray) -> np.ndarray:
@@ -27,21 +25,11 @@ def _extreme_points(gtype: int, prm: np.ndarray) -> np.ndarray:
     return np.array(pts)
 
 
-def _checker(tcb, scene_name: str, margin: float, balls: bool, rng: np.random.Generator) -> ValidityChecker:
-    scene = Scene.load(scene_name)
-    if balls:
-        scene = with_turned_boxes_and_balls(scene, rng)
-    vc = ValidityChecker(tcb, scene, margin=margin)
-    if vc.kernel != "native":
-        pytest.skip("no native kernel here (no C compiler)")
-    return vc
-
-
 @pytest.mark.parametrize("scene_name,margin,balls", [("ssps_scene1", 0.0, False), ("hard_window", 0.0, False),
                                                      ("hard_clutter_dense", 0.03, True)])
 def test_safe_steps_find_the_first_point_in_collision(tcb, scene_name, margin, balls):
     rng = np.random.default_rng(2911)
-    vc = _checker(tcb, scene_name, margin, balls, rng)
+    vc = native_checker(tcb, scene_name, margin, balls, rng)
     nv = vc._native
     scene = vc.scene
     kin = ClosedChainKinematics(tcb, scene.object.grasps)
@@ -75,7 +63,7 @@ def test_safe_steps_find_the_first_point_in_collision(tcb, scene_name, margin, b
 
 def test_safe_steps_without_broad_phase_and_short_edges(tcb):
     rng = np.random.default_rng(7)
-    vc = _checker(tcb, "hard_window", 0.0, False, rng)
+    vc = native_checker(tcb, "hard_window", 0.0, False, rng)
     pairs = [(cp.first, cp.second) for cp in vc.gmodel.collisionPairs]
     try:
         plain = NativeKernel(tcb.model, vc.gmodel, pairs, broad_phase=False)
@@ -96,7 +84,7 @@ def test_pair_slacks_are_lower_bounds_on_exact_distances(tcb):
     """Sphere, capsule and capsule-box pairs: the exact distance (coal's, to 1e-6 m); box-box pairs: never
     above it."""
     rng = np.random.default_rng(11)
-    vc = _checker(tcb, "hard_clutter_dense", 0.0, True, rng)
+    vc = native_checker(tcb, "hard_clutter_dense", 0.0, True, rng)
     K, gm = vc._native.kernel, vc.gmodel
     data = tcb.model.createData()
     gd = pin.GeometryData(gm)
@@ -128,7 +116,7 @@ def test_sweep_weights_bound_how_fast_pair_clearances_change(tcb):
     """Between two configurations no pair's slack changes by more than its sweep-weight bound, and no extreme
     point of a primitive moves farther than its geometry's bound."""
     rng = np.random.default_rng(3)
-    vc = _checker(tcb, "hard_clutter_dense", 0.0, True, rng)
+    vc = native_checker(tcb, "hard_clutter_dense", 0.0, True, rng)
     K, gm = vc._native.kernel, vc.gmodel
     assert K._wg is not None and K._wp is not None
     types = K.types
@@ -203,7 +191,7 @@ def test_expected_free_edges_get_the_coarse_to_fine_verdicts(tcb):
     """``edge_is_valid(..., expect_free=True)`` (a found regrasp motion's re-check: the Jacobian-spaced points in
     order, with safe steps) gives the coarse-to-fine check's verdicts, with fewer points checked."""
     rng = np.random.default_rng(12)
-    vc = _checker(tcb, "ssps_scene2", 0.0, False, rng)
+    vc = native_checker(tcb, "ssps_scene2", 0.0, False, rng)
     scene = vc.scene
     kin = ClosedChainKinematics(tcb, scene.object.grasps)
     qs, qg = nominal_configurations(tcb, scene)
