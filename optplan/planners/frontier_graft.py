@@ -83,10 +83,12 @@ def lookahead_graft(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray,
     poses = interpolate_task(R, p, Rs, ps, o.n_interp, o.interpolation)
     twins = [tree.q[k] for k in tree.twins.get(i, [i])]
     step = cast(float, o.max_joint_step)   # resolved from the variant
+    # kin.ik, with its loop in C when the extension is native (the same solutions)
+    ik = pl._ext.ik_block if pl._ext is not None else (lambda q, R_, p_: kin.ik(q, R_, p_, o.ik))
     for _ in range(o.frontier_seeds):
         if deadline.expired():
             return None
-        x, its = kin.ik(rng.uniform(pl.robot.lower, pl.robot.upper), R, p, o.ik)
+        x, its = ik(rng.uniform(pl.robot.lower, pl.robot.upper), R, p)
         st["ik_iterations"] += its
         if x is None:
             continue

@@ -137,7 +137,7 @@ from .task_sampling import ObjectPoseFilter, TaskSampler
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
 from .tcbirrt_edges import EdgeCheckMixin
 from .tcbirrt_lead import LeadState, lead_attempt
-from .tcbirrt_native import loop_extend, make_extender, native_extend, native_path_ik, poses_array
+from .tcbirrt_native import _merge, loop_extend, make_extender, native_extend, native_path_ik, pose_list, poses_array
 from .tcbirrt_options import (
     PAPER_REACH,
     PAPER_XI_LOWER,
@@ -146,6 +146,7 @@ from .tcbirrt_options import (
     TCBiRRTOptions,
     reach_scaled_workspace,
 )
+from .tcbirrt_streak import STREAK_DONE, STREAK_EXTENDED, STREAK_SAMPLED, NativePose, NativeStreak, quiet_iterations
 from .tcbirrt_tree import _TaskTree as _TaskTree  # re-exported: frontier_graft types its trees with it
 from .tcbirrt_tree import extract_path
 from .validity import ValidityChecker
@@ -196,6 +197,8 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         self._ext = make_extender(self) if self.checker.kernel == "native" and self.options.extension != "python" else None
         #: ``extension="loop"``: the query's native random stream (sampler, lead path, restarts), None: NumPy's
         self._nrng: Any = None
+        #: ξ → (R, p) of an extension's target: Pinocchio's, or with the native loop the native code's (:class:`.NativePose`)
+        self._pose: Any = pose_from_xi
         #: restarts: the object's lead path found by an earlier search of the query and what was spent on it
         self._lead = LeadState()
 
@@ -267,7 +270,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         else:
             xi_s, reach = xi_near + (step / dist) * d, False   # Eq. 3
         R0, p0 = tree.pose[i_near]
-        Rs, ps = pose_from_xi(xi_s)
+        Rs, ps = self._pose(xi_s)
         q_near = tree.q[i_near]
         if dist > 0.0:
             if self._nrng is not None and self._ext is not None and self._ext.edge_on and o.interpolation == "geodesic":
@@ -280,15 +283,23 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             if not Q:
                 st["trapped"] += 1
                 return TRAPPED, -1, None
-            if len(Q) < len(poses):          # keep_prefix: the valid part is a shorter extension
-                st["partial"] += 1
-                k = len(Q)
-                Rk, pk = poses[k - 1]
-                Rk, pk = np.asarray(Rk), np.asarray(pk)
-                i_s = tree.add(Q[-1], xi_from_pose(pin.SE3(Rk, pk)), Rk, pk, i_near, Q[:-1], poses[:k - 1])
-                return PARTIAL, i_s, None
         else:
             poses, Q = [], [q_near.copy()]
+        return self._extended(tree, i_near, xi_s, reach, Rs, ps, poses, Q, q_rand, rng, deadline, st)
+
+    def _extended(self, tree: _TaskTree, i_near: int, xi_s: np.ndarray, reach: bool, Rs: np.ndarray, ps: np.ndarray,
+                  poses: list[Any], Q: list[np.ndarray], q_rand: np.ndarray | None, rng: np.random.Generator,
+                  deadline: Deadline, st: dict[str, Any]) -> tuple[str, int, Sequence[tuple[str | None, list[np.ndarray]]] | None]:
+        """The end of :meth:`constrained_extend` after its path IK: the configurations ``Q`` of the poses ``poses``
+        toward ξ_s (pose ``(Rs, ps)``; no poses: ξ_s is the node's), not empty."""
+        o = self.options
+        if len(Q) < len(poses):          # keep_prefix: the valid part is a shorter extension
+            st["partial"] += 1
+            k = len(Q)
+            Rk, pk = poses[k - 1]
+            Rk, pk = np.asarray(Rk), np.asarray(pk)
+            i_s = tree.add(Q[-1], xi_from_pose(pin.SE3(Rk, pk)), Rk, pk, i_near, Q[:-1], poses[:k - 1])
+            return PARTIAL, i_s, None
         q_s = Q[-1]
         reg: Sequence[tuple[str | None, list[np.ndarray]]] | None = None
         if reach and q_rand is not None:
@@ -302,11 +313,21 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             if reg is None:
                 st["trapped"] += 1
                 return TRAPPED, -1, None
-        if dist > 0.0:
+        if poses:
             i_s = tree.add(q_s, xi_s, Rs, ps, i_near, Q[:-1], poses[:-1])
         else:
             i_s = i_near
         return (REACHED if reach else ADVANCED), i_s, reg
+
+    def _streak(self, sampler: Any, deadline: Deadline) -> NativeStreak | None:
+        """The query's trapped streaks (:mod:`.tcbirrt_streak`), or None where the loop runs them one by one: the
+        option off, no native loop (its sampler, restarts and Jacobian-spaced edges), another ``trap_adapt`` than
+        ``"step"``/``"off"``, a deadline with a work budget."""
+        o, ext = self.options, self._ext
+        if not (o.streaks and self._nrng is not None and ext is not None and ext.edge_on and ext.native_restarts
+                and o.interpolation == "geodesic" and o.trap_adapt in ("step", "off") and math.isinf(deadline.work)):
+            return None
+        return NativeStreak(self, sampler)
 
     def _sample_near(self, ta: _TaskTree, tb: _TaskTree, sampler: Any, rng: np.random.Generator,
                      st: dict[str, Any]) -> tuple[np.ndarray, int]:
@@ -346,13 +367,17 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         """``trap_grafts``: count a trapped extension from node i of ``tree`` (toward ``xi_rand``); at its
         ``trap_graft_count``-th, the arms re-grasp at the node into a branch from which a step toward
         ``trap_graft_target`` (``other``'s node nearest in ξ, or ``xi_rand``) passes
-        (:func:`.frontier_graft.trap_lookahead`). ``trap``: the tree's ``[traps per node, grafts made, stream]``. The node
+        (:func:`.frontier_graft.trap_lookahead`); the counts per node are the tree's ``trapn``. ``trap``: the tree's
+        ``[None, grafts made, stream]``. The node
         one step beyond the graft, or None."""
-        counts = trap[0]
-        k = counts.get(i, 0) + 1
-        counts[i] = k
-        if k != self.options.trap_graft_count:
+        tree.trapn[i] += 1
+        if tree.trapn[i] != self.options.trap_graft_count:
             return None
+        return self._trap_fire(tree, i, xi_rand, other, trap, deadline, st)
+
+    def _trap_fire(self, tree: _TaskTree, i: int, xi_rand: np.ndarray, other: _TaskTree, trap: list[Any],
+                   deadline: Deadline, st: dict[str, Any]) -> int | None:
+        """The trap graft of :meth:`_trap_graft` at node i, its count reached: the node one step beyond it, or None."""
         target = other.xi[other.nearest(tree.xi[i])] if self.options.trap_graft_target == "other" else xi_rand
         got = trap_lookahead(self, tree, i, target, trap, deadline, st)
         trap[1] += got is not None
@@ -363,7 +388,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         native sampler (:class:`~optplan.planners.kernel.sampler.NativeTaskSampler`, for the paper's box too)
         when it can be built, and then :attr:`_nrng` is the query's native random stream."""
         o = self.options
-        self._nrng = None
+        self._nrng, self._pose = None, pose_from_xi
         if self._ext is not None and o.extension == "loop":
             got = self._native_sampler()
             if got is not None:
@@ -406,7 +431,7 @@ class TCBiRRT(EdgeCheckMixin, Planner):
         except KernelUnavailable as e:
             log.info("TCBiRRT samples in Python: %s", e)
             return None
-        self._nrng = nrng
+        self._nrng, self._pose = nrng, NativePose()
         ext = cast(Any, self._ext)
         ext.restarts_in_c(nrng, cast(int, o.ik_restarts), o.ik_restart_sigma, self.robot.lower - 1e-9,
                           self.robot.upper + 1e-9)
@@ -481,10 +506,11 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             st["guide_attempts"] = st["guide_waypoints"] = 0
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
         fronts = {id(ta): 0, id(tb): 0}
-        traps: dict[int, list[Any]] = {id(ta): [{}, 0, (seed, 0)], id(tb): [{}, 0, (seed, 1)]}   # trap_grafts (_trap_graft)
+        traps: dict[int, list[Any]] = {id(ta): [None, 0, (seed, 0)], id(tb): [None, 0, (seed, 1)]}   # trap_grafts (_trap_graft)
         if branch_roots:
             self._root_branches(ta, tb, deadline, st)
         best_gap, since_gap = np.inf, 0   # stall_iterations: the smallest gap a connection left, iterations since it shrank
+        streak = self._streak(sampler, deadline)
         if o.branch_grafts and o.root_grafts_first and not o.graft_after:
             for tr, other in ((ta, tb), (tb, ta)):
                 self._graft(tr, 0, other, deadline, st)
@@ -515,18 +541,58 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                     since_gap = 0
                 i_front = frontier_graft(self, ta, tb, deadline, st)
                 fronts[id(ta)] += i_front is not None
+            sk = None
             if i_front is not None:       # the step beyond the frontier graft: connect tree b to it
                 res, i_a = ADVANCED, i_front
             else:
-                xi_rand, i_near = self._sample_near(ta, tb, sampler, rng, st)              # lines 3-4
-                step = float(ta.dom[i_near]) if o.trap_adapt == "step" and np.isfinite(ta.dom[i_near]) else None
-                res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st, step)   # line 5
-                self._trap_update(ta, i_near, res)
-                if res == TRAPPED and o.trap_grafts and traps[id(ta)][1] < o.trap_grafts and \
-                        st["iterations"] > (o.trap_graft_after or 0):   # no trap counted before trap_graft_after
-                    i_trap = self._trap_graft(ta, i_near, xi_rand, tb, traps[id(ta)], deadline, st)
-                    if i_trap is not None:   # the step beyond the trap graft: connect tree b to it
-                        res, i_a = ADVANCED, i_trap
+                if streak is not None:    # this iteration and the trapped ones after it in one native call
+                    lead_on = sampler.guide is None and lead.budget_left(self)
+                    n_max = quiet_iterations(self, st["iterations"] - 1, since_gap, max_iterations, sampler, lead_on,
+                                             min(fronts.values()) < cast(int, o.frontier_grafts))
+                    sk = streak.run(ta, tb, bool(o.trap_grafts) and traps[id(ta)][1] < o.trap_grafts,
+                                    bool(o.trap_grafts) and traps[id(tb)][1] < o.trap_grafts,
+                                    st["iterations"] - 1, n_max, deadline)
+                    _merge(st, streak.ext)
+                    n = sk.n_done
+                    st["extensions"] += n
+                    st["trapped"] += n
+                    done = n - 1 if sk.code == STREAK_DONE else n   # iterations completed after this one
+                    st["iterations"] += done
+                    since_gap += done
+                    if done % 2:
+                        ta, tb, a_is_start = tb, ta, not a_is_start
+                if sk is not None and sk.code == STREAK_DONE:
+                    res = TRAPPED
+                elif sk is not None and sk.code == STREAK_EXTENDED:   # not trapped: the iteration goes on here
+                    st["extensions"] += 1
+                    i_near = int(sk.i_near)
+                    P, Q = cast(NativeStreak, streak).take()
+                    res, i_a, _ = self._extended(ta, i_near, np.array(sk.xi_s), bool(sk.reach), P[-1, :9].reshape(3, 3),
+                                                 P[-1, 9:], pose_list(P), list(Q[:sk.k]), None, rng, deadline, st)
+                    self._trap_update(ta, i_near, res)
+                else:
+                    if sk is None:
+                        xi_rand, i_near = self._sample_near(ta, tb, sampler, rng, st)              # lines 3-4
+                    else:
+                        xi_rand, i_near = np.array(sk.xi_rand), int(sk.i_near)
+                    if sk is None or sk.code == STREAK_SAMPLED:
+                        if sk is not None:
+                            i_near = ta.twin_nearest(i_near, None, rng)
+                        step = float(ta.dom[i_near]) if o.trap_adapt == "step" and np.isfinite(ta.dom[i_near]) else None
+                        res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st, step)   # line 5
+                        self._trap_update(ta, i_near, res)
+                        if res == TRAPPED and o.trap_grafts and traps[id(ta)][1] < o.trap_grafts and \
+                                st["iterations"] > (o.trap_graft_after or 0):   # no trap counted before trap_graft_after
+                            i_trap = self._trap_graft(ta, i_near, xi_rand, tb, traps[id(ta)], deadline, st)
+                            if i_trap is not None:   # the step beyond the trap graft: connect tree b to it
+                                res, i_a = ADVANCED, i_trap
+                    else:   # trapped, its step and trap count updated in C: the trap graft is due
+                        st["extensions"] += 1
+                        st["trapped"] += 1
+                        res = TRAPPED
+                        i_trap = self._trap_fire(ta, i_near, xi_rand, tb, traps[id(ta)], deadline, st)
+                        if i_trap is not None:
+                            res, i_a = ADVANCED, i_trap
             if res != TRAPPED:
                 target_xi, target_q = ta.xi[i_a].copy(), ta.q[i_a].copy()
                 gap = np.inf

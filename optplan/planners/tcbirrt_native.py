@@ -72,6 +72,8 @@ def _merge(st: dict[str, Any], ext: NativeExtender) -> None:
     st["edge_collisions"] += c[7]
     st["ik_restarts"] += c[9]
     st["ik_path_iterations"] = st.get("ik_path_iterations", 0) + c[10]   # absent in a caller's own counters
+    if c[11]:
+        st["ik_restarts_skipped"] = st.get("ik_restarts_skipped", 0) + c[11]
     ext.checker.n_checks += c[5]
 
 

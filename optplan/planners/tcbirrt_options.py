@@ -229,6 +229,10 @@ class TCBiRRTOptions:
     #: planner's generator: the same search as ``"python"``) or ``"python"``. Without a compiler or with
     #: ``validity_kernel="coal"`` the Python code runs.
     extension: str = "loop"
+    #: With ``extension="loop"``: run each series of plain trapped iterations (a sample, its nearest node, an
+    #: extension trapped at once) in one native call (:mod:`.tcbirrt_streak`; the same search as without, faster
+    #: on hard scenes, where most iterations are such). False: one call per step, as before.
+    streaks: bool = True
     #: Cap on Alg. 1 iterations [count] (0: only the time limit), over all restarts.
     max_iterations: int = 0
     #: Restart the search from the two roots (new trees; the lead path kept; the query's random stream going on)
@@ -337,6 +341,8 @@ class TCBiRRTOptions:
         if self.trap_adapt not in ("off", "step", "domain"):
             raise ValueError(f"TCBiRRTOptions.trap_adapt: expected 'off', 'step' or 'domain', got {self.trap_adapt!r}")
         _pos("domain_radius", self.domain_radius)
+        if not isinstance(self.streaks, bool):
+            raise ValueError(f"TCBiRRTOptions.streaks: expected True or False, got {self.streaks!r}")
         if not (isinstance(self.domain_tries, int) and not isinstance(self.domain_tries, bool) and self.domain_tries >= 1):
             raise ValueError(f"TCBiRRTOptions.domain_tries: expected an int >= 1, got {self.domain_tries!r}")
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):

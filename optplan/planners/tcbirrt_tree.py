@@ -24,10 +24,14 @@ class _TaskTree(Tree):
     q: np.ndarray       # columns the base class creates with setattr
     checked: np.ndarray
     dom: np.ndarray     # per node: its dynamic domain radius or its step (``trap_adapt``); inf: unset
+    pose12: np.ndarray  # per node: its object pose as 12 values (rotation row-major, position), for the native code
+    trapn: np.ndarray   # per node: trapped extensions from it counted for its trap graft (``trap_grafts``)
+    twin: np.ndarray    # per node: whether it has other IK branches at its pose (a key of :attr:`twins`)
     edge: list[Any]     # always kept (edges=True)
 
     def __init__(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, cap: int = 512):
-        super().__init__(xi, cap, edges=True, q=q, checked=True, dom=np.inf)
+        super().__init__(xi, cap, edges=True, q=q, checked=True, dom=np.inf, pose12=_pose12(R, p),
+                         trapn=np.int64(0), twin=False)
         self.pose = [(R, p)]
         self.edge[0] = ([], [])
         #: graft node → its regrasp motions from the parent's configuration (object fixed at the node's pose)
@@ -45,18 +49,21 @@ class _TaskTree(Tree):
 
     def add(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, parent: int, edge_q: list[np.ndarray], edge_poses: list[tuple[np.ndarray, np.ndarray]]) -> int:  # type: ignore[override]  # a task node needs its q and object pose too; never used as a plain Tree
         self.pose.append((R, p))
-        return super().add(xi, parent, (edge_q, edge_poses), q=q, checked=False, dom=np.inf)
+        return super().add(xi, parent, (edge_q, edge_poses), q=q, checked=False, dom=np.inf, pose12=_pose12(R, p),
+                           trapn=0, twin=False)
 
     def add_graft(self, i: int, q: np.ndarray, motions: list[tuple[str, list[np.ndarray]]]) -> int:
         """A node at node i's object pose with another joint solution ``q``, reached from node i's
         configuration by the regrasp ``motions``: a second IK branch of the same tree."""
         R, p = self.pose[i]
         self.pose.append((R, p))
-        k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=False, dom=np.inf)
+        k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=False, dom=np.inf, pose12=self.pose12[i],
+                        trapn=0, twin=True)
         self.graft[k] = motions
         group = self.twins.setdefault(i, [i])
         group.append(k)
         self.twins[k] = group
+        self.twin[i] = True
         return k
 
     def twin_nearest(self, i: int, q: np.ndarray | None, rng: np.random.Generator) -> int:
@@ -101,6 +108,14 @@ class _TaskTree(Tree):
             qs.append(self.q[k].copy())
             ps.append(self.pose[k])
         return qs, ps
+
+
+def _pose12(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """An object pose as the 12 values of the native code (rotation row-major, then position [m])."""
+    out = np.empty(12)
+    out[:9] = np.asarray(R).reshape(9)
+    out[9:] = p
+    return out
 
 
 def _reverse_move(m: tuple[Any, ...]) -> tuple[Any, ...]:

@@ -37,6 +37,7 @@ from .extend_csource import EXTEND_SOURCE
 from .ik_csource import IK_SOURCE
 from .native import KernelUnavailable
 from .sampler_csource import RNG_SOURCE, SAMPLER_SOURCE
+from .streak_csource import STREAK_SOURCE
 
 __all__ = ["NativeExtender", "NativePoseFilter", "load_extend_library", "nearest", "nearest_available"]
 log = logging.getLogger(__name__)
@@ -44,10 +45,10 @@ log = logging.getLogger(__name__)
 _P = ctypes.c_void_p
 _LL = ctypes.c_longlong
 _LIB: list[Any] = []        # the loaded library (one per process), or [None] after a failed build
-SOURCE = C_SOURCE + RNG_SOURCE + IK_SOURCE + EXTEND_SOURCE + SAMPLER_SOURCE
+SOURCE = C_SOURCE + RNG_SOURCE + IK_SOURCE + EXTEND_SOURCE + SAMPLER_SOURCE + STREAK_SOURCE
 #: counters of one native call, in the order of the C code
 COUNTERS = ("ik_calls", "ik_iterations", "ik_failures", "ik_jumps", "collisions", "checks", "edge_checks",
-            "edge_collisions", "terminal", "ik_restarts", "ik_path_iterations")
+            "edge_collisions", "terminal", "ik_restarts", "ik_path_iterations", "ik_restarts_skipped")
 
 
 class _Ctx(ctypes.Structure):
@@ -60,7 +61,7 @@ class _Ctx(ctypes.Structure):
                 ("W", _P), ("nw", ctypes.c_int),
                 ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int), ("edge_res", ctypes.c_double),
                 ("rng", _P), ("restarts", ctypes.c_int), ("restart_sigma", ctypes.c_double), ("lower", _P), ("upper", _P),
-                ("ikm", _P), ("predictor", ctypes.c_int), ("qlo", _P), ("qhi", _P)]
+                ("ikm", _P), ("predictor", ctypes.c_int), ("qlo", _P), ("qhi", _P), ("pfix", _P)]
 
 
 def load_extend_library() -> Any:
@@ -108,6 +109,8 @@ def load_extend_library() -> Any:
     lib.tcb_filter_segment.argtypes = [_P, _P, _P, ctypes.c_double, ctypes.c_int, _P]
     lib.tcb_extend.restype = _LL
     lib.tcb_extend.argtypes = [_P, _P, _P, _P, _P, _LL, _P, _P, _P, _P, _P]
+    lib.tcb_ik_block.restype = ctypes.c_int
+    lib.tcb_ik_block.argtypes = [_P, _P, _P, _P, _P]
     lib.tcb_extend_prefix.restype = _LL
     lib.tcb_extend_prefix.argtypes = [_P, _P, _P, _P, _P, _LL, _P, _P, _P, _P, ctypes.c_int]
     _declare_sampler_functions(lib)
@@ -221,6 +224,21 @@ def _cfun(ff: Any) -> tuple[int, Any, Any, int] | None:
     return ctypes.cast(cf._fn, ctypes.c_void_p).value or 0, cf._iw, cf._w, int(ff.n_out)
 
 
+def pose_fixed_pairs(kernel: Any, kin: Any) -> np.ndarray | None:
+    """Per collision pair of ``kernel`` (:class:`~optplan.planners.kernel.native.NativeKernel`): 1 when both its
+    geometries are placed by the object's pose alone — static (parent joint 0) or on the joint that carries a
+    hand's frame, which the closed-chain IK puts at its grasp of the object — so that every IK solution of one
+    object pose has that pair in the same contact (up to the IK's tolerance). None when the kernel's joints are not
+    the robot model's."""
+    model = kin.robot.model
+    jparent, gparent, pa, pb = kernel._arrays[0], kernel._arrays[5], kernel._arrays[10], kernel._arrays[11]
+    if len(jparent) != model.njoints:
+        return None
+    placed = {0, *(int(model.frames[int(arm.ee_frame_id)].parentJoint) for arm in kin.arms)}
+    fixed = np.array([int(g) in placed for g in gparent], bool)
+    return np.ascontiguousarray(fixed[np.asarray(pa)] & fixed[np.asarray(pb)], dtype=np.uint8)
+
+
 class NativeExtender:
     """One TCBiRRT extension per native call for a planner's checker, kinematics and options.
 
@@ -274,6 +292,8 @@ class NativeExtender:
         c.edge_res = float(edge_resolution or 0.0)
         self._qlim = (np.ascontiguousarray(kin.lower, dtype=float), np.ascontiguousarray(kin.upper, dtype=float))
         c.predictor, c.qlo, c.qhi = PREDICTORS.index(ik_predictor), self._qlim[0].ctypes.data, self._qlim[1].ctypes.data
+        self._pfix = pose_fixed_pairs(nv.kernel, kin)
+        c.pfix = None if self._pfix is None else self._pfix.ctypes.data
         self._ctx = c
         self._ik: Any = None
         try:
@@ -292,6 +312,10 @@ class NativeExtender:
         self._cnt_p = self.cnt.ctypes.data
         self._edge_k = _LL(-1)
         self._edge_kp = ctypes.addressof(self._edge_k)
+        self._its = _LL(0)
+        self._its_p = ctypes.addressof(self._its)
+        self._seed, self._pose_in = np.zeros(self.nq), np.zeros(12)
+        self._seed_p, self._pose_in_p = self._seed.ctypes.data, self._pose_in.ctypes.data
         self._R0 = np.zeros(9)
         self._p0 = np.zeros(3)
         self._R1 = np.zeros(9)
@@ -328,6 +352,19 @@ class NativeExtender:
         c.rng, c.restarts, c.restart_sigma = rng.address, int(restarts), float(sigma)
         c.lower, c.upper = self._lim[0].ctypes.data, self._lim[1].ctypes.data
         self.native_restarts = True
+
+    def ik_block(self, q_seed: np.ndarray, R: np.ndarray, p: np.ndarray) -> tuple[np.ndarray | None, int]:
+        """:meth:`~optplan.constraints.closed_chain.ClosedChainKinematics.ik` with this extension's IK settings, its
+        loop in C over the same compiled block (the same result bit for bit, without a Python call per block call):
+        ``(q, iterations)``, ``q`` None when not converged."""
+        self._seed[:] = q_seed
+        self._pose_in[:9] = np.asarray(R).reshape(9)
+        self._pose_in[9:] = p
+        out = np.empty(self.nq)
+        r = self.lib.tcb_ik_block(self._cp, self._seed_p, self._pose_in_p, out.ctypes.data, self._its_p)
+        if r < 0:
+            raise KernelUnavailable("the native extension refused the model (too many joints)")
+        return (out if r else None), int(self._its.value)
 
     def take_counts(self) -> dict[str, int]:
         """The counters since the last call (reset); ``checks`` are also added to the checker's ``n_checks``."""

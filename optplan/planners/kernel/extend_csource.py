@@ -56,11 +56,15 @@ typedef struct {
     const tcb_ikm *ikm;           /* non-NULL: the hand-written IK (ik_csource) instead of the CasADi block */
     int predictor;                /* a waypoint's IK seed: 0 the previous solution, 1 the secant prediction */
     const double *qlo, *qhi;      /* joint limits of the IK (a predicted seed is clamped to them) */
+    const unsigned char *pfix;    /* per pair of km, may be NULL: 1 when both its geometries are placed by the waypoint's
+                                     object pose alone (static, or on a hand's last link), so that every IK solution
+                                     of that pose has the pair in the same contact */
 } tcb_ctx;
 
 /* counters: 0 ik_calls, 1 ik_iterations, 2 ik_failures, 3 ik_jumps, 4 collisions, 5 checks, 6 edge_checks,
    7 edge_collisions, 8 set to 1 when the failing waypoint failed its edge_res segment (no restarts),
-   9 ik_restarts, 10 ik_path_iterations (the iterations of the waypoints' first IK, restarts not counted) */
+   9 ik_restarts, 10 ik_path_iterations (the iterations of the waypoints' first IK, restarts not counted),
+   11 ik_restarts_skipped (restarts of a waypoint whose pose alone collides: drawn, not run) */
 
 long long tcb_nearest(const double *X, long long n, int dim, const unsigned char *alive, const double *x) {
     long long best = -1;
@@ -154,6 +158,23 @@ static int tcb_collides(const tcb_ctx *c, const double *q) {
     return config_collides(c->km, c->active, q, NULL, -1, oMi, oMg);
 }
 
+/* after tcb_collides returned 1: whether the pair that collided (the broad phase's hint) is one the waypoint's pose
+   alone places (c->pfix), so that no restart toward the same pose can pass */
+static int tcb_pose_collision(const tcb_ctx *c) {
+    const kmodel *m = c->km;
+    if (!c->pfix || !m->hint || m->ngrp <= 0 || m->nstat > 4096) return 0;
+    int h = *m->hint;
+    return h >= 0 && h < m->npairs && c->pfix[h];
+}
+
+/* ClosedChainKinematics.ik itself (the compiled CasADi block, never the hand-written IK): 1 when converged */
+int tcb_ik_block(const tcb_ctx *c, const double *seed, const double *P, double *qout, long long *its) {
+    if (c->nq > KMAXJ) return -2;
+    tcb_ctx d = *c;
+    d.ikm = NULL;
+    return tcb_ik(&d, seed, P, qout, its);
+}
+
 /* the edge_res segment q -> qn (midpoints in bisection order): 1 free, 0 colliding, -2 out of memory */
 static int tcb_segment_ok(const tcb_ctx *c, const double *q, const double *qn, long long *cnt) {
     int nq = c->nq;
@@ -240,12 +261,20 @@ long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *q_pp
             for (int k = 0; k < nq; ++k) { double d = fabs(qn[k] - q[k]); if (d > m) m = d; }
             if (m > c->max_joint_step) { cnt[3] += 1; ok = 0; }
         }
+        int posed = 0;
         if (ok) {
             cnt[5] += 1;
-            if (tcb_collides(c, qn)) { cnt[4] += 1; ok = 0; }
+            if (tcb_collides(c, qn)) { cnt[4] += 1; ok = 0; posed = tcb_pose_collision(c); }
         }
         int restarted = 0;
         if (!ok) {
+            if (posed && c->rng && c->restarts > 0) {
+                /* every restart would fail on the same pair: their draws taken, their IK not run */
+                for (int r = 0; r < c->restarts; ++r)
+                    for (int k = 0; k < nq; ++k) (void)tcb_normal(c->rng);
+                cnt[11] += c->restarts;
+                return j;
+            }
             if (!c->rng || c->restarts <= 0 || !tcb_restarts(c, q, P + 12*j, qn, cnt)) return j;
             restarted = 1;
         }

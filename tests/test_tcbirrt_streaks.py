@@ -1,0 +1,186 @@
+"""TCBiRRT's trapped streaks (optplan.planners.tcbirrt_streak) and the native loop's other shortcuts: each
+gives the search it replaces, iteration for iteration. Checked against the loop without them on fixed seeds,
+against Pinocchio (the target pose, the hands' placements) and against the compiled IK block called from
+Python."""
+from __future__ import annotations
+
+import dataclasses
+import platform
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optplan.planners.kernel.extend import nearest_available
+
+pytestmark = pytest.mark.skipif(not nearest_available(), reason="no C compiler: the native loop is not built")
+
+
+def _planner(robot, scene_name, **options):
+    from optplan.planners.tcbirrt import TCBiRRT
+    from optplan.planners.tcbirrt_options import TCBiRRTOptions
+    from optplan.scene import Scene
+
+    pl = TCBiRRT(robot, Scene.load(scene_name), TCBiRRTOptions(variant="improved", **options))
+    if pl._ext is None:
+        pytest.skip("no native extension here")
+    return pl
+
+
+def _same(a, b) -> bool:
+    return (a.status == b.status and a.stats["iterations"] == b.stats["iterations"] and a.stats["nodes"] == b.stats["nodes"]
+            and len(a.path) == len(b.path) and all(np.array_equal(x, y) for x, y in zip(a.path, b.path)))
+
+
+@pytest.mark.parametrize("scene_name, trials, options", [
+    ("hard_bay", (3, 4), {}), ("hard_clutter_dense", (3,), {}), ("hard_window", (5,), {}),
+    # the adaptive step (halved in C when trapped) and a stall bound on the streaks
+    ("hard_bay", (5,), {"trap_adapt": "step", "stall_iterations": 120})])
+def test_streaks_and_restart_skips_give_the_same_search(tcb, scene_name, trials, options):
+    """Streaks on/off and the skipped restarts on/off: the same iterations, nodes and path, bit for bit (the streaks
+    ran: several iterations per call on these trapped scenes; restarts were skipped)."""
+    from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
+
+    on = _planner(tcb, scene_name, **options)
+    off = _planner(tcb, scene_name, streaks=False, **options)
+    plain = _planner(tcb, scene_name, streaks=False, **options)
+    plain._ext._ctx.pfix = None          # every restart run
+    gen = TrialGenerator(tcb, Scene.load(scene_name))
+    skipped = 0
+    for t in trials:
+        tr = gen.generate(t, 0)
+        ra, rb, rc = (p.plan(tr.q_start, tr.q_goal, time_limit=30.0, seed=t, clock="cpu") for p in (on, off, plain))
+        assert ra.status.value == "exact"
+        assert _same(ra, rb) and _same(ra, rc), (scene_name, t, ra.stats["iterations"], rb.stats["iterations"],
+                                                 rc.stats["iterations"])
+        assert ra.stats["trapped"] == rb.stats["trapped"] == rc.stats["trapped"]
+        skipped += ra.stats.get("ik_restarts_skipped", 0)
+        assert rc.stats.get("ik_restarts_skipped", 0) == 0
+        assert ra.stats["ik_iterations"] <= rc.stats["ik_iterations"]
+    assert skipped > 0
+
+
+def test_a_streak_runs_several_iterations_and_stops_where_python_must_go_on(tcb):
+    """On a trapped scene the calls average more than one iteration; each ends at one of its codes."""
+    from optplan.planners import tcbirrt_streak as ts
+    from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
+
+    pl = _planner(tcb, "hard_bay")
+    seen: list[tuple[int, int]] = []
+    run = ts.NativeStreak.run
+
+    def spy(self, *a, **k):
+        out = run(self, *a, **k)
+        seen.append((int(out.code), int(out.n_done)))
+        return out
+    ts.NativeStreak.run = spy
+    try:
+        tr = TrialGenerator(tcb, Scene.load("hard_bay")).generate(3, 0)
+        r = pl.plan(tr.q_start, tr.q_goal, time_limit=30.0, seed=3, clock="cpu")
+    finally:
+        ts.NativeStreak.run = run
+    assert r.status.value == "exact" and seen
+    codes = {c for c, _ in seen}
+    assert codes <= {ts.STREAK_DONE, ts.STREAK_SAMPLED, ts.STREAK_EXTENDED, ts.STREAK_TRAP_GRAFT}
+    assert ts.STREAK_EXTENDED in codes
+    done = sum(n for _, n in seen) + sum(c != ts.STREAK_DONE for c, _ in seen)
+    assert done / len(seen) > 1.5            # iterations per call
+    assert done <= r.stats["iterations"]
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="bit-equality assumes no fused multiply-adds")
+def test_the_target_pose_is_pinocchios_to_the_bit():
+    from optplan.planners.tcbirrt_streak import NativePose
+
+    f, rng = NativePose(), np.random.default_rng(11)
+    for _ in range(3000):
+        xi = rng.uniform(-3.3, 3.3, 6)
+        R, p = f(xi)
+        assert np.array_equal(R, np.asarray(pin.rpy.rpyToMatrix(*xi[3:]))) and np.array_equal(p, xi[:3])
+    R, _ = f(np.r_[0.0, 0.0, 0.0, 0.0, np.pi / 2, 0.0])    # gimbal lock still a rotation
+    assert np.allclose(R @ R.T, np.eye(3), atol=1e-15)
+
+
+def test_ik_block_in_c_is_the_python_loop_to_the_bit(tcb):
+    pl = _planner(tcb, "hard_bay")
+    kin, rng = pl.kin, np.random.default_rng(4)
+    conv = 0
+    for _ in range(300):
+        q = rng.uniform(tcb.lower, tcb.upper)
+        M = kin.object_pose(q)
+        seed = q + rng.normal(0.0, 0.1, q.size)
+        a, ia = kin.ik(seed, M.rotation, M.translation, pl.options.ik)
+        b, ib = pl._ext.ik_block(seed, M.rotation, M.translation)
+        assert ia == ib and (a is None) == (b is None)
+        if a is not None:
+            conv += 1
+            assert np.array_equal(a, b)
+    assert conv > 20
+
+
+def test_pose_fixed_pairs_are_placed_by_the_object_pose_alone(tcb):
+    """Two IK solutions of one object pose (Pinocchio's forward kinematics): every joint that carries a geometry of a
+    flagged pair is at the same placement; some unflagged pair has a geometry on a joint that moved."""
+    from optplan.planners.kernel.extend import pose_fixed_pairs
+
+    pl = _planner(tcb, "hard_bay")
+    kern = pl.checker._native.kernel
+    fix = pose_fixed_pairs(kern, pl.kin)
+    gparent, pa, pb = kern._arrays[5], kern._arrays[10], kern._arrays[11]
+    assert fix is not None and 0 < fix.sum() < fix.size
+    model, data, rng = tcb.model, tcb.model.createData(), np.random.default_rng(9)
+    pairs = 0
+    for _ in range(200):
+        q0 = rng.uniform(tcb.lower, tcb.upper)
+        M = pl.kin.object_pose(q0)              # arm 1's hand holds the object here; both hands hold it at q1 and q2
+        q1, _ = pl.kin.ik(q0, M.rotation, M.translation, pl.options.ik)
+        if q1 is None:
+            continue
+        q2, _ = pl.kin.ik(q1 + rng.normal(0.0, 0.8, q1.size), M.rotation, M.translation, pl.options.ik)
+        if q2 is None or np.abs(q2 - q1).max() < 0.3:
+            continue
+        pin.forwardKinematics(model, data, q1)
+        o1 = [data.oMi[j].copy() for j in range(model.njoints)]
+        pin.forwardKinematics(model, data, q2)
+        o2 = [data.oMi[j].copy() for j in range(model.njoints)]
+        same = [np.allclose(o1[j].homogeneous, o2[j].homogeneous, atol=1e-6) for j in range(model.njoints)]
+        for k in np.flatnonzero(fix):
+            assert same[int(gparent[pa[k]])] and same[int(gparent[pb[k]])]
+        assert any(not (same[int(gparent[pa[k]])] and same[int(gparent[pb[k]])]) for k in np.flatnonzero(fix == 0))
+        pairs += 1
+        if pairs >= 10:
+            break
+    assert pairs >= 5
+
+
+def test_quiet_iterations_stop_before_every_event_of_the_loops_head(tcb):
+    """The closed form against the head's own tests, iteration by iteration (options with every event on)."""
+    from optplan.planners.tcbirrt_streak import quiet_iterations
+
+    pl = _planner(tcb, "hard_bay")
+    o = dataclasses.replace(pl.options, branch_grafts=2, graft_after=40, graft_interval=30, frontier_grafts=3,
+                            frontier_interval=45, stall_iterations=70, guide_probability=0.2)
+    pl.options = o
+
+    class _S:
+        guide = None
+
+    def fires(v: int, since: int, max_it: int) -> bool:   # the head of the iteration with v iterations before it
+        k_graft, k_front = v - o.graft_after, v + 1 - o.graft_after
+        return bool((max_it and v >= max_it) or (k_graft > 0 and k_graft % o.graft_interval == 0) or v % 25 == 0
+                    or (k_front > 0 and k_front % o.frontier_interval == 0) or since > o.stall_iterations)
+    for v0 in range(0, 400, 7):
+        for since0 in (1, 30, 69, 70, 71):
+            for max_it in (0, v0 + 3, v0 + 200):
+                n = quiet_iterations(pl, v0, since0, max_it, _S(), True, True)
+                expect = next(j for j in range(1, 10_000) if fires(v0 + j, since0 + j, max_it))
+                assert n == expect, (v0, since0, max_it, n, expect)
+
+
+def test_streaks_option_is_checked():
+    from optplan.planners.tcbirrt_options import TCBiRRTOptions
+
+    with pytest.raises(ValueError, match="streaks: expected True or False"):
+        TCBiRRTOptions(streaks=1)
