@@ -130,14 +130,14 @@ from ..model.robot import RobotModel
 from ..scene import Scene
 from .base import Deadline, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2
-from .frontier_graft import frontier_graft, trap_lookahead
+from .frontier_graft import frontier_graft
 from .ik_seed import predicted_seed
 from .rrtconnect import edge_is_valid
 from .task_sampling import ObjectPoseFilter, TaskSampler
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
 from .tcbirrt_edges import EdgeCheckMixin
 from .tcbirrt_lead import LeadState, lead_attempt
-from .tcbirrt_native import _merge, loop_extend, make_extender, native_extend, native_path_ik, pose_list, poses_array
+from .tcbirrt_native import loop_extend, make_extender, native_extend, native_path_ik, poses_array
 from .tcbirrt_options import (
     PAPER_REACH,
     PAPER_XI_LOWER,
@@ -146,7 +146,8 @@ from .tcbirrt_options import (
     TCBiRRTOptions,
     reach_scaled_workspace,
 )
-from .tcbirrt_streak import STREAK_DONE, STREAK_EXTENDED, STREAK_SAMPLED, NativePose, NativeStreak, quiet_iterations
+from .tcbirrt_streak import STREAK_DONE, STREAK_EXTENDED, STREAK_SAMPLED, NativePose, NativeStreak
+from .tcbirrt_traps import ADVANCED, PARTIAL, REACHED, TRAPPED, TrapMixin
 from .tcbirrt_tree import _TaskTree as _TaskTree  # re-exported: frontier_graft types its trees with it
 from .tcbirrt_tree import extract_path
 from .validity import ValidityChecker
@@ -156,12 +157,10 @@ __all__ = ["TCBiRRTOptions", "TCBiRRT", "exp_coordinates", "rotation_from_exp", 
            "reach_scaled_workspace"]
 log = logging.getLogger(__name__)
 
-TRAPPED, ADVANCED, REACHED = "trapped", "advanced", "reached"
-PARTIAL = "partial"
 
 
 # ---------------------------------------------------------------------- planner
-class TCBiRRT(EdgeCheckMixin, Planner):
+class TCBiRRT(TrapMixin, EdgeCheckMixin, Planner):
     """TCBiRRT for a robot holding ``scene.object`` with two arms (``scene.object.grasps``).
 
     ``plan(q_start, q_goal, time_limit=10, seed=0)``: both configurations must hold the object
@@ -319,16 +318,6 @@ class TCBiRRT(EdgeCheckMixin, Planner):
             i_s = i_near
         return (REACHED if reach else ADVANCED), i_s, reg
 
-    def _streak(self, sampler: Any, deadline: Deadline) -> NativeStreak | None:
-        """The query's trapped streaks (:mod:`.tcbirrt_streak`), or None where the loop runs them one by one: the
-        option off, no native loop (its sampler, restarts and Jacobian-spaced edges), another ``trap_adapt`` than
-        ``"step"``/``"off"``, a deadline with a work budget."""
-        o, ext = self.options, self._ext
-        if not (o.streaks and self._nrng is not None and ext is not None and ext.edge_on and ext.native_restarts
-                and o.interpolation == "geodesic" and o.trap_adapt in ("step", "off") and math.isinf(deadline.work)):
-            return None
-        return NativeStreak(self, sampler)
-
     def _sample_near(self, ta: _TaskTree, tb: _TaskTree, sampler: Any, rng: np.random.Generator,
                      st: dict[str, Any]) -> tuple[np.ndarray, int]:
         """Alg. 1 lines 3-4: ξ_rand and the node of ``ta`` to extend from. With ``trap_adapt="domain"`` a sample
@@ -351,37 +340,6 @@ class TCBiRRT(EdgeCheckMixin, Planner):
     def _make_filter(self, native: bool) -> ObjectPoseFilter:
         """The task-space filter of the samples and the lead path (``filter_robot_body``: the robot's fixed body too)."""
         return ObjectPoseFilter(self.robot, self.scene, native=native, robot_body=bool(self.options.filter_robot_body))
-
-    def _trap_update(self, tree: _TaskTree, i: int, res: str) -> None:
-        """``trap_adapt``: after an extension from node i, its dynamic domain (set when trapped) or its step
-        (halved when trapped, down to s_ξ/8; doubled back, up to s_ξ, when not)."""
-        o = self.options
-        if o.trap_adapt == "domain" and res == TRAPPED:
-            tree.dom[i] = self.step_size * o.domain_radius
-        elif o.trap_adapt == "step":
-            cur = self.step_size if not np.isfinite(tree.dom[i]) else float(tree.dom[i])
-            tree.dom[i] = max(cur * 0.5, self.step_size / 8.0) if res == TRAPPED else min(cur * 2.0, self.step_size)
-
-    def _trap_graft(self, tree: _TaskTree, i: int, xi_rand: np.ndarray, other: _TaskTree, trap: list[Any],
-                    deadline: Deadline, st: dict[str, Any]) -> int | None:
-        """``trap_grafts``: count a trapped extension from node i of ``tree`` (toward ``xi_rand``); at its
-        ``trap_graft_count``-th, the arms re-grasp at the node into a branch from which a step toward
-        ``trap_graft_target`` (``other``'s node nearest in ξ, or ``xi_rand``) passes
-        (:func:`.frontier_graft.trap_lookahead`); the counts per node are the tree's ``trapn``. ``trap``: the tree's
-        ``[None, grafts made, stream]``. The node
-        one step beyond the graft, or None."""
-        tree.trapn[i] += 1
-        if tree.trapn[i] != self.options.trap_graft_count:
-            return None
-        return self._trap_fire(tree, i, xi_rand, other, trap, deadline, st)
-
-    def _trap_fire(self, tree: _TaskTree, i: int, xi_rand: np.ndarray, other: _TaskTree, trap: list[Any],
-                   deadline: Deadline, st: dict[str, Any]) -> int | None:
-        """The trap graft of :meth:`_trap_graft` at node i, its count reached: the node one step beyond it, or None."""
-        target = other.xi[other.nearest(tree.xi[i])] if self.options.trap_graft_target == "other" else xi_rand
-        got = trap_lookahead(self, tree, i, target, trap, deadline, st)
-        trap[1] += got is not None
-        return got
 
     def _sampler(self) -> Any:
         """The improved variant's ξ sampler (None: the paper's uniform box); with ``extension="loop"`` the
@@ -546,30 +504,15 @@ class TCBiRRT(EdgeCheckMixin, Planner):
                 res, i_a = ADVANCED, i_front
             else:
                 if streak is not None:    # this iteration and the trapped ones after it in one native call
-                    lead_on = sampler.guide is None and lead.budget_left(self)
-                    n_max = quiet_iterations(self, st["iterations"] - 1, since_gap, max_iterations, sampler, lead_on,
-                                             min(fronts.values()) < cast(int, o.frontier_grafts))
-                    sk = streak.run(ta, tb, bool(o.trap_grafts) and traps[id(ta)][1] < o.trap_grafts,
-                                    bool(o.trap_grafts) and traps[id(tb)][1] < o.trap_grafts,
-                                    st["iterations"] - 1, n_max, deadline)
-                    _merge(st, streak.ext)
-                    n = sk.n_done
-                    st["extensions"] += n
-                    st["trapped"] += n
-                    done = n - 1 if sk.code == STREAK_DONE else n   # iterations completed after this one
-                    st["iterations"] += done
+                    sk, done = self._run_streak(streak, ta, tb, traps, fronts, since_gap, max_iterations, sampler, lead,
+                                                deadline, st)
                     since_gap += done
                     if done % 2:
                         ta, tb, a_is_start = tb, ta, not a_is_start
                 if sk is not None and sk.code == STREAK_DONE:
                     res = TRAPPED
                 elif sk is not None and sk.code == STREAK_EXTENDED:   # not trapped: the iteration goes on here
-                    st["extensions"] += 1
-                    i_near = int(sk.i_near)
-                    P, Q = cast(NativeStreak, streak).take()
-                    res, i_a, _ = self._extended(ta, i_near, np.array(sk.xi_s), bool(sk.reach), P[-1, :9].reshape(3, 3),
-                                                 P[-1, 9:], pose_list(P), list(Q[:sk.k]), None, rng, deadline, st)
-                    self._trap_update(ta, i_near, res)
+                    res, i_a = self._streak_extended(cast(NativeStreak, streak), ta, sk, rng, deadline, st)
                 else:
                     if sk is None:
                         xi_rand, i_near = self._sample_near(ta, tb, sampler, rng, st)              # lines 3-4

@@ -1,0 +1,113 @@
+"""TCBiRRT's trapped extensions: what a trapped extension changes at its node (``trap_adapt``), the trap grafts it
+counts toward (``trap_grafts``), and the trapped streaks that run series of them in one native call
+(:mod:`.tcbirrt_streak`).
+
+:class:`TrapMixin` holds these methods of :class:`~.tcbirrt.TCBiRRT`; it uses the planner's options, its native
+extension and its constrained extension's end (``_extended``).
+"""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+
+from .frontier_graft import trap_lookahead
+from .tcbirrt_native import _merge, pose_list
+from .tcbirrt_options import TCBiRRTOptions
+from .tcbirrt_streak import STREAK_DONE, NativeStreak, quiet_iterations
+
+if TYPE_CHECKING:
+    from .base import Deadline
+    from .kernel.extend import NativeExtender
+    from .tcbirrt import TCBiRRT
+    from .tcbirrt_tree import _TaskTree
+
+__all__ = ["TrapMixin"]
+
+#: the results of a constrained extension (Alg. 2): trapped, advanced a step, reached its target, or the valid prefix
+TRAPPED, ADVANCED, REACHED, PARTIAL = "trapped", "advanced", "reached", "partial"
+
+
+class TrapMixin:
+    """The trap methods of :class:`~.tcbirrt.TCBiRRT` (the attributes below are the planner's)."""
+
+    options: TCBiRRTOptions
+    step_size: float
+    _ext: NativeExtender | None
+    _nrng: Any
+    _extended: Any
+
+    def _trap_update(self, tree: _TaskTree, i: int, res: str) -> None:
+        """``trap_adapt``: after an extension from node i, its dynamic domain (set when trapped) or its step
+        (halved when trapped, down to s_ξ/8; doubled back, up to s_ξ, when not)."""
+        o = self.options
+        if o.trap_adapt == "domain" and res == TRAPPED:
+            tree.dom[i] = self.step_size * o.domain_radius
+        elif o.trap_adapt == "step":
+            cur = self.step_size if not np.isfinite(tree.dom[i]) else float(tree.dom[i])
+            tree.dom[i] = max(cur * 0.5, self.step_size / 8.0) if res == TRAPPED else min(cur * 2.0, self.step_size)
+
+    def _trap_graft(self, tree: _TaskTree, i: int, xi_rand: np.ndarray, other: _TaskTree, trap: list[Any],
+                    deadline: Deadline, st: dict[str, Any]) -> int | None:
+        """``trap_grafts``: count a trapped extension from node i of ``tree`` (toward ``xi_rand``); at its
+        ``trap_graft_count``-th, the arms re-grasp at the node into a branch from which a step toward
+        ``trap_graft_target`` (``other``'s node nearest in ξ, or ``xi_rand``) passes
+        (:func:`.frontier_graft.trap_lookahead`); the counts per node are the tree's ``trapn``. ``trap``: the tree's
+        ``[None, grafts made, stream]``. The node
+        one step beyond the graft, or None."""
+        tree.trapn[i] += 1
+        if tree.trapn[i] != self.options.trap_graft_count:
+            return None
+        return self._trap_fire(tree, i, xi_rand, other, trap, deadline, st)
+
+    def _trap_fire(self, tree: _TaskTree, i: int, xi_rand: np.ndarray, other: _TaskTree, trap: list[Any],
+                   deadline: Deadline, st: dict[str, Any]) -> int | None:
+        """The trap graft of :meth:`_trap_graft` at node i, its count reached: the node one step beyond it, or None."""
+        target = other.xi[other.nearest(tree.xi[i])] if self.options.trap_graft_target == "other" else xi_rand
+        got = trap_lookahead(cast("TCBiRRT", self), tree, i, target, trap, deadline, st)
+        trap[1] += got is not None
+        return got
+
+    def _streak(self, sampler: Any, deadline: Deadline) -> NativeStreak | None:
+        """The query's trapped streaks (:mod:`.tcbirrt_streak`), or None where the loop runs them one by one: the
+        option off, no native loop (its sampler, restarts and Jacobian-spaced edges), another ``trap_adapt`` than
+        ``"step"``/``"off"``, a deadline with a work budget."""
+        o, ext = self.options, self._ext
+        if not (o.streaks and self._nrng is not None and ext is not None and ext.edge_on and ext.native_restarts
+                and o.interpolation == "geodesic" and o.trap_adapt in ("step", "off") and math.isinf(deadline.work)):
+            return None
+        return NativeStreak(cast("TCBiRRT", self), sampler)
+
+    def _run_streak(self, streak: NativeStreak, ta: _TaskTree, tb: _TaskTree, traps: dict[int, list[Any]],
+                    fronts: dict[int, int], since_gap: int, max_iterations: int, sampler: Any, lead: Any,
+                    deadline: Deadline, st: dict[str, Any]) -> tuple[Any, int]:
+        """The loop's current iteration (its head has run) and the plain trapped ones after it in one native call:
+        ``(result, iterations completed after the current one)``; the counters merged. The caller swaps the trees
+        once per completed iteration and goes on with the result's code."""
+        o = self.options
+        lead_on = sampler.guide is None and lead.budget_left(self)
+        n_max = quiet_iterations(cast("TCBiRRT", self), st["iterations"] - 1, since_gap, max_iterations, sampler, lead_on,
+                                 min(fronts.values()) < cast(int, o.frontier_grafts))
+        sk = streak.run(ta, tb, bool(o.trap_grafts) and traps[id(ta)][1] < cast(int, o.trap_grafts),
+                        bool(o.trap_grafts) and traps[id(tb)][1] < cast(int, o.trap_grafts),
+                        st["iterations"] - 1, n_max, deadline)
+        _merge(st, streak.ext)
+        n = int(sk.n_done)
+        st["extensions"] += n
+        st["trapped"] += n
+        done = n - 1 if sk.code == STREAK_DONE else n
+        st["iterations"] += done
+        return sk, done
+
+    def _streak_extended(self, streak: NativeStreak, ta: _TaskTree, sk: Any, rng: np.random.Generator,
+                         deadline: Deadline, st: dict[str, Any]) -> tuple[str, int]:
+        """The end of the extension a streak stopped at, not trapped: the node it adds to ``ta`` (Python's tree)."""
+        st["extensions"] += 1
+        i_near = int(sk.i_near)
+        P, Q = streak.take()
+        res, i_a, _ = self._extended(ta, i_near, np.array(sk.xi_s), bool(sk.reach), P[-1, :9].reshape(3, 3), P[-1, 9:],
+                                     pose_list(P), list(Q[:sk.k]), None, rng, deadline, st)
+        self._trap_update(ta, i_near, res)
+        return res, i_a
+
