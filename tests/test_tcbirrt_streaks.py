@@ -62,7 +62,8 @@ def test_streaks_and_restart_skips_give_the_same_search(tcb, scene_name, trials,
 
 
 def test_a_streak_runs_several_iterations_and_stops_where_python_must_go_on(tcb):
-    """On a trapped scene the calls average more than one iteration; each ends at one of its codes."""
+    """On a trapped scene the calls average more than one iteration; each ends at one of its codes; the trees' Python
+    lists hold every node the calls added."""
     from optplan.planners import tcbirrt_streak as ts
     from optplan.scene import Scene
     from optplan.trials import TrialGenerator
@@ -74,6 +75,8 @@ def test_a_streak_runs_several_iterations_and_stops_where_python_must_go_on(tcb)
     def spy(self, *a, **k):
         out = run(self, *a, **k)
         seen.append((int(out.code), int(out.n_done)))
+        for t in a[:2]:   # the nodes added in C: in the arrays and in the lists of poses and edges
+            assert len(t.pose) == len(t.edge) == t.n and np.isfinite(t.X[:t.n]).all()
         return out
     ts.NativeStreak.run = spy
     try:
@@ -83,10 +86,12 @@ def test_a_streak_runs_several_iterations_and_stops_where_python_must_go_on(tcb)
         ts.NativeStreak.run = run
     assert r.status.value == "exact" and seen
     codes = {c for c, _ in seen}
-    assert codes <= {ts.STREAK_DONE, ts.STREAK_SAMPLED, ts.STREAK_EXTENDED, ts.STREAK_TRAP_GRAFT}
-    assert ts.STREAK_EXTENDED in codes
+    assert codes <= {ts.STREAK_DONE, ts.STREAK_SAMPLED, ts.STREAK_EXTENDED, ts.STREAK_TRAP_GRAFT, ts.STREAK_CONNECT,
+                     ts.STREAK_CONNECTED}
+    # advanced extensions go on in C: the calls stop where a connection step was not trapped
+    assert ts.STREAK_CONNECTED in codes
     done = sum(n for _, n in seen) + sum(c != ts.STREAK_DONE for c, _ in seen)
-    assert done / len(seen) > 1.5            # iterations per call
+    assert done / len(seen) > 5.0            # iterations per call
     assert done <= r.stats["iterations"]
 
 
@@ -184,3 +189,83 @@ def test_streaks_option_is_checked():
 
     with pytest.raises(ValueError, match="streaks: expected True or False"):
         TCBiRRTOptions(streaks=1)
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="bit-equality assumes no fused multiply-adds")
+def test_a_partial_nodes_key_is_pinocchios_to_the_bit():
+    """The native ξ of a pose (``tcb_xi_of_pose``) against Pinocchio's matrixToRpy: random rotations, and rotations
+    near the pitch's singularity (±π/2) and the angles' branch cuts (±π)."""
+    from optplan.planners.task_space import xi_from_pose
+    from optplan.planners.tcbirrt_streak import NativeXi
+
+    f, rng = NativeXi(), np.random.default_rng(12)
+    eps = np.concatenate([[0.0], 10.0 ** -np.arange(1, 16)])
+    for k in range(6000):
+        if k % 3 == 0:
+            R = pin.rpy.rpyToMatrix(*rng.uniform(-np.pi, np.pi, 3))
+        elif k % 3 == 1:
+            R = pin.exp3(rng.normal(size=3) * rng.choice([1e-9, 1e-3, 1.0, 3.0]))
+        else:   # pitch at ±π/2 and angles at ±π, up to a tiny offset
+            r, y = rng.choice([-np.pi, np.pi, 0.0, np.pi / 2]) + rng.choice(eps) * rng.choice([-1, 1], 2)
+            pch = rng.choice([-np.pi / 2, np.pi / 2]) + rng.choice(eps) * rng.choice([-1, 1])
+            R = pin.rpy.rpyToMatrix(r, pch, y)
+        p = rng.normal(size=3)
+        a, b = f(R, p), xi_from_pose(pin.SE3(R, p))
+        assert np.array_equal(a, b), (R, a, b)
+
+
+def test_native_twin_choice_is_the_trees_on_groups_with_dead_nodes():
+    """Twin groups grown by ``add_graft`` (grafts at any member, dead members): the arrays list each group in the
+    order of ``twins``, and the native choice of the twin nearest a configuration is the tree's."""
+    from optplan.planners.tcbirrt_streak import NativeTwin
+    from optplan.planners.tcbirrt_tree import _TaskTree
+
+    rng = np.random.default_rng(5)
+    nq = 14
+    t = _TaskTree(rng.normal(size=nq), rng.normal(size=6), np.eye(3), np.zeros(3), cap=4)
+    for _ in range(60):   # plain nodes, then grafts at random nodes (a member of a group or not)
+        t.add(rng.normal(size=nq), rng.normal(size=6), np.eye(3), np.zeros(3), int(rng.integers(t.n)), [], [])
+    for _ in range(80):
+        t.add_graft(int(rng.integers(t.n)), rng.normal(size=nq), [])
+    for i in range(t.n):
+        if i in t.twins:
+            walk, m = [], int(t.thead[i])
+            while m >= 0:
+                walk.append(m)
+                m = int(t.tnext[m])
+            assert walk == t.twins[i]
+        else:
+            assert t.thead[i] == -1 and not t.twin[i]
+    twin = NativeTwin()
+    t.kill(int(rng.integers(1, t.n)))
+    for _ in range(400):
+        i = int(rng.integers(t.n))
+        if t.alive is not None and not t.alive[i]:
+            continue
+        q = rng.normal(size=nq) if rng.random() < 0.7 else t.q[int(rng.integers(t.n))].copy()
+        assert twin(t, i, q, rng) == t.twin_nearest(i, q, rng)
+
+
+def test_native_twin_draws_are_numpys_generator_integers():
+    """Generator.integers(n) on the PCG64 state, in C, against NumPy's own draws: the values and the state after
+    them (the buffered 32-bit half included), for the group sizes twins have and larger ones."""
+    import ctypes
+
+    from optplan.planners.kernel.extend import load_extend_library
+    from optplan.planners.tcbirrt_streak import _declare, _Pcg
+
+    lib = load_extend_library()
+    _declare(lib)
+    for seed in range(40):
+        g, ref = np.random.default_rng(seed), np.random.default_rng(seed)
+        if seed % 2:   # leave a buffered 32-bit half
+            g.integers(5), ref.integers(5)
+        for n in (1, 2, 3, 5, 7, 12, 1000, 2**31 + 11):
+            pcg = _Pcg()
+            assert pcg.load(g)
+            out = np.zeros(25, np.int64)
+            if lib.tcb_pcg_integers(ctypes.byref(pcg), n, len(out), out.ctypes.data) < 0:
+                pytest.skip("no 128-bit integers in this C compiler")
+            pcg.store(g)
+            assert out.tolist() == [int(ref.integers(n)) for _ in range(len(out))], (seed, n)
+            assert g.bit_generator.state == ref.bit_generator.state

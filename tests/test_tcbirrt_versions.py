@@ -30,3 +30,13 @@ def test_summary_pairs_per_query(tmp_path):
 def test_main_needs_both_trees():
     with pytest.raises(SystemExit):
         main(["--tree-a", "/tmp"])
+
+
+def test_summary_leaves_out_trials_neither_version_could_draw(tmp_path):
+    nt = {"status": "no_trial", "success": False, "cpu_s": float("nan"), "iterations": 0, "path": None}
+    rows = [_row("s1", 0, (True, 0.2, 10, "p"), (True, 0.1, 10, "p")),
+            {"scene": "s1", "trial": 1, "first": "b", "a": nt, "b": nt}]
+    f = tmp_path / "versions.jsonl"
+    f.write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+    s1 = next(x for x in summary(f) if x.startswith("| s1 "))
+    assert "| 1 | 1 / 1 |" in s1 and s1.endswith("| 1 / 1 |")

@@ -41,7 +41,7 @@ def test_trap_graft_fires_once_at_the_count_and_steps_toward_the_other_tree(tcb,
     xi_far = np.full(6, 9.0)   # the trapping sample: unused with trap_graft_target="other"
     n, tries = None, 0
     while n is None and tries < 10:   # a fresh tree and counter per try: the graft's random seeds may all fail
-        a, st, trap = task_tree(kin, t.q_start), extension_stats(), [None, 0]
+        a, st, trap = task_tree(kin, t.q_start), extension_stats(), [0]
         for k in range(1, count):
             assert pl._trap_graft(a, 0, xi_far, b, trap, Deadline(5.0, "cpu"), st) is None
             assert "trap_attempts" not in st and a.trapn[0] == k   # the node's count, in its tree
@@ -49,7 +49,7 @@ def test_trap_graft_fires_once_at_the_count_and_steps_toward_the_other_tree(tcb,
         assert st["trap_attempts"] == 1
         assert pl._trap_graft(a, 0, xi_far, b, trap, Deadline(5.0, "cpu"), st) is None and st["trap_attempts"] == 1
         tries += 1
-    assert n is not None and trap[1] == 1 and st["trap_grafts"] == 1
+    assert n is not None and trap[0] == 1 and st["trap_grafts"] == 1
     check_graft_node(pl, tcb, scene, ck, kin, t.q_start, a, b, n)
 
 

@@ -9,6 +9,8 @@ Each worker runs the benchmark's planner set-up (:mod:`optplan.bench.tcbirrt`) w
 kernel cache of ``--cache-a`` / ``--cache-b`` when given). One JSON line per query in ``OUT/versions.jsonl``;
 ``--summary OUT`` prints success, median CPU and iterations per scene, the per-query CPU ratio a/b (median and
 geometric mean over the queries both solve) and how many queries took the same search (same iterations and path).
+A trial that cannot be drawn for its seed (no start/goal IK) is a row with status ``no_trial``, left out of the
+summary when neither version could draw it.
 """
 from __future__ import annotations
 
@@ -35,7 +37,12 @@ for line in sys.stdin:
     q = json.loads(line)
     _worker_setup("tcbirrt_dual_arm", [q["scene"]], [q["spec"]])
     w = _W[q["scene"]]
-    t = w["gen"].generate(int(q["trial"]), int(q["seed"]))
+    try:
+        t = w["gen"].generate(int(q["trial"]), int(q["seed"]))
+    except Exception as exc:   # no start/goal IK for this trial: a row, not the end of the run
+        print(json.dumps({"status": "no_trial", "error": f"{type(exc).__name__}: {exc}", "cpu_s": float("nan"),
+                          "iterations": 0, "path": None, "success": False, "package": optplan.__file__}), flush=True)
+        continue
     res = w["planners"][q["spec"]].plan(t.q_start, t.q_goal, time_limit=q["time_limit"], seed=t.seed, clock="cpu")
     checks = _path_checks(w["robot"], w["scene"], w["checker"], res)
     digest = hashlib.sha1(np.asarray(res.path, float).tobytes()).hexdigest()[:16] if res.success else None
@@ -68,6 +75,8 @@ def _ask(p: subprocess.Popen[str], q: dict[str, Any]) -> dict[str, Any]:
 def summary(path: Path) -> list[str]:
     """The per-scene lines of a ``versions.jsonl``."""
     rows = [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
+    # a trial neither version could draw (no start/goal IK for its seed) is no query
+    rows = [r for r in rows if not (r["a"].get("status") == "no_trial" and r["b"].get("status") == "no_trial")]
     out = ["| scene | queries | success a / b | median CPU s a / b | median iterations a / b | CPU a/b per query: "
            "median, geo. mean | same search |", "|---|---|---|---|---|---|---|"]
     for sc in dict.fromkeys(r["scene"] for r in rows):   # scenes in the order of their first row

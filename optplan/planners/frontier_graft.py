@@ -120,24 +120,24 @@ def lookahead_graft(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray,
 def trap_lookahead(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray, trap: list[Any], deadline: Deadline,
                    st: dict[str, Any]) -> int | None:
     """A trap graft's :func:`lookahead_graft` (counters ``trap_*``). With ``trap_graft_stream="own"`` its IK seeds,
-    look-ahead restarts (the native ones too) and regrasp draw from the tree's own streams — ``trap[2]``: at the
+    look-ahead restarts (the native ones too) and regrasp draw from the tree's own streams — ``trap[1]``: at the
     first attempt ``(query seed, tree)``, then the streams — and the search's are restored after it, untouched."""
     if pl.options.trap_graft_stream != "own":
         return lookahead_graft(pl, tree, i, xi_target, deadline, st, "trap")
-    if isinstance(trap[2], tuple):   # the tree's first attempt: its streams, from the query's seed
+    if isinstance(trap[1], tuple):   # the tree's first attempt: its streams, from the query's seed
         from .kernel.sampler import NativeRandom
 
-        g = np.random.default_rng([0x7A9, *(abs(int(v)) for v in trap[2])])
-        trap[2] = [g, NativeRandom(g) if pl._nrng is not None else None]
+        g = np.random.default_rng([0x7A9, *(abs(int(v)) for v in trap[1])])
+        trap[1] = [g, NativeRandom(g) if pl._nrng is not None else None]
     o, ext, rng, nrng = pl.options, pl._ext, pl._rng, pl._nrng
-    native = ext is not None and ext.native_restarts and trap[2][1] is not None and nrng is not None
+    native = ext is not None and ext.native_restarts and trap[1][1] is not None and nrng is not None
 
     def restarts(r: Any) -> None:   # the extension's restarts in C draw from ``r``
         cast(Any, ext).restarts_in_c(r, cast(int, o.ik_restarts), o.ik_restart_sigma, pl.robot.lower - 1e-9,
                                      pl.robot.upper + 1e-9)
-    pl._rng = trap[2][0]
+    pl._rng = trap[1][0]
     if native:
-        restarts(trap[2][1])
+        restarts(trap[1][1])
     try:
         return lookahead_graft(pl, tree, i, xi_target, deadline, st, "trap")
     finally:

@@ -122,7 +122,6 @@ from collections.abc import Sequence
 from typing import Any, cast
 
 import numpy as np
-import pinocchio as pin
 
 from ..constraints.closed_chain import ClosedChainKinematics, closure_error
 from ..errors import ConfigurationError
@@ -133,7 +132,7 @@ from .cbirrt2 import CBiRRT2
 from .frontier_graft import frontier_graft
 from .ik_seed import predicted_seed
 from .rrtconnect import edge_is_valid
-from .task_sampling import ObjectPoseFilter, TaskSampler
+from .task_sampling import ObjectPoseFilter
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
 from .tcbirrt_edges import EdgeCheckMixin
 from .tcbirrt_lead import LeadState, lead_attempt
@@ -146,7 +145,8 @@ from .tcbirrt_options import (
     TCBiRRTOptions,
     reach_scaled_workspace,
 )
-from .tcbirrt_streak import STREAK_DONE, STREAK_EXTENDED, STREAK_SAMPLED, NativePose, NativeStreak
+from .tcbirrt_sampling import SamplingMixin, _twin_of, _xi_of_pose
+from .tcbirrt_streak import STREAK_CONNECT, STREAK_CONNECTED, STREAK_DONE, STREAK_EXTENDED, STREAK_SAMPLED, NativeStreak
 from .tcbirrt_traps import ADVANCED, PARTIAL, REACHED, TRAPPED, TrapMixin
 from .tcbirrt_tree import _TaskTree as _TaskTree  # re-exported: frontier_graft types its trees with it
 from .tcbirrt_tree import extract_path
@@ -158,9 +158,8 @@ __all__ = ["TCBiRRTOptions", "TCBiRRT", "exp_coordinates", "rotation_from_exp", 
 log = logging.getLogger(__name__)
 
 
-
 # ---------------------------------------------------------------------- planner
-class TCBiRRT(TrapMixin, EdgeCheckMixin, Planner):
+class TCBiRRT(TrapMixin, EdgeCheckMixin, SamplingMixin, Planner):
     """TCBiRRT for a robot holding ``scene.object`` with two arms (``scene.object.grasps``).
 
     ``plan(q_start, q_goal, time_limit=10, seed=0)``: both configurations must hold the object
@@ -198,6 +197,10 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, Planner):
         self._nrng: Any = None
         #: ξ → (R, p) of an extension's target: Pinocchio's, or with the native loop the native code's (:class:`.NativePose`)
         self._pose: Any = pose_from_xi
+        #: (R, p) → ξ of a partial extension's node: Pinocchio's, or with the native loop the native code's (:class:`.NativeXi`)
+        self._xi_of: Any = _xi_of_pose
+        #: (tree, node, q, rng) → the node's twin nearest q (:meth:`._TaskTree.twin_nearest`), or the native code's (:class:`.NativeTwin`)
+        self._twin_of: Any = _twin_of
         #: restarts: the object's lead path found by an earlier search of the query and what was spent on it
         self._lead = LeadState()
 
@@ -297,7 +300,7 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, Planner):
             k = len(Q)
             Rk, pk = poses[k - 1]
             Rk, pk = np.asarray(Rk), np.asarray(pk)
-            i_s = tree.add(Q[-1], xi_from_pose(pin.SE3(Rk, pk)), Rk, pk, i_near, Q[:-1], poses[:k - 1])
+            i_s = tree.add(Q[-1], self._xi_of(Rk, pk), Rk, pk, i_near, Q[:-1], poses[:k - 1])
             return PARTIAL, i_s, None
         q_s = Q[-1]
         reg: Sequence[tuple[str | None, list[np.ndarray]]] | None = None
@@ -336,64 +339,6 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, Planner):
                 break
             st["domain_rejections"] = st.get("domain_rejections", 0) + 1
         return xi_rand, ta.twin_nearest(i_near, None, rng)
-
-    def _make_filter(self, native: bool) -> ObjectPoseFilter:
-        """The task-space filter of the samples and the lead path (``filter_robot_body``: the robot's fixed body too)."""
-        return ObjectPoseFilter(self.robot, self.scene, native=native, robot_body=bool(self.options.filter_robot_body))
-
-    def _sampler(self) -> Any:
-        """The improved variant's ξ sampler (None: the paper's uniform box); with ``extension="loop"`` the
-        native sampler (:class:`~optplan.planners.kernel.sampler.NativeTaskSampler`, for the paper's box too)
-        when it can be built, and then :attr:`_nrng` is the query's native random stream."""
-        o = self.options
-        self._nrng, self._pose = None, pose_from_xi
-        if self._ext is not None and o.extension == "loop":
-            got = self._native_sampler()
-            if got is not None:
-                return got
-        if not (o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.goal_bias) > 0 or cast(float, o.guide_probability) > 0
-                or cast(float, o.geodesic_probability) > 0 or cast(float, o.lead_orientation_probability) > 0):
-            return None
-        if self._filter is None:
-            self._filter = self._make_filter(o.validity_kernel == "native")
-            if o.extension == "python":
-                self._filter._xi_native = None   # the filter's pose test in Python too (native object check)
-        need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
-        return TaskSampler(self._filter if need else None,
-                           self._lo, self._hi, bridge_probability=cast(float, o.bridge_probability),
-                           bridge_sigma=o.bridge_sigma, goal_bias=cast(float, o.goal_bias),
-                           filter_tries=30 if o.sample_filter else 0, guide_probability=cast(float, o.guide_probability),
-                           guide_sigma=o.guide_sigma, geodesic_probability=cast(float, o.geodesic_probability),
-                           geodesic_sigma=o.geodesic_sigma,
-                           lead_orientation_probability=cast(float, o.lead_orientation_probability))
-
-    def _native_sampler(self) -> Any:
-        """The native sampler with the options' probabilities, seeded by one draw of the planner's generator
-        (None: the filter has no native pose test); the extension's restarts draw from the same stream."""
-        from .kernel.native import KernelUnavailable
-        from .kernel.sampler import NativeRandom, NativeTaskSampler
-
-        o = self.options
-        need = o.sample_filter or cast(float, o.bridge_probability) > 0 or cast(float, o.guide_probability) > 0
-        if need and self._filter is None:
-            self._filter = self._make_filter(True)
-        try:
-            nrng = NativeRandom(self._rng)
-            smp = NativeTaskSampler(self._filter if need else None, self._lo, self._hi, nrng,
-                                    bridge_probability=cast(float, o.bridge_probability), bridge_sigma=o.bridge_sigma,
-                                    goal_bias=cast(float, o.goal_bias), filter_tries=30 if o.sample_filter else 0,
-                                    guide_probability=cast(float, o.guide_probability), guide_sigma=o.guide_sigma,
-                                    geodesic_probability=cast(float, o.geodesic_probability),
-                                    geodesic_sigma=o.geodesic_sigma,
-                                    lead_orientation_probability=cast(float, o.lead_orientation_probability))
-        except KernelUnavailable as e:
-            log.info("TCBiRRT samples in Python: %s", e)
-            return None
-        self._nrng, self._pose = nrng, NativePose()
-        ext = cast(Any, self._ext)
-        ext.restarts_in_c(nrng, cast(int, o.ik_restarts), o.ik_restart_sigma, self.robot.lower - 1e-9,
-                          self.robot.upper + 1e-9)
-        return smp
 
     # ------------------------------------------------------------------ restarts
     def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator, seed: int) -> PlanResult:
@@ -464,7 +409,7 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, Planner):
             st["guide_attempts"] = st["guide_waypoints"] = 0
         root_grafted = {id(ta): not o.root_grafts_first, id(tb): not o.root_grafts_first}
         fronts = {id(ta): 0, id(tb): 0}
-        traps: dict[int, list[Any]] = {id(ta): [None, 0, (seed, 0)], id(tb): [None, 0, (seed, 1)]}   # trap_grafts (_trap_graft)
+        traps: dict[int, list[Any]] = {id(ta): [0, (seed, 0)], id(tb): [0, (seed, 1)]}   # trap_grafts (_trap_graft)
         if branch_roots:
             self._root_branches(ta, tb, deadline, st)
         best_gap, since_gap = np.inf, 0   # stall_iterations: the smallest gap a connection left, iterations since it shrank
@@ -505,7 +450,7 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, Planner):
             else:
                 if streak is not None:    # this iteration and the trapped ones after it in one native call
                     sk, done = self._run_streak(streak, ta, tb, traps, fronts, since_gap, max_iterations, sampler, lead,
-                                                deadline, st)
+                                                deadline, st, rng)
                     since_gap += done
                     if done % 2:
                         ta, tb, a_is_start = tb, ta, not a_is_start
@@ -513,6 +458,9 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, Planner):
                     res = TRAPPED
                 elif sk is not None and sk.code == STREAK_EXTENDED:   # not trapped: the iteration goes on here
                     res, i_a = self._streak_extended(cast(NativeStreak, streak), ta, sk, rng, deadline, st)
+                elif sk is not None and sk.code in (STREAK_CONNECT, STREAK_CONNECTED):   # its node added in C
+                    res = PARTIAL if sk.k < o.n_interp else REACHED if sk.reach else ADVANCED
+                    i_a = int(sk.i_a)
                 else:
                     if sk is None:
                         xi_rand, i_near = self._sample_near(ta, tb, sampler, rng, st)              # lines 3-4
@@ -524,7 +472,7 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, Planner):
                         step = float(ta.dom[i_near]) if o.trap_adapt == "step" and np.isfinite(ta.dom[i_near]) else None
                         res, i_a, _ = self.constrained_extend(ta, i_near, xi_rand, None, rng, deadline, st, step)   # line 5
                         self._trap_update(ta, i_near, res)
-                        if res == TRAPPED and o.trap_grafts and traps[id(ta)][1] < o.trap_grafts and \
+                        if res == TRAPPED and o.trap_grafts and traps[id(ta)][0] < o.trap_grafts and \
                                 st["iterations"] > (o.trap_graft_after or 0):   # no trap counted before trap_graft_after
                             i_trap = self._trap_graft(ta, i_near, xi_rand, tb, traps[id(ta)], deadline, st)
                             if i_trap is not None:   # the step beyond the trap graft: connect tree b to it
@@ -539,10 +487,17 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, Planner):
             if res != TRAPPED:
                 target_xi, target_q = ta.xi[i_a].copy(), ta.q[i_a].copy()
                 gap = np.inf
+                # the first connection step, taken by a streak (not trapped): its result applied here
+                n_reg = st["regrasp_attempts"]
+                first = self._streak_connected(cast(NativeStreak, streak), tb, sk, target_q, rng, deadline, st) \
+                    if sk is not None and sk.code == STREAK_CONNECTED else None
                 while True:                                                              # lines 7-11
-                    i_nb = tb.twin_nearest(tb.nearest(target_xi), target_q, rng)
-                    n_reg = st["regrasp_attempts"]
-                    res, i_b, reg = self.constrained_extend(tb, i_nb, target_xi, target_q, rng, deadline, st)
+                    if first is not None:
+                        i_nb, (res, i_b, reg), first = int(cast(Any, sk).i_nb), first, None
+                    else:
+                        i_nb = self._twin_of(tb, tb.nearest(target_xi), target_q, rng)
+                        n_reg = st["regrasp_attempts"]
+                        res, i_b, reg = self.constrained_extend(tb, i_nb, target_xi, target_q, rng, deadline, st)
                     if o.stall_iterations:
                         i_gap = i_b if res in (ADVANCED, PARTIAL) else i_nb
                         gap = min(gap, 0.0 if res == REACHED or st["regrasp_attempts"] > n_reg   # met: a failed regrasp

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
-from .kernel.native import KernelUnavailable
+from .kernel.native import KernelUnavailable, pose12
 from .rrtconnect import edge_is_valid
 
 if TYPE_CHECKING:
@@ -48,8 +48,7 @@ def poses_array(poses: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
     """Object poses ``(R, p)`` as the n × 12 array of the native code (rotation row-major, position [m])."""
     P = np.empty((len(poses), 12))
     for j, (R, p) in enumerate(poses):
-        P[j, :9] = np.asarray(R).reshape(9)
-        P[j, 9:] = p
+        P[j] = pose12(R, p)
     return P
 
 

@@ -229,9 +229,9 @@ class TCBiRRTOptions:
     #: planner's generator: the same search as ``"python"``) or ``"python"``. Without a compiler or with
     #: ``validity_kernel="coal"`` the Python code runs.
     extension: str = "loop"
-    #: With ``extension="loop"``: run each series of plain trapped iterations (a sample, its nearest node, an
-    #: extension trapped at once) in one native call (:mod:`.tcbirrt_streak`; the same search as without, faster
-    #: on hard scenes, where most iterations are such). False: one call per step, as before.
+    #: With ``extension="loop"``: run series of iterations in one native call (:mod:`.tcbirrt_streak`): trapped
+    #: extensions, advanced ones with their node and tree b's first connection step, the twins' draws; the same
+    #: search as without, faster on hard scenes, where most iterations are such. False: one call per step.
     streaks: bool = True
     #: Cap on Alg. 1 iterations [count] (0: only the time limit), over all restarts.
     max_iterations: int = 0

@@ -54,7 +54,7 @@ class TrapMixin:
         ``trap_graft_count``-th, the arms re-grasp at the node into a branch from which a step toward
         ``trap_graft_target`` (``other``'s node nearest in ξ, or ``xi_rand``) passes
         (:func:`.frontier_graft.trap_lookahead`); the counts per node are the tree's ``trapn``. ``trap``: the tree's
-        ``[None, grafts made, stream]``. The node
+        ``[grafts made, stream]``. The node
         one step beyond the graft, or None."""
         tree.trapn[i] += 1
         if tree.trapn[i] != self.options.trap_graft_count:
@@ -66,7 +66,7 @@ class TrapMixin:
         """The trap graft of :meth:`_trap_graft` at node i, its count reached: the node one step beyond it, or None."""
         target = other.xi[other.nearest(tree.xi[i])] if self.options.trap_graft_target == "other" else xi_rand
         got = trap_lookahead(cast("TCBiRRT", self), tree, i, target, trap, deadline, st)
-        trap[1] += got is not None
+        trap[0] += got is not None
         return got
 
     def _streak(self, sampler: Any, deadline: Deadline) -> NativeStreak | None:
@@ -81,7 +81,7 @@ class TrapMixin:
 
     def _run_streak(self, streak: NativeStreak, ta: _TaskTree, tb: _TaskTree, traps: dict[int, list[Any]],
                     fronts: dict[int, int], since_gap: int, max_iterations: int, sampler: Any, lead: Any,
-                    deadline: Deadline, st: dict[str, Any]) -> tuple[Any, int]:
+                    deadline: Deadline, st: dict[str, Any], rng: np.random.Generator) -> tuple[Any, int]:
         """The loop's current iteration (its head has run) and the plain trapped ones after it in one native call:
         ``(result, iterations completed after the current one)``; the counters merged. The caller swaps the trees
         once per completed iteration and goes on with the result's code."""
@@ -89,13 +89,14 @@ class TrapMixin:
         lead_on = sampler.guide is None and lead.budget_left(self)
         n_max = quiet_iterations(cast("TCBiRRT", self), st["iterations"] - 1, since_gap, max_iterations, sampler, lead_on,
                                  min(fronts.values()) < cast(int, o.frontier_grafts))
-        sk = streak.run(ta, tb, bool(o.trap_grafts) and traps[id(ta)][1] < cast(int, o.trap_grafts),
-                        bool(o.trap_grafts) and traps[id(tb)][1] < cast(int, o.trap_grafts),
-                        st["iterations"] - 1, n_max, deadline)
+        sk = streak.run(ta, tb, bool(o.trap_grafts) and traps[id(ta)][0] < cast(int, o.trap_grafts),
+                        bool(o.trap_grafts) and traps[id(tb)][0] < cast(int, o.trap_grafts),
+                        st["iterations"] - 1, n_max, deadline, rng)
         _merge(st, streak.ext)
         n = int(sk.n_done)
-        st["extensions"] += n
-        st["trapped"] += n
+        st["extensions"] += int(sk.n_ext)
+        st["trapped"] += int(sk.n_trap)
+        st["partial"] += int(sk.n_partial)
         done = n - 1 if sk.code == STREAK_DONE else n
         st["iterations"] += done
         return sk, done
@@ -110,4 +111,13 @@ class TrapMixin:
                                      pose_list(P), list(Q[:sk.k]), None, rng, deadline, st)
         self._trap_update(ta, i_near, res)
         return res, i_a
+
+    def _streak_connected(self, streak: NativeStreak, tb: _TaskTree, sk: Any, target_q: np.ndarray,
+                          rng: np.random.Generator, deadline: Deadline, st: dict[str, Any]) -> tuple[str, int, Any]:
+        """The end of tree b's first connection step a streak took and stopped at, not trapped (``STREAK_CONNECTED``;
+        the step and its extension counted in C): ``constrained_extend``'s result."""
+        P, Q = streak.take()
+        return cast(tuple[str, int, Any], self._extended(
+            tb, int(sk.i_nb), np.array(sk.xi_sb), bool(sk.reach_b), P[-1, :9].reshape(3, 3), P[-1, 9:], pose_list(P),
+            list(Q[:sk.k_b]), target_q, rng, deadline, st))
 

@@ -11,6 +11,7 @@ import numpy as np
 import pinocchio as pin
 
 from .base import PathSegment, PlanResult, PlanStatus
+from .kernel.native import pose12 as _pose12
 from .tree import Tree
 
 __all__ = ["_TaskTree", "extract_path"]
@@ -27,11 +28,13 @@ class _TaskTree(Tree):
     pose12: np.ndarray  # per node: its object pose as 12 values (rotation row-major, position), for the native code
     trapn: np.ndarray   # per node: trapped extensions from it counted for its trap graft (``trap_grafts``)
     twin: np.ndarray    # per node: whether it has other IK branches at its pose (a key of :attr:`twins`)
+    tnext: np.ndarray   # per node in a twin group: the group's next node in :attr:`twins`' order (-1: last, or none)
+    thead: np.ndarray   # per node in a twin group: the group's first node (-1: no group), for the native code
     edge: list[Any]     # always kept (edges=True)
 
     def __init__(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, cap: int = 512):
         super().__init__(xi, cap, edges=True, q=q, checked=True, dom=np.inf, pose12=_pose12(R, p),
-                         trapn=np.int64(0), twin=False)
+                         trapn=np.int64(0), twin=False, tnext=np.int64(-1), thead=np.int64(-1))
         self.pose = [(R, p)]
         self.edge[0] = ([], [])
         #: graft node → its regrasp motions from the parent's configuration (object fixed at the node's pose)
@@ -50,17 +53,19 @@ class _TaskTree(Tree):
     def add(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, parent: int, edge_q: list[np.ndarray], edge_poses: list[tuple[np.ndarray, np.ndarray]]) -> int:  # type: ignore[override]  # a task node needs its q and object pose too; never used as a plain Tree
         self.pose.append((R, p))
         return super().add(xi, parent, (edge_q, edge_poses), q=q, checked=False, dom=np.inf, pose12=_pose12(R, p),
-                           trapn=0, twin=False)
+                           trapn=0, twin=False, tnext=-1, thead=-1)
 
     def add_graft(self, i: int, q: np.ndarray, motions: list[tuple[str, list[np.ndarray]]]) -> int:
         """A node at node i's object pose with another joint solution ``q``, reached from node i's
         configuration by the regrasp ``motions``: a second IK branch of the same tree."""
         R, p = self.pose[i]
         self.pose.append((R, p))
-        k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=False, dom=np.inf, pose12=self.pose12[i],
-                        trapn=0, twin=True)
-        self.graft[k] = motions
         group = self.twins.setdefault(i, [i])
+        k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=False, dom=np.inf, pose12=self.pose12[i],
+                        trapn=0, twin=True, tnext=-1, thead=group[0])
+        self.graft[k] = motions
+        self.tnext[group[-1]] = k      # the group as a list in its arrays: first node, then each one's next
+        self.thead[group[0]] = group[0]
         group.append(k)
         self.twins[k] = group
         self.twin[i] = True
@@ -108,14 +113,6 @@ class _TaskTree(Tree):
             qs.append(self.q[k].copy())
             ps.append(self.pose[k])
         return qs, ps
-
-
-def _pose12(R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """An object pose as the 12 values of the native code (rotation row-major, then position [m])."""
-    out = np.empty(12)
-    out[:9] = np.asarray(R).reshape(9)
-    out[9:] = p
-    return out
 
 
 def _reverse_move(m: tuple[Any, ...]) -> tuple[Any, ...]:

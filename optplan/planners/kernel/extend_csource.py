@@ -203,6 +203,12 @@ static int tcb_segment_ok(const tcb_ctx *c, const double *q, const double *qn, l
     return ok;
 }
 
+/* one restart's IK seed, q + N(0, sigma^2) per joint, drawn from c->rng: every restart, run or skipped, draws
+   through here, so that the stream goes on the same either way */
+static void tcb_restart_seed(const tcb_ctx *c, const double *q, double *seed) {
+    for (int k = 0; k < c->nq; ++k) seed[k] = q[k] + c->restart_sigma*tcb_normal(c->rng);
+}
+
 /* the random restarts of a failing waypoint (TCBiRRT.path_ik): IK from q + N(0, sigma^2), accepted within the
    joint-jump bound, the joint limits and collision-free; 1 with the solution in qn */
 static int tcb_restarts(const tcb_ctx *c, const double *q, const double *P, double *qn, long long *cnt) {
@@ -210,7 +216,7 @@ static int tcb_restarts(const tcb_ctx *c, const double *q, const double *P, doub
     double seed[KMAXJ], x[KMAXJ];
     for (int r = 0; r < c->restarts; ++r) {
         cnt[9] += 1;
-        for (int k = 0; k < nq; ++k) seed[k] = q[k] + c->restart_sigma*tcb_normal(c->rng);
+        tcb_restart_seed(c, q, seed);
         long long its = 0;
         int ok = tcb_ik(c, seed, P, x, &its);
         cnt[1] += its;
@@ -270,8 +276,8 @@ long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *q_pp
         if (!ok) {
             if (posed && c->rng && c->restarts > 0) {
                 /* every restart would fail on the same pair: their draws taken, their IK not run */
-                for (int r = 0; r < c->restarts; ++r)
-                    for (int k = 0; k < nq; ++k) (void)tcb_normal(c->rng);
+                double unused[KMAXJ];
+                for (int r = 0; r < c->restarts; ++r) tcb_restart_seed(c, q, unused);
                 cnt[11] += c->restarts;
                 return j;
             }

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import ConfigurationError, UsageError
-from .native import KernelUnavailable
+from .native import KernelUnavailable, se3_pose12
 
 __all__ = ["NativeIK"]
 
@@ -28,11 +28,6 @@ _MAXC = 32            # TIK_MAXC of the C source: joints per arm chain
 class _IKM(ctypes.Structure):
     _fields_ = [("km", _P), ("nchain", ctypes.c_int * 2), ("chain", _P), ("col", _P), ("na", ctypes.c_int * 2),
                 ("qidx", _P), ("eej", ctypes.c_int * 2), ("eeplace", _P), ("grasp", _P), ("lower", _P), ("upper", _P)]
-
-
-def _pose12(M: Any) -> np.ndarray:
-    """A pin.SE3 as 12 values: rotation row-major, then translation [m]."""
-    return np.concatenate([np.asarray(M.rotation, float).reshape(9), np.asarray(M.translation, float)])
 
 
 class NativeIK:
@@ -75,8 +70,8 @@ class NativeIK:
             if sorted(c for c in col[a] if c >= 0) != list(range(len(v_idx))):
                 raise KernelUnavailable("the native IK needs every joint of an arm on its hand's chain")
             qidx[a, :len(v_idx)] = v_idx
-            ee[a] = _pose12(f.placement)
-            grasp[a] = _pose12(kin.grasps[arm.name])
+            ee[a] = se3_pose12(f.placement)
+            grasp[a] = se3_pose12(kin.grasps[arm.name])
             s.nchain[a], s.na[a], s.eej[a] = len(js), len(v_idx), int(f.parentJoint)
         self._arrays = (chain, col, qidx, ee, grasp, np.ascontiguousarray(kin.lower, float),
                         np.ascontiguousarray(kin.upper, float))

@@ -214,8 +214,18 @@ def load_library() -> Any:
     return lib
 
 
-def _pose12(M: pin.SE3) -> np.ndarray:
-    return np.concatenate([np.asarray(M.rotation, float).ravel(), np.asarray(M.translation, float)])
+def pose12(R: Any, p: Any) -> np.ndarray:
+    """A placement (rotation ``R``, position ``p`` [m]) as the 12 values of the native code: the rotation
+    row-major, then the position."""
+    out = np.empty(12)
+    out[:9] = np.asarray(R, float).reshape(9)
+    out[9:] = p
+    return out
+
+
+def se3_pose12(M: pin.SE3) -> np.ndarray:
+    """A ``pin.SE3`` as :func:`pose12`'s 12 values."""
+    return pose12(M.rotation, M.translation)
 
 
 def _joint_kind(jm: Any) -> tuple[int, np.ndarray]:
@@ -273,11 +283,11 @@ class NativeKernel:
         jidx = np.zeros(nj, np.int32)
         jplace = np.zeros((nj, 12))
         jaxis = np.zeros((nj, 3))
-        jplace[0] = _pose12(pin.SE3.Identity())
+        jplace[0] = se3_pose12(pin.SE3.Identity())
         for j in range(1, nj):
             kind, ax = _joint_kind(model.joints[j])
             jparent[j], jtype[j], jidx[j] = model.parents[j], kind, model.joints[j].idx_q
-            jplace[j] = _pose12(model.jointPlacements[j])
+            jplace[j] = se3_pose12(model.jointPlacements[j])
             jaxis[j] = ax
         objs = list(gmodel.geometryObjects)
         ng = len(objs)
@@ -290,7 +300,7 @@ class NativeKernel:
         for g, go in enumerate(objs):
             t, prm, off, rad = _primitive(go)
             gparent[g], gtype[g], gparam[g], grad[g] = go.parentJoint, t, prm, rad
-            gplace[g] = _pose12(go.placement * off)
+            gplace[g] = se3_pose12(go.placement * off)
             self._offsets.append(off)
         pa = np.array([a for a, _ in pairs], np.int32)
         pb = np.array([b for _, b in pairs], np.int32)
@@ -336,7 +346,7 @@ class NativeKernel:
         if override is None:
             return -1
         g, M = override
-        self._pose[:] = _pose12(M * self._offsets[g])
+        self._pose[:] = se3_pose12(M * self._offsets[g])
         return int(g)
 
     def first_invalid(self, Q: np.ndarray, active: np.ndarray | int, override: tuple[int, pin.SE3] | None = None) -> int:
