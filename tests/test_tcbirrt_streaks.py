@@ -35,7 +35,9 @@ def _same(a, b) -> bool:
 @pytest.mark.parametrize("scene_name, trials, options", [
     ("hard_bay", (3, 4), {}), ("hard_clutter_dense", (3,), {}), ("hard_window", (5,), {}),
     # the adaptive step (halved in C when trapped) and a stall bound on the streaks
-    ("hard_bay", (5,), {"trap_adapt": "step", "stall_iterations": 120})])
+    ("hard_bay", (5,), {"trap_adapt": "step", "stall_iterations": 120}),
+    # extensions that keep no prefix (a failed one is trapped whole)
+    ("ssps_scene2", (0, 1, 2), {"keep_prefix": False})])
 def test_streaks_and_restart_skips_give_the_same_search(tcb, scene_name, trials, options):
     """Streaks on/off and the skipped restarts on/off: the same iterations, nodes and path, bit for bit (the streaks
     ran: several iterations per call on these trapped scenes; restarts were skipped)."""
@@ -59,6 +61,54 @@ def test_streaks_and_restart_skips_give_the_same_search(tcb, scene_name, trials,
         assert rc.stats.get("ik_restarts_skipped", 0) == 0
         assert ra.stats["ik_iterations"] <= rc.stats["ik_iterations"]
     assert skipped > 0
+
+
+def _check_trees(trees, robot, log=None):
+    """Every node of the trees (and every configuration of its edge) within the joint limits, its parent before it,
+    the lists as long as the arrays; ``log``: the node log rows a call wrote (tree, node, configurations kept)."""
+    lo, hi = robot.lower - 1e-6, robot.upper + 1e-6
+    for t in trees:
+        n = t.n
+        assert len(t.pose) == len(t.edge) == n and np.isfinite(t.X[:n]).all()
+        assert np.all((t.q[:n] >= lo) & (t.q[:n] <= hi))
+        assert np.all((t.parent[1:n] >= 0) & (t.parent[1:n] < np.arange(1, n)))
+        for eq, ep in t.edge[:n]:
+            assert len(ep) == len(eq) and all(np.all((x >= lo) & (x <= hi)) for x in eq)
+    if log is not None:
+        assert np.all(log[:, 2] >= 1)
+
+
+@pytest.mark.parametrize("scene_name, trial, options", [("hard_bay", 3, {}), ("ssps_scene2", 1, {"keep_prefix": False})])
+def test_the_nodes_a_streak_adds_are_whole(tcb, scene_name, trial, options):
+    """After every native call (streak or connection) the trees are whole: their nodes and edges' configurations
+    within the joint limits, parents before children, the Python lists as long as the arrays, the log's rows kept
+    configurations (an extension trapped without a prefix is not a node)."""
+    from optplan.planners import tcbirrt_streak as ts
+    from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
+
+    pl = _planner(tcb, scene_name, **options)
+    run, conn = ts.NativeStreak.run, ts.NativeStreak.connect
+    calls = []
+
+    def spy_run(self, ta, tb, *a, **k):
+        out = run(self, ta, tb, *a, **k)
+        _check_trees((ta, tb), tcb, self.LM[:out.n_log])
+        calls.append(int(out.n_log))
+        return out
+
+    def spy_conn(self, tb, *a, **k):
+        out = conn(self, tb, *a, **k)
+        _check_trees((tb,), tcb, self.LM[:out.n_log])
+        calls.append(int(out.n_log))
+        return out
+    ts.NativeStreak.run, ts.NativeStreak.connect = spy_run, spy_conn
+    try:
+        tr = TrialGenerator(tcb, Scene.load(scene_name)).generate(trial, 0)
+        r = pl.plan(tr.q_start, tr.q_goal, time_limit=30.0, seed=trial, clock="cpu")
+    finally:
+        ts.NativeStreak.run, ts.NativeStreak.connect = run, conn
+    assert r.status.value == "exact" and sum(calls) > 0   # nodes were added in C
 
 
 def test_a_streak_runs_several_iterations_and_stops_where_python_must_go_on(tcb):

@@ -131,7 +131,9 @@ def log_regrasp_calls() -> list[dict[str, Any]]:
         got = inner(*args, **kw)
         names = [f.name for f in traceback.extract_stack(limit=8)]
         caller = next((n for n in reversed(names) if n in ("_graft", "lookahead_graft", "branch_roots",
-                                                            "constrained_extend")), names[-2])
+                                                            "constrained_extend", "_streak_connected")), names[-2])
+        if caller == "_streak_connected":   # a connection step taken in C, its regrasp test applied in Python
+            caller = "constrained_extend"
         if got is not None:
             calls.append({"status": got.status, "iterations": got.iterations, "tree_nodes": got.tree_nodes,
                           "longest_stall": got.longest_stall, "cpu_s": time.process_time() - c0, "caller": caller})

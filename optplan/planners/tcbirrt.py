@@ -13,7 +13,10 @@ Two trees grow in the object's pose space ξ = [p; roll, pitch, yaw] (RPY as in 
   collision-checked; Trapped / Advanced / Reached.
 * Connection (Alg. 1 lines 7-11): tree b is extended toward tree a's new node until Trapped or
   Reached; when it reaches ξ of that node with a different joint solution, the two solutions are
-  joined by a **regrasp** (Section 4.3, below). A failed regrasp counts as Trapped.
+  joined by a **regrasp** (Section 4.3, below). A failed regrasp counts as Trapped. A step whose
+  node is no nearer the target in ξ than the node it grew from ends the connection too (not in the
+  paper: a partial step's node keyed across an angle's ±π can be farther in ξ though nearer on the
+  manifold, and the loop would grow the same node from the same node without end).
 
 Regrasp (Section 4.3). The paper: "the same object pose ξ_I corresponds to two joint solutions
 q_a, q_b"; the motion between them "can be interpreted as a regrasp ... an unconstrained motion
@@ -147,7 +150,7 @@ from .tcbirrt_options import (
 )
 from .tcbirrt_sampling import SamplingMixin, _twin_of, _xi_of_pose
 from .tcbirrt_streak import STREAK_CONNECT, STREAK_CONNECTED, STREAK_DONE, STREAK_EXTENDED, STREAK_SAMPLED, NativeStreak
-from .tcbirrt_traps import ADVANCED, PARTIAL, REACHED, TRAPPED, TrapMixin
+from .tcbirrt_traps import ADVANCED, PARTIAL, REACHED, TRAPPED, TrapMixin, no_nearer
 from .tcbirrt_tree import _TaskTree as _TaskTree  # re-exported: frontier_graft types its trees with it
 from .tcbirrt_tree import extract_path
 from .validity import ValidityChecker
@@ -491,18 +494,27 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, SamplingMixin, Planner):
                 n_reg = st["regrasp_attempts"]
                 first = self._streak_connected(cast(NativeStreak, streak), tb, sk, target_q, rng, deadline, st) \
                     if sk is not None and sk.code == STREAK_CONNECTED else None
+                native = streak is not None and bool(streak.args.advance)   # its steps in C, as in the streaks
                 while True:                                                              # lines 7-11
+                    ended = False
                     if first is not None:
                         i_nb, (res, i_b, reg), first = int(cast(Any, sk).i_nb), first, None
+                    elif native:
+                        n_reg = st["regrasp_attempts"]
+                        res, i_b, reg, i_nb, ended = self._connect_steps(cast(NativeStreak, streak), tb, target_xi,
+                                                                         target_q, rng, deadline, st)
                     else:
                         i_nb = self._twin_of(tb, tb.nearest(target_xi), target_q, rng)
                         n_reg = st["regrasp_attempts"]
                         res, i_b, reg = self.constrained_extend(tb, i_nb, target_xi, target_q, rng, deadline, st)
+                    if not ended and res in (ADVANCED, PARTIAL) and no_nearer(tb, i_b, i_nb, target_xi):
+                        st["connect_no_nearer"] = st.get("connect_no_nearer", 0) + 1
+                        ended = True   # the next step would grow from the same node toward the same target again
                     if o.stall_iterations:
                         i_gap = i_b if res in (ADVANCED, PARTIAL) else i_nb
                         gap = min(gap, 0.0 if res == REACHED or st["regrasp_attempts"] > n_reg   # met: a failed regrasp
                                   else float(np.linalg.norm(tb.xi[i_gap] - target_xi)))
-                    if res not in (ADVANCED, PARTIAL) or deadline.expired():
+                    if res not in (ADVANCED, PARTIAL) or ended or deadline.expired():
                         break
                 if gap < 0.99 * best_gap:
                     best_gap, since_gap = gap, 0

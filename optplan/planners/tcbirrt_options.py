@@ -230,8 +230,8 @@ class TCBiRRTOptions:
     #: ``validity_kernel="coal"`` the Python code runs.
     extension: str = "loop"
     #: With ``extension="loop"``: run series of iterations in one native call (:mod:`.tcbirrt_streak`): trapped
-    #: extensions, advanced ones with their node and tree b's first connection step, the twins' draws; the same
-    #: search as without, faster on hard scenes, where most iterations are such. False: one call per step.
+    #: extensions, advanced ones with their node and tree b's connection, the twins' draws; and every connection
+    #: in one native call too. The same search as without, faster on hard scenes. False: one call per step.
     streaks: bool = True
     #: Cap on Alg. 1 iterations [count] (0: only the time limit), over all restarts.
     max_iterations: int = 0

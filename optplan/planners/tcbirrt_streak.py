@@ -5,12 +5,12 @@ whose first waypoint already fails, the node's step halved and its trap counted,
 crossed from Python into C two or three times. :class:`NativeStreak` runs a run of iterations in one call
 (``tcb_streak``, :mod:`.kernel.streak_csource`): the same draws from the query's native stream, the same extensions,
 the same step and trap bookkeeping. An extension that is not trapped goes on in C as well: its node is added to the
-tree's arrays (and, when the call returns, to the tree's lists of poses and edges), and tree b's first connection
-step toward it runs; a trapped connection ends the iteration there. A sampled node's other IK branches are drawn in
+tree's arrays (and, when the call returns, to the tree's lists of poses and edges), and tree b connects toward it
+step by step, each advanced or partial step's node added; a trapped step (or one that got no nearer) ends the
+iteration there. :meth:`NativeStreak.connect` runs the same connection alone for the loop's other connections. A sampled node's other IK branches are drawn in
 C from the state of the search's NumPy Generator (:class:`_Pcg`, NumPy's PCG64 and ``integers`` step for step), and
 the connection's twin is chosen by :class:`NativeTwin`. A call hands the iteration back to the Python loop where it
-must go on there: a connection step that was not trapped (its result applied in Python, the connection goes on), a
-trap graft that is due, a node at the sample or a twin preferred by the tree, a full tree array or node log.
+must go on there: a connection step that reached its target (its regrasp test, in Python), a trap graft that is due, a node at the sample or a twin preferred by the tree, a full tree array or node log.
 :func:`quiet_iterations` bounds a streak so that no event of the loop's head (branch and frontier grafts, the lead
 path, a stall, the iteration cap) falls inside it. A search with streaks is the search without them, iteration for
 iteration (tested).
@@ -88,7 +88,7 @@ class _SArgs(ctypes.Structure):
                 ("xi_rand", _D * 6), ("xi_s", _D * 6), ("Ps", _D * 12),
                 ("n_ext", _LL), ("n_trap", _LL), ("n_log", _LL), ("n_partial", _LL), ("i_a", _LL), ("i_nb", _LL),
                 ("k_b", _LL),
-                ("reach_b", ctypes.c_int), ("xi_sb", _D * 6)]
+                ("reach_b", ctypes.c_int), ("xi_sb", _D * 6), ("conn_trapped", ctypes.c_int)]
 
 
 def _declare(lib: Any) -> None:
@@ -101,6 +101,8 @@ def _declare(lib: Any) -> None:
     lib.tcb_xi_of_pose.restype = None
     lib.tcb_xi_of_pose.argtypes = [_P, _P]
     lib.tcb_twin_nearest.restype = _LL
+    lib.tcb_connect.restype = ctypes.c_int
+    lib.tcb_connect.argtypes = [_P, _P, _P, _P, _P, _P, _P, _P, _P, _P, _P]
     lib.tcb_pcg_integers.restype = ctypes.c_int
     lib.tcb_pcg_integers.argtypes = [_P, _LL, _LL, _P]
     lib.tcb_twin_nearest.argtypes = [_P, ctypes.c_int, _P, _P, _P, _LL, _P]
@@ -180,19 +182,22 @@ class NativeStreak:
             raise KernelUnavailable("trapped streaks need the native loop (extension='loop')")
         lib = load_extend_library()
         _declare(lib)
-        self._f = lib.tcb_streak
+        self._f, self._fc = lib.tcb_streak, lib.tcb_connect
         self.ext, self.sampler, o = ext, sampler, pl.options
         n = int(o.n_interp)
         self.P, self.Q = np.empty((n, 12)), np.empty((n, ext.nq))
-        a = self.args = _SArgs()
-        a.step_size, a.step_adapt = float(pl.step_size), int(o.trap_adapt == "step")
-        a.prefix, a.n_interp = int(bool(o.keep_prefix)), n
-        a.trap_count = int(o.trap_graft_count or 0)
-        a.trap_after = int(o.trap_graft_after or 0)
-        # advanced extensions and their trapped connections in C too, unless the loop watches their gaps (a stall
-        # bound) or joins trapped connections in joint space
-        a.advance = int(not o.stall_iterations and not o.joint_connect)
-        a.log_cap = LOG_ROWS
+        #: the streaks' arguments, and the connections' (:meth:`connect`)
+        self.args, self.cargs = _SArgs(), _SArgs()
+        for a in (self.args, self.cargs):
+            a.step_size, a.step_adapt = float(pl.step_size), int(o.trap_adapt == "step")
+            a.prefix, a.n_interp = int(bool(o.keep_prefix)), n
+            a.trap_count = int(o.trap_graft_count or 0)
+            a.trap_after = int(o.trap_graft_after or 0)
+            # advanced extensions and their connections in C too, unless the loop watches the connections' gaps (a
+            # stall bound) or joins trapped connections in joint space
+            a.advance = int(not o.stall_iterations and not o.joint_connect)
+            a.log_cap = LOG_ROWS
+        a = self.args
         #: the log of the nodes a call added: (tree, node, configurations kept), their poses and configurations
         self.LM = np.zeros((LOG_ROWS, 3), np.int64)
         self.LP, self.LQ = np.empty((LOG_ROWS, n, 12)), np.empty((LOG_ROWS, n, ext.nq))
@@ -245,22 +250,42 @@ class NativeStreak:
         if a.pcg_on and a.pcg.used:
             a.pcg.store(cast(np.random.Generator, rng))
         if a.n_log:
-            self._added(ta, tb)
+            self._added(a, (ta, tb))
         if r < 0:
             raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
         return a
 
-    def _added(self, ta: _TaskTree, tb: _TaskTree) -> None:
+    def connect(self, tb: _TaskTree, target_xi: np.ndarray, target_q: np.ndarray, deadline: Deadline) -> _SArgs:
+        """Tree b's connection (Alg. 1 lines 7-11) toward the node with key ``target_xi`` and configuration ``target_q``
+        in one native call (``tcb_connect``), its advanced and partial steps' nodes added to ``tb``. The arguments'
+        outputs: ``code`` 0 (ended: by a trapped step when ``conn_trapped``, else by the deadline), 4 (tree b's nearest
+        node is at the target: the next step runs in Python) or 5 (a step to apply in Python: ``i_nb``, ``xi_sb``,
+        ``reach_b``, ``k_b``, its poses and configurations in :attr:`P`, :attr:`Q`); ``n_ext``, ``n_trap``,
+        ``n_partial`` its counts."""
+        a = self.cargs
+        a.clock_kind, a.end = _clock(deadline)
+        pb = self._tree(tb, False)
+        x, q = np.ascontiguousarray(target_xi, float), np.ascontiguousarray(target_q, float)
+        cp, ap, pp, qp, cnt = self._ptrs
+        r = self._fc(cp, pb, x.ctypes.data, q.ctypes.data, ctypes.addressof(a), pp, qp, cnt, *self._logs)
+        if a.n_log:
+            self._added(a, (tb, tb))
+        if r < 0:
+            raise KernelUnavailable("the native extension refused the model (too many joints or geometries)")
+        return a
+
+    def _added(self, a: _SArgs, trees: tuple[_TaskTree, _TaskTree]) -> None:
         """The nodes the call added to the trees' arrays, into their Python lists (each node's pose; its edge: the
-        configurations and poses before it), as :meth:`~.tcbirrt_tree._TaskTree.add` keeps them."""
-        for e, (w, m, k) in enumerate(self.LM[:self.args.n_log].tolist()):
-            t = tb if w else ta
+        configurations and poses before it), as :meth:`~.tcbirrt_tree._TaskTree.add` keeps them. ``trees``: the
+        trees the log's tags 0 and 1 name."""
+        for e, (w, m, k) in enumerate(self.LM[:a.n_log].tolist()):
+            t = trees[w]
             if m != len(t.pose):   # pragma: no cover - the log's rows are in the order the nodes were added
                 raise RuntimeError(f"streak log out of order: node {m} of a tree with {len(t.pose)} poses")
             P, Q = self.LP[e, :k].copy(), self.LQ[e, :k].copy()   # the waypoints kept (all, or a prefix)
             t.pose.append((P[-1, :9].reshape(3, 3), P[-1, 9:]))
             t.edge.append((list(Q[:-1]), [(P[j, :9].reshape(3, 3), P[j, 9:]) for j in range(k - 1)]))
-        for t in (ta, tb):
+        for t in trees:
             t.n = int(self._trees[id(t)][1].n)
 
 

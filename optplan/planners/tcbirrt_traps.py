@@ -15,7 +15,7 @@ import numpy as np
 from .frontier_graft import trap_lookahead
 from .tcbirrt_native import _merge, pose_list
 from .tcbirrt_options import TCBiRRTOptions
-from .tcbirrt_streak import STREAK_DONE, NativeStreak, quiet_iterations
+from .tcbirrt_streak import STREAK_CONNECTED, STREAK_DONE, NativeStreak, quiet_iterations
 
 if TYPE_CHECKING:
     from .base import Deadline
@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from .tcbirrt import TCBiRRT
     from .tcbirrt_tree import _TaskTree
 
-__all__ = ["TrapMixin"]
+__all__ = ["TrapMixin", "no_nearer"]
 
 #: the results of a constrained extension (Alg. 2): trapped, advanced a step, reached its target, or the valid prefix
 TRAPPED, ADVANCED, REACHED, PARTIAL = "trapped", "advanced", "reached", "partial"
@@ -37,6 +37,8 @@ class TrapMixin:
     _ext: NativeExtender | None
     _nrng: Any
     _extended: Any
+    _twin_of: Any
+    constrained_extend: Any
 
     def _trap_update(self, tree: _TaskTree, i: int, res: str) -> None:
         """``trap_adapt``: after an extension from node i, its dynamic domain (set when trapped) or its step
@@ -114,10 +116,45 @@ class TrapMixin:
 
     def _streak_connected(self, streak: NativeStreak, tb: _TaskTree, sk: Any, target_q: np.ndarray,
                           rng: np.random.Generator, deadline: Deadline, st: dict[str, Any]) -> tuple[str, int, Any]:
-        """The end of tree b's first connection step a streak took and stopped at, not trapped (``STREAK_CONNECTED``;
-        the step and its extension counted in C): ``constrained_extend``'s result."""
+        """The end of a connection step of tree b that a native call took and stopped at, not trapped
+        (``STREAK_CONNECTED``; the step and its extension counted in C): ``constrained_extend``'s result."""
         P, Q = streak.take()
         return cast(tuple[str, int, Any], self._extended(
             tb, int(sk.i_nb), np.array(sk.xi_sb), bool(sk.reach_b), P[-1, :9].reshape(3, 3), P[-1, 9:], pose_list(P),
             list(Q[:sk.k_b]), target_q, rng, deadline, st))
 
+    def _connect_steps(self, streak: NativeStreak, tb: _TaskTree, target_xi: np.ndarray, target_q: np.ndarray,
+                       rng: np.random.Generator, deadline: Deadline, st: dict[str, Any]) -> tuple[str, int, Any, int, bool]:
+        """Tree b's connection toward the target node (lines 7-11) in one native call, up to its last step:
+        ``(result, node, regrasp motions, tree b's node it stepped from, ended)`` of that step as
+        ``constrained_extend`` gives them; ``ended``: the call ended the connection after a step that was not trapped —
+        it got no nearer (:func:`no_nearer`), or the deadline came (then the result is ``ADVANCED``, its nodes added)."""
+        c = streak.connect(tb, target_xi, target_q, deadline)
+        _merge(st, streak.ext)
+        st["extensions"] += int(c.n_ext)
+        st["trapped"] += int(c.n_trap)
+        st["partial"] += int(c.n_partial)
+        i_nb = int(c.i_nb)
+        if c.code == STREAK_DONE:
+            if c.conn_trapped == 2:
+                st["connect_no_nearer"] = st.get("connect_no_nearer", 0) + 1
+            return (TRAPPED if c.conn_trapped == 1 else ADVANCED), -1, None, i_nb, c.conn_trapped != 1
+        if c.code == STREAK_CONNECTED:
+            return (*self._streak_connected(streak, tb, c, target_q, rng, deadline, st), i_nb, False)
+        # tree b's nearest node is at the target: that step in Python
+        i_nb = self._twin_of(tb, tb.nearest(target_xi), target_q, rng)
+        return (*self.constrained_extend(tb, i_nb, target_xi, target_q, rng, deadline, st), i_nb, False)
+
+
+def no_nearer(tree: _TaskTree, i_new: int, i_from: int, target_xi: np.ndarray) -> bool:
+    """Whether a connection step's node ``i_new`` is no nearer ``target_xi`` in the key than the node ``i_from`` it
+    grew from (the squared distances summed coordinate by coordinate, as the native connection sums them). A partial
+    step's node keyed across an angle's ±π can be farther than its start in ξ although nearer on the manifold; the
+    next step would then grow from the same node toward the same target again, without end."""
+    a, b, t = tree.xi[i_new].tolist(), tree.xi[i_from].tolist(), np.asarray(target_xi, float).tolist()
+    dn = df = 0.0
+    for k in range(len(t)):
+        e, f = t[k] - a[k], t[k] - b[k]
+        dn += e * e
+        df += f * f
+    return not dn < df

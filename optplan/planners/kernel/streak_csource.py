@@ -16,11 +16,14 @@ count, and the next iteration runs. It stops, handing the iteration to the Pytho
 
 With ``advance`` set, an extension that is not trapped goes on here instead of code 2: its node (at its last valid
 waypoint when it kept a prefix, keyed by ``tcb_xi_of_pose``) is added to the tree (into the tree's arrays, below their capacity; its poses and configurations logged for the
-Python lists of poses and edges), its parent's step doubled back, and tree b takes its first connection step toward
-the node (lines 7-11, the full step; among the nearest node's other IK branches the one whose configuration is
-nearest the node's, ``tcb_twin_nearest``). A trapped connection step finishes the iteration here. The iteration is handed
-back with the node added when tree b's nearest node sits at the node (code 4: the connection runs in Python), or after a connection step that was not trapped (code 5: its poses and configurations in
-``P``, ``Q``, its target in ``xi_sb``).
+Python lists of poses and edges), its parent's step doubled back, and tree b connects toward the node step by step
+(``tcb_connect_loop``, lines 7-11: the full step; among the nearest node's other IK branches the one whose
+configuration is nearest the node's, ``tcb_twin_nearest``), each advanced or partial step's node added. A trapped
+step, a step whose node is no nearer the target in ξ than the node it grew from, or the deadline after a step ends the
+iteration here. The iteration is handed back with the node added when tree b's nearest node sits at the target (code
+4: the connection goes on in Python), or after a step that reached the target or whose node has no room (code 5: its
+poses and configurations in ``P``, ``Q``, its target in ``xi_sb``). ``tcb_connect`` runs the connection alone for the
+Python loop's other connections (after a graft, a sampled twin, a handed-back extension).
 
 It returns (code 0) after ``max_n`` iterations or when the deadline is reached (checked before every
 iteration but the first). The caller computes ``max_n`` so that no event of the loop's head (grafts, lead
@@ -188,16 +191,17 @@ typedef struct {
     long long n_partial;              /* extensions applied here that kept a prefix of their waypoints */
     long long i_a, i_nb, k_b; int reach_b;   /* codes 4, 5: the node added; the connection's node, kept, reach */
     double xi_sb[6];                  /* code 5: the connection step's target */
+    int conn_trapped;                 /* a connection ended here: 1 a trapped step, 2 no nearer, 0 the deadline */
 } tcb_streak_args;
 
-/* node i's extension to xi_s (pose Ps), not trapped, its first k waypoints kept (P, Q): its node added to tree t as
+/* node i's extension toward xi_s (n waypoints), not trapped, its first k waypoints kept (P, Q): its node added to tree t as
    TCBiRRT._extended adds it, logged (LM: tree, node, kept; LP, LQ: the extension's poses and configurations) for the
    Python lists of poses and edges; the node's index */
-static long long tcb_streak_add(const tcb_ctx *c, tcb_stree *t, int which, long long i, const tcb_streak_args *a,
+static long long tcb_streak_add(const tcb_ctx *c, tcb_stree *t, int which, long long i, const double *xi_s, long long n,
                                 const double *P, const double *Q, long long k, double *LP, double *LQ, long long *LM,
                                 long long row) {
-    long long m = t->n, nq = c->nq, n = a->n_interp;
-    if (k == n) memcpy(t->X + 6*m, a->xi_s, 6*sizeof(double));
+    long long m = t->n, nq = c->nq;
+    if (k == n) memcpy(t->X + 6*m, xi_s, 6*sizeof(double));
     else tcb_xi_of_pose(P + 12*(k - 1), t->X + 6*m);      /* partial: the node at its last valid waypoint */
     memcpy(t->q + nq*m, Q + nq*(k - 1), (size_t)nq*sizeof(double));
     memcpy(t->pose + 12*m, P + 12*(k - 1), 12*sizeof(double));
@@ -208,6 +212,61 @@ static long long tcb_streak_add(const tcb_ctx *c, tcb_stree *t, int which, long 
     memcpy(LP + 12*n*row, P, (size_t)(12*n)*sizeof(double));
     memcpy(LQ + nq*n*row, Q, (size_t)(nq*k)*sizeof(double));
     return m;
+}
+
+/* lines 7-11 of Alg. 1: tree b (t; which: its log tag) connects toward the node with key tx and configuration tq, step
+   by step (the full step; among the nearest node's twins the one nearest tq). An advanced or partial step's node is
+   added here. Returns 0 when a step was trapped (a->conn_trapped = 1), a step's node is no nearer the target in the key
+   than the node it grew from (2), or the deadline has come after a step (0);
+   4 when tree b's nearest node is at the target (the connection goes on in Python from there); 5 after a step that
+   reached the target (its regrasp test) or whose node has no room here (its result in P, Q, a->i_nb, xi_sb, reach_b,
+   k_b); -2: the model is too large */
+static int tcb_connect_loop(const tcb_ctx *c, tcb_stree *tb, int which, const double *tx, const double *tq,
+                            tcb_streak_args *a, double *P, double *Q, long long *cnt, double *LP, double *LQ,
+                            long long *LM) {
+    a->conn_trapped = 0;
+    for (;;) {
+        long long ib = tcb_nearest(tb->X, tb->n, 6, tb->alive, tx);
+        if (tb->twin[ib]) ib = tcb_twin_nearest(tb->q, c->nq, tb->thead, tb->tnext, tb->alive, ib, tq);
+        a->i_nb = ib;
+        const double *xb = tb->X + 6*ib;
+        double db[6], ddb = 0.0;
+        for (int u = 0; u < 6; ++u) { db[u] = tx[u] - xb[u]; ddb += db[u]*db[u]; }
+        double distb = sqrt(ddb);
+        if (distb <= 0.0) return 4;
+        a->reach_b = distb <= a->step_size;
+        if (a->reach_b) memcpy(a->xi_sb, tx, 6*sizeof(double));
+        else { double f = a->step_size / distb; for (int u = 0; u < 6; ++u) a->xi_sb[u] = xb[u] + f*db[u]; }
+        double Pb[12];
+        tcb_pose_xi(a->xi_sb, Pb);
+        const double *Rb = tb->pose + 12*ib;
+        long long kb = tcb_extend_prefix(c, Rb, Rb + 9, Pb, Pb + 9, a->n_interp, tb->q + (long long)c->nq*ib,
+                                         P, Q, cnt, a->prefix);
+        if (kb < -1) return -2;
+        a->n_ext += 1;
+        if (kb <= 0) { a->n_trap += 1; a->conn_trapped = 1; return 0; }   /* trapped (-1: without a prefix kept) */
+        a->k_b = kb;
+        if ((kb == a->n_interp && a->reach_b) || tb->n >= tb->cap || a->n_log >= a->log_cap) return 5;
+        long long m = tcb_streak_add(c, tb, which, ib, a->xi_sb, a->n_interp, P, Q, kb, LP, LQ, LM, a->n_log++);
+        if (kb < a->n_interp) a->n_partial += 1;
+        /* no nearer the target in the key than the node it grew from (a partial step's node keyed across an
+           angle's +-pi): the connection ends, or it would grow the same node again and again */
+        const double *xm = tb->X + 6*m;
+        double dm = 0.0;
+        for (int u = 0; u < 6; ++u) { double e = tx[u] - xm[u]; dm += e*e; }
+        if (!(dm < ddb)) { a->conn_trapped = 2; return 0; }
+        if (tcb_clock(a->clock_kind) >= a->end) return 0;
+    }
+}
+
+/* the connection of lines 7-11 alone, for the Python loop (after a graft, a sampled twin, a handed-back extension):
+   tcb_connect_loop with the counters and the node log reset; the return value is also a->code */
+int tcb_connect(const tcb_ctx *c, tcb_stree *tb, const double *tx, const double *tq, tcb_streak_args *a, double *P,
+                double *Q, long long *cnt, double *LP, double *LQ, long long *LM) {
+    a->n_ext = 0; a->n_trap = 0; a->n_log = 0; a->n_partial = 0;
+    int r = tcb_connect_loop(c, tb, 1, tx, tq, a, P, Q, cnt, LP, LQ, LM);
+    a->code = r;
+    return r;
 }
 
 /* returns the code (0..5; -2: the model is too large); a->n_done iterations were completed */
@@ -247,7 +306,7 @@ int tcb_streak(tcb_sampler *s, const tcb_ctx *c, tcb_stree *t0, tcb_stree *t1, t
         if (k > 0) {
             if (!a->advance || ta->n >= ta->cap || a->n_log >= a->log_cap) { a->code = 2; return 2; }
             /* advanced, reached its sample, or partial: the node, its parent's step doubled back (up to s) */
-            long long m = tcb_streak_add(c, ta, ta == t1, i, a, P, Q, k, LP, LQ, LM, a->n_log++);
+            long long m = tcb_streak_add(c, ta, ta == t1, i, a->xi_s, a->n_interp, P, Q, k, LP, LQ, LM, a->n_log++);
             a->n_ext += 1;
             a->k = k;
             if (k < a->n_interp) a->n_partial += 1;
@@ -255,29 +314,10 @@ int tcb_streak(tcb_sampler *s, const tcb_ctx *c, tcb_stree *t0, tcb_stree *t1, t
                 double cur = isfinite(ta->dom[i]) ? ta->dom[i] : a->step_size, h = cur * 2.0;
                 ta->dom[i] = h < a->step_size ? h : a->step_size;
             }
-            /* lines 7-11: tree b's first step toward the new node; only a trapped one is finished here */
+            /* lines 7-11: tree b connects toward the new node */
             a->i_a = m;
-            const double *tx = ta->X + 6*m, *tq = ta->q + (long long)c->nq*m;
-            long long ib = tcb_nearest(tb->X, tb->n, 6, tb->alive, tx);
-            if (tb->twin[ib]) ib = tcb_twin_nearest(tb->q, c->nq, tb->thead, tb->tnext, tb->alive, ib, tq);
-            a->i_nb = ib;
-            const double *xb = tb->X + 6*ib;
-            double db[6], ddb = 0.0;
-            for (int u = 0; u < 6; ++u) { db[u] = tx[u] - xb[u]; ddb += db[u]*db[u]; }
-            double distb = sqrt(ddb);
-            if (distb <= 0.0) { a->code = 4; return 4; }
-            a->reach_b = distb <= a->step_size;
-            if (a->reach_b) memcpy(a->xi_sb, tx, 6*sizeof(double));
-            else { double f = a->step_size / distb; for (int u = 0; u < 6; ++u) a->xi_sb[u] = xb[u] + f*db[u]; }
-            double Pb[12];
-            tcb_pose_xi(a->xi_sb, Pb);
-            const double *Rb = tb->pose + 12*ib;
-            long long kb = tcb_extend_prefix(c, Rb, Rb + 9, Pb, Pb + 9, a->n_interp, tb->q + (long long)c->nq*ib,
-                                             P, Q, cnt, a->prefix);
-            if (kb < -1) return -2;
-            a->n_ext += 1;
-            if (kb > 0) { a->k_b = kb; a->code = 5; return 5; }
-            a->n_trap += 1;
+            int r = tcb_connect_loop(c, tb, tb == t1, ta->X + 6*m, ta->q + (long long)c->nq*m, a, P, Q, cnt, LP, LQ, LM);
+            if (r != 0) { if (r > 0) a->code = r; return r; }
             a->n_done = j + 1;
             continue;
         }
