@@ -34,6 +34,49 @@ def test_native_nearest_matches_brute_force_with_dead_nodes_and_ties():
                 assert nearest(X, n, x, alive) == _brute(X, n, x, alive)
 
 
+def test_kd_index_gives_the_scans_answers_as_rows_are_appended():
+    """The k-d index (rows appended between queries, dead rows, exact ties, monotone chains that make it deep, keys on
+    a coarse grid with many equal distances): the scan's answer at every query, the first index among equals."""
+    from optplan.planners.kernel.extend import kd_index
+
+    rng = np.random.default_rng(12)
+    for trial in range(24):
+        dim, cap = int(rng.integers(2, 9)), int(rng.integers(1100, 4000))
+        X, (K, kdn) = np.empty((cap, dim)), kd_index(cap)
+        grid = trial % 3 == 0
+        alive = np.ones(cap, bool) if trial % 2 else None
+        n = 0
+        while n < cap:
+            m = min(cap, n + int(rng.integers(1, 900)))
+            X[n:m] = rng.integers(0, 4, size=(m - n, dim)) * 0.5 if grid else rng.normal(size=(m - n, dim))
+            if trial % 4 == 1:
+                X[n:m] = np.cumsum(np.abs(X[n:m]), axis=0)
+            n = m
+            if alive is not None:
+                alive[:n] = rng.random(n) < 0.7
+            for _ in range(15):
+                x = rng.integers(0, 4, size=dim) * 0.5 if grid else rng.normal(size=dim) * 3
+                want = _brute(X, n, x, alive) if alive is None or alive[:n].any() else -1
+                assert nearest(X, n, x, alive, (K, kdn)) == want, (trial, n)
+        assert kdn[0] == cap or cap < 1024
+
+
+def test_a_tree_with_an_index_answers_as_the_scan_after_growing_and_killing():
+    from optplan.planners.tcbirrt_tree import _TaskTree
+
+    rng = np.random.default_rng(4)
+    t = _TaskTree(np.zeros(3), rng.normal(size=6), np.eye(3), np.zeros(3), cap=16)
+    assert t.kd is not None
+    for _ in range(3000):   # grows its arrays (and the index) eight times
+        t.add(np.zeros(3), rng.normal(size=6), np.eye(3), np.zeros(3), int(rng.integers(t.n)), [], [])
+        if t.n % 700 == 0:
+            t.kill(int(rng.integers(1, t.n)))
+            for _ in range(30):
+                x = rng.normal(size=6)
+                assert t.nearest(x) == _brute(t.X, t.n, x, t.alive)
+    assert t.kd[0].shape == (len(t.X), 2)
+
+
 def test_native_nearest_bad_input():
     X = np.zeros((5, 6))
     with pytest.raises(ValueError, match="rows of 3 values"):
@@ -42,6 +85,8 @@ def test_native_nearest_bad_input():
         nearest(X, 9, np.zeros(6))
     with pytest.raises(ValueError, match="C-contiguous float64"):
         nearest(np.zeros((5, 6), np.float32), 5, np.zeros(6))
+    with pytest.raises(ValueError, match="k-d index of 5 x 2"):
+        nearest(X, 5, np.zeros(6), None, (np.zeros((4, 2), np.int64), np.zeros(1, np.int64)))
 
 
 def test_tree_uses_the_native_scan_with_the_same_answers():

@@ -319,3 +319,65 @@ def test_native_twin_draws_are_numpys_generator_integers():
             pcg.store(g)
             assert out.tolist() == [int(ref.integers(n)) for _ in range(len(out))], (seed, n)
             assert g.bit_generator.state == ref.bit_generator.state
+
+
+def test_native_seed_draws_are_numpys_generator_uniform():
+    """Generator.uniform(lower, upper) on the PCG64 state, in C (the look-ahead grafts' IK seeds), against NumPy's own
+    draws: the values to the bit and the state after them (a buffered 32-bit half left untouched)."""
+    import ctypes
+
+    from optplan.planners.kernel.extend import load_extend_library
+    from optplan.planners.tcbirrt_streak import _Pcg
+
+    lib = load_extend_library()
+    lib.tcb_pcg_uniform.restype = ctypes.c_int
+    lib.tcb_pcg_uniform.argtypes = [ctypes.c_void_p] * 3 + [ctypes.c_int, ctypes.c_void_p]
+    lo = np.array([-3.1, -2.0, 0.0, -1e-3, -7.5, 2.0, -np.pi])
+    hi = np.array([3.1, 2.5, 1.0, 1e-3, 0.5, 2.0 + 1e-12, np.pi])
+    rng = np.subtract(hi, lo)
+    for seed in range(30):
+        g, ref = np.random.default_rng(seed), np.random.default_rng(seed)
+        if seed % 2:   # leave a buffered 32-bit half
+            g.integers(5), ref.integers(5)
+        for _ in range(5):
+            pcg, out = _Pcg(), np.empty(lo.size)
+            assert pcg.load(g)
+            if lib.tcb_pcg_uniform(ctypes.byref(pcg), lo.ctypes.data, rng.ctypes.data, lo.size, out.ctypes.data) < 0:
+                pytest.skip("no 128-bit integers in this C compiler")
+            pcg.store(g)
+            assert np.array_equal(out, ref.uniform(lo, hi)), seed
+            assert g.bit_generator.state == ref.bit_generator.state
+
+
+@pytest.mark.parametrize("scene_name, trials", [("hard_bay", (3, 4, 5)), ("hard_truss", (0, 7)), ("hard_clutter_dense", (3,))])
+def test_native_lookahead_gives_the_same_search(tcb, scene_name, trials, monkeypatch):
+    """The look-ahead grafts' candidate loop in C (NativeLookahead) and in Python: the same iterations, nodes, path
+    (bit for bit) and graft counters, on queries where look-ahead grafts were tried and some were made."""
+    from optplan.planners import tcbirrt_sampling
+    from optplan.scene import Scene
+    from optplan.trials import TrialGenerator
+
+    on = _planner(tcb, scene_name)
+    off = _planner(tcb, scene_name)
+    native = tcbirrt_sampling.SamplingMixin._native_sampler
+
+    def without(self):   # the native loop, its look-ahead candidates in Python
+        smp = native(self)
+        if self is off:
+            self._la = None
+        return smp
+    monkeypatch.setattr(tcbirrt_sampling.SamplingMixin, "_native_sampler", without)
+    gen = TrialGenerator(tcb, Scene.load(scene_name))
+    tried = made = 0
+    for t in trials:
+        tr = gen.generate(t, 0)
+        ra, rb = (p.plan(tr.q_start, tr.q_goal, time_limit=30.0, seed=t, clock="cpu") for p in (on, off))
+        assert ra.status.value == "exact"
+        assert _same(ra, rb), (scene_name, t, ra.stats["iterations"], rb.stats["iterations"])
+        for k in ("trap", "frontier"):
+            for c in ("attempts", "grafts", "lookahead_failures", "regrasp_failures"):
+                assert ra.stats.get(f"{k}_{c}", 0) == rb.stats.get(f"{k}_{c}", 0), (t, k, c)
+            tried += ra.stats.get(f"{k}_attempts", 0)
+            made += ra.stats.get(f"{k}_grafts", 0)
+        assert ra.stats["ik_iterations"] == rb.stats["ik_iterations"]
+    assert on._la is not None and tried > 0 and made > 0, (tried, made)

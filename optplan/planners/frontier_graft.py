@@ -34,6 +34,7 @@ from .task_space import interpolate_task, pose_from_xi
 
 if TYPE_CHECKING:   # the planner and its tree; imported only for the type checker (tcbirrt imports this module)
     from .base import Deadline
+    from .kernel.extend import NativeExtender
     from .tcbirrt import TCBiRRT, _TaskTree
 
 __all__ = ["closest_pair", "frontier_graft", "lookahead_graft", "trap_lookahead"]
@@ -82,6 +83,8 @@ def lookahead_graft(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray,
     Rs, ps = pose_from_xi(xi_s)
     poses = interpolate_task(R, p, Rs, ps, o.n_interp, o.interpolation)
     twins = [tree.q[k] for k in tree.twins.get(i, [i])]
+    if pl._la is not None:   # the same candidates, checks and draws in one native call per candidate that passes
+        return _lookahead_native(pl, tree, i, xi_s, (Rs, ps), poses, twins, deadline, st, kind)
     step = cast(float, o.max_joint_step)   # resolved from the variant
     # kin.ik, with its loop in C when the extension is native (the same solutions)
     ik = pl._ext.ik_block if pl._ext is not None else (lambda q, R_, p_: kin.ik(q, R_, p_, o.ik))
@@ -107,14 +110,52 @@ def lookahead_graft(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray,
             if not Q or len(Q) < len(poses):
                 st[f"{kind}_lookahead_failures"] = st.get(f"{kind}_lookahead_failures", 0) + 1
                 continue
-            reg = pl.regrasp(q_i, y, R, p, rng, pl.graft_deadline(deadline), st)
-            if reg is None:
-                st[f"{kind}_regrasp_failures"] = st.get(f"{kind}_regrasp_failures", 0) + 1
-                continue
-            st[f"{kind}_grafts"] = st.get(f"{kind}_grafts", 0) + 1
-            g = tree.add_graft(i, y, reg)
-            return tree.add(Q[-1], xi_s, Rs, ps, g, Q[:-1], poses[:-1])
+            got = _regrasp_to(pl, tree, i, y, list(Q), xi_s, (Rs, ps), poses, deadline, st, kind)
+            if got is not None:
+                return got
     return None
+
+
+def _regrasp_to(pl: TCBiRRT, tree: _TaskTree, i: int, y: np.ndarray, Q: list[np.ndarray], xi_s: np.ndarray,
+                pose_s: tuple[np.ndarray, np.ndarray], poses: list[tuple[np.ndarray, np.ndarray]], deadline: Deadline,
+                st: dict[str, Any], kind: str) -> int | None:
+    """A candidate ``y`` whose look-ahead step ``Q`` (toward ``xi_s``, object poses ``poses``) passed: the arms regrasp
+    from node i's configuration to it; on success ``y`` becomes a graft of node i and the step's end a node below it
+    (returned), else None (counted in ``<kind>_regrasp_failures``)."""
+    R, p = tree.pose[i]
+    reg = pl.regrasp(tree.q[i], y, R, p, pl._rng, pl.graft_deadline(deadline), st)
+    if reg is None:
+        st[f"{kind}_regrasp_failures"] = st.get(f"{kind}_regrasp_failures", 0) + 1
+        return None
+    st[f"{kind}_grafts"] = st.get(f"{kind}_grafts", 0) + 1
+    g = tree.add_graft(i, y, reg)
+    return tree.add(Q[-1], xi_s, pose_s[0], pose_s[1], g, Q[:-1], poses[:-1])
+
+
+def _lookahead_native(pl: TCBiRRT, tree: _TaskTree, i: int, xi_s: np.ndarray, pose_s: tuple[np.ndarray, np.ndarray],
+                      poses: list[tuple[np.ndarray, np.ndarray]], twins: list[np.ndarray], deadline: Deadline,
+                      st: dict[str, Any], kind: str) -> int | None:
+    """The candidate loop of :func:`lookahead_graft` with the native loop (:class:`.tcbirrt_lookahead.NativeLookahead`):
+    each candidate that passes its look-ahead is regrasped here, and the loop goes on after a failed regrasp."""
+    from .tcbirrt_native import _merge, poses_array
+
+    if deadline.expired():
+        return None
+    la = pl._la
+    la.start(tree.pose12[i], tree.q[i], np.asarray(twins), poses_array(poses), pl.options.frontier_seeds, deadline)
+    try:
+        while True:
+            got = la.next(pl._rng, deadline)
+            _merge(st, cast("NativeExtender", pl._ext))
+            if got is None:
+                return None
+            node = _regrasp_to(pl, tree, i, got[0], list(got[1]), xi_s, pose_s, poses, deadline, st, kind)
+            if node is not None:
+                return node
+    finally:
+        st["ik_iterations"] += int(la.args.its)
+        if la.args.failures:
+            st[f"{kind}_lookahead_failures"] = st.get(f"{kind}_lookahead_failures", 0) + int(la.args.failures)
 
 
 def trap_lookahead(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray, trap: list[Any], deadline: Deadline,
@@ -134,7 +175,7 @@ def trap_lookahead(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray, 
 
     def restarts(r: Any) -> None:   # the extension's restarts in C draw from ``r``
         cast(Any, ext).restarts_in_c(r, cast(int, o.ik_restarts), o.ik_restart_sigma, pl.robot.lower - 1e-9,
-                                     pl.robot.upper + 1e-9)
+                                     pl.robot.upper + 1e-9, cast(int, o.ik_restart_iterations))
     pl._rng = trap[1][0]
     if native:
         restarts(trap[1][1])

@@ -119,6 +119,7 @@ Deviations from the paper, all options (defaults in brackets):
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Sequence
@@ -194,10 +195,15 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, SamplingMixin, Planner):
                 self.checker.certifier(self.options.edge_min_clearance).prepare(("held", "fixed"))
         self._cb: CBiRRT2 | None = None
         self._rng = np.random.default_rng(0)
+        #: the IK settings of a waypoint's restarts (``ik_restart_iterations``)
+        self._ik_restart = self.options.ik if not self.options.ik_restart_iterations else \
+            dataclasses.replace(self.options.ik, max_iterations=int(self.options.ik_restart_iterations))
         #: the extension step in native code (:mod:`.tcbirrt_native`), None: in Python
         self._ext = make_extender(self) if self.checker.kernel == "native" and self.options.extension != "python" else None
         #: ``extension="loop"``: the query's native random stream (sampler, lead path, restarts), None: NumPy's
         self._nrng: Any = None
+        #: the look-ahead grafts' candidate loop in native code (:class:`.tcbirrt_lookahead.NativeLookahead`), None: in Python
+        self._la: Any = None
         #: ξ → (R, p) of an extension's target: Pinocchio's, or with the native loop the native code's (:class:`.NativePose`)
         self._pose: Any = pose_from_xi
         #: (R, p) → ξ of a partial extension's node: Pinocchio's, or with the native loop the native code's (:class:`.NativeXi`)
@@ -245,8 +251,9 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, SamplingMixin, Planner):
                 qn = None
             for _ in range(cast(int, o.ik_restarts) if qn is None else 0):
                 st["ik_restarts"] += 1
-                x, its = kin.ik(q + self._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, o.ik)
+                x, its = kin.ik(q + self._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, self._ik_restart)
                 st["ik_iterations"] += its
+                st["ik_restart_iterations"] = st.get("ik_restart_iterations", 0) + its
                 if x is not None and float(np.abs(x - q).max()) <= cast(float, o.max_joint_step) and ck.in_limits(x) \
                         and ck.is_valid(x):
                     qn = x
@@ -332,7 +339,7 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, SamplingMixin, Planner):
         o = self.options
         if self._nrng is not None and o.trap_adapt != "domain":
             xi_rand, i_near = sampler.sample_near(ta.X, ta.n, ta.alive if ta.n_dead else None,
-                                                  tb.X, tb.n, tb.alive if tb.n_dead else None)
+                                                  tb.X, tb.n, tb.alive if tb.n_dead else None, ta.kd)
             return xi_rand, ta.twin_nearest(i_near, None, rng)
         for _ in range(o.domain_tries if o.trap_adapt == "domain" else 1):
             # lo + (hi − lo) u: Generator.uniform's formula and draws, without its argument checks

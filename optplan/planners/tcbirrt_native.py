@@ -73,6 +73,8 @@ def _merge(st: dict[str, Any], ext: NativeExtender) -> None:
     st["ik_path_iterations"] = st.get("ik_path_iterations", 0) + c[10]   # absent in a caller's own counters
     if c[11]:
         st["ik_restarts_skipped"] = st.get("ik_restarts_skipped", 0) + c[11]
+    if c[12]:
+        st["ik_restart_iterations"] = st.get("ik_restart_iterations", 0) + c[12]
     ext.checker.n_checks += c[5]
 
 
@@ -118,8 +120,9 @@ def native_path_ik(pl: TCBiRRT, P: np.ndarray, q_near: np.ndarray, st: dict[str,
         terminal = ext.terminal() or ext.native_restarts   # no restarts after a failed segment, or run in C
         for _ in range(0 if terminal else cast(int, o.ik_restarts)):
             st["ik_restarts"] += 1
-            x, its = kin.ik(q + pl._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, o.ik)
+            x, its = kin.ik(q + pl._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, pl._ik_restart)
             st["ik_iterations"] += its
+            st["ik_restart_iterations"] = st.get("ik_restart_iterations", 0) + its
             if x is not None and float(np.abs(x - q).max()) <= mjs and ck.in_limits(x) and ck.is_valid(x):
                 qn = x
                 break

@@ -27,7 +27,8 @@ VARIANTS = {
               "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.0,
               "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
               "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
-              "trap_graft_target": "other", "trap_graft_stream": "search", "trap_graft_after": 0},
+              "trap_graft_target": "other", "trap_graft_stream": "search", "trap_graft_after": 0,
+              "ik_restart_iterations": 0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
@@ -35,7 +36,8 @@ VARIANTS = {
                  "regrasp_both_arms": False, "regrasp_backoff": False, "lead_orientation_probability": 0.5,
                  "branch_roots": False, "stall_iterations": 0, "trap_grafts": 4, "restart_iterations": 0,
                  "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
-                 "trap_graft_target": "sample", "trap_graft_stream": "own", "trap_graft_after": 1500},
+                 "trap_graft_target": "sample", "trap_graft_stream": "own", "trap_graft_after": 1500,
+                 "ik_restart_iterations": 0},
 }
 
 
@@ -296,6 +298,13 @@ class TCBiRRTOptions:
     ik_restarts: int | None = None
     #: Standard deviation of an IK restart's perturbation, per joint [rad].
     ik_restart_sigma: float = 0.3
+    #: The iteration limit of a restart's IK [count]; 0: the IK's own ``ik.max_iterations`` (None: the variant's value,
+    #: :data:`VARIANTS`: 0 in both). A restart is accepted only near the previous configuration: on three long searches
+    #: of generated scenes (a bay, a wall, an overhang; 85,000-115,000 iterations) 5,043 of the 5,125 accepted restarts
+    #: (98.4 %) had converged within 12 iterations, while 89,734 of 326,673 restarts ran to the IK's 30 without
+    #: converging (2.7 of the queries' 8.3 million IK iterations). A limit of 12 was measured on 214 fresh generated
+    #: scenes and left off: the same successes, CPU per iteration only 4.5 % lower (docs: planners page).
+    ik_restart_iterations: int | None = None
     #: The path IK's seed of a waypoint after the first (:mod:`.ik_seed`): ``"none"`` (the previous solution, Alg. 3)
     #: or ``"secant"`` (``q_{k−1} + (q_{k−1} − q_{k−2})`` clamped to the joint limits; the joint-jump bound stays
     #: relative to ``q_{k−1}``) (None: the variant's value, :data:`VARIANTS`).
@@ -347,6 +356,10 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.domain_tries: expected an int >= 1, got {self.domain_tries!r}")
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
+        if not (isinstance(self.ik_restart_iterations, int) and not isinstance(self.ik_restart_iterations, bool)
+                and self.ik_restart_iterations >= 0):
+            raise ValueError(f"TCBiRRTOptions.ik_restart_iterations: expected an int >= 0 (0: the IK's own limit), got "
+                             f"{self.ik_restart_iterations!r}")
         for name in ("regrasp_stall_iterations", "branch_grafts", "graft_after", "graft_interval", "graft_seeds",
                      "frontier_grafts", "frontier_interval", "frontier_seeds", "frontier_pairs", "stall_iterations", "trap_grafts", "trap_graft_count",
                      "restart_iterations"):

@@ -51,6 +51,8 @@ class SamplingMixin:
     _pose: Any
     _xi_of: Any
     _twin_of: Any
+    _la: Any            # the look-ahead grafts' native candidate loop (:class:`.tcbirrt_lookahead.NativeLookahead`) or None
+    kin: Any
 
     def _make_filter(self, native: bool) -> ObjectPoseFilter:
         """The task-space filter of the samples and the lead path (``filter_robot_body``: the robot's fixed body too)."""
@@ -62,6 +64,7 @@ class SamplingMixin:
         when it can be built, and then :attr:`_nrng` is the query's native random stream."""
         o = self.options
         self._nrng, self._pose, self._xi_of, self._twin_of = None, pose_from_xi, _xi_of_pose, _twin_of
+        self._la = None
         if self._ext is not None and o.extension == "loop":
             got = self._native_sampler()
             if got is not None:
@@ -107,5 +110,10 @@ class SamplingMixin:
         self._nrng, self._pose, self._xi_of, self._twin_of = nrng, NativePose(), NativeXi(), NativeTwin()
         ext = cast(Any, self._ext)
         ext.restarts_in_c(nrng, cast(int, o.ik_restarts), o.ik_restart_sigma, self.robot.lower - 1e-9,
-                          self.robot.upper + 1e-9)
+                          self.robot.upper + 1e-9, cast(int, o.ik_restart_iterations))
+        if ext.edge_on:   # the look-ahead grafts' candidates in C too
+            from .tcbirrt_lookahead import NativeLookahead
+
+            self._la = NativeLookahead(ext, self.robot.lower, self.robot.upper, list(self.kin.idx),
+                                       cast(float, o.max_joint_step))
         return smp

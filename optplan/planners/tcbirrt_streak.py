@@ -76,7 +76,7 @@ _M64 = (1 << 64) - 1
 class _STree(ctypes.Structure):
     _fields_ = [("X", _P), ("n", _LL), ("alive", _P), ("pose", _P), ("q", _P), ("dom", _P), ("trapn", _P),
                 ("twin", _P), ("count_traps", ctypes.c_int), ("parent", _P), ("thead", _P), ("tnext", _P),
-                ("checked", _P), ("cap", _LL), ("twin_draw", ctypes.c_int)]
+                ("checked", _P), ("cap", _LL), ("twin_draw", ctypes.c_int), ("K", _P), ("kdn", _P)]
 
 
 class _SArgs(ctypes.Structure):
@@ -228,6 +228,7 @@ class NativeStreak:
             s.parent, s.checked, s.cap = t.parent.ctypes.data, t.checked.ctypes.data, len(t.X)
             s.thead, s.tnext = t.thead.ctypes.data, t.tnext.ctypes.data
             s.alive = None if alive is None else alive.ctypes.data
+            s.K, s.kdn = (None, None) if t.kd is None else (t.kd[0].ctypes.data, t.kd[1].ctypes.data)
             e[2], e[3] = t.X, alive
         s.n, s.count_traps, s.twin_draw = t.n, int(count_traps), int(not t.prefer)
         return cast(int, e[4])

@@ -32,6 +32,8 @@ class _TaskTree(Tree):
     thead: np.ndarray   # per node in a twin group: the group's first node (-1: no group), for the native code
     edge: list[Any]     # always kept (edges=True)
 
+    KD_INDEX = True     # nodes are only ever appended (pruned ones are marked dead)
+
     def __init__(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, cap: int = 512):
         super().__init__(xi, cap, edges=True, q=q, checked=True, dom=np.inf, pose12=_pose12(R, p),
                          trapn=np.int64(0), twin=False, tnext=np.int64(-1), thead=np.int64(-1))

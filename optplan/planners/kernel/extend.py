@@ -35,6 +35,7 @@ from .addresses import AddressCache
 from .csource import C_SOURCE
 from .extend_csource import EXTEND_SOURCE
 from .ik_csource import IK_SOURCE
+from .lookahead_csource import LOOKAHEAD_SOURCE
 from .native import KernelUnavailable
 from .sampler_csource import RNG_SOURCE, SAMPLER_SOURCE
 from .streak_csource import STREAK_SOURCE
@@ -45,10 +46,11 @@ log = logging.getLogger(__name__)
 _P = ctypes.c_void_p
 _LL = ctypes.c_longlong
 _LIB: list[Any] = []        # the loaded library (one per process), or [None] after a failed build
-SOURCE = C_SOURCE + RNG_SOURCE + IK_SOURCE + EXTEND_SOURCE + SAMPLER_SOURCE + STREAK_SOURCE
+SOURCE = C_SOURCE + RNG_SOURCE + IK_SOURCE + EXTEND_SOURCE + SAMPLER_SOURCE + STREAK_SOURCE + LOOKAHEAD_SOURCE
 #: counters of one native call, in the order of the C code
 COUNTERS = ("ik_calls", "ik_iterations", "ik_failures", "ik_jumps", "collisions", "checks", "edge_checks",
-            "edge_collisions", "terminal", "ik_restarts", "ik_path_iterations", "ik_restarts_skipped")
+            "edge_collisions", "terminal", "ik_restarts", "ik_path_iterations", "ik_restarts_skipped",
+            "ik_restart_iterations")
 
 
 class _Ctx(ctypes.Structure):
@@ -61,7 +63,8 @@ class _Ctx(ctypes.Structure):
                 ("W", _P), ("nw", ctypes.c_int),
                 ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int), ("edge_res", ctypes.c_double),
                 ("rng", _P), ("restarts", ctypes.c_int), ("restart_sigma", ctypes.c_double), ("lower", _P), ("upper", _P),
-                ("ikm", _P), ("predictor", ctypes.c_int), ("qlo", _P), ("qhi", _P), ("pfix", _P)]
+                ("ikm", _P), ("predictor", ctypes.c_int), ("qlo", _P), ("qhi", _P), ("pfix", _P),
+                ("restart_max_it", ctypes.c_int)]
 
 
 def load_extend_library() -> Any:
@@ -97,6 +100,8 @@ def load_extend_library() -> Any:
     assert lib is not None
     lib.tcb_nearest.restype = _LL
     lib.tcb_nearest.argtypes = [_P, _LL, ctypes.c_int, _P, _P]
+    lib.tcb_nearest_kd.restype = _LL
+    lib.tcb_nearest_kd.argtypes = [_P, _LL, ctypes.c_int, _P, _P, _P, _P]
     lib.tcb_interpolate.restype = None
     lib.tcb_interpolate.argtypes = [_P, _P, _P, _P, ctypes.c_int, _P]
     lib.tcb_path_ik.restype = _LL
@@ -130,7 +135,7 @@ def _declare_sampler_functions(lib: Any) -> None:
     lib.tcb_sample.restype = None
     lib.tcb_sample.argtypes = [_P, _P, _LL, _P, _P]
     lib.tcb_sample_near.restype = _LL
-    lib.tcb_sample_near.argtypes = [_P, _P, _LL, _P, _P, _LL, _P, _P]
+    lib.tcb_sample_near.argtypes = [_P, _P, _LL, _P, _P, _LL, _P, _P, _P, _P]
     lib.tcb_lead_path.restype = _LL
     lib.tcb_lead_path.argtypes = [_P, _P, _P, _D, _D, ctypes.c_int, ctypes.c_int, _D, _LL, ctypes.POINTER(ctypes.POINTER(_D)),
                                   ctypes.POINTER(_LL)]
@@ -147,20 +152,37 @@ def nearest_available() -> bool:
     return True
 
 
-def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = None) -> int:
+def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = None,
+            index: tuple[np.ndarray, np.ndarray] | None = None) -> int:
     """Index of the row of ``X[:n]`` (C-contiguous float64, rows of ``x.size``) nearest ``x`` in squared
     Euclidean distance, the first among equals; rows with ``alive[i]`` False are skipped (``alive``:
-    a boolean array, or None). −1 when no row is live."""
+    a boolean array, or None). −1 when no row is live. ``index``: the rows' k-d index ``(K, kdn)`` (:func:`kd_index`,
+    as many rows as ``X``), searched instead of every row from a couple of hundred rows on (the same answer); it
+    takes rows added since its last use (rows are only ever appended to ``X``)."""
     lib = load_extend_library()
     x = np.ascontiguousarray(x, dtype=float)
     if X.dtype != np.float64 or not X.flags.c_contiguous or X.ndim != 2 or x.size != X.shape[1] or not 0 <= n <= len(X):
         raise ValueError(f"nearest: expected a C-contiguous float64 array of rows of {x.size} values and "
                          f"0 <= n <= {len(X)}, got {X.dtype} {X.shape} and n = {n}")
-    return int(lib.tcb_nearest(_ADDR(X), n, x.size, _ADDR(alive), x.ctypes.data))
+    if index is None:
+        return int(lib.tcb_nearest(_ADDR(X), n, x.size, _ADDR(alive), x.ctypes.data))
+    K, kdn = index
+    if K.shape != (len(X), 2) or K.dtype != np.int64 or not K.flags.c_contiguous or kdn.shape != (1,) \
+            or kdn.dtype != np.int64:
+        raise ValueError(f"nearest: expected a k-d index of {len(X)} x 2 and 1 int64 values, got {K.dtype} {K.shape} "
+                         f"and {kdn.dtype} {kdn.shape}")
+    return int(lib.tcb_nearest_kd(_ADDR(X), n, x.size, _ADDR(alive), x.ctypes.data, _ADDR(K), _ADDR(kdn)))
+
+
+def kd_index(rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """An empty k-d index for :func:`nearest` over a key array of ``rows`` rows: ``(K, kdn)``, the children of each
+    row (``rows`` × 2, int64) and the number of rows it holds (1 int64, 0 now). Grow ``K`` with its key array
+    (rows appended, the old ones kept)."""
+    return np.full((int(rows), 2), -1, np.int64), np.zeros(1, np.int64)
 
 
 #: the trees' key arrays and masks, passed to :func:`nearest` at every call
-_ADDR = AddressCache()
+_ADDR = AddressCache(16)
 
 
 class _Filt(ctypes.Structure):
@@ -341,15 +363,18 @@ class NativeExtender:
             raise KernelUnavailable("the hand-written IK does not cover these arms")
         self._ctx.ikm = self._ik.address if on else None
 
-    def restarts_in_c(self, rng: Any, restarts: int, sigma: float, lower: np.ndarray, upper: np.ndarray) -> None:
+    def restarts_in_c(self, rng: Any, restarts: int, sigma: float, lower: np.ndarray, upper: np.ndarray,
+                      max_iterations: int = 0) -> None:
         """Run a failing waypoint's random restarts in C: ``restarts`` IK attempts [count] from the previous
         configuration perturbed by ``N(0, sigma²)`` [rad] per joint, drawn from ``rng`` (a
         :class:`~optplan.planners.kernel.sampler.NativeRandom`), accepted inside ``[lower, upper]`` [rad], within
         the joint-jump bound and collision-free (what :meth:`~optplan.planners.tcbirrt.TCBiRRT.path_ik` does with
-        the planner's NumPy generator)."""
+        the planner's NumPy generator); each IK stops after ``max_iterations`` [count] (0: the extension's IK
+        limit)."""
         self._lim = (np.ascontiguousarray(lower, dtype=float), np.ascontiguousarray(upper, dtype=float), rng)
         c = self._ctx
         c.rng, c.restarts, c.restart_sigma = rng.address, int(restarts), float(sigma)
+        c.restart_max_it = int(max_iterations)
         c.lower, c.upper = self._lim[0].ctypes.data, self._lim[1].ctypes.data
         self.native_restarts = True
 

@@ -59,12 +59,14 @@ typedef struct {
     const unsigned char *pfix;    /* per pair of km, may be NULL: 1 when both its geometries are placed by the waypoint's
                                      object pose alone (static, or on a hand's last link), so that every IK solution
                                      of that pose has the pair in the same contact */
+    int restart_max_it;           /* > 0: a restart's IK iteration limit (else max_it) */
 } tcb_ctx;
 
 /* counters: 0 ik_calls, 1 ik_iterations, 2 ik_failures, 3 ik_jumps, 4 collisions, 5 checks, 6 edge_checks,
    7 edge_collisions, 8 set to 1 when the failing waypoint failed its edge_res segment (no restarts),
    9 ik_restarts, 10 ik_path_iterations (the iterations of the waypoints' first IK, restarts not counted),
-   11 ik_restarts_skipped (restarts of a waypoint whose pose alone collides: drawn, not run) */
+   11 ik_restarts_skipped (restarts of a waypoint whose pose alone collides: drawn, not run), 12 ik_restart_iterations
+   (the restarts' IK iterations) */
 
 long long tcb_nearest(const double *X, long long n, int dim, const unsigned char *alive, const double *x) {
     long long best = -1;
@@ -75,6 +77,90 @@ long long tcb_nearest(const double *X, long long n, int dim, const unsigned char
         double s = 0.0;
         for (int k = 0; k < dim; ++k) { double d = r[k] - x[k]; s += d*d; }
         if (best < 0 || s < bd) { best = i; bd = s; }
+    }
+    return best;
+}
+
+/* A k-d index over a tree's key rows for tcb_nearest_kd: node m's children are K[2m] (keys below m's in the split
+   coordinate) and K[2m+1] (the others); the split coordinate cycles with the depth from row 0. The index holds rows
+   0..*kdn-1 and takes the newer rows at the next query (rows are only ever appended), so the code that adds nodes
+   (Python or C) need not know of it. */
+#define TCB_KD_MIN 1024      /* below this many rows the linear scan is as fast (measured) */
+#define TCB_KD_STACK 512     /* pending far branches; deeper indexes fall back to the scan */
+
+static void tcb_kd_insert(const double *X, long long n, int dim, long long *K, long long *kdn) {
+    long long m = *kdn;
+    if (m == 0) { K[0] = K[1] = -1; m = 1; }
+    for (; m < n; ++m) {
+        const double *x = X + (long long)dim*m;
+        long long cur = 0;
+        int d = 0;
+        K[2*m] = K[2*m + 1] = -1;
+        for (;;) {
+            long long *slot = x[d] < X[(long long)dim*cur + d] ? &K[2*cur] : &K[2*cur + 1];
+            if (*slot < 0) { *slot = m; break; }
+            cur = *slot;
+            d = d + 1 == dim ? 0 : d + 1;
+        }
+    }
+    *kdn = n;
+}
+
+/* tcb_nearest's answer (the first live row among the least squared distances, the same sums term by term) through the
+   index K, *kdn (see tcb_kd_insert); K NULL or few rows: the scan. A branch is skipped when a lower bound of its rows'
+   distances exceeds the best distance: the sum of the squared key offsets to the cells of the splits above it (Arya and
+   Mount's incremental distance), each offset no larger than that term of a row's distance in floating point too (a
+   difference rounds monotonically), the sum shrunk by 1e-9 against its rounding. An equal bound is searched, for
+   its rows' indices. */
+long long tcb_nearest_kd(const double *X, long long n, int dim, const unsigned char *alive, const double *x,
+                         long long *K, long long *kdn) {
+    if (!K || n < TCB_KD_MIN || dim > 8) return tcb_nearest(X, n, dim, alive, x);
+    if (*kdn > n) *kdn = 0;                      /* rows were taken back: the index is built again */
+    if (*kdn < n) tcb_kd_insert(X, n, dim, K, kdn);
+    long long stk[TCB_KD_STACK], best = -1;
+    int sdim[TCB_KD_STACK];
+    double soff[TCB_KD_STACK][8], off[8], bd = 0.0;
+    int top = 0;
+    for (int k = 0; k < dim; ++k) soff[0][k] = 0.0;
+    stk[top] = 0; sdim[top] = 0; ++top;
+    while (top > 0) {
+        --top;
+        long long cur = stk[top];
+        int d = sdim[top];
+        memcpy(off, soff[top], (size_t)dim*sizeof(double));
+        if (best >= 0) {
+            double lb = 0.0;
+            for (int k = 0; k < dim; ++k) lb += off[k]*off[k];
+            if (lb*(1.0 - 1e-9) > bd) continue;
+        }
+        while (cur >= 0) {
+            const double *r = X + (long long)dim*cur;
+            if (!alive || alive[cur]) {
+                double s = 0.0;
+                for (int k = 0; k < dim; ++k) { double e = r[k] - x[k]; s += e*e; }
+                if (best < 0 || s < bd || (s == bd && cur < best)) { best = cur; bd = s; }
+            }
+            long long nearc, farc;
+            double t;
+            if (x[d] < r[d]) { nearc = K[2*cur]; farc = K[2*cur + 1]; t = r[d] - x[d]; }
+            else { nearc = K[2*cur + 1]; farc = K[2*cur]; t = x[d] - r[d]; }
+            int dn = d + 1 == dim ? 0 : d + 1;
+            if (farc >= 0) {
+                double keep = off[d];
+                off[d] = t > keep ? t : keep;        /* the far cell lies beyond the split (and the older bound) */
+                double lb = 0.0;
+                for (int k = 0; k < dim; ++k) lb += off[k]*off[k];
+                if (best < 0 || lb*(1.0 - 1e-9) <= bd) {
+                    if (top == TCB_KD_STACK) return tcb_nearest(X, n, dim, alive, x);
+                    stk[top] = farc; sdim[top] = dn;
+                    memcpy(soff[top], off, (size_t)dim*sizeof(double));
+                    ++top;
+                }
+                off[d] = keep;
+            }
+            cur = nearc;
+            d = dn;
+        }
     }
     return best;
 }
@@ -214,12 +300,15 @@ static void tcb_restart_seed(const tcb_ctx *c, const double *q, double *seed) {
 static int tcb_restarts(const tcb_ctx *c, const double *q, const double *P, double *qn, long long *cnt) {
     int nq = c->nq;
     double seed[KMAXJ], x[KMAXJ];
+    tcb_ctx d = *c;                                   /* the restarts' own IK iteration limit */
+    if (c->restart_max_it > 0) d.max_it = c->restart_max_it;
     for (int r = 0; r < c->restarts; ++r) {
         cnt[9] += 1;
         tcb_restart_seed(c, q, seed);
         long long its = 0;
-        int ok = tcb_ik(c, seed, P, x, &its);
+        int ok = tcb_ik(&d, seed, P, x, &its);
         cnt[1] += its;
+        cnt[12] += its;
         if (!ok) continue;
         double m = 0.0;
         int inside = 1;

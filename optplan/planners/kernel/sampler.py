@@ -116,7 +116,7 @@ class NativeTaskSampler:
         self._guide: np.ndarray | None = None
         self._out = np.zeros(6)
         self._out_p = self._out.ctypes.data
-        self._addr = AddressCache()   # the trees' key arrays and masks, the same at most calls
+        self._addr = AddressCache(16)   # the trees' key arrays, masks and k-d indexes, the same at most calls
         self._calls0 = 0
         if endpoints is not None:
             self.set_endpoints(*endpoints)
@@ -169,13 +169,14 @@ class NativeTaskSampler:
         return self._out.copy()
 
     def sample_near(self, X_a: np.ndarray, n_a: int, alive_a: np.ndarray | None, X_b: np.ndarray, n_b: int,
-                    alive_b: np.ndarray | None) -> tuple[np.ndarray, int]:
+                    alive_b: np.ndarray | None, index_a: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, int]:
         """One ξ_rand (goal bias toward the live rows of ``X_b[:n_b]``) and the index of the live row of
         ``X_a[:n_a]`` nearest it; ``X_a``, ``X_b``: C-contiguous float64 arrays of 6 columns (a tree's keys);
-        ``alive_*``: boolean masks or None."""
+        ``alive_*``: boolean masks or None; ``index_a``: ``X_a``'s k-d index (:func:`.extend.kd_index`) or None."""
         ad = self._addr
         i = self.lib.tcb_sample_near(self._sp, ad(X_b), n_b, None if alive_b is None else ad(alive_b), ad(X_a), n_a,
-                                     None if alive_a is None else ad(alive_a), self._out_p)
+                                     None if alive_a is None else ad(alive_a), self._out_p,
+                                     None if index_a is None else ad(index_a[0]), None if index_a is None else ad(index_a[1]))
         return self._out.copy(), int(i)
 
 

@@ -194,9 +194,10 @@ void tcb_sample(tcb_sampler *s, const double *other, long long n_other, const un
 
 /* tcb_sample, then the nearest live row of Xa (na x 6) to the sample: its index */
 long long tcb_sample_near(tcb_sampler *s, const double *other, long long n_other, const unsigned char *alive_other,
-                          const double *Xa, long long na, const unsigned char *alive_a, double *out) {
+                          const double *Xa, long long na, const unsigned char *alive_a, double *out, long long *Ka,
+                          long long *kdn_a) {
     tcb_sample(s, other, n_other, alive_other, out);
-    return tcb_nearest(Xa, na, 6, alive_a, out);
+    return tcb_nearest_kd(Xa, na, 6, alive_a, out, Ka, kdn_a);
 }
 
 typedef struct { double *X; long long *parent; long long n, cap; } tcb_xtree;

@@ -176,6 +176,7 @@ typedef struct {
     unsigned char *checked;  /* n: the edge from the parent verified (lazy edges) */
     long long cap;           /* rows the arrays hold: a node is added here only below it */
     int twin_draw;           /* a sampled node's twin is drawn here (no preferred twins in this tree) */
+    long long *K, *kdn;      /* the keys' k-d index (tcb_nearest_kd; K NULL: none) */
 } tcb_stree;
 
 typedef struct {
@@ -226,7 +227,7 @@ static int tcb_connect_loop(const tcb_ctx *c, tcb_stree *tb, int which, const do
                             long long *LM) {
     a->conn_trapped = 0;
     for (;;) {
-        long long ib = tcb_nearest(tb->X, tb->n, 6, tb->alive, tx);
+        long long ib = tcb_nearest_kd(tb->X, tb->n, 6, tb->alive, tx, tb->K, tb->kdn);
         if (tb->twin[ib]) ib = tcb_twin_nearest(tb->q, c->nq, tb->thead, tb->tnext, tb->alive, ib, tq);
         a->i_nb = ib;
         const double *xb = tb->X + 6*ib;
@@ -276,7 +277,7 @@ int tcb_streak(tcb_sampler *s, const tcb_ctx *c, tcb_stree *t0, tcb_stree *t1, t
     for (long long j = 0; j < a->max_n; ++j) {
         if (j > 0 && tcb_clock(a->clock_kind) >= a->end) { a->code = 0; return 0; }
         tcb_stree *ta = (j & 1) ? t1 : t0, *tb = (j & 1) ? t0 : t1;
-        long long i = tcb_sample_near(s, tb->X, tb->n, tb->alive, ta->X, ta->n, ta->alive, a->xi_rand);
+        long long i = tcb_sample_near(s, tb->X, tb->n, tb->alive, ta->X, ta->n, ta->alive, a->xi_rand, ta->K, ta->kdn);
         a->i_near = i;
         const double *xn = ta->X + 6*i;
         double d[6], dd = 0.0;
