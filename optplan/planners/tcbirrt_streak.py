@@ -109,46 +109,51 @@ def _declare(lib: Any) -> None:
     lib._streak_declared = True
 
 
-class NativePose:
+class _NativeMap:
+    """A native function of one fixed-size input to one fixed-size output (``f(in, out)``), with its buffers."""
+
+    __slots__ = ("_f", "_in", "_out", "_pi", "_po")
+
+    def __init__(self, name: str, n_in: int, n_out: int) -> None:
+        lib = load_extend_library()
+        _declare(lib)
+        self._f = getattr(lib, name)
+        self._in, self._out = np.empty(n_in), np.empty(n_out)
+        self._pi, self._po = self._in.ctypes.data, self._out.ctypes.data
+
+
+class NativePose(_NativeMap):
     """``pose(xi)``: the rotation (3 × 3) and position [m] of ξ as the native code computes them (``tcb_pose_xi``:
     Rz(yaw) Ry(pitch) Rx(roll) as Pinocchio's ``rpyToMatrix`` computes it, operation for operation). The loop's
     extensions take their target pose from it, in the streaks and outside them, so that the two give the same
     search even where a compiler's fused multiply-adds would make it differ from Pinocchio's in the last bits."""
 
-    __slots__ = ("_f", "_x", "_out", "_px", "_po")
+    __slots__ = ()
 
     def __init__(self) -> None:
-        lib = load_extend_library()
-        _declare(lib)
-        self._f = lib.tcb_pose_xi
-        self._x, self._out = np.empty(6), np.empty(12)
-        self._px, self._po = self._x.ctypes.data, self._out.ctypes.data
+        super().__init__("tcb_pose_xi", 6, 12)
 
     def __call__(self, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        self._x[:] = xi
-        self._f(self._px, self._po)
+        self._in[:] = xi
+        self._f(self._pi, self._po)
         out = self._out.copy()
         return out[:9].reshape(3, 3), out[9:]
 
 
-class NativeXi:
+class NativeXi(_NativeMap):
     """``xi(R, p)``: ξ = (position, roll, pitch, yaw) of a pose as the native code computes it (``tcb_xi_of_pose``:
     Pinocchio's ``rpy.matrixToRpy``, operation for operation). The loop keys a partial extension's node with it, in
     the streaks and outside them."""
 
-    __slots__ = ("_f", "_P", "_out", "_pp", "_po")
+    __slots__ = ()
 
     def __init__(self) -> None:
-        lib = load_extend_library()
-        _declare(lib)
-        self._f = lib.tcb_xi_of_pose
-        self._P, self._out = np.empty(12), np.empty(6)
-        self._pp, self._po = self._P.ctypes.data, self._out.ctypes.data
+        super().__init__("tcb_xi_of_pose", 12, 6)
 
     def __call__(self, R: np.ndarray, p: np.ndarray) -> np.ndarray:
-        self._P[:9] = np.asarray(R).reshape(9)
-        self._P[9:] = p
-        self._f(self._pp, self._po)
+        self._in[:9] = np.asarray(R).reshape(9)
+        self._in[9:] = p
+        self._f(self._pi, self._po)
         return self._out.copy()
 
 
