@@ -77,7 +77,7 @@ class Tree:
         if self.KD_INDEX and _native_nearest() is not None:
             from .kernel.extend import kd_index
 
-            self.kd = kd_index(cap)
+            self.kd = kd_index(cap, self.X.shape[1])
         self.alive: np.ndarray | None = None     # created by the first kill()
         self.n_dead = 0
         self.n = 1

@@ -156,8 +156,8 @@ def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = Non
             index: tuple[np.ndarray, np.ndarray] | None = None) -> int:
     """Index of the row of ``X[:n]`` (C-contiguous float64, rows of ``x.size``) nearest ``x`` in squared
     Euclidean distance, the first among equals; rows with ``alive[i]`` False are skipped (``alive``:
-    a boolean array, or None). −1 when no row is live. ``index``: the rows' k-d index ``(K, kdn)`` (:func:`kd_index`,
-    as many rows as ``X``), searched instead of every row from a couple of hundred rows on (the same answer); it
+    a boolean array, or None). −1 when no row is live. ``index``: the rows' k-d index ``(K, kdn)`` (:func:`kd_index`
+    for rows of ``x.size`` values, as many rows as ``X``), searched instead of every row from a couple of hundred rows on (the same answer); it
     takes rows added since its last use (rows are only ever appended to ``X``)."""
     lib = load_extend_library()
     x = np.ascontiguousarray(x, dtype=float)
@@ -167,18 +167,20 @@ def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = Non
     if index is None:
         return int(lib.tcb_nearest(_ADDR(X), n, x.size, _ADDR(alive), x.ctypes.data))
     K, kdn = index
-    if K.shape != (len(X), 2) or K.dtype != np.int64 or not K.flags.c_contiguous or kdn.shape != (1,) \
+    width = 2 + x.size
+    if K.shape != (len(X), width) or K.dtype != np.int64 or not K.flags.c_contiguous or kdn.shape != (1,) \
             or kdn.dtype != np.int64:
-        raise ValueError(f"nearest: expected a k-d index of {len(X)} x 2 and 1 int64 values, got {K.dtype} {K.shape} "
-                         f"and {kdn.dtype} {kdn.shape}")
+        raise ValueError(f"nearest: expected a k-d index of {len(X)} x {width} and 1 int64 values, got {K.dtype} "
+                         f"{K.shape} and {kdn.dtype} {kdn.shape}")
     return int(lib.tcb_nearest_kd(_ADDR(X), n, x.size, _ADDR(alive), x.ctypes.data, _ADDR(K), _ADDR(kdn)))
 
 
-def kd_index(rows: int) -> tuple[np.ndarray, np.ndarray]:
-    """An empty k-d index for :func:`nearest` over a key array of ``rows`` rows: ``(K, kdn)``, the children of each
-    row (``rows`` × 2, int64) and the number of rows it holds (1 int64, 0 now). Grow ``K`` with its key array
-    (rows appended, the old ones kept)."""
-    return np.full((int(rows), 2), -1, np.int64), np.zeros(1, np.int64)
+def kd_index(rows: int, dim: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """An empty k-d index for :func:`nearest` over a key array of ``rows`` rows of ``dim`` values: ``(K, kdn)``, per
+    row its two children and a box that holds its subtree's keys (``rows`` × (2 + ``dim``) int64 slots, the box
+    stored as ``2 dim`` floats by the native code) and the number of rows it holds (1 int64, 0 now). Grow ``K`` with its key
+    array (rows appended, the old ones kept)."""
+    return np.full((int(rows), 2 + int(dim)), -1, np.int64), np.zeros(1, np.int64)
 
 
 #: the trees' key arrays and masks, passed to :func:`nearest` at every call

@@ -81,23 +81,40 @@ long long tcb_nearest(const double *X, long long n, int dim, const unsigned char
     return best;
 }
 
-/* A k-d index over a tree's key rows for tcb_nearest_kd: node m's children are K[2m] (keys below m's in the split
-   coordinate) and K[2m+1] (the others); the split coordinate cycles with the depth from row 0. The index holds rows
-   0..*kdn-1 and takes the newer rows at the next query (rows are only ever appended), so the code that adds nodes
-   (Python or C) need not know of it. */
+/* A k-d index over a tree's key rows for tcb_nearest_kd, row m's entry TCB_KD_W(dim) int64 slots of K from K + m*W:
+   its children (slot 0: keys below m's in the split coordinate, slot 1: the others; -1 none; the split coordinate
+   cycles with the depth from row 0), then a box that holds the keys of m's subtree as 2*dim floats (lower corner
+   rounded down, upper corner rounded up: 64 bytes an entry for 6-D keys). The index holds rows 0..*kdn-1 and takes
+   the newer rows at the next query (rows are only ever appended), so the code that adds nodes (Python or C) need not
+   know of it. */
 #define TCB_KD_MIN 1024      /* below this many rows the linear scan is as fast (measured) */
 #define TCB_KD_STACK 512     /* pending far branches; deeper indexes fall back to the scan */
+#define TCB_KD_W(dim) (2 + (long long)(dim))
+
+static inline float tcb_f_down(double v) { float f = (float)v; return (double)f > v ? nextafterf(f, -INFINITY) : f; }
+static inline float tcb_f_up(double v) { float f = (float)v; return (double)f < v ? nextafterf(f, INFINITY) : f; }
 
 static void tcb_kd_insert(const double *X, long long n, int dim, long long *K, long long *kdn) {
-    long long m = *kdn;
-    if (m == 0) { K[0] = K[1] = -1; m = 1; }
+    long long m = *kdn, W = TCB_KD_W(dim);
     for (; m < n; ++m) {
         const double *x = X + (long long)dim*m;
+        long long *e = K + W*m;
+        float *bb = (float *)(e + 2), lo[8], hi[8];
+        for (int k = 0; k < dim; ++k) { lo[k] = tcb_f_down(x[k]); hi[k] = tcb_f_up(x[k]); }
+        e[0] = e[1] = -1;
+        memcpy(bb, lo, (size_t)dim*sizeof(float));
+        memcpy(bb + dim, hi, (size_t)dim*sizeof(float));
+        if (m == 0) continue;
         long long cur = 0;
         int d = 0;
-        K[2*m] = K[2*m + 1] = -1;
         for (;;) {
-            long long *slot = x[d] < X[(long long)dim*cur + d] ? &K[2*cur] : &K[2*cur + 1];
+            long long *c = K + W*cur;
+            float *cb = (float *)(c + 2);
+            for (int k = 0; k < dim; ++k) {         /* the subtree below cur takes x: its box grows to hold it */
+                if (lo[k] < cb[k]) cb[k] = lo[k];
+                if (hi[k] > cb[dim + k]) cb[dim + k] = hi[k];
+            }
+            long long *slot = x[d] < X[(long long)dim*cur + d] ? &c[0] : &c[1];
             if (*slot < 0) { *slot = m; break; }
             cur = *slot;
             d = d + 1 == dim ? 0 : d + 1;
@@ -106,57 +123,53 @@ static void tcb_kd_insert(const double *X, long long n, int dim, long long *K, l
     *kdn = n;
 }
 
+/* a lower bound of the squared distances from x to the keys in node e's box: the sum, term by term in the distances'
+   order, of the squared offsets of x outside the box; each offset is no larger than that term of a key's distance in
+   floating point too (a difference rounds monotonically), and so is the sum */
+static inline double tcb_kd_bound(const long long *e, int dim, const double *x) {
+    const float *lo = (const float *)(e + 2), *hi = lo + dim;
+    double s = 0.0;
+    for (int k = 0; k < dim; ++k) {
+        double l = (double)lo[k], h = (double)hi[k];
+        double t = x[k] < l ? l - x[k] : x[k] > h ? x[k] - h : 0.0;
+        s += t*t;
+    }
+    return s;
+}
+
 /* tcb_nearest's answer (the first live row among the least squared distances, the same sums term by term) through the
-   index K, *kdn (see tcb_kd_insert); K NULL or few rows: the scan. A branch is skipped when a lower bound of its rows'
-   distances exceeds the best distance: the sum of the squared key offsets to the cells of the splits above it (Arya and
-   Mount's incremental distance), each offset no larger than that term of a row's distance in floating point too (a
-   difference rounds monotonically), the sum shrunk by 1e-9 against its rounding. An equal bound is searched, for
-   its rows' indices. */
+   index K, *kdn (see tcb_kd_insert); K NULL or few rows: the scan. A subtree is skipped when the lower bound of its
+   box (tcb_kd_bound), shrunk by 1e-9 against its rounding, exceeds the best distance; an equal bound is searched, for
+   its rows' indices. Dead rows stay in the boxes (a looser bound, the same answer). */
 long long tcb_nearest_kd(const double *X, long long n, int dim, const unsigned char *alive, const double *x,
                          long long *K, long long *kdn) {
     if (!K || n < TCB_KD_MIN || dim > 8) return tcb_nearest(X, n, dim, alive, x);
     if (*kdn > n) *kdn = 0;                      /* rows were taken back: the index is built again */
     if (*kdn < n) tcb_kd_insert(X, n, dim, K, kdn);
-    long long stk[TCB_KD_STACK], best = -1;
+    long long W = TCB_KD_W(dim), stk[TCB_KD_STACK], best = -1;
     int sdim[TCB_KD_STACK];
-    double soff[TCB_KD_STACK][8], off[8], bd = 0.0;
+    double bd = 0.0;
     int top = 0;
-    for (int k = 0; k < dim; ++k) soff[0][k] = 0.0;
     stk[top] = 0; sdim[top] = 0; ++top;
     while (top > 0) {
         --top;
         long long cur = stk[top];
         int d = sdim[top];
-        memcpy(off, soff[top], (size_t)dim*sizeof(double));
-        if (best >= 0) {
-            double lb = 0.0;
-            for (int k = 0; k < dim; ++k) lb += off[k]*off[k];
-            if (lb*(1.0 - 1e-9) > bd) continue;
-        }
         while (cur >= 0) {
+            const long long *e = K + W*cur;
+            if (best >= 0 && tcb_kd_bound(e, dim, x)*(1.0 - 1e-9) > bd) break;
             const double *r = X + (long long)dim*cur;
             if (!alive || alive[cur]) {
                 double s = 0.0;
-                for (int k = 0; k < dim; ++k) { double e = r[k] - x[k]; s += e*e; }
+                for (int k = 0; k < dim; ++k) { double q = r[k] - x[k]; s += q*q; }
                 if (best < 0 || s < bd || (s == bd && cur < best)) { best = cur; bd = s; }
             }
             long long nearc, farc;
-            double t;
-            if (x[d] < r[d]) { nearc = K[2*cur]; farc = K[2*cur + 1]; t = r[d] - x[d]; }
-            else { nearc = K[2*cur + 1]; farc = K[2*cur]; t = x[d] - r[d]; }
+            if (x[d] < r[d]) { nearc = e[0]; farc = e[1]; } else { nearc = e[1]; farc = e[0]; }
             int dn = d + 1 == dim ? 0 : d + 1;
-            if (farc >= 0) {
-                double keep = off[d];
-                off[d] = t > keep ? t : keep;        /* the far cell lies beyond the split (and the older bound) */
-                double lb = 0.0;
-                for (int k = 0; k < dim; ++k) lb += off[k]*off[k];
-                if (best < 0 || lb*(1.0 - 1e-9) <= bd) {
-                    if (top == TCB_KD_STACK) return tcb_nearest(X, n, dim, alive, x);
-                    stk[top] = farc; sdim[top] = dn;
-                    memcpy(soff[top], off, (size_t)dim*sizeof(double));
-                    ++top;
-                }
-                off[d] = keep;
+            if (farc >= 0 && (best < 0 || tcb_kd_bound(K + W*farc, dim, x)*(1.0 - 1e-9) <= bd)) {
+                if (top == TCB_KD_STACK) return tcb_nearest(X, n, dim, alive, x);
+                stk[top] = farc; sdim[top] = dn; ++top;
             }
             cur = nearc;
             d = dn;

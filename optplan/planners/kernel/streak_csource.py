@@ -215,6 +215,15 @@ static long long tcb_streak_add(const tcb_ctx *c, tcb_stree *t, int which, long 
     return m;
 }
 
+/* Eq. 3's step from the key xn toward xt (d = xt - xn, its length dist > 0) by at most step, into out: xt itself
+   when it is within the step (returns 1), else xn + step d / dist (0) */
+static int tcb_step_toward(const double *xn, const double *xt, const double *d, double dist, double step, double *out) {
+    if (dist <= step) { memcpy(out, xt, 6*sizeof(double)); return 1; }
+    double f = step / dist;
+    for (int k = 0; k < 6; ++k) out[k] = xn[k] + f*d[k];
+    return 0;
+}
+
 /* lines 7-11 of Alg. 1: tree b (t; which: its log tag) connects toward the node with key tx and configuration tq, step
    by step (the full step; among the nearest node's twins the one nearest tq). An advanced or partial step's node is
    added here. Returns 0 when a step was trapped (a->conn_trapped = 1), a step's node is no nearer the target in the key
@@ -226,8 +235,28 @@ static int tcb_connect_loop(const tcb_ctx *c, tcb_stree *tb, int which, const do
                             tcb_streak_args *a, double *P, double *Q, long long *cnt, double *LP, double *LQ,
                             long long *LM) {
     a->conn_trapped = 0;
+    long long ib_key = -1, n_seen = 0;   /* the nearest row to tx so far and the rows it was taken from */
+    double bd_key = 0.0;
     for (;;) {
-        long long ib = tcb_nearest_kd(tb->X, tb->n, 6, tb->alive, tx, tb->K, tb->kdn);
+        /* the nearest live row to tx: the rows are only appended here (none killed), so after the first search it is
+           the last answer or one of the rows added since, nearer by strictly less (the first among equals stays) */
+        long long ib;
+        if (ib_key < 0) {
+            ib = tcb_nearest_kd(tb->X, tb->n, 6, tb->alive, tx, tb->K, tb->kdn);
+            const double *r = tb->X + 6*ib;
+            bd_key = 0.0;
+            for (int u = 0; u < 6; ++u) { double e = r[u] - tx[u]; bd_key += e*e; }
+        } else {
+            ib = ib_key;
+            for (long long m = n_seen; m < tb->n; ++m) {
+                if (tb->alive && !tb->alive[m]) continue;
+                const double *r = tb->X + 6*m;
+                double sm = 0.0;
+                for (int u = 0; u < 6; ++u) { double e = r[u] - tx[u]; sm += e*e; }
+                if (sm < bd_key) { ib = m; bd_key = sm; }
+            }
+        }
+        ib_key = ib; n_seen = tb->n;
         if (tb->twin[ib]) ib = tcb_twin_nearest(tb->q, c->nq, tb->thead, tb->tnext, tb->alive, ib, tq);
         a->i_nb = ib;
         const double *xb = tb->X + 6*ib;
@@ -235,9 +264,7 @@ static int tcb_connect_loop(const tcb_ctx *c, tcb_stree *tb, int which, const do
         for (int u = 0; u < 6; ++u) { db[u] = tx[u] - xb[u]; ddb += db[u]*db[u]; }
         double distb = sqrt(ddb);
         if (distb <= 0.0) return 4;
-        a->reach_b = distb <= a->step_size;
-        if (a->reach_b) memcpy(a->xi_sb, tx, 6*sizeof(double));
-        else { double f = a->step_size / distb; for (int u = 0; u < 6; ++u) a->xi_sb[u] = xb[u] + f*db[u]; }
+        a->reach_b = tcb_step_toward(xb, tx, db, distb, a->step_size, a->xi_sb);
         double Pb[12];
         tcb_pose_xi(a->xi_sb, Pb);
         const double *Rb = tb->pose + 12*ib;
@@ -295,9 +322,7 @@ int tcb_streak(tcb_sampler *s, const tcb_ctx *c, tcb_stree *t0, tcb_stree *t1, t
             a->i_near = i;
         }
         double step = (a->step_adapt && isfinite(ta->dom[i])) ? ta->dom[i] : a->step_size;
-        a->reach = dist <= step;
-        if (a->reach) memcpy(a->xi_s, a->xi_rand, 6*sizeof(double));
-        else { double f = step / dist; for (int k = 0; k < 6; ++k) a->xi_s[k] = xn[k] + f*d[k]; }
+        a->reach = tcb_step_toward(xn, a->xi_rand, d, dist, step, a->xi_s);
         tcb_pose_xi(a->xi_s, a->Ps);
         const double *R0 = ta->pose + 12*i;
         long long k = tcb_extend_prefix(c, R0, R0 + 9, a->Ps, a->Ps + 9, a->n_interp, ta->q + (long long)c->nq*i,
