@@ -14,6 +14,7 @@ checked against the scan's (the first row among equal distances): a mismatch rai
 from __future__ import annotations
 
 import argparse
+import functools
 import time
 from typing import Any
 
@@ -32,6 +33,18 @@ def rrt_keys(n: int, rng: np.random.Generator, step: float = 0.05, box: float = 
         d = s - X[j]
         X[i] = X[j] + step * d / np.linalg.norm(d)
     return X
+
+
+def _kd(X: np.ndarray, n: int, idx: Any, q: np.ndarray) -> int:
+    from ..planners.kernel.extend import nearest
+
+    return nearest(X, n, q, None, idx)
+
+
+def _scan(X: np.ndarray, n: int, q: np.ndarray) -> int:
+    from ..planners.kernel.extend import nearest
+
+    return nearest(X, n, q)
 
 
 def _timed(f: Any, Q: np.ndarray, blocks: int = 4) -> tuple[float, list[int]]:
@@ -63,7 +76,7 @@ def nearest_costs(rows: int, n_queries: int, seed: int = 0) -> list[dict[str, An
             nearest(X, rows, Q[0], None, idx)                       # the index takes its rows
             kd_us = scan_us = 0.0
             for half in np.array_split(np.arange(n_queries), 2):  # alternating which runs first
-                runs = [("kd", lambda q: nearest(X, rows, q, None, idx)), ("scan", lambda q: nearest(X, rows, q))]
+                runs = [("kd", functools.partial(_kd, X, rows, idx)), ("scan", functools.partial(_scan, X, rows))]
                 got = {}
                 for name, f in (runs if half[0] == 0 else runs[::-1]):
                     us, ans = _timed(f, Q[half])
@@ -74,7 +87,7 @@ def nearest_costs(rows: int, n_queries: int, seed: int = 0) -> list[dict[str, An
                         scan_us += us * len(half) / n_queries
                 if got["kd"] != got["scan"]:
                     raise AssertionError(f"nearest_index: the k-d index and the scan disagree ({kind}, {qk})")
-            ck_us, _ = _timed(lambda q: tree.query(q, k=1), Q[:min(n_queries, 500)])
+            ck_us, _ = _timed(functools.partial(tree.query, k=1), Q[:min(n_queries, 500)])
             out.append({"rows": rows, "keys": kind, "queries": qk, "kd_us": kd_us, "scan_us": scan_us,
                         "ckdtree_us": ck_us})
     return out

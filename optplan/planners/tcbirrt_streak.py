@@ -281,15 +281,14 @@ class NativeStreak:
         return a
 
     def _added(self, a: _SArgs, trees: tuple[_TaskTree, _TaskTree]) -> None:
-        """The nodes the call added to the trees' arrays, into their Python lists (each node's pose; its edge: the
-        configurations and poses before it), as :meth:`~.tcbirrt_tree._TaskTree.add` keeps them. ``trees``: the
-        trees the log's tags 0 and 1 name."""
+        """The nodes the call added to the trees' arrays, into their Python lists as
+        :meth:`~.tcbirrt_tree._TaskTree.add` keeps them: each node's edge, the configurations and poses before it
+        (its own pose is its ``pose12`` row, written in C). ``trees``: the trees the log's tags 0 and 1 name."""
         for e, (w, m, k) in enumerate(self.LM[:a.n_log].tolist()):
             t = trees[w]
-            if m != len(t.pose):   # pragma: no cover - the log's rows are in the order the nodes were added
-                raise RuntimeError(f"streak log out of order: node {m} of a tree with {len(t.pose)} poses")
+            if m != len(t.edge):   # pragma: no cover - the log's rows are in the order the nodes were added
+                raise RuntimeError(f"streak log out of order: node {m} of a tree with {len(t.edge)} edges")
             P, Q = self.LP[e, :k].copy(), self.LQ[e, :k].copy()   # the waypoints kept (all, or a prefix)
-            t.pose.append((P[-1, :9].reshape(3, 3), P[-1, 9:]))
             t.edge.append((list(Q[:-1]), [(P[j, :9].reshape(3, 3), P[j, 9:]) for j in range(k - 1)]))
         for t in trees:
             t.n = int(self._trees[id(t)][1].n)

@@ -17,6 +17,28 @@ from .tree import Tree
 __all__ = ["_TaskTree", "extract_path"]
 
 
+class _Poses:
+    """A task tree's object poses ``(R, p)`` by node, read from its ``pose12`` rows (the one copy of each pose; the
+    native code reads the same rows): ``R`` 3 × 3 and ``p`` 3-vector views, read-only."""
+
+    __slots__ = ("_t",)
+
+    def __init__(self, tree: _TaskTree) -> None:
+        self._t = tree
+
+    def __len__(self) -> int:
+        return self._t.n
+
+    def __getitem__(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        n = self._t.n
+        if not -n <= i < n:
+            raise IndexError(f"node {i} of a tree of {n} nodes")
+        r = self._t.pose12[i % n]
+        R, p = r[:9].reshape(3, 3), r[9:]
+        R.flags.writeable = p.flags.writeable = False
+        return R, p
+
+
 class _TaskTree(Tree):
     """Nodes keyed by ξ (nearest neighbour), their configurations ``q``, object poses and, per
     node, the edge from its parent: intermediate configurations and object poses (j = 1..N−1)
@@ -37,7 +59,8 @@ class _TaskTree(Tree):
     def __init__(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, cap: int = 512):
         super().__init__(xi, cap, edges=True, q=q, checked=True, dom=np.inf, pose12=_pose12(R, p),
                          trapn=np.int64(0), twin=False, tnext=np.int64(-1), thead=np.int64(-1))
-        self.pose = [(R, p)]
+        #: node → its object pose (R, p), read from :attr:`pose12`
+        self.pose = _Poses(self)
         self.edge[0] = ([], [])
         #: graft node → its regrasp motions from the parent's configuration (object fixed at the node's pose)
         self.graft: dict[int, list[tuple[str, list[np.ndarray]]]] = {}
@@ -53,15 +76,12 @@ class _TaskTree(Tree):
         return self.X
 
     def add(self, q: np.ndarray, xi: np.ndarray, R: np.ndarray, p: np.ndarray, parent: int, edge_q: list[np.ndarray], edge_poses: list[tuple[np.ndarray, np.ndarray]]) -> int:  # type: ignore[override]  # a task node needs its q and object pose too; never used as a plain Tree
-        self.pose.append((R, p))
         return super().add(xi, parent, (edge_q, edge_poses), q=q, checked=False, dom=np.inf, pose12=_pose12(R, p),
                            trapn=0, twin=False, tnext=-1, thead=-1)
 
     def add_graft(self, i: int, q: np.ndarray, motions: list[tuple[str, list[np.ndarray]]]) -> int:
         """A node at node i's object pose with another joint solution ``q``, reached from node i's
         configuration by the regrasp ``motions``: a second IK branch of the same tree."""
-        R, p = self.pose[i]
-        self.pose.append((R, p))
         group = self.twins.setdefault(i, [i])
         k = super().add(self.X[i].copy(), i, ([], []), q=q, checked=False, dom=np.inf, pose12=self.pose12[i],
                         trapn=0, twin=True, tnext=-1, thead=group[0])
