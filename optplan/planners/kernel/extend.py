@@ -157,8 +157,8 @@ def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = Non
     """Index of the row of ``X[:n]`` (C-contiguous float64, rows of ``x.size``) nearest ``x`` in squared
     Euclidean distance, the first among equals; rows with ``alive[i]`` False are skipped (``alive``:
     a boolean array, or None). −1 when no row is live. ``index``: the rows' k-d index ``(K, kdn)`` (:func:`kd_index`
-    for rows of ``x.size`` values, as many rows as ``X``), searched instead of every row from a couple of hundred rows on (the same answer); it
-    takes rows added since its last use (rows are only ever appended to ``X``)."""
+    for rows of ``x.size`` values, as many rows as ``X``), searched instead of every row from 1,024 rows on (the same
+    answer); it takes rows added since its last use (rows are only ever appended to ``X``)."""
     lib = load_extend_library()
     x = np.ascontiguousarray(x, dtype=float)
     if X.dtype != np.float64 or not X.flags.c_contiguous or X.ndim != 2 or x.size != X.shape[1] or not 0 <= n <= len(X):
@@ -178,8 +178,8 @@ def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = Non
 def kd_index(rows: int, dim: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """An empty k-d index for :func:`nearest` over a key array of ``rows`` rows of ``dim`` values: ``(K, kdn)``, per
     row its two children and a box that holds its subtree's keys (``rows`` × (2 + ``dim``) int64 slots, the box
-    stored as ``2 dim`` floats by the native code) and the number of rows it holds (1 int64, 0 now). Grow ``K`` with its key
-    array (rows appended, the old ones kept)."""
+    stored as ``2 dim`` floats by the native code), and the number of rows it holds (1 int64, 0 now). Grow ``K``
+    with its key array (rows appended, the old ones kept)."""
     return np.full((int(rows), 2 + int(dim)), -1, np.int64), np.zeros(1, np.int64)
 
 
