@@ -35,8 +35,9 @@ def test_native_nearest_matches_brute_force_with_dead_nodes_and_ties():
 
 
 def test_kd_index_gives_the_scans_answers_as_rows_are_appended():
-    """The k-d index (rows appended between queries, dead rows, exact ties, monotone chains that make it deep, keys on
-    a coarse grid with many equal distances): the scan's answer at every query, the first index among equals."""
+    """The k-d index (rows appended between queries, so that some queries meet a tail of rows the tree was not built
+    over, dead rows, exact ties, monotone chains, keys on a coarse grid with many equal distances): the scan's answer
+    at every query, the first index among equals."""
     from optplan.planners.kernel.extend import kd_index
 
     rng = np.random.default_rng(12)
@@ -58,7 +59,25 @@ def test_kd_index_gives_the_scans_answers_as_rows_are_appended():
                 x = rng.integers(0, 4, size=dim) * 0.5 if grid else rng.normal(size=dim) * (3 if rng.random() < 0.5 else 40)
                 want = _brute(X, n, x, alive) if alive is None or alive[:n].any() else -1
                 assert nearest(X, n, x, alive, (K, kdn)) == want, (trial, n)
-        assert kdn[0] == cap or cap < 1024
+        # the index was built over all rows but a tail of at most a sixteenth of them (scanned)
+        assert cap < 1024 or (kdn[0] <= cap and 16 * (cap - kdn[0]) <= kdn[0]), (kdn[0], cap)
+
+
+def test_kd_index_stays_within_its_slots_for_every_dim():
+    """The index's tree over all rows (its row order and its nodes' boxes) fits the rows x (2 + dim) slots it is given:
+    slots past them (a guard region of the same array) are never written, from 1 to 8 coordinates."""
+    from optplan.planners.kernel.extend import kd_index
+
+    rng = np.random.default_rng(5)
+    for dim in range(1, 9):
+        for cap in (1024, 1500, 4099):
+            X = rng.normal(size=(cap, dim))
+            K, kdn = kd_index(cap + 64, dim)
+            K[cap:] = 777
+            x = rng.normal(size=dim)
+            assert nearest(X, cap, x, None, (K[:cap], kdn)) == _brute(X, cap, x)
+            assert kdn[0] == cap
+            assert (K[cap:] == 777).all(), (dim, cap)
 
 
 def test_a_tree_with_an_index_answers_as_the_scan_after_growing_and_killing():

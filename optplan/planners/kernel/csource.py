@@ -95,21 +95,23 @@ static void compose(const double *A, const double *B, double *C) {
 /* joint transform after the placement L: rotation about the unit axis u by x (jtype 1), about the
    joint's x, y or z axis (jtype 3, 4, 5: two columns mixed), or translation along u (jtype 2) */
 static void joint_motion(const double *L, int type, const double *u, double x, double *O) {
-    if (type >= 3) {
-        int a = (type - 2) % 3, b = (type - 1) % 3;   /* RX: columns y, z; RY: z, x; RZ: x, y */
-        double s = sin(x), c = cos(x);
-        memcpy(O, L, 12*sizeof(double));
-        for (int i = 0; i < 3; ++i) {
-            double la = L[3*i+a], lb = L[3*i+b];
-            O[3*i+a] = c*la + s*lb;
-            O[3*i+b] = -s*la + c*lb;
+    if (type >= 3 || type == 1) {
+        double s = sin(x), c = cos(x);        /* one sincos call for both */
+        if (type >= 3) {
+            int a = (type - 2) % 3, b = (type - 1) % 3;   /* RX: columns y, z; RY: z, x; RZ: x, y */
+            memcpy(O, L, 12*sizeof(double));
+            for (int i = 0; i < 3; ++i) {
+                double la = L[3*i+a], lb = L[3*i+b];
+                O[3*i+a] = c*la + s*lb;
+                O[3*i+b] = -s*la + c*lb;
+            }
+        } else {
+            double t = 1.0 - c;
+            double M[12] = {c + t*u[0]*u[0], t*u[0]*u[1] - s*u[2], t*u[0]*u[2] + s*u[1],
+                            t*u[0]*u[1] + s*u[2], c + t*u[1]*u[1], t*u[1]*u[2] - s*u[0],
+                            t*u[0]*u[2] - s*u[1], t*u[1]*u[2] + s*u[0], c + t*u[2]*u[2], 0, 0, 0};
+            compose(L, M, O);
         }
-    } else if (type == 1) {
-        double s = sin(x), c = cos(x), t = 1.0 - c;
-        double M[12] = {c + t*u[0]*u[0], t*u[0]*u[1] - s*u[2], t*u[0]*u[2] + s*u[1],
-                        t*u[0]*u[1] + s*u[2], c + t*u[1]*u[1], t*u[1]*u[2] - s*u[0],
-                        t*u[0]*u[2] - s*u[1], t*u[1]*u[2] + s*u[0], c + t*u[2]*u[2], 0, 0, 0};
-        compose(L, M, O);
     } else if (type == 2) {
         double M[12] = {1,0,0, 0,1,0, 0,0,1, u[0]*x, u[1]*x, u[2]*x};
         compose(L, M, O);

@@ -176,10 +176,11 @@ def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = Non
 
 
 def kd_index(rows: int, dim: int = 6) -> tuple[np.ndarray, np.ndarray]:
-    """An empty k-d index for :func:`nearest` over a key array of ``rows`` rows of ``dim`` values: ``(K, kdn)``, per
-    row its two children and a box that holds its subtree's keys (``rows`` × (2 + ``dim``) int64 slots, the box
-    stored as ``2 dim`` floats by the native code), and the number of rows it holds (1 int64, 0 now). Grow ``K``
-    with its key array (rows appended, the old ones kept)."""
+    """An empty k-d index for :func:`nearest` over a key array of ``rows`` rows of ``dim`` values: ``(K, kdn)``.
+    ``K`` (``rows`` × (2 + ``dim``) int64 slots) holds a balanced tree built by the native code over the first
+    ``kdn[0]`` rows (their order in the leaves, and per node the exact box of its keys), built again over all rows once
+    the rows appended since outgrow a sixteenth of them (those are scanned until then); ``kdn`` (1 int64, 0 now) is
+    that count. Grow ``K`` with its key array (rows appended, the old ones kept)."""
     return np.full((int(rows), 2 + int(dim)), -1, np.int64), np.zeros(1, np.int64)
 
 

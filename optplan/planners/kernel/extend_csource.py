@@ -81,98 +81,155 @@ long long tcb_nearest(const double *X, long long n, int dim, const unsigned char
     return best;
 }
 
-/* A k-d index over a tree's key rows for tcb_nearest_kd, row m's entry TCB_KD_W(dim) int64 slots of K from K + m*W:
-   its children (slot 0: keys below m's in the split coordinate, slot 1: the others; -1 none; the split coordinate
-   cycles with the depth from row 0), then a box that holds the keys of m's subtree as 2*dim floats (lower corner
-   rounded down, upper corner rounded up: 64 bytes an entry for 6-D keys). The index holds rows 0..*kdn-1 and takes
-   the newer rows at the next query (rows are only ever appended), so the code that adds nodes (Python or C) need not
-   know of it. */
+/* A k-d index over a tree's key rows for tcb_nearest_kd, kept in the int64 slots of K (TCB_KD_W(dim) per row of the key
+   array, so that it grows with it): a balanced tree built over the first *kdn rows, the rows after them (appended since)
+   scanned one by one, and the tree built again over all rows once that tail outgrows a sixteenth of it. Slot 0 holds
+   the rows built over (nb), slot 1 the nodes; then nb row numbers in leaf order; then the nodes, each 2*dim doubles
+   (the box of its rows' keys, lower corner then upper, exact) and two slots: a leaf's first and one-past-last position
+   in the row order (first stored as -1 - first), or an inner node's two children. A node splits its rows at the median
+   of the coordinate of the largest extent; a leaf holds at most TCB_KD_LEAF rows (at least half of that), so the nodes
+   take at most 2 nb / (TCB_KD_LEAF / 2) of 2 dim + 2 slots: within K for every dim up to 8. */
 #define TCB_KD_MIN 1024      /* below this many rows the linear scan is as fast (measured) */
-#define TCB_KD_STACK 512     /* pending far branches; deeper indexes fall back to the scan */
+#define TCB_KD_LEAF 12       /* rows of a leaf, at most */
+#define TCB_KD_STACK 128     /* pending far branches (a balanced tree is far shallower) */
 #define TCB_KD_W(dim) (2 + (long long)(dim))
+#define TCB_KD_HDR 2
 
-static inline float tcb_f_down(double v) { float f = (float)v; return (double)f > v ? nextafterf(f, -INFINITY) : f; }
-static inline float tcb_f_up(double v) { float f = (float)v; return (double)f < v ? nextafterf(f, INFINITY) : f; }
+static inline long long tcb_kd_nw(int dim) { return 2*(long long)dim + 2; }
 
-static void tcb_kd_insert(const double *X, long long n, int dim, long long *K, long long *kdn) {
-    long long m = *kdn, W = TCB_KD_W(dim);
-    for (; m < n; ++m) {
-        const double *x = X + (long long)dim*m;
-        long long *e = K + W*m;
-        float *bb = (float *)(e + 2), lo[8], hi[8];
-        for (int k = 0; k < dim; ++k) { lo[k] = tcb_f_down(x[k]); hi[k] = tcb_f_up(x[k]); }
-        e[0] = e[1] = -1;
-        memcpy(bb, lo, (size_t)dim*sizeof(float));
-        memcpy(bb + dim, hi, (size_t)dim*sizeof(float));
-        if (m == 0) continue;
-        long long cur = 0;
-        int d = 0;
-        for (;;) {
-            long long *c = K + W*cur;
-            float *cb = (float *)(c + 2);
-            for (int k = 0; k < dim; ++k) {         /* the subtree below cur takes x: its box grows to hold it */
-                if (lo[k] < cb[k]) cb[k] = lo[k];
-                if (hi[k] > cb[dim + k]) cb[dim + k] = hi[k];
-            }
-            long long *slot = x[d] < X[(long long)dim*cur + d] ? &c[0] : &c[1];
-            if (*slot < 0) { *slot = m; break; }
-            cur = *slot;
-            d = d + 1 == dim ? 0 : d + 1;
+/* rows perm[lo..hi) reordered so that the (mid-lo)-th smallest in coordinate d sits at mid, the smaller ones before */
+static void tcb_kd_select(const double *X, int dim, long long *perm, long long lo, long long hi, long long mid, int d) {
+    while (hi - lo > 1) {
+        long long a = lo, b = hi - 1, m = lo + (hi - lo)/2;
+        double va = X[dim*perm[a] + d], vb = X[dim*perm[b] + d], vm = X[dim*perm[m] + d];
+        double piv = va < vb ? (vm < va ? va : vm < vb ? vm : vb) : (vm < vb ? vb : vm < va ? vm : va);
+        long long i = lo, j = hi - 1;
+        while (i <= j) {                                  /* Hoare partition around the median of three */
+            while (X[dim*perm[i] + d] < piv) ++i;
+            while (X[dim*perm[j] + d] > piv) --j;
+            if (i <= j) { long long t = perm[i]; perm[i] = perm[j]; perm[j] = t; ++i; --j; }
         }
+        if (mid <= j) hi = j + 1;
+        else if (mid >= i) lo = i;
+        else return;
     }
-    *kdn = n;
 }
 
-/* a lower bound of the squared distances from x to the keys in node e's box: the sum, term by term in the distances'
-   order, of the squared offsets of x outside the box; each offset is no larger than that term of a key's distance in
-   floating point too (a difference rounds monotonically), and so is the sum */
-static inline double tcb_kd_bound(const long long *e, int dim, const double *x) {
-    const float *lo = (const float *)(e + 2), *hi = lo + dim;
+/* node `node` over perm[lo..hi): its box and its subtree; returns the next free node */
+static long long tcb_kd_build_node(const double *X, int dim, long long *perm, double *nodes, long long node, long long lo,
+                                   long long hi) {
+    long long nw = tcb_kd_nw(dim);
+    double *bx = nodes + nw*node;
+    long long *link = (long long *)(bx + 2*dim);
+    if (hi - lo <= TCB_KD_LEAF) {
+        for (int k = 0; k < dim; ++k) { bx[k] = INFINITY; bx[dim + k] = -INFINITY; }
+        for (long long i = lo; i < hi; ++i) {
+            const double *r = X + dim*perm[i];
+            for (int k = 0; k < dim; ++k) {
+                if (r[k] < bx[k]) bx[k] = r[k];
+                if (r[k] > bx[dim + k]) bx[dim + k] = r[k];
+            }
+        }
+        link[0] = -1 - lo; link[1] = hi;
+        return node + 1;
+    }
+    /* the coordinate of the largest extent over these rows, then its median */
+    double mn[8], mx[8];
+    for (int k = 0; k < dim; ++k) { mn[k] = INFINITY; mx[k] = -INFINITY; }
+    for (long long i = lo; i < hi; ++i) {
+        const double *r = X + dim*perm[i];
+        for (int k = 0; k < dim; ++k) { if (r[k] < mn[k]) mn[k] = r[k]; if (r[k] > mx[k]) mx[k] = r[k]; }
+    }
+    int d = 0;
+    for (int k = 1; k < dim; ++k) if (mx[k] - mn[k] > mx[d] - mn[d]) d = k;
+    long long mid = lo + (hi - lo)/2;
+    tcb_kd_select(X, dim, perm, lo, hi, mid, d);
+    long long left = node + 1;
+    long long right = tcb_kd_build_node(X, dim, perm, nodes, left, lo, mid);
+    long long next = tcb_kd_build_node(X, dim, perm, nodes, right, mid, hi);
+    const double *bl = nodes + nw*left, *br = nodes + nw*right;
+    for (int k = 0; k < dim; ++k) {
+        bx[k] = bl[k] < br[k] ? bl[k] : br[k];
+        bx[dim + k] = bl[dim + k] > br[dim + k] ? bl[dim + k] : br[dim + k];
+    }
+    link[0] = left; link[1] = right;
+    return next;
+}
+
+/* the tree over rows 0..n-1 into K */
+static void tcb_kd_build(const double *X, long long n, int dim, long long *K) {
+    long long *perm = K + TCB_KD_HDR;
+    for (long long i = 0; i < n; ++i) perm[i] = i;
+    double *nodes = (double *)(perm + n);
+    K[1] = tcb_kd_build_node(X, dim, perm, nodes, 0, 0, n);
+    K[0] = n;
+}
+
+/* a lower bound of the squared distances from x to the keys in a box: the sum, term by term in the distances' order, of
+   the squared offsets of x outside the box; each offset is no larger than that term of a key's distance in floating point
+   too (a difference rounds monotonically), and so is the sum */
+static inline double tcb_kd_bound(const double *bx, int dim, const double *x) {
     double s = 0.0;
     for (int k = 0; k < dim; ++k) {
-        double l = (double)lo[k], h = (double)hi[k];
-        double t = x[k] < l ? l - x[k] : x[k] > h ? x[k] - h : 0.0;
+        double t = x[k] < bx[k] ? bx[k] - x[k] : x[k] > bx[dim + k] ? x[k] - bx[dim + k] : 0.0;
         s += t*t;
     }
     return s;
 }
 
 /* tcb_nearest's answer (the first live row among the least squared distances, the same sums term by term) through the
-   index K, *kdn (see tcb_kd_insert); K NULL or few rows: the scan. A subtree is skipped when the lower bound of its
-   box (tcb_kd_bound), shrunk by 1e-9 against its rounding, exceeds the best distance; an equal bound is searched, for
-   its rows' indices. Dead rows stay in the boxes (a looser bound, the same answer). */
+   index K, *kdn (see above); K NULL or few rows: the scan. A subtree is skipped when the lower bound of its box exceeds
+   the best distance (an equal one is searched, for its rows' indices): the scan's answer, always. Dead rows stay in
+   the boxes (a looser bound, the same answer). */
 long long tcb_nearest_kd(const double *X, long long n, int dim, const unsigned char *alive, const double *x,
                          long long *K, long long *kdn) {
     if (!K || n < TCB_KD_MIN || dim > 8) return tcb_nearest(X, n, dim, alive, x);
-    if (*kdn > n) *kdn = 0;                      /* rows were taken back: the index is built again */
-    if (*kdn < n) tcb_kd_insert(X, n, dim, K, kdn);
-    long long W = TCB_KD_W(dim), stk[TCB_KD_STACK], best = -1;
-    int sdim[TCB_KD_STACK];
-    double bd = 0.0;
+    for (int k = 0; k < dim; ++k) if (x[k] != x[k]) return tcb_nearest(X, n, dim, alive, x);
+    long long nb = *kdn;
+    if (nb > n || nb < TCB_KD_MIN || K[0] != nb || n - nb > (nb >> 4)) {   /* rows taken back, none yet, a long tail */
+        tcb_kd_build(X, n, dim, K);
+        *kdn = nb = n;
+    }
+    const long long *perm = K + TCB_KD_HDR;
+    const double *nodes = (const double *)(perm + nb);
+    long long nw = tcb_kd_nw(dim), best = -1, stk[TCB_KD_STACK];
+    double bd = 0.0, sb[TCB_KD_STACK];
+    for (long long i = nb; i < n; ++i) {              /* the tail: rows appended since the build */
+        if (alive && !alive[i]) continue;
+        const double *r = X + i*dim;
+        double s = 0.0;
+        for (int k = 0; k < dim; ++k) { double q = r[k] - x[k]; s += q*q; }
+        if (best < 0 || s < bd) { best = i; bd = s; }
+    }
     int top = 0;
-    stk[top] = 0; sdim[top] = 0; ++top;
+    stk[0] = 0; sb[0] = tcb_kd_bound(nodes, dim, x); top = 1;
     while (top > 0) {
         --top;
         long long cur = stk[top];
-        int d = sdim[top];
-        while (cur >= 0) {
-            const long long *e = K + W*cur;
-            if (best >= 0 && tcb_kd_bound(e, dim, x)*(1.0 - 1e-9) > bd) break;
-            const double *r = X + (long long)dim*cur;
-            if (!alive || alive[cur]) {
-                double s = 0.0;
-                for (int k = 0; k < dim; ++k) { double q = r[k] - x[k]; s += q*q; }
-                if (best < 0 || s < bd || (s == bd && cur < best)) { best = cur; bd = s; }
+        double b = sb[top];
+        for (;;) {
+            if (best >= 0 && b > bd) break;
+            const double *bx = nodes + nw*cur;
+            const long long *link = (const long long *)(bx + 2*dim);
+            if (link[0] < 0) {                        /* a leaf: its rows */
+                for (long long p = -1 - link[0]; p < link[1]; ++p) {
+                    long long i = perm[p];
+                    if (alive && !alive[i]) continue;
+                    const double *r = X + i*dim;
+                    double s = 0.0;
+                    for (int k = 0; k < dim; ++k) { double q = r[k] - x[k]; s += q*q; }
+                    if (best < 0 || s < bd || (s == bd && i < best)) { best = i; bd = s; }
+                }
+                break;
             }
-            long long nearc, farc;
-            if (x[d] < r[d]) { nearc = e[0]; farc = e[1]; } else { nearc = e[1]; farc = e[0]; }
-            int dn = d + 1 == dim ? 0 : d + 1;
-            if (farc >= 0 && (best < 0 || tcb_kd_bound(K + W*farc, dim, x)*(1.0 - 1e-9) <= bd)) {
+            long long l = link[0], r = link[1];
+            double bl = tcb_kd_bound(nodes + nw*l, dim, x), br = tcb_kd_bound(nodes + nw*r, dim, x);
+            if (br < bl) { long long t = l; l = r; r = t; double u = bl; bl = br; br = u; }
+            if (best < 0 || br <= bd) {
                 if (top == TCB_KD_STACK) return tcb_nearest(X, n, dim, alive, x);
-                stk[top] = farc; sdim[top] = dn; ++top;
+                stk[top] = r; sb[top] = br; ++top;
             }
-            cur = nearc;
-            d = dn;
+            cur = l; b = bl;
         }
     }
     return best;
