@@ -42,7 +42,7 @@ def test_kd_index_gives_the_scans_answers_as_rows_are_appended():
 
     rng = np.random.default_rng(12)
     for trial in range(24):
-        dim, cap = int(rng.integers(2, 9)), int(rng.integers(1100, 4000))
+        dim, cap = int(rng.integers(2, 9)), int(rng.integers(600, 4000))
         X, (K, kdn) = np.empty((cap, dim)), kd_index(cap, dim)
         grid = trial % 3 == 0
         alive = np.ones(cap, bool) if trial % 2 else None
@@ -60,7 +60,7 @@ def test_kd_index_gives_the_scans_answers_as_rows_are_appended():
                 want = _brute(X, n, x, alive) if alive is None or alive[:n].any() else -1
                 assert nearest(X, n, x, alive, (K, kdn)) == want, (trial, n)
         # the index was built over all rows but a tail of at most a sixteenth of them (scanned)
-        assert cap < 1024 or (kdn[0] <= cap and 16 * (cap - kdn[0]) <= kdn[0]), (kdn[0], cap)
+        assert cap < 512 or (kdn[0] <= cap and 16 * (cap - kdn[0]) <= kdn[0]), (kdn[0], cap)
 
 
 def test_kd_index_stays_within_its_slots_for_every_dim():
@@ -70,7 +70,7 @@ def test_kd_index_stays_within_its_slots_for_every_dim():
 
     rng = np.random.default_rng(5)
     for dim in range(1, 9):
-        for cap in (1024, 1500, 4099):
+        for cap in (512, 700, 1500, 4099):
             X = rng.normal(size=(cap, dim))
             K, kdn = kd_index(cap + 64, dim)
             K[cap:] = 777

@@ -8,8 +8,10 @@ and ``rrt`` (a tree grown by steps of 0.05 from random nodes toward uniform samp
 tree grows). Queries ``near`` (a row plus noise of 0.01) and ``far`` (uniform in the sampling box; four times wider
 for ``gauss``): a planner's samples mostly lie far from its trees. Per case: µs per query of the index and of the
 scan, both through :func:`~optplan.planners.kernel.extend.nearest` (the ctypes call included), timed in alternating
-blocks on the same queries, their ratio, and ``cKDTree.query`` one query at a time. Every answer of the index is
-checked against the scan's (the first row among equal distances): a mismatch raises.
+blocks on the same queries, their ratio, and ``cKDTree.query`` one query at a time; then the same inside one native
+call for all queries (:func:`~optplan.planners.kernel.extend.nearest_batch`: the cost a search in C pays per query,
+no ctypes call), beside ``cKDTree.query`` of all queries at once. Every answer of the index is checked against the
+scan's (the first row among equal distances): a mismatch raises.
 """
 from __future__ import annotations
 
@@ -57,6 +59,28 @@ def _timed(f: Any, Q: np.ndarray, blocks: int = 4) -> tuple[float, list[int]]:
     return t / len(Q) * 1e6, out
 
 
+def _native_costs(X: np.ndarray, rows: int, idx: Any, Q: np.ndarray, tree: Any, reps: int = 3) -> tuple[float, float, float]:
+    """µs per query inside one native call for all queries (:func:`~optplan.planners.kernel.extend.nearest_batch`):
+    the index and the scan (the best of ``reps`` alternating runs; their answers compared), and cKDTree's own batch
+    ``query`` of all queries at once."""
+    from ..planners.kernel.extend import nearest_batch
+
+    best = [np.inf, np.inf, np.inf]
+    for _ in range(reps):
+        t = time.perf_counter()
+        a = nearest_batch(X, rows, Q, None, idx)
+        best[0] = min(best[0], time.perf_counter() - t)
+        t = time.perf_counter()
+        b = nearest_batch(X, rows, Q)
+        best[1] = min(best[1], time.perf_counter() - t)
+        t = time.perf_counter()
+        tree.query(Q, k=1)
+        best[2] = min(best[2], time.perf_counter() - t)
+        if not np.array_equal(a, b):
+            raise AssertionError("nearest_index: the k-d index and the scan disagree (native batch)")
+    return tuple(v / len(Q) * 1e6 for v in best)  # type: ignore[return-value]
+
+
 def nearest_costs(rows: int, n_queries: int, seed: int = 0) -> list[dict[str, Any]]:
     """One row per (key set, query kind) with ``rows`` keys and ``n_queries`` queries: µs per query of the index
     (``kd_us``), the scan (``scan_us``) and cKDTree (``ckdtree_us``)."""
@@ -88,8 +112,9 @@ def nearest_costs(rows: int, n_queries: int, seed: int = 0) -> list[dict[str, An
                 if got["kd"] != got["scan"]:
                     raise AssertionError(f"nearest_index: the k-d index and the scan disagree ({kind}, {qk})")
             ck_us, _ = _timed(functools.partial(tree.query, k=1), Q[:min(n_queries, 500)])
+            c_kd, c_scan, c_ck = _native_costs(X, rows, idx, Q, tree)
             out.append({"rows": rows, "keys": kind, "queries": qk, "kd_us": kd_us, "scan_us": scan_us,
-                        "ckdtree_us": ck_us})
+                        "ckdtree_us": ck_us, "kd_c_us": c_kd, "scan_c_us": c_scan, "ckdtree_batch_us": c_ck})
     return out
 
 
@@ -100,13 +125,15 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args(argv)
     rows = []
-    print("| rows | keys | queries | k-d index µs | scan µs | index / scan | cKDTree µs (one query) |")
-    print("|---|---|---|---|---|---|---|")
+    print("| rows | keys | queries | k-d index µs | scan µs | index / scan | cKDTree µs (one query) | in C: index µs | "
+          "in C: scan µs | in C: index / scan | cKDTree µs (all queries in one call) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for n in (int(v) for v in a.rows.split(",")):
         for r in nearest_costs(n, a.queries, a.seed):
             rows.append(r)
             print(f"| {r['rows']} | {r['keys']} | {r['queries']} | {r['kd_us']:.1f} | {r['scan_us']:.1f} | "
-                  f"{r['kd_us'] / r['scan_us']:.2f} | {r['ckdtree_us']:.1f} |", flush=True)
+                  f"{r['kd_us'] / r['scan_us']:.2f} | {r['ckdtree_us']:.1f} | {r['kd_c_us']:.2f} | {r['scan_c_us']:.2f} | "
+                  f"{r['kd_c_us'] / r['scan_c_us']:.2f} | {r['ckdtree_batch_us']:.2f} |", flush=True)
     return rows
 
 

@@ -15,7 +15,7 @@ When the native extension library builds (:func:`optplan.planners.kernel.extend.
 search runs as a linear scan in C over the contiguous key array: the same distances term by term, the
 first node among equals, 2-3x cheaper than the ``einsum`` (ctypes call included) from a hundred
 nodes on; without a C compiler the ``einsum`` stays. A tree class with :attr:`Tree.KD_INDEX` (TCBiRRT's trees) also
-keeps a k-d index of its keys, which the native search uses from 1,024 nodes on: the same answers (the same sums, an
+keeps a k-d index of its keys, which the native search uses from 512 nodes on: the same answers (the same sums, an
 exact pruning bound, the first node among equals), 2-5x fewer distance computations on large trees. It takes new
 rows lazily at the next query, so nodes added by native code need no hook.
 """

@@ -40,7 +40,7 @@ from .native import KernelUnavailable
 from .sampler_csource import RNG_SOURCE, SAMPLER_SOURCE
 from .streak_csource import STREAK_SOURCE
 
-__all__ = ["NativeExtender", "NativePoseFilter", "load_extend_library", "nearest", "nearest_available"]
+__all__ = ["NativeExtender", "NativePoseFilter", "load_extend_library", "nearest", "nearest_available", "nearest_batch"]
 log = logging.getLogger(__name__)
 
 _P = ctypes.c_void_p
@@ -102,6 +102,8 @@ def load_extend_library() -> Any:
     lib.tcb_nearest.argtypes = [_P, _LL, ctypes.c_int, _P, _P]
     lib.tcb_nearest_kd.restype = _LL
     lib.tcb_nearest_kd.argtypes = [_P, _LL, ctypes.c_int, _P, _P, _P, _P]
+    lib.tcb_nearest_batch.restype = None
+    lib.tcb_nearest_batch.argtypes = [_P, _LL, ctypes.c_int, _P, _P, _LL, _P, _P, _P]
     lib.tcb_interpolate.restype = None
     lib.tcb_interpolate.argtypes = [_P, _P, _P, _P, ctypes.c_int, _P]
     lib.tcb_path_ik.restype = _LL
@@ -157,7 +159,7 @@ def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = Non
     """Index of the row of ``X[:n]`` (C-contiguous float64, rows of ``x.size``) nearest ``x`` in squared
     Euclidean distance, the first among equals; rows with ``alive[i]`` False are skipped (``alive``:
     a boolean array, or None). −1 when no row is live. ``index``: the rows' k-d index ``(K, kdn)`` (:func:`kd_index`
-    for rows of ``x.size`` values, as many rows as ``X``), searched instead of every row from 1,024 rows on (the same
+    for rows of ``x.size`` values, as many rows as ``X``), searched instead of every row from 512 rows on (the same
     answer); it takes rows added since its last use (rows are only ever appended to ``X``)."""
     lib = load_extend_library()
     x = np.ascontiguousarray(x, dtype=float)
@@ -173,6 +175,33 @@ def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = Non
         raise ValueError(f"nearest: expected a k-d index of {len(X)} x {width} and 1 int64 values, got {K.dtype} "
                          f"{K.shape} and {kdn.dtype} {kdn.shape}")
     return int(lib.tcb_nearest_kd(_ADDR(X), n, x.size, _ADDR(alive), x.ctypes.data, _ADDR(K), _ADDR(kdn)))
+
+
+def nearest_batch(X: np.ndarray, n: int, Q: np.ndarray, alive: np.ndarray | None = None,
+                  index: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """:func:`nearest` of every row of ``Q`` (queries of ``X.shape[1]`` values) in one native call: their row
+    indices (int64). The benchmark's loop (:mod:`optplan.bench.nearest_index`), timed without a call per query."""
+    lib = load_extend_library()
+    Q = np.ascontiguousarray(Q, dtype=float)
+    if Q.ndim != 2 or X.ndim != 2 or Q.shape[1] != X.shape[1] or X.dtype != np.float64 or not X.flags.c_contiguous \
+            or not 0 <= n <= len(X):
+        raise ValueError(f"nearest_batch: expected C-contiguous float64 rows X and queries Q of one width and "
+                         f"0 <= n <= {len(X)}, got X {X.dtype} {X.shape}, Q {Q.shape} and n = {n}")
+    if alive is not None and (alive.dtype != np.bool_ or alive.shape[0] < n or not alive.flags.c_contiguous):
+        raise ValueError(f"nearest_batch: expected a boolean mask of at least {n} rows, got {alive.dtype} {alive.shape}")
+    K = kdn = None
+    if index is not None:
+        K, kdn = index
+        width = 2 + X.shape[1]
+        if K.shape != (len(X), width) or K.dtype != np.int64 or not K.flags.c_contiguous or kdn.shape != (1,) \
+                or kdn.dtype != np.int64:
+            raise ValueError(f"nearest_batch: expected a k-d index of {len(X)} x {width} and 1 int64 values, got "
+                             f"{K.dtype} {K.shape} and {kdn.dtype} {kdn.shape}")
+    out = np.empty(len(Q), np.int64)
+    lib.tcb_nearest_batch(X.ctypes.data, n, X.shape[1], None if alive is None else alive.ctypes.data, Q.ctypes.data,
+                          len(Q), None if K is None else K.ctypes.data, None if kdn is None else kdn.ctypes.data,
+                          out.ctypes.data)
+    return out
 
 
 def kd_index(rows: int, dim: int = 6) -> tuple[np.ndarray, np.ndarray]:

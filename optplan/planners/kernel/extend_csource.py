@@ -89,7 +89,7 @@ long long tcb_nearest(const double *X, long long n, int dim, const unsigned char
    in the row order (first stored as -1 - first), or an inner node's two children. A node splits its rows at the median
    of the coordinate of the largest extent; a leaf holds at most TCB_KD_LEAF rows (at least half of that), so the nodes
    take at most 2 nb / (TCB_KD_LEAF / 2) of 2 dim + 2 slots: within K for every dim up to 8. */
-#define TCB_KD_MIN 1024      /* below this many rows the linear scan is as fast (measured) */
+#define TCB_KD_MIN 512       /* below this many rows the linear scan is as fast for far queries (measured) */
 #define TCB_KD_LEAF 12       /* rows of a leaf, at most */
 #define TCB_KD_STACK 128     /* pending far branches (a balanced tree is far shallower) */
 #define TCB_KD_W(dim) (2 + (long long)(dim))
@@ -233,6 +233,15 @@ long long tcb_nearest_kd(const double *X, long long n, int dim, const unsigned c
         }
     }
     return best;
+}
+
+/* tcb_nearest_kd (K non-NULL) or tcb_nearest for each of the nq queries Q (nq x dim) into out: the benchmark's loop,
+   timed without a call per query */
+void tcb_nearest_batch(const double *X, long long n, int dim, const unsigned char *alive, const double *Q, long long nq,
+                       long long *K, long long *kdn, long long *out) {
+    for (long long j = 0; j < nq; ++j)
+        out[j] = K ? tcb_nearest_kd(X, n, dim, alive, Q + j*(long long)dim, K, kdn)
+                   : tcb_nearest(X, n, dim, alive, Q + j*(long long)dim);
 }
 
 static void tcb_log3(const double *R, double *w) {
