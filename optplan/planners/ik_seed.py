@@ -14,9 +14,11 @@ operation for operation.
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-__all__ = ["PREDICTORS", "predicted_seed"]
+__all__ = ["PREDICTORS", "predicted_seed", "restart_seed"]
 
 #: the seed predictors: ``"none"`` (the previous solution, Alg. 3 as published), ``"secant"``
 PREDICTORS = ("none", "secant")
@@ -31,3 +33,15 @@ def predicted_seed(predictor: str, q: np.ndarray, q_pp: np.ndarray | None, lower
     if predictor != "secant":
         raise ValueError(f"ik_predictor: expected one of {PREDICTORS}, got {predictor!r}")
     return np.minimum(np.maximum(q + (q - q_pp), lower), upper)
+
+
+def restart_seed(q: np.ndarray, rng: np.random.Generator, options: Any) -> np.ndarray:
+    """A random restart's IK seed after the solution ``q`` [rad] (``TCBiRRTOptions``: ``ik_restart_sigma``,
+    ``ik_restart_clip``, ``max_joint_step``): ``q + N(0, sigma²)`` per joint, with ``ik_restart_clip`` each offset
+    clipped to ±``max_joint_step`` (the same draws; the native extension's ``tcb_restart_seed`` does the same with
+    its own random stream)."""
+    o = rng.normal(0.0, options.ik_restart_sigma, q.size)
+    if options.ik_restart_clip:
+        j = float(options.max_joint_step)
+        o = np.clip(o, -j, j)
+    return q + o

@@ -134,7 +134,7 @@ from ..scene import Scene
 from .base import Deadline, Planner, PlanResult, PlanStatus
 from .cbirrt2 import CBiRRT2
 from .frontier_graft import frontier_graft
-from .ik_seed import predicted_seed
+from .ik_seed import predicted_seed, restart_seed
 from .rrtconnect import edge_is_valid
 from .task_sampling import ObjectPoseFilter
 from .task_space import exp_coordinates, interpolate_task, pose_from_xi, rotation_from_exp, xi_from_pose
@@ -251,7 +251,7 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, SamplingMixin, Planner):
                 qn = None
             for _ in range(cast(int, o.ik_restarts) if qn is None else 0):
                 st["ik_restarts"] += 1
-                x, its = kin.ik(q + self._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, self._ik_restart)
+                x, its = kin.ik(restart_seed(q, self._rng, o), R, p, self._ik_restart)
                 st["ik_iterations"] += its
                 st["ik_restart_iterations"] = st.get("ik_restart_iterations", 0) + its
                 if x is not None and float(np.abs(x - q).max()) <= cast(float, o.max_joint_step) and ck.in_limits(x) \

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
+from .ik_seed import restart_seed
 from .kernel.native import KernelUnavailable, pose12
 from .rrtconnect import edge_is_valid
 
@@ -120,7 +121,7 @@ def native_path_ik(pl: TCBiRRT, P: np.ndarray, q_near: np.ndarray, st: dict[str,
         terminal = ext.terminal() or ext.native_restarts   # no restarts after a failed segment, or run in C
         for _ in range(0 if terminal else cast(int, o.ik_restarts)):
             st["ik_restarts"] += 1
-            x, its = kin.ik(q + pl._rng.normal(0.0, o.ik_restart_sigma, q.size), R, p, pl._ik_restart)
+            x, its = kin.ik(restart_seed(q, pl._rng, o), R, p, pl._ik_restart)
             st["ik_iterations"] += its
             st["ik_restart_iterations"] = st.get("ik_restart_iterations", 0) + its
             if x is not None and float(np.abs(x - q).max()) <= mjs and ck.in_limits(x) and ck.is_valid(x):

@@ -28,7 +28,7 @@ VARIANTS = {
               "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
               "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
               "trap_graft_target": "other", "trap_graft_stream": "search", "trap_graft_after": 0,
-              "ik_restart_iterations": 0},
+              "ik_restart_iterations": 0, "ik_restart_clip": False},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
@@ -37,7 +37,7 @@ VARIANTS = {
                  "branch_roots": False, "stall_iterations": 0, "trap_grafts": 4, "restart_iterations": 0,
                  "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
                  "trap_graft_target": "sample", "trap_graft_stream": "own", "trap_graft_after": 1500,
-                 "ik_restart_iterations": 0},
+                 "ik_restart_iterations": 0, "ik_restart_clip": False},
 }
 
 
@@ -305,6 +305,11 @@ class TCBiRRTOptions:
     #: converging (2.7 of the queries' 8.3 million IK iterations). A limit of 12 was measured on 214 fresh generated
     #: scenes and left off: the same successes, CPU per iteration only 4.5 % lower (docs: planners page).
     ik_restart_iterations: int | None = None
+    #: Clip each joint's offset of a restart's seed to ±``max_joint_step``, the bound an accepted solution must keep
+    #: (the same draws). Unclipped, a seed's largest offset of N(0, 0.3²) over 14 joints mostly exceeds 0.25 rad, and
+    #: about half the restarts converge beyond the bound and are refused (docs: planners page) (None: the variant's
+    #: value, :data:`VARIANTS`).
+    ik_restart_clip: bool | None = None
     #: The path IK's seed of a waypoint after the first (:mod:`.ik_seed`): ``"none"`` (the previous solution, Alg. 3)
     #: or ``"secant"`` (``q_{k−1} + (q_{k−1} − q_{k−2})`` clamped to the joint limits; the joint-jump bound stays
     #: relative to ``q_{k−1}``) (None: the variant's value, :data:`VARIANTS`).
@@ -356,6 +361,8 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.domain_tries: expected an int >= 1, got {self.domain_tries!r}")
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
+        if not isinstance(self.ik_restart_clip, bool):
+            raise ValueError(f"TCBiRRTOptions.ik_restart_clip: expected True or False, got {self.ik_restart_clip!r}")
         if not (isinstance(self.ik_restart_iterations, int) and not isinstance(self.ik_restart_iterations, bool)
                 and self.ik_restart_iterations >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restart_iterations: expected an int >= 0 (0: the IK's own limit), got "

@@ -64,7 +64,7 @@ class _Ctx(ctypes.Structure):
                 ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int), ("edge_res", ctypes.c_double),
                 ("rng", _P), ("restarts", ctypes.c_int), ("restart_sigma", ctypes.c_double), ("lower", _P), ("upper", _P),
                 ("ikm", _P), ("predictor", ctypes.c_int), ("qlo", _P), ("qhi", _P), ("pfix", _P),
-                ("restart_max_it", ctypes.c_int)]
+                ("restart_max_it", ctypes.c_int), ("restart_clip", ctypes.c_int)]
 
 
 def load_extend_library() -> Any:
@@ -396,17 +396,18 @@ class NativeExtender:
         self._ctx.ikm = self._ik.address if on else None
 
     def restarts_in_c(self, rng: Any, restarts: int, sigma: float, lower: np.ndarray, upper: np.ndarray,
-                      max_iterations: int = 0) -> None:
+                      max_iterations: int = 0, clip: bool = False) -> None:
         """Run a failing waypoint's random restarts in C: ``restarts`` IK attempts [count] from the previous
         configuration perturbed by ``N(0, sigma²)`` [rad] per joint, drawn from ``rng`` (a
         :class:`~optplan.planners.kernel.sampler.NativeRandom`), accepted inside ``[lower, upper]`` [rad], within
         the joint-jump bound and collision-free (what :meth:`~optplan.planners.tcbirrt.TCBiRRT.path_ik` does with
         the planner's NumPy generator); each IK stops after ``max_iterations`` [count] (0: the extension's IK
-        limit)."""
+        limit). ``clip``: each offset clipped to the joint-jump bound (``TCBiRRTOptions.ik_restart_clip``)."""
         self._lim = (np.ascontiguousarray(lower, dtype=float), np.ascontiguousarray(upper, dtype=float), rng)
         c = self._ctx
         c.rng, c.restarts, c.restart_sigma = rng.address, int(restarts), float(sigma)
         c.restart_max_it = int(max_iterations)
+        c.restart_clip = int(bool(clip))
         c.lower, c.upper = self._lim[0].ctypes.data, self._lim[1].ctypes.data
         self.native_restarts = True
 

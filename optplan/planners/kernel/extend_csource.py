@@ -60,6 +60,7 @@ typedef struct {
                                      object pose alone (static, or on a hand's last link), so that every IK solution
                                      of that pose has the pair in the same contact */
     int restart_max_it;           /* > 0: a restart's IK iteration limit (else max_it) */
+    int restart_clip;             /* 1: a restart's seed offset clipped to +-max_joint_step per joint */
 } tcb_ctx;
 
 /* counters: 0 ik_calls, 1 ik_iterations, 2 ik_failures, 3 ik_jumps, 4 collisions, 5 checks, 6 edge_checks,
@@ -368,10 +369,16 @@ static int tcb_segment_ok(const tcb_ctx *c, const double *q, const double *qn, l
     return ok;
 }
 
-/* one restart's IK seed, q + N(0, sigma^2) per joint, drawn from c->rng: every restart, run or skipped, draws
-   through here, so that the stream goes on the same either way */
+/* one restart's IK seed, q + N(0, sigma^2) per joint (with c->restart_clip each offset clipped to the joint-jump
+   bound), drawn from c->rng: every restart, run or skipped, draws through here, so that the stream goes on the same
+   either way */
 static void tcb_restart_seed(const tcb_ctx *c, const double *q, double *seed) {
-    for (int k = 0; k < c->nq; ++k) seed[k] = q[k] + c->restart_sigma*tcb_normal(c->rng);
+    double J = c->max_joint_step;
+    for (int k = 0; k < c->nq; ++k) {
+        double o = c->restart_sigma*tcb_normal(c->rng);
+        if (c->restart_clip) o = o > J ? J : o < -J ? -J : o;
+        seed[k] = q[k] + o;
+    }
 }
 
 /* the random restarts of a failing waypoint (TCBiRRT.path_ik): IK from q + N(0, sigma^2), accepted within the
