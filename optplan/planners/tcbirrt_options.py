@@ -307,8 +307,9 @@ class TCBiRRTOptions:
     ik_restart_iterations: int | None = None
     #: Clip each joint's offset of a restart's seed to ±``max_joint_step``, the bound an accepted solution must keep
     #: (the same draws). Unclipped, a seed's largest offset of N(0, 0.3²) over 14 joints mostly exceeds 0.25 rad, and
-    #: about half the restarts converge beyond the bound and are refused (docs: planners page) (None: the variant's
-    #: value, :data:`VARIANTS`).
+    #: about half the restarts converge beyond the bound and are refused. Measured on 211 fresh generated scenes and
+    #: left off: the same successes (bays +3, walls -2), a fifth fewer iterations where both solve (docs: planners
+    #: page) (None: the variant's value, :data:`VARIANTS`: off in both).
     ik_restart_clip: bool | None = None
     #: The path IK's seed of a waypoint after the first (:mod:`.ik_seed`): ``"none"`` (the previous solution, Alg. 3)
     #: or ``"secant"`` (``q_{k−1} + (q_{k−1} − q_{k−2})`` clamped to the joint limits; the joint-jump bound stays
