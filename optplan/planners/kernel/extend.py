@@ -154,6 +154,17 @@ def nearest_available() -> bool:
     return True
 
 
+def _checked_index(index: tuple[np.ndarray, np.ndarray], X: np.ndarray, who: str) -> tuple[np.ndarray, np.ndarray]:
+    """``index`` (:func:`kd_index`) when it fits the key array ``X``, else a ValueError naming ``who``."""
+    K, kdn = index
+    width = 2 + X.shape[1]
+    if K.shape != (len(X), width) or K.dtype != np.int64 or not K.flags.c_contiguous or kdn.shape != (1,) \
+            or kdn.dtype != np.int64:
+        raise ValueError(f"{who}: expected a k-d index of {len(X)} x {width} and 1 int64 values, got {K.dtype} "
+                         f"{K.shape} and {kdn.dtype} {kdn.shape}")
+    return K, kdn
+
+
 def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = None,
             index: tuple[np.ndarray, np.ndarray] | None = None) -> int:
     """Index of the row of ``X[:n]`` (C-contiguous float64, rows of ``x.size``) nearest ``x`` in squared
@@ -168,12 +179,7 @@ def nearest(X: np.ndarray, n: int, x: np.ndarray, alive: np.ndarray | None = Non
                          f"0 <= n <= {len(X)}, got {X.dtype} {X.shape} and n = {n}")
     if index is None:
         return int(lib.tcb_nearest(_ADDR(X), n, x.size, _ADDR(alive), x.ctypes.data))
-    K, kdn = index
-    width = 2 + x.size
-    if K.shape != (len(X), width) or K.dtype != np.int64 or not K.flags.c_contiguous or kdn.shape != (1,) \
-            or kdn.dtype != np.int64:
-        raise ValueError(f"nearest: expected a k-d index of {len(X)} x {width} and 1 int64 values, got {K.dtype} "
-                         f"{K.shape} and {kdn.dtype} {kdn.shape}")
+    K, kdn = _checked_index(index, X, "nearest")
     return int(lib.tcb_nearest_kd(_ADDR(X), n, x.size, _ADDR(alive), x.ctypes.data, _ADDR(K), _ADDR(kdn)))
 
 
@@ -189,14 +195,7 @@ def nearest_batch(X: np.ndarray, n: int, Q: np.ndarray, alive: np.ndarray | None
                          f"0 <= n <= {len(X)}, got X {X.dtype} {X.shape}, Q {Q.shape} and n = {n}")
     if alive is not None and (alive.dtype != np.bool_ or alive.shape[0] < n or not alive.flags.c_contiguous):
         raise ValueError(f"nearest_batch: expected a boolean mask of at least {n} rows, got {alive.dtype} {alive.shape}")
-    K = kdn = None
-    if index is not None:
-        K, kdn = index
-        width = 2 + X.shape[1]
-        if K.shape != (len(X), width) or K.dtype != np.int64 or not K.flags.c_contiguous or kdn.shape != (1,) \
-                or kdn.dtype != np.int64:
-            raise ValueError(f"nearest_batch: expected a k-d index of {len(X)} x {width} and 1 int64 values, got "
-                             f"{K.dtype} {K.shape} and {kdn.dtype} {kdn.shape}")
+    K, kdn = (None, None) if index is None else _checked_index(index, X, "nearest_batch")
     out = np.empty(len(Q), np.int64)
     lib.tcb_nearest_batch(X.ctypes.data, n, X.shape[1], None if alive is None else alive.ctypes.data, Q.ctypes.data,
                           len(Q), None if K is None else K.ctypes.data, None if kdn is None else kdn.ctypes.data,

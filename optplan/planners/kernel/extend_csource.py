@@ -82,7 +82,7 @@ long long tcb_nearest(const double *X, long long n, int dim, const unsigned char
     return best;
 }
 
-/* A k-d index over a tree's key rows for tcb_nearest_kd, kept in the int64 slots of K (TCB_KD_W(dim) per row of the key
+/* A k-d index over a tree's key rows for tcb_nearest_kd, kept in the int64 slots of K (2 + dim per row of the key
    array, so that it grows with it): a balanced tree built over the first *kdn rows, the rows after them (appended since)
    scanned one by one, and the tree built again over all rows once that tail outgrows a sixteenth of it. Slot 0 holds
    the rows built over (nb), slot 1 the nodes; then nb row numbers in leaf order; then the nodes, each 2*dim doubles
@@ -93,7 +93,6 @@ long long tcb_nearest(const double *X, long long n, int dim, const unsigned char
 #define TCB_KD_MIN 512       /* below this many rows the linear scan is as fast for far queries (measured) */
 #define TCB_KD_LEAF 12       /* rows of a leaf, at most */
 #define TCB_KD_STACK 128     /* pending far branches (a balanced tree is far shallower) */
-#define TCB_KD_W(dim) (2 + (long long)(dim))
 #define TCB_KD_HDR 2
 
 static inline long long tcb_kd_nw(int dim) { return 2*(long long)dim + 2; }
