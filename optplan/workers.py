@@ -40,6 +40,12 @@ _CONTEXTS: dict[tuple[int, ...], tuple[Any, ...]] = {}
 _POOLS: OrderedDict[tuple[int, ...], ProcessPoolExecutor] = OrderedDict()
 #: how many pools (each with its worker processes) stay alive
 MAX_POOLS = 2
+#: pools shut down without waiting, whose manager thread may still run: joined before the next pool forks. A fork while
+#: such a thread holds its pool's lock leaves the child blocked on that lock for ever (the child's garbage collector
+#: frees the old pool, whose weakref callback takes the lock; seen as a hung test)
+_RETIRED: list[threading.Thread] = []
+#: how long a retired pool's thread is waited for before a fork [s] (it ends within milliseconds of its shutdown)
+JOIN_S = 10.0
 #: a job sent to a worker that has not started after this long once this process has nothing left to do is
 #: taken back and run here [s] (a job is handed to a worker's queue within milliseconds of being sent)
 STALL_S = 5.0
@@ -60,8 +66,29 @@ def shutdown(wait: bool = False) -> None:
     they and the pools' threads have ended."""
     while _POOLS:
         key, pool = _POOLS.popitem(last=False)
-        pool.shutdown(wait=wait, cancel_futures=True)
+        _retire(pool)
         _CONTEXTS.pop(key, None)
+    if wait:
+        _join_retired()
+
+
+def _retire(pool: ProcessPoolExecutor) -> None:
+    """Shut ``pool`` down without waiting; its manager thread is joined before the next fork (:func:`_join_retired`)."""
+    th = getattr(pool, "_executor_manager_thread", None)   # the executor forgets it in shutdown
+    pool.shutdown(wait=False, cancel_futures=True)
+    if isinstance(th, threading.Thread):
+        _RETIRED.append(th)
+
+
+def _join_retired() -> None:
+    """Wait (up to :data:`JOIN_S` each) for the threads of the pools shut down without waiting, so that no thread of
+    theirs holds a lock when a new pool forks."""
+    while _RETIRED:
+        th = _RETIRED.pop()
+        if th.is_alive():
+            th.join(JOIN_S)
+            if th.is_alive():  # pragma: no cover - a worker still busy with a job it was given before
+                log.warning("a stopped worker pool's thread is still running after %.0f s", JOIN_S)
 
 
 def _kill_all() -> None:
@@ -73,7 +100,7 @@ def _kill_all() -> None:
                 proc.kill()
             except (OSError, AttributeError):  # pragma: no cover - already gone
                 pass
-        pool.shutdown(wait=False, cancel_futures=True)
+        _retire(pool)
         _CONTEXTS.pop(key, None)
 
 
@@ -90,13 +117,14 @@ def _pool(context: tuple[Any, ...], workers: int) -> tuple[tuple[int, ...], Proc
     if pool is not None:
         _POOLS.move_to_end(key)
         return key, pool
+    while len(_POOLS) >= MAX_POOLS:      # the least recently used pools make room
+        old, p = _POOLS.popitem(last=False)
+        _retire(p)
+        _CONTEXTS.pop(old, None)
+    _join_retired()                      # no earlier pool's thread holds a lock when this one forks
     _CONTEXTS[key] = context             # before the workers fork: they inherit it
     pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"), initializer=interrupt.worker_init)
     _POOLS[key] = pool
-    while len(_POOLS) > MAX_POOLS:
-        old, p = _POOLS.popitem(last=False)
-        p.shutdown(wait=False, cancel_futures=True)
-        _CONTEXTS.pop(old, None)
     return key, pool
 
 

@@ -246,3 +246,31 @@ def test_pipeline_same_trajectory_with_the_longest_segment_sent_early(tcb, monke
     np.testing.assert_array_equal(a.q, b.q)
     assert a.iterations == b.iterations
     shutdown()
+
+
+def test_a_new_pool_forks_only_after_the_stopped_pools_threads_have_ended(monkeypatch):
+    """A pool shut down without waiting keeps its manager thread for a moment; a fork while that thread holds the old
+    pool's lock would leave the new worker blocked on it for ever (the child's garbage collector frees the old pool,
+    whose callback takes the lock). The next pool joins those threads before its workers fork."""
+    import concurrent.futures.process as cfp
+
+    import optplan.workers as W
+
+    run_jobs((1.0, 0.0), _job, [(0, 0.0), (1, 0.0)], cost=[1.0, 1.0], workers=2)
+    old = list(W._POOLS.values())
+    threads = [p._executor_manager_thread for p in old]
+    assert threads and all(t is not None for t in threads)
+    shutdown()                                              # without waiting: the pools are retired
+    assert W._RETIRED == threads
+    seen: list[bool] = []
+    launch = cfp.ProcessPoolExecutor._launch_processes
+
+    def spy(self):                                          # at the new pool's fork
+        seen.append(any(t.is_alive() for t in threads))
+        return launch(self)
+
+    monkeypatch.setattr(cfp.ProcessPoolExecutor, "_launch_processes", spy)
+    out, _ = run_jobs((2.0, 1.0), _job, [(0, 0.0), (1, 0.0)], cost=[1.0, 1.0], workers=2)
+    assert [r[0] for r in out] == [1.0, 3.0]
+    assert seen == [False] and W._RETIRED == []
+    shutdown(wait=True)
