@@ -43,8 +43,9 @@ def test_restart_clip_option_is_checked_and_off_in_both_variants():
     assert TCBiRRTOptions(variant="paper").ik_restart_clip is VARIANTS["paper"]["ik_restart_clip"] is False
     assert TCBiRRTOptions(variant="improved").ik_restart_clip is False
     assert TCBiRRTOptions(variant="improved", ik_restart_clip=True).ik_restart_clip is True
-    for bad in (1, "true", 0.0):
-        with pytest.raises(ValueError, match="ik_restart_clip: expected True or False"):
+    assert TCBiRRTOptions(variant="improved", ik_restart_clip="first").ik_restart_clip == "first"
+    for bad in (1, "true", 0.0, "First", "last"):
+        with pytest.raises(ValueError, match="ik_restart_clip: expected True, False or 'first'"):
             TCBiRRTOptions(variant="improved", ik_restart_clip=bad)
 
 
@@ -63,6 +64,15 @@ def test_restart_seed_takes_the_same_draws_and_clips_them_to_the_jump_bound():
     assert np.abs(a - q).max() > j                       # some offset of N(0, 0.3²) over 14 joints exceeds 0.25
     assert np.array_equal(b, q + np.clip(want - q, -j, j))
     assert np.abs(b - q).max() <= j + 1e-12          # (q + o) - q rounds
+    # "first": a waypoint's first restart (index 0) clipped, the second not; the same draws either way
+    first = TCBiRRTOptions(variant="improved", ik_restart_clip="first")
+    g = np.random.default_rng(3)
+    r0, r1 = restart_seed(q, g, first, 0), restart_seed(q, g, first, 1)
+    g = np.random.default_rng(3)
+    w0, w1 = g.normal(0.0, first.ik_restart_sigma, q.size), g.normal(0.0, first.ik_restart_sigma, q.size)
+    assert np.array_equal(r0, q + np.clip(w0, -j, j)) and np.array_equal(r1, q + w1)
+    assert np.abs(w1).max() > j                      # so that the unclipped second seed is told apart
+    assert np.array_equal(restart_seed(q, np.random.default_rng(3), clip, 1), b)   # True clips every restart
 
 
 @pytest.mark.parametrize("extension", ["loop", "python"])
@@ -76,11 +86,11 @@ def test_clipped_restart_seeds_reach_the_restarts(tcb, extension):
     scene = Scene.load("hard_bay")
     tr = TrialGenerator(tcb, scene).generate(3, 0)
     got = []
-    for clip in (False, True):
+    for clip in (False, True, "first"):
         pl = TCBiRRT(tcb, scene, TCBiRRTOptions(variant="improved", extension=extension, ik_restart_clip=clip))
         if extension != "python" and pl._ext is None:
             pytest.skip("no native extension here")
         r = pl.plan(tr.q_start, tr.q_goal, time_limit=20.0, seed=3, clock="cpu")
         assert r.success and r.stats["ik_restarts"] > 0
         got.append((r.stats["iterations"], r.stats["ik_restart_iterations"], len(r.path)))
-    assert got[0] != got[1]
+    assert len(set(got)) == 3

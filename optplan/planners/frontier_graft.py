@@ -175,7 +175,7 @@ def trap_lookahead(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray, 
 
     def restarts(r: Any) -> None:   # the extension's restarts in C draw from ``r``
         cast(Any, ext).restarts_in_c(r, cast(int, o.ik_restarts), o.ik_restart_sigma, pl.robot.lower - 1e-9,
-                                     pl.robot.upper + 1e-9, cast(int, o.ik_restart_iterations), bool(o.ik_restart_clip))
+                                     pl.robot.upper + 1e-9, cast(int, o.ik_restart_iterations), cast(Any, o.ik_restart_clip))
     pl._rng = trap[1][0]
     if native:
         restarts(trap[1][1])

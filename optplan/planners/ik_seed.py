@@ -35,13 +35,15 @@ def predicted_seed(predictor: str, q: np.ndarray, q_pp: np.ndarray | None, lower
     return np.minimum(np.maximum(q + (q - q_pp), lower), upper)
 
 
-def restart_seed(q: np.ndarray, rng: np.random.Generator, options: Any) -> np.ndarray:
-    """A random restart's IK seed after the solution ``q`` [rad] (``TCBiRRTOptions``: ``ik_restart_sigma``,
-    ``ik_restart_clip``, ``max_joint_step``): ``q + N(0, sigma²)`` per joint, with ``ik_restart_clip`` each offset
-    clipped to ±``max_joint_step`` (the same draws; the native extension's ``tcb_restart_seed`` does the same with
-    its own random stream)."""
+def restart_seed(q: np.ndarray, rng: np.random.Generator, options: Any, index: int = 0) -> np.ndarray:
+    """Restart ``index``'s (0: a failing waypoint's first) random IK seed after the solution ``q`` [rad]
+    (``TCBiRRTOptions``: ``ik_restart_sigma``, ``ik_restart_clip``, ``max_joint_step``): ``q + N(0, sigma²)`` per
+    joint, each offset clipped to ±``max_joint_step`` when ``ik_restart_clip`` is True, or is ``"first"`` and
+    ``index`` is 0 (the same draws; the native extension's ``tcb_restart_seed`` does the same with its own random
+    stream)."""
     o = rng.normal(0.0, options.ik_restart_sigma, q.size)
-    if options.ik_restart_clip:
+    clip = options.ik_restart_clip
+    if clip is True or (clip == "first" and index == 0):
         j = float(options.max_joint_step)
         o = np.clip(o, -j, j)
     return q + o

@@ -249,9 +249,9 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, SamplingMixin, Planner):
             elif not ck.is_valid(qn):
                 st["collisions"] += 1
                 qn = None
-            for _ in range(cast(int, o.ik_restarts) if qn is None else 0):
+            for i in range(cast(int, o.ik_restarts) if qn is None else 0):
                 st["ik_restarts"] += 1
-                x, its = kin.ik(restart_seed(q, self._rng, o), R, p, self._ik_restart)
+                x, its = kin.ik(restart_seed(q, self._rng, o, i), R, p, self._ik_restart)
                 st["ik_iterations"] += its
                 st["ik_restart_iterations"] = st.get("ik_restart_iterations", 0) + its
                 if x is not None and float(np.abs(x - q).max()) <= cast(float, o.max_joint_step) and ck.in_limits(x) \

@@ -119,9 +119,9 @@ def native_path_ik(pl: TCBiRRT, P: np.ndarray, q_near: np.ndarray, st: dict[str,
         R, p = P[r, :9].reshape(3, 3), P[r, 9:]
         qn = None
         terminal = ext.terminal() or ext.native_restarts   # no restarts after a failed segment, or run in C
-        for _ in range(0 if terminal else cast(int, o.ik_restarts)):
+        for i in range(0 if terminal else cast(int, o.ik_restarts)):
             st["ik_restarts"] += 1
-            x, its = kin.ik(restart_seed(q, pl._rng, o), R, p, pl._ik_restart)
+            x, its = kin.ik(restart_seed(q, pl._rng, o, i), R, p, pl._ik_restart)
             st["ik_iterations"] += its
             st["ik_restart_iterations"] = st.get("ik_restart_iterations", 0) + its
             if x is not None and float(np.abs(x - q).max()) <= mjs and ck.in_limits(x) and ck.is_valid(x):

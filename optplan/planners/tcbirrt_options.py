@@ -309,8 +309,10 @@ class TCBiRRTOptions:
     #: (the same draws). Unclipped, a seed's largest offset of N(0, 0.3²) over 14 joints mostly exceeds 0.25 rad, and
     #: about half the restarts converge beyond the bound and are refused. Measured on 211 fresh generated scenes and
     #: left off: the same successes (bays +3, walls -2), a fifth fewer iterations where both solve (docs: planners
-    #: page) (None: the variant's value, :data:`VARIANTS`: off in both).
-    ik_restart_clip: bool | None = None
+    #: page). ``"first"``: a failing waypoint's first restart clipped, the later ones not; measured on 213 fresh
+    #: generated scenes and left off: bays 34 → 32 of 35, the suite's bays and trusses about twice as fast (docs:
+    #: planners page) (None: the variant's value, :data:`VARIANTS`: off in both).
+    ik_restart_clip: bool | str | None = None
     #: The path IK's seed of a waypoint after the first (:mod:`.ik_seed`): ``"none"`` (the previous solution, Alg. 3)
     #: or ``"secant"`` (``q_{k−1} + (q_{k−1} − q_{k−2})`` clamped to the joint limits; the joint-jump bound stays
     #: relative to ``q_{k−1}``) (None: the variant's value, :data:`VARIANTS`).
@@ -362,8 +364,9 @@ class TCBiRRTOptions:
             raise ValueError(f"TCBiRRTOptions.domain_tries: expected an int >= 1, got {self.domain_tries!r}")
         if not (isinstance(self.ik_restarts, int) and not isinstance(self.ik_restarts, bool) and self.ik_restarts >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restarts: expected an int >= 0, got {self.ik_restarts!r}")
-        if not isinstance(self.ik_restart_clip, bool):
-            raise ValueError(f"TCBiRRTOptions.ik_restart_clip: expected True or False, got {self.ik_restart_clip!r}")
+        if not (isinstance(self.ik_restart_clip, bool) or self.ik_restart_clip == "first"):
+            raise ValueError(f"TCBiRRTOptions.ik_restart_clip: expected True, False or 'first', got "
+                             f"{self.ik_restart_clip!r}")
         if not (isinstance(self.ik_restart_iterations, int) and not isinstance(self.ik_restart_iterations, bool)
                 and self.ik_restart_iterations >= 0):
             raise ValueError(f"TCBiRRTOptions.ik_restart_iterations: expected an int >= 0 (0: the IK's own limit), got "

@@ -110,7 +110,7 @@ class SamplingMixin:
         self._nrng, self._pose, self._xi_of, self._twin_of = nrng, NativePose(), NativeXi(), NativeTwin()
         ext = cast(Any, self._ext)
         ext.restarts_in_c(nrng, cast(int, o.ik_restarts), o.ik_restart_sigma, self.robot.lower - 1e-9,
-                          self.robot.upper + 1e-9, cast(int, o.ik_restart_iterations), bool(o.ik_restart_clip))
+                          self.robot.upper + 1e-9, cast(int, o.ik_restart_iterations), cast(Any, o.ik_restart_clip))
         if ext.edge_on:   # the look-ahead grafts' candidates in C too
             from .tcbirrt_lookahead import NativeLookahead
 

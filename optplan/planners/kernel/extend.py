@@ -395,18 +395,21 @@ class NativeExtender:
         self._ctx.ikm = self._ik.address if on else None
 
     def restarts_in_c(self, rng: Any, restarts: int, sigma: float, lower: np.ndarray, upper: np.ndarray,
-                      max_iterations: int = 0, clip: bool = False) -> None:
+                      max_iterations: int = 0, clip: bool | str = False) -> None:
         """Run a failing waypoint's random restarts in C: ``restarts`` IK attempts [count] from the previous
         configuration perturbed by ``N(0, sigma²)`` [rad] per joint, drawn from ``rng`` (a
         :class:`~optplan.planners.kernel.sampler.NativeRandom`), accepted inside ``[lower, upper]`` [rad], within
         the joint-jump bound and collision-free (what :meth:`~optplan.planners.tcbirrt.TCBiRRT.path_ik` does with
         the planner's NumPy generator); each IK stops after ``max_iterations`` [count] (0: the extension's IK
-        limit). ``clip``: each offset clipped to the joint-jump bound (``TCBiRRTOptions.ik_restart_clip``)."""
+        limit). ``clip``: each offset clipped to the joint-jump bound (``TCBiRRTOptions.ik_restart_clip``: False,
+        True, or ``"first"``: in a waypoint's first restart only)."""
+        if clip not in (False, True, "first"):
+            raise ValueError(f"restarts_in_c: clip expected False, True or 'first', got {clip!r}")
         self._lim = (np.ascontiguousarray(lower, dtype=float), np.ascontiguousarray(upper, dtype=float), rng)
         c = self._ctx
         c.rng, c.restarts, c.restart_sigma = rng.address, int(restarts), float(sigma)
         c.restart_max_it = int(max_iterations)
-        c.restart_clip = int(bool(clip))
+        c.restart_clip = 2 if clip == "first" else int(bool(clip))
         c.lower, c.upper = self._lim[0].ctypes.data, self._lim[1].ctypes.data
         self.native_restarts = True
 

@@ -63,7 +63,8 @@ typedef struct {
                                      object pose alone (static, or on a hand's last link), so that every IK solution
                                      of that pose has the pair in the same contact */
     int restart_max_it;           /* > 0: a restart's IK iteration limit (else max_it) */
-    int restart_clip;             /* 1: a restart's seed offset clipped to +-max_joint_step per joint */
+    int restart_clip;             /* a restart's seed offset clipped to +-max_joint_step per joint: 0 never, 1 always,
+                                     2 in the first restart only */
 } tcb_ctx;
 
 /* counters: 0 ik_calls, 1 ik_iterations, 2 ik_failures, 3 ik_jumps, 4 collisions, 5 checks, 6 edge_checks,
@@ -196,14 +197,15 @@ static int tcb_segment_ok(const tcb_ctx *c, const double *q, const double *qn, l
     return ok;
 }
 
-/* one restart's IK seed, q + N(0, sigma^2) per joint (with c->restart_clip each offset clipped to the joint-jump
-   bound), drawn from c->rng: every restart, run or skipped, draws through here, so that the stream goes on the same
-   either way */
-static void tcb_restart_seed(const tcb_ctx *c, const double *q, double *seed) {
+/* restart r's IK seed, q + N(0, sigma^2) per joint (with c->restart_clip each offset clipped to the joint-jump
+   bound: in every restart, or in the first only), drawn from c->rng: every restart, run or skipped, draws through
+   here, so that the stream goes on the same either way */
+static void tcb_restart_seed(const tcb_ctx *c, const double *q, double *seed, int r) {
     double J = c->max_joint_step;
+    int clip = c->restart_clip == 1 || (c->restart_clip == 2 && r == 0);
     for (int k = 0; k < c->nq; ++k) {
         double o = c->restart_sigma*tcb_normal(c->rng);
-        if (c->restart_clip) o = o > J ? J : o < -J ? -J : o;
+        if (clip) o = o > J ? J : o < -J ? -J : o;
         seed[k] = q[k] + o;
     }
 }
@@ -217,7 +219,7 @@ static int tcb_restarts(const tcb_ctx *c, const double *q, const double *P, doub
     if (c->restart_max_it > 0) d.max_it = c->restart_max_it;
     for (int r = 0; r < c->restarts; ++r) {
         cnt[9] += 1;
-        tcb_restart_seed(c, q, seed);
+        tcb_restart_seed(c, q, seed, r);
         long long its = 0;
         int ok = tcb_ik(&d, seed, P, x, &its);
         cnt[1] += its;
@@ -279,7 +281,7 @@ long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *q_pp
             if (posed && c->rng && c->restarts > 0) {
                 /* every restart would fail on the same pair: their draws taken, their IK not run */
                 double unused[KMAXJ];
-                for (int r = 0; r < c->restarts; ++r) tcb_restart_seed(c, q, unused);
+                for (int r = 0; r < c->restarts; ++r) tcb_restart_seed(c, q, unused, r);
                 cnt[11] += c->restarts;
                 return j;
             }
