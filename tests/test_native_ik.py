@@ -149,3 +149,49 @@ def test_benchmarks_compare_identical_work():
     assert u["c_extension_us"] > 0 and u["casadi_extension_us"] > 0
     r = regrasp_search_costs("ssps_scene1", trials=1, goals=1)
     assert r["static_checks"] == r["whole_checks"] > 0 and r["static_us"] > 0 and r["whole_us"] > 0
+
+
+def test_the_extensions_ik_is_the_hand_written_one_and_the_block_without_it(tcb):
+    """``NativeExtender.ik`` (the look-ahead grafts' IK from uniform seeds): with the hand-written IK on, the CasADi
+    block's verdict and iteration count and its configuration to round-off on almost every seed (a seed drawn over
+    the whole joint box may sit where round-off tips a step: a rare difference, not a rule), and the hands on their
+    grasps by Pinocchio; with it off, the block itself, bit for bit."""
+    from optplan.planners.tcbirrt import TCBiRRT
+    from optplan.planners.tcbirrt_options import TCBiRRTOptions
+    from optplan.trials import TrialGenerator
+
+    sc, kin, _ = _setup(tcb, "hard_bay")
+    pl = TCBiRRT(tcb, sc, TCBiRRTOptions(variant="improved"), kinematics=kin)
+    ext = pl._ext
+    if ext is None or ext._ik is None:
+        pytest.skip("the native extension is not available here")
+    assert ext.native_ik
+    s = pl.options.ik
+    rng = np.random.default_rng(11)
+    M = kin.object_pose(TrialGenerator(tcb, sc).generate(0, 0).q_start)
+    R, p = M.rotation, M.translation
+    same = conv = 0
+    n = 300
+    for _ in range(n):
+        seed = rng.uniform(tcb.lower, tcb.upper)
+        qa, ia = ext.ik(seed, R, p)
+        qb, ib = ext.ik_block(seed, R, p)
+        if ia == ib and (qa is None) == (qb is None) and (qa is None or np.abs(qa - qb).max() < 1e-9):
+            same += 1
+        if qa is not None:
+            conv += 1
+            data = tcb.model.createData()
+            pin.framesForwardKinematics(tcb.model, data, qa)
+            for arm in kin.arms:
+                oMg, oMh = M * kin.grasps[arm.name], data.oMf[arm.ee_frame_id]
+                assert np.linalg.norm(oMg.translation - oMh.translation) < s.tol_position + 1e-12
+                assert np.linalg.norm(pin.log3(oMh.rotation.T @ oMg.rotation)) < s.tol_orientation + 1e-12
+    assert conv >= 10 and same >= 0.95 * n, (conv, same)
+    ext.native_ik = False
+    try:
+        for _ in range(50):
+            seed = rng.uniform(tcb.lower, tcb.upper)
+            (qa, ia), (qb, ib) = ext.ik(seed, R, p), ext.ik_block(seed, R, p)
+            assert ia == ib and (qa is None) == (qb is None) and (qa is None or np.array_equal(qa, qb))
+    finally:
+        ext.native_ik = True

@@ -38,7 +38,7 @@ FAMILIES: tuple[tuple[str, str, str, str], ...] = (
     ("  of which the C call, self time", "self", "planners/tcbirrt_streak.py", "run"),
     ("look-ahead grafts (frontier and trap grafts: IK, look-ahead step, regrasp)", "cum", "planners/frontier_graft.py",
      "lookahead_graft"),
-    ("  IK from random seeds, loop in C (NativeExtender.ik_block)", "cum", "planners/kernel/extend.py", "ik_block"),
+    ("  IK from random seeds, loop in C (NativeExtender.ik)", "cum", "planners/kernel/extend.py", "ik"),
     ("  candidates in one C call each (seeds, IK, checks, look-ahead step), self time", "self",
      "planners/tcbirrt_lookahead.py", "next"),
     ("frontier grafts' closest pairs (nearest-neighbour queries)", "cum", "planners/frontier_graft.py", "closest_pair"),

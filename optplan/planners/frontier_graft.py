@@ -86,8 +86,8 @@ def lookahead_graft(pl: TCBiRRT, tree: _TaskTree, i: int, xi_target: np.ndarray,
     if pl._la is not None:   # the same candidates, checks and draws in one native call per candidate that passes
         return _lookahead_native(pl, tree, i, xi_s, (Rs, ps), poses, twins, deadline, st, kind)
     step = cast(float, o.max_joint_step)   # resolved from the variant
-    # kin.ik, with its loop in C when the extension is native (the same solutions)
-    ik = pl._ext.ik_block if pl._ext is not None else (lambda q, R_, p_: kin.ik(q, R_, p_, o.ik))
+    # the extension's IK when it is native (the hand-written one, as the native look-ahead's), else kin.ik
+    ik = pl._ext.ik if pl._ext is not None else (lambda q, R_, p_: kin.ik(q, R_, p_, o.ik))
     for _ in range(o.frontier_seeds):
         if deadline.expired():
             return None

@@ -118,6 +118,8 @@ def load_extend_library() -> Any:
     lib.tcb_extend.argtypes = [_P, _P, _P, _P, _P, _LL, _P, _P, _P, _P, _P]
     lib.tcb_ik_block.restype = ctypes.c_int
     lib.tcb_ik_block.argtypes = [_P, _P, _P, _P, _P]
+    lib.tcb_ik_api.restype = ctypes.c_int
+    lib.tcb_ik_api.argtypes = [_P, _P, _P, _P, _P]
     lib.tcb_extend_prefix.restype = _LL
     lib.tcb_extend_prefix.argtypes = [_P, _P, _P, _P, _P, _LL, _P, _P, _P, _P, ctypes.c_int]
     _declare_sampler_functions(lib)
@@ -412,6 +414,19 @@ class NativeExtender:
         c.restart_clip = 2 if clip == "first" else int(bool(clip))
         c.lower, c.upper = self._lim[0].ctypes.data, self._lim[1].ctypes.data
         self.native_restarts = True
+
+    def ik(self, q_seed: np.ndarray, R: np.ndarray, p: np.ndarray) -> tuple[np.ndarray | None, int]:
+        """The extension's own IK toward the object pose ``(R, p)`` from ``q_seed`` [rad]: the hand-written one while
+        :attr:`native_ik` is on (the path IK's), else :meth:`ik_block`. ``(q, iterations)``, ``q`` None when not
+        converged."""
+        self._seed[:] = q_seed
+        self._pose_in[:9] = np.asarray(R).reshape(9)
+        self._pose_in[9:] = p
+        out = np.empty(self.nq)
+        r = self.lib.tcb_ik_api(self._cp, self._seed_p, self._pose_in_p, out.ctypes.data, self._its_p)
+        if r < 0:
+            raise KernelUnavailable("the native extension refused the model (too many joints)")
+        return (out if r else None), int(self._its.value)
 
     def ik_block(self, q_seed: np.ndarray, R: np.ndarray, p: np.ndarray) -> tuple[np.ndarray | None, int]:
         """:meth:`~optplan.constraints.closed_chain.ClosedChainKinematics.ik` with this extension's IK settings, its

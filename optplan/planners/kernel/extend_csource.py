@@ -161,6 +161,12 @@ static int tcb_pose_collision(const tcb_ctx *c) {
     return h >= 0 && h < m->npairs && c->pfix[h];
 }
 
+/* the extension's own IK (the hand-written one when c->ikm is set, else the compiled CasADi block): 1 when converged */
+int tcb_ik_api(const tcb_ctx *c, const double *seed, const double *P, double *qout, long long *its) {
+    if (c->nq > KMAXJ) return -2;
+    return tcb_ik(c, seed, P, qout, its);
+}
+
 /* ClosedChainKinematics.ik itself (the compiled CasADi block, never the hand-written IK): 1 when converged */
 int tcb_ik_block(const tcb_ctx *c, const double *seed, const double *P, double *qout, long long *its) {
     if (c->nq > KMAXJ) return -2;

@@ -3,8 +3,9 @@
 It is appended to the extension library's source after the streaks' (:mod:`.streak_csource`), whose NumPy PCG64
 mirror it draws with. ``tcb_lookahead`` runs the candidate loop of
 :func:`optplan.planners.frontier_graft.lookahead_graft`, step for step: a seed drawn as ``Generator.uniform(lower,
-upper)`` draws it (``lower + (upper − lower) u``, ``u`` the 53-bit double of the next 64-bit output), the compiled
-CasADi IK block at the node's object pose (``tcb_ik_block``), then per candidate (one arm re-grasped, each arm in turn,
+upper)`` draws it (``lower + (upper − lower) u``, ``u`` the 53-bit double of the next 64-bit output), the extension's
+IK at the node's object pose (``tcb_ik``: the hand-written one, as the path IK's; the compiled CasADi block before
+2026-11-30), then per candidate (one arm re-grasped, each arm in turn,
 then both) the twin test, the joint limits, the collision check and the look-ahead — the path IK of the look-ahead
 poses (restarts in C) and its edges. It returns at the first candidate that passes, for the regrasp (in Python), and
 goes on from the next candidate when called again.
@@ -70,7 +71,7 @@ int tcb_lookahead(const tcb_ctx *c, tcb_la_args *a, double *Q, long long *cnt) {
             double seed[KMAXJ];
             for (int k = 0; k < nq; ++k) seed[k] = a->lower[k] + a->range[k]*tcb_pcg_double(&a->pcg);
             long long its = 0;
-            int ok = tcb_ik_block(c, seed, a->node, a->x, &its);
+            int ok = tcb_ik(c, seed, a->node, a->x, &its);
             a->its += its;
             if (ok < 0) return -2;
             if (!ok) continue;
