@@ -419,24 +419,21 @@ class NativeExtender:
         """The extension's own IK toward the object pose ``(R, p)`` from ``q_seed`` [rad]: the hand-written one while
         :attr:`native_ik` is on (the path IK's), else :meth:`ik_block`. ``(q, iterations)``, ``q`` None when not
         converged."""
-        self._seed[:] = q_seed
-        self._pose_in[:9] = np.asarray(R).reshape(9)
-        self._pose_in[9:] = p
-        out = np.empty(self.nq)
-        r = self.lib.tcb_ik_api(self._cp, self._seed_p, self._pose_in_p, out.ctypes.data, self._its_p)
-        if r < 0:
-            raise KernelUnavailable("the native extension refused the model (too many joints)")
-        return (out if r else None), int(self._its.value)
+        return self._solve(self.lib.tcb_ik_api, q_seed, R, p)
 
     def ik_block(self, q_seed: np.ndarray, R: np.ndarray, p: np.ndarray) -> tuple[np.ndarray | None, int]:
         """:meth:`~optplan.constraints.closed_chain.ClosedChainKinematics.ik` with this extension's IK settings, its
         loop in C over the same compiled block (the same result bit for bit, without a Python call per block call):
         ``(q, iterations)``, ``q`` None when not converged."""
+        return self._solve(self.lib.tcb_ik_block, q_seed, R, p)
+
+    def _solve(self, fn: Any, q_seed: np.ndarray, R: np.ndarray, p: np.ndarray) -> tuple[np.ndarray | None, int]:
+        """One IK solve by the library function ``fn`` (``tcb_ik_api`` or ``tcb_ik_block``)."""
         self._seed[:] = q_seed
         self._pose_in[:9] = np.asarray(R).reshape(9)
         self._pose_in[9:] = p
         out = np.empty(self.nq)
-        r = self.lib.tcb_ik_block(self._cp, self._seed_p, self._pose_in_p, out.ctypes.data, self._its_p)
+        r = fn(self._cp, self._seed_p, self._pose_in_p, out.ctypes.data, self._its_p)
         if r < 0:
             raise KernelUnavailable("the native extension refused the model (too many joints)")
         return (out if r else None), int(self._its.value)
