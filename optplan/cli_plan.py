@@ -102,7 +102,11 @@ def _cmd_plan(args) -> int:
         out["pairs"] = pair_budget_counts(robot, scene)
         _plan_report(args, scene, out, res, robot)
         _plan_outputs(args, robot, scene, res, files)   # the files first, then the JSON that names them
-        interrupt.check()
+        with interrupt.committing():   # the record of a complete run: a signal from here on does not undo it
+            interrupt.progress(1, 1, "trials")
+            if args.json:
+                out["files"] = files
+                _write_json(args.json, out)
     except BaseException as exc:  # a failed or interrupted run still says what it has, never success
         if args.json:
             sig = interrupt.received()
@@ -112,10 +116,6 @@ def _cmd_plan(args) -> int:
             with contextlib.suppress(OptplanError):   # the first error is the one reported
                 _write_json(args.json, rec)
         raise
-    interrupt.progress(1, 1, "trials")
-    if args.json:
-        out["files"] = files
-        _write_json(args.json, out)
     return 0 if res.success else 1
 
 
@@ -165,11 +165,6 @@ def _cmd_plan_floating(args, robot, scene) -> int:
     print(f"plan -> optimize -> verify   scene {scene.name!r}, trial {args.trial}, seed {args.seed}, robot "
           f"{robot.name!r} (free-floating base, zero momentum)")
     print("\n".join(summary_lines(res)))
-    if args.json:
-        r = res.report
-        _write_json(args.json, {"success": res.success, "plan_status": res.plan.status.value,
-                                "report": r.to_dict() if r is not None else None, "attempts": res.attempts,
-                                "object_goal_error": list(res.goal_error)})
     traj = res.trajectory()
     if args.html and traj is not None:   # the view shows the base moving (full configurations)
         from .viz.outputs import write_views
@@ -177,6 +172,12 @@ def _cmd_plan_floating(args, robot, scene) -> int:
         for p in write_views(robot, scene, traj[0], traj[1], html=args.html,
                              title=f"optplan plan: {scene.name}, trial {args.trial}"):
             print(f"wrote {p}")
+    with interrupt.committing():   # the record last: a signal from here on does not undo it
+        if args.json:
+            r = res.report
+            _write_json(args.json, {"success": res.success, "plan_status": res.plan.status.value,
+                                    "report": r.to_dict() if r is not None else None, "attempts": res.attempts,
+                                    "object_goal_error": list(res.goal_error)})
     return 0 if res.success else 1
 
 

@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterator
 from typing import Any, NoReturn
 
 __all__ = ["Interrupted", "handling", "received", "check", "progress", "finish", "end_now", "stop_children",
-           "stop_process", "die_with_parent", "worker_init", "deferred", "SIGNALS", "GRACE_S", "STOP_S"]
+           "stop_process", "die_with_parent", "worker_init", "deferred", "committing", "SIGNALS", "GRACE_S", "STOP_S"]
 
 #: the signals handled
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -59,6 +59,7 @@ class _State:
     watchdog: threading.Timer | None = None
     stream: Any = None   # the stderr the interruption's line goes to
     defer = 0            # > 0 inside :func:`deferred`: a signal is recorded, raised when the block ends
+    active = False       # inside :func:`handling` (in the main thread)
 
 
 class _QuietAfterSignal:
@@ -104,6 +105,21 @@ def deferred() -> Iterator[None]:
         _state.defer -= 1
     if _state.defer == 0:
         check()
+
+
+@contextlib.contextmanager
+def committing() -> Iterator[None]:
+    """The block that writes a command's last output — the record that says it succeeded and names its files. A
+    signal that arrived before the block is the interruption it always was (raised on entry); from the block's start
+    on, SIGINT, SIGTERM and SIGHUP are ignored until :func:`handling` ends: the command is complete once the block
+    has written, and ends with its own exit status. (Without it a signal in the last instants — after the record,
+    while the idle workers are stopped — ended the command as interrupted beside a record saying success.) Outside
+    :func:`handling` it only checks."""
+    check()
+    if _state.active and threading.current_thread() is threading.main_thread():
+        for s in SIGNALS:
+            signal.signal(s, signal.SIG_IGN)
+    yield
 
 
 def received() -> int | None:
@@ -211,6 +227,7 @@ def handling(prog: str = "optplan", quiet: bool = True, ignore_after: bool = Fal
     for s in SIGNALS:
         signal.signal(s, _handler)
     _state.stream = sys.stderr
+    _state.active = True
     handlers = list(logging.getLogger().handlers) if quiet else []
     if quiet:
         sys.stderr = _QuietAfterSignal(_state.stream)
@@ -219,6 +236,7 @@ def handling(prog: str = "optplan", quiet: bool = True, ignore_after: bool = Fal
     try:
         yield
     finally:
+        _state.active = False
         for h in handlers:
             h.removeFilter(_no_record_after_signal)
         if isinstance(sys.stderr, _QuietAfterSignal):

@@ -126,6 +126,36 @@ def test_plan_interrupted_at_a_random_moment(warm, tmp_path, sig, to_group, extr
     _assert_outputs_complete(tmp_path)
 
 
+_SIGNAL_AFTER_RECORD = """
+import os, signal, sys
+import optplan.cli_plan as cp
+from optplan import cli
+write = cp._write_json
+def write_then_signal(path, data):
+    write(path, data)
+    if data.get("success"):          # the success record is on disk: the signal comes now
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(10000):
+            pass
+cp._write_json = write_then_signal
+sys.argv = ["optplan", *sys.argv[1:]]
+sys.exit(cli.main())
+"""
+
+
+def test_a_signal_after_the_success_record_leaves_a_complete_run(warm, tmp_path):
+    """A SIGTERM arriving once the record that says success is written (while the idle workers are stopped, as the
+    process ends) does not turn the run into an interruption beside that record: exit 0, no interruption line, the
+    record and the files it names complete."""
+    p = subprocess.run([sys.executable, "-c", _SIGNAL_AFTER_RECORD, *PLAN, "--json", "out.json", "--save", "traj.npz"],
+                       cwd=tmp_path, env=_env(), capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, (p.returncode, p.stderr[-2000:])
+    assert "interrupted" not in p.stderr and traceback_lines(p.stderr) == 0, p.stderr[-2000:]
+    rec = json.loads((tmp_path / "out.json").read_text())
+    assert rec["success"] and rec["files"] == ["traj.npz"], rec
+    _assert_outputs_complete(tmp_path)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", range(6))
 def test_plan_interrupted_many_moments(warm, tmp_path, seed):
