@@ -304,3 +304,48 @@ def test_static_part_gives_the_same_search(tcb, collide_static):
     if a.path is not None:
         assert np.array_equal(np.array(a.path), np.array(b.path))
     assert a.status == ("iteration cap" if collide_static else "found")
+
+
+@pytest.mark.parametrize("opts", [{"dynamic_domain": 6.0}, {"balance": 1.0}, {"connect": "new"},
+                                  {"dynamic_domain": 6.0, "balance": 1.0, "connect": "new", "sampler": "halton"}])
+def test_dynamic_domain_balance_and_vamps_connect_give_valid_seeded_paths(tcb, opts):
+    """VAMP's RRT-Connect heuristics in the native search: coal-valid paths (no shortcuts: every edge is a tree
+    edge of at most ``range``), the same search for a seed, samples drawn again under a dynamic domain."""
+    sc = Scene.load("hard_clutter_dense")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    pl = make_planner("rrtconnect", tcb, sc, max_iterations=20000, shortcut_iterations=0, **opts)
+    native_or_skip(pl.checker)
+    a, b = (pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=s) for s in (3, 3))
+    assert a.status.value == "exact" and a.stats["search"] == "native"
+    assert np.array_equal(a.path, b.path) and a.stats["iterations"] == b.stats["iterations"]
+    assert np.allclose(a.path[0], tr.q_start) and np.allclose(a.path[-1], tr.q_goal)
+    steps = np.linalg.norm(np.diff(a.path, axis=0), axis=1)
+    assert np.all(steps <= pl.options.range * (1 + 1e-9))
+    assert _coal_valid_path(tcb, sc, a.path)
+    if "dynamic_domain" in opts:
+        assert a.stats["rejected"] > 0
+
+
+def test_a_dynamic_domain_and_balance_that_never_bind_give_the_plain_search(tcb):
+    """A radius larger than any joint distance never rejects a sample, and a ratio no size difference reaches
+    never keeps a tree growing: the same search as with both off, node for node."""
+    sc = Scene.load("hard_bay")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    plain = make_planner("rrtconnect", tcb, sc, max_iterations=3000)
+    native_or_skip(plain.checker)
+    wide = make_planner("rrtconnect", tcb, sc, max_iterations=3000, dynamic_domain=1e6, dynamic_domain_min=1e6,
+                        balance=1e9)
+    a, b = (p.plan(tr.q_start, tr.q_goal, time_limit=60, seed=7) for p in (plain, wide))
+    assert a.status == b.status and a.stats["iterations"] == b.stats["iterations"]
+    assert a.stats["nodes"] == b.stats["nodes"] and np.array_equal(a.path, b.path)
+    assert b.stats["rejected"] == 0
+
+
+def test_vamp_heuristics_options_are_checked():
+    from optplan.planners.rrtconnect import RRTConnectOptions
+
+    for bad in ({"dynamic_domain": -1.0}, {"dynamic_domain_alpha": 1.0}, {"balance": float("nan")},
+                {"connect": "both"}, {"dynamic_domain": 2.0, "native_search": False},
+                {"connect": "new", "native_search": False}):
+        with pytest.raises(ValueError, match="RRTConnectOptions"):
+            RRTConnectOptions(**bad)

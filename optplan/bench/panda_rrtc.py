@@ -142,13 +142,14 @@ def queries(robot: Any, kind: str, n: int, seed: int, kernel: str = "native") ->
 
 def run_optplan(robot: Any, sc: Scene, ck: Any, seed: int, *, native: bool, range_: float = 1.0,
                 resolution: float = 0.03, time_limit: float = 10.0, shortcut_iterations: int = 0,
-                sampler: str = "uniform") -> dict[str, Any]:
-    """One RRT-Connect query (``sampler``: :attr:`.RRTConnectOptions.sampler`): CPU and wall time [s],
+                sampler: str = "uniform", **options: Any) -> dict[str, Any]:
+    """One RRT-Connect query (``sampler`` and ``options``: :class:`.RRTConnectOptions`): CPU and wall time [s],
     iterations, nodes, status and path."""
     from ..planners import RRTConnect, RRTConnectOptions
 
     pl = RRTConnect(robot, sc, RRTConnectOptions(range=range_, resolution=resolution, native_search=native,
-                                                 shortcut_iterations=shortcut_iterations, sampler=sampler), checker=ck)
+                                                 shortcut_iterations=shortcut_iterations, sampler=sampler, **options),
+                    checker=ck)
     t0, c0 = time.perf_counter(), time.process_time()
     res = pl.plan(START, GOAL, time_limit=time_limit, seed=seed)
     cpu, wall = time.process_time() - c0, time.perf_counter() - t0

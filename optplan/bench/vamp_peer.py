@@ -92,6 +92,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--vamp-defaults", action="store_true", help="keep VAMP's dynamic domain and tree balancing")
     ap.add_argument("--sampler", default="halton", choices=("uniform", "halton"),
                     help="optplan's sampler (default halton: the same kind of sequence as VAMP's sampler)")
+    ap.add_argument("--dynamic-domain", type=float, default=0.0,
+                    help="optplan's dynamic domain radius [rad] (RRTConnectOptions.dynamic_domain; 0: off; VAMP's "
+                         "default radius is 4)")
+    ap.add_argument("--balance", type=float, default=0.0,
+                    help="optplan's tree balancing ratio (RRTConnectOptions.balance; 0: off; VAMP's default is 1)")
     ap.add_argument("--spheres-urdf", default=None,
                     help="plan with this Panda URDF's collision spheres instead of the vendor's capsules, e.g. VAMP's "
                          "resources/panda/panda_spherized.urdf (the robot VAMP checks)")
@@ -122,7 +127,8 @@ def main(argv: list[str] | None = None) -> int:
                     rows[name].append(run_vamp(vamp, env, range_=args.range, vamp_defaults=args.vamp_defaults))
                 else:
                     rows[name].append(run_optplan(robot, sc, ck, args.seed + k, native=True, range_=args.range,
-                                                  resolution=args.resolution, sampler=args.sampler))
+                                                  resolution=args.resolution, sampler=args.sampler,
+                                                  dynamic_domain=args.dynamic_domain, balance=args.balance))
             P = rows["vamp"][-1]["path"]
             if P is not None:
                 f = ValidityChecker(robot, sc, kernel="coal").validity("free")

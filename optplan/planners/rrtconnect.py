@@ -58,6 +58,24 @@ class RRTConnectOptions:
     #: (the Halton sequence shifted by one uniform random vector modulo 1, :func:`halton_point`: a
     #: low-discrepancy sequence, each query its own; fewer iterations where a narrow region must be hit).
     sampler: str = "uniform"
+    #: Dynamic domain (Yershova et al. 2005; VAMP's RRT-Connect): a node whose extension was trapped gets this
+    #: radius [rad] (Euclidean joint distance), and a sample farther than its nearest node's radius is drawn
+    #: again; the radius grows by ``1 + dynamic_domain_alpha`` at each later extension from the node that
+    #: passes and shrinks by ``1 - dynamic_domain_alpha`` (to ``dynamic_domain_min``) at each that is trapped.
+    #: 0: off. Native search only.
+    dynamic_domain: float = 0.0
+    #: The dynamic domain's growth and shrink factor [-] (VAMP: 1e-4).
+    dynamic_domain_alpha: float = 1e-4
+    #: The dynamic domain's least radius [rad].
+    dynamic_domain_min: float = 1.0
+    #: Tree balancing (VAMP's ``tree_ratio``): the tree that just grew grows again, instead of the trees
+    #: alternating, while ``|n_this - n_other| / n_this >= balance`` (it is at most half the other's size
+    #: for 1) [-]. 0: off (the trees alternate). Native search only.
+    balance: float = 0.0
+    #: The connection after a sample's extension: ``"other"`` (Kuffner and LaValle's connect: the other tree
+    #: grows toward the new node, step after step of ``range``) or ``"new"`` (VAMP's: the new node's tree grows
+    #: from it toward the other tree's nearest node, in equal steps of at most ``range``). Native search only.
+    connect: str = "other"
 
     def __post_init__(self) -> None:
         for name in ("range", "resolution"):
@@ -74,12 +92,26 @@ class RRTConnectOptions:
             raise ValueError(f"RRTConnectOptions.native_search: expected True or False, got {self.native_search!r}")
         if self.validity_kernel not in ("native", "coal"):
             raise ValueError(f"RRTConnectOptions.validity_kernel: expected 'native' or 'coal', got {self.validity_kernel!r}")
+        for name in ("dynamic_domain", "dynamic_domain_alpha", "dynamic_domain_min", "balance"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"RRTConnectOptions.{name}: expected a number >= 0, got {v!r}")
+        if self.dynamic_domain_alpha >= 1:
+            raise ValueError(f"RRTConnectOptions.dynamic_domain_alpha: expected a number in [0, 1), got {self.dynamic_domain_alpha!r}")
+        if self.connect not in CONNECTS:
+            raise ValueError(f"RRTConnectOptions.connect: expected one of {CONNECTS}, got {self.connect!r}")
+        if not self.native_search and (self.dynamic_domain > 0 or self.balance > 0 or self.connect != "other"):
+            raise ValueError("RRTConnectOptions: dynamic_domain, balance and connect='new' are options of the native "
+                             f"search; native_search=False runs the Python search, which has none of them (got "
+                             f"dynamic_domain={self.dynamic_domain!r}, balance={self.balance!r}, connect={self.connect!r})")
         if self.sampler not in SAMPLERS:
             raise ValueError(f"RRTConnectOptions.sampler: expected one of {SAMPLERS}, got {self.sampler!r}")
 
 
 #: the samplers of :attr:`RRTConnectOptions.sampler`
 SAMPLERS = ("uniform", "halton")
+#: the connections of :attr:`RRTConnectOptions.connect`
+CONNECTS = ("other", "new")
 _PRIMES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53, 59, 61, 67, 71, 73, 79, 83, 89, 97, 101, 103,
            107, 109, 113, 127, 131, 137, 139, 149, 151, 157, 163, 167, 173)
 
@@ -231,16 +263,23 @@ def joint_space_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upp
         got = native_rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range,
                                  resolution=o.resolution, max_iterations=o.max_iterations,
                                  stall_iterations=o.stall_iterations,
-                                 shortcut_iterations=o.shortcut_iterations, sampler=o.sampler)
+                                 shortcut_iterations=o.shortcut_iterations, sampler=o.sampler,
+                                 tune=(o.dynamic_domain, o.dynamic_domain_alpha, o.dynamic_domain_min, o.balance,
+                                       float(o.connect == "new")))
         if got is not None:
             stats["search"] = "native"
             stats["iterations"] = stats.get("iterations", 0) + got.iterations
             stats["nodes"] = stats.get("nodes", 0) + got.nodes
+            if o.dynamic_domain > 0:
+                stats["rejected"] = stats.get("rejected", 0) + got.rejected
             if got.status == "stalled":
                 stats["stalled"] = stats.get("stalled", 0) + 1
             elif got.status not in ("found", "iteration cap", "time limit"):
                 log.warning("native RRT-Connect stopped: %s", got.status)
             return got.path
+    if o.dynamic_domain > 0 or o.balance > 0 or o.connect != "other":
+        log.warning("the native RRT-Connect is unavailable here: the Python search runs without dynamic_domain, "
+                    "balance and connect='new'")
     stats["search"] = "python"
     path = rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range, resolution=o.resolution,
                        max_iterations=o.max_iterations, stats=stats, sampler=o.sampler,

@@ -184,7 +184,7 @@ def load_rrtc_library() -> Any:
     lib.rrtc_plan.restype = ctypes.c_int
     lib.rrtc_plan.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_int, _P, _P, _P, _P, _P, _P, ctypes.c_double,
                               ctypes.c_double, ctypes.c_longlong, ctypes.c_longlong, ctypes.c_longlong, ctypes.c_int, ctypes.c_int,
-                              ctypes.c_double, ctypes.c_ulonglong, ctypes.c_int, ctypes.POINTER(ctypes.POINTER(ctypes.c_double)),
+                              ctypes.c_double, ctypes.c_ulonglong, ctypes.c_int, _P, ctypes.POINTER(ctypes.POINTER(ctypes.c_double)),
                               ctypes.POINTER(ctypes.c_int), _P]
     lib.rrtc_check_batch.restype = None
     lib.rrtc_check_batch.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_longlong, _P, _P]
@@ -199,14 +199,15 @@ class NativeRRTCResult:
     ``"out of memory"``), ``path`` (list of configurations of the searched joints, start to goal, after
     the shortcuts; None unless found), ``iterations``, ``nodes`` (both trees), ``checks``
     (configurations checked), ``tree_nodes`` (the start's and the goal's tree) and ``longest_stall`` (the
-    longest run of iterations in which one of the trees added no node) [counts]."""
+    longest run of iterations in which one of the trees added no node) and ``rejected`` (samples the dynamic
+    domain drew again, counted in ``iterations``) [counts]."""
 
-    __slots__ = ("status", "path", "iterations", "nodes", "checks", "tree_nodes", "longest_stall")
+    __slots__ = ("status", "path", "iterations", "nodes", "checks", "tree_nodes", "longest_stall", "rejected")
 
     def __init__(self, status: str, path: list[np.ndarray] | None, iterations: int, nodes: int, checks: int,
-                 tree_nodes: tuple[int, int] = (0, 0), longest_stall: int = 0) -> None:
+                 tree_nodes: tuple[int, int] = (0, 0), longest_stall: int = 0, rejected: int = 0) -> None:
         self.status, self.path, self.iterations, self.nodes, self.checks = status, path, iterations, nodes, checks
-        self.tree_nodes, self.longest_stall = tree_nodes, longest_stall
+        self.tree_nodes, self.longest_stall, self.rejected = tree_nodes, longest_stall, rejected
 
 
 def _clock(deadline: Deadline) -> tuple[int, float]:
@@ -221,12 +222,15 @@ def _clock(deadline: Deadline) -> tuple[int, float]:
 def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                        validity: Any, rng: np.random.Generator, deadline: Deadline, *, range_: float,
                        resolution: float, max_iterations: int = 0, stall_iterations: int = 0,
-                       shortcut_iterations: int = 0, sampler: str = "uniform") -> NativeRRTCResult | None:
+                       shortcut_iterations: int = 0, sampler: str = "uniform",
+                       tune: tuple[float, float, float, float, float] | None = None) -> NativeRRTCResult | None:
     """RRT-Connect from ``start`` to ``goal`` in the box ``[lower, upper]`` and ``shortcut_iterations``
     random shortcuts, in one native call; ``range_`` [rad] is the largest extension, ``resolution`` [rad]
     the largest joint change between two checks of an edge, ``max_iterations`` the cap on samples (0:
     the deadline only), ``stall_iterations`` the iterations after which a tree that added no node in them
-    ends the search (status ``"stalled"``; 0: never), ``sampler`` ``"uniform"`` or ``"halton"`` (:class:`.RRTConnectOptions`). ``validity`` must be a :class:`~optplan.planners.validity.ConfigValidity` of a
+    ends the search (status ``"stalled"``; 0: never), ``sampler`` ``"uniform"`` or ``"halton"`` (:class:`.RRTConnectOptions`),
+    ``tune`` the dynamic domain's radius [rad], factor [-] and least radius [rad], the balance ratio [-] and the
+    connection (0.0 ``"other"``, 1.0 ``"new"``) (None: all off). ``validity`` must be a :class:`~optplan.planners.validity.ConfigValidity` of a
     checker with the native backend, else None is returned (as when the library cannot be built).
     One 64-bit seed is drawn from ``rng``. The checker's ``n_checks`` grows by the configurations checked."""
     ck: Any = getattr(validity, "checker", None)   # a ConfigValidity (duck-typed: this layer does not import validity)
@@ -258,11 +262,12 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
     seed = int(rng.integers(0, 2**63))
     out = ctypes.POINTER(ctypes.c_double)()
     n_out = ctypes.c_int(0)
-    stats = np.zeros(6, np.int64)
+    stats = np.zeros(7, np.int64)
     bp = _broad_phase(kern, nat.fixed_id)
+    tune_a = np.ascontiguousarray(tune if tune is not None else (0.0, 0.0, 0.0, 0.0, 0.0), dtype=float)
     code = lib.rrtc_plan(kern._km_p, mask.ctypes.data, kern._pose_p, g, bp.pointer, dim, jidx.ctypes.data, base.ctypes.data,
                          *(a.ctypes.data for a in arrays), float(range_), float(resolution), int(max_iterations),
-                         MAX_NODES, int(stall_iterations), int(shortcut_iterations), clock_kind, end, seed, int(sampler == "halton"), ctypes.byref(out),
+                         MAX_NODES, int(stall_iterations), int(shortcut_iterations), clock_kind, end, seed, int(sampler == "halton"), tune_a.ctypes.data, ctypes.byref(out),
                          ctypes.byref(n_out), stats.ctypes.data)
     ck.n_checks += int(stats[2])
     if code == -2:
@@ -275,7 +280,7 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
             lib.rrtc_free(out)
         path = list(P)
     return NativeRRTCResult(RRTC_STATUS.get(code, f"status {code}"), path, int(stats[0]), int(stats[1]), int(stats[2]),
-                            (int(stats[3]), int(stats[4])), int(stats[5]))
+                            (int(stats[3]), int(stats[4])), int(stats[5]), int(stats[6]))
 
 
 def _mode(validity: ConfigValidity) -> tuple[str, Any]:

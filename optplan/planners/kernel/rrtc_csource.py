@@ -25,6 +25,14 @@ What it computes (the algorithm of :func:`optplan.planners.rrtconnect.rrt_connec
   verdicts, with the forward kinematics of the moving chain only);
 * an edge a → b is checked at ``n = max(1, ceil(max_j |b_j - a_j| / resolution))`` steps: the end b
   first, then the interior points ``a + (k/n)(b - a)`` in coarse-to-fine (bisection) order;
+* ``tune`` (NULL: all off): with a dynamic domain (Yershova et al. 2005, as VAMP's RRT-Connect) a node whose
+  extension toward a sample was trapped gets the domain's radius, and a sample farther than its nearest node's
+  radius is drawn again for the same tree (the rejected sample counts as an iteration, as in VAMP: the
+  iteration cap bounds a search whose samples the domains reject); the radius grows by 1 + alpha at each passing
+  extension from that node and shrinks by 1 - alpha (to its least value) at each trapped one. With balancing
+  (VAMP's ``tree_ratio``) the tree that just grew grows again while |n_A - n_B| / n_A >= the ratio. The
+  connection ``"new"`` (VAMP's) grows the new node's tree toward the other tree's nearest node in equal steps
+  of at most ``range`` instead of the other tree toward the new node;
 * with ``stall_iterations`` > 0 the search gives up (status 5, "stalled") when one of the two trees has
   added no node for that many iterations (the goal or the start of the moving arm walled in: its tree
   cannot leave a pocket, while the other fills the free space; a check of two counters per iteration);
@@ -69,18 +77,19 @@ static double rrtc_radical_inverse(int b, unsigned long long i) {
     return r;
 }
 
-typedef struct { int dim, n, cap; double *X; int *parent; } rrtc_tree;
+typedef struct { int dim, n, cap; double *X; int *parent; double *rad; } rrtc_tree;
 
 static int rrtc_tree_init(rrtc_tree *t, int dim, const double *root) {
     t->dim = dim; t->n = 0; t->cap = 256;
     t->X = (double *)malloc(sizeof(double) * (size_t)dim * (size_t)t->cap);
     t->parent = (int *)malloc(sizeof(int) * (size_t)t->cap);
-    if (!t->X || !t->parent) return -1;
+    t->rad = (double *)malloc(sizeof(double) * (size_t)t->cap);
+    if (!t->X || !t->parent || !t->rad) return -1;
     memcpy(t->X, root, sizeof(double) * (size_t)dim);
-    t->parent[0] = -1; t->n = 1;
+    t->parent[0] = -1; t->rad[0] = INFINITY; t->n = 1;
     return 0;
 }
-static void rrtc_tree_free(rrtc_tree *t) { free(t->X); free(t->parent); t->X = NULL; t->parent = NULL; }
+static void rrtc_tree_free(rrtc_tree *t) { free(t->X); free(t->parent); free(t->rad); t->X = NULL; t->parent = NULL; t->rad = NULL; }
 
 static int rrtc_tree_add(rrtc_tree *t, const double *x, int parent) {
     if (t->n == t->cap) {
@@ -90,10 +99,13 @@ static int rrtc_tree_add(rrtc_tree *t, const double *x, int parent) {
         t->X = X;
         int *P = (int *)realloc(t->parent, sizeof(int) * (size_t)cap);
         if (!P) return -1;
-        t->parent = P; t->cap = cap;
+        t->parent = P;
+        double *R = (double *)realloc(t->rad, sizeof(double) * (size_t)cap);
+        if (!R) return -1;
+        t->rad = R; t->cap = cap;
     }
     memcpy(t->X + (size_t)t->dim * t->n, x, sizeof(double) * (size_t)t->dim);
-    t->parent[t->n] = parent;
+    t->parent[t->n] = parent; t->rad[t->n] = INFINITY;
     return t->n++;
 }
 
@@ -137,6 +149,7 @@ typedef struct {
     int nmj, nmg; int *mj, *mg;   /* the moving joints (parents first) and moving geometries */
     unsigned char *smov;          /* ngroups: 1 when the group moves */
     int static_hit;
+    int dd_on; int near;          /* the dynamic domain applies (sample extensions only); the last extension's node */
 } rrtc_ctx;
 
 static double rrtc_now(int kind) {
@@ -298,6 +311,7 @@ static int rrtc_edge(rrtc_ctx *c, const double *a, const double *b) {
 #define RRTC_TRAPPED 0
 #define RRTC_ADVANCED 1
 #define RRTC_REACHED 2
+#define RRTC_REJECTED 3   /* dynamic domain: the sample lies outside its nearest node's radius */
 
 /* extend tree t toward target from its nearest node (near: that node when known, -1: the linear scan finds
    it): RRTC_* and the new node's index in *inew (-1 when none); -1 on out of memory */
@@ -307,6 +321,8 @@ static int rrtc_extend(rrtc_ctx *c, rrtc_tree *t, const double *target, double r
     double s = 0.0;
     for (int k = 0; k < dim; ++k) { double d = target[k] - xn[k]; s += d*d; }
     double dist = sqrt(s);
+    c->near = i;
+    if (c->dd_on && dist > t->rad[i]) { *inew = -1; return RRTC_REJECTED; }
     if (dist <= range) { memcpy(xnew, target, sizeof(double) * (size_t)dim); res = RRTC_REACHED; }
     else {
         double f = range / dist;
@@ -336,18 +352,25 @@ void rrtc_free(void *p) { free(p); }
    (free with rrtc_free) holds *path_len configurations of dim values, start to goal.
    stats[0] iterations, stats[1] nodes of both trees, stats[2] configurations checked, stats[3] and stats[4]
    the nodes of the start's and the goal's tree, stats[5] the longest run of iterations in which one tree
-   added no node (up to the last iteration). With stall_iterations > 0 the search stops (status 5) when
-   that run reaches stall_iterations. */
+   added no node (up to the last iteration), stats[6] the samples the dynamic domain rejected (drawn again; counted
+   in the iterations). With stall_iterations > 0 the search stops (status 5) when that run reaches stall_iterations. */
 int rrtc_plan(const kmodel *m, const unsigned char *active, const double *override_pose, int override_g,
               const rrtc_groups *grp, int dim, const int *jidx, const double *base, const double *start, const double *goal,
               const double *lower, const double *upper, double range, double resolution,
               long long max_iterations, long long max_nodes, long long stall_iterations, int shortcut_iterations,
-              int clock_kind, double end_time, unsigned long long seed, int sampler,
+              int clock_kind, double end_time, unsigned long long seed, int sampler, const double *tune,
               double **path_out, int *path_len, long long *stats) {
     *path_out = NULL; *path_len = 0;
-    stats[0] = stats[1] = stats[2] = stats[3] = stats[4] = stats[5] = 0;
+    stats[0] = stats[1] = stats[2] = stats[3] = stats[4] = stats[5] = stats[6] = 0;
+    long long rejected = 0;
     if (m->nj > KMAXJ || m->ng > KMAXG || m->nq > KMAXJ || dim > KMAXJ) return -2;
     if (sampler && dim > RRTC_NPRIMES) return -2;
+    /* tune: the dynamic domain's radius (0: off), its growth/shrink factor alpha and least radius [rad, -, rad];
+       the balance ratio (0: off: the trees alternate; else tree A grows again while |A.n - B.n| / A.n >= it);
+       the connection (0: tree B grows toward A's new node; 1: A grows from it toward B's nearest node) */
+    double dd_radius = tune ? tune[0] : 0.0, dd_alpha = tune ? tune[1] : 0.0, dd_min = tune ? tune[2] : 0.0;
+    double balance = tune ? tune[3] : 0.0;
+    int grow_new = tune ? tune[4] != 0.0 : 0;
     rrtc_ctx c;
     memset(&c, 0, sizeof c);
     c.m = m; c.active = active; c.opose = override_pose; c.og = override_g;
@@ -401,25 +424,64 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
                 if (u >= 1.0) u -= 1.0;
                 xr[k] = lower[k] + (upper[k] - lower[k]) * u;
             }
+            c.dd_on = dd_radius > 0.0;
             int ia, ib = -1, res = rrtc_extend(&c, A, xr, range, xnew, &ia, -1);
+            c.dd_on = 0;
             if (res < 0) { status = 4; break; }
-            if (res == RRTC_TRAPPED) { rrtc_tree *w = A; A = B; B = w; a_is_start = !a_is_start; continue; }
-            memcpy(target, A->X + (size_t)dim * ia, sizeof(double) * (size_t)dim);
-            /* connect: after an ADVANCED step the node just added is B's nearest to the target (it lies
-               range closer to it than the previous nearest, and every other node is at least as far as that
-               one), so the scan runs only for the first step: the same search, without a scan per step */
-            for (;;) {
-                res = rrtc_extend(&c, B, target, range, xnew, &ib, ib);
-                if (res != RRTC_ADVANCED || rrtc_expired(&c)) break;
-                if (ta.n + tb.n >= max_nodes) break;
+            if (res == RRTC_REJECTED) { rejected++; continue; }   /* the same tree draws again (an iteration, as VAMP counts) */
+            if (dd_radius > 0.0) {   /* the dynamic domain of the extended node (Yershova et al. 2005) */
+                double *r = A->rad + c.near;
+                if (res == RRTC_TRAPPED) *r = isinf(*r) ? dd_radius : fmax(*r * (1.0 - dd_alpha), dd_min);
+                else if (!isinf(*r)) *r *= 1.0 + dd_alpha;
             }
-            if (res < 0) { status = 4; break; }
-            if (res == RRTC_REACHED) { fa = ia; fb = ib; status = 0; break; }
-            rrtc_tree *w = A; A = B; B = w; a_is_start = !a_is_start;
+            if (res == RRTC_TRAPPED) {
+                if (!(balance > 0.0 && fabs((double)A->n - (double)B->n) / (double)A->n >= balance)) {
+                    rrtc_tree *w = A; A = B; B = w; a_is_start = !a_is_start;
+                }
+                continue;
+            }
+            if (grow_new) {   /* A grows from its new node toward B's nearest node, in equal steps of <= range */
+                int jb = rrtc_nearest(B, A->X + (size_t)dim * ia);
+                const double *xb = B->X + (size_t)dim * jb;
+                double s2 = 0.0;
+                for (int k = 0; k < dim; ++k) { double d = xb[k] - A->X[(size_t)dim * ia + k]; s2 += d*d; }
+                long long nst = (long long)ceil(sqrt(s2) / range), st = 0;
+                int prev = ia, bad = 0, stopped = 0;
+                for (; st < nst; ++st) {
+                    const double *xp = A->X + (size_t)dim * prev;
+                    double f = 1.0 / (double)(nst - st);
+                    for (int k = 0; k < dim; ++k) xnew[k] = xp[k] + f * (xb[k] - xp[k]);
+                    if (st == nst - 1) memcpy(xnew, xb, sizeof(double) * (size_t)dim);
+                    int e = rrtc_edge(&c, xp, xnew);
+                    if (e < 0) { bad = 1; break; }
+                    if (!e) break;
+                    int j = rrtc_tree_add(A, xnew, prev);
+                    if (j < 0) { bad = 1; break; }
+                    prev = j;
+                    if (st + 1 < nst && (rrtc_expired(&c) || ta.n + tb.n >= max_nodes)) { stopped = 1; break; }
+                }
+                if (bad) { status = 4; break; }
+                if (!stopped && st >= nst) { fa = prev; fb = jb; status = 0; break; }
+            } else {
+                memcpy(target, A->X + (size_t)dim * ia, sizeof(double) * (size_t)dim);
+                /* connect: after an ADVANCED step the node just added is B's nearest to the target (it lies
+                   range closer to it than the previous nearest, and every other node is at least as far as that
+                   one), so the scan runs only for the first step: the same search, without a scan per step */
+                for (;;) {
+                    res = rrtc_extend(&c, B, target, range, xnew, &ib, ib);
+                    if (res != RRTC_ADVANCED || rrtc_expired(&c)) break;
+                    if (ta.n + tb.n >= max_nodes) break;
+                }
+                if (res < 0) { status = 4; break; }
+                if (res == RRTC_REACHED) { fa = ia; fb = ib; status = 0; break; }
+            }
+            if (!(balance > 0.0 && fabs((double)A->n - (double)B->n) / (double)A->n >= balance)) {
+                rrtc_tree *w = A; A = B; B = w; a_is_start = !a_is_start;
+            }
         }
         stats[0] = it;
         stats[1] = ta.n + tb.n;
-        stats[3] = ta.n; stats[4] = tb.n; stats[5] = longest;
+        stats[3] = ta.n; stats[4] = tb.n; stats[5] = longest; stats[6] = rejected;
         if (status == 0) {
             idx = (int *)malloc(sizeof(int) * (size_t)(ta.n + tb.n));
             path = (double *)malloc(sizeof(double) * (size_t)dim * (size_t)(ta.n + tb.n));
