@@ -196,13 +196,15 @@ def test_vamp_peer_pairs_when_vamp_is_there(capsys):
 
 
 @pytest.mark.parametrize("mode", ["free", "fixed"])
-def test_broad_phase_gives_the_kernels_and_coals_verdicts(tcb, mode):
-    """The native search's check (groups of geometries bounded by spheres, then the kernel's pairs) on
-    random configurations near and far from collisions: the kernel's verdict on every one, and never free
-    where coal collides."""
+@pytest.mark.parametrize("scene_name", ["hard_clutter_dense", "hard_truss"])
+def test_broad_phase_gives_the_kernels_and_coals_verdicts(tcb, mode, scene_name):
+    """The native search's check (groups of geometries bounded by spheres, an obstacle's exact distance from a
+    group's sphere, then the kernel's pairs) on random configurations near and far from collisions: the kernel's
+    verdict on every one, and never free where coal collides (hard_truss: beams 4-6 m long, whose bounding spheres
+    meet nearly every link's)."""
     from optplan.planners.kernel.rrtc import broad_phase_valid
 
-    sc = Scene.load("hard_clutter_dense")
+    sc = Scene.load(scene_name)
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     ck = ValidityChecker(tcb, sc)
     native_or_skip(ck)

@@ -42,7 +42,7 @@ MAX_NODES = 2_000_000
 
 class _Groups(ctypes.Structure):
     _fields_ = [("ngroups", ctypes.c_int), ("nblocks", ctypes.c_int), ("gkind", _P), ("gref", _P), ("gcenter", _P),
-                ("gradius", _P), ("bstart", _P), ("bga", _P), ("bgb", _P), ("perm", _P)]
+                ("gradius", _P), ("bstart", _P), ("bga", _P), ("bgb", _P), ("perm", _P), ("gbox", _P)]
 
 
 class BroadPhase:
@@ -100,8 +100,12 @@ class BroadPhase:
             if len(perm) else perm
         sizes = (ends - starts)[order]
         bstart = np.r_[0, np.cumsum(sizes)].astype(np.int32)
+        gbox = np.zeros(len(kinds), np.uint8)   # a group with a box member (the exact sphere test skips box pairs)
+        for g in range(ng):
+            if int(gtype[g]) == 2:
+                gbox[group[g]] = 1
         self.arrays = (kind, np.array(refs, np.int32), np.ascontiguousarray(centers, float), np.array(radii, float),
-                       bstart, bl[order].astype(np.int32), bh[order].astype(np.int32), perm)
+                       bstart, bl[order].astype(np.int32), bh[order].astype(np.int32), perm, gbox)
         self.n_groups, self.n_blocks = len(kinds), len(starts)
         self.struct = _Groups(self.n_groups, self.n_blocks, *(x.ctypes.data for x in self.arrays))
         self.pointer = ctypes.addressof(self.struct)

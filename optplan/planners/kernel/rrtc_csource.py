@@ -123,7 +123,9 @@ static int rrtc_nearest(const rrtc_tree *t, const double *x) {
 
 /* the broad phase: the pairs sorted into blocks by the groups of their two geometries (a group is the
    geometries of one joint, or one geometry on its own), each group bounded by one sphere; a block is
-   skipped when its two spheres are farther apart than their radii and the margin */
+   skipped when its two spheres are farther apart than their radii and the margin, and a block of one capsule or
+   box on no joint (an obstacle) and a joint's group when the group's sphere is farther than the margin from that
+   primitive (exact: a long beam's bounding sphere meets nearly every link's) */
 typedef struct {
     int ngroups, nblocks;
     const int *gkind;        /* ngroups: 0 one geometry (its pose's origin), 1 the geometries of a joint */
@@ -133,7 +135,28 @@ typedef struct {
     const int *bstart;       /* nblocks + 1: the block's range in perm */
     const int *bga, *bgb;    /* nblocks: the block's groups */
     const int *perm;         /* npairs: pair indices, block after block */
+    const unsigned char *gbox;   /* ngroups: 1 when a member of the group is a box */
 } rrtc_groups;
+
+/* 1 when the sphere (o, R) is farther than thr from the capsule or box g (exact; 0 when unknown: a sphere, whose
+   bounding sphere the caller has tested, or a box against a group with a box, whose pair test is the conservative
+   separating-axis one and may call a pair in contact that this test would call apart) */
+static int rrtc_sphere_apart(const kmodel *m, const double **pose, int g, const double *o, double R, double thr,
+                             int group_has_box) {
+    int t = m->gtype[g];
+    const double *P = pose[g], *prm = m->gparam + 3*g;
+    if (t == 1) {
+        double a[3], b[3], r = prm[0] + R + thr;
+        capsule_ends(P, prm, a, b);
+        return ptseg2(o, a, b) > r*r;
+    }
+    if (t == 2 && !group_has_box) {
+        double x[3], r = R + thr;
+        to_local(P, o, x);
+        return ptbox2(x, prm) > r*r;
+    }
+    return 0;
+}
 
 typedef struct {
     const kmodel *m; const unsigned char *active; const double *opose; int og;
@@ -196,6 +219,11 @@ static int rrtc_valid(rrtc_ctx *c, const double *x) {
         const double *A = c->gc + 3*ga, *B = c->gc + 3*gb;
         double dx = A[0]-B[0], dy = A[1]-B[1], dz = A[2]-B[2], rr = G->gradius[ga] + G->gradius[gb] + thr;
         if (dx*dx + dy*dy + dz*dz > rr*rr) continue;
+        if ((G->gkind[ga] == 0) != (G->gkind[gb] == 0)) {   /* one capsule or box (an obstacle) against a joint's
+                                                               group: the exact distance from the group's sphere */
+            int og = G->gkind[ga] == 0 ? ga : gb, jg = og == ga ? gb : ga;
+            if (rrtc_sphere_apart(m, pose, G->gref[og], c->gc + 3*jg, G->gradius[jg], thr, G->gbox[jg])) continue;
+        }
         for (int i = G->bstart[b]; i < G->bstart[b+1]; ++i) {
             int k = G->perm[i];
             if (k != h && c->active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) { c->hint = k; return 0; }
