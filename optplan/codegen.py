@@ -248,16 +248,67 @@ def c_compiler() -> str | None:
     return shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
 
 
-def build_library(c_file: Path, lib: Path, opt: str) -> str | None:
+#: the flags of a build for the building machine (:func:`build_library` with ``native=True``): its instruction set
+#: (AVX and the like where the CPU has them), without fused multiply-adds, so that every operation rounds as in a
+#: portable build (the same results, bit for bit, as the tests' recorded searches)
+NATIVE_FLAGS = ("-march=native", "-ffp-contract=off")
+
+
+def native_builds() -> bool:
+    """Whether the planning kernels are built for this machine's CPU (:data:`NATIVE_FLAGS`): yes unless
+    ``$OPTPLAN_NATIVE_BUILD`` is ``0`` (portable builds, e.g. for a cache folder that machines whose
+    ``/proc/cpuinfo`` cannot be read share) or the CPU cannot be identified."""
+    return os.environ.get("OPTPLAN_NATIVE_BUILD", "1").strip() != "0" and cpu_tag() != "generic"
+
+
+def build_tag() -> str:
+    """The part of a planning kernel's cache name that says how it is built: :func:`cpu_tag` for a native
+    build, ``"portable"`` otherwise (:func:`native_builds`)."""
+    return cpu_tag() if native_builds() else "portable"
+
+
+def cpu_tag() -> str:
+    """A short hash of this machine's CPU (architecture, model and feature flags; ``"generic"`` where they
+    cannot be read): part of the cache name of a library built with :data:`NATIVE_FLAGS`, so that a cache
+    folder shared by machines of different CPUs never hands one of them an instruction it lacks."""
+    if _CPU_TAG:
+        return _CPU_TAG[0]
+    import platform
+
+    ident = [platform.machine()]
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                key = line.split(":", 1)[0].strip()
+                if key in ("vendor_id", "model name", "flags", "Features", "CPU implementer", "CPU part"):
+                    ident.append(line.strip())
+                elif not line.strip() and len(ident) > 1:
+                    break   # the first processor's block
+    except OSError:
+        pass
+    tag = hashlib.sha1("\n".join(ident).encode()).hexdigest()[:8] if len(ident) > 1 else "generic"
+    _CPU_TAG.append(tag)
+    return tag
+
+
+_CPU_TAG: list[str] = []
+
+
+def build_library(c_file: Path, lib: Path, opt: str, *, native: bool = False) -> str | None:
     """Compile the C file into the shared library ``lib``, written atomically (a concurrent
     process never loads half a library). None on success, else why not (no compiler, or the
-    compiler's last error lines)."""
+    compiler's last error lines). ``native``: with :data:`NATIVE_FLAGS` when :func:`native_builds` (the
+    caller names ``lib`` with :func:`build_tag`); a compiler that refuses them builds without."""
+    if native and native_builds():
+        if build_library(c_file, lib, " ".join((opt, *NATIVE_FLAGS))) is None:
+            return None
+        log.debug("%s: the compiler refused %s; building without", c_file.name, " ".join(NATIVE_FLAGS))
     cc = c_compiler()
     if cc is None:
         return "no C compiler"
     tmp_lib = lib.with_name(f"{lib.name}.{os.getpid()}.tmp")
     # its own process group: an interruption stops the compiler's own children (cc1, as, ld) with it
-    proc = subprocess.Popen([cc, opt, "-fPIC", "-shared", str(c_file), "-o", str(tmp_lib), "-lm"],
+    proc = subprocess.Popen([cc, *opt.split(), "-fPIC", "-shared", str(c_file), "-o", str(tmp_lib), "-lm"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         _, stderr = proc.communicate()

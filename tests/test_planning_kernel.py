@@ -329,7 +329,9 @@ def test_a_damaged_cached_library_is_rebuilt(monkeypatch, tmp_path):
         pytest.skip("no C compiler")
     monkeypatch.setattr(native, "_LIB", [])
     monkeypatch.setenv("OPTPLAN_CACHE", str(tmp_path))
-    so = tmp_path / f"optplan_planning_kernel_{hashlib.sha1(native.SOURCE.encode()).hexdigest()[:16]}.so"
+    from optplan.codegen import build_tag
+
+    so = tmp_path / f"optplan_planning_kernel_{hashlib.sha1(native.SOURCE.encode()).hexdigest()[:16]}_{build_tag()}.so"
     so.write_bytes(b"not a shared library")
     lib = native.load_library()
     assert so.stat().st_size > 1000 and hasattr(lib, "kernel_first_invalid")
@@ -385,3 +387,46 @@ def test_kernel_sincos_is_within_one_ulp_of_libm():
     s, c = np.empty(3), np.empty(3)
     lib.kernel_sincos_api(bad.ctypes.data_as(dp), ctypes.c_longlong(3), s.ctypes.data_as(dp), c.ctypes.data_as(dp))
     assert np.isnan(s).all() and np.isnan(c).all()
+
+
+_SEARCH_SCRIPT = """
+import hashlib, json
+from optplan.codegen import build_tag
+from optplan.model.robot import RobotModel
+from optplan.planners import make_planner
+from optplan.scene import Scene
+from optplan.trials import TrialGenerator
+robot = RobotModel.from_name("tcbirrt_dual_arm")
+sc = Scene.load("hard_truss")
+tr = TrialGenerator(robot, sc).generate(2, 0)
+pl = make_planner("tcbirrt", robot, sc, variant="improved")
+r = pl.plan(tr.q_start, tr.q_goal, time_limit=120, seed=tr.seed)
+print(json.dumps({"tag": build_tag(), "status": r.status.value, "iterations": r.stats["iterations"],
+                  "regrasps": r.stats.get("regrasp_attempts", 0), "path": hashlib.sha1(r.path.tobytes()).hexdigest()}))
+"""
+
+
+def test_a_build_for_this_cpu_searches_as_a_portable_build(tmp_path):
+    """The planning kernels built for this machine's CPU (-march=native, no fused multiply-adds) and built
+    portable (OPTPLAN_NATIVE_BUILD=0) give the same search bit for bit: TCBiRRT on hard_truss (the extension's
+    IK and checks, the regrasps' RRT-Connect), each in a fresh process with its own cache."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from optplan.codegen import c_compiler, cpu_tag
+
+    if c_compiler() is None or cpu_tag() == "generic":
+        pytest.skip("no C compiler, or the CPU cannot be identified (portable builds only)")
+    out = {}
+    for name, flag in (("native", "1"), ("portable", "0")):
+        env = dict(os.environ, OPTPLAN_CACHE=str(tmp_path / name), OPTPLAN_NATIVE_BUILD=flag)
+        done = subprocess.run([sys.executable, "-c", _SEARCH_SCRIPT], env=env, capture_output=True, text=True,
+                              timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
+        out[name] = json.loads(done.stdout.strip().splitlines()[-1])
+        assert any(p.name.endswith(f"_{out[name]['tag']}.so") for p in (tmp_path / name).iterdir())
+    assert out["native"]["tag"] == cpu_tag() and out["portable"]["tag"] == "portable"
+    assert out["native"]["regrasps"] > 0
+    assert {k: v for k, v in out["native"].items() if k != "tag"} == {k: v for k, v in out["portable"].items() if k != "tag"}

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ...codegen import build_library, cache_dir
+from ...codegen import build_library, build_tag, cache_dir
 from ..ik_seed import PREDICTORS
 from .addresses import AddressCache
 from .csource import C_SOURCE
@@ -76,7 +76,7 @@ def load_extend_library() -> Any:
         if _LIB[0] is None:
             raise KernelUnavailable("the native extension library could not be built in this process")
         return _LIB[0]
-    digest = hashlib.sha1(SOURCE.encode()).hexdigest()[:16]
+    digest = hashlib.sha1(SOURCE.encode()).hexdigest()[:16] + "_" + build_tag()
     lib_path = cache_dir() / f"optplan_tcb_extend_{digest}.so"
     lib = None
     for attempt in range(2):
@@ -84,7 +84,7 @@ def load_extend_library() -> Any:
             with tempfile.TemporaryDirectory() as tmp:
                 c_file = Path(tmp, "tcb_extend.c")
                 c_file.write_text(SOURCE)
-                err = build_library(c_file, lib_path, "-O3")
+                err = build_library(c_file, lib_path, "-O3", native=True)
             if err is not None:
                 _LIB.append(None)
                 raise KernelUnavailable(f"the native extension library could not be compiled: {err}")

@@ -30,7 +30,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from ...codegen import build_library, cache_dir
+from ...codegen import build_library, build_tag, cache_dir
 from ...errors import OptplanError
 from .clearance_csource import CLEARANCE_SOURCE
 from .csource import C_SOURCE, KERNEL_EPS
@@ -180,7 +180,7 @@ def load_library() -> Any:
     if _LIB:
         return _LIB[0]
     source = SOURCE
-    digest = hashlib.sha1(source.encode()).hexdigest()[:16]
+    digest = hashlib.sha1(source.encode()).hexdigest()[:16] + "_" + build_tag()
     lib_path = cache_dir() / f"optplan_planning_kernel_{digest}.so"
     lib = None
     for attempt in range(2):
@@ -188,7 +188,7 @@ def load_library() -> Any:
             with tempfile.TemporaryDirectory() as tmp:
                 c_file = Path(tmp, "planning_kernel.c")
                 c_file.write_text(source)
-                err = build_library(c_file, lib_path, "-O3")
+                err = build_library(c_file, lib_path, "-O3", native=True)
             if err is not None:
                 raise KernelUnavailable(f"the native planning kernel could not be compiled: {err}")
         try:

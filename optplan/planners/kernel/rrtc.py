@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...codegen import build_library, cache_dir
+from ...codegen import build_library, build_tag, cache_dir
 from .csource import C_SOURCE
 from .native import KernelUnavailable, NativeKernel
 from .rrtc_csource import RRTC_SOURCE, RRTC_STATUS
@@ -164,7 +164,7 @@ def load_rrtc_library() -> Any:
     if _FAILED:
         raise KernelUnavailable(_FAILED[0])
     source = C_SOURCE + RRTC_SOURCE
-    digest = hashlib.sha1(source.encode()).hexdigest()[:16]
+    digest = hashlib.sha1(source.encode()).hexdigest()[:16] + "_" + build_tag()
     lib_path = cache_dir() / f"optplan_rrtc_kernel_{digest}.so"
     lib = None
     for attempt in range(2):
@@ -172,7 +172,7 @@ def load_rrtc_library() -> Any:
             with tempfile.TemporaryDirectory() as tmp:
                 c_file = Path(tmp, "rrtc_kernel.c")
                 c_file.write_text(source)
-                err = build_library(c_file, lib_path, "-O3")
+                err = build_library(c_file, lib_path, "-O3", native=True)
             if err is not None:
                 _FAILED.append(f"the native RRT-Connect could not be compiled: {err}")
                 raise KernelUnavailable(_FAILED[0])
