@@ -254,8 +254,9 @@ def test_halton_sampler_paths_valid_and_seeded(tcb, native):
     assert not (a.path.shape == c.path.shape and np.array_equal(a.path, c.path))
 
 
+@pytest.mark.parametrize("flag_name", ["rrtc_use_static_part", "rrtc_use_layout"])
 @pytest.mark.parametrize("collide_static", [False, True])
-def test_static_part_gives_the_same_search(tcb, collide_static):
+def test_static_part_gives_the_same_search(tcb, collide_static, flag_name):
     """A regrasp's search (one arm, the other arm and the object still): placing the still part once and
     checking its pairs once gives the same search as checking the whole model every time — the same status,
     counts and path; with an obstacle on the still arm every configuration collides."""
@@ -281,7 +282,7 @@ def test_static_part_gives_the_same_search(tcb, collide_static):
     native_or_skip(ck)
     idx = np.asarray(kin.idx[0])
     M = tr.object_start
-    flag = ctypes.c_int.in_dll(load_rrtc_library(), "rrtc_use_static_part")
+    flag = ctypes.c_int.in_dll(load_rrtc_library(), flag_name)
     pairs = tuple(sorted(ck.grasp_contacts(base, M)))
     out = []
     with ck.exempt(pairs):
@@ -351,3 +352,29 @@ def test_vamp_heuristics_options_are_checked():
                 {"connect": "new", "native_search": False}):
         with pytest.raises(ValueError, match="RRTConnectOptions"):
             RRTConnectOptions(**bad)
+
+
+@pytest.mark.parametrize("scene_name", ["hard_truss", "hard_clutter_dense"])
+def test_laid_out_blocks_give_the_same_search(tcb, scene_name):
+    """The blocks laid out per moving group (still partners as arrays, tested in one pass) against the blocks in
+    their order: the same search of the whole robot (status, counts, path), with several planner seeds."""
+    import ctypes
+
+    from optplan.planners.kernel.rrtc import load_rrtc_library
+
+    sc = Scene.load(scene_name)
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    pl = make_planner("rrtconnect", tcb, sc, max_iterations=2000, shortcut_iterations=10)
+    native_or_skip(pl.checker)
+    flag = ctypes.c_int.in_dll(load_rrtc_library(), "rrtc_use_layout")
+    for seed in range(3):
+        out = []
+        for on in (1, 0):
+            flag.value = on
+            try:
+                out.append(pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=seed))
+            finally:
+                flag.value = 1
+        a, b = out
+        assert a.status == b.status and a.stats["iterations"] == b.stats["iterations"]
+        assert a.stats["collision_checks"] == b.stats["collision_checks"] and np.array_equal(a.path, b.path)
