@@ -36,6 +36,8 @@ def _same(a, b) -> bool:
     ("hard_bay", (3, 4), {}), ("hard_clutter_dense", (3,), {}), ("hard_window", (5,), {}),
     # the adaptive step (halved in C when trapped) and a stall bound on the streaks
     ("hard_bay", (5,), {"trap_adapt": "step", "stall_iterations": 120}),
+    # the dynamic domain (its draws and its trapped nodes' domains in C)
+    ("hard_bay", (3, 6), {"trap_adapt": "domain", "domain_radius": 2.0}),
     # extensions that keep no prefix (a failed one is trapped whole)
     ("ssps_scene2", (0, 1, 2), {"keep_prefix": False})])
 def test_streaks_and_restart_skips_give_the_same_search(tcb, scene_name, trials, options):

@@ -337,9 +337,19 @@ class TCBiRRT(TrapMixin, EdgeCheckMixin, SamplingMixin, Planner):
         outside its nearest node's dynamic domain is drawn again (up to ``domain_tries`` draws). A native sampler
         (``extension="loop"``) draws and finds the nearest node in one call."""
         o = self.options
-        if self._nrng is not None and o.trap_adapt != "domain":
-            xi_rand, i_near = sampler.sample_near(ta.X, ta.n, ta.alive if ta.n_dead else None,
-                                                  tb.X, tb.n, tb.alive if tb.n_dead else None, ta.kd)
+        if self._nrng is not None:   # the native sampler (the streaks' draws: the same test of the domain)
+            for _ in range(o.domain_tries if o.trap_adapt == "domain" else 1):
+                xi_rand, i_near = sampler.sample_near(ta.X, ta.n, ta.alive if ta.n_dead else None,
+                                                      tb.X, tb.n, tb.alive if tb.n_dead else None, ta.kd)
+                if o.trap_adapt != "domain":
+                    break
+                x, e, d = ta.X[i_near], 0.0, float(ta.dom[i_near])
+                for k in range(6):   # the streaks' arithmetic, term by term
+                    u = float(xi_rand[k]) - float(x[k])
+                    e += u * u
+                if e <= d * d:
+                    break
+                st["domain_rejections"] = st.get("domain_rejections", 0) + 1
             return xi_rand, ta.twin_nearest(i_near, None, rng)
         for _ in range(o.domain_tries if o.trap_adapt == "domain" else 1):
             # lo + (hi − lo) u: Generator.uniform's formula and draws, without its argument checks

@@ -28,7 +28,7 @@ VARIANTS = {
               "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
               "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
               "trap_graft_target": "other", "trap_graft_stream": "search", "trap_graft_after": 0,
-              "ik_restart_iterations": 0, "ik_restart_clip": False},
+              "ik_restart_iterations": 0, "ik_restart_clip": False, "trap_adapt": "off", "domain_radius": 1.0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
@@ -37,7 +37,7 @@ VARIANTS = {
                  "branch_roots": False, "stall_iterations": 0, "trap_grafts": 4, "restart_iterations": 0,
                  "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
                  "trap_graft_target": "sample", "trap_graft_stream": "own", "trap_graft_after": 1500,
-                 "ik_restart_iterations": 0, "ik_restart_clip": False},
+                 "ik_restart_iterations": 0, "ik_restart_clip": False, "trap_adapt": "off", "domain_radius": 1.0},
 }
 
 
@@ -320,10 +320,11 @@ class TCBiRRTOptions:
     #: What a trapped extension changes at the node it started from: ``"off"``; ``"step"`` (adaptive step size:
     #: the node's s_ξ is halved, down to s_ξ/8, and doubled back after an extension that is not trapped); or
     #: ``"domain"`` (dynamic domain: from then on a sample farther than ``domain_radius`` · s_ξ from the node,
-    #: when it is the nearest, is drawn again, up to ``domain_tries`` draws).
-    trap_adapt: str = "off"
-    #: Dynamic-domain radius of a node after a trapped extension, in units of s_ξ [-].
-    domain_radius: float = 1.0
+    #: when it is the nearest, is drawn again, up to ``domain_tries`` draws) (None: the variant's value,
+    #: :data:`VARIANTS`).
+    trap_adapt: str | None = None
+    #: Dynamic-domain radius of a node after a trapped extension, in units of s_ξ [-] (None: the variant's value).
+    domain_radius: float | None = None
     #: Draws per iteration with ``trap_adapt="domain"`` (the last one is extended toward regardless) [count].
     domain_tries: int = 10
     #: Scale the default box's position part and the step size by the robot's mean sampled arm reach

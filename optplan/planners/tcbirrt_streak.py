@@ -88,7 +88,8 @@ class _SArgs(ctypes.Structure):
                 ("xi_rand", _D * 6), ("xi_s", _D * 6), ("Ps", _D * 12),
                 ("n_ext", _LL), ("n_trap", _LL), ("n_log", _LL), ("n_partial", _LL), ("i_a", _LL), ("i_nb", _LL),
                 ("k_b", _LL),
-                ("reach_b", ctypes.c_int), ("xi_sb", _D * 6), ("conn_trapped", ctypes.c_int)]
+                ("reach_b", ctypes.c_int), ("xi_sb", _D * 6), ("conn_trapped", ctypes.c_int),
+                ("domain_adapt", ctypes.c_int), ("domain_tries", ctypes.c_int), ("domain_radius", _D), ("n_rej", _LL)]
 
 
 def _declare(lib: Any) -> None:
@@ -195,6 +196,8 @@ class NativeStreak:
         self.args, self.cargs = _SArgs(), _SArgs()
         for a in (self.args, self.cargs):
             a.step_size, a.step_adapt = float(pl.step_size), int(o.trap_adapt == "step")
+            a.domain_adapt, a.domain_tries = int(o.trap_adapt == "domain"), int(o.domain_tries)
+            a.domain_radius = float(cast(float, o.domain_radius))
             a.prefix, a.n_interp = int(bool(o.keep_prefix)), n
             a.trap_count = int(o.trap_graft_count or 0)
             a.trap_after = int(o.trap_graft_after or 0)

@@ -73,11 +73,10 @@ class TrapMixin:
 
     def _streak(self, sampler: Any, deadline: Deadline) -> NativeStreak | None:
         """The query's trapped streaks (:mod:`.tcbirrt_streak`), or None where the loop runs them one by one: the
-        option off, no native loop (its sampler, restarts and Jacobian-spaced edges), another ``trap_adapt`` than
-        ``"step"``/``"off"``, a deadline with a work budget."""
+        option off, no native loop (its sampler, restarts and Jacobian-spaced edges), a deadline with a work budget."""
         o, ext = self.options, self._ext
         if not (o.streaks and self._nrng is not None and ext is not None and ext.edge_on and ext.native_restarts
-                and o.interpolation == "geodesic" and o.trap_adapt in ("step", "off") and math.isinf(deadline.work)):
+                and o.interpolation == "geodesic" and math.isinf(deadline.work)):
             return None
         return NativeStreak(cast("TCBiRRT", self), sampler)
 
@@ -99,6 +98,8 @@ class TrapMixin:
         st["extensions"] += int(sk.n_ext)
         st["trapped"] += int(sk.n_trap)
         st["partial"] += int(sk.n_partial)
+        if sk.n_rej:
+            st["domain_rejections"] = st.get("domain_rejections", 0) + int(sk.n_rej)
         done = n - 1 if sk.code == STREAK_DONE else n
         st["iterations"] += done
         return sk, done

@@ -193,6 +193,10 @@ typedef struct {
     long long i_a, i_nb, k_b; int reach_b;   /* codes 4, 5: the node added; the connection's node, kept, reach */
     double xi_sb[6];                  /* code 5: the connection step's target */
     int conn_trapped;                 /* a connection ended here: 1 a trapped step, 2 no nearer, 0 the deadline */
+    /* the dynamic domain (trap_adapt "domain"): a sample farther than its nearest node's dom is drawn again, up to
+       domain_tries draws (the last one kept); a trapped extension sets its node's dom to domain_radius * step_size */
+    int domain_adapt, domain_tries; double domain_radius;
+    long long n_rej;                  /* out: draws outside their nearest node's domain */
 } tcb_streak_args;
 
 /* node i's extension toward xi_s (n waypoints), not trapped, its first k waypoints kept (P, Q): its node added to tree t as
@@ -300,11 +304,20 @@ int tcb_connect(const tcb_ctx *c, tcb_stree *tb, const double *tx, const double 
 /* returns the code (0..5; -2: the model is too large); a->n_done iterations were completed */
 int tcb_streak(tcb_sampler *s, const tcb_ctx *c, tcb_stree *t0, tcb_stree *t1, tcb_streak_args *a,
                double *P, double *Q, long long *cnt, double *LP, double *LQ, long long *LM) {
-    a->n_done = 0; a->n_ext = 0; a->n_trap = 0; a->n_log = 0; a->n_partial = 0;
+    a->n_done = 0; a->n_ext = 0; a->n_trap = 0; a->n_log = 0; a->n_partial = 0; a->n_rej = 0;
     for (long long j = 0; j < a->max_n; ++j) {
         if (j > 0 && tcb_clock(a->clock_kind) >= a->end) { a->code = 0; return 0; }
         tcb_stree *ta = (j & 1) ? t1 : t0, *tb = (j & 1) ? t0 : t1;
-        long long i = tcb_sample_near(s, tb->X, tb->n, tb->alive, ta->X, ta->n, ta->alive, a->xi_rand, ta->K, ta->kdn);
+        long long i = -1;
+        for (int tr = 0; tr < (a->domain_adapt ? a->domain_tries : 1); ++tr) {
+            i = tcb_sample_near(s, tb->X, tb->n, tb->alive, ta->X, ta->n, ta->alive, a->xi_rand, ta->K, ta->kdn);
+            if (!a->domain_adapt) break;
+            const double *xd = ta->X + 6*i;
+            double e = 0.0;
+            for (int k = 0; k < 6; ++k) { double u = a->xi_rand[k] - xd[k]; e += u*u; }
+            if (e <= ta->dom[i] * ta->dom[i]) break;   /* inside the domain (inf: none set) */
+            a->n_rej += 1;
+        }
         a->i_near = i;
         const double *xn = ta->X + 6*i;
         double d[6], dd = 0.0;
@@ -348,6 +361,7 @@ int tcb_streak(tcb_sampler *s, const tcb_ctx *c, tcb_stree *t0, tcb_stree *t1, t
             continue;
         }
         a->n_ext += 1; a->n_trap += 1;
+        if (a->domain_adapt) ta->dom[i] = a->step_size * a->domain_radius;   /* trapped: the node's domain */
         if (a->step_adapt) {   /* trapped: the node's step halved, down to s/8 */
             double cur = isfinite(ta->dom[i]) ? ta->dom[i] : a->step_size, h = cur * 0.5, lo = a->step_size / 8.0;
             ta->dom[i] = h > lo ? h : lo;
