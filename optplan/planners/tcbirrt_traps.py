@@ -45,7 +45,7 @@ class TrapMixin:
         (halved when trapped, down to s_ξ/8; doubled back, up to s_ξ, when not)."""
         o = self.options
         if o.trap_adapt == "domain" and res == TRAPPED:
-            tree.dom[i] = self.step_size * o.domain_radius
+            tree.dom[i] = self.step_size * cast(float, o.domain_radius)
         elif o.trap_adapt == "step":
             cur = self.step_size if not np.isfinite(tree.dom[i]) else float(tree.dom[i])
             tree.dom[i] = max(cur * 0.5, self.step_size / 8.0) if res == TRAPPED else min(cur * 2.0, self.step_size)
