@@ -113,6 +113,7 @@ class ValidityChecker(EdgeSweepMixin):
         self.scene = scene
         self.margin = float(margin)
         self.exact_contacts = bool(exact_contacts)
+        self._limits: dict[float, tuple[np.ndarray, np.ndarray]] = {}   # in_limits: the widened limits per tolerance
         self.model = robot.model
         self.data = robot.model.createData()
         # robot, obstacles, held object and the pair set as the exact checker has them
@@ -392,7 +393,11 @@ class ValidityChecker(EdgeSweepMixin):
         return self._exempted.get(mode, frozenset())
 
     def in_limits(self, q: np.ndarray, tol: float = 1e-9) -> bool:
-        return bool(np.all(q >= self.robot.lower - tol) and np.all(q <= self.robot.upper + tol))
+        """Whether ``q`` is within the joint limits widened by ``tol`` [rad or m]."""
+        lim = self._limits.get(tol)
+        if lim is None:   # the widened limits, computed once per tolerance
+            lim = self._limits[tol] = (self.robot.lower - tol, self.robot.upper + tol)
+        return bool((q >= lim[0]).all() and (q <= lim[1]).all())
 
     def colliding_pairs(self, q: np.ndarray, mode: str = "held", object_pose: pin.SE3 | None = None) -> list[tuple[str, str]]:
         """Names of every colliding pair at ``q`` (diagnostics; slow path)."""
