@@ -158,6 +158,12 @@ static int rrtc_extend(rrtc_ctx *c, rrtc_tree *t, const double *target, double r
     return res;
 }
 
+/* whether the other tree takes the next iteration: always, unless balancing (ratio > 0) keeps tree A, which just
+   tried to grow, growing while |n_A - n_B| / n_A >= ratio (VAMP's tree_ratio) */
+static int rrtc_other_turn(const rrtc_tree *A, const rrtc_tree *B, double ratio) {
+    return !(ratio > 0.0 && fabs((double)A->n - (double)B->n) / (double)A->n >= ratio);
+}
+
 /* the node indices from node i of t up to its root, into idx; returns their count */
 static int rrtc_branch(const rrtc_tree *t, int i, int *idx) {
     int n = 0;
@@ -255,7 +261,7 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
                 else if (!isinf(*r)) *r *= 1.0 + dd_alpha;
             }
             if (res == RRTC_TRAPPED) {
-                if (!(balance > 0.0 && fabs((double)A->n - (double)B->n) / (double)A->n >= balance)) {
+                if (rrtc_other_turn(A, B, balance)) {
                     rrtc_tree *w = A; A = B; B = w; a_is_start = !a_is_start;
                 }
                 continue;
@@ -295,7 +301,7 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
                 if (res < 0) { status = 4; break; }
                 if (res == RRTC_REACHED) { fa = ia; fb = ib; status = 0; break; }
             }
-            if (!(balance > 0.0 && fabs((double)A->n - (double)B->n) / (double)A->n >= balance)) {
+            if (rrtc_other_turn(A, B, balance)) {
                 rrtc_tree *w = A; A = B; B = w; a_is_start = !a_is_start;
             }
         }
