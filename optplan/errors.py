@@ -131,6 +131,8 @@ def check_int(value, what: str, *, minimum: int | None = None, maximum: int | No
     """``value`` as an ``int``, refusing what ``int()`` would silently truncate or convert: floats
     with a fraction (2.7), strings ("10"), booleans, None, NaN. A float equal to an integer (10.0)
     is accepted. Raises ``error`` (OptionError by default) naming ``what`` and the value."""
+    if type(value) is int and (minimum is None or value >= minimum) and (maximum is None or value <= maximum):
+        return value   # the common case, without building the message
     import numbers
 
     import numpy as np
@@ -154,6 +156,10 @@ def check_real(value, what: str, *, minimum: float | None = None, maximum: float
     """``value`` as a finite ``float`` within ``[minimum, maximum]`` (``minimum`` excluded when
     ``strict_minimum``), refusing strings, booleans, None, NaN and infinities. Raises ``error``
     (OptionError by default) naming ``what``, the value and the expected range with its unit."""
+    if (type(value) is float or type(value) is int) and value == value and abs(value) != float("inf") and \
+            (minimum is None or (value > minimum if strict_minimum else value >= minimum)) and \
+            (maximum is None or value <= maximum):
+        return float(value)   # the common case, without building the message
     import math
     import numbers
 

@@ -145,7 +145,7 @@ class PlanResult:
         if not isinstance(p, np.ndarray) or p.ndim != 2 or p.dtype.kind != "f":
             raise ConfigurationError(f"PlanResult.path: expected an M x nq float array, got "
                                      f"{type(p).__name__} of shape {np.shape(p)}")
-        if not np.all(np.isfinite(p)):
+        if not np.isfinite(p).all():
             bad = np.argwhere(~np.isfinite(p))[0].tolist()
             raise ConfigurationError(f"PlanResult.path: non-finite entry at {bad} ({p[tuple(bad)]})")
         M = len(p)

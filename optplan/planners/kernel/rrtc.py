@@ -237,54 +237,86 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
     connection (0.0 ``"other"``, 1.0 ``"new"``) (None: all off). ``validity`` must be a :class:`~optplan.planners.validity.ConfigValidity` of a
     checker with the native backend, else None is returned (as when the library cannot be built).
     One 64-bit seed is drawn from ``rng``. The checker's ``n_checks`` grows by the configurations checked."""
-    ck: Any = getattr(validity, "checker", None)   # a ConfigValidity (duck-typed: this layer does not import validity)
+    try:   # a ConfigValidity (duck-typed: this layer does not import validity)
+        ck: Any = validity.checker
+        mode, pose, vbase, vjoints = validity.mode, validity.object_pose, validity.base, validity.joints
+    except AttributeError:
+        return None
     nat = getattr(ck, "_native", None)
-    if nat is None or not all(hasattr(validity, a) for a in ("mode", "object_pose", "base", "joints")):
+    if nat is None:
         return None
-    try:
-        lib = load_rrtc_library()
-    except KernelUnavailable as e:
-        log.debug("native RRT-Connect unavailable (%s): the Python search runs", e)
-        return None
-    mode, pose = _mode(validity)
-    nq = int(ck.model.nq)
-    if validity.base is None:
-        base = np.zeros(nq)
-        jidx = np.arange(nq, dtype=np.int32)
-    else:
-        base = np.ascontiguousarray(validity.base, dtype=float)
-        jidx = np.ascontiguousarray(validity.joints, dtype=np.int32)
-    arrays = [np.ascontiguousarray(a, dtype=float) for a in (start, goal, lower, upper)]
-    dim = int(jidx.size)
-    if any(a.shape != (dim,) for a in arrays):
-        raise ValueError(f"native_rrt_connect: start, goal, lower and upper must have {dim} values, got shapes "
-                         f"{[a.shape for a in arrays]}")
+    lib = _LIB[0] if _LIB else None
+    if lib is None:
+        try:
+            lib = load_rrtc_library()
+        except KernelUnavailable as e:
+            log.debug("native RRT-Connect unavailable (%s): the Python search runs", e)
+            return None
+    if ck.object is None and mode in ("held", "fixed"):   # as _mode
+        mode, pose = "free", None
+    elif mode != "fixed":
+        pose = None
     kern = nat.kernel
+    nq = kern.nq
+    if vbase is None:
+        jidx_p, base_p, dim = _whole(nq)
+    else:
+        base = np.ascontiguousarray(vbase, dtype=float)
+        jidx = np.ascontiguousarray(vjoints, dtype=np.int32)
+        jidx_p, base_p, dim = jidx.ctypes.data, base.ctypes.data, int(jidx.size)
+    shapes = (np.shape(start), np.shape(goal), np.shape(lower), np.shape(upper))
+    if shapes != ((dim,),) * 4:
+        raise ValueError(f"native_rrt_connect: start, goal, lower and upper must have {dim} values, got shapes "
+                         f"{list(shapes)}")
+    ends = (ctypes.c_double * (4 * dim))()   # start, goal, lower, upper: one buffer
+    rows = np.frombuffer(memoryview(ends), dtype=float).reshape(4, dim)
+    rows[0], rows[1], rows[2], rows[3] = start, goal, lower, upper
     g = kern._override(nat._override(mode, pose))
-    mask = nat.masks[mode]
     clock_kind, end = _clock(deadline)
     seed = int(rng.integers(0, 2**63))
     out = ctypes.POINTER(ctypes.c_double)()
     n_out = ctypes.c_int(0)
-    stats = np.zeros(7, np.int64)
+    stats = (ctypes.c_longlong * 7)()
     bp = _broad_phase(kern, nat.fixed_id)
-    tune_a = np.ascontiguousarray(tune if tune is not None else (0.0, 0.0, 0.0, 0.0, 0.0), dtype=float)
-    code = lib.rrtc_plan(kern._km_p, mask.ctypes.data, kern._pose_p, g, bp.pointer, dim, jidx.ctypes.data, base.ctypes.data,
-                         *(a.ctypes.data for a in arrays), float(range_), float(resolution), int(max_iterations),
-                         MAX_NODES, int(stall_iterations), int(shortcut_iterations), clock_kind, end, seed, int(sampler == "halton"), tune_a.ctypes.data, ctypes.byref(out),
-                         ctypes.byref(n_out), stats.ctypes.data)
-    ck.n_checks += int(stats[2])
+    if tune is not None:
+        tune_a = (ctypes.c_double * 5)(*map(float, tune))
+    else:
+        tune_a = _NO_TUNE
+    e0 = ctypes.addressof(ends)
+    code = lib.rrtc_plan(kern._km_p, nat._mask_p[mode], kern._pose_p, g, bp.pointer, dim, jidx_p, base_p, e0,
+                         e0 + 8 * dim, e0 + 16 * dim, e0 + 24 * dim, float(range_), float(resolution),
+                         int(max_iterations), MAX_NODES, int(stall_iterations), int(shortcut_iterations), clock_kind,
+                         end, seed, int(sampler == "halton"), tune_a, ctypes.byref(out), ctypes.byref(n_out), stats)
+    st = stats[:]
+    ck.n_checks += st[2]
     if code == -2:
         return None
     path = None
     if code == 0:
         try:
-            P = np.ctypeslib.as_array(out, shape=(n_out.value, dim)).copy()
+            P = np.empty((n_out.value, dim))
+            ctypes.memmove(P.ctypes.data, out, P.nbytes)
         finally:
             lib.rrtc_free(out)
         path = list(P)
-    return NativeRRTCResult(RRTC_STATUS.get(code, f"status {code}"), path, int(stats[0]), int(stats[1]), int(stats[2]),
-                            (int(stats[3]), int(stats[4])), int(stats[5]), int(stats[6]))
+    return NativeRRTCResult(RRTC_STATUS.get(code, f"status {code}"), path, st[0], st[1], st[2], (st[3], st[4]),
+                            st[5], st[6])
+
+
+_WHOLE: dict[int, tuple[int, int, int]] = {}
+_WHOLE_ARRAYS: list[tuple[np.ndarray, np.ndarray]] = []   # kept alive: their addresses are in _WHOLE
+_NO_TUNE = (ctypes.c_double * 5)()
+
+
+def _whole(nq: int) -> tuple[int, int, int]:
+    """The addresses of the joint indices 0 … nq − 1 and of a zero base, and nq (a query that searches every
+    joint); the arrays are kept per nq (read only by the native call)."""
+    got = _WHOLE.get(nq)
+    if got is None:
+        jidx, base = np.arange(nq, dtype=np.int32), np.zeros(nq)
+        _WHOLE_ARRAYS.append((jidx, base))
+        got = _WHOLE[nq] = (jidx.ctypes.data, base.ctypes.data, nq)
+    return got
 
 
 def _mode(validity: ConfigValidity) -> tuple[str, Any]:
