@@ -312,9 +312,9 @@ def test_without_a_compiler_the_checker_falls_back_to_coal(tcb, monkeypatch, tmp
     tr = TrialGenerator(tcb, scene).generate(0, 0)
     res = make_planner("tcbirrt", tcb, scene, checker=ck, variant="improved", max_iterations=1000).plan(
         tr.q_start, tr.q_goal, time_limit=100, seed=0)
-    # the search tests/test_tree.py records for the same query with the native kernel
+    # the search tests/test_tree.py records for the same query with the native kernel (its regrasp motions balanced)
     assert (res.status.value, res.stats["nodes"], len(res.path)) == ("exact", 114, 82)
-    assert float(np.abs(res.path).sum()) == pytest.approx(1904.9856439901168, rel=1e-9)
+    assert float(np.abs(res.path).sum()) == pytest.approx(1906.3002102344522, rel=1e-9)
 
 
 def test_a_damaged_cached_library_is_rebuilt(monkeypatch, tmp_path):

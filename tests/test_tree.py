@@ -104,10 +104,11 @@ def test_tcbirrt_unchanged_on_fixed_seeds(tcb, variant, seed):
     sc = Scene.load("ssps_scene1")
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     # recorded before the improved variant took its orientations from the lead path (lead_orientation_probability)
+    # and before its regrasp motions balanced their trees (regrasp_balance)
     from optplan.planners import RRTConnectOptions
 
     # extension="python" (and "native", the same search) is the golden reference: "loop" draws from its own stream
-    o = TCBiRRTOptions(variant=variant, max_iterations=300, lead_orientation_probability=0.0,
+    o = TCBiRRTOptions(variant=variant, max_iterations=300, lead_orientation_probability=0.0, regrasp_balance=0.0,
                        regrasp=RRTConnectOptions(**PY_REGRASP), extension="python")
     pl = TCBiRRT(tcb, sc, o,
                  checker=ValidityChecker(tcb, sc), kinematics=ClosedChainKinematics(tcb, sc.object.grasps))
@@ -115,7 +116,8 @@ def test_tcbirrt_unchanged_on_fixed_seeds(tcb, variant, seed):
 
 
 def test_tcbirrt_improved_defaults_unchanged_on_a_fixed_seed(tcb):
-    """The improved variant's own defaults (lead-path orientations included), recorded 2026-11-24."""
+    """The improved variant's own defaults (lead-path orientations included), recorded 2026-11-24; the same search
+    with the regrasp motions' tree balancing (the default since 2026-11-30): the same nodes, other regrasp motions."""
     from optplan.planners import TCBiRRT, TCBiRRTOptions
     from optplan.scene import Scene
     from optplan.trials import TrialGenerator
@@ -124,9 +126,11 @@ def test_tcbirrt_improved_defaults_unchanged_on_a_fixed_seed(tcb):
     tr = TrialGenerator(tcb, sc).generate(0, 0)
     from optplan.planners import RRTConnectOptions
 
-    pl = TCBiRRT(tcb, sc, TCBiRRTOptions(variant="improved", max_iterations=1000, regrasp=RRTConnectOptions(**PY_REGRASP),
-                                         extension="python"))
-    _check(pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=0), ("exact", 114, 82, 1904.9856439901168))
+    for balance, golden in ((0.0, ("exact", 114, 82, 1904.9856439901168)),   # recorded 2026-11-24
+                            (None, ("exact", 114, 82, 1906.3002102344522))):  # the default 1 since 2026-11-30
+        pl = TCBiRRT(tcb, sc, TCBiRRTOptions(variant="improved", max_iterations=1000, regrasp_balance=balance,
+                                             regrasp=RRTConnectOptions(**PY_REGRASP), extension="python"))
+        _check(pl.plan(tr.q_start, tr.q_goal, time_limit=100, seed=0), golden)
 
 
 @pytest.mark.parametrize("scene_name,planner,seed", sorted(GOLDEN_PR2))

@@ -133,6 +133,8 @@ class RegraspMixin:
         rs: dict[str, Any] = {}
         lo, hi = self.robot.lower, self.robot.upper
         ro = o.regrasp if not o.regrasp_stall_iterations else replace(o.regrasp, stall_iterations=o.regrasp_stall_iterations)
+        if o.regrasp_balance and not ro.balance:
+            ro = replace(ro, balance=float(o.regrasp_balance))
         cap = sub.work_cap()   # the work left: the RRT-Connect's iteration cap
         if cap and not 0 < ro.max_iterations <= cap:
             ro = replace(ro, max_iterations=cap)

@@ -70,7 +70,7 @@ class RRTConnectOptions:
     dynamic_domain_min: float = 1.0
     #: Tree balancing (VAMP's ``tree_ratio``): the tree that just grew grows again, instead of the trees
     #: alternating, while ``|n_this - n_other| / n_this >= balance`` (it is at most half the other's size
-    #: for 1) [-]. 0: off (the trees alternate). Native search only.
+    #: for 1) [-]. 0: off (the trees alternate). The native and the Python search.
     balance: float = 0.0
     #: The connection after a sample's extension: ``"other"`` (Kuffner and LaValle's connect: the other tree
     #: grows toward the new node, step after step of ``range``) or ``"new"`` (VAMP's: the new node's tree grows
@@ -100,10 +100,10 @@ class RRTConnectOptions:
             raise ValueError(f"RRTConnectOptions.dynamic_domain_alpha: expected a number in [0, 1), got {self.dynamic_domain_alpha!r}")
         if self.connect not in CONNECTS:
             raise ValueError(f"RRTConnectOptions.connect: expected one of {CONNECTS}, got {self.connect!r}")
-        if not self.native_search and (self.dynamic_domain > 0 or self.balance > 0 or self.connect != "other"):
-            raise ValueError("RRTConnectOptions: dynamic_domain, balance and connect='new' are options of the native "
-                             f"search; native_search=False runs the Python search, which has none of them (got "
-                             f"dynamic_domain={self.dynamic_domain!r}, balance={self.balance!r}, connect={self.connect!r})")
+        if not self.native_search and (self.dynamic_domain > 0 or self.connect != "other"):
+            raise ValueError("RRTConnectOptions: dynamic_domain and connect='new' are options of the native search; "
+                             "native_search=False runs the Python search, which has neither (got "
+                             f"dynamic_domain={self.dynamic_domain!r}, connect={self.connect!r})")
         if self.sampler not in SAMPLERS:
             raise ValueError(f"RRTConnectOptions.sampler: expected one of {SAMPLERS}, got {self.sampler!r}")
 
@@ -159,9 +159,10 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
                 is_valid: Callable[[np.ndarray], bool], rng: np.random.Generator, deadline: Deadline, *,
                 range_: float = 1.0, resolution: float = 0.03, max_iterations: int = 0,
                 stats: dict[str, Any] | None = None, weights: np.ndarray | None = None,
-                sampler: str = "uniform", stall_iterations: int = 0) -> list[np.ndarray] | None:
+                sampler: str = "uniform", stall_iterations: int = 0, balance: float = 0.0) -> list[np.ndarray] | None:
     """RRTConnect between two valid points of the box ``[lower, upper]``, its samples drawn by ``sampler``
-    (:attr:`RRTConnectOptions.sampler`).
+    (:attr:`RRTConnectOptions.sampler`); ``balance`` (:attr:`RRTConnectOptions.balance`, 0: off) keeps the tree
+    that just tried to grow growing while ``|n_a − n_b| / n_a >= balance``, as the native search does.
 
     Returns the list of tree nodes from ``start`` to ``goal`` (consecutive nodes joined by valid
     straight edges, checked as :func:`edge_is_valid` with ``resolution`` and ``weights``) or None
@@ -208,7 +209,8 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
         xr = rng.uniform(lower, upper) if shift is None else lower + (upper - lower) * halton_point(it, shift)
         res, ia = extend(ta, xr)
         if res == TRAPPED:
-            ta, tb, a_is_start = tb, ta, not a_is_start
+            if not (balance > 0 and abs(ta.n - tb.n) / ta.n >= balance):
+                ta, tb, a_is_start = tb, ta, not a_is_start
             continue
         target = ta.X[ia].copy()
         while True:
@@ -218,7 +220,8 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
         if res == REACHED:
             found = (ia, ib)
             break
-        ta, tb, a_is_start = tb, ta, not a_is_start
+        if not (balance > 0 and abs(ta.n - tb.n) / ta.n >= balance):
+            ta, tb, a_is_start = tb, ta, not a_is_start
     stats["iterations"] = stats.get("iterations", 0) + it
     stats["nodes"] = stats.get("nodes", 0) + ta.n + tb.n
     if found is None:
@@ -277,13 +280,13 @@ def joint_space_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upp
             elif got.status not in ("found", "iteration cap", "time limit"):
                 log.warning("native RRT-Connect stopped: %s", got.status)
             return got.path
-    if o.dynamic_domain > 0 or o.balance > 0 or o.connect != "other":
-        log.warning("the native RRT-Connect is unavailable here: the Python search runs without dynamic_domain, "
-                    "balance and connect='new'")
+    if o.dynamic_domain > 0 or o.connect != "other":
+        log.warning("the native RRT-Connect is unavailable here: the Python search runs without dynamic_domain and "
+                    "connect='new'")
     stats["search"] = "python"
     path = rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range, resolution=o.resolution,
                        max_iterations=o.max_iterations, stats=stats, sampler=o.sampler,
-                       stall_iterations=o.stall_iterations)
+                       stall_iterations=o.stall_iterations, balance=o.balance)
     if path is not None and o.shortcut_iterations:
         path = shortcut_path(path, validity, o.resolution, rng, o.shortcut_iterations)
     return path

@@ -28,7 +28,8 @@ VARIANTS = {
               "branch_roots": False, "stall_iterations": 0, "trap_grafts": 0, "restart_iterations": 0,
               "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
               "trap_graft_target": "other", "trap_graft_stream": "search", "trap_graft_after": 0,
-              "ik_restart_iterations": 0, "ik_restart_clip": False, "trap_adapt": "off", "domain_radius": 1.0},
+              "ik_restart_iterations": 0, "ik_restart_clip": False, "trap_adapt": "off", "domain_radius": 1.0,
+              "regrasp_balance": 0.0},
     "improved": {"goal_bias": 0.1, "sample_filter": True, "bridge_probability": 0.0, "keep_prefix": True,
                  "guide_probability": 0.4, "geodesic_probability": 0.5, "ik_restarts": 2,
                  "edge_tolerance": 0.01, "lazy_edges": False, "joint_connect": False, "max_joint_step": 0.25,
@@ -37,7 +38,8 @@ VARIANTS = {
                  "branch_roots": False, "stall_iterations": 0, "trap_grafts": 4, "restart_iterations": 0,
                  "restart_branch_roots": False, "filter_robot_body": False, "ik_predictor": "none",
                  "trap_graft_target": "sample", "trap_graft_stream": "own", "trap_graft_after": 1500,
-                 "ik_restart_iterations": 0, "ik_restart_clip": False, "trap_adapt": "off", "domain_radius": 1.0},
+                 "ik_restart_iterations": 0, "ik_restart_clip": False, "trap_adapt": "off", "domain_radius": 1.0,
+                 "regrasp_balance": 1.0},
 }
 
 
@@ -116,6 +118,11 @@ class TCBiRRTOptions:
     #: walled in, and the search would otherwise spend the whole ``regrasp_time_limit`` (or ``graft_time_limit``)
     #: failing; the counter ``regrasp_stalled`` counts such motions.
     regrasp_stall_iterations: int = 0
+    #: Tree balancing of the regrasp motions' RRT-Connect (:attr:`.RRTConnectOptions.balance`, VAMP's tree ratio: the
+    #: tree that just grew grows again while the other has at least this many times its nodes more; 0: the trees
+    #: alternate) when ``regrasp.balance`` is 0 [-] (None: the variant's value, :data:`VARIANTS`). A motion whose one
+    #: end sits in a narrow place (a hand at the object) then spends its samples on that end's smaller tree.
+    regrasp_balance: float | None = None
     #: When neither one-arm-at-a-time order of a regrasp passes, move both arms at once (RRTConnect in the two
     #: arms' joints, the object standing still at its pose: a released object in orbit stays where it is), in
     #: what is left of the regrasp's time (None: the variant's value, :data:`VARIANTS`: off in both; a path with such a
@@ -380,6 +387,7 @@ class TCBiRRTOptions:
             if not (isinstance(v, int) and not isinstance(v, bool) and v >= low):
                 raise ValueError(f"TCBiRRTOptions.{name}: expected an int >= {low}, got {v!r}")
         _pos("graft_time_limit", self.graft_time_limit)
+        _pos("regrasp_balance", self.regrasp_balance, allow_zero=True)
         for name in ("regrasp_iterations", "regrasp_min_iterations", "graft_iterations", "guide_iterations",
                      "guide_attempt_iterations"):   # work budgets of sub-searches (0: none)
             if not (isinstance(getattr(self, name), int) and not isinstance(getattr(self, name), bool) and getattr(self, name) >= 0):
