@@ -106,3 +106,15 @@ def test_families_draws_only_those_indices(tmp_path, monkeypatch):
     assert keys == ["5_1", "5_7", "5_13"]
     with pytest.raises(SystemExit):
         main(["--generate-only", "--families", "bays", "--n", "2", "--out", str(tmp_path / "h")])
+
+
+def test_run_order_alternates_within_each_family():
+    """Index i draws family i % 6: the order must not follow the family (the first planner on a fresh scene pays its
+    warm-up), so each family runs a first and b first equally often over consecutive draws."""
+    from optplan.bench.scenegen import FAMILIES
+    from optplan.bench.tcbirrt_paired import _order
+
+    n = len(FAMILIES)
+    for f in range(n):
+        orders = [_order(f + n * k) for k in range(8)]
+        assert orders.count(("a", "b")) == orders.count(("b", "a")) == 4
