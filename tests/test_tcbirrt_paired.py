@@ -84,6 +84,22 @@ def test_from_and_summary_count_each_key_once(tmp_path, capsys):
     assert "all: 1 queries; success a 1/1, b 0/1 (b wins 0, loses 1;" in s
 
 
+def test_from_pairs_only_the_families_asked_for(tmp_path):
+    """``--from DIR --families bay`` pairs only the bay indices of DIR (the other families are left to another run)."""
+    import json
+
+    from optplan.bench.tcbirrt_paired import main
+
+    drawn = tmp_path / "drawn"
+    drawn.mkdir()
+    (drawn / "scenes.jsonl").write_text("".join(json.dumps({"key": f"7_{i}", "index": i, "group": g, "skipped": True})
+                                                + "\n" for i, g in enumerate(("wall", "bay", "corridor"))))
+    out = tmp_path / "out"
+    assert main(["--from", str(drawn), "--out", str(out), "--base-seed", "7", "--families", "bay"]) == 0
+    lines = [json.loads(x) for x in (out / "paired.jsonl").read_text().splitlines()]
+    assert [r["group"] for r in lines] == ["bay"]
+
+
 def test_families_draws_only_those_indices(tmp_path, monkeypatch):
     """``--families bay`` draws only the indices whose family (``FAMILIES[i % 6]``) is a bay, each with its own seed
     ``base_seed * 1000 + i``; an unknown family is refused."""

@@ -165,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--witness-time", type=float, default=10.0, help="CPU seconds [s] per witness search")
     ap.add_argument("--max-draws", type=int, default=4, help="draws per generated index")
     ap.add_argument("--families", default="",
-                    help="only the generated indices of these families (comma-separated; default all)")
+                    help="only the generated indices of these families, drawn or (with --from) paired (comma-separated; default all)")
     ap.add_argument("--planners", default=",".join(SPECS), help="the two planner specs a,b")
     ap.add_argument("--scenes", default="", help="instead of generated scenes: fixed scenes (suite, ssps, names)")
     ap.add_argument("--trials", type=int, default=0, help="trials per fixed scene")
@@ -196,9 +196,10 @@ def main(argv: list[str] | None = None) -> int:
             f.flush()
 
         if a.from_dir:
+            only = {x.strip() for x in a.families.split(",") if x.strip()}
             for line in (Path(a.from_dir) / "scenes.jsonl").read_text().splitlines():
                 drawn_rec: dict[str, Any] = json.loads(line) if line.strip() else {}
-                if not drawn_rec or drawn_rec.get("key") in done:
+                if not drawn_rec or drawn_rec.get("key") in done or (only and drawn_rec.get("group") not in only):
                     continue
                 if drawn_rec.get("skipped"):
                     emit(drawn_rec)
