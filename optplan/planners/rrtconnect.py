@@ -155,6 +155,12 @@ def edge_is_valid(a: np.ndarray, b: np.ndarray, is_valid: Callable[[np.ndarray],
     return True
 
 
+def _other_turn(ta: Tree, tb: Tree, balance: float) -> bool:
+    """Whether tree b takes the next iteration: always, unless balancing (``balance`` > 0) keeps tree a, which just
+    tried to grow, growing while ``|n_a − n_b| / n_a >= balance`` (the native search's ``rrtc_other_turn``)."""
+    return not (balance > 0 and abs(ta.n - tb.n) / ta.n >= balance)
+
+
 def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                 is_valid: Callable[[np.ndarray], bool], rng: np.random.Generator, deadline: Deadline, *,
                 range_: float = 1.0, resolution: float = 0.03, max_iterations: int = 0,
@@ -209,7 +215,7 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
         xr = rng.uniform(lower, upper) if shift is None else lower + (upper - lower) * halton_point(it, shift)
         res, ia = extend(ta, xr)
         if res == TRAPPED:
-            if not (balance > 0 and abs(ta.n - tb.n) / ta.n >= balance):
+            if _other_turn(ta, tb, balance):
                 ta, tb, a_is_start = tb, ta, not a_is_start
             continue
         target = ta.X[ia].copy()
@@ -220,7 +226,7 @@ def rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: n
         if res == REACHED:
             found = (ia, ib)
             break
-        if not (balance > 0 and abs(ta.n - tb.n) / ta.n >= balance):
+        if _other_turn(ta, tb, balance):
             ta, tb, a_is_start = tb, ta, not a_is_start
     stats["iterations"] = stats.get("iterations", 0) + it
     stats["nodes"] = stats.get("nodes", 0) + ta.n + tb.n

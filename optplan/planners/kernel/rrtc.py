@@ -239,7 +239,8 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
     One 64-bit seed is drawn from ``rng``. The checker's ``n_checks`` grows by the configurations checked."""
     try:   # a ConfigValidity (duck-typed: this layer does not import validity)
         ck: Any = validity.checker
-        mode, pose, vbase, vjoints = validity.mode, validity.object_pose, validity.base, validity.joints
+        vbase, vjoints = validity.base, validity.joints
+        mode, pose = _mode(validity)
     except AttributeError:
         return None
     nat = getattr(ck, "_native", None)
@@ -252,10 +253,6 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
         except KernelUnavailable as e:
             log.debug("native RRT-Connect unavailable (%s): the Python search runs", e)
             return None
-    if ck.object is None and mode in ("held", "fixed"):   # as _mode
-        mode, pose = "free", None
-    elif mode != "fixed":
-        pose = None
     kern = nat.kernel
     nq = kern.nq
     if vbase is None:
