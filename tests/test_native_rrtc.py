@@ -378,3 +378,58 @@ def test_laid_out_blocks_give_the_same_search(tcb, scene_name):
         a, b = out
         assert a.status == b.status and a.stats["iterations"] == b.stats["iterations"]
         assert a.stats["collision_checks"] == b.stats["collision_checks"] and np.array_equal(a.path, b.path)
+
+
+@pytest.mark.parametrize("scene_name", ["hard_truss", "hard_clutter_dense"])
+def test_search_check_of_a_regrasp_query_gives_the_kernels_and_coals_verdicts(tcb, scene_name):
+    """The check as a regrasp's query sets it up (arm A's joints searched; arm B and the object still, placed
+    once; moving geometries placed at first use; two joints' groups tested member by member against the other's
+    sphere): the kernel's verdict on 3,000 configurations near and far from the start, never free where coal
+    collides."""
+    from optplan.planners.kernel.rrtc import search_check_valid
+
+    sc, tr, ck, idx, pose, base, rng = one_arm_case(tcb, scene_name, 5)
+    X = np.vstack([rng.uniform(tcb.lower[idx], tcb.upper[idx], (1500, len(idx))),
+                   base[idx] + rng.normal(0.0, 0.2, (1500, len(idx)))])
+    full = np.tile(base, (len(X), 1))
+    full[:, idx] = X
+    f = ck.validity("fixed", pose)
+    got = search_check_valid(f, idx, base, X)
+    assert np.array_equal(got, ck.valid_batch(full, "fixed", pose))
+    want = ValidityChecker(tcb, sc, kernel="coal").valid_batch(full, "fixed", pose)
+    assert not np.any(got & ~want)
+    assert 0.05 < got.mean() < 0.95
+
+
+def test_vamp_environment_gives_vamps_own_verdicts():
+    """Turned boxes, capsules and spheres mapped into VAMP's environment, and VAMP's sphere Panda loaded with VAMP's
+    self-collision pairs: VAMP's check and optplan's (native and coal) agree on 3,000 random configurations. Needs
+    ``vamp`` and VAMP's source tree (``OPTPLAN_VAMP_SOURCE``: its ``resources/panda`` holds the sphere robot)."""
+    import os
+    from pathlib import Path
+
+    vamp = pytest.importorskip("vamp")
+    from optplan.model.example_robots import example_robots_available
+
+    src = os.environ.get("OPTPLAN_VAMP_SOURCE")
+    if not src or not example_robots_available():
+        pytest.skip("set OPTPLAN_VAMP_SOURCE to VAMP's source tree (and install optplan[robots])")
+    from optplan.bench.panda_rrtc import load_single_panda
+    from optplan.bench.vamp_peer import vamp_environment
+    from optplan.scene import Obstacle
+
+    robot = load_single_panda(Path(src) / "resources/panda/panda_spherized.urdf")
+    sc = Scene(name="vamp_map", robot=None, obstacles=(
+        Obstacle("shelf", "box", pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.5, 0.9), np.array([0.45, 0.1, 0.5])),
+                 size=(0.5, 0.3, 0.04)),
+        Obstacle("bar", "capsule", pin.SE3(pin.rpy.rpyToMatrix(1.1, 0.2, -0.4), np.array([-0.1, -0.45, 0.6])),
+                 radius=0.05, length=0.5),
+        Obstacle("ball", "sphere", pin.SE3(np.eye(3), np.array([-0.4, 0.3, 0.8])), radius=0.15)))
+    env = vamp_environment(vamp, sc)
+    rng = np.random.default_rng(2)
+    Q = rng.uniform(robot.lower, robot.upper, (3000, robot.nq))
+    theirs = np.array([bool(vamp.panda.validate([float(v) for v in q], env)) for q in Q])
+    ours = ValidityChecker(robot, sc).valid_batch(Q, "free")
+    exact = ValidityChecker(robot, sc, kernel="coal").valid_batch(Q, "free")
+    assert 0.2 < theirs.mean() < 0.95
+    assert np.array_equal(ours, theirs) and np.array_equal(exact, theirs)

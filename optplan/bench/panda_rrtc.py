@@ -53,12 +53,16 @@ BOX_SIZES = np.array([[0.3, 0.2, 0.3], [0.15, 0.3, 0.2], [0.2, 0.2, 0.25], [0.25
 FINGER_OPENING = 0.04  # [m]
 
 
-def load_single_panda(spheres_urdf: str | Path | None = None) -> Any:
+def load_single_panda(spheres_urdf: str | Path | None = None, srdf: str | Path | None = None) -> Any:
     """One Panda (module docstring) as a :class:`~optplan.model.robot.RobotModel` (needs ``example-robot-data``).
 
     ``spheres_urdf``: another URDF of the Panda to take instead of the vendor's, e.g. VAMP's
     ``resources/panda/panda_spherized.urdf`` (59 spheres: the robot VAMP checks); its visual
-    elements are dropped, its collision spheres kept as they are."""
+    elements are dropped, its collision spheres kept as they are. ``srdf``: an SRDF whose
+    ``disable_collisions`` decide the self-collision pairs instead: every pair of geometries on two
+    links that it does not disable (VAMP's rule with its ``panda.srdf``; default for a
+    ``spheres_urdf``: the ``panda.srdf`` beside it, if there is one); without one, the pairs at least
+    three joints apart minus those the vendor's SRDF disables."""
     from ..model._robot_data import _require_dir
     from ..model.dual_panda import srdf_disabled_pairs
     from ..model.robot import RobotModel
@@ -90,13 +94,21 @@ def load_single_panda(spheres_urdf: str | Path | None = None) -> Any:
     robot = RobotModel.from_urdf(path, arms={"arm": {"ee": ee,
                                                      "joints": [f"panda_joint{k}" for k in range(1, 8)]}},
                                  name=name)
-    disabled = srdf_disabled_pairs(share)
+    if srdf is None and spheres_urdf is not None and (src.parent / "panda.srdf").exists():
+        srdf = src.parent / "panda.srdf"
     objs = robot.collision_model.geometryObjects
 
     def link_of(g: int) -> str:
         return str(robot.model.frames[objs[g].parentFrame].name)
 
-    keep = [(a, b) for a, b in robot.collision_pairs if frozenset((link_of(a), link_of(b))) not in disabled]
+    if srdf is not None:
+        sroot = ET.parse(srdf).getroot()
+        disabled = {frozenset((d.get("link1"), d.get("link2"))) for d in sroot.iter("disable_collisions")}
+        candidates = [(a, b) for a in range(len(objs)) for b in range(a + 1, len(objs)) if link_of(a) != link_of(b)]
+    else:
+        disabled = srdf_disabled_pairs(share)
+        candidates = list(robot.collision_pairs)
+    keep = [(a, b) for a, b in candidates if frozenset((link_of(a), link_of(b))) not in disabled]
     robot.collision_pairs = keep
     robot.collision_model.removeAllCollisionPairs()
     for a, b in keep:
@@ -142,16 +154,16 @@ def queries(robot: Any, kind: str, n: int, seed: int, kernel: str = "native") ->
 
 def run_optplan(robot: Any, sc: Scene, ck: Any, seed: int, *, native: bool, range_: float = 1.0,
                 resolution: float = 0.03, time_limit: float = 10.0, shortcut_iterations: int = 0,
-                sampler: str = "uniform", **options: Any) -> dict[str, Any]:
-    """One RRT-Connect query (``sampler`` and ``options``: :class:`.RRTConnectOptions`): CPU and wall time [s],
-    iterations, nodes, status and path."""
+                sampler: str = "uniform", start: Any = START, goal: Any = GOAL, **options: Any) -> dict[str, Any]:
+    """One RRT-Connect query from ``start`` to ``goal`` [rad] (default: the cage example's; ``sampler`` and
+    ``options``: :class:`.RRTConnectOptions`): CPU and wall time [s], iterations, nodes, status and path."""
     from ..planners import RRTConnect, RRTConnectOptions
 
     pl = RRTConnect(robot, sc, RRTConnectOptions(range=range_, resolution=resolution, native_search=native,
                                                  shortcut_iterations=shortcut_iterations, sampler=sampler, **options),
                     checker=ck)
     t0, c0 = time.perf_counter(), time.process_time()
-    res = pl.plan(START, GOAL, time_limit=time_limit, seed=seed)
+    res = pl.plan(np.asarray(start, dtype=float), np.asarray(goal, dtype=float), time_limit=time_limit, seed=seed)
     cpu, wall = time.process_time() - c0, time.perf_counter() - t0
     return {"cpu_s": cpu, "wall_s": wall, "iterations": int(res.stats.get("iterations", 0)),
             "nodes": int(res.stats.get("nodes", 0)), "status": res.status.value, "path": res.path,

@@ -19,10 +19,19 @@ The setup, per query (the two planners alternate which goes first):
   exact, at 0.01 rad) accepts is reported; they are checked after all the timed calls, so that the garbage of
   those checks is not collected inside a timed call.
 
+``--mbm PATH`` plans MotionBenchMaker's Panda problems instead (VAMP's ``resources/panda/problems.tar.bz2``;
+:mod:`optplan.bench.mbm`: seven scenarios of 100 problems, shelves, tables, a box and a cage of turned boxes and
+capsules), the first ``--per-scenario`` of each, one query per problem; with ``--spheres-urdf`` both planners check
+the same robot (VAMP's spheres, and the self-collision pairs of VAMP's ``panda.srdf`` beside that URDF: every
+pair of links it does not disable — on 14,000 random configurations of 70 of these scenes VAMP's verdict and
+optplan's agree on every one). A problem whose start or goal either side calls invalid is skipped and counted.
+
 Times are CPU seconds of this process around each call (``time.process_time``); VAMP's own
 ``nanoseconds`` (wall, inside the call) are reported beside them.
 
-``python -m optplan.bench.vamp_peer --queries 25``
+``python -m optplan.bench.vamp_peer --queries 25``;
+``python -m optplan.bench.vamp_peer --mbm <vamp>/resources/panda/problems.tar.bz2 --spheres-urdf
+<vamp>/resources/panda/panda_spherized.urdf --per-scenario 100``
 """
 from __future__ import annotations
 
@@ -33,6 +42,7 @@ import time
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from .panda_rrtc import GOAL, START, queries, run_optplan
 
@@ -48,25 +58,29 @@ def vamp_available() -> Any:
 
 
 def vamp_environment(vamp: Any, scene: Any) -> Any:
-    """The scene's spheres and boxes as a ``vamp.Environment``."""
+    """The scene's spheres, boxes (turned too) and capsules as a ``vamp.Environment``."""
     env = vamp.Environment()
     for o in scene.obstacles:
         p = [float(v) for v in o.placement.translation]
+        R = o.placement.rotation
         if o.shape == "sphere":
             env.add_sphere(vamp.Sphere(p, float(o.radius)))
-        elif o.shape == "box":
-            R = o.placement.rotation
-            if not np.allclose(R, np.eye(3)):
-                raise ValueError(f"vamp_environment: box {o.name!r} is rotated; only axis-aligned boxes are mapped")
-            env.add_cuboid(vamp.Cuboid(p, [0.0, 0.0, 0.0], [float(v) / 2 for v in o.size]))
+        elif o.shape == "box":   # VAMP's Euler XYZ: R = Rz(c) Ry(b) Rx(a), as Pinocchio's roll-pitch-yaw
+            euler = [float(v) for v in pin.rpy.matrixToRpy(R)]
+            env.add_cuboid(vamp.Cuboid(p, euler, [float(v) / 2 for v in o.size]))
+        elif o.shape == "capsule":   # the segment along the local z axis, by its end points
+            h = 0.5 * float(o.length) * R[:, 2]
+            env.add_capsule(vamp.Cylinder([float(v) for v in o.placement.translation - h],
+                                          [float(v) for v in o.placement.translation + h], float(o.radius)))
         else:
-            raise ValueError(f"vamp_environment: obstacle {o.name!r} is a {o.shape}; spheres and boxes are mapped")
+            raise ValueError(f"vamp_environment: obstacle {o.name!r} is a {o.shape}; spheres, boxes and capsules are mapped")
     return env
 
 
-def run_vamp(vamp: Any, env: Any, *, range_: float, vamp_defaults: bool = False) -> dict[str, Any]:
-    """One VAMP RRT-Connect query from START to GOAL: CPU seconds around the call, VAMP's own time,
-    iterations, solved and path."""
+def run_vamp(vamp: Any, env: Any, *, range_: float, vamp_defaults: bool = False, start: Any = START,
+             goal: Any = GOAL) -> dict[str, Any]:
+    """One VAMP RRT-Connect query from ``start`` to ``goal`` (default: the cage example's): CPU seconds around
+    the call, VAMP's own time, iterations, solved and path."""
     planner = vamp.panda.rrtc
     settings = vamp.RRTCSettings()
     settings.range = float(range_)
@@ -75,7 +89,7 @@ def run_vamp(vamp: Any, env: Any, *, range_: float, vamp_defaults: bool = False)
         settings.balance = False
     sampler = vamp.panda.halton()
     c0 = time.process_time()
-    res = planner(list(START), list(GOAL), env, settings, sampler)
+    res = planner([float(v) for v in start], [float(v) for v in goal], env, settings, sampler)
     cpu = time.process_time() - c0
     solved = bool(res.solved)
     path = np.asarray(res.path.numpy(), dtype=float) if solved else None   # (a Path object cannot be iterated)
@@ -101,6 +115,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--spheres-urdf", default=None,
                     help="plan with this Panda URDF's collision spheres instead of the vendor's capsules, e.g. VAMP's "
                          "resources/panda/panda_spherized.urdf (the robot VAMP checks)")
+    ap.add_argument("--mbm", default=None, metavar="PATH",
+                    help="plan MotionBenchMaker's Panda problems instead (VAMP's resources/panda/problems.tar.bz2, "
+                         "or the directory it was unpacked into); with VAMP's sphere robot (--spheres-urdf), the same "
+                         "robot and self-collision pairs on both sides")
+    ap.add_argument("--scenarios", default=None, help="with --mbm: comma-separated scenarios (default: all seven)")
+    ap.add_argument("--per-scenario", type=int, default=20, help="with --mbm: the first N problems of each scenario")
+    ap.add_argument("--json", default=None, metavar="OUT", help="write every query's row (no paths) to this JSON file")
     args = ap.parse_args(argv)
     vamp = vamp_available()
     if vamp is None:
@@ -116,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     from .panda_rrtc import load_single_panda
 
     robot = load_single_panda(args.spheres_urdf)
+    if args.mbm is not None:
+        return _run_mbm(args, vamp, robot)
     for kind in args.scenes.split(","):
         rows: dict[str, list[dict[str, Any]]] = {"vamp": [], "optplan": []}
         accepted = 0
@@ -148,6 +171,85 @@ def main(argv: list[str] | None = None) -> int:
                   f"{statistics.median(r['iterations'] for r in rs) if rs else float('nan'):.0f} iterations{extra}")
         print(f"{kind:6s} optplan / vamp: {med['optplan'] / med['vamp']:.1f}x per query; "
               f"VAMP paths valid in optplan's model: {accepted}/{len(rows['vamp'])}")
+    return 0
+
+
+def _line(label: str, rows: dict[str, list[dict[str, Any]]], accepted: int) -> None:
+    """One summary line per planner and their ratio of medians, and the median of the per-query ratios."""
+    med = {}
+    for name, rs in rows.items():
+        ok = [r for r in rs if r["status"] == "exact"]
+        med[name] = statistics.median(r["cpu_s"] for r in rs) * 1e3 if rs else float("nan")
+        per_it = [r["cpu_s"] / r["iterations"] * 1e6 for r in ok if r["iterations"] > 0]
+        print(f"{label:18s} {name:8s} {len(ok)}/{len(rs)} solved, median {med[name]:.3f} ms CPU per query, "
+              f"{statistics.median(per_it) if per_it else float('nan'):.2f} us per iteration, median "
+              f"{statistics.median(r['iterations'] for r in rs) if rs else float('nan'):.0f} iterations")
+    q = [a["cpu_s"] / b["cpu_s"] for a, b in zip(rows["optplan"], rows["vamp"]) if b["cpu_s"] > 0]
+    print(f"{label:18s} optplan / vamp: {med['optplan'] / med['vamp']:.1f}x (medians), per query median "
+          f"{statistics.median(q) if q else float('nan'):.1f}x; VAMP paths valid in optplan's model: "
+          f"{accepted}/{len(rows['vamp'])}")
+
+
+def _run_mbm(args: Any, vamp: Any, robot: Any) -> int:
+    """MotionBenchMaker's problems (``--mbm``): per problem both planners, alternating which goes first; a problem
+    whose start or goal is invalid for either side is skipped and counted."""
+    import json
+
+    from ..planners.kernel.rrtc import prepare_native_search
+    from ..planners.rrtconnect import edge_is_valid
+    from ..planners.validity import ValidityChecker
+    from .mbm import load_mbm
+
+    scen = None if args.scenarios is None else [s.strip() for s in args.scenarios.split(",") if s.strip()]
+    problems = load_mbm(args.mbm, scen, args.per_scenario)
+    by: dict[str, list[Any]] = {}
+    for pr in problems:
+        by.setdefault(pr.scenario, []).append(pr)
+    every: dict[str, list[dict[str, Any]]] = {"vamp": [], "optplan": []}
+    dump = []
+    acc_all = 0
+    k = 0
+    for scenario, prs in by.items():
+        rows: dict[str, list[dict[str, Any]]] = {"vamp": [], "optplan": []}
+        to_validate, skipped = [], 0
+        for pr in prs:
+            env = vamp_environment(vamp, pr.scene)
+            ck = ValidityChecker(robot, pr.scene)
+            if not (vamp.panda.validate(list(pr.start), env) and vamp.panda.validate(list(pr.goal), env)
+                    and ck.is_valid_free(pr.start) and ck.is_valid_free(pr.goal)):
+                skipped += 1
+                continue
+            prepare_native_search(ck)   # the per-scene set-up, outside the timed queries (as VAMP's environment)
+            for name in (("vamp", "optplan") if k % 2 == 0 else ("optplan", "vamp")):
+                if name == "vamp":
+                    r = run_vamp(vamp, env, range_=args.range, vamp_defaults=args.vamp_defaults, start=pr.start,
+                                 goal=pr.goal)
+                else:
+                    r = run_optplan(robot, pr.scene, ck, args.seed + k, native=True, range_=args.range,
+                                    resolution=args.resolution, sampler=args.sampler, start=pr.start, goal=pr.goal,
+                                    dynamic_domain=args.dynamic_domain, balance=args.balance)
+                rows[name].append(r)
+            k += 1
+            to_validate.append((pr, rows["vamp"][-1]["path"]))
+            dump.append({"key": pr.key, **{n: {kk: v for kk, v in rows[n][-1].items() if kk not in ("path", "search")}
+                                           for n in rows}})
+        accepted = 0
+        for pr, P in to_validate:
+            if P is not None:
+                f = ValidityChecker(robot, pr.scene, kernel="coal").validity("free")
+                accepted += bool(f(P[0])) and all(edge_is_valid(a, b, f, 0.01) for a, b in zip(P[:-1], P[1:]))
+        if skipped:
+            print(f"{scenario}: {skipped} of {len(prs)} problems skipped (start or goal invalid for one side)")
+        _line(scenario, rows, accepted)
+        for n in rows:
+            every[n] += rows[n]
+        acc_all += accepted
+    if len(by) > 1:
+        _line("all", every, acc_all)
+    if args.json:
+        from .._io import write_text
+
+        write_text(args.json, json.dumps(dump, indent=1))
     return 0
 
 

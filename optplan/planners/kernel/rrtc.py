@@ -30,7 +30,8 @@ if TYPE_CHECKING:
     from ..base import Deadline
     from ..validity import ConfigValidity
 
-__all__ = ["NativeRRTCResult", "load_rrtc_library", "native_rrt_connect", "broad_phase_valid", "prepare_native_search"]
+__all__ = ["NativeRRTCResult", "load_rrtc_library", "native_rrt_connect", "broad_phase_valid", "search_check_valid",
+           "prepare_native_search"]
 log = logging.getLogger(__name__)
 
 _LIB: list[Any] = []
@@ -42,7 +43,8 @@ MAX_NODES = 2_000_000
 
 class _Groups(ctypes.Structure):
     _fields_ = [("ngroups", ctypes.c_int), ("nblocks", ctypes.c_int), ("gkind", _P), ("gref", _P), ("gcenter", _P),
-                ("gradius", _P), ("bstart", _P), ("bga", _P), ("bgb", _P), ("perm", _P), ("gbox", _P)]
+                ("gradius", _P), ("bstart", _P), ("bga", _P), ("bgb", _P), ("perm", _P), ("gbox", _P),
+                ("ggroup", _P), ("rownext", _P)]
 
 
 class BroadPhase:
@@ -100,12 +102,19 @@ class BroadPhase:
             if len(perm) else perm
         sizes = (ends - starts)[order]
         bstart = np.r_[0, np.cumsum(sizes)].astype(np.int32)
+        # after each position of perm, the next whose first geometry differs or whose block begins (a run's end)
+        pav = np.asarray(pa, np.int64)[perm] if len(perm) else np.zeros(0, np.int64)
+        brk = np.flatnonzero(np.r_[True, pav[1:] != pav[:-1]]) if len(perm) else np.zeros(0, np.int64)
+        brk = np.union1d(np.union1d(brk, bstart[:-1]), [len(perm)])
+        rownext = brk[np.searchsorted(brk, np.arange(len(perm)), side="right")].astype(np.int32) \
+            if len(perm) else np.zeros(0, np.int32)
         gbox = np.zeros(len(kinds), np.uint8)   # a group with a box member (the exact sphere test skips box pairs)
         for g in range(ng):
             if int(gtype[g]) == 2:
                 gbox[group[g]] = 1
         self.arrays = (kind, np.array(refs, np.int32), np.ascontiguousarray(centers, float), np.array(radii, float),
-                       bstart, bl[order].astype(np.int32), bh[order].astype(np.int32), perm, gbox)
+                       bstart, bl[order].astype(np.int32), bh[order].astype(np.int32), perm, gbox,
+                       group.astype(np.int32), rownext)
         self.n_groups, self.n_blocks = len(kinds), len(starts)
         self.struct = _Groups(self.n_groups, self.n_blocks, *(x.ctypes.data for x in self.arrays))
         self.pointer = ctypes.addressof(self.struct)
@@ -155,6 +164,28 @@ def broad_phase_valid(validity: Any, Q: np.ndarray) -> np.ndarray:
     return out.astype(bool)
 
 
+def search_check_valid(validity: Any, joints: Any, base: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """The native search's check as a query sets it up — the joints ``joints`` (indices into the configuration)
+    searched with the others at ``base``: the still part placed once, the blocks laid out, the moving geometries
+    placed when first needed — on every row of ``X`` (values of ``joints``) in the mode of ``validity``:
+    booleans, for tests against the kernel's and coal's verdicts."""
+    lib = load_rrtc_library()
+    nat = validity.checker._native
+    mode, pose = _mode(validity)
+    kern = nat.kernel
+    g = kern._override(nat._override(mode, pose))
+    bp = _broad_phase(kern, nat.fixed_id)
+    jidx = np.ascontiguousarray(joints, dtype=np.int32)
+    base = np.ascontiguousarray(base, dtype=float)
+    X = np.ascontiguousarray(X, dtype=float).reshape(-1, len(jidx))
+    out = np.zeros(len(X), np.uint8)
+    rc = lib.rrtc_check_batch_search(kern._km_p, nat.masks[mode].ctypes.data, kern._pose_p, g, bp.pointer, len(jidx),
+                                     jidx.ctypes.data, base.ctypes.data, len(X), X.ctypes.data, out.ctypes.data)
+    if rc != 0:
+        raise MemoryError("rrtc_check_batch_search: out of memory or too large a model")
+    return out.astype(bool)
+
+
 def load_rrtc_library() -> Any:
     """The compiled kernel with the RRT-Connect entry points (``ctypes.CDLL``), built at first use and
     cached under :func:`optplan.codegen.cache_dir` by a hash of its source. Raises
@@ -192,6 +223,9 @@ def load_rrtc_library() -> Any:
                               ctypes.POINTER(ctypes.c_int), _P]
     lib.rrtc_check_batch.restype = None
     lib.rrtc_check_batch.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_longlong, _P, _P]
+    lib.rrtc_check_batch_search.restype = ctypes.c_int
+    lib.rrtc_check_batch_search.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_int, _P, _P, ctypes.c_longlong,
+                                            _P, _P]
     lib.rrtc_free.restype = None
     lib.rrtc_free.argtypes = [_P]
     _LIB.append(lib)

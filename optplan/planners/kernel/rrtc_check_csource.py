@@ -9,6 +9,11 @@ check; the search itself is in :mod:`.rrtc_csource`, which places this text insi
 * with the still part: the joints and geometries no searched joint moves are placed once per query and their blocks
   checked once, and the blocks a check tests are laid out per moving group (the still partners' centres and squared
   radius sums as arrays, tested in one vectorised pass);
+* a block of two joints' groups (a spherized link beside its wrist: hundreds of sphere pairs) tests each member's
+  bounding sphere against the other group's sphere first, and skips the pairs of a member apart from it (the pairs
+  are in runs of one first geometry: a run at once);
+* with the still part, a moving geometry is placed when a test first needs it in a check (most of a sphere robot's
+  spheres are never needed when their joint's group is apart from everything);
 * the pair that collided last is tried first; the verdicts are the kernel's.
 """
 from __future__ import annotations
@@ -31,6 +36,8 @@ typedef struct {
     const int *bga, *bgb;    /* nblocks: the block's groups */
     const int *perm;         /* npairs: pair indices, block after block */
     const unsigned char *gbox;   /* ngroups: 1 when a member of the group is a box */
+    const int *ggroup;       /* ng: the group of each geometry */
+    const int *rownext;      /* npairs: the position in perm after the run of pairs with the same first geometry */
 } rrtc_groups;
 
 /* 1 when the sphere (o, R) is farther than thr from the capsule or box g (exact; 0 when unknown: a sphere, whose
@@ -72,7 +79,20 @@ typedef struct {
        the blocks of two moving groups */
     int nmv, nmm; int *mv, *sps, *spb, *mmb; double *spx, *spy, *spz, *sprr; long long *sph; void *spmem;
     int dd_on; int near;          /* the dynamic domain applies (sample extensions only); the last extension's node */
+    /* a block of two joints' groups: per geometry, whether its bounding sphere is apart from the other group's
+       sphere (then none of its pairs in the block can be in contact), computed once per block test (stamped) */
+    unsigned gtick; unsigned gst[KMAXG]; unsigned char gfar[KMAXG];
+    /* with the static part, a moving geometry (gmv) is placed when a test first needs it in a check (stamped) */
+    unsigned ptick; unsigned pst[KMAXG]; unsigned char gmv[KMAXG];
 } rrtc_ctx;
+
+/* geometry g placed for the current check (a moving geometry's pose is computed at its first use in the check) */
+static inline void rrtc_need(rrtc_ctx *c, const double **pose, int g) {
+    if (c->gmv[g] && c->pst[g] != c->ptick) {
+        fk_geom(c->m, c->opose, c->og, c->oMi, c->oMg, pose, 0, g);
+        c->pst[g] = c->ptick;
+    }
+}
 
 static double rrtc_now(int kind) {
     struct timespec ts;
@@ -96,9 +116,41 @@ static int rrtc_block(rrtc_ctx *c, const double **pose, int b, double thr, int h
         int og = G->gkind[ga] == 0 ? ga : gb, jg = og == ga ? gb : ga;
         if (rrtc_sphere_apart(m, pose, G->gref[og], c->gc + 3*jg, G->gradius[jg], thr, G->gbox[jg])) return 0;
     }
+    else if (ga != gb && G->gkind[ga] == 1 && G->gkind[gb] == 1) {
+        /* two joints' groups (many pairs when two links stay close, e.g. a wrist's spheres): a geometry whose
+           bounding sphere is apart from the other group's sphere is apart from every member of that group (the
+           group's sphere holds the members' spheres), so pair_collides would reject its pairs at its first test */
+        if (++c->gtick == 0) { memset(c->gst, 0, sizeof c->gst); c->gtick = 1; }   /* wrapped: no stale stamp */
+        unsigned tick = c->gtick;
+        int end = G->bstart[b+1];
+        for (int i = G->bstart[b]; i < end; ) {
+            int run = G->rownext[i];
+            for (int e = 0; e < 2; ++e) {   /* the run's first geometry, then each pair's second */
+                for (; i < run; ++i) {
+                    int k = G->perm[i];
+                    int g = e ? m->pb[k] : m->pa[k];
+                    if (c->gst[g] != tick) {
+                        int og = G->ggroup[g] == ga ? gb : ga;
+                        rrtc_need(c, pose, g);
+                        const double *P = pose[g], *o = c->gc + 3*og;
+                        double dx = P[9]-o[0], dy = P[10]-o[1], dz = P[11]-o[2], rr = m->grad[g] + G->gradius[og] + thr;
+                        c->gst[g] = tick;
+                        c->gfar[g] = dx*dx + dy*dy + dz*dz > rr*rr;
+                    }
+                    if (!e) { if (c->gfar[g]) i = run; break; }   /* far: the whole run is apart */
+                    if (c->gfar[g] || k == h || !c->active[k]) continue;
+                    rrtc_need(c, pose, m->pa[k]);   /* (placed by the run's test) */
+                    if (pair_collides(m, pose, m->pa[k], m->pb[k])) { c->hint = k; return 1; }
+                }
+            }
+        }
+        return 0;
+    }
     for (int i = G->bstart[b]; i < G->bstart[b+1]; ++i) {
         int k = G->perm[i];
-        if (k != h && c->active[k] && pair_collides(m, pose, m->pa[k], m->pb[k])) { c->hint = k; return 1; }
+        if (k == h || !c->active[k]) continue;
+        rrtc_need(c, pose, m->pa[k]); rrtc_need(c, pose, m->pb[k]);
+        if (pair_collides(m, pose, m->pa[k], m->pb[k])) { c->hint = k; return 1; }
     }
     return 0;
 }
@@ -116,10 +168,13 @@ static int rrtc_valid(rrtc_ctx *c, const double *x) {
     if (c->smov) {
         if (c->static_hit) return 0;
         for (int t = 0; t < c->nmj; ++t) fk_joint(m, c->q, c->oMi, c->mj[t]);
-        for (int t = 0; t < c->nmg; ++t) fk_geom(m, c->opose, c->og, c->oMi, c->oMg, pose, 0, c->mg[t]);
+        if (++c->ptick == 0) { memset(c->pst, 0, sizeof c->pst); c->ptick = 1; }   /* wrapped: no stale stamp */
     } else fk(m, c->q, c->opose, c->og, c->oMi, c->oMg, pose);
     int h = c->hint;
-    if (h >= 0 && c->active[h] && pair_collides(m, pose, m->pa[h], m->pb[h])) return 0;
+    if (h >= 0 && c->active[h]) {
+        rrtc_need(c, pose, m->pa[h]); rrtc_need(c, pose, m->pb[h]);
+        if (pair_collides(m, pose, m->pa[h], m->pb[h])) return 0;
+    }
     for (int i = 0; i < G->ngroups; ++i) {
         if (c->smov && !c->smov[i]) continue;
         double *o = c->gc + 3*i;
@@ -232,7 +287,7 @@ static int rrtc_static_setup(rrtc_ctx *c) {
         if (jmov[j]) c->mj[c->nmj++] = j;
     }
     for (int g = 0; g < m->ng; ++g)
-        if (g != c->og && m->gparent[g] != 0 && jmov[m->gparent[g]]) c->mg[c->nmg++] = g;
+        if (g != c->og && m->gparent[g] != 0 && jmov[m->gparent[g]]) { c->mg[c->nmg++] = g; c->gmv[g] = 1; }
     fk(m, c->q, c->opose, c->og, c->oMi, c->oMg, c->pose);
     for (int i = 0; i < G->ngroups; ++i) {
         int r = G->gref[i];
@@ -278,6 +333,31 @@ void rrtc_check_batch(const kmodel *m, const unsigned char *active, const double
     c.q = q;
     for (long long i = 0; i < M; ++i) out[i] = (unsigned char)rrtc_valid(&c, Q + i*m->nq);
     free(work); free(jidx);
+}
+
+/* the search's own check (the static part and the blocks' layout as rrtc_plan sets them up) of the rows of X
+   (M x dim values of the joints jidx, the others at base), for tests: out[i] = 1 when row i is free; -1 out of
+   memory or too large a model */
+int rrtc_check_batch_search(const kmodel *m, const unsigned char *active, const double *override_pose, int override_g,
+                            const rrtc_groups *grp, int dim, const int *jidx, const double *base, long long M,
+                            const double *X, unsigned char *out) {
+    if (m->nj > KMAXJ || m->ng > KMAXG || m->nq > KMAXJ || dim > KMAXJ) return -1;
+    double *work = (double *)malloc(sizeof(double) * (size_t)(12*KMAXJ + 12*KMAXG + KMAXJ + 3*grp->ngroups + 1));
+    rrtc_ctx *c = (rrtc_ctx *)calloc(1, sizeof(rrtc_ctx));
+    int rc = -1;
+    if (!work || !c) goto done;
+    c->m = m; c->active = active; c->opose = override_pose; c->og = override_g; c->grp = grp; c->hint = -1;
+    c->dim = dim; c->jidx = jidx; c->oMi = work; c->oMg = work + 12*KMAXJ; c->q = c->oMg + 12*KMAXG;
+    c->gc = c->q + KMAXJ;
+    memcpy(c->q, base, sizeof(double) * (size_t)m->nq);
+    if (rrtc_use_static_part && rrtc_static_setup(c) != 0) goto done;
+    if (c->smov && rrtc_use_layout && rrtc_layout_setup(c) != 0) goto done;
+    for (long long i = 0; i < M; ++i) out[i] = (unsigned char)rrtc_valid(c, X + i*dim);
+    rc = 0;
+done:
+    if (c) { free((void *)c->pose); free(c->spmem); }
+    free(c); free(work);
+    return rc;
 }
 
 /* the straight edge a -> b: 1 valid, 0 not, -1 out of memory */
