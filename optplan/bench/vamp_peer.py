@@ -8,8 +8,9 @@ The setup, per query (the two planners alternate which goes first):
 * the same obstacles (spheres as spheres; boxes as VAMP cuboids of the same centre and half edges),
   the same start and goal, the same joint limits as the sampling box, the same ``range`` (largest
   extension [rad]);
-* VAMP's RRT-Connect with ``dynamic_domain`` and ``balance`` off (optplan's RRT-Connect has neither;
-  ``--vamp-defaults`` keeps VAMP's own), its Halton sampler, no simplification; optplan's
+* VAMP's RRT-Connect with ``dynamic_domain`` off (optplan's default) and its tree balancing as optplan's
+  (``--balance``, default optplan's default 1, VAMP's ``tree_ratio`` default; ``--vamp-defaults`` keeps VAMP's own
+  settings, the dynamic domain on), its Halton sampler, no simplification; optplan's
   :class:`~optplan.planners.rrtconnect.RRTConnect` with the native search, no shortcuts, and by default
   its Halton sampler too (``--sampler uniform``: independent uniform draws; optplan's Halton points are
   shifted by a random vector per query, VAMP's sequence is fixed);
@@ -78,15 +79,18 @@ def vamp_environment(vamp: Any, scene: Any) -> Any:
 
 
 def run_vamp(vamp: Any, env: Any, *, range_: float, vamp_defaults: bool = False, start: Any = START,
-             goal: Any = GOAL) -> dict[str, Any]:
+             goal: Any = GOAL, balance: float = 0.0) -> dict[str, Any]:
     """One VAMP RRT-Connect query from ``start`` to ``goal`` (default: the cage example's): CPU seconds around
-    the call, VAMP's own time, iterations, solved and path."""
+    the call, VAMP's own time, iterations, solved and path. Without ``vamp_defaults`` its dynamic domain is off
+    and its tree balancing is ``balance`` (its ``tree_ratio``; 0: off), as optplan's."""
     planner = vamp.panda.rrtc
     settings = vamp.RRTCSettings()
     settings.range = float(range_)
     if not vamp_defaults:
         settings.dynamic_domain = False
-        settings.balance = False
+        settings.balance = balance > 0
+        if balance > 0:
+            settings.tree_ratio = float(balance)
     sampler = vamp.panda.halton()
     c0 = time.process_time()
     res = planner([float(v) for v in start], [float(v) for v in goal], env, settings, sampler)
@@ -110,8 +114,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dynamic-domain", type=float, default=0.0,
                     help="optplan's dynamic domain radius [rad] (RRTConnectOptions.dynamic_domain; 0: off; VAMP's "
                          "default radius is 4)")
-    ap.add_argument("--balance", type=float, default=0.0,
-                    help="optplan's tree balancing ratio (RRTConnectOptions.balance; 0: off; VAMP's default is 1)")
+    ap.add_argument("--balance", type=float, default=None,
+                    help="both planners' tree balancing ratio (RRTConnectOptions.balance and VAMP's tree_ratio; 0: "
+                         "off; default: optplan's default, 1, which is VAMP's)")
     ap.add_argument("--spheres-urdf", default=None,
                     help="plan with this Panda URDF's collision spheres instead of the vendor's capsules, e.g. VAMP's "
                          "resources/panda/panda_spherized.urdf (the robot VAMP checks)")
@@ -136,6 +141,10 @@ def main(argv: list[str] | None = None) -> int:
     from ..planners.validity import ValidityChecker
     from .panda_rrtc import load_single_panda
 
+    if args.balance is None:
+        from ..planners import RRTConnectOptions
+
+        args.balance = RRTConnectOptions().balance
     robot = load_single_panda(args.spheres_urdf)
     if args.mbm is not None:
         return _run_mbm(args, vamp, robot)
@@ -149,7 +158,8 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             for name in (("vamp", "optplan") if k % 2 == 0 else ("optplan", "vamp")):
                 if name == "vamp":
-                    rows[name].append(run_vamp(vamp, env, range_=args.range, vamp_defaults=args.vamp_defaults))
+                    rows[name].append(run_vamp(vamp, env, range_=args.range, vamp_defaults=args.vamp_defaults,
+                                               balance=args.balance))
                 else:
                     rows[name].append(run_optplan(robot, sc, ck, args.seed + k, native=True, range_=args.range,
                                                   resolution=args.resolution, sampler=args.sampler,
@@ -223,7 +233,7 @@ def _run_mbm(args: Any, vamp: Any, robot: Any) -> int:
             for name in (("vamp", "optplan") if k % 2 == 0 else ("optplan", "vamp")):
                 if name == "vamp":
                     r = run_vamp(vamp, env, range_=args.range, vamp_defaults=args.vamp_defaults, start=pr.start,
-                                 goal=pr.goal)
+                                 goal=pr.goal, balance=args.balance)
                 else:
                     r = run_optplan(robot, pr.scene, ck, args.seed + k, native=True, range_=args.range,
                                     resolution=args.resolution, sampler=args.sampler, start=pr.start, goal=pr.goal,

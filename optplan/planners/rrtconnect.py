@@ -70,8 +70,9 @@ class RRTConnectOptions:
     dynamic_domain_min: float = 1.0
     #: Tree balancing (VAMP's ``tree_ratio``): the tree that just grew grows again, instead of the trees
     #: alternating, while ``|n_this - n_other| / n_this >= balance`` (it is at most half the other's size
-    #: for 1) [-]. 0: off (the trees alternate). The native and the Python search.
-    balance: float = 0.0
+    #: for 1) [-]. 0: off (the trees alternate). The native and the Python search. Default 1 (VAMP's), since
+    #: 2026-11-30: on MotionBenchMaker's Panda problems it halves the CPU per query (docs/planners.md).
+    balance: float = 1.0
     #: The connection after a sample's extension: ``"other"`` (Kuffner and LaValle's connect: the other tree
     #: grows toward the new node, step after step of ``range``) or ``"new"`` (VAMP's: the new node's tree grows
     #: from it toward the other tree's nearest node, in equal steps of at most ``range``). Native search only.

@@ -107,7 +107,7 @@ class TCBiRRTOptions:
                                                                                          tolerance=1e-8))
     #: RRTConnect options of a regrasp motion (one arm, 7-D, object fixed).
     regrasp: RRTConnectOptions = field(default_factory=lambda: RRTConnectOptions(range=1.0, resolution=0.03,
-                                                                                 shortcut_iterations=50))
+                                                                                 shortcut_iterations=50, balance=0.0))
     #: Time limit per regrasp attempt [s]: a backstop of ``regrasp_iterations`` (docs/planners.md, "Reproducible searches").
     regrasp_time_limit: float = 20.0
     #: Work budget of one regrasp: RRT-Connect iterations of its motions, shared by the arm orders as the time is
