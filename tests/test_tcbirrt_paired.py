@@ -134,3 +134,32 @@ def test_run_order_alternates_within_each_family():
     for f in range(n):
         orders = [_order(f + n * k) for k in range(8)]
         assert orders.count(("a", "b")) == orders.count(("b", "a")) == 4
+
+
+def test_from_with_several_planner_seeds(tmp_path, monkeypatch):
+    """``--planner-seeds 3``: each certified query three times, the planner seed the trial's + k * 7919, the run order
+    alternating with k, keys ``K``, ``K~1``, ``K~2``; a rerun resumes without repeating a key; 0 is refused."""
+    import json
+
+    from optplan.bench import tcbirrt_paired as tp
+
+    calls = []
+
+    def fake(scene, trial, seed, limit, specs, order, seed_offset=0):
+        calls.append((scene, trial, seed, order, seed_offset))
+        return {"a": {"success": True}, "b": {"success": True}}
+
+    monkeypatch.setattr(tp, "run_query", fake)
+    drawn = tmp_path / "drawn"
+    drawn.mkdir()
+    (drawn / "scenes.jsonl").write_text(json.dumps({"key": "7_1", "index": 1, "group": "bay", "scene": "s.toml"}) + "\n")
+    out = tmp_path / "out"
+    args = ["--from", str(drawn), "--out", str(out), "--base-seed", "7", "--planner-seeds", "3"]
+    assert tp.main(args) == 0 and tp.main(args) == 0
+    assert [c[4] for c in calls] == [0, 7919, 15838]
+    assert calls[0][3] == calls[2][3] == calls[1][3][::-1]
+    rows = [json.loads(x) for x in (out / "paired.jsonl").read_text().splitlines()]
+    assert [r["key"] for r in rows] == ["7_1", "7_1~1", "7_1~2"]
+    assert [r["planner_seed_offset"] for r in rows] == [0, 7919, 15838]
+    with pytest.raises(SystemExit):
+        tp.main(["--from", str(drawn), "--out", str(out), "--planner-seeds", "0"])

@@ -21,7 +21,8 @@ trap-graft attempts and grafts made (``trap_attempts``, ``trap_grafts``; 0 with 
 Drawing and certifying scenes does not depend on the two planners: ``--generate-only`` draws and writes the
 certified scenes (one JSON line per index in ``OUT/scenes.jsonl``) without planning, and ``--from DIR`` later pairs
 two planners on the scenes written there (each grouped by its family), so that scenes certified by one version of
-the code can be paired by another.
+the code can be paired by another. ``--planner-seeds K`` plans each of those queries with K planner seeds (a query's
+success over seeds: a search's tail against a scene's difficulty).
 """
 from __future__ import annotations
 
@@ -66,10 +67,15 @@ def _order(index: int) -> tuple[str, str]:
     return KEYS if (index // len(FAMILIES)) % 2 == 0 else KEYS[::-1]
 
 
+#: the planner seed of a query's k-th planner seed is the trial's seed + k * SEED_STRIDE (``--planner-seeds``)
+SEED_STRIDE = 7919
+
+
 def run_query(scene: str, trial: int, seed: int, time_limit: float, specs: tuple[str, str] = SPECS,
-              order: tuple[str, str] = KEYS) -> dict[str, Any]:
+              order: tuple[str, str] = KEYS, seed_offset: int = 0) -> dict[str, Any]:
     """Both planners on trial ``trial`` of base seed ``seed`` of ``scene`` (``time_limit`` CPU seconds [s] each),
-    in ``order``; ``{"a": row, "b": row}`` or ``{"no_trial": why}``."""
+    in ``order``, with the planner seed the trial's seed + ``seed_offset``; ``{"a": row, "b": row}`` or
+    ``{"no_trial": why}``."""
     from ..errors import UnreachableError
     from .tcbirrt import _W, _path_checks, _worker_setup
 
@@ -81,8 +87,8 @@ def run_query(scene: str, trial: int, seed: int, time_limit: float, specs: tuple
         return {"no_trial": str(exc)}
     out: dict[str, Any] = {}
     for key in order:
-        res = w["planners"][specs[KEYS.index(key)]].plan(t.q_start, t.q_goal, time_limit=time_limit, seed=t.seed,
-                                                         clock="cpu")
+        res = w["planners"][specs[KEYS.index(key)]].plan(t.q_start, t.q_goal, time_limit=time_limit,
+                                                         seed=t.seed + int(seed_offset), clock="cpu")
         checks = _path_checks(w["robot"], w["scene"], w["checker"], res)
         tl, rl = task_length(res.object_poses) if res.success else (None, None)
         out[key] = {"success": bool(res.success and checks.get("swept_invalid_edges", 0) == 0),
@@ -174,6 +180,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--summary", nargs="+", metavar="DIR", help="print the paired statistics of these outputs")
     ap.add_argument("--generate-only", action="store_true",
                     help="draw and certify the generated scenes only (OUT/scenes.jsonl, OUT/scenes/), no planning")
+    ap.add_argument("--planner-seeds", type=int, default=1,
+                    help="with --from: plan each certified query with this many planner seeds (the trial's seed + k * "
+                         f"{SEED_STRIDE}, k = 0, 1, ...; key suffix ~k for k > 0), the order alternating with k too")
     ap.add_argument("--from", dest="from_dir", metavar="DIR",
                     help="pair on the scenes a --generate-only run wrote to DIR (in its index order)")
     a = ap.parse_args(argv)
@@ -185,6 +194,8 @@ def main(argv: list[str] | None = None) -> int:
     specs = tuple(s.strip() for s in a.planners.split(","))
     if (len(specs) != 2 and not a.generate_only) or not a.out:
         ap.error("--planners: expected two comma-separated specs, and --out")
+    if a.planner_seeds < 1:
+        ap.error(f"--planner-seeds: expected a positive count, got {a.planner_seeds}")
     logging.getLogger("optplan").setLevel(logging.ERROR)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -199,14 +210,20 @@ def main(argv: list[str] | None = None) -> int:
             only = {x.strip() for x in a.families.split(",") if x.strip()}
             for line in (Path(a.from_dir) / "scenes.jsonl").read_text().splitlines():
                 drawn_rec: dict[str, Any] = json.loads(line) if line.strip() else {}
-                if not drawn_rec or drawn_rec.get("key") in done or (only and drawn_rec.get("group") not in only):
+                if not drawn_rec or (only and drawn_rec.get("group") not in only):
                     continue
                 if drawn_rec.get("skipped"):
-                    emit(drawn_rec)
+                    if drawn_rec.get("key") not in done:
+                        emit(drawn_rec)
                     continue
-                order = _order(drawn_rec["index"])
-                emit({**drawn_rec, "order": order,
-                      **run_query(drawn_rec["scene"], 0, a.base_seed, a.time_limit, specs, order)})
+                for k in range(a.planner_seeds):
+                    key = drawn_rec["key"] if k == 0 else f"{drawn_rec['key']}~{k}"
+                    if key in done:
+                        continue
+                    order = _order(drawn_rec["index"])
+                    order = order if k % 2 == 0 else order[::-1]
+                    emit({**drawn_rec, "key": key, "order": order, "planner_seed_offset": SEED_STRIDE * k,
+                          **run_query(drawn_rec["scene"], 0, a.base_seed, a.time_limit, specs, order, SEED_STRIDE * k)})
             return 0
         if a.scenes:
             from .tcbirrt import expand_scenes
