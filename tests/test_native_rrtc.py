@@ -436,3 +436,15 @@ def test_vamp_environment_gives_vamps_own_verdicts():
     exact = ValidityChecker(robot, sc, kernel="coal").valid_batch(Q, "free")
     assert 0.2 < theirs.mean() < 0.95
     assert np.array_equal(ours, theirs) and np.array_equal(exact, theirs)
+
+
+def test_vamp_peer_mbm_bad_path_says_so(monkeypatch, capsys, tmp_path):
+    """``--mbm`` with a path that holds no problems: a one-line error and exit status 2, no traceback."""
+    from optplan.bench import vamp_peer
+    from optplan.model.example_robots import example_robots_available
+
+    if not example_robots_available():
+        pytest.skip("example-robot-data not installed (pip install 'optplan[robots]')")
+    monkeypatch.setattr(vamp_peer, "vamp_available", lambda: object())
+    assert vamp_peer.main(["--mbm", str(tmp_path / "nothing.tar.bz2")]) == 2
+    assert "neither VAMP's problems.tar.bz2 nor a directory" in capsys.readouterr().out
