@@ -55,12 +55,8 @@ def sphere_robot(tmp_path_factory):
         return -1 if name == "base" else int(name[1:])
 
     # every pair of geometries on links at least two apart (neighbours share a joint and always touch)
-    pairs = [(a, b) for a in range(len(objs)) for b in range(a + 1, len(objs)) if abs(link_of(a) - link_of(b)) >= 2]
-    robot.collision_pairs = pairs
-    robot.collision_model.removeAllCollisionPairs()
-    for a, b in pairs:
-        robot.collision_model.addCollisionPair(pin.CollisionPair(a, b))
-    robot.collision_data = pin.GeometryData(robot.collision_model)
+    robot.set_collision_pairs([(a, b) for a in range(len(objs)) for b in range(a + 1, len(objs))
+                               if abs(link_of(a) - link_of(b)) >= 2])
     return robot
 
 

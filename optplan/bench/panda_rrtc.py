@@ -108,12 +108,7 @@ def load_single_panda(spheres_urdf: str | Path | None = None, srdf: str | Path |
     else:
         disabled = srdf_disabled_pairs(share)
         candidates = list(robot.collision_pairs)
-    keep = [(a, b) for a, b in candidates if frozenset((link_of(a), link_of(b))) not in disabled]
-    robot.collision_pairs = keep
-    robot.collision_model.removeAllCollisionPairs()
-    for a, b in keep:
-        robot.collision_model.addCollisionPair(pin.CollisionPair(a, b))
-    robot.collision_data = pin.GeometryData(robot.collision_model)
+    robot.set_collision_pairs([(a, b) for a, b in candidates if frozenset((link_of(a), link_of(b))) not in disabled])
     return robot
 
 

@@ -151,17 +151,21 @@ def broad_phase_valid(validity: Any, Q: np.ndarray) -> np.ndarray:
     """The native search's own check (broad phase, then the kernel's pair tests) of every row of ``Q``
     (full configurations) in the mode of ``validity`` (a :class:`~optplan.planners.validity.ConfigValidity`
     on the native kernel): booleans, for tests against the kernel's and coal's verdicts."""
+    lib, kern, mask, g, bp = _check_args(validity)
+    Q = np.ascontiguousarray(Q, dtype=float)
+    out = np.zeros(len(Q), np.uint8)
+    lib.rrtc_check_batch(kern._km_p, mask, kern._pose_p, g, bp.pointer, len(Q), Q.ctypes.data, out.ctypes.data)
+    return out.astype(bool)
+
+
+def _check_args(validity: Any) -> tuple[Any, Any, int, int, BroadPhase]:
+    """The library, kernel, active-pair mask address, still-object slot and broad phase of ``validity``'s checks."""
     lib = load_rrtc_library()
     nat = validity.checker._native
     mode, pose = _mode(validity)
     kern = nat.kernel
-    g = kern._override(nat._override(mode, pose))
-    bp = _broad_phase(kern, nat.fixed_id)
-    Q = np.ascontiguousarray(Q, dtype=float)
-    out = np.zeros(len(Q), np.uint8)
-    lib.rrtc_check_batch(kern._km_p, nat.masks[mode].ctypes.data, kern._pose_p, g, bp.pointer, len(Q), Q.ctypes.data,
-                         out.ctypes.data)
-    return out.astype(bool)
+    return lib, kern, nat.masks[mode].ctypes.data, kern._override(nat._override(mode, pose)), \
+        _broad_phase(kern, nat.fixed_id)
 
 
 def search_check_valid(validity: Any, joints: Any, base: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -169,17 +173,12 @@ def search_check_valid(validity: Any, joints: Any, base: np.ndarray, X: np.ndarr
     searched with the others at ``base``: the still part placed once, the blocks laid out, the moving geometries
     placed when first needed — on every row of ``X`` (values of ``joints``) in the mode of ``validity``:
     booleans, for tests against the kernel's and coal's verdicts."""
-    lib = load_rrtc_library()
-    nat = validity.checker._native
-    mode, pose = _mode(validity)
-    kern = nat.kernel
-    g = kern._override(nat._override(mode, pose))
-    bp = _broad_phase(kern, nat.fixed_id)
+    lib, kern, mask, g, bp = _check_args(validity)
     jidx = np.ascontiguousarray(joints, dtype=np.int32)
     base = np.ascontiguousarray(base, dtype=float)
     X = np.ascontiguousarray(X, dtype=float).reshape(-1, len(jidx))
     out = np.zeros(len(X), np.uint8)
-    rc = lib.rrtc_check_batch_search(kern._km_p, nat.masks[mode].ctypes.data, kern._pose_p, g, bp.pointer, len(jidx),
+    rc = lib.rrtc_check_batch_search(kern._km_p, mask, kern._pose_p, g, bp.pointer, len(jidx),
                                      jidx.ctypes.data, base.ctypes.data, len(X), X.ctypes.data, out.ctypes.data)
     if rc != 0:
         raise MemoryError("rrtc_check_batch_search: out of memory or too large a model")
