@@ -140,8 +140,6 @@ def main(argv: list[str] | None = None) -> int:
     if not example_robots_available():
         print("example-robot-data is not installed (pip install 'optplan[robots]'): nothing to pair")
         return 0
-    from ..planners.rrtconnect import edge_is_valid
-    from ..planners.validity import ValidityChecker
     from .panda_rrtc import load_single_panda
 
     if args.balance is None:
@@ -153,7 +151,6 @@ def main(argv: list[str] | None = None) -> int:
         return _run_mbm(args, vamp, robot)
     for kind in args.scenes.split(","):
         rows: dict[str, list[dict[str, Any]]] = {"vamp": [], "optplan": []}
-        accepted = 0
         to_validate = []   # VAMP's paths, checked by coal after the timed runs (its garbage stays out of them)
         for k, (sc, ck) in enumerate(queries(robot, kind, args.queries, args.seed)):
             env = vamp_environment(vamp, sc)
@@ -168,23 +165,22 @@ def main(argv: list[str] | None = None) -> int:
                                                   resolution=args.resolution, sampler=args.sampler,
                                                   dynamic_domain=args.dynamic_domain, balance=args.balance))
             to_validate.append((sc, rows["vamp"][-1]["path"]))
-        for sc, P in to_validate:
-            if P is not None:
-                f = ValidityChecker(robot, sc, kernel="coal").validity("free")
-                accepted += bool(f(P[0])) and all(edge_is_valid(a, b, f, 0.01) for a, b in zip(P[:-1], P[1:]))
-        med = {}
-        for name, rs in rows.items():
-            ok = [r for r in rs if r["status"] == "exact"]
-            med[name] = statistics.median(r["cpu_s"] for r in rs) * 1e3 if rs else float("nan")
-            per_it = [r["cpu_s"] / r["iterations"] * 1e6 for r in ok if r["iterations"] > 0]
-            extra = (f", VAMP's own median {statistics.median(r['own_s'] for r in rs) * 1e3:.3f} ms"
-                     if name == "vamp" and rs else "")
-            print(f"{kind:6s} {name:8s} {len(ok)}/{len(rs)} solved, median {med[name]:.3f} ms CPU per query, "
-                  f"{statistics.median(per_it) if per_it else float('nan'):.2f} us per iteration, median "
-                  f"{statistics.median(r['iterations'] for r in rs) if rs else float('nan'):.0f} iterations{extra}")
-        print(f"{kind:6s} optplan / vamp: {med['optplan'] / med['vamp']:.1f}x per query (target <= {TARGET_RATIO:g}x); "
-              f"VAMP paths valid in optplan's model: {accepted}/{len(rows['vamp'])}")
+        _line(kind, rows, _accepted(robot, to_validate))
     return 0
+
+
+def _accepted(robot: Any, to_validate: list[tuple[Any, Any]]) -> int:
+    """How many of VAMP's paths (``(scene, path or None)``) optplan's exact model (coal, edges at 0.01 rad) accepts;
+    run after the timed calls, so that the garbage of these checks is not collected inside one."""
+    from ..planners.rrtconnect import edge_is_valid
+    from ..planners.validity import ValidityChecker
+
+    n = 0
+    for sc, P in to_validate:
+        if P is not None:
+            f = ValidityChecker(robot, sc, kernel="coal").validity("free")
+            n += bool(f(P[0])) and all(edge_is_valid(a, b, f, 0.01) for a, b in zip(P[:-1], P[1:]))
+    return n
 
 
 def _line(label: str, rows: dict[str, list[dict[str, Any]]], accepted: int) -> None:
@@ -194,9 +190,11 @@ def _line(label: str, rows: dict[str, list[dict[str, Any]]], accepted: int) -> N
         ok = [r for r in rs if r["status"] == "exact"]
         med[name] = statistics.median(r["cpu_s"] for r in rs) * 1e3 if rs else float("nan")
         per_it = [r["cpu_s"] / r["iterations"] * 1e6 for r in ok if r["iterations"] > 0]
+        extra = (f", VAMP's own median {statistics.median(r['own_s'] for r in rs) * 1e3:.3f} ms"
+                 if name == "vamp" and rs else "")
         print(f"{label:18s} {name:8s} {len(ok)}/{len(rs)} solved, median {med[name]:.3f} ms CPU per query, "
               f"{statistics.median(per_it) if per_it else float('nan'):.2f} us per iteration, median "
-              f"{statistics.median(r['iterations'] for r in rs) if rs else float('nan'):.0f} iterations")
+              f"{statistics.median(r['iterations'] for r in rs) if rs else float('nan'):.0f} iterations{extra}")
     q = [a["cpu_s"] / b["cpu_s"] for a, b in zip(rows["optplan"], rows["vamp"]) if b["cpu_s"] > 0]
     print(f"{label:18s} optplan / vamp: {med['optplan'] / med['vamp']:.1f}x (medians; target <= {TARGET_RATIO:g}x), per query median "
           f"{statistics.median(q) if q else float('nan'):.1f}x; VAMP paths valid in optplan's model: "
@@ -209,7 +207,6 @@ def _run_mbm(args: Any, vamp: Any, robot: Any) -> int:
     import json
 
     from ..planners.kernel.rrtc import prepare_native_search
-    from ..planners.rrtconnect import edge_is_valid
     from ..planners.validity import ValidityChecker
     from .mbm import load_mbm
 
@@ -250,11 +247,7 @@ def _run_mbm(args: Any, vamp: Any, robot: Any) -> int:
             to_validate.append((pr, rows["vamp"][-1]["path"]))
             dump.append({"key": pr.key, **{n: {kk: v for kk, v in rows[n][-1].items() if kk not in ("path", "search")}
                                            for n in rows}})
-        accepted = 0
-        for pr, P in to_validate:
-            if P is not None:
-                f = ValidityChecker(robot, pr.scene, kernel="coal").validity("free")
-                accepted += bool(f(P[0])) and all(edge_is_valid(a, b, f, 0.01) for a, b in zip(P[:-1], P[1:]))
+        accepted = _accepted(robot, [(pr.scene, P) for pr, P in to_validate])
         if skipped:
             print(f"{scenario}: {skipped} of {len(prs)} problems skipped (start or goal invalid for one side)")
         _line(scenario, rows, accepted)
