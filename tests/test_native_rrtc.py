@@ -448,3 +448,79 @@ def test_vamp_peer_mbm_bad_path_says_so(monkeypatch, capsys, tmp_path):
     monkeypatch.setattr(vamp_peer, "vamp_available", lambda: object())
     assert vamp_peer.main(["--mbm", str(tmp_path / "nothing.tar.bz2")]) == 2
     assert "neither VAMP's problems.tar.bz2 nor a directory" in capsys.readouterr().out
+
+
+def test_native_seed_is_numpys_generator_draw():
+    """The seed a plan hands the native search is the 63-bit value ``np.random.default_rng(seed).integers(0,
+    2**63)`` draws (computed natively: SeedSequence, PCG64, Lemire's bound), for seeds of one and two 32-bit words
+    and the ends of the range."""
+    from optplan.planners.kernel import KernelUnavailable
+    from optplan.planners.kernel.rrtc import load_rrtc_library
+
+    try:
+        lib = load_rrtc_library()
+    except KernelUnavailable as e:
+        pytest.skip(str(e))
+    rng = np.random.default_rng(11)
+    seeds = [0, 1, 2, 2**32 - 1, 2**32, 2**32 + 1, 2**62, 2**63 - 1, *range(3, 300),
+             *(int(v) for v in rng.integers(0, 2**32, 300)), *(int(v) for v in rng.integers(0, 2**63, 300))]
+    got = [int(lib.rrtc_numpy_seed(s)) for s in seeds]
+    want = [int(np.random.default_rng(s).integers(0, 2**63)) for s in seeds]
+    assert got == want
+
+
+def test_a_plans_seed_gives_the_search_of_its_generator(tcb):
+    """RRTConnect.plan(seed=s) runs the native search without a NumPy Generator: the same search (path, iterations,
+    checks) as the native call with ``np.random.default_rng(s)``; a seed outside [0, 2**63) without a Generator is
+    refused."""
+    from optplan.planners.kernel.rrtc import native_rrt_connect
+    from optplan.planners.rrtconnect import _tune
+
+    sc = Scene.load("hard_clutter_dense")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    pl = make_planner("rrtconnect", tcb, sc, max_iterations=3000)
+    native_or_skip(pl.checker)
+    f = pl.checker.validity("free")
+    for seed in (0, 7, 2**40 + 3):
+        res = pl.plan(tr.q_start, tr.q_goal, time_limit=60, seed=seed)
+        o = pl.options
+        ref = native_rrt_connect(tr.q_start, tr.q_goal, tcb.lower, tcb.upper, f, np.random.default_rng(seed),
+                                 Deadline(60.0), range_=o.range, resolution=o.resolution, max_iterations=3000,
+                                 shortcut_iterations=o.shortcut_iterations, sampler=o.sampler, tune=_tune(o))
+        assert ref is not None and ref.path is not None and res.status.value == "exact"
+        assert np.array_equal(res.path, ref.path)
+        assert res.stats["iterations"] == ref.iterations and res.stats["collision_checks"] == ref.checks
+    with pytest.raises(ValueError, match="seed"):
+        native_rrt_connect(tr.q_start, tr.q_goal, tcb.lower, tcb.upper, f, None, Deadline(1.0), range_=1.0,
+                           resolution=0.03, seed=-1)
+
+
+def test_native_plan_checks_its_ends(tcb):
+    """The native plan checks the start and the goal itself: out of the limits or in collision is INVALID_START /
+    INVALID_GOAL, as the Python search reports them; the checker's count holds those checks, the result's
+    ``collision_checks`` only the search's."""
+    from optplan.planners.base import PlanStatus
+
+    sc = Scene.load("hard_clutter_dense")
+    tr = TrialGenerator(tcb, sc).generate(0, 0)
+    ck = ValidityChecker(tcb, sc)
+    native_or_skip(ck)
+    rng = np.random.default_rng(3)
+    q_col = next(q for q in (rng.uniform(tcb.lower, tcb.upper) for _ in range(1000)) if not ck.is_valid_free(q))
+    out = tr.q_start.copy()
+    out[2] = tcb.upper[2] + 1e-6
+    edge = tr.q_start.copy()
+    edge[2] = tcb.upper[2] + 1e-10   # within the 1e-9 of the limits' check
+    for native in (True, False):
+        pl = make_planner("rrtconnect", tcb, sc, max_iterations=2000, native_search=native)
+        for bad in (q_col, out):
+            a = pl.plan(bad, tr.q_goal, time_limit=30, seed=0)
+            b = pl.plan(tr.q_start, bad, time_limit=30, seed=0)
+            assert (a.status, b.status) == (PlanStatus.INVALID_START, PlanStatus.INVALID_GOAL), (native, a.status, b.status)
+            assert a.path.shape == (0, tcb.nq) and b.path.shape == (0, tcb.nq)
+        if ck.is_valid_free(edge):
+            assert pl.plan(edge, tr.q_goal, time_limit=30, seed=0).status is not PlanStatus.INVALID_START
+    pl = make_planner("rrtconnect", tcb, sc, max_iterations=2000)
+    n0 = pl.checker.n_checks
+    res = pl.plan(tr.q_start, tr.q_goal, time_limit=30, seed=1)
+    assert res.stats["search"] == "native" and pl.checker.n_checks - n0 == res.stats["collision_checks"] + 2

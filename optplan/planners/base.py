@@ -31,7 +31,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -332,6 +332,8 @@ class Planner(abc.ABC):
     """
 
     name = "planner"
+    #: True: :meth:`_plan` receives ``rng`` None and makes ``np.random.default_rng(seed)`` itself when it needs one
+    _lazy_rng = False
 
     def __init__(self, robot: RobotModel, scene: Scene | None = None) -> None:
         if not isinstance(robot, RobotModel):
@@ -357,7 +359,8 @@ class Planner(abc.ABC):
         c0, w0 = time.process_time(), time.perf_counter()
         deadline = Deadline(time_limit, clock)
         try:
-            res = self._plan(qs, qg, deadline, np.random.default_rng(seed), seed)
+            rng = cast(np.random.Generator, None) if self._lazy_rng else np.random.default_rng(seed)
+            res = self._plan(qs, qg, deadline, rng, seed)
         except Exception as exc:  # a planner bug must not kill a benchmark run
             log.exception("%s failed", self.name)
             res = self.empty_result(PlanStatus.ERROR, f"{type(exc).__name__}: {exc}")

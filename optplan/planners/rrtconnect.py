@@ -254,6 +254,24 @@ def shortcut_path(path: list[np.ndarray], is_valid: Callable[[np.ndarray], bool]
     return path
 
 
+def _tune(o: RRTConnectOptions) -> tuple[float, float, float, float, float]:
+    """The native search's ``tune`` of ``o``: the dynamic domain, the balance ratio and the connection."""
+    return (o.dynamic_domain, o.dynamic_domain_alpha, o.dynamic_domain_min, o.balance, float(o.connect == "new"))
+
+
+def _native_stats(got: Any, o: RRTConnectOptions, stats: dict[str, Any]) -> None:
+    """A native query's counts into ``stats`` (as :func:`joint_space_path` reports them)."""
+    stats["search"] = "native"
+    stats["iterations"] = stats.get("iterations", 0) + got.iterations
+    stats["nodes"] = stats.get("nodes", 0) + got.nodes
+    if o.dynamic_domain > 0:
+        stats["rejected"] = stats.get("rejected", 0) + got.rejected
+    if got.status == "stalled":
+        stats["stalled"] = stats.get("stalled", 0) + 1
+    elif got.status not in ("found", "iteration cap", "time limit"):
+        log.warning("native RRT-Connect stopped: %s", got.status)
+
+
 def joint_space_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                      validity: Callable[[np.ndarray], bool], rng: np.random.Generator, deadline: Deadline,
                      options: RRTConnectOptions, stats: dict[str, Any] | None = None) -> list[np.ndarray] | None:
@@ -273,20 +291,10 @@ def joint_space_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upp
         got = native_rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range,
                                  resolution=o.resolution, max_iterations=o.max_iterations,
                                  stall_iterations=o.stall_iterations,
-                                 shortcut_iterations=o.shortcut_iterations, sampler=o.sampler,
-                                 tune=(o.dynamic_domain, o.dynamic_domain_alpha, o.dynamic_domain_min, o.balance,
-                                       float(o.connect == "new")))
+                                 shortcut_iterations=o.shortcut_iterations, sampler=o.sampler, tune=_tune(o))
         if got is not None:
-            stats["search"] = "native"
-            stats["iterations"] = stats.get("iterations", 0) + got.iterations
-            stats["nodes"] = stats.get("nodes", 0) + got.nodes
-            if o.dynamic_domain > 0:
-                stats["rejected"] = stats.get("rejected", 0) + got.rejected
-            if got.status == "stalled":
-                stats["stalled"] = stats.get("stalled", 0) + 1
-            elif got.status not in ("found", "iteration cap", "time limit"):
-                log.warning("native RRT-Connect stopped: %s", got.status)
-            return got.path
+            _native_stats(got, o, stats)
+            return None if got.path is None else list(got.path)
     if o.dynamic_domain > 0 or o.connect != "other":
         log.warning("the native RRT-Connect is unavailable here: the Python search runs without dynamic_domain and "
                     "connect='new'")
@@ -307,6 +315,7 @@ class RRTConnect(Planner):
     """
 
     name = "rrtconnect"
+    _lazy_rng = True   # the native query takes the seed itself; the Python search makes its Generator
 
     def __init__(self, robot: Any, scene: Scene | None = None, options: RRTConnectOptions | None = None, *,
                  checker: ValidityChecker | None = None) -> None:
@@ -317,15 +326,38 @@ class RRTConnect(Planner):
         self.checker = checker or ValidityChecker(robot, scene, margin=self.options.margin,
                                                    kernel=self.options.validity_kernel)
 
-    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator,
+    def _plan(self, q_start: np.ndarray, q_goal: np.ndarray, deadline: Deadline, rng: np.random.Generator | None,
               seed: int) -> PlanResult:
         o, ck = self.options, self.checker
+        stats: dict[str, Any] = {}
+        if o.native_search:   # one native call: the ends' checks and the search (the seed's Generator draw made there)
+            from .kernel.rrtc import native_rrt_connect
+
+            got = native_rrt_connect(q_start, q_goal, self.robot.lower, self.robot.upper, ck.validity("free"), None,
+                                     deadline, range_=o.range, resolution=o.resolution, max_iterations=o.max_iterations,
+                                     stall_iterations=o.stall_iterations, shortcut_iterations=o.shortcut_iterations,
+                                     sampler=o.sampler, tune=_tune(o), seed=seed, check_ends=True)
+            if got is not None:
+                if got.status == "invalid start":
+                    return self.empty_result(PlanStatus.INVALID_START, "start out of limits or in collision")
+                if got.status == "invalid goal":
+                    return self.empty_result(PlanStatus.INVALID_GOAL, "goal out of limits or in collision")
+                _native_stats(got, o, stats)
+                checks = got.checks - got.end_checks
+                if got.path is None:
+                    st = PlanStatus.TIMEOUT if deadline.expired() else PlanStatus.FAILED
+                    return self.empty_result(st, "no path", **stats, collision_checks=checks)
+                P = got.path
+                stats["collision_checks"] = checks
+                return PlanResult(PlanStatus.EXACT, self.name, P, [None] * len(P), np.zeros(len(P), bool),
+                                  [PathSegment("free", 0, len(P) - 1)], stats)
+        if rng is None:
+            rng = np.random.default_rng(seed)
         valid = ck.is_valid_free
         if not (ck.in_limits(q_start) and valid(q_start)):
             return self.empty_result(PlanStatus.INVALID_START, "start out of limits or in collision")
         if not (ck.in_limits(q_goal) and valid(q_goal)):
             return self.empty_result(PlanStatus.INVALID_GOAL, "goal out of limits or in collision")
-        stats: dict[str, Any] = {}
         c0 = ck.n_checks
         path = joint_space_path(q_start, q_goal, self.robot.lower, self.robot.upper, ck.validity("free"), rng, deadline,
                                 o, stats)

@@ -6,7 +6,9 @@ planning kernel's forward kinematics and exact primitive tests.
 :class:`~optplan.planners.validity.ValidityChecker` whose backend is the native kernel; it returns
 None when that is not the case (the caller then runs the Python search). The random stream is the
 kernel's own (xoshiro256**), seeded once per query by a 64-bit integer drawn from the caller's NumPy
-Generator: the same Generator state gives the same search, but not the Python search's.
+Generator: the same Generator state gives the same search, but not the Python search's. A plan's seed alone
+(:meth:`RRTConnect.plan <optplan.planners.rrtconnect.RRTConnect>`) gives the same search as its Generator
+``np.random.default_rng(seed)``: the draw is computed natively, without making the Generator (~30-80 µs a query).
 """
 from __future__ import annotations
 
@@ -225,6 +227,8 @@ def load_rrtc_library() -> Any:
     lib.rrtc_check_batch_search.restype = ctypes.c_int
     lib.rrtc_check_batch_search.argtypes = [_P, _P, _P, ctypes.c_int, _P, ctypes.c_int, _P, _P, ctypes.c_longlong,
                                             _P, _P]
+    lib.rrtc_numpy_seed.restype = ctypes.c_ulonglong
+    lib.rrtc_numpy_seed.argtypes = [ctypes.c_ulonglong]
     lib.rrtc_free.restype = None
     lib.rrtc_free.argtypes = [_P]
     _LIB.append(lib)
@@ -233,18 +237,22 @@ def load_rrtc_library() -> Any:
 
 class NativeRRTCResult:
     """One native query: ``status`` (``"found"``, ``"iteration cap"``, ``"time limit"``, ``"node cap"``,
-    ``"out of memory"``), ``path`` (list of configurations of the searched joints, start to goal, after
-    the shortcuts; None unless found), ``iterations``, ``nodes`` (both trees), ``checks``
-    (configurations checked), ``tree_nodes`` (the start's and the goal's tree) and ``longest_stall`` (the
-    longest run of iterations in which one of the trees added no node) and ``rejected`` (samples the dynamic
-    domain drew again, counted in ``iterations``) [counts]."""
+    ``"out of memory"``, ``"stalled"``, ``"invalid start"``, ``"invalid goal"``), ``path`` (M × dim array of
+    configurations of the searched joints, start to goal, after the shortcuts; None unless found), ``iterations``,
+    ``nodes`` (both trees), ``checks`` (configurations checked), ``tree_nodes`` (the start's and the goal's tree),
+    ``longest_stall`` (the longest run of iterations in which one of the trees added no node), ``rejected`` (samples
+    the dynamic domain drew again, counted in ``iterations``) and ``end_checks`` (of ``checks``, those of the
+    start and the goal) [counts]."""
 
-    __slots__ = ("status", "path", "iterations", "nodes", "checks", "tree_nodes", "longest_stall", "rejected")
+    __slots__ = ("status", "path", "iterations", "nodes", "checks", "tree_nodes", "longest_stall", "rejected",
+                 "end_checks")
 
-    def __init__(self, status: str, path: list[np.ndarray] | None, iterations: int, nodes: int, checks: int,
-                 tree_nodes: tuple[int, int] = (0, 0), longest_stall: int = 0, rejected: int = 0) -> None:
+    def __init__(self, status: str, path: np.ndarray | None, iterations: int, nodes: int, checks: int,
+                 tree_nodes: tuple[int, int] = (0, 0), longest_stall: int = 0, rejected: int = 0,
+                 end_checks: int = 0) -> None:
         self.status, self.path, self.iterations, self.nodes, self.checks = status, path, iterations, nodes, checks
         self.tree_nodes, self.longest_stall, self.rejected = tree_nodes, longest_stall, rejected
+        self.end_checks = end_checks
 
 
 def _clock(deadline: Deadline) -> tuple[int, float]:
@@ -257,10 +265,11 @@ def _clock(deadline: Deadline) -> tuple[int, float]:
 
 
 def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                       validity: Any, rng: np.random.Generator, deadline: Deadline, *, range_: float,
+                       validity: Any, rng: np.random.Generator | None, deadline: Deadline, *, range_: float,
                        resolution: float, max_iterations: int = 0, stall_iterations: int = 0,
                        shortcut_iterations: int = 0, sampler: str = "uniform",
-                       tune: tuple[float, float, float, float, float] | None = None) -> NativeRRTCResult | None:
+                       tune: tuple[float, float, float, float, float] | None = None, seed: int | None = None,
+                       check_ends: bool = False) -> NativeRRTCResult | None:
     """RRT-Connect from ``start`` to ``goal`` in the box ``[lower, upper]`` and ``shortcut_iterations``
     random shortcuts, in one native call; ``range_`` [rad] is the largest extension, ``resolution`` [rad]
     the largest joint change between two checks of an edge, ``max_iterations`` the cap on samples (0:
@@ -269,7 +278,11 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
     ``tune`` the dynamic domain's radius [rad], factor [-] and least radius [rad], the balance ratio [-] and the
     connection (0.0 ``"other"``, 1.0 ``"new"``) (None: all off). ``validity`` must be a :class:`~optplan.planners.validity.ConfigValidity` of a
     checker with the native backend, else None is returned (as when the library cannot be built).
-    One 64-bit seed is drawn from ``rng``. The checker's ``n_checks`` grows by the configurations checked."""
+    One 64-bit seed is drawn from ``rng``; with ``rng`` None, from ``seed`` [0, 2**63) as
+    ``np.random.default_rng(seed)`` would draw it (computed natively: the same search as with that Generator, without
+    making one). With ``check_ends`` the start and the goal are checked first (within ``[lower, upper]`` widened by
+    1e-9, and valid): status ``"invalid start"`` or ``"invalid goal"`` when one is not; ``checks`` counts those
+    checks too (``end_checks`` of them). The checker's ``n_checks`` grows by the configurations checked."""
     try:   # a ConfigValidity (duck-typed: this layer does not import validity)
         ck: Any = validity.checker
         vbase, vjoints = validity.base, validity.joints
@@ -298,26 +311,35 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
     if shapes != ((dim,),) * 4:
         raise ValueError(f"native_rrt_connect: start, goal, lower and upper must have {dim} values, got shapes "
                          f"{list(shapes)}")
-    ends = (ctypes.c_double * (4 * dim))()   # start, goal, lower, upper: one buffer
-    rows = np.frombuffer(memoryview(ends), dtype=float).reshape(4, dim)
-    rows[0], rows[1], rows[2], rows[3] = start, goal, lower, upper
+    # start, goal, lower, upper and the 7 values of tune: one buffer (NumPy arrays: a ctypes array type made per
+    # call is collected with the garbage and made again, ~50 µs on a cold cache)
+    buf = np.empty(4 * dim + 7)
+    buf[:dim], buf[dim:2 * dim], buf[2 * dim:3 * dim], buf[3 * dim:4 * dim] = start, goal, lower, upper
     g = kern._override(nat._override(mode, pose))
     clock_kind, end = _clock(deadline)
-    seed = int(rng.integers(0, 2**63))
+    if rng is not None:
+        seed = int(rng.integers(0, 2**63))
+        numpy_seed = 0.0
+    elif seed is None or not 0 <= seed < 2**63:
+        raise ValueError(f"native_rrt_connect: without rng, seed must be an integer in [0, 2**63), got {seed!r}")
+    else:
+        numpy_seed = 1.0
     out = ctypes.POINTER(ctypes.c_double)()
     n_out = ctypes.c_int(0)
-    stats = (ctypes.c_longlong * 7)()
+    stats = np.zeros(8, np.int64)
     bp = _broad_phase(kern, nat.fixed_id)
     if tune is not None:
-        tune_a = (ctypes.c_double * 5)(*map(float, tune))
+        buf[4 * dim:4 * dim + 5] = tune
     else:
-        tune_a = _NO_TUNE
-    e0 = ctypes.addressof(ends)
+        buf[4 * dim:4 * dim + 5] = 0.0
+    buf[4 * dim + 5], buf[4 * dim + 6] = (1.0 if check_ends else 0.0), numpy_seed
+    e0 = buf.ctypes.data
     code = lib.rrtc_plan(kern._km_p, nat._mask_p[mode], kern._pose_p, g, bp.pointer, dim, jidx_p, base_p, e0,
                          e0 + 8 * dim, e0 + 16 * dim, e0 + 24 * dim, float(range_), float(resolution),
                          int(max_iterations), MAX_NODES, int(stall_iterations), int(shortcut_iterations), clock_kind,
-                         end, seed, int(sampler == "halton"), tune_a, ctypes.byref(out), ctypes.byref(n_out), stats)
-    st = stats[:]
+                         end, seed, int(sampler == "halton"), e0 + 32 * dim, ctypes.byref(out), ctypes.byref(n_out),
+                         stats.ctypes.data)
+    st = stats.tolist()
     ck.n_checks += st[2]
     if code == -2:
         return None
@@ -328,14 +350,13 @@ def native_rrt_connect(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, u
             ctypes.memmove(P.ctypes.data, out, P.nbytes)
         finally:
             lib.rrtc_free(out)
-        path = list(P)
+        path = P
     return NativeRRTCResult(RRTC_STATUS.get(code, f"status {code}"), path, st[0], st[1], st[2], (st[3], st[4]),
-                            st[5], st[6])
+                            st[5], st[6], st[7])
 
 
 _WHOLE: dict[int, tuple[int, int, int]] = {}
 _WHOLE_ARRAYS: list[tuple[np.ndarray, np.ndarray]] = []   # kept alive: their addresses are in _WHOLE
-_NO_TUNE = (ctypes.c_double * 5)()
 
 
 def _whole(nq: int) -> tuple[int, int, int]:

@@ -13,10 +13,13 @@ What it computes (the algorithm of :func:`optplan.planners.rrtconnect.rrt_connec
 * the search space is ``dim`` joints (indices ``jidx`` into the configuration); the others stay at
   ``base`` (one arm of a regrasp), or all joints (``dim = nq``);
 * samples are uniform in the box ``[lower, upper]`` from xoshiro256** (Blackman & Vigna) seeded by
-  splitmix64 from one 64-bit seed (the Python side draws it from the planner's NumPy Generator), or
+  splitmix64 from one 64-bit seed (the Python side draws it from the planner's NumPy Generator, or passes the
+  plan's seed and the draw ``np.random.default_rng(seed).integers(0, 2**63)`` is computed here), or
   (``sampler`` 1) the Halton sequence (radical inverses in the first ``dim`` prime bases, point ``i`` at
   iteration ``i``) shifted by one uniform random vector modulo 1 (a Cranley-Patterson rotation: each
   query its own low-discrepancy sequence);
+* the start and the goal may be checked first (in the box, valid: statuses 6 and 7 otherwise), so that a plan is
+  one native call;
 * nearest neighbour is a linear scan over a contiguous node array (squared Euclidean distance), except
   in a connection's steps after the first, where the node the previous step added is the nearest;
 * a configuration check tries the pair that collided last first (the same verdict);
@@ -48,7 +51,7 @@ __all__ = ["RRTC_SOURCE", "RRTC_STATUS"]
 
 #: the status codes of ``rrtc_plan`` (its return value)
 RRTC_STATUS = {0: "found", 1: "iteration cap", 2: "time limit", 3: "node cap", 4: "out of memory", 5: "stalled",
-               -2: "model too large for the kernel"}
+               6: "invalid start", 7: "invalid goal", -2: "model too large for the kernel"}
 
 _RRTC_HEAD = r"""
 #include <stdlib.h>
@@ -69,6 +72,54 @@ static unsigned long long rrtc_next(rrtc_rng *r) {   /* xoshiro256** */
     return out;
 }
 static double rrtc_uniform(rrtc_rng *r) { return (double)(rrtc_next(r) >> 11) * 0x1.0p-53; }
+
+/* NumPy's int(np.random.default_rng(seed).integers(0, 2**63)) without NumPy: the SeedSequence of the seed's
+   32-bit words (pool of 4, hashmix / mix), its first 8 words as PCG64's state and increment, one PCG64 step
+   (XSL-RR output), and Lemire's bound 2**63, which for this bound is the output shifted right by one */
+static unsigned long long rrtc_mulhi(unsigned long long a, unsigned long long b) {
+    unsigned long long a0 = a & 0xffffffffULL, a1 = a >> 32, b0 = b & 0xffffffffULL, b1 = b >> 32;
+    unsigned long long p00 = a0*b0, p01 = a0*b1, p10 = a1*b0, p11 = a1*b1;
+    unsigned long long mid = (p00 >> 32) + (p01 & 0xffffffffULL) + (p10 & 0xffffffffULL);
+    return p11 + (p01 >> 32) + (p10 >> 32) + (mid >> 32);
+}
+/* (h, l) = (h, l) * (mh, ml) + (ih, il) mod 2**128 */
+static void rrtc_pcg_step(unsigned long long *h, unsigned long long *l, unsigned long long ih, unsigned long long il) {
+    const unsigned long long mh = 0x2360ED051FC65DA4ULL, ml = 0x4385DF649FCCF645ULL;
+    unsigned long long lo = *l * ml, hi = rrtc_mulhi(*l, ml) + *l * mh + *h * ml;
+    unsigned long long nl = lo + il;
+    *h = hi + ih + (nl < lo); *l = nl;
+}
+static unsigned rrtc_hashmix(unsigned v, unsigned *hc) {
+    v ^= *hc; *hc *= 0x931e8875U; v *= *hc; v ^= v >> 16; return v;
+}
+static unsigned rrtc_mix(unsigned x, unsigned y) { unsigned r = 0xca01f9ddU * x - 0x4973f715U * y; r ^= r >> 16; return r; }
+unsigned long long rrtc_numpy_seed(unsigned long long seed) {
+    unsigned ent[2], pool[4], hc = 0x43b0d7e5U, hb = 0x8b51f9ddU, st[8];
+    int ne = 0;
+    if (seed == 0) ent[ne++] = 0;
+    while (seed) { ent[ne++] = (unsigned)(seed & 0xffffffffULL); seed >>= 32; }
+    for (int i = 0; i < 4; ++i) pool[i] = rrtc_hashmix(i < ne ? ent[i] : 0U, &hc);
+    for (int s = 0; s < 4; ++s)
+        for (int d = 0; d < 4; ++d)
+            if (s != d) pool[d] = rrtc_mix(pool[d], rrtc_hashmix(pool[s], &hc));
+    for (int i = 0; i < 8; ++i) {
+        unsigned v = pool[i & 3] ^ hb;
+        hb *= 0x58f38dedU; v *= hb; v ^= v >> 16; st[i] = v;
+    }
+    unsigned long long w[4];
+    for (int i = 0; i < 4; ++i) w[i] = (unsigned long long)st[2*i] | ((unsigned long long)st[2*i+1] << 32);
+    /* PCG64 seeding: inc = (w2, w3) << 1 | 1; state = 0; step; state += (w0, w1); step; then one step per output */
+    unsigned long long ih = (w[2] << 1) | (w[3] >> 63), il = (w[3] << 1) | 1ULL, h = 0, l = 0;
+    rrtc_pcg_step(&h, &l, ih, il);
+    unsigned long long nl = l + w[1];
+    h += w[0] + (nl < l); l = nl;
+    rrtc_pcg_step(&h, &l, ih, il);
+    rrtc_pcg_step(&h, &l, ih, il);
+    unsigned long long x = h ^ l;
+    int rot = (int)(h >> 58);
+    unsigned long long out = (x >> rot) | (x << ((64 - rot) & 63));
+    return out >> 1;
+}
 
 /* the Halton sequence: coordinate k of point i is the radical inverse of i in the k-th prime base */
 #define RRTC_NPRIMES 40
@@ -178,7 +229,10 @@ void rrtc_free(void *p) { free(p); }
    stats[0] iterations, stats[1] nodes of both trees, stats[2] configurations checked, stats[3] and stats[4]
    the nodes of the start's and the goal's tree, stats[5] the longest run of iterations in which one tree
    added no node (up to the last iteration), stats[6] the samples the dynamic domain rejected (drawn again; counted
-   in the iterations). With stall_iterations > 0 the search stops (status 5) when that run reaches stall_iterations. */
+   in the iterations), stats[7] the configurations of stats[2] checked for the ends (tune[5]). With stall_iterations > 0
+   the search stops (status 5) when that run reaches stall_iterations. tune[5] != 0: the start and the goal are first
+   checked (within [lower, upper] widened by 1e-9, and valid): status 6 or 7 when one is not; tune[6] != 0: the seed
+   is NumPy's (rrtc_numpy_seed: the 64-bit value drawn as the Python side's Generator would draw it). */
 int rrtc_plan(const kmodel *m, const unsigned char *active, const double *override_pose, int override_g,
               const rrtc_groups *grp, int dim, const int *jidx, const double *base, const double *start, const double *goal,
               const double *lower, const double *upper, double range, double resolution,
@@ -186,7 +240,7 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
               int clock_kind, double end_time, unsigned long long seed, int sampler, const double *tune,
               double **path_out, int *path_len, long long *stats) {
     *path_out = NULL; *path_len = 0;
-    stats[0] = stats[1] = stats[2] = stats[3] = stats[4] = stats[5] = stats[6] = 0;
+    stats[0] = stats[1] = stats[2] = stats[3] = stats[4] = stats[5] = stats[6] = stats[7] = 0;
     long long rejected = 0;
     if (m->nj > KMAXJ || m->ng > KMAXG || m->nq > KMAXJ || dim > KMAXJ) return -2;
     if (sampler && dim > RRTC_NPRIMES) return -2;
@@ -196,6 +250,8 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
     double dd_radius = tune ? tune[0] : 0.0, dd_alpha = tune ? tune[1] : 0.0, dd_min = tune ? tune[2] : 0.0;
     double balance = tune ? tune[3] : 0.0;
     int grow_new = tune ? tune[4] != 0.0 : 0;
+    int check_ends = tune ? tune[5] != 0.0 : 0;
+    if (tune && tune[6] != 0.0) seed = rrtc_numpy_seed(seed);
     rrtc_ctx c;
     memset(&c, 0, sizeof c);
     c.m = m; c.active = active; c.opose = override_pose; c.og = override_g;
@@ -218,6 +274,16 @@ int rrtc_plan(const kmodel *m, const unsigned char *active, const double *overri
     for (int k = 0; k < 4; ++k) rng.s[k] = rrtc_splitmix(&sm);
 
     int plen = 0;
+    if (check_ends) {   /* the ends: within the box (widened by 1e-9) and valid */
+        for (int e = 0; e < 2; ++e) {
+            const double *x = e ? goal : start;
+            int in = 1;
+            for (int k = 0; k < dim; ++k) in &= x[k] >= lower[k] - 1e-9 && x[k] <= upper[k] + 1e-9;
+            if (!in || !rrtc_valid(&c, x)) { status = 6 + e; break; }
+        }
+        stats[7] = c.checks;
+        if (status != 4) goto done;
+    }
     int ok = rrtc_edge(&c, start, goal);
     if (ok < 0) goto done;
     if (ok) {
