@@ -1,6 +1,7 @@
 """The native search's check on a robot made of many spheres per link (as VAMP's Panda: 59 spheres): two links'
-groups that stay close test only the members near the other group's sphere, and a moving geometry is placed when
-a test first needs it. Independent references: the kernel's plain pair loop and coal's exact verdicts."""
+groups that stay close test only the members near the other group's sphere (by 64-bit masks of the members, or run
+by run for groups of more than 64), and a moving geometry is placed when a test first needs it. Independent
+references: the kernel's plain pair loop and coal's exact verdicts."""
 from __future__ import annotations
 
 import numpy as np
@@ -16,9 +17,10 @@ from optplan.scene import Obstacle, Scene
 N_LINKS = 6
 
 
-def _sphere_chain_urdf() -> str:
+def _sphere_chain_urdf(extra_last: int = 0) -> str:
     """Six revolute joints (axes z, y, y, z, y, z), links of 0.3 m along z, each with five spheres along it and
-    two off its axis (a fat, lumpy link like a spherized arm's)."""
+    two off its axis (a fat, lumpy link like a spherized arm's); the last link ``extra_last`` more small spheres
+    around its axis."""
     axes = ["0 0 1", "0 1 0", "0 1 0", "0 0 1", "0 1 0", "0 0 1"]
     parts = ['<robot name="spheres">', '<link name="base"><collision><origin xyz="0 0 0.05"/><geometry>'
              '<sphere radius="0.08"/></geometry></collision></link>']
@@ -28,7 +30,10 @@ def _sphere_chain_urdf() -> str:
         cols = "".join(f'<collision><origin xyz="{dx} {dy} {z:.3f}"/><geometry><sphere radius="{r}"/></geometry>'
                        f"</collision>"
                        for (dx, dy, z, r) in [(0, 0, 0.03 + 0.06 * k, 0.045 - 0.003 * i) for k in range(5)]
-                       + [(0.05, 0, 0.15, 0.03), (0, -0.05, 0.2, 0.03)])
+                       + [(0.05, 0, 0.15, 0.03), (0, -0.05, 0.2, 0.03)]
+                       + ([(round(0.04 * np.cos(0.7 * k), 4), round(0.04 * np.sin(0.7 * k), 4),
+                            round(0.02 + 0.26 * k / max(extra_last, 1), 4), 0.02) for k in range(extra_last)]
+                          if i == N_LINKS - 1 else []))
         parts.append(f'<link name="{link}">{cols}</link>')
         z0 = 0.1 if i == 0 else 0.3
         parts.append(f'<joint name="j{i}" type="revolute"><parent link="{parent}"/><child link="{link}"/>'
@@ -40,12 +45,11 @@ def _sphere_chain_urdf() -> str:
     return "".join(parts)
 
 
-@pytest.fixture(scope="module")
-def sphere_robot(tmp_path_factory):
+def _load(tmp_path_factory, extra_last: int = 0, drop_every: int = 0):
     from optplan.model.robot import RobotModel
 
     path = tmp_path_factory.mktemp("spheres") / "spheres.urdf"
-    path.write_text(_sphere_chain_urdf())
+    path.write_text(_sphere_chain_urdf(extra_last))
     robot = RobotModel.from_urdf(path, arms={"arm": {"ee": "tip", "joints": [f"j{i}" for i in range(N_LINKS)]}},
                                  name="sphere_chain")
     objs = robot.collision_model.geometryObjects
@@ -55,9 +59,16 @@ def sphere_robot(tmp_path_factory):
         return -1 if name == "base" else int(name[1:])
 
     # every pair of geometries on links at least two apart (neighbours share a joint and always touch)
-    robot.set_collision_pairs([(a, b) for a in range(len(objs)) for b in range(a + 1, len(objs))
-                               if abs(link_of(a) - link_of(b)) >= 2])
+    pairs = [(a, b) for a in range(len(objs)) for b in range(a + 1, len(objs)) if abs(link_of(a) - link_of(b)) >= 2]
+    if drop_every:   # a partial pair list (as an SRDF's): every drop_every-th pair left out
+        pairs = [p for k, p in enumerate(pairs) if k % drop_every != 1]
+    robot.set_collision_pairs(pairs)
     return robot
+
+
+@pytest.fixture(scope="module")
+def sphere_robot(tmp_path_factory):
+    return _load(tmp_path_factory)
 
 
 def _scene() -> Scene:
@@ -79,14 +90,65 @@ def _configs(robot, rng, n):
     return np.vstack([U, F])
 
 
+@pytest.mark.parametrize("masks", [1, 0])
 @pytest.mark.parametrize("searched", [list(range(N_LINKS)), [2, 3, 4, 5], [1, 2, 4]])
-def test_search_check_gives_the_kernels_and_coals_verdicts(sphere_robot, searched):
+def test_search_check_gives_the_kernels_and_coals_verdicts(sphere_robot, searched, masks):
     """The search's own check, set up as a query sets it up (the joints not searched still, placed once), on
     4,000 configurations: the kernel's verdict on every one (its plain loop over every pair) and never free where
-    coal collides; self-contacts and obstacle contacts both occur."""
+    coal collides; self-contacts and obstacle contacts both occur. With and without the members' masks of two
+    joints' groups (``rrtc_use_masks``)."""
+    import ctypes
+
+    from optplan.planners.kernel.rrtc import load_rrtc_library
+
+    ck = ValidityChecker(sphere_robot, _scene())
+    native_or_skip(ck)
+    flag = ctypes.c_int.in_dll(load_rrtc_library(), "rrtc_use_masks")
+    flag.value = masks
+    try:
+        _check_verdicts(sphere_robot, searched)
+    finally:
+        flag.value = 1
+
+
+def test_groups_of_more_than_64_members_test_run_by_run(tmp_path_factory):
+    """A link of 71 spheres: its blocks with other links' groups go run by run (no 64-bit masks), the others by
+    masks; the verdicts are the kernel's and never free where coal collides."""
+    from optplan.planners.kernel.rrtc import _broad_phase
+
+    robot = _load(tmp_path_factory, extra_last=64)
+    ck = ValidityChecker(robot, _scene())
+    native_or_skip(ck)
+    bp = _broad_phase(ck._native.kernel, ck._native.fixed_id)
+    kind, _refs, _c, _r, _bs, bga, bgb, *_rest = bp.arrays
+    bmask, gmstart = bp.arrays[11], bp.arrays[12]
+    size = np.diff(gmstart)
+    joint_joint = (kind[bga] == 1) & (kind[bgb] == 1) & (bga != bgb)
+    big = (size[bga] > 64) | (size[bgb] > 64)
+    assert size.max() == 71 and np.any(joint_joint & big) and np.any(joint_joint & ~big)
+    assert np.array_equal(bmask.astype(bool), joint_joint & ~big)
+    _check_verdicts(robot, list(range(N_LINKS)))
+
+
+def test_partial_pair_lists_find_each_pair_by_its_rank(tmp_path_factory):
+    """Pairs left out (as an SRDF disables some): a run's pairs are a subset of the other group's members, found by
+    their rank in the run's mask; the verdicts are the kernel's and never free where coal collides."""
+    from optplan.planners.kernel.rrtc import _broad_phase
+
+    robot = _load(tmp_path_factory, drop_every=3)
+    ck = ValidityChecker(robot, _scene())
+    native_or_skip(ck)
+    bp = _broad_phase(ck._native.kernel, ck._native.fixed_id)
+    runmask = bp.arrays[15]
+    masks = [int(v) for v in runmask if v]
+    assert masks and any(m & (m + 1) for m in masks)   # some run's members are not 0 … n-1: gaps in the mask
+    _check_verdicts(robot, list(range(N_LINKS)))
+    _check_verdicts(robot, [2, 3, 4, 5])
+
+
+def _check_verdicts(robot, searched) -> None:
     from optplan.planners.kernel.rrtc import broad_phase_valid, search_check_valid
 
-    robot = sphere_robot
     sc = _scene()
     ck = ValidityChecker(robot, sc)
     native_or_skip(ck)

@@ -46,7 +46,8 @@ MAX_NODES = 2_000_000
 class _Groups(ctypes.Structure):
     _fields_ = [("ngroups", ctypes.c_int), ("nblocks", ctypes.c_int), ("gkind", _P), ("gref", _P), ("gcenter", _P),
                 ("gradius", _P), ("bstart", _P), ("bga", _P), ("bgb", _P), ("perm", _P), ("gbox", _P),
-                ("ggroup", _P), ("rownext", _P)]
+                ("ggroup", _P), ("rownext", _P), ("bmask", _P), ("gmstart", _P), ("gmlist", _P), ("gmidx", _P),
+                ("runmask", _P)]
 
 
 class BroadPhase:
@@ -114,9 +115,37 @@ class BroadPhase:
         for g in range(ng):
             if int(gtype[g]) == 2:
                 gbox[group[g]] = 1
+        # the members of each joint group (ascending) and each geometry's index among them; the blocks of two joint
+        # groups of at most 64 members: their runs' pairs in the member order of the second geometry, and each run's
+        # mask of those members (at its first position)
+        gmlist = [[] for _ in kinds]
+        for g in range(ng):
+            if kinds[group[g]] == 1:
+                gmlist[group[g]].append(g)
+        gmidx = np.full(ng, -1, np.int32)
+        for gs in gmlist:
+            gmidx[gs] = np.arange(len(gs), dtype=np.int32)
+        gmstart = np.r_[0, np.cumsum([len(gs) for gs in gmlist])].astype(np.int32)
+        bga, bgb = bl[order].astype(np.int32), bh[order].astype(np.int32)
+        bmask = np.zeros(len(starts), np.uint8)
+        runmask = np.zeros(len(perm), np.uint64)
+        pbv = np.asarray(pb, np.int64)
+        for b in range(len(starts)):
+            a_, b_ = int(bga[b]), int(bgb[b])
+            if a_ == b_ or kinds[a_] != 1 or kinds[b_] != 1 or len(gmlist[a_]) > 64 or len(gmlist[b_]) > 64:
+                continue
+            bmask[b] = 1
+            i = int(bstart[b])
+            while i < int(bstart[b + 1]):
+                j = int(rownext[i])
+                seg = perm[i:j]
+                seg = seg[np.argsort(gmidx[pbv[seg]], kind="stable")]
+                perm[i:j] = seg
+                runmask[i] = np.bitwise_or.reduce(np.left_shift(np.uint64(1), gmidx[pbv[seg]].astype(np.uint64)))
+                i = j
         self.arrays = (kind, np.array(refs, np.int32), np.ascontiguousarray(centers, float), np.array(radii, float),
-                       bstart, bl[order].astype(np.int32), bh[order].astype(np.int32), perm, gbox,
-                       group.astype(np.int32), rownext)
+                       bstart, bga, bgb, perm, gbox, group.astype(np.int32), rownext, bmask, gmstart,
+                       np.array([g for gs in gmlist for g in gs] or [0], np.int32), gmidx, runmask)
         self.n_groups, self.n_blocks = len(kinds), len(starts)
         self.struct = _Groups(self.n_groups, self.n_blocks, *(x.ctypes.data for x in self.arrays))
         self.pointer = ctypes.addressof(self.struct)
