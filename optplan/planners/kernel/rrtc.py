@@ -118,7 +118,7 @@ class BroadPhase:
         # the members of each joint group (ascending) and each geometry's index among them; the blocks of two joint
         # groups of at most 64 members: their runs' pairs in the member order of the second geometry, and each run's
         # mask of those members (at its first position)
-        gmlist = [[] for _ in kinds]
+        gmlist: list[list[int]] = [[] for _ in kinds]
         for g in range(ng):
             if kinds[group[g]] == 1:
                 gmlist[group[g]].append(g)
@@ -130,13 +130,13 @@ class BroadPhase:
         bmask = np.zeros(len(starts), np.uint8)
         runmask = np.zeros(len(perm), np.uint64)
         pbv = np.asarray(pb, np.int64)
-        for b in range(len(starts)):
-            a_, b_ = int(bga[b]), int(bgb[b])
+        for blk in range(len(starts)):
+            a_, b_ = int(bga[blk]), int(bgb[blk])
             if a_ == b_ or kinds[a_] != 1 or kinds[b_] != 1 or len(gmlist[a_]) > 64 or len(gmlist[b_]) > 64:
                 continue
-            bmask[b] = 1
-            i = int(bstart[b])
-            while i < int(bstart[b + 1]):
+            bmask[blk] = 1
+            i = int(bstart[blk])
+            while i < int(bstart[blk + 1]):
                 j = int(rownext[i])
                 seg = perm[i:j]
                 seg = seg[np.argsort(gmidx[pbv[seg]], kind="stable")]
