@@ -259,6 +259,19 @@ def _tune(o: RRTConnectOptions) -> tuple[float, float, float, float, float]:
     return (o.dynamic_domain, o.dynamic_domain_alpha, o.dynamic_domain_min, o.balance, float(o.connect == "new"))
 
 
+def _native_query(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upper: np.ndarray, validity: Any,
+                  rng: np.random.Generator | None, deadline: Deadline, o: RRTConnectOptions, *, seed: int | None = None,
+                  check_ends: bool = False) -> Any:
+    """:func:`~optplan.planners.kernel.rrtc.native_rrt_connect` with the options ``o`` (its result, or None when
+    the native search cannot run)."""
+    from .kernel.rrtc import native_rrt_connect
+
+    return native_rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range,
+                              resolution=o.resolution, max_iterations=o.max_iterations,
+                              stall_iterations=o.stall_iterations, shortcut_iterations=o.shortcut_iterations,
+                              sampler=o.sampler, tune=_tune(o), seed=seed, check_ends=check_ends)
+
+
 def _native_stats(got: Any, o: RRTConnectOptions, stats: dict[str, Any]) -> None:
     """A native query's counts into ``stats`` (as :func:`joint_space_path` reports them)."""
     stats["search"] = "native"
@@ -286,12 +299,7 @@ def joint_space_path(start: np.ndarray, goal: np.ndarray, lower: np.ndarray, upp
     stats = stats if stats is not None else {}
     o = options
     if o.native_search:
-        from .kernel.rrtc import native_rrt_connect
-
-        got = native_rrt_connect(start, goal, lower, upper, validity, rng, deadline, range_=o.range,
-                                 resolution=o.resolution, max_iterations=o.max_iterations,
-                                 stall_iterations=o.stall_iterations,
-                                 shortcut_iterations=o.shortcut_iterations, sampler=o.sampler, tune=_tune(o))
+        got = _native_query(start, goal, lower, upper, validity, rng, deadline, o)
         if got is not None:
             _native_stats(got, o, stats)
             return None if got.path is None else list(got.path)
@@ -331,12 +339,8 @@ class RRTConnect(Planner):
         o, ck = self.options, self.checker
         stats: dict[str, Any] = {}
         if o.native_search:   # one native call: the ends' checks and the search (the seed's Generator draw made there)
-            from .kernel.rrtc import native_rrt_connect
-
-            got = native_rrt_connect(q_start, q_goal, self.robot.lower, self.robot.upper, ck.validity("free"), None,
-                                     deadline, range_=o.range, resolution=o.resolution, max_iterations=o.max_iterations,
-                                     stall_iterations=o.stall_iterations, shortcut_iterations=o.shortcut_iterations,
-                                     sampler=o.sampler, tune=_tune(o), seed=seed, check_ends=True)
+            got = _native_query(q_start, q_goal, self.robot.lower, self.robot.upper, ck.validity("free"), None,
+                                deadline, o, seed=seed, check_ends=True)
             if got is not None:
                 if got.status == "invalid start":
                     return self.empty_result(PlanStatus.INVALID_START, "start out of limits or in collision")
