@@ -50,6 +50,7 @@ def test_streaks_and_restart_skips_give_the_same_search(tcb, scene_name, trials,
     off = _planner(tcb, scene_name, streaks=False, **options)
     plain = _planner(tcb, scene_name, streaks=False, **options)
     plain._ext._ctx.pfix = None          # every restart run
+    plain._ext._ctx.npfl = 0             # and every waypoint's IK (no pose test before it)
     gen = TrialGenerator(tcb, Scene.load(scene_name))
     skipped = 0
     for t in trials:
@@ -60,7 +61,8 @@ def test_streaks_and_restart_skips_give_the_same_search(tcb, scene_name, trials,
                                                  rc.stats["iterations"])
         assert ra.stats["trapped"] == rb.stats["trapped"] == rc.stats["trapped"]
         skipped += ra.stats.get("ik_restarts_skipped", 0)
-        assert rc.stats.get("ik_restarts_skipped", 0) == 0
+        assert rc.stats.get("ik_restarts_skipped", 0) == 0 and rc.stats.get("pose_blocked", 0) == 0
+        assert ra.stats.get("pose_blocked", 0) > 0
         assert ra.stats["ik_iterations"] <= rc.stats["ik_iterations"]
     assert skipped > 0
 
@@ -210,6 +212,46 @@ def test_pose_fixed_pairs_are_placed_by_the_object_pose_alone(tcb):
         if pairs >= 10:
             break
     assert pairs >= 5
+
+
+@pytest.mark.parametrize("scene_name", ["hard_bay", "hard_clutter_dense"])
+def test_pose_test_before_the_ik_is_the_full_check_of_the_pose_fixed_pairs(tcb, scene_name):
+    """The test of a waypoint's object pose alone (``tcb_pose_blocked``: the hands' joints put at the grasps, the
+    flagged pairs' geometries placed from them) against the kernel's check of the same pairs at closed-chain
+    configurations of that pose (forward kinematics through the arms): the same verdict wherever the pairs are not
+    within 1e-6 m of contact, with poses blocked and free among them."""
+    import ctypes
+
+    from optplan.planners.kernel.extend import pose_fixed_pairs, pose_test_layout
+    from optplan.planners.kernel.native import se3_pose12
+
+    pl = _planner(tcb, scene_name)
+    ext, kern = pl._ext, pl.checker._native.kernel
+    fix = pose_fixed_pairs(kern, pl.kin)
+    layout = pose_test_layout(kern, pl.kin, fix)
+    assert layout is not None and ext._ctx.npfl == len(layout[0]) > 0
+    active = np.asarray(pl.checker._native.masks["held"], np.uint8)
+    mask = np.ascontiguousarray(fix & active, dtype=np.uint8)
+    rng = np.random.default_rng(31)
+    lo, hi = np.asarray(pl._lo), np.asarray(pl._hi)
+    seen = {True: 0, False: 0}
+    for _ in range(3000):
+        q0 = rng.uniform(tcb.lower, tcb.upper)
+        M = pl.kin.object_pose(q0)
+        M.translation = rng.uniform(lo[:3], hi[:3])      # the object anywhere in the sampling box
+        q1, _ = pl.kin.ik(q0, M.rotation, M.translation, pl.options.ik)
+        if q1 is None:
+            continue
+        P = np.ascontiguousarray(se3_pose12(pl.kin.object_pose(q1)))
+        slack = kern.pair_slacks(q1)[mask.astype(bool)]
+        if np.any(np.abs(slack) < 1e-6):
+            continue
+        blocked = bool(ext.lib.tcb_pose_blocked_api(ctypes.c_void_p(ext._cp), P.ctypes.data))
+        assert blocked == kern.collides(q1, mask), (q1, blocked)
+        seen[blocked] += 1
+        if min(seen.values()) >= 15 and sum(seen.values()) >= 60:
+            break
+    assert seen[True] >= 15 and seen[False] >= 15, seen
 
 
 def test_quiet_iterations_stop_before_every_event_of_the_loops_head(tcb):

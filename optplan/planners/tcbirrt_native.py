@@ -76,6 +76,8 @@ def _merge(st: dict[str, Any], ext: NativeExtender) -> None:
         st["ik_restarts_skipped"] = st.get("ik_restarts_skipped", 0) + c[11]
     if c[12]:
         st["ik_restart_iterations"] = st.get("ik_restart_iterations", 0) + c[12]
+    if c[13]:
+        st["pose_blocked"] = st.get("pose_blocked", 0) + c[13]
     ext.checker.n_checks += c[5]
 
 

@@ -36,7 +36,7 @@ from .csource import C_SOURCE
 from .extend_csource import EXTEND_SOURCE
 from .ik_csource import IK_SOURCE
 from .lookahead_csource import LOOKAHEAD_SOURCE
-from .native import KernelUnavailable
+from .native import KernelUnavailable, se3_pose12
 from .sampler_csource import RNG_SOURCE, SAMPLER_SOURCE
 from .streak_csource import STREAK_SOURCE
 
@@ -50,7 +50,7 @@ SOURCE = C_SOURCE + RNG_SOURCE + IK_SOURCE + EXTEND_SOURCE + SAMPLER_SOURCE + ST
 #: counters of one native call, in the order of the C code
 COUNTERS = ("ik_calls", "ik_iterations", "ik_failures", "ik_jumps", "collisions", "checks", "edge_checks",
             "edge_collisions", "terminal", "ik_restarts", "ik_path_iterations", "ik_restarts_skipped",
-            "ik_restart_iterations")
+            "ik_restart_iterations", "pose_blocked")
 
 
 class _Ctx(ctypes.Structure):
@@ -64,7 +64,8 @@ class _Ctx(ctypes.Structure):
                 ("prof", _P), ("prof_iw", _P), ("prof_w", _P), ("nprof", ctypes.c_int), ("edge_res", ctypes.c_double),
                 ("rng", _P), ("restarts", ctypes.c_int), ("restart_sigma", ctypes.c_double), ("lower", _P), ("upper", _P),
                 ("ikm", _P), ("predictor", ctypes.c_int), ("qlo", _P), ("qhi", _P), ("pfix", _P),
-                ("restart_max_it", ctypes.c_int), ("restart_clip", ctypes.c_int)]
+                ("restart_max_it", ctypes.c_int), ("restart_clip", ctypes.c_int),
+                ("npfl", ctypes.c_int), ("pfl", _P), ("npfg", ctypes.c_int), ("pfg", _P), ("pfa", _P), ("pfT", _P)]
 
 
 def load_extend_library() -> Any:
@@ -108,6 +109,8 @@ def load_extend_library() -> Any:
     lib.tcb_interpolate.argtypes = [_P, _P, _P, _P, ctypes.c_int, _P]
     lib.tcb_path_ik.restype = _LL
     lib.tcb_path_ik.argtypes = [_P, _P, _P, _P, _LL, _LL, _P, _P]
+    lib.tcb_pose_blocked_api.restype = ctypes.c_int
+    lib.tcb_pose_blocked_api.argtypes = [_P, _P]
     lib.tcb_edges.restype = _LL
     lib.tcb_edges.argtypes = [_P, _P, _P, _LL, _P]
     lib.tcb_filter_xi.restype = ctypes.c_int
@@ -294,6 +297,27 @@ def pose_fixed_pairs(kernel: Any, kin: Any) -> np.ndarray | None:
     return np.ascontiguousarray(fixed[np.asarray(pa)] & fixed[np.asarray(pb)], dtype=np.uint8)
 
 
+def pose_test_layout(kernel: Any, kin: Any, pfix: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                                np.ndarray] | None:
+    """What the native pose test before a waypoint's IK needs (``tcb_pose_blocked``): the pairs of ``pfix``
+    (:func:`pose_fixed_pairs`) with a moving geometry, those moving geometries, the arm whose hand joint carries each,
+    and per arm the hand joint's placement in the object frame at its grasp (``grasp · frame placement⁻¹``, 2 × 12).
+    None when there is nothing to test (no such pair, not two arms, or more than 8 such geometries)."""
+    if pfix is None or len(kin.arms) != 2:
+        return None
+    model = kin.robot.model
+    gparent, pa, pb = kernel._arrays[5], kernel._arrays[10], kernel._arrays[11]
+    hands = [int(model.frames[int(arm.ee_frame_id)].parentJoint) for arm in kin.arms]
+    pairs = [k for k in range(len(pfix)) if pfix[k] and (int(gparent[pa[k]]) != 0 or int(gparent[pb[k]]) != 0)]
+    geoms = sorted({int(g) for k in pairs for g in (pa[k], pb[k]) if int(gparent[g]) != 0})
+    if not pairs or len(geoms) > 8 or hands[0] == hands[1]:
+        return None
+    arm_of = np.array([hands.index(int(gparent[g])) for g in geoms], np.int32)
+    T = np.array([se3_pose12(kin.grasps[arm.name] * model.frames[int(arm.ee_frame_id)].placement.inverse())
+                  for arm in kin.arms], float)
+    return (np.asarray(pairs, np.int32), np.asarray(geoms, np.int32), arm_of, np.ascontiguousarray(T))
+
+
 class NativeExtender:
     """One TCBiRRT extension per native call for a planner's checker, kinematics and options.
 
@@ -349,6 +373,12 @@ class NativeExtender:
         c.predictor, c.qlo, c.qhi = PREDICTORS.index(ik_predictor), self._qlim[0].ctypes.data, self._qlim[1].ctypes.data
         self._pfix = pose_fixed_pairs(nv.kernel, kin)
         c.pfix = None if self._pfix is None else self._pfix.ctypes.data
+        #: the pose test before each waypoint's IK (None: off): the pairs the object pose alone places
+        self._pose_test = pose_test_layout(nv.kernel, kin, self._pfix)
+        if self._pose_test is not None:
+            pfl, pfg, pfa, pfT = self._pose_test
+            c.npfl, c.pfl, c.npfg, c.pfg, c.pfa, c.pfT = len(pfl), pfl.ctypes.data, len(pfg), pfg.ctypes.data, \
+                pfa.ctypes.data, pfT.ctypes.data
         self._ctx = c
         self._ik: Any = None
         try:

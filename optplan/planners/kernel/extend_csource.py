@@ -65,13 +65,19 @@ typedef struct {
     int restart_max_it;           /* > 0: a restart's IK iteration limit (else max_it) */
     int restart_clip;             /* a restart's seed offset clipped to +-max_joint_step per joint: 0 never, 1 always,
                                      2 in the first restart only */
+    /* the pose test before a waypoint's IK (tcb_pose_blocked); npfl 0: none */
+    int npfl;                     /* the pose-fixed pairs (pfix) with a moving geometry: their indices pfl[0..npfl) */
+    const int *pfl;
+    int npfg;                     /* the moving geometries of those pairs: pfg[i] on arm pfa[i]'s hand joint */
+    const int *pfg, *pfa;
+    const double *pfT;            /* 2 x 12: arm a's hand joint at the object pose P is P pfT[a] (grasp_a eeplace_a^-1) */
 } tcb_ctx;
 
 /* counters: 0 ik_calls, 1 ik_iterations, 2 ik_failures, 3 ik_jumps, 4 collisions, 5 checks, 6 edge_checks,
    7 edge_collisions, 8 set to 1 when the failing waypoint failed its edge_res segment (no restarts),
    9 ik_restarts, 10 ik_path_iterations (the iterations of the waypoints' first IK, restarts not counted),
    11 ik_restarts_skipped (restarts of a waypoint whose pose alone collides: drawn, not run), 12 ik_restart_iterations
-   (the restarts' IK iterations) */
+   (the restarts' IK iterations), 13 pose_blocked (waypoints whose pose alone collides, found before their IK) */
 
 """ + NEAREST_SOURCE + r"""static void tcb_log3(const double *R, double *w) {
     double v[3] = {0.5*(R[7]-R[5]), 0.5*(R[2]-R[6]), 0.5*(R[3]-R[1])};
@@ -159,6 +165,36 @@ static int tcb_pose_collision(const tcb_ctx *c) {
     if (!c->pfix || !m->hint || m->ngrp <= 0 || m->nstat > 4096) return 0;
     int h = *m->hint;
     return h >= 0 && h < m->npairs && c->pfix[h];
+}
+
+/* 1 when a pair that the object pose P alone places (c->pfl: a static geometry, the held object, a hand's last link)
+   is in contact at P. Every IK solution of P has its hands at P's grasps (to the IK's tolerance), hence those
+   geometries where this test puts them: the waypoint fails whatever its IK does, and so does every restart. */
+static int tcb_pose_blocked(const tcb_ctx *c, const double *P) {
+    const kmodel *m = c->km;
+    if (c->npfl <= 0 || c->npfg > 8 || m->ng > KMAXG) return 0;
+    double J[24], O[12*8];
+    const double *pose[KMAXG];
+    compose(P, c->pfT, J);
+    compose(P, c->pfT + 12, J + 12);
+    for (int i = 0; i < c->npfg; ++i) {
+        int g = c->pfg[i];
+        compose(J + 12*c->pfa[i], m->gplace + 12*g, O + 12*i);
+        pose[g] = O + 12*i;
+    }
+    for (int i = 0; i < c->npfl; ++i) {
+        int k = c->pfl[i], ga = m->pa[k], gb = m->pb[k];
+        if (!c->active[k]) continue;
+        if (m->gparent[ga] == 0) pose[ga] = m->gplace + 12*ga;
+        if (m->gparent[gb] == 0) pose[gb] = m->gplace + 12*gb;
+        if (pair_collides(m, pose, ga, gb)) return 1;
+    }
+    return 0;
+}
+
+/* for the tests: tcb_pose_blocked at the object pose P (12: R row-major, p) */
+int tcb_pose_blocked_api(const tcb_ctx *c, const double *P) {
+    return tcb_pose_blocked(c, P);
 }
 
 /* the extension's own IK (the hand-written one when c->ikm is set, else the compiled CasADi block): 1 when converged */
@@ -267,6 +303,18 @@ long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *q_pp
     for (long long j = j0; j < n; ++j) {
         double *qn = Q + j*nq;
         long long its = 0;
+        if (c->npfl > 0 && c->rng && tcb_pose_blocked(c, P + 12*j)) {
+            /* the pose alone collides: the waypoint fails as its IK solution's check or its restarts would make it
+               fail; the restarts' draws are taken, so that the stream goes on the same. Only where the restarts run
+               here (c->rng): a caller that runs them itself counts what the Python code counts */
+            cnt[4] += 1; cnt[13] += 1;
+            if (c->restarts > 0) {
+                double unused[KMAXJ];
+                for (int r = 0; r < c->restarts; ++r) tcb_restart_seed(c, q, unused, r);
+                cnt[11] += c->restarts;
+            }
+            return j;
+        }
         cnt[0] += 1;
         int ok = tcb_ik(c, tcb_seed(c, q, qpp, seed), P + 12*j, qn, &its);
         cnt[1] += its;
