@@ -252,6 +252,14 @@ static void tcb_restart_seed(const tcb_ctx *c, const double *q, double *seed, in
     }
 }
 
+/* the restarts of a waypoint that none of them can pass: their draws taken, so that the stream goes on as if they had
+   run, their IK not run */
+static void tcb_skip_restarts(const tcb_ctx *c, const double *q, long long *cnt) {
+    double unused[KMAXJ];
+    for (int r = 0; r < c->restarts; ++r) tcb_restart_seed(c, q, unused, r);
+    cnt[11] += c->restarts;
+}
+
 /* the random restarts of a failing waypoint (TCBiRRT.path_ik): IK from q + N(0, sigma^2), accepted within the
    joint-jump bound, the joint limits and collision-free; 1 with the solution in qn */
 static int tcb_restarts(const tcb_ctx *c, const double *q, const double *P, double *qn, long long *cnt) {
@@ -308,11 +316,7 @@ long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *q_pp
                fail; the restarts' draws are taken, so that the stream goes on the same. Only where the restarts run
                here (c->rng): a caller that runs them itself counts what the Python code counts */
             cnt[4] += 1; cnt[13] += 1;
-            if (c->restarts > 0) {
-                double unused[KMAXJ];
-                for (int r = 0; r < c->restarts; ++r) tcb_restart_seed(c, q, unused, r);
-                cnt[11] += c->restarts;
-            }
+            if (c->restarts > 0) tcb_skip_restarts(c, q, cnt);
             return j;
         }
         cnt[0] += 1;
@@ -332,11 +336,8 @@ long long tcb_path_ik(const tcb_ctx *c, const double *q_prev, const double *q_pp
         }
         int restarted = 0;
         if (!ok) {
-            if (posed && c->rng && c->restarts > 0) {
-                /* every restart would fail on the same pair: their draws taken, their IK not run */
-                double unused[KMAXJ];
-                for (int r = 0; r < c->restarts; ++r) tcb_restart_seed(c, q, unused, r);
-                cnt[11] += c->restarts;
+            if (posed && c->rng && c->restarts > 0) {   /* every restart would fail on the same pair */
+                tcb_skip_restarts(c, q, cnt);
                 return j;
             }
             if (!c->rng || c->restarts <= 0 || !tcb_restarts(c, q, P + 12*j, qn, cnt)) return j;
